@@ -1,0 +1,116 @@
+"""Encode engineering values into register words and back, for one field at a time.
+
+This is the only place that knows about scale, rounding, two's complement and word
+order. Every value is checked against its field before anything is sent: a value
+that does not fit raises :class:`ValueOutOfRangeError` naming the field, the value
+and the allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Sequence
+
+from ._exceptions import ValueOutOfRangeError
+from ._registers import DataType, RegisterField, WordOrder
+
+#: An engineering value as the user sees it.
+Value = float | int | bool
+
+_FLOAT32_MAX = 3.4028234663852886e38
+
+_INT_LIMITS = {
+    DataType.INT16: (-(2**15), 2**15 - 1),
+    DataType.UINT16: (0, 2**16 - 1),
+    DataType.INT32: (-(2**31), 2**31 - 1),
+    DataType.UINT32: (0, 2**32 - 1),
+}
+
+
+def allowed_range(field: RegisterField) -> tuple[float, float]:
+    """The engineering range a field accepts: its declared range cut to what its type holds."""
+    if field.dtype is DataType.BOOL:
+        return (0.0, 1.0)
+    if field.dtype is DataType.FLOAT32:
+        low, high = -_FLOAT32_MAX / field.scale, _FLOAT32_MAX / field.scale
+    else:
+        raw_low, raw_high = _INT_LIMITS[field.dtype]
+        low, high = raw_low / field.scale, raw_high / field.scale
+    if field.minimum is not None:
+        low = max(low, field.minimum)
+    if field.maximum is not None:
+        high = min(high, field.maximum)
+    return (low, high)
+
+
+def describe_range(field: RegisterField) -> str:
+    """Human-readable allowed range, with the encoding that limits it."""
+    if field.dtype is DataType.BOOL:
+        return "true or false"
+    low, high = allowed_range(field)
+    encoding = field.dtype.value if field.scale == 1 else f"{field.dtype.value} x{field.scale:g}"
+    unit = f" {field.unit}" if field.unit else ""
+    return f"{low:g}..{high:g}{unit}, {encoding}"
+
+
+def _round_half_away(x: float) -> int:
+    return int(math.copysign(math.floor(abs(x) + 0.5), x))
+
+
+def encode(field: RegisterField, value: Value) -> list[int]:
+    """Register words (or one 0/1 for a bit) for ``value``; raises before any I/O if it can't fit."""
+    if field.dtype is DataType.BOOL:
+        if isinstance(value, bool) or value in (0, 1):
+            return [int(bool(value))]
+        raise ValueOutOfRangeError(field.name, value, describe_range(field))
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        raise ValueOutOfRangeError(field.name, value, describe_range(field))
+    if not math.isfinite(value):
+        raise ValueOutOfRangeError(field.name, value, describe_range(field))
+    low, high = allowed_range(field)
+    if not low <= value <= high:
+        raise ValueOutOfRangeError(field.name, value, describe_range(field))
+    scaled = value * field.scale
+    if field.dtype is DataType.FLOAT32:
+        packed = struct.pack(">f", scaled)
+        words = [int.from_bytes(packed[0:2], "big"), int.from_bytes(packed[2:4], "big")]
+        return _order(words, field.word_order)
+    raw = _round_half_away(scaled)
+    raw_low, raw_high = _INT_LIMITS[field.dtype]
+    if not raw_low <= raw <= raw_high:
+        # Rounding can push a value that passed the range check over the edge.
+        raise ValueOutOfRangeError(field.name, value, describe_range(field))
+    if field.dtype.width == 1:
+        return [raw & 0xFFFF]
+    unsigned = raw & 0xFFFFFFFF
+    return _order([unsigned >> 16, unsigned & 0xFFFF], field.word_order)
+
+
+def decode(field: RegisterField, words: Sequence[int]) -> Value:
+    """The engineering value stored in ``words`` (exactly ``field.width`` words)."""
+    if len(words) != field.width:
+        raise ValueError(f"{field.name}: expected {field.width} words, got {len(words)}")
+    if field.dtype is DataType.BOOL:
+        return bool(words[0])
+    if any(not 0 <= w <= 0xFFFF for w in words):
+        raise ValueError(f"{field.name}: register words must be 0..65535, got {list(words)}")
+    if field.dtype is DataType.FLOAT32:
+        high, low = _order(list(words), field.word_order)
+        (number,) = struct.unpack(">f", bytes([high >> 8, high & 0xFF, low >> 8, low & 0xFF]))
+        return float(number) / field.scale if field.scale != 1 else float(number)
+    if field.dtype.width == 1:
+        raw = words[0]
+        if field.dtype is DataType.INT16 and raw >= 0x8000:
+            raw -= 0x10000
+    else:
+        high, low = _order(list(words), field.word_order)
+        raw = high << 16 | low
+        if field.dtype is DataType.INT32 and raw >= 0x80000000:
+            raw -= 0x100000000
+    return raw / field.scale if field.scale != 1 else raw
+
+
+def _order(words: list[int], order: WordOrder) -> list[int]:
+    # Swapping is its own inverse, so the same helper serves encode and decode.
+    return words if order is WordOrder.BIG else [words[1], words[0]]

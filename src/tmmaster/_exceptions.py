@@ -1,0 +1,180 @@
+"""Every error tmmaster raises derives from :class:`TMMasterError`.
+
+Errors are split by the phase in which they happen, and each also inherits the
+builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
+
+    TMMasterError
+    ├── ConfigError (ValueError)                  before any I/O: nothing was sent
+    │   ├── RegisterMapError                      a register map or profile is inconsistent
+    │   └── ValueOutOfRangeError                  a value does not fit its field
+    ├── TransportError                            talking Modbus failed
+    │   ├── ConnectError (ConnectionError)        could not open the connection
+    │   ├── ConnectionLostError (ConnectionError) the connection broke during a request
+    │   ├── ResponseTimeoutError (TimeoutError)   no answer within the request timeout
+    │   └── ModbusExceptionError                  the device answered with an exception code
+    │       ├── IllegalFunctionError              code 1
+    │       ├── IllegalAddressError               code 2
+    │       ├── IllegalValueError                 code 3
+    │       ├── DeviceFailureError                code 4
+    │       └── DeviceBusyError                   code 6
+    ├── RobotError                                the robot refused or failed a command
+    │   ├── RobotFaultError                       robot in error, with its error code
+    │   ├── EmergencyStopError                    e-stop pressed
+    │   ├── CommandRejectedError                  robot rejected the command (e.g. unreachable)
+    │   └── CommandStateUnknownError              cannot prove whether a command was taken
+    ├── MotionTimeoutError (TimeoutError)         a wait on the robot ran out of time
+    │   └── AcknowledgeTimeoutError               the robot never picked the command up
+    └── GripperError                              the gripper failed
+        ├── GripperTimeoutError (TimeoutError)    gripper still busy after its timeout
+        └── GraspFailedError                      closed, but no object detected
+
+Foreign errors (pymodbus, socket, pydantic) are mapped to these at one boundary
+each, always with ``raise ... from exc`` so the original stays visible.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ._pose import Pose
+
+
+class TMMasterError(Exception):
+    """Root of every error raised by tmmaster."""
+
+
+class ConfigError(TMMasterError, ValueError):
+    """Invalid configuration, detected before anything is sent."""
+
+
+class RegisterMapError(ConfigError):
+    """A register map or profile is inconsistent."""
+
+
+class ValueOutOfRangeError(ConfigError):
+    """A value cannot be encoded into its field."""
+
+    def __init__(self, field: str, value: object, allowed: str) -> None:
+        self.field = field
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"{field}: value {value!r} is out of range (allowed {allowed})")
+
+
+class TransportError(TMMasterError):
+    """A Modbus request failed."""
+
+
+class ConnectError(TransportError, ConnectionError):
+    """The connection could not be opened."""
+
+
+class ConnectionLostError(TransportError, ConnectionError):
+    """The connection broke while a request was in flight."""
+
+
+class ResponseTimeoutError(TransportError, TimeoutError):
+    """The device did not answer within the request timeout."""
+
+
+class ModbusExceptionError(TransportError):
+    """The device answered with a Modbus exception response."""
+
+    code: int = 0
+
+    def __init__(self, message: str, *, code: int | None = None) -> None:
+        if code is not None:
+            self.code = code
+        super().__init__(f"{message} (Modbus exception code {self.code})")
+
+
+class IllegalFunctionError(ModbusExceptionError):
+    """Modbus exception 1: the device does not support this function."""
+
+    code = 1
+
+
+class IllegalAddressError(ModbusExceptionError):
+    """Modbus exception 2: the address range is not served by the device."""
+
+    code = 2
+
+
+class IllegalValueError(ModbusExceptionError):
+    """Modbus exception 3: the device refused a value in the request."""
+
+    code = 3
+
+
+class DeviceFailureError(ModbusExceptionError):
+    """Modbus exception 4: the device failed while handling the request."""
+
+    code = 4
+
+
+class DeviceBusyError(ModbusExceptionError):
+    """Modbus exception 6: the device is busy."""
+
+    code = 6
+
+
+class RobotError(TMMasterError):
+    """The robot refused or failed a command."""
+
+    def __init__(self, message: str, *, error_code: int = 0, pose: Pose | None = None) -> None:
+        self.error_code = error_code
+        self.pose = pose
+        super().__init__(message)
+
+
+class RobotFaultError(RobotError):
+    """The robot reported an error (error mode or error flag) with its code."""
+
+
+class EmergencyStopError(RobotError):
+    """The emergency stop is pressed."""
+
+
+class CommandRejectedError(RobotError):
+    """The robot acknowledged the command but refused to execute it."""
+
+
+class CommandStateUnknownError(RobotError):
+    """It cannot be proven whether the robot took a command; nothing was resent."""
+
+
+class MotionTimeoutError(TMMasterError, TimeoutError):
+    """A wait on the robot ran out of time."""
+
+    def __init__(self, message: str, *, pose: Pose | None = None) -> None:
+        self.pose = pose
+        super().__init__(message)
+
+
+class AcknowledgeTimeoutError(MotionTimeoutError):
+    """The robot never picked the command up."""
+
+
+class GripperError(TMMasterError):
+    """The gripper failed."""
+
+
+class GripperTimeoutError(GripperError, TimeoutError):
+    """The gripper was still busy when its timeout ran out."""
+
+
+class GraspFailedError(GripperError):
+    """The gripper closed but no object was detected."""
+
+
+MODBUS_EXCEPTIONS: dict[int, type[ModbusExceptionError]] = {
+    cls.code: cls
+    for cls in (
+        IllegalFunctionError,
+        IllegalAddressError,
+        IllegalValueError,
+        DeviceFailureError,
+        DeviceBusyError,
+    )
+}

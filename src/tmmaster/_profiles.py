@@ -1,0 +1,153 @@
+"""Built-in profiles, loading profiles from TOML, and rendering them as Markdown.
+
+Built-in profiles are TOML files shipped in ``tmmaster/profiles``. A user's TOML file
+may start from one of them with ``extends = "article"`` and override single keys of
+single fields; the result is validated as a whole, exactly like a built-in.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pydantic import TypeAdapter, ValidationError
+
+from ._codec import describe_range
+from ._exceptions import RegisterMapError
+from ._registers import DataType, GripperProfile, RegisterField, RobotProfile
+
+Profile = RobotProfile | GripperProfile
+
+_ADAPTER: TypeAdapter[Profile] = TypeAdapter(Profile)
+
+
+def builtin_profile_names() -> list[str]:
+    """Names of the profiles shipped with tmmaster, sorted."""
+    folder = resources.files("tmmaster").joinpath("profiles")
+    return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def _builtin_data(name: str) -> dict[str, Any]:
+    if name not in builtin_profile_names():
+        known = ", ".join(builtin_profile_names())
+        raise RegisterMapError(f"unknown profile {name!r} (built-in profiles: {known})")
+    text = resources.files("tmmaster").joinpath("profiles").joinpath(f"{name}.toml").read_text("utf-8")
+    return tomllib.loads(text)
+
+
+def _merge(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in override.items():
+        if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def profile_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Profile:
+    """Validate a profile given as a mapping (``extends`` resolves a built-in base)."""
+    data = dict(data)
+    base_name = data.pop("extends", None)
+    if base_name is not None:
+        if not isinstance(base_name, str):
+            raise RegisterMapError(f"{source}: extends must be a profile name")
+        base = _builtin_data(base_name)
+        remove = data.pop("remove_fields", [])
+        data = _merge(base, data)
+        for name in remove:
+            data.get("fields", {}).pop(name, None)
+    try:
+        return _ADAPTER.validate_python(data)
+    except ValidationError as exc:
+        raise RegisterMapError(f"{source}: invalid profile:\n{_format_errors(exc)}") from exc
+
+
+def load_profile(name_or_path: str | Path) -> Profile:
+    """A built-in profile by name, or a profile from a TOML file."""
+    path = Path(name_or_path)
+    if isinstance(name_or_path, str) and path.suffix != ".toml":
+        return profile_from_data(_builtin_data(name_or_path), source=f"profile {name_or_path}")
+    try:
+        data = tomllib.loads(path.read_text("utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise RegisterMapError(f"{path}: cannot read profile: {exc}") from exc
+    return profile_from_data(data, source=str(path))
+
+
+def robot_profile(name_or_path: str | Path | RobotProfile) -> RobotProfile:
+    """Load a robot profile, refusing gripper profiles."""
+    if isinstance(name_or_path, RobotProfile):
+        return name_or_path
+    profile = load_profile(name_or_path)
+    if not isinstance(profile, RobotProfile):
+        raise RegisterMapError(f"{name_or_path} is a gripper profile, not a robot profile")
+    return profile
+
+
+def gripper_profile(name_or_path: str | Path | GripperProfile) -> GripperProfile:
+    """Load a gripper profile, refusing robot profiles."""
+    if isinstance(name_or_path, GripperProfile):
+        return name_or_path
+    profile = load_profile(name_or_path)
+    if not isinstance(profile, GripperProfile):
+        raise RegisterMapError(f"{name_or_path} is a robot profile, not a gripper profile")
+    return profile
+
+
+def _format_errors(exc: ValidationError) -> str:
+    lines = []
+    for error in exc.errors():
+        location = ".".join(str(part) for part in error["loc"])
+        lines.append(f"  {location or '<profile>'}: {error['msg']}")
+    return "\n".join(lines)
+
+
+def _address(field: RegisterField) -> str:
+    if field.width == 1:
+        return f"{field.address} (0x{field.address:04X})"
+    return f"{field.address}-{field.end} (0x{field.address:04X}-0x{field.end:04X})"
+
+
+def _meaning(field: RegisterField) -> str:
+    parts = [field.description] if field.description else []
+    if field.values:
+        parts.append(", ".join(f"{k} {v}" for k, v in sorted(field.values.items())))
+    if field.bits:
+        parts.append(", ".join(f"bit{b} {n}" for n, b in sorted(field.bits.items(), key=lambda i: i[1])))
+    return "; ".join(parts).replace("|", "\\|")
+
+
+def profile_markdown(profile: Profile) -> str:
+    """The profile as a Markdown document: header facts and one table row per field."""
+    out = [f"# Profile `{profile.name}`", "", profile.description, ""]
+    facts = [f"- kind: {profile.kind}", f"- Modbus unit id: {profile.device_id}"]
+    if isinstance(profile, RobotProfile):
+        facts.append(f"- handshake: `{profile.handshake.value}`")
+        if profile.has("robot_mode"):
+            facts.append(f"- robot_mode auto = {profile.mode_auto}, error = {profile.mode_error}")
+    else:
+        facts.append(f"- driver: `{profile.driver}`")
+        if profile.max_connections is not None:
+            facts.append(f"- at most {profile.max_connections} TCP connection(s) at a time")
+    facts.append(f"- a read may span up to {profile.max_read_gap} unused address(es)")
+    out += [*facts, ""]
+    out.append(
+        "| Field | Role | Table | Address | Type | Scale | Word order | Access | Unit "
+        "| Allowed | Meaning |"
+    )
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    ordered = sorted(profile.fields.values(), key=lambda f: (f.table.value, f.address))
+    for f in ordered:
+        word_order = f.word_order.value if f.width == 2 else ""
+        scale = "" if f.scale == 1 else f"x{f.scale:g}"
+        allowed = "" if f.dtype is DataType.BOOL else describe_range(f).split(",")[0]
+        out.append(
+            f"| `{f.name}` | {f.role.value} | {f.table.value} | {_address(f)} | {f.dtype.value} "
+            f"| {scale} | {word_order} | {f.access.value} | {f.unit} | {allowed} | {_meaning(f)} |"
+        )
+    out.append("")
+    return "\n".join(out)

@@ -1,0 +1,316 @@
+"""Register maps as validated data: fields, maps, robot and gripper profiles.
+
+A field says where a value lives (table, address), how it is encoded (data type,
+scale, word order), who may write it and what range it may take. A map groups fields
+by role and is validated as a whole: no two fields of one table overlap, nothing runs
+past address 65535, and nothing in a read-only table is writable.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from enum import StrEnum
+from typing import Annotated, Any, Literal, Self
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+#: Registers a data type occupies.
+_WIDTHS = {"int16": 1, "uint16": 1, "int32": 2, "uint32": 2, "float32": 2, "bool": 1}
+
+_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+
+
+class Table(StrEnum):
+    """The four Modbus data tables."""
+
+    HOLDING = "holding"
+    INPUT = "input"
+    COIL = "coil"
+    DISCRETE_INPUT = "discrete_input"
+
+    @property
+    def read_only(self) -> bool:
+        """True for input registers and discrete inputs, which a master cannot write."""
+        return self in (Table.INPUT, Table.DISCRETE_INPUT)
+
+    @property
+    def is_bit(self) -> bool:
+        """True for coils and discrete inputs (one bit per address)."""
+        return self in (Table.COIL, Table.DISCRETE_INPUT)
+
+
+class DataType(StrEnum):
+    """How a value is stored in one or two 16-bit registers, or one bit."""
+
+    INT16 = "int16"
+    UINT16 = "uint16"
+    INT32 = "int32"
+    UINT32 = "uint32"
+    FLOAT32 = "float32"
+    BOOL = "bool"
+
+    @property
+    def width(self) -> int:
+        """Number of addresses the type occupies."""
+        return _WIDTHS[self.value]
+
+
+class WordOrder(StrEnum):
+    """Order of the two registers of a 32-bit value; bytes inside a register are big-endian."""
+
+    BIG = "big"  # high word first ("AB CD"), the Techman and Modbus convention
+    LITTLE = "little"  # low word first ("CD AB")
+
+
+class Access(StrEnum):
+    """Who writes a field: the device only (r), the master only (w), or both (rw)."""
+
+    READ = "r"
+    WRITE = "w"
+    READ_WRITE = "rw"
+
+    @property
+    def writable(self) -> bool:
+        """True when the master may write the field."""
+        return self is not Access.READ
+
+
+class Role(StrEnum):
+    """What a field is for, so that code asks for groups, never for addresses."""
+
+    STATUS = "status"
+    POSE = "pose"
+    COMMAND = "command"
+    FEEDBACK = "feedback"
+    GRIPPER = "gripper"
+    CONTROL = "control"
+    INFO = "info"
+
+
+class RegisterField(BaseModel):
+    """One value in a device's register map."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+
+    name: str
+    role: Role
+    table: Table
+    address: Annotated[int, Field(ge=0, le=65535)]
+    dtype: DataType = Field(alias="type")
+    #: register value = engineering value x scale (e.g. 100 for "mm x100 in int16").
+    scale: Annotated[float, Field(gt=0)] = 1.0
+    word_order: WordOrder = WordOrder.BIG
+    access: Access = Access.READ
+    unit: str = ""
+    #: Allowed engineering range; values outside are refused before any I/O.
+    minimum: float | None = None
+    maximum: float | None = None
+    #: Meaning of enumerated values, e.g. {0: "idle", 1: "moving"}.
+    values: dict[int, str] = Field(default_factory=dict)
+    #: Named bits of a status word, e.g. {"busy": 0, "grip_detected": 1}.
+    bits: dict[str, Annotated[int, Field(ge=0, le=15)]] = Field(default_factory=dict)
+    description: str = ""
+
+    @model_validator(mode="after")
+    def _check(self) -> Self:
+        if not _NAME.match(self.name):
+            raise ValueError(f"field name {self.name!r} must be lower_snake_case")
+        if self.table.is_bit != (self.dtype is DataType.BOOL):
+            raise ValueError(
+                f"field {self.name}: type {self.dtype.value} does not fit table {self.table.value}"
+                " (coils and discrete inputs hold bool, registers hold numbers)"
+            )
+        if self.address + self.dtype.width - 1 > 65535:
+            raise ValueError(
+                f"field {self.name}: {self.dtype.value} at {self.address} runs past address 65535"
+            )
+        if self.table.read_only and self.access.writable:
+            raise ValueError(
+                f"field {self.name}: access {self.access.value!r} is impossible in the"
+                f" read-only {self.table.value} table"
+            )
+        if (
+            self.minimum is not None
+            and self.maximum is not None
+            and self.minimum > self.maximum
+        ):
+            raise ValueError(f"field {self.name}: minimum {self.minimum} > maximum {self.maximum}")
+        if self.bits and self.dtype not in (DataType.UINT16, DataType.INT16):
+            raise ValueError(f"field {self.name}: named bits need a 16-bit register")
+        return self
+
+    @property
+    def width(self) -> int:
+        """Number of addresses the field occupies."""
+        return self.dtype.width
+
+    @property
+    def end(self) -> int:
+        """Last address the field occupies."""
+        return self.address + self.width - 1
+
+    def label(self, value: int) -> str:
+        """Meaning of an enumerated value, or the number itself."""
+        return self.values.get(value, str(value))
+
+    def code_of(self, label: str) -> int:
+        """The raw value whose meaning is ``label`` (inverse of :meth:`label`)."""
+        for code, meaning in self.values.items():
+            if meaning == label:
+                return code
+        raise KeyError(f"field {self.name} has no value labelled {label!r}")
+
+    def bit(self, raw: int, name: str) -> bool:
+        """True when the named bit is set in ``raw``."""
+        return bool(raw >> self.bits[name] & 1)
+
+
+class RegisterMap(BaseModel):
+    """A validated set of fields served by one Modbus device."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str
+    description: str = ""
+    #: Modbus unit id ("slave id") of the device.
+    device_id: Annotated[int, Field(ge=0, le=255)] = 1
+    #: A read may span this many unused addresses to fetch two blocks in one request.
+    max_read_gap: Annotated[int, Field(ge=0, le=100)] = 0
+    fields: dict[str, RegisterField]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _names_from_keys(cls, data: Any) -> Any:
+        if isinstance(data, dict) and isinstance(data.get("fields"), dict):
+            fields: dict[str, Any] = {}
+            for key, spec in data["fields"].items():
+                if isinstance(spec, dict):
+                    spec = {"name": key, **spec}
+                fields[key] = spec
+            data = {**data, "fields": fields}
+        return data
+
+    @model_validator(mode="after")
+    def _check_layout(self) -> Self:
+        for key, field in self.fields.items():
+            if key != field.name:
+                raise ValueError(f"field key {key!r} differs from its name {field.name!r}")
+        for table in Table:
+            ordered = sorted(
+                (f for f in self.fields.values() if f.table is table), key=lambda f: f.address
+            )
+            for before, after in zip(ordered, ordered[1:], strict=False):
+                if after.address <= before.end:
+                    raise ValueError(
+                        f"fields {before.name} ({before.address}..{before.end}) and"
+                        f" {after.name} ({after.address}..{after.end}) overlap in the"
+                        f" {table.value} table"
+                    )
+        return self
+
+    def field(self, name: str) -> RegisterField:
+        """The field called ``name``."""
+        try:
+            return self.fields[name]
+        except KeyError:
+            raise KeyError(f"register map {self.name!r} has no field {name!r}") from None
+
+    def has(self, name: str) -> bool:
+        """True when the map defines a field called ``name``."""
+        return name in self.fields
+
+    def role(self, role: Role) -> tuple[RegisterField, ...]:
+        """Fields with this role, in table and address order."""
+        return tuple(
+            sorted(
+                (f for f in self.fields.values() if f.role is role),
+                key=lambda f: (f.table.value, f.address),
+            )
+        )
+
+    def select(self, names: Iterable[str]) -> tuple[RegisterField, ...]:
+        """The named fields, in the order given."""
+        return tuple(self.field(n) for n in names)
+
+
+class Handshake(StrEnum):
+    """How a robot profile tells the master that a command was taken and finished."""
+
+    #: The article's contract: the slave sets motion status to moving, then clears the
+    #: command register; done is "acknowledged, then motion status idle".
+    CLEAR_ON_ACCEPT = "clear-on-accept"
+    #: The tmflow contract: the master increments a sequence number; the robot program
+    #: echoes it into ack_seq when it takes the command and into done_seq when finished.
+    SEQUENCE = "sequence"
+
+
+_POSE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
+TARGET_FIELDS = tuple(f"target_{n}" for n in _POSE_NAMES)
+TCP_FIELDS = tuple(f"tcp_{n}" for n in _POSE_NAMES)
+
+_REQUIRED: dict[Handshake, tuple[str, ...]] = {
+    Handshake.CLEAR_ON_ACCEPT: (
+        *TCP_FIELDS,
+        *TARGET_FIELDS,
+        "robot_mode",
+        "motion_status",
+        "error_code",
+        "speed",
+        "command",
+    ),
+    Handshake.SEQUENCE: (
+        *TCP_FIELDS,
+        *TARGET_FIELDS,
+        "error",
+        "project_running",
+        "estop",
+        "last_error_code",
+        "speed",
+        "command",
+        "seq",
+        "ack_seq",
+        "done_seq",
+        "robot_state",
+        "result_code",
+    ),
+}
+
+
+class RobotProfile(RegisterMap):
+    """A robot's register map plus the handshake that its command block follows."""
+
+    kind: Literal["robot"] = "robot"
+    handshake: Handshake
+    #: Values of ``robot_mode`` (clear-on-accept profiles) that mean ready / error.
+    mode_auto: int = 5
+    mode_error: int = 7
+
+    @model_validator(mode="after")
+    def _check_roles(self) -> Self:
+        missing = [n for n in _REQUIRED[self.handshake] if n not in self.fields]
+        if missing:
+            raise ValueError(
+                f"profile {self.name!r} ({self.handshake.value} handshake) lacks fields: "
+                + ", ".join(missing)
+            )
+        command = self.fields["command"]
+        for label in ("ptp", "line"):
+            if label not in command.values.values():
+                raise ValueError(f"profile {self.name!r}: field command needs a value {label!r}")
+        writable = {*TARGET_FIELDS, "speed", "command"}
+        if self.handshake is Handshake.SEQUENCE:
+            writable.add("seq")
+        for name in sorted(writable):
+            if not self.fields[name].access.writable:
+                raise ValueError(f"profile {self.name!r}: field {name} must be writable")
+        return self
+
+
+class GripperProfile(RegisterMap):
+    """A gripper's register map; ``driver`` names the protocol spoken over it."""
+
+    kind: Literal["gripper"] = "gripper"
+    driver: Literal["blog-2fg7", "onrobot-2fg7"]
+    #: At most this many TCP connections at once (the OnRobot Compute Box allows one).
+    max_connections: Annotated[int, Field(ge=1)] | None = None

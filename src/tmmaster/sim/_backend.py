@@ -1,0 +1,74 @@
+"""The physics backend interface the simulated controller drives.
+
+The controller (Modbus handshake, faults, error codes) knows nothing about how the
+arm and gripper are simulated; it talks to one :class:`PhysicsBackend`. The built-in
+:class:`~tmmaster.sim.KinematicBackend` interpolates motions analytically; an Isaac
+Sim, MuJoCo or PyBullet scene plugs in by implementing the same methods (see
+``docs/physics-backends.md``).
+
+All times are *simulated* seconds: the controller calls :meth:`PhysicsBackend.step`
+with the simulated time that passed since the previous tick.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+from .._pose import MotionType, Pose
+
+
+@dataclass(frozen=True)
+class ObjectState:
+    """Where one object on the table is, and whether the gripper holds it."""
+
+    name: str
+    pose: Pose
+    held: bool
+
+
+@dataclass(frozen=True)
+class GripperState:
+    """What the fingers are doing right now."""
+
+    width_mm: float
+    moving: bool
+    #: Fingers stopped on an object (a grip is detected).
+    contact: bool
+
+
+@runtime_checkable
+class PhysicsBackend(Protocol):
+    """Moves the arm and gripper and reports what the physics did."""
+
+    def start_motion(
+        self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Begin a motion towards ``target``; return its expected duration in seconds."""
+
+    def stop_motion(self) -> None:
+        """Decelerate and hold the current pose."""
+
+    def step(self, dt: float) -> None:
+        """Advance the physics by ``dt`` simulated seconds."""
+
+    def tcp_pose(self) -> Pose:
+        """Current TCP pose."""
+
+    def is_settled(self) -> bool:
+        """True when the arm is at rest (no motion running, oscillation died out)."""
+
+    def is_ready(self) -> bool:
+        """True while the physics view is valid and commands can be executed."""
+
+    def reinitialize(self) -> None:
+        """Rebuild the physics view after it was invalidated (e.g. simulation restart)."""
+
+    def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
+        """Start moving the fingers towards ``width_mm``."""
+
+    def gripper_state(self) -> GripperState:
+        """Current finger width, motion and contact."""
+
+    def objects(self) -> list[ObjectState]:
+        """Every object in the scene with its pose."""
