@@ -1,0 +1,320 @@
+"""The simulator's physics layer: kinematic arm timing, gripper, grasp rule, held objects."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from sim_backends import BackendNotReadyError, SlowSettlingBackend
+from tmmaster._pose import MotionType, Pose
+from tmmaster._robot_models import robot_model
+from tmmaster.sim._backend import GripperState, PhysicsBackend
+from tmmaster.sim._kinematic import DEFAULT_HOME, KinematicBackend
+from tmmaster.sim._world import DEFAULT_PART_POSE, TableObject, World
+
+DT = 0.01
+MODEL = robot_model("tm5-700")
+ACCEL = MODEL.accel_time_s
+PICK = DEFAULT_PART_POSE
+ABOVE_PICK = PICK.offset(dz=100)
+PLACE = Pose(300, 200, 100, 180, 0, 90)
+
+
+def run_until(backend: KinematicBackend, done: Callable[[], bool], *, limit_s: float = 10.0) -> int:
+    """Step until ``done()``; return the number of ticks it took."""
+    for tick in range(1, round(limit_s / DT) + 1):
+        backend.step(DT)
+        if done():
+            return tick
+    raise AssertionError(f"not done after {limit_s} simulated seconds")
+
+
+def move(backend: KinematicBackend, target: Pose, motion: MotionType = MotionType.LINE) -> int:
+    """Run a full motion at 100 % speed; return its tick count."""
+    backend.start_motion(target, motion=motion, speed_percent=100, accel_time_s=ACCEL)
+    return run_until(backend, lambda: not backend.motion_running)
+
+
+def backend_at(
+    pose: Pose, *, world: World | None = None, settle_time_s: float = 0.0
+) -> KinematicBackend:
+    return KinematicBackend(MODEL, home=pose, world=world, settle_time_s=settle_time_s)
+
+
+def close_gripper(backend: KinematicBackend, width_mm: float = 10.0) -> None:
+    backend.drive_gripper(width_mm, speed_mm_s=50, force_n=20)
+    run_until(backend, lambda: not backend.gripper_state().moving)
+
+
+def test_backends_implement_the_protocol() -> None:
+    assert isinstance(KinematicBackend(MODEL), PhysicsBackend)
+    assert isinstance(SlowSettlingBackend(MODEL), PhysicsBackend)
+
+
+def test_initial_state() -> None:
+    backend = KinematicBackend(MODEL)
+    assert backend.tcp_pose() == DEFAULT_HOME == Pose(0, 0, 300, 180, 0, 0)
+    assert backend.is_settled()
+    assert backend.is_ready()
+    assert backend.gripper_state().width_mm == 39.0
+    assert not backend.gripper_state().moving
+    [part] = backend.objects()
+    assert (part.name, part.pose, part.held) == ("part", Pose(300, -200, 100, 180, 0, 90), False)
+
+
+def test_line_of_100_mm_at_10_percent_takes_the_model_time() -> None:
+    backend = backend_at(ABOVE_PICK)
+    duration = backend.start_motion(
+        PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=ACCEL
+    )
+    assert duration == MODEL.motion_time(
+        ABOVE_PICK, PICK, speed_percent=10, motion=MotionType.LINE, accel_time_s=ACCEL
+    )
+    # 110 mm/s at 10 %, plus one ramp time.
+    assert duration == pytest.approx(100 / 110 + 0.2)
+    assert not backend.is_settled()
+    ticks = run_until(backend, backend.is_settled)
+    assert abs(ticks * DT - duration) <= DT
+    assert backend.tcp_pose() == PICK
+
+
+def test_ptp_and_line_take_different_times_over_the_same_distance() -> None:
+    start, target = Pose(300, -50, 100, 180, 0, 90), Pose(300, 50, 100, 180, 0, 90)
+    elapsed = {}
+    for motion in MotionType:
+        backend = backend_at(start)
+        duration = backend.start_motion(target, motion=motion, speed_percent=10, accel_time_s=ACCEL)
+        ticks = 0
+        while backend.motion_running:
+            backend.step(DT)
+            ticks += 1
+        assert abs(ticks * DT - duration) <= DT
+        assert backend.tcp_pose() == target
+        elapsed[motion] = duration
+    # PTP is limited by the base joint swinging ~18.9 deg at 18 deg/s.
+    assert elapsed[MotionType.PTP] == pytest.approx(1.2514, abs=1e-3)
+    assert elapsed[MotionType.LINE] == pytest.approx(1.1091, abs=1e-3)
+
+
+def test_pose_moves_along_the_line_during_a_motion_and_ends_exactly_on_target() -> None:
+    backend = backend_at(ABOVE_PICK)
+    duration = backend.start_motion(
+        PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=ACCEL
+    )
+    heights = []
+    while backend.motion_running:
+        backend.step(DT)
+        pose = backend.tcp_pose()
+        assert (pose.x, pose.y, pose.rx, pose.ry, pose.rz) == (300, -200, 180, 0, 90)
+        heights.append(pose.z)
+    assert heights == sorted(heights, reverse=True)
+    assert len(set(heights)) == len(heights)  # never stalls mid-way
+    # The trapezoid is symmetric: half the time covers half the path.
+    backend = backend_at(ABOVE_PICK)
+    backend.start_motion(PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=ACCEL)
+    backend.step(duration / 2)
+    assert backend.tcp_pose().z == pytest.approx(150.0)
+    backend.step(duration / 2)
+    assert backend.tcp_pose() == PICK
+
+
+def test_settle_time_delays_settled_after_the_motion_ends() -> None:
+    backend = backend_at(ABOVE_PICK, settle_time_s=0.3)
+    move(backend, PICK)
+    assert not backend.is_settled()
+    ticks = run_until(backend, backend.is_settled)
+    assert abs(ticks * DT - 0.3) <= DT
+
+
+def test_a_replaced_motion_starts_from_the_current_pose() -> None:
+    backend = backend_at(ABOVE_PICK)
+    first = backend.start_motion(PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=0)
+    backend.step(first / 2)
+    midway = backend.tcp_pose()
+    assert midway.z == pytest.approx(150.0)
+    target = midway.offset(dx=50)
+    duration = backend.start_motion(
+        target, motion=MotionType.LINE, speed_percent=10, accel_time_s=0
+    )
+    assert duration == pytest.approx(50 / 110)
+    backend.step(duration / 2)
+    assert backend.tcp_pose().is_close(midway.offset(dx=25), mm=1e-6)
+    backend.step(duration)
+    assert backend.tcp_pose() == target
+
+
+def test_stop_motion_holds_the_current_pose() -> None:
+    backend = backend_at(ABOVE_PICK)
+    duration = backend.start_motion(
+        PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=ACCEL
+    )
+    backend.step(duration / 2)
+    stopped = backend.tcp_pose()
+    backend.stop_motion()
+    assert not backend.motion_running
+    backend.step(duration)
+    assert backend.tcp_pose() == stopped
+    assert stopped.z == pytest.approx(150.0)
+    assert backend.is_settled()
+
+
+def test_orientation_wraps_the_short_way() -> None:
+    start = Pose(300, 0, 300, 180, 0, 179)
+    target = Pose(300, 0, 300, 180, 0, -179)
+    backend = backend_at(start)
+    duration = backend.start_motion(
+        target, motion=MotionType.LINE, speed_percent=100, accel_time_s=ACCEL
+    )
+    # 2 degrees at 225 deg/s, triangular profile; 358 degrees would take ~1.8 s.
+    assert duration == pytest.approx(2 * (2 * ACCEL / 225) ** 0.5)
+    while backend.motion_running:
+        backend.step(duration / 10)
+        rz = backend.tcp_pose().rz
+        assert abs(rz) >= 179 - 1e-9, rz
+        assert backend.tcp_pose().rx == 180  # not reported as -180
+    assert backend.tcp_pose() == target
+
+
+def test_gripper_moves_at_the_commanded_speed() -> None:
+    backend = KinematicBackend(MODEL)
+    backend.drive_gripper(10, speed_mm_s=29, force_n=20)
+    backend.step(0.5)
+    state = backend.gripper_state()
+    assert state.moving
+    assert state.width_mm == pytest.approx(24.5)
+    backend.step(0.5)
+    assert backend.gripper_state() == GripperState(width_mm=10, moving=False, contact=False)
+
+
+def test_gripper_target_is_clamped_to_the_stroke() -> None:
+    backend = KinematicBackend(MODEL)
+    close_gripper(backend, width_mm=-5)
+    assert backend.gripper_state().width_mm == 1.0
+
+
+def test_closing_away_from_the_object_grips_nothing() -> None:
+    backend = KinematicBackend(MODEL)
+    close_gripper(backend)
+    state = backend.gripper_state()
+    assert (state.width_mm, state.contact, state.moving) == (10.0, False, False)
+    assert [o.held for o in backend.objects()] == [False]
+    assert backend.world.held is None
+
+
+@pytest.mark.parametrize(("offset_mm", "grips"), [(4.9, True), (5.1, False)])
+def test_grasp_needs_the_tcp_within_tolerance(offset_mm: float, grips: bool) -> None:
+    backend = backend_at(PICK.offset(dy=offset_mm))
+    close_gripper(backend)
+    assert backend.gripper_state().contact is grips
+    assert backend.gripper_state().width_mm == (30.0 if grips else 10.0)
+
+
+def test_closing_on_the_object_stops_at_its_width_with_contact() -> None:
+    backend = backend_at(ABOVE_PICK)
+    move(backend, PICK)
+    backend.drive_gripper(10, speed_mm_s=9, force_n=20)
+    ticks = run_until(backend, lambda: not backend.gripper_state().moving)
+    assert abs(ticks * DT - 1.0) <= DT  # 39 -> 30 mm at 9 mm/s
+    state = backend.gripper_state()
+    assert (state.width_mm, state.contact, state.moving) == (30.0, True, False)
+    [part] = backend.objects()
+    assert part.held
+
+
+def test_object_wider_than_the_opening_or_narrower_than_the_target_is_not_gripped() -> None:
+    world = World([TableObject(name="box", pose=PICK, width_mm=45)])
+    backend = backend_at(PICK, world=world)
+    close_gripper(backend)
+    assert backend.gripper_state().contact is False
+    assert backend.gripper_state().width_mm == 10.0
+
+    backend = backend_at(PICK)
+    close_gripper(backend, width_mm=35)  # stops before touching the 30 mm part
+    assert backend.gripper_state().contact is False
+    assert backend.world.held is None
+
+
+def test_held_object_follows_the_tcp_and_stays_where_released() -> None:
+    backend = backend_at(ABOVE_PICK)
+    move(backend, PICK)
+    close_gripper(backend)
+    backend.start_motion(PLACE, motion=MotionType.PTP, speed_percent=50, accel_time_s=ACCEL)
+    backend.step(0.3)
+    [part] = backend.objects()
+    assert part.held
+    assert part.pose == backend.tcp_pose()
+    assert part.pose.distance_to(PICK) > 10
+    run_until(backend, lambda: not backend.motion_running)
+    assert backend.objects()[0].pose == PLACE
+
+    backend.drive_gripper(39, speed_mm_s=50, force_n=0)
+    backend.step(DT)
+    assert backend.gripper_state().contact is False
+    assert backend.gripper_state().moving
+    assert backend.world.held is None
+    move(backend, DEFAULT_HOME, MotionType.PTP)
+    [part] = backend.objects()
+    assert (part.pose, part.held) == (PLACE, False)
+
+
+def test_squeezing_a_held_object_keeps_contact() -> None:
+    backend = backend_at(PICK)
+    close_gripper(backend)
+    backend.drive_gripper(5, speed_mm_s=50, force_n=40)
+    backend.step(DT)
+    state = backend.gripper_state()
+    assert (state.width_mm, state.contact, state.moving) == (30.0, True, False)
+
+
+def test_invalid_arguments_are_rejected() -> None:
+    backend = KinematicBackend(MODEL)
+    with pytest.raises(ValueError, match="dt"):
+        backend.step(-0.1)
+    with pytest.raises(ValueError, match="speed_percent"):
+        backend.start_motion(PICK, motion=MotionType.LINE, speed_percent=0, accel_time_s=0.2)
+    with pytest.raises(ValueError, match="speed_mm_s"):
+        backend.drive_gripper(10, speed_mm_s=0, force_n=10)
+    with pytest.raises(ValueError, match="duplicate"):
+        World([TableObject(name="a", pose=PICK), TableObject(name="a", pose=PLACE)])
+
+
+def test_slow_settling_backend_loses_its_view_and_recovers() -> None:
+    backend = SlowSettlingBackend(MODEL, home=ABOVE_PICK, invalidate_after_motions=1)
+    move(backend, PICK)
+    assert backend.motions_completed == 1
+    assert not backend.is_ready()
+    with pytest.raises(BackendNotReadyError):
+        backend.start_motion(ABOVE_PICK, motion=MotionType.LINE, speed_percent=100, accel_time_s=0)
+    with pytest.raises(BackendNotReadyError):
+        backend.drive_gripper(10, speed_mm_s=50, force_n=10)
+    assert backend.rejected_commands == 2
+    backend.step(5.0)  # a paused physics view does not settle either
+    assert not backend.is_settled()
+
+    backend.reinitialize()
+    assert backend.is_ready()
+    assert backend.reinitialize_count == 1
+    assert backend.tcp_pose() == PICK
+    ticks = run_until(backend, backend.is_settled)
+    assert abs(ticks * DT - 1.5) <= DT
+    # The view stays valid until the next motion completes.
+    assert backend.is_ready()
+    move(backend, ABOVE_PICK)
+    assert backend.tcp_pose() == ABOVE_PICK
+    assert not backend.is_ready()
+
+
+def test_world_grasp_rule() -> None:
+    world = World()
+    part = world.get("part")
+    assert world.grasp_candidate(PICK, current_width_mm=39, target_width_mm=10) == part
+    assert world.grasp_candidate(PICK, current_width_mm=39, target_width_mm=30) is None
+    assert world.grasp_candidate(PICK, current_width_mm=29, target_width_mm=10) is None
+    assert world.grasp_candidate(PICK, current_width_mm=10, target_width_mm=39) is None
+    assert world.grasp_candidate(PICK.offset(dz=6), current_width_mm=39, target_width_mm=10) is None
+    world.grasp("part", PICK)
+    assert world.held == part
+    assert world.release(PLACE) == part.model_copy(update={"pose": PLACE})
+    assert world.held is None
+    assert world.release(PLACE) is None
