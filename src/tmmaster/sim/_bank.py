@@ -1,0 +1,173 @@
+"""The register memory of one simulated device: the single source of truth.
+
+Both sides use the same bank. The network side (the Modbus server) calls
+:meth:`RegisterBank.read` and :meth:`RegisterBank.write` with raw addresses and words and
+gets the same refusals a real device gives (:class:`IllegalAddressError`). The device
+side (controller, gripper logic) calls :meth:`RegisterBank.get` / :meth:`RegisterBank.set`
+with field names and engineering values; every conversion goes through
+:mod:`tmmaster._codec`, and the device may set fields the master may not write.
+
+What a master may address:
+
+* read: every address covered by a field, plus the unused addresses of a gap of at most
+  ``register_map.max_read_gap`` between two fields of the same table (they read as 0),
+  so that a master can fetch two neighbouring blocks in one request;
+* write: only addresses covered by a field whose access is ``w`` or ``rw``, never in
+  the read-only tables, never in a gap. A write is all or nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from itertools import pairwise
+
+from .._codec import Value, decode, encode
+from .._exceptions import IllegalAddressError, IllegalValueError
+from .._registers import RegisterField, RegisterMap, Table
+
+
+def _merge(addresses: set[int]) -> list[tuple[int, int]]:
+    """Contiguous runs of ``addresses`` as ``(first address, count)``, in address order."""
+    runs: list[tuple[int, int]] = []
+    for address in sorted(addresses):
+        if runs and runs[-1][0] + runs[-1][1] == address:
+            runs[-1] = (runs[-1][0], runs[-1][1] + 1)
+        else:
+            runs.append((address, 1))
+    return runs
+
+
+class RegisterBank:
+    """Register memory of one device, serving exactly the addresses of its register map."""
+
+    def __init__(self, register_map: RegisterMap) -> None:
+        self._map = register_map
+        self._words: dict[Table, dict[int, int]] = {table: {} for table in Table}
+        # Address -> the field covering it, to check write access per address.
+        self._owner: dict[Table, dict[int, RegisterField]] = {table: {} for table in Table}
+        self._gaps: dict[Table, set[int]] = {table: set() for table in Table}
+        self._version = 0
+        self._network_writes = 0
+        self._field_writes: dict[str, int] = dict.fromkeys(register_map.fields, 0)
+        for field in register_map.fields.values():
+            for address in range(field.address, field.end + 1):
+                self._words[field.table][address] = 0
+                self._owner[field.table][address] = field
+        for table in Table:
+            ordered = sorted(
+                (f for f in register_map.fields.values() if f.table is table),
+                key=lambda f: f.address,
+            )
+            for before, after in pairwise(ordered):
+                gap = after.address - before.end - 1
+                if 0 < gap <= register_map.max_read_gap:
+                    self._gaps[table].update(range(before.end + 1, after.address))
+
+    @property
+    def register_map(self) -> RegisterMap:
+        """The map whose fields this bank serves."""
+        return self._map
+
+    @property
+    def version(self) -> int:
+        """Counter incremented by every change (device ``set`` or network ``write``)."""
+        return self._version
+
+    @property
+    def network_writes(self) -> int:
+        """Number of successful network writes so far."""
+        return self._network_writes
+
+    def field_writes(self, name: str) -> int:
+        """How many network writes touched field ``name`` (even with an unchanged value)."""
+        self._map.field(name)  # KeyError naming the map for an unknown field
+        return self._field_writes[name]
+
+    # -- device side -------------------------------------------------------------------
+
+    def get(self, name: str) -> Value:
+        """Engineering value of field ``name``."""
+        field = self._map.field(name)
+        words = self._words[field.table]
+        return decode(field, [words[a] for a in range(field.address, field.end + 1)])
+
+    def set(self, name: str, value: Value) -> None:
+        """Store ``value`` in field ``name`` (device side: read-only fields too)."""
+        field = self._map.field(name)
+        # encode() raises ValueOutOfRangeError before anything is stored.
+        new = encode(field, value)
+        words = self._words[field.table]
+        old = [words[a] for a in range(field.address, field.end + 1)]
+        if new != old:
+            for offset, word in enumerate(new):
+                words[field.address + offset] = word
+            self._version += 1
+
+    # -- network side ------------------------------------------------------------------
+
+    def served(self, table: Table) -> list[tuple[int, int]]:
+        """Addresses covered by fields, as contiguous ``(first address, count)`` runs."""
+        return _merge(set(self._words[table]))
+
+    def readable(self, table: Table) -> list[tuple[int, int]]:
+        """Addresses a read may cover (fields plus bridgeable gaps), as ``(first, count)``."""
+        return _merge(set(self._words[table]) | self._gaps[table])
+
+    def read(self, table: Table, address: int, count: int) -> list[int]:
+        """Words (or 0/1 per bit) at ``address``..``address + count - 1``; gaps read as 0."""
+        self._check_range(table, address, count)
+        words = self._words[table]
+        gaps = self._gaps[table]
+        for a in range(address, address + count):
+            if a not in words and a not in gaps:
+                raise IllegalAddressError(
+                    f"{self._map.name}: {table.value} address {a} is not served"
+                    f" (read of {count} from {address})"
+                )
+        return [words.get(a, 0) for a in range(address, address + count)]
+
+    def write(self, table: Table, address: int, values: Sequence[int]) -> None:
+        """Store words (or 0/1 bits) from the network; all or nothing."""
+        self._check_range(table, address, len(values))
+        if table.read_only:
+            raise IllegalAddressError(
+                f"{self._map.name}: the {table.value} table is read-only (write at {address})"
+            )
+        owners = self._owner[table]
+        touched: dict[str, RegisterField] = {}
+        for offset, value in enumerate(values):
+            a = address + offset
+            field = owners.get(a)
+            if field is None:
+                raise IllegalAddressError(
+                    f"{self._map.name}: {table.value} address {a} is not served"
+                    f" (write of {len(values)} at {address})"
+                )
+            if not field.access.writable:
+                raise IllegalAddressError(
+                    f"{self._map.name}: field {field.name} ({table.value} {a}) is written by"
+                    " the device only"
+                )
+            limit = 1 if table.is_bit else 0xFFFF
+            if not 0 <= value <= limit:
+                raise IllegalValueError(
+                    f"{self._map.name}: value {value} does not fit {table.value} address {a}"
+                )
+            touched[field.name] = field
+        words = self._words[table]
+        changed = False
+        for offset, value in enumerate(values):
+            if words[address + offset] != value:
+                words[address + offset] = value
+                changed = True
+        for name in touched:
+            self._field_writes[name] += 1
+        self._network_writes += 1
+        if changed:
+            self._version += 1
+
+    def _check_range(self, table: Table, address: int, count: int) -> None:
+        if count < 1 or address < 0 or address + count - 1 > 65535:
+            raise IllegalAddressError(
+                f"{self._map.name}: bad {table.value} range: {count} from {address}"
+            )
