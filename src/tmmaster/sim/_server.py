@@ -1,0 +1,466 @@
+"""The simulator's Modbus TCP servers: the only module that calls pymodbus' server API.
+
+One :class:`DeviceServer` serves one :class:`~tmmaster.sim._bank.RegisterBank` on one TCP
+port. pymodbus 3.16 runs a ``SimDevice`` internally; we give it one ``SimData`` block per
+readable run of the bank (so the layout comes from the register map, never from a second
+list of addresses) and an ``action`` callback that copies words from the bank before a
+read and applies writes to the bank. The bank stays the single source of truth; the
+pymodbus registers are only a mirror.
+
+Every request first passes the per-request trace hook (``trace_pdu``), which sees the
+exact request (device id, function code, address, count, values). It records the
+request, enforces the device id, validates reads against the bank (pymodbus packs coils
+16 to a register, so its own checks cannot be exact for bits), applies the
+``modbus_exception`` fault and counts requests for the network faults. A refused request
+is swapped for a small PDU whose only job is to answer with the exception code.
+
+Everything here runs on the simulator's event loop thread; nothing is locked except the
+request log, which other threads read.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Protocol
+
+from pymodbus.constants import ExcCodes
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.server import ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from .._exceptions import IllegalAddressError, IllegalValueError
+from .._registers import Table
+from ._faults import (
+    DropConnectionsFault,
+    ModbusExceptionFault,
+    NetworkFault,
+    SlowResponsesFault,
+    StopListeningFault,
+)
+
+#: Table addressed by each function code pymodbus' server decodes.
+_TABLE_OF_FC: dict[int, Table] = {
+    1: Table.COIL,
+    5: Table.COIL,
+    15: Table.COIL,
+    2: Table.DISCRETE_INPUT,
+    3: Table.HOLDING,
+    6: Table.HOLDING,
+    16: Table.HOLDING,
+    22: Table.HOLDING,
+    23: Table.HOLDING,
+    4: Table.INPUT,
+}
+_READ_FCS = frozenset({1, 2, 3, 4})
+
+#: Oldest entries are dropped beyond this, so a long-running CLI does not grow forever.
+REQUEST_LOG_LIMIT = 100_000
+
+
+@dataclass(frozen=True)
+class RequestRecord:
+    """One Modbus request as the simulator received it."""
+
+    #: Wall-clock time (``time.time()``) when the request arrived.
+    time: float
+    #: Which listener got it: ``"robot"`` or ``"gripper"``.
+    server: str
+    device_id: int
+    function_code: int
+    address: int
+    count: int
+    #: Written words (0/1 for coils); None for reads.
+    values: tuple[int, ...] | None
+    #: Modbus exception code the simulator answered with before touching data, else 0.
+    refused: int = 0
+
+    @property
+    def is_write(self) -> bool:
+        """True for a request that writes (FC 5, 6, 15, 16, 22, 23)."""
+        return self.values is not None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The record as plain JSON-able data."""
+        data = asdict(self)
+        data["values"] = None if self.values is None else list(self.values)
+        return data
+
+
+class RequestLog:
+    """Thread-safe, bounded list of :class:`RequestRecord`, shared by all servers."""
+
+    def __init__(
+        self,
+        *,
+        limit: int = REQUEST_LOG_LIMIT,
+        listener: Callable[[RequestRecord], None] | None = None,
+    ) -> None:
+        self._records: deque[RequestRecord] = deque(maxlen=limit)
+        # Written on the loop thread, copied from test threads: a lock keeps copies whole.
+        self._lock = threading.Lock()
+        self._listener = listener
+
+    def append(self, record: RequestRecord) -> None:
+        """Add a record (and pass it to the listener, if any)."""
+        with self._lock:
+            self._records.append(record)
+        if self._listener is not None:
+            self._listener(record)
+
+    def records(self) -> list[RequestRecord]:
+        """A copy of every record, oldest first."""
+        with self._lock:
+            return list(self._records)
+
+    def clear(self) -> None:
+        """Forget every record."""
+        with self._lock:
+            self._records.clear()
+
+
+def json_line(record: RequestRecord) -> str:
+    """One JSON line for ``--log-json``."""
+    return json.dumps(record.as_dict(), separators=(",", ":"))
+
+
+class Bank(Protocol):
+    """What a server needs from a register bank."""
+
+    def readable(self, table: Table) -> list[tuple[int, int]]:
+        """Readable runs as (first address, count)."""
+
+    def read(self, table: Table, address: int, count: int) -> list[int]:
+        """Words (0/1 for bits); raises IllegalAddressError."""
+
+    def write(self, table: Table, address: int, values: Sequence[int]) -> None:
+        """Store words; raises IllegalAddressError / IllegalValueError."""
+
+
+class _Refusal(ModbusPDU):
+    """Stands in for a refused request: answers with a Modbus exception, touches nothing."""
+
+    def __init__(self, request: ModbusPDU, code: int, delay_s: float) -> None:
+        super().__init__(dev_id=request.dev_id, transaction_id=request.transaction_id)
+        self.function_code = request.function_code
+        self._code = code
+        self._delay_s = delay_s
+
+    async def datastore_update(self, context: Any, device_id: int) -> ModbusPDU:
+        """Answer with the exception (after the slow_responses delay, like every answer)."""
+        _ = context, device_id
+        if self._delay_s > 0:
+            await asyncio.sleep(self._delay_s)
+        return ExceptionResponse(self.function_code, self._code)
+
+
+@dataclass(frozen=True)
+class _Request:
+    table: Table
+    address: int
+    count: int
+    values: tuple[int, ...] | None
+
+
+def _describe(pdu: ModbusPDU) -> _Request | None:
+    """Table, address, count and written values of a request (None: not a data request)."""
+    table = _TABLE_OF_FC.get(pdu.function_code)
+    if table is None:
+        return None
+    fc = pdu.function_code
+    if fc in _READ_FCS:
+        return _Request(table, pdu.address, pdu.count, None)
+    if fc in (5, 15):
+        bits = tuple(int(bool(b)) for b in pdu.bits)
+        return _Request(table, pdu.address, len(bits), bits)
+    if fc == 23:
+        written = tuple(int(v) for v in getattr(pdu, "write_registers", ()))
+        return _Request(table, int(getattr(pdu, "write_address", 0)), len(written), written)
+    if fc == 22:
+        # Mask write: the written word depends on the current value; log the masks' target.
+        return _Request(table, pdu.address, 1, ())
+    registers = tuple(int(v) for v in pdu.registers)
+    return _Request(table, pdu.address, len(registers), registers)
+
+
+def _overlaps(request: _Request, table: Table, start: int, end: int) -> bool:
+    last = request.address + max(request.count, 1) - 1
+    return request.table is table and request.address <= end and last >= start
+
+
+class DeviceServer:
+    """A Modbus TCP listener serving one register bank, with network faults."""
+
+    def __init__(
+        self,
+        name: str,
+        bank: Bank,
+        *,
+        host: str,
+        port: int,
+        log: RequestLog,
+        device_id: int | None = None,
+        max_connections: int | None = None,
+    ) -> None:
+        self.name = name
+        self._bank = bank
+        self._host = host
+        self._port = port
+        self._log = log
+        #: None = answer every unit id (the TM controller ignores it).
+        self._device_id = device_id
+        self._max_connections = max_connections
+        self._server: ModbusTcpServer | None = None
+        self._faults: list[NetworkFault] = []
+        # Requests counted since each fault was injected (same order as _faults).
+        self._counts: list[int] = []
+        # Faults whose trigger request arrived; they fire when its answer has been sent.
+        self._pending: list[NetworkFault] = []
+        self._outage: asyncio.Task[None] | None = None
+        self._stopped = False
+
+    # -- lifecycle ----------------------------------------------------------------------
+
+    @property
+    def port(self) -> int:
+        """The TCP port (the real one once started with port 0)."""
+        return self._port
+
+    @property
+    def listening(self) -> bool:
+        """True while the listener accepts connections."""
+        return self._server is not None
+
+    async def start(self) -> None:
+        """Bind and start accepting connections."""
+        self._stopped = False
+        await self._listen()
+
+    async def stop(self) -> None:
+        """Stop listening and close every client connection."""
+        self._stopped = True
+        if self._outage is not None:
+            self._outage.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._outage
+            self._outage = None
+        await self._unlisten()
+
+    async def _listen(self) -> None:
+        server = ModbusTcpServer(
+            self._sim_device(),
+            address=(self._host, self._port),
+            trace_pdu=self._trace_pdu,
+            trace_connect=self._trace_connect,
+        )
+        await server.serve_forever(background=True)
+        listener = server.transport
+        sockets = getattr(listener, "sockets", None)
+        if sockets:
+            # Port 0 asked for a free port: remember the real one so a restart after a
+            # stop_listening outage binds the same port.
+            self._port = int(sockets[0].getsockname()[1])
+        self._server = server
+
+    async def _unlisten(self) -> None:
+        server, self._server = self._server, None
+        if server is not None:
+            await server.shutdown()  # type: ignore[no-untyped-call]
+
+    def _sim_device(self) -> SimDevice:
+        blocks: list[list[SimData]] = []
+        for table in (Table.COIL, Table.DISCRETE_INPUT, Table.HOLDING, Table.INPUT):
+            runs = self._bank.readable(table)
+            if table.is_bit:
+                entries = [
+                    SimData(address=a, count=n, values=False, datatype=DataType.BITS)
+                    for a, n in runs
+                ]
+                # pymodbus needs at least one entry per table; the trace hook refuses
+                # every address of an empty table before pymodbus looks at it.
+                entries = entries or [SimData(address=0, values=False, datatype=DataType.BITS)]
+            else:
+                entries = [
+                    SimData(address=a, count=n, values=0, datatype=DataType.REGISTERS)
+                    for a, n in runs
+                ]
+                entries = entries or [SimData(address=0, datatype=DataType.INVALID)]
+            blocks.append(entries)
+        coils, discrete, holding, inputs = blocks
+        # id 0 = every unit id; the trace hook enforces a device id where one is required.
+        return SimDevice(id=0, simdata=(coils, discrete, holding, inputs), action=self._action)
+
+    # -- faults -------------------------------------------------------------------------
+
+    def set_faults(self, faults: Iterable[NetworkFault]) -> None:
+        """Replace the network faults."""
+        self._faults = list(faults)
+        self._counts = [0] * len(self._faults)
+        self._pending = []
+
+    def add_fault(self, fault: NetworkFault) -> None:
+        """Add one network fault; its request count starts now."""
+        self._faults.append(fault)
+        self._counts.append(0)
+
+    def _remove_fault(self, fault: NetworkFault) -> None:
+        for index, known in enumerate(self._faults):
+            if known is fault:
+                del self._faults[index]
+                del self._counts[index]
+                return
+
+    def _delay_s(self) -> float:
+        return sum(f.delay_s for f in self._faults if isinstance(f, SlowResponsesFault))
+
+    # -- pymodbus hooks -----------------------------------------------------------------
+
+    def _trace_connect(self, connected: bool) -> None:
+        """Enforce max_connections: a newcomer is closed while older clients are connected."""
+        if not connected or self._max_connections is None or self._server is None:
+            return
+        handlers = list(self._server.active_connections.values())
+        # pymodbus adds a connection before announcing it, so the newest ones are last.
+        for extra in handlers[self._max_connections :]:
+            extra.close()
+
+    def _trace_pdu(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU:
+        if sending:
+            if self._pending:
+                # The trigger request's answer is written right after this hook returns;
+                # acting on the next loop turn lets the client receive that answer first.
+                due, self._pending = self._pending, []
+                asyncio.get_running_loop().call_soon(self._fire, due)
+            return pdu
+        try:
+            return self._gate(pdu)
+        except Exception:  # a bug in the gate must not kill the connection
+            return _Refusal(pdu, ExcCodes.DEVICE_FAILURE, 0.0)
+
+    def _gate(self, pdu: ModbusPDU) -> ModbusPDU:
+        request = _describe(pdu)
+        refused = self._check(pdu, request)
+        self._log.append(
+            RequestRecord(
+                time=time.time(),
+                server=self.name,
+                device_id=pdu.dev_id,
+                function_code=pdu.function_code,
+                address=request.address if request else pdu.address,
+                count=request.count if request else pdu.count,
+                values=request.values if request else None,
+                refused=int(refused),
+            )
+        )
+        self._count_request()
+        if refused:
+            return _Refusal(pdu, refused, self._delay_s())
+        return pdu
+
+    def _check(self, pdu: ModbusPDU, request: _Request | None) -> int:
+        """Exception code to answer with, or 0 to let the request through."""
+        if self._device_id is not None and pdu.dev_id != self._device_id:
+            return ExcCodes.GATEWAY_NO_RESPONSE
+        if request is None:
+            return ExcCodes.ILLEGAL_FUNCTION
+        for fault in self._faults:
+            if isinstance(fault, ModbusExceptionFault) and _overlaps(
+                request, fault.table, fault.start, fault.end
+            ):
+                return fault.code
+        if request.values is None:
+            try:
+                self._bank.read(request.table, request.address, request.count)
+            except IllegalAddressError:
+                return ExcCodes.ILLEGAL_ADDRESS
+        return 0
+
+    def _count_request(self) -> None:
+        for index, fault in enumerate(self._faults):
+            if not isinstance(fault, DropConnectionsFault | StopListeningFault):
+                continue
+            self._counts[index] += 1
+            if self._counts[index] >= fault.after_requests:
+                self._counts[index] = 0
+                self._pending.append(fault)
+
+    def _fire(self, due: list[NetworkFault]) -> None:
+        for fault in due:
+            if isinstance(fault, DropConnectionsFault):
+                self.drop_connections()
+                if fault.once:
+                    self._remove_fault(fault)
+            elif isinstance(fault, StopListeningFault):
+                # One outage per injected fault: afterwards the server behaves again.
+                self._remove_fault(fault)
+                if self._outage is None and not self._stopped:
+                    self._outage = asyncio.get_running_loop().create_task(
+                        self._stop_listening(fault.duration_s)
+                    )
+
+    def drop_connections(self) -> None:
+        """Close every client connection (the listener keeps accepting)."""
+        if self._server is not None:
+            for handler in list(self._server.active_connections.values()):
+                handler.close()
+
+    async def _stop_listening(self, duration_s: float) -> None:
+        try:
+            await self._unlisten()
+            await asyncio.sleep(duration_s)
+            if not self._stopped:
+                await self._listen()
+        finally:
+            self._outage = None
+
+    async def _action(
+        self,
+        function_code: int,
+        start_address: int,
+        address: int,
+        count: int,
+        registers: list[int],
+        values: list[int] | list[bool] | None,
+    ) -> ExcCodes | None:
+        """Copy bank words into pymodbus' registers before a read; apply writes to the bank."""
+        table = _TABLE_OF_FC[function_code]
+        # pymodbus reads back after a write (same request): delay only the first call.
+        if values is not None or function_code in _READ_FCS:
+            delay = self._delay_s()
+            if delay > 0:
+                await asyncio.sleep(delay)
+        try:
+            if values is not None:
+                self._bank.write(table, address, [int(v) for v in values])
+            if table.is_bit:
+                # For bits pymodbus passes the first packed word and the number of words.
+                self._refresh_bits(table, address // 16, count, start_address, registers)
+            elif values is None:
+                offset = address - start_address
+                registers[offset : offset + count] = self._bank.read(table, address, count)
+        except IllegalAddressError:
+            return ExcCodes.ILLEGAL_ADDRESS
+        except IllegalValueError:
+            return ExcCodes.ILLEGAL_VALUE
+        return None
+
+    def _refresh_bits(
+        self, table: Table, first_word: int, words: int, start_word: int, registers: list[int]
+    ) -> None:
+        readable = self._bank.readable(table)
+        for word_address in range(first_word, first_word + words):
+            word = 0
+            for bit in range(16):
+                address = word_address * 16 + bit
+                if (
+                    any(a <= address < a + n for a, n in readable)
+                    and self._bank.read(table, address, 1)[0]
+                ):
+                    word |= 1 << bit  # pymodbus packs bits LSB first
+            registers[word_address - start_word] = word
