@@ -1,0 +1,693 @@
+"""The simulated robot controller: handshakes, error codes and device faults, tick by tick.
+
+The controller owns no socket, no thread and no clock. The server (or a test) calls
+:meth:`RobotController.tick` with the simulated time that passed; everything the
+controller does happens inside a tick, never when a register is written, so a master
+sees exactly the race a real robot shows: right after it writes a command, before the
+next tick, nothing has been acknowledged yet.
+
+Per tick, in this order: advance the physics backend, check that it is ready (else
+rebuild it), fire timed faults, run the profile's handshake (advance the running
+command, then take a pending one), publish the TCP pose. The rules, error codes and
+fault effects are documented in ``docs/simulator-model.md``; keep the two in step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any, Literal, Protocol
+
+import structlog
+
+from .._codec import encode
+from .._exceptions import ValueOutOfRangeError
+from .._pose import MotionType, Pose
+from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RobotProfile
+from .._robot_models import RobotModel
+from ._backend import PhysicsBackend
+from ._bank import RegisterBank
+from ._faults import (
+    EstopFault,
+    Fault,
+    GraspMissFault,
+    LateAckFault,
+    RobotErrorFault,
+    StallFault,
+)
+
+#: Faults that fire during the N-th motion.
+_MoveFault = RobotErrorFault | StallFault | EstopFault
+
+#: While the backend stays not ready, ``reinitialize()`` is retried this often (simulated s).
+REINITIALIZE_RETRY_S = 1.0
+
+
+class SimErrorCode(IntEnum):
+    """Error codes the simulated controller reports (article error_code, tmflow last_error_code)."""
+
+    #: Target outside the arm's reach (article only; tmflow reports result_code unreachable).
+    UNREACHABLE = 0x0101
+    #: Unknown command value, speed outside 1..100 % or a target that is not a number.
+    INVALID_COMMAND = 0x0102
+    #: The TCP pose cannot be encoded into the profile's pose registers.
+    POSE_OUT_OF_RANGE = 0x0103
+    #: The physics backend raised while starting a motion or driving the gripper.
+    BACKEND_FAILURE = 0x0104
+    #: Emergency stop pressed.
+    EMERGENCY_STOP = 0x0200
+
+
+class Logger(Protocol):
+    """The part of a structlog logger the simulator uses."""
+
+    def info(self, event: str, **kw: Any) -> Any:
+        """Log an ordinary state change."""
+
+    def warning(self, event: str, **kw: Any) -> Any:
+        """Log a fault or a refused command."""
+
+
+@dataclass
+class _Active:
+    """The command the controller is executing."""
+
+    kind: Literal["motion", "gripper"]
+    #: Motion number (1 = first motion started) or grasp number for a gripper close.
+    number: int
+    seq: int = 0
+    target: Pose | None = None
+    expected_s: float = 0.0
+    elapsed_s: float = 0.0
+    fault: _MoveFault | None = None
+    stalled: bool = False
+    closing: bool = False
+    miss: bool = False
+
+
+class RobotController:
+    """Simulated TM robot behind one robot profile: runs its handshake on every tick."""
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        bank: RegisterBank,
+        backend: PhysicsBackend,
+        model: RobotModel,
+        *,
+        faults: Sequence[Fault] = (),
+        init_time_s: float = 0.2,
+        accel_time_s: float | None = None,
+        log: Logger | None = None,
+        step_backend: bool = True,
+        gripper_open_width_mm: float = 39.0,
+        gripper_close_width_mm: float = 0.0,
+        gripper_speed_mm_s: float = 100.0,
+        gripper_force_n: float = 40.0,
+    ) -> None:
+        if bank.register_map is not profile and bank.register_map != profile:
+            raise ValueError("the register bank must serve the controller's profile")
+        if init_time_s < 0 or (accel_time_s is not None and accel_time_s < 0):
+            raise ValueError("init_time_s and accel_time_s must be >= 0")
+        self._profile = profile
+        self._bank = bank
+        self._backend = backend
+        self._model = model
+        self._init_time_s = init_time_s
+        self._accel_time_s = model.accel_time_s if accel_time_s is None else accel_time_s
+        self._log: Logger = structlog.get_logger("tmmaster.sim") if log is None else log
+        self._step_backend = step_backend
+        self._gripper_open = gripper_open_width_mm
+        self._gripper_close = gripper_close_width_mm
+        self._gripper_speed = gripper_speed_mm_s
+        self._gripper_force = gripper_force_n
+        self._article = profile.handshake is Handshake.CLEAR_ON_ACCEPT
+
+        # Only device faults concern the controller; network faults are the server's.
+        self._move_faults = [f for f in faults if isinstance(f, _MoveFault)]
+        self._timed_estops = [
+            f for f in faults if isinstance(f, EstopFault) and f.after_s is not None
+        ]
+        self._grasp_misses = {f.at_grasp for f in faults if isinstance(f, GraspMissFault)}
+        self._late_acks = [f for f in faults if isinstance(f, LateAckFault)]
+        for fault in self._move_faults:
+            if isinstance(fault, RobotErrorFault):
+                # Refuse at start-up a code the error register cannot hold, not mid-run.
+                encode(profile.field(self._error_code_field), fault.code)
+
+        self._time_s = 0.0
+        self._initialised = False
+        self._active: _Active | None = None
+        self._error_code = 0
+        self._estop = False
+        self._moves_started = 0
+        self._grasps = 0
+        self._running = False  # tmflow: the TMflow project runs
+        self._late_key: object = None
+        self._late_since = 0.0
+        self._reinit_at: float | None = None
+        self._gripper_seen = 0  # article: last gripper_command value acted upon
+        self._gripper_closing = False
+        self._gripper_miss = False
+        self._reset_registers()
+
+    # -- read-only state for the server and tests --------------------------------------
+
+    @property
+    def profile(self) -> RobotProfile:
+        """The robot profile whose handshake the controller runs."""
+        return self._profile
+
+    @property
+    def bank(self) -> RegisterBank:
+        """The register memory the controller works on."""
+        return self._bank
+
+    @property
+    def time_s(self) -> float:
+        """Simulated seconds since the controller started."""
+        return self._time_s
+
+    @property
+    def moves_started(self) -> int:
+        """Motion commands taken that started a motion (rejected ones do not count)."""
+        return self._moves_started
+
+    @property
+    def grasps(self) -> int:
+        """Gripper close commands executed."""
+        return self._grasps
+
+    @property
+    def error_code(self) -> int:
+        """Current robot error code, 0 when there is no robot error."""
+        return self._error_code
+
+    @property
+    def estop_pressed(self) -> bool:
+        """True while the emergency stop is pressed (until :meth:`clear_error`)."""
+        return self._estop
+
+    @property
+    def project_running(self) -> bool:
+        """tmflow: the TMflow project runs; article: the robot is initialised."""
+        return self._running if not self._article else self._initialised
+
+    @property
+    def active_target(self) -> Pose | None:
+        """Target of the motion being executed, or None."""
+        active = self._active
+        return active.target if active is not None and active.kind == "motion" else None
+
+    @property
+    def state(self) -> str:
+        """One word: initialising, error, stopped (tmflow project), moving, gripping or idle."""
+        if self._error_code:
+            return "error"
+        if not self._initialised:
+            return "initialising"
+        if not self._article and not self._running:
+            return "stopped"
+        if self._active is None:
+            return "idle"
+        return "moving" if self._active.kind == "motion" else "gripping"
+
+    # -- operator actions --------------------------------------------------------------
+
+    def clear_error(self) -> None:
+        """Operator resets the error (and releases the e-stop) on the pendant."""
+        if not self._error_code and not self._estop:
+            return
+        code = self._error_code
+        self._error_code = 0
+        self._estop = False
+        if self._article:
+            self._bank.set("error_code", 0)
+            self._bank.set("robot_mode", self._mode_now())
+        else:
+            # last_error_code keeps the code: it is the *last* error, not the current one.
+            self._bank.set("estop", False)
+            self._bank.set("error", False)
+        self._log.info("sim.error_cleared", device=self._profile.name, code=code)
+
+    def press_estop(self) -> None:
+        """Press the emergency stop now (the estop fault does the same at its trigger)."""
+        if self._estop:
+            return
+        self._estop = True
+        self._log.warning("sim.estop", device=self._profile.name, time_s=self._time_s)
+        if not self._article:
+            self._bank.set("estop", True)
+        self._enter_error(SimErrorCode.EMERGENCY_STOP, "emergency stop")
+
+    # -- the tick ----------------------------------------------------------------------
+
+    def tick(self, dt: float) -> None:
+        """Advance the controller (and, unless told otherwise, the backend) by ``dt`` seconds."""
+        if not math.isfinite(dt) or dt < 0:
+            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
+        self._time_s += dt
+        if self._step_backend:
+            self._backend.step(dt)
+        ready = self._check_ready()
+        for fault in list(self._timed_estops):
+            if fault.after_s is not None and self._time_s + 1e-9 >= fault.after_s:
+                self._timed_estops.remove(fault)
+                self._log.warning("sim.fault_fired", device=self._profile.name, fault="estop")
+                self.press_estop()
+        if not self._initialised and self._time_s + 1e-9 >= self._init_time_s:
+            self._initialised = True
+            self._log.info("sim.initialised", device=self._profile.name)
+            if self._article:
+                self._bank.set("robot_mode", self._mode_now())
+            elif not self._error_code:
+                self._start_project()
+        if self._article:
+            self._tick_article(dt, ready)
+        else:
+            self._tick_sequence(dt, ready)
+        if ready:
+            self._publish_pose()
+
+    # -- clear-on-accept (article) -----------------------------------------------------
+
+    def _tick_article(self, dt: float, ready: bool) -> None:
+        if self._active is not None:
+            self._advance(dt, ready)
+        command_field = self._profile.field("command")
+        raw = int(self._bank.get("command"))
+        label = command_field.label(raw)
+        if raw == 0:
+            self._late_key = None
+        elif label == "stop":
+            # Stop is taken in any state, even while moving or in error.
+            self._stop_motion()
+            self._bank.set("command", 0)
+            self._log.info("sim.command_accepted", device=self._profile.name, command="stop")
+            self._check_done(ready)
+        elif self._initialised and not self._error_code and self._active is None:
+            if label in ("ptp", "line"):
+                self._take_article_motion(MotionType(label), ready)
+            else:
+                self._log.warning("sim.command_rejected", device=self._profile.name, command=raw)
+                self._enter_error(SimErrorCode.INVALID_COMMAND, f"unknown command {raw}")
+                self._bank.set("command", 0)
+        # Otherwise (initialising, in error, or moving) the command waits in its register.
+        if self._profile.has("gripper_command"):
+            self._tick_article_gripper(ready)
+
+    def _take_article_motion(self, motion: MotionType, ready: bool) -> None:
+        block = (int(self._bank.get("command")), *self._targets_raw(), self._bank.get("speed"))
+        if self._late_ack_pending(block, motion_command=True) or not ready:
+            return
+        target, speed = self._read_target()
+        if target is None or speed is None:
+            self._enter_error(SimErrorCode.INVALID_COMMAND, "invalid speed or target")
+            self._bank.set("command", 0)
+            return
+        if not self._model.can_reach(target):
+            self._log.warning(
+                "sim.command_rejected",
+                device=self._profile.name,
+                reason="unreachable",
+                target=str(target),
+            )
+            # Error first, then the acknowledgement: a master that sees command == 0
+            # already sees the error.
+            self._enter_error(SimErrorCode.UNREACHABLE, "target out of reach")
+            self._bank.set("command", 0)
+            return
+        # The contract: moving first, then clear the command, in the same tick.
+        self._bank.set("motion_status", 1)
+        self._bank.set("command", 0)
+        self._log.info(
+            "sim.command_accepted",
+            device=self._profile.name,
+            command=motion.value,
+            target=str(target),
+            speed=speed,
+        )
+        self._start_motion(target, motion, speed, self._accel_time_s, seq=0)
+
+    def _tick_article_gripper(self, ready: bool) -> None:
+        value = int(self._bank.get("gripper_command"))
+        if (
+            value != self._gripper_seen
+            and ready
+            and self._initialised
+            and not self._error_code
+            and self._profile.field("gripper_command").label(value) in ("open", "close")
+        ):
+            self._gripper_seen = value
+            self._drive_gripper(
+                close=self._profile.field("gripper_command").label(value) == "close"
+            )
+        if self._profile.has("grasp_status"):
+            self._bank.set("grasp_status", int(self._grip_detected()))
+
+    # -- sequence (tmflow) -------------------------------------------------------------
+
+    def _tick_sequence(self, dt: float, ready: bool) -> None:
+        self._handle_buttons()
+        if not self._running:
+            return
+        if self._profile.has("heartbeat"):
+            self._bank.set("heartbeat", (int(self._bank.get("heartbeat")) + 1) % 65536)
+        if self._active is not None:
+            self._advance(dt, ready)
+        if self._active is None and self._running:
+            self._take_sequence_command(ready)
+
+    def _handle_buttons(self) -> None:
+        # Coils are buttons: act on a press, then release them like a spring would.
+        if self._profile.has("stop_project") and self._bank.get("stop_project"):
+            self._bank.set("stop_project", False)
+            if self._running:
+                self._log.info("sim.button", device=self._profile.name, button="stop")
+                self._stop_project("stop button")
+        if self._profile.has("play_pause") and self._bank.get("play_pause"):
+            self._bank.set("play_pause", False)
+            if self._running:
+                # Pausing a running project is not modelled; the press is ignored.
+                self._log.info(
+                    "sim.button_ignored",
+                    device=self._profile.name,
+                    button="play_pause",
+                    reason="project already running",
+                )
+            elif not self._initialised or self._error_code or self._estop:
+                self._log.warning(
+                    "sim.button_ignored",
+                    device=self._profile.name,
+                    button="play_pause",
+                    reason="robot in error" if self._initialised else "initialising",
+                )
+            else:
+                self._log.info("sim.button", device=self._profile.name, button="play_pause")
+                self._start_project()
+
+    def _take_sequence_command(self, ready: bool) -> None:
+        seq = int(self._bank.get("seq"))
+        if seq == 0 or seq == int(self._bank.get("ack_seq")):
+            # Nothing new; a duplicate write of the acknowledged seq is never executed twice.
+            self._late_key = None
+            return
+        command_field = self._profile.field("command")
+        raw = int(self._bank.get("command"))
+        label = command_field.label(raw)
+        if self._late_ack_pending(seq, motion_command=label in ("ptp", "line")) or not ready:
+            return
+        self._bank.set("ack_seq", seq)
+        self._bank.set("result_code", self._code("result_code", "ok", 0))
+        self._bank.set("robot_state", self._code("robot_state", "busy", 1))
+        self._log.info("sim.command_accepted", device=self._profile.name, seq=seq, command=label)
+        if label in ("ptp", "line"):
+            target, speed = self._read_target()
+            if target is None or speed is None:
+                self._fail_sequence(seq, "invalid_command", 2)
+                return
+            if not self._model.can_reach(target):
+                self._fail_sequence(seq, "unreachable", 1)
+                return
+            accel = self._accel_time_s
+            if self._profile.has("accel_time"):
+                ms = int(self._bank.get("accel_time"))
+                # 0 means "the program's default", i.e. the controller's accel time.
+                accel = ms / 1000.0 if ms > 0 else self._accel_time_s
+            self._start_motion(target, MotionType(label), speed, accel, seq=seq)
+        elif label in ("gripper_open", "gripper_close"):
+            self._drive_gripper(close=label == "gripper_close", seq=seq)
+        else:
+            self._fail_sequence(seq, "invalid_command", 2)
+
+    def _fail_sequence(self, seq: int, result: str, default: int) -> None:
+        self._log.warning("sim.command_rejected", device=self._profile.name, seq=seq, reason=result)
+        # result_code before robot_state: whoever sees "error" sees why.
+        self._bank.set("result_code", self._code("result_code", result, default))
+        self._bank.set("robot_state", self._code("robot_state", "error", 2))
+
+    def _finish_sequence(self, active: _Active) -> None:
+        if active.kind == "gripper" and active.closing and self._profile.has("grasp_status"):
+            self._bank.set("grasp_status", int(self._grip_detected()))
+        elif active.kind == "gripper" and self._profile.has("grasp_status"):
+            self._bank.set("grasp_status", 0)
+        self._bank.set("result_code", self._code("result_code", "ok", 0))
+        self._bank.set("done_seq", active.seq)
+        self._bank.set("robot_state", self._code("robot_state", "idle", 0))
+        self._log.info("sim.command_done", device=self._profile.name, seq=active.seq)
+
+    def _start_project(self) -> None:
+        self._running = True
+        # The program starts idle; ack_seq survives, so a command taken before the stop
+        # is not executed again, while one written during the stop is taken now.
+        self._bank.set("robot_state", self._code("robot_state", "idle", 0))
+        self._bank.set("project_running", True)
+        self._log.info("sim.project_started", device=self._profile.name)
+
+    def _stop_project(self, reason: str) -> None:
+        self._running = False
+        self._stop_motion()
+        self._active = None
+        self._bank.set("project_running", False)
+        self._log.warning("sim.project_stopped", device=self._profile.name, reason=reason)
+
+    # -- shared machinery --------------------------------------------------------------
+
+    def _start_motion(
+        self, target: Pose, motion: MotionType, speed: float, accel: float, *, seq: int
+    ) -> None:
+        number = self._moves_started + 1
+        try:
+            expected = self._backend.start_motion(
+                target, motion=motion, speed_percent=speed, accel_time_s=accel
+            )
+        except Exception as exc:  # a backend failure is a robot error, not a crash
+            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
+            if self._article:
+                self._enter_error(SimErrorCode.BACKEND_FAILURE, "backend failed")
+            else:
+                self._fail_sequence(seq, "motion_failed", 3)
+            return
+        self._moves_started = number
+        fault = next((f for f in self._move_faults if f.at_move == number), None)
+        self._active = _Active(
+            "motion", number, seq=seq, target=target, expected_s=expected, fault=fault
+        )
+        self._log.info(
+            "sim.motion_started",
+            device=self._profile.name,
+            move=number,
+            motion=motion.value,
+            target=str(target),
+            speed=speed,
+            expected_s=round(expected, 4),
+        )
+
+    def _drive_gripper(self, *, close: bool, seq: int = 0) -> None:
+        number = 0
+        miss = False
+        if close:
+            self._grasps += 1
+            number = self._grasps
+            miss = number in self._grasp_misses
+        try:
+            self._backend.drive_gripper(
+                self._gripper_close if close else self._gripper_open,
+                speed_mm_s=self._gripper_speed,
+                force_n=self._gripper_force,
+            )
+        except Exception as exc:  # a backend failure is a robot error, not a crash
+            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
+            if self._article:
+                self._enter_error(SimErrorCode.BACKEND_FAILURE, "backend failed")
+            else:
+                self._fail_sequence(seq, "gripper_failed", 4)
+            return
+        self._gripper_closing = close
+        self._gripper_miss = miss
+        if miss:
+            self._log.warning(
+                "sim.fault_fired", device=self._profile.name, fault="grasp_miss", grasp=number
+            )
+        self._log.info("sim.gripper", device=self._profile.name, close=close, grasp=number)
+        if not self._article:
+            self._active = _Active("gripper", number, seq=seq, closing=close, miss=miss)
+
+    def _grip_detected(self) -> bool:
+        return (
+            self._gripper_closing
+            and not self._gripper_miss
+            and self._backend.gripper_state().contact
+        )
+
+    def _advance(self, dt: float, ready: bool) -> None:
+        active = self._active
+        assert active is not None
+        active.elapsed_s += dt
+        fault = active.fault
+        # Move faults fire halfway through the motion, at least one tick after its start.
+        if fault is not None and active.elapsed_s + 1e-9 >= active.expected_s / 2:
+            active.fault = None
+            self._fire(fault, active)
+            if self._active is not active:
+                return
+        self._check_done(ready)
+
+    def _check_done(self, ready: bool) -> None:
+        active = self._active
+        if active is None or active.stalled or not ready:
+            return
+        if active.kind == "motion":
+            if not self._backend.is_settled():
+                return
+            self._active = None
+            self._log.info("sim.motion_done", device=self._profile.name, move=active.number)
+            if self._article:
+                self._bank.set("motion_status", 0)
+            else:
+                self._finish_sequence(active)
+        elif not self._backend.gripper_state().moving:
+            self._active = None
+            self._finish_sequence(active)
+
+    def _fire(self, fault: _MoveFault, active: _Active) -> None:
+        self._log.warning(
+            "sim.fault_fired", device=self._profile.name, fault=fault.kind, move=active.number
+        )
+        if isinstance(fault, StallFault):
+            # The arm stops where it is but the motion never reports completion.
+            self._backend.stop_motion()
+            active.stalled = True
+        elif isinstance(fault, EstopFault):
+            self.press_estop()
+        else:
+            self._enter_error(fault.code, "injected robot error")
+
+    def _stop_motion(self) -> None:
+        active = self._active
+        if active is not None and active.kind == "motion":
+            self._backend.stop_motion()
+            # A stopped motion is over once the arm settles, stalled or not.
+            active.stalled = False
+            active.fault = None
+
+    def _enter_error(self, code: int, reason: str) -> None:
+        self._error_code = int(code)
+        self._log.warning(
+            "sim.robot_error", device=self._profile.name, code=int(code), reason=reason
+        )
+        self._stop_motion()
+        self._active = None
+        if self._article:
+            self._bank.set("error_code", int(code))
+            self._bank.set("robot_mode", self._profile.mode_error)
+            self._bank.set("motion_status", 0)
+        else:
+            self._bank.set("last_error_code", int(code))
+            self._bank.set("error", True)
+            if self._running:
+                self._stop_project(reason)
+
+    def _check_ready(self) -> bool:
+        if self._backend.is_ready():
+            if self._reinit_at is not None:
+                self._log.info("sim.backend_ready", device=self._profile.name)
+            self._reinit_at = None
+            return True
+        if self._reinit_at is None or self._time_s - self._reinit_at >= REINITIALIZE_RETRY_S:
+            self._log.warning("sim.backend_reinitialize", device=self._profile.name)
+            self._reinit_at = self._time_s
+            self._backend.reinitialize()
+        return self._backend.is_ready()
+
+    def _late_ack_pending(self, key: object, *, motion_command: bool) -> bool:
+        """True while a late_ack fault still holds back the command identified by ``key``."""
+        number = self._moves_started + 1
+        delay = max(
+            (
+                f.delay_s
+                for f in self._late_acks
+                if f.at_move is None or (motion_command and f.at_move == number)
+            ),
+            default=0.0,
+        )
+        if delay <= 0:
+            return False
+        if key != self._late_key:
+            # A changed command restarts the delay: it is a different command.
+            self._late_key = key
+            self._late_since = self._time_s
+            self._log.warning(
+                "sim.fault_fired", device=self._profile.name, fault="late_ack", delay_s=delay
+            )
+        if self._time_s - self._late_since + 1e-9 >= delay:
+            self._late_key = None
+            return False
+        return True
+
+    def _read_target(self) -> tuple[Pose | None, float | None]:
+        speed = float(self._bank.get("speed"))
+        try:
+            target = Pose(*(float(self._bank.get(n)) for n in TARGET_FIELDS))
+        except ValueError:  # NaN or infinity in a float32 target
+            return None, None
+        if not 0 < speed <= 100:
+            return target, None
+        return target, speed
+
+    def _targets_raw(self) -> tuple[float, ...]:
+        return tuple(float(self._bank.get(n)) for n in TARGET_FIELDS)
+
+    def _publish_pose(self) -> None:
+        pose = self._backend.tcp_pose()
+        fields = [self._profile.field(n) for n in TCP_FIELDS]
+        try:
+            # Encode all six before storing any: a pose is published whole or not at all.
+            for field, value in zip(fields, pose.as_list(), strict=True):
+                encode(field, value)
+        except ValueOutOfRangeError as exc:
+            if self._error_code != SimErrorCode.POSE_OUT_OF_RANGE:
+                self._log.warning(
+                    "sim.pose_out_of_range",
+                    device=self._profile.name,
+                    pose=str(pose),
+                    error=str(exc),
+                )
+                self._enter_error(SimErrorCode.POSE_OUT_OF_RANGE, "pose cannot be encoded")
+            return
+        for name, value in zip(TCP_FIELDS, pose.as_list(), strict=True):
+            self._bank.set(name, value)
+
+    def _mode_now(self) -> int:
+        if self._error_code:
+            return self._profile.mode_error
+        if not self._initialised:
+            return self._code("robot_mode", "initialising", 0)
+        return self._profile.mode_auto
+
+    def _code(self, field: str, label: str, default: int) -> int:
+        try:
+            return self._profile.field(field).code_of(label)
+        except KeyError:
+            return default
+
+    @property
+    def _error_code_field(self) -> str:
+        return "error_code" if self._article else "last_error_code"
+
+    def _reset_registers(self) -> None:
+        if self._article:
+            self._bank.set("robot_mode", self._mode_now())
+            self._bank.set("motion_status", 0)
+            self._bank.set("error_code", 0)
+        else:
+            for name in ("error", "estop", "project_running"):
+                self._bank.set(name, False)
+            if self._profile.has("ma_mode"):
+                self._bank.set("ma_mode", self._code("ma_mode", "auto", 1))
+            if self._profile.has("project_speed"):
+                self._bank.set("project_speed", 100)
+            self._bank.set("robot_state", self._code("robot_state", "idle", 0))
+        self._publish_pose()
