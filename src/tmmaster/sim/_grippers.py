@@ -1,0 +1,316 @@
+"""Simulated standalone grippers: the blog-2fg7 map and OnRobot's real 2FG7 map.
+
+Each device works on its own :class:`RegisterBank` and drives the fingers of a shared
+:class:`PhysicsBackend`; like the robot controller it acts only inside
+:meth:`tick`, never when a register is written. A grip is detected only when the
+backend reports finger contact, i.e. the fingers closed on a real object; the
+``grasp_miss`` fault hides that contact for one close. The rules are documented in
+``docs/simulator-model.md``.
+
+When a robot controller and a gripper device share one backend, exactly one of them
+may step it: pass ``step_backend=False`` to the gripper.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import structlog
+
+from .._registers import GripperProfile
+from ._backend import PhysicsBackend
+from ._bank import RegisterBank
+from ._controller import REINITIALIZE_RETRY_S, Logger
+from ._faults import Fault, GraspMissFault
+
+#: blog-2fg7 control value that executes a move (rCTR).
+BLOG_EXECUTE = 16
+#: OnRobot 2FG7 product code (register 1536).
+ONROBOT_2FG7_PRODUCT_CODE = 0xC0
+
+
+class _GripperDevice:
+    """Shared tick skeleton: time, backend stepping and readiness, grasp counting."""
+
+    def __init__(
+        self,
+        profile: GripperProfile,
+        bank: RegisterBank,
+        backend: PhysicsBackend,
+        *,
+        faults: Sequence[Fault],
+        init_time_s: float,
+        step_backend: bool,
+        log: Logger | None,
+    ) -> None:
+        if bank.register_map is not profile and bank.register_map != profile:
+            raise ValueError("the register bank must serve the gripper's profile")
+        if init_time_s < 0:
+            raise ValueError(f"init_time_s must be >= 0, got {init_time_s}")
+        self._profile = profile
+        self._bank = bank
+        self._backend = backend
+        self._init_time_s = init_time_s
+        self._step_backend = step_backend
+        self._log: Logger = structlog.get_logger("tmmaster.sim") if log is None else log
+        self._misses = {f.at_grasp for f in faults if isinstance(f, GraspMissFault)}
+        self._time_s = 0.0
+        self._initialised = False
+        self._reinit_at: float | None = None
+        self._grasps = 0
+        self._busy = False  # a move was taken and the fingers have not stopped yet
+        self._closing = False
+        self._miss = False
+
+    @property
+    def bank(self) -> RegisterBank:
+        """The register memory of this gripper."""
+        return self._bank
+
+    @property
+    def grasps(self) -> int:
+        """Closing moves executed so far."""
+        return self._grasps
+
+    @property
+    def busy(self) -> bool:
+        """True while a taken move has not finished."""
+        return self._busy
+
+    def tick(self, dt: float) -> None:
+        """Advance the gripper (and, unless told otherwise, the backend) by ``dt`` seconds."""
+        if not math.isfinite(dt) or dt < 0:
+            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
+        self._time_s += dt
+        if self._step_backend:
+            self._backend.step(dt)
+        ready = self._check_ready()
+        if not self._initialised and self._time_s + 1e-9 >= self._init_time_s:
+            self._initialised = True
+            self._log.info("sim.initialised", device=self._profile.name)
+        if ready and self._busy and not self._backend.gripper_state().moving:
+            self._busy = False
+            self._log.info("sim.gripper_done", device=self._profile.name, detected=self._detected())
+        if ready and self._initialised:
+            self._handle_commands()
+        self._publish(ready)
+
+    def _handle_commands(self) -> None:
+        raise NotImplementedError
+
+    def _publish(self, ready: bool) -> None:
+        raise NotImplementedError
+
+    def _move(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> bool:
+        """Drive the fingers; True when the backend took the move."""
+        current = self._backend.gripper_state().width_mm
+        closing = width_mm < current
+        try:
+            self._backend.drive_gripper(width_mm, speed_mm_s=speed_mm_s, force_n=force_n)
+        except Exception as exc:  # a backend failure must not kill the server: log, no move
+            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
+            return False
+        self._closing = closing
+        self._miss = False
+        if closing:
+            self._grasps += 1
+            self._miss = self._grasps in self._misses
+            if self._miss:
+                self._log.warning(
+                    "sim.fault_fired",
+                    device=self._profile.name,
+                    fault="grasp_miss",
+                    grasp=self._grasps,
+                )
+        self._busy = True
+        self._log.info(
+            "sim.command_accepted",
+            device=self._profile.name,
+            width_mm=width_mm,
+            speed_mm_s=speed_mm_s,
+            force_n=force_n,
+            closing=closing,
+        )
+        return True
+
+    def _stop(self) -> None:
+        # The backend has no finger stop: driving to the current width holds the fingers.
+        width = self._backend.gripper_state().width_mm
+        try:
+            self._backend.drive_gripper(width, speed_mm_s=1.0, force_n=0.0)
+        except Exception as exc:  # a backend failure must not kill the server: log only
+            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
+        self._busy = False
+        self._log.info("sim.gripper_stopped", device=self._profile.name, width_mm=width)
+
+    def _detected(self) -> bool:
+        """Grip detected: fingers stopped on an object, unless grasp_miss hides it."""
+        state = self._backend.gripper_state()
+        return state.contact and not state.moving and not self._miss
+
+    def _check_ready(self) -> bool:
+        if self._backend.is_ready():
+            self._reinit_at = None
+            return True
+        if self._reinit_at is None or self._time_s - self._reinit_at >= REINITIALIZE_RETRY_S:
+            self._log.warning("sim.backend_reinitialize", device=self._profile.name)
+            self._reinit_at = self._time_s
+            self._backend.reinitialize()
+        return self._backend.is_ready()
+
+
+class Blog2FG7Device(_GripperDevice):
+    """The second article's gripper map: control 16 executes a move to width with force."""
+
+    def __init__(
+        self,
+        profile: GripperProfile,
+        bank: RegisterBank,
+        backend: PhysicsBackend,
+        *,
+        faults: Sequence[Fault] = (),
+        init_time_s: float = 0.2,
+        speed_mm_s: float = 100.0,
+        step_backend: bool = True,
+        log: Logger | None = None,
+    ) -> None:
+        super().__init__(
+            profile,
+            bank,
+            backend,
+            faults=faults,
+            init_time_s=init_time_s,
+            step_backend=step_backend,
+            log=log,
+        )
+        if speed_mm_s <= 0:
+            raise ValueError(f"speed_mm_s must be > 0, got {speed_mm_s}")
+        self._speed = speed_mm_s
+        self._control_writes = bank.field_writes("control")
+        self._publish(True)
+
+    def _handle_commands(self) -> None:
+        writes = self._bank.field_writes("control")
+        written = writes != self._control_writes
+        self._control_writes = writes
+        control = int(self._bank.get("control"))
+        if control == BLOG_EXECUTE:
+            width = float(self._bank.get("width"))
+            force = float(self._bank.get("force"))
+            if self._move(width, speed_mm_s=self._speed, force_n=force):
+                # Status first, then the acknowledgement (control back to 0), like the
+                # article robot's clear-on-accept: whoever sees 0 sees the move running.
+                self._set_status(object_status=0, motion_state=1)
+                self._bank.set("control", 0)
+                self._control_writes = self._bank.field_writes("control")
+        elif control == 0 and written and self._busy:
+            # Only a master's write of 0 stops: the device's own reset to 0 must not.
+            self._stop()
+        elif control != 0:
+            self._log.warning("sim.command_rejected", device=self._profile.name, control=control)
+            self._bank.set("control", 0)
+
+    def _set_status(self, *, object_status: int, motion_state: int) -> None:
+        self._bank.set("object_status", object_status)
+        self._bank.set("motion_state", motion_state)
+
+    def _publish(self, ready: bool) -> None:
+        self._bank.set("gripper_status", 3 if self._initialised else 1)
+        if not self._initialised or not ready:
+            self._set_status(object_status=0, motion_state=0)
+            return
+        if self._busy:
+            self._set_status(object_status=0, motion_state=1)
+        elif self._detected():
+            self._set_status(object_status=2 if self._closing else 1, motion_state=0)
+        else:
+            self._set_status(object_status=3, motion_state=0)
+
+
+class OnRobot2FG7Device(_GripperDevice):
+    """OnRobot 2FG7 on a Compute Box: grip external/internal/stop, status bits, live widths."""
+
+    def __init__(
+        self,
+        profile: GripperProfile,
+        bank: RegisterBank,
+        backend: PhysicsBackend,
+        *,
+        faults: Sequence[Fault] = (),
+        init_time_s: float = 0.2,
+        min_external_mm: float = 1.0,
+        max_external_mm: float = 39.0,
+        internal_offset_mm: float = 34.0,
+        speed_range_mm_s: tuple[float, float] = (16.0, 450.0),
+        step_backend: bool = True,
+        log: Logger | None = None,
+    ) -> None:
+        super().__init__(
+            profile,
+            bank,
+            backend,
+            faults=faults,
+            init_time_s=init_time_s,
+            step_backend=step_backend,
+            log=log,
+        )
+        self._min_ext = min_external_mm
+        self._max_ext = max_external_mm
+        self._offset = internal_offset_mm
+        self._speeds = speed_range_mm_s
+        self._force = 0.0
+        # Presets a master reads at run time instead of hard-coding the stroke.
+        bank.set("min_external_width", min_external_mm)
+        bank.set("max_external_width", max_external_mm)
+        bank.set("min_internal_width", min_external_mm + internal_offset_mm)
+        bank.set("max_internal_width", max_external_mm + internal_offset_mm)
+        bank.set("product_code", ONROBOT_2FG7_PRODUCT_CODE)
+        self._publish(True)
+
+    def speed_mm_s(self, percent: float) -> float:
+        """Finger speed for a target speed in % (10..100 mapped linearly, clamped)."""
+        low, high = self._speeds
+        pct = min(max(percent, 10.0), 100.0)
+        return low + (pct - 10.0) / 90.0 * (high - low)
+
+    def _handle_commands(self) -> None:
+        command = int(self._bank.get("command"))
+        if command == 0:
+            return
+        label = self._profile.field("command").label(command)
+        if label == "stop":
+            self._stop()
+        elif label in ("grip_external", "grip_internal"):
+            width = float(self._bank.get("target_width"))
+            external = width if label == "grip_external" else width - self._offset
+            clamped = min(max(external, self._min_ext), self._max_ext)
+            if clamped != external:
+                self._log.warning(
+                    "sim.width_clamped",
+                    device=self._profile.name,
+                    requested_mm=width,
+                    grip=label,
+                )
+            force = min(max(float(self._bank.get("target_force")), 20.0), 140.0)
+            speed = self.speed_mm_s(float(self._bank.get("target_speed")))
+            if self._move(clamped, speed_mm_s=speed, force_n=force):
+                self._force = force
+                self._publish(True)
+        else:
+            self._log.warning("sim.command_rejected", device=self._profile.name, command=command)
+        # The command register is reset once taken (status already shows busy).
+        self._bank.set("command", 0)
+
+    def _publish(self, ready: bool) -> None:
+        if not ready:
+            return
+        state = self._backend.gripper_state()
+        field = self._profile.field("status")
+        detected = self._detected()
+        busy = self._busy or not self._initialised
+        raw = (int(busy) << field.bits["busy"]) | (int(detected) << field.bits["grip_detected"])
+        self._bank.set("status", raw)
+        self._bank.set("external_width", round(state.width_mm, 1))
+        self._bank.set("internal_width", round(state.width_mm + self._offset, 1))
+        self._bank.set("force", round(self._force) if detected else 0)
