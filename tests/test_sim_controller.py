@@ -24,6 +24,7 @@ from tmmaster.sim._faults import (
     LateAckFault,
     RobotErrorFault,
     StallFault,
+    parse_fault,
 )
 from tmmaster.sim._grippers import Blog2FG7Device, OnRobot2FG7Device
 from tmmaster.sim._kinematic import DEFAULT_HOME, KinematicBackend
@@ -1018,3 +1019,51 @@ def test_robot_and_gripper_share_one_backend() -> None:
     held = next(o for o in backend.objects() if o.name == "part")
     assert held.held
     assert held.pose.is_close(AIR, mm=0.001)
+
+
+# -- run-time fault injection -------------------------------------------------------------
+
+
+def test_injected_faults_count_from_the_injection() -> None:
+    ctl, bank, _, _ = article()
+    move_article(ctl, bank, AIR)
+    ctl.inject(StallFault(at_move=1))  # the *next* motion
+    send_article(bank, PART)
+    run(ctl, 3.0)
+    assert bank.get("motion_status") == 1
+    bank.write(Table.HOLDING, 0x0207, [3])
+    ctl.tick(DT)
+    ctl.inject(EstopFault(after_s=0.2))
+    run(ctl, 0.18)
+    assert bank.get("robot_mode") == 5
+    run(ctl, 0.04)
+    assert bank.get("error_code") == SimErrorCode.EMERGENCY_STOP
+
+
+def test_clear_faults_forgets_pending_faults() -> None:
+    ctl, bank, _, _ = article(faults=[RobotErrorFault(at_move=1), GraspMissFault()])
+    ctl.clear_faults()
+    move_article(ctl, bank, PART)
+    assert bank.get("robot_mode") == 5
+    _close_article(ctl, bank, 1)
+    assert bank.get("grasp_status") == 1
+
+
+def test_network_faults_are_not_the_controllers() -> None:
+    ctl, _, _, _ = article()
+    with pytest.raises(ValueError, match="network fault"):
+        ctl.inject(parse_fault("slow_responses:delay_s=1"))
+
+
+def test_gripper_inject_grasp_miss() -> None:
+    device, bank = onrobot(KinematicBackend(MODEL, home=PART))
+    onrobot_grip(bank, 10.0)
+    device.tick(DT)
+    run_until(device, lambda: not busy(bank))
+    assert gripped(bank)
+    device.inject(GraspMissFault())
+    onrobot_grip(bank, 5.0)  # squeeze again: the next close
+    device.tick(DT)
+    run(device, 0.2)
+    assert not gripped(bank)
+    device.clear_faults()

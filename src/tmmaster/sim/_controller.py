@@ -36,6 +36,7 @@ from ._faults import (
     LateAckFault,
     RobotErrorFault,
     StallFault,
+    is_network_fault,
 )
 
 #: Faults that fire during the N-th motion.
@@ -125,17 +126,12 @@ class RobotController:
         self._gripper_force = gripper_force_n
         self._article = profile.handshake is Handshake.CLEAR_ON_ACCEPT
 
-        # Only device faults concern the controller; network faults are the server's.
-        self._move_faults = [f for f in faults if isinstance(f, _MoveFault)]
-        self._timed_estops = [
-            f for f in faults if isinstance(f, EstopFault) and f.after_s is not None
-        ]
-        self._grasp_misses = {f.at_grasp for f in faults if isinstance(f, GraspMissFault)}
-        self._late_acks = [f for f in faults if isinstance(f, LateAckFault)]
-        for fault in self._move_faults:
-            if isinstance(fault, RobotErrorFault):
-                # Refuse at start-up a code the error register cannot hold, not mid-run.
-                encode(profile.field(self._error_code_field), fault.code)
+        self._move_faults: list[_MoveFault] = []
+        self._timed_estops: list[EstopFault] = []
+        self._grasp_misses: set[int] = set()
+        self._late_acks: list[LateAckFault] = []
+        for fault in faults:
+            self._add_fault(fault)
 
         self._time_s = 0.0
         self._initialised = False
@@ -213,6 +209,47 @@ class RobotController:
         if self._active is None:
             return "idle"
         return "moving" if self._active.kind == "motion" else "gripping"
+
+    # -- faults ------------------------------------------------------------------------
+
+    def inject(self, fault: Fault) -> None:
+        """Add a device fault at run time; its at_move / at_grasp / after_s count from now."""
+        if is_network_fault(fault):
+            raise ValueError(f"{fault.kind} is a network fault: the Modbus server plays it")
+        at_move = getattr(fault, "at_move", None)
+        if at_move is not None:
+            fault = fault.model_copy(update={"at_move": at_move + self._moves_started})
+        elif isinstance(fault, EstopFault) and fault.after_s is not None:
+            fault = fault.model_copy(update={"after_s": fault.after_s + self._time_s})
+        elif isinstance(fault, GraspMissFault):
+            fault = fault.model_copy(update={"at_grasp": fault.at_grasp + self._grasps})
+        self._add_fault(fault)
+        self._log.info("sim.fault_injected", device=self._profile.name, fault=fault.kind)
+
+    def clear_faults(self) -> None:
+        """Forget every device fault not yet fired (an effect already under way stays)."""
+        self._move_faults.clear()
+        self._timed_estops.clear()
+        self._grasp_misses.clear()
+        self._late_acks.clear()
+        self._late_key = None
+        if self._active is not None:
+            self._active.fault = None
+        self._log.info("sim.faults_cleared", device=self._profile.name)
+
+    def _add_fault(self, fault: Fault) -> None:
+        # Only device faults concern the controller; network faults are the server's.
+        if isinstance(fault, RobotErrorFault):
+            # Refuse a code the error register cannot hold when it is given, not mid-run.
+            encode(self._profile.field(self._error_code_field), fault.code)
+        if isinstance(fault, EstopFault) and fault.after_s is not None:
+            self._timed_estops.append(fault)
+        elif isinstance(fault, RobotErrorFault | StallFault | EstopFault):
+            self._move_faults.append(fault)
+        elif isinstance(fault, GraspMissFault):
+            self._grasp_misses.add(fault.at_grasp)
+        elif isinstance(fault, LateAckFault):
+            self._late_acks.append(fault)
 
     # -- operator actions --------------------------------------------------------------
 

@@ -78,6 +78,16 @@ class _GripperDevice:
         """True while a taken move has not finished."""
         return self._busy
 
+    def inject(self, fault: Fault) -> None:
+        """Add a fault at run time; grasp_miss counts closes from now, others are ignored."""
+        if isinstance(fault, GraspMissFault):
+            self._misses.add(fault.at_grasp + self._grasps)
+            self._log.info("sim.fault_injected", device=self._profile.name, fault=fault.kind)
+
+    def clear_faults(self) -> None:
+        """Forget every grasp_miss not yet fired."""
+        self._misses.clear()
+
     def tick(self, dt: float) -> None:
         """Advance the gripper (and, unless told otherwise, the backend) by ``dt`` seconds."""
         if not math.isfinite(dt) or dt < 0:
