@@ -270,8 +270,17 @@ class DeviceServer:
 
     async def _unlisten(self) -> None:
         server, self._server = self._server, None
-        if server is not None:
-            await server.shutdown()  # type: ignore[no-untyped-call]
+        if server is None:
+            return
+        # Stop accepting first and let connections accepted in this very loop turn finish
+        # their setup: on Python 3.11 a connection accepted just before the listener
+        # closes is never handed to its protocol and its socket leaks.
+        loop = asyncio.get_running_loop()
+        for sock in getattr(server.transport, "sockets", None) or ():
+            loop.remove_reader(sock.fileno())
+        for _ in range(3):
+            await asyncio.sleep(0)
+        await server.shutdown()  # type: ignore[no-untyped-call]
 
     def _sim_device(self) -> SimDevice:
         blocks: list[list[SimData]] = []
