@@ -1,0 +1,160 @@
+"""``python -m tmmaster.sim``: run the simulator until Ctrl-C or SIGTERM.
+
+``tmmaster sim`` mounts the same options: ``add_arguments(parser)`` fills a parser and
+``run(args)`` runs the simulator from the parsed namespace.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from types import FrameType
+
+from .._exceptions import TMMasterError
+from .._profiles import builtin_profile_names
+from .._robot_models import ROBOT_MODELS
+from ._server import RequestRecord, json_line
+from ._simulator import Simulator, simulator_summary
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the simulator's options to ``parser`` (used by ``tmmaster sim``); return it."""
+    robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
+    grippers = [n for n in builtin_profile_names() if n not in robots]
+    parser.add_argument(
+        "--profile",
+        default="article",
+        metavar="NAME|FILE.toml",
+        help=f"robot profile: {' or '.join(robots)}, or a TOML file (default: article)",
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        default=5020,
+        help="robot Modbus TCP port; 0 picks a free one (default: 5020)",
+    )
+    parser.add_argument(
+        "--bind",
+        default="127.0.0.1",
+        metavar="ADDRESS",
+        help="address to listen on (default: 127.0.0.1; Modbus has no authentication,"
+        " so think twice before 0.0.0.0)",
+    )
+    parser.add_argument(
+        "--time-scale",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="simulated seconds per wall second (default: 1.0)",
+    )
+    parser.add_argument(
+        "--tick-hz",
+        type=float,
+        default=50.0,
+        metavar="HZ",
+        help="control tick rate in wall Hz (default: 50, like the TM controller)",
+    )
+    parser.add_argument(
+        "--model",
+        default="tm5-700",
+        choices=sorted(ROBOT_MODELS),
+        help="arm model whose reach and speed limits time the motions (default: tm5-700)",
+    )
+    parser.add_argument(
+        "--gripper",
+        default=None,
+        metavar="NAME|FILE.toml",
+        help=f"separate gripper device: {' or '.join(grippers)}, or a TOML file"
+        " (default: none; the article profile has its gripper in the robot map)",
+    )
+    parser.add_argument(
+        "--gripper-port",
+        type=int,
+        default=5021,
+        metavar="N",
+        help="gripper Modbus TCP port; 0 picks a free one (default: 5021)",
+    )
+    parser.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help='inject a fault, e.g. "slow_responses:delay_s=0.2" (repeatable;'
+        " see docs/simulator.md)",
+    )
+    parser.add_argument(
+        "--log-json",
+        action="store_true",
+        help="print every Modbus request as one JSON line on stdout",
+    )
+    return parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``python -m tmmaster.sim``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m tmmaster.sim",
+        description="Simulated TM robot (and gripper) served over Modbus TCP.",
+    )
+    return add_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the simulator described by parsed ``args`` until SIGINT/SIGTERM; return 0."""
+
+    def echo(record: RequestRecord) -> None:
+        print(json_line(record), flush=True)
+
+    try:
+        sim = Simulator(
+            args.profile,
+            host=args.bind,
+            port=args.port,
+            time_scale=args.time_scale,
+            tick_hz=args.tick_hz,
+            model=args.model,
+            gripper=args.gripper,
+            gripper_port=args.gripper_port,
+            faults=args.fault,
+            request_listener=echo if args.log_json else None,
+        )
+    except (TMMasterError, ValueError, KeyError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        _ = signum, frame
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            sim.start()
+        except OSError as exc:
+            print(f"error: cannot listen: {exc}", file=sys.stderr)
+            return 1
+        for line in simulator_summary(sim):
+            print(line, flush=True)
+        print("press Ctrl-C to stop", flush=True)
+        # wait() with a timeout keeps the main thread responsive to signals.
+        while not stop.wait(0.5):
+            pass
+    finally:
+        sim.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    print("simulator stopped", flush=True)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m tmmaster.sim``."""
+    return run(build_parser().parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,397 @@
+"""The in-process simulator: register banks, controller, physics and Modbus servers.
+
+Everything that changes simulator state runs on ONE asyncio event loop in ONE
+background thread: the Modbus servers and the control tick. So the register banks
+need no locks; calls from other threads (tests, the CLI) are handed to the loop with
+``run_coroutine_threadsafe`` and wait for the answer.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, TypeVar
+
+from .._pose import Pose
+from .._profiles import gripper_profile, robot_profile
+from .._registers import GripperProfile, RobotProfile
+from .._robot_models import robot_model
+from ._backend import ObjectState, PhysicsBackend
+from ._bank import RegisterBank
+from ._controller import RobotController
+from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
+from ._kinematic import KinematicBackend
+from ._server import DeviceServer, RequestLog, RequestRecord
+from ._world import TableObject, World
+
+if TYPE_CHECKING:
+    from ._grippers import Blog2FG7Device, OnRobot2FG7Device
+
+T = TypeVar("T")
+
+#: How long a call from another thread waits for the loop before giving up.
+_CALL_TIMEOUT_S = 10.0
+
+
+def _as_fault(fault: Fault | str) -> Fault:
+    return parse_fault(fault) if isinstance(fault, str) else fault
+
+
+class Simulator:
+    """A simulated TM robot (and optional gripper) served over Modbus TCP on loopback."""
+
+    def __init__(
+        self,
+        profile: str | Path | RobotProfile = "article",
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        time_scale: float = 1.0,
+        tick_hz: float = 50.0,
+        model: str = "tm5-700",
+        gripper: str | Path | GripperProfile | None = None,
+        gripper_port: int = 0,
+        objects: Iterable[TableObject] | None = None,
+        faults: Iterable[Fault | str] = (),
+        backend: PhysicsBackend | None = None,
+        init_time_s: float = 0.2,
+        request_listener: Callable[[RequestRecord], None] | None = None,
+    ) -> None:
+        if not (math.isfinite(time_scale) and time_scale > 0):
+            raise ValueError(f"time_scale must be > 0, got {time_scale}")
+        if not (math.isfinite(tick_hz) and 0 < tick_hz <= 1000):
+            raise ValueError(f"tick_hz must be in (0, 1000], got {tick_hz}")
+        for name, value in (("port", port), ("gripper_port", gripper_port)):
+            if not 0 <= value <= 65535:
+                raise ValueError(f"{name} must be 0..65535, got {value}")
+        self._profile = robot_profile(profile)
+        self._model = robot_model(model)
+        self._time_scale = float(time_scale)
+        self._tick_hz = float(tick_hz)
+        self._host = host
+        self._backend: PhysicsBackend = (
+            backend if backend is not None else KinematicBackend(self._model, world=World(objects))
+        )
+        all_faults = [_as_fault(f) for f in faults]
+        network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
+        device = [f for f in all_faults if not is_network_fault(f)]
+        self._log = RequestLog(listener=request_listener)
+        self._bank = RegisterBank(self._profile)
+        self._controller = RobotController(
+            self._profile,
+            self._bank,
+            self._backend,
+            self._model,
+            faults=device,
+            init_time_s=init_time_s,
+        )
+        self._robot_server = DeviceServer(
+            "robot",
+            self._bank,
+            host=host,
+            port=port,
+            log=self._log,
+            device_id=None,  # the TM controller ignores the unit id
+        )
+        self._servers = [self._robot_server]
+        self._gripper_profile: GripperProfile | None = None
+        self._gripper_bank: RegisterBank | None = None
+        self._gripper: Blog2FG7Device | OnRobot2FG7Device | None = None
+        self._gripper_server: DeviceServer | None = None
+        if gripper is not None:
+            # Imported here: the gripper devices are only needed with a separate gripper.
+            from ._grippers import Blog2FG7Device, OnRobot2FG7Device
+
+            gp = gripper_profile(gripper)
+            self._gripper_profile = gp
+            self._gripper_bank = RegisterBank(gp)
+            device_class = Blog2FG7Device if gp.driver == "blog-2fg7" else OnRobot2FG7Device
+            self._gripper = device_class(
+                gp,
+                self._gripper_bank,
+                self._backend,
+                faults=device,
+                init_time_s=init_time_s,
+                # One backend, stepped once per tick: the robot controller steps it.
+                step_backend=False,
+            )
+            self._gripper_server = DeviceServer(
+                "gripper",
+                self._gripper_bank,
+                host=host,
+                port=gripper_port,
+                log=self._log,
+                # The Compute Box answers its own unit id only; the article's Isaac Sim
+                # server (blog-2fg7) answers any.
+                device_id=gp.device_id if gp.driver == "onrobot-2fg7" else None,
+                max_connections=gp.max_connections,
+            )
+            self._servers.append(self._gripper_server)
+        for server in self._servers:
+            server.set_faults(network)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._tick_task: asyncio.Task[None] | None = None
+        self._tick_error: BaseException | None = None
+        #: Control ticks run so far (a plain int: reading it from another thread is safe).
+        self.ticks = 0
+        self._closed = False
+
+    # -- properties ---------------------------------------------------------------------
+
+    @property
+    def host(self) -> str:
+        """Address the servers listen on."""
+        return self._host
+
+    @property
+    def port(self) -> int:
+        """The robot's Modbus TCP port (the real one after start with port 0)."""
+        return self._robot_server.port
+
+    @property
+    def gripper_port(self) -> int | None:
+        """The separate gripper's Modbus TCP port, or None without such a gripper."""
+        return None if self._gripper_server is None else self._gripper_server.port
+
+    @property
+    def profile(self) -> RobotProfile:
+        """The robot profile being served."""
+        return self._profile
+
+    @property
+    def gripper_profile(self) -> GripperProfile | None:
+        """The separate gripper's profile, or None."""
+        return self._gripper_profile
+
+    @property
+    def time_scale(self) -> float:
+        """Simulated seconds per wall second."""
+        return self._time_scale
+
+    @property
+    def running(self) -> bool:
+        """True between start() and close()."""
+        return self._thread is not None and not self._closed
+
+    # -- lifecycle ----------------------------------------------------------------------
+
+    def start(self) -> Simulator:
+        """Start the event loop thread, the servers and the control tick; return self."""
+        if self._closed:
+            raise RuntimeError("a closed Simulator cannot be restarted; make a new one")
+        if self._thread is not None:
+            return self
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        self._thread = threading.Thread(target=self._run_loop, name="tmmaster-sim", daemon=True)
+        self._thread.start()
+        try:
+            asyncio.run_coroutine_threadsafe(self._start_async(), loop).result(_CALL_TIMEOUT_S)
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Stop servers, tick and thread; safe to call more than once."""
+        if self._closed:
+            return
+        self._closed = True
+        loop, thread = self._loop, self._thread
+        if loop is None or thread is None:
+            return
+        if loop.is_running():
+            with contextlib.suppress(Exception):
+                asyncio.run_coroutine_threadsafe(self._stop_async(), loop).result(_CALL_TIMEOUT_S)
+            loop.call_soon_threadsafe(loop.stop)
+        thread.join(_CALL_TIMEOUT_S)
+
+    def __enter__(self) -> Simulator:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def _run_loop(self) -> None:
+        loop = self._loop
+        assert loop is not None
+        asyncio.set_event_loop(loop)
+        try:
+            loop.run_forever()
+        finally:
+            # Like asyncio.run(): cancel what is left (pymodbus request tasks) and close.
+            pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
+            for task in pending:
+                task.cancel()
+            if pending:
+                loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+            # Closing transports finish on a later loop turn (their sockets close in a
+            # call_soon callback): give them those turns before the loop goes away.
+            for _ in range(3):
+                loop.run_until_complete(asyncio.sleep(0))
+            loop.run_until_complete(loop.shutdown_asyncgens())
+            loop.close()
+
+    async def _start_async(self) -> None:
+        for server in self._servers:
+            await server.start()
+        self._tick_task = asyncio.get_running_loop().create_task(self._tick_forever())
+
+    async def _stop_async(self) -> None:
+        if self._tick_task is not None:
+            self._tick_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._tick_task
+        for server in self._servers:
+            await server.stop()
+
+    async def _tick_forever(self) -> None:
+        loop = asyncio.get_running_loop()
+        period = 1.0 / self._tick_hz
+        dt_sim = period * self._time_scale
+        deadline = loop.time()
+        while True:
+            try:
+                self._controller.tick(dt_sim)
+                if self._gripper is not None:
+                    self._gripper.tick(dt_sim)
+                self.ticks += 1
+            except Exception as exc:
+                # Stop ticking and report it through wait_for(): a hidden bug would
+                # otherwise look like a robot that never moves.
+                self._tick_error = exc
+                raise
+            deadline += period
+            delay = deadline - loop.time()
+            if delay < -10 * period:
+                # Far behind (a stalled machine): restart the schedule instead of bursting.
+                deadline = loop.time()
+                delay = 0.0
+            await asyncio.sleep(max(delay, 0.0))
+
+    # -- calls from any thread ----------------------------------------------------------
+
+    def _call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` on the loop thread (directly when not running) and return its result."""
+        loop = self._loop
+        if loop is None or self._closed or not loop.is_running():
+            return fn()
+        if threading.current_thread() is self._thread:
+            return fn()
+
+        async def wrapper() -> T:
+            return fn()
+
+        return asyncio.run_coroutine_threadsafe(wrapper(), loop).result(_CALL_TIMEOUT_S)
+
+    @property
+    def request_log(self) -> list[RequestRecord]:
+        """A copy of every Modbus request received so far (robot and gripper)."""
+        return self._log.records()
+
+    def clear_request_log(self) -> None:
+        """Forget the recorded requests."""
+        self._log.clear()
+
+    def objects(self) -> list[ObjectState]:
+        """Every object in the scene with its pose and whether it is held."""
+        return self._call(self._backend.objects)
+
+    def tcp_pose(self) -> Pose:
+        """The arm's current TCP pose."""
+        return self._call(self._backend.tcp_pose)
+
+    def field(self, name: str, *, device: str = "robot") -> Any:
+        """Engineering value of a field of the robot's (or ``device="gripper"``) register map."""
+        bank = self._bank if device == "robot" else self._gripper_bank
+        if bank is None:
+            raise ValueError(f"no {device} register bank in this simulator")
+        return self._call(lambda: bank.get(name))
+
+    def inject(self, fault: Fault | str) -> None:
+        """Add a fault at run time (a Fault model or a ``"kind:k=v,..."`` spec)."""
+        parsed = _as_fault(fault)
+
+        def apply() -> None:
+            if is_network_fault(parsed):
+                for server in self._servers:
+                    server.add_fault(parsed)  # type: ignore[arg-type]
+            else:
+                inject = getattr(self._controller, "inject", None)
+                if inject is None:
+                    raise NotImplementedError(
+                        f"{parsed.kind}: device faults can only be given to Simulator(faults=...)"
+                    )
+                inject(parsed)
+
+        self._call(apply)
+
+    def clear_faults(self) -> None:
+        """Remove every injected fault (network and device)."""
+
+        def apply() -> None:
+            for server in self._servers:
+                server.set_faults(())
+            clear = getattr(self._controller, "clear_faults", None)
+            if clear is not None:
+                clear()
+
+        self._call(apply)
+
+    def clear_error(self) -> None:
+        """Clear the robot's error state, as an operator would on the pendant."""
+        self._call(self._controller.clear_error)
+
+    def drop_connections(self) -> None:
+        """Close every client connection now (robot and gripper listeners keep listening)."""
+
+        def apply() -> None:
+            for server in self._servers:
+                server.drop_connections()
+
+        self._call(apply)
+
+    def wait_for(
+        self, predicate: Callable[[], bool], timeout: float = 5.0, *, interval: float = 0.005
+    ) -> None:
+        """Poll ``predicate`` until true; raise TimeoutError after ``timeout`` wall seconds."""
+        deadline = time.monotonic() + timeout
+        while True:
+            if self._tick_error is not None:
+                raise RuntimeError("the simulator's control tick failed") from self._tick_error
+            if predicate():
+                return
+            if time.monotonic() >= deadline:
+                raise TimeoutError(f"condition not met within {timeout} s")
+            time.sleep(interval)
+
+
+def simulator_summary(sim: Simulator) -> Sequence[str]:
+    """Human-readable lines saying where the simulator listens."""
+    lines = [
+        f"robot   modbus tcp {sim.host}:{sim.port}  profile={sim.profile.name}"
+        f" handshake={sim.profile.handshake.value} unit id: any",
+    ]
+    gp = sim.gripper_profile
+    if gp is not None:
+        unit = gp.device_id if gp.driver == "onrobot-2fg7" else "any"
+        limit = f" max connections={gp.max_connections}" if gp.max_connections else ""
+        lines.append(
+            f"gripper modbus tcp {sim.host}:{sim.gripper_port}  profile={gp.name}"
+            f" unit id: {unit}{limit}"
+        )
+    elif sim.profile.has("gripper_command"):
+        lines.append("gripper in the robot's register map (gripper_command)")
+    return lines

@@ -1,0 +1,52 @@
+"""pytest fixtures for testing code that talks to a TM robot: a simulator per test.
+
+Registered as the ``tmmaster`` pytest11 entry point, so installing tmmaster makes the
+fixtures available everywhere (disable with ``-p no:tmmaster``):
+
+``tm_simulator``
+    A started article-profile :class:`~tmmaster.sim.Simulator` on a free loopback
+    port, running 20x faster than real time; closed after the test.
+``tm_simulator_factory``
+    ``tm_simulator_factory(profile="article", **options)`` starts a Simulator with
+    any :class:`~tmmaster.sim.Simulator` options (defaults: a free port and
+    ``time_scale=20``); every one it made is closed after the test.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+if TYPE_CHECKING:
+    from ._simulator import Simulator
+
+#: Simulated seconds per wall second used by the fixtures: moves of a few seconds
+#: finish in a fraction of a second while a 50 Hz tick still sees every step.
+FIXTURE_TIME_SCALE = 20.0
+
+
+@pytest.fixture
+def tm_simulator_factory() -> Iterator[Callable[..., Simulator]]:
+    """Start Simulators with any options; all are closed after the test."""
+    # Imported here so merely loading the plugin stays cheap for unrelated test suites.
+    from ._simulator import Simulator
+
+    made: list[Simulator] = []
+
+    def make(profile: Any = "article", **options: Any) -> Simulator:
+        options.setdefault("time_scale", FIXTURE_TIME_SCALE)
+        sim = Simulator(profile, **options)
+        made.append(sim)
+        return sim.start()
+
+    yield make
+    for sim in reversed(made):
+        sim.close()
+
+
+@pytest.fixture
+def tm_simulator(tm_simulator_factory: Callable[..., Simulator]) -> Simulator:
+    """A started article-profile Simulator on a free port (time_scale 20), closed after the test."""
+    return tm_simulator_factory("article")
