@@ -1,0 +1,372 @@
+"""The simulator over real loopback TCP: served map, request log, faults, robustness."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from pymodbus.client import ModbusTcpClient
+from pymodbus.pdu import ModbusPDU
+
+from tmmaster._pose import Pose
+from tmmaster._profiles import robot_profile
+from tmmaster._registers import Table
+from tmmaster.sim import Simulator
+from tmmaster.sim._bank import RegisterBank
+
+Factory = Callable[..., Simulator]
+
+#: Article move: target (300, -200, 200, 180, 0, 90) x100 as int16, speed 50 %, PTP.
+TARGET = Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0)
+MOVE_WORDS = [30000, (-20000) & 0xFFFF, 20000, 18000, 0, 9000, 50, 1]
+
+
+@contextmanager
+def client(port: int, *, timeout: float = 1.0) -> Iterator[ModbusTcpClient]:
+    """A pymodbus client without pymodbus retries, closed afterwards."""
+    c = ModbusTcpClient("127.0.0.1", port=port, timeout=timeout, retries=0, reconnect_delay=0)
+    try:
+        yield c
+    finally:
+        c.close()  # type: ignore[no-untyped-call]
+
+
+def read(
+    c: ModbusTcpClient, table: Table, address: int, count: int = 1, unit: int = 1
+) -> ModbusPDU:
+    """One read request of the right function code for ``table``."""
+    call = {
+        Table.HOLDING: c.read_holding_registers,
+        Table.INPUT: c.read_input_registers,
+        Table.COIL: c.read_coils,
+        Table.DISCRETE_INPUT: c.read_discrete_inputs,
+    }[table]
+    return call(address, count=count, device_id=unit)
+
+
+def hr(c: ModbusTcpClient, address: int) -> int:
+    """One holding register, asserting the read worked."""
+    response = c.read_holding_registers(address, count=1, device_id=1)
+    assert not response.isError(), response
+    return int(response.registers[0])
+
+
+def fails(request: Callable[[], ModbusPDU]) -> bool:
+    """True when a request gets no normal answer (error response or broken connection)."""
+    try:
+        return bool(request().isError())
+    except (OSError, Exception):  # pymodbus raises its own errors or the socket's
+        return True
+
+
+def wait_ready(sim: Simulator) -> None:
+    sim.wait_for(lambda: sim.field("robot_mode") == sim.profile.mode_auto, 2.0)
+
+
+# -- the served map ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["article", "tmflow"])
+def test_every_field_is_served_and_unserved_addresses_give_exception_2(
+    tm_simulator_factory: Factory, name: str
+) -> None:
+    sim = tm_simulator_factory(name)
+    profile = robot_profile(name)
+    bank = RegisterBank(profile)
+    with client(sim.port) as c:
+        for field in profile.fields.values():
+            response = read(c, field.table, field.address, field.width)
+            assert not response.isError(), (field.name, response)
+        for table in Table:
+            runs = bank.readable(table)
+            # One past the last readable address of the table (or 0 for an empty table).
+            unserved = runs[-1][0] + runs[-1][1] if runs else 0
+            response = read(c, table, unserved)
+            assert response.isError(), (table, unserved)
+            assert response.exception_code == 2
+
+
+def test_served_values_come_from_the_bank(tm_simulator: Simulator) -> None:
+    wait_ready(tm_simulator)
+    with client(tm_simulator.port) as c:
+        assert hr(c, 0x0000) == 5  # robot_mode auto, set by the controller
+        pose = c.read_holding_registers(0x10, count=6, device_id=1).registers
+    assert pose == [0, 0, 30000, 18000, 0, 0]  # DEFAULT_HOME x100
+
+
+def test_tmflow_bits_are_exact(tm_simulator_factory: Factory) -> None:
+    sim = tm_simulator_factory("tmflow")
+    sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
+    with client(sim.port) as c:
+        bits = c.read_discrete_inputs(7201, count=2, device_id=1).bits[:2]
+        assert bits == [False, True]  # error, project_running
+        # 7206 lies in a bridgeable gap; 7209 is past the last discrete input.
+        assert c.read_discrete_inputs(7208, count=2, device_id=1).exception_code == 2
+
+
+# -- request log ------------------------------------------------------------------------
+
+
+def test_request_log_shows_one_fc16_per_move(tm_simulator: Simulator) -> None:
+    wait_ready(tm_simulator)
+    tm_simulator.clear_request_log()
+    with client(tm_simulator.port) as c:
+        assert not c.write_registers(0x200, MOVE_WORDS, device_id=7).isError()
+        hr(c, 0x0001)
+    log = tm_simulator.request_log
+    assert [(r.function_code, r.address, r.count) for r in log] == [(16, 0x200, 8), (3, 1, 1)]
+    assert log[0].values == tuple(MOVE_WORDS)
+    assert log[0].device_id == 7  # the TM controller answers any unit id
+    assert log[0].server == "robot"
+    assert log[1].values is None
+    assert log[0].time <= log[1].time
+    tm_simulator.clear_request_log()
+    assert tm_simulator.request_log == []
+
+
+def test_refused_write_changes_nothing(tm_simulator: Simulator) -> None:
+    wait_ready(tm_simulator)
+    with client(tm_simulator.port) as c:
+        # motion_status is written by the device only.
+        response = c.write_register(0x0001, 1, device_id=1)
+        assert response.exception_code == 2
+        assert hr(c, 0x0001) == 0
+
+
+# -- the article's race -----------------------------------------------------------------
+
+
+def test_racy_article_master_sees_done_before_the_robot_moved(
+    tm_simulator_factory: Factory,
+) -> None:
+    """The article's master: FC16 the move, then poll motion_status == 0 as "done"."""
+    sim = tm_simulator_factory("article", time_scale=5.0)
+    wait_ready(sim)
+    with client(sim.port) as c:
+        for _attempt in range(5):
+            # Start right after a tick, so the write and the first poll fit before the next.
+            ticks = sim.ticks
+            sim.wait_for(lambda: sim.ticks != ticks, 1.0, interval=0.0002)  # noqa: B023
+            before = sim.ticks
+            assert not c.write_registers(0x200, MOVE_WORDS, device_id=1).isError()
+            racy_done = hr(c, 0x0001) == 0  # the article's completion check
+            pose_at_done = sim.tcp_pose()
+            if sim.ticks == before:
+                break
+        else:
+            pytest.fail("could not fit write + poll between two ticks")
+        assert racy_done, "the racy master reads idle and believes the move is done"
+        assert not pose_at_done.is_close(TARGET), "but the robot had not moved at all"
+        # Afterwards the robot does start the move the master thought was over.
+        sim.wait_for(lambda: hr(c, 0x0001) == 1, 1.0)
+        assert not sim.tcp_pose().is_close(TARGET)
+
+
+def test_correct_handshake_ends_at_the_target(tm_simulator: Simulator) -> None:
+    wait_ready(tm_simulator)
+    with client(tm_simulator.port) as c:
+        assert not c.write_registers(0x200, MOVE_WORDS, device_id=1).isError()
+        tm_simulator.wait_for(lambda: hr(c, 0x0207) == 0, 2.0)  # acknowledged
+        tm_simulator.wait_for(lambda: hr(c, 0x0001) == 0, 5.0)  # then idle
+        assert tm_simulator.tcp_pose().is_close(TARGET)
+        words = c.read_holding_registers(0x10, count=6, device_id=1).registers
+    assert words == MOVE_WORDS[:6]
+
+
+# -- network faults ---------------------------------------------------------------------
+
+
+def test_drop_connections_after_n_requests(tm_simulator_factory: Factory) -> None:
+    sim = tm_simulator_factory(faults=["drop_connections:after_requests=2"])
+    with client(sim.port) as c:
+        hr(c, 0)
+        hr(c, 0)  # the second request is answered, then the connection is closed
+        assert fails(lambda: c.read_holding_registers(0, count=1, device_id=1))
+    with client(sim.port) as c:  # once=true: a new connection is served normally
+        for _ in range(3):
+            hr(c, 0)
+
+
+def test_drop_connections_injected_at_run_time_repeats(tm_simulator: Simulator) -> None:
+    tm_simulator.inject("drop_connections:after_requests=1,once=false")
+    for _ in range(2):
+        with client(tm_simulator.port) as c:
+            hr(c, 0)
+            assert fails(lambda: c.read_holding_registers(0, count=1, device_id=1))
+    tm_simulator.clear_faults()
+    with client(tm_simulator.port) as c:
+        hr(c, 0)
+        hr(c, 0)
+
+
+def _connect_refused(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) != 0
+
+
+def test_stop_listening_then_listening_again_on_the_same_port(
+    tm_simulator_factory: Factory,
+) -> None:
+    sim = tm_simulator_factory(faults=["stop_listening:after_requests=1,duration_s=0.4"])
+    port = sim.port
+    with client(port) as c:
+        hr(c, 0)
+    sim.wait_for(lambda: _connect_refused(port), 1.0)
+    started = time.monotonic()
+    sim.wait_for(lambda: not _connect_refused(port), 2.0, interval=0.02)
+    assert time.monotonic() - started > 0.2
+    assert sim.port == port
+    with client(port) as c:
+        hr(c, 0)
+
+
+def test_slow_responses(tm_simulator: Simulator) -> None:
+    with client(tm_simulator.port) as c:
+        tm_simulator.inject("slow_responses:delay_s=0.25")
+        started = time.monotonic()
+        hr(c, 0)
+        assert time.monotonic() - started >= 0.25
+        tm_simulator.clear_faults()
+        started = time.monotonic()
+        hr(c, 0)
+        assert time.monotonic() - started < 0.2
+
+
+def test_modbus_exception_for_an_address_range(tm_simulator_factory: Factory) -> None:
+    sim = tm_simulator_factory(
+        faults=["modbus_exception:table=holding,start=0x200,end=0x207,code=6"]
+    )
+    with client(sim.port) as c:
+        assert c.write_registers(0x200, MOVE_WORDS, device_id=1).exception_code == 6
+        assert c.read_holding_registers(0x1FF + 8, count=1, device_id=1).exception_code == 6
+        hr(c, 0)  # outside the range
+    assert sim.field("command") == "none" or sim.field("command") == 0  # nothing written
+    assert [r.refused for r in sim.request_log][:2] == [6, 6]
+
+
+# -- the gripper device -----------------------------------------------------------------
+
+
+def test_onrobot_gripper_allows_one_connection_and_its_unit_id(
+    tm_simulator_factory: Factory,
+) -> None:
+    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    assert sim.gripper_port is not None
+    assert sim.gripper_port != sim.port
+    with client(sim.gripper_port) as first:
+        product = first.read_holding_registers(1536, count=1, device_id=65)
+        assert not product.isError()
+        with client(sim.gripper_port, timeout=0.5) as second:
+            second.connect()  # type: ignore[no-untyped-call]
+            assert fails(lambda: second.read_holding_registers(1536, count=1, device_id=65))
+        # The first connection is unaffected; a wrong unit id gets a gateway exception.
+        assert not first.read_holding_registers(256, count=1, device_id=65).isError()
+        assert first.read_holding_registers(256, count=1, device_id=1).exception_code == 0x0B
+    with client(sim.gripper_port) as again:  # the first has gone: a new client is served
+        sim.wait_for(
+            lambda: not again.read_holding_registers(1536, count=1, device_id=65).isError(), 2.0
+        )
+    assert {r.server for r in sim.request_log} == {"gripper"}
+
+
+# -- robustness -------------------------------------------------------------------------
+
+
+def test_garbage_half_open_and_abrupt_clients_do_not_stop_service(tm_simulator: Simulator) -> None:
+    port = tm_simulator.port
+    garbage = socket.create_connection(("127.0.0.1", port))
+    half_open = socket.create_connection(("127.0.0.1", port))
+    abrupt = socket.create_connection(("127.0.0.1", port))
+    try:
+        garbage.sendall(os.urandom(64) + b"\xff" * 600)
+        half_open.sendall(b"\x00\x01\x00\x00\x00\x06")  # an MBAP header and nothing more
+        # A full FC3 request, then RST without waiting for the answer.
+        abrupt.sendall(struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, 0, 1))
+        abrupt.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        abrupt.close()
+        with client(port) as c:
+            for _ in range(5):
+                hr(c, 0)
+    finally:
+        garbage.close()
+        half_open.close()
+        abrupt.close()
+    with client(port) as c:
+        hr(c, 0)
+
+
+# -- lifecycle --------------------------------------------------------------------------
+
+
+def test_close_twice_leaves_no_thread_or_listener() -> None:
+    before = set(threading.enumerate())
+    sim = Simulator(time_scale=20.0)
+    with sim:
+        port = sim.port
+        assert sim.running
+    sim.close()
+    sim.close()
+    assert not sim.running
+    assert set(threading.enumerate()) <= before
+    assert _connect_refused(port)
+    with pytest.raises(RuntimeError):
+        sim.start()
+
+
+def test_unknown_options_fail_before_anything_starts() -> None:
+    with pytest.raises(ValueError, match="time_scale"):
+        Simulator(time_scale=0)
+    with pytest.raises(ValueError, match="unknown robot model"):
+        Simulator(model="tm99")
+
+
+def test_objects_and_pose_are_visible(tm_simulator: Simulator) -> None:
+    names = [o.name for o in tm_simulator.objects()]
+    assert names == ["part"]
+    assert tm_simulator.tcp_pose().z == pytest.approx(300.0)
+
+
+# -- the command line -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_cli_runs_until_signal_and_exits_0(sig: signal.Signals) -> None:
+    src = Path(__file__).resolve().parents[1] / "src"
+    env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10", "--log-json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        assert proc.stdout is not None
+        line = ""
+        deadline = time.monotonic() + 10
+        while "robot" not in line and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+        assert "modbus tcp 127.0.0.1:" in line, line
+        port = int(line.split("127.0.0.1:")[1].split()[0])
+        with client(port) as c:
+            c.read_holding_registers(0, count=1, device_id=1)
+        proc.send_signal(sig)
+        out, _err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0
+    assert '"function_code":3' in out
+    assert "simulator stopped" in out
