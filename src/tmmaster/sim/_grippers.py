@@ -302,8 +302,18 @@ class OnRobot2FG7Device(_GripperDevice):
                     requested_mm=width,
                     grip=label,
                 )
-            force = min(max(float(self._bank.get("target_force")), 20.0), 140.0)
-            speed = self.speed_mm_s(float(self._bank.get("target_speed")))
+            requested_force = float(self._bank.get("target_force"))
+            force = min(max(requested_force, 20.0), 140.0)
+            percent = float(self._bank.get("target_speed"))
+            if force != requested_force or not 10.0 <= percent <= 100.0:
+                # Raw network writes can hold anything; the real box limits, we log it.
+                self._log.warning(
+                    "sim.value_clamped",
+                    device=self._profile.name,
+                    force_n=requested_force,
+                    speed_percent=percent,
+                )
+            speed = self.speed_mm_s(percent)
             if self._move(clamped, speed_mm_s=speed, force_n=force):
                 self._force = force
                 self._publish(True)
