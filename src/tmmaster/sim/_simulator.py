@@ -329,12 +329,9 @@ class Simulator:
                 for server in self._servers:
                     server.add_fault(parsed)  # type: ignore[arg-type]
             else:
-                inject = getattr(self._controller, "inject", None)
-                if inject is None:
-                    raise NotImplementedError(
-                        f"{parsed.kind}: device faults can only be given to Simulator(faults=...)"
-                    )
-                inject(parsed)
+                self._controller.inject(parsed)
+                if self._gripper is not None:
+                    self._gripper.inject(parsed)
 
         self._call(apply)
 
@@ -344,9 +341,9 @@ class Simulator:
         def apply() -> None:
             for server in self._servers:
                 server.set_faults(())
-            clear = getattr(self._controller, "clear_faults", None)
-            if clear is not None:
-                clear()
+            self._controller.clear_faults()
+            if self._gripper is not None:
+                self._gripper.clear_faults()
 
         self._call(apply)
 
