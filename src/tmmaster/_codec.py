@@ -59,7 +59,7 @@ def _round_half_away(x: float) -> int:
 
 
 def encode(field: RegisterField, value: Value) -> list[int]:
-    """Register words (or one 0/1 for a bit) for ``value``; raises before any I/O if it can't fit."""
+    """Register words (or one 0/1 for a bit) for ``value``; raises if it can't fit."""
     if field.dtype is DataType.BOOL:
         if isinstance(value, bool) or value in (0, 1):
             return [int(bool(value))]

@@ -11,9 +11,9 @@ import tomllib
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import TypeAdapter, ValidationError
+from pydantic import Field, TypeAdapter, ValidationError
 
 from ._codec import describe_range
 from ._exceptions import RegisterMapError
@@ -21,20 +21,26 @@ from ._registers import DataType, GripperProfile, RegisterField, RobotProfile
 
 Profile = RobotProfile | GripperProfile
 
-_ADAPTER: TypeAdapter[Profile] = TypeAdapter(Profile)
+_ADAPTER: TypeAdapter[Profile] = TypeAdapter(
+    Annotated[RobotProfile | GripperProfile, Field(discriminator="kind")]
+)
 
 
 def builtin_profile_names() -> list[str]:
     """Names of the profiles shipped with tmmaster, sorted."""
     folder = resources.files("tmmaster").joinpath("profiles")
-    return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
+    return sorted(
+        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
+    )
 
 
 def _builtin_data(name: str) -> dict[str, Any]:
     if name not in builtin_profile_names():
         known = ", ".join(builtin_profile_names())
         raise RegisterMapError(f"unknown profile {name!r} (built-in profiles: {known})")
-    text = resources.files("tmmaster").joinpath("profiles").joinpath(f"{name}.toml").read_text("utf-8")
+    text = (
+        resources.files("tmmaster").joinpath("profiles").joinpath(f"{name}.toml").read_text("utf-8")
+    )
     return tomllib.loads(text)
 
 
@@ -60,6 +66,8 @@ def profile_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Pro
         data = _merge(base, data)
         for name in remove:
             data.get("fields", {}).pop(name, None)
+    if data.get("kind") not in ("robot", "gripper"):
+        raise RegisterMapError(f'{source}: kind must be "robot" or "gripper"')
     try:
         return _ADAPTER.validate_python(data)
     except ValidationError as exc:
@@ -101,8 +109,10 @@ def gripper_profile(name_or_path: str | Path | GripperProfile) -> GripperProfile
 def _format_errors(exc: ValidationError) -> str:
     lines = []
     for error in exc.errors():
-        location = ".".join(str(part) for part in error["loc"])
-        lines.append(f"  {location or '<profile>'}: {error['msg']}")
+        # The first location part is the union tag ("robot" / "gripper"): noise to a user.
+        location = ".".join(str(part) for part in error["loc"][1:])
+        message = error["msg"].removeprefix("Value error, ")
+        lines.append(f"  {location or '<profile>'}: {message}")
     return "\n".join(lines)
 
 
@@ -117,7 +127,9 @@ def _meaning(field: RegisterField) -> str:
     if field.values:
         parts.append(", ".join(f"{k} {v}" for k, v in sorted(field.values.items())))
     if field.bits:
-        parts.append(", ".join(f"bit{b} {n}" for n, b in sorted(field.bits.items(), key=lambda i: i[1])))
+        parts.append(
+            ", ".join(f"bit{b} {n}" for n, b in sorted(field.bits.items(), key=lambda i: i[1]))
+        )
     return "; ".join(parts).replace("|", "\\|")
 
 

@@ -8,6 +8,7 @@ past address 65535, and nothing in a read-only table is writable.
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import Iterable
 from enum import StrEnum
@@ -130,11 +131,7 @@ class RegisterField(BaseModel):
                 f"field {self.name}: access {self.access.value!r} is impossible in the"
                 f" read-only {self.table.value} table"
             )
-        if (
-            self.minimum is not None
-            and self.maximum is not None
-            and self.minimum > self.maximum
-        ):
+        if self.minimum is not None and self.maximum is not None and self.minimum > self.maximum:
             raise ValueError(f"field {self.name}: minimum {self.minimum} > maximum {self.maximum}")
         if self.bits and self.dtype not in (DataType.UINT16, DataType.INT16):
             raise ValueError(f"field {self.name}: named bits need a 16-bit register")
@@ -200,7 +197,7 @@ class RegisterMap(BaseModel):
             ordered = sorted(
                 (f for f in self.fields.values() if f.table is table), key=lambda f: f.address
             )
-            for before, after in zip(ordered, ordered[1:], strict=False):
+            for before, after in itertools.pairwise(ordered):
                 if after.address <= before.end:
                     raise ValueError(
                         f"fields {before.name} ({before.address}..{before.end}) and"

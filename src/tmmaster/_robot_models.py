@@ -66,9 +66,7 @@ class RobotModel(BaseModel):
         )
         # Shoulder and elbow: approximate the joint swing by the change of the TCP's
         # position relative to the shoulder, measured as an angle over half the reach.
-        radial_change = math.hypot(
-            _radius(target) - _radius(start), target.z - start.z
-        )
+        radial_change = math.hypot(_radius(target) - _radius(start), target.z - start.z)
         arm = trapezoid_time(
             math.degrees(radial_change / (self.reach_mm / 2.0)),
             min(self.joint_speed_deg_s[1:3]) * scale,

@@ -1,0 +1,89 @@
+"""The one retry policy: exponential backoff with jitter, bounded by attempts and time.
+
+Only transient transport failures are retried (connection refused or lost, response
+timeout, device busy). pymodbus's own retries are switched off by the transport, so
+retries never multiply and no write is resent behind the caller's back.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Annotated, TypeVar
+
+import structlog
+import tenacity
+from pydantic import BaseModel, ConfigDict, Field
+
+from ._exceptions import (
+    ConnectError,
+    ConnectionLostError,
+    DeviceBusyError,
+    ResponseTimeoutError,
+    TransportError,
+)
+
+T = TypeVar("T")
+
+#: Failures worth another attempt: the request may succeed once the link is back.
+TRANSIENT_ERRORS: tuple[type[TransportError], ...] = (
+    ConnectError,
+    ConnectionLostError,
+    ResponseTimeoutError,
+    DeviceBusyError,
+)
+
+_log = structlog.get_logger("tmmaster.transport")
+
+
+class RetryPolicy(BaseModel):
+    """How often and how long to retry a request that failed transiently."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: Total attempts, the first one included (1 = never retry).
+    attempts: Annotated[int, Field(ge=1, le=100)] = 5
+    #: Give up once this much time has passed since the first attempt, in seconds.
+    total_time_s: Annotated[float, Field(gt=0)] = 10.0
+    initial_backoff_s: Annotated[float, Field(ge=0)] = 0.05
+    max_backoff_s: Annotated[float, Field(ge=0)] = 2.0
+    jitter_s: Annotated[float, Field(ge=0)] = 0.05
+
+    def call(
+        self,
+        operation: str,
+        fn: Callable[[], T],
+        *,
+        on_retry: Callable[[BaseException], None] | None = None,
+    ) -> T:
+        """Run ``fn``, retrying transient errors; the last error propagates unchanged."""
+
+        def before_sleep(state: tenacity.RetryCallState) -> None:
+            error = state.outcome.exception() if state.outcome else None
+            _log.warning(
+                "transport.retry",
+                operation=operation,
+                attempt=state.attempt_number,
+                delay_s=round(state.upcoming_sleep, 3),
+                error=str(error),
+                error_type=type(error).__name__,
+            )
+            if on_retry is not None and error is not None:
+                on_retry(error)
+
+        retrying = tenacity.Retrying(
+            stop=tenacity.stop_after_attempt(self.attempts)
+            | tenacity.stop_after_delay(self.total_time_s),
+            # Composed from the two long-stable strategies: wait_exponential_jitter's
+            # parameters were renamed in tenacity 9.2.
+            wait=tenacity.wait_exponential(
+                multiplier=self.initial_backoff_s, max=self.max_backoff_s
+            )
+            + tenacity.wait_random(0, self.jitter_s),
+            retry=tenacity.retry_if_exception_type(TRANSIENT_ERRORS),
+            before_sleep=before_sleep,
+            reraise=True,
+        )
+        return retrying(fn)
+
+
+NO_RETRY = RetryPolicy(attempts=1)

@@ -1,0 +1,389 @@
+"""The one module that calls pymodbus's client.
+
+A :class:`ModbusTransport` reads and writes register blocks for one device, counts
+what it does, maps every pymodbus failure to a :class:`TransportError`, and applies
+the :class:`RetryPolicy`. pymodbus's own retries are off (``retries=0``): a request
+is sent once per attempt we decide on, never again behind our back.
+
+Reads, and writes the caller declares idempotent, retry and reconnect. A write that
+triggers a command is sent exactly once: if it fails, the caller must read the
+device's state back to learn whether the command arrived.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, TypeVar
+
+import structlog
+from pymodbus import ModbusException
+from pymodbus.client import ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusIOException
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+
+from ._codec import Value, decode, encode
+from ._exceptions import (
+    MODBUS_EXCEPTIONS,
+    ConfigError,
+    ConnectError,
+    ConnectionLostError,
+    ModbusExceptionError,
+    ResponseTimeoutError,
+    TransportError,
+)
+from ._registers import RegisterField, Table
+from ._retry import NO_RETRY, RetryPolicy
+
+T = TypeVar("T")
+
+_log = structlog.get_logger("tmmaster.transport")
+
+#: Protocol limits of one request (Modbus application protocol spec, 6.1 - 6.12).
+MAX_READ_REGISTERS = 125
+MAX_READ_BITS = 2000
+MAX_WRITE_REGISTERS = 123
+MAX_WRITE_BITS = 1968
+
+
+class ConnectionState(StrEnum):
+    """Where a transport's connection stands."""
+
+    NEW = "new"
+    CONNECTED = "connected"
+    DISCONNECTED = "disconnected"  # lost; the next request reconnects
+    CLOSED = "closed"  # closed by the user; further requests are refused
+
+
+@dataclass
+class TransportStats:
+    """Counters of one transport, for run reports and benchmarks."""
+
+    requests: int = 0
+    retries: int = 0
+    reconnects: int = 0
+    errors: int = 0
+    bytes_sent: int = 0
+    bytes_received: int = 0
+    requests_by_function: dict[int, int] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """A plain-dict copy, for JSON reports."""
+        return {
+            "requests": self.requests,
+            "retries": self.retries,
+            "reconnects": self.reconnects,
+            "errors": self.errors,
+            "bytes_sent": self.bytes_sent,
+            "bytes_received": self.bytes_received,
+            "requests_by_function": dict(sorted(self.requests_by_function.items())),
+        }
+
+
+@dataclass(frozen=True)
+class Block:
+    """A contiguous address range of one table, read or written in one request."""
+
+    table: Table
+    address: int
+    count: int
+    fields: tuple[RegisterField, ...]
+
+
+def plan_reads(fields: Iterable[RegisterField], *, max_gap: int = 0) -> list[Block]:
+    """Group fields into as few contiguous blocks as the protocol limits allow."""
+    blocks: list[Block] = []
+    by_table: dict[Table, list[RegisterField]] = {}
+    for f in fields:
+        by_table.setdefault(f.table, []).append(f)
+    for table in Table:
+        ordered = sorted(by_table.get(table, []), key=lambda f: f.address)
+        limit = MAX_READ_BITS if table.is_bit else MAX_READ_REGISTERS
+        current: list[RegisterField] = []
+        for f in ordered:
+            if current:
+                start = current[0].address
+                end = max(c.end for c in current)
+                if f.address - end - 1 <= max_gap and f.end - start + 1 <= limit:
+                    current.append(f)
+                    continue
+                blocks.append(_block(table, current))
+            current = [f]
+        if current:
+            blocks.append(_block(table, current))
+    return blocks
+
+
+def _block(table: Table, fields: list[RegisterField]) -> Block:
+    start = fields[0].address
+    end = max(f.end for f in fields)
+    return Block(table, start, end - start + 1, tuple(fields))
+
+
+def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Block, list[int]]]:
+    """Encode every value first, then group adjacent fields into write blocks.
+
+    Encoding everything before returning means an out-of-range value anywhere refuses
+    the whole write: nothing is sent.
+    """
+    encoded: list[tuple[RegisterField, list[int]]] = []
+    for f, value in values:
+        if not f.access.writable:
+            raise ConfigError(f"{f.name}: field is read-only ({f.table.value} {f.address})")
+        encoded.append((f, encode(f, value)))
+    encoded.sort(key=lambda item: (item[0].table.value, item[0].address))
+    plans: list[tuple[Block, list[int]]] = []
+    group: list[tuple[RegisterField, list[int]]] = []
+
+    def flush() -> None:
+        if group:
+            table = group[0][0].table
+            words = [w for _, ws in group for w in ws]
+            plans.append((_block(table, [g[0] for g in group]), words))
+            group.clear()
+
+    for f, words in encoded:
+        if group:
+            last = group[-1][0]
+            limit = MAX_WRITE_BITS if f.table.is_bit else MAX_WRITE_REGISTERS
+            size = f.end - group[0][0].address + 1
+            if last.table is not f.table or f.address != last.end + 1 or size > limit:
+                flush()
+        group.append((f, words))
+    flush()
+    return plans
+
+
+class ModbusTransport:
+    """Reads and writes one Modbus TCP device, with counting, error mapping and retries."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int = 502,
+        *,
+        device_id: int = 1,
+        timeout: float = 1.0,
+        retry: RetryPolicy | None = None,
+        name: str = "device",
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.device_id = device_id
+        self.timeout = timeout
+        self.retry = retry if retry is not None else RetryPolicy()
+        self.name = name
+        self.stats = TransportStats()
+        self._state = ConnectionState.NEW
+        self._lock = threading.RLock()
+        self._log = _log.bind(device=name, host=host, port=port, device_id=device_id)
+        # retries=0: pymodbus must never resend a request on its own (reference 5).
+        self._client = ModbusTcpClient(
+            host,
+            port=port,
+            timeout=timeout,
+            retries=0,
+            reconnect_delay=0,
+            trace_packet=self._count_bytes,
+        )
+
+    # -- connection --------------------------------------------------------
+
+    @property
+    def state(self) -> ConnectionState:
+        """Current connection state."""
+        return self._state
+
+    def connect(self) -> None:
+        """Open the connection, retrying per the policy; raises :class:`ConnectError`."""
+        with self._lock:
+            self._refuse_if_closed()
+            self.retry.call(f"connect {self.name}", self._connect_once, on_retry=self._on_retry)
+
+    def close(self) -> None:
+        """Close the connection; safe to call more than once."""
+        with self._lock:
+            if self._state is ConnectionState.CLOSED:
+                return
+            self._client.close()  # type: ignore[no-untyped-call]
+            self._state = ConnectionState.CLOSED
+            self._log.debug("transport.closed")
+
+    def __enter__(self) -> ModbusTransport:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _refuse_if_closed(self) -> None:
+        if self._state is ConnectionState.CLOSED:
+            raise ConnectError(f"{self.name}: transport is closed")
+
+    def _connect_once(self) -> None:
+        if self._client.connected:
+            return
+        reconnect = self._state is ConnectionState.DISCONNECTED
+        if not self._client.connect():  # type: ignore[no-untyped-call]
+            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}")
+        if reconnect:
+            self.stats.reconnects += 1
+            self._log.info("transport.reconnected")
+        else:
+            self._log.debug("transport.connected")
+        self._state = ConnectionState.CONNECTED
+
+    def _drop(self) -> None:
+        # After a failure the stream may still carry a late answer to the failed
+        # request; a fresh connection guarantees it can't be taken for the next one.
+        self._client.close()  # type: ignore[no-untyped-call]
+        if self._state is not ConnectionState.CLOSED:
+            self._state = ConnectionState.DISCONNECTED
+
+    def _on_retry(self, _error: BaseException) -> None:
+        self.stats.retries += 1
+
+    def _count_bytes(self, sending: bool, data: bytes) -> bytes:
+        if sending:
+            self.stats.bytes_sent += len(data)
+        else:
+            self.stats.bytes_received += len(data)
+        return data
+
+    # -- raw requests --------------------------------------------------------
+
+    def _execute(self, what: str, function_code: int, call: Callable[[], ModbusPDU]) -> ModbusPDU:
+        """Send one request once; map every failure to a TransportError."""
+        self._refuse_if_closed()
+        self._connect_once()
+        self.stats.requests += 1
+        self.stats.requests_by_function[function_code] = (
+            self.stats.requests_by_function.get(function_code, 0) + 1
+        )
+        try:
+            response = call()
+        except ConnectionException as exc:
+            self.stats.errors += 1
+            self._drop()
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        except ModbusIOException as exc:
+            self.stats.errors += 1
+            self._drop()
+            raise ResponseTimeoutError(
+                f"{self.name}: no answer to {what} within {self.timeout:g} s"
+            ) from exc
+        except ModbusException as exc:
+            self.stats.errors += 1
+            self._drop()
+            raise TransportError(f"{self.name}: {what} failed: {exc}") from exc
+        except OSError as exc:
+            self.stats.errors += 1
+            self._drop()
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        if isinstance(response, ExceptionResponse) or response.isError():
+            self.stats.errors += 1
+            code = int(getattr(response, "exception_code", 0))
+            error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
+            raise error_class(f"{self.name}: device refused {what}", code=code)
+        return response
+
+    def _run(self, what: str, fn: Callable[[], T], *, retry: bool) -> T:
+        with self._lock:
+            self._refuse_if_closed()
+            policy = self.retry if retry else NO_RETRY
+            return policy.call(what, fn, on_retry=self._on_retry)
+
+    def read_block(
+        self, table: Table, address: int, count: int, *, retry: bool = True
+    ) -> list[int]:
+        """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
+        what = f"read {table.value} {address}+{count}"
+        kw = {"count": count, "device_id": self.device_id}
+        reader: dict[Table, tuple[int, Callable[..., ModbusPDU]]] = {
+            Table.HOLDING: (3, self._client.read_holding_registers),
+            Table.INPUT: (4, self._client.read_input_registers),
+            Table.COIL: (1, self._client.read_coils),
+            Table.DISCRETE_INPUT: (2, self._client.read_discrete_inputs),
+        }
+        function_code, method = reader[table]
+
+        def once() -> list[int]:
+            response = self._execute(what, function_code, lambda: method(address, **kw))
+            if table.is_bit:
+                return [int(b) for b in response.bits[:count]]
+            registers = list(response.registers)
+            if len(registers) != count:
+                raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+            return list(registers)
+
+        return self._run(what, once, retry=retry)
+
+    def write_block(self, table: Table, address: int, words: Sequence[int], *, retry: bool) -> None:
+        """Write words (holding, FC16) or bits (coils, FC05/FC15) in one request."""
+        if table.read_only:
+            raise ConfigError(f"the {table.value} table is read-only")
+        what = f"write {table.value} {address}+{len(words)}"
+        values = list(words)
+
+        def once() -> None:
+            if table is Table.HOLDING:
+                self._execute(
+                    what,
+                    16,
+                    lambda: self._client.write_registers(address, values, device_id=self.device_id),
+                )
+            elif len(values) == 1:
+                self._execute(
+                    what,
+                    5,
+                    lambda: self._client.write_coil(
+                        address, bool(values[0]), device_id=self.device_id
+                    ),
+                )
+            else:
+                self._execute(
+                    what,
+                    15,
+                    lambda: self._client.write_coils(
+                        address, [bool(v) for v in values], device_id=self.device_id
+                    ),
+                )
+
+        self._run(what, once, retry=retry)
+
+    # -- fields ---------------------------------------------------------------
+
+    def read_fields(
+        self, fields: Iterable[RegisterField], *, max_gap: int = 0, retry: bool = True
+    ) -> dict[str, Value]:
+        """Read and decode fields, one request per contiguous block."""
+        result: dict[str, Value] = {}
+        for block in plan_reads(fields, max_gap=max_gap):
+            words = self.read_block(block.table, block.address, block.count, retry=retry)
+            for f in block.fields:
+                offset = f.address - block.address
+                result[f.name] = decode(f, words[offset : offset + f.width])
+        return result
+
+    def write_fields(
+        self,
+        values: Sequence[tuple[RegisterField, Value]] | Mapping[RegisterField, Value],
+        *,
+        retry: bool,
+    ) -> None:
+        """Encode every value (refusing before any I/O), then write each block in one request.
+
+        Pass ``retry=False`` for a write that triggers a command: it is sent once.
+        """
+        items = list(values.items()) if isinstance(values, Mapping) else list(values)
+        plans = plan_writes(items)
+        for block, words in plans:
+            self.write_block(block.table, block.address, words, retry=retry)
+
+
+def monotonic() -> float:
+    """The clock every wait in tmmaster uses."""
+    return time.monotonic()

@@ -1,0 +1,52 @@
+"""Shared fixtures: every test must leave no thread and no socket behind."""
+
+from __future__ import annotations
+
+import gc
+import os
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+
+def _open_sockets() -> set[str]:
+    # Linux only: each open socket is a /proc/self/fd link to "socket:[inode]".
+    fds = "/proc/self/fd"
+    found = set()
+    for fd in os.listdir(fds):
+        try:
+            target = os.readlink(f"{fds}/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:"):
+            found.add(target)
+    return found
+
+
+@pytest.fixture(autouse=True)
+def no_leaks() -> Iterator[None]:
+    """Fail a test that leaves a thread or a socket open (python-can style)."""
+    if not os.path.isdir("/proc/self/fd"):
+        yield
+        return
+    threads_before = set(threading.enumerate())
+    sockets_before = _open_sockets()
+    yield
+    deadline = time.monotonic() + 2.0
+    while True:
+        # pymodbus's server can drop an accepted-but-unserved connection without
+        # closing it; such a socket is unreachable garbage, closed by a collection.
+        gc.collect()
+        new_threads = [t for t in threading.enumerate() if t not in threads_before and t.is_alive()]
+        new_sockets = _open_sockets() - sockets_before
+        if not new_threads and not new_sockets:
+            return
+        if time.monotonic() > deadline:
+            break
+        time.sleep(0.02)
+    pytest.fail(
+        f"test leaked {len(new_threads)} thread(s) {[t.name for t in new_threads]}"
+        f" and {len(new_sockets)} socket(s)"
+    )
