@@ -1,0 +1,428 @@
+"""Command channels: how a command reaches the robot and how its fate is observed.
+
+One class per handshake in a profile:
+
+* :class:`ClearOnAcceptChannel` (the ``article`` contract): the master writes target,
+  speed and command in one request; the robot sets motion status to moving and then
+  clears the command register. Cleared command = acknowledged; acknowledged and then
+  idle = done.
+* :class:`SequenceChannel` (the ``tmflow`` contract): the master writes the block with
+  a new sequence number; the robot program echoes it into ``ack_seq`` when it takes the
+  command and into ``done_seq`` when finished, or reports an error state.
+
+A channel reads and writes through a :class:`ModbusTransport` and raises tmmaster's
+errors; it never sleeps and never decides how long to wait: that is :mod:`._robot`'s job.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from enum import StrEnum
+from types import MappingProxyType
+
+import structlog
+
+from ._codec import Value, encode
+from ._exceptions import (
+    CommandRejectedError,
+    CommandStateUnknownError,
+    ConfigError,
+    EmergencyStopError,
+    RobotError,
+    RobotFaultError,
+)
+from ._pose import MotionType, Pose
+from ._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile, Role
+from ._status import RobotStatus
+from ._transport import ModbusTransport
+
+_log = structlog.get_logger("tmmaster.robot")
+
+
+class CommandKind(StrEnum):
+    """What a command asks for; values match the labels of the profile's command field."""
+
+    PTP = "ptp"
+    LINE = "line"
+    STOP = "stop"
+    GRIPPER_OPEN = "gripper_open"
+    GRIPPER_CLOSE = "gripper_close"
+
+    @classmethod
+    def of(cls, motion: MotionType) -> CommandKind:
+        """The command kind for a motion type."""
+        return cls.PTP if motion is MotionType.PTP else cls.LINE
+
+
+@dataclass(frozen=True)
+class Command:
+    """A command as the user asked for it, before encoding."""
+
+    kind: CommandKind
+    target: Pose | None = None
+    speed: int | None = None
+    accel_time_ms: int | None = None
+
+
+@dataclass
+class Ticket:
+    """A command that was written, with what is needed to follow it."""
+
+    command: Command
+    words: list[tuple[RegisterField, Value]]
+    sent_at: float
+    #: Sequence number (sequence handshake only).
+    seq: int = 0
+    #: Target registers before the write (clear-on-accept only): tells a lost write apart.
+    previous_target: tuple[float, ...] | None = None
+    acknowledged: bool = False
+    acknowledged_at: float | None = None
+    extra: dict[str, Value] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What one poll saw about a ticket."""
+
+    acknowledged: bool
+    done: bool
+    #: Set when the robot reported a failure; the wait must end with it.
+    failure: RobotError | None
+    pose: Pose | None
+
+
+def _pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
+    return Pose(*(float(values[n]) for n in names))
+
+
+class CommandChannel(ABC):
+    """Sends commands and interprets the robot's answers for one handshake."""
+
+    def __init__(self, profile: RobotProfile, transport: ModbusTransport) -> None:
+        self.profile = profile
+        self.transport = transport
+        command = profile.field("command")
+        self.supported = frozenset(
+            CommandKind(v) for v in command.values.values() if v in set(CommandKind)
+        )
+        readable_gripper = [f for f in profile.role(Role.GRIPPER) if not f.access.writable]
+        self.status_fields: tuple[RegisterField, ...] = (
+            *profile.role(Role.STATUS),
+            *profile.role(Role.POSE),
+            *profile.role(Role.FEEDBACK),
+            *readable_gripper,
+        )
+
+    # -- reading ---------------------------------------------------------
+
+    def read(self, fields: tuple[RegisterField, ...] | list[RegisterField]) -> dict[str, Value]:
+        """Read fields, one request per contiguous block, retrying transient failures."""
+        return self.transport.read_fields(fields, max_gap=self.profile.max_read_gap)
+
+    def read_status(self) -> RobotStatus:
+        """A full status snapshot."""
+        values = self.read(self.status_fields)
+        return self.status_from(values)
+
+    def read_pose(self) -> Pose:
+        """The current TCP pose (one request)."""
+        return _pose_from(self.read(self.profile.select(TCP_FIELDS)), TCP_FIELDS)
+
+    @abstractmethod
+    def status_from(self, values: dict[str, Value]) -> RobotStatus:
+        """Interpret raw field values as a status snapshot."""
+
+    # -- commands --------------------------------------------------------
+
+    def supports(self, kind: CommandKind) -> bool:
+        """True when the profile's command field has a value for ``kind``."""
+        return kind in self.supported
+
+    def encode_command(self, command: Command) -> list[tuple[RegisterField, Value]]:
+        """Field values of the command block; every value is range-checked here, before I/O."""
+        if not self.supports(command.kind):
+            raise ConfigError(
+                f"profile {self.profile.name!r} has no {command.kind.value!r} command"
+            )
+        p = self.profile
+        words: list[tuple[RegisterField, Value]] = []
+        if command.target is not None:
+            words += list(zip(p.select(TARGET_FIELDS), command.target.as_list(), strict=True))
+        if command.speed is not None:
+            words.append((p.field("speed"), command.speed))
+        if command.accel_time_ms is not None and p.has("accel_time"):
+            words.append((p.field("accel_time"), command.accel_time_ms))
+        words.append((p.field("command"), p.field("command").code_of(command.kind.value)))
+        for f, value in words:
+            encode(f, value)  # raises ValueOutOfRangeError naming the field
+        return words
+
+    @abstractmethod
+    def prepare(self, command: Command) -> Ticket:
+        """Check the robot can take the command and build the ticket; writes nothing."""
+
+    @abstractmethod
+    def poll(self, ticket: Ticket) -> Observation:
+        """Read the robot's state once and say what happened to the ticket."""
+
+    @abstractmethod
+    def withdraw(self, ticket: Ticket) -> bool:
+        """Take back a command the robot has not acknowledged; True if it had taken it after all."""
+
+    @abstractmethod
+    def resolve_lost_write(self, ticket: Ticket) -> bool:
+        """After a failed command write: True if the robot got it, False if provably not.
+
+        Raises :class:`CommandStateUnknownError` when neither can be proven.
+        """
+
+    def send(self, ticket: Ticket) -> None:
+        """Write the command block in one request, exactly once (never retried)."""
+        self.transport.write_fields(ticket.words, retry=False)
+        ticket.sent_at = time.monotonic()
+
+    def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
+        """Field values that stop the robot at once, or None if the profile has no stop."""
+        return None
+
+
+class ClearOnAcceptChannel(CommandChannel):
+    """The article's contract: the robot clears the command register when it takes a command."""
+
+    def status_from(self, values: dict[str, Value]) -> RobotStatus:
+        """Interpret robot_mode / motion_status / error_code / grasp_status."""
+        p = self.profile
+        mode_value = int(values["robot_mode"])
+        error_code = int(values["error_code"])
+        holding = bool(values["grasp_status"]) if "grasp_status" in values else None
+        return RobotStatus(
+            mode=p.field("robot_mode").label(mode_value),
+            moving=int(values["motion_status"]) == 1,
+            error=mode_value == p.mode_error or error_code != 0,
+            error_code=error_code,
+            estop=False,
+            holding=holding,
+            pose=_pose_from(values, TCP_FIELDS),
+            raw=MappingProxyType(dict(values)),
+            timestamp=time.monotonic(),
+        )
+
+    def _failure(self, status: RobotStatus) -> RobotError | None:
+        if status.error:
+            return RobotFaultError(
+                f"robot in error (mode {status.mode}, error code {status.error_code})",
+                error_code=status.error_code,
+                pose=status.pose,
+            )
+        return None
+
+    def prepare(self, command: Command) -> Ticket:
+        """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
+        words = self.encode_command(command)
+        p = self.profile
+        block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
+        status = self.read_status()
+        if (failure := self._failure(status)) is not None:
+            raise failure
+        if command.kind is not CommandKind.STOP:
+            if int(status.raw["robot_mode"]) != p.mode_auto:
+                raise RobotError(f"robot not ready: mode {status.mode}", pose=status.pose)
+            if status.moving:
+                raise RobotError("robot is still moving", pose=status.pose)
+            if int(block["command"]) != 0:
+                raise RobotError(
+                    f"a command ({p.field('command').label(int(block['command']))}) is still"
+                    " pending in the command register",
+                    pose=status.pose,
+                )
+        previous = tuple(float(block[n]) for n in TARGET_FIELDS)
+        return Ticket(command, words, time.monotonic(), previous_target=previous)
+
+    def poll(self, ticket: Ticket) -> Observation:
+        """Before acknowledgement read the command register first, then the status block."""
+        if not ticket.acknowledged:
+            pending = int(self.read([self.profile.field("command")])["command"])
+            if pending == 0:
+                ticket.acknowledged = True
+                ticket.acknowledged_at = time.monotonic()
+        # Read after the command register: the robot sets "moving" before it clears the
+        # command, so idle here, after seeing the command cleared, means finished.
+        status = self.read_status()
+        failure = self._failure(status)
+        done = ticket.acknowledged and not status.moving and failure is None
+        return Observation(ticket.acknowledged, done, failure, status.pose)
+
+    def withdraw(self, ticket: Ticket) -> bool:
+        """Write command = none, then check whether the robot had started the move meanwhile."""
+        command = self.profile.field("command")
+        self.transport.write_fields([(command, 0)], retry=True)
+        status = self.read_status()
+        return status.moving
+
+    def resolve_lost_write(self, ticket: Ticket) -> bool:
+        """Decide from the command and target registers whether the lost write landed."""
+        p = self.profile
+        block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
+        ours = {f.name: v for f, v in ticket.words}
+        targets_match = all(
+            abs(float(block[n]) - float(ours[n])) < 1e-6 for n in TARGET_FIELDS if n in ours
+        )
+        if not targets_match:
+            return False  # FC16 is atomic: other targets means our write never landed
+        if int(block["command"]) == int(ours["command"]):
+            return True  # landed, not yet picked up
+        if ticket.previous_target is not None and any(
+            abs(a - float(ours[n])) >= 1e-6
+            for a, n in zip(ticket.previous_target, TARGET_FIELDS, strict=True)
+            if n in ours
+        ):
+            return True  # our targets are there and the command was cleared: taken
+        raise CommandStateUnknownError(
+            "the command write failed and the registers cannot tell whether the robot took it"
+            " (same target as before, command register cleared); nothing was resent"
+        )
+
+    def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
+        """command = stop, when the profile defines it."""
+        if not self.supports(CommandKind.STOP):
+            return None
+        command = self.profile.field("command")
+        return [(command, command.code_of("stop"))]
+
+
+class SequenceChannel(CommandChannel):
+    """The tmflow contract: sequence number, acknowledge and done registers."""
+
+    def __init__(self, profile: RobotProfile, transport: ModbusTransport) -> None:
+        super().__init__(profile, transport)
+        p = profile
+        self.feedback_fields = p.role(Role.FEEDBACK)
+        self.flag_fields = p.select(("error", "estop", "project_running"))
+
+    def status_from(self, values: dict[str, Value]) -> RobotStatus:
+        """Interpret the TM discrete inputs and the robot program's feedback registers."""
+        estop = bool(values["estop"])
+        error = bool(values["error"]) or estop
+        running = bool(values["project_running"])
+        if estop:
+            mode = "estop"
+        elif error:
+            mode = "error"
+        else:
+            mode = "running" if running else "stopped"
+        state = self.profile.field("robot_state").label(int(values["robot_state"]))
+        return RobotStatus(
+            mode=mode,
+            moving=state == "busy",
+            error=error,
+            error_code=int(values["last_error_code"]),
+            estop=estop,
+            holding=bool(values["grasp_status"]) if "grasp_status" in values else None,
+            pose=_pose_from(values, TCP_FIELDS),
+            raw=MappingProxyType(dict(values)),
+            timestamp=time.monotonic(),
+        )
+
+    def _flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
+        if bool(flags["estop"]):
+            return EmergencyStopError("emergency stop is pressed", error_code=self._error_code())
+        if bool(flags["error"]):
+            code = self._error_code()
+            return RobotFaultError(f"robot error (last error code {code})", error_code=code)
+        if not bool(flags["project_running"]):
+            return RobotFaultError("the TMflow project is not running")
+        return None
+
+    def _error_code(self) -> int:
+        return int(self.read([self.profile.field("last_error_code")])["last_error_code"])
+
+    def prepare(self, command: Command) -> Ticket:
+        """Refuse unless the project runs, nothing failed, and the last command is finished."""
+        words = self.encode_command(command)
+        p = self.profile
+        flags = self.read(self.flag_fields)
+        if (failure := self._flags_failure(flags)) is not None:
+            raise failure
+        feedback = self.read([*self.feedback_fields, p.field("seq")])
+        seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
+        state = p.field("robot_state").label(int(feedback["robot_state"]))
+        if seq_now != ack:
+            raise RobotError(f"command {seq_now} is still waiting to be acknowledged")
+        if state == "busy" or (ack != done and state != "error"):
+            raise RobotError(f"the robot program is still executing command {ack}")
+        seq = seq_now % 65535 + 1  # 1..65535; 0 means "never commanded"
+        words.append((p.field("seq"), seq))
+        return Ticket(
+            command,
+            words,
+            time.monotonic(),
+            seq=seq,
+            extra={"heartbeat": feedback.get("heartbeat", 0)},
+        )
+
+    def poll(self, ticket: Ticket) -> Observation:
+        """One read of the feedback block and one of the status flags."""
+        feedback = self.read(self.feedback_fields)
+        flags = self.read(self.flag_fields)
+        ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
+        failure = self._flags_failure(flags)
+        if not ticket.acknowledged and int(feedback["ack_seq"]) == ticket.seq:
+            ticket.acknowledged = True
+            ticket.acknowledged_at = time.monotonic()
+        done = False
+        if ticket.acknowledged and failure is None:
+            if int(feedback["done_seq"]) == ticket.seq:
+                done = True
+            elif self.profile.field("robot_state").label(int(feedback["robot_state"])) == "error":
+                result = self.profile.field("result_code").label(int(feedback["result_code"]))
+                failure = CommandRejectedError(
+                    f"robot program rejected command {ticket.seq}: {result}",
+                    error_code=int(feedback["result_code"]),
+                )
+        return Observation(ticket.acknowledged, done, failure, None)
+
+    def withdraw(self, ticket: Ticket) -> bool:
+        """Put seq back to the last acknowledged value, then check whether ours was taken."""
+        p = self.profile
+        ack = int(self.read([p.field("ack_seq")])["ack_seq"])
+        if ack == ticket.seq:
+            return True
+        self.transport.write_fields([(p.field("seq"), ack)], retry=True)
+        # The program may have taken it between our read and our write.
+        return int(self.read([p.field("ack_seq")])["ack_seq"]) == ticket.seq
+
+    def resolve_lost_write(self, ticket: Ticket) -> bool:
+        """seq is written in the same request as the block: if it is ours, the write landed."""
+        p = self.profile
+        values = self.read([p.field("seq"), p.field("ack_seq")])
+        return ticket.seq in (int(values["seq"]), int(values["ack_seq"]))
+
+    def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
+        """Press the TM Stop button (coil 7105): the project stops and the arm halts."""
+        if not self.profile.has("stop_project"):
+            return None
+        return [(self.profile.field("stop_project"), True)]
+
+
+def channel_for(profile: RobotProfile, transport: ModbusTransport) -> CommandChannel:
+    """The channel implementing ``profile``'s handshake."""
+    from ._registers import Handshake
+
+    if profile.handshake is Handshake.CLEAR_ON_ACCEPT:
+        return ClearOnAcceptChannel(profile, transport)
+    return SequenceChannel(profile, transport)
+
+
+def heartbeat_stalled(ticket: Ticket) -> bool:
+    """True when the robot program's heartbeat did not move since the command was prepared."""
+    return (
+        "heartbeat" in ticket.extra
+        and ticket.extra.get("last_heartbeat") == ticket.extra["heartbeat"]
+    )
+
+
+def tcp_pose_names() -> tuple[str, ...]:
+    """Field names of the current TCP pose, in x, y, z, rx, ry, rz order."""
+    return TCP_FIELDS

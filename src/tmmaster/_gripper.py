@@ -1,0 +1,499 @@
+"""Grippers behind one interface: open, close, grip, status, holding.
+
+* :class:`RegisterGripper`: the article profile's gripper register and grasp status on
+  the robot's own connection. The map has no busy flag, so a close ends when an object
+  is detected or a configured settle time has passed: the weaker option, documented.
+* :class:`SequenceGripper`: the tmflow profile: gripper commands go through the robot
+  program's sequence handshake like motions; the program reports the grasp.
+* :class:`Blog2FG7Gripper`: the second article's map on its own connection: control
+  16 executes, the device clears control to acknowledge, gOBJ reports the outcome.
+* :class:`OnRobot2FG7Gripper`: the real OnRobot 2FG7 on its own connection (unit id
+  65): width in mm, force in N, speed %, busy and grip-detected bits, width limits
+  read at connect time.
+
+No driver sleeps a fixed time to "let the gripper finish": each polls status.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import structlog
+
+from ._channels import Command, CommandKind
+from ._codec import Value
+from ._exceptions import (
+    AcknowledgeTimeoutError,
+    ConfigError,
+    GraspFailedError,
+    GripperError,
+    GripperTimeoutError,
+)
+from ._profiles import gripper_profile
+from ._registers import GripperProfile
+from ._retry import RetryPolicy
+from ._transport import ModbusTransport
+
+if TYPE_CHECKING:
+    from ._robot import Robot
+
+_log = structlog.get_logger("tmmaster.gripper")
+
+
+@dataclass(frozen=True)
+class GripperStatus:
+    """One snapshot of the gripper."""
+
+    #: True while the fingers move; None when the device does not say.
+    busy: bool | None
+    #: True when an object is detected between the fingers.
+    holding: bool
+    #: Finger width in mm; None when the device does not report it.
+    width_mm: float | None
+
+
+class Gripper(ABC):
+    """What every gripper driver offers."""
+
+    kind: str = "gripper"
+
+    def connect(self) -> None:  # noqa: B027 - most grippers share the robot's link
+        """Open the gripper's own connection, if it has one."""
+
+    def disconnect(self) -> None:  # noqa: B027 - most grippers share the robot's link
+        """Close the gripper's own connection, if it has one (safe twice)."""
+
+    @abstractmethod
+    def status(self) -> GripperStatus:
+        """Read the gripper's status once."""
+
+    @abstractmethod
+    def open(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Open the fingers fully; returns when they have stopped."""
+
+    @abstractmethod
+    def close(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Close the fingers; returns when they stopped (on an object or fully closed)."""
+
+    def grip(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Close and require an object: raises :class:`GraspFailedError` when none is detected."""
+        status = self.close(timeout_s=timeout_s)
+        if not status.holding:
+            _log.warning("gripper.grasp_failed", gripper=self.kind)
+            raise GraspFailedError(f"{self.kind}: closed but no object detected")
+        return status
+
+    @property
+    def holding(self) -> bool:
+        """True when the gripper currently detects an object."""
+        return self.status().holding
+
+
+class NoGripper(Gripper):
+    """Stands in when no gripper is configured: every action is a configuration error."""
+
+    kind = "none"
+
+    def status(self) -> GripperStatus:
+        """Refuse: there is no gripper."""
+        raise ConfigError("no gripper is configured for this robot")
+
+    def open(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Refuse: there is no gripper."""
+        return self.status()
+
+    def close(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Refuse: there is no gripper."""
+        return self.status()
+
+
+def _wait(
+    what: str,
+    poll: float,
+    timeout_s: float,
+    check: Callable[[], GripperStatus | None],
+) -> GripperStatus:
+    """Poll ``check`` until it returns a status, bounded by ``timeout_s``."""
+    from ._robot import Poller
+
+    deadline = time.monotonic() + timeout_s
+    poller = Poller(poll)
+    while True:
+        result = check()
+        if result is not None:
+            return result
+        if time.monotonic() >= deadline:
+            raise GripperTimeoutError(f"{what} did not finish within {timeout_s:g} s")
+        poller.sleep()
+
+
+class RegisterGripper(Gripper):
+    """The article profile's gripper register (0 open / 1 close) and grasp status."""
+
+    kind = "article-register"
+
+    def __init__(self, robot: Robot, *, settle_s: float) -> None:
+        self._robot = robot
+        self._settle_s = settle_s
+        self._command = robot.profile.field("gripper_command")
+        self._grasp = robot.profile.field("grasp_status")
+
+    def status(self) -> GripperStatus:
+        """Grasp status only: this map has neither busy flag nor width."""
+        values = self._robot.channel.read([self._grasp])
+        return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
+
+    def _command_and_settle(self, value: int, *, stop_early_when_holding: bool) -> GripperStatus:
+        started = time.monotonic()
+        # Writing the same open/close value again is harmless, so retrying is allowed.
+        self._robot.transport.write_fields([(self._command, value)], retry=True)
+        _log.info("gripper.command_sent", gripper=self.kind, command=self._command.label(value))
+
+        def check() -> GripperStatus | None:
+            status = self.status()
+            if stop_early_when_holding and status.holding:
+                return status
+            if time.monotonic() - started >= self._settle_s:
+                return status
+            return None
+
+        status = _wait(
+            f"gripper {self._command.label(value)}",
+            self._robot.poll_interval_s,
+            self._settle_s + 1.0,
+            check,
+        )
+        _log.info(
+            "gripper.command_done",
+            gripper=self.kind,
+            holding=status.holding,
+            duration_s=round(time.monotonic() - started, 4),
+        )
+        return status
+
+    def open(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Write open, then wait the settle time (no busy flag to watch)."""
+        return self._command_and_settle(
+            self._command.code_of("open"), stop_early_when_holding=False
+        )
+
+    def close(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Write close; done when an object is detected or the settle time has passed."""
+        return self._command_and_settle(
+            self._command.code_of("close"), stop_early_when_holding=True
+        )
+
+
+class SequenceGripper(Gripper):
+    """Gripper commands through the tmflow profile's sequence handshake."""
+
+    kind = "tmflow-program"
+
+    def __init__(self, robot: Robot) -> None:
+        self._robot = robot
+
+    def status(self) -> GripperStatus:
+        """The robot program's grasp report."""
+        values = self._robot.channel.read([self._robot.profile.field("grasp_status")])
+        return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
+
+    def _run(self, kind: CommandKind, timeout_s: float | None) -> GripperStatus:
+        from ._robot import Motion
+
+        robot = self._robot
+        command = Command(kind)
+        robot.channel.encode_command(command)
+        ticket = robot.channel.prepare(command)
+        robot._send(ticket)
+        budget = timeout_s if timeout_s is not None else robot.timeouts.gripper_timeout_s
+        pose = robot.channel.read_pose()
+        motion = Motion(robot, ticket, start=pose, expected_s=0.0, timeout_s=budget)
+        _log.info("gripper.command_sent", gripper=self.kind, command=kind.value, seq=ticket.seq)
+        motion.wait()
+        return self.status()
+
+    def open(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Ask the robot program to open the gripper and wait for it to finish."""
+        return self._run(CommandKind.GRIPPER_OPEN, timeout_s)
+
+    def close(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Ask the robot program to close the gripper and wait for it to finish."""
+        return self._run(CommandKind.GRIPPER_CLOSE, timeout_s)
+
+
+@dataclass(frozen=True)
+class GripperLink:
+    """Where a stand-alone gripper listens and how patiently to talk to it."""
+
+    host: str
+    port: int
+    retry: RetryPolicy | None = None
+    request_timeout_s: float = 1.0
+    poll_interval_s: float = 0.05
+    timeout_s: float = 5.0
+    ack_timeout_s: float = 2.0
+
+
+class _OwnConnectionGripper(Gripper):
+    """A gripper with its own Modbus connection and register map."""
+
+    def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
+        self.profile = profile
+        self.kind = profile.name
+        self.poll_interval_s = link.poll_interval_s
+        self.timeout_s = link.timeout_s
+        self.ack_timeout_s = link.ack_timeout_s
+        self.transport = ModbusTransport(
+            link.host,
+            link.port,
+            device_id=profile.device_id,
+            timeout=link.request_timeout_s,
+            retry=link.retry,
+            name=profile.name,
+        )
+
+    def connect(self) -> None:
+        """Open the gripper's connection."""
+        self.transport.connect()
+
+    def disconnect(self) -> None:
+        """Close the gripper's connection (safe twice)."""
+        self.transport.close()
+
+    def read(self, *names: str) -> dict[str, Value]:
+        """Read fields by name, one request per block."""
+        return self.transport.read_fields(
+            self.profile.select(names), max_gap=self.profile.max_read_gap
+        )
+
+
+class Blog2FG7Gripper(_OwnConnectionGripper):
+    """The second article's map: force / width / control=16, gOBJ status from 258."""
+
+    def __init__(
+        self, profile: GripperProfile, link: GripperLink, *, force_n: float = 40.0
+    ) -> None:
+        super().__init__(profile, link)
+        self.force_n = force_n
+
+    def status(self) -> GripperStatus:
+        """gOBJ: 0 moving, 1/2 stopped on an object, 3 at position without object."""
+        values = self.read("object_status", "motion_state")
+        obj = self.profile.field("object_status").label(int(values["object_status"]))
+        return GripperStatus(
+            busy=obj == "moving",
+            holding=obj in ("object_opening", "object_closing"),
+            width_mm=None,
+        )
+
+    def _move(self, width_mm: float, timeout_s: float | None) -> GripperStatus:
+        p = self.profile
+        started = time.monotonic()
+        # One FC16 of force, width and control; sent once: the acknowledgement tells.
+        self.transport.write_fields(
+            [
+                (p.field("force"), self.force_n),
+                (p.field("width"), width_mm),
+                (p.field("control"), p.field("control").code_of("execute")),
+            ],
+            retry=False,
+        )
+        _log.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
+        acknowledged = False
+
+        def check() -> GripperStatus | None:
+            nonlocal acknowledged
+            if not acknowledged:
+                control = int(self.read("control")["control"])
+                if control != 0:
+                    if time.monotonic() - started > self.ack_timeout_s:
+                        raise AcknowledgeTimeoutError(
+                            f"{self.kind}: the gripper did not take the command within"
+                            f" {self.ack_timeout_s:g} s"
+                        )
+                    return None
+                acknowledged = True
+            status = self.status()
+            return None if status.busy else status
+
+        status = _wait(
+            f"{self.kind} move to {width_mm:g} mm",
+            self.poll_interval_s,
+            timeout_s or self.timeout_s,
+            check,
+        )
+        _log.info(
+            "gripper.command_done",
+            gripper=self.kind,
+            holding=status.holding,
+            duration_s=round(time.monotonic() - started, 4),
+        )
+        return status
+
+    def open(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Open to the map's maximum width."""
+        return self._move(self.profile.field("width").maximum or 160.0, timeout_s)
+
+    def close(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Close to width 0; the fingers stop on an object if there is one."""
+        return self._move(0.0, timeout_s)
+
+
+class OnRobot2FG7Gripper(_OwnConnectionGripper):
+    """The real OnRobot 2FG7 (Compute Box, unit id 65)."""
+
+    def __init__(
+        self,
+        profile: GripperProfile,
+        link: GripperLink,
+        *,
+        force_n: float = 40.0,
+        speed_percent: int = 50,
+        grip: Literal["external", "internal"] = "external",
+    ) -> None:
+        super().__init__(profile, link)
+        self.force_n = force_n
+        self.speed_percent = speed_percent
+        self.grip_mode = grip
+        self.limits: tuple[float, float] | None = None
+        self.width_tolerance_mm = 0.5
+
+    def connect(self) -> None:
+        """Connect and read the width limits (259-262): they depend on the fingers fitted."""
+        super().connect()
+        names = (
+            "min_external_width",
+            "max_external_width",
+            "min_internal_width",
+            "max_internal_width",
+        )
+        values = self.read(*names)
+        low, high = (
+            (values[names[0]], values[names[1]])
+            if self.grip_mode == "external"
+            else (values[names[2]], values[names[3]])
+        )
+        self.limits = (float(low), float(high))
+        _log.info(
+            "gripper.connected",
+            gripper=self.kind,
+            grip=self.grip_mode,
+            min_width_mm=self.limits[0],
+            max_width_mm=self.limits[1],
+        )
+
+    def _width_field(self) -> str:
+        return "external_width" if self.grip_mode == "external" else "internal_width"
+
+    def status(self) -> GripperStatus:
+        """Busy and grip-detected bits, and the current width."""
+        values = self.read("status", self._width_field())
+        word = int(values["status"])
+        status_field = self.profile.field("status")
+        return GripperStatus(
+            busy=status_field.bit(word, "busy"),
+            holding=status_field.bit(word, "grip_detected"),
+            width_mm=float(values[self._width_field()]),
+        )
+
+    def move_to_width(
+        self, width_mm: float, *, timeout_s: float | None = None, expect_object: bool = False
+    ) -> GripperStatus:
+        """Move the fingers to ``width_mm`` (inside the limits read at connect time)."""
+        if self.limits is None:
+            raise GripperError(f"{self.kind}: not connected")
+        low, high = self.limits
+        if not low <= width_mm <= high:
+            raise ConfigError(f"{self.kind}: width {width_mm:g} mm outside {low:g}..{high:g} mm")
+        p = self.profile
+        command = p.field("command").code_of(f"grip_{self.grip_mode}")
+        started = time.monotonic()
+        self.transport.write_fields(
+            [
+                (p.field("target_width"), width_mm),
+                (p.field("target_force"), self.force_n),
+                (p.field("target_speed"), self.speed_percent),
+                (p.field("command"), command),
+            ],
+            retry=False,
+        )
+        _log.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
+
+        def check() -> GripperStatus | None:
+            status = self.status()
+            if status.busy:
+                return None
+            # Not busy is not enough (it may not have started): the fingers must be at
+            # the target, or stopped on an object when closing onto one.
+            assert status.width_mm is not None
+            if abs(status.width_mm - width_mm) <= self.width_tolerance_mm:
+                return status
+            if expect_object and status.holding:
+                return status
+            return None
+
+        status = _wait(
+            f"{self.kind} move to {width_mm:g} mm",
+            self.poll_interval_s,
+            timeout_s or self.timeout_s,
+            check,
+        )
+        _log.info(
+            "gripper.command_done",
+            gripper=self.kind,
+            holding=status.holding,
+            width_mm=status.width_mm,
+            duration_s=round(time.monotonic() - started, 4),
+        )
+        return status
+
+    def open(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Open to the maximum width of the current grip mode."""
+        if self.limits is None:
+            raise GripperError(f"{self.kind}: not connected")
+        return self.move_to_width(self.limits[1], timeout_s=timeout_s)
+
+    def close(self, *, timeout_s: float | None = None) -> GripperStatus:
+        """Close to the minimum width; stops on an object (grip detected) if there is one."""
+        if self.limits is None:
+            raise GripperError(f"{self.kind}: not connected")
+        return self.move_to_width(self.limits[0], timeout_s=timeout_s, expect_object=True)
+
+
+def make_gripper(
+    spec: str | GripperProfile | None,
+    *,
+    robot: Robot,
+    host: str,
+    port: int,
+    retry: RetryPolicy | None,
+    request_timeout_s: float,
+    settle_s: float,
+) -> Gripper:
+    """The gripper driver for ``spec``: "auto" uses what the robot profile offers."""
+    if spec is None or spec == "none":
+        return NoGripper()
+    if spec == "auto":
+        profile = robot.profile
+        if profile.has("gripper_command"):
+            return RegisterGripper(robot, settle_s=settle_s)
+        if robot.channel.supports(CommandKind.GRIPPER_CLOSE) and profile.has("grasp_status"):
+            return SequenceGripper(robot)
+        return NoGripper()
+    gp = gripper_profile(spec)
+    link = GripperLink(
+        host=host,
+        port=port,
+        retry=retry,
+        request_timeout_s=request_timeout_s,
+        poll_interval_s=robot.poll_interval_s,
+        timeout_s=robot.timeouts.gripper_timeout_s,
+        ack_timeout_s=robot.timeouts.ack_timeout_s,
+    )
+    if gp.driver == "blog-2fg7":
+        return Blog2FG7Gripper(gp, link)
+    return OnRobot2FG7Gripper(gp, link)

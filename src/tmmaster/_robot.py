@@ -1,0 +1,560 @@
+"""The robot API: connect, read typed status, move safely, drive the gripper.
+
+Every move follows the same rules, whatever the profile:
+
+1. validate the pose (codec range, workspace envelope, reach) and the speed: an
+   invalid move raises before a single byte is sent;
+2. check the robot can take it (no error, idle, nothing pending);
+3. write target, speed and command in one request, exactly once;
+4. wait for the acknowledgement (bounded by ``ack_timeout_s``), then for completion
+   (bounded by a timeout derived from the move), polling on a monotonic clock;
+5. a robot error, error mode or e-stop ends the wait at once with a typed error.
+
+Completion is never inferred from an idle flag alone: the robot must have
+acknowledged the command first, and the final pose must be at the target.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Literal
+
+import structlog
+from pydantic import BaseModel, ConfigDict, Field
+
+from ._channels import (
+    Command,
+    CommandChannel,
+    CommandKind,
+    Ticket,
+    channel_for,
+    heartbeat_stalled,
+)
+from ._exceptions import (
+    AcknowledgeTimeoutError,
+    ConfigError,
+    ConnectionLostError,
+    MotionTimeoutError,
+    ResponseTimeoutError,
+    RobotError,
+)
+from ._gripper import Gripper, make_gripper
+from ._pose import MotionType, Pose
+from ._profiles import robot_profile
+from ._registers import GripperProfile, RobotProfile
+from ._retry import RetryPolicy
+from ._robot_models import RobotModel, robot_model
+from ._status import MovePhase, MoveProgress, RobotStatus
+from ._transport import ConnectionState, ModbusTransport, TransportStats
+
+_log = structlog.get_logger("tmmaster.robot")
+
+
+class Workspace(BaseModel):
+    """An axis-aligned box the TCP must stay inside, in mm (base frame)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    x: tuple[float, float] = (-2000.0, 2000.0)
+    y: tuple[float, float] = (-2000.0, 2000.0)
+    z: tuple[float, float] = (-2000.0, 2000.0)
+
+    def check(self, pose: Pose) -> None:
+        """Raise :class:`ConfigError` naming the axis when ``pose`` is outside the box."""
+        for axis, (low, high) in (("x", self.x), ("y", self.y), ("z", self.z)):
+            value = getattr(pose, axis)
+            if not low <= value <= high:
+                raise ConfigError(
+                    f"pose {axis} = {value:g} mm is outside the workspace ({low:g}..{high:g} mm)"
+                )
+
+
+class TimeoutPolicy(BaseModel):
+    """How long waits may take; motion timeouts derive from the move unless fixed."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: The robot must acknowledge a command within this time.
+    ack_timeout_s: Annotated[float, Field(gt=0)] = 2.0
+    #: Motion timeout = factor x expected time + margin (the article's ~130 % rule) ...
+    motion_factor: Annotated[float, Field(ge=1)] = 1.3
+    motion_margin_s: Annotated[float, Field(ge=0)] = 2.0
+    #: ... unless fixed here for every move.
+    motion_timeout_s: Annotated[float, Field(gt=0)] | None = None
+    #: Gripper moves must end within this time.
+    gripper_timeout_s: Annotated[float, Field(gt=0)] = 5.0
+
+    def for_motion(self, expected_s: float) -> float:
+        """The timeout of a move expected to take ``expected_s`` seconds."""
+        if self.motion_timeout_s is not None:
+            return self.motion_timeout_s
+        return expected_s * self.motion_factor + self.motion_margin_s
+
+
+class Poller:
+    """Paces a wait: one poll per interval on a monotonic clock, every wait bounded."""
+
+    def __init__(self, interval_s: float, stop_event: threading.Event | None = None) -> None:
+        if interval_s <= 0:
+            raise ConfigError(f"poll interval must be > 0 s, got {interval_s}")
+        self.interval_s = interval_s
+        self._next = time.monotonic()
+        self._stop = stop_event
+
+    def sleep(self) -> None:
+        """Sleep until the next poll is due (no drift: deadlines advance by the interval)."""
+        self._next += self.interval_s
+        delay = self._next - time.monotonic()
+        if delay < 0:  # a slow poll: don't try to catch up with a burst of reads
+            self._next = time.monotonic()
+            return
+        if self._stop is not None:
+            self._stop.wait(delay)
+        else:
+            time.sleep(delay)
+
+
+class Motion:
+    """A move that was sent; ask for its progress, or wait for it."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        ticket: Ticket,
+        *,
+        start: Pose,
+        expected_s: float,
+        timeout_s: float,
+    ) -> None:
+        self._robot = robot
+        self._ticket = ticket
+        self.start = start
+        self.target = ticket.command.target
+        self.expected_s = expected_s
+        self.timeout_s = timeout_s
+        self.phase = MovePhase.SENT
+        self.last_pose: Pose | None = None
+        self.finished_at: float | None = None
+
+    @property
+    def command(self) -> Command:
+        """The command this motion carries."""
+        return self._ticket.command
+
+    @property
+    def done(self) -> bool:
+        """True once the robot acknowledged and then finished the move."""
+        return self.phase is MovePhase.DONE
+
+    def progress(self) -> MoveProgress:
+        """Poll the robot once and report where the move stands (raises on robot failure)."""
+        if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
+            self._robot._poll_motion(self)
+        elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
+        fraction: float | None = None
+        if self.last_pose is not None and self.target is not None:
+            total = self.start.distance_to(self.target)
+            remaining = self.last_pose.distance_to(self.target)
+            fraction = 1.0 if total == 0 else max(0.0, min(1.0, 1 - remaining / total))
+        return MoveProgress(self.phase, self.last_pose, elapsed, self.expected_s, fraction)
+
+    def wait(self, timeout_s: float | None = None) -> None:
+        """Block until the move is done; raises a typed error on failure or timeout."""
+        self._robot._wait_motion(self, timeout_s)
+
+
+class Robot:
+    """A connection to one robot (and its gripper) speaking one profile."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int = 502,
+        *,
+        profile: str | Path | RobotProfile = "tmflow",
+        model: str | RobotModel = "tm5-700",
+        gripper: str | GripperProfile | None = "auto",
+        gripper_host: str | None = None,
+        gripper_port: int = 502,
+        poll_interval_s: float = 0.05,
+        timeouts: TimeoutPolicy | None = None,
+        retry: RetryPolicy | None = None,
+        request_timeout_s: float = 1.0,
+        workspace: Workspace | None = None,
+        max_speed_percent: int = 100,
+        position_tolerance_mm: float = 1.0,
+        orientation_tolerance_deg: float = 1.0,
+        gripper_settle_s: float = 0.5,
+        name: str = "robot",
+    ) -> None:
+        self.profile = robot_profile(profile)
+        self.model = model if isinstance(model, RobotModel) else robot_model(model)
+        if not 1 <= max_speed_percent <= 100:
+            raise ConfigError(f"max_speed_percent must be 1..100, got {max_speed_percent}")
+        if poll_interval_s <= 0:
+            raise ConfigError(f"poll_interval_s must be > 0, got {poll_interval_s}")
+        self.name = name
+        self.poll_interval_s = poll_interval_s
+        self.timeouts = timeouts if timeouts is not None else TimeoutPolicy()
+        self.workspace = workspace
+        self.max_speed_percent = max_speed_percent
+        self.position_tolerance_mm = position_tolerance_mm
+        self.orientation_tolerance_deg = orientation_tolerance_deg
+        self.transport = ModbusTransport(
+            host,
+            port,
+            device_id=self.profile.device_id,
+            timeout=request_timeout_s,
+            retry=retry,
+            name=name,
+        )
+        self.channel: CommandChannel = channel_for(self.profile, self.transport)
+        self._stop_event = threading.Event()
+        self._connected = False
+        self._log = _log.bind(robot=name)
+        self.gripper: Gripper = make_gripper(
+            gripper,
+            robot=self,
+            host=gripper_host or host,
+            port=gripper_port,
+            retry=retry,
+            request_timeout_s=request_timeout_s,
+            settle_s=gripper_settle_s,
+        )
+
+    # -- connection -------------------------------------------------------
+
+    @property
+    def state(self) -> ConnectionState:
+        """Connection state of the robot link."""
+        return self.transport.state
+
+    @property
+    def stats(self) -> TransportStats:
+        """Request, retry, reconnect and byte counters of the robot link."""
+        return self.transport.stats
+
+    def connect(self) -> Robot:
+        """Open the connections (robot, then gripper if it has its own); a no-op when open."""
+        if self._connected:
+            return self
+        self.transport.connect()
+        self.gripper.connect()
+        self._connected = True
+        self._log.info(
+            "robot.connected",
+            host=self.transport.host,
+            port=self.transport.port,
+            profile=self.profile.name,
+        )
+        return self
+
+    def close(self) -> None:
+        """Close every connection; safe to call more than once."""
+        self._stop_event.set()
+        self.gripper.disconnect()
+        self.transport.close()
+
+    def __enter__(self) -> Robot:
+        return self.connect()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- status -----------------------------------------------------------
+
+    def status(self) -> RobotStatus:
+        """One immutable snapshot: each status block read in one request."""
+        return self.channel.read_status()
+
+    def pose(self) -> Pose:
+        """The current TCP pose."""
+        return self.channel.read_pose()
+
+    def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
+        """Poll until the robot can take a motion command (auto / running, idle, no error)."""
+        deadline = time.monotonic() + timeout_s
+        poller = Poller(self.poll_interval_s, self._stop_event)
+        while True:
+            status = self.status()
+            if status.ready:
+                return status
+            if status.error or status.estop:
+                raise self.channel_failure(status)
+            if time.monotonic() >= deadline:
+                raise MotionTimeoutError(
+                    f"robot not ready after {timeout_s:g} s ({status})", pose=status.pose
+                )
+            poller.sleep()
+
+    def channel_failure(self, status: RobotStatus) -> RobotError:
+        """The typed error a failed status stands for."""
+        from ._exceptions import EmergencyStopError, RobotFaultError
+
+        if status.estop:
+            return EmergencyStopError(
+                "emergency stop is pressed", error_code=status.error_code, pose=status.pose
+            )
+        return RobotFaultError(
+            f"robot in error (error code {status.error_code})",
+            error_code=status.error_code,
+            pose=status.pose,
+        )
+
+    # -- moves ------------------------------------------------------------
+
+    def validate_move(self, pose: Pose, speed: int) -> None:
+        """Raise :class:`ConfigError` when a move is not allowed; sends nothing."""
+        if not isinstance(pose, Pose):
+            raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
+        if isinstance(speed, bool) or not isinstance(speed, int):
+            raise ConfigError(f"speed must be an integer percent, got {speed!r}")
+        if not 1 <= speed <= self.max_speed_percent:
+            raise ConfigError(f"speed {speed} % is outside 1..{self.max_speed_percent} %")
+        if self.workspace is not None:
+            self.workspace.check(pose)
+        if not self.model.can_reach(pose):
+            raise ConfigError(
+                f"pose {pose} is out of reach of a {self.model.name}"
+                f" ({self.model.distance_from_shoulder(pose):.0f} mm from the shoulder,"
+                f" reach {self.model.reach_mm:.0f} mm)"
+            )
+
+    def expected_motion_time(
+        self, start: Pose, target: Pose, speed: int, motion: MotionType
+    ) -> float:
+        """Expected duration of a move from the arm model's limits, in seconds."""
+        return self.model.motion_time(start, target, speed_percent=speed, motion=motion)
+
+    def start_move(
+        self,
+        target: Pose,
+        *,
+        speed: int = 30,
+        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+    ) -> Motion:
+        """Validate and send a move, returning at once with a :class:`Motion` handle."""
+        motion = MotionType(motion)
+        self.validate_move(target, speed)
+        command = Command(CommandKind.of(motion), target, speed, accel_time_ms)
+        # Encoding refuses out-of-range values here, before the first read or write.
+        self.channel.encode_command(command)
+        ticket = self.channel.prepare(command)
+        start = self.channel.read_pose()
+        expected = self.expected_motion_time(start, target, speed, motion)
+        timeout_s = timeout if timeout is not None else self.timeouts.for_motion(expected)
+        self._send(ticket)
+        self._log.info(
+            "robot.command_sent",
+            command=command.kind.value,
+            target=target.as_list(),
+            speed=speed,
+            seq=ticket.seq or None,
+            expected_s=round(expected, 3),
+            timeout_s=round(timeout_s, 3),
+        )
+        return Motion(self, ticket, start=start, expected_s=expected, timeout_s=timeout_s)
+
+    def move_to(
+        self,
+        target: Pose,
+        *,
+        speed: int = 30,
+        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+    ) -> Motion:
+        """Move to ``target`` and return when the robot acknowledged and finished the move."""
+        handle = self.start_move(
+            target, speed=speed, motion=motion, timeout=timeout, accel_time_ms=accel_time_ms
+        )
+        handle.wait()
+        return handle
+
+    def stop(self) -> None:
+        """Stop the arm now (article: command = stop; tmflow: the TM Stop button)."""
+        words = self.channel.stop_words()
+        if words is None:
+            raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
+        # A stop is idempotent: retrying it can only help.
+        self.transport.write_fields(words, retry=True)
+        self._log.warning("robot.stop_sent")
+
+    def clear_stop_request(self) -> None:
+        """Allow waits again after :meth:`interrupt`."""
+        self._stop_event.clear()
+
+    def interrupt(self) -> None:
+        """Make running waits give up at their next poll (for Ctrl-C handlers, other threads)."""
+        self._stop_event.set()
+
+    # -- internals --------------------------------------------------------
+
+    def _send(self, ticket: Ticket) -> None:
+        """Write a command once; after a failed write, find out whether it landed."""
+        try:
+            self.channel.send(ticket)
+            return
+        except (ConnectionLostError, ResponseTimeoutError) as exc:
+            self._log.warning(
+                "robot.command_write_failed", error=str(exc), command=ticket.command.kind.value
+            )
+            failure = exc
+        # Reconnect (transport policy), then ask the registers, never guess.
+        self.transport.connect()
+        if self.channel.resolve_lost_write(ticket):
+            self._log.info("robot.command_write_landed", command=ticket.command.kind.value)
+            return
+        self._log.warning(
+            "robot.command_resent",
+            command=ticket.command.kind.value,
+            reason="registers prove the first write never arrived",
+        )
+        try:
+            self.channel.send(ticket)
+        except (ConnectionLostError, ResponseTimeoutError) as exc:
+            raise exc from failure
+
+    def _poll_motion(self, motion: Motion) -> None:
+        observation = self.channel.poll(motion._ticket)
+        if observation.pose is not None:
+            motion.last_pose = observation.pose
+        if observation.failure is not None:
+            motion.phase = MovePhase.FAILED
+            self._log.error(
+                "robot.command_failed",
+                command=motion.command.kind.value,
+                error=str(observation.failure),
+            )
+            if observation.failure.pose is None and motion.last_pose is not None:
+                observation.failure.pose = motion.last_pose
+            raise observation.failure
+        if observation.acknowledged and motion.phase is MovePhase.SENT:
+            motion.phase = MovePhase.RUNNING
+            ticket = motion._ticket
+            self._log.info(
+                "robot.command_acknowledged",
+                command=motion.command.kind.value,
+                ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
+            )
+        if observation.done:
+            self._finish(motion)
+
+    def _finish(self, motion: Motion) -> None:
+        if motion.target is not None:
+            pose = self.channel.read_pose()
+            motion.last_pose = pose
+            if not pose.is_close(
+                motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+            ):
+                motion.phase = MovePhase.FAILED
+                raise RobotError(
+                    f"robot reported the move finished but the TCP is at {pose},"
+                    f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
+                    pose=pose,
+                )
+        motion.phase = MovePhase.DONE
+        motion.finished_at = time.monotonic()
+        self._log.info(
+            "robot.command_done",
+            command=motion.command.kind.value,
+            duration_s=round(motion.finished_at - motion._ticket.sent_at, 4),
+            expected_s=round(motion.expected_s, 3),
+        )
+
+    def _wait_motion(self, motion: Motion, timeout_s: float | None) -> None:
+        ticket = motion._ticket
+        budget = timeout_s if timeout_s is not None else motion.timeout_s
+        poller = Poller(self.poll_interval_s, self._stop_event)
+        ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
+        while motion.phase is not MovePhase.DONE:
+            if self._stop_event.is_set():
+                raise RobotError("wait interrupted", pose=motion.last_pose)
+            self._poll_motion(motion)
+            if motion.done:
+                return
+            now = time.monotonic()
+            if motion.phase is MovePhase.SENT and now >= ack_deadline:
+                self._ack_timed_out(motion)
+            elif motion.phase is MovePhase.RUNNING:
+                started = ticket.acknowledged_at or ticket.sent_at
+                if now - started >= budget:
+                    self._motion_timed_out(motion, budget)
+            poller.sleep()
+
+    def _ack_timed_out(self, motion: Motion) -> None:
+        ticket = motion._ticket
+        if self.channel.withdraw(ticket):
+            # The robot took it just as we gave up: it is executing our command.
+            ticket.acknowledged = True
+            ticket.acknowledged_at = time.monotonic()
+            motion.phase = MovePhase.RUNNING
+            self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
+            return
+        motion.phase = MovePhase.FAILED
+        hint = ""
+        if heartbeat_stalled(ticket):
+            hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
+        self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
+        raise AcknowledgeTimeoutError(
+            f"the robot did not acknowledge the {motion.command.kind.value} command within"
+            f" {self.timeouts.ack_timeout_s:g} s; the command was withdrawn{hint}",
+            pose=motion.last_pose,
+        )
+
+    def _motion_timed_out(self, motion: Motion, budget: float) -> None:
+        motion.phase = MovePhase.FAILED
+        pose = motion.last_pose
+        with contextlib.suppress(Exception):
+            pose = self.channel.read_pose()
+        self._log.error(
+            "robot.motion_timeout",
+            timeout_s=round(budget, 3),
+            pose=None if pose is None else pose.as_list(),
+        )
+        if self.channel.stop_words() is not None:
+            try:
+                self.stop()
+            except Exception as exc:
+                self._log.error("robot.stop_failed", error=str(exc))
+        raise MotionTimeoutError(
+            f"move to {motion.target} did not finish within {budget:.2f} s"
+            f" (expected {motion.expected_s:.2f} s); last pose {pose}",
+            pose=pose,
+        )
+
+
+def connect(
+    host: str,
+    port: int = 502,
+    *,
+    profile: str | Path | RobotProfile = "tmflow",
+    **options: object,
+) -> Robot:
+    """Open a :class:`Robot`; use it as a context manager so it is always closed."""
+    robot = Robot(host, port, profile=profile, **options)  # type: ignore[arg-type]
+    try:
+        return robot.connect()
+    except BaseException:
+        robot.close()
+        raise
+
+
+def poll_until(
+    predicate: Callable[[], bool], *, timeout_s: float, interval_s: float = 0.05
+) -> bool:
+    """Call ``predicate`` every ``interval_s`` until it is true or ``timeout_s`` passes."""
+    deadline = time.monotonic() + timeout_s
+    poller = Poller(interval_s)
+    while True:
+        if predicate():
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        poller.sleep()

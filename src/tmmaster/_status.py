@@ -1,0 +1,74 @@
+"""Immutable snapshots of what the robot reports."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import StrEnum
+
+from ._codec import Value
+from ._pose import Pose
+
+
+class MovePhase(StrEnum):
+    """Where a commanded move stands."""
+
+    SENT = "sent"  # written; the robot has not acknowledged it yet
+    RUNNING = "running"  # acknowledged, not finished
+    DONE = "done"  # acknowledged, then reported finished
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class RobotStatus:
+    """One snapshot of the robot's status registers, read block by block."""
+
+    #: "auto", "initialising", "error" (article) or "running", "stopped", "error", "estop" (tmflow).
+    mode: str
+    moving: bool
+    error: bool
+    error_code: int
+    estop: bool
+    #: Whether the gripper reports an object held; None when the profile has no such field.
+    holding: bool | None
+    pose: Pose
+    #: Every field that was read, by name (read-only view).
+    raw: Mapping[str, Value]
+    #: time.monotonic() when the read finished.
+    timestamp: float
+
+    @property
+    def ready(self) -> bool:
+        """True when the robot can take a motion command."""
+        return (
+            not self.moving
+            and not self.error
+            and not self.estop
+            and self.mode
+            in (
+                "auto",
+                "running",
+            )
+        )
+
+    def __str__(self) -> str:
+        flags = [self.mode, "moving" if self.moving else "idle"]
+        if self.error:
+            flags.append(f"error {self.error_code}")
+        if self.estop:
+            flags.append("E-STOP")
+        if self.holding is not None:
+            flags.append("holding" if self.holding else "empty")
+        return f"RobotStatus({', '.join(flags)}, pose={self.pose})"
+
+
+@dataclass(frozen=True)
+class MoveProgress:
+    """How far a running move has come."""
+
+    phase: MovePhase
+    pose: Pose | None
+    elapsed_s: float
+    expected_s: float
+    #: Fraction of the straight-line distance covered, 0..1 (None before the first pose read).
+    fraction: float | None
