@@ -29,9 +29,13 @@ from ._codec import Value
 from ._exceptions import (
     AcknowledgeTimeoutError,
     ConfigError,
+    ConnectError,
+    ConnectionLostError,
     GraspFailedError,
     GripperError,
     GripperTimeoutError,
+    ResponseTimeoutError,
+    TransportError,
 )
 from ._profiles import gripper_profile
 from ._registers import GripperProfile
@@ -311,9 +315,10 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
                 control = int(self.read("control")["control"])
                 if control != 0:
                     if time.monotonic() - started > self.ack_timeout_s:
+                        self._withdraw()
                         raise AcknowledgeTimeoutError(
                             f"{self.kind}: the gripper did not take the command within"
-                            f" {self.ack_timeout_s:g} s"
+                            f" {self.ack_timeout_s:g} s; the command was withdrawn (control = 0)"
                         )
                     return None
                 acknowledged = True
@@ -333,6 +338,16 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             duration_s=round(time.monotonic() - started, 4),
         )
         return status
+
+    def _withdraw(self) -> None:
+        # A pending execute left in the register would run whenever the device gets to
+        # it (e.g. once activated), long after the caller gave up. Writing 0 withdraws
+        # it, or stops the fingers if the device took it meanwhile: safe either way.
+        field = self.profile.field("control")
+        try:
+            self.transport.write_fields([(field, field.code_of("stop"))], retry=True)
+        except TransportError as exc:
+            _log.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the map's maximum width."""
@@ -371,7 +386,18 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             "min_internal_width",
             "max_internal_width",
         )
-        values = self.read(*names)
+        try:
+            values = self.read(*names)
+        except (ConnectionLostError, ResponseTimeoutError) as exc:
+            # The Compute Box completes the TCP connect, then drops a second client at
+            # once: a bare "connection lost" would hide that another master holds it.
+            self.transport.close()
+            raise ConnectError(
+                f"{self.kind}: {self.transport.host}:{self.transport.port} accepted the"
+                " connection but did not answer: the OnRobot Compute Box serves one"
+                " Modbus TCP connection at a time; is another master (or a TMflow"
+                " OnRobot node) connected to it?"
+            ) from exc
         low, high = (
             (values[names[0]], values[names[1]])
             if self.grip_mode == "external"

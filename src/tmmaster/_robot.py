@@ -242,8 +242,14 @@ class Robot:
         """Open the connections (robot, then gripper if it has its own); a no-op when open."""
         if self._connected:
             return self
-        self.transport.connect()
-        self.gripper.connect()
+        try:
+            self.transport.connect()
+            self.gripper.connect()
+        except BaseException:
+            # ``with Robot(...)`` never reaches __exit__ when connecting fails: close
+            # here so a half-open robot link is not left behind.
+            self.close()
+            raise
         self._connected = True
         self._log.info(
             "robot.connected",
