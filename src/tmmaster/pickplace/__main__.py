@@ -1,0 +1,484 @@
+"""``python -m tmmaster.pickplace``: run the article's pick & place (or any sequence).
+
+``tmmaster pickplace`` mounts the same options: :func:`add_arguments` fills a parser,
+:func:`run` runs from the parsed namespace and returns the exit code.
+
+Exit codes (also in docs/pickplace.md):
+
+===  ===========================================================================
+0    every cycle done (with --sim: and every part on the place position)
+1    any other failure (unexpected error; with --sim: a part not on the place position)
+2    invalid configuration or options: nothing was sent to the robot
+3    connection failure (cannot connect, or the link was lost for good)
+4    robot fault: robot error, e-stop, command rejected or in an unknown state
+5    grasp failure (no object after every retry) or another gripper failure
+6    timeout (motion, acknowledgement, gripper, robot not ready)
+130  interrupted (Ctrl-C / SIGINT): the arm was stopped and the report written
+===  ===========================================================================
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from types import FrameType
+from typing import Any, TextIO
+
+import structlog
+
+from .._exceptions import (
+    ConfigError,
+    GripperError,
+    MotionTimeoutError,
+    RobotError,
+    TransportError,
+)
+from .._logging import configure_logging
+from .._profiles import builtin_profile_names
+from .._robot import Robot
+from ._config import PickPlaceConfig, load_config
+from ._machine import mermaid
+from ._plan import format_plan, validate_plan
+from ._report import build_report, objects_report, write_report
+from ._runner import Runner, RunResult, StateEvent, StopRequestedError
+from ._sequences import load_sequence, pick_and_place
+from ._steps import TaskSequence
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_CONFIG = 2
+EXIT_CONNECTION = 3
+EXIT_ROBOT_FAULT = 4
+EXIT_GRASP = 5
+EXIT_TIMEOUT = 6
+EXIT_INTERRUPTED = 130
+
+#: Exit code -> result name in the report.
+RESULT_NAMES = {
+    EXIT_OK: "done",
+    EXIT_FAILED: "failed",
+    EXIT_CONFIG: "config_error",
+    EXIT_CONNECTION: "connection_error",
+    EXIT_ROBOT_FAULT: "robot_fault",
+    EXIT_GRASP: "grasp_failed",
+    EXIT_TIMEOUT: "timeout",
+    EXIT_INTERRUPTED: "interrupted",
+}
+
+#: How far (mm) a part may be from the place pose to count as placed (--sim check).
+PLACE_TOLERANCE_MM = 2.0
+
+_log = structlog.get_logger("tmmaster.pickplace")
+
+
+def exit_code_for(exc: BaseException) -> int:
+    """The exit code a failure maps to (see the module docstring)."""
+    if isinstance(exc, StopRequestedError | KeyboardInterrupt):
+        return EXIT_INTERRUPTED
+    if isinstance(exc, ConfigError):
+        return EXIT_CONFIG
+    # Before the timeouts: a response timeout is a link problem, not a slow robot.
+    if isinstance(exc, TransportError):
+        return EXIT_CONNECTION
+    if isinstance(exc, MotionTimeoutError | TimeoutError):
+        return EXIT_TIMEOUT
+    if isinstance(exc, GripperError):
+        return EXIT_GRASP
+    if isinstance(exc, RobotError):
+        return EXIT_ROBOT_FAULT
+    return EXIT_FAILED
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the pick & place options to ``parser`` (used by ``tmmaster pickplace``); return it."""
+    robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
+    parser.add_argument("--host", help="robot address (required unless --sim/--dry-run/--diagram)")
+    parser.add_argument("--port", type=int, default=None, help="robot Modbus TCP port (502)")
+    parser.add_argument(
+        "--profile",
+        default=None,
+        metavar="NAME|FILE.toml",
+        help=f"register contract: {' or '.join(robots)} or a TOML file (default: article;"
+        " use tmflow for a real TM robot running the tmmaster TMflow program)",
+    )
+    parser.add_argument("--config", metavar="FILE.toml", help="configuration file")
+    parser.add_argument(
+        "--sequence",
+        metavar="FILE.toml",
+        help="run a sequence described in TOML instead of the built-in pick & place",
+    )
+    parser.add_argument("--cycles", type=int, default=None, metavar="N", help="cycles to run")
+    parser.add_argument(
+        "--poll-interval", type=float, default=None, metavar="S", help="poll interval (0.05 s)"
+    )
+    parser.add_argument(
+        "--sim",
+        action="store_true",
+        help="start the built-in simulator on a free loopback port and run against it",
+    )
+    parser.add_argument(
+        "--sim-time-scale",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="with --sim: simulated seconds per wall second (default 1.0; 10 for a quick demo)",
+    )
+    parser.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="validate and print the plan (poses, speeds, motion types, expected times);"
+        " connect to nothing",
+    )
+    parser.add_argument(
+        "--diagram", action="store_true", help="print the state machine as a mermaid diagram"
+    )
+    parser.add_argument("--log-json", action="store_true", help="log one JSON object per line")
+    parser.add_argument(
+        "--log-level",
+        default=None,
+        choices=["debug", "info", "warning", "error"],
+        help="log level (default: info; warning when stderr is a terminal, which shows"
+        " live progress instead)",
+    )
+    parser.add_argument("--report", metavar="FILE.json", help="write a JSON run report")
+    return parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``python -m tmmaster.pickplace``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m tmmaster.pickplace",
+        description="Pick & place on a TM robot over Modbus TCP (the article's cycle by default).",
+        epilog="exit codes: 0 done, 1 other failure, 2 config error, 3 connection failure,"
+        " 4 robot fault / e-stop, 5 grasp failure, 6 timeout, 130 interrupted",
+    )
+    return add_arguments(parser)
+
+
+def make_robot(
+    config: PickPlaceConfig,
+    host: str,
+    port: int,
+    *,
+    gripper_port: int | None = None,
+    settle_scale: float = 1.0,
+) -> Robot:
+    """A :class:`Robot` set up from the configuration; opens no connection."""
+    g = config.gripper
+    return Robot(
+        host,
+        port,
+        profile=config.robot.profile,
+        model=config.robot.model,
+        gripper=g.kind,
+        gripper_host=g.host,
+        gripper_port=gripper_port if gripper_port is not None else g.port,
+        poll_interval_s=config.run.poll_interval_s,
+        timeouts=config.timeouts.policy(),
+        request_timeout_s=config.timeouts.request_s,
+        workspace=config.workspace_box(),
+        max_speed_percent=config.robot.max_speed,
+        position_tolerance_mm=config.robot.position_tolerance_mm,
+        gripper_settle_s=g.settle_s / settle_scale,
+    )
+
+
+class _Progress:
+    """One line on a terminal, redrawn at every state change."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+        self.used = False
+
+    def __call__(self, event: StateEvent) -> None:
+        self.used = True
+        self._stream.write(
+            f"\r\033[K cycle {max(event.cycle, 1)}/{event.cycles}  {event.state:<20}"
+            f" cycle time {event.cycle_elapsed_s:6.2f} s"
+        )
+        self._stream.flush()
+
+    def end(self) -> None:
+        if self.used:
+            self._stream.write("\n")
+            self._stream.flush()
+
+
+class _Outcome:
+    """What the report needs, filled in as far as the run got."""
+
+    def __init__(self) -> None:
+        self.config_file: str | None = None
+        self.config: PickPlaceConfig | None = None
+        self.run: RunResult | None = None
+        self.target: dict[str, Any] | None = None
+        self.transport: dict[str, Any] | None = None
+        self.sim: dict[str, Any] | None = None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run pick & place from parsed ``args``; returns the exit code (never raises)."""
+    previous = structlog.get_config()
+    try:
+        return _run(args)
+    finally:
+        # In-process callers (tests, tmmaster's CLI) get their logging back.
+        structlog.configure(**previous)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _run(args: argparse.Namespace) -> int:
+    stderr = sys.stderr
+    tty = stderr.isatty()
+    level = args.log_level or ("warning" if tty else "info")
+    configure_logging(json=args.log_json, level=level, stream=stderr)
+    outcome = _Outcome()
+    code = EXIT_FAILED
+    reason: str | None = None
+    try:
+        code, reason = _execute(args, outcome, progress=_Progress(stderr) if tty else None)
+    except KeyboardInterrupt:
+        code, reason = EXIT_INTERRUPTED, "interrupted"
+    except ConfigError as exc:
+        code, reason = EXIT_CONFIG, f"config error: {exc}"
+    except Exception as exc:  # the last line of defence: one line, never a traceback
+        code = exit_code_for(exc)
+        reason = f"{type(exc).__name__}: {exc}"
+        _log.error("pickplace.unexpected_error", error=str(exc), error_type=type(exc).__name__)
+    if reason is not None:
+        print(f"pickplace: {_one_line(reason)} [exit {code}]", file=stderr, flush=True)
+    if args.report:
+        report = build_report(
+            exit_code=code,
+            result_name=RESULT_NAMES.get(code, "failed"),
+            reason=reason,
+            run=outcome.run,
+            config_file=outcome.config_file,
+            config_digest=None if outcome.config is None else outcome.config.digest(),
+            target=outcome.target,
+            transport=outcome.transport,
+            sim=outcome.sim,
+        )
+        try:
+            write_report(args.report, report)
+        except OSError as exc:
+            print(f"pickplace: cannot write the report {args.report}: {exc}", file=stderr)
+            return code or EXIT_FAILED
+    return code
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    overrides: dict[str, dict[str, Any]] = {}
+    if args.profile is not None:
+        overrides.setdefault("robot", {})["profile"] = args.profile
+    if args.port is not None:
+        overrides.setdefault("robot", {})["port"] = args.port
+    if args.host is not None:
+        overrides.setdefault("robot", {})["host"] = args.host
+    if args.cycles is not None:
+        overrides.setdefault("run", {})["cycles"] = args.cycles
+    if args.poll_interval is not None:
+        overrides.setdefault("run", {})["poll_interval_s"] = args.poll_interval
+    return overrides
+
+
+def _execute(
+    args: argparse.Namespace, outcome: _Outcome, *, progress: _Progress | None
+) -> tuple[int, str | None]:
+    # 1. Everything is validated before anything connects.
+    outcome.config_file = args.config
+    config = load_config(args.config, overrides=_overrides(args))
+    outcome.config = config
+    source = args.config or "the default configuration"
+    sequence: TaskSequence
+    if args.sequence:
+        sequence = load_sequence(args.sequence)
+        cycles = args.cycles if args.cycles is not None else sequence.default_cycles
+        source = args.sequence
+    else:
+        sequence = pick_and_place(config)
+        cycles = config.run.cycles
+    if args.diagram:
+        print(mermaid(sequence, cycles=cycles))
+        return EXIT_OK, None
+    host = config.robot.host
+    if host is None and not (args.sim or args.dry_run):
+        raise ConfigError("--host is required (or --sim, --dry-run, --diagram)")
+    if args.sim and not (args.sim_time_scale > 0):
+        raise ConfigError(f"--sim-time-scale must be > 0, got {args.sim_time_scale}")
+    probe = make_robot(config, host or "127.0.0.1", config.robot.port)
+    try:
+        validate_plan(probe, sequence, cycles, source=source)
+        if args.dry_run:
+            print(
+                format_plan(
+                    sequence,
+                    cycles,
+                    probe.model,
+                    start=config.poses.resolved()["home"],
+                    profile=probe.profile.name,
+                )
+            )
+            return EXIT_OK, None
+    finally:
+        probe.close()
+    if args.sim:
+        return _run_with_sim(args, config, sequence, cycles, outcome, progress)
+    assert host is not None
+    return _run_on(config, sequence, cycles, host, config.robot.port, outcome, progress)
+
+
+def _run_with_sim(
+    args: argparse.Namespace,
+    config: PickPlaceConfig,
+    sequence: TaskSequence,
+    cycles: int,
+    outcome: _Outcome,
+    progress: _Progress | None,
+) -> tuple[int, str | None]:
+    from ..sim import Simulator, TableObject
+
+    poses = config.poses.resolved()
+    # A feeder: one part per cycle waits at the pick pose.
+    parts = [TableObject(name=f"part-{i}", pose=poses["pick"]) for i in range(1, cycles + 1)]
+    gripper = config.gripper.kind if config.gripper.kind not in ("auto", "none") else None
+    sim = Simulator(
+        config.robot.profile,
+        time_scale=args.sim_time_scale,
+        model=config.robot.model,
+        gripper=gripper,
+        objects=parts,
+    )
+    with sim:
+        print(
+            f"simulator: {config.robot.profile} profile on {sim.host}:{sim.port}"
+            f" (time scale {args.sim_time_scale:g}), {len(parts)} part(s) at the pick pose",
+            flush=True,
+        )
+        code, reason = _run_on(
+            config,
+            sequence,
+            cycles,
+            sim.host,
+            sim.port,
+            outcome,
+            progress,
+            gripper_port=sim.gripper_port,
+            # Simulated time runs faster: so does a gripper's settle time.
+            settle_scale=args.sim_time_scale,
+        )
+        place = poses["place"] if not args.sequence else None
+        outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
+        outcome.sim["time_scale"] = args.sim_time_scale
+    if place is not None:
+        for item in outcome.sim["objects"]:
+            where = "on the place position" if item["on_place"] else "NOT on the place position"
+            pose = ", ".join(f"{v:g}" for v in item["pose"][:3])
+            print(f"simulator: {item['name']} is {where} ({pose})", flush=True)
+        if code == EXIT_OK and not outcome.sim["on_place"]:
+            return EXIT_FAILED, "the run ended DONE but a part is not on the place position"
+    return code, reason
+
+
+def _run_on(
+    config: PickPlaceConfig,
+    sequence: TaskSequence,
+    cycles: int,
+    host: str,
+    port: int,
+    outcome: _Outcome,
+    progress: _Progress | None,
+    *,
+    gripper_port: int | None = None,
+    settle_scale: float = 1.0,
+) -> tuple[int, str | None]:
+    robot = make_robot(config, host, port, gripper_port=gripper_port, settle_scale=settle_scale)
+    outcome.target = {"host": host, "port": port, "profile": robot.profile.name}
+    runner = Runner(
+        robot,
+        error_reaction=config.on_error.reaction,
+        ready_timeout_s=config.timeouts.ready_s,
+        on_state=progress,
+    )
+    restore = _install_sigint(runner.request_stop)
+    try:
+        try:
+            robot.connect()
+        except TransportError as exc:
+            return EXIT_CONNECTION, f"cannot connect to the robot at {host}:{port}: {exc}"
+        result = runner.run(sequence, cycles=cycles)
+        outcome.run = result
+    finally:
+        if progress is not None:
+            progress.end()
+        robot.close()
+        restore()
+        outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
+    if result.ok:
+        times = ", ".join(f"{t:.2f}" for t in result.cycle_times_s)
+        print(
+            f"DONE: {result.cycles_completed}/{cycles} cycle(s) of {sequence.name} in"
+            f" {result.duration_s:.2f} s (cycle times: {times} s;"
+            f" {result.retries} grasp retr{'y' if result.retries == 1 else 'ies'})",
+            flush=True,
+        )
+        return EXIT_OK, None
+    failure = result.failure
+    assert failure is not None
+    code = exit_code_for(failure.exception)
+    if failure.interrupted:
+        return code, f"interrupted in {failure.state} (cycle {failure.cycle}); the arm was stopped"
+    label = RESULT_NAMES[code].replace("_", " ")
+    code_text = f" (robot error code {failure.error_code})" if failure.error_code else ""
+    reaction = ""
+    if result.reaction is not None and result.reaction.reaction == "retreat":
+        reaction = "; retreated" if result.reaction.performed else "; did not retreat"
+    return code, (
+        f"{label} in {failure.state} (cycle {failure.cycle}): {failure.type}:"
+        f" {failure.message}{code_text}{reaction}"
+    )
+
+
+def _gripper_stats(robot: Robot) -> dict[str, Any] | None:
+    transport = getattr(robot.gripper, "transport", None)
+    stats = getattr(transport, "stats", None)
+    return None if stats is None else dict(stats.as_dict())
+
+
+def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
+    """First Ctrl-C: stop the run cleanly; a second one: give up at once."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    pressed = threading.Event()
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        _ = signum, frame
+        if pressed.is_set():
+            raise KeyboardInterrupt
+        pressed.set()
+        stop()
+
+    previous = signal.signal(signal.SIGINT, handler)
+
+    def restore() -> None:
+        signal.signal(signal.SIGINT, previous)
+
+    return restore
+
+
+def main(argv: Sequence[str] | list[str] | None = None) -> int:
+    """Entry point of ``python -m tmmaster.pickplace``."""
+    return run(build_parser().parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "make_robot", "run"]

@@ -1,0 +1,283 @@
+"""The pick & place configuration: one TOML file, validated by pydantic before any I/O.
+
+Every default reproduces the article's master: its five poses, 30 % PTP for approach,
+place and home, 10 % Line for pick and lift, 50 ms polling. Unknown keys are refused
+(a typo must not silently fall back to a default), and every error names the key and
+the file it came from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Annotated, Any, Literal, Self
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
+
+from .._exceptions import ConfigError
+from .._pose import MotionType, Pose
+from .._robot import TimeoutPolicy, Workspace
+
+
+def _finite_pose(value: object) -> object:
+    # A NaN or infinite coordinate would pass a range check ("not < max") by accident.
+    if isinstance(value, list | tuple):
+        for item in value:
+            if isinstance(item, float) and not math.isfinite(item):
+                raise ValueError("pose values must be finite numbers")
+    return value
+
+
+#: ``[x, y, z, rx, ry, rz]`` in mm and degrees.
+PoseValue = Annotated[
+    tuple[float, float, float, float, float, float], BeforeValidator(_finite_pose)
+]
+Speed = Annotated[int, Field(ge=1, le=100, strict=True)]
+
+#: The article's task coordinates.
+ARTICLE_APPROACH: tuple[float, ...] = (300, -200, 200, 180, 0, 90)
+ARTICLE_PICK = (300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
+ARTICLE_LIFT: tuple[float, ...] = (300, -200, 250, 180, 0, 90)
+ARTICLE_PLACE = (300.0, 200.0, 200.0, 180.0, 0.0, 90.0)
+ARTICLE_HOME = (0.0, 0.0, 300.0, 180.0, 0.0, 0.0)
+
+#: The moves of one pick & place cycle, in order.
+MOVES = ("approach", "pick", "lift", "place", "home")
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RobotSection(_Section):
+    """Which robot and how to reach it."""
+
+    #: Register contract: "article", "tmflow", or a profile TOML file.
+    profile: str = "article"
+    #: Arm model (reach, speed limits): tm5-700, tm5-900, tm12, tm14.
+    model: Literal["tm5-700", "tm5-900", "tm12", "tm14"] = "tm5-700"
+    host: str | None = None
+    port: Annotated[int, Field(ge=1, le=65535)] = 502
+    #: Highest speed any move may use, %.
+    max_speed: Speed = 100
+    position_tolerance_mm: Annotated[float, Field(gt=0, le=50)] = 1.0
+
+
+class PosesSection(_Section):
+    """Task poses; approach and lift default to the pick pose raised by a z offset."""
+
+    approach: PoseValue | None = None
+    pick: PoseValue = ARTICLE_PICK
+    lift: PoseValue | None = None
+    place: PoseValue = ARTICLE_PLACE
+    home: PoseValue = ARTICLE_HOME
+    #: approach = pick + this in z, unless ``approach`` is given (article: 100 mm).
+    approach_z_offset: Annotated[float, Field(ge=0, le=1000)] = 100.0
+    #: lift = pick + this in z, unless ``lift`` is given (article: 150 mm).
+    lift_z_offset: Annotated[float, Field(ge=0, le=1000)] = 150.0
+
+    @model_validator(mode="after")
+    def _one_source_each(self) -> Self:
+        for pose, offset in (("approach", "approach_z_offset"), ("lift", "lift_z_offset")):
+            if getattr(self, pose) is not None and offset in self.model_fields_set:
+                raise ValueError(f"give either {pose} or {offset}, not both")
+        return self
+
+    def resolved(self) -> dict[str, Pose]:
+        """Every pose of the cycle, derived ones included."""
+        pick = Pose.from_sequence(self.pick)
+        approach = (
+            Pose.from_sequence(self.approach)
+            if self.approach is not None
+            else pick.offset(dz=self.approach_z_offset)
+        )
+        lift = (
+            Pose.from_sequence(self.lift)
+            if self.lift is not None
+            else pick.offset(dz=self.lift_z_offset)
+        )
+        return {
+            "approach": approach,
+            "pick": pick,
+            "lift": lift,
+            "place": Pose.from_sequence(self.place),
+            "home": Pose.from_sequence(self.home),
+        }
+
+
+class SpeedsSection(_Section):
+    """Speed of each move, % (article: normal 30 %, slow 10 % for pick and lift)."""
+
+    approach: Speed = 30
+    pick: Speed = 10
+    lift: Speed = 10
+    place: Speed = 30
+    home: Speed = 30
+
+
+class MotionSection(_Section):
+    """Motion type of each move: "ptp" (joint interpolation) or "line"."""
+
+    approach: MotionType = MotionType.PTP
+    pick: MotionType = MotionType.LINE
+    lift: MotionType = MotionType.LINE
+    place: MotionType = MotionType.PTP
+    home: MotionType = MotionType.PTP
+
+
+class TimeoutsSection(_Section):
+    """How long each wait may take, in seconds."""
+
+    #: The robot must acknowledge (pick up) a command within this time.
+    ack_s: Annotated[float, Field(gt=0, le=60)] = 2.0
+    #: Motion timeout = factor x expected motion time + margin (the article's ~130 %) ...
+    motion_factor: Annotated[float, Field(ge=1, le=10)] = 1.3
+    motion_margin_s: Annotated[float, Field(ge=0, le=600)] = 2.0
+    #: ... unless fixed here for every move.
+    motion_s: Annotated[float, Field(gt=0, le=3600)] | None = None
+    gripper_s: Annotated[float, Field(gt=0, le=600)] = 5.0
+    #: One Modbus request must be answered within this time.
+    request_s: Annotated[float, Field(gt=0, le=60)] = 1.0
+    #: The robot must be ready (auto, idle, no error) within this time at start.
+    ready_s: Annotated[float, Field(gt=0, le=600)] = 10.0
+
+    def policy(self) -> TimeoutPolicy:
+        """The robot API's timeout policy."""
+        return TimeoutPolicy(
+            ack_timeout_s=self.ack_s,
+            motion_factor=self.motion_factor,
+            motion_margin_s=self.motion_margin_s,
+            motion_timeout_s=self.motion_s,
+            gripper_timeout_s=self.gripper_s,
+        )
+
+
+class GripperSection(_Section):
+    """The gripper: "auto" uses what the robot profile offers (article: gripper register)."""
+
+    kind: str = "auto"
+    #: Host / port of a gripper with its own connection (default: the robot's host).
+    host: str | None = None
+    port: Annotated[int, Field(ge=1, le=65535)] = 502
+    #: Register gripper without busy flag: how long a close/open takes at most, s.
+    settle_s: Annotated[float, Field(gt=0, le=60)] = 0.5
+    #: Open the fingers before the first approach (never approach a part with them closed).
+    open_at_start: bool = True
+
+
+class RunSection(_Section):
+    """How the cycle runs."""
+
+    cycles: Annotated[int, Field(ge=1, le=1_000_000, strict=True)] = 1
+    poll_interval_s: Annotated[float, Field(ge=0.005, le=5)] = 0.05
+    #: After a failed grasp: open, re-approach and try again up to this many times.
+    grasp_retries: Annotated[int, Field(ge=0, le=20, strict=True)] = 2
+
+
+class OnErrorSection(_Section):
+    """What the robot does after a failure (never anything after an e-stop or robot error)."""
+
+    reaction: Literal["stay", "retreat"] = "stay"
+    #: Safe pose to retreat to (default: home), reached at low speed.
+    pose: PoseValue | None = None
+    speed: Speed = 10
+    motion: MotionType = MotionType.PTP
+
+
+class WorkspaceSection(_Section):
+    """Optional box the TCP must stay inside, mm (base frame)."""
+
+    x: tuple[float, float] = (-2000.0, 2000.0)
+    y: tuple[float, float] = (-2000.0, 2000.0)
+    z: tuple[float, float] = (-2000.0, 2000.0)
+
+
+class PickPlaceConfig(_Section):
+    """The whole pick & place configuration (every section optional)."""
+
+    robot: RobotSection = RobotSection()
+    poses: PosesSection = PosesSection()
+    speeds: SpeedsSection = SpeedsSection()
+    motion: MotionSection = MotionSection()
+    timeouts: TimeoutsSection = TimeoutsSection()
+    gripper: GripperSection = GripperSection()
+    run: RunSection = RunSection()
+    on_error: OnErrorSection = OnErrorSection()
+    workspace: WorkspaceSection | None = None
+
+    def digest(self) -> str:
+        """sha256 of the normalised configuration (defaults filled in, keys sorted)."""
+        text = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+        return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+    def workspace_box(self) -> Workspace | None:
+        """The robot API's workspace, when one is configured."""
+        if self.workspace is None:
+            return None
+        return Workspace(x=self.workspace.x, y=self.workspace.y, z=self.workspace.z)
+
+    def retreat_pose(self) -> Pose:
+        """Where the "retreat" error reaction goes."""
+        if self.on_error.pose is not None:
+            return Pose.from_sequence(self.on_error.pose)
+        return self.poses.resolved()["home"]
+
+
+def format_validation_error(exc: ValidationError, source: str) -> str:
+    """One line naming every bad key (dotted path) and the file it came from."""
+    problems = []
+    for error in exc.errors():
+        where = ".".join(str(part) for part in error["loc"]) or "(top level)"
+        message = error["msg"]
+        if error["type"] == "extra_forbidden":
+            message = "unknown key"
+        problems.append(f"{where}: {message}")
+    return f"{source}: " + "; ".join(problems)
+
+
+def validate_config(data: Mapping[str, Any], *, source: str = "<defaults>") -> PickPlaceConfig:
+    """Validate a mapping; raises :class:`ConfigError` naming the key and ``source``."""
+    try:
+        return PickPlaceConfig.model_validate(dict(data))
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc, source)) from None
+
+
+def read_config_data(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file into a mapping; unreadable or malformed files raise ConfigError."""
+    p = Path(path)
+    try:
+        text = p.read_text("utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the config file ({exc.strerror})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+
+
+def load_config(
+    path: str | Path | None = None, *, overrides: Mapping[str, Mapping[str, Any]] | None = None
+) -> PickPlaceConfig:
+    """Load and validate a config file (None = the article's defaults) with overrides."""
+    data: dict[str, Any] = {} if path is None else read_config_data(path)
+    source = "<defaults>" if path is None else str(path)
+    if overrides:
+        for section, values in overrides.items():
+            current = data.get(section, {})
+            if not isinstance(current, dict):
+                break  # the file's own error is reported by validation below
+            data[section] = {**current, **values}
+        source += " (with command-line overrides)"
+    return validate_config(data, source=source)

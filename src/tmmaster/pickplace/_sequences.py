@@ -1,0 +1,397 @@
+"""Built-in sequences: the article's pick & place, palletizing, and sequences read from TOML.
+
+Each function only builds a :class:`TaskSequence` (states and what to do in them); the
+:class:`Runner` runs it with the shared policies.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .._exceptions import ConfigError
+from .._pose import MotionType, Pose
+from ._config import PickPlaceConfig, PoseValue, Speed, format_validation_error, read_config_data
+from ._runner import StepContext
+from ._steps import Action, PlannedMove, Predicate, RetryRule, TaskSequence
+
+#: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
+PICK_AND_PLACE_STATES = (
+    "MOVE_TO_APPROACH",
+    "MOVE_TO_PICK",
+    "GRIPPER_CLOSE",
+    "CHECK_GRASP",
+    "MOVE_TO_LIFT",
+    "MOVE_TO_PLACE",
+    "GRIPPER_OPEN",
+    "MOVE_TO_HOME",
+)
+
+
+def grasp_detected(ctx: StepContext) -> bool:
+    """Guard: the last gripper reading saw an object between the fingers."""
+    return ctx.last_gripper is not None and ctx.last_gripper.holding
+
+
+def _open(ctx: StepContext) -> None:
+    ctx.open_gripper()
+
+
+def _close(ctx: StepContext) -> None:
+    ctx.close_gripper()
+
+
+def _check(ctx: StepContext) -> None:
+    ctx.check_holding(True)
+
+
+def _mover(planned: PlannedMove) -> Action:
+    def move(ctx: StepContext) -> None:
+        ctx.move_planned(planned)
+
+    move.__name__ = f"move_to_{planned.source or planned.state.lower()}"
+    return move
+
+
+def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
+    """The article's cycle: approach, pick, close, check, lift, place, open, home."""
+    cfg = config if config is not None else PickPlaceConfig()
+    poses = cfg.poses.resolved()
+    moves = {
+        name: PlannedMove(
+            state=f"MOVE_TO_{name.upper()}",
+            pose=poses[name],
+            speed=getattr(cfg.speeds, name),
+            motion=getattr(cfg.motion, name),
+            source=f"poses.{name}",
+        )
+        for name in ("approach", "pick", "lift", "place", "home")
+    }
+    order = [moves[n] for n in ("approach", "pick", "lift", "place", "home")]
+    retreat = PlannedMove(
+        state="RETREAT",
+        pose=cfg.retreat_pose(),
+        speed=cfg.on_error.speed,
+        motion=cfg.on_error.motion,
+        source="on_error.pose" if cfg.on_error.pose is not None else "poses.home",
+    )
+    seq = TaskSequence(
+        "pick-and-place",
+        plan=lambda _cycle, _cycles: order,
+        retreat=retreat if cfg.on_error.reaction == "retreat" else None,
+        default_cycles=cfg.run.cycles,
+        prepare=_open if cfg.gripper.open_at_start else None,
+    )
+    seq.add("MOVE_TO_APPROACH", _mover(moves["approach"]), description="above the pick pose")
+    seq.add("MOVE_TO_PICK", _mover(moves["pick"]), description="down to the part")
+    seq.add("GRIPPER_CLOSE", _close, description="close the fingers")
+    seq.add(
+        "CHECK_GRASP",
+        _check,
+        retry=RetryRule("MOVE_TO_APPROACH", cfg.run.grasp_retries, recover=_open),
+        guard=grasp_detected,
+        description="require an object; else open, re-approach, try again",
+    )
+    seq.add("MOVE_TO_LIFT", _mover(moves["lift"]), description="lift the part")
+    seq.add("MOVE_TO_PLACE", _mover(moves["place"]), description="to the place pose")
+    seq.add("GRIPPER_OPEN", _open, description="release the part")
+    seq.add("MOVE_TO_HOME", _mover(moves["home"]), description="back home")
+    return seq
+
+
+# -- palletizing -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Pallet:
+    """A grid of ``rows`` x ``cols`` slots with pitch ``dx``, ``dy``; ``layers`` high."""
+
+    origin: Pose
+    rows: int
+    cols: int
+    dx: float
+    dy: float
+    layers: int = 1
+    dz: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("rows", "cols", "layers"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"pallet {name} must be >= 1, got {getattr(self, name)}")
+        for name in ("dx", "dy", "dz"):
+            if not math.isfinite(getattr(self, name)):
+                raise ConfigError(f"pallet {name} must be a finite number")
+
+    @property
+    def size(self) -> int:
+        """Number of slots."""
+        return self.rows * self.cols * self.layers
+
+    def slot(self, index: int) -> Pose:
+        """Pose of slot ``index`` (0-based): row by row, then layer by layer."""
+        if not 0 <= index < self.size:
+            raise ConfigError(f"slot {index} outside the pallet (0..{self.size - 1})")
+        per_layer = self.rows * self.cols
+        layer, rest = divmod(index, per_layer)
+        row, col = divmod(rest, self.cols)
+        return self.origin.offset(dx=col * self.dx, dy=row * self.dy, dz=layer * self.dz)
+
+
+def palletizing(
+    *,
+    pick: Pose,
+    pallet: Pallet,
+    home: Pose,
+    approach_dz: float = 100.0,
+    speed: int = 30,
+    slow_speed: int = 10,
+    grasp_retries: int = 2,
+    retreat_speed: int = 10,
+) -> TaskSequence:
+    """Pick parts from one spot and place cycle k into slot k of ``pallet``, then go home."""
+    above_pick = pick.offset(dz=approach_dz)
+    ptp, line = MotionType.PTP, MotionType.LINE
+
+    def slot_moves(cycle: int) -> list[PlannedMove]:
+        slot = pallet.slot(cycle - 1)
+        above = slot.offset(dz=approach_dz)
+        return [
+            PlannedMove("MOVE_TO_SLOT_ABOVE", above, speed, ptp, f"slot {cycle}"),
+            PlannedMove("MOVE_TO_SLOT", slot, slow_speed, line, f"slot {cycle}"),
+            PlannedMove("MOVE_TO_SLOT_CLEAR", above, slow_speed, line, f"slot {cycle}"),
+        ]
+
+    def plan(cycle: int, _cycles: int = pallet.size) -> list[PlannedMove]:
+        moves = [
+            PlannedMove("MOVE_TO_APPROACH", above_pick, speed, ptp, "pick"),
+            PlannedMove("MOVE_TO_PICK", pick, slow_speed, line, "pick"),
+            PlannedMove("MOVE_TO_LIFT", above_pick, slow_speed, line, "pick"),
+            *slot_moves(cycle),
+        ]
+        if cycle == _cycles:
+            moves.append(PlannedMove("MOVE_TO_HOME", home, speed, ptp, "home"))
+        return moves
+
+    def slot_move(index: int) -> Action:
+        def move(ctx: StepContext) -> None:
+            ctx.move_planned(slot_moves(ctx.cycle)[index])
+
+        return move
+
+    def last_cycle(ctx: StepContext) -> bool:
+        return ctx.last_cycle
+
+    seq = TaskSequence(
+        "palletizing",
+        plan=plan,
+        retreat=PlannedMove("RETREAT", home, retreat_speed, ptp, "home"),
+        default_cycles=pallet.size,
+        prepare=_open,
+    )
+    seq.add("MOVE_TO_APPROACH", _mover(plan(1)[0]))
+    seq.add("MOVE_TO_PICK", _mover(plan(1)[1]))
+    seq.add("GRIPPER_CLOSE", _close)
+    seq.add(
+        "CHECK_GRASP",
+        _check,
+        retry=RetryRule("MOVE_TO_APPROACH", grasp_retries, recover=_open),
+        guard=grasp_detected,
+    )
+    seq.add("MOVE_TO_LIFT", _mover(plan(1)[2]))
+    seq.add("MOVE_TO_SLOT_ABOVE", slot_move(0))
+    seq.add("MOVE_TO_SLOT", slot_move(1))
+    seq.add("GRIPPER_OPEN", _open)
+    seq.add("MOVE_TO_SLOT_CLEAR", slot_move(2))
+    seq.add("MOVE_TO_HOME", _mover(PlannedMove("MOVE_TO_HOME", home, speed, ptp)), when=last_cycle)
+    return seq
+
+
+# -- sequences described as data ------------------------------------------------------------
+
+
+class _DataStep(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    #: State name (UPPER_CASE by convention); default: the action and its position.
+    state: str | None = None
+    #: Run always, only in the first cycle, or only in the last.
+    when: Literal["always", "first_cycle", "last_cycle"] = "always"
+
+
+class _Retrying(_DataStep):
+    #: On a failed grasp: open, go back to this (earlier) state, try again.
+    retry_from: str | None = None
+    retries: Annotated[int, Field(ge=0, le=20)] = 0
+
+    @model_validator(mode="after")
+    def _pair(self) -> _Retrying:
+        if self.retries and self.retry_from is None:
+            raise ValueError("retries needs retry_from (the state to go back to)")
+        return self
+
+
+class MoveStep(_DataStep):
+    """Move to a pose (a name from [poses] or six numbers)."""
+
+    do: Literal["move"]
+    pose: str | PoseValue
+    speed: Speed
+    motion: MotionType = MotionType.PTP
+    #: Added to the pose's z, mm (e.g. 100 above a named pose).
+    z_offset: float = 0.0
+
+
+class GripStep(_Retrying):
+    """Close the gripper and require an object."""
+
+    do: Literal["grip"]
+
+
+class ReleaseStep(_DataStep):
+    """Open the gripper."""
+
+    do: Literal["release"]
+
+
+class WaitStep(_DataStep):
+    """Dwell (interruptible by a stop request)."""
+
+    do: Literal["wait"]
+    seconds: Annotated[float, Field(gt=0, le=3600)]
+
+
+class CheckStep(_Retrying):
+    """Require the gripper to hold (or not hold) an object."""
+
+    do: Literal["check"]
+    holding: bool = True
+
+
+DataStep = Annotated[
+    MoveStep | GripStep | ReleaseStep | WaitStep | CheckStep, Field(discriminator="do")
+]
+
+
+class RetreatSpec(BaseModel):
+    """Safe pose for the "retreat" error reaction."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    pose: str | PoseValue
+    speed: Speed = 10
+    motion: MotionType = MotionType.PTP
+
+
+class SequenceFile(BaseModel):
+    """A sequence described as data (TOML)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: Annotated[str, Field(min_length=1)]
+    cycles: Annotated[int, Field(ge=1, le=1_000_000)] = 1
+    open_at_start: bool = True
+    poses: dict[str, PoseValue] = {}
+    steps: Annotated[list[DataStep], Field(min_length=1)]
+    retreat: RetreatSpec | None = None
+
+
+def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> TaskSequence:
+    """Build a sequence from a mapping (a parsed TOML file); errors name key and source."""
+    try:
+        spec = SequenceFile.model_validate(dict(data))
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc, source)) from None
+
+    def pose_of(value: str | tuple[float, ...], where: str) -> Pose:
+        if isinstance(value, str):
+            if value not in spec.poses:
+                known = ", ".join(sorted(spec.poses)) or "none"
+                raise ConfigError(f"{source}: {where}: unknown pose {value!r} (known: {known})")
+            return Pose.from_sequence(spec.poses[value])
+        return Pose.from_sequence(value)
+
+    whens: dict[str, Predicate | None] = {
+        "always": None,
+        "first_cycle": lambda ctx: ctx.cycle == 1,
+        "last_cycle": lambda ctx: ctx.last_cycle,
+    }
+    moves: list[tuple[int, PlannedMove, str]] = []
+    seq = TaskSequence(
+        spec.name, default_cycles=spec.cycles, prepare=_open if spec.open_at_start else None
+    )
+    for index, step in enumerate(spec.steps):
+        name = step.state or f"{step.do.upper()}_{index + 1}"
+        where = f"steps.{index}"
+        action: Action
+        retry: RetryRule | None = None
+        if isinstance(step, MoveStep):
+            pose = pose_of(step.pose, f"{where}.pose").offset(dz=step.z_offset)
+            planned = PlannedMove(name, pose, step.speed, step.motion, f"{where}.pose")
+            moves.append((index, planned, step.when))
+            action = _mover(planned)
+        elif isinstance(step, GripStep):
+            action = _grip
+        elif isinstance(step, ReleaseStep):
+            action = _open
+        elif isinstance(step, WaitStep):
+            action = _waiter(step.seconds)
+        else:
+            action = _checker(step.holding)
+        if isinstance(step, _Retrying) and step.retry_from is not None:
+            retry = RetryRule(step.retry_from, step.retries, recover=_open)
+        try:
+            seq.add(name, action, retry=retry, when=whens[step.when])
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {where}.state: {exc}") from None
+    try:
+        seq.validate()
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+    def plan(cycle: int, cycles: int) -> list[PlannedMove]:
+        return [
+            m
+            for _, m, when in moves
+            if when == "always"
+            or (when == "first_cycle" and cycle == 1)
+            or (when == "last_cycle" and cycle == cycles)
+        ]
+
+    seq.plan = plan
+    if spec.retreat is not None:
+        seq.retreat = PlannedMove(
+            "RETREAT",
+            pose_of(spec.retreat.pose, "retreat.pose"),
+            spec.retreat.speed,
+            spec.retreat.motion,
+            "retreat.pose",
+        )
+    return seq
+
+
+def load_sequence(path: str | Path) -> TaskSequence:
+    """Read a sequence described in a TOML file (see docs/pickplace.md)."""
+    return sequence_from_data(read_config_data(path), source=str(path))
+
+
+def _grip(ctx: StepContext) -> None:
+    ctx.grip()
+
+
+def _waiter(seconds: float) -> Action:
+    def wait(ctx: StepContext) -> None:
+        ctx.wait(seconds)
+
+    return wait
+
+
+def _checker(holding: bool) -> Action:
+    def check(ctx: StepContext) -> None:
+        ctx.check_holding(holding)
+
+    return check
