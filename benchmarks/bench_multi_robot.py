@@ -1,0 +1,342 @@
+"""Several robots from one program: one thread per robot, measured.
+
+Runs N = 1, 2, 4, 8 simulated article-profile robots concurrently, each doing the same
+fixed sequence of moves, and reports per N:
+
+* move overshoot: wall time of ``move_to`` minus the move's expected time (arm model
+  time / time_scale). At N = 1 this is the handshake's inherent cost (acknowledge on the
+  next 50 Hz tick, completion seen at the next 50 ms poll); what grows with N is the
+  cost of driving the robots from one process;
+* poll interval: time between two status polls of the same move, as stamped by the
+  simulator on arrival (the target is the 50 ms poll interval);
+* master CPU %: CPU time of this process / wall time (100 % = one core);
+* requests/s: Modbus requests of all robots together per wall second.
+
+The simulators run in a separate process (``--serve``) so the CPU figure is the
+master's own, not the simulators' ticks. Both processes stay on 127.0.0.1.
+
+``--mode asyncio`` drives the same blocking code through ``asyncio.to_thread`` for
+comparison: it is still one OS thread per robot underneath (the library is synchronous).
+
+Usage::
+
+    python benchmarks/bench_multi_robot.py                 # threads, N = 1 2 4 8
+    python benchmarks/bench_multi_robot.py --mode both --moves 12 --repeat 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tmmaster import Pose, Robot
+
+#: The fixed tour every robot drives (article pick area; the article map holds
+#: |x|, |y|, |z| <= 327.67 mm), at 100 % speed, PTP.
+TOUR = [
+    Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0),
+    Pose(300.0, 200.0, 200.0, 180.0, 0.0, 90.0),
+    Pose(250.0, 0.0, 300.0, 180.0, 0.0, 90.0),
+]
+POLL_S = 0.05
+#: The status block the article channel polls while a move runs (FC3, address 0, 22 words).
+STATUS_POLL = (3, 0)
+#: The TCP pose read that ends a move (FC3, address 16).
+POSE_READ = (3, 16)
+
+
+# -- the simulator process -----------------------------------------------------------
+
+
+def serve(n: int, time_scale: float) -> None:
+    """Child mode: run ``n`` simulators, print their ports, dump request times on request."""
+    import structlog
+
+    from tmmaster.sim import Simulator
+
+    # stdout carries the JSON protocol: the simulators' log lines go to stderr.
+    structlog.configure(logger_factory=structlog.PrintLoggerFactory(sys.stderr))
+    sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
+    try:
+        print(json.dumps({"ports": [s.port for s in sims]}), flush=True)
+        for line in sys.stdin:
+            if line.strip() == "clear":
+                for s in sims:
+                    s.clear_request_log()
+                print("{}", flush=True)
+            elif line.strip() == "dump":
+                dump = [[(r.time, r.function_code, r.address) for r in s.request_log] for s in sims]
+                print(json.dumps(dump), flush=True)
+            else:
+                break
+    finally:
+        for s in sims:
+            s.close()
+
+
+class SimProcess:
+    """The child process hosting the simulators."""
+
+    def __init__(self, n: int, time_scale: float) -> None:
+        src = Path(__file__).resolve().parents[1] / "src"
+        env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+        cmd = [sys.executable, __file__, "--serve", str(n), "--time-scale", str(time_scale)]
+        self.proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,  # the simulators' structlog output
+            text=True,
+            env=env,
+        )
+        self.ports: list[int] = self._ask(None)["ports"]
+
+    def _ask(self, command: str | None) -> Any:
+        assert self.proc.stdin is not None
+        assert self.proc.stdout is not None
+        if command is not None:
+            self.proc.stdin.write(command + "\n")
+            self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError("the simulator process ended unexpectedly")
+        return json.loads(line)
+
+    def clear(self) -> None:
+        """Forget the requests received so far (connecting, homing)."""
+        self._ask("clear")
+
+    def requests(self) -> list[list[tuple[float, int, int]]]:
+        """Per simulator: (arrival time, function code, address) of every request."""
+        return [[(r[0], r[1], r[2]) for r in sim] for sim in self._ask("dump")]
+
+    def close(self) -> None:
+        """Stop the child and wait for it."""
+        assert self.proc.stdin is not None
+        try:
+            self.proc.stdin.write("quit\n")
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        self.proc.wait(10)
+
+
+# -- the master side -----------------------------------------------------------------
+
+
+@dataclass
+class RobotRun:
+    """What one robot measured."""
+
+    overshoot_s: list[float] = field(default_factory=list)
+    requests: int = 0
+    error: BaseException | None = None
+
+
+def drive(robot: Robot, moves: int, time_scale: float, start: threading.Barrier) -> RobotRun:
+    """One robot's work: wait for the others, then drive the tour, timing every move."""
+    run = RobotRun()
+    try:
+        start.wait(30)
+        before = robot.stats.requests
+        for i in range(moves):
+            target = TOUR[i % len(TOUR)]
+            t0 = time.monotonic()
+            motion = robot.move_to(target, speed=100)
+            elapsed = time.monotonic() - t0
+            run.overshoot_s.append(elapsed - motion.expected_s / time_scale)
+        run.requests = robot.stats.requests - before
+    except BaseException as exc:  # reported in the table; the benchmark must finish
+        run.error = exc
+    return run
+
+
+def run_threads(robots: list[Robot], moves: int, time_scale: float) -> list[RobotRun]:
+    """One plain thread per robot."""
+    barrier = threading.Barrier(len(robots) + 1)
+    results: list[RobotRun | None] = [None] * len(robots)
+
+    def worker(i: int) -> None:
+        results[i] = drive(robots[i], moves, time_scale, barrier)
+
+    threads = [threading.Thread(target=worker, args=(i,)) for i in range(len(robots))]
+    for t in threads:
+        t.start()
+    barrier.wait(30)
+    for t in threads:
+        t.join()
+    return [r for r in results if r is not None]
+
+
+def run_asyncio(robots: list[Robot], moves: int, time_scale: float) -> list[RobotRun]:
+    """Each robot's blocking calls in ``asyncio.to_thread``."""
+    barrier = threading.Barrier(len(robots) + 1)
+
+    async def main() -> list[RobotRun]:
+        loop = asyncio.get_running_loop()
+        # to_thread's default pool has min(32, cpus + 4) workers: with more robots than
+        # that, robots would queue behind others (and the start barrier would never fill).
+        # One worker per robot, plus one for this coroutine's own barrier wait.
+        loop.set_default_executor(ThreadPoolExecutor(max_workers=len(robots) + 1))
+        tasks = [asyncio.to_thread(drive, r, moves, time_scale, barrier) for r in robots]
+        gathered = asyncio.gather(*tasks)
+        await asyncio.to_thread(barrier.wait, 30)
+        return list(await gathered)
+
+    return asyncio.run(main())
+
+
+@dataclass
+class Row:
+    """One line of the result table."""
+
+    mode: str
+    n: int
+    wall_s: float
+    overshoot_ms: list[float]
+    poll_ms: list[float]
+    cpu_percent: float
+    requests_per_s: float
+    errors: int
+    first_error: str | None
+
+
+def poll_intervals(requests: list[tuple[float, int, int]]) -> list[float]:
+    """Intervals between successive status polls of one move.
+
+    A move's polls run from its command write (FC16) to the pose read that ends it
+    (FC3 at the pose registers); the status read before the next write is not a poll.
+    """
+    intervals: list[float] = []
+    last: float | None = None
+    active = False
+    for arrived, fc, address in requests:
+        if fc == 16:
+            active, last = True, None
+        elif (fc, address) == POSE_READ:
+            active = False
+        elif active and (fc, address) == STATUS_POLL:
+            if last is not None:
+                intervals.append(arrived - last)
+            last = arrived
+    return intervals
+
+
+def measure(mode: str, n: int, moves: int, time_scale: float) -> Row:
+    """Start n simulators, connect n robots, run the tour concurrently, measure."""
+    sims = SimProcess(n, time_scale)
+    robots = [
+        Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
+        for i, port in enumerate(sims.ports)
+    ]
+    try:
+        for robot in robots:
+            robot.connect()
+            robot.wait_until_ready(10.0)
+        sims.clear()
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        runner = run_threads if mode == "threads" else run_asyncio
+        runs = runner(robots, moves, time_scale)
+        wall = time.monotonic() - wall0
+        cpu = time.process_time() - cpu0
+        requests = sims.requests()
+    finally:
+        for robot in robots:
+            robot.close()
+        sims.close()
+    polls = [dt for sim in requests for dt in poll_intervals(sim)]
+    return Row(
+        mode=mode,
+        n=n,
+        wall_s=wall,
+        overshoot_ms=[o * 1000 for r in runs for o in r.overshoot_s],
+        poll_ms=[p * 1000 for p in polls],
+        cpu_percent=100 * cpu / wall,
+        requests_per_s=sum(r.requests for r in runs) / wall,
+        errors=sum(r.error is not None for r in runs),
+        first_error=next((repr(r.error) for r in runs if r.error is not None), None),
+    )
+
+
+def pct(values: list[float], q: float) -> float:
+    """The q-th percentile (nearest rank); NaN for no values."""
+    if not values:
+        return float("nan")
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, round(q / 100 * (len(ordered) - 1)))]
+
+
+def table(rows: list[Row]) -> str:
+    """The results as a Markdown table."""
+    head = (
+        "| mode | N | wall s | overshoot ms mean / p95 / max | poll interval ms"
+        " mean / p95 / max | master CPU % | requests/s | errors |\n"
+        "|---|---|---|---|---|---|---|---|"
+    )
+    lines = [head]
+    for r in rows:
+        o, p = r.overshoot_ms, r.poll_ms
+        lines.append(
+            f"| {r.mode} | {r.n} | {r.wall_s:.2f}"
+            f" | {statistics.fmean(o):.1f} / {pct(o, 95):.1f} / {max(o):.1f}"
+            f" | {statistics.fmean(p):.1f} / {pct(p, 95):.1f} / {max(p):.1f}"
+            f" | {r.cpu_percent:.1f} | {r.requests_per_s:.0f} | {r.errors} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--n", type=int, nargs="+", default=[1, 2, 4, 8])
+    parser.add_argument("--moves", type=int, default=12)
+    parser.add_argument("--time-scale", type=float, default=10.0)
+    parser.add_argument("--repeat", type=int, default=1, help="runs per (mode, N)")
+    parser.add_argument("--mode", choices=["threads", "asyncio", "both"], default="threads")
+    parser.add_argument("--json", action="store_true", help="also print raw rows as JSON")
+    parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.serve is not None:
+        serve(args.serve, args.time_scale)
+        return 0
+    # The master's structlog output would cost CPU and flood the table: keep warnings.
+    import logging
+
+    import structlog
+
+    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))
+    modes = ["threads", "asyncio"] if args.mode == "both" else [args.mode]
+    rows = [
+        measure(mode, n, args.moves, args.time_scale)
+        for n in args.n
+        for mode in modes
+        for _ in range(args.repeat)
+    ]
+    print(
+        f"# {platform.python_implementation()} {platform.python_version()},"
+        f" {os.cpu_count()} CPUs, time_scale {args.time_scale:g}, {args.moves} moves per robot,"
+        f" poll {POLL_S * 1000:.0f} ms"
+    )
+    print(table(rows))
+    for r in rows:
+        if r.first_error:
+            print(f"{r.mode} N={r.n}: {r.errors} robot(s) failed, first: {r.first_error}")
+    if args.json:
+        print(json.dumps([r.__dict__ for r in rows]))
+    return 1 if any(r.errors for r in rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
