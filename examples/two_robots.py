@@ -1,0 +1,235 @@
+"""Two robots, one program: robot A hands a part over to robot B.
+
+Robot A picks the part at its pick position and puts it down on a handover table;
+robot B picks it up from the handover table and puts it down at its own place
+position. Each robot is driven from its own thread (the library is synchronous: one
+thread per robot is the simple, measured choice, see docs/architecture.md), and the
+threads coordinate with a :class:`threading.Barrier` (both ready) and a
+:class:`threading.Event` (A has released the part and moved clear): B's descent to the
+handover table starts only after that event.
+
+Run against two simulators it starts itself (the default)::
+
+    python examples/two_robots.py --sim
+
+or against two robots (or simulators) already listening::
+
+    python -m tmmaster.sim --port 5020 &
+    python -m tmmaster.sim --port 5030 &
+    python examples/two_robots.py --host 127.0.0.1 --port-a 5020 --port-b 5030
+
+Be aware of what the simulation does NOT do: the two simulators do not share a world.
+A's part really travels in A's simulated world (it ends up on A's handover table), but
+nothing carries it into B's: with ``--sim`` this script gives B's simulator its own
+part, placed at the handover pose from the start. Only the coordination between the
+two programs is real here; the handover itself is modelled by giving both worlds a
+part at the same coordinates. With real robots the handover pose must be one point
+expressed in both robots' base frames (calibrate it); this script assumes the two
+base frames coincide.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from tmmaster import Pose, Robot, TMMasterError
+from tmmaster.sim import ObjectState, Simulator, TableObject
+
+HOST = "127.0.0.1"
+#: Where robot A's part lies (the article's pick position).
+PICK_A = Pose(300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
+#: The handover table, one pose for both robots (see the module docstring).
+HANDOVER = Pose(250.0, 0.0, 100.0, 180.0, 0.0, 90.0)
+#: Where robot B puts the part down.
+PLACE_B = Pose(300.0, 200.0, 100.0, 180.0, 0.0, 90.0)
+#: Approach and retreat height above a pick or place pose, mm.
+CLEARANCE_MM = 100.0
+SPEED = 80
+#: Longest B waits for A to release the part before giving up, wall seconds.
+HANDOVER_TIMEOUT_S = 60.0
+
+
+def above(pose: Pose) -> Pose:
+    """The approach pose straight above ``pose``."""
+    return Pose(pose.x, pose.y, pose.z + CLEARANCE_MM, pose.rx, pose.ry, pose.rz)
+
+
+@dataclass
+class Handover:
+    """What the two robot threads share."""
+
+    ready: threading.Barrier = field(default_factory=lambda: threading.Barrier(2))
+    #: Set by A once the part is released and A's gripper has moved clear.
+    released: threading.Event = field(default_factory=threading.Event)
+    #: Set by either robot when it failed, so the other does not wait for nothing.
+    failed: threading.Event = field(default_factory=threading.Event)
+    #: (monotonic time, robot, step) of every step, for the report and the tests.
+    steps: list[tuple[float, str, str]] = field(default_factory=list)
+    errors: dict[str, BaseException] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def log(self, robot: str, step: str) -> None:
+        """Record a step (thread-safe) and print it."""
+        with self._lock:
+            self.steps.append((time.monotonic(), robot, step))
+        print(f"[{robot}] {step}", flush=True)
+
+    def time_of(self, robot: str, step: str) -> float:
+        """When ``robot`` did ``step`` (KeyError if it never did)."""
+        for at, who, what in self.steps:
+            if who == robot and what == step:
+                return at
+        raise KeyError(f"{robot} never did {step!r}")
+
+
+def pick(robot: Robot, pose: Pose) -> None:
+    """Approach from above, go down, grip (an empty grip raises), go back up."""
+    robot.move_to(above(pose), speed=SPEED)
+    robot.move_to(pose, speed=SPEED, motion="line")
+    robot.gripper.grip()
+    robot.move_to(above(pose), speed=SPEED, motion="line")
+
+
+def place(robot: Robot, pose: Pose) -> None:
+    """Approach from above, go down, open, go back up."""
+    robot.move_to(above(pose), speed=SPEED)
+    robot.move_to(pose, speed=SPEED, motion="line")
+    robot.gripper.open()
+    robot.move_to(above(pose), speed=SPEED, motion="line")
+
+
+def robot_a(robot: Robot, shared: Handover) -> None:
+    """A: pick the part, put it on the handover table, then tell B."""
+    robot.wait_until_ready()
+    shared.ready.wait(HANDOVER_TIMEOUT_S)
+    pick(robot, PICK_A)
+    shared.log("A", "picked")
+    place(robot, HANDOVER)
+    # Only now, with A's fingers open and A back up, may B come down.
+    shared.log("A", "released")
+    shared.released.set()
+
+
+def robot_b(robot: Robot, shared: Handover) -> None:
+    """B: wait above the handover table until A has released, then take the part over."""
+    robot.wait_until_ready()
+    shared.ready.wait(HANDOVER_TIMEOUT_S)
+    robot.move_to(above(HANDOVER), speed=SPEED)
+    shared.log("B", "waiting above handover")
+    if not shared.released.wait(HANDOVER_TIMEOUT_S):
+        raise TimeoutError(f"A did not release the part within {HANDOVER_TIMEOUT_S:g} s")
+    if shared.failed.is_set():
+        raise RuntimeError("robot A failed: no handover")
+    shared.log("B", "descending to handover")
+    pick(robot, HANDOVER)
+    shared.log("B", "picked")
+    place(robot, PLACE_B)
+    shared.log("B", "placed")
+
+
+def run(port_a: int, port_b: int, *, host: str = HOST, settle_s: float = 0.5) -> Handover:
+    """Drive both robots, one thread each; errors are collected in the result."""
+    shared = Handover()
+    jobs: dict[str, tuple[int, Callable[[Robot, Handover], None]]] = {
+        "A": (port_a, robot_a),
+        "B": (port_b, robot_b),
+    }
+
+    def worker(name: str) -> None:
+        port, job = jobs[name]
+        try:
+            with Robot(
+                host, port, profile="article", gripper_settle_s=settle_s, name=f"robot-{name}"
+            ) as robot:
+                job(robot, shared)
+        except BaseException as exc:  # reported by main(); the other robot is told
+            shared.errors[name] = exc
+            shared.failed.set()
+            shared.released.set()  # wake B (it checks `failed` first)
+            shared.ready.abort()  # wake a partner still waiting to start
+
+    threads = [threading.Thread(target=worker, args=(n,), name=f"robot-{n}") for n in jobs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return shared
+
+
+@dataclass
+class SimResult:
+    """A run on two simulators, with each simulated world's objects at the end."""
+
+    handover: Handover
+    objects_a: list[ObjectState]
+    objects_b: list[ObjectState]
+
+
+def run_with_simulators(time_scale: float = 10.0) -> SimResult:
+    """Start two article simulators (A: part at PICK_A; B: part at HANDOVER) and run."""
+    sim_a = Simulator(
+        "article", time_scale=time_scale, objects=[TableObject(name="part", pose=PICK_A)]
+    )
+    # B's world gets its own part at the handover pose: the worlds are not linked.
+    sim_b = Simulator(
+        "article", time_scale=time_scale, objects=[TableObject(name="part", pose=HANDOVER)]
+    )
+    with sim_a, sim_b:
+        # The gripper's settle time is physical time: scale it with the simulation.
+        shared = run(sim_a.port, sim_b.port, settle_s=1.0 / time_scale)
+        return SimResult(shared, sim_a.objects(), sim_b.objects())
+
+
+def check_worlds(result: SimResult) -> list[str]:
+    """Problems with the final object positions (empty when both parts are where expected)."""
+    problems = []
+    for name, objects, expected in (
+        ("A", result.objects_a, HANDOVER),
+        ("B", result.objects_b, PLACE_B),
+    ):
+        part = next(o for o in objects if o.name == "part")
+        if part.held or not part.pose.is_close(expected, mm=1.0, deg=1.0):
+            problems.append(f"{name}'s part is at {part.pose} (held={part.held}), not {expected}")
+    return problems
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse options, run the handover, report; exit code 0 on success."""
+    parser = argparse.ArgumentParser(description="Robot A hands a part over to robot B.")
+    parser.add_argument("--sim", action="store_true", help="start two simulators (default)")
+    parser.add_argument("--host", default=HOST, help="robots' host (default 127.0.0.1)")
+    parser.add_argument("--port-a", type=int, help="robot A's Modbus TCP port")
+    parser.add_argument("--port-b", type=int, help="robot B's Modbus TCP port")
+    parser.add_argument("--time-scale", type=float, default=10.0, help="with --sim")
+    parser.add_argument("--settle", type=float, default=0.5, help="gripper settle time, s")
+    args = parser.parse_args(argv)
+    given = (args.port_a, args.port_b)
+    if args.sim or given == (None, None):
+        if given != (None, None):
+            parser.error("--sim starts its own simulators: do not give --port-a/--port-b")
+        result = run_with_simulators(args.time_scale)
+        shared = result.handover
+        problems = [] if shared.errors else check_worlds(result)
+        for problem in problems:
+            print(f"FAILED check: {problem}", file=sys.stderr)
+    elif None in given:
+        parser.error("give both --port-a and --port-b (or --sim)")
+    else:
+        shared = run(args.port_a, args.port_b, host=args.host, settle_s=args.settle)
+        problems = []
+    for name, error in sorted(shared.errors.items()):
+        kind = "robot error" if isinstance(error, TMMasterError) else "error"
+        print(f"robot {name} failed ({kind}): {error!r}", file=sys.stderr)
+    if shared.errors or problems:
+        return 1
+    print("handover done: A released before B came down, both parts where expected")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
