@@ -15,9 +15,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from pymodbus.client import ModbusTcpClient
-from pymodbus.pdu import ModbusPDU
 
+from tmmaster import ModbusExceptionError, ModbusTransport, RetryPolicy, TransportError
 from tmmaster._pose import Pose
 from tmmaster._profiles import robot_profile
 from tmmaster._registers import Table
@@ -32,41 +31,67 @@ MOVE_WORDS = [30000, (-20000) & 0xFFFF, 20000, 18000, 0, 9000, 50, 1]
 
 
 @contextmanager
-def client(port: int, *, timeout: float = 1.0) -> Iterator[ModbusTcpClient]:
-    """A pymodbus client without pymodbus retries, closed afterwards."""
-    c = ModbusTcpClient("127.0.0.1", port=port, timeout=timeout, retries=0, reconnect_delay=0)
+def client(port: int, *, timeout: float = 1.0, device_id: int = 1) -> Iterator[ModbusTransport]:
+    """tmmaster's transport without retries (each call is one request), closed afterwards."""
+    c = ModbusTransport(
+        "127.0.0.1",
+        port,
+        device_id=device_id,
+        timeout=timeout,
+        retry=RetryPolicy(attempts=1),
+        name="test-client",
+    )
     try:
         yield c
     finally:
-        c.close()  # type: ignore[no-untyped-call]
+        c.close()
 
 
-def read(
-    c: ModbusTcpClient, table: Table, address: int, count: int = 1, unit: int = 1
-) -> ModbusPDU:
+def read(c: ModbusTransport, table: Table, address: int, count: int = 1) -> list[int]:
     """One read request of the right function code for ``table``."""
-    call = {
-        Table.HOLDING: c.read_holding_registers,
-        Table.INPUT: c.read_input_registers,
-        Table.COIL: c.read_coils,
-        Table.DISCRETE_INPUT: c.read_discrete_inputs,
-    }[table]
-    return call(address, count=count, device_id=unit)
+    return c.read_block(table, address, count, retry=False)
 
 
-def hr(c: ModbusTcpClient, address: int) -> int:
-    """One holding register, asserting the read worked."""
-    response = c.read_holding_registers(address, count=1, device_id=1)
-    assert not response.isError(), response
-    return int(response.registers[0])
+def hr(c: ModbusTransport, address: int) -> int:
+    """One holding register (a failed read raises)."""
+    return read(c, Table.HOLDING, address)[0]
 
 
-def fails(request: Callable[[], ModbusPDU]) -> bool:
-    """True when a request gets no normal answer (error response or broken connection)."""
+def write(c: ModbusTransport, address: int, words: list[int]) -> None:
+    """One FC16 write of holding registers, sent once."""
+    c.write_block(Table.HOLDING, address, words, retry=False)
+
+
+def exception_code(request: Callable[[], object]) -> int:
+    """The Modbus exception code a request is answered with (fails if it is answered)."""
     try:
-        return bool(request().isError())
-    except (OSError, Exception):  # pymodbus raises its own errors or the socket's
+        request()
+    except ModbusExceptionError as exc:
+        return exc.code
+    pytest.fail("the request was answered normally, not with an exception")
+
+
+def fails(request: Callable[[], object]) -> bool:
+    """True when a request gets no normal answer (exception response or broken connection)."""
+    try:
+        request()
+    except TransportError:
         return True
+    return False
+
+
+def raw_request(port: int, pdu: bytes, *, unit: int = 1) -> bytes:
+    """Send one raw Modbus TCP request and return the response PDU (function code first)."""
+    with socket.create_connection(("127.0.0.1", port), timeout=1.0) as s:
+        s.sendall(struct.pack(">HHHB", 1, 0, len(pdu) + 1, unit) + pdu)
+        header = b""
+        while len(header) < 7:
+            header += s.recv(7 - len(header))
+        length = struct.unpack(">H", header[4:6])[0] - 1
+        body = b""
+        while len(body) < length:
+            body += s.recv(length - len(body))
+    return body
 
 
 def wait_ready(sim: Simulator) -> None:
@@ -85,22 +110,20 @@ def test_every_field_is_served_and_unserved_addresses_give_exception_2(
     bank = RegisterBank(profile)
     with client(sim.port) as c:
         for field in profile.fields.values():
-            response = read(c, field.table, field.address, field.width)
-            assert not response.isError(), (field.name, response)
+            words = read(c, field.table, field.address, field.width)  # raises if refused
+            assert len(words) == field.width, field.name
         for table in Table:
             runs = bank.readable(table)
             # One past the last readable address of the table (or 0 for an empty table).
             unserved = runs[-1][0] + runs[-1][1] if runs else 0
-            response = read(c, table, unserved)
-            assert response.isError(), (table, unserved)
-            assert response.exception_code == 2
+            assert exception_code(lambda: read(c, table, unserved)) == 2, (table, unserved)  # noqa: B023
 
 
 def test_served_values_come_from_the_bank(tm_simulator: Simulator) -> None:
     wait_ready(tm_simulator)
     with client(tm_simulator.port) as c:
         assert hr(c, 0x0000) == 5  # robot_mode auto, set by the controller
-        pose = c.read_holding_registers(0x10, count=6, device_id=1).registers
+        pose = read(c, Table.HOLDING, 0x10, 6)
     assert pose == [0, 0, 30000, 18000, 0, 0]  # DEFAULT_HOME x100
 
 
@@ -108,10 +131,10 @@ def test_tmflow_bits_are_exact(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("tmflow")
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     with client(sim.port) as c:
-        bits = c.read_discrete_inputs(7201, count=2, device_id=1).bits[:2]
-        assert bits == [False, True]  # error, project_running
+        bits = read(c, Table.DISCRETE_INPUT, 7201, 2)
+        assert bits == [0, 1]  # error, project_running
         # 7206 lies in a bridgeable gap; 7209 is past the last discrete input.
-        assert c.read_discrete_inputs(7208, count=2, device_id=1).exception_code == 2
+        assert exception_code(lambda: read(c, Table.DISCRETE_INPUT, 7208, 2)) == 2
 
 
 # -- request log ------------------------------------------------------------------------
@@ -120,8 +143,8 @@ def test_tmflow_bits_are_exact(tm_simulator_factory: Factory) -> None:
 def test_request_log_shows_one_fc16_per_move(tm_simulator: Simulator) -> None:
     wait_ready(tm_simulator)
     tm_simulator.clear_request_log()
-    with client(tm_simulator.port) as c:
-        assert not c.write_registers(0x200, MOVE_WORDS, device_id=7).isError()
+    with client(tm_simulator.port, device_id=7) as c:
+        write(c, 0x200, MOVE_WORDS)  # raises unless answered normally
         hr(c, 0x0001)
     log = tm_simulator.request_log
     assert [(r.function_code, r.address, r.count) for r in log] == [(16, 0x200, 8), (3, 1, 1)]
@@ -136,10 +159,13 @@ def test_request_log_shows_one_fc16_per_move(tm_simulator: Simulator) -> None:
 
 def test_refused_write_changes_nothing(tm_simulator: Simulator) -> None:
     wait_ready(tm_simulator)
+    # motion_status is written by the device only: refused by FC16 (the transport) and
+    # by FC06 (a raw frame: the transport never sends FC06).
     with client(tm_simulator.port) as c:
-        # motion_status is written by the device only.
-        response = c.write_register(0x0001, 1, device_id=1)
-        assert response.exception_code == 2
+        assert exception_code(lambda: write(c, 0x0001, [1])) == 2
+        assert hr(c, 0x0001) == 0
+    assert raw_request(tm_simulator.port, struct.pack(">BHH", 6, 0x0001, 1)) == bytes([0x86, 2])
+    with client(tm_simulator.port) as c:
         assert hr(c, 0x0001) == 0
 
 
@@ -158,7 +184,7 @@ def test_racy_article_master_sees_done_before_the_robot_moved(
             ticks = sim.ticks
             sim.wait_for(lambda: sim.ticks != ticks, 1.0, interval=0.0002)  # noqa: B023
             before = sim.ticks
-            assert not c.write_registers(0x200, MOVE_WORDS, device_id=1).isError()
+            write(c, 0x200, MOVE_WORDS)
             racy_done = hr(c, 0x0001) == 0  # the article's completion check
             pose_at_done = sim.tcp_pose()
             if sim.ticks == before:
@@ -175,11 +201,11 @@ def test_racy_article_master_sees_done_before_the_robot_moved(
 def test_correct_handshake_ends_at_the_target(tm_simulator: Simulator) -> None:
     wait_ready(tm_simulator)
     with client(tm_simulator.port) as c:
-        assert not c.write_registers(0x200, MOVE_WORDS, device_id=1).isError()
+        write(c, 0x200, MOVE_WORDS)
         tm_simulator.wait_for(lambda: hr(c, 0x0207) == 0, 2.0)  # acknowledged
         tm_simulator.wait_for(lambda: hr(c, 0x0001) == 0, 5.0)  # then idle
         assert tm_simulator.tcp_pose().is_close(TARGET)
-        words = c.read_holding_registers(0x10, count=6, device_id=1).registers
+        words = read(c, Table.HOLDING, 0x10, 6)
     assert words == MOVE_WORDS[:6]
 
 
@@ -191,7 +217,7 @@ def test_drop_connections_after_n_requests(tm_simulator_factory: Factory) -> Non
     with client(sim.port) as c:
         hr(c, 0)
         hr(c, 0)  # the second request is answered, then the connection is closed
-        assert fails(lambda: c.read_holding_registers(0, count=1, device_id=1))
+        assert fails(lambda: hr(c, 0))
     with client(sim.port) as c:  # once=true: a new connection is served normally
         for _ in range(3):
             hr(c, 0)
@@ -202,7 +228,7 @@ def test_drop_connections_injected_at_run_time_repeats(tm_simulator: Simulator) 
     for _ in range(2):
         with client(tm_simulator.port) as c:
             hr(c, 0)
-            assert fails(lambda: c.read_holding_registers(0, count=1, device_id=1))
+            assert fails(lambda: hr(c, 0))
     tm_simulator.clear_faults()
     with client(tm_simulator.port) as c:
         hr(c, 0)
@@ -248,8 +274,8 @@ def test_modbus_exception_for_an_address_range(tm_simulator_factory: Factory) ->
         faults=["modbus_exception:table=holding,start=0x200,end=0x207,code=6"]
     )
     with client(sim.port) as c:
-        assert c.write_registers(0x200, MOVE_WORDS, device_id=1).exception_code == 6
-        assert c.read_holding_registers(0x1FF + 8, count=1, device_id=1).exception_code == 6
+        assert exception_code(lambda: write(c, 0x200, MOVE_WORDS)) == 6
+        assert exception_code(lambda: hr(c, 0x1FF + 8)) == 6
         hr(c, 0)  # outside the range
     assert sim.field("command") == "none" or sim.field("command") == 0  # nothing written
     assert [r.refused for r in sim.request_log][:2] == [6, 6]
@@ -264,19 +290,18 @@ def test_onrobot_gripper_allows_one_connection_and_its_unit_id(
     sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
     assert sim.gripper_port is not None
     assert sim.gripper_port != sim.port
-    with client(sim.gripper_port) as first:
-        product = first.read_holding_registers(1536, count=1, device_id=65)
-        assert not product.isError()
-        with client(sim.gripper_port, timeout=0.5) as second:
-            second.connect()  # type: ignore[no-untyped-call]
-            assert fails(lambda: second.read_holding_registers(1536, count=1, device_id=65))
-        # The first connection is unaffected; a wrong unit id gets a gateway exception.
-        assert not first.read_holding_registers(256, count=1, device_id=65).isError()
-        assert first.read_holding_registers(256, count=1, device_id=1).exception_code == 0x0B
-    with client(sim.gripper_port) as again:  # the first has gone: a new client is served
-        sim.wait_for(
-            lambda: not again.read_holding_registers(1536, count=1, device_id=65).isError(), 2.0
-        )
+    with client(sim.gripper_port, device_id=65) as first:
+        assert hr(first, 1536) == 0xC0  # answered normally: the 2FG7's product code
+        with client(sim.gripper_port, timeout=0.5, device_id=65) as second:
+            second.connect()  # the kernel completes the TCP connect
+            assert fails(lambda: hr(second, 1536))
+        # The first connection is unaffected; a wrong unit id gets a gateway exception
+        # (same connection: the transport takes its unit id from device_id per request).
+        hr(first, 256)
+        first.device_id = 1
+        assert exception_code(lambda: hr(first, 256)) == 0x0B
+    with client(sim.gripper_port, device_id=65) as again:  # the first has gone: served
+        sim.wait_for(lambda: not fails(lambda: hr(again, 1536)), 2.0)
     assert {r.server for r in sim.request_log} == {"gripper"}
 
 
@@ -360,7 +385,7 @@ def test_cli_runs_until_signal_and_exits_0(sig: signal.Signals) -> None:
         assert "modbus tcp 127.0.0.1:" in line, line
         port = int(line.split("127.0.0.1:")[1].split()[0])
         with client(port) as c:
-            c.read_holding_registers(0, count=1, device_id=1)
+            hr(c, 0)
         proc.send_signal(sig)
         out, _err = proc.communicate(timeout=10)
     finally:
