@@ -178,11 +178,13 @@ def make_robot(
         gripper_port=gripper_port if gripper_port is not None else g.port,
         poll_interval_s=config.run.poll_interval_s,
         timeouts=config.timeouts.policy(),
+        retry=config.retry.policy(),
         request_timeout_s=config.timeouts.request_s,
         workspace=config.workspace_box(),
         max_speed_percent=config.robot.max_speed,
         position_tolerance_mm=config.robot.position_tolerance_mm,
-        gripper_settle_s=g.settle_s / settle_scale,
+        # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
+        gripper_settle_s=max(g.settle_s / settle_scale, min(g.settle_s, 0.1)),
     )
 
 

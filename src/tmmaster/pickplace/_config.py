@@ -27,6 +27,7 @@ from pydantic import (
 
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
+from .._retry import RetryPolicy
 from .._robot import TimeoutPolicy, Workspace
 
 
@@ -163,6 +164,17 @@ class TimeoutsSection(_Section):
         )
 
 
+class RetrySection(_Section):
+    """Retries of Modbus requests that failed transiently (reads, connects; never commands)."""
+
+    attempts: Annotated[int, Field(ge=1, le=100, strict=True)] = 5
+    total_time_s: Annotated[float, Field(gt=0, le=600)] = 10.0
+
+    def policy(self) -> RetryPolicy:
+        """The transport's retry policy."""
+        return RetryPolicy(attempts=self.attempts, total_time_s=self.total_time_s)
+
+
 class GripperSection(_Section):
     """The gripper: "auto" uses what the robot profile offers (article: gripper register)."""
 
@@ -211,6 +223,7 @@ class PickPlaceConfig(_Section):
     speeds: SpeedsSection = SpeedsSection()
     motion: MotionSection = MotionSection()
     timeouts: TimeoutsSection = TimeoutsSection()
+    retry: RetrySection = RetrySection()
     gripper: GripperSection = GripperSection()
     run: RunSection = RunSection()
     on_error: OnErrorSection = OnErrorSection()
@@ -232,6 +245,21 @@ class PickPlaceConfig(_Section):
         if self.on_error.pose is not None:
             return Pose.from_sequence(self.on_error.pose)
         return self.poses.resolved()["home"]
+
+
+def check_profiles(config: PickPlaceConfig, source: str) -> None:
+    """Load the robot and gripper profiles the config names; errors name key and file."""
+    from .._profiles import gripper_profile, robot_profile
+
+    try:
+        robot_profile(config.robot.profile)
+    except (ConfigError, OSError) as exc:
+        raise ConfigError(f"{source}: robot.profile: {exc}") from None
+    if config.gripper.kind not in ("auto", "none"):
+        try:
+            gripper_profile(config.gripper.kind)
+        except (ConfigError, OSError) as exc:
+            raise ConfigError(f"{source}: gripper.kind: {exc}") from None
 
 
 def format_validation_error(exc: ValidationError, source: str) -> str:
@@ -280,4 +308,6 @@ def load_config(
                 break  # the file's own error is reported by validation below
             data[section] = {**current, **values}
         source += " (with command-line overrides)"
-    return validate_config(data, source=source)
+    config = validate_config(data, source=source)
+    check_profiles(config, source)
+    return config
