@@ -178,9 +178,7 @@ def test_article_cycle_ends_done_with_the_part_on_the_place_position(
     assert "DONE: 1/1 cycle(s)" in capsys.readouterr().out
 
 
-def test_several_cycles_place_every_part(
-    tm_simulator_factory: SimFactory, tmp_path: Path
-) -> None:
+def test_several_cycles_place_every_part(tm_simulator_factory: SimFactory, tmp_path: Path) -> None:
     sim = tm_simulator_factory(objects=parts(3))
     code, report = run_cli(sim, write_config(tmp_path), tmp_path, "--cycles", "3")
 
@@ -325,9 +323,10 @@ def test_a_dropped_connection_is_survived_without_sending_any_command_twice(
         ("[speeds]\npick = '10'\n", ["speeds.pick"]),
         ("[poses]\npick = [300, -200, 100]\n", ["poses.pick"]),
         ("[run]\ncylces = 3\n", ["run.cylces", "unknown key"]),
-        ("[poses]\napproach = [300, -200, 200, 180, 0, 90]\napproach_z_offset = 50\n", [
-            "approach_z_offset"
-        ]),
+        (
+            "[poses]\napproach = [300, -200, 200, 180, 0, 90]\napproach_z_offset = 50\n",
+            ["approach_z_offset"],
+        ),
         ("[gripper]\nkind = 'no-such-gripper'\n", ["no-such-gripper"]),
     ],
 )
@@ -388,7 +387,8 @@ def test_dry_run_prints_the_plan_and_connects_to_nothing(
     out = capsys.readouterr().out
     assert "[300, -200, 200, 180, 0, 90]" in out
     assert "[0, 0, 300, 180, 0, 0]" in out
-    assert "line" in out and "ptp" in out
+    assert "line" in out
+    assert "ptp" in out
     assert "expected motion time" in out
     assert sim.request_log == []
 
