@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from .._exceptions import ConfigError, GraspFailedError
 from .._pose import MotionType, Pose
@@ -21,6 +21,8 @@ if TYPE_CHECKING:
 Action = Callable[["StepContext"], Any]
 #: A yes/no question about the run, asked without I/O (guards, skip conditions).
 Predicate = Callable[["StepContext"], bool]
+
+ActionT = TypeVar("ActionT", bound=Action)
 
 #: States every machine has; a sequence may not reuse these names.
 RESERVED_STATES = ("IDLE", "DONE", "ERROR")
@@ -126,10 +128,10 @@ class TaskSequence:
         retry: RetryRule | None = None,
         guard: Predicate | None = None,
         when: Predicate | None = None,
-    ) -> Callable[[Action], Action]:
+    ) -> Callable[[ActionT], ActionT]:
         """Decorator form of :meth:`add`."""
 
-        def register(action: Action) -> Action:
+        def register(action: ActionT) -> ActionT:
             self.add(name, action, retry=retry, guard=guard, when=when)
             return action
 
