@@ -23,6 +23,7 @@ from ._config import (
     ARTICLE_PLACE,
     PickPlaceConfig,
     load_config,
+    robot_from_config,
     validate_config,
 )
 from ._machine import DONE, ERROR, IDLE, SequenceMachine, mermaid
@@ -81,6 +82,7 @@ __all__ = [
     "mermaid",
     "palletizing",
     "pick_and_place",
+    "robot_from_config",
     "sequence_from_data",
     "validate_config",
     "validate_plan",

@@ -39,7 +39,7 @@ from .._exceptions import (
 from .._logging import configure_logging
 from .._profiles import builtin_profile_names
 from .._robot import Robot
-from ._config import PickPlaceConfig, load_config
+from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
 from ._plan import format_plan, validate_plan
 from ._report import build_report, objects_report, write_report
@@ -156,36 +156,6 @@ def build_parser() -> argparse.ArgumentParser:
         " 4 robot fault / e-stop, 5 grasp failure, 6 timeout, 130 interrupted",
     )
     return add_arguments(parser)
-
-
-def make_robot(
-    config: PickPlaceConfig,
-    host: str,
-    port: int,
-    *,
-    gripper_port: int | None = None,
-    settle_scale: float = 1.0,
-) -> Robot:
-    """A :class:`Robot` set up from the configuration; opens no connection."""
-    g = config.gripper
-    return Robot(
-        host,
-        port,
-        profile=config.robot.profile,
-        model=config.robot.model,
-        gripper=g.kind,
-        gripper_host=g.host,
-        gripper_port=gripper_port if gripper_port is not None else g.port,
-        poll_interval_s=config.run.poll_interval_s,
-        timeouts=config.timeouts.policy(),
-        retry=config.retry.policy(),
-        request_timeout_s=config.timeouts.request_s,
-        workspace=config.workspace_box(),
-        max_speed_percent=config.robot.max_speed,
-        position_tolerance_mm=config.robot.position_tolerance_mm,
-        # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
-        gripper_settle_s=max(g.settle_s / settle_scale, min(g.settle_s, 0.1)),
-    )
 
 
 class _Progress:
@@ -314,7 +284,7 @@ def _execute(
         raise ConfigError("--host is required (or --sim, --dry-run, --diagram)")
     if args.sim and not (args.sim_time_scale > 0):
         raise ConfigError(f"--sim-time-scale must be > 0, got {args.sim_time_scale}")
-    probe = make_robot(config, host or "127.0.0.1", config.robot.port)
+    probe = robot_from_config(config, host or "127.0.0.1", config.robot.port)
     try:
         validate_plan(probe, sequence, cycles, source=source)
         if args.dry_run:
@@ -400,7 +370,9 @@ def _run_on(
     gripper_port: int | None = None,
     settle_scale: float = 1.0,
 ) -> tuple[int, str | None]:
-    robot = make_robot(config, host, port, gripper_port=gripper_port, settle_scale=settle_scale)
+    robot = robot_from_config(
+        config, host, port, gripper_port=gripper_port, settle_scale=settle_scale
+    )
     outcome.target = {"host": host, "port": port, "profile": robot.profile.name}
     runner = Runner(
         robot,
@@ -483,4 +455,4 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "make_robot", "run"]
+__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "run"]

@@ -28,7 +28,7 @@ from pydantic import (
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
 from .._retry import RetryPolicy
-from .._robot import TimeoutPolicy, Workspace
+from .._robot import Robot, TimeoutPolicy, Workspace
 
 
 def _finite_pose(value: object) -> object:
@@ -311,3 +311,33 @@ def load_config(
     config = validate_config(data, source=source)
     check_profiles(config, source)
     return config
+
+
+def robot_from_config(
+    config: PickPlaceConfig,
+    host: str,
+    port: int,
+    *,
+    gripper_port: int | None = None,
+    settle_scale: float = 1.0,
+) -> Robot:
+    """A :class:`Robot` set up from the configuration; opens no connection."""
+    g = config.gripper
+    return Robot(
+        host,
+        port,
+        profile=config.robot.profile,
+        model=config.robot.model,
+        gripper=g.kind,
+        gripper_host=g.host,
+        gripper_port=gripper_port if gripper_port is not None else g.port,
+        poll_interval_s=config.run.poll_interval_s,
+        timeouts=config.timeouts.policy(),
+        retry=config.retry.policy(),
+        request_timeout_s=config.timeouts.request_s,
+        workspace=config.workspace_box(),
+        max_speed_percent=config.robot.max_speed,
+        position_tolerance_mm=config.robot.position_tolerance_mm,
+        # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
+        gripper_settle_s=max(g.settle_s / settle_scale, min(g.settle_s, 0.1)),
+    )

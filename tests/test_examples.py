@@ -1,0 +1,119 @@
+"""Every example runs against the simulator (loopback, time_scale 20).
+
+Examples are loaded from ``examples/`` and their ``main(argv)`` is called in-process
+with ``--host 127.0.0.1 --port <sim port>``; one also runs as a real subprocess.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from tmmaster import Pose
+from tmmaster.pickplace.__main__ import main as pickplace_main
+from tmmaster.sim import Simulator, TableObject
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+PICK = Pose(300, -200, 100, 180, 0, 90)
+PLACE = Pose(300, 200, 200, 180, 0, 90)
+HOME = Pose(0, 0, 300, 180, 0, 0)
+
+SimFactory = Callable[..., Simulator]
+
+
+def load_example(name: str) -> ModuleType:
+    """Import ``examples/<name>.py`` as a module."""
+    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def target(sim: Simulator) -> list[str]:
+    """The --host/--port arguments of ``sim``."""
+    return ["--host", "127.0.0.1", "--port", str(sim.port)]
+
+
+@pytest.fixture
+def fast_config(tmp_path: Path) -> Path:
+    """Keep the article's poses and speeds; poll and settle fast for time_scale 20."""
+    path = tmp_path / "fast.toml"
+    path.write_text("[gripper]\nsettle_s = 0.05\n[run]\npoll_interval_s = 0.02\n")
+    return path
+
+
+def test_pick_and_place_example(tm_simulator_factory: SimFactory, fast_config: Path) -> None:
+    sim = tm_simulator_factory(objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(2)])
+    argv = [*target(sim), "--cycles", "2", "--config", str(fast_config)]
+    assert load_example("pick_and_place").main(argv) == 0
+    assert all(o.pose.is_close(PLACE, mm=1.0) for o in sim.objects())
+
+
+def test_custom_sequence_example(tm_simulator_factory: SimFactory) -> None:
+    sim = tm_simulator_factory(faults=["grasp_miss:at_grasp=1"])  # exercises the retry
+    assert load_example("custom_sequence").main([*target(sim), "--settle", "0.05"]) == 0
+    (part,) = sim.objects()
+    assert part.pose.is_close(PICK, mm=1.0)  # put back where it was
+    assert not part.held
+
+
+def test_palletizing_example(tm_simulator_factory: SimFactory) -> None:
+    sim = tm_simulator_factory(objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(6)])
+    argv = [*target(sim), "--rows", "2", "--cols", "3", "--settle", "0.05"]
+    assert load_example("palletizing").main(argv) == 0
+    example = load_example("palletizing")
+    xs = sorted({round(o.pose.x) for o in sim.objects()})
+    ys = sorted({round(o.pose.y) for o in sim.objects()})
+    assert xs == [round(example.PALLET_ORIGIN.x + k * 40) for k in range(3)]
+    assert ys == [round(example.PALLET_ORIGIN.y + k * 40) for k in range(2)]
+
+
+def test_toml_sequence_example_runs_through_the_command(
+    tm_simulator_factory: SimFactory, fast_config: Path
+) -> None:
+    sim = tm_simulator_factory()
+    argv = [
+        *target(sim),
+        "--config",
+        str(fast_config),
+        "--sequence",
+        str(EXAMPLES / "inspect_sequence.toml"),
+    ]
+    assert pickplace_main(argv) == 0
+    assert sim.objects()[0].pose.is_close(PICK, mm=1.0)
+    assert sim.tcp_pose().is_close(HOME, mm=1.0)
+
+
+def test_an_example_runs_as_a_script(tm_simulator_factory: SimFactory) -> None:
+    sim = tm_simulator_factory(objects=[TableObject(name="p", pose=PICK)])
+    env = dict(os.environ)
+    src = str(EXAMPLES.parent / "src")
+    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(EXAMPLES / "palletizing.py"),
+            *target(sim),
+            "--rows",
+            "1",
+            "--cols",
+            "1",
+            "--settle",
+            "0.05",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "1/1 slots filled" in proc.stdout
