@@ -152,8 +152,10 @@ class CommandChannel(ABC):
             words += list(zip(p.select(TARGET_FIELDS), command.target.as_list(), strict=True))
         if command.speed is not None:
             words.append((p.field("speed"), command.speed))
-        if command.accel_time_ms is not None and p.has("accel_time"):
-            words.append((p.field("accel_time"), command.accel_time_ms))
+        if command.target is not None and p.has("accel_time"):
+            # Always written (0 = the program's default) so the block stays contiguous
+            # and goes out as one atomic request.
+            words.append((p.field("accel_time"), command.accel_time_ms or 0))
         words.append((p.field("command"), p.field("command").code_of(command.kind.value)))
         for f, value in words:
             encode(f, value)  # raises ValueOutOfRangeError naming the field

@@ -16,7 +16,6 @@ acknowledged the command first, and the final pose must be at the target.
 
 from __future__ import annotations
 
-import contextlib
 import threading
 import time
 from collections.abc import Callable
@@ -41,6 +40,7 @@ from ._exceptions import (
     MotionTimeoutError,
     ResponseTimeoutError,
     RobotError,
+    TMMasterError,
 )
 from ._gripper import Gripper, make_gripper
 from ._pose import MotionType, Pose
@@ -153,7 +153,11 @@ class Motion:
     def progress(self) -> MoveProgress:
         """Poll the robot once and report where the move stands (raises on robot failure)."""
         if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
+            polled_pose = self.last_pose
             self._robot._poll_motion(self)
+            if self.last_pose is polled_pose and not self.done:
+                # This profile's poll does not carry the pose: read it for the report.
+                self.last_pose = self._robot.pose()
         elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
         fraction: float | None = None
         if self.last_pose is not None and self.target is not None:
@@ -438,8 +442,8 @@ class Robot:
                 command=motion.command.kind.value,
                 error=str(observation.failure),
             )
-            if observation.failure.pose is None and motion.last_pose is not None:
-                observation.failure.pose = motion.last_pose
+            if observation.failure.pose is None:
+                observation.failure.pose = self._pose_or(motion.last_pose)
             raise observation.failure
         if observation.acknowledged and motion.phase is MovePhase.SENT:
             motion.phase = MovePhase.RUNNING
@@ -451,6 +455,13 @@ class Robot:
             )
         if observation.done:
             self._finish(motion)
+
+    def _pose_or(self, fallback: Pose | None) -> Pose | None:
+        """The current pose for an error report; the fallback if it cannot be read."""
+        try:
+            return self.channel.read_pose()
+        except TMMasterError:
+            return fallback
 
     def _finish(self, motion: Motion) -> None:
         if motion.target is not None:
@@ -516,9 +527,7 @@ class Robot:
 
     def _motion_timed_out(self, motion: Motion, budget: float) -> None:
         motion.phase = MovePhase.FAILED
-        pose = motion.last_pose
-        with contextlib.suppress(Exception):
-            pose = self.channel.read_pose()
+        pose = self._pose_or(motion.last_pose)
         self._log.error(
             "robot.motion_timeout",
             timeout_s=round(budget, 3),
@@ -527,7 +536,7 @@ class Robot:
         if self.channel.stop_words() is not None:
             try:
                 self.stop()
-            except Exception as exc:
+            except TMMasterError as exc:  # report the timeout; log why the stop failed
                 self._log.error("robot.stop_failed", error=str(exc))
         raise MotionTimeoutError(
             f"move to {motion.target} did not finish within {budget:.2f} s"

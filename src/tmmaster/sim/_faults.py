@@ -89,8 +89,14 @@ class DropConnectionsFault(_FaultBase):
     """The server closes every connection after ``after_requests`` requests (once or each time)."""
 
     kind: Literal["drop_connections"] = "drop_connections"
-    after_requests: PositiveInt
+    after_requests: PositiveInt = 1
     once: bool = True
+    #: Count only writes touching this address (e.g. a command register) instead of all
+    #: requests: the way to break the link exactly while a command is in flight.
+    on_write_to: Annotated[int, Field(ge=0, le=65535)] | None = None
+    #: What the drop destroys: nothing in flight ("none": the trigger is answered first),
+    #: the trigger "request" (never executed), or its "answer" (executed, reply lost).
+    lose: Literal["none", "request", "answer"] = "none"
 
 
 class StopListeningFault(_FaultBase):

@@ -222,6 +222,7 @@ class DeviceServer:
         self._counts: list[int] = []
         # Faults whose trigger request arrived; they fire when its answer has been sent.
         self._pending: list[NetworkFault] = []
+        self._lose_answer = False
         self._outage: asyncio.Task[None] | None = None
         self._stopped = False
 
@@ -341,6 +342,10 @@ class DeviceServer:
 
     def _trace_pdu(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU:
         if sending:
+            if self._lose_answer:
+                # The request was executed; cut the links before its answer is written.
+                self._lose_answer = False
+                self.drop_connections()
             if self._pending:
                 # The trigger request's answer is written right after this hook returns;
                 # acting on the next loop turn lets the client receive that answer first.
@@ -355,6 +360,12 @@ class DeviceServer:
     def _gate(self, pdu: ModbusPDU) -> ModbusPDU:
         request = _describe(pdu)
         refused = self._check(pdu, request)
+        lose = self._count_request(request)
+        if not refused and lose == "request":
+            # Lose the request itself: cut every link now and never execute it (the
+            # refusal's answer goes nowhere: its connection is already closed).
+            refused = ExcCodes.DEVICE_FAILURE
+            self.drop_connections()
         self._log.append(
             RequestRecord(
                 time=time.time(),
@@ -367,9 +378,8 @@ class DeviceServer:
                 refused=int(refused),
             )
         )
-        self._count_request()
         if refused:
-            return _Refusal(pdu, refused, self._delay_s())
+            return _Refusal(pdu, refused, 0.0 if lose == "request" else self._delay_s())
         return pdu
 
     def _check(self, pdu: ModbusPDU, request: _Request | None) -> int:
@@ -390,14 +400,35 @@ class DeviceServer:
                 return ExcCodes.ILLEGAL_ADDRESS
         return 0
 
-    def _count_request(self) -> None:
+    def _count_request(self, request: _Request | None) -> str:
+        """Count a request for the connection faults; returns what a due drop must lose."""
+        lose = "none"
+        spent: list[NetworkFault] = []
         for index, fault in enumerate(self._faults):
             if not isinstance(fault, DropConnectionsFault | StopListeningFault):
                 continue
+            if isinstance(fault, DropConnectionsFault) and fault.on_write_to is not None:
+                if (
+                    request is None
+                    or request.values is None
+                    or not _overlaps(request, request.table, fault.on_write_to, fault.on_write_to)
+                ):
+                    continue
             self._counts[index] += 1
-            if self._counts[index] >= fault.after_requests:
-                self._counts[index] = 0
-                self._pending.append(fault)
+            if self._counts[index] < fault.after_requests:
+                continue
+            self._counts[index] = 0
+            if isinstance(fault, DropConnectionsFault) and fault.lose != "none":
+                lose = fault.lose
+                if fault.once:
+                    spent.append(fault)
+                if lose == "answer":
+                    self._lose_answer = True
+                continue
+            self._pending.append(fault)
+        for fault in spent:
+            self._remove_fault(fault)
+        return lose
 
     def _fire(self, due: list[NetworkFault]) -> None:
         for fault in due:

@@ -1,0 +1,401 @@
+"""The robot API against the simulator: handshakes, validation, faults, connection loss."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+import tmmaster
+from tmmaster import MovePhase, Pose, Robot, TimeoutPolicy
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+
+APPROACH = Pose(300, -200, 200, 180, 0, 90)
+PICK = Pose(300, -200, 100, 180, 0, 90)
+COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
+
+
+@pytest.fixture
+def robots() -> Iterator[Callable[..., Robot]]:
+    """Open robots on a simulator; all closed after the test."""
+    opened: list[Robot] = []
+
+    def make(sim: Simulator, **options: Any) -> Robot:
+        options.setdefault("profile", sim.profile)
+        options.setdefault("poll_interval_s", 0.01)
+        options.setdefault(
+            "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
+        )
+        robot = Robot("127.0.0.1", sim.port, **options)
+        opened.append(robot)
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        return robot
+
+    yield make
+    for robot in opened:
+        robot.close()
+
+
+def command_writes(sim: Simulator) -> list[tuple[int, ...]]:
+    """Values of every write that reached the command block."""
+    start = COMMAND_BLOCK[sim.profile.name]
+    return [
+        tuple(r.values or ())
+        for r in sim.request_log
+        if r.function_code == 16 and r.address == start and not r.refused
+    ]
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_the_readme_script_runs_on_both_profiles(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile)
+    with tmmaster.connect("127.0.0.1", port=sim.port, profile=profile) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        assert robot.status().ready
+        robot.move_to(APPROACH, speed=30)
+        robot.move_to(PICK, speed=10, motion="line")
+        assert robot.gripper.close().holding
+        pose = robot.status().pose
+    assert pose.is_close(PICK, mm=0.01)
+    assert sim.tcp_pose().is_close(PICK, mm=0.01)
+    (part,) = sim.objects()
+    assert part.held
+    assert len(command_writes(sim)) == 2  # the two motion blocks; no resend
+
+
+@pytest.mark.parametrize(("profile", "expected_requests"), [("article", 1), ("tmflow", 5)])
+def test_status_reads_each_block_in_one_request(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    profile: str,
+    expected_requests: int,
+) -> None:
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim)
+    sim.clear_request_log()
+    status = robot.status()
+    assert len(sim.request_log) == expected_requests
+    assert status.pose.is_close(sim.tcp_pose(), mm=0.01)
+    assert status.mode in ("auto", "running")
+    with pytest.raises(AttributeError):
+        status.moving = True  # type: ignore[misc]
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_move_is_one_write_of_the_whole_command_block(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim)
+    sim.clear_request_log()
+    robot.move_to(APPROACH, speed=30)
+    writes = [r for r in sim.request_log if r.values is not None]
+    assert len(writes) == 1
+    assert writes[0].count == (8 if profile == "article" else 16)
+
+
+def test_out_of_range_pose_sends_nothing(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article", model="tm5-900")
+    robot = robots(sim, model="tm5-900")
+    sim.clear_request_log()
+    with pytest.raises(tmmaster.ValueOutOfRangeError, match=r"target_x: value 400"):
+        robot.move_to(Pose(400, 0, 300, 180, 0, 0), speed=30)
+    assert sim.request_log == []
+
+
+@pytest.mark.parametrize(
+    ("target", "speed", "message"),
+    [
+        (Pose(300, 0, 300, 180, 0, 0), 0, "speed 0 %"),
+        (Pose(300, 0, 300, 180, 0, 0), 101, "speed 101 %"),
+        (Pose(700, 300, 300, 180, 0, 0), 30, "out of reach"),
+        (Pose(300, 0, -50, 180, 0, 0), 30, "z = -50 mm is outside the workspace"),
+    ],
+)
+def test_invalid_moves_are_refused_before_any_request(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    target: Pose,
+    speed: int,
+    message: str,
+) -> None:
+    sim = tm_simulator_factory("tmflow")
+    robot = robots(sim, workspace=tmmaster.Workspace(z=(0, 800)))
+    sim.clear_request_log()
+    with pytest.raises(tmmaster.ConfigError, match=message):
+        robot.move_to(target, speed=speed)
+    assert sim.request_log == []
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_late_acknowledgement_is_waited_for(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    # 10 simulated s = 0.5 wall s before the robot picks the command up.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=10"])
+    robot = robots(sim)
+    started = time.monotonic()
+    motion = robot.move_to(APPROACH, speed=30)
+    assert time.monotonic() - started >= 0.45
+    # Returned only once the robot really arrived, not when "idle" was first read.
+    assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
+    assert motion.done
+    assert len(command_writes(sim)) == 1
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_unacknowledged_command_times_out_and_is_withdrawn(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])  # 1 s wall
+    robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.3))
+    home = sim.tcp_pose()
+    with pytest.raises(tmmaster.AcknowledgeTimeoutError, match="withdrawn"):
+        robot.move_to(APPROACH, speed=30)
+    # The command must not run later behind the script's back.
+    time.sleep(1.2)
+    assert sim.tcp_pose() == home
+    assert not robot.status().moving
+
+
+@pytest.mark.parametrize(
+    ("profile", "error"),
+    [("article", tmmaster.RobotFaultError), ("tmflow", tmmaster.RobotFaultError)],
+)
+def test_robot_error_mid_motion_ends_the_wait_at_once(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    profile: str,
+    error: type[Exception],
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["robot_error:at_move=1,code=0x1F4"])
+    robot = robots(sim)
+    started = time.monotonic()
+    with pytest.raises(error) as info:
+        robot.move_to(APPROACH, speed=30, timeout=30)
+    assert time.monotonic() - started < 2  # not the 30 s timeout
+    assert isinstance(info.value, tmmaster.RobotError)
+    assert info.value.error_code == 0x1F4
+    assert info.value.pose is not None
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_emergency_stop_during_a_move(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["estop:at_move=1"])
+    robot = robots(sim)
+    with pytest.raises(tmmaster.RobotError) as info:
+        robot.move_to(APPROACH, speed=30, timeout=30)
+    if profile == "tmflow":
+        assert isinstance(info.value, tmmaster.EmergencyStopError)
+    else:  # the article contract reports an e-stop as error mode with its code
+        assert isinstance(info.value, tmmaster.RobotFaultError)
+        assert info.value.error_code == 0x0200
+    # A robot in that state refuses the next move before anything is written.
+    before = len(command_writes(sim))
+    with pytest.raises(tmmaster.RobotError):
+        robot.move_to(PICK, speed=10)
+    assert len(command_writes(sim)) == before
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_stalled_motion_times_out_with_the_last_pose_and_is_stopped(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["stall:at_move=1"])
+    robot = robots(sim)
+    with pytest.raises(tmmaster.MotionTimeoutError) as info:
+        robot.move_to(APPROACH, speed=30, timeout=0.5)
+    assert isinstance(info.value, TimeoutError)
+    assert info.value.pose is not None
+    assert not info.value.pose.is_close(APPROACH)
+    stop_written = [
+        r
+        for r in sim.request_log
+        if r.values is not None and r.function_code in (5, 15, 16) and r is not None
+    ][-1]
+    if profile == "article":
+        assert (stop_written.address, stop_written.values) == (0x0207, (3,))
+    else:
+        assert (stop_written.address, stop_written.values) == (7105, (1,))
+
+
+def test_derived_timeout_follows_the_articles_rule(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article")
+    robot = robots(sim)
+    start = robot.pose()
+    motion = robot.start_move(APPROACH, speed=30)
+    expected = robot.model.motion_time(
+        start, APPROACH, speed_percent=30, motion=tmmaster.MotionType.PTP
+    )
+    assert motion.expected_s == pytest.approx(expected)
+    assert motion.timeout_s == pytest.approx(expected * 1.3 + 2.0)
+    motion.wait()
+    fixed = robots(tm_simulator_factory("article"), timeouts=TimeoutPolicy(motion_timeout_s=7))
+    assert fixed.start_move(APPROACH, speed=30).timeout_s == 7
+    assert robot.start_move(PICK, speed=10, timeout=3).timeout_s == 3
+
+
+def test_line_and_ptp_expectations_differ() -> None:
+    model = tmmaster.robot_model("tm5-700")
+    ptp = model.motion_time(APPROACH, PICK, speed_percent=10, motion=tmmaster.MotionType.PTP)
+    line = model.motion_time(APPROACH, PICK, speed_percent=10, motion=tmmaster.MotionType.LINE)
+    assert ptp != pytest.approx(line)
+    assert TimeoutPolicy().for_motion(10) == pytest.approx(15)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_non_blocking_move_reports_progress(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=2)
+    robot = robots(sim)
+    motion = robot.start_move(APPROACH, speed=30)
+    assert motion.phase is MovePhase.SENT
+    fractions = []
+    while not motion.done:
+        progress = motion.progress()
+        if progress.fraction is not None:
+            fractions.append(progress.fraction)
+        time.sleep(0.05)
+    assert motion.progress().phase is MovePhase.DONE
+    assert fractions == sorted(fractions)
+    assert 0 < fractions[len(fractions) // 2] < 1
+    assert fractions[-1] == pytest.approx(1.0)
+    motion.wait()  # already done: returns at once
+
+
+def test_stop_mid_move_is_not_mistaken_for_arrival(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article", time_scale=2)
+    robot = robots(sim)
+    motion = robot.start_move(APPROACH, speed=30)
+    while motion.progress().phase is not MovePhase.RUNNING:
+        time.sleep(0.01)
+    robot.stop()
+    with pytest.raises(tmmaster.RobotError, match="TCP is at"):
+        motion.wait()
+    assert not sim.tcp_pose().is_close(APPROACH)
+
+
+def test_command_rejected_by_the_robot_program(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    # The master believes in a TM12's reach; the simulated TM5-700 refuses the target.
+    sim = tm_simulator_factory("tmflow", model="tm5-700")
+    robot = robots(sim, model="tm12")
+    with pytest.raises(tmmaster.CommandRejectedError, match="unreachable") as info:
+        robot.move_to(Pose(0, 900, 300, 180, 0, 0), speed=30)
+    assert info.value.error_code == 1
+    robot.move_to(APPROACH, speed=30)  # the program takes the next command
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_connection_drop_during_the_wait_reconnects_and_never_resends(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=5)
+    robot = robots(sim)
+    motion = robot.start_move(APPROACH, speed=30)
+    sim.inject("drop_connections:after_requests=3")
+    motion.wait()
+    assert robot.stats.reconnects >= 1
+    assert len(command_writes(sim)) == 1
+    assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_lost_answer_to_the_command_write_is_resolved_without_resending(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim)
+    sim.inject(f"drop_connections:on_write_to={COMMAND_BLOCK[profile]},lose=answer")
+    robot.move_to(APPROACH, speed=30)
+    assert robot.stats.reconnects >= 1
+    assert len(command_writes(sim)) == 1
+    assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_lost_command_write_is_resent_once_when_provably_not_taken(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim)
+    sim.inject(f"drop_connections:on_write_to={COMMAND_BLOCK[profile]},lose=request")
+    robot.move_to(APPROACH, speed=30)
+    # Two writes arrived: the lost one was refused unexecuted, the resend was executed.
+    start = COMMAND_BLOCK[profile]
+    arrived = [r for r in sim.request_log if r.function_code == 16 and r.address == start]
+    assert len(arrived) == 2
+    assert len(command_writes(sim)) == 1
+    assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
+
+
+def test_repeating_the_same_target_after_a_lost_answer_cannot_be_proven_and_is_not_resent(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article")
+    robot = robots(sim)
+    robot.move_to(APPROACH, speed=30)
+    # Same target again, answer lost: registers look the same whether or not it arrived.
+    sim.inject("drop_connections:on_write_to=0x0207,lose=answer")
+    try:
+        robot.move_to(APPROACH, speed=30)
+    except tmmaster.CommandStateUnknownError:
+        pass  # the honest answer when the registers cannot tell
+    assert len(command_writes(sim)) == 2
+
+
+def test_a_pending_command_from_someone_else_blocks_a_move(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article", faults=["late_ack:delay_s=100"])
+    robot = robots(sim)
+    other = robots(sim)
+    other.start_move(APPROACH, speed=30)  # taken only after 5 wall s
+    before = len(command_writes(sim))
+    with pytest.raises(tmmaster.RobotError, match="still pending"):
+        robot.move_to(PICK, speed=10)
+    assert len(command_writes(sim)) == before
+
+
+def test_close_is_idempotent_and_connection_state_is_explicit(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("article")
+    robot = Robot("127.0.0.1", sim.port, profile="article")
+    assert robot.state is tmmaster.ConnectionState.NEW
+    robot.connect()
+    assert robot.state is tmmaster.ConnectionState.CONNECTED
+    robot.close()
+    robot.close()
+    assert robot.state is tmmaster.ConnectionState.CLOSED
+
+
+def test_connect_failure_is_typed() -> None:
+    from modbus_test_server import free_port
+
+    robot = Robot(
+        "127.0.0.1",
+        free_port(),
+        profile="article",
+        retry=tmmaster.RetryPolicy(attempts=2, initial_backoff_s=0.01),
+    )
+    with pytest.raises(tmmaster.ConnectError):
+        robot.connect()
+    robot.close()
