@@ -189,6 +189,13 @@ def _describe(pdu: ModbusPDU) -> _Request | None:
     return _Request(table, pdu.address, len(registers), registers)
 
 
+def _writes_to(request: _Request | None, address: int | None) -> bool:
+    """True when ``request`` is a write covering ``address``."""
+    if request is None or request.values is None or address is None:
+        return False
+    return _overlaps(request, request.table, address, address)
+
+
 def _overlaps(request: _Request, table: Table, start: int, end: int) -> bool:
     last = request.address + max(request.count, 1) - 1
     return request.table is table and request.address <= end and last >= start
@@ -407,13 +414,9 @@ class DeviceServer:
         for index, fault in enumerate(self._faults):
             if not isinstance(fault, DropConnectionsFault | StopListeningFault):
                 continue
-            if isinstance(fault, DropConnectionsFault) and fault.on_write_to is not None:
-                if (
-                    request is None
-                    or request.values is None
-                    or not _overlaps(request, request.table, fault.on_write_to, fault.on_write_to)
-                ):
-                    continue
+            targeted = isinstance(fault, DropConnectionsFault) and fault.on_write_to is not None
+            if targeted and not _writes_to(request, fault.on_write_to):
+                continue
             self._counts[index] += 1
             if self._counts[index] < fault.after_requests:
                 continue
