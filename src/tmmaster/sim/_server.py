@@ -189,9 +189,9 @@ def _describe(pdu: ModbusPDU) -> _Request | None:
     return _Request(table, pdu.address, len(registers), registers)
 
 
-def _writes_to(request: _Request | None, address: int | None) -> bool:
+def _writes_to(request: _Request | None, address: int) -> bool:
     """True when ``request`` is a write covering ``address``."""
-    if request is None or request.values is None or address is None:
+    if request is None or request.values is None:
         return False
     return _overlaps(request, request.table, address, address)
 
@@ -414,8 +414,8 @@ class DeviceServer:
         for index, fault in enumerate(self._faults):
             if not isinstance(fault, DropConnectionsFault | StopListeningFault):
                 continue
-            targeted = isinstance(fault, DropConnectionsFault) and fault.on_write_to is not None
-            if targeted and not _writes_to(request, fault.on_write_to):
+            target = fault.on_write_to if isinstance(fault, DropConnectionsFault) else None
+            if target is not None and not _writes_to(request, target):
                 continue
             self._counts[index] += 1
             if self._counts[index] < fault.after_requests:
