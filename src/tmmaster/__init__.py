@@ -7,7 +7,7 @@ here; modules starting with an underscore are private.
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
+from importlib import metadata as _metadata
 
 from ._codec import Value, allowed_range, decode, encode
 from ._exceptions import (
@@ -73,8 +73,8 @@ from ._status import MovePhase, MoveProgress, RobotStatus
 from ._transport import ConnectionState, ModbusTransport, TransportStats
 
 try:
-    __version__ = version("tmmaster")
-except PackageNotFoundError:  # running from a source tree without installing
+    __version__ = _metadata.version("tmmaster")
+except _metadata.PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.0.0"
 
 __all__ = [

@@ -1,0 +1,73 @@
+"""The ``tmmaster`` command: ``sim``, ``pickplace`` and ``profile`` subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from ._exceptions import TMMasterError
+from ._profiles import builtin_profile_names, load_profile, profile_markdown
+
+
+def _add_profile_commands(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="profile_command", required=True, metavar="{list,show}")
+    sub.add_parser("list", help="list the built-in profiles")
+    show = sub.add_parser("show", help="print a profile as a Markdown table")
+    show.add_argument("profile", help="a built-in profile name or a .toml file")
+    show.add_argument("--output", "-o", metavar="FILE.md", help="write to a file instead")
+
+
+def _run_profile(args: argparse.Namespace) -> int:
+    if args.profile_command == "list":
+        for name in builtin_profile_names():
+            profile = load_profile(name)
+            print(f"{name:14} {profile.kind:8} {profile.description}")
+        return 0
+    text = profile_markdown(load_profile(args.profile))
+    if args.output:
+        Path(args.output).write_text(text, encoding="utf-8")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``tmmaster`` argument parser with every subcommand mounted."""
+    from .pickplace import __main__ as pickplace_main
+    from .sim import __main__ as sim_main
+
+    parser = argparse.ArgumentParser(
+        prog="tmmaster", description="Drive a Techman robot over Modbus TCP."
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{sim,pickplace,profile}")
+    sim_main.add_arguments(
+        sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
+    )
+    pickplace_main.add_arguments(
+        sub.add_parser("pickplace", help="run a configurable pick & place")
+    )
+    _add_profile_commands(sub.add_parser("profile", help="list or show register profiles"))
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``tmmaster`` console script."""
+    from .pickplace import __main__ as pickplace_main
+    from .sim import __main__ as sim_main
+
+    args = build_parser().parse_args(argv)
+    if args.command == "sim":
+        return sim_main.run(args)
+    if args.command == "pickplace":
+        return pickplace_main.run(args)
+    try:
+        return _run_profile(args)
+    except TMMasterError as exc:
+        print(f"tmmaster: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover - exercised through the console script
+    raise SystemExit(main())

@@ -1,0 +1,73 @@
+"""The public surface: a complete, sorted __all__, and generated docs that match the code."""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+
+import pytest
+
+import tmmaster
+import tmmaster.sim
+from tmmaster._cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _isort_key(name: str) -> tuple[int, str]:
+    # ruff's RUF022 order: CONSTANTS, then Classes, then everything else.
+    if name.isupper():
+        return (0, name)
+    if name[0].isupper():
+        return (1, name)
+    return (2, name)
+
+
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim])
+def test_all_is_sorted_and_complete(module: object) -> None:
+    exported = list(module.__all__)  # type: ignore[attr-defined]
+    assert exported == sorted(exported, key=_isort_key), "keep __all__ sorted (ruff RUF022)"
+    public = {
+        name
+        for name, value in vars(module).items()
+        if not name.startswith("_")
+        and not inspect.ismodule(value)
+        and name != "annotations"
+    }
+    assert public - set(exported) == set(), "public names missing from __all__"
+    for name in exported:
+        assert hasattr(module, name), name
+
+
+def test_every_public_function_and_class_has_a_docstring() -> None:
+    for name in tmmaster.__all__:
+        value = getattr(tmmaster, name)
+        if inspect.isfunction(value) or inspect.isclass(value):
+            assert inspect.getdoc(value), f"{name} has no docstring"
+
+
+def test_exception_root_and_builtins() -> None:
+    for name in tmmaster.__all__:
+        value = getattr(tmmaster, name)
+        if inspect.isclass(value) and issubclass(value, Exception):
+            assert issubclass(value, tmmaster.TMMasterError), name
+    assert issubclass(tmmaster.MotionTimeoutError, TimeoutError)
+    assert issubclass(tmmaster.ResponseTimeoutError, TimeoutError)
+    assert issubclass(tmmaster.ConnectError, ConnectionError)
+    assert issubclass(tmmaster.ConfigError, ValueError)
+
+
+@pytest.mark.parametrize("name", tmmaster.builtin_profile_names())
+def test_profile_docs_are_generated_from_the_models(name: str) -> None:
+    committed = (ROOT / "docs" / "profiles" / f"{name}.md").read_text(encoding="utf-8")
+    assert committed == tmmaster.profile_markdown(tmmaster.load_profile(name)), (
+        f"docs/profiles/{name}.md is stale: run `tmmaster profile show {name} -o "
+        f"docs/profiles/{name}.md`"
+    )
+
+
+def test_profile_command_prints_markdown(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["profile", "show", "article"]) == 0
+    out = capsys.readouterr().out
+    assert "| `target_x` | command | holding | 512 (0x0200) | int16 | x100 |" in out
+    assert main(["profile", "show", "missing"]) == 2
