@@ -268,6 +268,29 @@ class _OwnConnectionGripper(Gripper):
         """Close the gripper's connection (safe twice)."""
         self.transport.close()
 
+    def wait_for(
+        self,
+        width_mm: float,
+        started: float,
+        timeout_s: float | None,
+        check: Callable[[], GripperStatus | None],
+    ) -> GripperStatus:
+        """Poll ``check`` until the move to ``width_mm`` is over, then log its outcome."""
+        status = _wait(
+            f"{self.kind} move to {width_mm:g} mm",
+            self.poll_interval_s,
+            timeout_s or self.timeout_s,
+            check,
+        )
+        _log.info(
+            "gripper.command_done",
+            gripper=self.kind,
+            holding=status.holding,
+            width_mm=status.width_mm,
+            duration_s=round(time.monotonic() - started, 4),
+        )
+        return status
+
     def read(self, *names: str) -> dict[str, Value]:
         """Read fields by name, one request per block."""
         return self.transport.read_fields(
@@ -325,19 +348,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             status = self.status()
             return None if status.busy else status
 
-        status = _wait(
-            f"{self.kind} move to {width_mm:g} mm",
-            self.poll_interval_s,
-            timeout_s or self.timeout_s,
-            check,
-        )
-        _log.info(
-            "gripper.command_done",
-            gripper=self.kind,
-            holding=status.holding,
-            duration_s=round(time.monotonic() - started, 4),
-        )
-        return status
+        return self.wait_for(width_mm, started, timeout_s, check)
 
     def _withdraw(self) -> None:
         # A pending execute left in the register would run whenever the device gets to
@@ -462,20 +473,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
                 return status
             return None
 
-        status = _wait(
-            f"{self.kind} move to {width_mm:g} mm",
-            self.poll_interval_s,
-            timeout_s or self.timeout_s,
-            check,
-        )
-        _log.info(
-            "gripper.command_done",
-            gripper=self.kind,
-            holding=status.holding,
-            width_mm=status.width_mm,
-            duration_s=round(time.monotonic() - started, 4),
-        )
-        return status
+        return self.wait_for(width_mm, started, timeout_s, check)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the maximum width of the current grip mode."""
