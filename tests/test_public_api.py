@@ -30,9 +30,7 @@ def test_all_is_sorted_and_complete(module: object) -> None:
     public = {
         name
         for name, value in vars(module).items()
-        if not name.startswith("_")
-        and not inspect.ismodule(value)
-        and name != "annotations"
+        if not name.startswith("_") and not inspect.ismodule(value) and name != "annotations"
     }
     assert public - set(exported) == set(), "public names missing from __all__"
     for name in exported:
