@@ -400,3 +400,22 @@ def test_connect_failure_is_typed() -> None:
     with pytest.raises(tmmaster.ConnectError):
         robot.connect()
     robot.close()
+
+
+def test_tmflow_accepts_commands_again_after_a_stop_and_restart(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("tmflow", faults=["stall:at_move=1"])
+    robot = robots(sim)
+    with pytest.raises(tmmaster.MotionTimeoutError):
+        robot.move_to(APPROACH, speed=30, timeout=0.5)  # stalls; the Stop button is pressed
+    sim.wait_for(lambda: not sim.field("project_running"), timeout=2)
+    sim.clear_faults()
+    # The operator starts the project again (Play on the pendant; here a plain Modbus write).
+    profile = robot.profile
+    with tmmaster.ModbusTransport("127.0.0.1", sim.port, name="pendant") as pendant:
+        pendant.write_fields([(profile.field("play_pause"), True)], retry=False)
+    robot.wait_until_ready(timeout_s=5)
+    # The abandoned command left ack_seq != done_seq; that must not block the next one.
+    robot.move_to(APPROACH, speed=30)
+    assert sim.tcp_pose().is_close(APPROACH, mm=0.01)

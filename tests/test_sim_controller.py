@@ -608,8 +608,27 @@ def test_tmflow_seq_zero_is_never_executed() -> None:
     assert bank.get("ack_seq") == 0
 
 
+def test_tmflow_takes_only_the_next_seq() -> None:
+    ctl, bank, _, _ = tmflow()
+    send_tmflow(bank, 1)
+    finish_tmflow(ctl, bank, 1)
+    # A seq put back by a withdrawing master (behind ack_seq) and a skipped one are not
+    # new commands; only ack_seq + 1 is.
+    for stale in (65535, 3):
+        send_tmflow(bank, stale, target=AIR)
+        run(ctl, 0.5)
+        assert ctl.moves_started == 1
+        assert bank.get("ack_seq") == 1
+    send_tmflow(bank, 2, target=AIR)
+    finish_tmflow(ctl, bank, 2)
+    assert ctl.moves_started == 2
+
+
 def test_tmflow_seq_wraps_from_65535_to_1() -> None:
     ctl, bank, _, _ = tmflow()
+    # As if 65534 commands had been taken before (ack_seq survives project restarts).
+    bank.set("ack_seq", 65534)
+    bank.set("done_seq", 65534)
     send_tmflow(bank, 65535, target=AIR)
     finish_tmflow(ctl, bank, 65535)
     send_tmflow(bank, 1, target=PART)
@@ -640,10 +659,10 @@ def test_tmflow_unreachable_is_a_program_error_not_a_robot_error() -> None:
 )
 def test_tmflow_invalid_command(command: int, speed: int, target: Pose) -> None:
     ctl, bank, _, _ = tmflow()
-    send_tmflow(bank, 5, command=command, target=target)
+    send_tmflow(bank, 1, command=command, target=target)
     bank.write(Table.HOLDING, 9012, [speed])  # raw: the codec would refuse speed 0
     ctl.tick(DT)
-    assert bank.get("ack_seq") == 5
+    assert bank.get("ack_seq") == 1
     assert bank.get("robot_state") == 2
     assert bank.get("result_code") == 2
     assert bank.get("done_seq") == 0

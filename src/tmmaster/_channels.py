@@ -350,11 +350,17 @@ class SequenceChannel(CommandChannel):
         feedback = self.read([*self.feedback_fields, p.field("seq")])
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
         state = p.field("robot_state").label(int(feedback["robot_state"]))
-        if seq_now != ack:
+        if seq_now == ack % 65535 + 1:
             raise RobotError(f"command {seq_now} is still waiting to be acknowledged")
-        if state == "busy" or (ack != done and state != "error"):
+        if state == "busy":
             raise RobotError(f"the robot program is still executing command {ack}")
-        seq = seq_now % 65535 + 1  # 1..65535; 0 means "never commanded"
+        if ack != done and state != "error":
+            # Abandoned (project stopped mid-command): the program is idle, so a new
+            # command is safe; say so, since the old one never finished.
+            _log.warning("robot.previous_command_unfinished", seq=ack, done_seq=done)
+        # The program takes only ack_seq + 1 (1..65535, skipping 0), so a seq that was
+        # put back to withdraw a command can never be mistaken for a new one.
+        seq = ack % 65535 + 1
         words.append((p.field("seq"), seq))
         return Ticket(
             command,
@@ -392,8 +398,12 @@ class SequenceChannel(CommandChannel):
         if ack == ticket.seq:
             return True
         self.transport.write_fields([(p.field("seq"), ack)], retry=True)
-        # The program may have taken it between our read and our write.
-        return int(self.read([p.field("ack_seq")])["ack_seq"]) == ticket.seq
+        # The program may have taken it between our read and our write. It ignores the
+        # put-back seq (not ack_seq + 1); restore ours so the registers agree again.
+        if int(self.read([p.field("ack_seq")])["ack_seq"]) == ticket.seq:
+            self.transport.write_fields([(p.field("seq"), ticket.seq)], retry=True)
+            return True
+        return False
 
     def resolve_lost_write(self, ticket: Ticket) -> bool:
         """seq is written in the same request as the block: if it is ours, the write landed."""

@@ -427,8 +427,9 @@ class RobotController:
 
     def _take_sequence_command(self, ready: bool) -> None:
         seq = int(self._bank.get("seq"))
-        if seq == 0 or seq == int(self._bank.get("ack_seq")):
-            # Nothing new; a duplicate write of the acknowledged seq is never executed twice.
+        if seq != int(self._bank.get("ack_seq")) % 65535 + 1:
+            # Only the next number is a new command: a duplicate of the acknowledged seq,
+            # or a seq a master put back to withdraw a command, is never executed.
             self._late_key = None
             return
         command_field = self._profile.field("command")
