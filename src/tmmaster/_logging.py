@@ -27,6 +27,10 @@ def configure_logging(
         renderer = structlog.processors.JSONRenderer()
     else:
         renderer = structlog.dev.ConsoleRenderer(colors=output.isatty())
+    # pymodbus logs every refused connection and dropped send on its own; the transport
+    # reports each of those as a typed error and a structured event, so keep only its
+    # critical messages out of the user's terminal.
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     structlog.configure(
         processors=[
             structlog.contextvars.merge_contextvars,

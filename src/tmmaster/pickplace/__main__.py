@@ -385,7 +385,7 @@ def _run_on(
         try:
             robot.connect()
         except TransportError as exc:
-            return EXIT_CONNECTION, f"cannot connect to the robot at {host}:{port}: {exc}"
+            return EXIT_CONNECTION, f"robot at {host}:{port} unreachable: {exc}"
         result = runner.run(sequence, cycles=cycles)
         outcome.run = result
     finally:
