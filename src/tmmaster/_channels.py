@@ -433,8 +433,3 @@ def heartbeat_stalled(ticket: Ticket) -> bool:
         "heartbeat" in ticket.extra
         and ticket.extra.get("last_heartbeat") == ticket.extra["heartbeat"]
     )
-
-
-def tcp_pose_names() -> tuple[str, ...]:
-    """Field names of the current TCP pose, in x, y, z, rx, ry, rz order."""
-    return TCP_FIELDS

@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import structlog
 from pydantic import BaseModel, ConfigDict, Field
@@ -550,26 +549,12 @@ def connect(
     port: int = 502,
     *,
     profile: str | Path | RobotProfile = "tmflow",
-    **options: object,
+    **options: Any,
 ) -> Robot:
-    """Open a :class:`Robot`; use it as a context manager so it is always closed."""
-    robot = Robot(host, port, profile=profile, **options)  # type: ignore[arg-type]
+    """Open a :class:`Robot` (options as for :class:`Robot`); use it in a ``with`` block."""
+    robot = Robot(host, port, profile=profile, **options)
     try:
         return robot.connect()
     except BaseException:
         robot.close()
         raise
-
-
-def poll_until(
-    predicate: Callable[[], bool], *, timeout_s: float, interval_s: float = 0.05
-) -> bool:
-    """Call ``predicate`` every ``interval_s`` until it is true or ``timeout_s`` passes."""
-    deadline = time.monotonic() + timeout_s
-    poller = Poller(interval_s)
-    while True:
-        if predicate():
-            return True
-        if time.monotonic() >= deadline:
-            return False
-        poller.sleep()
