@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 import tmmaster
+import tmmaster.pickplace
 import tmmaster.sim
 from tmmaster._cli import main
 
@@ -23,7 +24,7 @@ def _isort_key(name: str) -> tuple[int, str]:
     return (2, name)
 
 
-@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim])
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace])
 def test_all_is_sorted_and_complete(module: object) -> None:
     exported = list(module.__all__)  # type: ignore[attr-defined]
     assert exported == sorted(exported, key=_isort_key), "keep __all__ sorted (ruff RUF022)"
@@ -37,9 +38,10 @@ def test_all_is_sorted_and_complete(module: object) -> None:
         assert hasattr(module, name), name
 
 
-def test_every_public_function_and_class_has_a_docstring() -> None:
-    for name in tmmaster.__all__:
-        value = getattr(tmmaster, name)
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace])
+def test_every_public_function_and_class_has_a_docstring(module: object) -> None:
+    for name in module.__all__:  # type: ignore[attr-defined]
+        value = getattr(module, name)
         if inspect.isfunction(value) or inspect.isclass(value):
             assert inspect.getdoc(value), f"{name} has no docstring"
 
