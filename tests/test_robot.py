@@ -419,3 +419,29 @@ def test_tmflow_accepts_commands_again_after_a_stop_and_restart(
     # The abandoned command left ack_seq != done_seq; that must not block the next one.
     robot.move_to(APPROACH, speed=30)
     assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
+
+
+@pytest.mark.parametrize(
+    ("profile", "before_ack", "after_ack"), [("article", 2, 1), ("tmflow", 2, 2)]
+)
+def test_one_request_per_block_per_poll(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    profile: str,
+    before_ack: int,
+    after_ack: int,
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=1, faults=["late_ack:delay_s=0.5"])
+    robot = robots(sim)
+    motion = robot.start_move(APPROACH, speed=30)
+    sim.clear_request_log()
+    motion.progress() if profile == "article" else robot.channel.poll(motion._ticket)
+    assert len(sim.request_log) == before_ack
+    assert not motion._ticket.acknowledged
+    sim.wait_for(lambda: sim.field("motion_status" if profile == "article" else "robot_state") == 1)
+    robot.channel.poll(motion._ticket)  # sees the acknowledgement
+    sim.clear_request_log()
+    robot.channel.poll(motion._ticket)
+    assert motion._ticket.acknowledged
+    assert len(sim.request_log) == after_ack
+    motion.wait()

@@ -34,7 +34,7 @@ from ._exceptions import (
     RobotFaultError,
 )
 from ._pose import MotionType, Pose
-from ._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile, Role
+from ._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile, Role, Table
 from ._status import RobotStatus
 from ._transport import ModbusTransport
 
@@ -301,7 +301,9 @@ class SequenceChannel(CommandChannel):
         super().__init__(profile, transport)
         p = profile
         self.feedback_fields = p.role(Role.FEEDBACK)
-        self.flag_fields = p.select(("error", "estop", "project_running"))
+        # All of Techman's status bits, not just the three the handshake needs: together
+        # they are one contiguous block (7201-7208), so one request instead of two.
+        self.flag_fields = tuple(f for f in p.role(Role.STATUS) if f.table is Table.DISCRETE_INPUT)
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
