@@ -303,7 +303,10 @@ class SequenceChannel(CommandChannel):
         self.feedback_fields = p.role(Role.FEEDBACK)
         # All of Techman's status bits, not just the three the handshake needs: together
         # they are one contiguous block (7201-7208), so one request instead of two.
-        self.flag_fields = tuple(f for f in p.role(Role.STATUS) if f.table is Table.DISCRETE_INPUT)
+        needed = p.select(("error", "estop", "project_running"))
+        self.flag_fields = needed + tuple(
+            f for f in p.role(Role.STATUS) if f.table is Table.DISCRETE_INPUT and f not in needed
+        )
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
