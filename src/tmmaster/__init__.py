@@ -46,6 +46,7 @@ from ._gripper import (
     SequenceGripper,
 )
 from ._logging import configure_logging
+from ._poller import Poller
 from ._pose import MotionType, Pose
 from ._profiles import (
     builtin_profile_names,
@@ -67,7 +68,7 @@ from ._registers import (
     WordOrder,
 )
 from ._retry import RetryPolicy
-from ._robot import Motion, Poller, Robot, TimeoutPolicy, Workspace, connect
+from ._robot import Motion, Robot, TimeoutPolicy, Workspace, connect
 from ._robot_models import ROBOT_MODELS, RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, RobotStatus
 from ._transport import ConnectionState, ModbusTransport, TransportStats

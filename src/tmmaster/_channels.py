@@ -34,7 +34,15 @@ from ._exceptions import (
     RobotFaultError,
 )
 from ._pose import MotionType, Pose
-from ._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile, Role, Table
+from ._registers import (
+    TARGET_FIELDS,
+    TCP_FIELDS,
+    Handshake,
+    RegisterField,
+    RobotProfile,
+    Role,
+    Table,
+)
 from ._status import RobotStatus
 from ._transport import ModbusTransport
 
@@ -77,6 +85,8 @@ class Ticket:
     seq: int = 0
     #: Target registers before the write (clear-on-accept only): tells a lost write apart.
     previous_target: tuple[float, ...] | None = None
+    #: TCP pose read while preparing, when the check read it anyway (saves a request).
+    start_pose: Pose | None = None
     acknowledged: bool = False
     acknowledged_at: float | None = None
     extra: dict[str, Value] = field(default_factory=dict)
@@ -133,6 +143,20 @@ class CommandChannel(ABC):
     @abstractmethod
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret raw field values as a status snapshot."""
+
+    def status_failure(self, status: RobotStatus) -> RobotError | None:
+        """The typed error a status snapshot stands for (e-stop, error), or None."""
+        if status.estop:
+            return EmergencyStopError(
+                "emergency stop is pressed", error_code=status.error_code, pose=status.pose
+            )
+        if status.error:
+            return RobotFaultError(
+                f"robot in error (mode {status.mode}, error code {status.error_code})",
+                error_code=status.error_code,
+                pose=status.pose,
+            )
+        return None
 
     # -- commands --------------------------------------------------------
 
@@ -211,22 +235,13 @@ class ClearOnAcceptChannel(CommandChannel):
             timestamp=time.monotonic(),
         )
 
-    def _failure(self, status: RobotStatus) -> RobotError | None:
-        if status.error:
-            return RobotFaultError(
-                f"robot in error (mode {status.mode}, error code {status.error_code})",
-                error_code=status.error_code,
-                pose=status.pose,
-            )
-        return None
-
     def prepare(self, command: Command) -> Ticket:
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
         words = self.encode_command(command)
         p = self.profile
         block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
         status = self.read_status()
-        if (failure := self._failure(status)) is not None:
+        if (failure := self.status_failure(status)) is not None:
             raise failure
         if command.kind is not CommandKind.STOP:
             if int(status.raw["robot_mode"]) != p.mode_auto:
@@ -240,7 +255,9 @@ class ClearOnAcceptChannel(CommandChannel):
                     pose=status.pose,
                 )
         previous = tuple(float(block[n]) for n in TARGET_FIELDS)
-        return Ticket(command, words, time.monotonic(), previous_target=previous)
+        return Ticket(
+            command, words, time.monotonic(), previous_target=previous, start_pose=status.pose
+        )
 
     def poll(self, ticket: Ticket) -> Observation:
         """Before acknowledgement read the command register first, then the status block."""
@@ -252,7 +269,7 @@ class ClearOnAcceptChannel(CommandChannel):
         # Read after the command register: the robot sets "moving" before it clears the
         # command, so idle here, after seeing the command cleared, means finished.
         status = self.read_status()
-        failure = self._failure(status)
+        failure = self.status_failure(status)
         done = ticket.acknowledged and not status.moving and failure is None
         return Observation(ticket.acknowledged, done, failure, status.pose)
 
@@ -425,8 +442,6 @@ class SequenceChannel(CommandChannel):
 
 def channel_for(profile: RobotProfile, transport: ModbusTransport) -> CommandChannel:
     """The channel implementing ``profile``'s handshake."""
-    from ._registers import Handshake
-
     if profile.handshake is Handshake.CLEAR_ON_ACCEPT:
         return ClearOnAcceptChannel(profile, transport)
     return SequenceChannel(profile, transport)

@@ -37,6 +37,7 @@ from ._exceptions import (
     ResponseTimeoutError,
     TransportError,
 )
+from ._poller import Poller
 from ._profiles import gripper_profile
 from ._registers import GripperProfile
 from ._retry import RetryPolicy
@@ -122,8 +123,6 @@ def _wait(
     check: Callable[[], GripperStatus | None],
 ) -> GripperStatus:
     """Poll ``check`` until it returns a status, bounded by ``timeout_s``."""
-    from ._robot import Poller
-
     deadline = time.monotonic() + timeout_s
     poller = Poller(poll)
     while True:
@@ -206,17 +205,8 @@ class SequenceGripper(Gripper):
         return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
 
     def _run(self, kind: CommandKind, timeout_s: float | None) -> GripperStatus:
-        from ._robot import Motion
-
-        robot = self._robot
-        command = Command(kind)
-        robot.channel.encode_command(command)
-        ticket = robot.channel.prepare(command)
-        robot._send(ticket)
-        budget = timeout_s if timeout_s is not None else robot.timeouts.gripper_timeout_s
-        pose = robot.channel.read_pose()
-        motion = Motion(robot, ticket, start=pose, expected_s=0.0, timeout_s=budget)
-        _log.info("gripper.command_sent", gripper=self.kind, command=kind.value, seq=ticket.seq)
+        motion = self._robot.start_command(Command(kind), timeout=timeout_s)
+        _log.info("gripper.command_sent", gripper=self.kind, command=kind.value)
         motion.wait()
         return self.status()
 

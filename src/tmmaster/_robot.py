@@ -42,6 +42,7 @@ from ._exceptions import (
     TMMasterError,
 )
 from ._gripper import Gripper, make_gripper
+from ._poller import Poller
 from ._pose import MotionType, Pose
 from ._profiles import robot_profile
 from ._registers import GripperProfile, RobotProfile
@@ -94,29 +95,6 @@ class TimeoutPolicy(BaseModel):
         return expected_s * self.motion_factor + self.motion_margin_s
 
 
-class Poller:
-    """Paces a wait: one poll per interval on a monotonic clock, every wait bounded."""
-
-    def __init__(self, interval_s: float, stop_event: threading.Event | None = None) -> None:
-        if interval_s <= 0:
-            raise ConfigError(f"poll interval must be > 0 s, got {interval_s}")
-        self.interval_s = interval_s
-        self._next = time.monotonic()
-        self._stop = stop_event
-
-    def sleep(self) -> None:
-        """Sleep until the next poll is due (no drift: deadlines advance by the interval)."""
-        self._next += self.interval_s
-        delay = self._next - time.monotonic()
-        if delay < 0:  # a slow poll: don't try to catch up with a burst of reads
-            self._next = time.monotonic()
-            return
-        if self._stop is not None:
-            self._stop.wait(delay)
-        else:
-            time.sleep(delay)
-
-
 class Motion:
     """A move that was sent; ask for its progress, or wait for it."""
 
@@ -125,7 +103,7 @@ class Motion:
         robot: Robot,
         ticket: Ticket,
         *,
-        start: Pose,
+        start: Pose | None,
         expected_s: float,
         timeout_s: float,
     ) -> None:
@@ -159,7 +137,7 @@ class Motion:
                 self.last_pose = self._robot.pose()
         elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
         fraction: float | None = None
-        if self.last_pose is not None and self.target is not None:
+        if self.last_pose is not None and self.target is not None and self.start is not None:
             total = self.start.distance_to(self.target)
             remaining = self.last_pose.distance_to(self.target)
             fraction = 1.0 if total == 0 else max(0.0, min(1.0, 1 - remaining / total))
@@ -292,27 +270,13 @@ class Robot:
             status = self.status()
             if status.ready:
                 return status
-            if status.error or status.estop:
-                raise self.channel_failure(status)
+            if (failure := self.channel.status_failure(status)) is not None:
+                raise failure
             if time.monotonic() >= deadline:
                 raise MotionTimeoutError(
                     f"robot not ready after {timeout_s:g} s ({status})", pose=status.pose
                 )
             poller.sleep()
-
-    def channel_failure(self, status: RobotStatus) -> RobotError:
-        """The typed error a failed status stands for."""
-        from ._exceptions import EmergencyStopError, RobotFaultError
-
-        if status.estop:
-            return EmergencyStopError(
-                "emergency stop is pressed", error_code=status.error_code, pose=status.pose
-            )
-        return RobotFaultError(
-            f"robot in error (error code {status.error_code})",
-            error_code=status.error_code,
-            pose=status.pose,
-        )
 
     # -- moves ------------------------------------------------------------
 
@@ -351,19 +315,32 @@ class Robot:
         """Validate and send a move, returning at once with a :class:`Motion` handle."""
         motion = MotionType(motion)
         self.validate_move(target, speed)
-        command = Command(CommandKind.of(motion), target, speed, accel_time_ms)
+        return self.start_command(
+            Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
+        )
+
+    def start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
+        """Check, send and follow any command of the profile: a move or a gripper action."""
         # Encoding refuses out-of-range values here, before the first read or write.
         self.channel.encode_command(command)
         ticket = self.channel.prepare(command)
-        start = self.channel.read_pose()
-        expected = self.expected_motion_time(start, target, speed, motion)
-        timeout_s = timeout if timeout is not None else self.timeouts.for_motion(expected)
+        start: Pose | None = None
+        expected = 0.0
+        if command.target is not None:
+            start = ticket.start_pose or self.channel.read_pose()
+            expected = self.expected_motion_time(
+                start, command.target, command.speed or 100, MotionType(command.kind.value)
+            )
+            default_timeout = self.timeouts.for_motion(expected)
+        else:
+            default_timeout = self.timeouts.gripper_timeout_s
+        timeout_s = timeout if timeout is not None else default_timeout
         self._send(ticket)
         self._log.info(
             "robot.command_sent",
             command=command.kind.value,
-            target=target.as_list(),
-            speed=speed,
+            target=None if command.target is None else command.target.as_list(),
+            speed=command.speed,
             seq=ticket.seq or None,
             expected_s=round(expected, 3),
             timeout_s=round(timeout_s, 3),

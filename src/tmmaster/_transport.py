@@ -13,7 +13,6 @@ device's state back to learn whether the command arrived.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -382,8 +381,3 @@ class ModbusTransport:
         plans = plan_writes(items)
         for block, words in plans:
             self.write_block(block.table, block.address, words, retry=retry)
-
-
-def monotonic() -> float:
-    """The clock every wait in tmmaster uses."""
-    return time.monotonic()
