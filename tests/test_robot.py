@@ -331,20 +331,41 @@ def test_lost_answer_to_the_command_write_is_resolved_without_resending(
     assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
 
 
-@pytest.mark.parametrize("profile", ["article", "tmflow"])
-def test_lost_command_write_is_resent_once_when_provably_not_taken(
-    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+def test_lost_command_write_is_resent_with_the_same_sequence_number(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
-    sim = tm_simulator_factory(profile)
+    sim = tm_simulator_factory("tmflow")
     robot = robots(sim)
-    sim.inject(f"drop_connections:on_write_to={COMMAND_BLOCK[profile]},lose=request")
+    sim.inject(f"drop_connections:on_write_to={COMMAND_BLOCK['tmflow']},lose=request")
     robot.move_to(APPROACH, speed=30)
-    # Two writes arrived: the lost one was refused unexecuted, the resend was executed.
-    start = COMMAND_BLOCK[profile]
+    # Two writes arrived: the lost one was refused unexecuted, the resend was executed,
+    # and both carry the same sequence number: the program takes that number at most once.
+    start = COMMAND_BLOCK["tmflow"]
     arrived = [r for r in sim.request_log if r.function_code == 16 and r.address == start]
     assert len(arrived) == 2
+    assert arrived[0].values == arrived[1].values
     assert len(command_writes(sim)) == 1
     assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
+
+
+def test_lost_command_write_is_never_resent_on_a_clear_on_accept_profile(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article")
+    robot = robots(sim, timeouts=TimeoutPolicy(in_flight_s=0.3))
+    before = sim.tcp_pose()
+    sim.inject(f"drop_connections:on_write_to={COMMAND_BLOCK['article']},lose=request")
+    # Old targets in the registers cannot prove the write is lost rather than late: the
+    # master watches for it during the in-flight window, then withdraws and says so.
+    with pytest.raises(tmmaster.CommandStateUnknownError, match="not written again"):
+        robot.move_to(APPROACH, speed=30)
+    start = COMMAND_BLOCK["article"]
+    arrived = [r for r in sim.request_log if r.function_code == 16 and r.address == start]
+    assert len(arrived) == 1
+    assert command_writes(sim) == []
+    assert robot.last_motion is not None and robot.last_motion.withdrawn is True
+    assert sim.field("command") == 0
+    assert sim.tcp_pose().is_close(before, mm=0.01)
 
 
 def test_repeating_the_same_target_after_a_lost_answer_cannot_be_proven_and_is_not_resent(

@@ -301,14 +301,21 @@ def test_article_unreachable_target_is_an_error_without_motion() -> None:
     assert ctl.moves_started == 0
     run(ctl, 0.5)
     assert backend.tcp_pose() == HOME
-    # The error persists until the operator clears it; commands wait meanwhile.
+    # The error persists until the operator clears it; a command written meanwhile is
+    # not executed, and the reset discards it (issue 8: a reset never arms anything).
     send_article(bank, AIR.offset(dz=-200))
     run(ctl, 0.2)
-    assert bank.get("command") == 1
     assert bank.get("robot_mode") == 7
+    assert ctl.moves_started == 0
     ctl.clear_error()
     assert bank.get("robot_mode") == 5
     assert bank.get("error_code") == 0
+    assert bank.get("command") == 0
+    run(ctl, 0.2)
+    assert bank.get("motion_status") == 0
+    assert ctl.moves_started == 0
+    # A command written after the reset runs normally.
+    send_article(bank, AIR.offset(dz=-200))
     ctl.tick(DT)
     assert bank.get("command") == 0
     assert bank.get("motion_status") == 1
@@ -655,7 +662,7 @@ def test_tmflow_unreachable_is_a_program_error_not_a_robot_error() -> None:
 
 @pytest.mark.parametrize(
     ("command", "speed", "target"),
-    [(7, 100, PART), (0, 100, PART), (1, 0, PART)],
+    [(7, 100, PART), (1, 0, PART)],
 )
 def test_tmflow_invalid_command(command: int, speed: int, target: Pose) -> None:
     ctl, bank, _, _ = tmflow()
@@ -666,6 +673,24 @@ def test_tmflow_invalid_command(command: int, speed: int, target: Pose) -> None:
     assert bank.get("robot_state") == 2
     assert bank.get("result_code") == 2
     assert bank.get("done_seq") == 0
+
+
+def test_tmflow_command_none_is_a_cancel_that_uses_the_number_up() -> None:
+    ctl, bank, _, _ = tmflow()
+    send_tmflow(bank, 1, command=0, target=PART)
+    ctl.tick(DT)
+    assert bank.get("ack_seq") == 1
+    assert bank.get("robot_state") == 2
+    assert bank.get("result_code") == 5  # cancelled
+    assert bank.get("done_seq") == 0
+    # A late copy of the original frame (same seq, command ptp) can never run now.
+    send_tmflow(bank, 1, command=1, target=PART)
+    run(ctl, 0.5)
+    assert ctl.moves_started == 0
+    # The next number runs normally.
+    send_tmflow(bank, 2, command=1, target=PART)
+    finish_tmflow(ctl, bank, 2)
+    assert ctl.moves_started == 1
 
 
 def test_tmflow_nan_target_is_invalid() -> None:
@@ -761,8 +786,14 @@ def test_tmflow_robot_error_stops_the_project() -> None:
     bank.write(Table.COIL, 7104, [1])
     ctl.tick(DT)
     assert bank.get("project_running") is True
-    assert bank.get("ack_seq") == 2  # the command written meanwhile runs; seq 1 does not
-    finish_tmflow(ctl, bank, 2)
+    # The start-up rule: the command written while the project was stopped is consumed as
+    # cancelled, never executed (issue 8); seq 1 does not run again either.
+    assert bank.get("ack_seq") == 2
+    assert bank.get("result_code") == 5
+    run(ctl, 0.5)
+    assert ctl.moves_started == 1
+    send_tmflow(bank, 3, target=AIR)
+    finish_tmflow(ctl, bank, 3)
     assert ctl.moves_started == 2
 
 

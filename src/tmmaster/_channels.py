@@ -27,7 +27,6 @@ import structlog
 from ._codec import Value, encode
 from ._exceptions import (
     CommandRejectedError,
-    CommandStateUnknownError,
     ConfigError,
     EmergencyStopError,
     RobotError,
@@ -89,6 +88,8 @@ class Ticket:
     start_pose: Pose | None = None
     acknowledged: bool = False
     acknowledged_at: float | None = None
+    #: True once the command was taken back (it can no longer start).
+    withdrawn: bool = False
     extra: dict[str, Value] = field(default_factory=dict)
 
 
@@ -195,19 +196,29 @@ class CommandChannel(ABC):
 
     @abstractmethod
     def withdraw(self, ticket: Ticket) -> bool:
-        """Take back a command the robot has not acknowledged; True if it had taken it after all."""
+        """Take back a command the robot has not acknowledged; True if it had taken it after all.
+
+        Written with retries and regardless of a stop request: a withdraw is idempotent.
+        """
 
     @abstractmethod
-    def resolve_lost_write(self, ticket: Ticket) -> bool:
-        """After a failed command write: True if the robot got it, False if provably not.
+    def write_landed(self, ticket: Ticket) -> bool:
+        """After a failed command write: True when the registers show the write arrived.
 
-        Raises :class:`CommandStateUnknownError` when neither can be proven.
+        False means "not seen yet", never "provably lost": a delayed frame may still land.
         """
+
+    #: True when writing the same command block twice cannot make the robot run it twice.
+    duplicate_safe: bool = False
 
     def send(self, ticket: Ticket) -> None:
         """Write the command block in one request, exactly once (never retried)."""
-        self.transport.write_fields(ticket.words, retry=False)
         ticket.sent_at = time.monotonic()
+        self.transport.write_fields(ticket.words, retry=False)
+
+    def read_failure(self) -> RobotError | None:
+        """Read the fewest registers that tell whether the robot is in e-stop or error."""
+        return self.status_failure(self.read_status())
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """Field values that stop the robot at once, or None if the profile has no stop."""
@@ -276,32 +287,37 @@ class ClearOnAcceptChannel(CommandChannel):
     def withdraw(self, ticket: Ticket) -> bool:
         """Write command = none, then check whether the robot had started the move meanwhile."""
         command = self.profile.field("command")
-        self.transport.write_fields([(command, 0)], retry=True)
-        status = self.read_status()
-        return status.moving
+        self.transport.write_fields([(command, 0)], retry=True, interruptible=False)
+        status = self.transport.read_fields(
+            self.status_fields, max_gap=self.profile.max_read_gap, interruptible=False
+        )
+        return self.status_from(status).moving
 
-    def resolve_lost_write(self, ticket: Ticket) -> bool:
-        """Decide from the command and target registers whether the lost write landed."""
+    def write_landed(self, ticket: Ticket) -> bool:
+        """Our targets in the registers (pending or taken), or the arm moving: the write arrived.
+
+        The robot was idle with no command pending when the write was sent, so motion now
+        can only be ours. Old targets prove nothing: the frame may still be on its way.
+        """
         p = self.profile
         block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
         ours = {f.name: v for f, v in ticket.words}
         targets_match = all(
             abs(float(block[n]) - float(ours[n])) < 1e-6 for n in TARGET_FIELDS if n in ours
         )
-        if not targets_match:
-            return False  # FC16 is atomic: other targets means our write never landed
-        if int(block["command"]) == int(ours["command"]):
+        if targets_match and int(block["command"]) == int(ours["command"]):
             return True  # landed, not yet picked up
-        if ticket.previous_target is not None and any(
-            abs(a - float(ours[n])) >= 1e-6
-            for a, n in zip(ticket.previous_target, TARGET_FIELDS, strict=True)
-            if n in ours
+        if (
+            targets_match
+            and ticket.previous_target is not None
+            and any(
+                abs(a - float(ours[n])) >= 1e-6
+                for a, n in zip(ticket.previous_target, TARGET_FIELDS, strict=True)
+                if n in ours
+            )
         ):
             return True  # our targets are there and the command was cleared: taken
-        raise CommandStateUnknownError(
-            "the command write failed and the registers cannot tell whether the robot took it"
-            " (same target as before, command register cleared); nothing was resent"
-        )
+        return self.read_status().moving
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """command = stop, when the profile defines it."""
@@ -413,25 +429,46 @@ class SequenceChannel(CommandChannel):
                 )
         return Observation(ticket.acknowledged, done, failure, None)
 
-    def withdraw(self, ticket: Ticket) -> bool:
-        """Put seq back to the last acknowledged value, then check whether ours was taken."""
-        p = self.profile
-        ack = int(self.read([p.field("ack_seq")])["ack_seq"])
-        if ack == ticket.seq:
-            return True
-        self.transport.write_fields([(p.field("seq"), ack)], retry=True)
-        # The program may have taken it between our read and our write. It ignores the
-        # put-back seq (not ack_seq + 1); restore ours so the registers agree again.
-        if int(self.read([p.field("ack_seq")])["ack_seq"]) == ticket.seq:
-            self.transport.write_fields([(p.field("seq"), ticket.seq)], retry=True)
-            return True
-        return False
+    duplicate_safe = True  # the program takes a sequence number at most once
 
-    def resolve_lost_write(self, ticket: Ticket) -> bool:
+    def withdraw(self, ticket: Ticket) -> bool:
+        """Cancel our sequence number; True if the program had taken the command itself.
+
+        The cancel is the same sequence number with command = none, written as one
+        request: the program consumes it as a no-op (result "cancelled"), so the number
+        is used up and a late copy of the original frame can never be taken afterwards.
+        If the project is not running, the program consumes it at its next start.
+        """
+        p = self.profile
+        if self._taken(ticket.seq):
+            return True
+        command = p.field("command")
+        self.transport.write_fields(
+            [(command, command.code_of("none")), (p.field("seq"), ticket.seq)],
+            retry=True,
+            interruptible=False,
+        )
+        return self._taken(ticket.seq)
+
+    def _taken(self, seq: int) -> bool:
+        """True when the program took ``seq`` as the real command (not as a cancel)."""
+        p = self.profile
+        values = self.transport.read_fields(
+            self.feedback_fields, max_gap=p.max_read_gap, interruptible=False
+        )
+        if int(values["ack_seq"]) != seq:
+            return False
+        return p.field("result_code").label(int(values["result_code"])) != "cancelled"
+
+    def write_landed(self, ticket: Ticket) -> bool:
         """seq is written in the same request as the block: if it is ours, the write landed."""
         p = self.profile
         values = self.read([p.field("seq"), p.field("ack_seq")])
         return ticket.seq in (int(values["seq"]), int(values["ack_seq"]))
+
+    def read_failure(self) -> RobotError | None:
+        """One read of Techman's status bits (e-stop, error, project running)."""
+        return self._flags_failure(self.read(self.flag_fields))
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """Press the TM Stop button (coil 7105): the project stops and the arm halts."""

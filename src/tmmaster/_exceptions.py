@@ -24,9 +24,10 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     │   └── CommandStateUnknownError              cannot prove whether a command was taken
     ├── MotionTimeoutError (TimeoutError)         a wait on the robot ran out of time
     │   └── AcknowledgeTimeoutError               the robot never picked the command up
-    └── GripperError                              the gripper failed
-        ├── GripperTimeoutError (TimeoutError)    gripper still busy after its timeout
-        └── GraspFailedError                      closed, but no object detected
+    ├── GripperError                              the gripper failed
+    │   ├── GripperTimeoutError (TimeoutError)    gripper still busy after its timeout
+    │   └── GraspFailedError                      closed, but no object detected
+    └── StopRequestedError                        a wait gave up because a stop was requested
 
 Foreign errors (pymodbus, socket, pydantic) are mapped to these at one boundary
 each, always with ``raise ... from exc`` so the original stays visible.
@@ -166,6 +167,18 @@ class GripperTimeoutError(GripperError, TimeoutError):
 
 class GraspFailedError(GripperError):
     """The gripper closed but no object was detected."""
+
+
+class StopRequestedError(TMMasterError):
+    """A wait gave up because a stop was requested (Ctrl-C, ``Robot.interrupt()``, a runner stop).
+
+    Raised within one poll of the request. A command the wait was following has been
+    withdrawn (or the arm stopped, if it had started) before this propagates.
+    """
+
+    def __init__(self, message: str = "stop requested", *, pose: Pose | None = None) -> None:
+        self.pose = pose
+        super().__init__(message)
 
 
 MODBUS_EXCEPTIONS: dict[int, type[ModbusExceptionError]] = {

@@ -11,11 +11,15 @@
   65): width in mm, force in N, speed %, busy and grip-detected bits, width limits
   read at connect time.
 
-No driver sleeps a fixed time to "let the gripper finish": each polls status.
+No driver sleeps a fixed time to "let the gripper finish": each polls status. Every
+gripper wait also watches the robot: an e-stop or robot error ends it at once with the
+robot's typed error, no gripper command is written while the robot is in e-stop or
+error, and a stop request (``Robot.interrupt()``, Ctrl-C) ends it within one poll.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -116,16 +120,30 @@ class NoGripper(Gripper):
         return self.status()
 
 
+#: Raises the robot's typed error when it is in e-stop or error (``Robot.check_fault``).
+RobotGuard = Callable[[], None]
+
+
 def _wait(
     what: str,
     poll: float,
     timeout_s: float,
     check: Callable[[], GripperStatus | None],
+    *,
+    guard: RobotGuard | None = None,
+    stop_event: threading.Event | None = None,
 ) -> GripperStatus:
-    """Poll ``check`` until it returns a status, bounded by ``timeout_s``."""
+    """Poll ``check`` until it returns a status, bounded by ``timeout_s``.
+
+    ``guard`` runs before every check (robot e-stop / error end the wait); a set
+    ``stop_event`` ends it with :class:`StopRequestedError`.
+    """
     deadline = time.monotonic() + timeout_s
-    poller = Poller(poll)
+    poller = Poller(poll, stop_event)
     while True:
+        poller.check()
+        if guard is not None:
+            guard()
         result = check()
         if result is not None:
             return result
@@ -151,13 +169,20 @@ class RegisterGripper(Gripper):
         return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
 
     def _command_and_settle(self, value: int, *, stop_early_when_holding: bool) -> GripperStatus:
+        robot = self._robot
+        robot.check_fault()  # never write a gripper command during an e-stop or robot error
         started = time.monotonic()
         # Writing the same open/close value again is harmless, so retrying is allowed.
-        self._robot.transport.write_fields([(self._command, value)], retry=True)
+        robot.transport.write_fields([(self._command, value)], retry=True)
         _log.info("gripper.command_sent", gripper=self.kind, command=self._command.label(value))
 
         def check() -> GripperStatus | None:
-            status = self.status()
+            # One read: the article's status block holds the error state and the grasp.
+            robot_status = robot.status()
+            failure = robot.channel.status_failure(robot_status)
+            if failure is not None:
+                raise failure
+            status = GripperStatus(busy=None, holding=bool(robot_status.holding), width_mm=None)
             if stop_early_when_holding and status.holding:
                 return status
             if time.monotonic() - started >= self._settle_s:
@@ -166,9 +191,10 @@ class RegisterGripper(Gripper):
 
         status = _wait(
             f"gripper {self._command.label(value)}",
-            self._robot.poll_interval_s,
+            robot.poll_interval_s,
             self._settle_s + 1.0,
             check,
+            stop_event=robot._stop_event,
         )
         _log.info(
             "gripper.command_done",
@@ -230,6 +256,10 @@ class GripperLink:
     poll_interval_s: float = 0.05
     timeout_s: float = 5.0
     ack_timeout_s: float = 2.0
+    #: Checks the robot before each gripper write and poll (None: a gripper on its own).
+    guard: RobotGuard | None = None
+    #: Ends gripper waits on a stop request (the robot's stop event).
+    stop_event: threading.Event | None = None
 
 
 class _OwnConnectionGripper(Gripper):
@@ -241,6 +271,8 @@ class _OwnConnectionGripper(Gripper):
         self.poll_interval_s = link.poll_interval_s
         self.timeout_s = link.timeout_s
         self.ack_timeout_s = link.ack_timeout_s
+        self._guard = link.guard
+        self._stop_event = link.stop_event
         self.transport = ModbusTransport(
             link.host,
             link.port,
@@ -271,6 +303,8 @@ class _OwnConnectionGripper(Gripper):
             self.poll_interval_s,
             timeout_s or self.timeout_s,
             check,
+            guard=self._guard,
+            stop_event=self._stop_event,
         )
         _log.info(
             "gripper.command_done",
@@ -280,6 +314,11 @@ class _OwnConnectionGripper(Gripper):
             duration_s=round(time.monotonic() - started, 4),
         )
         return status
+
+    def check_robot(self) -> None:
+        """Raise the robot's typed error if it is in e-stop or error (no-op on its own)."""
+        if self._guard is not None:
+            self._guard()
 
     def read(self, *names: str) -> dict[str, Value]:
         """Read fields by name, one request per block."""
@@ -309,6 +348,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
 
     def _move(self, width_mm: float, timeout_s: float | None) -> GripperStatus:
         p = self.profile
+        self.check_robot()
         started = time.monotonic()
         # One FC16 of force, width and control; sent once: the acknowledgement tells.
         self.transport.write_fields(
@@ -328,7 +368,6 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
                 control = int(self.read("control")["control"])
                 if control != 0:
                     if time.monotonic() - started > self.ack_timeout_s:
-                        self._withdraw()
                         raise AcknowledgeTimeoutError(
                             f"{self.kind}: the gripper did not take the command within"
                             f" {self.ack_timeout_s:g} s; the command was withdrawn (control = 0)"
@@ -338,7 +377,14 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             status = self.status()
             return None if status.busy else status
 
-        return self.wait_for(width_mm, started, timeout_s, check)
+        try:
+            return self.wait_for(width_mm, started, timeout_s, check)
+        except BaseException:
+            # Whatever ends the wait (ack timeout, robot e-stop, stop request), an execute
+            # the gripper has not taken must not stay armed.
+            if not acknowledged:
+                self._withdraw()
+            raise
 
     def _withdraw(self) -> None:
         # A pending execute left in the register would run whenever the device gets to
@@ -346,7 +392,9 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         # it, or stops the fingers if the device took it meanwhile: safe either way.
         field = self.profile.field("control")
         try:
-            self.transport.write_fields([(field, field.code_of("stop"))], retry=True)
+            self.transport.write_fields(
+                [(field, field.code_of("stop"))], retry=True, interruptible=False
+            )
         except TransportError as exc:
             _log.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
 
@@ -438,6 +486,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             raise ConfigError(f"{self.kind}: width {width_mm:g} mm outside {low:g}..{high:g} mm")
         p = self.profile
         command = p.field("command").code_of(f"grip_{self.grip_mode}")
+        self.check_robot()
         started = time.monotonic()
         self.transport.write_fields(
             [
@@ -507,6 +556,8 @@ def make_gripper(
         poll_interval_s=robot.poll_interval_s,
         timeout_s=robot.timeouts.gripper_timeout_s,
         ack_timeout_s=robot.timeouts.ack_timeout_s,
+        guard=robot.check_fault,
+        stop_event=robot._stop_event,
     )
     if gp.driver == "blog-2fg7":
         return Blog2FG7Gripper(gp, link)

@@ -16,8 +16,12 @@ acknowledged the command first, and the final pose must be at the target.
 
 from __future__ import annotations
 
+import atexit
+import math
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -34,11 +38,16 @@ from ._channels import (
 )
 from ._exceptions import (
     AcknowledgeTimeoutError,
+    CommandRejectedError,
+    CommandStateUnknownError,
     ConfigError,
     ConnectionLostError,
+    EmergencyStopError,
     MotionTimeoutError,
     ResponseTimeoutError,
     RobotError,
+    RobotFaultError,
+    StopRequestedError,
     TMMasterError,
 )
 from ._gripper import Gripper, make_gripper
@@ -87,6 +96,9 @@ class TimeoutPolicy(BaseModel):
     motion_timeout_s: Annotated[float, Field(gt=0)] | None = None
     #: Gripper moves must end within this time.
     gripper_timeout_s: Annotated[float, Field(gt=0)] = 5.0
+    #: After a command write whose answer was lost (clear-on-accept profiles, which must
+    #: never write a command twice): how long to watch for the write to land late.
+    in_flight_s: Annotated[float, Field(gt=0)] = 5.0
 
     def for_motion(self, expected_s: float) -> float:
         """The timeout of a move expected to take ``expected_s`` seconds."""
@@ -116,6 +128,16 @@ class Motion:
         self.phase = MovePhase.SENT
         self.last_pose: Pose | None = None
         self.finished_at: float | None = None
+        #: After the master gave up on this command: True when it was withdrawn before the
+        #: robot took it, False when the withdraw failed or came too late, None otherwise.
+        self.withdrawn: bool | None = None
+        #: After the master gave up on a running move: True when the stop was delivered,
+        #: False when it could not be, None when no stop was needed.
+        self.stop_delivered: bool | None = None
+        #: True once the robot reported the command finished (done, or idle after it).
+        self.reported_finished = False
+        self._abandon_lock = threading.Lock()
+        self._abandoned = False
 
     @property
     def command(self) -> Command:
@@ -127,14 +149,20 @@ class Motion:
         """True once the robot acknowledged and then finished the move."""
         return self.phase is MovePhase.DONE
 
+    @property
+    def abandoned(self) -> bool:
+        """True once the master gave up on this command (failure, timeout, stop, close)."""
+        return self._abandoned
+
     def progress(self) -> MoveProgress:
         """Poll the robot once and report where the move stands (raises on robot failure)."""
         if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
             polled_pose = self.last_pose
-            self._robot._poll_motion(self)
-            if self.last_pose is polled_pose and not self.done:
-                # This profile's poll does not carry the pose: read it for the report.
-                self.last_pose = self._robot.pose()
+            with self._robot._following(self):
+                self._robot._poll_motion(self)
+                if self.last_pose is polled_pose and not self.done:
+                    # This profile's poll does not carry the pose: read it for the report.
+                    self.last_pose = self._robot.pose()
         elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
         fraction: float | None = None
         if self.last_pose is not None and self.target is not None and self.start is not None:
@@ -144,8 +172,28 @@ class Motion:
         return MoveProgress(self.phase, self.last_pose, elapsed, self.expected_s, fraction)
 
     def wait(self, timeout_s: float | None = None) -> None:
-        """Block until the move is done; raises a typed error on failure or timeout."""
-        self._robot._wait_motion(self, timeout_s)
+        """Block until the move is done; raises a typed error on failure or timeout.
+
+        Whatever ends the wait early (robot failure, timeout, stop request, lost link,
+        an exception), the command is withdrawn if the robot has not taken it, and a
+        running move is stopped unless the robot stopped it itself.
+        """
+        if timeout_s is not None:
+            _require_positive("timeout_s", timeout_s)
+        with self._robot._following(self):
+            self._robot._wait_motion(self, timeout_s)
+
+
+def _require_positive(name: str, value: object) -> float:
+    """``value`` as a float when it is a finite number > 0; else a ConfigError naming ``name``."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not math.isfinite(value)
+        or value <= 0
+    ):
+        raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
+    return float(value)
 
 
 class Robot:
@@ -176,8 +224,14 @@ class Robot:
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
         if not 1 <= max_speed_percent <= 100:
             raise ConfigError(f"max_speed_percent must be 1..100, got {max_speed_percent}")
-        if poll_interval_s <= 0:
-            raise ConfigError(f"poll_interval_s must be > 0, got {poll_interval_s}")
+        for option, value in (
+            ("poll_interval_s", poll_interval_s),
+            ("request_timeout_s", request_timeout_s),
+            ("position_tolerance_mm", position_tolerance_mm),
+            ("orientation_tolerance_deg", orientation_tolerance_deg),
+            ("gripper_settle_s", gripper_settle_s),
+        ):
+            _require_positive(option, value)
         self.name = name
         self.poll_interval_s = poll_interval_s
         self.timeouts = timeouts if timeouts is not None else TimeoutPolicy()
@@ -195,7 +249,11 @@ class Robot:
         )
         self.channel: CommandChannel = channel_for(self.profile, self.transport)
         self._stop_event = threading.Event()
+        # Retry sleeps of reads end at once on a stop request, like every poll.
+        self.transport.interrupt = self._stop_event
         self._connected = False
+        #: The last command sent; while it is not settled, close() withdraws or stops it.
+        self._last_motion: Motion | None = None
         self._log = _log.bind(robot=name)
         self.gripper: Gripper = make_gripper(
             gripper,
@@ -232,6 +290,7 @@ class Robot:
             self.close()
             raise
         self._connected = True
+        atexit.register(self._at_exit)
         self._log.info(
             "robot.connected",
             host=self.transport.host,
@@ -241,10 +300,38 @@ class Robot:
         return self
 
     def close(self) -> None:
-        """Close every connection; safe to call more than once."""
+        """Withdraw (or stop) a command still outstanding, then close every connection.
+
+        Safe to call more than once, and from another thread: waits in progress end with
+        :class:`StopRequestedError`.
+        """
         self._stop_event.set()
+        atexit.unregister(self._at_exit)
+        motion = self._last_motion
+        if motion is not None and self.transport.state is not ConnectionState.CLOSED:
+            self._abandon(motion, StopRequestedError("the robot connection is closing"))
         self.gripper.disconnect()
         self.transport.close()
+
+    def _at_exit(self) -> None:
+        # The interpreter is exiting with this robot still open: nothing may stay armed.
+        self.close()
+
+    @property
+    def last_motion(self) -> Motion | None:
+        """The last command sent (move or gripper action), with its outcome."""
+        return self._last_motion
+
+    @property
+    def can_stop(self) -> bool:
+        """True when the profile defines a way to stop the arm (:meth:`stop`)."""
+        return self.channel.stop_words() is not None
+
+    def check_fault(self) -> None:
+        """Read the fewest registers that tell; raise the typed error if in e-stop or error."""
+        failure = self.channel.read_failure()
+        if failure is not None:
+            raise failure
 
     def __enter__(self) -> Robot:
         return self.connect()
@@ -264,9 +351,11 @@ class Robot:
 
     def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
         """Poll until the robot can take a motion command (auto / running, idle, no error)."""
+        _require_positive("timeout_s", timeout_s)
         deadline = time.monotonic() + timeout_s
         poller = Poller(self.poll_interval_s, self._stop_event)
         while True:
+            poller.check()
             status = self.status()
             if status.ready:
                 return status
@@ -321,6 +410,8 @@ class Robot:
 
     def start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
         """Check, send and follow any command of the profile: a move or a gripper action."""
+        if timeout is not None:
+            _require_positive("timeout", timeout)
         # Encoding refuses out-of-range values here, before the first read or write.
         self.channel.encode_command(command)
         ticket = self.channel.prepare(command)
@@ -335,7 +426,10 @@ class Robot:
         else:
             default_timeout = self.timeouts.gripper_timeout_s
         timeout_s = timeout if timeout is not None else default_timeout
-        self._send(ticket)
+        motion = Motion(self, ticket, start=start, expected_s=expected, timeout_s=timeout_s)
+        self._last_motion = motion
+        with self._following(motion):
+            self._send(ticket)
         self._log.info(
             "robot.command_sent",
             command=command.kind.value,
@@ -345,7 +439,7 @@ class Robot:
             expected_s=round(expected, 3),
             timeout_s=round(timeout_s, 3),
         )
-        return Motion(self, ticket, start=start, expected_s=expected, timeout_s=timeout_s)
+        return motion
 
     def move_to(
         self,
@@ -368,8 +462,8 @@ class Robot:
         words = self.channel.stop_words()
         if words is None:
             raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
-        # A stop is idempotent: retrying it can only help.
-        self.transport.write_fields(words, retry=True)
+        # A stop is idempotent: retrying it can only help, even after a stop request.
+        self.transport.write_fields(words, retry=True, interruptible=False)
         self._log.warning("robot.stop_sent")
 
     def clear_stop_request(self) -> None:
@@ -383,7 +477,13 @@ class Robot:
     # -- internals --------------------------------------------------------
 
     def _send(self, ticket: Ticket) -> None:
-        """Write a command once; after a failed write, find out whether it landed."""
+        """Write a command once; after a failed write, find out whether it landed.
+
+        A command is written again only where the protocol makes a duplicate harmless
+        (a sequence number the program takes at most once). On a clear-on-accept profile
+        the master watches for the late write for ``timeouts.in_flight_s`` and carries on
+        if it lands; otherwise the command is withdrawn and the error says so.
+        """
         try:
             self.channel.send(ticket)
             return
@@ -391,21 +491,90 @@ class Robot:
             self._log.warning(
                 "robot.command_write_failed", error=str(exc), command=ticket.command.kind.value
             )
-            failure = exc
-        # Reconnect (transport policy), then ask the registers, never guess.
-        self.transport.connect()
-        if self.channel.resolve_lost_write(ticket):
+            failure: TMMasterError = exc
+        self.transport.connect()  # the transport's retry policy rides out a short outage
+        if self.channel.write_landed(ticket):
             self._log.info("robot.command_write_landed", command=ticket.command.kind.value)
             return
-        self._log.warning(
-            "robot.command_resent",
-            command=ticket.command.kind.value,
-            reason="registers prove the first write never arrived",
-        )
+        if self.channel.duplicate_safe:
+            self._log.warning(
+                "robot.command_resent",
+                command=ticket.command.kind.value,
+                seq=ticket.seq,
+                reason="same sequence number: the program takes it at most once",
+            )
+            try:
+                self.channel.send(ticket)
+                return
+            except (ConnectionLostError, ResponseTimeoutError) as exc:
+                failure = exc
+            self.transport.connect()
+            if self.channel.write_landed(ticket):
+                return
+        else:
+            deadline = time.monotonic() + self.timeouts.in_flight_s
+            poller = Poller(self.poll_interval_s, self._stop_event)
+            while time.monotonic() < deadline:
+                poller.sleep()
+                if self.channel.write_landed(ticket):
+                    self._log.warning(
+                        "robot.command_write_landed_late", command=ticket.command.kind.value
+                    )
+                    return
+        raise CommandStateUnknownError(
+            f"the {ticket.command.kind.value} command write got no answer and did not show up in"
+            " the robot's registers; it was not written again and has been withdrawn"
+        ) from failure
+
+    @contextmanager
+    def _following(self, motion: Motion) -> Iterator[None]:
+        """Whatever escapes the block, the master gives the command up safely first."""
         try:
-            self.channel.send(ticket)
-        except (ConnectionLostError, ResponseTimeoutError) as exc:
-            raise exc from failure
+            yield
+        except BaseException as exc:
+            self._abandon(motion, exc)
+            raise
+
+    def _abandon(self, motion: Motion, reason: BaseException) -> None:
+        """Make sure a command the master gives up on can never start later.
+
+        Not yet acknowledged: withdraw it (if the robot took it meanwhile, it is running).
+        Running: stop the arm, unless the robot stopped itself (fault, e-stop, refusal).
+        Every step is best effort and logged; none of them raises.
+        """
+        with motion._abandon_lock:
+            if motion._abandoned or motion.done or motion.reported_finished:
+                return
+            motion._abandoned = True
+        ticket = motion._ticket
+        motion.phase = MovePhase.FAILED
+        running = ticket.acknowledged
+        if not running and not ticket.withdrawn:
+            try:
+                running = self.channel.withdraw(ticket)
+                ticket.withdrawn = not running
+                motion.withdrawn = not running
+            except TMMasterError as exc:
+                motion.withdrawn = False
+                self._log.error(
+                    "robot.withdraw_failed", command=motion.command.kind.value, error=str(exc)
+                )
+            else:
+                self._log.warning(
+                    "robot.command_withdrawn" if not running else "robot.withdraw_too_late",
+                    command=motion.command.kind.value,
+                    reason=type(reason).__name__,
+                )
+        stopped_itself = isinstance(
+            reason, RobotFaultError | EmergencyStopError | CommandRejectedError
+        )
+        if running and not stopped_itself and self.can_stop:
+            try:
+                self.stop()
+                motion.stop_delivered = True
+            except TMMasterError as exc:
+                motion.stop_delivered = False
+                self._log.error("robot.stop_failed", error=str(exc))
 
     def _poll_motion(self, motion: Motion) -> None:
         observation = self.channel.poll(motion._ticket)
@@ -440,6 +609,7 @@ class Robot:
             return fallback
 
     def _finish(self, motion: Motion) -> None:
+        motion.reported_finished = True
         if motion.target is not None:
             pose = self.channel.read_pose()
             motion.last_pose = pose
@@ -467,8 +637,7 @@ class Robot:
         poller = Poller(self.poll_interval_s, self._stop_event)
         ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
         while motion.phase is not MovePhase.DONE:
-            if self._stop_event.is_set():
-                raise RobotError("wait interrupted", pose=motion.last_pose)
+            poller.check()
             self._poll_motion(motion)
             if motion.done:
                 return
@@ -490,6 +659,8 @@ class Robot:
             motion.phase = MovePhase.RUNNING
             self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
             return
+        ticket.withdrawn = True
+        motion.withdrawn = True
         motion.phase = MovePhase.FAILED
         hint = ""
         if heartbeat_stalled(ticket):
@@ -509,11 +680,7 @@ class Robot:
             timeout_s=round(budget, 3),
             pose=None if pose is None else pose.as_list(),
         )
-        if self.channel.stop_words() is not None:
-            try:
-                self.stop()
-            except TMMasterError as exc:  # report the timeout; log why the stop failed
-                self._log.error("robot.stop_failed", error=str(exc))
+        # The stop follows in _abandon, as for every running move the master gives up on.
         raise MotionTimeoutError(
             f"move to {motion.target} did not finish within {budget:.2f} s"
             f" (expected {motion.expected_s:.2f} s); last pose {pose}",

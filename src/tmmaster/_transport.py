@@ -175,6 +175,8 @@ class ModbusTransport:
         self.timeout = timeout
         self.retry = retry if retry is not None else RetryPolicy()
         self.name = name
+        #: When set, sleeps between retry attempts of interruptible requests end at once.
+        self.interrupt: threading.Event | None = None
         self.stats = TransportStats()
         self._state = ConnectionState.NEW
         self._lock = threading.RLock()
@@ -200,7 +202,12 @@ class ModbusTransport:
         """Open the connection, retrying per the policy; raises :class:`ConnectError`."""
         with self._lock:
             self._refuse_if_closed()
-            self.retry.call(f"connect {self.name}", self._connect_once, on_retry=self._on_retry)
+            self.retry.call(
+                f"connect {self.name}",
+                self._connect_once,
+                on_retry=self._on_retry,
+                interrupt=self.interrupt,
+            )
 
     def close(self) -> None:
         """Close the connection; safe to call more than once."""
@@ -289,14 +296,25 @@ class ModbusTransport:
             raise error_class(f"{self.name}: device refused {what}", code=code)
         return response
 
-    def _run(self, what: str, fn: Callable[[], T], *, retry: bool) -> T:
+    def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
         with self._lock:
             self._refuse_if_closed()
             policy = self.retry if retry else NO_RETRY
-            return policy.call(what, fn, on_retry=self._on_retry)
+            return policy.call(
+                what,
+                fn,
+                on_retry=self._on_retry,
+                interrupt=self.interrupt if interruptible else None,
+            )
 
     def read_block(
-        self, table: Table, address: int, count: int, *, retry: bool = True
+        self,
+        table: Table,
+        address: int,
+        count: int,
+        *,
+        retry: bool = True,
+        interruptible: bool = True,
     ) -> list[int]:
         """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
         what = f"read {table.value} {address}+{count}"
@@ -318,9 +336,17 @@ class ModbusTransport:
                 raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
             return list(registers)
 
-        return self._run(what, once, retry=retry)
+        return self._run(what, once, retry=retry, interruptible=interruptible)
 
-    def write_block(self, table: Table, address: int, words: Sequence[int], *, retry: bool) -> None:
+    def write_block(
+        self,
+        table: Table,
+        address: int,
+        words: Sequence[int],
+        *,
+        retry: bool,
+        interruptible: bool = True,
+    ) -> None:
         """Write words (holding, FC16) or bits (coils, FC05/FC15) in one request."""
         if table.read_only:
             raise ConfigError(f"the {table.value} table is read-only")
@@ -351,17 +377,24 @@ class ModbusTransport:
                     ),
                 )
 
-        self._run(what, once, retry=retry)
+        self._run(what, once, retry=retry, interruptible=interruptible)
 
     # -- fields ---------------------------------------------------------------
 
     def read_fields(
-        self, fields: Iterable[RegisterField], *, max_gap: int = 0, retry: bool = True
+        self,
+        fields: Iterable[RegisterField],
+        *,
+        max_gap: int = 0,
+        retry: bool = True,
+        interruptible: bool = True,
     ) -> dict[str, Value]:
         """Read and decode fields, one request per contiguous block."""
         result: dict[str, Value] = {}
         for block in plan_reads(fields, max_gap=max_gap):
-            words = self.read_block(block.table, block.address, block.count, retry=retry)
+            words = self.read_block(
+                block.table, block.address, block.count, retry=retry, interruptible=interruptible
+            )
             for f in block.fields:
                 offset = f.address - block.address
                 result[f.name] = decode(f, words[offset : offset + f.width])
@@ -372,12 +405,17 @@ class ModbusTransport:
         values: Sequence[tuple[RegisterField, Value]] | Mapping[RegisterField, Value],
         *,
         retry: bool,
+        interruptible: bool = True,
     ) -> None:
         """Encode every value (refusing before any I/O), then write each block in one request.
 
-        Pass ``retry=False`` for a write that triggers a command: it is sent once.
+        Pass ``retry=False`` for a write that triggers a command: it is sent once. Pass
+        ``interruptible=False`` for clean-up writes (withdraw, stop) that must still be
+        attempted after a stop request.
         """
         items = list(values.items()) if isinstance(values, Mapping) else list(values)
         plans = plan_writes(items)
         for block, words in plans:
-            self.write_block(block.table, block.address, words, retry=retry)
+            self.write_block(
+                block.table, block.address, words, retry=retry, interruptible=interruptible
+            )

@@ -407,7 +407,12 @@ def _run_on(
     assert failure is not None
     code = exit_code_for(failure.exception)
     if failure.interrupted:
-        return code, f"interrupted in {failure.state} (cycle {failure.cycle}); the arm was stopped"
+        stopped = {
+            True: "the arm was stopped",
+            False: "the stop could NOT be delivered (check the robot)",
+            None: "this profile has no stop command",
+        }[result.stop_delivered]
+        return code, f"interrupted in {failure.state} (cycle {failure.cycle}); {stopped}"
     label = RESULT_NAMES[code].replace("_", " ")
     code_text = f" (robot error code {failure.error_code})" if failure.error_code else ""
     reaction = ""

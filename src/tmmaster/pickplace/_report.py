@@ -90,6 +90,9 @@ def build_report(
             "performed": run.reaction.performed,
             "detail": run.reaction.detail,
         },
+        # Whether a stop reached the robot after a stop request or an abandoned move
+        # (null: none was needed, or the profile has no stop).
+        "stop_delivered": None if run is None else run.stop_delivered,
         "transport": transport,
         "sim": sim,
     }

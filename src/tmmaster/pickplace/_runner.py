@@ -25,6 +25,8 @@ from .._exceptions import (
     GraspFailedError,
     RobotError,
     RobotFaultError,
+    StopRequestedError,
+    TMMasterError,
 )
 from .._gripper import GripperStatus
 from .._pose import MotionType, Pose
@@ -35,10 +37,6 @@ from ._steps import PlannedMove, TaskSequence
 _log = structlog.get_logger("tmmaster.pickplace")
 
 Reaction = Literal["stay", "retreat"]
-
-
-class StopRequestedError(RobotError):
-    """The run was asked to stop (Ctrl-C, :meth:`Runner.request_stop`)."""
 
 
 @dataclass(frozen=True)
@@ -116,6 +114,9 @@ class RunResult:
     failure: Failure | None = None
     retries: int = 0
     reaction: ReactionRecord | None = None
+    #: After a stop request, or a move the master gave up on while the arm ran: whether
+    #: a stop was delivered to the robot (None: no stop was needed or possible).
+    stop_delivered: bool | None = None
     started_at: str = ""
     duration_s: float = 0.0
 
@@ -296,6 +297,9 @@ class Runner:
             if sequence.prepare is not None:
                 sequence.prepare(ctx)
         except Exception as exc:
+            if self._stop.is_set() and not isinstance(exc, StopRequestedError):
+                # The preparation failed because its wait was interrupted: that is the stop.
+                exc = StopRequestedError("stop requested during the preparation")
             self._record(result, IDLE, 0, state_start, "failed")
             self._fail(machine, result, IDLE, exc)
         else:
@@ -310,7 +314,11 @@ class Runner:
         result.state = machine.state
         if result.failure is not None:
             if result.failure.interrupted:
-                self._stop_arm()
+                result.stop_delivered = self._stop_arm()
+            else:
+                motion = self.robot.last_motion
+                if motion is not None and motion.abandoned:
+                    result.stop_delivered = motion.stop_delivered
             result.reaction = self._react(sequence, result.failure)
         result.duration_s = round(time.monotonic() - t0, 4)
         self._log.info(
@@ -448,13 +456,19 @@ class Runner:
         machine.fail()
         self._changed(machine, state, started)
 
-    def _stop_arm(self) -> None:
-        """After a stop request: stop the arm (best effort; the link may be gone)."""
+    def _stop_arm(self) -> bool | None:
+        """After a stop request: stop the arm; True if delivered, None if it cannot be stopped."""
+        if not self.robot.can_stop:
+            return None
+        motion = self.robot.last_motion
+        if motion is not None and motion.abandoned and motion.stop_delivered:
+            return True  # the interrupted wait already stopped the arm
         try:
-            if self.robot.channel.stop_words() is not None:
-                self.robot.stop()
-        except Exception as exc:
+            self.robot.stop()
+        except TMMasterError as exc:  # the link may be gone: report, never raise
             self._log.error("pickplace.stop_failed", error=str(exc))
+            return False
+        return True
 
     def _react(self, sequence: TaskSequence, failure: Failure) -> ReactionRecord:
         """Apply the error reaction; only ever moves a robot that is not in error."""

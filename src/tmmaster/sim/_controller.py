@@ -261,6 +261,9 @@ class RobotController:
         self._error_code = 0
         self._estop = False
         if self._article:
+            # A reset never arms anything: a command (or gripper command) written before or
+            # during the error is discarded, not executed now that the robot can move again.
+            self._discard_article_commands("reset")
             self._bank.set("error_code", 0)
             self._bank.set("robot_mode", self._mode_now())
         else:
@@ -437,6 +440,11 @@ class RobotController:
         label = command_field.label(raw)
         if self._late_ack_pending(seq, motion_command=label in ("ptp", "line")) or not ready:
             return
+        if label == "none":
+            # A master's cancel: the number is used up, nothing runs.
+            self._bank.set("ack_seq", seq)
+            self._cancel_sequence(seq, "withdrawn by the master")
+            return
         self._bank.set("ack_seq", seq)
         self._bank.set("result_code", self._code("result_code", "ok", 0))
         self._bank.set("robot_state", self._code("robot_state", "busy", 1))
@@ -476,11 +484,24 @@ class RobotController:
         self._bank.set("robot_state", self._code("robot_state", "idle", 0))
         self._log.info("sim.command_done", device=self._profile.name, seq=active.seq)
 
+    def _cancel_sequence(self, seq: int, reason: str) -> None:
+        self._log.warning(
+            "sim.command_cancelled", device=self._profile.name, seq=seq, reason=reason
+        )
+        self._bank.set("result_code", self._code("result_code", "cancelled", 5))
+        self._bank.set("robot_state", self._code("robot_state", "error", 2))
+
     def _start_project(self) -> None:
         self._running = True
-        # The program starts idle; ack_seq survives, so a command taken before the stop
-        # is not executed again, while one written during the stop is taken now.
-        self._bank.set("robot_state", self._code("robot_state", "idle", 0))
+        # The start-up rule (docs/tmflow-program.md): a freshly started project never takes
+        # a command written before it started. A pending sequence number is consumed as
+        # cancelled (ack_seq := seq), so neither it nor a late copy of it can run.
+        seq, ack = int(self._bank.get("seq")), int(self._bank.get("ack_seq"))
+        if seq != ack:
+            self._bank.set("ack_seq", seq)
+            self._cancel_sequence(seq, "written before the project started")
+        else:
+            self._bank.set("robot_state", self._code("robot_state", "idle", 0))
         self._bank.set("project_running", True)
         self._log.info("sim.project_started", device=self._profile.name)
 
@@ -622,6 +643,8 @@ class RobotController:
             self._bank.set("error_code", int(code))
             self._bank.set("robot_mode", self._profile.mode_error)
             self._bank.set("motion_status", 0)
+            # A robot in error discards a pending command instead of keeping it for later.
+            self._discard_article_commands("error")
         else:
             self._bank.set("last_error_code", int(code))
             self._bank.set("error", True)
@@ -697,6 +720,17 @@ class RobotController:
             return
         for name, value in zip(TCP_FIELDS, pose.as_list(), strict=True):
             self._bank.set(name, value)
+
+    def _discard_article_commands(self, reason: str) -> None:
+        pending = int(self._bank.get("command"))
+        if pending and self._profile.field("command").label(pending) != "stop":
+            self._log.warning(
+                "sim.command_discarded", device=self._profile.name, command=pending, reason=reason
+            )
+        self._bank.set("command", 0)
+        if self._profile.has("gripper_command"):
+            # The gripper register is level-triggered: adopt its value without acting on it.
+            self._gripper_seen = int(self._bank.get("gripper_command"))
 
     def _mode_now(self) -> int:
         if self._error_code:
