@@ -363,7 +363,8 @@ def test_lost_command_write_is_never_resent_on_a_clear_on_accept_profile(
     arrived = [r for r in sim.request_log if r.function_code == 16 and r.address == start]
     assert len(arrived) == 1
     assert command_writes(sim) == []
-    assert robot.last_motion is not None and robot.last_motion.withdrawn is True
+    assert robot.last_motion is not None
+    assert robot.last_motion.withdrawn is True
     assert sim.field("command") == 0
     assert sim.tcp_pose().is_close(before, mm=0.01)
 
