@@ -386,6 +386,8 @@ def _run_on(
             robot.connect()
         except TransportError as exc:
             return EXIT_CONNECTION, f"robot at {host}:{port} unreachable: {exc}"
+        except StopRequestedError:
+            return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
         result = runner.run(sequence, cycles=cycles)
         outcome.run = result
     finally:
@@ -453,7 +455,13 @@ def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
 
 def main(argv: Sequence[str] | list[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.pickplace``."""
-    return run(build_parser().parse_args(argv))
+    try:
+        return run(build_parser().parse_args(argv))
+    except KeyboardInterrupt:
+        # A Ctrl-C outside the run (argument parsing, report writing, a second Ctrl-C
+        # during the clean-up): still one line and exit 130, never a traceback.
+        print(f"pickplace: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":
