@@ -6,10 +6,10 @@ import math
 from typing import Any
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tmmaster._codec import allowed_range, decode, encode
+from tmmaster._codec import allowed_range, decode, decoder, encode
 from tmmaster._exceptions import ValueOutOfRangeError
 from tmmaster._profiles import robot_profile
 from tmmaster._registers import RegisterField
@@ -131,3 +131,28 @@ def test_bool_refuses_other_numbers() -> None:
 def test_decode_checks_word_count() -> None:
     with pytest.raises(ValueError, match="expected 2 words"):
         decode(field("int32"), [1])
+
+
+@pytest.mark.parametrize("type_", ["int16", "uint16", "int32", "uint32", "float32"])
+@pytest.mark.parametrize("word_order", ["big", "little"])
+@pytest.mark.parametrize("scale", [1.0, 100.0])
+@settings(max_examples=40)
+@given(words=st.lists(st.integers(0, 0xFFFF), min_size=4, max_size=4), at=st.integers(0, 2))
+def test_the_read_plan_decoder_equals_decode(
+    type_: str, word_order: str, scale: float, words: list[int], at: int
+) -> None:
+    f = field(type_, scale=scale, word_order=word_order)
+    expected = decode(f, words[at : at + f.width])
+    got = decoder(f)(words, at)
+    if isinstance(expected, float) and math.isnan(expected):
+        assert isinstance(got, float)
+        assert math.isnan(got)
+    else:
+        assert got == expected
+        assert type(got) is type(expected)
+
+
+def test_the_bool_decoder_equals_decode() -> None:
+    f = RegisterField(name="flag", role="status", table="coil", address=0, type="bool")
+    assert decoder(f)([0, 1], 1) is decode(f, [1]) is True
+    assert decoder(f)([0, 1], 0) is decode(f, [0]) is False

@@ -47,7 +47,7 @@ from ._gripper import (
     SequenceGripper,
 )
 from ._logging import configure_logging
-from ._poller import Poller
+from ._poller import Poller, PollPolicy
 from ._pose import MotionType, Pose
 from ._profiles import (
     builtin_profile_names,
@@ -113,6 +113,7 @@ __all__ = [
     "MoveProgress",
     "NoGripper",
     "OnRobot2FG7Gripper",
+    "PollPolicy",
     "Poller",
     "Pose",
     "RegisterField",

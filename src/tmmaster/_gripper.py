@@ -171,9 +171,11 @@ class RegisterGripper(Gripper):
     def _command_and_settle(self, value: int, *, stop_early_when_holding: bool) -> GripperStatus:
         robot = self._robot
         robot.check_fault()  # never write a gripper command during an e-stop or robot error
-        started = time.monotonic()
         # Writing the same open/close value again is harmless, so retrying is allowed.
         robot.transport.write_fields([(self._command, value)], retry=True)
+        # The settle time counts from the write that landed, not from the first attempt:
+        # retries during a short outage must not eat the time the fingers need.
+        started = time.monotonic()
         _log.info("gripper.command_sent", gripper=self.kind, command=self._command.label(value))
 
         def check() -> GripperStatus | None:

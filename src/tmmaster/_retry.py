@@ -12,6 +12,7 @@ attempts ends at once when the caller's stop event is set.
 
 from __future__ import annotations
 
+import random
 import threading
 import time
 from collections.abc import Callable
@@ -69,15 +70,22 @@ class RetryPolicy(BaseModel):
         With ``interrupt``, a sleep between attempts ends as soon as the event is set and
         :class:`StopRequestedError` is raised instead of another attempt.
         """
-        if self.attempts == 1:
-            return fn()  # nothing to retry: keep the hot path free of the retry machinery
+        # The first attempt runs outside tenacity: the retry machinery is entered only
+        # after a transient failure, so a healthy link pays nothing for it.
+        started = time.monotonic()
+        try:
+            return fn()
+        except TRANSIENT_ERRORS as exc:
+            if self.attempts == 1:
+                raise
+            first_error: BaseException = exc
 
         def before_sleep(state: tenacity.RetryCallState) -> None:
             error = state.outcome.exception() if state.outcome else None
             _log.warning(
                 "transport.retry",
                 operation=operation,
-                attempt=state.attempt_number,
+                attempt=state.attempt_number + 1,
                 delay_s=round(state.upcoming_sleep, 3),
                 error=str(error),
                 error_type=type(error).__name__,
@@ -85,18 +93,34 @@ class RetryPolicy(BaseModel):
             if on_retry is not None and error is not None:
                 on_retry(error)
 
+        _log.warning(
+            "transport.retry",
+            operation=operation,
+            attempt=1,
+            delay_s=round(self.initial_backoff_s, 3),
+            error=str(first_error),
+            error_type=type(first_error).__name__,
+        )
+        if on_retry is not None:
+            on_retry(first_error)
+        sleep = _sleeper(interrupt)
+        sleep(self.initial_backoff_s + random.uniform(0, self.jitter_s))
+        remaining_s = self.total_time_s - (time.monotonic() - started)
+        if remaining_s <= 0:
+            raise first_error
         retrying = tenacity.Retrying(
-            stop=tenacity.stop_after_attempt(self.attempts)
-            | tenacity.stop_after_delay(self.total_time_s),
+            # Attempts 2..n: the same bounds as one policy, counted from the first attempt.
+            stop=tenacity.stop_after_attempt(self.attempts - 1)
+            | tenacity.stop_after_delay(remaining_s),
             # Composed from the two long-stable strategies: wait_exponential_jitter's
-            # parameters were renamed in tenacity 9.2.
+            # parameters were renamed in tenacity 9.2. Doubling continues from attempt 2.
             wait=tenacity.wait_exponential(
-                multiplier=self.initial_backoff_s, max=self.max_backoff_s
+                multiplier=self.initial_backoff_s * 2, max=self.max_backoff_s
             )
             + tenacity.wait_random(0, self.jitter_s),
             retry=tenacity.retry_if_exception_type(TRANSIENT_ERRORS),
             before_sleep=before_sleep,
-            sleep=_sleeper(interrupt),
+            sleep=sleep,
             reraise=True,
         )
         return retrying(fn)

@@ -51,7 +51,7 @@ from ._exceptions import (
     TMMasterError,
 )
 from ._gripper import Gripper, make_gripper
-from ._poller import Poller
+from ._poller import MotionSchedule, Poller, PollPolicy
 from ._pose import MotionType, Pose
 from ._profiles import robot_profile
 from ._registers import GripperProfile, RobotProfile
@@ -210,6 +210,7 @@ class Robot:
         gripper_host: str | None = None,
         gripper_port: int = 502,
         poll_interval_s: float = 0.05,
+        polling: PollPolicy | None = None,
         timeouts: TimeoutPolicy | None = None,
         retry: RetryPolicy | None = None,
         request_timeout_s: float = 1.0,
@@ -234,6 +235,7 @@ class Robot:
             _require_positive(option, value)
         self.name = name
         self.poll_interval_s = poll_interval_s
+        self.polling = polling if polling is not None else PollPolicy()
         self.timeouts = timeouts if timeouts is not None else TimeoutPolicy()
         self.workspace = workspace
         self.max_speed_percent = max_speed_percent
@@ -599,7 +601,7 @@ class Robot:
                 ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
             )
         if observation.done:
-            self._finish(motion)
+            self._finish(motion, observation.pose)
 
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
         """The current pose for an error report; the fallback if it cannot be read."""
@@ -608,10 +610,12 @@ class Robot:
         except TMMasterError:
             return fallback
 
-    def _finish(self, motion: Motion) -> None:
+    def _finish(self, motion: Motion, polled_pose: Pose | None) -> None:
         motion.reported_finished = True
         if motion.target is not None:
-            pose = self.channel.read_pose()
+            # The poll that saw the move finished read the pose in the same snapshot
+            # (article); only a profile whose poll carries no pose needs one more read.
+            pose = polled_pose if polled_pose is not None else self.channel.read_pose()
             motion.last_pose = pose
             if not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
@@ -635,9 +639,16 @@ class Robot:
         ticket = motion._ticket
         budget = timeout_s if timeout_s is not None else motion.timeout_s
         poller = Poller(self.poll_interval_s, self._stop_event)
+        schedule = MotionSchedule(self.polling, self.poll_interval_s, ticket.sent_at)
+        anchored = False
         ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
         while motion.phase is not MovePhase.DONE:
-            poller.check()
+            if ticket.acknowledged and not anchored:
+                schedule.acknowledged(ticket.acknowledged_at or ticket.sent_at, motion.expected_s)
+                anchored = True
+            poller.sleep_until(
+                schedule.next_poll(time.monotonic(), acknowledged=ticket.acknowledged)
+            )
             self._poll_motion(motion)
             if motion.done:
                 return
@@ -648,7 +659,6 @@ class Robot:
                 started = ticket.acknowledged_at or ticket.sent_at
                 if now - started >= budget:
                     self._motion_timed_out(motion, budget)
-            poller.sleep()
 
     def _ack_timed_out(self, motion: Motion) -> None:
         ticket = motion._ticket

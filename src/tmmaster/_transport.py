@@ -24,7 +24,7 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
 
-from ._codec import Value, decode, encode
+from ._codec import Decoder, Value, decoder, encode
 from ._exceptions import (
     MODBUS_EXCEPTIONS,
     ConfigError,
@@ -90,6 +90,25 @@ class Block:
     address: int
     count: int
     fields: tuple[RegisterField, ...]
+
+
+@dataclass(frozen=True)
+class ReadPlan:
+    """The blocks to read for a set of fields, with each field's decoder: built once."""
+
+    blocks: tuple[Block, ...]
+    #: Per block: (field name, offset in the block, decoder) for every field in it.
+    slots: tuple[tuple[tuple[str, int, Decoder], ...], ...]
+
+    @classmethod
+    def build(cls, fields: Iterable[RegisterField], *, max_gap: int = 0) -> ReadPlan:
+        """Plan the reads of ``fields`` (see :func:`plan_reads`)."""
+        blocks = tuple(plan_reads(fields, max_gap=max_gap))
+        slots = tuple(
+            tuple((f.name, f.address - block.address, decoder(f)) for f in block.fields)
+            for block in blocks
+        )
+        return cls(blocks, slots)
 
 
 def plan_reads(fields: Iterable[RegisterField], *, max_gap: int = 0) -> list[Block]:
@@ -180,6 +199,10 @@ class ModbusTransport:
         self.stats = TransportStats()
         self._state = ConnectionState.NEW
         self._lock = threading.RLock()
+        # Read plans by the identity of the fields asked for: a status poll reads the same
+        # field objects every time, so its plan is computed once. The plan holds the
+        # fields, so their ids cannot be reused while the entry lives.
+        self._plans: dict[tuple[int, tuple[int, ...]], tuple[ReadPlan, tuple[object, ...]]] = {}
         self._log = _log.bind(device=name, host=host, port=port, device_id=device_id)
         # retries=0: pymodbus must never resend a request on its own (reference 5).
         self._client = ModbusTcpClient(
@@ -190,6 +213,12 @@ class ModbusTransport:
             reconnect_delay=0,
             trace_packet=self._count_bytes,
         )
+        self._readers: dict[Table, tuple[int, Callable[..., ModbusPDU]]] = {
+            Table.HOLDING: (3, self._client.read_holding_registers),
+            Table.INPUT: (4, self._client.read_input_registers),
+            Table.COIL: (1, self._client.read_coils),
+            Table.DISCRETE_INPUT: (2, self._client.read_discrete_inputs),
+        }
 
     # -- connection --------------------------------------------------------
 
@@ -318,17 +347,13 @@ class ModbusTransport:
     ) -> list[int]:
         """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
         what = f"read {table.value} {address}+{count}"
-        kw = {"count": count, "device_id": self.device_id}
-        reader: dict[Table, tuple[int, Callable[..., ModbusPDU]]] = {
-            Table.HOLDING: (3, self._client.read_holding_registers),
-            Table.INPUT: (4, self._client.read_input_registers),
-            Table.COIL: (1, self._client.read_coils),
-            Table.DISCRETE_INPUT: (2, self._client.read_discrete_inputs),
-        }
-        function_code, method = reader[table]
+        function_code, method = self._readers[table]
+        device_id = self.device_id
 
         def once() -> list[int]:
-            response = self._execute(what, function_code, lambda: method(address, **kw))
+            response = self._execute(
+                what, function_code, lambda: method(address, count=count, device_id=device_id)
+            )
             if table.is_bit:
                 return [int(b) for b in response.bits[:count]]
             registers = list(response.registers)
@@ -390,15 +415,26 @@ class ModbusTransport:
         interruptible: bool = True,
     ) -> dict[str, Value]:
         """Read and decode fields, one request per contiguous block."""
+        plan = self.read_plan(fields, max_gap=max_gap)
         result: dict[str, Value] = {}
-        for block in plan_reads(fields, max_gap=max_gap):
+        for block, slots in zip(plan.blocks, plan.slots, strict=True):
             words = self.read_block(
                 block.table, block.address, block.count, retry=retry, interruptible=interruptible
             )
-            for f in block.fields:
-                offset = f.address - block.address
-                result[f.name] = decode(f, words[offset : offset + f.width])
+            for name, offset, decode in slots:
+                result[name] = decode(words, offset)
         return result
+
+    def read_plan(self, fields: Iterable[RegisterField], *, max_gap: int = 0) -> ReadPlan:
+        """The cached :class:`ReadPlan` of ``fields`` (computed on first use)."""
+        chosen = tuple(fields)
+        key = (max_gap, tuple(map(id, chosen)))
+        entry = self._plans.get(key)
+        if entry is None:
+            entry = (ReadPlan.build(chosen, max_gap=max_gap), chosen)
+            if len(self._plans) < 256:  # bounded: ad-hoc reads of new field sets
+                self._plans[key] = entry
+        return entry[0]
 
     def write_fields(
         self,

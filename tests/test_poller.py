@@ -1,0 +1,103 @@
+"""The pacing loop and the predictive schedule of a move, without sockets or sleeps."""
+
+from __future__ import annotations
+
+import itertools
+import threading
+
+import pytest
+
+from tmmaster import ConfigError, Poller, PollPolicy, StopRequestedError
+from tmmaster._poller import MotionSchedule
+
+NOMINAL = 0.05
+
+
+def polls_of(
+    schedule: MotionSchedule, *, sent_at: float, ack_at: float, expected_s: float, until: float
+) -> list[float]:
+    """The poll times the schedule asks for, from the write until ``until``."""
+    times: list[float] = []
+    now = sent_at
+    anchored = False
+    while True:
+        acknowledged = now >= ack_at
+        if acknowledged and not anchored:
+            schedule.acknowledged(ack_at, expected_s)
+            anchored = True
+        nxt = schedule.next_poll(now, acknowledged=acknowledged)
+        assert nxt >= now
+        if nxt > until:
+            return times
+        times.append(nxt)
+        now = nxt
+
+
+@pytest.mark.parametrize("expected_s", [0.3, 1.0, 2.5, 8.0])
+def test_a_move_costs_no_more_polls_than_nominal_polling(expected_s: float) -> None:
+    policy = PollPolicy()
+    ack_at = 0.021
+    end = ack_at + expected_s
+    schedule = MotionSchedule(policy, NOMINAL, 0.0)
+    times = polls_of(
+        schedule,
+        sent_at=0.0,
+        ack_at=ack_at,
+        expected_s=expected_s,
+        until=end + policy.completion_window_s,
+    )
+    nominal_polls = (end + policy.completion_window_s) / NOMINAL
+    assert len(times) <= nominal_polls + 1
+    # Dense around the expected end: a completion reported in the window is seen within
+    # one dense interval.
+    window = schedule.window_s
+    assert window >= policy.dense_interval_s
+    near_end = [t for t in times if end - window / 2 <= t <= end + 1.5 * window]
+    gaps = [b - a for a, b in itertools.pairwise(near_end)]
+    assert len(gaps) >= 2
+    assert max(gaps) <= policy.dense_interval_s + 1e-9
+    # Never stretched beyond max_stretch x nominal in the middle.
+    all_gaps = [b - a for a, b in itertools.pairwise(times)]
+    assert max(all_gaps) <= NOMINAL * policy.max_stretch + 1e-9
+
+
+def test_the_first_poll_follows_the_robots_next_tick() -> None:
+    policy = PollPolicy()
+    schedule = MotionSchedule(policy, NOMINAL, sent_at=10.0)
+    assert schedule.next_poll(10.0, acknowledged=False) == pytest.approx(10.0 + policy.ack_delay_s)
+    # Dense for the acknowledgement window, then nominal.
+    assert schedule.next_poll(10.025, acknowledged=False) == pytest.approx(10.033)
+    assert schedule.next_poll(10.5, acknowledged=False) == pytest.approx(10.55)
+
+
+def test_predictive_polling_can_be_switched_off() -> None:
+    schedule = MotionSchedule(PollPolicy(predictive=False), NOMINAL, sent_at=0.0)
+    assert schedule.next_poll(0.0, acknowledged=False) == pytest.approx(NOMINAL)
+    schedule.acknowledged(0.02, 1.0)
+    assert schedule.next_poll(1.0, acknowledged=True) == pytest.approx(1.0 + NOMINAL)
+
+
+def test_a_short_move_that_cannot_afford_a_dense_window_polls_at_the_nominal_pace() -> None:
+    schedule = MotionSchedule(PollPolicy(), NOMINAL, sent_at=0.0)
+    schedule.acknowledged(0.02, 0.01)
+    assert schedule.next_poll(0.02, acknowledged=True) == pytest.approx(0.07)
+
+
+@pytest.mark.parametrize("bad", [0, -1, float("nan"), float("inf")])
+def test_meaningless_intervals_are_refused(bad: float) -> None:
+    with pytest.raises(ConfigError):
+        Poller(bad)
+    with pytest.raises(ValueError, match="dense_interval_s"):
+        PollPolicy(dense_interval_s=bad)
+
+
+def test_a_stop_request_ends_every_sleep_instead_of_spinning() -> None:
+    stop = threading.Event()
+    poller = Poller(10.0, stop)
+    stop.set()
+    with pytest.raises(StopRequestedError):
+        poller.sleep()
+    with pytest.raises(StopRequestedError):
+        poller.sleep_until(1e12)
+    with pytest.raises(StopRequestedError):
+        poller.check()
