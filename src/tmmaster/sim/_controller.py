@@ -495,9 +495,10 @@ class RobotController:
         self._running = True
         # The start-up rule (docs/tmflow-program.md): a freshly started project never takes
         # a command written before it started. A pending sequence number is consumed as
-        # cancelled (ack_seq := seq), so neither it nor a late copy of it can run.
+        # cancelled (ack_seq := seq), so neither it nor a late copy of it can run. Any
+        # other value in seq is not a command (the loop would never take it either).
         seq, ack = int(self._bank.get("seq")), int(self._bank.get("ack_seq"))
-        if seq != ack:
+        if seq == ack % 65535 + 1:  # the same "next number" rule the loop applies
             self._bank.set("ack_seq", seq)
             self._cancel_sequence(seq, "written before the project started")
         else:
