@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,16 @@ from tmmaster._profiles import (
     profile_from_data,
     robot_profile,
 )
-from tmmaster._registers import Handshake, RegisterField, RegisterMap, RobotProfile, Role, Table
+from tmmaster._registers import (
+    TARGET_FIELDS,
+    Handshake,
+    RegisterField,
+    RegisterMap,
+    RobotProfile,
+    Role,
+    Table,
+)
+from tmmaster._transport import plan_writes
 
 
 def _map(*fields: dict[str, Any]) -> RegisterMap:
@@ -154,3 +164,82 @@ def test_field_lookup_names_the_map() -> None:
     with pytest.raises(KeyError, match="no field 'tcp_w'"):
         p.field("tcp_w")
     assert isinstance(p.field("tcp_x"), RegisterField)
+
+
+# -- atomic command blocks (issue 8 item 4) ------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("override", "named"),
+    [
+        ({"target_y": {"address": 0x0220}}, "target_y"),  # the old docs example
+        ({"speed": {"address": 0x0300}}, "speed"),
+        ({"command": {"address": 0x0208}}, "command"),  # trigger left behind a gap
+        ({"command": {"table": "coil", "type": "bool"}}, "several tables.*command"),
+    ],
+)
+def test_split_command_block_is_refused_naming_the_fields(
+    override: dict[str, Any], named: str
+) -> None:
+    with pytest.raises(
+        RegisterMapError, match=rf"(?s)command block must be one contiguous.*{named}"
+    ):
+        profile_from_data({"extends": "article", "fields": override})
+
+
+def test_split_tmflow_block_is_refused() -> None:
+    # seq written in a second request would be the trigger arriving apart from its target.
+    with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*seq \(holding 9020\)"):
+        profile_from_data({"extends": "tmflow", "fields": {"seq": {"address": 9020}}})
+    with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*accel_time"):
+        profile_from_data({"extends": "tmflow", "fields": {"accel_time": {"address": 9030}}})
+
+
+def test_moved_but_contiguous_command_block_is_accepted() -> None:
+    moved = {n: {"address": 0x0300 + i} for i, n in enumerate([*TARGET_FIELDS, "speed", "command"])}
+    p = robot_profile(profile_from_data({"extends": "article", "fields": moved}))
+    assert [f.address for f in p.command_block()] == list(range(0x0300, 0x0308))
+
+
+@pytest.mark.parametrize("name", ["article", "tmflow"])
+def test_builtin_command_block_goes_out_as_one_fc16(name: str) -> None:
+    p = robot_profile(name)
+    values: list[tuple[RegisterField, Any]] = [(f, 1) for f in p.command_block()]
+    plans = plan_writes(values)
+    assert len(plans) == 1
+    block, words = plans[0]
+    assert block.address == p.command_block()[0].address
+    assert len(words) == sum(f.width for f in p.command_block())
+
+
+@pytest.mark.parametrize(
+    ("base", "values", "label"),
+    [
+        ("article", {"0": "ptp", "1": "none", "2": "line", "3": "stop"}, "ptp"),
+        ("article", {"0": "line", "1": "ptp", "3": "stop"}, "line"),  # no "none" label: 0 is none
+        ("article", {"5": "none", "1": "ptp", "2": "line", "0": "stop"}, "stop"),
+        ("tmflow", {"0": "gripper_open", "1": "ptp", "2": "line"}, "gripper_open"),
+        ("tmflow", {"0": "none", "1": "ptp", "2": "line", "7": "none"}, None),
+    ],
+)
+def test_command_code_colliding_with_none_is_refused(
+    base: str, values: dict[str, str], label: str | None
+) -> None:
+    # Replace the base's values entirely (a merge would keep the base's codes).
+    data = {"extends": base, "fields": {"command": {"values": values}}}
+    if label is None:
+        profile_from_data(data)  # two "none" codes are harmless: no action shares one
+        return
+    with pytest.raises(RegisterMapError, match=rf"code \d+ of '{label}' collides with the 'none'"):
+        profile_from_data(data)
+
+
+def test_register_maps_doc_examples_behave_as_documented(tmp_path: Path) -> None:
+    doc = Path(__file__).parent.parent / "docs" / "register-maps.md"
+    blocks = re.findall(r"```toml\n(.*?)```", doc.read_text("utf-8"), flags=re.S)
+    valid, refused = blocks[0], blocks[1]
+    (tmp_path / "ok.toml").write_text(valid)
+    assert robot_profile(tmp_path / "ok.toml").field("speed").maximum == 50
+    (tmp_path / "bad.toml").write_text(refused)
+    with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*target_y"):
+        robot_profile(tmp_path / "bad.toml")

@@ -246,6 +246,11 @@ _POSE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
 TARGET_FIELDS = tuple(f"target_{n}" for n in _POSE_NAMES)
 TCP_FIELDS = tuple(f"tcp_{n}" for n in _POSE_NAMES)
 
+#: Optional fields that belong to the command block when a profile has them.
+_OPTIONAL_BLOCK = ("accel_time",)
+#: Command labels that make the robot act; none may share the "none" code.
+_ACTION_LABELS = frozenset({"ptp", "line", "stop", "gripper_open", "gripper_close"})
+
 _REQUIRED: dict[Handshake, tuple[str, ...]] = {
     Handshake.CLEAR_ON_ACCEPT: (
         *TCP_FIELDS,
@@ -301,7 +306,45 @@ class RobotProfile(RegisterMap):
         for name in sorted(writable):
             if not self.fields[name].access.writable:
                 raise ValueError(f"profile {self.name!r}: field {name} must be writable")
+        self._check_command_codes()
+        self._check_command_block()
         return self
+
+    def command_block(self) -> tuple[RegisterField, ...]:
+        """Fields of the command block (targets, speed, accel_time, command, seq), by address."""
+        names = [*TARGET_FIELDS, "speed", *_OPTIONAL_BLOCK, "command", "seq"]
+        return tuple(
+            sorted((self.fields[n] for n in names if n in self.fields), key=lambda f: f.address)
+        )
+
+    def _check_command_codes(self) -> None:
+        # A command code equal to "none" (or to 0, what a withdraw writes) would be
+        # indistinguishable from "no command": refuse it.
+        command = self.fields["command"]
+        none_codes = {0} | {c for c, label in command.values.items() if label == "none"}
+        for code, label in sorted(command.values.items()):
+            if label in _ACTION_LABELS and code in none_codes:
+                raise ValueError(
+                    f"profile {self.name!r}: field command: code {code} of {label!r} collides"
+                    " with the 'none' value (0 / label 'none'); give it a non-zero code"
+                )
+
+    def _check_command_block(self) -> None:
+        # One block in one table, no gaps: the whole command goes out as one FC16
+        # request, so the robot can never see the trigger before the target.
+        block = self.command_block()
+        names = ", ".join(f"{f.name} ({f.table.value} {f.address})" for f in block)
+        tables = {f.table for f in block}
+        gaps = [
+            f"{a.name}..{b.name}" for a, b in itertools.pairwise(block) if b.address != a.end + 1
+        ]
+        if len(tables) > 1 or gaps:
+            why = "spans several tables" if len(tables) > 1 else "has gaps at " + ", ".join(gaps)
+            raise ValueError(
+                f"profile {self.name!r}: the command block must be one contiguous run of"
+                f" addresses in one table so that it is written in one request; it {why}:"
+                f" {names}"
+            )
 
 
 class GripperProfile(RegisterMap):
