@@ -345,6 +345,12 @@ class RobotProfile(RegisterMap):
                 f" addresses in one table so that it is written in one request; it {why}:"
                 f" {names}"
             )
+        size = block[-1].end - block[0].address + 1
+        if size > 123:  # one FC16 request (Modbus application protocol spec, 6.12)
+            raise ValueError(
+                f"profile {self.name!r}: the command block spans {size} registers;"
+                " one write request holds at most 123"
+            )
 
 
 class GripperProfile(RegisterMap):

@@ -557,6 +557,8 @@ class Robot:
                 ticket.withdrawn = not running
                 motion.withdrawn = not running
             except TMMasterError as exc:
+                # Not known whether the robot took it: stop, which is harmless if it did not.
+                running = True
                 motion.withdrawn = False
                 self._log.error(
                     "robot.withdraw_failed", command=motion.command.kind.value, error=str(exc)

@@ -8,6 +8,7 @@ code runs against it and against a real robot. Start one with
 from __future__ import annotations
 
 from ._backend import GripperState, ObjectState, PhysicsBackend
+from ._controller import MotionRecord
 from ._faults import (
     FAULT_KINDS,
     DropConnectionsFault,
@@ -40,6 +41,7 @@ __all__ = [
     "KinematicBackend",
     "LateAckFault",
     "ModbusExceptionFault",
+    "MotionRecord",
     "ObjectState",
     "PhysicsBackend",
     "RequestRecord",

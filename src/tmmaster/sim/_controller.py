@@ -15,6 +15,7 @@ fault effects are documented in ``docs/simulator-model.md``; keep the two in ste
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
@@ -69,6 +70,24 @@ class Logger(Protocol):
 
     def warning(self, event: str, **kw: Any) -> Any:
         """Log a fault or a refused command."""
+
+
+@dataclass(frozen=True)
+class MotionRecord:
+    """One motion or gripper action the controller started: the ground truth of what ran."""
+
+    #: Motion number (1 = first motion started); gripper closes count grasps instead.
+    number: int
+    #: "ptp", "line", "gripper_open" or "gripper_close".
+    kind: str
+    #: Sequence number of the command (tmflow), 0 for the article profile.
+    seq: int
+    target: Pose | None
+    speed: float | None
+    #: Simulated seconds since the controller started.
+    sim_time_s: float
+    #: ``time.monotonic()`` when the tick that started it ran.
+    wall_time: float
 
 
 @dataclass
@@ -147,6 +166,7 @@ class RobotController:
         self._gripper_seen = 0  # article: last gripper_command value acted upon
         self._gripper_closing = False
         self._gripper_miss = False
+        self._motion_log: list[MotionRecord] = []
         self._reset_registers()
 
     # -- read-only state for the server and tests --------------------------------------
@@ -170,6 +190,11 @@ class RobotController:
     def moves_started(self) -> int:
         """Motion commands taken that started a motion (rejected ones do not count)."""
         return self._moves_started
+
+    @property
+    def motion_log(self) -> tuple[MotionRecord, ...]:
+        """Every motion and gripper action started so far, in order."""
+        return tuple(self._motion_log)
 
     @property
     def grasps(self) -> int:
@@ -271,6 +296,11 @@ class RobotController:
             self._bank.set("estop", False)
             self._bank.set("error", False)
         self._log.info("sim.error_cleared", device=self._profile.name, code=code)
+
+    def press_play(self) -> None:
+        """Press Play on the pendant: acted on at the next tick, like the Play/Pause coil."""
+        if self._profile.has("play_pause"):
+            self._bank.set("play_pause", True)
 
     def press_estop(self) -> None:
         """Press the emergency stop now (the estop fault does the same at its trigger)."""
@@ -531,6 +561,7 @@ class RobotController:
                 self._fail_sequence(seq, "motion_failed", 3)
             return
         self._moves_started = number
+        self._record(number, motion.value, seq, target, speed)
         fault = next((f for f in self._move_faults if f.at_move == number), None)
         self._active = _Active(
             "motion", number, seq=seq, target=target, expected_s=expected, fault=fault
@@ -567,6 +598,7 @@ class RobotController:
             return
         self._gripper_closing = close
         self._gripper_miss = miss
+        self._record(number, "gripper_close" if close else "gripper_open", seq, None, None)
         if miss:
             self._log.warning(
                 "sim.fault_fired", device=self._profile.name, fault="grasp_miss", grasp=number
@@ -574,6 +606,13 @@ class RobotController:
         self._log.info("sim.gripper", device=self._profile.name, close=close, grasp=number)
         if not self._article:
             self._active = _Active("gripper", number, seq=seq, closing=close, miss=miss)
+
+    def _record(
+        self, number: int, kind: str, seq: int, target: Pose | None, speed: float | None
+    ) -> None:
+        self._motion_log.append(
+            MotionRecord(number, kind, seq, target, speed, self._time_s, time.monotonic())
+        )
 
     def _grip_detected(self) -> bool:
         return (

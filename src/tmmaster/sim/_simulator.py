@@ -24,7 +24,7 @@ from .._registers import GripperProfile, RobotProfile
 from .._robot_models import robot_model
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import RobotController
+from ._controller import MotionRecord, RobotController
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._server import DeviceServer, RequestLog, RequestRecord
@@ -350,6 +350,18 @@ class Simulator:
     def clear_error(self) -> None:
         """Clear the robot's error state, as an operator would on the pendant."""
         self._call(self._controller.clear_error)
+
+    def press_estop(self) -> None:
+        """Press the emergency stop now, as an operator would."""
+        self._call(self._controller.press_estop)
+
+    def press_play(self) -> None:
+        """Press Play on the pendant (tmflow: starts the project if the robot can run)."""
+        self._call(self._controller.press_play)
+
+    def motion_log(self) -> tuple[MotionRecord, ...]:
+        """Every motion and gripper action the robot started, in order (the ground truth)."""
+        return self._call(lambda: self._controller.motion_log)
 
     def drop_connections(self) -> None:
         """Close every client connection now (robot and gripper listeners keep listening)."""

@@ -1,0 +1,334 @@
+"""A fault-injecting Modbus TCP proxy: the hostile network between a master and a slave.
+
+The proxy listens on 127.0.0.1, opens one upstream connection to the slave for every
+client connection, parses MBAP frames, and plays scripted faults on matching requests:
+
+``delay``         hold the request ``delay_s`` before forwarding it (and everything after
+                  it on that connection: TCP keeps order)
+``hold``          forward the request ``delay_s`` later *even if the client has given up and
+                  closed the connection meanwhile* (a frame stuck in the network)
+``drop_request``  never forward the request (the master times out)
+``drop_answer``   forward the request, swallow the answer (executed, but the master
+                  cannot know)
+``close_after``   forward the request, then close the client's connection instead of
+                  relaying the answer
+``outage``        (``FaultProxy.outage``) close every connection and refuse new ones for a
+                  while, like a slave whose server restarts
+
+Everything runs on the proxy's own threads; :meth:`FaultProxy.close` joins them and
+closes every socket, so the suite's leak check holds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import socket
+import struct
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Literal
+
+Action = Literal["delay", "hold", "drop_request", "drop_answer", "close_after"]
+
+#: Function codes whose PDU starts with a starting address.
+_ADDRESSED = {1, 2, 3, 4, 5, 6, 15, 16, 23}
+
+
+@dataclass
+class Rule:
+    """Play ``action`` on the ``nth`` request matching ``function_code`` / ``address``."""
+
+    action: Action
+    function_code: int | None = None
+    address: int | None = None
+    nth: int = 1
+    delay_s: float = 0.0
+    #: How many times the rule fires (after ``nth - 1`` matching requests went through).
+    times: int = 1
+    _seen: int = field(default=0, repr=False)
+
+    def matches(self, function_code: int, address: int | None) -> bool:
+        """Count a matching request; True when this one is to be faulted."""
+        if self.times <= 0:
+            return False
+        if self.function_code is not None and function_code != self.function_code:
+            return False
+        if self.address is not None and address != self.address:
+            return False
+        self._seen += 1
+        if self._seen < self.nth:
+            return False
+        self.times -= 1
+        return True
+
+
+@dataclass(frozen=True)
+class Seen:
+    """One request as the proxy saw it."""
+
+    time: float
+    function_code: int
+    address: int | None
+    action: str
+
+
+def _recv_exact(sock: socket.socket, count: int) -> bytes | None:
+    data = b""
+    while len(data) < count:
+        try:
+            chunk = sock.recv(count - len(data))
+        except OSError:
+            return None
+        if not chunk:
+            return None
+        data += chunk
+    return data
+
+
+def _frames(sock: socket.socket) -> Iterator[bytes]:
+    """Whole MBAP frames from ``sock`` until it closes."""
+    while True:
+        header = _recv_exact(sock, 7)
+        if header is None:
+            return
+        (length,) = struct.unpack(">H", header[4:6])
+        body = _recv_exact(sock, max(length - 1, 0))
+        if body is None:
+            return
+        yield header + body
+
+
+def _parse(frame: bytes) -> tuple[int, int, int | None]:
+    """(transaction id, function code, address or None) of a request frame."""
+    tid = struct.unpack(">H", frame[0:2])[0]
+    pdu = frame[7:]
+    function_code = pdu[0] if pdu else 0
+    address = (
+        struct.unpack(">H", pdu[1:3])[0] if function_code in _ADDRESSED and len(pdu) >= 3 else None
+    )
+    return tid, function_code, address
+
+
+class _Link:
+    """One client connection and its upstream connection."""
+
+    def __init__(self, proxy: FaultProxy, client: socket.socket) -> None:
+        self.proxy = proxy
+        self.client = client
+        self.upstream = socket.create_connection((proxy.target_host, proxy.target_port), timeout=2)
+        self.upstream.settimeout(None)
+        self._send_lock = threading.Lock()
+        self._swallow: set[int] = set()
+        self._close_on_answer: set[int] = set()
+        self._holds = 0
+        self._holds_done = threading.Condition()
+        pumps = [
+            threading.Thread(target=self._client_to_upstream, name="proxy-c2u", daemon=True),
+            threading.Thread(target=self._upstream_to_client, name="proxy-u2c", daemon=True),
+        ]
+        self.threads = list(pumps)  # hold threads are appended as they start
+        for pump in pumps:
+            pump.start()
+
+    def _forward(self, frame: bytes) -> None:
+        with self._send_lock, contextlib.suppress(OSError):
+            self.upstream.sendall(frame)
+
+    def _client_to_upstream(self) -> None:
+        for frame in _frames(self.client):
+            tid, function_code, address = _parse(frame)
+            rule = self.proxy._match(function_code, address)
+            action = rule.action if rule is not None else "pass"
+            self.proxy._note(function_code, address, action)
+            if rule is None:
+                self._forward(frame)
+            elif rule.action == "delay":
+                if self.proxy._stopping.wait(rule.delay_s):
+                    break
+                self._forward(frame)
+            elif rule.action == "hold":
+                self._hold(frame, rule.delay_s)
+            elif rule.action == "drop_request":
+                continue
+            elif rule.action == "drop_answer":
+                self._swallow.add(tid)
+                self._forward(frame)
+            else:  # close_after
+                self._close_on_answer.add(tid)
+                self._forward(frame)
+        self._shut_client()
+        # Keep the upstream connection while a held frame still has to go through it.
+        with self._holds_done:
+            self._holds_done.wait_for(lambda: self._holds == 0 or self.proxy._stopping.is_set())
+        with contextlib.suppress(OSError):
+            self.upstream.shutdown(socket.SHUT_RDWR)
+
+    @property
+    def holds(self) -> int:
+        """Held frames not delivered yet."""
+        with self._holds_done:
+            return self._holds
+
+    def _hold(self, frame: bytes, delay_s: float) -> None:
+        with self._holds_done:
+            self._holds += 1
+
+        def deliver() -> None:
+            if not self.proxy._stopping.wait(delay_s):
+                self._forward(frame)
+            with self._holds_done:
+                self._holds -= 1
+                self._holds_done.notify_all()
+
+        thread = threading.Thread(target=deliver, name="proxy-hold", daemon=True)
+        self.threads.append(thread)
+        thread.start()
+
+    def _upstream_to_client(self) -> None:
+        for frame in _frames(self.upstream):
+            tid = struct.unpack(">H", frame[0:2])[0]
+            if tid in self._swallow:
+                self._swallow.discard(tid)
+                continue
+            if tid in self._close_on_answer:
+                self._close_on_answer.discard(tid)
+                self._shut_client()
+                continue
+            with contextlib.suppress(OSError):
+                self.client.sendall(frame)
+        self._shut_client()
+
+    def _shut_client(self) -> None:
+        with contextlib.suppress(OSError):
+            self.client.shutdown(socket.SHUT_RDWR)
+
+    def close(self) -> None:
+        self._shut_client()
+        with self._holds_done:
+            self._holds_done.notify_all()
+        with contextlib.suppress(OSError):
+            self.upstream.shutdown(socket.SHUT_RDWR)
+        for t in list(self.threads):
+            t.join(timeout=5)
+        self.client.close()
+        self.upstream.close()
+
+
+class FaultProxy:
+    """A Modbus TCP proxy on 127.0.0.1 in front of ``target_port`` that plays faults."""
+
+    def __init__(self, target_port: int, *, target_host: str = "127.0.0.1") -> None:
+        self.target_host = target_host
+        self.target_port = target_port
+        self._lock = threading.Lock()
+        self._rules: list[Rule] = []
+        self._links: list[_Link] = []
+        self._seen: list[Seen] = []
+        self._stopping = threading.Event()
+        self._refusing_until = 0.0
+        self._listener = self._listen(0)
+        self.port: int = self._listener.getsockname()[1]
+        self._acceptor = threading.Thread(
+            target=self._accept_loop, name="proxy-accept", daemon=True
+        )
+        self._acceptor.start()
+
+    # -- scripting -----------------------------------------------------------------------
+
+    def add(self, rule: Rule) -> Rule:
+        """Arm a fault rule; returns it (its ``times`` says whether it has fired)."""
+        with self._lock:
+            self._rules.append(rule)
+        return rule
+
+    def clear(self) -> None:
+        """Disarm every rule."""
+        with self._lock:
+            self._rules.clear()
+
+    def outage(self, seconds: float) -> None:
+        """Close every connection now and refuse new ones for ``seconds``."""
+        with self._lock:
+            self._refusing_until = time.monotonic() + seconds
+            links, self._links = self._links, []
+        for link in links:
+            link.close()
+
+    def wait_held(self, timeout: float = 5.0) -> None:
+        """Block until every held frame has been delivered (or ``timeout`` passed)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self._lock:
+                links = list(self._links)
+            if all(link.holds == 0 for link in links):
+                return
+            time.sleep(0.01)
+
+    @property
+    def seen(self) -> list[Seen]:
+        """Every request the proxy received, with the action it played."""
+        with self._lock:
+            return list(self._seen)
+
+    # -- internals -----------------------------------------------------------------------
+
+    def _listen(self, port: int) -> socket.socket:
+        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind(("127.0.0.1", port))
+        listener.listen(16)
+        return listener
+
+    def _match(self, function_code: int, address: int | None) -> Rule | None:
+        with self._lock:
+            for rule in self._rules:
+                if rule.matches(function_code, address):
+                    return rule
+        return None
+
+    def _note(self, function_code: int, address: int | None, action: str) -> None:
+        with self._lock:
+            self._seen.append(Seen(time.monotonic(), function_code, address, action))
+
+    def _accept_loop(self) -> None:
+        while not self._stopping.is_set():
+            ready, _, _ = select.select([self._listener], [], [], 0.02)
+            if not ready:
+                continue
+            try:
+                client, _ = self._listener.accept()
+            except OSError:
+                continue
+            if time.monotonic() < self._refusing_until:
+                # Refused: a reset, as from a host whose server is down.
+                client.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                client.close()
+                continue
+            try:
+                link = _Link(self, client)
+            except OSError:
+                client.close()
+                continue
+            with self._lock:
+                self._links.append(link)
+
+    def close(self) -> None:
+        """Stop forwarding, close every socket and join every thread (safe twice)."""
+        if self._stopping.is_set():
+            return
+        self._stopping.set()
+        self._acceptor.join(timeout=5)
+        self._listener.close()
+        with self._lock:
+            links, self._links = self._links, []
+        for link in links:
+            link.close()
+
+    def __enter__(self) -> FaultProxy:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()

@@ -1,0 +1,67 @@
+"""The command-safety invariant, checked on what the robot actually did (docs/safety.md).
+
+Every motion the robot executed corresponds to exactly one command the master issued, in
+order; a command the master gave up on never started after it gave up. The master's side
+is a list of :class:`Issued` commands (the test records them); the robot's side is the
+simulator's own motion log, never what the master believes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from tmmaster import Pose
+from tmmaster.sim import MotionRecord
+
+#: Targets closer than this are the same command (tests give each command its own target).
+SAME_TARGET_MM = 0.05
+
+
+@dataclass
+class Issued:
+    """A motion command as the master issued it, and how the master's call ended."""
+
+    target: Pose
+    #: time.monotonic() when the call started.
+    issued_at: float
+    #: time.monotonic() when the call returned or raised (None while it runs).
+    ended_at: float | None = None
+    #: "done", or the name of the exception the call raised.
+    outcome: str = "running"
+
+    @property
+    def gave_up(self) -> bool:
+        """True when the master's call ended with an error (the master gave the command up)."""
+        return self.outcome not in ("done", "running")
+
+
+def check(issued: Sequence[Issued], log: Sequence[MotionRecord]) -> None:
+    """Raise AssertionError, with the evidence, when the motion log breaks the invariant."""
+    motions = [m for m in log if m.target is not None]
+    matched: list[int] = []
+    for motion in motions:
+        assert motion.target is not None
+        owners = [
+            i
+            for i, command in enumerate(issued)
+            if command.target.distance_to(motion.target) <= SAME_TARGET_MM
+        ]
+        assert owners, f"motion {motion.number} to {motion.target} matches no command issued"
+        assert len(owners) == 1, f"motion {motion.number} matches several commands: {owners}"
+        matched.append(owners[0])
+    for index in set(matched):
+        count = matched.count(index)
+        assert count == 1, f"command {index} ({issued[index].target}) ran {count} times"
+    assert matched == sorted(matched), f"motions ran out of the order issued: {matched}"
+    for index, motion in zip(matched, motions, strict=True):
+        command = issued[index]
+        if command.gave_up and command.ended_at is not None:
+            late = motion.wall_time - command.ended_at
+            assert late <= 0, (
+                f"command {index} ({command.outcome}) started {late:.3f} s after the master"
+                " gave it up"
+            )
+    for index, command in enumerate(issued):
+        if command.outcome == "done":
+            assert index in matched, f"command {index} returned done but never ran"

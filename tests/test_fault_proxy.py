@@ -1,0 +1,104 @@
+"""The fault proxy itself: each fault does what it says, seen from both ends."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from fault_proxy import FaultProxy, Rule
+from tmmaster import ConnectionLostError, ModbusTransport, ResponseTimeoutError, RetryPolicy
+from tmmaster._registers import Table
+from tmmaster.sim import Simulator
+
+NO_RETRY = RetryPolicy(attempts=1)
+
+
+@pytest.fixture
+def sim(tm_simulator_factory: object) -> Simulator:
+    return tm_simulator_factory("article")  # type: ignore[operator, no-any-return]
+
+
+@pytest.fixture
+def proxy(sim: Simulator) -> Iterator[FaultProxy]:
+    with FaultProxy(sim.port) as p:
+        yield p
+
+
+@pytest.fixture
+def link(proxy: FaultProxy) -> Iterator[ModbusTransport]:
+    with ModbusTransport("127.0.0.1", proxy.port, timeout=0.3, retry=NO_RETRY) as t:
+        yield t
+
+
+def writes_at(sim: Simulator, address: int) -> int:
+    return sum(1 for r in sim.request_log if r.is_write and r.address == address)
+
+
+def test_requests_pass_through_untouched(sim: Simulator, link: ModbusTransport) -> None:
+    assert link.read_block(Table.HOLDING, 0, 4) == [int(sim.field("robot_mode")), 0, 0, 0]
+    link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1
+
+
+def test_drop_request_never_reaches_the_slave(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("drop_request", function_code=16))
+    with pytest.raises(ResponseTimeoutError):
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 0
+
+
+def test_drop_answer_executes_but_the_master_cannot_know(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("drop_answer", function_code=16))
+    with pytest.raises(ResponseTimeoutError):
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1
+
+
+def test_close_after_executes_then_breaks_the_link(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("close_after", function_code=16))
+    with pytest.raises(ConnectionLostError):
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1
+    link.read_block(Table.HOLDING, 0, 1)  # the next request reconnects
+
+
+def test_hold_delivers_late_even_after_the_master_gave_up(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("hold", function_code=16, delay_s=0.6))
+    with pytest.raises(ResponseTimeoutError):
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    link.close()  # the master is gone; the frame is still on its way
+    assert writes_at(sim, 0x0210) == 0
+    sim.wait_for(lambda: writes_at(sim, 0x0210) == 1, timeout=3)
+
+
+def test_delay_holds_back_one_request_only(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("delay", function_code=3, nth=2, delay_s=0.1))
+    link.read_block(Table.HOLDING, 0, 1)
+    started = time.monotonic()
+    link.read_block(Table.HOLDING, 0, 1)
+    assert time.monotonic() - started >= 0.1
+    assert [s.action for s in proxy.seen] == ["pass", "delay"]
+
+
+def test_an_outage_refuses_connections_for_a_while(proxy: FaultProxy) -> None:
+    proxy.outage(0.4)
+    with (
+        ModbusTransport("127.0.0.1", proxy.port, timeout=0.3, retry=NO_RETRY) as refused,
+        pytest.raises((ConnectionLostError, ResponseTimeoutError)),
+    ):
+        refused.read_block(Table.HOLDING, 0, 1)
+    time.sleep(0.45)
+    with ModbusTransport("127.0.0.1", proxy.port, timeout=0.3, retry=NO_RETRY) as back:
+        back.read_block(Table.HOLDING, 0, 1)

@@ -1,0 +1,373 @@
+"""One regression test per failure of issue 8, reproduced the way the issue describes it.
+
+Each test checks what the robot actually did (the simulator's motion log, its registers),
+not what the master believes. The numbers are the issue's.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import tmmaster
+from fault_proxy import FaultProxy, Rule
+from safety_invariant import Issued, check
+from tmmaster import Pose, RetryPolicy, Robot, TimeoutPolicy
+from tmmaster.pickplace import Runner, TaskSequence
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+
+A = Pose(300, -200, 150, 180, 0, 90)
+B = Pose(300, -200, 180, 180, 0, 90)
+C = Pose(250, 0, 160, 180, 0, 90)
+COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
+REQUEST_TIMEOUT_S = 0.15
+
+
+@pytest.fixture
+def robots() -> Iterator[Callable[..., Robot]]:
+    """Open robots with short timeouts; all closed after the test."""
+    opened: list[Robot] = []
+
+    def make(port: int, profile: str, **options: Any) -> Robot:
+        options.setdefault("gripper", None)
+        options.setdefault("poll_interval_s", 0.01)
+        options.setdefault("request_timeout_s", REQUEST_TIMEOUT_S)
+        options.setdefault(
+            "timeouts", TimeoutPolicy(ack_timeout_s=0.5, in_flight_s=0.5, motion_margin_s=1.0)
+        )
+        options.setdefault(
+            "retry",
+            RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02, max_backoff_s=0.3),
+        )
+        robot = Robot("127.0.0.1", port, profile=profile, **options)
+        opened.append(robot)
+        robot.connect()
+        return robot
+
+    yield make
+    for robot in opened:
+        robot.close()
+
+
+def attempt(robot: Robot, target: Pose, issued: list[Issued], **kw: Any) -> str:
+    """move_to, recording the command and how the call ended; returns the outcome."""
+    command = Issued(target, time.monotonic())
+    issued.append(command)
+    try:
+        robot.move_to(target, speed=kw.pop("speed", 80), **kw)
+    except tmmaster.TMMasterError as exc:
+        command.outcome = type(exc).__name__
+    else:
+        command.outcome = "done"
+    command.ended_at = time.monotonic()
+    return command.outcome
+
+
+def operator_resets(sim: Simulator) -> None:
+    """Reset the error and press Play, then give stale commands time to run (if any)."""
+    sim.clear_error()
+    sim.press_play()
+    time.sleep(0.4)  # 8 simulated seconds
+
+
+# -- 8.1: a late command write runs twice (article) --------------------------------------
+
+
+def test_8_1_a_late_write_is_never_written_again_and_runs_once(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article")
+    issued: list[Issued] = []
+    with FaultProxy(sim.port) as proxy:
+        robot = robots(proxy.port, "article")
+        for delay_s, target in ((0.3, A), (0.45, B)):
+            # Delivered after the request timeout, on the connection the master dropped.
+            proxy.add(Rule("hold", function_code=16, address=0x0200, delay_s=delay_s))
+            assert attempt(robot, target, issued) == "done"
+            proxy.clear()
+        assert attempt(robot, C, issued) == "done"
+        writes = [s for s in proxy.seen if s.function_code == 16 and s.address == 0x0200]
+        assert len(writes) == 3  # one write per command: nothing was written again
+    time.sleep(0.3)
+    check(issued, sim.motion_log())
+    assert len(sim.motion_log()) == 3
+
+
+def test_8_1_a_write_later_than_the_in_flight_window_is_reported_not_assumed(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    # The article contract cannot tell a lost frame from a late one: the master must not
+    # claim success, must not write again, and withdraws (docs/safety.md says what remains).
+    sim = tm_simulator_factory("article")
+    issued: list[Issued] = []
+    with FaultProxy(sim.port) as proxy:
+        robot = robots(proxy.port, "article")
+        proxy.add(Rule("drop_request", function_code=16, address=0x0200))
+        assert attempt(robot, A, issued) == "CommandStateUnknownError"
+        assert robot.last_motion is not None
+        assert robot.last_motion.withdrawn is True
+        assert [s.action for s in proxy.seen if s.function_code == 16] == ["drop_request", "pass"]
+    assert sim.motion_log() == ()
+    assert sim.field("command") == 0
+
+
+def test_8_1_tmflow_a_frame_held_for_any_time_never_runs_after_the_master_gave_up(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("tmflow")
+    issued: list[Issued] = []
+    with FaultProxy(sim.port) as proxy:
+        robot = robots(proxy.port, "tmflow")
+        # Held past the timeout, the resend (same sequence number) and the withdraw.
+        proxy.add(Rule("hold", function_code=16, address=9000, delay_s=1.5))
+        proxy.add(Rule("drop_request", function_code=16, address=9000, nth=1))
+        attempt(robot, A, issued)
+        time.sleep(1.6)  # the held frame lands now
+        assert attempt(robot, B, issued) == "done"
+    check(issued, sim.motion_log())
+
+
+# -- 8.2: abandoned commands stay armed ---------------------------------------------------
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_8_2_estop_before_the_acknowledgement_leaves_nothing_armed(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=5"])
+    robot = robots(sim.port, profile)
+    issued: list[Issued] = []
+    threading.Timer(0.05, sim.press_estop).start()
+    # The article table has no e-stop bit: the robot reports it as an error (code 0x0200).
+    expected = {"article": "RobotFaultError", "tmflow": "EmergencyStopError"}[profile]
+    assert attempt(robot, A, issued) == expected
+    if profile == "tmflow":
+        assert robot.last_motion is not None
+        assert robot.last_motion.withdrawn is True  # the cancel record
+    # (article: the robot discarded the pending command when it entered the error.)
+    sim.clear_faults()
+    operator_resets(sim)
+    assert sim.motion_log() == ()
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_8_2_a_master_that_died_leaves_nothing_the_robot_runs_after_a_reset(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # The master wrote its command and vanished (no withdraw); then an e-stop, a reset
+    # and Play. The robot side discards the stale command.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=5"])
+    with Robot("127.0.0.1", sim.port, profile=profile, gripper=None) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        robot.start_move(A, speed=50)
+        sim.press_estop()
+        robot._last_motion = None  # simulate a process that died: close() withdraws nothing
+    sim.clear_faults()
+    operator_resets(sim)
+    assert sim.motion_log() == ()
+
+
+def test_8_2_a_stop_request_while_a_tmflow_command_is_pending_withdraws_it(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=3"])
+    robot = robots(sim.port, "tmflow")
+    issued: list[Issued] = []
+    threading.Timer(0.05, robot.interrupt).start()
+    assert attempt(robot, A, issued) == "StopRequestedError"
+    assert robot.last_motion is not None
+    assert robot.last_motion.withdrawn is True
+    robot.clear_stop_request()
+    time.sleep(0.4)  # the late acknowledgement would have come by now
+    sim.press_estop()
+    operator_resets(sim)
+    assert sim.motion_log() == ()
+    assert sim.field("result_code") == 5  # the program consumed the cancel
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_8_2_a_stop_during_the_runners_preparation_is_an_interruption(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=5"])
+    with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.01) as robot:
+        runner = Runner(robot)
+        sequence = TaskSequence("one-move", prepare=lambda ctx: ctx.open_gripper())
+        sequence.add("MOVE", lambda ctx: ctx.move(A, speed=30))
+        threading.Timer(0.1, runner.request_stop).start()
+        result = runner.run(sequence)
+    assert result.interrupted
+    sim.clear_faults()
+    operator_resets(sim)
+    assert [m for m in sim.motion_log() if m.target is not None] == []
+
+
+# -- 8.3: a split command block moves toward stale targets --------------------------------
+
+
+def test_8_3_a_profile_whose_command_block_is_split_is_refused(tmp_path: Path) -> None:
+    # The example the register-maps guide used to show: target_y moved out of the block.
+    split = tmp_path / "split.toml"
+    split.write_text('extends = "article"\nname = "split"\n[fields.target_y]\naddress = 0x0220\n')
+    with pytest.raises(tmmaster.RegisterMapError, match=r"contiguous.*target_y \(holding 544\)"):
+        tmmaster.load_profile(split)
+
+
+def test_8_3_a_command_code_equal_to_none_is_refused(tmp_path: Path) -> None:
+    zero = tmp_path / "zero.toml"
+    zero.write_text(
+        'extends = "article"\nname = "zero"\n[fields.command]\n'
+        'values = { 0 = "ptp", 2 = "line", 3 = "stop" }\n'
+    )
+    with pytest.raises(tmmaster.RegisterMapError, match="code 0 of 'ptp' collides"):
+        tmmaster.load_profile(zero)
+
+
+# -- 8.4: a stop request while waiting for readiness --------------------------------------
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_8_4_a_stop_request_ends_the_ready_wait_without_a_busy_loop(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, init_time_s=1000.0)  # initialising for good
+    with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.05) as robot:
+        sim.clear_request_log()
+        timer = threading.Timer(0.2, robot.interrupt)
+        timer.start()
+        started = time.monotonic()
+        with pytest.raises(tmmaster.StopRequestedError):
+            robot.wait_until_ready(timeout_s=8)
+        elapsed = time.monotonic() - started
+        timer.join()
+        requests = len(sim.request_log)
+    assert elapsed < 1.0  # honoured at once, not after the 8 s timeout
+    # Paced: one status snapshot per 50 ms (1 request for article, 5 for tmflow), no spin.
+    per_poll = {"article": 1, "tmflow": 5}[profile]
+    assert requests <= (elapsed / 0.05 + 2) * per_poll
+
+
+# -- 8.5: e-stop during a gripper action ---------------------------------------------------
+
+
+def test_8_5_estop_ends_an_article_gripper_wait_and_blocks_gripper_writes(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("article")
+    with Robot(
+        "127.0.0.1", sim.port, profile="article", poll_interval_s=0.01, gripper_settle_s=5.0
+    ) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        threading.Timer(0.05, sim.press_estop).start()
+        # The article table has no e-stop bit: the robot reports it as an error (0x0200).
+        with pytest.raises(tmmaster.RobotFaultError, match="512"):
+            robot.gripper.open()  # would wait its 5 s settle time without the robot check
+        sim.clear_request_log()
+        with pytest.raises(tmmaster.RobotFaultError):
+            robot.gripper.close()
+    assert not [r for r in sim.request_log if r.is_write]
+
+
+def test_8_5_estop_ends_an_onrobot_gripper_wait(tm_simulator_factory: SimFactory) -> None:
+    sim = tm_simulator_factory("tmflow", gripper="onrobot-2fg7")
+    with Robot(
+        "127.0.0.1",
+        sim.port,
+        profile="tmflow",
+        gripper="onrobot-2fg7",
+        gripper_port=sim.gripper_port,
+        poll_interval_s=0.01,
+    ) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        sim.press_estop()
+        sim.clear_request_log()
+        with pytest.raises(tmmaster.EmergencyStopError):
+            robot.gripper.close()
+    assert not [r for r in sim.request_log if r.is_write and r.server == "gripper"]
+
+
+# -- 8.6: unbounded or meaningless limits --------------------------------------------------
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, 0, -1])
+def test_8_6_meaningless_timeouts_are_refused_before_any_request(
+    tm_simulator_factory: SimFactory, bad: float
+) -> None:
+    sim = tm_simulator_factory("article")
+    with Robot("127.0.0.1", sim.port, profile="article") as robot:
+        robot.wait_until_ready(timeout_s=5)
+        sim.clear_request_log()
+        with pytest.raises(tmmaster.ConfigError, match="timeout"):
+            robot.move_to(A, speed=30, timeout=bad)
+        assert sim.request_log == []
+
+
+@pytest.mark.parametrize(
+    "option",
+    [
+        "position_tolerance_mm",
+        "orientation_tolerance_deg",
+        "poll_interval_s",
+        "request_timeout_s",
+        "gripper_settle_s",
+    ],
+)
+@pytest.mark.parametrize("bad", [math.nan, math.inf, 0, -1])
+def test_8_6_meaningless_robot_options_are_refused(option: str, bad: float) -> None:
+    with pytest.raises(tmmaster.ConfigError, match=option):
+        Robot("127.0.0.1", 1, profile="article", **{option: bad})
+
+
+# -- 8.8: outages --------------------------------------------------------------------------
+
+
+def test_8_8_the_default_retry_policy_rides_out_a_one_second_outage_mid_cycle(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("article")
+    issued: list[Issued] = []
+    with (
+        FaultProxy(sim.port) as proxy,
+        Robot(
+            "127.0.0.1", proxy.port, profile="article", gripper=None, poll_interval_s=0.01
+        ) as robot,
+    ):
+        robot.wait_until_ready(timeout_s=5)
+        assert attempt(robot, A, issued) == "done"
+        proxy.outage(1.0)
+        assert attempt(robot, B, issued) == "done"
+        assert attempt(robot, C, issued) == "done"
+        assert robot.stats.reconnects >= 1
+    check(issued, sim.motion_log())
+    assert len(sim.motion_log()) == 3
+
+
+def test_8_8_a_link_loss_mid_move_stops_the_arm_once_the_link_is_back(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article", faults=["stall:at_move=1"])
+    with FaultProxy(sim.port) as proxy:
+        robot = robots(
+            proxy.port,
+            "article",
+            # The wait gives up after 0.35 s of outage; the clean-up has its own 0.35 s.
+            retry=RetryPolicy(
+                attempts=20, total_time_s=0.35, initial_backoff_s=0.05, max_backoff_s=0.1
+            ),
+        )
+        motion = robot.start_move(A, speed=30)
+        sim.wait_for(lambda: sim.field("motion_status") == 1, timeout=5)
+        proxy.outage(0.5)  # longer than this robot's retry budget
+        with pytest.raises(tmmaster.TransportError):
+            motion.wait()
+    assert motion.stop_delivered is True
+    stops = [r for r in sim.request_log if r.is_write and r.values == (3,)]
+    assert len(stops) == 1
