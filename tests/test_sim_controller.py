@@ -167,12 +167,22 @@ def tmflow(
     backend: KinematicBackend | None = None,
     model: Any = MODEL,
     initialise: bool = True,
+    initial_seq: int = 0,
 ) -> tuple[RobotController, RegisterBank, KinematicBackend, ListLogger]:
     profile = robot_profile("tmflow")
     bank = RegisterBank(profile)
     backend = KinematicBackend(model) if backend is None else backend
     log = ListLogger()
-    ctl = RobotController(profile, bank, backend, model, faults=faults, init_time_s=INIT_S, log=log)
+    ctl = RobotController(
+        profile,
+        bank,
+        backend,
+        model,
+        faults=faults,
+        init_time_s=INIT_S,
+        log=log,
+        initial_seq=initial_seq,
+    )
     if initialise:
         run(ctl, INIT_S)
     return ctl, bank, backend, log
@@ -576,7 +586,8 @@ def test_tmflow_project_runs_once_initialised_and_heartbeat_ticks() -> None:
 
 def test_tmflow_heartbeat_wraps() -> None:
     ctl, bank, _, _ = tmflow()
-    bank.set("heartbeat", 65534)
+    # The program writes it with an int16 preset: it stays in 0..32767.
+    bank.set("heartbeat", 32766)
     ctl.tick(DT)
     ctl.tick(DT)
     assert bank.get("heartbeat") == 0
@@ -621,7 +632,7 @@ def test_tmflow_takes_only_the_next_seq() -> None:
     finish_tmflow(ctl, bank, 1)
     # A seq put back by a withdrawing master (behind ack_seq) and a skipped one are not
     # new commands; only ack_seq + 1 is.
-    for stale in (65535, 3):
+    for stale in (32767, 3):
         send_tmflow(bank, stale, target=AIR)
         run(ctl, 0.5)
         assert ctl.moves_started == 1
@@ -631,17 +642,44 @@ def test_tmflow_takes_only_the_next_seq() -> None:
     assert ctl.moves_started == 2
 
 
-def test_tmflow_seq_wraps_from_65535_to_1() -> None:
-    ctl, bank, _, _ = tmflow()
-    # As if 65534 commands had been taken before (ack_seq survives project restarts).
-    bank.set("ack_seq", 65534)
-    bank.set("done_seq", 65534)
-    send_tmflow(bank, 65535, target=AIR)
-    finish_tmflow(ctl, bank, 65535)
+def test_tmflow_seq_walks_32766_32767_1() -> None:
+    # As if 32766 commands had been taken before (ack_seq survives project restarts).
+    ctl, bank, _, _ = tmflow(initial_seq=32766)
+    assert (bank.get("seq"), bank.get("ack_seq"), bank.get("done_seq")) == (32766, 32766, 32766)
+    send_tmflow(bank, 32767, target=AIR)
+    finish_tmflow(ctl, bank, 32767)
     send_tmflow(bank, 1, target=PART)
     finish_tmflow(ctl, bank, 1)
     assert ctl.moves_started == 2
     assert bank.get("ack_seq") == 1
+
+
+def write_raw_seq(bank: RegisterBank, raw: int) -> None:
+    """A master that treats seq as uint16 writes the raw word, e.g. 32768 after 32767."""
+    bank.write(Table.HOLDING, bank.register_map.field("seq").address, [raw])
+
+
+@pytest.mark.parametrize("raw", [32768, 65535, 0])
+def test_tmflow_uint16_style_seq_is_never_taken(raw: int) -> None:
+    ctl, bank, _, _ = tmflow(initial_seq=32766)
+    send_tmflow(bank, 32767, target=AIR)
+    finish_tmflow(ctl, bank, 32767)
+    # The block a uint16 master would send next: 32768 (or 65535 -> "0", or 0) as seq.
+    send_tmflow(bank, 1, target=PART)
+    write_raw_seq(bank, raw)  # the program reads it as int16: -32768, -1, 0
+    run(ctl, 0.5)
+    assert ctl.moves_started == 1
+    assert bank.get("ack_seq") == 32767
+    assert bank.get("robot_state") == 0
+    # The right number is still taken afterwards.
+    write_raw_seq(bank, 1)
+    finish_tmflow(ctl, bank, 1)
+    assert ctl.moves_started == 2
+
+
+def test_tmflow_initial_seq_is_checked() -> None:
+    with pytest.raises(ValueError, match="initial_seq"):
+        tmflow(initial_seq=32768)
 
 
 def test_tmflow_unreachable_is_a_program_error_not_a_robot_error() -> None:

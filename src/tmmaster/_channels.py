@@ -388,7 +388,9 @@ class SequenceChannel(CommandChannel):
         feedback = self.read([*self.feedback_fields, p.field("seq")])
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
         state = p.field("robot_state").label(int(feedback["robot_state"]))
-        if seq_now == ack % 65535 + 1:
+        if not 0 <= ack <= p.seq_max:
+            raise RobotError(f"the robot program reports ack_seq {ack}, outside 0..{p.seq_max}")
+        if seq_now == p.next_seq(ack):
             raise RobotError(f"command {seq_now} is still waiting to be acknowledged")
         if state == "busy":
             raise RobotError(f"the robot program is still executing command {ack}")
@@ -396,9 +398,9 @@ class SequenceChannel(CommandChannel):
             # Abandoned (project stopped mid-command): the program is idle, so a new
             # command is safe; say so, since the old one never finished.
             _log.warning("robot.previous_command_unfinished", seq=ack, done_seq=done)
-        # The program takes only ack_seq + 1 (1..65535, skipping 0), so a seq that was
+        # The program takes only ack_seq + 1 (1..seq_max, skipping 0), so a seq that was
         # put back to withdraw a command can never be mistaken for a new one.
-        seq = ack % 65535 + 1
+        seq = p.next_seq(ack)
         words.append((p.field("seq"), seq))
         return Ticket(
             command,

@@ -310,6 +310,20 @@ class RobotProfile(RegisterMap):
         self._check_command_block()
         return self
 
+    @property
+    def seq_max(self) -> int:
+        """Largest sequence number (sequence handshake): the ``seq`` field's maximum.
+
+        Without a declared maximum, 32767: what TMflow's ``modbus_read_int16`` reads as a
+        positive number (docs/tmflow-program.md).
+        """
+        top = self.fields["seq"].maximum if "seq" in self.fields else None
+        return int(top) if top is not None else 2**15 - 1
+
+    def next_seq(self, seq: int) -> int:
+        """The sequence number after ``seq``: 1, 2, ... ``seq_max``, then 1 again; never 0."""
+        return seq % self.seq_max + 1
+
     def command_block(self) -> tuple[RegisterField, ...]:
         """Fields of the command block (targets, speed, accel_time, command, seq), by address."""
         names = [*TARGET_FIELDS, "speed", *_OPTIONAL_BLOCK, "command", "seq"]

@@ -23,7 +23,7 @@ from typing import Any, Literal, Protocol
 
 import structlog
 
-from .._codec import encode
+from .._codec import allowed_range, encode
 from .._exceptions import ValueOutOfRangeError
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RobotProfile
@@ -126,6 +126,7 @@ class RobotController:
         gripper_close_width_mm: float = 0.0,
         gripper_speed_mm_s: float = 100.0,
         gripper_force_n: float = 40.0,
+        initial_seq: int = 0,
     ) -> None:
         if bank.register_map is not profile and bank.register_map != profile:
             raise ValueError("the register bank must serve the controller's profile")
@@ -144,6 +145,12 @@ class RobotController:
         self._gripper_speed = gripper_speed_mm_s
         self._gripper_force = gripper_force_n
         self._article = profile.handshake is Handshake.CLEAR_ON_ACCEPT
+        if initial_seq and (self._article or not 0 <= initial_seq <= profile.seq_max):
+            raise ValueError(
+                f"initial_seq must be 0..{profile.seq_max} with a sequence profile,"
+                f" got {initial_seq}"
+            )
+        self._initial_seq = initial_seq
 
         self._move_faults: list[_MoveFault] = []
         self._timed_estops: list[EstopFault] = []
@@ -424,7 +431,8 @@ class RobotController:
         if not self._running:
             return
         if self._profile.has("heartbeat"):
-            self._bank.set("heartbeat", (int(self._bank.get("heartbeat")) + 1) % 65536)
+            wrap = int(allowed_range(self._profile.field("heartbeat"))[1]) + 1
+            self._bank.set("heartbeat", (int(self._bank.get("heartbeat")) + 1) % wrap)
         if self._active is not None:
             self._advance(dt, ready)
         if self._active is None and self._running:
@@ -459,8 +467,10 @@ class RobotController:
                 self._start_project()
 
     def _take_sequence_command(self, ready: bool) -> None:
+        # As the TMflow program reads them: int16, signed (a uint16-style 32768 reads as
+        # -32768), and taken only when seq is the number after ack_seq.
         seq = int(self._bank.get("seq"))
-        if seq != int(self._bank.get("ack_seq")) % 65535 + 1:
+        if seq != self._profile.next_seq(int(self._bank.get("ack_seq"))):
             # Only the next number is a new command: a duplicate of the acknowledged seq,
             # or a seq a master put back to withdraw a command, is never executed.
             self._late_key = None
@@ -528,7 +538,7 @@ class RobotController:
         # cancelled (ack_seq := seq), so neither it nor a late copy of it can run. Any
         # other value in seq is not a command (the loop would never take it either).
         seq, ack = int(self._bank.get("seq")), int(self._bank.get("ack_seq"))
-        if seq == ack % 65535 + 1:  # the same "next number" rule the loop applies
+        if seq == self._profile.next_seq(ack):  # the same "next number" rule the loop applies
             self._bank.set("ack_seq", seq)
             self._cancel_sequence(seq, "written before the project started")
         else:
@@ -802,4 +812,7 @@ class RobotController:
             if self._profile.has("project_speed"):
                 self._bank.set("project_speed", 100)
             self._bank.set("robot_state", self._code("robot_state", "idle", 0))
+            # As if command number initial_seq had been the last one, taken and finished.
+            for name in ("seq", "ack_seq", "done_seq"):
+                self._bank.set(name, self._initial_seq)
         self._publish_pose()

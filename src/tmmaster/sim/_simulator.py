@@ -62,6 +62,7 @@ class Simulator:
         backend: PhysicsBackend | None = None,
         init_time_s: float = 0.2,
         request_listener: Callable[[RequestRecord], None] | None = None,
+        initial_seq: int = 0,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ValueError(f"time_scale must be > 0, got {time_scale}")
@@ -90,6 +91,7 @@ class Simulator:
             self._model,
             faults=device,
             init_time_s=init_time_s,
+            initial_seq=initial_seq,
         )
         self._robot_server = DeviceServer(
             "robot",
