@@ -72,7 +72,7 @@ from ._retry import RetryPolicy
 from ._robot import Motion, Robot, TimeoutPolicy, Workspace, connect
 from ._robot_models import ROBOT_MODELS, RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, RobotStatus
-from ._transport import ConnectionState, ModbusTransport, TransportStats
+from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
 
 try:
     __version__ = _metadata.version("tmmaster")
@@ -134,6 +134,7 @@ __all__ = [
     "TMMasterError",
     "Table",
     "TimeoutPolicy",
+    "Transport",
     "TransportError",
     "TransportStats",
     "Value",

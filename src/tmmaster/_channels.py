@@ -10,7 +10,7 @@ One class per handshake in a profile:
   a new sequence number; the robot program echoes it into ``ack_seq`` when it takes the
   command and into ``done_seq`` when finished, or reports an error state.
 
-A channel reads and writes through a :class:`ModbusTransport` and raises tmmaster's
+A channel reads and writes through a :class:`~tmmaster._transport.Transport` and raises tmmaster's
 errors; it never sleeps and never decides how long to wait: that is :mod:`._robot`'s job.
 """
 
@@ -43,7 +43,7 @@ from ._registers import (
     Table,
 )
 from ._status import RobotStatus
-from ._transport import ModbusTransport
+from ._transport import Transport
 
 _log = structlog.get_logger("tmmaster.robot")
 
@@ -111,7 +111,7 @@ def _pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
 class CommandChannel(ABC):
     """Sends commands and interprets the robot's answers for one handshake."""
 
-    def __init__(self, profile: RobotProfile, transport: ModbusTransport) -> None:
+    def __init__(self, profile: RobotProfile, transport: Transport) -> None:
         self.profile = profile
         self.transport = transport
         command = profile.field("command")
@@ -330,7 +330,7 @@ class ClearOnAcceptChannel(CommandChannel):
 class SequenceChannel(CommandChannel):
     """The tmflow contract: sequence number, acknowledge and done registers."""
 
-    def __init__(self, profile: RobotProfile, transport: ModbusTransport) -> None:
+    def __init__(self, profile: RobotProfile, transport: Transport) -> None:
         super().__init__(profile, transport)
         p = profile
         self.feedback_fields = p.role(Role.FEEDBACK)
@@ -479,7 +479,7 @@ class SequenceChannel(CommandChannel):
         return [(self.profile.field("stop_project"), True)]
 
 
-def channel_for(profile: RobotProfile, transport: ModbusTransport) -> CommandChannel:
+def channel_for(profile: RobotProfile, transport: Transport) -> CommandChannel:
     """The channel implementing ``profile``'s handshake."""
     if profile.handshake is Handshake.CLEAR_ON_ACCEPT:
         return ClearOnAcceptChannel(profile, transport)

@@ -45,7 +45,7 @@ from ._poller import Poller
 from ._profiles import gripper_profile
 from ._registers import GripperProfile
 from ._retry import RetryPolicy
-from ._transport import ModbusTransport
+from ._transport import Transport, open_transport
 
 if TYPE_CHECKING:
     from ._robot import Robot
@@ -258,6 +258,8 @@ class GripperLink:
     poll_interval_s: float = 0.05
     timeout_s: float = 5.0
     ack_timeout_s: float = 2.0
+    #: A ready transport (e.g. in-memory); None opens one to ``host:port``.
+    transport: Transport | None = None
     #: Checks the robot before each gripper write and poll (None: a gripper on its own).
     guard: RobotGuard | None = None
     #: Ends gripper waits on a stop request (the robot's stop event).
@@ -275,9 +277,10 @@ class _OwnConnectionGripper(Gripper):
         self.ack_timeout_s = link.ack_timeout_s
         self._guard = link.guard
         self._stop_event = link.stop_event
-        self.transport = ModbusTransport(
+        self.transport: Transport = link.transport or open_transport(
             link.host,
             link.port,
+            role="gripper",
             device_id=profile.device_id,
             timeout=link.request_timeout_s,
             retry=link.retry,
@@ -538,6 +541,7 @@ def make_gripper(
     retry: RetryPolicy | None,
     request_timeout_s: float,
     settle_s: float,
+    transport: Transport | None = None,
 ) -> Gripper:
     """The gripper driver for ``spec``: "auto" uses what the robot profile offers."""
     if spec is None or spec == "none":
@@ -560,6 +564,7 @@ def make_gripper(
         ack_timeout_s=robot.timeouts.ack_timeout_s,
         guard=robot.check_fault,
         stop_event=robot._stop_event,
+        transport=transport,
     )
     if gp.driver == "blog-2fg7":
         return Blog2FG7Gripper(gp, link)

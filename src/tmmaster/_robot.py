@@ -58,7 +58,7 @@ from ._registers import GripperProfile, RobotProfile
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, RobotStatus
-from ._transport import ConnectionState, ModbusTransport, TransportStats
+from ._transport import ConnectionState, Transport, TransportStats, open_transport
 
 _log = structlog.get_logger("tmmaster.robot")
 
@@ -220,6 +220,8 @@ class Robot:
         orientation_tolerance_deg: float = 1.0,
         gripper_settle_s: float = 0.5,
         name: str = "robot",
+        transport: Transport | None = None,
+        gripper_transport: Transport | None = None,
     ) -> None:
         self.profile = robot_profile(profile)
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
@@ -241,7 +243,8 @@ class Robot:
         self.max_speed_percent = max_speed_percent
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
-        self.transport = ModbusTransport(
+        # ``host`` "sim://name" reaches an in-process simulator without a socket.
+        self.transport: Transport = transport or open_transport(
             host,
             port,
             device_id=self.profile.device_id,
@@ -265,6 +268,7 @@ class Robot:
             retry=retry,
             request_timeout_s=request_timeout_s,
             settle_s=gripper_settle_s,
+            transport=gripper_transport,
         )
 
     # -- connection -------------------------------------------------------

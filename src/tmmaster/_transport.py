@@ -13,10 +13,11 @@ device's state back to learn whether the command arrived.
 from __future__ import annotations
 
 import threading
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, TypeVar
+from typing import Any, Protocol, Self, TypeVar, runtime_checkable
 
 import structlog
 from pymodbus import ModbusException
@@ -46,6 +47,14 @@ MAX_READ_REGISTERS = 125
 MAX_READ_BITS = 2000
 MAX_WRITE_REGISTERS = 123
 MAX_WRITE_BITS = 1968
+
+#: The read function code of each table.
+READ_FUNCTION: dict[Table, int] = {
+    Table.COIL: 1,
+    Table.DISCRETE_INPUT: 2,
+    Table.HOLDING: 3,
+    Table.INPUT: 4,
+}
 
 
 class ConnectionState(StrEnum):
@@ -175,18 +184,94 @@ def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Blo
     return plans
 
 
-class ModbusTransport:
-    """Reads and writes one Modbus TCP device, with counting, error mapping and retries."""
+@runtime_checkable
+class Transport(Protocol):
+    """What the layers above (channels, grippers, the robot) need from a device link.
+
+    :class:`ModbusTransport` (Modbus TCP through pymodbus) is the default;
+    ``tmmaster.sim.MemoryTransport`` talks to an in-process simulator without sockets.
+    Both share :class:`BlockTransport`: the same counters, error mapping and retries.
+    """
+
+    host: str
+    port: int
+    name: str
+    device_id: int
+    timeout: float
+    stats: TransportStats
+    #: When set, sleeps between retry attempts of interruptible requests end at once.
+    interrupt: threading.Event | None
+
+    @property
+    def state(self) -> ConnectionState:
+        """Current connection state."""
+
+    def connect(self) -> None:
+        """Open the link, retrying per the policy; raises :class:`ConnectError`."""
+
+    def close(self) -> None:
+        """Close the link; safe to call more than once."""
+
+    def read_block(
+        self,
+        table: Table,
+        address: int,
+        count: int,
+        *,
+        retry: bool = True,
+        interruptible: bool = True,
+    ) -> list[int]:
+        """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
+
+    def write_block(
+        self,
+        table: Table,
+        address: int,
+        words: Sequence[int],
+        *,
+        retry: bool,
+        interruptible: bool = True,
+    ) -> None:
+        """Write words (holding) or bits (coils) in one request."""
+
+    def read_fields(
+        self,
+        fields: Iterable[RegisterField],
+        *,
+        max_gap: int = 0,
+        retry: bool = True,
+        interruptible: bool = True,
+    ) -> dict[str, Value]:
+        """Read and decode fields, one request per contiguous block."""
+
+    def write_fields(
+        self,
+        values: Sequence[tuple[RegisterField, Value]] | Mapping[RegisterField, Value],
+        *,
+        retry: bool,
+        interruptible: bool = True,
+    ) -> None:
+        """Encode every value (refusing before any I/O), then write each block once."""
+
+
+class BlockTransport(ABC):
+    """The link-independent part of a transport: state, counters, retries, field plans.
+
+    A subclass supplies the link: :meth:`_open_link`, :meth:`_close_link`,
+    :meth:`_link_open` and :meth:`_exchange` (one request, failures already mapped to
+    :class:`TransportError` subclasses). Everything else, and so every rule about
+    when a request may be retried, is shared.
+    """
 
     def __init__(
         self,
         host: str,
-        port: int = 502,
+        port: int,
         *,
-        device_id: int = 1,
-        timeout: float = 1.0,
-        retry: RetryPolicy | None = None,
-        name: str = "device",
+        device_id: int,
+        timeout: float,
+        retry: RetryPolicy | None,
+        name: str,
     ) -> None:
         self.host = host
         self.port = port
@@ -204,21 +289,30 @@ class ModbusTransport:
         # fields, so their ids cannot be reused while the entry lives.
         self._plans: dict[tuple[int, tuple[int, ...]], tuple[ReadPlan, tuple[object, ...]]] = {}
         self._log = _log.bind(device=name, host=host, port=port, device_id=device_id)
-        # retries=0: pymodbus must never resend a request on its own (reference 5).
-        self._client = ModbusTcpClient(
-            host,
-            port=port,
-            timeout=timeout,
-            retries=0,
-            reconnect_delay=0,
-            trace_packet=self._count_bytes,
-        )
-        self._readers: dict[Table, tuple[int, Callable[..., ModbusPDU]]] = {
-            Table.HOLDING: (3, self._client.read_holding_registers),
-            Table.INPUT: (4, self._client.read_input_registers),
-            Table.COIL: (1, self._client.read_coils),
-            Table.DISCRETE_INPUT: (2, self._client.read_discrete_inputs),
-        }
+
+    # -- the link (subclasses) ----------------------------------------------------
+
+    @abstractmethod
+    def _link_open(self) -> bool:
+        """True while the link can carry a request."""
+
+    @abstractmethod
+    def _open_link(self) -> None:
+        """Open the link once; raise :class:`ConnectError` when it cannot be opened."""
+
+    @abstractmethod
+    def _close_link(self) -> None:
+        """Close the link (safe when already closed)."""
+
+    @abstractmethod
+    def _exchange(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        """Send one request once and return the words (bits as 0/1) of its answer.
+
+        Raise :class:`ConnectionLostError`, :class:`ResponseTimeoutError`,
+        :class:`ModbusExceptionError` (and subclasses) or :class:`TransportError`.
+        """
 
     # -- connection --------------------------------------------------------
 
@@ -243,11 +337,11 @@ class ModbusTransport:
         with self._lock:
             if self._state is ConnectionState.CLOSED:
                 return
-            self._client.close()  # type: ignore[no-untyped-call]
+            self._close_link()
             self._state = ConnectionState.CLOSED
             self._log.debug("transport.closed")
 
-    def __enter__(self) -> ModbusTransport:
+    def __enter__(self) -> Self:
         self.connect()
         return self
 
@@ -259,11 +353,10 @@ class ModbusTransport:
             raise ConnectError(f"{self.name}: transport is closed")
 
     def _connect_once(self) -> None:
-        if self._client.connected:
+        if self._link_open():
             return
         reconnect = self._state is ConnectionState.DISCONNECTED
-        if not self._client.connect():  # type: ignore[no-untyped-call]
-            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}")
+        self._open_link()
         if reconnect:
             self.stats.reconnects += 1
             self._log.info("transport.reconnected")
@@ -274,24 +367,19 @@ class ModbusTransport:
     def _drop(self) -> None:
         # After a failure the stream may still carry a late answer to the failed
         # request; a fresh connection guarantees it can't be taken for the next one.
-        self._client.close()  # type: ignore[no-untyped-call]
+        self._close_link()
         if self._state is not ConnectionState.CLOSED:
             self._state = ConnectionState.DISCONNECTED
 
     def _on_retry(self, _error: BaseException) -> None:
         self.stats.retries += 1
 
-    def _count_bytes(self, sending: bool, data: bytes) -> bytes:
-        if sending:
-            self.stats.bytes_sent += len(data)
-        else:
-            self.stats.bytes_received += len(data)
-        return data
-
     # -- raw requests --------------------------------------------------------
 
-    def _execute(self, what: str, function_code: int, call: Callable[[], ModbusPDU]) -> ModbusPDU:
-        """Send one request once; map every failure to a TransportError."""
+    def _execute(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        """Send one request once; count it, and drop the link after a link failure."""
         self._refuse_if_closed()
         self._connect_once()
         self.stats.requests += 1
@@ -299,31 +387,14 @@ class ModbusTransport:
             self.stats.requests_by_function.get(function_code, 0) + 1
         )
         try:
-            response = call()
-        except ConnectionException as exc:
+            return self._exchange(what, function_code, address, count, values)
+        except ModbusExceptionError:
+            self.stats.errors += 1  # the device answered: the link is fine
+            raise
+        except TransportError:
             self.stats.errors += 1
             self._drop()
-            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
-        except ModbusIOException as exc:
-            self.stats.errors += 1
-            self._drop()
-            raise ResponseTimeoutError(
-                f"{self.name}: no answer to {what} within {self.timeout:g} s"
-            ) from exc
-        except ModbusException as exc:
-            self.stats.errors += 1
-            self._drop()
-            raise TransportError(f"{self.name}: {what} failed: {exc}") from exc
-        except OSError as exc:
-            self.stats.errors += 1
-            self._drop()
-            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
-        if isinstance(response, ExceptionResponse) or response.isError():
-            self.stats.errors += 1
-            code = int(getattr(response, "exception_code", 0))
-            error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
-            raise error_class(f"{self.name}: device refused {what}", code=code)
-        return response
+            raise
 
     def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
         with self._lock:
@@ -347,19 +418,13 @@ class ModbusTransport:
     ) -> list[int]:
         """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
         what = f"read {table.value} {address}+{count}"
-        function_code, method = self._readers[table]
-        device_id = self.device_id
+        function_code = READ_FUNCTION[table]
 
         def once() -> list[int]:
-            response = self._execute(
-                what, function_code, lambda: method(address, count=count, device_id=device_id)
-            )
-            if table.is_bit:
-                return [int(b) for b in response.bits[:count]]
-            registers = list(response.registers)
-            if len(registers) != count:
+            words = self._execute(what, function_code, address, count, None)
+            if len(words) != count:
                 raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
-            return list(registers)
+            return words
 
         return self._run(what, once, retry=retry, interruptible=interruptible)
 
@@ -376,31 +441,11 @@ class ModbusTransport:
         if table.read_only:
             raise ConfigError(f"the {table.value} table is read-only")
         what = f"write {table.value} {address}+{len(words)}"
-        values = list(words)
+        values = [int(bool(v)) for v in words] if table.is_bit else list(words)
+        function_code = 16 if table is Table.HOLDING else 5 if len(values) == 1 else 15
 
         def once() -> None:
-            if table is Table.HOLDING:
-                self._execute(
-                    what,
-                    16,
-                    lambda: self._client.write_registers(address, values, device_id=self.device_id),
-                )
-            elif len(values) == 1:
-                self._execute(
-                    what,
-                    5,
-                    lambda: self._client.write_coil(
-                        address, bool(values[0]), device_id=self.device_id
-                    ),
-                )
-            else:
-                self._execute(
-                    what,
-                    15,
-                    lambda: self._client.write_coils(
-                        address, [bool(v) for v in values], device_id=self.device_id
-                    ),
-                )
+            self._execute(what, function_code, address, len(values), values)
 
         self._run(what, once, retry=retry, interruptible=interruptible)
 
@@ -455,3 +500,126 @@ class ModbusTransport:
             self.write_block(
                 block.table, block.address, words, retry=retry, interruptible=interruptible
             )
+
+
+class ModbusTransport(BlockTransport):
+    """Reads and writes one Modbus TCP device, with counting, error mapping and retries."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int = 502,
+        *,
+        device_id: int = 1,
+        timeout: float = 1.0,
+        retry: RetryPolicy | None = None,
+        name: str = "device",
+    ) -> None:
+        super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
+        # retries=0: pymodbus must never resend a request on its own (reference 5).
+        self._client = ModbusTcpClient(
+            host,
+            port=port,
+            timeout=timeout,
+            retries=0,
+            reconnect_delay=0,
+            trace_packet=self._count_bytes,
+        )
+        c = self._client
+        self._calls: dict[int, Callable[[int, int, list[int] | None], ModbusPDU]] = {
+            1: lambda a, n, _v: c.read_coils(a, count=n, device_id=self.device_id),
+            2: lambda a, n, _v: c.read_discrete_inputs(a, count=n, device_id=self.device_id),
+            3: lambda a, n, _v: c.read_holding_registers(a, count=n, device_id=self.device_id),
+            4: lambda a, n, _v: c.read_input_registers(a, count=n, device_id=self.device_id),
+            5: lambda a, _n, v: c.write_coil(a, bool(v and v[0]), device_id=self.device_id),
+            15: lambda a, _n, v: c.write_coils(
+                a, [bool(b) for b in v or ()], device_id=self.device_id
+            ),
+            16: lambda a, _n, v: c.write_registers(a, list(v or ()), device_id=self.device_id),
+        }
+
+    def _link_open(self) -> bool:
+        return bool(self._client.connected)
+
+    def _open_link(self) -> None:
+        if not self._client.connect():  # type: ignore[no-untyped-call]
+            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}")
+
+    def _close_link(self) -> None:
+        self._client.close()  # type: ignore[no-untyped-call]
+
+    def _count_bytes(self, sending: bool, data: bytes) -> bytes:
+        if sending:
+            self.stats.bytes_sent += len(data)
+        else:
+            self.stats.bytes_received += len(data)
+        return data
+
+    def _exchange(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        """One pymodbus call; every pymodbus failure mapped to a TransportError."""
+        try:
+            response = self._calls[function_code](address, count, values)
+        except ConnectionException as exc:
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        except ModbusIOException as exc:
+            raise ResponseTimeoutError(
+                f"{self.name}: no answer to {what} within {self.timeout:g} s"
+            ) from exc
+        except ModbusException as exc:
+            raise TransportError(f"{self.name}: {what} failed: {exc}") from exc
+        except OSError as exc:
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        if isinstance(response, ExceptionResponse) or response.isError():
+            code = int(getattr(response, "exception_code", 0))
+            error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
+            raise error_class(f"{self.name}: device refused {what}", code=code)
+        if values is not None:
+            return []
+        if function_code in (1, 2):
+            return [int(b) for b in response.bits[:count]]
+        return list(response.registers)
+
+
+#: ``scheme://name`` -> factory of a transport for one device role ("robot", "gripper").
+TransportFactory = Callable[..., Transport]
+_ENDPOINTS: dict[str, TransportFactory] = {}
+_ENDPOINTS_LOCK = threading.Lock()
+
+
+def register_endpoint(url: str, factory: TransportFactory) -> None:
+    """Make ``url`` (e.g. ``sim://sim-1``) open transports through ``factory``."""
+    with _ENDPOINTS_LOCK:
+        _ENDPOINTS[url] = factory
+
+
+def unregister_endpoint(url: str) -> None:
+    """Forget ``url`` (safe when unknown)."""
+    with _ENDPOINTS_LOCK:
+        _ENDPOINTS.pop(url, None)
+
+
+def open_transport(
+    host: str,
+    port: int,
+    *,
+    role: str = "robot",
+    device_id: int = 1,
+    timeout: float = 1.0,
+    retry: RetryPolicy | None = None,
+    name: str = "device",
+) -> Transport:
+    """A Modbus TCP transport to ``host:port``, or an in-process one for a ``sim://`` name."""
+    if "://" not in host:
+        return ModbusTransport(
+            host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
+        )
+    with _ENDPOINTS_LOCK:
+        factory = _ENDPOINTS.get(host)
+    if factory is None:
+        known = ", ".join(sorted(_ENDPOINTS)) or "none"
+        raise ConnectError(
+            f"no in-process endpoint {host!r} (started simulators in this process: {known})"
+        )
+    return factory(role=role, device_id=device_id, timeout=timeout, retry=retry, name=name)

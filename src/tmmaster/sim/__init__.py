@@ -2,7 +2,9 @@
 
 Like python-can's virtual bus, the simulator is part of the library: the same master
 code runs against it and against a real robot. Start one with
-``with Simulator() as sim:`` (a free loopback port) or ``python -m tmmaster.sim``.
+``with Simulator() as sim:`` (a free loopback port) or ``python -m tmmaster.sim``;
+``Simulator(listen=False)`` opens no socket and is reached in-process at ``sim.url``
+(``Robot(sim.url)``, or ``Robot(..., transport=MemoryTransport(sim))``).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from ._faults import (
     parse_fault,
 )
 from ._kinematic import DEFAULT_HOME, KinematicBackend
+from ._memory import MemoryTransport
 from ._server import RequestRecord
 from ._simulator import Simulator
 from ._world import DEFAULT_PART_POSE, TableObject, World
@@ -40,6 +43,7 @@ __all__ = [
     "GripperState",
     "KinematicBackend",
     "LateAckFault",
+    "MemoryTransport",
     "ModbusExceptionFault",
     "MotionRecord",
     "ObjectState",

@@ -27,7 +27,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 
 from pymodbus.constants import ExcCodes
@@ -35,7 +35,7 @@ from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from .._exceptions import IllegalAddressError, IllegalValueError
+from .._exceptions import ConnectError, IllegalAddressError, IllegalValueError
 from .._registers import Table
 from ._faults import (
     DropConnectionsFault,
@@ -168,6 +168,23 @@ class _Request:
     values: tuple[int, ...] | None
 
 
+@dataclass(frozen=True)
+class MemoryAnswer:
+    """What an in-memory request got back from :class:`DeviceServer`."""
+
+    #: Words read (bits as 0/1); empty for writes and refusals.
+    words: list[int] = field(default_factory=list)
+    #: Modbus exception code, or 0.
+    refused: int = 0
+    #: Wall seconds the answer is late (slow_responses).
+    delay_s: float = 0.0
+    #: The data is untouched yet: call ``memory_apply`` after ``delay_s``.
+    pending: bool = False
+    #: "none"; "link" (link was down: request not sent); "request" (lost, not executed);
+    #: "answer" (executed, answer lost).
+    lost: str = "none"
+
+
 def _describe(pdu: ModbusPDU) -> _Request | None:
     """Table, address, count and written values of a request (None: not a data request)."""
     table = _TABLE_OF_FC.get(pdu.function_code)
@@ -214,8 +231,15 @@ class DeviceServer:
         log: RequestLog,
         device_id: int | None = None,
         max_connections: int | None = None,
+        tcp: bool = True,
     ) -> None:
         self.name = name
+        #: False: no socket at all, only in-memory links (see :meth:`memory_connect`).
+        self.tcp = tcp
+        self._accepting = False
+        # In-memory links: ids of the open ones; a dropped link's id is forgotten.
+        self._links: set[int] = set()
+        self._next_link = 0
         self._bank = bank
         self._host = host
         self._port = port
@@ -242,8 +266,8 @@ class DeviceServer:
 
     @property
     def listening(self) -> bool:
-        """True while the listener accepts connections."""
-        return self._server is not None
+        """True while the listener accepts connections (TCP or in-memory)."""
+        return self._accepting
 
     async def start(self) -> None:
         """Bind and start accepting connections."""
@@ -261,6 +285,9 @@ class DeviceServer:
         await self._unlisten()
 
     async def _listen(self) -> None:
+        self._accepting = True
+        if not self.tcp:
+            return
         server = ModbusTcpServer(
             self._sim_device(),
             address=(self._host, self._port),
@@ -277,6 +304,8 @@ class DeviceServer:
         self._server = server
 
     async def _unlisten(self) -> None:
+        self._accepting = False
+        self._links.clear()
         server, self._server = self._server, None
         if server is None:
             return
@@ -366,7 +395,21 @@ class DeviceServer:
 
     def _gate(self, pdu: ModbusPDU) -> ModbusPDU:
         request = _describe(pdu)
-        refused = self._check(pdu, request)
+        refused, lose = self._admit(pdu.dev_id, pdu.function_code, request, pdu.address, pdu.count)
+        if refused:
+            return _Refusal(pdu, refused, 0.0 if lose == "request" else self._delay_s())
+        return pdu
+
+    def _admit(
+        self,
+        device_id: int,
+        function_code: int,
+        request: _Request | None,
+        address: int,
+        count: int,
+    ) -> tuple[int, str]:
+        """Check, count and log one request (TCP or in-memory): (refusal code, what is lost)."""
+        refused = self._check(device_id, request)
         lose = self._count_request(request)
         if not refused and lose == "request":
             # Lose the request itself: cut every link now and never execute it (the
@@ -377,21 +420,19 @@ class DeviceServer:
             RequestRecord(
                 time=time.time(),
                 server=self.name,
-                device_id=pdu.dev_id,
-                function_code=pdu.function_code,
-                address=request.address if request else pdu.address,
-                count=request.count if request else pdu.count,
+                device_id=device_id,
+                function_code=function_code,
+                address=request.address if request else address,
+                count=request.count if request else count,
                 values=request.values if request else None,
                 refused=int(refused),
             )
         )
-        if refused:
-            return _Refusal(pdu, refused, 0.0 if lose == "request" else self._delay_s())
-        return pdu
+        return int(refused), lose
 
-    def _check(self, pdu: ModbusPDU, request: _Request | None) -> int:
+    def _check(self, device_id: int, request: _Request | None) -> int:
         """Exception code to answer with, or 0 to let the request through."""
-        if self._device_id is not None and pdu.dev_id != self._device_id:
+        if self._device_id is not None and device_id != self._device_id:
             return ExcCodes.GATEWAY_NO_RESPONSE
         if request is None:
             return ExcCodes.ILLEGAL_FUNCTION
@@ -449,9 +490,94 @@ class DeviceServer:
 
     def drop_connections(self) -> None:
         """Close every client connection (the listener keeps accepting)."""
+        self._links.clear()
         if self._server is not None:
             for handler in list(self._server.active_connections.values()):
                 handler.close()
+
+    # -- in-memory links (same checks, log and faults as a TCP request) ------------------
+
+    def memory_connect(self) -> int:
+        """Open an in-memory link; its id. Raises ConnectError while not listening."""
+        if not self._accepting:
+            raise ConnectError(f"simulated {self.name}: not listening (connection refused)")
+        self._next_link += 1
+        link = self._next_link
+        if self._max_connections is None or len(self._links) < self._max_connections:
+            self._links.add(link)
+        # Else, as over TCP, the newcomer is accepted and closed at once: its first
+        # request finds the link gone.
+        return link
+
+    def memory_disconnect(self, link: int) -> None:
+        """Close an in-memory link."""
+        self._links.discard(link)
+
+    def memory_request(
+        self,
+        link: int,
+        device_id: int,
+        function_code: int,
+        address: int,
+        count: int,
+        values: Sequence[int] | None,
+    ) -> MemoryAnswer:
+        """Serve one request of an in-memory link through the TCP path's gate and faults.
+
+        With a ``slow_responses`` fault the data is not touched here: the caller waits
+        ``delay_s`` and then calls :meth:`memory_apply` (as the TCP server touches the
+        data only after its delay).
+        """
+        if link not in self._links:
+            return MemoryAnswer(lost="link")  # the request never reached the device
+        table = _TABLE_OF_FC.get(function_code)
+        request = (
+            None
+            if table is None
+            else _Request(table, address, count, None if values is None else tuple(values))
+        )
+        refused, lose = self._admit(device_id, function_code, request, address, count)
+        if lose == "request":
+            return MemoryAnswer(refused=refused, lost="request")
+        delay = self._delay_s()
+        if refused:
+            return MemoryAnswer(refused=refused, delay_s=delay)
+        if delay > 0:
+            return MemoryAnswer(delay_s=delay, pending=True)
+        return self._finish(function_code, address, count, values)
+
+    def memory_apply(
+        self, function_code: int, address: int, count: int, values: Sequence[int] | None
+    ) -> MemoryAnswer:
+        """Touch the data of a request admitted by :meth:`memory_request` (after a delay)."""
+        return self._finish(function_code, address, count, values)
+
+    def _finish(
+        self, function_code: int, address: int, count: int, values: Sequence[int] | None
+    ) -> MemoryAnswer:
+        table = _TABLE_OF_FC[function_code]
+        words: list[int] = []
+        refused = 0
+        try:
+            if values is not None:
+                self._bank.write(table, address, [int(v) for v in values])
+            else:
+                words = self._bank.read(table, address, count)
+        except IllegalAddressError:
+            refused = ExcCodes.ILLEGAL_ADDRESS
+        except IllegalValueError:
+            refused = ExcCodes.ILLEGAL_VALUE
+        lost = "none"
+        if self._lose_answer:
+            # Executed; the link goes down before the answer is delivered.
+            self._lose_answer = False
+            self.drop_connections()
+            lost = "answer"
+        if self._pending:
+            # The answer is delivered when this returns: due faults act right after it.
+            due, self._pending = self._pending, []
+            asyncio.get_running_loop().call_soon(self._fire, due)
+        return MemoryAnswer(words=words, refused=int(refused), lost=lost)
 
     async def _stop_listening(self, duration_s: float) -> None:
         try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import math
 import threading
 import time
@@ -18,10 +19,13 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from .._exceptions import ConfigError
 from .._pose import Pose
 from .._profiles import gripper_profile, robot_profile
 from .._registers import GripperProfile, RobotProfile
+from .._retry import RetryPolicy
 from .._robot_models import robot_model
+from .._transport import Transport, register_endpoint, unregister_endpoint
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
 from ._controller import MotionRecord, RobotController
@@ -37,6 +41,9 @@ T = TypeVar("T")
 
 #: How long a call from another thread waits for the loop before giving up.
 _CALL_TIMEOUT_S = 10.0
+
+#: Numbers the ``sim://sim-N`` names of simulators made without a name.
+_SIM_NUMBERS = itertools.count(1)
 
 
 def _as_fault(fault: Fault | str) -> Fault:
@@ -63,19 +70,24 @@ class Simulator:
         init_time_s: float = 0.2,
         request_listener: Callable[[RequestRecord], None] | None = None,
         initial_seq: int = 0,
+        listen: bool = True,
+        name: str | None = None,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ValueError(f"time_scale must be > 0, got {time_scale}")
         if not (math.isfinite(tick_hz) and 0 < tick_hz <= 1000):
             raise ValueError(f"tick_hz must be in (0, 1000], got {tick_hz}")
-        for name, value in (("port", port), ("gripper_port", gripper_port)):
+        for option, value in (("port", port), ("gripper_port", gripper_port)):
             if not 0 <= value <= 65535:
-                raise ValueError(f"{name} must be 0..65535, got {value}")
+                raise ValueError(f"{option} must be 0..65535, got {value}")
         self._profile = robot_profile(profile)
         self._model = robot_model(model)
         self._time_scale = float(time_scale)
         self._tick_hz = float(tick_hz)
         self._host = host
+        #: False: no TCP listener; reach it in-process through :attr:`url`.
+        self.listen = listen
+        self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
         self._backend: PhysicsBackend = (
             backend if backend is not None else KinematicBackend(self._model, world=World(objects))
         )
@@ -100,6 +112,7 @@ class Simulator:
             port=port,
             log=self._log,
             device_id=None,  # the TM controller ignores the unit id
+            tcp=listen,
         )
         self._servers = [self._robot_server]
         self._gripper_profile: GripperProfile | None = None
@@ -133,6 +146,7 @@ class Simulator:
                 # server (blog-2fg7) answers any.
                 device_id=gp.device_id if gp.driver == "onrobot-2fg7" else None,
                 max_connections=gp.max_connections,
+                tcp=listen,
             )
             self._servers.append(self._gripper_server)
         for server in self._servers:
@@ -151,6 +165,11 @@ class Simulator:
     def host(self) -> str:
         """Address the servers listen on."""
         return self._host
+
+    @property
+    def url(self) -> str:
+        """The in-process address (``sim://name``): ``Robot(sim.url)`` needs no socket."""
+        return self._url
 
     @property
     def port(self) -> int:
@@ -199,6 +218,7 @@ class Simulator:
         except BaseException:
             self.close()
             raise
+        register_endpoint(self._url, self._open_memory_transport)
         return self
 
     def close(self) -> None:
@@ -206,6 +226,7 @@ class Simulator:
         if self._closed:
             return
         self._closed = True
+        unregister_endpoint(self._url)
         loop, thread = self._loop, self._thread
         if loop is None or thread is None:
             return
@@ -297,6 +318,39 @@ class Simulator:
             return fn()
 
         return asyncio.run_coroutine_threadsafe(wrapper(), loop).result(_CALL_TIMEOUT_S)
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` on the simulator's loop thread and return its result."""
+        return self._call(fn)
+
+    def call_later(self, delay_s: float, fn: Callable[[], object]) -> None:
+        """Run ``fn`` on the loop thread after ``delay_s`` wall seconds (dropped when closed)."""
+        loop = self._loop
+        if loop is not None and not self._closed and loop.is_running():
+            loop.call_soon_threadsafe(loop.call_later, max(delay_s, 0.0), fn)
+
+    def device_server(self, device: str = "robot") -> DeviceServer:
+        """The request path (gate, log, network faults) of ``"robot"`` or ``"gripper"``."""
+        if device == "robot":
+            return self._robot_server
+        if device == "gripper" and self._gripper_server is not None:
+            return self._gripper_server
+        raise ConfigError(f"this simulator has no {device!r} device (known: robot, gripper)")
+
+    def _open_memory_transport(
+        self,
+        *,
+        role: str,
+        device_id: int,
+        timeout: float,
+        retry: RetryPolicy | None,
+        name: str,
+    ) -> Transport:
+        from ._memory import MemoryTransport
+
+        return MemoryTransport(
+            self, role, device_id=device_id, timeout=timeout, retry=retry, name=name
+        )
 
     @property
     def request_log(self) -> list[RequestRecord]:

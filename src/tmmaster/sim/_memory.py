@@ -1,0 +1,131 @@
+"""A transport to an in-process simulator: the TCP server's request path without sockets.
+
+:class:`MemoryTransport` is a :class:`~tmmaster._transport.BlockTransport` like the
+Modbus TCP transport: the same counters, retry rules and error types. Each request is
+handed to the simulator's event loop thread and served by the same
+:class:`~tmmaster.sim._server.DeviceServer` gate as a TCP request: the device-id
+check, the request log and the network faults. A dropped connection raises
+:class:`ConnectionLostError` (after the write was applied when the fault loses the
+answer), a ``slow_responses`` delay longer than the timeout raises
+:class:`ResponseTimeoutError` while the device still applies the write later, and
+``stop_listening`` refuses connections for its duration.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from .._exceptions import (
+    MODBUS_EXCEPTIONS,
+    ConnectError,
+    ConnectionLostError,
+    ModbusExceptionError,
+    ResponseTimeoutError,
+)
+from .._retry import RetryPolicy
+from .._transport import BlockTransport
+from ._server import DeviceServer, MemoryAnswer
+
+if TYPE_CHECKING:
+    from ._simulator import Simulator
+
+
+def frame_bytes(function_code: int, count: int, *, request: bool, refused: bool) -> int:
+    """Size of the Modbus TCP frame (7-byte MBAP header + PDU) a request or answer takes."""
+    header = 7
+    bits = (count + 7) // 8
+    if request:
+        pdu = {5: 5, 15: 6 + bits, 16: 6 + 2 * count}.get(function_code, 5)
+    elif refused:
+        pdu = 2
+    elif function_code in (1, 2):
+        pdu = 2 + bits
+    elif function_code in (3, 4):
+        pdu = 2 + 2 * count
+    else:
+        pdu = 5
+    return header + pdu
+
+
+class MemoryTransport(BlockTransport):
+    """Talks to one device (``"robot"`` or ``"gripper"``) of an in-process Simulator."""
+
+    def __init__(
+        self,
+        sim: Simulator,
+        device: str = "robot",
+        *,
+        device_id: int = 1,
+        timeout: float = 1.0,
+        retry: RetryPolicy | None = None,
+        name: str | None = None,
+    ) -> None:
+        server = sim.device_server(device)
+        super().__init__(
+            sim.url,
+            server.port,
+            device_id=device_id,
+            timeout=timeout,
+            retry=retry,
+            name=name or device,
+        )
+        self._sim = sim
+        self._server: DeviceServer = server
+        self._link: int | None = None
+
+    def _link_open(self) -> bool:
+        return self._link is not None
+
+    def _open_link(self) -> None:
+        if not self._sim.running:
+            raise ConnectError(f"cannot connect to {self.name} at {self.host}: not running")
+        self._link = self._sim.call(self._server.memory_connect)
+
+    def _close_link(self) -> None:
+        link, self._link = self._link, None
+        if link is not None and self._sim.running:
+            self._sim.call(lambda: self._server.memory_disconnect(link))
+
+    def _exchange(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        link = self._link
+        if link is None or not self._sim.running:
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}")
+        self.stats.bytes_sent += frame_bytes(function_code, count, request=True, refused=False)
+        device_id = self.device_id
+        answer: MemoryAnswer = self._sim.call(
+            lambda: self._server.memory_request(
+                link, device_id, function_code, address, count, values
+            )
+        )
+        if answer.lost != "none":
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}")
+        if answer.delay_s > 0:
+            if answer.delay_s >= self.timeout:
+                time.sleep(self.timeout)
+                if answer.pending:
+                    # The device still executes it once its delay is over, as over TCP.
+                    self._sim.call_later(
+                        answer.delay_s - self.timeout,
+                        lambda: self._server.memory_apply(function_code, address, count, values),
+                    )
+                raise ResponseTimeoutError(
+                    f"{self.name}: no answer to {what} within {self.timeout:g} s"
+                )
+            time.sleep(answer.delay_s)
+            if answer.pending:
+                answer = self._sim.call(
+                    lambda: self._server.memory_apply(function_code, address, count, values)
+                )
+                if answer.lost != "none":
+                    raise ConnectionLostError(f"{self.name}: connection lost during {what}")
+        refused = bool(answer.refused)
+        self.stats.bytes_received += frame_bytes(
+            function_code, count, request=False, refused=refused
+        )
+        if refused:
+            error_class = MODBUS_EXCEPTIONS.get(answer.refused, ModbusExceptionError)
+            raise error_class(f"{self.name}: device refused {what}", code=answer.refused)
+        return answer.words

@@ -1,0 +1,93 @@
+"""The in-memory transport: the simulator's request path (gate, log, faults) without sockets."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+import tmmaster
+from tmmaster import ConnectError, ConnectionLostError, ResponseTimeoutError, RetryPolicy, Table
+from tmmaster.sim import MemoryTransport, Simulator
+
+ONCE = RetryPolicy(attempts=1)
+
+
+@pytest.fixture
+def sim() -> Iterator[Simulator]:
+    with Simulator("article", listen=False, time_scale=20) as s:
+        yield s
+
+
+def test_a_memory_robot_is_a_transport_and_logs_like_tcp(sim: Simulator) -> None:
+    with tmmaster.connect(sim.url, profile="article", poll_interval_s=0.01) as robot:
+        assert isinstance(robot.transport, tmmaster.Transport)
+        assert isinstance(robot.transport, MemoryTransport)
+        before = robot.stats.requests
+        sim.clear_request_log()
+        robot.status()
+        (record,) = sim.request_log
+        assert (record.server, record.function_code, record.values) == ("robot", 3, None)
+        robot.move_to(tmmaster.Pose(300, -200, 200, 180, 0, 90), speed=30)
+    assert sim.tcp_pose().is_close(tmmaster.Pose(300, -200, 200, 180, 0, 90), mm=0.01)
+    assert robot.stats.requests == before + len(sim.request_log)
+    assert robot.stats.bytes_sent > 0
+
+
+def test_a_sim_without_listener_opens_no_socket_and_unknown_names_are_refused() -> None:
+    with Simulator("article", listen=False) as sim:
+        assert sim.port == 0
+        url = sim.url
+    with pytest.raises(ConnectError, match="no in-process endpoint"):
+        tmmaster.Robot(url, profile="article")
+
+
+def test_a_lost_answer_applies_the_write_then_raises_connection_lost(sim: Simulator) -> None:
+    with MemoryTransport(sim, retry=ONCE) as link:
+        sim.inject("drop_connections:lose=answer")
+        with pytest.raises(ConnectionLostError):
+            link.write_block(Table.HOLDING, 0x0200, [0], retry=False)
+        assert sim.request_log[-1].refused == 0  # it arrived and was executed
+        link.connect()  # a new link works again
+        assert link.stats.reconnects == 1
+
+
+def test_a_lost_request_is_never_executed(sim: Simulator) -> None:
+    with MemoryTransport(sim, retry=ONCE) as link:
+        sim.inject("drop_connections:lose=request")
+        with pytest.raises(ConnectionLostError):
+            link.write_block(Table.HOLDING, 0x0200, [0], retry=False)
+        assert sim.request_log[-1].refused != 0
+
+
+def test_a_slow_answer_times_out(sim: Simulator) -> None:
+    with MemoryTransport(sim, retry=ONCE, timeout=0.05) as link:
+        sim.inject("slow_responses:delay_s=0.1")
+        with pytest.raises(ResponseTimeoutError):
+            link.read_block(Table.HOLDING, 0x0200, 1)
+
+
+def test_stop_listening_refuses_connections_for_a_while(sim: Simulator) -> None:
+    with MemoryTransport(sim, retry=ONCE) as link:
+        sim.inject("stop_listening:after_requests=1,duration_s=0.3")
+        link.read_block(Table.HOLDING, 0x0200, 1)  # answered, then the outage starts
+        sim.wait_for(lambda: not sim.device_server().listening, timeout=2)
+        with pytest.raises(ConnectionLostError):
+            link.read_block(Table.HOLDING, 0x0200, 1)
+        with pytest.raises(ConnectError):
+            link.connect()
+        sim.wait_for(lambda: sim.device_server().listening, timeout=2)
+        link.connect()
+        assert link.read_block(Table.HOLDING, 0x0200, 1) == [0]
+
+
+def test_the_onrobot_gripper_serves_one_memory_link_at_a_time() -> None:
+    sim = Simulator("article", listen=False, gripper="onrobot-2fg7")
+    with (
+        sim,
+        MemoryTransport(sim, "gripper", device_id=65, retry=ONCE) as first,
+        MemoryTransport(sim, "gripper", device_id=65, retry=ONCE) as second,
+    ):
+        assert first.read_block(Table.HOLDING, 259, 1)
+        with pytest.raises(ConnectionLostError):
+            second.read_block(Table.HOLDING, 259, 1)
