@@ -29,6 +29,8 @@ from tmmaster import (
     gripper_profile,
 )
 from tmmaster._gripper import GripperLink
+from tmmaster._profiles import profile_from_data
+from tmmaster._registers import GripperProfile
 from tmmaster.sim import DEFAULT_PART_POSE, RequestRecord, Simulator
 
 Factory = Callable[..., Simulator]
@@ -250,7 +252,9 @@ def test_onrobot_limits_are_read_from_the_device_at_connect(
     )
     assert external.limits != internal.limits
     log = gripper_requests(sim)
-    assert [(r.function_code, r.address, r.count) for r in log] == [(3, 259, 4)] * 2
+    # Width limits, then force ceiling (0x0405) and product code (0x0600).
+    connect_reads = [(3, 259, 4), (3, 1029, 1), (3, 1536, 1)]
+    assert [(r.function_code, r.address, r.count) for r in log] == connect_reads * 2
     assert {r.device_id for r in log} == {65}
 
 
@@ -368,3 +372,59 @@ def test_onrobot_second_connection_is_a_clear_error(tm_simulator_factory: Factor
         assert first.status().width_mm == pytest.approx(39.0, abs=0.5)
     finally:
         first.disconnect()
+
+
+def test_onrobot_force_zero_is_accepted_and_the_live_ceiling_is_enforced(
+    tm_simulator_factory: Factory,
+) -> None:
+    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    gripper = onrobot(sim, force_n=0.0, speed_percent=1)
+    try:
+        assert gripper.max_force_n == 100.0  # read from 0x0405 at connect
+        assert gripper.product == "2FG7"
+        gripper.move_to_width(20.0)  # force 0 = the device's minimum, speed 1 %
+        sim.clear_request_log()
+        for force in (10.0, 120.0):  # below 20 N, above the live ceiling
+            gripper.force_n = force
+            with pytest.raises(ConfigError, match=r"0 \(the device's minimum\) or 20\.\.100 N"):
+                gripper.move_to_width(20.0)
+        gripper.force_n = 40.0
+        gripper.speed_percent = 0
+        with pytest.raises(ConfigError, match=r"outside 1\.\.100 %"):
+            gripper.move_to_width(20.0)
+        assert sim.request_log == []
+    finally:
+        gripper.disconnect()
+
+
+@pytest.mark.parametrize(("force", "speed"), [(10.0, 50), (141.0, 50), (40.0, 0), (40.0, 101)])
+def test_onrobot_bad_force_or_speed_is_refused_at_construction(force: float, speed: int) -> None:
+    link = GripperLink("127.0.0.1", 9)  # never contacted
+    with pytest.raises(ConfigError):
+        OnRobot2FG7Gripper(
+            gripper_profile("onrobot-2fg7"), link, force_n=force, speed_percent=speed
+        )
+
+
+def test_onrobot_refuses_a_device_that_is_not_a_2fg(tm_simulator_factory: Factory) -> None:
+    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim._call(lambda: sim._gripper_bank.set("product_code", 0x20))  # type: ignore[union-attr]
+    with pytest.raises(GripperError, match=r"0x0020 \(RG2\), not a 2FG7"):
+        onrobot(sim)
+
+
+def test_onrobot_dual_quick_changer_unit_ids(tm_simulator_factory: Factory) -> None:
+    secondary = profile_from_data({"extends": "onrobot-2fg7", "device_id": 67})
+    assert isinstance(secondary, GripperProfile)
+    sim = tm_simulator_factory("article", gripper=secondary)
+    assert sim.gripper_port is not None
+    link = GripperLink("127.0.0.1", sim.gripper_port, timeout_s=2.0)
+    gripper = OnRobot2FG7Gripper(secondary, link)
+    gripper.connect()
+    try:
+        gripper.move_to_width(15.0)
+    finally:
+        gripper.disconnect()
+    assert {r.device_id for r in gripper_requests(sim)} == {67}
+    with pytest.raises(ConfigError, match="65, 66 or 67"):
+        profile_from_data({"extends": "onrobot-2fg7", "device_id": 1})

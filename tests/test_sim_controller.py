@@ -987,21 +987,21 @@ def test_blog_gripper_stop() -> None:
 
 
 def onrobot(
-    backend: KinematicBackend, *, faults: Sequence[Fault] = ()
+    backend: KinematicBackend, *, faults: Sequence[Fault] = (), **options: Any
 ) -> tuple[OnRobot2FG7Device, RegisterBank]:
     profile = gripper_profile("onrobot-2fg7")
     bank = RegisterBank(profile)
     device = OnRobot2FG7Device(
-        profile, bank, backend, faults=faults, init_time_s=INIT_S, log=ListLogger()
+        profile, bank, backend, faults=faults, init_time_s=INIT_S, log=ListLogger(), **options
     )
     run(device, INIT_S)
     return device, bank
 
 
 def onrobot_grip(
-    bank: RegisterBank, width_mm: float, *, command: int = 1, speed: int = 100
+    bank: RegisterBank, width_mm: float, *, command: int = 1, speed: int = 100, force: int = 60
 ) -> None:
-    values = {"target_width": width_mm, "target_force": 60, "target_speed": speed}
+    values = {"target_width": width_mm, "target_force": force, "target_speed": speed}
     bank.write(Table.HOLDING, 0, [*words(bank.register_map, values), command])
 
 
@@ -1038,7 +1038,35 @@ def test_onrobot_grip_external_on_the_part() -> None:
     run_until(device, lambda: not busy(bank))
     assert gripped(bank)
     assert bank.get("external_width") == 30.0
-    assert bank.get("force") == 60
+    # Signed, negative while closing on the object (OnRobot's fixture seeds -40).
+    assert bank.get("force") == -60
+    assert bank.read(Table.HOLDING, 263, 1) == [65536 - 60]
+
+
+@pytest.mark.parametrize(("requested", "applied"), [(0, 20), (5, 20), (60, 60), (140, 100)])
+def test_onrobot_force_zero_is_the_minimum_and_max_force_is_the_ceiling(
+    requested: int, applied: int
+) -> None:
+    device, bank = onrobot(KinematicBackend(MODEL, home=PART))
+    assert bank.get("max_force") == 100  # the default power setting's ceiling (fixture)
+    onrobot_grip(bank, 10.0, force=requested)
+    device.tick(DT)
+    run_until(device, lambda: not busy(bank))
+    assert bank.get("force") == -applied
+
+
+def test_onrobot_serves_the_official_fixtures_identity_registers() -> None:
+    _, bank = onrobot(KinematicBackend(MODEL))
+    assert bank.read(Table.HOLDING, 0x0600, 1) == [0xC0]
+    assert bank.read(Table.HOLDING, 0x0604, 2) == [0x0100, 33]
+    assert bank.read(Table.HOLDING, 0x0404, 4) == [14, 100, 0, 95]
+    assert bank.read(Table.HOLDING, 0x0220, 10)[0] == 0xB422
+    _, bank14 = onrobot(KinematicBackend(MODEL), product_code=0xC1)
+    assert bank14.read(Table.HOLDING, 0x0600, 1) == [0xC1]
+    assert bank14.read(Table.HOLDING, 0x0604, 2) == [0x0101, 21]
+    assert bank14.read(Table.HOLDING, 0x0407, 1) == [196]
+    with pytest.raises(ValueError, match="product_code"):
+        onrobot(KinematicBackend(MODEL), product_code=0x20)
 
 
 def test_onrobot_grip_in_the_air_and_grasp_miss() -> None:
@@ -1057,11 +1085,12 @@ def test_onrobot_grip_in_the_air_and_grasp_miss() -> None:
 
 def test_onrobot_speed_mapping_drives_the_fingers() -> None:
     device, _ = onrobot(KinematicBackend(MODEL))
-    assert device.speed_mm_s(10) == pytest.approx(16.0)
+    # Target speed is 1..100 %.
+    assert device.speed_mm_s(1) == pytest.approx(16.0)
     assert device.speed_mm_s(100) == pytest.approx(450.0)
-    assert device.speed_mm_s(55) == pytest.approx(233.0)
+    assert device.speed_mm_s(50.5) == pytest.approx(233.0)
     slow_device, slow_bank = onrobot(KinematicBackend(MODEL))
-    onrobot_grip(slow_bank, 7.0, speed=10)  # 32 mm at 16 mm/s: 2 s
+    onrobot_grip(slow_bank, 7.0, speed=1)  # 32 mm at 16 mm/s: 2 s
     slow_device.tick(DT)
     took = run_until(slow_device, lambda: not busy(slow_bank))
     assert took == pytest.approx(2.0, abs=2 * DT)

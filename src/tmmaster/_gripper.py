@@ -7,9 +7,10 @@
   program's sequence handshake like motions; the program reports the grasp.
 * :class:`Blog2FG7Gripper`: the second article's map on its own connection: control
   16 executes, the device clears control to acknowledge, gOBJ reports the outcome.
-* :class:`OnRobot2FG7Gripper`: the real OnRobot 2FG7 on its own connection (unit id
-  65): width in mm, force in N, speed %, busy and grip-detected bits, width limits
-  read at connect time.
+* :class:`OnRobot2FG7Gripper`: the real OnRobot 2FG7 / 2FG14 on its own connection
+  (unit id 65; 66 / 67 on a Dual Quick Changer): width in mm, force in N (0 = the
+  device's minimum, the ceiling read from the device), speed 1-100 %, busy and
+  grip-detected bits; product code, width limits and force ceiling read at connect.
 
 No driver sleeps a fixed time to "let the gripper finish": each polls status. Every
 gripper wait also watches the robot: an e-stop or robot error ends it at once with the
@@ -412,8 +413,25 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         return self._move(0.0, timeout_s)
 
 
+#: The 2FG7's smallest target force other than 0 (0 = "the device's minimum"); the
+#: largest is read from the device (max_force, 0x0405): it follows the power setting.
+ONROBOT_MIN_FORCE_N = 20.0
+#: Products that speak the 2FG map (product code labels in the profile).
+ONROBOT_2FG_PRODUCTS = ("2FG7", "2FG14")
+
+
+def _check_force_speed(kind: str, force_n: float, speed_percent: int, ceiling_n: float) -> None:
+    if force_n != 0 and not ONROBOT_MIN_FORCE_N <= force_n <= ceiling_n:
+        raise ConfigError(
+            f"{kind}: force {force_n:g} N must be 0 (the device's minimum) or"
+            f" {ONROBOT_MIN_FORCE_N:g}..{ceiling_n:g} N"
+        )
+    if not 1 <= speed_percent <= 100:
+        raise ConfigError(f"{kind}: speed {speed_percent} % is outside 1..100 %")
+
+
 class OnRobot2FG7Gripper(_OwnConnectionGripper):
-    """The real OnRobot 2FG7 (Compute Box, unit id 65)."""
+    """The real OnRobot 2FG7 or 2FG14 (Compute Box, unit id 65; 66 / 67 on a Dual Quick Changer)."""
 
     def __init__(
         self,
@@ -425,14 +443,23 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         grip: Literal["external", "internal"] = "external",
     ) -> None:
         super().__init__(profile, link)
+        # Checked against the profile's static range now, against the live ceiling
+        # (max_force, read at connect) before every move.
+        _check_force_speed(
+            self.kind, force_n, speed_percent, profile.field("target_force").maximum or 0
+        )
         self.force_n = force_n
         self.speed_percent = speed_percent
         self.grip_mode = grip
         self.limits: tuple[float, float] | None = None
+        #: Largest target force the device accepts now (register max_force, at connect).
+        self.max_force_n: float | None = None
+        #: "2FG7" or "2FG14", from the product code read at connect.
+        self.product: str | None = None
         self.width_tolerance_mm = 0.5
 
     def connect(self) -> None:
-        """Connect and read the width limits (259-262): they depend on the fingers fitted."""
+        """Connect; check the product code; read the width limits and the force ceiling."""
         super().connect()
         names = (
             "min_external_width",
@@ -452,6 +479,17 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
                 " Modbus TCP connection at a time; is another master (or a TMflow"
                 " OnRobot node) connected to it?"
             ) from exc
+        identity = self.read("product_code", "max_force")
+        code = int(identity["product_code"])
+        product = self.profile.field("product_code").label(code)
+        if product not in ONROBOT_2FG_PRODUCTS:
+            self.transport.close()
+            raise GripperError(
+                f"{self.kind}: unit id {self.profile.device_id} reports product code"
+                f" {code:#06x} ({product}), not a 2FG7 (0xc0) or 2FG14 (0xc1)"
+            )
+        self.product = product
+        self.max_force_n = float(identity["max_force"])
         low, high = (
             (values[names[0]], values[names[1]])
             if self.grip_mode == "external"
@@ -461,9 +499,11 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         _log.info(
             "gripper.connected",
             gripper=self.kind,
+            product=product,
             grip=self.grip_mode,
             min_width_mm=self.limits[0],
             max_width_mm=self.limits[1],
+            max_force_n=self.max_force_n,
         )
 
     def _width_field(self) -> str:
@@ -484,11 +524,12 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         self, width_mm: float, *, timeout_s: float | None = None, expect_object: bool = False
     ) -> GripperStatus:
         """Move the fingers to ``width_mm`` (inside the limits read at connect time)."""
-        if self.limits is None:
+        if self.limits is None or self.max_force_n is None:
             raise GripperError(f"{self.kind}: not connected")
         low, high = self.limits
         if not low <= width_mm <= high:
             raise ConfigError(f"{self.kind}: width {width_mm:g} mm outside {low:g}..{high:g} mm")
+        _check_force_speed(self.kind, self.force_n, self.speed_percent, self.max_force_n)
         p = self.profile
         command = p.field("command").code_of(f"grip_{self.grip_mode}")
         self.check_robot()

@@ -367,6 +367,10 @@ class RobotProfile(RegisterMap):
             )
 
 
+#: Unit ids of an OnRobot Compute Box: single gripper, Dual Quick Changer primary, secondary.
+ONROBOT_UNIT_IDS = (65, 66, 67)
+
+
 class GripperProfile(RegisterMap):
     """A gripper's register map; ``driver`` names the protocol spoken over it."""
 
@@ -374,3 +378,14 @@ class GripperProfile(RegisterMap):
     driver: Literal["blog-2fg7", "onrobot-2fg7"]
     #: At most this many TCP connections at once (the OnRobot Compute Box allows one).
     max_connections: Annotated[int, Field(ge=1)] | None = None
+
+    @model_validator(mode="after")
+    def _check_unit_id(self) -> Self:
+        # The Compute Box answers 65 for a single gripper, 66 / 67 for the primary /
+        # secondary gripper on a Dual Quick Changer; any other id is never answered.
+        if self.driver == "onrobot-2fg7" and self.device_id not in ONROBOT_UNIT_IDS:
+            raise ValueError(
+                f"profile {self.name!r}: an OnRobot Compute Box answers unit id 65, 66 or 67,"
+                f" not {self.device_id}"
+            )
+        return self

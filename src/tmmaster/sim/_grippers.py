@@ -26,8 +26,40 @@ from ._faults import Fault, GraspMissFault
 
 #: blog-2fg7 control value that executes a move (rCTR).
 BLOG_EXECUTE = 16
-#: OnRobot 2FG7 product code (register 1536).
+#: OnRobot product codes (register 1536): 2FG7 and 2FG14.
 ONROBOT_2FG7_PRODUCT_CODE = 0xC0
+ONROBOT_2FG14_PRODUCT_CODE = 0xC1
+
+
+def _identity(reg_1031: int, version: int, build: int, git_hash: tuple[int, ...]) -> dict[str, int]:
+    words = {f"firmware_hash_{i}": word for i, word in enumerate(git_hash)}
+    return {
+        "reg_1028": 14,
+        "reg_1031": reg_1031,
+        "firmware_version": version,
+        "firmware_build": build,
+        **words,
+    }
+
+
+#: Identity registers, seeded per product as the test fixture of OnRobot's official ROS 2
+#: driver seeds them (OnRobot/onrobot-ros2, commit f0dcd6cd54b57505e4dc4f36662192be4bb2bbe7,
+#: onrobot_gripper_hardware/tests/support/modbus_tcp_test_server.hpp). Their meaning is
+#: not publicly documented; the simulator serves them so clients that read them work.
+_FIXTURE_IDENTITY: dict[int, dict[str, int]] = {
+    ONROBOT_2FG7_PRODUCT_CODE: _identity(
+        95,
+        0x0100,
+        33,
+        (0xB422, 0x2B25, 0x1054, 0xDEC1, 0x1291, 0x3425, 0xA623, 0x86D2, 0x8939, 0xC375),
+    ),
+    ONROBOT_2FG14_PRODUCT_CODE: _identity(
+        196,
+        0x0101,
+        21,
+        (0x0E03, 0x7259, 0x7CC6, 0x6EF5, 0xF5EC, 0x4174, 0xA143, 0x73E2, 0x3215, 0xD071),
+    ),
+}
 
 
 class _GripperDevice:
@@ -253,9 +285,18 @@ class OnRobot2FG7Device(_GripperDevice):
         max_external_mm: float = 39.0,
         internal_offset_mm: float = 34.0,
         speed_range_mm_s: tuple[float, float] = (16.0, 450.0),
+        min_force_n: float = 20.0,
+        max_force_n: float = 100.0,
+        product_code: int = ONROBOT_2FG7_PRODUCT_CODE,
         step_backend: bool = True,
         log: Logger | None = None,
     ) -> None:
+        if product_code not in _FIXTURE_IDENTITY:
+            raise ValueError(
+                f"product_code must be 0xC0 (2FG7) or 0xC1 (2FG14), got {product_code}"
+            )
+        if not 0 < min_force_n <= max_force_n:
+            raise ValueError("need 0 < min_force_n <= max_force_n")
         super().__init__(
             profile,
             bank,
@@ -269,20 +310,34 @@ class OnRobot2FG7Device(_GripperDevice):
         self._max_ext = max_external_mm
         self._offset = internal_offset_mm
         self._speeds = speed_range_mm_s
+        self._min_force = min_force_n
         self._force = 0.0
+        self._internal_grip = False
         # Presets a master reads at run time instead of hard-coding the stroke.
         bank.set("min_external_width", min_external_mm)
         bank.set("max_external_width", max_external_mm)
         bank.set("min_internal_width", min_external_mm + internal_offset_mm)
         bank.set("max_internal_width", max_external_mm + internal_offset_mm)
-        bank.set("product_code", ONROBOT_2FG7_PRODUCT_CODE)
+        bank.set("product_code", product_code)
+        # The force ceiling of the power setting (the box's default power, fixture value).
+        bank.set("max_force", max_force_n)
+        for name, value in _FIXTURE_IDENTITY[product_code].items():
+            if self._profile.has(name):
+                bank.set(name, value)
         self._publish(True)
 
     def speed_mm_s(self, percent: float) -> float:
-        """Finger speed for a target speed in % (10..100 mapped linearly, clamped)."""
+        """Finger speed for a target speed in % (1..100 mapped linearly, clamped)."""
         low, high = self._speeds
-        pct = min(max(percent, 10.0), 100.0)
-        return low + (pct - 10.0) / 90.0 * (high - low)
+        pct = min(max(percent, 1.0), 100.0)
+        return low + (pct - 1.0) / 99.0 * (high - low)
+
+    def force_n(self, requested: float) -> float:
+        """The force the device applies: 0 = its minimum; else clamped to min..max_force."""
+        ceiling = float(self._bank.get("max_force"))
+        if requested == 0:
+            return self._min_force
+        return min(max(requested, self._min_force), ceiling)
 
     def _handle_commands(self) -> None:
         command = int(self._bank.get("command"))
@@ -303,9 +358,9 @@ class OnRobot2FG7Device(_GripperDevice):
                     grip=label,
                 )
             requested_force = float(self._bank.get("target_force"))
-            force = min(max(requested_force, 20.0), 140.0)
+            force = self.force_n(requested_force)
             percent = float(self._bank.get("target_speed"))
-            if force != requested_force or not 10.0 <= percent <= 100.0:
+            if (requested_force not in (0.0, force)) or not 1.0 <= percent <= 100.0:
                 # Raw network writes can hold anything; the real box limits, we log it.
                 self._log.warning(
                     "sim.value_clamped",
@@ -316,6 +371,7 @@ class OnRobot2FG7Device(_GripperDevice):
             speed = self.speed_mm_s(percent)
             if self._move(clamped, speed_mm_s=speed, force_n=force):
                 self._force = force
+                self._internal_grip = label == "grip_internal"
                 self._publish(True)
         else:
             self._log.warning("sim.command_rejected", device=self._profile.name, command=command)
@@ -333,4 +389,7 @@ class OnRobot2FG7Device(_GripperDevice):
         self._bank.set("status", raw)
         self._bank.set("external_width", round(state.width_mm, 1))
         self._bank.set("internal_width", round(state.width_mm + self._offset, 1))
-        self._bank.set("force", round(self._force) if detected else 0)
+        # Signed: negative while closing on an object (an external grip), as OnRobot's
+        # fixture shows (-40); positive for an internal grip (an assumption).
+        sign = 1 if self._internal_grip else -1
+        self._bank.set("force", sign * round(self._force) if detected else 0)
