@@ -6,9 +6,12 @@ import gc
 import os
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
+
+from tmmaster.sim import Simulator
 
 
 def _open_sockets() -> set[str]:
@@ -50,3 +53,18 @@ def no_leaks() -> Iterator[None]:
         f"test leaked {len(new_threads)} thread(s) {[t.name for t in new_threads]}"
         f" and {len(new_sockets)} socket(s)"
     )
+
+
+@pytest.fixture
+def memory_simulator_factory(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> Callable[..., Simulator]:
+    """Like ``tm_simulator_factory``, but the simulators open no socket: use ``sim.url``.
+
+    A module whose subject is not TCP overrides ``tm_simulator_factory`` with this one.
+    """
+
+    def make(profile: Any = "article", **options: Any) -> Simulator:
+        return tm_simulator_factory(profile, listen=False, **options)
+
+    return make

@@ -1,4 +1,4 @@
-"""The four gripper drivers against the simulator over loopback TCP.
+"""The four gripper drivers against the simulator, in memory (no sockets).
 
 Each test drives a real :class:`~tmmaster.sim.Simulator` through the public driver and
 checks the outcome both from the driver's answer and from the simulated device (its
@@ -35,6 +35,13 @@ from tmmaster.sim import DEFAULT_PART_POSE, RequestRecord, Simulator
 
 Factory = Callable[..., Simulator]
 
+
+@pytest.fixture
+def tm_simulator_factory(memory_simulator_factory: Factory) -> Factory:
+    """The drivers are the subject here, not TCP: simulators in memory."""
+    return memory_simulator_factory
+
+
 #: 100 mm above the part: the fingers close on nothing there.
 ABOVE_PART = Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0)
 
@@ -42,7 +49,7 @@ ABOVE_PART = Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0)
 @contextmanager
 def robot_at(sim: Simulator, pose: Pose, **options: object) -> Iterator[Robot]:
     """A connected robot on ``sim`` (and its gripper), moved to ``pose``; closed afterwards."""
-    robot = Robot("127.0.0.1", sim.port, profile=sim.profile, **options)  # type: ignore[arg-type]
+    robot = Robot(sim.url, profile=sim.profile, **options)  # type: ignore[arg-type]
     with robot:
         robot.wait_until_ready(5.0)
         robot.move_to(pose, speed=100)
@@ -204,7 +211,7 @@ def test_blog_unacknowledged_command_times_out_and_is_withdrawn(
     # A gripper still activating (gSTA 1) leaves control at 16: nobody acknowledges.
     sim = tm_simulator_factory("article", gripper="blog-2fg7", time_scale=1.0, init_time_s=1.0)
     assert sim.gripper_port is not None
-    link = GripperLink("127.0.0.1", sim.gripper_port, ack_timeout_s=0.2, timeout_s=5.0)
+    link = GripperLink(sim.url, sim.gripper_port, ack_timeout_s=0.2, timeout_s=5.0)
     gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link)
     gripper.connect()
     try:
@@ -228,7 +235,7 @@ def test_blog_unacknowledged_command_times_out_and_is_withdrawn(
 def onrobot(sim: Simulator, **options: object) -> OnRobot2FG7Gripper:
     """A connected OnRobot driver on ``sim``'s gripper port (caller disconnects)."""
     assert sim.gripper_port is not None
-    link = GripperLink("127.0.0.1", sim.gripper_port, timeout_s=2.0)
+    link = GripperLink(sim.url, sim.gripper_port, timeout_s=2.0)
     gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), link, **options)  # type: ignore[arg-type]
     gripper.connect()
     return gripper
@@ -358,7 +365,7 @@ def test_onrobot_second_connection_is_a_clear_error(tm_simulator_factory: Factor
     try:
         assert sim.gripper_port is not None
         second = Robot(
-            "127.0.0.1",
+            sim.url,
             sim.port,
             profile="article",
             gripper="onrobot-2fg7",

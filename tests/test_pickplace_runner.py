@@ -46,6 +46,12 @@ TARGET_BLOCK = 0x0200
 SimFactory = Callable[..., Simulator]
 
 
+@pytest.fixture
+def tm_simulator_factory(memory_simulator_factory: SimFactory) -> SimFactory:
+    """The runner is the subject here, not TCP: simulators in memory."""
+    return memory_simulator_factory
+
+
 def fast_config(**sections: dict[str, object]) -> PickPlaceConfig:
     """The article's defaults with settings that keep a time_scale-20 run fast."""
     data: dict[str, dict[str, object]] = {
@@ -70,8 +76,7 @@ def sim(tm_simulator_factory: SimFactory) -> Simulator:
 def robot(sim: Simulator) -> Iterator[Robot]:
     """A connected robot with the fast settings."""
     with Robot(
-        "127.0.0.1",
-        sim.port,
+        sim.url,
         profile="article",
         poll_interval_s=0.02,
         gripper_settle_s=0.05,
@@ -231,7 +236,7 @@ def test_a_stop_request_interrupts_a_running_wait_and_stops_the_arm(
     tm_simulator_factory: SimFactory,
 ) -> None:
     sim = tm_simulator_factory(faults=["stall:at_move=1"])
-    with Robot("127.0.0.1", sim.port, profile="article", poll_interval_s=0.02) as robot:
+    with Robot(sim.url, profile="article", poll_interval_s=0.02) as robot:
         runner = Runner(robot)
         seq = TaskSequence("one-move")
         seq.add("MOVE", lambda ctx: ctx.move(PICK.offset(dz=100), speed=30))
@@ -270,9 +275,7 @@ def test_a_user_sequence_in_python_gets_the_shared_retry_policy(
 
     seq.add("GRIP", lambda ctx: ctx.grip(), retry=RetryRule("ABOVE", 1, recover=_open))
     seq.add("UP", lambda ctx: ctx.move(above, speed=20, motion="line"))
-    with Robot(
-        "127.0.0.1", sim.port, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05
-    ) as robot:
+    with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
         result = Runner(robot).run(seq)
     assert result.ok
     assert result.retries == 1
@@ -303,9 +306,7 @@ def test_palletizing_places_each_part_into_its_slot(tm_simulator_factory: SimFac
         objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(pallet.size)]
     )
     seq = palletizing(pick=PICK, pallet=pallet, home=HOME)
-    with Robot(
-        "127.0.0.1", sim.port, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05
-    ) as robot:
+    with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
         validate_plan(robot, seq, pallet.size, source="test")
         result = Runner(robot).run(seq)
     assert result.ok
@@ -342,9 +343,7 @@ def test_a_toml_sequence_runs_with_retries(tm_simulator_factory: SimFactory) -> 
             ],
         }
     )
-    with Robot(
-        "127.0.0.1", sim.port, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05
-    ) as robot:
+    with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
         result = Runner(robot).run(seq)
     assert result.ok, result.failure
     assert result.retries == 1

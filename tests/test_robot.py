@@ -11,9 +11,16 @@ import pytest
 
 import tmmaster
 from tmmaster import MovePhase, Pose, Robot, TimeoutPolicy
-from tmmaster.sim import Simulator
+from tmmaster.sim import MemoryTransport, Simulator
 
 SimFactory = Callable[..., Simulator]
+
+
+@pytest.fixture
+def tm_simulator_factory(memory_simulator_factory: SimFactory) -> SimFactory:
+    """The robot API is the subject here, not TCP: simulators in memory."""
+    return memory_simulator_factory
+
 
 APPROACH = Pose(300, -200, 200, 180, 0, 90)
 PICK = Pose(300, -200, 100, 180, 0, 90)
@@ -31,7 +38,7 @@ def robots() -> Iterator[Callable[..., Robot]]:
         options.setdefault(
             "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
         )
-        robot = Robot("127.0.0.1", sim.port, **options)
+        robot = Robot(sim.url, **options)
         opened.append(robot)
         robot.connect()
         robot.wait_until_ready(timeout_s=5)
@@ -57,7 +64,7 @@ def test_the_readme_script_runs_on_both_profiles(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
     sim = tm_simulator_factory(profile)
-    with tmmaster.connect("127.0.0.1", port=sim.port, profile=profile) as robot:
+    with tmmaster.connect(sim.url, profile=profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         assert robot.status().ready
         robot.move_to(APPROACH, speed=30)
@@ -401,7 +408,7 @@ def test_close_is_idempotent_and_connection_state_is_explicit(
     tm_simulator_factory: SimFactory,
 ) -> None:
     sim = tm_simulator_factory("article")
-    robot = Robot("127.0.0.1", sim.port, profile="article")
+    robot = Robot(sim.url, profile="article")
     assert robot.state is tmmaster.ConnectionState.NEW
     robot.connect()
     assert robot.state is tmmaster.ConnectionState.CONNECTED
@@ -435,7 +442,7 @@ def test_tmflow_accepts_commands_again_after_a_stop_and_restart(
     sim.clear_faults()
     # The operator starts the project again (Play on the pendant; here a plain Modbus write).
     profile = robot.profile
-    with tmmaster.ModbusTransport("127.0.0.1", sim.port, name="pendant") as pendant:
+    with MemoryTransport(sim, name="pendant") as pendant:
         pendant.write_fields([(profile.field("play_pause"), True)], retry=False)
     robot.wait_until_ready(timeout_s=5)
     # The abandoned command left ack_seq != done_seq; that must not block the next one.

@@ -1,6 +1,6 @@
 """The physics-backend interface, proven end to end with a second, misbehaving backend.
 
-The master drives the simulator over Modbus exactly as it would a robot; underneath,
+The master drives the simulator (in memory) exactly as it would a robot; underneath,
 the test-only SlowSettlingBackend settles slowly and loses its physics view after every
 motion (like an Isaac Sim scene restarted). The controller must re-initialise it and
 keep commands pending meanwhile, and the master must never see a move finish early.
@@ -25,8 +25,8 @@ def test_moves_complete_through_slow_settling_and_reinitialisation(profile: str)
         tmmaster.robot_model("tm5-700"), settle_time_s=2.0, invalidate_after_motions=1
     )
     with (
-        Simulator(profile, time_scale=20, backend=backend) as sim,
-        tmmaster.connect("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.01) as robot,
+        Simulator(profile, time_scale=20, backend=backend, listen=False) as sim,
+        tmmaster.connect(sim.url, profile=profile, poll_interval_s=0.01) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
         for target in (APPROACH, PICK, APPROACH):
