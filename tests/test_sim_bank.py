@@ -88,6 +88,7 @@ def test_gap_of_exactly_max_read_gap_is_readable() -> None:
         "kind": "gripper",
         "name": "gappy",
         "driver": "onrobot-2fg7",
+        "device_id": 65,
         "max_read_gap": 2,
         "fields": {
             "a": {"role": "status", "table": "holding", "address": 0, "type": "uint16"},
@@ -166,7 +167,15 @@ def test_version_counts_changes_only(article: RegisterBank) -> None:
 
 def test_gripper_maps() -> None:
     onrobot = RegisterBank(gripper_profile("onrobot-2fg7"))
-    assert onrobot.served(Table.HOLDING) == [(0, 4), (256, 8), (1536, 1)]
+    assert onrobot.served(Table.HOLDING) == [
+        (0, 4),
+        (256, 8),
+        (544, 10),  # firmware identity words OnRobot's ROS 2 test fixture serves
+        (1028, 2),
+        (1031, 1),
+        (1536, 1),
+        (1540, 2),
+    ]
     blog = RegisterBank(gripper_profile("blog-2fg7"))
     assert blog.served(Table.INPUT) == [(258, 3)]
     with pytest.raises(IllegalAddressError):
