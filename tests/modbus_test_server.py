@@ -133,7 +133,19 @@ class TestServer:
         if self._loop is None or self._server is None or self._thread is None:
             return
         server = self._server
-        asyncio.run_coroutine_threadsafe(server.shutdown(), self._loop).result(5)
+
+        async def shutdown() -> None:
+            # As the simulator's server does (sim/_server.py _unlisten): stop accepting,
+            # let a connection accepted in this very loop turn reach its protocol, then
+            # shut down. Otherwise pymodbus never closes that just-accepted socket.
+            loop = asyncio.get_running_loop()
+            for sock in getattr(server.transport, "sockets", None) or ():
+                loop.remove_reader(sock.fileno())
+            for _ in range(3):
+                await asyncio.sleep(0)
+            await server.shutdown()  # type: ignore[no-untyped-call]
+
+        asyncio.run_coroutine_threadsafe(shutdown(), self._loop).result(5)
         self._thread.join(5)
         self._loop = None
         self._server = None

@@ -488,3 +488,27 @@ def test_sigint_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
     data = json.loads(report.read_text())
     assert data["result"] == "interrupted"
     assert '"robot.stop_sent"' in err
+
+
+@pytest.mark.parametrize("after_s", [0.35, 0.7])
+def test_sigint_at_any_moment_exits_130_in_one_line(tmp_path: Path, after_s: float) -> None:
+    # Whether the modules are still loading, the simulator is starting or the run is
+    # under way: exit 130, one line, never a traceback (issue 8, failure 8).
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tmmaster.pickplace", "--sim", "--sim-time-scale", "5"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(),
+    )
+    try:
+        time.sleep(after_s)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == EXIT_INTERRUPTED, err
+    assert "Traceback" not in err
+    assert last_stderr_line(err).startswith("pickplace: interrupted")

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+# isort: off
+from . import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+# isort: on
+
 import argparse
 import sys
 from collections.abc import Sequence
@@ -54,9 +58,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``tmmaster`` console script."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print(f"tmmaster: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
+        return _sigint.EXIT_INTERRUPTED
+
+
+def _main(argv: Sequence[str] | None) -> int:
     from .pickplace import __main__ as pickplace_main
     from .sim import __main__ as sim_main
 
+    _sigint.handled_by_main()
     args = build_parser().parse_args(argv)
     if args.command == "sim":
         return sim_main.run(args)

@@ -17,38 +17,85 @@ logging, error reaction). See docs/pickplace.md.
 
 from __future__ import annotations
 
-from ._config import (
-    ARTICLE_HOME,
-    ARTICLE_PICK,
-    ARTICLE_PLACE,
-    PickPlaceConfig,
-    load_config,
-    robot_from_config,
-    validate_config,
-)
-from ._machine import DONE, ERROR, IDLE, SequenceMachine, mermaid
-from ._plan import estimate, format_plan, validate_plan
-from ._report import build_report, write_report
-from ._runner import (
-    Failure,
-    ReactionRecord,
-    Runner,
-    RunResult,
-    StateEvent,
-    StateRecord,
-    StepContext,
-    StopRequestedError,
-)
-from ._sequences import (
-    PICK_AND_PLACE_STATES,
-    Pallet,
-    grasp_detected,
-    load_sequence,
-    palletizing,
-    pick_and_place,
-    sequence_from_data,
-)
-from ._steps import PlannedMove, RetryRule, Step, TaskSequence
+from typing import TYPE_CHECKING as _TYPE_CHECKING
+
+from .._lazy import lazy_attributes as _lazy_attributes
+
+if _TYPE_CHECKING:
+    from ._config import (
+        ARTICLE_HOME,
+        ARTICLE_PICK,
+        ARTICLE_PLACE,
+        PickPlaceConfig,
+        load_config,
+        robot_from_config,
+        validate_config,
+    )
+    from ._machine import DONE, ERROR, IDLE, SequenceMachine, mermaid
+    from ._plan import estimate, format_plan, validate_plan
+    from ._report import build_report, write_report
+    from ._runner import (
+        Failure,
+        ReactionRecord,
+        Runner,
+        RunResult,
+        StateEvent,
+        StateRecord,
+        StepContext,
+        StopRequestedError,
+    )
+    from ._sequences import (
+        PICK_AND_PLACE_STATES,
+        Pallet,
+        grasp_detected,
+        load_sequence,
+        palletizing,
+        pick_and_place,
+        sequence_from_data,
+    )
+    from ._steps import PlannedMove, RetryRule, Step, TaskSequence
+
+#: Public name -> the private module that defines it (imported on first use).
+_EXPORTS = {
+    "ARTICLE_HOME": "._config",
+    "ARTICLE_PICK": "._config",
+    "ARTICLE_PLACE": "._config",
+    "DONE": "._machine",
+    "ERROR": "._machine",
+    "Failure": "._runner",
+    "IDLE": "._machine",
+    "PICK_AND_PLACE_STATES": "._sequences",
+    "Pallet": "._sequences",
+    "PickPlaceConfig": "._config",
+    "PlannedMove": "._steps",
+    "ReactionRecord": "._runner",
+    "RetryRule": "._steps",
+    "RunResult": "._runner",
+    "Runner": "._runner",
+    "SequenceMachine": "._machine",
+    "StateEvent": "._runner",
+    "StateRecord": "._runner",
+    "Step": "._steps",
+    "StepContext": "._runner",
+    "StopRequestedError": "._runner",
+    "TaskSequence": "._steps",
+    "build_report": "._report",
+    "estimate": "._plan",
+    "format_plan": "._plan",
+    "grasp_detected": "._sequences",
+    "load_config": "._config",
+    "load_sequence": "._sequences",
+    "mermaid": "._machine",
+    "palletizing": "._sequences",
+    "pick_and_place": "._sequences",
+    "robot_from_config": "._config",
+    "sequence_from_data": "._sequences",
+    "validate_config": "._config",
+    "validate_plan": "._plan",
+    "write_report": "._report",
+}
+
+__getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
 
 __all__ = [
     "ARTICLE_HOME",

@@ -19,6 +19,10 @@ Exit codes (also in docs/pickplace.md):
 
 from __future__ import annotations
 
+# isort: off
+from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+# isort: on
+
 import argparse
 import signal
 import sys
@@ -455,6 +459,7 @@ def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
 
 def main(argv: Sequence[str] | list[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.pickplace``."""
+    _sigint.handled_by_main()
     try:
         return run(build_parser().parse_args(argv))
     except KeyboardInterrupt:

@@ -9,28 +9,64 @@ code runs against it and against a real robot. Start one with
 
 from __future__ import annotations
 
-from ._backend import GripperState, ObjectState, PhysicsBackend
-from ._controller import MotionRecord
-from ._faults import (
-    FAULT_KINDS,
-    DropConnectionsFault,
-    EstopFault,
-    Fault,
-    GraspMissFault,
-    LateAckFault,
-    ModbusExceptionFault,
-    RobotErrorFault,
-    SlowResponsesFault,
-    StallFault,
-    StopListeningFault,
-    is_network_fault,
-    parse_fault,
-)
-from ._kinematic import DEFAULT_HOME, KinematicBackend
-from ._memory import MemoryTransport
-from ._server import RequestRecord
-from ._simulator import Simulator
-from ._world import DEFAULT_PART_POSE, TableObject, World
+from typing import TYPE_CHECKING as _TYPE_CHECKING
+
+from .._lazy import lazy_attributes as _lazy_attributes
+
+if _TYPE_CHECKING:
+    from ._backend import GripperState, ObjectState, PhysicsBackend
+    from ._controller import MotionRecord
+    from ._faults import (
+        FAULT_KINDS,
+        DropConnectionsFault,
+        EstopFault,
+        Fault,
+        GraspMissFault,
+        LateAckFault,
+        ModbusExceptionFault,
+        RobotErrorFault,
+        SlowResponsesFault,
+        StallFault,
+        StopListeningFault,
+        is_network_fault,
+        parse_fault,
+    )
+    from ._kinematic import DEFAULT_HOME, KinematicBackend
+    from ._memory import MemoryTransport
+    from ._server import RequestRecord
+    from ._simulator import Simulator
+    from ._world import DEFAULT_PART_POSE, TableObject, World
+
+#: Public name -> the private module that defines it (imported on first use).
+_EXPORTS = {
+    "DEFAULT_HOME": "._kinematic",
+    "DEFAULT_PART_POSE": "._world",
+    "DropConnectionsFault": "._faults",
+    "EstopFault": "._faults",
+    "FAULT_KINDS": "._faults",
+    "Fault": "._faults",
+    "GraspMissFault": "._faults",
+    "GripperState": "._backend",
+    "KinematicBackend": "._kinematic",
+    "LateAckFault": "._faults",
+    "MemoryTransport": "._memory",
+    "ModbusExceptionFault": "._faults",
+    "MotionRecord": "._controller",
+    "ObjectState": "._backend",
+    "PhysicsBackend": "._backend",
+    "RequestRecord": "._server",
+    "RobotErrorFault": "._faults",
+    "Simulator": "._simulator",
+    "SlowResponsesFault": "._faults",
+    "StallFault": "._faults",
+    "StopListeningFault": "._faults",
+    "TableObject": "._world",
+    "World": "._world",
+    "is_network_fault": "._faults",
+    "parse_fault": "._faults",
+}
+
+__getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
 
 __all__ = [
     "DEFAULT_HOME",

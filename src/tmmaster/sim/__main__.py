@@ -6,6 +6,10 @@
 
 from __future__ import annotations
 
+# isort: off
+from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+# isort: on
+
 import argparse
 import signal
 import sys
@@ -153,7 +157,12 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.sim``."""
-    return run(build_parser().parse_args(argv))
+    _sigint.handled_by_main()
+    try:
+        return run(build_parser().parse_args(argv))
+    except KeyboardInterrupt:  # before the simulator's own handler is in place
+        print(f"sim: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
+        return _sigint.EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,0 +1,61 @@
+"""Ctrl-C while a command starts: exit 130 with one line, never a traceback.
+
+Imported first by each command's entry module, before pymodbus, pydantic and the rest
+load. When the running program is one of tmmaster's commands, a Ctrl-C until the
+command's ``main()`` takes over (:func:`handled_by_main`) ends the process at once:
+nothing is connected or started yet, so there is nothing to clean up. Imported any
+other way (a library user, a test), this module does nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from types import FrameType
+
+#: Entry modules of the commands, and the name each prints its messages under.
+_COMMANDS = {
+    "tmmaster.__main__": "tmmaster",
+    "tmmaster.pickplace.__main__": "pickplace",
+    "tmmaster.sim.__main__": "sim",
+}
+
+#: Exit status of an interrupted command (128 + SIGINT), as shells report it.
+EXIT_INTERRUPTED = 130
+
+
+def _command_name() -> str | None:
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None and spec.name in _COMMANDS:
+        return _COMMANDS[spec.name]
+    if os.path.basename(sys.argv[0] if sys.argv else "") == "tmmaster":
+        return "tmmaster"  # the console script
+    return None
+
+
+def _install() -> None:
+    name = _command_name()
+    if name is None or threading.current_thread() is not threading.main_thread():
+        return
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        return  # started in the background by a shell: leave it ignored
+
+    def interrupted(signum: int, frame: FrameType | None) -> None:
+        _ = signum, frame
+        os.write(2, f"{name}: interrupted [exit {EXIT_INTERRUPTED}]\n".encode())
+        os._exit(EXIT_INTERRUPTED)
+
+    signal.signal(signal.SIGINT, interrupted)
+
+
+def handled_by_main() -> None:
+    """Hand Ctrl-C back to Python's default (KeyboardInterrupt), which ``main()`` catches."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+_install()
