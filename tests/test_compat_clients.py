@@ -8,6 +8,7 @@ decoding (float32 high word first, signed 16-bit by hand), as a third-party scri
 
 from __future__ import annotations
 
+import struct
 import time
 from collections.abc import Callable
 
@@ -122,3 +123,90 @@ def test_the_2fg7_clients_force_reads_negative_on_a_part(tm_simulator_factory: S
         assert gripper.force() == -40  # signed, as OnRobot's fixture seeds it
     finally:
         gripper.close()
+
+
+class TMClient:
+    """A TM robot client in the style of public TMflow Modbus tools (plain pymodbus)."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.client = ModbusTcpClient(host, port=port, timeout=2)
+        assert self.client.connect()
+
+    def _ok(self, reply: object) -> object:
+        assert not reply.isError(), reply  # type: ignore[attr-defined]
+        return reply
+
+    def floats(self, address: int, n: int) -> list[float]:
+        reply = self.client.read_input_registers(address, count=2 * n, device_id=1)
+        regs = self._ok(reply).registers  # type: ignore[attr-defined]
+        return [
+            struct.unpack(">f", struct.pack(">HH", regs[i], regs[i + 1]))[0]
+            for i in range(0, 2 * n, 2)
+        ]
+
+    def read(self, fc: int, address: int, count: int = 1) -> list[int]:
+        call = {
+            1: self.client.read_coils,
+            2: self.client.read_discrete_inputs,
+            3: self.client.read_holding_registers,
+            4: self.client.read_input_registers,
+        }[fc]
+        reply = self._ok(call(address, count=count, device_id=1))
+        if fc in (1, 2):
+            return [int(b) for b in reply.bits[:count]]  # type: ignore[attr-defined]
+        return list(reply.registers)  # type: ignore[attr-defined]
+
+    def refused(self, fc: int, address: int) -> bool:
+        call = {2: self.client.read_discrete_inputs, 4: self.client.read_input_registers}[fc]
+        reply = call(address, count=1, device_id=1)
+        return bool(reply.isError()) and getattr(reply, "exception_code", None) == 2
+
+    def close(self) -> None:
+        self.client.close()
+
+
+#: Documented addresses (TMflow SW 2.24 Software Manual, appendix C) as (FC, first, count).
+TM_DOCUMENTED = [
+    (2, 7200, 1), (2, 7201, 1), (2, 7202, 3), (2, 7205, 1), (1, 7206, 1), (2, 7207, 2),
+    (2, 7209, 2), (2, 7212, 3), (4, 7215, 6), (2, 7221, 1),
+    (1, 0, 16), (2, 0, 16), (2, 800, 4), (1, 800, 4), (4, 800, 2), (3, 0, 4), (4, 0, 4),
+    (4, 7001, 60), (4, 7101, 2), (2, 7149, 1), (2, 7151, 7),
+    (4, 7301, 6), (4, 7308, 5), (4, 7320, 8), (4, 7332, 1), (4, 7340, 12),
+    (4, 7390, 7), (4, 7561, 19),
+    (1, 9000, 1000), (3, 9000, 125), (3, 9875, 125),
+]  # fmt: skip
+
+
+def test_a_public_style_tm_client_reads_every_documented_address(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("tmflow")
+    sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
+    tm = TMClient("127.0.0.1", sim.port)
+    try:
+        for fc, address, count in TM_DOCUMENTED:
+            assert len(tm.read(fc, address, count)) == count, (fc, address)
+        flange, joints, tcp = tm.floats(7001, 6), tm.floats(7013, 6), tm.floats(7025, 6)
+        base_flange, base_tcp = tm.floats(7037, 6), tm.floats(7049, 6)
+        pose = sim.tcp_pose().as_list()
+        assert tcp == pytest.approx(pose, abs=1e-3)
+        # No tool and no joint model in the kinematic backend: flange = TCP, joints 0.
+        assert flange == pytest.approx(tcp)
+        assert base_flange == pytest.approx(flange)
+        assert base_tcp == pytest.approx(tcp)
+        assert joints == [0.0] * 6
+        assert tm.read(2, 7200) == [1]  # robot link
+        assert tm.read(4, 7215, 2) == [0, 1]  # robot state normal, operation mode auto
+        # The user define area is plain memory: FC 06 / 16 / 05 / 15 and back.
+        assert not tm.client.write_register(9020, 12345, device_id=1).isError()
+        assert not tm.client.write_registers(9500, [1, 2, 3], device_id=1).isError()
+        assert not tm.client.write_coil(9001, True, device_id=1).isError()
+        assert tm.read(3, 9020) == [12345]
+        assert tm.read(3, 9500, 3) == [1, 2, 3]
+        assert tm.read(1, 9001) == [1]
+        # Undocumented addresses answer exception 2.
+        assert tm.refused(2, 7211)
+        assert tm.refused(4, 7400)
+        assert tm.refused(4, 10000)
+    finally:
+        tm.close()

@@ -425,7 +425,7 @@ def test_onrobot_dual_quick_changer_unit_ids(tm_simulator_factory: Factory) -> N
     assert isinstance(secondary, GripperProfile)
     sim = tm_simulator_factory("article", gripper=secondary)
     assert sim.gripper_port is not None
-    link = GripperLink("127.0.0.1", sim.gripper_port, timeout_s=2.0)
+    link = GripperLink(sim.url, sim.gripper_port, timeout_s=2.0)
     gripper = OnRobot2FG7Gripper(secondary, link)
     gripper.connect()
     try:

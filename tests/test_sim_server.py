@@ -22,6 +22,7 @@ from tmmaster._profiles import robot_profile
 from tmmaster._registers import Table
 from tmmaster.sim import Simulator
 from tmmaster.sim._bank import RegisterBank
+from tmmaster.sim._tm_table import USER_AREA, tm_table_fields
 
 Factory = Callable[..., Simulator]
 
@@ -107,7 +108,12 @@ def test_every_field_is_served_and_unserved_addresses_give_exception_2(
 ) -> None:
     sim = tm_simulator_factory(name)
     profile = robot_profile(name)
-    bank = RegisterBank(profile)
+    # A tmflow simulator also serves Techman's table and the user define area.
+    bank = (
+        RegisterBank(profile, extra_fields=tm_table_fields(profile), raw_areas=USER_AREA)
+        if name == "tmflow"
+        else RegisterBank(profile)
+    )
     with client(sim.port) as c:
         for field in profile.fields.values():
             words = read(c, field.table, field.address, field.width)  # raises if refused
@@ -133,8 +139,8 @@ def test_tmflow_bits_are_exact(tm_simulator_factory: Factory) -> None:
     with client(sim.port) as c:
         bits = read(c, Table.DISCRETE_INPUT, 7201, 2)
         assert bits == [0, 1]  # error, project_running
-        # 7206 lies in a bridgeable gap; 7209 is past the last discrete input.
-        assert exception_code(lambda: read(c, Table.DISCRETE_INPUT, 7208, 2)) == 2
+        # 7211 is in no profile field and not in Techman's table.
+        assert exception_code(lambda: read(c, Table.DISCRETE_INPUT, 7210, 2)) == 2
 
 
 # -- request log ------------------------------------------------------------------------

@@ -55,6 +55,12 @@ class PhysicsBackend(Protocol):
     def tcp_pose(self) -> Pose:
         """Current TCP pose."""
 
+    def joint_positions_deg(self) -> tuple[float, ...] | None:
+        """Current joint angles J1..J6 in degrees, or None without a joint model."""
+
+    def flange_pose(self) -> Pose | None:
+        """Current flange pose (no tool), or None without a joint model; TCP = flange x tool."""
+
     def is_settled(self) -> bool:
         """True when the arm is at rest (no motion running, oscillation died out)."""
 

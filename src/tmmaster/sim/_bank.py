@@ -40,19 +40,35 @@ def _merge(addresses: set[int]) -> list[tuple[int, int]]:
 class RegisterBank:
     """Register memory of one device, serving exactly the addresses of its register map."""
 
-    def __init__(self, register_map: RegisterMap) -> None:
+    def __init__(
+        self,
+        register_map: RegisterMap,
+        *,
+        extra_fields: Sequence[RegisterField] = (),
+        raw_areas: Sequence[tuple[Table, int, int]] = (),
+    ) -> None:
+        """Serve ``register_map``; plus ``extra_fields`` (served and settable by name,
+        e.g. Techman's fixed table) and ``raw_areas`` ``(table, first, count)`` of plain
+        read/write memory (e.g. the user define area) wherever no field is."""
         self._map = register_map
         self._words: dict[Table, dict[int, int]] = {table: {} for table in Table}
         # Address -> the field covering it, to check write access per address.
         self._owner: dict[Table, dict[int, RegisterField]] = {table: {} for table in Table}
         self._gaps: dict[Table, set[int]] = {table: set() for table in Table}
+        self._raw: dict[Table, set[int]] = {table: set() for table in Table}
+        self._extra = {f.name: f for f in extra_fields if f.name not in register_map.fields}
         self._version = 0
         self._network_writes = 0
         self._field_writes: dict[str, int] = dict.fromkeys(register_map.fields, 0)
-        for field in register_map.fields.values():
+        for field in (*register_map.fields.values(), *self._extra.values()):
             for address in range(field.address, field.end + 1):
                 self._words[field.table][address] = 0
                 self._owner[field.table][address] = field
+        for table, first, count in raw_areas:
+            for address in range(first, first + count):
+                if address not in self._words[table]:
+                    self._words[table][address] = 0
+                    self._raw[table].add(address)
         for table in Table:
             ordered = sorted(
                 (f for f in register_map.fields.values() if f.table is table),
@@ -85,15 +101,23 @@ class RegisterBank:
 
     # -- device side -------------------------------------------------------------------
 
+    def has(self, name: str) -> bool:
+        """True when ``name`` is a field of the map or an extra field."""
+        return name in self._map.fields or name in self._extra
+
+    def _field(self, name: str) -> RegisterField:
+        extra = self._extra.get(name)
+        return extra if extra is not None else self._map.field(name)
+
     def get(self, name: str) -> Value:
         """Engineering value of field ``name``."""
-        field = self._map.field(name)
+        field = self._field(name)
         words = self._words[field.table]
         return decode(field, [words[a] for a in range(field.address, field.end + 1)])
 
     def set(self, name: str, value: Value) -> None:
         """Store ``value`` in field ``name`` (device side: read-only fields too)."""
-        field = self._map.field(name)
+        field = self._field(name)
         # encode() raises ValueOutOfRangeError before anything is stored.
         new = encode(field, value)
         words = self._words[field.table]
@@ -134,10 +158,18 @@ class RegisterBank:
                 f"{self._map.name}: the {table.value} table is read-only (write at {address})"
             )
         owners = self._owner[table]
+        raw = self._raw[table]
         touched: dict[str, RegisterField] = {}
         for offset, value in enumerate(values):
             a = address + offset
             field = owners.get(a)
+            limit = 1 if table.is_bit else 0xFFFF
+            if field is None and a in raw:
+                if not 0 <= value <= limit:
+                    raise IllegalValueError(
+                        f"{self._map.name}: value {value} does not fit {table.value} address {a}"
+                    )
+                continue
             if field is None:
                 raise IllegalAddressError(
                     f"{self._map.name}: {table.value} address {a} is not served"
@@ -148,7 +180,6 @@ class RegisterBank:
                     f"{self._map.name}: field {field.name} ({table.value} {a}) is written by"
                     " the device only"
                 )
-            limit = 1 if table.is_bit else 0xFFFF
             if not 0 <= value <= limit:
                 raise IllegalValueError(
                     f"{self._map.name}: value {value} does not fit {table.value} address {a}"
@@ -161,7 +192,8 @@ class RegisterBank:
                 words[address + offset] = value
                 changed = True
         for name in touched:
-            self._field_writes[name] += 1
+            if name in self._field_writes:
+                self._field_writes[name] += 1
         self._network_writes += 1
         if changed:
             self._version += 1

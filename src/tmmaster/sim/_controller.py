@@ -770,6 +770,29 @@ class RobotController:
             return
         for name, value in zip(TCP_FIELDS, pose.as_list(), strict=True):
             self._bank.set(name, value)
+        if self._bank.has("flange_x"):
+            self._publish_tm_table(pose)
+
+    def _publish_tm_table(self, tcp: Pose) -> None:
+        """Techman's fixed table beside a tmflow profile (docs/simulator-model.md)."""
+        flange = getattr(self._backend, "flange_pose", lambda: None)()
+        joints = getattr(self._backend, "joint_positions_deg", lambda: None)()
+        # Without a joint model the simulated tool is the identity: flange = TCP.
+        flange = tcp if flange is None else flange
+        # The simulated current base is the robot base.
+        for prefix, p in (
+            ("flange", flange),
+            ("robot_base_flange", flange),
+            ("robot_base_tcp", tcp),
+        ):
+            for axis, value in zip(("x", "y", "z", "rx", "ry", "rz"), p.as_list(), strict=True):
+                self._bank.set(f"{prefix}_{axis}", value)
+        for i, angle in enumerate(joints or (0.0,) * 6, start=1):
+            self._bank.set(f"joint_{i}", angle)
+        self._bank.set("robot_link", True)
+        self._bank.set("operation_mode", 1)  # auto
+        state = 4 if self._estop else 2 if self._error_code else 0  # STO / error / normal
+        self._bank.set("tm_robot_state", state)
 
     def _discard_article_commands(self, reason: str) -> None:
         pending = int(self._bank.get("command"))

@@ -114,6 +114,14 @@ class KinematicBackend:
         """Current TCP pose."""
         return self._pose
 
+    def joint_positions_deg(self) -> tuple[float, ...] | None:
+        """None: the analytic backend moves the TCP, it has no joint model."""
+        return None
+
+    def flange_pose(self) -> Pose | None:
+        """None: the analytic backend moves the TCP, it has no joint model."""
+        return None
+
     def is_settled(self) -> bool:
         """True once no motion runs and ``settle_time_s`` has passed since the last one."""
         return self._motion is None and self._rest_s + _EPS >= self._settle_time_s

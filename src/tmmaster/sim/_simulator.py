@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from .._exceptions import ConfigError
 from .._pose import Pose
 from .._profiles import gripper_profile, robot_profile
-from .._registers import GripperProfile, RobotProfile
+from .._registers import GripperProfile, Handshake, RobotProfile
 from .._retry import RetryPolicy
 from .._robot_models import robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
@@ -32,6 +32,7 @@ from ._controller import MotionRecord, RobotController
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._server import DeviceServer, RequestLog, RequestRecord
+from ._tm_table import USER_AREA, tm_table_fields
 from ._world import TableObject, World
 
 if TYPE_CHECKING:
@@ -95,7 +96,13 @@ class Simulator:
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
         device = [f for f in all_faults if not is_network_fault(f)]
         self._log = RequestLog(listener=request_listener)
-        self._bank = RegisterBank(self._profile)
+        if self._profile.handshake is Handshake.SEQUENCE:
+            # A real TM controller: Techman's fixed table and the user define area too.
+            self._bank = RegisterBank(
+                self._profile, extra_fields=tm_table_fields(self._profile), raw_areas=USER_AREA
+            )
+        else:
+            self._bank = RegisterBank(self._profile)
         self._controller = RobotController(
             self._profile,
             self._bank,
