@@ -1184,3 +1184,14 @@ def test_gripper_inject_grasp_miss() -> None:
     run(device, 0.2)
     assert not gripped(bank)
     device.clear_faults()
+
+
+def test_tmflow_accel_time_beyond_its_maximum_is_an_invalid_command() -> None:
+    # docs/tmflow-program.md, check M2: accel_time 0..10000 ms. A raw write can hold more.
+    ctl, bank, _, _ = tmflow()
+    send_tmflow(bank, 1, target=AIR)
+    bank.write(Table.HOLDING, bank.register_map.field("accel_time").address, [10001])
+    ctl.tick(DT)
+    assert bank.get("ack_seq") == 1
+    assert (bank.get("robot_state"), bank.get("result_code")) == (2, 2)
+    assert ctl.moves_started == 0

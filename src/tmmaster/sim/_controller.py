@@ -491,7 +491,13 @@ class RobotController:
         self._log.info("sim.command_accepted", device=self._profile.name, seq=seq, command=label)
         if label in ("ptp", "line"):
             target, speed = self._read_target()
-            if target is None or speed is None:
+            # The guide's check M2: accel_time beyond its declared maximum is invalid too.
+            accel_ok = (
+                not self._profile.has("accel_time")
+                or int(self._bank.get("accel_time"))
+                <= allowed_range(self._profile.field("accel_time"))[1]
+            )
+            if target is None or speed is None or not accel_ok:
                 self._fail_sequence(seq, "invalid_command", 2)
                 return
             if not self._model.can_reach(target):
