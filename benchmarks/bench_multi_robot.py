@@ -62,12 +62,9 @@ POSE_READ = (3, 16)
 
 def serve(n: int, time_scale: float) -> None:
     """Child mode: run ``n`` simulators, print their ports, dump request times on request."""
-    import structlog
-
     from tmmaster.sim import Simulator
 
-    # stdout carries the JSON protocol: the simulators' log lines go to stderr.
-    structlog.configure(logger_factory=structlog.PrintLoggerFactory(sys.stderr))
+    # stdout carries the JSON protocol; tmmaster logs nothing unless configured to.
     sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
     try:
         print(json.dumps({"ports": [s.port for s in sims]}), flush=True)
@@ -311,12 +308,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.serve is not None:
         serve(args.serve, args.time_scale)
         return 0
-    # The master's structlog output would cost CPU and flood the table: keep warnings.
-    import logging
-
-    import structlog
-
-    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))
+    # tmmaster logs nothing unless configured to: no log output costs CPU or floods the table.
     modes = ["threads", "asyncio"] if args.mode == "both" else [args.mode]
     rows = [
         measure(mode, n, args.moves, args.time_scale)

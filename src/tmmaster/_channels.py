@@ -22,8 +22,6 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
 
-import structlog
-
 from ._codec import Value, encode
 from ._exceptions import (
     CommandRejectedError,
@@ -32,6 +30,7 @@ from ._exceptions import (
     RobotError,
     RobotFaultError,
 )
+from ._logging import get_logger
 from ._pose import MotionType, Pose
 from ._registers import (
     TARGET_FIELDS,
@@ -45,7 +44,7 @@ from ._registers import (
 from ._status import RobotStatus
 from ._transport import Transport
 
-_log = structlog.get_logger("tmmaster.robot")
+_log = get_logger("tmmaster.robot")
 
 
 class CommandKind(StrEnum):

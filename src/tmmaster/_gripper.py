@@ -27,8 +27,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
-import structlog
-
 from ._channels import Command, CommandKind
 from ._codec import Value
 from ._exceptions import (
@@ -42,6 +40,7 @@ from ._exceptions import (
     ResponseTimeoutError,
     TransportError,
 )
+from ._logging import get_logger
 from ._poller import Poller
 from ._profiles import gripper_profile
 from ._registers import GripperProfile
@@ -51,7 +50,7 @@ from ._transport import Transport, open_transport
 if TYPE_CHECKING:
     from ._robot import Robot
 
-_log = structlog.get_logger("tmmaster.gripper")
+_log = get_logger("tmmaster.gripper")
 
 
 @dataclass(frozen=True)

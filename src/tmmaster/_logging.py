@@ -1,23 +1,59 @@
-"""Structured logging set-up: pretty lines on a terminal, JSON lines on request.
+"""Logging: structured events through the standard ``logging`` module, quiet by default.
 
-tmmaster logs through structlog loggers named ``tmmaster.*`` and never configures
-logging on import: a library must not decide for its host program. Command-line
-entry points call :func:`configure_logging`.
+Every tmmaster module logs through :func:`get_logger`: structlog builds the event (name,
+key-value fields, level, timestamp) and hands it to the standard logger of the same name
+(``tmmaster.robot``, ``tmmaster.transport``, ``tmmaster.sim`` ...). The ``tmmaster``
+logger has only a ``NullHandler``: a library must not decide for its host program, so
+nothing is printed unless the application configures logging (``logging.basicConfig``,
+its own handlers, or :func:`configure_logging`). The simulator logs under ``tmmaster.sim``,
+so its events can be filtered apart from the master's.
 """
 
 from __future__ import annotations
 
 import logging
 import sys
-from typing import TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
 
 import structlog
+
+#: The logger every tmmaster logger descends from.
+ROOT_LOGGER = "tmmaster"
+
+logging.getLogger(ROOT_LOGGER).addHandler(logging.NullHandler())
+
+_PROCESSORS: list[structlog.typing.Processor] = [
+    # Before anything else: a disabled level costs one check, not a whole event.
+    structlog.stdlib.filter_by_level,
+    structlog.contextvars.merge_contextvars,
+    structlog.stdlib.add_log_level,
+    structlog.stdlib.add_logger_name,
+    structlog.processors.TimeStamper(fmt="iso", utc=True),
+    structlog.processors.format_exc_info,
+    # The event dict travels to the handler's formatter; a plain formatter prints it
+    # as a dict, configure_logging's renders it as key=value or JSON.
+    structlog.stdlib.ProcessorFormatter.wrap_for_formatter,
+]
+
+
+def get_logger(name: str) -> Any:
+    """A structlog logger on the standard logger ``name`` (``tmmaster.*``)."""
+    return structlog.wrap_logger(
+        logging.getLogger(name),
+        processors=_PROCESSORS,
+        wrapper_class=structlog.stdlib.BoundLogger,
+        cache_logger_on_first_use=True,
+    )
 
 
 def configure_logging(
     *, json: bool = False, level: str = "info", stream: TextIO | None = None
-) -> None:
-    """Send tmmaster's events to ``stream`` (stderr): coloured key=value, or one JSON per line."""
+) -> Callable[[], None]:
+    """Print tmmaster's events to ``stream`` (stderr): coloured key=value, or one JSON per line.
+
+    For command-line tools and scripts. Returns a function that undoes it.
+    """
     numeric = logging.getLevelNamesMapping().get(level.upper())
     if numeric is None:
         raise ValueError(f"unknown log level {level!r}")
@@ -27,19 +63,28 @@ def configure_logging(
         renderer = structlog.processors.JSONRenderer()
     else:
         renderer = structlog.dev.ConsoleRenderer(colors=output.isatty())
+    handler = logging.StreamHandler(output)
+    handler.setFormatter(
+        structlog.stdlib.ProcessorFormatter(
+            processors=[structlog.stdlib.ProcessorFormatter.remove_processors_meta, renderer]
+        )
+    )
+    root = logging.getLogger(ROOT_LOGGER)
+    saved = (root.level, root.propagate)
+    root.addHandler(handler)
+    root.setLevel(numeric)
+    root.propagate = False  # printed here; not a second time by the application's root
     # pymodbus logs every refused connection and dropped send on its own; the transport
     # reports each of those as a typed error and a structured event, so keep only its
     # critical messages out of the user's terminal.
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    structlog.configure(
-        processors=[
-            structlog.contextvars.merge_contextvars,
-            structlog.processors.add_log_level,
-            structlog.processors.TimeStamper(fmt="iso", utc=True),
-            structlog.processors.format_exc_info,
-            renderer,
-        ],
-        wrapper_class=structlog.make_filtering_bound_logger(numeric),
-        logger_factory=structlog.PrintLoggerFactory(file=output),
-        cache_logger_on_first_use=False,
-    )
+    pymodbus = logging.getLogger("pymodbus")
+    pymodbus_level = pymodbus.level
+    pymodbus.setLevel(logging.CRITICAL)
+
+    def undo() -> None:
+        root.removeHandler(handler)
+        root.setLevel(saved[0])
+        root.propagate = saved[1]
+        pymodbus.setLevel(pymodbus_level)
+
+    return undo

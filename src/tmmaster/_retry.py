@@ -18,7 +18,6 @@ import time
 from collections.abc import Callable
 from typing import Annotated, TypeVar
 
-import structlog
 import tenacity
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -30,6 +29,7 @@ from ._exceptions import (
     StopRequestedError,
     TransportError,
 )
+from ._logging import get_logger
 
 T = TypeVar("T")
 
@@ -41,7 +41,7 @@ TRANSIENT_ERRORS: tuple[type[TransportError], ...] = (
     DeviceBusyError,
 )
 
-_log = structlog.get_logger("tmmaster.transport")
+_log = get_logger("tmmaster.transport")
 
 
 class RetryPolicy(BaseModel):

@@ -25,7 +25,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import structlog
 from pydantic import BaseModel, ConfigDict, Field
 
 from ._channels import (
@@ -51,6 +50,7 @@ from ._exceptions import (
     TMMasterError,
 )
 from ._gripper import Gripper, make_gripper
+from ._logging import get_logger
 from ._poller import MotionSchedule, Poller, PollPolicy
 from ._pose import MotionType, Pose
 from ._profiles import robot_profile
@@ -60,7 +60,7 @@ from ._robot_models import RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, RobotStatus
 from ._transport import ConnectionState, Transport, TransportStats, open_transport
 
-_log = structlog.get_logger("tmmaster.robot")
+_log = get_logger("tmmaster.robot")
 
 
 class Workspace(BaseModel):

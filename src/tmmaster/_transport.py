@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, Self, TypeVar, runtime_checkable
 
-import structlog
 from pymodbus import ModbusException
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
@@ -35,12 +34,13 @@ from ._exceptions import (
     ResponseTimeoutError,
     TransportError,
 )
+from ._logging import get_logger
 from ._registers import RegisterField, Table
 from ._retry import NO_RETRY, RetryPolicy
 
 T = TypeVar("T")
 
-_log = structlog.get_logger("tmmaster.transport")
+_log = get_logger("tmmaster.transport")
 
 #: Protocol limits of one request (Modbus application protocol spec, 6.1 - 6.12).
 MAX_READ_REGISTERS = 125

@@ -31,8 +31,6 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 from typing import Any, TextIO
 
-import structlog
-
 from .._exceptions import (
     ConfigError,
     GripperError,
@@ -40,7 +38,7 @@ from .._exceptions import (
     RobotError,
     TransportError,
 )
-from .._logging import configure_logging
+from .._logging import configure_logging, get_logger
 from .._profiles import builtin_profile_names
 from .._robot import Robot
 from ._config import PickPlaceConfig, load_config, robot_from_config
@@ -75,7 +73,7 @@ RESULT_NAMES = {
 #: How far (mm) a part may be from the place pose to count as placed (--sim check).
 PLACE_TOLERANCE_MM = 2.0
 
-_log = structlog.get_logger("tmmaster.pickplace")
+_log = get_logger("tmmaster.pickplace")
 
 
 def exit_code_for(exc: BaseException) -> int:
@@ -197,12 +195,14 @@ class _Outcome:
 
 def run(args: argparse.Namespace) -> int:
     """Run pick & place from parsed ``args``; returns the exit code (never raises)."""
-    previous = structlog.get_config()
+    stderr = sys.stderr
+    level = args.log_level or ("warning" if stderr.isatty() else "info")
+    undo_logging = configure_logging(json=args.log_json, level=level, stream=stderr)
     try:
         return _run(args)
     finally:
         # In-process callers (tests, tmmaster's CLI) get their logging back.
-        structlog.configure(**previous)
+        undo_logging()
 
 
 def _one_line(text: str) -> str:
@@ -212,8 +212,6 @@ def _one_line(text: str) -> str:
 def _run(args: argparse.Namespace) -> int:
     stderr = sys.stderr
     tty = stderr.isatty()
-    level = args.log_level or ("warning" if tty else "info")
-    configure_logging(json=args.log_json, level=level, stream=stderr)
     outcome = _Outcome()
     code = EXIT_FAILED
     reason: str | None = None

@@ -18,8 +18,6 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any, Literal
 
-import structlog
-
 from .._exceptions import (
     EmergencyStopError,
     GraspFailedError,
@@ -29,12 +27,13 @@ from .._exceptions import (
     TMMasterError,
 )
 from .._gripper import GripperStatus
+from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Robot
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
 from ._steps import PlannedMove, TaskSequence
 
-_log = structlog.get_logger("tmmaster.pickplace")
+_log = get_logger("tmmaster.pickplace")
 
 Reaction = Literal["stay", "retreat"]
 

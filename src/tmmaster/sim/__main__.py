@@ -14,10 +14,11 @@ import argparse
 import signal
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from types import FrameType
 
 from .._exceptions import TMMasterError
+from .._logging import configure_logging
 from .._profiles import builtin_profile_names
 from .._robot_models import ROBOT_MODELS
 from ._server import RequestRecord, json_line
@@ -94,6 +95,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         action="store_true",
         help="print every Modbus request as one JSON line on stdout",
     )
+    parser.add_argument(
+        "--log-level",
+        default="info",
+        choices=["debug", "info", "warning", "error"],
+        help="level of the simulator's events on stderr (logger tmmaster.sim; default: info)",
+    )
     return parser
 
 
@@ -111,6 +118,15 @@ def run(args: argparse.Namespace) -> int:
 
     def echo(record: RequestRecord) -> None:
         print(json_line(record), flush=True)
+
+    undo_logging = configure_logging(level=args.log_level, stream=sys.stderr)
+    try:
+        return _serve(args, echo)
+    finally:
+        undo_logging()
+
+
+def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
 
     try:
         sim = Simulator(

@@ -21,10 +21,9 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Literal, Protocol
 
-import structlog
-
 from .._codec import allowed_range, encode
 from .._exceptions import ValueOutOfRangeError
+from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RobotProfile
 from .._robot_models import RobotModel
@@ -138,7 +137,7 @@ class RobotController:
         self._model = model
         self._init_time_s = init_time_s
         self._accel_time_s = model.accel_time_s if accel_time_s is None else accel_time_s
-        self._log: Logger = structlog.get_logger("tmmaster.sim") if log is None else log
+        self._log: Logger = get_logger("tmmaster.sim") if log is None else log
         self._step_backend = step_backend
         self._gripper_open = gripper_open_width_mm
         self._gripper_close = gripper_close_width_mm

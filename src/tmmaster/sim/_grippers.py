@@ -16,8 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import structlog
-
+from .._logging import get_logger
 from .._registers import GripperProfile
 from ._backend import PhysicsBackend
 from ._bank import RegisterBank
@@ -85,7 +84,7 @@ class _GripperDevice:
         self._backend = backend
         self._init_time_s = init_time_s
         self._step_backend = step_backend
-        self._log: Logger = structlog.get_logger("tmmaster.sim") if log is None else log
+        self._log: Logger = get_logger("tmmaster.sim") if log is None else log
         self._misses = {f.at_grasp for f in faults if isinstance(f, GraspMissFault)}
         self._time_s = 0.0
         self._initialised = False

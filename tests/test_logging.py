@@ -1,0 +1,53 @@
+"""The library is quiet unless the application configures logging."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+
+def test_the_readme_snippet_prints_only_what_the_user_prints() -> None:
+    script = textwrap.dedent(
+        """
+        import tmmaster
+        from tmmaster.sim import Simulator
+
+        with Simulator("article", listen=False) as sim:
+            with tmmaster.connect(sim.url, profile="article") as robot:
+                robot.wait_until_ready()
+                robot.move_to(tmmaster.Pose(300, -200, 200, 180, 0, 90), speed=30)
+                print("mine")
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert done.stdout == "mine\n"
+    assert done.stderr == ""
+
+
+def test_configure_logging_prints_events_and_can_be_undone() -> None:
+    script = textwrap.dedent(
+        """
+        import io, json, tmmaster
+        from tmmaster._logging import get_logger
+
+        stream = io.StringIO()
+        undo = tmmaster.configure_logging(json=True, level="info", stream=stream)
+        get_logger("tmmaster.robot").info("robot.test_event", answer=42)
+        get_logger("tmmaster.robot").debug("robot.too_detailed")
+        undo()
+        get_logger("tmmaster.robot").warning("robot.after_undo")
+        (line,) = stream.getvalue().splitlines()
+        event = json.loads(line)
+        assert event["event"] == "robot.test_event" and event["answer"] == 42, event
+        assert event["logger"] == "tmmaster.robot" and event["level"] == "info", event
+        print("ok")
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.stdout == "ok\n", done.stderr
+    assert done.stderr == ""
