@@ -11,6 +11,7 @@ import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
@@ -38,6 +39,33 @@ class Knobs:
     requests: list[LoggedRequest] = field(default_factory=list)
 
 
+class _TcpServer(ModbusTcpServer):
+    """A pymodbus server that remembers its connection handlers, to close late ones.
+
+    asyncio accepts a connection in a task: when the listener closes between the accept
+    and the handler's ``connection_made``, pymodbus has already closed (and forgotten)
+    the handler, and ``connection_made`` then installs a transport nobody ever closes.
+    Its socket would leak until garbage collection warns about it in some later test.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.handlers: list[Any] = []
+
+    def callback_new_connection(self) -> Any:
+        handler = super().callback_new_connection()
+        self.handlers.append(handler)
+        return handler
+
+    def close_late_connections(self) -> None:
+        """Close every handler transport still open (call once the listener is shut)."""
+        for handler in self.handlers:
+            transport = handler.transport
+            if transport is not None:
+                transport.close()
+        self.handlers.clear()
+
+
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that nobody listens on right now."""
     with socket.socket() as s:
@@ -56,7 +84,7 @@ class TestServer:
         self.size = size
         self.knobs = Knobs()
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._server: ModbusTcpServer | None = None
+        self._server: _TcpServer | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
 
@@ -96,7 +124,7 @@ class TestServer:
         self._loop = loop
 
         async def main() -> None:
-            self._server = ModbusTcpServer(self._device(), address=("127.0.0.1", self.port))
+            self._server = _TcpServer(self._device(), address=("127.0.0.1", self.port))
             await self._server.serve_forever(background=True)
             self._ready.set()
             await self._server.serving
@@ -114,6 +142,9 @@ class TestServer:
                 for task in stuck:
                     task.cancel()
                 await asyncio.gather(*stuck, return_exceptions=True)
+            # Every accept has been handled by now: close what connected too late.
+            assert self._server is not None
+            self._server.close_late_connections()
             await asyncio.sleep(0.01)
 
         loop.run_until_complete(finish_pending())
