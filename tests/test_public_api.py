@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import inspect
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -71,3 +73,23 @@ def test_profile_command_prints_markdown(capsys: pytest.CaptureFixture[str]) -> 
     out = capsys.readouterr().out
     assert "| `target_x` | command | holding | 512 (0x0200) | int16 | x100 |" in out
     assert main(["profile", "show", "missing"]) == 2
+
+
+@pytest.mark.parametrize(
+    "command", [["tmmaster"], ["tmmaster.pickplace"], ["tmmaster.sim"]], ids=lambda c: c[0]
+)
+def test_every_command_answers_version(command: list[str]) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", *command, "--version"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().endswith(tmmaster.__version__)
+
+
+def test_tmmaster_alone_prints_help(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([]) == 0
+    assert "usage: tmmaster" in capsys.readouterr().out

@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING as _TYPE_CHECKING
 
 from ._lazy import lazy_attributes as _lazy_attributes
+from ._version import version as _version_of_package
 
 if _TYPE_CHECKING:
     from ._codec import Value, allowed_range, decode, encode
@@ -155,17 +156,8 @@ _EXPORTS = {
 }
 
 
-def _version() -> str:
-    from importlib import metadata
-
-    try:
-        return metadata.version("tmmaster")
-    except metadata.PackageNotFoundError:  # running from a source tree without installing
-        return "0.0.0"
-
-
 __getattr__, __dir__ = _lazy_attributes(
-    __name__, globals(), _EXPORTS, computed={"__version__": _version}
+    __name__, globals(), _EXPORTS, computed={"__version__": _version_of_package}
 )
 
 __all__ = [

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ._exceptions import TMMasterError
 from ._profiles import builtin_profile_names, load_profile, profile_markdown
+from ._version import add_version_argument
 
 
 def _add_profile_commands(parser: argparse.ArgumentParser) -> None:
@@ -45,7 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tmmaster", description="Drive a Techman robot over Modbus TCP."
     )
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{sim,pickplace,profile}")
+    add_version_argument(parser)
+    sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,profile}")
     sim_main.add_arguments(
         sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
     )
@@ -70,7 +72,11 @@ def _main(argv: Sequence[str] | None) -> int:
     from .sim import __main__ as sim_main
 
     _sigint.handled_by_main()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:  # plain ``tmmaster``: say what it can do
+        parser.print_help()
+        return 0
     if args.command == "sim":
         return sim_main.run(args)
     if args.command == "pickplace":

@@ -41,6 +41,7 @@ from .._exceptions import (
 from .._logging import configure_logging, get_logger
 from .._profiles import builtin_profile_names
 from .._robot import Robot
+from .._version import add_version_argument
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
 from ._plan import format_plan, validate_plan
@@ -138,6 +139,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--diagram", action="store_true", help="print the state machine as a mermaid diagram"
     )
     parser.add_argument("--log-json", action="store_true", help="log one JSON object per line")
+    add_version_argument(parser)
     parser.add_argument(
         "--log-level",
         default=None,

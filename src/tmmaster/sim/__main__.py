@@ -21,6 +21,7 @@ from .._exceptions import TMMasterError
 from .._logging import configure_logging
 from .._profiles import builtin_profile_names
 from .._robot_models import ROBOT_MODELS
+from .._version import add_version_argument
 from ._server import RequestRecord, json_line
 from ._simulator import Simulator, simulator_summary
 
@@ -101,6 +102,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         choices=["debug", "info", "warning", "error"],
         help="level of the simulator's events on stderr (logger tmmaster.sim; default: info)",
     )
+    add_version_argument(parser)
     return parser
 
 
