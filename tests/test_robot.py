@@ -460,7 +460,8 @@ def test_one_request_per_block_per_poll(
     before_ack: int,
     after_ack: int,
 ) -> None:
-    sim = tm_simulator_factory(profile, time_scale=1, faults=["late_ack:delay_s=0.5"])
+    # 0.5 s of wall time before the acknowledgement; the move itself then takes ~0.3 s.
+    sim = tm_simulator_factory(profile, time_scale=5, faults=["late_ack:delay_s=2.5"])
     robot = robots(sim)
     motion = robot.start_move(APPROACH, speed=30)
     sim.clear_request_log()

@@ -136,6 +136,7 @@ def test_a_late_answered_command_write_reaches_the_device_exactly_once(
 
 
 def test_idempotent_writes_are_retried(server: TestServer, transport: ModbusTransport) -> None:
+    transport.retry = RetryPolicy(attempts=2, initial_backoff_s=0.02)  # one retry shows it
     server.knobs.write_delay_s = 0.6
     with pytest.raises(ResponseTimeoutError):
         transport.write_block(Table.HOLDING, 0, [1], retry=True)
