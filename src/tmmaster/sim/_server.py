@@ -25,6 +25,7 @@ import contextlib
 import json
 import threading
 import time
+import weakref
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -218,6 +219,32 @@ def _overlaps(request: _Request, table: Table, start: int, end: int) -> bool:
     return request.table is table and request.address <= end and last >= start
 
 
+class _Listener(ModbusTcpServer):
+    """pymodbus' TCP server, remembering its connection handlers to close late ones.
+
+    asyncio sets a connection up in a task: when the listener closes between the accept
+    and the handler's ``connection_made``, pymodbus has already closed and forgotten the
+    handler, and ``connection_made`` then installs a transport nobody closes; its socket
+    would leak until garbage collection warns about it.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.handlers: weakref.WeakSet[Any] = weakref.WeakSet()
+
+    def callback_new_connection(self) -> Any:
+        """Create a connection handler (pymodbus) and remember it."""
+        handler = super().callback_new_connection()  # type: ignore[no-untyped-call]
+        self.handlers.add(handler)
+        return handler
+
+    def close_late_connections(self) -> None:
+        """Close every handler transport still open (after the listener shut down)."""
+        for handler in list(self.handlers):
+            if handler.transport is not None:
+                handler.transport.close()
+
+
 class DeviceServer:
     """A Modbus TCP listener serving one register bank, with network faults."""
 
@@ -247,7 +274,7 @@ class DeviceServer:
         #: None = answer every unit id (the TM controller ignores it).
         self._device_id = device_id
         self._max_connections = max_connections
-        self._server: ModbusTcpServer | None = None
+        self._server: _Listener | None = None
         self._faults: list[NetworkFault] = []
         # Requests counted since each fault was injected (same order as _faults).
         self._counts: list[int] = []
@@ -288,7 +315,7 @@ class DeviceServer:
         self._accepting = True
         if not self.tcp:
             return
-        server = ModbusTcpServer(
+        server = _Listener(
             self._sim_device(),
             address=(self._host, self._port),
             trace_pdu=self._trace_pdu,
@@ -318,6 +345,9 @@ class DeviceServer:
         for _ in range(3):
             await asyncio.sleep(0)
         await server.shutdown()  # type: ignore[no-untyped-call]
+        for _ in range(3):
+            await asyncio.sleep(0)  # a set-up still in flight reaches connection_made
+        server.close_late_connections()
 
     def _sim_device(self) -> SimDevice:
         blocks: list[list[SimData]] = []
