@@ -418,8 +418,7 @@ class Robot:
         """Check, send and follow any command of the profile: a move or a gripper action."""
         if timeout is not None:
             _require_positive("timeout", timeout)
-        # Encoding refuses out-of-range values here, before the first read or write.
-        self.channel.encode_command(command)
+        # prepare() encodes (refusing out-of-range values) before its first read.
         ticket = self.channel.prepare(command)
         start: Pose | None = None
         expected = 0.0

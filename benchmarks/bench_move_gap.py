@@ -1,0 +1,78 @@
+"""Move-to-move gap and completion latency, with predictive polling on and off.
+
+Real time (time scale 1), 50 ms nominal polling, the simulator in-process on loopback
+TCP (its 50 Hz control tick is part of what is measured). For consecutive moves i, i+1:
+
+* gap = when the robot started move i+1 (the simulator's motion log) minus when move i
+  ended by the arm model (start + the expected time, the same model the simulator
+  moves by): the slave's tick that reports the end, the master's detection, its checks
+  before the next write, and the slave's tick that takes it;
+* requests per move, from the transport's counters.
+
+Run::
+
+    python benchmarks/bench_move_gap.py --moves 12 --rounds 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+
+import tmmaster
+from tmmaster import PollPolicy, Pose
+from tmmaster.sim import Simulator
+
+A = Pose(300, -200, 200, 180, 0, 90)
+B = Pose(300, -200, 120, 180, 0, 90)
+
+
+def measure(profile: str, predictive: bool, moves: int) -> tuple[list[float], float]:
+    with Simulator(profile, time_scale=1.0) as sim:
+        with tmmaster.Robot(
+            "127.0.0.1",
+            sim.port,
+            profile=profile,
+            gripper=None,
+            polling=PollPolicy(predictive=predictive),
+        ) as robot:
+            robot.wait_until_ready(timeout_s=10)
+            robot.move_to(A, speed=60)
+            expected: list[float] = []
+            before = robot.stats.requests
+            for i in range(moves):
+                motion = robot.move_to(B if i % 2 == 0 else A, speed=60)
+                expected.append(motion.expected_s)
+            requests = (robot.stats.requests - before) / moves
+        log = [m for m in sim.motion_log() if m.target is not None][1:]
+    gaps = [log[i + 1].wall_time - (log[i].wall_time + expected[i]) for i in range(len(log) - 1)]
+    return gaps, requests
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--moves", type=int, default=12)
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args(argv)
+    print("| profile | polling | gap p50 ms | gap p90 ms | gap max ms | requests/move |")
+    print("|---|---|---|---|---|---|")
+    for profile in ("article", "tmflow"):
+        for predictive in (False, True):
+            gaps: list[float] = []
+            requests: list[float] = []
+            for _ in range(args.rounds):
+                g, r = measure(profile, predictive, args.moves)
+                gaps += g
+                requests.append(r)
+            q = statistics.quantiles([g * 1000 for g in gaps], n=10)
+            print(
+                f"| {profile} | {'predictive' if predictive else 'nominal 50 ms'} |"
+                f" {statistics.median(gaps) * 1000:.0f} | {q[8]:.0f} | {max(gaps) * 1000:.0f} |"
+                f" {statistics.median(requests):.1f} |"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
