@@ -512,3 +512,14 @@ def test_sigint_at_any_moment_exits_130_in_one_line(tmp_path: Path, after_s: flo
     assert proc.returncode == EXIT_INTERRUPTED, err
     assert "Traceback" not in err
     assert last_stderr_line(err).startswith("pickplace: interrupted")
+
+
+def test_a_report_file_has_ordinary_permissions(tmp_path: Path) -> None:
+    from tmmaster.pickplace import write_report
+
+    previous = os.umask(0o022)
+    try:
+        write_report(tmp_path / "r.json", {"result": "done"})
+    finally:
+        os.umask(previous)
+    assert (tmp_path / "r.json").stat().st_mode & 0o777 == 0o644

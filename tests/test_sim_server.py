@@ -401,3 +401,22 @@ def test_cli_runs_until_signal_and_exits_0(sig: signal.Signals) -> None:
     assert proc.returncode == 0
     assert '"function_code":3' in out
     assert "simulator stopped" in out
+
+
+def test_a_taken_port_is_one_line_and_exit_1() -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [sys.executable, "-m", "tmmaster.sim", "--port", str(port)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        f"sim: cannot listen on 127.0.0.1:{port} (port in use, or not an address of this"
+        " machine) [exit 1]"
+    ]

@@ -107,6 +107,11 @@ def write_report(path: str | Path, report: dict[str, Any]) -> None:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             json.dump(report, handle, indent=2, sort_keys=False)
             handle.write("\n")
+        # mkstemp makes the file private (0600); a report is an ordinary file (0644
+        # under the usual umask 022), like one opened with open(path, "w").
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

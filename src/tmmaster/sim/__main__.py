@@ -24,6 +24,7 @@ from .._robot_models import ROBOT_MODELS
 from .._version import add_version_argument
 from ._server import RequestRecord, json_line
 from ._simulator import Simulator, simulator_summary
+from ._world import DEFAULT_PART_POSE, TableObject
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -97,6 +98,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="print every Modbus request as one JSON line on stdout",
     )
     parser.add_argument(
+        "--parts",
+        type=int,
+        default=1,
+        metavar="N",
+        help="parts waiting at the pick position, like a feeder: the next one is there"
+        " after one is taken (default: 1; 0 for an empty table)",
+    )
+    parser.add_argument(
         "--log-level",
         default="info",
         choices=["debug", "info", "warning", "error"],
@@ -128,6 +137,12 @@ def run(args: argparse.Namespace) -> int:
         undo_logging()
 
 
+def _parts(count: int) -> list[TableObject]:
+    if count < 0:
+        raise ValueError(f"--parts must be >= 0, got {count}")
+    return [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(1, count + 1)]
+
+
 def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
 
     try:
@@ -141,6 +156,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             gripper=args.gripper,
             gripper_port=args.gripper_port,
             faults=args.fault,
+            objects=_parts(args.parts),
             request_listener=echo if args.log_json else None,
         )
     except (TMMasterError, ValueError, KeyError) as exc:
@@ -157,7 +173,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
         try:
             sim.start()
         except OSError as exc:
-            print(f"error: cannot listen: {exc}", file=sys.stderr)
+            print(f"sim: {exc} [exit 1]", file=sys.stderr)
             return 1
         for line in simulator_summary(sim):
             print(line, flush=True)

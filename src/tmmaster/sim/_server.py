@@ -321,7 +321,13 @@ class DeviceServer:
             trace_pdu=self._trace_pdu,
             trace_connect=self._trace_connect,
         )
-        await server.serve_forever(background=True)
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError as exc:  # pymodbus's "Could not start listen": name the cause
+            raise OSError(
+                f"cannot listen on {self._host}:{self._port} (port in use, or not an"
+                " address of this machine)"
+            ) from exc
         listener = server.transport
         sockets = getattr(listener, "sockets", None)
         if sockets:

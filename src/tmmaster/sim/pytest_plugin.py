@@ -1,7 +1,8 @@
 """pytest fixtures for testing code that talks to a TM robot: a simulator per test.
 
-Registered as the ``tmmaster`` pytest11 entry point, so installing tmmaster makes the
-fixtures available everywhere (disable with ``-p no:tmmaster``):
+Opt-in, so installing tmmaster costs other test suites nothing: enable it with
+``-p tmmaster.sim.pytest_plugin`` (e.g. in ``addopts``) or
+``pytest_plugins = ["tmmaster.sim.pytest_plugin"]`` in your top-level ``conftest.py``:
 
 ``tm_simulator``
     A started article-profile :class:`~tmmaster.sim.Simulator` on a free loopback
