@@ -420,3 +420,37 @@ def test_a_taken_port_is_one_line_and_exit_1() -> None:
         f"sim: cannot listen on 127.0.0.1:{port} (port in use, or not an address of this"
         " machine) [exit 1]"
     ]
+
+
+def test_the_cli_banner_lists_faults_and_sigusr1_resets_an_error() -> None:
+    proc = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10"),
+            *("--fault", "estop:after_s=0.5", "--log-level", "warning"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        banner = [proc.stdout.readline() for _ in range(4)]
+        port = int(banner[0].split()[3].rsplit(":", 1)[1])
+        assert banner[2].strip() == "fault   armed: estop:after_s=0.5"
+        assert f"kill -USR1 {proc.pid}" in banner[3]
+        with ModbusTransport("127.0.0.1", port) as link:
+            deadline = time.monotonic() + 10
+            while link.read_block(Table.HOLDING, 3, 1) != [0x0200]:  # e-stop fired
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+            proc.send_signal(signal.SIGUSR1)
+            while link.read_block(Table.HOLDING, 3, 1) != [0]:  # the operator's reset
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0

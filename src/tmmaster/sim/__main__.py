@@ -11,6 +11,7 @@ from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -163,12 +164,17 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()
+    reset = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
-        _ = signum, frame
-        stop.set()
+        _ = frame
+        # SIGUSR1 is the operator's reset on the pendant: clear the error, keep running.
+        (reset if signum == signal.SIGUSR1 else stop).set()
 
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {
+        sig: signal.signal(sig, on_signal)
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
+    }
     try:
         try:
             sim.start()
@@ -177,10 +183,18 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             return 1
         for line in simulator_summary(sim):
             print(line, flush=True)
-        print("press Ctrl-C to stop", flush=True)
+        for fault in args.fault:
+            print(f"fault   armed: {fault}", flush=True)
+        print(
+            f"press Ctrl-C to stop; kill -USR1 {os.getpid()} resets a robot error or e-stop",
+            flush=True,
+        )
         # wait() with a timeout keeps the main thread responsive to signals.
-        while not stop.wait(0.5):
-            pass
+        while not stop.wait(0.2):
+            if reset.is_set():
+                reset.clear()
+                sim.clear_error()
+                print("robot error reset (SIGUSR1)", flush=True)
     finally:
         sim.close()
         for sig, handler in previous.items():
