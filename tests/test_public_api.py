@@ -5,6 +5,7 @@ from __future__ import annotations
 import inspect
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -93,3 +94,73 @@ def test_every_command_answers_version(command: list[str]) -> None:
 def test_tmmaster_alone_prints_help(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([]) == 0
     assert "usage: tmmaster" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace])
+def test_public_names_live_in_the_public_package(module: object) -> None:
+    # Tracebacks and reprs show tmmaster.Robot, not tmmaster._robot.Robot.
+    for name in module.__all__:  # type: ignore[attr-defined]
+        value = getattr(module, name)
+        if inspect.isclass(value) or inspect.isfunction(value):
+            home = value.__module__
+            assert not home.rsplit(".", 1)[-1].startswith("_"), f"{name}: {home}"
+
+
+def _bad_calls() -> list[tuple[str, Callable[[], object]]]:
+    article = tmmaster.robot_profile("article")
+    return [
+        ("unknown model", lambda: tmmaster.Robot("127.0.0.1", model="tm7")),
+        ("unknown model name", lambda: tmmaster.robot_model("tm7")),
+        ("unknown profile", lambda: tmmaster.Robot("127.0.0.1", profile="no-such")),
+        ("unknown field", lambda: article.field("x")),
+        ("unknown label", lambda: article.field("command").code_of("jump")),
+        ("nan pose", lambda: tmmaster.Pose(float("nan"), 0, 0)),
+        ("text pose", lambda: tmmaster.Pose("here", 0, 0)),  # type: ignore[arg-type]
+        ("motion lin", lambda: tmmaster.Robot("127.0.0.1", profile="article").start_move(
+            tmmaster.Pose(300, -200, 200, 180, 0, 90), motion="lin"  # type: ignore[arg-type]
+        )),
+        ("bad poll interval", lambda: tmmaster.Robot("127.0.0.1", poll_interval_s=0)),
+        ("value out of range", lambda: tmmaster.encode(article.field("target_x"), 400)),
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(("what", "call"), _bad_calls(), ids=[w for w, _ in _bad_calls()])
+def test_the_error_promise_holds(what: str, call: Callable[[], object]) -> None:
+    with pytest.raises(tmmaster.TMMasterError) as caught:
+        call()
+    assert str(caught.value), what
+
+
+def test_unknown_names_list_the_choices() -> None:
+    with pytest.raises(KeyError, match="tm5-700"):  # still a KeyError/ValueError for old code
+        tmmaster.robot_model("tm7")
+    with pytest.raises(ValueError, match="'ptp', 'line'"):
+        tmmaster.Robot("127.0.0.1", profile="article").start_move(
+            tmmaster.Pose(300, -200, 200, 180, 0, 90),
+            motion="lin",  # type: ignore[arg-type]
+        )
+
+
+def test_connect_after_close_is_a_clear_error() -> None:
+    sim = tmmaster.sim.Simulator("article", listen=False).start()
+    try:
+        robot = tmmaster.Robot(sim.url, profile="article")
+        robot.connect()
+        robot.close()
+        robot.close()
+        with pytest.raises(tmmaster.ConnectError, match="was closed"):
+            robot.connect()
+    finally:
+        sim.close()
+
+
+def test_a_profile_mismatch_names_the_profile_the_device_speaks() -> None:
+    sim = tmmaster.sim.Simulator("tmflow", listen=False).start()
+    try:
+        with (
+            tmmaster.Robot(sim.url, profile="article", gripper=None) as robot,
+            pytest.raises(tmmaster.IllegalAddressError, match="'tmflow' profile"),
+        ):
+            robot.status()
+    finally:
+        sim.close()

@@ -6,6 +6,7 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     TMMasterError
     ├── ConfigError (ValueError)                  before any I/O: nothing was sent
     │   ├── RegisterMapError                      a register map or profile is inconsistent
+    │   │   └── UnknownNameError (KeyError)       no field / value / model of that name
     │   └── ValueOutOfRangeError                  a value does not fit its field
     ├── TransportError                            talking Modbus failed
     │   ├── ConnectError (ConnectionError)        could not open the connection
@@ -51,6 +52,13 @@ class ConfigError(TMMasterError, ValueError):
 
 class RegisterMapError(ConfigError):
     """A register map or profile is inconsistent."""
+
+
+class UnknownNameError(RegisterMapError, KeyError):
+    """A field, value label, profile or model name that does not exist (choices listed)."""
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return str(self.args[0]) if self.args else ""
 
 
 class ValueOutOfRangeError(ConfigError):

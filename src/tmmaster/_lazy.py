@@ -10,6 +10,7 @@ imports under ``TYPE_CHECKING``.
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -30,6 +31,7 @@ def lazy_attributes(
         module = exports.get(name)
         if module is not None:
             value = getattr(importlib.import_module(module, package), name)
+            _rehome(value, package)
         elif name in computed:
             value = computed[name]()
         else:
@@ -41,3 +43,16 @@ def lazy_attributes(
         return sorted({*namespace, *exports, *computed})
 
     return getattr_, dir_
+
+
+def _rehome(value: Any, package: str) -> None:
+    """Show a public class or function as ``package.Name`` (tracebacks, reprs, docs).
+
+    Only names defined in a private module of tmmaster (``tmmaster._x``,
+    ``tmmaster.sim._x``): their private home is an implementation detail.
+    """
+    module = getattr(value, "__module__", None)
+    if not (inspect.isclass(value) or inspect.isfunction(value)) or not isinstance(module, str):
+        return
+    if module.startswith("tmmaster.") and module.rsplit(".", 1)[-1].startswith("_"):
+        value.__module__ = package

@@ -5,9 +5,14 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 from enum import StrEnum
+from typing import Any
 
-from pydantic import ConfigDict
+from pydantic import ConfigDict, ValidationError
 from pydantic.dataclasses import dataclass
+
+from ._exceptions import ConfigError
+
+_POSE_FIELDS = ("x", "y", "z", "rx", "ry", "rz")
 
 
 class MotionType(StrEnum):
@@ -68,6 +73,26 @@ class Pose:
             f"({self.x:.2f}, {self.y:.2f}, {self.z:.2f} mm; "
             f"{self.rx:.2f}, {self.ry:.2f}, {self.rz:.2f} deg)"
         )
+
+
+_validated_init = Pose.__init__
+
+
+def _pose_init(self: Pose, *args: Any, **kwargs: Any) -> None:
+    # A pose built in code fails as a ConfigError naming the coordinate, like every
+    # other invalid input; inside a pydantic model it stays that model's validation error.
+    try:
+        _validated_init(self, *args, **kwargs)
+    except ValidationError as exc:
+        problems = []
+        for error in exc.errors():
+            where = error["loc"][0] if error["loc"] else "pose"
+            name = _POSE_FIELDS[where] if isinstance(where, int) and where < 6 else where
+            problems.append(f"{name}: {error['msg']}")
+        raise ConfigError(f"invalid pose: {'; '.join(problems)}") from exc
+
+
+Pose.__init__ = _pose_init  # type: ignore[method-assign]
 
 
 def _wrap(angle: float) -> float:

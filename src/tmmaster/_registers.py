@@ -16,6 +16,8 @@ from typing import Annotated, Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from ._exceptions import UnknownNameError
+
 #: Registers a data type occupies.
 _WIDTHS = {"int16": 1, "uint16": 1, "int32": 2, "uint32": 2, "float32": 2, "bool": 1}
 
@@ -156,7 +158,8 @@ class RegisterField(BaseModel):
         for code, meaning in self.values.items():
             if meaning == label:
                 return code
-        raise KeyError(f"field {self.name} has no value labelled {label!r}")
+        choices = ", ".join(repr(v) for v in self.values.values()) or "none defined"
+        raise UnknownNameError(f"field {self.name} has no value labelled {label!r} ({choices})")
 
     def bit(self, raw: int, name: str) -> bool:
         """True when the named bit is set in ``raw``."""
@@ -211,7 +214,10 @@ class RegisterMap(BaseModel):
         try:
             return self.fields[name]
         except KeyError:
-            raise KeyError(f"register map {self.name!r} has no field {name!r}") from None
+            raise UnknownNameError(
+                f"register map {self.name!r} has no field {name!r}"
+                f" (fields: {', '.join(sorted(self.fields))})"
+            ) from None
 
     def has(self, name: str) -> bool:
         """True when the map defines a field called ``name``."""

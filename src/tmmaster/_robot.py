@@ -40,8 +40,10 @@ from ._exceptions import (
     CommandRejectedError,
     CommandStateUnknownError,
     ConfigError,
+    ConnectError,
     ConnectionLostError,
     EmergencyStopError,
+    IllegalAddressError,
     MotionTimeoutError,
     ResponseTimeoutError,
     RobotError,
@@ -53,8 +55,8 @@ from ._gripper import Gripper, make_gripper
 from ._logging import get_logger
 from ._poller import MotionSchedule, Poller, PollPolicy
 from ._pose import MotionType, Pose
-from ._profiles import robot_profile
-from ._registers import GripperProfile, RobotProfile
+from ._profiles import builtin_profile_names, load_profile, robot_profile
+from ._registers import GripperProfile, RobotProfile, Role
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, RobotStatus
@@ -285,6 +287,10 @@ class Robot:
 
     def connect(self) -> Robot:
         """Open the connections (robot, then gripper if it has its own); a no-op when open."""
+        if self.transport.state is ConnectionState.CLOSED:
+            raise ConnectError(
+                f"{self.name}: this Robot was closed; create a new Robot to connect again"
+            )
         if self._connected:
             return self
         try:
@@ -349,7 +355,34 @@ class Robot:
 
     def status(self) -> RobotStatus:
         """One immutable snapshot: each status block read in one request."""
-        return self.channel.read_status()
+        try:
+            return self.channel.read_status()
+        except IllegalAddressError as exc:
+            hint = self._profile_hint()
+            if hint is None:
+                raise
+            raise IllegalAddressError(f"{exc}; {hint}", code=exc.code) from exc
+
+    def _profile_hint(self) -> str | None:
+        """After a refused status read: which built-in profile the device seems to speak."""
+        for name in builtin_profile_names():
+            if name == self.profile.name:
+                continue
+            other = load_profile(name)
+            if not isinstance(other, RobotProfile):
+                continue
+            probe = channel_for(other, self.transport)
+            try:
+                probe.transport.read_fields(
+                    other.role(Role.STATUS)[:1], retry=False, interruptible=False
+                )
+            except TMMasterError:
+                continue
+            return (
+                f"the device answers the {name!r} profile's status registers:"
+                f" is it running that profile? (this Robot speaks {self.profile.name!r})"
+            )
+        return None
 
     def pose(self) -> Pose:
         """The current TCP pose."""
@@ -408,7 +441,11 @@ class Robot:
         accel_time_ms: int | None = None,
     ) -> Motion:
         """Validate and send a move, returning at once with a :class:`Motion` handle."""
-        motion = MotionType(motion)
+        try:
+            motion = MotionType(motion)
+        except ValueError:
+            choices = ", ".join(repr(m.value) for m in MotionType)
+            raise ConfigError(f"motion must be one of {choices}, got {motion!r}") from None
         self.validate_move(target, speed)
         return self.start_command(
             Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout

@@ -14,6 +14,7 @@ from types import MappingProxyType
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from ._exceptions import UnknownNameError
 from ._pose import MotionType, Pose
 
 
@@ -160,4 +161,4 @@ def robot_model(name: str) -> RobotModel:
         return ROBOT_MODELS[name]
     except KeyError:
         known = ", ".join(sorted(ROBOT_MODELS))
-        raise ValueError(f"unknown robot model {name!r} (known: {known})") from None
+        raise UnknownNameError(f"unknown robot model {name!r} (known: {known})") from None
