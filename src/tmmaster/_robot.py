@@ -17,13 +17,14 @@ acknowledged the command first, and the final pose must be at the target.
 from __future__ import annotations
 
 import atexit
+import inspect
 import math
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal, ParamSpec
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -63,6 +64,8 @@ from ._status import MovePhase, MoveProgress, RobotStatus
 from ._transport import ConnectionState, Transport, TransportStats, open_transport
 
 _log = get_logger("tmmaster.robot")
+
+_P = ParamSpec("_P")
 
 
 class Workspace(BaseModel):
@@ -740,17 +743,22 @@ class Robot:
         )
 
 
-def connect(
-    host: str,
-    port: int = 502,
-    *,
-    profile: str | Path | RobotProfile = "tmflow",
-    **options: Any,
-) -> Robot:
-    """Open a :class:`Robot` (options as for :class:`Robot`); use it in a ``with`` block."""
-    robot = Robot(host, port, profile=profile, **options)
-    try:
-        return robot.connect()
-    except BaseException:
-        robot.close()
-        raise
+def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:
+    """``make`` then ``connect()``, with ``make``'s exact signature (typos caught by mypy)."""
+
+    def connect(*args: _P.args, **kwargs: _P.kwargs) -> Robot:
+        """Open a :class:`Robot` (same arguments as :class:`Robot`); use it in a ``with`` block."""
+        robot = make(*args, **kwargs)
+        try:
+            return robot.connect()
+        except BaseException:
+            robot.close()
+            raise
+
+    connect.__qualname__ = "connect"
+    # help() and the API docs show Robot's parameters, not *args/**kwargs.
+    connect.__signature__ = inspect.signature(make)  # type: ignore[attr-defined]
+    return connect
+
+
+connect = _connected(Robot)
