@@ -164,3 +164,12 @@ def test_a_profile_mismatch_names_the_profile_the_device_speaks() -> None:
             robot.status()
     finally:
         sim.close()
+
+
+def test_the_shipped_config_schema_matches_the_model() -> None:
+    from tmmaster._cli import config_schema
+
+    shipped = ROOT / "src" / "tmmaster" / "schemas" / "pickplace-config.schema.json"
+    assert shipped.read_text(encoding="utf-8") == config_schema(), (
+        "stale: run `tmmaster schema -o src/tmmaster/schemas/pickplace-config.schema.json`"
+    )

@@ -7,6 +7,7 @@ from . import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
+import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -47,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tmmaster", description="Drive a Techman robot over Modbus TCP."
     )
     add_version_argument(parser)
-    sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,profile}")
+    sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,profile,schema}")
     sim_main.add_arguments(
         sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
     )
@@ -55,7 +56,19 @@ def build_parser() -> argparse.ArgumentParser:
         sub.add_parser("pickplace", help="run a configurable pick & place")
     )
     _add_profile_commands(sub.add_parser("profile", help="list or show register profiles"))
+    schema = sub.add_parser("schema", help="print the JSON Schema of the pick & place config")
+    schema.add_argument("--output", "-o", metavar="FILE.json", help="write to a file instead")
     return parser
+
+
+def config_schema() -> str:
+    """The JSON Schema of the pick & place configuration file, generated from its model."""
+    from .pickplace import PickPlaceConfig
+
+    schema = PickPlaceConfig.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "tmmaster pick & place configuration (TOML)"
+    return json.dumps(schema, indent=2, sort_keys=True) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -81,6 +94,12 @@ def _main(argv: Sequence[str] | None) -> int:
         return sim_main.run(args)
     if args.command == "pickplace":
         return pickplace_main.run(args)
+    if args.command == "schema":
+        if args.output:
+            Path(args.output).write_text(config_schema(), encoding="utf-8")
+        else:
+            sys.stdout.write(config_schema())
+        return 0
     try:
         return _run_profile(args)
     except TMMasterError as exc:
