@@ -48,17 +48,11 @@ class Poller:
 
     def sleep(self) -> None:
         """Sleep until the next poll is due (no drift: deadlines advance by the interval)."""
-        self.check()
         self._next += self.interval_s
-        delay = self._next - time.monotonic()
-        if delay < 0:  # a slow poll: don't try to catch up with a burst of reads
-            self._next = time.monotonic()
-            return
-        if self._stop is not None:
-            if self._stop.wait(delay):
-                raise StopRequestedError("stop requested")
-        else:
-            time.sleep(delay)
+        now = time.monotonic()
+        if self._next < now:  # a slow poll: don't try to catch up with a burst of reads
+            self._next = now
+        self.sleep_until(self._next)
 
 
 class PollPolicy(BaseModel):
