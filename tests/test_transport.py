@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+import threading
 import time
 from collections.abc import Iterator
 
@@ -171,3 +173,28 @@ def test_counts_bytes_per_modbus_framing(server: TestServer, transport: ModbusTr
     # Request: 7-byte MBAP + 5-byte PDU. Response: MBAP + fc + byte count + 20 data bytes.
     assert transport.stats.bytes_sent == 12
     assert transport.stats.bytes_received == 7 + 2 + 20
+
+
+def test_an_fc2_answer_with_zero_data_bytes_is_a_transport_error() -> None:
+    # A device (or a proxy) that answers FC2 with a byte count of 0: never a bare ValueError.
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(1)
+    port = listener.getsockname()[1]
+
+    def answer_empty() -> None:
+        conn, _ = listener.accept()
+        with conn:
+            request = conn.recv(260)
+            conn.sendall(request[:2] + b"\x00\x00\x00\x03" + request[6:7] + b"\x02\x00")
+            conn.recv(260)  # until the master drops the link
+
+    server = threading.Thread(target=answer_empty)
+    server.start()
+    try:
+        link = ModbusTransport("127.0.0.1", port, timeout=0.5, retry=RetryPolicy(attempts=1))
+        with link, pytest.raises(TransportError):
+            link.read_block(Table.DISCRETE_INPUT, 7201, 1)
+    finally:
+        server.join(5)
+        listener.close()

@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ._cliparse import ArgumentParser, UsageError, one_line
 from ._exceptions import TMMasterError
 from ._profiles import builtin_profile_names, load_profile, profile_markdown
 from ._version import add_version_argument
@@ -44,9 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .pickplace import __main__ as pickplace_main
     from .sim import __main__ as sim_main
 
-    parser = argparse.ArgumentParser(
-        prog="tmmaster", description="Drive a Techman robot over Modbus TCP."
-    )
+    parser = ArgumentParser(prog="tmmaster", description="Drive a Techman robot over Modbus TCP.")
     add_version_argument(parser)
     sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,profile,schema}")
     sim_main.add_arguments(
@@ -86,7 +85,11 @@ def _main(argv: Sequence[str] | None) -> int:
 
     _sigint.handled_by_main()
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as exc:
+        print(f"tmmaster: {one_line(exc)} [exit 2]", file=sys.stderr)
+        return 2
     if args.command is None:  # plain ``tmmaster``: say what it can do
         parser.print_help()
         return 0

@@ -63,6 +63,10 @@ def profile_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Pro
             raise RegisterMapError(f"{source}: extends must be a profile name")
         base = _builtin_data(base_name)
         remove = data.pop("remove_fields", [])
+        if not isinstance(remove, list) or not all(isinstance(n, str) for n in remove):
+            raise RegisterMapError(f"{source}: remove_fields must be a list of field names")
+        if not isinstance(data.get("fields", {}), Mapping):
+            raise RegisterMapError(f"{source}: fields must be a table of field tables")
         data = _merge(base, data)
         for name in remove:
             data.get("fields", {}).pop(name, None)
@@ -83,6 +87,11 @@ def load_profile(name_or_path: str | Path) -> Profile:
         data = tomllib.loads(path.read_text("utf-8"))
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise RegisterMapError(f"{path}: cannot read profile: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise RegisterMapError(
+            f"{path}: not a UTF-8 text (TOML) file: byte 0x{exc.object[exc.start]:02x}"
+            f" at offset {exc.start}"
+        ) from exc
     return profile_from_data(data, source=str(path))
 
 

@@ -94,7 +94,9 @@ class Role(StrEnum):
 class RegisterField(BaseModel):
     """One value in a device's register map."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
+    model_config = ConfigDict(
+        frozen=True, extra="forbid", populate_by_name=True, allow_inf_nan=False
+    )
 
     name: str
     role: Role

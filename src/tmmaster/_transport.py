@@ -12,6 +12,7 @@ device's state back to learn whether the command arrived.
 
 from __future__ import annotations
 
+import struct
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -571,6 +572,8 @@ class ModbusTransport(BlockTransport):
             raise TransportError(f"{self.name}: {what} failed: {exc}") from exc
         except OSError as exc:
             raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        except (ValueError, IndexError, struct.error) as exc:  # a malformed answer
+            raise TransportError(f"{self.name}: malformed answer to {what}: {exc}") from exc
         if isinstance(response, ExceptionResponse) or response.isError():
             code = int(getattr(response, "exception_code", 0))
             error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)

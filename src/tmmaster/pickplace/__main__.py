@@ -24,6 +24,7 @@ from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
+import math
 import signal
 import sys
 import threading
@@ -31,6 +32,7 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 from typing import Any, TextIO
 
+from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import (
     ConfigError,
     GripperError,
@@ -153,7 +155,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m tmmaster.pickplace``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m tmmaster.pickplace",
         description="Pick & place on a TM robot over Modbus TCP (the article's cycle by default).",
         epilog="exit codes: 0 done, 1 other failure, 2 config error, 3 connection failure,"
@@ -286,8 +288,10 @@ def _execute(
     host = config.robot.host
     if host is None and not (args.sim or args.dry_run):
         raise ConfigError("--host is required (or --sim, --dry-run, --diagram)")
-    if args.sim and not (args.sim_time_scale > 0):
-        raise ConfigError(f"--sim-time-scale must be > 0, got {args.sim_time_scale}")
+    if not (math.isfinite(args.sim_time_scale) and args.sim_time_scale > 0):
+        raise ConfigError(
+            f"--sim-time-scale must be a finite number > 0, got {args.sim_time_scale}"
+        )
     probe = robot_from_config(config, host or "127.0.0.1", config.robot.port)
     try:
         validate_plan(probe, sequence, cycles, source=source)
@@ -461,7 +465,12 @@ def main(argv: Sequence[str] | list[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.pickplace``."""
     _sigint.handled_by_main()
     try:
-        return run(build_parser().parse_args(argv))
+        try:
+            args = build_parser().parse_args(argv)
+        except UsageError as exc:
+            print(f"pickplace: {one_line(exc)} [exit {EXIT_CONFIG}]", file=sys.stderr)
+            return EXIT_CONFIG
+        return run(args)
     except KeyboardInterrupt:
         # A Ctrl-C outside the run (argument parsing, report writing, a second Ctrl-C
         # during the clean-up): still one line and exit 130, never a traceback.

@@ -58,7 +58,9 @@ MOVES = ("approach", "pick", "lift", "place", "home")
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # Every number in a configuration is finite: NaN and infinity pass range checks by
+    # accident ("not < max"), so they are refused here, naming the key.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class RobotSection(_Section):
@@ -288,7 +290,12 @@ def read_config_data(path: str | Path) -> dict[str, Any]:
     try:
         text = p.read_text("utf-8")
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the config file ({exc.strerror})") from None
+        raise ConfigError(f"{p}: cannot read the file ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{p}: not a UTF-8 text (TOML) file: byte 0x{exc.object[exc.start]:02x}"
+            f" at offset {exc.start}"
+        ) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -301,6 +308,10 @@ def load_config(
     """Load and validate a config file (None = the article's defaults) with overrides."""
     data: dict[str, Any] = {} if path is None else read_config_data(path)
     source = "<defaults>" if path is None else str(path)
+    if path is not None:
+        # The file must be valid on its own: a command-line option that overrides a
+        # key must not hide that key's bad value in the file.
+        validate_config(data, source=source)
     if overrides:
         for section, values in overrides.items():
             current = data.get(section, {})

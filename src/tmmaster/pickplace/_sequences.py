@@ -215,7 +215,7 @@ def palletizing(
 
 
 class _DataStep(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     #: State name (UPPER_CASE by convention); default: the action and its position.
     state: str | None = None
@@ -280,7 +280,7 @@ DataStep = Annotated[
 class RetreatSpec(BaseModel):
     """Safe pose for the "retreat" error reaction."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     pose: str | PoseValue
     speed: Speed = 10
@@ -290,7 +290,7 @@ class RetreatSpec(BaseModel):
 class SequenceFile(BaseModel):
     """A sequence described as data (TOML)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     name: Annotated[str, Field(min_length=1)]
     cycles: Annotated[int, Field(ge=1, le=1_000_000)] = 1

@@ -18,6 +18,7 @@ import threading
 from collections.abc import Callable, Sequence
 from types import FrameType
 
+from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import TMMasterError
 from .._logging import configure_logging
 from .._profiles import builtin_profile_names
@@ -118,7 +119,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m tmmaster.sim``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m tmmaster.sim",
         description="Simulated TM robot (and gripper) served over Modbus TCP.",
     )
@@ -161,7 +162,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             request_listener=echo if args.log_json else None,
         )
     except (TMMasterError, ValueError, KeyError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2
     stop = threading.Event()
     reset = threading.Event()
@@ -207,7 +208,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.sim``."""
     _sigint.handled_by_main()
     try:
-        return run(build_parser().parse_args(argv))
+        try:
+            args = build_parser().parse_args(argv)
+        except UsageError as exc:
+            print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
+            return 2
+        return run(args)
     except KeyboardInterrupt:  # before the simulator's own handler is in place
         print(f"sim: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
         return _sigint.EXIT_INTERRUPTED

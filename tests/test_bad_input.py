@@ -1,0 +1,418 @@
+"""Bad input is exit 2, always (issue 8 item 7): one stderr line naming file and key, nothing sent.
+
+Every case runs ``main([...])`` in-process. Nothing may start: the runner and the
+simulator's server are replaced by tripwires, and the cases that give a host point it
+at a listener that counts connections (it must stay at zero).
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tmmaster import _cli
+from tmmaster.pickplace import __main__ as pickplace_main
+from tmmaster.sim import __main__ as sim_main
+from tmmaster.sim._simulator import Simulator
+
+BINARY = b"\x00\x01\x02\xff\xfe\x80PK\x03\x04"
+NOT_UTF8 = b'name = "caf\xe9"\n'
+
+GOOD_SEQUENCE = """name = "s"
+[poses]
+p = [300, -200, 100, 180, 0, 90]
+[[steps]]
+do = "move"
+pose = "p"
+speed = 30
+"""
+
+
+class ConnectionCounter:
+    """A TCP listener on 127.0.0.1 that counts accepted connections."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(8)
+        self.port: int = self.sock.getsockname()[1]
+        self.accepted = 0
+        self._thread = threading.Thread(target=self._accept, daemon=True)
+        self._thread.start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            self.accepted += 1
+            conn.close()
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@pytest.fixture(scope="module")
+def counter() -> Iterator[ConnectionCounter]:
+    c = ConnectionCounter()
+    yield c
+    c.close()
+
+
+@pytest.fixture(autouse=True)
+def tripwires(monkeypatch: pytest.MonkeyPatch) -> None:
+    def boom(*_: Any, **__: Any) -> Any:
+        raise AssertionError("bad input got past validation: something was started")
+
+    monkeypatch.setattr(pickplace_main, "_run_on", boom)
+    monkeypatch.setattr(pickplace_main, "_run_with_sim", boom)
+    monkeypatch.setattr(Simulator, "start", boom)
+
+
+# (case id, files {name: content}, argv after "pickplace", text the line must contain)
+# "{dir}" in argv is replaced with the folder holding the files; "{port}" with the counter's.
+Case = tuple[str, dict[str, str | bytes], list[str], str]
+HOST = ["--host", "127.0.0.1", "--port", "{port}"]
+
+
+def _config(key: str, section: str, body: str) -> Case:
+    return (
+        f"config-{section}-{key}",
+        {"c.toml": f"[{section}]\n{body}\n"},
+        [*HOST, "--config", "{dir}/c.toml"],
+        key,
+    )
+
+
+CONFIG_CASES: list[Case] = [
+    ("config-binary", {"c.toml": BINARY}, [*HOST, "--config", "{dir}/c.toml"], "c.toml"),
+    ("config-not-utf8", {"c.toml": NOT_UTF8}, [*HOST, "--config", "{dir}/c.toml"], "c.toml"),
+    ("config-not-toml", {"c.toml": "[robot"}, [*HOST, "--config", "{dir}/c.toml"], "c.toml"),
+    ("config-array-table", {"c.toml": "[[1]]\n"}, [*HOST, "--config", "{dir}/c.toml"], "1"),
+    ("config-missing", {}, [*HOST, "--config", "{dir}/nope.toml"], "nope.toml"),
+    ("config-directory", {}, [*HOST, "--config", "{dir}"], "config"),
+    (
+        "config-section-not-table",
+        {"c.toml": "robot = 5\n"},
+        [*HOST, "--config", "{dir}/c.toml"],
+        "robot",
+    ),
+    ("config-run-not-table", {"c.toml": "run = [1]\n"}, [*HOST, "--config", "{dir}/c.toml"], "run"),
+    ("config-unknown-section", {"c.toml": "[robo]\n"}, [*HOST, "--config", "{dir}/c.toml"], "robo"),
+    _config("port", "robot", "port = 70000"),
+    _config("port", "robot", "port = 0"),
+    _config("port", "robot", 'port = "x"'),
+    _config("model", "robot", 'model = "tm7"'),
+    _config("profile", "robot", 'profile = "nope"'),
+    _config("profile", "robot", "profile = 5"),
+    _config("host", "robot", "host = 5"),
+    _config("max_speed", "robot", "max_speed = 0"),
+    _config("max_speed", "robot", "max_speed = 101"),
+    _config("position_tolerance_mm", "robot", "position_tolerance_mm = nan"),
+    _config("position_tolerance_mm", "robot", "position_tolerance_mm = inf"),
+    _config("position_tolerance_mm", "robot", "position_tolerance_mm = 0"),
+    _config("position_tolerance_mm", "robot", "position_tolerance_mm = -1"),
+    _config("pick", "poses", "pick = [1, 2, 3]"),
+    _config("pick", "poses", "pick = [nan, 0, 0, 0, 0, 0]"),
+    _config("pick", "poses", "pick = [0, inf, 0, 0, 0, 0]"),
+    _config("pick", "poses", 'pick = "here"'),
+    _config("approach_z_offset", "poses", "approach_z_offset = nan"),
+    _config("approach_z_offset", "poses", "approach_z_offset = inf"),
+    _config("lift_z_offset", "poses", "lift_z_offset = -1"),
+    _config("pick", "speeds", "pick = 0"),
+    _config("pick", "speeds", "pick = 200"),
+    _config("pick", "speeds", "pick = nan"),
+    _config("pick", "motion", 'pick = "lin"'),
+    _config("ack_s", "timeouts", "ack_s = nan"),
+    _config("ack_s", "timeouts", "ack_s = inf"),
+    _config("ack_s", "timeouts", "ack_s = 0"),
+    _config("motion_factor", "timeouts", "motion_factor = nan"),
+    _config("motion_margin_s", "timeouts", "motion_margin_s = -1"),
+    _config("motion_s", "timeouts", "motion_s = 0"),
+    _config("gripper_s", "timeouts", "gripper_s = inf"),
+    _config("request_s", "timeouts", "request_s = 0"),
+    _config("ready_s", "timeouts", "ready_s = nan"),
+    _config("attempts", "retry", "attempts = 0"),
+    _config("total_time_s", "retry", "total_time_s = nan"),
+    _config("total_time_s", "retry", "total_time_s = inf"),
+    _config("kind", "gripper", 'kind = "nope"'),
+    _config("port", "gripper", "port = 70000"),
+    _config("settle_s", "gripper", "settle_s = nan"),
+    _config("settle_s", "gripper", "settle_s = 0"),
+    _config("cycles", "run", "cycles = 0"),
+    _config("cycles", "run", "cycles = -1"),
+    _config("cycles", "run", "cycles = 1.5"),
+    _config("poll_interval_s", "run", "poll_interval_s = nan"),
+    _config("poll_interval_s", "run", "poll_interval_s = inf"),
+    _config("poll_interval_s", "run", "poll_interval_s = 0"),
+    _config("grasp_retries", "run", "grasp_retries = -1"),
+    _config("reaction", "on_error", 'reaction = "jump"'),
+    _config("pose", "on_error", "pose = [nan, 0, 0, 0, 0, 0]"),
+    _config("speed", "on_error", "speed = 0"),
+    _config("x", "workspace", "x = [nan, 1]"),
+    _config("x", "workspace", "x = [1, 0]"),
+    _config("y", "workspace", "y = [-inf, inf]"),
+    _config("z", "workspace", "z = [1, 2, 3]"),
+]
+
+OPTION_CASES: list[Case] = [
+    ("opt-port-70000", {}, ["--host", "127.0.0.1", "--port", "70000"], "port"),
+    ("opt-port-0", {}, ["--host", "127.0.0.1", "--port", "0"], "port"),
+    ("opt-port-negative", {}, ["--host", "127.0.0.1", "--port", "-1"], "port"),
+    ("opt-port-text", {}, ["--host", "127.0.0.1", "--port", "x"], "--port"),
+    ("opt-cycles-negative", {}, [*HOST, "--cycles", "-1"], "cycles"),
+    ("opt-cycles-zero", {}, [*HOST, "--cycles", "0"], "cycles"),
+    ("opt-cycles-text", {}, [*HOST, "--cycles", "x"], "--cycles"),
+    ("opt-poll-nan", {}, [*HOST, "--poll-interval", "nan"], "poll_interval"),
+    ("opt-poll-inf", {}, [*HOST, "--poll-interval", "inf"], "poll_interval"),
+    ("opt-poll-zero", {}, [*HOST, "--poll-interval", "0"], "poll_interval"),
+    ("opt-poll-negative", {}, [*HOST, "--poll-interval", "-1"], "poll_interval"),
+    ("opt-sim-scale-inf", {}, ["--sim", "--sim-time-scale", "inf"], "--sim-time-scale"),
+    ("opt-sim-scale-nan", {}, ["--sim", "--sim-time-scale", "nan"], "--sim-time-scale"),
+    ("opt-sim-scale-zero", {}, ["--sim", "--sim-time-scale", "0"], "--sim-time-scale"),
+    ("opt-sim-scale-negative", {}, ["--sim", "--sim-time-scale", "-1"], "--sim-time-scale"),
+    ("opt-sim-scale-no-sim", {}, [*HOST, "--sim-time-scale", "inf"], "--sim-time-scale"),
+    ("opt-log-level", {}, [*HOST, "--log-level", "loud"], "--log-level"),
+    ("opt-unknown", {}, [*HOST, "--speed", "5"], "--speed"),
+    ("opt-no-host", {}, [], "--host"),
+    ("opt-profile-unknown", {}, [*HOST, "--profile", "nope"], "nope"),
+    ("opt-profile-gripper", {}, [*HOST, "--profile", "onrobot-2fg7"], "onrobot-2fg7"),
+    ("opt-profile-missing", {}, [*HOST, "--profile", "{dir}/nope.toml"], "nope.toml"),
+    ("profile-binary", {"p.toml": BINARY}, [*HOST, "--profile", "{dir}/p.toml"], "p.toml"),
+    ("profile-not-utf8", {"p.toml": NOT_UTF8}, [*HOST, "--profile", "{dir}/p.toml"], "p.toml"),
+    ("profile-array-table", {"p.toml": "[[1]]\n"}, [*HOST, "--profile", "{dir}/p.toml"], "p.toml"),
+    (
+        "profile-remove-fields-int",
+        {"p.toml": 'extends = "article"\nremove_fields = 5\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "remove_fields",
+    ),
+    (
+        "profile-remove-fields-list-of-int",
+        {"p.toml": 'extends = "article"\nremove_fields = [5]\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "remove_fields",
+    ),
+    (
+        "profile-fields-int",
+        {"p.toml": 'extends = "article"\nfields = 5\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "fields",
+    ),
+    (
+        "profile-field-int",
+        {"p.toml": 'extends = "article"\n[fields]\ntarget_x = 5\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "target_x",
+    ),
+    (
+        "profile-extends-int",
+        {"p.toml": "extends = 5\n"},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "extends",
+    ),
+    (
+        "profile-extends-unknown",
+        {"p.toml": 'extends = "nope"\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "nope",
+    ),
+    (
+        "profile-kind",
+        {"p.toml": 'kind = "arm"\nname = "x"\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "kind",
+    ),
+    (
+        "profile-split-block",
+        {"p.toml": 'extends = "article"\n[fields.target_y]\naddress = 0x0220\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "target_y",
+    ),
+    (
+        "profile-ptp-is-none",
+        {"p.toml": 'extends = "article"\n[fields.command.values]\n0 = "ptp"\n1 = "none"\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "ptp",
+    ),
+    (
+        "profile-scale-nan",
+        {"p.toml": 'extends = "article"\n[fields.target_x]\nscale = nan\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "scale",
+    ),
+    (
+        "profile-minimum-nan",
+        {"p.toml": 'extends = "article"\n[fields.target_x]\nminimum = nan\n'},
+        [*HOST, "--profile", "{dir}/p.toml"],
+        "minimum",
+    ),
+]
+
+
+def _seq(case_id: str, body: str | bytes, named: str) -> Case:
+    return (case_id, {"s.toml": body}, [*HOST, "--sequence", "{dir}/s.toml"], named)
+
+
+SEQUENCE_CASES: list[Case] = [
+    _seq("seq-binary", BINARY, "s.toml"),
+    _seq("seq-not-utf8", NOT_UTF8, "s.toml"),
+    _seq("seq-not-toml", "[[steps]", "s.toml"),
+    _seq("seq-array-table", "[[1]]\n", "1"),
+    _seq("seq-empty", "", "name"),
+    _seq("seq-no-steps", 'name = "s"\n', "steps"),
+    _seq("seq-steps-int", 'name = "s"\nsteps = 5\n', "steps"),
+    _seq("seq-poses-int", GOOD_SEQUENCE.replace("[poses]\n", "poses = 5\n[x]\n"), "poses"),
+    _seq("seq-z-offset-nan", GOOD_SEQUENCE + "z_offset = nan\n", "z_offset"),
+    _seq("seq-z-offset-inf", GOOD_SEQUENCE + "z_offset = inf\n", "z_offset"),
+    _seq("seq-speed-zero", GOOD_SEQUENCE.replace("speed = 30", "speed = 0"), "speed"),
+    _seq("seq-motion-lin", GOOD_SEQUENCE + 'motion = "lin"\n', "motion"),
+    _seq("seq-unknown-pose", GOOD_SEQUENCE.replace('pose = "p"', 'pose = "q"'), "q"),
+    _seq("seq-pose-nan", GOOD_SEQUENCE.replace("300,", "nan,"), "p"),
+    _seq("seq-unknown-do", GOOD_SEQUENCE.replace('do = "move"', 'do = "jump"'), "do"),
+    _seq("seq-wait-nan", GOOD_SEQUENCE + '[[steps]]\ndo = "wait"\nseconds = nan\n', "seconds"),
+    _seq("seq-wait-inf", GOOD_SEQUENCE + '[[steps]]\ndo = "wait"\nseconds = inf\n', "seconds"),
+    _seq(
+        "seq-cycles-negative",
+        GOOD_SEQUENCE.replace('name = "s"', 'name = "s"\ncycles = -1'),
+        "cycles",
+    ),
+    _seq(
+        "seq-retry-from-unknown",
+        GOOD_SEQUENCE + '[[steps]]\ndo = "grip"\nretry_from = "X"\nretries = 1\n',
+        "X",
+    ),
+    _seq("seq-missing", b"", "s.toml")
+    if False
+    else ("seq-missing", {}, [*HOST, "--sequence", "{dir}/nope.toml"], "nope.toml"),
+]
+
+PICKPLACE_CASES = CONFIG_CASES + OPTION_CASES + SEQUENCE_CASES
+
+
+def _prepare(
+    tmp_path: Path, files: dict[str, str | bytes], argv: list[str], port: int
+) -> list[str]:
+    for name, content in files.items():
+        data = content.encode() if isinstance(content, str) else content
+        (tmp_path / name).write_bytes(data)
+    return [a.replace("{dir}", str(tmp_path)).replace("{port}", str(port)) for a in argv]
+
+
+def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, f"expected one stderr line, got:\n{err}"
+    return lines[0]
+
+
+Entry = Callable[[list[str]], int]
+PICKPLACE_ENTRIES: dict[str, Entry] = {
+    "module": lambda argv: pickplace_main.main(argv),
+    "console": lambda argv: _cli.main(["pickplace", *argv]),
+}
+
+
+@pytest.mark.parametrize(
+    ("files", "argv", "named"),
+    [pytest.param(f, a, n, id=i) for i, f, a, n in PICKPLACE_CASES],
+)
+def test_pickplace_bad_input_is_exit_2_with_one_line(
+    files: dict[str, str | bytes],
+    argv: list[str],
+    named: str,
+    tmp_path: Path,
+    counter: ConnectionCounter,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args = _prepare(tmp_path, files, argv, counter.port)
+    assert pickplace_main.main(args) == 2
+    line = _one_line(capsys)
+    assert named in line
+    assert counter.accepted == 0
+
+
+# The console script mounts the same options: a sample of the cases through it.
+@pytest.mark.parametrize(
+    ("files", "argv", "named"),
+    [pytest.param(f, a, n, id=i) for i, f, a, n in PICKPLACE_CASES[::6]],
+)
+def test_console_pickplace_bad_input_is_exit_2(
+    files: dict[str, str | bytes],
+    argv: list[str],
+    named: str,
+    tmp_path: Path,
+    counter: ConnectionCounter,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args = _prepare(tmp_path, files, argv, counter.port)
+    assert _cli.main(["pickplace", *args]) == 2
+    assert named in _one_line(capsys)
+    assert counter.accepted == 0
+
+
+SIM_CASES: list[Case] = [
+    ("sim-port-70000", {}, ["--port", "70000"], "port"),
+    ("sim-port-negative", {}, ["--port", "-1"], "port"),
+    (
+        "sim-gripper-port-70000",
+        {},
+        ["--gripper", "onrobot-2fg7", "--gripper-port", "70000"],
+        "gripper",
+    ),
+    ("sim-time-scale-inf", {}, ["--time-scale", "inf"], "time"),
+    ("sim-time-scale-nan", {}, ["--time-scale", "nan"], "time"),
+    ("sim-time-scale-zero", {}, ["--time-scale", "0"], "time"),
+    ("sim-time-scale-negative", {}, ["--time-scale", "-1"], "time"),
+    ("sim-tick-hz-nan", {}, ["--tick-hz", "nan"], "tick"),
+    ("sim-tick-hz-zero", {}, ["--tick-hz", "0"], "tick"),
+    ("sim-tick-hz-inf", {}, ["--tick-hz", "inf"], "tick"),
+    ("sim-model", {}, ["--model", "tm7"], "--model"),
+    ("sim-profile-unknown", {}, ["--profile", "nope"], "nope"),
+    ("sim-profile-binary", {"p.toml": BINARY}, ["--profile", "{dir}/p.toml"], "p.toml"),
+    ("sim-profile-not-utf8", {"p.toml": NOT_UTF8}, ["--profile", "{dir}/p.toml"], "p.toml"),
+    ("sim-profile-array-table", {"p.toml": "[[1]]\n"}, ["--profile", "{dir}/p.toml"], "p.toml"),
+    (
+        "sim-profile-remove-fields-int",
+        {"p.toml": 'extends = "article"\nremove_fields = 5\n'},
+        ["--profile", "{dir}/p.toml"],
+        "remove_fields",
+    ),
+    (
+        "sim-profile-fields-int",
+        {"p.toml": 'extends = "article"\nfields = 5\n'},
+        ["--profile", "{dir}/p.toml"],
+        "fields",
+    ),
+    ("sim-gripper-unknown", {}, ["--gripper", "nope"], "nope"),
+    ("sim-gripper-is-robot", {}, ["--gripper", "article"], "article"),
+    ("sim-fault-unknown", {}, ["--fault", "bogus"], "bogus"),
+    ("sim-fault-nan", {}, ["--fault", "slow_responses:delay_s=nan"], "delay_s"),
+    ("sim-fault-bad-key", {}, ["--fault", "slow_responses:nope=1"], "nope"),
+    ("sim-unknown-option", {}, ["--speed", "5"], "--speed"),
+]
+
+
+@pytest.mark.parametrize("console", [False, True], ids=["module", "console"])
+@pytest.mark.parametrize(
+    ("files", "argv", "named"),
+    [pytest.param(f, a, n, id=i) for i, f, a, n in SIM_CASES],
+)
+def test_sim_bad_input_is_exit_2_with_one_line(
+    files: dict[str, str | bytes],
+    argv: list[str],
+    named: str,
+    console: bool,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args = _prepare(tmp_path, files, argv, 0)
+    code = _cli.main(["sim", *args]) if console else sim_main.main(args)
+    assert code == 2
+    assert named in _one_line(capsys)
