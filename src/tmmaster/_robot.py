@@ -374,9 +374,8 @@ class Robot:
             other = load_profile(name)
             if not isinstance(other, RobotProfile):
                 continue
-            probe = channel_for(other, self.transport)
             try:
-                probe.transport.read_fields(
+                self.transport.read_fields(
                     other.role(Role.STATUS)[:1], retry=False, interruptible=False
                 )
             except TMMasterError:
