@@ -3,7 +3,8 @@
     python -m tmmaster.sim --port 5020 --parts 6
     python examples/palletizing.py --port 5020 --rows 2 --cols 3
 
-Poses stay within +/-327.67 mm, the range of the article profile's int16 x100 registers.
+Poses stay within +/-327.67 mm, the range of the article profile's int16 x100 registers,
+and every move is checked by the TM5-700's inverse kinematics before anything is sent.
 """
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import Pose, Robot, TMMasterError, configure_logging
+from tmmaster import DEFAULT_HOME, Pose, Robot, TMMasterError, configure_logging
 from tmmaster.pickplace import Pallet, Runner, palletizing, validate_plan
 
 PICK = Pose(300, -200, 100, 180, 0, 90)
-HOME = Pose(0, 0, 300, 180, 0, 0)
-PALLET_ORIGIN = Pose(220, 120, 100, 180, 0, 90)
+HOME = DEFAULT_HOME  # tool down, 250 mm in front of J1: reachable by a TM5-700
+PALLET_ORIGIN = Pose(260, 100, 100, 180, 0, 90)
 
 
 def main(argv: list[str] | None = None) -> int:

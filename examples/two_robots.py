@@ -44,7 +44,7 @@ HOST = "127.0.0.1"
 #: Where robot A's part lies (the article's pick position).
 PICK_A = Pose(300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
 #: The handover table, one pose for both robots (see the module docstring).
-HANDOVER = Pose(250.0, 0.0, 100.0, 180.0, 0.0, 90.0)
+HANDOVER = Pose(300.0, 0.0, 100.0, 180.0, 0.0, 90.0)
 #: Where robot B puts the part down.
 PLACE_B = Pose(300.0, 200.0, 100.0, 180.0, 0.0, 90.0)
 #: Approach and retreat height above a pick or place pose, mm.

@@ -16,14 +16,14 @@ from types import ModuleType
 
 import pytest
 
-from tmmaster import Pose
+from tmmaster import DEFAULT_HOME, Pose
 from tmmaster.pickplace.__main__ import main as pickplace_main
 from tmmaster.sim import Simulator, TableObject
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PICK = Pose(300, -200, 100, 180, 0, 90)
 PLACE = Pose(300, 200, 200, 180, 0, 90)
-HOME = Pose(0, 0, 300, 180, 0, 0)
+HOME = DEFAULT_HOME
 
 SimFactory = Callable[..., Simulator]
 

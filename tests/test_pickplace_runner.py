@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
+import tmmaster
 from tmmaster import ConfigError, Pose, Robot
 from tmmaster.pickplace import (
-    ARTICLE_HOME,
     ARTICLE_PICK,
     ARTICLE_PLACE,
     DONE,
@@ -40,7 +40,7 @@ from tmmaster.sim import Simulator, TableObject
 
 PICK = Pose.from_sequence(ARTICLE_PICK)
 PLACE = Pose.from_sequence(ARTICLE_PLACE)
-HOME = Pose.from_sequence(ARTICLE_HOME)
+HOME = tmmaster.DEFAULT_HOME  # the article's HOME is out of a TM5's reach
 TARGET_BLOCK = 0x0200
 
 SimFactory = Callable[..., Simulator]
@@ -95,7 +95,7 @@ def test_defaults_are_the_articles_cycle() -> None:
         "pick": [300, -200, 100, 180, 0, 90],
         "lift": [300, -200, 250, 180, 0, 90],
         "place": [300, 200, 200, 180, 0, 90],
-        "home": [0, 0, 300, 180, 0, 0],
+        "home": [250, 0, 300, 180, 0, 90],  # not the article's: out of reach
     }
     assert config.speeds.model_dump() == {
         "approach": 30,
@@ -133,7 +133,7 @@ def test_the_digest_ignores_how_the_config_was_written(tmp_path: Path) -> None:
 
 
 def test_a_pose_out_of_the_article_encoding_is_refused_before_connecting() -> None:
-    config = validate_config({"poses": {"home": [0, 0, 400, 180, 0, 0]}})
+    config = validate_config({"poses": {"home": [250, 0, 400, 180, 0, 90]}})
     robot = Robot("127.0.0.1", 1, profile="article")  # never connected
     try:
         with pytest.raises(ConfigError, match=r"cell\.toml: poses\.home.*target_z"):
@@ -332,7 +332,7 @@ def test_a_toml_sequence_runs_with_retries(tm_simulator_factory: SimFactory) -> 
     seq = sequence_from_data(
         {
             "name": "data",
-            "poses": {"part": list(ARTICLE_PICK), "home": list(ARTICLE_HOME)},
+            "poses": {"part": list(ARTICLE_PICK), "home": HOME.as_list()},
             "steps": [
                 {"state": "ABOVE", "do": "move", "pose": "part", "z_offset": 100, "speed": 30},
                 {"state": "DOWN", "do": "move", "pose": "part", "speed": 10, "motion": "line"},

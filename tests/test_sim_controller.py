@@ -693,7 +693,7 @@ def test_tmflow_unreachable_is_a_program_error_not_a_robot_error() -> None:
     assert bank.get("error") is False
     assert ctl.moves_started == 0
     # The program takes the next command.
-    send_tmflow(bank, 2, target=Pose(100, 0, 250, 180, 0, 0))
+    send_tmflow(bank, 2, target=Pose(250, 0, 250, 180, 0, 90))
     finish_tmflow(ctl, bank, 2)
     assert bank.get("result_code") == 0
 

@@ -130,7 +130,7 @@ def test_served_values_come_from_the_bank(tm_simulator: Simulator) -> None:
     with client(tm_simulator.port) as c:
         assert hr(c, 0x0000) == 5  # robot_mode auto, set by the controller
         pose = read(c, Table.HOLDING, 0x10, 6)
-    assert pose == [0, 0, 30000, 18000, 0, 0]  # DEFAULT_HOME x100
+    assert pose == [25000, 0, 30000, 18000, 0, 9000]  # DEFAULT_HOME x100
 
 
 def test_tmflow_bits_are_exact(tm_simulator_factory: Factory) -> None:

@@ -40,6 +40,7 @@ if _TYPE_CHECKING:
         StopRequestedError,
         TMMasterError,
         TransportError,
+        UnreachablePoseError,
         ValueOutOfRangeError,
     )
     from ._gripper import (
@@ -53,7 +54,7 @@ if _TYPE_CHECKING:
     )
     from ._logging import configure_logging
     from ._poller import Poller, PollPolicy
-    from ._pose import MotionType, Pose
+    from ._pose import DEFAULT_HOME, MotionType, Pose
     from ._profiles import (
         builtin_profile_names,
         gripper_profile,
@@ -75,7 +76,7 @@ if _TYPE_CHECKING:
     )
     from ._retry import RetryPolicy
     from ._robot import Motion, Robot, TimeoutPolicy, Workspace, connect
-    from ._robot_models import ROBOT_MODELS, RobotModel, robot_model
+    from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
     from ._status import MovePhase, MoveProgress, RobotStatus
     from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
 
@@ -90,6 +91,7 @@ _EXPORTS = {
     "ConnectError": "._exceptions",
     "ConnectionLostError": "._exceptions",
     "ConnectionState": "._transport",
+    "DEFAULT_HOME": "._pose",
     "DataType": "._registers",
     "DeviceBusyError": "._exceptions",
     "DeviceFailureError": "._exceptions",
@@ -106,6 +108,7 @@ _EXPORTS = {
     "IllegalValueError": "._exceptions",
     "ModbusExceptionError": "._exceptions",
     "ModbusTransport": "._transport",
+    "JointSpec": "._robot_models",
     "Motion": "._robot",
     "MotionTimeoutError": "._exceptions",
     "MotionType": "._pose",
@@ -138,6 +141,7 @@ _EXPORTS = {
     "Transport": "._transport",
     "TransportError": "._exceptions",
     "TransportStats": "._transport",
+    "UnreachablePoseError": "._exceptions",
     "Value": "._codec",
     "ValueOutOfRangeError": "._exceptions",
     "WordOrder": "._registers",
@@ -161,6 +165,7 @@ __getattr__, __dir__ = _lazy_attributes(
 )
 
 __all__ = [
+    "DEFAULT_HOME",
     "ROBOT_MODELS",
     "Access",
     "AcknowledgeTimeoutError",
@@ -185,6 +190,7 @@ __all__ = [
     "IllegalAddressError",
     "IllegalFunctionError",
     "IllegalValueError",
+    "JointSpec",
     "ModbusExceptionError",
     "ModbusTransport",
     "Motion",
@@ -218,6 +224,7 @@ __all__ = [
     "Transport",
     "TransportError",
     "TransportStats",
+    "UnreachablePoseError",
     "Value",
     "ValueOutOfRangeError",
     "WordOrder",

@@ -7,7 +7,8 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     ├── ConfigError (ValueError)                  before any I/O: nothing was sent
     │   ├── RegisterMapError                      a register map or profile is inconsistent
     │   │   └── UnknownNameError (KeyError)       no field / value / model of that name
-    │   └── ValueOutOfRangeError                  a value does not fit its field
+    │   ├── ValueOutOfRangeError                  a value does not fit its field
+    │   └── UnreachablePoseError                  out of reach, past a joint limit, or singular
     ├── TransportError                            talking Modbus failed
     │   ├── ConnectError (ConnectionError)        could not open the connection
     │   ├── ConnectionLostError (ConnectionError) the connection broke during a request
@@ -69,6 +70,18 @@ class ValueOutOfRangeError(ConfigError):
         self.value = value
         self.allowed = allowed
         super().__init__(f"{field}: value {value!r} is out of range (allowed {allowed})")
+
+
+class UnreachablePoseError(ConfigError):
+    """The arm cannot take a pose: out of reach, past a joint limit, or at a singularity."""
+
+    #: Why: ``"reach"``, ``"joint_limit"`` or ``"singularity"``.
+    reason: str
+
+    def __init__(self, message: str, *, reason: str, pose: Pose | None = None) -> None:
+        self.reason = reason
+        self.pose = pose
+        super().__init__(message)
 
 
 class TransportError(TMMasterError):

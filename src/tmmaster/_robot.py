@@ -21,7 +21,7 @@ import inspect
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Literal, ParamSpec
@@ -224,6 +224,7 @@ class Robot:
         position_tolerance_mm: float = 1.0,
         orientation_tolerance_deg: float = 1.0,
         gripper_settle_s: float = 0.5,
+        tool: Pose | None = None,
         name: str = "robot",
         transport: Transport | None = None,
         gripper_transport: Transport | None = None,
@@ -245,6 +246,15 @@ class Robot:
         self.polling = polling if polling is not None else PollPolicy()
         self.timeouts = timeouts if timeouts is not None else TimeoutPolicy()
         self.workspace = workspace
+        if tool is not None and not isinstance(tool, Pose):
+            raise ConfigError(
+                f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
+            )
+        #: The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool.
+        self.tool = tool
+        # The joints of the last commanded target: inverse kinematics starts there, so
+        # validation and timing follow the branch the arm is on.
+        self._joints_hint: tuple[float, ...] | None = None
         self.max_speed_percent = max_speed_percent
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
@@ -410,8 +420,15 @@ class Robot:
 
     # -- moves ------------------------------------------------------------
 
-    def validate_move(self, pose: Pose, speed: int) -> None:
-        """Raise :class:`ConfigError` when a move is not allowed; sends nothing."""
+    def validate_move(
+        self, pose: Pose, speed: int, *, seed_deg: Sequence[float] | None = None
+    ) -> tuple[float, ...]:
+        """Check a move (speed, workspace, inverse kinematics); return the target's joints.
+
+        Raises :class:`ConfigError` (:class:`UnreachablePoseError` for a pose the arm
+        cannot take) when the move is not allowed; sends nothing. The joints are searched
+        from ``seed_deg``, else from the last commanded target's.
+        """
         if not isinstance(pose, Pose):
             raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
         if isinstance(speed, bool) or not isinstance(speed, int):
@@ -420,18 +437,25 @@ class Robot:
             raise ConfigError(f"speed {speed} % is outside 1..{self.max_speed_percent} %")
         if self.workspace is not None:
             self.workspace.check(pose)
-        if not self.model.can_reach(pose):
-            raise ConfigError(
-                f"pose {pose} is out of reach of a {self.model.name}"
-                f" ({self.model.distance_from_shoulder(pose):.0f} mm from the shoulder,"
-                f" reach {self.model.reach_mm:.0f} mm)"
-            )
+        seed = seed_deg if seed_deg is not None else self._joints_hint
+        return self.model.inverse(pose, seed_deg=seed, tool=self.tool)
 
     def expected_motion_time(
         self, start: Pose, target: Pose, speed: int, motion: MotionType
     ) -> float:
-        """Expected duration of a move from the arm model's limits, in seconds."""
-        return self.model.motion_time(start, target, speed_percent=speed, motion=motion)
+        """Expected duration of a move from the arm model (joint-space PTP, checked Line), s.
+
+        A Line whose straight path leaves the arm's range raises
+        :class:`UnreachablePoseError`.
+        """
+        return self.model.motion_time(
+            start,
+            target,
+            speed_percent=speed,
+            motion=motion,
+            start_joints_deg=self._joints_hint,
+            tool=self.tool,
+        )
 
     def start_move(
         self,
@@ -448,10 +472,12 @@ class Robot:
         except ValueError:
             choices = ", ".join(repr(m.value) for m in MotionType)
             raise ConfigError(f"motion must be one of {choices}, got {motion!r}") from None
-        self.validate_move(target, speed)
-        return self.start_command(
+        joints = self.validate_move(target, speed)
+        handle = self.start_command(
             Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
         )
+        self._joints_hint = joints
+        return handle
 
     def start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
         """Check, send and follow any command of the profile: a move or a gripper action."""

@@ -1,45 +1,331 @@
-"""Arm models (reach, joint and TCP speed limits) and motion-time estimates.
+"""Arm models: the joint chain (forward and inverse kinematics), limits, motion times.
 
-The same estimate drives the simulator's motion timing and the master's derived
-timeouts, so the two can never disagree about how long a move should take.
-Figures come from Techman datasheets where known; the TCP speeds are typical values
-(marked uncertain in ``docs/simulator.md``) and every field can be overridden.
+The same model drives the simulator's motion and the master's validation and derived
+timeouts, so the two can never disagree about whether a pose is reachable or how long a
+move should take. The chain, joint ranges and joint speeds are Techman's own numbers
+(``robot_models.toml`` cites them); the TCP speeds are typical values (marked uncertain
+in ``docs/simulator-model.md``) and every field can be overridden.
 """
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
-from collections.abc import Mapping
+import tomllib
+from collections.abc import Mapping, Sequence
+from importlib import resources
 from types import MappingProxyType
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from ._exceptions import UnknownNameError
+from . import _kinematics as kin
+from ._exceptions import UnknownNameError, UnreachablePoseError
 from ._pose import MotionType, Pose
+
+Joints = tuple[float, float, float, float, float, float]
+
+
+class JointSpec(BaseModel):
+    """One revolute joint: its URDF origin from the previous frame, range and top speed."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    origin_xyz_mm: tuple[float, float, float]
+    origin_rpy_deg: tuple[float, float, float]
+    limits_deg: tuple[float, float]
+    speed_deg_s: float = Field(gt=0)
+
+    @model_validator(mode="after")
+    def _range_is_ordered(self) -> JointSpec:
+        if not self.limits_deg[0] < self.limits_deg[1]:
+            raise ValueError(f"limits_deg must be (lower, upper), got {self.limits_deg}")
+        return self
 
 
 class RobotModel(BaseModel):
-    """Kinematic limits of one arm model."""
+    """One arm model: its joint chain, ranges, speeds and the motion-time model."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     name: str
+    #: Datasheet reach, mm: a quick pre-check before inverse kinematics.
     reach_mm: float = Field(gt=0)
-    shoulder_height_mm: float = Field(default=145.0, ge=0)
-    #: Maximum joint speeds J1..J6 at 100 % speed, deg/s.
-    joint_speed_deg_s: tuple[float, float, float, float, float, float]
+    joints: tuple[JointSpec, JointSpec, JointSpec, JointSpec, JointSpec, JointSpec]
     #: Maximum TCP speed of a Line motion at 100 % speed, mm/s.
     tcp_speed_mm_s: float = Field(gt=0)
     #: Time to reach top speed (TM motion nodes call it acceleration time), s.
     accel_time_s: float = Field(default=0.2, ge=0)
+    #: Posture inverse kinematics starts from when nothing better is known.
+    ready_joints_deg: Joints = (0.0, 0.0, 90.0, 0.0, 90.0, 0.0)
+    #: Refuse joint solutions with J5 this close to 0 or 180 deg (wrist singularity).
+    wrist_margin_deg: float = Field(default=5.0, ge=0)
+    #: Refuse joint solutions with J3 this close to 0 deg (arm stretched: elbow singularity).
+    elbow_margin_deg: float = Field(default=5.0, ge=0)
+    #: Refuse wrist centres this close to the J1 axis plane (shoulder singularity), mm.
+    shoulder_margin_mm: float = Field(default=20.0, ge=0)
+
+    @property
+    def shoulder_height_mm(self) -> float:
+        """Height of the shoulder (J2 axis) above the base, mm."""
+        return self.joints[0].origin_xyz_mm[2]
+
+    @property
+    def joint_speed_deg_s(self) -> Joints:
+        """Maximum joint speeds J1..J6 at 100 % speed, deg/s."""
+        s = [j.speed_deg_s for j in self.joints]
+        return (s[0], s[1], s[2], s[3], s[4], s[5])
+
+    @property
+    def _chain(self) -> kin.Chain:
+        # Keyed by the joints, not cached on the instance: model_copy(update=...) would
+        # carry a cached chain over to a model with other joints.
+        return _chain_of(self.joints)
+
+    # -- kinematics ------------------------------------------------------------------
+
+    def joint_frames(self, joints_deg: Sequence[float]) -> list[kin.Transform]:
+        """Base -> frame of each joint J1..J6 (after its rotation); the last is the flange."""
+        return self._chain.frames([math.radians(q) for q in _six(joints_deg)])
+
+    def forward(self, joints_deg: Sequence[float], tool: Pose | None = None) -> Pose:
+        """Flange pose for the joints (J1..J6, deg), or the TCP pose with a ``tool`` offset."""
+        flange = self._chain.flange([math.radians(q) for q in _six(joints_deg)])
+        if tool is not None:
+            flange = kin.multiply(flange, kin.pose_to_transform(tool))
+        return kin.transform_to_pose(flange)
+
+    def inverse(
+        self,
+        pose: Pose,
+        *,
+        seed_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
+        same_branch: bool = False,
+    ) -> Joints:
+        """Joints (deg) that put the flange (or the ``tool``'s TCP) at ``pose``, nearest the seed.
+
+        Raises :class:`~tmmaster.UnreachablePoseError` naming the reason: out of reach,
+        past a joint limit, or too close to a singularity. ``same_branch`` searches from
+        the seed only (no restart from other postures): a continuous path uses it.
+        """
+        seed = self.ready_joints_deg if seed_deg is None else _six(seed_deg)
+        target = kin.pose_to_transform(pose)
+        tool_t = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
+        if tool is None and self._outside_reach_sphere(pose):
+            raise UnreachablePoseError(
+                f"pose {pose} is out of reach of a {self.name}"
+                f" ({self.distance_from_shoulder(pose):.0f} mm from the shoulder,"
+                f" reach {self.reach_mm:.0f} mm)",
+                reason="reach",
+                pose=pose,
+            )
+        problems: list[tuple[str, str]] = []
+        best: Joints | None = None
+        best_distance = math.inf
+        for start in [seed] if same_branch else self._starts(seed):
+            raw = kin.dls_inverse(
+                self._chain, target, [math.radians(q) for q in start], tool=tool_t
+            )
+            if raw is None:
+                continue
+            joints, problem = self._admissible([math.degrees(q) for q in raw], seed)
+            if problem is not None:
+                problems.append(problem)
+                continue
+            assert joints is not None
+            distance = max(abs(a - b) for a, b in zip(joints, seed, strict=True))
+            if distance < best_distance:
+                best, best_distance = joints, distance
+            if start == seed:
+                # Converged from the seed itself: that is the nearest branch.
+                break
+        if best is not None:
+            return best
+        if not problems:
+            raise UnreachablePoseError(
+                f"pose {pose} is out of reach of a {self.name}: no joint solution takes the"
+                f" {'TCP' if tool else 'flange'} there"
+                f" ({self.distance_from_shoulder(pose):.0f} mm from the shoulder,"
+                f" {math.hypot(pose.x, pose.y):.0f} mm from the J1 axis;"
+                f" reach {self.reach_mm:.0f} mm)",
+                reason="reach",
+                pose=pose,
+            )
+        reason, detail = problems[0]
+        raise UnreachablePoseError(
+            f"pose {pose} cannot be taken by a {self.name}: {detail}", reason=reason, pose=pose
+        )
+
+    def singularity(self, joints_deg: Sequence[float]) -> str | None:
+        """Which singularity the joints are too close to (wrist, elbow, shoulder), or None."""
+        q = _six(joints_deg)
+        if abs(math.sin(math.radians(q[4]))) < math.sin(math.radians(self.wrist_margin_deg)):
+            return f"wrist singularity (J5 = {q[4]:.1f} deg, margin {self.wrist_margin_deg:g})"
+        if abs(math.sin(math.radians(q[2]))) < math.sin(math.radians(self.elbow_margin_deg)):
+            return f"elbow singularity (J3 = {q[2]:.1f} deg, arm stretched)"
+        distance = self.shoulder_distance_mm(q)
+        if distance < self.shoulder_margin_mm:
+            return f"shoulder singularity (wrist {distance:.0f} mm from the J1 axis plane)"
+        return None
+
+    def shoulder_distance_mm(self, joints_deg: Sequence[float]) -> float:
+        """Distance of the wrist centre from the plane of the J1 axis and the J2 axis, mm.
+
+        For this family of arms (J2, J3, J4 parallel) ``det(J)`` factors into
+        ``a2 * a3 * sin(J3) * sin(J5) * d``; ``d`` is this distance.
+        """
+        q = [math.radians(a) for a in _six(joints_deg)]
+        jacobian, _ = self._chain.jacobian(q)
+        scale = (
+            self.joints[2].origin_xyz_mm[0]
+            * self.joints[3].origin_xyz_mm[0]
+            * math.sin(q[2])
+            * math.sin(q[4])
+        )
+        if abs(scale) < 1e-12:
+            return 0.0
+        return abs(kin.determinant(jacobian) * 1e9 / scale)
+
+    def _admissible(
+        self, joints: list[float], seed: Sequence[float]
+    ) -> tuple[Joints | None, tuple[str, str] | None]:
+        """Joints moved by whole turns into range nearest the seed, or why they cannot be."""
+        chosen = []
+        for i, (q, s, spec) in enumerate(zip(joints, seed, self.joints, strict=True)):
+            low, high = spec.limits_deg
+            candidates = [q + k * 360.0 for k in range(-2, 3) if low <= q + k * 360.0 <= high]
+            if not candidates:
+                wrapped = (q + 180.0) % 360.0 - 180.0
+                return None, (
+                    "joint_limit",
+                    f"J{i + 1} would be {wrapped:.1f} deg, outside {low:g}..{high:g} deg",
+                )
+            chosen.append(_nearest(candidates, s))
+        result = (chosen[0], chosen[1], chosen[2], chosen[3], chosen[4], chosen[5])
+        singular = self.singularity(result)
+        if singular is not None:
+            return None, ("singularity", singular)
+        return result, None
+
+    def _starts(self, seed: Joints) -> list[Joints]:
+        """The seed first, then canonical postures (shoulder, elbow and wrist flips)."""
+        j1 = seed[0]
+        starts = [seed]
+        for base in (j1, j1 + 180.0, j1 - 180.0):
+            for shoulder, elbow, wrist in ((0.0, 90.0, 0.0), (-60.0, -90.0, 150.0)):
+                for j5 in (90.0, -90.0):
+                    starts.append((base, shoulder, elbow, wrist, j5, seed[5]))
+        return starts
 
     def distance_from_shoulder(self, pose: Pose) -> float:
-        """Distance from the shoulder joint to the TCP, in mm."""
+        """Distance from the shoulder joint to the pose's position, in mm."""
         return math.dist((0.0, 0.0, self.shoulder_height_mm), (pose.x, pose.y, pose.z))
 
-    def can_reach(self, pose: Pose) -> bool:
-        """True when the TCP position is inside the arm's reach sphere."""
-        return self.distance_from_shoulder(pose) <= self.reach_mm
+    def _outside_reach_sphere(self, pose: Pose) -> bool:
+        # Conservative on purpose: the chain alone would let the flange a little past the
+        # datasheet reach, which Techman does not promise.
+        return self.distance_from_shoulder(pose) > self.reach_mm
+
+    def can_reach(self, pose: Pose, *, seed_deg: Sequence[float] | None = None) -> bool:
+        """True when the arm can take ``pose`` (inverse kinematics, ranges, singularities)."""
+        try:
+            self.inverse(pose, seed_deg=seed_deg)
+        except UnreachablePoseError:
+            return False
+        return True
+
+    # -- timing ----------------------------------------------------------------------
+
+    def ptp_time(
+        self,
+        start_deg: Sequence[float],
+        target_deg: Sequence[float],
+        *,
+        speed_percent: float,
+        accel_time_s: float | None = None,
+    ) -> float:
+        """Duration of a synchronised joint-space trapezoid between two joint vectors, s."""
+        scale = _speed_scale(speed_percent)
+        ramp = self.accel_time_s if accel_time_s is None else accel_time_s
+        return max(
+            trapezoid_time(abs(b - a), spec.speed_deg_s * scale, ramp)
+            for a, b, spec in zip(_six(start_deg), _six(target_deg), self.joints, strict=True)
+        )
+
+    def line_joints(
+        self,
+        start: Pose,
+        target: Pose,
+        *,
+        start_joints_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
+        step_mm: float = 5.0,
+        step_deg: float = 2.0,
+    ) -> list[Joints]:
+        """Joint samples along the straight TCP path from ``start`` to ``target``.
+
+        Raises :class:`~tmmaster.UnreachablePoseError` when a point of the path cannot be
+        taken or the arm would have to flip configuration on the way.
+        """
+        seed = self.inverse(start, seed_deg=start_joints_deg, tool=tool)
+        a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
+        rotation = math.degrees(math.hypot(*kin.rotation_error(a, b)))
+        steps = max(1, math.ceil(max(start.distance_to(target) / step_mm, rotation / step_deg)))
+        samples = [seed]
+        for k in range(1, steps + 1):
+            pose = kin.transform_to_pose(kin.interpolate(a, b, k / steps))
+            try:
+                joints = self.inverse(pose, seed_deg=samples[-1], tool=tool, same_branch=True)
+            except UnreachablePoseError as exc:
+                raise UnreachablePoseError(
+                    f"the straight path to {target} leaves the arm's range at {pose}: {exc}",
+                    reason=exc.reason,
+                    pose=pose,
+                ) from exc
+            jump = max(abs(x - y) for x, y in zip(joints, samples[-1], strict=True))
+            if jump > 30.0:
+                raise UnreachablePoseError(
+                    f"the straight path to {target} needs a configuration flip near {pose}"
+                    f" (a joint jumps {jump:.0f} deg)",
+                    reason="singularity",
+                    pose=pose,
+                )
+            samples.append(joints)
+        return samples
+
+    def line_time(
+        self,
+        start: Pose,
+        target: Pose,
+        *,
+        speed_percent: float,
+        accel_time_s: float | None = None,
+        start_joints_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
+    ) -> float:
+        """Duration of a Line move: the TCP trapezoid, slowed where a joint would be too fast."""
+        scale = _speed_scale(speed_percent)
+        ramp = self.accel_time_s if accel_time_s is None else accel_time_s
+        rotation = math.degrees(
+            math.hypot(
+                *kin.rotation_error(kin.pose_to_transform(start), kin.pose_to_transform(target))
+            )
+        )
+        cartesian = max(
+            trapezoid_time(start.distance_to(target), self.tcp_speed_mm_s * scale, ramp),
+            trapezoid_time(rotation, min(self.joint_speed_deg_s[3:]) * scale, ramp),
+        )
+        samples = self.line_joints(start, target, start_joints_deg=start_joints_deg, tool=tool)
+        steps = len(samples) - 1
+        # Peak path rate of a trapezoid of duration T is 1 / (T - ramp) (path fraction / s);
+        # joint i moves |dq_i/ds| deg per unit path, so T >= ramp + max |dq_i/ds| / v_i.
+        needed = 0.0
+        for prev, cur in itertools.pairwise(samples):
+            for a, b, spec in zip(prev, cur, self.joints, strict=True):
+                needed = max(needed, abs(b - a) * steps / (spec.speed_deg_s * scale))
+        joint_bound = needed + ramp if needed > 0 else 0.0
+        return max(cartesian, joint_bound)
 
     def motion_time(
         self,
@@ -49,31 +335,60 @@ class RobotModel(BaseModel):
         speed_percent: float,
         motion: MotionType,
         accel_time_s: float | None = None,
+        start_joints_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
     ) -> float:
-        """Expected duration of a move in seconds, from a trapezoidal speed profile."""
-        if not 0 < speed_percent <= 100:
-            raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
-        ramp = self.accel_time_s if accel_time_s is None else accel_time_s
-        scale = speed_percent / 100.0
-        wrist = min(self.joint_speed_deg_s[3:]) * scale
-        rotation = trapezoid_time(start.rotation_to(target), wrist, ramp)
+        """Expected duration of a move in seconds (joint-space PTP or Cartesian Line).
+
+        ``start_joints_deg`` is where the arm is (or the seed its joints are searched
+        from); without it the ready posture is the seed.
+        """
+        _speed_scale(speed_percent)
         if motion is MotionType.LINE:
-            travel = trapezoid_time(start.distance_to(target), self.tcp_speed_mm_s * scale, ramp)
-            return max(travel, rotation)
-        base = trapezoid_time(
-            abs(_wrap(_azimuth(target) - _azimuth(start))),
-            self.joint_speed_deg_s[0] * scale,
-            ramp,
+            return self.line_time(
+                start,
+                target,
+                speed_percent=speed_percent,
+                accel_time_s=accel_time_s,
+                start_joints_deg=start_joints_deg,
+                tool=tool,
+            )
+        first = self.inverse(start, seed_deg=start_joints_deg, tool=tool)
+        last = self.inverse(target, seed_deg=first, tool=tool)
+        return self.ptp_time(first, last, speed_percent=speed_percent, accel_time_s=accel_time_s)
+
+
+@functools.lru_cache(maxsize=32)
+def _chain_of(joints: tuple[JointSpec, ...]) -> kin.Chain:
+    return kin.Chain(
+        tuple(
+            kin.rpy_transform(j.origin_xyz_mm, [math.radians(a) for a in j.origin_rpy_deg])
+            for j in joints
         )
-        # Shoulder and elbow: approximate the joint swing by the change of the TCP's
-        # position relative to the shoulder, measured as an angle over half the reach.
-        radial_change = math.hypot(_radius(target) - _radius(start), target.z - start.z)
-        arm = trapezoid_time(
-            math.degrees(radial_change / (self.reach_mm / 2.0)),
-            min(self.joint_speed_deg_s[1:3]) * scale,
-            ramp,
-        )
-        return max(base, arm, rotation)
+    )
+
+
+def _speed_scale(speed_percent: float) -> float:
+    if not 0 < speed_percent <= 100:
+        raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
+    return speed_percent / 100.0
+
+
+def _nearest(candidates: list[float], reference: float) -> float:
+    return min(candidates, key=lambda c: abs(c - reference))
+
+
+def _six(joints: Sequence[float]) -> Joints:
+    if len(joints) != 6:
+        raise ValueError(f"need 6 joint values J1..J6, got {len(joints)}")
+    return (
+        float(joints[0]),
+        float(joints[1]),
+        float(joints[2]),
+        float(joints[3]),
+        float(joints[4]),
+        float(joints[5]),
+    )
 
 
 def trapezoid_time(distance: float, top_speed: float, accel_time: float) -> float:
@@ -108,51 +423,14 @@ def trapezoid_progress(elapsed: float, total: float, accel_time: float) -> float
     return 1.0 - 0.5 * a * remaining**2
 
 
-def _azimuth(pose: Pose) -> float:
-    return math.degrees(math.atan2(pose.y, pose.x))
-
-
-def _radius(pose: Pose) -> float:
-    return math.hypot(pose.x, pose.y)
-
-
-def _wrap(angle: float) -> float:
-    return (angle + 180.0) % 360.0 - 180.0
-
-
-ROBOT_MODELS: Mapping[str, RobotModel] = MappingProxyType(
-    {
-        model.name: model
-        for model in (
-            RobotModel(
-                name="tm5-700",
-                reach_mm=700,
-                joint_speed_deg_s=(180, 180, 180, 225, 225, 225),
-                tcp_speed_mm_s=1100,
-            ),
-            RobotModel(
-                name="tm5-900",
-                reach_mm=900,
-                joint_speed_deg_s=(180, 180, 180, 225, 225, 225),
-                tcp_speed_mm_s=1400,
-            ),
-            RobotModel(
-                name="tm12",
-                reach_mm=1300,
-                shoulder_height_mm=165,
-                joint_speed_deg_s=(120, 120, 180, 180, 180, 180),
-                tcp_speed_mm_s=1300,
-            ),
-            RobotModel(
-                name="tm14",
-                reach_mm=1100,
-                shoulder_height_mm=165,
-                joint_speed_deg_s=(120, 120, 180, 180, 180, 180),
-                tcp_speed_mm_s=1100,
-            ),
-        )
+def _load_models() -> dict[str, RobotModel]:
+    text = resources.files("tmmaster").joinpath("robot_models.toml").read_text("utf-8")
+    return {
+        entry["name"]: RobotModel.model_validate(entry) for entry in tomllib.loads(text)["model"]
     }
-)
+
+
+ROBOT_MODELS: Mapping[str, RobotModel] = MappingProxyType(_load_models())
 
 
 def robot_model(name: str) -> RobotModel:

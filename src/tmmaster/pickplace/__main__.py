@@ -303,6 +303,7 @@ def _execute(
                     probe.model,
                     start=config.poses.resolved()["home"],
                     profile=probe.profile.name,
+                    tool=probe.tool,
                 )
             )
             return EXIT_OK, None

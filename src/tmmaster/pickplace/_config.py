@@ -51,7 +51,11 @@ ARTICLE_APPROACH: tuple[float, ...] = (300, -200, 200, 180, 0, 90)
 ARTICLE_PICK = (300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
 ARTICLE_LIFT: tuple[float, ...] = (300, -200, 250, 180, 0, 90)
 ARTICLE_PLACE = (300.0, 200.0, 200.0, 180.0, 0.0, 90.0)
+#: The article's HOME: out of a TM5's reach (the wrist offsets keep a tool-down flange
+#: ~120 mm from the J1 axis), refused by inverse kinematics; see docs/pickplace.md.
 ARTICLE_HOME = (0.0, 0.0, 300.0, 180.0, 0.0, 0.0)
+#: The default home: tool down, 250 mm in front of J1 (tmmaster.DEFAULT_HOME).
+DEFAULT_HOME_VALUE = (250.0, 0.0, 300.0, 180.0, 0.0, 90.0)
 
 #: The moves of one pick & place cycle, in order.
 MOVES = ("approach", "pick", "lift", "place", "home")
@@ -75,6 +79,12 @@ class RobotSection(_Section):
     #: Highest speed any move may use, %.
     max_speed: Speed = 100
     position_tolerance_mm: Annotated[float, Field(gt=0, le=50)] = 1.0
+    #: The TCP in the flange frame ``[x, y, z, rx, ry, rz]`` (mm, deg); poses are TCP poses.
+    tool: PoseValue | None = None
+
+    def tool_pose(self) -> Pose | None:
+        """The tool offset as a :class:`Pose`, or None for the bare flange."""
+        return None if self.tool is None else Pose.from_sequence(self.tool)
 
 
 class PosesSection(_Section):
@@ -84,7 +94,7 @@ class PosesSection(_Section):
     pick: PoseValue = ARTICLE_PICK
     lift: PoseValue | None = None
     place: PoseValue = ARTICLE_PLACE
-    home: PoseValue = ARTICLE_HOME
+    home: PoseValue = DEFAULT_HOME_VALUE
     #: approach = pick + this in z, unless ``approach`` is given (article: 100 mm).
     approach_z_offset: Annotated[float, Field(ge=0, le=1000)] = 100.0
     #: lift = pick + this in z, unless ``lift`` is given (article: 150 mm).
@@ -349,6 +359,7 @@ def robot_from_config(
         workspace=config.workspace_box(),
         max_speed_percent=config.robot.max_speed,
         position_tolerance_mm=config.robot.position_tolerance_mm,
+        tool=config.robot.tool_pose(),
         # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
         gripper_settle_s=max(g.settle_s / settle_scale, min(g.settle_s, 0.1)),
     )

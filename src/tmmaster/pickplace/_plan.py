@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from .._channels import Command, CommandKind
 from .._exceptions import ConfigError
-from .._pose import Pose
+from .._pose import MotionType, Pose
 from .._robot import Robot
 from .._robot_models import RobotModel
 from ._steps import PlannedMove, TaskSequence
@@ -16,20 +16,33 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
     """Validate every known move against the profile, arm and limits; returns the count.
 
     Nothing is sent: a move that cannot be encoded (e.g. beyond +/-327.67 mm in the
-    article profile), is out of reach or too fast raises :class:`ConfigError` naming
-    the configuration key and ``source``.
+    article profile), that the arm cannot take (inverse kinematics from the previous
+    move's joints: reach, joint ranges, singularities), a Line whose straight path
+    leaves the arm's range, or a move too fast raises :class:`ConfigError` naming the
+    configuration key and ``source``.
     """
     sequence.validate()
     count = 0
-    seen: set[tuple[object, ...]] = set()
+    # Each move continues from the previous one's joints (cycles repeat: each distinct
+    # transition is checked once).
+    previous: tuple[Pose, tuple[float, ...]] | None = None
+    joints_after: dict[tuple[object, ...], tuple[float, ...]] = {}
     for move in sequence.planned_moves(cycles):
-        key = (move.pose, move.speed, move.motion)
-        if key in seen:
+        # The retreat starts wherever the run stopped: its path is not known in advance.
+        if move is sequence.retreat:
+            previous = None
+        key = (previous, move.pose, move.speed, move.motion)
+        if key in joints_after:
+            previous = (move.pose, joints_after[key])
             continue
-        seen.add(key)
         where = move.source or move.state
         try:
-            robot.validate_move(move.pose, move.speed)
+            seed = None if previous is None else previous[1]
+            joints = robot.validate_move(move.pose, move.speed, seed_deg=seed)
+            if move.motion is MotionType.LINE and previous is not None:
+                robot.model.line_joints(
+                    previous[0], move.pose, start_joints_deg=previous[1], tool=robot.tool
+                )
             robot.channel.encode_command(
                 Command(CommandKind.of(move.motion), move.pose, move.speed)
             )
@@ -38,7 +51,9 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
                 f"{source}: {where} ({move.state}): {exc} [profile {robot.profile.name},"
                 f" model {robot.model.name}]"
             ) from None
+        joints_after[key] = joints
         count += 1
+        previous = (move.pose, joints)
     return count
 
 
@@ -49,48 +64,70 @@ class EstimatedMove:
     cycle: int
     move: PlannedMove
     expected_s: float
+    #: Joints J1..J6 (deg) at the move's target, continuing from the previous move's.
+    joints_deg: tuple[float, ...]
 
 
 def estimate(
-    sequence: TaskSequence, cycles: int, model: RobotModel, *, start: Pose
+    sequence: TaskSequence,
+    cycles: int,
+    model: RobotModel,
+    *,
+    start: Pose,
+    tool: Pose | None = None,
 ) -> list[EstimatedMove]:
-    """Expected duration of every planned move (RobotModel.motion_time), from ``start``."""
+    """Expected duration and target joints of every planned move, from ``start``."""
     if sequence.plan is None:
         return []
     here = start
+    joints = model.inverse(start, tool=tool)
     result = []
     for cycle in range(1, cycles + 1):
         for move in sequence.plan(cycle, cycles):
             seconds = model.motion_time(
-                here, move.pose, speed_percent=move.speed, motion=move.motion
+                here,
+                move.pose,
+                speed_percent=move.speed,
+                motion=move.motion,
+                start_joints_deg=joints,
+                tool=tool,
             )
-            result.append(EstimatedMove(cycle, move, seconds))
+            joints = model.inverse(move.pose, seed_deg=joints, tool=tool)
+            result.append(EstimatedMove(cycle, move, seconds, joints))
             here = move.pose
     return result
 
 
 def format_plan(
-    sequence: TaskSequence, cycles: int, model: RobotModel, *, start: Pose, profile: str
+    sequence: TaskSequence,
+    cycles: int,
+    model: RobotModel,
+    *,
+    start: Pose,
+    profile: str,
+    tool: Pose | None = None,
 ) -> str:
-    """The --dry-run text: every move with pose, speed, motion type and expected time."""
+    """The --dry-run text: every move with pose, joints, speed, motion type and expected time."""
     lines = [
         f"sequence {sequence.name}: {cycles} cycle(s), profile {profile}, model {model.name}",
         f"states: IDLE -> {' -> '.join(s.name for s in sequence.steps)} -> DONE | ERROR",
         f"start pose assumed: {start}",
         "",
         f"{'cycle':>5}  {'state':<20} {'pose [x, y, z, rx, ry, rz]':<44} {'speed':>5}"
-        f"  {'motion':<6} {'expected':>9}",
+        f"  {'motion':<6} {'expected':>9}  joints J1..J6 [deg]",
     ]
-    moves = estimate(sequence, cycles, model, start=start)
+    moves = estimate(sequence, cycles, model, start=start, tool=tool)
     # Long runs: the first and last cycle say it all.
     shown = {1, cycles}
     for item in moves:
         if item.cycle not in shown:
             continue
         pose = ", ".join(f"{v:g}" for v in item.move.pose.as_list())
+        joints = ", ".join(f"{q:.1f}" for q in item.joints_deg)
         lines.append(
             f"{item.cycle:>5}  {item.move.state:<20} [{pose}]".ljust(73)
             + f" {item.move.speed:>4}%  {item.move.motion.value:<6} {item.expected_s:>8.2f}s"
+            + f"  [{joints}]"
         )
     if cycles > 2:
         middle = "cycle 2" if cycles == 3 else f"cycles 2..{cycles - 1}"

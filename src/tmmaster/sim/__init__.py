@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING
 from .._lazy import lazy_attributes as _lazy_attributes
 
 if _TYPE_CHECKING:
+    from .._pose import DEFAULT_HOME
     from ._backend import GripperState, ObjectState, PhysicsBackend
     from ._controller import MotionRecord
     from ._faults import (
@@ -31,7 +32,7 @@ if _TYPE_CHECKING:
         is_network_fault,
         parse_fault,
     )
-    from ._kinematic import DEFAULT_HOME, KinematicBackend
+    from ._kinematic import KinematicBackend
     from ._memory import MemoryTransport
     from ._server import RequestRecord
     from ._simulator import Simulator
@@ -39,7 +40,7 @@ if _TYPE_CHECKING:
 
 #: Public name -> the private module that defines it (imported on first use).
 _EXPORTS = {
-    "DEFAULT_HOME": "._kinematic",
+    "DEFAULT_HOME": "tmmaster._pose",
     "DEFAULT_PART_POSE": "._world",
     "DropConnectionsFault": "._faults",
     "EstopFault": "._faults",

@@ -12,13 +12,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .._pose import MotionType, Pose
+from .._pose import DEFAULT_HOME, MotionType, Pose
 from .._robot_models import RobotModel, trapezoid_progress
 from ._backend import GripperState, ObjectState
 from ._world import World
-
-#: Home pose of the article's pick-and-place example.
-DEFAULT_HOME = Pose(0.0, 0.0, 300.0, 180.0, 0.0, 0.0)
 
 # Absorbs float drift from summing many small dt values, so a move of T seconds stepped
 # in ticks of T/n ends on the n-th tick instead of the (n+1)-th.

@@ -1,0 +1,329 @@
+"""Rigid transforms, TM's Euler convention, and the serial-chain maths of an arm.
+
+Pure Python on 4x4 homogeneous matrices (tuples of rows, millimetres): the chain has six
+joints, so a numerical library would cost more to import than it saves.
+
+**Orientation convention.** A pose's ``rx, ry, rz`` (degrees) mean
+``R = Rz(rz) @ Ry(ry) @ Rx(rx)``: rotate about the fixed base X, then Y, then Z. Source:
+Techman's own ROS 2 driver converts the robot's tool pose with ``quat.setRPY(rx, ry, rz)``
+(``TechmanRobotInc/tmr_ros2``, ``tm_driver/src/tm_ros2_svr.cpp`` lines 144-145, commit
+684faab), and tf2's ``setRPY`` is exactly that fixed-axis X-Y-Z order.
+
+**Joint chain.** Each joint is a URDF joint: a fixed origin transform (translation, then
+roll-pitch-yaw) from the previous frame, then a rotation about its own z axis. The
+flange is the frame of joint 6 (Techman's ``flange_fixed_joint`` is the identity).
+
+**Inverse kinematics** is damped least squares on the geometric Jacobian, started from a
+seed (the current joints), so it converges to the solution nearest the seed; when it
+fails from the seed it is restarted from a few canonical postures and the solution
+nearest the seed wins. A pose no start converges to is refused as out of reach.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ._pose import Pose
+
+Row = tuple[float, float, float, float]
+Transform = tuple[Row, Row, Row, Row]
+Vector = tuple[float, float, float]
+
+IDENTITY: Transform = (
+    (1.0, 0.0, 0.0, 0.0),
+    (0.0, 1.0, 0.0, 0.0),
+    (0.0, 0.0, 1.0, 0.0),
+    (0.0, 0.0, 0.0, 1.0),
+)
+
+
+def multiply(a: Transform, b: Transform) -> Transform:
+    """The product ``a @ b`` of two homogeneous transforms."""
+    b0, b1, b2 = b[0], b[1], b[2]
+    rows = []
+    for r in a[:3]:
+        rows.append(
+            (
+                r[0] * b0[0] + r[1] * b1[0] + r[2] * b2[0],
+                r[0] * b0[1] + r[1] * b1[1] + r[2] * b2[1],
+                r[0] * b0[2] + r[1] * b1[2] + r[2] * b2[2],
+                r[0] * b0[3] + r[1] * b1[3] + r[2] * b2[3] + r[3],
+            )
+        )
+    return (rows[0], rows[1], rows[2], IDENTITY[3])
+
+
+def invert(t: Transform) -> Transform:
+    """The inverse of a rigid transform (rotation transposed, translation mapped back)."""
+    r = [[t[j][i] for j in range(3)] for i in range(3)]
+    p = [t[0][3], t[1][3], t[2][3]]
+    rows = [(*r[i], -(r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2])) for i in range(3)]
+    return (
+        (rows[0][0], rows[0][1], rows[0][2], rows[0][3]),
+        (rows[1][0], rows[1][1], rows[1][2], rows[1][3]),
+        (rows[2][0], rows[2][1], rows[2][2], rows[2][3]),
+        IDENTITY[3],
+    )
+
+
+def rpy_transform(xyz: Sequence[float], rpy_rad: Sequence[float]) -> Transform:
+    """Translation ``xyz`` then rotation ``Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (URDF, tf2 setRPY)."""
+    roll, pitch, yaw = rpy_rad
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (
+        (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr, float(xyz[0])),
+        (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr, float(xyz[1])),
+        (-sp, cp * sr, cp * cr, float(xyz[2])),
+        IDENTITY[3],
+    )
+
+
+def rot_z(angle_rad: float) -> Transform:
+    """A rotation about z."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return ((c, -s, 0.0, 0.0), (s, c, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), IDENTITY[3])
+
+
+def pose_to_transform(pose: Pose) -> Transform:
+    """The transform of a TM pose (mm; rx, ry, rz in degrees, ``Rz @ Ry @ Rx``)."""
+    return rpy_transform(
+        (pose.x, pose.y, pose.z),
+        (math.radians(pose.rx), math.radians(pose.ry), math.radians(pose.rz)),
+    )
+
+
+def transform_to_pose(t: Transform) -> Pose:
+    """The TM pose of a transform; at ry = ±90 deg (gimbal lock) rx is reported as 0."""
+    r20 = max(-1.0, min(1.0, t[2][0]))
+    pitch = -math.asin(r20)
+    if abs(r20) < 1.0 - 1e-12:
+        roll = math.atan2(t[2][1], t[2][2])
+        yaw = math.atan2(t[1][0], t[0][0])
+    else:
+        roll = 0.0
+        yaw = math.atan2(-t[0][1], t[1][1])
+    return Pose(
+        t[0][3],
+        t[1][3],
+        t[2][3],
+        _tidy(math.degrees(roll)),
+        _tidy(math.degrees(pitch)),
+        _tidy(math.degrees(yaw)),
+    )
+
+
+def _tidy(angle_deg: float) -> float:
+    # (-180, 180], and 180 rather than -180 for the common "tool down" rx.
+    angle = math.fmod(angle_deg, 360.0)
+    if angle > 180.0:
+        angle -= 360.0
+    elif angle <= -180.0:
+        angle += 360.0
+    if abs(angle + 180.0) < 1e-7:
+        return 180.0
+    return 0.0 if abs(angle) < 1e-12 else angle
+
+
+def rotation_error(current: Transform, target: Transform) -> Vector:
+    """Rotation vector (rad, base frame) that turns ``current``'s orientation into ``target``'s."""
+    # R_err = R_t @ R_c^T, then its axis-angle (log map), robust up to 180 degrees.
+    r = [[sum(target[i][k] * current[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
+    cos_angle = max(-1.0, min(1.0, (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0))
+    angle = math.acos(cos_angle)
+    axis = (r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1])
+    sin2 = math.hypot(*axis)  # = 2 sin(angle)
+    if sin2 > 1e-9:
+        scale = angle / sin2
+        return (axis[0] * scale, axis[1] * scale, axis[2] * scale)
+    if cos_angle > 0:
+        return (0.0, 0.0, 0.0)
+    # 180 degrees: the axis is the column of (R + I) with the largest norm.
+    cols = [(r[0][j] + (j == 0), r[1][j] + (j == 1), r[2][j] + (j == 2)) for j in range(3)]
+    col = max(cols, key=lambda c: math.hypot(*c))
+    norm = math.hypot(*col)
+    return (col[0] / norm * math.pi, col[1] / norm * math.pi, col[2] / norm * math.pi)
+
+
+def solve(matrix: list[list[float]], rhs: list[float]) -> list[float]:
+    """Solve ``matrix @ x = rhs`` by Gaussian elimination with partial pivoting."""
+    n = len(rhs)
+    a = [[*row, b] for row, b in zip(matrix, rhs, strict=True)]
+    for col in range(n):
+        pivot = max(range(col, n), key=lambda i: abs(a[i][col]))
+        if abs(a[pivot][col]) < 1e-300:
+            raise ZeroDivisionError("singular matrix")
+        a[col], a[pivot] = a[pivot], a[col]
+        p = a[col]
+        for i in range(col + 1, n):
+            f = a[i][col] / p[col]
+            if f:
+                row = a[i]
+                for j in range(col, n + 1):
+                    row[j] -= f * p[j]
+    x = [0.0] * n
+    for i in range(n - 1, -1, -1):
+        x[i] = (a[i][n] - sum(a[i][j] * x[j] for j in range(i + 1, n))) / a[i][i]
+    return x
+
+
+def determinant(matrix: list[list[float]]) -> float:
+    """Determinant of a square matrix (Gaussian elimination)."""
+    n = len(matrix)
+    a = [list(row) for row in matrix]
+    det = 1.0
+    for col in range(n):
+        pivot = max(range(col, n), key=lambda i: abs(a[i][col]))
+        if abs(a[pivot][col]) < 1e-300:
+            return 0.0
+        if pivot != col:
+            a[col], a[pivot] = a[pivot], a[col]
+            det = -det
+        det *= a[col][col]
+        for i in range(col + 1, n):
+            f = a[i][col] / a[col][col]
+            for j in range(col, n):
+                a[i][j] -= f * a[col][j]
+    return det
+
+
+@dataclass(frozen=True)
+class Chain:
+    """The fixed origin transforms of a serial arm whose joints turn about their own z."""
+
+    origins: tuple[Transform, ...]
+
+    def frames(self, joints_rad: Sequence[float]) -> list[Transform]:
+        """Base -> frame of each joint, after the joint's rotation (the last is the flange)."""
+        frames = []
+        current = IDENTITY
+        for origin, q in zip(self.origins, joints_rad, strict=True):
+            current = multiply(multiply(current, origin), rot_z(q))
+            frames.append(current)
+        return frames
+
+    def flange(self, joints_rad: Sequence[float]) -> Transform:
+        """Base -> flange transform."""
+        return self.frames(joints_rad)[-1]
+
+    def jacobian(
+        self, joints_rad: Sequence[float], tool: Transform = IDENTITY
+    ) -> tuple[list[list[float]], Transform]:
+        """Geometric Jacobian (rows: vx, vy, vz in m/rad, wx, wy, wz) of the TCP, and the TCP."""
+        frames = self.frames(joints_rad)
+        tcp = multiply(frames[-1], tool)
+        p = (tcp[0][3], tcp[1][3], tcp[2][3])
+        columns = []
+        for f in frames:
+            z = (f[0][2], f[1][2], f[2][2])
+            d = ((p[0] - f[0][3]) / 1000.0, (p[1] - f[1][3]) / 1000.0, (p[2] - f[2][3]) / 1000.0)
+            columns.append(
+                (
+                    z[1] * d[2] - z[2] * d[1],
+                    z[2] * d[0] - z[0] * d[2],
+                    z[0] * d[1] - z[1] * d[0],
+                    z[0],
+                    z[1],
+                    z[2],
+                )
+            )
+        return [[col[i] for col in columns] for i in range(6)], tcp
+
+
+def pose_error(current: Transform, target: Transform) -> list[float]:
+    """Twist from ``current`` to ``target``: position in metres, rotation vector in rad."""
+    w = rotation_error(current, target)
+    return [
+        (target[0][3] - current[0][3]) / 1000.0,
+        (target[1][3] - current[1][3]) / 1000.0,
+        (target[2][3] - current[2][3]) / 1000.0,
+        *w,
+    ]
+
+
+def dls_inverse(
+    chain: Chain,
+    target: Transform,
+    seed_rad: Sequence[float],
+    *,
+    tool: Transform = IDENTITY,
+    tolerance_m: float = 1e-6,
+    tolerance_rad: float = 1e-6,
+    iterations: int = 100,
+) -> list[float] | None:
+    """Damped-least-squares IK from ``seed_rad``: the joints (rad), or None without convergence."""
+    q = list(seed_rad)
+    damping = 1e-3
+    previous = best = math.inf
+    since_best = 0
+    for _ in range(iterations):
+        jac, tcp = chain.jacobian(q, tool)
+        error = pose_error(tcp, target)
+        position = math.hypot(*error[:3])
+        rotation = math.hypot(*error[3:])
+        if position < tolerance_m and rotation < tolerance_rad:
+            return q
+        norm = position + rotation
+        # A pose out of reach stalls at a nonzero error: give up once it stops improving.
+        if norm < best * 0.99:
+            best, since_best = norm, 0
+        else:
+            since_best += 1
+            if since_best > 8:
+                return None
+        # Adapt the damping: shrink it while converging, grow it when an update overshoots.
+        damping = max(damping * 0.5, 1e-6) if norm < previous else min(damping * 4.0, 1.0)
+        previous = norm
+        jjt = [
+            [
+                sum(jac[i][k] * jac[j][k] for k in range(6)) + (damping**2 if i == j else 0.0)
+                for j in range(6)
+            ]
+            for i in range(6)
+        ]
+        try:
+            y = solve(jjt, error)
+        except ZeroDivisionError:
+            return None
+        step = [sum(jac[i][k] * y[i] for i in range(6)) for k in range(6)]
+        # Bound a single update so a far target is approached, not jumped over.
+        largest = max(abs(s) for s in step)
+        if largest > 0.5:
+            step = [s * 0.5 / largest for s in step]
+        q = [a + b for a, b in zip(q, step, strict=True)]
+    return None
+
+
+def rotation_matrix(rotation_vector: Vector) -> tuple[Vector, Vector, Vector]:
+    """The rotation matrix of a rotation vector (axis times angle in rad), by Rodrigues."""
+    angle = math.hypot(*rotation_vector)
+    if angle < 1e-15:
+        return ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    x, y, z = (c / angle for c in rotation_vector)
+    c, s = math.cos(angle), math.sin(angle)
+    v = 1.0 - c
+    return (
+        (c + x * x * v, x * y * v - z * s, x * z * v + y * s),
+        (y * x * v + z * s, c + y * y * v, y * z * v - x * s),
+        (z * x * v - y * s, z * y * v + x * s, c + z * z * v),
+    )
+
+
+def interpolate(a: Transform, b: Transform, fraction: float) -> Transform:
+    """The pose ``fraction`` (0..1) of the way from ``a`` to ``b``: straight line, shortest turn."""
+    w = rotation_error(a, b)
+    r = rotation_matrix((w[0] * fraction, w[1] * fraction, w[2] * fraction))
+    rows = []
+    for i in range(3):
+        rows.append(
+            (
+                r[i][0] * a[0][0] + r[i][1] * a[1][0] + r[i][2] * a[2][0],
+                r[i][0] * a[0][1] + r[i][1] * a[1][1] + r[i][2] * a[2][1],
+                r[i][0] * a[0][2] + r[i][1] * a[1][2] + r[i][2] * a[2][2],
+                a[i][3] + (b[i][3] - a[i][3]) * fraction,
+            )
+        )
+    return (rows[0], rows[1], rows[2], IDENTITY[3])
