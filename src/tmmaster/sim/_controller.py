@@ -166,6 +166,7 @@ class RobotController:
         self._moves_started = 0
         self._grasps = 0
         self._running = False  # tmflow: the TMflow project runs
+        self._project_started_s = 0.0  # tmflow: when the project last started
         self._late_key: object = None
         self._late_since = 0.0
         self._reinit_at: float | None = None
@@ -538,6 +539,7 @@ class RobotController:
 
     def _start_project(self) -> None:
         self._running = True
+        self._project_started_s = self._time_s
         # The start-up rule (docs/tmflow-program.md): a freshly started project never takes
         # a command written before it started. A pending sequence number is consumed as
         # cancelled (ack_seq := seq), so neither it nor a late copy of it can run. Any
@@ -780,11 +782,11 @@ class RobotController:
 
     def _publish_tm_table(self, tcp: Pose) -> None:
         """Techman's fixed table beside a tmflow profile (docs/simulator-model.md)."""
-        flange = getattr(self._backend, "flange_pose", lambda: None)()
-        joints = getattr(self._backend, "joint_positions_deg", lambda: None)()
+        flange = self._backend.flange_pose()
+        joints = self._backend.joint_positions_deg()
         # Without a joint model the simulated tool is the identity: flange = TCP.
         flange = tcp if flange is None else flange
-        # The simulated current base is the robot base.
+        # The simulated current base is the robot base (Current Base 8300-8311 reads 0).
         for prefix, p in (
             ("flange", flange),
             ("robot_base_flange", flange),
@@ -795,9 +797,18 @@ class RobotController:
         for i, angle in enumerate(joints or (0.0,) * 6, start=1):
             self._bank.set(f"joint_{i}", angle)
         self._bank.set("robot_link", True)
-        self._bank.set("operation_mode", 1)  # auto
+        self._bank.set("operation_mode", 1)  # auto, as ma_mode
+        self._bank.set("aut_p", True)  # AUT.P high: able to play in auto mode
         state = 4 if self._estop else 2 if self._error_code else 0  # STO / error / normal
         self._bank.set("tm_robot_state", state)
+        # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
+        running = self._time_s - self._project_started_s if self._running else 0.0
+        for prefix, seconds in (("running", running), ("up", self._time_s)):
+            whole = int(seconds)
+            self._bank.set(f"{prefix}_days", whole // 86400)
+            self._bank.set(f"{prefix}_hours", whole // 3600 % 24)
+            self._bank.set(f"{prefix}_minutes", whole // 60 % 60)
+            self._bank.set(f"{prefix}_seconds", whole % 60)
 
     def _discard_article_commands(self, reason: str) -> None:
         pending = int(self._bank.get("command"))

@@ -360,9 +360,10 @@ class DeviceServer:
         for table in (Table.COIL, Table.DISCRETE_INPUT, Table.HOLDING, Table.INPUT):
             runs = self._bank.readable(table)
             if table.is_bit:
+                # One list of n bits, not count=n: pymodbus 3.16 checks bit blocks for
+                # overlap with n * n addresses, which a long run (e.g. 900-1699) overflows.
                 entries = [
-                    SimData(address=a, count=n, values=False, datatype=DataType.BITS)
-                    for a, n in runs
+                    SimData(address=a, values=[False] * n, datatype=DataType.BITS) for a, n in runs
                 ]
                 # pymodbus needs at least one entry per table; the trace hook refuses
                 # every address of an empty table before pymodbus looks at it.

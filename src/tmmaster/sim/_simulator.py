@@ -32,7 +32,7 @@ from ._controller import MotionRecord, RobotController
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._server import DeviceServer, RequestLog, RequestRecord
-from ._tm_table import USER_AREA, tm_table_fields
+from ._tm_table import tm_table_areas, tm_table_fields
 from ._world import TableObject, World
 
 if TYPE_CHECKING:
@@ -97,9 +97,12 @@ class Simulator:
         device = [f for f in all_faults if not is_network_fault(f)]
         self._log = RequestLog(listener=request_listener)
         if self._profile.handshake is Handshake.SEQUENCE:
-            # A real TM controller: Techman's fixed table and the user define area too.
+            # A real TM controller: Techman's fixed table, the External Module range and
+            # the user define area too.
             self._bank = RegisterBank(
-                self._profile, extra_fields=tm_table_fields(self._profile), raw_areas=USER_AREA
+                self._profile,
+                extra_fields=tm_table_fields(self._profile),
+                raw_areas=tm_table_areas(),
             )
         else:
             self._bank = RegisterBank(self._profile)

@@ -1,9 +1,10 @@
 """Techman's Modbus slave table (TMflow 2.24, appendix C) as data, served beside a profile.
 
-``tm_table.toml`` lists the transcribed entries; :func:`tm_table_fields` turns them into
-register fields for a robot profile, leaving out every address the profile itself
-defines (the profile's field wins), and :data:`USER_AREA` is the user define area
-(9000-9999, coils and holding registers, FC 01/03/05/06/15/16).
+``tm_table.toml`` lists every entry of the appendix (``[[entry]]``) and its plain memory
+areas (``[[area]]``: the External Module range and the user define area, 9000-9999);
+:func:`tm_table_fields` turns the entries into register fields for a robot profile,
+leaving out every address the profile itself defines (the profile's field wins), and
+:func:`tm_table_areas` gives the areas as ``(table, first address, count)``.
 """
 
 from __future__ import annotations
@@ -13,30 +14,83 @@ from functools import cache
 from importlib import resources
 from typing import Any
 
-from .._registers import RegisterField, RegisterMap, Table
+from .._registers import Access, RegisterField, RegisterMap, Table
 
-#: The user define area: (table, first address, count); read and write.
-USER_AREA = ((Table.COIL, 9000, 1000), (Table.HOLDING, 9000, 1000))
+#: Which table each Modbus function code reads or writes (TMflow 2.24, appendix C, p. 305).
+_FC_TABLE = {
+    1: Table.COIL,
+    2: Table.DISCRETE_INPUT,
+    3: Table.HOLDING,
+    4: Table.INPUT,
+    5: Table.COIL,
+    6: Table.HOLDING,
+    15: Table.COIL,
+    16: Table.HOLDING,
+}
+_FC_READS = frozenset({1, 2, 3, 4})
+
+#: Keys of a table entry that describe the manual's row, not the register field.
+_ROW_KEYS = ("section", "count", "fc", "page")
+
+
+def _check_fc(where: str, fc: str, table: Table, access: Access) -> None:
+    """Refuse an entry whose function codes disagree with its table or access."""
+    codes = {int(c) for c in fc.split("/")}
+    tables = {_FC_TABLE[c] for c in codes}
+    if tables != {table}:
+        raise ValueError(f"tm_table.toml {where}: FC {fc} does not address the {table} table")
+    reads, writes = bool(codes & _FC_READS), bool(codes - _FC_READS)
+    expected = Access.READ_WRITE if reads and writes else Access.WRITE if writes else Access.READ
+    if access is not expected:
+        raise ValueError(f"tm_table.toml {where}: FC {fc} means access {expected.value!r}")
+
+
+@cache
+def _document() -> dict[str, Any]:
+    text = resources.files("tmmaster.sim").joinpath("tm_table.toml").read_text("utf-8")
+    return tomllib.loads(text)
 
 
 @cache
 def _entries() -> tuple[RegisterField, ...]:
-    text = resources.files("tmmaster.sim").joinpath("tm_table.toml").read_text("utf-8")
     fields: list[RegisterField] = []
-    for entry in tomllib.loads(text)["entry"]:
-        spec: dict[str, Any] = {k: v for k, v in entry.items() if k not in ("section", "count")}
+    for entry in _document()["entry"]:
+        spec: dict[str, Any] = {k: v for k, v in entry.items() if k not in _ROW_KEYS}
         count = int(entry.get("count", 1))
-        spec["description"] = f"{entry['section']}: {spec.get('description', '')}"
-        if count == 1:
-            fields.append(RegisterField.model_validate(spec))
-            continue
-        for i in range(count):
-            fields.append(
-                RegisterField.model_validate(
-                    {**spec, "name": f"{spec['name']}_{i}", "address": spec["address"] + i}
-                )
-            )
+        spec["description"] = (
+            f"{entry['section']} (p. {entry['page']}, FC {entry['fc']}): "
+            f"{spec.get('description', '')}"
+        )
+        specs = (
+            [spec]
+            if count == 1
+            else [
+                {**spec, "name": f"{spec['name']}_{i}", "address": spec["address"] + i}
+                for i in range(count)
+            ]
+        )
+        for one in specs:
+            field = RegisterField.model_validate(one)
+            _check_fc(field.name, entry["fc"], field.table, field.access)
+            fields.append(field)
     return tuple(fields)
+
+
+@cache
+def tm_table_areas(section: str | None = None) -> tuple[tuple[Table, int, int], ...]:
+    """The plain memory areas (of one ``section``, or all) as ``(table, first, count)``."""
+    areas: list[tuple[Table, int, int]] = []
+    for area in _document()["area"]:
+        if section is not None and area["section"] != section:
+            continue
+        table = Table(area["table"])
+        _check_fc(area["section"], area["fc"], table, Access(area.get("access", "r")))
+        areas.append((table, int(area["address"]), int(area["count"])))
+    return tuple(areas)
+
+
+#: The user define area (9000-9999): coils and holding registers, read and write.
+USER_AREA = tm_table_areas("User Define Area")
 
 
 def tm_table_fields(profile: RegisterMap) -> tuple[RegisterField, ...]:
