@@ -302,6 +302,7 @@ class RobotController:
             # last_error_code keeps the code: it is the *last* error, not the current one.
             self._bank.set("estop", False)
             self._bank.set("error", False)
+            self._publish_tm_state()
         self._log.info("sim.error_cleared", device=self._profile.name, code=code)
 
     def press_play(self) -> None:
@@ -705,6 +706,7 @@ class RobotController:
         else:
             self._bank.set("last_error_code", int(code))
             self._bank.set("error", True)
+            self._publish_tm_state()
             if self._running:
                 self._stop_project(reason)
 
@@ -799,8 +801,7 @@ class RobotController:
         self._bank.set("robot_link", True)
         self._bank.set("operation_mode", 1)  # auto, as ma_mode
         self._bank.set("aut_p", True)  # AUT.P high: able to play in auto mode
-        state = 4 if self._estop else 2 if self._error_code else 0  # STO / error / normal
-        self._bank.set("tm_robot_state", state)
+        self._publish_tm_state()
         # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
         running = self._time_s - self._project_started_s if self._running else 0.0
         for prefix, seconds in (("running", running), ("up", self._time_s)):
@@ -809,6 +810,12 @@ class RobotController:
             self._bank.set(f"{prefix}_hours", whole // 3600 % 24)
             self._bank.set(f"{prefix}_minutes", whole // 60 % 60)
             self._bank.set(f"{prefix}_seconds", whole % 60)
+
+    def _publish_tm_state(self) -> None:
+        """Robot State (7215) in the same step as the error and e-stop bits."""
+        if self._bank.has("tm_robot_state"):
+            state = 4 if self._estop else 2 if self._error_code else 0  # STO / error / normal
+            self._bank.set("tm_robot_state", state)
 
     def _discard_article_commands(self, reason: str) -> None:
         pending = int(self._bank.get("command"))

@@ -1,0 +1,42 @@
+"""The TM table loader: every entry's function codes agree with its table and access."""
+
+from __future__ import annotations
+
+import pytest
+
+from tmmaster._registers import Access, Table
+from tmmaster.sim._tm_table import USER_AREA, _check_fc, _entries, tm_table_areas
+
+
+def test_the_function_codes_of_the_manual_name_the_table_and_access() -> None:
+    _check_fc("light", "01/05", Table.COIL, Access.READ_WRITE)
+    _check_fc("stop", "05", Table.COIL, Access.WRITE)
+    _check_fc("speed", "06", Table.HOLDING, Access.WRITE)
+    _check_fc("project", "06/16", Table.HOLDING, Access.WRITE)
+    _check_fc("ao", "03/16", Table.HOLDING, Access.READ_WRITE)
+    _check_fc("error", "02", Table.DISCRETE_INPUT, Access.READ)
+    _check_fc("pose", "04", Table.INPUT, Access.READ)
+
+
+@pytest.mark.parametrize(
+    ("fc", "table", "access"),
+    [
+        ("04", Table.HOLDING, Access.READ),  # FC 04 reads input registers
+        ("02", Table.COIL, Access.READ),
+        ("01/05", Table.COIL, Access.WRITE),  # FC 01 reads it too
+        ("05", Table.COIL, Access.READ_WRITE),  # write-only
+        ("03/06", Table.INPUT, Access.READ_WRITE),
+        ("01/03", Table.COIL, Access.READ),  # two tables
+    ],
+)
+def test_an_entry_whose_fc_disagrees_is_refused(fc: str, table: Table, access: Access) -> None:
+    with pytest.raises(ValueError, match="FC"):
+        _check_fc("x", fc, table, access)
+
+
+def test_the_table_loads_and_names_its_areas() -> None:
+    fields = _entries()
+    assert len({f.name for f in fields}) == len(fields)
+    assert all("p. 3" in f.description for f in fields)  # every entry cites its page
+    assert USER_AREA == ((Table.COIL, 9000, 1000), (Table.HOLDING, 9000, 1000))
+    assert (Table.INPUT, 900, 800) in tm_table_areas("External Module")
