@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from tmmaster._registers import Access, Table
-from tmmaster.sim._tm_table import USER_AREA, _check_fc, _entries, tm_table_areas
+from tmmaster.sim._tm_table import (
+    USER_AREA,
+    _check_fc,
+    _entries,
+    tm_table_areas,
+    tm_table_markdown,
+)
 
 
 def test_the_function_codes_of_the_manual_name_the_table_and_access() -> None:
@@ -40,3 +48,11 @@ def test_the_table_loads_and_names_its_areas() -> None:
     assert all("p. 3" in f.description for f in fields)  # every entry cites its page
     assert USER_AREA == ((Table.COIL, 9000, 1000), (Table.HOLDING, 9000, 1000))
     assert (Table.INPUT, 900, 800) in tm_table_areas("External Module")
+
+
+def test_the_table_doc_is_generated_from_the_toml() -> None:
+    committed = (Path(__file__).parent.parent / "docs" / "tm-table.md").read_text("utf-8")
+    assert committed == tm_table_markdown(), (
+        "docs/tm-table.md is stale: run python -c 'from tmmaster.sim._tm_table import"
+        ' tm_table_markdown; print(tm_table_markdown(), end="")\' > docs/tm-table.md'
+    )

@@ -93,6 +93,44 @@ def tm_table_areas(section: str | None = None) -> tuple[tuple[Table, int, int], 
 USER_AREA = tm_table_areas("User Define Area")
 
 
+def tm_table_markdown() -> str:
+    """The table as Markdown, one row per entry of ``tm_table.toml`` (docs/tm-table.md)."""
+    doc = _document()
+    out = [
+        "# Techman's Modbus table in the simulator",
+        "",
+        "Generated from `src/tmmaster/sim/tm_table.toml` by `tm_table_markdown()` in",
+        "`src/tmmaster/sim/_tm_table.py`; do not edit. Source: TMflow SW 2.24 Software Manual",
+        '(document version 1.00), appendix C "Modbus List", pp. 305-319. The simulator serves',
+        "all of it beside the `tmflow` profile (a profile field at the same address wins);",
+        "what it puts in the registers is in [simulator-model.md](simulator-model.md).",
+        "",
+        "| Section | Name | Table | Address | Type | FC | Access | Unit | Page | Meaning |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    width = {"bool": 1, "int16": 1, "uint16": 1, "int32": 2, "uint32": 2, "float32": 2}
+    for e in doc["entry"]:
+        last = e["address"] + width[e["type"]] * int(e.get("count", 1)) - 1
+        address = str(e["address"]) if last == e["address"] else f"{e['address']}-{last}"
+        kind = e["type"] if "count" not in e else f"string ({e['count']} x uint16)"
+        out.append(
+            f"| {e['section']} | `{e['name']}` | {e['table']} | {address} | {kind} | {e['fc']} "
+            f"| {e.get('access', 'r')} | {e.get('unit', '')} | {e['page']} | {e['description']} |"
+        )
+    out += ["", "Plain memory areas (every address reads 0 until a master writes it):", ""]
+    out += [
+        "| Section | Table | Addresses | FC | Access | Page | Meaning |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for a in doc["area"]:
+        out.append(
+            f"| {a['section']} | {a['table']} | {a['address']}-{a['address'] + a['count'] - 1} "
+            f"| {a['fc']} | {a.get('access', 'r')} | {a['page']} | {a['description']} |"
+        )
+    out.append("")
+    return "\n".join(out)
+
+
 def tm_table_fields(profile: RegisterMap) -> tuple[RegisterField, ...]:
     """Table entries that ``profile`` does not define itself (by name or by address)."""
     taken = {(f.table, a) for f in profile.fields.values() for a in range(f.address, f.end + 1)}
