@@ -131,12 +131,16 @@ def tm_table_markdown() -> str:
     return "\n".join(out)
 
 
+@cache
+def _spans() -> tuple[tuple[RegisterField, frozenset[tuple[Table, int]]], ...]:
+    return tuple(
+        (f, frozenset((f.table, a) for a in range(f.address, f.end + 1))) for f in _entries()
+    )
+
+
 def tm_table_fields(profile: RegisterMap) -> tuple[RegisterField, ...]:
     """Table entries that ``profile`` does not define itself (by name or by address)."""
     taken = {(f.table, a) for f in profile.fields.values() for a in range(f.address, f.end + 1)}
     return tuple(
-        f
-        for f in _entries()
-        if f.name not in profile.fields
-        and not any((f.table, a) in taken for a in range(f.address, f.end + 1))
+        f for f, span in _spans() if f.name not in profile.fields and taken.isdisjoint(span)
     )
