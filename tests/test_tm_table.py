@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
+from tmmaster import Pose, robot_model
 from tmmaster._registers import Access, Table
+from tmmaster.sim import KinematicBackend, Simulator
 from tmmaster.sim._tm_table import (
     USER_AREA,
     _check_fc,
@@ -56,3 +59,32 @@ def test_the_table_doc_is_generated_from_the_toml() -> None:
         "docs/tm-table.md is stale: run python -c 'from tmmaster.sim._tm_table import"
         ' tm_table_markdown; print(tm_table_markdown(), end="")\' > docs/tm-table.md'
     )
+
+
+class JointModelBackend(KinematicBackend):
+    """A backend with a (fixed, made-up) joint model: flange and joints of its own."""
+
+    FLANGE = Pose(300.0, -200.0, 300.0, 180.0, 0.0, 90.0)
+    JOINTS = (10.0, -20.0, 30.0, -40.0, 50.0, -60.0)
+
+    def joint_positions_deg(self) -> tuple[float, ...] | None:
+        return self.JOINTS
+
+    def flange_pose(self) -> Pose | None:
+        return self.FLANGE
+
+
+def test_flange_and_joints_come_from_the_backend_when_it_has_them(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> None:
+    sim = tm_simulator_factory("tmflow", backend=JointModelBackend(robot_model("tm5-700")))
+    sim.wait_for(lambda: sim.field("joint_6") == pytest.approx(-60.0), 2.0)
+    flange = [sim.field(f"flange_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")]
+    base_flange = [sim.field(f"robot_base_flange_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")]
+    joints = [sim.field(f"joint_{j}") for j in range(1, 7)]
+    tcp = [sim.field(f"robot_base_tcp_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")]
+    assert flange == pytest.approx(JointModelBackend.FLANGE.as_list())
+    assert base_flange == pytest.approx(flange)
+    assert joints == pytest.approx(list(JointModelBackend.JOINTS))
+    assert tcp == pytest.approx(sim.tcp_pose().as_list(), abs=1e-3)
+    assert flange != pytest.approx(tcp)  # the TCP is not the flange here
