@@ -29,11 +29,14 @@ class SlowSettlingBackend(KinematicBackend):
         world: World | None = None,
         settle_time_s: float = 1.5,
         invalidate_after_motions: int | None = 1,
+        motion_survives_reinit: bool = True,
     ) -> None:
         if invalidate_after_motions is not None and invalidate_after_motions < 1:
             raise ValueError("invalidate_after_motions must be >= 1 or None")
         super().__init__(model, home=home, world=world, settle_time_s=settle_time_s)
         self.invalidate_after_motions = invalidate_after_motions
+        #: False: a motion running when the view is rebuilt is lost (the arm stops).
+        self.motion_survives_reinit = motion_survives_reinit
         self.reinitialize_count = 0
         self.motions_completed = 0
         #: Commands refused because the view was invalid (the controller should send none).
@@ -49,11 +52,15 @@ class SlowSettlingBackend(KinematicBackend):
         """False from the N-th completed motion until ``reinitialize()``."""
         return self._ready
 
-    def reinitialize(self) -> None:
-        """Rebuild the physics view; the arm keeps its last pose."""
+    def reinitialize(self) -> bool:
+        """Rebuild the physics view; the arm keeps its last pose. True: the motion survived."""
         self.reinitialize_count += 1
         self._ready = True
         self._motions_since_reinit = 0
+        if self.motion_running and not self.motion_survives_reinit:
+            self.stop_motion()
+            return False
+        return True
 
     def step(self, dt: float) -> None:
         """Advance the physics; an invalid view does not step at all."""

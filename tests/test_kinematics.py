@@ -97,8 +97,8 @@ def test_inverse_kinematics_round_trips_from_a_nearby_seed(
         return
     seed = [q + d for q, d in zip(joints, nudge, strict=True)]
     solution = TM5.inverse(pose, seed_deg=seed)
-    # The nearest solution is the one the seed came from.
-    assert max(abs(a - b) for a, b in zip(solution, joints, strict=True)) < 1e-3
+    # The nearest solution is the one the seed came from (to IK's 1 um / 1 urad tolerance).
+    assert max(abs(a - b) for a, b in zip(solution, joints, strict=True)) < 1e-2
     assert close(TM5.forward(solution), pose)
 
 

@@ -15,6 +15,7 @@ from tmmaster._pose import MotionType, Pose
 from tmmaster._profiles import gripper_profile, robot_profile
 from tmmaster._registers import TARGET_FIELDS, RegisterMap, Table
 from tmmaster._robot_models import robot_model
+from tmmaster.sim._backend import MotionRejectedError, RejectReason
 from tmmaster.sim._bank import RegisterBank
 from tmmaster.sim._controller import RobotController, SimErrorCode
 from tmmaster.sim._faults import (
@@ -76,10 +77,11 @@ class LateReadyBackend(KinematicBackend):
     def is_ready(self) -> bool:
         return self.ready
 
-    def reinitialize(self) -> None:
+    def reinitialize(self) -> bool:
         self.reinit_calls += 1
         if self._countdown is None:
             self._countdown = self.ready_after_s
+        return True
 
     def step(self, dt: float) -> None:
         super().step(dt)
@@ -1195,3 +1197,113 @@ def test_tmflow_accel_time_beyond_its_maximum_is_an_invalid_command() -> None:
     assert bank.get("ack_seq") == 1
     assert (bank.get("robot_state"), bank.get("result_code")) == (2, 2)
     assert ctl.moves_started == 0
+
+
+# -- the backend's own rejection and a motion lost on re-initialise (issue 9 item 5) --------
+
+
+class RejectingBackend(KinematicBackend):
+    """Refuses every motion with the given reason, as a backend with joint limits would."""
+
+    def __init__(self, reason: RejectReason) -> None:
+        super().__init__(MODEL)
+        self.reason: RejectReason = reason
+
+    def start_motion(
+        self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
+    ) -> float:
+        raise MotionRejectedError(self.reason, f"{target} rejected: {self.reason}")
+
+
+@pytest.mark.parametrize(
+    ("reason", "code"),
+    [
+        ("reach", SimErrorCode.UNREACHABLE),
+        ("joint_limit", SimErrorCode.JOINT_LIMIT),
+        ("singularity", SimErrorCode.SINGULARITY),
+    ],
+)
+def test_article_backend_rejection_is_an_error_with_the_reasons_code(
+    reason: RejectReason, code: SimErrorCode
+) -> None:
+    profile = robot_profile("article")
+    bank = RecordingBank(profile)
+    log = ListLogger()
+    backend = RejectingBackend(reason)
+    ctl = RobotController(profile, bank, backend, MODEL, init_time_s=INIT_S, log=log)
+    run(ctl, INIT_S)
+    bank.sets.clear()
+    send_article(bank, AIR)
+    ctl.tick(DT)
+    assert bank.get("error_code") == code
+    assert bank.get("robot_mode") == 7
+    assert bank.get("motion_status") == 0
+    assert ctl.moves_started == 0
+    # Error first, acknowledgement last; moving (motion_status = 1) never shows.
+    names = [name for name, _ in bank.sets]
+    assert names.index("error_code") < names.index("command")
+    assert ("motion_status", 1) not in bank.sets
+    assert any(e[1] == "sim.command_rejected" and e[2].get("reason") == reason for e in log.events)
+
+
+def test_tmflow_backend_rejection_is_result_unreachable() -> None:
+    ctl, bank, _, _ = tmflow(backend=RejectingBackend("joint_limit"))
+    send_tmflow(bank, 1, target=AIR)
+    ctl.tick(DT)
+    assert bank.get("ack_seq") == 1
+    assert (bank.get("result_code"), bank.get("robot_state")) == (1, 2)
+    assert bank.get("done_seq") == 0
+    assert bank.get("error") is False
+    assert ctl.moves_started == 0
+
+
+def test_article_motion_lost_on_reinitialise_is_an_error_never_done() -> None:
+    backend = SlowSettlingBackend(
+        MODEL, settle_time_s=0.0, invalidate_after_motions=None, motion_survives_reinit=False
+    )
+    ctl, bank, _, log = article(backend=backend)
+    send_article(bank, AIR)
+    run(ctl, 0.2)
+    assert bank.get("motion_status") == 1
+    backend.invalidate()
+    ctl.tick(DT)
+    assert backend.reinitialize_count == 1
+    assert bank.get("error_code") == SimErrorCode.MOTION_LOST
+    assert bank.get("motion_status") == 0
+    assert "sim.motion_lost" in log.names()
+    run(ctl, 2.0)
+    assert not backend.tcp_pose().is_close(AIR, mm=1.0)  # stopped where it was
+    assert "sim.motion_done" not in log.names()
+
+
+def test_tmflow_motion_lost_on_reinitialise_fails_the_command() -> None:
+    backend = SlowSettlingBackend(
+        MODEL, settle_time_s=0.0, invalidate_after_motions=None, motion_survives_reinit=False
+    )
+    ctl, bank, _, log = tmflow(backend=backend)
+    send_tmflow(bank, 1, target=AIR)
+    run(ctl, 0.2)
+    assert bank.get("robot_state") == 1
+    backend.invalidate()
+    ctl.tick(DT)
+    assert (bank.get("result_code"), bank.get("robot_state")) == (3, 2)
+    run(ctl, 2.0)
+    assert bank.get("done_seq") == 0  # never reported done
+    assert "sim.motion_done" not in log.names()
+    # The program takes the next command.
+    send_tmflow(bank, 2, target=AIR)
+    finish_tmflow(ctl, bank, 2)
+    assert pose_of(bank).is_close(AIR, mm=0.01, deg=0.01)
+
+
+def test_a_motion_that_survives_reinitialise_completes() -> None:
+    backend = SlowSettlingBackend(MODEL, settle_time_s=0.0, invalidate_after_motions=None)
+    ctl, bank, _, log = article(backend=backend)
+    send_article(bank, AIR)
+    run(ctl, 0.2)
+    backend.invalidate()
+    run_until(ctl, lambda: bank.get("motion_status") == 0)
+    assert backend.reinitialize_count == 1
+    assert bank.get("error_code") == 0
+    assert pose_of(bank).is_close(AIR, mm=0.01, deg=0.01)
+    assert "sim.motion_lost" not in log.names()

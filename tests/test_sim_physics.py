@@ -7,11 +7,18 @@ from collections.abc import Callable
 import pytest
 
 from sim_backends import BackendNotReadyError, SlowSettlingBackend
+from tmmaster._exceptions import TMMasterError
 from tmmaster._pose import MotionType, Pose
 from tmmaster._robot_models import robot_model
-from tmmaster.sim._backend import GripperState, PhysicsBackend
+from tmmaster.sim._backend import GripperState, MotionRejectedError, PhysicsBackend
 from tmmaster.sim._kinematic import DEFAULT_HOME, KinematicBackend
-from tmmaster.sim._world import DEFAULT_PART_POSE, TableObject, World
+from tmmaster.sim._world import (
+    DEFAULT_PART_POSE,
+    DEFAULT_TABLE_TOP_Z_MM,
+    TABLE,
+    TableObject,
+    World,
+)
 
 DT = 0.01
 MODEL = robot_model("tm5-700")
@@ -318,3 +325,106 @@ def test_world_grasp_rule() -> None:
     assert world.release(PLACE) == part.model_copy(update={"pose": PLACE})
     assert world.held is None
     assert world.release(PLACE) is None
+
+
+# -- size, mass and the falling rule (issue 9) ---------------------------------------------
+
+
+def test_objects_have_size_and_mass_and_width_is_the_y_size() -> None:
+    box = TableObject(name="box", pose=PICK, size_mm=(40, 20, 10), mass_kg=0.5)
+    assert (box.width_mm, box.mass_kg) == (20, 0.5)
+    assert TableObject(name="w", pose=PICK, width_mm=45).size_mm == (30, 45, 30)
+    with pytest.raises(ValueError, match="width_mm or size_mm"):
+        TableObject(name="x", pose=PICK, width_mm=45, size_mm=(30, 30, 30))
+    with pytest.raises(ValueError, match="greater than 0"):
+        TableObject(name="x", pose=PICK, size_mm=(30, 0, 30))
+    [state] = World([box]).states()
+    assert (state.size_mm, state.mass_kg) == ((40, 20, 10), 0.5)
+
+
+def test_the_default_part_rests_on_the_table_where_it_starts() -> None:
+    world = World()
+    assert world.table_top_z_mm == DEFAULT_TABLE_TOP_Z_MM == 85.0
+    [state] = world.states()
+    assert (state.pose, state.resting_on) == (DEFAULT_PART_POSE, "table")
+
+
+def test_an_object_placed_in_the_air_starts_on_its_support() -> None:
+    world = World([TableObject(name="high", pose=PLACE.offset(dz=80))])
+    assert world.get("high").pose == PLACE
+    assert world.resting_on("high") == TABLE
+
+
+def test_released_object_falls_onto_the_table_keeping_x_y_and_orientation() -> None:
+    world = World()
+    world.grasp("part", PICK)
+    air = Pose(250, 150, 260, 180, 0, 45)
+    world.follow(air)
+    assert world.resting_on("part") is None
+    released = world.release(air)
+    assert released is not None
+    assert released.pose == Pose(250, 150, 100, 180, 0, 45)
+    assert world.resting_on("part") == TABLE
+
+
+def test_released_object_falls_onto_the_object_below_it() -> None:
+    world = World(
+        [
+            TableObject(name="bottom", pose=PLACE),
+            TableObject(name="top", pose=PICK, size_mm=(30, 30, 20)),
+        ]
+    )
+    world.grasp("top", PICK)
+    # 10 mm off to the side: the footprints still overlap, so it lands on "bottom".
+    world.release(PLACE.offset(dx=10, dz=100))
+    assert world.get("top").pose == PLACE.offset(dx=10, dz=15 + 10)
+    assert world.resting_on("top") == "bottom"
+    # 31 mm off: no overlap with the 30 mm box, it falls past it onto the table.
+    world.grasp("top", world.get("top").pose)
+    world.release(PLACE.offset(dx=31, dz=100))
+    assert world.get("top").pose.z == DEFAULT_TABLE_TOP_Z_MM + 10
+    assert world.resting_on("top") == TABLE
+
+
+def test_a_support_above_the_object_does_not_carry_it() -> None:
+    # Parts waiting at the pick spot (a feeder) overlap; none stands on another.
+    world = World([TableObject(name=f"p{i}", pose=PICK) for i in range(3)])
+    assert [s.resting_on for s in world.states()] == [TABLE] * 3
+    assert all(s.pose == PICK for s in world.states())
+
+
+def test_rotated_box_rests_on_its_rotated_height() -> None:
+    # A 60 x 30 x 20 box turned on its side (rx = 90): 30 mm high in the base frame.
+    box = TableObject(name="b", pose=Pose(300, 0, 300, 90, 0, 0), size_mm=(60, 30, 20))
+    world = World([box])
+    assert world.get("b").pose.z == pytest.approx(DEFAULT_TABLE_TOP_Z_MM + 15)
+
+
+def test_kinematic_backend_drops_the_released_part() -> None:
+    backend = backend_at(ABOVE_PICK)
+    move(backend, PICK)
+    close_gripper(backend)
+    move(backend, PLACE.offset(dz=100), MotionType.PTP)
+    assert backend.objects()[0].resting_on is None
+    backend.drive_gripper(39, speed_mm_s=50, force_n=0)
+    backend.step(DT)
+    [part] = backend.objects()
+    assert (part.pose, part.held, part.resting_on) == (PLACE, False, TABLE)
+
+
+def test_kinematic_backend_reinitialize_keeps_the_motion() -> None:
+    backend = backend_at(ABOVE_PICK)
+    backend.start_motion(PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=ACCEL)
+    backend.step(0.3)
+    assert backend.reinitialize() is True
+    assert backend.motion_running
+    run_until(backend, lambda: not backend.motion_running)
+    assert backend.tcp_pose() == PICK
+
+
+def test_motion_rejected_error_names_a_known_reason() -> None:
+    error = MotionRejectedError("joint_limit", "J3 beyond 155 deg")
+    assert (error.reason, str(error)) == ("joint_limit", "J3 beyond 155 deg")
+    assert isinstance(error, TMMasterError)
+    with pytest.raises(ValueError, match="reason"):
+        MotionRejectedError("bad")  # type: ignore[arg-type]

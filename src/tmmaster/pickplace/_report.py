@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -16,15 +17,23 @@ REPORT_VERSION = 1
 
 
 def objects_report(objects: list[Any], place: Pose | None, tolerance_mm: float) -> dict[str, Any]:
-    """Where the simulator's objects ended, and whether they are on the place position."""
+    """Where the simulator's objects ended, and whether they are on the place position.
+
+    The place check is the same for every physics backend: a part released at the place
+    pose falls onto the surface below it, so it is on the place position when it is not
+    held, rests on something (the table or another part) and its x-y is within
+    ``tolerance_mm`` of the place pose's x-y (docs/simulator-model.md, "Falling").
+    """
     items = [
         {
             "name": obj.name,
             "pose": obj.pose.as_list(),
             "held": obj.held,
+            "resting_on": obj.resting_on,
             "on_place": place is not None
             and not obj.held
-            and obj.pose.distance_to(place) <= tolerance_mm,
+            and obj.resting_on is not None
+            and math.hypot(obj.pose.x - place.x, obj.pose.y - place.y) <= tolerance_mm,
         }
         for obj in objects
     ]

@@ -15,7 +15,7 @@ from .._lazy import lazy_attributes as _lazy_attributes
 
 if _TYPE_CHECKING:
     from .._pose import DEFAULT_HOME
-    from ._backend import GripperState, ObjectState, PhysicsBackend
+    from ._backend import GripperState, MotionRejectedError, ObjectState, PhysicsBackend
     from ._controller import MotionRecord
     from ._faults import (
         FAULT_KINDS,
@@ -51,6 +51,7 @@ _EXPORTS = {
     "KinematicBackend": "._kinematic",
     "LateAckFault": "._faults",
     "MemoryTransport": "._memory",
+    "MotionRejectedError": "._backend",
     "ModbusExceptionFault": "._faults",
     "MotionRecord": "._controller",
     "ObjectState": "._backend",
@@ -83,6 +84,7 @@ __all__ = [
     "MemoryTransport",
     "ModbusExceptionFault",
     "MotionRecord",
+    "MotionRejectedError",
     "ObjectState",
     "PhysicsBackend",
     "RequestRecord",

@@ -13,18 +13,41 @@ with the simulated time that passed since the previous tick.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, get_args, runtime_checkable
 
+from .._exceptions import TMMasterError
 from .._pose import MotionType, Pose
+
+#: Why a backend refused a motion: the target is out of reach, needs a joint beyond its
+#: limits, or lies on a singularity.
+RejectReason = Literal["reach", "joint_limit", "singularity"]
+REJECT_REASONS: tuple[str, ...] = get_args(RejectReason)
+
+
+class MotionRejectedError(TMMasterError):
+    """Raised by :meth:`PhysicsBackend.start_motion`: the target cannot be reached (no motion)."""
+
+    def __init__(self, reason: RejectReason, message: str = "") -> None:
+        if reason not in REJECT_REASONS:
+            raise ValueError(f"reason must be one of {', '.join(REJECT_REASONS)}, got {reason!r}")
+        self.reason: RejectReason = reason
+        super().__init__(message or f"motion rejected: {reason}")
 
 
 @dataclass(frozen=True)
 class ObjectState:
-    """Where one object on the table is, and whether the gripper holds it."""
+    """Where one object is, whether the gripper holds it, and what it rests on."""
 
     name: str
+    #: Pose of the object's centre (its grasp point), mm / deg, robot base frame.
     pose: Pose
     held: bool
+    #: Size along the object's own x, y (across the fingers) and z axes, mm.
+    size_mm: tuple[float, float, float] = (30.0, 30.0, 30.0)
+    mass_kg: float = 0.1
+    #: What it lies on at rest: "table" or another object's name; None while it is held,
+    #: falling or still moving.
+    resting_on: str | None = None
 
 
 @dataclass(frozen=True)
@@ -44,7 +67,11 @@ class PhysicsBackend(Protocol):
     def start_motion(
         self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
     ) -> float:
-        """Begin a motion towards ``target``; return its expected duration in seconds."""
+        """Begin a motion towards ``target``; return its expected duration in seconds.
+
+        Raises :class:`MotionRejectedError` (and starts nothing) when the target cannot be
+        reached; any other exception is reported as a backend failure.
+        """
 
     def stop_motion(self) -> None:
         """Decelerate and hold the current pose."""
@@ -67,8 +94,12 @@ class PhysicsBackend(Protocol):
     def is_ready(self) -> bool:
         """True while the physics view is valid and commands can be executed."""
 
-    def reinitialize(self) -> None:
-        """Rebuild the physics view after it was invalidated (e.g. simulation restart)."""
+    def reinitialize(self) -> bool:
+        """Rebuild the physics view; return True when a running motion survived (or none ran).
+
+        False means the motion that was running is lost: the controller stops it and
+        reports it failed, never done.
+        """
 
     def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
         """Start moving the fingers towards ``width_mm``."""

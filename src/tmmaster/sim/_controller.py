@@ -27,7 +27,7 @@ from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RobotProfile
 from .._robot_models import RobotModel
-from ._backend import PhysicsBackend
+from ._backend import MotionRejectedError, PhysicsBackend
 from ._bank import RegisterBank
 from ._faults import (
     EstopFault,
@@ -57,8 +57,22 @@ class SimErrorCode(IntEnum):
     POSE_OUT_OF_RANGE = 0x0103
     #: The physics backend raised while starting a motion or driving the gripper.
     BACKEND_FAILURE = 0x0104
+    #: The backend refused the target: a joint would leave its limits (article only).
+    JOINT_LIMIT = 0x0105
+    #: The backend refused the target: it lies on a singularity (article only).
+    SINGULARITY = 0x0106
+    #: The physics view was rebuilt mid-motion and the motion did not survive.
+    MOTION_LOST = 0x0107
     #: Emergency stop pressed.
     EMERGENCY_STOP = 0x0200
+
+
+#: Article error code of each reason a backend may give for refusing a motion.
+_REJECT_CODES = {
+    "reach": SimErrorCode.UNREACHABLE,
+    "joint_limit": SimErrorCode.JOINT_LIMIT,
+    "singularity": SimErrorCode.SINGULARITY,
+}
 
 
 class Logger(Protocol):
@@ -397,9 +411,6 @@ class RobotController:
             self._enter_error(SimErrorCode.UNREACHABLE, "target out of reach")
             self._bank.set("command", 0)
             return
-        # The contract: moving first, then clear the command, in the same tick.
-        self._bank.set("motion_status", 1)
-        self._bank.set("command", 0)
         self._log.info(
             "sim.command_accepted",
             device=self._profile.name,
@@ -407,7 +418,13 @@ class RobotController:
             target=str(target),
             speed=speed,
         )
-        self._start_motion(target, motion, speed, self._accel_time_s, seq=0)
+        if not self._start_motion(target, motion, speed, self._accel_time_s, seq=0):
+            # Refused by the backend: the error is already set; acknowledge after it.
+            self._bank.set("command", 0)
+            return
+        # The contract: moving first, then clear the command, in the same tick.
+        self._bank.set("motion_status", 1)
+        self._bank.set("command", 0)
 
     def _tick_article_gripper(self, ready: bool) -> None:
         value = int(self._bank.get("gripper_command"))
@@ -565,19 +582,32 @@ class RobotController:
 
     def _start_motion(
         self, target: Pose, motion: MotionType, speed: float, accel: float, *, seq: int
-    ) -> None:
+    ) -> bool:
+        """Start the backend motion; False (error reported, nothing started) if it failed."""
         number = self._moves_started + 1
         try:
             expected = self._backend.start_motion(
                 target, motion=motion, speed_percent=speed, accel_time_s=accel
             )
+        except MotionRejectedError as exc:  # the backend's own reach / limit check
+            self._log.warning(
+                "sim.command_rejected",
+                device=self._profile.name,
+                reason=exc.reason,
+                target=str(target),
+            )
+            if self._article:
+                self._enter_error(_REJECT_CODES[exc.reason], f"target rejected: {exc.reason}")
+            else:
+                self._fail_sequence(seq, "unreachable", 1)
+            return False
         except Exception as exc:  # a backend failure is a robot error, not a crash
             self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
             if self._article:
                 self._enter_error(SimErrorCode.BACKEND_FAILURE, "backend failed")
             else:
                 self._fail_sequence(seq, "motion_failed", 3)
-            return
+            return False
         self._moves_started = number
         self._record(number, motion.value, seq, target, speed)
         fault = next((f for f in self._move_faults if f.at_move == number), None)
@@ -593,6 +623,7 @@ class RobotController:
             speed=speed,
             expected_s=round(expected, 4),
         )
+        return True
 
     def _drive_gripper(self, *, close: bool, seq: int = 0) -> None:
         number = 0
@@ -719,8 +750,22 @@ class RobotController:
         if self._reinit_at is None or self._time_s - self._reinit_at >= REINITIALIZE_RETRY_S:
             self._log.warning("sim.backend_reinitialize", device=self._profile.name)
             self._reinit_at = self._time_s
-            self._backend.reinitialize()
+            survived = self._backend.reinitialize()
+            active = self._active
+            if survived is not True and active is not None and active.kind == "motion":
+                self._motion_lost(active)
         return self._backend.is_ready()
+
+    def _motion_lost(self, active: _Active) -> None:
+        """The rebuilt physics lost the running motion: it fails, it is never reported done."""
+        self._log.warning("sim.motion_lost", device=self._profile.name, move=active.number)
+        self._backend.stop_motion()
+        if self._article:
+            self._enter_error(SimErrorCode.MOTION_LOST, "motion lost when the physics was rebuilt")
+        else:
+            self._active = None
+            self._bank.set("result_code", self._code("result_code", "motion_failed", 3))
+            self._bank.set("robot_state", self._code("robot_state", "error", 2))
 
     def _late_ack_pending(self, key: object, *, motion_command: bool) -> bool:
         """True while a late_ack fault still holds back the command identified by ``key``."""

@@ -127,8 +127,9 @@ class KinematicBackend:
         """Always True: the analytic model has no physics view to lose."""
         return True
 
-    def reinitialize(self) -> None:
-        """Nothing to rebuild for the analytic model."""
+    def reinitialize(self) -> bool:
+        """Nothing to rebuild for the analytic model: a running motion always survives."""
+        return True
 
     # -- simulation --------------------------------------------------------------------
 
