@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .._channels import Command, CommandKind
-from .._exceptions import ConfigError
+from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import MotionType, Pose
 from .._robot import Robot
 from .._robot_models import RobotModel
@@ -47,10 +47,13 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
                 Command(CommandKind.of(move.motion), move.pose, move.speed)
             )
         except ConfigError as exc:
-            raise ConfigError(
+            message = (
                 f"{source}: {where} ({move.state}): {exc} [profile {robot.profile.name},"
                 f" model {robot.model.name}]"
-            ) from None
+            )
+            if isinstance(exc, UnreachablePoseError):
+                raise UnreachablePoseError(message, reason=exc.reason, pose=exc.pose) from None
+            raise ConfigError(message) from None
         joints_after[key] = joints
         count += 1
         previous = (move.pose, joints)
