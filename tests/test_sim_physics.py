@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections.abc import Callable
 
 import pytest
@@ -428,3 +430,26 @@ def test_motion_rejected_error_names_a_known_reason() -> None:
     assert isinstance(error, TMMasterError)
     with pytest.raises(ValueError, match="reason"):
         MotionRejectedError("bad")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("module", "argv"),
+    [
+        ("tmmaster.sim", ["--physics", "mujoco", "--port", "0"]),
+        ("tmmaster.pickplace", ["--sim", "--sim-physics", "mujoco"]),
+    ],
+)
+def test_without_mujoco_the_clis_exit_1_naming_the_extra(module: str, argv: list[str]) -> None:
+    # sys.modules["mujoco"] = None makes "import mujoco" fail as if it were not installed.
+    code = (
+        "import sys, runpy; sys.modules['mujoco'] = None;"
+        f" sys.argv = ['x', *{argv!r}]; runpy.run_module({module!r}, run_name='__main__')"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 1, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, done.stderr
+    assert "tmmaster[mujoco]" in lines[0]
+    assert lines[0].endswith("[exit 1]")

@@ -25,6 +25,7 @@ from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 
 import argparse
 import math
+import os
 import signal
 import sys
 import threading
@@ -44,6 +45,7 @@ from .._logging import configure_logging, get_logger
 from .._profiles import builtin_profile_names
 from .._robot import Robot
 from .._version import add_version_argument
+from ..sim._backend import PhysicsUnavailableError
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
 from ._plan import format_plan, validate_plan
@@ -130,6 +132,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default=1.0,
         metavar="X",
         help="with --sim: simulated seconds per wall second (default 1.0; 10 for a quick demo)",
+    )
+    parser.add_argument(
+        "--sim-physics",
+        default="kinematic",
+        choices=["kinematic", "mujoco"],
+        help="with --sim: physics backend (default kinematic; mujoco needs the extra"
+        " tmmaster[mujoco])",
+    )
+    parser.add_argument(
+        "--snapshot",
+        metavar="DIR",
+        default=None,
+        help="with --sim --sim-physics mujoco: render the cell at the end to DIR/cell-end.png"
+        " (needs OpenGL: MUJOCO_GL=egl and PyOpenGL, extra tmmaster[mujoco-render])",
     )
     parser.add_argument(
         "--dry-run",
@@ -225,6 +241,8 @@ def _run(args: argparse.Namespace) -> int:
         code, reason = EXIT_INTERRUPTED, "interrupted"
     except ConfigError as exc:
         code, reason = EXIT_CONFIG, f"config error: {exc}"
+    except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
+        code, reason = EXIT_FAILED, str(exc)
     except Exception as exc:  # the last line of defence: one line, never a traceback
         code = exit_code_for(exc)
         reason = f"{type(exc).__name__}: {exc}"
@@ -270,6 +288,14 @@ def _execute(
     args: argparse.Namespace, outcome: _Outcome, *, progress: _Progress | None
 ) -> tuple[int, str | None]:
     # 1. Everything is validated before anything connects.
+    if args.sim and args.sim_physics == "mujoco":
+        from ..sim._mujoco import require_mujoco
+
+        if args.snapshot is not None:
+            # Headless rendering: EGL, read by mujoco when it is first imported.
+            os.environ.setdefault("MUJOCO_GL", "egl")
+
+        require_mujoco()  # a missing extra is said first, in one line
     outcome.config_file = args.config
     config = load_config(args.config, overrides=_overrides(args))
     outcome.config = config
@@ -325,6 +351,8 @@ def _run_with_sim(
 ) -> tuple[int, str | None]:
     from ..sim import Simulator, TableObject
 
+    if args.snapshot is not None and args.sim_physics != "mujoco":
+        raise ConfigError("--snapshot needs --sim-physics mujoco")
     poses = config.poses.resolved()
     # A feeder: one part per cycle waits at the pick pose.
     parts = [TableObject(name=f"part-{i}", pose=poses["pick"]) for i in range(1, cycles + 1)]
@@ -335,6 +363,7 @@ def _run_with_sim(
         model=config.robot.model,
         gripper=gripper,
         objects=parts,
+        physics=args.sim_physics,
     )
     with sim:
         print(
@@ -357,6 +386,11 @@ def _run_with_sim(
         place = poses["place"] if not args.sequence else None
         outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
         outcome.sim["time_scale"] = args.sim_time_scale
+        outcome.sim["physics"] = args.sim_physics
+    if args.snapshot is not None:
+        from ..sim._mujoco import save_snapshot
+
+        print(f"simulator: snapshot {save_snapshot(sim, args.snapshot)}", flush=True)
     if place is not None:
         for item in outcome.sim["objects"]:
             where = "on the place position" if item["on_place"] else "NOT on the place position"

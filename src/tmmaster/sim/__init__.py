@@ -15,7 +15,13 @@ from .._lazy import lazy_attributes as _lazy_attributes
 
 if _TYPE_CHECKING:
     from .._pose import DEFAULT_HOME
-    from ._backend import GripperState, MotionRejectedError, ObjectState, PhysicsBackend
+    from ._backend import (
+        GripperState,
+        MotionRejectedError,
+        ObjectState,
+        PhysicsBackend,
+        PhysicsUnavailableError,
+    )
     from ._controller import MotionRecord
     from ._faults import (
         FAULT_KINDS,
@@ -56,6 +62,7 @@ _EXPORTS = {
     "MotionRecord": "._controller",
     "ObjectState": "._backend",
     "PhysicsBackend": "._backend",
+    "PhysicsUnavailableError": "._backend",
     "RequestRecord": "._server",
     "RobotErrorFault": "._faults",
     "Simulator": "._simulator",
@@ -87,6 +94,7 @@ __all__ = [
     "MotionRejectedError",
     "ObjectState",
     "PhysicsBackend",
+    "PhysicsUnavailableError",
     "RequestRecord",
     "RobotErrorFault",
     "Simulator",

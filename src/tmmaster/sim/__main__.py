@@ -24,6 +24,7 @@ from .._logging import configure_logging
 from .._profiles import builtin_profile_names
 from .._robot_models import ROBOT_MODELS
 from .._version import add_version_argument
+from ._backend import PhysicsUnavailableError
 from ._server import RequestRecord, json_line
 from ._simulator import Simulator, simulator_summary
 from ._world import DEFAULT_PART_POSE, TableObject
@@ -71,6 +72,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default="tm5-700",
         choices=sorted(ROBOT_MODELS),
         help="arm model whose reach and speed limits time the motions (default: tm5-700)",
+    )
+    parser.add_argument(
+        "--physics",
+        default="kinematic",
+        choices=["kinematic", "mujoco"],
+        help="physics backend: kinematic (analytic, default) or mujoco (needs the extra"
+        " tmmaster[mujoco]; docs/physics-backends.md)",
     )
     parser.add_argument(
         "--gripper",
@@ -160,7 +168,11 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             faults=args.fault,
             objects=_parts(args.parts),
             request_listener=echo if args.log_json else None,
+            physics=args.physics,
         )
+    except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
+        print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)
+        return 1
     except (TMMasterError, ValueError, KeyError) as exc:
         print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2

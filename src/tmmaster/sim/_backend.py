@@ -34,6 +34,10 @@ class MotionRejectedError(TMMasterError):
         super().__init__(message or f"motion rejected: {reason}")
 
 
+class PhysicsUnavailableError(TMMasterError, ImportError):
+    """A physics backend's engine is not installed (the message names the extra to install)."""
+
+
 @dataclass(frozen=True)
 class ObjectState:
     """Where one object is, whether the gripper holds it, and what it rests on."""

@@ -19,12 +19,12 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from .._exceptions import ConfigError
-from .._pose import Pose
+from .._exceptions import ConfigError, UnknownNameError
+from .._pose import DEFAULT_HOME, Pose
 from .._profiles import gripper_profile, robot_profile
 from .._registers import GripperProfile, Handshake, RobotProfile
 from .._retry import RetryPolicy
-from .._robot_models import robot_model
+from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
@@ -68,6 +68,7 @@ class Simulator:
         objects: Iterable[TableObject] | None = None,
         faults: Iterable[Fault | str] = (),
         backend: PhysicsBackend | None = None,
+        physics: str = "kinematic",
         init_time_s: float = 0.2,
         request_listener: Callable[[RequestRecord], None] | None = None,
         initial_seq: int = 0,
@@ -89,8 +90,12 @@ class Simulator:
         #: False: no TCP listener; reach it in-process through :attr:`url`.
         self.listen = listen
         self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
+        if backend is not None and physics != "kinematic":
+            raise ValueError("give either backend or physics, not both")
         self._backend: PhysicsBackend = (
-            backend if backend is not None else KinematicBackend(self._model, world=World(objects))
+            backend
+            if backend is not None
+            else physics_backend(physics, self._model, world=World(objects))
         )
         all_faults = [_as_fault(f) for f in faults]
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
@@ -200,6 +205,11 @@ class Simulator:
     def gripper_profile(self) -> GripperProfile | None:
         """The separate gripper's profile, or None."""
         return self._gripper_profile
+
+    @property
+    def backend(self) -> PhysicsBackend:
+        """The physics backend (call its methods through :meth:`call` while running)."""
+        return self._backend
 
     @property
     def time_scale(self) -> float:
@@ -451,6 +461,27 @@ class Simulator:
             if time.monotonic() >= deadline:
                 raise TimeoutError(f"condition not met within {timeout} s")
             time.sleep(interval)
+
+
+#: Physics backends a simulator can be built with by name (``--physics``).
+PHYSICS_BACKENDS = ("kinematic", "mujoco")
+
+
+def physics_backend(name: str, model: RobotModel, *, world: World) -> PhysicsBackend:
+    """A built-in physics backend by name: "kinematic" (analytic) or "mujoco" (optional extra).
+
+    Raises :class:`UnknownNameError` for another name and
+    :class:`~tmmaster.sim.PhysicsUnavailableError` when the MuJoCo extra is missing.
+    """
+    if name == "kinematic":
+        return KinematicBackend(model, world=world)
+    if name == "mujoco":
+        from ._mujoco import MuJoCoBackend  # imports mujoco: only when asked for
+
+        return MuJoCoBackend(model, world=world, home=DEFAULT_HOME)
+    raise UnknownNameError(
+        f"unknown physics backend {name!r} (known: {', '.join(PHYSICS_BACKENDS)})"
+    )
 
 
 def simulator_summary(sim: Simulator) -> Sequence[str]:
