@@ -3,7 +3,8 @@
 Each backend runs the article's cycle (approach, pick, close, lift, place, open, home,
 speeds 30 % / 10 %) driven directly, tick by tick (``dt`` = 20 ms of simulated time, the
 controller's 50 Hz), with no Modbus and no master: the figure is simulated seconds per
-wall second of the backend alone, median of ``--rounds``. For MuJoCo it also times a
+wall second of the backend alone (and per CPU second of this process, which a busy
+machine disturbs less), median of ``--rounds``. For MuJoCo it also times a
 model rebuild (``reinitialize()``). Run::
 
     python benchmarks/bench_physics.py --rounds 5
@@ -60,16 +61,17 @@ def run_cycle(backend: PhysicsBackend) -> float:
     return sim_s
 
 
-def measure(make: Callable[[], PhysicsBackend], rounds: int) -> tuple[float, float]:
-    """Median x real time and the simulated cycle length."""
-    ratios = []
+def measure(make: Callable[[], PhysicsBackend], rounds: int) -> tuple[float, float, float]:
+    """Median x real time (wall clock, and CPU time of this process), cycle length."""
+    wall, cpu = [], []
     sim_s = 0.0
     for _ in range(rounds):
         backend = make()
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         sim_s = run_cycle(backend)
-        ratios.append(sim_s / (time.perf_counter() - start))
-    return statistics.median(ratios), sim_s
+        wall.append(sim_s / (time.perf_counter() - start))
+        cpu.append(sim_s / (time.process_time() - start_cpu))
+    return statistics.median(wall), statistics.median(cpu), sim_s
 
 
 def main() -> None:
@@ -78,16 +80,18 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     model = tmmaster.robot_model("tm5-700")
-    ratio, sim_s = measure(lambda: KinematicBackend(model, home=HOME), args.rounds)
-    print(f"kinematic: cycle {sim_s:.2f} s simulated, {ratio:,.0f}x real time")
+    wall, cpu, sim_s = measure(lambda: KinematicBackend(model, home=HOME), args.rounds)
+    print(
+        f"kinematic: cycle {sim_s:.2f} s simulated, {wall:,.0f}x real time ({cpu:,.0f}x per CPU s)"
+    )
     try:
         from tmmaster.sim._mujoco import MuJoCoBackend
     except ImportError:
         print("mujoco: not installed (pip install 'tmmaster[mujoco]')")
         return
 
-    ratio, sim_s = measure(lambda: MuJoCoBackend(model, home=HOME), args.rounds)
-    print(f"mujoco:    cycle {sim_s:.2f} s simulated, {ratio:.1f}x real time")
+    wall, cpu, sim_s = measure(lambda: MuJoCoBackend(model, home=HOME), args.rounds)
+    print(f"mujoco:    cycle {sim_s:.2f} s simulated, {wall:.1f}x real time ({cpu:.1f}x per CPU s)")
     backend = MuJoCoBackend(model, home=HOME)
     rebuilds = []
     for _ in range(max(args.rounds, 5)):
