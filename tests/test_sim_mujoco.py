@@ -329,8 +329,9 @@ def test_snapshot_renders_the_cell_offscreen(tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
     )
-    if done.returncode != 0 and "OpenGL" in done.stderr:
-        pytest.skip(f"no OpenGL context here: {done.stderr.splitlines()[-1]}")
+    if done.returncode != 0 and any(k in done.stderr for k in ("OpenGL", "EGL", "GLContext")):
+        # PyOpenGL is installed but this machine offers no EGL display (no libEGL/Mesa).
+        pytest.skip(f"no OpenGL context here: {done.stderr.strip().splitlines()[-1]}")
     assert done.returncode == 0, done.stderr
     png = (tmp_path / "cell.png").read_bytes()
     assert png.startswith(b"\x89PNG\r\n\x1a\n")
