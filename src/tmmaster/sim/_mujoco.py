@@ -556,6 +556,8 @@ class MuJoCoBackend:
         self._pending_s -= steps * self._timestep
         for _ in range(steps):
             self._substep()
+        if self._queued:
+            self._feed()  # once per tick: a waiting part appears when its spot is free
         # Report exactly the commanded joints (the integrator moved them by a hair).
         self._set_arm(self._command_joints(), None)
         self._mj.mj_kinematics(self._m, self._d)
@@ -593,8 +595,6 @@ class MuJoCoBackend:
         self.sim_time_s += h
         if self._gripper_moving:
             self._update_gripper(h)
-        if self._queued:
-            self._feed()
 
     # -- gripper ------------------------------------------------------------------------
 
