@@ -339,3 +339,14 @@ def test_snapshot_renders_the_cell_offscreen(tmp_path: Path) -> None:
     assert (width, height) == (320, 240)
     # Not a blank frame: the compressed image of a uniform picture would be tiny.
     assert len(png) > 5000
+
+
+def test_squeezing_a_held_part_keeps_contact() -> None:
+    b = backend()
+    pick(b)
+    b.drive_gripper(5, speed_mm_s=50, force_n=40)
+    b.step(DT)
+    state = b.gripper_state()
+    assert state.contact
+    assert not state.moving
+    assert state.width_mm == pytest.approx(30, abs=CONTACT_MM)

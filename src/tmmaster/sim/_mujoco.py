@@ -305,7 +305,6 @@ class MuJoCoBackend:
         self._gripper_max = gripper_max_width_mm
         self.keep_motion_on_reinit = keep_motion_on_reinit
         self._objects = list(world.objects)
-        self._table_top_mm = world.table_top_z_mm
         self._xml = build_mjcf(
             model,
             self._objects,
@@ -334,6 +333,7 @@ class MuJoCoBackend:
         self._trajectory: _Trajectory | None = None
         self._ready = True
         self._pending_s = 0.0
+        #: Simulated seconds stepped so far.
         self.sim_time_s = 0.0
         #: Wall seconds spent in the last rebuild (``reinitialize()``).
         self.last_rebuild_s = 0.0
@@ -345,7 +345,6 @@ class MuJoCoBackend:
         self._gripper_moving = False
         self._stopped_for = 0.0
         self._held: int | None = None
-        self._squeezing = False
         self._build(None)
 
     # -- model --------------------------------------------------------------------------
@@ -613,16 +612,14 @@ class MuJoCoBackend:
         self._finger_speed = speed_mm_s / 2000
         self._finger_target = target / 2000
         width = self._width_mm()
-        # The new move starts where the fingers are (the old target may lie beyond a part).
-        self._finger_ctrl = width / 2000
         if self._held is not None:
             if target <= width:
                 # Squeezing a held part harder: it blocks the fingers.
-                self._squeezing = True
                 self._gripper_moving = False
                 return
             self._release()
-        self._squeezing = False
+        # The new move starts where the fingers are (the old target may lie beyond a part).
+        self._finger_ctrl = width / 2000
         self._stopped_for = 0.0
         self._gripper_moving = abs(target - width) > 0.05
 
