@@ -20,6 +20,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
+from .. import _kinematics as kin
 from .._pose import Pose
 from ._backend import ObjectState
 
@@ -76,7 +77,7 @@ class TableObject(BaseModel):
 
     def half_extents_mm(self, pose: Pose | None = None) -> tuple[float, float, float]:
         """Half size of the box's axis-aligned bounding box in the base frame at ``pose``."""
-        rot = _rotation(self.pose if pose is None else pose)
+        rot = kin.pose_to_transform(self.pose if pose is None else pose)
         half = [s / 2 for s in self.size_mm]
         return (
             sum(abs(rot[0][j]) * half[j] for j in range(3)),
@@ -212,21 +213,3 @@ class World:
         rested = Pose(pose.x, pose.y, z, pose.rx, pose.ry, pose.rz)
         self._objects[name] = obj.model_copy(update={"pose": rested})
         self._resting_on[name] = support
-
-
-def _rotation(pose: Pose) -> list[list[float]]:
-    """Rotation matrix of ``pose``: R = Rz(rz) Ry(ry) Rx(rx), the convention of Pose."""
-    a, b, c = (math.radians(v) for v in (pose.rx, pose.ry, pose.rz))
-    ca, sa, cb, sb, cc, sc = (
-        math.cos(a),
-        math.sin(a),
-        math.cos(b),
-        math.sin(b),
-        math.cos(c),
-        math.sin(c),
-    )
-    return [
-        [cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
-        [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
-        [-sb, cb * sa, cb * ca],
-    ]
