@@ -12,6 +12,7 @@ import pytest
 
 import tmmaster
 import tmmaster.pickplace
+import tmmaster.report
 import tmmaster.sim
 from tmmaster._cli import main
 
@@ -27,7 +28,7 @@ def _isort_key(name: str) -> tuple[int, str]:
     return (2, name)
 
 
-@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace])
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace, tmmaster.report])
 def test_all_is_sorted_and_complete(module: object) -> None:
     exported = list(module.__all__)  # type: ignore[attr-defined]
     assert exported == sorted(exported, key=_isort_key), "keep __all__ sorted (ruff RUF022)"
@@ -41,7 +42,7 @@ def test_all_is_sorted_and_complete(module: object) -> None:
         assert hasattr(module, name), name
 
 
-@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace])
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace, tmmaster.report])
 def test_every_public_function_and_class_has_a_docstring(module: object) -> None:
     for name in module.__all__:  # type: ignore[attr-defined]
         value = getattr(module, name)
@@ -77,7 +78,9 @@ def test_profile_command_prints_markdown(capsys: pytest.CaptureFixture[str]) -> 
 
 
 @pytest.mark.parametrize(
-    "command", [["tmmaster"], ["tmmaster.pickplace"], ["tmmaster.sim"]], ids=lambda c: c[0]
+    "command",
+    [["tmmaster"], ["tmmaster.pickplace"], ["tmmaster.sim"], ["tmmaster.report"]],
+    ids=lambda c: c[0],
 )
 def test_every_command_answers_version(command: list[str]) -> None:
     done = subprocess.run(
@@ -173,3 +176,21 @@ def test_the_shipped_config_schema_matches_the_model() -> None:
     assert shipped.read_text(encoding="utf-8") == config_schema(), (
         "stale: run `tmmaster schema -o src/tmmaster/schemas/pickplace-config.schema.json`"
     )
+
+
+def test_the_shipped_report_schema_matches_the_model() -> None:
+    from tmmaster._cli import report_schema
+
+    shipped = ROOT / "src" / "tmmaster" / "schemas" / "run-report.schema.json"
+    assert shipped.read_text(encoding="utf-8") == report_schema(), (
+        "stale: run `tmmaster schema --report -o src/tmmaster/schemas/run-report.schema.json`"
+    )
+
+
+def test_schema_report_prints_the_report_schema(capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    assert main(["schema", "--report"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    assert schema["title"] == "tmmaster pick & place run report (JSON)"
+    assert {"result", "timeline", "sim", "move_states"} <= set(schema["properties"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -376,7 +377,17 @@ def test_cli_runs_until_signal_and_exits_0(sig: signal.Signals) -> None:
     src = Path(__file__).resolve().parents[1] / "src"
     env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10", "--log-json"],
+        [
+            sys.executable,
+            "-m",
+            "tmmaster.sim",
+            "--port",
+            "0",
+            "--time-scale",
+            "10",
+            "--trace-requests",
+            "--log-json",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -393,14 +404,17 @@ def test_cli_runs_until_signal_and_exits_0(sig: signal.Signals) -> None:
         with client(port) as c:
             hr(c, 0)
         proc.send_signal(sig)
-        out, _err = proc.communicate(timeout=10)
+        out, err = proc.communicate(timeout=10)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
     assert proc.returncode == 0
-    assert '"function_code":3' in out
+    assert '"function_code":3' in out  # --trace-requests: the requests on stdout
     assert "simulator stopped" in out
+    # --log-json: the simulator's events, one JSON object per line on stderr.
+    events = [json.loads(line) for line in err.splitlines() if line.strip()]
+    assert any(e["event"] == "sim.initialised" for e in events), err
 
 
 def test_a_taken_port_is_one_line_and_exit_1() -> None:

@@ -1,4 +1,4 @@
-"""The ``tmmaster`` command: ``sim``, ``pickplace`` and ``profile`` subcommands."""
+"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``profile`` and ``schema``."""
 
 from __future__ import annotations
 
@@ -14,16 +14,19 @@ from pathlib import Path
 
 from ._cliparse import ArgumentParser, UsageError, one_line
 from ._exceptions import TMMasterError
+from ._logging import add_logging_arguments, configure_logging
 from ._profiles import builtin_profile_names, load_profile, profile_markdown
 from ._version import add_version_argument
 
 
 def _add_profile_commands(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="profile_command", required=True, metavar="{list,show}")
-    sub.add_parser("list", help="list the built-in profiles")
+    listing = sub.add_parser("list", help="list the built-in profiles")
+    add_logging_arguments(listing, default_level="warning")
     show = sub.add_parser("show", help="print a profile as a Markdown table")
     show.add_argument("profile", help="a built-in profile name or a .toml file")
     show.add_argument("--output", "-o", metavar="FILE.md", help="write to a file instead")
+    add_logging_arguments(show, default_level="warning")
 
 
 def _run_profile(args: argparse.Namespace) -> int:
@@ -43,20 +46,30 @@ def _run_profile(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The ``tmmaster`` argument parser with every subcommand mounted."""
     from .pickplace import __main__ as pickplace_main
+    from .report import __main__ as report_main
     from .sim import __main__ as sim_main
 
     parser = ArgumentParser(prog="tmmaster", description="Drive a Techman robot over Modbus TCP.")
     add_version_argument(parser)
-    sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,profile,schema}")
+    sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,report,profile,schema}")
     sim_main.add_arguments(
         sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
     )
     pickplace_main.add_arguments(
         sub.add_parser("pickplace", help="run a configurable pick & place")
     )
+    report_main.add_arguments(
+        sub.add_parser("report", help="show a run report as a table, or plot it")
+    )
     _add_profile_commands(sub.add_parser("profile", help="list or show register profiles"))
-    schema = sub.add_parser("schema", help="print the JSON Schema of the pick & place config")
+    schema = sub.add_parser(
+        "schema", help="print the JSON Schema of the pick & place config (or of the run report)"
+    )
+    schema.add_argument(
+        "--report", action="store_true", help="the run report's schema instead of the config's"
+    )
     schema.add_argument("--output", "-o", metavar="FILE.json", help="write to a file instead")
+    add_logging_arguments(schema, default_level="warning")
     return parser
 
 
@@ -70,6 +83,13 @@ def config_schema() -> str:
     return json.dumps(schema, indent=2, sort_keys=True) + "\n"
 
 
+def report_schema() -> str:
+    """The JSON Schema of the pick & place run report, generated from its model."""
+    from .pickplace._report import report_schema as schema
+
+    return schema()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``tmmaster`` console script."""
     try:
@@ -81,6 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str] | None) -> int:
     from .pickplace import __main__ as pickplace_main
+    from .report import __main__ as report_main
     from .sim import __main__ as sim_main
 
     _sigint.handled_by_main()
@@ -97,17 +118,23 @@ def _main(argv: Sequence[str] | None) -> int:
         return sim_main.run(args)
     if args.command == "pickplace":
         return pickplace_main.run(args)
-    if args.command == "schema":
-        if args.output:
-            Path(args.output).write_text(config_schema(), encoding="utf-8")
-        else:
-            sys.stdout.write(config_schema())
-        return 0
+    if args.command == "report":
+        return report_main.run(args)
+    undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
+        if args.command == "schema":
+            text = report_schema() if args.report else config_schema()
+            if args.output:
+                Path(args.output).write_text(text, encoding="utf-8")
+            else:
+                sys.stdout.write(text)
+            return 0
         return _run_profile(args)
     except TMMasterError as exc:
         print(f"tmmaster: {exc}", file=sys.stderr)
         return 2
+    finally:
+        undo_logging()
 
 
 if __name__ == "__main__":  # pragma: no cover - exercised through the console script

@@ -14,9 +14,12 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Callable
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import structlog
+
+if TYPE_CHECKING:
+    import argparse
 
 #: The logger every tmmaster logger descends from.
 ROOT_LOGGER = "tmmaster"
@@ -35,6 +38,30 @@ _PROCESSORS: list[structlog.typing.Processor] = [
     # as a dict, configure_logging's renders it as key=value or JSON.
     structlog.stdlib.ProcessorFormatter.wrap_for_formatter,
 ]
+
+
+#: The levels every command's ``--log-level`` accepts.
+LOG_LEVELS = ("debug", "info", "warning", "error")
+
+
+def add_logging_arguments(
+    parser: argparse.ArgumentParser,
+    *,
+    default_level: str | None = None,
+    level_help: str | None = None,
+) -> None:
+    """Add ``--log-json`` and ``--log-level``, which mean the same on every command."""
+    parser.add_argument(
+        "--log-json",
+        action="store_true",
+        help="log structured events as one JSON object per line on stderr",
+    )
+    parser.add_argument(
+        "--log-level",
+        default=default_level,
+        choices=LOG_LEVELS,
+        help=level_help or f"level of the events logged on stderr (default: {default_level})",
+    )
 
 
 def get_logger(name: str) -> Any:

@@ -33,7 +33,7 @@ if _TYPE_CHECKING:
     )
     from ._machine import DONE, ERROR, IDLE, SequenceMachine, mermaid
     from ._plan import estimate, format_plan, validate_plan
-    from ._report import build_report, write_report
+    from ._report import RunReport, build_report, load_report, report_schema, write_report
     from ._runner import (
         Failure,
         ReactionRecord,
@@ -70,6 +70,7 @@ _EXPORTS = {
     "PlannedMove": "._steps",
     "ReactionRecord": "._runner",
     "RetryRule": "._steps",
+    "RunReport": "._report",
     "RunResult": "._runner",
     "Runner": "._runner",
     "SequenceMachine": "._machine",
@@ -84,10 +85,12 @@ _EXPORTS = {
     "format_plan": "._plan",
     "grasp_detected": "._sequences",
     "load_config": "._config",
+    "load_report": "._report",
     "load_sequence": "._sequences",
     "mermaid": "._machine",
     "palletizing": "._sequences",
     "pick_and_place": "._sequences",
+    "report_schema": "._report",
     "robot_from_config": "._config",
     "sequence_from_data": "._sequences",
     "validate_config": "._config",
@@ -111,6 +114,7 @@ __all__ = [
     "PlannedMove",
     "ReactionRecord",
     "RetryRule",
+    "RunReport",
     "RunResult",
     "Runner",
     "SequenceMachine",
@@ -125,10 +129,12 @@ __all__ = [
     "format_plan",
     "grasp_detected",
     "load_config",
+    "load_report",
     "load_sequence",
     "mermaid",
     "palletizing",
     "pick_and_place",
+    "report_schema",
     "robot_from_config",
     "sequence_from_data",
     "validate_config",

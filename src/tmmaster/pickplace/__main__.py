@@ -29,6 +29,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from types import FrameType
 from typing import Any, TextIO
@@ -41,15 +42,15 @@ from .._exceptions import (
     RobotError,
     TransportError,
 )
-from .._logging import configure_logging, get_logger
+from .._logging import add_logging_arguments, configure_logging, get_logger
 from .._profiles import builtin_profile_names
 from .._robot import Robot
 from .._version import add_version_argument
 from ..sim._backend import PhysicsUnavailableError
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
-from ._plan import format_plan, validate_plan
-from ._report import build_report, objects_report, write_report
+from ._plan import estimate, format_plan, validate_plan
+from ._report import RunReport, build_run_report, objects_report, write_report
 from ._runner import Runner, RunResult, StateEvent, StopRequestedError
 from ._sequences import load_sequence, pick_and_place
 from ._steps import TaskSequence
@@ -156,15 +157,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument(
         "--diagram", action="store_true", help="print the state machine as a mermaid diagram"
     )
-    parser.add_argument("--log-json", action="store_true", help="log one JSON object per line")
-    add_version_argument(parser)
-    parser.add_argument(
-        "--log-level",
-        default=None,
-        choices=["debug", "info", "warning", "error"],
-        help="log level (default: info; warning when stderr is a terminal, which shows"
-        " live progress instead)",
+    add_logging_arguments(
+        parser,
+        level_help="log level (default: info; warning when stderr is a terminal, which shows"
+        " a live display instead)",
     )
+    parser.add_argument(
+        "--quiet",
+        "-q",
+        action="store_true",
+        help="print only errors and the final one-line result",
+    )
+    add_version_argument(parser)
     parser.add_argument("--report", metavar="FILE.json", help="write a JSON run report")
     return parser
 
@@ -181,11 +185,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class _Progress:
-    """One line on a terminal, redrawn at every state change."""
+    """The plain fallback (rich missing): one line on a terminal, redrawn at every state change."""
 
     def __init__(self, stream: TextIO) -> None:
         self._stream = stream
         self.used = False
+
+    def begin(self, cycles: int, expected_cycle_s: float | None = None) -> None:
+        """Nothing to prepare."""
+        _ = cycles, expected_cycle_s
 
     def __call__(self, event: StateEvent) -> None:
         self.used = True
@@ -211,16 +219,56 @@ class _Outcome:
         self.target: dict[str, Any] | None = None
         self.transport: dict[str, Any] | None = None
         self.sim: dict[str, Any] | None = None
+        self.move_states: list[str] = []
+        self.expected_cycle_s: float | None = None
+        #: The one-line result of a successful run (printed last).
+        self.done_line: str | None = None
 
 
-def run(args: argparse.Namespace) -> int:
+class _Output:
+    """Where the command's own lines go: plain, quiet, or a rich live display on a terminal."""
+
+    def __init__(self, *, quiet: bool, live: Any = None, console: Any = None) -> None:
+        self.quiet = quiet
+        self.live = live
+        self.console = console
+
+    def info(self, line: str) -> None:
+        """An informative line on stdout (not with --quiet)."""
+        if not self.quiet:
+            print(line, flush=True)
+
+    @property
+    def progress(self) -> Any:
+        """The runner's on_state listener, or None."""
+        return self.live
+
+
+def _make_output(args: argparse.Namespace, stderr: TextIO) -> _Output:
+    if args.quiet or args.log_json or not stderr.isatty():
+        return _Output(quiet=args.quiet)
+    try:
+        from rich.console import Console
+
+        from ._live import LiveProgress
+    except ImportError:  # pragma: no cover - rich is a dependency; a stripped install
+        return _Output(quiet=False, live=_Progress(stderr))
+    console = Console(file=stderr)
+    return _Output(quiet=False, live=LiveProgress(console), console=console)
+
+
+def run(args: argparse.Namespace, *, output: _Output | None = None) -> int:
     """Run pick & place from parsed ``args``; returns the exit code (never raises)."""
     stderr = sys.stderr
-    level = args.log_level or ("warning" if stderr.isatty() else "info")
-    undo_logging = configure_logging(json=args.log_json, level=level, stream=stderr)
+    out = output if output is not None else _make_output(args, stderr)
+    level = "error" if args.quiet else args.log_level or ("warning" if stderr.isatty() else "info")
+    log_stream = getattr(out.live, "log_stream", None) or stderr
+    undo_logging = configure_logging(json=args.log_json, level=level, stream=log_stream)
     try:
-        return _run(args)
+        return _run(args, out)
     finally:
+        if out.live is not None:
+            out.live.end()
         # In-process callers (tests, tmmaster's CLI) get their logging back.
         undo_logging()
 
@@ -229,14 +277,13 @@ def _one_line(text: str) -> str:
     return " ".join(text.split())
 
 
-def _run(args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace, out: _Output) -> int:
     stderr = sys.stderr
-    tty = stderr.isatty()
     outcome = _Outcome()
     code = EXIT_FAILED
     reason: str | None = None
     try:
-        code, reason = _execute(args, outcome, progress=_Progress(stderr) if tty else None)
+        code, reason = _execute(args, outcome, out)
     except KeyboardInterrupt:
         code, reason = EXIT_INTERRUPTED, "interrupted"
     except ConfigError as exc:
@@ -247,26 +294,39 @@ def _run(args: argparse.Namespace) -> int:
         code = exit_code_for(exc)
         reason = f"{type(exc).__name__}: {exc}"
         _log.error("pickplace.unexpected_error", error=str(exc), error_type=type(exc).__name__)
+    if out.live is not None:
+        out.live.end()
+    report = build_run_report(
+        exit_code=code,
+        result_name=RESULT_NAMES.get(code, "failed"),
+        reason=reason,
+        run=outcome.run,
+        config_file=outcome.config_file,
+        config_digest=None if outcome.config is None else outcome.config.digest(),
+        target=outcome.target,
+        transport=outcome.transport,
+        sim=outcome.sim,
+        move_states=outcome.move_states,
+    )
+    if out.console is not None and outcome.run is not None:
+        _print_summary(out.console, report)
     if reason is not None:
         print(f"pickplace: {_one_line(reason)} [exit {code}]", file=stderr, flush=True)
+    elif outcome.done_line is not None:
+        print(outcome.done_line, flush=True)
     if args.report:
-        report = build_report(
-            exit_code=code,
-            result_name=RESULT_NAMES.get(code, "failed"),
-            reason=reason,
-            run=outcome.run,
-            config_file=outcome.config_file,
-            config_digest=None if outcome.config is None else outcome.config.digest(),
-            target=outcome.target,
-            transport=outcome.transport,
-            sim=outcome.sim,
-        )
         try:
             write_report(args.report, report)
         except OSError as exc:
             print(f"pickplace: cannot write the report {args.report}: {exc}", file=stderr)
             return code or EXIT_FAILED
     return code
+
+
+def _print_summary(console: Any, report: RunReport) -> None:
+    from ._summary import summary_renderable
+
+    console.print(summary_renderable(report))
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
@@ -284,9 +344,7 @@ def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     return overrides
 
 
-def _execute(
-    args: argparse.Namespace, outcome: _Outcome, *, progress: _Progress | None
-) -> tuple[int, str | None]:
+def _execute(args: argparse.Namespace, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
     # 1. Everything is validated before anything connects.
     if args.sim and args.sim_physics == "mujoco":
         from ..sim._mujoco import require_mujoco
@@ -321,6 +379,9 @@ def _execute(
     probe = robot_from_config(config, host or "127.0.0.1", config.robot.port)
     try:
         validate_plan(probe, sequence, cycles, source=source)
+        outcome.move_states = sorted({m.state for m in sequence.planned_moves(cycles)})
+        planned = estimate(sequence, 1, probe.model, start=config.poses.resolved()["home"])
+        outcome.expected_cycle_s = sum(m.expected_s for m in planned) or None
         if args.dry_run:
             print(
                 format_plan(
@@ -336,9 +397,9 @@ def _execute(
     finally:
         probe.close()
     if args.sim:
-        return _run_with_sim(args, config, sequence, cycles, outcome, progress)
+        return _run_with_sim(args, config, sequence, cycles, outcome, out)
     assert host is not None
-    return _run_on(config, sequence, cycles, host, config.robot.port, outcome, progress)
+    return _run_on(config, sequence, cycles, host, config.robot.port, outcome, out)
 
 
 def _run_with_sim(
@@ -347,7 +408,7 @@ def _run_with_sim(
     sequence: TaskSequence,
     cycles: int,
     outcome: _Outcome,
-    progress: _Progress | None,
+    out: _Output,
 ) -> tuple[int, str | None]:
     from ..sim import Simulator, TableObject
 
@@ -366,11 +427,13 @@ def _run_with_sim(
         physics=args.sim_physics,
     )
     with sim:
-        print(
+        out.info(
             f"simulator: {config.robot.profile} profile on {sim.host}:{sim.port}"
-            f" (time scale {args.sim_time_scale:g}), {len(parts)} part(s) at the pick pose",
-            flush=True,
+            f" (time scale {args.sim_time_scale:g}), {len(parts)} part(s) at the pick pose"
         )
+        if outcome.expected_cycle_s is not None:  # the plan is in simulated seconds
+            outcome.expected_cycle_s /= args.sim_time_scale
+        sampler = _TcpSampler(sim.tcp_pose)
         code, reason = _run_on(
             config,
             sequence,
@@ -378,24 +441,26 @@ def _run_with_sim(
             sim.host,
             sim.port,
             outcome,
-            progress,
+            out,
             gripper_port=sim.gripper_port,
             # Simulated time runs faster: so does a gripper's settle time.
             settle_scale=args.sim_time_scale,
+            sampler=sampler,
         )
         place = poses["place"] if not args.sequence else None
         outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
         outcome.sim["time_scale"] = args.sim_time_scale
         outcome.sim["physics"] = args.sim_physics
+        outcome.sim["tcp_path"] = sampler.rows()
     if args.snapshot is not None:
         from ..sim._mujoco import save_snapshot
 
-        print(f"simulator: snapshot {save_snapshot(sim, args.snapshot)}", flush=True)
+        out.info(f"simulator: snapshot {save_snapshot(sim, args.snapshot)}")
     if place is not None:
         for item in outcome.sim["objects"]:
             where = "on the place position" if item["on_place"] else "NOT on the place position"
             pose = ", ".join(f"{v:g}" for v in item["pose"][:3])
-            print(f"simulator: {item['name']} is {where} ({pose})", flush=True)
+            out.info(f"simulator: {item['name']} is {where} ({pose})")
         if code == EXIT_OK and not outcome.sim["on_place"]:
             return EXIT_FAILED, "the run ended DONE but a part is not on the place position"
     return code, reason
@@ -408,10 +473,11 @@ def _run_on(
     host: str,
     port: int,
     outcome: _Outcome,
-    progress: _Progress | None,
+    out: _Output,
     *,
     gripper_port: int | None = None,
     settle_scale: float = 1.0,
+    sampler: _TcpSampler | None = None,
 ) -> tuple[int, str | None]:
     robot = robot_from_config(
         config, host, port, gripper_port=gripper_port, settle_scale=settle_scale
@@ -421,9 +487,11 @@ def _run_on(
         robot,
         error_reaction=config.on_error.reaction,
         ready_timeout_s=config.timeouts.ready_s,
-        on_state=progress,
+        on_state=out.progress,
     )
     restore = _install_sigint(runner.request_stop)
+    if out.live is not None:
+        out.live.begin(cycles, outcome.expected_cycle_s)
     try:
         try:
             robot.connect()
@@ -431,21 +499,27 @@ def _run_on(
             return EXIT_CONNECTION, f"robot at {host}:{port} unreachable: {exc}"
         except StopRequestedError:
             return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
-        result = runner.run(sequence, cycles=cycles)
+        if sampler is not None:
+            sampler.start()
+        try:
+            result = runner.run(sequence, cycles=cycles)
+        finally:
+            if sampler is not None:
+                # The runner's clock: timeline and TCP path share one time axis.
+                sampler.stop(origin=getattr(runner, "_run_start", None))
         outcome.run = result
     finally:
-        if progress is not None:
-            progress.end()
+        if out.live is not None:
+            out.live.end()
         robot.close()
         restore()
         outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
     if result.ok:
         times = ", ".join(f"{t:.2f}" for t in result.cycle_times_s)
-        print(
+        outcome.done_line = (
             f"DONE: {result.cycles_completed}/{cycles} cycle(s) of {sequence.name} in"
             f" {result.duration_s:.2f} s (cycle times: {times} s;"
-            f" {result.retries} grasp retr{'y' if result.retries == 1 else 'ies'})",
-            flush=True,
+            f" {result.retries} grasp retr{'y' if result.retries == 1 else 'ies'})"
         )
         return EXIT_OK, None
     failure = result.failure
@@ -467,6 +541,60 @@ def _run_on(
         f"{label} in {failure.state} (cycle {failure.cycle}): {failure.type}:"
         f" {failure.message}{code_text}{reaction}"
     )
+
+
+class _TcpSampler:
+    """With --sim: the TCP seen by the simulator, sampled in the background while the run runs."""
+
+    #: Wall seconds between samples (the simulator's default tick is 50 Hz).
+    INTERVAL_S = 0.02
+    #: A row only when the TCP moved this far (mm) since the last row.
+    MIN_STEP_MM = 0.5
+    #: Enough for an hour at full rate; the report stays bounded.
+    MAX_ROWS = 200_000
+
+    def __init__(self, read_pose: Callable[[], Any]) -> None:
+        self._read = read_pose
+        self._rows: list[tuple[float, float, float, float]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="tcp-sampler", daemon=True)
+        self._origin: float | None = None
+
+    def start(self) -> None:
+        """Start sampling."""
+        self._thread.start()
+
+    def stop(self, origin: float | None) -> None:
+        """Stop sampling; ``origin`` (monotonic seconds) is time 0 of the rows."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+        self._origin = origin
+
+    def _loop(self) -> None:
+        last: tuple[float, float, float] | None = None
+        while len(self._rows) < self.MAX_ROWS:
+            now = time.monotonic()
+            try:
+                pose = self._read()
+            except Exception:  # the simulator is closing: the path ends here
+                return
+            here = (pose.x, pose.y, pose.z)
+            if last is None or math.dist(here, last) >= self.MIN_STEP_MM:
+                self._rows.append((now, *here))
+                last = here
+            if self._stop.wait(self.INTERVAL_S):
+                return
+
+    def rows(self) -> list[list[float]]:
+        """``[t_s, x, y, z]`` rows, ``t_s`` from the origin given to :meth:`stop`."""
+        origin = (
+            self._origin if self._origin is not None else (self._rows[0][0] if self._rows else 0.0)
+        )
+        return [
+            [round(t - origin, 3), round(x, 2), round(y, 2), round(z, 2)]
+            for t, x, y, z in self._rows
+        ]
 
 
 def _gripper_stats(robot: Robot) -> dict[str, Any] | None:

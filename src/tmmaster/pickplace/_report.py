@@ -1,4 +1,10 @@
-"""The JSON run report: what ran, how long each state took, what the link did, how it ended."""
+"""The JSON run report: what ran, how long each state took, what the link did, how it ended.
+
+:class:`RunReport` is the report's pydantic model: the command builds one, writes it as
+JSON (:func:`write_report`) and ``tmmaster report show|plot`` reads it back
+(:func:`load_report`). Its JSON Schema ships as ``tmmaster/schemas/run-report.schema.json``.
+Keys are only ever added (with a default), so an older report still reads.
+"""
 
 from __future__ import annotations
 
@@ -9,11 +15,196 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from .._exceptions import ConfigError
 from .._pose import Pose
 from ._runner import RunResult
 
 #: Bumped when a key changes meaning or disappears (adding keys keeps the version).
 REPORT_VERSION = 1
+
+
+class _Part(BaseModel):
+    # Unknown keys (from a newer tmmaster) are ignored on reading.
+    model_config = ConfigDict(extra="ignore")
+
+
+class ConfigRef(_Part):
+    """Which configuration ran."""
+
+    file: str | None = None
+    #: ``sha256:`` of the normalised configuration.
+    digest: str | None = None
+
+
+class Target(_Part):
+    """The robot the run talked to."""
+
+    host: str
+    port: int
+    profile: str
+
+
+class CycleSummary(_Part):
+    """Cycles requested and completed, with each completed cycle's time."""
+
+    requested: int | None = None
+    completed: int = 0
+    times_s: list[float] = Field(default_factory=list)
+
+
+class StateTiming(_Part):
+    """Time spent in one state over the run (skipped passes excluded)."""
+
+    count: int
+    total_s: float
+    mean_s: float
+    max_s: float
+
+
+class TimelineEntry(_Part):
+    """One pass through a state."""
+
+    state: str
+    cycle: int
+    #: Seconds since the run started.
+    started_s: float
+    duration_s: float
+    #: ``ok``, ``skipped``, ``retry`` or ``failed``.
+    outcome: str
+
+
+class Retries(_Part):
+    """Retries used."""
+
+    grasp: int = 0
+
+
+class ErrorInfo(_Part):
+    """The failure that ended the run."""
+
+    state: str
+    cycle: int
+    type: str
+    message: str
+    error_code: int | None = None
+
+
+class ReactionInfo(_Part):
+    """What was done after the failure."""
+
+    reaction: str
+    performed: bool
+    detail: str
+
+
+class LinkStats(_Part):
+    """One Modbus link's counters."""
+
+    requests: int = 0
+    retries: int = 0
+    reconnects: int = 0
+    errors: int = 0
+    bytes_sent: int = 0
+    bytes_received: int = 0
+    #: Requests per Modbus function code (keys are the codes as text).
+    requests_by_function: dict[str, int] = Field(default_factory=dict)
+
+    @field_validator("requests_by_function", mode="before")
+    @classmethod
+    def _codes_as_text(cls, value: Any) -> Any:
+        if isinstance(value, dict):
+            return {str(k): v for k, v in value.items()}
+        return value
+
+
+class TransportSummary(_Part):
+    """The robot's link, and the gripper's when it has its own."""
+
+    robot: LinkStats
+    gripper: LinkStats | None = None
+
+
+class SimObject(_Part):
+    """Where a simulated part ended."""
+
+    name: str
+    #: ``[x, y, z, rx, ry, rz]``, mm and degrees.
+    pose: list[float]
+    held: bool
+    on_place: bool
+
+
+class SimSummary(_Part):
+    """With ``--sim``: where the parts ended, and the path the TCP took."""
+
+    objects: list[SimObject] = Field(default_factory=list)
+    place: list[float] | None = None
+    tolerance_mm: float = 2.0
+    #: Every part on the place position.
+    on_place: bool = False
+    time_scale: float = 1.0
+    #: The TCP as the simulator saw it: ``[t_s, x, y, z]`` rows, ``t_s`` in wall seconds
+    #: since the run started (same clock as ``timeline``), a row whenever it moved.
+    tcp_path: list[tuple[float, float, float, float]] = Field(default_factory=list)
+
+
+class RunReport(_Part):
+    """The run report written by ``--report`` (every key present; unknown values null)."""
+
+    report_version: int = REPORT_VERSION
+    tmmaster_version: str
+    #: ``done``, ``failed``, ``config_error``, ``connection_error``, ``robot_fault``,
+    #: ``grasp_failed``, ``timeout`` or ``interrupted``.
+    result: str
+    exit_code: int
+    #: The one-line reason (null on success).
+    reason: str | None = None
+    config: ConfigRef = Field(default_factory=ConfigRef)
+    target: Target | None = None
+    sequence: str | None = None
+    final_state: str | None = None
+    started_at: str | None = None
+    duration_s: float | None = None
+    cycles: CycleSummary = Field(default_factory=CycleSummary)
+    states: dict[str, StateTiming] = Field(default_factory=dict)
+    timeline: list[TimelineEntry] = Field(default_factory=list)
+    retries: Retries = Field(default_factory=Retries)
+    error: ErrorInfo | None = None
+    reaction: ReactionInfo | None = None
+    #: Whether a stop reached the robot after a stop request or an abandoned move
+    #: (null: none was needed, or the profile has no stop).
+    stop_delivered: bool | None = None
+    transport: TransportSummary | None = None
+    sim: SimSummary | None = None
+    #: The states that move the arm (known from the plan); the rest wait (gripper,
+    #: checks, dwells). Empty in reports older than this key.
+    move_states: list[str] = Field(default_factory=list)
+
+
+def report_schema() -> str:
+    """The JSON Schema of the run report, generated from :class:`RunReport`."""
+    schema = RunReport.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "tmmaster pick & place run report (JSON)"
+    return json.dumps(schema, indent=2, sort_keys=True) + "\n"
+
+
+def load_report(path: str | Path) -> RunReport:
+    """Read a run report; a missing, unreadable or invalid file raises :class:`ConfigError`."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the report: {exc.strerror or exc}") from None
+    try:
+        return RunReport.model_validate_json(text)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in err['loc']) or '(top)'}: {err['msg']}"
+            for err in exc.errors()[:3]
+        )
+        raise ConfigError(f"{path}: not a tmmaster run report: {problems}") from None
 
 
 def objects_report(objects: list[Any], place: Pose | None, tolerance_mm: float) -> dict[str, Any]:
@@ -56,11 +247,40 @@ def build_report(
     target: dict[str, Any] | None = None,
     transport: dict[str, Any] | None = None,
     sim: dict[str, Any] | None = None,
+    move_states: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Assemble the report (every key always present; unknown values are null)."""
+    """Assemble the report as JSON-ready data (every key present; unknown values null)."""
+    return build_run_report(
+        exit_code=exit_code,
+        result_name=result_name,
+        reason=reason,
+        run=run,
+        config_file=config_file,
+        config_digest=config_digest,
+        target=target,
+        transport=transport,
+        sim=sim,
+        move_states=move_states,
+    ).model_dump(mode="json")
+
+
+def build_run_report(
+    *,
+    exit_code: int,
+    result_name: str,
+    reason: str | None,
+    run: RunResult | None = None,
+    config_file: str | None = None,
+    config_digest: str | None = None,
+    target: dict[str, Any] | None = None,
+    transport: dict[str, Any] | None = None,
+    sim: dict[str, Any] | None = None,
+    move_states: list[str] | None = None,
+) -> RunReport:
+    """Assemble the report as a validated :class:`RunReport`."""
     from .. import __version__
 
-    return {
+    data = {
         "report_version": REPORT_VERSION,
         "tmmaster_version": __version__,
         "result": result_name,
@@ -104,11 +324,15 @@ def build_report(
         "stop_delivered": None if run is None else run.stop_delivered,
         "transport": transport,
         "sim": sim,
+        "move_states": list(move_states or []),
     }
+    return RunReport.model_validate(data)
 
 
-def write_report(path: str | Path, report: dict[str, Any]) -> None:
+def write_report(path: str | Path, report: RunReport | dict[str, Any]) -> None:
     """Write the report atomically (a crash never leaves half a JSON file)."""
+    if isinstance(report, RunReport):
+        report = report.model_dump(mode="json")
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".report-", suffix=".json", dir=target.parent)

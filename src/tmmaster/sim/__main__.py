@@ -20,7 +20,7 @@ from types import FrameType
 
 from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import TMMasterError
-from .._logging import configure_logging
+from .._logging import add_logging_arguments, configure_logging
 from .._profiles import builtin_profile_names
 from .._robot_models import ROBOT_MODELS
 from .._version import add_version_argument
@@ -103,9 +103,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         " see docs/simulator.md)",
     )
     parser.add_argument(
-        "--log-json",
+        "--trace-requests",
         action="store_true",
-        help="print every Modbus request as one JSON line on stdout",
+        help="print every Modbus request the simulator receives as one JSON line on stdout",
     )
     parser.add_argument(
         "--parts",
@@ -115,11 +115,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="parts waiting at the pick position, like a feeder: the next one is there"
         " after one is taken (default: 1; 0 for an empty table)",
     )
-    parser.add_argument(
-        "--log-level",
-        default="info",
-        choices=["debug", "info", "warning", "error"],
-        help="level of the simulator's events on stderr (logger tmmaster.sim; default: info)",
+    add_logging_arguments(
+        parser,
+        default_level="info",
+        level_help="level of the simulator's events on stderr (logger tmmaster.sim; default: info)",
     )
     add_version_argument(parser)
     return parser
@@ -140,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     def echo(record: RequestRecord) -> None:
         print(json_line(record), flush=True)
 
-    undo_logging = configure_logging(level=args.log_level, stream=sys.stderr)
+    undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
         return _serve(args, echo)
     finally:
@@ -167,7 +166,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             gripper_port=args.gripper_port,
             faults=args.fault,
             objects=_parts(args.parts),
-            request_listener=echo if args.log_json else None,
+            request_listener=echo if args.trace_requests else None,
             physics=args.physics,
         )
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which

@@ -127,7 +127,7 @@ class RequestLog:
 
 
 def json_line(record: RequestRecord) -> str:
-    """One JSON line for ``--log-json``."""
+    """One JSON line for ``--trace-requests``."""
     return json.dumps(record.as_dict(), separators=(",", ":"))
 
 

@@ -1,0 +1,156 @@
+"""The live display of ``python -m tmmaster.pickplace`` on a terminal (rich).
+
+One region at the bottom of the terminal shows the state, cycle k/N, elapsed time, an
+ETA and the last event; log records are printed *above* it through the same console
+(:attr:`LiveProgress.log_stream` is what ``configure_logging`` writes to), so a log line
+never breaks the display. Imported only when stderr is a terminal.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from typing import Any
+
+from rich.console import Console, Group
+from rich.live import Live
+from rich.progress_bar import ProgressBar
+from rich.table import Table
+from rich.text import Text
+
+from ._runner import StateEvent
+
+#: structlog's leading ISO timestamp: the live region has its own clock.
+_TIMESTAMP = re.compile(r"^\d{4}-\d\d-\d\dT[\d:.]+Z?\s+")
+
+
+class _ConsoleStream:
+    """A text stream whose complete lines are printed through a rich console."""
+
+    def __init__(self, console: Console, on_line: Any) -> None:
+        self._console = console
+        self._on_line = on_line
+        self._buffer = ""
+        self._lock = threading.Lock()
+
+    def write(self, text: str) -> int:
+        """Buffer ``text``; print every complete line above the live region."""
+        with self._lock:
+            self._buffer += text
+            *lines, self._buffer = self._buffer.split("\n")
+        for line in lines:
+            rendered = Text.from_ansi(line)
+            self._on_line(rendered.plain)  # first: the redraw below shows it as the last event
+            self._console.print(rendered, soft_wrap=True)
+        return len(text)
+
+    def flush(self) -> None:
+        """Print a pending partial line."""
+        with self._lock:
+            pending, self._buffer = self._buffer, ""
+        if pending:
+            self._console.print(Text.from_ansi(pending), soft_wrap=True)
+
+    def isatty(self) -> bool:
+        """True: the console renders colours (structlog colours its key=value lines)."""
+        return self._console.is_terminal
+
+
+class LiveProgress:
+    """State, cycle k/N, elapsed time, ETA and last event, redrawn in place."""
+
+    def __init__(self, console: Console, *, refresh_per_second: float = 4.0) -> None:
+        self.console = console
+        #: Give this to ``configure_logging(stream=...)``: records print above the display.
+        self.log_stream = _ConsoleStream(console, self._log_line)
+        self._refresh = refresh_per_second
+        self._live: Live | None = None
+        self.cycles = 0
+        self.expected_cycle_s: float | None = None
+        self.state = "STARTING"
+        self.cycle = 0
+        self.cycle_times: list[float] = []
+        self.last_event = ""
+        self._t0 = time.monotonic()
+        self._cycle_t0 = self._t0
+
+    # -- life cycle -------------------------------------------------------------------
+
+    def begin(self, cycles: int, expected_cycle_s: float | None = None) -> None:
+        """Start drawing (the run is about to connect)."""
+        self.cycles = cycles
+        self.expected_cycle_s = expected_cycle_s
+        self._t0 = self._cycle_t0 = time.monotonic()
+        if self._live is None:
+            self._live = Live(
+                get_renderable=self.renderable,
+                console=self.console,
+                refresh_per_second=self._refresh,
+                transient=True,
+                redirect_stdout=True,
+                redirect_stderr=True,
+            )
+            self._live.start()
+
+    def end(self) -> None:
+        """Stop drawing and clear the region (the summary follows)."""
+        live, self._live = self._live, None
+        if live is not None:
+            live.stop()
+
+    def __call__(self, event: StateEvent) -> None:
+        """The runner's ``on_state`` listener."""
+        now = time.monotonic()
+        if not self.cycle:
+            self._cycle_t0 = now  # the first state of cycle 1
+        elif event.cycle > self.cycle or event.state == "DONE":
+            self.cycle_times.append(now - self._cycle_t0)
+            self._cycle_t0 = now
+        self.state = event.state
+        self.cycle = event.cycle
+        self.cycles = event.cycles
+        self.last_event = f"{event.previous} -> {event.state}"
+        if self._live is not None:
+            self._live.refresh()
+
+    def _log_line(self, line: str) -> None:
+        text = _TIMESTAMP.sub("", line.strip())
+        if text:
+            self.last_event = " ".join(text.split())
+
+    # -- drawing -----------------------------------------------------------------------
+
+    def eta_s(self, now: float | None = None) -> float | None:
+        """Seconds left: mean completed cycle (else the plan's estimate) x cycles left."""
+        now = time.monotonic() if now is None else now
+        if self.state in ("DONE", "ERROR"):
+            return 0.0
+        if self.cycle_times:
+            per_cycle: float | None = sum(self.cycle_times) / len(self.cycle_times)
+        else:
+            per_cycle = self.expected_cycle_s
+        if per_cycle is None or self.cycles <= 0:
+            return None
+        left_in_cycle = max(per_cycle - (now - self._cycle_t0), 0.0) if self.cycle else per_cycle
+        later = max(self.cycles - max(self.cycle, 1), 0)
+        return left_in_cycle + later * per_cycle
+
+    def renderable(self) -> Any:
+        """What the live region shows now."""
+        now = time.monotonic()
+        done = len(self.cycle_times)
+        eta = self.eta_s(now)
+        grid = Table.grid(padding=(0, 2))
+        for _ in range(5):
+            grid.add_column()
+        style = {"DONE": "bold green", "ERROR": "bold red"}.get(self.state, "bold cyan")
+        grid.add_row(
+            Text(f"{self.state:<20}", style=style),
+            Text(f"cycle {max(self.cycle, 1) if self.cycles else 0}/{self.cycles}"),
+            ProgressBar(total=max(self.cycles, 1), completed=done, width=20),
+            Text(f"elapsed {now - self._t0:6.1f} s"),
+            Text("ETA     -" if eta is None else f"ETA {eta:5.1f} s"),
+        )
+        last = Text(f"last: {self.last_event}", style="dim", overflow="ellipsis", no_wrap=True)
+        return Group(grid, last)

@@ -1,0 +1,120 @@
+"""``python -m tmmaster.report`` (and ``tmmaster report``): show or plot a run report.
+
+``show run.json`` prints the summary table (per-state times, cycles, result);
+``plot run.json -o run.png`` draws the timeline (needs matplotlib: ``tmmaster[plot]``).
+Exit codes: 0 done, 1 matplotlib missing or the image cannot be written, 2 the file is
+not a readable run report or an option is wrong.
+"""
+
+from __future__ import annotations
+
+# isort: off
+from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+# isort: on
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .._cliparse import ArgumentParser, UsageError, one_line
+from .._exceptions import ConfigError
+from .._logging import add_logging_arguments, configure_logging
+from .._version import add_version_argument
+
+#: What to install when matplotlib is missing.
+PLOT_EXTRA = "tmmaster[plot]"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the ``show`` and ``plot`` subcommands to ``parser``; return it."""
+    add_version_argument(parser)
+    sub = parser.add_subparsers(dest="report_command", required=True, metavar="{show,plot}")
+    show = sub.add_parser("show", help="print the summary table of a run report")
+    show.add_argument("report", metavar="RUN.json", help="a report written by --report")
+    add_logging_arguments(show, default_level="warning")
+    plot = sub.add_parser(
+        "plot", help=f"draw the run as a picture (needs matplotlib: pip install '{PLOT_EXTRA}')"
+    )
+    plot.add_argument("report", metavar="RUN.json", help="a report written by --report")
+    plot.add_argument(
+        "--output",
+        "-o",
+        metavar="FILE.png",
+        help="image file; .png, .svg or .pdf (default: the report's name with .png)",
+    )
+    add_logging_arguments(plot, default_level="warning")
+    return parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``python -m tmmaster.report``."""
+    parser = ArgumentParser(
+        prog="python -m tmmaster.report",
+        description="Show or plot a pick & place run report (written by --report).",
+    )
+    return add_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``show`` or ``plot`` from parsed ``args``; return the exit code (never raises)."""
+    undo = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
+    try:
+        return _run(args)
+    finally:
+        undo()
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ..pickplace._report import load_report
+
+    if args.report_command == "plot":
+        try:
+            import matplotlib  # noqa: F401  # only to say which extra is missing
+        except ImportError:
+            print(
+                f"report: plotting needs matplotlib: pip install '{PLOT_EXTRA}' [exit 1]",
+                file=sys.stderr,
+            )
+            return 1
+    try:
+        report = load_report(args.report)
+    except ConfigError as exc:
+        print(f"report: {one_line(exc)} [exit 2]", file=sys.stderr)
+        return 2
+    if args.report_command == "show":
+        from rich.console import Console
+
+        from ..pickplace._summary import summary_renderable
+
+        Console(file=sys.stdout).print(summary_renderable(report))
+        return 0
+    from ._plot import plot_report
+
+    output = Path(args.output) if args.output else Path(args.report).with_suffix(".png")
+    try:
+        plot_report(report, output)
+    except (OSError, ValueError) as exc:  # unwritable path, unknown image format
+        print(f"report: cannot write {output}: {one_line(exc)} [exit 1]", file=sys.stderr)
+        return 1
+    print(f"wrote {output}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m tmmaster.report``."""
+    _sigint.handled_by_main()
+    try:
+        try:
+            args = build_parser().parse_args(argv)
+        except UsageError as exc:
+            print(f"report: {one_line(exc)} [exit 2]", file=sys.stderr)
+            return 2
+        return run(args)
+    except KeyboardInterrupt:
+        print(f"report: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
+        return _sigint.EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

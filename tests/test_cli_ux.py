@@ -1,0 +1,256 @@
+"""The command line people see: the live display, --quiet, plain piped output, run reports
+shown and plotted, and --log-json / --log-level meaning the same on every command.
+
+The live display is tested on a rich console forced to behave as a terminal (its output
+goes to a StringIO); nothing here asserts a duration.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tmmaster._cli import main as tmmaster_main
+from tmmaster.pickplace import RunReport, load_report
+from tmmaster.pickplace.__main__ import EXIT_OK, _Output, build_parser, run
+from tmmaster.pickplace.__main__ import main as pickplace_main
+from tmmaster.report.__main__ import main as report_main
+
+ROOT = Path(__file__).resolve().parents[1]
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
+#: The quick --sim run every test here uses (simulated time 40x faster).
+SIM = ["--sim", "--sim-time-scale", "40"]
+
+
+@pytest.fixture(scope="module")
+def sim_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A report written by a real ``--sim`` run of two cycles."""
+    path = tmp_path_factory.mktemp("report") / "run.json"
+    assert pickplace_main([*SIM, "--cycles", "2", "--quiet", "--report", str(path)]) == EXIT_OK
+    return path
+
+
+def _forced_terminal_run(argv: list[str]) -> tuple[int, str]:
+    from rich.console import Console
+
+    from tmmaster.pickplace._live import LiveProgress
+
+    buffer = io.StringIO()
+    console = Console(file=buffer, force_terminal=True, width=160, color_system="standard")
+    live = LiveProgress(console, refresh_per_second=20)
+    code = run(
+        build_parser().parse_args(argv), output=_Output(quiet=False, live=live, console=console)
+    )
+    return code, buffer.getvalue()
+
+
+def test_the_live_display_shows_progress_and_logs_print_above_it() -> None:
+    code, raw = _forced_terminal_run([*SIM, "--cycles", "2", "--log-level", "info"])
+    assert code == EXIT_OK
+    text = ANSI.sub("", raw)
+    # The live region: state, cycle k/N, elapsed time, ETA and the last event.
+    assert re.search(r"MOVE_TO_\w+\s+cycle 2/2 .*elapsed\s+[\d.]+ s\s+ETA", text), text[-2000:]
+    assert "last: " in text
+    # Every log record is one whole line of its own: the region is erased before it is
+    # printed and redrawn after it, never drawn into the middle of it.
+    records = [line for line in raw.split("\n") if "pickplace.state" in line]
+    assert len(records) >= 16  # 8 states x 2 cycles
+    for line in records:
+        # What a terminal shows of that line: what follows the last "erase line".
+        shown = ANSI.sub("", line.split("\x1b[2K")[-1])
+        assert re.match(r"\d{4}-\d\d-\d\dT[\d:.]+Z \[info\s*\] pickplace\.state ", shown), line
+        assert "ETA" not in shown
+        assert "last:" not in shown
+    # The display is transient: it ends with the summary table, not a stale region.
+    tail = text[text.rindex("time per state") :]
+    assert "MOVE_TO_PICK" in tail
+    assert "cycle times (s)" in tail
+    assert "ETA" not in tail
+
+
+def test_quiet_prints_only_the_final_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert pickplace_main([*SIM, "--quiet"]) == EXIT_OK
+    out, err = capsys.readouterr()
+    assert err == ""
+    (line,) = out.splitlines()
+    assert line.startswith("DONE: 1/1 cycle(s) of pick-and-place")
+
+
+def test_quiet_failure_is_the_one_line_reason(capsys: pytest.CaptureFixture[str]) -> None:
+    assert pickplace_main(["--quiet", "--cycles", "0", "--dry-run"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("pickplace: config error:")
+
+
+def test_piped_output_stays_plain_lines(capsys: pytest.CaptureFixture[str]) -> None:
+    # capsys streams are not terminals: no live display, no table, no escape codes.
+    assert pickplace_main(SIM) == EXIT_OK
+    out, err = capsys.readouterr()
+    assert "\x1b" not in out + err
+    assert "time per state" not in out + err
+    assert "pickplace.state" in err  # info logs, one per line
+    assert out.splitlines()[-1].startswith("DONE: 1/1")
+
+
+def test_import_tmmaster_loads_neither_rich_nor_matplotlib() -> None:
+    # (structlog itself imports rich when it is installed: the commands pay that anyway.)
+    code = (
+        "import sys, tmmaster; a = sorted(m for m in ('rich', 'matplotlib') if m in sys.modules);"
+        "import tmmaster.pickplace.__main__, tmmaster.report.__main__;"
+        "print(a, 'matplotlib' in sys.modules)"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert done.stdout.strip() == "[] False"
+
+
+# -- the report: model, show, plot ------------------------------------------------------
+
+
+def test_a_sim_report_records_the_tcp_path_and_the_move_states(sim_report: Path) -> None:
+    report = load_report(sim_report)
+    assert report.result == "done"
+    assert report.sim is not None
+    path = report.sim.tcp_path
+    assert len(path) > 10
+    times = [row[0] for row in path]
+    assert times == sorted(times)
+    # The path reaches the pick (300, -200, 100) and the place (300, 200, 200) poses.
+    assert min(row[3] for row in path) == pytest.approx(100, abs=2)
+    assert any(abs(row[1] - 300) < 2 and abs(row[2] - 200) < 2 for row in path)
+    assert "MOVE_TO_PICK" in report.move_states
+    assert "GRIPPER_CLOSE" not in report.move_states
+
+
+def test_an_older_report_still_reads(tmp_path: Path) -> None:
+    # A report of an earlier tmmaster: no move_states, no tcp_path.
+    old = {
+        "report_version": 1,
+        "tmmaster_version": "0.1.0",
+        "result": "done",
+        "exit_code": 0,
+        "reason": None,
+        "config": {"file": None, "digest": None},
+        "target": {"host": "127.0.0.1", "port": 5020, "profile": "article"},
+        "sequence": "pick-and-place",
+        "final_state": "DONE",
+        "started_at": "2026-01-01T00:00:00.000+00:00",
+        "duration_s": 1.0,
+        "cycles": {"requested": 1, "completed": 1, "times_s": [1.0]},
+        "states": {"MOVE_TO_PICK": {"count": 1, "total_s": 1.0, "mean_s": 1.0, "max_s": 1.0}},
+        "timeline": [
+            {
+                "state": "MOVE_TO_PICK",
+                "cycle": 1,
+                "started_s": 0,
+                "duration_s": 1.0,
+                "outcome": "ok",
+            }
+        ],
+        "retries": {"grasp": 0},
+        "error": None,
+        "reaction": None,
+        "stop_delivered": None,
+        "transport": {"robot": {"requests": 3, "requests_by_function": {"3": 2, "16": 1}}},
+        "sim": {"objects": [], "place": None, "tolerance_mm": 2.0, "on_place": False},
+    }
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(old))
+    report = load_report(path)
+    assert report.move_states == []
+    assert report.sim is not None
+    assert report.sim.tcp_path == []
+
+
+def test_report_show_prints_the_summary_table(
+    sim_report: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert tmmaster_main(["report", "show", str(sim_report)]) == 0
+    out = capsys.readouterr().out
+    assert "DONE" in out
+    assert "cycles 2/2" in out
+    assert "time per state" in out
+    row = next(line for line in out.splitlines() if "MOVE_TO_PICK" in line)
+    assert re.search(r"MOVE_TO_PICK\s+│\s+move\s+│\s+2\s+│", row), row
+    assert "cycle times (s):" in out
+
+
+def test_report_plot_writes_a_png(sim_report: Path, tmp_path: Path) -> None:
+    image = tmp_path / "run.png"
+    assert report_main(["plot", str(sim_report), "-o", str(image)]) == 0
+    data = image.read_bytes()
+    assert data.startswith(b"\x89PNG\r\n\x1a\n")
+    assert len(data) > 10_000
+
+
+def test_report_plot_without_matplotlib_names_the_extra(
+    sim_report: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    assert report_main(["plot", str(sim_report), "-o", str(tmp_path / "x.png")]) == 1
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [
+        "report: plotting needs matplotlib: pip install 'tmmaster[plot]' [exit 1]"
+    ]
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_report_show_of_a_bad_file_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"result": 3}')
+    assert report_main(["show", str(bad)]) == 2
+    assert report_main(["show", str(tmp_path / "missing.json")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 2
+    assert lines[0].startswith(f"report: {bad}: not a tmmaster run report:")
+    assert "cannot read the report" in lines[1]
+
+
+def test_the_report_model_round_trips(sim_report: Path) -> None:
+    data = json.loads(sim_report.read_text())
+    assert RunReport.model_validate(data).model_dump(mode="json") == data
+
+
+# -- --log-json and --log-level everywhere ------------------------------------------------
+
+
+def test_log_json_is_json_lines_on_stderr_for_pickplace(capsys: pytest.CaptureFixture[str]) -> None:
+    assert pickplace_main([*SIM, "--log-json"]) == EXIT_OK
+    err = capsys.readouterr().err
+    events = [json.loads(line) for line in err.splitlines()]
+    assert {"pickplace.run_started", "sim.initialised"} <= {e["event"] for e in events}
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["profile", "list"],
+        ["profile", "show", "article"],
+        ["schema"],
+        ["report", "show", "RUN"],
+        ["report", "plot", "RUN"],
+        ["sim"],
+        ["pickplace"],
+    ],
+    ids=lambda a: " ".join(a),
+)
+def test_every_command_takes_log_json_and_log_level(argv: list[str]) -> None:
+    from tmmaster._cli import build_parser as tmmaster_parser
+
+    args = tmmaster_parser().parse_args([*argv, "--log-json", "--log-level", "debug"])
+    assert args.log_json is True
+    assert args.log_level == "debug"
