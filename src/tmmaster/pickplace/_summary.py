@@ -71,9 +71,10 @@ def summary_renderable(report: RunReport) -> Any:
         )
     if report.error is not None:
         code = f" (robot error code {report.error.error_code})" if report.error.error_code else ""
+        verb = "stopped" if report.result == "interrupted" else "failed"
         parts.append(
             Text(
-                f"failed in {report.error.state} (cycle {report.error.cycle}):"
+                f"{verb} in {report.error.state} (cycle {report.error.cycle}):"
                 f" {report.error.type}: {report.error.message}{code}",
                 style="red",
             )
