@@ -59,12 +59,13 @@ def test_the_live_display_shows_progress_and_logs_print_above_it() -> None:
     assert "last: " in text
     # Every log record is one whole line of its own: the region is erased before it is
     # printed and redrawn after it, never drawn into the middle of it.
-    records = [line for line in raw.split("\n") if "pickplace.state" in line]
+    record = re.compile(r"\d{4}-\d\d-\d\dT[\d:.]+Z \[info\s*\] pickplace\.state ")
+    records = [line for line in raw.split("\n") if record.search(ANSI.sub("", line))]
     assert len(records) >= 16  # 8 states x 2 cycles
     for line in records:
         # What a terminal shows of that line: what follows the last "erase line".
         shown = ANSI.sub("", line.split("\x1b[2K")[-1])
-        assert re.match(r"\d{4}-\d\d-\d\dT[\d:.]+Z \[info\s*\] pickplace\.state ", shown), line
+        assert record.match(shown), line
         assert "ETA" not in shown
         assert "last:" not in shown
     # The display is transient: it ends with the summary table, not a stale region.
