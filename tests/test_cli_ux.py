@@ -255,3 +255,16 @@ def test_every_command_takes_log_json_and_log_level(argv: list[str]) -> None:
     args = tmmaster_parser().parse_args([*argv, "--log-json", "--log-level", "debug"])
     assert args.log_json is True
     assert args.log_level == "debug"
+
+
+def test_a_run_that_never_started_still_shows_and_plots(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "bad.json"
+    assert pickplace_main(["--dry-run", "--cycles", "0", "--quiet", "--report", str(path)]) == 2
+    assert report_main(["show", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "CONFIG_ERROR" in out
+    assert "run.cycles" in out
+    assert report_main(["plot", str(path)]) == 0  # default: the report's name, .png
+    assert path.with_suffix(".png").read_bytes().startswith(b"\x89PNG")

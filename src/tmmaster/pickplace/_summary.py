@@ -69,7 +69,7 @@ def summary_renderable(report: RunReport) -> Any:
                 f"  (mean {sum(times) / len(times):.2f}, max {max(times):.2f})"
             )
         )
-    if report.error is not None:
+    if report.error is not None and not report.reason:  # the reason already says it
         code = f" (robot error code {report.error.error_code})" if report.error.error_code else ""
         verb = "stopped" if report.result == "interrupted" else "failed"
         parts.append(

@@ -173,6 +173,15 @@ def plot_report(report: RunReport, output: str | Path, *, dpi: int = 110) -> Pat
     _moving_panel(figure.add_subplot(grid[1, 0]), report)
     if has_path:
         _path_panel(figure.add_subplot(grid[:, 1]), report)
+    if not report.timeline:
+        figure.text(
+            0.5,
+            0.5,
+            f"no state ran: {report.reason or report.result}",
+            ha="center",
+            va="center",
+            wrap=True,
+        )
     cycles = report.cycles
     figure.suptitle(
         f"{report.sequence or 'run'}: {report.result}, {cycles.completed}/"
