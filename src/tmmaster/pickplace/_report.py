@@ -26,16 +26,18 @@ REPORT_VERSION = 1
 
 
 class _Part(BaseModel):
-    # Unknown keys (from a newer tmmaster) are ignored on reading.
-    model_config = ConfigDict(extra="ignore")
+    # Unknown keys (from a newer tmmaster) are ignored on reading; the docstring under a
+    # field is its description in the JSON Schema.
+    model_config = ConfigDict(extra="ignore", use_attribute_docstrings=True)
 
 
 class ConfigRef(_Part):
     """Which configuration ran."""
 
     file: str | None = None
-    #: ``sha256:`` of the normalised configuration.
+    """The configuration file given with ``--config`` (null: the defaults)."""
     digest: str | None = None
+    """``sha256:`` of the normalised configuration."""
 
 
 class Target(_Part):
@@ -52,12 +54,14 @@ class CycleSummary(_Part):
     requested: int | None = None
     completed: int = 0
     times_s: list[float] = Field(default_factory=list)
+    """Seconds per completed cycle."""
 
 
 class StateTiming(_Part):
     """Time spent in one state over the run (skipped passes excluded)."""
 
     count: int
+    """Passes through the state."""
     total_s: float
     mean_s: float
     max_s: float
@@ -68,11 +72,11 @@ class TimelineEntry(_Part):
 
     state: str
     cycle: int
-    #: Seconds since the run started.
     started_s: float
+    """Seconds since the run started."""
     duration_s: float
-    #: ``ok``, ``skipped``, ``retry`` or ``failed``.
     outcome: str
+    """``ok``, ``skipped``, ``retry`` or ``failed``."""
 
 
 class Retries(_Part):
@@ -108,8 +112,8 @@ class LinkStats(_Part):
     errors: int = 0
     bytes_sent: int = 0
     bytes_received: int = 0
-    #: Requests per Modbus function code (keys are the codes as text).
     requests_by_function: dict[str, int] = Field(default_factory=dict)
+    """Requests per Modbus function code (keys are the codes as text)."""
 
     @field_validator("requests_by_function", mode="before")
     @classmethod
@@ -130,8 +134,8 @@ class SimObject(_Part):
     """Where a simulated part ended."""
 
     name: str
-    #: ``[x, y, z, rx, ry, rz]``, mm and degrees.
     pose: list[float]
+    """``[x, y, z, rx, ry, rz]``, mm and degrees."""
     held: bool
     on_place: bool
 
@@ -142,45 +146,49 @@ class SimSummary(_Part):
     objects: list[SimObject] = Field(default_factory=list)
     place: list[float] | None = None
     tolerance_mm: float = 2.0
-    #: Every part on the place position.
     on_place: bool = False
+    """Every part on the place position."""
     time_scale: float = 1.0
-    #: The TCP as the simulator saw it: ``[t_s, x, y, z]`` rows, ``t_s`` in wall seconds
-    #: since the run started (same clock as ``timeline``), a row whenever it moved.
     tcp_path: list[tuple[float, float, float, float]] = Field(default_factory=list)
+    """The TCP as the simulator saw it: ``[t_s, x, y, z]`` rows, ``t_s`` in wall seconds since
+    the run started (same clock as ``timeline``), a row whenever it moved."""
 
 
 class RunReport(_Part):
     """The run report written by ``--report`` (every key present; unknown values null)."""
 
     report_version: int = REPORT_VERSION
+    """Changes when a key changes meaning or disappears (keys are only ever added)."""
     tmmaster_version: str
-    #: ``done``, ``failed``, ``config_error``, ``connection_error``, ``robot_fault``,
-    #: ``grasp_failed``, ``timeout`` or ``interrupted``.
     result: str
+    """``done``, ``failed``, ``config_error``, ``connection_error``, ``robot_fault``,
+    ``grasp_failed``, ``timeout`` or ``interrupted``."""
     exit_code: int
-    #: The one-line reason (null on success).
+    """The command's exit code (docs/pickplace.md, exit codes)."""
     reason: str | None = None
+    """The one-line reason (null on success)."""
     config: ConfigRef = Field(default_factory=ConfigRef)
     target: Target | None = None
     sequence: str | None = None
     final_state: str | None = None
     started_at: str | None = None
+    """ISO 8601 UTC time the run started."""
     duration_s: float | None = None
     cycles: CycleSummary = Field(default_factory=CycleSummary)
     states: dict[str, StateTiming] = Field(default_factory=dict)
     timeline: list[TimelineEntry] = Field(default_factory=list)
+    """Every pass through a state, in order."""
     retries: Retries = Field(default_factory=Retries)
     error: ErrorInfo | None = None
     reaction: ReactionInfo | None = None
-    #: Whether a stop reached the robot after a stop request or an abandoned move
-    #: (null: none was needed, or the profile has no stop).
     stop_delivered: bool | None = None
+    """Whether a stop reached the robot after a stop request or an abandoned move (null: none
+    was needed, or the profile has no stop)."""
     transport: TransportSummary | None = None
     sim: SimSummary | None = None
-    #: The states that move the arm (known from the plan); the rest wait (gripper,
-    #: checks, dwells). Empty in reports older than this key.
     move_states: list[str] = Field(default_factory=list)
+    """The states that move the arm (known from the plan); the rest wait (gripper, checks,
+    dwells). Empty in reports older than this key."""
 
 
 def report_schema() -> str:
