@@ -9,6 +9,7 @@ never breaks the display. Imported only when stderr is a terminal.
 from __future__ import annotations
 
 import re
+import sys
 import threading
 import time
 from typing import Any
@@ -88,7 +89,9 @@ class LiveProgress:
                 console=self.console,
                 refresh_per_second=self._refresh,
                 transient=True,
-                redirect_stdout=True,
+                # Stray prints land above the region; stdout only when it is this
+                # terminal too (``> out.txt`` keeps its lines in the file).
+                redirect_stdout=sys.stdout.isatty(),
                 redirect_stderr=True,
             )
             self._live.start()
