@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -337,6 +338,16 @@ def build_run_report(
     return RunReport.model_validate(data)
 
 
+#: A JSON array of numbers only, as ``json.dumps(indent=2)`` spreads it over lines.
+_NUMBER_ARRAY = re.compile(r"\[\s*\n\s*(-?[\d.eE+-]+(?:,\s*\n\s*-?[\d.eE+-]+)*)\s*\n\s*\]")
+
+
+def _dumps(report: dict[str, Any]) -> str:
+    """Indented JSON with every array of numbers on one line (poses, times, TCP rows)."""
+    text = json.dumps(report, indent=2, sort_keys=False)
+    return _NUMBER_ARRAY.sub(lambda m: "[" + re.sub(r",\s*\n\s*", ", ", m[1]) + "]", text)
+
+
 def write_report(path: str | Path, report: RunReport | dict[str, Any]) -> None:
     """Write the report atomically (a crash never leaves half a JSON file)."""
     if isinstance(report, RunReport):
@@ -346,7 +357,7 @@ def write_report(path: str | Path, report: RunReport | dict[str, Any]) -> None:
     fd, tmp = tempfile.mkstemp(prefix=".report-", suffix=".json", dir=target.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(report, handle, indent=2, sort_keys=False)
+            handle.write(_dumps(report))
             handle.write("\n")
         # mkstemp makes the file private (0600); a report is an ordinary file (0644
         # under the usual umask 022), like one opened with open(path, "w").
