@@ -32,7 +32,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from types import FrameType
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO, cast
 
 from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import (
@@ -54,6 +54,11 @@ from ._report import RunReport, build_run_report, objects_report, write_report
 from ._runner import Runner, RunResult, StateEvent, StopRequestedError
 from ._sequences import load_sequence, pick_and_place
 from ._steps import TaskSequence
+
+if TYPE_CHECKING:  # rich loads only when a terminal shows the live display
+    from rich.console import Console
+
+    from ._live import LiveProgress
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -184,31 +189,6 @@ def build_parser() -> argparse.ArgumentParser:
     return add_arguments(parser)
 
 
-class _Progress:
-    """The plain fallback (rich missing): one line on a terminal, redrawn at every state change."""
-
-    def __init__(self, stream: TextIO) -> None:
-        self._stream = stream
-        self.used = False
-
-    def begin(self, cycles: int, expected_cycle_s: float | None = None) -> None:
-        """Nothing to prepare."""
-        _ = cycles, expected_cycle_s
-
-    def __call__(self, event: StateEvent) -> None:
-        self.used = True
-        self._stream.write(
-            f"\r\033[K cycle {max(event.cycle, 1)}/{event.cycles}  {event.state:<20}"
-            f" cycle time {event.cycle_elapsed_s:6.2f} s"
-        )
-        self._stream.flush()
-
-    def end(self) -> None:
-        if self.used:
-            self._stream.write("\n")
-            self._stream.flush()
-
-
 class _Outcome:
     """What the report needs, filled in as far as the run got."""
 
@@ -228,7 +208,13 @@ class _Outcome:
 class _Output:
     """Where the command's own lines go: plain, quiet, or a rich live display on a terminal."""
 
-    def __init__(self, *, quiet: bool, live: Any = None, console: Any = None) -> None:
+    def __init__(
+        self,
+        *,
+        quiet: bool,
+        live: LiveProgress | None = None,
+        console: Console | None = None,
+    ) -> None:
         self.quiet = quiet
         self.live = live
         self.console = console
@@ -239,7 +225,7 @@ class _Output:
             print(line, flush=True)
 
     @property
-    def progress(self) -> Any:
+    def progress(self) -> Callable[[StateEvent], None] | None:
         """The runner's on_state listener, or None."""
         return self.live
 
@@ -252,7 +238,7 @@ def _make_output(args: argparse.Namespace, stderr: TextIO) -> _Output:
 
         from ._live import LiveProgress
     except ImportError:  # pragma: no cover - rich is a dependency; a stripped install
-        return _Output(quiet=False, live=_Progress(stderr))
+        return _Output(quiet=False)  # plain lines, as when piped
     console = Console(file=stderr)
     return _Output(quiet=False, live=LiveProgress(console), console=console)
 
@@ -262,7 +248,8 @@ def run(args: argparse.Namespace, *, output: _Output | None = None) -> int:
     stderr = sys.stderr
     out = output if output is not None else _make_output(args, stderr)
     level = "error" if args.quiet else args.log_level or ("warning" if stderr.isatty() else "info")
-    log_stream = getattr(out.live, "log_stream", None) or stderr
+    # The live display's stream has what a logging handler uses: write, flush, isatty.
+    log_stream = cast("TextIO", out.live.log_stream) if out.live is not None else stderr
     undo_logging = configure_logging(json=args.log_json, level=level, stream=log_stream)
     try:
         return _run(args, out)
@@ -323,7 +310,7 @@ def _run(args: argparse.Namespace, out: _Output) -> int:
     return code
 
 
-def _print_summary(console: Any, report: RunReport) -> None:
+def _print_summary(console: Console, report: RunReport) -> None:
     from ._summary import summary_renderable
 
     console.print(summary_renderable(report))
