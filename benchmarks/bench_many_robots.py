@@ -1,0 +1,509 @@
+"""Many robots from one master process: poll jitter, CPU and poll rate, per design.
+
+N simulated article-profile robots (N = 1, 25, 50, 100, 200, 400 by default) are
+served by simulator *processes* (``--sims-per-process`` robots each, every robot on its
+own loopback port); ONE master process polls every robot's status block at
+``--rate`` Hz (20 Hz: one poll every 50 ms per robot, the robots' phases spread
+evenly over the period). Per design of the master:
+
+* ``threads``: one thread per :class:`tmmaster.Robot`, each calling ``Robot.status()``
+  on its own drift-free schedule (the library's design: one thread per robot);
+* ``scheduler``: ONE thread that owns every :class:`tmmaster.Robot` and issues their
+  ``Robot.status()`` reads in due order from a heap (blocking reads, one at a time);
+* ``asyncio``: ONE asyncio loop over pymodbus' ``AsyncModbusTcpClient``, one coroutine
+  per robot reading the same 22-word status block. This is raw pymodbus (no decoding,
+  none of tmmaster's logic): the ceiling a single event loop could reach, not a way to
+  drive a robot safely.
+
+Figures per (design, N), each round ``--seconds`` long:
+
+* jitter: how late each poll was issued after its due time (ms): p50, p99, max;
+* response: time from issuing the read to having the answer (ms): p50, p99;
+* rate: polls per robot per second achieved (the target is ``--rate``); a poll more
+  than a period late is skipped, not sent in a burst, so saturation shows as a lower
+  rate and ``missed`` slots;
+* master CPU %: this process's CPU time / wall time (100 % = one core);
+* sim CPU %: the simulator processes' CPU time / wall time, all of them together.
+
+The simulators share the machine's cores with the master: on a 2-core machine that is
+a pessimistic setup (real robots bring their own controllers). The simulators tick at
+``--sim-tick-hz`` (default 10 Hz, not the TM's 50 Hz) so that N idle simulators do not
+eat the cores the master is measured on; nothing here moves, so the tick only
+publishes the pose.
+
+Run::
+
+    python benchmarks/bench_many_robots.py --quick          # N = 1 25 100, 3 s rounds
+    python benchmarks/bench_many_robots.py --repeat 3       # the docs' table
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import heapq
+import json
+import math
+import os
+import platform
+import statistics
+import struct
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tmmaster import Robot
+
+#: The article status block Robot.status() reads (FC3, address 0, 22 words).
+STATUS_ADDRESS, STATUS_COUNT = 0, 22
+DESIGNS = ("threads", "scheduler", "asyncio")
+
+
+# -- the simulator processes -----------------------------------------------------------
+
+
+def serve(n: int, tick_hz: float) -> None:
+    """Child mode: run ``n`` simulators, print their ports, stay until stdin closes."""
+    from tmmaster.sim import Simulator
+
+    sims = [Simulator("article", tick_hz=tick_hz, init_time_s=0.0).start() for _ in range(n)]
+    try:
+        print(json.dumps({"ports": [s.port for s in sims]}), flush=True)
+        sys.stdin.read()  # until the parent closes our stdin
+    finally:
+        for s in sims:
+            s.close()
+
+
+class Responder(asyncio.Protocol):
+    """A minimal Modbus TCP slave: answers FC3 reads from a fixed image of the article map.
+
+    Not a simulator (nothing moves, no handshake, no checks beyond the function code):
+    a slave cheap enough that the master, not the slaves, is what a run measures.
+    """
+
+    def __init__(self, image: bytes) -> None:
+        self.image = image
+        self.buffer = b""
+        self.transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        self.buffer += data
+        while len(self.buffer) >= 12:
+            tid, _proto, length, unit, fc = struct.unpack(">HHHBB", self.buffer[:8])
+            end = 6 + length
+            if len(self.buffer) < end:
+                return
+            frame, self.buffer = self.buffer[:end], self.buffer[end:]
+            assert self.transport is not None
+            if fc == 3:
+                address, count = struct.unpack(">HH", frame[8:12])
+                words = self.image[2 * address : 2 * (address + count)]
+                words += bytes(2 * count - len(words))
+                pdu = struct.pack(">BB", 3, len(words)) + words
+            else:
+                pdu = struct.pack(">BB", fc | 0x80, 1)  # illegal function
+            self.transport.write(struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu)
+
+
+def serve_light(n: int) -> None:
+    """Child mode: ``n`` minimal responders on one asyncio loop."""
+    image = bytearray(2 * 0x220)
+    struct.pack_into(">HHHH", image, 0, 5, 0, 0, 0)  # mode auto, idle, no grasp, no error
+    struct.pack_into(">6h", image, 2 * 0x10, 30000, -20000, 20000, 18000, 0, 9000)
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        servers = [
+            await loop.create_server(lambda: Responder(bytes(image)), "127.0.0.1", 0)
+            for _ in range(n)
+        ]
+        print(json.dumps({"ports": [s.sockets[0].getsockname()[1] for s in servers]}), flush=True)
+        await loop.run_in_executor(None, sys.stdin.read)
+        for s in servers:
+            s.close()
+
+    asyncio.run(main())
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class SimFarm:
+    """Simulator processes serving ``n`` robots between them."""
+
+    def __init__(self, n: int, per_process: int, tick_hz: float, slave: str) -> None:
+        src = Path(__file__).resolve().parents[1] / "src"
+        env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+        sizes = [per_process] * (n // per_process) + ([n % per_process] if n % per_process else [])
+        self.procs = [
+            subprocess.Popen(
+                [sys.executable, __file__, "--serve", str(k), "--sim-tick-hz", str(tick_hz)]
+                + (["--slave", "light"] if slave == "light" else []),
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+                env=env,
+            )
+            for k in sizes
+        ]
+        self.ports: list[int] = []
+        for proc in self.procs:
+            assert proc.stdout is not None
+            line = proc.stdout.readline()
+            if not line:
+                self.close()
+                raise RuntimeError("a simulator process ended unexpectedly")
+            self.ports += json.loads(line)["ports"]
+
+    def cpu(self) -> float:
+        """CPU seconds used so far by all simulator processes."""
+        return sum(cpu_seconds(p.pid) for p in self.procs)
+
+    def close(self) -> None:
+        """End every simulator process and wait for it."""
+        for proc in self.procs:
+            assert proc.stdin is not None
+            with contextlib.suppress(OSError):
+                proc.stdin.close()
+        for proc in self.procs:
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5)
+
+
+# -- the master designs ----------------------------------------------------------------
+
+
+@dataclass
+class Samples:
+    """What one round measured."""
+
+    lateness_s: list[float] = field(default_factory=list)
+    response_s: list[float] = field(default_factory=list)
+    missed: int = 0
+    errors: int = 0
+    first_error: str | None = None
+
+    def merge(self, other: Samples) -> None:
+        """Add another's samples to these."""
+        self.lateness_s += other.lateness_s
+        self.response_s += other.response_s
+        self.missed += other.missed
+        self.errors += other.errors
+        self.first_error = self.first_error or other.first_error
+
+
+def next_due(due: float, period: float, now: float, samples: Samples) -> float:
+    """The next due time after ``due``; slots already more than a period past are skipped."""
+    due += period
+    if now - due > period:
+        skipped = math.floor((now - due) / period)
+        samples.missed += skipped
+        due += skipped * period
+    return due
+
+
+def poll_robot(robot: Robot, samples: Samples) -> None:
+    """One timed ``Robot.status()``; a failure is counted, not raised."""
+    sent = time.monotonic()
+    try:
+        robot.status()
+    except Exception as exc:  # reported in the table; the benchmark must finish
+        samples.errors += 1
+        samples.first_error = samples.first_error or repr(exc)
+        return
+    samples.response_s.append(time.monotonic() - sent)
+
+
+def run_threads(robots: list[Robot], period: float, start: float, end: float) -> Samples:
+    """One thread per robot, each on its own schedule."""
+    per_robot = [Samples() for _ in robots]
+
+    def worker(i: int) -> None:
+        robot, samples = robots[i], per_robot[i]
+        due = start + period * i / len(robots)
+        while due < end:
+            delay = due - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            samples.lateness_s.append(time.monotonic() - due)
+            poll_robot(robot, samples)
+            due = next_due(due, period, time.monotonic(), samples)
+
+    threads = [threading.Thread(target=worker, args=(i,)) for i in range(len(robots))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    total = Samples()
+    for s in per_robot:
+        total.merge(s)
+    return total
+
+
+def run_scheduler(robots: list[Robot], period: float, start: float, end: float) -> Samples:
+    """One thread issuing every robot's reads in due order."""
+    samples = Samples()
+    heap = [(start + period * i / len(robots), i) for i in range(len(robots))]
+    heapq.heapify(heap)
+    while heap:
+        due, i = heapq.heappop(heap)
+        if due >= end:
+            continue
+        delay = due - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        samples.lateness_s.append(time.monotonic() - due)
+        poll_robot(robots[i], samples)
+        heapq.heappush(heap, (next_due(due, period, time.monotonic(), samples), i))
+    return samples
+
+
+def run_asyncio(ports: list[int], period: float, seconds: float) -> tuple[Samples, float, float]:
+    """One event loop, one raw pymodbus async client per robot; returns (samples, cpu, wall)."""
+    from pymodbus.client import AsyncModbusTcpClient
+
+    async def main() -> tuple[Samples, float, float]:
+        clients = [AsyncModbusTcpClient("127.0.0.1", port=p, retries=0, timeout=1.0) for p in ports]
+        for c in clients:
+            if not await c.connect():
+                raise RuntimeError("asyncio client could not connect")
+        loop = asyncio.get_running_loop()
+        samples = Samples()
+        start = time.monotonic() + 0.2
+        end = start + seconds
+
+        async def robot(i: int) -> None:
+            client = clients[i]
+            due = start + period * i / len(clients)
+            while due < end:
+                delay = due - time.monotonic()
+                if delay > 0:
+                    await asyncio.sleep(delay)
+                sent = time.monotonic()
+                samples.lateness_s.append(sent - due)
+                try:
+                    answer = await client.read_holding_registers(
+                        STATUS_ADDRESS, count=STATUS_COUNT, device_id=1
+                    )
+                    if answer.isError():
+                        raise RuntimeError(f"device refused: {answer}")
+                    samples.response_s.append(time.monotonic() - sent)
+                except Exception as exc:
+                    samples.errors += 1
+                    samples.first_error = samples.first_error or repr(exc)
+                due = next_due(due, period, time.monotonic(), samples)
+
+        del loop
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        await asyncio.gather(*(robot(i) for i in range(len(clients))))
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        for c in clients:
+            c.close()
+        return samples, cpu, wall
+
+    return asyncio.run(main())
+
+
+# -- measuring -------------------------------------------------------------------------
+
+
+@dataclass
+class Row:
+    """One line of the result table."""
+
+    design: str
+    n: int
+    round: int
+    wall_s: float
+    polls: int
+    jitter_ms: tuple[float, float, float]
+    response_ms: tuple[float, float]
+    rate_hz: float
+    missed: int
+    master_cpu: float
+    sim_cpu: float
+    errors: int
+    first_error: str | None
+
+
+def pct(values: list[float], q: float) -> float:
+    """The q-th percentile (nearest rank); NaN for no values."""
+    if not values:
+        return float("nan")
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, math.ceil(q / 100 * len(ordered)) - 1)]
+
+
+def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, round_: int) -> Row:
+    """One round of one design against the running simulators."""
+    period = 1.0 / rate
+    sim0 = farm.cpu()
+    if design == "asyncio":
+        wall0 = time.monotonic()
+        samples, cpu, wall = run_asyncio(farm.ports, period, seconds)
+        sim_wall = time.monotonic() - wall0
+    else:
+        robots = [
+            Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
+            for i, port in enumerate(farm.ports)
+        ]
+        try:
+            for robot in robots:
+                robot.connect()
+                robot.status()  # the read plan is built before the clock starts
+            start = time.monotonic() + 0.2
+            end = start + seconds
+            cpu0, wall0 = time.process_time(), time.monotonic()
+            runner = run_threads if design == "threads" else run_scheduler
+            samples = runner(robots, period, start, end)
+            cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+            sim_wall = wall
+        finally:
+            for robot in robots:
+                robot.close()
+    sim_cpu = farm.cpu() - sim0
+    lateness = [x * 1000 for x in samples.lateness_s]
+    response = [x * 1000 for x in samples.response_s]
+    return Row(
+        design=design,
+        n=n,
+        round=round_,
+        wall_s=wall,
+        polls=len(samples.response_s),
+        jitter_ms=(pct(lateness, 50), pct(lateness, 99), max(lateness, default=float("nan"))),
+        response_ms=(pct(response, 50), pct(response, 99)),
+        rate_hz=len(samples.response_s) / seconds / n,
+        missed=samples.missed,
+        master_cpu=100 * cpu / wall,
+        sim_cpu=100 * sim_cpu / sim_wall,
+        errors=samples.errors,
+        first_error=samples.first_error,
+    )
+
+
+def table(rows: list[Row]) -> str:
+    """The results as a Markdown table, one line per round."""
+    lines = [
+        "| design | N | round | jitter ms p50 / p99 / max | response ms p50 / p99"
+        " | polls/s per robot | missed | master CPU % | sim CPU % | errors |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        j, p = r.jitter_ms, r.response_ms
+        lines.append(
+            f"| {r.design} | {r.n} | {r.round} | {j[0]:.2f} / {j[1]:.2f} / {j[2]:.1f}"
+            f" | {p[0]:.2f} / {p[1]:.2f} | {r.rate_hz:.2f} | {r.missed}"
+            f" | {r.master_cpu:.0f} | {r.sim_cpu:.0f} | {r.errors} |"
+        )
+    return "\n".join(lines)
+
+
+def summary(rows: list[Row]) -> str:
+    """Median of the rounds per (design, N), with the range of the p99 jitter."""
+    lines = [
+        "| design | N | jitter p50 ms | jitter p99 ms (range) | jitter max ms"
+        " | polls/s per robot | master CPU % (range) | sim CPU % |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    keys = sorted({(r.n, DESIGNS.index(r.design)) for r in rows})
+    for n, d in keys:
+        rs = [r for r in rows if r.n == n and r.design == DESIGNS[d]]
+
+        def med(values: list[float]) -> float:
+            return statistics.median(values)
+
+        p99 = [r.jitter_ms[1] for r in rs]
+        cpu = [r.master_cpu for r in rs]
+        lines.append(
+            f"| {DESIGNS[d]} | {n} | {med([r.jitter_ms[0] for r in rs]):.2f}"
+            f" | {med(p99):.2f} ({min(p99):.2f}-{max(p99):.2f})"
+            f" | {med([r.jitter_ms[2] for r in rs]):.1f}"
+            f" | {med([r.rate_hz for r in rs]):.2f}"
+            f" | {med(cpu):.0f} ({min(cpu):.0f}-{max(cpu):.0f})"
+            f" | {med([r.sim_cpu for r in rs]):.0f} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and print the tables."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--n", type=int, nargs="+", default=[1, 25, 50, 100, 200, 400])
+    parser.add_argument("--design", choices=[*DESIGNS, "all"], nargs="+", default=["all"])
+    parser.add_argument("--rate", type=float, default=20.0, help="polls per robot per second")
+    parser.add_argument("--seconds", type=float, default=5.0, help="length of one round")
+    parser.add_argument("--repeat", type=int, default=3, help="rounds per (design, N)")
+    parser.add_argument("--sims-per-process", type=int, default=50)
+    parser.add_argument("--sim-tick-hz", type=float, default=10.0)
+    parser.add_argument(
+        "--slave",
+        choices=["sim", "light"],
+        default="sim",
+        help="sim: tmmaster.sim simulators; light: minimal read-only responders",
+    )
+    parser.add_argument("--quick", action="store_true", help="N = 1 25 100, 3 s, 1 round")
+    parser.add_argument("--json", action="store_true", help="also print raw rows as JSON")
+    parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.serve is not None:
+        if args.slave == "light":
+            serve_light(args.serve)
+        else:
+            serve(args.serve, args.sim_tick_hz)
+        return 0
+    if args.quick:
+        args.n, args.seconds, args.repeat = [1, 25, 100], 3.0, 1
+    designs = list(DESIGNS) if "all" in args.design else args.design
+    rows: list[Row] = []
+    for n in args.n:
+        farm = SimFarm(n, args.sims_per_process, args.sim_tick_hz, args.slave)
+        try:
+            for round_ in range(1, args.repeat + 1):
+                for design in designs:
+                    rows.append(measure(design, farm, n, args.rate, args.seconds, round_))
+                    print(table(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
+        finally:
+            farm.close()
+    model = next(
+        (
+            line.split(":", 1)[1].strip()
+            for line in Path("/proc/cpuinfo").read_text().splitlines()
+            if line.startswith("model name")
+        ),
+        platform.processor(),
+    )
+    print(
+        f"# {platform.python_implementation()} {platform.python_version()}, nproc {os.cpu_count()}"
+        f" ({model}), load average {os.getloadavg()[0]:.2f}; {args.rate:g} Hz polling,"
+        f" {args.seconds:g} s rounds, simulators: {args.sims_per_process} per process,"
+        f" {args.sim_tick_hz:g} Hz tick, same machine"
+    )
+    print(summary(rows))
+    print()
+    print(table(rows))
+    for r in rows:
+        if r.first_error:
+            print(f"{r.design} N={r.n}: {r.errors} failed polls, first: {r.first_error}")
+    if args.json:
+        print(json.dumps([r.__dict__ for r in rows]))
+    return 1 if any(r.errors for r in rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
