@@ -10,8 +10,10 @@
 #     once. Patched: it first waits for the motion to start (the slave clears the
 #     command register when it takes the command, after setting "moving").
 #  2. negative coordinates: int(-200 * 100) = -20000 is not a valid uint16 register
-#     value (pymodbus refuses it). Patched: written as 16-bit two's complement, which
-#     is what the int16 registers of the map mean.
+#     value: pymodbus 3.16's write_register raises struct.error("argument out of range"),
+#     which run() does not catch (it catches IOError), so the script dies on its first
+#     move (APPROACH_POS has y = -200). Patched: written as 16-bit two's complement,
+#     which is what the int16 registers of the map mean.
 # Kept as published, on purpose: its layout and style (excluded from ruff in
 # pyproject.toml), the prints, the fixed gripper sleeps (0.8 s close, 0.5 s open), the
 # 50 ms poll, ModbusTcpClient's default retries.
