@@ -1,0 +1,166 @@
+"""Many robots from one program: one thread per robot, each driving its own tour.
+
+The recommended way to drive many robots from one Python process (measured in
+docs/performance.md, "Many robots from one process"):
+
+* one :class:`tmmaster.Robot` per robot, used by ONE thread (a Robot is not shared);
+  every safety rule (validation, handshake, giving a command up safely) stays in that
+  Robot, so nothing here re-implements any of it;
+* plain threads, one per robot (not ``asyncio.to_thread`` with its default executor,
+  which has only ``min(32, cpus + 4)`` workers: robot 33 would wait for another to
+  finish);
+* bounded work: each thread drives a fixed number of moves and ends; every wait inside
+  ``move_to`` is bounded by the robot's timeouts;
+* one failure stays with its robot: a robot that fails is reported, the others carry on;
+* stopping: ``Robot.interrupt()`` is the one call meant to come from another thread;
+  on Ctrl-C the main thread interrupts every robot, and each ``move_to`` in progress
+  gives its command up safely (withdrawn or stopped) before its thread ends.
+
+Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
+
+    python examples/many_robots.py --sim 8 --moves 6
+
+or against robots (or simulators) already listening on consecutive ports::
+
+    python -m tmmaster.sim --port 5020 &
+    python -m tmmaster.sim --port 5021 &
+    python examples/many_robots.py --host 127.0.0.1 --ports 5020 5021
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from tmmaster import Pose, Robot, TMMasterError
+from tmmaster.sim import Simulator
+
+HOST = "127.0.0.1"
+#: The tour every robot drives, over and over (article profile: |x|, |y|, |z| <= 327 mm).
+TOUR = (
+    Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0),
+    Pose(300.0, 200.0, 200.0, 180.0, 0.0, 90.0),
+    Pose(250.0, 0.0, 300.0, 180.0, 0.0, 90.0),
+)
+SPEED = 80
+
+
+@dataclass
+class RobotReport:
+    """What one robot's thread did."""
+
+    name: str
+    moves_done: int = 0
+    move_times_s: list[float] = field(default_factory=list)
+    error: TMMasterError | None = None
+
+
+def drive(robot: Robot, moves: int, report: RobotReport) -> None:
+    """One robot's work: ``moves`` moves of the tour, each checked by the library."""
+    try:
+        robot.wait_until_ready(timeout_s=10.0)
+        for i in range(moves):
+            started = time.monotonic()
+            robot.move_to(TOUR[i % len(TOUR)], speed=SPEED)
+            report.move_times_s.append(time.monotonic() - started)
+            report.moves_done += 1
+    except TMMasterError as exc:  # this robot's failure; the others carry on
+        report.error = exc
+
+
+def run(
+    ports: Sequence[int], *, host: str = HOST, moves: int = 6, profile: str = "article"
+) -> list[RobotReport]:
+    """Drive one robot per port, one thread each; returns every robot's report."""
+    robots = [
+        Robot(host, port, profile=profile, gripper=None, name=f"robot{i}")
+        for i, port in enumerate(ports)
+    ]
+    reports = [RobotReport(r.name) for r in robots]
+    threads: list[threading.Thread] = []
+    try:
+        for robot, report in zip(robots, reports, strict=True):
+            try:
+                robot.connect()
+            except TMMasterError as exc:
+                report.error = exc
+                continue
+            thread = threading.Thread(
+                target=drive, args=(robot, moves, report), name=robot.name, daemon=True
+            )
+            thread.start()
+            threads.append(thread)
+        for thread in threads:
+            # join() with a timeout in a loop: the main thread stays responsive to Ctrl-C.
+            while thread.is_alive():
+                thread.join(0.5)
+    except KeyboardInterrupt:
+        for robot in robots:
+            robot.interrupt()  # every move_to in progress gives its command up safely
+        for thread in threads:
+            thread.join(10.0)
+        raise
+    finally:
+        for robot in robots:
+            robot.close()
+    return reports
+
+
+def run_with_simulators(n: int, *, moves: int = 6, time_scale: float = 10.0) -> list[RobotReport]:
+    """Start ``n`` simulators on 127.0.0.1 in this process, drive them, close them."""
+    sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
+    try:
+        return run([s.port for s in sims], moves=moves)
+    finally:
+        for sim in sims:
+            sim.close()
+
+
+def print_reports(reports: Sequence[RobotReport]) -> int:
+    """One line per robot; returns 0 when every robot finished its moves, else 1."""
+    for r in reports:
+        if r.error is not None:
+            print(f"{r.name}: FAILED after {r.moves_done} move(s): {r.error}")
+        else:
+            mean = statistics.fmean(r.move_times_s) if r.move_times_s else 0.0
+            print(f"{r.name}: {r.moves_done} moves, mean {mean:.3f} s per move")
+    failed = sum(r.error is not None for r in reports)
+    print(f"{len(reports) - failed} of {len(reports)} robots done")
+    return 1 if failed else 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: ``--sim N`` (default) or ``--ports P1 P2 ...``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sim", type=int, default=None, metavar="N", help="start N simulators")
+    parser.add_argument("--host", default=HOST)
+    parser.add_argument("--ports", type=int, nargs="+", default=None)
+    parser.add_argument("--moves", type=int, default=6)
+    parser.add_argument("--profile", default="article")
+    parser.add_argument("--time-scale", type=float, default=10.0, help="with --sim")
+    args = parser.parse_args(argv)
+    if args.sim is not None and args.ports is not None:
+        parser.error("--sim and --ports are exclusive")
+    if args.moves < 1:
+        parser.error("--moves must be >= 1")
+    try:
+        if args.ports is not None:
+            reports = run(args.ports, host=args.host, moves=args.moves, profile=args.profile)
+        else:
+            n = 8 if args.sim is None else args.sim
+            if n < 1:
+                parser.error("--sim must be >= 1")
+            reports = run_with_simulators(n, moves=args.moves, time_scale=args.time_scale)
+    except KeyboardInterrupt:
+        print("interrupted: every robot gave its command up", file=sys.stderr)
+        return 130
+    return print_reports(reports)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

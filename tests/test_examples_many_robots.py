@@ -1,0 +1,83 @@
+"""examples/many_robots.py runs: on its own simulators, on given ports, and with one failure."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from tmmaster import RobotFaultError
+from tmmaster.sim import Simulator
+
+Factory = Callable[..., Simulator]
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "many_robots.py"
+
+
+@pytest.fixture(scope="module")
+def example() -> ModuleType:
+    """The example script, imported as a module (it is not part of the package)."""
+    spec = importlib.util.spec_from_file_location("many_robots_example", EXAMPLE)
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    # dataclasses look the module up in sys.modules while the class body is built.
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_robot_drives_its_tour(tm_simulator_factory: Factory, example: ModuleType) -> None:
+    sims = [tm_simulator_factory() for _ in range(4)]
+    reports = example.run([s.port for s in sims], moves=3)
+    assert [r.error for r in reports] == [None] * 4
+    assert [r.moves_done for r in reports] == [3] * 4
+    for sim in sims:
+        # The simulator's own record: exactly the three tour poses, in order, once each.
+        targets = [m.target for m in sim.motion_log() if m.target is not None]
+        assert len(targets) == 3
+        for target, expected in zip(targets, example.TOUR, strict=True):
+            assert target.is_close(expected)
+        assert sim.tcp_pose().is_close(example.TOUR[2])
+
+
+def test_one_failure_stays_with_its_robot(
+    tm_simulator_factory: Factory, example: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = [tm_simulator_factory() for _ in range(2)]
+    bad = tm_simulator_factory(faults=["robot_error:at_move=2"])
+    reports = example.run([good[0].port, bad.port, good[1].port], moves=3)
+    assert [r.moves_done for r in reports] == [3, 1, 3]
+    assert reports[0].error is None
+    assert reports[2].error is None
+    assert isinstance(reports[1].error, RobotFaultError)
+    # The failed robot started nothing after its error.
+    assert len([m for m in bad.motion_log() if m.target is not None]) == 2
+    assert example.print_reports(reports) == 1
+    out = capsys.readouterr().out
+    assert "robot1: FAILED after 1 move(s)" in out
+    assert "2 of 3 robots done" in out
+
+
+def test_main_on_its_own_simulators(
+    example: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert example.main(["--sim", "3", "--moves", "2", "--time-scale", "20"]) == 0
+    assert "3 of 3 robots done" in capsys.readouterr().out
+
+
+def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType) -> None:
+    sims = [tm_simulator_factory() for _ in range(2)]
+    assert example.main(["--ports", *(str(s.port) for s in sims), "--moves", "1"]) == 0
+
+
+@pytest.mark.parametrize(
+    "argv", [["--sim", "2", "--ports", "5020"], ["--moves", "0"], ["--sim", "0"]]
+)
+def test_bad_arguments_exit_2(example: ModuleType, argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        example.main(argv)
+    assert info.value.code == 2
