@@ -312,7 +312,7 @@ def run_asyncio(ports: list[int], period: float, seconds: float) -> tuple[Sample
         loop = asyncio.get_running_loop()
         samples = Samples()
         start = time.monotonic() + 0.2
-        end = start + seconds
+        end = start + seconds - period / 2  # exactly rate x seconds slots per robot
 
         async def robot(i: int) -> None:
             client = clients[i]
@@ -394,7 +394,7 @@ def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, rou
                 robot.connect()
                 robot.status()  # the read plan is built before the clock starts
             start = time.monotonic() + 0.2
-            end = start + seconds
+            end = start + seconds - period / 2  # exactly rate x seconds slots per robot
             cpu0, wall0 = time.process_time(), time.monotonic()
             runner = {"threads": run_threads, "pool": run_pool, "scheduler": run_scheduler}[design]
             samples = runner(robots, period, start, end)
