@@ -55,6 +55,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -300,11 +301,16 @@ def run_pool(robots: list[Robot], period: float, start: float, end: float) -> Sa
     return total
 
 
-def run_asyncio(ports: list[int], period: float, seconds: float) -> tuple[Samples, float, float]:
-    """One event loop, one raw pymodbus async client per robot; returns (samples, cpu, wall)."""
+def run_asyncio(
+    ports: list[int], period: float, seconds: float, sim_cpu: Callable[[], float]
+) -> tuple[Samples, float, float, float]:
+    """One event loop, one raw pymodbus async client per robot.
+
+    Returns (samples, master CPU s, wall s, simulators' CPU s), all over the polling only.
+    """
     from pymodbus.client import AsyncModbusTcpClient
 
-    async def main() -> tuple[Samples, float, float]:
+    async def main() -> tuple[Samples, float, float, float]:
         clients = [AsyncModbusTcpClient("127.0.0.1", port=p, retries=0, timeout=1.0) for p in ports]
         for c in clients:
             if not await c.connect():
@@ -336,12 +342,13 @@ def run_asyncio(ports: list[int], period: float, seconds: float) -> tuple[Sample
                 due = next_due(due, period, time.monotonic(), samples)
 
         del loop
-        cpu0, wall0 = time.process_time(), time.monotonic()
+        sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
         await asyncio.gather(*(robot(i) for i in range(len(clients))))
         cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        sims = sim_cpu() - sim0
         for c in clients:
             c.close()
-        return samples, cpu, wall
+        return samples, cpu, wall, sims
 
     return asyncio.run(main())
 
@@ -379,11 +386,8 @@ def pct(values: list[float], q: float) -> float:
 def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, round_: int) -> Row:
     """One round of one design against the running simulators."""
     period = 1.0 / rate
-    sim0 = farm.cpu()
     if design == "asyncio":
-        wall0 = time.monotonic()
-        samples, cpu, wall = run_asyncio(farm.ports, period, seconds)
-        sim_wall = time.monotonic() - wall0
+        samples, cpu, wall, sim_cpu = run_asyncio(farm.ports, period, seconds, farm.cpu)
     else:
         robots = [
             Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
@@ -395,15 +399,14 @@ def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, rou
                 robot.status()  # the read plan is built before the clock starts
             start = time.monotonic() + 0.2
             end = start + seconds - period / 2  # exactly rate x seconds slots per robot
-            cpu0, wall0 = time.process_time(), time.monotonic()
             runner = {"threads": run_threads, "pool": run_pool, "scheduler": run_scheduler}[design]
+            sim0, cpu0, wall0 = farm.cpu(), time.process_time(), time.monotonic()
             samples = runner(robots, period, start, end)
             cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-            sim_wall = wall
+            sim_cpu = farm.cpu() - sim0
         finally:
             for robot in robots:
                 robot.close()
-    sim_cpu = farm.cpu() - sim0
     lateness = [x * 1000 for x in samples.lateness_s]
     response = [x * 1000 for x in samples.response_s]
     return Row(
@@ -414,10 +417,11 @@ def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, rou
         polls=len(samples.response_s),
         jitter_ms=(pct(lateness, 50), pct(lateness, 99), max(lateness, default=float("nan"))),
         response_ms=(pct(response, 50), pct(response, 99)),
-        rate_hz=len(samples.response_s) / seconds / n,
+        # Answered polls per slot: polls skipped for lateness count as not achieved.
+        rate_hz=rate * len(samples.response_s) / max(1, len(lateness) + samples.missed),
         missed=samples.missed,
         master_cpu=100 * cpu / wall,
-        sim_cpu=100 * sim_cpu / sim_wall,
+        sim_cpu=100 * sim_cpu / wall,
         errors=samples.errors,
         first_error=samples.first_error,
     )
