@@ -7,8 +7,11 @@
 # Verbatim except two patches, each marked "PATCH (tmmaster)" below:
 #  1. the race: wait_motion_complete() polled "idle" right after the command write, so
 #     it could see the idle state from before the slave took the command and return at
-#     once. Patched: it first waits for the motion to start (the slave clears the
-#     command register when it takes the command, after setting "moving").
+#     once. Seen against tmmaster.sim (with patch 2 only): the pick command overwrote the
+#     approach command before the slave's next tick, the gripper closed with the arm
+#     still at home, and the script ended in ERROR ("Grasp failed") after 0.8 s.
+#     Patched: it first waits for the motion to start (the slave clears the command
+#     register when it takes the command, after setting "moving").
 #  2. negative coordinates: int(-200 * 100) = -20000 is not a valid uint16 register
 #     value: pymodbus 3.16's write_register raises struct.error("argument out of range"),
 #     which run() does not catch (it catches IOError), so the script dies on its first
