@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
             r = rounds[-1]
             print(
                 f"{master}: cycle {r.cycle_s:.3f} s, overhead {r.overhead_s * 1000:.0f} ms"
-                f" ({r.overhead_pct:.2f} %), gaps {[round(g) for g in r.gaps_ms]} ms",
+                f" ({r.overhead_pct:.2f} %), transitions {[round(g) for g in r.transitions_ms]} ms",
                 file=sys.stderr,
                 flush=True,
             )
