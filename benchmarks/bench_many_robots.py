@@ -84,6 +84,33 @@ def serve(n: int, tick_hz: float) -> None:
             s.close()
 
 
+def idle_cost(n: int, tick_hz: float, seconds: float) -> str:
+    """CPU % of ``n`` idle simulators in this process (no client), and one tick's CPU."""
+    from tmmaster.sim import Simulator
+
+    sims = [Simulator("article", tick_hz=tick_hz).start() for _ in range(n)]
+    try:
+        time.sleep(0.5)
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        time.sleep(seconds)
+        load = 100 * (time.process_time() - cpu0) / (time.monotonic() - wall0)
+    finally:
+        for s in sims:
+            s.close()
+    sim = Simulator("article")  # never started: its controller ticks in this thread
+    controller = sim._controller
+    for _ in range(50):
+        controller.tick(0.02)
+    cpu0 = time.process_time()
+    for _ in range(2000):
+        controller.tick(0.02)
+    tick_us = (time.process_time() - cpu0) / 2000 * 1e6
+    return (
+        f"{n} idle simulators at {tick_hz:g} Hz in one process: {load:.0f} % of a core;"
+        f" one idle control tick: {tick_us:.0f} µs of CPU"
+    )
+
+
 class Responder(asyncio.Protocol):
     """A minimal Modbus TCP slave: answers FC3 reads from a fixed image of the article map.
 
@@ -489,6 +516,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--quick", action="store_true", help="N = 1 25 100, 3 s, 1 round")
     parser.add_argument("--json", action="store_true", help="also print raw rows as JSON")
+    parser.add_argument(
+        "--idle-cost",
+        type=int,
+        metavar="N",
+        help="only measure what N idle simulators cost in one process, and exit",
+    )
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve is not None:
@@ -496,6 +529,9 @@ def main(argv: list[str] | None = None) -> int:
             serve_light(args.serve)
         else:
             serve(args.serve, args.sim_tick_hz)
+        return 0
+    if args.idle_cost is not None:
+        print(idle_cost(args.idle_cost, args.sim_tick_hz, args.seconds))
         return 0
     if args.quick:
         args.n, args.seconds, args.repeat = [1, 25, 100], 3.0, 1
