@@ -262,7 +262,7 @@ def summary(rounds: list[Round]) -> str:
         rs = [r for r in rounds if r.master == master]
 
         def med(key: str, rs: list[Round] = rs) -> float:
-            return statistics.median(getattr(r, key) for r in rs)
+            return float(statistics.median(float(getattr(r, key)) for r in rs))
 
         pcts = [r.overhead_pct for r in rs]
         gaps = [g for r in rs for g in r.gaps_ms]
