@@ -102,9 +102,13 @@ def test_gap_of_exactly_max_read_gap_is_readable() -> None:
         bank.read(Table.HOLDING, 3, 5)  # gap of 3 > max_read_gap 2
 
 
-def test_tmflow_gaps_bridge_discrete_inputs(tmflow: RegisterBank) -> None:
-    # 7206 is unused between get_control (7205) and safeguard_a (7207): gap 1 <= 2.
-    assert tmflow.read(Table.DISCRETE_INPUT, 7201, 8) == [0] * 8
+def test_tmflow_bridges_no_gap_across_7206(tmflow: RegisterBank) -> None:
+    # 7206 is only a coil in TMflow 2.24 appendix C: the tmflow profile (max_read_gap 0)
+    # reads 7201-7205 and 7207-7208 apart, and a read across 7206 is refused.
+    assert tmflow.read(Table.DISCRETE_INPUT, 7201, 5) == [0] * 5
+    assert tmflow.read(Table.DISCRETE_INPUT, 7207, 2) == [0] * 2
+    with pytest.raises(IllegalAddressError):
+        tmflow.read(Table.DISCRETE_INPUT, 7201, 8)
 
 
 def test_network_write_stores_words(article: RegisterBank) -> None:
