@@ -555,13 +555,16 @@ def test_article_late_ack_at_one_move_only() -> None:
 
 
 def test_article_pose_that_cannot_be_encoded_is_an_error() -> None:
-    backend = KinematicBackend(MODEL, home=Pose(0, 0, 400, 180, 0, 0))  # int16 x100 ends at 327.67
+    # int16 x100 ends at 327.67. (The article's (0, 0, 400, ...) is out of a TM5's reach.)
+    backend = KinematicBackend(MODEL, home=Pose(400, 0, 300, 180, 0, 90))
     profile = robot_profile("article")
     bank = RegisterBank(profile)
     ctl = RobotController(profile, bank, backend, MODEL, init_time_s=INIT_S, log=ListLogger())
     run(ctl, INIT_S)
     assert bank.get("robot_mode") == 7
     assert bank.get("error_code") == SimErrorCode.POSE_OUT_OF_RANGE
+    # The encodable range rule: the registers hold the pose saturated at the range's end.
+    assert bank.get("tcp_x") == pytest.approx(327.67)
 
 
 def test_dt_must_be_valid() -> None:

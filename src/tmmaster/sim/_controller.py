@@ -22,10 +22,10 @@ from enum import IntEnum
 from typing import Any, Literal, Protocol
 
 from .._codec import allowed_range, encode
-from .._exceptions import ValueOutOfRangeError
+from .._exceptions import UnreachablePoseError, ValueOutOfRangeError
 from .._logging import get_logger
 from .._pose import MotionType, Pose
-from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RobotProfile
+from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RegisterField, RobotProfile
 from .._robot_models import RobotModel
 from ._backend import MotionRejectedError, PhysicsBackend
 from ._bank import RegisterBank
@@ -49,11 +49,12 @@ REINITIALIZE_RETRY_S = 1.0
 class SimErrorCode(IntEnum):
     """Error codes the simulated controller reports (article error_code, tmflow last_error_code)."""
 
-    #: Target outside the arm's reach (article only; tmflow reports result_code unreachable).
+    #: Target out of the arm's reach: no joint solution (article only; tmflow reports
+    #: result_code unreachable).
     UNREACHABLE = 0x0101
     #: Unknown command value, speed outside 1..100 % or a target that is not a number.
     INVALID_COMMAND = 0x0102
-    #: The TCP pose cannot be encoded into the profile's pose registers.
+    #: The arm came to rest at a TCP pose the profile's pose registers cannot encode.
     POSE_OUT_OF_RANGE = 0x0103
     #: The physics backend raised while starting a motion or driving the gripper.
     BACKEND_FAILURE = 0x0104
@@ -73,6 +74,19 @@ _REJECT_CODES = {
     "joint_limit": SimErrorCode.JOINT_LIMIT,
     "singularity": SimErrorCode.SINGULARITY,
 }
+
+#: tmflow result_code label of each reason (a profile without the label reports unreachable).
+_REJECT_RESULTS = {
+    "reach": "unreachable",
+    "joint_limit": "joint_limit",
+    "singularity": "singularity",
+}
+
+
+def _saturate(field: RegisterField, value: float) -> float:
+    """``value`` clamped into what ``field`` can encode."""
+    low, high = allowed_range(field)
+    return min(max(value, low), high)
 
 
 class Logger(Protocol):
@@ -188,6 +202,8 @@ class RobotController:
         self._gripper_closing = False
         self._gripper_miss = False
         self._motion_log: list[MotionRecord] = []
+        self._saturating = False  # the published pose is saturated (encodable range rule)
+        self._rest_error_raised = False  # POSE_OUT_OF_RANGE raised for the current rest
         self._reset_registers()
 
     # -- read-only state for the server and tests --------------------------------------
@@ -399,16 +415,20 @@ class RobotController:
             self._enter_error(SimErrorCode.INVALID_COMMAND, "invalid speed or target")
             self._bank.set("command", 0)
             return
-        if not self._model.can_reach(target):
+        rejected = self._model_rejects(target)
+        if rejected is not None:
             self._log.warning(
                 "sim.command_rejected",
                 device=self._profile.name,
-                reason="unreachable",
+                reason=rejected.reason,
                 target=str(target),
             )
             # Error first, then the acknowledgement: a master that sees command == 0
             # already sees the error.
-            self._enter_error(SimErrorCode.UNREACHABLE, "target out of reach")
+            self._enter_error(
+                _REJECT_CODES.get(rejected.reason, SimErrorCode.UNREACHABLE),
+                f"target rejected: {rejected.reason}",
+            )
             self._bank.set("command", 0)
             return
         self._log.info(
@@ -518,8 +538,16 @@ class RobotController:
             if target is None or speed is None or not accel_ok:
                 self._fail_sequence(seq, "invalid_command", 2)
                 return
-            if not self._model.can_reach(target):
-                self._fail_sequence(seq, "unreachable", 1)
+            rejected = self._model_rejects(target)
+            if rejected is not None:
+                self._log.warning(
+                    "sim.command_rejected",
+                    device=self._profile.name,
+                    seq=seq,
+                    reason=rejected.reason,
+                    target=str(target),
+                )
+                self._reject_sequence(seq, rejected.reason)
                 return
             accel = self._accel_time_s
             if self._profile.has("accel_time"):
@@ -531,6 +559,26 @@ class RobotController:
             self._drive_gripper(close=label == "gripper_close", seq=seq)
         else:
             self._fail_sequence(seq, "invalid_command", 2)
+
+    def _model_rejects(self, target: Pose) -> UnreachablePoseError | None:
+        """Why the arm model refuses ``target``, for a backend without joints of its own.
+
+        A backend with a joint model (``joint_positions_deg()`` not None) knows its joints
+        and tool and refuses a target itself (:class:`MotionRejectedError`); checking here
+        without them could disagree with it.
+        """
+        if self._backend.joint_positions_deg() is not None:
+            return None
+        try:
+            self._model.inverse(target)
+        except UnreachablePoseError as exc:
+            return exc
+        return None
+
+    def _reject_sequence(self, seq: int, reason: str) -> None:
+        """tmflow: a target the arm cannot take, with the reason's own result_code."""
+        unreachable = self._code("result_code", "unreachable", 1)
+        self._fail_sequence(seq, _REJECT_RESULTS.get(reason, "unreachable"), unreachable)
 
     def _fail_sequence(self, seq: int, result: str, default: int) -> None:
         self._log.warning("sim.command_rejected", device=self._profile.name, seq=seq, reason=result)
@@ -599,7 +647,7 @@ class RobotController:
             if self._article:
                 self._enter_error(_REJECT_CODES[exc.reason], f"target rejected: {exc.reason}")
             else:
-                self._fail_sequence(seq, "unreachable", 1)
+                self._reject_sequence(seq, exc.reason)
             return False
         except Exception as exc:  # a backend failure is a robot error, not a crash
             self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
@@ -806,13 +854,22 @@ class RobotController:
         return tuple(float(self._bank.get(n)) for n in TARGET_FIELDS)
 
     def _publish_pose(self) -> None:
+        """Publish the TCP pose under the encodable range rule (docs/simulator-model.md).
+
+        A coordinate the pose registers cannot hold is published saturated at the end of
+        the register's range (the backend keeps the true pose). While the arm moves that
+        is all (logged once per excursion); an arm that comes to rest there is a robot
+        error, once per rest, since the registers cannot say where it is.
+        """
         pose = self._backend.tcp_pose()
         fields = [self._profile.field(n) for n in TCP_FIELDS]
+        values = pose.as_list()
+        published = [_saturate(f, v) for f, v in zip(fields, values, strict=True)]
         try:
             # Encode all six before storing any: a pose is published whole or not at all.
-            for field, value in zip(fields, pose.as_list(), strict=True):
+            for field, value in zip(fields, published, strict=True):
                 encode(field, value)
-        except ValueOutOfRangeError as exc:
+        except ValueOutOfRangeError as exc:  # not even the saturated value fits
             if self._error_code != SimErrorCode.POSE_OUT_OF_RANGE:
                 self._log.warning(
                     "sim.pose_out_of_range",
@@ -822,10 +879,42 @@ class RobotController:
                 )
                 self._enter_error(SimErrorCode.POSE_OUT_OF_RANGE, "pose cannot be encoded")
             return
-        for name, value in zip(TCP_FIELDS, pose.as_list(), strict=True):
+        clipped = [f.name for f, a, b in zip(fields, values, published, strict=True) if a != b]
+        self._check_saturation(pose, published, clipped)
+        for name, value in zip(TCP_FIELDS, published, strict=True):
             self._bank.set(name, value)
         if self._bank.has("flange_x"):
             self._publish_tm_table(pose)
+
+    def _check_saturation(self, pose: Pose, published: list[float], clipped: list[str]) -> None:
+        """Log a saturated excursion once; an arm at rest outside the range is an error."""
+        at_rest = self._backend.is_settled()
+        if clipped and not self._saturating:
+            self._saturating = True
+            self._log.warning(
+                "sim.pose_saturated",
+                device=self._profile.name,
+                pose=str(pose),
+                published=str(Pose(*published)),
+                fields=clipped,
+            )
+        elif not clipped and self._saturating:
+            self._saturating = False
+            self._log.info("sim.pose_in_range", device=self._profile.name, pose=str(pose))
+        if not at_rest or not clipped:
+            self._rest_error_raised = False
+        elif not self._rest_error_raised:
+            # Once per rest: after the operator's reset the arm may be moved back.
+            self._rest_error_raised = True
+            self._log.warning(
+                "sim.pose_out_of_range",
+                device=self._profile.name,
+                pose=str(pose),
+                fields=clipped,
+            )
+            self._enter_error(
+                SimErrorCode.POSE_OUT_OF_RANGE, "arm at rest at a pose the registers cannot hold"
+            )
 
     def _publish_tm_table(self, tcp: Pose) -> None:
         """Techman's fixed table beside a tmflow profile (docs/simulator-model.md)."""

@@ -1,20 +1,37 @@
-"""The built-in physics backend: analytic motion interpolation, no dynamics.
+"""The built-in physics backend: a TM arm moved through its joint chain, no dynamics.
 
-Motion timing comes from :meth:`RobotModel.motion_time` and the path follows
-:func:`trapezoid_progress`, so the simulator and the master's derived timeouts agree by
-construction. The path *shape* is not modelled: PTP and Line both move the TCP along
-the straight line (only their durations differ). Everything is driven by
-:meth:`KinematicBackend.step`; there is no wall clock.
+The arm's state is its six joint angles; poses come from the shared arm model
+(:class:`~tmmaster.RobotModel`: forward and inverse kinematics, limits, motion times),
+the same model the master validates targets and derives its timeouts with, so the two
+agree by construction.
+
+- **PTP** moves in joint space: the target's joints are solved nearest the current
+  ones, every joint follows the same trapezoid (:func:`trapezoid_progress`) over
+  :meth:`RobotModel.ptp_time`, and the TCP is the forward kinematics of the joints, so
+  its path curves.
+- **Line** moves the TCP along the straight segment (position linear, orientation by the
+  shortest turn); the joints follow by inverse kinematics, and the whole path is
+  checked before the motion starts (:meth:`RobotModel.line_joints`); its duration is
+  :meth:`RobotModel.line_time`.
+- A target (or a straight path) the arm cannot take is refused before anything moves:
+  :class:`~tmmaster.sim.MotionRejectedError` with the reason ``reach``, ``joint_limit`` or
+  ``singularity``.
+- ``tool`` is the TCP in the flange frame: TCP = flange x tool.
+
+Everything is driven by :meth:`KinematicBackend.step`; there is no wall clock.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
+from .. import _kinematics as kin
+from .._exceptions import UnreachablePoseError
 from .._pose import DEFAULT_HOME, MotionType, Pose
-from .._robot_models import RobotModel, trapezoid_progress
-from ._backend import GripperState, ObjectState
+from .._robot_models import Joints, RobotModel, trapezoid_progress
+from ._backend import GripperState, MotionRejectedError, ObjectState, RejectReason
 from ._world import World
 
 # Absorbs float drift from summing many small dt values, so a move of T seconds stepped
@@ -24,21 +41,33 @@ _EPS = 1e-9
 
 @dataclass
 class _Motion:
-    start: Pose
+    kind: MotionType
+    start_joints: Joints
+    target_joints: Joints
+    #: The commanded TCP pose: reported exactly once the motion is over.
     target: Pose
     duration_s: float
     accel_time_s: float
+    #: Line only: the TCP at the start, the target as transforms, joint samples along
+    #: the path at evenly spaced path fractions (the first is the start joints).
+    start_t: kin.Transform = kin.IDENTITY
+    target_t: kin.Transform = kin.IDENTITY
+    samples: list[Joints] = field(default_factory=list)
+    #: Line only: the orientation does not change (reported as the start's angles).
+    same_orientation: bool = False
+    start: Pose | None = None
     elapsed_s: float = 0.0
 
 
 class KinematicBackend:
-    """Analytic :class:`~tmmaster.sim.PhysicsBackend`: interpolated arm, ideal gripper."""
+    """Analytic :class:`~tmmaster.sim.PhysicsBackend`: a TM joint chain, ideal gripper."""
 
     def __init__(
         self,
         model: RobotModel,
         *,
         home: Pose = DEFAULT_HOME,
+        tool: Pose | None = None,
         world: World | None = None,
         settle_time_s: float = 0.0,
         gripper_min_width_mm: float = 1.0,
@@ -51,12 +80,23 @@ class KinematicBackend:
                 "need 0 <= gripper_min_width_mm < gripper_max_width_mm, got "
                 f"{gripper_min_width_mm} and {gripper_max_width_mm}"
             )
+        if tool is not None and not isinstance(tool, Pose):
+            raise TypeError(
+                f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
+            )
         self._model = model
+        self._tool = tool
+        try:
+            joints = model.inverse(home, tool=tool)
+        except UnreachablePoseError as exc:
+            raise UnreachablePoseError(f"home: {exc}", reason=exc.reason, pose=exc.pose) from exc
         self._world = World() if world is None else world
         self._settle_time_s = settle_time_s
         self._gripper_min = gripper_min_width_mm
         self._gripper_max = gripper_max_width_mm
+        self._joints: Joints = joints
         self._pose = home
+        self._flange: Pose | None = None
         self._motion: _Motion | None = None
         # Starts "long settled": the arm is at rest when the simulation begins.
         self._rest_s = math.inf
@@ -68,8 +108,13 @@ class KinematicBackend:
 
     @property
     def model(self) -> RobotModel:
-        """The arm model whose limits time the motions."""
+        """The arm model: joint chain, limits, motion times."""
         return self._model
+
+    @property
+    def tool(self) -> Pose | None:
+        """The TCP in the flange frame (None: the TCP is the flange)."""
+        return self._tool
 
     @property
     def world(self) -> World:
@@ -86,38 +131,85 @@ class KinematicBackend:
     def start_motion(
         self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
     ) -> float:
-        """Begin a motion from the current pose towards ``target``; return its duration in s."""
+        """Begin a motion from the current pose towards ``target``; return its duration in s.
+
+        Raises :class:`~tmmaster.sim.MotionRejectedError` (and keeps the current motion,
+        if any) when the target, or for a Line any point of the straight path, cannot be
+        taken by the arm.
+        """
         if accel_time_s < 0:
             raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
-        duration = self._model.motion_time(
-            self._pose,
+        if not 0 < speed_percent <= 100:
+            raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
+        try:
+            if motion is MotionType.LINE:
+                planned = self._plan_line(target, speed_percent, accel_time_s)
+            else:
+                planned = self._plan_ptp(target, speed_percent, accel_time_s)
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reason(exc.reason), str(exc)) from exc
+        # A running motion is simply replaced: queueing or rejecting is the controller's job.
+        self._motion = planned
+        self._rest_s = 0.0
+        return planned.duration_s
+
+    def _plan_ptp(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
+        start = self._joints
+        joints = self._model.inverse(target, seed_deg=start, tool=self._tool)
+        duration = self._model.ptp_time(
+            start, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
+        )
+        return _Motion(MotionType.PTP, start, joints, target, duration, accel_time_s)
+
+    def _plan_line(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
+        start = self._pose
+        samples = self._model.line_joints(
+            start, target, start_joints_deg=self._joints, tool=self._tool
+        )
+        duration = self._model.line_time(
+            start,
             target,
             speed_percent=speed_percent,
-            motion=motion,
             accel_time_s=accel_time_s,
+            start_joints_deg=self._joints,
+            tool=self._tool,
         )
-        # A running motion is simply replaced: queueing or rejecting is the controller's job.
-        self._motion = _Motion(self._pose, target, duration, accel_time_s)
-        self._rest_s = 0.0
-        return duration
+        # The path starts where the joints are (the solver's copy differs by its tolerance).
+        samples[0] = self._joints
+        start_t, target_t = kin.pose_to_transform(start), kin.pose_to_transform(target)
+        return _Motion(
+            MotionType.LINE,
+            self._joints,
+            samples[-1],
+            target,
+            duration,
+            accel_time_s,
+            start_t=start_t,
+            target_t=target_t,
+            samples=samples,
+            same_orientation=kin.rotation_error(start_t, target_t) == (0.0, 0.0, 0.0),
+            start=start,
+        )
 
     def stop_motion(self) -> None:
-        """Hold the current pose; the kinematic arm decelerates instantly."""
+        """Hold the current joints; the kinematic arm decelerates instantly."""
         if self._motion is not None:
             self._motion = None
             self._rest_s = 0.0
 
     def tcp_pose(self) -> Pose:
-        """Current TCP pose."""
+        """Current TCP pose: the flange pose times the tool (the commanded pose at rest)."""
         return self._pose
 
     def joint_positions_deg(self) -> tuple[float, ...] | None:
-        """None: the analytic backend moves the TCP, it has no joint model."""
-        return None
+        """Current joint angles J1..J6, degrees."""
+        return self._joints
 
     def flange_pose(self) -> Pose | None:
-        """None: the analytic backend moves the TCP, it has no joint model."""
-        return None
+        """Current flange pose: the forward kinematics of the joints, no tool."""
+        if self._flange is None:
+            self._flange = self._model.forward(self._joints)
+        return self._flange
 
     def is_settled(self) -> bool:
         """True once no motion runs and ``settle_time_s`` has passed since the last one."""
@@ -149,12 +241,41 @@ class KinematicBackend:
         motion.elapsed_s += dt
         if motion.elapsed_s + _EPS >= motion.duration_s:
             # Land exactly on the target, not on an interpolated approximation of it.
-            self._pose = motion.target
+            self._set(motion.target_joints, motion.target)
             self._motion = None
             self._rest_s = max(0.0, motion.elapsed_s - motion.duration_s)
             return
         progress = trapezoid_progress(motion.elapsed_s, motion.duration_s, motion.accel_time_s)
-        self._pose = _interpolate(motion.start, motion.target, progress)
+        if motion.kind is MotionType.PTP:
+            joints = _lerp(motion.start_joints, motion.target_joints, progress)
+            self._set(joints, self._model.forward(joints, self._tool))
+        else:
+            self._set(*self._line_point(motion, progress))
+
+    def _line_point(self, motion: _Motion, progress: float) -> tuple[Joints, Pose]:
+        """Joints and TCP ``progress`` (0..1) of the way along a Line's straight path."""
+        t = kin.interpolate(motion.start_t, motion.target_t, progress)
+        pose = kin.transform_to_pose(t)
+        if motion.same_orientation and motion.start is not None:
+            # An unchanged orientation reads unchanged (no round trip through a matrix).
+            pose = Pose(pose.x, pose.y, pose.z, motion.start.rx, motion.start.ry, motion.start.rz)
+        # The precomputed samples bracket the point: their interpolation is the seed.
+        samples = motion.samples
+        where = progress * (len(samples) - 1)
+        i = min(int(where), len(samples) - 2)
+        seed = _lerp(samples[i], samples[i + 1], where - i)
+        try:
+            joints = self._model.inverse(pose, seed_deg=seed, tool=self._tool, same_branch=True)
+        except UnreachablePoseError:
+            # Between two checked samples the solver may still touch a margin; the
+            # interpolated samples are then the joints (off the line by far under 1 mm).
+            return seed, self._model.forward(seed, self._tool)
+        return joints, pose
+
+    def _set(self, joints: Joints, tcp: Pose) -> None:
+        self._joints = joints
+        self._pose = tcp
+        self._flange = None
 
     # -- gripper -----------------------------------------------------------------------
 
@@ -210,28 +331,15 @@ class KinematicBackend:
         return self._world.states()
 
 
-def _interpolate(start: Pose, target: Pose, progress: float) -> Pose:
-    """Pose ``progress`` (0..1) of the way from ``start`` to ``target``, angles the short way."""
-    position = [
-        a + (b - a) * progress
-        for a, b in zip(start.as_list()[:3], target.as_list()[:3], strict=True)
-    ]
-    angles = [
-        _normalize(a + _wrap(b - a) * progress)
-        for a, b in zip(start.as_list()[3:], target.as_list()[3:], strict=True)
-    ]
-    return Pose(*position, *angles)
+def _lerp(a: Sequence[float], b: Sequence[float], fraction: float) -> Joints:
+    q = [x + (y - x) * fraction for x, y in zip(a, b, strict=True)]
+    return (q[0], q[1], q[2], q[3], q[4], q[5])
 
 
-def _wrap(angle: float) -> float:
-    return (angle + 180.0) % 360.0 - 180.0
-
-
-def _normalize(angle: float) -> float:
-    # (-180, 180] rather than [-180, 180): keeps the common rx = 180 from reading as -180.
-    angle = math.fmod(angle, 360.0)
-    if angle > 180.0:
-        return angle - 360.0
-    if angle <= -180.0:
-        return angle + 360.0
-    return angle
+def _reason(reason: str) -> RejectReason:
+    # UnreachablePoseError.reason is one of the same three words.
+    if reason == "joint_limit":
+        return "joint_limit"
+    if reason == "singularity":
+        return "singularity"
+    return "reach"
