@@ -19,8 +19,9 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 
 from .._cliparse import ArgumentParser, UsageError, one_line
-from .._exceptions import TMMasterError
+from .._exceptions import ConfigError, TMMasterError
 from .._logging import add_logging_arguments, configure_logging
+from .._pose import Pose
 from .._profiles import builtin_profile_names
 from .._robot_models import ROBOT_MODELS
 from .._version import add_version_argument
@@ -79,6 +80,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         choices=["kinematic", "mujoco"],
         help="physics backend: kinematic (analytic, default) or mujoco (needs the extra"
         " tmmaster[mujoco]; docs/physics-backends.md)",
+    )
+    parser.add_argument(
+        "--tool",
+        default=None,
+        metavar="X,Y,Z,RX,RY,RZ",
+        help="TCP offset in the flange frame, mm and deg (TCP = flange x tool;"
+        " default: none, the TCP is the flange)",
     )
     parser.add_argument(
         "--gripper",
@@ -152,6 +160,19 @@ def _parts(count: int) -> list[TableObject]:
     return [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(1, count + 1)]
 
 
+def _tool(text: str | None) -> Pose | None:
+    """The ``--tool`` pose, or None; a bad value raises ConfigError naming --tool."""
+    if text is None:
+        return None
+    try:
+        values = [float(part) for part in text.split(",")]
+        if len(values) != 6:
+            raise ValueError(f"need 6 comma-separated numbers, got {len(values)}")
+        return Pose.from_sequence(values)
+    except ValueError as exc:
+        raise ConfigError(f"--tool X,Y,Z,RX,RY,RZ: {exc} (got {text!r})") from exc
+
+
 def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
 
     try:
@@ -168,6 +189,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             objects=_parts(args.parts),
             request_listener=echo if args.trace_requests else None,
             physics=args.physics,
+            tool=_tool(args.tool),
         )
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
         print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)

@@ -904,8 +904,11 @@ class RobotController:
         if not at_rest or not clipped:
             self._rest_error_raised = False
         elif not self._rest_error_raised:
-            # Once per rest: after the operator's reset the arm may be moved back.
+            # Once per rest: after the operator's reset the arm may be moved back. An arm
+            # stopped by another error (an e-stop, a robot error) keeps that error's code.
             self._rest_error_raised = True
+            if self._error_code:
+                return
             self._log.warning(
                 "sim.pose_out_of_range",
                 device=self._profile.name,

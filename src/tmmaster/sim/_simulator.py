@@ -74,6 +74,7 @@ class Simulator:
         initial_seq: int = 0,
         listen: bool = True,
         name: str | None = None,
+        tool: Pose | None = None,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ValueError(f"time_scale must be > 0, got {time_scale}")
@@ -92,10 +93,14 @@ class Simulator:
         self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
         if backend is not None and physics != "kinematic":
             raise ValueError("give either backend or physics, not both")
+        if tool is not None and backend is not None:
+            raise ConfigError("tool: give the tool offset to your own backend, not to Simulator")
+        #: The TCP in the flange frame (TCP = flange x tool); None: the TCP is the flange.
+        self.tool = tool
         self._backend: PhysicsBackend = (
             backend
             if backend is not None
-            else physics_backend(physics, self._model, world=World(objects))
+            else physics_backend(physics, self._model, world=World(objects), tool=tool)
         )
         all_faults = [_as_fault(f) for f in faults]
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
@@ -467,18 +472,20 @@ class Simulator:
 PHYSICS_BACKENDS = ("kinematic", "mujoco")
 
 
-def physics_backend(name: str, model: RobotModel, *, world: World) -> PhysicsBackend:
+def physics_backend(
+    name: str, model: RobotModel, *, world: World, tool: Pose | None = None
+) -> PhysicsBackend:
     """A built-in physics backend by name: "kinematic" (analytic) or "mujoco" (optional extra).
 
     Raises :class:`UnknownNameError` for another name and
     :class:`~tmmaster.sim.PhysicsUnavailableError` when the MuJoCo extra is missing.
     """
     if name == "kinematic":
-        return KinematicBackend(model, world=world)
+        return KinematicBackend(model, world=world, tool=tool)
     if name == "mujoco":
         from ._mujoco import MuJoCoBackend  # imports mujoco: only when asked for
 
-        return MuJoCoBackend(model, world=world, home=DEFAULT_HOME)
+        return MuJoCoBackend(model, world=world, home=DEFAULT_HOME, tool=tool)
     raise UnknownNameError(
         f"unknown physics backend {name!r} (known: {', '.join(PHYSICS_BACKENDS)})"
     )
@@ -500,4 +507,6 @@ def simulator_summary(sim: Simulator) -> Sequence[str]:
         )
     elif sim.profile.has("gripper_command"):
         lines.append("gripper in the robot's register map (gripper_command)")
+    if sim.tool is not None:
+        lines.append(f"tool    TCP = flange x {sim.tool}")
     return lines
