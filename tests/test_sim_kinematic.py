@@ -383,3 +383,37 @@ def test_the_cli_takes_a_tool_and_refuses_a_bad_one(capsys: pytest.CaptureFixtur
 def test_a_tool_with_a_backend_of_ones_own_is_refused() -> None:
     with pytest.raises(ValueError, match="tool"):
         Simulator(backend=KinematicBackend(TM5), tool=TOOL, listen=False)
+
+
+class JointlessBackend(KinematicBackend):
+    """A backend without a joint model that takes any target (the controller must check)."""
+
+    def __init__(self) -> None:
+        super().__init__(TM5)
+        self.started: list[Pose] = []
+
+    def joint_positions_deg(self) -> tuple[float, ...] | None:
+        return None
+
+    def start_motion(
+        self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
+    ) -> float:
+        self.started.append(target)
+        return 1.0
+
+
+@pytest.mark.parametrize(
+    ("target", "code"),
+    [
+        (ARTICLE_HOME, SimErrorCode.UNREACHABLE),
+        (TM5_JOINT_LIMIT, SimErrorCode.JOINT_LIMIT),
+        (TM5_SINGULAR, SimErrorCode.SINGULARITY),
+    ],
+)
+def test_a_backend_without_joints_gets_the_models_check(target: Pose, code: SimErrorCode) -> None:
+    backend = JointlessBackend()
+    ctl, bank, _, _ = article(backend=backend)
+    send_article(bank, target)
+    ctl.tick(DT)
+    assert bank.get("error_code") == code
+    assert backend.started == []
