@@ -15,6 +15,7 @@ from typing import Any
 import pytest
 from pymodbus.client import ModbusTcpClient
 
+import tmmaster
 from test_sim_controller import (
     DT,
     article,
@@ -417,3 +418,20 @@ def test_a_backend_without_joints_gets_the_models_check(target: Pose, code: SimE
     ctl.tick(DT)
     assert bank.get("error_code") == code
     assert backend.started == []
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_master_with_the_same_tool_drives_the_simulator_through_the_cycle(
+    memory_simulator_factory: Callable[..., Simulator], profile: str
+) -> None:
+    sim = memory_simulator_factory(profile, tool=TOOL, time_scale=20)
+    with tmmaster.connect(sim.url, profile=profile, tool=TOOL) as robot:
+        robot.wait_until_ready()
+        for target, motion in CYCLE:
+            robot.move_to(target, speed=100, motion=motion)
+            assert sim.tcp_pose() == target
+    assert sim.field("error_code" if profile == "article" else "last_error_code") == 0
+    if profile == "tmflow":
+        # Back home, tool down: the flange (7001-7012) is 120 mm above the TCP.
+        flange = Pose(*(sim.field(f"flange_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")))
+        assert flange.is_close(DEFAULT_HOME.offset(dz=120), mm=1e-3, deg=1e-3)
