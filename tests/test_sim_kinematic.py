@@ -227,7 +227,7 @@ def test_the_tool_offset_is_the_tcp_in_the_flange_frame() -> None:
     assert flange is not None
     # Tool pointing down: the flange is 120 mm above the TCP.
     assert flange.is_close(DEFAULT_HOME.offset(dz=120), mm=1e-3, deg=1e-3)
-    with pytest.raises(TypeError, match="tool"):
+    with pytest.raises(tmmaster.ConfigError, match="tool"):
         KinematicBackend(TM5, tool=(0, 0, 120, 0, 0, 0))  # type: ignore[arg-type]
 
 
@@ -435,3 +435,19 @@ def test_a_master_with_the_same_tool_drives_the_simulator_through_the_cycle(
         # Back home, tool down: the flange (7001-7012) is 120 mm above the TCP.
         flange = Pose(*(sim.field(f"flange_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")))
         assert flange.is_close(DEFAULT_HOME.offset(dz=120), mm=1e-3, deg=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("target", "reason"), [(TM5_JOINT_LIMIT, "joint_limit"), (TM5_SINGULAR, "singularity")]
+)
+def test_tmflow_reports_unreachable_and_logs_the_reason(target: Pose, reason: str) -> None:
+    ctl, bank, _, log = tmflow()
+    send_tmflow(bank, 1, target=target)
+    ctl.tick(DT)
+    assert (bank.get("ack_seq"), bank.get("done_seq")) == (1, 0)
+    # The profile's result_code has no joint_limit / singularity label: unreachable.
+    assert (bank.get("result_code"), bank.get("robot_state")) == (1, 2)
+    assert any(
+        name == "sim.command_rejected" and fields.get("reason") == reason
+        for _, name, fields in log.events
+    )

@@ -540,13 +540,6 @@ class RobotController:
                 return
             rejected = self._model_rejects(target)
             if rejected is not None:
-                self._log.warning(
-                    "sim.command_rejected",
-                    device=self._profile.name,
-                    seq=seq,
-                    reason=rejected.reason,
-                    target=str(target),
-                )
                 self._reject_sequence(seq, rejected.reason)
                 return
             accel = self._accel_time_s

@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from .. import _kinematics as kin
-from .._exceptions import UnreachablePoseError
+from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import DEFAULT_HOME, MotionType, Pose
 from .._robot_models import Joints, RobotModel, trapezoid_progress
 from ._backend import GripperState, MotionRejectedError, ObjectState, RejectReason
@@ -81,7 +81,7 @@ class KinematicBackend:
                 f"{gripper_min_width_mm} and {gripper_max_width_mm}"
             )
         if tool is not None and not isinstance(tool, Pose):
-            raise TypeError(
+            raise ConfigError(
                 f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
             )
         self._model = model
