@@ -138,6 +138,8 @@ class SimObject(_Part):
     pose: list[float]
     """``[x, y, z, rx, ry, rz]``, mm and degrees."""
     held: bool
+    resting_on: str | None = None
+    """What the part rests on (``table`` or another part's name); null while held or falling."""
     on_place: bool
 
 
@@ -150,6 +152,8 @@ class SimSummary(_Part):
     on_place: bool = False
     """Every part on the place position."""
     time_scale: float = 1.0
+    physics: str = "kinematic"
+    """The simulator's physics backend: ``kinematic`` or ``mujoco``."""
     tcp_path: list[tuple[float, float, float, float]] = Field(default_factory=list)
     """The TCP as the simulator saw it: ``[t_s, x, y, z]`` rows, ``t_s`` in wall seconds since
     the run started (same clock as ``timeline``), a row whenever it moved."""
