@@ -303,8 +303,13 @@ class RobotModel(BaseModel):
         accel_time_s: float | None = None,
         start_joints_deg: Sequence[float] | None = None,
         tool: Pose | None = None,
+        samples: Sequence[Sequence[float]] | None = None,
     ) -> float:
-        """Duration of a Line move: the TCP trapezoid, slowed where a joint would be too fast."""
+        """Duration of a Line move: the TCP trapezoid, slowed where a joint would be too fast.
+
+        ``samples`` are the path's joints from :meth:`line_joints`, when the caller has
+        them already (they are computed otherwise).
+        """
         scale = _speed_scale(speed_percent)
         ramp = self.accel_time_s if accel_time_s is None else accel_time_s
         rotation = math.degrees(
@@ -316,7 +321,8 @@ class RobotModel(BaseModel):
             trapezoid_time(start.distance_to(target), self.tcp_speed_mm_s * scale, ramp),
             trapezoid_time(rotation, min(self.joint_speed_deg_s[3:]) * scale, ramp),
         )
-        samples = self.line_joints(start, target, start_joints_deg=start_joints_deg, tool=tool)
+        if samples is None:
+            samples = self.line_joints(start, target, start_joints_deg=start_joints_deg, tool=tool)
         steps = len(samples) - 1
         # Peak path rate of a trapezoid of duration T is 1 / (T - ramp) (path fraction / s);
         # joint i moves |dq_i/ds| deg per unit path, so T >= ramp + max |dq_i/ds| / v_i.

@@ -171,8 +171,8 @@ class KinematicBackend:
             target,
             speed_percent=speed_percent,
             accel_time_s=accel_time_s,
-            start_joints_deg=self._joints,
             tool=self._tool,
+            samples=samples,
         )
         # The path starts where the joints are (the solver's copy differs by its tolerance).
         samples[0] = self._joints

@@ -481,17 +481,19 @@ class MuJoCoBackend:
                     start, target, start_joints_deg=here, tool=self._tool
                 )
                 samples += [tuple(q) for q in path[1:]]
+                duration = self._model.line_time(
+                    start,
+                    target,
+                    speed_percent=speed_percent,
+                    accel_time_s=accel_time_s,
+                    tool=self._tool,
+                    samples=path,
+                )
             else:
                 samples.append(tuple(self._model.inverse(target, seed_deg=here, tool=self._tool)))
-            duration = self._model.motion_time(
-                start,
-                target,
-                speed_percent=speed_percent,
-                motion=motion,
-                accel_time_s=accel_time_s,
-                start_joints_deg=here,
-                tool=self._tool,
-            )
+                duration = self._model.ptp_time(
+                    here, samples[-1], speed_percent=speed_percent, accel_time_s=accel_time_s
+                )
         except UnreachablePoseError as exc:
             reason: RejectReason = "reach"
             if exc.reason == "joint_limit":
