@@ -255,6 +255,7 @@ class Robot:
         # The joints of the last commanded target: inverse kinematics starts there, so
         # validation and timing follow the branch the arm is on.
         self._joints_hint: tuple[float, ...] | None = None
+        self._last_target: Pose | None = None
         self.max_speed_percent = max_speed_percent
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
@@ -448,6 +449,13 @@ class Robot:
         A Line whose straight path leaves the arm's range raises
         :class:`UnreachablePoseError`.
         """
+        last = self._last_target
+        if last is not None and start.is_close(
+            last, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+        ):
+            # The arm is where the last move put it (the read pose differs by the
+            # registers' rounding): plan from the exact target, whose joints are known.
+            start = last
         return self.model.motion_time(
             start,
             target,
@@ -476,7 +484,7 @@ class Robot:
         handle = self.start_command(
             Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
         )
-        self._joints_hint = joints
+        self._joints_hint, self._last_target = joints, target
         return handle
 
     def start_command(self, command: Command, *, timeout: float | None = None) -> Motion:

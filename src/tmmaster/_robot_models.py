@@ -110,6 +110,12 @@ class RobotModel(BaseModel):
         the seed only (no restart from other postures): a continuous path uses it.
         """
         seed = self.ready_joints_deg if seed_deg is None else _six(seed_deg)
+        # A cycle repeats its poses from (nearly) the same joints: the answer is a pure
+        # function of the pose and the seed rounded to 0.001 deg, which keeps the cache
+        # hitting where solutions differ by the solver's tolerance.
+        return _cached_inverse(self, pose, _rounded(seed), tool, same_branch)
+
+    def _solve(self, pose: Pose, seed: Joints, tool: Pose | None, same_branch: bool) -> Joints:
         target = kin.pose_to_transform(pose)
         tool_t = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
         if tool is None and self._outside_reach_sphere(pose):
@@ -156,6 +162,16 @@ class RobotModel(BaseModel):
         raise UnreachablePoseError(
             f"pose {pose} cannot be taken by a {self.name}: {detail}", reason=reason, pose=pose
         )
+
+    def _start_joints(
+        self, start: Pose, joints_deg: Sequence[float] | None, tool: Pose | None
+    ) -> Joints:
+        """The joints a move starts from: the given ones when they put the arm at ``start``."""
+        if joints_deg is not None:
+            joints = _six(joints_deg)
+            if self.forward(joints, tool=tool).is_close(start, mm=1e-3, deg=1e-3):
+                return joints
+        return self.inverse(start, seed_deg=joints_deg, tool=tool)
 
     def singularity(self, joints_deg: Sequence[float]) -> str | None:
         """Which singularity the joints are too close to (wrist, elbow, shoulder), or None."""
@@ -268,7 +284,19 @@ class RobotModel(BaseModel):
         Raises :class:`~tmmaster.UnreachablePoseError` when a point of the path cannot be
         taken or the arm would have to flip configuration on the way.
         """
-        seed = self.inverse(start, seed_deg=start_joints_deg, tool=tool)
+        seed = self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg)
+        return list(_cached_line(self, start, target, _rounded(seed), tool, step_mm, step_deg))
+
+    def _line(
+        self,
+        start: Pose,
+        target: Pose,
+        start_joints: Joints,
+        tool: Pose | None,
+        step_mm: float,
+        step_deg: float,
+    ) -> tuple[Joints, ...]:
+        seed = self._start_joints(start, start_joints, tool)
         a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
         rotation = math.degrees(math.hypot(*kin.rotation_error(a, b)))
         steps = max(1, math.ceil(max(start.distance_to(target) / step_mm, rotation / step_deg)))
@@ -292,7 +320,7 @@ class RobotModel(BaseModel):
                     pose=pose,
                 )
             samples.append(joints)
-        return samples
+        return tuple(samples)
 
     def line_time(
         self,
@@ -359,9 +387,29 @@ class RobotModel(BaseModel):
                 start_joints_deg=start_joints_deg,
                 tool=tool,
             )
-        first = self.inverse(start, seed_deg=start_joints_deg, tool=tool)
+        first = self._start_joints(start, start_joints_deg, tool)
         last = self.inverse(target, seed_deg=first, tool=tool)
         return self.ptp_time(first, last, speed_percent=speed_percent, accel_time_s=accel_time_s)
+
+
+@functools.lru_cache(maxsize=1024)
+def _cached_inverse(
+    model: RobotModel, pose: Pose, seed: Joints, tool: Pose | None, same_branch: bool
+) -> Joints:
+    return model._solve(pose, seed, tool, same_branch)
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_line(
+    model: RobotModel,
+    start: Pose,
+    target: Pose,
+    seed: Joints,
+    tool: Pose | None,
+    step_mm: float,
+    step_deg: float,
+) -> tuple[Joints, ...]:
+    return model._line(start, target, seed, tool, step_mm, step_deg)
 
 
 @functools.lru_cache(maxsize=32)
@@ -378,6 +426,11 @@ def _speed_scale(speed_percent: float) -> float:
     if not 0 < speed_percent <= 100:
         raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
     return speed_percent / 100.0
+
+
+def _rounded(joints: Joints) -> Joints:
+    r = [round(q, 3) for q in joints]
+    return (r[0], r[1], r[2], r[3], r[4], r[5])
 
 
 def _nearest(candidates: list[float], reference: float) -> float:
