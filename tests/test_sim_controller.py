@@ -17,7 +17,7 @@ from tmmaster._registers import TARGET_FIELDS, RegisterMap, Table
 from tmmaster._robot_models import robot_model
 from tmmaster.sim._backend import MotionRejectedError, RejectReason
 from tmmaster.sim._bank import RegisterBank
-from tmmaster.sim._controller import RobotController, SimErrorCode
+from tmmaster.sim._controller import RobotController, SimErrorCode, controller_for
 from tmmaster.sim._faults import (
     EstopFault,
     Fault,
@@ -145,7 +145,7 @@ def article(
     bank = RegisterBank(profile)
     backend = KinematicBackend(model) if backend is None else backend
     log = ListLogger()
-    ctl = RobotController(profile, bank, backend, model, faults=faults, init_time_s=INIT_S, log=log)
+    ctl = controller_for(profile, bank, backend, model, faults=faults, init_time_s=INIT_S, log=log)
     if initialise:
         run(ctl, INIT_S)
     return ctl, bank, backend, log
@@ -175,7 +175,7 @@ def tmflow(
     bank = RegisterBank(profile)
     backend = KinematicBackend(model) if backend is None else backend
     log = ListLogger()
-    ctl = RobotController(
+    ctl = controller_for(
         profile,
         bank,
         backend,
@@ -257,7 +257,7 @@ class RecordingBank(RegisterBank):
 def test_article_sets_moving_before_it_clears_the_command() -> None:
     profile = robot_profile("article")
     bank = RecordingBank(profile)
-    ctl = RobotController(profile, bank, KinematicBackend(MODEL), MODEL, init_time_s=0.0)
+    ctl = controller_for(profile, bank, KinematicBackend(MODEL), MODEL, init_time_s=0.0)
     ctl.tick(DT)
     send_article(bank, PART)
     bank.sets.clear()
@@ -268,7 +268,7 @@ def test_article_sets_moving_before_it_clears_the_command() -> None:
 def test_article_reports_the_error_before_it_clears_the_command() -> None:
     profile = robot_profile("article")
     bank = RecordingBank(profile)
-    ctl = RobotController(profile, bank, KinematicBackend(SMALL), SMALL, init_time_s=0.0)
+    ctl = controller_for(profile, bank, KinematicBackend(SMALL), SMALL, init_time_s=0.0)
     ctl.tick(DT)
     send_article(bank, FAR)
     bank.sets.clear()
@@ -279,7 +279,7 @@ def test_article_reports_the_error_before_it_clears_the_command() -> None:
 def test_tmflow_writes_results_before_the_state() -> None:
     profile = robot_profile("tmflow")
     bank = RecordingBank(profile)
-    ctl = RobotController(profile, bank, KinematicBackend(SMALL), SMALL, init_time_s=0.0)
+    ctl = controller_for(profile, bank, KinematicBackend(SMALL), SMALL, init_time_s=0.0)
     ctl.tick(DT)
     send_tmflow(bank, 1, target=FAR)
     bank.sets.clear()
@@ -453,7 +453,7 @@ def test_article_robot_error_at_the_nth_move() -> None:
 def test_article_robot_error_code_must_fit_the_error_register() -> None:
     profile = robot_profile("article")
     with pytest.raises(ValueOutOfRangeError, match="error_code"):
-        RobotController(
+        controller_for(
             profile,
             RegisterBank(profile),
             KinematicBackend(MODEL),
@@ -559,7 +559,7 @@ def test_article_pose_that_cannot_be_encoded_is_an_error() -> None:
     backend = KinematicBackend(MODEL, home=Pose(400, 0, 300, 180, 0, 90))
     profile = robot_profile("article")
     bank = RegisterBank(profile)
-    ctl = RobotController(profile, bank, backend, MODEL, init_time_s=INIT_S, log=ListLogger())
+    ctl = controller_for(profile, bank, backend, MODEL, init_time_s=INIT_S, log=ListLogger())
     run(ctl, INIT_S)
     assert bank.get("robot_mode") == 7
     assert bank.get("error_code") == SimErrorCode.POSE_OUT_OF_RANGE
@@ -1233,7 +1233,7 @@ def test_article_backend_rejection_is_an_error_with_the_reasons_code(
     bank = RecordingBank(profile)
     log = ListLogger()
     backend = RejectingBackend(reason)
-    ctl = RobotController(profile, bank, backend, MODEL, init_time_s=INIT_S, log=log)
+    ctl = controller_for(profile, bank, backend, MODEL, init_time_s=INIT_S, log=log)
     run(ctl, INIT_S)
     bank.sets.clear()
     send_article(bank, AIR)

@@ -1,38 +1,45 @@
-"""The simulated robot controller: handshakes, error codes and device faults, tick by tick.
+"""The simulated robot controller: what both handshakes share, tick by tick.
 
-The controller owns no socket, no thread and no clock. The server (or a test) calls
-:meth:`RobotController.tick` with the simulated time that passed; everything the
-controller does happens inside a tick, never when a register is written, so a master
-sees exactly the race a real robot shows: right after it writes a command, before the
-next tick, nothing has been acknowledged yet.
+The controller owns no socket, no thread and no clock (a :class:`~._device.SimDevice`).
+The server (or a test) calls :meth:`RobotController.tick` with the simulated time that
+passed; everything the controller does happens inside a tick, never when a register is
+written, so a master sees exactly the race a real robot shows: right after it writes a
+command, before the next tick, nothing has been acknowledged yet.
 
 Per tick, in this order: advance the physics backend, check that it is ready (else
-rebuild it), fire timed faults, run the profile's handshake (advance the running
-command, then take a pending one), publish the TCP pose. The rules, error codes and
-fault effects are documented in ``docs/simulator-model.md``; keep the two in step.
+rebuild it), fire timed faults (the device prologue), run the profile's handshake
+(advance the running command, then take a pending one), publish the TCP pose.
+
+As the client has one channel per handshake (``_channels.py``), the simulator has one
+controller per handshake, chosen by :func:`controller_for`:
+:class:`~._clear_on_accept.ClearOnAcceptController` (the article) and
+:class:`~._sequence.SequenceController` (tmflow). This base holds what they share:
+backend driving, device faults, the error and e-stop state, motion records, pose
+publication under the encodable range rule and Techman's fixed table. The rules, error
+codes and fault effects are documented in ``docs/simulator-model.md``; keep the two in
+step.
 """
 
 from __future__ import annotations
 
-import math
 import time
+from abc import abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Literal, Protocol
+from typing import Any, ClassVar, Literal
 
 from .._codec import allowed_range, encode
 from .._exceptions import UnreachablePoseError, ValueOutOfRangeError
-from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RegisterField, RobotProfile
 from .._robot_models import RobotModel
 from ._backend import MotionRejectedError, PhysicsBackend
 from ._bank import RegisterBank
+from ._device import Logger, SimDevice
 from ._faults import (
     EstopFault,
     Fault,
-    GraspMissFault,
     LateAckFault,
     RobotErrorFault,
     StallFault,
@@ -41,9 +48,6 @@ from ._faults import (
 
 #: Faults that fire during the N-th motion.
 _MoveFault = RobotErrorFault | StallFault | EstopFault
-
-#: While the backend stays not ready, ``reinitialize()`` is retried this often (simulated s).
-REINITIALIZE_RETRY_S = 1.0
 
 
 class SimErrorCode(IntEnum):
@@ -68,35 +72,10 @@ class SimErrorCode(IntEnum):
     EMERGENCY_STOP = 0x0200
 
 
-#: Article error code of each reason a backend may give for refusing a motion.
-_REJECT_CODES = {
-    "reach": SimErrorCode.UNREACHABLE,
-    "joint_limit": SimErrorCode.JOINT_LIMIT,
-    "singularity": SimErrorCode.SINGULARITY,
-}
-
-#: tmflow result_code label of each reason (a profile without the label reports unreachable).
-_REJECT_RESULTS = {
-    "reach": "unreachable",
-    "joint_limit": "joint_limit",
-    "singularity": "singularity",
-}
-
-
 def _saturate(field: RegisterField, value: float) -> float:
     """``value`` clamped into what ``field`` can encode."""
     low, high = allowed_range(field)
     return min(max(value, low), high)
-
-
-class Logger(Protocol):
-    """The part of a structlog logger the simulator uses."""
-
-    def info(self, event: str, **kw: Any) -> Any:
-        """Log an ordinary state change."""
-
-    def warning(self, event: str, **kw: Any) -> Any:
-        """Log a fault or a refused command."""
 
 
 @dataclass(frozen=True)
@@ -134,8 +113,12 @@ class _Active:
     miss: bool = False
 
 
-class RobotController:
-    """Simulated TM robot behind one robot profile: runs its handshake on every tick."""
+class RobotController(SimDevice[RobotProfile]):
+    """Simulated TM robot behind one robot profile; a subclass per handshake runs it."""
+
+    #: The register holding the robot error code (the article's current error,
+    #: tmflow's last one).
+    _error_code_field: ClassVar[str]
 
     def __init__(
         self,
@@ -155,56 +138,46 @@ class RobotController:
         gripper_force_n: float = 40.0,
         initial_seq: int = 0,
     ) -> None:
-        if bank.register_map is not profile and bank.register_map != profile:
-            raise ValueError("the register bank must serve the controller's profile")
-        if init_time_s < 0 or (accel_time_s is not None and accel_time_s < 0):
-            raise ValueError("init_time_s and accel_time_s must be >= 0")
-        self._profile = profile
-        self._bank = bank
-        self._backend = backend
-        self._model = model
-        self._init_time_s = init_time_s
-        self._accel_time_s = model.accel_time_s if accel_time_s is None else accel_time_s
-        self._log: Logger = get_logger("tmmaster.sim") if log is None else log
-        self._step_backend = step_backend
-        self._gripper_open = gripper_open_width_mm
-        self._gripper_close = gripper_close_width_mm
-        self._gripper_speed = gripper_speed_mm_s
-        self._gripper_force = gripper_force_n
-        self._article = profile.handshake is Handshake.CLEAR_ON_ACCEPT
-        if initial_seq and (self._article or not 0 <= initial_seq <= profile.seq_max):
+        if accel_time_s is not None and accel_time_s < 0:
+            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+        if initial_seq and not self._takes_initial_seq(profile, initial_seq):
             raise ValueError(
                 f"initial_seq must be 0..{profile.seq_max} with a sequence profile,"
                 f" got {initial_seq}"
             )
-        self._initial_seq = initial_seq
-
         self._move_faults: list[_MoveFault] = []
         self._timed_estops: list[EstopFault] = []
-        self._grasp_misses: set[int] = set()
         self._late_acks: list[LateAckFault] = []
-        for fault in faults:
-            self._add_fault(fault)
+        super().__init__(
+            profile,
+            bank,
+            backend,
+            faults=faults,
+            init_time_s=init_time_s,
+            step_backend=step_backend,
+            log=log,
+        )
+        self._model = model
+        self._accel_time_s = model.accel_time_s if accel_time_s is None else accel_time_s
+        self._gripper_open = gripper_open_width_mm
+        self._gripper_close = gripper_close_width_mm
+        self._gripper_speed = gripper_speed_mm_s
+        self._gripper_force = gripper_force_n
+        self._initial_seq = initial_seq
 
-        self._time_s = 0.0
-        self._initialised = False
         self._active: _Active | None = None
         self._error_code = 0
         self._estop = False
         self._moves_started = 0
-        self._grasps = 0
-        self._running = False  # tmflow: the TMflow project runs
-        self._project_started_s = 0.0  # tmflow: when the project last started
         self._late_key: object = None
         self._late_since = 0.0
-        self._reinit_at: float | None = None
-        self._gripper_seen = 0  # article: last gripper_command value acted upon
         self._gripper_closing = False
         self._gripper_miss = False
         self._motion_log: list[MotionRecord] = []
         self._saturating = False  # the published pose is saturated (encodable range rule)
         self._rest_error_raised = False  # POSE_OUT_OF_RANGE raised for the current rest
-        self._reset_registers()
+        self._reset_handshake_registers()
+        self._publish_pose()
 
     # -- read-only state for the server and tests --------------------------------------
 
@@ -212,16 +185,6 @@ class RobotController:
     def profile(self) -> RobotProfile:
         """The robot profile whose handshake the controller runs."""
         return self._profile
-
-    @property
-    def bank(self) -> RegisterBank:
-        """The register memory the controller works on."""
-        return self._bank
-
-    @property
-    def time_s(self) -> float:
-        """Simulated seconds since the controller started."""
-        return self._time_s
 
     @property
     def moves_started(self) -> int:
@@ -234,11 +197,6 @@ class RobotController:
         return tuple(self._motion_log)
 
     @property
-    def grasps(self) -> int:
-        """Gripper close commands executed."""
-        return self._grasps
-
-    @property
     def error_code(self) -> int:
         """Current robot error code, 0 when there is no robot error."""
         return self._error_code
@@ -249,9 +207,9 @@ class RobotController:
         return self._estop
 
     @property
+    @abstractmethod
     def project_running(self) -> bool:
         """tmflow: the TMflow project runs; article: the robot is initialised."""
-        return self._running if not self._article else self._initialised
 
     @property
     def active_target(self) -> Pose | None:
@@ -266,7 +224,7 @@ class RobotController:
             return "error"
         if not self._initialised:
             return "initialising"
-        if not self._article and not self._running:
+        if not self.project_running:
             return "stopped"
         if self._active is None:
             return "idle"
@@ -278,29 +236,30 @@ class RobotController:
         """Add a device fault at run time; its at_move / at_grasp / after_s count from now."""
         if is_network_fault(fault):
             raise ValueError(f"{fault.kind} is a network fault: the Modbus server plays it")
-        at_move = getattr(fault, "at_move", None)
-        if at_move is not None:
-            fault = fault.model_copy(update={"at_move": at_move + self._moves_started})
-        elif isinstance(fault, EstopFault) and fault.after_s is not None:
-            fault = fault.model_copy(update={"after_s": fault.after_s + self._time_s})
-        elif isinstance(fault, GraspMissFault):
-            fault = fault.model_copy(update={"at_grasp": fault.at_grasp + self._grasps})
-        self._add_fault(fault)
-        self._log.info("sim.fault_injected", device=self._profile.name, fault=fault.kind)
+        super().inject(fault)
 
     def clear_faults(self) -> None:
         """Forget every device fault not yet fired (an effect already under way stays)."""
+        super().clear_faults()
         self._move_faults.clear()
         self._timed_estops.clear()
-        self._grasp_misses.clear()
         self._late_acks.clear()
         self._late_key = None
         if self._active is not None:
             self._active.fault = None
-        self._log.info("sim.faults_cleared", device=self._profile.name)
+        self._log.info("sim.faults_cleared", device=self._name)
+
+    def _from_now(self, fault: Fault) -> Fault | None:
+        at_move = getattr(fault, "at_move", None)
+        if at_move is not None:
+            return fault.model_copy(update={"at_move": at_move + self._moves_started})
+        if isinstance(fault, EstopFault) and fault.after_s is not None:
+            return fault.model_copy(update={"after_s": fault.after_s + self._time_s})
+        return super()._from_now(fault) or fault
 
     def _add_fault(self, fault: Fault) -> None:
         # Only device faults concern the controller; network faults are the server's.
+        super()._add_fault(fault)
         if isinstance(fault, RobotErrorFault):
             # Refuse a code the error register cannot hold when it is given, not mid-run.
             encode(self._profile.field(self._error_code_field), fault.code)
@@ -308,10 +267,15 @@ class RobotController:
             self._timed_estops.append(fault)
         elif isinstance(fault, RobotErrorFault | StallFault | EstopFault):
             self._move_faults.append(fault)
-        elif isinstance(fault, GraspMissFault):
-            self._grasp_misses.add(fault.at_grasp)
         elif isinstance(fault, LateAckFault):
             self._late_acks.append(fault)
+
+    def _fire_timed_faults(self) -> None:
+        for fault in list(self._timed_estops):
+            if fault.after_s is not None and self._time_s + 1e-9 >= fault.after_s:
+                self._timed_estops.remove(fault)
+                self._log.warning("sim.fault_fired", device=self._name, fault="estop")
+                self.press_estop()
 
     # -- operator actions --------------------------------------------------------------
 
@@ -322,18 +286,8 @@ class RobotController:
         code = self._error_code
         self._error_code = 0
         self._estop = False
-        if self._article:
-            # A reset never arms anything: a command (or gripper command) written before or
-            # during the error is discarded, not executed now that the robot can move again.
-            self._discard_article_commands("reset")
-            self._bank.set("error_code", 0)
-            self._bank.set("robot_mode", self._mode_now())
-        else:
-            # last_error_code keeps the code: it is the *last* error, not the current one.
-            self._bank.set("estop", False)
-            self._bank.set("error", False)
-            self._publish_tm_state()
-        self._log.info("sim.error_cleared", device=self._profile.name, code=code)
+        self._publish_error_cleared()
+        self._log.info("sim.error_cleared", device=self._name, code=code)
 
     def press_play(self) -> None:
         """Press Play on the pendant: acted on at the next tick, like the Play/Pause coil."""
@@ -345,213 +299,76 @@ class RobotController:
         if self._estop:
             return
         self._estop = True
-        self._log.warning("sim.estop", device=self._profile.name, time_s=self._time_s)
-        if not self._article:
-            self._bank.set("estop", True)
+        self._log.warning("sim.estop", device=self._name, time_s=self._time_s)
+        self._publish_estop()
         self._enter_error(SimErrorCode.EMERGENCY_STOP, "emergency stop")
+
+    # -- what each handshake does its own way --------------------------------------------
+
+    @staticmethod
+    @abstractmethod
+    def _takes_initial_seq(profile: RobotProfile, seq: int) -> bool:
+        """True when the handshake can start as if command ``seq`` had run (seq != 0)."""
+
+    @abstractmethod
+    def _reset_handshake_registers(self) -> None:
+        """Put the handshake's registers in their power-on state."""
+
+    @abstractmethod
+    def _run_handshake(self, dt: float, ready: bool) -> None:
+        """Advance the running command, then take a pending one."""
+
+    @abstractmethod
+    def _publish_error(self, code: int, reason: str) -> None:
+        """Report the robot error just entered (the motion is already stopped)."""
+
+    @abstractmethod
+    def _publish_error_cleared(self) -> None:
+        """Report that the operator reset the error."""
+
+    def _publish_estop(self) -> None:
+        """Show the pressed e-stop before the error it causes (nothing by default)."""
+
+    @abstractmethod
+    def _target_rejected(self, seq: int, reason: str) -> None:
+        """The arm cannot take the target of command ``seq``, for ``reason``."""
+
+    @abstractmethod
+    def _backend_failed(self, seq: int, kind: Literal["motion", "gripper"]) -> None:
+        """The backend raised while starting command ``seq``."""
+
+    @abstractmethod
+    def _gripper_started(self, number: int, seq: int, *, close: bool, miss: bool) -> None:
+        """The gripper of command ``seq`` started to move."""
+
+    @abstractmethod
+    def _command_done(self, active: _Active) -> None:
+        """The running command finished: the arm settled or the fingers stopped."""
+
+    @abstractmethod
+    def _motion_failed(self, active: _Active) -> None:
+        """The running motion was lost with the rebuilt physics (already stopped)."""
+
+    def _running_timer_s(self) -> float:
+        """Techman's Running Timer: seconds the project has run (0 by default)."""
+        return 0.0
 
     # -- the tick ----------------------------------------------------------------------
 
-    def tick(self, dt: float) -> None:
-        """Advance the controller (and, unless told otherwise, the backend) by ``dt`` seconds."""
-        if not math.isfinite(dt) or dt < 0:
-            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
-        self._time_s += dt
-        if self._step_backend:
-            self._backend.step(dt)
-        ready = self._check_ready()
-        for fault in list(self._timed_estops):
-            if fault.after_s is not None and self._time_s + 1e-9 >= fault.after_s:
-                self._timed_estops.remove(fault)
-                self._log.warning("sim.fault_fired", device=self._profile.name, fault="estop")
-                self.press_estop()
-        if not self._initialised and self._time_s + 1e-9 >= self._init_time_s:
-            self._initialised = True
-            self._log.info("sim.initialised", device=self._profile.name)
-            if self._article:
-                self._bank.set("robot_mode", self._mode_now())
-            elif not self._error_code:
-                self._start_project()
-        if self._article:
-            self._tick_article(dt, ready)
-        else:
-            self._tick_sequence(dt, ready)
+    def _run(self, dt: float, ready: bool) -> None:
+        self._run_handshake(dt, ready)
         if ready:
             self._publish_pose()
 
-    # -- clear-on-accept (article) -----------------------------------------------------
+    def _on_rebuilt(self, survived: bool) -> None:
+        active = self._active
+        if survived is not True and active is not None and active.kind == "motion":
+            # The rebuilt physics lost the running motion: it fails, never reported done.
+            self._log.warning("sim.motion_lost", device=self._name, move=active.number)
+            self._backend.stop_motion()
+            self._motion_failed(active)
 
-    def _tick_article(self, dt: float, ready: bool) -> None:
-        if self._active is not None:
-            self._advance(dt, ready)
-        command_field = self._profile.field("command")
-        raw = int(self._bank.get("command"))
-        label = command_field.label(raw)
-        if raw == 0:
-            self._late_key = None
-        elif label == "stop":
-            # Stop is taken in any state, even while moving or in error.
-            self._stop_motion()
-            self._bank.set("command", 0)
-            self._log.info("sim.command_accepted", device=self._profile.name, command="stop")
-            self._check_done(ready)
-        elif self._initialised and not self._error_code and self._active is None:
-            if label in ("ptp", "line"):
-                self._take_article_motion(MotionType(label), ready)
-            else:
-                self._log.warning("sim.command_rejected", device=self._profile.name, command=raw)
-                self._enter_error(SimErrorCode.INVALID_COMMAND, f"unknown command {raw}")
-                self._bank.set("command", 0)
-        # Otherwise (initialising, in error, or moving) the command waits in its register.
-        if self._profile.has("gripper_command"):
-            self._tick_article_gripper(ready)
-
-    def _take_article_motion(self, motion: MotionType, ready: bool) -> None:
-        block = (int(self._bank.get("command")), *self._targets_raw(), self._bank.get("speed"))
-        if self._late_ack_pending(block, motion_command=True) or not ready:
-            return
-        target, speed = self._read_target()
-        if target is None or speed is None:
-            self._enter_error(SimErrorCode.INVALID_COMMAND, "invalid speed or target")
-            self._bank.set("command", 0)
-            return
-        rejected = self._model_rejects(target)
-        if rejected is not None:
-            self._log.warning(
-                "sim.command_rejected",
-                device=self._profile.name,
-                reason=rejected.reason,
-                target=str(target),
-            )
-            # Error first, then the acknowledgement: a master that sees command == 0
-            # already sees the error.
-            self._enter_error(
-                _REJECT_CODES.get(rejected.reason, SimErrorCode.UNREACHABLE),
-                f"target rejected: {rejected.reason}",
-            )
-            self._bank.set("command", 0)
-            return
-        self._log.info(
-            "sim.command_accepted",
-            device=self._profile.name,
-            command=motion.value,
-            target=str(target),
-            speed=speed,
-        )
-        if not self._start_motion(target, motion, speed, self._accel_time_s, seq=0):
-            # Refused by the backend: the error is already set; acknowledge after it.
-            self._bank.set("command", 0)
-            return
-        # The contract: moving first, then clear the command, in the same tick.
-        self._bank.set("motion_status", 1)
-        self._bank.set("command", 0)
-
-    def _tick_article_gripper(self, ready: bool) -> None:
-        value = int(self._bank.get("gripper_command"))
-        if (
-            value != self._gripper_seen
-            and ready
-            and self._initialised
-            and not self._error_code
-            and self._profile.field("gripper_command").label(value) in ("open", "close")
-        ):
-            self._gripper_seen = value
-            self._drive_gripper(
-                close=self._profile.field("gripper_command").label(value) == "close"
-            )
-        if self._profile.has("grasp_status"):
-            self._bank.set("grasp_status", int(self._grip_detected()))
-
-    # -- sequence (tmflow) -------------------------------------------------------------
-
-    def _tick_sequence(self, dt: float, ready: bool) -> None:
-        self._handle_buttons()
-        if not self._running:
-            return
-        if self._profile.has("heartbeat"):
-            wrap = int(allowed_range(self._profile.field("heartbeat"))[1]) + 1
-            self._bank.set("heartbeat", (int(self._bank.get("heartbeat")) + 1) % wrap)
-        if self._active is not None:
-            self._advance(dt, ready)
-        if self._active is None and self._running:
-            self._take_sequence_command(ready)
-
-    def _handle_buttons(self) -> None:
-        # Coils are buttons: act on a press, then release them like a spring would.
-        if self._profile.has("stop_project") and self._bank.get("stop_project"):
-            self._bank.set("stop_project", False)
-            if self._running:
-                self._log.info("sim.button", device=self._profile.name, button="stop")
-                self._stop_project("stop button")
-        if self._profile.has("play_pause") and self._bank.get("play_pause"):
-            self._bank.set("play_pause", False)
-            if self._running:
-                # Pausing a running project is not modelled; the press is ignored.
-                self._log.info(
-                    "sim.button_ignored",
-                    device=self._profile.name,
-                    button="play_pause",
-                    reason="project already running",
-                )
-            elif not self._initialised or self._error_code or self._estop:
-                self._log.warning(
-                    "sim.button_ignored",
-                    device=self._profile.name,
-                    button="play_pause",
-                    reason="robot in error" if self._initialised else "initialising",
-                )
-            else:
-                self._log.info("sim.button", device=self._profile.name, button="play_pause")
-                self._start_project()
-
-    def _take_sequence_command(self, ready: bool) -> None:
-        # As the TMflow program reads them: int16, signed (a uint16-style 32768 reads as
-        # -32768), and taken only when seq is the number after ack_seq.
-        seq = int(self._bank.get("seq"))
-        if seq != self._profile.next_seq(int(self._bank.get("ack_seq"))):
-            # Only the next number is a new command: a duplicate of the acknowledged seq,
-            # or a seq a master put back to withdraw a command, is never executed.
-            self._late_key = None
-            return
-        command_field = self._profile.field("command")
-        raw = int(self._bank.get("command"))
-        label = command_field.label(raw)
-        if self._late_ack_pending(seq, motion_command=label in ("ptp", "line")) or not ready:
-            return
-        if label == "none":
-            # A master's cancel: the number is used up, nothing runs.
-            self._bank.set("ack_seq", seq)
-            self._cancel_sequence(seq, "withdrawn by the master")
-            return
-        self._bank.set("ack_seq", seq)
-        self._bank.set("result_code", self._code("result_code", "ok", 0))
-        self._bank.set("robot_state", self._code("robot_state", "busy", 1))
-        self._log.info("sim.command_accepted", device=self._profile.name, seq=seq, command=label)
-        if label in ("ptp", "line"):
-            target, speed = self._read_target()
-            # The guide's check M2: accel_time beyond its declared maximum is invalid too.
-            accel_ok = (
-                not self._profile.has("accel_time")
-                or int(self._bank.get("accel_time"))
-                <= allowed_range(self._profile.field("accel_time"))[1]
-            )
-            if target is None or speed is None or not accel_ok:
-                self._fail_sequence(seq, "invalid_command", 2)
-                return
-            rejected = self._model_rejects(target)
-            if rejected is not None:
-                self._reject_sequence(seq, rejected.reason)
-                return
-            accel = self._accel_time_s
-            if self._profile.has("accel_time"):
-                ms = int(self._bank.get("accel_time"))
-                # 0 means "the program's default", i.e. the controller's accel time.
-                accel = ms / 1000.0 if ms > 0 else self._accel_time_s
-            self._start_motion(target, MotionType(label), speed, accel, seq=seq)
-        elif label in ("gripper_open", "gripper_close"):
-            self._drive_gripper(close=label == "gripper_close", seq=seq)
-        else:
-            self._fail_sequence(seq, "invalid_command", 2)
+    # -- shared machinery --------------------------------------------------------------
 
     def _model_rejects(self, target: Pose) -> UnreachablePoseError | None:
         """Why the arm model refuses ``target``, for a backend without joints of its own.
@@ -568,59 +385,6 @@ class RobotController:
             return exc
         return None
 
-    def _reject_sequence(self, seq: int, reason: str) -> None:
-        """tmflow: a target the arm cannot take, with the reason's own result_code."""
-        unreachable = self._code("result_code", "unreachable", 1)
-        self._fail_sequence(seq, _REJECT_RESULTS.get(reason, "unreachable"), unreachable)
-
-    def _fail_sequence(self, seq: int, result: str, default: int) -> None:
-        self._log.warning("sim.command_rejected", device=self._profile.name, seq=seq, reason=result)
-        # result_code before robot_state: whoever sees "error" sees why.
-        self._bank.set("result_code", self._code("result_code", result, default))
-        self._bank.set("robot_state", self._code("robot_state", "error", 2))
-
-    def _finish_sequence(self, active: _Active) -> None:
-        if active.kind == "gripper" and active.closing and self._profile.has("grasp_status"):
-            self._bank.set("grasp_status", int(self._grip_detected()))
-        elif active.kind == "gripper" and self._profile.has("grasp_status"):
-            self._bank.set("grasp_status", 0)
-        self._bank.set("result_code", self._code("result_code", "ok", 0))
-        self._bank.set("done_seq", active.seq)
-        self._bank.set("robot_state", self._code("robot_state", "idle", 0))
-        self._log.info("sim.command_done", device=self._profile.name, seq=active.seq)
-
-    def _cancel_sequence(self, seq: int, reason: str) -> None:
-        self._log.warning(
-            "sim.command_cancelled", device=self._profile.name, seq=seq, reason=reason
-        )
-        self._bank.set("result_code", self._code("result_code", "cancelled", 5))
-        self._bank.set("robot_state", self._code("robot_state", "error", 2))
-
-    def _start_project(self) -> None:
-        self._running = True
-        self._project_started_s = self._time_s
-        # The start-up rule (docs/tmflow-program.md): a freshly started project never takes
-        # a command written before it started. A pending sequence number is consumed as
-        # cancelled (ack_seq := seq), so neither it nor a late copy of it can run. Any
-        # other value in seq is not a command (the loop would never take it either).
-        seq, ack = int(self._bank.get("seq")), int(self._bank.get("ack_seq"))
-        if seq == self._profile.next_seq(ack):  # the same "next number" rule the loop applies
-            self._bank.set("ack_seq", seq)
-            self._cancel_sequence(seq, "written before the project started")
-        else:
-            self._bank.set("robot_state", self._code("robot_state", "idle", 0))
-        self._bank.set("project_running", True)
-        self._log.info("sim.project_started", device=self._profile.name)
-
-    def _stop_project(self, reason: str) -> None:
-        self._running = False
-        self._stop_motion()
-        self._active = None
-        self._bank.set("project_running", False)
-        self._log.warning("sim.project_stopped", device=self._profile.name, reason=reason)
-
-    # -- shared machinery --------------------------------------------------------------
-
     def _start_motion(
         self, target: Pose, motion: MotionType, speed: float, accel: float, *, seq: int
     ) -> bool:
@@ -633,21 +397,15 @@ class RobotController:
         except MotionRejectedError as exc:  # the backend's own reach / limit check
             self._log.warning(
                 "sim.command_rejected",
-                device=self._profile.name,
+                device=self._name,
                 reason=exc.reason,
                 target=str(target),
             )
-            if self._article:
-                self._enter_error(_REJECT_CODES[exc.reason], f"target rejected: {exc.reason}")
-            else:
-                self._reject_sequence(seq, exc.reason)
+            self._target_rejected(seq, exc.reason)
             return False
         except Exception as exc:  # a backend failure is a robot error, not a crash
-            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
-            if self._article:
-                self._enter_error(SimErrorCode.BACKEND_FAILURE, "backend failed")
-            else:
-                self._fail_sequence(seq, "motion_failed", 3)
+            self._log.warning("sim.backend_failed", device=self._name, error=repr(exc))
+            self._backend_failed(seq, "motion")
             return False
         self._moves_started = number
         self._record(number, motion.value, seq, target, speed)
@@ -657,7 +415,7 @@ class RobotController:
         )
         self._log.info(
             "sim.motion_started",
-            device=self._profile.name,
+            device=self._name,
             move=number,
             motion=motion.value,
             target=str(target),
@@ -667,12 +425,7 @@ class RobotController:
         return True
 
     def _drive_gripper(self, *, close: bool, seq: int = 0) -> None:
-        number = 0
-        miss = False
-        if close:
-            self._grasps += 1
-            number = self._grasps
-            miss = number in self._grasp_misses
+        number, miss = self._count_grasp() if close else (0, False)
         try:
             self._backend.drive_gripper(
                 self._gripper_close if close else self._gripper_open,
@@ -680,22 +433,16 @@ class RobotController:
                 force_n=self._gripper_force,
             )
         except Exception as exc:  # a backend failure is a robot error, not a crash
-            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
-            if self._article:
-                self._enter_error(SimErrorCode.BACKEND_FAILURE, "backend failed")
-            else:
-                self._fail_sequence(seq, "gripper_failed", 4)
+            self._log.warning("sim.backend_failed", device=self._name, error=repr(exc))
+            self._backend_failed(seq, "gripper")
             return
         self._gripper_closing = close
         self._gripper_miss = miss
         self._record(number, "gripper_close" if close else "gripper_open", seq, None, None)
         if miss:
-            self._log.warning(
-                "sim.fault_fired", device=self._profile.name, fault="grasp_miss", grasp=number
-            )
-        self._log.info("sim.gripper", device=self._profile.name, close=close, grasp=number)
-        if not self._article:
-            self._active = _Active("gripper", number, seq=seq, closing=close, miss=miss)
+            self._log_grasp_miss(number)
+        self._log.info("sim.gripper", device=self._name, close=close, grasp=number)
+        self._gripper_started(number, seq, close=close, miss=miss)
 
     def _record(
         self, number: int, kind: str, seq: int, target: Pose | None, speed: float | None
@@ -732,18 +479,15 @@ class RobotController:
             if not self._backend.is_settled():
                 return
             self._active = None
-            self._log.info("sim.motion_done", device=self._profile.name, move=active.number)
-            if self._article:
-                self._bank.set("motion_status", 0)
-            else:
-                self._finish_sequence(active)
+            self._log.info("sim.motion_done", device=self._name, move=active.number)
+            self._command_done(active)
         elif not self._backend.gripper_state().moving:
             self._active = None
-            self._finish_sequence(active)
+            self._command_done(active)
 
     def _fire(self, fault: _MoveFault, active: _Active) -> None:
         self._log.warning(
-            "sim.fault_fired", device=self._profile.name, fault=fault.kind, move=active.number
+            "sim.fault_fired", device=self._name, fault=fault.kind, move=active.number
         )
         if isinstance(fault, StallFault):
             # The arm stops where it is but the motion never reports completion.
@@ -764,49 +508,10 @@ class RobotController:
 
     def _enter_error(self, code: int, reason: str) -> None:
         self._error_code = int(code)
-        self._log.warning(
-            "sim.robot_error", device=self._profile.name, code=int(code), reason=reason
-        )
+        self._log.warning("sim.robot_error", device=self._name, code=int(code), reason=reason)
         self._stop_motion()
         self._active = None
-        if self._article:
-            self._bank.set("error_code", int(code))
-            self._bank.set("robot_mode", self._profile.mode_error)
-            self._bank.set("motion_status", 0)
-            # A robot in error discards a pending command instead of keeping it for later.
-            self._discard_article_commands("error")
-        else:
-            self._bank.set("last_error_code", int(code))
-            self._bank.set("error", True)
-            self._publish_tm_state()
-            if self._running:
-                self._stop_project(reason)
-
-    def _check_ready(self) -> bool:
-        if self._backend.is_ready():
-            if self._reinit_at is not None:
-                self._log.info("sim.backend_ready", device=self._profile.name)
-            self._reinit_at = None
-            return True
-        if self._reinit_at is None or self._time_s - self._reinit_at >= REINITIALIZE_RETRY_S:
-            self._log.warning("sim.backend_reinitialize", device=self._profile.name)
-            self._reinit_at = self._time_s
-            survived = self._backend.reinitialize()
-            active = self._active
-            if survived is not True and active is not None and active.kind == "motion":
-                self._motion_lost(active)
-        return self._backend.is_ready()
-
-    def _motion_lost(self, active: _Active) -> None:
-        """The rebuilt physics lost the running motion: it fails, it is never reported done."""
-        self._log.warning("sim.motion_lost", device=self._profile.name, move=active.number)
-        self._backend.stop_motion()
-        if self._article:
-            self._enter_error(SimErrorCode.MOTION_LOST, "motion lost when the physics was rebuilt")
-        else:
-            self._active = None
-            self._bank.set("result_code", self._code("result_code", "motion_failed", 3))
-            self._bank.set("robot_state", self._code("robot_state", "error", 2))
+        self._publish_error(int(code), reason)
 
     def _late_ack_pending(self, key: object, *, motion_command: bool) -> bool:
         """True while a late_ack fault still holds back the command identified by ``key``."""
@@ -825,9 +530,7 @@ class RobotController:
             # A changed command restarts the delay: it is a different command.
             self._late_key = key
             self._late_since = self._time_s
-            self._log.warning(
-                "sim.fault_fired", device=self._profile.name, fault="late_ack", delay_s=delay
-            )
+            self._log.warning("sim.fault_fired", device=self._name, fault="late_ack", delay_s=delay)
         if self._time_s - self._late_since + 1e-9 >= delay:
             self._late_key = None
             return False
@@ -866,7 +569,7 @@ class RobotController:
             if self._error_code != SimErrorCode.POSE_OUT_OF_RANGE:
                 self._log.warning(
                     "sim.pose_out_of_range",
-                    device=self._profile.name,
+                    device=self._name,
                     pose=str(pose),
                     error=str(exc),
                 )
@@ -886,14 +589,14 @@ class RobotController:
             self._saturating = True
             self._log.warning(
                 "sim.pose_saturated",
-                device=self._profile.name,
+                device=self._name,
                 pose=str(pose),
                 published=str(Pose(*published)),
                 fields=clipped,
             )
         elif not clipped and self._saturating:
             self._saturating = False
-            self._log.info("sim.pose_in_range", device=self._profile.name, pose=str(pose))
+            self._log.info("sim.pose_in_range", device=self._name, pose=str(pose))
         if not at_rest or not clipped:
             self._rest_error_raised = False
         elif not self._rest_error_raised:
@@ -904,7 +607,7 @@ class RobotController:
                 return
             self._log.warning(
                 "sim.pose_out_of_range",
-                device=self._profile.name,
+                device=self._name,
                 pose=str(pose),
                 fields=clipped,
             )
@@ -933,7 +636,7 @@ class RobotController:
         self._bank.set("aut_p", True)  # AUT.P high: able to play in auto mode
         self._publish_tm_state()
         # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
-        running = self._time_s - self._project_started_s if self._running else 0.0
+        running = self._running_timer_s()
         for prefix, seconds in (("running", running), ("up", self._time_s)):
             whole = int(seconds)
             self._bank.set(f"{prefix}_days", whole // 86400)
@@ -947,48 +650,25 @@ class RobotController:
             state = 4 if self._estop else 2 if self._error_code else 0  # STO / error / normal
             self._bank.set("tm_robot_state", state)
 
-    def _discard_article_commands(self, reason: str) -> None:
-        pending = int(self._bank.get("command"))
-        if pending and self._profile.field("command").label(pending) != "stop":
-            self._log.warning(
-                "sim.command_discarded", device=self._profile.name, command=pending, reason=reason
-            )
-        self._bank.set("command", 0)
-        if self._profile.has("gripper_command"):
-            # The gripper register is level-triggered: adopt its value without acting on it.
-            self._gripper_seen = int(self._bank.get("gripper_command"))
-
-    def _mode_now(self) -> int:
-        if self._error_code:
-            return self._profile.mode_error
-        if not self._initialised:
-            return self._code("robot_mode", "initialising", 0)
-        return self._profile.mode_auto
-
     def _code(self, field: str, label: str, default: int) -> int:
         try:
             return self._profile.field(field).code_of(label)
         except KeyError:
             return default
 
-    @property
-    def _error_code_field(self) -> str:
-        return "error_code" if self._article else "last_error_code"
 
-    def _reset_registers(self) -> None:
-        if self._article:
-            self._bank.set("robot_mode", self._mode_now())
-            self._bank.set("motion_status", 0)
-            self._bank.set("error_code", 0)
-        else:
-            for name in ("error", "estop", "project_running"):
-                self._bank.set(name, False)
-            if self._profile.has("ma_mode"):
-                self._bank.set("ma_mode", self._code("ma_mode", "auto", 1))
-            if self._profile.has("project_speed"):
-                self._bank.set("project_speed", 100)
-            self._bank.set("robot_state", self._code("robot_state", "idle", 0))
-            # As if command number initial_seq had been the last one, taken and finished.
-            for name in ("seq", "ack_seq", "done_seq"):
-                self._bank.set(name, self._initial_seq)
-        self._publish_pose()
+def controller_for(
+    profile: RobotProfile,
+    bank: RegisterBank,
+    backend: PhysicsBackend,
+    model: RobotModel,
+    **options: Any,
+) -> RobotController:
+    """The controller running ``profile``'s handshake (as the client's ``channel_for``)."""
+    # Imported here: both modules derive from this one.
+    from ._clear_on_accept import ClearOnAcceptController
+    from ._sequence import SequenceController
+
+    if profile.handshake is Handshake.CLEAR_ON_ACCEPT:
+        return ClearOnAcceptController(profile, bank, backend, model, **options)
+    return SequenceController(profile, bank, backend, model, **options)

@@ -1,8 +1,9 @@
 """Simulated standalone grippers: the blog-2fg7 map and OnRobot's real 2FG7 map.
 
 Each device works on its own :class:`RegisterBank` and drives the fingers of a shared
-:class:`PhysicsBackend`; like the robot controller it acts only inside
-:meth:`tick`, never when a register is written. A grip is detected only when the
+:class:`PhysicsBackend`; like the robot controller it is a :class:`~._device.SimDevice`
+(the same tick prologue) and acts only inside :meth:`tick`, never when a register is
+written. A grip is detected only when the
 backend reports finger contact, i.e. the fingers closed on a real object; the
 ``grasp_miss`` fault hides that contact for one close. The rules are documented in
 ``docs/simulator-model.md``.
@@ -13,15 +14,14 @@ may step it: pass ``step_backend=False`` to the gripper.
 
 from __future__ import annotations
 
-import math
+from abc import abstractmethod
 from collections.abc import Sequence
 
-from .._logging import get_logger
 from .._registers import GripperProfile
 from ._backend import PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import REINITIALIZE_RETRY_S, Logger
-from ._faults import Fault, GraspMissFault
+from ._device import Logger, SimDevice
+from ._faults import Fault
 
 #: blog-2fg7 control value that executes a move (rCTR).
 BLOG_EXECUTE = 16
@@ -61,8 +61,8 @@ _FIXTURE_IDENTITY: dict[int, dict[str, int]] = {
 }
 
 
-class _GripperDevice:
-    """Shared tick skeleton: time, backend stepping and readiness, grasp counting."""
+class _GripperDevice(SimDevice[GripperProfile]):
+    """A standalone gripper: after the device prologue, finish a move, take commands, publish."""
 
     def __init__(
         self,
@@ -75,73 +75,39 @@ class _GripperDevice:
         step_backend: bool,
         log: Logger | None,
     ) -> None:
-        if bank.register_map is not profile and bank.register_map != profile:
-            raise ValueError("the register bank must serve the gripper's profile")
-        if init_time_s < 0:
-            raise ValueError(f"init_time_s must be >= 0, got {init_time_s}")
-        self._profile = profile
-        self._bank = bank
-        self._backend = backend
-        self._init_time_s = init_time_s
-        self._step_backend = step_backend
-        self._log: Logger = get_logger("tmmaster.sim") if log is None else log
-        self._misses = {f.at_grasp for f in faults if isinstance(f, GraspMissFault)}
-        self._time_s = 0.0
-        self._initialised = False
-        self._reinit_at: float | None = None
-        self._grasps = 0
+        super().__init__(
+            profile,
+            bank,
+            backend,
+            faults=faults,
+            init_time_s=init_time_s,
+            step_backend=step_backend,
+            log=log,
+        )
         self._busy = False  # a move was taken and the fingers have not stopped yet
         self._closing = False
         self._miss = False
-
-    @property
-    def bank(self) -> RegisterBank:
-        """The register memory of this gripper."""
-        return self._bank
-
-    @property
-    def grasps(self) -> int:
-        """Closing moves executed so far."""
-        return self._grasps
 
     @property
     def busy(self) -> bool:
         """True while a taken move has not finished."""
         return self._busy
 
-    def inject(self, fault: Fault) -> None:
-        """Add a fault at run time; grasp_miss counts closes from now, others are ignored."""
-        if isinstance(fault, GraspMissFault):
-            self._misses.add(fault.at_grasp + self._grasps)
-            self._log.info("sim.fault_injected", device=self._profile.name, fault=fault.kind)
-
-    def clear_faults(self) -> None:
-        """Forget every grasp_miss not yet fired."""
-        self._misses.clear()
-
-    def tick(self, dt: float) -> None:
-        """Advance the gripper (and, unless told otherwise, the backend) by ``dt`` seconds."""
-        if not math.isfinite(dt) or dt < 0:
-            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
-        self._time_s += dt
-        if self._step_backend:
-            self._backend.step(dt)
-        ready = self._check_ready()
-        if not self._initialised and self._time_s + 1e-9 >= self._init_time_s:
-            self._initialised = True
-            self._log.info("sim.initialised", device=self._profile.name)
+    def _run(self, dt: float, ready: bool) -> None:
         if ready and self._busy and not self._backend.gripper_state().moving:
             self._busy = False
-            self._log.info("sim.gripper_done", device=self._profile.name, detected=self._detected())
+            self._log.info("sim.gripper_done", device=self._name, detected=self._detected())
         if ready and self._initialised:
             self._handle_commands()
         self._publish(ready)
 
+    @abstractmethod
     def _handle_commands(self) -> None:
-        raise NotImplementedError
+        """Act on the command registers (the device is ready and initialised)."""
 
+    @abstractmethod
     def _publish(self, ready: bool) -> None:
-        raise NotImplementedError
+        """Publish the gripper's status registers."""
 
     def _move(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> bool:
         """Drive the fingers; True when the backend took the move."""
@@ -150,24 +116,18 @@ class _GripperDevice:
         try:
             self._backend.drive_gripper(width_mm, speed_mm_s=speed_mm_s, force_n=force_n)
         except Exception as exc:  # a backend failure must not kill the server: log, no move
-            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
+            self._log.warning("sim.backend_failed", device=self._name, error=repr(exc))
             return False
         self._closing = closing
         self._miss = False
         if closing:
-            self._grasps += 1
-            self._miss = self._grasps in self._misses
+            number, self._miss = self._count_grasp()
             if self._miss:
-                self._log.warning(
-                    "sim.fault_fired",
-                    device=self._profile.name,
-                    fault="grasp_miss",
-                    grasp=self._grasps,
-                )
+                self._log_grasp_miss(number)
         self._busy = True
         self._log.info(
             "sim.command_accepted",
-            device=self._profile.name,
+            device=self._name,
             width_mm=width_mm,
             speed_mm_s=speed_mm_s,
             force_n=force_n,
@@ -181,24 +141,14 @@ class _GripperDevice:
         try:
             self._backend.drive_gripper(width, speed_mm_s=1.0, force_n=0.0)
         except Exception as exc:  # a backend failure must not kill the server: log only
-            self._log.warning("sim.backend_failed", device=self._profile.name, error=repr(exc))
+            self._log.warning("sim.backend_failed", device=self._name, error=repr(exc))
         self._busy = False
-        self._log.info("sim.gripper_stopped", device=self._profile.name, width_mm=width)
+        self._log.info("sim.gripper_stopped", device=self._name, width_mm=width)
 
     def _detected(self) -> bool:
         """Grip detected: fingers stopped on an object, unless grasp_miss hides it."""
         state = self._backend.gripper_state()
         return state.contact and not state.moving and not self._miss
-
-    def _check_ready(self) -> bool:
-        if self._backend.is_ready():
-            self._reinit_at = None
-            return True
-        if self._reinit_at is None or self._time_s - self._reinit_at >= REINITIALIZE_RETRY_S:
-            self._log.warning("sim.backend_reinitialize", device=self._profile.name)
-            self._reinit_at = self._time_s
-            self._backend.reinitialize()
-        return self._backend.is_ready()
 
 
 class Blog2FG7Device(_GripperDevice):
@@ -249,7 +199,7 @@ class Blog2FG7Device(_GripperDevice):
             # Only a master's write of 0 stops: the device's own reset to 0 must not.
             self._stop()
         elif control != 0:
-            self._log.warning("sim.command_rejected", device=self._profile.name, control=control)
+            self._log.warning("sim.command_rejected", device=self._name, control=control)
             self._bank.set("control", 0)
 
     def _set_status(self, *, object_status: int, motion_state: int) -> None:
@@ -352,7 +302,7 @@ class OnRobot2FG7Device(_GripperDevice):
             if clamped != external:
                 self._log.warning(
                     "sim.width_clamped",
-                    device=self._profile.name,
+                    device=self._name,
                     requested_mm=width,
                     grip=label,
                 )
@@ -363,7 +313,7 @@ class OnRobot2FG7Device(_GripperDevice):
                 # Raw network writes can hold anything; the real box limits, we log it.
                 self._log.warning(
                     "sim.value_clamped",
-                    device=self._profile.name,
+                    device=self._name,
                     force_n=requested_force,
                     speed_percent=percent,
                 )
@@ -373,7 +323,7 @@ class OnRobot2FG7Device(_GripperDevice):
                 self._internal_grip = label == "grip_internal"
                 self._publish(True)
         else:
-            self._log.warning("sim.command_rejected", device=self._profile.name, command=command)
+            self._log.warning("sim.command_rejected", device=self._name, command=command)
         # The command register is reset once taken (status already shows busy).
         self._bank.set("command", 0)
 

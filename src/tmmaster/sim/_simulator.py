@@ -28,7 +28,7 @@ from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import MotionRecord, RobotController
+from ._controller import MotionRecord, controller_for
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._server import DeviceServer, RequestLog, RequestRecord
@@ -116,7 +116,7 @@ class Simulator:
             )
         else:
             self._bank = RegisterBank(self._profile)
-        self._controller = RobotController(
+        self._controller = controller_for(
             self._profile,
             self._bank,
             self._backend,
