@@ -303,7 +303,7 @@ class RobotController(SimDevice[RobotProfile]):
         self._publish_estop()
         self._enter_error(SimErrorCode.EMERGENCY_STOP, "emergency stop")
 
-    # -- what each handshake does its own way --------------------------------------------
+    # -- what each handshake does its own way ------------------------------------------
 
     @staticmethod
     @abstractmethod

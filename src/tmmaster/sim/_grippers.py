@@ -64,29 +64,12 @@ _FIXTURE_IDENTITY: dict[int, dict[str, int]] = {
 class _GripperDevice(SimDevice[GripperProfile]):
     """A standalone gripper: after the device prologue, finish a move, take commands, publish."""
 
-    def __init__(
-        self,
-        profile: GripperProfile,
-        bank: RegisterBank,
-        backend: PhysicsBackend,
-        *,
-        faults: Sequence[Fault],
-        init_time_s: float,
-        step_backend: bool,
-        log: Logger | None,
-    ) -> None:
-        super().__init__(
-            profile,
-            bank,
-            backend,
-            faults=faults,
-            init_time_s=init_time_s,
-            step_backend=step_backend,
-            log=log,
-        )
-        self._busy = False  # a move was taken and the fingers have not stopped yet
-        self._closing = False
-        self._miss = False
+    #: A move was taken and the fingers have not stopped yet.
+    _busy = False
+    #: The last move taken closes the fingers.
+    _closing = False
+    #: A grasp_miss fault hides the contact of the last close.
+    _miss = False
 
     @property
     def busy(self) -> bool:
