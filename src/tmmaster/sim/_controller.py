@@ -179,6 +179,11 @@ class RobotController(SimDevice[RobotProfile]):
         self._reset_handshake_registers()
         self._publish_pose()
 
+    @classmethod
+    def bank_for(cls, profile: RobotProfile) -> RegisterBank:
+        """The register memory such a controller serves: ``profile``'s fields."""
+        return RegisterBank(profile)
+
     # -- read-only state for the server and tests --------------------------------------
 
     @property
@@ -657,6 +662,17 @@ class RobotController(SimDevice[RobotProfile]):
             return default
 
 
+def controller_class(handshake: Handshake) -> type[RobotController]:
+    """The controller class running ``handshake`` (as the client's ``channel_for`` picks)."""
+    # Imported here: both modules derive from this one.
+    from ._clear_on_accept import ClearOnAcceptController
+    from ._sequence import SequenceController
+
+    if handshake is Handshake.CLEAR_ON_ACCEPT:
+        return ClearOnAcceptController
+    return SequenceController
+
+
 def controller_for(
     profile: RobotProfile,
     bank: RegisterBank,
@@ -664,11 +680,5 @@ def controller_for(
     model: RobotModel,
     **options: Any,
 ) -> RobotController:
-    """The controller running ``profile``'s handshake (as the client's ``channel_for``)."""
-    # Imported here: both modules derive from this one.
-    from ._clear_on_accept import ClearOnAcceptController
-    from ._sequence import SequenceController
-
-    if profile.handshake is Handshake.CLEAR_ON_ACCEPT:
-        return ClearOnAcceptController(profile, bank, backend, model, **options)
-    return SequenceController(profile, bank, backend, model, **options)
+    """The controller running ``profile``'s handshake on ``bank``."""
+    return controller_class(profile.handshake)(profile, bank, backend, model, **options)

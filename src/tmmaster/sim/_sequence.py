@@ -16,7 +16,9 @@ from typing import Literal
 from .._codec import allowed_range
 from .._pose import MotionType
 from .._registers import RobotProfile
+from ._bank import RegisterBank
 from ._controller import RobotController, _Active
+from ._tm_table import tm_table_areas, tm_table_fields
 
 #: tmflow result_code label of each reason (a profile without the label reports unreachable).
 _REJECT_RESULTS = {
@@ -34,6 +36,13 @@ class SequenceController(RobotController):
     _running = False
     #: Simulated time when the project last started.
     _project_started_s = 0.0
+
+    @classmethod
+    def bank_for(cls, profile: RobotProfile) -> RegisterBank:
+        """A TM controller's memory: the profile, Techman's fixed table and its raw areas."""
+        return RegisterBank(
+            profile, extra_fields=tm_table_fields(profile), raw_areas=tm_table_areas()
+        )
 
     @property
     def project_running(self) -> bool:

@@ -22,17 +22,16 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from .._exceptions import ConfigError, UnknownNameError
 from .._pose import DEFAULT_HOME, Pose
 from .._profiles import gripper_profile, robot_profile
-from .._registers import GripperProfile, Handshake, RobotProfile
+from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
 from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import MotionRecord, controller_for
+from ._controller import MotionRecord, controller_class
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._server import DeviceServer, RequestLog, RequestRecord
-from ._tm_table import tm_table_areas, tm_table_fields
 from ._world import TableObject, World
 
 if TYPE_CHECKING:
@@ -106,17 +105,9 @@ class Simulator:
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
         device = [f for f in all_faults if not is_network_fault(f)]
         self._log = RequestLog(listener=request_listener)
-        if self._profile.handshake is Handshake.SEQUENCE:
-            # A real TM controller: Techman's fixed table, the External Module range and
-            # the user define area too.
-            self._bank = RegisterBank(
-                self._profile,
-                extra_fields=tm_table_fields(self._profile),
-                raw_areas=tm_table_areas(),
-            )
-        else:
-            self._bank = RegisterBank(self._profile)
-        self._controller = controller_for(
+        controller = controller_class(self._profile.handshake)
+        self._bank = controller.bank_for(self._profile)
+        self._controller = controller(
             self._profile,
             self._bank,
             self._backend,
