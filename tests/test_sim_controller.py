@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
@@ -13,11 +14,16 @@ from tmmaster._codec import encode
 from tmmaster._exceptions import ValueOutOfRangeError
 from tmmaster._pose import MotionType, Pose
 from tmmaster._profiles import gripper_profile, robot_profile
-from tmmaster._registers import TARGET_FIELDS, RegisterMap, Table
+from tmmaster._registers import TARGET_FIELDS, Handshake, RegisterMap, Table
 from tmmaster._robot_models import robot_model
 from tmmaster.sim._backend import MotionRejectedError, RejectReason
 from tmmaster.sim._bank import RegisterBank
-from tmmaster.sim._controller import RobotController, SimErrorCode, controller_for
+from tmmaster.sim._controller import (
+    RobotController,
+    SimErrorCode,
+    controller_class,
+    controller_for,
+)
 from tmmaster.sim._faults import (
     EstopFault,
     Fault,
@@ -1310,3 +1316,48 @@ def test_a_motion_that_survives_reinitialise_completes() -> None:
     assert bank.get("error_code") == 0
     assert pose_of(bank).is_close(AIR, mm=0.01, deg=0.01)
     assert "sim.motion_lost" not in log.names()
+
+
+# -- the structure: one controller per handshake, one device prologue ----------------------
+
+
+@pytest.mark.parametrize(("name", "tm_table"), [("article", False), ("tmflow", True)])
+def test_each_handshake_runs_in_its_own_controller_class(name: str, tm_table: bool) -> None:
+    profile = robot_profile(name)
+    cls = controller_class(profile.handshake)
+    assert not inspect.isabstract(cls)
+    bank = cls.bank_for(profile)
+    assert bank.has("flange_x") is tm_table  # Techman's fixed table beside tmflow only
+    ctl = controller_for(profile, bank, KinematicBackend(MODEL), MODEL, log=ListLogger())
+    assert type(ctl) is cls
+
+
+def test_every_handshake_has_a_controller_class_of_its_own() -> None:
+    classes = {controller_class(handshake) for handshake in Handshake}
+    assert len(classes) == len(Handshake)
+    assert all(issubclass(cls, RobotController) for cls in classes)
+
+
+@pytest.mark.parametrize("device", ["robot", "gripper"])
+def test_robot_and_gripper_share_the_rebuild_prologue(device: str) -> None:
+    backend = LateReadyBackend(ready_after_s=0.2)
+    log = ListLogger()
+    ticked: RobotController | OnRobot2FG7Device
+    if device == "robot":
+        profile = robot_profile("article")
+        ticked = controller_for(
+            profile, RegisterBank(profile), backend, MODEL, init_time_s=INIT_S, log=log
+        )
+    else:
+        gripper = gripper_profile("onrobot-2fg7")
+        ticked = OnRobot2FG7Device(
+            gripper, RegisterBank(gripper), backend, init_time_s=INIT_S, log=log
+        )
+    run(ticked, INIT_S)
+    backend.invalidate()
+    run(ticked, 0.5)
+    names = log.names()
+    assert names.count("sim.initialised") == 1
+    assert names.count("sim.backend_reinitialize") == 1  # retried only after 1 s
+    assert names.index("sim.backend_reinitialize") < names.index("sim.backend_ready")
+    assert backend.reinit_calls == 1
