@@ -145,6 +145,7 @@ class RobotController(SimDevice[RobotProfile]):
                 f"initial_seq must be 0..{profile.seq_max} with a sequence profile,"
                 f" got {initial_seq}"
             )
+        # Ready before the base adds the given faults (through _add_fault).
         self._move_faults: list[_MoveFault] = []
         self._timed_estops: list[EstopFault] = []
         self._late_acks: list[LateAckFault] = []
