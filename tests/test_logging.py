@@ -13,7 +13,7 @@ def test_the_readme_snippet_prints_only_what_the_user_prints() -> None:
         import tmmaster
         from tmmaster.sim import Simulator
 
-        with Simulator("article", listen=False) as sim:
+        with Simulator("article", listen=False, time_scale=20) as sim:
             with tmmaster.connect(sim.url, profile="article") as robot:
                 robot.wait_until_ready()
                 robot.move_to(tmmaster.Pose(300, -200, 200, 180, 0, 90), speed=30)

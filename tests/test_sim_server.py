@@ -12,7 +12,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import pytest
@@ -183,10 +183,14 @@ def test_racy_article_master_sees_done_before_the_robot_moved(
     tm_simulator_factory: Factory,
 ) -> None:
     """The article's master: FC16 the move, then poll motion_status == 0 as "done"."""
-    sim = tm_simulator_factory("article", time_scale=5.0)
-    wait_ready(sim)
-    with client(sim.port) as c:
-        for _attempt in range(5):
+    with ExitStack() as clients:
+        for _attempt in range(20):
+            # A fresh robot per attempt: after a missed attempt the move is already under
+            # way, and writing it again would read "moving". Under CPU load (xdist workers)
+            # a tick can fall between the write and the poll, hence a few attempts.
+            sim = tm_simulator_factory("article", time_scale=5.0)
+            wait_ready(sim)
+            c = clients.enter_context(client(sim.port))
             # Start right after a tick, so the write and the first poll fit before the next.
             ticks = sim.ticks
             sim.wait_for(lambda: sim.ticks != ticks, 1.0, interval=0.0002)  # noqa: B023
