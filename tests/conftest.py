@@ -97,14 +97,16 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
     return min(SUITE_WORKERS, len(files)) if len(files) > 1 else 0
 
 
-#: Modules whose tests wait longest on the wall clock (simulated moves, timeouts), longest
-#: first (measured with ``--durations``). They are started first, so that under xdist
-#: (``-n`` in pyproject's ``addopts``) the short tests fill the other workers meanwhile
-#: instead of a long test starting last and the whole run waiting for it alone.
+#: Modules whose tests wait longest on the wall clock (simulated moves, timeouts, CLI
+#: subprocesses), longest first (measured with ``--durations``). They are started first, so
+#: that under xdist the short tests fill the other workers meanwhile instead of a long test
+#: starting last and the whole run waiting for it alone.
 _LONGEST_FIRST = (
     "test_safety_stateful.py",
+    "test_cli_ux.py",
     "test_examples.py",
     "test_examples_two_robots.py",
+    "test_sim_mujoco.py",
     "test_logging.py",
     "test_pickplace.py",
     "test_safety_regressions.py",
