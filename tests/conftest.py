@@ -76,16 +76,17 @@ def memory_simulator_factory(
     return make
 
 
-#: xdist workers for a run of several test files (``-n auto`` in pyproject's addopts). The
-#: tests wait on the wall clock far more than they compute (run one by one: about 115 s of
-#: waiting for 15 s of CPU), so six workers overlap those waits even on two cores; more
-#: would mostly add start-up (each worker imports and collects the suite, about 2 s of CPU).
-SUITE_WORKERS = 6
+#: xdist workers for a run of several test files (``-n auto`` in pyproject's addopts). Most
+#: tests wait on the wall clock (simulated moves, timeouts), which workers overlap; but each
+#: worker costs about 3 s of CPU to start and collect the suite, and the CLI tests'
+#: subprocesses are CPU-bound. On two cores four beat six and three (measured: see
+#: docs/architecture.md); more workers also squeeze the timing margins of the safety tests.
+SUITE_WORKERS = 4
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
-    """``-n auto``: six workers for the suite or several files, one process for one file."""
+    """``-n auto``: four workers for the suite or several files, one process for one file."""
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
         return None  # xdist's own hook reads it
     if config.args_source is pytest.Config.ArgsSource.TESTPATHS:
