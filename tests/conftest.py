@@ -108,6 +108,7 @@ _LONGEST_FIRST = (
     "test_examples.py",
     "test_examples_two_robots.py",
     "test_sim_mujoco.py",
+    "test_sim_kinematic.py",
     "test_logging.py",
     "test_pickplace.py",
     "test_safety_regressions.py",
