@@ -359,8 +359,14 @@ def test_8_8_a_link_loss_mid_move_stops_the_arm_once_the_link_is_back(
             proxy.port,
             "article",
             # The wait gives up after 0.35 s of outage; the clean-up has its own 0.35 s.
+            # No jitter: 0.1 s of it could let an attempt land after the 0.5 s outage,
+            # and the test is about the outage outlasting the budget.
             retry=RetryPolicy(
-                attempts=20, total_time_s=0.35, initial_backoff_s=0.05, max_backoff_s=0.1
+                attempts=20,
+                total_time_s=0.35,
+                initial_backoff_s=0.05,
+                max_backoff_s=0.1,
+                jitter_s=0,
             ),
         )
         motion = robot.start_move(A, speed=30)
