@@ -19,6 +19,7 @@ from tmmaster import (
     ConnectError,
     GraspFailedError,
     GripperError,
+    GripperLink,
     GripperTimeoutError,
     OnRobot2FG7Gripper,
     Pose,
@@ -26,9 +27,9 @@ from tmmaster import (
     RetryPolicy,
     Robot,
     SequenceGripper,
+    StopRequestedError,
     gripper_profile,
 )
-from tmmaster._gripper import GripperLink
 from tmmaster._profiles import profile_from_data
 from tmmaster._registers import GripperProfile
 from tmmaster.sim import DEFAULT_PART_POSE, RequestRecord, Simulator
@@ -435,3 +436,68 @@ def test_onrobot_dual_quick_changer_unit_ids(tm_simulator_factory: Factory) -> N
     assert {r.device_id for r in gripper_requests(sim)} == {67}
     with pytest.raises(ConfigError, match="65, 66 or 67"):
         profile_from_data({"extends": "onrobot-2fg7", "device_id": 1})
+
+
+# -- a gripper instance in Robot(gripper=...), the driver registry, timeouts --------------
+
+
+def test_a_gripper_instance_keeps_its_options_and_is_guarded_by_the_robot(
+    tm_simulator_factory: Factory,
+) -> None:
+    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    assert sim.gripper_port is not None
+    link = GripperLink(sim.url, sim.gripper_port, timeout_s=2.0)
+    gripper = OnRobot2FG7Gripper(
+        gripper_profile("onrobot-2fg7"), link, force_n=60.0, speed_percent=80
+    )
+    with robot_at(sim, ABOVE_PART, gripper=gripper) as robot:
+        assert robot.gripper is gripper
+        sim.clear_request_log()
+        gripper.move_to_width(20.0)
+        sent = writes(gripper_requests(sim))
+        # The robot's stop request ends the gripper's waits: the robot mounted it.
+        robot.interrupt()
+        with pytest.raises(StopRequestedError):
+            gripper.open()
+    assert [r.values for r in sent] == [(200, 60, 80, 1)]
+
+
+def test_a_robot_wired_gripper_needs_a_robot() -> None:
+    with pytest.raises(GripperError, match="not mounted"):
+        RegisterGripper(settle_s=0.3).close()
+    with pytest.raises(GripperError, match="not mounted"):
+        SequenceGripper().status()
+
+
+def test_article_register_gripper_instance_and_timeout(tm_simulator_factory: Factory) -> None:
+    sim = tm_simulator_factory("article")
+    with robot_at(sim, ABOVE_PART, gripper=RegisterGripper(settle_s=3.0)) as robot:
+        assert isinstance(robot.gripper, RegisterGripper)
+        # No busy flag: an open lasts the settle time; a shorter timeout_s ends the wait.
+        with pytest.raises(GripperTimeoutError, match=r"0\.3 s"):
+            robot.gripper.open(timeout_s=0.3)
+        with pytest.raises(ConfigError, match="timeout_s"):
+            robot.gripper.close(timeout_s=0)
+
+
+def test_every_gripper_protocol_has_one_driver_and_one_simulated_device() -> None:
+    from tmmaster._gripper import GRIPPER_DRIVERS
+    from tmmaster._registers import GRIPPER_DRIVER_NAMES
+    from tmmaster.sim._grippers import GRIPPER_DEVICES
+
+    assert set(GRIPPER_DRIVERS) == set(GRIPPER_DEVICES) == set(GRIPPER_DRIVER_NAMES)
+    for name in GRIPPER_DRIVER_NAMES:
+        profile = next(
+            p for p in ("blog-2fg7", "onrobot-2fg7") if gripper_profile(p).driver == name
+        )
+        link = GripperLink("127.0.0.1", 1)
+        assert isinstance(
+            tmmaster_gripper_for(gripper_profile(profile), link), GRIPPER_DRIVERS[name]
+        )
+
+
+def tmmaster_gripper_for(profile: GripperProfile, link: GripperLink) -> object:
+    """The registry's choice for ``profile`` (opens nothing)."""
+    from tmmaster._gripper import gripper_for_profile
+
+    return gripper_for_profile(profile, link)

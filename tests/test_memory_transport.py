@@ -21,8 +21,8 @@ def sim() -> Iterator[Simulator]:
 
 def test_a_memory_robot_is_a_transport_and_logs_like_tcp(sim: Simulator) -> None:
     with tmmaster.connect(sim.url, profile="article", poll_interval_s=0.01) as robot:
-        assert isinstance(robot.transport, tmmaster.Transport)
-        assert isinstance(robot.transport, MemoryTransport)
+        assert isinstance(robot._transport, tmmaster.Transport)
+        assert isinstance(robot._transport, MemoryTransport)
         before = robot.stats.requests
         sim.clear_request_log()
         robot.status()

@@ -467,13 +467,13 @@ def test_one_request_per_block_per_poll(
     robot = robots(sim)
     motion = robot.start_move(APPROACH, speed=30)
     sim.clear_request_log()
-    motion.progress() if profile == "article" else robot.channel.poll(motion._ticket)
+    motion.progress() if profile == "article" else robot._channel.poll(motion._ticket)
     assert len(sim.request_log) == before_ack
     assert not motion._ticket.acknowledged
     sim.wait_for(lambda: sim.field("motion_status" if profile == "article" else "robot_state") == 1)
-    robot.channel.poll(motion._ticket)  # sees the acknowledgement
+    robot._channel.poll(motion._ticket)  # sees the acknowledgement
     sim.clear_request_log()
-    robot.channel.poll(motion._ticket)
+    robot._channel.poll(motion._ticket)
     assert motion._ticket.acknowledged
     assert len(sim.request_log) == after_ack
     motion.wait()

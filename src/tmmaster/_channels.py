@@ -223,6 +223,25 @@ class CommandChannel(ABC):
         """Field values that stop the robot at once, or None if the profile has no stop."""
         return None
 
+    @property
+    def can_stop(self) -> bool:
+        """True when the profile defines a way to stop the arm (:meth:`stop`)."""
+        return self.stop_words() is not None
+
+    def stop(self) -> None:
+        """Stop the arm now; :class:`ConfigError` when the profile defines no stop.
+
+        A stop is idempotent: it is written with retries, even after a stop request.
+        """
+        words = self.stop_words()
+        if words is None:
+            raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
+        self.transport.write_fields(words, retry=True, interruptible=False)
+
+    def check_move(self, target: Pose, speed: int, motion: MotionType) -> None:
+        """Encode a move's command block without sending it (raises naming the field)."""
+        self.encode_command(Command(CommandKind.of(motion), target, speed))
+
 
 class ClearOnAcceptChannel(CommandChannel):
     """The article's contract: the robot clears the command register when it takes a command."""

@@ -20,14 +20,15 @@ error, and a stop request (``Robot.interrupt()``, Ctrl-C) ends it within one pol
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
-from ._channels import Command, CommandKind
+from ._channels import CommandKind
 from ._codec import Value
 from ._exceptions import (
     AcknowledgeTimeoutError,
@@ -42,15 +43,55 @@ from ._exceptions import (
 )
 from ._logging import get_logger
 from ._poller import Poller
-from ._profiles import gripper_profile
-from ._registers import GripperProfile
+from ._registers import GripperDriverName, GripperProfile, RobotProfile
 from ._retry import RetryPolicy
+from ._status import RobotStatus
 from ._transport import Transport, open_transport
 
-if TYPE_CHECKING:
-    from ._robot import Robot
-
 _log = get_logger("tmmaster.gripper")
+
+
+class GripperMount(Protocol):
+    """What a gripper driver gets from the robot it is mounted on (not the whole Robot).
+
+    :class:`~tmmaster.Robot` hands one to :meth:`Gripper.attach`: the robot's register
+    map and link (for grippers wired through the robot), its fault check, the stop
+    event that ends every wait, its poll interval and gripper timeouts, and a way to run
+    a gripper command through the robot program's handshake.
+    """
+
+    @property
+    def profile(self) -> RobotProfile:
+        """The robot's register map."""
+
+    @property
+    def transport(self) -> Transport:
+        """The robot's link."""
+
+    @property
+    def stop_event(self) -> threading.Event:
+        """Set when a stop is requested: every gripper wait ends with StopRequestedError."""
+
+    @property
+    def poll_interval_s(self) -> float:
+        """Interval of every gripper poll, s."""
+
+    @property
+    def gripper_timeout_s(self) -> float:
+        """Default bound of a gripper move, s."""
+
+    @property
+    def ack_timeout_s(self) -> float:
+        """A gripper with its own handshake must take a command within this time, s."""
+
+    def check_fault(self) -> None:
+        """Raise the robot's typed error when it is in e-stop or error."""
+
+    def checked_status(self) -> RobotStatus:
+        """One robot status read; raises the typed error in e-stop or error."""
+
+    def run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
+        """Send a gripper command through the robot program's handshake and wait for it."""
 
 
 @dataclass(frozen=True)
@@ -69,6 +110,11 @@ class Gripper(ABC):
     """What every gripper driver offers."""
 
     kind: str = "gripper"
+    _mount: GripperMount | None = None
+
+    def attach(self, mount: GripperMount) -> None:
+        """Mount on a robot: its fault check and stop event guard every wait (Robot calls it)."""
+        self._mount = mount
 
     def connect(self) -> None:  # noqa: B027 - most grippers share the robot's link
         """Open the gripper's own connection, if it has one."""
@@ -152,38 +198,70 @@ def _wait(
         poller.sleep()
 
 
-class RegisterGripper(Gripper):
-    """The article profile's gripper register (0 open / 1 close) and grasp status."""
+def _timeout(timeout_s: float | None, default: float) -> float:
+    """``timeout_s`` when given (a finite number > 0, else ConfigError), else ``default``."""
+    if timeout_s is None:
+        return default
+    if (
+        isinstance(timeout_s, bool)
+        or not isinstance(timeout_s, int | float)
+        or not math.isfinite(timeout_s)
+        or timeout_s <= 0
+    ):
+        raise ConfigError(f"timeout_s must be a finite number > 0, got {timeout_s!r}")
+    return float(timeout_s)
+
+
+class _RobotWiredGripper(Gripper):
+    """A gripper wired through the robot: it works only once mounted on one."""
+
+    def _robot(self) -> GripperMount:
+        if self._mount is None:
+            raise GripperError(
+                f"{self.kind}: not mounted on a robot; pass it as Robot(gripper=...)"
+            )
+        return self._mount
+
+    def status(self) -> GripperStatus:
+        """The robot's grasp report (this map has neither busy flag nor width)."""
+        robot = self._robot()
+        values = robot.transport.read_fields(
+            [robot.profile.field("grasp_status")], max_gap=robot.profile.max_read_gap
+        )
+        return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
+
+
+class RegisterGripper(_RobotWiredGripper):
+    """The article profile's gripper register (0 open / 1 close) and grasp status.
+
+    The map has no busy flag: a close ends when an object is detected or ``settle_s``
+    has passed, an open after ``settle_s``. ``timeout_s`` bounds the whole wait
+    (default: the settle time + 1 s).
+    """
 
     kind = "article-register"
 
-    def __init__(self, robot: Robot, *, settle_s: float) -> None:
-        self._robot = robot
-        self._settle_s = settle_s
-        self._command = robot.profile.field("gripper_command")
-        self._grasp = robot.profile.field("grasp_status")
+    def __init__(self, *, settle_s: float = 0.5) -> None:
+        self._settle_s = _timeout(settle_s, 0.5)
 
-    def status(self) -> GripperStatus:
-        """Grasp status only: this map has neither busy flag nor width."""
-        values = self._robot.channel.read([self._grasp])
-        return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
-
-    def _command_and_settle(self, value: int, *, stop_early_when_holding: bool) -> GripperStatus:
-        robot = self._robot
+    def _command_and_settle(
+        self, label: str, timeout_s: float | None, *, stop_early_when_holding: bool
+    ) -> GripperStatus:
+        robot = self._robot()
+        bound = _timeout(timeout_s, self._settle_s + 1.0)
+        command = robot.profile.field("gripper_command")
+        value = command.code_of(label)
         robot.check_fault()  # never write a gripper command during an e-stop or robot error
         # Writing the same open/close value again is harmless, so retrying is allowed.
-        robot.transport.write_fields([(self._command, value)], retry=True)
+        robot.transport.write_fields([(command, value)], retry=True)
         # The settle time counts from the write that landed, not from the first attempt:
         # retries during a short outage must not eat the time the fingers need.
         started = time.monotonic()
-        _log.info("gripper.command_sent", gripper=self.kind, command=self._command.label(value))
+        _log.info("gripper.command_sent", gripper=self.kind, command=label)
 
         def check() -> GripperStatus | None:
             # One read: the article's status block holds the error state and the grasp.
-            robot_status = robot.status()
-            failure = robot.channel.status_failure(robot_status)
-            if failure is not None:
-                raise failure
+            robot_status = robot.checked_status()
             status = GripperStatus(busy=None, holding=bool(robot_status.holding), width_mm=None)
             if stop_early_when_holding and status.holding:
                 return status
@@ -192,11 +270,7 @@ class RegisterGripper(Gripper):
             return None
 
         status = _wait(
-            f"gripper {self._command.label(value)}",
-            robot.poll_interval_s,
-            self._settle_s + 1.0,
-            check,
-            stop_event=robot._stop_event,
+            f"gripper {label}", robot.poll_interval_s, bound, check, stop_event=robot.stop_event
         )
         _log.info(
             "gripper.command_done",
@@ -208,34 +282,24 @@ class RegisterGripper(Gripper):
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Write open, then wait the settle time (no busy flag to watch)."""
-        return self._command_and_settle(
-            self._command.code_of("open"), stop_early_when_holding=False
-        )
+        return self._command_and_settle("open", timeout_s, stop_early_when_holding=False)
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Write close; done when an object is detected or the settle time has passed."""
-        return self._command_and_settle(
-            self._command.code_of("close"), stop_early_when_holding=True
-        )
+        return self._command_and_settle("close", timeout_s, stop_early_when_holding=True)
 
 
-class SequenceGripper(Gripper):
+class SequenceGripper(_RobotWiredGripper):
     """Gripper commands through the tmflow profile's sequence handshake."""
 
     kind = "tmflow-program"
 
-    def __init__(self, robot: Robot) -> None:
-        self._robot = robot
-
-    def status(self) -> GripperStatus:
-        """The robot program's grasp report."""
-        values = self._robot.channel.read([self._robot.profile.field("grasp_status")])
-        return GripperStatus(busy=None, holding=bool(values["grasp_status"]), width_mm=None)
-
     def _run(self, kind: CommandKind, timeout_s: float | None) -> GripperStatus:
-        motion = self._robot.start_command(Command(kind), timeout=timeout_s)
+        robot = self._robot()
+        if timeout_s is not None:
+            _timeout(timeout_s, 0.0)
         _log.info("gripper.command_sent", gripper=self.kind, command=kind.value)
-        motion.wait()
+        robot.run_command(kind, timeout_s)
         return self.status()
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
@@ -286,6 +350,17 @@ class _OwnConnectionGripper(Gripper):
             retry=link.retry,
             name=profile.name,
         )
+
+    def attach(self, mount: GripperMount) -> None:
+        """Mount on a robot: its fault check and stop event guard every wait.
+
+        A guard or stop event given in the :class:`GripperLink` is kept.
+        """
+        super().attach(mount)
+        if self._guard is None:
+            self._guard = mount.check_fault
+        if self._stop_event is None:
+            self._stop_event = mount.stop_event
 
     def connect(self) -> None:
         """Open the gripper's connection."""
@@ -572,40 +647,24 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         return self.move_to_width(self.limits[0], timeout_s=timeout_s, expect_object=True)
 
 
-def make_gripper(
-    spec: str | GripperProfile | None,
-    *,
-    robot: Robot,
-    host: str,
-    port: int,
-    retry: RetryPolicy | None,
-    request_timeout_s: float,
-    settle_s: float,
-    transport: Transport | None = None,
-) -> Gripper:
-    """The gripper driver for ``spec``: "auto" uses what the robot profile offers."""
-    if spec is None or spec == "none":
-        return NoGripper()
-    if spec == "auto":
-        profile = robot.profile
-        if profile.has("gripper_command"):
-            return RegisterGripper(robot, settle_s=settle_s)
-        if robot.channel.supports(CommandKind.GRIPPER_CLOSE) and profile.has("grasp_status"):
-            return SequenceGripper(robot)
-        return NoGripper()
-    gp = gripper_profile(spec)
-    link = GripperLink(
-        host=host,
-        port=port,
-        retry=retry,
-        request_timeout_s=request_timeout_s,
-        poll_interval_s=robot.poll_interval_s,
-        timeout_s=robot.timeouts.gripper_timeout_s,
-        ack_timeout_s=robot.timeouts.ack_timeout_s,
-        guard=robot.check_fault,
-        stop_event=robot._stop_event,
-        transport=transport,
-    )
-    if gp.driver == "blog-2fg7":
-        return Blog2FG7Gripper(gp, link)
-    return OnRobot2FG7Gripper(gp, link)
+#: The driver of each gripper protocol a profile may name (``GripperProfile.driver``);
+#: the simulated devices are keyed by the same names (``tmmaster.sim._grippers``).
+GRIPPER_DRIVERS: Mapping[GripperDriverName, type[Blog2FG7Gripper | OnRobot2FG7Gripper]] = {
+    "blog-2fg7": Blog2FG7Gripper,
+    "onrobot-2fg7": OnRobot2FG7Gripper,
+}
+
+
+def gripper_for_profile(profile: GripperProfile, link: GripperLink) -> Gripper:
+    """The driver of ``profile``'s protocol, on its own connection described by ``link``."""
+    return GRIPPER_DRIVERS[profile.driver](profile, link)
+
+
+def auto_gripper(profile: RobotProfile, *, settle_s: float) -> Gripper:
+    """What the robot profile itself offers: a gripper register, program commands, or none."""
+    if profile.has("gripper_command"):
+        return RegisterGripper(settle_s=settle_s)
+    labels = set(profile.field("command").values.values()) if profile.has("command") else set()
+    if CommandKind.GRIPPER_CLOSE.value in labels and profile.has("grasp_status"):
+        return SequenceGripper()
+    return NoGripper()

@@ -12,7 +12,7 @@ import itertools
 import re
 from collections.abc import Iterable
 from enum import StrEnum
-from typing import Annotated, Any, Literal, Self
+from typing import Annotated, Any, Literal, Self, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -379,11 +379,18 @@ class RobotProfile(RegisterMap):
 ONROBOT_UNIT_IDS = (65, 66, 67)
 
 
+#: The gripper protocols a :class:`GripperProfile` may name: each has exactly one driver
+#: (``tmmaster._gripper.GRIPPER_DRIVERS``) and one simulated device
+#: (``tmmaster.sim._grippers.GRIPPER_DEVICES``), both keyed by these names.
+GripperDriverName = Literal["blog-2fg7", "onrobot-2fg7"]
+GRIPPER_DRIVER_NAMES: tuple[str, ...] = get_args(GripperDriverName)
+
+
 class GripperProfile(RegisterMap):
     """A gripper's register map; ``driver`` names the protocol spoken over it."""
 
     kind: Literal["gripper"] = "gripper"
-    driver: Literal["blog-2fg7", "onrobot-2fg7"]
+    driver: GripperDriverName
     #: At most this many TCP connections at once (the OnRobot Compute Box allows one).
     max_connections: Annotated[int, Field(ge=1)] | None = None
 
@@ -397,3 +404,8 @@ class GripperProfile(RegisterMap):
                 f" not {self.device_id}"
             )
         return self
+
+    @property
+    def own_unit_id_only(self) -> bool:
+        """True when the device answers its own unit id only (the OnRobot Compute Box)."""
+        return self.driver == "onrobot-2fg7"

@@ -23,6 +23,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal, ParamSpec
 
@@ -52,11 +53,11 @@ from ._exceptions import (
     StopRequestedError,
     TMMasterError,
 )
-from ._gripper import Gripper, make_gripper
+from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._logging import get_logger
 from ._poller import MotionSchedule, Poller, PollPolicy
 from ._pose import MotionType, Pose
-from ._profiles import builtin_profile_names, load_profile, robot_profile
+from ._profiles import builtin_profile_names, gripper_profile, load_profile, robot_profile
 from ._registers import GripperProfile, RobotProfile, Role
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
@@ -189,6 +190,30 @@ class Motion:
             self._robot._wait_motion(self, timeout_s)
 
 
+def _motion_type(motion: MotionType | str) -> MotionType:
+    """``motion`` as a :class:`MotionType`; a ConfigError naming the choices otherwise."""
+    try:
+        return MotionType(motion)
+    except ValueError:
+        choices = ", ".join(repr(m.value) for m in MotionType)
+        raise ConfigError(f"motion must be one of {choices}, got {motion!r}") from None
+
+
+@dataclass(frozen=True)
+class _Mount:
+    """What a Robot hands its gripper driver (:class:`~tmmaster._gripper.GripperMount`)."""
+
+    profile: RobotProfile
+    transport: Transport
+    stop_event: threading.Event
+    poll_interval_s: float
+    gripper_timeout_s: float
+    ack_timeout_s: float
+    check_fault: Callable[[], None]
+    checked_status: Callable[[], RobotStatus]
+    run_command: Callable[[CommandKind, float | None], None]
+
+
 def _require_positive(name: str, value: object) -> float:
     """``value`` as a float when it is a finite number > 0; else a ConfigError naming ``name``."""
     if (
@@ -211,7 +236,7 @@ class Robot:
         *,
         profile: str | Path | RobotProfile = "tmflow",
         model: str | RobotModel = "tm5-700",
-        gripper: str | GripperProfile | None = "auto",
+        gripper: str | Path | GripperProfile | Gripper | None = "auto",
         gripper_host: str | None = None,
         gripper_port: int = 502,
         poll_interval_s: float = 0.05,
@@ -260,7 +285,7 @@ class Robot:
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
         # ``host`` "sim://name" reaches an in-process simulator without a socket.
-        self.transport: Transport = transport or open_transport(
+        self._transport: Transport = transport or open_transport(
             host,
             port,
             device_id=self.profile.device_id,
@@ -268,47 +293,80 @@ class Robot:
             retry=retry,
             name=name,
         )
-        self.channel: CommandChannel = channel_for(self.profile, self.transport)
+        self._channel: CommandChannel = channel_for(self.profile, self._transport)
         self._stop_event = threading.Event()
         # Retry sleeps of reads end at once on a stop request, like every poll.
-        self.transport.interrupt = self._stop_event
+        self._transport.interrupt = self._stop_event
         self._connected = False
         #: The last command sent; while it is not settled, close() withdraws or stops it.
         self._last_motion: Motion | None = None
         self._log = _log.bind(robot=name)
-        self.gripper: Gripper = make_gripper(
+        self.gripper: Gripper = self._make_gripper(
             gripper,
-            robot=self,
-            host=gripper_host or host,
-            port=gripper_port,
-            retry=retry,
-            request_timeout_s=request_timeout_s,
+            GripperLink(
+                host=gripper_host or host,
+                port=gripper_port,
+                retry=retry,
+                request_timeout_s=request_timeout_s,
+                poll_interval_s=poll_interval_s,
+                timeout_s=self.timeouts.gripper_timeout_s,
+                ack_timeout_s=self.timeouts.ack_timeout_s,
+                transport=gripper_transport,
+            ),
             settle_s=gripper_settle_s,
-            transport=gripper_transport,
         )
+        self.gripper.attach(
+            _Mount(
+                profile=self.profile,
+                transport=self._transport,
+                stop_event=self._stop_event,
+                poll_interval_s=poll_interval_s,
+                gripper_timeout_s=self.timeouts.gripper_timeout_s,
+                ack_timeout_s=self.timeouts.ack_timeout_s,
+                check_fault=self.check_fault,
+                checked_status=self._checked_status,
+                run_command=self._run_command,
+            )
+        )
+
+    def _make_gripper(
+        self,
+        spec: str | Path | GripperProfile | Gripper | None,
+        link: GripperLink,
+        *,
+        settle_s: float,
+    ) -> Gripper:
+        """The gripper for ``spec``: an instance as given, "auto" what the profile offers."""
+        if isinstance(spec, Gripper):
+            return spec
+        if spec is None or spec == "none":
+            return NoGripper()
+        if spec == "auto":
+            return auto_gripper(self.profile, settle_s=settle_s)
+        return gripper_for_profile(gripper_profile(spec), link)
 
     # -- connection -------------------------------------------------------
 
     @property
     def state(self) -> ConnectionState:
         """Connection state of the robot link."""
-        return self.transport.state
+        return self._transport.state
 
     @property
     def stats(self) -> TransportStats:
         """Request, retry, reconnect and byte counters of the robot link."""
-        return self.transport.stats
+        return self._transport.stats
 
     def connect(self) -> Robot:
         """Open the connections (robot, then gripper if it has its own); a no-op when open."""
-        if self.transport.state is ConnectionState.CLOSED:
+        if self._transport.state is ConnectionState.CLOSED:
             raise ConnectError(
                 f"{self.name}: this Robot was closed; create a new Robot to connect again"
             )
         if self._connected:
             return self
         try:
-            self.transport.connect()
+            self._transport.connect()
             self.gripper.connect()
         except BaseException:
             # ``with Robot(...)`` never reaches __exit__ when connecting fails: close
@@ -319,8 +377,8 @@ class Robot:
         atexit.register(self._at_exit)
         self._log.info(
             "robot.connected",
-            host=self.transport.host,
-            port=self.transport.port,
+            host=self._transport.host,
+            port=self._transport.port,
             profile=self.profile.name,
         )
         return self
@@ -334,10 +392,10 @@ class Robot:
         self._stop_event.set()
         atexit.unregister(self._at_exit)
         motion = self._last_motion
-        if motion is not None and self.transport.state is not ConnectionState.CLOSED:
+        if motion is not None and self._transport.state is not ConnectionState.CLOSED:
             self._abandon(motion, StopRequestedError("the robot connection is closing"))
         self.gripper.disconnect()
-        self.transport.close()
+        self._transport.close()
 
     def _at_exit(self) -> None:
         # The interpreter is exiting with this robot still open: nothing may stay armed.
@@ -351,11 +409,11 @@ class Robot:
     @property
     def can_stop(self) -> bool:
         """True when the profile defines a way to stop the arm (:meth:`stop`)."""
-        return self.channel.stop_words() is not None
+        return self._channel.can_stop
 
     def check_fault(self) -> None:
         """Read the fewest registers that tell; raise the typed error if in e-stop or error."""
-        failure = self.channel.read_failure()
+        failure = self._channel.read_failure()
         if failure is not None:
             raise failure
 
@@ -370,7 +428,7 @@ class Robot:
     def status(self) -> RobotStatus:
         """One immutable snapshot: each status block read in one request."""
         try:
-            return self.channel.read_status()
+            return self._channel.read_status()
         except IllegalAddressError as exc:
             hint = self._profile_hint()
             if hint is None:
@@ -386,7 +444,7 @@ class Robot:
             if not isinstance(other, RobotProfile):
                 continue
             try:
-                self.transport.read_fields(
+                self._transport.read_fields(
                     other.role(Role.STATUS)[:1], retry=False, interruptible=False
                 )
             except TMMasterError:
@@ -399,7 +457,7 @@ class Robot:
 
     def pose(self) -> Pose:
         """The current TCP pose."""
-        return self.channel.read_pose()
+        return self._channel.read_pose()
 
     def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
         """Poll until the robot can take a motion command (auto / running, idle, no error)."""
@@ -411,7 +469,7 @@ class Robot:
             status = self.status()
             if status.ready:
                 return status
-            if (failure := self.channel.status_failure(status)) is not None:
+            if (failure := self._channel.status_failure(status)) is not None:
                 raise failure
             if time.monotonic() >= deadline:
                 raise MotionTimeoutError(
@@ -465,6 +523,29 @@ class Robot:
             tool=self.tool,
         )
 
+    def check_move(
+        self,
+        target: Pose,
+        speed: int,
+        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
+        *,
+        start: Pose | None = None,
+        seed_deg: Sequence[float] | None = None,
+    ) -> tuple[float, ...]:
+        """Check a move fully without sending it; return the target's joints.
+
+        Everything :meth:`validate_move` checks, the command block encoded in this
+        profile (e.g. the article's +/-327.67 mm range), and for a Line from ``start``
+        (with the joints ``seed_deg`` there) that the straight path stays in the arm's
+        range. Raises :class:`ConfigError` naming what is wrong.
+        """
+        motion = _motion_type(motion)
+        joints = self.validate_move(target, speed, seed_deg=seed_deg)
+        if motion is MotionType.LINE and start is not None:
+            self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
+        self._channel.check_move(target, speed, motion)
+        return joints
+
     def start_move(
         self,
         target: Pose,
@@ -475,28 +556,35 @@ class Robot:
         accel_time_ms: int | None = None,
     ) -> Motion:
         """Validate and send a move, returning at once with a :class:`Motion` handle."""
-        try:
-            motion = MotionType(motion)
-        except ValueError:
-            choices = ", ".join(repr(m.value) for m in MotionType)
-            raise ConfigError(f"motion must be one of {choices}, got {motion!r}") from None
+        motion = _motion_type(motion)
         joints = self.validate_move(target, speed)
-        handle = self.start_command(
+        handle = self._start_command(
             Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
         )
         self._joints_hint, self._last_target = joints, target
         return handle
 
-    def start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
+    def _run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
+        """A gripper command through the robot program's handshake, waited for."""
+        self._start_command(Command(kind), timeout=timeout_s).wait()
+
+    def _checked_status(self) -> RobotStatus:
+        """One status read; raises the typed error when it shows e-stop or error."""
+        status = self.status()
+        if (failure := self._channel.status_failure(status)) is not None:
+            raise failure
+        return status
+
+    def _start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
         """Check, send and follow any command of the profile: a move or a gripper action."""
         if timeout is not None:
             _require_positive("timeout", timeout)
         # prepare() encodes (refusing out-of-range values) before its first read.
-        ticket = self.channel.prepare(command)
+        ticket = self._channel.prepare(command)
         start: Pose | None = None
         expected = 0.0
         if command.target is not None:
-            start = ticket.start_pose or self.channel.read_pose()
+            start = ticket.start_pose or self._channel.read_pose()
             expected = self.expected_motion_time(
                 start, command.target, command.speed or 100, MotionType(command.kind.value)
             )
@@ -537,11 +625,8 @@ class Robot:
 
     def stop(self) -> None:
         """Stop the arm now (article: command = stop; tmflow: the TM Stop button)."""
-        words = self.channel.stop_words()
-        if words is None:
-            raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
-        # A stop is idempotent: retrying it can only help, even after a stop request.
-        self.transport.write_fields(words, retry=True, interruptible=False)
+        # A stop is idempotent: the channel retries it, even after a stop request.
+        self._channel.stop()
         self._log.warning("robot.stop_sent")
 
     def clear_stop_request(self) -> None:
@@ -563,18 +648,18 @@ class Robot:
         if it lands; otherwise the command is withdrawn and the error says so.
         """
         try:
-            self.channel.send(ticket)
+            self._channel.send(ticket)
             return
         except (ConnectionLostError, ResponseTimeoutError) as exc:
             self._log.warning(
                 "robot.command_write_failed", error=str(exc), command=ticket.command.kind.value
             )
             failure: TMMasterError = exc
-        self.transport.connect()  # the transport's retry policy rides out a short outage
-        if self.channel.write_landed(ticket):
+        self._transport.connect()  # the transport's retry policy rides out a short outage
+        if self._channel.write_landed(ticket):
             self._log.info("robot.command_write_landed", command=ticket.command.kind.value)
             return
-        if self.channel.duplicate_safe:
+        if self._channel.duplicate_safe:
             self._log.warning(
                 "robot.command_resent",
                 command=ticket.command.kind.value,
@@ -582,19 +667,19 @@ class Robot:
                 reason="same sequence number: the program takes it at most once",
             )
             try:
-                self.channel.send(ticket)
+                self._channel.send(ticket)
                 return
             except (ConnectionLostError, ResponseTimeoutError) as exc:
                 failure = exc
-            self.transport.connect()
-            if self.channel.write_landed(ticket):
+            self._transport.connect()
+            if self._channel.write_landed(ticket):
                 return
         else:
             deadline = time.monotonic() + self.timeouts.in_flight_s
             poller = Poller(self.poll_interval_s, self._stop_event)
             while time.monotonic() < deadline:
                 poller.sleep()
-                if self.channel.write_landed(ticket):
+                if self._channel.write_landed(ticket):
                     self._log.warning(
                         "robot.command_write_landed_late", command=ticket.command.kind.value
                     )
@@ -629,7 +714,7 @@ class Robot:
         running = ticket.acknowledged
         if not running and not ticket.withdrawn:
             try:
-                running = self.channel.withdraw(ticket)
+                running = self._channel.withdraw(ticket)
                 ticket.withdrawn = not running
                 motion.withdrawn = not running
             except TMMasterError as exc:
@@ -657,7 +742,7 @@ class Robot:
                 self._log.error("robot.stop_failed", error=str(exc))
 
     def _poll_motion(self, motion: Motion) -> None:
-        observation = self.channel.poll(motion._ticket)
+        observation = self._channel.poll(motion._ticket)
         if observation.pose is not None:
             motion.last_pose = observation.pose
         if observation.failure is not None:
@@ -684,7 +769,7 @@ class Robot:
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
         """The current pose for an error report; the fallback if it cannot be read."""
         try:
-            return self.channel.read_pose()
+            return self._channel.read_pose()
         except TMMasterError:
             return fallback
 
@@ -693,7 +778,7 @@ class Robot:
         if motion.target is not None:
             # The poll that saw the move finished read the pose in the same snapshot
             # (article); only a profile whose poll carries no pose needs one more read.
-            pose = polled_pose if polled_pose is not None else self.channel.read_pose()
+            pose = polled_pose if polled_pose is not None else self._channel.read_pose()
             motion.last_pose = pose
             if not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
@@ -740,7 +825,7 @@ class Robot:
 
     def _ack_timed_out(self, motion: Motion) -> None:
         ticket = motion._ticket
-        if self.channel.withdraw(ticket):
+        if self._channel.withdraw(ticket):
             # The robot took it just as we gave up: it is executing our command.
             ticket.acknowledged = True
             ticket.acknowledged_at = time.monotonic()

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .._channels import Command, CommandKind
 from .._exceptions import ConfigError, UnreachablePoseError
-from .._pose import MotionType, Pose
+from .._pose import Pose
 from .._robot import Robot
 from .._robot_models import RobotModel
 from ._steps import PlannedMove, TaskSequence
@@ -37,14 +36,12 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
             continue
         where = move.source or move.state
         try:
-            seed = None if previous is None else previous[1]
-            joints = robot.validate_move(move.pose, move.speed, seed_deg=seed)
-            if move.motion is MotionType.LINE and previous is not None:
-                robot.model.line_joints(
-                    previous[0], move.pose, start_joints_deg=previous[1], tool=robot.tool
-                )
-            robot.channel.encode_command(
-                Command(CommandKind.of(move.motion), move.pose, move.speed)
+            joints = robot.check_move(
+                move.pose,
+                move.speed,
+                move.motion,
+                start=None if previous is None else previous[0],
+                seed_deg=None if previous is None else previous[1],
             )
         except ConfigError as exc:
             message = (

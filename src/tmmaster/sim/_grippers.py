@@ -15,9 +15,9 @@ may step it: pass ``step_backend=False`` to the gripper.
 from __future__ import annotations
 
 from abc import abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
-from .._registers import GripperProfile
+from .._registers import GripperDriverName, GripperProfile
 from ._backend import PhysicsBackend
 from ._bank import RegisterBank
 from ._device import Logger, SimDevice
@@ -325,3 +325,11 @@ class OnRobot2FG7Device(_GripperDevice):
         # fixture shows (-40); positive for an internal grip (an assumption).
         sign = 1 if self._internal_grip else -1
         self._bank.set("force", sign * round(self._force) if detected else 0)
+
+
+#: The simulated device of each gripper protocol (the drivers' registry is
+#: ``tmmaster._gripper.GRIPPER_DRIVERS``; both are keyed by ``GRIPPER_DRIVER_NAMES``).
+GRIPPER_DEVICES: Mapping[GripperDriverName, type[Blog2FG7Device | OnRobot2FG7Device]] = {
+    "blog-2fg7": Blog2FG7Device,
+    "onrobot-2fg7": OnRobot2FG7Device,
+}

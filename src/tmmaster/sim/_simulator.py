@@ -132,13 +132,12 @@ class Simulator:
         self._gripper_server: DeviceServer | None = None
         if gripper is not None:
             # Imported here: the gripper devices are only needed with a separate gripper.
-            from ._grippers import Blog2FG7Device, OnRobot2FG7Device
+            from ._grippers import GRIPPER_DEVICES
 
             gp = gripper_profile(gripper)
             self._gripper_profile = gp
             self._gripper_bank = RegisterBank(gp)
-            device_class = Blog2FG7Device if gp.driver == "blog-2fg7" else OnRobot2FG7Device
-            self._gripper = device_class(
+            self._gripper = GRIPPER_DEVICES[gp.driver](
                 gp,
                 self._gripper_bank,
                 self._backend,
@@ -155,7 +154,7 @@ class Simulator:
                 log=self._log,
                 # The Compute Box answers its own unit id only; the article's Isaac Sim
                 # server (blog-2fg7) answers any.
-                device_id=gp.device_id if gp.driver == "onrobot-2fg7" else None,
+                device_id=gp.device_id if gp.own_unit_id_only else None,
                 max_connections=gp.max_connections,
                 tcp=listen,
             )
@@ -490,7 +489,7 @@ def simulator_summary(sim: Simulator) -> Sequence[str]:
     ]
     gp = sim.gripper_profile
     if gp is not None:
-        unit = gp.device_id if gp.driver == "onrobot-2fg7" else "any"
+        unit = gp.device_id if gp.own_unit_id_only else "any"
         limit = f" max connections={gp.max_connections}" if gp.max_connections else ""
         lines.append(
             f"gripper modbus tcp {sim.host}:{sim.gripper_port}  profile={gp.name}"
