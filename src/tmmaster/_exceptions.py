@@ -39,16 +39,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+# The root and ConfigError live in _error_root.py so that data modules (_pose.py) can
+# raise them without importing this module, which needs Pose for its annotations.
+from ._error_root import ConfigError as ConfigError
+from ._error_root import TMMasterError as TMMasterError
+
 if TYPE_CHECKING:
     from ._pose import Pose
-
-
-class TMMasterError(Exception):
-    """Root of every error raised by tmmaster."""
-
-
-class ConfigError(TMMasterError, ValueError):
-    """Invalid configuration, detected before anything is sent."""
 
 
 class RegisterMapError(ConfigError):

@@ -10,7 +10,7 @@ from typing import Any
 from pydantic import ConfigDict, ValidationError
 from pydantic.dataclasses import dataclass
 
-from ._exceptions import ConfigError
+from ._error_root import ConfigError
 
 _POSE_FIELDS = ("x", "y", "z", "rx", "ry", "rz")
 

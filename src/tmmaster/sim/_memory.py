@@ -14,7 +14,8 @@ answer), a ``slow_responses`` delay longer than the timeout raises
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import Protocol, TypeVar
 
 from .._exceptions import (
     MODBUS_EXCEPTIONS,
@@ -27,8 +28,28 @@ from .._retry import RetryPolicy
 from .._transport import BlockTransport
 from ._server import DeviceServer, MemoryAnswer
 
-if TYPE_CHECKING:
-    from ._simulator import Simulator
+T = TypeVar("T")
+
+
+class SimulatorLoop(Protocol):
+    """What a MemoryTransport needs of its simulator (a :class:`Simulator` is one)."""
+
+    @property
+    def url(self) -> str:
+        """The simulator's ``sim://`` address."""
+
+    @property
+    def running(self) -> bool:
+        """True while the simulator's loop runs."""
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """Run ``fn`` on the simulator's loop thread and return its result."""
+
+    def call_later(self, delay_s: float, fn: Callable[[], object]) -> None:
+        """Run ``fn`` on the loop thread after ``delay_s`` seconds."""
+
+    def device_server(self, device: str = "robot") -> DeviceServer:
+        """The server of ``device`` ("robot" or "gripper")."""
 
 
 def frame_bytes(function_code: int, count: int, *, request: bool, refused: bool) -> int:
@@ -53,7 +74,7 @@ class MemoryTransport(BlockTransport):
 
     def __init__(
         self,
-        sim: Simulator,
+        sim: SimulatorLoop,
         device: str = "robot",
         *,
         device_id: int = 1,

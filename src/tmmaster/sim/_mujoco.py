@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 from xml.sax.saxutils import quoteattr
 
 from .. import _kinematics as kin
@@ -43,6 +43,7 @@ from ._backend import (
     GripperState,
     MotionRejectedError,
     ObjectState,
+    PhysicsBackend,
     PhysicsUnavailableError,
     RejectReason,
 )
@@ -51,7 +52,19 @@ from ._world import TABLE, TableObject, World
 if TYPE_CHECKING:
     from pathlib import Path
 
-    from ._simulator import Simulator
+_T = TypeVar("_T")
+
+
+class _RunningSimulator(Protocol):
+    """What :func:`save_snapshot` needs of a simulator (a :class:`Simulator` is one)."""
+
+    @property
+    def backend(self) -> PhysicsBackend:
+        """The simulator's physics backend."""
+
+    def call(self, fn: Callable[[], _T]) -> _T:
+        """Run ``fn`` on the simulator's loop thread and return its result."""
+
 
 #: Physics step, s.
 DEFAULT_TIMESTEP_S = 0.002
@@ -810,7 +823,9 @@ class MuJoCoBackend:
         return path
 
 
-def save_snapshot(sim: Simulator, directory: str | Path, name: str = "cell-end.png") -> Path:
+def save_snapshot(
+    sim: _RunningSimulator, directory: str | Path, name: str = "cell-end.png"
+) -> Path:
     """Render the MuJoCo scene of ``sim`` to ``directory/name`` (PNG); return the path.
 
     Needs an OpenGL context: PyOpenGL (extra ``tmmaster[mujoco-render]``) and, headless,
