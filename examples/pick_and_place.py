@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
         sequence = pick_and_place(config)
         with robot_from_config(config, args.host, args.port) as robot:
             validate_plan(robot, sequence, args.cycles, source=args.config or "defaults")
-            result = Runner(robot, error_reaction=config.on_error.reaction).run(sequence)
+            result = Runner.from_config(robot, config).run(sequence)
     except TMMasterError as exc:  # config error or no connection
         print(f"pick_and_place: {exc}", file=sys.stderr)
         return 1

@@ -20,6 +20,7 @@ from tmmaster.pickplace import (
     ERROR,
     IDLE,
     PICK_AND_PLACE_STATES,
+    Cycles,
     Pallet,
     PickPlaceConfig,
     RetryRule,
@@ -357,3 +358,89 @@ def test_a_toml_sequence_runs_with_retries(tm_simulator_factory: SimFactory) -> 
     assert result.retries == 1
     # Released at HOME (300 mm up), it fell onto the table below (issue 9).
     assert sim.objects()[0].pose.is_close(Pose(HOME.x, HOME.y, PICK.z, *HOME.as_list()[3:]), mm=1.0)
+
+
+# -- each sequence described once: the plan comes from the steps -------------------------
+
+
+def test_the_plan_is_derived_from_the_steps_moves() -> None:
+    pallet = Pallet(origin=PLACE, rows=1, cols=2, dx=60.0, dy=0.0)
+    seq = palletizing(pick=PICK, pallet=pallet, home=HOME)
+    first, last = seq.moves(1, 2), seq.moves(2, 2)
+    # Each move-making step carries its move; cycle 2 goes to slot 2, then home.
+    assert [m.state for m in first] == [
+        "MOVE_TO_APPROACH",
+        "MOVE_TO_PICK",
+        "MOVE_TO_LIFT",
+        "MOVE_TO_SLOT_ABOVE",
+        "MOVE_TO_SLOT",
+        "MOVE_TO_SLOT_CLEAR",
+    ]
+    assert [m.state for m in last] == [*(m.state for m in first), "MOVE_TO_HOME"]
+    assert first[4].pose == pallet.slot(0)
+    assert last[4].pose == pallet.slot(1)
+    assert last[-1].pose == HOME
+    # The steps say the same: the slot move of a step follows the cycle it runs in.
+    step = next(s for s in seq.steps if s.name == "MOVE_TO_SLOT")
+    assert step.move_of(2).pose == pallet.slot(1)
+
+
+def test_a_toml_step_when_decides_the_plan_and_the_run_alike() -> None:
+    seq = sequence_from_data(
+        {
+            "name": "w",
+            "poses": {"a": list(ARTICLE_PICK)},
+            "steps": [
+                {"state": "FIRST", "do": "move", "pose": "a", "speed": 30, "when": "first_cycle"},
+                {"state": "ALWAYS", "do": "move", "pose": "a", "z_offset": 50, "speed": 30},
+                {"state": "LAST", "do": "move", "pose": "a", "speed": 30, "when": "last_cycle"},
+            ],
+        }
+    )
+    assert [m.state for m in seq.moves(1, 3)] == ["FIRST", "ALWAYS"]
+    assert [m.state for m in seq.moves(2, 3)] == ["ALWAYS"]
+    assert [m.state for m in seq.moves(3, 3)] == ["ALWAYS", "LAST"]
+    # The run's skip condition is the same rule object the plan reads.
+    whens = {s.name: s.when for s in seq.steps}
+    assert whens["ALWAYS"] is None
+    assert whens["FIRST"] is Cycles.FIRST
+    assert whens["LAST"] is Cycles.LAST
+
+
+def test_a_step_without_action_or_move_is_refused_and_plan_is_deprecated() -> None:
+    with pytest.raises(ConfigError, match="action, a move"):
+        TaskSequence("t").add("A")
+    with pytest.warns(DeprecationWarning, match="plan"):
+        seq = TaskSequence("t", plan=lambda _c, _n: [])
+    assert seq.moves(1, 1) == []
+
+
+def test_a_bug_in_step_code_surfaces_as_itself(robot: Robot) -> None:
+    seq = TaskSequence("bug")
+
+    @seq.step("A")
+    def broken(ctx: StepContext) -> None:
+        ctx.no_such_method()  # type: ignore[attr-defined]
+
+    with pytest.raises(AttributeError, match="no_such_method"):
+        Runner(robot).run(seq)
+
+
+def test_a_robot_error_in_step_code_is_a_run_failure(robot: Robot) -> None:
+    seq = TaskSequence("fails")
+
+    @seq.step("A")
+    def refused(ctx: StepContext) -> None:
+        ctx.move(PICK, speed=1000)
+
+    result = Runner(robot).run(seq)
+    assert not result.ok
+    assert result.failure is not None
+    assert (result.failure.state, result.failure.type) == ("A", "ConfigError")
+
+
+def test_runner_from_config_takes_reaction_and_readiness(robot: Robot) -> None:
+    config = validate_config({"on_error": {"reaction": "retreat"}, "timeouts": {"ready_s": 3.5}})
+    runner = Runner.from_config(robot, config)
+    assert runner.error_reaction == "retreat"
+    assert runner.ready_timeout_s == 3.5

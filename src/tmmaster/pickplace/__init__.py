@@ -41,7 +41,6 @@ if _TYPE_CHECKING:
         RunResult,
         StateEvent,
         StateRecord,
-        StepContext,
         StopRequestedError,
     )
     from ._sequences import (
@@ -53,13 +52,14 @@ if _TYPE_CHECKING:
         pick_and_place,
         sequence_from_data,
     )
-    from ._steps import PlannedMove, RetryRule, Step, TaskSequence
+    from ._steps import Cycles, PlannedMove, RetryRule, Step, StepContext, TaskSequence
 
 #: Public name -> the private module that defines it (imported on first use).
 _EXPORTS = {
     "ARTICLE_HOME": "._config",
     "ARTICLE_PICK": "._config",
     "ARTICLE_PLACE": "._config",
+    "Cycles": "._steps",
     "DONE": "._machine",
     "ERROR": "._machine",
     "Failure": "._runner",
@@ -77,7 +77,7 @@ _EXPORTS = {
     "StateEvent": "._runner",
     "StateRecord": "._runner",
     "Step": "._steps",
-    "StepContext": "._runner",
+    "StepContext": "._steps",
     "StopRequestedError": "._runner",
     "TaskSequence": "._steps",
     "build_report": "._report",
@@ -108,6 +108,7 @@ __all__ = [
     "ERROR",
     "IDLE",
     "PICK_AND_PLACE_STATES",
+    "Cycles",
     "Failure",
     "Pallet",
     "PickPlaceConfig",

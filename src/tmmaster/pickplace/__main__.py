@@ -470,12 +470,7 @@ def _run_on(
         config, host, port, gripper_port=gripper_port, settle_scale=settle_scale
     )
     outcome.target = {"host": host, "port": port, "profile": robot.profile.name}
-    runner = Runner(
-        robot,
-        error_reaction=config.on_error.reaction,
-        ready_timeout_s=config.timeouts.ready_s,
-        on_state=out.progress,
-    )
+    runner = Runner.from_config(robot, config, on_state=out.progress)
     restore = _install_sigint(runner.request_stop)
     if out.live is not None:
         out.live.begin(cycles, outcome.expected_cycle_s)

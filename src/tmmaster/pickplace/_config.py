@@ -46,19 +46,14 @@ PoseValue = Annotated[
 ]
 Speed = Annotated[int, Field(ge=1, le=100, strict=True)]
 
-#: The article's task coordinates.
-ARTICLE_APPROACH: tuple[float, ...] = (300, -200, 200, 180, 0, 90)
+#: The article's task coordinates (its approach and lift derive from the pick pose).
 ARTICLE_PICK = (300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
-ARTICLE_LIFT: tuple[float, ...] = (300, -200, 250, 180, 0, 90)
 ARTICLE_PLACE = (300.0, 200.0, 200.0, 180.0, 0.0, 90.0)
 #: The article's HOME: out of a TM5's reach (the wrist offsets keep a tool-down flange
 #: ~120 mm from the J1 axis), refused by inverse kinematics; see docs/pickplace.md.
 ARTICLE_HOME = (0.0, 0.0, 300.0, 180.0, 0.0, 0.0)
 #: The default home: tool down, 250 mm in front of J1 (tmmaster.DEFAULT_HOME).
 DEFAULT_HOME_VALUE = (250.0, 0.0, 300.0, 180.0, 0.0, 90.0)
-
-#: The moves of one pick & place cycle, in order.
-MOVES = ("approach", "pick", "lift", "place", "home")
 
 
 class _Section(BaseModel):

@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from transitions import Machine
 
 from .._exceptions import ConfigError
-from ._steps import Step, TaskSequence
+from ._steps import Step, StepContext, TaskSequence
 
 IDLE, DONE, ERROR = "IDLE", "DONE", "ERROR"
 
@@ -38,11 +38,11 @@ class SequenceMachine:
 
     if TYPE_CHECKING:
         # Trigger methods that transitions binds onto the model at run time.
-        def start(self) -> bool: ...
-        def advance(self) -> bool: ...
-        def retry(self) -> bool: ...
-        def fail(self) -> bool: ...
-        def reset(self) -> bool: ...
+        def start(self, *context: object) -> bool: ...
+        def advance(self, *context: object) -> bool: ...
+        def retry(self, *context: object) -> bool: ...
+        def fail(self, *context: object) -> bool: ...
+        def reset(self, *context: object) -> bool: ...
 
     def __init__(
         self,
@@ -61,8 +61,8 @@ class SequenceMachine:
         self.retries_used: dict[str, int] = {}
         self._steps = {s.name: s for s in sequence.steps}
         self._stop = stop_event if stop_event is not None else threading.Event()
-        # Guards of steps are asked about the runner's context, which the machine
-        # itself does not know: the runner hands it over through this callable.
+        # Guards of steps are asked about the runner's context: the runner passes it
+        # with the trigger (``advance(ctx)``); this callable is the fallback without one.
         self._guard_context: Callable[[], Any] = (
             guard_context if guard_context is not None else (lambda: None)
         )
@@ -84,7 +84,13 @@ class SequenceMachine:
             return []
         name = f"guard_{step.guard_name or step.name.lower()}"
         guard = step.guard
-        setattr(self, name, lambda *_: bool(guard(self._guard_context())))
+
+        def check(*args: object) -> bool:
+            # The runner passes its step context with the trigger (advance(ctx)).
+            ctx = args[0] if args else self._guard_context()
+            return bool(guard(cast("StepContext", ctx)))
+
+        setattr(self, name, check)
         return [name]
 
     def _transitions(self, steps: list[Step]) -> list[dict[str, Any]]:

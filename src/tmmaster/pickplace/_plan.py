@@ -77,13 +77,13 @@ def estimate(
     tool: Pose | None = None,
 ) -> list[EstimatedMove]:
     """Expected duration and target joints of every planned move, from ``start``."""
-    if sequence.plan is None:
+    if not any(s.move is not None for s in sequence.steps) and sequence.plan is None:
         return []
     here = start
     joints = model.inverse(start, tool=tool)
     result = []
     for cycle in range(1, cycles + 1):
-        for move in sequence.plan(cycle, cycles):
+        for move in sequence.moves(cycle, cycles):
             seconds = model.motion_time(
                 here,
                 move.pose,

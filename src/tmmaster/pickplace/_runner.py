@@ -30,8 +30,9 @@ from .._gripper import GripperStatus
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Robot
+from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
-from ._steps import PlannedMove, TaskSequence
+from ._steps import PlannedMove, Step, TaskSequence
 
 _log = get_logger("tmmaster.pickplace")
 
@@ -148,13 +149,12 @@ class RunResult:
         return timings
 
 
-class StepContext:
-    """What a step's action may use: the robot, the cycle, and moves that obey the policies."""
+class _RunContext:
+    """The :class:`StepContext` of one run: the robot, the run's position, policy moves."""
 
-    def __init__(self, runner: Runner, machine: SequenceMachine) -> None:
-        self.runner = runner
-        self.robot = runner.robot
-        self._machine = machine
+    def __init__(self, run: _Run) -> None:
+        self._run = run
+        self.robot: Robot = run.runner.robot
         #: Free space for a sequence's own state between steps (reset per run).
         self.data: dict[str, Any] = {}
         #: The gripper status of the last gripper action or check.
@@ -163,32 +163,33 @@ class StepContext:
     @property
     def state(self) -> str:
         """The current state."""
-        return self._machine.state
+        return self._run.machine.state
 
     @property
     def cycle(self) -> int:
         """The current cycle, from 1."""
-        return self._machine.cycle
+        return self._run.machine.cycle
 
     @property
     def cycles(self) -> int:
         """How many cycles this run makes."""
-        return self._machine.cycles
+        return self._run.machine.cycles
 
     @property
     def last_cycle(self) -> bool:
         """True during the last cycle."""
-        return self._machine.cycle >= self._machine.cycles
+        return self.cycle >= self.cycles
 
     @property
     def attempt(self) -> int:
         """1 + the retries already used by the current step in this cycle."""
-        return 1 + self._machine.retries_used.get(self._machine.state, 0)
+        machine = self._run.machine
+        return 1 + machine.retries_used.get(machine.state, 0)
 
     @property
     def stop_requested(self) -> bool:
         """True once a stop was requested (long actions should return early)."""
-        return self.runner.stop_requested
+        return self._run.runner.stop_requested
 
     def move(
         self,
@@ -230,8 +231,47 @@ class StepContext:
 
     def wait(self, seconds: float) -> None:
         """Dwell for ``seconds``; a stop request ends the dwell at once."""
-        if self.runner._stop.wait(seconds):
+        if self._run.runner._stop.wait(seconds):
             raise StopRequestedError("stop requested during a dwell")
+
+
+class _Run:
+    """Everything one :meth:`Runner.run` call owns: machine, context, result, clocks."""
+
+    def __init__(self, runner: Runner, sequence: TaskSequence, cycles: int) -> None:
+        self.runner = runner
+        self.sequence = sequence
+        self.machine = SequenceMachine(sequence, cycles=cycles, stop_event=runner._stop)
+        self.ctx = _RunContext(self)
+        self.result = RunResult(
+            sequence=sequence.name,
+            state=IDLE,
+            cycles_requested=cycles,
+            started_at=datetime.now(UTC).isoformat(timespec="milliseconds"),
+        )
+        self.started = time.monotonic()
+        self.cycle_started = self.started
+
+    def record(self, state: str, cycle: int, started: float, outcome: str) -> None:
+        """Append the record of one pass through ``state``."""
+        now = time.monotonic()
+        self.result.records.append(
+            StateRecord(
+                state=state,
+                cycle=cycle,
+                started_s=round(started - self.started, 4),
+                duration_s=round(now - started, 4),
+                outcome=outcome,
+            )
+        )
+
+    def cycle_done(self, cycle: int) -> None:
+        """Count a finished cycle and start the clock of the next."""
+        elapsed = round(time.monotonic() - self.cycle_started, 4)
+        self.result.cycle_times_s.append(elapsed)
+        self.result.cycles_completed += 1
+        self.runner._log.info("pickplace.cycle_done", cycle=cycle, cycle_time_s=elapsed)
+        self.cycle_started = time.monotonic()
 
 
 class Runner:
@@ -252,6 +292,22 @@ class Runner:
         self._stop = threading.Event()
         self._log = _log.bind(robot=robot.name)
 
+    @classmethod
+    def from_config(
+        cls,
+        robot: Robot,
+        config: PickPlaceConfig,
+        *,
+        on_state: Callable[[StateEvent], None] | None = None,
+    ) -> Runner:
+        """A runner with the configuration's error reaction and readiness timeout."""
+        return cls(
+            robot,
+            error_reaction=config.on_error.reaction,
+            ready_timeout_s=config.timeouts.ready_s,
+            on_state=on_state,
+        )
+
     @property
     def stop_requested(self) -> bool:
         """True once :meth:`request_stop` was called."""
@@ -268,49 +324,21 @@ class Runner:
     # -- the run -------------------------------------------------------------
 
     def run(self, sequence: TaskSequence, *, cycles: int | None = None) -> RunResult:
-        """Run ``cycles`` cycles of ``sequence``; never raises for a robot failure."""
+        """Run ``cycles`` cycles of ``sequence``; never raises for a robot failure.
+
+        A :class:`~tmmaster.TMMasterError` from a step fails (or retries) it and ends the
+        run with a failure; any other exception from a step's code is a bug and is raised.
+        """
         count = cycles if cycles is not None else sequence.default_cycles
-        ctx_holder: list[StepContext] = []
-        machine = SequenceMachine(
-            sequence, cycles=count, stop_event=self._stop, guard_context=lambda: ctx_holder[0]
-        )
-        ctx = StepContext(self, machine)
-        ctx_holder.append(ctx)
-        result = RunResult(
-            sequence=sequence.name,
-            state=IDLE,
-            cycles_requested=count,
-            started_at=datetime.now(UTC).isoformat(timespec="milliseconds"),
-        )
-        t0 = time.monotonic()
-        self._run_start = t0
-        self._cycle_start = t0
+        run = _Run(self, sequence, count)
         if not self._stop.is_set():
             self.robot.clear_stop_request()
         self._log.info("pickplace.run_started", sequence=sequence.name, cycles=count)
-
-        state_start = time.monotonic()
-        try:
-            self._check_stop()
-            self.robot.wait_until_ready(self.ready_timeout_s)
-            if sequence.prepare is not None:
-                sequence.prepare(ctx)
-        except Exception as exc:
-            if self._stop.is_set() and not isinstance(exc, StopRequestedError):
-                # The preparation failed because its wait was interrupted: that is the stop.
-                exc = StopRequestedError("stop requested during the preparation")
-            self._record(result, IDLE, 0, state_start, "failed")
-            self._fail(machine, result, IDLE, exc)
-        else:
-            self._record(result, IDLE, 0, state_start, "ok")
-            if not machine.start():
-                self._fail(machine, result, IDLE, StopRequestedError("stop requested"))
-            else:
-                self._changed(machine, IDLE, state_start)
-        while not machine.finished:
-            self._step(machine, ctx, result)
-
-        result.state = machine.state
+        self._start(run)
+        while not run.machine.finished:
+            self._step(run)
+        result = run.result
+        result.state = run.machine.state
         if result.failure is not None:
             if result.failure.interrupted:
                 result.stop_delivered = self._stop_arm()
@@ -319,7 +347,7 @@ class Runner:
                 if motion is not None and motion.abandoned:
                     result.stop_delivered = motion.stop_delivered
             result.reaction = self._react(sequence, result.failure)
-        result.duration_s = round(time.monotonic() - t0, 4)
+        result.duration_s = round(time.monotonic() - run.started, 4)
         self._log.info(
             "pickplace.run_done",
             sequence=sequence.name,
@@ -329,69 +357,103 @@ class Runner:
         )
         return result
 
-    def _step(self, machine: SequenceMachine, ctx: StepContext, result: RunResult) -> None:
+    def _start(self, run: _Run) -> None:
+        """IDLE: wait until the robot is ready, prepare, then enter the first step."""
+        started = time.monotonic()
+        try:
+            self._check_stop()
+            self.robot.wait_until_ready(self.ready_timeout_s)
+            if run.sequence.prepare is not None:
+                run.sequence.prepare(run.ctx)
+        except TMMasterError as exc:
+            run.record(IDLE, 0, started, "failed")
+            self._fail(run, IDLE, self._as_stop(exc, "the preparation"))
+            return
+        run.record(IDLE, 0, started, "ok")
+        if not run.machine.start(run.ctx):
+            self._fail(run, IDLE, StopRequestedError("stop requested"))
+        else:
+            self._changed(run, IDLE, started)
+
+    def _step(self, run: _Run) -> None:
+        """Run the current state's action, then retry, fail or move on."""
+        machine = run.machine
         step = machine.step()
         state, cycle = machine.state, machine.cycle
         started = time.monotonic()
         try:
-            self._check_stop()
-            if step.when is not None and not step.when(ctx):
-                outcome = "skipped"
-            else:
-                step.action(ctx)
-                outcome = "ok"
-        except Exception as exc:
-            if self._stop.is_set() and not isinstance(exc, StopRequestedError):
-                # The action failed because its wait was interrupted: that is the stop.
-                exc = StopRequestedError(f"stop requested during {state}")
-            rule = step.retry
-            if (
-                rule is not None
-                and isinstance(exc, rule.on)
-                and not self._stop.is_set()
-                and machine.retries_left()
-            ):
-                self._record(result, state, cycle, started, "retry")
-                self._log.warning(
-                    "pickplace.retry",
-                    state=state,
-                    cycle=cycle,
-                    back_to=rule.back_to,
-                    attempt=ctx.attempt + 1,
-                    attempts=rule.attempts + 1,
-                    error=str(exc),
-                )
-                try:
-                    if rule.recover is not None:
-                        rule.recover(ctx)
-                except Exception as recover_exc:
-                    self._fail(machine, result, state, recover_exc)
-                    return
-                result.retries += 1
-                machine.retry()
-                self._changed(machine, state, started)
-                return
-            self._record(result, state, cycle, started, "failed")
-            self._fail(machine, result, state, exc)
+            outcome = self._act(run, step)
+        except TMMasterError as exc:
+            self._failed_step(run, step, cycle, started, self._as_stop(exc, state))
             return
-        self._record(result, state, cycle, started, outcome)
-        last = machine.is_last_step()
-        if not machine.advance():
+        except Exception as exc:
+            if step.retry is None or not isinstance(exc, step.retry.on):
+                # A bug in the step's code, not a robot failure: let it surface as itself.
+                self._log.error("pickplace.step_raised", state=state, error=repr(exc))
+                raise
+            self._failed_step(run, step, cycle, started, self._as_stop(exc, state))
+            return
+        run.record(state, cycle, started, outcome)
+        self._advance(run, step, state, cycle, started)
+
+    def _act(self, run: _Run, step: Step) -> str:
+        """The step's action, unless its skip condition says no; returns the outcome."""
+        self._check_stop()
+        if step.when is not None and not step.when(run.ctx):
+            return "skipped"
+        step.action(run.ctx)
+        return "ok"
+
+    def _failed_step(
+        self, run: _Run, step: Step, cycle: int, started: float, exc: BaseException
+    ) -> None:
+        """Go back by the step's retry rule when it allows, else fail the run."""
+        state = step.name
+        rule = step.retry
+        if (
+            rule is None
+            or not isinstance(exc, rule.on)
+            or self._stop.is_set()
+            or not run.machine.retries_left()
+        ):
+            run.record(state, cycle, started, "failed")
+            self._fail(run, state, exc)
+            return
+        run.record(state, cycle, started, "retry")
+        self._log.warning(
+            "pickplace.retry",
+            state=state,
+            cycle=cycle,
+            back_to=rule.back_to,
+            attempt=run.ctx.attempt + 1,
+            attempts=rule.attempts + 1,
+            error=str(exc),
+        )
+        try:
+            if rule.recover is not None:
+                rule.recover(run.ctx)
+        except TMMasterError as recover_exc:
+            self._fail(run, state, recover_exc)
+            return
+        run.result.retries += 1
+        run.machine.retry(run.ctx)
+        self._changed(run, state, started)
+
+    def _advance(self, run: _Run, step: Step, state: str, cycle: int, started: float) -> None:
+        """Leave a finished state forward (its guard must hold)."""
+        last = run.machine.is_last_step()
+        if not run.machine.advance(run.ctx):
             guard = step.guard_name or "guard"
             reason = (
                 StopRequestedError("stop requested")
                 if self._stop.is_set()
                 else RobotError(f"{state}: guard {guard} does not hold; not moving on")
             )
-            self._fail(machine, result, state, reason)
+            self._fail(run, state, reason)
             return
         if last:
-            elapsed = round(time.monotonic() - self._cycle_start, 4)
-            result.cycle_times_s.append(elapsed)
-            result.cycles_completed += 1
-            self._log.info("pickplace.cycle_done", cycle=cycle, cycle_time_s=elapsed)
-            self._cycle_start = time.monotonic()
-        self._changed(machine, state, started)
+            run.cycle_done(cycle)
+        self._changed(run, state, started)
 
     # -- helpers -----------------------------------------------------------------
 
@@ -399,21 +461,14 @@ class Runner:
         if self._stop.is_set():
             raise StopRequestedError("stop requested")
 
-    def _record(
-        self, result: RunResult, state: str, cycle: int, started: float, outcome: str
-    ) -> None:
-        now = time.monotonic()
-        result.records.append(
-            StateRecord(
-                state=state,
-                cycle=cycle,
-                started_s=round(started - self._run_start, 4),
-                duration_s=round(now - started, 4),
-                outcome=outcome,
-            )
-        )
+    def _as_stop(self, exc: BaseException, during: str) -> BaseException:
+        """A failure caused by an interrupted wait is the stop request itself."""
+        if self._stop.is_set() and not isinstance(exc, StopRequestedError):
+            return StopRequestedError(f"stop requested during {during}")
+        return exc
 
-    def _changed(self, machine: SequenceMachine, previous: str, started: float) -> None:
+    def _changed(self, run: _Run, previous: str, started: float) -> None:
+        machine = run.machine
         now = time.monotonic()
         self._log.info(
             "pickplace.state",
@@ -430,30 +485,28 @@ class Runner:
                     previous=previous,
                     cycle=machine.cycle,
                     cycles=machine.cycles,
-                    cycle_elapsed_s=now - self._cycle_start,
+                    cycle_elapsed_s=now - run.cycle_started,
                 )
             )
 
-    def _fail(
-        self, machine: SequenceMachine, result: RunResult, state: str, exc: BaseException
-    ) -> None:
+    def _fail(self, run: _Run, state: str, exc: BaseException) -> None:
         code = getattr(exc, "error_code", None)
         failure = Failure(
             state=state,
-            cycle=machine.cycle,
+            cycle=run.machine.cycle,
             type=type(exc).__name__,
             message=str(exc),
             error_code=code if isinstance(code, int) and code != 0 else None,
             exception=exc,
         )
-        result.failure = failure
+        run.result.failure = failure
         if failure.interrupted:
-            self._log.warning("pickplace.interrupted", state=state, cycle=machine.cycle)
+            self._log.warning("pickplace.interrupted", state=state, cycle=run.machine.cycle)
         else:
             self._log.error("pickplace.failed", **failure.as_dict())
         started = time.monotonic()
-        machine.fail()
-        self._changed(machine, state, started)
+        run.machine.fail(run.ctx)
+        self._changed(run, state, started)
 
     def _stop_arm(self) -> bool | None:
         """After a stop request: stop the arm; True if delivered, None if it cannot be stopped."""
@@ -493,7 +546,7 @@ class Runner:
                 up = Pose(here.x, here.y, target.pose.z, here.rx, here.ry, here.rz)
                 self.robot.move_to(up, speed=target.speed, motion=MotionType.LINE)
             self.robot.move_to(target.pose, speed=target.speed, motion=target.motion)
-        except Exception as exc:
+        except TMMasterError as exc:
             self._log.error("pickplace.retreat_failed", error=str(exc))
             return ReactionRecord(reaction, False, f"retreat failed: {exc}")
         return ReactionRecord(reaction, True, f"retreated to {target.pose}")
@@ -507,6 +560,5 @@ __all__ = [
     "Runner",
     "StateEvent",
     "StateRecord",
-    "StepContext",
     "StopRequestedError",
 ]

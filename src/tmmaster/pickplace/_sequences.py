@@ -17,8 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
 from ._config import PickPlaceConfig, PoseValue, Speed, format_validation_error, read_config_data
-from ._runner import StepContext
-from ._steps import Action, PlannedMove, Predicate, RetryRule, TaskSequence
+from ._steps import Action, Cycles, PlannedMove, RetryRule, StepContext, TaskSequence
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
 PICK_AND_PLACE_STATES = (
@@ -50,14 +49,6 @@ def _check(ctx: StepContext) -> None:
     ctx.check_holding(True)
 
 
-def _mover(planned: PlannedMove) -> Action:
-    def move(ctx: StepContext) -> None:
-        ctx.move_planned(planned)
-
-    move.__name__ = f"move_to_{planned.source or planned.state.lower()}"
-    return move
-
-
 def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
     """The article's cycle: approach, pick, close, check, lift, place, open, home."""
     cfg = config if config is not None else PickPlaceConfig()
@@ -72,7 +63,6 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
         )
         for name in ("approach", "pick", "lift", "place", "home")
     }
-    order = [moves[n] for n in ("approach", "pick", "lift", "place", "home")]
     retreat = PlannedMove(
         state="RETREAT",
         pose=cfg.retreat_pose(),
@@ -82,13 +72,12 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
     )
     seq = TaskSequence(
         "pick-and-place",
-        plan=lambda _cycle, _cycles: order,
         retreat=retreat if cfg.on_error.reaction == "retreat" else None,
         default_cycles=cfg.run.cycles,
         prepare=_open if cfg.gripper.open_at_start else None,
     )
-    seq.add("MOVE_TO_APPROACH", _mover(moves["approach"]), description="above the pick pose")
-    seq.add("MOVE_TO_PICK", _mover(moves["pick"]), description="down to the part")
+    seq.add("MOVE_TO_APPROACH", move=moves["approach"], description="above the pick pose")
+    seq.add("MOVE_TO_PICK", move=moves["pick"], description="down to the part")
     seq.add("GRIPPER_CLOSE", _close, description="close the fingers")
     seq.add(
         "CHECK_GRASP",
@@ -97,10 +86,10 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
         guard=grasp_detected,
         description="require an object; else open, re-approach, try again",
     )
-    seq.add("MOVE_TO_LIFT", _mover(moves["lift"]), description="lift the part")
-    seq.add("MOVE_TO_PLACE", _mover(moves["place"]), description="to the place pose")
+    seq.add("MOVE_TO_LIFT", move=moves["lift"], description="lift the part")
+    seq.add("MOVE_TO_PLACE", move=moves["place"], description="to the place pose")
     seq.add("GRIPPER_OPEN", _open, description="release the part")
-    seq.add("MOVE_TO_HOME", _mover(moves["home"]), description="back home")
+    seq.add("MOVE_TO_HOME", move=moves["home"], description="back home")
     return seq
 
 
@@ -157,44 +146,36 @@ def palletizing(
     above_pick = pick.offset(dz=approach_dz)
     ptp, line = MotionType.PTP, MotionType.LINE
 
-    def slot_moves(cycle: int) -> list[PlannedMove]:
-        slot = pallet.slot(cycle - 1)
-        above = slot.offset(dz=approach_dz)
-        return [
-            PlannedMove("MOVE_TO_SLOT_ABOVE", above, speed, ptp, f"slot {cycle}"),
-            PlannedMove("MOVE_TO_SLOT", slot, slow_speed, line, f"slot {cycle}"),
-            PlannedMove("MOVE_TO_SLOT_CLEAR", above, slow_speed, line, f"slot {cycle}"),
-        ]
+    def slot(cycle: int) -> Pose:
+        return pallet.slot(cycle - 1)
 
-    def plan(cycle: int, _cycles: int = pallet.size) -> list[PlannedMove]:
-        moves = [
-            PlannedMove("MOVE_TO_APPROACH", above_pick, speed, ptp, "pick"),
-            PlannedMove("MOVE_TO_PICK", pick, slow_speed, line, "pick"),
-            PlannedMove("MOVE_TO_LIFT", above_pick, slow_speed, line, "pick"),
-            *slot_moves(cycle),
-        ]
-        if cycle == _cycles:
-            moves.append(PlannedMove("MOVE_TO_HOME", home, speed, ptp, "home"))
-        return moves
+    def above_slot(cycle: int) -> PlannedMove:
+        return PlannedMove(
+            "MOVE_TO_SLOT_ABOVE", slot(cycle).offset(dz=approach_dz), speed, ptp, f"slot {cycle}"
+        )
 
-    def slot_move(index: int) -> Action:
-        def move(ctx: StepContext) -> None:
-            ctx.move_planned(slot_moves(ctx.cycle)[index])
+    def into_slot(cycle: int) -> PlannedMove:
+        return PlannedMove("MOVE_TO_SLOT", slot(cycle), slow_speed, line, f"slot {cycle}")
 
-        return move
-
-    def last_cycle(ctx: StepContext) -> bool:
-        return ctx.last_cycle
+    def clear_slot(cycle: int) -> PlannedMove:
+        return PlannedMove(
+            "MOVE_TO_SLOT_CLEAR",
+            slot(cycle).offset(dz=approach_dz),
+            slow_speed,
+            line,
+            f"slot {cycle}",
+        )
 
     seq = TaskSequence(
         "palletizing",
-        plan=plan,
         retreat=PlannedMove("RETREAT", home, retreat_speed, ptp, "home"),
         default_cycles=pallet.size,
         prepare=_open,
     )
-    seq.add("MOVE_TO_APPROACH", _mover(plan(1)[0]))
-    seq.add("MOVE_TO_PICK", _mover(plan(1)[1]))
+    seq.add(
+        "MOVE_TO_APPROACH", move=PlannedMove("MOVE_TO_APPROACH", above_pick, speed, ptp, "pick")
+    )
+    seq.add("MOVE_TO_PICK", move=PlannedMove("MOVE_TO_PICK", pick, slow_speed, line, "pick"))
     seq.add("GRIPPER_CLOSE", _close)
     seq.add(
         "CHECK_GRASP",
@@ -202,12 +183,14 @@ def palletizing(
         retry=RetryRule("MOVE_TO_APPROACH", grasp_retries, recover=_open),
         guard=grasp_detected,
     )
-    seq.add("MOVE_TO_LIFT", _mover(plan(1)[2]))
-    seq.add("MOVE_TO_SLOT_ABOVE", slot_move(0))
-    seq.add("MOVE_TO_SLOT", slot_move(1))
+    seq.add("MOVE_TO_LIFT", move=PlannedMove("MOVE_TO_LIFT", above_pick, slow_speed, line, "pick"))
+    seq.add("MOVE_TO_SLOT_ABOVE", move=above_slot)
+    seq.add("MOVE_TO_SLOT", move=into_slot)
     seq.add("GRIPPER_OPEN", _open)
-    seq.add("MOVE_TO_SLOT_CLEAR", slot_move(2))
-    seq.add("MOVE_TO_HOME", _mover(PlannedMove("MOVE_TO_HOME", home, speed, ptp)), when=last_cycle)
+    seq.add("MOVE_TO_SLOT_CLEAR", move=clear_slot)
+    seq.add(
+        "MOVE_TO_HOME", move=PlannedMove("MOVE_TO_HOME", home, speed, ptp, "home"), when=Cycles.LAST
+    )
     return seq
 
 
@@ -220,7 +203,7 @@ class _DataStep(BaseModel):
     #: State name (UPPER_CASE by convention); default: the action and its position.
     state: str | None = None
     #: Run always, only in the first cycle, or only in the last.
-    when: Literal["always", "first_cycle", "last_cycle"] = "always"
+    when: Cycles = Cycles.ALWAYS
 
 
 class _Retrying(_DataStep):
@@ -315,25 +298,18 @@ def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Ta
             return Pose.from_sequence(spec.poses[value])
         return Pose.from_sequence(value)
 
-    whens: dict[str, Predicate | None] = {
-        "always": None,
-        "first_cycle": lambda ctx: ctx.cycle == 1,
-        "last_cycle": lambda ctx: ctx.last_cycle,
-    }
-    moves: list[tuple[int, PlannedMove, str]] = []
     seq = TaskSequence(
         spec.name, default_cycles=spec.cycles, prepare=_open if spec.open_at_start else None
     )
     for index, step in enumerate(spec.steps):
         name = step.state or f"{step.do.upper()}_{index + 1}"
         where = f"steps.{index}"
-        action: Action
+        action: Action | None = None
+        planned: PlannedMove | None = None
         retry: RetryRule | None = None
         if isinstance(step, MoveStep):
             pose = pose_of(step.pose, f"{where}.pose").offset(dz=step.z_offset)
             planned = PlannedMove(name, pose, step.speed, step.motion, f"{where}.pose")
-            moves.append((index, planned, step.when))
-            action = _mover(planned)
         elif isinstance(step, GripStep):
             action = _grip
         elif isinstance(step, ReleaseStep):
@@ -345,7 +321,8 @@ def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Ta
         if isinstance(step, _Retrying) and step.retry_from is not None:
             retry = RetryRule(step.retry_from, step.retries, recover=_open)
         try:
-            seq.add(name, action, retry=retry, when=whens[step.when])
+            when = None if step.when is Cycles.ALWAYS else step.when
+            seq.add(name, action, move=planned, retry=retry, when=when)
         except ConfigError as exc:
             raise ConfigError(f"{source}: {where}.state: {exc}") from None
     try:
@@ -353,16 +330,6 @@ def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Ta
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
 
-    def plan(cycle: int, cycles: int) -> list[PlannedMove]:
-        return [
-            m
-            for _, m, when in moves
-            if when == "always"
-            or (when == "first_cycle" and cycle == 1)
-            or (when == "last_cycle" and cycle == cycles)
-        ]
-
-    seq.plan = plan
     if spec.retreat is not None:
         seq.retreat = PlannedMove(
             "RETREAT",

@@ -7,25 +7,113 @@ sequence: the built-in pick & place, palletizing, a Python sequence or a TOML on
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+from typing import Any, Literal, Protocol, TypeVar
 
 from .._exceptions import ConfigError, GraspFailedError
+from .._gripper import GripperStatus
 from .._pose import MotionType, Pose
+from .._robot import Robot
 
-if TYPE_CHECKING:
-    from ._runner import StepContext
 
-#: What a step does; its return value is ignored, an exception fails (or retries) the step.
-Action = Callable[["StepContext"], Any]
+class StepContext(Protocol):
+    """What a step's action may use: the robot, the run's position, moves under the policies.
+
+    The runner hands one to every action, guard and skip condition of a run.
+    """
+
+    #: The robot of the run.
+    robot: Robot
+    #: Free space for a sequence's own state between steps (reset per run).
+    data: dict[str, Any]
+    #: The gripper status of the last gripper action or check.
+    last_gripper: GripperStatus | None
+
+    @property
+    def state(self) -> str:
+        """The current state."""
+
+    @property
+    def cycle(self) -> int:
+        """The current cycle, from 1."""
+
+    @property
+    def cycles(self) -> int:
+        """How many cycles this run makes."""
+
+    @property
+    def last_cycle(self) -> bool:
+        """True during the last cycle."""
+
+    @property
+    def attempt(self) -> int:
+        """1 + the retries already used by the current step in this cycle."""
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once a stop was requested (long actions should return early)."""
+
+    def move(
+        self,
+        pose: Pose,
+        *,
+        speed: int,
+        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
+    ) -> None:
+        """Move and wait until the robot acknowledged and finished (robot API timeouts)."""
+
+    def move_planned(self, planned: PlannedMove) -> None:
+        """Make a :class:`PlannedMove`."""
+
+    def open_gripper(self) -> GripperStatus:
+        """Open the fingers and wait until they stopped."""
+
+    def close_gripper(self) -> GripperStatus:
+        """Close the fingers and wait until they stopped (no check of the object)."""
+
+    def check_holding(self, expected: bool = True) -> GripperStatus:
+        """Read the gripper; raise :class:`GraspFailedError` unless holding == ``expected``."""
+
+    def grip(self) -> GripperStatus:
+        """Close and require an object (raises :class:`GraspFailedError`)."""
+
+    def wait(self, seconds: float) -> None:
+        """Dwell for ``seconds``; a stop request ends the dwell at once."""
+
+
+#: What a step does; its return value is ignored; a :class:`~tmmaster.TMMasterError`
+#: fails (or retries) the step, any other exception is a bug and leaves the run.
+Action = Callable[[StepContext], Any]
 #: A yes/no question about the run, asked without I/O (guards, skip conditions).
-Predicate = Callable[["StepContext"], bool]
+Predicate = Callable[[StepContext], bool]
 
 ActionT = TypeVar("ActionT", bound=Action)
 
 #: States every machine has; a sequence may not reuse these names.
 RESERVED_STATES = ("IDLE", "DONE", "ERROR")
+
+
+class Cycles(StrEnum):
+    """In which cycles a step runs, known before the run (the plan follows it)."""
+
+    ALWAYS = "always"
+    FIRST = "first_cycle"
+    LAST = "last_cycle"
+
+    def applies(self, cycle: int, cycles: int) -> bool:
+        """True when a step with this rule runs in cycle ``cycle`` of ``cycles``."""
+        if self is Cycles.FIRST:
+            return cycle == 1
+        if self is Cycles.LAST:
+            return cycle == cycles
+        return True
+
+    def __call__(self, ctx: StepContext) -> bool:
+        """The same rule as a skip condition on a running context."""
+        return self.applies(ctx.cycle, ctx.cycles)
 
 
 @dataclass(frozen=True)
@@ -51,6 +139,10 @@ class PlannedMove:
     source: str = ""
 
 
+#: The move a step makes: one move, or the move of cycle k (1-based), e.g. a pallet slot.
+MoveSpec = PlannedMove | Callable[[int], PlannedMove]
+
+
 @dataclass(frozen=True)
 class Step:
     """One state of a sequence and the action run while in it."""
@@ -62,8 +154,39 @@ class Step:
     guard: Predicate | None = None
     guard_name: str | None = None
     #: When given and false, the action is skipped (the state is still passed through).
+    #: A :class:`Cycles` rule is also known to the plan; another predicate is not, and
+    #: the step's move is then planned (validated, estimated) in every cycle.
     when: Predicate | None = None
     description: str = ""
+    #: The move this step makes, known before the run: validated before the first byte
+    #: and shown by --dry-run. A step given a move and no action just makes the move.
+    move: MoveSpec | None = None
+
+    def planned(self, cycle: int, cycles: int) -> PlannedMove | None:
+        """This step's move in cycle ``cycle`` of ``cycles``; None when it makes none."""
+        if self.move is None:
+            return None
+        if isinstance(self.when, Cycles) and not self.when.applies(cycle, cycles):
+            return None
+        move = self.move if isinstance(self.move, PlannedMove) else self.move(cycle)
+        return move if move.state == self.name else replace(move, state=self.name)
+
+    def move_of(self, cycle: int) -> PlannedMove:
+        """This step's move in cycle ``cycle`` (raises when the step makes none)."""
+        if self.move is None:
+            raise ConfigError(f"step {self.name} makes no planned move")
+        return self.move if isinstance(self.move, PlannedMove) else self.move(cycle)
+
+
+def move_action(move: MoveSpec) -> Action:
+    """The action that makes ``move`` (in the running cycle when it depends on the cycle)."""
+
+    def make_move(ctx: StepContext) -> None:
+        ctx.move_planned(move if isinstance(move, PlannedMove) else move(ctx.cycle))
+
+    if isinstance(move, PlannedMove):
+        make_move.__name__ = f"move_to_{move.source or move.state.lower()}"
+    return make_move
 
 
 @dataclass
@@ -81,7 +204,8 @@ class TaskSequence:
 
     name: str
     steps: list[Step] = field(default_factory=list)
-    #: Moves of cycle k (1-based) of n, known in advance: validated before the first byte.
+    #: Deprecated: give the steps their moves (``add(..., move=)``); the plan is derived
+    #: from them. When set, these moves of cycle k (1-based) of n replace the derived plan.
     plan: Callable[[int, int], list[PlannedMove]] | None = None
     #: Where the "retreat" error reaction goes, at its low speed.
     retreat: PlannedMove | None = None
@@ -90,18 +214,43 @@ class TaskSequence:
     #: Runs once in IDLE before the first step (e.g. open the gripper).
     prepare: Action | None = None
 
+    def __post_init__(self) -> None:
+        if self.plan is not None:
+            warnings.warn(
+                "TaskSequence(plan=...) is deprecated: give each step its move"
+                " (TaskSequence.add(name, move=...)); the plan is derived from the steps",
+                DeprecationWarning,
+                stacklevel=3,
+            )
+
     def add(
         self,
         name: str,
-        action: Action,
+        action: Action | None = None,
         *,
+        move: MoveSpec | None = None,
         retry: RetryRule | None = None,
         guard: Predicate | None = None,
         guard_name: str | None = None,
-        when: Predicate | None = None,
+        when: Predicate | Cycles | str | None = None,
         description: str = "",
     ) -> TaskSequence:
-        """Append a step; returns the sequence so calls can be chained."""
+        """Append a step; returns the sequence so calls can be chained.
+
+        ``move``: the move the step makes, known in advance (validated before the run,
+        shown by --dry-run); without ``action`` the step just makes it. ``when``: a
+        :class:`Cycles` rule (or its value, e.g. ``"last_cycle"``) or any predicate.
+        """
+        if action is None:
+            if move is None:
+                raise ConfigError(f"step {name!r}: give an action, a move, or both")
+            action = move_action(move)
+        if isinstance(when, str):
+            try:
+                when = Cycles(when)
+            except ValueError:
+                choices = ", ".join(c.value for c in Cycles)
+                raise ConfigError(f"step {name!r}: when must be one of {choices}") from None
         if not name or not name.replace("_", "").isalnum():
             raise ConfigError(f"step name {name!r}: use letters, digits and underscores")
         if name in RESERVED_STATES:
@@ -117,6 +266,7 @@ class TaskSequence:
                 guard_name=guard_name or (guard.__name__ if guard is not None else None),
                 when=when,
                 description=description,
+                move=move,
             )
         )
         return self
@@ -158,10 +308,15 @@ class TaskSequence:
             if s.retry.attempts < 0:
                 raise ConfigError(f"sequence {self.name!r}: step {s.name}: attempts must be >= 0")
 
+    def moves(self, cycle: int, cycles: int) -> list[PlannedMove]:
+        """The moves of cycle ``cycle`` of ``cycles``, in step order, from the steps' moves."""
+        if self.plan is not None:
+            return self.plan(cycle, cycles)
+        return [m for s in self.steps if (m := s.planned(cycle, cycles)) is not None]
+
     def planned_moves(self, cycles: int) -> Iterable[PlannedMove]:
         """Every move known in advance over ``cycles`` cycles, then the retreat."""
-        if self.plan is not None:
-            for cycle in range(1, cycles + 1):
-                yield from self.plan(cycle, cycles)
+        for cycle in range(1, cycles + 1):
+            yield from self.moves(cycle, cycles)
         if self.retreat is not None:
             yield self.retreat
