@@ -58,6 +58,7 @@ if _TYPE_CHECKING:
     from ._poller import Poller, PollPolicy
     from ._pose import DEFAULT_HOME, MotionType, Pose
     from ._profiles import (
+        DEFAULT_PROFILE,
         builtin_profile_names,
         gripper_profile,
         load_profile,
@@ -94,6 +95,7 @@ _EXPORTS = {
     "ConnectionLostError": "._exceptions",
     "ConnectionState": "._transport",
     "DEFAULT_HOME": "._pose",
+    "DEFAULT_PROFILE": "._profiles",
     "DataType": "._registers",
     "DeviceBusyError": "._exceptions",
     "DeviceFailureError": "._exceptions",
@@ -170,6 +172,7 @@ __getattr__, __dir__ = _lazy_attributes(
 
 __all__ = [
     "DEFAULT_HOME",
+    "DEFAULT_PROFILE",
     "ROBOT_MODELS",
     "Access",
     "AcknowledgeTimeoutError",

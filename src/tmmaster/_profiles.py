@@ -26,6 +26,12 @@ _ADAPTER: TypeAdapter[Profile] = TypeAdapter(
 )
 
 
+#: The robot profile used when none is given, by ``Robot``/``connect()``, the simulator
+#: and both command lines: the sequence-number handshake, the only one that keeps the
+#: command-safety invariant on a real robot (docs/safety.md).
+DEFAULT_PROFILE = "tmflow"
+
+
 def builtin_profile_names() -> list[str]:
     """Names of the profiles shipped with tmmaster, sorted."""
     folder = resources.files("tmmaster").joinpath("profiles")

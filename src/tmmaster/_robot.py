@@ -57,7 +57,13 @@ from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for
 from ._logging import get_logger
 from ._poller import MotionSchedule, Poller, PollPolicy
 from ._pose import MotionType, Pose
-from ._profiles import builtin_profile_names, gripper_profile, load_profile, robot_profile
+from ._profiles import (
+    DEFAULT_PROFILE,
+    builtin_profile_names,
+    gripper_profile,
+    load_profile,
+    robot_profile,
+)
 from ._registers import GripperProfile, RobotProfile, Role
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
@@ -234,7 +240,7 @@ class Robot:
         host: str,
         port: int = 502,
         *,
-        profile: str | Path | RobotProfile = "tmflow",
+        profile: str | Path | RobotProfile = DEFAULT_PROFILE,
         model: str | RobotModel = "tm5-700",
         gripper: str | Path | GripperProfile | Gripper | None = "auto",
         gripper_host: str | None = None,

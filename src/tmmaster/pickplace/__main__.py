@@ -43,7 +43,7 @@ from .._exceptions import (
     TransportError,
 )
 from .._logging import add_logging_arguments, configure_logging, get_logger
-from .._profiles import builtin_profile_names
+from .._profiles import DEFAULT_PROFILE, builtin_profile_names
 from .._robot import Robot
 from .._version import add_version_argument
 from ..sim._backend import PhysicsUnavailableError
@@ -114,8 +114,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--profile",
         default=None,
         metavar="NAME|FILE.toml",
-        help=f"register contract: {' or '.join(robots)} or a TOML file (default: article;"
-        " use tmflow for a real TM robot running the tmmaster TMflow program)",
+        help=f"register contract: {' or '.join(robots)} or a TOML file (default:"
+        f" {DEFAULT_PROFILE}, the one a real TM robot running the tmmaster TMflow program"
+        " speaks; article: the article's map, for its simulator only)",
     )
     parser.add_argument("--config", metavar="FILE.toml", help="configuration file")
     parser.add_argument(

@@ -1,7 +1,8 @@
 """The pick & place configuration: one TOML file, validated by pydantic before any I/O.
 
 Every default reproduces the article's master: its five poses, 30 % PTP for approach,
-place and home, 10 % Line for pick and lift, 50 ms polling. Unknown keys are refused
+place and home, 10 % Line for pick and lift, 50 ms polling; only the register contract
+defaults to ``tmflow`` (the one safe on a real robot), not the article's map. Unknown keys are refused
 (a typo must not silently fall back to a default), and every error names the key and
 the file it came from.
 """
@@ -27,6 +28,7 @@ from pydantic import (
 
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
+from .._profiles import DEFAULT_PROFILE
 from .._retry import RetryPolicy
 from .._robot import Robot, TimeoutPolicy, Workspace
 
@@ -65,8 +67,8 @@ class _Section(BaseModel):
 class RobotSection(_Section):
     """Which robot and how to reach it."""
 
-    #: Register contract: "article", "tmflow", or a profile TOML file.
-    profile: str = "article"
+    #: Register contract: "tmflow" (default), "article", or a profile TOML file.
+    profile: str = DEFAULT_PROFILE
     #: Arm model (reach, speed limits): tm5-700, tm5-900, tm12, tm14.
     model: Literal["tm5-700", "tm5-900", "tm12", "tm14"] = "tm5-700"
     host: str | None = None

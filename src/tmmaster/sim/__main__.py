@@ -22,7 +22,7 @@ from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import ConfigError, TMMasterError
 from .._logging import add_logging_arguments, configure_logging
 from .._pose import Pose
-from .._profiles import builtin_profile_names
+from .._profiles import DEFAULT_PROFILE, builtin_profile_names
 from .._robot_models import ROBOT_MODELS
 from .._version import add_version_argument
 from ._backend import PhysicsUnavailableError
@@ -37,9 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     grippers = [n for n in builtin_profile_names() if n not in robots]
     parser.add_argument(
         "--profile",
-        default="article",
+        default=DEFAULT_PROFILE,
         metavar="NAME|FILE.toml",
-        help=f"robot profile: {' or '.join(robots)}, or a TOML file (default: article)",
+        help=f"robot profile: {' or '.join(robots)}, or a TOML file (default: {DEFAULT_PROFILE})",
     )
     parser.add_argument(
         "--port",

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from .._exceptions import ConfigError, UnknownNameError
 from .._pose import DEFAULT_HOME, Pose
-from .._profiles import gripper_profile, robot_profile
+from .._profiles import DEFAULT_PROFILE, gripper_profile, robot_profile
 from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
 from .._robot_models import RobotModel, robot_model
@@ -55,7 +55,7 @@ class Simulator:
 
     def __init__(
         self,
-        profile: str | Path | RobotProfile = "article",
+        profile: str | Path | RobotProfile = DEFAULT_PROFILE,
         *,
         host: str = "127.0.0.1",
         port: int = 0,
