@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal, ParamSpec
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field
 
 from ._channels import (
     Command,
@@ -78,7 +78,8 @@ _P = ParamSpec("_P")
 class Workspace(BaseModel):
     """An axis-aligned box the TCP must stay inside, in mm (base frame)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    # NaN or infinite bounds would make range checks pass or fail by accident.
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     x: tuple[float, float] = (-2000.0, 2000.0)
     y: tuple[float, float] = (-2000.0, 2000.0)
@@ -95,22 +96,36 @@ class Workspace(BaseModel):
 
 
 class TimeoutPolicy(BaseModel):
-    """How long waits may take; motion timeouts derive from the move unless fixed."""
+    """How long waits may take; motion timeouts derive from the move unless fixed.
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    Every bound is finite; the pick & place configuration (``[timeouts]``) is this model
+    and also accepts its older key names ``ack_s``, ``motion_s`` and ``gripper_s``.
+    """
+
+    model_config = ConfigDict(
+        frozen=True, extra="forbid", allow_inf_nan=False, populate_by_name=True
+    )
 
     #: The robot must acknowledge a command within this time.
-    ack_timeout_s: Annotated[float, Field(gt=0)] = 2.0
+    ack_timeout_s: Annotated[
+        float, Field(gt=0, le=60, validation_alias=AliasChoices("ack_timeout_s", "ack_s"))
+    ] = 2.0
     #: Motion timeout = factor x expected time + margin (the article's ~130 % rule) ...
-    motion_factor: Annotated[float, Field(ge=1)] = 1.3
-    motion_margin_s: Annotated[float, Field(ge=0)] = 2.0
+    motion_factor: Annotated[float, Field(ge=1, le=10)] = 1.3
+    motion_margin_s: Annotated[float, Field(ge=0, le=600)] = 2.0
     #: ... unless fixed here for every move.
-    motion_timeout_s: Annotated[float, Field(gt=0)] | None = None
+    motion_timeout_s: Annotated[
+        Annotated[float, Field(gt=0, le=3600)] | None,
+        Field(validation_alias=AliasChoices("motion_timeout_s", "motion_s")),
+    ] = None
     #: Gripper moves must end within this time.
-    gripper_timeout_s: Annotated[float, Field(gt=0)] = 5.0
+    gripper_timeout_s: Annotated[
+        float,
+        Field(gt=0, le=600, validation_alias=AliasChoices("gripper_timeout_s", "gripper_s")),
+    ] = 5.0
     #: After a command write whose answer was lost (clear-on-accept profiles, which must
     #: never write a command twice): how long to watch for the write to land late.
-    in_flight_s: Annotated[float, Field(gt=0)] = 5.0
+    in_flight_s: Annotated[float, Field(gt=0, le=600)] = 5.0
 
     def for_motion(self, expected_s: float) -> float:
         """The timeout of a move expected to take ``expected_s`` seconds."""

@@ -2,9 +2,10 @@
 
 Every default reproduces the article's master: its five poses, 30 % PTP for approach,
 place and home, 10 % Line for pick and lift, 50 ms polling; only the register contract
-defaults to ``tmflow`` (the one safe on a real robot), not the article's map. Unknown keys are refused
-(a typo must not silently fall back to a default), and every error names the key and
-the file it came from.
+defaults to ``tmflow`` (the one safe on a real robot), not the article's map. Unknown
+keys are refused (a typo must not silently fall back to a default), and every error
+names the key and the file it came from. The sections that configure the robot API are
+its own models (:class:`TimeoutPolicy`, :class:`RetryPolicy`, :class:`Workspace`).
 """
 
 from __future__ import annotations
@@ -146,42 +147,36 @@ class MotionSection(_Section):
     home: MotionType = MotionType.PTP
 
 
-class TimeoutsSection(_Section):
-    """How long each wait may take, in seconds."""
+class TimeoutsSection(TimeoutPolicy):
+    """How long each wait may take, in seconds: the robot API's :class:`TimeoutPolicy`
+    (``ack_timeout_s``, ``motion_factor``, ``motion_margin_s``, ``motion_timeout_s``,
+    ``gripper_timeout_s``, ``in_flight_s``; the older keys ``ack_s``, ``motion_s`` and
+    ``gripper_s`` are accepted) and the two waits the runner and the link add."""
 
-    #: The robot must acknowledge (pick up) a command within this time.
-    ack_s: Annotated[float, Field(gt=0, le=60)] = 2.0
-    #: Motion timeout = factor x expected motion time + margin (the article's ~130 %) ...
-    motion_factor: Annotated[float, Field(ge=1, le=10)] = 1.3
-    motion_margin_s: Annotated[float, Field(ge=0, le=600)] = 2.0
-    #: ... unless fixed here for every move.
-    motion_s: Annotated[float, Field(gt=0, le=3600)] | None = None
-    gripper_s: Annotated[float, Field(gt=0, le=600)] = 5.0
     #: One Modbus request must be answered within this time.
     request_s: Annotated[float, Field(gt=0, le=60)] = 1.0
     #: The robot must be ready (auto, idle, no error) within this time at start.
     ready_s: Annotated[float, Field(gt=0, le=600)] = 10.0
 
     def policy(self) -> TimeoutPolicy:
-        """The robot API's timeout policy."""
-        return TimeoutPolicy(
-            ack_timeout_s=self.ack_s,
-            motion_factor=self.motion_factor,
-            motion_margin_s=self.motion_margin_s,
-            motion_timeout_s=self.motion_s,
-            gripper_timeout_s=self.gripper_s,
+        """The robot API's timeout policy (this section without the runner's waits)."""
+        return TimeoutPolicy.model_validate(
+            self.model_dump(include=set(TimeoutPolicy.model_fields))
         )
 
 
-class RetrySection(_Section):
-    """Retries of Modbus requests that failed transiently (reads, connects; never commands)."""
+class RetrySection(RetryPolicy):
+    """Retries of Modbus requests that failed transiently (reads, connects; never commands):
+    the robot API's :class:`RetryPolicy`, with 5 attempts by default."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     attempts: Annotated[int, Field(ge=1, le=100, strict=True)] = 5
     total_time_s: Annotated[float, Field(gt=0, le=600)] = 10.0
 
     def policy(self) -> RetryPolicy:
         """The transport's retry policy."""
-        return RetryPolicy(attempts=self.attempts, total_time_s=self.total_time_s)
+        return RetryPolicy.model_validate(self.model_dump())
 
 
 class GripperSection(_Section):
@@ -216,14 +211,6 @@ class OnErrorSection(_Section):
     motion: MotionType = MotionType.PTP
 
 
-class WorkspaceSection(_Section):
-    """Optional box the TCP must stay inside, mm (base frame)."""
-
-    x: tuple[float, float] = (-2000.0, 2000.0)
-    y: tuple[float, float] = (-2000.0, 2000.0)
-    z: tuple[float, float] = (-2000.0, 2000.0)
-
-
 class PickPlaceConfig(_Section):
     """The whole pick & place configuration (every section optional)."""
 
@@ -236,7 +223,8 @@ class PickPlaceConfig(_Section):
     gripper: GripperSection = GripperSection()
     run: RunSection = RunSection()
     on_error: OnErrorSection = OnErrorSection()
-    workspace: WorkspaceSection | None = None
+    #: Optional box the TCP must stay inside, mm (base frame): the robot API's model.
+    workspace: Workspace | None = None
 
     def digest(self) -> str:
         """sha256 of the normalised configuration (defaults filled in, keys sorted)."""
@@ -244,10 +232,8 @@ class PickPlaceConfig(_Section):
         return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
     def workspace_box(self) -> Workspace | None:
-        """The robot API's workspace, when one is configured."""
-        if self.workspace is None:
-            return None
-        return Workspace(x=self.workspace.x, y=self.workspace.y, z=self.workspace.z)
+        """The robot API's workspace, when one is configured (the section is one)."""
+        return self.workspace
 
     def retreat_pose(self) -> Pose:
         """Where the "retreat" error reaction goes."""
