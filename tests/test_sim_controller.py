@@ -18,12 +18,8 @@ from tmmaster._registers import TARGET_FIELDS, Handshake, RegisterMap, Table
 from tmmaster._robot_models import robot_model
 from tmmaster.sim._backend import MotionRejectedError, RejectReason
 from tmmaster.sim._bank import RegisterBank
-from tmmaster.sim._controller import (
-    RobotController,
-    SimErrorCode,
-    controller_class,
-    controller_for,
-)
+from tmmaster.sim._controller import RobotController, SimErrorCode
+from tmmaster.sim._controllers import controller_class, controller_for
 from tmmaster.sim._faults import (
     EstopFault,
     Fault,

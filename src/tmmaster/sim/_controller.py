@@ -27,12 +27,12 @@ from abc import abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, ClassVar, Literal
+from typing import ClassVar, Literal
 
 from .._codec import allowed_range, encode
 from .._exceptions import UnreachablePoseError, ValueOutOfRangeError
 from .._pose import MotionType, Pose
-from .._registers import TARGET_FIELDS, TCP_FIELDS, Handshake, RegisterField, RobotProfile
+from .._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile
 from .._robot_models import RobotModel
 from ._backend import MotionRejectedError, PhysicsBackend
 from ._bank import RegisterBank
@@ -661,25 +661,3 @@ class RobotController(SimDevice[RobotProfile]):
             return self._profile.field(field).code_of(label)
         except KeyError:
             return default
-
-
-def controller_class(handshake: Handshake) -> type[RobotController]:
-    """The controller class running ``handshake`` (as the client's ``channel_for`` picks)."""
-    # Imported here: both modules derive from this one.
-    from ._clear_on_accept import ClearOnAcceptController
-    from ._sequence import SequenceController
-
-    if handshake is Handshake.CLEAR_ON_ACCEPT:
-        return ClearOnAcceptController
-    return SequenceController
-
-
-def controller_for(
-    profile: RobotProfile,
-    bank: RegisterBank,
-    backend: PhysicsBackend,
-    model: RobotModel,
-    **options: Any,
-) -> RobotController:
-    """The controller running ``profile``'s handshake on ``bank``."""
-    return controller_class(profile.handshake)(profile, bank, backend, model, **options)

@@ -28,7 +28,8 @@ from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import MotionRecord, controller_class
+from ._controller import MotionRecord
+from ._controllers import controller_class
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._server import DeviceServer, RequestLog, RequestRecord
