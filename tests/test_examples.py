@@ -91,6 +91,7 @@ def test_toml_sequence_example_runs_through_the_command(
     sim = tm_simulator_factory()
     argv = [
         *target(sim),
+        *("--profile", "article"),  # the simulator's profile; the command defaults to tmflow
         "--config",
         str(fast_config),
         "--sequence",

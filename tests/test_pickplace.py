@@ -81,8 +81,13 @@ def write_config(
 def run_cli(
     sim: Simulator, config: Path, tmp_path: Path, *extra: str
 ) -> tuple[int, dict[str, Any]]:
-    """Run the command in-process against ``sim``; return exit code and report."""
+    """Run the command in-process against ``sim``; return exit code and report.
+
+    These tests drive the article's map (its registers are what they check): the
+    profile is given, since the command's default is tmflow.
+    """
     report = tmp_path / "report.json"
+    profile = [] if "--profile" in extra else ["--profile", "article"]
     code = main(
         [
             "--host",
@@ -93,6 +98,7 @@ def run_cli(
             str(config),
             "--report",
             str(report),
+            *profile,
             *extra,
         ]
     )
@@ -469,6 +475,8 @@ def test_sigint_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
             "-m",
             "tmmaster.pickplace",
             "--sim",
+            "--profile",
+            "article",
             "--log-json",
             "--report",
             str(report),

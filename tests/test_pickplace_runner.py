@@ -116,7 +116,8 @@ def test_defaults_are_the_articles_cycle() -> None:
         "home": "ptp",
     }
     assert config.run.poll_interval_s == 0.05
-    assert config.robot.profile == "article"
+    # Issue 12: one default profile everywhere, tmflow (the article's map is opt-in).
+    assert config.robot.profile == "tmflow"
 
 
 def test_approach_and_lift_follow_the_pick_pose_by_their_z_offsets(tmp_path: Path) -> None:

@@ -444,7 +444,7 @@ def test_the_cli_banner_lists_faults_and_sigusr1_resets_an_error() -> None:
     proc = subprocess.Popen(
         [
             *(sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10"),
-            *("--fault", "estop:after_s=0.5", "--log-level", "warning"),
+            *("--profile", "article", "--fault", "estop:after_s=0.5", "--log-level", "warning"),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
