@@ -4,7 +4,7 @@ This one inspects a part: it picks it, shows it to a camera, and puts it back wh
 was. Polling, timeouts, retries, stop requests, logging and timing per state come from
 the runner, exactly as for the built-in pick & place.
 
-    python -m tmmaster.sim --port 5020
+    python -m tmmaster.sim --port 5020 --profile article
     python examples/custom_sequence.py --port 5020
 """
 

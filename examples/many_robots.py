@@ -22,8 +22,8 @@ Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
 
 or against robots (or simulators) already listening on consecutive ports::
 
-    python -m tmmaster.sim --port 5020 &
-    python -m tmmaster.sim --port 5021 &
+    python -m tmmaster.sim --port 5020 --profile article &
+    python -m tmmaster.sim --port 5021 --profile article &
     python examples/many_robots.py --host 127.0.0.1 --ports 5020 5021
 """
 

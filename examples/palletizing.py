@@ -1,6 +1,6 @@
 """Palletizing: pick parts from one spot and place them into a rows x cols grid.
 
-    python -m tmmaster.sim --port 5020 --parts 6
+    python -m tmmaster.sim --port 5020 --profile article --parts 6
     python examples/palletizing.py --port 5020 --rows 2 --cols 3
 
 Poses stay within +/-327.67 mm, the range of the article profile's int16 x100 registers,

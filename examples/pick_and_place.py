@@ -2,7 +2,7 @@
 
 Run it against the simulator in another terminal::
 
-    python -m tmmaster.sim --port 5020
+    python -m tmmaster.sim --port 5020 --profile article
     python examples/pick_and_place.py --port 5020 --cycles 1
 
 Against a robot: ``--host 192.168.1.100 --port 502 --profile tmflow``.

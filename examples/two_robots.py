@@ -14,8 +14,8 @@ Run against two simulators it starts itself (the default)::
 
 or against two robots (or simulators) already listening::
 
-    python -m tmmaster.sim --port 5020 &
-    python -m tmmaster.sim --port 5030 &
+    python -m tmmaster.sim --port 5020 --profile article &
+    python -m tmmaster.sim --port 5030 --profile article &
     python examples/two_robots.py --host 127.0.0.1 --port-a 5020 --port-b 5030
 
 Be aware of what the simulation does NOT do: the two simulators do not share a world.
