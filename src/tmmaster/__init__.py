@@ -8,6 +8,12 @@ use, so ``import tmmaster`` stays cheap.
 
 from __future__ import annotations
 
+# isort: off
+# First: under ``python -m tmmaster.<command>`` a Ctrl-C while the package loads exits
+# 130 in one line (a library user's program is left alone, see _sigint).
+from . import _sigint as _sigint
+# isort: on
+
 from typing import TYPE_CHECKING as _TYPE_CHECKING
 
 from ._lazy import lazy_attributes as _lazy_attributes

@@ -19,6 +19,7 @@ from types import FrameType
 _COMMANDS = {
     "tmmaster.__main__": "tmmaster",
     "tmmaster.pickplace.__main__": "pickplace",
+    "tmmaster.report.__main__": "report",
     "tmmaster.sim.__main__": "sim",
 }
 
@@ -30,6 +31,13 @@ def _command_name() -> str | None:
     spec = getattr(sys.modules.get("__main__"), "__spec__", None)
     if spec is not None and spec.name in _COMMANDS:
         return _COMMANDS[spec.name]
+    # ``python -m tmmaster.pickplace``: while runpy imports the packages (tmmaster's
+    # __init__ imports this module first), __main__ is not set up yet; the command line
+    # already says which module runs.
+    argv = getattr(sys, "orig_argv", [])
+    if "-m" in argv[:-1]:
+        module = argv[argv.index("-m") + 1]
+        return _COMMANDS.get(f"{module}.__main__")
     if os.path.basename(sys.argv[0] if sys.argv else "") == "tmmaster":
         return "tmmaster"  # the console script
     return None
