@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal, ParamSpec
+from typing import Annotated, Any, Literal, ParamSpec
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field
 
@@ -139,14 +139,14 @@ class Motion:
 
     def __init__(
         self,
-        robot: Robot,
+        follower: _MotionFollower,
         ticket: Ticket,
         *,
         start: Pose | None,
         expected_s: float,
         timeout_s: float,
     ) -> None:
-        self._robot = robot
+        self._follower = follower
         self._ticket = ticket
         self.start = start
         self.target = ticket.command.target
@@ -172,6 +172,11 @@ class Motion:
         return self._ticket.command
 
     @property
+    def ticket(self) -> Ticket:
+        """The channel's record of the command sent (sequence number, acknowledgement)."""
+        return self._ticket
+
+    @property
     def done(self) -> bool:
         """True once the robot acknowledged and then finished the move."""
         return self.phase is MovePhase.DONE
@@ -181,15 +186,27 @@ class Motion:
         """True once the master gave up on this command (failure, timeout, stop, close)."""
         return self._abandoned
 
+    def claim_abandon(self) -> bool:
+        """Mark the command given up on; True for the one caller that must withdraw or stop it.
+
+        False when it was already given up on, or the robot finished it: nothing is left to
+        withdraw or stop. Atomic, so two threads giving it up (a wait, ``close()``) act once.
+        """
+        with self._abandon_lock:
+            if self._abandoned or self.done or self.reported_finished:
+                return False
+            self._abandoned = True
+            return True
+
     def progress(self) -> MoveProgress:
         """Poll the robot once and report where the move stands (raises on robot failure)."""
         if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
             polled_pose = self.last_pose
-            with self._robot._following(self):
-                self._robot._poll_motion(self)
+            with self._follower.following(self):
+                self._follower.poll(self)
                 if self.last_pose is polled_pose and not self.done:
                     # This profile's poll does not carry the pose: read it for the report.
-                    self.last_pose = self._robot.pose()
+                    self.last_pose = self._follower.read_pose()
         elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
         fraction: float | None = None
         if self.last_pose is not None and self.target is not None and self.start is not None:
@@ -207,8 +224,218 @@ class Motion:
         """
         if timeout_s is not None:
             _require_positive("timeout_s", timeout_s)
-        with self._robot._following(self):
-            self._robot._wait_motion(self, timeout_s)
+        with self._follower.following(self):
+            self._follower.wait(self, timeout_s)
+
+
+class _MotionFollower:
+    """Follows every command a Robot sent: polls it, waits for it, gives it up safely.
+
+    The one place where a command the master gives up on is withdrawn or stopped
+    (docs/safety.md). A :class:`Robot` owns one and hands it to each :class:`Motion`;
+    the Robot's polling, timeout and tolerance settings are this object's attributes.
+    """
+
+    def __init__(
+        self,
+        channel: CommandChannel,
+        stop_event: threading.Event,
+        log: Any,
+        *,
+        poll_interval_s: float,
+        polling: PollPolicy,
+        timeouts: TimeoutPolicy,
+        position_tolerance_mm: float,
+        orientation_tolerance_deg: float,
+    ) -> None:
+        self._channel = channel
+        self._stop_event = stop_event
+        self._log = log
+        self.poll_interval_s = poll_interval_s
+        self.polling = polling
+        self.timeouts = timeouts
+        self.position_tolerance_mm = position_tolerance_mm
+        self.orientation_tolerance_deg = orientation_tolerance_deg
+
+    def read_pose(self) -> Pose:
+        """The current TCP pose."""
+        return self._channel.read_pose()
+
+    def stop(self) -> None:
+        """Stop the arm now (the channel retries a stop: it is idempotent)."""
+        self._channel.stop()
+        self._log.warning("robot.stop_sent")
+
+    @contextmanager
+    def following(self, motion: Motion) -> Iterator[None]:
+        """Whatever escapes the block, the master gives the command up safely first."""
+        try:
+            yield
+        except BaseException as exc:
+            self.abandon(motion, exc)
+            raise
+
+    def abandon(self, motion: Motion, reason: BaseException) -> None:
+        """Make sure a command the master gives up on can never start later.
+
+        Not yet acknowledged: withdraw it (if the robot took it meanwhile, it is running).
+        Running: stop the arm, unless the robot stopped itself (fault, e-stop, refusal).
+        Every step is best effort and logged; none of them raises.
+        """
+        if not motion.claim_abandon():
+            return
+        ticket = motion.ticket
+        motion.phase = MovePhase.FAILED
+        running = ticket.acknowledged
+        if not running and not ticket.withdrawn:
+            try:
+                running = self._channel.withdraw(ticket)
+                ticket.withdrawn = not running
+                motion.withdrawn = not running
+            except TMMasterError as exc:
+                # Not known whether the robot took it: stop, which is harmless if it did not.
+                running = True
+                motion.withdrawn = False
+                self._log.error(
+                    "robot.withdraw_failed", command=motion.command.kind.value, error=str(exc)
+                )
+            else:
+                self._log.warning(
+                    "robot.command_withdrawn" if not running else "robot.withdraw_too_late",
+                    command=motion.command.kind.value,
+                    reason=type(reason).__name__,
+                )
+        stopped_itself = isinstance(
+            reason, RobotFaultError | EmergencyStopError | CommandRejectedError
+        )
+        if running and not stopped_itself and self._channel.can_stop:
+            try:
+                self.stop()
+                motion.stop_delivered = True
+            except TMMasterError as exc:
+                motion.stop_delivered = False
+                self._log.error("robot.stop_failed", error=str(exc))
+
+    def poll(self, motion: Motion) -> None:
+        """Poll the command once; raises the typed error when the robot failed it."""
+        observation = self._channel.poll(motion.ticket)
+        if observation.pose is not None:
+            motion.last_pose = observation.pose
+        if observation.failure is not None:
+            motion.phase = MovePhase.FAILED
+            self._log.error(
+                "robot.command_failed",
+                command=motion.command.kind.value,
+                error=str(observation.failure),
+            )
+            if observation.failure.pose is None:
+                observation.failure.pose = self._pose_or(motion.last_pose)
+            raise observation.failure
+        if observation.acknowledged and motion.phase is MovePhase.SENT:
+            motion.phase = MovePhase.RUNNING
+            ticket = motion.ticket
+            self._log.info(
+                "robot.command_acknowledged",
+                command=motion.command.kind.value,
+                ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
+            )
+        if observation.done:
+            self._finish(motion, observation.pose)
+
+    def wait(self, motion: Motion, timeout_s: float | None) -> None:
+        """Poll until the command is done; raises on failure, timeout or stop request."""
+        ticket = motion.ticket
+        budget = timeout_s if timeout_s is not None else motion.timeout_s
+        poller = Poller(self.poll_interval_s, self._stop_event)
+        schedule = MotionSchedule(self.polling, self.poll_interval_s, ticket.sent_at)
+        anchored = False
+        ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
+        while motion.phase is not MovePhase.DONE:
+            if ticket.acknowledged and not anchored:
+                schedule.acknowledged(ticket.acknowledged_at or ticket.sent_at, motion.expected_s)
+                anchored = True
+            poller.sleep_until(
+                schedule.next_poll(time.monotonic(), acknowledged=ticket.acknowledged)
+            )
+            self.poll(motion)
+            if motion.done:
+                return
+            now = time.monotonic()
+            if motion.phase is MovePhase.SENT and now >= ack_deadline:
+                self._ack_timed_out(motion)
+            elif motion.phase is MovePhase.RUNNING:
+                started = ticket.acknowledged_at or ticket.sent_at
+                if now - started >= budget:
+                    self._motion_timed_out(motion, budget)
+
+    def _pose_or(self, fallback: Pose | None) -> Pose | None:
+        """The current pose for an error report; the fallback if it cannot be read."""
+        try:
+            return self._channel.read_pose()
+        except TMMasterError:
+            return fallback
+
+    def _finish(self, motion: Motion, polled_pose: Pose | None) -> None:
+        motion.reported_finished = True
+        if motion.target is not None:
+            # The poll that saw the move finished read the pose in the same snapshot
+            # (article); only a profile whose poll carries no pose needs one more read.
+            pose = polled_pose if polled_pose is not None else self._channel.read_pose()
+            motion.last_pose = pose
+            if not pose.is_close(
+                motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+            ):
+                motion.phase = MovePhase.FAILED
+                raise RobotError(
+                    f"robot reported the move finished but the TCP is at {pose},"
+                    f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
+                    pose=pose,
+                )
+        motion.phase = MovePhase.DONE
+        motion.finished_at = time.monotonic()
+        self._log.info(
+            "robot.command_done",
+            command=motion.command.kind.value,
+            duration_s=round(motion.finished_at - motion.ticket.sent_at, 4),
+            expected_s=round(motion.expected_s, 3),
+        )
+
+    def _ack_timed_out(self, motion: Motion) -> None:
+        ticket = motion.ticket
+        if self._channel.withdraw(ticket):
+            # The robot took it just as we gave up: it is executing our command.
+            ticket.acknowledged = True
+            ticket.acknowledged_at = time.monotonic()
+            motion.phase = MovePhase.RUNNING
+            self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
+            return
+        ticket.withdrawn = True
+        motion.withdrawn = True
+        motion.phase = MovePhase.FAILED
+        hint = ""
+        if heartbeat_stalled(ticket):
+            hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
+        self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
+        raise AcknowledgeTimeoutError(
+            f"the robot did not acknowledge the {motion.command.kind.value} command within"
+            f" {self.timeouts.ack_timeout_s:g} s; the command was withdrawn{hint}",
+            pose=motion.last_pose,
+        )
+
+    def _motion_timed_out(self, motion: Motion, budget: float) -> None:
+        motion.phase = MovePhase.FAILED
+        pose = self._pose_or(motion.last_pose)
+        self._log.error(
+            "robot.motion_timeout",
+            timeout_s=round(budget, 3),
+            pose=None if pose is None else pose.as_list(),
+        )
+        # The stop follows in abandon(), as for every running move the master gives up on.
+        raise MotionTimeoutError(
+            f"move to {motion.target} did not finish within {budget:.2f} s"
+            f" (expected {motion.expected_s:.2f} s); last pose {pose}",
+            pose=pose,
+        )
 
 
 def _motion_type(motion: MotionType | str) -> MotionType:
@@ -288,9 +515,6 @@ class Robot:
         ):
             _require_positive(option, value)
         self.name = name
-        self.poll_interval_s = poll_interval_s
-        self.polling = polling if polling is not None else PollPolicy()
-        self.timeouts = timeouts if timeouts is not None else TimeoutPolicy()
         self.workspace = workspace
         if tool is not None and not isinstance(tool, Pose):
             raise ConfigError(
@@ -303,8 +527,6 @@ class Robot:
         self._joints_hint: tuple[float, ...] | None = None
         self._last_target: Pose | None = None
         self.max_speed_percent = max_speed_percent
-        self.position_tolerance_mm = position_tolerance_mm
-        self.orientation_tolerance_deg = orientation_tolerance_deg
         # ``host`` "sim://name" reaches an in-process simulator without a socket.
         self._transport: Transport = transport or open_transport(
             host,
@@ -322,6 +544,17 @@ class Robot:
         #: The last command sent; while it is not settled, close() withdraws or stops it.
         self._last_motion: Motion | None = None
         self._log = _log.bind(robot=name)
+        # Polls, waits for and gives up safely every command sent (each Motion has it).
+        self._follower = _MotionFollower(
+            self._channel,
+            self._stop_event,
+            self._log,
+            poll_interval_s=poll_interval_s,
+            polling=polling if polling is not None else PollPolicy(),
+            timeouts=timeouts if timeouts is not None else TimeoutPolicy(),
+            position_tolerance_mm=position_tolerance_mm,
+            orientation_tolerance_deg=orientation_tolerance_deg,
+        )
         self.gripper: Gripper = self._make_gripper(
             gripper,
             GripperLink(
@@ -365,6 +598,53 @@ class Robot:
         if spec == "auto":
             return auto_gripper(self.profile, settle_s=settle_s)
         return gripper_for_profile(gripper_profile(spec), link)
+
+    # -- settings (the follower's: every wait reads them when it starts) ---
+
+    @property
+    def poll_interval_s(self) -> float:
+        """Seconds between two polls of a wait (its nominal pace)."""
+        return self._follower.poll_interval_s
+
+    @poll_interval_s.setter
+    def poll_interval_s(self, value: float) -> None:
+        self._follower.poll_interval_s = value
+
+    @property
+    def polling(self) -> PollPolicy:
+        """When a move is polled (dense around the acknowledgement and the expected end)."""
+        return self._follower.polling
+
+    @polling.setter
+    def polling(self, value: PollPolicy) -> None:
+        self._follower.polling = value
+
+    @property
+    def timeouts(self) -> TimeoutPolicy:
+        """How long waits may take (acknowledgement, motion, gripper, in-flight write)."""
+        return self._follower.timeouts
+
+    @timeouts.setter
+    def timeouts(self, value: TimeoutPolicy) -> None:
+        self._follower.timeouts = value
+
+    @property
+    def position_tolerance_mm(self) -> float:
+        """How far (mm) the final TCP may be from the target of a finished move."""
+        return self._follower.position_tolerance_mm
+
+    @position_tolerance_mm.setter
+    def position_tolerance_mm(self, value: float) -> None:
+        self._follower.position_tolerance_mm = value
+
+    @property
+    def orientation_tolerance_deg(self) -> float:
+        """How far (deg) the final TCP orientation may be from the target's."""
+        return self._follower.orientation_tolerance_deg
+
+    @orientation_tolerance_deg.setter
+    def orientation_tolerance_deg(self, value: float) -> None:
+        self._follower.orientation_tolerance_deg = value
 
     # -- connection -------------------------------------------------------
 
@@ -414,7 +694,7 @@ class Robot:
         atexit.unregister(self._at_exit)
         motion = self._last_motion
         if motion is not None and self._transport.state is not ConnectionState.CLOSED:
-            self._abandon(motion, StopRequestedError("the robot connection is closing"))
+            self._follower.abandon(motion, StopRequestedError("the robot connection is closing"))
         self.gripper.disconnect()
         self._transport.close()
 
@@ -613,9 +893,11 @@ class Robot:
         else:
             default_timeout = self.timeouts.gripper_timeout_s
         timeout_s = timeout if timeout is not None else default_timeout
-        motion = Motion(self, ticket, start=start, expected_s=expected, timeout_s=timeout_s)
+        motion = Motion(
+            self._follower, ticket, start=start, expected_s=expected, timeout_s=timeout_s
+        )
         self._last_motion = motion
-        with self._following(motion):
+        with self._follower.following(motion):
             self._send(ticket)
         self._log.info(
             "robot.command_sent",
@@ -647,8 +929,7 @@ class Robot:
     def stop(self) -> None:
         """Stop the arm now (article: command = stop; tmflow: the TM Stop button)."""
         # A stop is idempotent: the channel retries it, even after a stop request.
-        self._channel.stop()
-        self._log.warning("robot.stop_sent")
+        self._follower.stop()
 
     def clear_stop_request(self) -> None:
         """Allow waits again after :meth:`interrupt`."""
@@ -709,177 +990,6 @@ class Robot:
             f"the {ticket.command.kind.value} command write got no answer and did not show up in"
             " the robot's registers; it was not written again and has been withdrawn"
         ) from failure
-
-    @contextmanager
-    def _following(self, motion: Motion) -> Iterator[None]:
-        """Whatever escapes the block, the master gives the command up safely first."""
-        try:
-            yield
-        except BaseException as exc:
-            self._abandon(motion, exc)
-            raise
-
-    def _abandon(self, motion: Motion, reason: BaseException) -> None:
-        """Make sure a command the master gives up on can never start later.
-
-        Not yet acknowledged: withdraw it (if the robot took it meanwhile, it is running).
-        Running: stop the arm, unless the robot stopped itself (fault, e-stop, refusal).
-        Every step is best effort and logged; none of them raises.
-        """
-        with motion._abandon_lock:
-            if motion._abandoned or motion.done or motion.reported_finished:
-                return
-            motion._abandoned = True
-        ticket = motion._ticket
-        motion.phase = MovePhase.FAILED
-        running = ticket.acknowledged
-        if not running and not ticket.withdrawn:
-            try:
-                running = self._channel.withdraw(ticket)
-                ticket.withdrawn = not running
-                motion.withdrawn = not running
-            except TMMasterError as exc:
-                # Not known whether the robot took it: stop, which is harmless if it did not.
-                running = True
-                motion.withdrawn = False
-                self._log.error(
-                    "robot.withdraw_failed", command=motion.command.kind.value, error=str(exc)
-                )
-            else:
-                self._log.warning(
-                    "robot.command_withdrawn" if not running else "robot.withdraw_too_late",
-                    command=motion.command.kind.value,
-                    reason=type(reason).__name__,
-                )
-        stopped_itself = isinstance(
-            reason, RobotFaultError | EmergencyStopError | CommandRejectedError
-        )
-        if running and not stopped_itself and self.can_stop:
-            try:
-                self.stop()
-                motion.stop_delivered = True
-            except TMMasterError as exc:
-                motion.stop_delivered = False
-                self._log.error("robot.stop_failed", error=str(exc))
-
-    def _poll_motion(self, motion: Motion) -> None:
-        observation = self._channel.poll(motion._ticket)
-        if observation.pose is not None:
-            motion.last_pose = observation.pose
-        if observation.failure is not None:
-            motion.phase = MovePhase.FAILED
-            self._log.error(
-                "robot.command_failed",
-                command=motion.command.kind.value,
-                error=str(observation.failure),
-            )
-            if observation.failure.pose is None:
-                observation.failure.pose = self._pose_or(motion.last_pose)
-            raise observation.failure
-        if observation.acknowledged and motion.phase is MovePhase.SENT:
-            motion.phase = MovePhase.RUNNING
-            ticket = motion._ticket
-            self._log.info(
-                "robot.command_acknowledged",
-                command=motion.command.kind.value,
-                ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
-            )
-        if observation.done:
-            self._finish(motion, observation.pose)
-
-    def _pose_or(self, fallback: Pose | None) -> Pose | None:
-        """The current pose for an error report; the fallback if it cannot be read."""
-        try:
-            return self._channel.read_pose()
-        except TMMasterError:
-            return fallback
-
-    def _finish(self, motion: Motion, polled_pose: Pose | None) -> None:
-        motion.reported_finished = True
-        if motion.target is not None:
-            # The poll that saw the move finished read the pose in the same snapshot
-            # (article); only a profile whose poll carries no pose needs one more read.
-            pose = polled_pose if polled_pose is not None else self._channel.read_pose()
-            motion.last_pose = pose
-            if not pose.is_close(
-                motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
-            ):
-                motion.phase = MovePhase.FAILED
-                raise RobotError(
-                    f"robot reported the move finished but the TCP is at {pose},"
-                    f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
-                    pose=pose,
-                )
-        motion.phase = MovePhase.DONE
-        motion.finished_at = time.monotonic()
-        self._log.info(
-            "robot.command_done",
-            command=motion.command.kind.value,
-            duration_s=round(motion.finished_at - motion._ticket.sent_at, 4),
-            expected_s=round(motion.expected_s, 3),
-        )
-
-    def _wait_motion(self, motion: Motion, timeout_s: float | None) -> None:
-        ticket = motion._ticket
-        budget = timeout_s if timeout_s is not None else motion.timeout_s
-        poller = Poller(self.poll_interval_s, self._stop_event)
-        schedule = MotionSchedule(self.polling, self.poll_interval_s, ticket.sent_at)
-        anchored = False
-        ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
-        while motion.phase is not MovePhase.DONE:
-            if ticket.acknowledged and not anchored:
-                schedule.acknowledged(ticket.acknowledged_at or ticket.sent_at, motion.expected_s)
-                anchored = True
-            poller.sleep_until(
-                schedule.next_poll(time.monotonic(), acknowledged=ticket.acknowledged)
-            )
-            self._poll_motion(motion)
-            if motion.done:
-                return
-            now = time.monotonic()
-            if motion.phase is MovePhase.SENT and now >= ack_deadline:
-                self._ack_timed_out(motion)
-            elif motion.phase is MovePhase.RUNNING:
-                started = ticket.acknowledged_at or ticket.sent_at
-                if now - started >= budget:
-                    self._motion_timed_out(motion, budget)
-
-    def _ack_timed_out(self, motion: Motion) -> None:
-        ticket = motion._ticket
-        if self._channel.withdraw(ticket):
-            # The robot took it just as we gave up: it is executing our command.
-            ticket.acknowledged = True
-            ticket.acknowledged_at = time.monotonic()
-            motion.phase = MovePhase.RUNNING
-            self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
-            return
-        ticket.withdrawn = True
-        motion.withdrawn = True
-        motion.phase = MovePhase.FAILED
-        hint = ""
-        if heartbeat_stalled(ticket):
-            hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
-        self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
-        raise AcknowledgeTimeoutError(
-            f"the robot did not acknowledge the {motion.command.kind.value} command within"
-            f" {self.timeouts.ack_timeout_s:g} s; the command was withdrawn{hint}",
-            pose=motion.last_pose,
-        )
-
-    def _motion_timed_out(self, motion: Motion, budget: float) -> None:
-        motion.phase = MovePhase.FAILED
-        pose = self._pose_or(motion.last_pose)
-        self._log.error(
-            "robot.motion_timeout",
-            timeout_s=round(budget, 3),
-            pose=None if pose is None else pose.as_list(),
-        )
-        # The stop follows in _abandon, as for every running move the master gives up on.
-        raise MotionTimeoutError(
-            f"move to {motion.target} did not finish within {budget:.2f} s"
-            f" (expected {motion.expected_s:.2f} s); last pose {pose}",
-            pose=pose,
-        )
 
 
 def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:
