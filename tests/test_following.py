@@ -1,0 +1,78 @@
+"""The seam between Motion and its follower: the abandon claim, settings set after construction."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+import tmmaster
+from tmmaster import AcknowledgeTimeoutError, Pose, Robot, TimeoutPolicy
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+APPROACH = Pose(300, -200, 200, 180, 0, 90)
+
+
+@pytest.fixture
+def tm_simulator_factory(memory_simulator_factory: SimFactory) -> SimFactory:
+    """Simulators in memory: TCP is not the subject here."""
+    return memory_simulator_factory
+
+
+@pytest.fixture
+def robots() -> Iterator[Callable[..., Robot]]:
+    """Open robots on a simulator; all closed after the test."""
+    opened: list[Robot] = []
+
+    def make(sim: Simulator, **options: Any) -> Robot:
+        options.setdefault("profile", sim.profile)
+        options.setdefault("poll_interval_s", 0.01)
+        options.setdefault(
+            "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
+        )
+        robot = Robot(sim.url, **options)
+        opened.append(robot)
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        return robot
+
+    yield make
+    for robot in opened:
+        robot.close()
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_abandon_is_claimed_once_and_never_after_the_move_finished(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=20)
+    robot = robots(sim)
+    done = robot.move_to(APPROACH, speed=30)
+    assert done.done
+    assert not done.claim_abandon()  # nothing left to withdraw or stop
+    assert not done.abandoned
+    assert done.ticket.command is done.command
+
+    running = robot.start_move(Pose(300, -200, 100, 180, 0, 90), speed=30)
+    assert running.claim_abandon()
+    assert running.abandoned
+    assert not running.claim_abandon()  # a second caller (close(), another wait) does nothing
+    robot.stop()  # claimed by hand: stop the arm as abandon() would
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_timeouts_assigned_after_construction_bound_the_wait(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    # The acknowledgement comes 20 s of wall time late; the policy set afterwards says 0.2 s.
+    sim = tm_simulator_factory(profile, time_scale=5, faults=["late_ack:delay_s=100"])
+    robot = robots(sim)
+    robot.timeouts = TimeoutPolicy(ack_timeout_s=0.2)
+    assert robot.timeouts.ack_timeout_s == 0.2
+    motion = robot.start_move(APPROACH, speed=30)
+    with pytest.raises(AcknowledgeTimeoutError, match=r"within 0\.2 s"):
+        motion.wait()
+    assert motion.withdrawn is True
+    assert motion.abandoned
