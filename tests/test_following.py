@@ -1,4 +1,4 @@
-"""The seam between Motion and its follower: the abandon claim, settings set after construction."""
+"""The seam between Motion and its follower: abandon acts once; settings set later apply."""
 
 from __future__ import annotations
 
@@ -8,7 +8,14 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import AcknowledgeTimeoutError, Pose, Robot, TimeoutPolicy
+from tmmaster import (
+    AcknowledgeTimeoutError,
+    MovePhase,
+    Pose,
+    Robot,
+    StopRequestedError,
+    TimeoutPolicy,
+)
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -44,22 +51,30 @@ def robots() -> Iterator[Callable[..., Robot]]:
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
-def test_abandon_is_claimed_once_and_never_after_the_move_finished(
+def test_abandon_acts_once_and_never_after_the_move_finished(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
     sim = tm_simulator_factory(profile, time_scale=20)
     robot = robots(sim)
+    reason = StopRequestedError("given up by the test")
     done = robot.move_to(APPROACH, speed=30)
-    assert done.done
-    assert not done.claim_abandon()  # nothing left to withdraw or stop
-    assert not done.abandoned
     assert done.ticket.command is done.command
+    robot._follower.abandon(done, reason)  # nothing left to withdraw or stop
+    assert not done.abandoned
+    assert (done.withdrawn, done.stop_delivered) == (None, None)
+    assert done.phase is MovePhase.DONE
 
-    running = robot.start_move(Pose(300, -200, 100, 180, 0, 90), speed=30)
-    assert running.claim_abandon()
+    # A slow move (about 2 s of wall time), given up on once acknowledged: it is stopped.
+    running = robot.start_move(Pose(300, 200, 100, 180, 0, 90), speed=1)
+    sim.wait_for(lambda: sim.field("motion_status" if profile == "article" else "robot_state") == 1)
+    assert running.progress().phase is MovePhase.RUNNING
+    robot._follower.abandon(running, reason)
     assert running.abandoned
-    assert not running.claim_abandon()  # a second caller (close(), another wait) does nothing
-    robot.stop()  # claimed by hand: stop the arm as abandon() would
+    assert running.phase is MovePhase.FAILED
+    assert (running.withdrawn, running.stop_delivered) == (None, True)
+    running.stop_delivered = None
+    robot._follower.abandon(running, reason)  # a second caller (close(), a wait) does nothing
+    assert (running.withdrawn, running.stop_delivered) == (None, None)
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])

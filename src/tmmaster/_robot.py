@@ -21,6 +21,7 @@ import inspect
 import math
 import threading
 import time
+import weakref
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -163,8 +164,6 @@ class Motion:
         self.stop_delivered: bool | None = None
         #: True once the robot reported the command finished (done, or idle after it).
         self.reported_finished = False
-        self._abandon_lock = threading.Lock()
-        self._abandoned = False
 
     @property
     def command(self) -> Command:
@@ -173,7 +172,10 @@ class Motion:
 
     @property
     def ticket(self) -> Ticket:
-        """The channel's record of the command sent (sequence number, acknowledgement)."""
+        """The channel's record of the command sent (sequence number, acknowledgement).
+
+        Low level, for diagnostics: the robot's follower updates it; do not change it.
+        """
         return self._ticket
 
     @property
@@ -184,19 +186,7 @@ class Motion:
     @property
     def abandoned(self) -> bool:
         """True once the master gave up on this command (failure, timeout, stop, close)."""
-        return self._abandoned
-
-    def claim_abandon(self) -> bool:
-        """Mark the command given up on; True for the one caller that must withdraw or stop it.
-
-        False when it was already given up on, or the robot finished it: nothing is left to
-        withdraw or stop. Atomic, so two threads giving it up (a wait, ``close()``) act once.
-        """
-        with self._abandon_lock:
-            if self._abandoned or self.done or self.reported_finished:
-                return False
-            self._abandoned = True
-            return True
+        return self._follower.abandoned(self)
 
     def progress(self) -> MoveProgress:
         """Poll the robot once and report where the move stands (raises on robot failure)."""
@@ -256,6 +246,13 @@ class _MotionFollower:
         self.timeouts = timeouts
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
+        # The motions given up on: each is withdrawn or stopped once, by one caller.
+        self._abandon_lock = threading.Lock()
+        self._abandoned: weakref.WeakSet[Motion] = weakref.WeakSet()
+
+    def abandoned(self, motion: Motion) -> bool:
+        """True once the master gave up on ``motion``."""
+        return motion in self._abandoned
 
     def read_pose(self) -> Pose:
         """The current TCP pose."""
@@ -282,8 +279,12 @@ class _MotionFollower:
         Running: stop the arm, unless the robot stopped itself (fault, e-stop, refusal).
         Every step is best effort and logged; none of them raises.
         """
-        if not motion.claim_abandon():
-            return
+        with self._abandon_lock:
+            # Atomic: of two threads giving it up (a wait, close()), one acts; and a
+            # command the robot reported finished has nothing left to withdraw or stop.
+            if motion in self._abandoned or motion.done or motion.reported_finished:
+                return
+            self._abandoned.add(motion)
         ticket = motion.ticket
         motion.phase = MovePhase.FAILED
         running = ticket.acknowledged
