@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
 
-from ._codec import Value, encode
+from ._codec import Value
 from ._exceptions import (
     CommandRejectedError,
     ConfigError,
@@ -42,7 +42,7 @@ from ._registers import (
     Table,
 )
 from ._status import RobotStatus
-from ._transport import Transport
+from ._transport import Block, Encoded, Transport, encode_writes, group_writes
 
 _log = get_logger("tmmaster.robot")
 
@@ -90,6 +90,8 @@ class Ticket:
     #: True once the command was taken back (it can no longer start).
     withdrawn: bool = False
     extra: dict[str, Value] = field(default_factory=dict)
+    #: ``words`` encoded and grouped into write blocks while preparing (encoded once).
+    plan: list[tuple[Block, list[int]]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -166,6 +168,12 @@ class CommandChannel(ABC):
 
     def encode_command(self, command: Command) -> list[tuple[RegisterField, Value]]:
         """Field values of the command block; every value is range-checked here, before I/O."""
+        return self._encode_command(command)[0]
+
+    def _encode_command(
+        self, command: Command
+    ) -> tuple[list[tuple[RegisterField, Value]], list[Encoded]]:
+        """The command block's field values and their words (raises naming the field)."""
         if not self.supports(command.kind):
             raise ConfigError(
                 f"profile {self.profile.name!r} has no {command.kind.value!r} command"
@@ -181,9 +189,9 @@ class CommandChannel(ABC):
             # and goes out as one atomic request.
             words.append((p.field("accel_time"), command.accel_time_ms or 0))
         words.append((p.field("command"), p.field("command").code_of(command.kind.value)))
-        for f, value in words:
-            encode(f, value)  # raises ValueOutOfRangeError naming the field
-        return words
+        # Every value encoded now: ValueOutOfRangeError naming the field, before any I/O;
+        # the words are kept, so the write does not encode them again.
+        return words, encode_writes(words)
 
     @abstractmethod
     def prepare(self, command: Command) -> Ticket:
@@ -213,7 +221,11 @@ class CommandChannel(ABC):
     def send(self, ticket: Ticket) -> None:
         """Write the command block in one request, exactly once (never retried)."""
         ticket.sent_at = time.monotonic()
-        self.transport.write_fields(ticket.words, retry=False)
+        if not ticket.plan:
+            self.transport.write_fields(ticket.words, retry=False)
+            return
+        for block, words in ticket.plan:  # the command block: one block, one request
+            self.transport.write_block(block.table, block.address, words, retry=False)
 
     def read_failure(self) -> RobotError | None:
         """Read the fewest registers that tell whether the robot is in e-stop or error."""
@@ -266,7 +278,7 @@ class ClearOnAcceptChannel(CommandChannel):
 
     def prepare(self, command: Command) -> Ticket:
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
-        words = self.encode_command(command)
+        words, encoded = self._encode_command(command)
         p = self.profile
         block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
         status = self.read_status()
@@ -285,7 +297,12 @@ class ClearOnAcceptChannel(CommandChannel):
                 )
         previous = tuple(float(block[n]) for n in TARGET_FIELDS)
         return Ticket(
-            command, words, time.monotonic(), previous_target=previous, start_pose=status.pose
+            command,
+            words,
+            time.monotonic(),
+            previous_target=previous,
+            start_pose=status.pose,
+            plan=group_writes(encoded),
         )
 
     def poll(self, ticket: Ticket) -> Observation:
@@ -398,7 +415,7 @@ class SequenceChannel(CommandChannel):
 
     def prepare(self, command: Command) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
-        words = self.encode_command(command)
+        words, encoded = self._encode_command(command)
         p = self.profile
         flags = self.read(self.flag_fields)
         if (failure := self._flags_failure(flags)) is not None:
@@ -419,13 +436,15 @@ class SequenceChannel(CommandChannel):
         # The program takes only ack_seq + 1 (1..seq_max, skipping 0), so a seq that was
         # put back to withdraw a command can never be mistaken for a new one.
         seq = p.next_seq(ack)
-        words.append((p.field("seq"), seq))
+        seq_word = (p.field("seq"), seq)
+        words.append(seq_word)
         return Ticket(
             command,
             words,
             time.monotonic(),
             seq=seq,
             extra={"heartbeat": feedback.get("heartbeat", 0)},
+            plan=group_writes([*encoded, *encode_writes([seq_word])]),
         )
 
     def poll(self, ticket: Ticket) -> Observation:

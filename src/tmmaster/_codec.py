@@ -54,37 +54,95 @@ def describe_range(field: RegisterField) -> str:
     return f"{low:g}..{high:g}{unit}, {encoding}"
 
 
-def _round_half_away(x: float) -> int:
-    return int(math.copysign(math.floor(abs(x) + 0.5), x))
-
-
 def encode(field: RegisterField, value: Value) -> list[int]:
     """Register words (or one 0/1 for a bit) for ``value``; raises if it can't fit."""
-    if field.dtype is DataType.BOOL:
-        if isinstance(value, bool) or value in (0, 1):
-            return [int(bool(value))]
-        raise ValueOutOfRangeError(field.name, value, describe_range(field))
-    if not isinstance(value, int | float) or isinstance(value, bool):
-        raise ValueOutOfRangeError(field.name, value, describe_range(field))
-    if not math.isfinite(value):
-        raise ValueOutOfRangeError(field.name, value, describe_range(field))
+    return encoder(field)(value)
+
+
+#: Encodes one value of one field; built once per field by :func:`encoder`.
+Encoder = Callable[[Value], list[int]]
+
+# Encoders by the identity of their field; each entry holds the field, so its id cannot
+# be reused while the entry lives. Bounded: fields of ad-hoc maps are not kept forever.
+_ENCODERS: dict[int, tuple[RegisterField, Encoder]] = {}
+_MAX_ENCODERS = 4096
+
+
+def encoder(field: RegisterField) -> Encoder:
+    """A function ``value -> words`` equal to :func:`encode` for ``field``, built once.
+
+    The checks are the same (type, finite, the field's allowed range, the range after
+    rounding); what depends on the field alone (range, scale, word order) is computed
+    here once instead of at every call.
+    """
+    entry = _ENCODERS.get(id(field))
+    if entry is not None and entry[0] is field:
+        return entry[1]
+    built = _build_encoder(field)
+    if len(_ENCODERS) >= _MAX_ENCODERS:
+        _ENCODERS.clear()
+    _ENCODERS[id(field)] = (field, built)
+    return built
+
+
+def _build_encoder(field: RegisterField) -> Encoder:
+    name = field.name
+    dtype = field.dtype
+
+    def refuse(value: object) -> ValueOutOfRangeError:
+        return ValueOutOfRangeError(name, value, describe_range(field))
+
+    if dtype is DataType.BOOL:
+
+        def encode_bool(value: Value) -> list[int]:
+            if isinstance(value, bool) or value in (0, 1):
+                return [int(bool(value))]
+            raise refuse(value)
+
+        return encode_bool
     low, high = allowed_range(field)
-    if not low <= value <= high:
-        raise ValueOutOfRangeError(field.name, value, describe_range(field))
-    scaled = value * field.scale
-    if field.dtype is DataType.FLOAT32:
-        packed = struct.pack(">f", scaled)
-        words = [int.from_bytes(packed[0:2], "big"), int.from_bytes(packed[2:4], "big")]
-        return _order(words, field.word_order)
-    raw = _round_half_away(scaled)
-    raw_low, raw_high = _INT_LIMITS[field.dtype]
-    if not raw_low <= raw <= raw_high:
-        # Rounding can push a value that passed the range check over the edge.
-        raise ValueOutOfRangeError(field.name, value, describe_range(field))
-    if field.dtype.width == 1:
-        return [raw & 0xFFFF]
-    unsigned = raw & 0xFFFFFFFF
-    return _order([unsigned >> 16, unsigned & 0xFFFF], field.word_order)
+    scale = field.scale
+    big = field.word_order is WordOrder.BIG
+    isfinite = math.isfinite
+
+    def checked(value: Value) -> float:
+        # bool is an int: refused explicitly, as is anything that is not a number.
+        if value.__class__ is bool or not isinstance(value, int | float):
+            raise refuse(value)
+        if not isfinite(value) or not low <= value <= high:
+            raise refuse(value)
+        return value * scale
+
+    if dtype is DataType.FLOAT32:
+        pack = _FLOAT32.pack
+
+        def encode_float32(value: Value) -> list[int]:
+            packed = pack(checked(value))
+            high_word = packed[0] << 8 | packed[1]
+            low_word = packed[2] << 8 | packed[3]
+            return [high_word, low_word] if big else [low_word, high_word]
+
+        return encode_float32
+    raw_low, raw_high = _INT_LIMITS[dtype]
+    floor, copysign = math.floor, math.copysign
+
+    def rounded(value: Value) -> int:
+        scaled = checked(value)
+        raw = int(copysign(floor(abs(scaled) + 0.5), scaled))  # half away from zero
+        if not raw_low <= raw <= raw_high:
+            # Rounding can push a value that passed the range check over the edge.
+            raise refuse(value)
+        return raw
+
+    if dtype.width == 1:
+        return lambda value: [rounded(value) & 0xFFFF]
+
+    def encode_word32(value: Value) -> list[int]:
+        unsigned = rounded(value) & 0xFFFFFFFF
+        high_word, low_word = unsigned >> 16, unsigned & 0xFFFF
+        return [high_word, low_word] if big else [low_word, high_word]
+
+    return encode_word32
 
 
 def decode(field: RegisterField, words: Sequence[int]) -> Value:

@@ -56,7 +56,11 @@ class DataType(StrEnum):
     @property
     def width(self) -> int:
         """Number of addresses the type occupies."""
-        return _WIDTHS[self.value]
+        return _WIDTH_OF[self]
+
+
+#: Width of each data type, keyed by member: no ``.value`` lookup on the hot path.
+_WIDTH_OF: dict[DataType, int] = {t: _WIDTHS[t.value] for t in DataType}
 
 
 class WordOrder(StrEnum):
@@ -144,12 +148,12 @@ class RegisterField(BaseModel):
     @property
     def width(self) -> int:
         """Number of addresses the field occupies."""
-        return self.dtype.width
+        return _WIDTH_OF[self.dtype]
 
     @property
     def end(self) -> int:
         """Last address the field occupies."""
-        return self.address + self.width - 1
+        return self.address + _WIDTH_OF[self.dtype] - 1
 
     def label(self, value: int) -> str:
         """Meaning of an enumerated value, or the number itself."""

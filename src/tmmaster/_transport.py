@@ -25,7 +25,7 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
 
-from ._codec import Decoder, Value, decoder, encode
+from ._codec import Decoder, Value, decoder, encoder
 from ._exceptions import (
     MODBUS_EXCEPTIONS,
     ConfigError,
@@ -151,20 +151,34 @@ def _block(table: Table, fields: list[RegisterField]) -> Block:
     return Block(table, start, end - start + 1, tuple(fields))
 
 
+#: A field with the words its value encodes to.
+Encoded = tuple[RegisterField, list[int]]
+
+
+def encode_writes(values: Iterable[tuple[RegisterField, Value]]) -> list[Encoded]:
+    """Encode every value (each field must be writable); raises before anything is sent."""
+    encoded: list[Encoded] = []
+    for f, value in values:
+        if not f.access.writable:
+            raise ConfigError(f"{f.name}: field is read-only ({f.table.value} {f.address})")
+        encoded.append((f, encoder(f)(value)))
+    return encoded
+
+
 def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Block, list[int]]]:
     """Encode every value first, then group adjacent fields into write blocks.
 
     Encoding everything before returning means an out-of-range value anywhere refuses
     the whole write: nothing is sent.
     """
-    encoded: list[tuple[RegisterField, list[int]]] = []
-    for f, value in values:
-        if not f.access.writable:
-            raise ConfigError(f"{f.name}: field is read-only ({f.table.value} {f.address})")
-        encoded.append((f, encode(f, value)))
-    encoded.sort(key=lambda item: (item[0].table.value, item[0].address))
+    return group_writes(encode_writes(values))
+
+
+def group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
+    """Group already encoded fields into as few write blocks as the protocol allows."""
+    ordered = sorted(encoded, key=lambda item: (item[0].table.value, item[0].address))
     plans: list[tuple[Block, list[int]]] = []
-    group: list[tuple[RegisterField, list[int]]] = []
+    group: list[Encoded] = []
 
     def flush() -> None:
         if group:
@@ -173,7 +187,7 @@ def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Blo
             plans.append((_block(table, [g[0] for g in group]), words))
             group.clear()
 
-    for f, words in encoded:
+    for f, words in ordered:
         if group:
             last = group[-1][0]
             limit = MAX_WRITE_BITS if f.table.is_bit else MAX_WRITE_REGISTERS
@@ -289,6 +303,8 @@ class BlockTransport(ABC):
         # field objects every time, so its plan is computed once. The plan holds the
         # fields, so their ids cannot be reused while the entry lives.
         self._plans: dict[tuple[int, tuple[int, ...]], tuple[ReadPlan, tuple[object, ...]]] = {}
+        # Per read block (table, address, count): its description and function code.
+        self._reads: dict[tuple[Table, int, int], tuple[str, int]] = {}
         self._log = _log.bind(device=name, host=host, port=port, device_id=device_id)
 
     # -- the link (subclasses) ----------------------------------------------------
@@ -418,8 +434,13 @@ class BlockTransport(ABC):
         interruptible: bool = True,
     ) -> list[int]:
         """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
-        what = f"read {table.value} {address}+{count}"
-        function_code = READ_FUNCTION[table]
+        key = (table, address, count)
+        known = self._reads.get(key)
+        if known is None:
+            known = (f"read {table.value} {address}+{count}", READ_FUNCTION[table])
+            if len(self._reads) < 256:  # bounded, like the read plans
+                self._reads[key] = known
+        what, function_code = known
 
         def once() -> list[int]:
             words = self._execute(what, function_code, address, count, None)
