@@ -106,7 +106,15 @@ class Observation:
 
 
 def _pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
-    return Pose(*(float(values[n]) for n in names))
+    x, y, z, rx, ry, rz = names
+    return Pose(
+        float(values[x]),
+        float(values[y]),
+        float(values[z]),
+        float(values[rx]),
+        float(values[ry]),
+        float(values[rz]),
+    )
 
 
 class CommandChannel(ABC):
@@ -126,6 +134,11 @@ class CommandChannel(ABC):
             *profile.role(Role.FEEDBACK),
             *readable_gripper,
         )
+        # Field sets read on every command, built once (their read plans are cached by
+        # the tuple's identity).
+        self.tcp_fields = profile.select(TCP_FIELDS)
+        self.command_fields = (command,)
+        self.target_block = (*profile.select(TARGET_FIELDS), command)
 
     # -- reading ---------------------------------------------------------
 
@@ -140,7 +153,7 @@ class CommandChannel(ABC):
 
     def read_pose(self) -> Pose:
         """The current TCP pose (one request)."""
-        return _pose_from(self.read(self.profile.select(TCP_FIELDS)), TCP_FIELDS)
+        return _pose_from(self.read(self.tcp_fields), TCP_FIELDS)
 
     @abstractmethod
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
@@ -280,7 +293,7 @@ class ClearOnAcceptChannel(CommandChannel):
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
         words, encoded = self._encode_command(command)
         p = self.profile
-        block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
+        block = self.read(self.target_block)
         status = self.read_status()
         if (failure := self.status_failure(status)) is not None:
             raise failure
@@ -308,7 +321,7 @@ class ClearOnAcceptChannel(CommandChannel):
     def poll(self, ticket: Ticket) -> Observation:
         """Before acknowledgement read the command register first, then the status block."""
         if not ticket.acknowledged:
-            pending = int(self.read([self.profile.field("command")])["command"])
+            pending = int(self.read(self.command_fields)["command"])
             if pending == 0:
                 ticket.acknowledged = True
                 ticket.acknowledged_at = time.monotonic()
@@ -334,8 +347,7 @@ class ClearOnAcceptChannel(CommandChannel):
         The robot was idle with no command pending when the write was sent, so motion now
         can only be ours. Old targets prove nothing: the frame may still be on its way.
         """
-        p = self.profile
-        block = self.read([*p.select(TARGET_FIELDS), p.field("command")])
+        block = self.read(self.target_block)
         ours = {f.name: v for f, v in ticket.words}
         targets_match = all(
             abs(float(block[n]) - float(ours[n])) < 1e-6 for n in TARGET_FIELDS if n in ours
@@ -375,6 +387,9 @@ class SequenceChannel(CommandChannel):
         self.flag_fields = needed + tuple(
             f for f in p.role(Role.STATUS) if f.table is Table.DISCRETE_INPUT and f not in needed
         )
+        self.feedback_and_seq = (*self.feedback_fields, p.field("seq"))
+        self.error_code_fields = (p.field("last_error_code"),)
+        self.seq_fields = (p.field("seq"), p.field("ack_seq"))
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
@@ -411,7 +426,7 @@ class SequenceChannel(CommandChannel):
         return None
 
     def _error_code(self) -> int:
-        return int(self.read([self.profile.field("last_error_code")])["last_error_code"])
+        return int(self.read(self.error_code_fields)["last_error_code"])
 
     def prepare(self, command: Command) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
@@ -420,7 +435,7 @@ class SequenceChannel(CommandChannel):
         flags = self.read(self.flag_fields)
         if (failure := self._flags_failure(flags)) is not None:
             raise failure
-        feedback = self.read([*self.feedback_fields, p.field("seq")])
+        feedback = self.read(self.feedback_and_seq)
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
         state = p.field("robot_state").label(int(feedback["robot_state"]))
         if not 0 <= ack <= p.seq_max:
@@ -501,8 +516,7 @@ class SequenceChannel(CommandChannel):
 
     def write_landed(self, ticket: Ticket) -> bool:
         """seq is written in the same request as the block: if it is ours, the write landed."""
-        p = self.profile
-        values = self.read([p.field("seq"), p.field("ack_seq")])
+        values = self.read(self.seq_fields)
         return ticket.seq in (int(values["seq"]), int(values["ack_seq"]))
 
     def read_failure(self) -> RobotError | None:
