@@ -176,7 +176,8 @@ def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Blo
 
 def group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
     """Group already encoded fields into as few write blocks as the protocol allows."""
-    ordered = sorted(encoded, key=lambda item: (item[0].table.value, item[0].address))
+    # Table is a StrEnum: its members order as their values, without a .value lookup.
+    ordered = sorted(encoded, key=lambda item: (item[0].table, item[0].address))
     plans: list[tuple[Block, list[int]]] = []
     group: list[Encoded] = []
 
