@@ -156,3 +156,14 @@ def test_the_bool_decoder_equals_decode() -> None:
     f = RegisterField(name="flag", role="status", table="coil", address=0, type="bool")
     assert decoder(f)([0, 1], 1) is decode(f, [1]) is True
     assert decoder(f)([0, 1], 0) is decode(f, [0]) is False
+
+
+def test_the_encoder_is_built_once_per_field_and_never_shared_with_a_copy() -> None:
+    from tmmaster._codec import encoder
+
+    f = field("int16", scale=100, minimum=-300, maximum=300)
+    assert encoder(f) is encoder(f)
+    narrower = f.model_copy(update={"maximum": 10.0})
+    assert encode(f, 20) == [2000]
+    with pytest.raises(ValueOutOfRangeError, match="f"):
+        encode(narrower, 20)  # the copy's range, not the cached encoder of the original

@@ -51,3 +51,26 @@ def test_configure_logging_prints_events_and_can_be_undone() -> None:
     )
     assert done.stdout == "ok\n", done.stderr
     assert done.stderr == ""
+
+
+def test_a_disabled_event_never_enters_the_processors() -> None:
+    import logging
+
+    import structlog
+
+    from tmmaster._logging import _BoundLogger
+
+    seen: list[str] = []
+
+    def spy(_logger: object, _method: str, event: dict[str, object]) -> dict[str, object]:
+        seen.append(str(event["event"]))
+        raise structlog.DropEvent
+
+    std = logging.getLogger("tmmaster.test_disabled_events")
+    std.setLevel(logging.WARNING)
+    log = structlog.wrap_logger(std, processors=[spy], wrapper_class=_BoundLogger).bind(a=1)
+    log.debug("d")
+    log.info("i")
+    log.warning("w")
+    log.error("e")
+    assert seen == ["w", "e"]
