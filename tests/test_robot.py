@@ -99,6 +99,32 @@ def test_status_reads_each_block_in_one_request(
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_moves_command_block_is_encoded_once(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    profile: str,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import tmmaster._transport as transport_module
+
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim)
+    encoded: list[str] = []
+    real = transport_module.encoder
+
+    def counting(f: Any) -> Any:
+        encoded.append(f.name)
+        return real(f)
+
+    monkeypatch.setattr(transport_module, "encoder", counting)
+    sim.clear_request_log()
+    robot.move_to(APPROACH, speed=30)
+    block = [f.name for f in robot.profile.command_block()]
+    assert sorted(encoded) == sorted(block)  # each field once: checked, then written as is
+    assert len(command_writes(sim)) == 1
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_move_is_one_write_of_the_whole_command_block(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
