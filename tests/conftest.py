@@ -12,6 +12,8 @@ from typing import Any
 
 import pytest
 
+import tmmaster
+from tmmaster import Robot
 from tmmaster.sim import Simulator
 
 
@@ -124,3 +126,28 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Run the modules that wait longest first (stable: their own order is kept)."""
     rank = {name: i for i, name in enumerate(_LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+@pytest.fixture
+def robots() -> Iterator[Callable[..., Robot]]:
+    """Open robots on a simulator, connected and ready; all closed after the test.
+
+    Modules that need other defaults (ports, short timeouts) define their own ``robots``.
+    """
+    opened: list[Robot] = []
+
+    def make(sim: Simulator, **options: Any) -> Robot:
+        options.setdefault("profile", sim.profile)
+        options.setdefault("poll_interval_s", 0.01)
+        options.setdefault(
+            "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
+        )
+        robot = Robot(sim.url, **options)
+        opened.append(robot)
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        return robot
+
+    yield make
+    for robot in opened:
+        robot.close()

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from typing import Any
+from collections.abc import Callable
 
 import pytest
 
-import tmmaster
 from tmmaster import (
     AcknowledgeTimeoutError,
     MovePhase,
@@ -26,28 +24,6 @@ APPROACH = Pose(300, -200, 200, 180, 0, 90)
 def tm_simulator_factory(memory_simulator_factory: SimFactory) -> SimFactory:
     """Simulators in memory: TCP is not the subject here."""
     return memory_simulator_factory
-
-
-@pytest.fixture
-def robots() -> Iterator[Callable[..., Robot]]:
-    """Open robots on a simulator; all closed after the test."""
-    opened: list[Robot] = []
-
-    def make(sim: Simulator, **options: Any) -> Robot:
-        options.setdefault("profile", sim.profile)
-        options.setdefault("poll_interval_s", 0.01)
-        options.setdefault(
-            "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
-        )
-        robot = Robot(sim.url, **options)
-        opened.append(robot)
-        robot.connect()
-        robot.wait_until_ready(timeout_s=5)
-        return robot
-
-    yield make
-    for robot in opened:
-        robot.close()
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])

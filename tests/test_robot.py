@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -25,28 +25,6 @@ def tm_simulator_factory(memory_simulator_factory: SimFactory) -> SimFactory:
 APPROACH = Pose(300, -200, 200, 180, 0, 90)
 PICK = Pose(300, -200, 100, 180, 0, 90)
 COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
-
-
-@pytest.fixture
-def robots() -> Iterator[Callable[..., Robot]]:
-    """Open robots on a simulator; all closed after the test."""
-    opened: list[Robot] = []
-
-    def make(sim: Simulator, **options: Any) -> Robot:
-        options.setdefault("profile", sim.profile)
-        options.setdefault("poll_interval_s", 0.01)
-        options.setdefault(
-            "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
-        )
-        robot = Robot(sim.url, **options)
-        opened.append(robot)
-        robot.connect()
-        robot.wait_until_ready(timeout_s=5)
-        return robot
-
-    yield make
-    for robot in opened:
-        robot.close()
 
 
 def command_writes(sim: Simulator) -> list[tuple[int, ...]]:
