@@ -6,21 +6,19 @@ with ``--host 127.0.0.1 --port <sim port>``; one also runs as a real subprocess.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
 
 import pytest
 
+from examples_support import EXAMPLES, load_example
 from tmmaster import DEFAULT_HOME, Pose
 from tmmaster.pickplace.__main__ import main as pickplace_main
 from tmmaster.sim import Simulator, TableObject
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PICK = Pose(300, -200, 100, 180, 0, 90)
 PLACE = Pose(300, 200, 200, 180, 0, 90)
 HOME = DEFAULT_HOME
@@ -29,16 +27,6 @@ HOME = DEFAULT_HOME
 PLACED = Pose(PLACE.x, PLACE.y, PICK.z, PLACE.rx, PLACE.ry, PLACE.rz)
 
 SimFactory = Callable[..., Simulator]
-
-
-def load_example(name: str) -> ModuleType:
-    """Import ``examples/<name>.py`` as a module."""
-    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def target(sim: Simulator) -> list[str]:

@@ -2,32 +2,22 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from collections.abc import Callable
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from examples_support import load_example
 from tmmaster import RobotFaultError
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "many_robots.py"
 
 
 @pytest.fixture(scope="module")
 def example() -> ModuleType:
-    """The example script, imported as a module (it is not part of the package)."""
-    spec = importlib.util.spec_from_file_location("many_robots_example", EXAMPLE)
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    # dataclasses look the module up in sys.modules while the class body is built.
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    """The example script, imported as a module."""
+    return load_example("many_robots")
 
 
 def test_every_robot_drives_its_tour(tm_simulator_factory: Factory, example: ModuleType) -> None:
