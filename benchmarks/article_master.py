@@ -17,6 +17,9 @@
 #     which run() does not catch (it catches IOError), so the script dies on its first
 #     move (APPROACH_POS has y = -200). Patched: written as 16-bit two's complement,
 #     which is what the int16 registers of the map mean.
+# bench_cycle.py also sets HOME_POS to tmmaster.DEFAULT_HOME before running it: the
+# published HOME (0, 0, 300, 180, 0, 0) is out of a TM5's reach, and the simulator refuses
+# it as the real arm would (docs/kinematics.md). This file keeps the published value.
 # Kept as published, on purpose: its layout and style (excluded from ruff in
 # pyproject.toml), the prints, the fixed gripper sleeps (0.8 s close, 0.5 s open), the
 # 50 ms poll, ModbusTcpClient's default retries.

@@ -48,7 +48,6 @@ import heapq
 import json
 import math
 import os
-import platform
 import statistics
 import struct
 import subprocess
@@ -58,6 +57,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from _machine import machine_line
 
 from tmmaster import Robot
 
@@ -546,17 +547,8 @@ def main(argv: list[str] | None = None) -> int:
                     print(table(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
         finally:
             farm.close()
-    model = next(
-        (
-            line.split(":", 1)[1].strip()
-            for line in Path("/proc/cpuinfo").read_text().splitlines()
-            if line.startswith("model name")
-        ),
-        platform.processor(),
-    )
     print(
-        f"# {platform.python_implementation()} {platform.python_version()}, nproc {os.cpu_count()}"
-        f" ({model}), load average {os.getloadavg()[0]:.2f}; {args.rate:g} Hz polling,"
+        f"# {machine_line()}; {args.rate:g} Hz polling,"
         f" {args.seconds:g} s rounds, simulators: {args.sims_per_process} per process,"
         f" {args.sim_tick_hz:g} Hz tick, same machine"
     )
