@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -84,6 +85,39 @@ def memory_simulator_factory(
 #: subprocesses are CPU-bound. On two cores four beat six and three (measured: see
 #: docs/architecture.md); more workers also squeeze the timing margins of the safety tests.
 SUITE_WORKERS = 4
+
+
+def _warm_the_rewrite_cache(config: pytest.Config) -> None:
+    """Rewrite the test modules' asserts once, here, before the xdist workers start.
+
+    Otherwise each worker rewrites all of them at the same time on a clean checkout (CI):
+    about 1.6 s of CPU each. This uses pytest's private helpers, so any surprise from a
+    newer pytest only skips the warm-up (the workers then rewrite as usual).
+    """
+    try:
+        from _pytest.assertion import rewrite
+
+        state = config.stash[rewrite.assertstate_key]
+        for source in sorted(Path(__file__).parent.glob("test_*.py")):
+            pyc = rewrite.get_cache_dir(source) / (source.name[:-3] + rewrite.PYC_TAIL)
+            if rewrite._read_pyc(source, pyc) is not None:
+                continue
+            source_hash, code = rewrite._rewrite_test(source, config)
+            if rewrite.try_makedirs(pyc.parent):
+                rewrite._write_pyc(state, code, source_hash, pyc)
+    except Exception:  # an optimisation only: never fail the run for it
+        return
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Cache compiled test modules; in the xdist controller, warm that cache for the workers."""
+    # Containers (and .ci/run) often set PYTHONDONTWRITEBYTECODE=1: then every worker
+    # rewrote every test module's asserts on every run. The cache goes into the usual,
+    # git-ignored __pycache__ folders, as Python does by default.
+    sys.dont_write_bytecode = False
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+        return
+    _warm_the_rewrite_cache(config)
 
 
 @pytest.hookimpl(optionalhook=True)
