@@ -155,7 +155,7 @@ def test_late_acknowledgement_is_waited_for(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
     # 10 simulated s = 0.5 wall s before the robot picks the command up.
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=10"])
+    sim = tm_simulator_factory(profile, time_scale=20, faults=["late_ack:delay_s=10"])
     robot = robots(sim)
     started = time.monotonic()
     motion = robot.move_to(APPROACH, speed=30)
@@ -170,13 +170,13 @@ def test_late_acknowledgement_is_waited_for(
 def test_unacknowledged_command_times_out_and_is_withdrawn(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])  # 1 s wall
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])  # 0.5 s wall
     robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.3))
     home = sim.tcp_pose()
     with pytest.raises(tmmaster.AcknowledgeTimeoutError, match="withdrawn"):
         robot.move_to(APPROACH, speed=30)
-    # The command must not run later behind the script's back.
-    time.sleep(1.2)
+    # The command must not run later behind the script's back (the ack would come by now).
+    time.sleep(0.8)
     assert sim.tcp_pose() == home
     assert not robot.status().moving
 
@@ -403,7 +403,7 @@ def test_a_pending_command_from_someone_else_blocks_a_move(
     sim = tm_simulator_factory("article", faults=["late_ack:delay_s=100"])
     robot = robots(sim)
     other = robots(sim)
-    other.start_move(APPROACH, speed=30)  # taken only after 5 wall s
+    other.start_move(APPROACH, speed=30)  # taken only after 2.5 wall s
     before = len(command_writes(sim))
     with pytest.raises(tmmaster.RobotError, match="still pending"):
         robot.move_to(PICK, speed=10)

@@ -32,6 +32,18 @@ REQUEST_TIMEOUT_S = 0.15
 
 
 @pytest.fixture
+def tm_simulator_factory(tm_simulator_factory: SimFactory) -> SimFactory:
+    """The plugin's own 20x and 50 Hz: these faults are timed against the wall clock."""
+
+    def make(profile: str = "article", **options: Any) -> Simulator:
+        options.setdefault("time_scale", 20.0)
+        options.setdefault("tick_hz", 50.0)
+        return tm_simulator_factory(profile, **options)
+
+    return make
+
+
+@pytest.fixture
 def robots() -> Iterator[Callable[..., Robot]]:
     """Open robots with short timeouts; all closed after the test."""
     opened: list[Robot] = []
