@@ -31,6 +31,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from types import FrameType
 from typing import TYPE_CHECKING, Any, TextIO, cast
 
@@ -317,133 +318,209 @@ def _print_summary(console: Console, report: RunReport) -> None:
     console.print(summary_renderable(report))
 
 
+#: The options that set a configuration key, and the key (section, name). They are
+#: applied once, by :func:`_overrides` in :func:`_command`, to the one validated
+#: :class:`PickPlaceConfig` that everything downstream reads.
+_CONFIG_OPTIONS: dict[str, tuple[str, str]] = {
+    "host": ("robot", "host"),
+    "port": ("robot", "port"),
+    "profile": ("robot", "profile"),
+    "cycles": ("run", "cycles"),
+    "poll_interval": ("run", "poll_interval_s"),
+}
+#: The options that say what to run (the files, the mode, the simulator): read once, by
+#: :func:`_command`, into the :class:`_Command`.
+_COMMAND_OPTIONS = frozenset(
+    {"config", "sequence", "dry_run", "diagram", "sim", "sim_time_scale", "sim_physics", "snapshot"}
+)
+#: The options that only shape the output: the only ones read after :func:`_command`.
+_OUTPUT_OPTIONS = frozenset({"log_json", "log_level", "quiet", "report"})
+
+
+@dataclass(frozen=True)
+class _SimOptions:
+    """With --sim: how the embedded simulator runs."""
+
+    time_scale: float
+    physics: str
+    #: Folder for the end-of-run picture (--snapshot), or None.
+    snapshot: str | None
+
+
+@dataclass(frozen=True)
+class _Command:
+    """What the command runs, read from the arguments once and validated."""
+
+    #: The configuration with the command-line options applied: the one every part reads.
+    config: PickPlaceConfig
+    sequence: TaskSequence
+    cycles: int
+    #: What a plan error names: the sequence file, the config file or the defaults.
+    source: str
+    #: The TOML sequence run instead of pick & place, or None.
+    sequence_file: str | None
+    dry_run: bool
+    diagram: bool
+    #: The simulator to start and run against (--sim), or None.
+    sim: _SimOptions | None
+
+
 def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """The configuration keys the command line sets (section -> key -> value)."""
     overrides: dict[str, dict[str, Any]] = {}
-    if args.profile is not None:
-        overrides.setdefault("robot", {})["profile"] = args.profile
-    if args.port is not None:
-        overrides.setdefault("robot", {})["port"] = args.port
-    if args.host is not None:
-        overrides.setdefault("robot", {})["host"] = args.host
-    if args.cycles is not None:
-        overrides.setdefault("run", {})["cycles"] = args.cycles
-    if args.poll_interval is not None:
-        overrides.setdefault("run", {})["poll_interval_s"] = args.poll_interval
+    for option, (section, key) in _CONFIG_OPTIONS.items():
+        value = getattr(args, option)
+        if value is not None:
+            overrides.setdefault(section, {})[key] = value
     return overrides
 
 
-def _execute(args: argparse.Namespace, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
-    # 1. Everything is validated before anything connects.
-    if args.sim and args.sim_physics == "mujoco":
+def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
+    """Read every option but the output ones, once: nothing downstream reads ``args``.
+
+    The configuration options are applied to the file (or the defaults) in one step,
+    :func:`load_config`, which validates the result; the robot, the runner, the
+    simulator, the plan and the report all read that one :class:`PickPlaceConfig`.
+    """
+    sim = _SimOptions(args.sim_time_scale, args.sim_physics, args.snapshot) if args.sim else None
+    if sim is not None and sim.physics == "mujoco":
         from ..sim._mujoco import require_mujoco
 
-        if args.snapshot is not None:
+        if sim.snapshot is not None:
             # Headless rendering: EGL, read by mujoco when it is first imported.
             os.environ.setdefault("MUJOCO_GL", "egl")
 
         require_mujoco()  # a missing extra is said first, in one line
     outcome.config_file = args.config
-    config = load_config(args.config, overrides=_overrides(args))
+    overrides = _overrides(args)
+    config = load_config(args.config, overrides=overrides)
     outcome.config = config
-    source = args.config or "the default configuration"
     sequence: TaskSequence
     if args.sequence:
         sequence = load_sequence(args.sequence)
-        cycles = args.cycles if args.cycles is not None else sequence.default_cycles
+        # --cycles (run.cycles) counts for a TOML sequence too; without it, its own count.
+        given = "cycles" in overrides.get("run", {})
+        cycles = config.run.cycles if given else sequence.default_cycles
         source = args.sequence
     else:
         sequence = pick_and_place(config)
         cycles = config.run.cycles
-    if args.diagram:
-        print(mermaid(sequence, cycles=cycles))
-        return EXIT_OK, None
-    host = config.robot.host
-    if host is None and not (args.sim or args.dry_run):
+        source = args.config or "the default configuration"
+    command = _Command(
+        config=config,
+        sequence=sequence,
+        cycles=cycles,
+        source=source,
+        sequence_file=args.sequence,
+        dry_run=args.dry_run,
+        diagram=args.diagram,
+        sim=sim,
+    )
+    if command.diagram:  # draws the machine only: no robot, no simulator
+        return command
+    if config.robot.host is None and not (sim or command.dry_run):
         raise ConfigError("--host is required (or --sim, --dry-run, --diagram)")
     if not (math.isfinite(args.sim_time_scale) and args.sim_time_scale > 0):
         raise ConfigError(
             f"--sim-time-scale must be a finite number > 0, got {args.sim_time_scale}"
         )
-    probe = robot_from_config(config, host or "127.0.0.1", config.robot.port)
+    return command
+
+
+def _configured_robot(config: PickPlaceConfig) -> Robot:
+    """The robot the configuration names, not connected; it checks the plan, and runs it
+    unless --sim. Without a host (--dry-run, --sim) it stands on the loopback, unused."""
+    if config.robot.host is None:
+        return robot_from_config(config, "127.0.0.1")
+    return robot_from_config(config)
+
+
+def _execute(args: argparse.Namespace, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
+    # 1. Every option is read and validated before anything connects.
+    command = _command(args, outcome)
+    config, sequence, cycles = command.config, command.sequence, command.cycles
+    if command.diagram:
+        print(mermaid(sequence, cycles=cycles))
+        return EXIT_OK, None
+    # 2. Every move of the run is checked on the configured robot, still sending nothing.
+    robot = _configured_robot(config)
+    keep = False
     try:
-        validate_plan(probe, sequence, cycles, source=source)
+        validate_plan(robot, sequence, cycles, source=command.source)
         outcome.move_states = sorted({m.state for m in sequence.planned_moves(cycles)})
-        planned = estimate(sequence, 1, probe.model, start=config.poses.resolved()["home"])
+        home = config.poses.resolved()["home"]
+        planned = estimate(sequence, 1, robot.model, start=home)
         outcome.expected_cycle_s = sum(m.expected_s for m in planned) or None
-        if args.dry_run:
+        if command.dry_run:
             print(
                 format_plan(
                     sequence,
                     cycles,
-                    probe.model,
-                    start=config.poses.resolved()["home"],
-                    profile=probe.profile.name,
-                    tool=probe.tool,
+                    robot.model,
+                    start=home,
+                    profile=robot.profile.name,
+                    tool=robot.tool,
                 )
             )
             return EXIT_OK, None
+        keep = command.sim is None  # with --sim, the robot is the simulator's
     finally:
-        probe.close()
-    if args.sim:
-        return _run_with_sim(args, config, sequence, cycles, outcome, out)
-    assert host is not None
-    return _run_on(config, sequence, cycles, host, config.robot.port, outcome, out)
+        if not keep:
+            robot.close()
+    # 3. Run: on the simulator (--sim), or on the robot just checked.
+    if command.sim is not None:
+        return _run_with_sim(command, outcome, out)
+    assert config.robot.host is not None
+    return _run_on(command, robot, (config.robot.host, config.robot.port), outcome, out)
 
 
-def _run_with_sim(
-    args: argparse.Namespace,
-    config: PickPlaceConfig,
-    sequence: TaskSequence,
-    cycles: int,
-    outcome: _Outcome,
-    out: _Output,
-) -> tuple[int, str | None]:
+def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
     from ..sim import Simulator, TableObject
 
-    if args.snapshot is not None and args.sim_physics != "mujoco":
+    options, config = command.sim, command.config
+    assert options is not None
+    if options.snapshot is not None and options.physics != "mujoco":
         raise ConfigError("--snapshot needs --sim-physics mujoco")
     poses = config.poses.resolved()
     # A feeder: one part per cycle waits at the pick pose.
-    parts = [TableObject(name=f"part-{i}", pose=poses["pick"]) for i in range(1, cycles + 1)]
+    parts = [
+        TableObject(name=f"part-{i}", pose=poses["pick"]) for i in range(1, command.cycles + 1)
+    ]
     gripper = config.gripper.kind if config.gripper.kind not in ("auto", "none") else None
     sim = Simulator(
         config.robot.profile,
-        time_scale=args.sim_time_scale,
+        time_scale=options.time_scale,
         model=config.robot.model,
         gripper=gripper,
         objects=parts,
-        physics=args.sim_physics,
+        physics=options.physics,
     )
     with sim:
         out.info(
             f"simulator: {config.robot.profile} profile on {sim.host}:{sim.port}"
-            f" (time scale {args.sim_time_scale:g}), {len(parts)} part(s) at the pick pose"
+            f" (time scale {options.time_scale:g}), {len(parts)} part(s) at the pick pose"
         )
         if outcome.expected_cycle_s is not None:  # the plan is in simulated seconds
-            outcome.expected_cycle_s /= args.sim_time_scale
+            outcome.expected_cycle_s /= options.time_scale
         sampler = _TcpSampler(sim.tcp_pose)
-        code, reason = _run_on(
+        robot = robot_from_config(
             config,
-            sequence,
-            cycles,
             sim.host,
             sim.port,
-            outcome,
-            out,
             gripper_port=sim.gripper_port,
             # Simulated time runs faster: so does a gripper's settle time.
-            settle_scale=args.sim_time_scale,
-            sampler=sampler,
+            settle_scale=options.time_scale,
         )
-        place = poses["place"] if not args.sequence else None
+        code, reason = _run_on(command, robot, (sim.host, sim.port), outcome, out, sampler=sampler)
+        place = poses["place"] if command.sequence_file is None else None
         outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
-        outcome.sim["time_scale"] = args.sim_time_scale
-        outcome.sim["physics"] = args.sim_physics
+        outcome.sim["time_scale"] = options.time_scale
+        outcome.sim["physics"] = options.physics
         outcome.sim["tcp_path"] = sampler.rows()
-    if args.snapshot is not None:
+    if options.snapshot is not None:
         from ..sim._mujoco import save_snapshot
 
-        out.info(f"simulator: snapshot {save_snapshot(sim, args.snapshot)}")
+        out.info(f"simulator: snapshot {save_snapshot(sim, options.snapshot)}")
     if place is not None:
         for item in outcome.sim["objects"]:
             where = "on the place position" if item["on_place"] else "NOT on the place position"
@@ -455,23 +532,20 @@ def _run_with_sim(
 
 
 def _run_on(
-    config: PickPlaceConfig,
-    sequence: TaskSequence,
-    cycles: int,
-    host: str,
-    port: int,
+    command: _Command,
+    robot: Robot,
+    address: tuple[str, int],
     outcome: _Outcome,
     out: _Output,
     *,
-    gripper_port: int | None = None,
-    settle_scale: float = 1.0,
     sampler: _TcpSampler | None = None,
 ) -> tuple[int, str | None]:
-    robot = robot_from_config(
-        config, host, port, gripper_port=gripper_port, settle_scale=settle_scale
-    )
+    """Connect ``robot`` (at ``address``: the configured robot's or the simulator's),
+    run the command's sequence on it and close it."""
+    sequence, cycles = command.sequence, command.cycles
+    host, port = address
     outcome.target = {"host": host, "port": port, "profile": robot.profile.name}
-    runner = Runner.from_config(robot, config, on_state=out.progress)
+    runner = Runner.from_config(robot, command.config, on_state=out.progress)
     restore = _install_sigint(runner.request_stop)
     if out.live is not None:
         out.live.begin(cycles, outcome.expected_cycle_s)

@@ -158,12 +158,6 @@ class TimeoutsSection(TimeoutPolicy):
     #: The robot must be ready (auto, idle, no error) within this time at start.
     ready_s: Annotated[float, Field(gt=0, le=600)] = 10.0
 
-    def policy(self) -> TimeoutPolicy:
-        """The robot API's timeout policy (this section without the runner's waits)."""
-        return TimeoutPolicy.model_validate(
-            self.model_dump(include=set(TimeoutPolicy.model_fields))
-        )
-
 
 class RetrySection(RetryPolicy):
     """Retries of Modbus requests that failed transiently (reads, connects; never commands):
@@ -173,10 +167,6 @@ class RetrySection(RetryPolicy):
 
     attempts: Annotated[int, Field(ge=1, le=100, strict=True)] = 5
     total_time_s: Annotated[float, Field(gt=0, le=600)] = 10.0
-
-    def policy(self) -> RetryPolicy:
-        """The transport's retry policy."""
-        return RetryPolicy.model_validate(self.model_dump())
 
 
 class GripperSection(_Section):
@@ -230,10 +220,6 @@ class PickPlaceConfig(_Section):
         """sha256 of the normalised configuration (defaults filled in, keys sorted)."""
         text = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
         return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
-
-    def workspace_box(self) -> Workspace | None:
-        """The robot API's workspace, when one is configured (the section is one)."""
-        return self.workspace
 
     def retreat_pose(self) -> Pose:
         """Where the "retreat" error reaction goes."""
@@ -319,27 +305,35 @@ def load_config(
 
 def robot_from_config(
     config: PickPlaceConfig,
-    host: str,
-    port: int,
+    host: str | None = None,
+    port: int | None = None,
     *,
     gripper_port: int | None = None,
     settle_scale: float = 1.0,
 ) -> Robot:
-    """A :class:`Robot` set up from the configuration; opens no connection."""
+    """A :class:`Robot` set up from the configuration; opens no connection.
+
+    It reaches ``robot.host``:``robot.port`` unless ``host`` / ``port`` name another
+    address (a simulator's); the other sections are handed over as they are, the
+    robot API's own models (``timeouts``, ``retry``, ``workspace``) included.
+    """
+    target = host if host is not None else config.robot.host
+    if target is None:
+        raise ConfigError("robot.host: no robot address (set [robot] host, or pass host)")
     g = config.gripper
     return Robot(
-        host,
-        port,
+        target,
+        port if port is not None else config.robot.port,
         profile=config.robot.profile,
         model=config.robot.model,
         gripper=g.kind,
         gripper_host=g.host,
         gripper_port=gripper_port if gripper_port is not None else g.port,
         poll_interval_s=config.run.poll_interval_s,
-        timeouts=config.timeouts.policy(),
-        retry=config.retry.policy(),
+        timeouts=config.timeouts,
+        retry=config.retry,
         request_timeout_s=config.timeouts.request_s,
-        workspace=config.workspace_box(),
+        workspace=config.workspace,
         max_speed_percent=config.robot.max_speed,
         position_tolerance_mm=config.robot.position_tolerance_mm,
         tool=config.robot.tool_pose(),
