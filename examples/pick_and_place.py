@@ -29,14 +29,15 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(level="warning")
 
     try:
-        # Everything is validated here, before a single byte goes out.
+        # Everything is validated here, before a single byte goes out: the options are
+        # applied to the file once, and the rest reads only the configuration.
+        robot_options = {"host": args.host, "port": args.port, "profile": args.profile}
         config = load_config(
-            args.config,
-            overrides={"robot": {"profile": args.profile}, "run": {"cycles": args.cycles}},
+            args.config, overrides={"robot": robot_options, "run": {"cycles": args.cycles}}
         )
         sequence = pick_and_place(config)
-        with robot_from_config(config, args.host, args.port) as robot:
-            validate_plan(robot, sequence, args.cycles, source=args.config or "defaults")
+        with robot_from_config(config) as robot:
+            validate_plan(robot, sequence, config.run.cycles, source=args.config or "defaults")
             result = Runner.from_config(robot, config).run(sequence)
     except TMMasterError as exc:  # config error or no connection
         print(f"pick_and_place: {exc}", file=sys.stderr)
