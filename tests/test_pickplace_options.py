@@ -11,6 +11,7 @@ that step, or if the robot or the runner is built from another configuration.
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -163,6 +164,9 @@ def test_after_the_command_is_built_only_output_options_are_read(
     assert _run(argv, traced) == cli.EXIT_OK
 
     assert _after_build(traced["reads"]) <= cli._OUTPUT_OPTIONS
+    # ... and every other option was read once.
+    reads = Counter(name for name in traced["reads"] if name not in cli._OUTPUT_OPTIONS)
+    assert {name for name, count in reads.items() if count > 1} == set()
     assert "report" in _after_build(traced["reads"])
     # One configuration, loaded once; the robots and the runner are built from it.
     (loaded,) = traced["loaded"]

@@ -382,7 +382,8 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     :func:`load_config`, which validates the result; the robot, the runner, the
     simulator, the plan and the report all read that one :class:`PickPlaceConfig`.
     """
-    sim = _SimOptions(args.sim_time_scale, args.sim_physics, args.snapshot) if args.sim else None
+    config_file, sequence_file, time_scale = args.config, args.sequence, args.sim_time_scale
+    sim = _SimOptions(time_scale, args.sim_physics, args.snapshot) if args.sim else None
     if sim is not None and sim.physics == "mujoco":
         from ..sim._mujoco import require_mujoco
 
@@ -391,27 +392,27 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
             os.environ.setdefault("MUJOCO_GL", "egl")
 
         require_mujoco()  # a missing extra is said first, in one line
-    outcome.config_file = args.config
+    outcome.config_file = config_file
     overrides = _overrides(args)
-    config = load_config(args.config, overrides=overrides)
+    config = load_config(config_file, overrides=overrides)
     outcome.config = config
     sequence: TaskSequence
-    if args.sequence:
-        sequence = load_sequence(args.sequence)
+    if sequence_file:
+        sequence = load_sequence(sequence_file)
         # --cycles (run.cycles) counts for a TOML sequence too; without it, its own count.
         given = "cycles" in overrides.get("run", {})
         cycles = config.run.cycles if given else sequence.default_cycles
-        source = args.sequence
+        source = sequence_file
     else:
         sequence = pick_and_place(config)
         cycles = config.run.cycles
-        source = args.config or "the default configuration"
+        source = config_file or "the default configuration"
     command = _Command(
         config=config,
         sequence=sequence,
         cycles=cycles,
         source=source,
-        sequence_file=args.sequence,
+        sequence_file=sequence_file,
         dry_run=args.dry_run,
         diagram=args.diagram,
         sim=sim,
@@ -420,10 +421,8 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
         return command
     if config.robot.host is None and not (sim or command.dry_run):
         raise ConfigError("--host is required (or --sim, --dry-run, --diagram)")
-    if not (math.isfinite(args.sim_time_scale) and args.sim_time_scale > 0):
-        raise ConfigError(
-            f"--sim-time-scale must be a finite number > 0, got {args.sim_time_scale}"
-        )
+    if not (math.isfinite(time_scale) and time_scale > 0):
+        raise ConfigError(f"--sim-time-scale must be a finite number > 0, got {time_scale}")
     return command
 
 
