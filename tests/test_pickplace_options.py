@@ -103,7 +103,13 @@ BUILT = "<command built>"
 @pytest.fixture
 def traced(monkeypatch: pytest.MonkeyPatch) -> dict[str, list[Any]]:
     """Run the command with its reads of the arguments and its configurations recorded."""
-    seen: dict[str, list[Any]] = {"reads": [], "loaded": [], "robots": [], "runners": []}
+    seen: dict[str, list[Any]] = {
+        "reads": [],
+        "loaded": [],
+        "robots": [],
+        "built": [],
+        "runners": [],
+    }
     command, load, build = cli._command, cli.load_config, cli.robot_from_config
     runner_from_config = cli.Runner.from_config
 
@@ -119,7 +125,8 @@ def traced(monkeypatch: pytest.MonkeyPatch) -> dict[str, list[Any]]:
 
     def recorded_robot(config: PickPlaceConfig, *args: Any, **kwargs: Any) -> Any:
         seen["robots"].append(config)
-        return build(config, *args, **kwargs)
+        seen["built"].append(build(config, *args, **kwargs))
+        return seen["built"][-1]
 
     def recorded_runner(robot: Any, config: PickPlaceConfig, **kwargs: Any) -> Any:
         seen["runners"].append(config)
@@ -174,5 +181,7 @@ def test_after_the_command_is_built_only_output_options_are_read(
     assert traced["robots"], "no robot was built"
     assert all(config is loaded for config in traced["robots"] + traced["runners"])
     assert len(traced["runners"]) == (0 if mode == "dry-run" else 1)
+    # The register map checked while loading is the one the robots speak (loaded once).
+    assert all(robot.profile is loaded.robot_profile() for robot in traced["built"])
     # A real robot is checked and run as one Robot; --sim checks one, runs the simulator's.
     assert len(traced["robots"]) == {"sim": 2, "robot": 1, "dry-run": 1}[mode]

@@ -485,12 +485,11 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
     parts = [
         TableObject(name=f"part-{i}", pose=poses["pick"]) for i in range(1, command.cycles + 1)
     ]
-    gripper = config.gripper.kind if config.gripper.kind not in ("auto", "none") else None
     sim = Simulator(
-        config.robot.profile,
+        config.robot_profile(),
         time_scale=options.time_scale,
         model=config.robot.model,
-        gripper=gripper,
+        gripper=config.gripper_profile(),
         objects=parts,
         physics=options.physics,
     )

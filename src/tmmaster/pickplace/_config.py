@@ -23,13 +23,16 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    PrivateAttr,
     ValidationError,
     model_validator,
 )
 
+from .. import _profiles
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
 from .._profiles import DEFAULT_PROFILE
+from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
 from .._robot import Robot, TimeoutPolicy, Workspace
 
@@ -215,11 +218,32 @@ class PickPlaceConfig(_Section):
     on_error: OnErrorSection = OnErrorSection()
     #: Optional box the TCP must stay inside, mm (base frame): the robot API's model.
     workspace: Workspace | None = None
+    # The register maps robot.profile and gripper.kind name, once loaded (load_config
+    # loads them): the robot and the simulator get the very maps that were checked.
+    # Kept with the name they were loaded for (a model_copy may change the name).
+    _robot_profile: tuple[str, RobotProfile] | None = PrivateAttr(default=None)
+    _gripper_profile: tuple[str, GripperProfile] | None = PrivateAttr(default=None)
 
     def digest(self) -> str:
         """sha256 of the normalised configuration (defaults filled in, keys sorted)."""
         text = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
         return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+    def robot_profile(self) -> RobotProfile:
+        """The register map ``robot.profile`` names, loaded once."""
+        name = self.robot.profile
+        if self._robot_profile is None or self._robot_profile[0] != name:
+            self._robot_profile = (name, _profiles.robot_profile(name))
+        return self._robot_profile[1]
+
+    def gripper_profile(self) -> GripperProfile | None:
+        """The gripper map ``gripper.kind`` names, loaded once (None: "auto", "none")."""
+        kind = self.gripper.kind
+        if kind in ("auto", "none"):
+            return None
+        if self._gripper_profile is None or self._gripper_profile[0] != kind:
+            self._gripper_profile = (kind, _profiles.gripper_profile(kind))
+        return self._gripper_profile[1]
 
     def retreat_pose(self) -> Pose:
         """Where the "retreat" error reaction goes."""
@@ -230,17 +254,14 @@ class PickPlaceConfig(_Section):
 
 def check_profiles(config: PickPlaceConfig, source: str) -> None:
     """Load the robot and gripper profiles the config names; errors name key and file."""
-    from .._profiles import gripper_profile, robot_profile
-
     try:
-        robot_profile(config.robot.profile)
+        config.robot_profile()
     except (ConfigError, OSError) as exc:
         raise ConfigError(f"{source}: robot.profile: {exc}") from None
-    if config.gripper.kind not in ("auto", "none"):
-        try:
-            gripper_profile(config.gripper.kind)
-        except (ConfigError, OSError) as exc:
-            raise ConfigError(f"{source}: gripper.kind: {exc}") from None
+    try:
+        config.gripper_profile()
+    except (ConfigError, OSError) as exc:
+        raise ConfigError(f"{source}: gripper.kind: {exc}") from None
 
 
 def format_validation_error(exc: ValidationError, source: str) -> str:
@@ -321,12 +342,13 @@ def robot_from_config(
     if target is None:
         raise ConfigError("robot.host: no robot address (set [robot] host, or pass host)")
     g = config.gripper
+    loaded_gripper = config.gripper_profile()
     return Robot(
         target,
         port if port is not None else config.robot.port,
-        profile=config.robot.profile,
+        profile=config.robot_profile(),
         model=config.robot.model,
-        gripper=g.kind,
+        gripper=g.kind if loaded_gripper is None else loaded_gripper,
         gripper_host=g.host,
         gripper_port=gripper_port if gripper_port is not None else g.port,
         poll_interval_s=config.run.poll_interval_s,
