@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import subprocess
 import sys
@@ -78,20 +79,37 @@ def test_profile_command_prints_markdown(capsys: pytest.CaptureFixture[str]) -> 
 
 
 @pytest.mark.parametrize(
-    "command",
-    [["tmmaster"], ["tmmaster.pickplace"], ["tmmaster.sim"], ["tmmaster.report"]],
-    ids=lambda c: c[0],
+    ("command", "as_process"),
+    [
+        ("tmmaster", True),
+        ("tmmaster.pickplace", False),
+        ("tmmaster.sim", False),
+        ("tmmaster.report", True),
+    ],
+    ids=lambda c: c if isinstance(c, str) else "process" if c else "in-process",
 )
-def test_every_command_answers_version(command: list[str]) -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", *command, "--version"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip().endswith(tmmaster.__version__)
+def test_every_command_answers_version(
+    command: str, as_process: bool, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # ``python -m tmmaster.pickplace`` and ``python -m tmmaster.sim`` run as processes in
+    # test_pickplace.py and test_sim_server.py; here their ``main()`` is enough (a
+    # process costs most of a second of CPU importing pydantic, pymodbus and structlog).
+    if as_process:
+        done = subprocess.run(
+            [sys.executable, "-m", command, "--version"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.strip().endswith(tmmaster.__version__)
+        return
+    command_main = importlib.import_module(f"{command}.__main__").main
+    with pytest.raises(SystemExit) as exited:
+        command_main(["--version"])
+    assert exited.value.code == 0
+    assert capsys.readouterr().out.strip().endswith(tmmaster.__version__)
 
 
 def test_tmmaster_alone_prints_help(capsys: pytest.CaptureFixture[str]) -> None:

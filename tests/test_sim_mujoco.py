@@ -268,24 +268,28 @@ def test_simulator_builds_the_mujoco_backend_by_name() -> None:
         Simulator(physics="bullet", listen=False)
 
 
-def pickplace(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "tmmaster.pickplace", *argv],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=cwd,
-        check=False,
-    )
+def pickplace(*argv: str, cwd: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Run the pick & place command's ``main()`` in ``cwd``: exit code, stdout, stderr.
+
+    In-process: ``python -m tmmaster.pickplace`` itself runs as a process in
+    test_pickplace.py; here the subject is where the physics puts the part.
+    """
+    from tmmaster.pickplace.__main__ import main
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(cwd)
+        code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
 
 
 def test_pickplace_tmflow_cycle_ends_with_the_part_resting_at_the_place_x_y(
-    tmp_path: Path,
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     config = tmp_path / "fast.toml"
     config.write_text("[gripper]\nsettle_s = 0.05\n[run]\npoll_interval_s = 0.02\n")
     report = tmp_path / "report.json"
-    done = pickplace(
+    returncode, stdout, stderr = pickplace(
         "--sim",
         "--sim-physics",
         "mujoco",
@@ -298,9 +302,10 @@ def test_pickplace_tmflow_cycle_ends_with_the_part_resting_at_the_place_x_y(
         "--report",
         str(report),
         cwd=tmp_path,
+        capsys=capsys,
     )
-    assert done.returncode == 0, done.stderr
-    assert "part-1 is on the place position" in done.stdout
+    assert returncode == 0, stderr
+    assert "part-1 is on the place position" in stdout
     import json
 
     sim = json.loads(report.read_text())["sim"]
