@@ -6,6 +6,7 @@ with ``--host 127.0.0.1 --port <sim port>``; one also runs as a script (``runpy`
 
 from __future__ import annotations
 
+import logging
 import runpy
 import sys
 from collections.abc import Callable
@@ -102,8 +103,17 @@ def test_an_example_runs_as_a_script(
     argv = [*target(sim), "--rows", "1", "--cols", "1", "--settle", "0.05"]
     monkeypatch.setattr(sys, "argv", [str(script), *argv])
     monkeypatch.syspath_prepend(str(EXAMPLES))
-    with pytest.raises(SystemExit) as exited:
-        runpy.run_path(str(script), run_name="__main__")
+    # The script configures tmmaster's logging for a process of its own: undone after.
+    root, pymodbus = logging.getLogger("tmmaster"), logging.getLogger("pymodbus")
+    saved = ([*root.handlers], root.level, root.propagate, pymodbus.level)
+    try:
+        with pytest.raises(SystemExit) as exited:
+            runpy.run_path(str(script), run_name="__main__")
+    finally:
+        root.handlers[:] = saved[0]
+        root.setLevel(saved[1])
+        root.propagate = saved[2]
+        pymodbus.setLevel(saved[3])
     out, err = capsys.readouterr()
     assert exited.value.code == 0, err
     assert "1/1 slots filled" in out
