@@ -57,7 +57,7 @@ def test_a_disabled_event_never_enters_the_processors() -> None:
 
     import structlog
 
-    from tmmaster._logging import _BoundLogger
+    from tmmaster._structlog import _BoundLogger
 
     seen: list[str] = []
 

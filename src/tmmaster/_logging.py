@@ -16,8 +16,6 @@ import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TextIO
 
-import structlog
-
 if TYPE_CHECKING:
     import argparse
 
@@ -25,19 +23,6 @@ if TYPE_CHECKING:
 ROOT_LOGGER = "tmmaster"
 
 logging.getLogger(ROOT_LOGGER).addHandler(logging.NullHandler())
-
-_PROCESSORS: list[structlog.typing.Processor] = [
-    # Before anything else: a disabled level costs one check, not a whole event.
-    structlog.stdlib.filter_by_level,
-    structlog.contextvars.merge_contextvars,
-    structlog.stdlib.add_log_level,
-    structlog.stdlib.add_logger_name,
-    structlog.processors.TimeStamper(fmt="iso", utc=True),
-    structlog.processors.format_exc_info,
-    # The event dict travels to the handler's formatter; a plain formatter prints it
-    # as a dict, configure_logging's renders it as key=value or JSON.
-    structlog.stdlib.ProcessorFormatter.wrap_for_formatter,
-]
 
 
 #: The levels every command's ``--log-level`` accepts.
@@ -64,56 +49,63 @@ def add_logging_arguments(
     )
 
 
-class _BoundLogger(structlog.stdlib.BoundLogger):
-    """A stdlib bound logger that drops a disabled event before building it.
+class _Logger:
+    """What :func:`get_logger` returns: a structlog logger built on the first enabled event.
 
-    ``filter_by_level`` would drop it too, but only after structlog has copied the bound
-    context and entered its processor chain (several microseconds per event); the
-    library is quiet by default, so the events of every move would pay that for nothing.
-    ``Logger.isEnabledFor`` is the same test, answered from the logging module's cache.
+    An event below the standard logger's level costs one ``isEnabledFor`` check (answered
+    from the logging module's cache) and never imports structlog; ``bind`` keeps the
+    context for when an event is enabled. The structlog logger is
+    :class:`tmmaster._structlog._BoundLogger`.
     """
+
+    __slots__ = ("_context", "_std", "_wrapped")
+
+    def __init__(self, std: logging.Logger, context: dict[str, Any]) -> None:
+        self._std = std
+        self._context = context
+        self._wrapped: Any = None
+
+    def bind(self, **new_values: Any) -> _Logger:
+        """This logger with ``new_values`` added to every event's fields."""
+        return _Logger(self._std, {**self._context, **new_values})
+
+    def _emit(self, level: int, method: str, event: str | None, args: Any, kw: Any) -> Any:
+        if not self._std.isEnabledFor(level):
+            return None
+        wrapped = self._wrapped
+        if wrapped is None:
+            from ._structlog import wrap_logger
+
+            # Two threads may both build it: the same logger, one of them kept.
+            wrapped = self._wrapped = wrap_logger(self._std).bind(**self._context)
+        return getattr(wrapped, method)(event, *args, **kw)
 
     def debug(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
         """Log at DEBUG, if enabled."""
-        if not self._logger.isEnabledFor(logging.DEBUG):
-            return None
-        return super().debug(event, *args, **kw)
+        return self._emit(logging.DEBUG, "debug", event, args, kw)
 
     def info(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
         """Log at INFO, if enabled."""
-        if not self._logger.isEnabledFor(logging.INFO):
-            return None
-        return super().info(event, *args, **kw)
+        return self._emit(logging.INFO, "info", event, args, kw)
 
     def warning(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
         """Log at WARNING, if enabled."""
-        if not self._logger.isEnabledFor(logging.WARNING):
-            return None
-        return super().warning(event, *args, **kw)
+        return self._emit(logging.WARNING, "warning", event, args, kw)
 
     warn = warning
 
     def error(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
         """Log at ERROR, if enabled."""
-        if not self._logger.isEnabledFor(logging.ERROR):
-            return None
-        return super().error(event, *args, **kw)
+        return self._emit(logging.ERROR, "error", event, args, kw)
 
     def exception(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
         """Log at ERROR with the current exception, if enabled."""
-        if not self._logger.isEnabledFor(logging.ERROR):
-            return None
-        return super().exception(event, *args, **kw)
+        return self._emit(logging.ERROR, "exception", event, args, kw)
 
 
 def get_logger(name: str) -> Any:
     """A structlog logger on the standard logger ``name`` (``tmmaster.*``)."""
-    return structlog.wrap_logger(
-        logging.getLogger(name),
-        processors=_PROCESSORS,
-        wrapper_class=_BoundLogger,
-        cache_logger_on_first_use=True,
-    )
+    return _Logger(logging.getLogger(name), {})
 
 
 def configure_logging(
@@ -126,18 +118,11 @@ def configure_logging(
     numeric = logging.getLevelNamesMapping().get(level.upper())
     if numeric is None:
         raise ValueError(f"unknown log level {level!r}")
+    from ._structlog import event_formatter
+
     output = stream if stream is not None else sys.stderr
-    renderer: structlog.typing.Processor
-    if json:
-        renderer = structlog.processors.JSONRenderer()
-    else:
-        renderer = structlog.dev.ConsoleRenderer(colors=output.isatty())
     handler = logging.StreamHandler(output)
-    handler.setFormatter(
-        structlog.stdlib.ProcessorFormatter(
-            processors=[structlog.stdlib.ProcessorFormatter.remove_processors_meta, renderer]
-        )
-    )
+    handler.setFormatter(event_formatter(json=json, colors=output.isatty()))
     root = logging.getLogger(ROOT_LOGGER)
     saved = (root.level, root.propagate)
     root.addHandler(handler)
