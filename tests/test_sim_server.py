@@ -24,7 +24,7 @@ from tmmaster._registers import Table
 from tmmaster.sim import Simulator
 from tmmaster.sim.__main__ import main as sim_main
 from tmmaster.sim._bank import RegisterBank
-from tmmaster.sim._tm_table import USER_AREA, tm_table_fields
+from tmmaster.sim._tm_table import tm_table_fields, user_area
 
 Factory = Callable[..., Simulator]
 
@@ -112,7 +112,7 @@ def test_every_field_is_served_and_unserved_addresses_give_exception_2(
     profile = robot_profile(name)
     # A tmflow simulator also serves Techman's table and the user define area.
     bank = (
-        RegisterBank(profile, extra_fields=tm_table_fields(profile), raw_areas=USER_AREA)
+        RegisterBank(profile, extra_fields=tm_table_fields(profile), raw_areas=user_area())
         if name == "tmflow"
         else RegisterBank(profile)
     )

@@ -11,11 +11,11 @@ from tmmaster import Pose, robot_model
 from tmmaster._registers import Access, Table
 from tmmaster.sim import KinematicBackend, Simulator
 from tmmaster.sim._tm_table import (
-    USER_AREA,
     _check_fc,
     _entries,
     tm_table_areas,
     tm_table_markdown,
+    user_area,
 )
 
 
@@ -49,7 +49,7 @@ def test_the_table_loads_and_names_its_areas() -> None:
     fields = _entries()
     assert len({f.name for f in fields}) == len(fields)
     assert all("p. 3" in f.description for f in fields)  # every entry cites its page
-    assert USER_AREA == ((Table.COIL, 9000, 1000), (Table.HOLDING, 9000, 1000))
+    assert user_area() == ((Table.COIL, 9000, 1000), (Table.HOLDING, 9000, 1000))
     assert (Table.INPUT, 900, 800) in tm_table_areas("External Module")
 
 

@@ -89,8 +89,13 @@ def tm_table_areas(section: str | None = None) -> tuple[tuple[Table, int, int], 
     return tuple(areas)
 
 
-#: The user define area (9000-9999): coils and holding registers, read and write.
-USER_AREA = tm_table_areas("User Define Area")
+def user_area() -> tuple[tuple[Table, int, int], ...]:
+    """The user define area (9000-9999): coils and holding registers, read and write.
+
+    A function, not a constant: reading ``tm_table.toml`` (some 40 ms) waits until a
+    simulator serves the table.
+    """
+    return tm_table_areas("User Define Area")
 
 
 def tm_table_markdown() -> str:
