@@ -102,16 +102,21 @@ def test_piped_output_stays_plain_lines(capsys: pytest.CaptureFixture[str]) -> N
 
 
 def test_import_tmmaster_loads_neither_rich_nor_matplotlib() -> None:
-    # (structlog itself imports rich when it is installed: the commands pay that anyway.)
+    # structlog imports rich when it is installed; tmmaster imports structlog only once
+    # logging is on (the first enabled event, or configure_logging), so importing the
+    # commands loads neither.
     code = (
         "import sys, tmmaster; a = sorted(m for m in ('rich', 'matplotlib') if m in sys.modules);"
         "import tmmaster.pickplace.__main__, tmmaster.report.__main__;"
-        "print(a, 'matplotlib' in sys.modules)"
+        "print(a, 'matplotlib' in sys.modules);"
+        "print(sorted(m for m in ('rich', 'structlog') if m in sys.modules))"
     )
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
     )
-    assert done.stdout.strip() == "[] False"
+    first, commands = done.stdout.strip().splitlines()
+    assert first == "[] False"
+    assert commands == "[]"
 
 
 # -- the report: model, show, plot ------------------------------------------------------
