@@ -51,7 +51,6 @@ from ..sim._backend import PhysicsUnavailableError
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
 from ._plan import estimate, format_plan, validate_plan
-from ._report import RunReport, build_run_report, objects_report, write_report
 from ._runner import Runner, RunResult, StateEvent, StopRequestedError
 from ._sequences import load_sequence, pick_and_place
 from ._steps import TaskSequence
@@ -60,6 +59,7 @@ if TYPE_CHECKING:  # rich loads only when a terminal shows the live display
     from rich.console import Console
 
     from ._live import LiveProgress
+    from ._report import RunReport
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -267,6 +267,10 @@ def _one_line(text: str) -> str:
 
 
 def _run(args: argparse.Namespace, out: _Output) -> int:
+    # Here, not at the top: building the report's models costs some 60 ms that --help,
+    # --version and a wrong option do not need; a run loads them before it connects.
+    from ._report import build_run_report, write_report
+
     stderr = sys.stderr
     outcome = _Outcome()
     code = EXIT_FAILED
@@ -510,6 +514,8 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
             settle_scale=options.time_scale,
         )
         code, reason = _run_on(command, robot, (sim.host, sim.port), outcome, out, sampler=sampler)
+        from ._report import objects_report
+
         place = poses["place"] if command.sequence_file is None else None
         outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
         outcome.sim["time_scale"] = options.time_scale
