@@ -7,8 +7,10 @@ goes to a StringIO); nothing here asserts a duration.
 
 from __future__ import annotations
 
+import fcntl
 import io
 import json
+import os
 import re
 import subprocess
 import sys
@@ -30,9 +32,22 @@ SIM = ["--sim", "--sim-time-scale", "40"]
 
 @pytest.fixture(scope="module")
 def sim_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A report written by a real ``--sim`` run of two cycles."""
-    path = tmp_path_factory.mktemp("report") / "run.json"
-    assert pickplace_main([*SIM, "--cycles", "2", "--quiet", "--report", str(path)]) == EXIT_OK
+    """A report written by a real ``--sim`` run of two cycles, once per test session.
+
+    The xdist workers share one base temp folder: the first to need the report writes
+    it under a lock, the others read that file (a run costs about 2 s of wall time).
+    """
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent
+    path = shared / "sim-report-run.json"
+    with (shared / "sim-report.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not path.exists():
+            partial = path.with_suffix(".partial")
+            code = pickplace_main([*SIM, "--cycles", "2", "--quiet", "--report", str(partial)])
+            assert code == EXIT_OK
+            partial.rename(path)
     return path
 
 

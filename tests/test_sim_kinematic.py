@@ -340,7 +340,7 @@ def floats(client: ModbusTcpClient, address: int, n: int) -> list[float]:
 def test_joints_and_flange_read_over_modbus_agree_by_forward_kinematics(
     tm_simulator_factory: Callable[..., Simulator],
 ) -> None:
-    sim = tm_simulator_factory("tmflow", tool=TOOL, time_scale=0.5)
+    sim = tm_simulator_factory("tmflow", tool=TOOL, time_scale=2)
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     assert sim.tool == TOOL
     client = ModbusTcpClient("127.0.0.1", port=sim.port, timeout=2)
