@@ -42,7 +42,14 @@ from ._registers import (
     Table,
 )
 from ._status import RobotStatus
-from ._transport import Block, Encoded, Transport, encode_writes, group_writes
+from ._transport import (
+    Block,
+    ConnectionState,
+    Encoded,
+    Transport,
+    encode_writes,
+    group_writes,
+)
 
 _log = get_logger("tmmaster.robot")
 
@@ -87,11 +94,52 @@ class Ticket:
     start_pose: Pose | None = None
     acknowledged: bool = False
     acknowledged_at: float | None = None
+    #: ``time.monotonic()`` before the last poll that saw the command not yet taken (the
+    #: robot took it after this, and by ``acknowledged_at``).
+    pending_seen_at: float | None = None
     #: True once the command was taken back (it can no longer start).
     withdrawn: bool = False
     extra: dict[str, Value] = field(default_factory=dict)
     #: ``words`` encoded and grouped into write blocks while preparing (encoded once).
     plan: list[tuple[Block, list[int]]] = field(default_factory=list)
+
+
+#: Function codes that write (FC05, FC06, FC15, FC16).
+_WRITE_FUNCTIONS = (5, 6, 15, 16)
+
+
+def link_mark(transport: Transport) -> tuple[int, ...] | None:
+    """What changes whenever the link writes, fails, retries or reconnects (None: not connected).
+
+    Two equal marks mean: the same connection, and not one write, error, retry or
+    reconnect on it in between.
+    """
+    if transport.state is not ConnectionState.CONNECTED:
+        return None
+    stats = transport.stats
+    by_function = stats.requests_by_function
+    writes = sum(by_function.get(code, 0) for code in _WRITE_FUNCTIONS)
+    return (writes, stats.errors, stats.retries, stats.reconnects)
+
+
+@dataclass
+class StateAfterDone:
+    """The registers read by the poll that saw a command finished, and right after it.
+
+    The next command's checks may use them instead of reading the same registers again
+    (:meth:`CommandChannel.prepare`, ``reuse_s``): only once, only on the same
+    connection with nothing written (and no error, retry or reconnect) since the poll
+    began, and only while ``read_at`` is at most ``reuse_s`` old.
+    """
+
+    #: Every field the poll read (the read that saw the command done, and after it).
+    values: dict[str, Value]
+    #: ``time.monotonic()`` just before the poll's first request (the age counts from here).
+    read_at: float
+    #: :func:`link_mark` just before the poll's first request.
+    link: tuple[int, ...]
+    #: The TCP pose, when it was read after the done (the final at-target check).
+    pose: Pose | None = None
 
 
 @dataclass(frozen=True)
@@ -139,6 +187,8 @@ class CommandChannel(ABC):
         self.tcp_fields = profile.select(TCP_FIELDS)
         self.command_fields = (command,)
         self.target_block = (*profile.select(TARGET_FIELDS), command)
+        #: What the last poll that saw a command finished read (see :class:`StateAfterDone`).
+        self.after_done: StateAfterDone | None = None
 
     # -- reading ---------------------------------------------------------
 
@@ -153,7 +203,40 @@ class CommandChannel(ABC):
 
     def read_pose(self) -> Pose:
         """The current TCP pose (one request)."""
-        return _pose_from(self.read(self.tcp_fields), TCP_FIELDS)
+        pose = _pose_from(self.read(self.tcp_fields), TCP_FIELDS)
+        if self.after_done is not None:
+            # Read after the done poll: the next command may start its plan from it.
+            self.after_done.pose = pose
+        return pose
+
+    def _poll_mark(self) -> tuple[float, tuple[int, ...] | None]:
+        """Before a poll's first request: forget the last done state; the time and link mark."""
+        self.after_done = None
+        return time.monotonic(), link_mark(self.transport)
+
+    def _remember_done(
+        self, values: dict[str, Value], mark: tuple[float, tuple[int, ...] | None]
+    ) -> None:
+        """Keep what the poll that saw the command finished read, for the next command."""
+        read_at, link = mark
+        if link is not None:
+            self.after_done = StateAfterDone(values, read_at, link)
+
+    def take_after_done(self, reuse_s: float) -> StateAfterDone | None:
+        """The state read when the last command was seen finished, if it may stand in for a read.
+
+        Used at most once: it is forgotten whatever the answer. None when there is none,
+        when it is older than ``reuse_s`` (0: never reused), or when the link wrote,
+        failed, retried or reconnected since the poll that read it began.
+        """
+        state, self.after_done = self.after_done, None
+        if state is None or reuse_s <= 0:
+            return None
+        if time.monotonic() - state.read_at > reuse_s:
+            return None
+        if link_mark(self.transport) != state.link:
+            return None
+        return state
 
     @abstractmethod
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
@@ -207,8 +290,14 @@ class CommandChannel(ABC):
         return words, encode_writes(words)
 
     @abstractmethod
-    def prepare(self, command: Command) -> Ticket:
-        """Check the robot can take the command and build the ticket; writes nothing."""
+    def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
+        """Check the robot can take the command and build the ticket; writes nothing.
+
+        ``reuse_s`` > 0: the registers the poll that saw the previous command finished
+        read (and only those) stand in for reading them again, when that poll began at
+        most ``reuse_s`` ago on the same connection with nothing written since
+        (:meth:`take_after_done`). Every check is the same either way.
+        """
 
     @abstractmethod
     def poll(self, ticket: Ticket) -> Observation:
@@ -289,12 +378,19 @@ class ClearOnAcceptChannel(CommandChannel):
             timestamp=time.monotonic(),
         )
 
-    def prepare(self, command: Command) -> Ticket:
+    def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
         words, encoded = self._encode_command(command)
         p = self.profile
-        block = self.read(self.target_block)
-        status = self.read_status()
+        after_done = self.take_after_done(reuse_s)
+        if after_done is not None:
+            # The status block the poll that saw the last command finished read (after
+            # the cleared command register, idle): the same checks run on it.
+            status = self.status_from(after_done.values)
+            block = self.read(self.target_block)
+        else:
+            block = self.read(self.target_block)
+            status = self.read_status()
         if (failure := self.status_failure(status)) is not None:
             raise failure
         if command.kind is not CommandKind.STOP:
@@ -320,16 +416,21 @@ class ClearOnAcceptChannel(CommandChannel):
 
     def poll(self, ticket: Ticket) -> Observation:
         """Before acknowledgement read the command register first, then the status block."""
+        mark = self._poll_mark()
         if not ticket.acknowledged:
             pending = int(self.read(self.command_fields)["command"])
             if pending == 0:
                 ticket.acknowledged = True
                 ticket.acknowledged_at = time.monotonic()
+            else:
+                ticket.pending_seen_at = mark[0]
         # Read after the command register: the robot sets "moving" before it clears the
         # command, so idle here, after seeing the command cleared, means finished.
         status = self.read_status()
         failure = self.status_failure(status)
         done = ticket.acknowledged and not status.moving and failure is None
+        if done:
+            self._remember_done(dict(status.raw), mark)
         return Observation(ticket.acknowledged, done, failure, status.pose)
 
     def withdraw(self, ticket: Ticket) -> bool:
@@ -390,6 +491,7 @@ class SequenceChannel(CommandChannel):
         self.feedback_and_seq = (*self.feedback_fields, p.field("seq"))
         self.error_code_fields = (p.field("last_error_code"),)
         self.seq_fields = (p.field("seq"), p.field("ack_seq"))
+        self.seq_only = (p.field("seq"),)
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
@@ -428,14 +530,26 @@ class SequenceChannel(CommandChannel):
     def _error_code(self) -> int:
         return int(self.read(self.error_code_fields)["last_error_code"])
 
-    def prepare(self, command: Command) -> Ticket:
+    def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
         words, encoded = self._encode_command(command)
         p = self.profile
-        flags = self.read(self.flag_fields)
-        if (failure := self._flags_failure(flags)) is not None:
-            raise failure
-        feedback = self.read(self.feedback_and_seq)
+        after_done = self.take_after_done(reuse_s)
+        start_pose: Pose | None = None
+        if after_done is not None:
+            # The feedback block that showed the last command done and the flags read
+            # after it (the poll that saw it finished): the same checks run on them.
+            # ``seq`` is not part of a poll: it is read now.
+            flags = after_done.values
+            if (failure := self._flags_failure(flags)) is not None:
+                raise failure
+            feedback = {**after_done.values, **self.read(self.seq_only)}
+            start_pose = after_done.pose
+        else:
+            flags = self.read(self.flag_fields)
+            if (failure := self._flags_failure(flags)) is not None:
+                raise failure
+            feedback = self.read(self.feedback_and_seq)
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
         state = p.field("robot_state").label(int(feedback["robot_state"]))
         if not 0 <= ack <= p.seq_max:
@@ -458,19 +572,24 @@ class SequenceChannel(CommandChannel):
             words,
             time.monotonic(),
             seq=seq,
+            start_pose=start_pose,
             extra={"heartbeat": feedback.get("heartbeat", 0)},
             plan=group_writes([*encoded, *encode_writes([seq_word])]),
         )
 
     def poll(self, ticket: Ticket) -> Observation:
-        """One read of the feedback block and one of the status flags."""
+        """One read of the feedback block, then the status flags (two reads when split)."""
+        mark = self._poll_mark()
         feedback = self.read(self.feedback_fields)
         flags = self.read(self.flag_fields)
         ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
         failure = self._flags_failure(flags)
-        if not ticket.acknowledged and int(feedback["ack_seq"]) == ticket.seq:
-            ticket.acknowledged = True
-            ticket.acknowledged_at = time.monotonic()
+        if not ticket.acknowledged:
+            if int(feedback["ack_seq"]) == ticket.seq:
+                ticket.acknowledged = True
+                ticket.acknowledged_at = time.monotonic()
+            else:
+                ticket.pending_seen_at = mark[0]
         done = False
         if ticket.acknowledged and failure is None:
             if int(feedback["done_seq"]) == ticket.seq:
@@ -481,6 +600,8 @@ class SequenceChannel(CommandChannel):
                     f"robot program rejected command {ticket.seq}: {result}",
                     error_code=int(feedback["result_code"]),
                 )
+        if done:
+            self._remember_done({**feedback, **flags}, mark)
         return Observation(ticket.acknowledged, done, failure, None)
 
     duplicate_safe = True  # the program takes a sequence number at most once

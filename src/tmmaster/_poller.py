@@ -80,6 +80,11 @@ class PollPolicy(BaseModel):
     ack_window_s: Annotated[float, Field(ge=0, le=1)] = 0.02
     #: Never space the polls in the middle of a move by more than this many nominal intervals.
     max_stretch: Annotated[float, Field(ge=1, le=10)] = 3.0
+    #: The next command's checks may use the registers read by the poll that saw the
+    #: previous command finished instead of reading them again, if that poll began at most
+    #: this long ago (seconds) on the same connection with nothing written since; 0: the
+    #: checks always read again. The default is one TM control tick (50 Hz).
+    reuse_done_read_s: Annotated[float, Field(ge=0, le=0.1)] = 0.02
 
 
 class MotionSchedule:
@@ -91,10 +96,18 @@ class MotionSchedule:
         self._sent_at = sent_at
         self._end: float | None = None
         self._window = 0.0
+        self._early = 0.0
         self._mid_interval = nominal_s
 
-    def acknowledged(self, at: float, expected_s: float) -> None:
-        """Anchor the completion window: the move should end at ``at + expected_s``."""
+    def acknowledged(self, at: float, expected_s: float, *, since: float | None = None) -> None:
+        """Anchor the completion window: the move should end at ``at + expected_s``.
+
+        ``since``: the latest moment the command was seen not yet taken (the start of
+        the last poll that saw it pending, else the write). The robot took it between
+        ``since`` and ``at``, so it may report the end as early as ``since +
+        expected_s``: the window opens that much earlier, as far as the polls saved in
+        the middle of the move can pay for it.
+        """
         p = self._policy
         if not p.predictive or expected_s <= 0:
             return
@@ -104,16 +117,25 @@ class MotionSchedule:
         # window around the end; this is the widest window they can pay for (two polls
         # are kept in reserve for the rounding at the window's edges).
         denominator = 2 / d - 1 / cap - 1 / n
-        affordable = (expected_s * (1 / n - 1 / cap) - 2) / denominator if denominator > 0 else 0.0
+        if denominator <= 0:
+            return
+        budget = expected_s * (1 / n - 1 / cap) - 2
+        # The part of the acknowledgement's uncertainty the window also covers (its
+        # later part, at the dense pace), as far as the budget pays for it with a window
+        # of at least one dense interval.
+        early = 0.0 if since is None else min(max(at - since, 0.0), n, expected_s / 2)
+        early = max(0.0, min(early, (budget - d * denominator) * d))
+        affordable = (budget - early / d) / denominator
         window = min(p.completion_window_s, expected_s / 2, affordable)
         if window < d:
             return  # too short a move to afford a dense window: nominal pace
-        middle = (expected_s + window) / n - 2 * window / d - 2
-        span = expected_s - window
+        middle = (expected_s + window) / n - (2 * window + early) / d - 2
+        span = expected_s - early - window
         if middle < 1 or span <= 0:
             return
         self._end = at + expected_s
         self._window = window
+        self._early = early
         self._mid_interval = min(span / middle, cap)
 
     @property
@@ -135,7 +157,8 @@ class MotionSchedule:
             return now + nominal
         if self._end is None:
             return now + nominal
-        start, stop = self._end - self._window / 2, self._end + 1.5 * self._window
+        start = self._end - self._early - self._window / 2
+        stop = self._end + 1.5 * self._window
         if now < start:
             return min(now + self._mid_interval, start)
         if now < stop:

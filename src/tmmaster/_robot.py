@@ -353,7 +353,11 @@ class _MotionFollower:
         ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
         while motion.phase is not MovePhase.DONE:
             if ticket.acknowledged and not anchored:
-                schedule.acknowledged(ticket.acknowledged_at or ticket.sent_at, motion.expected_s)
+                schedule.acknowledged(
+                    ticket.acknowledged_at or ticket.sent_at,
+                    motion.expected_s,
+                    since=ticket.pending_seen_at or ticket.sent_at,
+                )
                 anchored = True
             poller.sleep_until(
                 schedule.next_poll(time.monotonic(), acknowledged=ticket.acknowledged)
@@ -386,6 +390,7 @@ class _MotionFollower:
             if not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
             ):
+                self._channel.after_done = None  # a failed move's state is not reused
                 motion.phase = MovePhase.FAILED
                 raise RobotError(
                     f"robot reported the move finished but the TCP is at {pose},"
@@ -882,7 +887,7 @@ class Robot:
         if timeout is not None:
             _require_positive("timeout", timeout)
         # prepare() encodes (refusing out-of-range values) before its first read.
-        ticket = self._channel.prepare(command)
+        ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
         start: Pose | None = None
         expected = 0.0
         if command.target is not None:
