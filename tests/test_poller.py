@@ -14,7 +14,13 @@ NOMINAL = 0.05
 
 
 def polls_of(
-    schedule: MotionSchedule, *, sent_at: float, ack_at: float, expected_s: float, until: float
+    schedule: MotionSchedule,
+    *,
+    sent_at: float,
+    ack_at: float,
+    expected_s: float,
+    until: float,
+    since: float | None = None,
 ) -> list[float]:
     """The poll times the schedule asks for, from the write until ``until``."""
     times: list[float] = []
@@ -23,7 +29,7 @@ def polls_of(
     while True:
         acknowledged = now >= ack_at
         if acknowledged and not anchored:
-            schedule.acknowledged(ack_at, expected_s)
+            schedule.acknowledged(ack_at, expected_s, since=since)
             anchored = True
         nxt = schedule.next_poll(now, acknowledged=acknowledged)
         assert nxt >= now
@@ -101,3 +107,26 @@ def test_a_stop_request_ends_every_sleep_instead_of_spinning() -> None:
         poller.sleep_until(1e12)
     with pytest.raises(StopRequestedError):
         poller.check()
+
+
+@pytest.mark.parametrize("expected_s", [0.34, 1.0, 2.5])
+def test_the_window_opens_early_enough_for_an_acknowledgement_seen_late(
+    expected_s: float,
+) -> None:
+    # The robot took the command somewhere between the write (0) and the poll that saw
+    # it (21 ms): it may report the end as early as expected_s after the write.
+    policy = PollPolicy()
+    ack_at, end = 0.021, 0.021 + expected_s
+    until = end + policy.completion_window_s
+    plain = MotionSchedule(policy, NOMINAL, 0.0)
+    plain_times = polls_of(plain, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until)
+    early = MotionSchedule(policy, NOMINAL, 0.0)
+    early_times = polls_of(
+        early, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until, since=0.0
+    )
+    first_dense = next(a for a, b in itertools.pairwise(early_times) if b - a <= 0.0081)
+    plain_dense = next(a for a, b in itertools.pairwise(plain_times) if b - a <= 0.0081)
+    assert first_dense < plain_dense
+    assert first_dense < end - early.window_s / 2
+    # Still no more polls than nominal polling over the move.
+    assert len(early_times) <= until / NOMINAL + 1
