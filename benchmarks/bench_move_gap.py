@@ -28,14 +28,18 @@ A = Pose(300, -200, 200, 180, 0, 90)
 B = Pose(300, -200, 120, 180, 0, 90)
 
 
-def measure(profile: str, predictive: bool, moves: int) -> tuple[list[float], float]:
+def measure(
+    profile: str, predictive: bool, moves: int, reuse_s: float | None = None
+) -> tuple[list[float], float]:
     with Simulator(profile, time_scale=1.0) as sim:
         with tmmaster.Robot(
             "127.0.0.1",
             sim.port,
             profile=profile,
             gripper=None,
-            polling=PollPolicy(predictive=predictive),
+            polling=PollPolicy(predictive=predictive)
+            if reuse_s is None
+            else PollPolicy(predictive=predictive, reuse_done_read_s=reuse_s),
         ) as robot:
             robot.wait_until_ready(timeout_s=10)
             robot.move_to(A, speed=60)
@@ -54,6 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--moves", type=int, default=12)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument(
+        "--reuse-done-read-s",
+        type=float,
+        default=None,
+        help="PollPolicy.reuse_done_read_s (0: the checks before a write always read again)",
+    )
     args = parser.parse_args(argv)
     print("| profile | polling | gap p50 ms | gap p90 ms | gap max ms | requests/move |")
     print("|---|---|---|---|---|---|")
@@ -62,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
             gaps: list[float] = []
             requests: list[float] = []
             for _ in range(args.rounds):
-                g, r = measure(profile, predictive, args.moves)
+                g, r = measure(profile, predictive, args.moves, args.reuse_done_read_s)
                 gaps += g
                 requests.append(r)
             q = statistics.quantiles([g * 1000 for g in gaps], n=10)
