@@ -119,17 +119,14 @@ class MotionSchedule:
         denominator = 2 / d - 1 / cap - 1 / n
         if denominator <= 0:
             return
-        budget = expected_s * (1 / n - 1 / cap) - 2
-        # The part of the acknowledgement's uncertainty the window also covers (its
-        # later part, at the dense pace), as far as the budget pays for it with a window
-        # of at least one dense interval.
-        early = 0.0 if since is None else min(max(at - since, 0.0), n, expected_s / 2)
-        early = max(0.0, min(early, (budget - d * denominator) * d))
-        affordable = (budget - early / d) / denominator
+        affordable = (expected_s * (1 / n - 1 / cap) - 2) / denominator
+        # The window also opens earlier by the acknowledgement's uncertainty, at most one
+        # dense interval: paid by one of the two polls kept in reserve above.
+        early = 0.0 if since is None else min(max(at - since, 0.0), d, expected_s / 4)
         window = min(p.completion_window_s, expected_s / 2, affordable)
         if window < d:
             return  # too short a move to afford a dense window: nominal pace
-        middle = (expected_s + window) / n - (2 * window + early) / d - 2
+        middle = (expected_s + window) / n - 2 * window / d - 2
         span = expected_s - early - window
         if middle < 1 or span <= 0:
             return
