@@ -311,7 +311,7 @@ def test_grasp_miss_after_every_retry_exits_with_the_grasp_code(
     assert len(motion_writes(sim.request_log)) == 6
 
 
-@pytest.mark.parametrize("after_requests", [6, 25, 32])
+@pytest.mark.parametrize("after_requests", [6, 24, 29])
 def test_a_dropped_connection_is_survived_without_sending_any_command_twice(
     tm_simulator_factory: SimFactory, tmp_path: Path, after_requests: int
 ) -> None:
