@@ -26,8 +26,8 @@ from tmmaster.report.__main__ import main as report_main
 
 ROOT = Path(__file__).resolve().parents[1]
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
-#: The quick --sim run every test here uses (simulated time 40x faster).
-SIM = ["--sim", "--sim-time-scale", "40"]
+#: The quick --sim run every test here uses (simulated time 40x faster, 20 ms polling).
+SIM = ["--sim", "--sim-time-scale", "40", "--poll-interval", "0.02"]
 
 
 @pytest.fixture(scope="module")
