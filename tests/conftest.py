@@ -101,11 +101,12 @@ def memory_simulator_factory(
 
 
 #: xdist workers for a run of several test files (``-n auto`` in pyproject's addopts). Most
-#: tests wait on the wall clock (simulated moves, timeouts), which workers overlap; but each
-#: worker costs about 3 s of CPU to start and collect the suite, and the CLI tests'
-#: subprocesses are CPU-bound. On two cores four beat six and three (measured: see
-#: docs/architecture.md); more workers also squeeze the timing margins of the safety tests.
-SUITE_WORKERS = 4
+#: tests wait on the wall clock (simulated moves, timeouts), which workers overlap: the
+#: suite waits about 125 s for 40 s of CPU. A worker costs about 1 s of CPU to start now
+#: that the test modules are rewritten once (above). On two cores six took 27-28 s,
+#: eight 25-27 s, four 37 s (docs/architecture.md); six keeps the load, and so the safety
+#: tests' timing margins, further from where they were seen to fail (load 8 and more).
+SUITE_WORKERS = 6
 
 
 def _warm_the_rewrite_cache(config: pytest.Config) -> None:

@@ -126,12 +126,12 @@ def test_reconnects_after_the_server_restarts(
 def test_a_late_answered_command_write_reaches_the_device_exactly_once(
     server: TestServer, transport: ModbusTransport
 ) -> None:
-    server.knobs.write_delay_s = 1.0  # answer after the client's 0.5 s timeout
+    server.knobs.write_delay_s = 0.8  # answer after the client's 0.5 s timeout
     server.knobs.requests.clear()
     with pytest.raises(ResponseTimeoutError) as info:
         transport.write_block(Table.HOLDING, 0x0207, [1], retry=False)
     assert isinstance(info.value, TimeoutError)
-    time.sleep(1.2)  # let the late answer and any resend surface
+    time.sleep(0.6)  # past the late answer (0.3 s from now): let it and any resend surface
     writes = [r for r in server.knobs.requests if r.function_code == 16]
     assert len(writes) == 1
     assert transport.stats.retries == 0
