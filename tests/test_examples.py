@@ -1,4 +1,4 @@
-"""Every example runs against the simulator (loopback, time_scale 20).
+"""Every example runs against the simulator (loopback, the suite's time_scale 40).
 
 Examples are loaded from ``examples/`` and their ``main(argv)`` is called in-process
 with ``--host 127.0.0.1 --port <sim port>``; one also runs as a script (``runpy``).
@@ -36,7 +36,7 @@ def target(sim: Simulator) -> list[str]:
 
 @pytest.fixture
 def fast_config(tmp_path: Path) -> Path:
-    """Keep the article's poses and speeds; poll and settle fast for time_scale 20."""
+    """Keep the article's poses and speeds; poll and settle fast for a simulator 40x real time."""
     path = tmp_path / "fast.toml"
     path.write_text("[gripper]\nsettle_s = 0.05\n[run]\npoll_interval_s = 0.02\n")
     return path

@@ -1,7 +1,7 @@
 """Pick & place against the simulator over loopback TCP: the command, end to end.
 
 The CLI's run() is called in-process (fast) against simulators started by the
-``tm_simulator_factory`` fixture (time_scale 20) with faults; two tests run the real
+``tm_simulator_factory`` fixture (time_scale 40) with faults; a few tests run the real
 ``python -m tmmaster.pickplace`` entry point as a subprocess.
 """
 
@@ -46,7 +46,7 @@ TARGET_BLOCK = 0x0200  # article: target x..rz, speed, command in one FC16
 COMMAND_REGISTER = 0x0207
 GRIPPER_REGISTER = 0x0210
 
-#: Settings that keep a simulated run (time_scale 20) fast; the poses and speeds stay
+#: Settings that keep a simulated run (time_scale 40) fast; the poses and speeds stay
 #: the article's defaults.
 FAST = """
 [gripper]
