@@ -7,6 +7,7 @@ tolerances below are about what the contact model does, not about timing.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import subprocess
 import sys
@@ -21,11 +22,15 @@ from tmmaster._pose import MotionType
 from tmmaster.sim import Simulator, TableObject, World
 from tmmaster.sim._backend import MotionRejectedError, PhysicsBackend
 from tmmaster.sim._kinematic import KinematicBackend
+from tmmaster.sim._mujoco import MuJoCoBackend, build_mjcf
 from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM, TABLE
 
-pytest.importorskip("mujoco", reason="the MuJoCo backend needs the mujoco extra")
-
-from tmmaster.sim._mujoco import MuJoCoBackend, build_mjcf
+# Looked up, not imported: importing mujoco (and numpy) costs ~0.2 s of CPU in every xdist
+# worker that collects this module; the backend imports it when a test first builds one.
+pytestmark = pytest.mark.skipif(
+    importlib.util.find_spec("mujoco") is None,
+    reason="the MuJoCo backend needs the mujoco extra",
+)
 
 MODEL = tmmaster.robot_model("tm5-700")
 DEFAULT_HOME = tmmaster.DEFAULT_HOME  # tool down, 250 mm in front of J1
