@@ -243,3 +243,21 @@ def test_register_maps_doc_examples_behave_as_documented(tmp_path: Path) -> None
     (tmp_path / "bad.toml").write_text(refused)
     with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*target_y"):
         robot_profile(tmp_path / "bad.toml")
+
+
+@pytest.mark.parametrize("name", ["article", "tmflow"])
+def test_write_layout_reused_gives_the_same_blocks_and_words(name: str) -> None:
+    # group_writes keeps the grouping per field sequence; a second call with other
+    # values (and an order it has already seen) must give what grouping afresh gives.
+    from tmmaster._transport import _group_writes, encode_writes, group_writes
+
+    p = robot_profile(name)
+    block = list(p.command_block())
+    orders = [block, block[::-1], block[1:] + block[:1], [block[0], block[-1]]]
+    for order in orders:
+        for round_ in range(3):
+            values: list[tuple[RegisterField, Any]] = [
+                (f, 1 + (round_ + i) % 2) for i, f in enumerate(order)
+            ]
+            encoded = encode_writes(values)
+            assert group_writes(encoded) == _group_writes(encoded)

@@ -104,10 +104,6 @@ class Ticket:
     plan: list[tuple[Block, list[int]]] = field(default_factory=list)
 
 
-#: Function codes that write (FC05, FC06, FC15, FC16).
-_WRITE_FUNCTIONS = (5, 6, 15, 16)
-
-
 def link_mark(transport: Transport) -> tuple[int, ...] | None:
     """What changes whenever the link writes, fails, retries or reconnects (None: not connected).
 
@@ -117,8 +113,10 @@ def link_mark(transport: Transport) -> tuple[int, ...] | None:
     if transport.state is not ConnectionState.CONNECTED:
         return None
     stats = transport.stats
-    by_function = stats.requests_by_function
-    writes = sum(by_function.get(code, 0) for code in _WRITE_FUNCTIONS)
+    get = stats.requests_by_function.get
+    # The write function codes (FC05, FC06, FC15, FC16), summed without a generator:
+    # this runs on every poll.
+    writes = get(5, 0) + get(6, 0) + get(15, 0) + get(16, 0)
     return (writes, stats.errors, stats.retries, stats.reconnects)
 
 
@@ -187,6 +185,13 @@ class CommandChannel(ABC):
         self.tcp_fields = profile.select(TCP_FIELDS)
         self.command_fields = (command,)
         self.target_block = (*profile.select(TARGET_FIELDS), command)
+        # The command block's fields, looked up once (the map does not change under a
+        # channel: the field sets above are built once too).
+        self._target_fields = profile.select(TARGET_FIELDS)
+        self._speed_field = profile.field("speed") if profile.has("speed") else None
+        self._accel_field = profile.field("accel_time") if profile.has("accel_time") else None
+        self._command_field = command
+        self._command_codes: dict[CommandKind, int] = {}
         #: What the last poll that saw a command finished read (see :class:`StateAfterDone`).
         self.after_done: StateAfterDone | None = None
 
@@ -277,14 +282,19 @@ class CommandChannel(ABC):
         p = self.profile
         words: list[tuple[RegisterField, Value]] = []
         if command.target is not None:
-            words += list(zip(p.select(TARGET_FIELDS), command.target.as_list(), strict=True))
+            words += zip(self._target_fields, command.target.as_list(), strict=True)
         if command.speed is not None:
-            words.append((p.field("speed"), command.speed))
-        if command.target is not None and p.has("accel_time"):
+            words.append((self._speed_field or p.field("speed"), command.speed))
+        if command.target is not None and self._accel_field is not None:
             # Always written (0 = the program's default) so the block stays contiguous
             # and goes out as one atomic request.
-            words.append((p.field("accel_time"), command.accel_time_ms or 0))
-        words.append((p.field("command"), p.field("command").code_of(command.kind.value)))
+            words.append((self._accel_field, command.accel_time_ms or 0))
+        code = self._command_codes.get(command.kind)
+        if code is None:
+            code = self._command_codes[command.kind] = self._command_field.code_of(
+                command.kind.value
+            )
+        words.append((self._command_field, code))
         # Every value encoded now: ValueOutOfRangeError naming the field, before any I/O;
         # the words are kept, so the write does not encode them again.
         return words, encode_writes(words)

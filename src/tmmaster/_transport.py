@@ -174,8 +174,39 @@ def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Blo
     return group_writes(encode_writes(values))
 
 
+#: Write layouts by the identities of their fields, in the order given: the blocks and,
+#: for each, the positions of its fields' words. Each entry holds its fields, so their
+#: ids cannot be reused while it lives. Bounded: ad-hoc writes are not kept forever.
+_WRITE_LAYOUTS: dict[
+    tuple[int, ...], tuple[tuple[RegisterField, ...], list[tuple[Block, tuple[int, ...]]]]
+] = {}
+_MAX_WRITE_LAYOUTS = 256
+
+
 def group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
-    """Group already encoded fields into as few write blocks as the protocol allows."""
+    """Group already encoded fields into as few write blocks as the protocol allows.
+
+    The grouping depends on the fields alone (table, address, width): it is worked out
+    once per field sequence and reused, each block's words taken in the same order.
+    """
+    fields = tuple(f for f, _ in encoded)
+    key = tuple(map(id, fields))
+    entry = _WRITE_LAYOUTS.get(key)
+    if entry is None or entry[0] != fields:
+        layout = _write_layout(fields)
+        if len(_WRITE_LAYOUTS) >= _MAX_WRITE_LAYOUTS:
+            _WRITE_LAYOUTS.clear()
+        _WRITE_LAYOUTS[key] = entry = (fields, layout)
+    return [(block, [w for i in positions for w in encoded[i][1]]) for block, positions in entry[1]]
+
+
+def _write_layout(fields: tuple[RegisterField, ...]) -> list[tuple[Block, tuple[int, ...]]]:
+    """The write blocks of ``fields`` and the positions (in ``fields``) of each's fields."""
+    grouped = _group_writes([(f, [i]) for i, f in enumerate(fields)])
+    return [(block, tuple(positions)) for block, positions in grouped]
+
+
+def _group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
     # Table is a StrEnum: its members order as their values, without a .value lookup.
     ordered = sorted(encoded, key=lambda item: (item[0].table, item[0].address))
     plans: list[tuple[Block, list[int]]] = []
