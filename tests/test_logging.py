@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import textwrap
+from typing import Any
 
 import pytest
 
@@ -73,3 +74,31 @@ def test_a_disabled_event_never_enters_the_processors() -> None:
     log.warning("w")
     log.error("e")
     assert seen == ["w", "e"]
+
+
+def test_is_enabled_for_follows_the_standard_loggers_level() -> None:
+    import logging
+
+    std = logging.getLogger("tmmaster.test_is_enabled_for")
+    log = get_logger("tmmaster.test_is_enabled_for").bind(robot="r1")
+    std.setLevel(logging.WARNING)
+    assert not log.is_enabled_for(logging.INFO)
+    assert log.is_enabled_for(logging.WARNING)
+    std.setLevel(logging.DEBUG)
+    assert log.is_enabled_for(logging.INFO)
+    std.setLevel(logging.NOTSET)
+
+
+def test_a_robots_info_events_are_still_logged_when_enabled(
+    tm_simulator_factory: Any, robots: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    # The move events' fields are built only when INFO is on: with it on, they go out.
+    import logging
+
+    from tmmaster import Pose
+
+    robot = robots(tm_simulator_factory("article"))
+    with caplog.at_level(logging.INFO, "tmmaster"):
+        robot.move_to(Pose(300, -200, 150, 180, 0, 90), speed=50)
+    for event in ("robot.command_sent", "robot.command_acknowledged", "robot.command_done"):
+        assert event in caplog.text

@@ -69,6 +69,10 @@ class _Logger:
         """This logger with ``new_values`` added to every event's fields."""
         return _Logger(self._std, {**self._context, **new_values})
 
+    def is_enabled_for(self, level: int) -> bool:
+        """True when an event at ``level`` would be logged (build costly fields only then)."""
+        return self._std.isEnabledFor(level)
+
     def _emit(self, level: int, method: str, event: str | None, args: Any, kw: Any) -> Any:
         if not self._std.isEnabledFor(level):
             return None

@@ -18,14 +18,15 @@ from __future__ import annotations
 
 import atexit
 import inspect
+import logging
 import math
 import threading
 import time
 import weakref
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import TracebackType
 from typing import Annotated, Any, Literal, ParamSpec
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field
@@ -218,6 +219,34 @@ class Motion:
             self._follower.wait(self, timeout_s)
 
 
+class _Following:
+    """The context of :meth:`_MotionFollower.following`: an escaping exception abandons the motion.
+
+    A class rather than a generator context manager: entered on every wait and send,
+    it costs one object instead of a generator's frame and ``contextlib``'s machinery.
+    The exception is never swallowed.
+    """
+
+    __slots__ = ("_follower", "_motion")
+
+    def __init__(self, follower: _MotionFollower, motion: Motion) -> None:
+        self._follower = follower
+        self._motion = motion
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> Literal[False]:
+        if exc is not None:
+            self._follower.abandon(self._motion, exc)
+        return False
+
+
 class _MotionFollower:
     """Follows every command a Robot sent: polls it, waits for it, gives it up safely.
 
@@ -263,14 +292,9 @@ class _MotionFollower:
         self._channel.stop()
         self._log.warning("robot.stop_sent")
 
-    @contextmanager
-    def following(self, motion: Motion) -> Iterator[None]:
+    def following(self, motion: Motion) -> _Following:
         """Whatever escapes the block, the master gives the command up safely first."""
-        try:
-            yield
-        except BaseException as exc:
-            self.abandon(motion, exc)
-            raise
+        return _Following(self, motion)
 
     def abandon(self, motion: Motion, reason: BaseException) -> None:
         """Make sure a command the master gives up on can never start later.
@@ -335,11 +359,12 @@ class _MotionFollower:
         if observation.acknowledged and motion.phase is MovePhase.SENT:
             motion.phase = MovePhase.RUNNING
             ticket = motion.ticket
-            self._log.info(
-                "robot.command_acknowledged",
-                command=motion.command.kind.value,
-                ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
-            )
+            if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+                self._log.info(
+                    "robot.command_acknowledged",
+                    command=motion.command.kind.value,
+                    ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
+                )
         if observation.done:
             self._finish(motion, observation.pose)
 
@@ -399,12 +424,13 @@ class _MotionFollower:
                 )
         motion.phase = MovePhase.DONE
         motion.finished_at = time.monotonic()
-        self._log.info(
-            "robot.command_done",
-            command=motion.command.kind.value,
-            duration_s=round(motion.finished_at - motion.ticket.sent_at, 4),
-            expected_s=round(motion.expected_s, 3),
-        )
+        if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+            self._log.info(
+                "robot.command_done",
+                command=motion.command.kind.value,
+                duration_s=round(motion.finished_at - motion.ticket.sent_at, 4),
+                expected_s=round(motion.expected_s, 3),
+            )
 
     def _ack_timed_out(self, motion: Motion) -> None:
         ticket = motion.ticket
@@ -905,15 +931,16 @@ class Robot:
         self._last_motion = motion
         with self._follower.following(motion):
             self._send(ticket)
-        self._log.info(
-            "robot.command_sent",
-            command=command.kind.value,
-            target=None if command.target is None else command.target.as_list(),
-            speed=command.speed,
-            seq=ticket.seq or None,
-            expected_s=round(expected, 3),
-            timeout_s=round(timeout_s, 3),
-        )
+        if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+            self._log.info(
+                "robot.command_sent",
+                command=command.kind.value,
+                target=None if command.target is None else command.target.as_list(),
+                speed=command.speed,
+                seq=ticket.seq or None,
+                expected_s=round(expected, 3),
+                timeout_s=round(timeout_s, 3),
+            )
         return motion
 
     def move_to(
