@@ -30,6 +30,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from typing import Any
 
 from pymodbus.client import ModbusTcpClient
 
@@ -60,14 +61,21 @@ def cpu_per_call(fn: Callable[[], object], calls: int) -> float:
     return (time.process_time() - started) / calls
 
 
-def raw_status(client: ModbusTcpClient, profile: str) -> Callable[[], None]:
+def status_blocks(
+    client: ModbusTcpClient, profile: str
+) -> list[tuple[Callable[..., Any], int, int]]:
+    """The profile's status blocks as (raw pymodbus read method, address, count)."""
     readers = {
         1: client.read_coils,
         2: client.read_discrete_inputs,
         3: client.read_holding_registers,
         4: client.read_input_registers,
     }
-    blocks = [(readers[fc], address, count) for fc, address, count in STATUS_BLOCKS[profile]]
+    return [(readers[fc], address, count) for fc, address, count in STATUS_BLOCKS[profile]]
+
+
+def raw_status(client: ModbusTcpClient, profile: str) -> Callable[[], None]:
+    blocks = status_blocks(client, profile)
 
     def read() -> None:
         for reader, address, count in blocks:
@@ -79,13 +87,7 @@ def raw_status(client: ModbusTcpClient, profile: str) -> Callable[[], None]:
 
 def paced_raw(client: ModbusTcpClient, profile: str, gaps: list[float]) -> float:
     """CPU per raw status-block read, each sent ``gaps[i]`` s after the previous one started."""
-    readers = {
-        1: client.read_coils,
-        2: client.read_discrete_inputs,
-        3: client.read_holding_registers,
-        4: client.read_input_registers,
-    }
-    blocks = [(readers[fc], address, count) for fc, address, count in STATUS_BLOCKS[profile]]
+    blocks = status_blocks(client, profile)
     cpu = 0.0
     due = time.monotonic()
     for i, gap in enumerate(gaps):
