@@ -24,7 +24,12 @@ stop. Per master, per round:
 * gap: from a motion's end to the next motion's start, for the moves with no gripper
   action between them (approach -> pick, lift -> place);
 * requests per move: Modbus requests from a move's command write to the next command
-  write (the move's polls and the next command's checks), from the simulator's log.
+  write (the move's polls and the next command's checks), from the simulator's log;
+* master CPU: the CPU time of the thread that runs the master (``time.thread_time``:
+  the simulator's threads are not counted), from connecting to the end of its cycle,
+  per cycle and per request of the cycle. The article's master is a master written on
+  raw pymodbus calls, so this compares tmmaster with raw pymodbus over whole moves, on
+  the same simulator in the same run, each paced by its own polling.
 
 Run::
 
@@ -130,6 +135,13 @@ class Round:
     transitions_ms: list[float] = field(default_factory=list)
     requests_per_move: float = 0.0
     requests_per_cycle: int = 0
+    #: CPU time of the master's thread over its run (connect to end of cycle), s.
+    master_cpu_s: float = 0.0
+
+    @property
+    def cpu_per_request_us(self) -> float:
+        """The master's CPU per request of its run, µs."""
+        return 1e6 * self.master_cpu_s / max(1, self.requests_per_cycle)
 
     @property
     def overhead_pct(self) -> float:
@@ -240,17 +252,21 @@ def one_round(master: str, policy: PollPolicy) -> Round:
     with Simulator("article", time_scale=1.0, backend=backend) as sim:
         sim.wait_for(lambda: sim.field("robot_mode") == 5, timeout=10)
         sim.clear_request_log()
+        cpu_started = time.thread_time()
         if master == "article":
             waits, ok = run_article(sim)
         else:
             waits, ok = run_tmmaster(sim, policy)
+        master_cpu_s = time.thread_time() - cpu_started
         if not ok:
             raise RuntimeError(f"the {master} master did not finish its cycle")
         events = list(backend.events)
         if master == "tmmaster":
             # pickplace opens the fingers before the first approach (outside the cycle).
             events = events[1:] if events and events[0].kind == "gripper" else events
-        return analyse(master, sim, events, waits)
+        measured = analyse(master, sim, events, waits)
+        measured.master_cpu_s = master_cpu_s
+        return measured
 
 
 def summary(rounds: list[Round]) -> str:
@@ -258,8 +274,8 @@ def summary(rounds: list[Round]) -> str:
     lines = [
         "| master | cycle s | motion s | gripper s | no-feedback wait s | overhead s"
         " | overhead % (range) | move-to-move gap ms p50 / max | requests/move"
-        " | requests/cycle |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        " | requests/cycle | master CPU ms/cycle | master CPU µs/request |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for master in dict.fromkeys(r.master for r in rounds):
         rs = [r for r in rounds if r.master == master]
@@ -275,7 +291,8 @@ def summary(rounds: list[Round]) -> str:
             f" | {med('overhead_s'):.3f}"
             f" | {statistics.median(pcts):.2f} ({min(pcts):.2f}-{max(pcts):.2f})"
             f" | {statistics.median(gaps):.0f} / {max(gaps):.0f}"
-            f" | {med('requests_per_move'):.1f} | {med('requests_per_cycle'):.0f} |"
+            f" | {med('requests_per_move'):.1f} | {med('requests_per_cycle'):.0f}"
+            f" | {1000 * med('master_cpu_s'):.1f} | {med('cpu_per_request_us'):.0f} |"
         )
     return "\n".join(lines)
 
