@@ -25,11 +25,12 @@ stop. Per master, per round:
   action between them (approach -> pick, lift -> place);
 * requests per move: Modbus requests from a move's command write to the next command
   write (the move's polls and the next command's checks), from the simulator's log;
-* master CPU: the CPU time of the thread that runs the master (``time.thread_time``:
-  the simulator's threads are not counted), from connecting to the end of its cycle,
-  per cycle and per request of the cycle. The article's master is a master written on
-  raw pymodbus calls, so this compares tmmaster with raw pymodbus over whole moves, on
-  the same simulator in the same run, each paced by its own polling.
+* master CPU: the CPU time of the thread that runs the master's cycle
+  (``time.thread_time``: the simulator's threads are not counted; connecting and
+  building the master are not in it), per cycle and per request made in that time. The
+  article's master is written on raw pymodbus calls, so this compares tmmaster with a
+  raw pymodbus master over whole moves, on the same simulator in the same run, each
+  paced by its own polling.
 
 Run::
 
@@ -135,13 +136,15 @@ class Round:
     transitions_ms: list[float] = field(default_factory=list)
     requests_per_move: float = 0.0
     requests_per_cycle: int = 0
-    #: CPU time of the master's thread over its run (connect to end of cycle), s.
+    #: CPU time of the master's thread over its cycle (connecting not included), s,
+    #: and the requests it made in that time.
     master_cpu_s: float = 0.0
+    master_requests: int = 0
 
     @property
     def cpu_per_request_us(self) -> float:
         """The master's CPU per request of its run, µs."""
-        return 1e6 * self.master_cpu_s / max(1, self.requests_per_cycle)
+        return 1e6 * self.master_cpu_s / max(1, self.master_requests)
 
     @property
     def overhead_pct(self) -> float:
@@ -160,8 +163,8 @@ def load_article_master() -> ModuleType:
     return module
 
 
-def run_article(sim: Simulator) -> tuple[list[float], bool]:
-    """The article's master, one cycle; returns its fixed gripper sleeps and success."""
+def run_article(sim: Simulator) -> tuple[list[float], bool, float, int]:
+    """The article's master, one cycle: its fixed gripper sleeps, success, cycle CPU (s)."""
     article = load_article_master()
     # Its HOME (0, 0, 300, 180, 0, 0) is out of a TM5's reach (docs/kinematics.md): the
     # simulator refuses it as a real arm would. Both masters go home to the same pose.
@@ -170,22 +173,29 @@ def run_article(sim: Simulator) -> tuple[list[float], bool]:
     assert ctrl.connect()
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # its progress prints
+            requests_before, cpu_started = len(sim.request_log), time.thread_time()
             ctrl.run()
+            cpu_s = time.thread_time() - cpu_started
+            requests = len(sim.request_log) - requests_before
     finally:
         ctrl.disconnect()
-    return [0.8, 0.5], ctrl.state is article.State.DONE
+    return [0.8, 0.5], ctrl.state is article.State.DONE, cpu_s, requests
 
 
-def run_tmmaster(sim: Simulator, policy: PollPolicy) -> tuple[list[float], bool]:
-    """tmmaster.pickplace with its defaults, one cycle; returns its open settle and success."""
+def run_tmmaster(sim: Simulator, policy: PollPolicy) -> tuple[list[float], bool, float, int]:
+    """tmmaster.pickplace with its defaults, one cycle: its open settle, success, cycle CPU."""
     config = PickPlaceConfig.model_validate({"robot": {"profile": "article"}})
     robot = robot_from_config(config, "127.0.0.1", sim.port)
     robot.polling = policy
     with robot:
         robot.wait_until_ready(timeout_s=10)
-        result = Runner(robot).run(pick_and_place(config))
+        runner, sequence = Runner(robot), pick_and_place(config)
+        requests_before, cpu_started = len(sim.request_log), time.thread_time()
+        result = runner.run(sequence)
+        cpu_s = time.thread_time() - cpu_started
+        requests = len(sim.request_log) - requests_before
     # Close stops at grasp_status = 1 (feedback); open waits the settle time (none).
-    return [0.0, config.gripper.settle_s], result.ok
+    return [0.0, config.gripper.settle_s], result.ok, cpu_s, requests
 
 
 def analyse(master: str, sim: Simulator, events: list[Event], waits: list[float]) -> Round:
@@ -252,12 +262,10 @@ def one_round(master: str, policy: PollPolicy) -> Round:
     with Simulator("article", time_scale=1.0, backend=backend) as sim:
         sim.wait_for(lambda: sim.field("robot_mode") == 5, timeout=10)
         sim.clear_request_log()
-        cpu_started = time.thread_time()
         if master == "article":
-            waits, ok = run_article(sim)
+            waits, ok, master_cpu_s, cycle_requests = run_article(sim)
         else:
-            waits, ok = run_tmmaster(sim, policy)
-        master_cpu_s = time.thread_time() - cpu_started
+            waits, ok, master_cpu_s, cycle_requests = run_tmmaster(sim, policy)
         if not ok:
             raise RuntimeError(f"the {master} master did not finish its cycle")
         events = list(backend.events)
@@ -266,6 +274,7 @@ def one_round(master: str, policy: PollPolicy) -> Round:
             events = events[1:] if events and events[0].kind == "gripper" else events
         measured = analyse(master, sim, events, waits)
         measured.master_cpu_s = master_cpu_s
+        measured.master_requests = cycle_requests
         return measured
 
 
