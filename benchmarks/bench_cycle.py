@@ -306,6 +306,26 @@ def summary(rounds: list[Round]) -> str:
     return "\n".join(lines)
 
 
+def cpu_ratios(rounds: list[Round]) -> str:
+    """tmmaster's master CPU over the article's, per round (both ran in the same round)."""
+    pairs = [
+        (a, t)
+        for a, t in itertools.pairwise(rounds)
+        if a.master == "article" and t.master == "tmmaster"
+    ]
+    if not pairs:
+        return ""
+    per_request = [t.cpu_per_request_us / a.cpu_per_request_us for a, t in pairs]
+    per_cycle = [t.master_cpu_s / a.master_cpu_s for a, t in pairs]
+    return (
+        "master CPU, tmmaster / article (raw pymodbus), median of rounds (range):"
+        f" per request {statistics.median(per_request):.2f}"
+        f" ({min(per_request):.2f}-{max(per_request):.2f}),"
+        f" per cycle {statistics.median(per_cycle):.2f}"
+        f" ({min(per_cycle):.2f}-{max(per_cycle):.2f})"
+    )
+
+
 def breakdown(rounds: list[Round]) -> str:
     """Median gap of every transition per master: where the cycle's extra time goes."""
     masters = list(dict.fromkeys(r.master for r in rounds))
@@ -342,12 +362,16 @@ def main(argv: list[str] | None = None) -> int:
             r = rounds[-1]
             print(
                 f"{master}: cycle {r.cycle_s:.3f} s, overhead {r.overhead_s * 1000:.0f} ms"
-                f" ({r.overhead_pct:.2f} %), transitions {[round(g) for g in r.transitions_ms]} ms",
+                f" ({r.overhead_pct:.2f} %), transitions {[round(g) for g in r.transitions_ms]} ms,"
+                f" master CPU {r.master_cpu_s * 1000:.1f} ms"
+                f" ({r.cpu_per_request_us:.0f} µs/request)",
                 file=sys.stderr,
                 flush=True,
             )
     print(f"# {machine_line()}; tmmaster {policy!r}")
     print(summary(rounds))
+    print()
+    print(cpu_ratios(rounds))
     print()
     print(breakdown(rounds))
     return 0
