@@ -154,12 +154,14 @@ def test_invalid_moves_are_refused_before_any_request(
 def test_late_acknowledgement_is_waited_for(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    # 10 simulated s = 0.5 wall s before the robot picks the command up.
-    sim = tm_simulator_factory(profile, time_scale=20, faults=["late_ack:delay_s=10"])
+    # 12 simulated s = 0.3 wall s (at 40x) before the robot picks the command up: far past
+    # the master's first polls (~40 ms), so returning early shows. The check leaves 0.1 s
+    # for a simulator that lagged and catches up (up to 10 ticks at once).
+    sim = tm_simulator_factory(profile, time_scale=40, tick_hz=100, faults=["late_ack:delay_s=12"])
     robot = robots(sim)
     started = time.monotonic()
     motion = robot.move_to(APPROACH, speed=30)
-    assert time.monotonic() - started >= 0.45
+    assert time.monotonic() - started >= 0.2
     # Returned only once the robot really arrived, not when "idle" was first read.
     assert sim.tcp_pose().is_close(APPROACH, mm=0.01)
     assert motion.done
@@ -170,13 +172,18 @@ def test_late_acknowledgement_is_waited_for(
 def test_unacknowledged_command_times_out_and_is_withdrawn(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])  # 0.5 s wall
-    robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.3))
+    # The ack would come 14 simulated s = 0.35 wall s after the robot sees the command:
+    # 0.2 s after the master's 0.15 s ack timeout, room for a master slowed by load.
+    sim = tm_simulator_factory(profile, time_scale=40, tick_hz=100, faults=["late_ack:delay_s=14"])
+    robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.15))
     home = sim.tcp_pose()
+    ticks = sim.ticks
     with pytest.raises(tmmaster.AcknowledgeTimeoutError, match="withdrawn"):
         robot.move_to(APPROACH, speed=30)
-    # The command must not run later behind the script's back (the ack would come by now).
-    time.sleep(0.8)
+    # The command must not run later behind the script's back: look once the simulator
+    # has run 22 simulated s (55 ticks of 0.4 s) since the write, 8 s past the late ack,
+    # on its own clock, so a simulator slowed by load is not looked at too early.
+    sim.wait_for(lambda: sim.ticks >= ticks + 55, 5.0)
     assert sim.tcp_pose() == home
     assert not robot.status().moving
 
@@ -466,8 +473,8 @@ def test_one_request_per_block_per_poll(
     before_ack: int,
     after_ack: int,
 ) -> None:
-    # 0.5 s of wall time before the acknowledgement; the move itself then takes ~0.3 s.
-    sim = tm_simulator_factory(profile, time_scale=5, faults=["late_ack:delay_s=2.5"])
+    # 0.3 s of wall time before the acknowledgement; the move itself then takes ~0.3 s.
+    sim = tm_simulator_factory(profile, time_scale=5, faults=["late_ack:delay_s=1.5"])
     robot = robots(sim)
     motion = robot.start_move(APPROACH, speed=30)
     sim.clear_request_log()
