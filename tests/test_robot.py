@@ -236,7 +236,7 @@ def test_a_stalled_motion_times_out_with_the_last_pose_and_is_stopped(
     sim = tm_simulator_factory(profile, faults=["stall:at_move=1"])
     robot = robots(sim)
     with pytest.raises(tmmaster.MotionTimeoutError) as info:
-        robot.move_to(APPROACH, speed=30, timeout=0.5)
+        robot.move_to(APPROACH, speed=30, timeout=0.3)  # the stall comes after ~13 ms
     assert isinstance(info.value, TimeoutError)
     assert info.value.pose is not None
     assert not info.value.pose.is_close(APPROACH)
@@ -372,7 +372,7 @@ def test_lost_command_write_is_never_resent_on_a_clear_on_accept_profile(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     sim = tm_simulator_factory("article")
-    robot = robots(sim, timeouts=TimeoutPolicy(in_flight_s=0.3))
+    robot = robots(sim, timeouts=TimeoutPolicy(in_flight_s=0.15))
     before = sim.tcp_pose()
     sim.inject(f"drop_connections:on_write_to={COMMAND_BLOCK['article']},lose=request")
     # Old targets in the registers cannot prove the write is lost rather than late: the
@@ -450,7 +450,7 @@ def test_tmflow_accepts_commands_again_after_a_stop_and_restart(
     sim = tm_simulator_factory("tmflow", faults=["stall:at_move=1"])
     robot = robots(sim)
     with pytest.raises(tmmaster.MotionTimeoutError):
-        robot.move_to(APPROACH, speed=30, timeout=0.5)  # stalls; the Stop button is pressed
+        robot.move_to(APPROACH, speed=30, timeout=0.3)  # stalls; the Stop button is pressed
     sim.wait_for(lambda: not sim.field("project_running"), timeout=2)
     sim.clear_faults()
     # The operator starts the project again (Play on the pendant; here a plain Modbus write).
