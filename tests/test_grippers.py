@@ -114,7 +114,8 @@ def test_article_grip_at_the_part_holds_it_and_returns_on_detection(
 
 def test_article_close_away_from_the_part_is_not_holding(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article")
-    with robot_at(sim, ABOVE_PART, gripper_settle_s=0.3) as robot:
+    # 0.15 s of settle: ~15 ticks, the fingers close all the way in one (39 mm at 40x).
+    with robot_at(sim, ABOVE_PART, gripper_settle_s=0.15) as robot:
         status = robot.gripper.close()
         assert not status.holding
         with pytest.raises(GraspFailedError):
@@ -125,7 +126,8 @@ def test_article_close_away_from_the_part_is_not_holding(tm_simulator_factory: F
 
 def test_article_grasp_miss_raises_grasp_failed(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article", faults=["grasp_miss:at_grasp=1"])
-    with robot_at(sim, DEFAULT_PART_POSE, gripper_settle_s=0.3) as robot:
+    # 0.2 s of settle: the last grip must see the part within it (it takes ~1-2 ticks).
+    with robot_at(sim, DEFAULT_PART_POSE, gripper_settle_s=0.2) as robot:
         with pytest.raises(GraspFailedError):
             robot.gripper.grip()
         # The miss hides one close only: after opening, the next grip succeeds.
@@ -323,7 +325,7 @@ def test_onrobot_stopped_short_without_grip_is_not_success(tm_simulator_factory:
         gripper = robot.gripper
         assert isinstance(gripper, OnRobot2FG7Gripper)
         with pytest.raises(GripperTimeoutError):
-            gripper.move_to_width(10.0, timeout_s=0.5)
+            gripper.move_to_width(10.0, timeout_s=0.25)  # the fingers stop after ~1 tick
         assert sim.field("external_width", device="gripper") == pytest.approx(30.0, abs=0.5)
 
 
@@ -481,8 +483,8 @@ def test_article_register_gripper_instance_and_timeout(tm_simulator_factory: Fac
     with robot_at(sim, ABOVE_PART, gripper=RegisterGripper(settle_s=3.0)) as robot:
         assert isinstance(robot.gripper, RegisterGripper)
         # No busy flag: an open lasts the settle time; a shorter timeout_s ends the wait.
-        with pytest.raises(GripperTimeoutError, match=r"0\.3 s"):
-            robot.gripper.open(timeout_s=0.3)
+        with pytest.raises(GripperTimeoutError, match=r"0\.15 s"):
+            robot.gripper.open(timeout_s=0.15)
         with pytest.raises(ConfigError, match="timeout_s"):
             robot.gripper.close(timeout_s=0)
 
