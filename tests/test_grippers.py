@@ -218,8 +218,9 @@ def test_blog_close_on_nothing_raises_grasp_failed(tm_simulator_factory: Factory
 def test_blog_unacknowledged_command_times_out_and_is_withdrawn(
     tm_simulator_factory: Factory,
 ) -> None:
-    # A gripper still activating (gSTA 1) leaves control at 16: nobody acknowledges.
-    sim = tm_simulator_factory("article", gripper="blog-2fg7", time_scale=1.0, init_time_s=1.0)
+    # A gripper still activating (gSTA 1) leaves control at 16: nobody acknowledges. It
+    # activates 0.5 s (wall, at 1x) after the start, 0.3 s after the 0.2 s ack timeout.
+    sim = tm_simulator_factory("article", gripper="blog-2fg7", time_scale=1.0, init_time_s=0.5)
     assert sim.gripper_port is not None
     link = GripperLink(sim.url, sim.gripper_port, ack_timeout_s=0.2, timeout_s=5.0)
     gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link)
