@@ -299,9 +299,10 @@ def test_onrobot_writes_width_force_speed_and_command_in_one_fc16(
 def test_onrobot_completion_is_the_target_width_not_just_not_busy(
     tm_simulator_factory: Factory,
 ) -> None:
-    # 5 ticks per second: the first status read after the write comes long before the
-    # device takes the command, while the status still says "not busy" at 39 mm.
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7", tick_hz=5.0, time_scale=2.0)
+    # 8 ticks per second (0.4 simulated s each): the write lands just after a tick, and the
+    # first status read after it comes ~120 ms before the device takes the command at the
+    # next one, while the status still says "not busy" at 39 mm.
+    sim = tm_simulator_factory("article", gripper="onrobot-2fg7", tick_hz=8.0, time_scale=3.2)
     gripper = onrobot(sim)
     try:
         ticks = sim.ticks
