@@ -44,6 +44,21 @@ def transport(server: TestServer) -> Iterator[ModbusTransport]:
     t.close()
 
 
+#: The answer timeout of ``quick_transport``: tests that wait for timeouts use it.
+QUICK_TIMEOUT_S = 0.25
+
+
+@pytest.fixture
+def quick_transport(server: TestServer) -> Iterator[ModbusTransport]:
+    """Like ``transport``, with a 0.25 s answer timeout (tests that wait for timeouts)."""
+    t = ModbusTransport(
+        "127.0.0.1", server.port, timeout=QUICK_TIMEOUT_S, retry=FAST_RETRY, name="test"
+    )
+    t.connect()
+    yield t
+    t.close()
+
+
 def test_status_and_pose_are_one_read_request(
     server: TestServer, transport: ModbusTransport
 ) -> None:
@@ -124,22 +139,28 @@ def test_reconnects_after_the_server_restarts(
 
 
 def test_a_late_answered_command_write_reaches_the_device_exactly_once(
-    server: TestServer, transport: ModbusTransport
+    server: TestServer, quick_transport: ModbusTransport
 ) -> None:
-    server.knobs.write_delay_s = 0.8  # answer after the client's 0.5 s timeout
+    transport = quick_transport
+    server.knobs.write_delay_s = 0.5  # answer 0.25 s after the client's 0.25 s timeout
     server.knobs.requests.clear()
     with pytest.raises(ResponseTimeoutError) as info:
         transport.write_block(Table.HOLDING, 0x0207, [1], retry=False)
     assert isinstance(info.value, TimeoutError)
-    time.sleep(0.6)  # past the late answer (0.3 s from now): let it and any resend surface
+    time.sleep(0.4)  # past the late answer (0.25 s from now): let it and any resend surface
     writes = [r for r in server.knobs.requests if r.function_code == 16]
     assert len(writes) == 1
     assert transport.stats.retries == 0
 
 
-def test_idempotent_writes_are_retried(server: TestServer, transport: ModbusTransport) -> None:
+def test_idempotent_writes_are_retried(
+    server: TestServer, quick_transport: ModbusTransport
+) -> None:
+    transport = quick_transport
     transport.retry = RetryPolicy(attempts=2, initial_backoff_s=0.02)  # one retry shows it
-    server.knobs.write_delay_s = 0.6
+    # Each answer comes 0.2 s after its attempt's 0.25 s timeout; the first one lands
+    # while the retry waits for its own.
+    server.knobs.write_delay_s = 0.45
     with pytest.raises(ResponseTimeoutError):
         transport.write_block(Table.HOLDING, 0, [1], retry=True)
     # Each of our attempts is one request: never multiplied by pymodbus's own retries.
