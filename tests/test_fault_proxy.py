@@ -38,6 +38,13 @@ def link(proxy: FaultProxy) -> Iterator[ModbusTransport]:
         yield t
 
 
+@pytest.fixture
+def quick_link(proxy: FaultProxy) -> Iterator[ModbusTransport]:
+    """Like ``link``, with a 0.2 s answer timeout: for the tests that wait for it to expire."""
+    with ModbusTransport("127.0.0.1", proxy.port, timeout=0.2, retry=NO_RETRY) as t:
+        yield t
+
+
 def writes_at(sim: Simulator, address: int) -> int:
     return sum(1 for r in sim.request_log if r.is_write and r.address == address)
 
@@ -49,20 +56,20 @@ def test_requests_pass_through_untouched(sim: Simulator, link: ModbusTransport) 
 
 
 def test_drop_request_never_reaches_the_slave(
-    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+    sim: Simulator, proxy: FaultProxy, quick_link: ModbusTransport
 ) -> None:
     proxy.add(Rule("drop_request", function_code=16))
     with pytest.raises(ResponseTimeoutError):
-        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+        quick_link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
     assert writes_at(sim, 0x0210) == 0
 
 
 def test_drop_answer_executes_but_the_master_cannot_know(
-    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+    sim: Simulator, proxy: FaultProxy, quick_link: ModbusTransport
 ) -> None:
     proxy.add(Rule("drop_answer", function_code=16))
     with pytest.raises(ResponseTimeoutError):
-        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+        quick_link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
     assert writes_at(sim, 0x0210) == 1
 
 
@@ -77,12 +84,13 @@ def test_close_after_executes_then_breaks_the_link(
 
 
 def test_hold_delivers_late_even_after_the_master_gave_up(
-    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+    sim: Simulator, proxy: FaultProxy, quick_link: ModbusTransport
 ) -> None:
-    proxy.add(Rule("hold", function_code=16, delay_s=0.6))
+    # Delivered 0.45 s after it was sent: 0.25 s after the master's 0.2 s timeout.
+    proxy.add(Rule("hold", function_code=16, delay_s=0.45))
     with pytest.raises(ResponseTimeoutError):
-        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
-    link.close()  # the master is gone; the frame is still on its way
+        quick_link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    quick_link.close()  # the master is gone; the frame is still on its way
     assert writes_at(sim, 0x0210) == 0
     sim.wait_for(lambda: writes_at(sim, 0x0210) == 1, timeout=3)
 
@@ -99,7 +107,8 @@ def test_delay_holds_back_one_request_only(
 
 
 def test_an_outage_refuses_connections_for_a_while(proxy: FaultProxy) -> None:
-    proxy.outage(0.4)
+    started = time.monotonic()
+    proxy.outage(0.3)
     # The proxy accepts and resets at once: depending on who is first, the connect itself
     # fails or the request on the reset link does. Either way nothing gets through.
     with (
@@ -107,6 +116,7 @@ def test_an_outage_refuses_connections_for_a_while(proxy: FaultProxy) -> None:
         ModbusTransport("127.0.0.1", proxy.port, timeout=0.3, retry=NO_RETRY) as refused,
     ):
         refused.read_block(Table.HOLDING, 0, 1)
-    time.sleep(0.6)  # past the outage with margin for a loaded machine
+    # Past the outage with margin for a loaded machine: 0.2 s after it ended.
+    time.sleep(max(0.0, started + 0.5 - time.monotonic()))
     with ModbusTransport("127.0.0.1", proxy.port, timeout=0.3, retry=NO_RETRY) as back:
         back.read_block(Table.HOLDING, 0, 1)
