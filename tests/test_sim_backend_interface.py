@@ -26,7 +26,11 @@ def test_moves_complete_through_slow_settling_and_reinitialisation(profile: str)
     )
     with (
         Simulator(profile, time_scale=20, backend=backend, listen=False) as sim,
-        tmmaster.connect(sim.url, profile=profile, poll_interval_s=0.01) as robot,
+        # The article's register gripper waits its settle time for a close on nothing:
+        # 0.2 s (wall) is 4 simulated s, ~10 ticks for the controller to take the close.
+        tmmaster.connect(
+            sim.url, profile=profile, poll_interval_s=0.01, gripper_settle_s=0.2
+        ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
         for target in (APPROACH, PICK, APPROACH):
