@@ -57,13 +57,13 @@ def test_abandon_acts_once_and_never_after_the_move_finished(
 def test_timeouts_assigned_after_construction_bound_the_wait(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    # The acknowledgement comes 20 s of wall time late; the policy set afterwards says 0.2 s.
+    # The acknowledgement comes 20 s of wall time late; the policy set afterwards says 0.1 s.
     sim = tm_simulator_factory(profile, time_scale=5, faults=["late_ack:delay_s=100"])
     robot = robots(sim)
-    robot.timeouts = TimeoutPolicy(ack_timeout_s=0.2)
-    assert robot.timeouts.ack_timeout_s == 0.2
+    robot.timeouts = TimeoutPolicy(ack_timeout_s=0.1)
+    assert robot.timeouts.ack_timeout_s == 0.1
     motion = robot.start_move(APPROACH, speed=30)
-    with pytest.raises(AcknowledgeTimeoutError, match=r"within 0\.2 s"):
+    with pytest.raises(AcknowledgeTimeoutError, match=r"within 0\.1 s"):
         motion.wait()
     assert motion.withdrawn is True
     assert motion.abandoned
