@@ -69,7 +69,8 @@ def test_a_slow_answer_times_out(sim: Simulator) -> None:
 
 def test_stop_listening_refuses_connections_for_a_while(sim: Simulator) -> None:
     with MemoryTransport(sim, retry=ONCE) as link:
-        sim.inject("stop_listening:after_requests=1,duration_s=0.3")
+        # 0.2 s of outage (wall time) for the refused read and connect made right after.
+        sim.inject("stop_listening:after_requests=1,duration_s=0.2")
         link.read_block(Table.HOLDING, 0x0200, 1)  # answered, then the outage starts
         sim.wait_for(lambda: not sim.device_server().listening, timeout=2)
         with pytest.raises(ConnectionLostError):
