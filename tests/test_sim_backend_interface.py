@@ -24,12 +24,14 @@ def test_moves_complete_through_slow_settling_and_reinitialisation(profile: str)
     backend = SlowSettlingBackend(
         tmmaster.robot_model("tm5-700"), settle_time_s=2.0, invalidate_after_motions=1
     )
+    # 40x at 100 Hz, polled every 5 ms: 0.4 simulated s per tick and two polls per tick,
+    # as at 20x, 50 Hz and 10 ms, in half the wall time; the 2 s settle is 5 ticks.
     with (
-        Simulator(profile, time_scale=20, backend=backend, listen=False) as sim,
+        Simulator(profile, time_scale=40, tick_hz=100, backend=backend, listen=False) as sim,
         # The article's register gripper waits its settle time for a close on nothing:
-        # 0.2 s (wall) is 4 simulated s, ~10 ticks for the controller to take the close.
+        # 0.2 s (wall) is 8 simulated s, ~20 ticks for the controller to take the close.
         tmmaster.connect(
-            sim.url, profile=profile, poll_interval_s=0.01, gripper_settle_s=0.2
+            sim.url, profile=profile, poll_interval_s=0.005, gripper_settle_s=0.2
         ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
