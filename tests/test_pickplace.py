@@ -66,6 +66,11 @@ motion_margin_s = 0.5
 #: suite's 40x at 100 Hz does, and a cycle takes about half the wall time.
 QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 250.0}
 
+#: The fixed motion timeout the stall tests wait out (wall seconds). Every move that is
+#: not stalled must end within it: at QUICK the longest, the retreat's 10 % PTP home
+#: (2.6 simulated s), ends in about 30 ms, seen done by the master within about 60 ms.
+STALL_TIMEOUT_S = 0.3
+
 SimFactory = Callable[..., Simulator]
 
 
@@ -218,8 +223,8 @@ def test_several_cycles_place_every_part(tm_simulator_factory: SimFactory, tmp_p
 def test_stall_times_out_stops_the_arm_and_exits_with_the_timeout_code(
     tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    sim = tm_simulator_factory(objects=parts(1), faults=["stall:at_move=2"])
-    config = write_config(tmp_path, timeouts="motion_s = 0.6")
+    sim = tm_simulator_factory(objects=parts(1), faults=["stall:at_move=2"], **QUICK)
+    config = write_config(tmp_path, timeouts=f"motion_s = {STALL_TIMEOUT_S}")
     code, report = run_cli(sim, config, tmp_path)
 
     assert code == EXIT_TIMEOUT
@@ -239,8 +244,10 @@ def test_stall_times_out_stops_the_arm_and_exits_with_the_timeout_code(
 def test_stall_with_retreat_goes_up_then_home_at_low_speed(
     tm_simulator_factory: SimFactory, tmp_path: Path
 ) -> None:
-    sim = tm_simulator_factory(objects=parts(1), faults=["stall:at_move=2"])
-    config = write_config(tmp_path, '[on_error]\nreaction = "retreat"\n', timeouts="motion_s = 0.6")
+    sim = tm_simulator_factory(objects=parts(1), faults=["stall:at_move=2"], **QUICK)
+    config = write_config(
+        tmp_path, '[on_error]\nreaction = "retreat"\n', timeouts=f"motion_s = {STALL_TIMEOUT_S}"
+    )
     code, report = run_cli(sim, config, tmp_path)
 
     assert code == EXIT_TIMEOUT
