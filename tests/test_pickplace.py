@@ -469,6 +469,10 @@ def test_entry_point_runs_the_article_cycle_on_the_simulator(tmp_path: Path) -> 
             "--sim",
             "--sim-time-scale",
             "40",
+            # The default 50 ms polls, stretched mid-move, cost half a second of the run's
+            # waits at 40x; the entry point, not the pace, is the subject here.
+            "--poll-interval",
+            "0.02",
             "--report",
             str(report),
         ],
