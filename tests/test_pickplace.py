@@ -488,6 +488,10 @@ def test_entry_point_runs_the_article_cycle_on_the_simulator(tmp_path: Path) -> 
 
 def test_sigint_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
     report = tmp_path / "r.json"
+    # The gripper's settle time (0.5 s at scale 1) only delays the first move, before the
+    # moment this test is about: the moves themselves keep their real-time durations.
+    config = tmp_path / "settle.toml"
+    config.write_text("[gripper]\nsettle_s = 0.05\n")
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -496,6 +500,8 @@ def test_sigint_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
             "--sim",
             "--profile",
             "article",
+            "--config",
+            str(config),
             "--log-json",
             "--report",
             str(report),
