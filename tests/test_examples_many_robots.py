@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -13,6 +14,15 @@ from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
+#: Simulated seconds one control tick may advance (the suite's: 40x at 100 Hz).
+TICK_SIM_S = 0.4
+#: The example's own simulators tick at Simulator's default 50 Hz, which allows 20x at
+#: most; its test runs them at 50x with the tick raised to match (``fast_example``).
+EXAMPLE_TIME_SCALE = 50.0
+#: The simulators a test starts for the example: 100x with a 250 Hz tick. The tests
+#: count moves and errors, not wall-clock times.
+QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 100.0 / TICK_SIM_S}
+
 
 @pytest.fixture(scope="module")
 def example() -> ModuleType:
@@ -20,8 +30,22 @@ def example() -> ModuleType:
     return load_example("many_robots")
 
 
+@pytest.fixture
+def fast_example(example: ModuleType, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
+    """The example, its own simulators ticking fast enough for their time scale.
+
+    Only the tick rate is added: the example still starts, drives and closes them itself.
+    """
+
+    def simulator(*args: Any, time_scale: float, **options: Any) -> Simulator:
+        return Simulator(*args, time_scale=time_scale, tick_hz=time_scale / TICK_SIM_S, **options)
+
+    monkeypatch.setattr(example, "Simulator", simulator)
+    return example
+
+
 def test_every_robot_drives_its_tour(tm_simulator_factory: Factory, example: ModuleType) -> None:
-    sims = [tm_simulator_factory() for _ in range(4)]
+    sims = [tm_simulator_factory(**QUICK) for _ in range(4)]
     reports = example.run([s.port for s in sims], moves=3)
     assert [r.error for r in reports] == [None] * 4
     assert [r.moves_done for r in reports] == [3] * 4
@@ -37,8 +61,8 @@ def test_every_robot_drives_its_tour(tm_simulator_factory: Factory, example: Mod
 def test_one_failure_stays_with_its_robot(
     tm_simulator_factory: Factory, example: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    good = [tm_simulator_factory() for _ in range(2)]
-    bad = tm_simulator_factory(faults=["robot_error:at_move=2"])
+    good = [tm_simulator_factory(**QUICK) for _ in range(2)]
+    bad = tm_simulator_factory(faults=["robot_error:at_move=2"], **QUICK)
     reports = example.run([good[0].port, bad.port, good[1].port], moves=3)
     assert [r.moves_done for r in reports] == [3, 1, 3]
     assert reports[0].error is None
@@ -53,14 +77,15 @@ def test_one_failure_stays_with_its_robot(
 
 
 def test_main_on_its_own_simulators(
-    example: ModuleType, capsys: pytest.CaptureFixture[str]
+    fast_example: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert example.main(["--sim", "3", "--moves", "2", "--time-scale", "20"]) == 0
+    argv = ["--sim", "3", "--moves", "2", "--time-scale", str(EXAMPLE_TIME_SCALE)]
+    assert fast_example.main(argv) == 0
     assert "3 of 3 robots done" in capsys.readouterr().out
 
 
 def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType) -> None:
-    sims = [tm_simulator_factory() for _ in range(2)]
+    sims = [tm_simulator_factory(**QUICK) for _ in range(2)]
     assert example.main(["--ports", *(str(s.port) for s in sims), "--moves", "1"]) == 0
 
 
