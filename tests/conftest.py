@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 
 import tmmaster
+from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Robot
 from tmmaster.sim import Simulator
 
@@ -64,18 +65,16 @@ def no_leaks() -> Iterator[None]:
     )
 
 
-#: The suite's simulators: 40x real time with a 100 Hz tick (each tick still advances
-#: 0.4 simulated seconds, as the plugin's 20x at 50 Hz does), so whole cycles take half
-#: the wall time. A test whose subject is a wall-clock delay passes its own time_scale.
-SUITE_TIME_SCALE = 40.0
-SUITE_TICK_HZ = 100.0
-
-
 @pytest.fixture
 def tm_simulator_factory(
     tm_simulator_factory: Callable[..., Simulator],
 ) -> Callable[..., Simulator]:
-    """The plugin's factory with the suite's faster defaults (``SUITE_TIME_SCALE``)."""
+    """The plugin's factory with the suite's faster defaults (``sim_speeds.SUITE_TIME_SCALE``).
+
+    40x real time with a 100 Hz tick (each tick still advances 0.4 simulated seconds, as
+    the plugin's 20x at 50 Hz does). A test whose subject is a wall-clock delay passes
+    its own time_scale.
+    """
 
     def make(profile: Any = "article", **options: Any) -> Simulator:
         options.setdefault("time_scale", SUITE_TIME_SCALE)
@@ -163,18 +162,18 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
 _LONGEST_FIRST = (
     "test_safety_stateful.py",
     "test_cli_ux.py",
-    "test_examples.py",
-    "test_examples_two_robots.py",
-    "test_sim_mujoco.py",
-    "test_sim_kinematic.py",
-    "test_logging.py",
-    "test_pickplace.py",
     "test_safety_regressions.py",
-    "test_robot.py",
+    "test_sim_mujoco.py",
+    "test_examples.py",
+    "test_pickplace.py",
+    "test_examples_two_robots.py",
+    "test_pickplace_options.py",
+    "test_transport.py",
+    "test_logging.py",
     "test_sim_server.py",
+    "test_robot.py",
     "test_grippers.py",
     "test_pickplace_runner.py",
-    "test_transport.py",
 )
 
 

@@ -11,11 +11,11 @@ import runpy
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from examples_support import EXAMPLES, load_example
+from sim_speeds import QUICK
 from tmmaster import DEFAULT_HOME, Pose
 from tmmaster.pickplace.__main__ import main as pickplace_main
 from tmmaster.sim import Simulator, TableObject
@@ -27,11 +27,9 @@ HOME = DEFAULT_HOME
 #: with its centre 100 mm up, where the parts start (issue 9: released parts fall).
 PLACED = Pose(PLACE.x, PLACE.y, PICK.z, PLACE.rx, PLACE.ry, PLACE.rz)
 
-#: The examples' runs are checked for their outcome (exit code, where the parts end up),
-#: not for a wall-clock delay: 100x with a 250 Hz tick, so each tick still advances 0.4
-#: simulated seconds as the suite's 40x at 100 Hz does, and a move ends by the master's
-#: first poll instead of a stretched mid-move one (the examples poll every 50 ms).
-QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 250.0}
+# The examples' runs are checked for their outcome (exit code, where the parts end up),
+# not for a wall-clock delay: their simulators run at sim_speeds.QUICK (the examples
+# poll every 50 ms).
 
 SimFactory = Callable[..., Simulator]
 

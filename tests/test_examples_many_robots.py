@@ -4,24 +4,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from types import ModuleType
-from typing import Any
 
 import pytest
 
 from examples_support import load_example
+from sim_speeds import QUICK, ticking_simulator
 from tmmaster import RobotFaultError
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
-#: Simulated seconds one control tick may advance (the suite's: 40x at 100 Hz).
-TICK_SIM_S = 0.4
 #: The example's own simulators tick at Simulator's default 50 Hz, which allows 20x at
 #: most; its test runs them at 50x with the tick raised to match (``fast_example``).
 EXAMPLE_TIME_SCALE = 50.0
-#: The simulators a test starts for the example: 100x with a 250 Hz tick. The tests
-#: count moves and errors, not wall-clock times.
-QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 100.0 / TICK_SIM_S}
+# The simulators a test starts for the example run at QUICK: the tests count moves and
+# errors, not wall-clock times.
 
 
 @pytest.fixture(scope="module")
@@ -36,11 +33,7 @@ def fast_example(example: ModuleType, monkeypatch: pytest.MonkeyPatch) -> Module
 
     Only the tick rate is added: the example still starts, drives and closes them itself.
     """
-
-    def simulator(*args: Any, time_scale: float, **options: Any) -> Simulator:
-        return Simulator(*args, time_scale=time_scale, tick_hz=time_scale / TICK_SIM_S, **options)
-
-    monkeypatch.setattr(example, "Simulator", simulator)
+    monkeypatch.setattr(example, "Simulator", ticking_simulator)
     return example
 
 

@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 import tmmaster
+from sim_speeds import QUICK
 from tmmaster import Pose
 from tmmaster.pickplace import ARTICLE_PICK, ARTICLE_PLACE
 from tmmaster.pickplace.__main__ import (
@@ -60,11 +61,9 @@ ack_s = 0.5
 motion_margin_s = 0.5
 """
 
-#: For the runs whose subject is the outcome (the moves sent, where the part ends up, the
-#: exit code), not a wall-clock delay nor the request count a fault is timed by: 100x
-#: with a 250 Hz tick, so each tick still advances 0.4 simulated seconds, as the
-#: suite's 40x at 100 Hz does, and a cycle takes about half the wall time.
-QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 250.0}
+# QUICK (sim_speeds) is for the runs whose subject is the outcome (the moves sent, where
+# the part ends up, the exit code), not a wall-clock delay nor the request count a
+# fault is timed by.
 
 #: The fixed motion timeout the stall tests wait out (wall seconds). Every move that is
 #: not stalled must end within it: at QUICK the longest, the retreat's 10 % PTP home

@@ -8,11 +8,11 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 import tmmaster
+from sim_speeds import QUICK
 from tmmaster import ConfigError, Pose, Robot
 from tmmaster.pickplace import (
     ARTICLE_PICK,
@@ -48,10 +48,8 @@ HOME = tmmaster.DEFAULT_HOME  # the article's HOME is out of a TM5's reach
 PLACED = Pose(PLACE.x, PLACE.y, PICK.z, PLACE.rx, PLACE.ry, PLACE.rz)
 TARGET_BLOCK = 0x0200
 
-#: For the runs here, whose subject is the runner's outcome, not a wall-clock delay: 100x
-#: with a 250 Hz tick (each tick still 0.4 simulated seconds, as the suite's 40x at
-#: 100 Hz), so a move ends by the master's first poll instead of a stretched later one.
-QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 250.0}
+# The runs here are checked for the runner's outcome, not a wall-clock delay: their
+# simulators run at QUICK (sim_speeds).
 
 SimFactory = Callable[..., Simulator]
 
