@@ -7,6 +7,7 @@ single fields; the result is validated as a whole, exactly like a built-in.
 
 from __future__ import annotations
 
+import functools
 import tomllib
 from collections.abc import Mapping
 from importlib import resources
@@ -34,14 +35,20 @@ DEFAULT_PROFILE = "tmflow"
 
 def builtin_profile_names() -> list[str]:
     """Names of the profiles shipped with tmmaster, sorted."""
+    return list(_builtin_names())
+
+
+@functools.cache
+def _builtin_names() -> tuple[str, ...]:
+    # The installed package's files do not change while it runs: listed once.
     folder = resources.files("tmmaster").joinpath("profiles")
-    return sorted(
-        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
+    return tuple(
+        sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
     )
 
 
 def _builtin_data(name: str) -> dict[str, Any]:
-    if name not in builtin_profile_names():
+    if name not in _builtin_names():
         known = ", ".join(builtin_profile_names())
         raise RegisterMapError(f"unknown profile {name!r} (built-in profiles: {known})")
     text = (
@@ -88,7 +95,7 @@ def load_profile(name_or_path: str | Path) -> Profile:
     """A built-in profile by name, or a profile from a TOML file."""
     path = Path(name_or_path)
     if isinstance(name_or_path, str) and path.suffix != ".toml":
-        return profile_from_data(_builtin_data(name_or_path), source=f"profile {name_or_path}")
+        return _builtin_profile(name_or_path)
     try:
         data = tomllib.loads(path.read_text("utf-8"))
     except (OSError, tomllib.TOMLDecodeError) as exc:
@@ -99,6 +106,14 @@ def load_profile(name_or_path: str | Path) -> Profile:
             f" at offset {exc.start}"
         ) from exc
     return profile_from_data(data, source=str(path))
+
+
+@functools.cache
+def _builtin_profile(name: str) -> Profile:
+    # Validated once per name: a built-in profile is immutable data (frozen models) that
+    # every Robot, Simulator and gripper of a process may share. An unknown name raises
+    # and is not cached.
+    return profile_from_data(_builtin_data(name), source=f"profile {name}")
 
 
 def robot_profile(name_or_path: str | Path | RobotProfile) -> RobotProfile:
