@@ -29,6 +29,11 @@ B = Pose(300, -200, 180, 180, 0, 90)
 C = Pose(250, 0, 160, 180, 0, 90)
 COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
 REQUEST_TIMEOUT_S = 0.15
+#: The suite's 40x at 100 Hz (conftest.SUITE_TIME_SCALE), for the tests whose faults are the
+#: simulator's own (in simulated seconds, scaled here to keep their wall-clock timing) and
+#: whose operator waits count the simulator's ticks: each tick is 0.4 simulated s at both
+#: speeds, so the same ticks take half the wall time.
+FAST = {"time_scale": 40.0, "tick_hz": 100.0}
 
 
 @pytest.fixture
@@ -83,11 +88,21 @@ def attempt(robot: Robot, target: Pose, issued: list[Issued], **kw: Any) -> str:
     return command.outcome
 
 
+def let_run(sim: Simulator, ticks: int) -> None:
+    """Wait until the simulator has run ``ticks`` more control ticks (0.4 simulated s each).
+
+    Counted on the simulator's own clock, so a simulator slowed by load is never looked
+    at too early; a pending command is taken at the next tick.
+    """
+    start = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
+
+
 def operator_resets(sim: Simulator) -> None:
     """Reset the error and press Play, then give stale commands time to run (if any)."""
     sim.clear_error()
     sim.press_play()
-    time.sleep(0.4)  # 8 simulated seconds
+    let_run(sim, 20)  # 8 simulated seconds
 
 
 # -- 8.1: a late command write runs twice (article) --------------------------------------
@@ -154,7 +169,8 @@ def test_8_1_tmflow_a_frame_held_for_any_time_never_runs_after_the_master_gave_u
 def test_8_2_estop_before_the_acknowledgement_leaves_nothing_armed(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=5"])
+    # The ack would come 10 simulated s = 0.25 s wall after the write, long after the e-stop.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=10"], **FAST)
     robot = robots(sim.port, profile)
     issued: list[Issued] = []
     threading.Timer(0.05, sim.press_estop).start()
@@ -175,8 +191,9 @@ def test_8_2_a_master_that_died_leaves_nothing_the_robot_runs_after_a_reset(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
     # The master wrote its command and vanished (no withdraw); then an e-stop, a reset
-    # and Play. The robot side discards the stale command.
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=5"])
+    # and Play. The robot side discards the stale command. The ack would come 10 simulated
+    # s = 0.25 s wall after the write: the e-stop comes first.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=10"], **FAST)
     with Robot("127.0.0.1", sim.port, profile=profile, gripper=None) as robot:
         robot.wait_until_ready(timeout_s=5)
         robot.start_move(A, speed=50)
@@ -190,7 +207,8 @@ def test_8_2_a_master_that_died_leaves_nothing_the_robot_runs_after_a_reset(
 def test_8_2_a_stop_request_while_a_tmflow_command_is_pending_withdraws_it(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
-    sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=3"])
+    # The ack would come 6 simulated s = 0.15 s wall after the write, 0.1 s after the stop.
+    sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=6"], **FAST)
     robot = robots(sim.port, "tmflow")
     issued: list[Issued] = []
     threading.Timer(0.05, robot.interrupt).start()
@@ -198,7 +216,7 @@ def test_8_2_a_stop_request_while_a_tmflow_command_is_pending_withdraws_it(
     assert robot.last_motion is not None
     assert robot.last_motion.withdrawn is True
     robot.clear_stop_request()
-    time.sleep(0.4)  # the late acknowledgement would have come by now
+    let_run(sim, 20)  # 8 simulated s: the late acknowledgement would have come by now
     sim.press_estop()
     operator_resets(sim)
     assert sim.motion_log() == ()
@@ -209,7 +227,9 @@ def test_8_2_a_stop_request_while_a_tmflow_command_is_pending_withdraws_it(
 def test_8_2_a_stop_during_the_runners_preparation_is_an_interruption(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=5"])
+    # Every command acknowledged 10 simulated s = 0.25 s wall late (tmflow's gripper_open
+    # too); the article gripper settles for 0.5 s: the stop at 0.1 s comes in preparation.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=10"], **FAST)
     with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.01) as robot:
         runner = Runner(robot)
         sequence = TaskSequence("one-move", prepare=lambda ctx: ctx.open_gripper())
