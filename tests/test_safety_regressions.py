@@ -156,8 +156,16 @@ def test_8_1_tmflow_a_frame_held_for_any_time_never_runs_after_the_master_gave_u
         # Held past the timeout, the resend (same sequence number) and the withdraw.
         proxy.add(Rule("hold", function_code=16, address=9000, delay_s=1.5))
         proxy.add(Rule("drop_request", function_code=16, address=9000, nth=1))
-        attempt(robot, A, issued)
-        time.sleep(1.6)  # the held frame lands now
+        attempt(robot, A, issued)  # gives up and withdraws after ~0.35 s
+        # The held frame lands 1.5 s after it was sent. The dropped resend never reaches
+        # the robot and the withdraw is written at 9014, so the first command write the
+        # robot sees at 9000 is the held frame; then 5 ticks (2 simulated s) for the
+        # program to take it, had its number not been used up.
+        sim.wait_for(
+            lambda: any(r.function_code == 16 and r.address == 9000 for r in sim.request_log),
+            timeout=5.0,
+        )
+        let_run(sim, 5)
         assert attempt(robot, B, issued) == "done"
     check(issued, sim.motion_log())
 
