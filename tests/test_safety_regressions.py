@@ -136,7 +136,12 @@ def test_8_1_a_write_later_than_the_in_flight_window_is_reported_not_assumed(
     sim = tm_simulator_factory("article")
     issued: list[Issued] = []
     with FaultProxy(sim.port) as proxy:
-        robot = robots(proxy.port, "article")
+        # The write never lands, so nothing races the in-flight window: 0.25 s of it.
+        robot = robots(
+            proxy.port,
+            "article",
+            timeouts=TimeoutPolicy(ack_timeout_s=0.5, in_flight_s=0.25, motion_margin_s=1.0),
+        )
         proxy.add(Rule("drop_request", function_code=16, address=0x0200))
         assert attempt(robot, A, issued) == "CommandStateUnknownError"
         assert robot.last_motion is not None
