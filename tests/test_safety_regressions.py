@@ -286,7 +286,7 @@ def test_8_4_a_stop_request_ends_the_ready_wait_without_a_busy_loop(
     sim = tm_simulator_factory(profile, init_time_s=1000.0)  # initialising for good
     with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.05) as robot:
         sim.clear_request_log()
-        timer = threading.Timer(0.2, robot.interrupt)
+        timer = threading.Timer(0.1, robot.interrupt)  # two polls into the wait
         timer.start()
         started = time.monotonic()
         with pytest.raises(tmmaster.StopRequestedError):
