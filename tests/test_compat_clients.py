@@ -114,7 +114,11 @@ def test_a_public_style_2fg7_client_opens_moves_and_reads_status(
 def test_the_2fg7_clients_force_reads_negative_on_a_part(tm_simulator_factory: SimFactory) -> None:
     sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
     assert sim.gripper_port is not None
-    with tmmaster.connect("127.0.0.1", port=sim.port, profile="article") as robot:
+    # Polled every 10 ms (the suite's pace; the default 50 ms is stretched mid-move): the
+    # move only brings the fingers around the 30 mm part for the client under test.
+    with tmmaster.connect(
+        "127.0.0.1", port=sim.port, profile="article", poll_interval_s=0.01
+    ) as robot:
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(DEFAULT_PART_POSE, speed=100)  # fingers around the 30 mm part
     gripper = TwoFG7Client("127.0.0.1", sim.gripper_port)
