@@ -101,10 +101,10 @@ def memory_simulator_factory(
 
 #: xdist workers for a run of several test files (``-n auto`` in pyproject's addopts). Most
 #: tests wait on the wall clock (simulated moves, timeouts), which workers overlap: the
-#: suite waits about 125 s for 40 s of CPU. A worker costs about 1 s of CPU to start now
-#: that the test modules are rewritten once (above). On two cores six took 27-28 s,
-#: eight 25-27 s, four 37 s (docs/architecture.md); six keeps the load, and so the safety
-#: tests' timing margins, further from where they were seen to fail (load 8 and more).
+#: suite waits about 88 s for 31-33 s of CPU. A worker costs about 1 s of CPU to start now
+#: that the test modules are rewritten once (above). On two cores (24 Nov 2026) six took
+#: 19.7-21.3 s, five 20.6-21.0 s, four 23.5 s (docs/architecture.md); more than six only
+#: adds CPU, and load, against the safety tests' timing margins.
 SUITE_WORKERS = 6
 
 
