@@ -143,7 +143,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
-    """``-n auto``: four workers for the suite or several files, one process for one file."""
+    """``-n auto``: ``SUITE_WORKERS`` for the suite or several files, one process for one file."""
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
         return None  # xdist's own hook reads it
     if config.args_source is pytest.Config.ArgsSource.TESTPATHS:
