@@ -16,6 +16,11 @@ evenly over the period). Per design of the master:
   per robot reading the same 22-word status block. This is raw pymodbus (no decoding,
   none of tmmaster's logic): the ceiling a single event loop could reach, not a way to
   drive a robot safely.
+* ``selectors``: ONE thread, one non-blocking socket per robot, the FC3 request and
+  answer framed with ``struct`` (no pymodbus, no tmmaster), every socket watched by one
+  ``selectors`` loop: the least CPU a poll can cost from Python, i.e. what a shared
+  poll scheduler over non-blocking links could reach at best. A poll whose slot comes
+  while the robot's last answer is still awaited is counted as missed.
 
 Figures per (design, N), each round ``--seconds`` long:
 
@@ -48,6 +53,8 @@ import heapq
 import json
 import math
 import os
+import selectors
+import socket
 import statistics
 import struct
 import subprocess
@@ -64,7 +71,7 @@ from tmmaster import Robot
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
-DESIGNS = ("threads", "pool", "scheduler", "asyncio")
+DESIGNS = ("threads", "pool", "scheduler", "asyncio", "selectors")
 #: Threads of the ``pool`` design.
 POOL_THREADS = 8
 
@@ -381,6 +388,80 @@ def run_asyncio(
     return asyncio.run(main())
 
 
+def run_selectors(
+    ports: list[int], period: float, seconds: float, sim_cpu: Callable[[], float]
+) -> tuple[Samples, float, float, float]:
+    """One thread, one non-blocking socket per robot, one ``selectors`` loop.
+
+    Returns (samples, master CPU s, wall s, simulators' CPU s), all over the polling only.
+    """
+    selector = selectors.DefaultSelector()
+    links: list[socket.socket] = []
+    for i, port in enumerate(ports):
+        link = socket.create_connection(("127.0.0.1", port), timeout=5)
+        link.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        link.setblocking(False)
+        selector.register(link, selectors.EVENT_READ, i)
+        links.append(link)
+    n = len(links)
+    answer_size = 9 + 2 * STATUS_COUNT  # MBAP (7) + function code + byte count + words
+    words_format = f">{STATUS_COUNT}H"
+    sent_at: list[float | None] = [None] * n
+    tids = [0] * n
+    buffers = [b""] * n
+    samples = Samples()
+    start = time.monotonic() + 0.2
+    end = start + seconds - period / 2  # exactly rate x seconds slots per robot
+    heap = [(start + period * i / n, i) for i in range(n)]
+    heapq.heapify(heap)
+    sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
+    try:
+        while True:
+            now = time.monotonic()
+            while heap and heap[0][0] <= now:
+                due, i = heapq.heappop(heap)
+                if due >= end:
+                    continue
+                if sent_at[i] is not None:
+                    samples.missed += 1  # the last answer is still awaited
+                else:
+                    samples.lateness_s.append(now - due)
+                    tids[i] = (tids[i] + 1) & 0xFFFF
+                    links[i].send(
+                        struct.pack(">HHHBBHH", tids[i], 0, 6, 1, 3, STATUS_ADDRESS, STATUS_COUNT)
+                    )
+                    sent_at[i] = now
+                heapq.heappush(heap, (next_due(due, period, now, samples), i))
+            waiting = [t for t in sent_at if t is not None]
+            if not heap and not waiting:
+                break
+            if waiting and now - min(waiting) > 1.0:
+                samples.errors += sum(1 for t in waiting if now - t > 1.0)
+                samples.first_error = samples.first_error or "no answer within 1 s"
+                sent_at = [None if t is not None and now - t > 1.0 else t for t in sent_at]
+            timeout = max(0.0, heap[0][0] - now) if heap else 0.05
+            for key, _events in selector.select(timeout):
+                i = key.data
+                buffers[i] += links[i].recv(4096)
+                while len(buffers[i]) >= answer_size:
+                    frame, buffers[i] = buffers[i][:answer_size], buffers[i][answer_size:]
+                    tid, _proto, _length, _unit, fc, _count = struct.unpack(">HHHBBB", frame[:9])
+                    sent = sent_at[i]
+                    if fc != 3 or tid != tids[i] or sent is None:
+                        samples.errors += 1
+                        samples.first_error = samples.first_error or f"bad answer {frame!r}"
+                        continue
+                    struct.unpack(words_format, frame[9:])  # the status words, decoded
+                    samples.response_s.append(time.monotonic() - sent)
+                    sent_at[i] = None
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        return samples, cpu, wall, sim_cpu() - sim0
+    finally:
+        selector.close()
+        for link in links:
+            link.close()
+
+
 # -- measuring -------------------------------------------------------------------------
 
 
@@ -414,8 +495,9 @@ def pct(values: list[float], q: float) -> float:
 def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, round_: int) -> Row:
     """One round of one design against the running simulators."""
     period = 1.0 / rate
-    if design == "asyncio":
-        samples, cpu, wall, sim_cpu = run_asyncio(farm.ports, period, seconds, farm.cpu)
+    if design in ("asyncio", "selectors"):
+        run_loop = run_asyncio if design == "asyncio" else run_selectors
+        samples, cpu, wall, sim_cpu = run_loop(farm.ports, period, seconds, farm.cpu)
     else:
         robots = [
             Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
