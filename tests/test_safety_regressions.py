@@ -18,6 +18,7 @@ import pytest
 import tmmaster
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
+from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Pose, RetryPolicy, Robot, TimeoutPolicy
 from tmmaster.pickplace import Runner, TaskSequence
 from tmmaster.sim import Simulator
@@ -29,11 +30,11 @@ B = Pose(300, -200, 180, 180, 0, 90)
 C = Pose(250, 0, 160, 180, 0, 90)
 COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
 REQUEST_TIMEOUT_S = 0.15
-#: The suite's 40x at 100 Hz (conftest.SUITE_TIME_SCALE), for the tests whose faults are the
+#: The suite's 40x at 100 Hz (sim_speeds.SUITE_TIME_SCALE), for the tests whose faults are the
 #: simulator's own (in simulated seconds, scaled here to keep their wall-clock timing) and
 #: whose operator waits count the simulator's ticks: each tick is 0.4 simulated s at both
 #: speeds, so the same ticks take half the wall time.
-FAST = {"time_scale": 40.0, "tick_hz": 100.0}
+FAST = {"time_scale": SUITE_TIME_SCALE, "tick_hz": SUITE_TICK_HZ}
 
 
 @pytest.fixture
