@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from sim_speeds import QUICK
 from tmmaster.pickplace import PickPlaceConfig
 from tmmaster.pickplace import __main__ as cli
 from tmmaster.sim import Simulator
@@ -165,7 +166,7 @@ def test_after_the_command_is_built_only_output_options_are_read(
     elif mode == "robot":
         # 100x with a 250 Hz tick (0.4 simulated s a tick, as the suite's 40x at 100 Hz):
         # the subject is which options are read, not the pace of the run.
-        sim = memory_simulator_factory("article", time_scale=100, tick_hz=250)
+        sim = memory_simulator_factory("article", **QUICK)
         argv += ["--host", sim.url, "--poll-interval", "0.03"]
     else:
         argv += ["--dry-run", "--cycles", "3"]

@@ -154,10 +154,10 @@ def test_invalid_moves_are_refused_before_any_request(
 def test_late_acknowledgement_is_waited_for(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    # 12 simulated s = 0.3 wall s (at 40x) before the robot picks the command up: far past
+    # 12 simulated s = 0.3 wall s (the suite's 40x) before the robot picks the command up: far past
     # the master's first polls (~40 ms), so returning early shows. The check leaves 0.1 s
     # for a simulator that lagged and catches up (up to 10 ticks at once).
-    sim = tm_simulator_factory(profile, time_scale=40, tick_hz=100, faults=["late_ack:delay_s=12"])
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=12"])
     robot = robots(sim)
     started = time.monotonic()
     motion = robot.move_to(APPROACH, speed=30)
@@ -174,7 +174,7 @@ def test_unacknowledged_command_times_out_and_is_withdrawn(
 ) -> None:
     # The ack would come 14 simulated s = 0.35 wall s after the robot sees the command:
     # 0.2 s after the master's 0.15 s ack timeout, room for a master slowed by load.
-    sim = tm_simulator_factory(profile, time_scale=40, tick_hz=100, faults=["late_ack:delay_s=14"])
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=14"])
     robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.15))
     home = sim.tcp_pose()
     ticks = sim.ticks

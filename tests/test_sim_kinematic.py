@@ -17,6 +17,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 import tmmaster
+from sim_speeds import QUICK
 from test_sim_controller import (
     DT,
     article,
@@ -432,7 +433,7 @@ def test_a_master_with_the_same_tool_drives_the_simulator_through_the_cycle(
 ) -> None:
     # 100x with a 250 Hz tick (0.4 simulated s a tick, as the suite's 40x at 100 Hz): the
     # subject is where the tool puts the TCP, and each move now ends by the first poll.
-    sim = memory_simulator_factory(profile, tool=TOOL, time_scale=100, tick_hz=250)
+    sim = memory_simulator_factory(profile, tool=TOOL, **QUICK)
     with tmmaster.connect(sim.url, profile=profile, tool=TOOL) as robot:
         robot.wait_until_ready()
         for target, motion in CYCLE:
