@@ -61,6 +61,7 @@ if _TYPE_CHECKING:
         SequenceGripper,
     )
     from ._logging import configure_logging
+    from ._monitor import MonitoredStatus, StatusMonitor
     from ._poller import Poller, PollPolicy
     from ._pose import DEFAULT_HOME, MotionType, Pose
     from ._profiles import (
@@ -120,6 +121,7 @@ _EXPORTS = {
     "IllegalValueError": "._exceptions",
     "ModbusExceptionError": "._exceptions",
     "ModbusTransport": "._transport",
+    "MonitoredStatus": "._monitor",
     "JointSpec": "._robot_models",
     "Motion": "._robot",
     "MotionTimeoutError": "._exceptions",
@@ -146,6 +148,7 @@ _EXPORTS = {
     "RobotStatus": "._status",
     "Role": "._registers",
     "SequenceGripper": "._gripper",
+    "StatusMonitor": "._monitor",
     "StopRequestedError": "._exceptions",
     "TMMasterError": "._exceptions",
     "Table": "._registers",
@@ -208,6 +211,7 @@ __all__ = [
     "JointSpec",
     "ModbusExceptionError",
     "ModbusTransport",
+    "MonitoredStatus",
     "Motion",
     "MotionTimeoutError",
     "MotionType",
@@ -232,6 +236,7 @@ __all__ = [
     "RobotStatus",
     "Role",
     "SequenceGripper",
+    "StatusMonitor",
     "StopRequestedError",
     "TMMasterError",
     "Table",

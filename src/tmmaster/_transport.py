@@ -566,6 +566,36 @@ class BlockTransport(ABC):
             )
 
 
+#: What a pymodbus call may raise (sync or async client): :func:`pymodbus_error` maps it.
+PYMODBUS_FAILURES: tuple[type[Exception], ...] = (
+    ModbusException,
+    OSError,
+    ValueError,
+    IndexError,
+    struct.error,
+)
+
+
+def pymodbus_error(exc: Exception, *, name: str, what: str, timeout: float) -> TransportError:
+    """The :class:`TransportError` a pymodbus failure stands for (one of ``PYMODBUS_FAILURES``)."""
+    if isinstance(exc, ConnectionException):
+        return ConnectionLostError(f"{name}: connection lost during {what}")
+    if isinstance(exc, ModbusIOException):
+        return ResponseTimeoutError(f"{name}: no answer to {what} within {timeout:g} s")
+    if isinstance(exc, ModbusException):
+        return TransportError(f"{name}: {what} failed: {exc}")
+    if isinstance(exc, OSError):
+        return ConnectionLostError(f"{name}: connection lost during {what}")
+    return TransportError(f"{name}: malformed answer to {what}: {exc}")  # a malformed answer
+
+
+def refused_error(response: ModbusPDU, *, name: str, what: str) -> ModbusExceptionError:
+    """The typed error of a Modbus exception response (IllegalAddressError for code 2 ...)."""
+    code = int(getattr(response, "exception_code", 0))
+    error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
+    return error_class(f"{name}: device refused {what}", code=code)
+
+
 class ModbusTransport(BlockTransport):
     """Reads and writes one Modbus TCP device, with counting, error mapping and retries."""
 
@@ -625,22 +655,10 @@ class ModbusTransport(BlockTransport):
         """One pymodbus call; every pymodbus failure mapped to a TransportError."""
         try:
             response = self._calls[function_code](address, count, values)
-        except ConnectionException as exc:
-            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
-        except ModbusIOException as exc:
-            raise ResponseTimeoutError(
-                f"{self.name}: no answer to {what} within {self.timeout:g} s"
-            ) from exc
-        except ModbusException as exc:
-            raise TransportError(f"{self.name}: {what} failed: {exc}") from exc
-        except OSError as exc:
-            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
-        except (ValueError, IndexError, struct.error) as exc:  # a malformed answer
-            raise TransportError(f"{self.name}: malformed answer to {what}: {exc}") from exc
+        except PYMODBUS_FAILURES as exc:
+            raise pymodbus_error(exc, name=self.name, what=what, timeout=self.timeout) from exc
         if isinstance(response, ExceptionResponse) or response.isError():
-            code = int(getattr(response, "exception_code", 0))
-            error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
-            raise error_class(f"{self.name}: device refused {what}", code=code)
+            raise refused_error(response, name=self.name, what=what)
         if values is not None:
             return []
         if function_code in (1, 2):

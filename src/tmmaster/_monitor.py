@@ -1,0 +1,431 @@
+"""A read-only status monitor for many robots, polled from one thread.
+
+:class:`StatusMonitor` runs ONE asyncio event loop in ONE background thread, with one
+pymodbus ``AsyncModbusTcpClient`` per robot (``retries=0``, our own timeout). Each robot
+is polled on its own drift-free schedule at ``rate_hz``, the robots' phases spread
+evenly over the period; a slot that comes while the robot's previous read is still
+outstanding is skipped and counted, never sent late in a burst.
+
+It never writes a register: it is for watching fleets (dashboards, supervision) beyond
+what one thread per :class:`~tmmaster.Robot` can poll. Commanding stays with ``Robot``
+(one per thread), whose safety rules are not copied here.
+
+Decoding is the library's own: the channel of the robot's profile names the status
+fields (:attr:`CommandChannel.status_fields`), :class:`ReadPlan` groups and decodes them
+exactly as ``Robot.status()`` does, and :meth:`CommandChannel.status_from` builds the
+same :class:`RobotStatus`. pymodbus failures are mapped to tmmaster's
+:class:`TransportError` subclasses here (:func:`pymodbus_error`, shared with the sync
+transport) and stored, never raised.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Self
+
+from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+
+from ._channels import CommandChannel, channel_for
+from ._codec import Value
+from ._exceptions import (
+    ConfigError,
+    ConnectError,
+    ModbusExceptionError,
+    ResponseTimeoutError,
+    TMMasterError,
+    TransportError,
+)
+from ._logging import get_logger
+from ._profiles import DEFAULT_PROFILE, robot_profile
+from ._registers import RobotProfile
+from ._status import RobotStatus
+from ._transport import (
+    PYMODBUS_FAILURES,
+    READ_FUNCTION,
+    BlockTransport,
+    ReadPlan,
+    pymodbus_error,
+    refused_error,
+)
+
+_log = get_logger("tmmaster.monitor")
+
+#: How long close() waits for the loop thread (it stops within a loop turn normally).
+_JOIN_TIMEOUT_S = 10.0
+
+
+@dataclass(frozen=True)
+class MonitoredStatus:
+    """What a :class:`StatusMonitor` last saw of one robot."""
+
+    #: The last status read successfully (None before the first).
+    status: RobotStatus | None
+    #: ``time.monotonic()`` when that status's poll finished (None before the first).
+    read_at: float | None
+    #: The last failure (a :class:`TransportError` subclass), or None once a poll succeeds.
+    error: TMMasterError | None
+    #: Polls answered and decoded.
+    polls: int
+    #: Slots skipped because the robot's previous read (or connect) was still outstanding.
+    skipped: int
+    #: Polls (or connects) that failed.
+    failures: int
+
+
+_NOTHING_YET = MonitoredStatus(None, None, None, 0, 0, 0)
+
+
+class _UnusedLink(BlockTransport):
+    """The transport a monitor's channel is built with: never used (the monitor reads async).
+
+    A channel only needs it to exist; the monitor calls ``status_fields`` and
+    ``status_from``, which read nothing. Any request through it is a bug.
+    """
+
+    def _link_open(self) -> bool:
+        return False
+
+    def _open_link(self) -> None:
+        raise ConfigError("a StatusMonitor's channel never opens a link")
+
+    def _close_link(self) -> None:
+        return None
+
+    def _exchange(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        raise ConfigError(f"a StatusMonitor never sends requests through its channel ({what})")
+
+
+_Reader = Callable[[AsyncModbusTcpClient, int, int, int], Awaitable[ModbusPDU]]
+
+#: The async client's read call of each read function code.
+_READERS: dict[int, _Reader] = {
+    1: lambda c, a, n, d: c.read_coils(a, count=n, device_id=d),
+    2: lambda c, a, n, d: c.read_discrete_inputs(a, count=n, device_id=d),
+    3: lambda c, a, n, d: c.read_holding_registers(a, count=n, device_id=d),
+    4: lambda c, a, n, d: c.read_input_registers(a, count=n, device_id=d),
+}
+
+
+class _Watched:
+    """One robot of a monitor: its link, plan and counters (touched by the loop thread only)."""
+
+    def __init__(
+        self, name: str, host: str, port: int, profile: RobotProfile, timeout_s: float
+    ) -> None:
+        self.name = name
+        self.host = host
+        self.port = port
+        self.profile = profile
+        self.timeout_s = timeout_s
+        self.channel: CommandChannel = channel_for(
+            profile,
+            _UnusedLink(
+                host, port, device_id=profile.device_id, timeout=timeout_s, retry=None, name=name
+            ),
+        )
+        self.plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
+        self.requests = tuple(
+            (
+                _READERS[READ_FUNCTION[block.table]],
+                block.address,
+                block.count,
+                block.table.is_bit,
+                f"read {block.table.value} {block.address}+{block.count}",
+                slots,
+            )
+            for block, slots in zip(self.plan.blocks, self.plan.slots, strict=True)
+        )
+        self.client: AsyncModbusTcpClient | None = None
+        self.status: RobotStatus | None = None
+        self.read_at: float | None = None
+        self.error: TMMasterError | None = None
+        self.polls = 0
+        self.skipped = 0
+        self.failures = 0
+        #: What readers see: replaced (one reference assignment) after every change.
+        self.published = _NOTHING_YET
+        self._log = _log.bind(robot=name, host=host, port=port)
+
+    def publish(self) -> None:
+        self.published = MonitoredStatus(
+            self.status, self.read_at, self.error, self.polls, self.skipped, self.failures
+        )
+
+    async def connect(self) -> None:
+        """Open the link (a fresh client); on failure record a :class:`ConnectError`."""
+        client = AsyncModbusTcpClient(
+            self.host,
+            port=self.port,
+            timeout=self.timeout_s,
+            retries=0,
+            reconnect_delay=0,  # no background reconnects: the next slot reconnects
+            name=self.name,
+        )
+        self.client = client
+        connected = False
+        with contextlib.suppress(TimeoutError, *PYMODBUS_FAILURES):
+            async with asyncio.timeout(self.timeout_s):
+                connected = await client.connect()
+        if not connected:
+            self.drop()
+            self.fail(ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}"))
+        else:
+            self._log.debug("monitor.connected")
+
+    def drop(self) -> None:
+        """Close the link: after a failure the stream may still carry a late answer."""
+        client, self.client = self.client, None
+        if client is not None:
+            client.close()
+
+    def fail(self, error: TransportError) -> None:
+        if self.error is None:
+            self._log.warning("monitor.poll_failed", error=str(error))
+        else:
+            self._log.debug("monitor.poll_failed", error=str(error))
+        self.error = error
+        self.failures += 1
+        self.publish()
+
+    async def poll(self) -> None:
+        """Read the status blocks once, decode them and publish the status or the failure."""
+        if self.client is None or not self.client.connected:
+            self.drop()
+            await self.connect()
+            if self.client is None:
+                return
+        client = self.client
+        device_id = self.profile.device_id
+        values: dict[str, Value] = {}
+        try:
+            for read, address, count, is_bit, what, slots in self.requests:
+                try:
+                    # asyncio.timeout, not wait_for: no task per request, and on 3.11
+                    # wait_for can swallow a cancellation that meets an answer.
+                    async with asyncio.timeout(self.timeout_s):
+                        response = await read(client, address, count, device_id)
+                except TimeoutError as exc:
+                    raise ResponseTimeoutError(
+                        f"{self.name}: no answer to {what} within {self.timeout_s:g} s"
+                    ) from exc
+                except PYMODBUS_FAILURES as exc:
+                    raise pymodbus_error(
+                        exc, name=self.name, what=what, timeout=self.timeout_s
+                    ) from exc
+                if isinstance(response, ExceptionResponse) or response.isError():
+                    raise refused_error(response, name=self.name, what=what)
+                words = [int(b) for b in response.bits[:count]] if is_bit else response.registers
+                if len(words) < count:
+                    raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+                for field_name, offset, decode in slots:
+                    values[field_name] = decode(words, offset)
+            status = self.channel.status_from(values)
+        except ModbusExceptionError as exc:
+            self.fail(exc)  # the device answered: the link is fine
+            return
+        except TransportError as exc:
+            self.drop()
+            self.fail(exc)
+            return
+        if self.error is not None:
+            self._log.debug("monitor.poll_recovered", failures=self.failures)
+        self.status = status
+        self.read_at = status.timestamp
+        self.error = None
+        self.polls += 1
+        self.publish()
+
+
+def _positive(name: str, value: float) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not math.isfinite(value)
+        or value <= 0
+    ):
+        raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+class StatusMonitor:
+    """Watch the status of many robots from one thread: read-only, for dashboards and supervision.
+
+    One background thread runs one asyncio event loop with one Modbus TCP link per robot;
+    every robot is polled at ``rate_hz`` on its own drift-free schedule (phases spread
+    over the period; a slot that comes while the last read is still outstanding is
+    skipped and counted). Each poll reads and decodes the profile's status registers
+    exactly as :meth:`Robot.status` does and yields the same :class:`RobotStatus`.
+
+    It NEVER writes a register. Commanding stays with :class:`Robot`, one per thread,
+    whose safety rules (command checks, withdraws, bounded waits) are not copied here: use
+    a monitor to watch more robots than one thread each can poll, not to drive them.
+    Failures are never raised: each robot's last error (a :class:`TransportError`
+    subclass) is kept in :meth:`latest`, and the link is retried on the next slot.
+    """
+
+    def __init__(self, *, rate_hz: float = 20.0, timeout_s: float = 1.0) -> None:
+        self.rate_hz = _positive("rate_hz", rate_hz)
+        self.timeout_s = _positive("timeout_s", timeout_s)
+        self._robots: dict[str, _Watched] = {}
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._stopping = False
+        self._closed = False
+        self._crash: BaseException | None = None
+        #: Set to a list before start() to record (lateness s, response s) of every
+        #: answered poll (benchmarks); None records nothing.
+        self._timings: list[tuple[float, float]] | None = None
+
+    # -- configuration ----------------------------------------------------------------
+
+    def add(
+        self,
+        name: str,
+        host: str,
+        port: int = 502,
+        *,
+        profile: str | Path | RobotProfile = DEFAULT_PROFILE,
+    ) -> None:
+        """Add a robot to watch, before :meth:`start` (ConfigError naming a bad argument)."""
+        if self._thread is not None or self._closed:
+            raise ConfigError("add robots before StatusMonitor.start()")
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"name must be a non-empty string, got {name!r}")
+        if name in self._robots:
+            raise ConfigError(f"name {name!r} is already watched by this StatusMonitor")
+        if not isinstance(host, str) or not host:
+            raise ConfigError(f"host must be a non-empty string, got {host!r}")
+        if "://" in host:
+            raise ConfigError(
+                f"host {host!r}: a StatusMonitor polls over Modbus TCP (no in-process endpoints)"
+            )
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+            raise ConfigError(f"port must be 1..65535, got {port!r}")
+        self._robots[name] = _Watched(name, host, port, robot_profile(profile), self.timeout_s)
+
+    # -- reading ----------------------------------------------------------------------
+
+    def latest(self, name: str) -> MonitoredStatus:
+        """What was last seen of robot ``name`` (ConfigError listing the names when unknown)."""
+        robot = self._robots.get(name)
+        if robot is None:
+            known = ", ".join(repr(n) for n in self._robots) or "none"
+            raise ConfigError(f"no robot named {name!r} in this StatusMonitor (known: {known})")
+        return robot.published
+
+    def snapshot(self) -> dict[str, MonitoredStatus]:
+        """What was last seen of every robot, by name."""
+        return {name: robot.published for name, robot in self._robots.items()}
+
+    # -- lifecycle --------------------------------------------------------------------
+
+    def start(self) -> Self:
+        """Start the loop thread; return once every link tried to connect (failures are kept)."""
+        if self._closed:
+            raise ConfigError("a closed StatusMonitor cannot be restarted; make a new one")
+        if self._thread is not None:
+            return self
+        self._thread = threading.Thread(target=self._run, name="tmmaster-monitor", daemon=True)
+        self._thread.start()
+        self._started.wait()
+        if self._crash is not None:
+            crash = self._crash
+            self.close()
+            raise TransportError(f"the StatusMonitor's loop failed: {crash!r}") from crash
+        return self
+
+    def close(self) -> None:
+        """Stop the loop, close every link and join the thread; safe to call more than once."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stopping = True
+        loop, wake, thread = self._loop, self._wake, self._thread
+        if loop is not None and wake is not None:
+            with contextlib.suppress(RuntimeError):  # the loop already ended
+                loop.call_soon_threadsafe(wake.set)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(_JOIN_TIMEOUT_S)
+            if thread.is_alive():
+                _log.warning("monitor.thread_still_running", timeout_s=_JOIN_TIMEOUT_S)
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- the loop thread --------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # a bug: reported by start(), never lost silently
+            self._crash = exc
+            _log.warning("monitor.loop_failed", error=repr(exc))
+        finally:
+            self._started.set()
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._wake = wake = asyncio.Event()
+        robots = list(self._robots.values())
+        tasks: list[asyncio.Task[None]] = []
+        try:
+            await asyncio.gather(*(robot.connect() for robot in robots))
+            self._started.set()
+            if not self._stopping:
+                origin = time.monotonic()
+                period = 1.0 / self.rate_hz
+                tasks = [
+                    asyncio.create_task(
+                        self._watch(robot, origin + period * i / len(robots), period),
+                        name=f"tmmaster-monitor-{robot.name}",
+                    )
+                    for i, robot in enumerate(robots)
+                ]
+                await wake.wait()
+        finally:
+            self._stopping = True
+            pending = set(tasks)
+            while pending:  # a cancellation that meets an answer may be lost: cancel again
+                for task in pending:
+                    task.cancel()
+                _done, pending = await asyncio.wait(pending, timeout=0.1)
+            for robot in robots:
+                robot.drop()
+            # Closing transports release their sockets on a later loop turn.
+            for _ in range(3):
+                await asyncio.sleep(0)
+
+    async def _watch(self, robot: _Watched, due: float, period: float) -> None:
+        """Poll one robot on its schedule until cancelled or stopping."""
+        timings = self._timings
+        while not self._stopping:
+            delay = due - time.monotonic()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            sent = time.monotonic()
+            await robot.poll()
+            now = time.monotonic()
+            if timings is not None and robot.read_at is not None and robot.read_at >= sent:
+                timings.append((sent - due, now - sent))
+            # The next slot after now: the ones that came while this poll was
+            # outstanding are skipped, not sent late in a burst.
+            passed = math.floor((now - due) / period)
+            if passed > 0:
+                robot.skipped += passed
+                robot.publish()
+            due += (max(passed, 0) + 1) * period
