@@ -16,6 +16,10 @@ evenly over the period). Per design of the master:
   per robot reading the same 22-word status block. This is raw pymodbus (no decoding,
   none of tmmaster's logic): the ceiling a single event loop could reach, not a way to
   drive a robot safely.
+* ``monitor``: :class:`tmmaster.StatusMonitor`, the library's read-only monitor: ONE
+  thread, one asyncio loop, one ``AsyncModbusTcpClient`` per robot, each poll decoded
+  into the same ``RobotStatus`` as ``Robot.status()`` (jitter and response from the
+  monitor's own schedule, through its private ``_timings`` record);
 * ``selectors``: ONE thread, one non-blocking socket per robot, the FC3 request and
   answer framed with ``struct`` (no pymodbus, no tmmaster), every socket watched by one
   ``selectors`` loop: the least CPU a poll can cost from Python, i.e. what a shared
@@ -67,11 +71,11 @@ from pathlib import Path
 
 from _machine import machine_line
 
-from tmmaster import Robot
+from tmmaster import Robot, StatusMonitor
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
-DESIGNS = ("threads", "pool", "scheduler", "asyncio", "selectors")
+DESIGNS = ("threads", "pool", "scheduler", "asyncio", "selectors", "monitor")
 #: Threads of the ``pool`` design.
 POOL_THREADS = 8
 
@@ -462,6 +466,40 @@ def run_selectors(
             link.close()
 
 
+def run_monitor(
+    ports: list[int], period: float, seconds: float, sim_cpu: Callable[[], float]
+) -> tuple[Samples, float, float, float]:
+    """One :class:`tmmaster.StatusMonitor` over every robot (one thread, one asyncio loop).
+
+    Returns (samples, master CPU s, wall s, simulators' CPU s), all over the polling only
+    (after ``start()``: the links are open and the schedules running).
+    """
+    monitor = StatusMonitor(rate_hz=1.0 / period, timeout_s=1.0)
+    for i, port in enumerate(ports):
+        monitor.add(f"robot{i}", "127.0.0.1", port, profile="article")
+    timings: list[tuple[float, float]] = []
+    monitor._timings = timings  # lateness and response of every answered poll
+    with monitor:
+        time.sleep(0.2)  # the first slots of every robot
+        before = monitor.snapshot()
+        del timings[:]
+        sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
+        time.sleep(seconds)
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        sims = sim_cpu() - sim0
+        taken = list(timings)
+        after = monitor.snapshot()
+    samples = Samples(
+        lateness_s=[late for late, _ in taken],
+        response_s=[response for _, response in taken],
+        missed=sum(after[k].skipped - before[k].skipped for k in after),
+        errors=sum(after[k].failures - before[k].failures for k in after),
+    )
+    failed = [s.error for s in after.values() if s.error is not None]
+    samples.first_error = repr(failed[0]) if failed else None
+    return samples, cpu, wall, sims
+
+
 # -- measuring -------------------------------------------------------------------------
 
 
@@ -495,8 +533,10 @@ def pct(values: list[float], q: float) -> float:
 def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, round_: int) -> Row:
     """One round of one design against the running simulators."""
     period = 1.0 / rate
-    if design in ("asyncio", "selectors"):
-        run_loop = run_asyncio if design == "asyncio" else run_selectors
+    if design in ("asyncio", "selectors", "monitor"):
+        run_loop = {"asyncio": run_asyncio, "selectors": run_selectors, "monitor": run_monitor}[
+            design
+        ]
         samples, cpu, wall, sim_cpu = run_loop(farm.ports, period, seconds, farm.cpu)
     else:
         robots = [
