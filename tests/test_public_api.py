@@ -141,6 +141,8 @@ def _bad_calls() -> list[tuple[str, Callable[[], object]]]:
             tmmaster.Pose(300, -200, 200, 180, 0, 90), motion="lin"  # type: ignore[arg-type]
         )),
         ("bad poll interval", lambda: tmmaster.Robot("127.0.0.1", poll_interval_s=0)),
+        ("bad monitor rate", lambda: tmmaster.StatusMonitor(rate_hz=0)),
+        ("unknown monitored robot", lambda: tmmaster.StatusMonitor().latest("r1")),
         ("value out of range", lambda: tmmaster.encode(article.field("target_x"), 400)),
     ]  # fmt: skip
 
