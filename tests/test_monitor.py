@@ -240,3 +240,18 @@ def test_a_refused_read_is_a_modbus_exception_error(tm_simulator_factory: SimFac
     assert seen.error.code == 2
     assert seen.status is None
     assert seen.polls == 0
+
+
+def test_a_robot_unreachable_at_start_is_picked_up_later(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    port = free_port()
+    monitor = StatusMonitor(rate_hz=RATE_HZ, timeout_s=0.2)
+    monitor.add("late", "127.0.0.1", port, profile="article")
+    with monitor:
+        assert isinstance(monitor.latest("late").error, ConnectError)
+        tm_simulator_factory("article", port=port)  # the robot comes up
+        seen = wait_for(monitor, "late", lambda s: s.polls >= 2)
+    assert seen.error is None
+    assert seen.status is not None
+    assert seen.failures >= 1
