@@ -39,9 +39,13 @@ def fast_example(example: ModuleType, monkeypatch: pytest.MonkeyPatch) -> Module
 
 def test_every_robot_drives_its_tour(tm_simulator_factory: Factory, example: ModuleType) -> None:
     sims = [tm_simulator_factory(**QUICK) for _ in range(4)]
-    reports = example.run([s.port for s in sims], moves=3)
+    reports = example.run([s.port for s in sims], moves=3, watch_hz=50)
     assert [r.error for r in reports] == [None] * 4
     assert [r.moves_done for r in reports] == [3] * 4
+    # One StatusMonitor watched the fleet while the threads drove it: every robot's link
+    # worked, and it polled (it starts polling before the robots even connect).
+    assert all(r.watched is not None and r.watched.failures == 0 for r in reports)
+    assert sum(r.watched.polls for r in reports if r.watched is not None) > 0
     for sim in sims:
         # The simulator's own record: exactly the three tour poses, in order, once each.
         targets = [m.target for m in sim.motion_log() if m.target is not None]
@@ -77,13 +81,23 @@ def test_main_on_its_own_simulators(
     assert "3 of 3 robots done" in capsys.readouterr().out
 
 
+def test_without_a_monitor_nothing_is_watched(
+    tm_simulator_factory: Factory, example: ModuleType
+) -> None:
+    sim = tm_simulator_factory(**QUICK)
+    (report,) = example.run([sim.port], moves=1, watch_hz=0)
+    assert report.moves_done == 1
+    assert report.watched is None
+
+
 def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType) -> None:
     sims = [tm_simulator_factory(**QUICK) for _ in range(2)]
     assert example.main(["--ports", *(str(s.port) for s in sims), "--moves", "1"]) == 0
 
 
 @pytest.mark.parametrize(
-    "argv", [["--sim", "2", "--ports", "5020"], ["--moves", "0"], ["--sim", "0"]]
+    "argv",
+    [["--sim", "2", "--ports", "5020"], ["--moves", "0"], ["--sim", "0"], ["--watch-hz", "-1"]],
 )
 def test_bad_arguments_exit_2(example: ModuleType, argv: list[str]) -> None:
     with pytest.raises(SystemExit) as info:
