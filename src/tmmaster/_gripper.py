@@ -20,7 +20,6 @@ error, and a stop request (``Robot.interrupt()``, Ctrl-C) ends it within one pol
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -29,6 +28,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 from ._channels import CommandKind
+from ._checks import require_positive
 from ._codec import Value
 from ._exceptions import (
     AcknowledgeTimeoutError,
@@ -202,14 +202,7 @@ def _timeout(timeout_s: float | None, default: float) -> float:
     """``timeout_s`` when given (a finite number > 0, else ConfigError), else ``default``."""
     if timeout_s is None:
         return default
-    if (
-        isinstance(timeout_s, bool)
-        or not isinstance(timeout_s, int | float)
-        or not math.isfinite(timeout_s)
-        or timeout_s <= 0
-    ):
-        raise ConfigError(f"timeout_s must be a finite number > 0, got {timeout_s!r}")
-    return float(timeout_s)
+    return require_positive("timeout_s", timeout_s)
 
 
 class _RobotWiredGripper(Gripper):

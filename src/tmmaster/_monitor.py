@@ -34,6 +34,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
 
 from ._channels import CommandChannel, channel_for
+from ._checks import require_positive
 from ._codec import Value
 from ._exceptions import (
     ConfigError,
@@ -246,17 +247,6 @@ class _Watched:
         self.publish()
 
 
-def _positive(name: str, value: float) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value <= 0
-    ):
-        raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
-    return float(value)
-
-
 class StatusMonitor:
     """Watch the status of many robots from one thread: read-only, for dashboards and supervision.
 
@@ -274,8 +264,8 @@ class StatusMonitor:
     """
 
     def __init__(self, *, rate_hz: float = 20.0, timeout_s: float = 1.0) -> None:
-        self.rate_hz = _positive("rate_hz", rate_hz)
-        self.timeout_s = _positive("timeout_s", timeout_s)
+        self.rate_hz = require_positive("rate_hz", rate_hz)
+        self.timeout_s = require_positive("timeout_s", timeout_s)
         self._robots: dict[str, _Watched] = {}
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None

@@ -19,7 +19,6 @@ from __future__ import annotations
 import atexit
 import inspect
 import logging
-import math
 import threading
 import time
 import weakref
@@ -39,6 +38,7 @@ from ._channels import (
     channel_for,
     heartbeat_stalled,
 )
+from ._checks import require_positive
 from ._exceptions import (
     AcknowledgeTimeoutError,
     CommandRejectedError,
@@ -214,7 +214,7 @@ class Motion:
         running move is stopped unless the robot stopped it itself.
         """
         if timeout_s is not None:
-            _require_positive("timeout_s", timeout_s)
+            require_positive("timeout_s", timeout_s)
         with self._follower.following(self):
             self._follower.wait(self, timeout_s)
 
@@ -494,18 +494,6 @@ class _Mount:
     run_command: Callable[[CommandKind, float | None], None]
 
 
-def _require_positive(name: str, value: object) -> float:
-    """``value`` as a float when it is a finite number > 0; else a ConfigError naming ``name``."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value <= 0
-    ):
-        raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
-    return float(value)
-
-
 class Robot:
     """A connection to one robot (and its gripper) speaking one profile."""
 
@@ -545,7 +533,7 @@ class Robot:
             ("orientation_tolerance_deg", orientation_tolerance_deg),
             ("gripper_settle_s", gripper_settle_s),
         ):
-            _require_positive(option, value)
+            require_positive(option, value)
         self.name = name
         self.workspace = workspace
         if tool is not None and not isinstance(tool, Pose):
@@ -794,7 +782,7 @@ class Robot:
 
     def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
         """Poll until the robot can take a motion command (auto / running, idle, no error)."""
-        _require_positive("timeout_s", timeout_s)
+        require_positive("timeout_s", timeout_s)
         deadline = time.monotonic() + timeout_s
         poller = Poller(self.poll_interval_s, self._stop_event)
         while True:
@@ -911,7 +899,7 @@ class Robot:
     def _start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
         """Check, send and follow any command of the profile: a move or a gripper action."""
         if timeout is not None:
-            _require_positive("timeout", timeout)
+            require_positive("timeout", timeout)
         # prepare() encodes (refusing out-of-range values) before its first read.
         ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
         start: Pose | None = None
