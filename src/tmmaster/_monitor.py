@@ -1,7 +1,8 @@
 """A read-only status monitor for many robots, polled from one thread.
 
 :class:`StatusMonitor` runs ONE asyncio event loop in ONE background thread, with one
-pymodbus ``AsyncModbusTcpClient`` per robot (``retries=0``, our own timeout). Each robot
+:class:`AsyncReadLink` per robot (pymodbus' asyncio client, in ``_transport.py`` with
+the other client calls; ``retries=0``, our own timeout). Each robot
 is polled on its own drift-free schedule at ``rate_hz``, the robots' phases spread
 evenly over the period; a slot that comes while the robot's previous read is still
 outstanding is skipped and counted, never sent late in a burst.
@@ -13,9 +14,9 @@ what one thread per :class:`~tmmaster.Robot` can poll. Commanding stays with ``R
 Decoding is the library's own: the channel of the robot's profile names the status
 fields (:attr:`CommandChannel.status_fields`), :class:`ReadPlan` groups and decodes them
 exactly as ``Robot.status()`` does, and :meth:`CommandChannel.status_from` builds the
-same :class:`RobotStatus`. pymodbus failures are mapped to tmmaster's
-:class:`TransportError` subclasses here (:func:`pymodbus_error`, shared with the sync
-transport) and stored, never raised.
+same :class:`RobotStatus`. The link maps pymodbus failures to tmmaster's
+:class:`TransportError` subclasses (as the sync transport does); the monitor stores
+them, never raises them.
 """
 
 from __future__ import annotations
@@ -25,13 +26,9 @@ import contextlib
 import math
 import threading
 import time
-from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Self
-
-from pymodbus.client import AsyncModbusTcpClient
-from pymodbus.pdu import ExceptionResponse, ModbusPDU
 
 from ._channels import CommandChannel, channel_for
 from ._checks import require_positive
@@ -40,7 +37,6 @@ from ._exceptions import (
     ConfigError,
     ConnectError,
     ModbusExceptionError,
-    ResponseTimeoutError,
     TMMasterError,
     TransportError,
 )
@@ -48,14 +44,7 @@ from ._logging import get_logger
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._status import RobotStatus
-from ._transport import (
-    PYMODBUS_FAILURES,
-    READ_FUNCTION,
-    BlockTransport,
-    ReadPlan,
-    pymodbus_error,
-    refused_error,
-)
+from ._transport import AsyncReadLink, BlockTransport, ReadPlan
 
 _log = get_logger("tmmaster.monitor")
 
@@ -106,17 +95,6 @@ class _UnusedLink(BlockTransport):
         raise ConfigError(f"a StatusMonitor never sends requests through its channel ({what})")
 
 
-_Reader = Callable[[AsyncModbusTcpClient, int, int, int], Awaitable[ModbusPDU]]
-
-#: The async client's read call of each read function code.
-_READERS: dict[int, _Reader] = {
-    1: lambda c, a, n, d: c.read_coils(a, count=n, device_id=d),
-    2: lambda c, a, n, d: c.read_discrete_inputs(a, count=n, device_id=d),
-    3: lambda c, a, n, d: c.read_holding_registers(a, count=n, device_id=d),
-    4: lambda c, a, n, d: c.read_input_registers(a, count=n, device_id=d),
-}
-
-
 class _Watched:
     """One robot of a monitor: its link, plan and counters (touched by the loop thread only)."""
 
@@ -137,16 +115,17 @@ class _Watched:
         self.plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
         self.requests = tuple(
             (
-                _READERS[READ_FUNCTION[block.table]],
+                block.table,
                 block.address,
                 block.count,
-                block.table.is_bit,
                 f"read {block.table.value} {block.address}+{block.count}",
                 slots,
             )
             for block, slots in zip(self.plan.blocks, self.plan.slots, strict=True)
         )
-        self.client: AsyncModbusTcpClient | None = None
+        self.link = AsyncReadLink(
+            host, port, device_id=profile.device_id, timeout=timeout_s, name=name
+        )
         self.status: RobotStatus | None = None
         self.read_at: float | None = None
         self.error: TMMasterError | None = None
@@ -163,31 +142,17 @@ class _Watched:
         )
 
     async def connect(self) -> None:
-        """Open the link (a fresh client); on failure record a :class:`ConnectError`."""
-        client = AsyncModbusTcpClient(
-            self.host,
-            port=self.port,
-            timeout=self.timeout_s,
-            retries=0,
-            reconnect_delay=0,  # no background reconnects: the next slot reconnects
-            name=self.name,
-        )
-        self.client = client
-        connected = False
-        with contextlib.suppress(TimeoutError, *PYMODBUS_FAILURES):
-            async with asyncio.timeout(self.timeout_s):
-                connected = await client.connect()
-        if not connected:
-            self.drop()
-            self.fail(ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}"))
+        """Open a fresh link; on failure record the :class:`ConnectError`."""
+        try:
+            await self.link.connect()
+        except ConnectError as exc:
+            self.fail(exc)
         else:
             self._log.debug("monitor.connected")
 
     def drop(self) -> None:
         """Close the link: after a failure the stream may still carry a late answer."""
-        client, self.client = self.client, None
-        if client is not None:
-            client.close()
+        self.link.close()
 
     def fail(self, error: TransportError) -> None:
         if self.error is None:
@@ -200,34 +165,15 @@ class _Watched:
 
     async def poll(self) -> None:
         """Read the status blocks once, decode them and publish the status or the failure."""
-        if self.client is None or not self.client.connected:
-            self.drop()
+        if not self.link.connected:
             await self.connect()
-            if self.client is None:
+            if not self.link.connected:
                 return
-        client = self.client
-        device_id = self.profile.device_id
+        read_block = self.link.read_block
         values: dict[str, Value] = {}
         try:
-            for read, address, count, is_bit, what, slots in self.requests:
-                try:
-                    # asyncio.timeout, not wait_for: no task per request, and on 3.11
-                    # wait_for can swallow a cancellation that meets an answer.
-                    async with asyncio.timeout(self.timeout_s):
-                        response = await read(client, address, count, device_id)
-                except TimeoutError as exc:
-                    raise ResponseTimeoutError(
-                        f"{self.name}: no answer to {what} within {self.timeout_s:g} s"
-                    ) from exc
-                except PYMODBUS_FAILURES as exc:
-                    raise pymodbus_error(
-                        exc, name=self.name, what=what, timeout=self.timeout_s
-                    ) from exc
-                if isinstance(response, ExceptionResponse) or response.isError():
-                    raise refused_error(response, name=self.name, what=what)
-                words = [int(b) for b in response.bits[:count]] if is_bit else response.registers
-                if len(words) < count:
-                    raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+            for table, address, count, what, slots in self.requests:
+                words = await read_block(table, address, count, what)
                 for field_name, offset, decode in slots:
                     values[field_name] = decode(words, offset)
             status = self.channel.status_from(values)

@@ -12,6 +12,8 @@ device's state back to learn whether the command arrived.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import struct
 import threading
 from abc import ABC, abstractmethod
@@ -21,7 +23,7 @@ from enum import StrEnum
 from typing import Any, Protocol, Self, TypeVar, runtime_checkable
 
 from pymodbus import ModbusException
-from pymodbus.client import ModbusTcpClient
+from pymodbus.client import AsyncModbusTcpClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
 
@@ -664,6 +666,84 @@ class ModbusTransport(BlockTransport):
         if function_code in (1, 2):
             return [int(b) for b in response.bits[:count]]
         return list(response.registers)
+
+
+class AsyncReadLink:
+    """A read-only Modbus TCP link on pymodbus' asyncio client (:class:`StatusMonitor`'s).
+
+    The only asynchronous pymodbus client calls, with the same failure mapping as
+    :class:`ModbusTransport` (:func:`pymodbus_error`, :func:`refused_error`). It has no
+    write and no retry: a failed read raises, and the caller decides when to reconnect.
+    """
+
+    def __init__(self, host: str, port: int, *, device_id: int, timeout: float, name: str):
+        self.host = host
+        self.port = port
+        self.device_id = device_id
+        self.timeout = timeout
+        self.name = name
+        self._client: AsyncModbusTcpClient | None = None
+        d = device_id
+        self._reads: dict[Table, Callable[[AsyncModbusTcpClient, int, int], Any]] = {
+            Table.COIL: lambda c, a, n: c.read_coils(a, count=n, device_id=d),
+            Table.DISCRETE_INPUT: lambda c, a, n: c.read_discrete_inputs(a, count=n, device_id=d),
+            Table.HOLDING: lambda c, a, n: c.read_holding_registers(a, count=n, device_id=d),
+            Table.INPUT: lambda c, a, n: c.read_input_registers(a, count=n, device_id=d),
+        }
+
+    @property
+    def connected(self) -> bool:
+        """True while the link is open."""
+        return self._client is not None and bool(self._client.connected)
+
+    async def connect(self) -> None:
+        """Open a fresh link within ``timeout`` (:class:`ConnectError` when it cannot)."""
+        self.close()
+        client = AsyncModbusTcpClient(
+            self.host,
+            port=self.port,
+            timeout=self.timeout,
+            retries=0,
+            reconnect_delay=0,  # no background reconnects: the caller reconnects
+            name=self.name,
+        )
+        self._client = client
+        connected = False
+        with contextlib.suppress(TimeoutError, *PYMODBUS_FAILURES):
+            async with asyncio.timeout(self.timeout):
+                connected = await client.connect()
+        if not connected:
+            self.close()
+            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}")
+
+    async def read_block(self, table: Table, address: int, count: int, what: str) -> list[int]:
+        """Read ``count`` words (or bits as 0/1) in one request; failures as TransportError."""
+        client = self._client
+        if client is None:
+            raise ConnectionLostError(f"{self.name}: not connected for {what}")
+        try:
+            # asyncio.timeout, not wait_for: no task per request, and on 3.11 wait_for can
+            # swallow a cancellation that meets an answer.
+            async with asyncio.timeout(self.timeout):
+                response = await self._reads[table](client, address, count)
+        except TimeoutError as exc:
+            raise ResponseTimeoutError(
+                f"{self.name}: no answer to {what} within {self.timeout:g} s"
+            ) from exc
+        except PYMODBUS_FAILURES as exc:
+            raise pymodbus_error(exc, name=self.name, what=what, timeout=self.timeout) from exc
+        if isinstance(response, ExceptionResponse) or response.isError():
+            raise refused_error(response, name=self.name, what=what)
+        words = [int(b) for b in response.bits[:count]] if table.is_bit else response.registers
+        if len(words) < count:
+            raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+        return list(words)
+
+    def close(self) -> None:
+        """Close the link (safe when closed): after a failure it may still carry a late answer."""
+        client, self._client = self._client, None
+        if client is not None:
+            client.close()
 
 
 #: ``scheme://name`` -> factory of a transport for one device role ("robot", "gripper").
