@@ -17,9 +17,10 @@ evenly over the period). Per design of the master:
   none of tmmaster's logic): the ceiling a single event loop could reach, not a way to
   drive a robot safely.
 * ``monitor``: :class:`tmmaster.StatusMonitor`, the library's read-only monitor: ONE
-  thread, one asyncio loop, one ``AsyncModbusTcpClient`` per robot, each poll decoded
-  into the same ``RobotStatus`` as ``Robot.status()`` (jitter and response from the
-  monitor's own schedule, through its private ``_timings`` record);
+  thread, one event loop (asyncio's own here), one ``AsyncModbusTcpClient`` per robot,
+  each poll decoded into the same ``RobotStatus`` as ``Robot.status()`` (jitter and
+  response from the monitor's own schedule, through its private ``_timings`` record);
+* ``monitor-uvloop``: the same monitor on uvloop's event loop (the ``monitor`` extra);
 * ``selectors``: ONE thread, one non-blocking socket per robot, the FC3 request and
   answer framed with ``struct`` (no pymodbus, no tmmaster), every socket watched by one
   ``selectors`` loop: the least CPU a poll can cost from Python, i.e. what a shared
@@ -53,6 +54,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import functools
 import heapq
 import json
 import math
@@ -68,6 +70,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 from _machine import machine_line
 
@@ -75,7 +78,7 @@ from tmmaster import Robot, StatusMonitor
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
-DESIGNS = ("threads", "pool", "scheduler", "asyncio", "selectors", "monitor")
+DESIGNS = ("threads", "pool", "scheduler", "asyncio", "selectors", "monitor", "monitor-uvloop")
 #: Threads of the ``pool`` design.
 POOL_THREADS = 8
 
@@ -467,14 +470,18 @@ def run_selectors(
 
 
 def run_monitor(
-    ports: list[int], period: float, seconds: float, sim_cpu: Callable[[], float]
+    ports: list[int],
+    period: float,
+    seconds: float,
+    sim_cpu: Callable[[], float],
+    event_loop: Literal["asyncio", "uvloop"] = "asyncio",
 ) -> tuple[Samples, float, float, float]:
-    """One :class:`tmmaster.StatusMonitor` over every robot (one thread, one asyncio loop).
+    """One :class:`tmmaster.StatusMonitor` over every robot (one thread, one event loop).
 
     Returns (samples, master CPU s, wall s, simulators' CPU s), all over the polling only
     (after ``start()``: the links are open and the schedules running).
     """
-    monitor = StatusMonitor(rate_hz=1.0 / period, timeout_s=1.0)
+    monitor = StatusMonitor(rate_hz=1.0 / period, timeout_s=1.0, event_loop=event_loop)
     for i, port in enumerate(ports):
         monitor.add(f"robot{i}", "127.0.0.1", port, profile="article")
     timings: list[tuple[float, float]] = []
@@ -533,11 +540,14 @@ def pct(values: list[float], q: float) -> float:
 def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, round_: int) -> Row:
     """One round of one design against the running simulators."""
     period = 1.0 / rate
-    if design in ("asyncio", "selectors", "monitor"):
-        run_loop = {"asyncio": run_asyncio, "selectors": run_selectors, "monitor": run_monitor}[
-            design
-        ]
-        samples, cpu, wall, sim_cpu = run_loop(farm.ports, period, seconds, farm.cpu)
+    loops: dict[str, Callable[..., tuple[Samples, float, float, float]]] = {
+        "asyncio": run_asyncio,
+        "selectors": run_selectors,
+        "monitor": run_monitor,
+        "monitor-uvloop": functools.partial(run_monitor, event_loop="uvloop"),
+    }
+    if design in loops:
+        samples, cpu, wall, sim_cpu = loops[design](farm.ports, period, seconds, farm.cpu)
     else:
         robots = [
             Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")

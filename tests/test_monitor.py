@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import socket
+import sys
 import time
 from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -24,6 +26,22 @@ SimFactory = Callable[..., Simulator]
 
 #: Fast enough that a few polls take tens of milliseconds.
 RATE_HZ = 100.0
+
+MonitorFactory = Callable[..., StatusMonitor]
+
+
+@pytest.fixture(params=["asyncio", "uvloop"])
+def make_monitor(request: pytest.FixtureRequest) -> MonitorFactory:
+    """``StatusMonitor`` on each event loop it supports (uvloop: the ``monitor`` extra)."""
+    if request.param == "uvloop":
+        pytest.importorskip("uvloop", reason="uvloop is the monitor extra")
+
+    def make(**options: Any) -> StatusMonitor:
+        monitor = StatusMonitor(event_loop=request.param, **options)
+        assert monitor.event_loop == request.param
+        return monitor
+
+    return make
 
 
 def wait_for(
@@ -74,15 +92,17 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def test_statuses_match_robot_status_on_both_profiles(tm_simulator_factory: SimFactory) -> None:
+def test_statuses_match_robot_status_on_both_profiles(
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
+) -> None:
     sims = {
         "a1": tm_simulator_factory("article"),
         "t1": tm_simulator_factory("tmflow"),
         "a2": tm_simulator_factory("article"),
     }
-    with StatusMonitor(rate_hz=RATE_HZ) as monitor:
+    with make_monitor(rate_hz=RATE_HZ) as monitor:
         pass  # an empty monitor starts and stops
-    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor = make_monitor(rate_hz=RATE_HZ)
     for name, sim in sims.items():
         monitor.add(name, sim.host, sim.port, profile=sim.profile.name)
     with monitor:
@@ -106,10 +126,10 @@ def test_statuses_match_robot_status_on_both_profiles(tm_simulator_factory: SimF
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_an_injected_estop_shows_in_the_next_statuses(
-    tm_simulator_factory: SimFactory, profile: str
+    tm_simulator_factory: SimFactory, profile: str, make_monitor: MonitorFactory
 ) -> None:
     sim = tm_simulator_factory(profile)
-    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor = make_monitor(rate_hz=RATE_HZ)
     monitor.add("r", sim.host, sim.port, profile=profile)
     with monitor:
         wait_for(monitor, "r", ready)
@@ -124,9 +144,11 @@ def test_an_injected_estop_shows_in_the_next_statuses(
     assert seen.error is None  # a robot fault is a status, not a link failure
 
 
-def test_a_simulator_closed_mid_run_fails_alone(tm_simulator_factory: SimFactory) -> None:
+def test_a_simulator_closed_mid_run_fails_alone(
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
+) -> None:
     doomed, alive = tm_simulator_factory("article"), tm_simulator_factory("tmflow")
-    monitor = StatusMonitor(rate_hz=RATE_HZ, timeout_s=0.2)
+    monitor = make_monitor(rate_hz=RATE_HZ, timeout_s=0.2)
     monitor.add("doomed", doomed.host, doomed.port, profile="article")
     monitor.add("alive", alive.host, alive.port, profile="tmflow")
     with monitor:
@@ -143,9 +165,11 @@ def test_a_simulator_closed_mid_run_fails_alone(tm_simulator_factory: SimFactory
     assert isinstance(monitor.latest("doomed").error, TransportError)
 
 
-def test_a_port_nobody_listens_on_is_a_connect_error(tm_simulator_factory: SimFactory) -> None:
+def test_a_port_nobody_listens_on_is_a_connect_error(
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
+) -> None:
     sim = tm_simulator_factory("article")
-    monitor = StatusMonitor(rate_hz=RATE_HZ, timeout_s=0.2)
+    monitor = make_monitor(rate_hz=RATE_HZ, timeout_s=0.2)
     monitor.add("nobody", "127.0.0.1", free_port())
     monitor.add("somebody", sim.host, sim.port, profile="article")
     with monitor:
@@ -157,11 +181,11 @@ def test_a_port_nobody_listens_on_is_a_connect_error(tm_simulator_factory: SimFa
         assert isinstance(monitor.latest("nobody").error, ConnectError)
 
 
-def test_it_only_reads(tm_simulator_factory: SimFactory) -> None:
+def test_it_only_reads(tm_simulator_factory: SimFactory, make_monitor: MonitorFactory) -> None:
     sims = [tm_simulator_factory("article"), tm_simulator_factory("tmflow")]
     for sim in sims:
         sim.clear_request_log()
-    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor = make_monitor(rate_hz=RATE_HZ)
     for i, sim in enumerate(sims):
         monitor.add(f"r{i}", sim.host, sim.port, profile=sim.profile)
     with monitor:
@@ -175,10 +199,12 @@ def test_it_only_reads(tm_simulator_factory: SimFactory) -> None:
         assert not any(r.refused for r in log)
 
 
-def test_a_slow_robot_skips_slots_instead_of_bursting(tm_simulator_factory: SimFactory) -> None:
+def test_a_slow_robot_skips_slots_instead_of_bursting(
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
+) -> None:
     sim = tm_simulator_factory("article")
     sim.inject("slow_responses:delay_s=0.05")  # 5 periods at 100 Hz
-    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor = make_monitor(rate_hz=RATE_HZ)
     monitor.add("slow", sim.host, sim.port, profile="article")
     with monitor:
         seen = wait_for(monitor, "slow", polled(3))
@@ -213,9 +239,21 @@ def test_bad_arguments_name_the_field() -> None:
         monitor.start()
 
 
-def test_close_twice_and_add_after_start(tm_simulator_factory: SimFactory) -> None:
+def test_the_event_loop_is_chosen_by_name(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert StatusMonitor(event_loop="asyncio").event_loop == "asyncio"
+    with pytest.raises(ConfigError, match="event_loop"):
+        StatusMonitor(event_loop="trio")  # type: ignore[arg-type]
+    monkeypatch.setitem(sys.modules, "uvloop", None)  # import uvloop -> ImportError
+    assert StatusMonitor().event_loop == "asyncio"  # auto: asyncio's own without uvloop
+    with pytest.raises(ConfigError, match=r"tmmaster\[monitor\]"):
+        StatusMonitor(event_loop="uvloop")
+
+
+def test_close_twice_and_add_after_start(
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
+) -> None:
     sim = tm_simulator_factory("article")
-    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor = make_monitor(rate_hz=RATE_HZ)
     monitor.add("r", sim.host, sim.port, profile="article")
     assert monitor.start() is monitor
     assert monitor.start() is monitor  # already running: nothing more
@@ -229,9 +267,11 @@ def test_close_twice_and_add_after_start(tm_simulator_factory: SimFactory) -> No
     assert monitor.latest("r").polls == polls  # stopped
 
 
-def test_a_refused_read_is_a_modbus_exception_error(tm_simulator_factory: SimFactory) -> None:
+def test_a_refused_read_is_a_modbus_exception_error(
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
+) -> None:
     sim = tm_simulator_factory("article")
-    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor = make_monitor(rate_hz=RATE_HZ)
     monitor.add("mismatch", sim.host, sim.port, profile="tmflow")  # the wrong profile
     with monitor:
         seen = wait_for(monitor, "mismatch", lambda s: s.failures >= 3)
@@ -243,10 +283,10 @@ def test_a_refused_read_is_a_modbus_exception_error(tm_simulator_factory: SimFac
 
 
 def test_a_robot_unreachable_at_start_is_picked_up_later(
-    tm_simulator_factory: SimFactory,
+    tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
 ) -> None:
     port = free_port()
-    monitor = StatusMonitor(rate_hz=RATE_HZ, timeout_s=0.2)
+    monitor = make_monitor(rate_hz=RATE_HZ, timeout_s=0.2)
     monitor.add("late", "127.0.0.1", port, profile="article")
     with monitor:
         assert isinstance(monitor.latest("late").error, ConnectError)
