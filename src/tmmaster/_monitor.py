@@ -45,7 +45,7 @@ from ._logging import get_logger
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._status import RobotStatus
-from ._transport import AsyncReadLink, BlockTransport, ReadPlan
+from ._transport import AsyncReadLink, BlockTransport, ReadPlan, describe_read
 
 _log = get_logger("tmmaster.monitor")
 
@@ -123,26 +123,23 @@ class _Watched:
         self, name: str, host: str, port: int, profile: RobotProfile, timeout_s: float
     ) -> None:
         self.name = name
-        self.host = host
-        self.port = port
-        self.profile = profile
-        self.timeout_s = timeout_s
         self.channel: CommandChannel = channel_for(
             profile,
             _UnusedLink(
                 host, port, device_id=profile.device_id, timeout=timeout_s, retry=None, name=name
             ),
         )
-        self.plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
+        plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
+        #: Per block of the plan: (table, address, count, description, decoding slots).
         self.requests = tuple(
             (
                 block.table,
                 block.address,
                 block.count,
-                f"read {block.table.value} {block.address}+{block.count}",
+                describe_read(block.table, block.address, block.count),
                 slots,
             )
-            for block, slots in zip(self.plan.blocks, self.plan.slots, strict=True)
+            for block, slots in zip(plan.blocks, plan.slots, strict=True)
         )
         self.link = AsyncReadLink(
             host, port, device_id=profile.device_id, timeout=timeout_s, name=name

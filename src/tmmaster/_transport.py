@@ -60,6 +60,11 @@ READ_FUNCTION: dict[Table, int] = {
 }
 
 
+def describe_read(table: Table, address: int, count: int) -> str:
+    """How a read is named in errors and logs, e.g. ``read holding 9100+6``."""
+    return f"read {table.value} {address}+{count}"
+
+
 class ConnectionState(StrEnum):
     """Where a transport's connection stands."""
 
@@ -472,7 +477,7 @@ class BlockTransport(ABC):
         key = (table, address, count)
         known = self._reads.get(key)
         if known is None:
-            known = (f"read {table.value} {address}+{count}", READ_FUNCTION[table])
+            known = (describe_read(table, address, count), READ_FUNCTION[table])
             if len(self._reads) < 256:  # bounded, like the read plans
                 self._reads[key] = known
         what, function_code = known
