@@ -37,8 +37,11 @@ Figures per (design, N), each round ``--seconds`` long:
 * master CPU %: this process's CPU time / wall time (100 % = one core);
 * sim CPU %: the simulator processes' CPU time / wall time, all of them together.
 
-The simulators share the machine's cores with the master: on a 2-core machine that is
-a pessimistic setup (real robots bring their own controllers). The simulators tick at
+Where the machine has the cores (``--pin auto``: 8 or more usable CPUs), the master is
+pinned to the first ``--master-cpus`` of them (2) and every simulator process to the rest,
+the issue's setup (a master on 2 cores of a 16-core machine, simulators on the other 14).
+Otherwise the simulators share the machine's cores with the master: on a 2-core machine
+that is a pessimistic setup (real robots bring their own controllers). The simulators tick at
 ``--sim-tick-hz`` (default 10 Hz, not the TM's 50 Hz) so that N idle simulators do not
 eat the cores the master is measured on; nothing here moves, so the tick only
 publishes the pose.
@@ -190,14 +193,17 @@ def cpu_seconds(pid: int) -> float:
 class SimFarm:
     """Simulator processes serving ``n`` robots between them."""
 
-    def __init__(self, n: int, per_process: int, tick_hz: float, slave: str) -> None:
+    def __init__(
+        self, n: int, per_process: int, tick_hz: float, slave: str, cpus: list[int] | None
+    ) -> None:
         src = Path(__file__).resolve().parents[1] / "src"
         env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
         sizes = [per_process] * (n // per_process) + ([n % per_process] if n % per_process else [])
         self.procs = [
             subprocess.Popen(
                 [sys.executable, __file__, "--serve", str(k), "--sim-tick-hz", str(tick_hz)]
-                + (["--slave", "light"] if slave == "light" else []),
+                + (["--slave", "light"] if slave == "light" else [])
+                + (["--cpus", ",".join(map(str, cpus))] if cpus else []),
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.DEVNULL,
@@ -631,6 +637,23 @@ def summary(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+def pin_plan(pin: str, master_count: int) -> tuple[list[int], list[int]]:
+    """(master CPUs, simulator CPUs) to pin to; both empty when not pinning."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if pin == "off" or (pin == "auto" and len(cpus) < 8):
+        return [], []
+    if len(cpus) <= master_count:
+        raise SystemExit(f"--pin on needs more than {master_count} CPUs, this process has {cpus}")
+    return cpus[:master_count], cpus[master_count:]
+
+
+def cpu_list(cpus: list[int]) -> str:
+    """``0-1`` for a run of CPUs, else a comma list."""
+    if cpus == list(range(cpus[0], cpus[-1] + 1)):
+        return f"{cpus[0]}-{cpus[-1]}"
+    return ",".join(map(str, cpus))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print the tables."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -655,9 +678,19 @@ def main(argv: list[str] | None = None) -> int:
         metavar="N",
         help="only measure what N idle simulators cost in one process, and exit",
     )
+    parser.add_argument(
+        "--pin",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="pin the master and the simulators to separate CPUs (auto: with 8 or more CPUs)",
+    )
+    parser.add_argument("--master-cpus", type=int, default=2, help="CPUs the master is pinned to")
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--cpus", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve is not None:
+        if args.cpus:
+            os.sched_setaffinity(0, {int(c) for c in args.cpus.split(",")})
         if args.slave == "light":
             serve_light(args.serve)
         else:
@@ -669,9 +702,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.n, args.seconds, args.repeat = [1, 25, 100], 3.0, 1
     designs = list(DESIGNS) if "all" in args.design else args.design
+    master_cpus, sim_cpus = pin_plan(args.pin, args.master_cpus)
+    if master_cpus:
+        os.sched_setaffinity(0, master_cpus)  # every thread the master starts inherits it
     rows: list[Row] = []
     for n in args.n:
-        farm = SimFarm(n, args.sims_per_process, args.sim_tick_hz, args.slave)
+        farm = SimFarm(n, args.sims_per_process, args.sim_tick_hz, args.slave, sim_cpus)
         try:
             for round_ in range(1, args.repeat + 1):
                 for design in designs:
@@ -682,7 +718,12 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"# {machine_line()}; {args.rate:g} Hz polling,"
         f" {args.seconds:g} s rounds, simulators: {args.sims_per_process} per process,"
-        f" {args.sim_tick_hz:g} Hz tick, same machine"
+        f" {args.sim_tick_hz:g} Hz tick, same machine, "
+        + (
+            f"master pinned to CPUs {cpu_list(master_cpus)}, simulators to {cpu_list(sim_cpus)}"
+            if master_cpus
+            else "not pinned"
+        )
     )
     print(summary(rows))
     print()
