@@ -1,10 +1,10 @@
 """A read-only status monitor for many robots, polled from one thread.
 
 :class:`StatusMonitor` runs ONE asyncio event loop in ONE background thread, with one
-:class:`AsyncReadLink` per robot (pymodbus' asyncio client, in ``_transport.py`` with
-the other client calls; ``retries=0``, our own timeout). Each robot
-is polled on its own drift-free schedule at ``rate_hz``, the robots' phases spread
-evenly over the period; a slot that comes while the robot's previous read is still
+:class:`AsyncReadLink` per robot (an asyncio protocol framed by pymodbus, in
+``_transport.py`` with the other client-side pymodbus code; no retry, our own
+timeout). Each robot is polled on its own drift-free schedule at ``rate_hz``, the
+robots' phases spread evenly over the period; a slot that comes while the robot's previous read is still
 outstanding is skipped and counted, never sent late in a burst.
 
 It never writes a register: it is for watching fleets (dashboards, supervision) beyond

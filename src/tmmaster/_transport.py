@@ -1,4 +1,4 @@
-"""The one module that calls pymodbus's client.
+"""The one module that uses pymodbus client-side (its sync client; its framer and PDUs).
 
 A :class:`ModbusTransport` reads and writes register blocks for one device, counts
 what it does, maps every pymodbus failure to a :class:`TransportError`, and applies
@@ -13,19 +13,21 @@ device's state back to learn whether the command arrived.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import struct
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Protocol, Self, TypeVar, runtime_checkable
+from typing import Any, Protocol, Self, TypeVar, cast, runtime_checkable
 
 from pymodbus import ModbusException
-from pymodbus.client import AsyncModbusTcpClient, ModbusTcpClient
+from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
-from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.framer import FramerSocket
+from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
+from pymodbus.pdu.bit_message import ReadCoilsRequest, ReadDiscreteInputsRequest
+from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, ReadInputRegistersRequest
 
 from ._codec import Decoder, Value, decoder, encoder
 from ._exceptions import (
@@ -673,12 +675,86 @@ class ModbusTransport(BlockTransport):
         return list(response.registers)
 
 
-class AsyncReadLink:
-    """A read-only Modbus TCP link on pymodbus' asyncio client (:class:`StatusMonitor`'s).
+#: The read request of each table (pymodbus' PDU classes: they encode and decode the PDU).
+_READ_REQUESTS: dict[Table, type[ModbusPDU]] = {
+    Table.COIL: ReadCoilsRequest,
+    Table.DISCRETE_INPUT: ReadDiscreteInputsRequest,
+    Table.HOLDING: ReadHoldingRegistersRequest,
+    Table.INPUT: ReadInputRegistersRequest,
+}
 
-    The only asynchronous pymodbus client calls, with the same failure mapping as
-    :class:`ModbusTransport` (:func:`pymodbus_error`, :func:`refused_error`). It has no
-    write and no retry: a failed read raises, and the caller decides when to reconnect.
+
+class _ReadStream(asyncio.Protocol):
+    """One Modbus TCP stream of an :class:`AsyncReadLink`: answers matched to requests by id.
+
+    pymodbus' socket framer cuts the stream into frames and its PDU decoder decodes them;
+    an answer whose transaction id no request awaits (a late answer to a request that
+    timed out) is dropped. Losing the connection or an undecodable frame fails every
+    awaited request and closes the stream.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.framer = FramerSocket(DecodePDU(is_server=False))
+        self.transport: asyncio.Transport | None = None
+        self.closed = False
+        #: Transaction id -> the future its answer resolves.
+        self.awaited: dict[int, asyncio.Future[ModbusPDU]] = {}
+        self._buffer = b""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        # uvloop's transports implement asyncio.Transport's methods without subclassing it.
+        self.transport = cast(asyncio.Transport, transport)
+
+    def data_received(self, data: bytes) -> None:
+        self._buffer += data
+        while self._buffer and not self.closed:
+            try:
+                used, pdu = self.framer.handleFrame(self._buffer, 0, 0)
+            except ModbusException as exc:
+                self.fail(TransportError(f"{self.name}: undecodable answer: {exc}"))
+                return
+            if not used:
+                return  # a partial frame: wait for the rest
+            self._buffer = self._buffer[used:]
+            if pdu is None:
+                continue
+            future = self.awaited.pop(pdu.transaction_id, None)
+            if future is None or future.done():
+                _log.debug("transport.unawaited_answer", device=self.name, tid=pdu.transaction_id)
+                continue
+            future.set_result(pdu)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.fail(ConnectionLostError(f"{self.name}: connection lost"))
+
+    def fail(self, error: TransportError) -> None:
+        """Fail every awaited request with ``error`` and close the stream."""
+        self.closed = True
+        awaited, self.awaited = self.awaited, {}
+        for future in awaited.values():
+            if not future.done():
+                future.set_exception(error)
+        if self.transport is not None:
+            self.transport.close()
+
+
+def _expire(future: asyncio.Future[ModbusPDU], link: AsyncReadLink, what: str) -> None:
+    """A request's deadline: fail it unless answered (the message is built only here)."""
+    if not future.done():
+        future.set_exception(
+            ResponseTimeoutError(f"{link.name}: no answer to {what} within {link.timeout:g} s")
+        )
+
+
+class AsyncReadLink:
+    """A read-only Modbus TCP link on the running asyncio loop (:class:`StatusMonitor`'s).
+
+    pymodbus frames and decodes (its socket framer and PDU classes); the stream is a
+    plain asyncio protocol, not pymodbus' async client, whose per-request machinery was
+    most of a monitor's CPU (docs/performance.md). Failures map to the same
+    :class:`TransportError` subclasses as :class:`ModbusTransport`'s. It has no write and
+    no retry: a failed read raises, and the caller closes the link and reconnects.
     """
 
     def __init__(self, host: str, port: int, *, device_id: int, timeout: float, name: str):
@@ -687,58 +763,50 @@ class AsyncReadLink:
         self.device_id = device_id
         self.timeout = timeout
         self.name = name
-        self._client: AsyncModbusTcpClient | None = None
-        d = device_id
-        self._reads: dict[Table, Callable[[AsyncModbusTcpClient, int, int], Any]] = {
-            Table.COIL: lambda c, a, n: c.read_coils(a, count=n, device_id=d),
-            Table.DISCRETE_INPUT: lambda c, a, n: c.read_discrete_inputs(a, count=n, device_id=d),
-            Table.HOLDING: lambda c, a, n: c.read_holding_registers(a, count=n, device_id=d),
-            Table.INPUT: lambda c, a, n: c.read_input_registers(a, count=n, device_id=d),
-        }
+        self._stream: _ReadStream | None = None
+        self._tid = 0
 
     @property
     def connected(self) -> bool:
         """True while the link is open."""
-        return self._client is not None and bool(self._client.connected)
+        return self._stream is not None and not self._stream.closed
 
     async def connect(self) -> None:
         """Open a fresh link within ``timeout`` (:class:`ConnectError` when it cannot)."""
         self.close()
-        client = AsyncModbusTcpClient(
-            self.host,
-            port=self.port,
-            timeout=self.timeout,
-            retries=0,
-            reconnect_delay=0,  # no background reconnects: the caller reconnects
-            name=self.name,
-        )
-        self._client = client
-        connected = False
-        with contextlib.suppress(TimeoutError, *PYMODBUS_FAILURES):
+        loop = asyncio.get_running_loop()
+        try:
             async with asyncio.timeout(self.timeout):
-                connected = await client.connect()
-        if not connected:
-            self.close()
-            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}")
+                _transport, stream = await loop.create_connection(
+                    lambda: _ReadStream(self.name), self.host, self.port
+                )
+        except (OSError, TimeoutError) as exc:
+            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
+        self._stream = stream
 
     async def read_block(self, table: Table, address: int, count: int, what: str) -> list[int]:
         """Read ``count`` words (or bits as 0/1) in one request; failures as TransportError."""
-        client = self._client
-        if client is None:
+        stream = self._stream
+        if stream is None or stream.closed or stream.transport is None:
             raise ConnectionLostError(f"{self.name}: not connected for {what}")
+        self._tid = tid = self._tid % 0xFFFF + 1
+        request = _READ_REQUESTS[table](
+            address=address, count=count, dev_id=self.device_id, transaction_id=tid
+        )
+        loop = asyncio.get_running_loop()
+        answer: asyncio.Future[ModbusPDU] = loop.create_future()
+        stream.awaited[tid] = answer
+        stream.transport.write(stream.framer.buildFrame(request))
+        deadline = loop.call_later(self.timeout, _expire, answer, self, what)
         try:
-            # asyncio.timeout, not wait_for: no task per request, and on 3.11 wait_for can
-            # swallow a cancellation that meets an answer.
-            async with asyncio.timeout(self.timeout):
-                response = await self._reads[table](client, address, count)
-        except TimeoutError as exc:
-            raise ResponseTimeoutError(
-                f"{self.name}: no answer to {what} within {self.timeout:g} s"
-            ) from exc
-        except PYMODBUS_FAILURES as exc:
-            raise pymodbus_error(exc, name=self.name, what=what, timeout=self.timeout) from exc
+            response = await answer
+        finally:
+            deadline.cancel()
+            stream.awaited.pop(tid, None)
         if isinstance(response, ExceptionResponse) or response.isError():
             raise refused_error(response, name=self.name, what=what)
+        if response.function_code != request.function_code:
+            raise TransportError(f"{self.name}: answer of another function to {what}")
         words = [int(b) for b in response.bits[:count]] if table.is_bit else response.registers
         if len(words) < count:
             raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
@@ -746,9 +814,9 @@ class AsyncReadLink:
 
     def close(self) -> None:
         """Close the link (safe when closed): after a failure it may still carry a late answer."""
-        client, self._client = self._client, None
-        if client is not None:
-            client.close()
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            stream.fail(ConnectionLostError(f"{self.name}: link closed"))
 
 
 #: ``scheme://name`` -> factory of a transport for one device role ("robot", "gripper").

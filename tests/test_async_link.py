@@ -1,0 +1,187 @@
+"""AsyncReadLink (the monitor's link) against a scripted slave: what it does with bad answers.
+
+The slave is a raw asyncio server in the test's own loop that answers each request as
+the test scripts it: held, late, of another function, short, undecodable, or with the
+connection closed. The link must never hand one request's answer to another.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import struct
+from collections.abc import Awaitable, Callable, Coroutine
+from typing import Any
+
+import pytest
+
+from tmmaster import ConnectionLostError, IllegalAddressError, ResponseTimeoutError, TransportError
+from tmmaster._registers import Table
+from tmmaster._transport import AsyncReadLink
+
+#: What the scripted slave does with one request: (transaction id, the request's PDU, writer).
+Answer = Callable[[int, bytes, asyncio.StreamWriter], Coroutine[Any, Any, None]]
+
+
+def frame(tid: int, pdu: bytes) -> bytes:
+    """An MBAP frame for unit 1 around ``pdu``."""
+    return struct.pack(">HHHB", tid, 0, len(pdu) + 1, 1) + pdu
+
+
+def registers(*words: int) -> bytes:
+    """An FC3 answer PDU carrying ``words``."""
+    return struct.pack(f">BB{len(words)}H", 3, 2 * len(words), *words)
+
+
+async def with_slave(
+    script: list[Answer], body: Callable[[AsyncReadLink], Awaitable[None]]
+) -> None:
+    """Run ``body`` with a link connected to a slave that answers request k by ``script[k]``."""
+    served: list[asyncio.Task[None]] = []
+    handlers: list[asyncio.Task[object]] = []
+
+    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        handlers.append(task)
+        try:
+            for answer in script:
+                head = await reader.readexactly(7)
+                tid, _protocol, length, _unit = struct.unpack(">HHHB", head)
+                pdu = await reader.readexactly(length - 1)
+                served.append(asyncio.create_task(answer(tid, pdu, writer)))
+            await reader.read()  # until the link closes
+        except (asyncio.IncompleteReadError, ConnectionError):
+            pass
+        finally:
+            await asyncio.gather(*served, return_exceptions=True)
+            writer.close()
+
+    server = await asyncio.start_server(handle, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    link = AsyncReadLink("127.0.0.1", port, device_id=1, timeout=0.2, name="slave")
+    try:
+        await link.connect()
+        await body(link)
+    finally:
+        link.close()
+        server.close()
+        await server.wait_closed()
+        if handlers:
+            await asyncio.wait(handlers, timeout=2)  # the slave's side ends too
+
+
+def answer_with(pdu: bytes, *, after_s: float = 0.0, tid_offset: int = 0) -> Answer:
+    """Answer ``pdu`` (after ``after_s``), under the request's own id plus ``tid_offset``."""
+
+    async def answer(tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
+        await asyncio.sleep(after_s)
+        writer.write(frame(tid + tid_offset, pdu))
+        await writer.drain()
+
+    return answer
+
+
+async def close_connection(_tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
+    """Close the connection instead of answering."""
+    writer.close()
+
+
+def test_a_late_answer_is_dropped_not_taken_for_the_next_read() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(ResponseTimeoutError, match=r"no answer to first read within 0\.2 s"):
+            await link.read_block(Table.HOLDING, 0, 2, "first read")
+        # The first answer (111, 111) arrives while the second read waits: it is not its.
+        assert await link.read_block(Table.HOLDING, 0, 2, "second read") == [222, 222]
+
+    asyncio.run(
+        with_slave(
+            [
+                answer_with(registers(111, 111), after_s=0.3),  # after the first gave up
+                answer_with(registers(222, 222), after_s=0.15),  # after that late one
+            ],
+            body,
+        )
+    )
+
+
+def test_an_answer_under_another_transaction_id_is_not_taken() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(ResponseTimeoutError):
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+
+    asyncio.run(with_slave([answer_with(registers(1, 2), tid_offset=7)], body))
+
+
+def test_an_answer_of_another_function_is_an_error() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(TransportError, match="another function"):
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+
+    fc4 = struct.pack(">BB2H", 4, 4, 1, 2)  # input registers, to a holding read
+    asyncio.run(with_slave([answer_with(fc4)], body))
+
+
+def test_a_short_answer_is_an_error() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(ResponseTimeoutError, match="short answer"):
+            await link.read_block(Table.HOLDING, 0, 3, "read")
+
+    asyncio.run(with_slave([answer_with(registers(1, 2))], body))
+
+
+def test_an_exception_answer_is_the_typed_refusal() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(IllegalAddressError, match="device refused read") as caught:
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+        assert caught.value.code == 2
+        assert link.connected  # the device answered: the link is fine
+
+    asyncio.run(with_slave([answer_with(bytes([0x83, 2]))], body))
+
+
+def test_an_undecodable_answer_fails_and_closes_the_link() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(TransportError):
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+        assert not link.connected
+
+    asyncio.run(with_slave([answer_with(bytes([0x41, 0, 0]))], body))
+
+
+def test_a_connection_closed_mid_read_is_connection_lost() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(ConnectionLostError, match="connection lost"):
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+        assert not link.connected
+        with pytest.raises(ConnectionLostError, match="not connected"):
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+
+    asyncio.run(with_slave([close_connection], body))
+
+
+def test_closing_the_link_fails_the_read_it_awaits() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        read = asyncio.create_task(link.read_block(Table.HOLDING, 0, 2, "read"))
+        await asyncio.sleep(0.05)
+        link.close()
+        with pytest.raises(ConnectionLostError, match="link closed"):
+            await read
+        link.close()  # twice is fine
+
+    asyncio.run(with_slave([answer_with(registers(1, 2), after_s=0.15)], body))
+
+
+def test_bits_and_an_answer_split_across_segments() -> None:
+    async def split(tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
+        whole = frame(tid, registers(7, 8))
+        for part in (whole[:3], whole[3:9], whole[9:]):
+            writer.write(part)
+            await writer.drain()
+            await asyncio.sleep(0.01)
+
+    async def body(link: AsyncReadLink) -> None:
+        assert await link.read_block(Table.HOLDING, 0, 2, "read") == [7, 8]
+        assert await link.read_block(Table.COIL, 0, 3, "coils") == [1, 0, 1]
+
+    coils = bytes([1, 1, 0b101])
+    asyncio.run(with_slave([split, answer_with(coils)], body))
