@@ -4,7 +4,10 @@ The simulator runs in another process (``python -m tmmaster.sim``), so only the
 master's CPU time (``time.process_time``) is measured. For each profile:
 
 * a status snapshot: ``Robot.status()`` against the same blocks read with
-  ``pymodbus.client.ModbusTcpClient`` calls, CPU per request;
+  ``pymodbus.client.ModbusTcpClient`` calls, CPU per request, the two measured in
+  alternating batches (ABBA) so that the machine's drift during a round weighs on both
+  (the moves below stay back to back: pausing between them would change what a move
+  reads);
 * whole moves: CPU per request while ``Robot.move_to`` runs (polls, the write, the
   final checks), against the raw status read's CPU per request; after one warm-up
   move to each pose (the first moves solve inverse kinematics, which is then cached);
@@ -32,6 +35,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from _machine import machine_line
 from pymodbus.client import ModbusTcpClient
 
 import tmmaster
@@ -54,11 +58,26 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def cpu_per_call(fn: Callable[[], object], calls: int) -> float:
-    started = time.process_time()
-    for _ in range(calls):
-        fn()
-    return (time.process_time() - started) / calls
+def interleaved_cpu_per_call(
+    first: Callable[[], object], second: Callable[[], object], calls: int, batches: int = 20
+) -> tuple[float, float]:
+    """CPU per call of ``first`` and of ``second``, measured in alternating batches.
+
+    The batches run in ABBA order, so a machine that speeds up or slows down during the
+    measurement (other load, frequency changes, the peer process sleeping) weighs on
+    both alike instead of on whichever ran last.
+    """
+    per_batch = max(1, calls // batches)
+    totals = [0.0, 0.0]
+    for batch in range(batches):
+        order = (0, 1) if batch % 2 == 0 else (1, 0)
+        for which in order:
+            fn = (first, second)[which]
+            started = time.process_time()
+            for _ in range(per_batch):
+                fn()
+            totals[which] += time.process_time() - started
+    return totals[0] / (per_batch * batches), totals[1] / (per_batch * batches)
 
 
 def status_blocks(
@@ -147,10 +166,13 @@ def measure(profile: str, reads: int, moves: int, time_scale: float) -> dict[str
             client = ModbusTcpClient("127.0.0.1", port=port, retries=0)
             client.connect()
             try:
-                raw = cpu_per_call(raw_status(client, profile), reads) / requests_per_status
+                raw, ours = interleaved_cpu_per_call(
+                    raw_status(client, profile), robot.status, reads
+                )
             finally:
                 client.close()
-            ours = cpu_per_call(robot.status, reads) / requests_per_status
+            raw /= requests_per_status
+            ours /= requests_per_status
             robot.move_to(B, speed=50)  # warm-up: each pose solved once
             robot.move_to(A, speed=50)
             before_requests, before_cpu = robot.stats.requests, time.process_time()
@@ -187,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--time-scale", type=float, default=5.0)
     args = parser.parse_args(argv)
+    print(f"# {machine_line()}")
     print("| profile | raw pymodbus µs/req | Robot.status µs/req | ratio |"
           " during moves µs/req | ratio | requests/move |"
           " raw paced µs/req | paced ratio |")  # fmt: skip
