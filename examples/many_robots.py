@@ -17,7 +17,7 @@ docs/performance.md, "Many robots from one process"):
   gives its command up safely (withdrawn or stopped) before its thread ends;
 * watching: one :class:`tmmaster.StatusMonitor` polls every robot's status from one
   thread while they move (read-only, a second Modbus connection per robot): one thread
-  per robot saturates one process past about 200 robots; a monitor on uvloop watched
+  per robot saturates one process past about 200-300 robots; a monitor on uvloop watched
   400 at 20 Hz with every slot polled, at 57-68 % of one core of a master pinned to 2
   cores (docs/performance.md). ``--watch-hz 0`` turns it off.
 
