@@ -75,7 +75,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from _machine import machine_line
+from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 
 from tmmaster import Robot, StatusMonitor
 
@@ -637,23 +637,6 @@ def summary(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def pin_plan(pin: str, master_count: int) -> tuple[list[int], list[int]]:
-    """(master CPUs, simulator CPUs) to pin to; both empty when not pinning."""
-    cpus = sorted(os.sched_getaffinity(0))
-    if pin == "off" or (pin == "auto" and len(cpus) < 8):
-        return [], []
-    if len(cpus) <= master_count:
-        raise SystemExit(f"--pin on needs more than {master_count} CPUs, this process has {cpus}")
-    return cpus[:master_count], cpus[master_count:]
-
-
-def cpu_list(cpus: list[int]) -> str:
-    """``0-1`` for a run of CPUs, else a comma list."""
-    if cpus == list(range(cpus[0], cpus[-1] + 1)):
-        return f"{cpus[0]}-{cpus[-1]}"
-    return ",".join(map(str, cpus))
-
-
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print the tables."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -678,19 +661,11 @@ def main(argv: list[str] | None = None) -> int:
         metavar="N",
         help="only measure what N idle simulators cost in one process, and exit",
     )
-    parser.add_argument(
-        "--pin",
-        choices=["auto", "on", "off"],
-        default="auto",
-        help="pin the master and the simulators to separate CPUs (auto: with 8 or more CPUs)",
-    )
-    parser.add_argument("--master-cpus", type=int, default=2, help="CPUs the master is pinned to")
+    add_pin_arguments(parser)
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
-    parser.add_argument("--cpus", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve is not None:
-        if args.cpus:
-            os.sched_setaffinity(0, {int(c) for c in args.cpus.split(",")})
+        pin_child(args)
         if args.slave == "light":
             serve_light(args.serve)
         else:
@@ -702,9 +677,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.n, args.seconds, args.repeat = [1, 25, 100], 3.0, 1
     designs = list(DESIGNS) if "all" in args.design else args.design
-    master_cpus, sim_cpus = pin_plan(args.pin, args.master_cpus)
-    if master_cpus:
-        os.sched_setaffinity(0, master_cpus)  # every thread the master starts inherits it
+    master_cpus, sim_cpus = pin_master(args)
     rows: list[Row] = []
     for n in args.n:
         farm = SimFarm(n, args.sims_per_process, args.sim_tick_hz, args.slave, sim_cpus)
@@ -718,12 +691,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"# {machine_line()}; {args.rate:g} Hz polling,"
         f" {args.seconds:g} s rounds, simulators: {args.sims_per_process} per process,"
-        f" {args.sim_tick_hz:g} Hz tick, same machine, "
-        + (
-            f"master pinned to CPUs {cpu_list(master_cpus)}, simulators to {cpu_list(sim_cpus)}"
-            if master_cpus
-            else "not pinned"
-        )
+        f" {args.sim_tick_hz:g} Hz tick, same machine, {pinning_line(master_cpus, sim_cpus)}"
     )
     print(summary(rows))
     print()

@@ -12,8 +12,11 @@ fixed sequence of moves, and reports per N:
 * master CPU %: CPU time of this process / wall time (100 % = one core);
 * requests/s: Modbus requests of all robots together per wall second.
 
-The simulators run in a separate process (``--serve``) so the CPU figure is the
-master's own, not the simulators' ticks. Both processes stay on 127.0.0.1.
+The simulators run in separate processes (``--serve``, ``--sims-per-process`` each, by
+default all in one) so the CPU figure is the master's own, not the simulators' ticks.
+Everything stays on 127.0.0.1. With 8 or more CPUs (``--pin auto``) the master is pinned
+to the first ``--master-cpus`` (2) and the simulator processes to the rest, as in
+``bench_many_robots.py``.
 
 ``--mode asyncio`` drives the same blocking code through ``asyncio.to_thread`` for
 comparison: it is still one OS thread per robot underneath (the library is synchronous).
@@ -22,6 +25,7 @@ Usage::
 
     python benchmarks/bench_multi_robot.py                 # threads, N = 1 2 4 8
     python benchmarks/bench_multi_robot.py --mode both --moves 12 --repeat 3
+    python benchmarks/bench_multi_robot.py --n 100 200 --sims-per-process 10 --time-scale 1
 """
 
 from __future__ import annotations
@@ -30,7 +34,6 @@ import argparse
 import asyncio
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -40,6 +43,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 
 from tmmaster import Pose, Robot
 
@@ -86,10 +91,12 @@ def serve(n: int, time_scale: float) -> None:
 class SimProcess:
     """The child process hosting the simulators."""
 
-    def __init__(self, n: int, time_scale: float) -> None:
+    def __init__(self, n: int, time_scale: float, cpus: list[int]) -> None:
         src = Path(__file__).resolve().parents[1] / "src"
         env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
         cmd = [sys.executable, __file__, "--serve", str(n), "--time-scale", str(time_scale)]
+        if cpus:
+            cmd += ["--cpus", ",".join(map(str, cpus))]
         self.proc = subprocess.Popen(
             cmd,
             stdin=subprocess.PIPE,
@@ -128,6 +135,35 @@ class SimProcess:
         except OSError:
             pass
         self.proc.wait(10)
+
+
+class SimFarm:
+    """``n`` simulators in processes of ``per_process`` each."""
+
+    def __init__(self, n: int, per_process: int, time_scale: float, cpus: list[int]) -> None:
+        sizes = [per_process] * (n // per_process) + ([n % per_process] if n % per_process else [])
+        self.processes: list[SimProcess] = []
+        try:
+            for k in sizes:
+                self.processes.append(SimProcess(k, time_scale, cpus))
+        except BaseException:
+            self.close()
+            raise
+        self.ports = [port for sims in self.processes for port in sims.ports]
+
+    def clear(self) -> None:
+        """Forget the requests every simulator received so far."""
+        for sims in self.processes:
+            sims.clear()
+
+    def requests(self) -> list[list[tuple[float, int, int]]]:
+        """Per simulator, in port order: its requests."""
+        return [log for sims in self.processes for log in sims.requests()]
+
+    def close(self) -> None:
+        """Stop every child."""
+        for sims in self.processes:
+            sims.close()
 
 
 # -- the master side -----------------------------------------------------------------
@@ -231,9 +267,11 @@ def poll_intervals(requests: list[tuple[float, int, int]]) -> list[float]:
     return intervals
 
 
-def measure(mode: str, n: int, moves: int, time_scale: float) -> Row:
+def measure(
+    mode: str, n: int, moves: int, time_scale: float, per_process: int, sim_cpus: list[int]
+) -> Row:
     """Start n simulators, connect n robots, run the tour concurrently, measure."""
-    sims = SimProcess(n, time_scale)
+    sims = SimFarm(n, per_process or n, time_scale, sim_cpus)
     robots = [
         Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
         for i, port in enumerate(sims.ports)
@@ -303,23 +341,29 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=1, help="runs per (mode, N)")
     parser.add_argument("--mode", choices=["threads", "asyncio", "both"], default="threads")
     parser.add_argument("--json", action="store_true", help="also print raw rows as JSON")
+    parser.add_argument(
+        "--sims-per-process", type=int, default=0, help="simulators per process (0: all in one)"
+    )
+    add_pin_arguments(parser)
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve is not None:
+        pin_child(args)
         serve(args.serve, args.time_scale)
         return 0
+    master_cpus, sim_cpus = pin_master(args)
     # tmmaster logs nothing unless configured to: no log output costs CPU or floods the table.
     modes = ["threads", "asyncio"] if args.mode == "both" else [args.mode]
     rows = [
-        measure(mode, n, args.moves, args.time_scale)
+        measure(mode, n, args.moves, args.time_scale, args.sims_per_process, sim_cpus)
         for n in args.n
         for mode in modes
         for _ in range(args.repeat)
     ]
     print(
-        f"# {platform.python_implementation()} {platform.python_version()},"
-        f" {os.cpu_count()} CPUs, time_scale {args.time_scale:g}, {args.moves} moves per robot,"
-        f" poll {POLL_S * 1000:.0f} ms"
+        f"# {machine_line()}; time_scale {args.time_scale:g}, {args.moves} moves per robot,"
+        f" poll {POLL_S * 1000:.0f} ms, simulators: {args.sims_per_process or 'all'} per"
+        f" process, {pinning_line(master_cpus, sim_cpus)}"
     )
     print(table(rows))
     for r in rows:
