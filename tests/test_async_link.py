@@ -22,9 +22,9 @@ from tmmaster._transport import AsyncReadLink
 Answer = Callable[[int, bytes, asyncio.StreamWriter], Coroutine[Any, Any, None]]
 
 
-def frame(tid: int, pdu: bytes) -> bytes:
-    """An MBAP frame for unit 1 around ``pdu``."""
-    return struct.pack(">HHHB", tid, 0, len(pdu) + 1, 1) + pdu
+def frame(tid: int, pdu: bytes, unit: int = 1) -> bytes:
+    """An MBAP frame for ``unit`` around ``pdu``."""
+    return struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu
 
 
 def registers(*words: int) -> bytes:
@@ -70,12 +70,12 @@ async def with_slave(
             await asyncio.wait(handlers, timeout=2)  # the slave's side ends too
 
 
-def answer_with(pdu: bytes, *, after_s: float = 0.0, tid_offset: int = 0) -> Answer:
-    """Answer ``pdu`` (after ``after_s``), under the request's own id plus ``tid_offset``."""
+def answer_with(pdu: bytes, *, after_s: float = 0.0, tid_offset: int = 0, unit: int = 1) -> Answer:
+    """Answer ``pdu`` after ``after_s`` as ``unit``, under the request's id + ``tid_offset``."""
 
     async def answer(tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
         await asyncio.sleep(after_s)
-        writer.write(frame(tid + tid_offset, pdu))
+        writer.write(frame(tid + tid_offset, pdu, unit))
         await writer.drain()
 
     return answer
@@ -110,6 +110,14 @@ def test_an_answer_under_another_transaction_id_is_not_taken() -> None:
             await link.read_block(Table.HOLDING, 0, 2, "read")
 
     asyncio.run(with_slave([answer_with(registers(1, 2), tid_offset=7)], body))
+
+
+def test_an_answer_from_another_unit_is_not_taken() -> None:
+    async def body(link: AsyncReadLink) -> None:
+        with pytest.raises(ResponseTimeoutError):
+            await link.read_block(Table.HOLDING, 0, 2, "read")
+
+    asyncio.run(with_slave([answer_with(registers(1, 2), unit=7)], body))
 
 
 def test_an_answer_of_another_function_is_an_error() -> None:

@@ -688,13 +688,15 @@ class _ReadStream(asyncio.Protocol):
     """One Modbus TCP stream of an :class:`AsyncReadLink`: answers matched to requests by id.
 
     pymodbus' socket framer cuts the stream into frames and its PDU decoder decodes them;
-    an answer whose transaction id no request awaits (a late answer to a request that
-    timed out) is dropped. Losing the connection or an undecodable frame fails every
-    awaited request and closes the stream.
+    an answer from another unit id, or whose transaction id no request awaits (a late
+    answer to a request that timed out), is dropped, as pymodbus' own client does.
+    Losing the connection or an undecodable frame fails every awaited request and closes
+    the stream.
     """
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, device_id: int) -> None:
         self.name = name
+        self.device_id = device_id
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
@@ -710,7 +712,7 @@ class _ReadStream(asyncio.Protocol):
         self._buffer += data
         while self._buffer and not self.closed:
             try:
-                used, pdu = self.framer.handleFrame(self._buffer, 0, 0)
+                used, pdu = self.framer.handleFrame(self._buffer, self.device_id, 0)
             except ModbusException as exc:
                 self.fail(TransportError(f"{self.name}: undecodable answer: {exc}"))
                 return
@@ -778,7 +780,7 @@ class AsyncReadLink:
         try:
             async with asyncio.timeout(self.timeout):
                 _transport, stream = await loop.create_connection(
-                    lambda: _ReadStream(self.name), self.host, self.port
+                    lambda: _ReadStream(self.name, self.device_id), self.host, self.port
                 )
         except (OSError, TimeoutError) as exc:
             raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
