@@ -17,9 +17,10 @@ evenly over the period). Per design of the master:
   none of tmmaster's logic): the ceiling a single event loop could reach, not a way to
   drive a robot safely.
 * ``monitor``: :class:`tmmaster.StatusMonitor`, the library's read-only monitor: ONE
-  thread, one event loop (asyncio's own here), one ``AsyncModbusTcpClient`` per robot,
-  each poll decoded into the same ``RobotStatus`` as ``Robot.status()`` (jitter and
-  response from the monitor's own schedule, through its private ``_timings`` record);
+  thread, one event loop (asyncio's own here), one ``AsyncReadLink`` per robot (an
+  asyncio protocol framed by pymodbus), each poll decoded into the same ``RobotStatus``
+  as ``Robot.status()`` (jitter and response from the monitor's own schedule, through
+  its private ``_timings`` record);
 * ``monitor-uvloop``: the same monitor on uvloop's event loop (the ``monitor`` extra);
 * ``selectors``: ONE thread, one non-blocking socket per robot, the FC3 request and
   answer framed with ``struct`` (no pymodbus, no tmmaster), every socket watched by one
@@ -45,6 +46,9 @@ that is a pessimistic setup (real robots bring their own controllers). The simul
 ``--sim-tick-hz`` (default 10 Hz, not the TM's 50 Hz) so that N idle simulators do not
 eat the cores the master is measured on; nothing here moves, so the tick only
 publishes the pose.
+
+``--profile tmflow`` polls tmflow-profile simulators instead (a status is six reads),
+with the designs that decode a status.
 
 Run::
 
@@ -89,11 +93,11 @@ POOL_THREADS = 8
 # -- the simulator processes -----------------------------------------------------------
 
 
-def serve(n: int, tick_hz: float) -> None:
+def serve(n: int, tick_hz: float, profile: str) -> None:
     """Child mode: run ``n`` simulators, print their ports, stay until stdin closes."""
     from tmmaster.sim import Simulator
 
-    sims = [Simulator("article", tick_hz=tick_hz, init_time_s=0.0).start() for _ in range(n)]
+    sims = [Simulator(profile, tick_hz=tick_hz, init_time_s=0.0).start() for _ in range(n)]
     try:
         print(json.dumps({"ports": [s.port for s in sims]}), flush=True)
         sys.stdin.read()  # until the parent closes our stdin
@@ -194,7 +198,13 @@ class SimFarm:
     """Simulator processes serving ``n`` robots between them."""
 
     def __init__(
-        self, n: int, per_process: int, tick_hz: float, slave: str, cpus: list[int] | None
+        self,
+        n: int,
+        per_process: int,
+        tick_hz: float,
+        slave: str,
+        cpus: list[int] | None,
+        profile: str = "article",
     ) -> None:
         src = Path(__file__).resolve().parents[1] / "src"
         env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
@@ -203,7 +213,8 @@ class SimFarm:
             subprocess.Popen(
                 [sys.executable, __file__, "--serve", str(k), "--sim-tick-hz", str(tick_hz)]
                 + (["--slave", "light"] if slave == "light" else [])
-                + (["--cpus", ",".join(map(str, cpus))] if cpus else []),
+                + (["--cpus", ",".join(map(str, cpus))] if cpus else [])
+                + ["--profile", profile],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.DEVNULL,
@@ -481,6 +492,7 @@ def run_monitor(
     seconds: float,
     sim_cpu: Callable[[], float],
     event_loop: Literal["asyncio", "uvloop"] = "asyncio",
+    profile: str = "article",
 ) -> tuple[Samples, float, float, float]:
     """One :class:`tmmaster.StatusMonitor` over every robot (one thread, one event loop).
 
@@ -489,7 +501,7 @@ def run_monitor(
     """
     monitor = StatusMonitor(rate_hz=1.0 / period, timeout_s=1.0, event_loop=event_loop)
     for i, port in enumerate(ports):
-        monitor.add(f"robot{i}", "127.0.0.1", port, profile="article")
+        monitor.add(f"robot{i}", "127.0.0.1", port, profile=profile)
     timings: list[tuple[float, float]] = []
     monitor._timings = timings  # lateness and response of every answered poll
     with monitor:
@@ -543,20 +555,28 @@ def pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, math.ceil(q / 100 * len(ordered)) - 1)]
 
 
-def measure(design: str, farm: SimFarm, n: int, rate: float, seconds: float, round_: int) -> Row:
+def measure(
+    design: str,
+    farm: SimFarm,
+    n: int,
+    rate: float,
+    seconds: float,
+    round_: int,
+    profile: str = "article",
+) -> Row:
     """One round of one design against the running simulators."""
     period = 1.0 / rate
     loops: dict[str, Callable[..., tuple[Samples, float, float, float]]] = {
         "asyncio": run_asyncio,
         "selectors": run_selectors,
-        "monitor": run_monitor,
-        "monitor-uvloop": functools.partial(run_monitor, event_loop="uvloop"),
+        "monitor": functools.partial(run_monitor, profile=profile),
+        "monitor-uvloop": functools.partial(run_monitor, event_loop="uvloop", profile=profile),
     }
     if design in loops:
         samples, cpu, wall, sim_cpu = loops[design](farm.ports, period, seconds, farm.cpu)
     else:
         robots = [
-            Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
+            Robot("127.0.0.1", port, profile=profile, gripper=None, name=f"robot{i}")
             for i, port in enumerate(farm.ports)
         ]
         try:
@@ -661,6 +681,13 @@ def main(argv: list[str] | None = None) -> int:
         metavar="N",
         help="only measure what N idle simulators cost in one process, and exit",
     )
+    parser.add_argument(
+        "--profile",
+        choices=["article", "tmflow"],
+        default="article",
+        help="the robots' profile (tmflow: tmmaster.sim simulators, and the designs that"
+        " decode a status: threads, pool, scheduler, monitor, monitor-uvloop)",
+    )
     add_pin_arguments(parser)
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -669,7 +696,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.slave == "light":
             serve_light(args.serve)
         else:
-            serve(args.serve, args.sim_tick_hz)
+            serve(args.serve, args.sim_tick_hz, args.profile)
         return 0
     if args.idle_cost is not None:
         print(idle_cost(args.idle_cost, args.sim_tick_hz, args.seconds))
@@ -677,19 +704,31 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.n, args.seconds, args.repeat = [1, 25, 100], 3.0, 1
     designs = list(DESIGNS) if "all" in args.design else args.design
+    if args.profile != "article":
+        raw = {"asyncio", "selectors"} & set(designs)
+        if args.slave == "light" or (raw and "all" not in args.design):
+            parser.error(
+                f"--profile {args.profile}: the light slaves and the raw designs serve and read"
+                " the article map only"
+            )
+        designs = [d for d in designs if d not in ("asyncio", "selectors")]
     master_cpus, sim_cpus = pin_master(args)
     rows: list[Row] = []
     for n in args.n:
-        farm = SimFarm(n, args.sims_per_process, args.sim_tick_hz, args.slave, sim_cpus)
+        farm = SimFarm(
+            n, args.sims_per_process, args.sim_tick_hz, args.slave, sim_cpus, args.profile
+        )
         try:
             for round_ in range(1, args.repeat + 1):
                 for design in designs:
-                    rows.append(measure(design, farm, n, args.rate, args.seconds, round_))
+                    rows.append(
+                        measure(design, farm, n, args.rate, args.seconds, round_, args.profile)
+                    )
                     print(table(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
         finally:
             farm.close()
     print(
-        f"# {machine_line()}; {args.rate:g} Hz polling,"
+        f"# {machine_line()}; {args.profile} profile, {args.rate:g} Hz polling,"
         f" {args.seconds:g} s rounds, simulators: {args.sims_per_process} per process,"
         f" {args.sim_tick_hz:g} Hz tick, same machine, {pinning_line(master_cpus, sim_cpus)}"
     )
