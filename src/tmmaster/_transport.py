@@ -575,7 +575,7 @@ class BlockTransport(ABC):
             )
 
 
-#: What a pymodbus call may raise (sync or async client): :func:`pymodbus_error` maps it.
+#: What a pymodbus client call may raise: :func:`pymodbus_error` maps it.
 PYMODBUS_FAILURES: tuple[type[Exception], ...] = (
     ModbusException,
     OSError,
