@@ -9,81 +9,36 @@ from __future__ import annotations
 
 import asyncio
 import struct
-from collections.abc import Awaitable, Callable, Coroutine
-from typing import Any
+from collections.abc import Awaitable, Callable
 
 import pytest
 
+from scripted_slave import (
+    Answer,
+    ScriptedServer,
+    answer_in_parts,
+    answer_with,
+    close_connection,
+    registers,
+)
 from tmmaster import ConnectionLostError, IllegalAddressError, ResponseTimeoutError, TransportError
 from tmmaster._registers import Table
 from tmmaster._transport import AsyncReadLink
-
-#: What the scripted slave does with one request: (transaction id, the request's PDU, writer).
-Answer = Callable[[int, bytes, asyncio.StreamWriter], Coroutine[Any, Any, None]]
-
-
-def frame(tid: int, pdu: bytes, unit: int = 1) -> bytes:
-    """An MBAP frame for ``unit`` around ``pdu``."""
-    return struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu
-
-
-def registers(*words: int) -> bytes:
-    """An FC3 answer PDU carrying ``words``."""
-    return struct.pack(f">BB{len(words)}H", 3, 2 * len(words), *words)
 
 
 async def with_slave(
     script: list[Answer], body: Callable[[AsyncReadLink], Awaitable[None]]
 ) -> None:
     """Run ``body`` with a link connected to a slave that answers request k by ``script[k]``."""
-    served: list[asyncio.Task[None]] = []
-    handlers: list[asyncio.Task[object]] = []
-
-    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        handlers.append(task)
-        try:
-            for answer in script:
-                head = await reader.readexactly(7)
-                tid, _protocol, length, _unit = struct.unpack(">HHHB", head)
-                pdu = await reader.readexactly(length - 1)
-                served.append(asyncio.create_task(answer(tid, pdu, writer)))
-            await reader.read()  # until the link closes
-        except (asyncio.IncompleteReadError, ConnectionError):
-            pass
-        finally:
-            await asyncio.gather(*served, return_exceptions=True)
-            writer.close()
-
-    server = await asyncio.start_server(handle, "127.0.0.1", 0)
-    port = server.sockets[0].getsockname()[1]
+    server = ScriptedServer(script)
+    port = await server.start()
     link = AsyncReadLink("127.0.0.1", port, device_id=1, timeout=0.2, name="slave")
     try:
         await link.connect()
         await body(link)
     finally:
         link.close()
-        server.close()
-        await server.wait_closed()
-        if handlers:
-            await asyncio.wait(handlers, timeout=2)  # the slave's side ends too
-
-
-def answer_with(pdu: bytes, *, after_s: float = 0.0, tid_offset: int = 0, unit: int = 1) -> Answer:
-    """Answer ``pdu`` after ``after_s`` as ``unit``, under the request's id + ``tid_offset``."""
-
-    async def answer(tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
-        await asyncio.sleep(after_s)
-        writer.write(frame(tid + tid_offset, pdu, unit))
-        await writer.drain()
-
-    return answer
-
-
-async def close_connection(_tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
-    """Close the connection instead of answering."""
-    writer.close()
+        await server.stop()  # the slave's side ends too
 
 
 def test_a_late_answer_is_dropped_not_taken_for_the_next_read() -> None:
@@ -180,16 +135,10 @@ def test_closing_the_link_fails_the_read_it_awaits() -> None:
 
 
 def test_bits_and_an_answer_split_across_segments() -> None:
-    async def split(tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
-        whole = frame(tid, registers(7, 8))
-        for part in (whole[:3], whole[3:9], whole[9:]):
-            writer.write(part)
-            await writer.drain()
-            await asyncio.sleep(0.01)
-
     async def body(link: AsyncReadLink) -> None:
         assert await link.read_block(Table.HOLDING, 0, 2, "read") == [7, 8]
         assert await link.read_block(Table.COIL, 0, 3, "coils") == [1, 0, 1]
 
     coils = bytes([1, 1, 0b101])
+    split = answer_in_parts(registers(7, 8), cuts=(3, 9), pause_s=0.01)
     asyncio.run(with_slave([split, answer_with(coils)], body))

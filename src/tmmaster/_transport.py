@@ -1,9 +1,11 @@
-"""The one module that uses pymodbus client-side (its sync client; its framer and PDUs).
+"""The one module that speaks Modbus client-side: pymodbus' framer and PDUs, our sockets.
 
 A :class:`ModbusTransport` reads and writes register blocks for one device, counts
-what it does, maps every pymodbus failure to a :class:`TransportError`, and applies
-the :class:`RetryPolicy`. pymodbus's own retries are off (``retries=0``): a request
-is sent once per attempt we decide on, never again behind our back.
+what it does, maps every failure to a :class:`TransportError`, and applies the
+:class:`RetryPolicy`. pymodbus' socket framer and PDU classes build every request and
+decode every answer; the socket under them is the transport's own (not pymodbus'
+client), one request at a time, so nothing is ever resent behind the policy's back,
+and a wait costs one system call (docs/performance.md).
 
 Reads, and writes the caller declares idempotent, retry and reconnect. A write that
 triggers a command is sent exactly once: if it fails, the caller must read the
@@ -13,8 +15,11 @@ device's state back to learn whether the command arrived.
 from __future__ import annotations
 
 import asyncio
+import socket
 import struct
+import sys
 import threading
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -22,12 +27,19 @@ from enum import StrEnum
 from typing import Any, Protocol, Self, TypeVar, cast, runtime_checkable
 
 from pymodbus import ModbusException
-from pymodbus.client import ModbusTcpClient
-from pymodbus.exceptions import ConnectionException, ModbusIOException
 from pymodbus.framer import FramerSocket
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
-from pymodbus.pdu.bit_message import ReadCoilsRequest, ReadDiscreteInputsRequest
-from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, ReadInputRegistersRequest
+from pymodbus.pdu.bit_message import (
+    ReadCoilsRequest,
+    ReadDiscreteInputsRequest,
+    WriteMultipleCoilsRequest,
+    WriteSingleCoilRequest,
+)
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    WriteMultipleRegistersRequest,
+)
 
 from ._codec import Decoder, Value, decoder, encoder
 from ._exceptions import (
@@ -454,6 +466,10 @@ class BlockTransport(ABC):
             self.stats.errors += 1
             self._drop()
             raise
+        except BaseException:
+            # Interrupted mid-request (KeyboardInterrupt): its answer may still come.
+            self._drop()
+            raise
 
     def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
         with self._lock:
@@ -575,27 +591,13 @@ class BlockTransport(ABC):
             )
 
 
-#: What a pymodbus client call may raise: :func:`pymodbus_error` maps it.
-PYMODBUS_FAILURES: tuple[type[Exception], ...] = (
+#: What pymodbus' framer and PDU decoding may raise on a malformed answer.
+DECODE_FAILURES: tuple[type[Exception], ...] = (
     ModbusException,
-    OSError,
     ValueError,
     IndexError,
     struct.error,
 )
-
-
-def pymodbus_error(exc: Exception, *, name: str, what: str, timeout: float) -> TransportError:
-    """The :class:`TransportError` a pymodbus failure stands for (one of ``PYMODBUS_FAILURES``)."""
-    if isinstance(exc, ConnectionException):
-        return ConnectionLostError(f"{name}: connection lost during {what}")
-    if isinstance(exc, ModbusIOException):
-        return ResponseTimeoutError(f"{name}: no answer to {what} within {timeout:g} s")
-    if isinstance(exc, ModbusException):
-        return TransportError(f"{name}: {what} failed: {exc}")
-    if isinstance(exc, OSError):
-        return ConnectionLostError(f"{name}: connection lost during {what}")
-    return TransportError(f"{name}: malformed answer to {what}: {exc}")  # a malformed answer
 
 
 def refused_error(response: ModbusPDU, *, name: str, what: str) -> ModbusExceptionError:
@@ -605,8 +607,113 @@ def refused_error(response: ModbusPDU, *, name: str, what: str) -> ModbusExcepti
     return error_class(f"{name}: device refused {what}", code=code)
 
 
+def request_pdu(
+    function_code: int,
+    address: int,
+    count: int,
+    values: list[int] | None,
+    *,
+    device_id: int,
+    tid: int,
+) -> ModbusPDU:
+    """pymodbus' PDU of one request (it encodes the request and decodes the answer)."""
+    if function_code in _READ_REQUEST_CLASSES:
+        return _READ_REQUEST_CLASSES[function_code](
+            address=address, count=count, dev_id=device_id, transaction_id=tid
+        )
+    words = values or []
+    if function_code == 16:
+        return WriteMultipleRegistersRequest(
+            address=address, registers=words, dev_id=device_id, transaction_id=tid
+        )
+    if function_code == 5:
+        return WriteSingleCoilRequest(
+            address=address, bits=[bool(words[0])], dev_id=device_id, transaction_id=tid
+        )
+    return WriteMultipleCoilsRequest(
+        address=address, bits=[bool(b) for b in words], dev_id=device_id, transaction_id=tid
+    )
+
+
+def answer_words(
+    response: ModbusPDU, request: ModbusPDU, *, count: int, name: str, what: str
+) -> list[int]:
+    """The words (bits as 0/1) of an answer to a read, ``[]`` for a write; refusals raised."""
+    if isinstance(response, ExceptionResponse) or response.isError():
+        raise refused_error(response, name=name, what=what)
+    if response.function_code != request.function_code:
+        raise TransportError(f"{name}: answer of another function to {what}")
+    function_code = request.function_code
+    if function_code not in _READ_REQUEST_CLASSES:
+        return []
+    if function_code in (1, 2):
+        words = [int(b) for b in response.bits[:count]]
+    else:
+        words = list(response.registers)
+    if len(words) < count:
+        raise ResponseTimeoutError(f"{name}: short answer to {what}")
+    return words
+
+
+def next_answer(
+    framer: FramerSocket, buffer: bytes, *, device_id: int, name: str
+) -> tuple[int, ModbusPDU | None]:
+    """The first whole answer from ``device_id`` in ``buffer``: (bytes used, PDU or None).
+
+    pymodbus' socket framer cuts and decodes the frame; a frame from another unit id is
+    skipped here (pymodbus would log it as an error). ``(0, None)``: wait for more bytes.
+    """
+    used = 0
+    while used < len(buffer):
+        size, pdu = framer.handleFrame(buffer[used:], 0, 0)
+        if not size:
+            break
+        used += size
+        if pdu is None:
+            continue
+        if pdu.dev_id != device_id:
+            _log.debug("transport.foreign_unit", device=name, unit=pdu.dev_id)
+            continue
+        return used, pdu
+    return used, None
+
+
+#: The request PDU class of each read function code.
+_READ_REQUEST_CLASSES: dict[int, type[ModbusPDU]] = {
+    1: ReadCoilsRequest,
+    2: ReadDiscreteInputsRequest,
+    3: ReadHoldingRegistersRequest,
+    4: ReadInputRegistersRequest,
+}
+
+#: Receive buffer per ``recv``: larger than any Modbus TCP frame (260 bytes).
+_RECV_SIZE = 4096
+
+#: Bound each blocking ``recv``/``send`` by the kernel (SO_RCVTIMEO/SO_SNDTIMEO) on Linux:
+#: one system call per wait and one release of the GIL, where Python's socket timeout
+#: polls first (two of each). Elsewhere Python's socket timeout bounds them.
+_KERNEL_TIMEOUTS = sys.platform.startswith("linux")
+
+
+def _kernel_timeout(sock: socket.socket, seconds: float) -> None:
+    """Bound every blocking receive and send on ``sock`` by ``seconds`` (Linux)."""
+    whole = int(seconds)
+    # At least 1 µs: a zero timeval would mean "wait forever".
+    micro = max(int((seconds - whole) * 1_000_000), 0 if whole else 1)
+    value = struct.pack("ll", whole, micro)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, value)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, value)
+
+
 class ModbusTransport(BlockTransport):
-    """Reads and writes one Modbus TCP device, with counting, error mapping and retries."""
+    """Reads and writes one Modbus TCP device, with counting, error mapping and retries.
+
+    One TCP socket, one request at a time: pymodbus' socket framer and PDU classes build
+    each request and decode its answer, and the answer is taken only under the request's
+    own transaction id and from the transport's unit id. A failure closes the socket
+    (:meth:`BlockTransport._drop`), so a late answer can never be read as a later
+    request's. Nothing is ever resent here: the :class:`RetryPolicy` decides.
+    """
 
     def __init__(
         self,
@@ -619,69 +726,100 @@ class ModbusTransport(BlockTransport):
         name: str = "device",
     ) -> None:
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
-        # retries=0: pymodbus must never resend a request on its own (reference 5).
-        self._client = ModbusTcpClient(
-            host,
-            port=port,
-            timeout=timeout,
-            retries=0,
-            reconnect_delay=0,
-            trace_packet=self._count_bytes,
-        )
-        c = self._client
-        self._calls: dict[int, Callable[[int, int, list[int] | None], ModbusPDU]] = {
-            1: lambda a, n, _v: c.read_coils(a, count=n, device_id=self.device_id),
-            2: lambda a, n, _v: c.read_discrete_inputs(a, count=n, device_id=self.device_id),
-            3: lambda a, n, _v: c.read_holding_registers(a, count=n, device_id=self.device_id),
-            4: lambda a, n, _v: c.read_input_registers(a, count=n, device_id=self.device_id),
-            5: lambda a, _n, v: c.write_coil(a, bool(v and v[0]), device_id=self.device_id),
-            15: lambda a, _n, v: c.write_coils(
-                a, [bool(b) for b in v or ()], device_id=self.device_id
-            ),
-            16: lambda a, _n, v: c.write_registers(a, list(v or ()), device_id=self.device_id),
-        }
+        self._socket: socket.socket | None = None
+        self._framer = FramerSocket(DecodePDU(is_server=False))
+        self._tid = 0
 
     def _link_open(self) -> bool:
-        return bool(self._client.connected)
+        return self._socket is not None
 
     def _open_link(self) -> None:
-        if not self._client.connect():  # type: ignore[no-untyped-call]
-            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}")
+        try:
+            sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
+        except OSError as exc:
+            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            if _KERNEL_TIMEOUTS:
+                sock.settimeout(None)
+                _kernel_timeout(sock, self.timeout)
+        except OSError as exc:
+            sock.close()
+            raise ConnectError(f"cannot set up the link to {self.name}: {exc}") from exc
+        self._socket = sock
 
     def _close_link(self) -> None:
-        self._client.close()  # type: ignore[no-untyped-call]
-
-    def _count_bytes(self, sending: bool, data: bytes) -> bytes:
-        if sending:
-            self.stats.bytes_sent += len(data)
-        else:
-            self.stats.bytes_received += len(data)
-        return data
+        sock, self._socket = self._socket, None
+        if sock is not None:
+            sock.close()
 
     def _exchange(
         self, what: str, function_code: int, address: int, count: int, values: list[int] | None
     ) -> list[int]:
-        """One pymodbus call; every pymodbus failure mapped to a TransportError."""
+        """Send one request once and wait, within ``timeout``, for its own answer."""
+        sock = self._socket
+        if sock is None:
+            raise ConnectionLostError(f"{self.name}: not connected for {what}")
+        self._tid = tid = self._tid % 0xFFFF + 1
+        request = request_pdu(
+            function_code, address, count, values, device_id=self.device_id, tid=tid
+        )
+        frame = self._framer.buildFrame(request)
+        deadline = time.monotonic() + self.timeout
         try:
-            response = self._calls[function_code](address, count, values)
-        except PYMODBUS_FAILURES as exc:
-            raise pymodbus_error(exc, name=self.name, what=what, timeout=self.timeout) from exc
-        if isinstance(response, ExceptionResponse) or response.isError():
-            raise refused_error(response, name=self.name, what=what)
-        if values is not None:
-            return []
-        if function_code in (1, 2):
-            return [int(b) for b in response.bits[:count]]
-        return list(response.registers)
+            sock.sendall(frame)
+            self.stats.bytes_sent += len(frame)
+            response = self._receive(sock, tid, deadline, what)
+        except (TimeoutError, BlockingIOError) as exc:
+            # BlockingIOError: the kernel's SO_RCVTIMEO/SO_SNDTIMEO ran out (EAGAIN).
+            raise ResponseTimeoutError(
+                f"{self.name}: no answer to {what} within {self.timeout:g} s"
+            ) from exc
+        except OSError as exc:
+            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        except DECODE_FAILURES as exc:
+            raise TransportError(f"{self.name}: malformed answer to {what}: {exc}") from exc
+        return answer_words(response, request, count=count, name=self.name, what=what)
 
-
-#: The read request of each table (pymodbus' PDU classes: they encode and decode the PDU).
-_READ_REQUESTS: dict[Table, type[ModbusPDU]] = {
-    Table.COIL: ReadCoilsRequest,
-    Table.DISCRETE_INPUT: ReadDiscreteInputsRequest,
-    Table.HOLDING: ReadHoldingRegistersRequest,
-    Table.INPUT: ReadInputRegistersRequest,
-}
+    def _receive(self, sock: socket.socket, tid: int, deadline: float, what: str) -> ModbusPDU:
+        """The answer under ``tid`` by ``deadline``; other ids' answers are skipped."""
+        buffer = b""
+        shortened = False
+        try:
+            while True:
+                chunk = sock.recv(_RECV_SIZE)
+                if not chunk:
+                    raise ConnectionResetError("closed by the device")  # mapped by _exchange
+                self.stats.bytes_received += len(chunk)
+                buffer += chunk
+                while buffer:
+                    used, pdu = next_answer(
+                        self._framer, buffer, device_id=self.device_id, name=self.name
+                    )
+                    if not used:
+                        break
+                    buffer = buffer[used:]
+                    if pdu is not None and pdu.transaction_id == tid:
+                        return pdu
+                    if pdu is not None:
+                        _log.debug(
+                            "transport.unawaited_answer", device=self.name, tid=pdu.transaction_id
+                        )
+                # Part of a frame, or another id's answer: wait on, by the same deadline.
+                now = time.monotonic()
+                if now >= deadline:
+                    raise TimeoutError
+                shortened = True
+                if _KERNEL_TIMEOUTS:
+                    _kernel_timeout(sock, deadline - now)
+                else:
+                    sock.settimeout(deadline - now)
+        finally:
+            if shortened and self._socket is sock:
+                if _KERNEL_TIMEOUTS:
+                    _kernel_timeout(sock, self.timeout)
+                else:
+                    sock.settimeout(self.timeout)
 
 
 class _ReadStream(asyncio.Protocol):
@@ -712,8 +850,10 @@ class _ReadStream(asyncio.Protocol):
         self._buffer += data
         while self._buffer and not self.closed:
             try:
-                used, pdu = self.framer.handleFrame(self._buffer, self.device_id, 0)
-            except ModbusException as exc:
+                used, pdu = next_answer(
+                    self.framer, self._buffer, device_id=self.device_id, name=self.name
+                )
+            except DECODE_FAILURES as exc:
                 self.fail(TransportError(f"{self.name}: undecodable answer: {exc}"))
                 return
             if not used:
@@ -792,8 +932,8 @@ class AsyncReadLink:
         if stream is None or stream.closed or stream.transport is None:
             raise ConnectionLostError(f"{self.name}: not connected for {what}")
         self._tid = tid = self._tid % 0xFFFF + 1
-        request = _READ_REQUESTS[table](
-            address=address, count=count, dev_id=self.device_id, transaction_id=tid
+        request = request_pdu(
+            READ_FUNCTION[table], address, count, None, device_id=self.device_id, tid=tid
         )
         loop = asyncio.get_running_loop()
         answer: asyncio.Future[ModbusPDU] = loop.create_future()
@@ -805,14 +945,7 @@ class AsyncReadLink:
         finally:
             deadline.cancel()
             stream.awaited.pop(tid, None)
-        if isinstance(response, ExceptionResponse) or response.isError():
-            raise refused_error(response, name=self.name, what=what)
-        if response.function_code != request.function_code:
-            raise TransportError(f"{self.name}: answer of another function to {what}")
-        words = [int(b) for b in response.bits[:count]] if table.is_bit else response.registers
-        if len(words) < count:
-            raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
-        return list(words)
+        return answer_words(response, request, count=count, name=self.name, what=what)
 
     def close(self) -> None:
         """Close the link (safe when closed): after a failure it may still carry a late answer."""

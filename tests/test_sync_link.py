@@ -1,0 +1,196 @@
+"""ModbusTransport's own socket link against a scripted slave: what it does with bad answers.
+
+The transport sends one request at a time on a plain socket and takes an answer only
+under the request's transaction id and from its unit id; after any failure it closes
+the socket, so a late answer can never be read as a later request's. Every test runs
+with both ways of bounding a wait: the kernel's receive timeout (Linux) and Python's
+socket timeout (elsewhere).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import struct
+import sys
+import time
+
+import pytest
+
+from scripted_slave import (
+    Answer,
+    SlaveThread,
+    answer_in_parts,
+    answer_with,
+    close_connection,
+    never_answer,
+    registers,
+)
+from tmmaster import (
+    ConnectionLostError,
+    IllegalAddressError,
+    ResponseTimeoutError,
+    TransportError,
+    _transport,
+)
+from tmmaster._registers import Table
+from tmmaster._retry import RetryPolicy
+from tmmaster._transport import ConnectionState, ModbusTransport
+
+TIMEOUT_S = 0.2
+
+WAYS = ["kernel", "python"] if sys.platform.startswith("linux") else ["python"]
+
+
+@pytest.fixture(params=WAYS)
+def bounded_by(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Which mechanism bounds each wait: SO_RCVTIMEO ("kernel") or the socket timeout."""
+    monkeypatch.setattr(_transport, "_KERNEL_TIMEOUTS", request.param == "kernel")
+    return str(request.param)
+
+
+@pytest.fixture
+def slave(bounded_by: str) -> type[SlaveThread]:
+    """SlaveThread, once the wait mechanism is chosen."""
+    return SlaveThread
+
+
+def link(port: int, *, attempts: int = 1) -> ModbusTransport:
+    """A transport to the scripted slave, retrying reads ``attempts`` times in all."""
+    policy = RetryPolicy(
+        attempts=attempts, total_time_s=5, initial_backoff_s=0.01, max_backoff_s=0.01
+    )
+    return ModbusTransport("127.0.0.1", port, timeout=TIMEOUT_S, retry=policy, name="slave")
+
+
+def test_a_late_answer_is_dropped_not_taken_for_the_next_read(slave: type[SlaveThread]) -> None:
+    script = [
+        answer_with(registers(111, 111), after_s=0.3),  # after the read gave up
+        answer_with(registers(222, 222)),
+    ]
+    with slave(script) as s, link(s.port) as t:
+        with pytest.raises(ResponseTimeoutError, match=r"no answer to read holding .* 0\.2 s"):
+            t.read_block(Table.HOLDING, 0, 2)
+        assert t.state is ConnectionState.DISCONNECTED  # the late answer's stream is gone
+        time.sleep(0.15)  # the late answer is sent now, into the closed link
+        assert t.read_block(Table.HOLDING, 0, 2) == [222, 222]
+        assert t.stats.reconnects == 1
+
+
+@pytest.mark.parametrize(
+    "foreign",
+    [answer_with(registers(1, 2), tid_offset=7), answer_with(registers(1, 2), unit=7)],
+    ids=["another transaction id", "another unit id"],
+)
+def test_a_foreign_answer_is_not_taken(slave: type[SlaveThread], foreign: Answer) -> None:
+    with slave([foreign]) as s, link(s.port) as t, pytest.raises(ResponseTimeoutError):
+        t.read_block(Table.HOLDING, 0, 2)
+
+
+def test_the_own_answer_after_a_foreign_one_is_taken(slave: type[SlaveThread]) -> None:
+    async def foreign_then_own(tid: int, request: bytes, writer: asyncio.StreamWriter) -> None:
+        await answer_with(registers(9, 9), tid_offset=3)(tid, request, writer)
+        await answer_with(registers(9, 9), unit=5)(tid, request, writer)
+        await answer_with(registers(1, 2), after_s=0.02)(tid, request, writer)
+
+    with slave([foreign_then_own]) as s, link(s.port) as t:
+        assert t.read_block(Table.HOLDING, 0, 2) == [1, 2]
+
+
+def test_an_answer_of_another_function_is_an_error(slave: type[SlaveThread]) -> None:
+    fc4 = struct.pack(">BB2H", 4, 4, 1, 2)  # input registers, to a holding read
+    with slave([answer_with(fc4)]) as s, link(s.port) as t:
+        with pytest.raises(TransportError, match="another function"):
+            t.read_block(Table.HOLDING, 0, 2)
+        assert t.state is ConnectionState.DISCONNECTED
+
+
+def test_a_short_answer_is_an_error(slave: type[SlaveThread]) -> None:
+    with (
+        slave([answer_with(registers(1, 2))]) as s,
+        link(s.port) as t,
+        pytest.raises(ResponseTimeoutError, match="short answer"),
+    ):
+        t.read_block(Table.HOLDING, 0, 3)
+
+
+def test_an_exception_answer_is_the_typed_refusal(slave: type[SlaveThread]) -> None:
+    with slave([answer_with(bytes([0x83, 2]))]) as s, link(s.port) as t:
+        with pytest.raises(IllegalAddressError, match="device refused") as caught:
+            t.read_block(Table.HOLDING, 0, 2)
+        assert caught.value.code == 2
+        assert t.state is ConnectionState.CONNECTED  # the device answered: the link is fine
+
+
+def test_an_undecodable_answer_is_an_error_and_drops_the_link(slave: type[SlaveThread]) -> None:
+    with slave([answer_with(bytes([0x41, 0, 0]))]) as s, link(s.port) as t:
+        with pytest.raises(TransportError, match="malformed answer"):
+            t.read_block(Table.HOLDING, 0, 2)
+        assert t.state is ConnectionState.DISCONNECTED
+
+
+def test_a_connection_closed_instead_of_an_answer_is_connection_lost(
+    slave: type[SlaveThread],
+) -> None:
+    with slave([close_connection]) as s, link(s.port) as t:
+        with pytest.raises(ConnectionLostError, match="connection lost during read holding"):
+            t.read_block(Table.HOLDING, 0, 2)
+        assert t.state is ConnectionState.DISCONNECTED
+
+
+def test_a_read_is_retried_on_a_fresh_connection(slave: type[SlaveThread]) -> None:
+    with (
+        slave([close_connection, answer_with(registers(4, 5))]) as s,
+        link(s.port, attempts=2) as t,
+    ):
+        assert t.read_block(Table.HOLDING, 0, 2) == [4, 5]
+        assert t.stats.retries == 1
+        assert t.stats.reconnects == 1
+
+
+def test_a_command_write_is_never_resent(slave: type[SlaveThread]) -> None:
+    with slave([never_answer, answer_with(registers(0, 0))]) as s, link(s.port, attempts=3) as t:
+        with pytest.raises(ResponseTimeoutError):
+            t.write_block(Table.HOLDING, 9000, [1, 2], retry=False)
+        assert len(s.server.requests) == 1  # sent once: the slave saw one request
+        assert s.server.requests[0][0] == 16
+
+
+def test_an_answer_in_segments_is_put_together(slave: type[SlaveThread]) -> None:
+    coils = bytes([1, 1, 0b101])
+    split = answer_in_parts(registers(7, 8), cuts=(3, 9), pause_s=0.01)
+    with slave([split, answer_with(coils)]) as s, link(s.port) as t:
+        assert t.read_block(Table.HOLDING, 0, 2) == [7, 8]
+        assert t.read_block(Table.COIL, 0, 3) == [1, 0, 1]
+
+
+def test_a_trickled_answer_is_bounded_by_one_deadline(slave: type[SlaveThread]) -> None:
+    # Each segment comes within the timeout of the last, the whole answer after 0.4 s:
+    # the wait is bounded from the request, not restarted by every segment.
+    trickle = answer_in_parts(registers(7, 8), cuts=(2, 4, 6, 8), pause_s=0.1)
+    with slave([trickle]) as s, link(s.port) as t, pytest.raises(ResponseTimeoutError):
+        t.read_block(Table.HOLDING, 0, 2)
+
+
+def test_a_silent_device_times_out_and_the_next_read_works(slave: type[SlaveThread]) -> None:
+    with slave([never_answer, answer_with(registers(3, 4))]) as s, link(s.port) as t:
+        with pytest.raises(ResponseTimeoutError, match=r"within 0\.2 s"):
+            t.read_block(Table.HOLDING, 0, 2)
+        assert t.read_block(Table.HOLDING, 0, 2) == [3, 4]
+
+
+def test_an_interrupted_request_drops_the_link(
+    slave: type[SlaveThread], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Ctrl-C while an answer is awaited: the answer may still come, so the socket goes.
+    def interrupted(*_args: object) -> object:
+        deadline = time.monotonic() + 2
+        while not s.server.requests and time.monotonic() < deadline:
+            time.sleep(0.005)  # the slave has the request (and its connection a handler)
+        raise KeyboardInterrupt
+
+    with slave([answer_with(registers(1, 2), after_s=0.05)]) as s, link(s.port) as t:
+        with monkeypatch.context() as patch:
+            patch.setattr(ModbusTransport, "_receive", interrupted)
+            with pytest.raises(KeyboardInterrupt):
+                t.read_block(Table.HOLDING, 0, 2)
+        assert t.state is ConnectionState.DISCONNECTED
