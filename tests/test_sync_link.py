@@ -10,6 +10,7 @@ socket timeout (elsewhere).
 from __future__ import annotations
 
 import asyncio
+import socket
 import struct
 import sys
 import time
@@ -194,3 +195,24 @@ def test_an_interrupted_request_drops_the_link(
             with pytest.raises(KeyboardInterrupt):
                 t.read_block(Table.HOLDING, 0, 2)
         assert t.state is ConnectionState.DISCONNECTED
+
+
+class GreenSocket(socket.socket):
+    """Stands for a monkey-patched socket class (gevent's, eventlet's): not the stdlib's."""
+
+
+def test_a_socket_of_another_class_is_bounded_by_its_own_timeout(
+    slave: type[SlaveThread], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A green socket never blocks in the kernel, so SO_RCVTIMEO would bound nothing there.
+    def green_connection(address: tuple[str, int], timeout: float) -> socket.socket:
+        sock = GreenSocket()
+        sock.settimeout(timeout)
+        sock.connect(address)
+        return sock
+
+    monkeypatch.setattr(socket, "create_connection", green_connection)
+    with slave([never_answer]) as s, link(s.port) as t:
+        with pytest.raises(ResponseTimeoutError):
+            t.read_block(Table.HOLDING, 0, 2)
+        assert not t._kernel_bounds

@@ -695,6 +695,16 @@ _RECV_SIZE = 4096
 _KERNEL_TIMEOUTS = sys.platform.startswith("linux")
 
 
+def _kernel_bounds(sock: socket.socket) -> bool:
+    """True when the kernel's timeouts bound ``sock``'s waits (see ``_KERNEL_TIMEOUTS``).
+
+    Only for the standard library's own socket class: a green socket (gevent's or
+    eventlet's, after monkey-patching) never blocks in the kernel, so only its own
+    timeout, Python's, bounds a wait there.
+    """
+    return _KERNEL_TIMEOUTS and type(sock).__module__ == "socket"
+
+
 def _kernel_timeout(sock: socket.socket, seconds: float) -> None:
     """Bound every blocking receive and send on ``sock`` by ``seconds`` (Linux)."""
     whole = int(seconds)
@@ -727,6 +737,7 @@ class ModbusTransport(BlockTransport):
     ) -> None:
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
         self._socket: socket.socket | None = None
+        self._kernel_bounds = False
         self._framer = FramerSocket(DecodePDU(is_server=False))
         self._tid = 0
 
@@ -740,7 +751,8 @@ class ModbusTransport(BlockTransport):
             raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            if _KERNEL_TIMEOUTS:
+            self._kernel_bounds = _kernel_bounds(sock)
+            if self._kernel_bounds:
                 sock.settimeout(None)
                 _kernel_timeout(sock, self.timeout)
         except OSError as exc:
@@ -810,13 +822,13 @@ class ModbusTransport(BlockTransport):
                 if now >= deadline:
                     raise TimeoutError
                 shortened = True
-                if _KERNEL_TIMEOUTS:
+                if self._kernel_bounds:
                     _kernel_timeout(sock, deadline - now)
                 else:
                     sock.settimeout(deadline - now)
         finally:
             if shortened and self._socket is sock:
-                if _KERNEL_TIMEOUTS:
+                if self._kernel_bounds:
                     _kernel_timeout(sock, self.timeout)
                 else:
                     sock.settimeout(self.timeout)
