@@ -82,6 +82,7 @@ from typing import Literal
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 
 from tmmaster import Robot, StatusMonitor
+from tmmaster._transport import BlockTransport
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
@@ -133,15 +134,22 @@ def idle_cost(n: int, tick_hz: float, seconds: float) -> str:
     )
 
 
-class Responder(asyncio.Protocol):
-    """A minimal Modbus TCP slave: answers FC3 reads from a fixed image of the article map.
+#: A light slave's answers: (function code, address, count) -> the answer's PDU.
+Answers = dict[tuple[int, int, int], bytes]
 
-    Not a simulator (nothing moves, no handshake, no checks beyond the function code):
-    a slave cheap enough that the master, not the slaves, is what a run measures.
+
+class Responder(asyncio.Protocol):
+    """A minimal Modbus TCP slave: answers reads from a fixed image.
+
+    The article map: FC3 reads of a fixed image of its registers. Other profiles: the
+    exact reads of a status (``answers``), snapshotted from a real simulator; any other
+    request is refused. Not a simulator (nothing moves, no handshake): a slave cheap
+    enough that the master, not the slaves, is what a run measures.
     """
 
-    def __init__(self, image: bytes) -> None:
+    def __init__(self, image: bytes, answers: Answers | None = None) -> None:
         self.image = image
+        self.answers = answers
         self.buffer = b""
         self.transport: asyncio.Transport | None = None
 
@@ -158,7 +166,10 @@ class Responder(asyncio.Protocol):
                 return
             frame, self.buffer = self.buffer[:end], self.buffer[end:]
             assert self.transport is not None
-            if fc == 3:
+            if self.answers is not None:
+                key = (fc, *struct.unpack(">HH", frame[8:12]))
+                pdu = self.answers.get(key) or struct.pack(">BB", fc | 0x80, 2)
+            elif fc == 3:
                 address, count = struct.unpack(">HH", frame[8:12])
                 words = self.image[2 * address : 2 * (address + count)]
                 words += bytes(2 * count - len(words))
@@ -168,16 +179,46 @@ class Responder(asyncio.Protocol):
             self.transport.write(struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu)
 
 
-def serve_light(n: int) -> None:
+def status_answers(profile: str) -> Answers:
+    """The answers to a status poll of ``profile``, read once from a real simulator."""
+    from tmmaster.sim import Simulator
+
+    answers: Answers = {}
+    with Simulator(profile, init_time_s=0.0) as sim:
+        robot = Robot("127.0.0.1", sim.port, profile=profile, gripper=None).connect()
+        try:
+            channel, transport = robot._channel, robot._transport
+            assert isinstance(transport, BlockTransport)  # a Modbus TCP link here
+            plan = transport.read_plan(channel.status_fields, max_gap=channel.profile.max_read_gap)
+            for block in plan.blocks:
+                words = transport.read_block(block.table, block.address, block.count)
+                function = {"coil": 1, "discrete_input": 2, "holding": 3, "input": 4}[block.table]
+                if function in (1, 2):
+                    packed = bytes(
+                        sum(bit << i for i, bit in enumerate(words[k : k + 8]))
+                        for k in range(0, len(words), 8)
+                    )
+                else:
+                    packed = struct.pack(f">{len(words)}H", *words)
+                answers[(function, block.address, block.count)] = (
+                    struct.pack(">BB", function, len(packed)) + packed
+                )
+        finally:
+            robot.close()
+    return answers
+
+
+def serve_light(n: int, profile: str = "article") -> None:
     """Child mode: ``n`` minimal responders on one asyncio loop."""
     image = bytearray(2 * 0x220)
     struct.pack_into(">HHHH", image, 0, 5, 0, 0, 0)  # mode auto, idle, no grasp, no error
     struct.pack_into(">6h", image, 2 * 0x10, 30000, -20000, 20000, 18000, 0, 9000)
+    answers = None if profile == "article" else status_answers(profile)
 
     async def main() -> None:
         loop = asyncio.get_running_loop()
         servers = [
-            await loop.create_server(lambda: Responder(bytes(image)), "127.0.0.1", 0)
+            await loop.create_server(lambda: Responder(bytes(image), answers), "127.0.0.1", 0)
             for _ in range(n)
         ]
         print(json.dumps({"ports": [s.sockets[0].getsockname()[1] for s in servers]}), flush=True)
@@ -685,8 +726,9 @@ def main(argv: list[str] | None = None) -> int:
         "--profile",
         choices=["article", "tmflow"],
         default="article",
-        help="the robots' profile (tmflow: tmmaster.sim simulators, and the designs that"
-        " decode a status: threads, pool, scheduler, monitor, monitor-uvloop)",
+        help="the robots' profile (tmflow: the designs that decode a status, i.e. threads,"
+        " pool, scheduler, monitor, monitor-uvloop; its light slaves answer a status poll's"
+        " reads as a real simulator answered them once)",
     )
     add_pin_arguments(parser)
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
@@ -694,7 +736,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.serve is not None:
         pin_child(args)
         if args.slave == "light":
-            serve_light(args.serve)
+            serve_light(args.serve, args.profile)
         else:
             serve(args.serve, args.sim_tick_hz, args.profile)
         return 0
@@ -706,11 +748,8 @@ def main(argv: list[str] | None = None) -> int:
     designs = list(DESIGNS) if "all" in args.design else args.design
     if args.profile != "article":
         raw = {"asyncio", "selectors"} & set(designs)
-        if args.slave == "light" or (raw and "all" not in args.design):
-            parser.error(
-                f"--profile {args.profile}: the light slaves and the raw designs serve and read"
-                " the article map only"
-            )
+        if raw and "all" not in args.design:
+            parser.error(f"--profile {args.profile}: the raw designs read the article map only")
         designs = [d for d in designs if d not in ("asyncio", "selectors")]
     master_cpus, sim_cpus = pin_master(args)
     rows: list[Row] = []
