@@ -21,11 +21,18 @@ to the first ``--master-cpus`` (2) and the simulator processes to the rest, as i
 ``--mode asyncio`` drives the same blocking code through ``asyncio.to_thread`` for
 comparison: it is still one OS thread per robot underneath (the library is synchronous).
 
+``--slave light`` replaces the simulators by :class:`LightRobot` s (the article map's
+clear-on-accept handshake and the arm model's move times, nothing else), cheap enough
+that hundreds fit on the master's machine; ``--stagger S`` spreads the robots' first
+moves over S seconds instead of starting every robot's tour together.
+
 Usage::
 
     python benchmarks/bench_multi_robot.py                 # threads, N = 1 2 4 8
     python benchmarks/bench_multi_robot.py --mode both --moves 12 --repeat 3
     python benchmarks/bench_multi_robot.py --n 100 200 --sims-per-process 10 --time-scale 1
+    python benchmarks/bench_multi_robot.py --slave light --sims-per-process 100 \
+        --n 100 400 --moves 6 --time-scale 1 --stagger 0.5
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ import asyncio
 import json
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import threading
@@ -46,7 +54,7 @@ from typing import Any
 
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 
-from tmmaster import Pose, Robot
+from tmmaster import MotionType, Pose, Robot
 
 #: The fixed tour every robot drives (article pick area; the article map holds
 #: |x|, |y|, |z| <= 327.67 mm), at 100 % speed, PTP.
@@ -63,6 +71,129 @@ POSE_READ = (3, 16)
 
 
 # -- the simulator process -----------------------------------------------------------
+
+#: The article map's addresses the light slave serves (profiles/article.toml).
+MODE, MOTION, POSE_AT, TARGET_AT, SPEED_AT, COMMAND_AT = 0x00, 0x01, 0x10, 0x200, 0x206, 0x207
+#: The light slave's control tick (the TM's 50 Hz): a command is taken on the next one.
+TICK_S = 0.02
+
+
+class LightRobot(asyncio.Protocol):
+    """A minimal article-map robot for many-robot runs: cheap enough to host hundreds.
+
+    Not the simulator: no faults, no gripper, no stop, no limits beyond the arm model's
+    time. It answers FC3 reads from its registers and takes FC16/FC6 writes; a PTP or
+    Line command written to the command register is taken on the next 20 ms tick
+    (``motion_status`` = moving, then the command register cleared: the clear-on-accept
+    handshake), and the move ends, pose = target and ``motion_status`` = idle, after the
+    arm model's time for it (the same ``RobotModel.motion_time`` the master expects),
+    divided by ``time_scale``. Every request's arrival is logged like the simulator's.
+    """
+
+    def __init__(self, time_scale: float, log: list[tuple[float, int, int]]) -> None:
+        from tmmaster import robot_model
+
+        self.model = robot_model("tm5-700")
+        self.time_scale = time_scale
+        self.log = log
+        self.words = [0] * 0x220
+        self.words[MODE] = 5  # auto
+        self.pose = TOUR[2]
+        self._set_pose(self.pose)
+        self.buffer = b""
+        self.transport: asyncio.Transport | None = None
+        self.taking: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def _set_pose(self, pose: Pose) -> None:
+        for i, value in enumerate(pose.as_list()):
+            self.words[POSE_AT + i] = round(value * 100) & 0xFFFF
+
+    def data_received(self, data: bytes) -> None:
+        self.buffer += data
+        while len(self.buffer) >= 12:
+            tid, _protocol, length, unit, fc = struct.unpack(">HHHBB", self.buffer[:8])
+            end = 6 + length
+            if len(self.buffer) < end:
+                return
+            frame, self.buffer = self.buffer[:end], self.buffer[end:]
+            address, count = struct.unpack(">HH", frame[8:12])
+            self.log.append((time.monotonic(), fc, address))
+            if fc == 3 and address + count <= len(self.words):
+                pdu = struct.pack(
+                    f">BB{count}H", 3, 2 * count, *self.words[address : address + count]
+                )
+            elif fc in (6, 16):
+                values = [count] if fc == 6 else list(struct.unpack(f">{count}H", frame[13:]))
+                self.words[address : address + len(values)] = values
+                pdu = frame[7:12]
+                if address <= COMMAND_AT < address + len(values):
+                    self._command_written()
+            else:
+                pdu = struct.pack(">BB", fc | 0x80, 2)
+            assert self.transport is not None
+            self.transport.write(struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu)
+
+    def _command_written(self) -> None:
+        if self.words[COMMAND_AT] in (1, 2) and self.taking is None and not self.words[MOTION]:
+            loop = asyncio.get_running_loop()
+            now = loop.time()
+            self.taking = loop.call_at(now + TICK_S - now % TICK_S, self._take)
+
+    def _take(self) -> None:
+        self.taking = None
+        command = self.words[COMMAND_AT]
+        if command not in (1, 2):
+            return  # withdrawn before the tick
+        target = Pose(*(((w ^ 0x8000) - 0x8000) / 100 for w in self.words[TARGET_AT:SPEED_AT]))
+        motion = MotionType.PTP if command == 1 else MotionType.LINE
+        seconds = self.model.motion_time(
+            self.pose, target, speed_percent=self.words[SPEED_AT], motion=motion
+        )
+        self.words[MOTION] = 1  # moving, then the command cleared: the acknowledgement
+        self.words[COMMAND_AT] = 0
+        loop = asyncio.get_running_loop()
+        end = loop.time() + seconds / self.time_scale
+        loop.call_at(end + TICK_S - end % TICK_S, self._finish, target)
+
+    def _finish(self, target: Pose) -> None:
+        self.pose = target
+        self._set_pose(target)
+        self.words[MOTION] = 0
+
+
+def serve_light(n: int, time_scale: float) -> None:
+    """Child mode: ``n`` :class:`LightRobot` s on one loop, the same stdin protocol as serve."""
+    logs: list[list[tuple[float, int, int]]] = [[] for _ in range(n)]
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        servers = [
+            await loop.create_server(
+                lambda log=log: LightRobot(time_scale, log),  # type: ignore[misc]
+                "127.0.0.1",
+                0,
+            )
+            for log in logs
+        ]
+        print(json.dumps({"ports": [s.sockets[0].getsockname()[1] for s in servers]}), flush=True)
+        while True:
+            line = (await loop.run_in_executor(None, sys.stdin.readline)).strip()
+            if line == "clear":
+                for log in logs:
+                    log.clear()
+                print("{}", flush=True)
+            elif line == "dump":
+                print(json.dumps(logs), flush=True)
+            else:
+                break
+        for server in servers:
+            server.close()
+
+    asyncio.run(main())
 
 
 def serve(n: int, time_scale: float) -> None:
@@ -91,10 +222,11 @@ def serve(n: int, time_scale: float) -> None:
 class SimProcess:
     """The child process hosting the simulators."""
 
-    def __init__(self, n: int, time_scale: float, cpus: list[int]) -> None:
+    def __init__(self, n: int, time_scale: float, cpus: list[int], slave: str = "sim") -> None:
         src = Path(__file__).resolve().parents[1] / "src"
         env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
         cmd = [sys.executable, __file__, "--serve", str(n), "--time-scale", str(time_scale)]
+        cmd += ["--slave", slave]
         if cpus:
             cmd += ["--cpus", ",".join(map(str, cpus))]
         self.proc = subprocess.Popen(
@@ -140,12 +272,14 @@ class SimProcess:
 class SimFarm:
     """``n`` simulators in processes of ``per_process`` each."""
 
-    def __init__(self, n: int, per_process: int, time_scale: float, cpus: list[int]) -> None:
+    def __init__(
+        self, n: int, per_process: int, time_scale: float, cpus: list[int], slave: str = "sim"
+    ) -> None:
         sizes = [per_process] * (n // per_process) + ([n % per_process] if n % per_process else [])
         self.processes: list[SimProcess] = []
         try:
             for k in sizes:
-                self.processes.append(SimProcess(k, time_scale, cpus))
+                self.processes.append(SimProcess(k, time_scale, cpus, slave))
         except BaseException:
             self.close()
             raise
@@ -178,11 +312,14 @@ class RobotRun:
     error: BaseException | None = None
 
 
-def drive(robot: Robot, moves: int, time_scale: float, start: threading.Barrier) -> RobotRun:
-    """One robot's work: wait for the others, then drive the tour, timing every move."""
+def drive(
+    robot: Robot, moves: int, time_scale: float, start: threading.Barrier, delay_s: float = 0.0
+) -> RobotRun:
+    """One robot's work: wait for the others (and ``delay_s``), then drive the tour, timed."""
     run = RobotRun()
     try:
         start.wait(30)
+        time.sleep(delay_s)
         before = robot.stats.requests
         for i in range(moves):
             target = TOUR[i % len(TOUR)]
@@ -196,13 +333,16 @@ def drive(robot: Robot, moves: int, time_scale: float, start: threading.Barrier)
     return run
 
 
-def run_threads(robots: list[Robot], moves: int, time_scale: float) -> list[RobotRun]:
+def run_threads(
+    robots: list[Robot], moves: int, time_scale: float, stagger_s: float = 0.0
+) -> list[RobotRun]:
     """One plain thread per robot."""
     barrier = threading.Barrier(len(robots) + 1)
     results: list[RobotRun | None] = [None] * len(robots)
 
     def worker(i: int) -> None:
-        results[i] = drive(robots[i], moves, time_scale, barrier)
+        delay = stagger_s * i / len(robots)
+        results[i] = drive(robots[i], moves, time_scale, barrier, delay)
 
     threads = [threading.Thread(target=worker, args=(i,)) for i in range(len(robots))]
     for t in threads:
@@ -213,7 +353,9 @@ def run_threads(robots: list[Robot], moves: int, time_scale: float) -> list[Robo
     return [r for r in results if r is not None]
 
 
-def run_asyncio(robots: list[Robot], moves: int, time_scale: float) -> list[RobotRun]:
+def run_asyncio(
+    robots: list[Robot], moves: int, time_scale: float, stagger_s: float = 0.0
+) -> list[RobotRun]:
     """Each robot's blocking calls in ``asyncio.to_thread``."""
     barrier = threading.Barrier(len(robots) + 1)
 
@@ -223,7 +365,10 @@ def run_asyncio(robots: list[Robot], moves: int, time_scale: float) -> list[Robo
         # that, robots would queue behind others (and the start barrier would never fill).
         # One worker per robot, plus one for this coroutine's own barrier wait.
         loop.set_default_executor(ThreadPoolExecutor(max_workers=len(robots) + 1))
-        tasks = [asyncio.to_thread(drive, r, moves, time_scale, barrier) for r in robots]
+        tasks = [
+            asyncio.to_thread(drive, r, moves, time_scale, barrier, stagger_s * i / len(robots))
+            for i, r in enumerate(robots)
+        ]
         gathered = asyncio.gather(*tasks)
         await asyncio.to_thread(barrier.wait, 30)
         return list(await gathered)
@@ -268,10 +413,17 @@ def poll_intervals(requests: list[tuple[float, int, int]]) -> list[float]:
 
 
 def measure(
-    mode: str, n: int, moves: int, time_scale: float, per_process: int, sim_cpus: list[int]
+    mode: str,
+    n: int,
+    moves: int,
+    time_scale: float,
+    per_process: int,
+    sim_cpus: list[int],
+    slave: str = "sim",
+    stagger_s: float = 0.0,
 ) -> Row:
     """Start n simulators, connect n robots, run the tour concurrently, measure."""
-    sims = SimFarm(n, per_process or n, time_scale, sim_cpus)
+    sims = SimFarm(n, per_process or n, time_scale, sim_cpus, slave)
     robots = [
         Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
         for i, port in enumerate(sims.ports)
@@ -283,7 +435,7 @@ def measure(
         sims.clear()
         cpu0, wall0 = time.process_time(), time.monotonic()
         runner = run_threads if mode == "threads" else run_asyncio
-        runs = runner(robots, moves, time_scale)
+        runs = runner(robots, moves, time_scale, stagger_s)
         wall = time.monotonic() - wall0
         cpu = time.process_time() - cpu0
         requests = sims.requests()
@@ -344,25 +496,51 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--sims-per-process", type=int, default=0, help="simulators per process (0: all in one)"
     )
+    parser.add_argument(
+        "--slave",
+        choices=["sim", "light"],
+        default="sim",
+        help="sim: tmmaster.sim simulators; light: minimal article-map robots (LightRobot)",
+    )
+    parser.add_argument(
+        "--stagger",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="spread the robots' first moves evenly over S seconds (0: all start together)",
+    )
     add_pin_arguments(parser)
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve is not None:
         pin_child(args)
-        serve(args.serve, args.time_scale)
+        if args.slave == "light":
+            serve_light(args.serve, args.time_scale)
+        else:
+            serve(args.serve, args.time_scale)
         return 0
     master_cpus, sim_cpus = pin_master(args)
     # tmmaster logs nothing unless configured to: no log output costs CPU or floods the table.
     modes = ["threads", "asyncio"] if args.mode == "both" else [args.mode]
     rows = [
-        measure(mode, n, args.moves, args.time_scale, args.sims_per_process, sim_cpus)
+        measure(
+            mode,
+            n,
+            args.moves,
+            args.time_scale,
+            args.sims_per_process,
+            sim_cpus,
+            args.slave,
+            args.stagger,
+        )
         for n in args.n
         for mode in modes
         for _ in range(args.repeat)
     ]
     print(
         f"# {machine_line()}; time_scale {args.time_scale:g}, {args.moves} moves per robot,"
-        f" poll {POLL_S * 1000:.0f} ms, simulators: {args.sims_per_process or 'all'} per"
+        f" poll {POLL_S * 1000:.0f} ms, first moves spread over {args.stagger:g} s,"
+        f" {args.slave} slaves: {args.sims_per_process or 'all'} per"
         f" process, {pinning_line(master_cpus, sim_cpus)}"
     )
     print(table(rows))
