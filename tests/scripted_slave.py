@@ -72,34 +72,40 @@ class ScriptedServer:
         self.script: deque[Answer] = deque(script)
         self.requests: list[bytes] = []
         self._served: list[asyncio.Task[None]] = []
-        self._handlers: list[asyncio.Task[object]] = []
+        self._handlers: list[asyncio.Task[None]] = []
         self._writers: list[asyncio.StreamWriter] = []
         self._server: asyncio.Server | None = None
         self.port = 0
 
     async def start(self) -> int:
         """Listen on a free loopback port and return it."""
-        self._server = await asyncio.start_server(self._handle, "127.0.0.1", 0)
+        self._server = await asyncio.start_server(self._accept, "127.0.0.1", 0)
         self.port = self._server.sockets[0].getsockname()[1]
         return self.port
 
     async def stop(self) -> None:
         """Stop listening and wait (bounded) for every connection's handler to end."""
+        # A connection the loop is accepting right now must finish first: closing the
+        # server under it makes asyncio (3.11) drop the accepted socket unclosed.
+        await asyncio.sleep(0.01)
         if self._server is not None:
             self._server.close()
             await self._server.wait_closed()
-        await asyncio.sleep(0.01)  # a connection accepted just now gets its handler
         if self._handlers:
             await asyncio.wait(self._handlers, timeout=2)
         for writer in self._writers:  # whatever is still open (a handler cut short)
             writer.close()
-        await asyncio.sleep(0)  # let the transports close their sockets
+        closing = [asyncio.ensure_future(w.wait_closed()) for w in self._writers]
+        if closing:
+            await asyncio.wait(closing, timeout=2)  # the sockets are closed, not just asked to
+
+    def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        # Registered here, in connection_made, not when the handler first runs: stop()
+        # must see every accepted connection, however short the test.
+        self._writers.append(writer)
+        self._handlers.append(asyncio.get_running_loop().create_task(self._handle(reader, writer)))
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._handlers.append(task)
-        self._writers.append(writer)
         try:
             while self.script:
                 head = await reader.readexactly(7)

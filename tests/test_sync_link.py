@@ -27,10 +27,12 @@ from scripted_slave import (
     registers,
 )
 from tmmaster import (
+    ConfigError,
     ConnectionLostError,
     IllegalAddressError,
     ResponseTimeoutError,
     TransportError,
+    ValueOutOfRangeError,
     _transport,
 )
 from tmmaster._registers import Table
@@ -216,3 +218,42 @@ def test_a_socket_of_another_class_is_bounded_by_its_own_timeout(
         with pytest.raises(ResponseTimeoutError):
             t.read_block(Table.HOLDING, 0, 2)
         assert not t._kernel_bounds
+
+
+@pytest.mark.parametrize(
+    ("table", "address", "words", "error"),
+    [
+        (Table.HOLDING, 9000, [1, 70000], ValueOutOfRangeError),  # not a 16-bit word
+        (Table.HOLDING, 9000, [-1], ValueOutOfRangeError),
+        (Table.HOLDING, 9000, [0] * 124, ConfigError),  # FC16 carries at most 123
+        (Table.HOLDING, 65535, [1, 2], ConfigError),  # past the last address
+        (Table.INPUT, 7000, [1], ConfigError),  # a read-only table
+    ],
+)
+def test_a_write_no_request_can_carry_sends_nothing(
+    slave: type[SlaveThread], table: Table, address: int, words: list[int], error: type[Exception]
+) -> None:
+    with slave([]) as s, link(s.port) as t:
+        with pytest.raises(error):
+            t.write_block(table, address, words, retry=False)
+        assert t.stats.requests == 0
+    assert s.server.requests == []
+
+
+@pytest.mark.parametrize(
+    ("table", "address", "count"),
+    [
+        (Table.HOLDING, 0, 126),
+        (Table.COIL, 0, 2001),
+        (Table.INPUT, 65530, 7),
+        (Table.HOLDING, 0, 0),
+    ],
+)
+def test_a_read_no_request_can_carry_sends_nothing(
+    slave: type[SlaveThread], table: Table, address: int, count: int
+) -> None:
+    with slave([]) as s, link(s.port) as t:
+        with pytest.raises(ConfigError, match="one request carries"):
+            t.read_block(table, address, count)
+        assert t.stats.requests == 0
+    assert s.server.requests == []

@@ -50,6 +50,7 @@ from ._exceptions import (
     ModbusExceptionError,
     ResponseTimeoutError,
     TransportError,
+    ValueOutOfRangeError,
 )
 from ._logging import get_logger
 from ._registers import RegisterField, Table
@@ -72,6 +73,20 @@ READ_FUNCTION: dict[Table, int] = {
     Table.HOLDING: 3,
     Table.INPUT: 4,
 }
+
+
+def check_request(table: Table, address: int, count: int, *, write: bool) -> None:
+    """Refuse, before any I/O, a block one Modbus request cannot carry."""
+    if write:
+        limit = MAX_WRITE_BITS if table.is_bit else MAX_WRITE_REGISTERS
+    else:
+        limit = MAX_READ_BITS if table.is_bit else MAX_READ_REGISTERS
+    if not (address >= 0 and 1 <= count <= limit and address + count <= 0x10000):
+        unit = "bits" if table.is_bit else "registers"
+        raise ConfigError(
+            f"{table.value} {address}+{count}: one request carries 1-{limit} {unit}"
+            " within addresses 0-65535"
+        )
 
 
 def describe_read(table: Table, address: int, count: int) -> str:
@@ -495,6 +510,7 @@ class BlockTransport(ABC):
         key = (table, address, count)
         known = self._reads.get(key)
         if known is None:
+            check_request(table, address, count, write=False)
             known = (describe_read(table, address, count), READ_FUNCTION[table])
             if len(self._reads) < 256:  # bounded, like the read plans
                 self._reads[key] = known
@@ -522,6 +538,10 @@ class BlockTransport(ABC):
             raise ConfigError(f"the {table.value} table is read-only")
         what = f"write {table.value} {address}+{len(words)}"
         values = [int(bool(v)) for v in words] if table.is_bit else list(words)
+        check_request(table, address, len(values), write=True)
+        for value in values:
+            if not (isinstance(value, int) and 0 <= value <= 0xFFFF):
+                raise ValueOutOfRangeError(what, value, "0-65535, one 16-bit register")
         function_code = 16 if table is Table.HOLDING else 5 if len(values) == 1 else 15
 
         def once() -> None:
@@ -781,7 +801,7 @@ class ModbusTransport(BlockTransport):
         try:
             sock.sendall(frame)
             self.stats.bytes_sent += len(frame)
-            response = self._receive(sock, tid, deadline, what)
+            response = self._receive(sock, tid, deadline)
         except (TimeoutError, BlockingIOError) as exc:
             # BlockingIOError: the kernel's SO_RCVTIMEO/SO_SNDTIMEO ran out (EAGAIN).
             raise ResponseTimeoutError(
@@ -793,7 +813,7 @@ class ModbusTransport(BlockTransport):
             raise TransportError(f"{self.name}: malformed answer to {what}: {exc}") from exc
         return answer_words(response, request, count=count, name=self.name, what=what)
 
-    def _receive(self, sock: socket.socket, tid: int, deadline: float, what: str) -> ModbusPDU:
+    def _receive(self, sock: socket.socket, tid: int, deadline: float) -> ModbusPDU:
         """The answer under ``tid`` by ``deadline``; other ids' answers are skipped."""
         buffer = b""
         shortened = False
