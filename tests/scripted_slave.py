@@ -66,7 +66,7 @@ async def never_answer(_tid: int, _request: bytes, _writer: asyncio.StreamWriter
 
 
 class ScriptedServer:
-    """The slave's server on the running loop; :attr:`requests` records (function, PDU)."""
+    """The slave's server on the running loop; :attr:`requests` records each request's PDU."""
 
     def __init__(self, script: Iterable[Answer]) -> None:
         self.script: deque[Answer] = deque(script)
