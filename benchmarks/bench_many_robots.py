@@ -82,7 +82,7 @@ from typing import Literal
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 
 from tmmaster import Robot, StatusMonitor
-from tmmaster._transport import BlockTransport
+from tmmaster._transport import READ_FUNCTION, BlockTransport
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
@@ -192,7 +192,7 @@ def status_answers(profile: str) -> Answers:
             plan = transport.read_plan(channel.status_fields, max_gap=channel.profile.max_read_gap)
             for block in plan.blocks:
                 words = transport.read_block(block.table, block.address, block.count)
-                function = {"coil": 1, "discrete_input": 2, "holding": 3, "input": 4}[block.table]
+                function = READ_FUNCTION[block.table]
                 if function in (1, 2):
                     packed = bytes(
                         sum(bit << i for i, bit in enumerate(words[k : k + 8]))

@@ -773,12 +773,19 @@ class ModbusTransport(BlockTransport):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._kernel_bounds = _kernel_bounds(sock)
             if self._kernel_bounds:
-                sock.settimeout(None)
-                _kernel_timeout(sock, self.timeout)
+                sock.settimeout(None)  # blocking: the kernel's timeouts bound each wait
+            self._bound_waits(sock, self.timeout)
         except OSError as exc:
             sock.close()
             raise ConnectError(f"cannot set up the link to {self.name}: {exc}") from exc
         self._socket = sock
+
+    def _bound_waits(self, sock: socket.socket, seconds: float) -> None:
+        """Bound every later send and receive on ``sock`` by ``seconds``."""
+        if self._kernel_bounds:
+            _kernel_timeout(sock, seconds)
+        else:
+            sock.settimeout(seconds)
 
     def _close_link(self) -> None:
         sock, self._socket = self._socket, None
@@ -842,16 +849,10 @@ class ModbusTransport(BlockTransport):
                 if now >= deadline:
                     raise TimeoutError
                 shortened = True
-                if self._kernel_bounds:
-                    _kernel_timeout(sock, deadline - now)
-                else:
-                    sock.settimeout(deadline - now)
+                self._bound_waits(sock, deadline - now)
         finally:
             if shortened and self._socket is sock:
-                if self._kernel_bounds:
-                    _kernel_timeout(sock, self.timeout)
-                else:
-                    sock.settimeout(self.timeout)
+                self._bound_waits(sock, self.timeout)
 
 
 class _ReadStream(asyncio.Protocol):
