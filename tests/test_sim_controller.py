@@ -452,6 +452,21 @@ def test_article_robot_error_at_the_nth_move() -> None:
     assert ("warning", "sim.fault_fired") in [(lvl, ev) for lvl, ev, _ in log.events]
 
 
+def test_article_motion_record_notes_the_tick_that_reported_the_end() -> None:
+    ctl, bank, _, _ = article(faults=[RobotErrorFault(at_move=2, code=0x1F4)])
+    send_article(bank, AIR)
+    run_until(ctl, lambda: bank.get("motion_status") == 1)
+    assert ctl.motion_log[-1].done_wall_time is None  # running: no end reported yet
+    run_until(ctl, lambda: bank.get("motion_status") == 0)
+    first = ctl.motion_log[-1]
+    assert first.done_wall_time is not None
+    assert first.done_wall_time >= first.wall_time
+    # The second move fails with a robot error: it never reported an end.
+    send_article(bank, PART)
+    run_until(ctl, lambda: bank.get("robot_mode") == 7)
+    assert [r.done_wall_time is None for r in ctl.motion_log] == [False, True]
+
+
 def test_article_robot_error_code_must_fit_the_error_register() -> None:
     profile = robot_profile("article")
     with pytest.raises(ValueOutOfRangeError, match="error_code"):
@@ -780,6 +795,16 @@ def test_tmflow_gripper_close_reports_grasp_status() -> None:
     send_tmflow(bank, 3, command=3)
     finish_tmflow(ctl, bank, 3)
     assert bank.get("grasp_status") == 0
+
+
+def test_tmflow_gripper_record_notes_the_tick_that_reported_the_end() -> None:
+    ctl, bank, _, _ = tmflow()
+    send_tmflow(bank, 1, command=4)
+    ctl.tick(DT)
+    assert ctl.motion_log[-1].kind == "gripper_close"
+    assert ctl.motion_log[-1].done_wall_time is None
+    finish_tmflow(ctl, bank, 1)
+    assert ctl.motion_log[-1].done_wall_time is not None
 
 
 def test_tmflow_gripper_close_on_nothing_is_done_but_empty() -> None:

@@ -165,6 +165,8 @@ class Motion:
         self.stop_delivered: bool | None = None
         #: True once the robot reported the command finished (done, or idle after it).
         self.reported_finished = False
+        #: ``time.monotonic()`` when the poll that saw it reported finished returned.
+        self.reported_finished_at: float | None = None
 
     @property
     def command(self) -> Command:
@@ -407,6 +409,7 @@ class _MotionFollower:
 
     def _finish(self, motion: Motion, polled_pose: Pose | None) -> None:
         motion.reported_finished = True
+        motion.reported_finished_at = time.monotonic()
         if motion.target is not None:
             # The poll that saw the move finished read the pose in the same snapshot
             # (article); only a profile whose poll carries no pose needs one more read.

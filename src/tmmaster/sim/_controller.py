@@ -25,7 +25,7 @@ from __future__ import annotations
 import time
 from abc import abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum
 from typing import ClassVar, Literal
 
@@ -94,6 +94,10 @@ class MotionRecord:
     sim_time_s: float
     #: ``time.monotonic()`` when the tick that started it ran.
     wall_time: float
+    #: ``time.monotonic()`` when the tick that reported it finished ran (the registers
+    #: showing the end were set in that tick); None while it runs, and for one that
+    #: failed, was stopped by an error or never reports its end.
+    done_wall_time: float | None = None
 
 
 @dataclass
@@ -111,6 +115,8 @@ class _Active:
     stalled: bool = False
     closing: bool = False
     miss: bool = False
+    #: Its record's index in the motion log (-1: none).
+    record: int = -1
 
 
 class RobotController(SimDevice[RobotProfile]):
@@ -417,7 +423,13 @@ class RobotController(SimDevice[RobotProfile]):
         self._record(number, motion.value, seq, target, speed)
         fault = next((f for f in self._move_faults if f.at_move == number), None)
         self._active = _Active(
-            "motion", number, seq=seq, target=target, expected_s=expected, fault=fault
+            "motion",
+            number,
+            seq=seq,
+            target=target,
+            expected_s=expected,
+            fault=fault,
+            record=len(self._motion_log) - 1,
         )
         self._log.info(
             "sim.motion_started",
@@ -487,9 +499,17 @@ class RobotController(SimDevice[RobotProfile]):
             self._active = None
             self._log.info("sim.motion_done", device=self._name, move=active.number)
             self._command_done(active)
+            self._record_done(active)
         elif not self._backend.gripper_state().moving:
             self._active = None
             self._command_done(active)
+            self._record_done(active)
+
+    def _record_done(self, active: _Active) -> None:
+        """Note in its record when ``active`` was reported finished (this tick)."""
+        if 0 <= active.record < len(self._motion_log):
+            record = self._motion_log[active.record]
+            self._motion_log[active.record] = replace(record, done_wall_time=time.monotonic())
 
     def _fire(self, fault: _MoveFault, active: _Active) -> None:
         self._log.warning(

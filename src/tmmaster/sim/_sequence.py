@@ -175,7 +175,14 @@ class SequenceController(RobotController):
             self._fail_sequence(seq, "gripper_failed", 4)
 
     def _gripper_started(self, number: int, seq: int, *, close: bool, miss: bool) -> None:
-        self._active = _Active("gripper", number, seq=seq, closing=close, miss=miss)
+        self._active = _Active(
+            "gripper",
+            number,
+            seq=seq,
+            closing=close,
+            miss=miss,
+            record=len(self._motion_log) - 1,
+        )
 
     def _command_done(self, active: _Active) -> None:
         self._finish_sequence(active)
