@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
+from types import SimpleNamespace
 
 import pytest
 
+import tmmaster._poller as poller_module
+import tmmaster._robot as robot_module
 from tmmaster import (
     AcknowledgeTimeoutError,
     MovePhase,
+    PollPolicy,
     Pose,
     Robot,
     StopRequestedError,
     TimeoutPolicy,
 )
+from tmmaster._channels import Command, CommandKind, Observation, Ticket
+from tmmaster._robot import Motion, _MotionFollower
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -67,3 +74,103 @@ def test_timeouts_assigned_after_construction_bound_the_wait(
         motion.wait()
     assert motion.withdrawn is True
     assert motion.abandoned
+
+
+class FakeClock:
+    """A monotonic clock that moves only when a poll or a sleep spends time."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+class ClockEvent:
+    """A stop event never set: waiting on it spends the fake clock's time."""
+
+    def __init__(self, clock: FakeClock) -> None:
+        self._clock = clock
+
+    def is_set(self) -> bool:
+        return False
+
+    def wait(self, timeout: float) -> bool:
+        self._clock.now += timeout
+        return False
+
+
+class QuietLog:
+    def is_enabled_for(self, level: int) -> bool:
+        return False
+
+    def info(self, event: str, **kw: object) -> None: ...
+    def warning(self, event: str, **kw: object) -> None: ...
+    def error(self, event: str, **kw: object) -> None: ...
+
+
+class TimedChannel:
+    """A robot whose every poll takes ``poll_s``; it takes the command at once and
+    reports the end from ``end_at`` on (a poll that starts then sees it)."""
+
+    can_stop = False
+
+    def __init__(self, clock: FakeClock, poll_s: float, end_at: float) -> None:
+        self._clock = clock
+        self._poll_s = poll_s
+        self._end_at = end_at
+        self.poll_starts: list[float] = []
+
+    def poll(self, ticket: Ticket) -> Observation:
+        started = self._clock.now
+        self.poll_starts.append(started)
+        self._clock.now += self._poll_s
+        if not ticket.acknowledged:
+            ticket.acknowledged = True
+            ticket.acknowledged_at = self._clock.now
+        return Observation(True, started >= self._end_at, None, None)
+
+
+@pytest.mark.parametrize("poll_s", [0.0005, 0.003, 0.012])
+def test_polls_are_paced_from_each_polls_start_not_its_end(
+    monkeypatch: pytest.MonkeyPatch, poll_s: float
+) -> None:
+    clock = FakeClock()
+    fake_time = SimpleNamespace(monotonic=clock.monotonic)
+    monkeypatch.setattr(robot_module, "time", fake_time)
+    monkeypatch.setattr(poller_module, "time", fake_time)
+    policy = PollPolicy()
+    expected_s = 1.0
+    sent_at = clock.now
+    # The robot reports the end 5 ms after the expected end, inside the dense window.
+    ack_at = sent_at + policy.ack_delay_s + poll_s
+    end_at = ack_at + expected_s + 0.005
+    channel = TimedChannel(clock, poll_s, end_at)
+    follower = _MotionFollower(
+        channel,  # type: ignore[arg-type]
+        ClockEvent(clock),  # type: ignore[arg-type]
+        QuietLog(),
+        poll_interval_s=0.05,
+        polling=policy,
+        timeouts=TimeoutPolicy(),
+        position_tolerance_mm=0.1,
+        orientation_tolerance_deg=0.1,
+    )
+    ticket = Ticket(Command(CommandKind.GRIPPER_CLOSE), [], sent_at)
+    motion = Motion(follower, ticket, start=None, expected_s=expected_s, timeout_s=10)
+    follower.wait(motion, None)
+    assert motion.done
+    assert motion.reported_finished_at == clock.now
+    starts = channel.poll_starts
+    dense = [b - a for a, b in itertools.pairwise(starts) if b > end_at - 0.02]
+    assert dense, "no poll in the window around the expected end"
+    # Start to start: the dense interval, or back to back when a poll takes longer.
+    for gap in dense:
+        assert gap == pytest.approx(max(policy.dense_interval_s, poll_s))
+    # The end is seen at most one interval plus one poll after the robot reported it.
+    assert clock.now - end_at <= max(policy.dense_interval_s, poll_s) + poll_s + 1e-9
+    # Never more than one poll per dense interval, however long the polls take.
+    assert (
+        min(b - a for a, b in itertools.pairwise(starts))
+        >= min(policy.dense_interval_s, poll_s) - 1e-9
+    )

@@ -378,6 +378,11 @@ class _MotionFollower:
         schedule = MotionSchedule(self.polling, self.poll_interval_s, ticket.sent_at)
         anchored = False
         ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
+        # The schedule counts from the start of the last poll, not its end (no drift):
+        # in a dense window a poll follows the last one's start by the dense interval,
+        # whatever the poll's own requests took. A poll that took longer than its
+        # interval is followed at once: never more than one poll per interval.
+        poll_started = time.monotonic()
         while motion.phase is not MovePhase.DONE:
             if ticket.acknowledged and not anchored:
                 schedule.acknowledged(
@@ -386,9 +391,8 @@ class _MotionFollower:
                     since=ticket.pending_seen_at or ticket.sent_at,
                 )
                 anchored = True
-            poller.sleep_until(
-                schedule.next_poll(time.monotonic(), acknowledged=ticket.acknowledged)
-            )
+            poller.sleep_until(schedule.next_poll(poll_started, acknowledged=ticket.acknowledged))
+            poll_started = time.monotonic()
             self.poll(motion)
             if motion.done:
                 return
