@@ -21,7 +21,14 @@ docs/performance.md, "Many robots from one process"):
   400 at 20 Hz with every slot polled, at 57-68 % of one core of a master pinned to 2
   cores (docs/performance.md). ``--watch-hz 0`` turns it off. Those counts are for the
   article map (one read per status); a status of the real TM table is six reads, and on
-  2 cores one process polled about 100 TM robots with threads, 200 with a monitor.
+  2 cores one process polled about 100 TM robots with threads, 200 with a monitor;
+* past about 200 driven robots, more processes (``--processes K``): this script runs
+  itself K times, each child driving a contiguous share of the robots with one thread
+  per robot, and gathers their reports. 400 robots from two processes of 200 on a
+  2-core machine took 57-69 % of one core in all, every poll on time, where one
+  process of 400 threads sometimes falls behind (docs/performance.md). On Ctrl-C in a
+  terminal every child receives it too and gives its own commands up safely; the
+  parent waits for them and never kills one.
 
 Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
 
@@ -32,17 +39,24 @@ or against robots (or simulators) already listening on consecutive ports::
     python -m tmmaster.sim --port 5020 --profile article &
     python -m tmmaster.sim --port 5021 --profile article &
     python examples/many_robots.py --host 127.0.0.1 --ports 5020 5021
+
+and from several processes (here 2, each driving 4 of 8 simulators)::
+
+    python examples/many_robots.py --sim 8 --processes 2
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
+import subprocess
 import sys
 import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from tmmaster import MonitoredStatus, Pose, Robot, StatusMonitor, TMMasterError
 from tmmaster.sim import Simulator
@@ -89,10 +103,11 @@ def run(
     moves: int = 6,
     profile: str = "article",
     watch_hz: float = 10.0,
+    first_index: int = 0,
 ) -> list[RobotReport]:
     """Drive one robot per port, one thread each, watched by one monitor (``watch_hz`` > 0)."""
     robots = [
-        Robot(host, port, profile=profile, gripper=None, name=f"robot{i}")
+        Robot(host, port, profile=profile, gripper=None, name=f"robot{first_index + i}")
         for i, port in enumerate(ports)
     ]
     reports = [RobotReport(r.name) for r in robots]
@@ -134,13 +149,92 @@ def run(
     return reports
 
 
+def report_to_json(report: RobotReport) -> dict[str, Any]:
+    """A report as JSON, for a child process to hand to its parent."""
+    watched = report.watched
+    return {
+        "name": report.name,
+        "moves_done": report.moves_done,
+        "move_times_s": report.move_times_s,
+        "error": None if report.error is None else f"{type(report.error).__name__}: {report.error}",
+        "watched": None if watched is None else [watched.polls, watched.failures],
+    }
+
+
+def report_from_json(data: dict[str, Any]) -> RobotReport:
+    """A child's report (its error keeps the type's name in the message)."""
+    watched = data["watched"]
+    return RobotReport(
+        data["name"],
+        moves_done=data["moves_done"],
+        move_times_s=data["move_times_s"],
+        error=None if data["error"] is None else TMMasterError(data["error"]),
+        watched=None
+        if watched is None
+        else MonitoredStatus(None, None, None, watched[0], 0, watched[1]),
+    )
+
+
+def run_in_processes(
+    ports: Sequence[int],
+    *,
+    processes: int,
+    host: str = HOST,
+    moves: int = 6,
+    profile: str = "article",
+    watch_hz: float = 10.0,
+) -> list[RobotReport]:
+    """Drive the robots from ``processes`` child processes of this script, a share each."""
+    share, extra = divmod(len(ports), processes)
+    children: list[tuple[list[int], int, subprocess.Popen[str]]] = []
+    first = 0
+    for k in range(processes):
+        group = list(ports[first : first + share + (k < extra)])
+        if not group:
+            break
+        command = [
+            sys.executable, __file__, "--host", host, "--ports", *map(str, group),
+            "--moves", str(moves), "--profile", profile, "--watch-hz", str(watch_hz),
+            "--first-index", str(first), "--json",
+        ]  # fmt: skip
+        children.append(
+            (group, first, subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
+        )
+        first += len(group)
+    reports: list[RobotReport] = []
+    try:
+        for group, first, child in children:
+            out, _ = child.communicate()
+            got = [report_from_json(json.loads(line)) for line in out.splitlines() if line]
+            reports += got
+            for i in range(len(got), len(group)):  # a child that ended before reporting
+                name = f"robot{first + i}"
+                reason = f"its process ended with code {child.returncode} before reporting"
+                reports.append(RobotReport(name, error=TMMasterError(reason)))
+    except KeyboardInterrupt:
+        # A terminal's Ctrl-C reached every child too: each gives its commands up itself.
+        # Wait for them; killing one could cut a withdraw or a stop short.
+        for _, _, child in children:
+            child.wait()
+        raise
+    return reports
+
+
 def run_with_simulators(
-    n: int, *, moves: int = 6, time_scale: float = 10.0, watch_hz: float = 10.0
+    n: int,
+    *,
+    moves: int = 6,
+    time_scale: float = 10.0,
+    watch_hz: float = 10.0,
+    processes: int = 1,
 ) -> list[RobotReport]:
     """Start ``n`` simulators on 127.0.0.1 in this process, drive them, close them."""
     sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
     try:
-        return run([s.port for s in sims], moves=moves, watch_hz=watch_hz)
+        ports = [s.port for s in sims]
+        if processes > 1:
+            return run_in_processes(ports, processes=processes, moves=moves, watch_hz=watch_hz)
+        return run(ports, moves=moves, watch_hz=watch_hz)
     finally:
         for sim in sims:
             sim.close()
@@ -162,7 +256,7 @@ def print_reports(reports: Sequence[RobotReport]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``--sim N`` (default) or ``--ports P1 P2 ...``."""
+    """Command line: ``--sim N`` (default) or ``--ports P1 P2 ...``; ``--processes K``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sim", type=int, default=None, metavar="N", help="start N simulators")
     parser.add_argument("--host", default=HOST)
@@ -173,6 +267,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--watch-hz", type=float, default=10.0, help="StatusMonitor rate; 0: no monitor"
     )
+    parser.add_argument(
+        "--processes", type=int, default=1, help="child processes sharing the robots"
+    )
+    # Used by --processes for its children: their robots' numbers, and JSON reports.
+    parser.add_argument("--first-index", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.sim is not None and args.ports is not None:
         parser.error("--sim and --ports are exclusive")
@@ -180,25 +280,45 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--moves must be >= 1")
     if not args.watch_hz >= 0:
         parser.error("--watch-hz must be >= 0")
+    if args.processes < 1:
+        parser.error("--processes must be >= 1")
     try:
-        if args.ports is not None:
+        if args.ports is not None and args.processes > 1:
+            reports = run_in_processes(
+                args.ports,
+                processes=args.processes,
+                host=args.host,
+                moves=args.moves,
+                profile=args.profile,
+                watch_hz=args.watch_hz,
+            )
+        elif args.ports is not None:
             reports = run(
                 args.ports,
                 host=args.host,
                 moves=args.moves,
                 profile=args.profile,
                 watch_hz=args.watch_hz,
+                first_index=args.first_index,
             )
         else:
             n = 8 if args.sim is None else args.sim
             if n < 1:
                 parser.error("--sim must be >= 1")
             reports = run_with_simulators(
-                n, moves=args.moves, time_scale=args.time_scale, watch_hz=args.watch_hz
+                n,
+                moves=args.moves,
+                time_scale=args.time_scale,
+                watch_hz=args.watch_hz,
+                processes=args.processes,
             )
     except KeyboardInterrupt:
         print("interrupted: every robot gave its command up", file=sys.stderr)
         return 130
+    if args.json:
+        for report in reports:
+            print(json.dumps(report_to_json(report)))
+        return 1 if any(r.error is not None for r in reports) else 0
     return print_reports(reports)
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
+from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -90,16 +92,70 @@ def test_without_a_monitor_nothing_is_watched(
     assert report.watched is None
 
 
-def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType) -> None:
+@pytest.mark.parametrize("processes", ["1", "2"])
+def test_main_on_given_ports(
+    tm_simulator_factory: Factory,
+    example: ModuleType,
+    processes: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     sims = [tm_simulator_factory(**QUICK) for _ in range(2)]
-    assert example.main(["--ports", *(str(s.port) for s in sims), "--moves", "1"]) == 0
+    ports = [str(s.port) for s in sims]
+    assert example.main(["--ports", *ports, "--moves", "1", "--processes", processes]) == 0
+    assert "2 of 2 robots done" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
     "argv",
-    [["--sim", "2", "--ports", "5020"], ["--moves", "0"], ["--sim", "0"], ["--watch-hz", "-1"]],
+    [
+        ["--sim", "2", "--ports", "5020"],
+        ["--moves", "0"],
+        ["--sim", "0"],
+        ["--watch-hz", "-1"],
+        ["--processes", "0"],
+    ],
 )
 def test_bad_arguments_exit_2(example: ModuleType, argv: list[str]) -> None:
     with pytest.raises(SystemExit) as info:
         example.main(argv)
     assert info.value.code == 2
+
+
+def test_several_processes_share_the_robots(
+    tm_simulator_factory: Factory, example: ModuleType
+) -> None:
+    sims = [tm_simulator_factory(**QUICK) for _ in range(4)]
+    sims.append(tm_simulator_factory(faults=["robot_error:at_move=2"], **QUICK))
+    reports = example.run_in_processes([s.port for s in sims], processes=2, moves=3, watch_hz=50)
+    # Each child drove a contiguous share; the parent gathered them in order.
+    assert [r.name for r in reports] == [f"robot{i}" for i in range(5)]
+    assert [r.moves_done for r in reports] == [3, 3, 3, 3, 1]
+    assert [r.error is None for r in reports] == [True] * 4 + [False]
+    assert str(reports[4].error).startswith("RobotFaultError: ")
+    assert all(r.watched is not None and r.watched.failures == 0 for r in reports)
+    for sim in sims[:4]:
+        targets = [m.target for m in sim.motion_log() if m.target is not None]
+        assert len(targets) == 3  # each robot driven by exactly one child
+    # The failed robot started nothing after its error.
+    assert len([m for m in sims[4].motion_log() if m.target is not None]) == 2
+
+
+def test_a_child_that_ends_without_reporting_fails_its_robots(
+    example: ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    script = tmp_path / "crash.py"
+    script.write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.setattr(example, "__file__", str(script))
+    reports = example.run_in_processes([1, 2, 3], processes=2)
+    assert [r.name for r in reports] == ["robot0", "robot1", "robot2"]
+    assert all("ended with code 3 before reporting" in str(r.error) for r in reports)
+
+
+def test_a_report_survives_the_trip_from_a_child(example: ModuleType) -> None:
+    report = example.RobotReport(
+        "robot7", moves_done=2, move_times_s=[0.5, 0.25], error=RobotFaultError("robot in error")
+    )
+    back = example.report_from_json(json.loads(json.dumps(example.report_to_json(report))))
+    assert (back.name, back.moves_done, back.move_times_s) == ("robot7", 2, [0.5, 0.25])
+    assert str(back.error) == "RobotFaultError: robot in error"
+    assert back.watched is None
