@@ -205,7 +205,9 @@ def run_in_processes(
     try:
         for group, first, child in children:
             out, _ = child.communicate()
-            got = [report_from_json(json.loads(line)) for line in out.splitlines() if line]
+            got = [
+                report_from_json(json.loads(line)) for line in out.splitlines() if line[:1] == "{"
+            ]
             reports += got
             for i in range(len(got), len(group)):  # a child that ended before reporting
                 name = f"robot{first + i}"
