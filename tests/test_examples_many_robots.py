@@ -83,6 +83,21 @@ def test_main_on_its_own_simulators(
     assert "3 of 3 robots done" in capsys.readouterr().out
 
 
+def test_main_on_its_own_simulators_from_two_processes(
+    fast_example: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The simulators run in this process; two child processes drive them.
+    argv = ["--sim", "3", "--moves", "2", "--time-scale", str(EXAMPLE_TIME_SCALE)]
+    assert fast_example.main([*argv, "--processes", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "3 of 3 robots done" in out
+    assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot")] == [
+        "robot0",
+        "robot1",
+        "robot2",
+    ]
+
+
 def test_without_a_monitor_nothing_is_watched(
     tm_simulator_factory: Factory, example: ModuleType
 ) -> None:
