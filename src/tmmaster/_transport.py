@@ -75,12 +75,16 @@ READ_FUNCTION: dict[Table, int] = {
 }
 
 
+def request_limit(table: Table, *, write: bool) -> int:
+    """The most registers (or bits) of ``table`` one read or write request may carry."""
+    if write:
+        return MAX_WRITE_BITS if table.is_bit else MAX_WRITE_REGISTERS
+    return MAX_READ_BITS if table.is_bit else MAX_READ_REGISTERS
+
+
 def check_request(table: Table, address: int, count: int, *, write: bool) -> None:
     """Refuse, before any I/O, a block one Modbus request cannot carry."""
-    if write:
-        limit = MAX_WRITE_BITS if table.is_bit else MAX_WRITE_REGISTERS
-    else:
-        limit = MAX_READ_BITS if table.is_bit else MAX_READ_REGISTERS
+    limit = request_limit(table, write=write)
     if not (address >= 0 and 1 <= count <= limit and address + count <= 0x10000):
         unit = "bits" if table.is_bit else "registers"
         raise ConfigError(
@@ -165,7 +169,7 @@ def plan_reads(fields: Iterable[RegisterField], *, max_gap: int = 0) -> list[Blo
         by_table.setdefault(f.table, []).append(f)
     for table in Table:
         ordered = sorted(by_table.get(table, []), key=lambda f: f.address)
-        limit = MAX_READ_BITS if table.is_bit else MAX_READ_REGISTERS
+        limit = request_limit(table, write=False)
         current: list[RegisterField] = []
         for f in ordered:
             if current:
@@ -258,7 +262,7 @@ def _group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
     for f, words in ordered:
         if group:
             last = group[-1][0]
-            limit = MAX_WRITE_BITS if f.table.is_bit else MAX_WRITE_REGISTERS
+            limit = request_limit(f.table, write=True)
             size = f.end - group[0][0].address + 1
             if last.table is not f.table or f.address != last.end + 1 or size > limit:
                 flush()
