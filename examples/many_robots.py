@@ -183,6 +183,7 @@ def run_in_processes(
     moves: int = 6,
     profile: str = "article",
     watch_hz: float = 10.0,
+    first_index: int = 0,
 ) -> list[RobotReport]:
     """Drive the robots from ``processes`` child processes of this script, a share each."""
     share, extra = divmod(len(ports), processes)
@@ -195,7 +196,7 @@ def run_in_processes(
         command = [
             sys.executable, __file__, "--host", host, "--ports", *map(str, group),
             "--moves", str(moves), "--profile", profile, "--watch-hz", str(watch_hz),
-            "--first-index", str(first), "--json",
+            "--first-index", str(first_index + first), "--json",
         ]  # fmt: skip
         children.append(
             (group, first, subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
@@ -210,7 +211,7 @@ def run_in_processes(
             ]
             reports += got
             for i in range(len(got), len(group)):  # a child that ended before reporting
-                name = f"robot{first + i}"
+                name = f"robot{first_index + first + i}"
                 reason = f"its process ended with code {child.returncode} before reporting"
                 reports.append(RobotReport(name, error=TMMasterError(reason)))
     except KeyboardInterrupt:
@@ -220,6 +221,32 @@ def run_in_processes(
             child.wait()
         raise
     return reports
+
+
+def drive_fleet(
+    ports: Sequence[int],
+    *,
+    processes: int = 1,
+    host: str = HOST,
+    moves: int = 6,
+    profile: str = "article",
+    watch_hz: float = 10.0,
+    first_index: int = 0,
+) -> list[RobotReport]:
+    """:func:`run` in this process, or :func:`run_in_processes` when ``processes`` > 1."""
+    if processes > 1:
+        return run_in_processes(
+            ports,
+            processes=processes,
+            host=host,
+            moves=moves,
+            profile=profile,
+            watch_hz=watch_hz,
+            first_index=first_index,
+        )
+    return run(
+        ports, host=host, moves=moves, profile=profile, watch_hz=watch_hz, first_index=first_index
+    )
 
 
 def run_with_simulators(
@@ -234,9 +261,7 @@ def run_with_simulators(
     sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
     try:
         ports = [s.port for s in sims]
-        if processes > 1:
-            return run_in_processes(ports, processes=processes, moves=moves, watch_hz=watch_hz)
-        return run(ports, moves=moves, watch_hz=watch_hz)
+        return drive_fleet(ports, processes=processes, moves=moves, watch_hz=watch_hz)
     finally:
         for sim in sims:
             sim.close()
@@ -285,18 +310,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.processes < 1:
         parser.error("--processes must be >= 1")
     try:
-        if args.ports is not None and args.processes > 1:
-            reports = run_in_processes(
+        if args.ports is not None:
+            reports = drive_fleet(
                 args.ports,
                 processes=args.processes,
-                host=args.host,
-                moves=args.moves,
-                profile=args.profile,
-                watch_hz=args.watch_hz,
-            )
-        elif args.ports is not None:
-            reports = run(
-                args.ports,
                 host=args.host,
                 moves=args.moves,
                 profile=args.profile,
