@@ -80,6 +80,7 @@ from pathlib import Path
 from typing import Literal
 
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
+from _mbap import answer_frame, split_requests
 
 from tmmaster import Robot, StatusMonitor
 from tmmaster._transport import READ_FUNCTION, BlockTransport
@@ -158,13 +159,9 @@ class Responder(asyncio.Protocol):
         self.transport = transport
 
     def data_received(self, data: bytes) -> None:
-        self.buffer += data
-        while len(self.buffer) >= 12:
-            tid, _proto, length, unit, fc = struct.unpack(">HHHBB", self.buffer[:8])
-            end = 6 + length
-            if len(self.buffer) < end:
-                return
-            frame, self.buffer = self.buffer[:end], self.buffer[end:]
+        frames, self.buffer = split_requests(self.buffer + data)
+        for frame in frames:
+            fc = frame[7]
             assert self.transport is not None
             if self.answers is not None:
                 key = (fc, *struct.unpack(">HH", frame[8:12]))
@@ -176,7 +173,7 @@ class Responder(asyncio.Protocol):
                 pdu = struct.pack(">BB", 3, len(words)) + words
             else:
                 pdu = struct.pack(">BB", fc | 0x80, 1)  # illegal function
-            self.transport.write(struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu)
+            self.transport.write(answer_frame(frame, pdu))
 
 
 def status_answers(profile: str) -> Answers:

@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
+from _mbap import answer_frame, split_requests
 
 from tmmaster import MotionType, Pose, Robot
 
@@ -113,13 +114,9 @@ class LightRobot(asyncio.Protocol):
             self.words[POSE_AT + i] = round(value * 100) & 0xFFFF
 
     def data_received(self, data: bytes) -> None:
-        self.buffer += data
-        while len(self.buffer) >= 12:
-            tid, _protocol, length, unit, fc = struct.unpack(">HHHBB", self.buffer[:8])
-            end = 6 + length
-            if len(self.buffer) < end:
-                return
-            frame, self.buffer = self.buffer[:end], self.buffer[end:]
+        frames, self.buffer = split_requests(self.buffer + data)
+        for frame in frames:
+            fc = frame[7]
             address, count = struct.unpack(">HH", frame[8:12])
             self.log.append((time.monotonic(), fc, address))
             if fc == 3 and address + count <= len(self.words):
@@ -135,7 +132,7 @@ class LightRobot(asyncio.Protocol):
             else:
                 pdu = struct.pack(">BB", fc | 0x80, 2)
             assert self.transport is not None
-            self.transport.write(struct.pack(">HHHB", tid, 0, len(pdu) + 1, unit) + pdu)
+            self.transport.write(answer_frame(frame, pdu))
 
     def _command_written(self) -> None:
         if self.words[COMMAND_AT] in (1, 2) and self.taking is None and not self.words[MOTION]:
