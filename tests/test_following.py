@@ -20,6 +20,7 @@ from tmmaster import (
     TimeoutPolicy,
 )
 from tmmaster._channels import Command, CommandKind, Observation, Ticket
+from tmmaster._logging import get_logger
 from tmmaster._robot import Motion, _MotionFollower
 from tmmaster.sim import Simulator
 
@@ -100,15 +101,6 @@ class ClockEvent:
         return False
 
 
-class QuietLog:
-    def is_enabled_for(self, level: int) -> bool:
-        return False
-
-    def info(self, event: str, **kw: object) -> None: ...
-    def warning(self, event: str, **kw: object) -> None: ...
-    def error(self, event: str, **kw: object) -> None: ...
-
-
 class TimedChannel:
     """A robot whose every poll takes ``poll_s``; it takes the command at once and
     reports the end from ``end_at`` on (a poll that starts then sees it)."""
@@ -149,7 +141,7 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
     follower = _MotionFollower(
         channel,  # type: ignore[arg-type]
         ClockEvent(clock),  # type: ignore[arg-type]
-        QuietLog(),
+        get_logger("tmmaster.test_following").bind(robot="timed"),
         poll_interval_s=0.05,
         polling=policy,
         timeouts=TimeoutPolicy(),
