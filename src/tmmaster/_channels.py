@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Generator
 from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
@@ -149,6 +150,11 @@ class Observation:
     #: Set when the robot reported a failure; the wait must end with it.
     failure: RobotError | None
     pose: Pose | None
+
+
+#: A poll without I/O (:meth:`CommandChannel.poll_steps`): yields the fields to read
+#: next, is sent their values, returns what the poll saw.
+PollSteps = Generator[tuple[RegisterField, ...], dict[str, Value], Observation]
 
 
 def _pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
@@ -309,9 +315,26 @@ class CommandChannel(ABC):
         (:meth:`take_after_done`). Every check is the same either way.
         """
 
-    @abstractmethod
     def poll(self, ticket: Ticket) -> Observation:
         """Read the robot's state once and say what happened to the ticket."""
+        steps = self.poll_steps(ticket)
+        fields = next(steps)
+        while True:
+            try:
+                fields = steps.send(self.read(fields))
+            except StopIteration as finished:
+                observation: Observation = finished.value
+                return observation
+
+    @abstractmethod
+    def poll_steps(self, ticket: Ticket) -> PollSteps:
+        """One poll without I/O: yields each field set to read, is sent its values, returns.
+
+        The one implementation of a poll: :meth:`poll` reads each set through the
+        transport (blocking); a :class:`~tmmaster.Fleet` reads them on its event loop.
+        The reads are in order, one after the other (the order carries meaning: the
+        article's status block is read after the command register).
+        """
 
     @abstractmethod
     def withdraw(self, ticket: Ticket) -> bool:
@@ -424,11 +447,11 @@ class ClearOnAcceptChannel(CommandChannel):
             plan=group_writes(encoded),
         )
 
-    def poll(self, ticket: Ticket) -> Observation:
+    def poll_steps(self, ticket: Ticket) -> PollSteps:
         """Before acknowledgement read the command register first, then the status block."""
         mark = self._poll_mark()
         if not ticket.acknowledged:
-            pending = int(self.read(self.command_fields)["command"])
+            pending = int((yield self.command_fields)["command"])
             if pending == 0:
                 ticket.acknowledged = True
                 ticket.acknowledged_at = time.monotonic()
@@ -436,7 +459,7 @@ class ClearOnAcceptChannel(CommandChannel):
                 ticket.pending_seen_at = mark[0]
         # Read after the command register: the robot sets "moving" before it clears the
         # command, so idle here, after seeing the command cleared, means finished.
-        status = self.read_status()
+        status = self.status_from((yield self.status_fields))
         failure = self.status_failure(status)
         done = ticket.acknowledged and not status.moving and failure is None
         if done:
@@ -587,11 +610,11 @@ class SequenceChannel(CommandChannel):
             plan=group_writes([*encoded, *encode_writes([seq_word])]),
         )
 
-    def poll(self, ticket: Ticket) -> Observation:
+    def poll_steps(self, ticket: Ticket) -> PollSteps:
         """One read of the feedback block, then the status flags (two reads when split)."""
         mark = self._poll_mark()
-        feedback = self.read(self.feedback_fields)
-        flags = self.read(self.flag_fields)
+        feedback = yield self.feedback_fields
+        flags = yield self.flag_fields
         ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
         failure = self._flags_failure(flags)
         if not ticket.acknowledged:
