@@ -17,7 +17,7 @@ evenly over the period). Per design of the master:
   none of tmmaster's logic): the ceiling a single event loop could reach, not a way to
   drive a robot safely.
 * ``monitor``: :class:`tmmaster.StatusMonitor`, the library's read-only monitor: ONE
-  thread, one event loop (asyncio's own here), one ``AsyncReadLink`` per robot (an
+  thread, one event loop (asyncio's own here), one ``AsyncLink`` per robot (an
   asyncio protocol framed by pymodbus), each poll decoded into the same ``RobotStatus``
   as ``Robot.status()`` (jitter and response from the monitor's own schedule, through
   its private ``_timings`` record);

@@ -1,4 +1,4 @@
-"""AsyncReadLink (the monitor's link) against a scripted slave: what it does with bad answers.
+"""AsyncLink (the monitor's link) against a scripted slave: what it does with bad answers.
 
 The slave is a raw asyncio server in the test's own loop that answers each request as
 the test scripts it: held, late, of another function, short, undecodable, or with the
@@ -23,16 +23,16 @@ from scripted_slave import (
 )
 from tmmaster import ConnectionLostError, IllegalAddressError, ResponseTimeoutError, TransportError
 from tmmaster._registers import Table
-from tmmaster._transport import AsyncReadLink
+from tmmaster._transport import AsyncLink
 
 
 async def with_slave(
-    script: list[Answer], body: Callable[[AsyncReadLink], Awaitable[None]]
+    script: list[Answer], body: Callable[[AsyncLink], Awaitable[None]]
 ) -> None:
     """Run ``body`` with a link connected to a slave that answers request k by ``script[k]``."""
     server = ScriptedServer(script)
     port = await server.start()
-    link = AsyncReadLink("127.0.0.1", port, device_id=1, timeout=0.2, name="slave")
+    link = AsyncLink("127.0.0.1", port, device_id=1, timeout=0.2, name="slave")
     try:
         await link.connect()
         await body(link)
@@ -42,7 +42,7 @@ async def with_slave(
 
 
 def test_a_late_answer_is_dropped_not_taken_for_the_next_read() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(ResponseTimeoutError, match=r"no answer to first read within 0\.2 s"):
             await link.read_block(Table.HOLDING, 0, 2, "first read")
         # The first answer (111, 111) arrives while the second read waits: it is not its.
@@ -60,7 +60,7 @@ def test_a_late_answer_is_dropped_not_taken_for_the_next_read() -> None:
 
 
 def test_an_answer_under_another_transaction_id_is_not_taken() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(ResponseTimeoutError):
             await link.read_block(Table.HOLDING, 0, 2, "read")
 
@@ -68,7 +68,7 @@ def test_an_answer_under_another_transaction_id_is_not_taken() -> None:
 
 
 def test_an_answer_from_another_unit_is_not_taken() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(ResponseTimeoutError):
             await link.read_block(Table.HOLDING, 0, 2, "read")
 
@@ -76,7 +76,7 @@ def test_an_answer_from_another_unit_is_not_taken() -> None:
 
 
 def test_an_answer_of_another_function_is_an_error() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(TransportError, match="another function"):
             await link.read_block(Table.HOLDING, 0, 2, "read")
 
@@ -85,7 +85,7 @@ def test_an_answer_of_another_function_is_an_error() -> None:
 
 
 def test_a_short_answer_is_an_error() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(ResponseTimeoutError, match="short answer"):
             await link.read_block(Table.HOLDING, 0, 3, "read")
 
@@ -93,7 +93,7 @@ def test_a_short_answer_is_an_error() -> None:
 
 
 def test_an_exception_answer_is_the_typed_refusal() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(IllegalAddressError, match="device refused read") as caught:
             await link.read_block(Table.HOLDING, 0, 2, "read")
         assert caught.value.code == 2
@@ -103,7 +103,7 @@ def test_an_exception_answer_is_the_typed_refusal() -> None:
 
 
 def test_an_undecodable_answer_fails_and_closes_the_link() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(TransportError):
             await link.read_block(Table.HOLDING, 0, 2, "read")
         assert not link.connected
@@ -112,7 +112,7 @@ def test_an_undecodable_answer_fails_and_closes_the_link() -> None:
 
 
 def test_a_connection_closed_mid_read_is_connection_lost() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         with pytest.raises(ConnectionLostError, match="connection lost"):
             await link.read_block(Table.HOLDING, 0, 2, "read")
         assert not link.connected
@@ -123,7 +123,7 @@ def test_a_connection_closed_mid_read_is_connection_lost() -> None:
 
 
 def test_closing_the_link_fails_the_read_it_awaits() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         read = asyncio.create_task(link.read_block(Table.HOLDING, 0, 2, "read"))
         await asyncio.sleep(0.05)
         link.close()
@@ -135,7 +135,7 @@ def test_closing_the_link_fails_the_read_it_awaits() -> None:
 
 
 def test_bits_and_an_answer_split_across_segments() -> None:
-    async def body(link: AsyncReadLink) -> None:
+    async def body(link: AsyncLink) -> None:
         assert await link.read_block(Table.HOLDING, 0, 2, "read") == [7, 8]
         assert await link.read_block(Table.COIL, 0, 3, "coils") == [1, 0, 1]
 

@@ -1,7 +1,7 @@
 """A read-only status monitor for many robots, polled from one thread.
 
 :class:`StatusMonitor` runs ONE asyncio event loop in ONE background thread, with one
-:class:`AsyncReadLink` per robot (an asyncio protocol framed by pymodbus, in
+:class:`AsyncLink` per robot (an asyncio protocol framed by pymodbus, in
 ``_transport.py`` with the other client-side pymodbus code; no retry, our own
 timeout). Each robot is polled on its own drift-free schedule at ``rate_hz``, the
 robots' phases spread evenly over the period; a slot that comes while the robot's
@@ -45,7 +45,7 @@ from ._logging import get_logger
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._status import RobotStatus
-from ._transport import AsyncReadLink, BlockTransport, ReadPlan, describe_read
+from ._transport import AsyncLink, BlockTransport, ReadPlan, describe_read
 
 _log = get_logger("tmmaster.monitor")
 
@@ -141,7 +141,7 @@ class _Watched:
             )
             for block, slots in zip(plan.blocks, plan.slots, strict=True)
         )
-        self.link = AsyncReadLink(
+        self.link = AsyncLink(
             host, port, device_id=profile.device_id, timeout=timeout_s, name=name
         )
         self.status: RobotStatus | None = None

@@ -24,6 +24,7 @@ import time
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from types import TracebackType
 from typing import Annotated, Any, Literal, ParamSpec
@@ -34,6 +35,7 @@ from ._channels import (
     Command,
     CommandChannel,
     CommandKind,
+    Observation,
     Ticket,
     channel_for,
     heartbeat_stalled,
@@ -249,6 +251,86 @@ class _Following:
         return False
 
 
+class _Overdue(Enum):
+    """Which deadline of a wait passed (:meth:`FollowState.overdue`)."""
+
+    ACK = "ack"
+    MOTION = "motion"
+
+
+class FollowState:
+    """One wait on one motion between polls: when to poll next, and when to stop polling.
+
+    No I/O: the robot's thread consults it between its own polls, and a
+    :class:`~tmmaster.Fleet`'s event loop between the polls it runs for the thread
+    (:meth:`settled` says when the thread must take over). The schedule counts from
+    the start of the last poll, not its end (no drift): in a dense window a poll
+    follows the last one's start by the dense interval, whatever the poll's own
+    requests took. A poll that took longer than its interval is followed at once:
+    never more than one poll per interval.
+    """
+
+    __slots__ = (
+        "_anchored",
+        "ack_deadline",
+        "budget",
+        "motion",
+        "poll_started",
+        "poller",
+        "schedule",
+        "stop_event",
+    )
+
+    def __init__(self, follower: _MotionFollower, motion: Motion, timeout_s: float | None) -> None:
+        ticket = motion.ticket
+        self.motion = motion
+        #: The motion's time budget from its acknowledgement, s.
+        self.budget = timeout_s if timeout_s is not None else motion.timeout_s
+        self.stop_event = follower.stop_event
+        self.poller = Poller(follower.poll_interval_s, follower.stop_event)
+        self.schedule = MotionSchedule(follower.polling, follower.poll_interval_s, ticket.sent_at)
+        self.ack_deadline = ticket.sent_at + follower.timeouts.ack_timeout_s
+        #: ``time.monotonic()`` at the start of the last poll (the wait's start before one).
+        self.poll_started = time.monotonic()
+        self._anchored = False
+
+    def due(self) -> float:
+        """The monotonic time of the next poll."""
+        ticket = self.motion.ticket
+        if ticket.acknowledged and not self._anchored:
+            self.schedule.acknowledged(
+                ticket.acknowledged_at or ticket.sent_at,
+                self.motion.expected_s,
+                since=ticket.pending_seen_at or ticket.sent_at,
+            )
+            self._anchored = True
+        return self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
+
+    def overdue(self, now: float) -> _Overdue | None:
+        """The deadline that passed: acknowledgement (while sent), motion (while running)."""
+        motion = self.motion
+        if motion.phase is MovePhase.SENT:
+            return _Overdue.ACK if now >= self.ack_deadline else None
+        if motion.phase is MovePhase.RUNNING:
+            ticket = motion.ticket
+            started = ticket.acknowledged_at or ticket.sent_at
+            return _Overdue.MOTION if now - started >= self.budget else None
+        return None
+
+    def settled(self, observation: Observation, now: float) -> bool:
+        """True when a poll's result needs the waiting thread (anything but "poll again")."""
+        if observation.failure is not None or observation.done:
+            return True
+        if observation.acknowledged and self.motion.phase is MovePhase.SENT:
+            return True  # the thread notes it (and the schedule anchors on it)
+        return self.overdue(now) is not None
+
+
+#: A driver that polls a wait for the robot's thread (a Fleet's event loop): it returns
+#: the first observation the thread must act on, or None to hand the next poll back.
+SharedDriver = Callable[[FollowState], Observation | None]
+
+
 class _MotionFollower:
     """Follows every command a Robot sent: polls it, waits for it, gives it up safely.
 
@@ -270,8 +352,10 @@ class _MotionFollower:
         orientation_tolerance_deg: float,
     ) -> None:
         self._channel = channel
-        self._stop_event = stop_event
+        self.stop_event = stop_event
         self._log = log
+        #: Set for a robot of a Fleet: its waits' polls run on the fleet's event loop.
+        self.shared_driver: SharedDriver | None = None
         self.poll_interval_s = poll_interval_s
         self.polling = polling
         self.timeouts = timeouts
@@ -345,7 +429,10 @@ class _MotionFollower:
 
     def poll(self, motion: Motion) -> None:
         """Poll the command once; raises the typed error when the robot failed it."""
-        observation = self._channel.poll(motion.ticket)
+        self._apply(motion, self._channel.poll(motion.ticket))
+
+    def _apply(self, motion: Motion, observation: Observation) -> None:
+        """Act on what a poll saw: raise the robot's failure, note the acknowledgement, finish."""
         if observation.pose is not None:
             motion.last_pose = observation.pose
         if observation.failure is not None:
@@ -372,37 +459,24 @@ class _MotionFollower:
 
     def wait(self, motion: Motion, timeout_s: float | None) -> None:
         """Poll until the command is done; raises on failure, timeout or stop request."""
-        ticket = motion.ticket
-        budget = timeout_s if timeout_s is not None else motion.timeout_s
-        poller = Poller(self.poll_interval_s, self._stop_event)
-        schedule = MotionSchedule(self.polling, self.poll_interval_s, ticket.sent_at)
-        anchored = False
-        ack_deadline = ticket.sent_at + self.timeouts.ack_timeout_s
-        # The schedule counts from the start of the last poll, not its end (no drift):
-        # in a dense window a poll follows the last one's start by the dense interval,
-        # whatever the poll's own requests took. A poll that took longer than its
-        # interval is followed at once: never more than one poll per interval.
-        poll_started = time.monotonic()
-        while motion.phase is not MovePhase.DONE:
-            if ticket.acknowledged and not anchored:
-                schedule.acknowledged(
-                    ticket.acknowledged_at or ticket.sent_at,
-                    motion.expected_s,
-                    since=ticket.pending_seen_at or ticket.sent_at,
-                )
-                anchored = True
-            poller.sleep_until(schedule.next_poll(poll_started, acknowledged=ticket.acknowledged))
-            poll_started = time.monotonic()
-            self.poll(motion)
+        follow = FollowState(self, motion, timeout_s)
+        shared = self.shared_driver
+        while True:
+            observation = None if shared is None else shared(follow)
+            if observation is None:
+                # This thread polls: no shared driver, or it handed this poll back (a
+                # stop request, a failed or busy link: the transport's retries apply).
+                follow.poller.sleep_until(follow.due())
+                follow.poll_started = time.monotonic()
+                observation = self._channel.poll(motion.ticket)
+            self._apply(motion, observation)
             if motion.done:
                 return
-            now = time.monotonic()
-            if motion.phase is MovePhase.SENT and now >= ack_deadline:
+            overdue = follow.overdue(time.monotonic())
+            if overdue is _Overdue.ACK:
                 self._ack_timed_out(motion)
-            elif motion.phase is MovePhase.RUNNING:
-                started = ticket.acknowledged_at or ticket.sent_at
-                if now - started >= budget:
-                    self._motion_timed_out(motion, budget)
+            elif overdue is _Overdue.MOTION:
+                self._motion_timed_out(motion, follow.budget)
 
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
         """The current pose for an error report; the fallback if it cannot be read."""

@@ -472,23 +472,30 @@ class BlockTransport(ABC):
         """Send one request once; count it, and drop the link after a link failure."""
         self._refuse_if_closed()
         self._connect_once()
+        self._count_request(function_code)
+        try:
+            return self._exchange(what, function_code, address, count, values)
+        except BaseException as exc:
+            self._request_failed(exc)
+            raise
+
+    def _count_request(self, function_code: int) -> None:
+        """Count a request about to be sent (every link's requests are counted here)."""
         self.stats.requests += 1
         self.stats.requests_by_function[function_code] = (
             self.stats.requests_by_function.get(function_code, 0) + 1
         )
-        try:
-            return self._exchange(what, function_code, address, count, values)
-        except ModbusExceptionError:
+
+    def _request_failed(self, error: BaseException) -> None:
+        """After a request failed: count it, and drop the link unless the device answered."""
+        if isinstance(error, ModbusExceptionError):
             self.stats.errors += 1  # the device answered: the link is fine
-            raise
-        except TransportError:
+            return
+        if isinstance(error, TransportError):
             self.stats.errors += 1
-            self._drop()
-            raise
-        except BaseException:
-            # Interrupted mid-request (KeyboardInterrupt): its answer may still come.
-            self._drop()
-            raise
+        # A link failure, or an interruption mid-request (KeyboardInterrupt, a cancelled
+        # task): the request's answer may still come on this stream.
+        self._drop()
 
     def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
         with self._lock:
@@ -511,14 +518,7 @@ class BlockTransport(ABC):
         interruptible: bool = True,
     ) -> list[int]:
         """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
-        key = (table, address, count)
-        known = self._reads.get(key)
-        if known is None:
-            check_request(table, address, count, write=False)
-            known = (describe_read(table, address, count), READ_FUNCTION[table])
-            if len(self._reads) < 256:  # bounded, like the read plans
-                self._reads[key] = known
-        what, function_code = known
+        what, function_code = self._read_request(table, address, count)
 
         def once() -> list[int]:
             words = self._execute(what, function_code, address, count, None)
@@ -527,6 +527,17 @@ class BlockTransport(ABC):
             return words
 
         return self._run(what, once, retry=retry, interruptible=interruptible)
+
+    def _read_request(self, table: Table, address: int, count: int) -> tuple[str, int]:
+        """A read's description and function code, checked against the protocol's limits once."""
+        key = (table, address, count)
+        known = self._reads.get(key)
+        if known is None:
+            check_request(table, address, count, write=False)
+            known = (describe_read(table, address, count), READ_FUNCTION[table])
+            if len(self._reads) < 256:  # bounded, like the read plans
+                self._reads[key] = known
+        return known
 
     def write_block(
         self,
@@ -859,8 +870,8 @@ class ModbusTransport(BlockTransport):
                 self._bound_waits(sock, self.timeout)
 
 
-class _ReadStream(asyncio.Protocol):
-    """One Modbus TCP stream of an :class:`AsyncReadLink`: answers matched to requests by id.
+class _Stream(asyncio.Protocol):
+    """One Modbus TCP stream of an :class:`AsyncLink`: answers matched to requests by id.
 
     pymodbus' socket framer cuts the stream into frames and its PDU decoder decodes them;
     an answer from another unit id, or whose transaction id no request awaits (a late
@@ -869,9 +880,10 @@ class _ReadStream(asyncio.Protocol):
     the stream.
     """
 
-    def __init__(self, name: str, device_id: int) -> None:
+    def __init__(self, name: str, device_id: int, stats: TransportStats | None = None) -> None:
         self.name = name
         self.device_id = device_id
+        self.stats = stats
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
@@ -884,6 +896,8 @@ class _ReadStream(asyncio.Protocol):
         self.transport = cast(asyncio.Transport, transport)
 
     def data_received(self, data: bytes) -> None:
+        if self.stats is not None:
+            self.stats.bytes_received += len(data)
         self._buffer += data
         while self._buffer and not self.closed:
             try:
@@ -918,7 +932,7 @@ class _ReadStream(asyncio.Protocol):
             self.transport.close()
 
 
-def _expire(future: asyncio.Future[ModbusPDU], link: AsyncReadLink, what: str) -> None:
+def _expire(future: asyncio.Future[ModbusPDU], link: AsyncLink, what: str) -> None:
     """A request's deadline: fail it unless answered (the message is built only here)."""
     if not future.done():
         future.set_exception(
@@ -926,14 +940,15 @@ def _expire(future: asyncio.Future[ModbusPDU], link: AsyncReadLink, what: str) -
         )
 
 
-class AsyncReadLink:
-    """A read-only Modbus TCP link on the running asyncio loop (:class:`StatusMonitor`'s).
+class AsyncLink:
+    """A Modbus TCP link on the running asyncio loop (a StatusMonitor's, a Fleet's robots').
 
     pymodbus frames and decodes (its socket framer and PDU classes); the stream is a
     plain asyncio protocol, not pymodbus' async client, whose per-request machinery was
     most of a monitor's CPU (docs/performance.md). Failures map to the same
-    :class:`TransportError` subclasses as :class:`ModbusTransport`'s. It has no write and
-    no retry: a failed read raises, and the caller closes the link and reconnects.
+    :class:`TransportError` subclasses as :class:`ModbusTransport`'s. It has no retry and
+    no counters of its own (``stats``, when set, counts bytes): a failed request raises,
+    and the caller closes the link and reconnects.
     """
 
     def __init__(self, host: str, port: int, *, device_id: int, timeout: float, name: str):
@@ -942,7 +957,9 @@ class AsyncReadLink:
         self.device_id = device_id
         self.timeout = timeout
         self.name = name
-        self._stream: _ReadStream | None = None
+        #: When set, the bytes sent and received are counted here (a Fleet robot's link).
+        self.stats: TransportStats | None = None
+        self._stream: _Stream | None = None
         self._tid = 0
 
     @property
@@ -957,7 +974,9 @@ class AsyncReadLink:
         try:
             async with asyncio.timeout(self.timeout):
                 _transport, stream = await loop.create_connection(
-                    lambda: _ReadStream(self.name, self.device_id), self.host, self.port
+                    lambda: _Stream(self.name, self.device_id, self.stats),
+                    self.host,
+                    self.port,
                 )
         except (OSError, TimeoutError) as exc:
             raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
@@ -965,17 +984,30 @@ class AsyncReadLink:
 
     async def read_block(self, table: Table, address: int, count: int, what: str) -> list[int]:
         """Read ``count`` words (or bits as 0/1) in one request; failures as TransportError."""
+        return await self.exchange(what, READ_FUNCTION[table], address, count, None)
+
+    async def exchange(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        """Send one request once and await its own answer within ``timeout``.
+
+        The words (bits as 0/1) of a read's answer, ``[]`` for a write; failures as
+        :class:`TransportError` subclasses. Nothing is ever resent here.
+        """
         stream = self._stream
         if stream is None or stream.closed or stream.transport is None:
             raise ConnectionLostError(f"{self.name}: not connected for {what}")
         self._tid = tid = self._tid % 0xFFFF + 1
         request = request_pdu(
-            READ_FUNCTION[table], address, count, None, device_id=self.device_id, tid=tid
+            function_code, address, count, values, device_id=self.device_id, tid=tid
         )
         loop = asyncio.get_running_loop()
         answer: asyncio.Future[ModbusPDU] = loop.create_future()
         stream.awaited[tid] = answer
-        stream.transport.write(stream.framer.buildFrame(request))
+        frame = stream.framer.buildFrame(request)
+        stream.transport.write(frame)
+        if self.stats is not None:
+            self.stats.bytes_sent += len(frame)
         deadline = loop.call_later(self.timeout, _expire, answer, self, what)
         try:
             response = await answer
