@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import pytest
 
+import tmmaster._following as following_module
 import tmmaster._poller as poller_module
 import tmmaster._robot as robot_module
 from tmmaster import (
@@ -131,6 +132,7 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
     fake_time = SimpleNamespace(monotonic=clock.monotonic)
     monkeypatch.setattr(robot_module, "time", fake_time)
     monkeypatch.setattr(poller_module, "time", fake_time)
+    monkeypatch.setattr(following_module, "time", fake_time)
     policy = PollPolicy()
     expected_s = 1.0
     sent_at = clock.now

@@ -49,6 +49,7 @@ if _TYPE_CHECKING:
         UnreachablePoseError,
         ValueOutOfRangeError,
     )
+    from ._fleet import Fleet
     from ._gripper import (
         Blog2FG7Gripper,
         Gripper,
@@ -107,6 +108,7 @@ _EXPORTS = {
     "DeviceBusyError": "._exceptions",
     "DeviceFailureError": "._exceptions",
     "EmergencyStopError": "._exceptions",
+    "Fleet": "._fleet",
     "GraspFailedError": "._exceptions",
     "Gripper": "._gripper",
     "GripperError": "._exceptions",
@@ -196,6 +198,7 @@ __all__ = [
     "DeviceBusyError",
     "DeviceFailureError",
     "EmergencyStopError",
+    "Fleet",
     "GraspFailedError",
     "Gripper",
     "GripperError",

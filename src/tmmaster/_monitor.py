@@ -141,9 +141,7 @@ class _Watched:
             )
             for block, slots in zip(plan.blocks, plan.slots, strict=True)
         )
-        self.link = AsyncLink(
-            host, port, device_id=profile.device_id, timeout=timeout_s, name=name
-        )
+        self.link = AsyncLink(host, port, device_id=profile.device_id, timeout=timeout_s, name=name)
         self.status: RobotStatus | None = None
         self.read_at: float | None = None
         self.error: TMMasterError | None = None

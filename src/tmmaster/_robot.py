@@ -24,7 +24,6 @@ import time
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from enum import Enum
 from pathlib import Path
 from types import TracebackType
 from typing import Annotated, Any, Literal, ParamSpec
@@ -57,9 +56,11 @@ from ._exceptions import (
     StopRequestedError,
     TMMasterError,
 )
+from ._fleet import Fleet, FleetMember, LoopTransport
+from ._following import FollowState, Overdue, SharedDriver
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._logging import get_logger
-from ._poller import MotionSchedule, Poller, PollPolicy
+from ._poller import Poller, PollPolicy
 from ._pose import MotionType, Pose
 from ._profiles import (
     DEFAULT_PROFILE,
@@ -251,86 +252,6 @@ class _Following:
         return False
 
 
-class _Overdue(Enum):
-    """Which deadline of a wait passed (:meth:`FollowState.overdue`)."""
-
-    ACK = "ack"
-    MOTION = "motion"
-
-
-class FollowState:
-    """One wait on one motion between polls: when to poll next, and when to stop polling.
-
-    No I/O: the robot's thread consults it between its own polls, and a
-    :class:`~tmmaster.Fleet`'s event loop between the polls it runs for the thread
-    (:meth:`settled` says when the thread must take over). The schedule counts from
-    the start of the last poll, not its end (no drift): in a dense window a poll
-    follows the last one's start by the dense interval, whatever the poll's own
-    requests took. A poll that took longer than its interval is followed at once:
-    never more than one poll per interval.
-    """
-
-    __slots__ = (
-        "_anchored",
-        "ack_deadline",
-        "budget",
-        "motion",
-        "poll_started",
-        "poller",
-        "schedule",
-        "stop_event",
-    )
-
-    def __init__(self, follower: _MotionFollower, motion: Motion, timeout_s: float | None) -> None:
-        ticket = motion.ticket
-        self.motion = motion
-        #: The motion's time budget from its acknowledgement, s.
-        self.budget = timeout_s if timeout_s is not None else motion.timeout_s
-        self.stop_event = follower.stop_event
-        self.poller = Poller(follower.poll_interval_s, follower.stop_event)
-        self.schedule = MotionSchedule(follower.polling, follower.poll_interval_s, ticket.sent_at)
-        self.ack_deadline = ticket.sent_at + follower.timeouts.ack_timeout_s
-        #: ``time.monotonic()`` at the start of the last poll (the wait's start before one).
-        self.poll_started = time.monotonic()
-        self._anchored = False
-
-    def due(self) -> float:
-        """The monotonic time of the next poll."""
-        ticket = self.motion.ticket
-        if ticket.acknowledged and not self._anchored:
-            self.schedule.acknowledged(
-                ticket.acknowledged_at or ticket.sent_at,
-                self.motion.expected_s,
-                since=ticket.pending_seen_at or ticket.sent_at,
-            )
-            self._anchored = True
-        return self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
-
-    def overdue(self, now: float) -> _Overdue | None:
-        """The deadline that passed: acknowledgement (while sent), motion (while running)."""
-        motion = self.motion
-        if motion.phase is MovePhase.SENT:
-            return _Overdue.ACK if now >= self.ack_deadline else None
-        if motion.phase is MovePhase.RUNNING:
-            ticket = motion.ticket
-            started = ticket.acknowledged_at or ticket.sent_at
-            return _Overdue.MOTION if now - started >= self.budget else None
-        return None
-
-    def settled(self, observation: Observation, now: float) -> bool:
-        """True when a poll's result needs the waiting thread (anything but "poll again")."""
-        if observation.failure is not None or observation.done:
-            return True
-        if observation.acknowledged and self.motion.phase is MovePhase.SENT:
-            return True  # the thread notes it (and the schedule anchors on it)
-        return self.overdue(now) is not None
-
-
-#: A driver that polls a wait for the robot's thread (a Fleet's event loop): it returns
-#: the first observation the thread must act on, or None to hand the next poll back.
-SharedDriver = Callable[[FollowState], Observation | None]
-
-
 class _MotionFollower:
     """Follows every command a Robot sent: polls it, waits for it, gives it up safely.
 
@@ -459,7 +380,14 @@ class _MotionFollower:
 
     def wait(self, motion: Motion, timeout_s: float | None) -> None:
         """Poll until the command is done; raises on failure, timeout or stop request."""
-        follow = FollowState(self, motion, timeout_s)
+        follow = FollowState(
+            motion,
+            timeout_s,
+            stop_event=self.stop_event,
+            poll_interval_s=self.poll_interval_s,
+            polling=self.polling,
+            ack_timeout_s=self.timeouts.ack_timeout_s,
+        )
         shared = self.shared_driver
         while True:
             observation = None if shared is None else shared(follow)
@@ -473,9 +401,9 @@ class _MotionFollower:
             if motion.done:
                 return
             overdue = follow.overdue(time.monotonic())
-            if overdue is _Overdue.ACK:
+            if overdue is Overdue.ACK:
                 self._ack_timed_out(motion)
-            elif overdue is _Overdue.MOTION:
+            elif overdue is Overdue.MOTION:
                 self._motion_timed_out(motion, follow.budget)
 
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
@@ -602,6 +530,7 @@ class Robot:
         name: str = "robot",
         transport: Transport | None = None,
         gripper_transport: Transport | None = None,
+        fleet: Fleet | None = None,
     ) -> None:
         self.profile = robot_profile(profile)
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
@@ -628,14 +557,32 @@ class Robot:
         self._joints_hint: tuple[float, ...] | None = None
         self._last_target: Pose | None = None
         self.max_speed_percent = max_speed_percent
+        self._fleet = fleet
+        loop_link: LoopTransport | None = None
+        if fleet is not None:
+            if transport is not None:
+                raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
+            loop_link = fleet.link_for(
+                self,
+                host,
+                port,
+                device_id=self.profile.device_id,
+                timeout=request_timeout_s,
+                retry=retry,
+                name=name,
+            )
         # ``host`` "sim://name" reaches an in-process simulator without a socket.
-        self._transport: Transport = transport or open_transport(
-            host,
-            port,
-            device_id=self.profile.device_id,
-            timeout=request_timeout_s,
-            retry=retry,
-            name=name,
+        self._transport: Transport = (
+            loop_link
+            or transport
+            or open_transport(
+                host,
+                port,
+                device_id=self.profile.device_id,
+                timeout=request_timeout_s,
+                retry=retry,
+                name=name,
+            )
         )
         self._channel: CommandChannel = channel_for(self.profile, self._transport)
         self._stop_event = threading.Event()
@@ -656,6 +603,11 @@ class Robot:
             position_tolerance_mm=position_tolerance_mm,
             orientation_tolerance_deg=orientation_tolerance_deg,
         )
+        self._shared: FleetMember | None = None
+        if fleet is not None and loop_link is not None:
+            # The polls of this robot's waits run on the fleet's loop.
+            self._shared = fleet.driver(self._channel, loop_link)
+            self._follower.shared_driver = self._shared.follow
         self.gripper: Gripper = self._make_gripper(
             gripper,
             GripperLink(
@@ -791,7 +743,7 @@ class Robot:
         Safe to call more than once, and from another thread: waits in progress end with
         :class:`StopRequestedError`.
         """
-        self._stop_event.set()
+        self.interrupt()
         atexit.unregister(self._at_exit)
         motion = self._last_motion
         if motion is not None and self._transport.state is not ConnectionState.CLOSED:
@@ -1040,6 +992,8 @@ class Robot:
     def interrupt(self) -> None:
         """Make running waits give up at their next poll (for Ctrl-C handlers, other threads)."""
         self._stop_event.set()
+        if self._fleet is not None and self._shared is not None:
+            self._fleet.call_soon(self._shared.wake)  # a wait polled by the fleet ends now
 
     # -- internals --------------------------------------------------------
 

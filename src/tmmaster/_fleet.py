@@ -1,0 +1,448 @@
+"""Many robots driven from one process: their links and their waits on one event loop.
+
+A :class:`Fleet` runs ONE asyncio event loop in ONE background thread. Every
+:class:`~tmmaster.Robot` made with ``fleet=`` keeps its own thread for what it decides
+(checks, the command write, withdraws, stops: the blocking code of ``_robot.py``,
+unchanged), but its connection lives on the fleet's loop (:class:`LoopTransport`), and
+the polls of its waits run there too: the loop polls each waiting robot on the same
+:class:`~tmmaster._robot.FollowState` schedule the thread would, through the channel's
+one poll (:meth:`CommandChannel.poll_steps`), and wakes the robot's thread only when a
+poll needs it (acknowledged, done, failed, a deadline passed). So 400 waiting robots
+cost one thread's wake-ups, not 400 threads queueing for the GIL
+(docs/performance.md).
+
+Whenever the loop cannot poll as the thread would (a stop request, the link busy with
+another thread's request, a failed read), it hands the poll back: the thread polls
+itself, with the transport's retry policy. So every rule stays in one place: the loop
+only ever decides "poll again".
+
+Requests from a robot's thread go to the loop and the thread waits for the answer
+(bounded by the request timeout): one connection per robot, requests in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import threading
+import time
+import weakref
+from collections.abc import Coroutine, Iterable
+from typing import Any, Protocol, Self, TypeVar
+
+from ._channels import CommandChannel, Observation
+from ._codec import Value
+from ._exceptions import (
+    ConfigError,
+    ConnectionLostError,
+    ResponseTimeoutError,
+    TransportError,
+)
+from ._following import FollowState
+from ._logging import get_logger
+from ._monitor import EventLoopName, _loop_factory
+from ._registers import RegisterField
+from ._retry import RetryPolicy
+from ._transport import AsyncLink, BlockTransport
+
+_log = get_logger("tmmaster.fleet")
+
+T = TypeVar("T")
+
+
+class _Closable(Protocol):
+    """A fleet's robot, as the fleet sees it: something to close at the end."""
+
+    def close(self) -> None:
+        """Withdraw or stop what is outstanding, then close the links."""
+
+
+#: How long close() waits for the loop thread (it stops within a loop turn normally).
+_JOIN_TIMEOUT_S = 10.0
+#: Beyond a request's own timeout: how long a thread waits for the loop to answer at all.
+_LOOP_GRACE_S = 1.0
+
+
+class LoopTransport(BlockTransport):
+    """A robot's Modbus TCP link on a :class:`Fleet`'s event loop.
+
+    The robot's thread uses it like any transport (blocking, with the retry policy);
+    each request is sent on the loop and the thread waits for its answer. The fleet's
+    loop reads through :meth:`read_on_loop`, holding the same lock, so requests on the
+    link never interleave.
+    """
+
+    def __init__(
+        self,
+        fleet: Fleet,
+        host: str,
+        port: int,
+        *,
+        device_id: int,
+        timeout: float,
+        retry: RetryPolicy | None,
+        name: str,
+    ) -> None:
+        super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
+        self._fleet = fleet
+        self._link = AsyncLink(host, port, device_id=device_id, timeout=timeout, name=name)
+        self._link.stats = self.stats
+
+    # -- the link, from the robot's thread ----------------------------------------
+
+    def _link_open(self) -> bool:
+        return self._link.connected
+
+    def _open_link(self) -> None:
+        self._fleet.call(self._link.connect(), self.timeout + _LOOP_GRACE_S, self.name)
+
+    def _close_link(self) -> None:
+        if self._fleet.on_loop():
+            self._link.close()
+        else:
+            self._fleet.call_soon(self._link.close)
+
+    def _exchange(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> list[int]:
+        return self._fleet.call(
+            self._link.exchange(what, function_code, address, count, values),
+            self.timeout + _LOOP_GRACE_S,
+            self.name,
+        )
+
+    # -- the loop's side ------------------------------------------------------------
+
+    def drop_on_loop(self) -> None:
+        """From the loop, as it ends: close the link (a later request reconnects, and fails)."""
+        self._link.close()
+
+    def hold(self) -> bool:
+        """From the loop: take the link's lock if it is free (never blocks); True if taken."""
+        return self._lock.acquire(blocking=False)
+
+    def release(self) -> None:
+        """From the loop: give back the lock :meth:`hold` took."""
+        self._lock.release()
+
+    async def read_on_loop(
+        self, fields: Iterable[RegisterField], *, max_gap: int = 0
+    ) -> dict[str, Value]:
+        """From the loop, holding the lock: read and decode fields, each block once.
+
+        No retry and no reconnect (the loop never blocks): a failure raises, counted and
+        with the link dropped as for any request, and the robot's thread takes over.
+        """
+        plan = self.read_plan(fields, max_gap=max_gap)
+        result: dict[str, Value] = {}
+        for block, slots in zip(plan.blocks, plan.slots, strict=True):
+            what, function_code = self._read_request(block.table, block.address, block.count)
+            self._refuse_if_closed()
+            if not self._link.connected:
+                raise ConnectionLostError(f"{self.name}: not connected for {what}")
+            self._count_request(function_code)
+            try:
+                words = await self._link.exchange(
+                    what, function_code, block.address, block.count, None
+                )
+            except BaseException as exc:
+                self._request_failed(exc)
+                raise
+            if len(words) != block.count:
+                raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+            for name, offset, decode in slots:
+                result[name] = decode(words, offset)
+        return result
+
+
+class FleetMember:
+    """One robot of a fleet: the loop's side of its waits (touched by the loop thread)."""
+
+    def __init__(self, fleet: Fleet, channel: CommandChannel, transport: LoopTransport) -> None:
+        self.fleet = fleet
+        self.channel = channel
+        self.transport = transport
+        self.polling = False
+        self._nap: asyncio.Future[None] | None = None
+
+    def follow(self, follow: FollowState) -> Observation | None:
+        """From the robot's thread: poll on the loop until the thread must act (None: poll)."""
+        if follow.stop_event.is_set():
+            return None
+        ended = threading.Event()
+        now = time.monotonic()
+        # The loop hands back by the deadlines; beyond them, the last poll's requests.
+        bound = max(follow.ack_deadline - now, 0.0) + follow.budget
+        bound += 4 * self.transport.timeout + _LOOP_GRACE_S
+        future = self.fleet.submit(self._follow(follow, ended))
+        if future is None:
+            return None  # the loop has ended: the thread polls (and its requests fail)
+        try:
+            return future.result(bound)
+        except concurrent.futures.CancelledError:
+            return None  # the loop ended meanwhile: as above
+        except concurrent.futures.TimeoutError as exc:
+            raise TransportError(
+                f"{self.transport.name}: the fleet's event loop did not answer within {bound:.1f} s"
+            ) from exc
+        finally:
+            if not ended.is_set():
+                # Given up (Ctrl-C, the bound): the loop's poll must be over before the
+                # thread acts on the command (withdraw, stop), so nothing interleaves.
+                future.cancel()
+                if self.fleet.running:
+                    ended.wait(self.transport.timeout + _LOOP_GRACE_S)
+
+    def wake(self) -> None:
+        """On the loop: end the current nap early (a stop request)."""
+        nap = self._nap
+        if nap is not None and not nap.done():
+            nap.set_result(None)
+
+    async def _sleep(self, delay: float) -> None:
+        loop = asyncio.get_running_loop()
+        self._nap = nap = loop.create_future()
+        timer = loop.call_later(delay, _settle, nap)
+        try:
+            await nap
+        finally:
+            timer.cancel()
+            self._nap = None
+
+    async def _follow(self, follow: FollowState, ended: threading.Event) -> Observation | None:
+        """Poll on the follow's schedule until a poll settles it, or hand the poll back."""
+        if self.polling:
+            ended.set()
+            return None  # another wait on this robot is being polled: this one polls itself
+        self.polling = True
+        try:
+            motion = follow.motion
+            stop = follow.stop_event
+            while True:
+                delay = follow.due() - time.monotonic()
+                if delay > 0:
+                    await self._sleep(delay)
+                if stop.is_set() or not self.transport.hold():
+                    return None  # a stop request, or another thread's request on the link
+                try:
+                    follow.poll_started = time.monotonic()
+                    observation = await self._poll(follow)
+                except TransportError:
+                    return None  # the thread polls again, with the transport's retries
+                finally:
+                    self.transport.release()
+                if observation.pose is not None:
+                    motion.last_pose = observation.pose
+                if follow.settled(observation, time.monotonic()):
+                    return observation
+        finally:
+            self.polling = False
+            ended.set()
+
+    async def _poll(self, follow: FollowState) -> Observation:
+        """The channel's one poll, its reads made on the loop."""
+        steps = self.channel.poll_steps(follow.motion.ticket)
+        fields = next(steps)
+        max_gap = self.channel.profile.max_read_gap
+        while True:
+            values = await self.transport.read_on_loop(fields, max_gap=max_gap)
+            try:
+                fields = steps.send(values)
+            except StopIteration as finished:
+                observation: Observation = finished.value
+                return observation
+
+
+def _settle(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
+
+
+class Fleet:
+    """Drive many robots from one process: their links and the polls of their waits on one loop.
+
+    Make each robot with ``Robot(host, port, fleet=fleet)`` and drive it from its own
+    thread as usual (``move_to``, ``wait``, ``stop``): the safety rules are the
+    Robot's, unchanged. What changes is who polls: while a robot's thread waits for a
+    move, the fleet's single event loop polls it on the same schedule and wakes the
+    thread only when the poll needs it, so hundreds of robots do not mean hundreds of
+    threads waking for every poll (docs/performance.md).
+
+    ``event_loop``: as :class:`StatusMonitor`'s (uvloop when installed, for ``auto``).
+    :meth:`close` closes every robot still open (withdrawing or stopping what each has
+    outstanding), then the loop; safe to call more than once.
+    """
+
+    def __init__(self, *, event_loop: EventLoopName = "auto") -> None:
+        #: The event loop the fleet runs on: "uvloop" or "asyncio".
+        self.event_loop, self._new_loop = _loop_factory(event_loop)
+        self._robots: weakref.WeakSet[_Closable] = weakref.WeakSet()
+        self._links: list[weakref.ref[LoopTransport]] = []
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._lock = threading.Lock()
+        self._closed = False
+        self._crash: BaseException | None = None
+
+    # -- for Robot ----------------------------------------------------------------------
+
+    def link_for(
+        self,
+        robot: _Closable,
+        host: str,
+        port: int,
+        *,
+        device_id: int,
+        timeout: float,
+        retry: RetryPolicy | None,
+        name: str,
+    ) -> LoopTransport:
+        """A new robot's link on this fleet's loop (starts the loop on first use)."""
+        if "://" in host:
+            raise ConfigError(
+                f"host {host!r}: a Fleet's robots speak Modbus TCP (no in-process endpoints)"
+            )
+        self.start()
+        transport = LoopTransport(
+            self, host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
+        )
+        with self._lock:
+            self._robots.add(robot)
+            self._links.append(weakref.ref(transport))
+        return transport
+
+    def driver(self, channel: CommandChannel, transport: LoopTransport) -> FleetMember:
+        """The loop's side of one robot's waits."""
+        return FleetMember(self, channel, transport)
+
+    # -- lifecycle ----------------------------------------------------------------------
+
+    @property
+    def robots(self) -> list[_Closable]:
+        """The robots made with this fleet that still exist."""
+        with self._lock:
+            return list(self._robots)
+
+    def start(self) -> Self:
+        """Start the loop thread (done by the first robot; a no-op when running)."""
+        with self._lock:
+            if self._closed:
+                raise ConfigError("this Fleet is closed; make a new one")
+            if self._thread is not None:
+                return self
+            self._thread = threading.Thread(target=self._run, name="tmmaster-fleet", daemon=True)
+            self._thread.start()
+        self._started.wait()
+        if self._crash is not None:
+            raise TransportError(f"the Fleet's loop failed: {self._crash!r}") from self._crash
+        return self
+
+    def close(self) -> None:
+        """Close every robot still open, then stop the loop and join its thread."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            robots = list(self._robots)
+        for robot in robots:
+            robot.close()  # withdraws or stops what it has outstanding, through the loop
+        loop, wake, thread = self._loop, self._wake, self._thread
+        if loop is not None and wake is not None:
+            with contextlib.suppress(RuntimeError):  # the loop already ended
+                loop.call_soon_threadsafe(wake.set)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(_JOIN_TIMEOUT_S)
+            if thread.is_alive():
+                _log.warning("fleet.thread_still_running", timeout_s=_JOIN_TIMEOUT_S)
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- calling the loop ------------------------------------------------------------------
+
+    @property
+    def running(self) -> bool:
+        """True while the loop runs and takes work."""
+        loop, wake = self._loop, self._wake
+        return loop is not None and not loop.is_closed() and wake is not None and not wake.is_set()
+
+    def on_loop(self) -> bool:
+        """True in the loop's own thread."""
+        return threading.current_thread() is self._thread
+
+    def submit(self, coroutine: Coroutine[Any, Any, T]) -> concurrent.futures.Future[T] | None:
+        """Run ``coroutine`` on the loop; None (the coroutine closed) when the loop has ended."""
+        loop = self._loop
+        if loop is None or not self.running:
+            coroutine.close()
+            return None
+        try:
+            return asyncio.run_coroutine_threadsafe(coroutine, loop)
+        except RuntimeError:  # closed meanwhile
+            coroutine.close()
+            return None
+
+    def call(self, coroutine: Coroutine[Any, Any, T], bound: float, name: str) -> T:
+        """Run ``coroutine`` on the loop and wait for its result, at most ``bound`` seconds."""
+        if self.on_loop():
+            coroutine.close()
+            raise RuntimeError("a Fleet's loop must never wait for itself")
+        future = self.submit(coroutine)
+        if future is None:
+            raise ConnectionLostError(f"{name}: the fleet is closed")
+        try:
+            return future.result(bound)
+        except concurrent.futures.TimeoutError as exc:
+            future.cancel()
+            raise ResponseTimeoutError(
+                f"{name}: the fleet's event loop did not answer within {bound:.1f} s"
+            ) from exc
+        except concurrent.futures.CancelledError as exc:
+            raise ConnectionLostError(f"{name}: the fleet closed during the request") from exc
+        except BaseException:
+            future.cancel()  # interrupted (Ctrl-C): the request is dropped with its link
+            raise
+
+    def call_soon(self, callback: Any) -> None:
+        """Run ``callback()`` on the loop soon (nothing when the loop has ended)."""
+        loop = self._loop
+        if loop is None:
+            return
+        with contextlib.suppress(RuntimeError):  # the loop already ended
+            loop.call_soon_threadsafe(callback)
+
+    # -- the loop thread ----------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            with asyncio.Runner(loop_factory=self._new_loop) as runner:
+                runner.run(self._main())
+        except BaseException as exc:  # a bug: reported by start(), never lost silently
+            self._crash = exc
+            _log.warning("fleet.loop_failed", error=repr(exc))
+        finally:
+            self._started.set()
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._wake = wake = asyncio.Event()
+        self._started.set()
+        try:
+            await wake.wait()
+        finally:
+            wake.set()  # submit() refuses from now on
+            with self._lock:
+                links = [ref() for ref in self._links]
+            for transport in links:
+                if transport is not None:
+                    transport.drop_on_loop()
+            # Closing transports release their sockets on a later loop turn; the
+            # requests still awaited (none, normally) end with ConnectionLostError.
+            for _ in range(3):
+                await asyncio.sleep(0)

@@ -1,0 +1,121 @@
+"""One wait on one motion, between polls: its schedule and deadlines, without I/O.
+
+The robot's thread (``_robot.py``) and a Fleet's event loop (``_fleet.py``) both poll
+a wait by this state, so when to poll and when to stop polling are written once.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from enum import Enum
+from typing import Protocol
+
+from ._channels import Observation, Ticket
+from ._poller import MotionSchedule, Poller, PollPolicy
+from ._pose import Pose
+from ._status import MovePhase
+
+
+class FollowedMotion(Protocol):
+    """What a wait needs of a :class:`~tmmaster.Motion`."""
+
+    phase: MovePhase
+    expected_s: float
+    timeout_s: float
+    last_pose: Pose | None
+
+    @property
+    def ticket(self) -> Ticket:
+        """The channel's record of the command."""
+        ...
+
+
+class Overdue(Enum):
+    """Which deadline of a wait passed (:meth:`FollowState.overdue`)."""
+
+    ACK = "ack"
+    MOTION = "motion"
+
+
+class FollowState:
+    """One wait on one motion between polls: when to poll next, and when to stop polling.
+
+    No I/O: the robot's thread consults it between its own polls, and a
+    :class:`~tmmaster.Fleet`'s event loop between the polls it runs for the thread
+    (:meth:`settled` says when the thread must take over). The schedule counts from
+    the start of the last poll, not its end (no drift): in a dense window a poll
+    follows the last one's start by the dense interval, whatever the poll's own
+    requests took. A poll that took longer than its interval is followed at once:
+    never more than one poll per interval.
+    """
+
+    __slots__ = (
+        "_anchored",
+        "ack_deadline",
+        "budget",
+        "motion",
+        "poll_started",
+        "poller",
+        "schedule",
+        "stop_event",
+    )
+
+    def __init__(
+        self,
+        motion: FollowedMotion,
+        timeout_s: float | None,
+        *,
+        stop_event: threading.Event,
+        poll_interval_s: float,
+        polling: PollPolicy,
+        ack_timeout_s: float,
+    ) -> None:
+        ticket = motion.ticket
+        self.motion = motion
+        #: The motion's time budget from its acknowledgement, s.
+        self.budget = timeout_s if timeout_s is not None else motion.timeout_s
+        self.stop_event = stop_event
+        self.poller = Poller(poll_interval_s, stop_event)
+        self.schedule = MotionSchedule(polling, poll_interval_s, ticket.sent_at)
+        self.ack_deadline = ticket.sent_at + ack_timeout_s
+        #: ``time.monotonic()`` at the start of the last poll (the wait's start before one).
+        self.poll_started = time.monotonic()
+        self._anchored = False
+
+    def due(self) -> float:
+        """The monotonic time of the next poll."""
+        ticket = self.motion.ticket
+        if ticket.acknowledged and not self._anchored:
+            self.schedule.acknowledged(
+                ticket.acknowledged_at or ticket.sent_at,
+                self.motion.expected_s,
+                since=ticket.pending_seen_at or ticket.sent_at,
+            )
+            self._anchored = True
+        return self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
+
+    def overdue(self, now: float) -> Overdue | None:
+        """The deadline that passed: acknowledgement (while sent), motion (while running)."""
+        motion = self.motion
+        if motion.phase is MovePhase.SENT:
+            return Overdue.ACK if now >= self.ack_deadline else None
+        if motion.phase is MovePhase.RUNNING:
+            ticket = motion.ticket
+            started = ticket.acknowledged_at or ticket.sent_at
+            return Overdue.MOTION if now - started >= self.budget else None
+        return None
+
+    def settled(self, observation: Observation, now: float) -> bool:
+        """True when a poll's result needs the waiting thread (anything but "poll again")."""
+        if observation.failure is not None or observation.done:
+            return True
+        if observation.acknowledged and self.motion.phase is MovePhase.SENT:
+            return True  # the thread notes it (and the schedule anchors on it)
+        return self.overdue(now) is not None
+
+
+#: A driver that polls a wait for the robot's thread (a Fleet's event loop): it returns
+#: the first observation the thread must act on, or None to hand the next poll back.
+SharedDriver = Callable[[FollowState], Observation | None]
