@@ -26,9 +26,7 @@ from tmmaster._registers import Table
 from tmmaster._transport import AsyncLink
 
 
-async def with_slave(
-    script: list[Answer], body: Callable[[AsyncLink], Awaitable[None]]
-) -> None:
+async def with_slave(script: list[Answer], body: Callable[[AsyncLink], Awaitable[None]]) -> None:
     """Run ``body`` with a link connected to a slave that answers request k by ``script[k]``."""
     server = ScriptedServer(script)
     port = await server.start()
