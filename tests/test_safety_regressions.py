@@ -49,10 +49,15 @@ def tm_simulator_factory(tm_simulator_factory: SimFactory) -> SimFactory:
     return make
 
 
-@pytest.fixture
-def robots() -> Iterator[Callable[..., Robot]]:
-    """Open robots with short timeouts; all closed after the test."""
+@pytest.fixture(params=["thread", "fleet"])
+def robots(request: pytest.FixtureRequest) -> Iterator[Callable[..., Robot]]:
+    """Open robots with short timeouts; all closed after the test.
+
+    Twice: each robot polling its own waits, and each in a Fleet (its waits polled on
+    the fleet's event loop).
+    """
     opened: list[Robot] = []
+    fleet = tmmaster.Fleet() if request.param == "fleet" else None
 
     def make(port: int, profile: str, **options: Any) -> Robot:
         options.setdefault("gripper", None)
@@ -65,7 +70,7 @@ def robots() -> Iterator[Callable[..., Robot]]:
             "retry",
             RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02, max_backoff_s=0.3),
         )
-        robot = Robot("127.0.0.1", port, profile=profile, **options)
+        robot = Robot("127.0.0.1", port, profile=profile, fleet=fleet, **options)
         opened.append(robot)
         robot.connect()
         return robot
@@ -73,6 +78,8 @@ def robots() -> Iterator[Callable[..., Robot]]:
     yield make
     for robot in opened:
         robot.close()
+    if fleet is not None:
+        fleet.close()
 
 
 def attempt(robot: Robot, target: Pose, issued: list[Issued], **kw: Any) -> str:

@@ -25,7 +25,7 @@ from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, 
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
-from tmmaster import Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import Fleet, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import Simulator
 
 STATEFUL_EXAMPLES = int(os.environ.get("TMMASTER_STATEFUL_EXAMPLES", "5"))
@@ -49,6 +49,8 @@ class CommandSafety(RuleBasedStateMachine):
     """Moves, faults and operator actions; the robot's own log must keep the invariant."""
 
     profile = "article"
+    #: True: the robot is a Fleet's (its waits polled on the fleet's event loop).
+    in_fleet = False
     #: The longest a held command frame may take. Article cannot tell a late frame from a
     #: lost one: one that lands after the in-flight window runs after the master gave up
     #: (docs/safety.md, "what it cannot guarantee"), so the hunt stays inside the window.
@@ -60,6 +62,7 @@ class CommandSafety(RuleBasedStateMachine):
         self.proxy = FaultProxy(self.sim.port)
         self.issued: list[Issued] = []
         self.robot: Robot | None = None
+        self.fleet = Fleet() if self.in_fleet else None
         self.count = 0
         self._open()
 
@@ -79,6 +82,7 @@ class CommandSafety(RuleBasedStateMachine):
             retry=RetryPolicy(
                 attempts=6, total_time_s=1.0, initial_backoff_s=0.02, max_backoff_s=0.2
             ),
+            fleet=self.fleet,
         )
         try:
             robot.connect()
@@ -208,6 +212,8 @@ class CommandSafety(RuleBasedStateMachine):
             time.sleep(0.3)  # 6 simulated seconds
             check(self.issued, self.sim.motion_log())
         finally:
+            if self.fleet is not None:
+                self.fleet.close()
             self.proxy.close()
             self.sim.close()
 
@@ -218,6 +224,18 @@ class TmflowCommandSafety(CommandSafety):
     profile = "tmflow"
     #: Sequence numbers make any delay safe: a late frame carries a used-up number.
     max_hold_s = 1.5
+
+
+class FleetCommandSafety(CommandSafety):
+    """The article hunt with the robot in a Fleet: its waits polled on the fleet's loop."""
+
+    in_fleet = True
+
+
+class FleetTmflowCommandSafety(TmflowCommandSafety):
+    """The tmflow hunt with the robot in a Fleet."""
+
+    in_fleet = True
 
 
 _SETTINGS = settings(
@@ -231,3 +249,7 @@ TestArticleCommandSafety = CommandSafety.TestCase
 TestArticleCommandSafety.settings = _SETTINGS
 TestTmflowCommandSafety = TmflowCommandSafety.TestCase
 TestTmflowCommandSafety.settings = _SETTINGS
+TestFleetArticleCommandSafety = FleetCommandSafety.TestCase
+TestFleetArticleCommandSafety.settings = _SETTINGS
+TestFleetTmflowCommandSafety = FleetTmflowCommandSafety.TestCase
+TestFleetTmflowCommandSafety.settings = _SETTINGS

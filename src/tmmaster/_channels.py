@@ -550,18 +550,28 @@ class SequenceChannel(CommandChannel):
             timestamp=time.monotonic(),
         )
 
-    def _flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
+    @staticmethod
+    def _faulted(flags: dict[str, Value]) -> bool:
+        """True when the flags show an e-stop or an error (the error code says which)."""
+        return bool(flags["estop"]) or bool(flags["error"])
+
+    @staticmethod
+    def _flags_failure(flags: dict[str, Value], code: int) -> RobotError | None:
+        """The failure Techman's status bits show; ``code``: the last error code (if faulted)."""
         if bool(flags["estop"]):
-            return EmergencyStopError("emergency stop is pressed", error_code=self._error_code())
+            return EmergencyStopError("emergency stop is pressed", error_code=code)
         if bool(flags["error"]):
-            code = self._error_code()
             return RobotFaultError(f"robot error (last error code {code})", error_code=code)
         if not bool(flags["project_running"]):
             return RobotFaultError("the TMflow project is not running")
         return None
 
-    def _error_code(self) -> int:
-        return int(self.read(self.error_code_fields)["last_error_code"])
+    def _read_flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
+        """:meth:`_flags_failure`, reading the error code when the flags show a fault."""
+        code = 0
+        if self._faulted(flags):
+            code = int(self.read(self.error_code_fields)["last_error_code"])
+        return self._flags_failure(flags, code)
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
@@ -574,13 +584,13 @@ class SequenceChannel(CommandChannel):
             # after it (the poll that saw it finished): the same checks run on them.
             # ``seq`` is not part of a poll: it is read now.
             flags = after_done.values
-            if (failure := self._flags_failure(flags)) is not None:
+            if (failure := self._read_flags_failure(flags)) is not None:
                 raise failure
             feedback = {**after_done.values, **self.read(self.seq_only)}
             start_pose = after_done.pose
         else:
             flags = self.read(self.flag_fields)
-            if (failure := self._flags_failure(flags)) is not None:
+            if (failure := self._read_flags_failure(flags)) is not None:
                 raise failure
             feedback = self.read(self.feedback_and_seq)
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
@@ -616,7 +626,10 @@ class SequenceChannel(CommandChannel):
         feedback = yield self.feedback_fields
         flags = yield self.flag_fields
         ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
-        failure = self._flags_failure(flags)
+        code = 0
+        if self._faulted(flags):
+            code = int((yield self.error_code_fields)["last_error_code"])
+        failure = self._flags_failure(flags, code)
         if not ticket.acknowledged:
             if int(feedback["ack_seq"]) == ticket.seq:
                 ticket.acknowledged = True
@@ -675,7 +688,7 @@ class SequenceChannel(CommandChannel):
 
     def read_failure(self) -> RobotError | None:
         """One read of Techman's status bits (e-stop, error, project running)."""
-        return self._flags_failure(self.read(self.flag_fields))
+        return self._read_flags_failure(self.read(self.flag_fields))
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """Press the TM Stop button (coil 7105): the project stops and the arm halts."""
