@@ -179,7 +179,7 @@ class FleetMember:
         if future is None:
             return None  # the loop has ended: the thread polls (and its requests fail)
         try:
-            return future.result(bound)
+            return _result(future, bound)
         except concurrent.futures.CancelledError:
             return None  # the loop ended meanwhile: as above
         except concurrent.futures.TimeoutError as exc:
@@ -252,6 +252,26 @@ class FleetMember:
             except StopIteration as finished:
                 observation: Observation = finished.value
                 return observation
+
+
+#: How often the main thread looks up from a wait the loop polls: a Ctrl-C that did not
+#: interrupt the wait itself (signalled to another thread, ``_thread.interrupt_main()``)
+#: is raised within this. Other threads wait in one piece: they get no KeyboardInterrupt.
+_MAIN_THREAD_SLICE_S = 0.05
+
+
+def _result(future: concurrent.futures.Future[T], bound: float) -> T:
+    """``future.result(bound)``; in the main thread in slices, so Ctrl-C is never held up."""
+    if threading.current_thread() is not threading.main_thread():
+        return future.result(bound)
+    deadline = time.monotonic() + bound
+    while True:
+        left = deadline - time.monotonic()
+        try:
+            return future.result(max(min(left, _MAIN_THREAD_SLICE_S), 0.0))
+        except concurrent.futures.TimeoutError:
+            if left <= _MAIN_THREAD_SLICE_S:
+                raise
 
 
 def _settle(future: asyncio.Future[None]) -> None:
@@ -397,7 +417,7 @@ class Fleet:
         if future is None:
             raise ConnectionLostError(f"{name}: the fleet is closed")
         try:
-            return future.result(bound)
+            return _result(future, bound)
         except concurrent.futures.TimeoutError as exc:
             future.cancel()
             raise ResponseTimeoutError(

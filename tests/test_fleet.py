@@ -1,0 +1,257 @@
+"""Fleet: robots whose waits are polled on one event loop, checked on what the robot did.
+
+The safety regressions and the stateful hunt also run every robot in a Fleet
+(``test_safety_regressions.py``'s ``robots`` fixture, ``test_safety_stateful.py``'s Fleet
+classes); these tests cover what is the fleet's own: who polls, how a wait it polls ends
+early, and its life cycle.
+"""
+
+from __future__ import annotations
+
+import _thread
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+import tmmaster
+import tmmaster._fleet as fleet_module
+from tmmaster import Fleet, MovePhase, Pose, Robot, TimeoutPolicy
+from tmmaster._channels import channel_for
+from tmmaster._profiles import robot_profile
+from tmmaster.sim import MemoryTransport, Simulator
+
+SimFactory = Callable[..., Simulator]
+
+A = Pose(300, -200, 150, 180, 0, 90)
+B = Pose(300, -200, 180, 180, 0, 90)
+C = Pose(250, 0, 160, 180, 0, 90)
+PROFILES = ["article", "tmflow"]
+
+
+@pytest.fixture
+def fleet() -> Iterator[Fleet]:
+    with Fleet() as opened:
+        yield opened
+
+
+@pytest.fixture
+def robots(fleet: Fleet) -> Iterator[Callable[..., Robot]]:
+    """Robots of the fleet, connected and ready; closed after the test (then the fleet)."""
+    opened: list[Robot] = []
+
+    def make(sim: Simulator, **options: Any) -> Robot:
+        options.setdefault("gripper", None)
+        options.setdefault("poll_interval_s", 0.01)
+        robot = Robot("127.0.0.1", sim.port, profile=sim.profile, fleet=fleet, **options)
+        opened.append(robot)
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        return robot
+
+    yield make
+    for robot in opened:
+        robot.close()
+
+
+class Wakes:
+    """Counts what the loop handed the waiting threads: observations and hand-backs."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        self.observations = 0
+        self.handed_back = 0
+        follow = fleet_module.FleetMember.follow
+
+        def counted(member: fleet_module.FleetMember, state: Any) -> Any:
+            observation = follow(member, state)
+            if observation is None:
+                self.handed_back += 1
+            else:
+                self.observations += 1
+            return observation
+
+        monkeypatch.setattr(fleet_module.FleetMember, "follow", counted)
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_the_loop_polls_and_wakes_the_thread_only_when_the_poll_needs_it(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    monkeypatch: pytest.MonkeyPatch,
+    profile: str,
+) -> None:
+    wakes = Wakes(monkeypatch)  # before the robot: it takes its driver when made
+    sim = tm_simulator_factory(profile, time_scale=4)  # moves of tenths of a second
+    robot = robots(sim)
+    requests = robot.stats.requests
+    for target in (A, B, C):
+        motion = robot.move_to(target, speed=60)
+        assert motion.done
+        assert motion.last_pose is not None
+        assert motion.last_pose.is_close(target)
+    assert [r.target for r in sim.motion_log()] == [A, B, C]
+    # Each move: once for the acknowledgement, once for the end (one poll may see both,
+    # for these short moves at 40x); nothing handed back.
+    assert 3 <= wakes.observations <= 6
+    assert wakes.handed_back == 0
+    # The loop polled in between: far more requests than the threads were woken for
+    # (each move also costs its checks and its write: about 3 requests).
+    assert robot.stats.requests - requests > 3 * 3 + 2 * wakes.observations
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_two_robots_of_one_fleet_move_at_once(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sims = [tm_simulator_factory(profile) for _ in range(2)]
+    pair = [robots(sim) for sim in sims]
+    errors: list[BaseException] = []
+
+    def tour(robot: Robot) -> None:
+        try:
+            for target in (A, B, C, A):
+                robot.move_to(target, speed=80)
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=tour, args=(robot,)) for robot in pair]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(30)
+    assert errors == []
+    for sim in sims:
+        assert [r.target for r in sim.motion_log()] == [A, B, C, A]
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_an_interrupt_ends_a_wait_the_loop_polls_at_once_and_stops_the_arm(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=2)
+    # Nominal polling at 1 s: only the interrupt's wake-up can end the wait quickly.
+    robot = robots(sim, poll_interval_s=1.0, polling=tmmaster.PollPolicy(predictive=False))
+    motion = robot.start_move(A, speed=10)
+    sim.wait_for(lambda: bool(sim.motion_log()), timeout=5)
+    threading.Timer(0.1, robot.interrupt).start()
+    started = time.monotonic()
+    with pytest.raises(tmmaster.StopRequestedError):
+        motion.wait()
+    assert time.monotonic() - started < 0.6
+    assert motion.phase is MovePhase.FAILED
+    assert motion.stop_delivered is True
+    assert sim.motion_log()[-1].done_wall_time is None  # stopped, never finished
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_ctrl_c_in_a_wait_the_loop_polls_withdraws_or_stops_before_returning(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    # The acknowledgement would come 100 simulated s later: Ctrl-C finds it pending.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=100"])
+    robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=30))
+    motion = robot.start_move(A, speed=60)
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        motion.wait()
+    timer.join()
+    assert motion.withdrawn is True
+    sim.clear_faults()
+    time.sleep(0.3)  # many simulated seconds: a command still armed would run now
+    assert sim.motion_log() == ()
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_robot_failure_seen_by_the_loop_is_raised_in_the_thread(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, faults=["estop:at_move=1"])
+    robot = robots(sim)
+    expected = tmmaster.RobotFaultError if profile == "article" else tmmaster.EmergencyStopError
+    with pytest.raises(expected):
+        robot.move_to(A, speed=30)
+
+
+def test_closing_the_fleet_closes_its_robots_and_is_safe_twice(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("article", time_scale=2)
+    fleet = Fleet()
+    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+    robot.connect()
+    robot.wait_until_ready(timeout_s=5)
+    motion = robot.start_move(A, speed=10)
+    sim.wait_for(lambda: bool(sim.motion_log()), timeout=5)
+    fleet.close()
+    fleet.close()
+    assert robot.state is tmmaster.ConnectionState.CLOSED
+    assert motion.stop_delivered is True  # the move outstanding was stopped first
+    with pytest.raises(tmmaster.ConnectError):
+        robot.status()
+    with pytest.raises(tmmaster.ConfigError):
+        Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+
+
+def test_a_fleet_robot_refuses_an_explicit_transport_or_an_in_process_host(
+    fleet: Fleet, tm_simulator_factory: SimFactory
+) -> None:
+    sim = tm_simulator_factory("article", listen=False)
+    with pytest.raises(tmmaster.ConfigError, match="transport or fleet"):
+        Robot("127.0.0.1", transport=MemoryTransport(sim), fleet=fleet)
+    with pytest.raises(tmmaster.ConfigError, match="Modbus TCP"):
+        Robot(sim.url, fleet=fleet)
+
+
+class _NoIO:
+    """A transport that fails the test on any request: a poll must only yield its reads."""
+
+    stats = tmmaster.TransportStats()
+    state = tmmaster.ConnectionState.CONNECTED
+
+    def __getattr__(self, name: str) -> Any:
+        raise AssertionError(f"a poll used the transport directly ({name})")
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+@pytest.mark.parametrize("situation", ["pending", "running", "done", "estop", "error"])
+def test_a_poll_reads_only_by_yielding_its_field_sets(profile: str, situation: str) -> None:
+    """What the fleet's loop relies on: no branch of a poll reads behind its back."""
+    channel = channel_for(robot_profile(profile), _NoIO())  # type: ignore[arg-type]
+    ticket = tmmaster._channels.Ticket(
+        tmmaster._channels.Command(tmmaster._channels.CommandKind.PTP, A, 50), [], 0.0, seq=1
+    )
+    values = _registers(profile, situation)
+    steps = channel.poll_steps(ticket)
+    fields = next(steps)
+    while True:
+        try:
+            fields = steps.send({f.name: values.get(f.name, 0) for f in fields})
+        except StopIteration as finished:
+            observation = finished.value
+            break
+    faulted = situation in ("estop", "error")
+    assert (observation.failure is not None) == faulted
+    assert observation.done == (situation == "done")
+
+
+def _registers(profile: str, situation: str) -> dict[str, Any]:
+    """Register values (by field name) that show ``situation`` for a ticket with seq 1."""
+    if profile == "article":
+        return {
+            "command": 1 if situation == "pending" else 0,
+            "motion_status": 1 if situation in ("pending", "running") else 0,
+            "robot_mode": 7 if situation in ("estop", "error") else 5,
+            "error_code": 0x200 if situation in ("estop", "error") else 0,
+        }
+    return {
+        "ack_seq": 0 if situation == "pending" else 1,
+        "done_seq": 1 if situation == "done" else 0,
+        "robot_state": 1 if situation in ("pending", "running") else 0,
+        "estop": situation == "estop",
+        "error": situation == "error",
+        "project_running": situation not in ("estop", "error"),
+        "last_error_code": 7 if situation in ("estop", "error") else 0,
+    }
