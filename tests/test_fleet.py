@@ -18,6 +18,7 @@ import pytest
 
 import tmmaster
 import tmmaster._fleet as fleet_module
+from fault_proxy import FaultProxy, Rule
 from tmmaster import Fleet, MovePhase, Pose, Robot, TimeoutPolicy
 from tmmaster._channels import channel_for
 from tmmaster._profiles import robot_profile
@@ -173,6 +174,30 @@ def test_a_robot_failure_seen_by_the_loop_is_raised_in_the_thread(
     expected = tmmaster.RobotFaultError if profile == "article" else tmmaster.EmergencyStopError
     with pytest.raises(expected):
         robot.move_to(A, speed=30)
+
+
+def test_a_request_without_an_answer_times_out_on_its_own_timeout(
+    tm_simulator_factory: SimFactory, fleet: Fleet
+) -> None:
+    """The link's ResponseTimeoutError (a TimeoutError) is its answer, not the loop's silence."""
+    sim = tm_simulator_factory("article")
+    with FaultProxy(sim.port) as proxy:
+        robot = Robot(
+            "127.0.0.1",
+            proxy.port,
+            profile="article",
+            gripper=None,
+            request_timeout_s=0.1,
+            retry=tmmaster.RetryPolicy(attempts=1),
+            fleet=fleet,
+        )
+        with robot:
+            proxy.add(Rule("drop_answer", function_code=3))
+            started = time.monotonic()
+            with pytest.raises(tmmaster.ResponseTimeoutError, match="no answer"):
+                robot.status()
+            # The request's 0.1 s, not the 1 s more the thread would give a silent loop.
+            assert time.monotonic() - started < 0.6
 
 
 def test_closing_the_fleet_closes_its_robots_and_is_safe_twice(

@@ -182,7 +182,7 @@ class FleetMember:
             return _result(future, bound)
         except concurrent.futures.CancelledError:
             return None  # the loop ended meanwhile: as above
-        except concurrent.futures.TimeoutError as exc:
+        except _NoAnswer as exc:
             raise TransportError(
                 f"{self.transport.name}: the fleet's event loop did not answer within {bound:.1f} s"
             ) from exc
@@ -260,18 +260,29 @@ class FleetMember:
 _MAIN_THREAD_SLICE_S = 0.05
 
 
+class _NoAnswer(Exception):
+    """The loop did not finish a coroutine within its bound (not the coroutine's own error)."""
+
+
 def _result(future: concurrent.futures.Future[T], bound: float) -> T:
-    """``future.result(bound)``; in the main thread in slices, so Ctrl-C is never held up."""
-    if threading.current_thread() is not threading.main_thread():
-        return future.result(bound)
+    """``future.result(bound)``; in the main thread in slices, so Ctrl-C is never held up.
+
+    Raises :class:`_NoAnswer` when the bound passes: a ``TimeoutError`` the coroutine
+    raised itself (a :class:`ResponseTimeoutError`) is its answer, raised as it is.
+    """
+    main = threading.current_thread() is threading.main_thread()
     deadline = time.monotonic() + bound
     while True:
         left = deadline - time.monotonic()
+        wait = max(min(left, _MAIN_THREAD_SLICE_S) if main else left, 0.0)
         try:
-            return future.result(max(min(left, _MAIN_THREAD_SLICE_S), 0.0))
+            return future.result(wait)
         except concurrent.futures.TimeoutError:
-            if left <= _MAIN_THREAD_SLICE_S:
-                raise
+            if future.done():
+                # Its own TimeoutError (ResponseTimeoutError), or it finished just now.
+                return future.result()
+            if left <= wait:
+                raise _NoAnswer from None
 
 
 def _settle(future: asyncio.Future[None]) -> None:
@@ -418,7 +429,7 @@ class Fleet:
             raise ConnectionLostError(f"{name}: the fleet is closed")
         try:
             return _result(future, bound)
-        except concurrent.futures.TimeoutError as exc:
+        except _NoAnswer as exc:
             future.cancel()
             raise ResponseTimeoutError(
                 f"{name}: the fleet's event loop did not answer within {bound:.1f} s"
