@@ -20,6 +20,9 @@ to the first ``--master-cpus`` (2) and the simulator processes to the rest, as i
 
 ``--mode asyncio`` drives the same blocking code through ``asyncio.to_thread`` for
 comparison: it is still one OS thread per robot underneath (the library is synchronous).
+``--mode fleet`` is one thread per robot too, every robot in one :class:`tmmaster.Fleet`:
+the robots' links and the polls of their waits on the fleet's event loop, the threads
+woken only when a poll needs them. ``--mode`` takes several modes.
 
 ``--slave light`` replaces the simulators by :class:`LightRobot` s (the article map's
 clear-on-accept handshake and the arm model's move times, nothing else), cheap enough
@@ -55,7 +58,7 @@ from typing import Any
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 from _mbap import answer_frame, split_requests
 
-from tmmaster import MotionType, Pose, Robot
+from tmmaster import Fleet, MotionType, Pose, Robot
 
 #: The fixed tour every robot drives (article pick area; the article map holds
 #: |x|, |y|, |z| <= 327.67 mm), at 100 % speed, PTP.
@@ -421,8 +424,9 @@ def measure(
 ) -> Row:
     """Start n simulators, connect n robots, run the tour concurrently, measure."""
     sims = SimFarm(n, per_process or n, time_scale, sim_cpus, slave)
+    fleet = Fleet() if mode == "fleet" else None
     robots = [
-        Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}")
+        Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}", fleet=fleet)
         for i, port in enumerate(sims.ports)
     ]
     try:
@@ -431,7 +435,7 @@ def measure(
             robot.wait_until_ready(10.0)
         sims.clear()
         cpu0, wall0 = time.process_time(), time.monotonic()
-        runner = run_threads if mode == "threads" else run_asyncio
+        runner = run_asyncio if mode == "asyncio" else run_threads
         runs = runner(robots, moves, time_scale, stagger_s)
         wall = time.monotonic() - wall0
         cpu = time.process_time() - cpu0
@@ -439,6 +443,8 @@ def measure(
     finally:
         for robot in robots:
             robot.close()
+        if fleet is not None:
+            fleet.close()
         sims.close()
     polls = [dt for sim in requests for dt in poll_intervals(sim)]
     return Row(
@@ -488,7 +494,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--moves", type=int, default=12)
     parser.add_argument("--time-scale", type=float, default=10.0)
     parser.add_argument("--repeat", type=int, default=1, help="runs per (mode, N)")
-    parser.add_argument("--mode", choices=["threads", "asyncio", "both"], default="threads")
+    parser.add_argument(
+        "--mode",
+        choices=["threads", "asyncio", "fleet", "both"],
+        nargs="+",
+        default=["threads"],
+        help="both: threads and asyncio",
+    )
     parser.add_argument("--json", action="store_true", help="also print raw rows as JSON")
     parser.add_argument(
         "--sims-per-process", type=int, default=0, help="simulators per process (0: all in one)"
@@ -518,7 +530,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     master_cpus, sim_cpus = pin_master(args)
     # tmmaster logs nothing unless configured to: no log output costs CPU or floods the table.
-    modes = ["threads", "asyncio"] if args.mode == "both" else [args.mode]
+    modes = [
+        m for mode in args.mode for m in (["threads", "asyncio"] if mode == "both" else [mode])
+    ]
     rows = [
         measure(
             mode,

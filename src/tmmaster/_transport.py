@@ -15,6 +15,7 @@ device's state back to learn whether the command arrived.
 from __future__ import annotations
 
 import asyncio
+import functools
 import socket
 import struct
 import sys
@@ -940,6 +941,42 @@ def _expire(future: asyncio.Future[ModbusPDU], link: AsyncLink, what: str) -> No
         )
 
 
+def _answered(
+    deadline: asyncio.TimerHandle,
+    awaited: dict[int, asyncio.Future[ModbusPDU]],
+    tid: int,
+    _answer: asyncio.Future[ModbusPDU],
+) -> None:
+    """A request's answer came, failed or was given up: its deadline and slot go."""
+    deadline.cancel()
+    awaited.pop(tid, None)
+
+
+def _deliver(
+    request: ModbusPDU,
+    count: int,
+    name: str,
+    what: str,
+    settle: Callable[[list[int]], object],
+    fail: Callable[[BaseException], object],
+    answer: asyncio.Future[ModbusPDU],
+) -> None:
+    """A started request's outcome, to the one callback that wants it (:meth:`AsyncLink.start`)."""
+    if answer.cancelled():
+        fail(ConnectionLostError(f"{name}: {what} was given up"))
+        return
+    error = answer.exception()
+    if error is not None:
+        fail(error)
+        return
+    try:
+        words = answer_words(answer.result(), request, count=count, name=name, what=what)
+    except TransportError as exc:
+        fail(exc)
+        return
+    settle(words)
+
+
 class AsyncLink:
     """A Modbus TCP link on the running asyncio loop (a StatusMonitor's, a Fleet's robots').
 
@@ -994,6 +1031,19 @@ class AsyncLink:
         The words (bits as 0/1) of a read's answer, ``[]`` for a write; failures as
         :class:`TransportError` subclasses. Nothing is ever resent here.
         """
+        request, answer = self.send(what, function_code, address, count, values)
+        response = await answer
+        return answer_words(response, request, count=count, name=self.name, what=what)
+
+    def send(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> tuple[ModbusPDU, asyncio.Future[ModbusPDU]]:
+        """On the loop: send one request once; the request and the future of its answer.
+
+        The future fails with :class:`ResponseTimeoutError` after ``timeout`` and with
+        :class:`ConnectionLostError` when the link is lost; :func:`answer_words` reads
+        the answer. For a caller in another thread, without a coroutine per request.
+        """
         stream = self._stream
         if stream is None or stream.closed or stream.transport is None:
             raise ConnectionLostError(f"{self.name}: not connected for {what}")
@@ -1009,12 +1059,30 @@ class AsyncLink:
         if self.stats is not None:
             self.stats.bytes_sent += len(frame)
         deadline = loop.call_later(self.timeout, _expire, answer, self, what)
+        answer.add_done_callback(functools.partial(_answered, deadline, stream.awaited, tid))
+        return request, answer
+
+    def start(
+        self,
+        what: str,
+        function_code: int,
+        address: int,
+        count: int,
+        values: list[int] | None,
+        settle: Callable[[list[int]], object],
+        fail: Callable[[BaseException], object],
+    ) -> None:
+        """On the loop: send one request; ``settle(words)`` or ``fail(error)`` follows, once.
+
+        For a caller in another thread (a Fleet robot's), without a coroutine per request.
+        """
         try:
-            response = await answer
-        finally:
-            deadline.cancel()
-            stream.awaited.pop(tid, None)
-        return answer_words(response, request, count=count, name=self.name, what=what)
+            request, answer = self.send(what, function_code, address, count, values)
+        except BaseException as exc:
+            fail(exc)
+            return
+        deliver = functools.partial(_deliver, request, count, self.name, what, settle, fail)
+        answer.add_done_callback(deliver)
 
     def close(self) -> None:
         """Close the link (safe when closed): after a failure it may still carry a late answer."""
