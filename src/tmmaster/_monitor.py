@@ -26,10 +26,10 @@ import contextlib
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Self
+from typing import Any, Literal, Self
 
 from ._channels import CommandChannel, channel_for
 from ._checks import require_positive
@@ -116,13 +116,91 @@ class _UnusedLink(BlockTransport):
         raise ConfigError(f"a StatusMonitor never sends requests through its channel ({what})")
 
 
-class _Watched:
+class StatusRecord:
+    """What was last seen of one watched robot, and the counters (touched by one loop only).
+
+    A :class:`StatusMonitor`'s robots and a :class:`~tmmaster.Fleet`'s watched robots
+    keep one each; readers in other threads see :attr:`published`.
+    """
+
+    def __init__(self, name: str, log: Any, *, events: str = "monitor") -> None:
+        self.name = name
+        self._failed_event = f"{events}.poll_failed"
+        self._recovered_event = f"{events}.poll_recovered"
+        self.status: RobotStatus | None = None
+        self.read_at: float | None = None
+        self.error: TMMasterError | None = None
+        self.polls = 0
+        self.skipped = 0
+        self.failures = 0
+        #: What readers see: replaced (one reference assignment) after every change.
+        self.published = _NOTHING_YET
+        self._log = log
+
+    def publish(self) -> None:
+        """Make the current state visible to readers."""
+        self.published = MonitoredStatus(
+            self.status, self.read_at, self.error, self.polls, self.skipped, self.failures
+        )
+
+    def fail(self, error: TMMasterError) -> None:
+        """Record a failed poll (logged once as a warning, then at debug level)."""
+        if self.error is None:
+            self._log.warning(self._failed_event, error=str(error))
+        else:
+            self._log.debug(self._failed_event, error=str(error))
+        self.error = error
+        self.failures += 1
+        self.publish()
+
+    def succeed(self, status: RobotStatus) -> None:
+        """Record a poll's status."""
+        if self.error is not None:
+            self._log.debug(self._recovered_event, failures=self.failures)
+        self.status = status
+        self.read_at = status.timestamp
+        self.error = None
+        self.polls += 1
+        self.publish()
+
+
+async def poll_on_schedule(
+    record: StatusRecord,
+    poll: Callable[[], Awaitable[None]],
+    *,
+    due: float,
+    period: float,
+    running: Callable[[], bool],
+    timings: list[tuple[float, float]] | None,
+) -> None:
+    """Poll one robot every ``period`` from ``due`` while ``running()``, drift-free.
+
+    The slots that come while a poll is outstanding are skipped and counted, never sent
+    late in a burst. ``timings``, when a list: (lateness, response) of every answered poll.
+    """
+    while running():
+        delay = due - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        sent = time.monotonic()
+        await poll()
+        now = time.monotonic()
+        if timings is not None and record.read_at is not None and record.read_at >= sent:
+            timings.append((sent - due, now - sent))
+        passed = math.floor((now - due) / period)
+        if passed > 0:
+            record.skipped += passed
+            record.publish()
+        due += (max(passed, 0) + 1) * period
+
+
+class _Watched(StatusRecord):
     """One robot of a monitor: its link, plan and counters (touched by the loop thread only)."""
 
     def __init__(
         self, name: str, host: str, port: int, profile: RobotProfile, timeout_s: float
     ) -> None:
-        self.name = name
+        super().__init__(name, _log.bind(robot=name, host=host, port=port))
         self.channel: CommandChannel = channel_for(
             profile,
             _UnusedLink(
@@ -142,20 +220,6 @@ class _Watched:
             for block, slots in zip(plan.blocks, plan.slots, strict=True)
         )
         self.link = AsyncLink(host, port, device_id=profile.device_id, timeout=timeout_s, name=name)
-        self.status: RobotStatus | None = None
-        self.read_at: float | None = None
-        self.error: TMMasterError | None = None
-        self.polls = 0
-        self.skipped = 0
-        self.failures = 0
-        #: What readers see: replaced (one reference assignment) after every change.
-        self.published = _NOTHING_YET
-        self._log = _log.bind(robot=name, host=host, port=port)
-
-    def publish(self) -> None:
-        self.published = MonitoredStatus(
-            self.status, self.read_at, self.error, self.polls, self.skipped, self.failures
-        )
 
     async def connect(self) -> None:
         """Open a fresh link; on failure record the :class:`ConnectError`."""
@@ -169,15 +233,6 @@ class _Watched:
     def drop(self) -> None:
         """Close the link: after a failure the stream may still carry a late answer."""
         self.link.close()
-
-    def fail(self, error: TransportError) -> None:
-        if self.error is None:
-            self._log.warning("monitor.poll_failed", error=str(error))
-        else:
-            self._log.debug("monitor.poll_failed", error=str(error))
-        self.error = error
-        self.failures += 1
-        self.publish()
 
     async def poll(self) -> None:
         """Read the status blocks once, decode them and publish the status or the failure."""
@@ -200,13 +255,7 @@ class _Watched:
             self.drop()
             self.fail(exc)
             return
-        if self.error is not None:
-            self._log.debug("monitor.poll_recovered", failures=self.failures)
-        self.status = status
-        self.read_at = status.timestamp
-        self.error = None
-        self.polls += 1
-        self.publish()
+        self.succeed(status)
 
 
 class StatusMonitor:
@@ -374,20 +423,11 @@ class StatusMonitor:
 
     async def _watch(self, robot: _Watched, due: float, period: float) -> None:
         """Poll one robot on its schedule until cancelled or stopping."""
-        timings = self._timings
-        while not self._stopping:
-            delay = due - time.monotonic()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            sent = time.monotonic()
-            await robot.poll()
-            now = time.monotonic()
-            if timings is not None and robot.read_at is not None and robot.read_at >= sent:
-                timings.append((sent - due, now - sent))
-            # The next slot after now: the ones that came while this poll was
-            # outstanding are skipped, not sent late in a burst.
-            passed = math.floor((now - due) / period)
-            if passed > 0:
-                robot.skipped += passed
-                robot.publish()
-            due += (max(passed, 0) + 1) * period
+        await poll_on_schedule(
+            robot,
+            robot.poll,
+            due=due,
+            period=period,
+            running=lambda: not self._stopping,
+            timings=self._timings,
+        )
