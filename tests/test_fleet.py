@@ -280,3 +280,50 @@ def _registers(profile: str, situation: str) -> dict[str, Any]:
         "project_running": situation not in ("estop", "error"),
         "last_error_code": 7 if situation in ("estop", "error") else 0,
     }
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_the_watch_reads_each_robots_status_between_its_moves_and_polls(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=4)
+    with Fleet(watch_hz=50) as fleet:
+        idle = Robot("127.0.0.1", sim.port, profile=profile, gripper=None, fleet=fleet)
+        time.sleep(0.1)
+        assert fleet.latest(idle).polls == 0  # not connected: nothing read, nothing failed
+        assert fleet.latest(idle).failures == 0
+        robot = Robot(
+            "127.0.0.1", sim.port, profile=profile, gripper=None, poll_interval_s=0.01, fleet=fleet
+        )
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        before = fleet.latest(robot).polls
+        for target in (A, B):
+            motion = robot.move_to(target, speed=60)
+            assert motion.done
+        assert motion.finished_at is not None
+        deadline = time.monotonic() + 2
+        while (fleet.latest(robot).read_at or 0) <= motion.finished_at:  # a read after the end
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        seen = fleet.latest(robot)
+        assert seen.polls > before  # the watch went on reading while the robot moved
+        assert seen.error is None
+        assert seen.status is not None
+        assert seen.status.pose.is_close(B)
+        assert [r.target for r in sim.motion_log()] == [A, B]
+        idle.close()
+
+
+def test_latest_needs_a_watching_fleet_and_one_of_its_robots(
+    fleet: Fleet, tm_simulator_factory: SimFactory
+) -> None:
+    sim = tm_simulator_factory("article")
+    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+    with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
+        fleet.latest(robot)
+    with Fleet(watch_hz=20) as other, pytest.raises(tmmaster.ConfigError, match="not one"):
+        other.latest(robot)
+    with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
+        Fleet(watch_hz=0)
+    robot.close()

@@ -62,7 +62,8 @@ class CommandSafety(RuleBasedStateMachine):
         self.proxy = FaultProxy(self.sim.port)
         self.issued: list[Issued] = []
         self.robot: Robot | None = None
-        self.fleet = Fleet() if self.in_fleet else None
+        # Watched too: its reads interleave with the commands, the polls and the faults.
+        self.fleet = Fleet(watch_hz=50) if self.in_fleet else None
         self.count = 0
         self._open()
 

@@ -32,6 +32,7 @@ from collections.abc import Callable, Coroutine, Iterable
 from typing import Any, Generic, Protocol, Self, TypeVar, cast
 
 from ._channels import CommandChannel, Observation
+from ._checks import require_positive
 from ._codec import Value
 from ._exceptions import (
     ConfigError,
@@ -41,10 +42,16 @@ from ._exceptions import (
 )
 from ._following import FollowState
 from ._logging import get_logger
-from ._monitor import EventLoopName, _loop_factory
+from ._monitor import (
+    EventLoopName,
+    MonitoredStatus,
+    StatusRecord,
+    _loop_factory,
+    poll_on_schedule,
+)
 from ._registers import RegisterField
 from ._retry import RetryPolicy
-from ._transport import AsyncLink, BlockTransport
+from ._transport import AsyncLink, BlockTransport, ConnectionState
 
 _log = get_logger("tmmaster.fleet")
 
@@ -130,6 +137,11 @@ class LoopTransport(BlockTransport):
 
     # -- the loop's side ------------------------------------------------------------
 
+    @property
+    def link_up(self) -> bool:
+        """True while the link is open."""
+        return self._link.connected
+
     def drop_on_loop(self) -> None:
         """From the loop, as it ends: close the link (a later request reconnects, and fails)."""
         self._link.close()
@@ -181,6 +193,12 @@ class FleetMember:
         self.transport = transport
         self.polling = False
         self._nap: asyncio.Future[None] | None = None
+        # On the loop, the polls of a wait and the watch's reads take turns on the link
+        # (both hold its lock from the same thread, the loop's, which would not tell them
+        # apart).
+        self._turn = asyncio.Lock()
+        #: What the fleet's watch last saw of this robot (``Fleet(watch_hz=...)``).
+        self.record = StatusRecord(transport.name, _log.bind(robot=transport.name), events="fleet")
 
     def follow(self, follow: FollowState) -> Observation | None:
         """From the robot's thread: poll on the loop until the thread must act (None: poll)."""
@@ -239,15 +257,16 @@ class FleetMember:
                 delay = follow.due() - time.monotonic()
                 if delay > 0:
                     await self._sleep(delay)
-                if stop.is_set() or not self.transport.hold():
-                    return None  # a stop request, or another thread's request on the link
-                try:
-                    follow.poll_started = time.monotonic()
-                    observation = await self._poll(follow)
-                except TransportError:
-                    return None  # the thread polls again, with the transport's retries
-                finally:
-                    self.transport.release()
+                async with self._turn:
+                    if stop.is_set() or not self.transport.hold():
+                        return None  # a stop request, or another thread's request on the link
+                    try:
+                        follow.poll_started = time.monotonic()
+                        observation = await self._poll(follow)
+                    except TransportError:
+                        return None  # the thread polls again, with the transport's retries
+                    finally:
+                        self.transport.release()
                 if observation.pose is not None:
                     motion.last_pose = observation.pose
                 if follow.settled(observation, time.monotonic()):
@@ -255,6 +274,37 @@ class FleetMember:
         finally:
             self.polling = False
             ended.set()
+
+    def watching(self) -> bool:
+        """True until the robot is closed or the fleet stops."""
+        return self.transport.state is not ConnectionState.CLOSED and self.fleet.running
+
+    async def watch_once(self) -> None:
+        """Read the robot's status once for the fleet's watch (nothing while not connected)."""
+        record = self.transport_ready()
+        if record is None:
+            return
+        async with self._turn:
+            if not self.transport.hold():
+                record.skipped += 1  # the robot's thread is using the link: next slot
+                record.publish()
+                return
+            try:
+                values = await self.transport.read_on_loop(
+                    self.channel.status_fields, max_gap=self.channel.profile.max_read_gap
+                )
+            except TransportError as exc:
+                record.fail(exc)
+                return
+            finally:
+                self.transport.release()
+        record.succeed(self.channel.status_from(values))
+
+    def transport_ready(self) -> StatusRecord | None:
+        """The watch's record when the link is up (the robot's thread opens it), else None."""
+        if self.transport.state is ConnectionState.CONNECTED and self.transport.link_up:
+            return self.record
+        return None
 
     async def _poll(self, follow: FollowState) -> Observation:
         """The channel's one poll, its reads made on the loop."""
@@ -356,14 +406,30 @@ class Fleet:
     thread only when the poll needs it, so hundreds of robots do not mean hundreds of
     threads waking for every poll (docs/performance.md).
 
+    ``watch_hz``: also read every connected robot's status this often on the loop, over
+    the robot's own link, between its other requests (:meth:`latest`); ``None``: no
+    watch. The robots' phases are spread over the period; a slot that finds the link
+    busy or a read outstanding is skipped and counted, as in :class:`StatusMonitor`.
+
     ``event_loop``: as :class:`StatusMonitor`'s (uvloop when installed, for ``auto``).
     :meth:`close` closes every robot still open (withdrawing or stopping what each has
     outstanding), then the loop; safe to call more than once.
     """
 
-    def __init__(self, *, event_loop: EventLoopName = "auto") -> None:
+    def __init__(
+        self, *, watch_hz: float | None = None, event_loop: EventLoopName = "auto"
+    ) -> None:
+        #: How often each robot's status is read for :meth:`latest` (None: not watched).
+        self.watch_hz = None if watch_hz is None else require_positive("watch_hz", watch_hz)
         #: The event loop the fleet runs on: "uvloop" or "asyncio".
         self.event_loop, self._new_loop = _loop_factory(event_loop)
+        self._members: weakref.WeakKeyDictionary[_Closable, FleetMember] = (
+            weakref.WeakKeyDictionary()
+        )
+        self._watches: set[asyncio.Task[None]] = set()
+        #: Set to a list before the robots connect to record (lateness s, response s) of
+        #: every answered watch read (benchmarks); None records nothing.
+        self._timings: list[tuple[float, float]] | None = None
         self._robots: weakref.WeakSet[_Closable] = weakref.WeakSet()
         self._links: list[weakref.ref[LoopTransport]] = []
         self._thread: threading.Thread | None = None
@@ -401,9 +467,47 @@ class Fleet:
             self._links.append(weakref.ref(transport))
         return transport
 
-    def driver(self, channel: CommandChannel, transport: LoopTransport) -> FleetMember:
-        """The loop's side of one robot's waits."""
-        return FleetMember(self, channel, transport)
+    def driver(
+        self, robot: _Closable, channel: CommandChannel, transport: LoopTransport
+    ) -> FleetMember:
+        """The loop's side of one robot's waits (and of its watch)."""
+        member = FleetMember(self, channel, transport)
+        with self._lock:
+            self._members[robot] = member
+            index = len(self._members) - 1
+        if self.watch_hz is not None:
+            self.call_soon(self._start_watch, member, index)
+        return member
+
+    def latest(self, robot: _Closable) -> MonitoredStatus:
+        """What the fleet's watch last saw of ``robot`` (ConfigError when not watched here)."""
+        if self.watch_hz is None:
+            raise ConfigError("this Fleet does not watch its robots: make it with watch_hz")
+        with self._lock:
+            member = self._members.get(robot)
+        if member is None:
+            raise ConfigError("that robot is not one of this Fleet's")
+        return member.record.published
+
+    def _start_watch(self, member: FleetMember, index: int) -> None:
+        """On the loop: start one robot's watch, its phase spread over the period."""
+        assert self.watch_hz is not None
+        period = 1.0 / self.watch_hz
+        # Golden-ratio phases: evenly spread however many robots join, and when.
+        due = time.monotonic() + period * ((index * 0.6180339887) % 1.0)
+        task = asyncio.get_running_loop().create_task(
+            poll_on_schedule(
+                member.record,
+                member.watch_once,
+                due=due,
+                period=period,
+                running=member.watching,
+                timings=self._timings,
+            ),
+            name=f"tmmaster-fleet-watch-{member.transport.name}",
+        )
+        self._watches.add(task)
+        task.add_done_callback(self._watches.discard)
 
     # -- lifecycle ----------------------------------------------------------------------
 
@@ -527,6 +631,8 @@ class Fleet:
             await wake.wait()
         finally:
             wake.set()  # submit() refuses from now on
+            for task in list(self._watches):
+                task.cancel()
             with self._lock:
                 links = [ref() for ref in self._links]
             for transport in links:

@@ -606,7 +606,7 @@ class Robot:
         self._shared: FleetMember | None = None
         if fleet is not None and loop_link is not None:
             # The polls of this robot's waits run on the fleet's loop.
-            self._shared = fleet.driver(self._channel, loop_link)
+            self._shared = fleet.driver(self, self._channel, loop_link)
             self._follower.shared_driver = self._shared.follow
         self.gripper: Gripper = self._make_gripper(
             gripper,
