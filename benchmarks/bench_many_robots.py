@@ -22,6 +22,10 @@ evenly over the period). Per design of the master:
   as ``Robot.status()`` (jitter and response from the monitor's own schedule, through
   its private ``_timings`` record);
 * ``monitor-uvloop``: the same monitor on uvloop's event loop (the ``monitor`` extra);
+* ``fleet``: one :class:`tmmaster.Fleet` with ``watch_hz`` = the rate and every robot a
+  connected :class:`tmmaster.Robot` of it: the robots can be driven (their links are the
+  fleet's), and the fleet's loop (uvloop when installed) reads each one's status over
+  that link (jitter and response from the watch's own schedule);
 * ``selectors``: ONE thread, one non-blocking socket per robot, the FC3 request and
   answer framed with ``struct`` (no pymodbus, no tmmaster), every socket watched by one
   ``selectors`` loop: the least CPU a poll can cost from Python, i.e. what a shared
@@ -82,12 +86,21 @@ from typing import Literal
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 from _mbap import answer_frame, split_requests
 
-from tmmaster import Robot, StatusMonitor
+from tmmaster import Fleet, Robot, StatusMonitor
 from tmmaster._transport import READ_FUNCTION, BlockTransport
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
-DESIGNS = ("threads", "pool", "scheduler", "asyncio", "selectors", "monitor", "monitor-uvloop")
+DESIGNS = (
+    "threads",
+    "pool",
+    "scheduler",
+    "asyncio",
+    "selectors",
+    "monitor",
+    "monitor-uvloop",
+    "fleet",
+)
 #: Threads of the ``pool`` design.
 POOL_THREADS = 8
 
@@ -563,6 +576,49 @@ def run_monitor(
     return samples, cpu, wall, sims
 
 
+def run_fleet(
+    ports: list[int],
+    period: float,
+    seconds: float,
+    sim_cpu: Callable[[], float],
+    profile: str = "article",
+) -> tuple[Samples, float, float, float]:
+    """One :class:`tmmaster.Fleet` watching every robot at the rate (robots that can be driven).
+
+    Each robot is a connected :class:`tmmaster.Robot` of the fleet, idle: the fleet's loop
+    reads its status over the robot's own link (``watch_hz``), as ``run_monitor`` does
+    over links of its own. Returns what ``run_monitor`` returns.
+    """
+    fleet = Fleet(watch_hz=1.0 / period)
+    timings: list[tuple[float, float]] = []
+    fleet._timings = timings  # lateness and response of every answered watch read
+    with fleet:
+        robots = [
+            Robot("127.0.0.1", port, profile=profile, gripper=None, name=f"robot{i}", fleet=fleet)
+            for i, port in enumerate(ports)
+        ]
+        for robot in robots:
+            robot.connect()
+        time.sleep(0.2)  # the first slots of every robot
+        before = [fleet.latest(robot) for robot in robots]
+        del timings[:]
+        sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
+        time.sleep(seconds)
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        sims = sim_cpu() - sim0
+        taken = list(timings)
+        after = [fleet.latest(robot) for robot in robots]
+    samples = Samples(
+        lateness_s=[late for late, _ in taken],
+        response_s=[response for _, response in taken],
+        missed=sum(a.skipped - b.skipped for a, b in zip(after, before, strict=True)),
+        errors=sum(a.failures - b.failures for a, b in zip(after, before, strict=True)),
+    )
+    failed = [s.error for s in after if s.error is not None]
+    samples.first_error = repr(failed[0]) if failed else None
+    return samples, cpu, wall, sims
+
+
 # -- measuring -------------------------------------------------------------------------
 
 
@@ -609,6 +665,7 @@ def measure(
         "selectors": run_selectors,
         "monitor": functools.partial(run_monitor, profile=profile),
         "monitor-uvloop": functools.partial(run_monitor, event_loop="uvloop", profile=profile),
+        "fleet": functools.partial(run_fleet, profile=profile),
     }
     if design in loops:
         samples, cpu, wall, sim_cpu = loops[design](farm.ports, period, seconds, farm.cpu)
