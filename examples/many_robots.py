@@ -6,6 +6,12 @@ docs/performance.md, "Many robots from one process"):
 * one :class:`tmmaster.Robot` per robot, used by ONE thread (a Robot is not shared);
   every safety rule (validation, handshake, giving a command up safely) stays in that
   Robot, so nothing here re-implements any of it;
+* every Robot in one :class:`tmmaster.Fleet` (the default here; ``--no-fleet`` turns it
+  off): the robots' links and the polls of their waits run on the fleet's one event
+  loop, which wakes a robot's thread only when a poll needs it (acknowledged, done,
+  failed, a deadline). 400 moving robots took about 60 % of one core this way against
+  75-84 % with each thread polling its own waits, and the fleet's loop cannot queue
+  for the GIL the way 400 polling threads sometimes do (docs/performance.md);
 * plain threads, one per robot (not ``asyncio.to_thread`` with its default executor,
   which has only ``min(32, cpus + 4)`` workers: robot 33 would wait for another to
   finish);
@@ -15,20 +21,15 @@ docs/performance.md, "Many robots from one process"):
 * stopping: ``Robot.interrupt()`` is the one call meant to come from another thread;
   on Ctrl-C the main thread interrupts every robot, and each ``move_to`` in progress
   gives its command up safely (withdrawn or stopped) before its thread ends;
-* watching: one :class:`tmmaster.StatusMonitor` polls every robot's status from one
-  thread while they move (read-only, a second Modbus connection per robot): one thread
-  per robot saturates one process past about 200-300 robots; a monitor on uvloop watched
-  400 at 20 Hz with every slot polled, at 57-68 % of one core of a master pinned to 2
-  cores (docs/performance.md). ``--watch-hz 0`` turns it off. Those counts are for the
-  article map (one read per status); a status of the real TM table is six reads, and on
-  2 cores one process polled about 100 TM robots with threads, 200 with a monitor;
-* past about 200 driven robots, more processes (``--processes K``): this script runs
-  itself K times, each child driving a contiguous share of the robots with one thread
-  per robot, and gathers their reports. 400 robots from two processes of 200 on a
-  2-core machine took 57-69 % of one core in all, every poll on time, where one
-  process of 400 threads sometimes falls behind (docs/performance.md). On Ctrl-C in a
-  terminal every child receives it too and gives its own commands up safely; the
-  parent waits for them and never kills one.
+* watching: the fleet reads every robot's status ``--watch-hz`` times a second on its
+  loop, over the robot's own link (``Fleet(watch_hz=...)``, ``Fleet.latest``);
+  without a fleet a :class:`tmmaster.StatusMonitor` does it from one thread over a
+  second connection per robot. ``--watch-hz 0`` turns watching off. A status of the
+  article map is one read, of the real TM table six;
+* past what one process can drive, more processes (``--processes K``): this script
+  runs itself K times, each child driving a contiguous share of the robots, and
+  gathers their reports. On Ctrl-C in a terminal every child receives it too and gives
+  its own commands up safely; the parent waits for them and never kills one.
 
 Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
 
@@ -58,7 +59,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from tmmaster import MonitoredStatus, Pose, Robot, StatusMonitor, TMMasterError
+from tmmaster import Fleet, MonitoredStatus, Pose, Robot, StatusMonitor, TMMasterError
 from tmmaster.sim import Simulator
 
 HOST = "127.0.0.1"
@@ -104,15 +105,29 @@ def run(
     profile: str = "article",
     watch_hz: float = 10.0,
     first_index: int = 0,
+    fleet: bool = True,
 ) -> list[RobotReport]:
-    """Drive one robot per port, one thread each, watched by one monitor (``watch_hz`` > 0)."""
+    """Drive one robot per port, one thread each, watched at ``watch_hz`` (> 0).
+
+    ``fleet``: the robots in one :class:`tmmaster.Fleet`, which polls their waits and
+    watches them on one event loop over their own links; else each robot polls its own
+    waits, watched by a :class:`tmmaster.StatusMonitor` over links of its own.
+    """
+    shared = Fleet(watch_hz=watch_hz or None) if fleet else None
     robots = [
-        Robot(host, port, profile=profile, gripper=None, name=f"robot{first_index + i}")
+        Robot(
+            host,
+            port,
+            profile=profile,
+            gripper=None,
+            name=f"robot{first_index + i}",
+            fleet=shared,
+        )
         for i, port in enumerate(ports)
     ]
     reports = [RobotReport(r.name) for r in robots]
     threads: list[threading.Thread] = []
-    monitor = StatusMonitor(rate_hz=watch_hz) if watch_hz > 0 else None
+    monitor = StatusMonitor(rate_hz=watch_hz) if watch_hz > 0 and shared is None else None
     if monitor is not None:
         for robot, port in zip(robots, ports, strict=True):
             monitor.add(robot.name, host, port, profile=profile)
@@ -144,8 +159,13 @@ def run(
             for report in reports:
                 report.watched = monitor.latest(report.name)
             monitor.close()
+        if shared is not None and shared.watch_hz is not None:
+            for robot, report in zip(robots, reports, strict=True):
+                report.watched = shared.latest(robot)
         for robot in robots:
             robot.close()
+        if shared is not None:
+            shared.close()
     return reports
 
 
@@ -184,6 +204,7 @@ def run_in_processes(
     profile: str = "article",
     watch_hz: float = 10.0,
     first_index: int = 0,
+    fleet: bool = True,
 ) -> list[RobotReport]:
     """Drive the robots from ``processes`` child processes of this script, a share each."""
     share, extra = divmod(len(ports), processes)
@@ -197,6 +218,7 @@ def run_in_processes(
             sys.executable, __file__, "--host", host, "--ports", *map(str, group),
             "--moves", str(moves), "--profile", profile, "--watch-hz", str(watch_hz),
             "--first-index", str(first_index + first), "--json",
+            *([] if fleet else ["--no-fleet"]),
         ]  # fmt: skip
         children.append(
             (group, first, subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
@@ -223,7 +245,7 @@ def run_in_processes(
     return reports
 
 
-def drive_fleet(
+def drive_all(
     ports: Sequence[int],
     *,
     processes: int = 1,
@@ -232,21 +254,20 @@ def drive_fleet(
     profile: str = "article",
     watch_hz: float = 10.0,
     first_index: int = 0,
+    fleet: bool = True,
 ) -> list[RobotReport]:
     """:func:`run` in this process, or :func:`run_in_processes` when ``processes`` > 1."""
+    options: dict[str, Any] = {
+        "host": host,
+        "moves": moves,
+        "profile": profile,
+        "watch_hz": watch_hz,
+        "first_index": first_index,
+        "fleet": fleet,
+    }
     if processes > 1:
-        return run_in_processes(
-            ports,
-            processes=processes,
-            host=host,
-            moves=moves,
-            profile=profile,
-            watch_hz=watch_hz,
-            first_index=first_index,
-        )
-    return run(
-        ports, host=host, moves=moves, profile=profile, watch_hz=watch_hz, first_index=first_index
-    )
+        return run_in_processes(ports, processes=processes, **options)
+    return run(ports, **options)
 
 
 def run_with_simulators(
@@ -256,12 +277,13 @@ def run_with_simulators(
     time_scale: float = 10.0,
     watch_hz: float = 10.0,
     processes: int = 1,
+    fleet: bool = True,
 ) -> list[RobotReport]:
     """Start ``n`` simulators on 127.0.0.1 in this process, drive them, close them."""
     sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
     try:
         ports = [s.port for s in sims]
-        return drive_fleet(ports, processes=processes, moves=moves, watch_hz=watch_hz)
+        return drive_all(ports, processes=processes, moves=moves, watch_hz=watch_hz, fleet=fleet)
     finally:
         for sim in sims:
             sim.close()
@@ -292,7 +314,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--profile", default="article")
     parser.add_argument("--time-scale", type=float, default=10.0, help="with --sim")
     parser.add_argument(
-        "--watch-hz", type=float, default=10.0, help="StatusMonitor rate; 0: no monitor"
+        "--watch-hz", type=float, default=10.0, help="status watch rate; 0: no watch"
+    )
+    parser.add_argument(
+        "--no-fleet",
+        dest="fleet",
+        action="store_false",
+        help="no Fleet: each robot polls its own waits; a StatusMonitor watches",
     )
     parser.add_argument(
         "--processes", type=int, default=1, help="child processes sharing the robots"
@@ -311,7 +339,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--processes must be >= 1")
     try:
         if args.ports is not None:
-            reports = drive_fleet(
+            reports = drive_all(
                 args.ports,
                 processes=args.processes,
                 host=args.host,
@@ -319,6 +347,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 profile=args.profile,
                 watch_hz=args.watch_hz,
                 first_index=args.first_index,
+                fleet=args.fleet,
             )
         else:
             n = 8 if args.sim is None else args.sim
@@ -330,6 +359,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 time_scale=args.time_scale,
                 watch_hz=args.watch_hz,
                 processes=args.processes,
+                fleet=args.fleet,
             )
     except KeyboardInterrupt:
         print("interrupted: every robot gave its command up", file=sys.stderr)

@@ -39,13 +39,16 @@ def fast_example(example: ModuleType, monkeypatch: pytest.MonkeyPatch) -> Module
     return example
 
 
-def test_every_robot_drives_its_tour(tm_simulator_factory: Factory, example: ModuleType) -> None:
+@pytest.mark.parametrize("fleet", [True, False], ids=["fleet", "no-fleet"])
+def test_every_robot_drives_its_tour(
+    tm_simulator_factory: Factory, example: ModuleType, fleet: bool
+) -> None:
     sims = [tm_simulator_factory(**QUICK) for _ in range(4)]
-    reports = example.run([s.port for s in sims], moves=3, watch_hz=50)
+    reports = example.run([s.port for s in sims], moves=3, watch_hz=50, fleet=fleet)
     assert [r.error for r in reports] == [None] * 4
     assert [r.moves_done for r in reports] == [3] * 4
-    # One StatusMonitor watched the fleet while the threads drove it: every robot's link
-    # worked, and it polled (it starts polling before the robots even connect).
+    # The fleet's watch (or one StatusMonitor) watched the robots while the threads drove
+    # them: every robot's link worked, and it polled.
     assert all(r.watched is not None and r.watched.failures == 0 for r in reports)
     assert sum(r.watched.polls for r in reports if r.watched is not None) > 0
     for sim in sims:
@@ -88,7 +91,7 @@ def test_main_on_its_own_simulators_from_two_processes(
 ) -> None:
     # The simulators run in this process; two child processes drive them.
     argv = ["--sim", "3", "--moves", "2", "--time-scale", str(EXAMPLE_TIME_SCALE)]
-    assert fast_example.main([*argv, "--processes", "2"]) == 0
+    assert fast_example.main([*argv, "--processes", "2", "--no-fleet"]) == 0
     out = capsys.readouterr().out
     assert "3 of 3 robots done" in out
     assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot")] == [
@@ -98,11 +101,12 @@ def test_main_on_its_own_simulators_from_two_processes(
     ]
 
 
-def test_without_a_monitor_nothing_is_watched(
-    tm_simulator_factory: Factory, example: ModuleType
+@pytest.mark.parametrize("fleet", [True, False], ids=["fleet", "no-fleet"])
+def test_without_a_watch_nothing_is_watched(
+    tm_simulator_factory: Factory, example: ModuleType, fleet: bool
 ) -> None:
     sim = tm_simulator_factory(**QUICK)
-    (report,) = example.run([sim.port], moves=1, watch_hz=0)
+    (report,) = example.run([sim.port], moves=1, watch_hz=0, fleet=fleet)
     assert report.moves_done == 1
     assert report.watched is None
 
