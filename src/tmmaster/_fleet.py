@@ -107,8 +107,17 @@ class LoopTransport(BlockTransport):
     def _close_link(self) -> None:
         if self._fleet.on_loop():
             self._link.close()
-        else:
-            self._fleet.call_soon(self._link.close)
+            return
+        # Closed before this returns, as a socket of our own would be: a reconnect right
+        # after must not find the old link still open.
+        closed: _Latch[None] = _Latch()
+        if self._fleet.call_soon(self._close_on_loop, closed):
+            with contextlib.suppress(_NoAnswerError):
+                closed.wait(_LOOP_GRACE_S)
+
+    def _close_on_loop(self, closed: _Latch[None]) -> None:
+        self._link.close()
+        closed.settle(None)
 
     def _exchange(
         self, what: str, function_code: int, address: int, count: int, values: list[int] | None
