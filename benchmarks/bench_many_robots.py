@@ -86,7 +86,7 @@ from typing import Literal
 from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pinning_line
 from _mbap import answer_frame, split_requests
 
-from tmmaster import Fleet, Robot, StatusMonitor
+from tmmaster import Fleet, MonitoredStatus, Robot, StatusMonitor
 from tmmaster._transport import READ_FUNCTION, BlockTransport
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
@@ -537,6 +537,36 @@ def run_selectors(
             link.close()
 
 
+def watched_round(
+    seen: Callable[[], list[MonitoredStatus]],
+    timings: list[tuple[float, float]],
+    seconds: float,
+    sim_cpu: Callable[[], float],
+) -> tuple[Samples, float, float, float]:
+    """Measure ``seconds`` of a running watch: what ``seen()`` and ``timings`` record.
+
+    Returns (samples, master CPU s, wall s, simulators' CPU s), over the polling only.
+    """
+    time.sleep(0.2)  # the first slots of every robot
+    before = seen()
+    del timings[:]
+    sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
+    time.sleep(seconds)
+    cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+    sims = sim_cpu() - sim0
+    taken = list(timings)
+    after = seen()
+    samples = Samples(
+        lateness_s=[late for late, _ in taken],
+        response_s=[response for _, response in taken],
+        missed=sum(a.skipped - b.skipped for a, b in zip(after, before, strict=True)),
+        errors=sum(a.failures - b.failures for a, b in zip(after, before, strict=True)),
+    )
+    failed = [s.error for s in after if s.error is not None]
+    samples.first_error = repr(failed[0]) if failed else None
+    return samples, cpu, wall, sims
+
+
 def run_monitor(
     ports: list[int],
     period: float,
@@ -547,8 +577,7 @@ def run_monitor(
 ) -> tuple[Samples, float, float, float]:
     """One :class:`tmmaster.StatusMonitor` over every robot (one thread, one event loop).
 
-    Returns (samples, master CPU s, wall s, simulators' CPU s), all over the polling only
-    (after ``start()``: the links are open and the schedules running).
+    Measured after ``start()``: the links are open and the schedules running.
     """
     monitor = StatusMonitor(rate_hz=1.0 / period, timeout_s=1.0, event_loop=event_loop)
     for i, port in enumerate(ports):
@@ -556,24 +585,7 @@ def run_monitor(
     timings: list[tuple[float, float]] = []
     monitor._timings = timings  # lateness and response of every answered poll
     with monitor:
-        time.sleep(0.2)  # the first slots of every robot
-        before = monitor.snapshot()
-        del timings[:]
-        sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
-        time.sleep(seconds)
-        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-        sims = sim_cpu() - sim0
-        taken = list(timings)
-        after = monitor.snapshot()
-    samples = Samples(
-        lateness_s=[late for late, _ in taken],
-        response_s=[response for _, response in taken],
-        missed=sum(after[k].skipped - before[k].skipped for k in after),
-        errors=sum(after[k].failures - before[k].failures for k in after),
-    )
-    failed = [s.error for s in after.values() if s.error is not None]
-    samples.first_error = repr(failed[0]) if failed else None
-    return samples, cpu, wall, sims
+        return watched_round(lambda: list(monitor.snapshot().values()), timings, seconds, sim_cpu)
 
 
 def run_fleet(
@@ -587,7 +599,7 @@ def run_fleet(
 
     Each robot is a connected :class:`tmmaster.Robot` of the fleet, idle: the fleet's loop
     reads its status over the robot's own link (``watch_hz``), as ``run_monitor`` does
-    over links of its own. Returns what ``run_monitor`` returns.
+    over links of its own.
     """
     fleet = Fleet(watch_hz=1.0 / period)
     timings: list[tuple[float, float]] = []
@@ -599,24 +611,9 @@ def run_fleet(
         ]
         for robot in robots:
             robot.connect()
-        time.sleep(0.2)  # the first slots of every robot
-        before = [fleet.latest(robot) for robot in robots]
-        del timings[:]
-        sim0, cpu0, wall0 = sim_cpu(), time.process_time(), time.monotonic()
-        time.sleep(seconds)
-        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-        sims = sim_cpu() - sim0
-        taken = list(timings)
-        after = [fleet.latest(robot) for robot in robots]
-    samples = Samples(
-        lateness_s=[late for late, _ in taken],
-        response_s=[response for _, response in taken],
-        missed=sum(a.skipped - b.skipped for a, b in zip(after, before, strict=True)),
-        errors=sum(a.failures - b.failures for a, b in zip(after, before, strict=True)),
-    )
-    failed = [s.error for s in after if s.error is not None]
-    samples.first_error = repr(failed[0]) if failed else None
-    return samples, cpu, wall, sims
+        return watched_round(
+            lambda: [fleet.latest(robot) for robot in robots], timings, seconds, sim_cpu
+        )
 
 
 # -- measuring -------------------------------------------------------------------------

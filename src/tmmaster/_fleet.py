@@ -44,9 +44,9 @@ from ._following import FollowState
 from ._logging import get_logger
 from ._monitor import (
     EventLoopName,
+    LoopThread,
     MonitoredStatus,
     StatusRecord,
-    _loop_factory,
     poll_on_schedule,
 )
 from ._registers import RegisterField
@@ -65,8 +65,6 @@ class _Closable(Protocol):
         """Withdraw or stop what is outstanding, then close the links."""
 
 
-#: How long close() waits for the loop thread (it stops within a loop turn normally).
-_JOIN_TIMEOUT_S = 10.0
 #: Beyond a request's own timeout: how long a thread waits for the loop to answer at all.
 _LOOP_GRACE_S = 1.0
 
@@ -430,8 +428,9 @@ class Fleet:
     ) -> None:
         #: How often each robot's status is read for :meth:`latest` (None: not watched).
         self.watch_hz = None if watch_hz is None else require_positive("watch_hz", watch_hz)
+        self._runner = LoopThread(event_loop, name="tmmaster-fleet", owner="Fleet")
         #: The event loop the fleet runs on: "uvloop" or "asyncio".
-        self.event_loop, self._new_loop = _loop_factory(event_loop)
+        self.event_loop = self._runner.event_loop
         self._members: weakref.WeakKeyDictionary[_Closable, FleetMember] = (
             weakref.WeakKeyDictionary()
         )
@@ -441,13 +440,8 @@ class Fleet:
         self._timings: list[tuple[float, float]] | None = None
         self._robots: weakref.WeakSet[_Closable] = weakref.WeakSet()
         self._links: list[weakref.ref[LoopTransport]] = []
-        self._thread: threading.Thread | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._wake: asyncio.Event | None = None
-        self._started = threading.Event()
         self._lock = threading.Lock()
         self._closed = False
-        self._crash: BaseException | None = None
 
     # -- for Robot ----------------------------------------------------------------------
 
@@ -531,13 +525,7 @@ class Fleet:
         with self._lock:
             if self._closed:
                 raise ConfigError("this Fleet is closed; make a new one")
-            if self._thread is not None:
-                return self
-            self._thread = threading.Thread(target=self._run, name="tmmaster-fleet", daemon=True)
-            self._thread.start()
-        self._started.wait()
-        if self._crash is not None:
-            raise TransportError(f"the Fleet's loop failed: {self._crash!r}") from self._crash
+            self._runner.start(self._main)
         return self
 
     def close(self) -> None:
@@ -549,14 +537,7 @@ class Fleet:
             robots = list(self._robots)
         for robot in robots:
             robot.close()  # withdraws or stops what it has outstanding, through the loop
-        loop, wake, thread = self._loop, self._wake, self._thread
-        if loop is not None and wake is not None:
-            with contextlib.suppress(RuntimeError):  # the loop already ended
-                loop.call_soon_threadsafe(wake.set)
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(_JOIN_TIMEOUT_S)
-            if thread.is_alive():
-                _log.warning("fleet.thread_still_running", timeout_s=_JOIN_TIMEOUT_S)
+        self._runner.stop()
 
     def __enter__(self) -> Self:
         return self.start()
@@ -569,16 +550,16 @@ class Fleet:
     @property
     def running(self) -> bool:
         """True while the loop runs and takes work."""
-        loop, wake = self._loop, self._wake
+        loop, wake = self._runner.loop, self._runner.wake
         return loop is not None and not loop.is_closed() and wake is not None and not wake.is_set()
 
     def on_loop(self) -> bool:
         """True in the loop's own thread."""
-        return threading.current_thread() is self._thread
+        return threading.current_thread() is self._runner.thread
 
     def submit(self, coroutine: Coroutine[Any, Any, T]) -> concurrent.futures.Future[T] | None:
         """Run ``coroutine`` on the loop; None (the coroutine closed) when the loop has ended."""
-        loop = self._loop
+        loop = self._runner.loop
         if loop is None or not self.running:
             coroutine.close()
             return None
@@ -611,7 +592,7 @@ class Fleet:
 
     def call_soon(self, callback: Callable[..., object], *args: Any) -> bool:
         """Run ``callback(*args)`` on the loop soon; False when the loop has ended."""
-        loop = self._loop
+        loop = self._runner.loop
         if loop is None or not self.running:
             return False
         try:
@@ -622,20 +603,8 @@ class Fleet:
 
     # -- the loop thread ----------------------------------------------------------------
 
-    def _run(self) -> None:
-        try:
-            with asyncio.Runner(loop_factory=self._new_loop) as runner:
-                runner.run(self._main())
-        except BaseException as exc:  # a bug: reported by start(), never lost silently
-            self._crash = exc
-            _log.warning("fleet.loop_failed", error=repr(exc))
-        finally:
-            self._started.set()
-
     async def _main(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._wake = wake = asyncio.Event()
-        self._started.set()
+        wake = self._runner.ready()
         try:
             await wake.wait()
         finally:

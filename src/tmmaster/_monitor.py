@@ -26,7 +26,7 @@ import contextlib
 import math
 import threading
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Self
@@ -92,6 +92,77 @@ def _loop_factory(event_loop: str) -> tuple[str, Callable[[], asyncio.AbstractEv
             ) from exc
         return "asyncio", asyncio.new_event_loop
     return "uvloop", uvloop.new_event_loop
+
+
+class LoopThread:
+    """One asyncio event loop in one daemon thread (a StatusMonitor's, a Fleet's).
+
+    :meth:`start` runs the owner's main coroutine on a new loop and returns once that
+    coroutine called :meth:`ready` (or failed: a bug, raised by ``start`` as a
+    :class:`TransportError`); :meth:`stop` wakes the coroutine's :meth:`ready` event
+    and joins the thread.
+    """
+
+    def __init__(self, event_loop: str, *, name: str, owner: str) -> None:
+        #: The event loop it runs: "uvloop" or "asyncio".
+        self.event_loop, self._new_loop = _loop_factory(event_loop)
+        self._name = name
+        self._owner = owner
+        self.thread: threading.Thread | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        #: Set (on the loop) to end the main coroutine's wait.
+        self.wake: asyncio.Event | None = None
+        self._started = threading.Event()
+        self._crash: BaseException | None = None
+
+    def start(self, main: Callable[[], Coroutine[Any, Any, None]]) -> None:
+        """Run ``main()`` in the thread; return once it called :meth:`ready` (no-op if started)."""
+        if self.thread is not None:
+            return
+        self.thread = threading.Thread(target=self._run, args=(main,), name=self._name, daemon=True)
+        self.thread.start()
+        self._started.wait()
+        if self._crash is not None:
+            raise TransportError(
+                f"the {self._owner}'s loop failed: {self._crash!r}"
+            ) from self._crash
+
+    def ready(self) -> asyncio.Event:
+        """From the main coroutine: the loop is up; the event :meth:`stop` will set."""
+        self.loop = asyncio.get_running_loop()
+        if self.wake is None:
+            self.wake = asyncio.Event()
+        self._started.set()
+        return self.wake
+
+    def bind(self) -> asyncio.Event:
+        """From the main coroutine, before :meth:`ready`: the event :meth:`stop` will set."""
+        self.loop = asyncio.get_running_loop()
+        self.wake = asyncio.Event()
+        return self.wake
+
+    def stop(self) -> None:
+        """Wake the main coroutine to end and join the thread (bounded); safe twice."""
+        loop, wake, thread = self.loop, self.wake, self.thread
+        if loop is not None and wake is not None:
+            with contextlib.suppress(RuntimeError):  # the loop already ended
+                loop.call_soon_threadsafe(wake.set)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(_JOIN_TIMEOUT_S)
+            if thread.is_alive():
+                _log.warning(
+                    "loop.thread_still_running", owner=self._owner, timeout_s=_JOIN_TIMEOUT_S
+                )
+
+    def _run(self, main: Callable[[], Coroutine[Any, Any, None]]) -> None:
+        try:
+            with asyncio.Runner(loop_factory=self._new_loop) as runner:
+                runner.run(main())
+        except BaseException as exc:  # a bug: reported by start(), never lost silently
+            self._crash = exc
+            _log.warning("loop.failed", owner=self._owner, error=repr(exc))
+        finally:
+            self._started.set()
 
 
 class _UnusedLink(BlockTransport):
@@ -284,16 +355,12 @@ class StatusMonitor:
     ) -> None:
         self.rate_hz = require_positive("rate_hz", rate_hz)
         self.timeout_s = require_positive("timeout_s", timeout_s)
+        self._runner = LoopThread(event_loop, name="tmmaster-monitor", owner="StatusMonitor")
         #: The event loop the monitor runs on: "uvloop" or "asyncio".
-        self.event_loop, self._new_loop = _loop_factory(event_loop)
+        self.event_loop = self._runner.event_loop
         self._robots: dict[str, _Watched] = {}
-        self._thread: threading.Thread | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._wake: asyncio.Event | None = None
-        self._started = threading.Event()
         self._stopping = False
         self._closed = False
-        self._crash: BaseException | None = None
         #: Set to a list before start() to record (lateness s, response s) of every
         #: answered poll (benchmarks); None records nothing.
         self._timings: list[tuple[float, float]] | None = None
@@ -309,7 +376,7 @@ class StatusMonitor:
         profile: str | Path | RobotProfile = DEFAULT_PROFILE,
     ) -> None:
         """Add a robot to watch, before :meth:`start` (ConfigError naming a bad argument)."""
-        if self._thread is not None or self._closed:
+        if self._runner.thread is not None or self._closed:
             raise ConfigError("add robots before StatusMonitor.start()")
         if not isinstance(name, str) or not name:
             raise ConfigError(f"name must be a non-empty string, got {name!r}")
@@ -345,15 +412,11 @@ class StatusMonitor:
         """Start the loop thread; return once every link tried to connect (failures are kept)."""
         if self._closed:
             raise ConfigError("a closed StatusMonitor cannot be restarted; make a new one")
-        if self._thread is not None:
-            return self
-        self._thread = threading.Thread(target=self._run, name="tmmaster-monitor", daemon=True)
-        self._thread.start()
-        self._started.wait()
-        if self._crash is not None:
-            crash = self._crash
+        try:
+            self._runner.start(self._main)
+        except TransportError:
             self.close()
-            raise TransportError(f"the StatusMonitor's loop failed: {crash!r}") from crash
+            raise
         return self
 
     def close(self) -> None:
@@ -362,14 +425,7 @@ class StatusMonitor:
             return
         self._closed = True
         self._stopping = True
-        loop, wake, thread = self._loop, self._wake, self._thread
-        if loop is not None and wake is not None:
-            with contextlib.suppress(RuntimeError):  # the loop already ended
-                loop.call_soon_threadsafe(wake.set)
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(_JOIN_TIMEOUT_S)
-            if thread.is_alive():
-                _log.warning("monitor.thread_still_running", timeout_s=_JOIN_TIMEOUT_S)
+        self._runner.stop()
 
     def __enter__(self) -> Self:
         return self.start()
@@ -379,24 +435,13 @@ class StatusMonitor:
 
     # -- the loop thread --------------------------------------------------------------
 
-    def _run(self) -> None:
-        try:
-            with asyncio.Runner(loop_factory=self._new_loop) as runner:
-                runner.run(self._main())
-        except BaseException as exc:  # a bug: reported by start(), never lost silently
-            self._crash = exc
-            _log.warning("monitor.loop_failed", error=repr(exc))
-        finally:
-            self._started.set()
-
     async def _main(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._wake = wake = asyncio.Event()
+        wake = self._runner.bind()
         robots = list(self._robots.values())
         tasks: list[asyncio.Task[None]] = []
         try:
             await asyncio.gather(*(robot.connect() for robot in robots))
-            self._started.set()
+            self._runner.ready()
             if not self._stopping:
                 origin = time.monotonic()
                 period = 1.0 / self.rate_hz

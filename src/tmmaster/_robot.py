@@ -558,32 +558,19 @@ class Robot:
         self._last_target: Pose | None = None
         self.max_speed_percent = max_speed_percent
         self._fleet = fleet
+        link: dict[str, Any] = {
+            "device_id": self.profile.device_id,
+            "timeout": request_timeout_s,
+            "retry": retry,
+            "name": name,
+        }
         loop_link: LoopTransport | None = None
         if fleet is not None:
             if transport is not None:
                 raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
-            loop_link = fleet.link_for(
-                self,
-                host,
-                port,
-                device_id=self.profile.device_id,
-                timeout=request_timeout_s,
-                retry=retry,
-                name=name,
-            )
+            loop_link = fleet.link_for(self, host, port, **link)
         # ``host`` "sim://name" reaches an in-process simulator without a socket.
-        self._transport: Transport = (
-            loop_link
-            or transport
-            or open_transport(
-                host,
-                port,
-                device_id=self.profile.device_id,
-                timeout=request_timeout_s,
-                retry=retry,
-                name=name,
-            )
-        )
+        self._transport: Transport = loop_link or transport or open_transport(host, port, **link)
         self._channel: CommandChannel = channel_for(self.profile, self._transport)
         self._stop_event = threading.Event()
         # Retry sleeps of reads end at once on a stop request, like every poll.
