@@ -22,7 +22,8 @@ to the first ``--master-cpus`` (2) and the simulator processes to the rest, as i
 comparison: it is still one OS thread per robot underneath (the library is synchronous).
 ``--mode fleet`` is one thread per robot too, every robot in one :class:`tmmaster.Fleet`:
 the robots' links and the polls of their waits on the fleet's event loop, the threads
-woken only when a poll needs them. ``--mode`` takes several modes.
+woken only when a poll needs them; ``--watch HZ`` makes the fleet also read every
+robot's status HZ times a second. ``--mode`` takes several modes.
 
 ``--slave light`` replaces the simulators by :class:`LightRobot` s (the article map's
 clear-on-accept handshake and the arm model's move times, nothing else), cheap enough
@@ -389,6 +390,8 @@ class Row:
     requests_per_s: float
     errors: int
     first_error: str | None
+    #: Fleet mode with --watch: what the fleet's status watch did.
+    watch: str | None = None
 
 
 def poll_intervals(requests: list[tuple[float, int, int]]) -> list[float]:
@@ -421,10 +424,11 @@ def measure(
     sim_cpus: list[int],
     slave: str = "sim",
     stagger_s: float = 0.0,
+    watch_hz: float = 0.0,
 ) -> Row:
     """Start n simulators, connect n robots, run the tour concurrently, measure."""
     sims = SimFarm(n, per_process or n, time_scale, sim_cpus, slave)
-    fleet = Fleet() if mode == "fleet" else None
+    fleet = Fleet(watch_hz=watch_hz or None) if mode == "fleet" else None
     robots = [
         Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}", fleet=fleet)
         for i, port in enumerate(sims.ports)
@@ -440,6 +444,14 @@ def measure(
         wall = time.monotonic() - wall0
         cpu = time.process_time() - cpu0
         requests = sims.requests()
+        watch = None
+        if fleet is not None and fleet.watch_hz is not None:
+            seen = [fleet.latest(robot) for robot in robots]
+            watch = (
+                f"watch: {sum(s.polls for s in seen)} reads,"
+                f" {sum(s.skipped for s in seen)} slots skipped,"
+                f" {sum(s.failures for s in seen)} failed (whole run, setup included)"
+            )
     finally:
         for robot in robots:
             robot.close()
@@ -457,6 +469,7 @@ def measure(
         requests_per_s=sum(r.requests for r in runs) / wall,
         errors=sum(r.error is not None for r in runs),
         first_error=next((repr(r.error) for r in runs if r.error is not None), None),
+        watch=watch,
     )
 
 
@@ -512,6 +525,13 @@ def main(argv: list[str] | None = None) -> int:
         help="sim: tmmaster.sim simulators; light: minimal article-map robots (LightRobot)",
     )
     parser.add_argument(
+        "--watch",
+        type=float,
+        default=0.0,
+        metavar="HZ",
+        help="fleet mode: the fleet also reads every robot's status HZ times a second",
+    )
+    parser.add_argument(
         "--stagger",
         type=float,
         default=0.0,
@@ -543,6 +563,7 @@ def main(argv: list[str] | None = None) -> int:
             sim_cpus,
             args.slave,
             args.stagger,
+            args.watch,
         )
         for n in args.n
         for mode in modes
@@ -551,11 +572,14 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"# {machine_line()}; time_scale {args.time_scale:g}, {args.moves} moves per robot,"
         f" poll {POLL_S * 1000:.0f} ms, first moves spread over {args.stagger:g} s,"
+        f" fleet watch {args.watch:g} Hz,"
         f" {args.slave} slaves: {args.sims_per_process or 'all'} per"
         f" process, {pinning_line(master_cpus, sim_cpus)}"
     )
     print(table(rows))
     for r in rows:
+        if r.watch:
+            print(f"{r.mode} N={r.n}: {r.watch}")
         if r.first_error:
             print(f"{r.mode} N={r.n}: {r.errors} robot(s) failed, first: {r.first_error}")
     if args.json:
