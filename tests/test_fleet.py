@@ -327,3 +327,25 @@ def test_latest_needs_a_watching_fleet_and_one_of_its_robots(
     with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
         Fleet(watch_hz=0)
     robot.close()
+
+
+def test_the_watch_does_not_read_again_what_a_moves_poll_just_read(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    """Article: a move's polls read the whole status, so the watch adds no reads then."""
+    sim = tm_simulator_factory("article", time_scale=1)
+    options: dict[str, Any] = {"profile": "article", "gripper": None, "poll_interval_s": 0.005}
+    added: list[int] = []
+    for watch_hz, target in ((None, B), (20.0, A)):  # the same move, back and forth
+        with Fleet(watch_hz=watch_hz) as fleet:
+            robot = Robot("127.0.0.1", sim.port, fleet=fleet, **options)
+            with robot:
+                robot.wait_until_ready(timeout_s=5)
+                if target == B:
+                    robot.move_to(A, speed=100)
+                before = robot.stats.requests
+                motion = robot.move_to(target, speed=20)
+                added.append(robot.stats.requests - before)
+                assert motion.expected_s > 0.3  # real time: six watch slots or more
+    unwatched, watched = added
+    assert watched <= unwatched + 2

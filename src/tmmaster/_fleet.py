@@ -206,6 +206,9 @@ class FleetMember:
         self._turn = asyncio.Lock()
         #: What the fleet's watch last saw of this robot (``Fleet(watch_hz=...)``).
         self.record = StatusRecord(transport.name, _log.bind(robot=transport.name), events="fleet")
+        #: A status read this recently (s) is fresh: the watch does not read it again
+        #: (0: the fleet does not watch).
+        self.fresh_s = 0.0 if fleet.watch_hz is None else 0.5 / fleet.watch_hz
 
     def follow(self, follow: FollowState) -> Observation | None:
         """From the robot's thread: poll on the loop until the thread must act (None: poll)."""
@@ -287,9 +290,16 @@ class FleetMember:
         return self.transport.state is not ConnectionState.CLOSED and self.fleet.running
 
     async def watch_once(self) -> None:
-        """Read the robot's status once for the fleet's watch (nothing while not connected)."""
+        """Read the robot's status once for the fleet's watch (nothing while not connected).
+
+        Nothing either when a poll of the robot's wait read the whole status within the
+        last half period (the article's polls do): that status is published already.
+        """
         record = self.transport_ready()
         if record is None:
+            return
+        read_at = record.read_at
+        if read_at is not None and time.monotonic() - read_at < self.fresh_s:
             return
         async with self._turn:
             if not self.transport.hold():
@@ -320,6 +330,9 @@ class FleetMember:
         max_gap = self.channel.profile.max_read_gap
         while True:
             values = await self.transport.read_on_loop(fields, max_gap=max_gap)
+            if fields is self.channel.status_fields and self.fresh_s > 0:
+                # The whole status, read anyway: the watch publishes it, and skips its read.
+                self.record.succeed(self.channel.status_from(values))
             try:
                 fields = steps.send(values)
             except StopIteration as finished:
