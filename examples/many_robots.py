@@ -26,6 +26,9 @@ docs/performance.md, "Many robots from one process"):
   without a fleet a :class:`tmmaster.StatusMonitor` does it from one thread over a
   second connection per robot. ``--watch-hz 0`` turns watching off. A status of the
   article map is one read, of the real TM table six;
+* ``gc.freeze()`` once the robots are connected: with hundreds of robots, CPython's full
+  garbage collections walking every long-lived object were what made the worst watch
+  read 15-30 ms late (2-4 ms frozen);
 * past what one process can drive, more processes (``--processes K``): this script
   runs itself K times, each child driving a contiguous share of the robots, and
   gathers their reports. On Ctrl-C in a terminal every child receives it too and gives
@@ -49,6 +52,7 @@ and from several processes (here 2, each driving 4 of 8 simulators)::
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import statistics
 import subprocess
@@ -133,12 +137,19 @@ def run(
             monitor.add(robot.name, host, port, profile=profile)
         monitor.start()  # read-only: it never writes, so it cannot move anything
     try:
+        connected: list[tuple[Robot, RobotReport]] = []
         for robot, report in zip(robots, reports, strict=True):
             try:
                 robot.connect()
             except TMMasterError as exc:
                 report.error = exc
                 continue
+            connected.append((robot, report))
+        # Everything made so far lives as long as the run: keep CPython's full garbage
+        # collections from walking it again and again (with hundreds of robots they
+        # made the worst poll 15-30 ms late instead of 2-4; docs/performance.md).
+        gc.freeze()
+        for robot, report in connected:
             thread = threading.Thread(
                 target=drive, args=(robot, moves, report), name=robot.name, daemon=True
             )
@@ -155,6 +166,7 @@ def run(
             thread.join(10.0)
         raise
     finally:
+        gc.unfreeze()
         if monitor is not None:
             for report in reports:
                 report.watched = monitor.latest(report.name)
