@@ -9,6 +9,7 @@ early, and its life cycle.
 from __future__ import annotations
 
 import _thread
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -22,7 +23,7 @@ from fault_proxy import FaultProxy, Rule
 from tmmaster import Fleet, MovePhase, Pose, Robot, TimeoutPolicy
 from tmmaster._channels import channel_for
 from tmmaster._profiles import robot_profile
-from tmmaster.sim import MemoryTransport, Simulator
+from tmmaster.sim import DEFAULT_PART_POSE, MemoryTransport, Simulator
 
 SimFactory = Callable[..., Simulator]
 
@@ -361,3 +362,34 @@ def test_the_watch_does_not_read_again_what_a_moves_poll_just_read(
             # edges (without this, about one read per slot: six or more).
             assert len(reads) - before <= 2
             assert fleet.latest(robot).polls - published >= 6
+
+
+def test_a_gripper_command_through_the_robot_program_is_followed_by_the_loop(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    """tmflow: grip and release are commands of the sequence handshake, waited for alike."""
+    sim = tm_simulator_factory("tmflow")
+    robot = robots(sim, gripper="auto")
+    robot.move_to(DEFAULT_PART_POSE, speed=100)
+    assert robot.gripper.grip().holding
+    assert sim.field("grasp_status") == 1
+    assert any(o.held for o in sim.objects())
+    robot.gripper.open()
+    assert sim.field("grasp_status") == 0
+
+
+def test_a_fleet_robot_that_cannot_connect_raises_connect_error(fleet: Fleet) -> None:
+    with socket.socket() as unused:  # a loopback port nothing listens on
+        unused.bind(("127.0.0.1", 0))
+        port = unused.getsockname()[1]
+    robot = Robot(
+        "127.0.0.1",
+        port,
+        profile="article",
+        gripper=None,
+        retry=tmmaster.RetryPolicy(attempts=2, initial_backoff_s=0.01),
+        fleet=fleet,
+    )
+    with pytest.raises(tmmaster.ConnectError):
+        robot.connect()
+    assert robot.state is tmmaster.ConnectionState.CLOSED  # closed by the failed connect
