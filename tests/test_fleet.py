@@ -22,6 +22,7 @@ import tmmaster._fleet as fleet_module
 from fault_proxy import FaultProxy, Rule
 from tmmaster import Fleet, MovePhase, Pose, Robot, TimeoutPolicy
 from tmmaster._channels import channel_for
+from tmmaster._following import FollowState
 from tmmaster._profiles import robot_profile
 from tmmaster.sim import DEFAULT_PART_POSE, MemoryTransport, Simulator
 
@@ -393,3 +394,29 @@ def test_a_fleet_robot_that_cannot_connect_raises_connect_error(fleet: Fleet) ->
     with pytest.raises(tmmaster.ConnectError):
         robot.connect()
     assert robot.state is tmmaster.ConnectionState.CLOSED  # closed by the failed connect
+
+
+def test_a_stop_request_just_before_the_loops_first_nap_is_not_slept_through(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The stop event set after the thread handed the wait over, before the loop's nap,
+    with no wake-up call (the race interrupt() has with the loop): the loop sees it."""
+    sim = tm_simulator_factory("article", time_scale=2)
+    robot = robots(sim, poll_interval_s=1.0, polling=tmmaster.PollPolicy(predictive=False))
+    due = FollowState.due
+
+    def due_then_stop(state: FollowState) -> float:
+        when = due(state)
+        if threading.current_thread().name == "tmmaster-fleet":
+            state.stop_event.set()  # as interrupt() does, minus its wake-up call
+        return when
+
+    monkeypatch.setattr(FollowState, "due", due_then_stop)
+    motion = robot.start_move(A, speed=10)
+    started = time.monotonic()
+    with pytest.raises(tmmaster.StopRequestedError):
+        motion.wait()
+    assert time.monotonic() - started < 0.5  # not the 1 s nap
+    assert motion.stop_delivered is True or motion.withdrawn is True

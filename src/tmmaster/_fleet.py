@@ -266,6 +266,10 @@ class FleetMember:
             while True:
                 delay = follow.due() - time.monotonic()
                 if delay > 0:
+                    if stop.is_set():
+                        # Checked with no await before the nap begins: a stop request
+                        # set after this finds the nap to wake (interrupt() wakes it).
+                        return None
                     await self._sleep(delay)
                 async with self._turn:
                     if stop.is_set() or not self.transport.hold():
