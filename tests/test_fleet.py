@@ -420,3 +420,35 @@ def test_a_stop_request_just_before_the_loops_first_nap_is_not_slept_through(
         motion.wait()
     assert time.monotonic() - started < 0.5  # not the 1 s nap
     assert motion.stop_delivered is True or motion.withdrawn is True
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_closing_the_fleet_while_a_thread_waits_ends_the_wait_and_stops_the_arm(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=2)
+    fleet = Fleet(watch_hz=20)
+    robot = Robot("127.0.0.1", sim.port, profile=profile, gripper=None, fleet=fleet)
+    robot.connect()
+    robot.wait_until_ready(timeout_s=5)
+    ended: list[BaseException] = []
+
+    def drive() -> None:
+        try:
+            robot.move_to(A, speed=10)  # seconds long
+        except BaseException as exc:
+            ended.append(exc)
+
+    thread = threading.Thread(target=drive)
+    thread.start()
+    sim.wait_for(lambda: bool(sim.motion_log()), timeout=5)
+    fleet.close()
+    thread.join(5)
+    assert not thread.is_alive()
+    assert len(ended) == 1
+    assert isinstance(ended[0], tmmaster.TMMasterError)  # StopRequested, or the link closed
+    motion = robot.last_motion
+    assert motion is not None
+    assert motion.stop_delivered is True
+    time.sleep(0.2)
+    assert not sim.tcp_pose().is_close(A)  # stopped short of the target
