@@ -100,16 +100,16 @@ class LoopTransport(BlockTransport):
         return self._link.connected
 
     def _open_link(self) -> None:
-        self._fleet.call(self._link.connect(), self.timeout + _LOOP_GRACE_S, self.name)
+        self._fleet._call(self._link.connect(), self.timeout + _LOOP_GRACE_S, self.name)
 
     def _close_link(self) -> None:
-        if self._fleet.on_loop():
+        if self._fleet._on_loop():
             self._link.close()
             return
         # Closed before this returns, as a socket of our own would be: a reconnect right
         # after must not find the old link still open.
         closed: _Latch[None] = _Latch()
-        if self._fleet.call_soon(self._close_on_loop, closed):
+        if self._fleet._call_soon(self._close_on_loop, closed):
             with contextlib.suppress(_NoAnswerError):
                 closed.wait(_LOOP_GRACE_S)
 
@@ -123,7 +123,7 @@ class LoopTransport(BlockTransport):
         # A callback on the loop and a lock to wait on: no task or coroutine per request
         # (about a third of a request's cost through run_coroutine_threadsafe).
         latch: _Latch[list[int]] = _Latch()
-        started = self._fleet.call_soon(
+        started = self._fleet._call_soon(
             self._link.start,
             what,
             function_code,
@@ -219,7 +219,7 @@ class FleetMember:
         # The loop hands back by the deadlines; beyond them, the last poll's requests.
         bound = max(follow.ack_deadline - now, 0.0) + follow.budget
         bound += 4 * self.transport.timeout + _LOOP_GRACE_S
-        future = self.fleet.submit(self._follow(follow, ended))
+        future = self.fleet._submit(self._follow(follow, ended))
         if future is None:
             return None  # the loop has ended: the thread polls (and its requests fail)
         try:
@@ -235,7 +235,7 @@ class FleetMember:
                 # Given up (Ctrl-C, the bound): the loop's poll must be over before the
                 # thread acts on the command (withdraw, stop), so nothing interleaves.
                 future.cancel()
-                if self.fleet.running:
+                if self.fleet._running:
                     ended.wait(self.transport.timeout + _LOOP_GRACE_S)
 
     def wake(self) -> None:
@@ -291,7 +291,7 @@ class FleetMember:
 
     def watching(self) -> bool:
         """True until the robot is closed or the fleet stops."""
-        return self.transport.state is not ConnectionState.CLOSED and self.fleet.running
+        return self.transport.state is not ConnectionState.CLOSED and self.fleet._running
 
     async def watch_once(self) -> None:
         """Read the robot's status once for the fleet's watch (nothing while not connected).
@@ -462,7 +462,7 @@ class Fleet:
 
     # -- for Robot ----------------------------------------------------------------------
 
-    def link_for(
+    def _link_for(
         self,
         robot: _Closable,
         host: str,
@@ -487,7 +487,7 @@ class Fleet:
             self._links.append(weakref.ref(transport))
         return transport
 
-    def driver(
+    def _driver(
         self, robot: _Closable, channel: CommandChannel, transport: LoopTransport
     ) -> FleetMember:
         """The loop's side of one robot's waits (and of its watch)."""
@@ -496,7 +496,7 @@ class Fleet:
             self._members[robot] = member
             index = len(self._members) - 1
         if self.watch_hz is not None:
-            self.call_soon(self._start_watch, member, index)
+            self._call_soon(self._start_watch, member, index)
         return member
 
     def latest(self, robot: _Closable) -> MonitoredStatus:
@@ -531,12 +531,6 @@ class Fleet:
 
     # -- lifecycle ----------------------------------------------------------------------
 
-    @property
-    def robots(self) -> list[_Closable]:
-        """The robots made with this fleet that still exist."""
-        with self._lock:
-            return list(self._robots)
-
     def start(self) -> Self:
         """Start the loop thread (done by the first robot; a no-op when running)."""
         with self._lock:
@@ -565,19 +559,19 @@ class Fleet:
     # -- calling the loop ------------------------------------------------------------------
 
     @property
-    def running(self) -> bool:
+    def _running(self) -> bool:
         """True while the loop runs and takes work."""
         loop, wake = self._runner.loop, self._runner.wake
         return loop is not None and not loop.is_closed() and wake is not None and not wake.is_set()
 
-    def on_loop(self) -> bool:
+    def _on_loop(self) -> bool:
         """True in the loop's own thread."""
         return threading.current_thread() is self._runner.thread
 
-    def submit(self, coroutine: Coroutine[Any, Any, T]) -> concurrent.futures.Future[T] | None:
+    def _submit(self, coroutine: Coroutine[Any, Any, T]) -> concurrent.futures.Future[T] | None:
         """Run ``coroutine`` on the loop; None (the coroutine closed) when the loop has ended."""
         loop = self._runner.loop
-        if loop is None or not self.running:
+        if loop is None or not self._running:
             coroutine.close()
             return None
         try:
@@ -586,12 +580,12 @@ class Fleet:
             coroutine.close()
             return None
 
-    def call(self, coroutine: Coroutine[Any, Any, T], bound: float, name: str) -> T:
+    def _call(self, coroutine: Coroutine[Any, Any, T], bound: float, name: str) -> T:
         """Run ``coroutine`` on the loop and wait for its result, at most ``bound`` seconds."""
-        if self.on_loop():
+        if self._on_loop():
             coroutine.close()
             raise RuntimeError("a Fleet's loop must never wait for itself")
-        future = self.submit(coroutine)
+        future = self._submit(coroutine)
         if future is None:
             raise ConnectionLostError(f"{name}: the fleet is closed")
         try:
@@ -607,10 +601,10 @@ class Fleet:
             future.cancel()  # interrupted (Ctrl-C): the request is dropped with its link
             raise
 
-    def call_soon(self, callback: Callable[..., object], *args: Any) -> bool:
+    def _call_soon(self, callback: Callable[..., object], *args: Any) -> bool:
         """Run ``callback(*args)`` on the loop soon; False when the loop has ended."""
         loop = self._runner.loop
-        if loop is None or not self.running:
+        if loop is None or not self._running:
             return False
         try:
             loop.call_soon_threadsafe(callback, *args)
@@ -637,3 +631,32 @@ class Fleet:
             # requests still awaited (none, normally) end with ConnectionLostError.
             for _ in range(3):
                 await asyncio.sleep(0)
+
+
+def join_fleet(
+    fleet: Fleet,
+    robot: _Closable,
+    host: str,
+    port: int,
+    *,
+    device_id: int,
+    timeout: float,
+    retry: RetryPolicy | None,
+    name: str,
+) -> LoopTransport:
+    """For :class:`~tmmaster.Robot`: a new robot's link on ``fleet``'s loop."""
+    return fleet._link_for(
+        robot, host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
+    )
+
+
+def fleet_driver(
+    fleet: Fleet, robot: _Closable, channel: CommandChannel, transport: LoopTransport
+) -> FleetMember:
+    """For :class:`~tmmaster.Robot`: the loop's side of the robot's waits (and watch)."""
+    return fleet._driver(robot, channel, transport)
+
+
+def wake_waits(member: FleetMember) -> None:
+    """For :meth:`Robot.interrupt`: a wait the loop polls for ``member`` ends now."""
+    member.fleet._call_soon(member.wake)

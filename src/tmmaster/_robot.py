@@ -56,7 +56,7 @@ from ._exceptions import (
     StopRequestedError,
     TMMasterError,
 )
-from ._fleet import Fleet, FleetMember, LoopTransport
+from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet, wake_waits
 from ._following import FollowState, Overdue, SharedDriver
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._logging import get_logger
@@ -557,7 +557,6 @@ class Robot:
         self._joints_hint: tuple[float, ...] | None = None
         self._last_target: Pose | None = None
         self.max_speed_percent = max_speed_percent
-        self._fleet = fleet
         link: dict[str, Any] = {
             "device_id": self.profile.device_id,
             "timeout": request_timeout_s,
@@ -568,7 +567,7 @@ class Robot:
         if fleet is not None:
             if transport is not None:
                 raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
-            loop_link = fleet.link_for(self, host, port, **link)
+            loop_link = join_fleet(fleet, self, host, port, **link)
         # ``host`` "sim://name" reaches an in-process simulator without a socket.
         self._transport: Transport = loop_link or transport or open_transport(host, port, **link)
         self._channel: CommandChannel = channel_for(self.profile, self._transport)
@@ -593,7 +592,7 @@ class Robot:
         self._shared: FleetMember | None = None
         if fleet is not None and loop_link is not None:
             # The polls of this robot's waits run on the fleet's loop.
-            self._shared = fleet.driver(self, self._channel, loop_link)
+            self._shared = fleet_driver(fleet, self, self._channel, loop_link)
             self._follower.shared_driver = self._shared.follow
         self.gripper: Gripper = self._make_gripper(
             gripper,
@@ -979,8 +978,8 @@ class Robot:
     def interrupt(self) -> None:
         """Make running waits give up at their next poll (for Ctrl-C handlers, other threads)."""
         self._stop_event.set()
-        if self._fleet is not None and self._shared is not None:
-            self._fleet.call_soon(self._shared.wake)  # a wait polled by the fleet ends now
+        if self._shared is not None:
+            wake_waits(self._shared)  # a wait polled by the fleet ends now
 
     # -- internals --------------------------------------------------------
 
