@@ -22,6 +22,7 @@ from collections.abc import Generator
 from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
+from typing import TypeVar
 
 from ._codec import Value
 from ._exceptions import (
@@ -155,6 +156,8 @@ class Observation:
 #: A poll without I/O (:meth:`CommandChannel.poll_steps`): yields the fields to read
 #: next, is sent their values, returns what the poll saw.
 PollSteps = Generator[tuple[RegisterField, ...], dict[str, Value], Observation]
+
+R = TypeVar("R")
 
 
 def _pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
@@ -317,14 +320,17 @@ class CommandChannel(ABC):
 
     def poll(self, ticket: Ticket) -> Observation:
         """Read the robot's state once and say what happened to the ticket."""
-        steps = self.poll_steps(ticket)
-        fields = next(steps)
-        while True:
-            try:
+        return self._drive(self.poll_steps(ticket))
+
+    def _drive(self, steps: Generator[tuple[RegisterField, ...], dict[str, Value], R]) -> R:
+        """Run steps without I/O here: read each field set they yield through the transport."""
+        try:
+            fields = next(steps)  # steps that need no read end here
+            while True:
                 fields = steps.send(self.read(fields))
-            except StopIteration as finished:
-                observation: Observation = finished.value
-                return observation
+        except StopIteration as finished:
+            result: R = finished.value
+            return result
 
     @abstractmethod
     def poll_steps(self, ticket: Ticket) -> PollSteps:
@@ -566,12 +572,18 @@ class SequenceChannel(CommandChannel):
             return RobotFaultError("the TMflow project is not running")
         return None
 
-    def _read_flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
-        """:meth:`_flags_failure`, reading the error code when the flags show a fault."""
+    def _flags_failure_steps(
+        self, flags: dict[str, Value]
+    ) -> Generator[tuple[RegisterField, ...], dict[str, Value], RobotError | None]:
+        """:meth:`_flags_failure`, reading the error code (by yielding it) when faulted."""
         code = 0
         if self._faulted(flags):
-            code = int(self.read(self.error_code_fields)["last_error_code"])
+            code = int((yield self.error_code_fields)["last_error_code"])
         return self._flags_failure(flags, code)
+
+    def _read_flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
+        """:meth:`_flags_failure_steps`, its read made through the transport."""
+        return self._drive(self._flags_failure_steps(flags))
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
@@ -626,10 +638,7 @@ class SequenceChannel(CommandChannel):
         feedback = yield self.feedback_fields
         flags = yield self.flag_fields
         ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
-        code = 0
-        if self._faulted(flags):
-            code = int((yield self.error_code_fields)["last_error_code"])
-        failure = self._flags_failure(flags, code)
+        failure = yield from self._flags_failure_steps(flags)
         if not ticket.acknowledged:
             if int(feedback["ack_seq"]) == ticket.seq:
                 ticket.acknowledged = True
