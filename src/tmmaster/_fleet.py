@@ -299,16 +299,15 @@ class FleetMember:
         Nothing either when a poll of the robot's wait read the whole status within the
         last half period (the article's polls do): that status is published already.
         """
-        record = self.transport_ready()
-        if record is None:
+        if not self.linked():
             return
+        record = self.record
         read_at = record.read_at
         if read_at is not None and time.monotonic() - read_at < self.fresh_s:
             return
         async with self._turn:
             if not self.transport.hold():
-                record.skipped += 1  # the robot's thread is using the link: next slot
-                record.publish()
+                record.skip(1)  # the robot's thread is using the link: next slot
                 return
             try:
                 values = await self.transport.read_on_loop(
@@ -321,11 +320,9 @@ class FleetMember:
                 self.transport.release()
         record.succeed(self.channel.status_from(values))
 
-    def transport_ready(self) -> StatusRecord | None:
-        """The watch's record when the link is up (the robot's thread opens it), else None."""
-        if self.transport.state is ConnectionState.CONNECTED and self.transport.link_up:
-            return self.record
-        return None
+    def linked(self) -> bool:
+        """True while the robot's link is up (the robot's thread opens it, never the watch)."""
+        return self.transport.state is ConnectionState.CONNECTED and self.transport.link_up
 
     async def _poll(self, follow: FollowState) -> Observation:
         """The channel's one poll, its reads made on the loop."""
@@ -371,10 +368,19 @@ class _Latch(Generic[T]):
         self._error = error
         self._lock.release()
 
+    def take(self, future: concurrent.futures.Future[T]) -> None:
+        """A finished future's result, or its exception (cancelled: ``CancelledError``)."""
+        try:
+            value = future.result()
+        except BaseException as exc:
+            self.fail(exc)
+        else:
+            self.settle(value)
+
     def wait(self, bound: float) -> T:
         """The answer, or its failure raised; :class:`_NoAnswerError` after ``bound`` seconds.
 
-        In the main thread in slices, so Ctrl-C is never held up (as :func:`_result`).
+        In the main thread in slices, so Ctrl-C is never held up.
         """
         main = threading.current_thread() is threading.main_thread()
         deadline = time.monotonic() + bound
@@ -395,24 +401,14 @@ class _NoAnswerError(Exception):
 
 
 def _result(future: concurrent.futures.Future[T], bound: float) -> T:
-    """``future.result(bound)``; in the main thread in slices, so Ctrl-C is never held up.
+    """``future.result()`` within ``bound`` seconds, waited for as a :class:`_Latch` is.
 
-    Raises :class:`_NoAnswerError` when the bound passes: a ``TimeoutError`` the coroutine
+    Raises :class:`_NoAnswerError` when the bound passes; a ``TimeoutError`` the coroutine
     raised itself (a :class:`ResponseTimeoutError`) is its answer, raised as it is.
     """
-    main = threading.current_thread() is threading.main_thread()
-    deadline = time.monotonic() + bound
-    while True:
-        left = deadline - time.monotonic()
-        wait = max(min(left, _MAIN_THREAD_SLICE_S) if main else left, 0.0)
-        try:
-            return future.result(wait)
-        except concurrent.futures.TimeoutError:
-            if future.done():
-                # Its own TimeoutError (ResponseTimeoutError), or it finished just now.
-                return future.result()
-            if left <= wait:
-                raise _NoAnswerError from None
+    latch: _Latch[T] = _Latch()
+    future.add_done_callback(latch.take)
+    return latch.wait(bound)
 
 
 def _settle(future: asyncio.Future[None]) -> None:
@@ -455,49 +451,8 @@ class Fleet:
         #: Set to a list before the robots connect to record (lateness s, response s) of
         #: every answered watch read (benchmarks); None records nothing.
         self._timings: list[tuple[float, float]] | None = None
-        self._robots: weakref.WeakSet[_Closable] = weakref.WeakSet()
-        self._links: list[weakref.ref[LoopTransport]] = []
         self._lock = threading.Lock()
         self._closed = False
-
-    # -- for Robot ----------------------------------------------------------------------
-
-    def _link_for(
-        self,
-        robot: _Closable,
-        host: str,
-        port: int,
-        *,
-        device_id: int,
-        timeout: float,
-        retry: RetryPolicy | None,
-        name: str,
-    ) -> LoopTransport:
-        """A new robot's link on this fleet's loop (starts the loop on first use)."""
-        if "://" in host:
-            raise ConfigError(
-                f"host {host!r}: a Fleet's robots speak Modbus TCP (no in-process endpoints)"
-            )
-        self.start()
-        transport = LoopTransport(
-            self, host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
-        )
-        with self._lock:
-            self._robots.add(robot)
-            self._links.append(weakref.ref(transport))
-        return transport
-
-    def _driver(
-        self, robot: _Closable, channel: CommandChannel, transport: LoopTransport
-    ) -> FleetMember:
-        """The loop's side of one robot's waits (and of its watch)."""
-        member = FleetMember(self, channel, transport)
-        with self._lock:
-            self._members[robot] = member
-            index = len(self._members) - 1
-        if self.watch_hz is not None:
-            self._call_soon(self._start_watch, member, index)
-        return member
 
     def latest(self, robot: _Closable) -> MonitoredStatus:
         """What the fleet's watch last saw of ``robot`` (ConfigError when not watched here)."""
@@ -545,7 +500,7 @@ class Fleet:
             if self._closed:
                 return
             self._closed = True
-            robots = list(self._robots)
+            robots = list(self._members)
         for robot in robots:
             robot.close()  # withdraws or stops what it has outstanding, through the loop
         self._runner.stop()
@@ -623,10 +578,9 @@ class Fleet:
             for task in list(self._watches):
                 task.cancel()
             with self._lock:
-                links = [ref() for ref in self._links]
-            for transport in links:
-                if transport is not None:
-                    transport.drop_on_loop()
+                members = list(self._members.values())
+            for member in members:
+                member.transport.drop_on_loop()
             # Closing transports release their sockets on a later loop turn; the
             # requests still awaited (none, normally) end with ConnectionLostError.
             for _ in range(3):
@@ -635,7 +589,6 @@ class Fleet:
 
 def join_fleet(
     fleet: Fleet,
-    robot: _Closable,
     host: str,
     port: int,
     *,
@@ -644,17 +597,31 @@ def join_fleet(
     retry: RetryPolicy | None,
     name: str,
 ) -> LoopTransport:
-    """For :class:`~tmmaster.Robot`: a new robot's link on ``fleet``'s loop."""
-    return fleet._link_for(
-        robot, host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
+    """For :class:`~tmmaster.Robot`: a new robot's link on ``fleet``'s loop (started here)."""
+    if "://" in host:
+        raise ConfigError(
+            f"host {host!r}: a Fleet's robots speak Modbus TCP (no in-process endpoints)"
+        )
+    fleet.start()
+    return LoopTransport(
+        fleet, host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
     )
 
 
 def fleet_driver(
     fleet: Fleet, robot: _Closable, channel: CommandChannel, transport: LoopTransport
 ) -> FleetMember:
-    """For :class:`~tmmaster.Robot`: the loop's side of the robot's waits (and watch)."""
-    return fleet._driver(robot, channel, transport)
+    """For :class:`~tmmaster.Robot`: the loop's side of its waits and watch, registered.
+
+    The fleet closes ``robot`` when it closes (:meth:`Fleet.close`).
+    """
+    member = FleetMember(fleet, channel, transport)
+    with fleet._lock:
+        fleet._members[robot] = member
+        index = len(fleet._members) - 1
+    if fleet.watch_hz is not None:
+        fleet._call_soon(fleet._start_watch, member, index)
+    return member
 
 
 def wake_waits(member: FleetMember) -> None:

@@ -214,6 +214,11 @@ class StatusRecord:
             self.status, self.read_at, self.error, self.polls, self.skipped, self.failures
         )
 
+    def skip(self, slots: int) -> None:
+        """Record ``slots`` slots that passed without a poll."""
+        self.skipped += slots
+        self.publish()
+
     def fail(self, error: TMMasterError) -> None:
         """Record a failed poll (logged once as a warning, then at debug level)."""
         if self.error is None:
@@ -260,8 +265,7 @@ async def poll_on_schedule(
             timings.append((sent - due, now - sent))
         passed = math.floor((now - due) / period)
         if passed > 0:
-            record.skipped += passed
-            record.publish()
+            record.skip(passed)
         due += (max(passed, 0) + 1) * period
 
 

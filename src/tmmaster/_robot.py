@@ -567,7 +567,7 @@ class Robot:
         if fleet is not None:
             if transport is not None:
                 raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
-            loop_link = join_fleet(fleet, self, host, port, **link)
+            loop_link = join_fleet(fleet, host, port, **link)
         # ``host`` "sim://name" reaches an in-process simulator without a socket.
         self._transport: Transport = loop_link or transport or open_transport(host, port, **link)
         self._channel: CommandChannel = channel_for(self.profile, self._transport)
