@@ -286,7 +286,9 @@ def test_a_robot_unreachable_at_start_is_picked_up_later(
     tm_simulator_factory: SimFactory, make_monitor: MonitorFactory
 ) -> None:
     port = free_port()
-    monitor = make_monitor(rate_hz=RATE_HZ, timeout_s=0.2)
+    # Refused connects back off (doubling from one period): a short cap keeps the next
+    # try within a quarter second of the robot coming up.
+    monitor = make_monitor(rate_hz=RATE_HZ, timeout_s=0.2, backoff_max_s=0.25)
     monitor.add("late", "127.0.0.1", port, profile="article")
     with monitor:
         assert isinstance(monitor.latest("late").error, ConnectError)

@@ -11,6 +11,14 @@ It never writes a register: it is for watching fleets (dashboards, supervision) 
 what one thread per :class:`~tmmaster.Robot` can poll. Commanding stays with ``Robot``
 (one per thread), whose safety rules are not copied here.
 
+A robot this process also commands is watched over the Robot's own link
+(:meth:`StatusMonitor.add_robot`): a worker thread takes the transport's lock only when
+it is free (never waiting for it), reads with no retry and no reconnect, and gives the
+lock back; a slot that finds the link busy is skipped. A Modbus slave that accepts one
+client then sees one client. A robot watched over a link of the monitor's own
+(:meth:`StatusMonitor.add`) is reconnected after a doubling back-off, never on every
+slot, so a monitor that lost the only slot to a Robot does not keep taking it back.
+
 Decoding is the library's own: the channel of the robot's profile names the status
 fields (:attr:`CommandChannel.status_fields`), :class:`ReadPlan` groups and decodes them
 exactly as ``Robot.status()`` does, and :meth:`CommandChannel.status_from` builds the
@@ -27,16 +35,17 @@ import math
 import threading
 import time
 from collections.abc import Awaitable, Callable, Coroutine
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, Self
+from typing import TYPE_CHECKING, Any, Literal, Self
 
 from ._channels import CommandChannel, channel_for
-from ._checks import require_positive
 from ._codec import Value
 from ._exceptions import (
     ConfigError,
     ConnectError,
+    ConnectionLostError,
     ModbusExceptionError,
     TMMasterError,
     TransportError,
@@ -45,12 +54,19 @@ from ._logging import get_logger
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._status import RobotStatus
-from ._transport import AsyncLink, BlockTransport, ReadPlan, describe_read
+from ._transport import AsyncLink, BlockTransport, ConnectionState, ReadPlan, describe_read
+
+if TYPE_CHECKING:
+    from ._robot import Robot
 
 _log = get_logger("tmmaster.monitor")
 
 #: How long close() waits for the loop thread (it stops within a loop turn normally).
 _JOIN_TIMEOUT_S = 10.0
+
+#: Worker threads that read robots' own links (one read outstanding per robot at most):
+#: beyond this many robots, a slot's read may wait for a worker (and be late or skipped).
+_MAX_READ_WORKERS = 32
 
 
 @dataclass(frozen=True)
@@ -270,12 +286,34 @@ async def poll_on_schedule(
 
 
 class _Watched(StatusRecord):
-    """One robot of a monitor: its link, plan and counters (touched by the loop thread only)."""
+    """One robot of a monitor: its link, plan and counters (touched by the loop thread only).
+
+    After a refused connect or a lost link, the next connect waits: one period after the
+    first loss in a row, doubling with each further one up to ``backoff_max_s``. The row
+    starts again only once a link stayed up ``backoff_max_s``: a link the slave keeps
+    closing (another client took the only slot) is not retried on every slot.
+    """
 
     def __init__(
-        self, name: str, host: str, port: int, profile: RobotProfile, timeout_s: float
+        self,
+        name: str,
+        host: str,
+        port: int,
+        profile: RobotProfile,
+        timeout_s: float,
+        *,
+        period: float,
+        backoff_max_s: float,
     ) -> None:
         super().__init__(name, _log.bind(robot=name, host=host, port=port))
+        self._period = period
+        self._backoff_max_s = backoff_max_s
+        #: Refused connects and lost links in a row (the back-off's exponent).
+        self._losses = 0
+        #: ``time.monotonic()`` before which no connect is tried.
+        self._retry_at = 0.0
+        #: When the current link opened (None while there is none).
+        self._opened_at: float | None = None
         self.channel: CommandChannel = channel_for(
             profile,
             _UnusedLink(
@@ -297,21 +335,44 @@ class _Watched(StatusRecord):
         self.link = AsyncLink(host, port, device_id=profile.device_id, timeout=timeout_s, name=name)
 
     async def connect(self) -> None:
-        """Open a fresh link; on failure record the :class:`ConnectError`."""
+        """Open a fresh link; on failure record the :class:`ConnectError` and back off."""
         try:
             await self.link.connect()
         except ConnectError as exc:
+            self._back_off()
             self.fail(exc)
         else:
+            self._opened_at = time.monotonic()
             self._log.debug("monitor.connected")
+
+    def _back_off(self) -> None:
+        """After a refused connect or a lost link: when the next connect may be tried."""
+        now = time.monotonic()
+        if self._opened_at is not None and now - self._opened_at >= self._backoff_max_s:
+            self._losses = 0  # the link had been up a while: a new row of losses begins
+        self._opened_at = None
+        self._losses += 1
+        # The exponent is bounded: 2**64 periods exceed any cap anyway.
+        delay = min(self._period * 2.0 ** min(self._losses - 1, 64), self._backoff_max_s)
+        self._retry_at = now + delay
+        self._log.debug("monitor.backing_off", delay_s=round(delay, 3), losses=self._losses)
 
     def drop(self) -> None:
         """Close the link: after a failure the stream may still carry a late answer."""
         self.link.close()
 
     async def poll(self) -> None:
-        """Read the status blocks once, decode them and publish the status or the failure."""
+        """Read the status blocks once, decode them and publish the status or the failure.
+
+        Without a link, a slot before the back-off's end is skipped and counted; the
+        first slot after it connects.
+        """
         if not self.link.connected:
+            if self._opened_at is not None:
+                self._back_off()  # the peer closed the link between two polls
+            if time.monotonic() < self._retry_at:
+                self.skip(1)
+                return
             await self.connect()
             if not self.link.connected:
                 return
@@ -328,41 +389,146 @@ class _Watched(StatusRecord):
             return
         except TransportError as exc:
             self.drop()
+            self._back_off()
             self.fail(exc)
             return
         self.succeed(status)
 
 
+class _SharedWatched(StatusRecord):
+    """A robot watched over the :class:`~tmmaster.Robot`'s own link (one connection in all).
+
+    The robot's transport is blocking and guarded by its lock: each poll runs in a worker
+    thread that takes the lock only when it is free, reads the status with no retry and
+    no reconnect, and gives the lock back. A slot that finds the robot's thread (or
+    another) using the link is skipped and counted; a link that is down is a failure,
+    never reopened from here: only the robot's own requests reconnect it.
+    """
+
+    def __init__(self, name: str, transport: BlockTransport, channel: CommandChannel) -> None:
+        super().__init__(
+            name, _log.bind(robot=name, host=transport.host, port=transport.port, shared=True)
+        )
+        self.transport = transport
+        self.channel = channel
+        self.executor: ThreadPoolExecutor | None = None
+
+    async def connect(self) -> None:
+        """Nothing: the robot opens its link (``Robot.connect``), never the monitor."""
+
+    def drop(self) -> None:
+        """Nothing: the link is the robot's, closed by ``Robot.close``."""
+
+    async def poll(self) -> None:
+        """Read the status in a worker thread; publish it, the failure, or a skipped slot."""
+        loop = asyncio.get_running_loop()
+        try:
+            values = await loop.run_in_executor(self.executor, self._read_if_free)
+        except TMMasterError as exc:
+            self.fail(exc)
+            return
+        if values is None:
+            self.skip(1)  # the robot is using its link: the next slot tries again
+            return
+        self.succeed(self.channel.status_from(values))
+
+    def _read_if_free(self) -> dict[str, Value] | None:
+        """In a worker thread: the status fields' values; None when the link is busy."""
+        transport = self.transport
+        lock = transport._lock
+        # Never wait for the robot: its thread may hold the lock for a whole retried
+        # request, and a stop it sends must not queue behind a monitor's read.
+        if not lock.acquire(blocking=False):
+            return None
+        try:
+            # Checked under the lock: nobody can reconnect or close the link meanwhile.
+            if transport.state is not ConnectionState.CONNECTED or not transport._link_open():
+                raise ConnectionLostError(
+                    f"{self.name}: the robot's link is not connected"
+                    " (a StatusMonitor never opens or reopens a Robot's link)"
+                )
+            # No retry (its sleeps would hold the lock) and so no reconnect: a failure
+            # drops the link as any failed request does, and the robot's next request
+            # reconnects it.
+            return transport.read_fields(
+                self.channel.status_fields,
+                max_gap=self.channel.profile.max_read_gap,
+                retry=False,
+                interruptible=False,
+            )
+        finally:
+            lock.release()
+
+
 class StatusMonitor:
     """Watch the status of many robots from one thread: read-only, for dashboards and supervision.
 
-    One background thread runs one asyncio event loop with one Modbus TCP link per robot;
-    every robot is polled at ``rate_hz`` on its own drift-free schedule (phases spread
-    over the period; a slot that comes while the last read is still outstanding is
-    skipped and counted). Each poll reads and decodes the profile's status registers
-    exactly as :meth:`Robot.status` does and yields the same :class:`RobotStatus`.
+    One background thread runs one asyncio event loop; every robot is polled at
+    ``rate_hz`` on its own drift-free schedule (phases spread over the period; a slot
+    that comes while the last read is still outstanding is skipped and counted). Each
+    poll reads and decodes the profile's status registers exactly as
+    :meth:`Robot.status` does and yields the same :class:`RobotStatus`.
+
+    Two ways to watch a robot:
+
+    * :meth:`add_robot`: over a :class:`Robot`'s own link, for a robot this process also
+      commands (the default for those: a Modbus slave may accept only one client). The
+      monitor opens no connection; it reads between the robot's requests, only when the
+      link is free, and skips the slot otherwise.
+    * :meth:`add`: over a Modbus TCP link of the monitor's own, for robots nobody in this
+      process commands. After a refused connect or a lost link it reconnects after a
+      back-off (one period, doubling per loss in a row, at most ``backoff_max_s``).
 
     It NEVER writes a register. Commanding stays with :class:`Robot`, one per thread,
-    whose safety rules (command checks, withdraws, bounded waits) are not copied here: use
-    a monitor to watch more robots than one thread each can poll, not to drive them.
+    whose safety rules (command checks, withdraws, bounded waits) are not copied here.
     Failures are never raised: each robot's last error (a :class:`TransportError`
-    subclass) is kept in :meth:`latest`, and the link is retried on the next slot.
+    subclass) is kept in :meth:`latest`.
 
-    ``event_loop``: ``"auto"`` (the default) runs on uvloop when it is installed
-    (``pip install 'tmmaster[monitor]'``), else on asyncio's own loop; ``"asyncio"`` or
-    ``"uvloop"`` choose. uvloop's loop takes about a quarter to a third off the
-    monitor's CPU at a few hundred robots (docs/performance.md).
+    ``rate_hz``: polls per second of each robot, at most :attr:`MAX_RATE_HZ`.
+    ``timeout_s``: the answer timeout of the monitor's own links (a shared robot's reads
+    use the robot's request timeout), within :attr:`MIN_TIMEOUT_S`..:attr:`MAX_TIMEOUT_S`.
+    ``backoff_max_s``: the longest wait before reconnecting an own link, at most
+    :attr:`MAX_BACKOFF_S`. ``event_loop``: ``"auto"`` (the default) runs on uvloop when
+    it is installed (``pip install 'tmmaster[monitor]'``), else on asyncio's own loop;
+    ``"asyncio"`` or ``"uvloop"`` choose. uvloop's loop takes about a quarter to a third
+    off the monitor's CPU at a few hundred robots (docs/performance.md).
+
+    Raises :class:`ConfigError` naming the argument when one is out of its range.
     """
 
+    #: The fastest poll rate (Hz) per robot: a TM status is up to six Modbus requests, so
+    #: 100 Hz is already 600 requests a second to one slave, which also serves the
+    #: robot's own program and its commanding master (docs/robot-api.md).
+    MAX_RATE_HZ = 100.0
+    #: The slowest poll rate (Hz): one poll every 100 s.
+    MIN_RATE_HZ = 0.01
+    #: The answer timeouts (s) a Modbus TCP link can sensibly use: below 10 ms even a
+    #: loaded loopback misses answers; beyond a minute a dead robot goes unnoticed.
+    MIN_TIMEOUT_S = 0.01
+    MAX_TIMEOUT_S = 60.0
+    #: The longest reconnect back-off (s) that may be asked for.
+    MAX_BACKOFF_S = 3600.0
+
     def __init__(
-        self, *, rate_hz: float = 20.0, timeout_s: float = 1.0, event_loop: EventLoopName = "auto"
+        self,
+        *,
+        rate_hz: float = 20.0,
+        timeout_s: float = 1.0,
+        backoff_max_s: float = 5.0,
+        event_loop: EventLoopName = "auto",
     ) -> None:
-        self.rate_hz = require_positive("rate_hz", rate_hz)
-        self.timeout_s = require_positive("timeout_s", timeout_s)
+        self.rate_hz = _require_within("rate_hz", rate_hz, self.MIN_RATE_HZ, self.MAX_RATE_HZ)
+        self.timeout_s = _require_within(
+            "timeout_s", timeout_s, self.MIN_TIMEOUT_S, self.MAX_TIMEOUT_S
+        )
+        self.backoff_max_s = _require_within(
+            "backoff_max_s", backoff_max_s, 0.0, self.MAX_BACKOFF_S, low_inclusive=False
+        )
         self._runner = LoopThread(event_loop, name="tmmaster-monitor", owner="StatusMonitor")
         #: The event loop the monitor runs on: "uvloop" or "asyncio".
         self.event_loop = self._runner.event_loop
-        self._robots: dict[str, _Watched] = {}
+        self._robots: dict[str, _Watched | _SharedWatched] = {}
+        self._executor: ThreadPoolExecutor | None = None
         self._stopping = False
         self._closed = False
         #: Set to a list before start() to record (lateness s, response s) of every
@@ -370,6 +536,15 @@ class StatusMonitor:
         self._timings: list[tuple[float, float]] | None = None
 
     # -- configuration ----------------------------------------------------------------
+
+    def _check_name(self, name: object) -> None:
+        """ConfigError unless robots may still be added under ``name``."""
+        if self._runner.thread is not None or self._closed:
+            raise ConfigError("add robots before StatusMonitor.start()")
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"name must be a non-empty string, got {name!r}")
+        if name in self._robots:
+            raise ConfigError(f"name {name!r} is already watched by this StatusMonitor")
 
     def add(
         self,
@@ -379,13 +554,20 @@ class StatusMonitor:
         *,
         profile: str | Path | RobotProfile = DEFAULT_PROFILE,
     ) -> None:
-        """Add a robot to watch, before :meth:`start` (ConfigError naming a bad argument)."""
-        if self._runner.thread is not None or self._closed:
-            raise ConfigError("add robots before StatusMonitor.start()")
-        if not isinstance(name, str) or not name:
-            raise ConfigError(f"name must be a non-empty string, got {name!r}")
-        if name in self._robots:
-            raise ConfigError(f"name {name!r} is already watched by this StatusMonitor")
+        """Add a robot to watch over a Modbus TCP link of the monitor's own, before :meth:`start`.
+
+        For a robot this process also commands, use :meth:`add_robot`: a slave that
+        accepts one client cannot serve both links.
+
+        :param name: the robot's name in :meth:`latest` and :meth:`snapshot`.
+        :param host: the robot's address (Modbus TCP; no ``sim://`` endpoints).
+        :param port: its Modbus TCP port.
+        :param profile: the register profile it speaks (a built-in name, a TOML path or
+            a :class:`RobotProfile`).
+        :raises ConfigError: after :meth:`start`, or naming a bad argument.
+        :raises RegisterMapError: when the profile cannot be loaded.
+        """
+        self._check_name(name)
         if not isinstance(host, str) or not host:
             raise ConfigError(f"host must be a non-empty string, got {host!r}")
         if "://" in host:
@@ -394,7 +576,62 @@ class StatusMonitor:
             )
         if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
             raise ConfigError(f"port must be 1..65535, got {port!r}")
-        self._robots[name] = _Watched(name, host, port, robot_profile(profile), self.timeout_s)
+        self._robots[name] = _Watched(
+            name,
+            host,
+            port,
+            robot_profile(profile),
+            self.timeout_s,
+            period=1.0 / self.rate_hz,
+            backoff_max_s=self.backoff_max_s,
+        )
+
+    def add_robot(self, robot: Robot, name: str | None = None) -> str:
+        """Watch ``robot`` over its own link (no second connection), before :meth:`start`.
+
+        Each poll runs in a worker thread: it takes the robot link's lock only when it is
+        free (never waiting for the robot's requests), reads the status once with no
+        retry and no reconnect (the robot's request timeout bounds it), and gives the lock
+        back; a slot that finds the link busy is skipped and counted. While the robot's
+        link is down (not connected yet, lost, closed) each slot records a
+        :class:`ConnectionLostError` and the monitor leaves the link alone: only the
+        robot's own requests reconnect it. The reads count in ``robot.stats``.
+
+        :param robot: a :class:`Robot` (connected now or later) made without ``fleet=``.
+        :param name: its name here; the robot's ``name`` when None.
+        :returns: the name it is watched under.
+        :raises ConfigError: after :meth:`start`; for a name or a robot already watched
+            here, a closed robot, a robot of a :class:`Fleet` (watched by
+            ``Fleet(watch_hz=...)`` and read with ``Fleet.latest``), or a robot whose
+            transport cannot be shared (one of your own not derived from
+            ``BlockTransport``).
+        """
+        # Imported here: _robot.py imports this module (through _fleet.py).
+        from ._fleet import LoopTransport
+        from ._robot import Robot
+
+        if not isinstance(robot, Robot):
+            raise ConfigError(f"robot must be a tmmaster.Robot, got {robot!r}")
+        name = robot.name if name is None else name
+        self._check_name(name)
+        transport = robot._transport
+        for known, watched in self._robots.items():
+            if isinstance(watched, _SharedWatched) and watched.transport is transport:
+                raise ConfigError(f"that robot is already watched by this monitor as {known!r}")
+        if isinstance(transport, LoopTransport):
+            raise ConfigError(
+                f"{robot.name!r} is a Fleet's robot: the Fleet watches it over its link;"
+                " make the Fleet with watch_hz and read Fleet.latest(robot)"
+            )
+        if not isinstance(transport, BlockTransport):
+            raise ConfigError(
+                f"{robot.name!r}: its transport {type(transport).__name__} has no lock to share;"
+                " watch it with add(name, host, port) on a slave that accepts several clients"
+            )
+        if transport.state is ConnectionState.CLOSED:
+            raise ConfigError(f"{robot.name!r} is closed: a StatusMonitor never reopens it")
+        self._robots[name] = _SharedWatched(name, transport, robot._channel)
+        return name
 
     # -- reading ----------------------------------------------------------------------
 
@@ -413,9 +650,19 @@ class StatusMonitor:
     # -- lifecycle --------------------------------------------------------------------
 
     def start(self) -> Self:
-        """Start the loop thread; return once every link tried to connect (failures are kept)."""
+        """Start the loop thread; return once every own link tried to connect (failures kept)."""
         if self._closed:
             raise ConfigError("a closed StatusMonitor cannot be restarted; make a new one")
+        if self._runner.thread is not None:
+            return self
+        shared = [r for r in self._robots.values() if isinstance(r, _SharedWatched)]
+        if shared and self._executor is None:
+            self._executor = ThreadPoolExecutor(
+                max_workers=min(len(shared), _MAX_READ_WORKERS),
+                thread_name_prefix="tmmaster-monitor-read",
+            )
+            for robot in shared:
+                robot.executor = self._executor
         try:
             self._runner.start(self._main)
         except TransportError:
@@ -424,12 +671,19 @@ class StatusMonitor:
         return self
 
     def close(self) -> None:
-        """Stop the loop, close every link and join the thread; safe to call more than once."""
+        """Stop the loop, close every own link and join the threads; safe to call twice.
+
+        A read outstanding on a robot's own link is waited for (its request timeout
+        bounds it): it holds the robot's lock until it ends.
+        """
         if self._closed:
             return
         self._closed = True
         self._stopping = True
         self._runner.stop()
+        executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> Self:
         return self.start()
@@ -470,7 +724,7 @@ class StatusMonitor:
             for _ in range(3):
                 await asyncio.sleep(0)
 
-    async def _watch(self, robot: _Watched, due: float, period: float) -> None:
+    async def _watch(self, robot: _Watched | _SharedWatched, due: float, period: float) -> None:
         """Poll one robot on its schedule until cancelled or stopping."""
         await poll_on_schedule(
             robot,
@@ -480,3 +734,20 @@ class StatusMonitor:
             running=lambda: not self._stopping,
             timings=self._timings,
         )
+
+
+def _require_within(
+    name: str, value: object, low: float, high: float, *, low_inclusive: bool = True
+) -> float:
+    """``value`` as a float when it is a finite number in range; else a ConfigError naming it."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not math.isfinite(value)
+        or value > high
+        or value < low
+        or (value == low and not low_inclusive)
+    ):
+        bounds = f"in {low:g}..{high:g}" if low_inclusive else f"> {low:g} and <= {high:g}"
+        raise ConfigError(f"{name} must be a finite number {bounds}, got {value!r}")
+    return float(value)
