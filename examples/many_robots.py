@@ -23,8 +23,9 @@ docs/performance.md, "Many robots from one process"):
   gives its command up safely (withdrawn or stopped) before its thread ends;
 * watching: the fleet reads every robot's status ``--watch-hz`` times a second on its
   loop, over the robot's own link (``Fleet(watch_hz=...)``, ``Fleet.latest``);
-  without a fleet a :class:`tmmaster.StatusMonitor` does it from one thread over a
-  second connection per robot. ``--watch-hz 0`` turns watching off. A status of the
+  without a fleet a :class:`tmmaster.StatusMonitor` does it from one thread, over each
+  connected robot's own link too (``StatusMonitor.add_robot``: a slave that accepts one
+  client still sees one). ``--watch-hz 0`` turns watching off. A status of the
   article map is one read, of the real TM table six;
 * ``gc.freeze()`` once the robots are connected: with hundreds of robots, CPython's full
   garbage collections walking every long-lived object were what made the worst watch
@@ -115,7 +116,8 @@ def run(
 
     ``fleet``: the robots in one :class:`tmmaster.Fleet`, which polls their waits and
     watches them on one event loop over their own links; else each robot polls its own
-    waits, watched by a :class:`tmmaster.StatusMonitor` over links of its own.
+    waits, and a :class:`tmmaster.StatusMonitor` watches the connected ones over their
+    links too, between their requests.
     """
     shared = Fleet(watch_hz=watch_hz or None) if fleet else None
     robots = [
@@ -132,10 +134,6 @@ def run(
     reports = [RobotReport(r.name) for r in robots]
     threads: list[threading.Thread] = []
     monitor = StatusMonitor(rate_hz=watch_hz) if watch_hz > 0 and shared is None else None
-    if monitor is not None:
-        for robot, port in zip(robots, ports, strict=True):
-            monitor.add(robot.name, host, port, profile=profile)
-        monitor.start()  # read-only: it never writes, so it cannot move anything
     try:
         connected: list[tuple[Robot, RobotReport]] = []
         for robot, report in zip(robots, reports, strict=True):
@@ -145,6 +143,12 @@ def run(
                 report.error = exc
                 continue
             connected.append((robot, report))
+        if monitor is not None:
+            # Over each robot's own link: no second connection, which a controller that
+            # takes one Modbus client would refuse (or give the robot's slot away for).
+            for robot, _report in connected:
+                monitor.add_robot(robot)
+            monitor.start()  # read-only: it never writes, so it cannot move anything
         # Everything made so far lives as long as the run: keep CPython's full garbage
         # collections from walking it again and again (with hundreds of robots they
         # made the worst poll 15-30 ms late instead of 2-4; docs/performance.md).
@@ -168,8 +172,9 @@ def run(
     finally:
         gc.unfreeze()
         if monitor is not None:
+            watched = monitor.snapshot()  # the connected robots
             for report in reports:
-                report.watched = monitor.latest(report.name)
+                report.watched = watched.get(report.name)
             monitor.close()
         if shared is not None and shared.watch_hz is not None:
             for robot, report in zip(robots, reports, strict=True):
