@@ -368,8 +368,11 @@ class _Watched(StatusRecord):
         first slot after it connects.
         """
         if not self.link.connected:
-            if self._opened_at is not None:
-                self._back_off()  # the peer closed the link between two polls
+            if self._opened_at is not None:  # the peer closed the link between two polls
+                self.drop()
+                self._back_off()
+                self.fail(ConnectionLostError(f"{self.name}: the robot closed the link"))
+                return
             if time.monotonic() < self._retry_at:
                 self.skip(1)
                 return
