@@ -482,3 +482,91 @@ def test_without_mujoco_the_clis_exit_1_naming_the_extra(
     assert len(lines) == 1, err
     assert "tmmaster[mujoco]" in lines[0]
     assert lines[0].endswith("[exit 1]")
+
+
+def _reference_support(world: World, obj: TableObject) -> tuple[str, float]:
+    """The support rule read straight off every object (what the world's index must find)."""
+    hx, hy, hz = obj.half_extents_mm()
+    best = (TABLE, world.table_top_z_mm)
+    for other in world.objects:
+        if other.name == obj.name or (world.held is not None and other.name == world.held.name):
+            continue
+        ox, oy, oz = other.half_extents_mm()
+        overlaps = (
+            abs(other.pose.x - obj.pose.x) < ox + hx and abs(other.pose.y - obj.pose.y) < oy + hy
+        )
+        top = other.pose.z + oz
+        if overlaps and top <= obj.pose.z - hz + 0.5 and top > best[1]:
+            best = (other.name, top)
+    return best
+
+
+def test_the_support_index_finds_what_reading_every_object_finds() -> None:
+    # Random heaps of boxes (some turned, one wider than the index's grid), dropped one at
+    # a time: each lands where the plain rule over every object says it should.
+    import random
+
+    rng = random.Random(7)
+    objects = [
+        TableObject(
+            name=f"o{i}",
+            pose=Pose(
+                rng.uniform(250, 350),
+                rng.uniform(-50, 50),
+                rng.uniform(100, 400),
+                rng.choice([180, 90, 0]),
+                0,
+                rng.choice([0, 30, 90]),
+            ),
+            size_mm=(rng.uniform(5, 80), rng.uniform(5, 40), rng.uniform(5, 40)),
+        )
+        for i in range(40)
+    ]
+    objects.append(
+        TableObject(name="plate", pose=Pose(300, 0, 90, 180, 0, 0), size_mm=(3000, 3000, 2))
+    )
+    world = World(objects)
+    for state in world.states():
+        assert state.resting_on is not None
+        if state.resting_on != TABLE:  # it rests on something that is under it
+            below = world.get(state.resting_on)
+            assert below.pose.z < state.pose.z
+    for i in range(40):
+        name = f"o{rng.randrange(40)}"
+        obj = world.get(name)
+        world.grasp(name, obj.pose)
+        tcp = Pose(rng.uniform(250, 350), rng.uniform(-50, 50), 500, obj.pose.rx, 0, obj.pose.rz)
+        world.follow(tcp)
+        falling = world.get(name)
+        expected = _reference_support(world, falling)
+        assert world.support_below(falling) == expected, i
+        world.release(tcp)
+        assert world.resting_on(name) == expected[0]
+
+
+def test_parts_waiting_at_one_spot_settle_in_linear_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Structural, not timed: settling N parts stacked in a feeder must not look at every
+    # other part for each one (N * N box computations: a 100,000-cycle --sim run never
+    # started). Count the bounding-box computations: a few per part.
+    calls = 0
+    original = TableObject.half_extents_mm
+
+    def counting(self: TableObject, pose: Pose | None = None) -> tuple[float, float, float]:
+        nonlocal calls
+        calls += 1
+        return original(self, pose)
+
+    monkeypatch.setattr(TableObject, "half_extents_mm", counting)
+    parts = [TableObject(name=f"part-{i}", pose=PICK) for i in range(1000)]
+    world = World(parts)
+    assert calls <= 10 * len(parts)
+    assert {s.resting_on for s in world.states()} == {TABLE}
+    # Putting one back on the heap: a few box computations again, and of the parts equally
+    # high under it, the first in the world's order carries it (as a scan would say).
+    world.grasp("part-0", PICK)
+    world.follow(PICK.offset(dz=50))
+    expected = _reference_support(world, world.get("part-0"))
+    calls = 0
+    world.release(PICK.offset(dz=50))
+    assert calls <= 10
+    assert world.resting_on("part-0") == expected[0] == "part-1"

@@ -14,6 +14,8 @@ resting x-y and on *what* the object rests on.
 
 from __future__ import annotations
 
+import bisect
+import functools
 import math
 from collections.abc import Iterable
 from typing import Any
@@ -39,6 +41,16 @@ SUPPORT_TOLERANCE_MM = 0.5
 
 #: Name :attr:`ObjectState.resting_on` gives the table.
 TABLE = "table"
+
+#: Side of the square cells of the support index's floor grid, mm.
+_CELL_MM = 100.0
+
+#: Height of the support index's layers (objects grouped by the height of their top), mm.
+_LAYER_MM = 10.0
+
+#: An object whose footprint covers more cells than this is kept on one list that every
+#: search reads: a huge plate would otherwise fill (or make a search visit) the whole grid.
+_MAX_CELLS = 256
 
 
 class TableObject(BaseModel):
@@ -77,13 +89,135 @@ class TableObject(BaseModel):
 
     def half_extents_mm(self, pose: Pose | None = None) -> tuple[float, float, float]:
         """Half size of the box's axis-aligned bounding box in the base frame at ``pose``."""
-        rot = kin.pose_to_transform(self.pose if pose is None else pose)
-        half = [s / 2 for s in self.size_mm]
-        return (
-            sum(abs(rot[0][j]) * half[j] for j in range(3)),
-            sum(abs(rot[1][j]) * half[j] for j in range(3)),
-            sum(abs(rot[2][j]) * half[j] for j in range(3)),
-        )
+        pose = self.pose if pose is None else pose
+        return _half_extents(self.size_mm, pose.rx, pose.ry, pose.rz)
+
+
+@functools.lru_cache(maxsize=1024)
+def _half_extents(
+    size_mm: tuple[float, float, float], rx: float, ry: float, rz: float
+) -> tuple[float, float, float]:
+    # Cached: the parts of a feeder share size and orientation, and a World asks for
+    # each object's extents several times while it settles (no trigonometry each time).
+    rot = kin.pose_to_transform(Pose(0.0, 0.0, 0.0, rx, ry, rz))
+    half = [s / 2 for s in size_mm]
+    return (
+        sum(abs(rot[0][j]) * half[j] for j in range(3)),
+        sum(abs(rot[1][j]) * half[j] for j in range(3)),
+        sum(abs(rot[2][j]) * half[j] for j in range(3)),
+    )
+
+
+#: What the support index keeps of a resting object: x, y, half x, half y, top (mm), and
+#: its place in the world's order (of two supports as high, the earlier one is named).
+_Entry = tuple[float, float, float, float, float, int]
+
+
+class _SupportIndex:
+    """Where the resting objects are, so that finding the support under one is not a scan.
+
+    Each object is filed under the floor cells its footprint covers and, in each cell,
+    under the layer of its top's height. A search reads only the cells under the falling
+    object and, in each, the layers from its bottom down, highest first, stopping below
+    the best support found. So N parts waiting at the same spot (the pick-and-place
+    feeder) settle in time linear in N, not quadratic: a part at the same height as the
+    others never looks at them.
+    """
+
+    def __init__(self) -> None:
+        # cell -> layer -> name -> what is kept of the resting object (_Entry).
+        self._cells: dict[tuple[int, int], dict[int, dict[str, _Entry]]] = {}
+        # cell -> its occupied layers, ascending (a search walks them downwards).
+        self._layers: dict[tuple[int, int], list[int]] = {}
+        # Objects too wide for the grid, read by every search.
+        self._wide: dict[str, _Entry] = {}
+        # name -> (its cells, its layer, its entry), to remove it again.
+        self._where: dict[str, tuple[list[tuple[int, int]], int, _Entry]] = {}
+
+    @staticmethod
+    def _footprint(x: float, y: float, hx: float, hy: float) -> list[tuple[int, int]] | None:
+        """The cells under a footprint, or None when there are more than _MAX_CELLS."""
+        x0, x1 = math.floor((x - hx) / _CELL_MM), math.floor((x + hx) / _CELL_MM)
+        y0, y1 = math.floor((y - hy) / _CELL_MM), math.floor((y + hy) / _CELL_MM)
+        if (x1 - x0 + 1) * (y1 - y0 + 1) > _MAX_CELLS:
+            return None
+        return [(i, j) for i in range(x0, x1 + 1) for j in range(y0, y1 + 1)]
+
+    def add(self, name: str, entry: _Entry) -> None:
+        """File ``name`` (not filed yet) resting with ``entry``."""
+        x, y, hx, hy, top, _ = entry
+        cells = self._footprint(x, y, hx, hy)
+        layer = math.floor(top / _LAYER_MM)
+        if cells is None:
+            self._wide[name] = entry
+            self._where[name] = ([], layer, entry)
+            return
+        for cell in cells:
+            layers = self._cells.setdefault(cell, {})
+            if layer not in layers:
+                layers[layer] = {}
+                bisect.insort(self._layers.setdefault(cell, []), layer)
+            layers[layer][name] = entry
+        self._where[name] = (cells, layer, entry)
+
+    def entry(self, name: str) -> _Entry | None:
+        """What is filed for ``name``, or None."""
+        where = self._where.get(name)
+        return None if where is None else where[2]
+
+    def remove(self, name: str) -> None:
+        """Forget ``name`` (safe when not filed)."""
+        where = self._where.pop(name, None)
+        if where is None:
+            return
+        cells, layer, _ = where
+        self._wide.pop(name, None)
+        for cell in cells:
+            layers = self._cells[cell]
+            del layers[layer][name]
+            if not layers[layer]:
+                del layers[layer]
+                self._layers[cell].remove(layer)
+
+    def highest_below(
+        self, x: float, y: float, hx: float, hy: float, limit: float, best: tuple[str, float]
+    ) -> tuple[str, float]:
+        """The highest filed top <= ``limit`` whose footprint overlaps, if above ``best``.
+
+        Of tops equally high, the object earliest in the world's order is named (as a scan
+        of every object in order would name it); ``best`` wins a tie.
+        """
+        found = (best[0], best[1], -1)
+
+        def consider(name: str, entry: _Entry) -> None:
+            nonlocal found
+            ox, oy, ohx, ohy, top, order = entry
+            if top > limit or abs(ox - x) >= ohx + hx or abs(oy - y) >= ohy + hy:
+                return
+            if top > found[1] or (top == found[1] and found[2] >= 0 and order < found[2]):
+                found = (name, top, order)
+
+        if self._wide:
+            for name, entry in self._wide.items():
+                consider(name, entry)
+        cells = self._footprint(x, y, hx, hy)
+        if cells is None:  # wider than the grid allows: read every cell
+            cells = list(self._cells)
+        top_layer = math.floor(limit / _LAYER_MM)
+        for cell in cells:
+            layers = self._layers.get(cell)
+            if not layers:
+                continue
+            by_layer = self._cells[cell]
+            for k in range(bisect.bisect_right(layers, top_layer) - 1, -1, -1):
+                layer = layers[k]
+                # Tops in this layer are below (layer + 1) * _LAYER_MM; one layer more of
+                # margin for the rounding of top / _LAYER_MM.
+                if (layer + 2) * _LAYER_MM <= found[1]:
+                    break
+                for name, entry in by_layer[layer].items():
+                    consider(name, entry)
+        return found[0], found[1]
 
 
 class World:
@@ -106,6 +240,10 @@ class World:
                 raise ValueError(f"duplicate object name {item.name!r}")
             self._objects[item.name] = item
         self._held: str | None = None
+        self._order = {name: k for k, name in enumerate(self._objects)}
+        self._index = _SupportIndex()
+        for name, obj in self._objects.items():
+            self._file(name, obj)
         # Objects start at rest: each one placed in the air drops onto its support,
         # lowest first (so one standing on another finds it already settled).
         for name in sorted(self._objects, key=lambda n: self._bottom(self._objects[n])):
@@ -156,6 +294,7 @@ class World:
         self._objects[name] = self.get(name).model_copy(update={"pose": tcp})
         self._held = name
         self._resting_on[name] = None
+        self._index.remove(name)  # a held object supports nothing
 
     def follow(self, tcp: Pose) -> None:
         """Move the held object (if any) rigidly with the TCP."""
@@ -177,16 +316,21 @@ class World:
         pose = obj.pose if pose is None else pose
         hx, hy, hz = obj.half_extents_mm(pose)
         bottom = pose.z - hz
-        best = (TABLE, self.table_top_z_mm)
-        for other in self._objects.values():
-            if other.name in (obj.name, self._held):
-                continue
-            ox, oy, oz = other.half_extents_mm()
-            overlaps = abs(other.pose.x - pose.x) < ox + hx and abs(other.pose.y - pose.y) < oy + hy
-            top = other.pose.z + oz
-            if overlaps and top <= bottom + SUPPORT_TOLERANCE_MM and top > best[1]:
-                best = (other.name, top)
-        return best
+        # obj itself must not count: out of the index for the search, then back if it was.
+        entry = self._index.entry(obj.name)
+        self._index.remove(obj.name)
+        try:
+            return self._index.highest_below(
+                pose.x,
+                pose.y,
+                hx,
+                hy,
+                bottom + SUPPORT_TOLERANCE_MM,
+                (TABLE, self.table_top_z_mm),
+            )
+        finally:
+            if entry is not None:
+                self._index.add(obj.name, entry)
 
     def states(self) -> list[ObjectState]:
         """Every object's name, pose, size, mass, whether it is held and what it rests on."""
@@ -207,9 +351,19 @@ class World:
 
     def _drop(self, name: str) -> None:
         obj = self._objects[name]
+        self._index.remove(name)  # moving: filed again where it comes to rest
         support, top = self.support_below(obj)
         z = top + obj.half_extents_mm()[2]
         pose = obj.pose
-        rested = Pose(pose.x, pose.y, z, pose.rx, pose.ry, pose.rz)
-        self._objects[name] = obj.model_copy(update={"pose": rested})
+        if z != pose.z:  # a part already at rest (a feeder's) keeps its object: no copy
+            rested = Pose(pose.x, pose.y, z, pose.rx, pose.ry, pose.rz)
+            obj = self._objects[name] = obj.model_copy(update={"pose": rested})
         self._resting_on[name] = support
+        self._file(name, obj)
+
+    def _file(self, name: str, obj: TableObject) -> None:
+        """(Re)file ``name`` in the support index at ``obj``'s pose."""
+        self._index.remove(name)
+        hx, hy, hz = obj.half_extents_mm()
+        entry = (obj.pose.x, obj.pose.y, hx, hy, obj.pose.z + hz, self._order[name])
+        self._index.add(name, entry)
