@@ -452,3 +452,82 @@ def test_closing_the_fleet_while_a_thread_waits_ends_the_wait_and_stops_the_arm(
     assert motion.stop_delivered is True
     time.sleep(0.2)
     assert not sim.tcp_pose().is_close(A)  # stopped short of the target
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_budget(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # Four robots moving back and forth; one robot's simulator vanishes mid-move. Closing
+    # the fleet must not wait on the dead robot's retries before the others: no robot
+    # starts a motion after close() is called, and close() returns within its budget,
+    # naming the robot it could not confirm.
+    sims = [tm_simulator_factory(profile) for _ in range(4)]
+    fleet = Fleet()
+    robots = [
+        Robot(
+            "127.0.0.1",
+            sim.port,
+            profile=profile,
+            gripper=None,
+            poll_interval_s=0.01,
+            name=f"r{i}",
+            fleet=fleet,
+        )
+        for i, sim in enumerate(sims)
+    ]
+
+    def drive(robot: Robot) -> None:
+        for i in range(10_000):
+            try:
+                robot.move_to(A if i % 2 else B, speed=100)
+            except tmmaster.TMMasterError:
+                return
+
+    threads = []
+    for robot in robots:
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        threads.append(threading.Thread(target=drive, args=(robot,)))
+    for thread in threads:
+        thread.start()
+    dead = sims[0]
+    dead.wait_for(lambda: len(dead.motion_log()) >= 2, timeout=5)
+    dead.close()  # mid-move: the robot's link is refused from now on
+    time.sleep(0.05)
+    called = time.monotonic()
+    unconfirmed = fleet.close(timeout_s=0.5)  # (2 s by default)
+    took = time.monotonic() - called
+    for thread in threads:
+        thread.join(15)
+    assert not any(thread.is_alive() for thread in threads)
+    assert took < 1.5, f"Fleet.close(timeout_s=0.5) took {took:.2f} s with one dead robot"
+    assert unconfirmed == ("r0",)
+    for sim, robot in zip(sims[1:], robots[1:], strict=True):
+        late = [m for m in sim.motion_log() if m.wall_time > called]
+        if not late:
+            continue
+        # Only a command written before close() was called may start after it (the robot
+        # takes it at its next tick): the last one, which close() then gave up (stopped,
+        # unless it had finished already).
+        motion = robot.last_motion
+        assert motion is not None and motion.target is not None
+        assert len(late) == 1, f"motions {[m.number for m in late]} started after close()"
+        assert late[0].target is not None and late[0].target.is_close(motion.target)
+        assert motion.ticket.sent_at < called
+        assert motion.stop_delivered is True or motion.reported_finished
+    assert all(robot.state is tmmaster.ConnectionState.CLOSED for robot in robots)
+
+
+def test_a_fleet_refuses_what_it_cannot_serve(tm_simulator_factory: SimFactory) -> None:
+    with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
+        Fleet(watch_hz=1e6)
+    with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
+        Fleet(watch_hz=float("nan"))
+    with pytest.raises(tmmaster.ConfigError, match="fleet must be a tmmaster.Fleet"):
+        Robot("127.0.0.1", 1, profile="article", fleet=object())  # type: ignore[arg-type]
+    with Fleet(watch_hz=20) as fleet:
+        with pytest.raises(tmmaster.ConfigError, match="not one"):
+            fleet.latest(object())  # type: ignore[arg-type]
+        with pytest.raises(tmmaster.ConfigError, match="timeout_s"):
+            fleet.close(timeout_s=0)

@@ -7,6 +7,7 @@ not what the master believes. The numbers are the issue's.
 from __future__ import annotations
 
 import math
+import signal
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -430,3 +431,113 @@ def test_8_8_a_link_loss_mid_move_stops_the_arm_once_the_link_is_back(
     assert motion.stop_delivered is True
     stops = [r for r in sim.request_log if r.is_write and r.values == (3,)]
     assert len(stops) == 1
+
+
+# -- shutdown races: close() from another thread, a second Ctrl-C, Fleet.close() ----------
+
+
+def _finish_first_move(sim: Simulator, robot: Robot, issued: list[Issued]) -> None:
+    robot.wait_until_ready(timeout_s=5)
+    assert attempt(robot, A, issued) == "done"
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_close_from_another_thread_never_lets_the_next_command_run(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    # The robot's thread is inside a request (it holds the link's lock) on its way to its
+    # next command when close() comes from another thread. The last command close() can
+    # see is the finished one; the next one must never be written, or be given up.
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim.port, profile)
+    issued: list[Issued] = []
+    _finish_first_move(sim, robot, issued)
+    link_lock = robot._transport._lock  # type: ignore[attr-defined]
+    prepared = threading.Event()
+    real_prepare = robot._channel.prepare
+
+    def prepare_then_hold(*args: Any, **kwargs: Any) -> Any:
+        ticket = real_prepare(*args, **kwargs)
+        link_lock.acquire()  # a request in flight: the link is busy
+        prepared.set()
+        time.sleep(0.3)  # close() is called meanwhile, and blocks on the busy link
+        return ticket
+
+    def let_go() -> None:
+        while link_lock._is_owned():  # type: ignore[attr-defined]
+            link_lock.release()
+
+    real_send = robot._channel.send
+
+    def send_then_pause(ticket: Any) -> None:
+        real_send(ticket)  # (never reached when close() refuses the command)
+        let_go()  # the request is over: close() takes the link and closes it
+        time.sleep(0.2)
+
+    robot._channel.prepare = prepare_then_hold  # type: ignore[method-assign]
+    robot._channel.send = send_then_pause  # type: ignore[method-assign]
+
+    def next_move() -> None:
+        try:
+            attempt(robot, B, issued)
+        finally:
+            let_go()
+
+    mover = threading.Thread(target=next_move)
+    mover.start()
+    assert prepared.wait(5)
+    closed_at = time.monotonic()
+    closer = threading.Thread(target=robot.close)
+    closer.start()
+    mover.join(10)
+    closer.join(10)
+    assert not mover.is_alive() and not closer.is_alive()
+    let_run(sim, 20)  # 8 simulated s: a command left armed would run now
+    started_after_close = [m for m in sim.motion_log() if m.wall_time > closed_at]
+    assert started_after_close == [], f"{started_after_close} started after close()"
+    check(issued, sim.motion_log())
+    assert issued[1].outcome == "StopRequestedError"
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+@pytest.mark.parametrize("cut", ["withdraw", "stop"])
+def test_a_second_ctrl_c_during_the_clean_up_never_leaves_a_command_armed(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str, cut: str
+) -> None:
+    # First Ctrl-C: a stop request ends the wait. A second one comes in the middle of the
+    # withdraw (the command is pending: its ack comes late) or the stop (the arm moves).
+    # The clean-up must still be delivered, and the second Ctrl-C still be raised.
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("SIGINT reaches the main thread only")
+    faults = ["late_ack:delay_s=6"] if cut == "withdraw" else []
+    sim = tm_simulator_factory(profile, faults=faults, **FAST)
+    robot = robots(sim.port, profile)
+    robot.wait_until_ready(timeout_s=5)
+    channel = robot._channel
+    real = getattr(channel, cut)
+
+    def second_ctrl_c(*args: Any, **kwargs: Any) -> Any:
+        signal.raise_signal(signal.SIGINT)  # handled at the next bytecode boundary
+        return real(*args, **kwargs)
+
+    setattr(channel, cut, second_ctrl_c)
+    issued = [Issued(A, time.monotonic())]
+    motion = robot.start_move(A, speed=20 if cut == "stop" else 80)
+    if cut == "stop":
+        sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=5)  # the arm moves
+    robot.interrupt()  # the first Ctrl-C
+    with pytest.raises(KeyboardInterrupt):
+        motion.wait()  # the second one, held back until the clean-up is done
+    issued[0].outcome, issued[0].ended_at = "KeyboardInterrupt", time.monotonic()
+    setattr(channel, cut, real)
+    if cut == "withdraw":
+        assert motion.withdrawn is True
+    else:
+        assert motion.stop_delivered is True
+    robot.close()
+    let_run(sim, 25)  # 10 simulated s: past the late ack, past the move's end
+    check(issued, sim.motion_log())
+    if cut == "withdraw":
+        assert sim.motion_log() == ()
+    else:
+        assert sim.tcp_pose().distance_to(A) > 1.0, "the arm was not stopped short of A"

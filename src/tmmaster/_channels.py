@@ -101,6 +101,9 @@ class Ticket:
     pending_seen_at: float | None = None
     #: True once the command was taken back (it can no longer start).
     withdrawn: bool = False
+    #: True once a write of the command block was attempted (it may have landed even if
+    #: the write failed); a command never written has nothing to withdraw or stop.
+    written: bool = False
     extra: dict[str, Value] = field(default_factory=dict)
     #: ``words`` encoded and grouped into write blocks while preparing (encoded once).
     plan: list[tuple[Block, list[int]]] = field(default_factory=list)
@@ -362,6 +365,7 @@ class CommandChannel(ABC):
     def send(self, ticket: Ticket) -> None:
         """Write the command block in one request, exactly once (never retried)."""
         ticket.sent_at = time.monotonic()
+        ticket.written = True
         if not ticket.plan:
             self.transport.write_fields(ticket.words, retry=False)
             return

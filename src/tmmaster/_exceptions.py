@@ -89,6 +89,13 @@ class ConnectError(TransportError, ConnectionError):
     """The connection could not be opened."""
 
 
+class TransportClosedError(ConnectError):
+    """The link was closed by its owner (``close()``, its Fleet closing): nothing was sent.
+
+    Never retried: no later attempt can succeed on a closed link.
+    """
+
+
 class ConnectionLostError(TransportError, ConnectionError):
     """The connection broke while a request was in flight."""
 

@@ -38,9 +38,11 @@ from ._exceptions import (
     ConfigError,
     ConnectionLostError,
     ResponseTimeoutError,
+    TransportClosedError,
     TransportError,
 )
 from ._following import FollowState
+from ._gate import CommandGate
 from ._logging import get_logger
 from ._monitor import (
     EventLoopName,
@@ -61,9 +63,17 @@ T = TypeVar("T")
 class _Closable(Protocol):
     """A fleet's robot, as the fleet sees it: something to close at the end."""
 
-    def close(self) -> None:
-        """Withdraw or stop what is outstanding, then close the links."""
+    name: str
 
+    def close(self, *, timeout_s: float | None = None) -> bool:
+        """Withdraw or stop what is outstanding, then close the links; True when confirmed."""
+        ...
+
+
+#: The fastest watch: a status read per robot every 10 ms. A TM robot's status is several
+#: requests (the tmflow profile: six), each a round trip to a controller that serves other
+#: clients too; faster than this only queues reads behind the robot's own commands.
+MAX_WATCH_HZ = 100.0
 
 #: Beyond a request's own timeout: how long a thread waits for the loop to answer at all.
 _LOOP_GRACE_S = 1.0
@@ -134,7 +144,7 @@ class LoopTransport(BlockTransport):
             latch.fail,
         )
         if not started:
-            raise ConnectionLostError(f"{self.name}: the fleet is closed")
+            raise TransportClosedError(f"{self.name}: the fleet is closed")
         try:
             return latch.wait(self.timeout + _LOOP_GRACE_S)
         except _NoAnswerError as exc:
@@ -194,10 +204,18 @@ class LoopTransport(BlockTransport):
 class FleetMember:
     """One robot of a fleet: the loop's side of its waits (touched by the loop thread)."""
 
-    def __init__(self, fleet: Fleet, channel: CommandChannel, transport: LoopTransport) -> None:
+    def __init__(
+        self,
+        fleet: Fleet,
+        channel: CommandChannel,
+        transport: LoopTransport,
+        gate: CommandGate,
+    ) -> None:
         self.fleet = fleet
         self.channel = channel
         self.transport = transport
+        #: The robot's command gate: closed by the fleet before any robot is closed.
+        self.gate = gate
         self.polling = False
         self._nap: asyncio.Future[None] | None = None
         # On the loop, the polls of a wait and the watch's reads take turns on the link
@@ -439,8 +457,15 @@ class Fleet:
     def __init__(
         self, *, watch_hz: float | None = None, event_loop: EventLoopName = "auto"
     ) -> None:
+        if watch_hz is not None:
+            require_positive("watch_hz", watch_hz)
+            if watch_hz > MAX_WATCH_HZ:
+                raise ConfigError(
+                    f"watch_hz must be at most {MAX_WATCH_HZ:g} Hz (one status read per robot"
+                    f" every {1000 / MAX_WATCH_HZ:g} ms at most), got {watch_hz!r}"
+                )
         #: How often each robot's status is read for :meth:`latest` (None: not watched).
-        self.watch_hz = None if watch_hz is None else require_positive("watch_hz", watch_hz)
+        self.watch_hz = watch_hz
         self._runner = LoopThread(event_loop, name="tmmaster-fleet", owner="Fleet")
         #: The event loop the fleet runs on: "uvloop" or "asyncio".
         self.event_loop = self._runner.event_loop
@@ -458,8 +483,11 @@ class Fleet:
         """What the fleet's watch last saw of ``robot`` (ConfigError when not watched here)."""
         if self.watch_hz is None:
             raise ConfigError("this Fleet does not watch its robots: make it with watch_hz")
-        with self._lock:
-            member = self._members.get(robot)
+        try:
+            with self._lock:
+                member = self._members.get(robot)
+        except TypeError:  # not a robot at all (cannot be weakly referenced)
+            member = None
         if member is None:
             raise ConfigError("that robot is not one of this Fleet's")
         return member.record.published
@@ -494,16 +522,59 @@ class Fleet:
             self._runner.start(self._main)
         return self
 
-    def close(self) -> None:
-        """Close every robot still open, then stop the loop and join its thread."""
+    def close(self, *, timeout_s: float = 2.0) -> tuple[str, ...]:
+        """Close every robot at once, then stop the loop and join its thread.
+
+        First every robot's gate closes, so no robot writes a new command from then on
+        (a write already in flight finishes and is given up like any other), and every
+        wait the loop polls ends. Then all robots are closed in parallel, each
+        withdrawing or stopping what it has outstanding, within ``timeout_s`` in all:
+        a robot whose link is dead does not hold the others up. Safe to call more than
+        once (later calls return an empty tuple).
+
+        Args:
+            timeout_s: the budget for the robots' clean-up, in seconds.
+
+        Returns:
+            The names of the robots whose withdraw or stop could not be confirmed
+            (a dead link, the budget spent); each is also logged as an error. Empty
+            when every command the fleet's robots sent can no longer run.
+
+        Raises:
+            ConfigError: ``timeout_s`` is not a finite number > 0.
+        """
+        require_positive("timeout_s", timeout_s)
         with self._lock:
             if self._closed:
-                return
+                return ()
             self._closed = True
-            robots = list(self._members)
-        for robot in robots:
-            robot.close()  # withdraws or stops what it has outstanding, through the loop
+            members = list(self._members.items())
+        deadline = time.monotonic() + timeout_s
+        for _robot, member in members:
+            member.gate.close()  # no new command anywhere, before any robot is closed
+            self._call_soon(member.wake)
+        outcomes: dict[str, bool] = {}
+
+        def close_one(robot: _Closable) -> None:
+            outcomes[robot.name] = robot.close(timeout_s=max(deadline - time.monotonic(), 1e-3))
+
+        threads = [
+            threading.Thread(
+                target=close_one, args=(robot,), name=f"tmmaster-close-{robot.name}", daemon=True
+            )
+            for robot, _member in members
+        ]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(max(deadline - time.monotonic(), 0.0))
+        unconfirmed = tuple(
+            robot.name for robot, _member in members if not outcomes.get(robot.name, False)
+        )
+        for name in unconfirmed:
+            _log.error("fleet.close_unconfirmed", robot=name)
         self._runner.stop()
+        return unconfirmed
 
     def __enter__(self) -> Self:
         return self.start()
@@ -542,7 +613,7 @@ class Fleet:
             raise RuntimeError("a Fleet's loop must never wait for itself")
         future = self._submit(coroutine)
         if future is None:
-            raise ConnectionLostError(f"{name}: the fleet is closed")
+            raise TransportClosedError(f"{name}: the fleet is closed")
         try:
             return _result(future, bound)
         except _NoAnswerError as exc:
@@ -609,13 +680,17 @@ def join_fleet(
 
 
 def fleet_driver(
-    fleet: Fleet, robot: _Closable, channel: CommandChannel, transport: LoopTransport
+    fleet: Fleet,
+    robot: _Closable,
+    channel: CommandChannel,
+    transport: LoopTransport,
+    gate: CommandGate,
 ) -> FleetMember:
     """For :class:`~tmmaster.Robot`: the loop's side of its waits and watch, registered.
 
-    The fleet closes ``robot`` when it closes (:meth:`Fleet.close`).
+    The fleet closes ``gate`` and then ``robot`` when it closes (:meth:`Fleet.close`).
     """
-    member = FleetMember(fleet, channel, transport)
+    member = FleetMember(fleet, channel, transport, gate)
     with fleet._lock:
         fleet._members[robot] = member
         index = len(fleet._members) - 1

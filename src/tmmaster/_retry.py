@@ -27,6 +27,7 @@ from ._exceptions import (
     DeviceBusyError,
     ResponseTimeoutError,
     StopRequestedError,
+    TransportClosedError,
     TransportError,
 )
 from ._logging import get_logger
@@ -75,6 +76,8 @@ class RetryPolicy(BaseModel):
         started = time.monotonic()
         try:
             return fn()
+        except TransportClosedError:
+            raise  # closed by its owner: no attempt can succeed
         except TRANSIENT_ERRORS as exc:
             if self.attempts == 1:
                 raise
@@ -118,12 +121,26 @@ class RetryPolicy(BaseModel):
                 multiplier=self.initial_backoff_s * 2, max=self.max_backoff_s
             )
             + tenacity.wait_random(0, self.jitter_s),
-            retry=tenacity.retry_if_exception_type(TRANSIENT_ERRORS),
+            retry=tenacity.retry_if_exception_type(TRANSIENT_ERRORS)
+            & tenacity.retry_if_not_exception_type(TransportClosedError),
             before_sleep=before_sleep,
             sleep=sleep,
             reraise=True,
         )
         return retrying(fn)
+
+    def within(self, seconds: float) -> RetryPolicy:
+        """This policy, its total time cut to ``seconds`` (for a clean-up under a deadline).
+
+        Args:
+            seconds: the most time the attempts may take from the first one; at least
+                one attempt is always made.
+
+        Returns:
+            A policy no longer than this one and no longer than ``seconds``.
+        """
+        total = max(min(self.total_time_s, seconds), 1e-3)
+        return self.model_copy(update={"total_time_s": total})
 
 
 def _sleeper(interrupt: threading.Event | None) -> Callable[[float], None]:

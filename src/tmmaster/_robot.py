@@ -17,6 +17,7 @@ acknowledged the command first, and the final pose must be at the target.
 from __future__ import annotations
 
 import atexit
+import functools
 import inspect
 import logging
 import threading
@@ -58,6 +59,7 @@ from ._exceptions import (
 )
 from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet, wake_waits
 from ._following import FollowState, Overdue, SharedDriver
+from ._gate import CommandGate
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._logging import get_logger
 from ._poller import Poller, PollPolicy
@@ -72,8 +74,15 @@ from ._profiles import (
 from ._registers import GripperProfile, RobotProfile, Role
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
+from ._sigint import deferred
 from ._status import MovePhase, MoveProgress, RobotStatus
-from ._transport import ConnectionState, Transport, TransportStats, open_transport
+from ._transport import (
+    BlockTransport,
+    ConnectionState,
+    Transport,
+    TransportStats,
+    open_transport,
+)
 
 _log = get_logger("tmmaster.robot")
 
@@ -282,13 +291,16 @@ class _MotionFollower:
         self.timeouts = timeouts
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
-        # The motions given up on: each is withdrawn or stopped once, by one caller.
+        # One caller at a time gives a command up (a wait, close(), the exit hook).
         self._abandon_lock = threading.Lock()
-        self._abandoned: weakref.WeakSet[Motion] = weakref.WeakSet()
+        # The motions the master gave up on, and of those, the ones whose clean-up is
+        # over: True when safe, False when it could not be confirmed.
+        self._given_up: weakref.WeakSet[Motion] = weakref.WeakSet()
+        self._settled: weakref.WeakKeyDictionary[Motion, bool] = weakref.WeakKeyDictionary()
 
     def abandoned(self, motion: Motion) -> bool:
         """True once the master gave up on ``motion``."""
-        return motion in self._abandoned
+        return motion in self._given_up
 
     def read_pose(self) -> Pose:
         """The current TCP pose."""
@@ -303,22 +315,64 @@ class _MotionFollower:
         """Whatever escapes the block, the master gives the command up safely first."""
         return _Following(self, motion)
 
-    def abandon(self, motion: Motion, reason: BaseException) -> None:
+    def abandon(
+        self, motion: Motion, reason: BaseException, *, deadline: float | None = None
+    ) -> bool:
         """Make sure a command the master gives up on can never start later.
 
         Not yet acknowledged: withdraw it (if the robot took it meanwhile, it is running).
         Running: stop the arm, unless the robot stopped itself (fault, e-stop, refusal).
-        Every step is best effort and logged; none of them raises.
+        Every step is best effort and logged; none of them raises a tmmaster error.
+
+        One caller at a time does the work (a wait, ``close()`` on another thread, the
+        exit hook): the others wait for it. The command counts as given up safely only
+        once its withdraw or stop was delivered or definitively failed: a caller cut
+        short (a second Ctrl-C, an exception) leaves it to the next one. In the main
+        thread, Ctrl-C is held back until the work is done (``_sigint.deferred``).
+
+        Args:
+            motion: the command given up on.
+            reason: why (a robot fault means the robot stopped itself).
+            deadline: a ``time.monotonic()`` bound on waiting for another caller's
+                clean-up; None waits as long as that takes (its requests are bounded).
+
+        Returns:
+            True when the command can no longer run: never written, already finished,
+            withdrawn, stopped by the robot itself, or a stop delivered. False when that
+            could not be confirmed (the withdraw and the stop failed, the profile has no
+            stop, or another caller was still at it at ``deadline``).
         """
-        with self._abandon_lock:
-            # Atomic: of two threads giving it up (a wait, close()), one acts; and a
-            # command the robot reported finished has nothing left to withdraw or stop.
-            if motion in self._abandoned or motion.done or motion.reported_finished:
-                return
-            self._abandoned.add(motion)
+        lock = self._abandon_lock
+        if deadline is None:
+            acquired = lock.acquire()
+        else:
+            acquired = lock.acquire(timeout=max(deadline - time.monotonic(), 0.0))
+        if not acquired:
+            return False
+        try:
+            settled = self._settled.get(motion)
+            if settled is not None:
+                return settled
+            if motion.done or motion.reported_finished:
+                return True  # nothing left to withdraw or stop
+            self._given_up.add(motion)
+            motion.phase = MovePhase.FAILED
+            if not motion.ticket.written:
+                self._settled[motion] = True  # refused before any byte was sent
+                return True
+            with deferred():
+                confirmed = self._withdraw_or_stop(motion, reason)
+                # Recorded inside the section: a Ctrl-C held back is raised after it.
+                self._settled[motion] = confirmed
+            return confirmed
+        finally:
+            lock.release()
+
+    def _withdraw_or_stop(self, motion: Motion, reason: BaseException) -> bool:
+        """:meth:`abandon`'s work: withdraw a command not yet taken, stop a running one."""
         ticket = motion.ticket
-        motion.phase = MovePhase.FAILED
         running = ticket.acknowledged
+        confirmed = True
         if not running and not ticket.withdrawn:
             try:
                 running = self._channel.withdraw(ticket)
@@ -340,13 +394,17 @@ class _MotionFollower:
         stopped_itself = isinstance(
             reason, RobotFaultError | EmergencyStopError | CommandRejectedError
         )
-        if running and not stopped_itself and self._channel.can_stop:
+        if running and not stopped_itself:
+            if not self._channel.can_stop:
+                return False  # running, and this profile cannot stop it
             try:
                 self.stop()
                 motion.stop_delivered = True
             except TMMasterError as exc:
                 motion.stop_delivered = False
+                confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
+        return confirmed
 
     def poll(self, motion: Motion) -> None:
         """Poll the command once; raises the typed error when the robot failed it."""
@@ -565,6 +623,8 @@ class Robot:
         }
         loop_link: LoopTransport | None = None
         if fleet is not None:
+            if not isinstance(fleet, Fleet):
+                raise ConfigError(f"fleet must be a tmmaster.Fleet, got {type(fleet).__name__}")
             if transport is not None:
                 raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
             loop_link = join_fleet(fleet, host, port, **link)
@@ -574,7 +634,11 @@ class Robot:
         self._stop_event = threading.Event()
         # Retry sleeps of reads end at once on a stop request, like every poll.
         self._transport.interrupt = self._stop_event
+        # Every command write passes here: never after close() or a stop request began.
+        self._gate = CommandGate(self._stop_event)
         self._connected = False
+        # What the last close() found: True when nothing it sent can still run.
+        self._closed_safely: bool | None = None
         #: The last command sent; while it is not settled, close() withdraws or stops it.
         self._last_motion: Motion | None = None
         self._log = _log.bind(robot=name)
@@ -592,7 +656,7 @@ class Robot:
         self._shared: FleetMember | None = None
         if fleet is not None and loop_link is not None:
             # The polls of this robot's waits run on the fleet's loop.
-            self._shared = fleet_driver(fleet, self, self._channel, loop_link)
+            self._shared = fleet_driver(fleet, self, self._channel, loop_link, self._gate)
             self._follower.shared_driver = self._shared.follow
         self.gripper: Gripper = self._make_gripper(
             gripper,
@@ -723,19 +787,59 @@ class Robot:
         )
         return self
 
-    def close(self) -> None:
+    def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
 
-        Safe to call more than once, and from another thread: waits in progress end with
-        :class:`StopRequestedError`.
+        Safe to call more than once, and from any thread. From the moment it is called,
+        no command is written any more; a command write already in flight on another
+        thread finishes first and is then withdrawn or stopped like any other, whichever
+        thread wrote it. Waits in progress end with :class:`StopRequestedError`. In the
+        main thread, Ctrl-C is held back until the clean-up is done.
+
+        Args:
+            timeout_s: a bound on the clean-up (waiting for a write in flight or another
+                thread's withdraw, and the withdraw's or stop's retries); None: the
+                retry policy's own bounds.
+
+        Returns:
+            True when nothing this robot sent can still run; False when a withdraw or
+            stop could not be confirmed (logged as ``robot.close_unconfirmed``).
+
+        Raises:
+            ConfigError: ``timeout_s`` is not a finite number > 0.
         """
-        self.interrupt()
-        atexit.unregister(self._at_exit)
-        motion = self._last_motion
-        if motion is not None and self._transport.state is not ConnectionState.CLOSED:
-            self._follower.abandon(motion, StopRequestedError("the robot connection is closing"))
-        self.gripper.disconnect()
-        self._transport.close()
+        if timeout_s is not None:
+            require_positive("timeout_s", timeout_s)
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        with deferred():
+            self._gate.close()
+            if self._shared is not None:
+                wake_waits(self._shared)  # a wait polled by the fleet ends now
+            if self._closed_safely is None or self._transport.state is not ConnectionState.CLOSED:
+                self._closed_safely = self._give_up_outstanding(deadline)
+                self.gripper.disconnect()
+                self._transport.close()
+            # Only now: until the clean-up is over, the exit hook may still have it to do.
+            atexit.unregister(self._at_exit)
+            safely = self._closed_safely
+        if not safely:
+            self._log.error("robot.close_unconfirmed")
+        return safely
+
+    def _give_up_outstanding(self, deadline: float | None) -> bool:
+        """For :meth:`close`: withdraw or stop the last command written, if not settled."""
+        if self._transport.state is ConnectionState.CLOSED:
+            return True  # closed by someone else: nothing can be written any more
+        if deadline is not None and isinstance(self._transport, BlockTransport):
+            self._transport.bound_retries(deadline)
+        if not self._gate.drain(deadline):
+            return False  # a command write still in flight at the deadline
+        motion = self._last_motion  # after drain(): the last command that can ever be written
+        if motion is None:
+            return True
+        return self._follower.abandon(
+            motion, StopRequestedError("the robot connection is closing"), deadline=deadline
+        )
 
     def _at_exit(self) -> None:
         # The interpreter is exiting with this robot still open: nothing may stay armed.
@@ -935,9 +1039,12 @@ class Robot:
         motion = Motion(
             self._follower, ticket, start=start, expected_s=expected, timeout_s=timeout_s
         )
-        self._last_motion = motion
+
+        def register() -> None:
+            self._last_motion = motion  # under the gate's lock, before the write
+
         with self._follower.following(motion):
-            self._send(ticket)
+            self._send(ticket, register)
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
             self._log.info(
                 "robot.command_sent",
@@ -972,27 +1079,37 @@ class Robot:
         self._follower.stop()
 
     def clear_stop_request(self) -> None:
-        """Allow waits again after :meth:`interrupt`."""
-        self._stop_event.clear()
+        """Allow waits and commands again after :meth:`interrupt` (not after :meth:`close`)."""
+        if not self._gate.closed:
+            self._stop_event.clear()
 
     def interrupt(self) -> None:
-        """Make running waits give up at their next poll (for Ctrl-C handlers, other threads)."""
+        """Make running waits give up at their next poll (for Ctrl-C handlers, other threads).
+
+        Until :meth:`clear_stop_request`, no new command is written either: a move or
+        gripper command started meanwhile raises :class:`StopRequestedError` unsent.
+        """
         self._stop_event.set()
         if self._shared is not None:
             wake_waits(self._shared)  # a wait polled by the fleet ends now
 
     # -- internals --------------------------------------------------------
 
-    def _send(self, ticket: Ticket) -> None:
+    def _send(self, ticket: Ticket, register: Callable[[], None]) -> None:
         """Write a command once; after a failed write, find out whether it landed.
+
+        Each write passes the gate: refused (:class:`StopRequestedError`, nothing
+        written) once :meth:`close` or a stop request began; ``register`` records the
+        command as outstanding under the same lock, before its first byte is sent.
 
         A command is written again only where the protocol makes a duplicate harmless
         (a sequence number the program takes at most once). On a clear-on-accept profile
         the master watches for the late write for ``timeouts.in_flight_s`` and carries on
         if it lands; otherwise the command is withdrawn and the error says so.
         """
+        send = functools.partial(self._channel.send, ticket)
         try:
-            self._channel.send(ticket)
+            self._gate.write(register, send)
             return
         except (ConnectionLostError, ResponseTimeoutError) as exc:
             self._log.warning(
@@ -1011,7 +1128,7 @@ class Robot:
                 reason="same sequence number: the program takes it at most once",
             )
             try:
-                self._channel.send(ticket)
+                self._gate.write(_nothing, send)
                 return
             except (ConnectionLostError, ResponseTimeoutError) as exc:
                 failure = exc
@@ -1032,6 +1149,10 @@ class Robot:
             f"the {ticket.command.kind.value} command write got no answer and did not show up in"
             " the robot's registers; it was not written again and has been withdrawn"
         ) from failure
+
+
+def _nothing() -> None:
+    """A command already registered (a resend of the same ticket)."""
 
 
 def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:

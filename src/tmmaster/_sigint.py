@@ -67,3 +67,54 @@ def handled_by_main() -> None:
 
 
 _install()
+
+
+class deferred:  # noqa: N801 - used as a context manager, like contextlib's lower-case ones
+    """Hold Ctrl-C back for the length of a critical section, then deliver it.
+
+    A withdraw or stop that a second Ctrl-C cuts short leaves a command armed. In the
+    main thread (the only one that receives SIGINT), the handler is replaced by one that
+    only records the signal; on exit the previous handler is restored and, if a signal
+    came meanwhile, called once, so the interrupt still happens, just after the clean-up.
+    Elsewhere (other threads, a handler Python did not install) it does nothing.
+    Re-entrant: a nested section leaves the outer one's recorder in place.
+    """
+
+    __slots__ = ("_pending", "_previous")
+
+    def __init__(self) -> None:
+        self._previous: signal.Handlers | object | None = None
+        self._pending = False
+
+    def __enter__(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        try:
+            previous = signal.getsignal(signal.SIGINT)
+        except ValueError:  # not the main interpreter
+            return
+        if previous is None or previous is signal.SIG_IGN or getattr(previous, "deferring", False):
+            return
+
+        def record(signum: int, frame: FrameType | None) -> None:
+            _ = signum, frame
+            self._pending = True
+
+        record.deferring = True  # type: ignore[attr-defined]
+        try:
+            signal.signal(signal.SIGINT, record)
+        except ValueError:
+            return
+        self._previous = previous
+
+    def __exit__(self, *exc_info: object) -> None:
+        previous, self._previous = self._previous, None
+        if previous is None:
+            return
+        signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
+        if self._pending:
+            self._pending = False
+            if previous is signal.SIG_DFL:
+                signal.raise_signal(signal.SIGINT)
+            elif callable(previous):
+                previous(signal.SIGINT, None)

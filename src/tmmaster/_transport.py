@@ -50,6 +50,7 @@ from ._exceptions import (
     ConnectionLostError,
     ModbusExceptionError,
     ResponseTimeoutError,
+    TransportClosedError,
     TransportError,
     ValueOutOfRangeError,
 )
@@ -372,6 +373,8 @@ class BlockTransport(ABC):
         self.stats = TransportStats()
         self._state = ConnectionState.NEW
         self._lock = threading.RLock()
+        # Set by bound_retries(): no retry past this time (a clean-up under a budget).
+        self._retry_deadline: float | None = None
         # Read plans by the identity of the fields asked for: a status poll reads the same
         # field objects every time, so its plan is computed once. The plan holds the
         # fields, so their ids cannot be reused while the entry lives.
@@ -441,7 +444,7 @@ class BlockTransport(ABC):
 
     def _refuse_if_closed(self) -> None:
         if self._state is ConnectionState.CLOSED:
-            raise ConnectError(f"{self.name}: transport is closed")
+            raise TransportClosedError(f"{self.name}: transport is closed")
 
     def _connect_once(self) -> None:
         if self._link_open():
@@ -498,10 +501,20 @@ class BlockTransport(ABC):
         # task): the request's answer may still come on this stream.
         self._drop()
 
+    def bound_retries(self, deadline: float) -> None:
+        """From now on, retry no request past ``deadline`` (``time.monotonic()``).
+
+        For a clean-up under a time budget (``Robot.close(timeout_s=...)``): the
+        withdraw or stop still gets its first attempt, and its retries end in time.
+        """
+        self._retry_deadline = deadline
+
     def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
         with self._lock:
             self._refuse_if_closed()
             policy = self.retry if retry else NO_RETRY
+            if self._retry_deadline is not None and retry:
+                policy = policy.within(self._retry_deadline - time.monotonic())
             return policy.call(
                 what,
                 fn,
