@@ -38,7 +38,7 @@ from collections.abc import Awaitable, Callable, Coroutine
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Self
+from typing import Any, Literal, Protocol, Self
 
 from ._channels import CommandChannel, channel_for
 from ._codec import Value
@@ -54,10 +54,14 @@ from ._logging import get_logger
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._status import RobotStatus
-from ._transport import AsyncLink, BlockTransport, ConnectionState, ReadPlan, describe_read
-
-if TYPE_CHECKING:
-    from ._robot import Robot
+from ._transport import (
+    AsyncLink,
+    BlockTransport,
+    ConnectionState,
+    ReadPlan,
+    Transport,
+    describe_read,
+)
 
 _log = get_logger("tmmaster.monitor")
 
@@ -463,6 +467,18 @@ class _SharedWatched(StatusRecord):
             lock.release()
 
 
+class _CommandedRobot(Protocol):
+    """What :meth:`StatusMonitor.add_robot` uses of a :class:`~tmmaster.Robot`.
+
+    Its name, its link and its command channel: described here, not imported, because
+    ``_robot.py`` depends on this module (through the Fleet) and not the other way.
+    """
+
+    name: str
+    _transport: Transport
+    _channel: CommandChannel
+
+
 class StatusMonitor:
     """Watch the status of many robots from one thread: read-only, for dashboards and supervision.
 
@@ -589,7 +605,7 @@ class StatusMonitor:
             backoff_max_s=self.backoff_max_s,
         )
 
-    def add_robot(self, robot: Robot, name: str | None = None) -> str:
+    def add_robot(self, robot: _CommandedRobot, name: str | None = None) -> str:
         """Watch ``robot`` over its own link (no second connection), before :meth:`start`.
 
         Each poll runs in a worker thread: it takes the robot link's lock only when it is
@@ -609,19 +625,18 @@ class StatusMonitor:
             transport cannot be shared (one of your own not derived from
             ``BlockTransport``).
         """
-        # Imported here: _robot.py imports this module (through _fleet.py).
-        from ._fleet import LoopTransport
-        from ._robot import Robot
-
-        if not isinstance(robot, Robot):
+        transport = getattr(robot, "_transport", None)
+        channel = getattr(robot, "_channel", None)
+        if transport is None or not isinstance(channel, CommandChannel):
             raise ConfigError(f"robot must be a tmmaster.Robot, got {robot!r}")
         name = robot.name if name is None else name
         self._check_name(name)
-        transport = robot._transport
         for known, watched in self._robots.items():
             if isinstance(watched, _SharedWatched) and watched.transport is transport:
                 raise ConfigError(f"that robot is already watched by this monitor as {known!r}")
-        if isinstance(transport, LoopTransport):
+        # A Fleet's robot: its link lives on the fleet's loop, which reads it there
+        # (recognised by that read, as _fleet.py depends on this module, not the reverse).
+        if callable(getattr(transport, "read_on_loop", None)):
             raise ConfigError(
                 f"{robot.name!r} is a Fleet's robot: the Fleet watches it over its link;"
                 " make the Fleet with watch_hz and read Fleet.latest(robot)"
@@ -633,7 +648,7 @@ class StatusMonitor:
             )
         if transport.state is ConnectionState.CLOSED:
             raise ConfigError(f"{robot.name!r} is closed: a StatusMonitor never reopens it")
-        self._robots[name] = _SharedWatched(name, transport, robot._channel)
+        self._robots[name] = _SharedWatched(name, transport, channel)
         return name
 
     # -- reading ----------------------------------------------------------------------
