@@ -511,9 +511,11 @@ def test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_
         # takes it at its next tick): the last one, which close() then gave up (stopped,
         # unless it had finished already).
         motion = robot.last_motion
-        assert motion is not None and motion.target is not None
+        assert motion is not None
+        assert motion.target is not None
         assert len(late) == 1, f"motions {[m.number for m in late]} started after close()"
-        assert late[0].target is not None and late[0].target.is_close(motion.target)
+        assert late[0].target is not None
+        assert late[0].target.is_close(motion.target)
         assert motion.ticket.sent_at < called
         assert motion.stop_delivered is True or motion.reported_finished
     assert all(robot.state is tmmaster.ConnectionState.CLOSED for robot in robots)
@@ -524,7 +526,7 @@ def test_a_fleet_refuses_what_it_cannot_serve(tm_simulator_factory: SimFactory) 
         Fleet(watch_hz=1e6)
     with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
         Fleet(watch_hz=float("nan"))
-    with pytest.raises(tmmaster.ConfigError, match="fleet must be a tmmaster.Fleet"):
+    with pytest.raises(tmmaster.ConfigError, match=r"fleet must be a tmmaster\.Fleet"):
         Robot("127.0.0.1", 1, profile="article", fleet=object())  # type: ignore[arg-type]
     with Fleet(watch_hz=20) as fleet:
         with pytest.raises(tmmaster.ConfigError, match="not one"):

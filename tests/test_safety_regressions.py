@@ -491,7 +491,8 @@ def test_close_from_another_thread_never_lets_the_next_command_run(
     closer.start()
     mover.join(10)
     closer.join(10)
-    assert not mover.is_alive() and not closer.is_alive()
+    assert not mover.is_alive()
+    assert not closer.is_alive()
     let_run(sim, 20)  # 8 simulated s: a command left armed would run now
     started_after_close = [m for m in sim.motion_log() if m.wall_time > closed_at]
     assert started_after_close == [], f"{started_after_close} started after close()"

@@ -5,9 +5,10 @@ against the in-process simulator (both handshakes), with random rules: moves to 
 targets, network faults on the next command write (held and delivered late, delayed
 answer, dropped request or answer, connection closed after the write, a short outage),
 an operator's e-stop, reset and Play, a stop request in the middle of a move, and closing
-and reopening the robot. After every rule, and after letting simulated time run on at
-the end (so a stale armed command would have had its chance), the invariant of
-docs/safety.md is checked on the simulator's own motion log.
+and reopening the robot, closing it from another thread while it commands, and a
+second Ctrl-C in the middle of a withdraw or stop. After every rule, and after letting
+simulated time run on at the end (so a stale armed command would have had its chance),
+the invariant of docs/safety.md is checked on the simulator's own motion log.
 
 CI runs ``STATEFUL_EXAMPLES`` (5) examples of up to 8 steps per profile; set the
 environment variable ``TMMASTER_STATEFUL_EXAMPLES`` for a longer hunt.
@@ -15,7 +16,9 @@ environment variable ``TMMASTER_STATEFUL_EXAMPLES`` for a longer hunt.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import threading
 import time
 
@@ -187,6 +190,68 @@ class CommandSafety(RuleBasedStateMachine):
         self.sim.clear_error()
         self.sim.press_play()
         time.sleep(0.01)
+
+    @precondition(lambda self: self.robot is not None)
+    @rule(after_s=st.floats(0.0, 0.08), speed=st.integers(40, 100))
+    def close_from_another_thread_while_moving(self, after_s: float, speed: int) -> None:
+        # The robot's thread keeps commanding; close() comes from another thread at any
+        # moment (between commands, mid-write, mid-wait). Then a fresh robot.
+        robot = self.robot
+        assert robot is not None
+        closer = threading.Timer(after_s, robot.close)
+        closer.start()
+        try:
+            for _ in range(3):
+                self._move(speed, "ptp")
+        finally:
+            closer.join()
+            self.robot = None
+        self._open()
+
+    @precondition(lambda self: self.robot is not None)
+    @rule(
+        after_s=st.floats(0.0, 0.06),
+        speed=st.integers(40, 100),
+        cut=st.sampled_from(["withdraw", "stop"]),
+    )
+    def second_interrupt_during_the_clean_up(self, after_s: float, speed: int, cut: str) -> None:
+        # A stop request ends the move; a second Ctrl-C lands in the withdraw or the stop
+        # (the main thread only receives SIGINT: elsewhere, a KeyboardInterrupt raised
+        # there, which is what a handler raising it does). Then close, as the CLI does.
+        robot = self.robot
+        assert robot is not None
+        channel = robot._channel
+        real = getattr(channel, cut)
+        main = threading.current_thread() is threading.main_thread()
+
+        def second_ctrl_c(*args: object, **kwargs: object) -> object:
+            setattr(channel, cut, real)  # once
+            if main:
+                signal.raise_signal(signal.SIGINT)
+            else:
+                raise KeyboardInterrupt
+            return real(*args, **kwargs)
+
+        setattr(channel, cut, second_ctrl_c)
+        timer = threading.Timer(after_s, robot.interrupt)
+        timer.start()
+        command = Issued(self._target(), time.monotonic())
+        self.issued.append(command)
+        try:
+            robot.move_to(command.target, speed=speed)
+        except (TMMasterError, KeyboardInterrupt) as exc:
+            command.outcome = type(exc).__name__
+        else:
+            command.outcome = "done"
+        finally:
+            command.ended_at = time.monotonic()
+            timer.join()
+            setattr(channel, cut, real)
+            # (A held-back Ctrl-C of a clean-up that close() did itself is raised here.)
+            with contextlib.suppress(KeyboardInterrupt):
+                robot.close()
+            self.robot = None
+        self._open()
 
     @rule()
     def close_and_reopen(self) -> None:
