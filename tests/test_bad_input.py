@@ -15,10 +15,11 @@ from typing import Any
 
 import pytest
 
-from tmmaster import _cli
+from tmmaster import ConfigError, _cli
 from tmmaster.pickplace import __main__ as pickplace_main
 from tmmaster.sim import __main__ as sim_main
 from tmmaster.sim._simulator import Simulator
+from tmmaster.sim._world import DEFAULT_PART_POSE, TableObject
 
 BINARY = b"\x00\x01\x02\xff\xfe\x80PK\x03\x04"
 NOT_UTF8 = b'name = "caf\xe9"\n'
@@ -396,6 +397,9 @@ SIM_CASES: list[Case] = [
     ("sim-fault-nan", {}, ["--fault", "slow_responses:delay_s=nan"], "delay_s"),
     ("sim-fault-bad-key", {}, ["--fault", "slow_responses:nope=1"], "nope"),
     ("sim-unknown-option", {}, ["--speed", "5"], "--speed"),
+    ("sim-parts-negative", {}, ["--parts", "-1"], "--parts"),
+    # Bounded: a million parts settle in seconds; far more would only eat memory.
+    ("sim-parts-too-many", {}, ["--parts", "1000001"], "--parts"),
 ]
 
 
@@ -416,3 +420,35 @@ def test_sim_bad_input_is_exit_2_with_one_line(
     code = _cli.main(["sim", *args]) if console else sim_main.main(args)
     assert code == 2
     assert named in _one_line(capsys)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        pytest.param({"time_scale": float("nan")}, "time_scale", id="time-scale-nan"),
+        pytest.param({"time_scale": float("inf")}, "time_scale", id="time-scale-inf"),
+        pytest.param({"time_scale": 0.0}, "time_scale", id="time-scale-zero"),
+        pytest.param({"time_scale": -1.0}, "time_scale", id="time-scale-negative"),
+        pytest.param({"tick_hz": float("nan")}, "tick_hz", id="tick-hz-nan"),
+        pytest.param({"port": 70000}, "port", id="port-70000"),
+        pytest.param({"gripper_port": -1}, "gripper_port", id="gripper-port-negative"),
+        pytest.param({"init_time_s": float("nan")}, "init_time_s", id="init-time-nan"),
+        pytest.param({"initial_seq": 40000}, "initial_seq", id="initial-seq-past-seq-max"),
+        pytest.param({"initial_seq": -1}, "initial_seq", id="initial-seq-negative"),
+        pytest.param(
+            {"profile": "article", "initial_seq": 3}, "initial_seq", id="initial-seq-no-seq"
+        ),
+        pytest.param(
+            {"objects": [TableObject(name="p", pose=DEFAULT_PART_POSE)] * 2},
+            "duplicate",
+            id="objects-duplicate-name",
+        ),
+    ],
+)
+def test_simulator_bad_arguments_raise_config_error_naming_them(
+    kwargs: dict[str, Any], named: str
+) -> None:
+    # A TMMasterError (ConfigError, still a ValueError), not a bare ValueError: callers
+    # catch the library's errors at one root.
+    with pytest.raises(ConfigError, match=named):
+        Simulator(**kwargs)

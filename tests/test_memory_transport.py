@@ -92,3 +92,21 @@ def test_the_onrobot_gripper_serves_one_memory_link_at_a_time() -> None:
         assert first.read_block(Table.HOLDING, 259, 1)
         with pytest.raises(ConnectionLostError):
             second.read_block(Table.HOLDING, 259, 1)
+
+
+def test_a_second_running_simulator_of_one_name_is_refused_and_close_frees_it() -> None:
+    # Replacing the first one's registration would send its robots to the second.
+    with Simulator("article", listen=False, name="cell-a") as first:
+        second = Simulator("article", listen=False, name="cell-a")
+        with pytest.raises(tmmaster.ConfigError, match="sim://cell-a"):
+            second.start()
+        assert not second.running  # nothing started
+        second.close()  # frees nothing: the name still leads to the first one
+        with tmmaster.connect(first.url, profile="article", poll_interval_s=0.01) as robot:
+            robot.status()
+        assert first.request_log  # the robot talked to the first simulator
+    # Closed, the name is free for a new simulator.
+    with Simulator("article", listen=False, name="cell-a") as again:
+        assert again.url == "sim://cell-a"
+        with tmmaster.connect(again.url, profile="article", poll_interval_s=0.01) as robot:
+            robot.status()

@@ -1111,15 +1111,38 @@ _ENDPOINTS_LOCK = threading.Lock()
 
 
 def register_endpoint(url: str, factory: TransportFactory) -> None:
-    """Make ``url`` (e.g. ``sim://sim-1``) open transports through ``factory``."""
+    """Make ``url`` (e.g. ``sim://sim-1``) open transports through ``factory``.
+
+    Args:
+        url: the in-process address, ``sim://<name>``.
+        factory: opens a transport to the endpoint.
+
+    Raises:
+        ConfigError: ``url`` already belongs to another endpoint of this process (two
+            simulators of one name): replacing it would silently send the first one's
+            robots to the second.
+    """
     with _ENDPOINTS_LOCK:
+        current = _ENDPOINTS.get(url)
+        if current is not None and current != factory:
+            raise ConfigError(
+                f"{url} is already taken by a running simulator in this process:"
+                " give each simulator its own name, or close the first one"
+            )
         _ENDPOINTS[url] = factory
 
 
-def unregister_endpoint(url: str) -> None:
-    """Forget ``url`` (safe when unknown)."""
+def unregister_endpoint(url: str, factory: TransportFactory | None = None) -> None:
+    """Forget ``url`` (safe when unknown).
+
+    Args:
+        url: the in-process address to forget.
+        factory: when given, forget ``url`` only while it still opens through this
+            factory (one refused for a taken name must not free the other's).
+    """
     with _ENDPOINTS_LOCK:
-        _ENDPOINTS.pop(url, None)
+        if factory is None or _ENDPOINTS.get(url) == factory:
+            _ENDPOINTS.pop(url, None)
 
 
 def open_transport(

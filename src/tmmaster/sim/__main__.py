@@ -30,6 +30,9 @@ from ._server import RequestRecord, json_line
 from ._simulator import Simulator, simulator_summary
 from ._world import DEFAULT_PART_POSE, TableObject
 
+#: Most parts ``--parts`` puts on the table: as many as ``--cycles`` of pick & place runs.
+MAX_PARTS = 1_000_000
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the simulator's options to ``parser`` (used by ``tmmaster sim``); return it."""
@@ -121,7 +124,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default=1,
         metavar="N",
         help="parts waiting at the pick position, like a feeder: the next one is there"
-        " after one is taken (default: 1; 0 for an empty table)",
+        f" after one is taken (default: 1; 0 for an empty table; at most {MAX_PARTS:,})",
     )
     add_logging_arguments(
         parser,
@@ -155,8 +158,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _parts(count: int) -> list[TableObject]:
-    if count < 0:
-        raise ValueError(f"--parts must be >= 0, got {count}")
+    if not 0 <= count <= MAX_PARTS:
+        raise ConfigError(f"--parts must be 0..{MAX_PARTS:,}, got {count}")
     return [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(1, count + 1)]
 
 

@@ -30,7 +30,7 @@ from enum import IntEnum
 from typing import ClassVar, Literal
 
 from .._codec import allowed_range, encode
-from .._exceptions import UnreachablePoseError, ValueOutOfRangeError
+from .._exceptions import ConfigError, UnreachablePoseError, ValueOutOfRangeError
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile
 from .._robot_models import RobotModel
@@ -145,10 +145,15 @@ class RobotController(SimDevice[RobotProfile]):
         initial_seq: int = 0,
     ) -> None:
         if accel_time_s is not None and accel_time_s < 0:
-            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+            raise ConfigError(f"accel_time_s must be >= 0, got {accel_time_s}")
         if initial_seq and not self._takes_initial_seq(profile, initial_seq):
-            raise ValueError(
-                f"initial_seq must be 0..{profile.seq_max} with a sequence profile,"
+            if not self._takes_initial_seq(profile, 1):  # no sequence numbers at all
+                raise ConfigError(
+                    f"initial_seq must be 0: profile {profile.name} has no sequence numbers,"
+                    f" got {initial_seq}"
+                )
+            raise ConfigError(
+                f"initial_seq must be 0..{profile.seq_max} with profile {profile.name},"
                 f" got {initial_seq}"
             )
         # Ready before the base adds the given faults (through _add_fault).

@@ -77,12 +77,12 @@ class Simulator:
         tool: Pose | None = None,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
-            raise ValueError(f"time_scale must be > 0, got {time_scale}")
+            raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
         if not (math.isfinite(tick_hz) and 0 < tick_hz <= 1000):
-            raise ValueError(f"tick_hz must be in (0, 1000], got {tick_hz}")
+            raise ConfigError(f"tick_hz must be in (0, 1000], got {tick_hz}")
         for option, value in (("port", port), ("gripper_port", gripper_port)):
             if not 0 <= value <= 65535:
-                raise ValueError(f"{option} must be 0..65535, got {value}")
+                raise ConfigError(f"{option} must be 0..65535, got {value}")
         self._profile = robot_profile(profile)
         self._model = robot_model(model)
         self._time_scale = float(time_scale)
@@ -92,7 +92,7 @@ class Simulator:
         self.listen = listen
         self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
         if backend is not None and physics != "kinematic":
-            raise ValueError("give either backend or physics, not both")
+            raise ConfigError("give either backend or physics, not both")
         if tool is not None and backend is not None:
             raise ConfigError("tool: give the tool offset to your own backend, not to Simulator")
         #: The TCP in the flange frame (TCP = flange x tool); None: the TCP is the flange.
@@ -220,11 +220,23 @@ class Simulator:
     # -- lifecycle ----------------------------------------------------------------------
 
     def start(self) -> Simulator:
-        """Start the event loop thread, the servers and the control tick; return self."""
+        """Start the event loop thread, the servers and the control tick; return self.
+
+        Returns:
+            This simulator, running.
+
+        Raises:
+            ConfigError: another running simulator of this process has the same
+                :attr:`url` (its name); nothing was started.
+            RuntimeError: the simulator was closed (make a new one).
+            OSError: a listening port could not be bound.
+        """
         if self._closed:
             raise RuntimeError("a closed Simulator cannot be restarted; make a new one")
         if self._thread is not None:
             return self
+        # First: a name another running simulator holds is refused before anything starts.
+        register_endpoint(self._url, self._open_memory_transport)
         loop = asyncio.new_event_loop()
         self._loop = loop
         self._thread = threading.Thread(target=self._run_loop, name="tmmaster-sim", daemon=True)
@@ -234,15 +246,18 @@ class Simulator:
         except BaseException:
             self.close()
             raise
-        register_endpoint(self._url, self._open_memory_transport)
         return self
 
     def close(self) -> None:
-        """Stop servers, tick and thread; safe to call more than once."""
+        """Stop servers, tick and thread; safe to call more than once.
+
+        Its :attr:`url` is free again afterwards: a new simulator may take the name.
+        """
         if self._closed:
             return
         self._closed = True
-        unregister_endpoint(self._url)
+        # Only our own registration: a simulator refused for a taken name frees nothing.
+        unregister_endpoint(self._url, self._open_memory_transport)
         loop, thread = self._loop, self._thread
         if loop is None or thread is None:
             return
@@ -389,7 +404,7 @@ class Simulator:
         """Engineering value of a field of the robot's (or ``device="gripper"``) register map."""
         bank = self._bank if device == "robot" else self._gripper_bank
         if bank is None:
-            raise ValueError(f"no {device} register bank in this simulator")
+            raise ConfigError(f"no {device} register bank in this simulator")
         return self._call(lambda: bank.get(name))
 
     def inject(self, fault: Fault | str) -> None:

@@ -23,6 +23,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
 from .. import _kinematics as kin
+from .._error_root import ConfigError
 from .._pose import Pose
 from ._backend import ObjectState
 
@@ -230,14 +231,14 @@ class World:
         table_top_z_mm: float = DEFAULT_TABLE_TOP_Z_MM,
     ) -> None:
         if not math.isfinite(table_top_z_mm):
-            raise ValueError(f"table_top_z_mm must be finite, got {table_top_z_mm}")
+            raise ConfigError(f"table_top_z_mm must be finite, got {table_top_z_mm}")
         self.table_top_z_mm = float(table_top_z_mm)
         items = [TableObject(name="part", pose=DEFAULT_PART_POSE)] if objects is None else objects
         self._objects: dict[str, TableObject] = {}
         self._resting_on: dict[str, str | None] = {}
         for item in items:
             if item.name in self._objects:
-                raise ValueError(f"duplicate object name {item.name!r}")
+                raise ConfigError(f"objects: duplicate object name {item.name!r}")
             self._objects[item.name] = item
         self._held: str | None = None
         self._order = {name: k for k, name in enumerate(self._objects)}
