@@ -564,3 +564,57 @@ def test_a_report_file_has_ordinary_permissions(tmp_path: Path) -> None:
     finally:
         os.umask(previous)
     assert (tmp_path / "r.json").stat().st_mode & 0o777 == 0o644
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_three_ctrl_c_on_a_slow_link_leave_nothing_armed_after_exit(
+    tm_simulator_factory: Callable[..., Simulator], profile: str
+) -> None:
+    # A robot in its own process, its commands taken late, every answer 40 ms late: the
+    # first Ctrl-C starts the withdraw, the second and third land in the middle of it and
+    # of the close. Whatever the master printed, nothing may start once it has exited.
+    from fault_proxy import FaultProxy, Rule
+
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=8"])  # 0.2 s wall
+    with FaultProxy(sim.port) as proxy:
+        proxy.add(Rule("delay", delay_s=0.04, times=1_000_000))
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "tmmaster.pickplace",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(proxy.port),
+                "--profile",
+                profile,
+                "--log-json",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=_env(),
+        )
+        try:
+            assert proc.stderr is not None
+            deadline = time.monotonic() + 30
+            for line in proc.stderr:
+                if '"robot.command_sent"' in line:
+                    break
+                assert time.monotonic() < deadline
+            for _ in range(3):
+                proc.send_signal(signal.SIGINT)
+                time.sleep(0.03)
+            _, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        exited = time.monotonic()
+        assert proc.returncode == EXIT_INTERRUPTED, err
+        assert "Traceback" not in err
+        start = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= start + 40, timeout=5)  # 16 simulated s
+    late = [(m.number, m.kind) for m in sim.motion_log() if m.wall_time > exited]
+    assert late == [], f"{late} started after the master exited: {last_stderr_line(err)}"
