@@ -7,7 +7,10 @@ not what the master believes. The numbers are the issue's.
 from __future__ import annotations
 
 import math
+import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -542,3 +545,65 @@ def test_a_second_ctrl_c_during_the_clean_up_never_leaves_a_command_armed(
         assert sim.motion_log() == ()
     else:
         assert sim.tcp_pose().distance_to(A) > 1.0, "the arm was not stopped short of A"
+
+
+_EXIT_WHILE_COMMANDING = """
+import sys, threading, time
+from tmmaster import Pose, Robot
+robot = Robot("127.0.0.1", int(sys.argv[1]), profile=sys.argv[2], gripper=None,
+              poll_interval_s=0.01)
+robot.connect()
+robot.wait_until_ready(timeout_s=5)
+robot.move_to(Pose(300, -200, 150, 180, 0, 90), speed=80)
+link_lock = robot._transport._lock
+prepared = threading.Event()
+real_prepare, real_send = robot._channel.prepare, robot._channel.send
+def prepare_then_hold(*args, **kwargs):
+    ticket = real_prepare(*args, **kwargs)
+    link_lock.acquire()  # a request in flight when the interpreter exits
+    prepared.set()
+    time.sleep(0.3)
+    return ticket
+def send_then_pause(ticket):
+    real_send(ticket)
+    while link_lock._is_owned():
+        link_lock.release()
+    time.sleep(0.3)
+robot._channel.prepare, robot._channel.send = prepare_then_hold, send_then_pause
+def next_move():
+    try:
+        robot.move_to(Pose(300, -200, 180, 180, 0, 90), speed=80)
+    finally:
+        while link_lock._is_owned():
+            link_lock.release()
+threading.Thread(target=next_move, daemon=True).start()
+prepared.wait(5)
+print("exiting", flush=True)
+# The script ends with the robot open: the exit hook closes it.
+"""
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_interpreter_exit_while_a_thread_commands_leaves_nothing_armed(
+    tm_simulator_factory: SimFactory, profile: str, tmp_path: Path
+) -> None:
+    sim = tm_simulator_factory(profile)
+    script = tmp_path / "exit_while_commanding.py"
+    script.write_text(_EXIT_WHILE_COMMANDING)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1] / "src")
+    proc = subprocess.run(
+        [sys.executable, str(script), str(sim.port), profile],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
+    exited = time.monotonic()
+    assert proc.returncode == 0, proc.stderr
+    assert "exiting" in proc.stdout
+    let_run(sim, 20)  # 8 simulated s: a command left armed would run now
+    assert len(sim.motion_log()) >= 1
+    late = [m.number for m in sim.motion_log()[1:] if m.wall_time > exited]
+    assert late == [], f"motions {late} started after the interpreter exited"
+    assert len(sim.motion_log()) == 1, "the second command ran"
