@@ -133,6 +133,7 @@ def run(
     ]
     reports = [RobotReport(r.name) for r in robots]
     threads: list[threading.Thread] = []
+    interrupted = False
     monitor = StatusMonitor(rate_hz=watch_hz) if watch_hz > 0 and shared is None else None
     try:
         connected: list[tuple[Robot, RobotReport]] = []
@@ -164,11 +165,11 @@ def run(
             while thread.is_alive():
                 thread.join(0.5)
     except KeyboardInterrupt:
+        interrupted = True
         for robot in robots:
             robot.interrupt()  # every move_to in progress gives its command up safely
         for thread in threads:
             thread.join(10.0)
-        raise
     finally:
         gc.unfreeze()
         if monitor is not None:
@@ -179,11 +180,22 @@ def run(
         if shared is not None and shared.watch_hz is not None:
             for robot, report in zip(robots, reports, strict=True):
                 report.watched = shared.latest(robot)
-        for robot in robots:
-            robot.close()
+        # close() says whether it could confirm that nothing the robot sent can still run.
+        unconfirmed = [robot.name for robot in robots if not robot.close()]
         if shared is not None:
-            shared.close()
+            unconfirmed += [name for name in shared.close() if name not in unconfirmed]
+    if interrupted:
+        raise Interrupted(unconfirmed)
     return reports
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C ended a run once every robot was closed: which ones could not confirm it."""
+
+    def __init__(self, unconfirmed: Sequence[str]) -> None:
+        super().__init__("interrupted")
+        #: The robots whose withdraw or stop could not be confirmed (empty: none).
+        self.unconfirmed = tuple(unconfirmed)
 
 
 def report_to_json(report: RobotReport) -> dict[str, Any]:
@@ -378,8 +390,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                 processes=args.processes,
                 fleet=args.fleet,
             )
+    except Interrupted as exc:
+        if exc.unconfirmed:
+            names = ", ".join(exc.unconfirmed)
+            print(f"interrupted: could NOT confirm that {names} gave up: check", file=sys.stderr)
+        else:
+            print("interrupted: every robot gave its command up", file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
-        print("interrupted: every robot gave its command up", file=sys.stderr)
+        # Again before every robot was closed, or in --processes' parent (each child
+        # reports its own robots): a robot still open gives up as the program exits.
+        print("interrupted: each robot still open gives its command up at exit", file=sys.stderr)
         return 130
     if args.json:
         for report in reports:
