@@ -1,0 +1,276 @@
+"""The robot-side program of a sequence-handshake profile, as a TMflow Script Project.
+
+One artifact: the text :func:`robot_program` returns is what a user loads into TMflow
+(``tmmaster robot-program -o tmmaster.tms``) and what the simulator executes through
+:mod:`tmmaster.tmscript`. The template (``robot_program.tms``, beside this module) cites
+the TMscript 2.24 section of every construct it uses; this module only fills in the
+profile's addresses and codes, the tool and the gripper wiring, after checking that the
+profile is one the program can serve.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+from collections.abc import Sequence
+from dataclasses import dataclass
+from importlib import resources
+from string import Template
+
+from ._exceptions import ConfigError
+from ._pose import Pose
+from ._registers import TARGET_FIELDS, DataType, Handshake, RobotProfile, Table, WordOrder
+from ._version import version
+
+#: The feedback and command fields the program reads or writes, by name.
+_FEEDBACK = ("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "grasp_status")
+_WORDS = ("speed", "accel_time", "command", "seq")
+
+
+@dataclass(frozen=True)
+class GripperWiring:
+    """How the program drives the gripper: none, or an end-module output and input.
+
+    ``kind`` "io": end-module digital output ``output`` closes the gripper when high and
+    opens it when low, the program waits ``settle_ms``, then reads grip detected on
+    end-module digital input ``input`` (TMscript 2.24 §11.5 IO, p. 301). ``kind`` "none":
+    gripper commands are refused with ``gripper_failed``.
+    """
+
+    kind: str = "io"
+    output: int = 0
+    input: int = 0
+    settle_ms: int = 500
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("io", "none"):
+            raise ConfigError(f"gripper must be 'io' or 'none', got {self.kind!r}")
+        for name, value, high in (
+            ("output", self.output, 7),
+            ("input", self.input, 7),
+            ("settle_ms", self.settle_ms, 60_000),
+        ):
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
+                raise ConfigError(f"gripper {name} must be an integer 0..{high}, got {value!r}")
+
+
+_GRIP_IO = """// The gripper on the end module ([TS] 11.5 IO, p. 301): digital output DO$output
+// closes it when high and opens it when low; after $settle_ms ms ([TS] 5.5 Sleep, p. 159)
+// digital input DI$input tells whether a part is held. Edit this function for another
+// gripper; keep its last two writes (grasp_status, then Done()).
+void Grip()
+{
+    if (cmd == $cmd_close)
+    {
+        IO["EndModule"].DO[$output] = 1
+    }
+    else
+    {
+        IO["EndModule"].DO[$output] = 0
+    }
+    Sleep($settle_ms)
+    grasp = 0
+    if (cmd == $cmd_close)
+    {
+        grasp = IO["EndModule"].DI[$input]
+    }
+    modbus_write("TM", "fbGrasp", grasp)
+    Done()
+}"""
+
+_GRIP_NONE = """// No gripper: gripper commands are refused.
+void Grip()
+{
+    Finish($gripper_failed, $state_error)
+}"""
+
+
+def _format_number(value: float) -> str:
+    """A number as TMscript source: integers without a fraction, others shortest-exact."""
+    if not math.isfinite(value):
+        raise ConfigError(f"tool values must be finite, got {value!r}")
+    return str(int(value)) if float(value).is_integer() else repr(float(value))
+
+
+def check_program_profile(profile: RobotProfile) -> None:
+    """Refuse a profile the Script Project cannot serve (:class:`ConfigError` naming why).
+
+    Args:
+        profile: the robot profile the program is for.
+
+    Raises:
+        ConfigError: not a sequence-handshake profile, a field missing, the target not
+            six big-endian float32 registers followed by speed, accel, command and seq,
+            or a feedback field outside the holding registers.
+    """
+    if profile.handshake is not Handshake.SEQUENCE:
+        raise ConfigError(
+            f"profile {profile.name!r} uses the {profile.handshake.value} handshake: the robot"
+            " program implements the sequence handshake (the tmflow contract)"
+        )
+    missing = [name for name in (*TARGET_FIELDS, *_WORDS, *_FEEDBACK) if not profile.has(name)]
+    if missing:
+        raise ConfigError(f"profile {profile.name!r} lacks the fields {', '.join(missing)}")
+    first = profile.field(TARGET_FIELDS[0]).address
+    for index, name in enumerate(TARGET_FIELDS):
+        field = profile.field(name)
+        if (
+            field.table is not Table.HOLDING
+            or field.dtype is not DataType.FLOAT32
+            or field.word_order is not WordOrder.BIG
+            or field.address != first + 2 * index
+        ):
+            raise ConfigError(
+                f"profile {profile.name!r}: {name} must be a big-endian float32 holding"
+                f" register at {first + 2 * index} for the robot program"
+            )
+    for index, name in enumerate(_WORDS):
+        field = profile.field(name)
+        if field.table is not Table.HOLDING or field.address != first + 12 + index:
+            raise ConfigError(
+                f"profile {profile.name!r}: {name} must be the holding register at"
+                f" {first + 12 + index} for the robot program"
+            )
+    for name in _FEEDBACK:
+        if profile.field(name).table is not Table.HOLDING:
+            raise ConfigError(f"profile {profile.name!r}: {name} must be a holding register")
+
+
+def robot_program(
+    profile: RobotProfile,
+    *,
+    tool: Pose | None = None,
+    gripper: GripperWiring | None = None,
+    arguments: str = "",
+) -> str:
+    """The TMflow Script Project that implements ``profile``'s contract on the robot.
+
+    Args:
+        profile: a sequence-handshake robot profile (``tmflow`` or one extending it).
+        tool: the TCP in the flange frame the master plans with (mm, deg); None: the
+            flange itself.
+        gripper: how the program drives the gripper (end-module I/O by default).
+        arguments: the command line that made it, quoted in the program's header.
+
+    Returns:
+        The program's text (TMscript 2.24), ending with a newline.
+
+    Raises:
+        ConfigError: a profile the program cannot serve, or a bad tool or gripper.
+    """
+    check_program_profile(profile)
+    wiring = gripper if gripper is not None else GripperWiring()
+    tool_values = (0.0,) * 6 if tool is None else tool.as_list()
+    codes = {
+        "cmd_none": profile.field("command").code_of("none"),
+        "cmd_ptp": profile.field("command").code_of("ptp"),
+        "cmd_line": profile.field("command").code_of("line"),
+        "cmd_open": profile.field("command").code_of("gripper_open"),
+        "cmd_close": profile.field("command").code_of("gripper_close"),
+        "state_idle": profile.field("robot_state").code_of("idle"),
+        "state_busy": profile.field("robot_state").code_of("busy"),
+        "state_error": profile.field("robot_state").code_of("error"),
+        "result_ok": profile.field("result_code").code_of("ok"),
+        "unreachable": profile.field("result_code").code_of("unreachable"),
+        "invalid_command": profile.field("result_code").code_of("invalid_command"),
+        "motion_failed": profile.field("result_code").code_of("motion_failed"),
+        "gripper_failed": profile.field("result_code").code_of("gripper_failed"),
+        "cancelled": profile.field("result_code").code_of("cancelled"),
+    }
+    first = profile.field(TARGET_FIELDS[0]).address
+    addresses = {name: profile.field(name).address for name in (*_FEEDBACK, "command")}
+    grip = Template(_GRIP_IO if wiring.kind == "io" else _GRIP_NONE).substitute(
+        output=wiring.output, input=wiring.input, settle_ms=wiring.settle_ms, **codes
+    )
+    template = resources.files("tmmaster").joinpath("robot_program.tms").read_text("utf-8")
+    text = Template(template).substitute(
+        version=version(),
+        profile=profile.name,
+        arguments=arguments,
+        block_first=first,
+        block_last=first + 15,
+        block_count=16,
+        words_offset=24,
+        fb_first=min(addresses[name] for name in _FEEDBACK),
+        fb_last=max(addresses[name] for name in _FEEDBACK),
+        seq_max=profile.seq_max,
+        tool=", ".join(_format_number(v) for v in tool_values),
+        gripper=grip,
+        **addresses,
+        **codes,
+    )
+    return text if text.endswith("\n") else text + "\n"
+
+
+def _tool_argument(text: str) -> Pose:
+    """``--tool X,Y,Z,RX,RY,RZ`` as a Pose (argparse type; ValueError names the problem)."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) != 6:
+        raise ValueError(f"--tool needs six comma-separated numbers, got {text!r}")
+    values = [float(p) for p in parts]
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"--tool values must be finite, got {text!r}")
+    return Pose(*values)
+
+
+def _gripper_argument(text: str) -> GripperWiring:
+    """``--gripper none`` or ``io[:do=N,di=N,settle_ms=N]`` as a GripperWiring."""
+    kind, _, options = text.partition(":")
+    values: dict[str, int] = {}
+    for item in filter(None, (o.strip() for o in options.split(","))):
+        key, _, value = item.partition("=")
+        names = {"do": "output", "di": "input", "settle_ms": "settle_ms"}
+        if key not in names or not value.strip().isdigit():
+            raise ValueError(f"--gripper option {item!r}: expected do=N, di=N or settle_ms=N")
+        values[names[key]] = int(value)
+    try:
+        return GripperWiring(kind, **values)
+    except ConfigError as exc:
+        raise ValueError(str(exc)) from exc
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Mount ``tmmaster robot-program``'s options on ``parser``.
+
+    Args:
+        parser: the subcommand's parser.
+    """
+    parser.add_argument(
+        "--profile", default="tmflow", help="a sequence-handshake profile name or .toml file"
+    )
+    parser.add_argument(
+        "--tool",
+        type=_tool_argument,
+        metavar="X,Y,Z,RX,RY,RZ",
+        help="the TCP in the flange frame (mm, deg), as the master's Robot(tool=...)",
+    )
+    parser.add_argument(
+        "--gripper",
+        type=_gripper_argument,
+        default=GripperWiring(),
+        metavar="io[:do=N,di=N,settle_ms=N]|none",
+        help="end-module I/O gripper (default io:do=0,di=0,settle_ms=500) or none",
+    )
+    parser.add_argument("--output", "-o", metavar="FILE.tms", help="write to a file instead")
+
+
+def run(args: argparse.Namespace, argv: Sequence[str] = ()) -> str:
+    """The program for parsed ``args`` (the command line ``argv`` quoted in its header).
+
+    Args:
+        args: parsed by a parser that :func:`add_arguments` set up.
+        argv: the subcommand's own arguments, for the header.
+
+    Returns:
+        The program text.
+
+    Raises:
+        ConfigError: a profile the program cannot serve.
+    """
+    from ._profiles import robot_profile
+
+    quoted = "".join(f" {shlex.quote(a)}" for a in argv)
+    return robot_program(
+        robot_profile(args.profile), tool=args.tool, gripper=args.gripper, arguments=quoted
+    )
