@@ -452,3 +452,171 @@ def test_simulator_bad_arguments_raise_config_error_naming_them(
     # catch the library's errors at one root.
     with pytest.raises(ConfigError, match=named):
         Simulator(**kwargs)
+
+
+# -- tmmaster report show|plot: the report file is read bounded, strictly, and checked --
+
+
+def _valid_report(path: Path, **changes: Any) -> Path:
+    from tmmaster.pickplace._report import RunReport, write_report
+
+    data = RunReport(tmmaster_version="0.1.0", result="done", exit_code=0).model_dump(mode="json")
+    write_report(path, {**data, **changes})
+    return path
+
+
+def _report_file(kind: str, tmp_path: Path) -> Path:
+    """A file that is not a readable run report, of the given kind."""
+    import os
+
+    path = tmp_path / "run.json"
+    text = _valid_report(tmp_path / "good.json").read_text("utf-8")
+    if kind == "latin-1":
+        path.write_bytes(text.replace('"done"', '"caf\u00e9"').encode("latin-1"))
+    elif kind == "utf-16":
+        path.write_bytes(text.encode("utf-16"))
+    elif kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "directory":
+        path.mkdir()
+    elif kind == "device":
+        return Path("/dev/zero")
+    elif kind == "too-big":
+        with path.open("wb") as handle:  # sparse: nothing is written
+            handle.truncate(256 * 1024 * 1024 + 1)
+    elif kind == "version-999":
+        _valid_report(path, report_version=999)
+    elif kind == "version-0":
+        _valid_report(path, report_version=0)
+    elif kind == "not-json":
+        path.write_text("{", encoding="utf-8")
+    return path
+
+
+REPORT_CASES = [
+    ("latin-1", "UTF-8"),
+    ("utf-16", "UTF-8"),
+    ("fifo", "regular file"),
+    ("directory", "regular file"),
+    ("device", "regular file"),
+    ("too-big", "256 MiB"),
+    ("version-999", "report_version 999"),
+    ("version-0", "report_version 0"),
+    ("not-json", "JSON"),
+]
+
+
+@pytest.mark.parametrize("command", ["show", "plot"])
+@pytest.mark.parametrize("console", [False, True], ids=["module", "console"])
+@pytest.mark.parametrize(("kind", "named"), REPORT_CASES, ids=[k for k, _ in REPORT_CASES])
+def test_report_bad_file_is_exit_2_with_one_line(
+    kind: str,
+    named: str,
+    command: str,
+    console: bool,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    pytest.importorskip("matplotlib")  # plot says "install the extra" before reading
+    from tmmaster.report import __main__ as report_main
+
+    path = _report_file(kind, tmp_path)
+    argv = (
+        [command, str(path), "-o", str(tmp_path / "out.png")]
+        if command == "plot"
+        else [
+            command,
+            str(path),
+        ]
+    )
+    codes: list[int] = []
+    # In a thread: a reader that blocks (a FIFO without a writer) must fail the test,
+    # not hang it.
+    runner = threading.Thread(
+        target=lambda: codes.append(
+            _cli.main(["report", *argv]) if console else report_main.main(argv)
+        )
+    )
+    runner.start()
+    runner.join(10)
+    if runner.is_alive():  # let it go: a writer that closes at once ends its read
+        with open(path, "wb"):
+            pass
+        runner.join(10)
+        pytest.fail(f"report {command} blocked on {kind}")
+    assert codes == [2]
+    line = _one_line(capsys)
+    assert named in line
+    assert str(path) in line
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_valid_report_still_shows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _valid_report(tmp_path / "run.json")
+    assert _cli.main(["report", "show", str(path)]) == 0
+    assert "DONE" in capsys.readouterr().out
+
+
+# -- output that cannot be written: one line and exit 1 (not bad input), or quiet ---------
+
+OUTPUT_COMMANDS = [
+    ["schema"],
+    ["schema", "--report"],
+    ["profile", "show", "tmflow"],
+    ["profile", "list"],
+]
+
+
+@pytest.mark.parametrize("argv", OUTPUT_COMMANDS, ids=" ".join)
+def test_a_full_stdout_is_one_line_and_exit_1(
+    argv: list[str], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with open("/dev/full", "w", encoding="utf-8") as full:
+        monkeypatch.setattr("sys.stdout", full)
+        assert _cli.main(argv) == 1
+    assert "No space left on device" in _one_line(capsys)
+
+
+def test_report_show_to_a_full_stdout_is_one_line_and_exit_1(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _valid_report(tmp_path / "run.json")
+    with open("/dev/full", "w", encoding="utf-8") as full:
+        monkeypatch.setattr("sys.stdout", full)
+        assert _cli.main(["report", "show", str(path)]) == 1
+    assert "No space left on device" in _one_line(capsys)
+
+
+def test_a_closed_pipe_ends_quietly_with_exit_1(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import os
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader went away (``| head``)
+    with open(write_end, "w", encoding="utf-8") as pipe:
+        monkeypatch.setattr("sys.stdout", pipe)
+        assert _cli.main(["schema"]) == 1
+        monkeypatch.undo()
+    # Leaving the with block flushed what was left: no second error.
+    assert capsys.readouterr().err == ""
+
+
+def test_schema_to_dev_full_in_a_subprocess_exits_1_with_one_line() -> None:
+    # The whole process: its own exit (which flushes stdout again) must stay quiet too.
+    import subprocess
+    import sys
+
+    with open("/dev/full", "wb") as full:
+        done = subprocess.run(
+            [sys.executable, "-m", "tmmaster", "schema"],
+            stdout=full,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+    assert done.returncode == 1
+    assert done.stderr.splitlines() == [
+        "tmmaster: cannot write the output: No space left on device [exit 1]"
+    ]

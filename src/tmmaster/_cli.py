@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ._cliparse import ArgumentParser, UsageError, one_line
+from ._cliparse import EXIT_OUTPUT_FAILED, ArgumentParser, UsageError, one_line, write_stdout
 from ._exceptions import TMMasterError
 from ._logging import add_logging_arguments, configure_logging
 from ._profiles import builtin_profile_names, load_profile, profile_markdown
@@ -31,15 +31,31 @@ def _add_profile_commands(parser: argparse.ArgumentParser) -> None:
 
 def _run_profile(args: argparse.Namespace) -> int:
     if args.profile_command == "list":
+        lines = []
         for name in builtin_profile_names():
             profile = load_profile(name)
-            print(f"{name:14} {profile.kind:8} {profile.description}")
-        return 0
-    text = profile_markdown(load_profile(args.profile))
-    if args.output:
-        Path(args.output).write_text(text, encoding="utf-8")
-    else:
-        sys.stdout.write(text)
+            lines.append(f"{name:14} {profile.kind:8} {profile.description}\n")
+        return _emit("".join(lines), None)
+    return _emit(profile_markdown(load_profile(args.profile)), args.output)
+
+
+def _emit(text: str, output: str | None) -> int:
+    """Write a command's ``text`` to the file ``output`` or to stdout; the exit status.
+
+    A file or stdout that cannot be written is one line on stderr and exit 1 (not bad
+    input: see :data:`EXIT_OUTPUT_FAILED`), never a traceback.
+    """
+    if output is None:
+        return write_stdout(lambda: sys.stdout.write(text), prog="tmmaster")
+    try:
+        Path(output).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        print(
+            f"tmmaster: cannot write {output}: {reason} [exit {EXIT_OUTPUT_FAILED}]",
+            file=sys.stderr,
+        )
+        return EXIT_OUTPUT_FAILED
     return 0
 
 
@@ -123,12 +139,7 @@ def _main(argv: Sequence[str] | None) -> int:
     undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
         if args.command == "schema":
-            text = report_schema() if args.report else config_schema()
-            if args.output:
-                Path(args.output).write_text(text, encoding="utf-8")
-            else:
-                sys.stdout.write(text)
-            return 0
+            return _emit(report_schema() if args.report else config_schema(), args.output)
         return _run_profile(args)
     except TMMasterError as exc:
         print(f"tmmaster: {exc}", file=sys.stderr)

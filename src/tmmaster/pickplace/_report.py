@@ -12,6 +12,7 @@ import json
 import math
 import os
 import re
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,17 @@ from ._runner import RunResult
 
 #: Bumped when a key changes meaning or disappears (adding keys keeps the version).
 REPORT_VERSION = 1
+
+#: The report versions :func:`load_report` reads: every one up to this tmmaster's (keys
+#: are only ever added, with defaults); a newer one may mean something else.
+SUPPORTED_REPORT_VERSIONS = range(1, REPORT_VERSION + 1)
+
+#: Largest report :func:`load_report` reads, bytes (256 MiB). A report takes about 1 kB
+#: per cycle on a robot and about 12 kB per cycle of a --sim run at time scale 1 (its
+#: TCP path), so this holds some 20,000 simulated or 200,000 real cycles; reading it
+#: takes several times that in memory, which is what the limit protects (and reading
+#: /dev/zero would never end).
+MAX_REPORT_BYTES = 256 * 1024 * 1024
 
 
 class _Part(BaseModel):
@@ -205,19 +217,89 @@ def report_schema() -> str:
 
 
 def load_report(path: str | Path) -> RunReport:
-    """Read a run report; a missing, unreadable or invalid file raises :class:`ConfigError`."""
+    """Read a run report written by ``--report`` (:func:`write_report`).
+
+    Args:
+        path: the report file.
+
+    Returns:
+        The validated report.
+
+    Raises:
+        ConfigError: the file is missing or unreadable, is not a regular file (a
+            directory, a FIFO, a device), is larger than :data:`MAX_REPORT_BYTES`, is not
+            UTF-8, is not a run report, or has a ``report_version`` this tmmaster does not
+            read (:data:`SUPPORTED_REPORT_VERSIONS`). The message names the file.
+    """
+    text = _read_report_text(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the report: {exc.strerror or exc}") from None
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not a tmmaster run report: invalid JSON at line {exc.lineno}"
+            f" column {exc.colno}: {exc.msg}"
+        ) from None
+    version = data.get("report_version") if isinstance(data, dict) else None
+    # Checked first: a report from a newer tmmaster fails validation in ways that would
+    # hide the real reason (its keys may mean something else).
+    if (
+        isinstance(version, int)
+        and not isinstance(version, bool)
+        and version not in SUPPORTED_REPORT_VERSIONS
+    ):
+        raise ConfigError(
+            f"{path}: report_version {version} is not supported (this tmmaster reads"
+            f" {SUPPORTED_REPORT_VERSIONS.start}..{SUPPORTED_REPORT_VERSIONS.stop - 1};"
+            " a newer tmmaster may have written it)"
+        )
     try:
-        return RunReport.model_validate_json(text)
+        return RunReport.model_validate(data)
     except ValidationError as exc:
         problems = "; ".join(
             f"{'.'.join(str(p) for p in err['loc']) or '(top)'}: {err['msg']}"
             for err in exc.errors()[:3]
         )
         raise ConfigError(f"{path}: not a tmmaster run report: {problems}") from None
+
+
+def _read_report_text(path: str | Path) -> str:
+    """The report's text: a regular file of at most MAX_REPORT_BYTES, strict UTF-8."""
+    # O_NONBLOCK: opening a FIFO without a writer would otherwise wait forever; a regular
+    # file reads the same with it. (Not on Windows, which has no FIFOs to open here.)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the report: {exc.strerror or exc}") from None
+    too_big = ConfigError(
+        f"{path}: larger than {MAX_REPORT_BYTES // (1024 * 1024)} MiB, the most a run report may be"
+    )
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise ConfigError(
+                f"{path}: not a regular file (a run report is a JSON file written by --report)"
+            )
+        if info.st_size > MAX_REPORT_BYTES:
+            raise too_big
+        with os.fdopen(fd, "rb") as handle:
+            fd = -1  # the file object closes it now
+            # One byte more than allowed: a file that grew since fstat is still caught.
+            data = handle.read(MAX_REPORT_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the report: {exc.strerror or exc}") from None
+    finally:
+        if fd >= 0:
+            os.close(fd)
+    if len(data) > MAX_REPORT_BYTES:
+        raise too_big
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte {exc.start}: {data[exc.start : exc.start + 1]!r});"
+            " a run report is UTF-8 JSON"
+        ) from None
 
 
 def objects_report(objects: list[Any], place: Pose | None, tolerance_mm: float) -> dict[str, Any]:

@@ -2,8 +2,10 @@
 
 ``show run.json`` prints the summary table (per-state times, cycles, result);
 ``plot run.json -o run.png`` draws the timeline (needs matplotlib: ``tmmaster[plot]``).
-Exit codes: 0 done, 1 matplotlib missing or the image cannot be written, 2 the file is
-not a readable run report or an option is wrong.
+Exit codes: 0 done, 1 matplotlib missing, the image or the table cannot be written
+(a full disk, a closed pipe), 2 the file is not a readable run report (not a regular
+file, larger than 256 MiB, not UTF-8, not a report, an unsupported ``report_version``) or
+an option is wrong.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .._cliparse import ArgumentParser, UsageError, one_line
+from .._cliparse import ArgumentParser, UsageError, one_line, write_stdout
 from .._exceptions import ConfigError
 from .._logging import add_logging_arguments, configure_logging
 from .._version import add_version_argument
@@ -25,18 +27,22 @@ from .._version import add_version_argument
 #: What to install when matplotlib is missing.
 PLOT_EXTRA = "tmmaster[plot]"
 
+#: The report argument's help. The size is pickplace._report.MAX_REPORT_BYTES, written out:
+#: importing that module here would load the runner before the options are even parsed.
+_REPORT_HELP = "a report written by --report (a UTF-8 JSON file of at most 256 MiB)"
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the ``show`` and ``plot`` subcommands to ``parser``; return it."""
     add_version_argument(parser)
     sub = parser.add_subparsers(dest="report_command", required=True, metavar="{show,plot}")
     show = sub.add_parser("show", help="print the summary table of a run report")
-    show.add_argument("report", metavar="RUN.json", help="a report written by --report")
+    show.add_argument("report", metavar="RUN.json", help=_REPORT_HELP)
     add_logging_arguments(show, default_level="warning")
     plot = sub.add_parser(
         "plot", help=f"draw the run as a picture (needs matplotlib: pip install '{PLOT_EXTRA}')"
     )
-    plot.add_argument("report", metavar="RUN.json", help="a report written by --report")
+    plot.add_argument("report", metavar="RUN.json", help=_REPORT_HELP)
     plot.add_argument(
         "--output",
         "-o",
@@ -87,8 +93,9 @@ def _run(args: argparse.Namespace) -> int:
 
         from ..pickplace._summary import summary_renderable
 
-        Console(file=sys.stdout).print(summary_renderable(report))
-        return 0
+        return write_stdout(
+            lambda: Console(file=sys.stdout).print(summary_renderable(report)), prog="report"
+        )
     from ._plot import plot_report
 
     output = Path(args.output) if args.output else Path(args.report).with_suffix(".png")
