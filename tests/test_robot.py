@@ -178,8 +178,13 @@ def test_unacknowledged_command_times_out_and_is_withdrawn(
     robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.15))
     home = sim.tcp_pose()
     ticks = sim.ticks
-    with pytest.raises(tmmaster.AcknowledgeTimeoutError, match="withdrawn"):
+    with pytest.raises(tmmaster.AcknowledgeTimeoutError, match="did not acknowledge"):
         robot.move_to(APPROACH, speed=30)
+    motion = robot.last_motion
+    assert motion is not None
+    # Withdrawn: at once (article), or once the program answered the cancel (tmflow,
+    # late too); if it had not answered by then, the project would have been stopped.
+    assert motion.withdrawn is True or motion.stop_delivered is True
     # The command must not run later behind the script's back: look once the simulator
     # has run 22 simulated s (55 ticks of 0.4 s) since the write, 8 s past the late ack,
     # on its own clock, so a simulator slowed by load is not looked at too early.

@@ -29,6 +29,7 @@ from ._exceptions import (
     CommandRejectedError,
     ConfigError,
     EmergencyStopError,
+    ProjectPausedError,
     RobotError,
     RobotFaultError,
 )
@@ -346,11 +347,25 @@ class CommandChannel(ABC):
         """
 
     @abstractmethod
-    def withdraw(self, ticket: Ticket) -> bool:
+    def withdraw(self, ticket: Ticket) -> bool | None:
         """Take back a command the robot has not acknowledged; True if it had taken it after all.
 
         Written with retries and regardless of a stop request: a withdraw is idempotent.
+        None: the withdraw is written but the robot has not answered it yet; ask
+        :meth:`withdraw_outcome` until it does.
         """
+
+    def withdraw_outcome(self, ticket: Ticket) -> bool | None:
+        """After :meth:`withdraw` returned None: True taken, False withdrawn, None not yet."""
+        return False
+
+    def may_resume(self) -> bool:
+        """True when a move the robot stopped itself could still be resumed (Play).
+
+        Read after a fault ends a running move: such a move is stopped for good (the
+        master presses Stop) where the robot could otherwise resume it.
+        """
+        return False
 
     @abstractmethod
     def write_landed(self, ticket: Ticket) -> bool:
@@ -572,6 +587,10 @@ class SequenceChannel(CommandChannel):
             return EmergencyStopError("emergency stop is pressed", error_code=code)
         if bool(flags["error"]):
             return RobotFaultError(f"robot error (last error code {code})", error_code=code)
+        if bool(flags.get("paused", False)):
+            return ProjectPausedError(
+                "the TMflow project is paused: Play would resume the interrupted move"
+            )
         if not bool(flags["project_running"]):
             return RobotFaultError("the TMflow project is not running")
         return None
@@ -665,34 +684,58 @@ class SequenceChannel(CommandChannel):
 
     duplicate_safe = True  # the program takes a sequence number at most once
 
-    def withdraw(self, ticket: Ticket) -> bool:
+    def withdraw(self, ticket: Ticket) -> bool | None:
         """Cancel our sequence number; True if the program had taken the command itself.
 
         The cancel is the same sequence number with command = none, written as one
         request: the program consumes it as a no-op (result "cancelled"), so the number
         is used up and a late copy of the original frame can never be taken afterwards.
         If the project is not running, the program consumes it at its next start.
+
+        The cancel is withdrawn only once the program has answered it: the program may
+        have read the block just before the cancel landed, and it acknowledges the
+        number it read (then reads the block again and finds the cancel, or runs the
+        command if the cancel came later still). So this returns None until the answer
+        (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with result "cancelled"
+        (withdrawn) or not (taken); or the project not running (withdrawn: the start-up
+        rule consumes it).
         """
         p = self.profile
-        if self._taken(ticket.seq):
-            return True
+        outcome = self.withdraw_outcome(ticket)
+        if outcome is not None:
+            return outcome
         command = p.field("command")
         self.transport.write_fields(
             [(command, command.code_of("none")), (p.field("seq"), ticket.seq)],
             retry=True,
             interruptible=False,
         )
-        return self._taken(ticket.seq)
+        return self.withdraw_outcome(ticket)
 
-    def _taken(self, seq: int) -> bool:
-        """True when the program took ``seq`` as the real command (not as a cancel)."""
+    def withdraw_outcome(self, ticket: Ticket) -> bool | None:
+        """What the program did with our number: True taken, False cancelled or not running.
+
+        None: it has not answered yet (``ack_seq`` is not our number and the project runs).
+        """
         p = self.profile
         values = self.transport.read_fields(
             self.feedback_fields, max_gap=p.max_read_gap, interruptible=False
         )
-        if int(values["ack_seq"]) != seq:
-            return False
-        return p.field("result_code").label(int(values["result_code"])) != "cancelled"
+        if int(values["ack_seq"]) == ticket.seq:
+            return p.field("result_code").label(int(values["result_code"])) != "cancelled"
+        flags = self.transport.read_fields(
+            self.flag_fields, max_gap=p.max_read_gap, interruptible=False
+        )
+        if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
+            return False  # not running: nothing takes it before the start-up rule consumes it
+        return None
+
+    def may_resume(self) -> bool:
+        """True while the project is paused or still running: Play could resume a move."""
+        flags = self.transport.read_fields(
+            self.flag_fields, max_gap=self.profile.max_read_gap, interruptible=False
+        )
+        return bool(flags.get("paused", False)) or bool(flags["project_running"])
 
     def write_landed(self, ticket: Ticket) -> bool:
         """seq is written in the same request as the block: if it is ours, the write landed."""

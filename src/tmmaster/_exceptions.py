@@ -162,6 +162,13 @@ class EmergencyStopError(RobotError):
     """The emergency stop is pressed."""
 
 
+class ProjectPausedError(RobotFaultError):
+    """The robot program is paused: the move was interrupted, and Play would resume it.
+
+    The master gives such a move up and presses Stop, so it can never resume later.
+    """
+
+
 class CommandRejectedError(RobotError):
     """The robot acknowledged the command but refused to execute it."""
 
@@ -216,3 +223,24 @@ MODBUS_EXCEPTIONS: dict[int, type[ModbusExceptionError]] = {
         DeviceBusyError,
     )
 }
+
+
+class TMScriptError(TMMasterError):
+    """A TMscript program is wrong or failed (``tmmaster.tmscript``).
+
+    ``line`` and ``column`` (1-based) say where in the script; the message starts with them.
+    """
+
+    def __init__(self, message: str, *, line: int, column: int) -> None:
+        self.line = line
+        self.column = column
+        self.reason = message
+        super().__init__(f"line {line}, column {column}: {message}")
+
+
+class TMScriptSyntaxError(TMScriptError):
+    """The script cannot be run: a syntax error, an unknown or unsupported function, a type error."""
+
+
+class TMScriptRuntimeError(TMScriptError):
+    """A statement of the script failed while it ran (division by zero, a bad conversion...)."""

@@ -375,7 +375,7 @@ class _MotionFollower:
         confirmed = True
         if not running and not ticket.withdrawn:
             try:
-                running = self._channel.withdraw(ticket)
+                running = self._withdraw(ticket)
                 ticket.withdrawn = not running
                 motion.withdrawn = not running
             except TMMasterError as exc:
@@ -394,6 +394,13 @@ class _MotionFollower:
         stopped_itself = isinstance(
             reason, RobotFaultError | EmergencyStopError | CommandRejectedError
         )
+        if running and stopped_itself and not isinstance(reason, CommandRejectedError):
+            # The robot stopped the move itself; where Play could resume it (a paused
+            # TMflow project), press Stop so that it never resumes.
+            try:
+                stopped_itself = not self._channel.may_resume()
+            except TMMasterError:
+                stopped_itself = False  # not known: the Stop is harmless
         if running and not stopped_itself:
             if not self._channel.can_stop:
                 return False  # running, and this profile cannot stop it
@@ -405,6 +412,32 @@ class _MotionFollower:
                 confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
         return confirmed
+
+    def _withdraw(self, ticket: Ticket) -> bool:
+        """Withdraw ``ticket`` and wait for the robot's answer; True if it was taken after all.
+
+        A program that answers withdraws (tmflow's cancel record) is waited for, bounded
+        by ``ack_timeout_s`` and not interruptible (a clean-up): "withdrawn" is reported
+        only once the program consumed the cancel or cannot take the command any more.
+
+        Raises:
+            CommandStateUnknownError: no answer within the bound (the caller stops).
+        """
+        outcome = self._channel.withdraw(ticket)
+        if outcome is not None:
+            return outcome
+        deadline = time.monotonic() + self.timeouts.ack_timeout_s
+        poller = Poller(self.poll_interval_s)
+        while True:
+            poller.sleep()
+            outcome = self._channel.withdraw_outcome(ticket)
+            if outcome is not None:
+                return outcome
+            if time.monotonic() >= deadline:
+                raise CommandStateUnknownError(
+                    f"the robot program did not answer the cancel of command {ticket.seq}"
+                    f" within {self.timeouts.ack_timeout_s:g} s"
+                )
 
     def poll(self, motion: Motion) -> None:
         """Poll the command once; raises the typed error when the robot failed it."""
@@ -501,7 +534,19 @@ class _MotionFollower:
 
     def _ack_timed_out(self, motion: Motion) -> None:
         ticket = motion.ticket
-        if self._channel.withdraw(ticket):
+        try:
+            taken = self._withdraw(ticket)
+        except CommandStateUnknownError as exc:
+            # Not known whether the program will take it: the clean-up that follows
+            # (abandon) withdraws again, and stops the project if still unanswered.
+            motion.phase = MovePhase.FAILED
+            self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
+            raise AcknowledgeTimeoutError(
+                f"the robot did not acknowledge the {motion.command.kind.value} command within"
+                f" {self.timeouts.ack_timeout_s:g} s, nor answer its cancel: {exc}",
+                pose=motion.last_pose,
+            ) from exc
+        if taken:
             # The robot took it just as we gave up: it is executing our command.
             ticket.acknowledged = True
             ticket.acknowledged_at = time.monotonic()
