@@ -52,7 +52,18 @@ def _as_fault(fault: Fault | str) -> Fault:
 
 
 class Simulator:
-    """A simulated TM robot (and optional gripper) served over Modbus TCP on loopback."""
+    """A simulated TM robot (and optional gripper) served over Modbus TCP on loopback.
+
+    The arguments are described in docs/simulator.md. Nothing starts before
+    :meth:`start` (or ``with``).
+
+    Raises:
+        ConfigError: a bad argument, named in the message: ``time_scale`` not a finite
+            number above 0, ``tick_hz`` outside (0, 1000], a port outside 0..65535,
+            ``init_time_s`` below 0 or not finite, ``initial_seq`` outside the
+            profile's sequence range, two objects of one name, an unknown profile,
+            model or physics backend.
+    """
 
     def __init__(
         self,
