@@ -607,3 +607,39 @@ def test_interpreter_exit_while_a_thread_commands_leaves_nothing_armed(
     late = [m.number for m in sim.motion_log()[1:] if m.wall_time > exited]
     assert late == [], f"motions {late} started after the interpreter exited"
     assert len(sim.motion_log()) == 1, "the second command ran"
+
+
+# -- a paused TMflow project never resumes a move the master gave up on ------------------
+
+
+@pytest.mark.parametrize("pause", ["estop", "pause_button"])
+def test_a_move_interrupted_by_a_resumable_stop_is_stopped_for_good(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], pause: str
+) -> None:
+    # Resumption Behavior on: an e-stop (or the Pause button) leaves the project paused,
+    # and Play would resume the interrupted move (TMflow 2.24 manual, Table 5, p. 53).
+    # The master gives the move up, so it presses Stop: Play then starts the project from
+    # the beginning, whose start-up rule runs nothing.
+    sim = tm_simulator_factory("tmflow", resume_after_error=True, **FAST)
+    robot = robots(sim.port, "tmflow")
+    robot.wait_until_ready(timeout_s=5)
+    issued = [Issued(A, time.monotonic())]
+    motion = robot.start_move(A, speed=10)
+    sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=5)  # the arm moves
+    if pause == "estop":
+        sim.press_estop()
+        expected: type[Exception] = tmmaster.EmergencyStopError
+    else:
+        sim.press_play()  # the Play/Pause button: pauses a running project
+        expected = tmmaster.ProjectPausedError
+    with pytest.raises(expected):
+        motion.wait()
+    issued[0].outcome, issued[0].ended_at = expected.__name__, time.monotonic()
+    assert motion.stop_delivered is True
+    let_run(sim, 5)
+    assert not sim.field("project_running")  # stopped, not paused: nothing to resume
+    operator_resets(sim)  # clear the error, press Play
+    let_run(sim, 40)  # 16 simulated s: a resumed move would have arrived
+    check(issued, sim.motion_log())
+    assert len(sim.motion_log()) == 1
+    assert not sim.tcp_pose().is_close(A)

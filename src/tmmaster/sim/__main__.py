@@ -114,6 +114,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         " see docs/simulator.md)",
     )
     parser.add_argument(
+        "--resume-after-error",
+        choices=("on", "off"),
+        default="off",
+        help="tmflow: TMflow's Resumption Behavior; on: an e-stop pauses the project and"
+        " Play resumes the interrupted move (default: off)",
+    )
+    parser.add_argument(
         "--trace-requests",
         action="store_true",
         help="print every Modbus request the simulator receives as one JSON line on stdout",
@@ -193,6 +200,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             request_listener=echo if args.trace_requests else None,
             physics=args.physics,
             tool=_tool(args.tool),
+            resume_after_error=args.resume_after_error == "on",
         )
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
         print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)

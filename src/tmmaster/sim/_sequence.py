@@ -11,13 +11,13 @@ project and keeps its code in ``last_error_code``. The rules are documented in
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from .._codec import allowed_range
-from .._pose import MotionType
+from .._pose import MotionType, Pose
 from .._registers import RobotProfile
 from ._bank import RegisterBank
-from ._controller import RobotController, _Active
+from ._controller import RobotController, SimErrorCode, _Active
 from ._tm_table import tm_table_areas, tm_table_fields
 
 #: tmflow result_code label of each reason (a profile without the label reports unreachable).
@@ -34,8 +34,27 @@ class SequenceController(RobotController):
     _error_code_field = "last_error_code"
     #: The TMflow project runs (started once initialised, by Play, stopped by an error).
     _running = False
+    #: Paused (Pause button, or an e-stop with resumption on): Play resumes the move.
+    _paused = False
     #: Simulated time when the project last started.
     _project_started_s = 0.0
+
+    def __init__(self, *args: Any, resume_after_error: bool = False, **options: Any) -> None:
+        #: TMflow's Motion Settings > Resumption Behavior, "continue project execution from
+        #: the error position" (TMflow 2.24 manual, Table 5, pp. 53-54; p. 112): an e-stop
+        #: pauses the project instead of stopping it, and Play resumes the interrupted move.
+        self._resume_after_error = resume_after_error
+        #: The move a pause or a resumable stop interrupted: (target, motion, speed,
+        #: accel, seq), restarted by Play.
+        self._interrupted: tuple[Pose, MotionType, float, float, int] | None = None
+        self._motion_args: tuple[Pose, MotionType, float, float, int] | None = None
+        self._pausing_on_error = False
+        super().__init__(*args, **options)
+
+    @property
+    def project_paused(self) -> bool:
+        """The project is paused: Play resumes it (and the move it interrupted)."""
+        return self._paused
 
     @classmethod
     def bank_for(cls, profile: RobotProfile) -> RegisterBank:
@@ -54,8 +73,9 @@ class SequenceController(RobotController):
         return 0 <= seq <= profile.seq_max
 
     def _reset_handshake_registers(self) -> None:
-        for name in ("error", "estop", "project_running"):
-            self._bank.set(name, False)
+        for name in ("error", "estop", "project_running", "paused"):
+            if self._bank.has(name):
+                self._bank.set(name, False)
         if self._profile.has("ma_mode"):
             self._bank.set("ma_mode", self._code("ma_mode", "auto", 1))
         if self._profile.has("project_speed"):
@@ -76,7 +96,7 @@ class SequenceController(RobotController):
 
     def _run_handshake(self, dt: float, ready: bool) -> None:
         self._handle_buttons()
-        if not self._running:
+        if not self._running or self._paused:
             return
         if self._profile.has("heartbeat"):
             wrap = int(allowed_range(self._profile.field("heartbeat"))[1]) + 1
@@ -95,14 +115,9 @@ class SequenceController(RobotController):
                 self._stop_project("stop button")
         if self._profile.has("play_pause") and self._bank.get("play_pause"):
             self._bank.set("play_pause", False)
-            if self._running:
-                # Pausing a running project is not modelled; the press is ignored.
-                self._log.info(
-                    "sim.button_ignored",
-                    device=self._name,
-                    button="play_pause",
-                    reason="project already running",
-                )
+            if self._running and not self._paused:
+                self._log.info("sim.button", device=self._name, button="pause")
+                self._pause("pause button")
             elif not self._initialised or self._error_code or self._estop:
                 self._log.warning(
                     "sim.button_ignored",
@@ -110,6 +125,9 @@ class SequenceController(RobotController):
                     button="play_pause",
                     reason="robot in error" if self._initialised else "initialising",
                 )
+            elif self._paused:
+                self._log.info("sim.button", device=self._name, button="play")
+                self._resume()
             else:
                 self._log.info("sim.button", device=self._name, button="play_pause")
                 self._start_project()
@@ -157,6 +175,7 @@ class SequenceController(RobotController):
                 ms = int(self._bank.get("accel_time"))
                 # 0 means "the program's default", i.e. the controller's accel time.
                 accel = ms / 1000.0 if ms > 0 else self._accel_time_s
+            self._motion_args = (target, MotionType(label), speed, accel, seq)
             self._start_motion(target, MotionType(label), speed, accel, seq=seq)
         elif label in ("gripper_open", "gripper_close"):
             self._drive_gripper(close=label == "gripper_close", seq=seq)
@@ -195,11 +214,26 @@ class SequenceController(RobotController):
     def _publish_estop(self) -> None:
         self._bank.set("estop", True)
 
+    def _enter_error(self, code: int, reason: str) -> None:
+        # Table 5 (TMflow 2.24, p. 53): with resumption on, a stop from a safety function
+        # (the e-stop) pauses the project, other errors stop it.
+        self._pausing_on_error = (
+            self._resume_after_error
+            and self._running
+            and code == SimErrorCode.EMERGENCY_STOP
+        )
+        if self._pausing_on_error and not self._paused:
+            self._interrupted = self._running_move()
+        super()._enter_error(code, reason)
+
     def _publish_error(self, code: int, reason: str) -> None:
         self._bank.set("last_error_code", code)
         self._bank.set("error", True)
         self._publish_tm_state()
-        if self._running:
+        if self._pausing_on_error:
+            self._pausing_on_error = False
+            self._set_paused(True, reason)
+        elif self._running:
             self._stop_project(reason)
 
     def _publish_error_cleared(self) -> None:
@@ -254,5 +288,38 @@ class SequenceController(RobotController):
         self._running = False
         self._stop_motion()
         self._active = None
+        self._interrupted = None
+        self._set_paused(False, reason)
         self._bank.set("project_running", False)
         self._log.warning("sim.project_stopped", device=self._name, reason=reason)
+
+    def _running_move(self) -> tuple[Pose, MotionType, float, float, int] | None:
+        """The move being executed now (what a pause interrupts), if any."""
+        active = self._active
+        args = self._motion_args
+        if active is None or active.kind != "motion" or args is None or args[4] != active.seq:
+            return None
+        return args
+
+    def _set_paused(self, paused: bool, reason: str) -> None:
+        self._paused = paused
+        if self._profile.has("paused"):
+            self._bank.set("paused", paused)
+        if paused:
+            self._log.warning("sim.project_paused", device=self._name, reason=reason)
+
+    def _pause(self, reason: str) -> None:
+        """Pause the project: the arm stops, and Play resumes the move it was making."""
+        self._interrupted = self._running_move()
+        self._stop_motion()
+        self._active = None
+        self._set_paused(True, reason)
+
+    def _resume(self) -> None:
+        """Play on a paused project: it goes on, and the interrupted move runs to its end."""
+        self._set_paused(False, "play")
+        interrupted, self._interrupted = self._interrupted, None
+        self._log.info("sim.project_resumed", device=self._name)
+        if interrupted is not None:
+            target, motion, speed, accel, seq = interrupted
+            self._start_motion(target, motion, speed, accel, seq=seq)

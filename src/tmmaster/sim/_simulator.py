@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from .._exceptions import ConfigError, UnknownNameError
 from .._pose import DEFAULT_HOME, Pose
 from .._profiles import DEFAULT_PROFILE, gripper_profile, robot_profile
-from .._registers import GripperProfile, RobotProfile
+from .._registers import GripperProfile, Handshake, RobotProfile
 from .._retry import RetryPolicy
 from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
@@ -86,6 +86,7 @@ class Simulator:
         listen: bool = True,
         name: str | None = None,
         tool: Pose | None = None,
+        resume_after_error: bool = False,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
@@ -119,6 +120,14 @@ class Simulator:
         self._log = RequestLog(listener=request_listener)
         controller = controller_class(self._profile.handshake)
         self._bank = controller.bank_for(self._profile)
+        handshake_options: dict[str, Any] = {}
+        if resume_after_error:
+            if self._profile.handshake is not Handshake.SEQUENCE:
+                raise ConfigError(
+                    "resume_after_error is a TMflow project setting: it needs a"
+                    f" sequence-handshake profile, not {self._profile.name!r}"
+                )
+            handshake_options["resume_after_error"] = True
         self._controller = controller(
             self._profile,
             self._bank,
@@ -127,6 +136,7 @@ class Simulator:
             faults=device,
             init_time_s=init_time_s,
             initial_seq=initial_seq,
+            **handshake_options,
         )
         self._robot_server = DeviceServer(
             "robot",
