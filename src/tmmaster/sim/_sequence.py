@@ -218,9 +218,7 @@ class SequenceController(RobotController):
         # Table 5 (TMflow 2.24, p. 53): with resumption on, a stop from a safety function
         # (the e-stop) pauses the project, other errors stop it.
         self._pausing_on_error = (
-            self._resume_after_error
-            and self._running
-            and code == SimErrorCode.EMERGENCY_STOP
+            self._resume_after_error and self._running and code == SimErrorCode.EMERGENCY_STOP
         )
         if self._pausing_on_error and not self._paused:
             self._interrupted = self._running_move()
