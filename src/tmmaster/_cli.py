@@ -1,4 +1,5 @@
-"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``profile`` and ``schema``."""
+"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``profile``, ``schema`` and
+``robot-program``."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from . import _robot_program as robot_program_cli
 from ._cliparse import EXIT_OUTPUT_FAILED, ArgumentParser, UsageError, one_line, write_stdout
 from ._exceptions import TMMasterError
 from ._logging import add_logging_arguments, configure_logging
@@ -67,7 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = ArgumentParser(prog="tmmaster", description="Drive a Techman robot over Modbus TCP.")
     add_version_argument(parser)
-    sub = parser.add_subparsers(dest="command", metavar="{sim,pickplace,report,profile,schema}")
+    sub = parser.add_subparsers(
+        dest="command", metavar="{sim,pickplace,report,profile,schema,robot-program}"
+    )
     sim_main.add_arguments(
         sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
     )
@@ -86,6 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     schema.add_argument("--output", "-o", metavar="FILE.json", help="write to a file instead")
     add_logging_arguments(schema, default_level="warning")
+    program = sub.add_parser(
+        "robot-program",
+        help="write the TMflow Script Project the robot runs for a sequence profile (tmflow)",
+    )
+    robot_program_cli.add_arguments(program)
+    add_logging_arguments(program, default_level="warning")
     return parser
 
 
@@ -140,6 +150,10 @@ def _main(argv: Sequence[str] | None) -> int:
     try:
         if args.command == "schema":
             return _emit(report_schema() if args.report else config_schema(), args.output)
+        if args.command == "robot-program":
+            own = list(argv if argv is not None else sys.argv[1:])
+            own = own[own.index("robot-program") + 1 :] if "robot-program" in own else []
+            return _emit(robot_program_cli.run(args, own), args.output)
         return _run_profile(args)
     except TMMasterError as exc:
         print(f"tmmaster: {exc}", file=sys.stderr)

@@ -204,13 +204,14 @@ def robot_program(
 
 
 def _tool_argument(text: str) -> Pose:
-    """``--tool X,Y,Z,RX,RY,RZ`` as a Pose (argparse type; ValueError names the problem)."""
+    """``--tool X,Y,Z,RX,RY,RZ`` as a Pose (argparse type; the error names the problem)."""
     parts = [p.strip() for p in text.split(",")]
-    if len(parts) != 6:
-        raise ValueError(f"--tool needs six comma-separated numbers, got {text!r}")
-    values = [float(p) for p in parts]
-    if not all(math.isfinite(v) for v in values):
-        raise ValueError(f"--tool values must be finite, got {text!r}")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"needs six finite comma-separated numbers, got {text!r}")
     return Pose(*values)
 
 
@@ -222,12 +223,12 @@ def _gripper_argument(text: str) -> GripperWiring:
         key, _, value = item.partition("=")
         names = {"do": "output", "di": "input", "settle_ms": "settle_ms"}
         if key not in names or not value.strip().isdigit():
-            raise ValueError(f"--gripper option {item!r}: expected do=N, di=N or settle_ms=N")
+            raise argparse.ArgumentTypeError(f"option {item!r}: expected do=N, di=N or settle_ms=N")
         values[names[key]] = int(value)
     try:
         return GripperWiring(kind, **values)
     except ConfigError as exc:
-        raise ValueError(str(exc)) from exc
+        raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
