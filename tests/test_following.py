@@ -74,7 +74,9 @@ def test_timeouts_assigned_after_construction_bound_the_wait(
     motion = robot.start_move(APPROACH, speed=30)
     with pytest.raises(AcknowledgeTimeoutError, match=r"within 0\.1 s"):
         motion.wait()
-    assert motion.withdrawn is True
+    # Withdrawn (article); tmflow's program answers its cancel as late as the command:
+    # unanswered within the bound, the project is stopped instead.
+    assert motion.withdrawn is True or motion.stop_delivered is True
     assert motion.abandoned
 
 
