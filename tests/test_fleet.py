@@ -496,12 +496,12 @@ def test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_
     dead.close()  # mid-move: the robot's link is refused from now on
     time.sleep(0.05)
     called = time.monotonic()
-    unconfirmed = fleet.close(timeout_s=0.5)  # (2 s by default)
+    unconfirmed = fleet.close(timeout_s=1.0)  # (2 s by default)
     took = time.monotonic() - called
     for thread in threads:
         thread.join(15)
     assert not any(thread.is_alive() for thread in threads)
-    assert took < 1.5, f"Fleet.close(timeout_s=0.5) took {took:.2f} s with one dead robot"
+    assert took < 2.0, f"Fleet.close(timeout_s=1.0) took {took:.2f} s with one dead robot"
     assert unconfirmed == ("r0",)
     for sim, robot in zip(sims[1:], robots[1:], strict=True):
         late = [m for m in sim.motion_log() if m.wall_time > called]
