@@ -66,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .pickplace import __main__ as pickplace_main
     from .report import __main__ as report_main
     from .sim import __main__ as sim_main
+    from .tmscript import __main__ as tmscript_main
 
     parser = ArgumentParser(prog="tmmaster", description="Drive a Techman robot over Modbus TCP.")
     add_version_argument(parser)
@@ -80,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     report_main.add_arguments(
         sub.add_parser("report", help="show a run report as a table, or plot it")
+    )
+    tmscript_main.add_arguments(
+        sub.add_parser("tmscript", help="check, evaluate or run TMscript (Script Projects)")
     )
     _add_profile_commands(sub.add_parser("profile", help="list or show register profiles"))
     schema = sub.add_parser(
@@ -146,6 +150,10 @@ def _main(argv: Sequence[str] | None) -> int:
         return pickplace_main.run(args)
     if args.command == "report":
         return report_main.run(args)
+    if args.command == "tmscript":
+        from .tmscript import __main__ as tmscript_main
+
+        return tmscript_main.run(args)
     undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
         if args.command == "schema":

@@ -21,6 +21,7 @@ _COMMANDS = {
     "tmmaster.pickplace.__main__": "pickplace",
     "tmmaster.report.__main__": "report",
     "tmmaster.sim.__main__": "sim",
+    "tmmaster.tmscript.__main__": "tmscript",
 }
 
 #: Exit status of an interrupted command (128 + SIGINT), as shells report it.

@@ -1,0 +1,1149 @@
+"""The built-in functions: ONE registry keyed by the manual's section (TMscript 2.24).
+
+Each :class:`Builtin` names its section and page, lists its signatures as the manual
+writes them, and has one implementation. A function the manual lists but this registry
+lacks is refused when the script is checked (:data:`UNSUPPORTED` names the known ones).
+
+Types in signatures: ``byte int int16 float double bool string`` and arrays ``int[]``;
+``?`` is any scalar, ``?[]`` any array, ``*`` anything; a return type ``$0`` is the type
+of the first argument.
+"""
+
+from __future__ import annotations
+
+import math
+import random as _rng
+import struct
+from collections.abc import Callable, Generator, Sequence
+from dataclasses import dataclass, field
+from typing import cast
+
+from ._host import Host, ModbusDevice, MotionCall
+from ._types import ARRAY_MAX, Scalar, Value, display_text, to_f32, wrap32
+
+__all__ = ["BUILTINS", "UNSUPPORTED", "Builtin", "BuiltinError", "Runtime", "Signature"]
+
+
+class BuiltinError(Exception):
+    """A built-in function refused its arguments (the evaluator adds line and column)."""
+
+
+#: What a blocking built-in yields while it waits.
+BLOCKED = "blocked"
+PAUSED = "paused"
+
+
+@dataclass
+class ModbusConfig:
+    """A ``ModbusTCP`` variable: where the device is, and its presets (§16.1)."""
+
+    name: str
+    host: str
+    port: int
+    timeout_ms: int
+    presets: dict[str, tuple[int, str, int, str, int]] = field(default_factory=dict)
+
+
+class ExitRequest(Exception):  # noqa: N818 - a signal, not an error
+    """``Exit()`` was called (TMscript 2.24 §5.1)."""
+
+    def __init__(self, code: int) -> None:
+        self.code = code
+        super().__init__(code)
+
+
+class Runtime:
+    """What built-ins reach while a script runs: the host and the declared devices."""
+
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        self.devices: dict[str, ModbusConfig] = {}
+        self.motion_allowed = True
+        self.paused = False
+
+
+Impl = Callable[[Runtime, list[Value], tuple[str, ...]], Value]
+BlockingImpl = Callable[[Runtime, list[Value], tuple[str, ...]], Generator[str, None, Value]]
+
+
+@dataclass(frozen=True)
+class Signature:
+    """One syntax of a function: parameter types and return type."""
+
+    params: tuple[str, ...]
+    returns: str
+
+
+@dataclass(frozen=True)
+class Builtin:
+    """A built-in function: its manual section and page, its syntaxes, its implementation."""
+
+    name: str
+    section: str
+    page: int
+    signatures: tuple[Signature, ...]
+    impl: Impl | None = None
+    blocking: BlockingImpl | None = None
+    motion: bool = False  # moves the robot: refused in closestop and errorstop (§3.3, §3.4)
+
+
+BUILTINS: dict[str, Builtin] = {}
+
+
+def _sigs(*specs: str) -> tuple[Signature, ...]:
+    out = []
+    for spec in specs:
+        ret, _, params = spec.partition("(")
+        names = tuple(p.strip() for p in params.rstrip(")").split(",") if p.strip())
+        out.append(Signature(names, ret.strip()))
+    return tuple(out)
+
+
+def _register(section: str, page: int, *specs: str, motion: bool = False) -> Callable[[Impl], Impl]:
+    def decorate(fn: Impl) -> Impl:
+        name = fn.__name__.lstrip("_")
+        BUILTINS[name] = Builtin(name, section, page, _sigs(*specs), impl=fn, motion=motion)
+        return fn
+
+    return decorate
+
+
+def _register_blocking(
+    section: str, page: int, *specs: str
+) -> Callable[[BlockingImpl], BlockingImpl]:
+    def decorate(fn: BlockingImpl) -> BlockingImpl:
+        name = fn.__name__.lstrip("_")
+        BUILTINS[name] = Builtin(name, section, page, _sigs(*specs), blocking=fn)
+        return fn
+
+    return decorate
+
+
+def _int(v: Value) -> int:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise BuiltinError(f"expected a number, got {v!r}")
+    return int(v)
+
+
+def _num(v: Value) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise BuiltinError(f"expected a number, got {v!r}")
+    return float(v)
+
+
+def _str(v: Value) -> str:
+    if not isinstance(v, str):
+        raise BuiltinError(f"expected a string, got {v!r}")
+    return v
+
+
+def _arr(v: Value) -> list[Scalar]:
+    if not isinstance(v, list):
+        raise BuiltinError(f"expected an array, got {v!r}")
+    return list(v)
+
+
+def _bytes(v: Value) -> bytes:
+    return bytes(_int(b) & 0xFF for b in _arr(v))
+
+
+def _floats(v: Value) -> list[float]:
+    return [_num(x) for x in _arr(v)]
+
+
+def _checked(items: list[Scalar]) -> list[Scalar]:
+    if len(items) > ARRAY_MAX:
+        raise BuiltinError(f"an array holds at most {ARRAY_MAX} elements")
+    return items
+
+
+# ---- chapter 4: general functions ------------------------------------------------------
+
+
+def _endian_bytes(data: bytes, size: int, endian: int) -> bytes:
+    # Too short: filled up with zeros before converting (TMscript 2.24 §4.1, p. 52).
+    chunk = data[:size].ljust(size, b"\0")
+    return chunk if endian == 1 else chunk[::-1]
+
+
+@_register("4.1", 52, "int(byte[], int, int)", "int(byte[], int)", "int(byte[])")
+def _Byte_ToInt16(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.1 Byte_ToInt16, p. 52: 2 bytes, 0 Little / 1 Big Endian, signed/unsigned."""
+    endian = _int(args[1]) if len(args) > 1 else 0
+    unsigned = _int(args[2]) if len(args) > 2 else 0
+    raw = int.from_bytes(_endian_bytes(_bytes(args[0]), 2, endian), "big")
+    return raw if unsigned == 1 else raw - 0x10000 if raw & 0x8000 else raw
+
+
+@_register("4.2", 54, "int(byte[], int)", "int(byte[])")
+def _Byte_ToInt32(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.2 Byte_ToInt32, p. 54: 4 bytes, 0 Little (default) / 1 Big Endian."""
+    endian = _int(args[1]) if len(args) > 1 else 0
+    return int.from_bytes(_endian_bytes(_bytes(args[0]), 4, endian), "big", signed=True)
+
+
+@_register("4.3", 55, "float(byte[], int)", "float(byte[])")
+def _Byte_ToFloat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.3 Byte_ToFloat, p. 55: IEEE-754 single from 4 bytes."""
+    endian = _int(args[1]) if len(args) > 1 else 0
+    value: float = struct.unpack(">f", _endian_bytes(_bytes(args[0]), 4, endian))[0]
+    return value
+
+
+@_register("4.4", 56, "double(byte[], int)", "double(byte[])")
+def _Byte_ToDouble(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.4 Byte_ToDouble, p. 56: IEEE-754 double from 8 bytes."""
+    endian = _int(args[1]) if len(args) > 1 else 0
+    value: float = struct.unpack(">d", _endian_bytes(_bytes(args[0]), 8, endian))[0]
+    return value
+
+
+def _chunks(data: bytes, size: int) -> list[bytes]:
+    return [data[i : i + size] for i in range(0, len(data), size)]
+
+
+@_register("4.5", 57, "int[](byte[], int, int)", "int[](byte[], int)", "int[](byte[])")
+def _Byte_ToInt16Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.5 Byte_ToInt16Array, p. 57: every 2 bytes to an int16."""
+    rest = args[1:]
+    return [
+        cast(Scalar, _Byte_ToInt16(rt, [list(c), *rest], types))
+        for c in _chunks(_bytes(args[0]), 2)
+    ]
+
+
+@_register("4.6", 59, "int[](byte[], int)", "int[](byte[])")
+def _Byte_ToInt32Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.6 Byte_ToInt32Array, p. 59: every 4 bytes to an int."""
+    rest = args[1:]
+    return [
+        cast(Scalar, _Byte_ToInt32(rt, [list(c), *rest], types))
+        for c in _chunks(_bytes(args[0]), 4)
+    ]
+
+
+@_register("4.7", 60, "float[](byte[], int)", "float[](byte[])")
+def _Byte_ToFloatArray(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.7 Byte_ToFloatArray, p. 60: every 4 bytes to a float."""
+    rest = args[1:]
+    return [
+        cast(Scalar, _Byte_ToFloat(rt, [list(c), *rest], types))
+        for c in _chunks(_bytes(args[0]), 4)
+    ]
+
+
+@_register("4.8", 61, "double[](byte[], int)", "double[](byte[])")
+def _Byte_ToDoubleArray(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.8 Byte_ToDoubleArray, p. 61: every 8 bytes to a double."""
+    rest = args[1:]
+    return [
+        cast(Scalar, _Byte_ToDouble(rt, [list(c), *rest], types))
+        for c in _chunks(_bytes(args[0]), 8)
+    ]
+
+
+@_register("4.9", 62, "string(byte[], int)", "string(byte[])")
+def _Byte_ToString(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.9 Byte_ToString, p. 62: 0 UTF-8, 1 hexadecimal, 2 ASCII (stop at 0x00)."""
+    data = _bytes(args[0])
+    mode = _int(args[1]) if len(args) > 1 else 0
+    if mode == 1:
+        return data.hex().upper()
+    text = data.split(b"\0", 1)[0]
+    if mode == 2:
+        return "".join(chr(b) if b < 0x80 else "?" for b in text)
+    return text.decode("utf-8", errors="replace")
+
+
+@_register("4.10", 63, "byte[](byte[], byte[])", "byte[](byte[], byte)")
+def _Byte_Concat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.10 Byte_Concat, p. 63: the two-argument syntaxes."""
+    first = _arr(args[0])
+    second = args[1]
+    tail: list[Scalar] = list(second) if isinstance(second, list) else [second]
+    return _checked([*first, *(_int(b) & 0xFF for b in tail)])
+
+
+def _parse_int(text: str, base: int) -> int:
+    body = text.strip()
+    sign = -1 if body.startswith("-") else 1
+    body = body.lstrip("+-")
+    low = body.lower()
+    if low.startswith("0x"):
+        base, body = 16, body[2:]
+    elif low.startswith("0b"):
+        base, body = 2, body[2:]
+    try:
+        return wrap32(sign * int(body, base))
+    except ValueError:
+        raise BuiltinError(f'unable to convert "{text}" to an integer') from None
+
+
+@_register("4.11", 66, "int(string, int)", "int(string)", "int[](string[], int)", "int[](string[])")
+def _String_ToInteger(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.11 String_ToInteger, p. 66: base 10, 16 or 2; 0x/0b prefixes win."""
+    base = _int(args[1]) if len(args) > 1 else 10
+    if isinstance(args[0], list):
+        return [_parse_int(_str(s), base) for s in args[0]]
+    return _parse_int(_str(args[0]), base)
+
+
+def _parse_float(text: str) -> float:
+    try:
+        return float(text.strip())
+    except ValueError:
+        raise BuiltinError(f'unable to convert "{text}" to a number') from None
+
+
+@_register("4.12", 68, "float(string)", "float[](string[])")
+def _String_ToFloat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.12 String_ToFloat, p. 68 (decimal text)."""
+    if isinstance(args[0], list):
+        return [to_f32(_parse_float(_str(s))) for s in args[0]]
+    return to_f32(_parse_float(_str(args[0])))
+
+
+@_register("4.13", 70, "double(string)", "double[](string[])")
+def _String_ToDouble(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.13 String_ToDouble, p. 70 (decimal text)."""
+    if isinstance(args[0], list):
+        return [_parse_float(_str(s)) for s in args[0]]
+    return _parse_float(_str(args[0]))
+
+
+@_register("4.14", 72, "byte[](string)")
+def _String_ToByte(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.14 String_ToByte, p. 72: the UTF-8 bytes of the string."""
+    return _checked(list(_str(args[0]).encode("utf-8")))
+
+
+@_register("4.15", 73, "int(string, string, int)", "int(string, string)")
+def _String_IndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.15 String_IndexOf, p. 73: first index of the substring, -1 if none."""
+    text, sub = _str(args[0]), _str(args[1])
+    start = _int(args[2]) if len(args) > 2 else 0
+    if start < 0 or start > len(text):
+        return -1
+    return text.find(sub, start)
+
+
+@_register("4.16", 75, "int(string, string, int)", "int(string, string)")
+def _String_LastIndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.16 String_LastIndexOf, p. 75: last index of the substring, -1 if none."""
+    text, sub = _str(args[0]), _str(args[1])
+    if len(args) > 2:
+        start = _int(args[2])
+        if start < 0:
+            return -1
+        return text.rfind(sub, 0, start + len(sub))
+    return text.rfind(sub)
+
+
+@_register("4.18", 78, "string(string, int, int)", "string(string, int)")
+def _String_Substring(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.18 String_Substring, p. 78: by start index and length (syntaxes 1, 2).
+
+    A start out of the string gives ``""``; a negative or too long length runs to the end.
+    """
+    text, start = _str(args[0]), _int(args[1])
+    length = _int(args[2]) if len(args) > 2 else -1
+    if start < 0 or start >= len(text):
+        return ""
+    return text[start:] if length < 0 else text[start : start + length]
+
+
+@_register("4.19", 81, "string[](string, string, int)", "string[](string, string)")
+def _String_Split(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.19 String_Split, p. 81: option 0 keeps empty strings, 1 drops them."""
+    text, sep = _str(args[0]), _str(args[1])
+    option = _int(args[2]) if len(args) > 2 else 0
+    if option not in (0, 1):
+        raise BuiltinError(f"option {option} is not supported (0 or 1)")
+    parts: list[Scalar] = list(text.split(sep)) if sep else [text]
+    if option == 1:
+        parts = [p for p in parts if p != ""]
+    return _checked(parts)
+
+
+@_register("4.20", 82, "string(string, string, string)")
+def _String_Replace(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.20 String_Replace, p. 82 (an empty search string replaces nothing)."""
+    text, old, new = _str(args[0]), _str(args[1]), _str(args[2])
+    return text.replace(old, new) if old else text
+
+
+@_register("4.21", 83, "string(string)")
+def _String_Trim(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.21 String_Trim, p. 83: white space off both ends (syntax 1)."""
+    return _str(args[0]).strip()
+
+
+@_register("4.22", 85, "string(string)")
+def _String_ToLower(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.22 String_ToLower, p. 85."""
+    return _str(args[0]).lower()
+
+
+@_register("4.23", 86, "string(string)")
+def _String_ToUpper(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.23 String_ToUpper, p. 86."""
+    return _str(args[0]).upper()
+
+
+@_register("4.24", 87, "$0(?[], *)")
+def _Array_Append(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.24 Array_Append, p. 87: an element or an array at the end."""
+    second = args[1]
+    tail: list[Scalar] = list(second) if isinstance(second, list) else [second]
+    return _checked([*_arr(args[0]), *tail])
+
+
+@_register("4.25", 88, "$0(?[], int, *)")
+def _Array_Insert(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.25 Array_Insert, p. 88: an element or an array before ``index``."""
+    items, index = _arr(args[0]), _int(args[1])
+    if index < 0 or index > len(items):
+        raise BuiltinError(f"index {index} is out of the array (0..{len(items)})")
+    second = args[2]
+    middle: list[Scalar] = list(second) if isinstance(second, list) else [second]
+    return _checked([*items[:index], *middle, *items[index:]])
+
+
+@_register("4.26", 89, "$0(?[], int, int)", "$0(?[], int)")
+def _Array_Remove(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.26 Array_Remove, p. 89: ``count`` elements (default 1) from ``index``."""
+    items, index = _arr(args[0]), _int(args[1])
+    count = _int(args[2]) if len(args) > 2 else 1
+    if index < 0 or index >= len(items):
+        raise BuiltinError(f"index {index} is out of the array")
+    return [*items[:index], *items[index + max(count, 0) :]]
+
+
+@_register("4.27", 90, "bool(?[], ?[])")
+def _Array_Equals(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.27 Array_Equals, p. 90 (syntax 1: the whole arrays)."""
+    return _arr(args[0]) == _arr(args[1])
+
+
+@_register("4.28", 92, "int(?[], ?, int)", "int(?[], ?)")
+def _Array_IndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.28 Array_IndexOf, p. 92: first index of the element, -1 if none."""
+    items = _arr(args[0])
+    start = _int(args[2]) if len(args) > 2 else 0
+    for i in range(max(start, 0), len(items)):
+        if items[i] == args[1]:
+            return i
+    return -1
+
+
+@_register("4.29", 94, "int(?[], ?)")
+def _Array_LastIndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.29 Array_LastIndexOf, p. 94: last index of the element, -1 if none."""
+    items = _arr(args[0])
+    for i in range(len(items) - 1, -1, -1):
+        if items[i] == args[1]:
+            return i
+    return -1
+
+
+@_register("4.30", 96, "$0(?[])", "$0(?[], int)")
+def _Array_Reverse(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.30 Array_Reverse, p. 96: the whole array, or within sections of N."""
+    items = _arr(args[0])
+    if len(args) == 1:
+        return items[::-1]
+    size = _int(args[1])
+    if size <= 0:
+        raise BuiltinError(f"section size {size} must be at least 1")
+    out: list[Scalar] = []
+    for i in range(0, len(items), size):
+        out.extend(items[i : i + size][::-1])
+    return out
+
+
+@_register("4.31", 98, "$0(?[], int)", "$0(?[])")
+def _Array_Sort(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.31 Array_Sort, p. 98: 0 ascending (default), 1 descending."""
+    items = _arr(args[0])
+    descending = len(args) > 1 and _int(args[1]) == 1
+    return sorted(
+        items, key=lambda v: (str(v), 0) if isinstance(v, str) else ("", v), reverse=descending
+    )
+
+
+@_register("4.32", 99, "$0(?[], int, int)", "$0(?[], int)")
+def _Array_SubElements(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.32 Array_SubElements, p. 99: ``count`` elements from ``index``."""
+    items, index = _arr(args[0]), _int(args[1])
+    if index < 0 or index >= len(items):
+        return []
+    count = _int(args[2]) if len(args) > 2 else len(items)
+    return items[index : index + max(count, 0)]
+
+
+def _value_bytes(value: Value, typ: str) -> bytes:
+    # Little Endian by default (TMscript 2.24 §2.6, p. 25).
+    if isinstance(value, list):
+        elem = typ[:-2] if typ.endswith("[]") else "?"
+        return b"".join(_value_bytes(v, elem) for v in value)
+    if isinstance(value, bool):
+        return b"\x01" if value else b"\x00"
+    if isinstance(value, str):
+        return value.encode("utf-8")
+    if isinstance(value, float):
+        return struct.pack("<f" if typ == "float" else "<d", value)
+    if typ == "byte":
+        return bytes([value & 0xFF])
+    if typ == "int16":
+        return struct.pack("<h", ((value + 0x8000) & 0xFFFF) - 0x8000)
+    return struct.pack("<i", wrap32(value))
+
+
+@_register("4.34", 105, "byte[](*, int)", "byte[](*)")
+def _GetBytes(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.34 GetBytes, p. 105: 0 Little Endian (default), 1 Big Endian per value."""
+    big = len(args) > 1 and _int(args[1]) == 1
+    value, typ = args[0], types[0]
+    if not big or isinstance(value, str):
+        return _checked(list(_value_bytes(value, typ)))
+    items = value if isinstance(value, list) else [value]
+    elem = typ[:-2] if typ.endswith("[]") else typ
+    out: list[Scalar] = []
+    for item in items:
+        out.extend(_value_bytes(item, elem)[::-1])
+    return _checked(out)
+
+
+@_register("4.42", 133, "int(*)")
+def _Length(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.42 Length, p. 133: bytes of a number, characters, or elements."""
+    value, typ = args[0], types[0]
+    if isinstance(value, list | str):
+        return len(value)
+    return len(_value_bytes(value, typ))
+
+
+# ---- chapter 5: script functions -------------------------------------------------------
+
+
+@_register("5.1", 154, "void(bool, int)", "void(bool)", "void()", "void(int)")
+def _Exit(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §5.1 Exit, p. 154: > 0 closestop, 0 by whether it erred, < 0 errorstop."""
+    code = 0
+    for arg, typ in zip(args, types, strict=True):
+        if typ != "bool":
+            code = _int(arg)
+    raise ExitRequest(code)
+
+
+@_register_blocking("5.2", 156, "bool()")
+def _Pause(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
+    """TMscript 2.24 §5.2 Pause, p. 156: the host pauses; the script waits for a resume."""
+    rt.host.pause()
+    rt.paused = True
+    while rt.paused:
+        yield PAUSED
+    return True
+
+
+@_register("5.3", 157, "bool()")
+def _Resume(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §5.3 Resume, p. 157: the project is running already when it runs."""
+    return True
+
+
+def _wait_ms(rt: Runtime, ms: int) -> Generator[str, None, Value]:
+    if ms < 0:
+        return False  # "invalid" (TMscript 2.24 §5.5, p. 159)
+    until = rt.host.now_s() + ms / 1000.0
+    while rt.host.now_s() < until:
+        yield BLOCKED
+    return True
+
+
+@_register_blocking("5.5", 159, "bool(int)")
+def _Sleep(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
+    """TMscript 2.24 §5.5 Sleep, p. 159: waits on the host's clock."""
+    return (yield from _wait_ms(rt, _int(args[0])))
+
+
+# WaitFor(bool, int) evaluates its condition again on every poll: the evaluator compiles it
+# (TMscript 2.24 §5.4, p. 158); this entry gives its signatures and WaitFor(int).
+@_register_blocking("5.4", 158, "bool(bool, int)", "bool(int)")
+def _WaitFor(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
+    """TMscript 2.24 §5.4 WaitFor, p. 158 (syntax 2: a time)."""
+    return (yield from _wait_ms(rt, _int(args[0])))
+
+
+@_register(
+    "5.6", 160, "bool(string, string, string, string)", "bool(string, string)", "bool(string)"
+)
+def _Display(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §5.6 Display, p. 160: the text goes to the host (colours are dropped).
+
+    With a headline (syntaxes 1 and 2) the host gets ``headline: text``.
+    """
+    texts = [_str(a) for a in args]
+    if len(texts) == 4:
+        texts = texts[2:]
+    text = texts[-1] if len(texts) == 1 or texts[0] == "" else f"{texts[0]}: {texts[1]}"
+    rt.host.display(text)
+    return True
+
+
+# ---- chapter 6: math -------------------------------------------------------------------
+
+
+def _math1(section: str, page: int, name: str, fn: Callable[[float], float]) -> None:
+    def impl(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+        try:
+            result = fn(_num(args[0]))
+        except (ValueError, OverflowError):
+            raise BuiltinError(f"{name}({display_text(args[0], types[0])}) is undefined") from None
+        return result
+
+    impl.__doc__ = f"TMscript 2.24 §{section} {name}, p. {page}."
+    BUILTINS[name] = Builtin(
+        name, section, page, _sigs("double(double)", "float(float)"), impl=impl
+    )
+
+
+@_register("6.1", 165, "$0(?)")
+def _abs(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.1 abs, p. 165: same type as the argument."""
+    value = args[0]
+    if isinstance(value, int) and not isinstance(value, bool):
+        return wrap32(abs(value))
+    return abs(_num(value))
+
+
+@_register("6.2", 166, "double(double, double)", "float(float, float)")
+def _pow(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.2 pow, p. 166."""
+    try:
+        return math.pow(_num(args[0]), _num(args[1]))
+    except (ValueError, OverflowError, ZeroDivisionError):
+        raise BuiltinError("the power is undefined") from None
+
+
+_math1("6.3", 168, "sqrt", math.sqrt)
+
+
+@_register("6.4", 169, "int(?)")
+def _ceil(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.4 ceil, p. 169: the smallest integer not below."""
+    return wrap32(math.ceil(_num(args[0])))
+
+
+@_register("6.5", 170, "int(?)")
+def _floor(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.5 floor, p. 170: the largest integer not above."""
+    return wrap32(math.floor(_num(args[0])))
+
+
+@_register("6.6", 171, "int(?)", "$0(?, int)")
+def _round(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.6 round, p. 171: half away from zero; optional decimal places."""
+    value = _num(args[0])
+    places = _int(args[1]) if len(args) > 1 else 0
+    scale = 10.0**places
+    rounded = math.floor(abs(value) * scale + 0.5) / scale
+    rounded = math.copysign(rounded, value)
+    return wrap32(int(rounded)) if len(args) == 1 else rounded
+
+
+@_register("6.7", 173, "int(int, int)", "double()")
+def _random(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.7 random, p. 173: an int in [min, max], or a double in [0, 1)."""
+    if not args:
+        return _rng.random()
+    low, high = _int(args[0]), _int(args[1])
+    return _rng.randint(min(low, high), max(low, high))
+
+
+def _numbers(args: list[Value]) -> list[float]:
+    if len(args) == 1 and isinstance(args[0], list):
+        return _floats(args[0])
+    return [_num(a) for a in args]
+
+
+@_register("6.8", 175, "double(?[])")
+def _sum(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.8 sum, p. 175: of an array's elements."""
+    return math.fsum(_numbers(args))
+
+
+@_register("6.9", 176, "double(?[])")
+def _average(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.9 average, p. 176: of an array's elements."""
+    values = _numbers(args)
+    if not values:
+        raise BuiltinError("the average of an empty array")
+    return math.fsum(values) / len(values)
+
+
+@_register("6.12", 179, "double(?[])")
+def _min(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.12 min, p. 179: the smallest element."""
+    values = _numbers(args)
+    if not values:
+        raise BuiltinError("the minimum of an empty array")
+    return min(values)
+
+
+@_register("6.13", 180, "double(?[])")
+def _max(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.13 max, p. 180: the largest element."""
+    values = _numbers(args)
+    if not values:
+        raise BuiltinError("the maximum of an empty array")
+    return max(values)
+
+
+_math1("6.14", 181, "d2r", math.radians)
+_math1("6.15", 182, "r2d", math.degrees)
+# The trigonometric functions take and return degrees (TMscript 2.24 §6.16-§6.22).
+_math1("6.16", 183, "sin", lambda d: math.sin(math.radians(d)))
+_math1("6.17", 184, "cos", lambda d: math.cos(math.radians(d)))
+_math1("6.18", 185, "tan", lambda d: math.tan(math.radians(d)))
+_math1("6.19", 186, "asin", lambda x: math.degrees(math.asin(x)))
+_math1("6.20", 187, "acos", lambda x: math.degrees(math.acos(x)))
+_math1("6.21", 188, "atan", lambda x: math.degrees(math.atan(x)))
+_math1("6.24", 192, "log10", math.log10)
+
+
+@_register("6.22", 189, "double(double, double)", "float(float, float)")
+def _atan2(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.22 atan2, p. 189: degrees, of (y, x)."""
+    return math.degrees(math.atan2(_num(args[0]), _num(args[1])))
+
+
+@_register("6.23", 190, "double(double)", "double(double, double)")
+def _log(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.23 log, p. 190: natural logarithm, or of (value, base)."""
+    try:
+        if len(args) == 2:
+            return math.log(_num(args[0]), _num(args[1]))
+        return math.log(_num(args[0]))
+    except (ValueError, ZeroDivisionError):
+        raise BuiltinError("the logarithm is undefined") from None
+
+
+@_register("6.35", 207, "float[](float[])", "float[](float[], int[])", "float[](float[], float[])")
+def _inversekin(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.35 inversekin, p. 207: computed by the host (the robot's model)."""
+    reference = _floats(args[1]) if len(args) > 1 else None
+    return list(rt.host.inversekin(_floats(args[0]), reference))
+
+
+@_register("6.36", 209, "float[](float[])")
+def _forwardkin(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §6.36 forwardkin, p. 209: computed by the host (the robot's model)."""
+    return list(rt.host.forwardkin(_floats(args[0])))
+
+
+# ---- chapter 13: motion ----------------------------------------------------------------
+
+
+def _tag(value: Value) -> int:
+    tag = _int(value)
+    if not 1 <= tag <= 15:
+        raise BuiltinError(f"tag number {tag} is not 1..15")
+    return tag
+
+
+@_register_blocking("13.1", 320, "bool(int, int)", "bool(int)")
+def _QueueTag(  # noqa: N802
+    rt: Runtime, args: list[Value], types: tuple[str, ...]
+) -> Generator[str, None, Value]:
+    """TMscript 2.24 §13.1 QueueTag, p. 320: tag the queue; wait 1 waits until it is done."""
+    tag = _tag(args[0])
+    wait = _int(args[1]) if len(args) > 1 else 0
+    rt.host.queue_tag(tag, wait)
+    while wait == 1 and not rt.host.queue_tag_done(tag):
+        yield BLOCKED
+    return True
+
+
+@_register_blocking("13.2", 321, "int(int, int)", "int(int)")
+def _WaitQueueTag(  # noqa: N802
+    rt: Runtime, args: list[Value], types: tuple[str, ...]
+) -> Generator[str, None, Value]:
+    """TMscript 2.24 §13.2 WaitQueueTag, p. 321: 1 done, 0 timed out, -1 no such tag.
+
+    A timeout < 0 waits without end; 0 checks once.
+    """
+    tag = _int(args[0])
+    timeout = _int(args[1]) if len(args) > 1 else -1
+    if not 1 <= tag <= 15:
+        return -1
+    start = rt.host.now_s()
+    while True:
+        done = rt.host.queue_tag_done(tag)
+        if done is None:
+            return -1
+        if done:
+            return 1
+        if timeout == 0 or (timeout > 0 and rt.host.now_s() - start >= timeout / 1000.0):
+            return 0
+        yield BLOCKED
+
+
+@_register("13.3", 322, "int(int)")
+def _CheckQueueTag(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.3 CheckQueueTag, p. 322: 1 done, 0 not yet, -1 no such tag."""
+    tag = _int(args[0])
+    if not 1 <= tag <= 15:
+        return -1
+    done = rt.host.queue_tag_done(tag)
+    return -1 if done is None else 1 if done else 0
+
+
+@_register("13.4", 324, "bool()", motion=True)
+def _StopAndClearBuffer(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.4 StopAndClearBuffer, p. 324."""
+    rt.host.stop_and_clear_buffer()
+    return True
+
+
+@_register(
+    "13.5",
+    325,
+    "bool(string)",
+    "bool(float[])",
+    "bool(float, float, float, float, float, float)",
+    motion=True,
+)
+def _ChangeBase(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.5 ChangeBase, p. 325: a base name or X, Y, Z, RX, RY, RZ."""
+    if len(args) == 1 and isinstance(args[0], str):
+        rt.host.change_base(args[0])
+    else:
+        rt.host.change_base(_numbers(args))
+    return True
+
+
+@_register(
+    "13.6",
+    327,
+    "bool(string)",
+    "bool(float[])",
+    "bool(float[], float)",
+    "bool(float[], float, float[])",
+    motion=True,
+)
+def _ChangeTCP(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.6 ChangeTCP, p. 327: a TCP name, or values, mass and inertia."""
+    if isinstance(args[0], str):
+        rt.host.change_tcp(args[0])
+        return True
+    mass = _num(args[1]) if len(args) > 1 else None
+    inertia = _floats(args[2]) if len(args) > 2 else None
+    rt.host.change_tcp(_floats(args[0]), mass, inertia)
+    return True
+
+
+def _motion(kind: str, args: list[Value]) -> MotionCall:
+    fmt = _str(args[0])
+    target = _floats(args[1])
+    if len(target) != 6:
+        raise BuiltinError(f"the target needs 6 values, got {len(target)}")
+    pose: tuple[int, ...] | None = None
+    joints: tuple[float, ...] | None = None
+    if len(args) > 6:
+        extra = args[6]
+        if kind == "PTP" and len(_arr(extra)) == 3:
+            pose = tuple(_int(v) for v in _arr(extra))
+        elif kind == "PTP":
+            joints = tuple(_floats(extra))
+    return MotionCall(
+        kind="PTP" if kind == "PTP" else "Line",
+        format=fmt,
+        target=tuple(target),
+        speed=_int(args[2]),
+        accel_time_ms=_int(args[3]),
+        blending=_int(args[4]),
+        precise_positioning=bool(args[5]),
+        pose=pose,
+        reference_joints=joints,
+    )
+
+
+@_register(
+    "13.8",
+    331,
+    "bool(string, float[], int, int, int, bool)",
+    "bool(string, float[], int, int, int, bool, int[])",
+    "bool(string, float[], int, int, int, bool, float[])",
+    motion=True,
+)
+def _PTP(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.8 PTP, p. 331: queue a point-to-point motion ("CPP" or "JPP")."""
+    if _str(args[0]) not in ("CPP", "JPP"):
+        return False  # "Command rejected (format error)"
+    rt.host.motion(_motion("PTP", args))
+    return True
+
+
+@_register("13.10", 337, "bool(string, float[], int, int, int, bool)", motion=True)
+def _Line(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.10 Line, p. 337: queue a linear motion ("C" + P/A/D + P/R)."""
+    fmt = _str(args[0])
+    if len(fmt) != 3 or fmt[0] != "C" or fmt[1] not in "PAD" or fmt[2] not in "PR":
+        return False
+    rt.host.motion(_motion("Line", args))
+    return True
+
+
+# ---- chapter 16: Modbus ----------------------------------------------------------------
+
+_READ_CODES = {"DO": 1, "DI": 2, "RO": 3, "RI": 4}
+_TYPE_WORDS = {"bool": 1, "byte": 1, "int16": 1, "int32": 2, "int": 2, "float": 2, "double": 4}
+
+
+def _device(rt: Runtime, name: Value, unit: int) -> ModbusDevice:
+    key = _str(name).strip()
+    config = rt.devices.get(key)
+    if config is None:
+        raise BuiltinError(f'no ModbusTCP device named "{key}" is declared')
+    return ModbusDevice(config.name, config.host, config.port, unit, config.timeout_ms)
+
+
+def _read(rt: Runtime, args: list[Value]) -> tuple[str, list[int]]:
+    device = _device(rt, args[0], _int(args[1]) & 0xFF)
+    kind = _str(args[2])
+    if kind not in _READ_CODES:
+        raise BuiltinError(f'read type "{kind}" is not DO, DI, RO or RI')
+    count = _int(args[4])
+    words = rt.host.modbus_request(device, _READ_CODES[kind], _int(args[3]), count, None)
+    return kind, list(words)
+
+
+def _as_bytes(kind: str, words: list[int]) -> bytes:
+    # Bits: one byte each; registers: two bytes each, high byte first (§16.5, p. 424).
+    if kind in ("DO", "DI"):
+        return bytes(1 if w else 0 for w in words)
+    return b"".join((w & 0xFFFF).to_bytes(2, "big") for w in words)
+
+
+def _ordered(chunk: bytes, endian: int) -> bytes:
+    # Big Endian (AB CD) as read; Little Endian (CD AB) swaps the 16-bit words (§16.7).
+    if endian == 1:
+        return chunk
+    words = _chunks(chunk, 2)
+    return b"".join(reversed(words))
+
+
+def _decode_all(data: bytes, size: int, fmt: str, endian: int) -> list[Scalar]:
+    out: list[Scalar] = []
+    for chunk in _chunks(data, size):
+        raw = _ordered(chunk.ljust(size, b"\0"), endian)
+        out.append(struct.unpack(fmt, raw)[0])
+    return out
+
+
+def _preset_read(rt: Runtime, args: list[Value]) -> Value:
+    config = rt.devices.get(_str(args[0]).strip())
+    if config is None:
+        raise BuiltinError(f'no ModbusTCP device named "{_str(args[0])}" is declared')
+    preset = config.presets.get(_str(args[1]))
+    if preset is None:
+        raise BuiltinError(f'device "{config.name}" has no preset "{_str(args[1])}"')
+    unit, kind, address, typ, suffix = preset
+    count = suffix if typ == "string" else _TYPE_WORDS[typ]
+    kind_, words = _read(rt, [config.name, unit, kind, address, count])
+    data = _as_bytes(kind_, words)
+    endian = 1 if typ == "string" else suffix
+    if typ == "bool":
+        return bool(words[0])
+    if typ == "byte":
+        return words[0] & 0xFF if kind in ("RO", "RI") else int(bool(words[0]))
+    if typ == "int16":
+        return _decode_all(data, 2, ">h", 1)[0]
+    if typ in ("int32", "int"):
+        return _decode_all(data, 4, ">i", endian)[0]
+    if typ == "float":
+        return _decode_all(data, 4, ">f", endian)[0]
+    if typ == "double":
+        return _decode_all(data, 8, ">d", endian)[0]
+    return data.split(b"\0", 1)[0].decode("utf-8", errors="replace")
+
+
+@_register("16.5", 423, "?(string, string)", "byte[](string, byte, string, int, int)")
+def _modbus_read(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.5 modbus_read, p. 423: by preset, or a byte array (Big Endian)."""
+    if len(args) == 2:
+        return _preset_read(rt, args)
+    kind, words = _read(rt, args)
+    return list(_as_bytes(kind, words))
+
+
+def _endian_arg(args: list[Value]) -> int:
+    return _int(args[5]) if len(args) > 5 else 1
+
+
+@_register(
+    "16.6",
+    426,
+    "int[](string, byte, string, int, int, int)",
+    "int[](string, byte, string, int, int)",
+)
+def _modbus_read_int16(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.6 modbus_read_int16, p. 426: every 2 bytes to an int16."""
+    kind, words = _read(rt, args)
+    return _decode_all(_as_bytes(kind, words), 2, ">h", 1)
+
+
+@_register(
+    "16.7",
+    428,
+    "int[](string, byte, string, int, int, int)",
+    "int[](string, byte, string, int, int)",
+)
+def _modbus_read_int32(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.7 modbus_read_int32, p. 428: 1 Big Endian (AB CD), 0 Little (CD AB)."""
+    kind, words = _read(rt, args)
+    return _decode_all(_as_bytes(kind, words), 4, ">i", _endian_arg(args))
+
+
+@_register(
+    "16.8",
+    430,
+    "float[](string, byte, string, int, int, int)",
+    "float[](string, byte, string, int, int)",
+)
+def _modbus_read_float(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.8 modbus_read_float, p. 430: every 4 bytes to a float."""
+    kind, words = _read(rt, args)
+    return _decode_all(_as_bytes(kind, words), 4, ">f", _endian_arg(args))
+
+
+@_register(
+    "16.9",
+    432,
+    "double[](string, byte, string, int, int, int)",
+    "double[](string, byte, string, int, int)",
+)
+def _modbus_read_double(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.9 modbus_read_double, p. 432: every 8 bytes to a double."""
+    kind, words = _read(rt, args)
+    return _decode_all(_as_bytes(kind, words), 8, ">d", _endian_arg(args))
+
+
+@_register(
+    "16.10",
+    434,
+    "string(string, byte, string, int, int, int)",
+    "string(string, byte, string, int, int)",
+)
+def _modbus_read_string(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.10 modbus_read_string, p. 434: UTF-8, stops at 0x00."""
+    kind, words = _read(rt, args)
+    return _as_bytes(kind, words).split(b"\0", 1)[0].decode("utf-8", errors="replace")
+
+
+def _encode_registers(value: Value, typ: str) -> bytes:
+    # User-defined writes are Big Endian (AB CD); int means int32 (§16.11, p. 438).
+    if isinstance(value, list):
+        elem = typ[:-2]
+        return b"".join(_encode_registers(v, elem) for v in value)
+    if isinstance(value, bool):
+        return b"\x00\x01" if value else b"\x00\x00"
+    if isinstance(value, str):
+        return value.encode("utf-8")
+    if isinstance(value, float):
+        return struct.pack(">f" if typ == "float" else ">d", value)
+    if typ == "byte":
+        return bytes([0, value & 0xFF])
+    return struct.pack(">i", wrap32(value))
+
+
+@_register(
+    "16.11", 436, "bool(string, byte, string, int, *, int)", "bool(string, byte, string, int, *)"
+)
+def _modbus_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """TMscript 2.24 §16.11 modbus_write, p. 436 (syntaxes 3 and 4: by address).
+
+    DO: FC 05 for one value, FC 15 for an array; RO: FC 06 for one register, else FC 16.
+    """
+    device = _device(rt, args[0], _int(args[1]) & 0xFF)
+    kind, address, value, typ = _str(args[2]), _int(args[3]), args[4], types[4]
+    limit = _int(args[5]) if len(args) > 5 else 0
+    if value == "" or value == []:
+        return False  # "the input data is empty" (p. 438)
+    if kind == "DO":
+        bits = [1 if v else 0 for v in value] if isinstance(value, list) else [1 if value else 0]
+        if limit > 0:
+            bits = bits[:limit]
+        code = 15 if isinstance(value, list) else 5
+        rt.host.modbus_request(device, code, address, len(bits), bits)
+        return True
+    if kind != "RO":
+        raise BuiltinError(f'write type "{kind}" is not DO or RO')
+    data = _encode_registers(value, typ)
+    if len(data) % 2:
+        data += b"\0"
+    words = [int.from_bytes(c, "big") for c in _chunks(data, 2)]
+    if limit > 0 and isinstance(value, str):
+        words = words[:limit]
+    code = 6 if len(words) == 1 else 16
+    rt.host.modbus_request(device, code, address, len(words), words)
+    return True
+
+
+#: Functions of the manual this interpreter refuses, by name (checked when a script is read).
+UNSUPPORTED: frozenset[str] = frozenset(
+    {
+        "String_DiffIndexOf",
+        "GetString",
+        "GetToken",
+        "GetAllTokens",
+        "GetNow",
+        "GetNowStamp",
+        "GetVarValue",
+        "SetVarValue",
+        "Ctrl",
+        "XOR8",
+        "SUM8",
+        "SUM16",
+        "SUM32",
+        "CRC16",
+        "CRC32",
+        "ListenPacket",
+        "ListenSend",
+        "VarSync",
+        "ExecText",
+        "ExecFile",
+        "RedirectToProject",
+        "ThreadRun",
+        "ThreadID",
+        "ThreadState",
+        "ThreadExit",
+        "stdevp",
+        "stdevs",
+        "norm2",
+        "dist",
+        "trans",
+        "inversetrans",
+        "applytrans",
+        "interpoint",
+        "changeref",
+        "points2coord",
+        "intercoord",
+        "coorshift",
+        "ValueReverse",
+        "Move_PTP",
+        "Move_Line",
+        "PLine",
+        "Move_PLine",
+        "Circle",
+        "ChangeLoad",
+        "modbus_open",
+        "modbus_close",
+        "IODDPreset",
+    }
+)
+
+
+def _unused(_: Sequence[object]) -> None:  # keeps Sequence imported for type checkers
+    return None

@@ -1,0 +1,1448 @@
+"""Check a Script Project and run it one bounded step at a time.
+
+The syntax tree is compiled once into closures (:class:`Program`): a variable is a slot in a
+list, a type is known before the script runs. Statements run as generators so that an
+:class:`Execution` can stop anywhere, a statement budget or a blocking call (``Sleep``,
+``WaitFor``, ``WaitQueueTag``, ``Pause``) yielding, and go on at the next :meth:`step`.
+Expressions are plain closures unless they call a blocking built-in or a customized
+function; only those become generators (the common statement costs one call).
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from collections.abc import Callable, Generator
+from dataclasses import dataclass, field
+from typing import Any, TypeAlias, cast
+
+from .._exceptions import TMMasterError, TMScriptRuntimeError, TMScriptSyntaxError
+from . import _ast as a
+from ._builtins import BUILTINS, UNSUPPORTED, Builtin, ExitRequest, ModbusConfig, Runtime
+from ._host import Host, HostError
+from ._parser import parse_script
+from ._types import (
+    INTEGRAL,
+    NUMERIC,
+    ConversionError,
+    Value,
+    convert,
+    default_value,
+    display_text,
+    element_type,
+    is_array,
+    to_f32,
+    truthy,
+    wrap32,
+)
+
+__all__ = [
+    "ExecState",
+    "Execution",
+    "Program",
+    "ScriptWarning",
+    "Status",
+    "compile_program",
+    "parse",
+]
+
+#: Longest a closestop or errorstop section runs (TMscript 2.24 §3.3, p. 30).
+STOP_SECTION_LIMIT_S = 12.0
+
+_BUDGET = "budget"
+_BLOCKED = "blocked"
+_PAUSED = "paused"
+
+
+class ExecState(enum.StrEnum):
+    """Where an :class:`Execution` stands after a :meth:`Execution.step` (compares to str)."""
+
+    RUNNING = "running"  #: the budget ran out; step again
+    BLOCKED = "blocked"  #: waiting on the host's clock or state; step again later
+    PAUSED = "paused"  #: Pause() was called: :meth:`Execution.resume` continues it
+    ENDED = "ended"  #: the project stopped (after closestop, or errorstop for Exit(-1))
+    ERROR = "error"  #: the project stopped by an error (:attr:`Execution.error`)
+
+
+@dataclass(frozen=True)
+class Status:
+    """What :meth:`Execution.step` reports: the state, and the error that ended the project."""
+
+    state: ExecState
+    error: TMScriptRuntimeError | None = None
+    exit_code: int | None = None
+
+
+class _Frame:
+    __slots__ = ("g", "l", "rt")
+
+    def __init__(self, g: list[Value], size: int, rt: _Run) -> None:
+        self.g = g
+        self.l: list[Value] = [None] * size  # type: ignore[list-item]
+        self.rt = rt
+
+
+class _Run(Runtime):
+    """The runtime state one execution shares with every closure."""
+
+    def __init__(self, host: Host) -> None:
+        super().__init__(host)
+        self.budget = 0
+
+
+class _Return:
+    __slots__ = ("value",)
+
+    def __init__(self, value: Value) -> None:
+        self.value = value
+
+
+_BREAK = "break"
+_CONTINUE = "continue"
+Control: TypeAlias = str | _Return | None
+Gen: TypeAlias = Generator[str, None, Any]
+PureFn: TypeAlias = Callable[[_Frame], Value]
+GenFn: TypeAlias = Callable[[_Frame], Gen]
+StmtFn: TypeAlias = Callable[[_Frame], Generator[str, None, Control]]
+
+
+@dataclass(frozen=True)
+class ScriptWarning:
+    """A compile warning the manual documents (§2.7): a bare word taken as a string."""
+
+    line: int
+    column: int
+    message: str
+
+
+@dataclass
+class _CExpr:
+    fn: Callable[[_Frame], Any]
+    type: str
+    gen: bool  # fn returns a generator
+
+
+def _syntax(node: a.Node, message: str) -> TMScriptSyntaxError:
+    return TMScriptSyntaxError(message, line=node.line, column=node.column)
+
+
+def _runtime(node: a.Node, message: str) -> TMScriptRuntimeError:
+    return TMScriptRuntimeError(message, line=node.line, column=node.column)
+
+
+def _type_name(spec: a.TypeSpec) -> str:
+    base = {"int32": "int"}.get(spec.base, spec.base)
+    return base + ("[]" if spec.array else "")
+
+
+def _promote(left: str, right: str) -> str:
+    if left in INTEGRAL and right in INTEGRAL:
+        return "int"
+    if "double" in (left, right):
+        return "double"
+    return "float"
+
+
+def _lift(ce: _CExpr) -> GenFn:
+    """The expression as a generator function (pure ones are wrapped)."""
+    if ce.gen:
+        return cast(GenFn, ce.fn)
+    fn = cast(PureFn, ce.fn)
+
+    def gen(fr: _Frame) -> Gen:
+        return fn(fr)
+        yield  # pragma: no cover - makes this a generator
+
+    return gen
+
+
+@dataclass
+class _Function:
+    node: a.FunctionDef
+    returns: str
+    params: tuple[str, ...]
+    size: int = 0
+    body: StmtFn | None = None
+
+
+@dataclass
+class _Scope:
+    names: list[dict[str, tuple[int, str]]] = field(default_factory=lambda: [{}])
+    size: int = 0
+    is_global: bool = False
+
+
+class _Compiler:
+    def __init__(self, script: a.Script) -> None:
+        self.script = script
+        self.globals: dict[str, tuple[int, str]] = {}
+        self.devices: set[str] = set()
+        self.functions: dict[str, _Function] = {}
+        self.warnings: list[ScriptWarning] = []
+        self.scope = _Scope(is_global=True)
+        self.function: _Function | None = None
+        self.section = ""
+
+    # ---- names ----
+
+    def declare(self, node: a.Node, name: str, typ: str) -> tuple[bool, int]:
+        scope = self.scope
+        if any(name in s for s in scope.names) or (not scope.is_global and name in self.globals):
+            raise _syntax(node, f"variable {name} is declared twice")
+        if scope.is_global:
+            slot = len(self.globals)
+            self.globals[name] = (slot, typ)
+            scope.names[-1][name] = (slot, typ)
+            return True, slot
+        slot = scope.size
+        scope.size += 1
+        scope.names[-1][name] = (slot, typ)
+        return False, slot
+
+    def lookup(self, name: str) -> tuple[bool, int, str] | None:
+        for names in reversed(self.scope.names):
+            if name in names:
+                slot, typ = names[name]
+                return self.scope.is_global, slot, typ
+        if name in self.globals:
+            slot, typ = self.globals[name]
+            return True, slot, typ
+        return None
+
+    # ---- the project ----
+
+    def compile(self) -> Program:
+        script = self.script
+        for fn in script.functions:
+            if fn.name in self.functions:  # a customized function may shadow a built-in (§3.10.1)
+                raise _syntax(fn, f"function {fn.name} is defined twice")
+            params = tuple(_type_name(p.type) for p in fn.params)
+            self.functions[fn.name] = _Function(fn, _type_name(fn.return_type), params)
+        define = self.statements(script.define)
+        sections: dict[str, tuple[StmtFn, int]] = {}
+        for kind, block in (
+            ("main", script.main),
+            ("closestop", script.closestop),
+            ("errorstop", script.errorstop),
+        ):
+            if block is not None:
+                self.section = kind
+                self.scope = _Scope()
+                body = self.block(block, new_scope=False)
+                sections[kind] = (body, self.scope.size)
+        for fn_info in self.functions.values():
+            self.section = "function"
+            self.scope = _Scope()
+            self.function = fn_info
+            for param, typ in zip(fn_info.node.params, fn_info.params, strict=True):
+                self.declare(param, param.name, typ)
+            fn_info.body = self.block(fn_info.node.body, new_scope=False)
+            fn_info.size = self.scope.size
+            self.function = None
+        return Program(
+            script=script,
+            define=define,
+            globals_size=len(self.globals),
+            sections=sections,
+            warnings=tuple(self.warnings),
+        )
+
+    # ---- statements ----
+
+    def block(self, node: a.Block, *, new_scope: bool = True) -> StmtFn:
+        if new_scope:
+            self.scope.names.append({})
+        try:
+            return self.statements(node.statements)
+        finally:
+            if new_scope:
+                self.scope.names.pop()
+
+    def statements(self, nodes: tuple[a.Statement, ...]) -> StmtFn:
+        items: list[tuple[bool, Callable[[_Frame], Any]]] = []
+        for node in nodes:
+            simple, fn = self.statement(node)
+            items.append((simple, fn))
+        steps = tuple(items)
+
+        def run(fr: _Frame) -> Generator[str, None, Control]:
+            rt = fr.rt
+            for simple, fn in steps:
+                rt.budget -= 1
+                if rt.budget < 0:
+                    yield _BUDGET
+                if simple:
+                    fn(fr)
+                else:
+                    ctl = yield from fn(fr)
+                    if ctl is not None:
+                        return cast(Control, ctl)
+            return None
+
+        return run
+
+    def as_gen(self, node: a.Statement) -> StmtFn:
+        simple, fn = self.statement(node)
+        if not simple:
+            return cast(StmtFn, fn)
+        pure = fn
+
+        def run(fr: _Frame) -> Generator[str, None, Control]:
+            rt = fr.rt
+            rt.budget -= 1
+            if rt.budget < 0:
+                yield _BUDGET
+            pure(fr)
+            return None
+
+        return run
+
+    def statement(self, node: a.Statement) -> tuple[bool, Callable[[_Frame], Any]]:
+        """(simple, fn): a simple statement is a plain call; the others are generators."""
+        if isinstance(node, a.Declaration):
+            return self.declaration(node)
+        if isinstance(node, a.ClassDeclaration):
+            return True, self.class_declaration(node)
+        if isinstance(node, a.ExprStatement):
+            ce = self.expr(node.expr)
+            if not ce.gen:
+                return True, ce.fn
+            gen = cast(GenFn, ce.fn)
+
+            def run_expr(fr: _Frame) -> Generator[str, None, Control]:
+                yield from gen(fr)
+                return None
+
+            return False, run_expr
+        if isinstance(node, a.Block):
+            self.scope.names.append({})
+            try:
+                return False, self.statements(node.statements)
+            finally:
+                self.scope.names.pop()
+        if isinstance(node, a.Break | a.Continue):
+            ctl: Control = _BREAK if isinstance(node, a.Break) else _CONTINUE
+
+            def jump(fr: _Frame) -> Generator[str, None, Control]:
+                return ctl
+                yield  # pragma: no cover
+
+            return False, jump
+        if isinstance(node, a.Return):
+            return False, self.return_(node)
+        if isinstance(node, a.If):
+            return False, self.if_(node)
+        if isinstance(node, a.While):
+            return False, self.while_(node)
+        if isinstance(node, a.DoWhile):
+            return False, self.do_while(node)
+        if isinstance(node, a.For):
+            return False, self.for_(node)
+        if isinstance(node, a.Switch):
+            return False, self.switch(node)
+        raise _syntax(node, f"unsupported statement {type(node).__name__}")
+
+    def declaration(self, node: a.Declaration) -> tuple[bool, Callable[[_Frame], Any]]:
+        typ = _type_name(node.type)
+        if typ not in ("byte", "int", "int16", "float", "double", "bool", "string") and not (
+            is_array(typ)
+        ):
+            raise _syntax(node.type, f"unknown type {node.type}")
+        init = self.converted(node.init, typ, node) if node.init is not None else None
+        is_global, slot = self.declare(node, node.name, typ)
+        default = default_value(typ)
+        array = is_array(typ)
+        if init is None:
+
+            def declare_default(fr: _Frame) -> None:
+                target = fr.g if is_global else fr.l
+                target[slot] = [] if array else default
+
+            return True, declare_default
+        if not init.gen:
+            fn = cast(PureFn, init.fn)
+            if is_global:
+
+                def declare_global(fr: _Frame) -> None:
+                    fr.g[slot] = fn(fr)
+
+                return True, declare_global
+
+            def declare_local(fr: _Frame) -> None:
+                fr.l[slot] = fn(fr)
+
+            return True, declare_local
+        gen = cast(GenFn, init.fn)
+
+        def declare_gen(fr: _Frame) -> Generator[str, None, Control]:
+            value = yield from gen(fr)
+            (fr.g if is_global else fr.l)[slot] = value
+            return None
+
+        return False, declare_gen
+
+    def class_declaration(self, node: a.ClassDeclaration) -> Callable[[_Frame], None]:
+        # ModbusTCP name = host[, port[, timeout]] (TMscript 2.24 §16.1, p. 414).
+        if not 1 <= len(node.args) <= 3:
+            raise _syntax(node, "ModbusTCP takes an address, a port and a timeout")
+        args = [self.pure(arg, "ModbusTCP") for arg in node.args]
+        name = node.name
+        if name in self.devices:
+            raise _syntax(node, f"device {name} is declared twice")
+        self.devices.add(name)
+        fns = [
+            self.to_type(arg, want, node)
+            for arg, want in zip(args, ("string", "int", "int"), strict=False)
+        ]
+
+        def declare(fr: _Frame) -> None:
+            values = [fn(fr) for fn in fns]
+            port = cast(int, values[1]) if len(values) > 1 else 502
+            timeout = cast(int, values[2]) if len(values) > 2 else 10000
+            fr.rt.devices[name] = ModbusConfig(name, cast(str, values[0]), port, timeout)
+
+        return declare
+
+    def return_(self, node: a.Return) -> StmtFn:
+        want = self.function.returns if self.function is not None else "void"
+        if node.value is None:
+            if want != "void" and self.function is not None:
+                raise _syntax(node, f"{self.function.node.name} must return a {want}")
+
+            def ret_void(fr: _Frame) -> Generator[str, None, Control]:
+                return _Return(None)  # type: ignore[arg-type]
+                yield  # pragma: no cover
+
+            return ret_void
+        if want == "void":
+            raise _syntax(node, "a void function returns no value")
+        value = _lift(self.converted(node.value, want, node))
+
+        def ret(fr: _Frame) -> Generator[str, None, Control]:
+            result = yield from value(fr)
+            return _Return(result)
+
+        return ret
+
+    def condition(self, node: a.Expr) -> GenFn | PureFn:
+        return self.expr(node).fn
+
+    def if_(self, node: a.If) -> StmtFn:
+        cond = self.expr(node.condition)
+        then = self.scoped(node.then)
+        other = self.scoped(node.otherwise) if node.otherwise is not None else None
+        if not cond.gen:
+            test = cast(PureFn, cond.fn)
+
+            def run_if(fr: _Frame) -> Generator[str, None, Control]:
+                if truthy(test(fr)):
+                    return (yield from then(fr))
+                if other is not None:
+                    return (yield from other(fr))
+                return None
+
+            return run_if
+        gtest = cast(GenFn, cond.fn)
+
+        def run_if_gen(fr: _Frame) -> Generator[str, None, Control]:
+            if truthy((yield from gtest(fr))):
+                return (yield from then(fr))
+            if other is not None:
+                return (yield from other(fr))
+            return None
+
+        return run_if_gen
+
+    def scoped(self, node: a.Statement) -> StmtFn:
+        self.scope.names.append({})
+        try:
+            return self.as_gen(node)
+        finally:
+            self.scope.names.pop()
+
+    def while_(self, node: a.While) -> StmtFn:
+        test = _lift(self.expr(node.condition))
+        body = self.scoped(node.body)
+
+        def run_while(fr: _Frame) -> Generator[str, None, Control]:
+            rt = fr.rt
+            while True:
+                rt.budget -= 1  # each iteration counts: while(true){} yields
+                if rt.budget < 0:
+                    yield _BUDGET
+                if not truthy((yield from test(fr))):
+                    return None
+                ctl = yield from body(fr)
+                if ctl is _BREAK:
+                    return None
+                if ctl is not None and ctl is not _CONTINUE:
+                    return ctl
+
+        return run_while
+
+    def do_while(self, node: a.DoWhile) -> StmtFn:
+        body = self.scoped(node.body)
+        test = _lift(self.expr(node.condition))
+
+        def run_do(fr: _Frame) -> Generator[str, None, Control]:
+            rt = fr.rt
+            while True:
+                rt.budget -= 1
+                if rt.budget < 0:
+                    yield _BUDGET
+                ctl = yield from body(fr)
+                if ctl is _BREAK:
+                    return None
+                if ctl is not None and ctl is not _CONTINUE:
+                    return ctl
+                if not truthy((yield from test(fr))):
+                    return None
+
+        return run_do
+
+    def for_(self, node: a.For) -> StmtFn:
+        self.scope.names.append({})  # the initialization's variables live in the loop
+        try:
+            init = self.as_gen(node.init) if node.init is not None else None
+            test = _lift(self.expr(node.condition)) if node.condition is not None else None
+            step = _lift(self.expr(node.step)) if node.step is not None else None
+            body = self.scoped(node.body)
+        finally:
+            self.scope.names.pop()
+
+        def run_for(fr: _Frame) -> Generator[str, None, Control]:
+            rt = fr.rt
+            if init is not None:
+                yield from init(fr)
+            while True:
+                rt.budget -= 1
+                if rt.budget < 0:
+                    yield _BUDGET
+                if test is not None and not truthy((yield from test(fr))):
+                    return None
+                ctl = yield from body(fr)
+                if ctl is _BREAK:
+                    return None
+                if ctl is not None and ctl is not _CONTINUE:
+                    return ctl
+                if step is not None:
+                    yield from step(fr)
+
+        return run_for
+
+    def switch(self, node: a.Switch) -> StmtFn:
+        subject = self.expr(node.subject)
+        subject_fn = _lift(subject)
+        cases: list[tuple[Callable[[Value, _Frame], Gen] | None, StmtFn]] = []
+        for case in node.cases:
+            test = None
+            if case.value is not None:
+                test = self.case_test(case, subject.type)
+            self.scope.names.append({})
+            try:
+                body = self.statements(case.body)
+            finally:
+                self.scope.names.pop()
+            cases.append((test, body))
+
+        def run_switch(fr: _Frame) -> Generator[str, None, Control]:
+            # The subject is read once, then compared case by case (TMscript 2.24 §3.9.2);
+            # from the matching case on, statements run until a break.
+            value = yield from subject_fn(fr)
+            matched = False
+            for test, body in cases:
+                if not matched:
+                    if test is None:
+                        matched = True
+                    else:
+                        matched = yield from test(value, fr)
+                if matched:
+                    ctl = yield from body(fr)
+                    if ctl is _BREAK:
+                        return None
+                    if ctl is not None:
+                        return ctl
+            return None
+
+        return run_switch
+
+    def case_test(self, case: a.Case, subject_type: str) -> Callable[[Value, _Frame], Gen]:
+        assert case.value is not None
+        value = self.expr(case.value)
+        compare = self.comparison(case, case.op, subject_type, value.type)
+        value_fn = _lift(value)
+
+        def test(subject: Value, fr: _Frame) -> Gen:
+            other = yield from value_fn(fr)
+            return compare(subject, other)
+
+        return test
+
+    # ---- expressions ----
+
+    def pure(self, node: a.Expr, where: str) -> _CExpr:
+        ce = self.expr(node)
+        if ce.gen:
+            raise _syntax(node, f"{where}: a waiting call or a function call is not allowed here")
+        return ce
+
+    def to_type(self, ce: _CExpr, want: str, node: a.Node) -> PureFn:
+        conv = self.converter(ce.type, want, node)
+        fn = cast(PureFn, ce.fn)
+        if conv is None:
+            return fn
+        return lambda fr: conv(fn(fr))
+
+    def converter(self, source: str, target: str, node: a.Node) -> Callable[[Value], Value] | None:
+        """The implicit conversion of an assignment (TMscript 2.24 §2.7), None if none needed."""
+        if source == target and target not in ("float",):
+            if is_array(target):
+                return _copy  # arrays are values: an assignment copies
+            return None
+        if target == "?" or target == "*":
+            return None
+        if source not in ("?", "void") and is_array(source) != is_array(target):
+            raise _syntax(node, f"a {source} cannot be assigned to a {target}")
+        if source == "void":
+            raise _syntax(node, "the function returns no value")
+
+        def conv(value: Value) -> Value:
+            try:
+                return convert(value, source, target)
+            except ConversionError as exc:
+                raise _runtime(node, str(exc)) from None
+
+        return conv
+
+    def converted(self, node: a.Expr, want: str, at: a.Node) -> _CExpr:
+        ce = self.expr(node)
+        conv = self.converter(ce.type, want, at)
+        if conv is None:
+            return _CExpr(ce.fn, want, ce.gen)
+        if not ce.gen:
+            fn = cast(PureFn, ce.fn)
+            return _CExpr(lambda fr: conv(fn(fr)), want, False)
+        gen = cast(GenFn, ce.fn)
+
+        def converted_gen(fr: _Frame) -> Gen:
+            return conv((yield from gen(fr)))
+
+        return _CExpr(converted_gen, want, True)
+
+    def expr(self, node: a.Expr) -> _CExpr:
+        if isinstance(node, a.Literal):
+            value = node.value
+            return _CExpr(lambda fr: value, node.type, False)
+        if isinstance(node, a.Name):
+            return self.name(node)
+        if isinstance(node, a.ArrayLiteral):
+            return self.array(node)
+        if isinstance(node, a.Binary):
+            return self.binary(node)
+        if isinstance(node, a.Logic):
+            return self.logic(node)
+        if isinstance(node, a.Unary):
+            return self.unary(node)
+        if isinstance(node, a.Ternary):
+            return self.ternary(node)
+        if isinstance(node, a.Assign):
+            return self.assign(node)
+        if isinstance(node, a.IncDec):
+            return self.incdec(node)
+        if isinstance(node, a.Index):
+            return self.index(node)
+        if isinstance(node, a.Cast):
+            return self.cast(node)
+        if isinstance(node, a.Call):
+            return self.call(node)
+        if isinstance(node, a.MethodCall):
+            return self.method_call(node)
+        raise _syntax(node, f"unsupported expression {type(node).__name__}")
+
+    def name(self, node: a.Name) -> _CExpr:
+        found = self.lookup(node.name)
+        if found is None:
+            if node.name in self.devices:
+                device = node.name
+                return _CExpr(lambda fr: device, "string", False)
+            # A bare word that is no variable is a string, with a warning (§2.2, p. 16).
+            self.warnings.append(
+                ScriptWarning(
+                    node.line, node.column, f"{node.name} is not a variable: taken as a string"
+                )
+            )
+            text = node.name
+            return _CExpr(lambda fr: text, "string", False)
+        is_global, slot, typ = found
+        if is_global:
+            return _CExpr(lambda fr: fr.g[slot], typ, False)
+        return _CExpr(lambda fr: fr.l[slot], typ, False)
+
+    def array(self, node: a.ArrayLiteral) -> _CExpr:
+        items = [self.expr(item) for item in node.items]
+        types = {ce.type for ce in items}
+        if not items:
+            elem = "?"
+        elif types <= NUMERIC:
+            elem = "byte" if types == {"byte"} else "int"
+            if types & {"float", "double"}:
+                elem = "double" if "double" in types else "float"
+            elif types - {"byte"}:
+                elem = "int"
+        elif len(types) == 1:
+            elem = next(iter(types))
+        else:
+            raise _syntax(node, "the elements of an array have one type")
+        if any(is_array(t) for t in types):
+            raise _syntax(node, "only one-dimensional arrays exist (§2.3)")
+        if any(ce.gen for ce in items):
+            gens = [_lift(ce) for ce in items]
+
+            def make_gen(fr: _Frame) -> Gen:
+                out = []
+                for g in gens:
+                    out.append((yield from g(fr)))
+                return out
+
+            return _CExpr(make_gen, elem + "[]", True)
+        fns = [cast(PureFn, ce.fn) for ce in items]
+        return _CExpr(lambda fr: [fn(fr) for fn in fns], elem + "[]", False)
+
+    def arith(self, node: a.Node, op: str, lt: str, rt_: str) -> tuple[Callable[..., Value], str]:
+        """The function of a binary operator on two values, and the result type."""
+        if op == "+" and ("string" in (lt, rt_)):
+            if is_array(lt) or is_array(rt_):
+                raise _syntax(node, "an array cannot be added to a string")
+            return (lambda x, y: display_text(x, lt) + display_text(y, rt_)), "string"
+        if op in ("==", "!=", "<", "<=", ">", ">="):
+            return self.comparison(node, op, lt, rt_), "bool"
+        if lt not in NUMERIC or rt_ not in NUMERIC:
+            raise _syntax(node, f"operator {op} does not apply to {lt} and {rt_}")
+        typ = _promote(lt, rt_)
+        if op in ("%", "<<", ">>", "&", "|", "^") and typ != "int":
+            raise _syntax(node, f"operator {op} takes integers, not {lt} and {rt_}")
+        return _ARITH[(op, typ)](node), typ
+
+    def comparison(self, node: a.Node, op: str, lt: str, rt_: str) -> Callable[[Any, Any], bool]:
+        kinds = {("n" if t in NUMERIC else t) for t in (lt, rt_)}
+        if len(kinds) != 1 or any(is_array(t) for t in (lt, rt_)):
+            raise _syntax(node, f"a {lt} cannot be compared with a {rt_}")
+        if "bool" in kinds and op not in ("==", "!="):
+            raise _syntax(node, f"operator {op} does not apply to bool")
+        return _COMPARE[op]
+
+    def binary(self, node: a.Binary) -> _CExpr:
+        left, right = self.expr(node.left), self.expr(node.right)
+        fn, typ = self.arith(node, node.op, left.type, right.type)
+        if not left.gen and not right.gen:
+            lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
+            return _CExpr(lambda fr: fn(lf(fr), rf(fr)), typ, False)
+        lg, rg = _lift(left), _lift(right)
+
+        def binary_gen(fr: _Frame) -> Gen:
+            x = yield from lg(fr)
+            y = yield from rg(fr)
+            return fn(x, y)
+
+        return _CExpr(binary_gen, typ, True)
+
+    def logic(self, node: a.Logic) -> _CExpr:
+        left, right = self.expr(node.left), self.expr(node.right)
+        is_and = node.op == "&&"
+        if not left.gen and not right.gen:
+            lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
+            if is_and:
+                return _CExpr(lambda fr: truthy(lf(fr)) and truthy(rf(fr)), "bool", False)
+            return _CExpr(lambda fr: truthy(lf(fr)) or truthy(rf(fr)), "bool", False)
+        lg, rg = _lift(left), _lift(right)
+
+        def logic_gen(fr: _Frame) -> Gen:
+            first = truthy((yield from lg(fr)))
+            if first != is_and:
+                return first
+            return truthy((yield from rg(fr)))
+
+        return _CExpr(logic_gen, "bool", True)
+
+    def unary(self, node: a.Unary) -> _CExpr:
+        operand = self.expr(node.operand)
+        typ = operand.type
+        fn: Callable[[Any], Value]
+        if node.op == "!":
+            fn, typ = (lambda v: not truthy(v)), "bool"
+        elif typ not in NUMERIC:
+            raise _syntax(node, f"operator {node.op} does not apply to {typ}")
+        elif node.op == "~":
+            if typ not in INTEGRAL:
+                raise _syntax(node, "operator ~ takes an integer")
+            fn, typ = (lambda v: wrap32(~v)), "int"
+        elif node.op == "-":
+            if typ in INTEGRAL:
+                fn, typ = (lambda v: wrap32(-v)), "int"
+            else:
+                fn = lambda v: -v  # noqa: E731
+        else:
+            fn = lambda v: v  # noqa: E731
+            typ = "int" if typ in INTEGRAL else typ
+        if not operand.gen:
+            of = cast(PureFn, operand.fn)
+            return _CExpr(lambda fr: fn(of(fr)), typ, False)
+        og = cast(GenFn, operand.fn)
+
+        def unary_gen(fr: _Frame) -> Gen:
+            return fn((yield from og(fr)))
+
+        return _CExpr(unary_gen, typ, True)
+
+    def ternary(self, node: a.Ternary) -> _CExpr:
+        cond, then, other = (self.expr(n) for n in (node.condition, node.then, node.otherwise))
+        typ = then.type
+        if then.type != other.type:
+            if then.type in NUMERIC and other.type in NUMERIC:
+                typ = _promote(then.type, other.type)
+            else:
+                raise _syntax(node, f"the two results are {then.type} and {other.type}")
+        if not (cond.gen or then.gen or other.gen):
+            cf, tf, of = (cast(PureFn, c.fn) for c in (cond, then, other))
+            return _CExpr(lambda fr: tf(fr) if truthy(cf(fr)) else of(fr), typ, False)
+        cg, tg, og = _lift(cond), _lift(then), _lift(other)
+
+        def ternary_gen(fr: _Frame) -> Gen:
+            if truthy((yield from cg(fr))):
+                return (yield from tg(fr))
+            return (yield from og(fr))
+
+        return _CExpr(ternary_gen, typ, True)
+
+    def target(self, node: a.Expr) -> tuple[str, Callable[[_Frame, Value], None], _CExpr]:
+        """An assignable place: its type, a store function and its read expression."""
+        if isinstance(node, a.Name):
+            found = self.lookup(node.name)
+            if found is None:
+                raise _syntax(node, f"variable {node.name} is not declared")
+            is_global, slot, typ = found
+
+            def store(fr: _Frame, value: Value) -> None:
+                (fr.g if is_global else fr.l)[slot] = value
+
+            return typ, store, self.name(node)
+        if isinstance(node, a.Index):
+            base = self.expr(node.target)
+            if not is_array(base.type) or base.gen:
+                raise _syntax(node, "only an array variable's element can be assigned")
+            index = self.pure(node.index, "an index")
+            bf, xf = cast(PureFn, base.fn), self.to_type(index, "int", node.index)
+
+            def store_elem(fr: _Frame, value: Value) -> None:
+                items = cast(list[Value], bf(fr))
+                i = cast(int, xf(fr))
+                if not 0 <= i < len(items):
+                    raise _runtime(node, f"index {i} is out of the array (length {len(items)})")
+                items[i] = value
+
+            return element_type(base.type), store_elem, self.index(node)
+        raise _syntax(node, "only a variable or an array element can be assigned")
+
+    def assign(self, node: a.Assign) -> _CExpr:
+        typ, store, current = self.target(node.target)
+        value = self.expr(node.value)
+        combine: Callable[[Any, Any], Value] | None = None
+        vtype = value.type
+        if node.op != "=":
+            combine, vtype = self.arith(node, node.op[:-1], typ, value.type)
+        conv = self.converter(vtype, typ, node)
+        cur_fn = cast(PureFn, current.fn)
+        if not value.gen:
+            vf = cast(PureFn, value.fn)
+
+            def assign_pure(fr: _Frame) -> Value:
+                result = vf(fr)
+                if combine is not None:
+                    result = combine(cur_fn(fr), result)
+                if conv is not None:
+                    result = conv(result)
+                store(fr, result)
+                return result
+
+            return _CExpr(assign_pure, typ, False)
+        vg = cast(GenFn, value.fn)
+
+        def assign_gen(fr: _Frame) -> Gen:
+            result = yield from vg(fr)
+            if combine is not None:
+                result = combine(cur_fn(fr), result)
+            if conv is not None:
+                result = conv(result)
+            store(fr, result)
+            return result
+
+        return _CExpr(assign_gen, typ, True)
+
+    def incdec(self, node: a.IncDec) -> _CExpr:
+        typ, store, current = self.target(node.target)
+        if typ not in NUMERIC:
+            raise _syntax(node, f"{node.op} takes a numeric variable, not {typ}")
+        delta = 1 if node.op == "++" else -1
+        conv = self.converter("int" if typ in INTEGRAL else typ, typ, node)
+        cur = cast(PureFn, current.fn)
+        prefix = node.prefix
+        is_int = typ in INTEGRAL
+
+        def step(fr: _Frame) -> Value:
+            old = cast(float, cur(fr))
+            new: Value = wrap32(int(old) + delta) if is_int else old + delta
+            if conv is not None:
+                new = conv(new)
+            store(fr, new)
+            return new if prefix else old
+
+        return _CExpr(step, typ, False)
+
+    def index(self, node: a.Index) -> _CExpr:
+        base = self.expr(node.target)
+        if not is_array(base.type):
+            raise _syntax(node, f"a {base.type} has no elements")
+        index = self.expr(node.index)
+        elem = element_type(base.type)
+        conv = self.converter(index.type, "int", node.index)
+
+        def get(items: list[Value], i: Value) -> Value:
+            if conv is not None:
+                i = conv(i)
+            n = cast(int, i)
+            if not 0 <= n < len(items):
+                raise _runtime(node, f"index {n} is out of the array (length {len(items)})")
+            return items[n]
+
+        if not base.gen and not index.gen:
+            bf, xf = cast(PureFn, base.fn), cast(PureFn, index.fn)
+            return _CExpr(lambda fr: get(cast(list[Value], bf(fr)), xf(fr)), elem, False)
+        bg, xg = _lift(base), _lift(index)
+
+        def index_gen(fr: _Frame) -> Gen:
+            items = yield from bg(fr)
+            i = yield from xg(fr)
+            return get(items, i)
+
+        return _CExpr(index_gen, elem, True)
+
+    def cast(self, node: a.Cast) -> _CExpr:
+        operand = self.expr(node.operand)
+        target = _type_name(node.type)
+        if is_array(operand.type) != is_array(target) and operand.type != "?":
+            raise _syntax(node, f"a {operand.type} cannot be converted to {target} (§2.5)")
+        source = operand.type
+
+        def conv(value: Value) -> Value:
+            try:
+                return convert(value, source, target)
+            except ConversionError as exc:
+                raise _runtime(node, str(exc)) from None
+
+        if not operand.gen:
+            of = cast(PureFn, operand.fn)
+            return _CExpr(lambda fr: conv(of(fr)), target, False)
+        og = cast(GenFn, operand.fn)
+
+        def cast_gen(fr: _Frame) -> Gen:
+            return conv((yield from og(fr)))
+
+        return _CExpr(cast_gen, target, True)
+
+    # ---- calls ----
+
+    def call(self, node: a.Call) -> _CExpr:
+        if node.name in self.functions:
+            return self.user_call(node, self.functions[node.name])
+        builtin = BUILTINS.get(node.name)
+        if builtin is None:
+            if node.name in UNSUPPORTED:
+                raise _syntax(node, f"{node.name}() is not supported by tmmaster.tmscript")
+            raise _syntax(node, f"unknown function {node.name}()")
+        if node.name == "WaitFor" and len(node.args) == 2:
+            return self.wait_for(node, builtin)
+        if builtin.motion and self.section in ("closestop", "errorstop"):
+            raise _syntax(node, f"{node.name}(): no motion in {self.section} (§3.3, §3.4)")
+        args = [self.expr(arg) for arg in node.args]
+        sig = self.resolve(node, builtin, [ce.type for ce in args])
+        params = sig.params
+        fns: list[_CExpr] = []
+        types: list[str] = []
+        for ce, want, arg in zip(args, params, node.args, strict=True):
+            if node.name == "Display" and ce.type != "string" and not ce.gen:
+                # Display shows any value as TMflow writes it (§5.6; arrays as {1,2,3}).
+                shown_type = ce.type
+                shown = cast(PureFn, ce.fn)
+                fns.append(_CExpr(_shown(shown, shown_type), "string", False))
+                types.append("string")
+            elif want in ("?", "?[]", "*"):
+                fns.append(ce)
+                types.append(ce.type)
+            else:
+                fns.append(self.converted(arg, want, arg) if ce.type != want else ce)
+                types.append(want)
+        ret = sig.returns
+        if ret == "$0":
+            ret = types[0]
+        arg_types = tuple(types)
+        name = node.name
+
+        def fail(exc: Exception) -> TMScriptRuntimeError:
+            return _runtime(node, f"{name}(): {exc}")
+
+        impl = builtin.impl
+        blocking = builtin.blocking
+        if impl is not None and not any(ce.gen for ce in fns):
+            pure = [cast(PureFn, ce.fn) for ce in fns]
+
+            def call_pure(fr: _Frame) -> Value:
+                values = [fn(fr) for fn in pure]
+                try:
+                    return impl(fr.rt, values, arg_types)
+                except (ExitRequest, TMScriptRuntimeError):
+                    raise
+                except (HostError, TMMasterError, OSError, ValueError, ArithmeticError) as exc:
+                    raise fail(exc) from None
+                except Exception as exc:
+                    raise fail(exc) from None
+
+            return _CExpr(call_pure, ret, False)
+        gens = [_lift(ce) for ce in fns]
+
+        def call_gen(fr: _Frame) -> Gen:
+            values = []
+            for g in gens:
+                values.append((yield from g(fr)))
+            try:
+                if blocking is not None:
+                    return (yield from blocking(fr.rt, values, arg_types))
+                assert impl is not None
+                return impl(fr.rt, values, arg_types)
+            except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
+                raise
+            except Exception as exc:
+                raise fail(exc) from None
+
+        return _CExpr(call_gen, ret, True)
+
+    def resolve(self, node: a.Call, builtin: Builtin, types: list[str]) -> Any:
+        """Pick the syntax the arguments fit (TMscript 2.24 §2.2: smaller types widen)."""
+        candidates = [s for s in builtin.signatures if len(s.params) == len(types)]
+        if builtin.name == "Display":
+            types = ["string" if not t.endswith("?") else t for t in types]
+        for sig in candidates:
+            if all(_fits(t, p) for t, p in zip(types, sig.params, strict=True)):
+                return sig
+        shown = ", ".join(types)
+        syntaxes = "; ".join(f"{builtin.name}({', '.join(s.params)})" for s in builtin.signatures)
+        raise _syntax(
+            node,
+            f"{builtin.name}({shown}) matches no syntax of §{builtin.section} "
+            f"(p. {builtin.page}): {syntaxes}",
+        )
+
+    def wait_for(self, node: a.Call, builtin: Builtin) -> _CExpr:
+        # WaitFor(condition, ms) evaluates the condition again on each poll (§5.4, p. 158).
+        cond = _lift(self.expr(node.args[0]))
+        timeout_ce = self.converted(node.args[1], "int", node.args[1])
+        timeout = _lift(timeout_ce)
+
+        def wait_gen(fr: _Frame) -> Gen:
+            ms = cast(int, (yield from timeout(fr)))
+            host = fr.rt.host
+            start = host.now_s()
+            while True:
+                if truthy((yield from cond(fr))):
+                    return True
+                if ms >= 0 and host.now_s() - start >= ms / 1000.0:
+                    return False
+                yield _BLOCKED
+
+        return _CExpr(wait_gen, "bool", True)
+
+    def user_call(self, node: a.Call, fn: _Function) -> _CExpr:
+        if len(node.args) != len(fn.params):
+            raise _syntax(
+                node, f"{fn.node.name}() takes {len(fn.params)} arguments, not {len(node.args)}"
+            )
+        args = [
+            _lift(self.converted(arg, want, arg))
+            for arg, want in zip(node.args, fn.params, strict=True)
+        ]
+        returns = fn.returns
+
+        def call_user(fr: _Frame) -> Gen:
+            values = []
+            for g in args:
+                values.append((yield from g(fr)))
+            callee = _Frame(fr.g, fn.size, fr.rt)
+            callee.l[: len(values)] = values
+            assert fn.body is not None
+            ctl = yield from fn.body(callee)
+            if isinstance(ctl, _Return):
+                return ctl.value
+            if returns != "void":
+                raise _runtime(node, f"{fn.node.name}() ended without returning a {returns}")
+            return None
+
+        return _CExpr(call_user, returns, True)
+
+    def method_call(self, node: a.MethodCall) -> _CExpr:
+        # device.Preset(name, slave, "DO"/"DI"/"RO"/"RI", address, type[, suffix]) (§16.1.1).
+        if not isinstance(node.target, a.Name) or node.target.name not in self.devices:
+            raise _syntax(node, f"{node.method}() needs a ModbusTCP device variable")
+        if node.method != "Preset":
+            raise _syntax(node, f"{node.method}() is not supported by tmmaster.tmscript")
+        if len(node.args) not in (5, 6):
+            raise _syntax(node, "Preset() takes 5 or 6 arguments (§16.1.1)")
+        wants = ("string", "byte", "string", "int", "string", "int")
+        fns = [
+            self.to_type(self.pure(arg, "Preset"), want, arg)
+            for arg, want in zip(node.args, wants, strict=False)
+        ]
+        device = node.target.name
+
+        def preset(fr: _Frame) -> Value:
+            values = [f(fr) for f in fns]
+            name, unit, kind, address, typ = (cast(Any, v) for v in values[:5])
+            if not str(name).isidentifier() or str(name)[0].isdigit():
+                raise _runtime(node, f'preset name "{name}" must be alphanumeric (§16.1.1)')
+            if kind not in ("DO", "DI", "RO", "RI"):
+                raise _runtime(node, f'signal type "{kind}" is not DO, DI, RO or RI')
+            if typ not in ("bool", "byte", "int16", "int32", "float", "double", "string", "int"):
+                raise _runtime(node, f'type "{typ}" is not supported by Preset()')
+            suffix = cast(int, values[5]) if len(values) > 5 else (0 if typ == "string" else 1)
+            fr.rt.devices[device].presets[name] = (unit, kind, address, typ, suffix)
+            return True
+
+        return _CExpr(preset, "bool", False)
+
+
+def _shown(fn: PureFn, typ: str) -> PureFn:
+    return lambda fr: display_text(fn(fr), typ)
+
+
+def _copy(value: Value) -> Value:
+    return list(value) if isinstance(value, list) else value
+
+
+def _fits(arg: str, param: str) -> bool:
+    if param == "*":
+        return True
+    if param == "?":
+        return not is_array(arg)
+    if param == "?[]":
+        return is_array(arg)
+    if arg == "?":
+        return True
+    if is_array(param) != is_array(arg):
+        return False
+    pe, ae = element_type(param), element_type(arg)
+    if pe == ae or ae == "?":
+        return True
+    if pe in NUMERIC and ae in NUMERIC:
+        return True
+    return pe == "string" and ae in NUMERIC
+
+
+# ---- operators -------------------------------------------------------------------------
+
+
+def _int_div(node: a.Node) -> Callable[[int, int], int]:
+    def div(x: int, y: int) -> int:
+        if y == 0:
+            raise _runtime(node, "division by zero")
+        q = abs(x) // abs(y)  # truncates toward zero, like C
+        return wrap32(q if (x >= 0) == (y >= 0) else -q)
+
+    return div
+
+
+def _int_mod(node: a.Node) -> Callable[[int, int], int]:
+    def mod(x: int, y: int) -> int:
+        if y == 0:
+            raise _runtime(node, "division by zero")
+        r = abs(x) % abs(y)  # the sign of the dividend, like C
+        return r if x >= 0 else -r
+
+    return mod
+
+
+def _float_op(
+    node: a.Node, fn: Callable[[float, float], float], single: bool
+) -> Callable[..., Value]:
+    def op(x: float, y: float) -> float:
+        try:
+            result = fn(x, y)
+        except ZeroDivisionError:
+            raise _runtime(node, "division by zero") from None
+        if single:
+            try:
+                return to_f32(result)
+            except ConversionError as exc:
+                raise _runtime(node, str(exc)) from None
+        return result
+
+    return op
+
+
+def _shift_left(x: int, y: int) -> int:
+    return wrap32(x << (y & 31))
+
+
+def _arith_table() -> dict[tuple[str, str], Callable[[a.Node], Callable[..., Value]]]:
+    table: dict[tuple[str, str], Callable[[a.Node], Callable[..., Value]]] = {
+        ("+", "int"): lambda n: lambda x, y: wrap32(x + y),
+        ("-", "int"): lambda n: lambda x, y: wrap32(x - y),
+        ("*", "int"): lambda n: lambda x, y: wrap32(x * y),
+        ("/", "int"): _int_div,
+        ("%", "int"): _int_mod,
+        ("<<", "int"): lambda n: _shift_left,
+        (">>", "int"): lambda n: lambda x, y: x >> (y & 31),
+        ("&", "int"): lambda n: lambda x, y: x & y,
+        ("|", "int"): lambda n: lambda x, y: x | y,
+        ("^", "int"): lambda n: lambda x, y: x ^ y,
+    }
+    ops: dict[str, Callable[[float, float], float]] = {
+        "+": lambda x, y: x + y,
+        "-": lambda x, y: x - y,
+        "*": lambda x, y: x * y,
+        "/": lambda x, y: x / y,
+    }
+    for sym, fn in ops.items():
+        table[(sym, "float")] = lambda n, fn=fn: _float_op(n, fn, True)  # type: ignore[misc]
+        table[(sym, "double")] = lambda n, fn=fn: _float_op(n, fn, False)  # type: ignore[misc]
+    return table
+
+
+_ARITH = _arith_table()
+_COMPARE: dict[str, Callable[[Any, Any], bool]] = {
+    "==": lambda x, y: x == y,
+    "!=": lambda x, y: x != y,
+    "<": lambda x, y: x < y,
+    "<=": lambda x, y: x <= y,
+    ">": lambda x, y: x > y,
+    ">=": lambda x, y: x >= y,
+}
+
+
+# ---- the program and its execution -----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Program:
+    """A checked Script Project, ready to run any number of times (see :func:`parse`)."""
+
+    script: a.Script
+    define: StmtFn
+    globals_size: int
+    sections: dict[str, tuple[StmtFn, int]]
+    warnings: tuple[ScriptWarning, ...]
+    filename: str = "<script>"
+
+
+def compile_program(script: a.Script, filename: str = "<script>") -> Program:
+    """Check a syntax tree and compile it.
+
+    :param script: from :func:`._parser.parse_script`.
+    :param filename: shown in messages.
+    :returns: the :class:`Program`.
+    :raises TMScriptSyntaxError: an unknown or unsupported function, a type error, a
+        variable declared twice.
+    """
+    program = _Compiler(script).compile()
+    return Program(
+        program.script,
+        program.define,
+        program.globals_size,
+        program.sections,
+        program.warnings,
+        filename,
+    )
+
+
+def parse(text: str, filename: str = "<script>") -> Program:
+    """Parse and check a Script Project (``define``, ``main``, ``closestop``, ``errorstop``).
+
+    :param text: the script.
+    :param filename: the name shown in messages.
+    :returns: the checked :class:`Program`; :attr:`Program.warnings` lists bare words taken
+        as strings (TMscript 2.24 §2.7).
+    :raises TMScriptSyntaxError: a syntax error, an unknown or unsupported function, a type
+        error; ``.line`` and ``.column`` say where.
+    """
+    return compile_program(parse_script(text), filename)
+
+
+class Execution:
+    """One run of a :class:`Program` against a :class:`~tmmaster.tmscript.Host`.
+
+    Nothing runs until :meth:`step`. The project runs ``define`` then ``main``; when main
+    ends (or ``Exit()``, or :meth:`stop`) it runs ``closestop``; on an error (or
+    ``Exit(-1)``, or :meth:`fail`) ``errorstop``. An error inside either ends the project
+    at once (TMscript 2.24 §3.3, §3.4).
+
+    :param program: from :func:`parse`.
+    :param host: the clock, dashboard, Modbus and motion.
+    """
+
+    def __init__(self, program: Program, host: Host) -> None:
+        self.program = program
+        self.host = host
+        self._rt = _Run(host)
+        self._globals: list[Value] = [None] * program.globals_size  # type: ignore[list-item]
+        self.state = ExecState.RUNNING
+        #: The error that stopped the project (state ERROR), else None.
+        self.error: TMScriptRuntimeError | None = None
+        #: The code given to Exit(), if it was called.
+        self.exit_code: int | None = None
+        self._phase = "main"
+        self._phase_start = 0.0
+        self._gen: Generator[str, None, Control] | None = self._main()
+
+    def _section(self, kind: str) -> Generator[str, None, Control] | None:
+        section = self.program.sections.get(kind)
+        if section is None:
+            return None
+        body, size = section
+        return body(_Frame(self._globals, size, self._rt))
+
+    def _main(self) -> Generator[str, None, Control]:
+        yield from self.program.define(_Frame(self._globals, 0, self._rt))
+        main = self._section("main")
+        if main is not None:
+            yield from main
+        return None
+
+    def _enter(self, phase: str) -> None:
+        if self._gen is not None:
+            self._gen.close()
+        self._phase = phase
+        self._phase_start = self.host.now_s()
+        self._rt.motion_allowed = False
+        self._gen = self._section(phase)
+        if self._gen is None:
+            self._finish()
+
+    def _finish(self) -> None:
+        self._gen = None
+        self.state = ExecState.ERROR if self.error is not None else ExecState.ENDED
+
+    def _on_error(self, error: TMScriptRuntimeError) -> None:
+        if self._phase == "main":
+            self.error = error
+            self._enter("errorstop")
+        else:  # an error in closestop or errorstop ends the project directly
+            if self.error is None:
+                self.error = error
+            self._finish()
+
+    def step(self, max_statements: int = 1000) -> Status:
+        """Run until the script blocks, ends, fails or has run ``max_statements`` statements.
+
+        Each statement and each loop iteration counts. The next call goes on where this
+        one stopped.
+
+        :param max_statements: the budget (at least 1).
+        :returns: the new :attr:`state`, with :attr:`error` and :attr:`exit_code`.
+        """
+        self._step(max_statements)
+        return Status(self.state, self.error, self.exit_code)
+
+    def _step(self, max_statements: int) -> ExecState:
+        if self.state in (ExecState.ENDED, ExecState.ERROR):
+            return self.state
+        if self._rt.paused:
+            self.state = ExecState.PAUSED
+            return self.state
+        self._rt.budget = max(1, max_statements)
+        while self._gen is not None:
+            if self._phase != "main" and (
+                self.host.now_s() - self._phase_start > STOP_SECTION_LIMIT_S
+            ):
+                self._finish()  # closed after 12 s at most (§3.3, p. 30)
+                break
+            try:
+                signal = next(self._gen)
+            except StopIteration:
+                if self._phase == "main":
+                    self._enter("closestop")
+                else:
+                    self._finish()
+                continue
+            except ExitRequest as exit_:
+                self.exit_code = exit_.code
+                if self._phase != "main":
+                    self._finish()
+                else:
+                    self._enter("errorstop" if exit_.code < 0 else "closestop")
+                continue
+            except TMScriptRuntimeError as exc:
+                self._on_error(exc)
+                continue
+            except RecursionError:
+                self._on_error(TMScriptRuntimeError("too deep recursion", line=0, column=0))
+                continue
+            if signal == _BUDGET:
+                self.state = ExecState.RUNNING
+            elif signal == _PAUSED:
+                self.state = ExecState.PAUSED
+            else:
+                self.state = ExecState.BLOCKED
+            return self.state
+        return self.state
+
+    def resume(self) -> None:
+        """Resume after ``Pause()`` (the Play button)."""
+        self._rt.paused = False
+        if self.state == ExecState.PAUSED:
+            self.state = ExecState.RUNNING
+
+    def stop(self, max_statements: int = 100_000) -> ExecState:
+        """Stop the project (the Stop button): run ``closestop`` (TMscript 2.24 §3.3).
+
+        closestop runs at once with its own budget; if it blocks (a Sleep), later
+        :meth:`step` calls finish it.
+
+        :returns: the new :attr:`state`.
+        """
+        if self._phase == "main" and self.state not in (ExecState.ENDED, ExecState.ERROR):
+            self._rt.paused = False
+            self._enter("closestop")
+            self._step(max_statements)
+        return self.state
+
+    def fail(self, error: str | TMScriptRuntimeError, max_statements: int = 100_000) -> ExecState:
+        """An error from outside the script (an emergency stop): run ``errorstop`` (§3.4).
+
+        :param error: the error, or its message.
+        :returns: the new :attr:`state`.
+        """
+        if isinstance(error, str):
+            error = TMScriptRuntimeError(error, line=0, column=0)
+        if self.state in (ExecState.ENDED, ExecState.ERROR):
+            return self.state
+        self._rt.paused = False
+        self._on_error(error)
+        if self._gen is not None:
+            self._step(max_statements)
+        return self.state
+
+    def run_to_end(self, timeout_s: float | None = None, poll_s: float = 0.001) -> ExecState:
+        """Step until the project ends, sleeping (wall clock) while it waits.
+
+        :param timeout_s: stop the project (closestop) after this many seconds.
+        :returns: :attr:`ExecState.ENDED` or :attr:`ExecState.ERROR`, or PAUSED when the
+            script paused itself and nothing can resume it.
+        :raises TimeoutError: the timeout ran out (the project was stopped first).
+        """
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            state = self._step(10_000)
+            if state in (ExecState.ENDED, ExecState.ERROR, ExecState.PAUSED):
+                return state
+            if deadline is not None and time.monotonic() > deadline:
+                self.stop()
+                raise TimeoutError(f"the script ran longer than {timeout_s} s")
+            if state == ExecState.BLOCKED:
+                time.sleep(poll_s)

@@ -1,0 +1,235 @@
+"""How a running script reaches the world: the :class:`Host` protocol, and :class:`NullHost`.
+
+The interpreter calls a host for everything outside the script: the clock, the dashboard,
+Modbus devices, the motion queue, kinematics. A host answers at once (it never blocks):
+waiting (``Sleep``, ``WaitFor``, ``WaitQueueTag``) is done by the interpreter, which polls
+the host on each :meth:`Execution.step`. A host reports a failure by raising
+:class:`HostError`; the interpreter turns it into a ``TMScriptRuntimeError`` at the call.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol, runtime_checkable
+
+__all__ = ["Host", "HostError", "ModbusDevice", "MotionCall", "NullHost", "NullHostError"]
+
+
+class HostError(Exception):
+    """A host could not do what the script asked (a Modbus timeout, a rejected motion...)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusDevice:
+    """A Modbus TCP device as the script declared it (TMscript 2.24 §16.1).
+
+    :ivar name: the variable's name (``ModbusTCP dev = ...`` is ``"dev"``).
+    :ivar host: the IP address or host name.
+    :ivar port: the TCP port (502 by default).
+    :ivar unit: the slave ID of this request.
+    :ivar timeout_ms: read/write timeout in milliseconds (10000 by default).
+    """
+
+    name: str
+    host: str
+    port: int = 502
+    unit: int = 0
+    timeout_ms: int = 10000
+
+
+@dataclass(frozen=True, slots=True)
+class MotionCall:
+    """One motion for the robot's queue: ``PTP()`` or ``Line()`` (TMscript 2.24 §13.8, §13.10).
+
+    :ivar kind: ``"PTP"`` or ``"Line"``.
+    :ivar format: the data format string: ``"CPP"``, ``"JPP"`` for PTP; ``"CPP"``,
+        ``"CAR"``... for Line (target, speed, blending letters).
+    :ivar target: six values: X, Y, Z (mm), RX, RY, RZ (degrees) or six joint angles.
+    :ivar speed: percentage of speed, or mm/s for Line's ``A``/``D`` speed formats.
+    :ivar accel_time_ms: time to reach top speed (ms).
+    :ivar blending: percentage, or radius in mm for Line's ``R`` blending format.
+    :ivar precise_positioning: the script's last bool argument, as given (the manual
+        names it "disable precise positioning").
+    :ivar pose: PTP's pose configuration ``[Config1, Config2, Config3]``, when given.
+    :ivar reference_joints: PTP's reference joint angles, when given.
+    """
+
+    kind: Literal["PTP", "Line"]
+    format: str
+    target: tuple[float, ...]
+    speed: int
+    accel_time_ms: int
+    blending: int
+    precise_positioning: bool
+    pose: tuple[int, ...] | None = None
+    reference_joints: tuple[float, ...] | None = None
+
+
+@runtime_checkable
+class Host(Protocol):
+    """What a script needs from the robot (or the simulator). All methods return at once."""
+
+    def now_s(self) -> float:
+        """The host's clock in seconds (simulated time in the simulator)."""
+        ...
+
+    def display(self, text: str) -> None:
+        """Show a ``Display()`` text on the dashboard (one call per ``Display()``)."""
+        ...
+
+    def modbus_request(
+        self,
+        device: ModbusDevice,
+        function: int,
+        address: int,
+        count: int,
+        values: Sequence[int] | None,
+    ) -> list[int]:
+        """One Modbus request.
+
+        :param device: the device and slave ID.
+        :param function: 1, 2, 3, 4 (read coils, discrete inputs, holding, input
+            registers) or 5, 6, 15, 16 (write a coil, a register, coils, registers).
+        :param address: the starting address.
+        :param count: how many coils or registers.
+        :param values: for writes, the words (0..65535) or bits (0/1); None for reads.
+        :returns: the words or bits read (``count`` of them); an empty list for writes.
+        :raises HostError: the request failed.
+        """
+        ...
+
+    def motion(self, call: MotionCall) -> None:
+        """Queue a motion (it runs later; the script goes on at once)."""
+        ...
+
+    def queue_tag(self, tag: int, wait: int) -> None:
+        """Tag the motion queued last with ``tag`` (1..15) (TMscript 2.24 §13.1)."""
+        ...
+
+    def queue_tag_done(self, tag: int) -> bool | None:
+        """Whether the motions up to ``tag`` are done; None when no such tag exists."""
+        ...
+
+    def stop_and_clear_buffer(self) -> None:
+        """Stop the robot and clear the motion queue (§13.4)."""
+        ...
+
+    def change_base(self, value: str | Sequence[float]) -> None:
+        """The base of the following motions: a base name or X, Y, Z, RX, RY, RZ (§13.5)."""
+        ...
+
+    def change_tcp(
+        self,
+        value: str | Sequence[float],
+        mass: float | None = None,
+        inertia: Sequence[float] | None = None,
+    ) -> None:
+        """The tool of the following motions: a TCP name or X, Y, Z, RX, RY, RZ (§13.6)."""
+        ...
+
+    def inversekin(
+        self, pose: Sequence[float], reference: Sequence[float] | None = None
+    ) -> list[float]:
+        """Joint angles of a Cartesian pose (§6.35); ``reference`` is three pose
+        configuration numbers or six reference joint angles. Empty when unreachable."""
+        ...
+
+    def forwardkin(self, joints: Sequence[float]) -> list[float]:
+        """The Cartesian pose of six joint angles (§6.36); empty when it cannot be computed."""
+        ...
+
+    def pause(self) -> None:
+        """The script called ``Pause()``: pause the project and the robot's motion (§5.2)."""
+        ...
+
+
+class NullHostError(HostError):
+    """A script that moves the robot or talks Modbus ran without a robot."""
+
+
+class NullHost:
+    """A host for scripts that move nothing: a real clock, ``Display()`` to a callback.
+
+    Any motion, kinematics or Modbus call fails naming the function.
+
+    :param on_display: called with each ``Display()`` text (default: print it).
+    :param clock: the clock (default :func:`time.monotonic`).
+    """
+
+    def __init__(
+        self,
+        on_display: Callable[[str], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._on_display = on_display if on_display is not None else print
+        self._clock = clock
+
+    def now_s(self) -> float:
+        """The clock's reading in seconds."""
+        return self._clock()
+
+    def display(self, text: str) -> None:
+        """Pass the text to the callback."""
+        self._on_display(text)
+
+    @staticmethod
+    def _refuse(what: str) -> NullHostError:
+        return NullHostError(
+            f"{what}: this script moves the robot or talks Modbus: "
+            "run it on a robot or in the simulator"
+        )
+
+    def modbus_request(
+        self,
+        device: ModbusDevice,
+        function: int,
+        address: int,
+        count: int,
+        values: Sequence[int] | None,
+    ) -> list[int]:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("Modbus")
+
+    def motion(self, call: MotionCall) -> None:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse(call.kind)
+
+    def queue_tag(self, tag: int, wait: int) -> None:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("QueueTag")
+
+    def queue_tag_done(self, tag: int) -> bool | None:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("WaitQueueTag")
+
+    def stop_and_clear_buffer(self) -> None:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("StopAndClearBuffer")
+
+    def change_base(self, value: str | Sequence[float]) -> None:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("ChangeBase")
+
+    def change_tcp(
+        self,
+        value: str | Sequence[float],
+        mass: float | None = None,
+        inertia: Sequence[float] | None = None,
+    ) -> None:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("ChangeTCP")
+
+    def inversekin(
+        self, pose: Sequence[float], reference: Sequence[float] | None = None
+    ) -> list[float]:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("inversekin")
+
+    def forwardkin(self, joints: Sequence[float]) -> list[float]:
+        """Refuse: :raises NullHostError:."""
+        raise self._refuse("forwardkin")
+
+    def pause(self) -> None:
+        """Nothing to pause: the execution reports paused until resumed."""

@@ -1,0 +1,479 @@
+"""Text to syntax tree: lark's LALR parser over ``grammar.lark``, then :mod:`._ast` nodes.
+
+Newlines end statements in TMscript (TMscript 2.24 §3.8), but a newline may also sit where
+no statement ends: between ``if (c)`` and its body, before ``{`` or ``else``, inside
+parentheses or an array constant. :class:`_Newlines` keeps only the newlines that end a
+statement (and adds one before a block's ``}``), so the grammar stays LALR(1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from functools import cache
+from importlib.resources import files
+from typing import cast
+
+from lark import Lark, Token, Transformer, v_args
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+from lark.lark import PostLex
+from lark.tree import Meta
+
+from .._exceptions import TMScriptSyntaxError
+from . import _ast as a
+
+__all__ = ["parse_script"]
+
+#: Words after which a ``{`` opens a block (anything else opens an array constant).
+_BLOCK_OPENERS = frozenset({")", "else", "do", "define", "main", "closestop", "errorstop"})
+#: Keywords whose parenthesised header is followed by a body (newlines there are dropped).
+_HEADER_KEYWORDS = frozenset({"if", "for", "while", "switch"})
+_PUNCT_TYPES = frozenset({"NAME", "STRING", "INT", "HEX", "BIN", "FLOAT", "TYPE", "CLASS"})
+
+
+def _word(tok: Token) -> str:
+    """A token's text when it is a keyword or punctuation, else its type (NAME, STRING...)."""
+    return tok.type if tok.type in _PUNCT_TYPES else str(tok.value)
+
+
+class _Newlines(PostLex):
+    """Keep a newline only where it ends a statement."""
+
+    always_accept = ("_NL",)
+
+    def process(self, stream: Iterator[Token]) -> Iterator[Token]:
+        # Each open bracket: "paren" (newlines inside are ignored), "header" (its ")" is
+        # followed by a body), "block", "do" (a do-while's body), "array".
+        stack: list[str] = []
+        prev: str | None = None  # the previous significant token's word
+        pending: Token | None = None  # a newline not yet known to end a statement
+        after_header = False  # the previous token closed an if/for/while/switch header
+        after_do = False  # the previous token closed a do-while's body
+        do_while = False  # the last while seen ends a do-while
+
+        def ignore_newlines() -> bool:
+            if not stack:
+                return True  # between sections
+            top = stack[-1]
+            return top in ("paren", "header", "array")
+
+        for tok in stream:
+            if tok.type == "_NL":
+                if (
+                    pending is None
+                    and not ignore_newlines()
+                    and not after_header
+                    and prev not in ("{", "else", "do", None)
+                    and not after_do
+                ):
+                    pending = tok
+                continue
+            word = _word(tok)
+            if pending is not None and word in ("{", "}", "else"):
+                pending = None
+            if pending is not None and word == "while" and after_do:
+                pending = None
+            if (
+                word == "}"
+                and stack
+                and stack[-1] in ("block", "do")
+                and pending is None
+                and prev not in ("{", None, "_NL")
+            ):
+                pending = Token.new_borrow_pos("_NL", "\n", tok)
+            if pending is not None:
+                yield pending
+                pending = None
+                prev = "_NL"
+            closed_header = after_header
+            after_header = False
+            if word == "while":
+                do_while = after_do  # the while of a do-while: no body follows its header
+            after_do = False
+            if word == "(":
+                header = prev in _HEADER_KEYWORDS and not (prev == "while" and do_while)
+                stack.append("header" if header else "paren")
+            elif word == "[":
+                stack.append("paren")
+            elif word == "{":
+                # After ")" only an if/for/while/switch header or a function's parameters
+                # open a block: "(int[]){...}" is a cast of an array constant.
+                opens_block = prev in _BLOCK_OPENERS and (prev != ")" or closed_header or not stack)
+                if opens_block or prev == "_NL" or prev is None:
+                    stack.append("do" if prev == "do" else "block")
+                else:
+                    stack.append("array")
+            elif word in (")", "]", "}") and stack:
+                top = stack.pop()
+                after_header = top == "header"
+                after_do = top == "do"
+                if word == "}" and top in ("block", "do"):
+                    tok = Token.new_borrow_pos("_RB", "}", tok)
+            if word == "{" and stack[-1] in ("block", "do"):
+                tok = Token.new_borrow_pos("_LB", "{", tok)
+            yield tok
+            prev = word
+        if pending is not None and stack:
+            yield pending
+
+
+@cache
+def _parser() -> Lark:
+    grammar = files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8")
+    return Lark(
+        grammar,
+        parser="lalr",
+        lexer="basic",
+        postlex=_Newlines(),
+        propagate_positions=True,
+        maybe_placeholders=True,
+    )
+
+
+def _pos(meta: Meta) -> dict[str, int]:
+    return {"line": meta.line, "column": meta.column}
+
+
+def _tpos(tok: Token) -> dict[str, int]:
+    return {"line": tok.line or 0, "column": tok.column or 0}
+
+
+def _string_value(text: str) -> str:
+    return text[1:-1].replace('""', '"')
+
+
+def _exprs(items: list[object]) -> tuple[a.Expr, ...]:
+    return tuple(cast(a.Expr, item) for item in items if item is not None)
+
+
+def _smallest_int_type(value: int) -> str:
+    # The smallest type the constant fits, byte first (TMscript 2.24 §2.2, p. 14).
+    if 0 <= value <= 255:
+        return "byte"
+    if -(2**31) <= value < 2**31:
+        return "int"
+    return "double"
+
+
+@v_args(meta=True)
+class _ToAst(Transformer[Token, object]):
+    """lark's tree to :mod:`._ast` nodes."""
+
+    def start(self, meta: Meta, children: list[object]) -> a.Script:
+        define: list[a.Statement] = []
+        blocks: dict[str, a.Block] = {}
+        functions: list[a.FunctionDef] = []
+        for child in children:
+            if isinstance(child, a.FunctionDef):
+                functions.append(child)
+            else:
+                kind, node = cast(tuple[str, object], child)
+                if kind == "define":
+                    define.extend(cast(tuple[a.Statement, ...], node))
+                else:
+                    if kind in blocks:
+                        block = cast(a.Block, node)
+                        raise TMScriptSyntaxError(
+                            f"a second {kind} section", line=block.line, column=block.column
+                        )
+                    blocks[kind] = cast(a.Block, node)
+        line = meta.line if not meta.empty else 1
+        column = meta.column if not meta.empty else 1
+        return a.Script(
+            line=line,
+            column=column,
+            define=tuple(define),
+            main=blocks.get("main"),
+            closestop=blocks.get("closestop"),
+            errorstop=blocks.get("errorstop"),
+            functions=tuple(functions),
+        )
+
+    def define_section(self, meta: Meta, children: list[object]) -> tuple[str, object]:
+        return ("define", tuple(children))
+
+    def main_section(self, meta: Meta, children: list[object]) -> tuple[str, object]:
+        return ("main", children[0])
+
+    def closestop_section(self, meta: Meta, children: list[object]) -> tuple[str, object]:
+        return ("closestop", children[0])
+
+    def errorstop_section(self, meta: Meta, children: list[object]) -> tuple[str, object]:
+        return ("errorstop", children[0])
+
+    def function_def(self, meta: Meta, children: list[object]) -> a.FunctionDef:
+        ret, name, *rest = children
+        body = cast(a.Block, rest[-1])
+        params = tuple(cast(a.Param, p) for p in rest[:-1] if p is not None)
+        return a.FunctionDef(
+            **_pos(meta),
+            return_type=cast(a.TypeSpec, ret),
+            name=str(name),
+            params=params,
+            body=body,
+        )
+
+    def return_type(self, meta: Meta, children: list[object]) -> a.TypeSpec:
+        child = children[0]
+        if isinstance(child, a.TypeSpec):
+            return child
+        return a.TypeSpec(line=meta.line, column=meta.column, base="void")
+
+    def param(self, meta: Meta, children: list[object]) -> a.Param:
+        return a.Param(**_pos(meta), type=cast(a.TypeSpec, children[0]), name=str(children[1]))
+
+    def type_spec(self, meta: Meta, children: list[object]) -> a.TypeSpec:
+        base = str(children[0])
+        return a.TypeSpec(
+            line=meta.line, column=meta.column, base=base, array=children[1] is not None
+        )
+
+    def block(self, meta: Meta, children: list[object]) -> a.Block:
+        return a.Block(**_pos(meta), statements=tuple(cast(a.Statement, c) for c in children))
+
+    def declaration(self, meta: Meta, children: list[object]) -> a.Declaration:
+        spec, name, init = children
+        return a.Declaration(
+            **_pos(meta),
+            type=cast(a.TypeSpec, spec),
+            name=str(name),
+            init=cast(a.Expr | None, init),
+        )
+
+    def class_declaration(self, meta: Meta, children: list[object]) -> a.ClassDeclaration:
+        cls, name, *args = children
+        return a.ClassDeclaration(**_pos(meta), cls=str(cls), name=str(name), args=_exprs(args))
+
+    def expr_statement(self, meta: Meta, children: list[object]) -> a.ExprStatement:
+        return a.ExprStatement(**_pos(meta), expr=cast(a.Expr, children[0]))
+
+    def break_statement(self, meta: Meta, children: list[object]) -> a.Break:
+        return a.Break(**_pos(meta))
+
+    def continue_statement(self, meta: Meta, children: list[object]) -> a.Continue:
+        return a.Continue(**_pos(meta))
+
+    def return_statement(self, meta: Meta, children: list[object]) -> a.Return:
+        return a.Return(**_pos(meta), value=cast(a.Expr | None, children[0]))
+
+    def if_statement(self, meta: Meta, children: list[object]) -> a.If:
+        cond, then, otherwise = children
+        return a.If(
+            **_pos(meta),
+            condition=cast(a.Expr, cond),
+            then=cast(a.Statement, then),
+            otherwise=cast(a.Statement | None, otherwise),
+        )
+
+    def switch_statement(self, meta: Meta, children: list[object]) -> a.Switch:
+        subject, *cases = children
+        return a.Switch(
+            **_pos(meta),
+            subject=cast(a.Expr, subject),
+            cases=tuple(cast(a.Case, c) for c in cases),
+        )
+
+    def case_clause(self, meta: Meta, children: list[object]) -> a.Case:
+        label, *body = children
+        op, value = cast(tuple[str, a.Expr], label)
+        return a.Case(
+            **_pos(meta), op=op, value=value, body=tuple(cast(a.Statement, s) for s in body)
+        )
+
+    def default_clause(self, meta: Meta, children: list[object]) -> a.Case:
+        return a.Case(
+            **_pos(meta), op="==", value=None, body=tuple(cast(a.Statement, s) for s in children)
+        )
+
+    def case_label(self, meta: Meta, children: list[object]) -> tuple[str, a.Expr]:
+        if len(children) == 2:
+            return (str(children[0]), cast(a.Expr, children[1]))
+        return ("==", cast(a.Expr, children[0]))
+
+    def for_statement(self, meta: Meta, children: list[object]) -> a.For:
+        init, cond, step, body = children
+        init_stmt: a.Statement | None
+        if init is None or isinstance(init, a.Declaration):
+            init_stmt = init
+        else:
+            expr = cast(a.Expr, init)
+            init_stmt = a.ExprStatement(line=expr.line, column=expr.column, expr=expr)
+        return a.For(
+            **_pos(meta),
+            init=init_stmt,
+            condition=cast(a.Expr | None, cond),
+            step=cast(a.Expr | None, step),
+            body=cast(a.Statement, body),
+        )
+
+    def while_statement(self, meta: Meta, children: list[object]) -> a.While:
+        return a.While(
+            **_pos(meta), condition=cast(a.Expr, children[0]), body=cast(a.Statement, children[1])
+        )
+
+    def do_statement(self, meta: Meta, children: list[object]) -> a.DoWhile:
+        return a.DoWhile(
+            **_pos(meta), body=cast(a.Statement, children[0]), condition=cast(a.Expr, children[1])
+        )
+
+    # ---- expressions ----
+
+    def assign(self, meta: Meta, children: list[object]) -> a.Assign:
+        target, op, value = children
+        return a.Assign(
+            **_pos(meta), op=str(op), target=cast(a.Expr, target), value=cast(a.Expr, value)
+        )
+
+    def assign_op(self, meta: Meta, children: list[object]) -> str:
+        return str(children[0])
+
+    def ternary(self, meta: Meta, children: list[object]) -> a.Ternary:
+        cond, then, otherwise = children
+        return a.Ternary(
+            **_pos(meta),
+            condition=cast(a.Expr, cond),
+            then=cast(a.Expr, then),
+            otherwise=cast(a.Expr, otherwise),
+        )
+
+    def logic_or(self, meta: Meta, children: list[object]) -> a.Logic:
+        return a.Logic(
+            **_pos(meta), op="||", left=cast(a.Expr, children[0]), right=cast(a.Expr, children[1])
+        )
+
+    def logic_and(self, meta: Meta, children: list[object]) -> a.Logic:
+        return a.Logic(
+            **_pos(meta), op="&&", left=cast(a.Expr, children[0]), right=cast(a.Expr, children[1])
+        )
+
+    def binary(self, meta: Meta, children: list[object]) -> a.Binary:
+        left, op, right = children
+        return a.Binary(
+            **_tpos(cast(Token, op)),
+            op=str(op),
+            left=cast(a.Expr, left),
+            right=cast(a.Expr, right),
+        )
+
+    def unary(self, meta: Meta, children: list[object]) -> a.Expr:
+        op, operand = children
+        # -2147483648 and friends are constants, not negations of an out-of-range constant.
+        if str(op) == "-" and isinstance(operand, a.Literal) and operand.type != "string":
+            value = operand.value
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                neg = -value
+                typ = _smallest_int_type(neg) if isinstance(neg, int) else operand.type
+                if typ == "byte":
+                    typ = "int"  # -5 does not fit a byte
+                return a.Literal(**_pos(meta), value=neg, type=typ)
+        return a.Unary(**_pos(meta), op=str(op), operand=cast(a.Expr, operand))
+
+    def prefix(self, meta: Meta, children: list[object]) -> a.IncDec:
+        op, target = children
+        return a.IncDec(**_pos(meta), op=str(op), target=cast(a.Expr, target), prefix=True)
+
+    def postfix(self, meta: Meta, children: list[object]) -> a.IncDec:
+        target, op = children
+        return a.IncDec(**_pos(meta), op=str(op), target=cast(a.Expr, target), prefix=False)
+
+    def cast(self, meta: Meta, children: list[object]) -> a.Cast:
+        return a.Cast(
+            **_pos(meta), type=cast(a.TypeSpec, children[0]), operand=cast(a.Expr, children[1])
+        )
+
+    def index(self, meta: Meta, children: list[object]) -> a.Index:
+        return a.Index(
+            **_pos(meta), target=cast(a.Expr, children[0]), index=cast(a.Expr, children[1])
+        )
+
+    def call(self, meta: Meta, children: list[object]) -> a.Call:
+        name, *args = children
+        return a.Call(**_pos(meta), name=str(name), args=_exprs(args))
+
+    def method_call(self, meta: Meta, children: list[object]) -> a.MethodCall:
+        target, method, *args = children
+        return a.MethodCall(
+            **_pos(meta), target=cast(a.Expr, target), method=str(method), args=_exprs(args)
+        )
+
+    def name(self, meta: Meta, children: list[object]) -> a.Expr:
+        word = str(children[0])
+        # Boolean constants are case sensitive: true/True, false/False (§2.2, p. 16).
+        if word in ("true", "True"):
+            return a.Literal(**_pos(meta), value=True, type="bool")
+        if word in ("false", "False"):
+            return a.Literal(**_pos(meta), value=False, type="bool")
+        if word == "empty":
+            return a.Literal(**_pos(meta), value="", type="string")
+        if word in ("newline", "NewLine"):
+            return a.Literal(**_pos(meta), value="\r\n", type="string")
+        return a.Name(**_pos(meta), name=word)
+
+    def int_literal(self, meta: Meta, children: list[object]) -> a.Literal:
+        value = int(str(children[0]), 10)
+        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value))
+
+    def hex_literal(self, meta: Meta, children: list[object]) -> a.Literal:
+        value = int(str(children[0])[2:], 16)
+        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value))
+
+    def bin_literal(self, meta: Meta, children: list[object]) -> a.Literal:
+        value = int(str(children[0])[2:], 2)
+        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value))
+
+    def float_literal(self, meta: Meta, children: list[object]) -> a.Literal:
+        text = str(children[0])
+        value = float(text)
+        # float when it fits a float's range and 7 significant digits, else double (§2.2).
+        digits = len(text.lower().split("e")[0].replace(".", "").lstrip("0"))
+        typ = "float" if abs(value) <= 3.4028235e38 and digits <= 7 else "double"
+        return a.Literal(**_pos(meta), value=value, type=typ)
+
+    def string_literal(self, meta: Meta, children: list[object]) -> a.Literal:
+        return a.Literal(**_pos(meta), value=_string_value(str(children[0])), type="string")
+
+    def array_literal(self, meta: Meta, children: list[object]) -> a.ArrayLiteral:
+        return a.ArrayLiteral(**_pos(meta), items=_exprs(children))
+
+
+def _error_position(exc: UnexpectedInput, text: str) -> tuple[int, int]:
+    line = getattr(exc, "line", -1)
+    column = getattr(exc, "column", -1)
+    if isinstance(line, int) and line > 0 and isinstance(column, int) and column > 0:
+        return line, column
+    lines = text.splitlines() or [""]
+    return len(lines), len(lines[-1]) + 1
+
+
+def _describe(exc: UnexpectedInput) -> str:
+    if isinstance(exc, UnexpectedCharacters):
+        return f"unexpected character {exc.char!r}"
+    if isinstance(exc, UnexpectedEOF):
+        return "unexpected end of the script (a missing '}' or ')'?)"
+    if isinstance(exc, UnexpectedToken):
+        tok = exc.token
+        if tok.type == "$END":
+            return "unexpected end of the script (a missing '}' or ')'?)"
+        if tok.type == "_NL":
+            return "unexpected end of line"
+        return f"unexpected {str(tok.value)!r}"
+    return "syntax error"
+
+
+def parse_script(text: str) -> a.Script:
+    """Parse a Script Project's text into its syntax tree.
+
+    :param text: the whole script.
+    :returns: the :class:`._ast.Script`.
+    :raises TMScriptSyntaxError: the text is not TMscript; ``line``/``column`` say where.
+    """
+    try:
+        tree = _parser().parse(text)
+        return cast(a.Script, _ToAst().transform(tree))
+    except UnexpectedInput as exc:
+        line, column = _error_position(exc, text)
+        raise TMScriptSyntaxError(_describe(exc), line=line, column=column) from None
+    except Exception as exc:  # a TMScriptSyntaxError raised inside the transformer
+        inner = getattr(exc, "orig_exc", None)
+        if isinstance(inner, TMScriptSyntaxError):
+            raise inner from None
+        raise
