@@ -239,7 +239,7 @@ class TMScriptError(TMMasterError):
 
 
 class TMScriptSyntaxError(TMScriptError):
-    """The script cannot be run: a syntax error, an unknown or unsupported function, a type error."""
+    """The script cannot run: a syntax error, an unknown or unsupported function, a type error."""
 
 
 class TMScriptRuntimeError(TMScriptError):
