@@ -30,9 +30,9 @@ def test_the_program_carries_the_profiles_addresses_codes_and_tool() -> None:
     assert "float[] tool = {0, 0, 150, 0, 0, 90.5}" in text
     assert 'ChangeBase("RobotBase")' in text
     assert "joints = inversekin(target)" in text
-    assert 'IO["EndModule"].DO[0] = 1' in text
+    assert 'modbus_write("TM", 1, "DO", 800, 1)' in text
     # Compare-and-ack: the block is read again after the acknowledgement.
-    assert text.index('modbus_write("TM", "fbAck", seq)') < text.index(
+    assert text.index('modbus_write("TM", "fbAck", seq)') < text.rindex(
         'again = Byte_ToInt16Array(modbus_read("TM", 1, "RO", 9014, 2), 1, 0)'
     )
     assert "$" not in text  # every placeholder filled
@@ -40,13 +40,13 @@ def test_the_program_carries_the_profiles_addresses_codes_and_tool() -> None:
 
 def test_the_gripper_wiring_is_configurable() -> None:
     text = robot_program(robot_profile("tmflow"), gripper=GripperWiring("io", 2, 3, 250))
-    assert 'IO["EndModule"].DO[2] = 1' in text
-    assert 'grasp = IO["EndModule"].DI[3]' in text
+    assert 'modbus_write("TM", 1, "DO", 802, 1)' in text
+    assert 'grasp = modbus_read("TM", 1, "DI", 803, 1)[0]' in text
     assert "Sleep(250)" in text
     none = robot_program(robot_profile("tmflow"), gripper=GripperWiring("none"))
-    assert "IO[" not in none
+    assert '"DO"' not in none
     with pytest.raises(tmmaster.ConfigError, match="output"):
-        GripperWiring("io", 8)
+        GripperWiring("io", 4)
     with pytest.raises(tmmaster.ConfigError, match="gripper"):
         GripperWiring("magnet")
 
@@ -79,7 +79,7 @@ def test_the_command_writes_the_program(tmp_path: Path, capsys: pytest.CaptureFi
         (["--profile", "article"], "sequence handshake"),
         (["--tool", "1,2,3"], "--tool"),
         (["--tool", "0,0,nan,0,0,0"], "--tool"),
-        (["--gripper", "io:do=9"], "output"),
+        (["--gripper", "io:do=4"], "output"),
         (["--gripper", "io:colour=red"], "--gripper"),
         (["--profile", "no-such-profile"], "no-such-profile"),
     ],

@@ -26,12 +26,17 @@ class FakeHost:
         self.motions: list[MotionCall] = []
         self.tags: dict[int, bool] = {}
         self.paused = 0
+        #: Until this host time, a Modbus request waits (a slow link).
+        self.link_busy_until = 0.0
 
     def now_s(self) -> float:
         return self.t
 
     def display(self, text: str) -> None:
         self.shown.append(text)
+
+    def modbus_ready(self, device: ModbusDevice) -> bool:
+        return self.t >= self.link_busy_until
 
     def modbus_request(
         self,

@@ -23,6 +23,10 @@ from ._pose import Pose
 from ._registers import TARGET_FIELDS, DataType, Handshake, RobotProfile, Table, WordOrder
 from ._version import version
 
+#: The end module's DO 0 (coil) and DI 0 (discrete input) in Techman's Modbus table.
+END_MODULE_DO = 800
+END_MODULE_DI = 800
+
 #: The feedback and command fields the program reads or writes, by name.
 _FEEDBACK = ("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "grasp_status")
 _WORDS = ("speed", "accel_time", "command", "seq")
@@ -32,10 +36,11 @@ _WORDS = ("speed", "accel_time", "command", "seq")
 class GripperWiring:
     """How the program drives the gripper: none, or an end-module output and input.
 
-    ``kind`` "io": end-module digital output ``output`` closes the gripper when high and
-    opens it when low, the program waits ``settle_ms``, then reads grip detected on
-    end-module digital input ``input`` (TMscript 2.24 §11.5 IO, p. 301). ``kind`` "none":
-    gripper commands are refused with ``gripper_failed``.
+    ``kind`` "io": end-module digital output ``output`` (0-3) closes the gripper when high
+    and opens it when low, the program waits ``settle_ms``, then reads grip detected on
+    end-module digital input ``input`` (0-3), both through the robot's own Modbus table
+    (coils and discrete inputs 800-803, TMflow 2.24 manual, appendix C, p. 307). ``kind``
+    "none": gripper commands are refused with ``gripper_failed``.
     """
 
     kind: str = "io"
@@ -47,33 +52,35 @@ class GripperWiring:
         if self.kind not in ("io", "none"):
             raise ConfigError(f"gripper must be 'io' or 'none', got {self.kind!r}")
         for name, value, high in (
-            ("output", self.output, 7),
-            ("input", self.input, 7),
+            ("output", self.output, 3),
+            ("input", self.input, 3),
             ("settle_ms", self.settle_ms, 60_000),
         ):
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
                 raise ConfigError(f"gripper {name} must be an integer 0..{high}, got {value!r}")
 
 
-_GRIP_IO = """// The gripper on the end module ([TS] 11.5 IO, p. 301): digital output DO$output
-// closes it when high and opens it when low; after $settle_ms ms ([TS] 5.5 Sleep, p. 159)
-// digital input DI$input tells whether a part is held. Edit this function for another
-// gripper; keep its last two writes (grasp_status, then Done()).
+_GRIP_IO = """// The gripper on the end module, through the robot's own Modbus table ([TMF]
+// appendix C, End Module, p. 307: DO 0-3 are coils 800-803, FC 05; DI 0-3 are discrete
+// inputs 800-803, FC 02): DO$output closes it when high and opens it when low; after $settle_ms ms
+// ([TS] 5.5 Sleep, p. 159) DI$input tells whether a part is held ([TS] 16.11 modbus_write
+// Syntax 3, p. 437; 16.5 modbus_read Syntax 2, p. 424). Edit this function for another
+// gripper; keep its last two steps (grasp_status, then Done()).
 void Grip()
 {
     if (cmd == $cmd_close)
     {
-        IO["EndModule"].DO[$output] = 1
+        modbus_write("TM", 1, "DO", $do_address, 1)
     }
     else
     {
-        IO["EndModule"].DO[$output] = 0
+        modbus_write("TM", 1, "DO", $do_address, 0)
     }
     Sleep($settle_ms)
     grasp = 0
     if (cmd == $cmd_close)
     {
-        grasp = IO["EndModule"].DI[$input]
+        grasp = modbus_read("TM", 1, "DI", $di_address, 1)[0]
     }
     modbus_write("TM", "fbGrasp", grasp)
     Done()
@@ -181,7 +188,12 @@ def robot_program(
     first = profile.field(TARGET_FIELDS[0]).address
     addresses = {name: profile.field(name).address for name in (*_FEEDBACK, "command")}
     grip = Template(_GRIP_IO if wiring.kind == "io" else _GRIP_NONE).substitute(
-        output=wiring.output, input=wiring.input, settle_ms=wiring.settle_ms, **codes
+        output=wiring.output,
+        input=wiring.input,
+        do_address=END_MODULE_DO + wiring.output,
+        di_address=END_MODULE_DI + wiring.input,
+        settle_ms=wiring.settle_ms,
+        **codes,
     )
     template = resources.files("tmmaster").joinpath("robot_program.tms").read_text("utf-8")
     text = Template(template).substitute(

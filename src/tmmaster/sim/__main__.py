@@ -114,6 +114,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         " see docs/simulator.md)",
     )
     parser.add_argument(
+        "--program",
+        metavar="FILE|generated",
+        help="tmflow: run this TMflow Script Project on the robot through the TMscript"
+        " interpreter ('generated': the one tmmaster robot-program writes)",
+    )
+    parser.add_argument(
         "--resume-after-error",
         choices=("on", "off"),
         default="off",
@@ -201,6 +207,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             physics=args.physics,
             tool=_tool(args.tool),
             resume_after_error=args.resume_after_error == "on",
+            program=args.program,
         )
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
         print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)

@@ -150,10 +150,17 @@ class RegisterBank:
                 )
         return [words.get(a, 0) for a in range(address, address + count)]
 
-    def write(self, table: Table, address: int, values: Sequence[int]) -> None:
-        """Store words (or 0/1 bits) from the network; all or nothing."""
+    def write(
+        self, table: Table, address: int, values: Sequence[int], *, device: bool = False
+    ) -> None:
+        """Store words (or 0/1 bits) from the network; all or nothing.
+
+        ``device``: written by the robot's own program (a Script Project's Modbus client),
+        which may write the fields a master may not (its feedback); not counted as a
+        network write.
+        """
         self._check_range(table, address, len(values))
-        if table.read_only:
+        if table.read_only and not device:
             raise IllegalAddressError(
                 f"{self._map.name}: the {table.value} table is read-only (write at {address})"
             )
@@ -175,7 +182,7 @@ class RegisterBank:
                     f"{self._map.name}: {table.value} address {a} is not served"
                     f" (write of {len(values)} at {address})"
                 )
-            if not field.access.writable:
+            if not field.access.writable and not device:
                 raise IllegalAddressError(
                     f"{self._map.name}: field {field.name} ({table.value} {a}) is written by"
                     " the device only"
@@ -191,10 +198,11 @@ class RegisterBank:
             if words[address + offset] != value:
                 words[address + offset] = value
                 changed = True
-        for name in touched:
-            if name in self._field_writes:
-                self._field_writes[name] += 1
-        self._network_writes += 1
+        if not device:
+            for name in touched:
+                if name in self._field_writes:
+                    self._field_writes[name] += 1
+            self._network_writes += 1
         if changed:
             self._version += 1
 

@@ -116,6 +116,18 @@ class KinematicBackend:
         """The TCP in the flange frame (None: the TCP is the flange)."""
         return self._tool
 
+    def set_tool(self, tool: Pose | None) -> None:
+        """Change the TCP (a program's ``ChangeTCP``) at rest: the joints stay, the TCP moves.
+
+        Raises:
+            ConfigError: a motion is running (TMflow changes the tool for the motions
+                that follow, not the one under way).
+        """
+        if self._motion is not None:
+            raise ConfigError("the tool cannot change while the arm moves")
+        self._tool = tool
+        self._pose = self._model.forward(self._joints, tool)
+
     @property
     def world(self) -> World:
         """The objects on the table."""

@@ -28,7 +28,7 @@ from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import MotionRecord
+from ._controller import MotionRecord, RobotController
 from ._controllers import controller_class
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
@@ -87,6 +87,7 @@ class Simulator:
         name: str | None = None,
         tool: Pose | None = None,
         resume_after_error: bool = False,
+        program: str | Path | None = None,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
@@ -119,8 +120,12 @@ class Simulator:
         device = [f for f in all_faults if not is_network_fault(f)]
         self._log = RequestLog(listener=request_listener)
         controller = controller_class(self._profile.handshake)
-        self._bank = controller.bank_for(self._profile)
         handshake_options: dict[str, Any] = {}
+        if program is None and self._profile.handshake is Handshake.SEQUENCE:
+            program = "generated"  # the robot program tmmaster ships, interpreted
+        if program is not None:
+            controller, handshake_options = _script_project(self._profile, program, tool)
+        self._bank = controller.bank_for(self._profile)
         if resume_after_error:
             if self._profile.handshake is not Handshake.SEQUENCE:
                 raise ConfigError(
@@ -497,6 +502,34 @@ class Simulator:
 
 #: Physics backends a simulator can be built with by name (``--physics``).
 PHYSICS_BACKENDS = ("kinematic", "mujoco")
+
+
+def _script_project(
+    profile: RobotProfile, program: str | Path, tool: Pose | None
+) -> tuple[type[RobotController], dict[str, Any]]:
+    """The controller that runs a Script Project, and its options (ConfigError if it can't).
+
+    ``program``: "generated" (``tmmaster robot-program`` for the profile and ``tool``) or
+    a Script Project file.
+    """
+    if profile.handshake is not Handshake.SEQUENCE:
+        raise ConfigError(
+            f"program: a Script Project runs on a sequence-handshake profile (tmflow),"
+            f" not {profile.name!r}"
+        )
+    # Imported here: the interpreter is loaded only by a simulator that runs a program.
+    from .._robot_program import robot_program
+    from ._script_project import ScriptProjectController
+
+    if program == "generated":
+        text = robot_program(profile, tool=tool)
+    else:
+        path = Path(program)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"program {path}: cannot read it ({exc})") from exc
+    return ScriptProjectController, {"program": text}
 
 
 def physics_backend(

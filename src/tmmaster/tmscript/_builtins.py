@@ -108,6 +108,25 @@ def _register(section: str, page: int, *specs: str, motion: bool = False) -> Cal
     return decorate
 
 
+def _register_linked(section: str, page: int, *specs: str) -> Callable[[Impl], Impl]:
+    """A Modbus function: it waits at the call until the host's link can take the request."""
+
+    def decorate(fn: Impl) -> Impl:
+        def wait_then_call(
+            rt: Runtime, args: list[Value], types: tuple[str, ...]
+        ) -> Generator[str, None, Value]:
+            device = _device(rt, args[0], 0)
+            while not rt.host.modbus_ready(device):
+                yield BLOCKED
+            return fn(rt, args, types)
+
+        name = fn.__name__.lstrip("_")
+        BUILTINS[name] = Builtin(name, section, page, _sigs(*specs), blocking=wait_then_call)
+        return fn
+
+    return decorate
+
+
 def _register_blocking(
     section: str, page: int, *specs: str
 ) -> Callable[[BlockingImpl], BlockingImpl]:
@@ -969,7 +988,7 @@ def _preset_read(rt: Runtime, args: list[Value]) -> Value:
     return data.split(b"\0", 1)[0].decode("utf-8", errors="replace")
 
 
-@_register("16.5", 423, "?(string, string)", "byte[](string, byte, string, int, int)")
+@_register_linked("16.5", 423, "?(string, string)", "byte[](string, byte, string, int, int)")
 def _modbus_read(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
     """TMscript 2.24 §16.5 modbus_read, p. 423: by preset, or a byte array (Big Endian)."""
     if len(args) == 2:
@@ -982,7 +1001,7 @@ def _endian_arg(args: list[Value]) -> int:
     return _int(args[5]) if len(args) > 5 else 1
 
 
-@_register(
+@_register_linked(
     "16.6",
     426,
     "int[](string, byte, string, int, int, int)",
@@ -994,7 +1013,7 @@ def _modbus_read_int16(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     return _decode_all(_as_bytes(kind, words), 2, ">h", 1)
 
 
-@_register(
+@_register_linked(
     "16.7",
     428,
     "int[](string, byte, string, int, int, int)",
@@ -1006,7 +1025,7 @@ def _modbus_read_int32(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     return _decode_all(_as_bytes(kind, words), 4, ">i", _endian_arg(args))
 
 
-@_register(
+@_register_linked(
     "16.8",
     430,
     "float[](string, byte, string, int, int, int)",
@@ -1018,7 +1037,7 @@ def _modbus_read_float(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     return _decode_all(_as_bytes(kind, words), 4, ">f", _endian_arg(args))
 
 
-@_register(
+@_register_linked(
     "16.9",
     432,
     "double[](string, byte, string, int, int, int)",
@@ -1030,7 +1049,7 @@ def _modbus_read_double(rt: Runtime, args: list[Value], types: tuple[str, ...]) 
     return _decode_all(_as_bytes(kind, words), 8, ">d", _endian_arg(args))
 
 
-@_register(
+@_register_linked(
     "16.10",
     434,
     "string(string, byte, string, int, int, int)",
@@ -1058,14 +1077,71 @@ def _encode_registers(value: Value, typ: str) -> bytes:
     return struct.pack(">i", wrap32(value))
 
 
-@_register(
-    "16.11", 436, "bool(string, byte, string, int, *, int)", "bool(string, byte, string, int, *)"
+def _preset_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """§16.11 syntaxes 1 and 2 (p. 436): one value through a preset, never an array.
+
+    DO: FC 05; RO: an int16, byte or bool preset is one register (FC 06), an int32,
+    float, double or string preset FC 16, in the preset's word order (strings UTF-8,
+    padded with 0x00 to the preset's address count, or to the given count).
+    """
+    config = rt.devices.get(_str(args[0]).strip())
+    if config is None:
+        raise BuiltinError(f'no ModbusTCP device named "{_str(args[0])}" is declared')
+    preset = config.presets.get(_str(args[1]))
+    if preset is None:
+        raise BuiltinError(f'device "{config.name}" has no preset "{_str(args[1])}"')
+    unit, kind, address, typ, suffix = preset
+    value = args[2]
+    if isinstance(value, list):
+        raise BuiltinError("writing an array is not supported with a preset (§16.11, p. 436)")
+    if value == "":
+        return False  # "the input data is empty" (p. 437)
+    device = ModbusDevice(config.name, config.host, config.port, unit, config.timeout_ms)
+    if kind == "DO":
+        rt.host.modbus_request(device, 5, address, 1, [1 if value else 0])
+        return True
+    if kind != "RO":
+        raise BuiltinError(f'preset "{_str(args[1])}" is {kind}: only DO and RO are written')
+    if typ in ("int16", "byte", "bool"):
+        word = (
+            (1 if value else 0)
+            if typ == "bool"
+            else _int(value) & (0xFF if typ == "byte" else 0xFFFF)
+        )
+        rt.host.modbus_request(device, 6, address, 1, [word])
+        return True
+    if typ == "string":
+        count = _int(args[3]) if len(args) > 3 else suffix
+        data = _str(value).encode("utf-8")
+        if count > 0:
+            data = data[: 2 * count].ljust(2 * count, b"\0")
+        elif len(data) % 2:
+            data += b"\0"
+    else:
+        fmt = {"int32": ">i", "int": ">i", "float": ">f", "double": ">d"}[typ]
+        number = wrap32(_int(value)) if fmt == ">i" else float(value)
+        data = _ordered(struct.pack(fmt, number), suffix)
+    words = [int.from_bytes(c, "big") for c in _chunks(data, 2)]
+    rt.host.modbus_request(device, 16, address, len(words), words)
+    return True
+
+
+@_register_linked(
+    "16.11",
+    436,
+    "bool(string, byte, string, int, *, int)",
+    "bool(string, byte, string, int, *)",
+    "bool(string, string, *, int)",
+    "bool(string, string, *)",
 )
 def _modbus_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §16.11 modbus_write, p. 436 (syntaxes 3 and 4: by address).
+    """TMscript 2.24 §16.11 modbus_write, p. 436: by preset (syntaxes 1 and 2) or by address.
 
-    DO: FC 05 for one value, FC 15 for an array; RO: FC 06 for one register, else FC 16.
+    By address (syntaxes 3 and 4): DO: FC 05 for one value, FC 15 for an array; RO: FC 06
+    for one register, else FC 16.
     """
+    if types[1] == "string":
+        return _preset_write(rt, args, types)
     device = _device(rt, args[0], _int(args[1]) & 0xFF)
     kind, address, value, typ = _str(args[2]), _int(args[3]), args[4], types[4]
     limit = _int(args[5]) if len(args) > 5 else 0

@@ -100,6 +100,15 @@ class Host(Protocol):
         """
         ...
 
+    def modbus_ready(self, device: ModbusDevice) -> bool:
+        """False while ``device`` cannot answer a request yet: the script waits at the call.
+
+        A request takes time on a real link; a host models that latency (or a slow link)
+        by answering False until the request may go out. The script's statement waits
+        there, as ``modbus_read`` on a robot waits for the answer.
+        """
+        ...
+
     def motion(self, call: MotionCall) -> None:
         """Queue a motion (it runs later; the script goes on at once)."""
         ...
@@ -180,6 +189,10 @@ class NullHost:
             f"{what}: this script moves the robot or talks Modbus: "
             "run it on a robot or in the simulator"
         )
+
+    def modbus_ready(self, device: ModbusDevice) -> bool:
+        """Always ready (and any request is refused)."""
+        return True
 
     def modbus_request(
         self,

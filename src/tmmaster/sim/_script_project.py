@@ -1,0 +1,406 @@
+"""A TMflow Script Project on the simulated robot: the robot program, interpreted.
+
+The ``tmflow`` robot of the simulator runs the very program a user loads into TMflow
+(``tmmaster robot-program``, or the user's own Script Project) through
+:mod:`tmmaster.tmscript`, one slice of statements per control tick. The program reaches
+the robot through :class:`SimHost`:
+
+- ``modbus_read`` / ``modbus_write`` on the robot's own slave (127.0.0.1, port 502 as the
+  program declares it) read and write this robot's register bank, as TMflow's own
+  Modbus client would;
+- motion functions queue moves that the physics backend runs one after the other, in the
+  current TCP (``ChangeTCP``) and the robot base; ``QueueTag``/``WaitQueueTag`` wait for
+  them; ``inversekin`` is the arm model's;
+- the end module's digital output drives the gripper, its digital input reports grip.
+
+TMflow's operational model stays the controller's (:class:`SequenceController`): the
+project Running / Paused / Stopped / Error on the documented discrete inputs, the Play /
+Pause and Stop coils, an e-stop pausing the project (Resumption Behavior on) or stopping
+it; stopping runs ``closestop``, an error ``errorstop``; a start runs ``main`` from the
+beginning.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from .._exceptions import UnreachablePoseError
+from .._pose import MotionType, Pose
+from .._registers import Table
+from .._robot_models import RobotModel
+from .._robot_program import END_MODULE_DO
+from ..tmscript import Execution, Program, parse
+from ..tmscript._host import HostError, ModbusDevice, MotionCall
+from ._bank import RegisterBank
+from ._controller import SimErrorCode, _Active
+from ._kinematic import KinematicBackend
+from ._sequence import SequenceController
+
+#: Statements a program may run per control tick before it yields to the robot (a busy
+#: loop must not freeze the simulator; TMflow time-slices a project the same way).
+STATEMENTS_PER_TICK = 400
+
+#: The Modbus tables behind each function code, and whether it writes.
+_FUNCTIONS: dict[int, tuple[Table, bool]] = {
+    1: (Table.COIL, False),
+    2: (Table.DISCRETE_INPUT, False),
+    3: (Table.HOLDING, False),
+    4: (Table.INPUT, False),
+    5: (Table.COIL, True),
+    6: (Table.HOLDING, True),
+    15: (Table.COIL, True),
+    16: (Table.HOLDING, True),
+}
+
+#: Error code the simulated controller reports when the program fails (a script error).
+SCRIPT_ERROR = 0x0300
+
+
+@dataclass
+class _Queued:
+    """A move in the robot's motion buffer."""
+
+    target: Pose
+    motion: MotionType
+    speed: float
+    accel_s: float
+    tag: int = 0
+    done: bool = False
+
+
+class SimHost:
+    """The robot as a running program sees it (the :class:`tmmaster.tmscript` host)."""
+
+    def __init__(self, controller: ScriptProjectController) -> None:
+        self._c = controller
+
+    def now_s(self) -> float:
+        """The simulated clock, seconds."""
+        return self._c.time_s
+
+    def display(self, text: str) -> None:
+        """A ``Display()`` line, logged."""
+        self._c.displayed.append(text)
+        self._c.log_display(text)
+
+    def modbus_request(
+        self,
+        device: ModbusDevice,
+        function: int,
+        address: int,
+        count: int,
+        values: Sequence[int] | None,
+    ) -> list[int]:
+        """A request on the robot's own slave: this robot's register bank."""
+        if device.host not in ("127.0.0.1", "localhost") or device.port != 502:
+            raise HostError(
+                f"device {device.name} is {device.host}:{device.port}: the simulated robot's"
+                " program reaches only its own slave (127.0.0.1, port 502)"
+            )
+        table, write = _FUNCTIONS.get(function, (None, False))
+        if table is None:
+            raise HostError(f"Modbus function {function} is not supported")
+        bank = self._c.bank
+        try:
+            if write:
+                bank.write(table, address, list(values or ()), device=True)
+                self._c.after_write(table, address, list(values or ()))
+                return []
+            words = bank.read(table, address, count)
+        except Exception as exc:  # an illegal address: the device's exception answer
+            raise HostError(f"{device.name}: {exc}") from exc
+        self._c.after_read(table, address, words)
+        return words
+
+    def modbus_ready(self, device: ModbusDevice) -> bool:
+        """False while a late_ack fault holds the program's link (its next request waits)."""
+        return self._c.time_s >= self._c.link_free_at
+
+    def motion(self, call: MotionCall) -> None:
+        """Put a PTP or Line into the motion buffer ("CPP" Cartesian, or PTP "JPP")."""
+        self._c.queue_motion(call)
+
+    def queue_tag(self, tag: int, wait: int) -> None:
+        """Tag the move queued last (done at once when the buffer is empty)."""
+        self._c.tag_last(tag)
+
+    def queue_tag_done(self, tag: int) -> bool | None:
+        """Whether the moves up to ``tag`` ran; None when no move carries it."""
+        return self._c.tag_done(tag)
+
+    def stop_and_clear_buffer(self) -> None:
+        """Stop the arm and forget the queued moves."""
+        self._c.clear_buffer()
+
+    def change_base(self, value: str | Sequence[float]) -> None:
+        """Only the robot base is modelled (a base name other than RobotBase is refused)."""
+        if isinstance(value, str):
+            if value != "RobotBase":
+                raise HostError(f"base {value!r}: the simulator models only RobotBase")
+            return
+        if any(abs(v) > 1e-9 for v in value):
+            raise HostError("the simulator models only the robot base (all zeros)")
+
+    def change_tcp(
+        self,
+        value: str | Sequence[float],
+        mass: float | None = None,
+        inertia: Sequence[float] | None = None,
+    ) -> None:
+        """The TCP of the following moves: the flange, or X, Y, Z, RX, RY, RZ."""
+        if isinstance(value, str):
+            if value != "RobotEndFlange":
+                raise HostError(f"TCP {value!r}: the simulator knows RobotEndFlange only")
+            tool: Pose | None = None
+        else:
+            tool = None if all(abs(v) < 1e-9 for v in value) else Pose(*value)
+        self._c.change_tool(tool)
+
+    def inversekin(
+        self, pose: Sequence[float], reference: Sequence[float] | None = None
+    ) -> list[float]:
+        """The arm model's joints for a TCP pose in the current tool; empty when unreachable."""
+        seed = list(reference) if reference is not None and len(reference) == 6 else None
+        try:
+            return list(self._c.model.inverse(Pose(*pose), seed_deg=seed, tool=self._c.tool))
+        except UnreachablePoseError:
+            return []
+
+    def forwardkin(self, joints: Sequence[float]) -> list[float]:
+        """The TCP pose of six joint angles in the current tool."""
+        return self._c.model.forward(joints, self._c.tool).as_list()
+
+    def pause(self) -> None:
+        """``Pause()``: the project pauses, as with the Pause button."""
+        self._c.pause_from_program()
+
+
+class ScriptProjectController(SequenceController):
+    """The tmflow robot running a Script Project through the TMscript interpreter."""
+
+    def __init__(
+        self,
+        *args: Any,
+        program: str | Program,
+        gripper_output: int = 0,
+        gripper_input: int = 0,
+        **options: Any,
+    ) -> None:
+        self._program = program if isinstance(program, Program) else parse(program)
+        self._execution: Execution | None = None
+        self._queue: deque[_Queued] = deque()
+        self._tags: dict[int, _Queued | None] = {}
+        #: Simulated time from which the program's next Modbus request may go (late_ack).
+        self.link_free_at = -1.0
+        self._gripper_output = gripper_output
+        self._gripper_input = gripper_input
+        self._gripper_output_high = False
+        #: Every ``Display()`` text, in order (for tests and the CLI's trace).
+        self.displayed: list[str] = []
+        super().__init__(*args, **options)
+
+    # -- what the host reaches ----------------------------------------------------------
+
+    @property
+    def time_s(self) -> float:
+        """Simulated seconds since the controller started."""
+        return self._time_s
+
+    @property
+    def bank(self) -> RegisterBank:
+        """The robot's register bank."""
+        return self._bank
+
+    @property
+    def model(self) -> RobotModel:
+        """The arm model."""
+        return self._model
+
+    @property
+    def tool(self) -> Pose | None:
+        """The TCP the program set (``ChangeTCP``)."""
+        backend = self._backend
+        return backend.tool if isinstance(backend, KinematicBackend) else None
+
+    def log_display(self, text: str) -> None:
+        """Log a program's ``Display()``."""
+        self._log.info("sim.display", device=self._name, text=text)
+
+    def change_tool(self, tool: Pose | None) -> None:
+        """``ChangeTCP``: the backend's tool for the following moves."""
+        backend = self._backend
+        if isinstance(backend, KinematicBackend):
+            if self._active is not None and self._active.kind == "motion":
+                raise HostError("ChangeTCP while the arm moves")
+            backend.set_tool(tool)
+            return
+        if tool is not None:
+            raise HostError("this physics backend keeps its own tool: ChangeTCP is refused")
+
+    def after_read(self, table: Table, address: int, words: list[int]) -> None:
+        """A late_ack fault: the program read a new command and takes ``delay_s`` to ack it.
+
+        Its next Modbus request waits ``delay_s`` (a slow link between the program and its
+        slave): the block was read before the delay, so a cancel written meanwhile is seen
+        only when the program reads the command again before and after its ack.
+        """
+        if table is not Table.HOLDING or not self._late_acks:
+            return
+        seq_field = self._profile.field("seq")
+        if not address <= seq_field.address < address + len(words):
+            return
+        seq = int(self._bank.get("seq"))
+        if seq != self._profile.next_seq(int(self._bank.get("ack_seq"))):
+            return
+        number = self._moves_started + 1
+        label = self._profile.field("command").label(int(self._bank.get("command")))
+        delay = max(
+            (
+                f.delay_s
+                for f in self._late_acks
+                if f.at_move is None or (label in ("ptp", "line") and f.at_move == number)
+            ),
+            default=0.0,
+        )
+        if delay > 0 and self.link_free_at < self._time_s:
+            self.link_free_at = self._time_s + delay
+            self._log.warning("sim.fault_fired", device=self._name, fault="late_ack", delay_s=delay)
+
+    def queue_motion(self, call: MotionCall) -> None:
+        """Put a move into the buffer (refused formats are a host error)."""
+        if call.format.upper() not in ("CPP", "JPP"):
+            raise HostError(f"motion format {call.format!r} is not modelled (CPP, JPP)")
+        if call.format.upper() == "JPP":
+            if call.kind != "PTP":
+                raise HostError("Line takes a Cartesian target")
+            target = self._model.forward(call.target, self.tool)
+        else:
+            target = Pose(*call.target)
+        accel_s = (call.accel_time_ms if call.accel_time_ms > 0 else 200) / 1000.0
+        motion = MotionType.PTP if call.kind == "PTP" else MotionType.LINE
+        self._queue.append(_Queued(target, motion, float(call.speed), accel_s))
+
+    def tag_last(self, tag: int) -> None:
+        """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done)."""
+        self._tags[tag] = self._queue[-1] if self._queue else None
+        if self._queue:
+            self._queue[-1].tag = tag
+
+    def tag_done(self, tag: int) -> bool | None:
+        """True once the move tagged ``tag`` (and every one before it) ran."""
+        if tag not in self._tags:
+            return None
+        move = self._tags[tag]
+        return move is None or move.done
+
+    def clear_buffer(self) -> None:
+        """StopAndClearBuffer: stop the arm, forget the queue (tags count as done)."""
+        self._stop_motion()
+        self._active = None
+        for move in self._queue:
+            move.done = True
+        self._queue.clear()
+
+    def pause_from_program(self) -> None:
+        """The program called ``Pause()``."""
+        self._pause("Pause() in the program")
+
+    def after_write(self, table: Table, address: int, values: Sequence[int]) -> None:
+        """The end module's gripper output (a coil): high closes the gripper, low opens it."""
+        output = END_MODULE_DO + self._gripper_output
+        if table is not Table.COIL or not address <= output < address + len(values):
+            return
+        close = bool(values[output - address])
+        if close != self._gripper_output_high:
+            self._gripper_output_high = close
+            self._drive_gripper(close=close, seq=int(self._bank.get("ack_seq")))
+
+    def _publish_grip(self) -> None:
+        """The end module's grip input: a part is held between closed fingers."""
+        name = f"em_di_{self._gripper_input}"
+        if self._bank.has(name):
+            self._bank.set(name, self._grip_detected())
+
+    # -- the project -------------------------------------------------------------------
+
+    def _start_project(self) -> None:
+        self._running = True
+        self._project_started_s = self._time_s
+        self._queue.clear()
+        self._tags.clear()
+        self.link_free_at = -1.0
+        self._set_paused(False, "start")
+        self._bank.set("project_running", True)
+        # main from the beginning; define's variables fresh ([TS] 3.1-3.2, p. 29).
+        self._execution = Execution(self._program, SimHost(self))
+        self._log.info("sim.project_started", device=self._name)
+
+    def _stop_project(self, reason: str) -> None:
+        execution, self._execution = self._execution, None
+        super()._stop_project(reason)
+        self._queue.clear()
+        if execution is not None:
+            if self._error_code:
+                execution.fail(reason)  # errorstop ([TS] 3.4, p. 31)
+            else:
+                execution.stop()  # closestop ([TS] 3.3, p. 30)
+
+    def _run_handshake(self, dt: float, ready: bool) -> None:
+        self._handle_buttons()
+        self._publish_grip()
+        if not self._running or self._paused:
+            return
+        if self._active is not None:
+            self._advance(dt, ready)
+        execution = self._execution
+        if execution is not None:
+            self._step(execution)
+        # A move the program queued in this tick starts in this tick, as TMflow's motion
+        # buffer takes it at once.
+        if self._active is None and self._queue and ready and self._running:
+            self._start_queued()
+
+    def _step(self, execution: Execution) -> None:
+        status = execution.step(STATEMENTS_PER_TICK)
+        if self._execution is not execution:
+            return  # the program stopped the project (Exit()) or failed: handled below
+        if status.state == "ended":
+            self._log.info("sim.program_ended", device=self._name)
+            self._execution = None
+            self._running = False
+            self._bank.set("project_running", False)
+        elif status.state == "error":
+            self._log.warning("sim.program_error", device=self._name, error=str(status.error))
+            self._execution = None
+            self._enter_error(SCRIPT_ERROR, f"program error: {status.error}")
+
+    def _start_queued(self) -> None:
+        move = self._queue[0]
+        seq = int(self._bank.get("ack_seq"))
+        self._motion_args = (move.target, move.motion, move.speed, move.accel_s, seq)
+        if not self._start_motion(move.target, move.motion, move.speed, move.accel_s, seq=seq):
+            return
+
+    def _command_done(self, active: _Active) -> None:
+        if active.kind == "motion" and self._queue:
+            self._queue.popleft().done = True
+
+    def _motion_failed(self, active: _Active) -> None:
+        self._active = None
+        self._enter_error(SimErrorCode.MOTION_LOST, "motion lost")
+
+    def _target_rejected(self, seq: int, reason: str) -> None:
+        # A motion function given a target the arm cannot take: an error stop.
+        self._queue.clear()
+        self._enter_error(SimErrorCode.UNREACHABLE, f"motion target rejected ({reason})")
+
+    def _backend_failed(self, seq: int, kind: Literal["motion", "gripper"]) -> None:
+        self._queue.clear()
+        self._enter_error(SimErrorCode.BACKEND_FAILURE, f"{kind} backend failed")
+
+    def _gripper_started(self, number: int, seq: int, *, close: bool, miss: bool) -> None:
+        # The program waits for the fingers itself (Sleep, then the grip input).
+        return None
