@@ -155,8 +155,9 @@ def test_an_interrupt_ends_a_wait_the_loop_polls_at_once_and_stops_the_arm(
 def test_ctrl_c_in_a_wait_the_loop_polls_withdraws_or_stops_before_returning(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    # The acknowledgement would come 100 simulated s later: Ctrl-C finds it pending.
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=100"])
+    # The acknowledgement would come 20 simulated s (0.5 s) later: Ctrl-C at 0.2 s finds it
+    # pending, and the tmflow program answers the cancel once its link is free again.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
     robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=30))
     motion = robot.start_move(A, speed=60)
     timer = threading.Timer(0.2, _thread.interrupt_main)

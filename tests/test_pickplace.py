@@ -566,15 +566,15 @@ def test_a_report_file_has_ordinary_permissions(tmp_path: Path) -> None:
     assert (tmp_path / "r.json").stat().st_mode & 0o777 == 0o644
 
 
-@pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_three_ctrl_c_on_a_slow_link_leave_nothing_armed_after_exit(
-    tm_simulator_factory: Callable[..., Simulator], profile: str
+    tm_simulator_factory: Callable[..., Simulator],
 ) -> None:
     # A robot in its own process, its commands taken late, every answer 40 ms late: the
     # first Ctrl-C starts the withdraw, the second and third land in the middle of it and
     # of the close. Whatever the master printed, nothing may start once it has exited.
     from fault_proxy import FaultProxy, Rule
 
+    profile = "tmflow"
     sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=8"])  # 0.2 s wall
     with FaultProxy(sim.port) as proxy:
         proxy.add(Rule("delay", delay_s=0.04, times=1_000_000))

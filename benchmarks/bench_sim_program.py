@@ -1,0 +1,107 @@
+"""CPU per control tick of the simulated tmflow robot, idle and commanded.
+
+The simulated ``tmflow`` robot runs the robot program (``tmmaster robot-program``)
+through the TMscript interpreter on each control tick. This measures what a tick costs,
+without threads or sockets: controllers are ticked in a plain loop, so the figure is the
+simulator's own CPU per robot per tick.
+
+- ``idle``: the project runs, nobody commands (the program polls its command block).
+- ``moving``: a master's writes are played into the register bank directly: a PTP to
+  and fro, the next command as soon as the previous one is done.
+
+Run it on the current code, and with ``PYTHONPATH`` pointing at another revision's
+``src`` to compare (docs/performance.md shows both)::
+
+    python benchmarks/bench_sim_program.py --robots 20 --ticks 500
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from tmmaster import Pose
+from tmmaster._profiles import robot_profile
+from tmmaster._robot_models import robot_model
+from tmmaster._transport import encode_writes, group_writes
+from tmmaster.sim._controllers import controller_class
+from tmmaster.sim._kinematic import KinematicBackend
+from tmmaster.sim._world import World
+
+
+def make_controllers(n: int) -> list[object]:
+    """``n`` simulated tmflow robots, as ``Simulator`` builds them (default program)."""
+    from tmmaster.sim import _simulator
+
+    profile = robot_profile("tmflow")
+    model = robot_model("tm5-700")
+    out = []
+    for _ in range(n):
+        backend = KinematicBackend(model, world=World(()))
+        cls = controller_class(profile.handshake)
+        options: dict[str, object] = {}
+        script = getattr(_simulator, "_script_project", None)
+        if script is not None:  # a revision whose tmflow robot runs the program
+            cls, options = script(profile, "generated", None)
+        bank = cls.bank_for(profile)
+        out.append((cls(profile, bank, backend, model, **options), bank))
+    return out
+
+
+def command(bank: object, seq: int, target: Pose) -> None:
+    """Write a PTP command block into ``bank`` as a master's FC16 would."""
+    profile = robot_profile("tmflow")
+    words = [
+        (profile.field(f"target_{n}"), v)
+        for n, v in zip("x y z rx ry rz".split(), target.as_list(), strict=True)
+    ]
+    words += [
+        (profile.field("speed"), 100),
+        (profile.field("accel_time"), 0),
+        (profile.field("command"), 1),
+        (profile.field("seq"), seq),
+    ]
+    for block, values in group_writes(encode_writes(words)):
+        bank.write(block.table, block.address, values)  # type: ignore[attr-defined]
+
+
+def run(n: int, ticks: int, moving: bool) -> float:
+    """Microseconds of CPU per robot per tick."""
+    robots = make_controllers(n)
+    dt = 0.02  # 50 Hz, real time
+    for _ in range(50):  # initialise, start the project
+        for controller, _bank in robots:
+            controller.tick(dt)  # type: ignore[attr-defined]
+    targets = (Pose(300, -200, 150, 180, 0, 90), Pose(300, -200, 250, 180, 0, 90))
+    seqs = [0] * n
+    started = time.process_time()
+    for _ in range(ticks):
+        for i, (controller, bank) in enumerate(robots):
+            if moving:
+                done = int(bank.get("done_seq"))  # type: ignore[attr-defined]
+                if done == seqs[i]:
+                    seqs[i] += 1
+                    command(bank, seqs[i], targets[seqs[i] % 2])
+            controller.tick(dt)  # type: ignore[attr-defined]
+    return (time.process_time() - started) * 1e6 / (n * ticks)
+
+
+def main() -> None:
+    """Print idle and moving figures, several rounds each."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=20)
+    parser.add_argument("--ticks", type=int, default=500)
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args()
+    for moving in (False, True):
+        figures = [run(args.robots, args.ticks, moving) for _ in range(args.rounds)]
+        print(
+            f"{'moving' if moving else 'idle':6} {args.robots} robots x {args.ticks} ticks:"
+            f" {min(figures):.0f} us per robot tick (least of {len(figures)} rounds)"
+            f"; rounds: {', '.join(f'{f:.0f}' for f in figures)}"
+        )
+
+
+if __name__ == "__main__":
+    main()
