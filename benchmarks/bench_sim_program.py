@@ -18,7 +18,6 @@ Run it on the current code, and with ``PYTHONPATH`` pointing at another revision
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 
 from tmmaster import Pose
@@ -54,7 +53,7 @@ def command(bank: object, seq: int, target: Pose) -> None:
     profile = robot_profile("tmflow")
     words = [
         (profile.field(f"target_{n}"), v)
-        for n, v in zip("x y z rx ry rz".split(), target.as_list(), strict=True)
+        for n, v in zip(["x", "y", "z", "rx", "ry", "rz"], target.as_list(), strict=True)
     ]
     words += [
         (profile.field("speed"), 100),
