@@ -91,3 +91,16 @@ def test_bad_options_are_exit_2_with_one_line(
     err = capsys.readouterr().err
     assert needle in err
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "tool", [None, Pose(0, 0, 150, 0, 0, 0), Pose(10.5, -3, 98.25, 0, 0, 45)], ids=str
+)
+@pytest.mark.parametrize("gripper", ["io", "none"])
+def test_every_program_parses_as_tmscript(tool: Pose | None, gripper: str) -> None:
+    from tmmaster import tmscript
+
+    for name in sequence_profiles():
+        text = robot_program(robot_profile(name), tool=tool, gripper=GripperWiring(gripper))
+        program = tmscript.parse(text, filename=f"{name}.tms")
+        assert program.warnings == ()  # no bare word taken for a string

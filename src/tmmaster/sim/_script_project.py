@@ -249,8 +249,10 @@ class ScriptProjectController(SequenceController):
         """
         if table is not Table.HOLDING or not self._late_acks:
             return
+        # The read the program acts on: the whole block, targets and seq together.
+        first = self._profile.field("target_x").address
         seq_field = self._profile.field("seq")
-        if not address <= seq_field.address < address + len(words):
+        if not (address <= first and seq_field.address < address + len(words)):
             return
         seq = int(self._bank.get("seq"))
         if seq != self._profile.next_seq(int(self._bank.get("ack_seq"))):

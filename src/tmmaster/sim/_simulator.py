@@ -426,6 +426,11 @@ class Simulator:
         """The arm's current TCP pose."""
         return self._call(self._backend.tcp_pose)
 
+    def displayed(self) -> list[str]:
+        """Every ``Display()`` text the robot's Script Project showed, in order (tmflow)."""
+        texts = getattr(self._controller, "displayed", None)
+        return [] if texts is None else self._call(lambda: list(texts))
+
     def field(self, name: str, *, device: str = "robot") -> Any:
         """Engineering value of a field of the robot's (or ``device="gripper"``) register map."""
         bank = self._bank if device == "robot" else self._gripper_bank
