@@ -31,6 +31,7 @@ from tmmaster.sim._faults import (
 )
 from tmmaster.sim._grippers import Blog2FG7Device, OnRobot2FG7Device
 from tmmaster.sim._kinematic import DEFAULT_HOME, KinematicBackend
+from tmmaster.sim._tm_table import tm_table_areas, tm_table_fields
 from tmmaster.sim._world import DEFAULT_PART_POSE
 
 DT = 0.02  # 50 Hz, the article slave's tick
@@ -174,7 +175,7 @@ def tmflow(
     initial_seq: int = 0,
 ) -> tuple[RobotController, RegisterBank, KinematicBackend, ListLogger]:
     profile = robot_profile("tmflow")
-    bank = RegisterBank(profile)
+    bank = controller_class(profile.handshake).bank_for(profile)  # Techman's table too
     backend = KinematicBackend(model) if backend is None else backend
     log = ListLogger()
     ctl = controller_for(
@@ -245,15 +246,26 @@ def test_article_race_ack_happens_on_the_tick_not_at_write_time() -> None:
 
 
 class RecordingBank(RegisterBank):
-    """Records the order of device-side writes, to check the order the contracts demand."""
+    """Records the order of device-side writes, to check the order the contracts demand.
 
-    def __init__(self, register_map: RegisterMap) -> None:
-        super().__init__(register_map)
+    Both the controller's own (``set``) and the robot program's (``write(device=True)``,
+    one field per register write), by field name.
+    """
+
+    def __init__(self, register_map: RegisterMap, **options: Any) -> None:
+        super().__init__(register_map, **options)
         self.sets: list[tuple[str, Any]] = []
 
     def set(self, name: str, value: Any) -> None:
         self.sets.append((name, value))
         super().set(name, value)
+
+    def write(self, table: Table, address: int, values: Any, *, device: bool = False) -> None:
+        super().write(table, address, values, device=device)
+        if device:
+            for field in self.register_map.fields.values():
+                if field.table is table and field.address == address:
+                    self.sets.append((field.name, self.get(field.name)))
 
 
 def test_article_sets_moving_before_it_clears_the_command() -> None:
@@ -279,19 +291,23 @@ def test_article_reports_the_error_before_it_clears_the_command() -> None:
 
 
 def test_tmflow_writes_results_before_the_state() -> None:
+    # The program's ordering rules: whoever sees the acknowledgement sees no stale state
+    # (result, state, then ack_seq); a refusal writes its result before the error state;
+    # done writes result and the idle state before done_seq.
     profile = robot_profile("tmflow")
-    bank = RecordingBank(profile)
+    bank = RecordingBank(profile, extra_fields=tm_table_fields(profile), raw_areas=tm_table_areas())
     ctl = controller_for(profile, bank, KinematicBackend(SMALL), SMALL, init_time_s=0.0)
     ctl.tick(DT)
     send_tmflow(bank, 1, target=FAR)
     bank.sets.clear()
     ctl.tick(DT)
-    assert bank.sets.index(("ack_seq", 1)) < bank.sets.index(("robot_state", 1))
+    assert bank.sets.index(("result_code", 0)) < bank.sets.index(("robot_state", 1))
+    assert bank.sets.index(("robot_state", 1)) < bank.sets.index(("ack_seq", 1))
     assert bank.sets.index(("result_code", 1)) < bank.sets.index(("robot_state", 2))
     send_tmflow(bank, 2, command=3)
     bank.sets.clear()
     run_until(ctl, lambda: bank.get("done_seq") == 2)
-    assert bank.sets.index(("done_seq", 2)) < bank.sets.index(("robot_state", 0))
+    assert bank.sets.index(("robot_state", 0)) < bank.sets.index(("done_seq", 2))
 
 
 def test_article_pose_is_live_during_the_motion() -> None:
@@ -606,13 +622,16 @@ def test_tmflow_project_runs_once_initialised_and_heartbeat_ticks() -> None:
     assert bank.get("heartbeat") == beat + 5
 
 
-def test_tmflow_heartbeat_wraps() -> None:
+def test_tmflow_heartbeat_counts_every_program_loop_and_wraps() -> None:
+    from tmmaster import tmscript
+
     ctl, bank, _, _ = tmflow()
-    # The program writes it with an int16 preset: it stays in 0..32767.
-    bank.set("heartbeat", 32766)
-    ctl.tick(DT)
-    ctl.tick(DT)
-    assert bank.get("heartbeat") == 0
+    beat = int(bank.get("heartbeat"))
+    run(ctl, 5 * DT)
+    assert int(bank.get("heartbeat")) == beat + 5  # one idle loop per tick
+    # The program's own expression, written with an int16 preset: 0..32767.
+    assert "hb = (hb + 1) % 32768" in (ctl.program_text or "")  # type: ignore[attr-defined]
+    assert tmscript.evaluate("(32767 + 1) % 32768")[0] == 0
 
 
 def test_tmflow_sequence_handshake() -> None:
@@ -627,7 +646,7 @@ def test_tmflow_sequence_handshake() -> None:
     assert bank.get("result_code") == 0
     assert pose_of(bank).is_close(PART, mm=0.001, deg=0.001)
     names = log.names()
-    assert names.index("sim.command_accepted") < names.index("sim.command_done")
+    assert names.index("sim.motion_started") < names.index("sim.motion_done")
 
 
 def test_tmflow_duplicate_seq_is_not_executed_twice() -> None:
@@ -929,12 +948,13 @@ def test_tmflow_late_ack() -> None:
 
 
 def test_tmflow_backend_not_ready() -> None:
+    # The program takes the command; the move waits in the buffer for the backend.
     backend = LateReadyBackend(ready_after_s=0.2)
     ctl, bank, _, _ = tmflow(backend=backend)
     backend.invalidate()
     send_tmflow(bank, 1, target=AIR)
     run(ctl, 0.1)
-    assert bank.get("ack_seq") == 0
+    assert ctl.moves_started == 0
     assert backend.reinit_calls == 1
     finish_tmflow(ctl, bank, 1)
     assert pose_of(bank).is_close(AIR, mm=0.001, deg=0.001)
@@ -1276,14 +1296,29 @@ def test_article_backend_rejection_is_an_error_with_the_reasons_code(
     assert any(e[1] == "sim.command_rejected" and e[2].get("reason") == reason for e in log.events)
 
 
-def test_tmflow_backend_rejection_is_result_unreachable() -> None:
-    ctl, bank, _, _ = tmflow(backend=RejectingBackend("joint_limit"))
-    send_tmflow(bank, 1, target=AIR)
+def test_tmflow_a_target_the_model_cannot_reach_is_result_unreachable() -> None:
+    # The program's inversekin() answers first: nothing reaches a motion function.
+    ctl, bank, _, _ = tmflow()
+    send_tmflow(bank, 1, target=Pose(2000, 0, 300, 180, 0, 90))
     ctl.tick(DT)
     assert bank.get("ack_seq") == 1
     assert (bank.get("result_code"), bank.get("robot_state")) == (1, 2)
     assert bank.get("done_seq") == 0
     assert bank.get("error") is False
+    assert ctl.moves_started == 0
+
+
+def test_tmflow_a_motion_the_backend_refuses_is_an_error_stop() -> None:
+    # A target the model takes but the physics refuses reaches the motion function: a
+    # motion error stops the project (errorstop reports the command failed).
+    ctl, bank, _, _ = tmflow(backend=RejectingBackend("joint_limit"))
+    send_tmflow(bank, 1, target=AIR)
+    run(ctl, 2 * DT)
+    assert bank.get("ack_seq") == 1
+    assert (bank.get("result_code"), bank.get("robot_state")) == (3, 2)
+    assert bank.get("done_seq") == 0
+    assert bank.get("error") is True
+    assert bank.get("project_running") is False
     assert ctl.moves_started == 0
 
 
@@ -1316,11 +1351,15 @@ def test_tmflow_motion_lost_on_reinitialise_fails_the_command() -> None:
     assert bank.get("robot_state") == 1
     backend.invalidate()
     ctl.tick(DT)
+    # A motion error: the project stops, errorstop reports the command failed.
     assert (bank.get("result_code"), bank.get("robot_state")) == (3, 2)
     run(ctl, 2.0)
     assert bank.get("done_seq") == 0  # never reported done
     assert "sim.motion_done" not in log.names()
-    # The program takes the next command.
+    # After the operator's reset and Play, the program takes the next command.
+    ctl.clear_error()
+    ctl.press_play()
+    run(ctl, DT)
     send_tmflow(bank, 2, target=AIR)
     finish_tmflow(ctl, bank, 2)
     assert pose_of(bank).is_close(AIR, mm=0.01, deg=0.01)

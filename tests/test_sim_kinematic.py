@@ -258,14 +258,16 @@ def test_article_reports_each_refusal_with_its_own_error_code(
     assert "sim.motion_started" not in log.names()
 
 
-def test_tmflow_refuses_a_line_through_the_base_with_result_unreachable() -> None:
+def test_tmflow_refuses_a_line_through_the_base_with_result_motion_failed() -> None:
+    # The target is reachable (inversekin), the straight path is not: Line() rejects the
+    # command (returns False) and the program reports motion_failed.
     ctl, bank, backend, _ = tmflow()
     send_tmflow(bank, 1, target=APPROACH)
     run_until(ctl, lambda: bank.get("done_seq") == 1)
     send_tmflow(bank, 2, command=2, target=Pose(-300, 200, 200, 180, 0, 90))
     ctl.tick(DT)
     assert (bank.get("ack_seq"), bank.get("done_seq")) == (2, 1)
-    assert (bank.get("result_code"), bank.get("robot_state")) == (1, 2)
+    assert (bank.get("result_code"), bank.get("robot_state")) == (3, 2)
     assert ctl.moves_started == 1
     assert backend.tcp_pose() == APPROACH
 

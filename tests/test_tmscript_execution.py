@@ -54,8 +54,9 @@ class FakeHost:
             return []
         return [self.registers.get(address + i, 0) for i in range(count)]
 
-    def motion(self, call: MotionCall) -> None:
+    def motion(self, call: MotionCall) -> bool:
         self.motions.append(call)
+        return True
 
     def queue_tag(self, tag: int, wait: int) -> None:
         self.tags[tag] = False

@@ -14,14 +14,20 @@ from ._backend import PhysicsBackend
 from ._bank import RegisterBank
 from ._clear_on_accept import ClearOnAcceptController
 from ._controller import RobotController
-from ._sequence import SequenceController
 
 
 def controller_class(handshake: Handshake) -> type[RobotController]:
-    """The controller class running ``handshake`` (as the client's ``channel_for`` picks)."""
+    """The controller class running ``handshake`` (as the client's ``channel_for`` picks).
+
+    The sequence handshake is a TMflow project: the robot program, interpreted
+    (:class:`~._script_project.ScriptProjectController`).
+    """
     if handshake is Handshake.CLEAR_ON_ACCEPT:
         return ClearOnAcceptController
-    return SequenceController
+    # Imported here: the interpreter (and lark) load only for a robot that runs a program.
+    from ._script_project import ScriptProjectController
+
+    return ScriptProjectController
 
 
 def controller_for(

@@ -29,11 +29,12 @@ from typing import Any, Literal
 
 from .._exceptions import UnreachablePoseError
 from .._pose import MotionType, Pose
-from .._registers import Table
+from .._registers import RobotProfile, Table
 from .._robot_models import RobotModel
-from .._robot_program import END_MODULE_DO
+from .._robot_program import END_MODULE_DO, robot_program
 from ..tmscript import Execution, Program, parse
 from ..tmscript._host import HostError, ModbusDevice, MotionCall
+from ._backend import PhysicsBackend
 from ._bank import RegisterBank
 from ._controller import SimErrorCode, _Active
 from ._kinematic import KinematicBackend
@@ -119,9 +120,12 @@ class SimHost:
         """False while a late_ack fault holds the program's link (its next request waits)."""
         return self._c.time_s >= self._c.link_free_at
 
-    def motion(self, call: MotionCall) -> None:
-        """Put a PTP or Line into the motion buffer ("CPP" Cartesian, or PTP "JPP")."""
-        self._c.queue_motion(call)
+    def motion(self, call: MotionCall) -> bool:
+        """Put a PTP or Line into the motion buffer ("CPP" Cartesian, or PTP "JPP").
+
+        False (nothing queued) for a target or a Line path the arm cannot take.
+        """
+        return self._c.queue_motion(call)
 
     def queue_tag(self, tag: int, wait: int) -> None:
         """Tag the move queued last (done at once when the buffer is empty)."""
@@ -166,7 +170,8 @@ class SimHost:
         seed = list(reference) if reference is not None and len(reference) == 6 else None
         try:
             return list(self._c.model.inverse(Pose(*pose), seed_deg=seed, tool=self._c.tool))
-        except UnreachablePoseError:
+        except UnreachablePoseError as exc:
+            self._c.log_rejected("inversekin", exc.reason, Pose(*pose))
             return []
 
     def forwardkin(self, joints: Sequence[float]) -> list[float]:
@@ -183,12 +188,22 @@ class ScriptProjectController(SequenceController):
 
     def __init__(
         self,
-        *args: Any,
-        program: str | Program,
+        profile: RobotProfile,
+        bank: RegisterBank,
+        backend: PhysicsBackend,
+        model: RobotModel,
+        *,
+        program: str | Program | None = None,
         gripper_output: int = 0,
         gripper_input: int = 0,
         **options: Any,
     ) -> None:
+        if program is None:
+            # The program tmmaster ships, for this profile and the backend's tool.
+            tool = backend.tool if isinstance(backend, KinematicBackend) else None
+            program = robot_program(profile, tool=tool)
+        #: The program's source, when given as text (the generated one is).
+        self.program_text: str | None = program if isinstance(program, str) else None
         self._program = program if isinstance(program, Program) else parse(program)
         self._execution: Execution | None = None
         self._queue: deque[_Queued] = deque()
@@ -200,7 +215,7 @@ class ScriptProjectController(SequenceController):
         self._gripper_output_high = False
         #: Every ``Display()`` text, in order (for tests and the CLI's trace).
         self.displayed: list[str] = []
-        super().__init__(*args, **options)
+        super().__init__(profile, bank, backend, model, **options)
 
     # -- what the host reaches ----------------------------------------------------------
 
@@ -271,8 +286,17 @@ class ScriptProjectController(SequenceController):
             self.link_free_at = self._time_s + delay
             self._log.warning("sim.fault_fired", device=self._name, fault="late_ack", delay_s=delay)
 
-    def queue_motion(self, call: MotionCall) -> None:
-        """Put a move into the buffer (refused formats are a host error)."""
+    def log_rejected(self, what: str, reason: str, target: Pose) -> None:
+        """Log a target or path the arm model refused."""
+        self._log.warning(
+            "sim.command_rejected", device=self._name, by=what, reason=reason, target=str(target)
+        )
+
+    def queue_motion(self, call: MotionCall) -> bool:
+        """Put a move into the buffer; False for a target or Line path the arm cannot take.
+
+        Refused formats are a host error.
+        """
         if call.format.upper() not in ("CPP", "JPP"):
             raise HostError(f"motion format {call.format!r} is not modelled (CPP, JPP)")
         if call.format.upper() == "JPP":
@@ -283,7 +307,18 @@ class ScriptProjectController(SequenceController):
             target = Pose(*call.target)
         accel_s = (call.accel_time_ms if call.accel_time_ms > 0 else 200) / 1000.0
         motion = MotionType.PTP if call.kind == "PTP" else MotionType.LINE
+        try:
+            if motion is MotionType.LINE:
+                # From where the arm will be: the end of the last queued move, or here.
+                start = self._queue[-1].target if self._queue else self._backend.tcp_pose()
+                self._model.line_joints(start, target, tool=self.tool)
+            else:
+                self._model.inverse(target, tool=self.tool)
+        except UnreachablePoseError as exc:
+            self.log_rejected(call.kind, exc.reason, target)
+            return False
         self._queue.append(_Queued(target, motion, float(call.speed), accel_s))
+        return True
 
     def tag_last(self, tag: int) -> None:
         """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done)."""
@@ -387,6 +422,8 @@ class ScriptProjectController(SequenceController):
             return
 
     def _command_done(self, active: _Active) -> None:
+        # A move of the buffer ran; the fingers stopped (the program reports the gripper
+        # command itself, after its settle time and the grip input).
         if active.kind == "motion" and self._queue:
             self._queue.popleft().done = True
 
@@ -402,7 +439,3 @@ class ScriptProjectController(SequenceController):
     def _backend_failed(self, seq: int, kind: Literal["motion", "gripper"]) -> None:
         self._queue.clear()
         self._enter_error(SimErrorCode.BACKEND_FAILURE, f"{kind} backend failed")
-
-    def _gripper_started(self, number: int, seq: int, *, close: bool, miss: bool) -> None:
-        # The program waits for the fingers itself (Sleep, then the grip input).
-        return None

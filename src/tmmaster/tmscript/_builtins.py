@@ -900,8 +900,7 @@ def _PTP(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # no
     """TMscript 2.24 §13.8 PTP, p. 331: queue a point-to-point motion ("CPP" or "JPP")."""
     if _str(args[0]) not in ("CPP", "JPP"):
         return False  # "Command rejected (format error)"
-    rt.host.motion(_motion("PTP", args))
-    return True
+    return rt.host.motion(_motion("PTP", args))
 
 
 @_register("13.10", 337, "bool(string, float[], int, int, int, bool)", motion=True)
@@ -910,8 +909,7 @@ def _Line(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # n
     fmt = _str(args[0])
     if len(fmt) != 3 or fmt[0] != "C" or fmt[1] not in "PAD" or fmt[2] not in "PR":
         return False
-    rt.host.motion(_motion("Line", args))
-    return True
+    return rt.host.motion(_motion("Line", args))
 
 
 # ---- chapter 16: Modbus ----------------------------------------------------------------

@@ -109,8 +109,12 @@ class Host(Protocol):
         """
         ...
 
-    def motion(self, call: MotionCall) -> None:
-        """Queue a motion (it runs later; the script goes on at once)."""
+    def motion(self, call: MotionCall) -> bool:
+        """Queue a motion (it runs later; the script goes on at once).
+
+        :returns: False when the robot rejects the command (the motion function then
+            returns False, TMscript 2.24 §13.8, p. 331): nothing was queued.
+        """
         ...
 
     def queue_tag(self, tag: int, wait: int) -> None:
@@ -205,7 +209,7 @@ class NullHost:
         """Refuse: :raises NullHostError:."""
         raise self._refuse("Modbus")
 
-    def motion(self, call: MotionCall) -> None:
+    def motion(self, call: MotionCall) -> bool:
         """Refuse: :raises NullHostError:."""
         raise self._refuse(call.kind)
 
