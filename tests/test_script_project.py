@@ -203,3 +203,19 @@ def test_the_start_up_rule_of_the_program_cancels_a_command_written_while_stoppe
         assert len(sim.motion_log()) == 1
     finally:
         robot.close()
+
+
+def test_a_programs_own_pause_waits_for_play(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    program = tmp_path / "pause.tms"
+    program.write_text(
+        'main\n{\n    Display("before")\n    Pause()\n    Display("after")\n}\n',
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", program=program)
+    sim.wait_for(lambda: bool(sim.field("paused")), timeout=5)
+    assert sim.displayed() == ["before"]
+    sim.press_play()
+    sim.wait_for(lambda: "after" in sim.displayed(), timeout=5)
+    assert not sim.field("paused")

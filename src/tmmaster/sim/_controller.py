@@ -53,8 +53,8 @@ _MoveFault = RobotErrorFault | StallFault | EstopFault
 class SimErrorCode(IntEnum):
     """Error codes the simulated controller reports (article error_code, tmflow last_error_code)."""
 
-    #: Target out of the arm's reach: no joint solution (article only; tmflow reports
-    #: result_code unreachable).
+    #: Target out of the arm's reach: no joint solution (article; on tmflow a motion the
+    #: physics refuses although the program's checks passed: an error stop).
     UNREACHABLE = 0x0101
     #: Unknown command value, speed outside 1..100 % or a target that is not a number.
     INVALID_COMMAND = 0x0102
@@ -62,9 +62,9 @@ class SimErrorCode(IntEnum):
     POSE_OUT_OF_RANGE = 0x0103
     #: The physics backend raised while starting a motion or driving the gripper.
     BACKEND_FAILURE = 0x0104
-    #: The backend refused the target: a joint would leave its limits (article only).
+    #: The backend refused the target: a joint would leave its limits (article).
     JOINT_LIMIT = 0x0105
-    #: The backend refused the target: it lies on a singularity (article only).
+    #: The backend refused the target: it lies on a singularity (article).
     SINGULARITY = 0x0106
     #: The physics view was rebuilt mid-motion and the motion did not survive.
     MOTION_LOST = 0x0107

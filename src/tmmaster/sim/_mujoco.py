@@ -363,6 +363,11 @@ class MuJoCoBackend:
     # -- model --------------------------------------------------------------------------
 
     @property
+    def tool(self) -> Pose | None:
+        """The TCP in the flange frame (None: the TCP is the flange); fixed with the scene."""
+        return self._tool
+
+    @property
     def model(self) -> RobotModel:
         """The arm model whose kinematics and limits plan the motions."""
         return self._model

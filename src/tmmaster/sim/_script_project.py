@@ -38,6 +38,7 @@ from ._backend import PhysicsBackend
 from ._bank import RegisterBank
 from ._controller import SimErrorCode, _Active
 from ._kinematic import KinematicBackend
+from ._mujoco import MuJoCoBackend
 from ._sequence import SequenceController
 
 #: Statements a program may run per control tick before it yields to the robot (a busy
@@ -200,8 +201,7 @@ class ScriptProjectController(SequenceController):
     ) -> None:
         if program is None:
             # The program tmmaster ships, for this profile and the backend's tool.
-            tool = backend.tool if isinstance(backend, KinematicBackend) else None
-            program = robot_program(profile, tool=tool)
+            program = robot_program(profile, tool=_backend_tool(backend))
         #: The program's source, when given as text (the generated one is).
         self.program_text: str | None = program if isinstance(program, str) else None
         self._program = program if isinstance(program, Program) else parse(program)
@@ -237,8 +237,7 @@ class ScriptProjectController(SequenceController):
     @property
     def tool(self) -> Pose | None:
         """The TCP the program set (``ChangeTCP``)."""
-        backend = self._backend
-        return backend.tool if isinstance(backend, KinematicBackend) else None
+        return _backend_tool(self._backend)
 
     def log_display(self, text: str) -> None:
         """Log a program's ``Display()``."""
@@ -252,8 +251,15 @@ class ScriptProjectController(SequenceController):
                 raise HostError("ChangeTCP while the arm moves")
             backend.set_tool(tool)
             return
-        if tool is not None:
-            raise HostError("this physics backend keeps its own tool: ChangeTCP is refused")
+        own = _backend_tool(backend)
+        same = (tool is None and own is None) or (
+            tool is not None and own is not None and tool.is_close(own, mm=1e-6, deg=1e-6)
+        )
+        if not same:
+            raise HostError(
+                f"this physics backend keeps its tool ({own}): ChangeTCP to {tool} is refused;"
+                " start the simulator with that tool"
+            )
 
     def after_read(self, table: Table, address: int, words: list[int]) -> None:
         """A late_ack fault: the program read a new command and takes ``delay_s`` to ack it.
@@ -344,6 +350,12 @@ class ScriptProjectController(SequenceController):
     def pause_from_program(self) -> None:
         """The program called ``Pause()``."""
         self._pause("Pause() in the program")
+
+    def _resume(self) -> None:
+        # Play resumes the program too, where it called Pause() (TMscript 2.24 §5.2).
+        super()._resume()
+        if self._execution is not None:
+            self._execution.resume()
 
     def after_write(self, table: Table, address: int, values: Sequence[int]) -> None:
         """The end module's gripper output (a coil): high closes the gripper, low opens it."""
@@ -439,3 +451,10 @@ class ScriptProjectController(SequenceController):
     def _backend_failed(self, seq: int, kind: Literal["motion", "gripper"]) -> None:
         self._queue.clear()
         self._enter_error(SimErrorCode.BACKEND_FAILURE, f"{kind} backend failed")
+
+
+def _backend_tool(backend: PhysicsBackend) -> Pose | None:
+    """The TCP a built-in backend moves (None: the flange, or a backend of one's own)."""
+    if isinstance(backend, KinematicBackend | MuJoCoBackend):
+        return backend.tool
+    return None
