@@ -494,3 +494,30 @@ def test_one_request_per_block_per_poll(
     assert motion._ticket.acknowledged
     assert len(sim.request_log) == after_ack
     motion.wait()
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_close_says_whether_it_could_confirm_the_clean_up(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # Nothing outstanding: confirmed. A move outstanding on a robot that vanished: the
+    # withdraw and the stop cannot be delivered, within the budget: not confirmed.
+    sim = tm_simulator_factory(profile)
+    robot = Robot(sim.url, profile=profile, gripper=None, poll_interval_s=0.01)
+    robot.connect()
+    robot.wait_until_ready(timeout_s=5)
+    robot.move_to(APPROACH, speed=80)
+    assert robot.close() is True
+    assert robot.close() is True  # a second close says the same
+    other = tm_simulator_factory(profile, time_scale=1)
+    robot = Robot(other.url, profile=profile, gripper=None, poll_interval_s=0.01)
+    robot.connect()
+    robot.wait_until_ready(timeout_s=5)
+    robot.start_move(APPROACH.offset(dz=-50), speed=5)  # seconds long
+    other.close()
+    started = time.monotonic()
+    assert robot.close(timeout_s=0.5) is False
+    assert time.monotonic() - started < 2.0
+    assert robot.state is tmmaster.ConnectionState.CLOSED
+    with pytest.raises(tmmaster.ConfigError, match="timeout_s"):
+        robot.close(timeout_s=0)
