@@ -513,8 +513,10 @@ def test_a_second_ctrl_c_during_the_clean_up_never_leaves_a_command_armed(
     # The clean-up must still be delivered, and the second Ctrl-C still be raised.
     if threading.current_thread() is not threading.main_thread():
         pytest.skip("SIGINT reaches the main thread only")
-    faults = ["late_ack:delay_s=6"] if cut == "withdraw" else []
-    sim = tm_simulator_factory(profile, faults=faults, **FAST)
+    if cut == "withdraw":
+        sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=6"], **FAST)
+    else:
+        sim = tm_simulator_factory(profile)  # 20x: the move lasts long enough to be stopped
     robot = robots(sim.port, profile)
     robot.wait_until_ready(timeout_s=5)
     channel = robot._channel
@@ -526,7 +528,7 @@ def test_a_second_ctrl_c_during_the_clean_up_never_leaves_a_command_armed(
 
     setattr(channel, cut, second_ctrl_c)
     issued = [Issued(A, time.monotonic())]
-    motion = robot.start_move(A, speed=20 if cut == "stop" else 80)
+    motion = robot.start_move(A, speed=5 if cut == "stop" else 80)
     if cut == "stop":
         sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=5)  # the arm moves
     robot.interrupt()  # the first Ctrl-C

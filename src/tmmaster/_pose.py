@@ -52,13 +52,28 @@ class Pose:
         return math.dist((self.x, self.y, self.z), (other.x, other.y, other.z))
 
     def rotation_to(self, other: Pose) -> float:
-        """Largest change of one orientation angle, in degrees (wrapped to ±180)."""
-        return max(
-            abs(_wrap(b - a))
-            for a, b in zip(
-                (self.rx, self.ry, self.rz), (other.rx, other.ry, other.rz), strict=True
-            )
-        )
+        """The angle of the rotation from this orientation to ``other``'s, in degrees (0..180).
+
+        Compared as rotations, not angle by angle: Euler angles that describe the same
+        orientation (``(0, 180, -90)`` and ``(180, 0, 90)``, ``rz`` = 180 and -180, any
+        ``rx``/``rz`` split at ``ry`` = ±90) are 0 degrees apart, as a robot reporting its
+        own Euler angles may describe a pose it reached exactly.
+
+        Args:
+            other: the other pose (its position is ignored).
+
+        Returns:
+            The geodesic angle between the two orientations.
+        """
+        w1, x1, y1, z1 = _quaternion(self.rx, self.ry, self.rz)
+        w2, x2, y2, z2 = _quaternion(other.rx, other.ry, other.rz)
+        # The relative rotation conj(q1) * q2: its vector part's norm and its scalar part
+        # give the angle without acos' loss of precision near 0.
+        w = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+        x = w1 * x2 - x1 * w2 - y1 * z2 + z1 * y2
+        y = w1 * y2 + x1 * z2 - y1 * w2 - z1 * x2
+        z = w1 * z2 - x1 * y2 + y1 * x2 - z1 * w2
+        return math.degrees(2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w)))
 
     def is_close(self, other: Pose, *, mm: float = 0.5, deg: float = 0.5) -> bool:
         """True when both position and orientation agree within the tolerances."""
@@ -73,6 +88,19 @@ class Pose:
             f"({self.x:.2f}, {self.y:.2f}, {self.z:.2f} mm; "
             f"{self.rx:.2f}, {self.ry:.2f}, {self.rz:.2f} deg)"
         )
+
+
+def _quaternion(rx: float, ry: float, rz: float) -> tuple[float, float, float, float]:
+    """The unit quaternion (w, x, y, z) of TM's orientation ``Rz(rz) @ Ry(ry) @ Rx(rx)``, deg."""
+    cr, sr = math.cos(math.radians(rx) / 2), math.sin(math.radians(rx) / 2)
+    cp, sp = math.cos(math.radians(ry) / 2), math.sin(math.radians(ry) / 2)
+    cy, sy = math.cos(math.radians(rz) / 2), math.sin(math.radians(rz) / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
 
 
 _validated_init = Pose.__init__
@@ -99,6 +127,3 @@ Pose.__init__ = _pose_init  # type: ignore[method-assign]
 #: article's HOME (0, 0, 300, 180, 0, 0) is out of a TM5's reach: docs/pickplace.md.)
 DEFAULT_HOME = Pose(250.0, 0.0, 300.0, 180.0, 0.0, 90.0)
 
-
-def _wrap(angle: float) -> float:
-    return (angle + 180.0) % 360.0 - 180.0
