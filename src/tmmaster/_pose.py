@@ -126,4 +126,3 @@ Pose.__init__ = _pose_init  # type: ignore[method-assign]
 #: Home pose of the default pick & place cell: tool down, 250 mm in front of J1. (The
 #: article's HOME (0, 0, 300, 180, 0, 0) is out of a TM5's reach: docs/pickplace.md.)
 DEFAULT_HOME = Pose(250.0, 0.0, 300.0, 180.0, 0.0, 90.0)
-
