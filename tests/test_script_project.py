@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import Pose, Robot, TimeoutPolicy
+from tmmaster import ConfigError, FrameCheck, Pose, Robot, TimeoutPolicy
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
 from tmmaster.sim import Simulator
@@ -90,14 +90,22 @@ def test_the_program_sets_the_masters_tcp_whatever_the_robot_had(
     # A TCP of 150 mm is configured on the robot; the master plans without a tool. The
     # program sets the TCP the master plans with (ChangeTCP at start), so the flange goes
     # where the master's kinematics put it. Without it, the robot reaches the same TCP
-    # pose with its own tool: the flange (and every joint) 150 mm from the master's plan.
+    # pose with its own tool: the flange (and every joint) 150 mm from the master's plan,
+    # which the master's frame check refuses at connect (switched off here to show it).
     text = robot_program(robot_profile("tmflow"), tool=None)
     if not change_tcp:
         text = text.replace("    ChangeTCP(tool)\n", "")
     program = tmp_path / "program.tms"
     program.write_text(text, encoding="utf-8")
     sim = tm_simulator_factory("tmflow", tool=Pose(0, 0, 150, 0, 0, 0), program=program)
-    robot = open_robot(sim)
+    # The program's ChangeTCP runs when the project starts: the master connects after it.
+    sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
+    options: dict[str, Any] = {}
+    if not change_tcp:
+        with pytest.raises(ConfigError, match=r"tool offset of \(0, 0, 150, 0, 0, 0\)"):
+            open_robot(sim)
+        options["frame_check"] = FrameCheck.off("the test shows where the flange goes")
+    robot = open_robot(sim, **options)
     try:
         joints = robot.validate_move(B, 50)
         robot.move_to(B, speed=50)

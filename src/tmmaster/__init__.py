@@ -91,7 +91,7 @@ if _TYPE_CHECKING:
         WordOrder,
     )
     from ._retry import RetryPolicy
-    from ._robot import Motion, Robot, TimeoutPolicy, Workspace, connect
+    from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
     from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
     from ._status import MovePhase, MoveProgress, RobotStatus
     from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
@@ -114,6 +114,7 @@ _EXPORTS = {
     "DeviceFailureError": "._exceptions",
     "EmergencyStopError": "._exceptions",
     "Fleet": "._fleet",
+    "FrameCheck": "._robot",
     "GraspFailedError": "._exceptions",
     "Gripper": "._gripper",
     "GripperError": "._exceptions",
@@ -209,6 +210,7 @@ __all__ = [
     "DeviceFailureError",
     "EmergencyStopError",
     "Fleet",
+    "FrameCheck",
     "GraspFailedError",
     "Gripper",
     "GripperError",

@@ -36,6 +36,9 @@ from ._exceptions import (
 from ._logging import get_logger
 from ._pose import MotionType, Pose
 from ._registers import (
+    FLANGE_FIELDS,
+    JOINT_FIELDS,
+    ROBOT_BASE_TCP_FIELDS,
     TARGET_FIELDS,
     TCP_FIELDS,
     Handshake,
@@ -95,6 +98,8 @@ class Ticket:
     previous_target: tuple[float, ...] | None = None
     #: TCP pose read while preparing, when the check read it anyway (saves a request).
     start_pose: Pose | None = None
+    #: The joints (deg) read with ``start_pose``, where the profile publishes them.
+    start_joints: tuple[float, ...] | None = None
     acknowledged: bool = False
     acknowledged_at: float | None = None
     #: ``time.monotonic()`` before the last poll that saw the command not yet taken (the
@@ -144,6 +149,8 @@ class StateAfterDone:
     link: tuple[int, ...]
     #: The TCP pose, when it was read after the done (the final at-target check).
     pose: Pose | None = None
+    #: The joints (deg) read with ``pose``, where the profile publishes them.
+    joints: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -164,7 +171,13 @@ PollSteps = Generator[tuple[RegisterField, ...], dict[str, Value], Observation]
 R = TypeVar("R")
 
 
-def _pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
+def _published(profile: RobotProfile, names: tuple[str, ...]) -> tuple[RegisterField, ...]:
+    """The named fields when the profile has every one of them, else none."""
+    return profile.select(names) if all(profile.has(n) for n in names) else ()
+
+
+def pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
+    """The pose in ``values`` under the six field ``names`` (x, y, z, rx, ry, rz, in order)."""
     x, y, z, rx, ry, rz = names
     return Pose(
         float(values[x]),
@@ -196,6 +209,14 @@ class CommandChannel(ABC):
         # Field sets read on every command, built once (their read plans are cached by
         # the tuple's identity).
         self.tcp_fields = profile.select(TCP_FIELDS)
+        # Optional sets of Techman's table, empty where the profile lacks them: read at
+        # connect and before a plan, never by a status poll.
+        self.joint_fields = _published(profile, JOINT_FIELDS)
+        self.flange_fields = _published(profile, FLANGE_FIELDS)
+        self.robot_base_tcp_fields = _published(profile, ROBOT_BASE_TCP_FIELDS)
+        # Before a plan: the TCP pose with the joints, where published (Techman's
+        # 7013-7036: one request).
+        self.plan_fields = (*self.joint_fields, *self.tcp_fields)
         self.command_fields = (command,)
         self.target_block = (*profile.select(TARGET_FIELDS), command)
         # The command block's fields, looked up once (the map does not change under a
@@ -221,11 +242,32 @@ class CommandChannel(ABC):
 
     def read_pose(self) -> Pose:
         """The current TCP pose (one request)."""
-        pose = _pose_from(self.read(self.tcp_fields), TCP_FIELDS)
+        pose = pose_from(self.read(self.tcp_fields), TCP_FIELDS)
         if self.after_done is not None:
             # Read after the done poll: the next command may start its plan from it.
             self.after_done.pose = pose
         return pose
+
+    def read_pose_and_joints(self) -> tuple[Pose, tuple[float, ...] | None]:
+        """The TCP pose and the joints (deg; None where the profile does not publish them).
+
+        One request where the two are contiguous (Techman's 7013-7036), as one for the
+        pose alone.
+        """
+        values = self.read(self.plan_fields)
+        pose = pose_from(values, TCP_FIELDS)
+        joints = self.joints_from(values)
+        if self.after_done is not None:
+            # Read after the done poll: the next command may start its plan from them.
+            self.after_done.pose = pose
+            self.after_done.joints = joints
+        return pose, joints
+
+    def joints_from(self, values: dict[str, Value]) -> tuple[float, ...] | None:
+        """The joints J1..J6 (deg) in ``values``; None where the profile does not publish them."""
+        if not self.joint_fields:
+            return None
+        return tuple(float(values[f.name]) for f in self.joint_fields)
 
     def _poll_mark(self) -> tuple[float, tuple[int, ...] | None]:
         """Before a poll's first request: forget the last done state; the time and link mark."""
@@ -431,7 +473,7 @@ class ClearOnAcceptChannel(CommandChannel):
             error_code=error_code,
             estop=False,
             holding=holding,
-            pose=_pose_from(values, TCP_FIELDS),
+            pose=pose_from(values, TCP_FIELDS),
             raw=MappingProxyType(dict(values)),
             timestamp=time.monotonic(),
         )
@@ -570,7 +612,7 @@ class SequenceChannel(CommandChannel):
             error_code=int(values["last_error_code"]),
             estop=estop,
             holding=bool(values["grasp_status"]) if "grasp_status" in values else None,
-            pose=_pose_from(values, TCP_FIELDS),
+            pose=pose_from(values, TCP_FIELDS),
             raw=MappingProxyType(dict(values)),
             timestamp=time.monotonic(),
         )
@@ -614,6 +656,7 @@ class SequenceChannel(CommandChannel):
         p = self.profile
         after_done = self.take_after_done(reuse_s)
         start_pose: Pose | None = None
+        start_joints: tuple[float, ...] | None = None
         if after_done is not None:
             # The feedback block that showed the last command done and the flags read
             # after it (the poll that saw it finished): the same checks run on them.
@@ -622,7 +665,7 @@ class SequenceChannel(CommandChannel):
             if (failure := self._read_flags_failure(flags)) is not None:
                 raise failure
             feedback = {**after_done.values, **self.read(self.seq_only)}
-            start_pose = after_done.pose
+            start_pose, start_joints = after_done.pose, after_done.joints
         else:
             flags = self.read(self.flag_fields)
             if (failure := self._read_flags_failure(flags)) is not None:
@@ -651,6 +694,7 @@ class SequenceChannel(CommandChannel):
             time.monotonic(),
             seq=seq,
             start_pose=start_pose,
+            start_joints=start_joints,
             extra={"heartbeat": feedback.get("heartbeat", 0)},
             plan=group_writes([*encoded, *encode_writes([seq_word])]),
         )

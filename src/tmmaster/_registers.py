@@ -257,6 +257,11 @@ class Handshake(StrEnum):
 _POSE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
 TARGET_FIELDS = tuple(f"target_{n}" for n in _POSE_NAMES)
 TCP_FIELDS = tuple(f"tcp_{n}" for n in _POSE_NAMES)
+#: Optional fields (Techman's table, 7001-7024 and 7049-7060): the flange pose in the
+#: current base, the joints J1..J6 in degrees, the TCP pose in the robot base.
+FLANGE_FIELDS = tuple(f"flange_{n}" for n in _POSE_NAMES)
+JOINT_FIELDS = tuple(f"joint_{i}" for i in range(1, 7))
+ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 
 #: Optional fields that belong to the command block when a profile has them.
 _OPTIONAL_BLOCK = ("accel_time",)

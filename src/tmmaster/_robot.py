@@ -29,8 +29,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Annotated, Any, Literal, ParamSpec
 
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
+from . import _kinematics as kin
 from ._channels import (
     Command,
     CommandChannel,
@@ -39,6 +40,7 @@ from ._channels import (
     Ticket,
     channel_for,
     heartbeat_stalled,
+    pose_from,
 )
 from ._checks import require_positive
 from ._exceptions import (
@@ -71,7 +73,14 @@ from ._profiles import (
     load_profile,
     robot_profile,
 )
-from ._registers import GripperProfile, RobotProfile, Role
+from ._registers import (
+    FLANGE_FIELDS,
+    ROBOT_BASE_TCP_FIELDS,
+    TCP_FIELDS,
+    GripperProfile,
+    RobotProfile,
+    Role,
+)
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
 from ._sigint import deferred
@@ -146,6 +155,54 @@ class TimeoutPolicy(BaseModel):
         if self.motion_timeout_s is not None:
             return self.motion_timeout_s
         return expected_s * self.motion_factor + self.motion_margin_s
+
+
+class FrameCheck(BaseModel):
+    """At connect: the robot's TCP must be its flange times the master's ``tool``.
+
+    For a profile that publishes the flange pose and the TCP pose (``tmflow``: Techman's
+    7001-7012 and 7025-7036, both in the current base), :meth:`Robot.connect` reads both
+    in one request and refuses a robot whose TCP is not ``flange x tool`` within the
+    tolerances, naming the tool offset the robot appears to have (``inverse(flange) x
+    TCP``). Where the profile also publishes the TCP in the robot base (7049-7060), the
+    two TCP poses must agree: the master's poses are in the robot base. On by default;
+    ``FrameCheck.off("why")`` switches it off, and the reason is logged at warning level
+    at every connect.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    #: False: not checked (``reason`` says why).
+    enabled: bool = True
+    #: Why the check is off (required then); logged at warning level at connect.
+    reason: str = ""
+    #: Largest distance between the robot's TCP and flange x tool, mm.
+    position_tolerance_mm: Annotated[float, Field(gt=0, le=1000)] = 1.0
+    #: Largest angle between the two orientations (:meth:`Pose.rotation_to`), deg.
+    orientation_tolerance_deg: Annotated[float, Field(gt=0, le=180)] = 1.0
+
+    @model_validator(mode="after")
+    def _off_needs_a_reason(self) -> FrameCheck:
+        if not self.enabled and not self.reason.strip():
+            raise ValueError('a frame check switched off needs a reason: FrameCheck.off("why")')
+        return self
+
+    @classmethod
+    def off(cls, reason: str) -> FrameCheck:
+        """The check switched off, for ``reason`` (logged at warning level at connect).
+
+        Args:
+            reason: why the robot's TCP need not match the master's tool (not empty).
+
+        Returns:
+            A disabled check.
+
+        Raises:
+            ConfigError: ``reason`` is empty.
+        """
+        if not isinstance(reason, str) or not reason.strip():
+            raise ConfigError(f"FrameCheck.off needs a reason, got {reason!r}")
+        return cls(enabled=False, reason=reason)
 
 
 class Motion:
@@ -510,7 +567,10 @@ class _MotionFollower:
         if motion.target is not None:
             # The poll that saw the move finished read the pose in the same snapshot
             # (article); only a profile whose poll carries no pose needs one more read.
-            pose = polled_pose if polled_pose is not None else self._channel.read_pose()
+            # tmflow: the joints come with it (one request), for the next move's plan.
+            pose = (
+                polled_pose if polled_pose is not None else self._channel.read_pose_and_joints()[0]
+            )
             motion.last_pose = pose
             if not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
@@ -634,6 +694,7 @@ class Robot:
         transport: Transport | None = None,
         gripper_transport: Transport | None = None,
         fleet: Fleet | None = None,
+        frame_check: FrameCheck | None = None,
     ) -> None:
         self.profile = robot_profile(profile)
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
@@ -655,10 +716,23 @@ class Robot:
             )
         #: The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool.
         self.tool = tool
-        # The joints of the last commanded target: inverse kinematics starts there, so
-        # validation and timing follow the branch the arm is on.
+        if frame_check is None:
+            frame_check = FrameCheck()
+        if not isinstance(frame_check, FrameCheck):
+            raise ConfigError(
+                'frame_check must be a tmmaster.FrameCheck (FrameCheck.off("why") switches'
+                f" it off), got {frame_check!r}"
+            )
+        #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
+        self.frame_check = frame_check
+        # Where the arm is believed to be, for inverse kinematics and motion times: the
+        # joints the robot reported (at connect, before each plan) where the profile
+        # publishes them, moved on to each commanded target's joints; the pose they put
+        # the TCP at. Without published joints: the last commanded target's (none at
+        # first: the model's ready posture is the seed).
         self._joints_hint: tuple[float, ...] | None = None
-        self._last_target: Pose | None = None
+        self._hint_pose: Pose | None = None
+        self._joints_mismatch_logged = False
         self.max_speed_percent = max_speed_percent
         link: dict[str, Any] = {
             "device_id": self.profile.device_id,
@@ -807,7 +881,23 @@ class Robot:
         return self._transport.stats
 
     def connect(self) -> Robot:
-        """Open the connections (robot, then gripper if it has its own); a no-op when open."""
+        """Open the connections (robot, then gripper if it has its own); a no-op when open.
+
+        Where the profile publishes them (``tmflow``: Techman's 7001-7036, one request,
+        and the TCP in the robot base, 7049-7060), it then reads the robot's flange, joints
+        and TCP: the :class:`FrameCheck` compares the TCP with flange x ``tool``, and the
+        joints seed the first plan. A connect that fails closes the robot.
+
+        Returns:
+            This robot, connected.
+
+        Raises:
+            ConnectError: the robot was closed, or cannot be reached.
+            ConfigError: the frame check found the robot's TCP is not its flange x
+                ``tool`` (naming the tool offset the robot appears to have), or not in
+                the robot base.
+            IllegalAddressError: the device does not serve the profile's registers.
+        """
         if self._transport.state is ConnectionState.CLOSED:
             raise ConnectError(
                 f"{self.name}: this Robot was closed; create a new Robot to connect again"
@@ -817,6 +907,7 @@ class Robot:
         try:
             self._transport.connect()
             self.gripper.connect()
+            self._read_arm_at_connect()
         except BaseException:
             # ``with Robot(...)`` never reaches __exit__ when connecting fails: close
             # here so a half-open robot link is not left behind.
@@ -831,6 +922,79 @@ class Robot:
             profile=self.profile.name,
         )
         return self
+
+    def _read_arm_at_connect(self) -> None:
+        """At connect: the frame check and the robot's joints, in one read where contiguous.
+
+        Raises:
+            ConfigError: the robot's TCP is not its flange x ``tool`` (or not in the robot
+                base), with the frame check on.
+        """
+        channel = self._channel
+        check = self.frame_check.enabled and bool(channel.flange_fields)
+        if channel.flange_fields and not self.frame_check.enabled:
+            self._log.warning("robot.frame_check_off", reason=self.frame_check.reason)
+        fields = (
+            *(channel.flange_fields if check else ()),
+            *channel.plan_fields,
+            *(channel.robot_base_tcp_fields if check else ()),
+        )
+        if not check and not channel.joint_fields:
+            return  # nothing to check, nothing to seed from
+        try:
+            values = channel.read(fields)
+        except IllegalAddressError as exc:
+            hint = self._profile_hint()
+            if hint is None:
+                raise
+            raise IllegalAddressError(f"{exc}; {hint}", code=exc.code) from exc
+        tcp = pose_from(values, TCP_FIELDS)
+        if check:
+            self._check_frames(
+                pose_from(values, FLANGE_FIELDS),
+                tcp,
+                pose_from(values, ROBOT_BASE_TCP_FIELDS) if channel.robot_base_tcp_fields else None,
+            )
+        joints = channel.joints_from(values)
+        if joints is not None:
+            self._take_robot_joints(tcp, joints)
+
+    def _check_frames(self, flange: Pose, tcp: Pose, robot_base_tcp: Pose | None) -> None:
+        """:class:`FrameCheck`: the robot's TCP is its flange x ``tool``, in the robot base.
+
+        Raises:
+            ConfigError: naming the tool offset the robot appears to have and ``tool``, or
+                the two TCP poses when the current base is not the robot base.
+        """
+        check = self.frame_check
+        tool = kin.IDENTITY if self.tool is None else kin.pose_to_transform(self.tool)
+        expected = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(flange), tool))
+        mm, deg = tcp.distance_to(expected), tcp.rotation_to(expected)
+        if mm > check.position_tolerance_mm or deg > check.orientation_tolerance_deg:
+            apparent = kin.transform_to_pose(
+                kin.multiply(kin.invert(kin.pose_to_transform(flange)), kin.pose_to_transform(tcp))
+            )
+            mine = "none (the TCP is the flange)" if self.tool is None else _pose_text(self.tool)
+            raise ConfigError(
+                f"frame check: the robot's TCP is not its flange x this Robot's tool: the robot"
+                f" reports a tool offset of {_pose_text(apparent)} (inverse(flange) x TCP;"
+                f" TCP {tcp}, flange {flange}), this Robot's tool is {mine}"
+                f" ({mm:.1f} mm, {deg:.1f} deg apart). Give Robot(tool=...) the robot's"
+                " tool, or generate the robot program for the master's (tmmaster"
+                " robot-program --tool; its ChangeTCP sets the robot's TCP when the project"
+                ' starts), or pass frame_check=FrameCheck.off("why")'
+            )
+        if robot_base_tcp is not None and (
+            robot_base_tcp.distance_to(tcp) > check.position_tolerance_mm
+            or robot_base_tcp.rotation_to(tcp) > check.orientation_tolerance_deg
+        ):
+            raise ConfigError(
+                f"frame check: the robot reports its TCP in a base other than the robot base"
+                f" ({tcp} in the current base, {robot_base_tcp} in the robot base); the"
+                " master's poses are in the robot base (the robot program's"
+                ' ChangeBase("RobotBase") when the project starts), or pass'
+                ' frame_check=FrameCheck.off("why")'
+            )
 
     def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
@@ -975,7 +1139,10 @@ class Robot:
 
         Raises :class:`ConfigError` (:class:`UnreachablePoseError` for a pose the arm
         cannot take) when the move is not allowed; sends nothing. The joints are searched
-        from ``seed_deg``, else from the last commanded target's.
+        from ``seed_deg``, else from where the arm is believed to be: the joints the robot
+        reported (at :meth:`connect` and before each move, where the profile publishes
+        them) moved on to each commanded target's; without published joints, the last
+        commanded target's (the model's ready posture before the first move).
         """
         if not isinstance(pose, Pose):
             raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
@@ -996,7 +1163,7 @@ class Robot:
         A Line whose straight path leaves the arm's range raises
         :class:`UnreachablePoseError`.
         """
-        last = self._last_target
+        last = self._hint_pose
         if last is not None and start.is_close(
             last, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
         ):
@@ -1044,14 +1211,19 @@ class Robot:
         timeout: float | None = None,
         accel_time_ms: int | None = None,
     ) -> Motion:
-        """Validate and send a move, returning at once with a :class:`Motion` handle."""
+        """Validate and send a move, returning at once with a :class:`Motion` handle.
+
+        Everything :meth:`validate_move` checks is checked before the first request. Where
+        the profile publishes the robot's joints, they are read with the start pose before
+        the write (no extra request: Techman's 7013-7036 is one read, or the final check of
+        the previous move read them) and the target's joints and the expected time are
+        planned from them, on the branch the arm is actually on.
+        """
         motion = _motion_type(motion)
-        joints = self.validate_move(target, speed)
-        handle = self._start_command(
+        self.validate_move(target, speed)
+        return self._start_command(
             Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
         )
-        self._joints_hint, self._last_target = joints, target
-        return handle
 
     def _run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
         """A gripper command through the robot program's handshake, waited for."""
@@ -1071,12 +1243,10 @@ class Robot:
         # prepare() encodes (refusing out-of-range values) before its first read.
         ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
         start: Pose | None = None
+        joints: tuple[float, ...] | None = None
         expected = 0.0
         if command.target is not None:
-            start = ticket.start_pose or self._channel.read_pose()
-            expected = self.expected_motion_time(
-                start, command.target, command.speed or 100, MotionType(command.kind.value)
-            )
+            start, joints, expected = self._plan(ticket, command.target)
             default_timeout = self.timeouts.for_motion(expected)
         else:
             default_timeout = self.timeouts.gripper_timeout_s
@@ -1090,6 +1260,9 @@ class Robot:
 
         with self._follower.following(motion):
             self._send(ticket, register)
+        if joints is not None:
+            # The next move starts where this one ends (until the robot says otherwise).
+            self._joints_hint, self._hint_pose = joints, command.target
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
             self._log.info(
                 "robot.command_sent",
@@ -1101,6 +1274,54 @@ class Robot:
                 timeout_s=round(timeout_s, 3),
             )
         return motion
+
+    def _plan(self, ticket: Ticket, target: Pose) -> tuple[Pose, tuple[float, ...], float]:
+        """A move's start (the robot's pose and joints), its target's joints, its expected time.
+
+        Before the write: the start pose comes from the checks' read when they made one,
+        else it is read, with the joints where the profile publishes them (one request).
+        Raises :class:`UnreachablePoseError` when the target (or a Line's path) cannot be
+        taken from the arm's actual joints.
+        """
+        command = ticket.command
+        start, joints = ticket.start_pose, ticket.start_joints
+        if start is None or (joints is None and self._channel.joint_fields):
+            start, joints = self._channel.read_pose_and_joints()
+        if joints is not None:
+            self._take_robot_joints(start, joints)
+        # The same solve as validate_move's when the hint did not change (cached).
+        target_joints = self.model.inverse(target, seed_deg=self._joints_hint, tool=self.tool)
+        expected = self.expected_motion_time(
+            start, target, command.speed or 100, MotionType(command.kind.value)
+        )
+        return start, target_joints, expected
+
+    def _take_robot_joints(self, pose: Pose, joints: tuple[float, ...]) -> None:
+        """Plan from the joints the robot reported at ``pose``, unless they are the hint's.
+
+        Joints within :data:`_SAME_JOINTS_DEG` of the hint keep the hint (the arm is where
+        the last move put it: its exact joints and target are kept, and the solver's cache
+        hits). Joints whose forward kinematics (with ``tool``) do not put the TCP at
+        ``pose`` are not taken (a simulated arm without a joint model publishes zeros).
+        """
+        hint = self._joints_hint
+        if hint is not None and all(
+            abs(a - b) <= _SAME_JOINTS_DEG for a, b in zip(joints, hint, strict=True)
+        ):
+            return
+        if not self.model.forward(joints, self.tool).is_close(
+            pose, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+        ):
+            if not self._joints_mismatch_logged:
+                self._joints_mismatch_logged = True
+                self._log.warning(
+                    "robot.joints_not_taken",
+                    joints=[round(q, 3) for q in joints],
+                    pose=pose.as_list(),
+                    reason="their forward kinematics with the tool miss the reported TCP",
+                )
+            return
+        self._joints_hint, self._hint_pose = joints, pose
 
     def move_to(
         self,
@@ -1198,6 +1419,17 @@ class Robot:
 
 def _nothing() -> None:
     """A command already registered (a resend of the same ticket)."""
+
+
+#: Reported joints this close (deg, each) to the hint are the hint's (the registers'
+#: float32 rounding, a servo's last hundredths of a degree).
+_SAME_JOINTS_DEG = 0.05
+
+
+def _pose_text(pose: Pose) -> str:
+    """``pose`` as ``(x, y, z, rx, ry, rz)`` rounded to 0.01: ``(0, 0, 150, 0, 0, 0)``."""
+    values = [round(v, 2) + 0.0 for v in pose.as_list()]  # + 0.0: no "-0"
+    return "(" + ", ".join(f"{v:g}" for v in values) + ")"
 
 
 def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:
