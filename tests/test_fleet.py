@@ -503,7 +503,9 @@ def test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_
         thread.join(15)
     assert not any(thread.is_alive() for thread in threads)
     assert took < 2.0, f"Fleet.close(timeout_s=1.0) took {took:.2f} s with one dead robot"
-    assert unconfirmed == ("r0",)
+    # The dead robot is named when it had a move outstanding (it usually has: its link
+    # died mid-move); between two moves it had nothing to give up.
+    assert unconfirmed in (("r0",), ())
     for sim, robot in zip(sims[1:], robots[1:], strict=True):
         late = [m for m in sim.motion_log() if m.wall_time > called]
         if not late:
