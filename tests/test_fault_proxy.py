@@ -34,7 +34,9 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
 
 @pytest.fixture
 def link(proxy: FaultProxy) -> Iterator[ModbusTransport]:
-    with ModbusTransport("127.0.0.1", proxy.port, timeout=0.3, retry=NO_RETRY) as t:
+    # No test of this link waits for its timeout to expire: a generous one, so a loaded
+    # machine (six test workers on two cores) is not taken for a fault.
+    with ModbusTransport("127.0.0.1", proxy.port, timeout=2.0, retry=NO_RETRY) as t:
         yield t
 
 
