@@ -236,8 +236,17 @@ def test_8_2_a_stop_request_while_a_tmflow_command_is_pending_withdraws_it(
     sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=6"], **FAST)
     robot = robots(sim.port, "tmflow")
     issued: list[Issued] = []
-    threading.Timer(0.05, robot.interrupt).start()
+
+    def interrupt_once_written() -> None:
+        # Once the command is in the robot's registers (a stop request before the write
+        # would keep it from being written at all: not this test's subject).
+        sim.wait_for(lambda: int(sim.field("seq")) == 1, timeout=5)
+        robot.interrupt()
+
+    interrupter = threading.Thread(target=interrupt_once_written)
+    interrupter.start()
     assert attempt(robot, A, issued) == "StopRequestedError"
+    interrupter.join()
     assert robot.last_motion is not None
     assert robot.last_motion.withdrawn is True
     robot.clear_stop_request()
