@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NoReturn
 
+from . import _sigint
 from ._exceptions import ConfigError
 
 
@@ -76,3 +77,34 @@ def _discard_stdout() -> None:
             os.close(null)
     except (OSError, ValueError):  # not a real file (a test's captured stdout)
         pass
+
+
+def run_command(
+    prog: str,
+    build_parser: Callable[[], argparse.ArgumentParser],
+    run: Callable[[argparse.Namespace], int],
+    argv: Sequence[str] | None,
+) -> int:
+    """A command's ``main()``: parse ``argv``, run, and turn bad usage and Ctrl-C into one line.
+
+    Args:
+        prog: the name the messages start with.
+        build_parser: makes the command's parser.
+        run: runs the parsed command; returns the exit status.
+        argv: the arguments (None: ``sys.argv[1:]``).
+
+    Returns:
+        ``run``'s status; 2 for bad usage; 130 when interrupted before the command's
+        own handling of Ctrl-C took over.
+    """
+    _sigint.handled_by_main()
+    try:
+        try:
+            args = build_parser().parse_args(argv)
+        except UsageError as exc:
+            print(f"{prog}: {one_line(exc)} [exit 2]", file=sys.stderr)
+            return 2
+        return run(args)
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
+        return _sigint.EXIT_INTERRUPTED

@@ -11,7 +11,7 @@ an option is wrong.
 from __future__ import annotations
 
 # isort: off
-from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
@@ -19,7 +19,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .._cliparse import ArgumentParser, UsageError, one_line, write_stdout
+from .._cliparse import ArgumentParser, one_line, run_command, write_stdout
 from .._exceptions import ConfigError
 from .._logging import add_logging_arguments, configure_logging
 from .._version import add_version_argument
@@ -110,17 +110,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.report``."""
-    _sigint.handled_by_main()
-    try:
-        try:
-            args = build_parser().parse_args(argv)
-        except UsageError as exc:
-            print(f"report: {one_line(exc)} [exit 2]", file=sys.stderr)
-            return 2
-        return run(args)
-    except KeyboardInterrupt:
-        print(f"report: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
-        return _sigint.EXIT_INTERRUPTED
+    return run_command("report", build_parser, run, argv)
 
 
 if __name__ == "__main__":

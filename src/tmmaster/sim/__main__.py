@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 # isort: off
-from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
@@ -18,7 +18,7 @@ import threading
 from collections.abc import Callable, Sequence
 from types import FrameType
 
-from .._cliparse import ArgumentParser, UsageError, one_line
+from .._cliparse import ArgumentParser, one_line, run_command
 from .._exceptions import ConfigError, TMMasterError
 from .._logging import add_logging_arguments, configure_logging
 from .._pose import Pose
@@ -257,17 +257,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.sim``."""
-    _sigint.handled_by_main()
-    try:
-        try:
-            args = build_parser().parse_args(argv)
-        except UsageError as exc:
-            print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
-            return 2
-        return run(args)
-    except KeyboardInterrupt:  # before the simulator's own handler is in place
-        print(f"sim: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
-        return _sigint.EXIT_INTERRUPTED
+    return run_command("sim", build_parser, run, argv)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ error, an unsupported function, it moves the robot or talks Modbus) or a wrong o
 from __future__ import annotations
 
 # isort: off
-from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
+from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
@@ -18,7 +18,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .._cliparse import ArgumentParser, UsageError, one_line
+from .._cliparse import ArgumentParser, one_line, run_command
 from .._version import add_version_argument
 
 
@@ -108,17 +108,7 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.tmscript``."""
-    _sigint.handled_by_main()
-    try:
-        try:
-            args = build_parser().parse_args(argv)
-        except UsageError as exc:
-            print(f"tmscript: {one_line(exc)} [exit 2]", file=sys.stderr)
-            return 2
-        return run(args)
-    except KeyboardInterrupt:
-        print(f"tmscript: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
-        return _sigint.EXIT_INTERRUPTED
+    return run_command("tmscript", build_parser, run, argv)
 
 
 if __name__ == "__main__":
