@@ -544,10 +544,10 @@ class RobotController(SimDevice[RobotProfile]):
         self._active = None
         self._publish_error(int(code), reason)
 
-    def _late_ack_pending(self, key: object, *, motion_command: bool) -> bool:
-        """True while a late_ack fault still holds back the command identified by ``key``."""
+    def _late_ack_delay(self, *, motion_command: bool) -> float:
+        """How late the late_ack faults take the next command (0: not late)."""
         number = self._moves_started + 1
-        delay = max(
+        return max(
             (
                 f.delay_s
                 for f in self._late_acks
@@ -555,6 +555,10 @@ class RobotController(SimDevice[RobotProfile]):
             ),
             default=0.0,
         )
+
+    def _late_ack_pending(self, key: object, *, motion_command: bool) -> bool:
+        """True while a late_ack fault still holds back the command identified by ``key``."""
+        delay = self._late_ack_delay(motion_command=motion_command)
         if delay <= 0:
             return False
         if key != self._late_key:

@@ -278,16 +278,8 @@ class ScriptProjectController(SequenceController):
         seq = int(self._bank.get("seq"))
         if seq != self._profile.next_seq(int(self._bank.get("ack_seq"))):
             return
-        number = self._moves_started + 1
         label = self._profile.field("command").label(int(self._bank.get("command")))
-        delay = max(
-            (
-                f.delay_s
-                for f in self._late_acks
-                if f.at_move is None or (label in ("ptp", "line") and f.at_move == number)
-            ),
-            default=0.0,
-        )
+        delay = self._late_ack_delay(motion_command=label in ("ptp", "line"))
         if delay > 0 and self.link_free_at < self._time_s:
             self.link_free_at = self._time_s + delay
             self._log.warning("sim.fault_fired", device=self._name, fault="late_ack", delay_s=delay)
