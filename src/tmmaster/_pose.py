@@ -40,6 +40,28 @@ class Pose:
             raise ValueError(f"a pose needs 6 values [x, y, z, rx, ry, rz], got {len(values)}")
         return cls(*values)
 
+    @classmethod
+    def parse(cls, text: str) -> Pose:
+        """A pose from ``"X,Y,Z,RX,RY,RZ"`` (a command-line option's text).
+
+        Args:
+            text: six comma-separated numbers, mm and degrees.
+
+        Returns:
+            The pose.
+
+        Raises:
+            ConfigError: not six numbers, or one that is not finite (naming it).
+        """
+        parts = text.split(",")
+        if len(parts) != 6:
+            raise ConfigError(f"need 6 comma-separated numbers, got {len(parts)}")
+        try:
+            values = [float(part) for part in parts]
+        except ValueError as exc:
+            raise ConfigError(f"not a number: {exc}") from None
+        return cls(*values)
+
     def as_list(self) -> list[float]:
         """Return ``[x, y, z, rx, ry, rz]``."""
         return [self.x, self.y, self.z, self.rx, self.ry, self.rz]

@@ -217,14 +217,10 @@ def robot_program(
 
 def _tool_argument(text: str) -> Pose:
     """``--tool X,Y,Z,RX,RY,RZ`` as a Pose (argparse type; the error names the problem)."""
-    parts = [p.strip() for p in text.split(",")]
     try:
-        values = [float(p) for p in parts]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"needs six finite comma-separated numbers, got {text!r}")
-    return Pose(*values)
+        return Pose.parse(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (got {text!r})") from exc
 
 
 def _gripper_argument(text: str) -> GripperWiring:

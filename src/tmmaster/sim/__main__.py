@@ -181,11 +181,8 @@ def _tool(text: str | None) -> Pose | None:
     if text is None:
         return None
     try:
-        values = [float(part) for part in text.split(",")]
-        if len(values) != 6:
-            raise ValueError(f"need 6 comma-separated numbers, got {len(values)}")
-        return Pose.from_sequence(values)
-    except ValueError as exc:
+        return Pose.parse(text)
+    except ConfigError as exc:
         raise ConfigError(f"--tool X,Y,Z,RX,RY,RZ: {exc} (got {text!r})") from exc
 
 
