@@ -422,8 +422,7 @@ class ScriptProjectController(SequenceController):
         move = self._queue[0]
         seq = int(self._bank.get("ack_seq"))
         self._motion_args = (move.target, move.motion, move.speed, move.accel_s, seq)
-        if not self._start_motion(move.target, move.motion, move.speed, move.accel_s, seq=seq):
-            return
+        self._start_motion(move.target, move.motion, move.speed, move.accel_s, seq=seq)
 
     def _command_done(self, active: _Active) -> None:
         # A move of the buffer ran; the fingers stopped (the program reports the gripper

@@ -959,13 +959,19 @@ def _decode_all(data: bytes, size: int, fmt: str, endian: int) -> list[Scalar]:
     return out
 
 
-def _preset_read(rt: Runtime, args: list[Value]) -> Value:
+def _preset(rt: Runtime, args: list[Value]) -> tuple[ModbusConfig, tuple[int, str, int, str, int]]:
+    """The device named by ``args[0]`` and its preset named by ``args[1]`` (§16.1.1)."""
     config = rt.devices.get(_str(args[0]).strip())
     if config is None:
         raise BuiltinError(f'no ModbusTCP device named "{_str(args[0])}" is declared')
     preset = config.presets.get(_str(args[1]))
     if preset is None:
         raise BuiltinError(f'device "{config.name}" has no preset "{_str(args[1])}"')
+    return config, preset
+
+
+def _preset_read(rt: Runtime, args: list[Value]) -> Value:
+    config, preset = _preset(rt, args)
     unit, kind, address, typ, suffix = preset
     count = suffix if typ == "string" else _TYPE_WORDS[typ]
     kind_, words = _read(rt, [config.name, unit, kind, address, count])
@@ -1082,12 +1088,7 @@ def _preset_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
     float, double or string preset FC 16, in the preset's word order (strings UTF-8,
     padded with 0x00 to the preset's address count, or to the given count).
     """
-    config = rt.devices.get(_str(args[0]).strip())
-    if config is None:
-        raise BuiltinError(f'no ModbusTCP device named "{_str(args[0])}" is declared')
-    preset = config.presets.get(_str(args[1]))
-    if preset is None:
-        raise BuiltinError(f'device "{config.name}" has no preset "{_str(args[1])}"')
+    config, preset = _preset(rt, args)
     unit, kind, address, typ, suffix = preset
     value = args[2]
     if isinstance(value, list):
