@@ -552,7 +552,7 @@ class Fleet:
         deadline = time.monotonic() + timeout_s
         for _robot, member in members:
             member.gate.close()  # no new command anywhere, before any robot is closed
-            self._call_soon(member.wake)
+            wake_waits(member)
         outcomes: dict[str, bool] = {}
 
         def close_one(robot: _Closable) -> None:

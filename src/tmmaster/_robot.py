@@ -1022,8 +1022,7 @@ class Robot:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         with deferred():
             self._gate.close()
-            if self._shared is not None:
-                wake_waits(self._shared)  # a wait polled by the fleet ends now
+            self.interrupt()  # waits in progress end now, a fleet's included
             if self._closed_safely is None or self._transport.state is not ConnectionState.CLOSED:
                 self._closed_safely = self._give_up_outstanding(deadline)
                 self.gripper.disconnect()
