@@ -1,0 +1,201 @@
+"""Griffe extension: render the public API as a reader meets it.
+
+Loaded by mkdocstrings (``extensions:`` in mkdocs.yml). Three things the source does
+that static analysis would otherwise show wrong:
+
+- ``#:`` comments above an assignment document it (the convention of the source, as
+  Sphinx's autodoc reads it); Griffe only reads a string after the assignment.
+- A public class deriving from a private helper class (``_OwnConnectionGripper``,
+  ``BlockTransport``) is shown with the helper's own bases instead, and the helper's
+  members as its own: the reader sees ``Blog2FG7Gripper(Gripper)`` with every method
+  it has, and no name the reference does not document.
+- ``tmmaster.connect`` is made at import time with ``Robot``'s signature
+  (``connect = _connected(Robot)``): it is shown as the function it is, with
+  ``Robot``'s parameters and the docstring it has at run time.
+
+tests/test_api_reference.py checks the same rules on the source, without a build.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import importlib
+import inspect
+from pathlib import Path
+from typing import Any
+
+import griffe
+
+#: The packages whose ``__all__`` the reference documents.
+PUBLIC_PACKAGES = (
+    "tmmaster",
+    "tmmaster.sim",
+    "tmmaster.pickplace",
+    "tmmaster.report",
+    "tmmaster.tmscript",
+)
+
+#: Functions made at import time with a class's signature: function -> class.
+MADE_LIKE = {"tmmaster._robot.connect": "tmmaster._robot.Robot"}
+
+
+@functools.cache
+def _lines(filepath: str) -> list[str]:
+    return Path(filepath).read_text(encoding="utf-8").splitlines()
+
+
+def _comment_above(filepath: Path | list[Path] | None, lineno: int | None) -> str | None:
+    """The ``#:`` comment lines right above line ``lineno`` (1-based), joined."""
+    if not isinstance(filepath, Path) or lineno is None:
+        return None
+    lines = _lines(str(filepath))
+    found: list[str] = []
+    index = lineno - 2
+    while index >= 0 and lines[index].strip().startswith("#:"):
+        found.insert(0, lines[index].strip()[2:].strip())
+        index -= 1
+    return "\n".join(found) or None
+
+
+class PublicAPI(griffe.Extension):
+    """The three rules of the module docstring."""
+
+    def on_attribute_instance(
+        self, *, node: ast.AST | griffe.ObjectNode, attr: griffe.Attribute, **kwargs: Any
+    ) -> None:
+        """Document an attribute by the ``#:`` comment above it (when it has no string)."""
+        _ = (node, kwargs)
+        if attr.docstring is not None:
+            return
+        text = _comment_above(attr.filepath, attr.lineno)
+        if text:
+            attr.docstring = griffe.Docstring(
+                text, lineno=attr.lineno, endlineno=attr.lineno, parent=attr
+            )
+
+    def on_package(self, *, pkg: griffe.Module, **kwargs: Any) -> None:
+        """Once the package is loaded: hide private bases, shape made-up functions."""
+        _ = kwargs
+        if pkg.name != "tmmaster":
+            return
+        public = _public_paths(pkg)
+        for cls in _classes(pkg):
+            if cls.path in public:
+                _hide_private_bases(cls, public)
+        for function_path, class_path in MADE_LIKE.items():
+            _shape_like(pkg, function_path, class_path)
+
+
+def _public_paths(pkg: griffe.Module) -> set[str]:
+    """Canonical paths of every object a public package exports."""
+    paths: set[str] = set()
+    for package in PUBLIC_PACKAGES:
+        module = pkg if package == "tmmaster" else pkg[package.removeprefix("tmmaster.")]
+        for name in module.exports or ():
+            if not isinstance(name, str) or name not in module.members:
+                continue
+            member = module.members[name]
+            try:
+                paths.add(member.final_target.path if member.is_alias else member.path)
+            except griffe.AliasResolutionError:
+                continue
+    return paths
+
+
+def _classes(obj: griffe.Object) -> list[griffe.Class]:
+    found: list[griffe.Class] = []
+    for member in obj.members.values():
+        if member.is_alias:
+            continue
+        if isinstance(member, griffe.Class):
+            found.append(member)
+            found.extend(_classes(member))
+        elif isinstance(member, griffe.Module):
+            found.extend(_classes(member))
+    return found
+
+
+def _is_private(base: griffe.Class, public: set[str]) -> bool:
+    """A base of the package that the reference does not show (underscore or unexported)."""
+    if base.name.startswith("_"):
+        return True
+    return base.path.split(".")[0] == "tmmaster" and base.path not in public
+
+
+def _hide_private_bases(cls: griffe.Class, public: set[str]) -> None:
+    """Replace private bases by their bases, and take over their members."""
+    bases: list[str | griffe.Expr] = []
+    for expr, resolved in zip(cls.bases, _resolved(cls), strict=True):
+        if resolved is None or not _is_private(resolved, public):
+            bases.append(expr)
+            continue
+        for inner in _ancestors_shown(resolved, public):
+            bases.append(inner)
+        _adopt_members(cls, resolved, public)
+    cls.bases = bases
+
+
+def _resolved(cls: griffe.Class) -> list[griffe.Class | None]:
+    found: list[griffe.Class | None] = []
+    for base in cls.bases:
+        target = None
+        if isinstance(base, griffe.Expr):
+            try:
+                candidate = cls.modules_collection.get_member(base.canonical_path)
+                target = candidate.final_target if candidate.is_alias else candidate
+            except (KeyError, griffe.AliasResolutionError, ValueError):
+                target = None
+        found.append(target if isinstance(target, griffe.Class) else None)
+    return found
+
+
+def _ancestors_shown(base: griffe.Class, public: set[str]) -> list[str | griffe.Expr]:
+    """The bases of a private base, with private ones replaced in turn.
+
+    ``ABC`` is left out: it made the helper abstract, not the public class.
+    """
+    shown: list[str | griffe.Expr] = []
+    for expr, resolved in zip(base.bases, _resolved(base), strict=True):
+        if resolved is not None and _is_private(resolved, public):
+            shown.extend(_ancestors_shown(resolved, public))
+        elif str(expr) not in {"ABC", "abc.ABC"} and expr not in shown:
+            shown.append(expr)
+    return shown
+
+
+def _adopt_members(cls: griffe.Class, base: griffe.Class, public: set[str]) -> None:
+    """Show ``base``'s public members (and its private bases') as members of ``cls``."""
+    for name, member in base.members.items():
+        if name.startswith("_") and name != "__init__":
+            continue
+        if name in cls.members or name == "__init__":
+            continue
+        cls.set_member(name, griffe.Alias(name, member, parent=cls))
+    for resolved in _resolved(base):
+        if resolved is not None and _is_private(resolved, public):
+            _adopt_members(cls, resolved, public)
+
+
+def _shape_like(pkg: griffe.Module, function_path: str, class_path: str) -> None:
+    """Turn the attribute at ``function_path`` into a function with the class's signature."""
+    module_path, name = function_path.rsplit(".", 1)
+    module = pkg.modules_collection.get_member(module_path)
+    attribute = module.members[name]
+    cls = pkg.modules_collection.get_member(class_path)
+    init = cls.members["__init__"]
+    parameters = griffe.Parameters(*[p for p in init.parameters if p.name != "self"])
+    runtime = getattr(importlib.import_module(module_path), name)
+    function = griffe.Function(
+        name,
+        lineno=attribute.lineno,
+        endlineno=attribute.endlineno,
+        parameters=parameters,
+        returns=griffe.ExprName(cls.name, parent=module),
+    )
+    doc = inspect.getdoc(runtime)
+    if doc:
+        function.docstring = griffe.Docstring(
+            doc, lineno=attribute.lineno, endlineno=attribute.endlineno, parent=function
+        )
+    module.set_member(name, function)
