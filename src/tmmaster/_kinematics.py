@@ -116,6 +116,13 @@ def transform_to_pose(t: Transform) -> Pose:
     )
 
 
+def flange_of(tcp: Pose, tool: Pose | None) -> Pose:
+    """The flange pose that puts the TCP at ``tcp`` (TCP = flange x tool); no tool: ``tcp``."""
+    if tool is None:
+        return tcp
+    return transform_to_pose(multiply(pose_to_transform(tcp), invert(pose_to_transform(tool))))
+
+
 def _tidy(angle_deg: float) -> float:
     # (-180, 180], and 180 rather than -180 for the common "tool down" rx.
     angle = math.fmod(angle_deg, 360.0)

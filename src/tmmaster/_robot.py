@@ -99,7 +99,15 @@ _P = ParamSpec("_P")
 
 
 class Workspace(BaseModel):
-    """An axis-aligned box the TCP must stay inside, in mm (base frame)."""
+    """Where the tool may go, in mm (robot base frame): a table plane and a box.
+
+    The table plane is on by default: no TCP and no flange (the two ends of the tool;
+    the tool between them is a straight segment, so it stays above the plane too) may
+    go below ``floor_z_mm``. Its default, 0 mm, is the plane the robot's base stands
+    on in Techman's robot base frame; set the height of your table top (for instance
+    ``Workspace(floor_z_mm=85)``), or ``None`` for an arm that must reach below its
+    mounting plane (mounted on a pedestal or a wall). The box bounds the TCP only.
+    """
 
     # NaN or infinite bounds would make range checks pass or fail by accident.
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -107,14 +115,40 @@ class Workspace(BaseModel):
     x: tuple[float, float] = (-2000.0, 2000.0)
     y: tuple[float, float] = (-2000.0, 2000.0)
     z: tuple[float, float] = (-2000.0, 2000.0)
+    #: The table plane, mm: no TCP and no flange below it. None: no plane.
+    floor_z_mm: float | None = 0.0
 
-    def check(self, pose: Pose) -> None:
-        """Raise :class:`ConfigError` naming the axis when ``pose`` is outside the box."""
+    def check(self, pose: Pose, *, tool: Pose | None = None) -> None:
+        """Refuse a TCP ``pose`` outside the box or with the tool below the table plane.
+
+        Args:
+            pose: the TCP pose (mm, deg) in the robot base frame.
+            tool: the TCP in the flange frame (None: the TCP is the flange), to place
+                the flange for the table plane.
+
+        Raises:
+            ConfigError: naming the axis or the point (TCP, flange) and its height.
+        """
         for axis, (low, high) in (("x", self.x), ("y", self.y), ("z", self.z)):
             value = getattr(pose, axis)
             if not low <= value <= high:
                 raise ConfigError(
                     f"pose {axis} = {value:g} mm is outside the workspace ({low:g}..{high:g} mm)"
+                )
+        floor = self.floor_z_mm
+        if floor is None:
+            return
+        if pose.z < floor:
+            raise ConfigError(
+                f"pose z = {pose.z:g} mm puts the TCP below the table plane"
+                f" (workspace floor_z_mm = {floor:g} mm)"
+            )
+        if tool is not None:
+            flange = kin.flange_of(pose, tool)
+            if flange.z < floor:
+                raise ConfigError(
+                    f"pose {pose} puts the flange at z = {flange.z:.1f} mm, below the table"
+                    f" plane (workspace floor_z_mm = {floor:g} mm)"
                 )
 
 
@@ -709,7 +743,8 @@ class Robot:
         ):
             require_positive(option, value)
         self.name = name
-        self.workspace = workspace
+        #: Where the tool may go: the table plane (on by default) and the TCP's box.
+        self.workspace = Workspace() if workspace is None else workspace
         if tool is not None and not isinstance(tool, Pose):
             raise ConfigError(
                 f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
@@ -1149,8 +1184,7 @@ class Robot:
             raise ConfigError(f"speed must be an integer percent, got {speed!r}")
         if not 1 <= speed <= self.max_speed_percent:
             raise ConfigError(f"speed {speed} % is outside 1..{self.max_speed_percent} %")
-        if self.workspace is not None:
-            self.workspace.check(pose)
+        self.workspace.check(pose, tool=self.tool)
         seed = seed_deg if seed_deg is not None else self._joints_hint
         return self.model.inverse(pose, seed_deg=seed, tool=self.tool)
 
@@ -1212,7 +1246,9 @@ class Robot:
     ) -> Motion:
         """Validate and send a move, returning at once with a :class:`Motion` handle.
 
-        Everything :meth:`validate_move` checks is checked before the first request. Where
+        Everything :meth:`validate_move` checks is checked before the first request, and
+        for a Line the straight path from where the arm is believed to be (the pose the
+        robot reported, or the last target it reached), when that is known. Where
         the profile publishes the robot's joints, they are read with the start pose before
         the write (no extra request: Techman's 7013-7036 is one read, or the final check of
         the previous move read them) and the target's joints and the expected time are
@@ -1220,6 +1256,13 @@ class Robot:
         """
         motion = _motion_type(motion)
         self.validate_move(target, speed)
+        if motion is MotionType.LINE and self._hint_pose is not None:
+            # The straight path from where the arm is believed to be, before any request:
+            # a Line the arm cannot follow is refused without touching the robot. It is
+            # checked again from the pose the robot reports before the write.
+            self.model.line_joints(
+                self._hint_pose, target, start_joints_deg=self._joints_hint, tool=self.tool
+            )
         return self._start_command(
             Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
         )

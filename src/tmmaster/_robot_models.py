@@ -118,18 +118,60 @@ class RobotModel(BaseModel):
     def _solve(self, pose: Pose, seed: Joints, tool: Pose | None, same_branch: bool) -> Joints:
         target = kin.pose_to_transform(pose)
         tool_t = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
-        if tool is None and self._outside_reach_sphere(pose):
+        # The datasheet reach is the flange's: with a tool, the flange is where the TCP
+        # pose puts it (TCP = flange x tool), so ``tool=Pose(0, 0, 0, 0, 0, 0)`` and
+        # ``tool=None`` refuse the same poses.
+        flange = kin.flange_of(pose, tool)
+        if self._outside_reach_sphere(flange):
             raise UnreachablePoseError(
                 f"pose {pose} is out of reach of a {self.name}"
-                f" ({self.distance_from_shoulder(pose):.0f} mm from the shoulder,"
+                f" (the flange {self.distance_from_shoulder(flange):.0f} mm from the shoulder,"
                 f" reach {self.reach_mm:.0f} mm)",
                 reason="reach",
                 pose=pose,
             )
         problems: list[tuple[str, str]] = []
         best: Joints | None = None
+        if same_branch:
+            best = self._search([seed], seed, target, tool_t, problems)
+        else:
+            # The canonical postures find nearly every pose; the wider search (J1 aimed at
+            # the flange and its opposite, the shoulder all round) runs only when they
+            # found no admissible solution, so a refusal is never a missed branch.
+            best = self._search(self._starts(seed), seed, target, tool_t, problems)
+            if best is None:
+                best = self._search(self._wide_starts(seed, flange), seed, target, tool_t, problems)
+        if best is not None:
+            return best
+        if not problems:
+            raise UnreachablePoseError(
+                f"pose {pose} is out of reach of a {self.name}: no joint solution takes the"
+                f" {'TCP' if tool else 'flange'} there"
+                f" ({self.distance_from_shoulder(flange):.0f} mm from the shoulder,"
+                f" {math.hypot(flange.x, flange.y):.0f} mm from the J1 axis;"
+                f" reach {self.reach_mm:.0f} mm)",
+                reason="reach",
+                pose=pose,
+            )
+        # A solution inside every joint range but too close to a singularity is the true
+        # cause of the refusal: the joint ranges would have allowed that branch.
+        reason, detail = min(problems, key=lambda p: p[0] != "singularity")
+        raise UnreachablePoseError(
+            f"pose {pose} cannot be taken by a {self.name}: {detail}", reason=reason, pose=pose
+        )
+
+    def _search(
+        self,
+        starts: Sequence[Joints],
+        seed: Joints,
+        target: kin.Transform,
+        tool_t: kin.Transform,
+        problems: list[tuple[str, str]],
+    ) -> Joints | None:
+        """The admissible solution nearest the seed from ``starts``; appends what failed."""
+        best: Joints | None = None
         best_distance = math.inf
-        for start in [seed] if same_branch else self._starts(seed):
+        for start in starts:
             raw = kin.dls_inverse(
                 self._chain, target, [math.radians(q) for q in start], tool=tool_t
             )
@@ -146,22 +188,7 @@ class RobotModel(BaseModel):
             if start == seed:
                 # Converged from the seed itself: that is the nearest branch.
                 break
-        if best is not None:
-            return best
-        if not problems:
-            raise UnreachablePoseError(
-                f"pose {pose} is out of reach of a {self.name}: no joint solution takes the"
-                f" {'TCP' if tool else 'flange'} there"
-                f" ({self.distance_from_shoulder(pose):.0f} mm from the shoulder,"
-                f" {math.hypot(pose.x, pose.y):.0f} mm from the J1 axis;"
-                f" reach {self.reach_mm:.0f} mm)",
-                reason="reach",
-                pose=pose,
-            )
-        reason, detail = problems[0]
-        raise UnreachablePoseError(
-            f"pose {pose} cannot be taken by a {self.name}: {detail}", reason=reason, pose=pose
-        )
+        return best
 
     def _start_joints(
         self, start: Pose, joints_deg: Sequence[float] | None, tool: Pose | None
@@ -233,6 +260,17 @@ class RobotModel(BaseModel):
                 for j5 in (90.0, -90.0):
                     starts.append((base, shoulder, elbow, wrist, j5, seed[5]))
         return starts
+
+    def _wide_starts(self, seed: Joints, flange: Pose) -> list[Joints]:
+        """Starts all round the shoulder, J1 aimed at the flange and away from it."""
+        aim = math.degrees(math.atan2(flange.y, flange.x))
+        return [
+            (base, shoulder, elbow, 0.0, j5, seed[5])
+            for base in (aim, aim + 180.0 if aim <= 0 else aim - 180.0)
+            for shoulder in (-135.0, -45.0, 45.0, 135.0)
+            for elbow in (-90.0, 90.0)
+            for j5 in (90.0, -90.0)
+        ]
 
     def distance_from_shoulder(self, pose: Pose) -> float:
         """Distance from the shoulder joint to the pose's position, in mm."""
