@@ -102,3 +102,53 @@ def test_a_robots_info_events_are_still_logged_when_enabled(
         robot.move_to(Pose(300, -200, 150, 180, 0, 90), speed=50)
     for event in ("robot.command_sent", "robot.command_acknowledged", "robot.command_done"):
         assert event in caplog.text
+
+
+def test_a_plain_logging_setup_prints_the_event_then_key_value() -> None:
+    # What logging.basicConfig(level=logging.INFO) prints: its own format around the
+    # message, and the message is the event and its fields, never a dict.
+    import logging
+
+    stream = io.StringIO()
+    handler = logging.StreamHandler(stream)
+    handler.setFormatter(logging.Formatter(logging.BASIC_FORMAT))
+    std = logging.getLogger("tmmaster.test_plain")
+    std.addHandler(handler)
+    std.setLevel(logging.INFO)
+    try:
+        log = get_logger("tmmaster.test_plain").bind(robot="r1")
+        log.info("robot.connected", host="127.0.0.1", port=5020, target=[1.0, 2.5], note="a b")
+        try:
+            raise ValueError("boom")
+        except ValueError:
+            log.exception("robot.failed", quote='say "hi"')
+    finally:
+        std.removeHandler(handler)
+        std.setLevel(logging.NOTSET)
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == (
+        "INFO:tmmaster.test_plain:robot.connected robot=r1 host=127.0.0.1 port=5020"
+        ' target=[1.0,2.5] note="a b"'
+    )
+    assert lines[1] == 'ERROR:tmmaster.test_plain:robot.failed robot=r1 quote="say \\"hi\\""'
+    assert lines[2] == "Traceback (most recent call last):"
+    assert lines[-1] == "ValueError: boom"
+    assert "timestamp" not in stream.getvalue()
+
+
+def test_json_and_key_value_are_still_there_when_asked() -> None:
+    # configure_logging renders the same events as JSON (--log-json) or as key=value.
+    for as_json in (True, False):
+        stream = io.StringIO()
+        undo = tmmaster.configure_logging(json=as_json, level="info", stream=stream)
+        try:
+            get_logger("tmmaster.robot").bind(robot="r1").info("robot.connected", port=5020)
+        finally:
+            undo()
+        (line,) = stream.getvalue().splitlines()
+        if as_json:
+            assert json.loads(line)["event"] == "robot.connected"
+        else:
+            assert "robot.connected" in line
+            assert "port=5020" in line
+            assert not line.startswith("{")
