@@ -1,7 +1,7 @@
 """Griffe extension: render the public API as a reader meets it.
 
-Loaded by mkdocstrings (``extensions:`` in mkdocs.yml). Three things the source does
-that static analysis would otherwise show wrong:
+Loaded by mkdocstrings (``extensions:`` in mkdocs.yml). What the source does that
+static analysis would otherwise show wrong (the names involved: docs_hooks/api_names.py):
 
 - ``#:`` comments above an assignment document it (the convention of the source, as
   Sphinx's autodoc reads it); Griffe only reads a string after the assignment.
@@ -12,6 +12,10 @@ that static analysis would otherwise show wrong:
 - ``tmmaster.connect`` is made at import time with ``Robot``'s signature
   (``connect = _connected(Robot)``): it is shown as the function it is, with
   ``Robot``'s parameters and the docstring it has at run time.
+- A Protocol that stands for a public class in a signature (it breaks an import
+  cycle: ``Fleet.latest(robot: _Closable)``) is shown as that class (``Robot``).
+- Classes only the package makes (``Motion``) are shown without a constructor, and
+  members that serve the package itself are left out.
 
 tests/test_api_reference.py checks the same rules on the source, without a build.
 """
@@ -21,23 +25,25 @@ from __future__ import annotations
 import ast
 import functools
 import importlib
+import importlib.util
 import inspect
 from pathlib import Path
 from typing import Any
 
 import griffe
 
-#: The packages whose ``__all__`` the reference documents.
-PUBLIC_PACKAGES = (
-    "tmmaster",
-    "tmmaster.sim",
-    "tmmaster.pickplace",
-    "tmmaster.report",
-    "tmmaster.tmscript",
-)
 
-#: Functions made at import time with a class's signature: function -> class.
-MADE_LIKE = {"tmmaster._robot.connect": "tmmaster._robot.Robot"}
+def _load_names() -> Any:
+    path = Path(__file__).with_name("api_names.py")
+    spec = importlib.util.spec_from_file_location("tmmaster_docs_api_names", path)
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+NAMES = _load_names()
 
 
 @functools.cache
@@ -79,18 +85,29 @@ class PublicAPI(griffe.Extension):
         _ = kwargs
         if pkg.name != "tmmaster":
             return
+        for path in NAMES.INTERNAL_MEMBERS:
+            owner, name = path.rsplit(".", 1)
+            pkg.modules_collection.get_member(owner).del_member(name)
+        for path in NAMES.MADE_BY_THE_PACKAGE:
+            cls = pkg.modules_collection.get_member(path)
+            # No __init__ made from dataclass fields either (Griffe's dataclasses extension).
+            cls.labels.discard("dataclass")
+            cls.decorators = [d for d in cls.decorators if "dataclass" not in str(d.value)]
+            if "__init__" in cls.members:
+                cls.del_member("__init__")
         public = _public_paths(pkg)
         for cls in _classes(pkg):
             if cls.path in public:
                 _hide_private_bases(cls, public)
-        for function_path, class_path in MADE_LIKE.items():
+        for function_path, class_path in NAMES.MADE_LIKE.items():
             _shape_like(pkg, function_path, class_path)
+        _name_stand_ins(pkg)
 
 
 def _public_paths(pkg: griffe.Module) -> set[str]:
     """Canonical paths of every object a public package exports."""
     paths: set[str] = set()
-    for package in PUBLIC_PACKAGES:
+    for package in NAMES.PAGES:
         module = pkg if package == "tmmaster" else pkg[package.removeprefix("tmmaster.")]
         for name in module.exports or ():
             if not isinstance(name, str) or name not in module.members:
@@ -199,3 +216,40 @@ def _shape_like(pkg: griffe.Module, function_path: str, class_path: str) -> None
             doc, lineno=attribute.lineno, endlineno=attribute.endlineno, parent=function
         )
     module.set_member(name, function)
+
+
+def _name_stand_ins(pkg: griffe.Module) -> None:
+    """Show the public class where a signature names a Protocol standing for it."""
+    for obj in _callables_and_attributes(pkg):
+        expressions: list[Any] = []
+        if isinstance(obj, griffe.Function):
+            expressions += [p.annotation for p in obj.parameters]
+            expressions.append(obj.returns)
+        else:
+            expressions.append(obj.annotation)
+        for expression in expressions:
+            if not isinstance(expression, griffe.Expr):
+                continue
+            for name in expression.iterate(flat=True):
+                if not isinstance(name, griffe.ExprName):
+                    continue
+                try:
+                    public = NAMES.STAND_INS.get(name.canonical_path)
+                except Exception:  # a name Griffe cannot resolve
+                    continue
+                if public is not None:
+                    package, short = public.rsplit(".", 1)
+                    name.name = short
+                    name.parent = pkg.modules_collection.get_member(package)
+
+
+def _callables_and_attributes(obj: griffe.Object) -> list[griffe.Object]:
+    found: list[griffe.Object] = []
+    for member in obj.members.values():
+        if member.is_alias:
+            continue
+        if isinstance(member, griffe.Function | griffe.Attribute):
+            found.append(member)
+        elif isinstance(member, griffe.Class | griffe.Module):
+            found.extend(_callables_and_attributes(member))
+    return found

@@ -28,7 +28,12 @@ from transitions import Machine
 from .._exceptions import ConfigError
 from ._steps import Step, StepContext, TaskSequence
 
-IDLE, DONE, ERROR = "IDLE", "DONE", "ERROR"
+IDLE = "IDLE"
+"""The state before a run starts, and after ``reset``."""
+DONE = "DONE"
+"""The state after the last cycle's last step."""
+ERROR = "ERROR"
+"""The state after a failure (``fail``), from any step."""
 
 
 class SequenceMachine:

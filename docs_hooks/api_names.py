@@ -1,0 +1,50 @@
+"""How the API reference shows a few names: read by docs_hooks/griffe_api.py (the site)
+and by tests/test_api_reference.py (the check), so both follow the same rules.
+
+Paths are where the source defines a name (``tmmaster._robot.Robot``), as Griffe and
+``inspect`` find it; the values are the public names the reader knows.
+"""
+
+from __future__ import annotations
+
+#: The public packages the reference documents, and the page of each.
+PAGES = {
+    "tmmaster": "docs/api/tmmaster.md",
+    "tmmaster.sim": "docs/api/sim.md",
+    "tmmaster.pickplace": "docs/api/pickplace.md",
+    "tmmaster.report": "docs/api/report.md",
+    "tmmaster.tmscript": "docs/api/tmscript.md",
+}
+
+#: Protocols that stand for a public class in a signature (the module cannot import the
+#: class without an import cycle): the reference names the public class.
+STAND_INS = {
+    "tmmaster._fleet._Closable": "tmmaster.Robot",
+    "tmmaster._monitor._CommandedRobot": "tmmaster.Robot",
+    "tmmaster.sim._memory.SimulatorLoop": "tmmaster.sim.Simulator",
+}
+
+#: Classes the package makes and hands out (never made by a user): the reference shows
+#: them without a constructor.
+MADE_BY_THE_PACKAGE = {
+    "tmmaster._robot.Motion",
+    "tmmaster.tmscript._evaluator.Program",
+}
+
+#: Members of public classes that serve the package itself, not its users: left out of
+#: the reference.
+INTERNAL_MEMBERS = {
+    "tmmaster._transport.BlockTransport.read_plan",
+    "tmmaster.sim._simulator.Simulator.device_server",
+    "tmmaster.tmscript._evaluator.Program.script",
+    "tmmaster.tmscript._evaluator.Program.define",
+    "tmmaster.tmscript._evaluator.Program.globals_size",
+    "tmmaster.tmscript._evaluator.Program.sections",
+}
+
+#: Functions made at import time with a class's signature (``connect =
+#: _connected(Robot)``): the reference shows them with the class's parameters.
+MADE_LIKE = {"tmmaster._robot.connect": "tmmaster._robot.Robot"}
+
+#: Public names documented by their package's docstring, not rendered on their own.
+NOT_RENDERED = {"tmmaster.__version__"}
