@@ -22,6 +22,7 @@ beginning.
 
 from __future__ import annotations
 
+import functools
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -184,6 +185,14 @@ class SimHost:
         self._c.pause_from_program()
 
 
+@functools.lru_cache(maxsize=8)
+def _parsed(text: str) -> Program:
+    """``parse(text)``, once per text: a Program runs any number of times, and the
+    simulators of one process mostly run the same generated program (a parse takes a
+    few tenths of a second, which a process starting many simulators paid for each)."""
+    return parse(text)
+
+
 class ScriptProjectController(SequenceController):
     """The tmflow robot running a Script Project through the TMscript interpreter."""
 
@@ -204,7 +213,7 @@ class ScriptProjectController(SequenceController):
             program = robot_program(profile, tool=_backend_tool(backend))
         #: The program's source, when given as text (the generated one is).
         self.program_text: str | None = program if isinstance(program, str) else None
-        self._program = program if isinstance(program, Program) else parse(program)
+        self._program = program if isinstance(program, Program) else _parsed(program)
         self._execution: Execution | None = None
         self._queue: deque[_Queued] = deque()
         self._tags: dict[int, _Queued | None] = {}
