@@ -11,6 +11,9 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     │   └── UnreachablePoseError                  out of reach, past a joint limit, or singular
     ├── TransportError                            talking Modbus failed
     │   ├── ConnectError (ConnectionError)        could not open the connection
+    │   │   ├── ConnectRefusedError               nothing listens at host:port (refused)
+    │   │   ├── HostNotFoundError                 the host name does not resolve
+    │   │   └── TransportClosedError              the link was closed by its owner
     │   ├── ConnectionLostError (ConnectionError) the connection broke during a request
     │   ├── ResponseTimeoutError (TimeoutError)   no answer within the request timeout
     │   └── ModbusExceptionError                  the device answered with an exception code
@@ -86,7 +89,35 @@ class TransportError(TMMasterError):
 
 
 class ConnectError(TransportError, ConnectionError):
-    """The connection could not be opened."""
+    """The connection could not be opened.
+
+    Attributes:
+        retryable: False when another attempt cannot help, so the
+            :class:`~tmmaster.RetryPolicy` raises it at once: a closed link, or a first
+            connection refused or to a name that does not resolve
+            (docs/robot-api.md, "When a connection fails").
+    """
+
+    #: Whether the retry policy may try again (an outage: a timeout, a reset, an
+    #: unreachable network); False raises at once.
+    retryable: bool = True
+
+
+class ConnectRefusedError(ConnectError, ConnectionRefusedError):
+    """Nothing accepts connections at the host and port (the host answered: refused).
+
+    On a link never connected it is raised at once (``retryable`` False): a wrong port,
+    the Modbus slave switched off, the simulator not started. Once the link has been
+    up, a refused reconnect is an outage (a server restarting) and is retried.
+    """
+
+
+class HostNotFoundError(ConnectError):
+    """The host name does not resolve (DNS or the hosts file): ``cannot resolve host 'x'``.
+
+    On a link never connected it is raised at once (``retryable`` False); once the
+    link has been up, a failed look-up while reconnecting is retried like an outage.
+    """
 
 
 class TransportClosedError(ConnectError):
@@ -94,6 +125,8 @@ class TransportClosedError(ConnectError):
 
     Never retried: no later attempt can succeed on a closed link.
     """
+
+    retryable = False
 
 
 class ConnectionLostError(TransportError, ConnectionError):

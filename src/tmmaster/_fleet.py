@@ -31,6 +31,7 @@ import weakref
 from collections.abc import Callable, Coroutine, Iterable
 from typing import Any, Generic, Protocol, Self, TypeVar, cast
 
+from ._address import SIM_SCHEME, check_host, check_port
 from ._channels import CommandChannel, Observation
 from ._checks import require_positive
 from ._codec import Value
@@ -669,7 +670,8 @@ def join_fleet(
     name: str,
 ) -> LoopTransport:
     """For :class:`~tmmaster.Robot`: a new robot's link on ``fleet``'s loop (started here)."""
-    if "://" in host:
+    host, port = check_host(host), check_port(port)
+    if host.startswith(SIM_SCHEME):
         raise ConfigError(
             f"host {host!r}: a Fleet's robots speak Modbus TCP (no in-process endpoints)"
         )

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Protocol, Self
 
+from ._address import SIM_SCHEME, check_host
 from ._channels import CommandChannel, channel_for
 from ._codec import Value
 from ._exceptions import (
@@ -587,9 +588,8 @@ class StatusMonitor:
         :raises RegisterMapError: when the profile cannot be loaded.
         """
         self._check_name(name)
-        if not isinstance(host, str) or not host:
-            raise ConfigError(f"host must be a non-empty string, got {host!r}")
-        if "://" in host:
+        host = check_host(host)
+        if host.startswith(SIM_SCHEME):
             raise ConfigError(
                 f"host {host!r}: a StatusMonitor polls over Modbus TCP (no in-process endpoints)"
             )

@@ -1,8 +1,12 @@
 """The one retry policy: exponential backoff with jitter, bounded by attempts and time.
 
-Only transient transport failures are retried (connection refused or lost, response
-timeout, device busy). pymodbus's own retries are switched off by the transport, so
-retries never multiply and no write is resent behind the caller's back.
+Only transient transport failures are retried (a connection lost or not opened in
+time, a response timeout, a busy device). A connection that cannot succeed on a later
+attempt is raised at once (its ``retryable`` is False): a closed link, and on a link
+never connected yet a refused connection or a host name that does not resolve (the
+transport decides, :meth:`BlockTransport._connect_once`). pymodbus's own retries are
+switched off by the transport, so retries never multiply and no write is resent behind
+the caller's back.
 
 The defaults ride out an outage of about 5 s (a switch rebooting, the robot's Modbus
 server restarting): the backoff grows to 1.5 s, so the attempts are spread over the
@@ -27,7 +31,6 @@ from ._exceptions import (
     DeviceBusyError,
     ResponseTimeoutError,
     StopRequestedError,
-    TransportClosedError,
     TransportError,
 )
 from ._logging import get_logger
@@ -43,6 +46,11 @@ TRANSIENT_ERRORS: tuple[type[TransportError], ...] = (
 )
 
 _log = get_logger("tmmaster.transport")
+
+
+def is_transient(error: BaseException) -> bool:
+    """Whether another attempt may succeed: a transient error not marked ``retryable`` False."""
+    return isinstance(error, TRANSIENT_ERRORS) and getattr(error, "retryable", True)
 
 
 class RetryPolicy(BaseModel):
@@ -76,10 +84,9 @@ class RetryPolicy(BaseModel):
         started = time.monotonic()
         try:
             return fn()
-        except TransportClosedError:
-            raise  # closed by its owner: no attempt can succeed
         except TRANSIENT_ERRORS as exc:
-            if self.attempts == 1:
+            # A closed link, a first connection refused or unresolved: no attempt can help.
+            if self.attempts == 1 or not is_transient(exc):
                 raise
             first_error: BaseException = exc
 
@@ -121,8 +128,7 @@ class RetryPolicy(BaseModel):
                 multiplier=self.initial_backoff_s * 2, max=self.max_backoff_s
             )
             + tenacity.wait_random(0, self.jitter_s),
-            retry=tenacity.retry_if_exception_type(TRANSIENT_ERRORS)
-            & tenacity.retry_if_not_exception_type(TransportClosedError),
+            retry=tenacity.retry_if_exception(is_transient),
             before_sleep=before_sleep,
             sleep=sleep,
             reraise=True,

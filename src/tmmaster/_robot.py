@@ -32,6 +32,7 @@ from typing import Annotated, Any, Literal, ParamSpec
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
 from . import _kinematics as kin
+from ._address import SIM_SCHEME, check_host, check_port
 from ._channels import (
     Command,
     CommandChannel,
@@ -730,6 +731,19 @@ class Robot:
         fleet: Fleet | None = None,
         frame_check: FrameCheck | None = None,
     ) -> None:
+        # The addresses used are checked before anything else (a sim:// host has no port).
+        if transport is None:
+            host = check_host(host, field="host", port_field="port")
+            if not host.startswith(SIM_SCHEME):
+                port = check_port(port, field="port")
+        if gripper_transport is None:
+            if gripper_host is not None:
+                gripper_host = check_host(
+                    gripper_host, field="gripper_host", port_field="gripper_port"
+                )
+            reached = gripper_host or host
+            if not (isinstance(reached, str) and reached.startswith(SIM_SCHEME)):
+                gripper_port = check_port(gripper_port, field="gripper_port")
         self.profile = robot_profile(profile)
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
         if not 1 <= max_speed_percent <= 100:

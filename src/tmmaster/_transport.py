@@ -42,12 +42,15 @@ from pymodbus.pdu.register_message import (
     WriteMultipleRegistersRequest,
 )
 
+from ._address import SIM_SCHEME, check_host, check_port
 from ._codec import Decoder, Value, decoder, encoder
 from ._exceptions import (
     MODBUS_EXCEPTIONS,
     ConfigError,
     ConnectError,
     ConnectionLostError,
+    ConnectRefusedError,
+    HostNotFoundError,
     ModbusExceptionError,
     ResponseTimeoutError,
     TransportClosedError,
@@ -450,7 +453,15 @@ class BlockTransport(ABC):
         if self._link_open():
             return
         reconnect = self._state is ConnectionState.DISCONNECTED
-        self._open_link()
+        try:
+            self._open_link()
+        except (ConnectRefusedError, HostNotFoundError) as exc:
+            # Never connected yet: nothing listens there, or no such name; a later
+            # attempt would fail the same way. Once the link has been up, the same
+            # failure is an outage (a server restarting, a resolver away): retried.
+            if not reconnect:
+                exc.retryable = False
+            raise
         if reconnect:
             self.stats.reconnects += 1
             self._log.info("transport.reconnected")
@@ -649,6 +660,36 @@ DECODE_FAILURES: tuple[type[Exception], ...] = (
 )
 
 
+def endpoint_text(host: str, port: int) -> str:
+    """``host:port`` as written in a URL: ``192.168.1.100:502``, ``[::1]:502``."""
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+def connect_error(
+    exc: BaseException, *, name: str, host: str, port: int, timeout: float
+) -> ConnectError:
+    """The typed error of a connection that could not be opened (the one mapping).
+
+    A name that does not resolve is a :class:`HostNotFoundError`, a refusal a
+    :class:`ConnectRefusedError`; anything else (no answer in time, no route, the
+    network down) a plain :class:`ConnectError`, an outage.
+    """
+    where = endpoint_text(host, port)
+    if isinstance(exc, socket.gaierror | UnicodeError):
+        # UnicodeError: the IDNA codec refusing a label (longer than 63 characters).
+        reason = exc.strerror if isinstance(exc, socket.gaierror) else str(exc)
+        return HostNotFoundError(f"cannot resolve host {host!r} ({name}): {reason}")
+    if isinstance(exc, ConnectionRefusedError):
+        return ConnectRefusedError(
+            f"{name} at {where} refused the connection: nothing listens on port {port}"
+            " (is the port right, the robot's Modbus slave on, the simulator started?)"
+        )
+    if isinstance(exc, TimeoutError):
+        return ConnectError(f"cannot connect to {name} at {where}: no answer within {timeout:g} s")
+    reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    return ConnectError(f"cannot connect to {name} at {where}: {reason or type(exc).__name__}")
+
+
 def refused_error(response: ModbusPDU, *, name: str, what: str) -> ModbusExceptionError:
     """The typed error of a Modbus exception response (IllegalAddressError for code 2 ...)."""
     code = int(getattr(response, "exception_code", 0))
@@ -784,6 +825,12 @@ class ModbusTransport(BlockTransport):
         retry: RetryPolicy | None = None,
         name: str = "device",
     ) -> None:
+        host, port = check_host(host), check_port(port)
+        if host.startswith(SIM_SCHEME):
+            raise ConfigError(
+                f"host {host!r}: a ModbusTransport speaks Modbus TCP (use open_transport or"
+                " Robot for an in-process simulator)"
+            )
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
         self._socket: socket.socket | None = None
         self._kernel_bounds = False
@@ -796,8 +843,10 @@ class ModbusTransport(BlockTransport):
     def _open_link(self) -> None:
         try:
             sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
-        except OSError as exc:
-            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
+        except (OSError, UnicodeError) as exc:
+            raise connect_error(
+                exc, name=self.name, host=self.host, port=self.port, timeout=self.timeout
+            ) from exc
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._kernel_bounds = _kernel_bounds(sock)
@@ -1028,8 +1077,10 @@ class AsyncLink:
                     self.host,
                     self.port,
                 )
-        except (OSError, TimeoutError) as exc:
-            raise ConnectError(f"cannot connect to {self.name} at {self.host}:{self.port}") from exc
+        except (OSError, TimeoutError, UnicodeError) as exc:
+            raise connect_error(
+                exc, name=self.name, host=self.host, port=self.port, timeout=self.timeout
+            ) from exc
         self._stream = stream
 
     async def read_block(self, table: Table, address: int, count: int, what: str) -> list[int]:
@@ -1155,8 +1206,13 @@ def open_transport(
     retry: RetryPolicy | None = None,
     name: str = "device",
 ) -> Transport:
-    """A Modbus TCP transport to ``host:port``, or an in-process one for a ``sim://`` name."""
-    if "://" not in host:
+    """A Modbus TCP transport to ``host:port``, or an in-process one for a ``sim://`` name.
+
+    The host and port are checked first (:func:`check_host`): a port in the host, a URL,
+    or anything that is no address is a :class:`ConfigError`, before any I/O.
+    """
+    host = check_host(host)
+    if not host.startswith(SIM_SCHEME):
         return ModbusTransport(
             host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
         )

@@ -38,7 +38,9 @@ from typing import TYPE_CHECKING, Any, TextIO, cast
 from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import (
     ConfigError,
+    ConnectRefusedError,
     GripperError,
+    HostNotFoundError,
     MotionTimeoutError,
     RobotError,
     TransportError,
@@ -556,6 +558,8 @@ def _run_on(
     try:
         try:
             robot.connect()
+        except (ConnectRefusedError, HostNotFoundError) as exc:
+            return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
         except TransportError as exc:
             return EXIT_CONNECTION, f"robot at {host}:{port} unreachable: {exc}"
         except StopRequestedError:

@@ -25,10 +25,12 @@ from pydantic import (
     Field,
     PrivateAttr,
     ValidationError,
+    field_validator,
     model_validator,
 )
 
 from .. import _profiles
+from .._address import check_host
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
 from .._profiles import DEFAULT_PROFILE
@@ -75,6 +77,7 @@ class RobotSection(_Section):
     profile: str = DEFAULT_PROFILE
     #: Arm model (reach, speed limits): tm5-700, tm5-900, tm12, tm14.
     model: Literal["tm5-700", "tm5-900", "tm12", "tm14"] = "tm5-700"
+    #: The robot's IP address or host name (no port, no URL: the port is ``port``).
     host: str | None = None
     port: Annotated[int, Field(ge=1, le=65535)] = 502
     #: Highest speed any move may use, %.
@@ -82,6 +85,11 @@ class RobotSection(_Section):
     position_tolerance_mm: Annotated[float, Field(gt=0, le=50)] = 1.0
     #: The TCP in the flange frame ``[x, y, z, rx, ry, rz]`` (mm, deg); poses are TCP poses.
     tool: PoseValue | None = None
+
+    @field_validator("host")
+    @classmethod
+    def _an_address(cls, host: str | None) -> str | None:
+        return None if host is None else check_host(host, field="", port_field="robot.port")
 
     def tool_pose(self) -> Pose | None:
         """The tool offset as a :class:`Pose`, or None for the bare flange."""
@@ -184,6 +192,11 @@ class GripperSection(_Section):
     #: Open the fingers before the first approach (never approach a part with them closed).
     open_at_start: bool = True
 
+    @field_validator("host")
+    @classmethod
+    def _an_address(cls, host: str | None) -> str | None:
+        return None if host is None else check_host(host, field="", port_field="gripper.port")
+
 
 class RunSection(_Section):
     """How the cycle runs."""
@@ -269,7 +282,7 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
     problems = []
     for error in exc.errors():
         where = ".".join(str(part) for part in error["loc"]) or "(top level)"
-        message = error["msg"]
+        message = error["msg"].removeprefix("Value error, ")  # our own validators' text
         if error["type"] == "extra_forbidden":
             message = "unknown key"
         problems.append(f"{where}: {message}")
@@ -313,6 +326,9 @@ def load_config(
         # key must not hide that key's bad value in the file.
         validate_config(data, source=source)
     if overrides:
+        host = overrides.get("robot", {}).get("host")
+        if host is not None:  # said as the option it came from, before anything else
+            check_host(host, field="--host", port_field="--port")
         for section, values in overrides.items():
             current = data.get(section, {})
             if not isinstance(current, dict):

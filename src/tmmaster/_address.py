@@ -1,0 +1,145 @@
+"""Where a robot is: a host and a port, checked before any I/O.
+
+A host is an IPv4 address (``192.168.1.100``), an IPv6 address (``::1``, or ``[::1]``
+as in a URL, taken without its brackets), a host name (``robot-3.local``), or the
+``sim://name`` of an in-process simulator. Everything else is refused with a
+:class:`ConfigError` naming the field and the value as written: a port in the host
+(``192.168.1.100:502``), a URL (``http://...``, ``modbus://...``), spaces, characters no
+host name has, an IPv4 address with a part missing (``192.168.1`` would silently be
+``192.168.0.1``) or out of range (``192.168.1.300`` would go to a name server).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import operator
+import string
+from urllib.parse import urlsplit
+
+from ._error_root import ConfigError
+
+#: The prefix of an in-process simulator's address (``Simulator(listen=False).url``).
+SIM_SCHEME = "sim://"
+
+_NAME_PUNCTUATION = frozenset("-._")
+_DIGITS_AND_DOTS = frozenset(string.digits + ".")
+
+
+def check_host(host: object, *, field: str = "host", port_field: str = "port") -> str:
+    """``host`` checked and normalised (``[::1]`` -> ``::1``), before any I/O.
+
+    Args:
+        host: what the user gave.
+        field: its name, which starts each message (``host``, ``gripper_host``,
+            ``--host``); empty: no name (a pydantic validator's, whose error names it).
+        port_field: where a port belongs instead, named in messages.
+
+    Returns:
+        The host to connect to: as given, or an IPv6 address without its brackets.
+
+    Raises:
+        ConfigError: not an address, a host name or a ``sim://`` name; the message is
+            ``"<field>: <what is wrong>"``, quoting the value as given and saying what
+            to write instead.
+    """
+    prefix = f"{field}: " if field else ""
+    if not isinstance(host, str):
+        raise ConfigError(f"{prefix}not a string (an IP address or host name): {host!r}")
+    if not host.strip():
+        raise ConfigError(f"{prefix}empty; give the robot's IP address or host name")
+    if host.startswith(SIM_SCHEME):
+        return host  # an in-process simulator, resolved where the link is opened
+    if "://" in host:
+        raise ConfigError(_url_message(host, prefix, port_field))
+    if any(c.isspace() for c in host):
+        raise ConfigError(f"{prefix}{host!r} contains a space: give the address alone")
+    if host.startswith("["):
+        inner, bracket, rest = host[1:].partition("]")
+        if bracket and _is_ipv6(inner):
+            if not rest:
+                return inner
+            if rest[0] == ":" and rest[1:].isdigit():
+                raise ConfigError(_port_message(host, prefix, port_field))
+        raise ConfigError(f"{prefix}{host!r} is not an IPv6 address in brackets ([::1])")
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        pass
+    else:
+        return host
+    colons = host.count(":")
+    if colons == 1 and host.partition(":")[2].isdigit():
+        raise ConfigError(_port_message(host, prefix, port_field))
+    if colons > 1:
+        raise ConfigError(f"{prefix}{host!r} is not a valid IPv6 address")
+    if set(host) <= _DIGITS_AND_DOTS:
+        raise ConfigError(
+            f"{prefix}{host!r} is not a valid IPv4 address (four numbers 0-255, as in"
+            " 192.168.1.100)"
+        )
+    for char in host:
+        if not (char.isalnum() or char in _NAME_PUNCTUATION):
+            raise ConfigError(
+                f"{prefix}{host!r} is not an IP address or host name ({char!r} is not"
+                " allowed in one)"
+            )
+    labels = host.removesuffix(".").split(".")
+    if any(not label for label in labels):
+        raise ConfigError(f"{prefix}{host!r} is not a valid host name (an empty part)")
+    if len(host) > 253 or any(len(label) > 63 for label in labels):
+        raise ConfigError(
+            f"{prefix}{host!r} is not a valid host name (at most 63 characters between"
+            " dots, 253 in all)"
+        )
+    return host
+
+
+def check_port(port: object, *, field: str = "port") -> int:
+    """``port`` checked: an integer 1..65535 (a TCP port), before any I/O.
+
+    Args:
+        port: what the user gave.
+        field: its name, which starts each message (``port``, ``gripper_port``).
+
+    Returns:
+        The port, as an ``int``.
+
+    Raises:
+        ConfigError: not an integer, or outside 1..65535 (naming ``field``).
+    """
+    prefix = f"{field}: " if field else ""
+    if isinstance(port, bool):
+        raise ConfigError(f"{prefix}not an integer 1..65535: {port!r}")
+    try:
+        number = operator.index(port)  # type: ignore[arg-type]
+    except TypeError:
+        raise ConfigError(f"{prefix}not an integer 1..65535: {port!r}") from None
+    if not 1 <= number <= 65535:
+        raise ConfigError(f"{prefix}{number} is not a TCP port (1..65535)")
+    return number
+
+
+def _is_ipv6(text: str) -> bool:
+    try:
+        return isinstance(ipaddress.ip_address(text), ipaddress.IPv6Address)
+    except ValueError:
+        return False
+
+
+def _port_message(host: str, prefix: str, port_field: str) -> str:
+    return f"{prefix}{host!r} includes a port; put the port in {port_field}"
+
+
+def _url_message(host: str, prefix: str, port_field: str) -> str:
+    """What to write instead of a URL: the address alone, and its port where it belongs."""
+    try:
+        parts = urlsplit(host)
+        name, port = parts.hostname, parts.port
+    except ValueError:
+        name, port = None, None
+    message = f"{prefix}{host!r} is a URL; give the address alone"
+    if name:
+        message += f" ({name!r})"
+    if port is not None:
+        message += f" and the port in {port_field} ({port})"
+    return message
