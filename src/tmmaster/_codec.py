@@ -29,7 +29,14 @@ _INT_LIMITS = {
 
 
 def allowed_range(field: RegisterField) -> tuple[float, float]:
-    """The engineering range a field accepts: its declared range cut to what its type holds."""
+    """The engineering range a field accepts: its declared range cut to what its type holds.
+
+    Args:
+        field: A register field.
+
+    Returns:
+        ``(lowest, highest)`` engineering value.
+    """
     if field.dtype is DataType.BOOL:
         return (0.0, 1.0)
     if field.dtype is DataType.FLOAT32:
@@ -55,7 +62,18 @@ def describe_range(field: RegisterField) -> str:
 
 
 def encode(field: RegisterField, value: Value) -> list[int]:
-    """Register words (or one 0/1 for a bit) for ``value``; raises if it can't fit."""
+    """Register words (or one 0/1 for a bit) for ``value``; raises if it can't fit.
+
+    Args:
+        field: The field the value is for (type, scale, word order, range).
+        value: The engineering value.
+
+    Returns:
+        ``field.width`` words.
+
+    Raises:
+        ValueOutOfRangeError: The value is outside :func:`allowed_range` or not finite.
+    """
     return encoder(field)(value)
 
 
@@ -146,7 +164,18 @@ def _build_encoder(field: RegisterField) -> Encoder:
 
 
 def decode(field: RegisterField, words: Sequence[int]) -> Value:
-    """The engineering value stored in ``words`` (exactly ``field.width`` words)."""
+    """The engineering value stored in ``words`` (exactly ``field.width`` words).
+
+    Args:
+        field: The field the words belong to.
+        words: Its register words (0..65535 each), as read.
+
+    Returns:
+        The engineering value (a bool for a bit).
+
+    Raises:
+        ValueError: Not ``field.width`` words, or a word out of 0..65535.
+    """
     if len(words) != field.width:
         raise ValueError(f"{field.name}: expected {field.width} words, got {len(words)}")
     if field.dtype is DataType.BOOL:

@@ -88,10 +88,20 @@ class GripperMount(Protocol):
         """Raise the robot's typed error when it is in e-stop or error."""
 
     def checked_status(self) -> RobotStatus:
-        """One robot status read; raises the typed error in e-stop or error."""
+        """One robot status read; raises the typed error in e-stop or error.
+
+        Returns:
+            The robot's status.
+        """
 
     def run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
-        """Send a gripper command through the robot program's handshake and wait for it."""
+        """Send a gripper command through the robot program's handshake and wait for it.
+
+        Args:
+            kind: ``CommandKind.GRIPPER_OPEN`` or ``CommandKind.GRIPPER_CLOSE``.
+            timeout_s: How long the command may take, s; None: the robot's gripper
+                timeout.
+        """
 
 
 @dataclass(frozen=True)
@@ -107,13 +117,39 @@ class GripperStatus:
 
 
 class Gripper(ABC):
-    """What every gripper driver offers."""
+    """What every gripper driver offers: open, close, grip, status, holding.
 
+    A :class:`~tmmaster.Robot` makes its gripper from ``Robot(gripper=...)`` ("auto":
+    what the robot profile offers) and hands it out as ``robot.gripper``. Every wait
+    polls the gripper and watches the robot: an e-stop or a robot error ends it at once
+    with the robot's typed error, and a stop request (``Robot.interrupt()``) within one
+    poll.
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``), whose
+        tmflow robot program drives the gripper:
+
+        ```python
+        from tmmaster import connect
+
+        with connect("127.0.0.1", 5020) as robot:
+            status = robot.gripper.open()
+            print(robot.gripper.kind, status.holding)  # tmflow-program False
+            status = robot.gripper.close()  # no part between the fingers here
+            print(status.holding)  # False; grip() would raise GraspFailedError
+        ```
+    """
+
+    #: The driver's name (a gripper profile's name for the stand-alone grippers).
     kind: str = "gripper"
     _mount: GripperMount | None = None
 
     def attach(self, mount: GripperMount) -> None:
-        """Mount on a robot: its fault check and stop event guard every wait (Robot calls it)."""
+        """Mount on a robot: its fault check and stop event guard every wait (Robot calls it).
+
+        Args:
+            mount: What the robot lends its gripper.
+        """
         self._mount = mount
 
     def connect(self) -> None:  # noqa: B027 - most grippers share the robot's link
@@ -124,18 +160,58 @@ class Gripper(ABC):
 
     @abstractmethod
     def status(self) -> GripperStatus:
-        """Read the gripper's status once."""
+        """Read the gripper's status once.
+
+        Returns:
+            The gripper's status now.
+        """
 
     @abstractmethod
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Open the fingers fully; returns when they have stopped."""
+        """Open the fingers fully; returns when they have stopped.
+
+        Args:
+            timeout_s: How long the fingers may take, s; None: the driver's default.
+
+        Returns:
+            The status once the fingers stopped.
+
+        Raises:
+            GripperTimeoutError: The fingers did not stop in time.
+            StopRequestedError: A stop was requested meanwhile.
+            RobotFaultError: The robot went into e-stop or error (a subclass of it).
+        """
 
     @abstractmethod
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Close the fingers; returns when they stopped (on an object or fully closed)."""
+        """Close the fingers; returns when they stopped (on an object or fully closed).
+
+        Args:
+            timeout_s: How long the fingers may take, s; None: the driver's default.
+
+        Returns:
+            The status once the fingers stopped; ``holding`` says whether they hold
+            an object.
+
+        Raises:
+            GripperTimeoutError: The fingers did not stop in time.
+            StopRequestedError: A stop was requested meanwhile.
+            RobotFaultError: The robot went into e-stop or error (a subclass of it).
+        """
 
     def grip(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Close and require an object: raises :class:`GraspFailedError` when none is detected."""
+        """Close and require an object: raises :class:`GraspFailedError` when none is detected.
+
+        Args:
+            timeout_s: How long the fingers may take, s; None: the driver's default.
+
+        Returns:
+            The status, holding an object.
+
+        Raises:
+            GraspFailedError: The fingers closed on nothing.
+            GripperTimeoutError: The fingers did not stop in time.
+        """
         status = self.close(timeout_s=timeout_s)
         if not status.holding:
             _log.warning("gripper.grasp_failed", gripper=self.kind)
@@ -152,17 +228,45 @@ class NoGripper(Gripper):
     """Stands in when no gripper is configured: every action is a configuration error."""
 
     kind = "none"
+    """Always ``"none"``."""
 
     def status(self) -> GripperStatus:
-        """Refuse: there is no gripper."""
+        """Refuse: there is no gripper.
+
+        Returns:
+            Never.
+
+        Raises:
+            ConfigError: Always.
+        """
         raise ConfigError("no gripper is configured for this robot")
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Refuse: there is no gripper."""
+        """Refuse: there is no gripper.
+
+        Args:
+            timeout_s: Ignored.
+
+        Returns:
+            Never.
+
+        Raises:
+            ConfigError: Always.
+        """
         return self.status()
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Refuse: there is no gripper."""
+        """Refuse: there is no gripper.
+
+        Args:
+            timeout_s: Ignored.
+
+        Returns:
+            Never.
+
+        Raises:
+            ConfigError: Always.
+        """
         return self.status()
 
 
@@ -216,7 +320,14 @@ class _RobotWiredGripper(Gripper):
         return self._mount
 
     def status(self) -> GripperStatus:
-        """The robot's grasp report (this map has neither busy flag nor width)."""
+        """The robot's grasp report (this map has neither busy flag nor width).
+
+        Returns:
+            ``holding`` from the robot's grasp status; ``busy`` and ``width_mm`` None.
+
+        Raises:
+            GripperError: The gripper is not mounted on a robot.
+        """
         robot = self._robot()
         values = robot.transport.read_fields(
             [robot.profile.field("grasp_status")], max_gap=robot.profile.max_read_gap
@@ -230,9 +341,13 @@ class RegisterGripper(_RobotWiredGripper):
     The map has no busy flag: a close ends when an object is detected or ``settle_s``
     has passed, an open after ``settle_s``. ``timeout_s`` bounds the whole wait
     (default: the settle time + 1 s).
+
+    Args:
+        settle_s: How long an open or a close takes at most, s.
     """
 
     kind = "article-register"
+    """Always ``"article-register"``."""
 
     def __init__(self, *, settle_s: float = 0.5) -> None:
         self._settle_s = _timeout(settle_s, 0.5)
@@ -274,11 +389,25 @@ class RegisterGripper(_RobotWiredGripper):
         return status
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Write open, then wait the settle time (no busy flag to watch)."""
+        """Write open, then wait the settle time (no busy flag to watch).
+
+        Args:
+            timeout_s: Bound of the whole wait, s; None: the settle time + 1 s.
+
+        Returns:
+            The status after the settle time.
+        """
         return self._command_and_settle("open", timeout_s, stop_early_when_holding=False)
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Write close; done when an object is detected or the settle time has passed."""
+        """Write close; done when an object is detected or the settle time has passed.
+
+        Args:
+            timeout_s: Bound of the whole wait, s; None: the settle time + 1 s.
+
+        Returns:
+            The status: holding an object, or not once the settle time has passed.
+        """
         return self._command_and_settle("close", timeout_s, stop_early_when_holding=True)
 
 
@@ -286,6 +415,7 @@ class SequenceGripper(_RobotWiredGripper):
     """Gripper commands through the tmflow profile's sequence handshake."""
 
     kind = "tmflow-program"
+    """Always ``"tmflow-program"``."""
 
     def _run(self, kind: CommandKind, timeout_s: float | None) -> GripperStatus:
         robot = self._robot()
@@ -296,11 +426,27 @@ class SequenceGripper(_RobotWiredGripper):
         return self.status()
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Ask the robot program to open the gripper and wait for it to finish."""
+        """Ask the robot program to open the gripper and wait for it to finish.
+
+        Args:
+            timeout_s: How long the program may take, s; None: the robot's gripper
+                timeout.
+
+        Returns:
+            The status once the program reported the gripper done.
+        """
         return self._run(CommandKind.GRIPPER_OPEN, timeout_s)
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Ask the robot program to close the gripper and wait for it to finish."""
+        """Ask the robot program to close the gripper and wait for it to finish.
+
+        Args:
+            timeout_s: How long the program may take, s; None: the robot's gripper
+                timeout.
+
+        Returns:
+            The status once the program reported the gripper done (with its grasp).
+        """
         return self._run(CommandKind.GRIPPER_CLOSE, timeout_s)
 
 
@@ -308,12 +454,19 @@ class SequenceGripper(_RobotWiredGripper):
 class GripperLink:
     """Where a stand-alone gripper listens and how patiently to talk to it."""
 
+    #: The gripper's address (its Compute Box or the simulator).
     host: str
+    #: Its Modbus TCP port.
     port: int
+    #: How failed requests are retried; None: the default policy.
     retry: RetryPolicy | None = None
+    #: Bound of one Modbus request, s.
     request_timeout_s: float = 1.0
+    #: Interval of the gripper's polls, s.
     poll_interval_s: float = 0.05
+    #: Default bound of a gripper move, s.
     timeout_s: float = 5.0
+    #: A command must be taken within this time, s.
     ack_timeout_s: float = 2.0
     #: A ready transport (e.g. in-memory); None opens one to ``host:port``.
     transport: Transport | None = None
@@ -327,13 +480,19 @@ class _OwnConnectionGripper(Gripper):
     """A gripper with its own Modbus connection and register map."""
 
     def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
+        #: The gripper's register map.
         self.profile = profile
+        #: The profile's name.
         self.kind = profile.name
+        #: Interval of the gripper's polls, s.
         self.poll_interval_s = link.poll_interval_s
+        #: Default bound of a gripper move, s.
         self.timeout_s = link.timeout_s
+        #: A command must be taken within this time, s.
         self.ack_timeout_s = link.ack_timeout_s
         self._guard = link.guard
         self._stop_event = link.stop_event
+        #: The gripper's own link.
         self.transport: Transport = link.transport or open_transport(
             link.host,
             link.port,
@@ -348,6 +507,9 @@ class _OwnConnectionGripper(Gripper):
         """Mount on a robot: its fault check and stop event guard every wait.
 
         A guard or stop event given in the :class:`GripperLink` is kept.
+
+        Args:
+            mount: What the robot lends its gripper.
         """
         super().attach(mount)
         if self._guard is None:
@@ -370,7 +532,21 @@ class _OwnConnectionGripper(Gripper):
         timeout_s: float | None,
         check: Callable[[], GripperStatus | None],
     ) -> GripperStatus:
-        """Poll ``check`` until the move to ``width_mm`` is over, then log its outcome."""
+        """Poll ``check`` until the move to ``width_mm`` is over, then log its outcome.
+
+        Args:
+            width_mm: The move's target width (for the messages).
+            started: ``time.monotonic()`` when the command was written.
+            timeout_s: Bound of the wait, s; None: ``timeout_s`` of the link.
+            check: Returns the final status once the move is over, else None.
+
+        Returns:
+            The final status.
+
+        Raises:
+            GripperTimeoutError: The move did not end in time.
+            StopRequestedError: A stop was requested meanwhile.
+        """
         status = _wait(
             f"{self.kind} move to {width_mm:g} mm",
             self.poll_interval_s,
@@ -394,23 +570,44 @@ class _OwnConnectionGripper(Gripper):
             self._guard()
 
     def read(self, *names: str) -> dict[str, Value]:
-        """Read fields by name, one request per block."""
+        """Read fields by name, one request per block.
+
+        Args:
+            *names: Field names of the gripper's profile.
+
+        Returns:
+            Each field's decoded value, by name.
+        """
         return self.transport.read_fields(
             self.profile.select(names), max_gap=self.profile.max_read_gap
         )
 
 
 class Blog2FG7Gripper(_OwnConnectionGripper):
-    """The second article's map: force / width / control=16, gOBJ status from 258."""
+    """The second article's map: force / width / control=16, gOBJ status from 258.
+
+    Made by ``Robot(gripper="blog-2fg7", gripper_port=...)`` (or
+    ``Robot(gripper=Blog2FG7Gripper(...))``), on its own Modbus connection.
+
+    Args:
+        profile: The gripper's register map (``tmmaster.gripper_profile("blog-2fg7")``).
+        link: Where it listens and how patiently to talk to it.
+        force_n: Gripping force, N.
+    """
 
     def __init__(
         self, profile: GripperProfile, link: GripperLink, *, force_n: float = 40.0
     ) -> None:
         super().__init__(profile, link)
+        #: Gripping force of every move, N.
         self.force_n = force_n
 
     def status(self) -> GripperStatus:
-        """gOBJ: 0 moving, 1/2 stopped on an object, 3 at position without object."""
+        """gOBJ: 0 moving, 1/2 stopped on an object, 3 at position without object.
+
+        Returns:
+            ``busy`` while moving and ``holding`` on an object; no width.
+        """
         values = self.read("object_status", "motion_state")
         obj = self.profile.field("object_status").label(int(values["object_status"]))
         return GripperStatus(
@@ -472,11 +669,33 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             _log.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Open to the map's maximum width."""
+        """Open to the map's maximum width.
+
+        Args:
+            timeout_s: How long the move may take, s; None: the link's ``timeout_s``.
+
+        Returns:
+            The status once the fingers stopped.
+
+        Raises:
+            AcknowledgeTimeoutError: The gripper did not take the command (withdrawn).
+            GripperTimeoutError: The fingers did not stop in time.
+        """
         return self._move(self.profile.field("width").maximum or 160.0, timeout_s)
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Close to width 0; the fingers stop on an object if there is one."""
+        """Close to width 0; the fingers stop on an object if there is one.
+
+        Args:
+            timeout_s: How long the move may take, s; None: the link's ``timeout_s``.
+
+        Returns:
+            The status once the fingers stopped.
+
+        Raises:
+            AcknowledgeTimeoutError: The gripper did not take the command (withdrawn).
+            GripperTimeoutError: The fingers did not stop in time.
+        """
         return self._move(0.0, timeout_s)
 
 
@@ -498,7 +717,25 @@ def _check_force_speed(kind: str, force_n: float, speed_percent: int, ceiling_n:
 
 
 class OnRobot2FG7Gripper(_OwnConnectionGripper):
-    """The real OnRobot 2FG7 or 2FG14 (Compute Box, unit id 65; 66 / 67 on a Dual Quick Changer)."""
+    """The real OnRobot 2FG7 or 2FG14 (Compute Box, unit id 65; 66 / 67 on a Dual Quick Changer).
+
+    Made by ``Robot(gripper="onrobot-2fg7", gripper_host=..., gripper_port=...)`` (or
+    ``Robot(gripper=OnRobot2FG7Gripper(...))``), on its own Modbus connection. At
+    :meth:`connect` it checks the product code and reads the width limits of the grip
+    mode and the force ceiling.
+
+    Args:
+        profile: The gripper's register map (``tmmaster.gripper_profile("onrobot-2fg7")``).
+        link: Where the Compute Box listens and how patiently to talk to it.
+        force_n: Target force, N: 0 (the device's minimum) or 20 up to the device's
+            ceiling.
+        speed_percent: Finger speed, 1-100 %.
+        grip: ``"external"`` (closing onto a part from outside) or ``"internal"``
+            (opening into a part from inside).
+
+    Raises:
+        ConfigError: A force or speed out of range.
+    """
 
     def __init__(
         self,
@@ -515,18 +752,29 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         _check_force_speed(
             self.kind, force_n, speed_percent, profile.field("target_force").maximum or 0
         )
+        #: Target force, N (0: the device's minimum).
         self.force_n = force_n
+        #: Finger speed, %.
         self.speed_percent = speed_percent
+        #: ``"external"`` or ``"internal"``.
         self.grip_mode = grip
+        #: The grip mode's (smallest, largest) width, mm, read at connect; None before.
         self.limits: tuple[float, float] | None = None
         #: Largest target force the device accepts now (register max_force, at connect).
         self.max_force_n: float | None = None
         #: "2FG7" or "2FG14", from the product code read at connect.
         self.product: str | None = None
+        #: A move has arrived when the width is this close to its target, mm.
         self.width_tolerance_mm = 0.5
 
     def connect(self) -> None:
-        """Connect; check the product code; read the width limits and the force ceiling."""
+        """Connect; check the product code; read the width limits and the force ceiling.
+
+        Raises:
+            ConnectError: The Compute Box took the connection but does not answer
+                (another master holds it).
+            GripperError: The device is not a 2FG7 or 2FG14.
+        """
         super().connect()
         names = (
             "min_external_width",
@@ -577,7 +825,11 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         return "external_width" if self.grip_mode == "external" else "internal_width"
 
     def status(self) -> GripperStatus:
-        """Busy and grip-detected bits, and the current width."""
+        """Busy and grip-detected bits, and the current width.
+
+        Returns:
+            ``busy``, ``holding`` and ``width_mm`` (of the grip mode).
+        """
         values = self.read("status", self._width_field())
         word = int(values["status"])
         status_field = self.profile.field("status")
@@ -590,7 +842,21 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
     def move_to_width(
         self, width_mm: float, *, timeout_s: float | None = None, expect_object: bool = False
     ) -> GripperStatus:
-        """Move the fingers to ``width_mm`` (inside the limits read at connect time)."""
+        """Move the fingers to ``width_mm`` (inside the limits read at connect time).
+
+        Args:
+            width_mm: Target width, mm.
+            timeout_s: How long the move may take, s; None: the link's ``timeout_s``.
+            expect_object: Stopping on an object before the width ends the move too.
+
+        Returns:
+            The status once the fingers are at the width (or on an object).
+
+        Raises:
+            GripperError: Not connected.
+            ConfigError: The width, force or speed is out of range.
+            GripperTimeoutError: The move did not end in time.
+        """
         if self.limits is None or self.max_force_n is None:
             raise GripperError(f"{self.kind}: not connected")
         low, high = self.limits
@@ -628,13 +894,33 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         return self.wait_for(width_mm, started, timeout_s, check)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Open to the maximum width of the current grip mode."""
+        """Open to the maximum width of the current grip mode.
+
+        Args:
+            timeout_s: How long the move may take, s; None: the link's ``timeout_s``.
+
+        Returns:
+            The status once the fingers are open.
+
+        Raises:
+            GripperError: Not connected.
+        """
         if self.limits is None:
             raise GripperError(f"{self.kind}: not connected")
         return self.move_to_width(self.limits[1], timeout_s=timeout_s)
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Close to the minimum width; stops on an object (grip detected) if there is one."""
+        """Close to the minimum width; stops on an object (grip detected) if there is one.
+
+        Args:
+            timeout_s: How long the move may take, s; None: the link's ``timeout_s``.
+
+        Returns:
+            The status once the fingers stopped.
+
+        Raises:
+            GripperError: Not connected.
+        """
         if self.limits is None:
             raise GripperError(f"{self.kind}: not connected")
         return self.move_to_width(self.limits[0], timeout_s=timeout_s, expect_object=True)

@@ -24,18 +24,48 @@ class MotionType(StrEnum):
 
 @dataclass(frozen=True, config=ConfigDict(allow_inf_nan=False, extra="forbid"))
 class Pose:
-    """A TCP pose in the robot base frame: position in mm, orientation in degrees."""
+    """A TCP pose in the robot base frame: position in mm, orientation in degrees.
 
+    The orientation is Techman's: ``Rz(rz) @ Ry(ry) @ Rx(rx)``, as TMflow shows it.
+    Every coordinate must be a finite number: anything else raises
+    :class:`~tmmaster.ConfigError` naming the coordinate.
+
+    Example:
+        ```python
+        from tmmaster import Pose
+
+        pick = Pose(300, -200, 200, 180, 0, 90)
+        above = pick.offset(dz=100)  # 100 mm higher, same orientation
+        print(above.distance_to(pick))  # 100.0
+        ```
+    """
+
+    #: Position along the base's x axis, mm.
     x: float
+    #: Position along the base's y axis, mm.
     y: float
+    #: Position along the base's z axis, mm.
     z: float
+    #: Rotation about x, degrees.
     rx: float = 0.0
+    #: Rotation about y, degrees.
     ry: float = 0.0
+    #: Rotation about z, degrees.
     rz: float = 0.0
 
     @classmethod
     def from_sequence(cls, values: Sequence[float]) -> Pose:
-        """Build a pose from ``[x, y, z, rx, ry, rz]``."""
+        """Build a pose from ``[x, y, z, rx, ry, rz]``.
+
+        Args:
+            values: Six numbers, mm and degrees.
+
+        Returns:
+            The pose.
+
+        Raises:
+            ValueError: Not six values (a ConfigError when one is not a finite number).
+        """
         if len(values) != 6:
             raise ValueError(f"a pose needs 6 values [x, y, z, rx, ry, rz], got {len(values)}")
         return cls(*values)
@@ -63,14 +93,25 @@ class Pose:
         return cls(*values)
 
     def as_list(self) -> list[float]:
-        """Return ``[x, y, z, rx, ry, rz]``."""
+        """The six coordinates as a list.
+
+        Returns:
+            ``[x, y, z, rx, ry, rz]``.
+        """
         return [self.x, self.y, self.z, self.rx, self.ry, self.rz]
 
     def __iter__(self) -> Iterator[float]:
         return iter(self.as_list())
 
     def distance_to(self, other: Pose) -> float:
-        """Euclidean distance between the two positions, in mm."""
+        """Euclidean distance between the two positions, in mm.
+
+        Args:
+            other: The other pose (its orientation is ignored).
+
+        Returns:
+            The distance, mm.
+        """
         return math.dist((self.x, self.y, self.z), (other.x, other.y, other.z))
 
     def rotation_to(self, other: Pose) -> float:
@@ -98,11 +139,29 @@ class Pose:
         return math.degrees(2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w)))
 
     def is_close(self, other: Pose, *, mm: float = 0.5, deg: float = 0.5) -> bool:
-        """True when both position and orientation agree within the tolerances."""
+        """True when both position and orientation agree within the tolerances.
+
+        Args:
+            other: The other pose.
+            mm: Largest distance between the positions, mm.
+            deg: Largest rotation between the orientations (:meth:`rotation_to`), deg.
+
+        Returns:
+            Whether both agree.
+        """
         return self.distance_to(other) <= mm and self.rotation_to(other) <= deg
 
     def offset(self, *, dx: float = 0.0, dy: float = 0.0, dz: float = 0.0) -> Pose:
-        """Return this pose translated by the given offsets."""
+        """This pose translated by the given offsets (in the base frame), same orientation.
+
+        Args:
+            dx: Offset along x, mm.
+            dy: Offset along y, mm.
+            dz: Offset along z, mm.
+
+        Returns:
+            The translated pose.
+        """
         return Pose(self.x + dx, self.y + dy, self.z + dz, self.rx, self.ry, self.rz)
 
     def __str__(self) -> str:

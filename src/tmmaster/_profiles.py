@@ -34,7 +34,11 @@ DEFAULT_PROFILE = "tmflow"
 
 
 def builtin_profile_names() -> list[str]:
-    """Names of the profiles shipped with tmmaster, sorted."""
+    """Names of the profiles shipped with tmmaster, sorted.
+
+    Returns:
+        The names, e.g. ``["article", "blog-2fg7", "onrobot-2fg7", "tmflow"]``.
+    """
     return list(_builtin_names())
 
 
@@ -92,7 +96,19 @@ def profile_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Pro
 
 
 def load_profile(name_or_path: str | Path) -> Profile:
-    """A built-in profile by name, or a profile from a TOML file."""
+    """A built-in profile by name, or a profile from a TOML file.
+
+    Args:
+        name_or_path: A built-in profile's name (:func:`builtin_profile_names`), or the
+            path of a TOML file (a ``str`` ending in ``.toml``, or a ``Path``).
+
+    Returns:
+        The validated robot or gripper profile.
+
+    Raises:
+        RegisterMapError: An unknown name, an unreadable file or an invalid profile
+            (the message names every problem).
+    """
     path = Path(name_or_path)
     if isinstance(name_or_path, str) and path.suffix != ".toml":
         return _builtin_profile(name_or_path)
@@ -117,7 +133,17 @@ def _builtin_profile(name: str) -> Profile:
 
 
 def robot_profile(name_or_path: str | Path | RobotProfile) -> RobotProfile:
-    """Load a robot profile, refusing gripper profiles."""
+    """Load a robot profile, refusing gripper profiles.
+
+    Args:
+        name_or_path: A built-in name, a TOML file, or a profile (returned as is).
+
+    Returns:
+        The robot profile.
+
+    Raises:
+        RegisterMapError: As :func:`load_profile`, or a gripper profile.
+    """
     if isinstance(name_or_path, RobotProfile):
         return name_or_path
     profile = load_profile(name_or_path)
@@ -127,7 +153,17 @@ def robot_profile(name_or_path: str | Path | RobotProfile) -> RobotProfile:
 
 
 def gripper_profile(name_or_path: str | Path | GripperProfile) -> GripperProfile:
-    """Load a gripper profile, refusing robot profiles."""
+    """Load a gripper profile, refusing robot profiles.
+
+    Args:
+        name_or_path: A built-in name, a TOML file, or a profile (returned as is).
+
+    Returns:
+        The gripper profile.
+
+    Raises:
+        RegisterMapError: As :func:`load_profile`, or a robot profile.
+    """
     if isinstance(name_or_path, GripperProfile):
         return name_or_path
     profile = load_profile(name_or_path)
@@ -164,7 +200,16 @@ def _meaning(field: RegisterField) -> str:
 
 
 def profile_markdown(profile: Profile) -> str:
-    """The profile as a Markdown document: header facts and one table row per field."""
+    """The profile as a Markdown document: header facts and one table row per field.
+
+    ``tmmaster profile show NAME`` prints it (the docs' profile pages are made so).
+
+    Args:
+        profile: A robot or gripper profile.
+
+    Returns:
+        The Markdown text.
+    """
     out = [f"# Profile `{profile.name}`", "", profile.description, ""]
     facts = [f"- kind: {profile.kind}", f"- Modbus unit id: {profile.device_id}"]
     if isinstance(profile, RobotProfile):

@@ -102,23 +102,33 @@ class RegisterField(BaseModel):
         frozen=True, extra="forbid", populate_by_name=True, allow_inf_nan=False
     )
 
+    #: The field's name (lower_snake_case), its key in the map.
     name: str
+    #: What the field is for.
     role: Role
+    #: The Modbus table it lives in.
     table: Table
+    #: Its first address in the table, 0-based.
     address: Annotated[int, Field(ge=0, le=65535)]
+    #: How its words encode the value (``type`` in a profile file).
     dtype: DataType = Field(alias="type")
     #: register value = engineering value x scale (e.g. 100 for "mm x100 in int16").
     scale: Annotated[float, Field(gt=0)] = 1.0
+    #: Word order of a 32-bit value.
     word_order: WordOrder = WordOrder.BIG
+    #: Who may write it.
     access: Access = Access.READ
+    #: Unit of the engineering value ("mm", "deg", "%"...).
     unit: str = ""
     #: Allowed engineering range; values outside are refused before any I/O.
     minimum: float | None = None
+    #: Upper end of the allowed engineering range (None: the type's own limit).
     maximum: float | None = None
     #: Meaning of enumerated values, e.g. {0: "idle", 1: "moving"}.
     values: dict[int, str] = Field(default_factory=dict)
     #: Named bits of a status word, e.g. {"busy": 0, "grip_detected": 1}.
     bits: dict[str, Annotated[int, Field(ge=0, le=15)]] = Field(default_factory=dict)
+    #: What the field means, for people.
     description: str = ""
 
     @model_validator(mode="after")
@@ -156,11 +166,28 @@ class RegisterField(BaseModel):
         return self.address + _WIDTH_OF[self.dtype] - 1
 
     def label(self, value: int) -> str:
-        """Meaning of an enumerated value, or the number itself."""
+        """Meaning of an enumerated value, or the number itself.
+
+        Args:
+            value: A raw value of the field.
+
+        Returns:
+            Its label from ``values``, or the number as text.
+        """
         return self.values.get(value, str(value))
 
     def code_of(self, label: str) -> int:
-        """The raw value whose meaning is ``label`` (inverse of :meth:`label`)."""
+        """The raw value whose meaning is ``label`` (inverse of :meth:`label`).
+
+        Args:
+            label: A label of ``values``.
+
+        Returns:
+            Its raw value.
+
+        Raises:
+            RegisterMapError: No value has that label (the message lists the labels).
+        """
         for code, meaning in self.values.items():
             if meaning == label:
                 return code
@@ -168,7 +195,15 @@ class RegisterField(BaseModel):
         raise UnknownNameError(f"field {self.name} has no value labelled {label!r} ({choices})")
 
     def bit(self, raw: int, name: str) -> bool:
-        """True when the named bit is set in ``raw``."""
+        """True when the named bit is set in ``raw``.
+
+        Args:
+            raw: The register's raw word.
+            name: A bit name of ``bits``.
+
+        Returns:
+            Whether the bit is set.
+        """
         return bool(raw >> self.bits[name] & 1)
 
 
@@ -177,12 +212,15 @@ class RegisterMap(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
+    #: The map's name (a built-in profile's name, or the file's).
     name: str
+    #: What the map is, for people.
     description: str = ""
     #: Modbus unit id ("slave id") of the device.
     device_id: Annotated[int, Field(ge=0, le=255)] = 1
     #: A read may span this many unused addresses to fetch two blocks in one request.
     max_read_gap: Annotated[int, Field(ge=0, le=100)] = 0
+    #: Every field, by name.
     fields: dict[str, RegisterField]
 
     @model_validator(mode="before")
@@ -216,7 +254,17 @@ class RegisterMap(BaseModel):
         return self
 
     def field(self, name: str) -> RegisterField:
-        """The field called ``name``."""
+        """The field called ``name``.
+
+        Args:
+            name: A field name.
+
+        Returns:
+            The field.
+
+        Raises:
+            RegisterMapError: The map has no such field (the message lists them).
+        """
         try:
             return self.fields[name]
         except KeyError:
@@ -226,11 +274,25 @@ class RegisterMap(BaseModel):
             ) from None
 
     def has(self, name: str) -> bool:
-        """True when the map defines a field called ``name``."""
+        """True when the map defines a field called ``name``.
+
+        Args:
+            name: A field name.
+
+        Returns:
+            Whether the map has it.
+        """
         return name in self.fields
 
     def role(self, role: Role) -> tuple[RegisterField, ...]:
-        """Fields with this role, in table and address order."""
+        """Fields with this role, in table and address order.
+
+        Args:
+            role: The role to look for.
+
+        Returns:
+            The fields, possibly none.
+        """
         return tuple(
             sorted(
                 (f for f in self.fields.values() if f.role is role),
@@ -239,7 +301,17 @@ class RegisterMap(BaseModel):
         )
 
     def select(self, names: Iterable[str]) -> tuple[RegisterField, ...]:
-        """The named fields, in the order given."""
+        """The named fields, in the order given.
+
+        Args:
+            names: Field names.
+
+        Returns:
+            The fields.
+
+        Raises:
+            RegisterMapError: A name the map does not define.
+        """
         return tuple(self.field(n) for n in names)
 
 
@@ -299,10 +371,13 @@ _REQUIRED: dict[Handshake, tuple[str, ...]] = {
 class RobotProfile(RegisterMap):
     """A robot's register map plus the handshake that its command block follows."""
 
+    #: Always "robot" (a profile file's ``kind``).
     kind: Literal["robot"] = "robot"
+    #: How the robot acknowledges and finishes a command.
     handshake: Handshake
-    #: Values of ``robot_mode`` (clear-on-accept profiles) that mean ready / error.
+    #: Value of ``robot_mode`` (clear-on-accept profiles) that means ready.
     mode_auto: int = 5
+    #: Value of ``robot_mode`` (clear-on-accept profiles) that means error.
     mode_error: int = 7
 
     @model_validator(mode="after")
@@ -338,11 +413,22 @@ class RobotProfile(RegisterMap):
         return int(top) if top is not None else 2**15 - 1
 
     def next_seq(self, seq: int) -> int:
-        """The sequence number after ``seq``: 1, 2, ... ``seq_max``, then 1 again; never 0."""
+        """The sequence number after ``seq``: 1, 2, ... ``seq_max``, then 1 again; never 0.
+
+        Args:
+            seq: The last sequence number (0 before the first).
+
+        Returns:
+            The next one.
+        """
         return seq % self.seq_max + 1
 
     def command_block(self) -> tuple[RegisterField, ...]:
-        """Fields of the command block (targets, speed, accel_time, command, seq), by address."""
+        """Fields of the command block (targets, speed, accel_time, command, seq), by address.
+
+        Returns:
+            The fields, contiguous in one table: written in one request.
+        """
         names = [*TARGET_FIELDS, "speed", *_OPTIONAL_BLOCK, "command", "seq"]
         return tuple(
             sorted((self.fields[n] for n in names if n in self.fields), key=lambda f: f.address)
@@ -398,7 +484,9 @@ GRIPPER_DRIVER_NAMES: tuple[str, ...] = get_args(GripperDriverName)
 class GripperProfile(RegisterMap):
     """A gripper's register map; ``driver`` names the protocol spoken over it."""
 
+    #: Always "gripper" (a profile file's ``kind``).
     kind: Literal["gripper"] = "gripper"
+    #: The protocol spoken over the map: ``"blog-2fg7"`` or ``"onrobot-2fg7"``.
     driver: GripperDriverName
     #: At most this many TCP connections at once (the OnRobot Compute Box allows one).
     max_connections: Annotated[int, Field(ge=1)] | None = None

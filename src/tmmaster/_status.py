@@ -25,12 +25,17 @@ class RobotStatus:
 
     #: "auto", "initialising", "error" (article) or "running", "stopped", "error", "estop" (tmflow).
     mode: str
+    #: True while the arm moves.
     moving: bool
+    #: True while the robot reports an error.
     error: bool
+    #: The robot's error code (0: none).
     error_code: int
+    #: True while the emergency stop is pressed.
     estop: bool
     #: Whether the gripper reports an object held; None when the profile has no such field.
     holding: bool | None
+    #: The TCP pose the robot reports (mm, deg).
     pose: Pose
     #: Every field that was read, by name (read-only view).
     raw: Mapping[str, Value]
@@ -66,9 +71,13 @@ class RobotStatus:
 class MoveProgress:
     """How far a running move has come."""
 
+    #: Where the move stands.
     phase: MovePhase
+    #: The last TCP pose read (None before the first read).
     pose: Pose | None
+    #: Seconds since the command was written (until it finished, once finished).
     elapsed_s: float
+    #: The move's expected duration, s (from the arm model).
     expected_s: float
     #: Fraction of the straight-line distance covered, 0..1 (None before the first pose read).
     fraction: float | None
