@@ -25,7 +25,15 @@ REJECT_REASONS: tuple[str, ...] = get_args(RejectReason)
 
 
 class MotionRejectedError(TMMasterError):
-    """Raised by :meth:`PhysicsBackend.start_motion`: the target cannot be reached (no motion)."""
+    """Raised by :meth:`PhysicsBackend.start_motion`: the target cannot be reached (no motion).
+
+    Args:
+        reason: ``"reach"``, ``"joint_limit"`` or ``"singularity"``.
+        message: The explanation; default: "motion rejected: REASON".
+
+    Raises:
+        ValueError: An unknown reason.
+    """
 
     def __init__(self, reason: RejectReason, message: str = "") -> None:
         if reason not in REJECT_REASONS:
@@ -42,12 +50,15 @@ class PhysicsUnavailableError(TMMasterError, ImportError):
 class ObjectState:
     """Where one object is, whether the gripper holds it, and what it rests on."""
 
+    #: The object's name.
     name: str
     #: Pose of the object's centre (its grasp point), mm / deg, robot base frame.
     pose: Pose
+    #: True while the gripper holds it.
     held: bool
     #: Size along the object's own x, y (across the fingers) and z axes, mm.
     size_mm: tuple[float, float, float] = (30.0, 30.0, 30.0)
+    #: Its mass, kg.
     mass_kg: float = 0.1
     #: What it lies on at rest: "table" or another object's name; None while it is held,
     #: falling or still moving.
@@ -58,7 +69,9 @@ class ObjectState:
 class GripperState:
     """What the fingers are doing right now."""
 
+    #: Finger width, mm.
     width_mm: float
+    #: True while the fingers move.
     moving: bool
     #: Fingers stopped on an object (a grip is detected).
     contact: bool
@@ -73,43 +86,92 @@ class PhysicsBackend(Protocol):
     ) -> float:
         """Begin a motion towards ``target``; return its expected duration in seconds.
 
-        Raises :class:`MotionRejectedError` (and starts nothing) when the target cannot be
-        reached; any other exception is reported as a backend failure.
+        Args:
+            target: The TCP pose to reach.
+            motion: PTP (joint interpolation) or LINE (a straight TCP path).
+            speed_percent: Speed, % of the arm's maximum (0 < speed <= 100).
+            accel_time_s: Time to reach full speed, s.
+
+        Returns:
+            The motion's expected duration, simulated seconds.
+
+        Raises:
+            MotionRejectedError: The target cannot be reached (nothing starts); any other
+                exception is reported as a backend failure.
         """
 
     def stop_motion(self) -> None:
         """Decelerate and hold the current pose."""
 
     def step(self, dt: float) -> None:
-        """Advance the physics by ``dt`` simulated seconds."""
+        """Advance the physics by ``dt`` simulated seconds.
+
+        Args:
+            dt: Simulated seconds, >= 0.
+        """
 
     def tcp_pose(self) -> Pose:
-        """Current TCP pose."""
+        """Current TCP pose.
+
+        Returns:
+            The TCP pose, mm / deg.
+        """
 
     def joint_positions_deg(self) -> tuple[float, ...] | None:
-        """Current joint angles J1..J6 in degrees, or None without a joint model."""
+        """Current joint angles J1..J6 in degrees, or None without a joint model.
+
+        Returns:
+            The six joint angles, or None.
+        """
 
     def flange_pose(self) -> Pose | None:
-        """Current flange pose (no tool), or None without a joint model; TCP = flange x tool."""
+        """Current flange pose (no tool), or None without a joint model; TCP = flange x tool.
+
+        Returns:
+            The flange pose, or None.
+        """
 
     def is_settled(self) -> bool:
-        """True when the arm is at rest (no motion running, oscillation died out)."""
+        """True when the arm is at rest (no motion running, oscillation died out).
+
+        Returns:
+            Whether the arm is at rest.
+        """
 
     def is_ready(self) -> bool:
-        """True while the physics view is valid and commands can be executed."""
+        """True while the physics view is valid and commands can be executed.
+
+        Returns:
+            Whether commands can be executed.
+        """
 
     def reinitialize(self) -> bool:
         """Rebuild the physics view; return True when a running motion survived (or none ran).
 
-        False means the motion that was running is lost: the controller stops it and
-        reports it failed, never done.
+        Returns:
+            False when the motion that was running is lost: the controller stops it and
+            reports it failed, never done.
         """
 
     def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
-        """Start moving the fingers towards ``width_mm``."""
+        """Start moving the fingers towards ``width_mm``.
+
+        Args:
+            width_mm: Target width, mm.
+            speed_mm_s: Finger speed, mm/s (> 0).
+            force_n: Gripping force, N (a backend may ignore it).
+        """
 
     def gripper_state(self) -> GripperState:
-        """Current finger width, motion and contact."""
+        """Current finger width, motion and contact.
+
+        Returns:
+            The fingers' state.
+        """
 
     def objects(self) -> list[ObjectState]:
-        """Every object in the scene with its pose."""
+        """Every object in the scene with its pose.
+
+        Returns:
+            One state per object.
+        """

@@ -42,22 +42,29 @@ class _FaultBase(BaseModel):
 class RobotErrorFault(_FaultBase):
     """The robot goes to error with ``code`` during the ``at_move``-th motion it starts."""
 
+    #: Always ``"robot_error"`` (the fault's name in ``--fault robot_error:...``).
     kind: Literal["robot_error"] = "robot_error"
+    #: The motion (1 = the first one started) during which the error comes.
     at_move: PositiveInt
+    #: The robot's error code (default 0x1F4: a stand-in, not a Techman code).
     code: ErrorCode = DEFAULT_ROBOT_ERROR_CODE
 
 
 class StallFault(_FaultBase):
     """The ``at_move``-th motion stops halfway and never completes: the robot stays busy."""
 
+    #: Always ``"stall"`` (the fault's name in ``--fault stall:...``).
     kind: Literal["stall"] = "stall"
+    #: The motion (1 = the first one started) that stalls.
     at_move: PositiveInt
 
 
 class EstopFault(_FaultBase):
     """The emergency stop is pressed during the ``at_move``-th motion or at ``after_s``."""
 
+    #: Always ``"estop"`` (the fault's name in ``--fault estop:...``).
     kind: Literal["estop"] = "estop"
+    #: The motion during which the stop is pressed (or ``after_s``).
     at_move: PositiveInt | None = None
     #: Simulated seconds after the simulation started.
     after_s: NonNegativeFloat | None = None
@@ -72,14 +79,18 @@ class EstopFault(_FaultBase):
 class GraspMissFault(_FaultBase):
     """The ``at_grasp``-th gripper close detects no object (it slipped)."""
 
+    #: Always ``"grasp_miss"`` (the fault's name in ``--fault grasp_miss:...``).
     kind: Literal["grasp_miss"] = "grasp_miss"
+    #: The gripper close (1 = the first) that misses.
     at_grasp: PositiveInt = 1
 
 
 class LateAckFault(_FaultBase):
     """A command is taken ``delay_s`` simulated seconds late (every command, or move N)."""
 
+    #: Always ``"late_ack"`` (the fault's name in ``--fault late_ack:...``).
     kind: Literal["late_ack"] = "late_ack"
+    #: How late a command is taken, simulated seconds.
     delay_s: PositiveFloat
     #: Only the at_move-th motion command; None delays every command (stop excepted).
     at_move: PositiveInt | None = None
@@ -88,8 +99,11 @@ class LateAckFault(_FaultBase):
 class DropConnectionsFault(_FaultBase):
     """The server closes every connection after ``after_requests`` requests (once or each time)."""
 
+    #: Always ``"drop_connections"`` (the fault's name in ``--fault drop_connections:...``).
     kind: Literal["drop_connections"] = "drop_connections"
+    #: Drop after this many requests (counted as ``on_write_to`` says).
     after_requests: PositiveInt = 1
+    #: Drop once; False: again after each further ``after_requests`` requests.
     once: bool = True
     #: Count only writes touching this address (e.g. a command register) instead of all
     #: requests: the way to break the link exactly while a command is in flight.
@@ -102,7 +116,9 @@ class DropConnectionsFault(_FaultBase):
 class StopListeningFault(_FaultBase):
     """After ``after_requests`` requests the server closes and refuses connections for a while."""
 
+    #: Always ``"stop_listening"`` (the fault's name in ``--fault stop_listening:...``).
     kind: Literal["stop_listening"] = "stop_listening"
+    #: Stop after this many requests.
     after_requests: PositiveInt
     #: Wall-clock seconds without a listening socket.
     duration_s: PositiveFloat
@@ -111,17 +127,24 @@ class StopListeningFault(_FaultBase):
 class SlowResponsesFault(_FaultBase):
     """Every response is sent ``delay_s`` wall-clock seconds late."""
 
+    #: Always ``"slow_responses"`` (the fault's name in ``--fault slow_responses:...``).
     kind: Literal["slow_responses"] = "slow_responses"
+    #: Delay of every response, wall-clock seconds.
     delay_s: PositiveFloat
 
 
 class ModbusExceptionFault(_FaultBase):
     """Requests touching ``table`` addresses ``start``..``end`` get exception ``code``."""
 
+    #: Always ``"modbus_exception"`` (the fault's name in ``--fault modbus_exception:...``).
     kind: Literal["modbus_exception"] = "modbus_exception"
+    #: The table whose addresses are refused.
     table: Table
+    #: First refused address.
     start: Annotated[int, Field(ge=0, le=65535)]
+    #: Last refused address.
     end: Annotated[int, Field(ge=0, le=65535)]
+    #: The Modbus exception code (2: illegal data address).
     code: Annotated[int, Field(ge=1, le=11)] = 2
 
     @model_validator(mode="after")
@@ -157,11 +180,19 @@ _MODELS: dict[str, type[_FaultBase]] = {
 }
 
 #: Every fault kind, in documentation order.
+#: The name (``kind``) of every fault.
 FAULT_KINDS: tuple[str, ...] = tuple(_MODELS)
 
 
 def is_network_fault(fault: Fault) -> bool:
-    """True for faults the Modbus server plays, False for device faults."""
+    """True for faults the Modbus server plays, False for device faults.
+
+    Args:
+        fault: A fault.
+
+    Returns:
+        Whether the server plays it (in wall time); device faults play in simulated time.
+    """
     return isinstance(
         fault, DropConnectionsFault | StopListeningFault | SlowResponsesFault | ModbusExceptionFault
     )
@@ -179,7 +210,20 @@ def _scalar(text: str) -> object:
 
 
 def parse_fault(text: str) -> Fault:
-    """Parse ``kind:key=value,...`` (e.g. ``robot_error:at_move=3,code=0x1F4``) into a fault."""
+    """Parse ``kind:key=value,...`` (e.g. ``robot_error:at_move=3,code=0x1F4``) into a fault.
+
+    The text of ``python -m tmmaster.sim --fault``.
+
+    Args:
+        text: The fault's kind, then its keys and values.
+
+    Returns:
+        The fault.
+
+    Raises:
+        ConfigError: An unknown kind or key, a key given twice, or a bad value (the
+            message names it).
+    """
     kind, _, rest = text.strip().partition(":")
     kind = kind.strip()
     model = _MODELS.get(kind)

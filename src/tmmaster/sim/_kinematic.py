@@ -60,7 +60,26 @@ class _Motion:
 
 
 class KinematicBackend:
-    """Analytic :class:`~tmmaster.sim.PhysicsBackend`: a TM joint chain, ideal gripper."""
+    """Analytic :class:`~tmmaster.sim.PhysicsBackend`: a TM joint chain, ideal gripper.
+
+    The simulator's default backend (``Simulator(physics="kinematic")``): joints
+    interpolated along the arm model's motion times, fingers at a constant speed,
+    objects grasped and dropped by the :class:`World`'s rules.
+
+    Args:
+        model: The arm (``tmmaster.robot_model("tm5-700")``).
+        home: The TCP pose at the start (must be reachable).
+        tool: The TCP in the flange frame (None: the TCP is the flange).
+        world: The objects on the table (None: one part at ``DEFAULT_PART_POSE``).
+        settle_time_s: How long the arm takes to come to rest after a motion, s.
+        gripper_min_width_mm: The fingers' smallest width, mm.
+        gripper_max_width_mm: The fingers' largest width (their width at the start), mm.
+
+    Raises:
+        ValueError: A negative settle time or an empty finger stroke.
+        ConfigError: ``tool`` is not a Pose.
+        UnreachablePoseError: ``home`` cannot be reached.
+    """
 
     def __init__(
         self,
@@ -119,6 +138,9 @@ class KinematicBackend:
     def set_tool(self, tool: Pose | None) -> None:
         """Change the TCP (a program's ``ChangeTCP``) at rest: the joints stay, the TCP moves.
 
+        Args:
+            tool: The new TCP in the flange frame (None: the flange).
+
         Raises:
             ConfigError: a motion is running (TMflow changes the tool for the motions
                 that follow, not the one under way).
@@ -145,9 +167,19 @@ class KinematicBackend:
     ) -> float:
         """Begin a motion from the current pose towards ``target``; return its duration in s.
 
-        Raises :class:`~tmmaster.sim.MotionRejectedError` (and keeps the current motion,
-        if any) when the target, or for a Line any point of the straight path, cannot be
-        taken by the arm.
+        Args:
+            target: The TCP pose to reach.
+            motion: PTP (joint interpolation) or LINE (a straight TCP path).
+            speed_percent: Speed, % of the arm's maximum (0 < speed <= 100).
+            accel_time_s: Time to reach full speed, s.
+
+        Returns:
+            The motion's duration, simulated seconds.
+
+        Raises:
+            MotionRejectedError: The target, or for a Line any point of the straight path,
+                cannot be taken by the arm (the current motion, if any, goes on).
+            ValueError: A speed or acceleration time out of range.
         """
         if accel_time_s < 0:
             raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
@@ -210,35 +242,66 @@ class KinematicBackend:
             self._rest_s = 0.0
 
     def tcp_pose(self) -> Pose:
-        """Current TCP pose: the flange pose times the tool (the commanded pose at rest)."""
+        """Current TCP pose: the flange pose times the tool (the commanded pose at rest).
+
+        Returns:
+            The TCP pose, mm / deg.
+        """
         return self._pose
 
     def joint_positions_deg(self) -> tuple[float, ...] | None:
-        """Current joint angles J1..J6, degrees."""
+        """Current joint angles J1..J6, degrees.
+
+        Returns:
+            The six joint angles.
+        """
         return self._joints
 
     def flange_pose(self) -> Pose | None:
-        """Current flange pose: the forward kinematics of the joints, no tool."""
+        """Current flange pose: the forward kinematics of the joints, no tool.
+
+        Returns:
+            The flange pose.
+        """
         if self._flange is None:
             self._flange = self._model.forward(self._joints)
         return self._flange
 
     def is_settled(self) -> bool:
-        """True once no motion runs and ``settle_time_s`` has passed since the last one."""
+        """True once no motion runs and ``settle_time_s`` has passed since the last one.
+
+        Returns:
+            Whether the arm is at rest.
+        """
         return self._motion is None and self._rest_s + _EPS >= self._settle_time_s
 
     def is_ready(self) -> bool:
-        """Always True: the analytic model has no physics view to lose."""
+        """Always True: the analytic model has no physics view to lose.
+
+        Returns:
+            True.
+        """
         return True
 
     def reinitialize(self) -> bool:
-        """Nothing to rebuild for the analytic model: a running motion always survives."""
+        """Nothing to rebuild for the analytic model: a running motion always survives.
+
+        Returns:
+            True.
+        """
         return True
 
     # -- simulation --------------------------------------------------------------------
 
     def step(self, dt: float) -> None:
-        """Advance arm, gripper and held object by ``dt`` simulated seconds."""
+        """Advance arm, gripper and held object by ``dt`` simulated seconds.
+
+        Args:
+            dt: Simulated seconds, >= 0.
+
+        Raises:
+            ValueError: A negative or non-finite ``dt``.
+        """
         if dt < 0 or not math.isfinite(dt):
             raise ValueError(f"dt must be a finite number >= 0, got {dt}")
         self._step_arm(dt)
@@ -292,7 +355,16 @@ class KinematicBackend:
     # -- gripper -----------------------------------------------------------------------
 
     def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
-        """Move the fingers towards ``width_mm`` (clamped to the stroke); force is ignored."""
+        """Move the fingers towards ``width_mm`` (clamped to the stroke); force is ignored.
+
+        Args:
+            width_mm: Target width, mm.
+            speed_mm_s: Finger speed, mm/s (> 0).
+            force_n: Ignored by this backend.
+
+        Raises:
+            ValueError: A speed that is not > 0.
+        """
         if speed_mm_s <= 0 or not math.isfinite(speed_mm_s):
             raise ValueError(f"speed_mm_s must be > 0, got {speed_mm_s}")
         if force_n < 0:
@@ -333,13 +405,21 @@ class KinematicBackend:
             self._gripper_moving = False
 
     def gripper_state(self) -> GripperState:
-        """Current finger width, motion and contact."""
+        """Current finger width, motion and contact.
+
+        Returns:
+            The fingers' state.
+        """
         return GripperState(
             width_mm=self._width, moving=self._gripper_moving, contact=self._contact
         )
 
     def objects(self) -> list[ObjectState]:
-        """Every object on the table with its pose."""
+        """Every object on the table with its pose.
+
+        Returns:
+            One state per object.
+        """
         return self._world.states()
 
 

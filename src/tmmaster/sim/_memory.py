@@ -70,7 +70,31 @@ def frame_bytes(function_code: int, count: int, *, request: bool, refused: bool)
 
 
 class MemoryTransport(BlockTransport):
-    """Talks to one device (``"robot"`` or ``"gripper"``) of an in-process Simulator."""
+    """Talks to one device (``"robot"`` or ``"gripper"``) of an in-process Simulator.
+
+    A :class:`~tmmaster.Transport` without a socket: each request goes through the
+    simulator's request path (device id, request log, network faults) as a TCP request
+    would. ``Robot(sim.url)`` picks one for a ``Simulator(listen=False)``.
+
+    Example:
+        ```python
+        from tmmaster import Robot
+        from tmmaster.sim import MemoryTransport, Simulator
+
+        with Simulator(listen=False) as sim:
+            robot = Robot(sim.url, transport=MemoryTransport(sim))
+            with robot:
+                print(robot.status().mode)
+        ```
+
+    Args:
+        sim: The simulator (started or not).
+        device: ``"robot"`` or ``"gripper"``.
+        device_id: The Modbus unit id of the requests.
+        timeout: Bound of one request, s.
+        retry: How failed requests are retried; None: the default policy.
+        name: Its name in messages and logs; None: ``device``.
+    """
 
     def __init__(
         self,

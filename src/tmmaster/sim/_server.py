@@ -73,9 +73,13 @@ class RequestRecord:
     time: float
     #: Which listener got it: ``"robot"`` or ``"gripper"``.
     server: str
+    #: The request's unit id.
     device_id: int
+    #: The Modbus function code (3 = read holding registers, 16 = write registers...).
     function_code: int
+    #: The first address.
     address: int
+    #: How many registers or bits.
     count: int
     #: Written words (0/1 for coils); None for reads.
     values: tuple[int, ...] | None
@@ -88,7 +92,11 @@ class RequestRecord:
         return self.values is not None
 
     def as_dict(self) -> dict[str, Any]:
-        """The record as plain JSON-able data."""
+        """The record as plain JSON-able data.
+
+        Returns:
+            The fields by name (``values`` a list).
+        """
         data = asdict(self)
         data["values"] = None if self.values is None else list(self.values)
         return data

@@ -59,11 +59,13 @@ class TableObject(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
+    #: The object's name (unique in a world).
     name: str = Field(min_length=1)
     #: Pose of the box's centre (the grasp point).
     pose: Pose
     #: Size along the box's own x, y (across the fingers) and z axes, mm.
     size_mm: tuple[PositiveFloat, PositiveFloat, PositiveFloat] = DEFAULT_PART_SIZE_MM
+    #: Its mass, kg.
     mass_kg: float = Field(default=0.1, gt=0, le=50)
     #: How far the TCP may be from the object's position for a grasp to work, mm.
     grasp_tolerance_mm: float = Field(default=5.0, ge=0)
@@ -89,7 +91,14 @@ class TableObject(BaseModel):
         return self.size_mm[1]
 
     def half_extents_mm(self, pose: Pose | None = None) -> tuple[float, float, float]:
-        """Half size of the box's axis-aligned bounding box in the base frame at ``pose``."""
+        """Half size of the box's axis-aligned bounding box in the base frame at ``pose``.
+
+        Args:
+            pose: Where the box is; None: its own pose.
+
+        Returns:
+            Half the box's extent along x, y and z, mm.
+        """
         pose = self.pose if pose is None else pose
         return _half_extents(self.size_mm, pose.rx, pose.ry, pose.rz)
 
@@ -222,7 +231,18 @@ class _SupportIndex:
 
 
 class World:
-    """The objects on the table, which one the gripper holds, the grasp and falling rules."""
+    """The objects on the table, which one the gripper holds, the grasp and falling rules.
+
+    Objects placed in the air drop onto what is under them (the table or another
+    object); a released object falls the same way.
+
+    Args:
+        objects: The objects; None: one part at ``DEFAULT_PART_POSE``.
+        table_top_z_mm: Height of the table top in the robot base frame, mm.
+
+    Raises:
+        ConfigError: A non-finite table height or two objects with one name.
+    """
 
     def __init__(
         self,
@@ -232,6 +252,7 @@ class World:
     ) -> None:
         if not math.isfinite(table_top_z_mm):
             raise ConfigError(f"table_top_z_mm must be finite, got {table_top_z_mm}")
+        #: Height of the table top, mm.
         self.table_top_z_mm = float(table_top_z_mm)
         items = [TableObject(name="part", pose=DEFAULT_PART_POSE)] if objects is None else objects
         self._objects: dict[str, TableObject] = {}
@@ -261,21 +282,50 @@ class World:
         return tuple(self._objects.values())
 
     def get(self, name: str) -> TableObject:
-        """Return the object called ``name`` with its current pose."""
+        """The object called ``name`` with its current pose.
+
+        Args:
+            name: An object's name.
+
+        Returns:
+            The object.
+
+        Raises:
+            KeyError: No such object.
+        """
         try:
             return self._objects[name]
         except KeyError:
             raise KeyError(f"no object named {name!r}") from None
 
     def resting_on(self, name: str) -> str | None:
-        """What ``name`` rests on ("table" or an object's name), None while held."""
+        """What ``name`` rests on ("table" or an object's name), None while held.
+
+        Args:
+            name: An object's name.
+
+        Returns:
+            The support's name, or None.
+
+        Raises:
+            KeyError: No such object.
+        """
         self.get(name)
         return self._resting_on.get(name)
 
     def grasp_candidate(
         self, tcp: Pose, *, current_width_mm: float, target_width_mm: float
     ) -> TableObject | None:
-        """The object fingers closing from ``current`` to ``target`` at ``tcp`` would stop on."""
+        """The object fingers closing from ``current`` to ``target`` at ``tcp`` would stop on.
+
+        Args:
+            tcp: Where the fingers are.
+            current_width_mm: Their width now, mm.
+            target_width_mm: The width they close to, mm.
+
+        Returns:
+            The widest object between the fingers, or None (also while one is held).
+        """
         if self._held is not None or target_width_mm >= current_width_mm:
             return None
         candidates = [
@@ -289,7 +339,15 @@ class World:
         return max(candidates, key=lambda obj: obj.width_mm, default=None)
 
     def grasp(self, name: str, tcp: Pose) -> None:
-        """Mark ``name`` as held; it snaps to the TCP pose."""
+        """Mark ``name`` as held; it snaps to the TCP pose.
+
+        Args:
+            name: The object's name.
+            tcp: The TCP pose.
+
+        Raises:
+            RuntimeError: Another object is held.
+        """
         if self._held is not None and self._held != name:
             raise RuntimeError(f"already holding {self._held!r}, cannot grasp {name!r}")
         self._objects[name] = self.get(name).model_copy(update={"pose": tcp})
@@ -298,12 +356,23 @@ class World:
         self._index.remove(name)  # a held object supports nothing
 
     def follow(self, tcp: Pose) -> None:
-        """Move the held object (if any) rigidly with the TCP."""
+        """Move the held object (if any) rigidly with the TCP.
+
+        Args:
+            tcp: The TCP pose.
+        """
         if self._held is not None:
             self._objects[self._held] = self._objects[self._held].model_copy(update={"pose": tcp})
 
     def release(self, tcp: Pose) -> TableObject | None:
-        """Let go of the held object at the TCP; it falls onto its support. Return it."""
+        """Let go of the held object at the TCP; it falls onto its support.
+
+        Args:
+            tcp: The TCP pose.
+
+        Returns:
+            The released object where it landed, or None when none was held.
+        """
         if self._held is None:
             return None
         self.follow(tcp)
@@ -313,7 +382,15 @@ class World:
         return self._objects[name]
 
     def support_below(self, obj: TableObject, pose: Pose | None = None) -> tuple[str, float]:
-        """The highest support under ``obj`` (at ``pose``): its name and top height, mm."""
+        """The highest support under ``obj`` (at ``pose``): its name and top height, mm.
+
+        Args:
+            obj: An object.
+            pose: Where it is; None: its own pose.
+
+        Returns:
+            ``("table", height)`` or another object's name and its top, mm.
+        """
         pose = obj.pose if pose is None else pose
         hx, hy, hz = obj.half_extents_mm(pose)
         bottom = pose.z - hz
@@ -334,7 +411,11 @@ class World:
                 self._index.add(obj.name, entry)
 
     def states(self) -> list[ObjectState]:
-        """Every object's name, pose, size, mass, whether it is held and what it rests on."""
+        """Every object's name, pose, size, mass, whether it is held and what it rests on.
+
+        Returns:
+            One state per object.
+        """
         return [
             ObjectState(
                 name=obj.name,
