@@ -44,10 +44,22 @@ __all__ = [
 def evaluate(expression: str) -> tuple[Value, str]:
     """Evaluate one expression with no variables (``tmmaster tmscript eval``).
 
-    :param expression: e.g. ``"10 / 3.0"``.
-    :returns: the value and its TMscript type.
-    :raises TMScriptSyntaxError: the expression is not valid.
-    :raises TMScriptRuntimeError: it failed (division by zero...).
+    Example:
+        ```python
+        from tmmaster.tmscript import evaluate
+
+        print(evaluate("10 / 4"))  # (2, 'int')
+        ```
+
+    Args:
+        expression: One expression on one line, e.g. ``"10 / 3.0"``.
+
+    Returns:
+        The value and its TMscript type.
+
+    Raises:
+        TMScriptSyntaxError: The expression is not valid.
+        TMScriptRuntimeError: It failed (division by zero...).
     """
     try:
         return _evaluate(expression)

@@ -70,7 +70,9 @@ BlockingImpl = Callable[[Runtime, list[Value], tuple[str, ...]], Generator[str, 
 class Signature:
     """One syntax of a function: parameter types and return type."""
 
+    #: The parameters' TMscript types (``"int"``, ``"string[]"``...).
     params: tuple[str, ...]
+    #: The return type (``"void"`` for none).
     returns: str
 
 
@@ -78,15 +80,23 @@ class Signature:
 class Builtin:
     """A built-in function: its manual section and page, its syntaxes, its implementation."""
 
+    #: The function's name, as a script calls it.
     name: str
+    #: Its section of the TMscript 2.24 manual.
     section: str
+    #: Its page in the manual.
     page: int
+    #: Every syntax it accepts.
     signatures: tuple[Signature, ...]
+    #: The implementation of a function that returns at once.
     impl: Impl | None = None
+    #: The implementation of a function that may wait (a generator).
     blocking: BlockingImpl | None = None
-    motion: bool = False  # moves the robot: refused in closestop and errorstop (§3.3, §3.4)
+    #: It moves the robot: refused in closestop and errorstop (§3.3, §3.4).
+    motion: bool = False
 
 
+#: Every function this interpreter runs, by name.
 BUILTINS: dict[str, Builtin] = {}
 
 

@@ -68,8 +68,11 @@ class ExecState(enum.StrEnum):
 class Status:
     """What :meth:`Execution.step` reports: the state, and the error that ended the project."""
 
+    #: Where the execution stands.
     state: ExecState
+    #: The error that stopped the project (state ERROR), else None.
     error: TMScriptRuntimeError | None = None
+    #: The code given to ``Exit()``, if it was called.
     exit_code: int | None = None
 
 
@@ -110,8 +113,11 @@ StmtFn: TypeAlias = Callable[[_Frame], Generator[str, None, Control]]
 class ScriptWarning:
     """A compile warning the manual documents (§2.7): a bare word taken as a string."""
 
+    #: The line, 1-based.
     line: int
+    #: The column, 1-based.
     column: int
+    #: What was found.
     message: str
 
 
@@ -1237,7 +1243,9 @@ class Program:
     define: StmtFn
     globals_size: int
     sections: dict[str, tuple[StmtFn, int]]
+    #: Bare words taken as strings (TMscript 2.24 §2.7).
     warnings: tuple[ScriptWarning, ...]
+    #: The name shown in messages.
     filename: str = "<script>"
 
 
@@ -1264,12 +1272,25 @@ def compile_program(script: a.Script, filename: str = "<script>") -> Program:
 def parse(text: str, filename: str = "<script>") -> Program:
     """Parse and check a Script Project (``define``, ``main``, ``closestop``, ``errorstop``).
 
-    :param text: the script.
-    :param filename: the name shown in messages.
-    :returns: the checked :class:`Program`; :attr:`Program.warnings` lists bare words taken
-        as strings (TMscript 2.24 §2.7).
-    :raises TMScriptSyntaxError: a syntax error, an unknown or unsupported function, a type
-        error; ``.line`` and ``.column`` say where.
+    Example:
+        ```python
+        from tmmaster.tmscript import Execution, NullHost, parse
+
+        program = parse('main { Display("hello " + (6 * 7)) }')
+        Execution(program, NullHost()).run_to_end()  # prints: hello 42
+        ```
+
+    Args:
+        text: The script.
+        filename: The name shown in messages.
+
+    Returns:
+        The checked Program; ``Program.warnings`` lists bare words taken as strings
+        (TMscript 2.24 §2.7).
+
+    Raises:
+        TMScriptSyntaxError: A syntax error, an unknown or unsupported function, a type
+            error; ``.line`` and ``.column`` say where.
     """
     return compile_program(parse_script(text), filename)
 
@@ -1282,15 +1303,19 @@ class Execution:
     ``Exit(-1)``, or :meth:`fail`) ``errorstop``. An error inside either ends the project
     at once (TMscript 2.24 §3.3, §3.4).
 
-    :param program: from :func:`parse`.
-    :param host: the clock, dashboard, Modbus and motion.
+    Args:
+        program: From :func:`parse`.
+        host: The clock, dashboard, Modbus and motion.
     """
 
     def __init__(self, program: Program, host: Host) -> None:
+        #: The program that runs.
         self.program = program
+        #: What the script reaches.
         self.host = host
         self._rt = _Run(host)
         self._globals: list[Value] = [None] * program.globals_size  # type: ignore[list-item]
+        #: Where the execution stands.
         self.state = ExecState.RUNNING
         #: The error that stopped the project (state ERROR), else None.
         self.error: TMScriptRuntimeError | None = None
@@ -1343,8 +1368,11 @@ class Execution:
         Each statement and each loop iteration counts. The next call goes on where this
         one stopped.
 
-        :param max_statements: the budget (at least 1).
-        :returns: the new :attr:`state`, with :attr:`error` and :attr:`exit_code`.
+        Args:
+            max_statements: The budget (at least 1).
+
+        Returns:
+            The new ``state``, with ``error`` and ``exit_code``.
         """
         self._step(max_statements)
         return Status(self.state, self.error, self.exit_code)
@@ -1404,7 +1432,11 @@ class Execution:
         closestop runs at once with its own budget; if it blocks (a Sleep), later
         :meth:`step` calls finish it.
 
-        :returns: the new :attr:`state`.
+        Args:
+            max_statements: closestop's budget now.
+
+        Returns:
+            The new ``state``.
         """
         if self._phase == "main" and self.state not in (ExecState.ENDED, ExecState.ERROR):
             self._rt.paused = False
@@ -1415,8 +1447,12 @@ class Execution:
     def fail(self, error: str | TMScriptRuntimeError, max_statements: int = 100_000) -> ExecState:
         """An error from outside the script (an emergency stop): run ``errorstop`` (§3.4).
 
-        :param error: the error, or its message.
-        :returns: the new :attr:`state`.
+        Args:
+            error: The error, or its message.
+            max_statements: errorstop's budget now.
+
+        Returns:
+            The new ``state``.
         """
         if isinstance(error, str):
             error = TMScriptRuntimeError(error, line=0, column=0)
@@ -1431,10 +1467,17 @@ class Execution:
     def run_to_end(self, timeout_s: float | None = None, poll_s: float = 0.001) -> ExecState:
         """Step until the project ends, sleeping (wall clock) while it waits.
 
-        :param timeout_s: stop the project (closestop) after this many seconds.
-        :returns: :attr:`ExecState.ENDED` or :attr:`ExecState.ERROR`, or PAUSED when the
-            script paused itself and nothing can resume it.
-        :raises TimeoutError: the timeout ran out (the project was stopped first).
+        Args:
+            timeout_s: Stop the project (closestop) after this many seconds; None: no
+                limit.
+            poll_s: Wall seconds to sleep while the script waits.
+
+        Returns:
+            ``ExecState.ENDED`` or ``ExecState.ERROR``, or ``PAUSED`` when the script
+            paused itself and nothing can resume it.
+
+        Raises:
+            TimeoutError: The timeout ran out (the project was stopped first).
         """
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:

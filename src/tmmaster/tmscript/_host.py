@@ -23,47 +23,43 @@ class HostError(Exception):
 
 @dataclass(frozen=True, slots=True)
 class ModbusDevice:
-    """A Modbus TCP device as the script declared it (TMscript 2.24 §16.1).
+    """A Modbus TCP device as the script declared it (TMscript 2.24 §16.1)."""
 
-    :ivar name: the variable's name (``ModbusTCP dev = ...`` is ``"dev"``).
-    :ivar host: the IP address or host name.
-    :ivar port: the TCP port (502 by default).
-    :ivar unit: the slave ID of this request.
-    :ivar timeout_ms: read/write timeout in milliseconds (10000 by default).
-    """
-
+    #: The variable's name (``ModbusTCP dev = ...`` is ``"dev"``).
     name: str
+    #: The IP address or host name.
     host: str
+    #: The TCP port.
     port: int = 502
+    #: The slave ID of this request.
     unit: int = 0
+    #: Read/write timeout, ms.
     timeout_ms: int = 10000
 
 
 @dataclass(frozen=True, slots=True)
 class MotionCall:
-    """One motion for the robot's queue: ``PTP()`` or ``Line()`` (TMscript 2.24 §13.8, §13.10).
+    """One motion for the robot's queue: ``PTP()`` or ``Line()`` (TMscript 2.24 §13.8, §13.10)."""
 
-    :ivar kind: ``"PTP"`` or ``"Line"``.
-    :ivar format: the data format string: ``"CPP"``, ``"JPP"`` for PTP; ``"CPP"``,
-        ``"CAR"``... for Line (target, speed, blending letters).
-    :ivar target: six values: X, Y, Z (mm), RX, RY, RZ (degrees) or six joint angles.
-    :ivar speed: percentage of speed, or mm/s for Line's ``A``/``D`` speed formats.
-    :ivar accel_time_ms: time to reach top speed (ms).
-    :ivar blending: percentage, or radius in mm for Line's ``R`` blending format.
-    :ivar precise_positioning: the script's last bool argument, as given (the manual
-        names it "disable precise positioning").
-    :ivar pose: PTP's pose configuration ``[Config1, Config2, Config3]``, when given.
-    :ivar reference_joints: PTP's reference joint angles, when given.
-    """
-
+    #: ``"PTP"`` or ``"Line"``.
     kind: Literal["PTP", "Line"]
+    #: The data format string: ``"CPP"``, ``"JPP"`` for PTP; ``"CPP"``, ``"CAR"``... for
+    #: Line (target, speed, blending letters).
     format: str
+    #: Six values: X, Y, Z (mm), RX, RY, RZ (degrees) or six joint angles.
     target: tuple[float, ...]
+    #: Percentage of speed, or mm/s for Line's ``A``/``D`` speed formats.
     speed: int
+    #: Time to reach top speed, ms.
     accel_time_ms: int
+    #: Percentage, or radius in mm for Line's ``R`` blending format.
     blending: int
+    #: The script's last bool argument, as given (the manual names it "disable precise
+    #: positioning").
     precise_positioning: bool
+    #: PTP's pose configuration ``[Config1, Config2, Config3]``, when given.
     pose: tuple[int, ...] | None = None
+    #: PTP's reference joint angles, when given.
     reference_joints: tuple[float, ...] | None = None
 
 
@@ -72,11 +68,19 @@ class Host(Protocol):
     """What a script needs from the robot (or the simulator). All methods return at once."""
 
     def now_s(self) -> float:
-        """The host's clock in seconds (simulated time in the simulator)."""
+        """The host's clock in seconds (simulated time in the simulator).
+
+        Returns:
+            The time, s.
+        """
         ...
 
     def display(self, text: str) -> None:
-        """Show a ``Display()`` text on the dashboard (one call per ``Display()``)."""
+        """Show a ``Display()`` text on the dashboard (one call per ``Display()``).
+
+        Args:
+            text: The text.
+        """
         ...
 
     def modbus_request(
@@ -89,14 +93,19 @@ class Host(Protocol):
     ) -> list[int]:
         """One Modbus request.
 
-        :param device: the device and slave ID.
-        :param function: 1, 2, 3, 4 (read coils, discrete inputs, holding, input
-            registers) or 5, 6, 15, 16 (write a coil, a register, coils, registers).
-        :param address: the starting address.
-        :param count: how many coils or registers.
-        :param values: for writes, the words (0..65535) or bits (0/1); None for reads.
-        :returns: the words or bits read (``count`` of them); an empty list for writes.
-        :raises HostError: the request failed.
+        Args:
+            device: The device and slave ID.
+            function: 1, 2, 3, 4 (read coils, discrete inputs, holding, input
+                registers) or 5, 6, 15, 16 (write a coil, a register, coils, registers).
+            address: The starting address.
+            count: How many coils or registers.
+            values: For writes, the words (0..65535) or bits (0/1); None for reads.
+
+        Returns:
+            The words or bits read (``count`` of them); an empty list for writes.
+
+        Raises:
+            HostError: The request failed.
         """
         ...
 
@@ -106,23 +115,45 @@ class Host(Protocol):
         A request takes time on a real link; a host models that latency (or a slow link)
         by answering False until the request may go out. The script's statement waits
         there, as ``modbus_read`` on a robot waits for the answer.
+
+        Args:
+            device: The device the script is about to talk to.
+
+        Returns:
+            Whether a request may go out now.
         """
         ...
 
     def motion(self, call: MotionCall) -> bool:
         """Queue a motion (it runs later; the script goes on at once).
 
-        :returns: False when the robot rejects the command (the motion function then
-            returns False, TMscript 2.24 §13.8, p. 331): nothing was queued.
+        Args:
+            call: The motion.
+
+        Returns:
+            False when the robot rejects the command (the motion function then returns
+            False, TMscript 2.24 §13.8, p. 331): nothing was queued.
         """
         ...
 
     def queue_tag(self, tag: int, wait: int) -> None:
-        """Tag the motion queued last with ``tag`` (1..15) (TMscript 2.24 §13.1)."""
+        """Tag the motion queued last with ``tag`` (1..15) (TMscript 2.24 §13.1).
+
+        Args:
+            tag: The tag number, 1..15.
+            wait: ``QueueTag``'s wait argument, as given.
+        """
         ...
 
     def queue_tag_done(self, tag: int) -> bool | None:
-        """Whether the motions up to ``tag`` are done; None when no such tag exists."""
+        """Whether the motions up to ``tag`` are done; None when no such tag exists.
+
+        Args:
+            tag: The tag number.
+
+        Returns:
+            True once done, False before, None for an unknown tag.
+        """
         ...
 
     def stop_and_clear_buffer(self) -> None:
@@ -130,7 +161,11 @@ class Host(Protocol):
         ...
 
     def change_base(self, value: str | Sequence[float]) -> None:
-        """The base of the following motions: a base name or X, Y, Z, RX, RY, RZ (§13.5)."""
+        """The base of the following motions: a base name or X, Y, Z, RX, RY, RZ (§13.5).
+
+        Args:
+            value: A base name, or the base as six numbers (mm, degrees).
+        """
         ...
 
     def change_tcp(
@@ -139,18 +174,38 @@ class Host(Protocol):
         mass: float | None = None,
         inertia: Sequence[float] | None = None,
     ) -> None:
-        """The tool of the following motions: a TCP name or X, Y, Z, RX, RY, RZ (§13.6)."""
+        """The tool of the following motions: a TCP name or X, Y, Z, RX, RY, RZ (§13.6).
+
+        Args:
+            value: A TCP name, or the TCP as six numbers (mm, degrees).
+            mass: The tool's mass, kg, when given.
+            inertia: The tool's inertia values, when given.
+        """
         ...
 
     def inversekin(
         self, pose: Sequence[float], reference: Sequence[float] | None = None
     ) -> list[float]:
-        """Joint angles of a Cartesian pose (§6.35); ``reference`` is three pose
-        configuration numbers or six reference joint angles. Empty when unreachable."""
+        """Joint angles of a Cartesian pose (§6.35).
+
+        Args:
+            pose: X, Y, Z (mm), RX, RY, RZ (degrees).
+            reference: Three pose configuration numbers or six reference joint angles.
+
+        Returns:
+            Six joint angles, degrees; empty when the pose is unreachable.
+        """
         ...
 
     def forwardkin(self, joints: Sequence[float]) -> list[float]:
-        """The Cartesian pose of six joint angles (§6.36); empty when it cannot be computed."""
+        """The Cartesian pose of six joint angles (§6.36).
+
+        Args:
+            joints: Six joint angles, degrees.
+
+        Returns:
+            X, Y, Z (mm), RX, RY, RZ (degrees); empty when it cannot be computed.
+        """
         ...
 
     def pause(self) -> None:
@@ -167,8 +222,9 @@ class NullHost:
 
     Any motion, kinematics or Modbus call fails naming the function.
 
-    :param on_display: called with each ``Display()`` text (default: print it).
-    :param clock: the clock (default :func:`time.monotonic`).
+    Args:
+        on_display: Called with each ``Display()`` text; None: print it.
+        clock: The clock, s.
     """
 
     def __init__(
@@ -180,11 +236,19 @@ class NullHost:
         self._clock = clock
 
     def now_s(self) -> float:
-        """The clock's reading in seconds."""
+        """The clock's reading in seconds.
+
+        Returns:
+            The time, s.
+        """
         return self._clock()
 
     def display(self, text: str) -> None:
-        """Pass the text to the callback."""
+        """Pass the text to the callback.
+
+        Args:
+            text: The ``Display()`` text.
+        """
         self._on_display(text)
 
     @staticmethod
@@ -195,7 +259,14 @@ class NullHost:
         )
 
     def modbus_ready(self, device: ModbusDevice) -> bool:
-        """Always ready (and any request is refused)."""
+        """Always ready (and any request is refused).
+
+        Args:
+            device: Ignored.
+
+        Returns:
+            True.
+        """
         return True
 
     def modbus_request(
@@ -206,27 +277,80 @@ class NullHost:
         count: int,
         values: Sequence[int] | None,
     ) -> list[int]:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            device: Ignored.
+            function: Ignored.
+            address: Ignored.
+            count: Ignored.
+            values: Ignored.
+
+        Returns:
+            Never.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("Modbus")
 
     def motion(self, call: MotionCall) -> bool:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            call: The motion (named in the message).
+
+        Returns:
+            Never.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse(call.kind)
 
     def queue_tag(self, tag: int, wait: int) -> None:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            tag: Ignored.
+            wait: Ignored.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("QueueTag")
 
     def queue_tag_done(self, tag: int) -> bool | None:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            tag: Ignored.
+
+        Returns:
+            Never.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("WaitQueueTag")
 
     def stop_and_clear_buffer(self) -> None:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("StopAndClearBuffer")
 
     def change_base(self, value: str | Sequence[float]) -> None:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            value: Ignored.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("ChangeBase")
 
     def change_tcp(
@@ -235,17 +359,47 @@ class NullHost:
         mass: float | None = None,
         inertia: Sequence[float] | None = None,
     ) -> None:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            value: Ignored.
+            mass: Ignored.
+            inertia: Ignored.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("ChangeTCP")
 
     def inversekin(
         self, pose: Sequence[float], reference: Sequence[float] | None = None
     ) -> list[float]:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            pose: Ignored.
+            reference: Ignored.
+
+        Returns:
+            Never.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("inversekin")
 
     def forwardkin(self, joints: Sequence[float]) -> list[float]:
-        """Refuse: :raises NullHostError:."""
+        """Refuse: this host moves nothing and talks to no device.
+
+        Args:
+            joints: Ignored.
+
+        Returns:
+            Never.
+
+        Raises:
+            NullHostError: Always (naming the function).
+        """
         raise self._refuse("forwardkin")
 
     def pause(self) -> None:

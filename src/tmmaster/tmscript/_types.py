@@ -216,6 +216,13 @@ def display_text(value: Value, typ: str) -> str:
     """``value`` as TMflow shows it: ``Display()`` and string conversion (§2.5, §5.6).
 
     Booleans are ``true``/``false``; arrays ``{1,2,3}``; floats 7 significant digits.
+
+    Args:
+        value: A TMscript value.
+        typ: Its TMscript type (``"float"``, ``"int[]"``...).
+
+    Returns:
+        The text.
     """
     if isinstance(value, list):
         elem = element_type(typ)
