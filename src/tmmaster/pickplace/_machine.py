@@ -37,9 +37,25 @@ ERROR = "ERROR"
 
 
 class SequenceMachine:
-    """The ``transitions`` model of one sequence run: current state, cycle, retries."""
+    """The ``transitions`` model of one sequence run: current state, cycle, retries.
 
-    state: str  # maintained by transitions
+    A :class:`Runner` makes one per run; its triggers are ``start``, ``advance``,
+    ``retry``, ``fail`` and ``reset`` (bound by ``transitions``).
+
+    Args:
+        sequence: The sequence (validated here).
+        cycles: How many cycles to run, >= 1.
+        stop_event: Set when a stop is requested: no transition but the end of a
+            finished cycle is taken then.
+        guard_context: What steps' guards are asked about when a trigger passes no
+            context.
+
+    Raises:
+        ConfigError: An invalid sequence, or fewer than one cycle.
+    """
+
+    #: The current state: IDLE, a step's name, DONE or ERROR (maintained by transitions).
+    state: str
 
     if TYPE_CHECKING:
         # Trigger methods that transitions binds onto the model at run time.
@@ -60,9 +76,13 @@ class SequenceMachine:
         sequence.validate()
         if cycles < 1:
             raise ConfigError(f"cycles must be >= 1, got {cycles}")
+        #: The sequence it runs.
         self.sequence = sequence
+        #: How many cycles to run.
         self.cycles = cycles
+        #: The current cycle, 1-based (0 before the first).
         self.cycle = 0
+        #: Retries used in this cycle, by step name.
         self.retries_used: dict[str, int] = {}
         self._steps = {s.name: s for s in sequence.steps}
         self._stop = stop_event if stop_event is not None else threading.Event()
@@ -71,6 +91,7 @@ class SequenceMachine:
         self._guard_context: Callable[[], Any] = (
             guard_context if guard_context is not None else (lambda: None)
         )
+        #: The ``transitions`` machine.
         self.machine = Machine(
             model=self,
             states=[IDLE, *self._steps, DONE, ERROR],
@@ -156,19 +177,35 @@ class SequenceMachine:
     # -- guards (no I/O) ----------------------------------------------------
 
     def may_continue(self, *_: object) -> bool:
-        """No stop has been requested."""
+        """No stop has been requested.
+
+        Returns:
+            Whether the run may go on.
+        """
         return not self._stop.is_set()
 
     def more_cycles(self, *_: object) -> bool:
-        """Cycles remain after the current one."""
+        """Cycles remain after the current one.
+
+        Returns:
+            Whether another cycle follows.
+        """
         return self.cycle < self.cycles
 
     def last_cycle(self, *_: object) -> bool:
-        """The current cycle is the last one."""
+        """The current cycle is the last one.
+
+        Returns:
+            Whether it is the last.
+        """
         return self.cycle >= self.cycles
 
     def retries_left(self, *_: object) -> bool:
-        """The current step's retry rule allows another attempt in this cycle."""
+        """The current step's retry rule allows another attempt in this cycle.
+
+        Returns:
+            Whether a retry is allowed.
+        """
         step = self._steps.get(self.state)
         if step is None or step.retry is None:
             return False
@@ -191,16 +228,37 @@ class SequenceMachine:
         return self.state in (DONE, ERROR)
 
     def step(self) -> Step:
-        """The step of the current state (raises in IDLE, DONE, ERROR)."""
+        """The step of the current state.
+
+        Returns:
+            The step.
+
+        Raises:
+            KeyError: In IDLE, DONE or ERROR.
+        """
         return self._steps[self.state]
 
     def is_last_step(self) -> bool:
-        """True while in the sequence's last step."""
+        """True while in the sequence's last step.
+
+        Returns:
+            Whether the current state is the last step.
+        """
         return self.state == self.sequence.steps[-1].name
 
 
 def mermaid(sequence: TaskSequence, *, cycles: int = 1) -> str:
-    """The machine of ``sequence`` as a mermaid state diagram (no graphviz needed)."""
+    """The machine of ``sequence`` as a mermaid state diagram (no graphviz needed).
+
+    ``python -m tmmaster.pickplace --diagram`` prints it.
+
+    Args:
+        sequence: The sequence.
+        cycles: The cycles its machine runs (the diagram is the same for any number).
+
+    Returns:
+        The diagram's mermaid text (``stateDiagram-v2``).
+    """
     from transitions.extensions import GraphMachine
 
     class _Model:

@@ -19,6 +19,20 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
     move's joints: reach, joint ranges, singularities), a Line whose straight path
     leaves the arm's range, or a move too fast raises :class:`ConfigError` naming the
     configuration key and ``source``.
+
+    Args:
+        robot: The robot that will run it (profile, arm model, tool, limits); it need
+            not be connected.
+        sequence: The sequence.
+        cycles: How many cycles will run.
+        source: Where the sequence comes from (a file name), for the messages.
+
+    Returns:
+        How many distinct moves were checked.
+
+    Raises:
+        ConfigError: A move that cannot be sent or taken (UnreachablePoseError when the
+            arm cannot reach it).
     """
     sequence.validate()
     count = 0
@@ -61,8 +75,11 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
 class EstimatedMove:
     """A planned move with its expected duration."""
 
+    #: The cycle, 1-based.
     cycle: int
+    #: The move.
     move: PlannedMove
+    #: Its expected duration, s (from the arm model).
     expected_s: float
     #: Joints J1..J6 (deg) at the move's target, continuing from the previous move's.
     joints_deg: tuple[float, ...]
@@ -76,7 +93,22 @@ def estimate(
     start: Pose,
     tool: Pose | None = None,
 ) -> list[EstimatedMove]:
-    """Expected duration and target joints of every planned move, from ``start``."""
+    """Expected duration and target joints of every planned move, from ``start``.
+
+    Args:
+        sequence: The sequence.
+        cycles: How many cycles.
+        model: The arm model that times the moves.
+        start: The TCP pose before the first move.
+        tool: The TCP in the flange frame (None: the flange).
+
+    Returns:
+        Every move of every cycle, in order (empty when the moves are not known in
+        advance).
+
+    Raises:
+        UnreachablePoseError: A pose the arm cannot reach.
+    """
     if not any(s.move is not None for s in sequence.steps) and sequence.plan is None:
         return []
     here = start
@@ -107,7 +139,19 @@ def format_plan(
     profile: str,
     tool: Pose | None = None,
 ) -> str:
-    """The --dry-run text: every move with pose, joints, speed, motion type and expected time."""
+    """The --dry-run text: every move with pose, joints, speed, motion type and expected time.
+
+    Args:
+        sequence: The sequence.
+        cycles: How many cycles (the first and the last are listed).
+        model: The arm model that times the moves.
+        start: The TCP pose before the first move.
+        profile: The profile's name, for the header.
+        tool: The TCP in the flange frame (None: the flange).
+
+    Returns:
+        The text, one line per move, with totals.
+    """
     lines = [
         f"sequence {sequence.name}: {cycles} cycle(s), profile {profile}, model {model.name}",
         f"states: IDLE -> {' -> '.join(s.name for s in sequence.steps)} -> DONE | ERROR",

@@ -43,12 +43,17 @@ Reaction = Literal["stay", "retreat"]
 class Failure:
     """Which state failed and why."""
 
+    #: The state that failed.
     state: str
+    #: The cycle, 1-based.
     cycle: int
+    #: The error's class name (``MotionTimeoutError``...).
     type: str
+    #: The error's message.
     message: str
     #: The robot's error code when the failure carries one (robot fault, e-stop).
     error_code: int | None
+    #: The error itself.
     exception: BaseException = field(repr=False, compare=False)
 
     @property
@@ -57,7 +62,11 @@ class Failure:
         return isinstance(self.exception, StopRequestedError)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready form (without the exception object)."""
+        """JSON-ready form (without the exception object).
+
+        Returns:
+            ``state``, ``cycle``, ``type``, ``message`` and ``error_code``.
+        """
         return {
             "state": self.state,
             "cycle": self.cycle,
@@ -71,10 +80,13 @@ class Failure:
 class StateRecord:
     """One pass through a state."""
 
+    #: The state.
     state: str
+    #: The cycle, 1-based.
     cycle: int
     #: Seconds since the run started.
     started_s: float
+    #: How long the pass took, s.
     duration_s: float
     #: "ok", "skipped", "retry" or "failed".
     outcome: str
@@ -84,8 +96,11 @@ class StateRecord:
 class ReactionRecord:
     """What was done after a failure."""
 
+    #: ``"stay"`` or ``"retreat"``.
     reaction: Reaction
+    #: Whether it was carried out (never a retreat after an e-stop or a robot error).
     performed: bool
+    #: What happened, in words.
     detail: str
 
 
@@ -93,9 +108,13 @@ class ReactionRecord:
 class StateEvent:
     """Sent to the ``on_state`` listener at every state change (for live progress)."""
 
+    #: The state entered.
     state: str
+    #: The state left.
     previous: str
+    #: The current cycle, 1-based.
     cycle: int
+    #: How many cycles run.
     cycles: int
     #: Seconds since the current cycle started.
     cycle_elapsed_s: float
@@ -105,19 +124,30 @@ class StateEvent:
 class RunResult:
     """The outcome of :meth:`Runner.run`."""
 
+    #: The sequence's name.
     sequence: str
+    #: The state the machine ended in: DONE or ERROR.
     state: str
+    #: How many cycles were asked for.
     cycles_requested: int
+    #: How many cycles finished.
     cycles_completed: int = 0
+    #: Each finished cycle's duration, s.
     cycle_times_s: list[float] = field(default_factory=list)
+    #: Every pass through a state, in order.
     records: list[StateRecord] = field(default_factory=list)
+    #: Why the run failed (None when it did not).
     failure: Failure | None = None
+    #: How many retries were used in all.
     retries: int = 0
+    #: What was done after the failure (None without one).
     reaction: ReactionRecord | None = None
     #: After a stop request, or a move the master gave up on while the arm ran: whether
     #: a stop was delivered to the robot (None: no stop was needed or possible).
     stop_delivered: bool | None = None
+    #: ISO 8601 UTC time the run started.
     started_at: str = ""
+    #: How long the run took, s.
     duration_s: float = 0.0
 
     @property
@@ -131,7 +161,11 @@ class RunResult:
         return self.failure is not None and self.failure.interrupted
 
     def state_timings(self) -> dict[str, dict[str, float]]:
-        """Per state: passes, total, mean and max seconds (skipped passes excluded)."""
+        """Per state: passes, total, mean and max seconds (skipped passes excluded).
+
+        Returns:
+            ``{state: {"count", "total_s", "mean_s", "max_s"}}``.
+        """
         timings: dict[str, dict[str, float]] = {}
         for record in self.records:
             if record.outcome == "skipped":
@@ -275,7 +309,33 @@ class _Run:
 
 
 class Runner:
-    """Runs sequences on one connected robot with shared policies."""
+    """Runs sequences on one connected robot with shared policies.
+
+    Readiness, stop requests, retries, cycles, timing, logging and the reaction to a
+    failure are the runner's; what each state does is the sequence's.
+
+    Example:
+        The article's cycle against the simulator (``python -m tmmaster.sim --port
+        5020``):
+
+        ```python
+        from tmmaster import connect
+        from tmmaster.pickplace import Runner, load_config, pick_and_place
+
+        config = load_config()  # the defaults: the built-in cell
+        with connect("127.0.0.1", 5020) as robot:
+            result = Runner.from_config(robot, config).run(pick_and_place(config))
+        print(result.state, result.cycles_completed)  # DONE 1
+        ```
+
+    Args:
+        robot: The robot, connected before :meth:`run`.
+        error_reaction: After a failure: ``"stay"`` where it stopped, or
+            ``"retreat"`` to the sequence's retreat pose (never after an e-stop or a
+            robot error).
+        ready_timeout_s: The robot must be ready within this time at the start, s.
+        on_state: Called with a StateEvent at every state change.
+    """
 
     def __init__(
         self,
@@ -285,9 +345,13 @@ class Runner:
         ready_timeout_s: float = 10.0,
         on_state: Callable[[StateEvent], None] | None = None,
     ) -> None:
+        #: The robot it runs on.
         self.robot = robot
+        #: ``"stay"`` or ``"retreat"`` after a failure.
         self.error_reaction: Reaction = error_reaction
+        #: The robot must be ready within this time at the start, s.
         self.ready_timeout_s = ready_timeout_s
+        #: Called with a StateEvent at every state change.
         self.on_state = on_state
         self._stop = threading.Event()
         self._log = _log.bind(robot=robot.name)
@@ -300,7 +364,16 @@ class Runner:
         *,
         on_state: Callable[[StateEvent], None] | None = None,
     ) -> Runner:
-        """A runner with the configuration's error reaction and readiness timeout."""
+        """A runner with the configuration's error reaction and readiness timeout.
+
+        Args:
+            robot: The robot (``robot_from_config(config)``).
+            config: The configuration.
+            on_state: Called with a StateEvent at every state change.
+
+        Returns:
+            The runner.
+        """
         return cls(
             robot,
             error_reaction=config.on_error.reaction,
@@ -328,6 +401,13 @@ class Runner:
 
         A :class:`~tmmaster.TMMasterError` from a step fails (or retries) it and ends the
         run with a failure; any other exception from a step's code is a bug and is raised.
+
+        Args:
+            sequence: What to run.
+            cycles: How many cycles; None: the sequence's default.
+
+        Returns:
+            The outcome: ``ok`` in DONE, else ``failure`` says where and why.
         """
         count = cycles if cycles is not None else sequence.default_cycles
         run = _Run(self, sequence, count)

@@ -63,25 +63,61 @@ class StepContext(Protocol):
         speed: int,
         motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
     ) -> None:
-        """Move and wait until the robot acknowledged and finished (robot API timeouts)."""
+        """Move and wait until the robot acknowledged and finished (robot API timeouts).
+
+        Args:
+            pose: The TCP target.
+            speed: Speed, %.
+            motion: PTP (joint interpolation) or LINE (a straight TCP path).
+        """
 
     def move_planned(self, planned: PlannedMove) -> None:
-        """Make a :class:`PlannedMove`."""
+        """Make a :class:`PlannedMove`.
+
+        Args:
+            planned: The move (pose, speed, motion type).
+        """
 
     def open_gripper(self) -> GripperStatus:
-        """Open the fingers and wait until they stopped."""
+        """Open the fingers and wait until they stopped.
+
+        Returns:
+            The gripper's status.
+        """
 
     def close_gripper(self) -> GripperStatus:
-        """Close the fingers and wait until they stopped (no check of the object)."""
+        """Close the fingers and wait until they stopped (no check of the object).
+
+        Returns:
+            The gripper's status.
+        """
 
     def check_holding(self, expected: bool = True) -> GripperStatus:
-        """Read the gripper; raise :class:`GraspFailedError` unless holding == ``expected``."""
+        """Read the gripper; raise :class:`GraspFailedError` unless holding == ``expected``.
+
+        Args:
+            expected: Whether an object should be held.
+
+        Returns:
+            The gripper's status.
+
+        Raises:
+            GraspFailedError: It holds, or does not hold, against ``expected``.
+        """
 
     def grip(self) -> GripperStatus:
-        """Close and require an object (raises :class:`GraspFailedError`)."""
+        """Close and require an object (raises :class:`GraspFailedError`).
+
+        Returns:
+            The gripper's status, holding.
+        """
 
     def wait(self, seconds: float) -> None:
-        """Dwell for ``seconds``; a stop request ends the dwell at once."""
+        """Dwell for ``seconds``; a stop request ends the dwell at once.
+
+        Args:
+            seconds: How long, s.
+        """
 
 
 #: What a step does; its return value is ignored; a :class:`~tmmaster.TMMasterError`
@@ -104,7 +140,15 @@ class Cycles(StrEnum):
     LAST = "last_cycle"
 
     def applies(self, cycle: int, cycles: int) -> bool:
-        """True when a step with this rule runs in cycle ``cycle`` of ``cycles``."""
+        """True when a step with this rule runs in cycle ``cycle`` of ``cycles``.
+
+        Args:
+            cycle: The cycle, 1-based.
+            cycles: How many cycles run.
+
+        Returns:
+            Whether the step runs.
+        """
         if self is Cycles.FIRST:
             return cycle == 1
         if self is Cycles.LAST:
@@ -120,10 +164,13 @@ class Cycles(StrEnum):
 class RetryRule:
     """When the step fails with one of ``on``: run ``recover``, go back to ``back_to``."""
 
+    #: The step to go back to: this one or an earlier one.
     back_to: str
+    #: How many retries a cycle may use (0: none).
     attempts: int
     #: Makes a new attempt possible, e.g. open the gripper; runs before going back.
     recover: Action | None = None
+    #: The errors that are retried; any other fails the step.
     on: tuple[type[BaseException], ...] = (GraspFailedError,)
 
 
@@ -131,9 +178,13 @@ class RetryRule:
 class PlannedMove:
     """A move a sequence will make, known before the run (validated, shown by --dry-run)."""
 
+    #: The state that makes it.
     state: str
+    #: The TCP target.
     pose: Pose
+    #: Speed, %.
     speed: int
+    #: PTP or LINE.
     motion: MotionType
     #: Which configuration key the pose came from (named in validation errors).
     source: str = ""
@@ -147,23 +198,36 @@ MoveSpec = PlannedMove | Callable[[int], PlannedMove]
 class Step:
     """One state of a sequence and the action run while in it."""
 
+    #: The state's name (letters, digits, underscores).
     name: str
+    #: What the step does (called with the StepContext).
     action: Action
+    #: What happens when it fails (None: the run fails).
     retry: RetryRule | None = None
     #: Must hold to leave the state forward (checked by the machine, after the action).
     guard: Predicate | None = None
+    #: The guard's name in the state diagram.
     guard_name: str | None = None
     #: When given and false, the action is skipped (the state is still passed through).
     #: A :class:`Cycles` rule is also known to the plan; another predicate is not, and
     #: the step's move is then planned (validated, estimated) in every cycle.
     when: Predicate | None = None
+    #: What the step does, in words (shown by --dry-run and the diagram).
     description: str = ""
     #: The move this step makes, known before the run: validated before the first byte
     #: and shown by --dry-run. A step given a move and no action just makes the move.
     move: MoveSpec | None = None
 
     def planned(self, cycle: int, cycles: int) -> PlannedMove | None:
-        """This step's move in cycle ``cycle`` of ``cycles``; None when it makes none."""
+        """This step's move in cycle ``cycle`` of ``cycles``; None when it makes none.
+
+        Args:
+            cycle: The cycle, 1-based.
+            cycles: How many cycles run.
+
+        Returns:
+            The move, named after this step, or None.
+        """
         if self.move is None:
             return None
         if isinstance(self.when, Cycles) and not self.when.applies(cycle, cycles):
@@ -172,7 +236,17 @@ class Step:
         return move if move.state == self.name else replace(move, state=self.name)
 
     def move_of(self, cycle: int) -> PlannedMove:
-        """This step's move in cycle ``cycle`` (raises when the step makes none)."""
+        """This step's move in cycle ``cycle`` (raises when the step makes none).
+
+        Args:
+            cycle: The cycle, 1-based.
+
+        Returns:
+            The move.
+
+        Raises:
+            ConfigError: The step makes no planned move.
+        """
         if self.move is None:
             raise ConfigError(f"step {self.name} makes no planned move")
         return self.move if isinstance(self.move, PlannedMove) else self.move(cycle)
@@ -193,16 +267,25 @@ def move_action(move: MoveSpec) -> Action:
 class TaskSequence:
     """An ordered list of steps, run once per cycle by a :class:`Runner`.
 
-    Build one in Python::
+    Example:
+        ```python
+        from tmmaster import Pose
+        from tmmaster.pickplace import TaskSequence
 
+        CAMERA = Pose(300, 0, 300, 180, 0, 90)
         seq = TaskSequence("inspect")
 
         @seq.step("MOVE_TO_CAMERA")
         def to_camera(ctx):
             ctx.move(CAMERA, speed=30)
+
+        seq.add("DWELL", lambda ctx: ctx.wait(0.5), description="let the camera see")
+        ```
     """
 
+    #: The sequence's name (in logs and reports).
     name: str
+    #: The steps, in order.
     steps: list[Step] = field(default_factory=list)
     #: Deprecated: give the steps their moves (``add(..., move=)``); the plan is derived
     #: from them. When set, these moves of cycle k (1-based) of n replace the derived plan.
@@ -237,9 +320,25 @@ class TaskSequence:
     ) -> TaskSequence:
         """Append a step; returns the sequence so calls can be chained.
 
-        ``move``: the move the step makes, known in advance (validated before the run,
-        shown by --dry-run); without ``action`` the step just makes it. ``when``: a
-        :class:`Cycles` rule (or its value, e.g. ``"last_cycle"``) or any predicate.
+        Args:
+            name: The state's name: letters, digits and underscores, not IDLE, DONE
+                or ERROR, unique in the sequence.
+            action: What the step does; None: it makes ``move``.
+            move: The move the step makes, known in advance (validated before the run,
+                shown by --dry-run); a PlannedMove, or a function of the cycle.
+            retry: What happens when the step fails.
+            guard: Must hold to leave the state forward.
+            guard_name: The guard's name in the diagram (default: its function's).
+            when: A :class:`Cycles` rule (or its value, e.g. ``"last_cycle"``) or any
+                predicate: when false, the action is skipped.
+            description: What the step does, in words.
+
+        Returns:
+            The sequence.
+
+        Raises:
+            ConfigError: Neither action nor move, a bad or reserved name, a name used
+                twice, or an unknown ``when``.
         """
         if action is None:
             if move is None:
@@ -279,7 +378,17 @@ class TaskSequence:
         guard: Predicate | None = None,
         when: Predicate | None = None,
     ) -> Callable[[ActionT], ActionT]:
-        """Decorator form of :meth:`add`."""
+        """Decorator form of :meth:`add`.
+
+        Args:
+            name: The state's name.
+            retry: What happens when the step fails.
+            guard: Must hold to leave the state forward.
+            when: When false, the action is skipped.
+
+        Returns:
+            A decorator that adds the function as the step's action (and returns it).
+        """
 
         def register(action: ActionT) -> ActionT:
             self.add(name, action, retry=retry, guard=guard, when=when)
@@ -288,7 +397,11 @@ class TaskSequence:
         return register
 
     def validate(self) -> None:
-        """Check the structure: at least one step, retry targets exist and come earlier."""
+        """Check the structure: at least one step, retry targets exist and come earlier.
+
+        Raises:
+            ConfigError: What is wrong, naming the sequence and the step.
+        """
         if not self.steps:
             raise ConfigError(f"sequence {self.name!r} has no steps")
         names = [s.name for s in self.steps]
@@ -309,13 +422,28 @@ class TaskSequence:
                 raise ConfigError(f"sequence {self.name!r}: step {s.name}: attempts must be >= 0")
 
     def moves(self, cycle: int, cycles: int) -> list[PlannedMove]:
-        """The moves of cycle ``cycle`` of ``cycles``, in step order, from the steps' moves."""
+        """The moves of cycle ``cycle`` of ``cycles``, in step order, from the steps' moves.
+
+        Args:
+            cycle: The cycle, 1-based.
+            cycles: How many cycles run.
+
+        Returns:
+            The moves.
+        """
         if self.plan is not None:
             return self.plan(cycle, cycles)
         return [m for s in self.steps if (m := s.planned(cycle, cycles)) is not None]
 
     def planned_moves(self, cycles: int) -> Iterable[PlannedMove]:
-        """Every move known in advance over ``cycles`` cycles, then the retreat."""
+        """Every move known in advance over ``cycles`` cycles, then the retreat.
+
+        Args:
+            cycles: How many cycles run.
+
+        Yields:
+            The moves, in order.
+        """
         for cycle in range(1, cycles + 1):
             yield from self.moves(cycle, cycles)
         if self.retreat is not None:

@@ -157,7 +157,26 @@ def _path_panel(ax: Any, report: RunReport) -> None:
 
 
 def plot_report(report: RunReport, output: str | Path, *, dpi: int = 110) -> Path:
-    """Draw ``report`` into the image file ``output`` (PNG, SVG, PDF by suffix); return it."""
+    """Draw ``report`` into the image file ``output`` (PNG, SVG, PDF by suffix); return it.
+
+    Needs matplotlib (``pip install 'tmmaster[plot]'``).
+
+    Example:
+        ```python
+        from tmmaster.pickplace import load_report
+        from tmmaster.report import plot_report
+
+        plot_report(load_report("run.json"), "run.png")
+        ```
+
+    Args:
+        report: A run report (:func:`tmmaster.pickplace.load_report`).
+        output: The image file; its suffix picks the format.
+        dpi: Resolution of a bitmap, dots per inch.
+
+    Returns:
+        The path of the image written.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=True)  # files only: no display needed
