@@ -445,14 +445,44 @@ class Fleet:
     thread only when the poll needs it, so hundreds of robots do not mean hundreds of
     threads waking for every poll (docs/performance.md).
 
-    ``watch_hz``: also read every connected robot's status this often on the loop, over
-    the robot's own link, between its other requests (:meth:`latest`); ``None``: no
-    watch. The robots' phases are spread over the period; a slot that finds the link
-    busy or a read outstanding is skipped and counted, as in :class:`StatusMonitor`.
-
-    ``event_loop``: as :class:`StatusMonitor`'s (uvloop when installed, for ``auto``).
     :meth:`close` closes every robot still open (withdrawing or stopping what each has
     outstanding), then the loop; safe to call more than once.
+
+    Example:
+        Two robots against two simulators (``python -m tmmaster.sim --port 5020`` and
+        ``--port 5021``), one thread each:
+
+        ```python
+        import threading
+
+        from tmmaster import Fleet, Pose, Robot
+
+        def cycle(robot: Robot) -> None:
+            with robot:
+                robot.move_to(Pose(300, -200, 200, 180, 0, 90), speed=50)
+
+        with Fleet(watch_hz=10) as fleet:
+            robots = [Robot("127.0.0.1", port, fleet=fleet, name=f"r{port}")
+                      for port in (5020, 5021)]
+            threads = [threading.Thread(target=cycle, args=(r,)) for r in robots]
+            for thread in threads:
+                thread.start()
+            for thread in threads:
+                thread.join()
+        ```
+
+    Args:
+        watch_hz: Also read every connected robot's status this often on the loop, over
+            the robot's own link, between its other requests (:meth:`latest`); None: no
+            watch. The robots' phases are spread over the period; a slot that finds the
+            link busy or a read outstanding is skipped and counted, as in
+            :class:`StatusMonitor`.
+        event_loop: ``"auto"`` (uvloop when installed, else asyncio's own loop),
+            ``"asyncio"`` or ``"uvloop"``.
+
+    Raises:
+        ConfigError: ``watch_hz`` not a number > 0 or above 100 Hz, or an unknown or
+            missing event loop.
     """
 
     def __init__(
@@ -481,7 +511,18 @@ class Fleet:
         self._closed = False
 
     def latest(self, robot: _Closable) -> MonitoredStatus:
-        """What the fleet's watch last saw of ``robot`` (ConfigError when not watched here)."""
+        """What the fleet's watch last saw of ``robot``.
+
+        Args:
+            robot: One of this fleet's robots.
+
+        Returns:
+            Its last status read (or the error of the last read), and when.
+
+        Raises:
+            ConfigError: The fleet does not watch (no ``watch_hz``), or the robot is not
+                one of its own.
+        """
         if self.watch_hz is None:
             raise ConfigError("this Fleet does not watch its robots: make it with watch_hz")
         try:
@@ -516,7 +557,14 @@ class Fleet:
     # -- lifecycle ----------------------------------------------------------------------
 
     def start(self) -> Self:
-        """Start the loop thread (done by the first robot; a no-op when running)."""
+        """Start the loop thread (done by the first robot; a no-op when running).
+
+        Returns:
+            The fleet.
+
+        Raises:
+            ConfigError: The fleet is closed.
+        """
         with self._lock:
             if self._closed:
                 raise ConfigError("this Fleet is closed; make a new one")

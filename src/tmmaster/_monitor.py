@@ -504,16 +504,36 @@ class StatusMonitor:
     Failures are never raised: each robot's last error (a :class:`TransportError`
     subclass) is kept in :meth:`latest`.
 
-    ``rate_hz``: polls per second of each robot, at most :attr:`MAX_RATE_HZ`.
-    ``timeout_s``: the answer timeout of the monitor's own links (a shared robot's reads
-    use the robot's request timeout), within :attr:`MIN_TIMEOUT_S`..:attr:`MAX_TIMEOUT_S`.
-    ``backoff_max_s``: the longest wait before reconnecting an own link, at most
-    :attr:`MAX_BACKOFF_S`. ``event_loop``: ``"auto"`` (the default) runs on uvloop when
-    it is installed (``pip install 'tmmaster[monitor]'``), else on asyncio's own loop;
-    ``"asyncio"`` or ``"uvloop"`` choose. uvloop's loop takes about a quarter to a third
-    off the monitor's CPU at a few hundred robots (docs/performance.md).
+    Example:
+        Watching the simulator (``python -m tmmaster.sim --port 5020``) for a second:
 
-    Raises :class:`ConfigError` naming the argument when one is out of its range.
+        ```python
+        import time
+
+        from tmmaster import StatusMonitor
+
+        monitor = StatusMonitor(rate_hz=10)
+        monitor.add("cell-1", "127.0.0.1", 5020)
+        with monitor:  # started here, closed at the end
+            time.sleep(1.0)
+            seen = monitor.latest("cell-1")
+            print(seen.polls, seen.status.mode if seen.status else seen.error)
+        ```
+
+    Args:
+        rate_hz: Polls per second of each robot, at most :attr:`MAX_RATE_HZ`.
+        timeout_s: The answer timeout of the monitor's own links (a shared robot's
+            reads use the robot's request timeout), within
+            :attr:`MIN_TIMEOUT_S`..:attr:`MAX_TIMEOUT_S`.
+        backoff_max_s: The longest wait before reconnecting an own link, at most
+            :attr:`MAX_BACKOFF_S`.
+        event_loop: ``"auto"`` runs on uvloop when it is installed (``pip install
+            'tmmaster[monitor]'``), else on asyncio's own loop; ``"asyncio"`` or
+            ``"uvloop"`` choose. uvloop's loop takes about a quarter to a third off the
+            monitor's CPU at a few hundred robots (docs/performance.md).
+
+    Raises:
+        ConfigError: An argument out of its range (named in the message).
     """
 
     #: The fastest poll rate (Hz) per robot: a TM status is up to six Modbus requests, so
@@ -525,6 +545,7 @@ class StatusMonitor:
     #: The answer timeouts (s) a Modbus TCP link can sensibly use: below 10 ms even a
     #: loaded loopback misses answers; beyond a minute a dead robot goes unnoticed.
     MIN_TIMEOUT_S = 0.01
+    #: The longest answer timeout, s.
     MAX_TIMEOUT_S = 60.0
     #: The longest reconnect back-off (s) that may be asked for.
     MAX_BACKOFF_S = 3600.0
@@ -537,10 +558,13 @@ class StatusMonitor:
         backoff_max_s: float = 5.0,
         event_loop: EventLoopName = "auto",
     ) -> None:
+        #: Polls per second of each robot.
         self.rate_hz = _require_within("rate_hz", rate_hz, self.MIN_RATE_HZ, self.MAX_RATE_HZ)
+        #: The answer timeout of the monitor's own links, s.
         self.timeout_s = _require_within(
             "timeout_s", timeout_s, self.MIN_TIMEOUT_S, self.MAX_TIMEOUT_S
         )
+        #: The longest wait before reconnecting an own link, s.
         self.backoff_max_s = _require_within(
             "backoff_max_s", backoff_max_s, 0.0, self.MAX_BACKOFF_S, low_inclusive=False
         )
@@ -579,13 +603,16 @@ class StatusMonitor:
         For a robot this process also commands, use :meth:`add_robot`: a slave that
         accepts one client cannot serve both links.
 
-        :param name: the robot's name in :meth:`latest` and :meth:`snapshot`.
-        :param host: the robot's address (Modbus TCP; no ``sim://`` endpoints).
-        :param port: its Modbus TCP port.
-        :param profile: the register profile it speaks (a built-in name, a TOML path or
-            a :class:`RobotProfile`).
-        :raises ConfigError: after :meth:`start`, or naming a bad argument.
-        :raises RegisterMapError: when the profile cannot be loaded.
+        Args:
+            name: The robot's name in :meth:`latest` and :meth:`snapshot`.
+            host: The robot's address (Modbus TCP; no ``sim://`` endpoints).
+            port: Its Modbus TCP port.
+            profile: The register profile it speaks (a built-in name, a TOML path or a
+                :class:`RobotProfile`).
+
+        Raises:
+            ConfigError: After :meth:`start`, or naming a bad argument.
+            RegisterMapError: The profile cannot be loaded.
         """
         self._check_name(name)
         host = check_host(host)
@@ -616,14 +643,18 @@ class StatusMonitor:
         :class:`ConnectionLostError` and the monitor leaves the link alone: only the
         robot's own requests reconnect it. The reads count in ``robot.stats``.
 
-        :param robot: a :class:`Robot` (connected now or later) made without ``fleet=``.
-        :param name: its name here; the robot's ``name`` when None.
-        :returns: the name it is watched under.
-        :raises ConfigError: after :meth:`start`; for a name or a robot already watched
-            here, a closed robot, a robot of a :class:`Fleet` (watched by
-            ``Fleet(watch_hz=...)`` and read with ``Fleet.latest``), or a robot whose
-            transport cannot be shared (one of your own not derived from
-            ``BlockTransport``).
+        Args:
+            robot: A :class:`Robot` (connected now or later) made without ``fleet=``.
+            name: Its name here; the robot's ``name`` when None.
+
+        Returns:
+            The name it is watched under.
+
+        Raises:
+            ConfigError: After :meth:`start`; for a name or a robot already watched
+                here, a closed robot, a robot of a :class:`Fleet` (watched by
+                ``Fleet(watch_hz=...)`` and read with ``Fleet.latest``), or a robot
+                whose transport cannot be shared (a transport of your own).
         """
         transport = getattr(robot, "_transport", None)
         channel = getattr(robot, "_channel", None)
@@ -654,7 +685,17 @@ class StatusMonitor:
     # -- reading ----------------------------------------------------------------------
 
     def latest(self, name: str) -> MonitoredStatus:
-        """What was last seen of robot ``name`` (ConfigError listing the names when unknown)."""
+        """What was last seen of robot ``name``.
+
+        Args:
+            name: The name it was added under.
+
+        Returns:
+            Its last status (or the error of the last poll), and when.
+
+        Raises:
+            ConfigError: An unknown name (the message lists the names).
+        """
         robot = self._robots.get(name)
         if robot is None:
             known = ", ".join(repr(n) for n in self._robots) or "none"
@@ -662,13 +703,24 @@ class StatusMonitor:
         return robot.published
 
     def snapshot(self) -> dict[str, MonitoredStatus]:
-        """What was last seen of every robot, by name."""
+        """What was last seen of every robot, by name.
+
+        Returns:
+            Each robot's last status, by name.
+        """
         return {name: robot.published for name, robot in self._robots.items()}
 
     # -- lifecycle --------------------------------------------------------------------
 
     def start(self) -> Self:
-        """Start the loop thread; return once every own link tried to connect (failures kept)."""
+        """Start the loop thread; return once every own link tried to connect (failures kept).
+
+        Returns:
+            The monitor.
+
+        Raises:
+            ConfigError: The monitor was closed.
+        """
         if self._closed:
             raise ConfigError("a closed StatusMonitor cannot be restarted; make a new one")
         if self._runner.thread is not None:

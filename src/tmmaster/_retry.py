@@ -62,8 +62,11 @@ class RetryPolicy(BaseModel):
     attempts: Annotated[int, Field(ge=1, le=100)] = 12
     #: Give up once this much time has passed since the first attempt, in seconds.
     total_time_s: Annotated[float, Field(gt=0)] = 10.0
+    #: The wait before the second attempt, s; it doubles for each further one.
     initial_backoff_s: Annotated[float, Field(ge=0)] = 0.1
+    #: The longest wait between two attempts, s.
     max_backoff_s: Annotated[float, Field(ge=0)] = 1.5
+    #: Up to this much random time is added to each wait, s.
     jitter_s: Annotated[float, Field(ge=0)] = 0.1
 
     def call(
@@ -78,6 +81,18 @@ class RetryPolicy(BaseModel):
 
         With ``interrupt``, a sleep between attempts ends as soon as the event is set and
         :class:`StopRequestedError` is raised instead of another attempt.
+
+        Args:
+            operation: What is tried, for the log's retry events.
+            fn: One attempt.
+            on_retry: Called with each failure that is retried.
+            interrupt: Ends the waits between attempts when set.
+
+        Returns:
+            What ``fn`` returned.
+
+        Raises:
+            StopRequestedError: ``interrupt`` was set during a wait.
         """
         # The first attempt runs outside tenacity: the retry machinery is entered only
         # after a transient failure, so a healthy link pays nothing for it.

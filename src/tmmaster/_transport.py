@@ -116,16 +116,27 @@ class ConnectionState(StrEnum):
 class TransportStats:
     """Counters of one transport, for run reports and benchmarks."""
 
+    #: Requests sent (retries included).
     requests: int = 0
+    #: Retries of failed requests and connects.
     retries: int = 0
+    #: Connections opened again after a lost link.
     reconnects: int = 0
+    #: Failed requests (exception answers included).
     errors: int = 0
+    #: Bytes sent (Modbus TCP frames).
     bytes_sent: int = 0
+    #: Bytes received.
     bytes_received: int = 0
+    #: Requests by Modbus function code.
     requests_by_function: dict[int, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
-        """A plain-dict copy, for JSON reports."""
+        """A plain-dict copy, for JSON reports.
+
+        Returns:
+            The counters by name (``requests_by_function`` sorted by code).
+        """
         return {
             "requests": self.requests,
             "retries": self.retries,
@@ -282,14 +293,20 @@ class Transport(Protocol):
 
     :class:`ModbusTransport` (Modbus TCP through pymodbus) is the default;
     ``tmmaster.sim.MemoryTransport`` talks to an in-process simulator without sockets.
-    Both share :class:`BlockTransport`: the same counters, error mapping and retries.
+    Both share the same counters, error mapping and retries.
     """
 
+    #: The device's address.
     host: str
+    #: Its Modbus TCP port.
     port: int
+    #: The link's name in messages and logs.
     name: str
+    #: The Modbus unit id of every request.
     device_id: int
+    #: Bound of one request, s.
     timeout: float
+    #: Request, retry, reconnect and byte counters.
     stats: TransportStats
     #: When set, sleeps between retry attempts of interruptible requests end at once.
     interrupt: threading.Event | None
@@ -313,7 +330,22 @@ class Transport(Protocol):
         retry: bool = True,
         interruptible: bool = True,
     ) -> list[int]:
-        """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
+        """Read ``count`` words (or bits as 0/1) from ``address`` in one request.
+
+        Args:
+            table: The Modbus table.
+            address: The first address.
+            count: How many registers (or bits).
+            retry: Retry a failed read per the retry policy.
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Returns:
+            ``count`` words (bits as 0/1).
+
+        Raises:
+            TransportError: The read failed (a subclass says how).
+        """
 
     def write_block(
         self,
@@ -324,7 +356,20 @@ class Transport(Protocol):
         retry: bool,
         interruptible: bool = True,
     ) -> None:
-        """Write words (holding) or bits (coils) in one request."""
+        """Write words (holding) or bits (coils) in one request.
+
+        Args:
+            table: ``Table.HOLDING`` or ``Table.COIL``.
+            address: The first address.
+            words: The words (0..65535) or bits.
+            retry: Retry a failed write per the retry policy (False for a write that
+                triggers a command: it is sent once).
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Raises:
+            TransportError: The write failed (a subclass says how).
+        """
 
     def read_fields(
         self,
@@ -334,7 +379,22 @@ class Transport(Protocol):
         retry: bool = True,
         interruptible: bool = True,
     ) -> dict[str, Value]:
-        """Read and decode fields, one request per contiguous block."""
+        """Read and decode fields, one request per contiguous block.
+
+        Args:
+            fields: The fields.
+            max_gap: A read may span this many unused addresses to fetch two fields
+                in one request.
+            retry: Retry a failed read per the retry policy.
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Returns:
+            Each field's engineering value, by name.
+
+        Raises:
+            TransportError: A read failed (a subclass says how).
+        """
 
     def write_fields(
         self,
@@ -343,7 +403,19 @@ class Transport(Protocol):
         retry: bool,
         interruptible: bool = True,
     ) -> None:
-        """Encode every value (refusing before any I/O), then write each block once."""
+        """Encode every value (refusing before any I/O), then write each block once.
+
+        Args:
+            values: ``(field, value)`` pairs, or a mapping of them.
+            retry: Retry a failed write per the retry policy (False for a write that
+                triggers a command: it is sent once).
+            interruptible: False for clean-up writes (withdraw, stop) that must still
+                be attempted after a stop request.
+
+        Raises:
+            ValueOutOfRangeError: A value does not fit its field (nothing is sent).
+            TransportError: A write failed (a subclass says how).
+        """
 
 
 class BlockTransport(ABC):
@@ -365,14 +437,21 @@ class BlockTransport(ABC):
         retry: RetryPolicy | None,
         name: str,
     ) -> None:
+        #: The device's address.
         self.host = host
+        #: Its Modbus TCP port.
         self.port = port
+        #: The Modbus unit id of every request.
         self.device_id = device_id
+        #: Bound of one request, s.
         self.timeout = timeout
+        #: How failed requests and connects are retried.
         self.retry = retry if retry is not None else RetryPolicy()
+        #: The link's name in messages and logs.
         self.name = name
         #: When set, sleeps between retry attempts of interruptible requests end at once.
         self.interrupt: threading.Event | None = None
+        #: Request, retry, reconnect and byte counters.
         self.stats = TransportStats()
         self._state = ConnectionState.NEW
         self._lock = threading.RLock()
@@ -517,6 +596,9 @@ class BlockTransport(ABC):
 
         For a clean-up under a time budget (``Robot.close(timeout_s=...)``): the
         withdraw or stop still gets its first attempt, and its retries end in time.
+
+        Args:
+            deadline: The ``time.monotonic()`` after which no retry starts.
         """
         self._retry_deadline = deadline
 
@@ -542,7 +624,22 @@ class BlockTransport(ABC):
         retry: bool = True,
         interruptible: bool = True,
     ) -> list[int]:
-        """Read ``count`` words (or bits as 0/1) from ``address`` in one request."""
+        """Read ``count`` words (or bits as 0/1) from ``address`` in one request.
+
+        Args:
+            table: The Modbus table.
+            address: The first address.
+            count: How many registers (or bits).
+            retry: Retry a failed read per the retry policy.
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Returns:
+            ``count`` words (bits as 0/1).
+
+        Raises:
+            TransportError: The read failed (a subclass says how).
+        """
         what, function_code = self._read_request(table, address, count)
 
         def once() -> list[int]:
@@ -573,7 +670,22 @@ class BlockTransport(ABC):
         retry: bool,
         interruptible: bool = True,
     ) -> None:
-        """Write words (holding, FC16) or bits (coils, FC05/FC15) in one request."""
+        """Write words (holding, FC16) or bits (coils, FC05/FC15) in one request.
+
+        Args:
+            table: ``Table.HOLDING`` or ``Table.COIL``.
+            address: The first address.
+            words: The words (0..65535) or bits.
+            retry: Retry a failed write per the retry policy (False for a write that
+                triggers a command: it is sent once).
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Raises:
+            ConfigError: A read-only table.
+            ValueOutOfRangeError: A word outside 0..65535 (nothing is sent).
+            TransportError: The write failed (a subclass says how).
+        """
         if table.read_only:
             raise ConfigError(f"the {table.value} table is read-only")
         what = f"write {table.value} {address}+{len(words)}"
@@ -599,7 +711,22 @@ class BlockTransport(ABC):
         retry: bool = True,
         interruptible: bool = True,
     ) -> dict[str, Value]:
-        """Read and decode fields, one request per contiguous block."""
+        """Read and decode fields, one request per contiguous block.
+
+        Args:
+            fields: The fields.
+            max_gap: A read may span this many unused addresses to fetch two fields
+                in one request.
+            retry: Retry a failed read per the retry policy.
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Returns:
+            Each field's engineering value, by name.
+
+        Raises:
+            TransportError: A read failed (a subclass says how).
+        """
         plan = self.read_plan(fields, max_gap=max_gap)
         result: dict[str, Value] = {}
         read_block = self.read_block
@@ -642,6 +769,17 @@ class BlockTransport(ABC):
         Pass ``retry=False`` for a write that triggers a command: it is sent once. Pass
         ``interruptible=False`` for clean-up writes (withdraw, stop) that must still be
         attempted after a stop request.
+
+        Args:
+            values: ``(field, value)`` pairs, or a mapping of them.
+            retry: Retry a failed write per the retry policy (False for a write that
+                triggers a command: it is sent once).
+            interruptible: False for clean-up writes (withdraw, stop) that must still
+                be attempted after a stop request.
+
+        Raises:
+            ValueOutOfRangeError: A value does not fit its field (nothing is sent).
+            TransportError: A write failed (a subclass says how).
         """
         items = list(values.items()) if isinstance(values, Mapping) else list(values)
         plans = plan_writes(items)
@@ -810,9 +948,32 @@ class ModbusTransport(BlockTransport):
 
     One TCP socket, one request at a time: pymodbus' socket framer and PDU classes build
     each request and decode its answer, and the answer is taken only under the request's
-    own transaction id and from the transport's unit id. A failure closes the socket
-    (:meth:`BlockTransport._drop`), so a late answer can never be read as a later
-    request's. Nothing is ever resent here: the :class:`RetryPolicy` decides.
+    own transaction id and from the transport's unit id. A failure closes the socket,
+    so a late answer can never be read as a later request's. Nothing is ever resent
+    here: the :class:`RetryPolicy` decides. ``Robot(host, port)`` makes one; make your
+    own to read or write a device directly.
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+        ```python
+        from tmmaster import ModbusTransport, robot_profile
+
+        profile = robot_profile("tmflow")
+        with ModbusTransport("127.0.0.1", 5020, device_id=profile.device_id) as link:
+            print(link.read_fields(profile.select(["tcp_x", "tcp_y", "tcp_z"])))
+        ```
+
+    Args:
+        host: The device's address (an IP address or a host name).
+        port: Its Modbus TCP port.
+        device_id: The Modbus unit id of every request.
+        timeout: Bound of one request (and of a connect), s.
+        retry: How failed requests and connects are retried; None: the default policy.
+        name: The link's name in messages and logs.
+
+    Raises:
+        ConfigError: An invalid host or port, or a ``sim://`` address.
     """
 
     def __init__(
