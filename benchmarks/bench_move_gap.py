@@ -4,18 +4,19 @@ Real time (time scale 1), 50 ms nominal polling, the simulator in-process on loo
 TCP (its 50 Hz control tick is part of what is measured). For consecutive moves i, i+1:
 
 * gap = when the robot started move i+1 (the simulator's motion log) minus when move i
-  ended by the arm model (start + the expected time, the same model the simulator
-  moves by): the slave's tick that reports the end, the master's detection, its checks
-  before the next write, and the slave's tick that takes it;
+  really ended (its start + the expected time / the speed factor: the simulator's arm
+  is the model's, ``--speed-factor`` times faster, which the master does not know): the
+  slave's tick that reports the end, the master's detection, its checks before the
+  next write, and the slave's tick that takes it;
 * seen = when the master's poll that saw move i finished returned
   (``Motion.reported_finished_at``) minus when the simulator's tick reported it
   finished (``MotionRecord.done_wall_time``); the same clock, both in this process.
   The issue's target: within 10 ms;
 * requests per move, from the transport's counters.
 
-Run::
+Run (``--speed-factor 0.5 1 2``: a slave twice as slow, as the model, twice as fast)::
 
-    python benchmarks/bench_move_gap.py --moves 12 --rounds 3
+    python benchmarks/bench_move_gap.py --moves 12 --rounds 3 --speed-factor 0.5 1 2
 """
 
 from __future__ import annotations
@@ -29,13 +30,19 @@ from tmmaster import PollPolicy, Pose
 from tmmaster.sim import Simulator
 
 A = Pose(300, -200, 200, 180, 0, 90)
-B = Pose(300, -200, 120, 180, 0, 90)
 
 
 def measure(
-    profile: str, predictive: bool, moves: int, reuse_s: float | None = None
+    profile: str,
+    predictive: bool,
+    moves: int,
+    reuse_s: float | None = None,
+    speed_factor: float = 1.0,
+    dz: float = 80.0,
+    speed: int = 60,
 ) -> tuple[list[float], list[float], float]:
-    with Simulator(profile, time_scale=1.0) as sim:
+    b = A.offset(dz=-dz)
+    with Simulator(profile, time_scale=1.0, speed_factor=speed_factor) as sim:
         with tmmaster.Robot(
             "127.0.0.1",
             sim.port,
@@ -51,13 +58,16 @@ def measure(
             seen_at: list[float] = []
             before = robot.stats.requests
             for i in range(moves):
-                motion = robot.move_to(B if i % 2 == 0 else A, speed=60)
+                motion = robot.move_to(b if i % 2 == 0 else A, speed=speed)
                 expected.append(motion.expected_s)
                 assert motion.reported_finished_at is not None
                 seen_at.append(motion.reported_finished_at)
             requests = (robot.stats.requests - before) / moves
         log = [m for m in sim.motion_log() if m.target is not None][1:]
-    gaps = [log[i + 1].wall_time - (log[i].wall_time + expected[i]) for i in range(len(log) - 1)]
+    gaps = [
+        log[i + 1].wall_time - (log[i].wall_time + expected[i] / speed_factor)
+        for i in range(len(log) - 1)
+    ]
     seen: list[float] = []
     for record, at in zip(log, seen_at, strict=True):
         assert record.done_wall_time is not None
@@ -81,26 +91,49 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="PollPolicy.reuse_done_read_s (0: the checks before a write always read again)",
     )
+    parser.add_argument(
+        "--speed-factor",
+        type=float,
+        nargs="+",
+        default=[1.0],
+        metavar="K",
+        help="the simulated arm is K times faster than the model the master plans with",
+    )
+    parser.add_argument("--profile", nargs="+", default=["article", "tmflow"])
+    parser.add_argument(
+        "--dz", type=float, default=80.0, help="the moves' length, mm (down and up; max 190)"
+    )
+    parser.add_argument("--speed", type=int, default=60, help="the moves' speed, %%")
     args = parser.parse_args(argv)
     print(
-        "| profile | polling | gap p50 ms | gap p90 ms | gap max ms"
+        "| slave speed | profile | polling | gap p50 ms | gap p90 ms | gap max ms"
         " | seen p50 ms | seen p90 ms | seen max ms | requests/move |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
-    for profile in ("article", "tmflow"):
-        for predictive in (False, True):
-            gaps: list[float] = []
-            seen: list[float] = []
-            requests: list[float] = []
-            for _ in range(args.rounds):
-                g, d, r = measure(profile, predictive, args.moves, args.reuse_done_read_s)
-                gaps += g
-                seen += d
-                requests.append(r)
-            print(
-                f"| {profile} | {'predictive' if predictive else 'nominal 50 ms'} |"
-                f" {ms(gaps)} | {ms(seen)} | {statistics.median(requests):.1f} |"
-            )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for factor in args.speed_factor:
+        for profile in args.profile:
+            for predictive in (False, True):
+                gaps: list[float] = []
+                seen: list[float] = []
+                requests: list[float] = []
+                for _ in range(args.rounds):
+                    g, d, r = measure(
+                        profile,
+                        predictive,
+                        args.moves,
+                        args.reuse_done_read_s,
+                        factor,
+                        args.dz,
+                        args.speed,
+                    )
+                    gaps += g
+                    seen += d
+                    requests.append(r)
+                print(
+                    f"| {factor:g}x | {profile} |"
+                    f" {'predictive' if predictive else 'nominal 50 ms'} |"
+                    f" {ms(gaps)} | {ms(seen)} | {statistics.median(requests):.1f} |"
+                )
     return 0
 
 

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import itertools
+import math
 import threading
 
 import pytest
 
 from tmmaster import ConfigError, Poller, PollPolicy, StopRequestedError
 from tmmaster._poller import MotionSchedule
+from tmmaster._robot_models import trapezoid_progress
 
 NOMINAL = 0.05
 
@@ -39,7 +41,7 @@ def polls_of(
         now = nxt
 
 
-@pytest.mark.parametrize("expected_s", [0.3, 1.0, 2.5, 8.0])
+@pytest.mark.parametrize("expected_s", [0.8, 1.0, 2.5, 8.0])
 def test_a_move_costs_no_more_polls_than_nominal_polling(expected_s: float) -> None:
     policy = PollPolicy()
     ack_at = 0.021
@@ -109,7 +111,7 @@ def test_a_stop_request_ends_every_sleep_instead_of_spinning() -> None:
         poller.check()
 
 
-@pytest.mark.parametrize("expected_s", [0.34, 1.0, 2.5])
+@pytest.mark.parametrize("expected_s", [0.8, 1.0, 2.5])
 def test_the_window_opens_early_enough_for_an_acknowledgement_seen_late(
     expected_s: float,
 ) -> None:
@@ -130,3 +132,79 @@ def test_the_window_opens_early_enough_for_an_acknowledgement_seen_late(
     assert first_dense < end - early.window_s / 2
     # Still no more polls than nominal polling over the move.
     assert len(early_times) <= until / NOMINAL + 1
+
+
+# -- a robot that differs from the model ------------------------------------------------
+
+TICK = 0.02  # the robot's control tick: it reports the end at its next one
+
+
+def seen_after_the_end(
+    pace: float, expected_s: float, *, observe: bool, policy: PollPolicy | None = None
+) -> tuple[float, int]:
+    """How long after a move really ended the schedule's polls see it, and their count.
+
+    The robot takes the command at 21 ms and moves ``pace`` times slower than the model
+    (0.5: twice as fast); it reports the end at its first tick after it. With
+    ``observe``, each poll tells the schedule the progress it saw (the model's trapezoid,
+    at the robot's pace).
+    """
+    policy = policy or PollPolicy()
+    accel = 0.2
+    schedule = MotionSchedule(policy, NOMINAL, 0.0, accel_s=accel)
+    ack_at = 0.021
+    end = ack_at + expected_s * pace
+    reported = math.ceil(end / TICK) * TICK
+    now, anchored, polls = 0.0, False, 0
+    while True:
+        acknowledged = now >= ack_at
+        if acknowledged and not anchored:
+            schedule.acknowledged(ack_at, expected_s)
+            anchored = True
+        elif anchored and observe:
+            elapsed = (now - ack_at) / pace
+            schedule.observed(now, trapezoid_progress(elapsed, expected_s, accel))
+        if now >= reported:
+            return now - end, polls
+        now = schedule.next_poll(now, acknowledged=acknowledged)
+        polls += 1
+
+
+@pytest.mark.parametrize("pace", [0.5, 0.7, 1.0, 1.4, 2.0])
+@pytest.mark.parametrize("expected_s", [0.4, 1.0, 3.0, 8.0])
+@pytest.mark.parametrize("observe", [False, True], ids=["blind", "observing"])
+def test_a_robot_faster_or_slower_than_the_model_is_seen_within_one_interval(
+    pace: float, expected_s: float, observe: bool
+) -> None:
+    # Up to twice as fast or twice as slow as the model: the end is seen within one
+    # nominal interval and one robot tick, with or without the progress each poll sees.
+    late, _ = seen_after_the_end(pace, expected_s, observe=observe)
+    assert late <= NOMINAL + TICK + 1e-9
+
+
+@pytest.mark.parametrize("pace", [0.6, 1.5])
+def test_the_observed_progress_moves_the_dense_window_to_the_real_end(pace: float) -> None:
+    # A long move whose robot is off the model: what the polls see carries the dense
+    # window to the real end, so the end is seen within a dense interval of the report.
+    blind, _ = seen_after_the_end(pace, 4.0, observe=False)
+    late, polls = seen_after_the_end(pace, 4.0, observe=True)
+    assert late <= TICK + PollPolicy().dense_interval_s + 1e-9 < blind
+    assert polls <= (4.0 * pace) / NOMINAL + 4
+
+
+def test_a_robot_that_speeds_up_after_a_slow_start_is_seen_within_one_interval() -> None:
+    # A poll sees the move barely started (a robot far slower than the model, or an
+    # operator's speed override turned down): the polls may be spaced again, but never
+    # past the model's own end, so a robot that speeds up again is seen in time.
+    policy = PollPolicy()
+    schedule = MotionSchedule(policy, NOMINAL, 0.0, accel_s=0.2)
+    schedule.acknowledged(0.0, 2.0)
+    schedule.observed(0.9, 0.06)
+    assert schedule.expected_end is not None
+    assert schedule.expected_end > 2.0
+    now = 0.9
+    while now < 3.0:
+        nxt = schedule.next_poll(now, acknowledged=True)
+        if now >= 2.0:
+            assert nxt - now <= NOMINAL + 1e-9
+        now = nxt

@@ -105,6 +105,9 @@ class Ticket:
     #: ``time.monotonic()`` before the last poll that saw the command not yet taken (the
     #: robot took it after this, and by ``acknowledged_at``).
     pending_seen_at: float | None = None
+    #: Set by the wait's schedule: the next poll also reads the TCP pose, where the
+    #: profile's poll does not carry it (one request), to gauge the move's progress.
+    observe_pose: bool = False
     #: True once the command was taken back (it can no longer start).
     withdrawn: bool = False
     #: True once a write of the command block was attempted (it may have landed even if
@@ -724,7 +727,11 @@ class SequenceChannel(CommandChannel):
                 )
         if done:
             self._remember_done({**feedback, **flags}, mark)
-        return Observation(ticket.acknowledged, done, failure, None)
+        pose: Pose | None = None
+        if ticket.observe_pose and not done and failure is None:
+            ticket.observe_pose = False
+            pose = pose_from((yield self.tcp_fields), TCP_FIELDS)
+        return Observation(ticket.acknowledged, done, failure, pose)
 
     duplicate_safe = True  # the program takes a sequence number at most once
 

@@ -25,6 +25,12 @@ class FollowedMotion(Protocol):
     expected_s: float
     timeout_s: float
     last_pose: Pose | None
+    #: The move's acceleration time by the arm model, s (0: not a move).
+    accel_s: float
+
+    def path_fraction(self, pose: Pose) -> float | None:
+        """How much of the move's path the robot covered at ``pose`` (None: cannot tell)."""
+        ...
 
     @property
     def ticket(self) -> Ticket:
@@ -53,6 +59,7 @@ class FollowState:
 
     __slots__ = (
         "_anchored",
+        "_observed",
         "ack_deadline",
         "budget",
         "motion",
@@ -78,23 +85,38 @@ class FollowState:
         self.budget = timeout_s if timeout_s is not None else motion.timeout_s
         self.stop_event = stop_event
         self.poller = Poller(poll_interval_s, stop_event)
-        self.schedule = MotionSchedule(polling, poll_interval_s, ticket.sent_at)
+        self.schedule = MotionSchedule(
+            polling, poll_interval_s, ticket.sent_at, accel_s=motion.accel_s
+        )
         self.ack_deadline = ticket.sent_at + ack_timeout_s
         #: ``time.monotonic()`` at the start of the last poll (the wait's start before one).
         self.poll_started = time.monotonic()
         self._anchored = False
+        self._observed: Pose | None = None
 
     def due(self) -> float:
-        """The monotonic time of the next poll."""
-        ticket = self.motion.ticket
+        """The monotonic time of the next poll.
+
+        The prediction follows what the polls observe: each new pose the robot reported
+        moves the predicted end by the pace it shows (:meth:`MotionSchedule.observed`).
+        """
+        motion = self.motion
+        ticket = motion.ticket
         if ticket.acknowledged and not self._anchored:
             self.schedule.acknowledged(
                 ticket.acknowledged_at or ticket.sent_at,
-                self.motion.expected_s,
+                motion.expected_s,
                 since=ticket.pending_seen_at or ticket.sent_at,
             )
             self._anchored = True
-        return self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
+        pose = motion.last_pose
+        if self._anchored and pose is not None and pose is not self._observed:
+            self._observed = pose
+            self.schedule.observed(self.poll_started, motion.path_fraction(pose))
+        due = self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
+        # A profile whose poll carries no pose reads it once, where it tells the most.
+        ticket.observe_pose = self.schedule.wants_observation(due)
+        return due
 
     def overdue(self, now: float) -> Overdue | None:
         """The deadline that passed: acknowledgement (while sent), motion (while running)."""

@@ -10,6 +10,7 @@ from typing import Annotated
 from pydantic import BaseModel, ConfigDict, Field
 
 from ._exceptions import ConfigError, StopRequestedError
+from ._robot_models import trapezoid_progress
 
 
 class Poller:
@@ -62,6 +63,13 @@ class PollPolicy(BaseModel):
     write) and when the move should end (acknowledgement + expected time). It polls
     densely in a short window at those moments and spaces the polls in between so that
     a move costs no more requests than polling at the nominal interval would.
+
+    The prediction is the arm model's, and a robot may differ from it: the polls are
+    spaced only until the earliest moment the move could plausibly end (a robot
+    ``1 / earliest_end_fraction`` times faster than the model), never more sparsely
+    than the nominal interval after that, and the predicted end moves with the progress
+    each poll observes. A finish the model did not predict is seen within one nominal
+    interval.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -80,6 +88,10 @@ class PollPolicy(BaseModel):
     ack_window_s: Annotated[float, Field(ge=0, le=1)] = 0.02
     #: Never space the polls in the middle of a move by more than this many nominal intervals.
     max_stretch: Annotated[float, Field(ge=1, le=10)] = 3.0
+    #: The earliest a move may end, as a fraction of its expected time (0.5: a robot
+    #: twice as fast as the model): polls are never spaced beyond the nominal interval
+    #: from then on. 0 never spaces them; 1 trusts the model's time.
+    earliest_end_fraction: Annotated[float, Field(ge=0, le=1)] = 0.5
     #: The next command's checks may use the registers read by the poll that saw the
     #: previous command finished instead of reading them again, if that poll began at most
     #: this long ago (seconds) on the same connection with nothing written since; 0: the
@@ -87,17 +99,40 @@ class PollPolicy(BaseModel):
     reuse_done_read_s: Annotated[float, Field(ge=0, le=0.1)] = 0.02
 
 
-class MotionSchedule:
-    """When to poll a move next, from its send time, acknowledgement and expected time."""
+#: How far an observed pace may move the predicted end: a robot between 4 times faster
+#: and 4 times slower than the model; beyond that the observation is not trusted.
+_PACE_LIMITS = (0.25, 4.0)
+#: Polls a move's schedule keeps in reserve for the rounding at the dense window's edges.
+_RESERVE = 2.0
+#: Observed progress used to re-predict the end: not the ramps' first and last few per
+#: cent, where a pose's rounding weighs more than the progress.
+_PROGRESS_USED = (0.05, 0.95)
 
-    def __init__(self, policy: PollPolicy, nominal_s: float, sent_at: float) -> None:
+
+class MotionSchedule:
+    """When to poll a move next, from its send time, acknowledgement and expected time.
+
+    ``accel_s``: the move's acceleration time by the model (the progress of a move
+    follows a trapezoid profile), used to read the robot's pace from the progress a
+    poll observes (:meth:`observed`).
+    """
+
+    def __init__(
+        self, policy: PollPolicy, nominal_s: float, sent_at: float, *, accel_s: float = 0.0
+    ) -> None:
         self._policy = policy
         self._nominal = nominal_s
         self._sent_at = sent_at
+        self._accel = max(accel_s, 0.0)
+        self._acked_at = 0.0
+        self._expected = 0.0
+        #: No poll spaced beyond the nominal interval from this moment (monotonic s).
+        self._earliest = math.inf
         self._end: float | None = None
         self._window = 0.0
         self._early = 0.0
         self._mid_interval = nominal_s
+        self._observations = 0
 
     def acknowledged(self, at: float, expected_s: float, *, since: float | None = None) -> None:
         """Anchor the completion window: the move should end at ``at + expected_s``.
@@ -111,34 +146,102 @@ class MotionSchedule:
         p = self._policy
         if not p.predictive or expected_s <= 0:
             return
-        n, d, cap = self._nominal, p.dense_interval_s, self._nominal * p.max_stretch
-        # A move may cost no more polls than nominal polling over the same time. The
-        # polls saved by stretching the middle (at most to ``cap``) pay for the dense
-        # window around the end; this is the widest window they can pay for (two polls
-        # are kept in reserve for the rounding at the window's edges).
-        denominator = 2 / d - 1 / cap - 1 / n
-        if denominator <= 0:
-            return
-        affordable = (expected_s * (1 / n - 1 / cap) - 2) / denominator
         # The window also opens earlier by the acknowledgement's uncertainty, at most one
-        # dense interval: paid by one of the two polls kept in reserve above.
-        early = 0.0 if since is None else min(max(at - since, 0.0), d, expected_s / 4)
-        window = min(p.completion_window_s, expected_s / 2, affordable)
-        if window < d:
-            return  # too short a move to afford a dense window: nominal pace
-        middle = (expected_s + window) / n - 2 * window / d - 2
-        span = expected_s - early - window
-        if middle < 1 or span <= 0:
+        # dense interval: paid by one of the two polls kept in reserve in _plan.
+        early = 0.0 if since is None else min(max(at - since, 0.0), p.dense_interval_s)
+        self._early = min(early, expected_s / 4)
+        self._acked_at, self._expected = at, expected_s
+        self._earliest = at - self._early + expected_s * p.earliest_end_fraction
+        self._plan(at, at + expected_s)
+
+    def observed(self, at: float, fraction: float | None) -> None:
+        """Re-predict the end from the progress a poll observed.
+
+        Args:
+            at: when the poll began (``time.monotonic()``).
+            fraction: how much of the move's path the robot had covered (0..1), None
+                when the poll could not tell.
+        """
+        if fraction is None or self._expected <= 0:
             return
-        self._end = at + expected_s
-        self._window = window
-        self._early = early
-        self._mid_interval = min(span / middle, cap)
+        self._observations += 1
+        low, high = _PROGRESS_USED
+        if not low < fraction < high:
+            return
+        elapsed = at - self._acked_at
+        if elapsed <= 0:
+            return
+        # A robot k times slower than the model covers the model's profile k times
+        # slower: the progress seen at ``elapsed`` is the model's at ``elapsed / k``.
+        model_elapsed = _elapsed_at(fraction, self._expected, self._accel)
+        if model_elapsed <= 0:
+            return
+        pace = min(max(elapsed / model_elapsed, _PACE_LIMITS[0]), _PACE_LIMITS[1])
+        end = self._acked_at + self._expected * pace
+        current = self._end if self._end is not None else self._acked_at + self._expected
+        if abs(end - current) < self._policy.dense_interval_s:
+            return
+        # The robot's own pace now says when it could end at the earliest; never later
+        # than the model's end, so a robot that speeds up again (a speed override raised
+        # mid-move) is still seen within one nominal interval from then on.
+        remaining = max(end - at, 0.0)
+        self._earliest = min(
+            at + remaining * self._policy.earliest_end_fraction,
+            self._acked_at + self._expected,
+        )
+        self._plan(at, end)
+
+    def _plan(self, start: float, end: float) -> None:
+        """Window and middle pace for a move predicted to end at ``end``, seen from ``start``.
+
+        A move may cost no more polls than nominal polling over the same time: the polls
+        saved by spacing the middle (at most to ``max_stretch`` nominal intervals, and
+        only before the earliest plausible end) pay for the dense window around the
+        end. The widest window they can pay for is taken; two polls are kept in reserve
+        for the rounding at the window's edges.
+        """
+        p = self._policy
+        n, d, cap = self._nominal, p.dense_interval_s, self._nominal * p.max_stretch
+        self._end = None
+        span = end - start
+        window = min(p.completion_window_s, span / 2)
+        while window >= d:
+            opens = end - self._early - window / 2
+            closes = end + 1.5 * window
+            stretchable = max(min(self._earliest, opens) - start, 0.0)
+            nominal = max(opens - max(self._earliest, start), 0.0)
+            spare = (closes - start) / n - nominal / n - (2 * window + self._early) / d - _RESERVE
+            if spare >= stretchable / cap and (spare > 0 or stretchable == 0):
+                self._end, self._window = end, window
+                if stretchable > 0:
+                    self._mid_interval = min(max(stretchable / spare, n), cap)
+                return
+            window *= 0.8
+        self._window = 0.0
+
+    def wants_observation(self, at: float) -> bool:
+        """True when the poll at ``at`` should read the pose: a third and two thirds in.
+
+        Only a move with a dense window gains from it: the progress seen on the way
+        moves the window to where the robot's own pace puts the end, and the second
+        look corrects the first (read early, in the ramp, it weighs a pose's rounding
+        and the model's profile more).
+        """
+        if self._observations >= 2 or self._end is None:
+            return False
+        return at >= self._acked_at + (self._end - self._acked_at) * (self._observations + 1) / 3
 
     @property
     def window_s(self) -> float:
         """Half-width of the dense window around the expected end (0 when there is none)."""
         return self._window if self._end is not None else 0.0
+
+    @property
+    def expected_end(self) -> float | None:
+        """When the move is predicted to end (monotonic s), None before the acknowledgement."""
+        if self._expected <= 0:
+            return None
+        return self._end if self._end is not None else self._acked_at + self._expected
 
     def next_poll(self, now: float, *, acknowledged: bool) -> float:
         """The monotonic time of the next poll (never earlier than ``now``)."""
@@ -154,10 +257,24 @@ class MotionSchedule:
             return now + nominal
         if self._end is None:
             return now + nominal
-        start = self._end - self._early - self._window / 2
-        stop = self._end + 1.5 * self._window
-        if now < start:
-            return min(now + self._mid_interval, start)
-        if now < stop:
+        opens = self._end - self._early - self._window / 2
+        closes = self._end + 1.5 * self._window
+        if now < opens:
+            if now < self._earliest:
+                return min(now + self._mid_interval, self._earliest, opens)
+            return min(now + nominal, opens)
+        if now < closes:
             return now + p.dense_interval_s
         return now + nominal
+
+
+def _elapsed_at(fraction: float, total: float, accel_time: float) -> float:
+    """When a trapezoid move of ``total`` s has covered ``fraction`` of its path (bisection)."""
+    low, high = 0.0, total
+    for _ in range(40):
+        middle = (low + high) / 2
+        if trapezoid_progress(middle, total, accel_time) < fraction:
+            low = middle
+        else:
+            high = middle
+    return (low + high) / 2

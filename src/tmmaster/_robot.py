@@ -83,7 +83,7 @@ from ._registers import (
     Role,
 )
 from ._retry import RetryPolicy
-from ._robot_models import RobotModel, robot_model
+from ._robot_models import PathGauge, RobotModel, robot_model
 from ._sigint import deferred
 from ._status import MovePhase, MoveProgress, RobotStatus
 from ._transport import (
@@ -251,6 +251,8 @@ class Motion:
         start: Pose | None,
         expected_s: float,
         timeout_s: float,
+        gauge: PathGauge | None = None,
+        accel_s: float = 0.0,
     ) -> None:
         self._follower = follower
         self._ticket = ticket
@@ -258,6 +260,9 @@ class Motion:
         self.target = ticket.command.target
         self.expected_s = expected_s
         self.timeout_s = timeout_s
+        #: The move's acceleration time by the arm model, s (0: not a move).
+        self.accel_s = accel_s
+        self._gauge = gauge
         self.phase = MovePhase.SENT
         self.last_pose: Pose | None = None
         self.finished_at: float | None = None
@@ -271,6 +276,18 @@ class Motion:
         self.reported_finished = False
         #: ``time.monotonic()`` when the poll that saw it reported finished returned.
         self.reported_finished_at: float | None = None
+
+    def path_fraction(self, pose: Pose) -> float | None:
+        """How much of the path the robot covered at ``pose``, by the arm model (0..1).
+
+        Args:
+            pose: a TCP pose the robot reported during the move.
+
+        Returns:
+            The fraction of the path, or None where the model cannot tell (not a move,
+            or a PTP whose distance to the target does not shrink all the way).
+        """
+        return None if self._gauge is None else self._gauge.fraction(pose)
 
     @property
     def command(self) -> Command:
@@ -1210,21 +1227,25 @@ class Robot:
         A Line whose straight path leaves the arm's range raises
         :class:`UnreachablePoseError`.
         """
-        last = self._hint_pose
-        if last is not None and start.is_close(
-            last, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
-        ):
-            # The arm is where the last move put it (the read pose differs by the
-            # registers' rounding): plan from the exact target, whose joints are known.
-            start = last
         return self.model.motion_time(
-            start,
+            self._planning_start(start),
             target,
             speed_percent=speed,
             motion=motion,
             start_joints_deg=self._joints_hint,
             tool=self.tool,
         )
+
+    def _planning_start(self, start: Pose) -> Pose:
+        """The pose a plan starts from: the last target when the arm reads as being there."""
+        last = self._hint_pose
+        if last is not None and start.is_close(
+            last, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+        ):
+            # The arm is where the last move put it (the read pose differs by the
+            # registers' rounding): plan from the exact target, whose joints are known.
+            return last
+        return start
 
     def check_move(
         self,
@@ -1300,15 +1321,22 @@ class Robot:
         ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
         start: Pose | None = None
         joints: tuple[float, ...] | None = None
+        gauge: PathGauge | None = None
         expected = 0.0
         if command.target is not None:
-            start, joints, expected = self._plan(ticket, command.target)
+            start, joints, expected, gauge = self._plan(ticket, command.target)
             default_timeout = self.timeouts.for_motion(expected)
         else:
             default_timeout = self.timeouts.gripper_timeout_s
         timeout_s = timeout if timeout is not None else default_timeout
         motion = Motion(
-            self._follower, ticket, start=start, expected_s=expected, timeout_s=timeout_s
+            self._follower,
+            ticket,
+            start=start,
+            expected_s=expected,
+            timeout_s=timeout_s,
+            gauge=gauge,
+            accel_s=self.model.accel_time_s if gauge is not None else 0.0,
         )
 
         def register() -> None:
@@ -1331,8 +1359,10 @@ class Robot:
             )
         return motion
 
-    def _plan(self, ticket: Ticket, target: Pose) -> tuple[Pose, tuple[float, ...], float]:
-        """A move's start (the robot's pose and joints), its target's joints, its expected time.
+    def _plan(
+        self, ticket: Ticket, target: Pose
+    ) -> tuple[Pose, tuple[float, ...], float, PathGauge]:
+        """A move's start (the robot's pose), its target's joints, expected time and gauge.
 
         Before the write: the start pose comes from the checks' read when they made one,
         else it is read, with the joints where the profile publishes them (one request).
@@ -1347,10 +1377,18 @@ class Robot:
             self._take_robot_joints(start, joints)
         # The same solve as validate_move's when the hint did not change (cached).
         target_joints = self.model.inverse(target, seed_deg=self._joints_hint, tool=self.tool)
-        expected = self.expected_motion_time(
-            start, target, command.speed or 100, MotionType(command.kind.value)
+        motion = MotionType(command.kind.value)
+        expected = self.expected_motion_time(start, target, command.speed or 100, motion)
+        gauge = PathGauge.of(
+            self.model,
+            self._planning_start(start),
+            target,
+            motion=motion,
+            start_joints_deg=self._joints_hint,
+            target_joints_deg=target_joints,
+            tool=self.tool,
         )
-        return start, target_joints, expected
+        return start, target_joints, expected, gauge
 
     def _take_robot_joints(self, pose: Pose, joints: tuple[float, ...]) -> None:
         """Plan from the joints the robot reported at ``pose``, unless they are the hint's.

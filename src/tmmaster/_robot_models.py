@@ -430,6 +430,88 @@ class RobotModel(BaseModel):
         return self.ptp_time(first, last, speed_percent=speed_percent, accel_time_s=accel_time_s)
 
 
+class PathGauge:
+    """How much of a move's path a pose the robot reports has covered, by the arm model.
+
+    A Line's TCP runs along a straight segment, so the fraction is the pose's
+    projection on it. A PTP's joints share one profile, so the TCP passes the forward
+    kinematics of the interpolated joints: the fraction is read from the remaining
+    distance to the target along those samples, where it decreases all the way (else
+    the gauge cannot tell, and says None).
+    """
+
+    __slots__ = ("_line", "_remaining", "_rotation", "_start", "_target", "_total")
+
+    #: Samples along a PTP's joint path.
+    SAMPLES = 20
+
+    def __init__(self, start: Pose, target: Pose, remaining: tuple[float, ...] | None) -> None:
+        self._start, self._target = start, target
+        self._line = remaining is None
+        self._remaining = remaining or ()
+        self._total = start.distance_to(target)
+        self._rotation = self._total < 1.0  # a pure rotation: gauge the angle instead
+
+    def fraction(self, pose: Pose) -> float | None:
+        """The fraction (0..1) of the path covered at ``pose``; None when it cannot tell."""
+        start, target = self._start, self._target
+        if self._rotation:
+            total = start.rotation_to(target)
+            if total < 0.5:
+                return None
+            return min(max(1.0 - pose.rotation_to(target) / total, 0.0), 1.0)
+        if self._line:
+            along = (
+                (pose.x - start.x) * (target.x - start.x)
+                + (pose.y - start.y) * (target.y - start.y)
+                + (pose.z - start.z) * (target.z - start.z)
+            )
+            return min(max(along / self._total**2, 0.0), 1.0)
+        left = pose.distance_to(target)
+        samples = self._remaining
+        for i in range(len(samples) - 1):
+            if samples[i] >= left >= samples[i + 1]:
+                span = samples[i] - samples[i + 1]
+                step = 1.0 / (len(samples) - 1)
+                return step * (i + (samples[i] - left) / span if span > 0 else i)
+        return None
+
+    @classmethod
+    def of(
+        cls,
+        model: RobotModel,
+        start: Pose,
+        target: Pose,
+        *,
+        motion: MotionType,
+        start_joints_deg: Sequence[float] | None,
+        target_joints_deg: Sequence[float],
+        tool: Pose | None,
+    ) -> PathGauge:
+        """The gauge of a move from ``start`` (at ``start_joints_deg``) to ``target``."""
+        if motion is MotionType.LINE or start.distance_to(target) < 1.0:
+            return cls(start, target, None)
+        first = model._start_joints(start, start_joints_deg, tool)
+        return _cached_gauge(model, start, target, _rounded(first), _six(target_joints_deg), tool)
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_gauge(
+    model: RobotModel, start: Pose, target: Pose, first: Joints, last: Joints, tool: Pose | None
+) -> PathGauge:
+    # A repeating cycle gauges the same moves: forward kinematics once per move.
+    n = PathGauge.SAMPLES
+    remaining = tuple(
+        model.forward(
+            [a + (b - a) * k / n for a, b in zip(first, last, strict=True)], tool
+        ).distance_to(target)
+        for k in range(n + 1)
+    )
+    if any(b >= a for a, b in itertools.pairwise(remaining)):
+        remaining = ()  # not decreasing all the way: the distance cannot tell the progress
+    return PathGauge(start, target, remaining)
+
+
 @functools.lru_cache(maxsize=1024)
 def _cached_inverse(
     model: RobotModel, pose: Pose, seed: Joints, tool: Pose | None, same_branch: bool

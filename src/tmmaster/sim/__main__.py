@@ -65,6 +65,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="simulated seconds per wall second (default: 1.0)",
     )
     parser.add_argument(
+        "--speed-factor",
+        type=float,
+        default=1.0,
+        metavar="K",
+        help="the arm moves K times faster than the arm model the master plans with"
+        " (0.1..10, default: 1; for testing a master against a robot it does not predict)",
+    )
+    parser.add_argument(
         "--tick-hz",
         type=float,
         default=50.0,
@@ -205,6 +213,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             tool=_tool(args.tool),
             resume_after_error=args.resume_after_error == "on",
             program=args.program,
+            speed_factor=args.speed_factor,
         )
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
         print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)

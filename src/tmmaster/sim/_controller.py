@@ -88,7 +88,9 @@ class MotionRecord:
     kind: str
     #: Sequence number of the command (tmflow), 0 for the article profile.
     seq: int
+    #: The motion's target (None for a gripper action).
     target: Pose | None
+    #: The motion's speed, % (None for a gripper action).
     speed: float | None
     #: Simulated seconds since the controller started.
     sim_time_s: float
@@ -143,6 +145,7 @@ class RobotController(SimDevice[RobotProfile]):
         gripper_speed_mm_s: float = 100.0,
         gripper_force_n: float = 40.0,
         initial_seq: int = 0,
+        speed_factor: float = 1.0,
     ) -> None:
         if accel_time_s is not None and accel_time_s < 0:
             raise ConfigError(f"accel_time_s must be >= 0, got {accel_time_s}")
@@ -176,6 +179,9 @@ class RobotController(SimDevice[RobotProfile]):
         self._gripper_speed = gripper_speed_mm_s
         self._gripper_force = gripper_force_n
         self._initial_seq = initial_seq
+        #: The arm is this many times faster than the model (its backend moves by a
+        #: model with the speeds scaled): acceleration times shrink by as much.
+        self._speed_factor = speed_factor
 
         self._active: _Active | None = None
         self._error_code = 0
@@ -409,7 +415,10 @@ class RobotController(SimDevice[RobotProfile]):
         number = self._moves_started + 1
         try:
             expected = self._backend.start_motion(
-                target, motion=motion, speed_percent=speed, accel_time_s=accel
+                target,
+                motion=motion,
+                speed_percent=speed,
+                accel_time_s=accel / self._speed_factor,
             )
         except MotionRejectedError as exc:  # the backend's own reach / limit check
             self._log.warning(

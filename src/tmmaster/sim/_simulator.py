@@ -88,6 +88,7 @@ class Simulator:
         tool: Pose | None = None,
         resume_after_error: bool = False,
         program: str | Path | None = None,
+        speed_factor: float = 1.0,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
@@ -106,6 +107,10 @@ class Simulator:
         self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
         if backend is not None and physics != "kinematic":
             raise ConfigError("give either backend or physics, not both")
+        if not (isinstance(speed_factor, int | float) and 0.1 <= speed_factor <= 10):
+            raise ConfigError(f"speed_factor must be a number in 0.1..10, got {speed_factor!r}")
+        if speed_factor != 1 and backend is not None:
+            raise ConfigError("speed_factor: give your own backend a model with its speeds")
         if tool is not None and backend is not None:
             raise ConfigError("tool: give the tool offset to your own backend, not to Simulator")
         #: The TCP in the flange frame (TCP = flange x tool); None: the TCP is the flange.
@@ -113,7 +118,9 @@ class Simulator:
         self._backend: PhysicsBackend = (
             backend
             if backend is not None
-            else physics_backend(physics, self._model, world=World(objects), tool=tool)
+            else physics_backend(
+                physics, _faster(self._model, speed_factor), world=World(objects), tool=tool
+            )
         )
         all_faults = [_as_fault(f) for f in faults]
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
@@ -141,6 +148,7 @@ class Simulator:
             faults=device,
             init_time_s=init_time_s,
             initial_seq=initial_seq,
+            speed_factor=float(speed_factor),
             **handshake_options,
         )
         self._robot_server = DeviceServer(
@@ -535,6 +543,22 @@ def _script_project(
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(f"program {path}: cannot read it ({exc})") from exc
     return ScriptProjectController, {"program": text}
+
+
+def _faster(model: RobotModel, factor: float) -> RobotModel:
+    """The arm ``factor`` times faster than ``model``: every move takes 1/factor the time."""
+    if factor == 1:
+        return model
+    joints = tuple(
+        j.model_copy(update={"speed_deg_s": j.speed_deg_s * factor}) for j in model.joints
+    )
+    return model.model_copy(
+        update={
+            "joints": joints,
+            "tcp_speed_mm_s": model.tcp_speed_mm_s * factor,
+            "accel_time_s": model.accel_time_s / factor,
+        }
+    )
 
 
 def physics_backend(

@@ -1,0 +1,139 @@
+"""The wait reads the robot's pace from the poses it reports, not from the model alone.
+
+* :class:`PathGauge`: how much of a move's path a reported pose has covered (a Line's
+  projection; a PTP's joint interpolation, by the model's forward kinematics).
+* A profile whose poll carries no pose (tmflow) reads it on the polls the schedule
+  asks to observe, and only on those.
+* :class:`FollowState` hands each new pose to the schedule: the predicted end moves.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import pytest
+
+import tmmaster
+from tmmaster import MotionType, PollPolicy, Pose
+from tmmaster._channels import Command, CommandKind, Ticket, channel_for
+from tmmaster._following import FollowState
+from tmmaster._profiles import robot_profile
+from tmmaster._robot_models import PathGauge, trapezoid_progress
+from tmmaster._status import MovePhase
+
+TM5 = tmmaster.robot_model("tm5-700")
+START = Pose(300, -200, 250, 180, 0, 90)
+TARGET = Pose(-100, 350, 150, 180, 0, 0)
+
+
+def test_a_line_is_gauged_along_its_segment() -> None:
+    gauge = PathGauge.of(
+        TM5,
+        START,
+        TARGET,
+        motion=MotionType.LINE,
+        start_joints_deg=None,
+        target_joints_deg=TM5.inverse(TARGET),
+        tool=None,
+    )
+    halfway = Pose(100, 75, 200, 180, 0, 45)
+    assert gauge.fraction(halfway) == pytest.approx(0.5)
+    assert gauge.fraction(START) == 0.0
+    assert gauge.fraction(TARGET) == 1.0
+
+
+@pytest.mark.parametrize("progress", [0.1, 0.3, 0.5, 0.8])
+def test_a_ptp_is_gauged_by_its_joint_path(progress: float) -> None:
+    first = TM5.inverse(START)
+    last = TM5.inverse(TARGET, seed_deg=first)
+    gauge = PathGauge.of(
+        TM5,
+        START,
+        TARGET,
+        motion=MotionType.PTP,
+        start_joints_deg=first,
+        target_joints_deg=last,
+        tool=None,
+    )
+    on_the_way = TM5.forward([a + (b - a) * progress for a, b in zip(first, last, strict=True)])
+    # The straight-line distance would say otherwise: the TCP swings round the base.
+    fraction = gauge.fraction(on_the_way)
+    assert fraction == pytest.approx(progress, abs=0.01)
+
+
+class _NoIO:
+    stats = tmmaster.TransportStats()
+    state = tmmaster.ConnectionState.CONNECTED
+
+    def __getattr__(self, name: str) -> Any:
+        raise AssertionError(f"a poll used the transport directly ({name})")
+
+
+def _run_poll(channel: Any, ticket: Ticket, values: dict[str, Any]) -> tuple[Any, list[str]]:
+    steps = channel.poll_steps(ticket)
+    read: list[str] = []
+    fields = next(steps)
+    while True:
+        read += [f.name for f in fields]
+        try:
+            fields = steps.send({f.name: values.get(f.name, 0) for f in fields})
+        except StopIteration as finished:
+            return finished.value, read
+
+
+def test_a_tmflow_poll_reads_the_pose_only_when_asked() -> None:
+    channel = channel_for(robot_profile("tmflow"), _NoIO())  # type: ignore[arg-type]
+    ticket = Ticket(Command(CommandKind.PTP, TARGET, 50), [], 0.0, seq=1)
+    running = {
+        "ack_seq": 1,
+        "done_seq": 0,
+        "robot_state": 1,
+        "project_running": True,
+        **dict(zip(("tcp_x", "tcp_y", "tcp_z", "tcp_rx", "tcp_ry", "tcp_rz"), START, strict=True)),
+    }
+    observation, read = _run_poll(channel, ticket, running)
+    assert observation.pose is None
+    assert "tcp_x" not in read
+    ticket.observe_pose = True
+    observation, read = _run_poll(channel, ticket, running)
+    assert observation.pose == START
+    assert "tcp_x" in read
+    assert not ticket.observe_pose  # once per request
+
+
+class _Motion:
+    """What a wait needs of a motion, moving at half the model's pace."""
+
+    def __init__(self, ticket: Ticket) -> None:
+        self.ticket = ticket
+        self.phase = MovePhase.RUNNING
+        self.expected_s = 2.0
+        self.timeout_s = 10.0
+        self.last_pose: Pose | None = None
+        self.accel_s = 0.2
+
+    def path_fraction(self, pose: Pose) -> float | None:
+        return pose.x / 100.0  # the test's poses carry their progress in x
+
+
+def test_each_new_pose_moves_the_predicted_end() -> None:
+    ticket = Ticket(Command(CommandKind.PTP, TARGET, 50), [], 0.0, seq=1)
+    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
+    motion = _Motion(ticket)
+    follow = FollowState(
+        motion,
+        None,
+        stop_event=threading.Event(),
+        poll_interval_s=0.05,
+        polling=PollPolicy(),
+        ack_timeout_s=1.0,
+    )
+    follow.poll_started = 0.0
+    follow.due()
+    assert follow.schedule.expected_end == pytest.approx(2.0)
+    # One second in, the robot has covered what the model covers in half a second.
+    follow.poll_started = 1.0
+    motion.last_pose = Pose(100 * trapezoid_progress(0.5, 2.0, 0.2), 0, 300, 180, 0, 0)
+    follow.due()
+    assert follow.schedule.expected_end == pytest.approx(4.0, rel=0.01)
