@@ -2,10 +2,14 @@
 
 This one inspects a part: it picks it, shows it to a camera, and puts it back where it
 was. Polling, timeouts, retries, stop requests, logging and timing per state come from
-the runner, exactly as for the built-in pick & place.
+the runner, exactly as for the built-in pick & place. Start the simulator in one
+terminal, then the example in another::
 
-    python -m tmmaster.sim --port 5020 --profile article
+    python -m tmmaster.sim --port 5020
     python examples/custom_sequence.py --port 5020
+
+Both speak the ``tmflow`` profile unless told otherwise (``--profile article`` on both
+for the article's map).
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import Pose, Robot, TMMasterError, configure_logging
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, configure_logging
 from tmmaster.pickplace import RetryRule, Runner, StepContext, TaskSequence, mermaid
 
 PART = Pose(300, -200, 100, 180, 0, 90)
@@ -62,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=5020)
-    parser.add_argument("--profile", default="article")
+    parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"default: {DEFAULT_PROFILE}")
     parser.add_argument("--settle", type=float, default=0.5, help="gripper settle time, s")
     parser.add_argument("--diagram", action="store_true", help="print the mermaid diagram")
     args = parser.parse_args(argv)

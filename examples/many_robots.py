@@ -41,13 +41,16 @@ Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
 
 or against robots (or simulators) already listening on consecutive ports::
 
-    python -m tmmaster.sim --port 5020 --profile article &
-    python -m tmmaster.sim --port 5021 --profile article &
+    python -m tmmaster.sim --port 5020 &
+    python -m tmmaster.sim --port 5021 &
     python examples/many_robots.py --host 127.0.0.1 --ports 5020 5021
 
 and from several processes (here 2, each driving 4 of 8 simulators)::
 
     python examples/many_robots.py --sim 8 --processes 2
+
+Robots and simulators speak the ``tmflow`` profile unless told otherwise
+(``--profile article`` here, and on simulators you start, for the article's map).
 """
 
 from __future__ import annotations
@@ -64,7 +67,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from tmmaster import Fleet, MonitoredStatus, Pose, Robot, StatusMonitor, TMMasterError
+from tmmaster import (
+    DEFAULT_PROFILE,
+    Fleet,
+    MonitoredStatus,
+    Pose,
+    Robot,
+    StatusMonitor,
+    TMMasterError,
+)
 from tmmaster.sim import Simulator
 
 HOST = "127.0.0.1"
@@ -107,7 +118,7 @@ def run(
     *,
     host: str = HOST,
     moves: int = 6,
-    profile: str = "article",
+    profile: str = DEFAULT_PROFILE,
     watch_hz: float = 10.0,
     first_index: int = 0,
     fleet: bool = True,
@@ -230,7 +241,7 @@ def run_in_processes(
     processes: int,
     host: str = HOST,
     moves: int = 6,
-    profile: str = "article",
+    profile: str = DEFAULT_PROFILE,
     watch_hz: float = 10.0,
     first_index: int = 0,
     fleet: bool = True,
@@ -280,7 +291,7 @@ def drive_all(
     processes: int = 1,
     host: str = HOST,
     moves: int = 6,
-    profile: str = "article",
+    profile: str = DEFAULT_PROFILE,
     watch_hz: float = 10.0,
     first_index: int = 0,
     fleet: bool = True,
@@ -307,12 +318,20 @@ def run_with_simulators(
     watch_hz: float = 10.0,
     processes: int = 1,
     fleet: bool = True,
+    profile: str = DEFAULT_PROFILE,
 ) -> list[RobotReport]:
     """Start ``n`` simulators on 127.0.0.1 in this process, drive them, close them."""
-    sims = [Simulator("article", time_scale=time_scale).start() for _ in range(n)]
+    sims = [Simulator(profile, time_scale=time_scale).start() for _ in range(n)]
     try:
         ports = [s.port for s in sims]
-        return drive_all(ports, processes=processes, moves=moves, watch_hz=watch_hz, fleet=fleet)
+        return drive_all(
+            ports,
+            processes=processes,
+            moves=moves,
+            profile=profile,
+            watch_hz=watch_hz,
+            fleet=fleet,
+        )
     finally:
         for sim in sims:
             sim.close()
@@ -340,7 +359,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--host", default=HOST)
     parser.add_argument("--ports", type=int, nargs="+", default=None)
     parser.add_argument("--moves", type=int, default=6)
-    parser.add_argument("--profile", default="article")
+    parser.add_argument(
+        "--profile", default=DEFAULT_PROFILE, help=f"robots' profile (default: {DEFAULT_PROFILE})"
+    )
     parser.add_argument("--time-scale", type=float, default=10.0, help="with --sim")
     parser.add_argument(
         "--watch-hz", type=float, default=10.0, help="status watch rate; 0: no watch"
@@ -389,6 +410,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 watch_hz=args.watch_hz,
                 processes=args.processes,
                 fleet=args.fleet,
+                profile=args.profile,
             )
     except Interrupted as exc:
         if exc.unconfirmed:

@@ -1,10 +1,17 @@
 """Palletizing: pick parts from one spot and place them into a rows x cols grid.
 
-    python -m tmmaster.sim --port 5020 --profile article --parts 6
+Start the simulator in one terminal (six parts waiting at the pick position, one for
+each slot of a 2 x 3 pallet), then the example in another::
+
+    python -m tmmaster.sim --port 5020 --parts 6
     python examples/palletizing.py --port 5020 --rows 2 --cols 3
 
-Poses stay within +/-327.67 mm, the range of the article profile's int16 x100 registers,
-and every move is checked by the TM5-700's inverse kinematics before anything is sent.
+Both speak the ``tmflow`` profile unless told otherwise (``--profile article`` on both
+for the article's map). Every move is checked before anything is sent: against the
+profile's registers and by the TM5-700's inverse kinematics. Pallets of up to 3 x 3
+slots and 3 layers at the default pitch stay within +/-327.67 mm, the range of the
+article profile's int16 x100 registers, and well above the table; a slot out of range
+or out of reach is refused with its number before the first move.
 """
 
 from __future__ import annotations
@@ -12,12 +19,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import DEFAULT_HOME, Pose, Robot, TMMasterError, configure_logging
+from tmmaster import DEFAULT_HOME, DEFAULT_PROFILE, Pose, Robot, TMMasterError, configure_logging
 from tmmaster.pickplace import Pallet, Runner, palletizing, validate_plan
 
 PICK = Pose(300, -200, 100, 180, 0, 90)
 HOME = DEFAULT_HOME  # tool down, 250 mm in front of J1: reachable by a TM5-700
-PALLET_ORIGIN = Pose(260, 100, 100, 180, 0, 90)
+#: Slot 1; columns go along +x, rows along +y, layers up (a part's centre, 100 mm up).
+PALLET_ORIGIN = Pose(240, 140, 100, 180, 0, 90)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,7 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=5020)
-    parser.add_argument("--profile", default="article")
+    parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"default: {DEFAULT_PROFILE}")
     parser.add_argument("--rows", type=int, default=2)
     parser.add_argument("--cols", type=int, default=2)
     parser.add_argument("--layers", type=int, default=1)
@@ -50,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             args.host, args.port, profile=args.profile, gripper_settle_s=args.settle
         ) as robot:
             # Every slot is checked against the profile before the first move.
-            validate_plan(robot, sequence, pallet.size, source="palletizing")
+            validate_plan(robot, sequence, pallet.size, source=f"{args.rows}x{args.cols} pallet")
             result = Runner(robot).run(sequence)
     except TMMasterError as exc:
         print(f"palletizing: {exc}", file=sys.stderr)

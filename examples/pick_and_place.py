@@ -1,11 +1,13 @@
 """Pick & place from your own script: the article's cycle through the Python API.
 
-Run it against the simulator in another terminal::
+Start the simulator in one terminal, then the example in another::
 
-    python -m tmmaster.sim --port 5020 --profile article
+    python -m tmmaster.sim --port 5020
     python examples/pick_and_place.py --port 5020 --cycles 1
 
-Against a robot: ``--host 192.168.1.100 --port 502 --profile tmflow``.
+Both speak the ``tmflow`` profile unless told otherwise (``--profile article`` on both
+for the article's map). Against a robot running the robot program
+(docs/tmflow-program.md): ``--host 192.168.1.100 --port 502``.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import TMMasterError, configure_logging
+from tmmaster import DEFAULT_PROFILE, TMMasterError, configure_logging
 from tmmaster.pickplace import Runner, load_config, pick_and_place, robot_from_config, validate_plan
 
 
@@ -22,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=5020)
-    parser.add_argument("--profile", default="article")
+    parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"default: {DEFAULT_PROFILE}")
     parser.add_argument("--config", default=None, help="a pick & place TOML file")
     parser.add_argument("--cycles", type=int, default=1)
     args = parser.parse_args(argv)

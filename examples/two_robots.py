@@ -1,12 +1,18 @@
 """Two robots, one program: robot A hands a part over to robot B.
 
-Robot A picks the part at its pick position and puts it down on a handover table;
-robot B picks it up from the handover table and puts it down at its own place
-position. Each robot is driven from its own thread (the library is synchronous: one
-thread per robot is the simple, measured choice, see docs/architecture.md), and the
-threads coordinate with a :class:`threading.Barrier` (both ready) and a
-:class:`threading.Event` (A has released the part and moved clear): B's descent to the
-handover table starts only after that event.
+Robot A picks the part at its pick position, puts it down on a handover table and moves
+clear; robot B, waiting clear of the table, then picks it up from the handover table and
+puts it down at its own place position. Each robot is driven from its own thread (the
+library is synchronous: one thread per robot is the simple, measured choice, see
+docs/architecture.md), and the threads coordinate with a :class:`threading.Barrier`
+(both ready) and a :class:`threading.Event` (A has released the part and moved clear):
+B's move to the handover table starts only after that event.
+
+The two robots stand side by side, facing the same way: B's base is ``B_OFFSET_Y_MM``
+(400 mm) along A's y axis. Each robot is given poses in its own base frame, so the
+handover point is ``HANDOVER`` for A and ``HANDOVER_B``, the same point, for B. With
+real robots, measure where B's base stands in A's frame (calibrate it) and set the
+offset, and check that the waiting and clearing poses keep the two arms apart.
 
 Run against two simulators it starts itself (the default)::
 
@@ -14,18 +20,20 @@ Run against two simulators it starts itself (the default)::
 
 or against two robots (or simulators) already listening::
 
-    python -m tmmaster.sim --port 5020 --profile article &
-    python -m tmmaster.sim --port 5030 --profile article &
+    python -m tmmaster.sim --port 5020 &
+    python -m tmmaster.sim --port 5030 &
     python examples/two_robots.py --host 127.0.0.1 --port-a 5020 --port-b 5030
+
+Both speak the ``tmflow`` profile unless told otherwise (``--profile article`` on the
+simulators and here for the article's map, which is only safe against its simulator).
 
 Be aware of what the simulation does NOT do: the two simulators do not share a world.
 A's part really travels in A's simulated world (it ends up on A's handover table), but
-nothing carries it into B's: with ``--sim`` this script gives B's simulator its own
-part, placed at the handover pose from the start. Only the coordination between the
-two programs is real here; the handover itself is modelled by giving both worlds a
-part at the same coordinates. With real robots the handover pose must be one point
-expressed in both robots' base frames (calibrate it); this script assumes the two
-base frames coincide.
+nothing carries it into B's: B's simulator has a part of its own at the handover point
+from the start. The simulator puts its parts at ``PICK_A``'s coordinates unless told
+otherwise, which is where A picks and, in B's frame, the handover point: so the two
+simulators above need no options. Only the coordination between the two programs is
+real here; the handover itself is modelled by giving both worlds a part.
 """
 
 from __future__ import annotations
@@ -37,15 +45,19 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from tmmaster import Pose, Robot, TMMasterError
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError
 from tmmaster.sim import ObjectState, Simulator, TableObject
 
 HOST = "127.0.0.1"
-#: Where robot A's part lies (the article's pick position).
+#: Where B's base stands, along A's y axis (B faces the same way as A), mm.
+B_OFFSET_Y_MM = 400.0
+#: Where robot A's part lies (the article's pick position), in A's frame.
 PICK_A = Pose(300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
-#: The handover table, one pose for both robots (see the module docstring).
-HANDOVER = Pose(300.0, 0.0, 100.0, 180.0, 0.0, 90.0)
-#: Where robot B puts the part down.
+#: The handover table in A's frame (the article's place position, on the table)...
+HANDOVER = Pose(300.0, 200.0, 100.0, 180.0, 0.0, 90.0)
+#: ... and the same point in B's frame.
+HANDOVER_B = HANDOVER.offset(dy=-B_OFFSET_Y_MM)
+#: Where robot B puts the part down, in B's frame.
 PLACE_B = Pose(300.0, 200.0, 100.0, 180.0, 0.0, 90.0)
 #: Approach and retreat height above a pick or place pose, mm.
 CLEARANCE_MM = 100.0
@@ -104,35 +116,43 @@ def place(robot: Robot, pose: Pose) -> None:
 
 
 def robot_a(robot: Robot, shared: Handover) -> None:
-    """A: pick the part, put it on the handover table, then tell B."""
+    """A: pick the part, put it on the handover table, move clear, then tell B."""
     robot.wait_until_ready()
     shared.ready.wait(HANDOVER_TIMEOUT_S)
     pick(robot, PICK_A)
     shared.log("A", "picked")
     place(robot, HANDOVER)
-    # Only now, with A's fingers open and A back up, may B come down.
+    # Only now, with A's fingers open and A back over its own pick position, may B come.
+    robot.move_to(above(PICK_A), speed=SPEED)
     shared.log("A", "released")
     shared.released.set()
 
 
 def robot_b(robot: Robot, shared: Handover) -> None:
-    """B: wait above the handover table until A has released, then take the part over."""
+    """B: wait clear of the handover table until A has released, then take the part over."""
     robot.wait_until_ready()
     shared.ready.wait(HANDOVER_TIMEOUT_S)
-    robot.move_to(above(HANDOVER), speed=SPEED)
-    shared.log("B", "waiting above handover")
+    robot.move_to(above(PLACE_B), speed=SPEED)
+    shared.log("B", "waiting clear of handover")
     if not shared.released.wait(HANDOVER_TIMEOUT_S):
         raise TimeoutError(f"A did not release the part within {HANDOVER_TIMEOUT_S:g} s")
     if shared.failed.is_set():
         raise RuntimeError("robot A failed: no handover")
-    shared.log("B", "descending to handover")
-    pick(robot, HANDOVER)
+    shared.log("B", "going to handover")
+    pick(robot, HANDOVER_B)
     shared.log("B", "picked")
     place(robot, PLACE_B)
     shared.log("B", "placed")
 
 
-def run(port_a: int, port_b: int, *, host: str = HOST, settle_s: float = 0.5) -> Handover:
+def run(
+    port_a: int,
+    port_b: int,
+    *,
+    host: str = HOST,
+    profile: str = DEFAULT_PROFILE,
+    settle_s: float = 0.5,
+) -> Handover:
     """Drive both robots, one thread each; errors are collected in the result."""
     shared = Handover()
     jobs: dict[str, tuple[int, Callable[[Robot, Handover], None]]] = {
@@ -144,7 +164,7 @@ def run(port_a: int, port_b: int, *, host: str = HOST, settle_s: float = 0.5) ->
         port, job = jobs[name]
         try:
             with Robot(
-                host, port, profile="article", gripper_settle_s=settle_s, name=f"robot-{name}"
+                host, port, profile=profile, gripper_settle_s=settle_s, name=f"robot-{name}"
             ) as robot:
                 job(robot, shared)
         except BaseException as exc:  # reported by main(); the other robot is told
@@ -170,18 +190,18 @@ class SimResult:
     objects_b: list[ObjectState]
 
 
-def run_with_simulators(time_scale: float = 10.0) -> SimResult:
-    """Start two article simulators (A: part at PICK_A; B: part at HANDOVER) and run."""
+def run_with_simulators(time_scale: float = 10.0, *, profile: str = DEFAULT_PROFILE) -> SimResult:
+    """Start two simulators (A: part at PICK_A; B: part at HANDOVER_B) and run."""
     sim_a = Simulator(
-        "article", time_scale=time_scale, objects=[TableObject(name="part", pose=PICK_A)]
+        profile, time_scale=time_scale, objects=[TableObject(name="part", pose=PICK_A)]
     )
-    # B's world gets its own part at the handover pose: the worlds are not linked.
+    # B's world gets its own part at the handover point: the worlds are not linked.
     sim_b = Simulator(
-        "article", time_scale=time_scale, objects=[TableObject(name="part", pose=HANDOVER)]
+        profile, time_scale=time_scale, objects=[TableObject(name="part", pose=HANDOVER_B)]
     )
     with sim_a, sim_b:
         # The gripper's settle time is physical time: scale it with the simulation.
-        shared = run(sim_a.port, sim_b.port, settle_s=1.0 / time_scale)
+        shared = run(sim_a.port, sim_b.port, profile=profile, settle_s=1.0 / time_scale)
         return SimResult(shared, sim_a.objects(), sim_b.objects())
 
 
@@ -205,29 +225,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--host", default=HOST, help="robots' host (default 127.0.0.1)")
     parser.add_argument("--port-a", type=int, help="robot A's Modbus TCP port")
     parser.add_argument("--port-b", type=int, help="robot B's Modbus TCP port")
+    parser.add_argument(
+        "--profile",
+        default=DEFAULT_PROFILE,
+        help=f"both robots' profile (default: {DEFAULT_PROFILE})",
+    )
     parser.add_argument("--time-scale", type=float, default=10.0, help="with --sim")
     parser.add_argument("--settle", type=float, default=0.5, help="gripper settle time, s")
     args = parser.parse_args(argv)
     given = (args.port_a, args.port_b)
+    checked = ""
     if args.sim or given == (None, None):
         if given != (None, None):
             parser.error("--sim starts its own simulators: do not give --port-a/--port-b")
-        result = run_with_simulators(args.time_scale)
+        result = run_with_simulators(args.time_scale, profile=args.profile)
         shared = result.handover
         problems = [] if shared.errors else check_worlds(result)
         for problem in problems:
             print(f"FAILED check: {problem}", file=sys.stderr)
+        checked = ", both simulated parts where expected"
     elif None in given:
         parser.error("give both --port-a and --port-b (or --sim)")
     else:
-        shared = run(args.port_a, args.port_b, host=args.host, settle_s=args.settle)
+        shared = run(
+            args.port_a, args.port_b, host=args.host, profile=args.profile, settle_s=args.settle
+        )
         problems = []
     for name, error in sorted(shared.errors.items()):
         kind = "robot error" if isinstance(error, TMMasterError) else "error"
         print(f"robot {name} failed ({kind}): {error!r}", file=sys.stderr)
     if shared.errors or problems:
         return 1
-    print("handover done: A released before B came down, both parts where expected")
+    print(f"handover done: A released and moved clear before B came{checked}")
     return 0
 
 

@@ -71,12 +71,13 @@ def tm_simulator_factory(
 ) -> Callable[..., Simulator]:
     """The plugin's factory with the suite's faster defaults (``sim_speeds.SUITE_TIME_SCALE``).
 
+    The tmflow profile, as everywhere, unless a test asks for another (``"article"``).
     40x real time with a 100 Hz tick (each tick still advances 0.4 simulated seconds, as
     the plugin's 20x at 50 Hz does). A test whose subject is a wall-clock delay passes
     its own time_scale.
     """
 
-    def make(profile: Any = "article", **options: Any) -> Simulator:
+    def make(profile: Any = "tmflow", **options: Any) -> Simulator:
         options.setdefault("time_scale", SUITE_TIME_SCALE)
         options.setdefault("tick_hz", SUITE_TICK_HZ)
         return tm_simulator_factory(profile, **options)
@@ -93,7 +94,7 @@ def memory_simulator_factory(
     A module whose subject is not TCP overrides ``tm_simulator_factory`` with this one.
     """
 
-    def make(profile: Any = "article", **options: Any) -> Simulator:
+    def make(profile: Any = "tmflow", **options: Any) -> Simulator:
         return tm_simulator_factory(profile, listen=False, **options)
 
     return make
@@ -164,6 +165,7 @@ _LONGEST_FIRST = (
     "test_cli_ux.py",
     "test_safety_regressions.py",
     "test_sim_mujoco.py",
+    "test_examples_docstrings.py",
     "test_examples.py",
     "test_pickplace.py",
     "test_examples_two_robots.py",

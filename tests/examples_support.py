@@ -1,8 +1,11 @@
-"""Import the scripts in ``examples/`` as modules (they are not part of the package)."""
+"""The scripts in ``examples/``: import them as modules (they are not part of the package), read
+the commands their docstrings document."""
 
 from __future__ import annotations
 
+import ast
 import importlib.util
+import shlex
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -20,3 +23,25 @@ def load_example(name: str) -> ModuleType:
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def documented_commands(name: str) -> list[list[list[str]]]:
+    """The command lines of ``examples/<name>.py``'s docstring, in blocks, split like a shell.
+
+    A command line is one whose text starts with ``python ``; consecutive command lines
+    form one block (run together: simulators, then the example). A trailing ``&`` (run
+    in the background) is dropped.
+    """
+    source = (EXAMPLES / f"{name}.py").read_text(encoding="utf-8")
+    docstring = ast.get_docstring(ast.parse(source)) or ""
+    blocks: list[list[list[str]]] = []
+    block: list[list[str]] = []
+    for line in [*docstring.splitlines(), ""]:
+        text = line.strip()
+        if text.startswith("python "):
+            words = shlex.split(text)
+            block.append(words[:-1] if words[-1] == "&" else words)
+        elif block:
+            blocks.append(block)
+            block = []
+    return blocks

@@ -29,14 +29,15 @@ PLACED = Pose(PLACE.x, PLACE.y, PICK.z, PLACE.rx, PLACE.ry, PLACE.rz)
 
 # The examples' runs are checked for their outcome (exit code, where the parts end up),
 # not for a wall-clock delay: their simulators run at sim_speeds.QUICK (the examples
-# poll every 50 ms).
+# poll every 50 ms). The commands of their docstrings run them on the default tmflow
+# profile (test_examples_docstrings.py); most of these run them on the article's map.
 
 SimFactory = Callable[..., Simulator]
 
 
 def target(sim: Simulator) -> list[str]:
-    """The --host/--port arguments of ``sim``."""
-    return ["--host", "127.0.0.1", "--port", str(sim.port)]
+    """The --host/--port/--profile arguments of ``sim``."""
+    return ["--host", "127.0.0.1", "--port", str(sim.port), "--profile", sim.profile.name]
 
 
 @pytest.fixture
@@ -49,7 +50,7 @@ def fast_config(tmp_path: Path) -> Path:
 
 def test_pick_and_place_example(tm_simulator_factory: SimFactory, fast_config: Path) -> None:
     sim = tm_simulator_factory(
-        objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(2)], **QUICK
+        "article", objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(2)], **QUICK
     )
     argv = [*target(sim), "--cycles", "2", "--config", str(fast_config)]
     assert load_example("pick_and_place").main(argv) == 0
@@ -62,7 +63,8 @@ def test_pick_and_place_example(tm_simulator_factory: SimFactory, fast_config: P
 
 
 def test_custom_sequence_example(tm_simulator_factory: SimFactory) -> None:
-    sim = tm_simulator_factory(faults=["grasp_miss:at_grasp=1"], **QUICK)  # exercises the retry
+    # A missed grasp exercises the retry.
+    sim = tm_simulator_factory("article", faults=["grasp_miss:at_grasp=1"], **QUICK)
     assert load_example("custom_sequence").main([*target(sim), "--settle", "0.05"]) == 0
     (part,) = sim.objects()
     assert part.pose.is_close(PICK, mm=1.0)  # put back where it was
@@ -71,7 +73,7 @@ def test_custom_sequence_example(tm_simulator_factory: SimFactory) -> None:
 
 def test_palletizing_example(tm_simulator_factory: SimFactory) -> None:
     sim = tm_simulator_factory(
-        objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(4)], **QUICK
+        "article", objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(4)], **QUICK
     )
     argv = [*target(sim), "--rows", "2", "--cols", "2", "--settle", "0.05"]
     assert load_example("palletizing").main(argv) == 0
@@ -88,7 +90,6 @@ def test_toml_sequence_example_runs_through_the_command(
     sim = tm_simulator_factory(**QUICK)
     argv = [
         *target(sim),
-        *("--profile", "article"),  # the simulator's profile; the command defaults to tmflow
         "--config",
         str(fast_config),
         "--sequence",
@@ -107,7 +108,7 @@ def test_an_example_runs_as_a_script(
     # As ``python examples/palletizing.py ...`` runs it: __name__ == "__main__", sys.argv
     # and sys.path[0] set to the script's, its exit status from sys.exit() (in-process: a
     # new interpreter would cost most of a second of CPU importing the dependencies).
-    sim = tm_simulator_factory(objects=[TableObject(name="p", pose=PICK)], **QUICK)
+    sim = tm_simulator_factory("article", objects=[TableObject(name="p", pose=PICK)], **QUICK)
     script = EXAMPLES / "palletizing.py"
     argv = [*target(sim), "--rows", "1", "--cols", "1", "--settle", "0.05"]
     monkeypatch.setattr(sys, "argv", [str(script), *argv])

@@ -10,17 +10,14 @@ from types import ModuleType
 import pytest
 
 from examples_support import load_example
-from sim_speeds import QUICK, ticking_simulator
 from tmmaster import RobotFaultError
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
-#: The example's own simulators tick at Simulator's default 50 Hz, which allows 20x at
-#: most; its test runs them at 50x with the tick raised to match (``fast_example``).
-EXAMPLE_TIME_SCALE = 50.0
-# The simulators a test starts for the example run at QUICK: the tests count moves and
-# errors, not wall-clock times.
+# The simulators a test starts for the example run at the suite's pace (40x, 100 Hz): the
+# tests count moves and errors, not wall-clock times, and several tmflow simulators (each
+# tick runs the robot program) cost about twice the CPU at QUICK's 250 Hz, for no gain.
 
 
 @pytest.fixture(scope="module")
@@ -29,21 +26,11 @@ def example() -> ModuleType:
     return load_example("many_robots")
 
 
-@pytest.fixture
-def fast_example(example: ModuleType, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
-    """The example, its own simulators ticking fast enough for their time scale.
-
-    Only the tick rate is added: the example still starts, drives and closes them itself.
-    """
-    monkeypatch.setattr(example, "Simulator", ticking_simulator)
-    return example
-
-
 @pytest.mark.parametrize("fleet", [True, False], ids=["fleet", "no-fleet"])
 def test_every_robot_drives_its_tour(
     tm_simulator_factory: Factory, example: ModuleType, fleet: bool
 ) -> None:
-    sims = [tm_simulator_factory(**QUICK) for _ in range(4)]
+    sims = [tm_simulator_factory() for _ in range(4)]
     reports = example.run([s.port for s in sims], moves=3, watch_hz=50, fleet=fleet)
     assert [r.error for r in reports] == [None] * 4
     assert [r.moves_done for r in reports] == [3] * 4
@@ -63,8 +50,8 @@ def test_every_robot_drives_its_tour(
 def test_one_failure_stays_with_its_robot(
     tm_simulator_factory: Factory, example: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    good = [tm_simulator_factory(**QUICK) for _ in range(2)]
-    bad = tm_simulator_factory(faults=["robot_error:at_move=2"], **QUICK)
+    good = [tm_simulator_factory() for _ in range(2)]
+    bad = tm_simulator_factory(faults=["robot_error:at_move=2"])
     reports = example.run([good[0].port, bad.port, good[1].port], moves=3)
     assert [r.moves_done for r in reports] == [3, 1, 3]
     assert reports[0].error is None
@@ -78,50 +65,39 @@ def test_one_failure_stays_with_its_robot(
     assert "2 of 3 robots done" in out
 
 
-def test_main_on_its_own_simulators(
-    fast_example: ModuleType, capsys: pytest.CaptureFixture[str]
-) -> None:
-    argv = ["--sim", "3", "--moves", "2", "--time-scale", str(EXAMPLE_TIME_SCALE)]
-    assert fast_example.main(argv) == 0
-    assert "3 of 3 robots done" in capsys.readouterr().out
-
-
-def test_main_on_its_own_simulators_from_two_processes(
-    fast_example: ModuleType, capsys: pytest.CaptureFixture[str]
-) -> None:
-    # The simulators run in this process; two child processes drive them.
-    argv = ["--sim", "3", "--moves", "2", "--time-scale", str(EXAMPLE_TIME_SCALE)]
-    assert fast_example.main([*argv, "--processes", "2", "--no-fleet"]) == 0
-    out = capsys.readouterr().out
-    assert "3 of 3 robots done" in out
-    assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot")] == [
-        "robot0",
-        "robot1",
-        "robot2",
-    ]
+# main() on its own simulators, in one process and from two: the commands of the
+# example's docstring (tests/test_examples_docstrings.py).
 
 
 @pytest.mark.parametrize("fleet", [True, False], ids=["fleet", "no-fleet"])
 def test_without_a_watch_nothing_is_watched(
     tm_simulator_factory: Factory, example: ModuleType, fleet: bool
 ) -> None:
-    sim = tm_simulator_factory(**QUICK)
+    sim = tm_simulator_factory()
     (report,) = example.run([sim.port], moves=1, watch_hz=0, fleet=fleet)
     assert report.moves_done == 1
     assert report.watched is None
 
 
-@pytest.mark.parametrize("processes", ["1", "2"])
+@pytest.mark.parametrize(
+    "options", [["--processes", "1"], ["--processes", "2", "--no-fleet"]], ids=["1", "2"]
+)
 def test_main_on_given_ports(
     tm_simulator_factory: Factory,
     example: ModuleType,
-    processes: str,
+    options: list[str],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    sims = [tm_simulator_factory(**QUICK) for _ in range(2)]
+    sims = [tm_simulator_factory() for _ in range(2)]
     ports = [str(s.port) for s in sims]
-    assert example.main(["--ports", *ports, "--moves", "1", "--processes", processes]) == 0
-    assert "2 of 2 robots done" in capsys.readouterr().out
+    assert example.main(["--ports", *ports, "--moves", "1", *options]) == 0
+    out = capsys.readouterr().out
+    assert "2 of 2 robots done" in out
+    # Two children, one robot each, reported in order.
+    assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot")] == [
+        "robot0",
+        "robot1",
+    ]
 
 
 @pytest.mark.parametrize(
@@ -143,9 +119,11 @@ def test_bad_arguments_exit_2(example: ModuleType, argv: list[str]) -> None:
 def test_several_processes_share_the_robots(
     tm_simulator_factory: Factory, example: ModuleType
 ) -> None:
-    sims = [tm_simulator_factory(**QUICK) for _ in range(4)]
-    sims.append(tm_simulator_factory(faults=["robot_error:at_move=2"], **QUICK))
-    reports = example.run_in_processes([s.port for s in sims], processes=2, moves=3, watch_hz=50)
+    # On the article's map: the children are told the profile.
+    sims = [tm_simulator_factory("article") for _ in range(4)]
+    sims.append(tm_simulator_factory("article", faults=["robot_error:at_move=2"]))
+    ports = [s.port for s in sims]
+    reports = example.run_in_processes(ports, processes=2, moves=3, watch_hz=50, profile="article")
     # Each child drove a contiguous share; the parent gathered them in order.
     assert [r.name for r in reports] == [f"robot{i}" for i in range(5)]
     assert [r.moves_done for r in reports] == [3, 3, 3, 3, 1]

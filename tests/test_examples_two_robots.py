@@ -43,8 +43,8 @@ def test_handover_on_its_own_simulators(fast_example: ModuleType) -> None:
     shared = result.handover
     assert shared.errors == {}
     # B came down to the handover table only after A had released and moved clear.
-    assert shared.time_of("A", "released") < shared.time_of("B", "descending to handover")
-    assert shared.time_of("B", "waiting above handover") < shared.time_of("B", "picked")
+    assert shared.time_of("A", "released") < shared.time_of("B", "going to handover")
+    assert shared.time_of("B", "waiting clear of handover") < shared.time_of("B", "picked")
     # Each simulated world: A's part on the handover table, B's part at B's place pose.
     assert example.check_worlds(result) == []
     (part_a,) = result.objects_a
@@ -55,33 +55,47 @@ def test_handover_on_its_own_simulators(fast_example: ModuleType) -> None:
     assert not part_b.held
 
 
-def test_main_defaults_to_sim_and_exits_0(
-    fast_example: ModuleType, capsys: pytest.CaptureFixture[str]
-) -> None:
-    assert fast_example.main(["--time-scale", str(EXAMPLE_TIME_SCALE)]) == 0
-    assert "handover done" in capsys.readouterr().out
+# main() on its own simulators: the first command of the example's docstring
+# (tests/test_examples_docstrings.py).
 
 
 def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType) -> None:
     sim_a = tm_simulator_factory(objects=[TableObject(name="part", pose=example.PICK_A)], **QUICK)
-    sim_b = tm_simulator_factory(objects=[TableObject(name="part", pose=example.HANDOVER)], **QUICK)
+    sim_b = tm_simulator_factory(
+        objects=[TableObject(name="part", pose=example.HANDOVER_B)], **QUICK
+    )
     code = example.main(
         ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
     )
     assert code == 0
     assert sim_a.objects()[0].pose.is_close(example.HANDOVER)
     assert sim_b.objects()[0].pose.is_close(example.PLACE_B)
+    # A's last move took it clear of the handover point, back over its own pick position.
+    (*_, last_a) = [m.target for m in sim_a.motion_log() if m.target is not None]
+    assert last_a.is_close(example.above(example.PICK_A))
+
+
+def test_the_article_profile_on_both(tm_simulator_factory: Factory, example: ModuleType) -> None:
+    sim_a = tm_simulator_factory(
+        "article", objects=[TableObject(name="part", pose=example.PICK_A)], **QUICK
+    )
+    sim_b = tm_simulator_factory(
+        "article", objects=[TableObject(name="part", pose=example.HANDOVER_B)], **QUICK
+    )
+    argv = ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
+    assert example.main([*argv, "--profile", "article"]) == 0
+    assert sim_b.objects()[0].pose.is_close(example.PLACE_B)
 
 
 def test_b_does_not_pick_when_a_fails(tm_simulator_factory: Factory, example: ModuleType) -> None:
     # A's world has no part: A's grip fails, so B must not come down to the table.
     sim_a = tm_simulator_factory(objects=[])
-    sim_b = tm_simulator_factory(objects=[TableObject(name="part", pose=example.HANDOVER)])
+    sim_b = tm_simulator_factory(objects=[TableObject(name="part", pose=example.HANDOVER_B)])
     shared = example.run(sim_a.port, sim_b.port, settle_s=0.05)
     assert set(shared.errors) == {"A", "B"}
     assert "robot A failed" in str(shared.errors["B"])
     assert not any(who == "B" and step == "picked" for _, who, step in shared.steps)
-    assert sim_b.objects()[0].pose.is_close(example.HANDOVER)
+    assert sim_b.objects()[0].pose.is_close(example.HANDOVER_B)
     assert not sim_b.objects()[0].held
 
 

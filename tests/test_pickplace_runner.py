@@ -76,7 +76,7 @@ def fast_config(**sections: dict[str, object]) -> PickPlaceConfig:
 def sim(tm_simulator_factory: SimFactory) -> Simulator:
     """An article simulator with three parts at the pick pose."""
     return tm_simulator_factory(
-        objects=[TableObject(name=f"part-{i}", pose=PICK) for i in range(3)], **QUICK
+        "article", objects=[TableObject(name=f"part-{i}", pose=PICK) for i in range(3)], **QUICK
     )
 
 
@@ -249,7 +249,7 @@ def test_a_stop_request_is_honoured_between_states(sim: Simulator, robot: Robot)
 def test_a_stop_request_interrupts_a_running_wait_and_stops_the_arm(
     tm_simulator_factory: SimFactory,
 ) -> None:
-    sim = tm_simulator_factory(faults=["stall:at_move=1"])
+    sim = tm_simulator_factory("article", faults=["stall:at_move=1"])
     with Robot(sim.url, profile="article", poll_interval_s=0.02) as robot:
         runner = Runner(robot)
         seq = TaskSequence("one-move")
@@ -275,7 +275,7 @@ def test_a_stop_request_interrupts_a_running_wait_and_stops_the_arm(
 def test_a_user_sequence_in_python_gets_the_shared_retry_policy(
     tm_simulator_factory: SimFactory,
 ) -> None:
-    sim = tm_simulator_factory(faults=["grasp_miss:at_grasp=1"], **QUICK)
+    sim = tm_simulator_factory("article", faults=["grasp_miss:at_grasp=1"], **QUICK)
     above = PICK.offset(dz=50)
     seq = TaskSequence("custom")
 
@@ -317,7 +317,9 @@ def test_pallet_slots_fill_rows_then_layers() -> None:
 def test_palletizing_places_each_part_into_its_slot(tm_simulator_factory: SimFactory) -> None:
     pallet = Pallet(origin=Pose(250, 150, 100, 180, 0, 90), rows=1, cols=2, dx=40, dy=40)
     sim = tm_simulator_factory(
-        objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(pallet.size)], **QUICK
+        "article",
+        objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(pallet.size)],
+        **QUICK,
     )
     seq = palletizing(pick=PICK, pallet=pallet, home=HOME)
     with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
@@ -342,7 +344,7 @@ def test_a_toml_sequence_names_the_bad_key_and_file(tmp_path: Path) -> None:
 
 
 def test_a_toml_sequence_runs_with_retries(tm_simulator_factory: SimFactory) -> None:
-    sim = tm_simulator_factory(faults=["grasp_miss:at_grasp=1"], **QUICK)
+    sim = tm_simulator_factory("article", faults=["grasp_miss:at_grasp=1"], **QUICK)
     seq = sequence_from_data(
         {
             "name": "data",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+from collections.abc import Callable
 
 import pytest
 
@@ -35,8 +36,10 @@ def registers(output: str) -> dict[int, int]:
     return {int(a): int(v) for a, v in re.findall(r"^\[(\d+)\]:\s+(\d+)", output, re.MULTILINE)}
 
 
-def test_mbpoll_reads_status_writes_a_move_and_sees_it_complete(tm_simulator: Simulator) -> None:
-    sim = tm_simulator
+def test_mbpoll_reads_status_writes_a_move_and_sees_it_complete(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> None:
+    sim = tm_simulator_factory("article")  # its registers are the ones written below
     port = sim.port
     sim.wait_for(lambda: registers(mbpoll(port, "-r", "0", "-c", "4", "-1"))[0] == 5, 5.0)
     # FC16 of target (int16 x100; -200 mm as its two's complement 45536), speed, command.

@@ -17,7 +17,13 @@ from pathlib import Path
 
 import pytest
 
-from tmmaster import ModbusExceptionError, ModbusTransport, RetryPolicy, TransportError
+from tmmaster import (
+    DEFAULT_PROFILE,
+    ModbusExceptionError,
+    ModbusTransport,
+    RetryPolicy,
+    TransportError,
+)
 from tmmaster._pose import Pose
 from tmmaster._profiles import robot_profile
 from tmmaster._registers import Table
@@ -31,6 +37,12 @@ Factory = Callable[..., Simulator]
 #: Article move: target (300, -200, 200, 180, 0, 90) x100 as int16, speed 50 %, PTP.
 TARGET = Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0)
 MOVE_WORDS = [30000, (-20000) & 0xFFFF, 20000, 18000, 0, 9000, 50, 1]
+
+
+@pytest.fixture
+def article_simulator(tm_simulator_factory: Factory) -> Simulator:
+    """A started simulator on the article's map: the tests read its registers directly."""
+    return tm_simulator_factory("article")
 
 
 @contextmanager
@@ -127,9 +139,18 @@ def test_every_field_is_served_and_unserved_addresses_give_exception_2(
             assert exception_code(lambda: read(c, table, unserved)) == 2, (table, unserved)  # noqa: B023
 
 
-def test_served_values_come_from_the_bank(tm_simulator: Simulator) -> None:
-    wait_ready(tm_simulator)
-    with client(tm_simulator.port) as c:
+def test_the_fixtures_speak_the_default_profile(
+    tm_simulator: Simulator, tm_simulator_factory: Factory
+) -> None:
+    # As every entry point does: the article's map only when a test asks for it.
+    assert tm_simulator.profile.name == DEFAULT_PROFILE == "tmflow"
+    assert tm_simulator_factory(listen=False).profile.name == DEFAULT_PROFILE
+    assert tm_simulator_factory("article", listen=False).profile.name == "article"
+
+
+def test_served_values_come_from_the_bank(article_simulator: Simulator) -> None:
+    wait_ready(article_simulator)
+    with client(article_simulator.port) as c:
         assert hr(c, 0x0000) == 5  # robot_mode auto, set by the controller
         pose = read(c, Table.HOLDING, 0x10, 6)
     assert pose == [25000, 0, 30000, 18000, 0, 9000]  # DEFAULT_HOME x100
@@ -148,32 +169,34 @@ def test_tmflow_bits_are_exact(tm_simulator_factory: Factory) -> None:
 # -- request log ------------------------------------------------------------------------
 
 
-def test_request_log_shows_one_fc16_per_move(tm_simulator: Simulator) -> None:
-    wait_ready(tm_simulator)
-    tm_simulator.clear_request_log()
-    with client(tm_simulator.port, device_id=7) as c:
+def test_request_log_shows_one_fc16_per_move(article_simulator: Simulator) -> None:
+    wait_ready(article_simulator)
+    article_simulator.clear_request_log()
+    with client(article_simulator.port, device_id=7) as c:
         write(c, 0x200, MOVE_WORDS)  # raises unless answered normally
         hr(c, 0x0001)
-    log = tm_simulator.request_log
+    log = article_simulator.request_log
     assert [(r.function_code, r.address, r.count) for r in log] == [(16, 0x200, 8), (3, 1, 1)]
     assert log[0].values == tuple(MOVE_WORDS)
     assert log[0].device_id == 7  # the TM controller answers any unit id
     assert log[0].server == "robot"
     assert log[1].values is None
     assert log[0].time <= log[1].time
-    tm_simulator.clear_request_log()
-    assert tm_simulator.request_log == []
+    article_simulator.clear_request_log()
+    assert article_simulator.request_log == []
 
 
-def test_refused_write_changes_nothing(tm_simulator: Simulator) -> None:
-    wait_ready(tm_simulator)
+def test_refused_write_changes_nothing(article_simulator: Simulator) -> None:
+    wait_ready(article_simulator)
     # motion_status is written by the device only: refused by FC16 (the transport) and
     # by FC06 (a raw frame: the transport never sends FC06).
-    with client(tm_simulator.port) as c:
+    with client(article_simulator.port) as c:
         assert exception_code(lambda: write(c, 0x0001, [1])) == 2
         assert hr(c, 0x0001) == 0
-    assert raw_request(tm_simulator.port, struct.pack(">BHH", 6, 0x0001, 1)) == bytes([0x86, 2])
-    with client(tm_simulator.port) as c:
+    assert raw_request(article_simulator.port, struct.pack(">BHH", 6, 0x0001, 1)) == bytes(
+        [0x86, 2]
+    )
+    with client(article_simulator.port) as c:
         assert hr(c, 0x0001) == 0
 
 
@@ -210,13 +233,13 @@ def test_racy_article_master_sees_done_before_the_robot_moved(
         assert not sim.tcp_pose().is_close(TARGET)
 
 
-def test_correct_handshake_ends_at_the_target(tm_simulator: Simulator) -> None:
-    wait_ready(tm_simulator)
-    with client(tm_simulator.port) as c:
+def test_correct_handshake_ends_at_the_target(article_simulator: Simulator) -> None:
+    wait_ready(article_simulator)
+    with client(article_simulator.port) as c:
         write(c, 0x200, MOVE_WORDS)
-        tm_simulator.wait_for(lambda: hr(c, 0x0207) == 0, 2.0)  # acknowledged
-        tm_simulator.wait_for(lambda: hr(c, 0x0001) == 0, 5.0)  # then idle
-        assert tm_simulator.tcp_pose().is_close(TARGET)
+        article_simulator.wait_for(lambda: hr(c, 0x0207) == 0, 2.0)  # acknowledged
+        article_simulator.wait_for(lambda: hr(c, 0x0001) == 0, 5.0)  # then idle
+        assert article_simulator.tcp_pose().is_close(TARGET)
         words = read(c, Table.HOLDING, 0x10, 6)
     assert words == MOVE_WORDS[:6]
 
@@ -225,7 +248,7 @@ def test_correct_handshake_ends_at_the_target(tm_simulator: Simulator) -> None:
 
 
 def test_drop_connections_after_n_requests(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory(faults=["drop_connections:after_requests=2"])
+    sim = tm_simulator_factory("article", faults=["drop_connections:after_requests=2"])
     with client(sim.port) as c:
         hr(c, 0)
         hr(c, 0)  # the second request is answered, then the connection is closed
@@ -235,14 +258,14 @@ def test_drop_connections_after_n_requests(tm_simulator_factory: Factory) -> Non
             hr(c, 0)
 
 
-def test_drop_connections_injected_at_run_time_repeats(tm_simulator: Simulator) -> None:
-    tm_simulator.inject("drop_connections:after_requests=1,once=false")
+def test_drop_connections_injected_at_run_time_repeats(article_simulator: Simulator) -> None:
+    article_simulator.inject("drop_connections:after_requests=1,once=false")
     for _ in range(2):
-        with client(tm_simulator.port) as c:
+        with client(article_simulator.port) as c:
             hr(c, 0)
             assert fails(lambda: hr(c, 0))
-    tm_simulator.clear_faults()
-    with client(tm_simulator.port) as c:
+    article_simulator.clear_faults()
+    with client(article_simulator.port) as c:
         hr(c, 0)
         hr(c, 0)
 
@@ -258,7 +281,7 @@ def test_stop_listening_then_listening_again_on_the_same_port(
 ) -> None:
     # 0.3 s of outage (wall time); seen refused within a few ms of its start, so it is
     # seen down for more than 0.15 s (half of it, as 0.2 s of the 0.4 s it was).
-    sim = tm_simulator_factory(faults=["stop_listening:after_requests=1,duration_s=0.3"])
+    sim = tm_simulator_factory("article", faults=["stop_listening:after_requests=1,duration_s=0.3"])
     port = sim.port
     with client(port) as c:
         hr(c, 0)
@@ -271,15 +294,15 @@ def test_stop_listening_then_listening_again_on_the_same_port(
         hr(c, 0)
 
 
-def test_slow_responses(tm_simulator: Simulator) -> None:
-    with client(tm_simulator.port) as c:
+def test_slow_responses(article_simulator: Simulator) -> None:
+    with client(article_simulator.port) as c:
         # Answers 0.15 s late; once cleared, a read (a few ms) must take under 0.12 s,
         # which a still-delayed answer cannot.
-        tm_simulator.inject("slow_responses:delay_s=0.15")
+        article_simulator.inject("slow_responses:delay_s=0.15")
         started = time.monotonic()
         hr(c, 0)
         assert time.monotonic() - started >= 0.15
-        tm_simulator.clear_faults()
+        article_simulator.clear_faults()
         started = time.monotonic()
         hr(c, 0)
         assert time.monotonic() - started < 0.12
@@ -287,7 +310,7 @@ def test_slow_responses(tm_simulator: Simulator) -> None:
 
 def test_modbus_exception_for_an_address_range(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory(
-        faults=["modbus_exception:table=holding,start=0x200,end=0x207,code=6"]
+        "article", faults=["modbus_exception:table=holding,start=0x200,end=0x207,code=6"]
     )
     with client(sim.port) as c:
         assert exception_code(lambda: write(c, 0x200, MOVE_WORDS)) == 6
@@ -324,8 +347,10 @@ def test_onrobot_gripper_allows_one_connection_and_its_unit_id(
 # -- robustness -------------------------------------------------------------------------
 
 
-def test_garbage_half_open_and_abrupt_clients_do_not_stop_service(tm_simulator: Simulator) -> None:
-    port = tm_simulator.port
+def test_garbage_half_open_and_abrupt_clients_do_not_stop_service(
+    article_simulator: Simulator,
+) -> None:
+    port = article_simulator.port
     garbage = socket.create_connection(("127.0.0.1", port))
     half_open = socket.create_connection(("127.0.0.1", port))
     abrupt = socket.create_connection(("127.0.0.1", port))
@@ -372,10 +397,10 @@ def test_unknown_options_fail_before_anything_starts() -> None:
         Simulator(model="tm99")
 
 
-def test_objects_and_pose_are_visible(tm_simulator: Simulator) -> None:
-    names = [o.name for o in tm_simulator.objects()]
+def test_objects_and_pose_are_visible(article_simulator: Simulator) -> None:
+    names = [o.name for o in article_simulator.objects()]
     assert names == ["part"]
-    assert tm_simulator.tcp_pose().z == pytest.approx(300.0)
+    assert article_simulator.tcp_pose().z == pytest.approx(300.0)
 
 
 # -- the command line -------------------------------------------------------------------

@@ -5,12 +5,20 @@ Opt-in, so installing tmmaster costs other test suites nothing: enable it with
 ``pytest_plugins = ["tmmaster.sim.pytest_plugin"]`` in your top-level ``conftest.py``:
 
 ``tm_simulator``
-    A started article-profile :class:`~tmmaster.sim.Simulator` on a free loopback
-    port, running 20x faster than real time; closed after the test.
+    A started :class:`~tmmaster.sim.Simulator` speaking the ``tmflow`` profile (the
+    default of every entry point) on a free loopback port, running 20x faster than real
+    time; closed after the test.
 ``tm_simulator_factory``
-    ``tm_simulator_factory(profile="article", **options)`` starts a Simulator with
-    any :class:`~tmmaster.sim.Simulator` options (defaults: a free port and
+    ``tm_simulator_factory(profile="tmflow", **options)`` starts a Simulator with any
+    :class:`~tmmaster.sim.Simulator` options (defaults: a free port and
     ``time_scale=20``); every one it made is closed after the test.
+
+The profile is the simulator's register map, and the code under test must speak the same
+one. For the article's map, ask for it: ``tm_simulator_factory("article")``, and connect
+with ``Robot(sim.url, profile="article")``; ``Robot(sim.url, profile=sim.profile)`` follows
+whatever the simulator speaks. A Robot on the other profile fails on its first read
+with a :class:`~tmmaster.ProfileMismatchError` that names the profile the simulator
+answers.
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ def tm_simulator_factory() -> Iterator[Callable[..., Simulator]]:
 
     made: list[Simulator] = []
 
-    def make(profile: Any = "article", **options: Any) -> Simulator:
+    def make(profile: Any = "tmflow", **options: Any) -> Simulator:
         options.setdefault("time_scale", FIXTURE_TIME_SCALE)
         sim = Simulator(profile, **options)
         made.append(sim)
@@ -49,5 +57,5 @@ def tm_simulator_factory() -> Iterator[Callable[..., Simulator]]:
 
 @pytest.fixture
 def tm_simulator(tm_simulator_factory: Callable[..., Simulator]) -> Simulator:
-    """A started article-profile Simulator on a free port (time_scale 20), closed after the test."""
-    return tm_simulator_factory("article")
+    """A started tmflow-profile Simulator on a free port (time_scale 20), closed after the test."""
+    return tm_simulator_factory()
