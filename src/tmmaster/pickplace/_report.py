@@ -57,15 +57,20 @@ class Target(_Part):
     """The robot the run talked to."""
 
     host: str
+    """The robot's address."""
     port: int
+    """Its Modbus TCP port."""
     profile: str
+    """The register profile it was spoken to in."""
 
 
 class CycleSummary(_Part):
     """Cycles requested and completed, with each completed cycle's time."""
 
     requested: int | None = None
+    """Cycles asked for (null: the run did not start)."""
     completed: int = 0
+    """Cycles finished."""
     times_s: list[float] = Field(default_factory=list)
     """Seconds per completed cycle."""
 
@@ -76,18 +81,24 @@ class StateTiming(_Part):
     count: int
     """Passes through the state."""
     total_s: float
+    """Seconds in the state, all passes together."""
     mean_s: float
+    """Mean seconds per pass."""
     max_s: float
+    """The longest pass, seconds."""
 
 
 class TimelineEntry(_Part):
     """One pass through a state."""
 
     state: str
+    """The state."""
     cycle: int
+    """The cycle, from 1."""
     started_s: float
     """Seconds since the run started."""
     duration_s: float
+    """How long the pass took, seconds."""
     outcome: str
     """``ok``, ``skipped``, ``retry`` or ``failed``."""
 
@@ -96,35 +107,50 @@ class Retries(_Part):
     """Retries used."""
 
     grasp: int = 0
+    """Grasps tried again after a failed one."""
 
 
 class ErrorInfo(_Part):
     """The failure that ended the run."""
 
     state: str
+    """The state that failed."""
     cycle: int
+    """The cycle, from 1."""
     type: str
+    """The error's type (``MotionTimeoutError``...)."""
     message: str
+    """The error's message."""
     error_code: int | None = None
+    """The robot's error code, when the failure carries one."""
 
 
 class ReactionInfo(_Part):
     """What was done after the failure."""
 
     reaction: str
+    """``stay`` or ``retreat``."""
     performed: bool
+    """Whether it was carried out (never a retreat after an e-stop or a robot error)."""
     detail: str
+    """What happened, in words."""
 
 
 class LinkStats(_Part):
     """One Modbus link's counters."""
 
     requests: int = 0
+    """Requests sent (retries included)."""
     retries: int = 0
+    """Retries of failed requests and connects."""
     reconnects: int = 0
+    """Connections opened again after a lost link."""
     errors: int = 0
+    """Failed requests."""
     bytes_sent: int = 0
+    """Bytes sent."""
     bytes_received: int = 0
+    """Bytes received."""
     requests_by_function: dict[str, int] = Field(default_factory=dict)
     """Requests per Modbus function code (keys are the codes as text)."""
 
@@ -140,30 +166,39 @@ class TransportSummary(_Part):
     """The robot's link, and the gripper's when it has its own."""
 
     robot: LinkStats
+    """The robot's link."""
     gripper: LinkStats | None = None
+    """The gripper's own link (null: it has none)."""
 
 
 class SimObject(_Part):
     """Where a simulated part ended."""
 
     name: str
+    """The part's name."""
     pose: list[float]
     """``[x, y, z, rx, ry, rz]``, mm and degrees."""
     held: bool
+    """Whether the gripper held it at the end."""
     resting_on: str | None = None
     """What the part rests on (``table`` or another part's name); null while held or falling."""
     on_place: bool
+    """Whether it lies on the place position (within ``tolerance_mm``)."""
 
 
 class SimSummary(_Part):
     """With ``--sim``: where the parts ended, and the path the TCP took."""
 
     objects: list[SimObject] = Field(default_factory=list)
+    """Every part, where it ended."""
     place: list[float] | None = None
+    """The place pose ``[x, y, z, rx, ry, rz]`` (null: none)."""
     tolerance_mm: float = 2.0
+    """How close to the place pose a part counts as placed, mm."""
     on_place: bool = False
     """Every part on the place position."""
     time_scale: float = 1.0
+    """Simulated seconds per wall second."""
     physics: str = "kinematic"
     """The simulator's physics backend: ``kinematic`` or ``mujoco``."""
     tcp_path: list[tuple[float, float, float, float]] = Field(default_factory=list)
@@ -177,6 +212,7 @@ class RunReport(_Part):
     report_version: int = REPORT_VERSION
     """Changes when a key changes meaning or disappears (keys are only ever added)."""
     tmmaster_version: str
+    """The tmmaster version that wrote the report."""
     result: str
     """``done``, ``failed``, ``config_error``, ``connection_error``, ``robot_fault``,
     ``grasp_failed``, ``timeout`` or ``interrupted``."""
@@ -185,31 +221,47 @@ class RunReport(_Part):
     reason: str | None = None
     """The one-line reason (null on success)."""
     config: ConfigRef = Field(default_factory=ConfigRef)
+    """Which configuration ran."""
     target: Target | None = None
+    """The robot the run talked to (null: it did not get that far)."""
     sequence: str | None = None
+    """The sequence's name."""
     final_state: str | None = None
+    """The state the machine ended in: ``DONE`` or ``ERROR``."""
     started_at: str | None = None
     """ISO 8601 UTC time the run started."""
     duration_s: float | None = None
+    """How long the run took, seconds."""
     cycles: CycleSummary = Field(default_factory=CycleSummary)
+    """Cycles requested and completed."""
     states: dict[str, StateTiming] = Field(default_factory=dict)
+    """Time spent in each state, by name."""
     timeline: list[TimelineEntry] = Field(default_factory=list)
     """Every pass through a state, in order."""
     retries: Retries = Field(default_factory=Retries)
+    """Retries used."""
     error: ErrorInfo | None = None
+    """The failure that ended the run (null on success)."""
     reaction: ReactionInfo | None = None
+    """What was done after the failure (null without one)."""
     stop_delivered: bool | None = None
     """Whether a stop reached the robot after a stop request or an abandoned move (null: none
     was needed, or the profile has no stop)."""
     transport: TransportSummary | None = None
+    """The links' counters."""
     sim: SimSummary | None = None
+    """With ``--sim``: where the parts ended, and the TCP's path."""
     move_states: list[str] = Field(default_factory=list)
     """The states that move the arm (known from the plan); the rest wait (gripper, checks,
     dwells). Empty in reports older than this key."""
 
 
 def report_schema() -> str:
-    """The JSON Schema of the run report, generated from :class:`RunReport`."""
+    """The JSON Schema of the run report, generated from :class:`RunReport`.
+
+    Returns:
+        The schema as indented JSON text (``tmmaster schema --report``).
+    """
     schema = RunReport.model_json_schema()
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "tmmaster pick & place run report (JSON)"
@@ -344,7 +396,23 @@ def build_report(
     sim: dict[str, Any] | None = None,
     move_states: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Assemble the report as JSON-ready data (every key present; unknown values null)."""
+    """Assemble the report as JSON-ready data (every key present; unknown values null).
+
+    Args:
+        exit_code: The command's exit code.
+        result_name: ``done``, ``failed``, ``config_error``... (RunReport.result).
+        reason: The one-line reason (None on success).
+        run: The runner's result (None: the run did not start).
+        config_file: The configuration file (None: the defaults).
+        config_digest: The configuration's digest (``PickPlaceConfig.digest()``).
+        target: The robot's ``host``, ``port`` and ``profile``.
+        transport: The links' counters (``robot``, ``gripper``).
+        sim: With ``--sim``: where the parts ended and the TCP's path.
+        move_states: The states that move the arm.
+
+    Returns:
+        The report as a dict of JSON values (validated as a RunReport).
+    """
     return build_run_report(
         exit_code=exit_code,
         result_name=result_name,
@@ -435,7 +503,12 @@ def _dumps(report: dict[str, Any]) -> str:
 
 
 def write_report(path: str | Path, report: RunReport | dict[str, Any]) -> None:
-    """Write the report atomically (a crash never leaves half a JSON file)."""
+    """Write the report atomically (a crash never leaves half a JSON file).
+
+    Args:
+        path: The file (its folder is made if needed).
+        report: The report, as a RunReport or as :func:`build_report`'s data.
+    """
     if isinstance(report, RunReport):
         report = report.model_dump(mode="json")
     target = Path(path)
