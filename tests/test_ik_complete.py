@@ -57,6 +57,9 @@ def admissible_poses(model: tmmaster.RobotModel, count: int, seed: int) -> list[
         # The shoulder folded back below the base (J2 -133 deg): none of the canonical
         # postures converges there.
         (TM12, Pose(649, 197, -880, 41.8, -78.2, 73.4)),
+        # Every canonical posture converges with a joint past its range; J1 at +142 deg
+        # (aimed away from the flange) takes it.
+        (TM12, Pose(66.92, 92.58, 335.10, 24.08, -15.18, 30.74)),
     ],
 )
 def test_a_pose_reachable_only_on_a_far_branch_is_found(

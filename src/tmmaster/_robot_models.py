@@ -23,7 +23,10 @@ from . import _kinematics as kin
 from ._exceptions import UnknownNameError, UnreachablePoseError
 from ._pose import MotionType, Pose
 
+#: Six joint angles J1..J6, degrees.
 Joints = tuple[float, float, float, float, float, float]
+#: A homogeneous transform: four rows of four numbers (translation in mm).
+Transform = kin.Transform
 
 
 class JointSpec(BaseModel):
@@ -31,9 +34,13 @@ class JointSpec(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
+    #: Position of the joint's frame in the previous one, mm.
     origin_xyz_mm: tuple[float, float, float]
+    #: Orientation of the joint's frame in the previous one (roll, pitch, yaw), deg.
     origin_rpy_deg: tuple[float, float, float]
+    #: The joint's range (lower, upper), deg.
     limits_deg: tuple[float, float]
+    #: The joint's top speed at 100 % speed, deg/s.
     speed_deg_s: float = Field(gt=0)
 
     @model_validator(mode="after")
@@ -44,13 +51,31 @@ class JointSpec(BaseModel):
 
 
 class RobotModel(BaseModel):
-    """One arm model: its joint chain, ranges, speeds and the motion-time model."""
+    """One arm model: its joint chain, ranges, speeds and the motion-time model.
+
+    The built-in models (:data:`ROBOT_MODELS`, :func:`robot_model`) are Techman's URDF
+    chains; the master validates moves and times its waits with the model, and the
+    simulator moves the arm with the same one.
+
+    Example:
+        ```python
+        from tmmaster import MotionType, Pose, robot_model
+
+        arm = robot_model("tm5-700")
+        joints = arm.inverse(Pose(300, -200, 200, 180, 0, 90))
+        print(arm.forward(joints))  # the same pose back
+        print(arm.motion_time(Pose(250, 0, 300, 180, 0, 90), Pose(300, -200, 200, 180, 0, 90),
+                              speed_percent=50, motion=MotionType.PTP))
+        ```
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
+    #: The model's name (``"tm5-700"``...).
     name: str
     #: Datasheet reach, mm: a quick pre-check before inverse kinematics.
     reach_mm: float = Field(gt=0)
+    #: The joints J1..J6.
     joints: tuple[JointSpec, JointSpec, JointSpec, JointSpec, JointSpec, JointSpec]
     #: Maximum TCP speed of a Line motion at 100 % speed, mm/s.
     tcp_speed_mm_s: float = Field(gt=0)
@@ -84,12 +109,27 @@ class RobotModel(BaseModel):
 
     # -- kinematics ------------------------------------------------------------------
 
-    def joint_frames(self, joints_deg: Sequence[float]) -> list[kin.Transform]:
-        """Base -> frame of each joint J1..J6 (after its rotation); the last is the flange."""
+    def joint_frames(self, joints_deg: Sequence[float]) -> list[Transform]:
+        """Base -> frame of each joint J1..J6 (after its rotation); the last is the flange.
+
+        Args:
+            joints_deg: Six joint angles, deg.
+
+        Returns:
+            Six transforms from the base frame.
+        """
         return self._chain.frames([math.radians(q) for q in _six(joints_deg)])
 
     def forward(self, joints_deg: Sequence[float], tool: Pose | None = None) -> Pose:
-        """Flange pose for the joints (J1..J6, deg), or the TCP pose with a ``tool`` offset."""
+        """Flange pose for the joints (J1..J6, deg), or the TCP pose with a ``tool`` offset.
+
+        Args:
+            joints_deg: Six joint angles, deg.
+            tool: The TCP in the flange frame (None: the flange pose).
+
+        Returns:
+            The pose in the base frame.
+        """
         flange = self._chain.flange([math.radians(q) for q in _six(joints_deg)])
         if tool is not None:
             flange = kin.multiply(flange, kin.pose_to_transform(tool))
@@ -105,9 +145,19 @@ class RobotModel(BaseModel):
     ) -> Joints:
         """Joints (deg) that put the flange (or the ``tool``'s TCP) at ``pose``, nearest the seed.
 
-        Raises :class:`~tmmaster.UnreachablePoseError` naming the reason: out of reach,
-        past a joint limit, or too close to a singularity. ``same_branch`` searches from
-        the seed only (no restart from other postures): a continuous path uses it.
+        Args:
+            pose: The flange pose, or the TCP pose with ``tool``.
+            seed_deg: Joints to start from (where the arm is); None: the ready posture.
+            tool: The TCP in the flange frame (None: ``pose`` is the flange's).
+            same_branch: Search from the seed only (no restart from other postures): a
+                continuous path uses it.
+
+        Returns:
+            Six joint angles, deg.
+
+        Raises:
+            UnreachablePoseError: Out of reach, past a joint limit, or too close to a
+                singularity (``reason`` says which).
         """
         seed = self.ready_joints_deg if seed_deg is None else _six(seed_deg)
         # A cycle repeats its poses from (nearly) the same joints: the answer is a pure
@@ -201,7 +251,14 @@ class RobotModel(BaseModel):
         return self.inverse(start, seed_deg=joints_deg, tool=tool)
 
     def singularity(self, joints_deg: Sequence[float]) -> str | None:
-        """Which singularity the joints are too close to (wrist, elbow, shoulder), or None."""
+        """Which singularity the joints are too close to (wrist, elbow, shoulder), or None.
+
+        Args:
+            joints_deg: Six joint angles, deg.
+
+        Returns:
+            The singularity, in words, or None.
+        """
         q = _six(joints_deg)
         if abs(math.sin(math.radians(q[4]))) < math.sin(math.radians(self.wrist_margin_deg)):
             return f"wrist singularity (J5 = {q[4]:.1f} deg, margin {self.wrist_margin_deg:g})"
@@ -217,6 +274,12 @@ class RobotModel(BaseModel):
 
         For this family of arms (J2, J3, J4 parallel) ``det(J)`` factors into
         ``a2 * a3 * sin(J3) * sin(J5) * d``; ``d`` is this distance.
+
+        Args:
+            joints_deg: Six joint angles, deg.
+
+        Returns:
+            The distance, mm.
         """
         q = [math.radians(a) for a in _six(joints_deg)]
         jacobian, _ = self._chain.jacobian(q)
@@ -262,18 +325,30 @@ class RobotModel(BaseModel):
         return starts
 
     def _wide_starts(self, seed: Joints, flange: Pose) -> list[Joints]:
-        """Starts all round the shoulder, J1 aimed at the flange and away from it."""
+        """Starts all round the shoulder, J1 aimed at the flange and away from it.
+
+        Both elbows at four shoulder angles, for J1 towards the flange and opposite
+        it; the wrist alternates between its two flips (16 starts: a refusal pays for
+        every one of them, so the grid is as coarse as finds every branch).
+        """
         aim = math.degrees(math.atan2(flange.y, flange.x))
+        opposite = aim + 180.0 if aim <= 0 else aim - 180.0
         return [
-            (base, shoulder, elbow, 0.0, j5, seed[5])
-            for base in (aim, aim + 180.0 if aim <= 0 else aim - 180.0)
-            for shoulder in (-135.0, -45.0, 45.0, 135.0)
-            for elbow in (-90.0, 90.0)
-            for j5 in (90.0, -90.0)
+            (base, shoulder, elbow, 0.0, 90.0 if (i + k) % 2 == 0 else -90.0, seed[5])
+            for base in (aim, opposite)
+            for i, shoulder in enumerate((-135.0, -45.0, 45.0, 135.0))
+            for k, elbow in enumerate((-90.0, 90.0))
         ]
 
     def distance_from_shoulder(self, pose: Pose) -> float:
-        """Distance from the shoulder joint to the pose's position, in mm."""
+        """Distance from the shoulder joint to the pose's position, in mm.
+
+        Args:
+            pose: A pose in the base frame.
+
+        Returns:
+            The distance, mm.
+        """
         return math.dist((0.0, 0.0, self.shoulder_height_mm), (pose.x, pose.y, pose.z))
 
     def _outside_reach_sphere(self, pose: Pose) -> bool:
@@ -282,7 +357,15 @@ class RobotModel(BaseModel):
         return self.distance_from_shoulder(pose) > self.reach_mm
 
     def can_reach(self, pose: Pose, *, seed_deg: Sequence[float] | None = None) -> bool:
-        """True when the arm can take ``pose`` (inverse kinematics, ranges, singularities)."""
+        """True when the arm can take ``pose`` (inverse kinematics, ranges, singularities).
+
+        Args:
+            pose: The flange pose.
+            seed_deg: Joints to start from; None: the ready posture.
+
+        Returns:
+            Whether :meth:`inverse` finds joints.
+        """
         try:
             self.inverse(pose, seed_deg=seed_deg)
         except UnreachablePoseError:
@@ -299,7 +382,17 @@ class RobotModel(BaseModel):
         speed_percent: float,
         accel_time_s: float | None = None,
     ) -> float:
-        """Duration of a synchronised joint-space trapezoid between two joint vectors, s."""
+        """Duration of a synchronised joint-space trapezoid between two joint vectors, s.
+
+        Args:
+            start_deg: Six joint angles at the start, deg.
+            target_deg: Six joint angles at the target, deg.
+            speed_percent: Speed, % of the joints' top speeds.
+            accel_time_s: Time to reach top speed, s; None: the model's.
+
+        Returns:
+            The duration, s.
+        """
         scale = _speed_scale(speed_percent)
         ramp = self.accel_time_s if accel_time_s is None else accel_time_s
         return max(
@@ -319,8 +412,21 @@ class RobotModel(BaseModel):
     ) -> list[Joints]:
         """Joint samples along the straight TCP path from ``start`` to ``target``.
 
-        Raises :class:`~tmmaster.UnreachablePoseError` when a point of the path cannot be
-        taken or the arm would have to flip configuration on the way.
+        Args:
+            start: The TCP pose at the start.
+            target: The TCP pose at the end.
+            start_joints_deg: The joints at the start (None: searched from the ready
+                posture).
+            tool: The TCP in the flange frame (None: the flange).
+            step_mm: Largest distance between two samples, mm.
+            step_deg: Largest rotation between two samples, deg.
+
+        Returns:
+            The joints at each sample, start and target included.
+
+        Raises:
+            UnreachablePoseError: A point of the path cannot be taken, or the arm would
+                have to flip configuration on the way.
         """
         seed = self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg)
         return list(_cached_line(self, start, target, _rounded(seed), tool, step_mm, step_deg))
@@ -373,8 +479,22 @@ class RobotModel(BaseModel):
     ) -> float:
         """Duration of a Line move: the TCP trapezoid, slowed where a joint would be too fast.
 
-        ``samples`` are the path's joints from :meth:`line_joints`, when the caller has
-        them already (they are computed otherwise).
+        Args:
+            start: The TCP pose at the start.
+            target: The TCP pose at the end.
+            speed_percent: Speed, % of the model's top TCP speed.
+            accel_time_s: Time to reach top speed, s; None: the model's.
+            start_joints_deg: The joints at the start (None: searched from the ready
+                posture).
+            tool: The TCP in the flange frame (None: the flange).
+            samples: The path's joints from :meth:`line_joints`, when the caller has
+                them already (they are computed otherwise).
+
+        Returns:
+            The duration, s.
+
+        Raises:
+            UnreachablePoseError: The path cannot be taken.
         """
         scale = _speed_scale(speed_percent)
         ramp = self.accel_time_s if accel_time_s is None else accel_time_s
@@ -412,8 +532,21 @@ class RobotModel(BaseModel):
     ) -> float:
         """Expected duration of a move in seconds (joint-space PTP or Cartesian Line).
 
-        ``start_joints_deg`` is where the arm is (or the seed its joints are searched
-        from); without it the ready posture is the seed.
+        Args:
+            start: The TCP pose at the start.
+            target: The TCP target.
+            speed_percent: Speed, %.
+            motion: PTP (joint interpolation) or LINE (a straight TCP path).
+            accel_time_s: Time to reach top speed, s; None: the model's.
+            start_joints_deg: Where the arm is (or the seed its joints are searched
+                from); None: the ready posture is the seed.
+            tool: The TCP in the flange frame (None: the flange).
+
+        Returns:
+            The expected duration, s.
+
+        Raises:
+            UnreachablePoseError: The start, the target or a Line's path cannot be taken.
         """
         _speed_scale(speed_percent)
         if motion is MotionType.LINE:
@@ -616,11 +749,23 @@ def _load_models() -> dict[str, RobotModel]:
     }
 
 
+#: The built-in arm models, by name (read-only).
 ROBOT_MODELS: Mapping[str, RobotModel] = MappingProxyType(_load_models())
 
 
 def robot_model(name: str) -> RobotModel:
-    """Return a built-in arm model by name (``tm5-700``, ``tm5-900``, ``tm12``, ``tm14``)."""
+    """A built-in arm model by name (``tm5-700``, ``tm5-900``, ``tm12``, ``tm14``).
+
+    Args:
+        name: The model's name.
+
+    Returns:
+        The model.
+
+    Raises:
+        RegisterMapError: An unknown name (the message lists the models); also a
+            KeyError.
+    """
     try:
         return ROBOT_MODELS[name]
     except KeyError:
