@@ -1,14 +1,16 @@
 """Pick & place (and any other sequence) on a ``transitions`` state machine.
 
 The article's cycle runs with ``python -m tmmaster.pickplace --sim`` (against the
-built-in simulator) or ``--host H`` (a robot). From Python::
+built-in simulator) or ``--host H`` (a robot). From Python:
 
-    from tmmaster import connect
-    from tmmaster.pickplace import Runner, load_config, pick_and_place
+```python
+from tmmaster import connect
+from tmmaster.pickplace import Runner, load_config, pick_and_place
 
-    config = load_config("cell.toml")
-    with connect("127.0.0.1", 5020, profile="article") as robot:
-        result = Runner(robot).run(pick_and_place(config))
+config = load_config("cell.toml")
+with connect("127.0.0.1", 5020, profile="article") as robot:
+    result = Runner(robot).run(pick_and_place(config))
+```
 
 A :class:`TaskSequence` says what to do in each state; the :class:`Runner` runs any
 sequence with the same policies (readiness, stop requests, retries, cycles, timing,
