@@ -135,8 +135,9 @@ def _bad_calls() -> list[tuple[str, Callable[[], object]]]:
         ("unknown profile", lambda: tmmaster.Robot("127.0.0.1", profile="no-such")),
         ("unknown field", lambda: article.field("x")),
         ("unknown label", lambda: article.field("command").code_of("jump")),
-        ("nan pose", lambda: tmmaster.Pose(float("nan"), 0, 0)),
-        ("text pose", lambda: tmmaster.Pose("here", 0, 0)),  # type: ignore[arg-type]
+        ("nan pose", lambda: tmmaster.Pose(float("nan"), 0, 0, 0, 0, 0)),
+        ("text pose", lambda: tmmaster.Pose("here", 0, 0, 0, 0, 0)),  # type: ignore[arg-type]
+        ("five values", lambda: tmmaster.Pose(300, -200, 200, 180, 0)),  # type: ignore[call-arg]
         ("motion lin", lambda: tmmaster.Robot("127.0.0.1", profile="article").start_move(
             tmmaster.Pose(300, -200, 200, 180, 0, 90), motion="lin"  # type: ignore[arg-type]
         )),

@@ -71,7 +71,7 @@ if _TYPE_CHECKING:
     from ._logging import configure_logging
     from ._monitor import MonitoredStatus, StatusMonitor
     from ._poller import Poller, PollPolicy
-    from ._pose import DEFAULT_HOME, MotionType, Pose
+    from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsWarning
     from ._profiles import (
         DEFAULT_PROFILE,
         builtin_profile_names,
@@ -173,6 +173,7 @@ _EXPORTS = {
     "TransportClosedError": "._exceptions",
     "TransportError": "._exceptions",
     "TransportStats": "._transport",
+    "UnitsWarning": "._pose",
     "UnreachablePoseError": "._exceptions",
     "Value": "._codec",
     "ValueOutOfRangeError": "._exceptions",
@@ -270,6 +271,7 @@ __all__ = [
     "TransportClosedError",
     "TransportError",
     "TransportStats",
+    "UnitsWarning",
     "UnreachablePoseError",
     "Value",
     "ValueOutOfRangeError",

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+import sys
+import warnings
+from collections.abc import Iterable, Iterator, Sequence
 from enum import StrEnum
+from pathlib import Path
 from typing import Any
 
 from pydantic import ConfigDict, ValidationError
@@ -47,11 +50,11 @@ class Pose:
     #: Position along the base's z axis, mm.
     z: float
     #: Rotation about x, degrees.
-    rx: float = 0.0
+    rx: float
     #: Rotation about y, degrees.
-    ry: float = 0.0
+    ry: float
     #: Rotation about z, degrees.
-    rz: float = 0.0
+    rz: float
 
     @classmethod
     def from_sequence(cls, values: Sequence[float]) -> Pose:
@@ -67,7 +70,7 @@ class Pose:
             ValueError: Not six values (a ConfigError when one is not a finite number).
         """
         if len(values) != 6:
-            raise ValueError(f"a pose needs 6 values [x, y, z, rx, ry, rz], got {len(values)}")
+            raise ConfigError(pose_count_problem(values))
         return cls(*values)
 
     @classmethod
@@ -184,6 +187,101 @@ def _quaternion(rx: float, ry: float, rz: float) -> tuple[float, float, float, f
     )
 
 
+class UnitsWarning(ConfigError, UserWarning):  # noqa: N818 - a warning first
+    """A pose whose values look like metres or radians, where tmmaster takes mm and degrees.
+
+    Issued by :class:`~tmmaster.Robot` for a target (before anything is sent) and for
+    its ``tool``; the rule is in docs/robot-api.md ("Units"). ``Robot(check_units=False)``
+    switches it off; ``warnings.simplefilter("error", tmmaster.UnitsWarning)`` raises it
+    instead, a :class:`~tmmaster.ConfigError` like every refusal before I/O.
+    """
+
+
+#: Within this (mm) of the base origin on all three axes, a position looks like metres:
+#: no TM arm reaches there, and every TM arm's reach is under 2 m.
+METRES_LIMIT = 2.0
+#: Within this of a multiple of 45 degrees in radians (pi/4 .. 2 pi), an angle looks like
+#: radians: 3.14, 3.1416, 1.5708 and 0.785 do, 3, 1.5 and 0.8 do not.
+RADIANS_TOLERANCE = 0.005
+_QUARTER_TURNS = [k * math.pi / 4 for k in range(1, 9)]
+
+
+def written(value: float) -> str:
+    """A number as a user writes it: ``300`` for 300.0, ``0.3``, ``3.14159``."""
+    number = float(value)
+    if math.isfinite(number) and number.is_integer() and abs(number) < 1e15:
+        return str(int(number))
+    return repr(number)
+
+
+def written_list(values: Iterable[object]) -> str:
+    """Values as a user writes them: ``[0.3, -0.2, 0.1, 180, 0, 90]``."""
+    shown = (written(v) if isinstance(v, int | float) else repr(v) for v in values)
+    return f"[{', '.join(shown)}]"
+
+
+def pose_count_problem(values: Sequence[object]) -> str:
+    """What is wrong with ``values`` that are not six: the count and the names missing."""
+    message = (
+        f"{written_list(values)} has {len(values)} value{'' if len(values) == 1 else 's'};"
+        " a pose needs all 6: x, y, z (mm), rx, ry, rz (degrees)"
+    )
+    if len(values) < 6:
+        missing = ", ".join(_POSE_FIELDS[len(values) :])
+        message += f" ({missing} missing)"
+    return message
+
+
+def suspect_units(values: Sequence[float]) -> str | None:
+    """Why ``[x, y, z, rx, ry, rz]`` looks like metres or radians, or None.
+
+    The rule (docs/robot-api.md, "Units"):
+
+    - **metres**: ``|x|``, ``|y|`` and ``|z|`` all under :data:`METRES_LIMIT` (2 mm from
+      the base origin, inside the robot's own base) and not all zero;
+    - **radians**: ``|rx|``, ``|ry|`` and ``|rz|`` all at most 2 pi (6.28), and one of them
+      within :data:`RADIANS_TOLERANCE` of a multiple of pi/4 (0.785, 1.571, 3.1416, ...).
+      Small degree values (0, 1.5, 5, 0.5) and every usual degree pose (180, 0, 90) do
+      not look like radians.
+
+    Args:
+        values: the six values, mm and degrees as the user gave them.
+
+    Returns:
+        None, or the reason, quoting the values as written.
+    """
+    x, y, z, rx, ry, rz = (float(v) for v in values)
+    position, angles = (x, y, z), (rx, ry, rz)
+    if all(abs(v) < METRES_LIMIT for v in position) and any(position):
+        first = next(v for v in position if v)
+        return (
+            f"x, y, z = {', '.join(map(written, position))} look like metres: positions are"
+            f" in mm ({written(first)} m is {written(round(first * 1000, 3))} mm)"
+        )
+    if all(abs(a) <= 2 * math.pi + RADIANS_TOLERANCE for a in angles):
+        for angle in angles:
+            if any(abs(abs(angle) - q) <= RADIANS_TOLERANCE for q in _QUARTER_TURNS):
+                degrees = round(math.degrees(angle))
+                return (
+                    f"rx, ry, rz = {', '.join(map(written, angles))} look like radians:"
+                    f" orientations are in degrees ({written(angle)} rad is {degrees} deg)"
+                )
+    return None
+
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def warn_units(message: str) -> None:
+    """Issue a :class:`UnitsWarning` pointing at the first caller outside tmmaster."""
+    frame = sys._getframe(1)
+    level = 2
+    while frame.f_back is not None and _PACKAGE in Path(frame.f_code.co_filename).resolve().parents:
+        frame = frame.f_back
+        level += 1
+    warnings.warn(message, UnitsWarning, stacklevel=level)
+
+
 _validated_init = Pose.__init__
 
 
@@ -194,10 +292,20 @@ def _pose_init(self: Pose, *args: Any, **kwargs: Any) -> None:
         _validated_init(self, *args, **kwargs)
     except ValidationError as exc:
         problems = []
+        missing = []
         for error in exc.errors():
             where = error["loc"][0] if error["loc"] else "pose"
             name = _POSE_FIELDS[where] if isinstance(where, int) and where < 6 else where
-            problems.append(f"{name}: {error['msg']}")
+            if error["type"] == "missing":
+                missing.append(str(name))
+            elif error["type"] != "unexpected_positional_argument":
+                problems.append(f"{name}: {error['msg']}")
+        given = [repr(a) for a in args] + [f"{k}={v!r}" for k, v in kwargs.items()]
+        needs = "a pose needs all 6: x, y, z (mm), rx, ry, rz (degrees)"
+        if missing:
+            problems.insert(0, f"{', '.join(missing)} missing in Pose({', '.join(given)}); {needs}")
+        elif len(args) > 6:
+            problems.insert(0, f"{len(args)} values in Pose({', '.join(given)}); {needs}")
         raise ConfigError(f"invalid pose: {'; '.join(problems)}") from exc
 
 

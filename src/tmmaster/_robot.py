@@ -59,6 +59,7 @@ from ._exceptions import (
     RobotFaultError,
     StopRequestedError,
     TMMasterError,
+    UnreachablePoseError,
 )
 from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet, wake_waits
 from ._following import FollowState, Overdue, SharedDriver
@@ -66,7 +67,7 @@ from ._gate import CommandGate
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._logging import get_logger
 from ._poller import Poller, PollPolicy
-from ._pose import MotionType, Pose
+from ._pose import MotionType, Pose, suspect_units, warn_units, written_list
 from ._profiles import (
     DEFAULT_PROFILE,
     builtin_profile_names,
@@ -747,6 +748,7 @@ class Robot:
         gripper_transport: Transport | None = None,
         fleet: Fleet | None = None,
         frame_check: FrameCheck | None = None,
+        check_units: bool = True,
     ) -> None:
         # The addresses used are checked before anything else (a sim:// host has no port).
         if transport is None:
@@ -782,6 +784,13 @@ class Robot:
             )
         #: The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool.
         self.tool = tool
+        #: Whether a target or ``tool`` that looks like metres or radians warns
+        #: (:class:`~tmmaster.UnitsWarning`; docs/robot-api.md, "Units").
+        self.check_units = bool(check_units)
+        if self.check_units and tool is not None:
+            problem = suspect_units(tool.as_list())
+            if problem is not None:
+                warn_units(f"tool {written_list(tool)}: {problem}")
         if frame_check is None:
             frame_check = FrameCheck()
         if not isinstance(frame_check, FrameCheck):
@@ -1215,9 +1224,22 @@ class Robot:
             raise ConfigError(f"speed must be an integer percent, got {speed!r}")
         if not 1 <= speed <= self.max_speed_percent:
             raise ConfigError(f"speed {speed} % is outside 1..{self.max_speed_percent} %")
-        self.workspace.check(pose, tool=self.tool)
+        units = suspect_units(pose.as_list()) if self.check_units else None
+        if units is not None:
+            warn_units(f"target {written_list(pose)}: {units}")
         seed = seed_deg if seed_deg is not None else self._joints_hint
-        return self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+        try:
+            self.workspace.check(pose, tool=self.tool)
+            return self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+        except ConfigError as exc:
+            if units is None:
+                raise
+            # Refused: say why it probably is (what the user wrote, read as mm and deg).
+            if isinstance(exc, UnreachablePoseError):
+                raise UnreachablePoseError(
+                    f"{exc}; {units}", reason=exc.reason, pose=exc.pose
+                ) from exc
+            raise ConfigError(f"{exc}; {units}") from exc
 
     def expected_motion_time(
         self, start: Pose, target: Pose, speed: int, motion: MotionType

@@ -32,7 +32,7 @@ from pydantic import (
 from .. import _profiles
 from .._address import check_host
 from .._exceptions import ConfigError
-from .._pose import MotionType, Pose
+from .._pose import MotionType, Pose, pose_count_problem, suspect_units, written_list
 from .._profiles import DEFAULT_PROFILE
 from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
@@ -40,12 +40,28 @@ from .._robot import Robot, TimeoutPolicy, Workspace
 
 
 def _finite_pose(value: object) -> object:
-    # A NaN or infinite coordinate would pass a range check ("not < max") by accident.
     if isinstance(value, list | tuple):
+        if len(value) != 6:  # said with the values as written and the names missing
+            raise ValueError(pose_count_problem(value))
+        # A NaN or infinite coordinate would pass a range check ("not < max") by accident.
         for item in value:
             if isinstance(item, float) and not math.isfinite(item):
                 raise ValueError("pose values must be finite numbers")
     return value
+
+
+def units_problem(where: str, values: tuple[float, ...], opt_out: str) -> str | None:
+    """Why the pose at ``where`` looks like metres or radians (quoting it), or None.
+
+    ``opt_out`` says how to switch the check off in that file.
+    """
+    problem = suspect_units(values)
+    if problem is None:
+        return None
+    return (
+        f"{where}: {written_list(values)}: {problem}; if these really are mm and degrees,"
+        f" set {opt_out}"
+    )
 
 
 #: ``[x, y, z, rx, ry, rz]`` in mm and degrees.
@@ -108,6 +124,9 @@ class PosesSection(_Section):
     approach_z_offset: Annotated[float, Field(ge=0, le=1000)] = 100.0
     #: lift = pick + this in z, unless ``lift`` is given (article: 150 mm).
     lift_z_offset: Annotated[float, Field(ge=0, le=1000)] = 150.0
+    #: Refuse a pose of this file that looks like metres or radians (every pose:
+    #: [poses], [robot] tool, [on_error] pose); false: take them as mm and degrees.
+    check_units: bool = True
 
     @model_validator(mode="after")
     def _one_source_each(self) -> Self:
@@ -292,9 +311,34 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
 def validate_config(data: Mapping[str, Any], *, source: str = "<defaults>") -> PickPlaceConfig:
     """Validate a mapping; raises :class:`ConfigError` naming the key and ``source``."""
     try:
-        return PickPlaceConfig.model_validate(dict(data))
+        config = PickPlaceConfig.model_validate(dict(data))
     except ValidationError as exc:
         raise ConfigError(format_validation_error(exc, source)) from None
+    check_pose_units(config, source)
+    return config
+
+
+def check_pose_units(config: PickPlaceConfig, source: str) -> None:
+    """Refuse a pose that looks like metres or radians, unless ``[poses] check_units = false``.
+
+    Raises:
+        ConfigError: naming the key and quoting its values as written.
+    """
+    if not config.poses.check_units:
+        return
+    given: list[tuple[str, tuple[float, ...] | None]] = [
+        ("robot.tool", config.robot.tool),
+        *((f"poses.{name}", getattr(config.poses, name)) for name in _POSE_KEYS),
+        ("on_error.pose", config.on_error.pose),
+    ]
+    for where, values in given:
+        if values is not None:
+            problem = units_problem(where, values, "[poses] check_units = false")
+            if problem is not None:
+                raise ConfigError(f"{source}: {problem}")
+
+
+_POSE_KEYS = ("approach", "pick", "lift", "place", "home")
 
 
 def read_config_data(path: str | Path) -> dict[str, Any]:
@@ -375,6 +419,8 @@ def robot_from_config(
         max_speed_percent=config.robot.max_speed,
         position_tolerance_mm=config.robot.position_tolerance_mm,
         tool=config.robot.tool_pose(),
+        # The configuration's poses were checked as written (check_pose_units).
+        check_units=False,
         # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
         gripper_settle_s=max(g.settle_s / settle_scale, min(g.settle_s, 0.1)),
     )

@@ -16,7 +16,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose
-from ._config import PickPlaceConfig, PoseValue, Speed, format_validation_error, read_config_data
+from ._config import (
+    PickPlaceConfig,
+    PoseValue,
+    Speed,
+    format_validation_error,
+    read_config_data,
+    units_problem,
+)
 from ._steps import Action, Cycles, PlannedMove, RetryRule, StepContext, TaskSequence
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
@@ -278,6 +285,9 @@ class SequenceFile(BaseModel):
     name: Annotated[str, Field(min_length=1)]
     cycles: Annotated[int, Field(ge=1, le=1_000_000)] = 1
     open_at_start: bool = True
+    #: Refuse a pose of this file that looks like metres or radians; false: take them
+    #: as mm and degrees.
+    check_units: bool = True
     poses: dict[str, PoseValue] = {}
     steps: Annotated[list[DataStep], Field(min_length=1)]
     retreat: RetreatSpec | None = None
@@ -289,6 +299,8 @@ def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Ta
         spec = SequenceFile.model_validate(dict(data))
     except ValidationError as exc:
         raise ConfigError(format_validation_error(exc, source)) from None
+    if spec.check_units:
+        _check_units(spec, source)
 
     def pose_of(value: str | tuple[float, ...], where: str) -> Pose:
         if isinstance(value, str):
@@ -339,6 +351,26 @@ def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Ta
             "retreat.pose",
         )
     return seq
+
+
+def _check_units(spec: SequenceFile, source: str) -> None:
+    """Refuse a pose of the file that looks like metres or radians, quoting it as written."""
+    given: list[tuple[str, str | tuple[float, ...]]] = [
+        *((f"poses.{name}", values) for name, values in spec.poses.items()),
+        *(
+            (f"steps.{index}.pose", step.pose)
+            for index, step in enumerate(spec.steps)
+            if isinstance(step, MoveStep)
+        ),
+    ]
+    if spec.retreat is not None:
+        given.append(("retreat.pose", spec.retreat.pose))
+    for where, values in given:
+        if isinstance(values, str):
+            continue  # a name from [poses], checked there
+        problem = units_problem(where, values, "check_units = false at the top of the file")
+        if problem is not None:
+            raise ConfigError(f"{source}: {problem}")
 
 
 def load_sequence(path: str | Path) -> TaskSequence:
