@@ -326,3 +326,14 @@ def test_pickplace_says_a_refused_connection_and_does_not_retry(
     assert f"robot at 127.0.0.1:{port} refused the connection" in line
     assert "unreachable" not in line
     assert json.loads(report.read_text())["transport"]["robot"]["retries"] == 0
+
+
+def test_the_simulators_bind_address_is_checked_too(
+    no_io: None, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tmmaster.sim.__main__ import main as sim_main
+
+    assert sim_main(["--bind", "127.0.0.1:5020", "--port", "0"]) == 2
+    assert _last_line(capsys.readouterr().err) == (
+        "sim: --bind: '127.0.0.1:5020' includes a port; put the port in --port [exit 2]"
+    )

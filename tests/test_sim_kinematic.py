@@ -57,7 +57,10 @@ TOOL = Pose(0, 0, 120, 0, 0, 0)  # 120 mm along the flange's z axis
 ARTICLE_MAX = 327.67
 #: Poses inside the article map a TM5 cannot take (from DEFAULT_HOME's joints), by reason.
 ARTICLE_HOME = Pose(0, 0, 300, 180, 0, 0)  # out of reach: the flange cannot be on J1's axis
-TM5_JOINT_LIMIT = Pose(0, 50, 200, 90, 0, 90)  # J3 would be ~171 deg (range -155..155)
+#: Every solution needs J3 past its range (-155..155 deg): about -161 deg. (Pose(0, 50,
+#: 200, 90, 0, 90) is not one: an in-range branch exists, 19 mm from the shoulder
+#: singularity, which is then the reason.)
+TM5_JOINT_LIMIT = Pose(0, 60, 150, 90, 0, 90)
 TM5_SINGULAR = Pose(0, -50, 100, 90, 0, 90)  # the wrist ~19 mm from the J1 axis plane
 
 

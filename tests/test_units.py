@@ -18,7 +18,13 @@ import pytest
 import tmmaster
 from tmmaster import ConfigError, Pose, Robot, UnitsWarning, UnreachablePoseError
 from tmmaster._pose import suspect_units
-from tmmaster.pickplace import load_config, load_sequence, robot_from_config
+from tmmaster.pickplace import (
+    load_config,
+    load_sequence,
+    pick_and_place,
+    robot_from_config,
+    validate_plan,
+)
 from tmmaster.pickplace.__main__ import EXIT_CONFIG, EXIT_OK, main
 
 # -- all six values ---------------------------------------------------------------------
@@ -258,3 +264,18 @@ def test_a_sequence_files_poses_are_checked(tmp_path: Path) -> None:
 
 def test_the_warning_class_is_public() -> None:
     assert issubclass(tmmaster.UnitsWarning, UserWarning)
+
+
+def test_a_derived_pose_is_named_by_what_was_written(tmp_path: Path) -> None:
+    # Taken as mm on request: the approach derived from it is out of reach, and the
+    # error names the keys the user wrote, not a poses.approach they never did.
+    path = _config(tmp_path, "[poses]\ncheck_units = false\npick = [0.3, -0.2, 0.1, 180, 0, 90]\n")
+    config = load_config(path)
+    robot = robot_from_config(config, "127.0.0.1")
+    try:
+        with pytest.raises(
+            ConfigError, match=r"^x: poses\.pick \+ approach_z_offset \(MOVE_TO_APP"
+        ):
+            validate_plan(robot, pick_and_place(config), 1, source="x")
+    finally:
+        robot.close()

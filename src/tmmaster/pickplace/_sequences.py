@@ -60,13 +60,19 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
     """The article's cycle: approach, pick, close, check, lift, place, open, home."""
     cfg = config if config is not None else PickPlaceConfig()
     poses = cfg.poses.resolved()
+    # A pose not written derives from pick: errors name what was written.
+    derived = {
+        name: f"poses.pick + {name}_z_offset"
+        for name in ("approach", "lift")
+        if getattr(cfg.poses, name) is None
+    }
     moves = {
         name: PlannedMove(
             state=f"MOVE_TO_{name.upper()}",
             pose=poses[name],
             speed=getattr(cfg.speeds, name),
             motion=getattr(cfg.motion, name),
-            source=f"poses.{name}",
+            source=derived.get(name, f"poses.{name}"),
         )
         for name in ("approach", "pick", "lift", "place", "home")
     }

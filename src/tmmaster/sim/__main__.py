@@ -18,6 +18,7 @@ import threading
 from collections.abc import Callable, Sequence
 from types import FrameType
 
+from .._address import check_host
 from .._cliparse import ArgumentParser, one_line, run_command
 from .._exceptions import ConfigError, TMMasterError
 from .._logging import add_logging_arguments, configure_logging
@@ -199,7 +200,8 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     try:
         sim = Simulator(
             args.profile,
-            host=args.bind,
+            # An address alone (a port goes in --port): said as the option, exit 2.
+            host=check_host(args.bind, field="--bind", port_field="--port"),
             port=args.port,
             time_scale=args.time_scale,
             tick_hz=args.tick_hz,
