@@ -238,3 +238,26 @@ def test_the_check_is_typed_and_off_needs_a_reason() -> None:
         FrameCheck(enabled=False)
     assert FrameCheck().enabled
     assert FrameCheck.off("why").reason == "why"
+
+
+# -- the frame check in the pick & place configuration ----------------------------------
+
+
+def test_the_pick_and_place_configuration_switches_the_frame_check_off_only_with_a_reason() -> None:
+    from tmmaster.pickplace import robot_from_config, validate_config
+
+    default = robot_from_config(validate_config({"robot": {"host": "127.0.0.1"}}))
+    assert default.frame_check.enabled
+    off = validate_config(
+        {
+            "robot": {
+                "host": "127.0.0.1",
+                "frame_check": {"enabled": False, "reason": "the project sets the tool"},
+            }
+        }
+    )
+    robot = robot_from_config(off)
+    assert not robot.frame_check.enabled
+    assert robot.frame_check.reason == "the project sets the tool"
+    with pytest.raises(ConfigError, match="reason"):
+        validate_config({"robot": {"frame_check": {"enabled": False}}})

@@ -36,7 +36,7 @@ from .._pose import MotionType, Pose, pose_count_problem, suspect_units, written
 from .._profiles import DEFAULT_PROFILE
 from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
-from .._robot import Robot, TimeoutPolicy, Workspace
+from .._robot import FrameCheck, Robot, TimeoutPolicy, Workspace
 
 
 def _finite_pose(value: object) -> object:
@@ -101,6 +101,9 @@ class RobotSection(_Section):
     position_tolerance_mm: Annotated[float, Field(gt=0, le=50)] = 1.0
     #: The TCP in the flange frame ``[x, y, z, rx, ry, rz]`` (mm, deg); poses are TCP poses.
     tool: PoseValue | None = None
+    #: At connect, the robot's TCP must be its flange x ``tool`` (tmflow). Switched off
+    #: only with a reason: ``[robot.frame_check]`` ``enabled = false``, ``reason = "..."``.
+    frame_check: FrameCheck = FrameCheck()
 
     @field_validator("host")
     @classmethod
@@ -419,6 +422,7 @@ def robot_from_config(
         max_speed_percent=config.robot.max_speed,
         position_tolerance_mm=config.robot.position_tolerance_mm,
         tool=config.robot.tool_pose(),
+        frame_check=config.robot.frame_check,
         # The configuration's poses were checked as written (check_pose_units).
         check_units=False,
         # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
