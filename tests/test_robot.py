@@ -521,3 +521,30 @@ def test_close_says_whether_it_could_confirm_the_clean_up(
     assert robot.state is tmmaster.ConnectionState.CLOSED
     with pytest.raises(tmmaster.ConfigError, match="timeout_s"):
         robot.close(timeout_s=0)
+
+
+@pytest.mark.parametrize(("speaks", "device"), [("article", "tmflow"), ("tmflow", "article")])
+def test_a_device_running_another_profile_is_a_profile_mismatch(
+    tm_simulator_factory: SimFactory, speaks: str, device: str
+) -> None:
+    # tmflow reads the arm at connect, article only its status: either way the refused
+    # read becomes one ConfigError naming both profiles, the Modbus code said once.
+    sim = tm_simulator_factory(device)
+    robot = Robot(sim.url, profile=speaks)
+
+    def connect_and_read() -> None:
+        robot.connect()
+        robot.status()
+
+    try:
+        with pytest.raises(tmmaster.ProfileMismatchError) as caught:
+            connect_and_read()
+    finally:
+        robot.close()
+    error = caught.value
+    assert isinstance(error, tmmaster.ConfigError)
+    assert isinstance(error, tmmaster.IllegalAddressError)
+    assert (error.profile, error.device_profile, error.code) == (speaks, device, 2)
+    assert str(error).count("(Modbus exception code 2)") == 1
+    assert f"the device answers the '{device}' profile's status registers" in str(error)
+    assert command_writes(sim) == []

@@ -19,6 +19,7 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     │   └── ModbusExceptionError                  the device answered with an exception code
     │       ├── IllegalFunctionError              code 1
     │       ├── IllegalAddressError               code 2
+    │       │   └── ProfileMismatchError (ConfigError) the device speaks another profile
     │       ├── IllegalValueError                 code 3
     │       ├── DeviceFailureError                code 4
     │       └── DeviceBusyError                   code 6
@@ -158,6 +159,28 @@ class IllegalAddressError(ModbusExceptionError):
     """Modbus exception 2: the address range is not served by the device."""
 
     code = 2
+
+
+class ProfileMismatchError(IllegalAddressError, ConfigError):
+    """The device refused the profile's registers and answers another built-in profile's.
+
+    The robot (or simulator) runs another register contract than the one the Robot was
+    given: a configuration error (also a :class:`ConfigError`), found by reading before
+    anything was commanded. The message names both profiles.
+
+    Args:
+        message: What was refused, naming both profiles.
+        profile: The profile this Robot speaks.
+        device_profile: The built-in profile whose status registers the device answers.
+    """
+
+    def __init__(self, message: str, *, profile: str, device_profile: str) -> None:
+        #: The profile this Robot speaks.
+        self.profile = profile
+        #: The built-in profile whose status registers the device answers.
+        self.device_profile = device_profile
+        # The message quotes the refused read, which already names the Modbus code.
+        Exception.__init__(self, message)
 
 
 class IllegalValueError(ModbusExceptionError):

@@ -54,6 +54,7 @@ from ._exceptions import (
     EmergencyStopError,
     IllegalAddressError,
     MotionTimeoutError,
+    ProfileMismatchError,
     ResponseTimeoutError,
     RobotError,
     RobotFaultError,
@@ -1019,10 +1020,10 @@ class Robot:
         try:
             values = channel.read(fields)
         except IllegalAddressError as exc:
-            hint = self._profile_hint()
-            if hint is None:
+            mismatch = self._profile_mismatch(exc)
+            if mismatch is None:
                 raise
-            raise IllegalAddressError(f"{exc}; {hint}", code=exc.code) from exc
+            raise mismatch from exc
         tcp = pose_from(values, TCP_FIELDS)
         if check:
             self._check_frames(
@@ -1157,13 +1158,13 @@ class Robot:
         try:
             return self._channel.read_status()
         except IllegalAddressError as exc:
-            hint = self._profile_hint()
-            if hint is None:
+            mismatch = self._profile_mismatch(exc)
+            if mismatch is None:
                 raise
-            raise IllegalAddressError(f"{exc}; {hint}", code=exc.code) from exc
+            raise mismatch from exc
 
-    def _profile_hint(self) -> str | None:
-        """After a refused status read: which built-in profile the device seems to speak."""
+    def _profile_mismatch(self, refused: IllegalAddressError) -> ProfileMismatchError | None:
+        """After a refused read: the built-in profile the device seems to speak, as an error."""
         for name in builtin_profile_names():
             if name == self.profile.name:
                 continue
@@ -1176,9 +1177,11 @@ class Robot:
                 )
             except TMMasterError:
                 continue
-            return (
-                f"the device answers the {name!r} profile's status registers:"
-                f" is it running that profile? (this Robot speaks {self.profile.name!r})"
+            return ProfileMismatchError(
+                f"{refused}; the device answers the {name!r} profile's status registers:"
+                f" is it running that profile? (this Robot speaks {self.profile.name!r})",
+                profile=self.profile.name,
+                device_profile=name,
             )
         return None
 
