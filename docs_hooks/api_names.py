@@ -34,6 +34,7 @@ MADE_BY_THE_PACKAGE = {
 #: Members of public classes that serve the package itself, not its users: left out of
 #: the reference.
 INTERNAL_MEMBERS = {
+    "tmmaster._robot.Motion.ticket",
     "tmmaster._transport.BlockTransport.read_plan",
     "tmmaster.sim._simulator.Simulator.device_server",
     "tmmaster.tmscript._evaluator.Program.script",

@@ -16,6 +16,9 @@ static analysis would otherwise show wrong (the names involved: docs_hooks/api_n
   cycle: ``Fleet.latest(robot: _Closable)``) is shown as that class (``Robot``).
 - Classes only the package makes (``Motion``) are shown without a constructor, and
   members that serve the package itself are left out.
+- An attribute's value is shown unless it is an implementation detail: the value an
+  ``__init__`` assigns (``self.gripper = self._make_gripper(...)``), or an expression
+  naming something private (``MappingProxyType(_load_models())``).
 
 tests/test_api_reference.py checks the same rules on the source, without a build.
 """
@@ -27,6 +30,7 @@ import functools
 import importlib
 import importlib.util
 import inspect
+import re
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +76,7 @@ class PublicAPI(griffe.Extension):
     ) -> None:
         """Document an attribute by the ``#:`` comment above it (when it has no string)."""
         _ = (node, kwargs)
+        _hide_private_value(attr)
         if attr.docstring is not None:
             return
         text = _comment_above(attr.filepath, attr.lineno)
@@ -102,6 +107,17 @@ class PublicAPI(griffe.Extension):
         for function_path, class_path in NAMES.MADE_LIKE.items():
             _shape_like(pkg, function_path, class_path)
         _name_stand_ins(pkg)
+
+
+_PRIVATE_NAME = re.compile(r"(?<![\w.])_[A-Za-z]\w*|\._\w+|\bself\.")
+
+
+def _hide_private_value(attr: griffe.Attribute) -> None:
+    """No value for an instance attribute, nor one that names something private."""
+    if "instance-attribute" in attr.labels or (
+        attr.value is not None and _PRIVATE_NAME.search(str(attr.value))
+    ):
+        attr.value = None
 
 
 def _public_paths(pkg: griffe.Module) -> set[str]:

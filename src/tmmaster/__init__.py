@@ -3,7 +3,8 @@
 The same code runs against the built-in simulator (``python -m tmmaster.sim``) and
 against a real robot: only the host changes. Everything public is importable from
 here; modules starting with an underscore are private. Names are imported on first
-use, so ``import tmmaster`` stays cheap.
+use, so ``import tmmaster`` stays cheap. ``tmmaster.__version__`` is the installed
+version.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from ._lazy import lazy_attributes as _lazy_attributes
 from ._version import version as _version_of_package
 
 if _TYPE_CHECKING:
+    from ._channels import Command, CommandKind
     from ._codec import Value, allowed_range, decode, encode
     from ._exceptions import (
         AcknowledgeTimeoutError,
@@ -104,6 +106,8 @@ _EXPORTS = {
     "Access": "._registers",
     "AcknowledgeTimeoutError": "._exceptions",
     "Blog2FG7Gripper": "._gripper",
+    "Command": "._channels",
+    "CommandKind": "._channels",
     "CommandRejectedError": "._exceptions",
     "CommandStateUnknownError": "._exceptions",
     "ConfigError": "._exceptions",
@@ -206,6 +210,8 @@ __all__ = [
     "Access",
     "AcknowledgeTimeoutError",
     "Blog2FG7Gripper",
+    "Command",
+    "CommandKind",
     "CommandRejectedError",
     "CommandStateUnknownError",
     "ConfigError",

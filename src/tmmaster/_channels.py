@@ -71,7 +71,14 @@ class CommandKind(StrEnum):
 
     @classmethod
     def of(cls, motion: MotionType) -> CommandKind:
-        """The command kind for a motion type."""
+        """The command kind for a motion type.
+
+        Args:
+            motion: PTP or LINE.
+
+        Returns:
+            ``CommandKind.PTP`` or ``CommandKind.LINE``.
+        """
         return cls.PTP if motion is MotionType.PTP else cls.LINE
 
 
@@ -79,9 +86,13 @@ class CommandKind(StrEnum):
 class Command:
     """A command as the user asked for it, before encoding."""
 
+    #: What it asks for.
     kind: CommandKind
+    #: The TCP target of a move (None for a gripper command or a stop).
     target: Pose | None = None
+    #: The move's speed, %.
     speed: int | None = None
+    #: The move's acceleration time, ms (None: the robot's default).
     accel_time_ms: int | None = None
 
 
