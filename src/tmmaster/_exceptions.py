@@ -64,23 +64,39 @@ class UnknownNameError(RegisterMapError, KeyError):
 
 
 class ValueOutOfRangeError(ConfigError):
-    """A value cannot be encoded into its field."""
+    """A value cannot be encoded into its field.
+
+    Args:
+        field: The field's name.
+        value: The value refused.
+        allowed: The allowed range, in words (``"-327.68..327.67 mm, int16 x100"``).
+    """
 
     def __init__(self, field: str, value: object, allowed: str) -> None:
+        #: The field's name.
         self.field = field
+        #: The value refused.
         self.value = value
+        #: The allowed range, in words.
         self.allowed = allowed
         super().__init__(f"{field}: value {value!r} is out of range (allowed {allowed})")
 
 
 class UnreachablePoseError(ConfigError):
-    """The arm cannot take a pose: out of reach, past a joint limit, or at a singularity."""
+    """The arm cannot take a pose: out of reach, past a joint limit, or at a singularity.
+
+    Args:
+        message: What is wrong, naming the pose.
+        reason: ``"reach"``, ``"joint_limit"`` or ``"singularity"``.
+        pose: The pose refused.
+    """
 
     #: Why: ``"reach"``, ``"joint_limit"`` or ``"singularity"``.
     reason: str
 
     def __init__(self, message: str, *, reason: str, pose: Pose | None = None) -> None:
         self.reason = reason
+        #: The pose refused.
         self.pose = pose
         super().__init__(message)
 
@@ -139,8 +155,14 @@ class ResponseTimeoutError(TransportError, TimeoutError):
 
 
 class ModbusExceptionError(TransportError):
-    """The device answered with a Modbus exception response."""
+    """The device answered with a Modbus exception response.
 
+    Args:
+        message: The request that was refused.
+        code: The Modbus exception code (a subclass has its own).
+    """
+
+    #: The Modbus exception code.
     code: int = 0
 
     def __init__(self, message: str, *, code: int | None = None) -> None:
@@ -172,12 +194,14 @@ class ProfileMismatchError(IllegalAddressError, ConfigError):
         message: What was refused, naming both profiles.
         profile: The profile this Robot speaks.
         device_profile: The built-in profile whose status registers the device answers.
+
+    Attributes:
+        profile: The profile this Robot speaks.
+        device_profile: The built-in profile whose status registers the device answers.
     """
 
     def __init__(self, message: str, *, profile: str, device_profile: str) -> None:
-        #: The profile this Robot speaks.
         self.profile = profile
-        #: The built-in profile whose status registers the device answers.
         self.device_profile = device_profile
         # The message quotes the refused read, which already names the Modbus code.
         Exception.__init__(self, message)
@@ -202,10 +226,18 @@ class DeviceBusyError(ModbusExceptionError):
 
 
 class RobotError(TMMasterError):
-    """The robot refused or failed a command."""
+    """The robot refused or failed a command.
+
+    Args:
+        message: What happened.
+        error_code: The robot's error code (0: none reported).
+        pose: Where the arm was, when known.
+    """
 
     def __init__(self, message: str, *, error_code: int = 0, pose: Pose | None = None) -> None:
+        #: The robot's error code (0: none reported).
         self.error_code = error_code
+        #: Where the arm was, when known.
         self.pose = pose
         super().__init__(message)
 
@@ -234,9 +266,15 @@ class CommandStateUnknownError(RobotError):
 
 
 class MotionTimeoutError(TMMasterError, TimeoutError):
-    """A wait on the robot ran out of time."""
+    """A wait on the robot ran out of time.
+
+    Args:
+        message: What was waited for, and how long.
+        pose: Where the arm was, when known.
+    """
 
     def __init__(self, message: str, *, pose: Pose | None = None) -> None:
+        #: Where the arm was, when known.
         self.pose = pose
         super().__init__(message)
 
@@ -262,9 +300,14 @@ class StopRequestedError(TMMasterError):
 
     Raised within one poll of the request. A command the wait was following has been
     withdrawn (or the arm stopped, if it had started) before this propagates.
+
+    Args:
+        message: What was given up.
+        pose: Where the arm was, when known.
     """
 
     def __init__(self, message: str = "stop requested", *, pose: Pose | None = None) -> None:
+        #: Where the arm was, when known.
         self.pose = pose
         super().__init__(message)
 
@@ -285,11 +328,19 @@ class TMScriptError(TMMasterError):
     """A TMscript program is wrong or failed (``tmmaster.tmscript``).
 
     ``line`` and ``column`` (1-based) say where in the script; the message starts with them.
+
+    Args:
+        message: What is wrong (``reason``).
+        line: The line, 1-based.
+        column: The column, 1-based.
     """
 
     def __init__(self, message: str, *, line: int, column: int) -> None:
+        #: The line, 1-based.
         self.line = line
+        #: The column, 1-based.
         self.column = column
+        #: The message without the position.
         self.reason = message
         super().__init__(f"line {line}, column {column}: {message}")
 

@@ -117,8 +117,33 @@ def configure_logging(
 ) -> Callable[[], None]:
     """Print tmmaster's events to ``stream`` (stderr): coloured key=value, or one JSON per line.
 
-    For command-line tools and scripts. Returns a function that undoes it.
+    For command-line tools and scripts; a library user's own logging configuration
+    (tmmaster logs on the standard loggers ``tmmaster.*``) needs none of it.
+
+    Args:
+        json: One JSON object per line instead of key=value text.
+        level: The lowest level shown: ``"debug"``, ``"info"``, ``"warning"`` or
+            ``"error"``.
+        stream: Where to print; None: stderr.
+
+    Returns:
+        A function that undoes the configuration.
+
+    Raises:
+        ValueError: An unknown level.
     """
+    return configure_command_logging(json=json, level=level, stream=stream)
+
+
+def configure_command_logging(
+    *,
+    json: bool,
+    level: str,
+    stream: TextIO | None,
+    record_filter: logging.Filter | None = None,
+) -> Callable[[], None]:
+    """:func:`configure_logging`, with ``record_filter`` on the handler (for a command that
+    says some events itself, in its own words)."""
     numeric = logging.getLevelNamesMapping().get(level.upper())
     if numeric is None:
         raise ValueError(f"unknown log level {level!r}")
@@ -127,6 +152,8 @@ def configure_logging(
     output = stream if stream is not None else sys.stderr
     handler = logging.StreamHandler(output)
     handler.setFormatter(event_formatter(json=json, colors=output.isatty()))
+    if record_filter is not None:
+        handler.addFilter(record_filter)
     root = logging.getLogger(ROOT_LOGGER)
     saved = (root.level, root.propagate)
     root.addHandler(handler)

@@ -19,6 +19,13 @@ class Poller:
     A stop event, when given, ends the wait: :meth:`sleep` raises
     :class:`StopRequestedError` as soon as the event is set (``Event.wait`` wakes at
     once), so a stop request never turns a wait into a busy loop of requests.
+
+    Args:
+        interval_s: Seconds between two polls (> 0).
+        stop_event: Ends every sleep when set; None: nothing ends them early.
+
+    Raises:
+        ConfigError: An interval that is not a finite number > 0.
     """
 
     def __init__(self, interval_s: float, stop_event: threading.Event | None = None) -> None:
@@ -26,17 +33,29 @@ class Poller:
             interval_s <= 0
         ):
             raise ConfigError(f"poll interval must be a finite number > 0 s, got {interval_s!r}")
+        #: Seconds between two polls.
         self.interval_s = interval_s
         self._next = time.monotonic()
         self._stop = stop_event
 
     def check(self) -> None:
-        """Raise :class:`StopRequestedError` if a stop was requested."""
+        """Raise :class:`StopRequestedError` if a stop was requested.
+
+        Raises:
+            StopRequestedError: The stop event is set.
+        """
         if self._stop is not None and self._stop.is_set():
             raise StopRequestedError("stop requested")
 
     def sleep_until(self, when: float) -> None:
-        """Sleep until the monotonic time ``when`` (at once if it has passed)."""
+        """Sleep until the monotonic time ``when`` (at once if it has passed).
+
+        Args:
+            when: A ``time.monotonic()`` value.
+
+        Raises:
+            StopRequestedError: The stop event is set, before or during the sleep.
+        """
         self.check()
         delay = when - time.monotonic()
         if delay <= 0:

@@ -115,8 +115,11 @@ class Workspace(BaseModel):
     # NaN or infinite bounds would make range checks pass or fail by accident.
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
+    #: The TCP's range along x (lowest, highest), mm.
     x: tuple[float, float] = (-2000.0, 2000.0)
+    #: The TCP's range along y, mm.
     y: tuple[float, float] = (-2000.0, 2000.0)
+    #: The TCP's range along z, mm.
     z: tuple[float, float] = (-2000.0, 2000.0)
     #: The table plane, mm: no TCP and no flange below it. None: no plane.
     floor_z_mm: float | None = 0.0
@@ -172,6 +175,7 @@ class TimeoutPolicy(BaseModel):
     ] = 2.0
     #: Motion timeout = factor x expected time + margin (the article's ~130 % rule) ...
     motion_factor: Annotated[float, Field(ge=1, le=10)] = 1.3
+    #: ... + this margin, s.
     motion_margin_s: Annotated[float, Field(ge=0, le=600)] = 2.0
     #: ... unless fixed here for every move.
     motion_timeout_s: Annotated[
@@ -188,7 +192,14 @@ class TimeoutPolicy(BaseModel):
     in_flight_s: Annotated[float, Field(gt=0, le=600)] = 5.0
 
     def for_motion(self, expected_s: float) -> float:
-        """The timeout of a move expected to take ``expected_s`` seconds."""
+        """The timeout of a move expected to take ``expected_s`` seconds.
+
+        Args:
+            expected_s: The move's expected duration, s.
+
+        Returns:
+            ``motion_timeout_s`` when fixed, else factor x expected + margin, s.
+        """
         if self.motion_timeout_s is not None:
             return self.motion_timeout_s
         return expected_s * self.motion_factor + self.motion_margin_s
@@ -243,7 +254,23 @@ class FrameCheck(BaseModel):
 
 
 class Motion:
-    """A move that was sent; ask for its progress, or wait for it."""
+    """A move that was sent; ask for its progress, or wait for it.
+
+    Made by :meth:`Robot.start_move` (and returned by :meth:`Robot.move_to`, done).
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+        ```python
+        from tmmaster import Pose, connect
+
+        with connect("127.0.0.1", 5020) as robot:
+            motion = robot.start_move(Pose(300, -200, 200, 180, 0, 90), speed=50)
+            print(motion.progress().phase)  # sent or running
+            motion.wait()
+            print(motion.done, motion.last_pose)
+        ```
+    """
 
     def __init__(
         self,
@@ -258,15 +285,22 @@ class Motion:
     ) -> None:
         self._follower = follower
         self._ticket = ticket
+        #: Where the move started, when known.
         self.start = start
+        #: The TCP target (None for a gripper command).
         self.target = ticket.command.target
+        #: The expected duration by the arm model, s.
         self.expected_s = expected_s
+        #: How long the move may take before its wait gives up, s.
         self.timeout_s = timeout_s
         #: The move's acceleration time by the arm model, s (0: not a move).
         self.accel_s = accel_s
         self._gauge = gauge
+        #: Where the move stands.
         self.phase = MovePhase.SENT
+        #: The last TCP pose read during the move (None before the first read).
         self.last_pose: Pose | None = None
+        #: ``time.monotonic()`` when the move was seen done or failed (None before).
         self.finished_at: float | None = None
         #: After the master gave up on this command: True when it was withdrawn before the
         #: robot took it, False when the withdraw failed or came too late, None otherwise.
@@ -315,7 +349,16 @@ class Motion:
         return self._follower.abandoned(self)
 
     def progress(self) -> MoveProgress:
-        """Poll the robot once and report where the move stands (raises on robot failure)."""
+        """Poll the robot once and report where the move stands (raises on robot failure).
+
+        Returns:
+            The phase, the last pose, the time elapsed and expected, and the fraction
+            of the distance covered.
+
+        Raises:
+            RobotFaultError: The robot reported an error (EmergencyStopError for an
+                e-stop).
+        """
         if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
             polled_pose = self.last_pose
             with self._follower.following(self):
@@ -337,6 +380,17 @@ class Motion:
         Whatever ends the wait early (robot failure, timeout, stop request, lost link,
         an exception), the command is withdrawn if the robot has not taken it, and a
         running move is stopped unless the robot stopped it itself.
+
+        Args:
+            timeout_s: How long to wait, s; None: the move's own ``timeout_s``.
+
+        Raises:
+            AcknowledgeTimeoutError: The robot did not take the command in time.
+            MotionTimeoutError: The move did not finish in time.
+            RobotFaultError: The robot reported an error (EmergencyStopError for an
+                e-stop).
+            StopRequestedError: A stop was requested (:meth:`Robot.interrupt`).
+            ConnectionLostError: The link broke and did not come back in time.
         """
         if timeout_s is not None:
             require_positive("timeout_s", timeout_s)
@@ -721,7 +775,74 @@ class _Mount:
 
 
 class Robot:
-    """A connection to one robot (and its gripper) speaking one profile."""
+    """A connection to one robot (and its gripper) speaking one profile.
+
+    Every move is validated before a byte is sent (speed, workspace, the arm's reach,
+    the profile's encodable range), written once, acknowledged, waited for on a
+    monotonic clock and checked at its end (docs/robot-api.md). Nothing connects before
+    :meth:`connect` (or ``with``); :func:`~tmmaster.connect` does both. One Robot is
+    used by one thread; :meth:`interrupt` is the call meant for other threads.
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+        ```python
+        from tmmaster import Pose, Robot
+
+        robot = Robot("127.0.0.1", 5020, name="cell-1")
+        with robot:  # connects; closes (withdrawing anything outstanding) at the end
+            robot.wait_until_ready()
+            robot.move_to(Pose(300, -200, 200, 180, 0, 90), speed=50)
+            robot.move_to(Pose(300, -200, 150, 180, 0, 90), speed=10, motion="line")
+            print(robot.pose(), robot.status().ready)
+        ```
+
+    Args:
+        host: The robot's address: an IP address or a host name, or ``"sim://NAME"``
+            for an in-process simulator (``Simulator(listen=False)``).
+        port: The robot's Modbus TCP port.
+        profile: The register map the robot speaks: ``"tmflow"`` (the default, the
+            robot program's sequence handshake), ``"article"``, a TOML file or a
+            RobotProfile.
+        model: The arm: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"``, ``"tm14"`` or a
+            RobotModel; inverse kinematics of every target, and expected motion times.
+        gripper: ``"auto"`` (what the profile offers), None, ``"blog-2fg7"``,
+            ``"onrobot-2fg7"``, a gripper TOML file, a GripperProfile, or a Gripper.
+        gripper_host: Where a stand-alone gripper listens; None: the robot's host.
+        gripper_port: The stand-alone gripper's port.
+        poll_interval_s: Seconds between two status reads of a wait.
+        polling: When a move is polled (dense around the acknowledgement and the
+            expected end); None: ``PollPolicy()``.
+        timeouts: Acknowledgement, motion and gripper timeouts; None:
+            ``TimeoutPolicy()``.
+        retry: How transient failures are retried (never a command write); None:
+            ``RetryPolicy()``, up to 12 attempts within 10 s.
+        request_timeout_s: Bound of one Modbus request, s.
+        workspace: Where the tool may go (a table plane at z = 0 and a box); None:
+            ``Workspace()``.
+        max_speed_percent: Faster moves are refused, 1..100.
+        position_tolerance_mm: A finished move's TCP must be this close to the
+            target, mm.
+        orientation_tolerance_deg: ... and its orientation this close, deg.
+        gripper_settle_s: The article profile's register gripper (no busy flag): how
+            long an open or a close takes at most, s.
+        tool: The TCP in the flange frame (mm, deg): poses are TCP poses, TCP = flange
+            x tool; None: the TCP is the flange.
+        name: The robot's name in messages and logs.
+        transport: A ready Transport for the robot's link instead of one opened to
+            ``host:port``.
+        gripper_transport: A ready Transport for a stand-alone gripper's link.
+        fleet: A Fleet: the robot's link and the polls of its waits on the fleet's
+            event loop (not with ``transport`` or a ``sim://`` host).
+        frame_check: At connect, the robot's TCP must be its flange x ``tool``; None:
+            ``FrameCheck()``; ``FrameCheck.off("why")`` switches it off.
+        check_units: Warn (UnitsWarning) when a target or the ``tool`` looks like
+            metres or radians.
+
+    Raises:
+        ConfigError: An invalid argument, named in the message (an unknown profile or
+            model: RegisterMapError).
+    """
 
     def __init__(
         self,
@@ -764,7 +885,9 @@ class Robot:
             reached = gripper_host or host
             if not (isinstance(reached, str) and reached.startswith(SIM_SCHEME)):
                 gripper_port = check_port(gripper_port, field="gripper_port")
+        #: The robot's register map.
         self.profile = robot_profile(profile)
+        #: The arm model.
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
         if not 1 <= max_speed_percent <= 100:
             raise ConfigError(f"max_speed_percent must be 1..100, got {max_speed_percent}")
@@ -776,6 +899,7 @@ class Robot:
             ("gripper_settle_s", gripper_settle_s),
         ):
             require_positive(option, value)
+        #: The robot's name in messages and logs.
         self.name = name
         #: Where the tool may go: the table plane (on by default) and the TCP's box.
         self.workspace = Workspace() if workspace is None else workspace
@@ -809,6 +933,7 @@ class Robot:
         self._joints_hint: tuple[float, ...] | None = None
         self._hint_pose: Pose | None = None
         self._joints_mismatch_logged = False
+        #: Faster moves are refused, %.
         self.max_speed_percent = max_speed_percent
         link: dict[str, Any] = {
             "device_id": self.profile.device_id,
@@ -853,6 +978,7 @@ class Robot:
             # The polls of this robot's waits run on the fleet's loop.
             self._shared = fleet_driver(fleet, self, self._channel, loop_link, self._gate)
             self._follower.shared_driver = self._shared.follow
+        #: The robot's gripper (a NoGripper when there is none).
         self.gripper: Gripper = self._make_gripper(
             gripper,
             GripperLink(
@@ -972,7 +1098,9 @@ class Robot:
             ConfigError: the frame check found the robot's TCP is not its flange x
                 ``tool`` (naming the tool offset the robot appears to have), or not in
                 the robot base.
-            IllegalAddressError: the device does not serve the profile's registers.
+            IllegalAddressError: the device does not serve the profile's registers
+                (:class:`ProfileMismatchError` when it answers another built-in
+                profile's).
         """
         if self._transport.state is ConnectionState.CLOSED:
             raise ConnectError(
@@ -1154,7 +1282,15 @@ class Robot:
     # -- status -----------------------------------------------------------
 
     def status(self) -> RobotStatus:
-        """One immutable snapshot: each status block read in one request."""
+        """One immutable snapshot: each status block read in one request.
+
+        Returns:
+            The robot's mode, motion, error, e-stop, grasp and TCP pose.
+
+        Raises:
+            TransportError: The read failed (ProfileMismatchError when the device answers
+                another built-in profile's registers).
+        """
         try:
             return self._channel.read_status()
         except IllegalAddressError as exc:
@@ -1186,11 +1322,27 @@ class Robot:
         return None
 
     def pose(self) -> Pose:
-        """The current TCP pose."""
+        """The current TCP pose.
+
+        Returns:
+            The TCP pose the robot reports, mm / deg.
+        """
         return self._channel.read_pose()
 
     def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
-        """Poll until the robot can take a motion command (auto / running, idle, no error)."""
+        """Poll until the robot can take a motion command (auto / running, idle, no error).
+
+        Args:
+            timeout_s: How long to wait, s.
+
+        Returns:
+            The first status that is ready.
+
+        Raises:
+            MotionTimeoutError: Not ready in time.
+            RobotFaultError: The robot is in error (EmergencyStopError for an e-stop).
+            StopRequestedError: A stop was requested.
+        """
         require_positive("timeout_s", timeout_s)
         deadline = time.monotonic() + timeout_s
         poller = Poller(self.poll_interval_s, self._stop_event)
@@ -1220,6 +1372,18 @@ class Robot:
         reported (at :meth:`connect` and before each move, where the profile publishes
         them) moved on to each commanded target's; without published joints, the last
         commanded target's (the model's ready posture before the first move).
+
+        Args:
+            pose: The TCP target.
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            seed_deg: Joints to search from; None: where the arm is believed to be.
+
+        Returns:
+            The target's joints, deg.
+
+        Raises:
+            ConfigError: The move is not allowed (UnreachablePoseError for a pose the
+                arm cannot take).
         """
         if not isinstance(pose, Pose):
             raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
@@ -1249,8 +1413,18 @@ class Robot:
     ) -> float:
         """Expected duration of a move from the arm model (joint-space PTP, checked Line), s.
 
-        A Line whose straight path leaves the arm's range raises
-        :class:`UnreachablePoseError`.
+        Args:
+            start: The TCP pose at the start.
+            target: The TCP target.
+            speed: Speed, %.
+            motion: PTP or LINE.
+
+        Returns:
+            The expected duration, s.
+
+        Raises:
+            UnreachablePoseError: The target, or a Line's straight path, cannot be
+                taken.
         """
         return self.model.motion_time(
             self._planning_start(start),
@@ -1286,7 +1460,21 @@ class Robot:
         Everything :meth:`validate_move` checks, the command block encoded in this
         profile (e.g. the article's +/-327.67 mm range), and for a Line from ``start``
         (with the joints ``seed_deg`` there) that the straight path stays in the arm's
-        range. Raises :class:`ConfigError` naming what is wrong.
+        range.
+
+        Args:
+            target: The TCP target.
+            speed: Speed, an integer percent.
+            motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
+            start: Where a Line starts (None: its path is not checked).
+            seed_deg: The joints at ``start``.
+
+        Returns:
+            The target's joints, deg.
+
+        Raises:
+            ConfigError: What is wrong (UnreachablePoseError for a pose or a path the
+                arm cannot take, ValueOutOfRangeError for one the profile cannot encode).
         """
         motion = _motion_type(motion)
         joints = self.validate_move(target, speed, seed_deg=seed_deg)
@@ -1313,6 +1501,24 @@ class Robot:
         the write (no extra request: Techman's 7013-7036 is one read, or the final check of
         the previous move read them) and the target's joints and the expected time are
         planned from them, on the branch the arm is actually on.
+
+        Args:
+            target: The TCP target (mm, deg, robot base frame).
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
+            timeout: How long the move may take, s; None: from the expected time
+                (``TimeoutPolicy.for_motion``).
+            accel_time_ms: Time to reach full speed, ms, where the profile has the
+                field; None: the robot's default.
+
+        Returns:
+            The move's handle: :meth:`Motion.wait` for it, or :meth:`Motion.progress`.
+
+        Raises:
+            ConfigError: The move is not allowed (nothing is sent).
+            RobotFaultError: The robot is in error or e-stop (nothing is sent).
+            CommandRejectedError: The robot refused the command.
+            StopRequestedError: A stop was requested (nothing is sent).
         """
         motion = _motion_type(motion)
         self.validate_move(target, speed)
@@ -1451,7 +1657,47 @@ class Robot:
         timeout: float | None = None,
         accel_time_ms: int | None = None,
     ) -> Motion:
-        """Move to ``target`` and return when the robot acknowledged and finished the move."""
+        """Move to ``target`` and return when the robot acknowledged and finished the move.
+
+        :meth:`start_move`, then :meth:`Motion.wait`: the move is validated before the
+        first byte, written once, and its final pose checked against the target.
+
+        Example:
+            Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+            ```python
+            from tmmaster import MotionTimeoutError, Pose, connect
+
+            with connect("127.0.0.1", 5020) as robot:
+                above = Pose(300, -200, 200, 180, 0, 90)
+                robot.move_to(above, speed=50)  # PTP
+                try:
+                    robot.move_to(above.offset(dz=-50), speed=10, motion="line")
+                except MotionTimeoutError as exc:
+                    print("gave up, the arm was stopped:", exc.pose)
+            ```
+
+        Args:
+            target: The TCP target (mm, deg, robot base frame).
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
+            timeout: How long the move may take, s; None: from the expected time
+                (``TimeoutPolicy.for_motion``).
+            accel_time_ms: Time to reach full speed, ms, where the profile has the
+                field; None: the robot's default.
+
+        Returns:
+            The finished move.
+
+        Raises:
+            ConfigError: The move is not allowed (UnreachablePoseError: the arm cannot
+                take it); nothing is sent.
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested (the move is withdrawn or stopped).
+            TransportError: The link failed and did not come back in time.
+        """
         handle = self.start_move(
             target, speed=speed, motion=motion, timeout=timeout, accel_time_ms=accel_time_ms
         )
@@ -1555,7 +1801,30 @@ def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:
     """``make`` then ``connect()``, with ``make``'s exact signature (typos caught by mypy)."""
 
     def connect(*args: _P.args, **kwargs: _P.kwargs) -> Robot:
-        """Open a :class:`Robot` (same arguments as :class:`Robot`); use it in a ``with`` block."""
+        """Open a :class:`Robot` (same arguments as :class:`Robot`); use it in a ``with`` block.
+
+        ``Robot(...)`` then :meth:`Robot.connect`; a connect that fails closes the robot.
+        Every argument is :class:`Robot`'s, with the same defaults.
+
+        Example:
+            Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+            ```python
+            from tmmaster import Pose, connect
+
+            with connect("127.0.0.1", 5020) as robot:  # the tmflow profile, a TM5-700
+                robot.move_to(Pose(300, -200, 200, 180, 0, 90), speed=50)
+                print(robot.status())
+            ```
+
+        Returns:
+            The robot, connected.
+
+        Raises:
+            ConfigError: An invalid argument.
+            ConnectError: The robot cannot be reached (ConnectRefusedError,
+                HostNotFoundError say why).
+        """
         robot = make(*args, **kwargs)
         try:
             return robot.connect()
