@@ -70,8 +70,9 @@ PoseValue = Annotated[
 ]
 Speed = Annotated[int, Field(ge=1, le=100, strict=True)]
 
-#: The article's task coordinates (its approach and lift derive from the pick pose).
+#: The article's pick pose (its approach and lift derive from it), mm and degrees.
 ARTICLE_PICK = (300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
+#: The article's place pose, mm and degrees.
 ARTICLE_PLACE = (300.0, 200.0, 200.0, 180.0, 0.0, 90.0)
 #: The article's HOME: out of a TM5's reach (the wrist offsets keep a tool-down flange
 #: ~120 mm from the J1 axis), refused by inverse kinematics; see docs/pickplace.md.
@@ -95,9 +96,11 @@ class RobotSection(_Section):
     model: Literal["tm5-700", "tm5-900", "tm12", "tm14"] = "tm5-700"
     #: The robot's IP address or host name (no port, no URL: the port is ``port``).
     host: str | None = None
+    #: The robot's Modbus TCP port.
     port: Annotated[int, Field(ge=1, le=65535)] = 502
     #: Highest speed any move may use, %.
     max_speed: Speed = 100
+    #: A finished move's TCP must be this close to the target, mm.
     position_tolerance_mm: Annotated[float, Field(gt=0, le=50)] = 1.0
     #: The TCP in the flange frame ``[x, y, z, rx, ry, rz]`` (mm, deg); poses are TCP poses.
     tool: PoseValue | None = None
@@ -111,17 +114,26 @@ class RobotSection(_Section):
         return None if host is None else check_host(host, field="", port_field="robot.port")
 
     def tool_pose(self) -> Pose | None:
-        """The tool offset as a :class:`Pose`, or None for the bare flange."""
+        """The tool offset as a :class:`Pose`, or None for the bare flange.
+
+        Returns:
+            The TCP in the flange frame, or None.
+        """
         return None if self.tool is None else Pose.from_sequence(self.tool)
 
 
 class PosesSection(_Section):
     """Task poses; approach and lift default to the pick pose raised by a z offset."""
 
+    #: Above the pick pose (default: ``pick`` raised by ``approach_z_offset``).
     approach: PoseValue | None = None
+    #: Where the part is gripped.
     pick: PoseValue = ARTICLE_PICK
+    #: Where the part is lifted to (default: ``pick`` raised by ``lift_z_offset``).
     lift: PoseValue | None = None
+    #: Where the part is released.
     place: PoseValue = ARTICLE_PLACE
+    #: Where each cycle ends (and the retreat goes, by default).
     home: PoseValue = DEFAULT_HOME_VALUE
     #: approach = pick + this in z, unless ``approach`` is given (article: 100 mm).
     approach_z_offset: Annotated[float, Field(ge=0, le=1000)] = 100.0
@@ -139,7 +151,11 @@ class PosesSection(_Section):
         return self
 
     def resolved(self) -> dict[str, Pose]:
-        """Every pose of the cycle, derived ones included."""
+        """Every pose of the cycle, derived ones included.
+
+        Returns:
+            ``approach``, ``pick``, ``lift``, ``place`` and ``home``, as Poses.
+        """
         pick = Pose.from_sequence(self.pick)
         approach = (
             Pose.from_sequence(self.approach)
@@ -163,20 +179,30 @@ class PosesSection(_Section):
 class SpeedsSection(_Section):
     """Speed of each move, % (article: normal 30 %, slow 10 % for pick and lift)."""
 
+    #: Speed to the approach pose, %.
     approach: Speed = 30
+    #: Speed down to the pick pose, %.
     pick: Speed = 10
+    #: Speed of the lift, %.
     lift: Speed = 10
+    #: Speed to the place pose, %.
     place: Speed = 30
+    #: Speed home, %.
     home: Speed = 30
 
 
 class MotionSection(_Section):
     """Motion type of each move: "ptp" (joint interpolation) or "line"."""
 
+    #: Motion type to the approach pose.
     approach: MotionType = MotionType.PTP
+    #: Motion type down to the pick pose.
     pick: MotionType = MotionType.LINE
+    #: Motion type of the lift.
     lift: MotionType = MotionType.LINE
+    #: Motion type to the place pose.
     place: MotionType = MotionType.PTP
+    #: Motion type home.
     home: MotionType = MotionType.PTP
 
 
@@ -198,16 +224,20 @@ class RetrySection(RetryPolicy):
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
+    #: Total attempts, the first one included.
     attempts: Annotated[int, Field(ge=1, le=100, strict=True)] = 5
+    #: Give up once this much time has passed since the first attempt, s.
     total_time_s: Annotated[float, Field(gt=0, le=600)] = 10.0
 
 
 class GripperSection(_Section):
     """The gripper: "auto" uses what the robot profile offers (article: gripper register)."""
 
+    #: "auto", "none", "blog-2fg7", "onrobot-2fg7" or a gripper profile TOML file.
     kind: str = "auto"
     #: Host / port of a gripper with its own connection (default: the robot's host).
     host: str | None = None
+    #: The port of a gripper with its own connection.
     port: Annotated[int, Field(ge=1, le=65535)] = 502
     #: Register gripper without busy flag: how long a close/open takes at most, s.
     settle_s: Annotated[float, Field(gt=0, le=60)] = 0.5
@@ -223,7 +253,9 @@ class GripperSection(_Section):
 class RunSection(_Section):
     """How the cycle runs."""
 
+    #: How many cycles to run.
     cycles: Annotated[int, Field(ge=1, le=1_000_000, strict=True)] = 1
+    #: Seconds between two status reads of a wait.
     poll_interval_s: Annotated[float, Field(ge=0.005, le=5)] = 0.05
     #: After a failed grasp: open, re-approach and try again up to this many times.
     grasp_retries: Annotated[int, Field(ge=0, le=20, strict=True)] = 2
@@ -232,24 +264,36 @@ class RunSection(_Section):
 class OnErrorSection(_Section):
     """What the robot does after a failure (never anything after an e-stop or robot error)."""
 
+    #: "stay" where it stopped, or "retreat" to ``pose``.
     reaction: Literal["stay", "retreat"] = "stay"
     #: Safe pose to retreat to (default: home), reached at low speed.
     pose: PoseValue | None = None
+    #: Speed of the retreat, %.
     speed: Speed = 10
+    #: Motion type of the retreat.
     motion: MotionType = MotionType.PTP
 
 
 class PickPlaceConfig(_Section):
     """The whole pick & place configuration (every section optional)."""
 
+    #: ``[robot]``: which robot and how to reach it.
     robot: RobotSection = RobotSection()
+    #: ``[poses]``: the task poses.
     poses: PosesSection = PosesSection()
+    #: ``[speeds]``: the speed of each move.
     speeds: SpeedsSection = SpeedsSection()
+    #: ``[motion]``: the motion type of each move.
     motion: MotionSection = MotionSection()
+    #: ``[timeouts]``: how long each wait may take.
     timeouts: TimeoutsSection = TimeoutsSection()
+    #: ``[retry]``: retries of transiently failed requests.
     retry: RetrySection = RetrySection()
+    #: ``[gripper]``: the gripper.
     gripper: GripperSection = GripperSection()
+    #: ``[run]``: how the cycle runs.
     run: RunSection = RunSection()
+    #: ``[on_error]``: what the robot does after a failure.
     on_error: OnErrorSection = OnErrorSection()
     #: Optional box the TCP must stay inside, mm (base frame): the robot API's model.
     workspace: Workspace | None = None
@@ -260,19 +304,37 @@ class PickPlaceConfig(_Section):
     _gripper_profile: tuple[str, GripperProfile] | None = PrivateAttr(default=None)
 
     def digest(self) -> str:
-        """sha256 of the normalised configuration (defaults filled in, keys sorted)."""
+        """sha256 of the normalised configuration (defaults filled in, keys sorted).
+
+        Returns:
+            ``"sha256:..."``, the run report's ``config.digest``.
+        """
         text = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
         return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
     def robot_profile(self) -> RobotProfile:
-        """The register map ``robot.profile`` names, loaded once."""
+        """The register map ``robot.profile`` names, loaded once.
+
+        Returns:
+            The robot profile.
+
+        Raises:
+            RegisterMapError: The profile cannot be loaded.
+        """
         name = self.robot.profile
         if self._robot_profile is None or self._robot_profile[0] != name:
             self._robot_profile = (name, _profiles.robot_profile(name))
         return self._robot_profile[1]
 
     def gripper_profile(self) -> GripperProfile | None:
-        """The gripper map ``gripper.kind`` names, loaded once (None: "auto", "none")."""
+        """The gripper map ``gripper.kind`` names, loaded once (None: "auto", "none").
+
+        Returns:
+            The gripper profile, or None.
+
+        Raises:
+            RegisterMapError: The profile cannot be loaded.
+        """
         kind = self.gripper.kind
         if kind in ("auto", "none"):
             return None
@@ -281,7 +343,11 @@ class PickPlaceConfig(_Section):
         return self._gripper_profile[1]
 
     def retreat_pose(self) -> Pose:
-        """Where the "retreat" error reaction goes."""
+        """Where the "retreat" error reaction goes.
+
+        Returns:
+            ``on_error.pose``, else the home pose.
+        """
         if self.on_error.pose is not None:
             return Pose.from_sequence(self.on_error.pose)
         return self.poses.resolved()["home"]
@@ -312,7 +378,19 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
 
 
 def validate_config(data: Mapping[str, Any], *, source: str = "<defaults>") -> PickPlaceConfig:
-    """Validate a mapping; raises :class:`ConfigError` naming the key and ``source``."""
+    """Validate a mapping; raises :class:`ConfigError` naming the key and ``source``.
+
+    Args:
+        data: The configuration's sections (a parsed TOML file).
+        source: Where the data comes from, for the messages.
+
+    Returns:
+        The configuration.
+
+    Raises:
+        ConfigError: A bad key or value (naming every one), or a pose that looks like
+            metres or radians.
+    """
     try:
         config = PickPlaceConfig.model_validate(dict(data))
     except ValidationError as exc:
@@ -365,7 +443,30 @@ def read_config_data(path: str | Path) -> dict[str, Any]:
 def load_config(
     path: str | Path | None = None, *, overrides: Mapping[str, Mapping[str, Any]] | None = None
 ) -> PickPlaceConfig:
-    """Load and validate a config file (None = the article's defaults) with overrides."""
+    """Load and validate a config file (None = the article's defaults) with overrides.
+
+    The file must be valid on its own; the overrides (the command line's options) are
+    applied to it and the result validated again; the profiles it names are loaded.
+
+    Example:
+        ```python
+        from tmmaster.pickplace import load_config
+
+        config = load_config(overrides={"robot": {"host": "127.0.0.1", "port": 5020}})
+        print(config.robot.host, config.poses.resolved()["pick"])
+        ```
+
+    Args:
+        path: A TOML file; None: the defaults.
+        overrides: Keys to replace, by section: ``{"robot": {"port": 5020}}``.
+
+    Returns:
+        The configuration (its profiles loaded).
+
+    Raises:
+        ConfigError: An unreadable file, a bad key or value, or a profile that cannot
+            be loaded; the message names the key and the file.
+    """
     data: dict[str, Any] = {} if path is None else read_config_data(path)
     source = "<defaults>" if path is None else str(path)
     if path is not None:
@@ -400,6 +501,20 @@ def robot_from_config(
     It reaches ``robot.host``:``robot.port`` unless ``host`` / ``port`` name another
     address (a simulator's); the other sections are handed over as they are, the
     robot API's own models (``timeouts``, ``retry``, ``workspace``) included.
+
+    Args:
+        config: The configuration.
+        host: Another address than ``robot.host`` (None: that one).
+        port: Another port than ``robot.port``.
+        gripper_port: Another port than ``gripper.port``.
+        settle_scale: Divides ``gripper.settle_s`` (a faster simulator; never below
+            0.1 s).
+
+    Returns:
+        The robot, not connected.
+
+    Raises:
+        ConfigError: No robot address, or an invalid one.
     """
     target = host if host is not None else config.robot.host
     if target is None:

@@ -27,6 +27,7 @@ from ._config import (
 from ._steps import Action, Cycles, PlannedMove, RetryRule, StepContext, TaskSequence
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
+#: The states of :func:`pick_and_place`, in order.
 PICK_AND_PLACE_STATES = (
     "MOVE_TO_APPROACH",
     "MOVE_TO_PICK",
@@ -40,7 +41,14 @@ PICK_AND_PLACE_STATES = (
 
 
 def grasp_detected(ctx: StepContext) -> bool:
-    """Guard: the last gripper reading saw an object between the fingers."""
+    """Guard: the last gripper reading saw an object between the fingers.
+
+    Args:
+        ctx: The step context.
+
+    Returns:
+        Whether an object was held at the last reading.
+    """
     return ctx.last_gripper is not None and ctx.last_gripper.holding
 
 
@@ -57,7 +65,18 @@ def _check(ctx: StepContext) -> None:
 
 
 def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
-    """The article's cycle: approach, pick, close, check, lift, place, open, home."""
+    """The article's cycle: approach, pick, close, check, lift, place, open, home.
+
+    A failed grasp opens the fingers and goes back to the approach, up to
+    ``run.grasp_retries`` times.
+
+    Args:
+        config: Poses, speeds, motion types, retries and the error reaction; None: the
+            defaults (the built-in cell).
+
+    Returns:
+        The sequence (:data:`PICK_AND_PLACE_STATES`).
+    """
     cfg = config if config is not None else PickPlaceConfig()
     poses = cfg.poses.resolved()
     # A pose not written derives from pick: errors name what was written.
@@ -111,14 +130,25 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
 
 @dataclass(frozen=True)
 class Pallet:
-    """A grid of ``rows`` x ``cols`` slots with pitch ``dx``, ``dy``; ``layers`` high."""
+    """A grid of ``rows`` x ``cols`` slots with pitch ``dx``, ``dy``; ``layers`` high.
 
+    Raises:
+        ConfigError: A count below 1 or a pitch that is not finite.
+    """
+
+    #: The TCP pose of slot 0 (row 0, column 0, bottom layer).
     origin: Pose
+    #: Rows, along y.
     rows: int
+    #: Columns, along x.
     cols: int
+    #: Pitch between columns, mm.
     dx: float
+    #: Pitch between rows, mm.
     dy: float
+    #: Layers, along z.
     layers: int = 1
+    #: Pitch between layers, mm.
     dz: float = 0.0
 
     def __post_init__(self) -> None:
@@ -135,7 +165,17 @@ class Pallet:
         return self.rows * self.cols * self.layers
 
     def slot(self, index: int) -> Pose:
-        """Pose of slot ``index`` (0-based): row by row, then layer by layer."""
+        """Pose of slot ``index`` (0-based): row by row, then layer by layer.
+
+        Args:
+            index: The slot, 0 .. ``size`` - 1.
+
+        Returns:
+            Its TCP pose (the origin's orientation).
+
+        Raises:
+            ConfigError: An index outside the pallet.
+        """
         if not 0 <= index < self.size:
             raise ConfigError(f"slot {index} outside the pallet (0..{self.size - 1})")
         per_layer = self.rows * self.cols
@@ -155,7 +195,21 @@ def palletizing(
     grasp_retries: int = 2,
     retreat_speed: int = 10,
 ) -> TaskSequence:
-    """Pick parts from one spot and place cycle k into slot k of ``pallet``, then go home."""
+    """Pick parts from one spot and place cycle k into slot k of ``pallet``, then go home.
+
+    Args:
+        pick: Where each part is picked.
+        pallet: The slots; one cycle per slot (its default cycle count).
+        home: Where the arm goes at the end of each cycle.
+        approach_dz: Height of the approach above the pick and the slots, mm.
+        speed: Speed of the travel moves, %.
+        slow_speed: Speed into and out of the pick and the slots, %.
+        grasp_retries: Attempts after a failed grasp (open, re-approach).
+        retreat_speed: Speed of the retreat home after a failure, %.
+
+    Returns:
+        The sequence.
+    """
     above_pick = pick.offset(dz=approach_dz)
     ptp, line = MotionType.PTP, MotionType.LINE
 
@@ -300,7 +354,18 @@ class SequenceFile(BaseModel):
 
 
 def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> TaskSequence:
-    """Build a sequence from a mapping (a parsed TOML file); errors name key and source."""
+    """Build a sequence from a mapping (a parsed TOML file); errors name key and source.
+
+    Args:
+        data: The sequence's keys (docs/pickplace.md describes the file).
+        source: Where the data comes from, for the messages.
+
+    Returns:
+        The sequence.
+
+    Raises:
+        ConfigError: An invalid key or value, naming it and ``source``.
+    """
     try:
         spec = SequenceFile.model_validate(dict(data))
     except ValidationError as exc:
@@ -380,7 +445,17 @@ def _check_units(spec: SequenceFile, source: str) -> None:
 
 
 def load_sequence(path: str | Path) -> TaskSequence:
-    """Read a sequence described in a TOML file (see docs/pickplace.md)."""
+    """Read a sequence described in a TOML file (see docs/pickplace.md).
+
+    Args:
+        path: The file.
+
+    Returns:
+        The sequence.
+
+    Raises:
+        ConfigError: An unreadable file or an invalid sequence, naming the file.
+    """
     return sequence_from_data(read_config_data(path), source=str(path))
 
 

@@ -54,15 +54,67 @@ def _as_fault(fault: Fault | str) -> Fault:
 class Simulator:
     """A simulated TM robot (and optional gripper) served over Modbus TCP on loopback.
 
-    The arguments are described in docs/simulator.md. Nothing starts before
-    :meth:`start` (or ``with``).
+    Nothing starts before :meth:`start` (or ``with``). ``python -m tmmaster.sim`` runs
+    one from the command line.
+
+    Example:
+        A simulator on a free loopback port, a robot connected to it, one move:
+
+        ```python
+        from tmmaster import Pose, connect
+        from tmmaster.sim import Simulator
+
+        with Simulator(time_scale=10) as sim:  # the tmflow profile, 10x real time
+            with connect(sim.host, sim.port) as robot:
+                robot.move_to(Pose(300, -200, 200, 180, 0, 90), speed=50)
+            print(sim.tcp_pose(), sim.motion_log()[-1].kind)  # ... ptp
+        ```
+
+        ``Simulator(listen=False)`` opens no socket: ``connect(sim.url)`` reaches it
+        in-process.
+
+    Args:
+        profile: The robot's register map: ``"tmflow"`` (default), ``"article"``, a
+            TOML file or a RobotProfile.
+        host: The address to listen on (Modbus has no authentication: loopback unless
+            you mean it).
+        port: The robot's Modbus TCP port; 0 picks a free one (``sim.port`` once
+            started).
+        time_scale: Simulated seconds per wall second (10: a 2 s move takes 0.2 s).
+        tick_hz: Control ticks per wall second; each advances simulated time by
+            ``time_scale / tick_hz``.
+        model: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``.
+        gripper: A separate gripper device: None, ``"blog-2fg7"``, ``"onrobot-2fg7"``,
+            a TOML file or a GripperProfile.
+        gripper_port: The separate gripper's port; 0 picks a free one.
+        objects: The objects on the table; None: one part at ``DEFAULT_PART_POSE``.
+        faults: Faults to play from the start: Fault models or ``"kind:key=value,..."``
+            texts (:func:`parse_fault`).
+        backend: Your own PhysicsBackend; None: the ``physics`` backend.
+        physics: ``"kinematic"`` (analytic) or ``"mujoco"`` (the ``tmmaster[mujoco]``
+            extra); not with ``backend``.
+        init_time_s: Simulated seconds before the robot reports ready.
+        request_listener: Called with each RequestRecord, on the simulator's thread.
+        initial_seq: tmflow: the sequence numbers at the start (e.g. 32766, to test
+            their wrap).
+        listen: False: no TCP listener at all; reach it in-process at ``sim.url``.
+        name: The in-process name (``sim.url`` is ``"sim://NAME"``); default
+            ``sim-1``, ``sim-2``...; unique among running simulators.
+        tool: The TCP in the flange frame (TCP = flange x tool); not with ``backend``.
+        resume_after_error: tmflow: an e-stop pauses the project (Play resumes the
+            move) instead of stopping it.
+        program: tmflow: the Script Project the robot runs; None or ``"generated"``:
+            the program ``tmmaster robot-program`` writes for the profile and tool.
+        speed_factor: The arm moves this many times faster than the model the master
+            plans with (0.1..10; for testing a master against a robot it does not
+            predict); not with ``backend``.
 
     Raises:
         ConfigError: a bad argument, named in the message: ``time_scale`` not a finite
             number above 0, ``tick_hz`` outside (0, 1000], a port outside 0..65535,
             ``init_time_s`` below 0 or not finite, ``initial_seq`` outside the
-            profile's sequence range, two objects of one name, an unknown profile,
-            model or physics backend.
+            profile's sequence range, ``speed_factor`` outside 0.1..10, two objects
+            of one name, an unknown profile, model or physics backend.
     """
 
     def __init__(
@@ -385,11 +437,23 @@ class Simulator:
         return asyncio.run_coroutine_threadsafe(wrapper(), loop).result(_CALL_TIMEOUT_S)
 
     def call(self, fn: Callable[[], T]) -> T:
-        """Run ``fn`` on the simulator's loop thread and return its result."""
+        """Run ``fn`` on the simulator's loop thread and return its result.
+
+        Args:
+            fn: What to run (between two control ticks).
+
+        Returns:
+            What ``fn`` returned.
+        """
         return self._call(fn)
 
     def call_later(self, delay_s: float, fn: Callable[[], object]) -> None:
-        """Run ``fn`` on the loop thread after ``delay_s`` wall seconds (dropped when closed)."""
+        """Run ``fn`` on the loop thread after ``delay_s`` wall seconds (dropped when closed).
+
+        Args:
+            delay_s: Wall seconds to wait.
+            fn: What to run.
+        """
         loop = self._loop
         if loop is not None and not self._closed and loop.is_running():
             loop.call_soon_threadsafe(loop.call_later, max(delay_s, 0.0), fn)
@@ -427,27 +491,57 @@ class Simulator:
         self._log.clear()
 
     def objects(self) -> list[ObjectState]:
-        """Every object in the scene with its pose and whether it is held."""
+        """Every object in the scene with its pose and whether it is held.
+
+        Returns:
+            One state per object.
+        """
         return self._call(self._backend.objects)
 
     def tcp_pose(self) -> Pose:
-        """The arm's current TCP pose."""
+        """The arm's current TCP pose.
+
+        Returns:
+            The TCP pose, mm / deg.
+        """
         return self._call(self._backend.tcp_pose)
 
     def displayed(self) -> list[str]:
-        """Every ``Display()`` text the robot's Script Project showed, in order (tmflow)."""
+        """Every ``Display()`` text the robot's Script Project showed, in order (tmflow).
+
+        Returns:
+            The texts; empty for a profile without a program (``article``).
+        """
         texts = getattr(self._controller, "displayed", None)
         return [] if texts is None else self._call(lambda: list(texts))
 
     def field(self, name: str, *, device: str = "robot") -> Any:
-        """Engineering value of a field of the robot's (or ``device="gripper"``) register map."""
+        """Engineering value of a field of the robot's (or ``device="gripper"``) register map.
+
+        Args:
+            name: A field of the device's profile.
+            device: ``"robot"`` or ``"gripper"``.
+
+        Returns:
+            The field's engineering value now.
+
+        Raises:
+            ConfigError: The simulator has no such device.
+        """
         bank = self._bank if device == "robot" else self._gripper_bank
         if bank is None:
             raise ConfigError(f"no {device} register bank in this simulator")
         return self._call(lambda: bank.get(name))
 
     def inject(self, fault: Fault | str) -> None:
-        """Add a fault at run time (a Fault model or a ``"kind:k=v,..."`` spec)."""
+        """Add a fault at run time (a Fault model or a ``"kind:k=v,..."`` spec).
+
+        Args:
+            fault: The fault; request counts start now.
+
+        Raises:
+            ConfigError: A text that is not a valid fault.
+        """
         parsed = _as_fault(fault)
 
         def apply() -> None:
@@ -486,7 +580,11 @@ class Simulator:
         self._call(self._controller.press_play)
 
     def motion_log(self) -> tuple[MotionRecord, ...]:
-        """Every motion and gripper action the robot started, in order (the ground truth)."""
+        """Every motion and gripper action the robot started, in order (the ground truth).
+
+        Returns:
+            One record per motion or gripper action.
+        """
         return self._call(lambda: self._controller.motion_log)
 
     def drop_connections(self) -> None:
@@ -501,7 +599,17 @@ class Simulator:
     def wait_for(
         self, predicate: Callable[[], bool], timeout: float = 5.0, *, interval: float = 0.005
     ) -> None:
-        """Poll ``predicate`` until true; raise TimeoutError after ``timeout`` wall seconds."""
+        """Poll ``predicate`` until true; raise TimeoutError after ``timeout`` wall seconds.
+
+        Args:
+            predicate: The condition, called from this thread.
+            timeout: Wall seconds to wait at most.
+            interval: Wall seconds between two calls of ``predicate``.
+
+        Raises:
+            TimeoutError: The condition was not met in time.
+            RuntimeError: The simulator's control tick failed.
+        """
         deadline = time.monotonic() + timeout
         while True:
             if self._tick_error is not None:
