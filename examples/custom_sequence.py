@@ -67,7 +67,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=5020)
     parser.add_argument("--profile", default=DEFAULT_PROFILE, help=f"default: {DEFAULT_PROFILE}")
-    parser.add_argument("--settle", type=float, default=0.5, help="gripper settle time, s")
+    parser.add_argument(
+        "--settle",
+        type=float,
+        default=0.5,
+        help="gripper settle time, s (the article map's gripper has no busy flag)",
+    )
     parser.add_argument("--diagram", action="store_true", help="print the mermaid diagram")
     args = parser.parse_args(argv)
     configure_logging(level="warning")

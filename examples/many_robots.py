@@ -9,9 +9,11 @@ docs/performance.md, "Many robots from one process"):
 * every Robot in one :class:`tmmaster.Fleet` (the default here; ``--no-fleet`` turns it
   off): the robots' links and the polls of their waits run on the fleet's one event
   loop, which wakes a robot's thread only when a poll needs it (acknowledged, done,
-  failed, a deadline). 400 moving robots took 57-66 % of one core this way against
-  64-84 % with each thread polling its own waits, and the fleet's loop cannot queue
-  for the GIL the way 400 polling threads sometimes do (docs/performance.md);
+  failed, a deadline). 400 moving robots on the article's map took 57-66 % of one core
+  this way against 64-84 % with each thread polling its own waits, and the fleet's loop
+  cannot queue for the GIL the way 400 polling threads sometimes do; the tmflow
+  profile's status is six reads, not one: about 100 driven robots per process on two
+  cores (docs/performance.md);
 * plain threads, one per robot (not ``asyncio.to_thread`` with its default executor,
   which has only ``min(32, cpus + 4)`` workers: robot 33 would wait for another to
   finish);

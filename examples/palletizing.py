@@ -39,7 +39,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--layers", type=int, default=1)
     parser.add_argument("--pitch", type=float, default=40.0, help="dx = dy, mm")
     parser.add_argument("--layer-height", type=float, default=30.0, help="dz, mm")
-    parser.add_argument("--settle", type=float, default=0.5, help="gripper settle time, s")
+    parser.add_argument(
+        "--settle",
+        type=float,
+        default=0.5,
+        help="gripper settle time, s (the article map's gripper has no busy flag)",
+    )
     args = parser.parse_args(argv)
     configure_logging(level="warning")
 

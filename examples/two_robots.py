@@ -231,7 +231,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help=f"both robots' profile (default: {DEFAULT_PROFILE})",
     )
     parser.add_argument("--time-scale", type=float, default=10.0, help="with --sim")
-    parser.add_argument("--settle", type=float, default=0.5, help="gripper settle time, s")
+    parser.add_argument(
+        "--settle",
+        type=float,
+        default=0.5,
+        help="gripper settle time, s (the article map's gripper has no busy flag)",
+    )
     args = parser.parse_args(argv)
     given = (args.port_a, args.port_b)
     checked = ""
