@@ -14,7 +14,9 @@ import os
 import re
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -22,7 +24,11 @@ from tmmaster._cli import main as tmmaster_main
 from tmmaster.pickplace import RunReport, load_report
 from tmmaster.pickplace.__main__ import EXIT_OK, _Output, build_parser, run
 from tmmaster.pickplace.__main__ import main as pickplace_main
+from tmmaster.pickplace._runner import StateEvent
 from tmmaster.report.__main__ import main as report_main
+
+if TYPE_CHECKING:
+    from tmmaster.pickplace._live import LiveProgress
 
 ROOT = Path(__file__).resolve().parents[1]
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
@@ -108,12 +114,78 @@ def test_quiet_failure_is_the_one_line_reason(capsys: pytest.CaptureFixture[str]
 
 def test_piped_output_stays_plain_lines(capsys: pytest.CaptureFixture[str]) -> None:
     # capsys streams are not terminals: no live display, no table, no escape codes.
-    assert pickplace_main(SIM) == EXIT_OK
+    assert pickplace_main([*SIM, "-v"]) == EXIT_OK
     out, err = capsys.readouterr()
     assert "\x1b" not in out + err
     assert "time per state" not in out + err
-    assert "pickplace.state" in err  # info logs, one per line
+    assert "pickplace.state" in err  # -v: info events, one per line
     assert out.splitlines()[-1].startswith("DONE: 1/1")
+
+
+# -- the live display ---------------------------------------------------------------------
+
+STEPS = ["MOVE_TO_APPROACH", "MOVE_TO_PICK", "GRIPPER_CLOSE", "CHECK_GRASP", "MOVE_TO_LIFT"]
+
+
+@pytest.fixture
+def live_at() -> Iterator[Callable[..., tuple[io.StringIO, LiveProgress]]]:
+    """Live displays of a given width on a plain console (ended after the test)."""
+    from rich.console import Console
+
+    from tmmaster.pickplace._live import LiveProgress
+
+    made: list[LiveProgress] = []
+
+    def make(width: int, cycles: int = 2, states: list[str] | None = None) -> Any:
+        buffer = io.StringIO()
+        console = Console(file=buffer, width=width, force_terminal=False, color_system=None)
+        live = LiveProgress(console)
+        made.append(live)
+        steps = [*STEPS, "MOVE_TO_PLACE", "GRIPPER_OPEN", "MOVE_TO_HOME"]
+        live.begin(cycles, 10.0, steps if states is None else states)
+        return buffer, live
+
+    yield make
+    for live in made:
+        live.end()
+
+
+def _enter(live: LiveProgress, state: str, cycle: int, cycles: int = 2) -> None:
+    live(StateEvent(state=state, previous="IDLE", cycle=cycle, cycles=cycles, cycle_elapsed_s=0))
+
+
+def test_the_bar_advances_with_every_state_of_a_cycle(live_at: Callable[..., Any]) -> None:
+    _, live = live_at(120)
+    assert live.progress() == (0.0, 2)
+    _enter(live, "MOVE_TO_APPROACH", 1)
+    assert live.progress() == (0.0, 2)
+    _enter(live, "MOVE_TO_PICK", 1)
+    assert live.progress() == (1 / 8, 2)  # one state of eight behind
+    _enter(live, "MOVE_TO_HOME", 1)
+    assert live.progress() == (7 / 8, 2)
+    _enter(live, "MOVE_TO_APPROACH", 2)
+    assert live.progress() == (1.0, 2)
+    _enter(live, "GRIPPER_CLOSE", 2)
+    _enter(live, "ERROR", 2)
+    assert live.progress() == (1.25, 2)  # stays where the run stopped
+    _, one = live_at(120, cycles=1, states=STEPS)
+    _enter(one, "MOVE_TO_LIFT", 1, cycles=1)
+    assert one.progress() == (0.8, 1)
+    _enter(one, "DONE", 1, cycles=1)
+    assert one.progress() == (1.0, 1)  # full at DONE, a single cycle too
+
+
+@pytest.mark.parametrize("width", [40, 60, 80, 120])
+def test_the_state_is_never_cut_whatever_the_width(width: int, live_at: Callable[..., Any]) -> None:
+    buffer, live = live_at(width)
+    _enter(live, "MOVE_TO_APPROACH", 1)
+    live.console.print(live.renderable())
+    lines = buffer.getvalue().splitlines()
+    assert lines[0].startswith("MOVE_TO_APPROACH  cycle 1/2"), lines
+    assert all(len(line) <= width for line in lines), lines
+    assert "…" not in "".join(lines[:-1])  # only the last event may be shortened
+    assert any("elapsed" in line for line in lines)
+    assert any("ETA" in line for line in lines)
 
 
 def test_import_tmmaster_loads_neither_rich_nor_matplotlib() -> None:

@@ -24,6 +24,8 @@ from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
+import difflib
+import logging
 import math
 import os
 import signal
@@ -42,11 +44,13 @@ from .._exceptions import (
     GripperError,
     HostNotFoundError,
     MotionTimeoutError,
+    ProfileMismatchError,
     RobotError,
     TransportError,
 )
-from .._logging import add_logging_arguments, configure_logging, get_logger
-from .._profiles import DEFAULT_PROFILE, builtin_profile_names
+from .._logging import add_logging_arguments, configure_command_logging, get_logger
+from .._profiles import DEFAULT_PROFILE, builtin_profile_names, load_profile
+from .._registers import RobotProfile
 from .._robot import Robot
 from .._version import add_version_argument
 from ..sim._backend import PhysicsUnavailableError
@@ -168,8 +172,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     )
     add_logging_arguments(
         parser,
-        level_help="log level (default: info; warning when stderr is a terminal, which shows"
-        " a live display instead)",
+        level_help="level of the events logged on stderr (default: warning; info with -v or"
+        " --log-json)",
+    )
+    parser.add_argument(
+        "--verbose",
+        "-v",
+        action="count",
+        default=0,
+        help="log the run's events on stderr (info; -vv: debug), above the live display on a"
+        " terminal",
     )
     parser.add_argument(
         "--quiet",
@@ -209,8 +221,19 @@ class _Outcome:
         self.done_line: str | None = None
 
 
+#: Events the command's last line says again, in its own words (the reason it failed
+#: or stopped): printed only when events were asked for.
+_SAID_BY_THE_LAST_LINE = frozenset({"pickplace.failed", "pickplace.interrupted"})
+
+
 class _Output:
-    """Where the command's own lines go: plain, quiet, or a rich live display on a terminal."""
+    """Where the command's own lines go: plain, quiet, or a rich live display on a terminal.
+
+    ``events``: the events were asked for (``-v``, ``--log-level``, ``--log-json``): every
+    one is logged, and a Ctrl-C does not cut the output short. Otherwise the log shows
+    warnings and errors, less what the last line says itself, and after a Ctrl-C only
+    errors: the command ends with its one line.
+    """
 
     def __init__(
         self,
@@ -218,15 +241,31 @@ class _Output:
         quiet: bool,
         live: LiveProgress | None = None,
         console: Console | None = None,
+        events: bool = False,
     ) -> None:
         self.quiet = quiet
         self.live = live
         self.console = console
+        self.events = events
+        #: Set by the first Ctrl-C.
+        self.interrupted = False
+        #: What the log handler lets through (None: everything at the level).
+        self.log_filter: logging.Filter | None = None if events else _LogFilter(self)
 
     def info(self, line: str) -> None:
-        """An informative line on stdout (not with --quiet)."""
-        if not self.quiet:
+        """A line about the run as it goes, on stdout: on a terminal, or with -v."""
+        if not self.quiet and (self.events or self.live is not None) and not self.interrupted:
             print(line, flush=True)
+
+    def result(self, line: str) -> None:
+        """A line of the run's result on stdout (not with --quiet, nor after a Ctrl-C)."""
+        if not self.quiet and (self.events or not self.interrupted):
+            print(line, flush=True)
+
+    def interrupt(self) -> None:
+        """The first Ctrl-C: from now on the command says only how it ended (safe in a
+        signal handler: it sets a flag)."""
+        self.interrupted = True
 
     @property
     def progress(self) -> Callable[[StateEvent], None] | None:
@@ -234,34 +273,66 @@ class _Output:
         return self.live
 
 
+class _LogFilter(logging.Filter):
+    """The log records :class:`_Output` shows when no events were asked for."""
+
+    def __init__(self, out: _Output) -> None:
+        super().__init__()
+        self._out = out
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """False for an event the last line repeats, and below ERROR after a Ctrl-C."""
+        event = record.msg.get("event") if isinstance(record.msg, dict) else None
+        if event in _SAID_BY_THE_LAST_LINE:
+            return False
+        return not self._out.interrupted or record.levelno >= logging.ERROR
+
+
 def _make_output(args: argparse.Namespace, stderr: TextIO) -> _Output:
+    events = bool(args.verbose or args.log_level or args.log_json)
     if args.quiet or args.log_json or not stderr.isatty():
-        return _Output(quiet=args.quiet)
+        return _Output(quiet=args.quiet, events=events)
     try:
         from rich.console import Console
 
         from ._live import LiveProgress
     except ImportError:  # pragma: no cover - rich is a dependency; a stripped install
-        return _Output(quiet=False)  # plain lines, as when piped
+        return _Output(quiet=False, events=events)  # plain lines, as when piped
     console = Console(file=stderr)
-    return _Output(quiet=False, live=LiveProgress(console), console=console)
+    return _Output(quiet=False, live=LiveProgress(console), console=console, events=events)
+
+
+def _log_level(args: argparse.Namespace) -> str:
+    """Warnings and errors by default, on a terminal or not; the events with -v (or JSON)."""
+    if args.quiet:
+        return "error"
+    if args.log_level:
+        return str(args.log_level)
+    if args.verbose >= 2:
+        return "debug"
+    return "info" if args.verbose or args.log_json else "warning"
 
 
 def run(args: argparse.Namespace, *, output: _Output | None = None) -> int:
     """Run pick & place from parsed ``args``; returns the exit code (never raises)."""
     stderr = sys.stderr
     out = output if output is not None else _make_output(args, stderr)
-    level = "error" if args.quiet else args.log_level or ("warning" if stderr.isatty() else "info")
     # The live display's stream has what a logging handler uses: write, flush, isatty.
     log_stream = cast("TextIO", out.live.log_stream) if out.live is not None else stderr
-    undo_logging = configure_logging(json=args.log_json, level=level, stream=log_stream)
+    undo_logging = configure_command_logging(
+        json=args.log_json, level=_log_level(args), stream=log_stream, record_filter=out.log_filter
+    )
+    sigint = _sigint_handler()
     try:
         return _run(args, out)
     finally:
         if out.live is not None:
             out.live.end()
-        # In-process callers (tests, tmmaster's CLI) get their logging back.
+        # In-process callers (tests, tmmaster's CLI) get their logging and Ctrl-C back;
+        # main()'s own handler is main()'s to put back (or to leave ignored).
         undo_logging()
+        if sigint is not None and sigint is not _interrupt_once:
+            signal.signal(signal.SIGINT, sigint)
 
 
 def _one_line(text: str) -> str:
@@ -281,6 +352,8 @@ def _run(args: argparse.Namespace, out: _Output) -> int:
         code, reason = _execute(args, outcome, out)
     except KeyboardInterrupt:
         code, reason = EXIT_INTERRUPTED, "interrupted"
+    except UsageError as exc:  # an option that cannot be: said as the option
+        code, reason = EXIT_CONFIG, str(exc)
     except ConfigError as exc:
         code, reason = EXIT_CONFIG, f"config error: {exc}"
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
@@ -303,7 +376,10 @@ def _run(args: argparse.Namespace, out: _Output) -> int:
         sim=outcome.sim,
         move_states=outcome.move_states,
     )
-    if out.console is not None and outcome.run is not None:
+    if code == EXIT_INTERRUPTED:
+        out.interrupt()  # a second Ctrl-C, or one before the run: its last line only
+    shown = out.events or not out.interrupted
+    if out.console is not None and outcome.run is not None and not out.quiet and shown:
         _print_summary(out.console, report)
     if reason is not None:
         print(f"pickplace: {_one_line(reason)} [exit {code}]", file=stderr, flush=True)
@@ -340,7 +416,7 @@ _COMMAND_OPTIONS = frozenset(
     {"config", "sequence", "dry_run", "diagram", "sim", "sim_time_scale", "sim_physics", "snapshot"}
 )
 #: The options that only shape the output: the only ones read after :func:`_command`.
-_OUTPUT_OPTIONS = frozenset({"log_json", "log_level", "quiet", "report"})
+_OUTPUT_OPTIONS = frozenset({"log_json", "log_level", "quiet", "report", "verbose"})
 
 
 @dataclass(frozen=True)
@@ -381,6 +457,37 @@ def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     return overrides
 
 
+def _robot_profile_names() -> list[str]:
+    """The built-in robot profiles (the others are grippers')."""
+    return [n for n in builtin_profile_names() if isinstance(load_profile(n), RobotProfile)]
+
+
+def _check_profile_option(value: str) -> None:
+    """``--profile``: a built-in robot profile, or a FILE.toml (which load_config reads)."""
+    if value.endswith(".toml"):
+        return
+    robots = _robot_profile_names()
+    if value in robots:
+        return
+    what = "a gripper profile" if value in builtin_profile_names() else "no such profile"
+    close = difflib.get_close_matches(value, robots, n=1)
+    hint = f"; did you mean {close[0]}?" if close else ""
+    raise UsageError(
+        f"--profile {value}: {what}; the robot profiles are {', '.join(robots)}"
+        f" (or a profile FILE.toml){hint}"
+    )
+
+
+def _check_sim_options(sim: bool, overrides: dict[str, dict[str, Any]]) -> None:
+    """--sim runs on a simulator of its own: a robot address with it would be ignored."""
+    given = [f"--{key}" for key in ("host", "port") if key in overrides.get("robot", {})]
+    if sim and given:
+        raise UsageError(
+            f"{' and '.join(given)} cannot be used with --sim, which runs on its own"
+            " simulator on a free loopback port (drop --sim to run on the robot)"
+        )
+
+
 def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     """Read every option but the output ones, once: nothing downstream reads ``args``.
 
@@ -400,6 +507,10 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
         require_mujoco()  # a missing extra is said first, in one line
     outcome.config_file = config_file
     overrides = _overrides(args)
+    _check_sim_options(sim is not None, overrides)
+    profile = overrides.get("robot", {}).get("profile")
+    if profile is not None:
+        _check_profile_option(profile)
     config = load_config(config_file, overrides=overrides)
     outcome.config = config
     sequence: TaskSequence
@@ -526,12 +637,12 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
     if options.snapshot is not None:
         from ..sim._mujoco import save_snapshot
 
-        out.info(f"simulator: snapshot {save_snapshot(sim, options.snapshot)}")
+        out.result(f"simulator: snapshot {save_snapshot(sim, options.snapshot)}")
     if place is not None:
         for item in outcome.sim["objects"]:
             where = "on the place position" if item["on_place"] else "NOT on the place position"
             pose = ", ".join(f"{v:g}" for v in item["pose"][:3])
-            out.info(f"simulator: {item['name']} is {where} ({pose})")
+            out.result(f"simulator: {item['name']} is {where} ({pose})")
         if code == EXIT_OK and not outcome.sim["on_place"]:
             return EXIT_FAILED, "the run ended DONE but a part is not on the place position"
     return code, reason
@@ -552,12 +663,19 @@ def _run_on(
     host, port = address
     outcome.target = {"host": host, "port": port, "profile": robot.profile.name}
     runner = Runner.from_config(robot, command.config, on_state=out.progress)
-    restore = _install_sigint(runner.request_stop)
+
+    def stop() -> None:
+        out.interrupt()
+        runner.request_stop()
+
+    restore = _install_sigint(stop)
     if out.live is not None:
-        out.live.begin(cycles, outcome.expected_cycle_s)
+        out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
     try:
         try:
             robot.connect()
+        except ProfileMismatchError as exc:
+            return EXIT_CONFIG, _mismatch_reason(exc)
         except (ConnectRefusedError, HostNotFoundError) as exc:
             return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
         except TransportError as exc:
@@ -589,6 +707,8 @@ def _run_on(
         return EXIT_OK, None
     failure = result.failure
     assert failure is not None
+    if isinstance(failure.exception, ProfileMismatchError):
+        return EXIT_CONFIG, _mismatch_reason(failure.exception)
     code = exit_code_for(failure.exception)
     if failure.interrupted:
         stopped = {
@@ -606,6 +726,11 @@ def _run_on(
         f"{label} in {failure.state} (cycle {failure.cycle}): {failure.type}:"
         f" {failure.message}{code_text}{reaction}"
     )
+
+
+def _mismatch_reason(exc: ProfileMismatchError) -> str:
+    """The robot speaks another profile: nothing was commanded, the option is wrong."""
+    return f"wrong profile: {exc}; run with --profile {exc.device_profile}"
 
 
 class _TcpSampler:
@@ -668,8 +793,33 @@ def _gripper_stats(robot: Robot) -> dict[str, Any] | None:
     return None if stats is None else dict(stats.as_dict())
 
 
+def _sigint_handler() -> Any:
+    """SIGINT's handler now (None outside the main thread, where it cannot be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.getsignal(signal.SIGINT)
+
+
+def _ignore_sigint() -> None:
+    """From here on a Ctrl-C changes nothing: the command is only saying how it ended."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _interrupt_once(signum: int, frame: FrameType | None) -> None:
+    """Ctrl-C outside the run: interrupt once; any later one is ignored, so the one line
+    and exit 130 that follow are never cut short (nor the process killed by the signal)."""
+    _ = signum, frame
+    _ignore_sigint()
+    raise KeyboardInterrupt
+
+
 def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
-    """First Ctrl-C: stop the run cleanly; a second one: give up at once."""
+    """First Ctrl-C: stop the run cleanly; a second one: give up at once.
+
+    After the first, the rest of the command (the clean-up, the report, the last line)
+    ignores Ctrl-C: the handler the restore puts back is SIG_IGN.
+    """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
     pressed = threading.Event()
@@ -677,6 +827,7 @@ def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
     def handler(signum: int, frame: FrameType | None) -> None:
         _ = signum, frame
         if pressed.is_set():
+            _ignore_sigint()
             raise KeyboardInterrupt
         pressed.set()
         stop()
@@ -684,30 +835,47 @@ def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
     previous = signal.signal(signal.SIGINT, handler)
 
     def restore() -> None:
-        signal.signal(signal.SIGINT, previous)
+        if signal.getsignal(signal.SIGINT) is handler:
+            signal.signal(signal.SIGINT, signal.SIG_IGN if pressed.is_set() else previous)
 
     return restore
 
 
 def main(argv: Sequence[str] | list[str] | None = None) -> int:
     """Entry point of ``python -m tmmaster.pickplace``."""
+    return _main(argv, process=False)
+
+
+def _main(argv: Sequence[str] | list[str] | None, *, process: bool) -> int:
+    """``main``; as the process itself (``process``), Ctrl-C stays ignored on the way out."""
     _sigint.handled_by_main()
+    previous = _sigint_handler()
+    if previous is not None and previous is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, _interrupt_once)
     try:
         try:
             args = build_parser().parse_args(argv)
         except UsageError as exc:
             print(f"pickplace: {one_line(exc)} [exit {EXIT_CONFIG}]", file=sys.stderr)
-            return EXIT_CONFIG
-        return run(args)
+            code = EXIT_CONFIG
+        else:
+            code = run(args)
     except KeyboardInterrupt:
         # A Ctrl-C outside the run (argument parsing, report writing, a second Ctrl-C
-        # during the clean-up): still one line and exit 130, never a traceback.
+        # during the clean-up): still one line and exit 130, never a traceback. The
+        # handler that raised it ignores any further one.
         print(f"pickplace: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
-        return EXIT_INTERRUPTED
+        code = EXIT_INTERRUPTED
+    finally:
+        if process:
+            _ignore_sigint()  # the process only exits now
+        elif previous is not None:
+            signal.signal(signal.SIGINT, previous)  # an in-process caller gets its own back
+    return code
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_main(None, process=True))
 
 
 __all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "run"]

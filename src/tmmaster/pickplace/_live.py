@@ -1,9 +1,10 @@
 """The live display of ``python -m tmmaster.pickplace`` on a terminal (rich).
 
-One region at the bottom of the terminal shows the state, cycle k/N, elapsed time, an
-ETA and the last event; log records are printed *above* it through the same console
-(:attr:`LiveProgress.log_stream` is what ``configure_logging`` writes to), so a log line
-never breaks the display. Imported only when stderr is a terminal.
+One region at the bottom of the terminal shows the state, cycle k/N, a bar that
+advances with every state of the cycle, the elapsed time, an ETA and the last event; log
+records are printed *above* it through the same console (:attr:`LiveProgress.log_stream`
+is what ``configure_logging`` writes to), so a log line never breaks the display.
+Imported only when stderr is a terminal.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import re
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from rich.console import Console, Group
@@ -58,8 +60,22 @@ class _ConsoleStream:
         return self._console.is_terminal
 
 
+#: The bar's width on the line it shares, at most and at least (narrower: a line of its own).
+_BAR_WIDTH = 30
+_BAR_MIN_WIDTH = 10
+
+
+def _row(*cells: Any) -> Table:
+    """One line of cells two columns apart, none of them wrapped or cut."""
+    grid = Table.grid(padding=(0, 2))
+    for _ in cells:
+        grid.add_column(no_wrap=True)
+    grid.add_row(*cells)
+    return grid
+
+
 class LiveProgress:
-    """State, cycle k/N, elapsed time, ETA and last event, redrawn in place."""
+    """State, cycle k/N, a progress bar, elapsed time, ETA and last event, redrawn in place."""
 
     def __init__(self, console: Console, *, refresh_per_second: float = 4.0) -> None:
         self.console = console
@@ -69,6 +85,10 @@ class LiveProgress:
         self._live: Live | None = None
         self.cycles = 0
         self.expected_cycle_s: float | None = None
+        #: The states of one cycle, in order (the bar advances by one of them at a time).
+        self.states: list[str] = []
+        #: The share of the current cycle behind, 0..1, by its states.
+        self.within_cycle = 0.0
         self.state = "STARTING"
         self.cycle = 0
         self.cycle_times: list[float] = []
@@ -78,10 +98,13 @@ class LiveProgress:
 
     # -- life cycle -------------------------------------------------------------------
 
-    def begin(self, cycles: int, expected_cycle_s: float | None = None) -> None:
-        """Start drawing (the run is about to connect)."""
+    def begin(
+        self, cycles: int, expected_cycle_s: float | None = None, states: Sequence[str] = ()
+    ) -> None:
+        """Start drawing (the run is about to connect); ``states``: one cycle's, in order."""
         self.cycles = cycles
         self.expected_cycle_s = expected_cycle_s
+        self.states = list(states)
         self._t0 = self._cycle_t0 = time.monotonic()
         if self._live is None:
             self._live = Live(
@@ -110,6 +133,8 @@ class LiveProgress:
         elif event.cycle > self.cycle or event.state == "DONE":
             self.cycle_times.append(now - self._cycle_t0)
             self._cycle_t0 = now
+        if event.state in self.states:  # entered: the states before it are behind
+            self.within_cycle = self.states.index(event.state) / len(self.states)
         self.state = event.state
         self.cycle = event.cycle
         self.cycles = event.cycles
@@ -139,21 +164,41 @@ class LiveProgress:
         later = max(self.cycles - max(self.cycle, 1), 0)
         return left_in_cycle + later * per_cycle
 
+    def progress(self) -> tuple[float, int]:
+        """The bar: ``(completed, total)`` in cycles, the current one by its states behind.
+
+        Full at DONE; at ERROR it stays where the run stopped.
+        """
+        total = max(self.cycles, 1)
+        if self.state == "DONE":
+            return float(total), total
+        if self.cycle < 1:
+            return 0.0, total
+        return min(self.cycle - 1 + self.within_cycle, float(total)), total
+
     def renderable(self) -> Any:
-        """What the live region shows now."""
+        """What the live region shows now: a line and the last event, on a narrow terminal
+        the bar on a line of its own; the state's name is never cut."""
         now = time.monotonic()
-        done = len(self.cycle_times)
         eta = self.eta_s(now)
-        grid = Table.grid(padding=(0, 2))
-        for _ in range(5):
-            grid.add_column()
         style = {"DONE": "bold green", "ERROR": "bold red"}.get(self.state, "bold cyan")
-        grid.add_row(
-            Text(f"{self.state:<20}", style=style),
-            Text(f"cycle {max(self.cycle, 1) if self.cycles else 0}/{self.cycles}"),
-            ProgressBar(total=max(self.cycles, 1), completed=done, width=20),
-            Text(f"elapsed {now - self._t0:6.1f} s"),
-            Text("ETA     -" if eta is None else f"ETA {eta:5.1f} s"),
-        )
+        name_width = max([len(self.state), *(len(s) for s in self.states), len("STARTING")])
+        state = Text(self.state.ljust(name_width), style=style)
+        cycle = Text(f"cycle {max(self.cycle, 1) if self.cycles else 0}/{self.cycles}")
+        # Fixed widths: the layout does not jump as the numbers grow.
+        elapsed = Text(f"elapsed {now - self._t0:6.1f} s")
+        left = Text("ETA     -" if eta is None else f"ETA {eta:5.1f} s")
+        completed, total = self.progress()
+        texts = [state, cycle, elapsed, left]
+        room = self.console.width - sum(t.cell_len for t in texts) - 2 * len(texts)
+        if room >= _BAR_MIN_WIDTH:  # all on one line
+            bar = ProgressBar(total=total, completed=completed, width=min(room, _BAR_WIDTH))
+            lines = [_row(state, cycle, bar, elapsed, left)]
+        else:  # the bar below, the full width; the times too if they do not fit either
+            bar = ProgressBar(total=total, completed=completed)
+            if room + _BAR_MIN_WIDTH >= 0:
+                lines = [_row(*texts), _row(bar)]
+            else:
+                lines = [_row(state, cycle), _row(elapsed, left), _row(bar)]
         last = Text(f"last: {self.last_event}", style="dim", overflow="ellipsis", no_wrap=True)
-        return Group(grid, last)
+        return Group(*lines, last)
