@@ -17,7 +17,7 @@ import pytest
 import tmmaster
 from tmmaster import MotionType, PollPolicy, Pose
 from tmmaster._channels import Command, CommandKind, Ticket, channel_for
-from tmmaster._following import FollowState
+from tmmaster._following import FollowState, Overdue
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_models import PathGauge, trapezoid_progress
 from tmmaster._status import MovePhase
@@ -112,9 +112,45 @@ class _Motion:
         self.timeout_s = 10.0
         self.last_pose: Pose | None = None
         self.accel_s = 0.2
+        self.timeout_from_model = True
 
     def path_fraction(self, pose: Pose) -> float | None:
         return pose.x / 100.0  # the test's poses carry their progress in x
+
+
+def _follow(motion: _Motion) -> FollowState:
+    return FollowState(
+        motion,
+        None,
+        stop_event=threading.Event(),
+        poll_interval_s=0.05,
+        polling=PollPolicy(),
+        ack_timeout_s=1.0,
+    )
+
+
+def _half_pace(motion: _Motion, follow: FollowState) -> None:
+    """Anchor the wait, then show it a pose one second in, where the model is at 0.5 s."""
+    follow.poll_started = 0.0
+    follow.due()
+    follow.poll_started = 1.0
+    motion.last_pose = Pose(100 * trapezoid_progress(0.5, 2.0, 0.2), 0, 300, 180, 0, 0)
+    follow.due()
+
+
+@pytest.mark.parametrize("from_model", [True, False])
+def test_a_robot_seen_moving_slower_than_the_model_gets_more_time(from_model: bool) -> None:
+    ticket = Ticket(Command(CommandKind.PTP, TARGET, 50), [], 0.0, seq=1)
+    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
+    motion = _Motion(ticket)
+    motion.timeout_s = 4.6  # 2 s x 1.3 + 2 s: the model's budget
+    motion.timeout_from_model = from_model
+    follow = _follow(motion)
+    _half_pace(motion, follow)
+    assert follow.overdue(4.7) is (None if from_model else Overdue.MOTION)
+    # Twice the budget for a robot moving at half the model's pace; a timeout the user
+    # fixed stays as it is.
+    assert follow.overdue(9.3) is Overdue.MOTION
 
 
 def test_each_new_pose_moves_the_predicted_end() -> None:

@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 from collections.abc import Callable, Sequence
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from . import _sigint
 from ._exceptions import ConfigError
@@ -17,7 +17,16 @@ class UsageError(ConfigError):
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """``argparse.ArgumentParser`` whose errors raise :class:`UsageError` for ``main()``."""
+    """``argparse.ArgumentParser`` whose errors raise :class:`UsageError` for ``main()``.
+
+    Options are never abbreviated: a mistyped or shortened option (``--speed`` for
+    ``--speed-factor``) is refused by name instead of silently taken as another one,
+    and adding an option never changes what an existing command line means.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         """Raise instead of printing the usage and exiting: ``main()`` says it in one line."""

@@ -27,6 +27,8 @@ class FollowedMotion(Protocol):
     last_pose: Pose | None
     #: The move's acceleration time by the arm model, s (0: not a move).
     accel_s: float
+    #: True when ``timeout_s`` was derived from the model's expected time.
+    timeout_from_model: bool
 
     def path_fraction(self, pose: Pose) -> float | None:
         """How much of the move's path the robot covered at ``pose`` (None: cannot tell)."""
@@ -65,6 +67,7 @@ class FollowState:
         "motion",
         "poll_started",
         "poller",
+        "scales_with_pace",
         "schedule",
         "stop_event",
     )
@@ -83,6 +86,9 @@ class FollowState:
         self.motion = motion
         #: The motion's time budget from its acknowledgement, s.
         self.budget = timeout_s if timeout_s is not None else motion.timeout_s
+        #: True when the budget was derived from the model's expected time (no timeout
+        #: given): it then grows with the pace the polls observe.
+        self.scales_with_pace = timeout_s is None and motion.timeout_from_model
         self.stop_event = stop_event
         self.poller = Poller(poll_interval_s, stop_event)
         self.schedule = MotionSchedule(
@@ -126,7 +132,14 @@ class FollowState:
         if motion.phase is MovePhase.RUNNING:
             ticket = motion.ticket
             started = ticket.acknowledged_at or ticket.sent_at
-            return Overdue.MOTION if now - started >= self.budget else None
+            budget = self.budget
+            if self.scales_with_pace:
+                # A robot slower than the model (a reduced project speed) that the polls
+                # see progressing steadily is not stalled: its budget grows with the pace
+                # observed (at most 4 times). A stalled arm shows no progress, and keeps
+                # the model's budget.
+                budget *= max(self.schedule.pace, 1.0)
+            return Overdue.MOTION if now - started >= budget else None
         return None
 
     def settled(self, observation: Observation, now: float) -> bool:

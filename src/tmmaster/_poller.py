@@ -152,6 +152,7 @@ class MotionSchedule:
         self._early = 0.0
         self._mid_interval = nominal_s
         self._observations = 0
+        self._pace = 1.0
 
     def acknowledged(self, at: float, expected_s: float, *, since: float | None = None) -> None:
         """Anchor the completion window: the move should end at ``at + expected_s``.
@@ -196,6 +197,7 @@ class MotionSchedule:
         if model_elapsed <= 0:
             return
         pace = min(max(elapsed / model_elapsed, _PACE_LIMITS[0]), _PACE_LIMITS[1])
+        self._pace = pace
         end = self._acked_at + self._expected * pace
         current = self._end if self._end is not None else self._acked_at + self._expected
         if abs(end - current) < self._policy.dense_interval_s:
@@ -254,6 +256,12 @@ class MotionSchedule:
     def window_s(self) -> float:
         """Half-width of the dense window around the expected end (0 when there is none)."""
         return self._window if self._end is not None else 0.0
+
+    @property
+    def pace(self) -> float:
+        """How many times slower than the model the robot moves, as last observed (1: as
+        predicted or not observed; 0.25..4)."""
+        return self._pace
 
     @property
     def expected_end(self) -> float | None:

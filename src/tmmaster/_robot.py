@@ -295,6 +295,9 @@ class Motion:
         self.timeout_s = timeout_s
         #: The move's acceleration time by the arm model, s (0: not a move).
         self.accel_s = accel_s
+        #: True when ``timeout_s`` was derived from the model's expected time: the wait
+        #: then gives a robot the polls see moving slower than the model more time.
+        self.timeout_from_model = False
         self._gauge = gauge
         #: Where the move stands.
         self.phase = MovePhase.SENT
@@ -1568,6 +1571,9 @@ class Robot:
             timeout_s=timeout_s,
             gauge=gauge,
             accel_s=self.model.accel_time_s if gauge is not None else 0.0,
+        )
+        motion.timeout_from_model = (
+            gauge is not None and timeout is None and self.timeouts.motion_timeout_s is None
         )
 
         def register() -> None:
