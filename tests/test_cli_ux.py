@@ -285,6 +285,70 @@ def test_report_plot_writes_a_png(sim_report: Path, tmp_path: Path) -> None:
     assert len(data) > 10_000
 
 
+def _figure_texts(report: RunReport) -> tuple[Any, str]:
+    """The report's figure (closed by the caller) and every text drawn on it."""
+    from tmmaster.report._plot import _figure
+
+    figure = _figure(report)
+    texts = [t.get_text() for t in figure.findobj(lambda o: hasattr(o, "get_text"))]
+    return figure, "\n".join(texts)
+
+
+def test_report_plot_marks_the_pick_and_place_poses(sim_report: Path) -> None:
+    from matplotlib import pyplot as plt
+
+    report = load_report(sim_report)
+    assert report.sim is not None
+    assert report.sim.pick == [300, -200, 100, 180, 0, 90]
+    figure, texts = _figure_texts(report)
+    try:
+        (path,) = [ax for ax in figure.axes if ax.get_title().startswith("TCP path")]
+        legend = [t.get_text() for t in path.get_legend().get_texts()]
+        assert "pick (300, -200, 100)" in legend
+        assert "place (300, 200, 200)" in legend
+        marks = {t.get_text(): t.xy for t in path.texts}
+        assert marks == {"pick": (300, -200), "place": (300, 200)}
+        assert "pick-and-place: done, 2/2 cycle(s)" in texts
+    finally:
+        plt.close(figure)
+
+
+def _failed_report(outcome: str, timeline: list[dict[str, Any]]) -> RunReport:
+    return RunReport.model_validate(
+        {
+            "tmmaster_version": "0",
+            "result": outcome,
+            "exit_code": 130 if outcome == "interrupted" else 4,
+            "reason": f"{outcome.replace('_', ' ')} in {timeline[-1]['state']} (cycle 0)",
+            "sequence": "pick-and-place",
+            "duration_s": 0.5,
+            "cycles": {"requested": 3, "completed": 0},
+            "timeline": timeline,
+        }
+    )
+
+
+@pytest.mark.parametrize("outcome", ["interrupted", "robot_fault"])
+def test_a_failed_run_plots_what_it_recorded_and_says_so(outcome: str) -> None:
+    from matplotlib import pyplot as plt
+
+    # It failed while the robot was getting ready: IDLE, before cycle 1, is all it has.
+    idle = {"state": "IDLE", "cycle": 0, "started_s": 0, "duration_s": 0.5, "outcome": "failed"}
+    report = _failed_report(outcome, [idle])
+    figure, texts = _figure_texts(report)
+    try:
+        cycles = next(ax for ax in figure.axes if ax.get_title() == "states per cycle")
+        assert len(cycles.patches) == 1  # the IDLE bar, not empty axes
+        assert [t.get_text() for t in cycles.get_yticklabels()] == ["start"]
+        said = "INTERRUPTED" if outcome == "interrupted" else "FAILED (robot fault)"
+        assert f"pick-and-place: {said}, 0/3 cycle(s)" in figure.get_suptitle()
+        assert report.reason is not None
+        assert report.reason in figure.get_suptitle()
+        assert "nothing to plot" not in texts
+    finally:
+        plt.close(figure)
+
+
 def test_report_plot_without_matplotlib_names_the_extra(
     sim_report: Path,
     tmp_path: Path,
@@ -360,3 +424,13 @@ def test_a_run_that_never_started_still_shows_and_plots(
     assert "run.cycles" in out
     assert report_main(["plot", str(path)]) == 0  # default: the report's name, .png
     assert path.with_suffix(".png").read_bytes().startswith(b"\x89PNG")
+    (line,) = capsys.readouterr().out.splitlines()
+    assert line.startswith(f"wrote {path.with_suffix('.png')}: nothing to plot, the run ended")
+    assert "run.cycles" in line
+    from matplotlib import pyplot as plt
+
+    figure, texts = _figure_texts(load_report(path))
+    plt.close(figure)
+    assert figure.axes == []  # no empty axes: the picture says why
+    assert "nothing to plot: the run ended before its first state" in texts
+    assert "FAILED (config error)" in texts

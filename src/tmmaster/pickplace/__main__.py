@@ -631,6 +631,7 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
 
         place = poses["place"] if command.sequence_file is None else None
         outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
+        outcome.sim["pick"] = None if place is None else poses["pick"].as_list()
         outcome.sim["time_scale"] = options.time_scale
         outcome.sim["physics"] = options.physics
         outcome.sim["tcp_path"] = sampler.rows()

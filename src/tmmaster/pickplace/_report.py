@@ -191,6 +191,9 @@ class SimSummary(_Part):
 
     objects: list[SimObject] = Field(default_factory=list)
     """Every part, where it ended."""
+    pick: list[float] | None = None
+    """The pick pose ``[x, y, z, rx, ry, rz]``, where the parts waited (null: none, or a
+    report older than this key)."""
     place: list[float] | None = None
     """The place pose ``[x, y, z, rx, ry, rz]`` (null: none)."""
     tolerance_mm: float = 2.0

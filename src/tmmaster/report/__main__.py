@@ -96,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         return write_stdout(
             lambda: Console(file=sys.stdout).print(summary_renderable(report)), prog="report"
         )
-    from ._plot import plot_report
+    from ._plot import plot_report, recorded_nothing
 
     output = Path(args.output) if args.output else Path(args.report).with_suffix(".png")
     try:
@@ -104,7 +104,11 @@ def _run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:  # unwritable path, unknown image format
         print(f"report: cannot write {output}: {one_line(exc)} [exit 1]", file=sys.stderr)
         return 1
-    print(f"wrote {output}")
+    if recorded_nothing(report):
+        why = one_line(report.reason or report.result)
+        print(f"wrote {output}: nothing to plot, the run ended before its first state ({why})")
+    else:
+        print(f"wrote {output}")
     return 0
 
 

@@ -2,7 +2,9 @@
 
 Three panels: the states of every cycle on a common time axis (seconds since the
 cycle started), the whole run split into moving and waiting (with the TCP speed the
-simulator saw, for a ``--sim`` run), and the TCP path seen from above (``--sim`` runs).
+simulator saw, for a ``--sim`` run), and the TCP path seen from above with the pick and
+place poses (``--sim`` runs). A run that did not end DONE says so in the title, with its
+reason, and shows what it recorded; one that recorded nothing is a picture saying so.
 """
 
 from __future__ import annotations
@@ -17,6 +19,11 @@ from ..pickplace._report import RunReport
 #: Colours of the moving / waiting bands.
 _MOVING = "#2a9d8f"
 _WAITING = "#e9c46a"
+#: Colours of the pick and place poses on the path.
+_PICK = "#6a4c93"
+_PLACE = "#e76f51"
+#: The reason under the title is cut to this many characters.
+_REASON_CHARS = 150
 
 
 def _state_colours(report: RunReport) -> dict[str, Any]:
@@ -31,11 +38,13 @@ def _state_colours(report: RunReport) -> dict[str, Any]:
 
 
 def _cycle_panel(ax: Any, report: RunReport, colours: dict[str, Any]) -> None:
-    cycles = sorted({e.cycle for e in report.timeline if e.cycle >= 1})
+    # Cycle 0 is what ran before the first cycle (IDLE: the wait for the robot to be
+    # ready): its own row, "start", so a run that failed there still shows it.
+    cycles = sorted({e.cycle for e in report.timeline})
     starts = {c: min(e.started_s for e in report.timeline if e.cycle == c) for c in cycles}
     seen: set[str] = set()
     for entry in report.timeline:
-        if entry.cycle < 1 or entry.outcome == "skipped":
+        if entry.outcome == "skipped":
             continue
         label = entry.state if entry.state not in seen else None
         seen.add(entry.state)
@@ -49,7 +58,7 @@ def _cycle_panel(ax: Any, report: RunReport, colours: dict[str, Any]) -> None:
             hatch="//" if entry.outcome == "retry" else None,
             label=label,
         )
-    ax.set_yticks(cycles, [f"cycle {c}" for c in cycles])
+    ax.set_yticks(cycles, [f"cycle {c}" if c >= 1 else "start" for c in cycles])
     ax.invert_yaxis()
     ax.set_xlabel("seconds since the cycle started")
     ax.set_title("states per cycle")
@@ -134,26 +143,106 @@ def _path_panel(ax: Any, report: RunReport) -> None:
     )
     ax.figure.colorbar(points, ax=ax, label="z, mm", shrink=0.8)
     ax.plot(xs[:1], ys[:1], marker="o", color="black", linestyle="", label="start")
-    if report.sim.place is not None:
-        px, py = report.sim.place[0], report.sim.place[1]
+    for name, pose, colour in (
+        ("pick", report.sim.pick, _PICK),
+        ("place", report.sim.place, _PLACE),
+    ):
+        if pose is None:
+            continue
         ax.plot(
-            [px],
-            [py],
+            [pose[0]],
+            [pose[1]],
             marker="s",
-            markersize=10,
+            markersize=12,
             fillstyle="none",
-            color="#e76f51",
+            markeredgewidth=1.5,
+            color=colour,
             linestyle="",
-            label="place",
+            label=f"{name} ({pose[0]:g}, {pose[1]:g}, {pose[2]:g})",
+            zorder=3,
         )
-    for obj in report.sim.objects:
-        ax.plot([obj.pose[0]], [obj.pose[1]], marker="x", color="#e76f51", linestyle="")
+        ax.annotate(
+            name,
+            (pose[0], pose[1]),
+            xytext=(8, 8),
+            textcoords="offset points",
+            color=colour,
+            fontweight="bold",
+        )
+    for i, obj in enumerate(report.sim.objects):
+        ax.plot(
+            [obj.pose[0]],
+            [obj.pose[1]],
+            marker="x",
+            color=_PLACE if obj.on_place else "red",
+            linestyle="",
+            label="where the parts ended" if i == 0 else None,
+            zorder=3,
+        )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x, mm")
     ax.set_ylabel("y, mm")
     ax.set_title("TCP path from above (simulator)")
     ax.legend(loc="best", fontsize="small")
     ax.grid(alpha=0.3)
+
+
+def _title(report: RunReport) -> str:
+    """The result, the cycles and the time; for a run that did not end DONE, its reason."""
+    cycles = report.cycles
+    requested = cycles.requested if cycles.requested is not None else "-"
+    if report.result == "done":
+        outcome = "done"
+    elif report.result == "interrupted":
+        outcome = "INTERRUPTED"
+    else:
+        outcome = f"FAILED ({report.result.replace('_', ' ')})"
+    title = (
+        f"{report.sequence or 'run'}: {outcome}, {cycles.completed}/{requested} cycle(s)"
+        f" in {report.duration_s if report.duration_s is not None else 0:.2f} s"
+        + (f" (simulator time scale {report.sim.time_scale:g})" if report.sim else "")
+    )
+    if report.reason:
+        reason = " ".join(report.reason.split())
+        if len(reason) > _REASON_CHARS:
+            reason = reason[: _REASON_CHARS - 1] + "…"
+        title += f"\n{reason}"
+    return title
+
+
+def recorded_nothing(report: RunReport) -> bool:
+    """True when ``report`` has nothing to draw: no state ran, no TCP path was sampled."""
+    return not report.timeline and (report.sim is None or len(report.sim.tcp_path) < 2)
+
+
+def _figure(report: RunReport) -> Any:
+    """The picture of ``report`` (a matplotlib Figure)."""
+    from matplotlib import pyplot as plt
+
+    if recorded_nothing(report):
+        figure = plt.figure(figsize=(10, 3))
+        figure.text(
+            0.5,
+            0.6,
+            "nothing to plot: the run ended before its first state",
+            ha="center",
+            va="center",
+            fontsize="x-large",
+        )
+        figure.text(0.5, 0.3, _title(report), ha="center", va="center", wrap=True)
+        return figure
+    has_path = report.sim is not None and len(report.sim.tcp_path) > 1
+    figure = plt.figure(figsize=(14 if has_path else 10, 6.5), layout="constrained")
+    grid = figure.add_gridspec(
+        2, 2 if has_path else 1, width_ratios=[3, 2] if has_path else None, height_ratios=[3, 2]
+    )
+    colours = _state_colours(report)
+    _cycle_panel(figure.add_subplot(grid[0, 0]), report, colours)
+    _moving_panel(figure.add_subplot(grid[1, 0]), report)
+    if has_path:
+        _path_panel(figure.add_subplot(grid[:, 1]), report)
+    figure.suptitle(_title(report), color="black" if report.result == "done" else "#b00020")
+    return figure
 
 
 def plot_report(report: RunReport, output: str | Path, *, dpi: int = 110) -> Path:
@@ -182,32 +271,7 @@ def plot_report(report: RunReport, output: str | Path, *, dpi: int = 110) -> Pat
     matplotlib.use("Agg", force=True)  # files only: no display needed
     from matplotlib import pyplot as plt
 
-    has_path = report.sim is not None and len(report.sim.tcp_path) > 1
-    figure = plt.figure(figsize=(14 if has_path else 10, 6.5), layout="constrained")
-    grid = figure.add_gridspec(
-        2, 2 if has_path else 1, width_ratios=[3, 2] if has_path else None, height_ratios=[3, 2]
-    )
-    colours = _state_colours(report)
-    _cycle_panel(figure.add_subplot(grid[0, 0]), report, colours)
-    _moving_panel(figure.add_subplot(grid[1, 0]), report)
-    if has_path:
-        _path_panel(figure.add_subplot(grid[:, 1]), report)
-    if not report.timeline:
-        figure.text(
-            0.5,
-            0.5,
-            f"no state ran: {report.reason or report.result}",
-            ha="center",
-            va="center",
-            wrap=True,
-        )
-    cycles = report.cycles
-    figure.suptitle(
-        f"{report.sequence or 'run'}: {report.result}, {cycles.completed}/"
-        f"{cycles.requested if cycles.requested is not None else '-'} cycle(s)"
-        f" in {report.duration_s if report.duration_s is not None else 0:.2f} s"
-        + (f" (simulator time scale {report.sim.time_scale:g})" if report.sim else "")
-    )
+    figure = _figure(report)
     target = Path(output)
     figure.savefig(target, dpi=dpi)
     plt.close(figure)
