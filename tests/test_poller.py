@@ -86,9 +86,22 @@ def test_predictive_polling_can_be_switched_off() -> None:
 
 
 def test_a_short_move_that_cannot_afford_a_dense_window_polls_at_the_nominal_pace() -> None:
-    schedule = MotionSchedule(PollPolicy(), NOMINAL, sent_at=0.0)
+    policy = PollPolicy()
+    schedule = MotionSchedule(policy, NOMINAL, sent_at=0.0)
     schedule.acknowledged(0.02, 0.01)
-    assert schedule.next_poll(0.02, acknowledged=True) == pytest.approx(0.07)
+    # One poll a robot tick after the predicted end, then the nominal pace.
+    seen = 0.02 + 0.01 + policy.ack_delay_s
+    assert schedule.next_poll(0.02, acknowledged=True) == pytest.approx(seen)
+    assert schedule.next_poll(seen, acknowledged=True) == pytest.approx(seen + NOMINAL)
+
+
+@pytest.mark.parametrize("expected_s", [0.3, 0.34, 0.5])
+def test_a_short_move_on_the_model_is_seen_at_the_robots_next_tick(expected_s: float) -> None:
+    # Too short for a dense window: the nominal polls are shifted so that one lands a
+    # tick after the predicted end, where a robot on the model reports it.
+    late, polls = seen_after_the_end(1.0, expected_s, observe=False)
+    assert late <= TICK + PollPolicy().ack_delay_s
+    assert polls <= (0.021 + expected_s) / NOMINAL + 3
 
 
 @pytest.mark.parametrize("bad", [0, -1, float("nan"), float("inf")])

@@ -283,6 +283,13 @@ class MotionSchedule:
                 return now + p.dense_interval_s
             return now + nominal
         if self._end is None:
+            if self._expected > 0:
+                # No window the budget pays for (a short move): the nominal polls are
+                # shifted so that one falls a robot tick after the predicted end, where
+                # a robot on the model reports it; one poll more at most.
+                seen = self._acked_at + self._expected + p.ack_delay_s
+                if now < seen:
+                    return min(now + nominal, seen)
             return now + nominal
         opens = self._end - self._early - self._window / 2
         closes = self._end + 1.5 * self._window
