@@ -27,6 +27,7 @@ STAND_INS = {
 #: Classes the package makes and hands out (never made by a user): the reference shows
 #: them without a constructor.
 MADE_BY_THE_PACKAGE = {
+    "tmmaster._io.RobotIO",
     "tmmaster._robot.Motion",
     "tmmaster.tmscript._evaluator.Program",
 }

@@ -7,6 +7,7 @@ at a listener that counts connections (it must stay at zero).
 
 from __future__ import annotations
 
+import re
 import socket
 import threading
 from collections.abc import Callable, Iterator
@@ -452,6 +453,75 @@ def test_simulator_bad_arguments_raise_config_error_naming_them(
     # catch the library's errors at one root.
     with pytest.raises(ConfigError, match=named):
         Simulator(**kwargs)
+
+
+# -- robot.io and Simulator.set_di: every argument checked before a byte is sent --------
+
+NAN = float("nan")
+
+# (id, call on robot.io, text the ConfigError must contain)
+IO_CASES: list[tuple[str, Callable[[Any], object], str]] = [
+    ("do-negative", lambda io: io.set_do(-1, True), "control_box DO -1 does not exist"),
+    ("do-16", lambda io: io.set_do(16, True), "module control_box has DO 0-15"),
+    ("do-bool-channel", lambda io: io.set_do(True, True), "got True (bool)"),
+    ("do-nan-channel", lambda io: io.set_do(NAN, True), "got NaN (float)"),
+    ("do-float-channel", lambda io: io.set_do(1.0, True), "got 1.0 (float)"),
+    ("do-str-channel", lambda io: io.set_do("3", True), "got '3' (str)"),
+    ("do-value-int", lambda io: io.set_do(3, 1), "control_box DO 3: the value must be True"),
+    ("do-value-nan", lambda io: io.set_do(3, NAN), "got nan (float)"),
+    ("do-value-none", lambda io: io.set_do(3, None), "got None"),
+    ("do-value-str", lambda io: io.set_do(3, "on"), "got 'on'"),
+    ("end-do-4", lambda io: io.set_do(4, True, module="end_module"), "end_module has DO 0-3"),
+    ("end-do-gripper", lambda io: io.set_do(0, True, module="end_module"), "gripper"),
+    ("module-unknown", lambda io: io.set_do(1, True, module="tool"), "module 'tool'"),
+    ("module-none", lambda io: io.set_do(1, True, module=None), "module None"),
+    ("read-do-16", lambda io: io.do(16), "control_box DO 16"),
+    ("read-di-negative", lambda io: io.di(-1), "control_box DI -1"),
+    ("read-di-16", lambda io: io.di(16), "module control_box has DI 0-15"),
+    ("read-end-di-4", lambda io: io.di(4, module="end_module"), "end_module has DI 0-3"),
+    ("read-di-bool", lambda io: io.di(False), "got False (bool)"),
+    ("read-dis-module", lambda io: io.dis(module="end"), "module 'end'"),
+    ("read-dos-module", lambda io: io.dos(module="Control_Box"), "module 'Control_Box'"),
+]
+
+
+@pytest.mark.parametrize(("call", "named"), [pytest.param(c, n, id=i) for i, c, n in IO_CASES])
+def test_robot_io_bad_arguments_raise_before_any_connection(
+    call: Callable[[Any], object], named: str, counter: ConnectionCounter
+) -> None:
+    from tmmaster import Robot
+
+    robot = Robot("127.0.0.1", counter.port)  # not connected: a request would connect
+    try:
+        with pytest.raises(ConfigError, match=re.escape(named)):
+            call(robot.io)
+    finally:
+        robot.close()
+    assert counter.accepted == 0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        pytest.param({"channel": 16, "value": True}, "control_box DI 16", id="di-16"),
+        pytest.param({"channel": -1, "value": True}, "control_box DI -1", id="di-negative"),
+        pytest.param({"channel": True, "value": True}, "(bool)", id="di-bool-channel"),
+        pytest.param({"channel": NAN, "value": True}, "NaN", id="di-nan-channel"),
+        pytest.param({"channel": 1, "value": 1}, "True or False", id="value-int"),
+        pytest.param({"channel": 1, "value": NAN}, "True or False", id="value-nan"),
+        pytest.param(
+            {"channel": 4, "value": True, "module": "end_module"}, "DI 0-3", id="end-di-4"
+        ),
+        pytest.param({"channel": 1, "value": True, "module": "box"}, "'box'", id="module"),
+    ],
+)
+def test_simulator_set_di_bad_arguments_raise_config_error(
+    kwargs: dict[str, Any], named: str
+) -> None:
+    sim = Simulator()  # not started (Simulator.start is a tripwire here)
+    with pytest.raises(ConfigError, match=re.escape(named)):
+        sim.set_di(**kwargs)
+    assert sim.do(0) is False  # nothing was driven
 
 
 # -- tmmaster report show|plot: the report file is read bounded, strictly, and checked --

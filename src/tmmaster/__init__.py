@@ -71,6 +71,7 @@ if _TYPE_CHECKING:
         RegisterGripper,
         SequenceGripper,
     )
+    from ._io import RobotIO
     from ._logging import configure_logging
     from ._monitor import MonitoredStatus, StatusMonitor
     from ._poller import Poller, PollPolicy
@@ -86,6 +87,7 @@ if _TYPE_CHECKING:
     from ._registers import (
         Access,
         DataType,
+        DigitalIOModule,
         GripperProfile,
         Handshake,
         RegisterField,
@@ -120,6 +122,7 @@ _EXPORTS = {
     "DataType": "._registers",
     "DeviceBusyError": "._exceptions",
     "DeviceFailureError": "._exceptions",
+    "DigitalIOModule": "._registers",
     "EmergencyStopError": "._exceptions",
     "Fleet": "._fleet",
     "FrameCheck": "._robot",
@@ -162,6 +165,7 @@ _EXPORTS = {
     "Robot": "._robot",
     "RobotError": "._exceptions",
     "RobotFaultError": "._exceptions",
+    "RobotIO": "._io",
     "RobotModel": "._robot_models",
     "RobotProfile": "._registers",
     "RobotStatus": "._status",
@@ -222,6 +226,7 @@ __all__ = [
     "DataType",
     "DeviceBusyError",
     "DeviceFailureError",
+    "DigitalIOModule",
     "EmergencyStopError",
     "Fleet",
     "FrameCheck",
@@ -263,6 +268,7 @@ __all__ = [
     "Robot",
     "RobotError",
     "RobotFaultError",
+    "RobotIO",
     "RobotModel",
     "RobotProfile",
     "RobotStatus",

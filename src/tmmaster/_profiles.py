@@ -237,4 +237,27 @@ def profile_markdown(profile: Profile) -> str:
             f"| {scale} | {word_order} | {f.access.value} | {f.unit} | {allowed} | {_meaning(f)} |"
         )
     out.append("")
+    if isinstance(profile, RobotProfile) and profile.digital_io:
+        out += [
+            "Digital I/O (`Robot.io`): DO n is the coil at the first address + n (FC 01 read,"
+            " FC 05 write), DI n the discrete input at the first address + n (FC 02).",
+            "",
+            "| Module | DO | Coils | DI | Discrete inputs | Source |",
+            "|---|---|---|---|---|---|",
+        ]
+        for name, module in sorted(profile.digital_io.items()):
+            out.append(
+                f"| `{name}` | {_io_range(module.do_count)}"
+                f" | {_io_range(module.do_count, module.do_address)}"
+                f" | {_io_range(module.di_count)}"
+                f" | {_io_range(module.di_count, module.di_address)} | {module.source} |"
+            )
+        out.append("")
     return "\n".join(out)
+
+
+def _io_range(count: int, first: int = 0) -> str:
+    """``first``..``first + count - 1`` as ``0-15``; empty when there are none."""
+    if count == 0:
+        return ""
+    return f"{first}" if count == 1 else f"{first}-{first + count - 1}"

@@ -368,6 +368,54 @@ _REQUIRED: dict[Handshake, tuple[str, ...]] = {
 }
 
 
+class DigitalIOModule(BaseModel):
+    """One module's digital outputs (coils) and inputs (discrete inputs), numbered from 0.
+
+    DO ``n`` is the coil at ``do_address + n`` (read FC 01, written FC 05), DI ``n`` the
+    discrete input at ``di_address + n`` (read FC 02). A profile lists its modules under
+    ``[digital_io.NAME]``; ``Robot.io`` reads and writes them (docs/robot-api.md).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: The coil of DO 0.
+    do_address: Annotated[int, Field(ge=0, le=65535)] = 0
+    #: How many DOs the module has (0: none).
+    do_count: Annotated[int, Field(ge=0, le=2000)] = 0
+    #: The discrete input of DI 0.
+    di_address: Annotated[int, Field(ge=0, le=65535)] = 0
+    #: How many DIs the module has (0: none).
+    di_count: Annotated[int, Field(ge=0, le=2000)] = 0
+    #: Where the addresses come from (a manual's section and page), for people.
+    source: str = ""
+
+    @model_validator(mode="after")
+    def _check_span(self) -> Self:
+        for kind, address, count in (
+            ("do", self.do_address, self.do_count),
+            ("di", self.di_address, self.di_count),
+        ):
+            if address + count > 65536:
+                raise ValueError(f"{kind}_address + {kind}_count runs past address 65535")
+        if self.do_count == 0 and self.di_count == 0:
+            raise ValueError("a digital I/O module needs do_count or di_count above 0")
+        return self
+
+    def spans(self) -> tuple[tuple[Table, int, int], ...]:
+        """The module's addresses as ``(table, first address, count)``, DOs then DIs.
+
+        Returns:
+            One entry per non-empty kind: ``(Table.COIL, do_address, do_count)`` and
+            ``(Table.DISCRETE_INPUT, di_address, di_count)``.
+        """
+        out = []
+        if self.do_count:
+            out.append((Table.COIL, self.do_address, self.do_count))
+        if self.di_count:
+            out.append((Table.DISCRETE_INPUT, self.di_address, self.di_count))
+        return tuple(out)
+
+
 class RobotProfile(RegisterMap):
     """A robot's register map plus the handshake that its command block follows."""
 
@@ -379,6 +427,32 @@ class RobotProfile(RegisterMap):
     mode_auto: int = 5
     #: Value of ``robot_mode`` (clear-on-accept profiles) that means error.
     mode_error: int = 7
+    #: The robot's digital I/O modules by name (``control_box``, ``end_module`` on a TM
+    #: robot); none: the robot has no digital I/O the master may reach.
+    digital_io: dict[str, DigitalIOModule] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _check_digital_io(self) -> Self:
+        # A module's address is nothing else's: not another module's, not a field's.
+        owners: dict[tuple[Table, int], str] = {}
+        for field in self.fields.values():
+            for address in range(field.address, field.end + 1):
+                owners[(field.table, address)] = f"field {field.name}"
+        for name, module in sorted(self.digital_io.items()):
+            if not _NAME.match(name):
+                raise ValueError(
+                    f"profile {self.name!r}: digital I/O module name {name!r} must be"
+                    " lower-case letters, digits and underscores"
+                )
+            for table, first, count in module.spans():
+                for address in range(first, first + count):
+                    other = owners.setdefault((table, address), f"digital I/O module {name}")
+                    if other != f"digital I/O module {name}":
+                        raise ValueError(
+                            f"profile {self.name!r}: digital I/O module {name}"
+                            f" ({table.value} {address}) overlaps {other}"
+                        )
+        return self
 
     @model_validator(mode="after")
     def _check_roles(self) -> Self:

@@ -66,6 +66,7 @@ from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet,
 from ._following import FollowState, Overdue, SharedDriver
 from ._gate import CommandGate
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
+from ._io import RobotIO
 from ._logging import get_logger
 from ._poller import Poller, PollPolicy
 from ._pose import MotionType, Pose, suspect_units, warn_units, written_list
@@ -965,6 +966,8 @@ class Robot:
         #: The last command sent; while it is not settled, close() withdraws or stops it.
         self._last_motion: Motion | None = None
         self._log = _log.bind(robot=name)
+        # Digital I/O: its writes pass the same gate as commands.
+        self._io = RobotIO(self.profile, self._transport, self._gate, self._log)
         # Polls, waits for and gives up safely every command sent (each Motion has it).
         self._follower = _MotionFollower(
             self._channel,
@@ -1259,6 +1262,11 @@ class Robot:
     def _at_exit(self) -> None:
         # The interpreter is exiting with this robot still open: nothing may stay armed.
         self.close()
+
+    @property
+    def io(self) -> RobotIO:
+        """The robot's digital I/O: control-box and end-module DOs and DIs (RobotIO)."""
+        return self._io
 
     @property
     def last_motion(self) -> Motion | None:

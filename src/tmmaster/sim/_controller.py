@@ -31,6 +31,7 @@ from typing import ClassVar, Literal
 
 from .._codec import allowed_range, encode
 from .._exceptions import ConfigError, UnreachablePoseError, ValueOutOfRangeError
+from .._io import digital_io_areas
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile
 from .._robot_models import RobotModel
@@ -199,8 +200,9 @@ class RobotController(SimDevice[RobotProfile]):
 
     @classmethod
     def bank_for(cls, profile: RobotProfile) -> RegisterBank:
-        """The register memory such a controller serves: ``profile``'s fields."""
-        return RegisterBank(profile)
+        """The register memory such a controller serves: ``profile``'s fields and its
+        digital I/O (plain memory where no field is)."""
+        return RegisterBank(profile, raw_areas=digital_io_areas(profile))
 
     # -- read-only state for the server and tests --------------------------------------
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 from abc import abstractmethod
 from typing import Any
 
+from .._io import digital_io_areas
 from .._pose import MotionType, Pose
 from .._registers import RobotProfile
 from ._bank import RegisterBank
@@ -52,9 +53,12 @@ class SequenceController(RobotController):
 
     @classmethod
     def bank_for(cls, profile: RobotProfile) -> RegisterBank:
-        """A TM controller's memory: the profile, Techman's fixed table and its raw areas."""
+        """A TM controller's memory: the profile, Techman's fixed table and its raw areas
+        (and the profile's digital I/O, where the table does not serve it)."""
         return RegisterBank(
-            profile, extra_fields=tm_table_fields(profile), raw_areas=tm_table_areas()
+            profile,
+            extra_fields=tm_table_fields(profile),
+            raw_areas=(*tm_table_areas(), *digital_io_areas(profile)),
         )
 
     @property

@@ -20,9 +20,10 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from .._exceptions import ConfigError, UnknownNameError
+from .._io import io_address, io_value
 from .._pose import DEFAULT_HOME, Pose
 from .._profiles import DEFAULT_PROFILE, gripper_profile, robot_profile
-from .._registers import GripperProfile, Handshake, RobotProfile
+from .._registers import GripperProfile, Handshake, RobotProfile, Table
 from .._retry import RetryPolicy
 from .._robot_models import RobotModel, robot_model
 from .._transport import Transport, register_endpoint, unregister_endpoint
@@ -532,6 +533,46 @@ class Simulator:
         if bank is None:
             raise ConfigError(f"no {device} register bank in this simulator")
         return self._call(lambda: bank.get(name))
+
+    def set_di(self, channel: int, value: bool, *, module: str = "control_box") -> None:
+        """Drive digital input ``channel`` of ``module``, as the wiring of a real cell would.
+
+        The input reads ``value`` for every master from then on (FC 02 at the address
+        the profile gives, e.g. control box DI 3 at discrete input 3). On the ``tmflow``
+        profile the end-module DI the robot program reads as its gripper's grip signal
+        (DI 0 by default) is driven by the simulated gripper at every tick.
+
+        Args:
+            channel: The DI number, from 0 (control box 0-15, end module 0-3 on tmflow).
+            value: True: high; False: low.
+            module: ``"control_box"`` or ``"end_module"`` (the profile's modules).
+
+        Raises:
+            ConfigError: A profile without digital I/O, an unknown module, a channel out
+                of range or not an int, a value that is not a bool.
+        """
+        address = io_address(self._profile, module, "di", channel)
+        bit = int(io_value(value, f"{module} DI {channel}"))
+        bank = self._bank
+        self._call(lambda: bank.write(Table.DISCRETE_INPUT, address, [bit], device=True))
+
+    def do(self, channel: int, *, module: str = "control_box") -> bool:
+        """What digital output ``channel`` of ``module`` is now (as a master last set it).
+
+        Args:
+            channel: The DO number, from 0 (control box 0-15, end module 0-3 on tmflow).
+            module: ``"control_box"`` or ``"end_module"`` (the profile's modules).
+
+        Returns:
+            True when the output is high.
+
+        Raises:
+            ConfigError: A profile without digital I/O, an unknown module, a channel out
+                of range or not an int.
+        """
+        address = io_address(self._profile, module, "do", channel)
+        bank = self._bank
+        return bool(self._call(lambda: bank.read(Table.COIL, address, 1))[0])
 
     def inject(self, fault: Fault | str) -> None:
         """Add a fault at run time (a Fault model or a ``"kind:k=v,..."`` spec).

@@ -1,0 +1,350 @@
+"""Digital I/O of the robot's modules (control box, end module): ``Robot.io``.
+
+The addresses come from the profile (``[digital_io.NAME]``, :class:`DigitalIOModule`);
+the ``tmflow`` profile lists Techman's own table (TMflow 2.24 manual, appendix C "Modbus
+List": control box DO/DI 0-15 at coils / discrete inputs 0000-0015, pp. 306-307; end
+module DO/DI 0-3 at 0800-0803, p. 307). Everything is checked before a byte is sent: the
+module, the channel (in range for that module), the value (a bool).
+
+A DO write sets an absolute value, so writing it twice is harmless: it goes through the
+transport's retry policy like a read (docs/safety.md). It passes the robot's command
+gate, so no DO is written once ``close()`` began or while a stop is requested. The
+end-module output that the robot program's gripper uses is refused unless the user
+releases it (:attr:`RobotIO.gripper_output`): writing it behind the program's back would
+open or close the gripper outside any command the master follows.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+from ._exceptions import ConfigError, StopRequestedError
+from ._gate import CommandGate
+from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
+from ._robot_program import END_MODULE_DO, GripperWiring
+from ._transport import Transport
+
+#: The module ``RobotIO``'s calls address when none is named.
+DEFAULT_MODULE = "control_box"
+#: The module whose output the robot program's gripper uses.
+END_MODULE = "end_module"
+
+Kind = Literal["do", "di"]
+
+
+def io_modules(profile: RobotProfile) -> dict[str, DigitalIOModule]:
+    """The profile's digital I/O modules, refusing a profile that has none.
+
+    Args:
+        profile: The robot profile.
+
+    Returns:
+        The modules by name.
+
+    Raises:
+        ConfigError: The profile declares no digital I/O.
+    """
+    if not profile.digital_io:
+        raise ConfigError(
+            f"profile {profile.name!r} declares no digital I/O (a [digital_io.NAME] table,"
+            " docs/register-maps.md)"
+        )
+    return profile.digital_io
+
+
+def io_module(profile: RobotProfile, module: object) -> DigitalIOModule:
+    """The module called ``module`` (``ConfigError`` listing the profile's modules).
+
+    Args:
+        profile: The robot profile.
+        module: The module's name, e.g. ``"control_box"`` or ``"end_module"``.
+
+    Returns:
+        The module.
+
+    Raises:
+        ConfigError: The profile has no digital I/O, or no module of that name.
+    """
+    modules = io_modules(profile)
+    found = modules.get(module) if isinstance(module, str) else None
+    if found is None:
+        raise ConfigError(
+            f"module {module!r} is not a digital I/O module of profile {profile.name!r}"
+            f" (modules: {', '.join(sorted(modules))})"
+        )
+    return found
+
+
+def io_address(profile: RobotProfile, module: object, kind: Kind, channel: object) -> int:
+    """The coil (``kind`` "do") or discrete input ("di") of ``channel`` of ``module``.
+
+    Args:
+        profile: The robot profile.
+        module: The module's name.
+        kind: ``"do"`` or ``"di"``.
+        channel: The DO or DI number, an int from 0.
+
+    Returns:
+        The Modbus address.
+
+    Raises:
+        ConfigError: An unknown module, a channel that is not an int (a bool, a float,
+            NaN) or out of the module's range; the message names the module.
+    """
+    found = io_module(profile, module)
+    label = kind.upper()
+    first, count = (
+        (found.do_address, found.do_count) if kind == "do" else (found.di_address, found.di_count)
+    )
+    if count == 0:
+        raise ConfigError(f"module {module} has no {label}")
+    if isinstance(channel, bool) or not isinstance(channel, int):
+        shown = "NaN" if isinstance(channel, float) and math.isnan(channel) else repr(channel)
+        raise ConfigError(
+            f"{module} {label}: the channel must be an int (0..{count - 1}), got {shown}"
+            f" ({type(channel).__name__})"
+        )
+    if not 0 <= channel < count:
+        raise ConfigError(
+            f"{module} {label} {channel} does not exist: module {module} has {label} 0-{count - 1}"
+        )
+    return first + channel
+
+
+def io_value(value: object, what: str) -> bool:
+    """``value`` if it is a bool, else ``ConfigError`` naming ``what``.
+
+    Args:
+        value: The value to write.
+        what: What is written, for the message (``"control_box DO 3"``).
+
+    Returns:
+        The value.
+
+    Raises:
+        ConfigError: Anything but True or False (1, 0, "on", None...).
+    """
+    if not isinstance(value, bool):
+        raise ConfigError(
+            f"{what}: the value must be True or False, got {value!r} ({type(value).__name__})"
+        )
+    return value
+
+
+def digital_io_areas(profile: RobotProfile) -> tuple[tuple[Table, int, int], ...]:
+    """Every module's coils and discrete inputs as ``(table, first address, count)``.
+
+    Args:
+        profile: The robot profile.
+
+    Returns:
+        The areas, module by module (none for a profile without digital I/O).
+    """
+    return tuple(span for module in profile.digital_io.values() for span in module.spans())
+
+
+def default_gripper_output(profile: RobotProfile) -> int | None:
+    """The end-module DO the robot program's gripper uses, by default.
+
+    A sequence-handshake profile is served by a robot program; the one ``tmmaster
+    robot-program`` writes drives its gripper with end-module DO 0 unless told otherwise
+    (``--gripper io:do=N``, ``--gripper none``).
+
+    Args:
+        profile: The robot profile.
+
+    Returns:
+        The DO number, or None when no program drives one (clear-on-accept profiles).
+    """
+    if profile.handshake is Handshake.SEQUENCE:
+        return GripperWiring().output
+    return None
+
+
+class RobotIO:
+    """A robot's digital I/O: control-box and end-module DOs and DIs (``robot.io``).
+
+    Every call names a ``module`` (``"control_box"``, the default, or ``"end_module"`` on
+    the ``tmflow`` profile) and a channel number from 0. Inputs and outputs are read in
+    one request each (``dis()``, ``dos()``); an output is written on its own (FC 05).
+    Arguments are checked before any byte is sent (:class:`ConfigError` naming the
+    module). A write is refused with :class:`StopRequestedError` once ``close()`` began
+    or while a stop is requested, and the end-module output the robot program's gripper
+    uses (:attr:`gripper_output`) is refused unless released.
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+        ```python
+        from tmmaster import connect
+
+        with connect("127.0.0.1", 5020) as robot:
+            robot.io.set_do(3, True)                    # control box DO 3 high
+            print(robot.io.do(3), robot.io.di(0))       # True False
+            print(robot.io.dis())                       # 16 control box DIs, one read
+            print(robot.io.di(1, module="end_module"))  # end module DI 1
+        ```
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        transport: Transport,
+        gate: CommandGate,
+        log: Any,
+    ) -> None:
+        """Made by :class:`~tmmaster.Robot` (``robot.io``), never by a user.
+
+        Args:
+            profile: The robot's profile (its ``digital_io`` modules).
+            transport: The robot's link.
+            gate: The robot's command gate.
+            log: The robot's logger.
+        """
+        self._profile = profile
+        self._transport = transport
+        self._gate = gate
+        self._log = log
+        self._gripper_output = default_gripper_output(profile)
+
+    @property
+    def modules(self) -> tuple[str, ...]:
+        """The names of the robot's digital I/O modules (empty when the profile has none)."""
+        return tuple(sorted(self._profile.digital_io))
+
+    @property
+    def gripper_output(self) -> int | None:
+        """The end-module DO the robot program's gripper uses; writing it is refused.
+
+        With a sequence-handshake profile (``tmflow``) it is DO 0, the output of the
+        program ``tmmaster robot-program`` writes by default. Set it to the program's
+        ``--gripper io:do=N``, or to None when no program drives a gripper output
+        (``--gripper none``) and the output is yours.
+
+        Raises:
+            ConfigError: (setting) neither None nor an end-module DO number.
+        """
+        return self._gripper_output
+
+    @gripper_output.setter
+    def gripper_output(self, output: int | None) -> None:
+        if output is not None:
+            io_address(self._profile, END_MODULE, "do", output)
+        self._gripper_output = output
+        self._log.info("robot.io_gripper_output", output=output)
+
+    def set_do(self, channel: int, value: bool, *, module: str = DEFAULT_MODULE) -> None:
+        """Set digital output ``channel`` of ``module`` high (True) or low (False).
+
+        Checked before any byte: the module, the channel, the value, and that the output
+        is not the robot program's gripper output. One FC 05 request, retried per the
+        robot's retry policy when its answer is lost (setting a DO to the same value
+        twice is harmless); logged as ``robot.io_set``.
+
+        Args:
+            channel: The DO number, from 0 (control box 0-15, end module 0-3 on a TM).
+            value: True: high; False: low.
+            module: ``"control_box"`` or ``"end_module"`` (the profile's modules).
+
+        Raises:
+            ConfigError: An unknown module, a channel out of range or not an int, a
+                value that is not a bool, or the gripper's output.
+            StopRequestedError: The robot is closing or a stop is requested: not written.
+            TransportError: The write failed after its retries (a subclass says how).
+        """
+        address = io_address(self._profile, module, "do", channel)
+        what = f"{module} DO {channel}"
+        value = io_value(value, what)
+        gripper = self._gripper_output
+        if gripper is not None and address == END_MODULE_DO + gripper:
+            raise ConfigError(
+                f"{what} (coil {address}) drives the gripper through the robot program (its"
+                f" gripper wiring io:do={gripper}): writing it would open or close the"
+                " gripper behind the program's back; use robot.gripper, or set"
+                " robot.io.gripper_output = None if no program drives this output"
+            )
+
+        def send() -> None:
+            self._transport.write_block(Table.COIL, address, [int(value)], retry=True)
+
+        try:
+            self._gate.write(_nothing, send)
+        except StopRequestedError as exc:
+            raise StopRequestedError(f"{what} not written: {exc}") from exc
+        self._log.info("robot.io_set", module=module, do=channel, value=value)
+
+    def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
+        """Read digital output ``channel`` of ``module`` back (one FC 01 request).
+
+        Args:
+            channel: The DO number, from 0.
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            True when the output is high.
+
+        Raises:
+            ConfigError: An unknown module or a channel out of range or not an int.
+            TransportError: The read failed (a subclass says how).
+        """
+        address = io_address(self._profile, module, "do", channel)
+        return bool(self._transport.read_block(Table.COIL, address, 1)[0])
+
+    def di(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
+        """Read digital input ``channel`` of ``module`` (one FC 02 request).
+
+        Args:
+            channel: The DI number, from 0 (control box 0-15, end module 0-3 on a TM).
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            True when the input is high.
+
+        Raises:
+            ConfigError: An unknown module or a channel out of range or not an int.
+            TransportError: The read failed (a subclass says how).
+        """
+        address = io_address(self._profile, module, "di", channel)
+        return bool(self._transport.read_block(Table.DISCRETE_INPUT, address, 1)[0])
+
+    def dos(self, *, module: str = DEFAULT_MODULE) -> tuple[bool, ...]:
+        """Read every digital output of ``module`` in one request (FC 01).
+
+        Args:
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            One bool per DO, DO 0 first.
+
+        Raises:
+            ConfigError: An unknown module, or one without DOs.
+            TransportError: The read failed (a subclass says how).
+        """
+        return self._read_all(module, "do")
+
+    def dis(self, *, module: str = DEFAULT_MODULE) -> tuple[bool, ...]:
+        """Read every digital input of ``module`` in one request (FC 02).
+
+        Args:
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            One bool per DI, DI 0 first.
+
+        Raises:
+            ConfigError: An unknown module, or one without DIs.
+            TransportError: The read failed (a subclass says how).
+        """
+        return self._read_all(module, "di")
+
+    def _read_all(self, module: str, kind: Kind) -> tuple[bool, ...]:
+        first = io_address(self._profile, module, kind, 0)
+        found = io_module(self._profile, module)
+        count = found.do_count if kind == "do" else found.di_count
+        table = Table.COIL if kind == "do" else Table.DISCRETE_INPUT
+        return tuple(bool(bit) for bit in self._transport.read_block(table, first, count))
+
+
+def _nothing() -> None:
+    """A DO write registers no command: close() has nothing to withdraw for it."""
