@@ -6,6 +6,7 @@ import logging
 import re
 import shutil
 import subprocess
+import threading
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -200,6 +201,34 @@ def test_a_lost_answer_leaves_the_coil_as_requested(tcp_sim: Simulator, retries:
                 assert requests(tcp_sim, 5) == [(3, 1)]
             assert tcp_sim.do(3) is True
             assert robot.io.do(3) is True
+
+
+def test_close_waits_for_a_do_write_in_flight_then_refuses_the_next(tcp_sim: Simulator) -> None:
+    """close() from another thread never cuts a DO write short, and no write follows it."""
+    with FaultProxy(tcp_sim.port) as proxy:
+        robot = Robot("127.0.0.1", proxy.port, request_timeout_s=2.0)
+        robot.connect()
+        proxy.add(Rule("delay", function_code=5, delay_s=0.3))
+        outcome: list[BaseException | None] = []
+
+        def write() -> None:
+            try:
+                robot.io.set_do(3, True)
+                outcome.append(None)
+            except BaseException as exc:  # reported below
+                outcome.append(exc)
+
+        writer = threading.Thread(target=write)
+        writer.start()
+        tcp_sim.wait_for(lambda: any(s.function_code == 5 for s in proxy.seen), 5.0)
+        assert robot.close(timeout_s=3.0) is True  # waits for the write on the wire
+        writer.join(5.0)
+        assert outcome == [None]
+        with pytest.raises(StopRequestedError):
+            robot.io.set_do(4, True)
+        assert tcp_sim.do(3) is True
+        assert tcp_sim.do(4) is False
+        assert [s.function_code for s in proxy.seen].count(5) == 1
 
 
 MBPOLL = shutil.which("mbpoll")
