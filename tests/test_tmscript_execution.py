@@ -258,6 +258,25 @@ def test_ptp_and_queue_tags() -> None:
     assert host.shown == ["1"]
 
 
+def test_circle_queues_an_arc_through_its_via_point() -> None:
+    # TMscript 2.24 §13.12, pp. 343-344: Syntax 1 (arc angle) and Syntax 2 (and rotation).
+    ex, host = start(
+        "main\n{\nfloat[] p = {417.5, -122.3, 343.9, 180, 0, 90}\n"
+        "float[] e = {381.7, 208.74, 343.9, 180, 0, 135}\n"
+        'Circle("CAP", p, e, 100, 200, 50, 0, false)\n'
+        'Circle("CPP", p, e, 10, 200, 0, 270, 1, false)\n'
+        'bool ok = Circle("JPP", p, e, 10, 200, 0, 0, false)\nDisplay(ok)\n}\n'
+    )
+    assert ex.step(100).state == ExecState.ENDED
+    first, second = host.motions
+    assert first == MotionCall(
+        "Circle", "CAP", (381.7, 208.74, 343.9, 180.0, 0.0, 135.0), 100, 200, 50, False,
+        via=(417.5, -122.3, 343.9, 180.0, 0.0, 90.0), arc_angle=0,
+    )  # fmt: skip
+    assert (second.arc_angle, second.rotation, second.speed) == (270, 1, 10)
+    assert host.shown == ["false"]  # "JPP" is no Circle format: rejected, nothing queued
+
+
 def test_motion_is_refused_in_closestop() -> None:
     with pytest.raises(TMScriptSyntaxError, match="no motion in closestop"):
         parse('closestop\n{\nPTP("JPP", {0,0,90,0,90,0}, 10, 200, 0, false)\n}\n')

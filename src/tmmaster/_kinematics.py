@@ -334,3 +334,135 @@ def interpolate(a: Transform, b: Transform, fraction: float) -> Transform:
             )
         )
     return (rows[0], rows[1], rows[2], IDENTITY[3])
+
+
+def _sub(a: Vector, b: Vector) -> Vector:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def _cross(a: Vector, b: Vector) -> Vector:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a: Vector, b: Vector) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _scaled(a: Vector, k: float) -> Vector:
+    return (a[0] * k, a[1] * k, a[2] * k)
+
+
+#: An arc's three points must be this far apart, mm, and its radius at most this large.
+ARC_MIN_SPACING_MM = 1.0
+ARC_MAX_RADIUS_MM = 100_000.0
+
+
+@dataclass(frozen=True)
+class Arc:
+    """The circular arc from a start pose through a via point to an end pose.
+
+    The TCP runs along the circle through the three positions, from the start through the
+    via to the end; its orientation turns uniformly (the shortest turn) from the start's
+    to the end's along the arc, as a TMscript ``Circle`` with arc angle 0 moves ("linear
+    interpolation on pose", TMscript 2.24, 13.12, p. 343). The via's orientation is not
+    used: :meth:`at` gives the one the TCP has there.
+    """
+
+    start: Transform
+    end: Transform
+    #: The circle's centre, mm.
+    centre: Vector
+    radius_mm: float
+    #: Unit vector from the centre to the start, and the one 90 degrees ahead of it in the
+    #: direction of travel: the arc's point at angle phi is centre + r (cos u + sin w).
+    u: Vector
+    w: Vector
+    #: The angle swept from the start to the end, rad (0 < sweep < 2 pi).
+    sweep_rad: float
+    #: Where the via point lies on the arc (fraction of the sweep, 0 < f < 1).
+    via_fraction: float
+
+    @classmethod
+    def through(cls, start: Pose, via: Pose, end: Pose) -> Arc:
+        """The arc from ``start`` through ``via``'s position to ``end``.
+
+        Raises:
+            ValueError: two of the points are closer than 1 mm, the three lie on one
+                line (no circle passes through them), or the radius is over 100 m.
+        """
+        p0, p1, p2 = (start.x, start.y, start.z), (via.x, via.y, via.z), (end.x, end.y, end.z)
+        a, b = _sub(p1, p0), _sub(p2, p0)
+        for name, (p, q) in (
+            ("start and via", (p0, p1)),
+            ("via and end", (p1, p2)),
+            ("start and end", (p0, p2)),
+        ):
+            if math.dist(p, q) < ARC_MIN_SPACING_MM:
+                raise ValueError(
+                    f"the arc's {name} are {math.dist(p, q):.2f} mm apart: an arc needs three"
+                    f" distinct points (at least {ARC_MIN_SPACING_MM:g} mm apart)"
+                )
+        n = _cross(a, b)
+        n2 = _dot(n, n)
+        if math.sqrt(n2) < 1e-6 * math.hypot(*a) * math.hypot(*b):
+            raise ValueError(
+                "the arc's start, via and end lie on one line: no circle passes through them"
+            )
+        # Circumcentre: p0 + (|a|^2 (b x n) + |b|^2 (n x a)) / (2 |n|^2).
+        first, second = _scaled(_cross(b, n), _dot(a, a)), _scaled(_cross(n, a), _dot(b, b))
+        k = 1.0 / (2.0 * n2)
+        offset = (
+            (first[0] + second[0]) * k,
+            (first[1] + second[1]) * k,
+            (first[2] + second[2]) * k,
+        )
+        centre = (p0[0] + offset[0], p0[1] + offset[1], p0[2] + offset[2])
+        radius = math.dist(centre, p0)
+        if radius > ARC_MAX_RADIUS_MM:
+            raise ValueError(
+                f"the arc's radius is {radius / 1000:.0f} m: its start, via and end are too"
+                " nearly on one line (use a Line)"
+            )
+        u = _scaled(_sub(p0, centre), 1.0 / radius)
+        normal = _scaled(n, 1.0 / math.sqrt(n2))
+        w = _cross(normal, u)
+
+        def angle(p: Vector) -> float:
+            d = _sub(p, centre)
+            return math.atan2(_dot(d, w), _dot(d, u)) % (2.0 * math.pi)
+
+        via_angle, end_angle = angle(p1), angle(p2)
+        if via_angle > end_angle:
+            # Through the via, the arc runs the other way round the normal.
+            w = _scaled(w, -1.0)
+            via_angle, end_angle = 2.0 * math.pi - via_angle, 2.0 * math.pi - end_angle
+        return cls(
+            pose_to_transform(start),
+            pose_to_transform(end),
+            centre,
+            radius,
+            u,
+            w,
+            end_angle,
+            via_angle / end_angle,
+        )
+
+    @property
+    def length_mm(self) -> float:
+        """The arc's length, mm."""
+        return self.radius_mm * self.sweep_rad
+
+    def at(self, fraction: float) -> Transform:
+        """The TCP ``fraction`` (0..1) of the way along the arc: on the circle, turned that far."""
+        if fraction >= 1.0:
+            return self.end
+        turned = interpolate(self.start, self.end, fraction)
+        phi = self.sweep_rad * fraction
+        c, s = math.cos(phi) * self.radius_mm, math.sin(phi) * self.radius_mm
+        point = [self.centre[i] + c * self.u[i] + s * self.w[i] for i in range(3)]
+        return (
+            (*turned[0][:3], point[0]),
+            (*turned[1][:3], point[1]),
+            (*turned[2][:3], point[2]),
+            IDENTITY[3],
+        )

@@ -13,13 +13,14 @@ import functools
 import itertools
 import math
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from importlib import resources
 from types import MappingProxyType
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from . import _kinematics as kin
+from ._error_root import ConfigError
 from ._exceptions import UnknownNameError, UnreachablePoseError
 from ._pose import MotionType, Pose
 
@@ -269,6 +270,53 @@ class RobotModel(BaseModel):
             return f"shoulder singularity (wrist {distance:.0f} mm from the J1 axis plane)"
         return None
 
+    def check_joints(self, joints_deg: Sequence[float], *, tool: Pose | None = None) -> Joints:
+        """Refuse joints the arm must not be commanded to; return them as a tuple.
+
+        The same rules as :meth:`inverse` applies to its solutions: every joint inside its
+        range, no joint solution too close to a singularity (:meth:`singularity`), and the
+        flange inside the datasheet reach.
+
+        Args:
+            joints_deg: Six joint angles J1..J6, deg.
+            tool: The TCP in the flange frame, for the pose the error names.
+
+        Returns:
+            The six joint angles, deg.
+
+        Raises:
+            UnreachablePoseError: ``reason`` ``"joint_limit"``, ``"singularity"`` or
+                ``"reach"``; ``pose`` is the TCP the joints would put the arm at.
+        """
+        joints = _six(joints_deg)
+        tcp = _cached_forward(self, joints, tool)
+        for i, (q, spec) in enumerate(zip(joints, self.joints, strict=True)):
+            low, high = spec.limits_deg
+            if not low <= q <= high:
+                raise UnreachablePoseError(
+                    f"joints {_joints_text(joints)} cannot be taken by a {self.name}: J{i + 1}"
+                    f" = {q:g} deg is outside {low:g}..{high:g} deg",
+                    reason="joint_limit",
+                    pose=tcp,
+                )
+        singular = self.singularity(joints)
+        if singular is not None:
+            raise UnreachablePoseError(
+                f"joints {_joints_text(joints)} cannot be taken by a {self.name}: {singular}",
+                reason="singularity",
+                pose=tcp,
+            )
+        flange = _cached_forward(self, joints, None)
+        if self._outside_reach_sphere(flange):
+            raise UnreachablePoseError(
+                f"joints {_joints_text(joints)} put the flange"
+                f" {self.distance_from_shoulder(flange):.0f} mm from the shoulder of a"
+                f" {self.name}, past its reach ({self.reach_mm:.0f} mm)",
+                reason="reach",
+                pose=tcp,
+            )
+        return joints
+
     def shoulder_distance_mm(self, joints_deg: Sequence[float]) -> float:
         """Distance of the wrist centre from the plane of the J1 axis and the J2 axis, mm.
 
@@ -440,31 +488,104 @@ class RobotModel(BaseModel):
         step_mm: float,
         step_deg: float,
     ) -> tuple[Joints, ...]:
-        seed = self._start_joints(start, start_joints, tool)
         a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
         rotation = math.degrees(math.hypot(*kin.rotation_error(a, b)))
         steps = max(1, math.ceil(max(start.distance_to(target) / step_mm, rotation / step_deg)))
+        return self._path(
+            start,
+            lambda f: kin.interpolate(a, b, f),
+            steps,
+            start_joints,
+            tool,
+            f"the straight path to {target}",
+        )
+
+    def _path(
+        self,
+        start: Pose,
+        at: Callable[[float], kin.Transform],
+        steps: int,
+        start_joints: Joints,
+        tool: Pose | None,
+        what: str,
+    ) -> tuple[Joints, ...]:
+        """Joints at ``steps`` + 1 evenly spaced points ``at(k / steps)`` of a TCP path."""
+        seed = self._start_joints(start, start_joints, tool)
         samples = [seed]
         for k in range(1, steps + 1):
-            pose = kin.transform_to_pose(kin.interpolate(a, b, k / steps))
+            pose = kin.transform_to_pose(at(k / steps))
             try:
                 joints = self.inverse(pose, seed_deg=samples[-1], tool=tool, same_branch=True)
             except UnreachablePoseError as exc:
                 raise UnreachablePoseError(
-                    f"the straight path to {target} leaves the arm's range at {pose}: {exc}",
+                    f"{what} leaves the arm's range at {pose}: {exc}",
                     reason=exc.reason,
                     pose=pose,
                 ) from exc
             jump = max(abs(x - y) for x, y in zip(joints, samples[-1], strict=True))
             if jump > 30.0:
                 raise UnreachablePoseError(
-                    f"the straight path to {target} needs a configuration flip near {pose}"
-                    f" (a joint jumps {jump:.0f} deg)",
+                    f"{what} needs a configuration flip near {pose} (a joint jumps {jump:.0f} deg)",
                     reason="singularity",
                     pose=pose,
                 )
             samples.append(joints)
         return tuple(samples)
+
+    def arc_joints(
+        self,
+        start: Pose,
+        via: Pose,
+        target: Pose,
+        *,
+        start_joints_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
+        step_mm: float = 5.0,
+        step_deg: float = 2.0,
+    ) -> list[Joints]:
+        """Joint samples along the circular arc from ``start`` through ``via`` to ``target``.
+
+        The TCP follows the circle through the three positions; its orientation turns
+        uniformly from ``start``'s to ``target``'s (:class:`~tmmaster._kinematics.Arc`, a
+        TMscript ``Circle`` with arc angle 0); ``via``'s orientation is not used.
+
+        Args:
+            start: The TCP pose at the start.
+            via: A pose whose position the arc passes through.
+            target: The TCP pose at the end.
+            start_joints_deg: The joints at the start (None: searched from the ready
+                posture).
+            tool: The TCP in the flange frame (None: the flange).
+            step_mm: Largest distance along the arc between two samples, mm.
+            step_deg: Largest rotation between two samples, deg.
+
+        Returns:
+            The joints at each sample, start and target included (evenly spaced along
+            the arc).
+
+        Raises:
+            ConfigError: No arc passes through the three points (two closer than 1 mm,
+                or all three on one line).
+            UnreachablePoseError: A point of the arc cannot be taken, or the arm would
+                have to flip configuration on the way.
+        """
+        seed = self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg)
+        return list(_cached_arc(self, start, via, target, _rounded(seed), tool, step_mm, step_deg))
+
+    def _arc(
+        self,
+        start: Pose,
+        via: Pose,
+        target: Pose,
+        start_joints: Joints,
+        tool: Pose | None,
+        step_mm: float,
+        step_deg: float,
+    ) -> tuple[Joints, ...]:
+        arc = arc_through(start, via, target)
+        rotation = math.degrees(math.hypot(*kin.rotation_error(arc.start, arc.end)))
+        steps = max(1, math.ceil(max(arc.length_mm / step_mm, rotation / step_deg)))
+        return self._path(start, arc.at, steps, start_joints, tool, f"the arc to {target}")
 
     def line_time(
         self,
@@ -496,19 +617,80 @@ class RobotModel(BaseModel):
         Raises:
             UnreachablePoseError: The path cannot be taken.
         """
-        scale = _speed_scale(speed_percent)
-        ramp = self.accel_time_s if accel_time_s is None else accel_time_s
-        rotation = math.degrees(
-            math.hypot(
-                *kin.rotation_error(kin.pose_to_transform(start), kin.pose_to_transform(target))
-            )
-        )
-        cartesian = max(
-            trapezoid_time(start.distance_to(target), self.tcp_speed_mm_s * scale, ramp),
-            trapezoid_time(rotation, min(self.joint_speed_deg_s[3:]) * scale, ramp),
-        )
+        _speed_scale(speed_percent)
+        a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
         if samples is None:
             samples = self.line_joints(start, target, start_joints_deg=start_joints_deg, tool=tool)
+        return self._path_time(
+            start.distance_to(target),
+            math.degrees(math.hypot(*kin.rotation_error(a, b))),
+            samples,
+            speed_percent,
+            accel_time_s,
+        )
+
+    def arc_time(
+        self,
+        start: Pose,
+        via: Pose,
+        target: Pose,
+        *,
+        speed_percent: float,
+        accel_time_s: float | None = None,
+        start_joints_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
+        samples: Sequence[Sequence[float]] | None = None,
+    ) -> float:
+        """Duration of a Circle move: the TCP trapezoid along the arc, slowed for the joints.
+
+        Args:
+            start: The TCP pose at the start.
+            via: A pose whose position the arc passes through.
+            target: The TCP pose at the end.
+            speed_percent: Speed, % of the model's top TCP speed.
+            accel_time_s: Time to reach top speed, s; None: the model's.
+            start_joints_deg: The joints at the start (None: searched from the ready
+                posture).
+            tool: The TCP in the flange frame (None: the flange).
+            samples: The arc's joints from :meth:`arc_joints`, when the caller has them
+                already (they are computed otherwise).
+
+        Returns:
+            The duration, s.
+
+        Raises:
+            ConfigError: No arc passes through the three points.
+            UnreachablePoseError: The arc cannot be taken.
+        """
+        _speed_scale(speed_percent)
+        arc = arc_through(start, via, target)
+        if samples is None:
+            samples = self.arc_joints(
+                start, via, target, start_joints_deg=start_joints_deg, tool=tool
+            )
+        return self._path_time(
+            arc.length_mm,
+            math.degrees(math.hypot(*kin.rotation_error(arc.start, arc.end))),
+            samples,
+            speed_percent,
+            accel_time_s,
+        )
+
+    def _path_time(
+        self,
+        length_mm: float,
+        rotation_deg: float,
+        samples: Sequence[Sequence[float]],
+        speed_percent: float,
+        accel_time_s: float | None,
+    ) -> float:
+        """A Cartesian path's trapezoid, slowed where a joint would be too fast, s."""
+        scale = _speed_scale(speed_percent)
+        ramp = self.accel_time_s if accel_time_s is None else accel_time_s
+        cartesian = max(
+            trapezoid_time(length_mm, self.tcp_speed_mm_s * scale, ramp),
+            trapezoid_time(rotation_deg, min(self.joint_speed_deg_s[3:]) * scale, ramp),
+        )
         steps = len(samples) - 1
         # Peak path rate of a trapezoid of duration T is 1 / (T - ramp) (path fraction / s);
         # joint i moves |dq_i/ds| deg per unit path, so T >= ramp + max |dq_i/ds| / v_i.
@@ -610,6 +792,25 @@ class PathGauge:
         return None
 
     @classmethod
+    def along(cls, start: Pose, target: Pose, poses: Sequence[Pose]) -> PathGauge:
+        """The gauge of a path through ``poses`` (evenly spaced, ``start`` to ``target``).
+
+        Args:
+            start: The TCP pose at the start.
+            target: The TCP target.
+            poses: TCP poses along the path, evenly spaced, the first at ``start`` and
+                the last at ``target``.
+
+        Returns:
+            A gauge that reads the fraction from the distance left to ``target`` (it
+            cannot tell where that distance does not shrink all the way).
+        """
+        remaining = tuple(p.distance_to(target) for p in poses)
+        if any(b >= a for a, b in itertools.pairwise(remaining)):
+            remaining = ()
+        return cls(start, target, remaining)
+
+    @classmethod
     def of(
         cls,
         model: RobotModel,
@@ -672,6 +873,28 @@ def _cached_line(
     return model._line(start, target, seed, tool, step_mm, step_deg)
 
 
+@functools.lru_cache(maxsize=256)
+def _cached_arc(
+    model: RobotModel,
+    start: Pose,
+    via: Pose,
+    target: Pose,
+    seed: Joints,
+    tool: Pose | None,
+    step_mm: float,
+    step_deg: float,
+) -> tuple[Joints, ...]:
+    return model._arc(start, via, target, seed, tool, step_mm, step_deg)
+
+
+def arc_through(start: Pose, via: Pose, target: Pose) -> kin.Arc:
+    """The arc from ``start`` through ``via`` to ``target``; ConfigError when there is none."""
+    try:
+        return kin.Arc.through(start, via, target)
+    except ValueError as exc:
+        raise ConfigError(f"no arc from {start} through {via} to {target}: {exc}") from None
+
+
 @functools.lru_cache(maxsize=32)
 def _chain_of(joints: tuple[JointSpec, ...]) -> kin.Chain:
     return kin.Chain(
@@ -686,6 +909,11 @@ def _speed_scale(speed_percent: float) -> float:
     if not 0 < speed_percent <= 100:
         raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
     return speed_percent / 100.0
+
+
+def _joints_text(joints: Sequence[float]) -> str:
+    """``(0, -10.5, 90, 0, 90, 0)``: joints as written in messages."""
+    return "(" + ", ".join(f"{round(q, 3) + 0.0:g}" for q in joints) + ")"
 
 
 def _rounded(joints: Joints) -> Joints:

@@ -922,6 +922,40 @@ def _Line(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # n
     return rt.host.motion(_motion("Line", args))
 
 
+@_register(
+    "13.12",
+    343,
+    "bool(string, float[], float[], int, int, int, int, bool)",
+    "bool(string, float[], float[], int, int, int, int, int, bool)",
+    motion=True,
+)
+def _Circle(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §13.12 Circle, pp. 343-344: queue an arc ("CPP", "CAP" or "CDP")."""
+    fmt = _str(args[0])
+    if fmt not in ("CPP", "CAP", "CDP"):
+        return False  # "Command rejected (format error)"
+    via, target = _floats(args[1]), _floats(args[2])
+    if len(via) != 6 or len(target) != 6:
+        raise BuiltinError(
+            f"the point on the arc and the end need 6 values each, got {len(via)} and {len(target)}"
+        )
+    rotation = _int(args[7]) if len(args) == 9 else None
+    return rt.host.motion(
+        MotionCall(
+            kind="Circle",
+            format=fmt,
+            target=tuple(target),
+            speed=_int(args[3]),
+            accel_time_ms=_int(args[4]),
+            blending=_int(args[5]),
+            precise_positioning=bool(args[-1]),
+            via=tuple(via),
+            arc_angle=_int(args[6]),
+            rotation=rotation,
+        )
+    )
+
+
 # ---- chapter 16: Modbus ----------------------------------------------------------------
 
 _READ_CODES = {"DO": 1, "DI": 2, "RO": 3, "RI": 4}
@@ -1221,7 +1255,6 @@ UNSUPPORTED: frozenset[str] = frozenset(
         "Move_Line",
         "PLine",
         "Move_PLine",
-        "Circle",
         "ChangeLoad",
         "modbus_open",
         "modbus_close",

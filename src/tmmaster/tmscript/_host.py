@@ -39,16 +39,19 @@ class ModbusDevice:
 
 @dataclass(frozen=True, slots=True)
 class MotionCall:
-    """One motion for the robot's queue: ``PTP()`` or ``Line()`` (TMscript 2.24 §13.8, §13.10)."""
+    """One motion for the robot's queue: ``PTP()``, ``Line()`` or ``Circle()``.
 
-    #: ``"PTP"`` or ``"Line"``.
-    kind: Literal["PTP", "Line"]
+    TMscript 2.24 §13.8, §13.10, §13.12.
+    """
+
+    #: ``"PTP"``, ``"Line"`` or ``"Circle"``.
+    kind: Literal["PTP", "Line", "Circle"]
     #: The data format string: ``"CPP"``, ``"JPP"`` for PTP; ``"CPP"``, ``"CAR"``... for
-    #: Line (target, speed, blending letters).
+    #: Line; ``"CPP"``, ``"CAP"``, ``"CDP"`` for Circle (target, speed, blending letters).
     format: str
     #: Six values: X, Y, Z (mm), RX, RY, RZ (degrees) or six joint angles.
     target: tuple[float, ...]
-    #: Percentage of speed, or mm/s for Line's ``A``/``D`` speed formats.
+    #: Percentage of speed, or mm/s for Line's and Circle's ``A``/``D`` speed formats.
     speed: int
     #: Time to reach top speed, ms.
     accel_time_ms: int
@@ -61,6 +64,12 @@ class MotionCall:
     pose: tuple[int, ...] | None = None
     #: PTP's reference joint angles, when given.
     reference_joints: tuple[float, ...] | None = None
+    #: Circle's point on the arc (X, Y, Z, RX, RY, RZ).
+    via: tuple[float, ...] | None = None
+    #: Circle's arc angle, deg (0: from here through ``via`` to ``target``).
+    arc_angle: int = 0
+    #: Circle's rotation (Syntax 2: 0 linear interpolation, 1 keep rotation), when given.
+    rotation: int | None = None
 
 
 @runtime_checkable
