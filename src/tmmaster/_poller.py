@@ -153,6 +153,8 @@ class MotionSchedule:
         self._mid_interval = nominal_s
         self._observations = 0
         self._pace = 1.0
+        #: When the move is predicted to end: the model's, then the observed pace's.
+        self._predicted = 0.0
 
     def acknowledged(self, at: float, expected_s: float, *, since: float | None = None) -> None:
         """Anchor the completion window: the move should end at ``at + expected_s``.
@@ -171,6 +173,7 @@ class MotionSchedule:
         early = 0.0 if since is None else min(max(at - since, 0.0), p.dense_interval_s)
         self._early = min(early, expected_s / 4)
         self._acked_at, self._expected = at, expected_s
+        self._predicted = at + expected_s
         self._earliest = at - self._early + expected_s * p.earliest_end_fraction
         self._plan(at, at + expected_s)
 
@@ -199,9 +202,11 @@ class MotionSchedule:
         pace = min(max(elapsed / model_elapsed, _PACE_LIMITS[0]), _PACE_LIMITS[1])
         self._pace = pace
         end = self._acked_at + self._expected * pace
-        current = self._end if self._end is not None else self._acked_at + self._expected
-        if abs(end - current) < self._policy.dense_interval_s:
+        # A new prediction within a quarter of the window (a dense interval at least)
+        # of the last one moves nothing: a pose's rounding, not the robot's pace.
+        if abs(end - self._predicted) < max(self._policy.dense_interval_s, self._window / 4):
             return
+        self._predicted = end
         # The robot's own pace now says when it could end at the earliest; never later
         # than the model's end, so a robot that speeds up again (a speed override raised
         # mid-move) is still seen within one nominal interval from then on.
@@ -210,7 +215,11 @@ class MotionSchedule:
             at + remaining * self._policy.earliest_end_fraction,
             self._acked_at + self._expected,
         )
-        self._plan(at, end)
+        if self._end is not None:
+            # The polls already spaced paid for the window: it moves with the end.
+            self._end = end
+        else:
+            self._plan(at, end)
 
     def _plan(self, start: float, end: float) -> None:
         """Window and middle pace for a move predicted to end at ``end``, seen from ``start``.
@@ -268,7 +277,7 @@ class MotionSchedule:
         """When the move is predicted to end (monotonic s), None before the acknowledgement."""
         if self._expected <= 0:
             return None
-        return self._end if self._end is not None else self._acked_at + self._expected
+        return self._predicted
 
     def next_poll(self, now: float, *, acknowledged: bool) -> float:
         """The monotonic time of the next poll (never earlier than ``now``)."""
@@ -287,7 +296,7 @@ class MotionSchedule:
                 # No window the budget pays for (a short move): the nominal polls are
                 # shifted so that one falls a robot tick after the predicted end, where
                 # a robot on the model reports it; one poll more at most.
-                seen = self._acked_at + self._expected + p.ack_delay_s
+                seen = self._predicted + p.ack_delay_s
                 if now < seen:
                     return min(now + nominal, seen)
             return now + nominal
