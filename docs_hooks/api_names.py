@@ -10,6 +10,7 @@ from __future__ import annotations
 #: The public packages the reference documents, and the page of each.
 PAGES = {
     "tmmaster": "docs/api/tmmaster.md",
+    "tmmaster.aio": "docs/api/aio.md",
     "tmmaster.sim": "docs/api/sim.md",
     "tmmaster.pickplace": "docs/api/pickplace.md",
     "tmmaster.report": "docs/api/report.md",
@@ -27,6 +28,9 @@ STAND_INS = {
 #: Classes the package makes and hands out (never made by a user): the reference shows
 #: them without a constructor.
 MADE_BY_THE_PACKAGE = {
+    "tmmaster.aio._robot.AsyncGripper",
+    "tmmaster.aio._robot.AsyncMotion",
+    "tmmaster.aio._robot.AsyncRobotIO",
     "tmmaster._io.RobotIO",
     "tmmaster._robot.Motion",
     "tmmaster.tmscript._evaluator.Program",
@@ -46,7 +50,10 @@ INTERNAL_MEMBERS = {
 
 #: Functions made at import time with a class's signature (``connect =
 #: _connected(Robot)``): the reference shows them with the class's parameters.
-MADE_LIKE = {"tmmaster._robot.connect": "tmmaster._robot.Robot"}
+MADE_LIKE = {
+    "tmmaster._robot.connect": "tmmaster._robot.Robot",
+    "tmmaster.aio._robot.connect": "tmmaster._robot.Robot",
+}
 
 #: Public names documented by their package's docstring, not rendered on their own.
 NOT_RENDERED = {"tmmaster.__version__"}

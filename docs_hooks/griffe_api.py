@@ -9,9 +9,10 @@ static analysis would otherwise show wrong (the names involved: docs_hooks/api_n
   ``BlockTransport``) is shown with the helper's own bases instead, and the helper's
   members as its own: the reader sees ``Blog2FG7Gripper(Gripper)`` with every method
   it has, and no name the reference does not document.
-- ``tmmaster.connect`` is made at import time with ``Robot``'s signature
-  (``connect = _connected(Robot)``): it is shown as the function it is, with
-  ``Robot``'s parameters and the docstring it has at run time.
+- ``tmmaster.connect`` and ``tmmaster.aio.connect`` are made at import time with
+  ``Robot``'s signature (``connect = _connected(Robot)``): each is shown as the function
+  it is, with ``Robot``'s parameters, its own return type and the docstring it has at
+  run time.
 - A Protocol that stands for a public class in a signature (it breaks an import
   cycle: ``Fleet.latest(robot: _Closable)``) is shown as that class (``Robot``).
 - Classes only the package makes (``Motion``) are shown without a constructor, and
@@ -219,12 +220,14 @@ def _shape_like(pkg: griffe.Module, function_path: str, class_path: str) -> None
     init = cls.members["__init__"]
     parameters = griffe.Parameters(*[p for p in init.parameters if p.name != "self"])
     runtime = getattr(importlib.import_module(module_path), name)
+    # What the function returns (``tmmaster.aio.connect``: an AsyncRobot), else the class.
+    returns = getattr(runtime, "__annotations__", {}).get("return", cls.name)
     function = griffe.Function(
         name,
         lineno=attribute.lineno,
         endlineno=attribute.endlineno,
         parameters=parameters,
-        returns=griffe.ExprName(cls.name, parent=module),
+        returns=griffe.ExprName(str(returns), parent=module),
     )
     doc = inspect.getdoc(runtime)
     if doc:

@@ -134,6 +134,30 @@ def test_moves_and_the_gripper_are_awaited_and_the_loop_keeps_running(
     assert [m.kind for m in sim.motion_log() if m.target is None][-1] == "gripper_close"
 
 
+def test_digital_io_is_awaited(tm_simulator_factory: SimFactory) -> None:
+    sim = tm_simulator_factory("tmflow")
+    sim.set_di(2, True)
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            assert "control_box" in robot.io.modules
+            await robot.io.set_do(3, True)
+            assert await robot.io.do(3)
+            assert (await robot.io.dos())[3]
+            assert await robot.io.di(2)
+            assert (await robot.io.dis())[2]
+            with pytest.raises(tmmaster.ConfigError):
+                await robot.io.set_do(0, True, module="end_module")  # the gripper's output
+            robot.interrupt()
+            with pytest.raises(tmmaster.StopRequestedError):
+                await robot.io.set_do(4, True)  # refused unsent
+            robot.clear_stop_request()
+
+    run(scenario)
+    assert sim.do(3)
+    assert not sim.do(4)
+
+
 @pytest.mark.parametrize("profile", PROFILES)
 def test_cancelling_before_the_robot_took_the_command_withdraws_it(
     tm_simulator_factory: SimFactory, profile: str

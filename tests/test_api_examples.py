@@ -23,6 +23,7 @@ from tmmaster.sim import Simulator
 
 PACKAGES = (
     "tmmaster",
+    "tmmaster.aio",
     "tmmaster.sim",
     "tmmaster.pickplace",
     "tmmaster.report",
@@ -36,6 +37,8 @@ REQUIRED = {
     "tmmaster.Robot.move_to",
     "tmmaster.Gripper",
     "tmmaster.Fleet",
+    "tmmaster.aio.connect",
+    "tmmaster.aio.AsyncRobot",
     "tmmaster.sim.Simulator",
 }
 

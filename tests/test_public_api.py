@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 import tmmaster
+import tmmaster.aio
 import tmmaster.pickplace
 import tmmaster.report
 import tmmaster.sim
@@ -29,7 +30,9 @@ def _isort_key(name: str) -> tuple[int, str]:
     return (2, name)
 
 
-@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace, tmmaster.report])
+@pytest.mark.parametrize(
+    "module", [tmmaster, tmmaster.aio, tmmaster.sim, tmmaster.pickplace, tmmaster.report]
+)
 def test_all_is_sorted_and_complete(module: object) -> None:
     exported = list(module.__all__)  # type: ignore[attr-defined]
     assert exported == sorted(exported, key=_isort_key), "keep __all__ sorted (ruff RUF022)"
@@ -43,7 +46,9 @@ def test_all_is_sorted_and_complete(module: object) -> None:
         assert hasattr(module, name), name
 
 
-@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace, tmmaster.report])
+@pytest.mark.parametrize(
+    "module", [tmmaster, tmmaster.aio, tmmaster.sim, tmmaster.pickplace, tmmaster.report]
+)
 def test_every_public_function_and_class_has_a_docstring(module: object) -> None:
     for name in module.__all__:  # type: ignore[attr-defined]
         value = getattr(module, name)
@@ -117,7 +122,7 @@ def test_tmmaster_alone_prints_help(capsys: pytest.CaptureFixture[str]) -> None:
     assert "usage: tmmaster" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("module", [tmmaster, tmmaster.sim, tmmaster.pickplace])
+@pytest.mark.parametrize("module", [tmmaster, tmmaster.aio, tmmaster.sim, tmmaster.pickplace])
 def test_public_names_live_in_the_public_package(module: object) -> None:
     # Tracebacks and reprs show tmmaster.Robot, not tmmaster._robot.Robot.
     for name in module.__all__:  # type: ignore[attr-defined]

@@ -17,15 +17,16 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING
 from .._lazy import lazy_attributes as _lazy_attributes
 
 if _TYPE_CHECKING:
-    from ._robot import AsyncGripper, AsyncMotion, AsyncRobot, connect
+    from ._robot import AsyncGripper, AsyncMotion, AsyncRobot, AsyncRobotIO, connect
 
 _EXPORTS = {
     "AsyncGripper": "._robot",
     "AsyncMotion": "._robot",
     "AsyncRobot": "._robot",
+    "AsyncRobotIO": "._robot",
     "connect": "._robot",
 }
 
 __getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
 
-__all__ = ["AsyncGripper", "AsyncMotion", "AsyncRobot", "connect"]
+__all__ = ["AsyncGripper", "AsyncMotion", "AsyncRobot", "AsyncRobotIO", "connect"]

@@ -32,6 +32,7 @@ from .._checks import require_positive
 from .._exceptions import TMMasterError, TransportClosedError
 from .._fleet import Fleet
 from .._gripper import GripperStatus
+from .._io import DEFAULT_MODULE
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Motion, Robot
@@ -39,8 +40,8 @@ from .._status import MovePhase, MoveProgress, RobotStatus
 
 _log = get_logger("tmmaster.aio")
 
-_P = ParamSpec("_P")
-_T = TypeVar("_T")
+P = ParamSpec("P")
+T = TypeVar("T")
 
 #: How long a cancelled call may take to give its command up before the CancelledError
 #: is raised anyway, s: beyond a withdraw's answer (``ack_timeout_s``) and a stop's
@@ -115,13 +116,13 @@ class _State(Enum):
     ENDED = "ended"
 
 
-class _Job(Generic[_T]):
+class _Job(Generic[T]):
     """One call of an AsyncRobot: run by the robot's thread, awaited on the caller's loop."""
 
     def __init__(
         self,
         owner: AsyncRobot,
-        call: Callable[[], _T],
+        call: Callable[[], T],
         *,
         follows: Motion | None = None,
     ) -> None:
@@ -131,7 +132,7 @@ class _Job(Generic[_T]):
         self.follows = follows
         self._loop = asyncio.get_running_loop()
         #: The call's result or exception, set on the caller's loop.
-        self.outcome: asyncio.Future[_T] = self._loop.create_future()
+        self.outcome: asyncio.Future[T] = self._loop.create_future()
         self.outcome.add_done_callback(_retrieve)
         self._lock = threading.Lock()
         self._state = _State.QUEUED
@@ -166,7 +167,7 @@ class _Job(Generic[_T]):
             if self._state is _State.SKIPPED:
                 return
             self._state = _State.RUNNING
-        value: _T | None = None
+        value: T | None = None
         error: BaseException | None = None
         try:
             value = self._call()
@@ -191,19 +192,19 @@ class _Job(Generic[_T]):
             return None
         return _live_motion(self.outcome.result(), self.follows)
 
-    def _deliver(self, value: _T | None, error: BaseException | None) -> None:
+    def _deliver(self, value: T | None, error: BaseException | None) -> None:
         try:
             self._loop.call_soon_threadsafe(self._settle, value, error)
         except RuntimeError:  # the caller's loop is closed: nobody awaits this any more
             return
 
-    def _settle(self, value: _T | None, error: BaseException | None) -> None:
+    def _settle(self, value: T | None, error: BaseException | None) -> None:
         if self.outcome.done():
             return
         if error is not None:
             self.outcome.set_exception(error)
         else:
-            self.outcome.set_result(value)  # type: ignore[arg-type]  # _T when no error
+            self.outcome.set_result(value)  # type: ignore[arg-type]  # T when no error
 
 
 def _retrieve(future: asyncio.Future[Any]) -> None:
@@ -277,6 +278,8 @@ class AsyncRobot:
         self.settle_timeout_s = settle_timeout_s
         #: The robot's gripper, awaited.
         self.gripper = AsyncGripper(self)
+        #: The robot's digital I/O, awaited.
+        self.io = AsyncRobotIO(self)
         self._worker = _Worker(f"tmmaster-aio-{robot.name}")
         self._log = _log.bind(robot=robot.name)
         # True while a stop request of the user's own (interrupt()) stands: a cancelled
@@ -304,8 +307,8 @@ class AsyncRobot:
     # -- the calls, on the robot's thread ----------------------------------------------
 
     async def call(
-        self, fn: Callable[Concatenate[Robot, _P], _T], /, *args: _P.args, **kwargs: _P.kwargs
-    ) -> _T:
+        self, fn: Callable[Concatenate[Robot, P], T], /, *args: P.args, **kwargs: P.kwargs
+    ) -> T:
         """Run ``fn(robot, *args, **kwargs)`` on the robot's thread, as the other calls.
 
         For a Robot method this class has no async method for, or a few sync steps that
@@ -593,14 +596,14 @@ class AsyncRobot:
 
     # -- internals -----------------------------------------------------------------------
 
-    async def _run(self, fn: Callable[_P, _T], /, *args: _P.args, **kwargs: _P.kwargs) -> _T:
+    async def _run(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> T:
         return await self._await(_Job(self, functools.partial(fn, *args, **kwargs)))
 
-    async def _follow(self, motion: Motion, call: Callable[[], _T]) -> _T:
+    async def _follow(self, motion: Motion, call: Callable[[], T]) -> T:
         """A call that follows ``motion`` (its wait, its progress): cancelled, it gives it up."""
         return await self._await(_Job(self, call, follows=motion))
 
-    async def _await(self, job: _Job[_T]) -> _T:
+    async def _await(self, job: _Job[T]) -> T:
         if not self._worker.submit(job):
             raise TransportClosedError(f"{self.name}: this robot is closed")
         try:
@@ -670,8 +673,8 @@ class AsyncRobot:
 
 def _hand_over(
     loop: asyncio.AbstractEventLoop,
-    future: asyncio.Future[_T],
-    value: _T | None,
+    future: asyncio.Future[T],
+    value: T | None,
     error: BaseException | None,
 ) -> None:
     """From a thread: settle ``future`` on ``loop`` (nothing if the loop has closed)."""
@@ -682,7 +685,7 @@ def _hand_over(
         if error is not None:
             future.set_exception(error)
         else:
-            future.set_result(value)  # type: ignore[arg-type]  # _T when no error
+            future.set_result(value)  # type: ignore[arg-type]  # T when no error
 
     try:
         loop.call_soon_threadsafe(settle)
@@ -839,6 +842,101 @@ class AsyncGripper:
         return (await self.status()).holding
 
 
+class AsyncRobotIO:
+    """An :class:`AsyncRobot`'s digital I/O: the Robot's :class:`~tmmaster.RobotIO`, awaited.
+
+    Each call runs on the robot's thread like the robot's own calls. An output write
+    passes the robot's command gate: refused unsent once ``close()`` began or while a
+    stop is requested.
+    """
+
+    def __init__(self, robot: AsyncRobot) -> None:
+        self._robot = robot
+
+    @property
+    def modules(self) -> tuple[str, ...]:
+        """The names of the robot's digital I/O modules (empty when the profile has none)."""
+        return self._robot.robot.io.modules
+
+    async def set_do(self, channel: int, value: bool, *, module: str = DEFAULT_MODULE) -> None:
+        """Set digital output ``channel`` of ``module`` high (True) or low (False).
+
+        Args:
+            channel: The DO number, from 0 (control box 0-15, end module 0-3 on a TM).
+            value: True: high; False: low.
+            module: ``"control_box"`` or ``"end_module"`` (the profile's modules).
+
+        Raises:
+            ConfigError: An unknown module, a channel out of range or not an int, a
+                value that is not a bool, or the gripper's output.
+            StopRequestedError: The robot is closing or a stop is requested: not written.
+            TransportError: The write failed after its retries.
+        """
+        await self._robot._run(self._robot.robot.io.set_do, channel, value, module=module)
+
+    async def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
+        """Read digital output ``channel`` of ``module`` back (one request).
+
+        Args:
+            channel: The DO number, from 0.
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            True when the output is high.
+
+        Raises:
+            ConfigError: An unknown module or a channel out of range or not an int.
+            TransportError: The read failed.
+        """
+        return await self._robot._run(self._robot.robot.io.do, channel, module=module)
+
+    async def di(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
+        """Read digital input ``channel`` of ``module`` (one request).
+
+        Args:
+            channel: The DI number, from 0.
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            True when the input is high.
+
+        Raises:
+            ConfigError: An unknown module or a channel out of range or not an int.
+            TransportError: The read failed.
+        """
+        return await self._robot._run(self._robot.robot.io.di, channel, module=module)
+
+    async def dos(self, *, module: str = DEFAULT_MODULE) -> tuple[bool, ...]:
+        """Read every digital output of ``module`` in one request.
+
+        Args:
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            One bool per DO, DO 0 first.
+
+        Raises:
+            ConfigError: An unknown module, or one without DOs.
+            TransportError: The read failed.
+        """
+        return await self._robot._run(self._robot.robot.io.dos, module=module)
+
+    async def dis(self, *, module: str = DEFAULT_MODULE) -> tuple[bool, ...]:
+        """Read every digital input of ``module`` in one request.
+
+        Args:
+            module: ``"control_box"`` or ``"end_module"``.
+
+        Returns:
+            One bool per DI, DI 0 first.
+
+        Raises:
+            ConfigError: An unknown module, or one without DIs.
+            TransportError: The read failed.
+        """
+        return await self._robot._run(self._robot.robot.io.dis, module=module)
+
+
 class _SharedFleet:
     """The Fleet of the robots :func:`connect` opens: made with the first, closed with the last."""
 
@@ -869,11 +967,11 @@ class _SharedFleet:
 _SHARED_FLEET = _SharedFleet()
 
 
-def _async_connected(make: Callable[_P, Robot]) -> Callable[_P, AsyncRobot]:
+def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
     """An AsyncRobot from ``make``'s arguments, with ``make``'s exact signature."""
     signature = inspect.signature(make)
 
-    def connect(*args: _P.args, **kwargs: _P.kwargs) -> AsyncRobot:
+    def connect(*args: P.args, **kwargs: P.kwargs) -> AsyncRobot:
         """Open an :class:`AsyncRobot`: ``await`` it, or use it in ``async with``.
 
         Every argument is :class:`~tmmaster.Robot`'s, with the same defaults, but for
