@@ -146,16 +146,40 @@ def test_gripper_width_follows_the_commands_at_the_commanded_speed() -> None:
     assert b.gripper_state().width_mm == pytest.approx(1, abs=0.1)
 
 
-def test_grip_force_follows_the_command() -> None:
-    b = backend()
-    b.drive_gripper(10, speed_mm_s=100, force_n=25)
-    assert list(b.mj_model.actuator_forcerange[0]) == [-25, 25]
-
-
-def pick(b: MuJoCoBackend) -> None:
+def pick(b: MuJoCoBackend, force_n: float = 40) -> None:
     move(b, ABOVE_PICK)
     move(b, PICK, MotionType.LINE, 10)
-    grip(b, 0)
+    b.drive_gripper(0, speed_mm_s=100, force_n=force_n)
+    run_until(b, lambda: not b.gripper_state().moving)
+
+
+def pad_forces(b: MuJoCoBackend) -> list[float]:
+    """The normal force each pad presses on the part with, N."""
+    import mujoco
+    import numpy as np
+
+    m, d = b.mj_model, b.mj_data
+    pads = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"pad_{s}") for s in "lr"]
+    totals = [0.0, 0.0]
+    wrench = np.zeros(6)
+    for i in range(d.ncon):
+        contact = d.contact[i]
+        for k, pad in enumerate(pads):
+            if pad in (contact.geom1, contact.geom2):
+                mujoco.mj_contactForce(m, d, i, wrench)
+                totals[k] += float(wrench[0])
+    return totals
+
+
+@pytest.mark.parametrize("force", [20, 40, 140])
+def test_the_fingers_squeeze_with_the_commanded_force(force: float) -> None:
+    # A force-limited drive: once the pads stop on the part each presses with the
+    # commanded force (a position servo's stiffness times its error gave 40 N -> 24 N).
+    b = backend()
+    pick(b, force)
+    b.step(0.1)
+    assert b.gripper_state().contact
+    assert pad_forces(b) == pytest.approx([force, force], rel=0.02)
 
 
 def test_closing_on_the_part_locks_it_and_it_follows_the_tcp() -> None:
@@ -213,15 +237,20 @@ def test_a_second_part_lands_on_the_first_and_the_feeder_refills() -> None:
     assert math.hypot(second.pose.x - PLACE.x, second.pose.y - PLACE.y) < 2.0
 
 
-def test_friction_only_grasp_is_an_option() -> None:
-    b = backend(grasp_lock=False)
-    pick(b)
-    assert b.gripper_state().contact
-    assert b.mj_data.eq_active.sum() == 0  # no weld: friction holds it
-    move(b, PICK.offset(dz=100), MotionType.LINE, 10)
-    [part] = b.objects()
-    assert part.held
-    assert part.pose.z > PICK.z + 90
+def test_a_weld_grasp_carries_what_friction_cannot() -> None:
+    # 5 kg at 40 N: friction (0.5) holds at most 4 kg; the weld option locks it anyway.
+    world = World([TableObject(name="heavy", pose=PICK, mass_kg=5.0)])
+    for grasp, carried in (("friction", False), ("weld", True)):
+        b = MuJoCoBackend(MODEL, world=world, home=DEFAULT_HOME, grasp=grasp)  # type: ignore[arg-type]
+        pick(b)
+        weld = b.mj_model.equality("grip0").id
+        assert bool(b.mj_data.eq_active[weld]) is (grasp == "weld")
+        move(b, PICK.offset(dz=100), MotionType.LINE, 10)
+        [part] = b.objects()
+        assert part.held is carried
+        assert (part.pose.z > PICK.z + 90) is carried
+    with pytest.raises(ValueError, match="grasp"):
+        backend(grasp="glue")
 
 
 @pytest.mark.parametrize("keep", [True, False])

@@ -238,12 +238,41 @@ def test_closing_away_from_the_object_grips_nothing() -> None:
     assert backend.world.held is None
 
 
-@pytest.mark.parametrize(("offset_mm", "grips"), [(4.9, True), (5.1, False)])
-def test_grasp_needs_the_tcp_within_tolerance(offset_mm: float, grips: bool) -> None:
-    backend = backend_at(PICK.offset(dy=offset_mm))
+@pytest.mark.parametrize(
+    ("offset", "grips"),
+    [
+        # Along the pads' depth (base y here): they overlap the 30 mm part up to 25 mm off.
+        ({"dy": 24.9}, True),
+        ({"dy": 25.1}, False),
+        # Along their height (base z): 12 mm of pad above and below the TCP, 15 mm of part.
+        ({"dz": 26.9}, True),
+        ({"dz": 27.1}, False),
+        # Across the fingers (base x): the part must lie between the open fingers.
+        ({"dx": 4.4}, True),
+    ],
+)
+def test_grasp_tolerance_comes_from_the_pads_and_the_part(
+    offset: dict[str, float], grips: bool
+) -> None:
+    # The TCP may be off the part's centre by as much as the pads still overlap it: the
+    # tolerance is derived from the same pad geometry the MuJoCo scene is built from.
+    backend = backend_at(PICK.offset(**offset))
     close_gripper(backend)
     assert backend.gripper_state().contact is grips
     assert backend.gripper_state().width_mm == (30.0 if grips else 10.0)
+
+
+def test_a_gripped_part_keeps_its_offset_in_the_fingers() -> None:
+    # Gripped 20 mm off its centre along the pads' depth and pushed to the middle across:
+    # it is carried where it sits between the pads, not snapped onto the TCP.
+    backend = backend_at(PICK.offset(dx=-3, dy=-20))
+    close_gripper(backend)
+    [part] = backend.objects()
+    assert part.held
+    assert part.pose.is_close(PICK.offset(dx=-3), mm=1e-6, deg=1e-6)
+    move(backend, PICK.offset(dx=-3, dy=-20, dz=100))
+    [part] = backend.objects()
+    assert part.pose.is_close(PICK.offset(dx=-3, dz=100), mm=1e-6, deg=1e-6)
 
 
 def test_closing_on_the_object_stops_at_its_width_with_contact() -> None:
@@ -348,7 +377,10 @@ def test_world_grasp_rule() -> None:
     assert world.grasp_candidate(PICK, current_width_mm=39, target_width_mm=30) is None
     assert world.grasp_candidate(PICK, current_width_mm=29, target_width_mm=10) is None
     assert world.grasp_candidate(PICK, current_width_mm=10, target_width_mm=39) is None
-    assert world.grasp_candidate(PICK.offset(dz=6), current_width_mm=39, target_width_mm=10) is None
+    # The pads (24 mm high) pass 3 mm above the 30 mm part.
+    above = PICK.offset(dz=30)
+    assert world.grasp_candidate(above, current_width_mm=39, target_width_mm=10) is None
+    assert world.grasp_candidate(PICK.offset(dz=6), current_width_mm=39, target_width_mm=10) == part
     world.grasp("part", PICK)
     assert world.held == part
     assert world.release(PLACE) == part.model_copy(update={"pose": PLACE})

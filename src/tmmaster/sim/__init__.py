@@ -16,9 +16,11 @@ from .._lazy import lazy_attributes as _lazy_attributes
 if _TYPE_CHECKING:
     from .._pose import DEFAULT_HOME
     from ._backend import (
+        BackendFault,
         GripperState,
         MotionRejectedError,
         ObjectState,
+        PathBackend,
         PhysicsBackend,
         PhysicsUnavailableError,
     )
@@ -42,17 +44,30 @@ if _TYPE_CHECKING:
     from ._memory import MemoryTransport
     from ._server import RequestRecord
     from ._simulator import Simulator
-    from ._world import DEFAULT_PART_POSE, TableObject, World
+    from ._world import (
+        DEFAULT_GRIPPER,
+        DEFAULT_PART_POSE,
+        GraspFit,
+        GraspMode,
+        GripperGeometry,
+        TableObject,
+        World,
+    )
 
 #: Public name -> the private module that defines it (imported on first use).
 _EXPORTS = {
+    "BackendFault": "._backend",
+    "DEFAULT_GRIPPER": "._world",
     "DEFAULT_HOME": "tmmaster._pose",
     "DEFAULT_PART_POSE": "._world",
     "DropConnectionsFault": "._faults",
     "EstopFault": "._faults",
     "FAULT_KINDS": "._faults",
     "Fault": "._faults",
+    "GraspFit": "._world",
     "GraspMissFault": "._faults",
+    "GraspMode": "._world",
+    "GripperGeometry": "._world",
     "GripperState": "._backend",
     "KinematicBackend": "._kinematic",
     "LateAckFault": "._faults",
@@ -61,6 +76,7 @@ _EXPORTS = {
     "ModbusExceptionFault": "._faults",
     "MotionRecord": "._controller",
     "ObjectState": "._backend",
+    "PathBackend": "._backend",
     "PhysicsBackend": "._backend",
     "PhysicsUnavailableError": "._backend",
     "RequestRecord": "._server",
@@ -78,13 +94,18 @@ _EXPORTS = {
 __getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
 
 __all__ = [
+    "DEFAULT_GRIPPER",
     "DEFAULT_HOME",
     "DEFAULT_PART_POSE",
     "FAULT_KINDS",
+    "BackendFault",
     "DropConnectionsFault",
     "EstopFault",
     "Fault",
+    "GraspFit",
     "GraspMissFault",
+    "GraspMode",
+    "GripperGeometry",
     "GripperState",
     "KinematicBackend",
     "LateAckFault",
@@ -93,6 +114,7 @@ __all__ = [
     "MotionRecord",
     "MotionRejectedError",
     "ObjectState",
+    "PathBackend",
     "PhysicsBackend",
     "PhysicsUnavailableError",
     "RequestRecord",

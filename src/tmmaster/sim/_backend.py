@@ -12,6 +12,7 @@ with the simulated time that passed since the previous tick.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol, get_args, runtime_checkable
 
@@ -44,6 +45,26 @@ class MotionRejectedError(TMMasterError):
 
 class PhysicsUnavailableError(TMMasterError, ImportError):
     """A physics backend's engine is not installed (the message names the extra to install)."""
+
+
+#: Why a backend stopped the arm on its own: it hit something (the table, a fixture, a
+#: part it pressed on), or it carries more than the arm's rated payload.
+FaultKind = Literal["collision", "payload"]
+
+
+@dataclass(frozen=True)
+class BackendFault:
+    """The physics stopped the arm: what happened (the controller reports it as a robot error).
+
+    A backend that detects collisions or an overloaded arm stops its motion itself, in the
+    physics step where it happened, and hands the fault to the controller once through
+    its optional ``take_fault()`` method (see ``docs/physics-backends.md``).
+    """
+
+    #: ``"collision"`` or ``"payload"``.
+    kind: FaultKind
+    #: What happened, for the log (which link touched what, the mass carried).
+    message: str
 
 
 @dataclass(frozen=True)
@@ -174,4 +195,54 @@ class PhysicsBackend(Protocol):
 
         Returns:
             One state per object.
+        """
+
+
+@runtime_checkable
+class PathBackend(Protocol):
+    """A :class:`PhysicsBackend` that also follows joint targets and circular arcs.
+
+    The robot program's ``PTP("JPP", ...)`` and ``Circle(...)`` need these two methods;
+    a backend without them refuses such motions (the program's motion function returns
+    False: nothing moves). :class:`~tmmaster.sim.KinematicBackend` and the MuJoCo backend
+    have both.
+    """
+
+    def start_joint_motion(
+        self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Begin a joint-space PTP to ``joints_deg``; return its expected duration in s.
+
+        Args:
+            joints_deg: The six joint angles J1..J6 to reach, deg.
+            speed_percent: Speed, % of the joints' top speeds (0 < speed <= 100).
+            accel_time_s: Time to reach full speed, s.
+
+        Returns:
+            The motion's expected duration, simulated seconds.
+
+        Raises:
+            MotionRejectedError: The joints cannot be taken (nothing starts).
+        """
+
+    def start_arc_motion(
+        self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Begin a circular arc from the TCP through ``via``'s position to ``target``.
+
+        The orientation turns uniformly from the start's to ``target``'s (a TMscript
+        ``Circle`` with arc angle 0).
+
+        Args:
+            via: A pose whose position the arc passes through.
+            target: The TCP pose at the arc's end.
+            speed_percent: Speed, % of the arm's top TCP speed (0 < speed <= 100).
+            accel_time_s: Time to reach full speed, s.
+
+        Returns:
+            The motion's expected duration, simulated seconds.
+
+        Raises:
+            MotionRejectedError: A point of the arc cannot be taken, or no arc passes
+                through the points (nothing starts).
         """

@@ -29,13 +29,14 @@ from dataclasses import dataclass, replace
 from enum import IntEnum
 from typing import ClassVar, Literal
 
+from .. import _kinematics as kin
 from .._codec import allowed_range, encode
 from .._exceptions import ConfigError, UnreachablePoseError, ValueOutOfRangeError
 from .._io import digital_io_areas
 from .._pose import MotionType, Pose
 from .._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile
 from .._robot_models import RobotModel
-from ._backend import MotionRejectedError, PhysicsBackend
+from ._backend import MotionRejectedError, PathBackend, PhysicsBackend
 from ._bank import RegisterBank
 from ._device import Logger, SimDevice
 from ._faults import (
@@ -71,6 +72,13 @@ class SimErrorCode(IntEnum):
     MOTION_LOST = 0x0107
     #: Emergency stop pressed.
     EMERGENCY_STOP = 0x0200
+    #: Techman's "Over Payload Limit" (0x0000000F, TMflow SW 2.24 Software Manual,
+    #: Appendix J, pp. 349 and 407): the arm carries a part over its rated payload.
+    OVER_PAYLOAD = 0x000F
+    #: Techman's "Force or Torque Over Range" (0x00000022, Appendix J, pp. 349 and 409,
+    #: whose first check is "if the robot collides with anything"): the arm, tool or
+    #: fingers hit the table, a fixture or a part.
+    COLLISION = 0x0022
 
 
 def _saturate(field: RegisterField, value: float) -> float:
@@ -85,7 +93,7 @@ class MotionRecord:
 
     #: Motion number (1 = first motion started); gripper closes count grasps instead.
     number: int
-    #: "ptp", "line", "gripper_open" or "gripper_close".
+    #: "ptp", "line", "ptp_joints", "circle", "gripper_open" or "gripper_close".
     kind: str
     #: Sequence number of the command (tmflow), 0 for the article profile.
     seq: int
@@ -101,6 +109,46 @@ class MotionRecord:
     #: showing the end were set in that tick); None while it runs, and for one that
     #: failed, was stopped by an error or never reports its end.
     done_wall_time: float | None = None
+
+
+@dataclass(frozen=True)
+class MoveArgs:
+    """A move as the controller starts it, and as Play resumes it after a pause."""
+
+    #: The TCP target.
+    target: Pose
+    #: PTP or LINE (a circle runs as a path, like a Line).
+    motion: MotionType
+    #: Speed, % of the arm's top speed.
+    speed: float
+    #: Time to reach full speed, s.
+    accel_s: float
+    #: The command's sequence number (tmflow), 0 otherwise.
+    seq: int = 0
+    #: A joint target: the joints to reach exactly (the program's ``PTP("JPP", ...)``).
+    joints: tuple[float, ...] | None = None
+    #: A circle: a point on the arc, and where the arc started.
+    via: Pose | None = None
+    start: Pose | None = None
+
+    @property
+    def kind(self) -> str:
+        """The motion log's word for it: ptp, line, ptp_joints or circle."""
+        if self.joints is not None:
+            return "ptp_joints"
+        return "circle" if self.via is not None else self.motion.value
+
+    def resumed(self, here: Pose) -> MoveArgs:
+        """The rest of this move from ``here``: an arc goes on along its own circle."""
+        if self.via is None or self.start is None:
+            return self
+        arc = kin.Arc.through(self.start, self.via, self.target)
+        n = 100
+        points = [kin.transform_to_pose(arc.at(k / n)) for k in range(n + 1)]
+        reached = min(range(n + 1), key=lambda k: points[k].distance_to(here))
+        if reached >= n - 2 or here.distance_to(self.target) < 2 * kin.ARC_MIN_SPACING_MM:
+            return replace(self, motion=MotionType.LINE, via=None, start=None)
+        return replace(self, via=points[(reached + n) // 2], start=here)
 
 
 @dataclass
@@ -381,9 +429,22 @@ class RobotController(SimDevice[RobotProfile]):
     # -- the tick ----------------------------------------------------------------------
 
     def _run(self, dt: float, ready: bool) -> None:
+        self._take_backend_fault()
         self._run_handshake(dt, ready)
         if ready:
             self._publish_pose()
+
+    def _take_backend_fault(self) -> None:
+        """A collision or overload the physics stopped the arm for becomes a robot error."""
+        take = getattr(self._backend, "take_fault", None)  # optional in a backend
+        fault = None if take is None else take()
+        if fault is None:
+            return
+        code = SimErrorCode.COLLISION if fault.kind == "collision" else SimErrorCode.OVER_PAYLOAD
+        self._log.warning(
+            "sim.backend_fault", device=self._name, fault=fault.kind, detail=fault.message
+        )
+        self._enter_error(code, fault.message)
 
     def _on_rebuilt(self, survived: bool) -> None:
         active = self._active
@@ -414,14 +475,37 @@ class RobotController(SimDevice[RobotProfile]):
         self, target: Pose, motion: MotionType, speed: float, accel: float, *, seq: int
     ) -> bool:
         """Start the backend motion; False (error reported, nothing started) if it failed."""
+        return self._start_move(MoveArgs(target, motion, speed, accel, seq))
+
+    def _start_move(self, move: MoveArgs) -> bool:
+        """Start ``move`` on the backend; False (error reported, nothing started) if it failed."""
+        target, motion, speed, seq = move.target, move.motion, move.speed, move.seq
+        accel = move.accel_s
         number = self._moves_started + 1
+        backend = self._backend
         try:
-            expected = self._backend.start_motion(
-                target,
-                motion=motion,
-                speed_percent=speed,
-                accel_time_s=accel / self._speed_factor,
-            )
+            if move.joints is not None or move.via is not None:
+                if not isinstance(backend, PathBackend):
+                    raise TypeError(f"{type(backend).__name__} cannot follow a {move.kind}")
+                if move.joints is not None:
+                    expected = backend.start_joint_motion(
+                        move.joints, speed_percent=speed, accel_time_s=accel / self._speed_factor
+                    )
+                else:
+                    assert move.via is not None
+                    expected = backend.start_arc_motion(
+                        move.via,
+                        target,
+                        speed_percent=speed,
+                        accel_time_s=accel / self._speed_factor,
+                    )
+            else:
+                expected = backend.start_motion(
+                    target,
+                    motion=motion,
+                    speed_percent=speed,
+                    accel_time_s=accel / self._speed_factor,
+                )
         except MotionRejectedError as exc:  # the backend's own reach / limit check
             self._log.warning(
                 "sim.command_rejected",
@@ -436,7 +520,7 @@ class RobotController(SimDevice[RobotProfile]):
             self._backend_failed(seq, "motion")
             return False
         self._moves_started = number
-        self._record(number, motion.value, seq, target, speed)
+        self._record(number, move.kind, seq, target, speed)
         fault = next((f for f in self._move_faults if f.at_move == number), None)
         self._active = _Active(
             "motion",
@@ -451,7 +535,7 @@ class RobotController(SimDevice[RobotProfile]):
             "sim.motion_started",
             device=self._name,
             move=number,
-            motion=motion.value,
+            motion=move.kind,
             target=str(target),
             speed=speed,
             expected_s=round(expected, 4),

@@ -16,7 +16,20 @@ agree by construction.
 - A target (or a straight path) the arm cannot take is refused before anything moves:
   :class:`~tmmaster.sim.MotionRejectedError` with the reason ``reach``, ``joint_limit`` or
   ``singularity``.
+- A **joint target** (``start_joint_motion``, the program's ``PTP("JPP", ...)``) moves in
+  joint space to exactly those joints (no inverse kinematics), timed like a PTP.
+- A **Circle** (``start_arc_motion``) moves the TCP along the arc through the via point
+  (:class:`~tmmaster._kinematics.Arc`), its orientation turning uniformly, the joints
+  following by inverse kinematics like a Line's; its duration is
+  :meth:`RobotModel.arc_time`.
 - ``tool`` is the TCP in the flange frame: TCP = flange x tool.
+- The gripper follows the grasp rule of :func:`~tmmaster.sim._world.grasp_fit` (the same
+  pads, stroke and friction as the MuJoCo scene): a part too heavy for the grip force
+  is squeezed but slips out when the arm moves away.
+- While the arm moves, the TCP, the flange and the pads' corners are checked against
+  the table top and the pads against the parts: a collision stops the arm and is
+  handed to the controller (:meth:`KinematicBackend.take_fault`), as is a carried part
+  over the arm's rated payload.
 
 Everything is driven by :meth:`KinematicBackend.step`; there is no wall clock.
 """
@@ -30,13 +43,28 @@ from dataclasses import dataclass, field
 from .. import _kinematics as kin
 from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import DEFAULT_HOME, MotionType, Pose
-from .._robot_models import Joints, RobotModel, trapezoid_progress
-from ._backend import GripperState, MotionRejectedError, ObjectState, RejectReason
-from ._world import World
+from .._robot_models import Joints, RobotModel, arc_through, trapezoid_progress
+from ._backend import BackendFault, GripperState, MotionRejectedError, ObjectState, RejectReason
+from ._world import (
+    GRASP_MODES,
+    TABLE_CENTRE_XY_MM,
+    TABLE_HALF_SIZE_XY_MM,
+    GraspMode,
+    GripperGeometry,
+    World,
+    gripper_geometry,
+    in_tool_frame,
+    pad_landing_mm,
+    rated_payload_kg,
+)
 
 # Absorbs float drift from summing many small dt values, so a move of T seconds stepped
 # in ticks of T/n ends on the n-th tick instead of the (n+1)-th.
 _EPS = 1e-9
+
+#: The arm deeper in the table than when its motion started by more than this is a
+#: collision, mm (the MuJoCo backend's figure).
+_COLLISION_DEPTH_MM = 0.2
 
 
 @dataclass
@@ -57,6 +85,8 @@ class _Motion:
     same_orientation: bool = False
     start: Pose | None = None
     elapsed_s: float = 0.0
+    #: A circle: the arc the TCP follows (a Line otherwise).
+    arc: kin.Arc | None = None
 
 
 class KinematicBackend:
@@ -72,11 +102,15 @@ class KinematicBackend:
         tool: The TCP in the flange frame (None: the TCP is the flange).
         world: The objects on the table (None: one part at ``DEFAULT_PART_POSE``).
         settle_time_s: How long the arm takes to come to rest after a motion, s.
-        gripper_min_width_mm: The fingers' smallest width, mm.
-        gripper_max_width_mm: The fingers' largest width (their width at the start), mm.
+        gripper_min_width_mm: The fingers' smallest width (None: the gripper's), mm.
+        gripper_max_width_mm: The fingers' largest width, their width at the start (None:
+            the gripper's), mm.
+        gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
+        grasp: ``"friction"`` (a part too heavy for the grip force slips out) or
+            ``"weld"`` (a part between the pads is carried whatever its mass).
 
     Raises:
-        ValueError: A negative settle time or an empty finger stroke.
+        ValueError: A negative settle time, an empty finger stroke or a bad grasp mode.
         ConfigError: ``tool`` is not a Pose.
         UnreachablePoseError: ``home`` cannot be reached.
     """
@@ -89,16 +123,17 @@ class KinematicBackend:
         tool: Pose | None = None,
         world: World | None = None,
         settle_time_s: float = 0.0,
-        gripper_min_width_mm: float = 1.0,
-        gripper_max_width_mm: float = 39.0,
+        gripper_min_width_mm: float | None = None,
+        gripper_max_width_mm: float | None = None,
+        gripper: GripperGeometry | None = None,
+        grasp: GraspMode = "friction",
     ) -> None:
         if settle_time_s < 0:
             raise ValueError(f"settle_time_s must be >= 0, got {settle_time_s}")
-        if not 0 <= gripper_min_width_mm < gripper_max_width_mm:
-            raise ValueError(
-                "need 0 <= gripper_min_width_mm < gripper_max_width_mm, got "
-                f"{gripper_min_width_mm} and {gripper_max_width_mm}"
-            )
+        if grasp not in GRASP_MODES:
+            raise ValueError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
+        self._gripper = gripper_geometry(gripper, gripper_min_width_mm, gripper_max_width_mm)
+        self._grasp_mode: GraspMode = grasp
         if tool is not None and not isinstance(tool, Pose):
             raise ConfigError(
                 f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
@@ -111,19 +146,32 @@ class KinematicBackend:
             raise UnreachablePoseError(f"home: {exc}", reason=exc.reason, pose=exc.pose) from exc
         self._world = World() if world is None else world
         self._settle_time_s = settle_time_s
-        self._gripper_min = gripper_min_width_mm
-        self._gripper_max = gripper_max_width_mm
+        self._gripper_min = self._gripper.min_width_mm
+        self._gripper_max = self._gripper.max_width_mm
         self._joints: Joints = joints
         self._pose = home
         self._flange: Pose | None = None
         self._motion: _Motion | None = None
         # Starts "long settled": the arm is at rest when the simulation begins.
         self._rest_s = math.inf
-        self._width = gripper_max_width_mm
-        self._target_width = gripper_max_width_mm
+        self._width = self._gripper_max
+        self._target_width = self._gripper_max
         self._finger_speed = 0.0
+        self._force = 40.0
         self._gripper_moving = False
         self._contact = False
+        # Where the fingers stopped on the held part (its width, or jammed its edges'), mm.
+        self._held_width = 0.0
+        # The width the fingers started closing from (a part between them then is pushed
+        # along by the first pad that touches it).
+        self._close_from = self._gripper_max
+        # A part squeezed but too heavy for the grip: it stays while the arm moves away.
+        self._pinched: str | None = None
+        # Collisions: the depth in the table and in each part the running motion started
+        # with (a contact being backed out of is known), and the fault not yet taken.
+        self._start_depth = -1.0
+        self._start_overlaps: dict[str, float] = {}
+        self._fault: BackendFault | None = None
 
     @property
     def model(self) -> RobotModel:
@@ -154,6 +202,16 @@ class KinematicBackend:
     def world(self) -> World:
         """The objects on the table."""
         return self._world
+
+    @property
+    def gripper(self) -> GripperGeometry:
+        """The fingers' stroke, pads and friction."""
+        return self._gripper
+
+    @property
+    def grasp(self) -> GraspMode:
+        """``"friction"`` or ``"weld"``: how a part between the pads is held."""
+        return self._grasp_mode
 
     @property
     def motion_running(self) -> bool:
@@ -195,6 +253,107 @@ class KinematicBackend:
         # A running motion is simply replaced: queueing or rejecting is the controller's job.
         self._motion = planned
         self._rest_s = 0.0
+        # Contacts the arm already has (a collision it is backing out of) are known: only
+        # deeper ones are collisions.
+        self._start_depth = self._table_depth()
+        self._start_overlaps = self._pad_overlaps()
+        return planned.duration_s
+
+    def start_joint_motion(
+        self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Begin a joint-space PTP to exactly ``joints_deg``; return its duration in s.
+
+        Args:
+            joints_deg: The six joint angles J1..J6 to reach, deg.
+            speed_percent: Speed, % of the joints' top speeds (0 < speed <= 100).
+            accel_time_s: Time to reach full speed, s.
+
+        Returns:
+            The motion's duration, simulated seconds.
+
+        Raises:
+            MotionRejectedError: A joint past its range, a singularity or the flange out
+                of reach (the current motion, if any, goes on).
+            ValueError: A speed or acceleration time out of range.
+        """
+        _check_speed(speed_percent, accel_time_s)
+        try:
+            joints = self._model.check_joints(joints_deg, tool=self._tool)
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reason(exc.reason), str(exc)) from exc
+        start = self._joints
+        duration = self._model.ptp_time(
+            start, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
+        )
+        target = self._model.forward(joints, self._tool)
+        return self._begin(_Motion(MotionType.PTP, start, joints, target, duration, accel_time_s))
+
+    def start_arc_motion(
+        self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Begin a circular arc through ``via``'s position to ``target``; return its duration.
+
+        Args:
+            via: A pose whose position the arc passes through.
+            target: The TCP pose at the arc's end.
+            speed_percent: Speed, % of the arm's top TCP speed (0 < speed <= 100).
+            accel_time_s: Time to reach full speed, s.
+
+        Returns:
+            The motion's duration, simulated seconds.
+
+        Raises:
+            MotionRejectedError: No arc passes through the points, or a point of it
+                cannot be taken (the current motion, if any, goes on).
+            ValueError: A speed or acceleration time out of range.
+        """
+        _check_speed(speed_percent, accel_time_s)
+        start = self._pose
+        try:
+            arc = arc_through(start, via, target)
+            samples = self._model.arc_joints(
+                start, via, target, start_joints_deg=self._joints, tool=self._tool
+            )
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reason(exc.reason), str(exc)) from exc
+        except ConfigError as exc:
+            raise MotionRejectedError("reach", str(exc)) from exc
+        duration = self._model.arc_time(
+            start,
+            via,
+            target,
+            speed_percent=speed_percent,
+            accel_time_s=accel_time_s,
+            tool=self._tool,
+            samples=samples,
+        )
+        samples[0] = self._joints
+        return self._begin(
+            _Motion(
+                MotionType.LINE,
+                self._joints,
+                samples[-1],
+                target,
+                duration,
+                accel_time_s,
+                start_t=arc.start,
+                target_t=arc.end,
+                samples=samples,
+                same_orientation=kin.rotation_error(arc.start, arc.end) == (0.0, 0.0, 0.0),
+                start=start,
+                arc=arc,
+            )
+        )
+
+    def _begin(self, planned: _Motion) -> float:
+        # A running motion is simply replaced: queueing or rejecting is the controller's job.
+        self._motion = planned
+        self._rest_s = 0.0
+        # Contacts the arm already has (a collision it is backing out of) are known: only
+        # deeper ones are collisions.
+        self._start_depth = self._table_depth()
+        self._start_overlaps = self._pad_overlaps()
         return planned.duration_s
 
     def _plan_ptp(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
@@ -304,9 +463,106 @@ class KinematicBackend:
         """
         if dt < 0 or not math.isfinite(dt):
             raise ValueError(f"dt must be a finite number >= 0, got {dt}")
+        moving = self._motion is not None
         self._step_arm(dt)
+        if moving:
+            fault = self._check_collision() or self._overload()
+            if fault is not None:
+                self.stop_motion()
+                self._fault = fault
         self._step_gripper(dt)
         self._world.follow(self._pose)
+        if self._pinched is not None:
+            self._check_pinched()
+
+    # -- faults ------------------------------------------------------------------------
+
+    def take_fault(self) -> BackendFault | None:
+        """The collision or overload that stopped the arm since the last call, once.
+
+        Returns:
+            The fault, or None.
+        """
+        fault, self._fault = self._fault, None
+        return fault
+
+    def _pad_corners(self) -> list[tuple[float, float, float]]:
+        """The 16 corners of the two pads in the base frame, mm."""
+        t = kin.pose_to_transform(self._pose)
+        g = self._gripper
+        inner, outer = self._width / 2, self._width / 2 + g.pad_thickness_mm
+        corners = []
+        for y in (inner, outer, -inner, -outer):
+            for x in (-g.pad_depth_mm / 2, g.pad_depth_mm / 2):
+                for z in (-g.pad_height_mm / 2, g.pad_height_mm / 2):
+                    corners.append(
+                        (
+                            t[0][0] * x + t[0][1] * y + t[0][2] * z + t[0][3],
+                            t[1][0] * x + t[1][1] * y + t[1][2] * z + t[1][3],
+                            t[2][0] * x + t[2][1] * y + t[2][2] * z + t[2][3],
+                        )
+                    )
+        return corners
+
+    def _table_depth(self) -> float:
+        """How deep the TCP, the flange or a pad corner is in the table (mm); -1: above it."""
+        flange = self.flange_pose() or self._pose
+        points = [(self._pose.x, self._pose.y, self._pose.z), (flange.x, flange.y, flange.z)]
+        points += self._pad_corners()
+        (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
+        top = self._world.table_top_z_mm
+        depths = [
+            top - z for x, y, z in points if abs(x - cx) <= sx and abs(y - cy) <= sy and z <= top
+        ]
+        return max(depths, default=-1.0)
+
+    def _pad_overlaps(self) -> dict[str, float]:
+        """How deep the pads came down on each part near them (not the one squeezed), mm."""
+        g = self._gripper
+        reach = math.hypot(g.pad_depth_mm, self._width + 2 * g.pad_thickness_mm) + g.pad_height_mm
+        overlaps = {}
+        for obj in self._world.near(self._pose.x, self._pose.y, reach):
+            if obj.name == self._pinched:
+                continue
+            depth = pad_landing_mm(obj, self._pose, width_mm=self._width, gripper=g)
+            if depth > 0:
+                overlaps[obj.name] = depth
+        return overlaps
+
+    def _check_collision(self) -> BackendFault | None:
+        """A contact the moving arm did not expect: the table, or a pad landing on a part."""
+        depth = self._table_depth()
+        if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_MM:
+            return BackendFault("collision", f"the arm hit the table ({depth:.1f} mm deep)")
+        for name, overlap in self._pad_overlaps().items():
+            if overlap > self._start_overlaps.get(name, 0.0) + _COLLISION_DEPTH_MM:
+                return BackendFault(
+                    "collision", f"a finger came down on {name} ({overlap:.1f} mm deep)"
+                )
+        return None
+
+    def _overload(self) -> BackendFault | None:
+        """The part carried is heavier than the arm's rated payload."""
+        held = self._world.held
+        payload = rated_payload_kg(self._model.name)
+        if held is None or payload is None or held.mass_kg <= payload:
+            return None
+        return BackendFault(
+            "payload",
+            f"carrying {held.name} ({held.mass_kg:g} kg) over the rated payload of {payload:g} kg",
+        )
+
+    def _check_pinched(self) -> None:
+        """The squeezed part too heavy to carry slips out once the pads leave it."""
+        assert self._pinched is not None
+        obj = self._world.get(self._pinched)
+        g = self._gripper
+        rel, (ex, _, ez) = in_tool_frame(obj, self._pose)
+        if abs(rel[0][3]) < g.pad_depth_mm / 2 + ex and abs(rel[2][3]) < g.pad_height_mm / 2 + ez:
+            return  # the pads still slide along it
+        self._pinched = None
+        self._contact = False
+        self._width = self._target_width  # nothing between them any more: they close
 
     def _step_arm(self, dt: float) -> None:
         motion = self._motion
@@ -328,8 +584,11 @@ class KinematicBackend:
             self._set(*self._line_point(motion, progress))
 
     def _line_point(self, motion: _Motion, progress: float) -> tuple[Joints, Pose]:
-        """Joints and TCP ``progress`` (0..1) of the way along a Line's straight path."""
-        t = kin.interpolate(motion.start_t, motion.target_t, progress)
+        """Joints and TCP ``progress`` (0..1) of the way along a Line's (or an arc's) path."""
+        if motion.arc is not None:
+            t = motion.arc.at(progress)
+        else:
+            t = kin.interpolate(motion.start_t, motion.target_t, progress)
         pose = kin.transform_to_pose(t)
         if motion.same_orientation and motion.start is not None:
             # An unchanged orientation reads unchanged (no round trip through a matrix).
@@ -355,51 +614,64 @@ class KinematicBackend:
     # -- gripper -----------------------------------------------------------------------
 
     def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
-        """Move the fingers towards ``width_mm`` (clamped to the stroke); force is ignored.
+        """Move the fingers towards ``width_mm`` (clamped to the stroke), gripping with ``force_n``.
 
         Args:
             width_mm: Target width, mm.
             speed_mm_s: Finger speed, mm/s (> 0).
-            force_n: Ignored by this backend.
+            force_n: The grip force each finger presses with, N: with the pads' friction it
+                decides whether a part is carried or slips out (friction grasp).
 
         Raises:
-            ValueError: A speed that is not > 0.
+            ValueError: A speed that is not > 0 or a negative force.
         """
         if speed_mm_s <= 0 or not math.isfinite(speed_mm_s):
             raise ValueError(f"speed_mm_s must be > 0, got {speed_mm_s}")
-        if force_n < 0:
+        if force_n < 0 or not math.isfinite(force_n):
             raise ValueError(f"force_n must be >= 0, got {force_n}")
         # Real fingers cannot go past their end stops; they stop there.
         self._target_width = min(max(width_mm, self._gripper_min), self._gripper_max)
         self._finger_speed = speed_mm_s
-        if self._world.held is not None and self._target_width <= self._width:
+        self._force = force_n
+        gripped = self._world.held is not None or self._pinched is not None
+        if gripped and self._target_width <= self._width:
             # Squeezing a held object harder: the object blocks the fingers.
             self._contact = True
             self._gripper_moving = False
             return
         self._contact = False
         self._gripper_moving = self._target_width != self._width
+        self._close_from = self._width
 
     def _step_gripper(self, dt: float) -> None:
         if not self._gripper_moving:
             return
         travel = self._finger_speed * dt
         if self._target_width < self._width:
-            candidate = self._world.grasp_candidate(
-                self._pose, current_width_mm=self._width, target_width_mm=self._target_width
+            fit = self._world.grasp_fit(
+                self._pose,
+                current_width_mm=self._width,
+                target_width_mm=self._target_width,
+                gripper=self._gripper,
+                opening_mm=self._close_from,
             )
             new_width = max(self._target_width, self._width - travel)
-            if candidate is not None and new_width <= candidate.width_mm:
-                self._width = candidate.width_mm
+            if fit is not None and new_width <= fit.width_mm:
+                self._width = fit.width_mm
                 self._gripper_moving = False
                 self._contact = True
-                self._world.grasp(candidate.name, self._pose)
+                obj = fit.obj
+                if self._grasp_mode == "weld" or self._gripper.holds(obj.mass_kg, self._force):
+                    self._world.grasp(obj.name, self._pose, fit.relative)
+                    self._held_width = fit.width_mm
+                else:
+                    self._pinched = obj.name  # squeezed, but it will slip out
                 return
         else:
             new_width = min(self._target_width, self._width + travel)
-            held = self._world.held
-            if held is not None and new_width > held.width_mm:
+            if self._world.held is not None and new_width > self._held_width:
                 self._world.release(self._pose)
+            self._pinched = None
         self._width = new_width
         if self._width == self._target_width:
             self._gripper_moving = False
@@ -421,6 +693,13 @@ class KinematicBackend:
             One state per object.
         """
         return self._world.states()
+
+
+def _check_speed(speed_percent: float, accel_time_s: float) -> None:
+    if accel_time_s < 0:
+        raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+    if not 0 < speed_percent <= 100:
+        raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
 
 
 def _lerp(a: Sequence[float], b: Sequence[float], fraction: float) -> Joints:

@@ -40,6 +40,7 @@ from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import MotionType, Pose
 from .._robot_models import RobotModel, trapezoid_progress
 from ._backend import (
+    BackendFault,
     GripperState,
     MotionRejectedError,
     ObjectState,
@@ -47,7 +48,19 @@ from ._backend import (
     PhysicsUnavailableError,
     RejectReason,
 )
-from ._world import TABLE, TableObject, World
+from ._world import (
+    DEFAULT_GRIPPER,
+    GRASP_MODES,
+    TABLE,
+    TABLE_CENTRE_XY_MM,
+    TABLE_HALF_SIZE_XY_MM,
+    GraspMode,
+    GripperGeometry,
+    TableObject,
+    World,
+    gripper_geometry,
+    rated_payload_kg,
+)
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -81,13 +94,30 @@ _FINGER_STOPPED = 0.002
 #: ... for this long (s) after their target ramp ended.
 _FINGER_STOP_TIME_S = 0.05
 
-#: Finger pad: half sizes along the tool's x (depth), y (thickness) and z (height), m.
-_PAD_HALF = (0.010, 0.004, 0.012)
+# Collision bits (MuJoCo: two geoms collide when one's contype meets the other's
+# conaffinity): the table carries parts; parts touch the table, each other and the pads;
+# the pads grip parts and hit the table; the arm, flange and palm hit the table only.
+_TABLE_BITS = (1, 0)
+_PART_BITS = (4, 1 | 2 | 4)
+_PAD_BITS = (2, 1)
+_ARM_BITS = (8, 1)
 
-# Collision bits: the table carries parts, pads touch parts only, parts touch everything.
-_TABLE_BITS = (1, 1)
-_PAD_BITS = (2, 4)
-_PART_BITS = (5, 3)
+#: Radius of the arm's capsules, m.
+_ARM_RADIUS_M = 0.045
+
+#: Finger servo while travelling: stiffness (N/m) and the joint's damping (N s/m).
+_FINGER_KP = 2000.0
+_FINGER_DAMPING = 20.0
+#: A pad pressing on a part harder than this while the arm moves is a collision, N:
+#: TMflow's default TCP force limit (TMflow SW 2.24 Software Manual, Appendix B, p. 285).
+DEFAULT_COLLISION_FORCE_N = 150.0
+#: The arm deeper in the table than when its motion started by more than this is a
+#: collision, m.
+_COLLISION_DEPTH_M = 0.0002
+
+#: A closing finger this far behind its ramped target (m) is blocked on something: it
+#: then presses with the whole commanded force.
+_FINGER_BLOCKED_M = 0.0005
 
 
 def _import_mujoco() -> Any:
@@ -164,11 +194,22 @@ def build_mjcf(
     *,
     table_top_z_mm: float,
     tool: Pose | None = None,
-    gripper_min_width_mm: float = 1.0,
-    gripper_max_width_mm: float = 39.0,
+    gripper: GripperGeometry = DEFAULT_GRIPPER,
     timestep_s: float = DEFAULT_TIMESTEP_S,
 ) -> str:
-    """The MJCF scene: the arm from ``model.joints``, gripper at ``tool``, table, parts."""
+    """The MJCF scene: the arm from ``model.joints``, gripper at ``tool``, table, parts.
+
+    Args:
+        model: The arm.
+        objects: The parts, free boxes with their size and mass.
+        table_top_z_mm: Height of the table top, mm.
+        tool: The TCP in the flange frame (None: the flange).
+        gripper: The fingers' stroke, pads and friction.
+        timestep_s: The physics step, s.
+
+    Returns:
+        The MJCF document.
+    """
     lines = [
         f"<mujoco model={quoteattr('tmmaster ' + model.name)}>",
         '  <compiler angle="radian" autolimits="true"/>',
@@ -186,17 +227,22 @@ def build_mjcf(
         ' contype="0" conaffinity="0"/>',
     ]
     top = table_top_z_mm / 1000
+    (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
     lines.append(
-        f'    <geom name="table" type="box" pos="0.45 0 {top - 0.02:.6g}" size="0.3 0.55 0.02"'
-        f' rgba=".55 .45 .35 1" friction="0.8 0.005 0.0001"'
+        f'    <geom name="table" type="box" pos="{cx / 1000:g} {cy / 1000:g} {top - 0.02:.6g}"'
+        f' size="{sx / 1000:g} {sy / 1000:g} 0.02" rgba=".55 .45 .35 1"'
+        ' friction="0.8 0.005 0.0001"'
         f' contype="{_TABLE_BITS[0]}" conaffinity="{_TABLE_BITS[1]}"/>'
     )
     lines.append(
         '    <geom name="base" type="cylinder" pos="0 0 0.04" size="0.075 0.04"'
         ' rgba=".85 .85 .85 1" contype="0" conaffinity="0"/>'
     )
-    # The arm: one body per joint, each holding a capsule to the next joint's origin.
+    # The arm: one body per joint, each holding a capsule to the next joint's origin. The
+    # capsules collide with the table (an arm collision); the last one stops short of the
+    # flange by its radius, so the wrist's collision shape ends at the flange plane.
     indent = "    "
+    arm = f'contype="{_ARM_BITS[0]}" conaffinity="{_ARM_BITS[1]}"'
     for i, spec in enumerate(model.joints):
         origin = kin.rpy_transform(
             spec.origin_xyz_mm, [math.radians(a) for a in spec.origin_rpy_deg]
@@ -211,43 +257,57 @@ def build_mjcf(
         nxt = model.joints[i + 1].origin_xyz_mm if i + 1 < len(model.joints) else (0.0, 0.0, 0.0)
         length = math.hypot(*nxt)
         if length > 1e-6:
+            end = [v / 1000 for v in nxt]
+            if i + 2 == len(model.joints):  # the wrist ends at the flange
+                keep = max(0.0, 1 - _ARM_RADIUS_M / (length / 1000))
+                end = [v * keep for v in end]
             lines.append(
-                f'{indent}<geom type="capsule" fromto="0 0 0 {_fmt([v / 1000 for v in nxt])}"'
-                ' size="0.045" rgba=".9 .9 .92 1" contype="0" conaffinity="0" mass="2"/>'
+                f'{indent}<geom name="arm{i + 1}" type="capsule"'
+                f' fromto="0 0 0 {_fmt(end)}" size="{_ARM_RADIUS_M:g}"'
+                f' rgba=".9 .9 .92 1" {arm} mass="2"/>'
             )
-        else:
+        elif i + 1 < len(model.joints):
             lines.append(
-                f'{indent}<geom type="sphere" size="0.05" rgba=".9 .9 .92 1"'
-                ' contype="0" conaffinity="0" mass="2"/>'
+                f'{indent}<geom name="arm{i + 1}" type="sphere" size="{_ARM_RADIUS_M + 0.005:g}"'
+                f' rgba=".9 .9 .92 1" {arm} mass="2"/>'
             )
     # Flange (frame of J6) -> TCP: the gripper, fingers closing along the tool's y.
     tcp = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
     lines.append(
-        f'{indent}<geom type="cylinder" pos="0 0 -0.005" size="0.032 0.005" rgba=".2 .2 .2 1"'
-        ' contype="0" conaffinity="0" mass="0.1"/>'
+        f'{indent}<geom name="flange" type="cylinder" pos="0 0 -0.005" size="0.032 0.005"'
+        f' rgba=".2 .2 .2 1" {arm} mass="0.1"/>'
     )
     lines.append(f'{indent}<body name="tcp" {_frame_attrs(tcp)} gravcomp="1">')
     g = indent + "  "
-    stroke = (gripper_min_width_mm / 2000, gripper_max_width_mm / 2000)
+    stroke = (gripper.min_width_mm / 2000, gripper.max_width_mm / 2000)
     lines.append(
-        f'{g}<geom name="palm" type="box" pos="0 0 -0.02" size="0.012 0.03 0.006"'
-        ' rgba=".25 .25 .28 1" contype="0" conaffinity="0" mass="0.2"/>'
+        f'{g}<geom name="palm" type="box" pos="0 0 -0.02" size="0.012 0.03 0.004"'
+        f' rgba=".25 .25 .28 1" {arm} mass="0.2"/>'
     )
-    hx, hy, hz = _PAD_HALF
+    hx, hy, hz = (
+        gripper.pad_depth_mm / 2000,
+        gripper.pad_thickness_mm / 2000,
+        gripper.pad_height_mm / 2000,
+    )
     for side, sign in (("l", 1), ("r", -1)):
         lines.append(f'{g}<body name="finger_{side}" gravcomp="1">')
         lines.append(
             f'{g}  <joint name="finger_{side}" type="slide" axis="0 {sign} 0"'
-            f' range="{stroke[0]:.6g} {stroke[1]:.6g}" damping="2" armature="0.01"/>'
+            f' range="{stroke[0]:.6g} {stroke[1]:.6g}" damping="{_FINGER_DAMPING:g}"'
+            ' armature="0.01"/>'
         )
+        # priority: the pad's friction, not the part's, rules a pad-part contact.
         lines.append(
             f'{g}  <geom name="pad_{side}" type="box" pos="0 {sign * hy:.6g} 0"'
-            f' size="{hx} {hy} {hz}" rgba=".1 .1 .1 1" friction="1.2 0.01 0.0001"'
-            f' condim="4" mass="0.02" contype="{_PAD_BITS[0]}" conaffinity="{_PAD_BITS[1]}"/>'
+            f' size="{hx:g} {hy:g} {hz:g}" rgba=".1 .1 .1 1"'
+            f' friction="{gripper.friction:g} 0.005 0.0001" priority="1" condim="4"'
+            ' solref="0.004 1" solimp="0.95 0.99 0.001"'
+            f' mass="0.02" contype="{_PAD_BITS[0]}" conaffinity="{_PAD_BITS[1]}"/>'
         )
         lines.append(
-            f'{g}  <geom type="box" pos="0 {sign * hy:.6g} -0.015" size="{hx} {hy} 0.003"'
-            ' rgba=".3 .3 .3 1" contype="0" conaffinity="0" mass="0.005"/>'
+            f'{g}  <geom type="box" pos="0 {sign * hy:.6g} {-hz - 0.003:.6g}"'
+            f' size="{hx:g} {hy:g} 0.003" rgba=".3 .3 .3 1" contype="0" conaffinity="0"'
+            ' mass="0.005"/>'
         )
         lines.append(f"{g}</body>")
     lines.append(f"{indent}</body>")
@@ -262,31 +322,73 @@ def build_mjcf(
         lines.append(f'      <freejoint name="part{k}"/>')
         lines.append(
             f'      <geom name="part{k}" type="box" size="{half}" mass="{obj.mass_kg:.6g}"'
-            f' rgba=".9 .5 .1 1" friction="1 0.005 0.0001" condim="4"'
+            f' rgba=".9 .5 .1 1" friction="0.8 0.005 0.0001" condim="4"'
             f' contype="{_PART_BITS[0]}" conaffinity="{_PART_BITS[1]}"/>'
         )
         lines.append("    </body>")
     lines.append("  </worldbody>")
     lines.append("  <equality>")
+    # The fingers move together, symmetrically about the TCP (one drive, as on the 2FG7;
+    # Menagerie's 2F-85 couples its fingers the same way): a part squeezed between them
+    # cannot shift them sideways when the arm accelerates.
+    lines.append(
+        '    <joint name="fingers" joint1="finger_r" joint2="finger_l" polycoef="0 1 0 0 0"'
+        ' solref="0.004 1" solimp="0.95 0.99 0.001"/>'
+    )
     for k in range(len(objects)):
         lines.append(
             f'    <weld name="grip{k}" body1="tcp" body2="part{k}" active="false"'
             f' solref="{2 * timestep_s:g} 1" solimp="0.99 0.999 0.001"/>'
         )
     lines.append("  </equality>")
+    # The fingers are force motors: the backend computes each finger's force (a
+    # speed-ramped position servo while it travels, the commanded force once it is
+    # blocked on a part), always within the commanded force.
     lines.append("  <actuator>")
     for side in ("l", "r"):
-        lines.append(
-            f'    <position name="finger_{side}" joint="finger_{side}" kp="2000" kv="20"'
-            f' ctrlrange="{stroke[0]:.6g} {stroke[1]:.6g}" forcerange="-40 40"/>'
-        )
+        lines.append(f'    <motor name="finger_{side}" joint="finger_{side}" gear="1"/>')
     lines.append("  </actuator>")
+    # Contact sensors (cheaper to read than MuJoCo's contact list every step): the arm,
+    # tool or pads in the table (the deepest contact), and what each pad touches (the
+    # hardest contact).
+    lines.append("  <sensor>")
+    lines.append(
+        '    <contact name="arm_table" subtree1="link1" geom2="table" num="1"'
+        ' reduce="mindist" data="found dist"/>'
+    )
+    for side in ("l", "r"):
+        lines.append(
+            f'    <contact name="pad_{side}_touch" geom1="pad_{side}" num="1"'
+            ' reduce="netforce" data="found force"/>'
+        )
+    lines.append("  </sensor>")
     lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
 
 
 class MuJoCoBackend:
-    """MuJoCo :class:`~tmmaster.sim.PhysicsBackend`: joint-space arm, gripper, falling parts."""
+    """MuJoCo :class:`~tmmaster.sim.PhysicsBackend`: joint-space arm, gripper, falling parts.
+
+    Args:
+        model: The arm (``tmmaster.robot_model("tm5-700")``).
+        world: The parts and the table (None: one part at ``DEFAULT_PART_POSE``).
+        home: The TCP pose at the start (None: the model's ready posture).
+        tool: The TCP in the flange frame (None: the TCP is the flange).
+        grasp: ``"friction"`` (the pads hold a part by friction alone: a part too heavy
+            for the grip force slips out) or ``"weld"`` (once both pads touch a part it is
+            locked to the tool, whatever its mass).
+        gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
+        timestep_s: The physics step, s.
+        gripper_min_width_mm: The fingers' smallest width (None: the gripper's), mm.
+        gripper_max_width_mm: The fingers' largest width (None: the gripper's), mm.
+        keep_motion_on_reinit: A rebuild keeps the running motion (False: loses it).
+        collision_force_n: A pad pressing on a part it does not hold harder than this while
+            the arm moves is a collision, N.
+
+    Raises:
+        PhysicsUnavailableError: ``mujoco`` is not installed.
+        ValueError: A bad time step, stroke or grasp mode, or an unreachable ``home``.
+    """
 
     def __init__(
         self,
@@ -295,36 +397,39 @@ class MuJoCoBackend:
         world: World | None = None,
         home: Pose | None = None,
         tool: Pose | None = None,
-        grasp_lock: bool = True,
+        grasp: GraspMode = "friction",
+        gripper: GripperGeometry | None = None,
         timestep_s: float = DEFAULT_TIMESTEP_S,
-        gripper_min_width_mm: float = 1.0,
-        gripper_max_width_mm: float = 39.0,
+        gripper_min_width_mm: float | None = None,
+        gripper_max_width_mm: float | None = None,
         keep_motion_on_reinit: bool = True,
+        collision_force_n: float = DEFAULT_COLLISION_FORCE_N,
     ) -> None:
         self._mj = _import_mujoco()
         if not (math.isfinite(timestep_s) and 0 < timestep_s <= 0.01):
             raise ValueError(f"timestep_s must be in (0, 0.01], got {timestep_s}")
-        if not 0 <= gripper_min_width_mm < gripper_max_width_mm:
-            raise ValueError(
-                "need 0 <= gripper_min_width_mm < gripper_max_width_mm, got "
-                f"{gripper_min_width_mm} and {gripper_max_width_mm}"
-            )
+        if grasp not in GRASP_MODES:
+            raise ValueError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
+        if not (math.isfinite(collision_force_n) and collision_force_n > 0):
+            raise ValueError(f"collision_force_n must be > 0, got {collision_force_n}")
+        self._gripper = gripper_geometry(gripper, gripper_min_width_mm, gripper_max_width_mm)
         world = World() if world is None else world
         self._model = model
         self._tool = tool
-        self._grasp_lock = grasp_lock
+        self._grasp_mode: GraspMode = grasp
         self._timestep = timestep_s
-        self._gripper_min = gripper_min_width_mm
-        self._gripper_max = gripper_max_width_mm
+        self._gripper_min = self._gripper.min_width_mm
+        self._gripper_max = self._gripper.max_width_mm
+        self._collision_force = collision_force_n
         self.keep_motion_on_reinit = keep_motion_on_reinit
         self._objects = list(world.objects)
+        self._table_top_mm = world.table_top_z_mm
         self._xml = build_mjcf(
             model,
             self._objects,
             table_top_z_mm=world.table_top_z_mm,
             tool=tool,
-            gripper_min_width_mm=gripper_min_width_mm,
-            gripper_max_width_mm=gripper_max_width_mm,
+            gripper=self._gripper,
             timestep_s=timestep_s,
         )
         # Feeder: a part that starts inside an earlier one waits out of the scene.
@@ -351,13 +456,20 @@ class MuJoCoBackend:
         #: Wall seconds spent in the last rebuild (``reinitialize()``).
         self.last_rebuild_s = 0.0
         self.rebuilds = 0
-        # Gripper command state.
-        self._finger_target = gripper_max_width_mm / 2000
+        # Gripper command state: targets are per finger (half the width), m.
+        self._finger_target = self._gripper_max / 2000
         self._finger_ctrl = self._finger_target
         self._finger_speed = 0.05
+        self._finger_force = 40.0
+        self._closing = False
         self._gripper_moving = False
         self._stopped_for = 0.0
         self._held: int | None = None
+        self._lost_ticks = 0
+        # Collisions: the arm's table penetration the running motion started with (m;
+        # -1: none), and the fault not yet taken by the controller.
+        self._start_depth = -1.0
+        self._fault: BackendFault | None = None
         self._build(None)
 
     # -- model --------------------------------------------------------------------------
@@ -371,6 +483,16 @@ class MuJoCoBackend:
     def model(self) -> RobotModel:
         """The arm model whose kinematics and limits plan the motions."""
         return self._model
+
+    @property
+    def gripper(self) -> GripperGeometry:
+        """The fingers' stroke, pads and friction."""
+        return self._gripper
+
+    @property
+    def grasp(self) -> GraspMode:
+        """``"friction"`` or ``"weld"``: how a part between the pads is held."""
+        return self._grasp_mode
 
     @property
     def mjcf(self) -> str:
@@ -406,6 +528,9 @@ class MuJoCoBackend:
             j = ident(obj.mjOBJ_JOINT, label)
             return int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
 
+        def sensor(label: str) -> int:
+            return int(m.sensor_adr[ident(obj.mjOBJ_SENSOR, label)])
+
         parts = range(len(self._objects))
         arm = [joint(f"j{i}") for i in range(1, 7)]
         fingers = [joint(f"finger_{s}") for s in ("l", "r")]
@@ -420,12 +545,13 @@ class MuJoCoBackend:
         self._part_body = [ident(obj.mjOBJ_BODY, f"part{k}") for k in parts]
         self._part_geom = {ident(obj.mjOBJ_GEOM, f"part{k}"): k for k in parts}
         self._welds = [ident(obj.mjOBJ_EQUALITY, f"grip{k}") for k in parts]
+        self._sense_table = sensor("arm_table")
+        self._sense_pads = [sensor("pad_l_touch"), sensor("pad_r_touch")]
         if snapshot is None:
             for adr, q in zip(self._arm_qpos, self._hold, strict=True):
                 d.qpos[adr] = math.radians(q)
             for adr in self._finger_qpos:
                 d.qpos[adr] = self._finger_ctrl
-            d.ctrl[:] = self._finger_ctrl
             for k in self._queued:
                 self._park(k)
         else:
@@ -435,7 +561,6 @@ class MuJoCoBackend:
             d.time = snapshot["time"]
             m.eq_data[:] = snapshot["eq_data"]
             d.eq_active[:] = snapshot["eq_active"]
-            m.actuator_forcerange[:] = snapshot["forcerange"]
         mj.mj_forward(m, d)
 
     def _snapshot(self) -> dict[str, Any]:
@@ -447,7 +572,6 @@ class MuJoCoBackend:
             "time": d.time,
             "eq_data": m.eq_data.copy(),
             "eq_active": d.eq_active.copy(),
-            "forcerange": m.actuator_forcerange.copy(),
         }
 
     # -- the ready / reinitialize contract ----------------------------------------------
@@ -520,6 +644,64 @@ class MuJoCoBackend:
                 reason = "singularity"
             raise MotionRejectedError(reason, str(exc)) from exc
         self._trajectory = _Trajectory(samples, duration, accel_time_s)
+        # A contact the arm already had (a collision it is backing out of) is known: only
+        # a deeper one is a collision.
+        self._start_depth = self._table_depth()
+        return duration
+
+    def start_joint_motion(
+        self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Start a joint-space PTP to exactly ``joints_deg``; return its duration in s."""
+        if accel_time_s < 0:
+            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+        if not self._ready:
+            raise RuntimeError("start_joint_motion while the MuJoCo model is being rebuilt")
+        here = self._command_joints()
+        try:
+            joints = self._model.check_joints(joints_deg, tool=self._tool)
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reject_reason(exc.reason), str(exc)) from exc
+        duration = self._model.ptp_time(
+            here, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
+        )
+        return self._follow([here, tuple(joints)], duration, accel_time_s)
+
+    def start_arc_motion(
+        self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Start a circular arc through ``via``'s position to ``target``; return its duration."""
+        if accel_time_s < 0:
+            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+        if not self._ready:
+            raise RuntimeError("start_arc_motion while the MuJoCo model is being rebuilt")
+        here = self._command_joints()
+        start = self._model.forward(here, tool=self._tool)
+        try:
+            path = self._model.arc_joints(
+                start, via, target, start_joints_deg=here, tool=self._tool
+            )
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reject_reason(exc.reason), str(exc)) from exc
+        except ConfigError as exc:  # no arc through the points
+            raise MotionRejectedError("reach", str(exc)) from exc
+        duration = self._model.arc_time(
+            start,
+            via,
+            target,
+            speed_percent=speed_percent,
+            accel_time_s=accel_time_s,
+            tool=self._tool,
+            samples=path,
+        )
+        return self._follow([here, *(tuple(q) for q in path[1:])], duration, accel_time_s)
+
+    def _follow(
+        self, samples: list[tuple[float, ...]], duration: float, accel_time_s: float
+    ) -> float:
+        """Start following joint ``samples`` over ``duration``; return it."""
+        self._trajectory = _Trajectory(samples, duration, accel_time_s)
+        self._start_depth = self._table_depth()
         return duration
 
     def _command_joints(self) -> tuple[float, ...]:
@@ -562,6 +744,58 @@ class MuJoCoBackend:
         """Current flange pose (frame of J6)."""
         return self._body_pose(self._flange_body)
 
+    # -- faults -------------------------------------------------------------------------
+
+    def take_fault(self) -> BackendFault | None:
+        """The collision or overload that stopped the arm since the last call, once.
+
+        Returns:
+            The fault, or None.
+        """
+        fault, self._fault = self._fault, None
+        return fault
+
+    def _table_depth(self) -> float:
+        """How deep the arm, tool or pads are in the table (m); -1 when they do not touch."""
+        data = self._d.sensordata
+        adr = self._sense_table
+        return -float(data[adr + 1]) if data[adr] > 0 else -1.0
+
+    def _check_collision(self) -> BackendFault | None:
+        """A contact the moving arm did not expect, from this step's contact sensors."""
+        depth = self._table_depth()
+        if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_M:
+            return BackendFault("collision", f"the arm hit the table ({depth * 1000:.1f} mm deep)")
+        if self._held is not None:
+            return None
+        data = self._d.sensordata
+        for adr, side in zip(self._sense_pads, ("left", "right"), strict=True):
+            if data[adr] <= 0:
+                continue
+            force = math.hypot(data[adr + 1], data[adr + 2], data[adr + 3])
+            if force > self._collision_force:
+                return BackendFault(
+                    "collision", f"the {side} finger pressed on a part with {force:.0f} N"
+                )
+        return None
+
+    def _overload(self) -> BackendFault | None:
+        """The part held is heavier than the arm's rated payload (while the arm moves)."""
+        payload = rated_payload_kg(self._model.name)
+        if self._held is None or payload is None:
+            return None
+        obj = self._objects[self._held]
+        if obj.mass_kg <= payload:
+            return None
+        return BackendFault(
+            "payload",
+            f"carrying {obj.name} ({obj.mass_kg:g} kg) over the rated payload of {payload:g} kg",
+        )
+
+    def _stop_for(self, fault: BackendFault) -> None:
+        self.stop_motion()
+        self._fault = fault
+
     # -- simulation ---------------------------------------------------------------------
 
     def step(self, dt: float) -> None:
@@ -577,6 +811,8 @@ class MuJoCoBackend:
             self._substep()
         if self._queued:
             self._feed()  # once per tick: a waiting part appears when its spot is free
+        if self._grasp_mode == "friction" and self._closing:
+            self._update_held()
         # Report exactly the commanded joints (the integrator moved them by a hair).
         self._set_arm(self._command_joints(), None)
         self._mj.mj_kinematics(self._m, self._d)
@@ -601,24 +837,51 @@ class MuJoCoBackend:
             if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
                 self._hold = trajectory.samples[-1]
                 self._trajectory = None
-        # Finger targets ramp at the commanded speed.
-        step = self._finger_speed * h
-        if self._finger_ctrl < self._finger_target:
-            self._finger_ctrl = min(self._finger_target, self._finger_ctrl + step)
-        else:
-            self._finger_ctrl = max(self._finger_target, self._finger_ctrl - step)
-        self._d.ctrl[:] = self._finger_ctrl
+        self._drive_fingers(h)
         for k in self._queued:
             self._park(k)
         self._mj.mj_step(self._m, self._d)
         self.sim_time_s += h
+        if trajectory is not None:
+            fault = self._check_collision() or self._overload()
+            if fault is not None:
+                self._stop_for(fault)
         if self._gripper_moving:
             self._update_gripper(h)
 
     # -- gripper ------------------------------------------------------------------------
 
+    def _drive_fingers(self, h: float) -> None:
+        """Each finger's force for this step: servo on the ramp, or the grip force if blocked."""
+        # The target ramps at the commanded speed.
+        step = self._finger_speed * h
+        ref = self._finger_ctrl
+        if ref < self._finger_target:
+            ref = min(self._finger_target, ref + step)
+            feed = _FINGER_DAMPING * self._finger_speed
+        elif ref > self._finger_target:
+            ref = max(self._finger_target, ref - step)
+            feed = -_FINGER_DAMPING * self._finger_speed
+        else:
+            feed = 0.0
+        self._finger_ctrl = ref
+        force = self._finger_force
+        d = self._d
+        for i, adr in enumerate(self._finger_qpos):
+            q = d.qpos[adr]
+            if self._closing and q - ref > _FINGER_BLOCKED_M:
+                f = -force  # blocked on a part: squeeze with the commanded force
+            else:
+                f = min(max(_FINGER_KP * (ref - q) + feed, -force), force)
+            d.ctrl[i] = f
+
     def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
-        """Move the fingers towards ``width_mm`` at ``speed_mm_s`` with at most ``force_n``."""
+        """Move the fingers towards ``width_mm`` at ``speed_mm_s``, squeezing with ``force_n``.
+
+        Each finger is a force motor: while it travels it follows the target ramped at
+        the commanded speed (never pushing harder than ``force_n``); once a part blocks
+        it, it presses with ``force_n``.
+        """
         if speed_mm_s <= 0 or not math.isfinite(speed_mm_s):
             raise ValueError(f"speed_mm_s must be > 0, got {speed_mm_s}")
         if force_n < 0 or not math.isfinite(force_n):
@@ -627,11 +890,11 @@ class MuJoCoBackend:
             raise RuntimeError("drive_gripper while the MuJoCo model is being rebuilt")
         target = min(max(width_mm, self._gripper_min), self._gripper_max)
         # Each finger moves half the width; below 1 N the fingers could not move at all.
-        force = max(force_n, 1.0)
-        self._m.actuator_forcerange[:] = (-force, force)
+        self._finger_force = max(force_n, 1.0)
         self._finger_speed = speed_mm_s / 2000
         self._finger_target = target / 2000
         width = self._width_mm()
+        self._closing = target < width
         if self._held is not None:
             if target <= width:
                 # Squeezing a held part harder: it blocks the fingers.
@@ -651,6 +914,9 @@ class MuJoCoBackend:
         left: set[int] = set()
         right: set[int] = set()
         d = self._d
+        data = d.sensordata
+        if not (data[self._sense_pads[0]] > 0 or data[self._sense_pads[1]] > 0):
+            return left, right  # neither pad touches anything: no contact to read
         for i in range(d.ncon):
             c = d.contact[i]
             g1, g2 = int(c.geom1), int(c.geom2)
@@ -664,17 +930,38 @@ class MuJoCoBackend:
                     right.add(part)
         return left, right
 
+    def _update_held(self) -> None:
+        """Friction grasp: the part both pads touch is held; it is lost once it slipped out.
+
+        Read once per tick. A part is let go of after two ticks without both pads on it (a
+        contact that flickers for a physics step does not drop it).
+        """
+        left, right = self._pad_contacts()
+        both = left & right
+        if self._held is None:
+            if both:
+                self._held = min(both)
+                self._lost_ticks = 0
+        elif self._held in both:
+            self._lost_ticks = 0
+        else:
+            self._lost_ticks += 1
+            if self._lost_ticks >= 2:
+                self._held = None  # it slipped out of the fingers
+
     def _update_gripper(self, h: float) -> None:
         closing = self._finger_target < self._finger_ctrl + 1e-9 and self._finger_target < (
             self._width_mm() / 2000 - 1e-6
         )
         if closing and self._held is None:
-            left, right = self._pad_contacts()
-            both = sorted(left & right)
-            if both:
-                self._grasp(both[0])
-                self._gripper_moving = False
-                return
+            data = self._d.sensordata
+            if data[self._sense_pads[0]] > 0 and data[self._sense_pads[1]] > 0:
+                left, right = self._pad_contacts()
+                both = sorted(left & right)
+                if both:
+                    self._grasp(both[0])
+                    self._gripper_moving = False
+                    return
         speed = max(abs(self._d.qvel[a]) for a in self._finger_dof)
         ramp_done = self._finger_ctrl == self._finger_target
         if ramp_done and abs(self._width_mm() - self._finger_target * 2000) < 0.1:
@@ -688,7 +975,7 @@ class MuJoCoBackend:
 
     def _grasp(self, k: int) -> None:
         self._held = k
-        if not self._grasp_lock:
+        if self._grasp_mode != "weld":
             return
         mj, m, d = self._mj, self._m, self._d
         eq = self._welds[k]
@@ -716,18 +1003,8 @@ class MuJoCoBackend:
             return
         self._d.eq_active[self._welds[k]] = 0
 
-    def _holding_contact(self) -> bool:
-        if self._held is None:
-            return False
-        if self._grasp_lock:
-            return True
-        left, right = self._pad_contacts()
-        return self._held in left and self._held in right
-
     def gripper_state(self) -> GripperState:
-        """Current finger width, motion and contact."""
-        if self._held is not None and not self._grasp_lock and not self._holding_contact():
-            self._held = None  # friction grasp: the part slipped out
+        """Current finger width, motion and contact (a part held between the pads)."""
         return GripperState(
             width_mm=self._width_mm(),
             moving=self._gripper_moving,
@@ -874,3 +1151,12 @@ def _write_png(path: Path, pixels: Any) -> None:
     header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, 6))
     path.write_bytes(png + chunk(b"IEND", b""))
+
+
+def _reject_reason(reason: str) -> RejectReason:
+    """An UnreachablePoseError's reason as a MotionRejectedError's."""
+    if reason == "joint_limit":
+        return "joint_limit"
+    if reason == "singularity":
+        return "singularity"
+    return "reach"

@@ -18,7 +18,8 @@ import bisect
 import functools
 import math
 from collections.abc import Iterable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
@@ -36,6 +37,134 @@ DEFAULT_PART_SIZE_MM = (30.0, 30.0, 30.0)
 #: Height of the table top in the robot base frame, mm: the default part (centre at
 #: DEFAULT_PART_POSE, 30 mm high) rests on it exactly where it starts.
 DEFAULT_TABLE_TOP_Z_MM = DEFAULT_PART_POSE.z - DEFAULT_PART_SIZE_MM[2] / 2
+
+#: Standard gravity, m/s^2.
+GRAVITY_M_S2 = 9.81
+
+#: Centre (x, y) and half size (x, y) of the table's top in the robot base frame, mm: a
+#: 0.6 x 1.1 m table in front of the arm. Parts rest on the table's plane anywhere (the
+#: falling rule); an arm collision with the table counts only over its top.
+TABLE_CENTRE_XY_MM = (450.0, 0.0)
+TABLE_HALF_SIZE_XY_MM = (300.0, 550.0)
+
+
+class GripperGeometry(BaseModel):
+    """The two-finger gripper both physics backends model (defaults: an OnRobot 2FG7).
+
+    The fingers close along the tool's y axis, symmetrically about the TCP; each carries a
+    flat pad centred on the TCP in the tool's x (depth) and z (height). The grasp rule
+    (:func:`grasp_fit`, :meth:`holds`) and the MuJoCo scene are both built from these
+    numbers, so the two backends grip, miss and drop the same parts.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: Narrowest finger width, mm (2FG7 external grip: about 1 mm).
+    min_width_mm: float = Field(default=1.0, ge=0)
+    #: Widest finger width, mm (2FG7 external grip: about 39 mm, a 38 mm stroke).
+    max_width_mm: float = Field(default=39.0, gt=0)
+    #: Pad size along the tool's x axis (depth), mm.
+    pad_depth_mm: float = Field(default=20.0, gt=0)
+    #: Pad size along the tool's z axis (height), centred on the TCP, mm.
+    pad_height_mm: float = Field(default=24.0, gt=0)
+    #: Pad thickness along the closing direction, mm (MuJoCo only: it has volume).
+    pad_thickness_mm: float = Field(default=8.0, gt=0)
+    #: Friction coefficient between a pad and a part (an assumption, see
+    #: docs/simulator-model.md#the-grasp-rule).
+    friction: float = Field(default=0.5, gt=0, le=2)
+    #: A part is carried when 2 x friction x force >= safety_factor x mass x g.
+    safety_factor: float = Field(default=2.0, ge=1)
+
+    @model_validator(mode="after")
+    def _stroke_is_ordered(self) -> GripperGeometry:
+        if not self.min_width_mm < self.max_width_mm:
+            raise ValueError(
+                f"need min_width_mm < max_width_mm, got {self.min_width_mm} and {self.max_width_mm}"
+            )
+        return self
+
+    def max_mass_kg(self, force_n: float) -> float:
+        """The heaviest part a grip of ``force_n`` carries (the friction rule).
+
+        Args:
+            force_n: The grip force each finger presses with, N.
+
+        Returns:
+            2 x friction x force / (safety_factor x g), kg.
+        """
+        return 2 * self.friction * force_n / (self.safety_factor * GRAVITY_M_S2)
+
+    def holds(self, mass_kg: float, force_n: float) -> bool:
+        """Whether a grip of ``force_n`` carries a part of ``mass_kg`` without slipping.
+
+        Args:
+            mass_kg: The part's mass, kg.
+            force_n: The grip force each finger presses with, N.
+
+        Returns:
+            True when 2 x friction x force >= safety_factor x mass x g.
+        """
+        return mass_kg <= self.max_mass_kg(force_n) + 1e-12
+
+
+#: Rated payload of each built-in arm model, kg: Techman's datasheet figures (TM5-700
+#: 6 kg, TM5-900 4 kg, TM12 12 kg, TM14 14 kg). The TMflow manual does not list them.
+RATED_PAYLOAD_KG: dict[str, float] = {"tm5-700": 6.0, "tm5-900": 4.0, "tm12": 12.0, "tm14": 14.0}
+
+
+def rated_payload_kg(model_name: str) -> float | None:
+    """The rated payload of a built-in arm model, or None for another model.
+
+    Args:
+        model_name: The model's name (``"tm5-700"``...).
+
+    Returns:
+        The payload, kg, or None.
+    """
+    return RATED_PAYLOAD_KG.get(model_name)
+
+
+#: How a backend holds a part between the pads: by friction alone (a part too heavy for
+#: the grip force slips out), or welded to the tool once both pads touch it.
+GraspMode = Literal["friction", "weld"]
+GRASP_MODES: tuple[str, ...] = get_args(GraspMode)
+
+#: The simulated gripper unless told otherwise: an OnRobot 2FG7, fingers inward.
+DEFAULT_GRIPPER = GripperGeometry()
+
+
+def gripper_geometry(
+    gripper: GripperGeometry | None,
+    min_width_mm: float | None = None,
+    max_width_mm: float | None = None,
+) -> GripperGeometry:
+    """The gripper a backend models: ``gripper``, or the default with another stroke.
+
+    Args:
+        gripper: The gripper; None: :data:`DEFAULT_GRIPPER`.
+        min_width_mm: The fingers' smallest width (None: the gripper's), mm.
+        max_width_mm: The fingers' largest width (None: the gripper's), mm.
+
+    Returns:
+        The gripper.
+
+    Raises:
+        ValueError: A stroke given twice (``gripper`` and a width), or an empty stroke.
+    """
+    if gripper is not None and (min_width_mm is not None or max_width_mm is not None):
+        raise ValueError("give the stroke in gripper or as widths, not both")
+    if gripper is not None:
+        return gripper
+    if min_width_mm is None and max_width_mm is None:
+        return DEFAULT_GRIPPER
+    low = DEFAULT_GRIPPER.min_width_mm if min_width_mm is None else min_width_mm
+    high = DEFAULT_GRIPPER.max_width_mm if max_width_mm is None else max_width_mm
+    if not 0 <= low < high:
+        raise ValueError(
+            f"need 0 <= gripper_min_width_mm < gripper_max_width_mm, got {low} and {high}"
+        )
+    return DEFAULT_GRIPPER.model_copy(update={"min_width_mm": low, "max_width_mm": high})
+
 
 #: A support may be this far above an object's bottom and still carry it (float slack).
 SUPPORT_TOLERANCE_MM = 0.5
@@ -67,8 +196,9 @@ class TableObject(BaseModel):
     size_mm: tuple[PositiveFloat, PositiveFloat, PositiveFloat] = DEFAULT_PART_SIZE_MM
     #: Its mass, kg.
     mass_kg: float = Field(default=0.1, gt=0, le=50)
-    #: How far the TCP may be from the object's position for a grasp to work, mm.
-    grasp_tolerance_mm: float = Field(default=5.0, ge=0)
+    #: An extra limit on how far the TCP may be from the object's centre for a grasp to
+    #: work, mm; None: the gripper's geometry alone decides (:func:`grasp_fit`).
+    grasp_tolerance_mm: float | None = Field(default=None, ge=0)
 
     @model_validator(mode="before")
     @classmethod
@@ -230,6 +360,218 @@ class _SupportIndex:
         return found[0], found[1]
 
 
+@dataclass(frozen=True)
+class GraspFit:
+    """How a part lies between the fingers at a TCP pose: where they stop on it, and how.
+
+    Made by :func:`grasp_fit` (the grasp rule both backends follow).
+    """
+
+    #: The part.
+    obj: TableObject
+    #: The finger width where the fingers stop on it: its face width across the fingers
+    #: or, jammed, its width across its edges, mm.
+    width_mm: float
+    #: Turned too far from square to the pads for the squeeze to straighten it: held on
+    #: two edges, at its width across them, its orientation kept.
+    jammed: bool
+    #: The part's pose in the TCP frame once squeezed: centred between the fingers,
+    #: straightened unless jammed.
+    relative: Pose
+
+
+def in_tool_frame(obj: TableObject, tcp: Pose) -> tuple[kin.Transform, tuple[float, ...]]:
+    """The part's transform in the TCP frame and its half extents along the tool's axes.
+
+    Args:
+        obj: The part (at its own pose).
+        tcp: The TCP pose.
+
+    Returns:
+        The transform (mm) and the half extents along the tool's x, y and z, mm.
+    """
+    rel = kin.multiply(kin.invert(kin.pose_to_transform(tcp)), kin.pose_to_transform(obj.pose))
+    half = [s / 2 for s in obj.size_mm]
+    extents = tuple(sum(abs(rel[i][j]) * half[j] for j in range(3)) for i in range(3))
+    return rel, extents
+
+
+def grasp_fit(
+    obj: TableObject,
+    tcp: Pose,
+    *,
+    opening_mm: float,
+    gripper: GripperGeometry = DEFAULT_GRIPPER,
+) -> GraspFit | None:
+    """Where fingers open ``opening_mm`` at ``tcp`` would close on ``obj``; None: they miss it.
+
+    The rule (docs/simulator-model.md, "The grasp rule"), all of it in the tool frame:
+
+    - the pads must overlap the part in depth (tool x) and height (tool z);
+    - its width across the fingers (tool y; a turned part is wider) must be within the
+      stroke, and the part between the open fingers (the fingers are rigid and move
+      together: a pad that comes down on its edge presses it, a collision, see
+      :func:`pad_landing_mm`);
+    - a part turned about the tool's z is straightened by the squeeze when its contact
+      corner's lever beats friction (``|x| > friction * |y|`` at the corner the pad
+      touches first: a square jams beyond 45 deg - atan(friction), 18.4 deg at 0.5);
+      otherwise it jams, held on two edges at its width across them.
+
+    Args:
+        obj: The part.
+        tcp: Where the fingers are.
+        opening_mm: Their width now (open), mm.
+        gripper: The gripper's stroke, pads and friction.
+
+    Returns:
+        How the fingers stop on the part, or None.
+    """
+    if obj.grasp_tolerance_mm is not None and tcp.distance_to(obj.pose) > obj.grasp_tolerance_mm:
+        return None
+    rel, (ex, ey, ez) = in_tool_frame(obj, tcp)
+    cx, cy, cz = rel[0][3], rel[1][3], rel[2][3]
+    if abs(cx) >= gripper.pad_depth_mm / 2 + ex or abs(cz) >= gripper.pad_height_mm / 2 + ez:
+        return None  # the pads pass beside, above or below it
+    across = 2 * ey
+    if not gripper.min_width_mm < across <= gripper.max_width_mm:
+        return None  # never between the fingers, or too thin to touch
+    if abs(cy) + ey > opening_mm / 2 + 1e-6:
+        return None  # a pad is on top of it, not beside it (the arm pressed it: a collision)
+    # The part's axis nearest the tool's z stands up; the other two lie in the pads' plane.
+    up = max(range(3), key=lambda j: abs(rel[2][j]))
+    a, b = (j for j in range(3) if j != up)
+    half = [s / 2 for s in obj.size_mm]
+    phi = math.atan2(rel[1][a], rel[0][a])  # axis a's direction in the tool's x-y plane
+    # Angle to the nearest square orientation (a along x or along y), in (-45, 45] deg.
+    theta = (phi + math.pi / 4) % (math.pi / 2) - math.pi / 4
+    jammed = False
+    if abs(theta) > 1e-4:
+        s_a, c_a = math.sin(phi), math.cos(phi)
+        # The corner the closing pad meets first (largest y) and its lever along x.
+        y = abs(half[a] * s_a) + abs(half[b] * c_a)
+        x = math.copysign(half[a], s_a) * c_a - math.copysign(half[b], c_a) * s_a
+        jammed = abs(x) <= gripper.friction * y
+    if jammed:
+        rotation = rel
+        width = across
+    else:
+        # Straightened: turned back by theta about the tool's z.
+        rotation = kin.multiply(kin.rot_z(-theta), rel)
+        width = 2 * sum(abs(rotation[1][j]) * half[j] for j in range(3))
+    centred = (
+        (rotation[0][0], rotation[0][1], rotation[0][2], cx),
+        (rotation[1][0], rotation[1][1], rotation[1][2], 0.0),
+        (rotation[2][0], rotation[2][1], rotation[2][2], cz),
+        kin.IDENTITY[3],
+    )
+    return GraspFit(obj, width, jammed, kin.transform_to_pose(centred))
+
+
+def pad_landing_mm(
+    obj: TableObject, tcp: Pose, *, width_mm: float, gripper: GripperGeometry = DEFAULT_GRIPPER
+) -> float:
+    """How deep a finger pad has come down onto ``obj`` from above (0: it has not), mm.
+
+    The pads are boxes in the tool frame; the part is taken as its bounding box along the
+    tool's axes. A pad is in the part by the smallest of its overlaps along the three axes
+    (how far it would have to move back out); it came down on it when that smallest
+    overlap is along the tool axis nearest the vertical. A pad that meets a part from the
+    side (a wrist turning with the fingers open around it) is not counted: it would push
+    a part aside, which the kinematic backend does not model.
+
+    Args:
+        obj: The part.
+        tcp: Where the fingers are.
+        width_mm: Their width, mm.
+        gripper: The gripper's pads.
+
+    Returns:
+        The deeper of the two pads' landing depths, mm.
+    """
+    tool = kin.pose_to_transform(tcp)
+    vertical = max(range(3), key=lambda i: abs(tool[2][i]))
+    rel, (ex, ey, ez) = in_tool_frame(obj, tcp)
+    cx, cy, cz = rel[0][3], rel[1][3], rel[2][3]
+    depth = 0.0
+    inner = width_mm / 2
+    outer = inner + gripper.pad_thickness_mm
+    for lo, hi in ((inner, outer), (-outer, -inner)):
+        overlaps = (
+            gripper.pad_depth_mm / 2 + ex - abs(cx),
+            min(hi, cy + ey) - max(lo, cy - ey),
+            gripper.pad_height_mm / 2 + ez - abs(cz),
+        )
+        smallest = min(overlaps)
+        if smallest > 0 and overlaps[vertical] == smallest:
+            depth = max(depth, smallest)
+    return depth
+
+
+class _Stacks:
+    """Resting objects grouped by what the grasp and collision rules see of them.
+
+    Objects of one pose, size and grasp tolerance (the parts a feeder keeps waiting at
+    one spot) are one stack; a query near a point reads one object per stack, the first
+    in the world's order, so a thousand waiting parts cost what one does.
+    """
+
+    def __init__(self) -> None:
+        self._stacks: dict[tuple[Any, ...], list[tuple[int, str]]] = {}
+        self._cells: dict[tuple[int, int], set[tuple[Any, ...]]] = {}
+        # name -> (its stack's key, its place in the world's order)
+        self._key_of: dict[str, tuple[tuple[Any, ...], int]] = {}
+        self._extent: dict[tuple[Any, ...], tuple[float, float, float, float]] = {}
+
+    def add(self, name: str, obj: TableObject, order: int) -> None:
+        key = (tuple(obj.pose.as_list()), obj.size_mm, obj.grasp_tolerance_mm)
+        if self._key_of.get(name, (None, 0))[0] == key:
+            return  # filed again where it was (a part that settled where it started)
+        self.remove(name)
+        stack = self._stacks.get(key)
+        if stack is None:
+            stack = self._stacks[key] = []
+            hx, hy, _ = obj.half_extents_mm()
+            x, y = obj.pose.x, obj.pose.y
+            self._extent[key] = (x, y, hx, hy)
+            for cell in self._cells_of(x, y, hx, hy):
+                self._cells.setdefault(cell, set()).add(key)
+        bisect.insort(stack, (order, name))
+        self._key_of[name] = (key, order)
+
+    def remove(self, name: str) -> None:
+        filed = self._key_of.pop(name, None)
+        if filed is None:
+            return
+        key, order = filed
+        stack = self._stacks[key]
+        del stack[bisect.bisect_left(stack, (order, name))]
+        if not stack:
+            del self._stacks[key]
+            x, y, hx, hy = self._extent.pop(key)
+            for cell in self._cells_of(x, y, hx, hy):
+                self._cells[cell].discard(key)
+
+    @staticmethod
+    def _cells_of(x: float, y: float, hx: float, hy: float) -> list[tuple[int, int]]:
+        cells = _SupportIndex._footprint(x, y, hx, hy)
+        return [(0x7FFFFFFF, 0)] if cells is None else cells  # too wide: one shared cell
+
+    def near(self, x: float, y: float, radius: float) -> list[str]:
+        keys: set[tuple[Any, ...]] = set(self._cells.get((0x7FFFFFFF, 0), ()))
+        cells = _SupportIndex._footprint(x, y, radius, radius)
+        if cells is None:  # a query wider than the grid: every stack
+            keys.update(self._stacks)
+        else:
+            for cell in cells:
+                keys.update(self._cells.get(cell, ()))
+        first = []
+        for key in keys:
+            ox, oy, ohx, ohy = self._extent[key]
+            if abs(ox - x) < ohx + radius and abs(oy - y) < ohy + radius:
+                first.append(self._stacks[key][0])
+        return [name for _, name in sorted(first)]
+
+
 class World:
     """The objects on the table, which one the gripper holds, the grasp and falling rules.
 
@@ -262,8 +604,11 @@ class World:
                 raise ConfigError(f"objects: duplicate object name {item.name!r}")
             self._objects[item.name] = item
         self._held: str | None = None
+        # The held object's pose in the TCP frame (None: its pose is the TCP's).
+        self._relative: kin.Transform | None = None
         self._order = {name: k for k, name in enumerate(self._objects)}
         self._index = _SupportIndex()
+        self._stacks = _Stacks()
         for name, obj in self._objects.items():
             self._file(name, obj)
         # Objects start at rest: each one placed in the air drops onto its support,
@@ -314,7 +659,12 @@ class World:
         return self._resting_on.get(name)
 
     def grasp_candidate(
-        self, tcp: Pose, *, current_width_mm: float, target_width_mm: float
+        self,
+        tcp: Pose,
+        *,
+        current_width_mm: float,
+        target_width_mm: float,
+        gripper: GripperGeometry = DEFAULT_GRIPPER,
     ) -> TableObject | None:
         """The object fingers closing from ``current`` to ``target`` at ``tcp`` would stop on.
 
@@ -322,38 +672,92 @@ class World:
             tcp: Where the fingers are.
             current_width_mm: Their width now, mm.
             target_width_mm: The width they close to, mm.
+            gripper: The gripper's stroke, pads and friction.
 
         Returns:
-            The widest object between the fingers, or None (also while one is held).
+            The object (:meth:`grasp_fit` says how they stop on it), or None.
+        """
+        fit = self.grasp_fit(
+            tcp,
+            current_width_mm=current_width_mm,
+            target_width_mm=target_width_mm,
+            gripper=gripper,
+        )
+        return None if fit is None else fit.obj
+
+    def grasp_fit(
+        self,
+        tcp: Pose,
+        *,
+        current_width_mm: float,
+        target_width_mm: float,
+        gripper: GripperGeometry = DEFAULT_GRIPPER,
+        opening_mm: float | None = None,
+    ) -> GraspFit | None:
+        """How fingers closing from ``current`` to ``target`` at ``tcp`` stop on an object.
+
+        Args:
+            tcp: Where the fingers are.
+            current_width_mm: Their width now, mm.
+            target_width_mm: The width they close to, mm.
+            gripper: The gripper's stroke, pads and friction.
+            opening_mm: Their width when they started closing (None: ``current``): a part
+                between them then is pushed along by the first pad to touch it.
+
+        Returns:
+            The fit of the object they meet first (the widest, :func:`grasp_fit`), or None
+            (also while one is held).
         """
         if self._held is not None or target_width_mm >= current_width_mm:
             return None
-        candidates = [
-            obj
-            for obj in self._objects.values()
-            if tcp.distance_to(obj.pose) <= obj.grasp_tolerance_mm
+        opening = max(current_width_mm, opening_mm or 0.0)
+        reach = math.hypot(gripper.pad_depth_mm, opening + 2 * gripper.pad_thickness_mm)
+        fits = []
+        for obj in self.near(tcp.x, tcp.y, reach):
+            fit = grasp_fit(obj, tcp, opening_mm=opening, gripper=gripper)
             # Fingers already touching (equal width) still count: they are on the object.
-            and target_width_mm < obj.width_mm <= current_width_mm
-        ]
+            if fit is not None and target_width_mm < fit.width_mm <= current_width_mm + 1e-9:
+                fits.append(fit)
         # Closing fingers meet the widest object first.
-        return max(candidates, key=lambda obj: obj.width_mm, default=None)
+        return max(fits, key=lambda fit: fit.width_mm, default=None)
 
-    def grasp(self, name: str, tcp: Pose) -> None:
-        """Mark ``name`` as held; it snaps to the TCP pose.
+    def near(self, x: float, y: float, radius_mm: float) -> list[TableObject]:
+        """The objects not held whose footprint comes within ``radius_mm`` of (x, y).
+
+        Of identical objects resting at one spot (a feeder's parts waiting) only the first
+        in the world's order is named: the others are the same for every rule.
+
+        Args:
+            x: Base x, mm.
+            y: Base y, mm.
+            radius_mm: The distance, mm.
+
+        Returns:
+            The objects, in the world's order.
+        """
+        return [self._objects[name] for name in self._stacks.near(x, y, radius_mm)]
+
+    def grasp(self, name: str, tcp: Pose, relative: Pose | None = None) -> None:
+        """Mark ``name`` as held at ``relative`` to the TCP (None: at the TCP pose itself).
 
         Args:
             name: The object's name.
             tcp: The TCP pose.
+            relative: The object's pose in the TCP frame while held (:attr:`GraspFit.relative`);
+                None: its pose is the TCP's.
 
         Raises:
             RuntimeError: Another object is held.
         """
         if self._held is not None and self._held != name:
             raise RuntimeError(f"already holding {self._held!r}, cannot grasp {name!r}")
-        self._objects[name] = self.get(name).model_copy(update={"pose": tcp})
+        identity = relative is None or relative == Pose(0, 0, 0, 0, 0, 0)
+        self._relative = None if identity else kin.pose_to_transform(relative)  # type: ignore[arg-type]
         self._held = name
         self._resting_on[name] = None
         self._index.remove(name)  # a held object supports nothing
+        self._stacks.remove(name)
+        self.follow(tcp)
 
     def follow(self, tcp: Pose) -> None:
         """Move the held object (if any) rigidly with the TCP.
@@ -361,8 +765,12 @@ class World:
         Args:
             tcp: The TCP pose.
         """
-        if self._held is not None:
-            self._objects[self._held] = self._objects[self._held].model_copy(update={"pose": tcp})
+        if self._held is None:
+            return
+        pose = tcp
+        if self._relative is not None:
+            pose = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(tcp), self._relative))
+        self._objects[self._held] = self._objects[self._held].model_copy(update={"pose": pose})
 
     def release(self, tcp: Pose) -> TableObject | None:
         """Let go of the held object at the TCP; it falls onto its support.
@@ -446,6 +854,7 @@ class World:
     def _file(self, name: str, obj: TableObject) -> None:
         """(Re)file ``name`` in the support index at ``obj``'s pose."""
         self._index.remove(name)
+        self._stacks.add(name, obj, self._order[name])
         hx, hy, hz = obj.half_extents_mm()
         entry = (obj.pose.x, obj.pose.y, hx, hy, obj.pose.z + hz, self._order[name])
         self._index.add(name, entry)
