@@ -65,6 +65,8 @@ _EPS = 1e-9
 #: The arm deeper in the table than when its motion started by more than this is a
 #: collision, mm (the MuJoCo backend's figure).
 _COLLISION_DEPTH_MM = 0.2
+#: Halvings of a step that find where in it a collision began (1/128 of the step).
+_CONTACT_BISECTIONS = 7
 
 
 @dataclass
@@ -463,11 +465,14 @@ class KinematicBackend:
         """
         if dt < 0 or not math.isfinite(dt):
             raise ValueError(f"dt must be a finite number >= 0, got {dt}")
-        moving = self._motion is not None
+        motion = self._motion
+        started_s = 0.0 if motion is None else motion.elapsed_s
         self._step_arm(dt)
-        if moving:
+        if motion is not None:
             fault = self._check_collision() or self._overload()
             if fault is not None:
+                if fault.kind == "collision":
+                    fault = self._back_to_contact(motion, started_s, fault)
                 self.stop_motion()
                 self._fault = fault
         self._step_gripper(dt)
@@ -541,6 +546,25 @@ class KinematicBackend:
                 )
         return None
 
+    def _back_to_contact(
+        self, motion: _Motion, started_s: float, fault: BackendFault
+    ) -> BackendFault:
+        """Put the arm back where, within this step, the collision began (the arm stops there).
+
+        A tick moves the arm up to ~22 mm at full speed: the physics would have stopped it
+        at the first touch, not a tick later inside the table.
+        """
+        low, high = started_s, min(motion.elapsed_s, motion.duration_s)
+        for _ in range(_CONTACT_BISECTIONS):
+            middle = (low + high) / 2
+            self._place(motion, middle)
+            if self._check_collision() is None:
+                low = middle
+            else:
+                high = middle
+        self._place(motion, high)
+        return self._check_collision() or fault
+
     def _overload(self) -> BackendFault | None:
         """The part carried is heavier than the arm's rated payload."""
         held = self._world.held
@@ -576,7 +600,14 @@ class KinematicBackend:
             self._motion = None
             self._rest_s = max(0.0, motion.elapsed_s - motion.duration_s)
             return
-        progress = trapezoid_progress(motion.elapsed_s, motion.duration_s, motion.accel_time_s)
+        self._place(motion, motion.elapsed_s)
+
+    def _place(self, motion: _Motion, elapsed_s: float) -> None:
+        """Put the arm where ``motion`` has it ``elapsed_s`` after its start."""
+        if elapsed_s + _EPS >= motion.duration_s:
+            self._set(motion.target_joints, motion.target)
+            return
+        progress = trapezoid_progress(elapsed_s, motion.duration_s, motion.accel_time_s)
         if motion.kind is MotionType.PTP:
             joints = _lerp(motion.start_joints, motion.target_joints, progress)
             self._set(joints, self._model.forward(joints, self._tool))

@@ -349,8 +349,8 @@ def build_mjcf(
         lines.append(f'    <motor name="finger_{side}" joint="finger_{side}" gear="1"/>')
     lines.append("  </actuator>")
     # Contact sensors (cheaper to read than MuJoCo's contact list every step): the arm,
-    # tool or pads in the table (the deepest contact), and what each pad touches (the
-    # hardest contact).
+    # tool or pads in the table (the deepest contact), and the net force on each pad
+    # from everything and from the table alone.
     lines.append("  <sensor>")
     lines.append(
         '    <contact name="arm_table" subtree1="link1" geom2="table" num="1"'
@@ -359,6 +359,10 @@ def build_mjcf(
     for side in ("l", "r"):
         lines.append(
             f'    <contact name="pad_{side}_touch" geom1="pad_{side}" num="1"'
+            ' reduce="netforce" data="found force"/>'
+        )
+        lines.append(
+            f'    <contact name="pad_{side}_table" geom1="pad_{side}" geom2="table" num="1"'
             ' reduce="netforce" data="found force"/>'
         )
     lines.append("  </sensor>")
@@ -547,6 +551,7 @@ class MuJoCoBackend:
         self._welds = [ident(obj.mjOBJ_EQUALITY, f"grip{k}") for k in parts]
         self._sense_table = sensor("arm_table")
         self._sense_pads = [sensor("pad_l_touch"), sensor("pad_r_touch")]
+        self._sense_pad_table = [sensor("pad_l_table"), sensor("pad_r_table")]
         if snapshot is None:
             for adr, q in zip(self._arm_qpos, self._hold, strict=True):
                 d.qpos[adr] = math.radians(q)
@@ -769,10 +774,13 @@ class MuJoCoBackend:
         if self._held is not None:
             return None
         data = self._d.sensordata
-        for adr, side in zip(self._sense_pads, ("left", "right"), strict=True):
+        for adr, table, side in zip(
+            self._sense_pads, self._sense_pad_table, ("left", "right"), strict=True
+        ):
             if data[adr] <= 0:
                 continue
-            force = math.hypot(data[adr + 1], data[adr + 2], data[adr + 3])
+            # The pad's net contact force, less what the table pushes on it: the parts'.
+            force = math.hypot(*(data[adr + i] - data[table + i] for i in (1, 2, 3)))
             if force > self._collision_force:
                 return BackendFault(
                     "collision", f"the {side} finger pressed on a part with {force:.0f} N"
@@ -792,8 +800,10 @@ class MuJoCoBackend:
             f"carrying {obj.name} ({obj.mass_kg:g} kg) over the rated payload of {payload:g} kg",
         )
 
-    def _stop_for(self, fault: BackendFault) -> None:
-        self.stop_motion()
+    def _stop_for(self, fault: BackendFault, joints: tuple[float, ...]) -> None:
+        """Stop where the fault showed (the step's pose, not the trajectory's next one)."""
+        self._trajectory = None
+        self._hold = joints
         self._fault = fault
 
     # -- simulation ---------------------------------------------------------------------
@@ -827,6 +837,7 @@ class MuJoCoBackend:
     def _substep(self) -> None:
         h = self._timestep
         trajectory = self._trajectory
+        now = self._hold
         if trajectory is None:
             self._set_arm(self._hold, None)
         else:
@@ -845,7 +856,7 @@ class MuJoCoBackend:
         if trajectory is not None:
             fault = self._check_collision() or self._overload()
             if fault is not None:
-                self._stop_for(fault)
+                self._stop_for(fault, now)
         if self._gripper_moving:
             self._update_gripper(h)
 
