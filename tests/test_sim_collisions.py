@@ -96,6 +96,22 @@ def test_moving_just_above_the_table_is_no_collision(backend_name: str) -> None:
         assert until_fault(b, b.is_settled) is None
 
 
+def test_a_tool_pointing_up_brings_the_flange_into_the_table() -> None:
+    # The kinematic backend checks the flange too: with a 120 mm tool pointing up it is
+    # under the TCP. (MuJoCo sees the wrist links hanging under it well before.)
+    tool = Pose(0, 0, 120, 0, 0, 0)
+    b = make("kinematic", home=Pose(400, 0, 320, 0, 0, 0), tool=tool)
+    b.start_motion(
+        Pose(400, 0, 150, 0, 0, 0), motion=MotionType.LINE, speed_percent=20, accel_time_s=0.1
+    )
+    fault = until_fault(b, b.is_settled)
+    assert fault is not None
+    assert fault.kind == "collision"
+    flange = b.flange_pose()
+    assert flange is not None
+    assert flange.z == pytest.approx(DEFAULT_TABLE_TOP_Z_MM, abs=0.3)
+
+
 @pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra")
 def test_mujoco_stops_an_arm_link_that_hits_the_table() -> None:
     # The tool horizontal, 110 mm up: its pads stay clear but the wrist (45 mm radius)

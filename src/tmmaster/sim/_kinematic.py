@@ -174,6 +174,8 @@ class KinematicBackend:
         self._start_depth = -1.0
         self._start_overlaps: dict[str, float] = {}
         self._fault: BackendFault | None = None
+        self._tool_back_of: Pose | None = None
+        self._tool_back_xyz = (0.0, 0.0, 0.0)
 
     @property
     def model(self) -> RobotModel:
@@ -491,9 +493,18 @@ class KinematicBackend:
         fault, self._fault = self._fault, None
         return fault
 
-    def _pad_corners(self) -> list[tuple[float, float, float]]:
-        """The 16 corners of the two pads in the base frame, mm."""
-        t = kin.pose_to_transform(self._pose)
+    @property
+    def _tool_back(self) -> tuple[float, float, float]:
+        """Where the flange is in the TCP frame, mm (the tool's inverse translation)."""
+        tool = self._tool
+        if tool is not self._tool_back_of:
+            back = kin.invert(kin.IDENTITY if tool is None else kin.pose_to_transform(tool))
+            self._tool_back_xyz = (back[0][3], back[1][3], back[2][3])
+            self._tool_back_of = tool
+        return self._tool_back_xyz
+
+    def _pad_corners(self, t: kin.Transform) -> list[tuple[float, float, float]]:
+        """The 16 corners of the two pads in the base frame (``t``: the TCP's transform), mm."""
         g = self._gripper
         inner, outer = self._width / 2, self._width / 2 + g.pad_thickness_mm
         corners = []
@@ -511,9 +522,19 @@ class KinematicBackend:
 
     def _table_depth(self) -> float:
         """How deep the TCP, the flange or a pad corner is in the table (mm); -1: above it."""
-        flange = self.flange_pose() or self._pose
-        points = [(self._pose.x, self._pose.y, self._pose.z), (flange.x, flange.y, flange.z)]
-        points += self._pad_corners()
+        t = kin.pose_to_transform(self._pose)
+        points = [(self._pose.x, self._pose.y, self._pose.z)]
+        if self._tool is not None:
+            # The flange is the TCP moved back along the tool (no forward kinematics).
+            x, y, z = self._tool_back
+            points.append(
+                (
+                    t[0][0] * x + t[0][1] * y + t[0][2] * z + t[0][3],
+                    t[1][0] * x + t[1][1] * y + t[1][2] * z + t[1][3],
+                    t[2][0] * x + t[2][1] * y + t[2][2] * z + t[2][3],
+                )
+            )
+        points += self._pad_corners(t)
         (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
         top = self._world.table_top_z_mm
         depths = [
