@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from tmmaster import ConfigError, _cli
+from tmmaster import ConfigError, Pose, _cli
 from tmmaster.pickplace import __main__ as pickplace_main
 from tmmaster.sim import __main__ as sim_main
 from tmmaster.sim._simulator import Simulator
@@ -522,6 +522,72 @@ def test_simulator_set_di_bad_arguments_raise_config_error(
     with pytest.raises(ConfigError, match=re.escape(named)):
         sim.set_di(**kwargs)
     assert sim.do(0) is False  # nothing was driven
+
+
+# -- moves: joints, relative moves, arcs and speeds checked before a byte is sent --------
+
+INF = float("inf")
+READY = [0, 0, 90, 0, 90, 0]
+ARC_VIA = Pose(350, -150, 200, 180, 0, 90)
+ARC_END = Pose(400, -200, 200, 180, 0, 90)
+
+# (id, call on a Robot, text the ConfigError must contain)
+MOVE_CASES: list[tuple[str, Callable[[Any], object], str]] = [
+    ("joints-nan", lambda r: r.move_joints([0, 0, 90, 0, NAN, 0]), "J5 must be a finite"),
+    ("joints-inf", lambda r: r.move_joints([INF, 0, 90, 0, 90, 0]), "J1 must be a finite"),
+    ("joints-none", lambda r: r.move_joints([0, None, 90, 0, 90, 0]), "J2 must be a finite"),
+    ("joints-bool", lambda r: r.move_joints([0, 0, True, 0, 90, 0]), "J3 must be a finite"),
+    ("joints-str-value", lambda r: r.move_joints([0, 0, "90", 0, 90, 0]), "J3 must be"),
+    ("joints-five", lambda r: r.move_joints([0, 0, 90, 0, 90]), "six angles J1..J6 (deg), got 5"),
+    ("joints-seven", lambda r: r.move_joints([*READY, 0]), "got 7"),
+    ("joints-text", lambda r: r.move_joints("0,0,90,0,90,0"), "a sequence of six angles"),
+    ("joints-pose", lambda r: r.move_joints(ARC_END), "a sequence of six angles"),
+    ("joints-number", lambda r: r.move_joints(90), "a sequence of six angles"),
+    ("joints-limit", lambda r: r.move_joints([300, 0, 90, 0, 90, 0]), "J1 = 300 deg is outside"),
+    ("joints-wrist", lambda r: r.move_joints([0, 0, 90, 0, 0, 0]), "wrist singularity"),
+    ("joints-elbow", lambda r: r.move_joints([0, 0, 0, 0, 90, 0]), "elbow singularity"),
+    ("joints-table", lambda r: r.move_joints([0, 60, 100, 0, 90, 0]), "below the table plane"),
+    ("joints-speed-0", lambda r: r.move_joints(READY, speed=0), "speed 0 %"),
+    ("joints-speed-float", lambda r: r.move_joints(READY, speed=30.5), "integer percent"),
+    ("joints-accel-float", lambda r: r.move_joints(READY, accel_time_ms=1.5), "accel_time_ms"),
+    ("joints-accel-big", lambda r: r.move_joints(READY, accel_time_ms=20000), "accel_time"),
+    ("joints-accel-negative", lambda r: r.move_joints(READY, accel_time_ms=-1), "accel_time"),
+    ("by-frame", lambda r: r.move_by(dz=1, frame="world"), "frame must be 'base' or 'tool'"),
+    ("by-frame-none", lambda r: r.move_by(dz=1, frame=None), "got None"),
+    ("by-frame-case", lambda r: r.move_by(dz=1, frame="Tool"), "got 'Tool'"),
+    ("by-nan", lambda r: r.move_by(dz=NAN), "dz must be a finite number"),
+    ("by-inf", lambda r: r.move_by(drx=INF), "drx must be a finite number"),
+    ("by-text", lambda r: r.move_by(dx="5"), "dx must be a finite number"),
+    ("by-bool", lambda r: r.move_by(dy=True), "dy must be a finite number"),
+    ("by-motion", lambda r: r.move_by(dz=1, motion="arc"), "motion must be one of"),
+    ("by-both-speeds", lambda r: r.move_by(dz=1, speed=10, speed_mm_s=100), "not both"),
+    ("by-ptp-mm-s", lambda r: r.move_by(dz=1, speed_mm_s=100), "a PTP's speed is a percent"),
+    ("arc-via-list", lambda r: r.move_arc([350, -150, 200, 180, 0, 90], ARC_END), "via must be"),
+    ("arc-to-list", lambda r: r.move_arc(ARC_VIA, [400, -200, 200, 180, 0, 90]), "target must"),
+    ("arc-to-below", lambda r: r.move_arc(ARC_VIA, ARC_END.offset(dz=-210)), "table plane"),
+    ("arc-via-below", lambda r: r.move_arc(ARC_VIA.offset(dz=-210), ARC_END), "table plane"),
+    ("arc-too-fast", lambda r: r.move_arc(ARC_VIA, ARC_END, speed_mm_s=5000), "1..1100 mm/s"),
+    ("arc-mm-s-float", lambda r: r.move_arc(ARC_VIA, ARC_END, speed_mm_s=99.5), "integer"),
+    ("arc-both-speeds", lambda r: r.move_arc(ARC_VIA, ARC_END, speed=5, speed_mm_s=5), "both"),
+    ("line-mm-s-ptp", lambda r: r.move_to(ARC_END, speed_mm_s=100), "a PTP's speed"),
+    ("line-mm-s-0", lambda r: r.move_to(ARC_END, motion="line", speed_mm_s=0), "1..1100"),
+    ("line-mm-s-bool", lambda r: r.move_to(ARC_END, motion="line", speed_mm_s=True), "integer"),
+]
+
+
+@pytest.mark.parametrize(("call", "named"), [pytest.param(c, n, id=i) for i, c, n in MOVE_CASES])
+def test_bad_moves_raise_before_any_connection(
+    call: Callable[[Any], object], named: str, counter: ConnectionCounter
+) -> None:
+    from tmmaster import Robot
+
+    robot = Robot("127.0.0.1", counter.port)  # not connected: a request would connect
+    try:
+        with pytest.raises(ConfigError, match=re.escape(named)):
+            call(robot)
+    finally:
+        robot.close()
+    assert counter.accepted == 0
 
 
 # -- tmmaster report show|plot: the report file is read bounded, strictly, and checked --

@@ -189,8 +189,8 @@ def test_split_command_block_is_refused_naming_the_fields(
 
 def test_split_tmflow_block_is_refused() -> None:
     # seq written in a second request would be the trigger arriving apart from its target.
-    with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*seq \(holding 9020\)"):
-        profile_from_data({"extends": "tmflow", "fields": {"seq": {"address": 9020}}})
+    with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*seq \(holding 9040\)"):
+        profile_from_data({"extends": "tmflow", "fields": {"seq": {"address": 9040}}})
     with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*accel_time"):
         profile_from_data({"extends": "tmflow", "fields": {"accel_time": {"address": 9030}}})
 

@@ -24,7 +24,7 @@ def sequence_profiles() -> list[str]:
 
 def test_the_program_carries_the_profiles_addresses_codes_and_tool() -> None:
     text = robot_program(robot_profile("tmflow"), tool=Pose(0, 0, 150, 0, 0, 90.5))
-    assert 'blk = modbus_read("TM", 1, "RO", 9000, 16)' in text
+    assert 'blk = modbus_read("TM", 1, "RO", 9000, 30)' in text  # with the extension
     assert 'TM.Preset("fbAck", 1, "RO", 9100, "int16")' in text
     assert "seq == ack % 32767 + 1" in text
     assert "float[] tool = {0, 0, 150, 0, 0, 90.5}" in text
@@ -36,6 +36,34 @@ def test_the_program_carries_the_profiles_addresses_codes_and_tool() -> None:
         'again = Byte_ToInt16Array(modbus_read("TM", 1, "RO", 9014, 2), 1, 0)'
     )
     assert "$" not in text  # every placeholder filled
+
+
+def test_the_program_runs_joint_moves_arcs_and_tcp_speeds() -> None:
+    text = robot_program(robot_profile("tmflow"))
+    # The codes of the two new commands, and their motion functions.
+    assert "cmd == 5 || cmd == 6" in text
+    assert 'ok = PTP("JPP", target, speed, accel, 0, false)' in text
+    assert 'ok = Circle("CPP", via, target, speed, accel, 0, 0, false)' in text
+    assert 'ok = Circle("CAP", via, target, smm, accel, 0, 0, false)' in text
+    assert 'ok = Line("CAP", target, smm, accel, 0, false)' in text
+    # The extension (via 9016-9027, speed_mm_s 9028, ext_seq 9029) is bytes 32-59 of
+    # the block: used only when it carries the command's number.
+    assert "Array_SubElements(blk, 56, 4)" in text
+    assert "if (ext != seq)" in text
+    assert "CheckFinite(32)" in text
+    # A joint target is never handed to inversekin (it is joints, not a pose): its
+    # branch comes first, the reachability check in the other one.
+    move = text.index("void Move()")
+    assert move < text.index('PTP("JPP"') < text.index("joints = inversekin(target)", move)
+
+
+def test_a_profile_without_the_extension_is_refused_naming_it() -> None:
+    profile = robot_profile("tmflow")
+    trimmed = profile.model_copy(
+        update={"fields": {k: v for k, v in profile.fields.items() if k != "ext_seq"}}
+    )
+    with pytest.raises(tmmaster.ConfigError, match="ext_seq"):
+        robot_program(trimmed)
 
 
 def test_the_gripper_wiring_is_configurable() -> None:

@@ -36,11 +36,13 @@ from ._exceptions import (
 from ._logging import get_logger
 from ._pose import MotionType, Pose
 from ._registers import (
+    EXTENSION_FIELDS,
     FLANGE_FIELDS,
     JOINT_FIELDS,
     ROBOT_BASE_TCP_FIELDS,
     TARGET_FIELDS,
     TCP_FIELDS,
+    VIA_FIELDS,
     Handshake,
     RegisterField,
     RobotProfile,
@@ -68,6 +70,15 @@ class CommandKind(StrEnum):
     STOP = "stop"
     GRIPPER_OPEN = "gripper_open"
     GRIPPER_CLOSE = "gripper_close"
+    #: A PTP to joint angles (TMscript ``PTP("JPP", ...)``): the target registers carry J1..J6.
+    PTP_JOINTS = "ptp_joints"
+    #: A circular arc through a via point (TMscript ``Circle``).
+    CIRCLE = "circle"
+
+    @property
+    def is_move(self) -> bool:
+        """True for the commands that move the arm (a target: PTP, Line, joints, Circle)."""
+        return self in _MOVES
 
     @classmethod
     def of(cls, motion: MotionType) -> CommandKind:
@@ -82,18 +93,32 @@ class CommandKind(StrEnum):
         return cls.PTP if motion is MotionType.PTP else cls.LINE
 
 
+#: The command kinds that move the arm to a target.
+_MOVES = frozenset({CommandKind.PTP, CommandKind.LINE, CommandKind.PTP_JOINTS, CommandKind.CIRCLE})
+#: The command kinds that write the command block's extension (via, speed_mm_s, ext_seq).
+_EXTENDED = frozenset({CommandKind.LINE, CommandKind.CIRCLE})
+
+
 @dataclass(frozen=True)
 class Command:
     """A command as the user asked for it, before encoding."""
 
     #: What it asks for.
     kind: CommandKind
-    #: The TCP target of a move (None for a gripper command or a stop).
+    #: The TCP target of a move (None for a gripper command or a stop); for a
+    #: ``ptp_joints`` command, the TCP the joints put the arm at.
     target: Pose | None = None
-    #: The move's speed, %.
+    #: The move's speed, % (a TCP speed in mm/s: the percent of the arm's top TCP speed it
+    #: is, rounded up).
     speed: int | None = None
     #: The move's acceleration time, ms (None: the robot's default).
     accel_time_ms: int | None = None
+    #: A ``ptp_joints`` command's joint angles J1..J6, deg (what the target registers carry).
+    joints: tuple[float, ...] | None = None
+    #: A ``circle`` command's point on the arc.
+    via: Pose | None = None
+    #: A Line's or a Circle's TCP speed, mm/s (None: ``speed`` in %).
+    speed_mm_s: int | None = None
 
 
 @dataclass
@@ -210,12 +235,24 @@ class CommandChannel(ABC):
         self.profile = profile
         self.transport = transport
         command = profile.field("command")
-        self.supported = frozenset(
-            CommandKind(v) for v in command.values.values() if v in set(CommandKind)
+        # The block's extension (a circle's via, a TCP speed in mm/s), where the profile
+        # has all of it: it is tied to a command by the sequence number (ext_seq).
+        self.extension_fields = (
+            _published(profile, EXTENSION_FIELDS) if profile.handshake is Handshake.SEQUENCE else ()
         )
+        self.supported = frozenset(
+            CommandKind(v)
+            for v in command.values.values()
+            if v in set(CommandKind) and (v != CommandKind.CIRCLE or self.extension_fields)
+        )
+        # Optional sets of Techman's table, empty where the profile lacks them: read at
+        # connect and before a plan; the joints also with the status (they come in the
+        # same request as the TCP pose, Techman's 7013-7036).
+        self.joint_fields = _published(profile, JOINT_FIELDS)
         readable_gripper = [f for f in profile.role(Role.GRIPPER) if not f.access.writable]
         self.status_fields: tuple[RegisterField, ...] = (
             *profile.role(Role.STATUS),
+            *self.joint_fields,
             *profile.role(Role.POSE),
             *profile.role(Role.FEEDBACK),
             *readable_gripper,
@@ -223,9 +260,6 @@ class CommandChannel(ABC):
         # Field sets read on every command, built once (their read plans are cached by
         # the tuple's identity).
         self.tcp_fields = profile.select(TCP_FIELDS)
-        # Optional sets of Techman's table, empty where the profile lacks them: read at
-        # connect and before a plan, never by a status poll.
-        self.joint_fields = _published(profile, JOINT_FIELDS)
         self.flange_fields = _published(profile, FLANGE_FIELDS)
         self.robot_base_tcp_fields = _published(profile, ROBOT_BASE_TCP_FIELDS)
         # Before a plan: the TCP pose with the joints, where published (Techman's
@@ -238,6 +272,8 @@ class CommandChannel(ABC):
         self._target_fields = profile.select(TARGET_FIELDS)
         self._speed_field = profile.field("speed") if profile.has("speed") else None
         self._accel_field = profile.field("accel_time") if profile.has("accel_time") else None
+        self._via_fields = self.extension_fields[: len(VIA_FIELDS)]
+        self._speed_mm_s_field = profile.field("speed_mm_s") if self.extension_fields else None
         self._command_field = command
         self._command_codes: dict[CommandKind, int] = {}
         #: What the last poll that saw a command finished read (see :class:`StateAfterDone`).
@@ -348,16 +384,38 @@ class CommandChannel(ABC):
             raise ConfigError(
                 f"profile {self.profile.name!r} has no {command.kind.value!r} command"
             )
+        if command.speed_mm_s is not None and (
+            self._speed_mm_s_field is None or command.kind not in _EXTENDED
+        ):
+            raise ConfigError(
+                f"profile {self.profile.name!r} has no TCP speed in mm/s for a"
+                f" {command.kind.value!r} command"
+                + ("" if self._speed_mm_s_field is None else " (only line and circle have one)")
+            )
         p = self.profile
         words: list[tuple[RegisterField, Value]] = []
         if command.target is not None:
-            words += zip(self._target_fields, command.target.as_list(), strict=True)
+            if command.kind is CommandKind.PTP_JOINTS:
+                if command.joints is None or len(command.joints) != 6:
+                    raise ConfigError("a ptp_joints command needs six joint angles")
+                values = list(command.joints)
+            else:
+                values = command.target.as_list()
+            words += zip(self._target_fields, values, strict=True)
         if command.speed is not None:
             words.append((self._speed_field or p.field("speed"), command.speed))
         if command.target is not None and self._accel_field is not None:
             # Always written (0 = the program's default) so the block stays contiguous
             # and goes out as one atomic request.
             words.append((self._accel_field, command.accel_time_ms or 0))
+        if command.kind is CommandKind.CIRCLE and command.via is None:
+            raise ConfigError("a circle command needs a via point")
+        if command.kind in _EXTENDED and self._speed_mm_s_field is not None:
+            # Every Line and Circle writes the extension (in the same request; ext_seq
+            # follows with the number): one left from an earlier command never applies.
+            via = command.via.as_list() if command.via is not None else [0.0] * 6
+            words += zip(self._via_fields, via, strict=True)
+            words.append((self._speed_mm_s_field, command.speed_mm_s or 0))
         code = self._command_codes.get(command.kind)
         if code is None:
             code = self._command_codes[command.kind] = self._command_field.code_of(
@@ -469,6 +527,10 @@ class CommandChannel(ABC):
     def check_move(self, target: Pose, speed: int, motion: MotionType) -> None:
         """Encode a move's command block without sending it (raises naming the field)."""
         self.encode_command(Command(CommandKind.of(motion), target, speed))
+
+    def check_command(self, command: Command) -> None:
+        """Encode any command's block without sending it (raises naming the field)."""
+        self.encode_command(command)
 
 
 class ClearOnAcceptChannel(CommandChannel):
@@ -629,6 +691,7 @@ class SequenceChannel(CommandChannel):
             pose=pose_from(values, TCP_FIELDS),
             raw=MappingProxyType(dict(values)),
             timestamp=time.monotonic(),
+            joints=self.joints_from(values) if "joint_1" in values else None,
         )
 
     @staticmethod
@@ -700,8 +763,11 @@ class SequenceChannel(CommandChannel):
         # The program takes only ack_seq + 1 (1..seq_max, skipping 0), so a seq that was
         # put back to withdraw a command can never be mistaken for a new one.
         seq = p.next_seq(ack)
-        seq_word = (p.field("seq"), seq)
-        words.append(seq_word)
+        numbered: list[tuple[RegisterField, Value]] = [(p.field("seq"), seq)]
+        if command.kind in _EXTENDED and self.extension_fields:
+            # The extension carries the number of the command it belongs to.
+            numbered.append((self.extension_fields[-1], seq))
+        words += numbered
         return Ticket(
             command,
             words,
@@ -710,7 +776,7 @@ class SequenceChannel(CommandChannel):
             start_pose=start_pose,
             start_joints=start_joints,
             extra={"heartbeat": feedback.get("heartbeat", 0)},
-            plan=group_writes([*encoded, *encode_writes([seq_word])]),
+            plan=group_writes([*encoded, *encode_writes(numbered)]),
         )
 
     def poll_steps(self, ticket: Ticket) -> PollSteps:

@@ -333,12 +333,18 @@ TCP_FIELDS = tuple(f"tcp_{n}" for n in _POSE_NAMES)
 #: current base, the joints J1..J6 in degrees, the TCP pose in the robot base.
 FLANGE_FIELDS = tuple(f"flange_{n}" for n in _POSE_NAMES)
 JOINT_FIELDS = tuple(f"joint_{i}" for i in range(1, 7))
+#: The command block's optional extension (tmflow): a circle's via point, a TCP speed in
+#: mm/s, and the number of the command they belong to.
+VIA_FIELDS = tuple(f"via_{n}" for n in _POSE_NAMES)
+EXTENSION_FIELDS = (*VIA_FIELDS, "speed_mm_s", "ext_seq")
 ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 
 #: Optional fields that belong to the command block when a profile has them.
-_OPTIONAL_BLOCK = ("accel_time",)
+_OPTIONAL_BLOCK = ("accel_time", *EXTENSION_FIELDS)
 #: Command labels that make the robot act; none may share the "none" code.
-_ACTION_LABELS = frozenset({"ptp", "line", "stop", "gripper_open", "gripper_close"})
+_ACTION_LABELS = frozenset(
+    {"ptp", "line", "stop", "gripper_open", "gripper_close", "ptp_joints", "circle"}
+)
 
 _REQUIRED: dict[Handshake, tuple[str, ...]] = {
     Handshake.CLEAR_ON_ACCEPT: (
@@ -498,7 +504,10 @@ class RobotProfile(RegisterMap):
         return seq % self.seq_max + 1
 
     def command_block(self) -> tuple[RegisterField, ...]:
-        """Fields of the command block (targets, speed, accel_time, command, seq), by address.
+        """Fields of the command block (targets, speed, accel_time, command, seq...), by address.
+
+        Where the profile has them, the extension's fields (``via_*``, ``speed_mm_s``,
+        ``ext_seq``) follow ``seq``.
 
         Returns:
             The fields, contiguous in one table: written in one request.

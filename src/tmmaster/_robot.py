@@ -20,6 +20,7 @@ import atexit
 import functools
 import inspect
 import logging
+import math
 import threading
 import time
 import weakref
@@ -86,7 +87,7 @@ from ._registers import (
     Role,
 )
 from ._retry import RetryPolicy
-from ._robot_models import PathGauge, RobotModel, robot_model
+from ._robot_models import PathGauge, RobotModel, arc_through, robot_model
 from ._sigint import deferred
 from ._status import MovePhase, MoveProgress, RobotStatus
 from ._transport import (
@@ -680,9 +681,11 @@ class _MotionFollower:
             # The poll that saw the move finished read the pose in the same snapshot
             # (article); only a profile whose poll carries no pose needs one more read.
             # tmflow: the joints come with it (one request), for the next move's plan.
-            pose = (
-                polled_pose if polled_pose is not None else self._channel.read_pose_and_joints()[0]
-            )
+            joints: tuple[float, ...] | None = None
+            if polled_pose is not None:
+                pose = polled_pose
+            else:
+                pose, joints = self._channel.read_pose_and_joints()
             motion.last_pose = pose
             if not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
@@ -694,6 +697,20 @@ class _MotionFollower:
                     f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
                     pose=pose,
                 )
+            wanted = motion.command.joints
+            if wanted is not None and joints is not None:
+                # A joint move arrives at its joints, not only at their TCP (another
+                # branch reaches the same TCP with other joints).
+                worst = max(abs(a - b) for a, b in zip(joints, wanted, strict=True))
+                if worst > self.orientation_tolerance_deg:
+                    self._channel.after_done = None
+                    motion.phase = MovePhase.FAILED
+                    raise RobotError(
+                        f"robot reported the move finished but its joints are"
+                        f" {[round(q, 2) for q in joints]}, {worst:.2f} deg from the target"
+                        f" {[round(q, 2) for q in wanted]}",
+                        pose=pose,
+                    )
         motion.phase = MovePhase.DONE
         motion.finished_at = time.monotonic()
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
@@ -1296,7 +1313,8 @@ class Robot:
         """One immutable snapshot: each status block read in one request.
 
         Returns:
-            The robot's mode, motion, error, e-stop, grasp and TCP pose.
+            The robot's mode, motion, error, e-stop, grasp, TCP pose and joints (where
+            the profile publishes them: tmflow reads them with the pose, one request).
 
         Raises:
             TransportError: The read failed (ProfileMismatchError when the device answers
@@ -1420,7 +1438,13 @@ class Robot:
             raise ConfigError(f"{exc}; {units}") from exc
 
     def expected_motion_time(
-        self, start: Pose, target: Pose, speed: int, motion: MotionType
+        self,
+        start: Pose,
+        target: Pose,
+        speed: float,
+        motion: MotionType,
+        *,
+        accel_time_ms: int | None = None,
     ) -> float:
         """Expected duration of a move from the arm model (joint-space PTP, checked Line), s.
 
@@ -1429,6 +1453,8 @@ class Robot:
             target: The TCP target.
             speed: Speed, %.
             motion: PTP or LINE.
+            accel_time_ms: Time to reach full speed, ms; None or 0: the robot program's
+                default (200 ms, the model's ``accel_time_s``).
 
         Returns:
             The expected duration, s.
@@ -1442,6 +1468,7 @@ class Robot:
             target,
             speed_percent=speed,
             motion=motion,
+            accel_time_s=_accel_s(accel_time_ms),
             start_joints_deg=self._joints_hint,
             tool=self.tool,
         )
@@ -1498,10 +1525,11 @@ class Robot:
         self,
         target: Pose,
         *,
-        speed: int = 30,
+        speed: int | None = None,
         motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
         timeout: float | None = None,
         accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
     ) -> Motion:
         """Validate and send a move, returning at once with a :class:`Motion` handle.
 
@@ -1515,12 +1543,16 @@ class Robot:
 
         Args:
             target: The TCP target (mm, deg, robot base frame).
-            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``); None: 30 %
+                (or ``speed_mm_s``).
             motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
             timeout: How long the move may take, s; None: from the expected time
                 (``TimeoutPolicy.for_motion``).
             accel_time_ms: Time to reach full speed, ms, where the profile has the
                 field; None: the robot's default.
+            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (at most
+                ``max_speed_percent`` of the arm's top TCP speed), where the profile
+                has the field (``tmflow``).
 
         Returns:
             The move's handle: :meth:`Motion.wait` for it, or :meth:`Motion.progress`.
@@ -1532,7 +1564,9 @@ class Robot:
             StopRequestedError: A stop was requested (nothing is sent).
         """
         motion = _motion_type(motion)
-        self.validate_move(target, speed)
+        percent = self._speed_argument(speed, speed_mm_s, motion)
+        _check_accel(accel_time_ms)
+        self.validate_move(target, percent)
         if motion is MotionType.LINE and self._hint_pose is not None:
             # The straight path from where the arm is believed to be, before any request:
             # a Line the arm cannot follow is refused without touching the robot. It is
@@ -1540,9 +1574,299 @@ class Robot:
             self.model.line_joints(
                 self._hint_pose, target, start_joints_deg=self._joints_hint, tool=self.tool
             )
-        return self._start_command(
-            Command(CommandKind.of(motion), target, speed, accel_time_ms), timeout=timeout
+        # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
+        command = Command(
+            CommandKind.of(motion), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
         )
+        return self._start_command(command, timeout=timeout)
+
+    def _speed_argument(
+        self, speed: int | None, speed_mm_s: int | None, motion: MotionType | None
+    ) -> int:
+        """The speed register's percent for ``speed`` or ``speed_mm_s`` (checked, no I/O).
+
+        ``motion`` None: a Circle (which takes mm/s too).
+        """
+        if speed_mm_s is None:
+            return 30 if speed is None else speed
+        if speed is not None:
+            raise ConfigError(
+                f"give either speed ({speed!r} %) or speed_mm_s ({speed_mm_s!r} mm/s), not both"
+            )
+        if motion is MotionType.PTP:
+            raise ConfigError(
+                "speed_mm_s is a TCP speed, for Line and Circle moves; a PTP's speed is a"
+                " percent (speed=)"
+            )
+        if isinstance(speed_mm_s, bool) or not isinstance(speed_mm_s, int):
+            raise ConfigError(f"speed_mm_s must be an integer (mm/s), got {speed_mm_s!r}")
+        top = int(self.model.tcp_speed_mm_s * self.max_speed_percent / 100)
+        if not 1 <= speed_mm_s <= top:
+            raise ConfigError(
+                f"speed_mm_s {speed_mm_s} mm/s is outside 1..{top} mm/s (max_speed_percent"
+                f" {self.max_speed_percent} % of the {self.model.name}'s"
+                f" {self.model.tcp_speed_mm_s:g} mm/s)"
+            )
+        if not self._channel.extension_fields:
+            raise ConfigError(
+                f"profile {self.profile.name!r} has no TCP speed in mm/s (speed_mm_s): give"
+                " speed in %"
+            )
+        return min(self.max_speed_percent, math.ceil(speed_mm_s * 100 / self.model.tcp_speed_mm_s))
+
+    def move_joints(
+        self,
+        joints: Sequence[float],
+        *,
+        speed: int = 30,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+    ) -> Motion:
+        """Move to joint angles J1..J6 (a PTP in joint space) and return when it is done.
+
+        The robot program runs ``PTP("JPP", ...)``: every joint turns on the same
+        profile to its angle. Checked before any request: six finite numbers, each inside
+        its range and the whole away from the arm model's singularities
+        (:meth:`RobotModel.check_joints`), the TCP they put the arm at (forward
+        kinematics with ``tool``) inside the ``workspace`` and above its table plane. The
+        expected time is the model's joint-space time from the joints the robot reports;
+        at the end, the joints the robot reports and its TCP must be those of the target.
+
+        Example:
+            Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+            ```python
+            from tmmaster import connect
+
+            with connect("127.0.0.1", 5020) as robot:
+                robot.move_joints([0, 0, 90, 0, 90, 0], speed=20)
+                print(robot.status().joints)
+            ```
+
+        Args:
+            joints: J1..J6, deg.
+            speed: Speed, an integer percent of the joints' top speeds (1 ..
+                ``max_speed_percent``).
+            timeout: How long the move may take, s; None: from the expected time.
+            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+
+        Returns:
+            The finished move (``motion.target``: the TCP pose the joints give).
+
+        Raises:
+            ConfigError: The move is not allowed, or the profile has no joint move
+                (``article``); UnreachablePoseError for joints past a range, at a
+                singularity or out of reach. Nothing is sent.
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested (the move is withdrawn or stopped).
+            TransportError: The link failed and did not come back in time.
+        """
+        self._require(CommandKind.PTP_JOINTS, "a joint move (move_joints)")
+        values = _joint_values(joints)
+        _check_accel(accel_time_ms)
+        checked = self.model.check_joints(values, tool=self.tool)
+        tcp = self.model.forward(checked, self.tool)
+        self.validate_move(tcp, speed, seed_deg=checked)
+        command = Command(CommandKind.PTP_JOINTS, tcp, speed, accel_time_ms, joints=checked)
+        handle = self._start_command(command, timeout=timeout)
+        handle.wait()
+        return handle
+
+    def move_by(
+        self,
+        dx: float = 0.0,
+        dy: float = 0.0,
+        dz: float = 0.0,
+        drx: float = 0.0,
+        dry: float = 0.0,
+        drz: float = 0.0,
+        *,
+        frame: Literal["base", "tool"] = "base",
+        speed: int | None = None,
+        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
+    ) -> Motion:
+        """Move relative to where the robot reports the TCP, and return when it is done.
+
+        The offset is resolved against the TCP pose the robot reports (read first) into
+        one absolute target, validated and sent like :meth:`move_to`'s; before the write
+        the arm must still be at that pose. ``frame="base"``: the TCP moves ``dx, dy,
+        dz`` along the robot base's axes and turns by ``Rz(drz) Ry(dry) Rx(drx)`` about
+        the base's axes, in place. ``frame="tool"``: the offset is a pose in the TCP's
+        own frame (target = TCP x offset), as TMscript's ``Move_PTP("TPP", ...)``.
+
+        Example:
+            Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+            ```python
+            from tmmaster import connect
+
+            with connect("127.0.0.1", 5020) as robot:
+                robot.move_by(dz=-50, motion="line", speed_mm_s=100)  # 50 mm down
+                robot.move_by(drz=30, frame="tool")                   # turn the tool
+            ```
+
+        Args:
+            dx: Offset along x, mm.
+            dy: Offset along y, mm.
+            dz: Offset along z, mm.
+            drx: Rotation about x, deg.
+            dry: Rotation about y, deg.
+            drz: Rotation about z, deg.
+            frame: ``"base"`` or ``"tool"``.
+            speed: Speed, an integer percent; None: 30 % (or ``speed_mm_s``).
+            motion: ``"ptp"`` or ``"line"``.
+            timeout: How long the move may take, s; None: from the expected time.
+            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed``.
+
+        Returns:
+            The finished move (``motion.start``: the pose it was resolved against).
+
+        Raises:
+            ConfigError: A bad offset, frame or speed (nothing is read or sent), or a
+                target the move may not take (nothing is sent).
+            RobotError: The arm moved between the read and the write (nothing is sent).
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested (the move is withdrawn or stopped).
+            TransportError: The link failed and did not come back in time.
+        """
+        offset = _offset_pose(dx, dy, dz, drx, dry, drz)
+        if frame not in ("base", "tool"):
+            raise ConfigError(f"frame must be 'base' or 'tool', got {frame!r}")
+        kind = _motion_type(motion)
+        percent = self._speed_argument(speed, speed_mm_s, kind)
+        _check_accel(accel_time_ms)
+        if speed_mm_s is not None:
+            self._channel.check_command(
+                Command(CommandKind.LINE, offset, percent, accel_time_ms, speed_mm_s=speed_mm_s)
+            )
+        start = self._read_start()
+        target = _moved(start, offset, frame)
+        self.validate_move(target, percent)
+        command = Command(
+            CommandKind.of(kind), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
+        )
+        self._channel.check_command(command)
+        handle = self._start_command(command, timeout=timeout, resolved_at=start)
+        handle.wait()
+        return handle
+
+    def move_arc(
+        self,
+        via: Pose,
+        to: Pose,
+        *,
+        speed: int | None = None,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
+    ) -> Motion:
+        """Move the TCP along a circular arc through ``via`` to ``to``; return when done.
+
+        The robot program runs TMscript's ``Circle`` with arc angle 0: the TCP follows
+        the circle through where it is, ``via``'s position and ``to``, from the start
+        through ``via`` to ``to``, and its orientation turns uniformly from the start's
+        to ``to``'s (``via``'s orientation is not used: the master writes the one the
+        TCP has there). The arc is resolved against the TCP pose the robot reports (read
+        first) and checked before the write like a Line: every point by inverse
+        kinematics on the arm's branch, and inside the ``workspace``, the tool above its
+        table plane.
+
+        Example:
+            Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+            ```python
+            from tmmaster import Pose, connect
+
+            with connect("127.0.0.1", 5020) as robot:
+                robot.move_to(Pose(300, -200, 200, 180, 0, 90), speed=30)
+                robot.move_arc(Pose(350, -150, 200, 180, 0, 90),
+                               Pose(400, -200, 200, 180, 0, 90), speed_mm_s=100)
+            ```
+
+        Args:
+            via: A pose whose position the arc passes through (mm).
+            to: The TCP target at the arc's end (mm, deg).
+            speed: Speed, an integer percent of the arm's top TCP speed; None: 30 % (or
+                ``speed_mm_s``).
+            timeout: How long the move may take, s; None: from the expected time.
+            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+            speed_mm_s: The TCP speed in mm/s instead of ``speed``.
+
+        Returns:
+            The finished move.
+
+        Raises:
+            ConfigError: No arc passes through the points, the arc may not be taken, or
+                the profile has no circle command (``article``); UnreachablePoseError
+                for an arc the arm cannot follow. Nothing is sent.
+            RobotError: The arm moved between the read and the write (nothing is sent).
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested (the move is withdrawn or stopped).
+            TransportError: The link failed and did not come back in time.
+        """
+        self._require(CommandKind.CIRCLE, "an arc (move_arc)")
+        if not isinstance(via, Pose):
+            raise ConfigError(f"via must be a tmmaster.Pose, got {type(via).__name__}")
+        percent = self._speed_argument(speed, speed_mm_s, None)
+        _check_accel(accel_time_ms)
+        self.validate_move(to, percent)
+        self.workspace.check(via)  # its position (the TCP passes there)
+        if self._hint_pose is not None:
+            # The arc from where the arm is believed to be, before any request.
+            self._check_arc(self._hint_pose, via, to, self._joints_hint)
+        self._channel.check_command(
+            Command(CommandKind.CIRCLE, to, percent, accel_time_ms, via=via, speed_mm_s=speed_mm_s)
+        )
+        start = self._read_start()
+        arc = arc_through(self._planning_start(start), via, to)
+        on_arc = kin.transform_to_pose(arc.at(arc.via_fraction))
+        command = Command(
+            CommandKind.CIRCLE, to, percent, accel_time_ms, via=on_arc, speed_mm_s=speed_mm_s
+        )
+        self._channel.check_command(command)
+        handle = self._start_command(command, timeout=timeout, resolved_at=start)
+        handle.wait()
+        return handle
+
+    def _require(self, kind: CommandKind, what: str) -> None:
+        """Refuse a command the profile has no code for (ConfigError naming it), no I/O."""
+        if not self._channel.supports(kind):
+            raise ConfigError(
+                f"profile {self.profile.name!r} has no {kind.value!r} command: {what} needs"
+                " the tmflow profile (its robot program)"
+            )
+
+    def _read_start(self) -> Pose:
+        """The TCP pose the robot reports (with its joints, where published), for a plan."""
+        start, joints = self._channel.read_pose_and_joints()
+        if joints is not None:
+            self._take_robot_joints(start, joints)
+        return start
+
+    def _check_arc(
+        self, start: Pose, via: Pose, to: Pose, joints: Sequence[float] | None
+    ) -> list[tuple[float, ...]]:
+        """The arc's joint samples from ``start``; refuses a point outside the workspace."""
+        samples = self.model.arc_joints(start, via, to, start_joints_deg=joints, tool=self.tool)
+        arc = arc_through(start, via, to)
+        steps = len(samples) - 1
+        for k in range(steps + 1):
+            point = kin.transform_to_pose(arc.at(k / steps))
+            try:
+                self.workspace.check(point, tool=self.tool)
+            except ConfigError as exc:
+                raise ConfigError(f"the arc to {to} passes {point}: {exc}") from exc
+        return list(samples)
 
     def _run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
         """A gripper command through the robot program's handshake, waited for."""
@@ -1555,8 +1879,18 @@ class Robot:
             raise failure
         return status
 
-    def _start_command(self, command: Command, *, timeout: float | None = None) -> Motion:
-        """Check, send and follow any command of the profile: a move or a gripper action."""
+    def _start_command(
+        self,
+        command: Command,
+        *,
+        timeout: float | None = None,
+        resolved_at: Pose | None = None,
+    ) -> Motion:
+        """Check, send and follow any command of the profile: a move or a gripper action.
+
+        ``resolved_at``: the pose a relative move or an arc was resolved against; the arm
+        must still be there before the write.
+        """
         if timeout is not None:
             require_positive("timeout", timeout)
         # prepare() encodes (refusing out-of-range values) before its first read.
@@ -1566,11 +1900,12 @@ class Robot:
         gauge: PathGauge | None = None
         expected = 0.0
         if command.target is not None:
-            start, joints, expected, gauge = self._plan(ticket, command.target)
+            start, joints, expected, gauge = self._plan(ticket, resolved_at)
             default_timeout = self.timeouts.for_motion(expected)
         else:
             default_timeout = self.timeouts.gripper_timeout_s
         timeout_s = timeout if timeout is not None else default_timeout
+        accel = _accel_s(command.accel_time_ms)
         motion = Motion(
             self._follower,
             ticket,
@@ -1578,7 +1913,7 @@ class Robot:
             expected_s=expected,
             timeout_s=timeout_s,
             gauge=gauge,
-            accel_s=self.model.accel_time_s if gauge is not None else 0.0,
+            accel_s=(self.model.accel_time_s if accel is None else accel) if gauge else 0.0,
         )
         motion.timeout_from_model = (
             gauge is not None and timeout is None and self.timeouts.motion_timeout_s is None
@@ -1605,31 +1940,85 @@ class Robot:
         return motion
 
     def _plan(
-        self, ticket: Ticket, target: Pose
+        self, ticket: Ticket, resolved_at: Pose | None = None
     ) -> tuple[Pose, tuple[float, ...], float, PathGauge]:
         """A move's start (the robot's pose), its target's joints, expected time and gauge.
 
         Before the write: the start pose comes from the checks' read when they made one,
         else it is read, with the joints where the profile publishes them (one request).
-        Raises :class:`UnreachablePoseError` when the target (or a Line's path) cannot be
-        taken from the arm's actual joints.
+        Raises :class:`UnreachablePoseError` when the target (or a Line's or an arc's
+        path) cannot be taken from the arm's actual joints, and :class:`RobotError` when
+        the arm is no longer at ``resolved_at``.
         """
         command = ticket.command
+        target = command.target
+        assert target is not None
         start, joints = ticket.start_pose, ticket.start_joints
         if start is None or (joints is None and self._channel.joint_fields):
             start, joints = self._channel.read_pose_and_joints()
         if joints is not None:
             self._take_robot_joints(start, joints)
-        # The same solve as validate_move's when the hint did not change (cached).
-        target_joints = self.model.inverse(target, seed_deg=self._joints_hint, tool=self.tool)
-        motion = MotionType(command.kind.value)
-        expected = self.expected_motion_time(start, target, command.speed or 100, motion)
+        if resolved_at is not None and not start.is_close(
+            resolved_at, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+        ):
+            raise RobotError(
+                f"the arm moved since the {command.kind.value} command was resolved against"
+                f" {resolved_at}: it is at {start}; nothing was sent",
+                pose=start,
+            )
+        origin = self._planning_start(start)
+        hint = self._joints_hint
+        accel = _accel_s(command.accel_time_ms)
+        speed = float(command.speed or 100)
+        if command.speed_mm_s is not None:
+            speed = min(100.0, command.speed_mm_s * 100 / self.model.tcp_speed_mm_s)
+        if command.kind is CommandKind.PTP_JOINTS:
+            assert command.joints is not None
+            target_joints = self.model.check_joints(command.joints, tool=self.tool)
+            first = self.model._start_joints(origin, hint, self.tool)
+            expected = self.model.ptp_time(
+                first, target_joints, speed_percent=speed, accel_time_s=accel
+            )
+            motion = MotionType.PTP
+        elif command.kind is CommandKind.CIRCLE:
+            assert command.via is not None
+            samples = self._check_arc(origin, command.via, target, hint)
+            target_joints = self.model.check_joints(samples[-1], tool=self.tool)
+            expected = self.model.arc_time(
+                origin,
+                command.via,
+                target,
+                speed_percent=speed,
+                accel_time_s=accel,
+                tool=self.tool,
+                samples=samples,
+            )
+            arc = arc_through(origin, command.via, target)
+            gauge = PathGauge.along(
+                origin,
+                target,
+                [kin.transform_to_pose(arc.at(k / PathGauge.SAMPLES)) for k in range(21)],
+            )
+            return start, target_joints, expected, gauge
+        else:
+            # The same solve as validate_move's when the hint did not change (cached).
+            target_joints = self.model.inverse(target, seed_deg=hint, tool=self.tool)
+            motion = MotionType(command.kind.value)
+            expected = self.model.motion_time(
+                origin,
+                target,
+                speed_percent=speed,
+                motion=motion,
+                accel_time_s=accel,
+                start_joints_deg=hint,
+                tool=self.tool,
+            )
         gauge = PathGauge.of(
             self.model,
-            self._planning_start(start),
+            origin,
             target,
             motion=motion,
-            start_joints_deg=self._joints_hint,
+            start_joints_deg=hint,
             target_joints_deg=target_joints,
             tool=self.tool,
         )
@@ -1666,10 +2055,11 @@ class Robot:
         self,
         target: Pose,
         *,
-        speed: int = 30,
+        speed: int | None = None,
         motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
         timeout: float | None = None,
         accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
     ) -> Motion:
         """Move to ``target`` and return when the robot acknowledged and finished the move.
 
@@ -1693,12 +2083,14 @@ class Robot:
 
         Args:
             target: The TCP target (mm, deg, robot base frame).
-            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``); None: 30 %
+                (or ``speed_mm_s``).
             motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
             timeout: How long the move may take, s; None: from the expected time
                 (``TimeoutPolicy.for_motion``).
             accel_time_ms: Time to reach full speed, ms, where the profile has the
                 field; None: the robot's default.
+            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
 
         Returns:
             The finished move.
@@ -1713,7 +2105,12 @@ class Robot:
             TransportError: The link failed and did not come back in time.
         """
         handle = self.start_move(
-            target, speed=speed, motion=motion, timeout=timeout, accel_time_ms=accel_time_ms
+            target,
+            speed=speed,
+            motion=motion,
+            timeout=timeout,
+            accel_time_ms=accel_time_ms,
+            speed_mm_s=speed_mm_s,
         )
         handle.wait()
         return handle
@@ -1798,6 +2195,64 @@ class Robot:
 
 def _nothing() -> None:
     """A command already registered (a resend of the same ticket)."""
+
+
+def _accel_s(accel_time_ms: int | None) -> float | None:
+    """A command's acceleration time in s; None (the model's) for None or 0 (the default)."""
+    return accel_time_ms / 1000.0 if accel_time_ms else None
+
+
+def _check_accel(accel_time_ms: object) -> None:
+    """An acceleration time is None or an integer number of ms (its range: the profile's)."""
+    if accel_time_ms is not None and (
+        isinstance(accel_time_ms, bool) or not isinstance(accel_time_ms, int)
+    ):
+        raise ConfigError(f"accel_time_ms must be an integer (ms), got {accel_time_ms!r}")
+
+
+def _joint_values(joints: object) -> tuple[float, ...]:
+    """Six finite joint angles as floats; ConfigError naming what is wrong."""
+    if isinstance(joints, str | bytes | Pose) or not isinstance(joints, Sequence):
+        raise ConfigError(
+            f"joints must be a sequence of six angles J1..J6 (deg), got {type(joints).__name__}"
+        )
+    if len(joints) != 6:
+        raise ConfigError(f"joints need six angles J1..J6 (deg), got {len(joints)}")
+    values = []
+    for i, q in enumerate(joints, start=1):
+        if isinstance(q, bool) or not isinstance(q, int | float) or not math.isfinite(q):
+            raise ConfigError(f"J{i} must be a finite number of degrees, got {q!r}")
+        values.append(float(q))
+    return tuple(values)
+
+
+def _offset_pose(*values: object) -> Pose:
+    """A relative move's offsets as a Pose; ConfigError naming a value that is no number."""
+    for name, v in zip(("dx", "dy", "dz", "drx", "dry", "drz"), values, strict=True):
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise ConfigError(f"{name} must be a finite number, got {v!r}")
+    x, y, z, rx, ry, rz = (float(v) for v in values)  # type: ignore[arg-type]
+    return Pose(x, y, z, rx, ry, rz)
+
+
+def _moved(start: Pose, offset: Pose, frame: str) -> Pose:
+    """``start`` moved by ``offset``: in the tool frame (start x offset), or in the base's.
+
+    In the base frame the TCP moves along the base's axes and turns about them in place.
+    """
+    here = kin.pose_to_transform(start)
+    if frame == "tool":
+        return kin.transform_to_pose(kin.multiply(here, kin.pose_to_transform(offset)))
+    turn = kin.pose_to_transform(Pose(0, 0, 0, offset.rx, offset.ry, offset.rz))
+    turned = kin.transform_to_pose(kin.multiply(turn, here))
+    return Pose(
+        start.x + offset.x,
+        start.y + offset.y,
+        start.z + offset.z,
+        turned.rx,
+        turned.ry,
+        turned.rz,
+    )
 
 
 #: Reported joints this close (deg, each) to the hint are the hint's (the registers'

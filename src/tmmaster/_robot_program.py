@@ -20,7 +20,16 @@ from string import Template
 
 from ._exceptions import ConfigError
 from ._pose import Pose
-from ._registers import TARGET_FIELDS, DataType, Handshake, RobotProfile, Table, WordOrder
+from ._registers import (
+    EXTENSION_FIELDS,
+    TARGET_FIELDS,
+    VIA_FIELDS,
+    DataType,
+    Handshake,
+    RobotProfile,
+    Table,
+    WordOrder,
+)
 from ._version import version
 
 #: The end module's DO 0 (coil) and DI 0 (discrete input) in Techman's Modbus table.
@@ -108,36 +117,45 @@ def check_program_profile(profile: RobotProfile) -> None:
 
     Raises:
         ConfigError: not a sequence-handshake profile, a field missing, the target not
-            six big-endian float32 registers followed by speed, accel, command and seq,
-            or a feedback field outside the holding registers.
+            six big-endian float32 registers followed by speed, accel, command and seq
+            and the extension (via as six float32, speed_mm_s, ext_seq), or a feedback
+            field outside the holding registers.
     """
     if profile.handshake is not Handshake.SEQUENCE:
         raise ConfigError(
             f"profile {profile.name!r} uses the {profile.handshake.value} handshake: the robot"
             " program implements the sequence handshake (the tmflow contract)"
         )
-    missing = [name for name in (*TARGET_FIELDS, *_WORDS, *_FEEDBACK) if not profile.has(name)]
+    missing = [
+        name
+        for name in (*TARGET_FIELDS, *_WORDS, *EXTENSION_FIELDS, *_FEEDBACK)
+        if not profile.has(name)
+    ]
     if missing:
         raise ConfigError(f"profile {profile.name!r} lacks the fields {', '.join(missing)}")
     first = profile.field(TARGET_FIELDS[0]).address
-    for index, name in enumerate(TARGET_FIELDS):
+    floats = [(name, first + 2 * i) for i, name in enumerate(TARGET_FIELDS)]
+    floats += [(name, first + 16 + 2 * i) for i, name in enumerate(VIA_FIELDS)]
+    for name, address in floats:
         field = profile.field(name)
         if (
             field.table is not Table.HOLDING
             or field.dtype is not DataType.FLOAT32
             or field.word_order is not WordOrder.BIG
-            or field.address != first + 2 * index
+            or field.address != address
         ):
             raise ConfigError(
                 f"profile {profile.name!r}: {name} must be a big-endian float32 holding"
-                f" register at {first + 2 * index} for the robot program"
+                f" register at {address} for the robot program"
             )
-    for index, name in enumerate(_WORDS):
+    words = [(name, first + 12 + i) for i, name in enumerate(_WORDS)]
+    words += [(name, first + 28 + i) for i, name in enumerate(EXTENSION_FIELDS[6:])]
+    for name, address in words:
         field = profile.field(name)
-        if field.table is not Table.HOLDING or field.address != first + 12 + index:
+        if field.table is not Table.HOLDING or field.address != address:
             raise ConfigError(
                 f"profile {profile.name!r}: {name} must be the holding register at"
-                f" {first + 12 + index} for the robot program"
+                f" {address} for the robot program"
             )
     for name in _FEEDBACK:
         if profile.field(name).table is not Table.HOLDING:
@@ -173,6 +191,8 @@ def robot_program(
         "cmd_none": profile.field("command").code_of("none"),
         "cmd_ptp": profile.field("command").code_of("ptp"),
         "cmd_line": profile.field("command").code_of("line"),
+        "cmd_joints": profile.field("command").code_of("ptp_joints"),
+        "cmd_circle": profile.field("command").code_of("circle"),
         "cmd_open": profile.field("command").code_of("gripper_open"),
         "cmd_close": profile.field("command").code_of("gripper_close"),
         "state_idle": profile.field("robot_state").code_of("idle"),
@@ -201,9 +221,14 @@ def robot_program(
         profile=profile.name,
         arguments=arguments,
         block_first=first,
-        block_last=first + 15,
-        block_count=16,
+        block_last=first + 29,
+        block_count=30,
         words_offset=24,
+        via_offset=32,
+        ext_offset=56,
+        ext_first=first + 16,
+        seq_address=first + 15,
+        smm_max=int(profile.field("speed_mm_s").maximum or 2000),
         fb_first=min(addresses[name] for name in _FEEDBACK),
         fb_last=max(addresses[name] for name in _FEEDBACK),
         seq_max=profile.seq_max,

@@ -41,6 +41,9 @@ class RobotStatus:
     raw: Mapping[str, Value]
     #: time.monotonic() when the read finished.
     timestamp: float
+    #: The joint angles J1..J6 the robot reports, deg; None where the profile does not
+    #: publish them (tmflow: Techman's 7013-7024, read with the TCP pose).
+    joints: tuple[float, ...] | None = None
 
     @property
     def ready(self) -> bool:

@@ -28,16 +28,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from .._exceptions import UnreachablePoseError
+from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import MotionType, Pose
 from .._registers import RobotProfile, Table
 from .._robot_models import RobotModel
 from .._robot_program import END_MODULE_DO, robot_program
 from ..tmscript import Execution, Program, parse
 from ..tmscript._host import HostError, ModbusDevice, MotionCall
-from ._backend import PhysicsBackend
+from ._backend import PathBackend, PhysicsBackend
 from ._bank import RegisterBank
-from ._controller import SimErrorCode, _Active
+from ._controller import MoveArgs, SimErrorCode, _Active
 from ._kinematic import KinematicBackend
 from ._mujoco import MuJoCoBackend
 from ._sequence import SequenceController
@@ -72,6 +72,11 @@ class _Queued:
     accel_s: float
     tag: int = 0
     done: bool = False
+    #: ``PTP("JPP", ...)``: the joints to reach.
+    joints: tuple[float, ...] | None = None
+    #: ``Circle``: a point on the arc, and where the arc starts.
+    via: Pose | None = None
+    start: Pose | None = None
 
 
 class SimHost:
@@ -123,9 +128,9 @@ class SimHost:
         return self._c.time_s >= self._c.link_free_at
 
     def motion(self, call: MotionCall) -> bool:
-        """Put a PTP or Line into the motion buffer ("CPP" Cartesian, or PTP "JPP").
+        """Put a PTP, Line or Circle into the motion buffer ("CPP", "JPP", "CAP"...).
 
-        False (nothing queued) for a target or a Line path the arm cannot take.
+        False (nothing queued) for a target or a path the arm cannot take.
         """
         return self._c.queue_motion(call)
 
@@ -288,7 +293,9 @@ class ScriptProjectController(SequenceController):
         if seq != self._profile.next_seq(int(self._bank.get("ack_seq"))):
             return
         label = self._profile.field("command").label(int(self._bank.get("command")))
-        delay = self._late_ack_delay(motion_command=label in ("ptp", "line"))
+        delay = self._late_ack_delay(
+            motion_command=label in ("ptp", "line", "ptp_joints", "circle")
+        )
         if delay > 0 and self.link_free_at < self._time_s:
             self.link_free_at = self._time_s + delay
             self._log.warning("sim.fault_fired", device=self._name, fault="late_ack", delay_s=delay)
@@ -300,31 +307,60 @@ class ScriptProjectController(SequenceController):
         )
 
     def queue_motion(self, call: MotionCall) -> bool:
-        """Put a move into the buffer; False for a target or Line path the arm cannot take.
+        """Put a move into the buffer; False for a target or path the arm cannot take.
 
-        Refused formats are a host error.
+        PTP "CPP" / "JPP" (joints reached exactly), Line "C" + speed in % ("P") or mm/s
+        ("A", "D") + any blending letter, Circle "CPP" / "CAP" / "CDP" with arc angle 0
+        (blending is not modelled: each move ends at rest). Formats and arguments not
+        modelled are a host error; a joint target or an arc on a backend that cannot
+        follow one is refused (False).
         """
-        if call.format.upper() not in ("CPP", "JPP"):
+        fmt = call.format.upper()
+        if call.kind == "PTP" and fmt not in ("CPP", "JPP"):
             raise HostError(f"motion format {call.format!r} is not modelled (CPP, JPP)")
-        if call.format.upper() == "JPP":
-            if call.kind != "PTP":
-                raise HostError("Line takes a Cartesian target")
-            target = self._model.forward(call.target, self.tool)
-        else:
-            target = Pose(*call.target)
+        if call.kind == "Circle" and (call.arc_angle != 0 or call.rotation not in (None, 0)):
+            raise HostError(
+                "Circle is modelled with arc angle 0 and linear interpolation of the pose only"
+            )
+        speed = float(call.speed)
+        if call.kind != "PTP" and fmt[1] in "AD":
+            # Absolute speed, mm/s: the percent of the arm's top TCP speed it is.
+            speed = speed * 100.0 / self._model.tcp_speed_mm_s
+        if not 0 < speed <= 100:
+            self.log_rejected(call.kind, f"speed {call.speed} ({fmt})", Pose(*call.target[:6]))
+            return False
         accel_s = (call.accel_time_ms if call.accel_time_ms > 0 else 200) / 1000.0
-        motion = MotionType.PTP if call.kind == "PTP" else MotionType.LINE
+        # From where the arm will be: the end of the last queued move, or here.
+        start = self._queue[-1].target if self._queue else self._backend.tcp_pose()
+        joints: tuple[float, ...] | None = None
+        via: Pose | None = None
         try:
-            if motion is MotionType.LINE:
-                # From where the arm will be: the end of the last queued move, or here.
-                start = self._queue[-1].target if self._queue else self._backend.tcp_pose()
-                self._model.line_joints(start, target, tool=self.tool)
+            if fmt == "JPP":
+                joints = self._model.check_joints(call.target, tool=self.tool)
+                target = self._model.forward(joints, self.tool)
             else:
+                target = Pose(*call.target)
+            if call.kind == "Circle":
+                assert call.via is not None
+                via = Pose(*call.via)
+                self._model.arc_joints(start, via, target, tool=self.tool)
+            elif call.kind == "Line":
+                self._model.line_joints(start, target, tool=self.tool)
+            elif joints is None:
                 self._model.inverse(target, tool=self.tool)
         except UnreachablePoseError as exc:
-            self.log_rejected(call.kind, exc.reason, target)
+            self.log_rejected(call.kind, exc.reason, Pose(*call.target[:6]))
             return False
-        self._queue.append(_Queued(target, motion, float(call.speed), accel_s))
+        except ConfigError as exc:  # no arc through the points
+            self.log_rejected(call.kind, str(exc), Pose(*call.target[:6]))
+            return False
+        if (joints is not None or via is not None) and not isinstance(self._backend, PathBackend):
+            self.log_rejected(call.kind, f"{type(self._backend).__name__} cannot follow it", target)
+            return False
+        motion = MotionType.PTP if call.kind == "PTP" else MotionType.LINE
+        self._queue.append(
+            _Queued(target, motion, speed, accel_s, joints=joints, via=via, start=start)
+        )
         return True
 
     def tag_last(self, tag: int) -> None:
@@ -429,9 +465,18 @@ class ScriptProjectController(SequenceController):
 
     def _start_queued(self) -> None:
         move = self._queue[0]
-        seq = int(self._bank.get("ack_seq"))
-        self._motion_args = (move.target, move.motion, move.speed, move.accel_s, seq)
-        self._start_motion(move.target, move.motion, move.speed, move.accel_s, seq=seq)
+        args = MoveArgs(
+            move.target,
+            move.motion,
+            move.speed,
+            move.accel_s,
+            int(self._bank.get("ack_seq")),
+            joints=move.joints,
+            via=move.via,
+            start=move.start if move.via is not None else None,
+        )
+        self._motion_args = args
+        self._start_move(args)
 
     def _command_done(self, active: _Active) -> None:
         # A move of the buffer ran; the fingers stopped (the program reports the gripper

@@ -16,10 +16,9 @@ from abc import abstractmethod
 from typing import Any
 
 from .._io import digital_io_areas
-from .._pose import MotionType, Pose
 from .._registers import RobotProfile
 from ._bank import RegisterBank
-from ._controller import RobotController, SimErrorCode, _Active
+from ._controller import MoveArgs, RobotController, SimErrorCode, _Active
 from ._tm_table import tm_table_areas, tm_table_fields
 
 
@@ -39,10 +38,9 @@ class SequenceController(RobotController):
         #: the error position" (TMflow 2.24 manual, Table 5, pp. 53-54; p. 112): an e-stop
         #: pauses the project instead of stopping it, and Play resumes the interrupted move.
         self._resume_after_error = resume_after_error
-        #: The move a pause or a resumable stop interrupted: (target, motion, speed,
-        #: accel, seq), restarted by Play.
-        self._interrupted: tuple[Pose, MotionType, float, float, int] | None = None
-        self._motion_args: tuple[Pose, MotionType, float, float, int] | None = None
+        #: The move a pause or a resumable stop interrupted, restarted by Play.
+        self._interrupted: MoveArgs | None = None
+        self._motion_args: MoveArgs | None = None
         self._pausing_on_error = False
         super().__init__(*args, **options)
 
@@ -170,11 +168,11 @@ class SequenceController(RobotController):
         self._bank.set("project_running", False)
         self._log.warning("sim.project_stopped", device=self._name, reason=reason)
 
-    def _running_move(self) -> tuple[Pose, MotionType, float, float, int] | None:
+    def _running_move(self) -> MoveArgs | None:
         """The move being executed now (what a pause interrupts), if any."""
         active = self._active
         args = self._motion_args
-        if active is None or active.kind != "motion" or args is None or args[4] != active.seq:
+        if active is None or active.kind != "motion" or args is None or args.seq != active.seq:
             return None
         return args
 
@@ -198,5 +196,4 @@ class SequenceController(RobotController):
         interrupted, self._interrupted = self._interrupted, None
         self._log.info("sim.project_resumed", device=self._name)
         if interrupted is not None:
-            target, motion, speed, accel, seq = interrupted
-            self._start_motion(target, motion, speed, accel, seq=seq)
+            self._start_move(interrupted.resumed(self._backend.tcp_pose()))
