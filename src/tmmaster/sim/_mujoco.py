@@ -85,6 +85,9 @@ DEFAULT_TIMESTEP_S = 0.002
 # Absorbs float drift when counting physics steps in a tick.
 _EPS = 1e-9
 
+#: Radians per degree.
+_RAD = math.pi / 180
+
 #: A part moving slower than this (m/s, rad/s) and touching a support is at rest.
 _REST_LINEAR = 0.005
 _REST_ANGULAR = 0.05
@@ -144,7 +147,18 @@ class _Trajectory:
     accel_time_s: float
     elapsed_s: float = 0.0
 
+    #: The last sample asked for (elapsed, joints): each physics step asks for the joints
+    #: where the previous one ended.
+    _last: tuple[float, tuple[float, ...]] = (-1.0, ())
+
     def joints_at(self, elapsed_s: float) -> tuple[float, ...]:
+        if elapsed_s == self._last[0]:
+            return self._last[1]
+        joints = self._joints_at(elapsed_s)
+        self._last = (elapsed_s, joints)
+        return joints
+
+    def _joints_at(self, elapsed_s: float) -> tuple[float, ...]:
         if elapsed_s + _EPS >= self.duration_s:
             return self.samples[-1]
         s = trapezoid_progress(elapsed_s, self.duration_s, self.accel_time_s)
@@ -540,6 +554,9 @@ class MuJoCoBackend:
         fingers = [joint(f"finger_{s}") for s in ("l", "r")]
         free = [joint(f"part{k}") for k in parts]
         self._arm_qpos, self._arm_dof = [a for a, _ in arm], [b for _, b in arm]
+        # MjData's arrays, cached: reading the attribute costs as much as the write.
+        self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
+        self._sensordata = d.sensordata
         self._finger_qpos, self._finger_dof = [a for a, _ in fingers], [b for _, b in fingers]
         self._part_qpos, self._part_dof = [a for a, _ in free], [b for _, b in free]
         self._pads = [ident(obj.mjOBJ_GEOM, f"pad_{s}") for s in ("l", "r")]
@@ -762,7 +779,7 @@ class MuJoCoBackend:
 
     def _table_depth(self) -> float:
         """How deep the arm, tool or pads are in the table (m); -1 when they do not touch."""
-        data = self._d.sensordata
+        data = self._sensordata
         adr = self._sense_table
         return -float(data[adr + 1]) if data[adr] > 0 else -1.0
 
@@ -773,7 +790,7 @@ class MuJoCoBackend:
             return BackendFault("collision", f"the arm hit the table ({depth * 1000:.1f} mm deep)")
         if self._held is not None:
             return None
-        data = self._d.sensordata
+        data = self._sensordata
         for adr, table, side in zip(
             self._sense_pads, self._sense_pad_table, ("left", "right"), strict=True
         ):
@@ -789,8 +806,10 @@ class MuJoCoBackend:
 
     def _overload(self) -> BackendFault | None:
         """The part held is heavier than the arm's rated payload (while the arm moves)."""
+        if self._held is None:
+            return None
         payload = rated_payload_kg(self._model.name)
-        if self._held is None or payload is None:
+        if payload is None:
             return None
         obj = self._objects[self._held]
         if obj.mass_kg <= payload:
@@ -828,11 +847,17 @@ class MuJoCoBackend:
         self._mj.mj_kinematics(self._m, self._d)
 
     def _set_arm(self, joints: Sequence[float], velocity: Sequence[float] | None) -> None:
-        d = self._d
-        for i, adr in enumerate(self._arm_qpos):
-            d.qpos[adr] = math.radians(joints[i])
-        for i, adr in enumerate(self._arm_dof):
-            d.qvel[adr] = 0.0 if velocity is None else math.radians(velocity[i])
+        # Element writes into the cached arrays: the cheapest way into MjData from Python
+        # (this runs every physics step).
+        qpos, qvel = self._qpos, self._qvel
+        for adr, q in zip(self._arm_qpos, joints, strict=True):
+            qpos[adr] = q * _RAD
+        if velocity is None:
+            for adr in self._arm_dof:
+                qvel[adr] = 0.0
+        else:
+            for adr, w in zip(self._arm_dof, velocity, strict=True):
+                qvel[adr] = w * _RAD
 
     def _substep(self) -> None:
         h = self._timestep
@@ -877,14 +902,14 @@ class MuJoCoBackend:
             feed = 0.0
         self._finger_ctrl = ref
         force = self._finger_force
-        d = self._d
+        qpos, ctrl = self._qpos, self._ctrl
         for i, adr in enumerate(self._finger_qpos):
-            q = d.qpos[adr]
+            q = qpos[adr]
             if self._closing and q - ref > _FINGER_BLOCKED_M:
                 f = -force  # blocked on a part: squeeze with the commanded force
             else:
                 f = min(max(_FINGER_KP * (ref - q) + feed, -force), force)
-            d.ctrl[i] = f
+            ctrl[i] = f
 
     def drive_gripper(self, width_mm: float, *, speed_mm_s: float, force_n: float) -> None:
         """Move the fingers towards ``width_mm`` at ``speed_mm_s``, squeezing with ``force_n``.
