@@ -465,3 +465,36 @@ def test_tmflow_reports_unreachable_and_logs_the_reason(target: Pose, reason: st
         name == "sim.command_rejected" and fields.get("reason") == reason
         for _, name, fields in log.events
     )
+
+
+@pytest.mark.parametrize(
+    ("start", "target", "speed"),
+    [
+        # The worst of 84 Lines between seven poses (at 30 %, sampled every 1 ms: 1.0003x).
+        (Pose(200, 250, 150, 180, 0, 45), Pose(150, -300, 200, 180, 0, 90), 100),
+        (Pose(300, -200, 200, 180, 0, 90), Pose(300, 200, 200, 180, 0, 90), 100),
+        (Pose(450, 0, 250, 180, 0, 0), Pose(150, -300, 200, 180, 0, 90), 100),
+    ],
+)
+def test_a_line_never_drives_a_joint_past_its_speed(start: Pose, target: Pose, speed: int) -> None:
+    # Sampled densely (every 5 ms, the ramps last 200 ms): the joints' rates between two
+    # samples stay within their limits scaled by the speed, where the TCP speeds up or the
+    # path passes near the base.
+    backend = KinematicBackend(TM5, home=start)
+    backend.start_motion(target, motion=MotionType.LINE, speed_percent=speed, accel_time_s=ACCEL)
+    limits = [s * speed / 100 for s in TM5.joint_speed_deg_s]
+    dt = 0.005
+    before = backend.joint_positions_deg()
+    assert before is not None
+    worst = 0.0
+    while backend.motion_running:
+        backend.step(dt)
+        joints = backend.joint_positions_deg()
+        assert joints is not None
+        rates = [
+            abs(b - a) / dt / limit for a, b, limit in zip(before, joints, limits, strict=True)
+        ]
+        worst = max(worst, *rates)
+        before = joints
+    assert backend.tcp_pose() == target
+    assert 0.9 < worst <= 1.005  # one joint runs at its limit, none beyond
