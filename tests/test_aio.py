@@ -9,6 +9,7 @@ simulator's motion log is the judge (``safety_invariant.check``).
 from __future__ import annotations
 
 import asyncio
+import inspect
 import signal
 import threading
 import time
@@ -156,6 +157,100 @@ def test_digital_io_is_awaited(tm_simulator_factory: SimFactory) -> None:
     run(scenario)
     assert sim.do(3)
     assert not sim.do(4)
+
+
+START = Pose(300, -200, 200, 180, 0, 90)
+VIA = Pose(350, -150, 200, 180, 0, 90)
+END = Pose(400, -200, 200, 180, 0, 90)
+JOINTS = (10.0, -5.0, 100.0, -5.0, 90.0, 10.0)
+
+
+def test_joint_relative_and_arc_moves_are_awaited(tm_simulator_factory: SimFactory) -> None:
+    sim = tm_simulator_factory("tmflow", **slow(10))
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            await robot.move_to(START)  # speed None: 30 %
+            joints = await robot.move_joints(JOINTS, speed=60, accel_time_ms=300)
+            assert joints.done
+            reported = (await robot.status()).joints
+            assert reported == pytest.approx(JOINTS, abs=1e-3)
+            await robot.move_to(START, speed=60)
+            down = await robot.move_by(dz=-30, motion="line", speed_mm_s=300)
+            assert down.start is not None
+            assert down.start.is_close(START)
+            assert (await robot.pose()).is_close(START.offset(dz=-30))
+            await robot.move_by(dz=30, frame="tool")  # the tool points down: z up is down
+            assert (await robot.pose()).is_close(START.offset(dz=-60))
+            await robot.move_to(START, motion="line", speed_mm_s=400)
+            arc = await robot.move_arc(VIA, END, speed_mm_s=400)
+            assert arc.done
+            assert (await robot.pose()).is_close(END)
+            handle = await robot.start_move(START, motion="line", speed_mm_s=400)
+            await handle
+
+    run(scenario)
+    kinds = [m.kind for m in sim.motion_log() if m.target is not None]
+    assert kinds == ["ptp", "ptp_joints", "ptp", "line", "ptp", "line", "circle", "line"]
+    assert sim.tcp_pose().is_close(START)
+
+
+@pytest.mark.parametrize("kind", ["joints", "arc"])
+def test_cancelling_a_running_joint_move_or_arc_stops_it_and_nothing_moves_later(
+    tm_simulator_factory: SimFactory, kind: str
+) -> None:
+    sim = tm_simulator_factory("tmflow", **slow(2))  # a move of seconds
+    issued: list[Issued] = []
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            issued.append(Issued(START, time.monotonic()))
+            await robot.move_to(START, speed=100)
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "done"
+            if kind == "joints":
+                target = robot.robot.model.forward(JOINTS, robot.robot.tool)
+                move = robot.move_joints(JOINTS, speed=5)
+            else:
+                target = END
+                move = robot.move_arc(VIA, END, speed=5)
+            issued.append(Issued(target, time.monotonic()))
+            task = asyncio.create_task(move)
+            await until(lambda: len(sim.motion_log()) == 2)
+            cancelled_at = time.monotonic()
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
+            assert time.monotonic() - cancelled_at < 1.0
+            motion = robot.last_motion
+            assert motion is not None
+            assert motion.stop_delivered is True  # before the CancelledError came
+            stopped_at = await settled_pose(sim)
+            await asyncio.sleep(0.3)  # longer than the simulator's tick
+            assert sim.tcp_pose().is_close(stopped_at)  # stopped, not resumed
+            assert not sim.tcp_pose().is_close(target)  # short of its target
+
+    run(scenario)
+    assert len(sim.motion_log()) == 2
+    check(issued, sim.motion_log())
+
+
+def test_the_awaited_moves_take_the_robots_parameters() -> None:
+    """AsyncRobot's methods take exactly Robot's parameters; every move is offered."""
+    shared = {
+        name
+        for name, member in vars(aio.AsyncRobot).items()
+        if not name.startswith("_") and callable(member) and callable(getattr(Robot, name, None))
+    }
+    robot_moves = {name for name in dir(Robot) if name.startswith(("move_", "start_move"))}
+    assert robot_moves >= {"move_to", "start_move", "move_joints", "move_by", "move_arc"}
+    assert sorted(robot_moves - shared) == []
+    for name in sorted(shared):
+        awaited = inspect.signature(getattr(aio.AsyncRobot, name)).parameters
+        sync = inspect.signature(getattr(Robot, name)).parameters
+        assert list(awaited.values()) == list(sync.values()), name
 
 
 @pytest.mark.parametrize("profile", PROFILES)

@@ -427,10 +427,11 @@ class AsyncRobot:
         self,
         target: Pose,
         *,
-        speed: int = 30,
+        speed: int | None = None,
         motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
         timeout: float | None = None,
         accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
     ) -> Motion:
         """Move to ``target``; return when the robot acknowledged and finished the move.
 
@@ -440,11 +441,13 @@ class AsyncRobot:
 
         Args:
             target: The TCP target (mm, deg, robot base frame).
-            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``); None: 30 %
+                (or ``speed_mm_s``).
             motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
             timeout: How long the move may take, s; None: from the expected time.
             accel_time_ms: Time to reach full speed, ms, where the profile has the
                 field; None: the robot's default.
+            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
 
         Returns:
             The finished move (its attributes; it has nothing left to wait for).
@@ -464,16 +467,18 @@ class AsyncRobot:
             motion=motion,
             timeout=timeout,
             accel_time_ms=accel_time_ms,
+            speed_mm_s=speed_mm_s,
         )
 
     async def start_move(
         self,
         target: Pose,
         *,
-        speed: int = 30,
+        speed: int | None = None,
         motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
         timeout: float | None = None,
         accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
     ) -> AsyncMotion:
         """Validate and send a move; return once it is sent (:meth:`Robot.start_move`).
 
@@ -482,10 +487,12 @@ class AsyncRobot:
 
         Args:
             target: The TCP target (mm, deg, robot base frame).
-            speed: Speed, an integer percent (1 .. ``max_speed_percent``).
+            speed: Speed, an integer percent (1 .. ``max_speed_percent``); None: 30 %
+                (or ``speed_mm_s``).
             motion: ``"ptp"`` or ``"line"``.
             timeout: How long the move may take, s; None: from the expected time.
             accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
 
         Returns:
             The move's handle.
@@ -502,8 +509,168 @@ class AsyncRobot:
             motion=motion,
             timeout=timeout,
             accel_time_ms=accel_time_ms,
+            speed_mm_s=speed_mm_s,
         )
         return AsyncMotion(self, sent)
+
+    async def move_joints(
+        self,
+        joints: Sequence[float],
+        *,
+        speed: int = 30,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+    ) -> Motion:
+        """Move to joint angles J1..J6 (a PTP in joint space); return when it is done.
+
+        :meth:`Robot.move_joints`, awaited: the same checks before any request, and the
+        joints and the TCP checked at the end. Cancelled before the robot took the
+        command, the command is withdrawn; while the arm moves, the arm is stopped; then
+        the ``CancelledError`` is raised.
+
+        Args:
+            joints: J1..J6, deg.
+            speed: Speed, an integer percent of the joints' top speeds (1 ..
+                ``max_speed_percent``).
+            timeout: How long the move may take, s; None: from the expected time.
+            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+
+        Returns:
+            The finished move (``motion.target``: the TCP pose the joints give).
+
+        Raises:
+            ConfigError: The move is not allowed, or the profile has no joint move
+                (``article``); UnreachablePoseError for joints past a range, at a
+                singularity or out of reach. Nothing is sent.
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested, or the robot was closed.
+            TransportError: The link failed and did not come back in time.
+        """
+        return await self._run(
+            self.robot.move_joints,
+            joints,
+            speed=speed,
+            timeout=timeout,
+            accel_time_ms=accel_time_ms,
+        )
+
+    async def move_by(
+        self,
+        dx: float = 0.0,
+        dy: float = 0.0,
+        dz: float = 0.0,
+        drx: float = 0.0,
+        dry: float = 0.0,
+        drz: float = 0.0,
+        *,
+        frame: Literal["base", "tool"] = "base",
+        speed: int | None = None,
+        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
+    ) -> Motion:
+        """Move relative to where the robot reports the TCP; return when it is done.
+
+        :meth:`Robot.move_by`, awaited: the offset is resolved against the TCP pose the
+        robot reports into one absolute target, sent like :meth:`move_to`'s. Cancelled
+        before the robot took the command, the command is withdrawn; while the arm
+        moves, the arm is stopped; then the ``CancelledError`` is raised.
+
+        Args:
+            dx: Offset along x, mm.
+            dy: Offset along y, mm.
+            dz: Offset along z, mm.
+            drx: Rotation about x, deg.
+            dry: Rotation about y, deg.
+            drz: Rotation about z, deg.
+            frame: ``"base"`` (the robot base's axes) or ``"tool"`` (the TCP's own frame).
+            speed: Speed, an integer percent; None: 30 % (or ``speed_mm_s``).
+            motion: ``"ptp"`` or ``"line"``.
+            timeout: How long the move may take, s; None: from the expected time.
+            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
+
+        Returns:
+            The finished move (``motion.start``: the pose it was resolved against).
+
+        Raises:
+            ConfigError: A bad offset, frame or speed (nothing is read or sent), or a
+                target the move may not take (nothing is sent).
+            RobotError: The arm moved between the read and the write (nothing is sent).
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested, or the robot was closed.
+            TransportError: The link failed and did not come back in time.
+        """
+        return await self._run(
+            self.robot.move_by,
+            dx,
+            dy,
+            dz,
+            drx,
+            dry,
+            drz,
+            frame=frame,
+            speed=speed,
+            motion=motion,
+            timeout=timeout,
+            accel_time_ms=accel_time_ms,
+            speed_mm_s=speed_mm_s,
+        )
+
+    async def move_arc(
+        self,
+        via: Pose,
+        to: Pose,
+        *,
+        speed: int | None = None,
+        timeout: float | None = None,
+        accel_time_ms: int | None = None,
+        speed_mm_s: int | None = None,
+    ) -> Motion:
+        """Move the TCP along a circular arc through ``via`` to ``to``; return when done.
+
+        :meth:`Robot.move_arc`, awaited: the arc is resolved against the TCP pose the
+        robot reports and checked before the write like a Line. Cancelled before the
+        robot took the command, the command is withdrawn; while the arm moves, the arm
+        is stopped; then the ``CancelledError`` is raised.
+
+        Args:
+            via: A pose whose position the arc passes through (mm).
+            to: The TCP target at the arc's end (mm, deg).
+            speed: Speed, an integer percent of the arm's top TCP speed; None: 30 % (or
+                ``speed_mm_s``).
+            timeout: How long the move may take, s; None: from the expected time.
+            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+            speed_mm_s: The TCP speed in mm/s instead of ``speed`` (``tmflow``).
+
+        Returns:
+            The finished move.
+
+        Raises:
+            ConfigError: No arc passes through the points, the arc may not be taken, or
+                the profile has no circle command (``article``); UnreachablePoseError
+                for an arc the arm cannot follow. Nothing is sent.
+            RobotError: The arm moved between the read and the write (nothing is sent).
+            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
+            MotionTimeoutError: The move did not finish in time (the arm is stopped).
+            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
+            StopRequestedError: A stop was requested, or the robot was closed.
+            TransportError: The link failed and did not come back in time.
+        """
+        return await self._run(
+            self.robot.move_arc,
+            via,
+            to,
+            speed=speed,
+            timeout=timeout,
+            accel_time_ms=accel_time_ms,
+            speed_mm_s=speed_mm_s,
+        )
 
     async def stop(self) -> None:
         """Stop the arm (:meth:`Robot.stop`), as the robot's next call.
