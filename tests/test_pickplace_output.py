@@ -93,9 +93,14 @@ def test_the_terminal_emulation_applies_erasures() -> None:
 # -- Ctrl-C ---------------------------------------------------------------------------------
 
 
-def _run_on_a_terminal(ctrl_c: Callable[[subprocess.Popen[bytes]], None]) -> tuple[int, str]:
+def _run_on_a_terminal(
+    ctrl_c: Callable[[subprocess.Popen[bytes]], None],
+    command: tuple[str, ...] = ("tmmaster.pickplace",),
+) -> tuple[int, str]:
     """Run a long --sim run on a pseudo-terminal (stdout and stderr), wait until the live
-    display shows the first move, call ``ctrl_c``; return the exit status and all it printed."""
+    display shows the first move, call ``ctrl_c``; return the exit status and all it printed.
+
+    ``command``: what ``python -m`` runs (the module, or ``tmmaster pickplace``)."""
     import fcntl
     import pty
     import select
@@ -105,7 +110,7 @@ def _run_on_a_terminal(ctrl_c: Callable[[subprocess.Popen[bytes]], None]) -> tup
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 60, 0, 0))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tmmaster.pickplace", *SLOW],
+        [sys.executable, "-m", *command, *SLOW],
         stdin=subprocess.DEVNULL,
         stdout=slave,
         stderr=slave,
@@ -153,7 +158,12 @@ def test_one_ctrl_c_on_a_terminal_ends_with_one_line() -> None:
     ), shown
 
 
-def test_ctrl_c_pressed_again_and_again_still_exits_130_in_one_line() -> None:
+@pytest.mark.parametrize(
+    "command", [("tmmaster.pickplace",), ("tmmaster", "pickplace")], ids=["module", "tmmaster"]
+)
+def test_ctrl_c_pressed_again_and_again_still_exits_130_in_one_line(
+    command: tuple[str, ...],
+) -> None:
     def keep_pressing(proc: subprocess.Popen[bytes]) -> None:
         # Every 2 ms until the process is gone: some land while the last line is printed,
         # some while the interpreter exits.
@@ -166,7 +176,7 @@ def test_ctrl_c_pressed_again_and_again_still_exits_130_in_one_line() -> None:
                 return
             time.sleep(0.002)
 
-    code, raw = _run_on_a_terminal(keep_pressing)
+    code, raw = _run_on_a_terminal(keep_pressing, command)
     assert code == EXIT_INTERRUPTED, raw[-2000:]  # never -2: killed by the signal
     shown = [line for line in _screen(raw) if line.strip()]
     assert "Traceback" not in raw

@@ -147,7 +147,8 @@ def _main(argv: Sequence[str] | None) -> int:
     if args.command == "sim":
         return sim_main.run(args)
     if args.command == "pickplace":
-        return pickplace_main.run(args)
+        # As the process itself (no argv given), Ctrl-C stays ignored on the way out.
+        return pickplace_main.run_guarded(lambda: pickplace_main.run(args), process=argv is None)
     if args.command == "report":
         return report_main.run(args)
     if args.command == "tmscript":

@@ -849,18 +849,40 @@ def main(argv: Sequence[str] | list[str] | None = None) -> int:
 
 def _main(argv: Sequence[str] | list[str] | None, *, process: bool) -> int:
     """``main``; as the process itself (``process``), Ctrl-C stays ignored on the way out."""
+
+    def parse_and_run() -> int:
+        try:
+            args = build_parser().parse_args(argv)
+        except UsageError as exc:
+            print(f"pickplace: {one_line(exc)} [exit {EXIT_CONFIG}]", file=sys.stderr)
+            return EXIT_CONFIG
+        return run(args)
+
+    return run_guarded(parse_and_run, process=process)
+
+
+def run_guarded(body: Callable[[], int], *, process: bool = False) -> int:
+    """Run the command ``body`` so that Ctrl-C ends it in one line and exit 130.
+
+    ``python -m tmmaster.pickplace`` and ``tmmaster pickplace`` both run through it: a
+    Ctrl-C outside the run (a second one during the clean-up, one while the report is
+    written) is one line and exit 130, never a traceback, and any further one is
+    ignored.
+
+    Args:
+        body: Parses (if it must) and runs the command; returns its exit status.
+        process: True when the command is the process itself: Ctrl-C stays ignored
+            on the way out; False: the caller's SIGINT handler is put back.
+
+    Returns:
+        The command's exit status (130 after a Ctrl-C).
+    """
     _sigint.handled_by_main()
     previous = _sigint_handler()
     if previous is not None and previous is not signal.SIG_IGN:
         signal.signal(signal.SIGINT, _interrupt_once)
     try:
-        try:
-            args = build_parser().parse_args(argv)
-        except UsageError as exc:
-            print(f"pickplace: {one_line(exc)} [exit {EXIT_CONFIG}]", file=sys.stderr)
-            code = EXIT_CONFIG
-        else:
-            code = run(args)
+        code = body()
     except KeyboardInterrupt:
         # A Ctrl-C outside the run (argument parsing, report writing, a second Ctrl-C
         # during the clean-up): still one line and exit 130, never a traceback. The
@@ -879,4 +901,4 @@ if __name__ == "__main__":
     sys.exit(_main(None, process=True))
 
 
-__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "run"]
+__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "run", "run_guarded"]
