@@ -392,3 +392,24 @@ def test_squeezing_a_held_part_keeps_contact() -> None:
     assert state.contact
     assert not state.moving
     assert state.width_mm == pytest.approx(30, abs=CONTACT_MM)
+
+
+def test_the_cli_writes_the_scene_it_would_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import mujoco
+
+    from tmmaster.sim import __main__ as sim_main
+
+    out = tmp_path / "cell.xml"
+    argv = ["--physics", "mujoco", "--parts", "2", "--tool", "0,0,100,0,0,0", "--mjcf", str(out)]
+    assert sim_main.main(argv) == 0
+    assert capsys.readouterr().out.strip() == f"mjcf    written to {out}"
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert [m.body(k).name for k in range(m.nbody) if m.body(k).name.startswith("part")] == [
+        "part0",
+        "part1",
+    ]
+    assert m.body("tcp").pos.tolist() == pytest.approx([0, 0, 0.1])  # the tool
+    assert sim_main.main(["--mjcf", str(tmp_path / "x.xml")]) == 2
+    assert capsys.readouterr().err.strip() == "sim: --mjcf needs --physics mujoco [exit 2]"

@@ -16,6 +16,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from types import FrameType
 
 from .._address import check_host
@@ -92,6 +93,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         choices=["kinematic", "mujoco"],
         help="physics backend: kinematic (analytic, default) or mujoco (needs the extra"
         " tmmaster[mujoco]; docs/physics-backends.md)",
+    )
+    parser.add_argument(
+        "--mjcf",
+        default=None,
+        metavar="FILE",
+        help="with --physics mujoco: write the MuJoCo scene this simulator would run (the"
+        " arm, gripper, table and parts, as MJCF) to FILE and exit, without serving",
     )
     parser.add_argument(
         "--tool",
@@ -196,7 +204,9 @@ def _tool(text: str | None) -> Pose | None:
 
 
 def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
-
+    if args.mjcf is not None and args.physics != "mujoco":
+        print("sim: --mjcf needs --physics mujoco [exit 2]", file=sys.stderr)
+        return 2
     try:
         sim = Simulator(
             args.profile,
@@ -223,6 +233,8 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     except (TMMasterError, ValueError, KeyError) as exc:
         print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2
+    if args.mjcf is not None:
+        return _write_mjcf(sim, args.mjcf)
     stop = threading.Event()
     reset = threading.Event()
 
@@ -260,6 +272,25 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     print("simulator stopped", flush=True)
+    return 0
+
+
+def _write_mjcf(sim: Simulator, path: str) -> int:
+    """Write ``sim``'s MuJoCo scene to ``path`` (never started); the exit code."""
+    # Imported here: mujoco is loaded already (the backend was built with it).
+    from ._mujoco import MuJoCoBackend
+
+    try:
+        backend = sim.backend
+        assert isinstance(backend, MuJoCoBackend)  # --physics mujoco
+        try:
+            Path(path).write_text(backend.mjcf, encoding="utf-8")
+        except OSError as exc:
+            print(f"sim: --mjcf {path}: {one_line(exc)} [exit 1]", file=sys.stderr)
+            return 1
+    finally:
+        sim.close()
+    print(f"mjcf    written to {path}", flush=True)
     return 0
 
 
