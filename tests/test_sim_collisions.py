@@ -112,6 +112,29 @@ def test_a_tool_pointing_up_brings_the_flange_into_the_table() -> None:
     assert flange.z == pytest.approx(DEFAULT_TABLE_TOP_Z_MM, abs=0.3)
 
 
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_fingers_opening_against_a_neighbour_then_rising_is_no_collision(
+    backend_name: str,
+) -> None:
+    # A pallet at a 40 mm pitch: the open fingers (39 mm + 8 mm pads) reach 2.5 mm into
+    # the part in the next slot. Opening pushes it (MuJoCo) or overlaps it from the side
+    # (kinematic); rising out of it is no collision.
+    slot = Pose(300, -200, DEFAULT_TABLE_TOP_Z_MM + 15, 180, 0, 90)
+    world = World(
+        [
+            TableObject(name="placed", pose=slot),
+            TableObject(name="neighbour", pose=slot.offset(dx=40)),  # across the fingers
+        ]
+    )
+    b = make(backend_name, world, home=slot)
+    b.drive_gripper(0, speed_mm_s=100, force_n=40)
+    until_fault(b, lambda: not b.gripper_state().moving)
+    b.drive_gripper(39, speed_mm_s=100, force_n=40)
+    until_fault(b, lambda: not b.gripper_state().moving)
+    b.start_motion(slot.offset(dz=60), motion=MotionType.LINE, speed_percent=20, accel_time_s=0.1)
+    assert until_fault(b, b.is_settled) is None
+
+
 @pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra")
 def test_mujoco_stops_an_arm_link_that_hits_the_table() -> None:
     # The tool horizontal, 110 mm up: its pads stay clear but the wrist (45 mm radius)

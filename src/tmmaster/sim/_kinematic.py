@@ -54,7 +54,7 @@ from ._world import (
     World,
     gripper_geometry,
     in_tool_frame,
-    pad_landing_mm,
+    pad_overlaps,
     rated_payload_kg,
 )
 
@@ -67,6 +67,19 @@ _EPS = 1e-9
 _COLLISION_DEPTH_MM = 0.2
 #: Halvings of a step that find where in it a collision began (1/128 of the step).
 _CONTACT_BISECTIONS = 7
+
+
+@dataclass(frozen=True)
+class _PadContact:
+    """A pad against a part at a check: overlaps along the tool's axes and how it got in."""
+
+    overlaps: tuple[float, float, float]
+    #: The index of the tool axis nearest the vertical.
+    vertical: int
+    #: It came down on the part from right above it.
+    landed: bool = False
+    #: Inside the part when the motion started: its vertical overlap then, mm.
+    baseline: float | None = None
 
 
 @dataclass
@@ -172,7 +185,8 @@ class KinematicBackend:
         # Collisions: the depth in the table and in each part the running motion started
         # with (a contact being backed out of is known), and the fault not yet taken.
         self._start_depth = -1.0
-        self._start_overlaps: dict[str, float] = {}
+        self._start_overlaps: dict[tuple[str, int], _PadContact] = {}
+        self._overlaps_now: dict[tuple[str, int], _PadContact] = {}
         self._fault: BackendFault | None = None
         self._tool_back_of: Pose | None = None
         self._tool_back_xyz = (0.0, 0.0, 0.0)
@@ -260,7 +274,7 @@ class KinematicBackend:
         # Contacts the arm already has (a collision it is backing out of) are known: only
         # deeper ones are collisions.
         self._start_depth = self._table_depth()
-        self._start_overlaps = self._pad_overlaps()
+        self._start_overlaps = self._start_contacts()
         return planned.duration_s
 
     def start_joint_motion(
@@ -357,7 +371,7 @@ class KinematicBackend:
         # Contacts the arm already has (a collision it is backing out of) are known: only
         # deeper ones are collisions.
         self._start_depth = self._table_depth()
-        self._start_overlaps = self._pad_overlaps()
+        self._start_overlaps = self._start_contacts()
         return planned.duration_s
 
     def _plan_ptp(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
@@ -472,7 +486,9 @@ class KinematicBackend:
         self._step_arm(dt)
         if motion is not None:
             fault = self._check_collision() or self._overload()
-            if fault is not None:
+            if fault is None:
+                self._start_overlaps = self._overlaps_now  # compared with the next tick's
+            else:
                 if fault.kind == "collision":
                     fault = self._back_to_contact(motion, started_s, fault)
                 self.stop_motion()
@@ -542,30 +558,77 @@ class KinematicBackend:
         ]
         return max(depths, default=-1.0)
 
-    def _pad_overlaps(self) -> dict[str, float]:
-        """How deep the pads came down on each part near them (not the one squeezed), mm."""
+    def _pad_contacts(self) -> dict[tuple[str, int], _PadContact]:
+        """Each pad against each part near it (not the one squeezed), after the last check.
+
+        A pad inside a part keeps how it got there: it *landed* when it was right above the
+        part at the check before (its horizontal overlaps positive, its vertical one not);
+        a contact the motion started with keeps its vertical overlap then as a baseline.
+        """
         g = self._gripper
         reach = math.hypot(g.pad_depth_mm, self._width + 2 * g.pad_thickness_mm) + g.pad_height_mm
-        overlaps = {}
+        contacts: dict[tuple[str, int], _PadContact] = {}
         for obj in self._world.near(self._pose.x, self._pose.y, reach):
             if obj.name == self._pinched:
                 continue
-            depth = pad_landing_mm(obj, self._pose, width_mm=self._width, gripper=g)
-            if depth > 0:
-                overlaps[obj.name] = depth
-        return overlaps
+            pads, vertical = pad_overlaps(obj, self._pose, width_mm=self._width, gripper=g)
+            for k, overlaps in enumerate(pads):
+                key = (obj.name, k)
+                before = self._start_overlaps.get(key)
+                if min(overlaps) <= 0:
+                    contacts[key] = _PadContact(overlaps, vertical)
+                elif before is None or min(before.overlaps) <= 0:
+                    # Entering now: from above, or (no check before) where it is shallowest.
+                    if before is None:
+                        landed = overlaps[vertical] == min(overlaps)
+                    else:
+                        landed = (
+                            before.overlaps[vertical]
+                            <= 0
+                            < min(o for i, o in enumerate(before.overlaps) if i != vertical)
+                        )
+                    contacts[key] = _PadContact(overlaps, vertical, landed=landed)
+                else:
+                    contacts[key] = _PadContact(
+                        overlaps, vertical, landed=before.landed, baseline=before.baseline
+                    )
+        return contacts
 
     def _check_collision(self) -> BackendFault | None:
-        """A contact the moving arm did not expect: the table, or a pad landing on a part."""
+        """A contact the moving arm did not expect: the table, or a pad coming down on a part.
+
+        The pads are compared with the last check without a collision (at first, the
+        motion's start, ``_start_overlaps``): a pad that came down on a part, or went
+        further down into one it started in, hit it; one rising out of a part, or meeting
+        it from the side, did not.
+        """
         depth = self._table_depth()
         if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_MM:
             return BackendFault("collision", f"the arm hit the table ({depth:.1f} mm deep)")
-        for name, overlap in self._pad_overlaps().items():
-            if overlap > self._start_overlaps.get(name, 0.0) + _COLLISION_DEPTH_MM:
+        contacts = self._pad_contacts()
+        self._overlaps_now = contacts
+        for (name, _), contact in contacts.items():
+            down = contact.overlaps[contact.vertical]
+            if min(contact.overlaps) <= 0:
+                continue
+            if (contact.landed and down > _COLLISION_DEPTH_MM) or (
+                contact.baseline is not None and down > contact.baseline + _COLLISION_DEPTH_MM
+            ):
                 return BackendFault(
-                    "collision", f"a finger came down on {name} ({overlap:.1f} mm deep)"
+                    "collision", f"a finger came down on {name} ({down:.1f} mm deep)"
                 )
         return None
+
+    def _start_contacts(self) -> dict[tuple[str, int], _PadContact]:
+        """The pads' contacts when a motion starts: those it already has are baselines."""
+        self._start_overlaps = {}
+        contacts = self._pad_contacts()
+        for key, contact in contacts.items():
+            if min(contact.overlaps) > 0:
+                contacts[key] = _PadContact(
+                    contact.overlaps, contact.vertical, baseline=contact.overlaps[contact.vertical]
+                )
+        return contacts
 
     def _back_to_contact(
         self, motion: _Motion, started_s: float, fault: BackendFault

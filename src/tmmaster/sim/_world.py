@@ -411,7 +411,7 @@ def grasp_fit(
     - its width across the fingers (tool y; a turned part is wider) must be within the
       stroke, and the part between the open fingers (the fingers are rigid and move
       together: a pad that comes down on its edge presses it, a collision, see
-      :func:`pad_landing_mm`);
+      :func:`pad_overlaps`);
     - a part turned about the tool's z is straightened by the squeeze when its contact
       corner's lever beats friction (``|x| > friction * |y|`` at the corner the pad
       touches first: a square jams beyond 45 deg - atan(friction), 18.4 deg at 0.5);
@@ -467,17 +467,21 @@ def grasp_fit(
     return GraspFit(obj, width, jammed, kin.transform_to_pose(centred))
 
 
-def pad_landing_mm(
+#: The two pads' overlaps with a part along the tool's x, y and z (negative: apart), mm.
+PadOverlaps = tuple[tuple[float, float, float], tuple[float, float, float]]
+
+
+def pad_overlaps(
     obj: TableObject, tcp: Pose, *, width_mm: float, gripper: GripperGeometry = DEFAULT_GRIPPER
-) -> float:
-    """How deep a finger pad has come down onto ``obj`` from above (0: it has not), mm.
+) -> tuple[PadOverlaps, int]:
+    """How far each finger pad overlaps ``obj`` along the tool's axes, and which is vertical.
 
     The pads are boxes in the tool frame; the part is taken as its bounding box along the
-    tool's axes. A pad is in the part by the smallest of its overlaps along the three axes
-    (how far it would have to move back out); it came down on it when that smallest
-    overlap is along the tool axis nearest the vertical. A pad that meets a part from the
-    side (a wrist turning with the fingers open around it) is not counted: it would push
-    a part aside, which the kinematic backend does not model.
+    tool's axes. A pad is inside the part when all three overlaps are positive. Compared
+    with the overlaps a moment before, they say how it got there: a pad that was right
+    above the part (its horizontal overlaps positive, its vertical one not) came down on
+    it; one that came in from the side (fingers opening against a neighbour, a wrist
+    turning with the fingers open around a part) would push the part aside instead.
 
     Args:
         obj: The part.
@@ -486,25 +490,20 @@ def pad_landing_mm(
         gripper: The gripper's pads.
 
     Returns:
-        The deeper of the two pads' landing depths, mm.
+        The two pads' overlaps (x, y, z of the tool, mm) and the index (0, 1, 2) of the
+        tool axis nearest the vertical.
     """
     tool = kin.pose_to_transform(tcp)
     vertical = max(range(3), key=lambda i: abs(tool[2][i]))
     rel, (ex, ey, ez) = in_tool_frame(obj, tcp)
     cx, cy, cz = rel[0][3], rel[1][3], rel[2][3]
-    depth = 0.0
     inner = width_mm / 2
     outer = inner + gripper.pad_thickness_mm
-    for lo, hi in ((inner, outer), (-outer, -inner)):
-        overlaps = (
-            gripper.pad_depth_mm / 2 + ex - abs(cx),
-            min(hi, cy + ey) - max(lo, cy - ey),
-            gripper.pad_height_mm / 2 + ez - abs(cz),
-        )
-        smallest = min(overlaps)
-        if smallest > 0 and overlaps[vertical] == smallest:
-            depth = max(depth, smallest)
-    return depth
+    depth = gripper.pad_depth_mm / 2 + ex - abs(cx)
+    height = gripper.pad_height_mm / 2 + ez - abs(cz)
+    left = (depth, min(outer, cy + ey) - max(inner, cy - ey), height)
+    right = (depth, min(-inner, cy + ey) - max(-outer, cy - ey), height)
+    return (left, right), vertical
 
 
 class _Stacks:
