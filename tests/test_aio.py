@@ -596,3 +596,54 @@ def test_a_robot_of_your_own_fleet_or_in_process_simulator(
     run(scenario)
     assert moves(tcp) == [A]
     assert moves(memory) == [A]
+
+
+def test_a_held_frame_of_an_awaited_move_never_runs_after_it_was_given_up() -> None:
+    # Between the master and the robot: the move's command write is held in the network
+    # for 0.9 s and its resend dropped; the awaited move_to gives up (no acknowledgement)
+    # and cancels the sequence number, so the frame that lands later can never run.
+    from fault_proxy import FaultProxy, Rule
+
+    async def scenario() -> None:
+        issued: list[Issued] = []
+        with (
+            Simulator("tmflow", time_scale=20.0, tick_hz=50.0) as sim,
+            FaultProxy(sim.port) as proxy,
+        ):
+            async with aio.connect(
+                "127.0.0.1",
+                proxy.port,
+                poll_interval_s=0.01,
+                request_timeout_s=0.15,
+                timeouts=TimeoutPolicy(ack_timeout_s=0.5, motion_margin_s=1.0),
+                retry=tmmaster.RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02),
+            ) as robot:
+                first = Issued(A, time.monotonic())
+                await robot.move_to(A, speed=80)
+                first.outcome, first.ended_at = "done", time.monotonic()
+                issued.append(first)
+                proxy.add(Rule("hold", function_code=16, address=9000, delay_s=0.9))
+                proxy.add(Rule("drop_request", function_code=16, address=9000, nth=1))
+                given_up = Issued(B, time.monotonic())
+                issued.append(given_up)
+                with pytest.raises(tmmaster.TMMasterError) as info:
+                    await robot.move_to(B, speed=80)
+                given_up.outcome, given_up.ended_at = type(info.value).__name__, time.monotonic()
+
+                def writes() -> int:
+                    return len(
+                        [r for r in sim.request_log if r.function_code == 16 and r.address == 9000]
+                    )
+
+                landed = writes()
+                await asyncio.to_thread(sim.wait_for, lambda: writes() > landed, timeout=5.0)
+                ticks = sim.ticks
+                await asyncio.to_thread(sim.wait_for, lambda: sim.ticks >= ticks + 5, timeout=5.0)
+                last = Issued(C, time.monotonic())
+                await robot.move_to(C, speed=80)
+                last.outcome, last.ended_at = "done", time.monotonic()
+                issued.append(last)
+            check(issued, sim.motion_log())
+            assert [r.target for r in sim.motion_log() if r.target is not None] == [A, C]
+
+    run(scenario)
