@@ -19,6 +19,7 @@ import pytest
 from tmmaster import ConfigError, Pose, _cli
 from tmmaster.pickplace import __main__ as pickplace_main
 from tmmaster.sim import __main__ as sim_main
+from tmmaster.sim._scene import Scene
 from tmmaster.sim._simulator import Simulator
 from tmmaster.sim._world import DEFAULT_PART_POSE, TableObject
 
@@ -401,6 +402,23 @@ SIM_CASES: list[Case] = [
     ("sim-parts-negative", {}, ["--parts", "-1"], "--parts"),
     # Bounded: a million parts settle in seconds; far more would only eat memory.
     ("sim-parts-too-many", {}, ["--parts", "1000001"], "--parts"),
+    ("sim-scene-missing", {}, ["--scene", "{dir}/none.toml"], "none.toml"),
+    ("sim-scene-not-toml", {"s.toml": "[table\n"}, ["--scene", "{dir}/s.toml"], "s.toml"),
+    ("sim-scene-not-utf8", {"s.toml": NOT_UTF8}, ["--scene", "{dir}/s.toml"], "s.toml"),
+    (
+        "sim-scene-bad-key",
+        {"s.toml": "[table]\ntop_z_mm = 'high'\n"},
+        ["--scene", "{dir}/s.toml"],
+        "table.top_z_mm",
+    ),
+    (
+        "sim-scene-part-mass",
+        {"s.toml": "[[parts]]\nname = 'p'\npose = [0, 0, 0, 0, 0, 0]\nmass_kg = 0\n"},
+        ["--scene", "{dir}/s.toml"],
+        "parts.0.mass_kg",
+    ),
+    ("sim-scene-and-parts", {"s.toml": ""}, ["--scene", "{dir}/s.toml", "--parts", "2"], "--parts"),
+    ("sim-grasp-unknown", {}, ["--grasp", "glue"], "--grasp"),
 ]
 
 
@@ -444,6 +462,14 @@ def test_sim_bad_input_is_exit_2_with_one_line(
             "duplicate",
             id="objects-duplicate-name",
         ),
+        pytest.param({"grasp": "glue"}, "grasp", id="grasp-unknown"),
+        pytest.param(
+            {"scene": Scene(), "objects": [TableObject(name="p", pose=DEFAULT_PART_POSE)]},
+            "objects or scene",
+            id="scene-and-objects",
+        ),
+        pytest.param({"scene": "nowhere.toml"}, "nowhere.toml", id="scene-missing"),
+        pytest.param({"scene": 3}, "scene", id="scene-not-a-scene"),
     ],
 )
 def test_simulator_bad_arguments_raise_config_error_naming_them(

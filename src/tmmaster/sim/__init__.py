@@ -42,11 +42,13 @@ if _TYPE_CHECKING:
     )
     from ._kinematic import KinematicBackend
     from ._memory import MemoryTransport
+    from ._scene import Scene, SceneTable, load_scene
     from ._server import RequestRecord
     from ._simulator import Simulator
     from ._world import (
         DEFAULT_GRIPPER,
         DEFAULT_PART_POSE,
+        Fixture,
         GraspFit,
         GraspMode,
         GripperGeometry,
@@ -64,6 +66,7 @@ _EXPORTS = {
     "EstopFault": "._faults",
     "FAULT_KINDS": "._faults",
     "Fault": "._faults",
+    "Fixture": "._world",
     "GraspFit": "._world",
     "GraspMissFault": "._faults",
     "GraspMode": "._world",
@@ -81,6 +84,8 @@ _EXPORTS = {
     "PhysicsUnavailableError": "._backend",
     "RequestRecord": "._server",
     "RobotErrorFault": "._faults",
+    "Scene": "._scene",
+    "SceneTable": "._scene",
     "Simulator": "._simulator",
     "SlowResponsesFault": "._faults",
     "StallFault": "._faults",
@@ -88,6 +93,7 @@ _EXPORTS = {
     "TableObject": "._world",
     "World": "._world",
     "is_network_fault": "._faults",
+    "load_scene": "._scene",
     "parse_fault": "._faults",
 }
 
@@ -102,6 +108,7 @@ __all__ = [
     "DropConnectionsFault",
     "EstopFault",
     "Fault",
+    "Fixture",
     "GraspFit",
     "GraspMissFault",
     "GraspMode",
@@ -119,6 +126,8 @@ __all__ = [
     "PhysicsUnavailableError",
     "RequestRecord",
     "RobotErrorFault",
+    "Scene",
+    "SceneTable",
     "Simulator",
     "SlowResponsesFault",
     "StallFault",
@@ -126,5 +135,6 @@ __all__ = [
     "TableObject",
     "World",
     "is_network_fault",
+    "load_scene",
     "parse_fault",
 ]

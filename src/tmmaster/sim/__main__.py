@@ -151,10 +151,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument(
         "--parts",
         type=int,
-        default=1,
+        default=None,
         metavar="N",
         help="parts waiting at the pick position, like a feeder: the next one is there"
-        f" after one is taken (default: 1; 0 for an empty table; at most {MAX_PARTS:,})",
+        f" after one is taken (default: 1; 0 for an empty table; at most {MAX_PARTS:,};"
+        " not with --scene)",
+    )
+    parser.add_argument(
+        "--scene",
+        default=None,
+        metavar="FILE.toml",
+        help="the cell from a TOML scene file: table height, fixtures the arm must not"
+        " touch, parts, gripper geometry (docs/simulator.md#scene-files)",
+    )
+    parser.add_argument(
+        "--grasp",
+        default="friction",
+        choices=["friction", "weld"],
+        help="how the fingers hold a part: friction (a part too heavy for the grip force"
+        " slips out, default) or weld (carried whatever its mass)",
     )
     add_logging_arguments(
         parser,
@@ -187,7 +202,13 @@ def run(args: argparse.Namespace) -> int:
         undo_logging()
 
 
-def _parts(count: int) -> list[TableObject]:
+def _parts(count: int | None, scene: str | None) -> list[TableObject] | None:
+    """The ``--parts`` feeder, or None with ``--scene`` (its parts)."""
+    if scene is not None:
+        if count is not None:
+            raise ConfigError("--parts: give the parts in the --scene file, not both")
+        return None
+    count = 1 if count is None else count
     if not 0 <= count <= MAX_PARTS:
         raise ConfigError(f"--parts must be 0..{MAX_PARTS:,}, got {count}")
     return [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(1, count + 1)]
@@ -219,7 +240,9 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             gripper=args.gripper,
             gripper_port=args.gripper_port,
             faults=args.fault,
-            objects=_parts(args.parts),
+            objects=_parts(args.parts, args.scene),
+            scene=args.scene,
+            grasp=args.grasp,
             request_listener=echo if args.trace_requests else None,
             physics=args.physics,
             tool=_tool(args.tool),

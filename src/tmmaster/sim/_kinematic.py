@@ -27,9 +27,9 @@ agree by construction.
   pads, stroke and friction as the MuJoCo scene): a part too heavy for the grip force
   is squeezed but slips out when the arm moves away.
 - While the arm moves, the TCP, the flange and the pads' corners are checked against
-  the table top and the pads against the parts: a collision stops the arm and is
-  handed to the controller (:meth:`KinematicBackend.take_fault`), as is a carried part
-  over the arm's rated payload.
+  the table top and the world's fixtures, and the pads against the parts: a collision
+  stops the arm and is handed to the controller (:meth:`KinematicBackend.take_fault`),
+  as is a carried part over the arm's rated payload.
 
 Everything is driven by :meth:`KinematicBackend.step`; there is no wall clock.
 """
@@ -185,6 +185,7 @@ class KinematicBackend:
         # Collisions: the depth in the table and in each part the running motion started
         # with (a contact being backed out of is known), and the fault not yet taken.
         self._start_depth = -1.0
+        self._obstacle = "the table"  # what the deepest point of _table_depth() is in
         self._start_overlaps: dict[tuple[str, int], _PadContact] = {}
         self._overlaps_now: dict[tuple[str, int], _PadContact] = {}
         self._fault: BackendFault | None = None
@@ -537,7 +538,12 @@ class KinematicBackend:
         return corners
 
     def _table_depth(self) -> float:
-        """How deep the TCP, the flange or a pad corner is in the table (mm); -1: above it."""
+        """How deep the TCP, the flange or a pad corner is in the table or a fixture (mm).
+
+        Returns:
+            The deepest such point's depth, -1 when none is inside; :attr:`_obstacle`
+            names what it is in.
+        """
         t = kin.pose_to_transform(self._pose)
         points = [(self._pose.x, self._pose.y, self._pose.z)]
         if self._tool is not None:
@@ -556,7 +562,12 @@ class KinematicBackend:
         depths = [
             top - z for x, y, z in points if abs(x - cx) <= sx and abs(y - cy) <= sy and z <= top
         ]
-        return max(depths, default=-1.0)
+        deepest, self._obstacle = max(depths, default=-1.0), "the table"
+        for fixture in self._world.fixtures:
+            depth = max((fixture.depth_of(point) for point in points), default=-1.0)
+            if depth > deepest:
+                deepest, self._obstacle = depth, f"fixture {fixture.name}"
+        return deepest
 
     def _pad_contacts(self) -> dict[tuple[str, int], _PadContact]:
         """Each pad against each part near it (not the one squeezed), after the last check.
@@ -604,7 +615,7 @@ class KinematicBackend:
         """
         depth = self._table_depth()
         if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_MM:
-            return BackendFault("collision", f"the arm hit the table ({depth:.1f} mm deep)")
+            return BackendFault("collision", f"the arm hit {self._obstacle} ({depth:.1f} mm deep)")
         contacts = self._pad_contacts()
         self._overlaps_now = contacts
         for (name, _), contact in contacts.items():

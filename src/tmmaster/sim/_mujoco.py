@@ -54,6 +54,7 @@ from ._world import (
     TABLE,
     TABLE_CENTRE_XY_MM,
     TABLE_HALF_SIZE_XY_MM,
+    Fixture,
     GraspMode,
     GripperGeometry,
     TableObject,
@@ -210,6 +211,7 @@ def build_mjcf(
     tool: Pose | None = None,
     gripper: GripperGeometry = DEFAULT_GRIPPER,
     timestep_s: float = DEFAULT_TIMESTEP_S,
+    fixtures: Sequence[Fixture] = (),
 ) -> str:
     """The MJCF scene: the arm from ``model.joints``, gripper at ``tool``, table, parts.
 
@@ -220,6 +222,8 @@ def build_mjcf(
         tool: The TCP in the flange frame (None: the flange).
         gripper: The fingers' stroke, pads and friction.
         timestep_s: The physics step, s.
+        fixtures: Static boxes (in the world body, as the table: the arm hitting one is
+            a collision; parts rest on them).
 
     Returns:
         The MJCF document.
@@ -248,6 +252,14 @@ def build_mjcf(
         ' friction="0.8 0.005 0.0001"'
         f' contype="{_TABLE_BITS[0]}" conaffinity="{_TABLE_BITS[1]}"/>'
     )
+    for k, fixture in enumerate(fixtures):
+        lines.append(
+            f'    <geom name="fixture{k}" type="box"'
+            f" {_frame_attrs(kin.pose_to_transform(fixture.pose))}"
+            f' size="{_fmt([s / 2000 for s in fixture.size_mm])}" rgba=".4 .45 .55 1"'
+            ' friction="0.8 0.005 0.0001"'
+            f' contype="{_TABLE_BITS[0]}" conaffinity="{_TABLE_BITS[1]}"/>'
+        )
     lines.append(
         '    <geom name="base" type="cylinder" pos="0 0 0.04" size="0.075 0.04"'
         ' rgba=".85 .85 .85 1" contype="0" conaffinity="0"/>'
@@ -367,7 +379,7 @@ def build_mjcf(
     # from everything and from the table alone.
     lines.append("  <sensor>")
     lines.append(
-        '    <contact name="arm_table" subtree1="link1" geom2="table" num="1"'
+        '    <contact name="arm_table" subtree1="link1" body2="world" num="1"'
         ' reduce="mindist" data="found dist"/>'
     )
     for side in ("l", "r"):
@@ -376,7 +388,7 @@ def build_mjcf(
             ' reduce="netforce" data="found force"/>'
         )
         lines.append(
-            f'    <contact name="pad_{side}_table" geom1="pad_{side}" geom2="table" num="1"'
+            f'    <contact name="pad_{side}_table" geom1="pad_{side}" body2="world" num="1"'
             ' reduce="netforce" data="found force"/>'
         )
     lines.append("  </sensor>")
@@ -449,6 +461,7 @@ class MuJoCoBackend:
             tool=tool,
             gripper=self._gripper,
             timestep_s=timestep_s,
+            fixtures=world.fixtures,
         )
         # Feeder: a part that starts inside an earlier one waits out of the scene.
         self._queued: list[int] = []

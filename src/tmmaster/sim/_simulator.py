@@ -33,8 +33,9 @@ from ._controller import MotionRecord, RobotController
 from ._controllers import controller_class
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
+from ._scene import Scene, scene_of
 from ._server import DeviceServer, RequestLog, RequestRecord
-from ._world import TableObject, World
+from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
 
 if TYPE_CHECKING:
     from ._grippers import Blog2FG7Device, OnRobot2FG7Device
@@ -88,7 +89,13 @@ class Simulator:
         gripper: A separate gripper device: None, ``"blog-2fg7"``, ``"onrobot-2fg7"``,
             a TOML file or a GripperProfile.
         gripper_port: The separate gripper's port; 0 picks a free one.
-        objects: The objects on the table; None: one part at ``DEFAULT_PART_POSE``.
+        objects: The objects on the table; None: one part at ``DEFAULT_PART_POSE``;
+            not with ``scene``.
+        scene: The cell: a :class:`Scene` or a TOML scene file (table height, fixtures,
+            parts, gripper geometry); not with ``objects`` or ``backend``.
+        grasp: How the fingers hold a part: ``"friction"`` (a part too heavy for the
+            grip force slips out) or ``"weld"`` (a part between the pads is carried
+            whatever its mass); not with ``backend``.
         faults: Faults to play from the start: Fault models or ``"kind:key=value,..."``
             texts (:func:`parse_fault`).
         backend: Your own PhysicsBackend; None: the ``physics`` backend.
@@ -115,7 +122,8 @@ class Simulator:
             number above 0, ``tick_hz`` outside (0, 1000], a port outside 0..65535,
             ``init_time_s`` below 0 or not finite, ``initial_seq`` outside the
             profile's sequence range, ``speed_factor`` outside 0.1..10, two objects
-            of one name, an unknown profile, model or physics backend.
+            of one name, an unknown profile, model or physics backend, an invalid
+            scene (naming the key), an unknown ``grasp``.
     """
 
     def __init__(
@@ -130,6 +138,8 @@ class Simulator:
         gripper: str | Path | GripperProfile | None = None,
         gripper_port: int = 0,
         objects: Iterable[TableObject] | None = None,
+        scene: Scene | str | Path | None = None,
+        grasp: str = "friction",
         faults: Iterable[Fault | str] = (),
         backend: PhysicsBackend | None = None,
         physics: str = "kinematic",
@@ -166,15 +176,27 @@ class Simulator:
             raise ConfigError("speed_factor: give your own backend a model with its speeds")
         if tool is not None and backend is not None:
             raise ConfigError("tool: give the tool offset to your own backend, not to Simulator")
+        if grasp not in GRASP_MODES:
+            raise ConfigError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
+        if grasp != "friction" and backend is not None:
+            raise ConfigError("grasp: give the grasp mode to your own backend, not to Simulator")
+        if scene is not None and objects is not None:
+            raise ConfigError("give either objects or scene, not both")
+        if scene is not None and backend is not None:
+            raise ConfigError("scene: give your own backend its world, not Simulator")
         #: The TCP in the flange frame (TCP = flange x tool); None: the TCP is the flange.
         self.tool = tool
-        self._backend: PhysicsBackend = (
-            backend
-            if backend is not None
-            else physics_backend(
-                physics, _faster(self._model, speed_factor), world=World(objects), tool=tool
+        if backend is None:
+            cell = None if scene is None else scene_of(scene)
+            backend = physics_backend(
+                physics,
+                _faster(self._model, speed_factor),
+                world=World(objects) if cell is None else cell.world(),
+                tool=tool,
+                gripper=None if cell is None else cell.gripper,
+                grasp=grasp,  # type: ignore[arg-type]  # checked against GRASP_MODES
             )
-        )
+        self._backend: PhysicsBackend = backend
         all_faults = [_as_fault(f) for f in faults]
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
         device = [f for f in all_faults if not is_network_fault(f)]
@@ -711,19 +733,39 @@ def _faster(model: RobotModel, factor: float) -> RobotModel:
 
 
 def physics_backend(
-    name: str, model: RobotModel, *, world: World, tool: Pose | None = None
+    name: str,
+    model: RobotModel,
+    *,
+    world: World,
+    tool: Pose | None = None,
+    gripper: GripperGeometry | None = None,
+    grasp: GraspMode = "friction",
 ) -> PhysicsBackend:
     """A built-in physics backend by name: "kinematic" (analytic) or "mujoco" (optional extra).
 
-    Raises :class:`UnknownNameError` for another name and
-    :class:`~tmmaster.sim.PhysicsUnavailableError` when the MuJoCo extra is missing.
+    Args:
+        name: ``"kinematic"`` or ``"mujoco"``.
+        model: The arm.
+        world: The table, fixtures and parts.
+        tool: The TCP in the flange frame (None: the TCP is the flange).
+        gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
+        grasp: ``"friction"`` or ``"weld"``.
+
+    Returns:
+        The backend.
+
+    Raises:
+        UnknownNameError: Another name.
+        PhysicsUnavailableError: The MuJoCo extra is missing.
     """
     if name == "kinematic":
-        return KinematicBackend(model, world=world, tool=tool)
+        return KinematicBackend(model, world=world, tool=tool, gripper=gripper, grasp=grasp)
     if name == "mujoco":
         from ._mujoco import MuJoCoBackend  # imports mujoco: only when asked for
 
-        return MuJoCoBackend(model, world=world, home=DEFAULT_HOME, tool=tool)
+        return MuJoCoBackend(
+            model, world=world, home=DEFAULT_HOME, tool=tool, gripper=gripper, grasp=grasp
+        )
     raise UnknownNameError(
         f"unknown physics backend {name!r} (known: {', '.join(PHYSICS_BACKENDS)})"
     )

@@ -19,9 +19,16 @@ import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, Literal, get_args
+from typing import Annotated, Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PositiveFloat,
+    model_validator,
+)
 
 from .. import _kinematics as kin
 from .._error_root import ConfigError
@@ -183,6 +190,22 @@ _LAYER_MM = 10.0
 _MAX_CELLS = 256
 
 
+_POSE_KEYS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def _pose_from_sequence(value: Any) -> Any:
+    # A scene file writes a pose as [x, y, z, rx, ry, rz] (mm, deg).
+    if isinstance(value, list | tuple):
+        if len(value) != 6:
+            raise ValueError(f"need 6 numbers [x, y, z, rx, ry, rz] (mm, deg), got {len(value)}")
+        return dict(zip(_POSE_KEYS, value, strict=True))
+    return value
+
+
+#: A pose field that also takes ``[x, y, z, rx, ry, rz]``.
+PoseField = Annotated[Pose, BeforeValidator(_pose_from_sequence)]
+
+
 class TableObject(BaseModel):
     """A box lying on the table that the gripper can pick up."""
 
@@ -191,7 +214,7 @@ class TableObject(BaseModel):
     #: The object's name (unique in a world).
     name: str = Field(min_length=1)
     #: Pose of the box's centre (the grasp point).
-    pose: Pose
+    pose: PoseField
     #: Size along the box's own x, y (across the fingers) and z axes, mm.
     size_mm: tuple[PositiveFloat, PositiveFloat, PositiveFloat] = DEFAULT_PART_SIZE_MM
     #: Its mass, kg.
@@ -246,6 +269,55 @@ def _half_extents(
         sum(abs(rot[1][j]) * half[j] for j in range(3)),
         sum(abs(rot[2][j]) * half[j] for j in range(3)),
     )
+
+
+class Fixture(BaseModel):
+    """A fixed box in the cell (a jig, a wall, a feeder): the arm must not touch it.
+
+    Parts rest on a fixture's top as on the table's; the gripper never picks it up. The
+    kinematic backend checks the TCP, the flange and the pad corners against it as
+    against the table; the MuJoCo backend makes it a static box the arm collides with.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: The fixture's name (unique among the fixtures and the parts of a world).
+    name: str = Field(min_length=1)
+    #: Pose of the box's centre in the robot base frame, mm / deg.
+    pose: PoseField
+    #: Size along the box's own x, y and z axes, mm.
+    size_mm: tuple[PositiveFloat, PositiveFloat, PositiveFloat]
+
+    def half_extents_mm(self) -> tuple[float, float, float]:
+        """Half size of the box's axis-aligned bounding box in the base frame.
+
+        Returns:
+            Half the box's extent along x, y and z, mm.
+        """
+        return _half_extents(self.size_mm, self.pose.rx, self.pose.ry, self.pose.rz)
+
+    def depth_of(self, point: tuple[float, float, float]) -> float:
+        """How deep ``point`` is inside the box: its distance to the nearest face, mm.
+
+        Args:
+            point: A point in the robot base frame, mm.
+
+        Returns:
+            The depth (> 0 inside, 0 on a face), or -1 when the point is outside.
+        """
+        inverse = _inverse_frame(*self.pose.as_list())
+        x, y, z = point
+        depth = math.inf
+        for i in range(3):
+            local = inverse[i][0] * x + inverse[i][1] * y + inverse[i][2] * z + inverse[i][3]
+            depth = min(depth, self.size_mm[i] / 2 - abs(local))
+        return depth if depth >= 0 else -1.0
+
+
+@functools.lru_cache(maxsize=256)
+def _inverse_frame(x: float, y: float, z: float, rx: float, ry: float, rz: float) -> kin.Transform:
+    """The base-to-box transform of a box at this pose (cached: fixtures do not move)."""
+    return kin.invert(kin.pose_to_transform(Pose(x, y, z, rx, ry, rz)))
 
 
 #: What the support index keeps of a resting object: x, y, half x, half y, top (mm), and
@@ -580,9 +652,10 @@ class World:
     Args:
         objects: The objects; None: one part at ``DEFAULT_PART_POSE``.
         table_top_z_mm: Height of the table top in the robot base frame, mm.
+        fixtures: Fixed boxes the arm must not touch; parts rest on their tops.
 
     Raises:
-        ConfigError: A non-finite table height or two objects with one name.
+        ConfigError: A non-finite table height, or two objects or fixtures with one name.
     """
 
     def __init__(
@@ -590,6 +663,7 @@ class World:
         objects: Iterable[TableObject] | None = None,
         *,
         table_top_z_mm: float = DEFAULT_TABLE_TOP_Z_MM,
+        fixtures: Iterable[Fixture] = (),
     ) -> None:
         if not math.isfinite(table_top_z_mm):
             raise ConfigError(f"table_top_z_mm must be finite, got {table_top_z_mm}")
@@ -602,12 +676,24 @@ class World:
             if item.name in self._objects:
                 raise ConfigError(f"objects: duplicate object name {item.name!r}")
             self._objects[item.name] = item
+        #: The fixed boxes of the cell.
+        self.fixtures: tuple[Fixture, ...] = tuple(fixtures)
+        names = set(self._objects)
+        for fixture in self.fixtures:
+            if fixture.name in names or fixture.name == TABLE:
+                raise ConfigError(f"fixtures: the name {fixture.name!r} is taken")
+            names.add(fixture.name)
         self._held: str | None = None
         # The held object's pose in the TCP frame (None: its pose is the TCP's).
         self._relative: kin.Transform | None = None
         self._order = {name: k for k, name in enumerate(self._objects)}
         self._index = _SupportIndex()
         self._stacks = _Stacks()
+        # Fixtures support parts as objects do (before every object in the world's order).
+        for k, fixture in enumerate(self.fixtures):
+            hx, hy, hz = fixture.half_extents_mm()
+            pose = fixture.pose
+            self._index.add(fixture.name, (pose.x, pose.y, hx, hy, pose.z + hz, k - len(names)))
         for name, obj in self._objects.items():
             self._file(name, obj)
         # Objects start at rest: each one placed in the air drops onto its support,
@@ -643,7 +729,7 @@ class World:
             raise KeyError(f"no object named {name!r}") from None
 
     def resting_on(self, name: str) -> str | None:
-        """What ``name`` rests on ("table" or an object's name), None while held.
+        """What ``name`` rests on ("table", a fixture's or an object's name), None while held.
 
         Args:
             name: An object's name.
@@ -796,7 +882,7 @@ class World:
             pose: Where it is; None: its own pose.
 
         Returns:
-            ``("table", height)`` or another object's name and its top, mm.
+            ``("table", height)`` or a fixture's or another object's name and its top, mm.
         """
         pose = obj.pose if pose is None else pose
         hx, hy, hz = obj.half_extents_mm(pose)
