@@ -453,6 +453,7 @@ class MuJoCoBackend:
         self._collision_force = collision_force_n
         self.keep_motion_on_reinit = keep_motion_on_reinit
         self._objects = list(world.objects)
+        self._fixtures = world.fixtures
         self._table_top_mm = world.table_top_z_mm
         self._xml = build_mjcf(
             model,
@@ -574,6 +575,9 @@ class MuJoCoBackend:
         self._part_qpos, self._part_dof = [a for a, _ in free], [b for _, b in free]
         self._pads = [ident(obj.mjOBJ_GEOM, f"pad_{s}") for s in ("l", "r")]
         self._table = ident(obj.mjOBJ_GEOM, "table")
+        self._fixture_geom = {
+            ident(obj.mjOBJ_GEOM, f"fixture{k}"): f.name for k, f in enumerate(self._fixtures)
+        }
         self._tcp_body = ident(obj.mjOBJ_BODY, "tcp")
         self._flange_body = ident(obj.mjOBJ_BODY, "link6")
         self._part_body = [ident(obj.mjOBJ_BODY, f"part{k}") for k in parts]
@@ -800,7 +804,9 @@ class MuJoCoBackend:
         """A contact the moving arm did not expect, from this step's contact sensors."""
         depth = self._table_depth()
         if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_M:
-            return BackendFault("collision", f"the arm hit the table ({depth * 1000:.1f} mm deep)")
+            return BackendFault(
+                "collision", f"the arm hit {self._obstacle()} ({depth * 1000:.1f} mm deep)"
+            )
         if self._held is not None:
             return None
         data = self._sensordata
@@ -1094,6 +1100,17 @@ class MuJoCoBackend:
             return self._objects[k].pose
         return self._body_pose(self._part_body[k])
 
+    def _obstacle(self) -> str:
+        """What the arm touches: "fixture NAME" when a fixture, else "the table"."""
+        d = self._d
+        for i in range(d.ncon):
+            g1, g2 = int(d.contact[i].geom1), int(d.contact[i].geom2)
+            for fixture, other in ((g1, g2), (g2, g1)):
+                name = self._fixture_geom.get(fixture)
+                if name is not None and other not in self._part_geom:  # a part resting on it
+                    return f"fixture {name}"
+        return "the table"
+
     def _resting_on(self, k: int) -> str | None:
         if k == self._held:
             return None
@@ -1115,6 +1132,8 @@ class MuJoCoBackend:
             other = g2 if g1 == my_geom else g1
             if other == self._table:
                 return TABLE
+            if other in self._fixture_geom:
+                return self._fixture_geom[other]
             j = self._part_geom.get(other)
             if j is not None and d.xpos[self._part_body[j]][2] < z:
                 support = self._objects[j].name
