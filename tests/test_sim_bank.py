@@ -44,6 +44,25 @@ def test_float32_fields_span_two_words(tmflow: RegisterBank) -> None:
     assert tmflow.get("tcp_x") == 123.5
 
 
+def test_setting_a_value_again_stores_it_again(tmflow: RegisterBank, article: RegisterBank) -> None:
+    # A value set before is not encoded again (RegisterBank caches its words), yet what
+    # is stored is always what set was given: after a network write changed the words,
+    # after a value of another type, and for -0.0 after 0.0 (a float32 keeps the sign).
+    article.set("target_y", -200.0)
+    article.write(Table.HOLDING, 0x0201, [7])
+    article.set("target_y", -200.0)
+    assert article.get("target_y") == -200.0
+    tmflow.set("tcp_x", 1.0)
+    tmflow.set("tcp_x", 1)
+    assert tmflow.read(Table.INPUT, 7025, 2) == encode(tmflow.register_map.field("tcp_x"), 1)
+    tmflow.set("tcp_x", 0.0)
+    tmflow.set("tcp_x", -0.0)
+    assert tmflow.read(Table.INPUT, 7025, 2) == encode(tmflow.register_map.field("tcp_x"), -0.0)
+    assert tmflow.read(Table.INPUT, 7025, 2) != encode(tmflow.register_map.field("tcp_x"), 0.0)
+    with pytest.raises(ValueOutOfRangeError, match="tcp_x"):
+        tmflow.set("tcp_x", float("nan"))
+
+
 def test_device_may_set_read_only_fields(tmflow: RegisterBank) -> None:
     tmflow.set("project_running", True)
     assert tmflow.read(Table.DISCRETE_INPUT, 7202, 1) == [1]

@@ -57,6 +57,10 @@ class RegisterBank:
         self._gaps: dict[Table, set[int]] = {table: set() for table in Table}
         self._raw: dict[Table, set[int]] = {table: set() for table in Table}
         self._extra = {f.name: f for f in extra_fields if f.name not in register_map.fields}
+        # The last value ``set`` stored in each field, its field and its words: a device
+        # publishes most fields unchanged at every tick, and encoding them again was most
+        # of an idle tick's cost.
+        self._encoded: dict[str, tuple[Value, RegisterField, list[int]]] = {}
         self._version = 0
         self._network_writes = 0
         self._field_writes: dict[str, int] = dict.fromkeys(register_map.fields, 0)
@@ -117,9 +121,18 @@ class RegisterBank:
 
     def set(self, name: str, value: Value) -> None:
         """Store ``value`` in field ``name`` (device side: read-only fields too)."""
-        field = self._field(name)
-        # encode() raises ValueOutOfRangeError before anything is stored.
-        new = encode(field, value)
+        cached = self._encoded.get(name)
+        # The same value of the same type encodes to the same words; a zero is encoded
+        # again (-0.0 == 0.0, yet a float32 field stores its sign).
+        if cached is not None and cached[0].__class__ is value.__class__ and cached[0] == value:
+            field, new = cached[1], cached[2]
+            if not value:
+                new = encode(field, value)
+        else:
+            field = self._field(name)
+            # encode() raises ValueOutOfRangeError before anything is stored.
+            new = encode(field, value)
+            self._encoded[name] = (value, field, new)
         words = self._words[field.table]
         old = [words[a] for a in range(field.address, field.end + 1)]
         if new != old:
