@@ -137,9 +137,30 @@ def pytest_configure(config: pytest.Config) -> None:
     # rewrote every test module's asserts on every run. The cache goes into the usual,
     # git-ignored __pycache__ folders, as Python does by default.
     sys.dont_write_bytecode = False
-    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+    if hasattr(config, "workerinput"):
+        return
+    _compile_the_package()
+    if not config.getoption("numprocesses", None):
         return
     _warm_the_rewrite_cache(config)
+
+
+def _compile_the_package() -> None:
+    """Write the bytecode of tmmaster's modules that has none, or an outdated one.
+
+    The plugin (``-p tmmaster.sim.pytest_plugin``) and this file import most of tmmaster
+    before ``pytest_configure`` lets this process write bytecode: under
+    PYTHONDONTWRITEBYTECODE=1 those modules (about half the package) were compiled from
+    source again by every xdist worker and every subprocess a test starts (the CLI
+    tests', the examples'), which can only read a cache. Up-to-date files are skipped.
+    """
+    import compileall
+
+    package = Path(tmmaster.__file__).parent
+    try:
+        compileall.compile_dir(package, quiet=2)
+    except OSError:  # a read-only install: an optimisation only
+        return
 
 
 @pytest.hookimpl(optionalhook=True)
