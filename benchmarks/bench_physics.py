@@ -2,10 +2,11 @@
 
 Each backend runs the article's cycle (approach, pick, close, lift, place, open, home,
 speeds 30 % / 10 %) driven directly, tick by tick (``dt`` = 20 ms of simulated time, the
-controller's 50 Hz), with no Modbus and no master: the figure is simulated seconds per
-wall second of the backend alone (and per CPU second of this process, which a busy
-machine disturbs less), median of ``--rounds``. For MuJoCo it also times a
-model rebuild (``reinitialize()``). Run::
+controller's 50 Hz), with no Modbus and no master (MuJoCo twice: joints set along the
+plan, and ``dynamics=True``, whose moves end once the joints settled): the figure is
+simulated seconds per wall second of the backend alone (and per CPU second of this
+process, which a busy machine disturbs less), median of ``--rounds``. For MuJoCo it also
+times a model rebuild (``reinitialize()``). Run::
 
     python benchmarks/bench_physics.py --rounds 5
 """
@@ -92,6 +93,11 @@ def main() -> None:
 
     wall, cpu, sim_s = measure(lambda: MuJoCoBackend(model, home=HOME), args.rounds)
     print(f"mujoco:    cycle {sim_s:.2f} s simulated, {wall:.1f}x real time ({cpu:.1f}x per CPU s)")
+    wall, cpu, sim_s = measure(lambda: MuJoCoBackend(model, home=HOME, dynamics=True), args.rounds)
+    print(
+        f"mujoco (dynamics=True): cycle {sim_s:.2f} s simulated, {wall:.1f}x real time"
+        f" ({cpu:.1f}x per CPU s)"
+    )
     backend = MuJoCoBackend(model, home=HOME)
     rebuilds = []
     for _ in range(max(args.rounds, 5)):

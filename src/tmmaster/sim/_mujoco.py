@@ -14,7 +14,9 @@ top is the world's. What is simulated, and what is not:
   :meth:`RobotModel.line_joints`), with the durations of :meth:`RobotModel.motion_time`,
   so the arm keeps the analytic backend's timing and the master's derived timeouts hold.
   The arm joints are driven directly (qpos / qvel set every physics step, heavy armature):
-  no joint dynamics, no servo lag. Arm links do not collide with anything.
+  no joint dynamics, no servo lag. With ``dynamics=True`` the links carry the masses and
+  inertias of Techman's URDF and the trajectory is the reference of torque-limited joint
+  servos: the arm lags it, and a move is done once the joints settled at its target.
 - **Gripper**: two fingers on slide joints along the tool's y axis, position actuators
   whose force is limited to the commanded grip force, their target ramped at the
   commanded speed. Only the finger pads collide, and only with parts.
@@ -124,6 +126,55 @@ _COLLISION_DEPTH_M = 0.0002
 _FINGER_BLOCKED_M = 0.0005
 
 
+#: The arm's links from Techman's URDF (TechmanRobotInc/tmr_ros2, commit 684faab3c808,
+#: tm_description/urdf/<model>-nominal.urdf, links link_1 .. link_6 ``<inertial>``): mass
+#: (kg) and the diagonal of the inertia tensor (kg m^2) about the link frame's origin,
+#: which is the frame of the joint that turns the link (the URDF's inertial origins are
+#: all zero); and each joint's ``<limit effort>``, N m.
+_URDF_LINKS: dict[str, tuple[tuple[float, tuple[float, float, float]], ...]] = {
+    "tm5-700": (
+        (4.032, (0.008800119, 0.011548982, 0.011970081)),
+        (8.567, (0.023552072, 0.19825197, 0.20459254)),
+        (2.273, (0.003380181, 0.033829144, 0.034328203)),
+        (1.576, (0.002058405, 0.002563079, 0.00264321)),
+        (1.576, (0.002058405, 0.002563079, 0.00264321)),
+        (0.65, (0.000774544, 0.001383811, 0.001559496)),
+    ),
+    "tm5-900": (
+        (4.032, (0.008800119, 0.011548982, 0.011970081)),
+        (8.897, (0.024459295, 0.205888616, 0.2124734246)),
+        (2.443, (0.003632988, 0.03635926, 0.036895644)),
+        (1.576, (0.002058405, 0.002563079, 0.00264321)),
+        (1.576, (0.002058405, 0.002563079, 0.00264321)),
+        (0.65, (0.000774544, 0.001383811, 0.001559496)),
+    ),
+}
+_URDF_EFFORT_NM: dict[str, tuple[float, ...]] = {
+    "tm5-700": (157.0, 157.0, 157.0, 43.0, 43.0, 43.0),
+    "tm5-900": (157.0, 157.0, 157.0, 43.0, 43.0, 43.0),
+}
+
+#: Rotor inertia reflected through the gearbox on each arm joint with ``dynamics=True``,
+#: kg m^2 (not in Techman's URDF: a typical harmonic-drive figure, ours).
+_DYN_ARMATURE = (0.4, 0.4, 0.2, 0.05, 0.05, 0.05)
+#: The joint servo's bandwidth with ``dynamics=True``: natural frequency (Hz) and
+#: damping ratio of each joint's PD loop, its gains scaled by the joint's inertia in the
+#: ready posture without payload; an integral term (time constant ``_SERVO_TI_S``) holds
+#: a payload the servo does not know of.
+_SERVO_HZ = 8.0
+_SERVO_ZETA = 1.0
+_SERVO_TI_S = 0.1
+#: A dynamic move is done once every joint is within this of its target (deg) ...
+SETTLE_TOLERANCE_DEG = 0.01
+#: ... and turns slower than this (deg/s).
+SETTLE_SPEED_DEG_S = 0.5
+
+
+def has_dynamics_data(model_name: str) -> bool:
+    """True when the link masses and joint torques of ``model_name`` are known."""
+    return model_name in _URDF_LINKS
+
+
 def _import_mujoco() -> Any:
     try:
         import mujoco
@@ -212,6 +263,7 @@ def build_mjcf(
     gripper: GripperGeometry = DEFAULT_GRIPPER,
     timestep_s: float = DEFAULT_TIMESTEP_S,
     fixtures: Sequence[Fixture] = (),
+    dynamics: bool = False,
 ) -> str:
     """The MJCF scene: the arm from ``model.joints``, gripper at ``tool``, table, parts.
 
@@ -224,10 +276,22 @@ def build_mjcf(
         timestep_s: The physics step, s.
         fixtures: Static boxes (in the world body, as the table: the arm hitting one is
             a collision; parts rest on them).
+        dynamics: The links get Techman's masses and inertias, feel gravity and are
+            driven by torque motors limited to the joints' efforts (False: weightless
+            links whose joints the backend sets).
 
     Returns:
         The MJCF document.
+
+    Raises:
+        ValueError: ``dynamics`` for a model whose link masses are not known.
     """
+    if dynamics and model.name not in _URDF_LINKS:
+        raise ValueError(
+            f"dynamics: no link masses for {model.name!r} (known: {', '.join(_URDF_LINKS)})"
+        )
+    # Arm links: weightless and gravity-compensated when the backend sets the joints.
+    comp = "" if dynamics else ' gravcomp="1"'
     lines = [
         f"<mujoco model={quoteattr('tmmaster ' + model.name)}>",
         '  <compiler angle="radian" autolimits="true"/>',
@@ -274,11 +338,19 @@ def build_mjcf(
             spec.origin_xyz_mm, [math.radians(a) for a in spec.origin_rpy_deg]
         )
         lo, hi = (math.radians(v) for v in spec.limits_deg)
-        lines.append(f'{indent}<body name="link{i + 1}" {_frame_attrs(origin)} gravcomp="1">')
+        lines.append(f'{indent}<body name="link{i + 1}" {_frame_attrs(origin)}{comp}>')
         indent += "  "
+        if dynamics:
+            mass, inertia = _URDF_LINKS[model.name][i]
+            lines.append(
+                f'{indent}<inertial pos="0 0 0" mass="{mass:g}" diaginertia="{_fmt(inertia)}"/>'
+            )
+            armature = f"{_DYN_ARMATURE[i]:g}"
+        else:
+            armature = "1000"
         lines.append(
             f'{indent}<joint name="j{i + 1}" type="hinge" axis="0 0 1" range="{lo:.9g} {hi:.9g}"'
-            ' armature="1000" damping="0"/>'
+            f' armature="{armature}" damping="0"/>'
         )
         nxt = model.joints[i + 1].origin_xyz_mm if i + 1 < len(model.joints) else (0.0, 0.0, 0.0)
         length = math.hypot(*nxt)
@@ -303,7 +375,7 @@ def build_mjcf(
         f'{indent}<geom name="flange" type="cylinder" pos="0 0 -0.005" size="0.032 0.005"'
         f' rgba=".2 .2 .2 1" {arm} mass="0.1"/>'
     )
-    lines.append(f'{indent}<body name="tcp" {_frame_attrs(tcp)} gravcomp="1">')
+    lines.append(f'{indent}<body name="tcp" {_frame_attrs(tcp)}{comp}>')
     g = indent + "  "
     stroke = (gripper.min_width_mm / 2000, gripper.max_width_mm / 2000)
     lines.append(
@@ -373,6 +445,14 @@ def build_mjcf(
     lines.append("  <actuator>")
     for side in ("l", "r"):
         lines.append(f'    <motor name="finger_{side}" joint="finger_{side}" gear="1"/>')
+    if dynamics:
+        # The joint servos (computed by the backend) drive these torque motors, each
+        # limited to its joint's effort.
+        for i, effort in enumerate(_URDF_EFFORT_NM[model.name]):
+            lines.append(
+                f'    <motor name="a{i + 1}" joint="j{i + 1}" gear="1"'
+                f' ctrlrange="{-effort:g} {effort:g}"/>'
+            )
     lines.append("  </actuator>")
     # Contact sensors (cheaper to read than MuJoCo's contact list every step): the arm,
     # tool or pads in the table (the deepest contact), and the net force on each pad
@@ -414,10 +494,19 @@ class MuJoCoBackend:
         keep_motion_on_reinit: A rebuild keeps the running motion (False: loses it).
         collision_force_n: A pad pressing on a part it does not hold harder than this while
             the arm moves is a collision, N.
+        dynamics: Arm dynamics: the links get the masses and inertias of Techman's URDF
+            and feel gravity, and each joint is a servo (PD plus the arm's own gravity,
+            an integral term for a payload it does not know of) whose torque is limited
+            to the joint's effort, following the planned trajectory as its reference:
+            the joints and TCP reported are where the joints are (they lag the
+            reference, more so with a heavy part), and a move is done only once every
+            joint has settled within ``SETTLE_TOLERANCE_DEG`` of its target. False: the
+            joints follow the trajectory exactly (no lag, no settling).
 
     Raises:
         PhysicsUnavailableError: ``mujoco`` is not installed.
-        ValueError: A bad time step, stroke or grasp mode, or an unreachable ``home``.
+        ValueError: A bad time step, stroke or grasp mode, an unreachable ``home``, or
+            ``dynamics`` for a model whose link masses are not known.
     """
 
     def __init__(
@@ -434,6 +523,7 @@ class MuJoCoBackend:
         gripper_max_width_mm: float | None = None,
         keep_motion_on_reinit: bool = True,
         collision_force_n: float = DEFAULT_COLLISION_FORCE_N,
+        dynamics: bool = False,
     ) -> None:
         self._mj = _import_mujoco()
         if not (math.isfinite(timestep_s) and 0 < timestep_s <= 0.01):
@@ -462,8 +552,19 @@ class MuJoCoBackend:
             tool=tool,
             gripper=self._gripper,
             timestep_s=timestep_s,
+            dynamics=dynamics,
             fixtures=world.fixtures,
         )
+        self._dynamics = dynamics
+        # Joint servo (dynamics): gains per joint, the integral term's torque (N m), and
+        # the last reference (rad, rad/s) and the torques (N m) commanded.
+        self._kp: list[float] = []
+        self._kd: list[float] = []
+        self._servo_joints: list[tuple[int, int, float, float, float]] = []
+        self._integral = [0.0] * len(model.joints)
+        self._effort = list(_URDF_EFFORT_NM.get(model.name, ()))
+        #: Largest tracking error seen since the last start of a motion (deg, per joint).
+        self.max_tracking_error_deg = [0.0] * len(model.joints)
         # Feeder: a part that starts inside an earlier one waits out of the scene.
         self._queued: list[int] = []
         placed: list[TableObject] = []
@@ -571,6 +672,7 @@ class MuJoCoBackend:
         # MjData's arrays, cached: reading the attribute costs as much as the write.
         self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
         self._sensordata = d.sensordata
+        self._bias = d.qfrc_bias
         self._finger_qpos, self._finger_dof = [a for a, _ in fingers], [b for _, b in fingers]
         self._part_qpos, self._part_dof = [a for a, _ in free], [b for _, b in free]
         self._pads = [ident(obj.mjOBJ_GEOM, f"pad_{s}") for s in ("l", "r")]
@@ -601,6 +703,28 @@ class MuJoCoBackend:
             m.eq_data[:] = snapshot["eq_data"]
             d.eq_active[:] = snapshot["eq_active"]
         mj.mj_forward(m, d)
+        if self._dynamics and not self._kp:
+            self._servo_gains(m)
+
+    def _servo_gains(self, m: Any) -> None:
+        """PD gains: ``_SERVO_HZ`` / ``_SERVO_ZETA`` for each joint's inertia when ready."""
+        mj = self._mj
+        d = mj.MjData(m)
+        for adr, q in zip(self._arm_qpos, self._model.ready_joints_deg, strict=True):
+            d.qpos[adr] = math.radians(q)
+        mj.mj_forward(m, d)
+        import numpy as np
+
+        full = np.zeros((m.nv, m.nv))
+        mj.mj_fullM(m, d, full)
+        w = 2 * math.pi * _SERVO_HZ
+        for dof in self._arm_dof:
+            inertia = float(full[dof, dof])  # the diagonal, armature included
+            self._kp.append(inertia * w * w)
+            self._kd.append(2 * _SERVO_ZETA * inertia * w)
+        self._servo_joints = list(
+            zip(self._arm_qpos, self._arm_dof, self._kp, self._kd, self._effort, strict=True)
+        )
 
     def _snapshot(self) -> dict[str, Any]:
         m, d = self._m, self._d
@@ -683,6 +807,7 @@ class MuJoCoBackend:
                 reason = "singularity"
             raise MotionRejectedError(reason, str(exc)) from exc
         self._trajectory = _Trajectory(samples, duration, accel_time_s)
+        self.max_tracking_error_deg = [0.0] * len(samples[0])
         # A contact the arm already had (a collision it is backing out of) is known: only
         # a deeper one is a collision.
         self._start_depth = self._table_depth()
@@ -740,6 +865,7 @@ class MuJoCoBackend:
     ) -> float:
         """Start following joint ``samples`` over ``duration``; return it."""
         self._trajectory = _Trajectory(samples, duration, accel_time_s)
+        self.max_tracking_error_deg = [0.0] * len(samples[0])
         self._start_depth = self._table_depth()
         return duration
 
@@ -756,8 +882,27 @@ class MuJoCoBackend:
             self._trajectory = None
 
     def is_settled(self) -> bool:
-        """True when no trajectory runs (the ideal servo has no oscillation to wait for)."""
-        return self._trajectory is None
+        """True when no trajectory runs (and, with dynamics, the joints settled at its end)."""
+        if self._trajectory is not None:
+            return False
+        if not self._dynamics:
+            return True
+        qpos, qvel = self._qpos, self._qvel
+        for adr, dof, q in zip(self._arm_qpos, self._arm_dof, self._hold, strict=True):
+            if abs(qpos[adr] / _RAD - q) > SETTLE_TOLERANCE_DEG:
+                return False
+            if abs(qvel[dof] / _RAD) > SETTLE_SPEED_DEG_S:
+                return False
+        return True
+
+    @property
+    def dynamics(self) -> bool:
+        """True when the joints are torque-driven servos (see the class docstring)."""
+        return self._dynamics
+
+    def reference_joints_deg(self) -> tuple[float, ...]:
+        """The joints the servo is told to be at now (the trajectory's sample), deg."""
+        return self._command_joints()
 
     def joint_positions_deg(self) -> tuple[float, ...]:
         """Current joint angles J1..J6, degrees."""
@@ -839,9 +984,14 @@ class MuJoCoBackend:
         )
 
     def _stop_for(self, fault: BackendFault, joints: tuple[float, ...]) -> None:
-        """Stop where the fault showed (the step's pose, not the trajectory's next one)."""
+        """Stop where the fault showed (the step's pose, not the trajectory's next one).
+
+        With dynamics the servo holds where the joints are, not where the reference
+        was: the reference leads them, and holding it would press into what was hit.
+        """
         self._trajectory = None
-        self._hold = joints
+        self._hold = self._current_joints() if self._dynamics else joints
+        self._integral = [0.0] * len(self._integral) if self._dynamics else self._integral
         self._fault = fault
 
     # -- simulation ---------------------------------------------------------------------
@@ -861,8 +1011,11 @@ class MuJoCoBackend:
             self._feed()  # once per tick: a waiting part appears when its spot is free
         if self._grasp_mode == "friction" and self._closing:
             self._update_held()
-        # Report exactly the commanded joints (the integrator moved them by a hair).
-        self._set_arm(self._command_joints(), None)
+        if not self._dynamics:
+            # Report exactly the commanded joints (the integrator moved them by a hair).
+            self._set_arm(self._command_joints(), None)
+        # The poses of the joints the last step ended with (mj_step leaves them one step
+        # behind).
         self._mj.mj_kinematics(self._m, self._d)
 
     def _set_arm(self, joints: Sequence[float], velocity: Sequence[float] | None) -> None:
@@ -878,17 +1031,53 @@ class MuJoCoBackend:
             for adr, w in zip(self._arm_dof, velocity, strict=True):
                 qvel[adr] = w * _RAD
 
+    def _servo(self, reference: Sequence[float], velocity: Sequence[float] | None) -> None:
+        """Each joint's torque towards ``reference`` (deg) moving at ``velocity`` (deg/s).
+
+        PD on the error plus the arm's own gravity and Coriolis torques (MuJoCo's bias
+        force of the last step: a part held is not in it) plus an integral term, the
+        total limited to the joint's effort (the integral stops growing at the limit).
+        """
+        # Plain floats (tolist) and one slice write: numpy scalars cost more than the maths.
+        qpos, qvel, bias = self._qpos.tolist(), self._qvel.tolist(), self._bias.tolist()
+        h = self._timestep
+        worst = self.max_tracking_error_deg
+        integral = self._integral
+        torques = []
+        for i, (adr, dof, kp, kd, effort) in enumerate(self._servo_joints):
+            error = reference[i] * _RAD - qpos[adr]
+            speed = qvel[dof]
+            v_error = -speed if velocity is None else velocity[i] * _RAD - speed
+            grown = integral[i] + kp * error * h / _SERVO_TI_S
+            torque = kp * error + kd * v_error + bias[dof] + grown
+            if -effort < torque < effort:
+                integral[i] = grown
+            else:
+                torque = effort if torque > 0 else -effort
+            torques.append(torque)
+            e = abs(error) / _RAD
+            if e > worst[i]:
+                worst[i] = e
+        self._ctrl[2:8] = torques
+
     def _substep(self) -> None:
         h = self._timestep
         trajectory = self._trajectory
         now = self._hold
         if trajectory is None:
-            self._set_arm(self._hold, None)
+            if self._dynamics:
+                self._servo(now, None)
+            else:
+                self._set_arm(self._hold, None)
         else:
             now = trajectory.joints_at(trajectory.elapsed_s)
             trajectory.elapsed_s += h
             nxt = trajectory.joints_at(trajectory.elapsed_s)
-            self._set_arm(now, [(b - a) / h for a, b in zip(now, nxt, strict=True)])
+            velocity = [(b - a) / h for a, b in zip(now, nxt, strict=True)]
+            if self._dynamics:
+                self._servo(nxt, velocity)
+            else:
+                self._set_arm(now, velocity)
             if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
                 self._hold = trajectory.samples[-1]
                 self._trajectory = None
