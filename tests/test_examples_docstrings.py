@@ -75,7 +75,8 @@ def start_simulator(words: list[str], factory: SimFactory) -> tuple[str, Simulat
         assert option in SIM_OPTIONS or value == parser.get_default(option), (
             f"this test does not reproduce the simulator option {option}={value!r}: add it"
         )
-    parts = [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(args.parts)]
+    count = 1 if args.parts is None else args.parts  # the simulator's default: one part
+    parts = [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(count)]
     sim = factory(args.profile, model=args.model, faults=args.fault, objects=parts, **QUICK)
     return str(args.port), sim
 
