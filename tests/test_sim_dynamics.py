@@ -156,3 +156,22 @@ def test_the_pick_and_place_cycle_through_the_master_with_a_heavy_part() -> None
         part = sim.call(lambda: b.objects()[0])
     assert part.pose.x == pytest.approx(PLACE.x, abs=5)
     assert part.pose.y == pytest.approx(PLACE.y, abs=5)
+
+
+def test_a_joint_held_at_its_effort_shows_as_saturation_and_lag(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from tmmaster.sim import _mujoco
+
+    full, full_lag, full_done = carry_fast(5.0)
+    assert full.saturated_steps == [0] * 6  # the TM5's efforts carry 5 kg at full speed
+    # The same arm with a J1 motor of 20 N m instead of 157: the servo is held at the
+    # limit, J1 falls behind its reference and the move settles later.
+    weak_efforts = (20.0, *_mujoco._URDF_EFFORT_NM["tm5-700"][1:])
+    monkeypatch.setitem(_mujoco._URDF_EFFORT_NM, "tm5-700", weak_efforts)
+    weak, weak_lag, weak_done = carry_fast(5.0)
+    assert weak.saturated_steps[0] > 100
+    assert weak.saturated_steps[1:] == [0] * 5
+    assert weak_lag > 5 * full_lag
+    assert weak_done > full_done
+    assert weak.tcp_pose().is_close(PLACE, mm=MASTER_MM, deg=MASTER_DEG)  # it gets there

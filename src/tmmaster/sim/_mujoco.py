@@ -565,6 +565,9 @@ class MuJoCoBackend:
         self._effort = list(_URDF_EFFORT_NM.get(model.name, ()))
         #: Largest tracking error seen since the last start of a motion (deg, per joint).
         self.max_tracking_error_deg = [0.0] * len(model.joints)
+        #: With dynamics: the physics steps of the current move at which each joint's
+        #: servo asked for more than the joint's effort and was held at it (saturated).
+        self.saturated_steps = [0] * len(model.joints)
         # Feeder: a part that starts inside an earlier one waits out of the scene.
         self._queued: list[int] = []
         placed: list[TableObject] = []
@@ -808,6 +811,7 @@ class MuJoCoBackend:
             raise MotionRejectedError(reason, str(exc)) from exc
         self._trajectory = _Trajectory(samples, duration, accel_time_s)
         self.max_tracking_error_deg = [0.0] * len(samples[0])
+        self.saturated_steps = [0] * len(samples[0])
         # A contact the arm already had (a collision it is backing out of) is known: only
         # a deeper one is a collision.
         self._start_depth = self._table_depth()
@@ -866,6 +870,7 @@ class MuJoCoBackend:
         """Start following joint ``samples`` over ``duration``; return it."""
         self._trajectory = _Trajectory(samples, duration, accel_time_s)
         self.max_tracking_error_deg = [0.0] * len(samples[0])
+        self.saturated_steps = [0] * len(samples[0])
         self._start_depth = self._table_depth()
         return duration
 
@@ -1042,6 +1047,7 @@ class MuJoCoBackend:
         qpos, qvel, bias = self._qpos.tolist(), self._qvel.tolist(), self._bias.tolist()
         h = self._timestep
         worst = self.max_tracking_error_deg
+        saturated = self.saturated_steps
         integral = self._integral
         torques = []
         for i, (adr, dof, kp, kd, effort) in enumerate(self._servo_joints):
@@ -1054,6 +1060,7 @@ class MuJoCoBackend:
                 integral[i] = grown
             else:
                 torque = effort if torque > 0 else -effort
+                saturated[i] += 1
             torques.append(torque)
             e = abs(error) / _RAD
             if e > worst[i]:
