@@ -16,8 +16,9 @@ from typing import Any
 
 import pytest
 
-from tmmaster import ConfigError, Pose, _cli
+from tmmaster import ConfigError, Pose, _cli, robot_model
 from tmmaster.pickplace import __main__ as pickplace_main
+from tmmaster.sim import KinematicBackend
 from tmmaster.sim import __main__ as sim_main
 from tmmaster.sim._scene import Scene
 from tmmaster.sim._simulator import Simulator
@@ -419,6 +420,7 @@ SIM_CASES: list[Case] = [
     ),
     ("sim-scene-and-parts", {"s.toml": ""}, ["--scene", "{dir}/s.toml", "--parts", "2"], "--parts"),
     ("sim-grasp-unknown", {}, ["--grasp", "glue"], "--grasp"),
+    ("sim-dynamics-kinematic", {}, ["--dynamics"], "dynamics"),
 ]
 
 
@@ -463,6 +465,12 @@ def test_sim_bad_input_is_exit_2_with_one_line(
             id="objects-duplicate-name",
         ),
         pytest.param({"grasp": "glue"}, "grasp", id="grasp-unknown"),
+        pytest.param({"dynamics": True}, "dynamics", id="dynamics-kinematic"),
+        pytest.param(
+            {"dynamics": True, "backend": KinematicBackend(robot_model("tm5-700"))},
+            "dynamics",
+            id="dynamics-own-backend",
+        ),
         pytest.param(
             {"scene": Scene(), "objects": [TableObject(name="p", pose=DEFAULT_PART_POSE)]},
             "objects or scene",

@@ -175,3 +175,14 @@ def test_a_joint_held_at_its_effort_shows_as_saturation_and_lag(
     assert weak_lag > 5 * full_lag
     assert weak_done > full_done
     assert weak.tcp_pose().is_close(PLACE, mm=MASTER_MM, deg=MASTER_DEG)  # it gets there
+
+
+def test_the_simulator_and_its_command_line_choose_the_dynamics() -> None:
+    with Simulator(physics="mujoco", dynamics=True, listen=False) as sim:
+        backend = sim.backend
+        assert isinstance(backend, MuJoCoBackend)
+        assert backend.dynamics
+    from tmmaster.sim.__main__ import build_parser
+
+    args = build_parser().parse_args(["--physics", "mujoco", "--dynamics"])
+    assert args.dynamics

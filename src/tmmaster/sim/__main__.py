@@ -165,6 +165,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         " touch, parts, gripper geometry (docs/simulator.md#scene-files)",
     )
     parser.add_argument(
+        "--dynamics",
+        action="store_true",
+        help="with --physics mujoco: the links carry Techman's masses and inertias and each"
+        " joint is a servo limited to its effort (the arm lags; a move is done once it settled)",
+    )
+    parser.add_argument(
         "--grasp",
         default="friction",
         choices=["friction", "weld"],
@@ -243,6 +249,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             objects=_parts(args.parts, args.scene),
             scene=args.scene,
             grasp=args.grasp,
+            dynamics=args.dynamics,
             request_listener=echo if args.trace_requests else None,
             physics=args.physics,
             tool=_tool(args.tool),

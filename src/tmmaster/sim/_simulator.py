@@ -116,6 +116,10 @@ class Simulator:
         speed_factor: The arm moves this many times faster than the model the master
             plans with (0.1..10; for testing a master against a robot it does not
             predict); not with ``backend``.
+        dynamics: ``physics="mujoco"`` only: the links carry Techman's masses and
+            inertias and each joint is a servo limited to its effort, so the arm lags
+            its trajectory (more with a heavy part) and a move is done once the joints
+            settled; the reported pose is where the joints are.
 
     Raises:
         ConfigError: a bad argument, named in the message: ``time_scale`` not a finite
@@ -123,7 +127,8 @@ class Simulator:
             ``init_time_s`` below 0 or not finite, ``initial_seq`` outside the
             profile's sequence range, ``speed_factor`` outside 0.1..10, two objects
             of one name, an unknown profile, model or physics backend, an invalid
-            scene (naming the key), an unknown ``grasp``.
+            scene (naming the key), an unknown ``grasp``, ``dynamics`` without the
+            mujoco backend.
     """
 
     def __init__(
@@ -152,6 +157,7 @@ class Simulator:
         resume_after_error: bool = False,
         program: str | Path | None = None,
         speed_factor: float = 1.0,
+        dynamics: bool = False,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
@@ -180,6 +186,13 @@ class Simulator:
             raise ConfigError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
         if grasp != "friction" and backend is not None:
             raise ConfigError("grasp: give the grasp mode to your own backend, not to Simulator")
+        if dynamics and backend is not None:
+            raise ConfigError("dynamics: give your own backend its dynamics, not Simulator")
+        if dynamics and physics != "mujoco":
+            raise ConfigError(
+                "dynamics: only the mujoco physics backend models arm dynamics"
+                " (physics='mujoco', --physics mujoco)"
+            )
         if scene is not None and objects is not None:
             raise ConfigError("give either objects or scene, not both")
         if scene is not None and backend is not None:
@@ -195,6 +208,7 @@ class Simulator:
                 tool=tool,
                 gripper=None if cell is None else cell.gripper,
                 grasp=grasp,  # type: ignore[arg-type]  # checked against GRASP_MODES
+                dynamics=dynamics,
             )
         self._backend: PhysicsBackend = backend
         all_faults = [_as_fault(f) for f in faults]
@@ -740,6 +754,7 @@ def physics_backend(
     tool: Pose | None = None,
     gripper: GripperGeometry | None = None,
     grasp: GraspMode = "friction",
+    dynamics: bool = False,
 ) -> PhysicsBackend:
     """A built-in physics backend by name: "kinematic" (analytic) or "mujoco" (optional extra).
 
@@ -750,6 +765,8 @@ def physics_backend(
         tool: The TCP in the flange frame (None: the TCP is the flange).
         gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
         grasp: ``"friction"`` or ``"weld"``.
+        dynamics: ``"mujoco"`` only: the links carry Techman's masses and inertias and
+            each joint is a servo limited to its effort (docs/physics-backends.md).
 
     Returns:
         The backend.
@@ -757,14 +774,26 @@ def physics_backend(
     Raises:
         UnknownNameError: Another name.
         PhysicsUnavailableError: The MuJoCo extra is missing.
+        ConfigError: ``dynamics`` with the kinematic backend, or for an arm model whose
+            link masses are not known.
     """
     if name == "kinematic":
+        if dynamics:
+            raise ConfigError("dynamics: the kinematic backend has none (physics='mujoco')")
         return KinematicBackend(model, world=world, tool=tool, gripper=gripper, grasp=grasp)
     if name == "mujoco":
-        from ._mujoco import MuJoCoBackend  # imports mujoco: only when asked for
+        from ._mujoco import MuJoCoBackend, has_dynamics_data  # imports mujoco: when asked
 
+        if dynamics and not has_dynamics_data(model.name):
+            raise ConfigError(f"dynamics: no link masses for the {model.name} model")
         return MuJoCoBackend(
-            model, world=world, home=DEFAULT_HOME, tool=tool, gripper=gripper, grasp=grasp
+            model,
+            world=world,
+            home=DEFAULT_HOME,
+            tool=tool,
+            gripper=gripper,
+            grasp=grasp,
+            dynamics=dynamics,
         )
     raise UnknownNameError(
         f"unknown physics backend {name!r} (known: {', '.join(PHYSICS_BACKENDS)})"
