@@ -147,7 +147,7 @@ class MotionSchedule:
         self._expected = 0.0
         #: No poll spaced beyond the nominal interval from this moment (monotonic s).
         self._earliest = math.inf
-        self._end: float | None = None
+        #: Half-width of the dense window around the predicted end; 0: no window.
         self._window = 0.0
         self._early = 0.0
         self._mid_interval = nominal_s
@@ -175,7 +175,7 @@ class MotionSchedule:
         self._acked_at, self._expected = at, expected_s
         self._predicted = at + expected_s
         self._earliest = at - self._early + expected_s * p.earliest_end_fraction
-        self._plan(at, at + expected_s)
+        self._plan(at)
 
     def observed(self, at: float, fraction: float | None) -> None:
         """Re-predict the end from the progress a poll observed.
@@ -215,14 +215,12 @@ class MotionSchedule:
             at + remaining * self._policy.earliest_end_fraction,
             self._acked_at + self._expected,
         )
-        if self._end is not None:
-            # The polls already spaced paid for the window: it moves with the end.
-            self._end = end
-        else:
-            self._plan(at, end)
+        if not self._window:
+            # The polls already spaced paid for a window: it moves with the end.
+            self._plan(at)
 
-    def _plan(self, start: float, end: float) -> None:
-        """Window and middle pace for a move predicted to end at ``end``, seen from ``start``.
+    def _plan(self, start: float) -> None:
+        """Window and middle pace for the move's predicted end, seen from ``start``.
 
         A move may cost no more polls than nominal polling over the same time: the polls
         saved by spacing the middle (at most to ``max_stretch`` nominal intervals, and
@@ -232,7 +230,7 @@ class MotionSchedule:
         """
         p = self._policy
         n, d, cap = self._nominal, p.dense_interval_s, self._nominal * p.max_stretch
-        self._end = None
+        end = self._predicted
         span = end - start
         window = min(p.completion_window_s, span / 2)
         while window >= d:
@@ -242,7 +240,7 @@ class MotionSchedule:
             nominal = max(opens - max(self._earliest, start), 0.0)
             spare = (closes - start) / n - nominal / n - (2 * window + self._early) / d - _RESERVE
             if spare >= stretchable / cap and (spare > 0 or stretchable == 0):
-                self._end, self._window = end, window
+                self._window = window
                 if stretchable > 0:
                     self._mid_interval = min(max(stretchable / spare, n), cap)
                 return
@@ -257,14 +255,15 @@ class MotionSchedule:
         look corrects the first (read early, in the ramp, it weighs a pose's rounding
         and the model's profile more).
         """
-        if self._observations >= 2 or self._end is None:
+        if self._observations >= 2 or not self._window:
             return False
-        return at >= self._acked_at + (self._end - self._acked_at) * (self._observations + 1) / 3
+        share = (self._observations + 1) / 3
+        return at >= self._acked_at + (self._predicted - self._acked_at) * share
 
     @property
     def window_s(self) -> float:
         """Half-width of the dense window around the expected end (0 when there is none)."""
-        return self._window if self._end is not None else 0.0
+        return self._window
 
     @property
     def pace(self) -> float:
@@ -291,7 +290,7 @@ class MotionSchedule:
             if now < first + p.ack_window_s:
                 return now + p.dense_interval_s
             return now + nominal
-        if self._end is None:
+        if not self._window:
             if self._expected > 0:
                 # No window the budget pays for (a short move): the nominal polls are
                 # shifted so that one falls a robot tick after the predicted end, where
@@ -300,8 +299,8 @@ class MotionSchedule:
                 if now < seen:
                     return min(now + nominal, seen)
             return now + nominal
-        opens = self._end - self._early - self._window / 2
-        closes = self._end + 1.5 * self._window
+        opens = self._predicted - self._early - self._window / 2
+        closes = self._predicted + 1.5 * self._window
         if now < opens:
             if now < self._earliest:
                 return min(now + self._mid_interval, self._earliest, opens)

@@ -835,15 +835,11 @@ def _cached_gauge(
 ) -> PathGauge:
     # A repeating cycle gauges the same moves: forward kinematics once per move.
     n = PathGauge.SAMPLES
-    remaining = tuple(
-        model.forward(
-            [a + (b - a) * k / n for a, b in zip(first, last, strict=True)], tool
-        ).distance_to(target)
+    poses = [
+        model.forward([a + (b - a) * k / n for a, b in zip(first, last, strict=True)], tool)
         for k in range(n + 1)
-    )
-    if any(b >= a for a, b in itertools.pairwise(remaining)):
-        remaining = ()  # not decreasing all the way: the distance cannot tell the progress
-    return PathGauge(start, target, remaining)
+    ]
+    return PathGauge.along(start, target, poses)
 
 
 @functools.lru_cache(maxsize=1024)
