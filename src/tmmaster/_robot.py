@@ -284,6 +284,7 @@ class Motion:
         timeout_s: float,
         gauge: PathGauge | None = None,
         accel_s: float = 0.0,
+        timeout_from_model: bool = False,
     ) -> None:
         self._follower = follower
         self._ticket = ticket
@@ -299,7 +300,7 @@ class Motion:
         self.accel_s = accel_s
         #: True when ``timeout_s`` was derived from the model's expected time: the wait
         #: then gives a robot the polls see moving slower than the model more time.
-        self.timeout_from_model = False
+        self.timeout_from_model = timeout_from_model
         self._gauge = gauge
         #: Where the move stands.
         self.phase = MovePhase.SENT
@@ -1914,9 +1915,9 @@ class Robot:
             timeout_s=timeout_s,
             gauge=gauge,
             accel_s=(self.model.accel_time_s if accel is None else accel) if gauge else 0.0,
-        )
-        motion.timeout_from_model = (
-            gauge is not None and timeout is None and self.timeouts.motion_timeout_s is None
+            timeout_from_model=(
+                gauge is not None and timeout is None and self.timeouts.motion_timeout_s is None
+            ),
         )
 
         def register() -> None:
