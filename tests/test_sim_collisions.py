@@ -21,7 +21,7 @@ from tmmaster._pose import MotionType
 from tmmaster.sim import KinematicBackend, Simulator, TableObject, World
 from tmmaster.sim._backend import BackendFault, PhysicsBackend
 from tmmaster.sim._controller import SimErrorCode
-from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM, rated_payload_kg
+from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM
 
 MODEL = tmmaster.robot_model("tm5-700")
 HAS_MUJOCO = importlib.util.find_spec("mujoco") is not None
@@ -151,7 +151,7 @@ def test_mujoco_stops_an_arm_link_that_hits_the_table() -> None:
 
 @pytest.mark.parametrize("backend_name", BACKENDS)
 def test_a_carried_part_over_the_rated_payload_stops_the_lift(backend_name: str) -> None:
-    assert rated_payload_kg("tm5-700") == 6.0
+    assert MODEL.payload_kg == 6.0
     pick = Pose(300, -200, DEFAULT_TABLE_TOP_Z_MM + 15, 180, 0, 90)
     for mass, fault_kind in ((5.9, None), (6.5, "payload")):
         world = World([TableObject(name="part", pose=pick, mass_kg=mass)])
@@ -166,6 +166,28 @@ def test_a_carried_part_over_the_rated_payload_stops_the_lift(backend_name: str)
         if fault is not None:
             assert "6.5 kg" in fault.message
             assert b.tcp_pose().z < pick.z + 5  # stopped as it lifted
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_the_payload_checked_is_the_arm_models_own(backend_name: str) -> None:
+    # The same 2 kg part: over a 1.5 kg model's payload, unchecked for a model without one.
+    pick = Pose(300, -200, DEFAULT_TABLE_TOP_Z_MM + 15, 180, 0, 90)
+    for payload, fault_kind in ((1.5, "payload"), (None, None)):
+        model = MODEL.model_copy(update={"payload_kg": payload})
+        world = World([TableObject(name="part", pose=pick, mass_kg=2.0)])
+        if backend_name == "kinematic":
+            b: PhysicsBackend = KinematicBackend(model, world=world, home=pick)
+        else:
+            from tmmaster.sim._mujoco import MuJoCoBackend
+
+            b = MuJoCoBackend(model, world=world, home=pick)
+        b.drive_gripper(0, speed_mm_s=100, force_n=140)
+        until_fault(b, lambda b=b: not b.gripper_state().moving)  # type: ignore[misc]
+        b.start_motion(
+            pick.offset(dz=60), motion=MotionType.LINE, speed_percent=20, accel_time_s=0.1
+        )
+        fault = until_fault(b, b.is_settled)
+        assert (fault and fault.kind) == fault_kind
 
 
 # -- the controller: TM's error codes ------------------------------------------------------

@@ -80,6 +80,9 @@ class RobotModel(BaseModel):
     joints: tuple[JointSpec, JointSpec, JointSpec, JointSpec, JointSpec, JointSpec]
     #: Maximum TCP speed of a Line motion at 100 % speed, mm/s.
     tcp_speed_mm_s: float = Field(gt=0)
+    #: Rated payload, kg: the simulator raises the robot's over-payload error (0x000F) for
+    #: a heavier part carried; None: not known, not checked.
+    payload_kg: float | None = Field(default=None, gt=0)
     #: Time to reach top speed (TM motion nodes call it acceleration time), s.
     accel_time_s: float = Field(default=0.2, ge=0)
     #: Posture inverse kinematics starts from when nothing better is known.

@@ -55,7 +55,6 @@ from ._world import (
     gripper_geometry,
     in_tool_frame,
     pad_overlaps,
-    rated_payload_kg,
 )
 
 # Absorbs float drift from summing many small dt values, so a move of T seconds stepped
@@ -663,7 +662,7 @@ class KinematicBackend:
     def _overload(self) -> BackendFault | None:
         """The part carried is heavier than the arm's rated payload."""
         held = self._world.held
-        payload = rated_payload_kg(self._model.name)
+        payload = self._model.payload_kg
         if held is None or payload is None or held.mass_kg <= payload:
             return None
         return BackendFault(

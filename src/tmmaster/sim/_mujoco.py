@@ -62,7 +62,6 @@ from ._world import (
     TableObject,
     World,
     gripper_geometry,
-    rated_payload_kg,
 )
 
 if TYPE_CHECKING:
@@ -977,7 +976,7 @@ class MuJoCoBackend:
         """The part held is heavier than the arm's rated payload (while the arm moves)."""
         if self._held is None:
             return None
-        payload = rated_payload_kg(self._model.name)
+        payload = self._model.payload_kg
         if payload is None:
             return None
         obj = self._objects[self._held]

@@ -114,23 +114,6 @@ class GripperGeometry(BaseModel):
         return mass_kg <= self.max_mass_kg(force_n) + 1e-12
 
 
-#: Rated payload of each built-in arm model, kg: Techman's datasheet figures (TM5-700
-#: 6 kg, TM5-900 4 kg, TM12 12 kg, TM14 14 kg). The TMflow manual does not list them.
-RATED_PAYLOAD_KG: dict[str, float] = {"tm5-700": 6.0, "tm5-900": 4.0, "tm12": 12.0, "tm14": 14.0}
-
-
-def rated_payload_kg(model_name: str) -> float | None:
-    """The rated payload of a built-in arm model, or None for another model.
-
-    Args:
-        model_name: The model's name (``"tm5-700"``...).
-
-    Returns:
-        The payload, kg, or None.
-    """
-    return RATED_PAYLOAD_KG.get(model_name)
-
-
 #: How a backend holds a part between the pads: by friction alone (a part too heavy for
 #: the grip force slips out), or welded to the tool once both pads touch it.
 GraspMode = Literal["friction", "weld"]
