@@ -3,8 +3,9 @@
 Both backends stop a motion in the physics step where the fingers (or, in MuJoCo, any arm
 link) hit the table, and when the arm carries a part over its rated payload; the
 controller turns the fault into a robot error with Techman's code (0x22 "Force or Torque
-Over Range", 0x0F "Over Payload Limit"). The master's workspace floor (0 mm by default)
-knows nothing of the simulator's table at 85 mm: the simulator catches what it lets by.
+Over Range", 0x0F "Over Payload Limit"). The library's default workspace floor (0 mm)
+knows nothing of the simulator's table at 85 mm: the simulator catches what it lets by
+(pick & place's default floor is the table top: tests/test_cell_floor.py).
 """
 
 from __future__ import annotations

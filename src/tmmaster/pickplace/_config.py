@@ -37,6 +37,7 @@ from .._profiles import DEFAULT_PROFILE
 from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
 from .._robot import FrameCheck, Robot, TimeoutPolicy, Workspace
+from ..sim._world import DEFAULT_TABLE_TOP_Z_MM
 
 
 def _finite_pose(value: object) -> object:
@@ -250,6 +251,20 @@ class GripperSection(_Section):
         return None if host is None else check_host(host, field="", port_field="gripper.port")
 
 
+class WorkspaceSection(Workspace):
+    """Where the tool may go: the robot API's :class:`Workspace`, with the table plane at
+    the top of the table the default plan is written for (85 mm: the article's 30 mm part,
+    gripped at its centre at z = 100 mm, rests on it; the built-in simulator's table).
+
+    A plan for another cell states its own table: ``floor_z_mm`` (the top of your table
+    in the robot base frame, mm), or ``floor_z_mm = -2000`` for an arm that reaches below
+    its base. A target below the plane is refused before anything connects.
+    """
+
+    #: The table plane, mm: no TCP and no flange below it. None: no plane.
+    floor_z_mm: float | None = DEFAULT_TABLE_TOP_Z_MM
+
+
 class RunSection(_Section):
     """How the cycle runs."""
 
@@ -295,8 +310,9 @@ class PickPlaceConfig(_Section):
     run: RunSection = RunSection()
     #: ``[on_error]``: what the robot does after a failure.
     on_error: OnErrorSection = OnErrorSection()
-    #: Optional box the TCP must stay inside, mm (base frame): the robot API's model.
-    workspace: Workspace | None = None
+    #: ``[workspace]``: the table plane (default: the default plan's table, 85 mm) and an
+    #: optional box the TCP must stay inside, mm (base frame).
+    workspace: WorkspaceSection = WorkspaceSection()
     # The register maps robot.profile and gripper.kind name, once loaded (load_config
     # loads them): the robot and the simulator get the very maps that were checked.
     # Kept with the name they were loaded for (a model_copy may change the name).
