@@ -17,10 +17,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, configure_logging
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, Workspace, configure_logging
 from tmmaster.pickplace import RetryRule, Runner, StepContext, TaskSequence, mermaid
 
 PART = Pose(300, -200, 100, 180, 0, 90)
+#: The top of the table the parts stand on, mm (the simulated cell's): no TCP or flange
+#: may go below it (state your own table's height).
+TABLE = Workspace(floor_z_mm=85)
 ABOVE_PART = PART.offset(dz=100)
 CAMERA = Pose(200, 0, 250, 180, 0, 90)
 
@@ -82,7 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         with Robot(
-            args.host, args.port, profile=args.profile, gripper_settle_s=args.settle
+            args.host,
+            args.port,
+            profile=args.profile,
+            gripper_settle_s=args.settle,
+            workspace=TABLE,
         ) as robot:
             result = Runner(robot).run(sequence)
     except TMMasterError as exc:
