@@ -76,7 +76,13 @@ def test_fingers_hitting_the_table_stop_the_arm_where_they_touch(
     assert fault is not None
     assert fault.kind == "collision"
     assert "table" in fault.message
-    assert b.is_settled()  # stopped, not still heading for the target
+    assert not b.motion_running  # stopped, not still heading for the target
+    dynamics = getattr(b, "dynamics", False)
+    if dynamics:
+        # The joints were moving: the servo brakes them, and the arm comes to rest
+        # against the table at once (not pressing ever harder into it, never at rest).
+        assert until_fault(b, b.is_settled, limit_s=0.5) is None
+    assert b.is_settled()
     # Stopped at the touch, not a tick (up to 22 mm at full speed) later: the kinematic
     # backend finds the moment in the tick, MuJoCo stops in the 2 ms physics step (2.2 mm
     # at 100 %).
@@ -85,16 +91,21 @@ def test_fingers_hitting_the_table_stop_the_arm_where_they_touch(
     # Backing out of a contact the arm already has is no new collision.
     b.start_motion(ABOVE, motion=MotionType.LINE, speed_percent=speed, accel_time_s=0.1)
     assert until_fault(b, b.is_settled) is None
-    assert b.tcp_pose().is_close(ABOVE, mm=0.01)
+    # With dynamics, settled within 0.01 deg on each joint: a tenth of a millimetre.
+    assert b.tcp_pose().is_close(ABOVE, mm=0.2 if dynamics else 0.01)
 
 
 @pytest.mark.parametrize("backend_name", BACKENDS)
 def test_moving_just_above_the_table_is_no_collision(backend_name: str) -> None:
     b = make(backend_name)
-    low = INTO_TABLE.offset(dz=TOUCH_Z + 1 - INTO_TABLE.z)
-    for target in (low, low.offset(dx=100), ABOVE):
-        b.start_motion(target, motion=MotionType.LINE, speed_percent=100, accel_time_s=0.1)
+    # 2 mm above the table, reached and crossed at 20 %: an arm lags at speed (with
+    # dynamics the TCP overshoots the end of a 100 % Line down with a 0.1 s ramp by ~6 mm,
+    # by ~0.7 mm at 20 %), so a program comes close to a surface slowly.
+    low = INTO_TABLE.offset(dz=TOUCH_Z + 2 - INTO_TABLE.z)
+    for target, speed in ((low, 20), (low.offset(dx=100), 20), (ABOVE, 100)):
+        b.start_motion(target, motion=MotionType.LINE, speed_percent=speed, accel_time_s=0.1)
         assert until_fault(b, b.is_settled) is None
+    assert b.tcp_pose().is_close(ABOVE, mm=0.2)
 
 
 def test_a_tool_pointing_up_brings_the_flange_into_the_table() -> None:

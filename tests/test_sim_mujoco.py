@@ -69,8 +69,12 @@ def grip(b: PhysicsBackend, width_mm: float) -> float:
 def test_implements_the_protocol_and_the_arm_matches_the_kinematic_model() -> None:
     b = backend()
     assert isinstance(b, PhysicsBackend)
+    assert b.dynamics  # the default for the TM5-700
     # MuJoCo's forward kinematics of the generated MJCF = the kinematics module's.
     assert b.tcp_pose().is_close(DEFAULT_HOME, mm=1e-6, deg=1e-6)
+    # Joints set by hand, read back at once: only the ideal servo puts the joints where
+    # it is told within the step (the links' frames are the same with dynamics).
+    b = backend(dynamics=False)
     for joints in ([10, -20, 100, 15, 80, -30], [-45, 30, 60, -20, 100, 45]):
         b._hold = tuple(float(q) for q in joints)
         b.step(0.0)
@@ -90,7 +94,10 @@ def test_mjcf_has_the_parts_with_their_size_and_mass() -> None:
 
 def test_motion_timing_matches_the_kinematic_backend() -> None:
     kinematic = KinematicBackend(MODEL, home=DEFAULT_HOME)
-    mujoco = backend()
+    # The ideal servo is done the tick its trajectory ends, as the kinematic backend; with
+    # dynamics the same trajectory is done once the joints settled, a little later.
+    ideal = backend(dynamics=False)
+    dynamic = backend()
     for target, motion, speed in (
         (ABOVE_PICK, MotionType.PTP, 30),
         (PICK, MotionType.LINE, 10),
@@ -99,26 +106,37 @@ def test_motion_timing_matches_the_kinematic_backend() -> None:
         expected = kinematic.start_motion(
             target, motion=motion, speed_percent=speed, accel_time_s=0.2
         )
-        duration = mujoco.start_motion(target, motion=motion, speed_percent=speed, accel_time_s=0.2)
+        duration = ideal.start_motion(target, motion=motion, speed_percent=speed, accel_time_s=0.2)
         # The same kinematics module times both: within 1 % (the issue allows a few %).
         assert duration == pytest.approx(expected, rel=0.01)
-        took = run_until(mujoco, mujoco.is_settled)
+        took = run_until(ideal, ideal.is_settled)
         assert abs(took - duration) <= DT + 1e-9
         run_until(kinematic, lambda: not kinematic.motion_running)
-        assert mujoco.tcp_pose().is_close(target, mm=0.01, deg=0.01)
+        assert ideal.tcp_pose().is_close(target, mm=0.01, deg=0.01)
+        planned = dynamic.start_motion(target, motion=motion, speed_percent=speed, accel_time_s=0.2)
+        assert planned == pytest.approx(duration, abs=1e-6)
+        took = run_until(dynamic, dynamic.is_settled)
+        assert duration < took <= duration + 0.5
+        # Settled within 0.01 deg on each joint: a tenth of a millimetre at the TCP.
+        assert dynamic.tcp_pose().is_close(target, mm=0.2, deg=0.05)
 
 
 def test_line_moves_the_tcp_along_the_straight_line() -> None:
     b = backend()
     move(b, ABOVE_PICK)
     b.start_motion(PICK, motion=MotionType.LINE, speed_percent=10, accel_time_s=0.2)
-    heights = []
+    lowest = math.inf
     while not b.is_settled():
         b.step(DT)
         pose = b.tcp_pose()
         assert math.hypot(pose.x - PICK.x, pose.y - PICK.y) < 0.5
-        heights.append(pose.z)
-    assert heights == sorted(heights, reverse=True)
+        # Down all the way: the only rebound is from the servo's overshoot at the end of
+        # the deceleration (hundredths of a millimetre at 10 %) to where the joints
+        # settle, within 0.01 deg each (a tenth of a millimetre).
+        assert pose.z < lowest + 0.2
+        lowest = min(lowest, pose.z)
+    assert lowest > PICK.z - 0.1
+    assert b.tcp_pose().is_close(PICK, mm=0.2, deg=0.05)
 
 
 def test_unreachable_target_is_rejected_with_its_reason() -> None:
@@ -179,7 +197,11 @@ def test_the_fingers_squeeze_with_the_commanded_force(force: float) -> None:
     pick(b, force)
     b.step(0.1)
     assert b.gripper_state().contact
-    assert pad_forces(b) == pytest.approx([force, force], rel=0.02)
+    left, right = pad_forces(b)
+    assert (left + right) / 2 == pytest.approx(force, rel=0.02)
+    # The part's friction on the table holds what little one pad pushes more.
+    [part] = b.objects()
+    assert abs(left - right) <= 0.8 * part.mass_kg * 9.81 + 0.02 * force
 
 
 def test_closing_on_the_part_locks_it_and_it_follows_the_tcp() -> None:
@@ -274,7 +296,8 @@ def test_reinitialise_mid_motion_rebuilds_the_model(keep: bool) -> None:
     assert b.objects()[0].held
     run_until(b, b.is_settled)
     expected = PLACE if keep else midway
-    assert b.tcp_pose().is_close(expected, mm=0.01, deg=0.01)
+    # Settled within 0.01 deg on each joint (arm dynamics): a tenth of a millimetre.
+    assert b.tcp_pose().is_close(expected, mm=0.2, deg=0.05)
     assert b.objects()[0].pose.is_close(expected, mm=CONTACT_MM, deg=0.5)
 
 

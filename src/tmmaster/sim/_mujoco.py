@@ -13,10 +13,12 @@ top is the world's. What is simulated, and what is not:
   (PTP: a synchronised joint trapezoid; Line: the straight TCP path sampled by
   :meth:`RobotModel.line_joints`), with the durations of :meth:`RobotModel.motion_time`,
   so the arm keeps the analytic backend's timing and the master's derived timeouts hold.
-  The arm joints are driven directly (qpos / qvel set every physics step, heavy armature):
-  no joint dynamics, no servo lag. With ``dynamics=True`` the links carry the masses and
-  inertias of Techman's URDF and the trajectory is the reference of torque-limited joint
-  servos: the arm lags it, and a move is done once the joints settled at its target.
+  With arm dynamics (the default for the models whose link masses are known, the TM5-700
+  and TM5-900) the links carry the masses and inertias of Techman's URDF and the
+  trajectory is the reference of torque-limited joint servos: the arm lags it, and a move
+  is done once the joints settled at its target. Without (``dynamics=False``, or another
+  model) the arm joints are driven directly (qpos / qvel set every physics step, heavy
+  armature): an ideal servo, no lag.
 - **Gripper**: two fingers on slide joints along the tool's y axis, position actuators
   whose force is limited to the commanded grip force, their target ramped at the
   commanded speed. Only the finger pads collide, and only with parts.
@@ -116,6 +118,11 @@ _FINGER_DAMPING = 20.0
 #: A pad pressing on a part harder than this while the arm moves is a collision, N:
 #: TMflow's default TCP force limit (TMflow SW 2.24 Software Manual, Appendix B, p. 285).
 DEFAULT_COLLISION_FORCE_N = 150.0
+#: The table and fixtures are rigid: their contacts (with the parts too, priority) are as
+#: stiff as the pads'. With MuJoCo's default (0.02 s) a part pressed by an arm driven
+#: through its joint servos sank millimetres into the table and squirted out from under
+#: a pad landing on it, instead of the pad's force rising to a collision.
+_RIGID = ' priority="1" solref="0.004 1" solimp="0.95 0.99 0.001"'
 #: The arm deeper in the table than when its motion started by more than this is a
 #: collision, m.
 _COLLISION_DEPTH_M = 0.0002
@@ -170,7 +177,15 @@ SETTLE_SPEED_DEG_S = 0.5
 
 
 def has_dynamics_data(model_name: str) -> bool:
-    """True when the link masses and joint torques of ``model_name`` are known."""
+    """Whether the MuJoCo backend can model the arm dynamics of ``model_name``.
+
+    Args:
+        model_name: A robot model's name (``"tm5-700"``).
+
+    Returns:
+        True when its link masses and joint torques are known (the TM5-700 and TM5-900):
+        the MuJoCo backend then models its dynamics unless told ``dynamics=False``.
+    """
     return model_name in _URDF_LINKS
 
 
@@ -312,7 +327,7 @@ def build_mjcf(
     lines.append(
         f'    <geom name="table" type="box" pos="{cx / 1000:g} {cy / 1000:g} {top - 0.02:.6g}"'
         f' size="{sx / 1000:g} {sy / 1000:g} 0.02" rgba=".55 .45 .35 1"'
-        ' friction="0.8 0.005 0.0001"'
+        f' friction="0.8 0.005 0.0001"{_RIGID}'
         f' contype="{_TABLE_BITS[0]}" conaffinity="{_TABLE_BITS[1]}"/>'
     )
     for k, fixture in enumerate(fixtures):
@@ -320,7 +335,7 @@ def build_mjcf(
             f'    <geom name="fixture{k}" type="box"'
             f" {_frame_attrs(kin.pose_to_transform(fixture.pose))}"
             f' size="{_fmt([s / 2000 for s in fixture.size_mm])}" rgba=".4 .45 .55 1"'
-            ' friction="0.8 0.005 0.0001"'
+            f' friction="0.8 0.005 0.0001"{_RIGID}'
             f' contype="{_TABLE_BITS[0]}" conaffinity="{_TABLE_BITS[1]}"/>'
         )
     lines.append(
@@ -499,8 +514,11 @@ class MuJoCoBackend:
             to the joint's effort, following the planned trajectory as its reference:
             the joints and TCP reported are where the joints are (they lag the
             reference, more so with a heavy part), and a move is done only once every
-            joint has settled within ``SETTLE_TOLERANCE_DEG`` of its target. False: the
-            joints follow the trajectory exactly (no lag, no settling).
+            joint has settled within ``SETTLE_TOLERANCE_DEG`` of its target. False: an
+            ideal servo, the joints follow the trajectory exactly (no lag, no
+            settling). None (the default): on for the models whose link masses are
+            known (:func:`has_dynamics_data`: the TM5-700 and TM5-900), off for the
+            others; :attr:`dynamics` says which.
 
     Raises:
         PhysicsUnavailableError: ``mujoco`` is not installed.
@@ -522,9 +540,11 @@ class MuJoCoBackend:
         gripper_max_width_mm: float | None = None,
         keep_motion_on_reinit: bool = True,
         collision_force_n: float = DEFAULT_COLLISION_FORCE_N,
-        dynamics: bool = False,
+        dynamics: bool | None = None,
     ) -> None:
         self._mj = _import_mujoco()
+        if dynamics is None:
+            dynamics = has_dynamics_data(model.name)
         if not (math.isfinite(timestep_s) and 0 < timestep_s <= 0.01):
             raise ValueError(f"timestep_s must be in (0, 0.01], got {timestep_s}")
         if grasp not in GRASP_MODES:
@@ -567,6 +587,10 @@ class MuJoCoBackend:
         #: With dynamics: the physics steps of the current move at which each joint's
         #: servo asked for more than the joint's effort and was held at it (saturated).
         self.saturated_steps = [0] * len(model.joints)
+        # Stopped by a fault (dynamics): at rest once the joints stop, wherever what was
+        # hit holds them; the integral term stops growing, so the servo does not press
+        # ever harder into it. The next motion clears it.
+        self._blocked = False
         # Feeder: a part that starts inside an earlier one waits out of the scene.
         self._queued: list[int] = []
         placed: list[TableObject] = []
@@ -808,13 +832,7 @@ class MuJoCoBackend:
             elif exc.reason == "singularity":
                 reason = "singularity"
             raise MotionRejectedError(reason, str(exc)) from exc
-        self._trajectory = _Trajectory(samples, duration, accel_time_s)
-        self.max_tracking_error_deg = [0.0] * len(samples[0])
-        self.saturated_steps = [0] * len(samples[0])
-        # A contact the arm already had (a collision it is backing out of) is known: only
-        # a deeper one is a collision.
-        self._start_depth = self._table_depth()
-        return duration
+        return self._follow(samples, duration, accel_time_s)
 
     def start_joint_motion(
         self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
@@ -868,8 +886,11 @@ class MuJoCoBackend:
     ) -> float:
         """Start following joint ``samples`` over ``duration``; return it."""
         self._trajectory = _Trajectory(samples, duration, accel_time_s)
+        self._blocked = False
         self.max_tracking_error_deg = [0.0] * len(samples[0])
         self.saturated_steps = [0] * len(samples[0])
+        # A contact the arm already had (a collision it is backing out of) is known: only
+        # a deeper one is a collision.
         self._start_depth = self._table_depth()
         return duration
 
@@ -880,9 +901,13 @@ class MuJoCoBackend:
         return trajectory.joints_at(trajectory.elapsed_s)
 
     def stop_motion(self) -> None:
-        """Hold the current joints (the servo stops at once)."""
+        """Hold the current joints (the servo stops at once).
+
+        With dynamics, the joints where they are, not the reference that leads them: the
+        arm brakes and comes to rest where it was stopped, as without.
+        """
         if self._trajectory is not None:
-            self._hold = self._command_joints()
+            self._hold = self._current_joints() if self._dynamics else self._command_joints()
             self._trajectory = None
 
     def is_settled(self) -> bool:
@@ -893,15 +918,21 @@ class MuJoCoBackend:
             return True
         qpos, qvel = self._qpos, self._qvel
         for adr, dof, q in zip(self._arm_qpos, self._arm_dof, self._hold, strict=True):
-            if abs(qpos[adr] / _RAD - q) > SETTLE_TOLERANCE_DEG:
-                return False
             if abs(qvel[dof] / _RAD) > SETTLE_SPEED_DEG_S:
+                return False
+            # Stopped by a fault, the arm rests where what it hit holds it: it may never
+            # reach the joints it held at the fault, and no move of it is reported done.
+            if not self._blocked and abs(qpos[adr] / _RAD - q) > SETTLE_TOLERANCE_DEG:
                 return False
         return True
 
     @property
     def dynamics(self) -> bool:
-        """True when the joints are torque-driven servos (see the class docstring)."""
+        """True when the joints are torque-driven servos, False for the ideal servo.
+
+        Returns:
+            Whether the arm's dynamics are modelled (see the class docstring).
+        """
         return self._dynamics
 
     def reference_joints_deg(self) -> tuple[float, ...]:
@@ -991,11 +1022,13 @@ class MuJoCoBackend:
         """Stop where the fault showed (the step's pose, not the trajectory's next one).
 
         With dynamics the servo holds where the joints are, not where the reference
-        was: the reference leads them, and holding it would press into what was hit.
+        was: the reference leads them, and holding it would press into what was hit;
+        the arm is at rest once its joints stop (see :meth:`is_settled`).
         """
         self._trajectory = None
         self._hold = self._current_joints() if self._dynamics else joints
         self._integral = [0.0] * len(self._integral) if self._dynamics else self._integral
+        self._blocked = self._dynamics
         self._fault = fault
 
     # -- simulation ---------------------------------------------------------------------
@@ -1048,12 +1081,13 @@ class MuJoCoBackend:
         worst = self.max_tracking_error_deg
         saturated = self.saturated_steps
         integral = self._integral
+        blocked = self._blocked
         torques = []
         for i, (adr, dof, kp, kd, effort) in enumerate(self._servo_joints):
             error = reference[i] * _RAD - qpos[adr]
             speed = qvel[dof]
             v_error = -speed if velocity is None else velocity[i] * _RAD - speed
-            grown = integral[i] + kp * error * h / _SERVO_TI_S
+            grown = integral[i] if blocked else integral[i] + kp * error * h / _SERVO_TI_S
             torque = kp * error + kd * v_error + bias[dof] + grown
             if -effort < torque < effort:
                 integral[i] = grown
