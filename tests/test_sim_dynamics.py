@@ -1,4 +1,4 @@
-"""The MuJoCo backend's arm dynamics (``MuJoCoBackend(dynamics=True)``).
+"""The MuJoCo backend's arm dynamics (its default for the TM5-700 and TM5-900).
 
 Techman's link masses and inertias, joint servos limited to the joints' efforts: the
 joints lag the planned trajectory (more with a heavy part), and a move is done only once
@@ -15,10 +15,11 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
-from tmmaster import Pose
+from tmmaster import ConfigError, Pose
 from tmmaster._pose import MotionType
-from tmmaster.sim import Simulator, TableObject, World
+from tmmaster.sim import KinematicBackend, Simulator, TableObject, World
 from tmmaster.sim._mujoco import MuJoCoBackend, build_mjcf
+from tmmaster.sim._simulator import simulator_summary
 
 pytestmark = pytest.mark.skipif(
     importlib.util.find_spec("mujoco") is None,
@@ -184,5 +185,42 @@ def test_the_simulator_and_its_command_line_choose_the_dynamics() -> None:
         assert backend.dynamics
     from tmmaster.sim.__main__ import build_parser
 
-    args = build_parser().parse_args(["--physics", "mujoco", "--dynamics"])
-    assert args.dynamics
+    parse = build_parser().parse_args
+    assert parse(["--physics", "mujoco", "--dynamics"]).dynamics is True
+    assert parse(["--physics", "mujoco", "--no-dynamics"]).dynamics is False
+    assert parse(["--physics", "mujoco"]).dynamics is None  # the simulator decides
+
+
+@pytest.mark.parametrize(
+    ("options", "expected"),
+    [
+        pytest.param({"physics": "mujoco"}, True, id="mujoco-tm5-700"),
+        pytest.param({"physics": "mujoco", "model": "tm5-900"}, True, id="mujoco-tm5-900"),
+        pytest.param({"physics": "mujoco", "model": "tm12"}, False, id="mujoco-tm12-no-data"),
+        pytest.param({"physics": "mujoco", "dynamics": False}, False, id="mujoco-ideal-servo"),
+        pytest.param({}, False, id="kinematic"),
+        pytest.param({"dynamics": False}, False, id="kinematic-told-off"),
+    ],
+)
+def test_dynamics_is_the_mujoco_default_where_the_link_masses_are_known(
+    options: dict[str, object], expected: bool
+) -> None:
+    sim = Simulator(listen=False, **options)  # type: ignore[arg-type]
+    try:
+        assert sim.dynamics is expected
+        assert getattr(sim.backend, "dynamics", False) is expected
+        [line] = [line for line in simulator_summary(sim) if line.startswith("physics")]
+        assert f"arm dynamics {'on' if expected else 'off'}" in line
+    finally:
+        sim.close()
+
+
+def test_dynamics_the_simulator_cannot_give_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="tm12"):
+        Simulator(physics="mujoco", model="tm12", dynamics=True, listen=False)
+    # Your own backend models what it models: not even False is Simulator's to give.
+    with pytest.raises(ConfigError, match="own backend"):
+        Simulator(backend=KinematicBackend(MODEL), dynamics=False, listen=False)
+    with Simulator(backend=KinematicBackend(MODEL), listen=False) as sim:
+        assert not sim.dynamics
+        assert sim.physics is None

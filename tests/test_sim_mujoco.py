@@ -361,11 +361,14 @@ def test_pickplace_tmflow_cycle_ends_with_the_part_resting_at_the_place_x_y(
         str(config),
         "--report",
         str(report),
+        "--verbose",
         cwd=tmp_path,
         capsys=capsys,
     )
     assert returncode == 0, stderr
     assert "part-1 is on the place position" in stdout
+    # The simulator's default for the TM5-700: the cycle ran with the arm's dynamics.
+    assert "mujoco physics, arm dynamics on" in stdout + stderr
     import json
 
     sim = json.loads(report.read_text())["sim"]

@@ -152,7 +152,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default="kinematic",
         choices=["kinematic", "mujoco"],
         help="with --sim: physics backend (default kinematic; mujoco needs the extra"
-        " tmmaster[mujoco])",
+        " tmmaster[mujoco] and models the arm's dynamics for the tm5-700 and tm5-900)",
     )
     parser.add_argument(
         "--snapshot",
@@ -611,9 +611,16 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
         physics=options.physics,
     )
     with sim:
+        # MuJoCo models the arm's dynamics where it can (the simulator's default): said.
+        physics = (
+            f", {sim.physics} physics, arm dynamics {'on' if sim.dynamics else 'off'}"
+            if sim.physics == "mujoco"
+            else ""
+        )
         out.info(
             f"simulator: {config.robot.profile} profile on {sim.host}:{sim.port}"
-            f" (time scale {options.time_scale:g}), {len(parts)} part(s) at the pick pose"
+            f" (time scale {options.time_scale:g}{physics}), {len(parts)} part(s) at the"
+            " pick pose"
         )
         if outcome.expected_cycle_s is not None:  # the plan is in simulated seconds
             outcome.expected_cycle_s /= options.time_scale

@@ -166,9 +166,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--dynamics",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
+        default=None,
         help="with --physics mujoco: the links carry Techman's masses and inertias and each"
-        " joint is a servo limited to its effort (the arm lags; a move is done once it settled)",
+        " joint is a servo limited to its effort (the arm lags; a move is done once it"
+        " settled); --no-dynamics: the ideal servo, the joints exactly where the trajectory"
+        " says (default: on for tm5-700 and tm5-900, off for the other models)",
     )
     parser.add_argument(
         "--grasp",

@@ -116,10 +116,15 @@ class Simulator:
         speed_factor: The arm moves this many times faster than the model the master
             plans with (0.1..10; for testing a master against a robot it does not
             predict); not with ``backend``.
-        dynamics: ``physics="mujoco"`` only: the links carry Techman's masses and
-            inertias and each joint is a servo limited to its effort, so the arm lags
-            its trajectory (more with a heavy part) and a move is done once the joints
-            settled; the reported pose is where the joints are.
+        dynamics: Arm dynamics, with ``physics="mujoco"``: the links carry Techman's
+            masses and inertias and each joint is a servo limited to its effort, so the
+            arm lags its trajectory (more with a heavy part) and a move is done once the
+            joints settled; the reported pose is where the joints are. None (the
+            default): on with the mujoco backend for the models whose link masses are
+            known (TM5-700, TM5-900), off otherwise; False: the ideal servo (the joints
+            are exactly where the trajectory says); True: on, or ConfigError where it
+            cannot be (the kinematic backend, another model). :attr:`dynamics` says
+            which the simulator runs with. Not with ``backend``.
 
     Raises:
         ConfigError: a bad argument, named in the message: ``time_scale`` not a finite
@@ -127,8 +132,9 @@ class Simulator:
             ``init_time_s`` below 0 or not finite, ``initial_seq`` outside the
             profile's sequence range, ``speed_factor`` outside 0.1..10, two objects
             of one name, an unknown profile, model or physics backend, an invalid
-            scene (naming the key), an unknown ``grasp``, ``dynamics`` without the
-            mujoco backend.
+            scene (naming the key), an unknown ``grasp``, ``dynamics=True`` without
+            the mujoco backend or for a model whose link masses are not known,
+            ``dynamics`` with ``backend``.
     """
 
     def __init__(
@@ -157,7 +163,7 @@ class Simulator:
         resume_after_error: bool = False,
         program: str | Path | None = None,
         speed_factor: float = 1.0,
-        dynamics: bool = False,
+        dynamics: bool | None = None,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
@@ -176,6 +182,7 @@ class Simulator:
         self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
         if backend is not None and physics != "kinematic":
             raise ConfigError("give either backend or physics, not both")
+        own_backend = backend is not None
         if not (isinstance(speed_factor, int | float) and 0.1 <= speed_factor <= 10):
             raise ConfigError(f"speed_factor must be a number in 0.1..10, got {speed_factor!r}")
         if speed_factor != 1 and backend is not None:
@@ -186,7 +193,8 @@ class Simulator:
             raise ConfigError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
         if grasp != "friction" and backend is not None:
             raise ConfigError("grasp: give the grasp mode to your own backend, not to Simulator")
-        if dynamics and backend is not None:
+        # Your own backend models what it models: neither True nor False can be honoured.
+        if dynamics is not None and backend is not None:
             raise ConfigError("dynamics: give your own backend its dynamics, not Simulator")
         if dynamics and physics != "mujoco":
             raise ConfigError(
@@ -210,6 +218,8 @@ class Simulator:
                 grasp=grasp,  # type: ignore[arg-type]  # checked against GRASP_MODES
                 dynamics=dynamics,
             )
+        # The built-in backend's name for the summary (None: your own backend).
+        self._physics = None if own_backend else physics
         self._backend: PhysicsBackend = backend
         all_faults = [_as_fault(f) for f in faults]
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
@@ -329,6 +339,27 @@ class Simulator:
     def backend(self) -> PhysicsBackend:
         """The physics backend (call its methods through :meth:`call` while running)."""
         return self._backend
+
+    @property
+    def physics(self) -> str | None:
+        """The built-in physics backend's name (``"kinematic"``, ``"mujoco"``).
+
+        Returns:
+            The name, or None with your own ``backend``.
+        """
+        return self._physics
+
+    @property
+    def dynamics(self) -> bool:
+        """Whether the physics backend models the arm's dynamics (see ``dynamics``).
+
+        Returns:
+            True with the mujoco backend's torque-limited joint servos (the default for
+            the TM5-700 and TM5-900), False with an ideal servo (the kinematic backend,
+            ``dynamics=False``, a model without link masses, or your own backend unless
+            it has a true ``dynamics`` attribute).
+        """
+        return getattr(self._backend, "dynamics", False) is True
 
     @property
     def time_scale(self) -> float:
@@ -754,7 +785,7 @@ def physics_backend(
     tool: Pose | None = None,
     gripper: GripperGeometry | None = None,
     grasp: GraspMode = "friction",
-    dynamics: bool = False,
+    dynamics: bool | None = None,
 ) -> PhysicsBackend:
     """A built-in physics backend by name: "kinematic" (analytic) or "mujoco" (optional extra).
 
@@ -765,8 +796,11 @@ def physics_backend(
         tool: The TCP in the flange frame (None: the TCP is the flange).
         gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
         grasp: ``"friction"`` or ``"weld"``.
-        dynamics: ``"mujoco"`` only: the links carry Techman's masses and inertias and
-            each joint is a servo limited to its effort (docs/physics-backends.md).
+        dynamics: Arm dynamics: the links carry Techman's masses and inertias and each
+            joint is a servo limited to its effort (docs/physics-backends.md). None: on
+            for ``"mujoco"`` and a model whose link masses are known (TM5-700, TM5-900),
+            off otherwise; False: the ideal servo (the kinematic backend has nothing
+            else); True: on, where it can be.
 
     Returns:
         The backend.
@@ -774,8 +808,8 @@ def physics_backend(
     Raises:
         UnknownNameError: Another name.
         PhysicsUnavailableError: The MuJoCo extra is missing.
-        ConfigError: ``dynamics`` with the kinematic backend, or for an arm model whose
-            link masses are not known.
+        ConfigError: ``dynamics=True`` with the kinematic backend, or for an arm model
+            whose link masses are not known.
     """
     if name == "kinematic":
         if dynamics:
@@ -818,4 +852,11 @@ def simulator_summary(sim: Simulator) -> Sequence[str]:
         lines.append("gripper in the robot's register map (gripper_command)")
     if sim.tool is not None:
         lines.append(f"tool    TCP = flange x {sim.tool}")
+    if sim.physics is not None:
+        servo = (
+            "on (torque-limited joint servos: the arm lags, done once settled)"
+            if sim.dynamics
+            else "off (ideal servo: the joints are where the trajectory says)"
+        )
+        lines.append(f"physics {sim.physics}, arm dynamics {servo}")
     return lines
