@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 import subprocess
 import sys
 from collections.abc import Callable
@@ -384,27 +385,28 @@ def test_pickplace_tmflow_cycle_ends_with_the_part_resting_at_the_place_x_y(
 
 def test_snapshot_renders_the_cell_offscreen(tmp_path: Path) -> None:
     pytest.importorskip("OpenGL", reason="offscreen rendering needs tmmaster[mujoco-render]")
-    code = (
-        "import os; os.environ['MUJOCO_GL'] = 'egl'\n"
-        "from pathlib import Path\n"
-        "import tmmaster\n"
-        "from tmmaster import Pose\n"
-        "from tmmaster.sim._mujoco import MuJoCoBackend\n"
-        "b = MuJoCoBackend(tmmaster.robot_model('tm5-700'), home=Pose(250, 0, 300, 180, 0, 90))\n"
-        f"b.snapshot(Path({str(tmp_path / 'cell.png')!r}), width=320, height=240)\n"
-    )
+    scene = Path(__file__).parent.parent / "examples" / "scene.toml"
+    out = tmp_path / "cell.png"
+    argv = ["--physics", "mujoco", "--scene", str(scene), "--snapshot", str(out)]
     # Its own process: MUJOCO_GL is read when mujoco is first imported.
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}  # the command sets it
     done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+        [sys.executable, "-m", "tmmaster.sim", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=env,
     )
     if done.returncode != 0 and any(k in done.stderr for k in ("OpenGL", "EGL", "GLContext")):
         # PyOpenGL is installed but this machine offers no EGL display (no libEGL/Mesa).
         pytest.skip(f"no OpenGL context here: {done.stderr.strip().splitlines()[-1]}")
     assert done.returncode == 0, done.stderr
-    png = (tmp_path / "cell.png").read_bytes()
+    assert done.stdout.strip() == f"picture written to {out}"
+    png = out.read_bytes()
     assert png.startswith(b"\x89PNG\r\n\x1a\n")
     width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
-    assert (width, height) == (320, 240)
+    assert (width, height) == (800, 600)
     # Not a blank frame: the compressed image of a uniform picture would be tiny.
     assert len(png) > 5000
 
@@ -439,3 +441,5 @@ def test_the_cli_writes_the_scene_it_would_run(
     assert m.body("tcp").pos.tolist() == pytest.approx([0, 0, 0.1])  # the tool
     assert sim_main.main(["--mjcf", str(tmp_path / "x.xml")]) == 2
     assert capsys.readouterr().err.strip() == "sim: --mjcf needs --physics mujoco [exit 2]"
+    assert sim_main.main(["--snapshot", str(tmp_path / "x.png")]) == 2
+    assert capsys.readouterr().err.strip() == "sim: --snapshot needs --physics mujoco [exit 2]"

@@ -102,6 +102,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         " arm, gripper, table and parts, as MJCF) to FILE and exit, without serving",
     )
     parser.add_argument(
+        "--snapshot",
+        default=None,
+        metavar="FILE.png",
+        help="with --physics mujoco: render the cell this simulator would start with (the"
+        " arm, gripper, table, fixtures and parts; --scene) to FILE.png and exit, without"
+        " serving (needs OpenGL: the extra tmmaster[mujoco-render]; MUJOCO_GL=egl headless)",
+    )
+    parser.add_argument(
         "--tool",
         default=None,
         metavar="X,Y,Z,RX,RY,RZ",
@@ -234,9 +242,13 @@ def _tool(text: str | None) -> Pose | None:
 
 
 def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
-    if args.mjcf is not None and args.physics != "mujoco":
-        print("sim: --mjcf needs --physics mujoco [exit 2]", file=sys.stderr)
-        return 2
+    for option, value in (("--mjcf", args.mjcf), ("--snapshot", args.snapshot)):
+        if value is not None and args.physics != "mujoco":
+            print(f"sim: {option} needs --physics mujoco [exit 2]", file=sys.stderr)
+            return 2
+    if args.snapshot is not None:
+        # Headless rendering: EGL, read by mujoco when it is first imported (below).
+        os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         sim = Simulator(
             args.profile,
@@ -266,8 +278,8 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     except (TMMasterError, ValueError, KeyError) as exc:
         print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2
-    if args.mjcf is not None:
-        return _write_mjcf(sim, args.mjcf)
+    if args.mjcf is not None or args.snapshot is not None:
+        return _write_scene(sim, args.mjcf, args.snapshot)
     stop = threading.Event()
     reset = threading.Event()
 
@@ -308,22 +320,35 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     return 0
 
 
-def _write_mjcf(sim: Simulator, path: str) -> int:
-    """Write ``sim``'s MuJoCo scene to ``path`` (never started); the exit code."""
+def _write_scene(sim: Simulator, mjcf: str | None, snapshot: str | None) -> int:
+    """Write ``sim``'s MuJoCo scene (MJCF) and/or its picture (never started); the exit code."""
     # Imported here: mujoco is loaded already (the backend was built with it).
     from ._mujoco import MuJoCoBackend
 
     try:
         backend = sim.backend
         assert isinstance(backend, MuJoCoBackend)  # --physics mujoco
+        option = "--mjcf"
         try:
-            Path(path).write_text(backend.mjcf, encoding="utf-8")
+            if mjcf is not None:
+                Path(mjcf).write_text(backend.mjcf, encoding="utf-8")
+                print(f"mjcf    written to {mjcf}", flush=True)
+            option = "--snapshot"
+            if snapshot is not None:
+                backend.snapshot(Path(snapshot))
+                print(f"picture written to {snapshot}", flush=True)
         except OSError as exc:
-            print(f"sim: --mjcf {path}: {one_line(exc)} [exit 1]", file=sys.stderr)
+            print(f"sim: {option}: {one_line(exc)} [exit 1]", file=sys.stderr)
+            return 1
+        except ImportError as exc:  # PyOpenGL missing, or no EGL / OSMesa library
+            print(
+                "sim: --snapshot: offscreen rendering needs OpenGL: pip install"
+                f" 'tmmaster[mujoco-render]' and set MUJOCO_GL=egl ({one_line(exc)}) [exit 1]",
+                file=sys.stderr,
+            )
             return 1
     finally:
         sim.close()
-    print(f"mjcf    written to {path}", flush=True)
     return 0
 
 
