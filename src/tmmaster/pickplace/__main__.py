@@ -25,6 +25,7 @@ from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 
 import argparse
 import difflib
+import itertools
 import logging
 import math
 import os
@@ -49,11 +50,14 @@ from .._exceptions import (
     TransportError,
 )
 from .._logging import add_logging_arguments, configure_command_logging, get_logger
+from .._pose import Pose
 from .._profiles import DEFAULT_PROFILE, builtin_profile_names, load_profile
 from .._registers import RobotProfile
 from .._robot import Robot
 from .._version import add_version_argument
 from ..sim._backend import PhysicsUnavailableError
+from ..sim._scene import Scene, load_scene
+from ..sim._world import TableObject
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
 from ._plan import estimate, format_plan, validate_plan
@@ -153,6 +157,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         choices=["kinematic", "mujoco"],
         help="with --sim: physics backend (default kinematic; mujoco needs the extra"
         " tmmaster[mujoco] and models the arm's dynamics for the tm5-700 and tm5-900)",
+    )
+    parser.add_argument(
+        "--sim-scene",
+        metavar="FILE.toml",
+        default=None,
+        help="with --sim: the simulated cell from a scene file (table height, fixtures, parts,"
+        " gripper; docs/simulator.md#scene-files); parts at the pick pose are the run's"
+        " (none there: one per cycle is added)",
     )
     parser.add_argument(
         "--snapshot",
@@ -413,7 +425,17 @@ _CONFIG_OPTIONS: dict[str, tuple[str, str]] = {
 #: The options that say what to run (the files, the mode, the simulator): read once, by
 #: :func:`_command`, into the :class:`_Command`.
 _COMMAND_OPTIONS = frozenset(
-    {"config", "sequence", "dry_run", "diagram", "sim", "sim_time_scale", "sim_physics", "snapshot"}
+    {
+        "config",
+        "sequence",
+        "dry_run",
+        "diagram",
+        "sim",
+        "sim_time_scale",
+        "sim_physics",
+        "sim_scene",
+        "snapshot",
+    }
 )
 #: The options that only shape the output: the only ones read after :func:`_command`.
 _OUTPUT_OPTIONS = frozenset({"log_json", "log_level", "quiet", "report", "verbose"})
@@ -427,6 +449,8 @@ class _SimOptions:
     physics: str
     #: Folder for the end-of-run picture (--snapshot), or None.
     snapshot: str | None
+    #: The cell (--sim-scene), loaded and validated, or None: the built-in one.
+    scene: Scene | None = None
 
 
 @dataclass(frozen=True)
@@ -496,7 +520,19 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     simulator, the plan and the report all read that one :class:`PickPlaceConfig`.
     """
     config_file, sequence_file, time_scale = args.config, args.sequence, args.sim_time_scale
-    sim = _SimOptions(time_scale, args.sim_physics, args.snapshot) if args.sim else None
+    scene_file = args.sim_scene
+    if scene_file is not None and not args.sim:
+        raise UsageError("--sim-scene needs --sim (a robot's cell is the robot's)")
+    sim = (
+        _SimOptions(
+            time_scale,
+            args.sim_physics,
+            args.snapshot,
+            None if scene_file is None else load_scene(scene_file),
+        )
+        if args.sim
+        else None
+    )
     if sim is not None and sim.physics == "mujoco":
         from ..sim._mujoco import require_mujoco
 
@@ -590,24 +626,45 @@ def _execute(args: argparse.Namespace, outcome: _Outcome, out: _Output) -> tuple
     return _run_on(command, robot, (config.robot.host, config.robot.port), outcome, out)
 
 
+def _at(pose: Pose, pick: Pose) -> bool:
+    """Whether a part at ``pose`` waits at the pick pose (its x-y within the tolerance)."""
+    return math.hypot(pose.x - pick.x, pose.y - pick.y) <= PLACE_TOLERANCE_MM
+
+
+def _sim_scene(scene: Scene | None, pick: Pose, cycles: int) -> Scene:
+    """The simulated cell: the scene given (or the built-in one) with the run's parts.
+
+    The parts a scene puts at the pick pose wait there like a feeder's; a scene with none
+    there (and the built-in cell) gets one part per cycle at the pick pose.
+    """
+    scene = Scene() if scene is None else scene
+    if any(_at(p.pose, pick) for p in scene.parts):
+        return scene
+    taken = {p.name for p in scene.parts}
+    names = (f"part-{i}" for i in itertools.count(1) if f"part-{i}" not in taken)
+    feeder = [TableObject(name=next(names), pose=pick) for _ in range(cycles)]
+    return scene.model_copy(update={"parts": (*scene.parts, *feeder)})
+
+
 def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
-    from ..sim import Simulator, TableObject
+    from ..sim import Simulator
 
     options, config = command.sim, command.config
     assert options is not None
     if options.snapshot is not None and options.physics != "mujoco":
         raise ConfigError("--snapshot needs --sim-physics mujoco")
     poses = config.poses.resolved()
-    # A feeder: one part per cycle waits at the pick pose.
-    parts = [
-        TableObject(name=f"part-{i}", pose=poses["pick"]) for i in range(1, command.cycles + 1)
-    ]
+    scene = _sim_scene(options.scene, poses["pick"], command.cycles)
+    # The feeder hands out the parts at the pick pose in order: the first `cycles` are the
+    # run's (a scene with fewer runs out, as a real feeder would).
+    waiting = [p.name for p in scene.parts if _at(p.pose, poses["pick"])]
+    run_parts = set(waiting[: command.cycles])
     sim = Simulator(
         config.robot_profile(),
         time_scale=options.time_scale,
         model=config.robot.model,
         gripper=config.gripper_profile(),
-        objects=parts,
+        scene=scene,
         physics=options.physics,
     )
     with sim:
@@ -619,9 +676,17 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
         )
         out.info(
             f"simulator: {config.robot.profile} profile on {sim.host}:{sim.port}"
-            f" (time scale {options.time_scale:g}{physics}), {len(parts)} part(s) at the"
+            f" (time scale {options.time_scale:g}{physics}), {len(run_parts)} part(s) at the"
             " pick pose"
         )
+        floor = config.workspace.floor_z_mm
+        if options.scene is not None and floor != scene.table.top_z_mm:
+            # The master plans with [workspace]; the scene is what the robot meets.
+            _log.warning(
+                "pickplace.scene_table_differs",
+                scene_table_top_z_mm=scene.table.top_z_mm,
+                workspace_floor_z_mm=floor,
+            )
         if outcome.expected_cycle_s is not None:  # the plan is in simulated seconds
             outcome.expected_cycle_s /= options.time_scale
         sampler = _TcpSampler(sim.tcp_pose)
@@ -637,7 +702,7 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
         from ._report import objects_report
 
         place = poses["place"] if command.sequence_file is None else None
-        outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM)
+        outcome.sim = objects_report(sim.objects(), place, PLACE_TOLERANCE_MM, run_parts)
         outcome.sim["pick"] = None if place is None else poses["pick"].as_list()
         outcome.sim["time_scale"] = options.time_scale
         outcome.sim["physics"] = options.physics
@@ -648,8 +713,11 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
         out.result(f"simulator: snapshot {save_snapshot(sim, options.snapshot)}")
     if place is not None:
         for item in outcome.sim["objects"]:
-            where = "on the place position" if item["on_place"] else "NOT on the place position"
             pose = ", ".join(f"{v:g}" for v in item["pose"][:3])
+            if not item["run_part"]:  # a scene's other part: where it is, nothing asked
+                out.info(f"simulator: {item['name']} rests on {item['resting_on']} ({pose})")
+                continue
+            where = "on the place position" if item["on_place"] else "NOT on the place position"
             out.result(f"simulator: {item['name']} is {where} ({pose})")
         if code == EXIT_OK and not outcome.sim["on_place"]:
             return EXIT_FAILED, "the run ended DONE but a part is not on the place position"

@@ -184,6 +184,9 @@ class SimObject(_Part):
     """What the part rests on (``table`` or another part's name); null while held or falling."""
     on_place: bool
     """Whether it lies on the place position (within ``tolerance_mm``)."""
+    run_part: bool = True
+    """Whether the run was to place it (it waited at the pick pose); a scene's other parts
+    are reported where they ended and count for nothing."""
 
 
 class SimSummary(_Part):
@@ -199,7 +202,7 @@ class SimSummary(_Part):
     tolerance_mm: float = 2.0
     """How close to the place pose a part counts as placed, mm."""
     on_place: bool = False
-    """Every part on the place position."""
+    """Every part of the run (``run_part``) on the place position."""
     time_scale: float = 1.0
     """Simulated seconds per wall second."""
     physics: str = "kinematic"
@@ -357,13 +360,28 @@ def _read_report_text(path: str | Path) -> str:
         ) from None
 
 
-def objects_report(objects: list[Any], place: Pose | None, tolerance_mm: float) -> dict[str, Any]:
+def objects_report(
+    objects: list[Any],
+    place: Pose | None,
+    tolerance_mm: float,
+    run_parts: set[str] | None = None,
+) -> dict[str, Any]:
     """Where the simulator's objects ended, and whether they are on the place position.
 
     The place check is the same for every physics backend: a part released at the place
     pose falls onto the surface below it, so it is on the place position when it is not
     held, rests on something (the table or another part) and its x-y is within
     ``tolerance_mm`` of the place pose's x-y (docs/simulator-model.md, "Falling").
+
+    Args:
+        objects: The simulator's objects (``name``, ``pose``, ``held``, ``resting_on``).
+        place: The place pose, or None (a sequence without one).
+        tolerance_mm: How close to the place pose's x-y a part counts as placed, mm.
+        run_parts: The names of the parts the run was to place; None: every object.
+
+    Returns:
+        The report's ``sim`` fields: ``objects``, ``place``, ``tolerance_mm``, ``on_place``
+        (every run part on the place position).
     """
     items = [
         {
@@ -375,14 +393,16 @@ def objects_report(objects: list[Any], place: Pose | None, tolerance_mm: float) 
             and not obj.held
             and obj.resting_on is not None
             and math.hypot(obj.pose.x - place.x, obj.pose.y - place.y) <= tolerance_mm,
+            "run_part": run_parts is None or obj.name in run_parts,
         }
         for obj in objects
     ]
+    counted = [i for i in items if i["run_part"]]
     return {
         "objects": items,
         "place": None if place is None else place.as_list(),
         "tolerance_mm": tolerance_mm,
-        "on_place": place is not None and bool(items) and all(i["on_place"] for i in items),
+        "on_place": place is not None and bool(counted) and all(i["on_place"] for i in counted),
     }
 
 
