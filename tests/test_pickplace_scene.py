@@ -83,3 +83,16 @@ def test_the_scene_is_checked_before_anything_starts(
     assert str(scene) in err
     assert main(["--host", "127.0.0.1", "--sim-scene", str(EXAMPLE)]) == EXIT_CONFIG
     assert "--sim-scene needs --sim" in capsys.readouterr().err
+
+
+def test_a_scene_table_the_configuration_does_not_know_is_said(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = tmp_path / "cell.toml"
+    scene.write_text("[table]\ntop_z_mm = 60\n")
+    code, _ = _run(tmp_path, "--sim-scene", str(scene))
+    assert code == EXIT_OK  # the plan stays above both
+    err = capsys.readouterr().err
+    assert "pickplace.scene_table_differs" in err
+    assert "scene_table_top_z_mm=60" in err
+    assert "workspace_floor_z_mm=85" in err
