@@ -1,7 +1,7 @@
 """Collisions and payload: the physics stops the arm, the controller raises TM's error code.
 
-Both backends stop a motion in the physics step where the fingers (or, in MuJoCo, any arm
-link) hit the table, and when the arm carries a part over its rated payload; the
+Both backends stop a motion in the physics step where the fingers or any arm link hit the
+table, and when the arm carries a part over its rated payload; the
 controller turns the fault into a robot error with Techman's code (0x22 "Force or Torque
 Over Range", 0x0F "Over Payload Limit"). The library's default workspace floor (0 mm)
 knows nothing of the simulator's table at 85 mm: the simulator catches what it lets by
@@ -108,20 +108,23 @@ def test_moving_just_above_the_table_is_no_collision(backend_name: str) -> None:
     assert b.tcp_pose().is_close(ABOVE, mm=0.2)
 
 
-def test_a_tool_pointing_up_brings_the_flange_into_the_table() -> None:
-    # The kinematic backend checks the flange too: with a 120 mm tool pointing up it is
-    # under the TCP. (MuJoCo sees the wrist links hanging under it well before.)
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_a_tool_pointing_up_hangs_the_wrist_into_the_table(backend_name: str) -> None:
+    # With a 120 mm tool pointing up, the wrist hangs under the flange: its links (45 mm
+    # capsules, the same in both backends) meet the table 113 + 45 mm under the flange,
+    # long before the flange does. MuJoCo: its ideal servo, which the kinematic arm is.
     tool = Pose(0, 0, 120, 0, 0, 0)
-    b = make("kinematic", home=Pose(400, 0, 320, 0, 0, 0), tool=tool)
+    ideal = {"dynamics": False} if backend_name == "mujoco" else {}
+    b = make(backend_name, home=Pose(400, 0, 600, 0, 0, 0), tool=tool, **ideal)
     b.start_motion(
-        Pose(400, 0, 150, 0, 0, 0), motion=MotionType.LINE, speed_percent=20, accel_time_s=0.1
+        Pose(400, 0, 200, 0, 0, 0), motion=MotionType.LINE, speed_percent=20, accel_time_s=0.1
     )
     fault = until_fault(b, b.is_settled)
     assert fault is not None
     assert fault.kind == "collision"
     flange = b.flange_pose()
     assert flange is not None
-    assert flange.z == pytest.approx(DEFAULT_TABLE_TOP_Z_MM, abs=0.3)
+    assert flange.z == pytest.approx(DEFAULT_TABLE_TOP_Z_MM + 113.15 + 45, abs=0.5)
 
 
 @pytest.mark.parametrize("backend_name", BACKENDS)
@@ -147,11 +150,11 @@ def test_fingers_opening_against_a_neighbour_then_rising_is_no_collision(
     assert until_fault(b, b.is_settled) is None
 
 
-@pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra")
-def test_mujoco_stops_an_arm_link_that_hits_the_table() -> None:
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_an_arm_link_that_hits_the_table_stops_the_arm(backend_name: str) -> None:
     # The tool horizontal, 110 mm up: its pads stay clear but the wrist (45 mm radius)
-    # comes down to 65 mm. The kinematic backend checks the TCP, flange and pads only.
-    b = make("mujoco", home=Pose(400, 0, 250, 90, 0, 0))
+    # comes down to 65 mm.
+    b = make(backend_name, home=Pose(400, 0, 250, 90, 0, 0))
     b.start_motion(
         Pose(400, 0, 110, 90, 0, 0), motion=MotionType.LINE, speed_percent=50, accel_time_s=0.1
     )

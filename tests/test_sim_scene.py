@@ -111,14 +111,10 @@ def test_the_arm_moving_through_a_fixture_is_a_collision(backend_name: str) -> N
     fault = line(b, THROUGH_JIG, speed=20)
     assert fault is not None
     assert fault.kind == "collision"
-    # Stopped where the outer pad touches the jig's side (x = 390): the fingers close along
-    # the base x here, the open pad's outer face 39 / 2 + 8 mm from the TCP. MuJoCo's
-    # wrist (a 45 mm capsule round the flange, here the TCP) touches it first.
+    # Stopped where the wrist (a 45 mm capsule round the flange, here the TCP) touches the
+    # jig's side (x = 390), before the open pad's outer face (39 / 2 + 8 mm from the TCP).
     assert "fixture jig" in fault.message
-    if backend_name == "kinematic":
-        assert b.tcp_pose().x == pytest.approx(390 - 27.5, abs=3)
-    else:
-        assert b.tcp_pose().x == pytest.approx(390 - 45, abs=3)
+    assert b.tcp_pose().x == pytest.approx(390 - 45, abs=3)
     # Backing out is no new collision.
     assert line(b, BESIDE_JIG, speed=20) is None
 

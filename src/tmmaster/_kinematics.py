@@ -216,6 +216,48 @@ class Chain:
         """Base -> flange transform."""
         return self.frames(joints_rad)[-1]
 
+    def joint_origins(self, joints_rad: Sequence[float]) -> list[Vector]:
+        """Base-frame position of each joint's origin, the last the flange's, mm.
+
+        The points of :meth:`frames`, computed without building its matrices (about
+        three times faster): the simulator checks the links between them every tick.
+        """
+        # The rotation so far, row by row, and the position of the current frame.
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        px = py = pz = 0.0
+        points = []
+        last = len(self.origins) - 1
+        for k, ((a0, a1, a2, _), q) in enumerate(zip(self.origins, joints_rad, strict=True)):
+            a00, a01, a02, ax = a0
+            a10, a11, a12, ay = a1
+            a20, a21, a22, az = a2
+            px, py, pz = (
+                r00 * ax + r01 * ay + r02 * az + px,
+                r10 * ax + r11 * ay + r12 * az + py,
+                r20 * ax + r21 * ay + r22 * az + pz,
+            )
+            points.append((px, py, pz))
+            if k == last:
+                break  # the flange's position needs no turn after it
+            # This joint's origin turned by its angle (columns 0 and 1 mixed), then
+            # appended to the rotation so far.
+            c, s = math.cos(q), math.sin(q)
+            m00, m01 = c * a00 + s * a01, c * a01 - s * a00
+            m10, m11 = c * a10 + s * a11, c * a11 - s * a10
+            m20, m21 = c * a20 + s * a21, c * a21 - s * a20
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
+                r00 * m00 + r01 * m10 + r02 * m20,
+                r00 * m01 + r01 * m11 + r02 * m21,
+                r00 * a02 + r01 * a12 + r02 * a22,
+                r10 * m00 + r11 * m10 + r12 * m20,
+                r10 * m01 + r11 * m11 + r12 * m21,
+                r10 * a02 + r11 * a12 + r12 * a22,
+                r20 * m00 + r21 * m10 + r22 * m20,
+                r20 * m01 + r21 * m11 + r22 * m21,
+                r20 * a02 + r21 * a12 + r22 * a22,
+            )
+        return points
+
     def jacobian(
         self, joints_rad: Sequence[float], tool: Transform = IDENTITY
     ) -> tuple[list[list[float]], Transform]:

@@ -894,6 +894,18 @@ def arc_through(start: Pose, via: Pose, target: Pose) -> kin.Arc:
         raise ConfigError(f"no arc from {start} through {via} to {target}: {exc}") from None
 
 
+def joint_chain(model: RobotModel) -> kin.Chain:
+    """The arm's serial chain (its joints' fixed origins), to keep for repeated kinematics.
+
+    Args:
+        model: The arm.
+
+    Returns:
+        The chain.
+    """
+    return _chain_of(model.joints)
+
+
 @functools.lru_cache(maxsize=32)
 def _chain_of(joints: tuple[JointSpec, ...]) -> kin.Chain:
     return kin.Chain(

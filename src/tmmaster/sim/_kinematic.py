@@ -26,10 +26,12 @@ agree by construction.
 - The gripper follows the grasp rule of :func:`~tmmaster.sim._world.grasp_fit` (the same
   pads, stroke and friction as the MuJoCo scene): a part too heavy for the grip force
   is squeezed but slips out when the arm moves away.
-- While the arm moves, the TCP, the flange and the pads' corners are checked against
-  the table top and the world's fixtures, and the pads against the parts: a collision
-  stops the arm and is handed to the controller (:meth:`KinematicBackend.take_fault`),
-  as is a carried part over the arm's rated payload.
+- While the arm moves, its links (capsules round the joint chain, the shapes of the
+  MuJoCo scene, :mod:`~tmmaster.sim._collide`), the flange, the palm and the pads'
+  corners, and a held part's box are checked against the table top and the world's
+  fixtures, and the pads against the parts: a collision stops the arm and is handed to
+  the controller (:meth:`KinematicBackend.take_fault`), as is a carried part over the
+  arm's rated payload.
 
 Everything is driven by :meth:`KinematicBackend.step`; there is no wall clock.
 """
@@ -43,8 +45,18 @@ from dataclasses import dataclass, field
 from .. import _kinematics as kin
 from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import DEFAULT_HOME, MotionType, Pose
-from .._robot_models import Joints, RobotModel, arc_through, trapezoid_progress
+from .._robot_models import Joints, RobotModel, arc_through, joint_chain, trapezoid_progress
 from ._backend import BackendFault, GripperState, MotionRejectedError, ObjectState, RejectReason
+from ._collide import (
+    FLANGE_RADIUS_MM,
+    PALM_CENTRE_MM,
+    PALM_HALF_MM,
+    Box,
+    arm_links,
+    box_depth,
+    link_contacts,
+    transform_point,
+)
 from ._world import (
     GRASP_MODES,
     TABLE_CENTRE_XY_MM,
@@ -64,6 +76,25 @@ _EPS = 1e-9
 #: The arm deeper in the table than when its motion started by more than this is a
 #: collision, mm (the MuJoCo backend's figure).
 _COLLISION_DEPTH_MM = 0.2
+#: What a contact is keyed by: (what touches: "the tool", "link 3", "held part NAME";
+#: what it touches: "the table", "fixture NAME").
+_ContactKey = tuple[str, str]
+#: The flange disc's rim, as points on the flange plane (flange frame), mm.
+_FLANGE_RIM = tuple(
+    (
+        FLANGE_RADIUS_MM * math.cos(k * math.pi / 4),
+        FLANGE_RADIUS_MM * math.sin(k * math.pi / 4),
+        0.0,
+    )
+    for k in range(8)
+)
+#: The palm's 8 corners in the TCP frame, mm.
+_PALM_CORNERS = tuple(
+    (PALM_CENTRE_MM[0] + x, PALM_CENTRE_MM[1] + y, PALM_CENTRE_MM[2] + z)
+    for x in (-PALM_HALF_MM[0], PALM_HALF_MM[0])
+    for y in (-PALM_HALF_MM[1], PALM_HALF_MM[1])
+    for z in (-PALM_HALF_MM[2], PALM_HALF_MM[2])
+)
 #: Halvings of a step that find where in it a collision began (1/128 of the step).
 _CONTACT_BISECTIONS = 7
 
@@ -181,15 +212,30 @@ class KinematicBackend:
         self._close_from = self._gripper_max
         # A part squeezed but too heavy for the grip: it stays while the arm moves away.
         self._pinched: str | None = None
-        # Collisions: the depth in the table and in each part the running motion started
-        # with (a contact being backed out of is known), and the fault not yet taken.
-        self._start_depth = -1.0
-        self._obstacle = "the table"  # what the deepest point of _table_depth() is in
+        # Collisions: what touches the table or a fixture, and how deep, when the running
+        # motion started (a contact being backed out of is known); the pads in the parts
+        # then; and the fault not yet taken.
+        self._chain = joint_chain(model)
+        self._links = arm_links(self._chain)
+        self._link_names = {link: f"link {link}" for link, _, _ in self._links}
+        (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
+        self._table_box = Box.table(self._world.table_top_z_mm, (cx, cy), (sx, sy))
+        self._fixture_boxes = tuple(
+            Box.at(f"fixture {f.name}", f.pose, f.size_mm) for f in self._world.fixtures
+        )
+        self._obstacles = (self._table_box, *self._fixture_boxes)
+        self._start_depths: dict[_ContactKey, float] = {}
+        # The tool's points in the TCP frame and their reach, for (finger width, tool).
+        self._local: tuple[float, list[tuple[float, float, float]]] = (0.0, [])
+        self._local_of: tuple[float, Pose | None] | None = None
+        # The TCP's transform, for the pose it was computed from.
+        self._tcp_t_of: Pose | None = None
+        self._tcp_t_value = kin.IDENTITY
         self._start_overlaps: dict[tuple[str, int], _PadContact] = {}
         self._overlaps_now: dict[tuple[str, int], _PadContact] = {}
         self._fault: BackendFault | None = None
         self._tool_back_of: Pose | None = None
-        self._tool_back_xyz = (0.0, 0.0, 0.0)
+        self._tool_back_t = kin.IDENTITY
 
     @property
     def model(self) -> RobotModel:
@@ -268,14 +314,7 @@ class KinematicBackend:
                 planned = self._plan_ptp(target, speed_percent, accel_time_s)
         except UnreachablePoseError as exc:
             raise MotionRejectedError(_reason(exc.reason), str(exc)) from exc
-        # A running motion is simply replaced: queueing or rejecting is the controller's job.
-        self._motion = planned
-        self._rest_s = 0.0
-        # Contacts the arm already has (a collision it is backing out of) are known: only
-        # deeper ones are collisions.
-        self._start_depth = self._table_depth()
-        self._start_overlaps = self._start_contacts()
-        return planned.duration_s
+        return self._begin(planned)
 
     def start_joint_motion(
         self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
@@ -370,7 +409,7 @@ class KinematicBackend:
         self._rest_s = 0.0
         # Contacts the arm already has (a collision it is backing out of) are known: only
         # deeper ones are collisions.
-        self._start_depth = self._table_depth()
+        self._start_depths = self._contacts()
         self._start_overlaps = self._start_contacts()
         return planned.duration_s
 
@@ -510,63 +549,115 @@ class KinematicBackend:
         return fault
 
     @property
-    def _tool_back(self) -> tuple[float, float, float]:
-        """Where the flange is in the TCP frame, mm (the tool's inverse translation)."""
+    def _tool_back_transform(self) -> kin.Transform:
+        """The flange in the TCP frame (the tool's inverse)."""
         tool = self._tool
         if tool is not self._tool_back_of:
-            back = kin.invert(kin.IDENTITY if tool is None else kin.pose_to_transform(tool))
-            self._tool_back_xyz = (back[0][3], back[1][3], back[2][3])
+            self._tool_back_t = kin.invert(
+                kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
+            )
             self._tool_back_of = tool
-        return self._tool_back_xyz
+        return self._tool_back_t
 
-    def _pad_corners(self, t: kin.Transform) -> list[tuple[float, float, float]]:
-        """The 16 corners of the two pads in the base frame (``t``: the TCP's transform), mm."""
-        g = self._gripper
-        inner, outer = self._width / 2, self._width / 2 + g.pad_thickness_mm
-        corners = []
-        for y in (inner, outer, -inner, -outer):
-            for x in (-g.pad_depth_mm / 2, g.pad_depth_mm / 2):
-                for z in (-g.pad_height_mm / 2, g.pad_height_mm / 2):
-                    corners.append(
-                        (
-                            t[0][0] * x + t[0][1] * y + t[0][2] * z + t[0][3],
-                            t[1][0] * x + t[1][1] * y + t[1][2] * z + t[1][3],
-                            t[2][0] * x + t[2][1] * y + t[2][2] * z + t[2][3],
-                        )
-                    )
-        return corners
+    def _contacts(self) -> dict[_ContactKey, float]:
+        """What touches the table or a fixture now, and how deep (mm).
 
-    def _table_depth(self) -> float:
-        """How deep the TCP, the flange or a pad corner is in the table or a fixture (mm).
+        The tool (the TCP, the flange's centre and rim, the palm's and the pads' corners)
+        as points, the links 2-5 as capsules, the held part as its box; each against the
+        table (the points: only over its top, their depth measured down from it) and
+        every fixture. A shape is only measured against an obstacle whose bounding box
+        its own overlaps: most ticks, far from everything, compute no distance at all.
 
         Returns:
-            The deepest such point's depth, -1 when none is inside; :attr:`_obstacle`
-            names what it is in.
+            The depth (>= 0) of each (shape, obstacle) in contact.
         """
-        t = kin.pose_to_transform(self._pose)
-        points = [(self._pose.x, self._pose.y, self._pose.z)]
-        if self._tool is not None:
-            # The flange is the TCP moved back along the tool (no forward kinematics).
-            x, y, z = self._tool_back
-            points.append(
-                (
-                    t[0][0] * x + t[0][1] * y + t[0][2] * z + t[0][3],
-                    t[1][0] * x + t[1][1] * y + t[1][2] * z + t[1][3],
-                    t[2][0] * x + t[2][1] * y + t[2][2] * z + t[2][3],
-                )
+        found: dict[_ContactKey, float] = {}
+        self._tool_contacts(found)
+        origins = self._chain.joint_origins([math.radians(q) for q in self._joints])
+        for link, box, depth in link_contacts(origins, self._links, self._obstacles):
+            found[self._link_names[link], box.name] = depth
+        held = None if self._world.held is None else self._world.held_frame(self._tcp_t)
+        if held is not None:
+            obj, frame = held
+            half = (obj.size_mm[0] / 2, obj.size_mm[1] / 2, obj.size_mm[2] / 2)
+            reach = math.hypot(*half)
+            centre = (frame[0][3], frame[1][3], frame[2][3])
+            low = (centre[0] - reach, centre[1] - reach, centre[2] - reach)
+            high = (centre[0] + reach, centre[1] + reach, centre[2] + reach)
+            for box in self._obstacles:
+                if box.overlaps(low, high):
+                    depth = box_depth(box, frame, half)
+                    if depth >= 0:
+                        found[f"held part {obj.name}", box.name] = depth
+        return found
+
+    @property
+    def _tcp_t(self) -> kin.Transform:
+        """The TCP's transform now (computed once per pose)."""
+        if self._tcp_t_of is not self._pose:
+            self._tcp_t_value = kin.pose_to_transform(self._pose)
+            self._tcp_t_of = self._pose
+        return self._tcp_t_value
+
+    def _tool_contacts(self, found: dict[_ContactKey, float]) -> None:
+        """Add the tool's points' contacts to ``found``."""
+        reach, local = self._tool_local()
+        x, y, z = self._pose.x, self._pose.y, self._pose.z
+        low, high = (x - reach, y - reach, z - reach), (x + reach, y + reach, z + reach)
+        near = [box for box in self._obstacles if box.overlaps(low, high)]
+        if not near:
+            return
+        t = self._tcp_t
+        (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz) = t[0], t[1], t[2]
+        points = [
+            (
+                r00 * px + r01 * py + r02 * pz + tx,
+                r10 * px + r11 * py + r12 * pz + ty,
+                r20 * px + r21 * py + r22 * pz + tz,
             )
-        points += self._pad_corners(t)
-        (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
-        top = self._world.table_top_z_mm
-        depths = [
-            top - z for x, y, z in points if abs(x - cx) <= sx and abs(y - cy) <= sy and z <= top
+            for px, py, pz in local
         ]
-        deepest, self._obstacle = max(depths, default=-1.0), "the table"
-        for fixture in self._world.fixtures:
-            depth = max((fixture.depth_of(point) for point in points), default=-1.0)
-            if depth > deepest:
-                deepest, self._obstacle = depth, f"fixture {fixture.name}"
-        return deepest
+        for box in near:
+            if box is self._table_box:
+                # Over the table's top, a point's depth is measured down from the top.
+                (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
+                top = self._world.table_top_z_mm
+                depth = max(
+                    (
+                        top - pz
+                        for px, py, pz in points
+                        if pz <= top and abs(px - cx) <= sx and abs(py - cy) <= sy
+                    ),
+                    default=-1.0,
+                )
+            else:
+                depth = max(box.point_depth(point) for point in points)
+            if depth >= 0:
+                found["the tool", box.name] = depth
+
+    def _tool_local(self) -> tuple[float, list[tuple[float, float, float]]]:
+        """The tool's points in the TCP frame and how far they reach from it, mm.
+
+        The TCP, the flange's centre and 8 points of its rim, the palm's 8 corners and
+        the pads' 16; kept while the finger width and the tool stay.
+        """
+        key = (self._width, self._tool)
+        if key != self._local_of:
+            g = self._gripper
+            back = self._tool_back_transform
+            points = [(0.0, 0.0, 0.0), (back[0][3], back[1][3], back[2][3])]
+            points += [transform_point(back, p) for p in _FLANGE_RIM]
+            points += _PALM_CORNERS
+            inner, outer = self._width / 2, self._width / 2 + g.pad_thickness_mm
+            points += [
+                (x, y, z)
+                for y in (inner, outer, -inner, -outer)
+                for x in (-g.pad_depth_mm / 2, g.pad_depth_mm / 2)
+                for z in (-g.pad_height_mm / 2, g.pad_height_mm / 2)
+            ]
+            reach = max(math.sqrt(x * x + y * y + z * z) for x, y, z in points)
+            self._local, self._local_of = (reach, points), key
+        return self._local
 
     def _pad_contacts(self) -> dict[tuple[str, int], _PadContact]:
         """Each pad against each part near it (not the one squeezed), after the last check.
@@ -605,16 +696,33 @@ class KinematicBackend:
         return contacts
 
     def _check_collision(self) -> BackendFault | None:
-        """A contact the moving arm did not expect: the table, or a pad coming down on a part.
+        """A contact the moving arm did not expect: the table, a fixture, a pad on a part.
 
-        The pads are compared with the last check without a collision (at first, the
-        motion's start, ``_start_overlaps``): a pad that came down on a part, or went
-        further down into one it started in, hit it; one rising out of a part, or meeting
-        it from the side, did not.
+        Each shape in the table or a fixture is compared with its depth in it when the
+        motion started: an arm link or the tool touching what it did not touch then, or
+        going 0.2 mm deeper into it, hit it; the held part hit it when more than 0.2 mm
+        deeper than then (a part resting on its support touches it: it may be lifted off
+        it, slid along it or set down on one, not pushed into one). The pads are
+        compared with the last check without a collision (at first, the motion's start,
+        ``_start_overlaps``): a pad that came down on a part, or went further down into
+        one it started in, hit it; one rising out of a part, or meeting it from the side,
+        did not.
         """
-        depth = self._table_depth()
-        if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_MM:
-            return BackendFault("collision", f"the arm hit {self._obstacle} ({depth:.1f} mm deep)")
+        worst: tuple[float, _ContactKey, float] | None = None
+        for key, depth in self._contacts().items():
+            before = self._start_depths.get(key, -1.0)
+            if key[0].startswith("held part "):
+                before = max(before, 0.0)
+            excess = depth - before - _COLLISION_DEPTH_MM
+            if excess > 0 and (worst is None or excess > worst[0]):
+                worst = (excess, key, depth)
+        if worst is not None:
+            _, (what, obstacle), depth = worst
+            if what.startswith("held part "):
+                text = f"the {what} hit {obstacle} ({depth:.1f} mm deep)"
+            else:
+                text = f"the arm hit {obstacle} ({what}, {depth:.1f} mm deep)"
+            return BackendFault("collision", text)
         contacts = self._pad_contacts()
         self._overlaps_now = contacts
         for (name, _), contact in contacts.items():

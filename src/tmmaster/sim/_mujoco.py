@@ -52,6 +52,7 @@ from ._backend import (
     PhysicsUnavailableError,
     RejectReason,
 )
+from ._collide import ARM_RADIUS_MM
 from ._world import (
     DEFAULT_GRIPPER,
     GRASP_MODES,
@@ -109,8 +110,8 @@ _PART_BITS = (4, 1 | 2 | 4)
 _PAD_BITS = (2, 1)
 _ARM_BITS = (8, 1)
 
-#: Radius of the arm's capsules, m.
-_ARM_RADIUS_M = 0.045
+#: Radius of the arm's capsules, m (the kinematic backend checks the same ones).
+_ARM_RADIUS_M = ARM_RADIUS_MM / 1000
 
 #: Finger servo while travelling: stiffness (N/m) and the joint's damping (N s/m).
 _FINGER_KP = 2000.0

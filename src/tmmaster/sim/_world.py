@@ -258,7 +258,7 @@ class Fixture(BaseModel):
     """A fixed box in the cell (a jig, a wall, a feeder): the arm must not touch it.
 
     Parts rest on a fixture's top as on the table's; the gripper never picks it up. The
-    kinematic backend checks the TCP, the flange and the pad corners against it as
+    kinematic backend checks the arm's links, its tool and a held part against it as
     against the table; the MuJoCo backend makes it a static box the arm collides with.
     """
 
@@ -839,6 +839,21 @@ class World:
         if self._relative is not None:
             pose = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(tcp), self._relative))
         self._objects[self._held] = self._objects[self._held].model_copy(update={"pose": pose})
+
+    def held_frame(self, tcp: kin.Transform) -> tuple[TableObject, kin.Transform] | None:
+        """The held object and its frame with the TCP at ``tcp`` (before :meth:`follow`).
+
+        Args:
+            tcp: The TCP's transform in the base frame.
+
+        Returns:
+            The object (its pose not updated) and its centre's transform, or None when
+            none is held.
+        """
+        if self._held is None:
+            return None
+        frame = tcp if self._relative is None else kin.multiply(tcp, self._relative)
+        return self._objects[self._held], frame
 
     def release(self, tcp: Pose) -> TableObject | None:
         """Let go of the held object at the TCP; it falls onto its support.
