@@ -188,6 +188,19 @@ def test_version_counts_changes_only(article: RegisterBank) -> None:
     assert article.field_writes("speed") == 1  # the write is still counted per field
 
 
+def test_changes_count_the_changed_words_of_each_table(tmflow: RegisterBank) -> None:
+    start = {table: tmflow.changes(table) for table in Table}
+    tmflow.set("tcp_x", 12.5)
+    tmflow.set("tcp_x", 12.5)
+    assert tmflow.changes(Table.INPUT) == start[Table.INPUT] + 1
+    tmflow.write(Table.HOLDING, 9000, [7])
+    tmflow.write(Table.HOLDING, 9000, [7])
+    tmflow.write(Table.HOLDING, 9000, [8], device=True)
+    assert tmflow.changes(Table.HOLDING) == start[Table.HOLDING] + 2
+    assert tmflow.changes(Table.INPUT) == start[Table.INPUT] + 1
+    assert tmflow.changes(Table.COIL) == start[Table.COIL]
+
+
 def test_gripper_maps() -> None:
     onrobot = RegisterBank(gripper_profile("onrobot-2fg7"))
     assert onrobot.served(Table.HOLDING) == [

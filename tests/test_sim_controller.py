@@ -1378,6 +1378,48 @@ def test_a_motion_that_survives_reinitialise_completes() -> None:
     assert "sim.motion_lost" not in log.names()
 
 
+class SignedZeroFlangeBackend(KinematicBackend):
+    """A backend whose flange pose is set by the test (a zero of either sign)."""
+
+    flange = Pose(300.0, -200.0, 300.0, 180.0, 0.0, 90.0)
+
+    def flange_pose(self) -> Pose | None:
+        return self.flange
+
+
+def test_tm_table_stays_what_the_robot_publishes_at_every_tick() -> None:
+    # An idle robot's Techman table is unchanged from tick to tick; whatever changed its
+    # words meanwhile is overwritten at the next tick, and the clock goes on.
+    backend = SignedZeroFlangeBackend(MODEL)
+    ctl, bank, _, _ = tmflow(backend=backend)
+    run(ctl, 1.0)
+    flange_x, joint_1, up = bank.get("flange_x"), bank.get("joint_1"), bank.get("up_seconds")
+    bank.set("flange_x", flange_x + 10.0)
+    bank.set("joint_1", joint_1 + 12.0)
+    bank.set("robot_link", False)
+    bank.set("tm_robot_state", 2)
+    bank.set("running_hours", 3)
+    ctl.tick(DT)
+    assert bank.get("flange_x") == flange_x
+    assert bank.get("joint_1") == joint_1
+    assert bank.get("robot_link") is True
+    assert bank.get("tm_robot_state") == 0
+    assert bank.get("running_hours") == 0
+    run(ctl, 1.0)
+    assert bank.get("up_seconds") == up + 1
+    # The sign of a zero is published too (a float32 register keeps it).
+    rx = bank.field("flange_rx")
+    backend.flange = Pose(300.0, -200.0, 300.0, -0.0, 0.0, 90.0)
+    ctl.tick(DT)
+    assert bank.read(rx.table, rx.address, 2) == encode(rx, -0.0)
+    backend.flange = Pose(300.0, -200.0, 300.0, 0.0, 0.0, 90.0)
+    ctl.tick(DT)
+    assert bank.read(rx.table, rx.address, 2) == encode(rx, 0.0)
+    ctl.press_estop()
+    ctl.tick(DT)
+    assert bank.get("tm_robot_state") == 4
+
+
 # -- the structure: one controller per handshake, one device prologue ----------------------
 
 

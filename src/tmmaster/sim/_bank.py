@@ -20,10 +20,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from itertools import pairwise
+from math import copysign
 
 from .._codec import Value, decode, encode
 from .._exceptions import IllegalAddressError, IllegalValueError
 from .._registers import RegisterField, RegisterMap, Table
+
+
+def _sign(value: float) -> float:
+    """1.0 or -1.0: the sign of ``value``, a zero's too."""
+    return copysign(1.0, value)
 
 
 def _merge(addresses: set[int]) -> list[tuple[int, int]]:
@@ -57,11 +63,12 @@ class RegisterBank:
         self._gaps: dict[Table, set[int]] = {table: set() for table in Table}
         self._raw: dict[Table, set[int]] = {table: set() for table in Table}
         self._extra = {f.name: f for f in extra_fields if f.name not in register_map.fields}
-        # The last value ``set`` stored in each field, its field and its words: a device
-        # publishes most fields unchanged at every tick, and encoding them again was most
-        # of an idle tick's cost.
-        self._encoded: dict[str, tuple[Value, RegisterField, list[int]]] = {}
+        # The last value ``set`` stored in each field, its words, its table and its
+        # addresses: a device publishes most fields unchanged at every tick, and
+        # encoding them again was most of an idle tick's cost.
+        self._encoded: dict[str, tuple[Value, list[int], Table, tuple[int, ...]]] = {}
         self._version = 0
+        self._table_changes: dict[Table, int] = dict.fromkeys(Table, 0)
         self._network_writes = 0
         self._field_writes: dict[str, int] = dict.fromkeys(register_map.fields, 0)
         for field in (*register_map.fields.values(), *self._extra.values()):
@@ -93,6 +100,17 @@ class RegisterBank:
         """Counter incremented by every change (device ``set`` or network ``write``)."""
         return self._version
 
+    def changes(self, table: Table) -> int:
+        """Counter incremented by every change of a word in ``table`` (device or network).
+
+        Args:
+            table: A Modbus table.
+
+        Returns:
+            The count of changes so far: while it stays, every word of ``table`` does.
+        """
+        return self._table_changes[table]
+
     @property
     def network_writes(self) -> int:
         """Number of successful network writes so far."""
@@ -109,6 +127,20 @@ class RegisterBank:
         """True when ``name`` is a field of the map or an extra field."""
         return name in self._map.fields or name in self._extra
 
+    def field(self, name: str) -> RegisterField:
+        """The field ``name`` of the map or of the extra fields.
+
+        Args:
+            name: A field name.
+
+        Returns:
+            Its :class:`~tmmaster._registers.RegisterField`.
+
+        Raises:
+            KeyError: No such field.
+        """
+        return self._field(name)
+
     def _field(self, name: str) -> RegisterField:
         extra = self._extra.get(name)
         return extra if extra is not None else self._map.field(name)
@@ -122,23 +154,33 @@ class RegisterBank:
     def set(self, name: str, value: Value) -> None:
         """Store ``value`` in field ``name`` (device side: read-only fields too)."""
         cached = self._encoded.get(name)
-        # The same value of the same type encodes to the same words; a zero is encoded
-        # again (-0.0 == 0.0, yet a float32 field stores its sign).
-        if cached is not None and cached[0].__class__ is value.__class__ and cached[0] == value:
-            field, new = cached[1], cached[2]
-            if not value:
-                new = encode(field, value)
+        # The same value of the same type encodes to the same words, but for the sign of a
+        # float zero (-0.0 == 0.0, yet a float32 field stores its sign).
+        if (
+            cached is not None
+            and cached[0].__class__ is value.__class__
+            and cached[0] == value
+            and (value or value.__class__ is not float or _sign(value) == _sign(cached[0]))
+        ):
+            new, table, addresses = cached[1], cached[2], cached[3]
         else:
             field = self._field(name)
             # encode() raises ValueOutOfRangeError before anything is stored.
             new = encode(field, value)
-            self._encoded[name] = (value, field, new)
-        words = self._words[field.table]
-        old = [words[a] for a in range(field.address, field.end + 1)]
-        if new != old:
-            for offset, word in enumerate(new):
-                words[field.address + offset] = word
-            self._version += 1
+            table = field.table
+            addresses = tuple(range(field.address, field.end + 1))
+            self._encoded[name] = (value, new, table, addresses)
+        words = self._words[table]
+        # Most fields are published unchanged at every tick: compared word by word, no list.
+        for address, word in zip(addresses, new, strict=True):
+            if words[address] != word:
+                break
+        else:
+            return
+        for address, word in zip(addresses, new, strict=True):
+            words[address] = word
+        self._version += 1
+        self._table_changes[table] += 1
 
     # -- network side ------------------------------------------------------------------
 
@@ -218,6 +260,7 @@ class RegisterBank:
             self._network_writes += 1
         if changed:
             self._version += 1
+            self._table_changes[table] += 1
 
     def _check_range(self, table: Table, address: int, count: int) -> None:
         if count < 1 or address < 0 or address + count - 1 > 65535:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import time
 from abc import abstractmethod
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import IntEnum
@@ -34,7 +35,14 @@ from .._codec import allowed_range, encode
 from .._exceptions import ConfigError, UnreachablePoseError, ValueOutOfRangeError
 from .._io import digital_io_areas
 from .._pose import MotionType, Pose
-from .._registers import TARGET_FIELDS, TCP_FIELDS, RegisterField, RobotProfile
+from .._registers import (
+    FLANGE_FIELDS,
+    JOINT_FIELDS,
+    ROBOT_BASE_TCP_FIELDS,
+    TARGET_FIELDS,
+    TCP_FIELDS,
+    RobotProfile,
+)
 from .._robot_models import RobotModel
 from ._backend import MotionRejectedError, PathBackend, PhysicsBackend
 from ._bank import RegisterBank
@@ -81,10 +89,23 @@ class SimErrorCode(IntEnum):
     COLLISION = 0x0022
 
 
-def _saturate(field: RegisterField, value: float) -> float:
-    """``value`` clamped into what ``field`` can encode."""
-    low, high = allowed_range(field)
-    return min(max(value, low), high)
+#: Techman's table: the flange pose in the robot base, and the Running Timer and Up Time
+#: (days, hours, minutes, seconds).
+_ROBOT_BASE_FLANGE_FIELDS = tuple(f"robot_base_{name}" for name in FLANGE_FIELDS)
+_RUNNING_TIMER_FIELDS = ("running_days", "running_hours", "running_minutes", "running_seconds")
+_UP_TIME_FIELDS = ("up_days", "up_hours", "up_minutes", "up_seconds")
+_TM_TABLE_FIELDS = (
+    *FLANGE_FIELDS,
+    *_ROBOT_BASE_FLANGE_FIELDS,
+    *ROBOT_BASE_TCP_FIELDS,
+    *JOINT_FIELDS,
+    "robot_link",
+    "operation_mode",
+    "aut_p",
+    "tm_robot_state",
+    *_RUNNING_TIMER_FIELDS,
+    *_UP_TIME_FIELDS,
+)
 
 
 @dataclass(frozen=True)
@@ -243,6 +264,18 @@ class RobotController(SimDevice[RobotProfile]):
         self._motion_log: list[MotionRecord] = []
         self._saturating = False  # the published pose is saturated (encodable range rule)
         self._rest_error_raised = False  # POSE_OUT_OF_RANGE raised for the current rest
+        # Published at every tick: the pose fields and their ranges are looked up once,
+        # and a pose equal to the last one that encoded is not encoded again to check it.
+        self._tcp_fields = tuple(profile.field(n) for n in TCP_FIELDS)
+        self._tcp_ranges = tuple(allowed_range(f) for f in self._tcp_fields)
+        self._encodable_pose: list[float] | None = None
+        # What _publish_tm_table stored last, and the change counts of its tables then.
+        self._tm_table_tables = tuple(
+            {bank.field(n).table for n in _TM_TABLE_FIELDS if bank.has(n)}
+        )
+        self._tm_table_pose: tuple[bytes, int | None] | None = None
+        self._tm_table_clock: tuple[int, int] | None = None
+        self._tm_table_mark: tuple[int, ...] | None = None
         self._reset_handshake_registers()
         self._publish_pose()
 
@@ -688,23 +721,30 @@ class RobotController(SimDevice[RobotProfile]):
         error, once per rest, since the registers cannot say where it is.
         """
         pose = self._backend.tcp_pose()
-        fields = [self._profile.field(n) for n in TCP_FIELDS]
+        fields = self._tcp_fields
         values = pose.as_list()
-        published = [_saturate(f, v) for f, v in zip(fields, values, strict=True)]
-        try:
-            # Encode all six before storing any: a pose is published whole or not at all.
-            for field, value in zip(fields, published, strict=True):
-                encode(field, value)
-        except ValueOutOfRangeError as exc:  # not even the saturated value fits
-            if self._error_code != SimErrorCode.POSE_OUT_OF_RANGE:
-                self._log.warning(
-                    "sim.pose_out_of_range",
-                    device=self._name,
-                    pose=str(pose),
-                    error=str(exc),
-                )
-                self._enter_error(SimErrorCode.POSE_OUT_OF_RANGE, "pose cannot be encoded")
-            return
+        published = [
+            min(max(v, low), high) for v, (low, high) in zip(values, self._tcp_ranges, strict=True)
+        ]
+        # Whether a value encodes does not depend on the sign of a zero: an unchanged pose
+        # (an idle arm) is not checked again.
+        if values != self._encodable_pose:
+            try:
+                # Encode all six before storing any: a pose is published whole or not at all.
+                for field, value in zip(fields, published, strict=True):
+                    encode(field, value)
+            except ValueOutOfRangeError as exc:  # not even the saturated value fits
+                self._encodable_pose = None
+                if self._error_code != SimErrorCode.POSE_OUT_OF_RANGE:
+                    self._log.warning(
+                        "sim.pose_out_of_range",
+                        device=self._name,
+                        pose=str(pose),
+                        error=str(exc),
+                    )
+                    self._enter_error(SimErrorCode.POSE_OUT_OF_RANGE, "pose cannot be encoded")
+                return
+            self._encodable_pose = values
         clipped = [f.name for f, a, b in zip(fields, values, published, strict=True) if a != b]
         self._check_saturation(pose, published, clipped)
         for name, value in zip(TCP_FIELDS, published, strict=True):
@@ -748,36 +788,59 @@ class RobotController(SimDevice[RobotProfile]):
     def _publish_tm_table(self, tcp: Pose) -> None:
         """Techman's fixed table beside a tmflow profile (docs/simulator-model.md)."""
         flange = self._backend.flange_pose()
-        joints = self._backend.joint_positions_deg()
+        joints = self._backend.joint_positions_deg() or (0.0,) * 6
         # Without a joint model the simulated tool is the identity: flange = TCP.
         flange = tcp if flange is None else flange
-        # The simulated current base is the robot base (Current Base 8300-8311 reads 0).
-        for prefix, p in (
-            ("flange", flange),
-            ("robot_base_flange", flange),
-            ("robot_base_tcp", tcp),
-        ):
-            for axis, value in zip(("x", "y", "z", "rx", "ry", "rz"), p.as_list(), strict=True):
-                self._bank.set(f"{prefix}_{axis}", value)
-        for i, angle in enumerate(joints or (0.0,) * 6, start=1):
-            self._bank.set(f"joint_{i}", angle)
-        self._bank.set("robot_link", True)
-        self._bank.set("operation_mode", 1)  # auto, as ma_mode
-        self._bank.set("aut_p", True)  # AUT.P high: able to play in auto mode
-        self._publish_tm_state()
+        flange_values = flange.as_list()
+        tcp_values = tcp.as_list()
         # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
-        running = self._running_timer_s()
-        for prefix, seconds in (("running", running), ("up", self._time_s)):
-            whole = int(seconds)
-            self._bank.set(f"{prefix}_days", whole // 86400)
-            self._bank.set(f"{prefix}_hours", whole // 3600 % 24)
-            self._bank.set(f"{prefix}_minutes", whole // 60 % 60)
-            self._bank.set(f"{prefix}_seconds", whole % 60)
+        clock = (int(self._running_timer_s()), int(self._time_s))
+        # Published at every tick and mostly unchanged (an idle arm, the same second): a
+        # part is stored again only when its values differ from those it stored last, or
+        # when any word of the table's Modbus tables changed since the last publication.
+        # The floats are compared as their bytes: a zero's sign is stored too.
+        values = array("d", [*flange_values, *tcp_values, *joints]).tobytes()
+        pose = (values, self._tm_robot_state())
+        bank = self._bank
+        bank_set = bank.set
+        unchanged = self._tm_table_mark == tuple(bank.changes(t) for t in self._tm_table_tables)
+        if not unchanged or pose != self._tm_table_pose:
+            # The simulated current base is the robot base (Current Base 8300-8311 reads 0).
+            for names, group in (
+                (FLANGE_FIELDS, flange_values),
+                (_ROBOT_BASE_FLANGE_FIELDS, flange_values),
+                (ROBOT_BASE_TCP_FIELDS, tcp_values),
+            ):
+                for name, value in zip(names, group, strict=True):
+                    bank_set(name, value)
+            for i, angle in enumerate(joints, start=1):
+                bank_set(f"joint_{i}", angle)
+            bank_set("robot_link", True)
+            bank_set("operation_mode", 1)  # auto, as ma_mode
+            bank_set("aut_p", True)  # AUT.P high: able to play in auto mode
+            self._publish_tm_state()
+            self._tm_table_pose = pose
+        if not unchanged or clock != self._tm_table_clock:
+            for (days, hours, minutes, secs), whole in zip(
+                (_RUNNING_TIMER_FIELDS, _UP_TIME_FIELDS), clock, strict=True
+            ):
+                bank_set(days, whole // 86400)
+                bank_set(hours, whole // 3600 % 24)
+                bank_set(minutes, whole // 60 % 60)
+                bank_set(secs, whole % 60)
+            self._tm_table_clock = clock
+        self._tm_table_mark = tuple(bank.changes(t) for t in self._tm_table_tables)
+
+    def _tm_robot_state(self) -> int | None:
+        """Robot State (7215): STO, error or normal; None when the profile has no such field."""
+        if not self._bank.has("tm_robot_state"):
+            return None
+        return 4 if self._estop else 2 if self._error_code else 0
 
     def _publish_tm_state(self) -> None:
         """Robot State (7215) in the same step as the error and e-stop bits."""
-        if self._bank.has("tm_robot_state"):
-            state = 4 if self._estop else 2 if self._error_code else 0  # STO / error / normal
+        state = self._tm_robot_state()
+        if state is not None:
             self._bank.set("tm_robot_state", state)
 
     def _code(self, field: str, label: str, default: int) -> int:
