@@ -228,6 +228,9 @@ class KinematicBackend:
         # The tool's points in the TCP frame and their reach, for (finger width, tool).
         self._local: tuple[float, list[tuple[float, float, float]]] = (0.0, [])
         self._local_of: tuple[float, Pose | None] | None = None
+        # The joints' origins, for the joints they were computed at.
+        self._origins: list[tuple[float, float, float]] = []
+        self._origins_of: Joints | None = None
         # The TCP's transform, for the pose it was computed from.
         self._tcp_t_of: Pose | None = None
         self._tcp_t_value = kin.IDENTITY
@@ -573,7 +576,7 @@ class KinematicBackend:
         """
         found: dict[_ContactKey, float] = {}
         self._tool_contacts(found)
-        origins = self._chain.joint_origins([math.radians(q) for q in self._joints])
+        origins = self._joint_origins()
         for link, box, depth in link_contacts(origins, self._links, self._obstacles):
             found[self._link_names[link], box.name] = depth
         held = None if self._world.held is None else self._world.held_frame(self._tcp_t)
@@ -812,7 +815,7 @@ class KinematicBackend:
         progress = trapezoid_progress(elapsed_s, motion.duration_s, motion.accel_time_s)
         if motion.kind is MotionType.PTP:
             joints = _lerp(motion.start_joints, motion.target_joints, progress)
-            self._set(joints, self._model.forward(joints, self._tool))
+            self._set(joints, self._forward(joints))
         else:
             self._set(*self._line_point(motion, progress))
 
@@ -838,6 +841,27 @@ class KinematicBackend:
             # interpolated samples are then the joints (off the line by far under 1 mm).
             return seed, self._model.forward(seed, self._tool)
         return joints, pose
+
+    def _forward(self, joints: Joints) -> Pose:
+        """The TCP at ``joints``, keeping the joints' origins for the collision check.
+
+        :meth:`RobotModel.forward`'s arithmetic on the chain kept here: one forward
+        kinematics gives both (a PTP's tick computes no other).
+        """
+        frames = self._chain.frames([math.radians(q) for q in joints])
+        self._origins = [(f[0][3], f[1][3], f[2][3]) for f in frames]
+        self._origins_of = joints
+        flange = frames[-1]
+        if self._tool is not None:
+            flange = kin.multiply(flange, kin.pose_to_transform(self._tool))
+        return kin.transform_to_pose(flange)
+
+    def _joint_origins(self) -> list[tuple[float, float, float]]:
+        """The joints' origins (J1..J6, the flange last) where the arm is now, mm."""
+        if self._origins_of is not self._joints:
+            self._origins = self._chain.joint_origins([math.radians(q) for q in self._joints])
+            self._origins_of = self._joints
+        return self._origins
 
     def _set(self, joints: Joints, tcp: Pose) -> None:
         self._joints = joints
