@@ -65,6 +65,7 @@ from ._world import (
     GripperGeometry,
     World,
     gripper_geometry,
+    held_frame,
     in_tool_frame,
     pad_overlaps,
 )
@@ -579,7 +580,7 @@ class KinematicBackend:
         origins = self._joint_origins()
         for link, box, depth in link_contacts(origins, self._links, self._obstacles):
             found[self._link_names[link], box.name] = depth
-        held = None if self._world.held is None else self._world.held_frame(self._tcp_t)
+        held = None if self._world.held is None else held_frame(self._world, self._tcp_t)
         if held is not None:
             obj, frame = held
             half = (obj.size_mm[0] / 2, obj.size_mm[1] / 2, obj.size_mm[2] / 2)

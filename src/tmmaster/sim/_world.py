@@ -840,21 +840,6 @@ class World:
             pose = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(tcp), self._relative))
         self._objects[self._held] = self._objects[self._held].model_copy(update={"pose": pose})
 
-    def held_frame(self, tcp: kin.Transform) -> tuple[TableObject, kin.Transform] | None:
-        """The held object and its frame with the TCP at ``tcp`` (before :meth:`follow`).
-
-        Args:
-            tcp: The TCP's transform in the base frame.
-
-        Returns:
-            The object (its pose not updated) and its centre's transform, or None when
-            none is held.
-        """
-        if self._held is None:
-            return None
-        frame = tcp if self._relative is None else kin.multiply(tcp, self._relative)
-        return self._objects[self._held], frame
-
     def release(self, tcp: Pose) -> TableObject | None:
         """Let go of the held object at the TCP; it falls onto its support.
 
@@ -941,3 +926,24 @@ class World:
         hx, hy, hz = obj.half_extents_mm()
         entry = (obj.pose.x, obj.pose.y, hx, hy, obj.pose.z + hz, self._order[name])
         self._index.add(name, entry)
+
+
+def held_frame(world: World, tcp: kin.Transform) -> tuple[TableObject, kin.Transform] | None:
+    """The object ``world``'s gripper holds and its frame with the TCP at ``tcp``.
+
+    What :meth:`World.follow` would put it at, without moving it (the kinematic backend
+    checks it against the table and the fixtures every tick).
+
+    Args:
+        world: The world.
+        tcp: The TCP's transform in the base frame.
+
+    Returns:
+        The object (its pose not updated) and its centre's transform, or None when none
+        is held.
+    """
+    if world._held is None:
+        return None
+    relative = world._relative
+    frame = tcp if relative is None else kin.multiply(tcp, relative)
+    return world._objects[world._held], frame
