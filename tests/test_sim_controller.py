@@ -1394,12 +1394,15 @@ def test_tm_table_stays_what_the_robot_publishes_at_every_tick() -> None:
     ctl, bank, _, _ = tmflow(backend=backend)
     run(ctl, 1.0)
     flange_x, joint_1, up = bank.get("flange_x"), bank.get("joint_1"), bank.get("up_seconds")
+    tcp = pose_of(bank)
+    bank.set("tcp_z", tcp.z + 10.0)
     bank.set("flange_x", flange_x + 10.0)
     bank.set("joint_1", joint_1 + 12.0)
     bank.set("robot_link", False)
     bank.set("tm_robot_state", 2)
     bank.set("running_hours", 3)
     ctl.tick(DT)
+    assert pose_of(bank) == tcp
     assert bank.get("flange_x") == flange_x
     assert bank.get("joint_1") == joint_1
     assert bank.get("robot_link") is True

@@ -269,13 +269,15 @@ class RobotController(SimDevice[RobotProfile]):
         self._tcp_fields = tuple(profile.field(n) for n in TCP_FIELDS)
         self._tcp_ranges = tuple(allowed_range(f) for f in self._tcp_fields)
         self._encodable_pose: list[float] | None = None
-        # What _publish_tm_table stored last, and the change counts of its tables then.
-        self._tm_table_tables = tuple(
-            {bank.field(n).table for n in _TM_TABLE_FIELDS if bank.has(n)}
+        # What the pose and Techman's table stored last, and the change counts of their
+        # Modbus tables then (see _publish_pose).
+        self._published_tables = tuple(
+            {bank.field(n).table for n in (*TCP_FIELDS, *_TM_TABLE_FIELDS) if bank.has(n)}
         )
+        self._published_mark: tuple[int, ...] | None = None
+        self._published_tcp: bytes | None = None
         self._tm_table_pose: tuple[bytes, int | None] | None = None
         self._tm_table_clock: tuple[int, int] | None = None
-        self._tm_table_mark: tuple[int, ...] | None = None
         self._reset_handshake_registers()
         self._publish_pose()
 
@@ -747,10 +749,24 @@ class RobotController(SimDevice[RobotProfile]):
             self._encodable_pose = values
         clipped = [f.name for f, a, b in zip(fields, values, published, strict=True) if a != b]
         self._check_saturation(pose, published, clipped)
-        for name, value in zip(TCP_FIELDS, published, strict=True):
-            self._bank.set(name, value)
-        if self._bank.has("flange_x"):
-            self._publish_tm_table(pose)
+        # Published at every tick and mostly unchanged (an idle arm, the same second): a
+        # part is stored again only when its values differ from those it stored last, or
+        # when any word of its Modbus tables changed since the last publication. Floats
+        # are compared as their bytes: a zero's sign is stored too.
+        bank = self._bank
+        unchanged = self._published_mark == self._published_changes()
+        tcp = array("d", published).tobytes()
+        if not unchanged or tcp != self._published_tcp:
+            for name, value in zip(TCP_FIELDS, published, strict=True):
+                bank.set(name, value)
+            self._published_tcp = tcp
+        if bank.has("flange_x"):
+            self._publish_tm_table(pose, unchanged=unchanged)
+        self._published_mark = self._published_changes()
+
+    def _published_changes(self) -> tuple[int, ...]:
+        """The change counts of the Modbus tables the pose and Techman's table are in."""
+        return tuple(self._bank.changes(table) for table in self._published_tables)
 
     def _check_saturation(self, pose: Pose, published: list[float], clipped: list[str]) -> None:
         """Log a saturated excursion once; an arm at rest outside the range is an error."""
@@ -785,8 +801,12 @@ class RobotController(SimDevice[RobotProfile]):
                 SimErrorCode.POSE_OUT_OF_RANGE, "arm at rest at a pose the registers cannot hold"
             )
 
-    def _publish_tm_table(self, tcp: Pose) -> None:
-        """Techman's fixed table beside a tmflow profile (docs/simulator-model.md)."""
+    def _publish_tm_table(self, tcp: Pose, *, unchanged: bool) -> None:
+        """Techman's fixed table beside a tmflow profile (docs/simulator-model.md).
+
+        ``unchanged``: no word of its Modbus tables changed since it was last published
+        (only the parts whose values changed are stored again).
+        """
         flange = self._backend.flange_pose()
         joints = self._backend.joint_positions_deg() or (0.0,) * 6
         # Without a joint model the simulated tool is the identity: flange = TCP.
@@ -795,15 +815,9 @@ class RobotController(SimDevice[RobotProfile]):
         tcp_values = tcp.as_list()
         # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
         clock = (int(self._running_timer_s()), int(self._time_s))
-        # Published at every tick and mostly unchanged (an idle arm, the same second): a
-        # part is stored again only when its values differ from those it stored last, or
-        # when any word of the table's Modbus tables changed since the last publication.
-        # The floats are compared as their bytes: a zero's sign is stored too.
         values = array("d", [*flange_values, *tcp_values, *joints]).tobytes()
         pose = (values, self._tm_robot_state())
-        bank = self._bank
-        bank_set = bank.set
-        unchanged = self._tm_table_mark == tuple(bank.changes(t) for t in self._tm_table_tables)
+        bank_set = self._bank.set
         if not unchanged or pose != self._tm_table_pose:
             # The simulated current base is the robot base (Current Base 8300-8311 reads 0).
             for names, group in (
@@ -829,7 +843,6 @@ class RobotController(SimDevice[RobotProfile]):
                 bank_set(minutes, whole // 60 % 60)
                 bank_set(secs, whole % 60)
             self._tm_table_clock = clock
-        self._tm_table_mark = tuple(bank.changes(t) for t in self._tm_table_tables)
 
     def _tm_robot_state(self) -> int | None:
         """Robot State (7215): STO, error or normal; None when the profile has no such field."""
