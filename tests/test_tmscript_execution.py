@@ -126,6 +126,22 @@ def test_waitfor_in_an_expression_reevaluates_its_condition() -> None:
     assert host.shown == ["true", "5"]
 
 
+def test_a_literal_is_converted_where_the_script_reaches_it() -> None:
+    # A literal given where another type is wanted (an assignment, an argument, an index)
+    # is converted as any value is; one that cannot be is an error only once reached.
+    lines = ["main", "{", "int[] a = {5, 6, 7}", "byte b = 1000", "Display(b)",
+             "Display(a[2])", 'Display(a["1"])', "Display(Byte_ToInt16({1, 2}, 1))",
+             "int n = 0", "if (n > 0)", "{", 'Display(a["x"])', "}",
+             "Display(n)", 'Display(a["x"])', "Display(n)", "}"]  # fmt: skip
+    ex, host = start("\n".join(lines) + "\n")
+    status = ex.step(100)
+    assert host.shown == ["232", "7", "6", "258", "0"]
+    assert status.state == ExecState.ERROR
+    assert status.error is not None
+    assert status.error.line == 15
+    assert '"x"' in str(status.error)
+
+
 def test_closestop_runs_on_stop_and_on_normal_end() -> None:
     text = (
         'main\n{\nSleep(1000)\n}\nclosestop\n{\nDisplay("closed")\n}\n'

@@ -42,6 +42,17 @@ class ModbusConfig:
     port: int
     timeout_ms: int
     presets: dict[str, tuple[int, str, int, str, int]] = field(default_factory=dict)
+    _devices: dict[int, ModbusDevice] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+
+    def device(self, unit: int) -> ModbusDevice:
+        """The device a request to slave ``unit`` goes to (made once per unit: immutable)."""
+        device = self._devices.get(unit)
+        if device is None:
+            device = ModbusDevice(self.name, self.host, self.port, unit, self.timeout_ms)
+            self._devices[unit] = device
+        return device
 
 
 class ExitRequest(Exception):  # noqa: N818 - a signal, not an error
@@ -148,14 +159,19 @@ def _register_blocking(
     return decorate
 
 
+#: What a number is (a tuple: a cheaper isinstance than ``int | float``, called for every
+#: numeric argument).
+_NUMBER = (int, float)
+
+
 def _int(v: Value) -> int:
-    if isinstance(v, bool) or not isinstance(v, int | float):
+    if isinstance(v, bool) or not isinstance(v, _NUMBER):
         raise BuiltinError(f"expected a number, got {v!r}")
     return int(v)
 
 
 def _num(v: Value) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float):
+    if isinstance(v, bool) or not isinstance(v, _NUMBER):
         raise BuiltinError(f"expected a number, got {v!r}")
     return float(v)
 
@@ -195,28 +211,40 @@ def _endian_bytes(data: bytes, size: int, endian: int) -> bytes:
     return chunk if endian == 1 else chunk[::-1]
 
 
+def _int16(data: bytes, endian: int, unsigned: int) -> int:
+    raw = int.from_bytes(_endian_bytes(data, 2, endian), "big")
+    return raw if unsigned == 1 else raw - 0x10000 if raw & 0x8000 else raw
+
+
 @_register("4.1", 52, "int(byte[], int, int)", "int(byte[], int)", "int(byte[])")
 def _Byte_ToInt16(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.1 Byte_ToInt16, p. 52: 2 bytes, 0 Little / 1 Big Endian, signed/unsigned."""
     endian = _int(args[1]) if len(args) > 1 else 0
     unsigned = _int(args[2]) if len(args) > 2 else 0
-    raw = int.from_bytes(_endian_bytes(_bytes(args[0]), 2, endian), "big")
-    return raw if unsigned == 1 else raw - 0x10000 if raw & 0x8000 else raw
+    return _int16(_bytes(args[0]), endian, unsigned)
+
+
+def _int32(data: bytes, endian: int) -> int:
+    return int.from_bytes(_endian_bytes(data, 4, endian), "big", signed=True)
 
 
 @_register("4.2", 54, "int(byte[], int)", "int(byte[])")
 def _Byte_ToInt32(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.2 Byte_ToInt32, p. 54: 4 bytes, 0 Little (default) / 1 Big Endian."""
     endian = _int(args[1]) if len(args) > 1 else 0
-    return int.from_bytes(_endian_bytes(_bytes(args[0]), 4, endian), "big", signed=True)
+    return _int32(_bytes(args[0]), endian)
+
+
+def _float32(data: bytes, endian: int) -> float:
+    value: float = struct.unpack(">f", _endian_bytes(data, 4, endian))[0]
+    return value
 
 
 @_register("4.3", 55, "float(byte[], int)", "float(byte[])")
 def _Byte_ToFloat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.3 Byte_ToFloat, p. 55: IEEE-754 single from 4 bytes."""
     endian = _int(args[1]) if len(args) > 1 else 0
-    value: float = struct.unpack(">f", _endian_bytes(_bytes(args[0]), 4, endian))[0]
-    return value
+    return _float32(_bytes(args[0]), endian)
 
 
 @_register("4.4", 56, "double(byte[], int)", "double(byte[])")
@@ -231,34 +259,39 @@ def _chunks(data: bytes, size: int) -> list[bytes]:
     return [data[i : i + size] for i in range(0, len(data), size)]
 
 
+# The arrays convert each chunk as the scalar function does; the endianness (and
+# signedness) arguments are checked once, when there is a chunk to convert.
+
+
 @_register("4.5", 57, "int[](byte[], int, int)", "int[](byte[], int)", "int[](byte[])")
 def _Byte_ToInt16Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.5 Byte_ToInt16Array, p. 57: every 2 bytes to an int16."""
-    rest = args[1:]
-    return [
-        cast(Scalar, _Byte_ToInt16(rt, [list(c), *rest], types))
-        for c in _chunks(_bytes(args[0]), 2)
-    ]
+    chunks = _chunks(_bytes(args[0]), 2)
+    if not chunks:
+        return []
+    endian = _int(args[1]) if len(args) > 1 else 0
+    unsigned = _int(args[2]) if len(args) > 2 else 0
+    return [_int16(c, endian, unsigned) for c in chunks]
 
 
 @_register("4.6", 59, "int[](byte[], int)", "int[](byte[])")
 def _Byte_ToInt32Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.6 Byte_ToInt32Array, p. 59: every 4 bytes to an int."""
-    rest = args[1:]
-    return [
-        cast(Scalar, _Byte_ToInt32(rt, [list(c), *rest], types))
-        for c in _chunks(_bytes(args[0]), 4)
-    ]
+    chunks = _chunks(_bytes(args[0]), 4)
+    if not chunks:
+        return []
+    endian = _int(args[1]) if len(args) > 1 else 0
+    return [_int32(c, endian) for c in chunks]
 
 
 @_register("4.7", 60, "float[](byte[], int)", "float[](byte[])")
 def _Byte_ToFloatArray(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.7 Byte_ToFloatArray, p. 60: every 4 bytes to a float."""
-    rest = args[1:]
-    return [
-        cast(Scalar, _Byte_ToFloat(rt, [list(c), *rest], types))
-        for c in _chunks(_bytes(args[0]), 4)
-    ]
+    chunks = _chunks(_bytes(args[0]), 4)
+    if not chunks:
+        return []
+    endian = _int(args[1]) if len(args) > 1 else 0
+    return [_float32(c, endian) for c in chunks]
 
 
 @_register("4.8", 61, "double[](byte[], int)", "double[](byte[])")
@@ -967,7 +1000,7 @@ def _device(rt: Runtime, name: Value, unit: int) -> ModbusDevice:
     config = rt.devices.get(key)
     if config is None:
         raise BuiltinError(f'no ModbusTCP device named "{key}" is declared')
-    return ModbusDevice(config.name, config.host, config.port, unit, config.timeout_ms)
+    return config.device(unit)
 
 
 def _read(rt: Runtime, args: list[Value]) -> tuple[str, list[int]]:
@@ -1139,7 +1172,7 @@ def _preset_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
         raise BuiltinError("writing an array is not supported with a preset (§16.11, p. 436)")
     if value == "":
         return False  # "the input data is empty" (p. 437)
-    device = ModbusDevice(config.name, config.host, config.port, unit, config.timeout_ms)
+    device = config.device(unit)
     if kind == "DO":
         rt.host.modbus_request(device, 5, address, 1, [1 if value else 0])
         return True

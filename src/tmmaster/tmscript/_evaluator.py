@@ -149,6 +149,23 @@ def _promote(left: str, right: str) -> str:
     return "float"
 
 
+_NOT_CONSTANT: Any = object()
+
+
+def _converted_literal(node: a.Expr, conv: Callable[[Value], Value]) -> Any:
+    """``conv`` of a literal's value, computed once when the script is compiled.
+
+    ``_NOT_CONSTANT`` for any other expression, and for a literal whose conversion fails:
+    that error is the script's at run time, where it reaches the literal.
+    """
+    if not isinstance(node, a.Literal):
+        return _NOT_CONSTANT
+    try:
+        return conv(node.value)
+    except Exception:
+        return _NOT_CONSTANT
+
+
 def _lift(ce: _CExpr) -> GenFn:
     """The expression as a generator function (pure ones are wrapped)."""
     if ce.gen:
@@ -625,6 +642,9 @@ class _Compiler:
         conv = self.converter(ce.type, want, at)
         if conv is None:
             return _CExpr(ce.fn, want, ce.gen)
+        constant = _converted_literal(node, conv)
+        if constant is not _NOT_CONSTANT:
+            return _CExpr(lambda fr: constant, want, False)
         if not ce.gen:
             fn = cast(PureFn, ce.fn)
             return _CExpr(lambda fr: conv(fn(fr)), want, False)
@@ -911,6 +931,9 @@ class _Compiler:
         index = self.expr(node.index)
         elem = element_type(base.type)
         conv = self.converter(index.type, "int", node.index)
+        constant = _NOT_CONSTANT if conv is None else _converted_literal(node.index, conv)
+        if constant is not _NOT_CONSTANT:
+            index, conv = _CExpr(lambda fr: constant, "int", False), None
 
         def get(items: list[Value], i: Value) -> Value:
             if conv is not None:
@@ -1013,12 +1036,13 @@ class _Compiler:
                     raise fail(exc) from None
 
             return _CExpr(call_pure, ret, False)
-        gens = [_lift(ce) for ce in fns]
+        # Arguments in order; a plain one is called, not wrapped into a generator.
+        steps = [(ce.gen, ce.fn) for ce in fns]
 
         def call_gen(fr: _Frame) -> Gen:
             values = []
-            for g in gens:
-                values.append((yield from g(fr)))
+            for gen, f in steps:
+                values.append((yield from f(fr)) if gen else f(fr))
             try:
                 if blocking is not None:
                     return (yield from blocking(fr.rt, values, arg_types))
@@ -1072,15 +1096,18 @@ class _Compiler:
                 node, f"{fn.node.name}() takes {len(fn.params)} arguments, not {len(node.args)}"
             )
         args = [
-            _lift(self.converted(arg, want, arg))
-            for arg, want in zip(node.args, fn.params, strict=True)
+            (ce.gen, ce.fn)
+            for ce in (
+                self.converted(arg, want, arg)
+                for arg, want in zip(node.args, fn.params, strict=True)
+            )
         ]
         returns = fn.returns
 
         def call_user(fr: _Frame) -> Gen:
             values = []
-            for g in args:
-                values.append((yield from g(fr)))
+            for gen, f in args:
+                values.append((yield from f(fr)) if gen else f(fr))
             callee = _Frame(fr.g, fn.size, fr.rt)
             callee.l[: len(values)] = values
             assert fn.body is not None
