@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
 
 from tmmaster import TMScriptSyntaxError
+from tmmaster._cli import main as tmmaster_main
 from tmmaster.tmscript import ExecState, Execution, ModbusDevice, MotionCall, parse
 from tmmaster.tmscript.__main__ import main as cli_main
 
@@ -348,14 +347,13 @@ def test_cli_check_eval_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert capsys.readouterr().err.startswith(f"{fails}:4:13: division by zero")
 
 
-def test_cli_subprocess(tmp_path: Path) -> None:
+def test_the_tmmaster_command_runs_a_script(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # ``tmmaster tmscript`` is the same main(); ``python -m tmmaster`` itself runs as a
+    # process in test_public_api.py and test_bad_input.py (a process costs over a second
+    # of CPU importing the whole command line).
     script = tmp_path / "s.tms"
     script.write_text('main\n{\nDisplay("hi")\n}\n', encoding="utf-8")
-    done = subprocess.run(
-        [sys.executable, "-m", "tmmaster", "tmscript", "run", str(script)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    assert (done.returncode, done.stdout) == (0, "hi\n")
+    assert tmmaster_main(["tmscript", "run", str(script)]) == 0
+    assert capsys.readouterr().out == "hi\n"
