@@ -477,10 +477,11 @@ def test_the_cli_banner_lists_faults_and_sigusr1_resets_an_error() -> None:
     )
     try:
         assert proc.stdout is not None
-        banner = [proc.stdout.readline() for _ in range(4)]
+        banner = [proc.stdout.readline() for _ in range(5)]
         port = int(banner[0].split()[3].rsplit(":", 1)[1])
-        assert banner[2].strip() == "fault   armed: estop:after_s=0.5"
-        assert f"kill -USR1 {proc.pid}" in banner[3]
+        assert banner[2].startswith("physics kinematic")
+        assert banner[3].strip() == "fault   armed: estop:after_s=0.5"
+        assert f"kill -USR1 {proc.pid}" in banner[4]
         with ModbusTransport("127.0.0.1", port) as link:
             deadline = time.monotonic() + 10
             while link.read_block(Table.HOLDING, 3, 1) != [0x0200]:  # e-stop fired
