@@ -85,8 +85,11 @@ def test_fingers_hitting_the_table_stop_the_arm_where_they_touch(
     assert b.is_settled()
     # Stopped at the touch, not a tick (up to 22 mm at full speed) later: the kinematic
     # backend finds the moment in the tick, MuJoCo stops in the 2 ms physics step (2.2 mm
-    # at 100 %).
-    assert TOUCH_Z - speed * 0.025 <= b.tcp_pose().z <= TOUCH_Z + 0.3
+    # at 100 %). With dynamics the arm hits at its planned speed (0.8 m/s at 100 %) and
+    # holds the joints of the step that saw the contact, the wrist already bent by the
+    # impact: it rests tilted (under 1 deg) on the pads' edge, the TCP up to 0.4 mm above
+    # the touch.
+    assert TOUCH_Z - speed * 0.025 <= b.tcp_pose().z <= TOUCH_Z + (0.5 if dynamics else 0.3)
     assert b.take_fault() is None  # handed over once
     # Backing out of a contact the arm already has is no new collision.
     b.start_motion(ABOVE, motion=MotionType.LINE, speed_percent=speed, accel_time_s=0.1)
@@ -99,8 +102,9 @@ def test_fingers_hitting_the_table_stop_the_arm_where_they_touch(
 def test_moving_just_above_the_table_is_no_collision(backend_name: str) -> None:
     b = make(backend_name)
     # 2 mm above the table, reached and crossed at 20 %: an arm lags at speed (with
-    # dynamics the TCP overshoots the end of a 100 % Line down with a 0.1 s ramp by ~6 mm,
-    # by ~0.7 mm at 20 %), so a program comes close to a surface slowly.
+    # dynamics, carrying a 5 kg part the servo does not know of, the TCP overshoots the
+    # end of a 100 % Line down with a 0.1 s ramp by ~8 mm), so a program comes close to a
+    # surface slowly.
     low = INTO_TABLE.offset(dz=TOUCH_Z + 2 - INTO_TABLE.z)
     for target, speed in ((low, 20), (low.offset(dx=100), 20), (ABOVE, 100)):
         b.start_motion(target, motion=MotionType.LINE, speed_percent=speed, accel_time_s=0.1)

@@ -15,7 +15,9 @@ top is the world's. What is simulated, and what is not:
   so the arm keeps the analytic backend's timing and the master's derived timeouts hold.
   With arm dynamics (the default for the models whose link masses are known, the TM5-700
   and TM5-900) the links carry the masses and inertias of Techman's URDF and the
-  trajectory is the reference of torque-limited joint servos: the arm lags it, and a move
+  trajectory is the reference of torque-limited joint servos (computed torque: the
+  planned acceleration through the arm's mass matrix, its gravity and Coriolis torques
+  fed forward): the arm follows it, lagging with a part it does not know of, and a move
   is done once the joints settled at its target. Without (``dynamics=False``, or another
   model) the arm joints are driven directly (qpos / qvel set every physics step, heavy
   armature): an ideal servo, no lag.
@@ -213,6 +215,9 @@ class _Trajectory:
     duration_s: float
     accel_time_s: float
     elapsed_s: float = 0.0
+    #: The reference velocity (deg/s) of the last physics step: the next step's velocity
+    #: less this gives the reference acceleration (every trajectory starts at rest).
+    velocity: tuple[float, ...] | list[float] = ()
 
     #: The last sample asked for (elapsed, joints): each physics step asks for the joints
     #: where the previous one ended.
@@ -510,11 +515,12 @@ class MuJoCoBackend:
         collision_force_n: A pad pressing on a part it does not hold harder than this while
             the arm moves is a collision, N.
         dynamics: Arm dynamics: the links get the masses and inertias of Techman's URDF
-            and feel gravity, and each joint is a servo (PD plus the arm's own gravity,
-            an integral term for a payload it does not know of) whose torque is limited
-            to the joint's effort, following the planned trajectory as its reference:
-            the joints and TCP reported are where the joints are (they lag the
-            reference, more so with a heavy part), and a move is done only once every
+            and feel gravity, and each joint is a servo (PD plus the arm's own gravity
+            and the planned acceleration through its mass matrix, an integral term for
+            a payload it does not know of) whose torque is limited to the joint's
+            effort, following the planned trajectory as its reference: the joints and
+            TCP reported are where the joints are (they lag the reference with a part
+            the servo does not know of), and a move is done only once every
             joint has settled within ``SETTLE_TOLERANCE_DEG`` of its target. False: an
             ideal servo, the joints follow the trajectory exactly (no lag, no
             settling). None (the default): on for the models whose link masses are
@@ -700,6 +706,17 @@ class MuJoCoBackend:
         self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
         self._sensordata = d.sensordata
         self._bias = d.qfrc_bias
+        # The servo's acceleration feed-forward M(q) a_ref: a_ref at the arm's dofs (one
+        # chain, so consecutive; the fingers' and parts' stay 0) and the torques, arrays
+        # reused every step.
+        import numpy as np
+
+        first = self._arm_dof[0]
+        self._arm_dofs = slice(first, first + len(self._arm_dof))
+        if self._arm_dof != list(range(first, self._arm_dofs.stop)):
+            raise RuntimeError(f"the arm's joints are not consecutive dofs: {self._arm_dof}")
+        self._accel = np.zeros(m.nv)
+        self._inertial = np.zeros(m.nv)
         self._finger_qpos, self._finger_dof = [a for a, _ in fingers], [b for _, b in fingers]
         self._part_qpos, self._part_dof = [a for a, _ in free], [b for _, b in free]
         self._pads = [ident(obj.mjOBJ_GEOM, f"pad_{s}") for s in ("l", "r")]
@@ -1069,15 +1086,31 @@ class MuJoCoBackend:
             for adr, w in zip(self._arm_dof, velocity, strict=True):
                 qvel[adr] = w * _RAD
 
-    def _servo(self, reference: Sequence[float], velocity: Sequence[float] | None) -> None:
+    def _servo(
+        self,
+        reference: Sequence[float],
+        velocity: Sequence[float] | None,
+        acceleration_rad: list[float] | None = None,
+    ) -> None:
         """Each joint's torque towards ``reference`` (deg) moving at ``velocity`` (deg/s).
 
         PD on the error plus the arm's own gravity and Coriolis torques (MuJoCo's bias
-        force of the last step: a part held is not in it) plus an integral term, the
+        force of the last step: a part held is not in it) plus the torque of the
+        reference's acceleration (``acceleration_rad``, rad/s^2) through the mass matrix
+        of the last step (the arm's links, armature, gripper and fingers: a part held,
+        welded or gripped, is a body of its own, not in it) plus an integral term, the
         total limited to the joint's effort (the integral stops growing at the limit).
         """
         # Plain floats (tolist) and one slice write: numpy scalars cost more than the maths.
-        qpos, qvel, bias = self._qpos.tolist(), self._qvel.tolist(), self._bias.tolist()
+        qpos, qvel = self._qpos.tolist(), self._qvel.tolist()
+        if acceleration_rad is None:
+            bias = self._bias.tolist()
+        else:
+            self._accel[self._arm_dofs] = acceleration_rad
+            inertial = self._inertial
+            self._mj.mj_mulM(self._m, self._d, inertial, self._accel)
+            inertial += self._bias
+            bias = inertial.tolist()
         h = self._timestep
         worst = self.max_tracking_error_deg
         saturated = self.saturated_steps
@@ -1116,7 +1149,20 @@ class MuJoCoBackend:
             nxt = trajectory.joints_at(trajectory.elapsed_s)
             velocity = [(b - a) / h for a, b in zip(now, nxt, strict=True)]
             if self._dynamics:
-                self._servo(nxt, velocity)
+                # Computed torque on the sampled reference, consistent with the step:
+                # the arm on the reference now (joints ``now``, moving at the last step's
+                # velocity, which brought it there) reaches ``nxt`` at the end of this
+                # step when its velocity changes to ``velocity``, so the feed-forward
+                # acceleration is that change over the step. Differencing rather than
+                # the trapezoid's phase: the joint samples are a polyline swept by the
+                # trapezoid, and the difference holds both the profile's acceleration and
+                # the polyline's turn at a sample, the PD then seeing no error on an arm
+                # that follows exactly.
+                last = trajectory.velocity or [0.0] * len(velocity)
+                scale = _RAD / h
+                accel = [(v - u) * scale for u, v in zip(last, velocity, strict=True)]
+                trajectory.velocity = velocity
+                self._servo(now, last, accel)
             else:
                 self._set_arm(now, velocity)
             if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
