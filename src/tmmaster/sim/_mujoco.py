@@ -173,6 +173,10 @@ _DYN_ARMATURE = (0.4, 0.4, 0.2, 0.05, 0.05, 0.05)
 _SERVO_HZ = 8.0
 _SERVO_ZETA = 1.0
 _SERVO_TI_S = 0.1
+#: A reference acceleration below this on every joint is none (rad/s^2): the inertial
+#: torque is then below a micronewton-metre, and a cruise (most physics steps of a
+#: move) skips the mass matrix product. Rounding in the sampled reference is ~1e-10.
+_FF_MIN_ACCEL = 1e-6
 #: A dynamic move is done once every joint is within this of its target (deg) ...
 SETTLE_TOLERANCE_DEG = 0.01
 #: ... and turns slower than this (deg/s).
@@ -1162,7 +1166,8 @@ class MuJoCoBackend:
                 scale = _RAD / h
                 accel = [(v - u) * scale for u, v in zip(last, velocity, strict=True)]
                 trajectory.velocity = velocity
-                self._servo(now, last, accel)
+                cruising = min(accel) > -_FF_MIN_ACCEL and max(accel) < _FF_MIN_ACCEL
+                self._servo(now, last, None if cruising else accel)
             else:
                 self._set_arm(now, velocity)
             if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
