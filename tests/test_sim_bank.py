@@ -201,6 +201,20 @@ def test_changes_count_the_changed_words_of_each_table(tmflow: RegisterBank) -> 
     assert tmflow.changes(Table.COIL) == start[Table.COIL]
 
 
+def test_banks_of_one_map_have_memories_of_their_own() -> None:
+    # Banks of the same map share its layout (built once), never their words.
+    profile = robot_profile("tmflow")
+    first, second = RegisterBank(profile), RegisterBank(profile)
+    first.set("tcp_x", 12.5)
+    first.write(Table.HOLDING, 9000, [7])
+    assert second.get("tcp_x") == 0
+    assert second.read(Table.HOLDING, 9000, 1) == [0]
+    runs = first.readable(Table.HOLDING)
+    runs.clear()
+    assert second.readable(Table.HOLDING) == first.readable(Table.HOLDING) != []
+    assert RegisterBank(profile).get("tcp_x") == 0
+
+
 def test_gripper_maps() -> None:
     onrobot = RegisterBank(gripper_profile("onrobot-2fg7"))
     assert onrobot.served(Table.HOLDING) == [

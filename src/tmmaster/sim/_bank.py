@@ -19,6 +19,7 @@ What a master may address:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from itertools import pairwise
 from math import copysign
 
@@ -43,6 +44,85 @@ def _merge(addresses: set[int]) -> list[tuple[int, int]]:
     return runs
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """What a bank serves where, for one map, its extra fields and its raw areas."""
+
+    #: Every served word of each table, 0 (copied into each bank's memory).
+    zeros: dict[Table, dict[int, int]]
+    #: Address -> the field covering it.
+    owner: dict[Table, dict[int, RegisterField]]
+    #: Unused addresses between two fields that a read may cover.
+    gaps: dict[Table, set[int]]
+    #: Plain memory addresses (no field).
+    raw: dict[Table, set[int]]
+    #: The extra fields by name (those the map does not define).
+    extra: dict[str, RegisterField]
+    #: ``RegisterBank.served`` and ``RegisterBank.readable`` of each table.
+    served: dict[Table, tuple[tuple[int, int], ...]]
+    readable: dict[Table, tuple[tuple[int, int], ...]]
+
+
+# Layouts by the identity of their map and extra fields, and their raw areas; each entry
+# holds its map and fields, so their ids cannot be reused while it lives. A simulator
+# builds the same bank each time (a tmflow robot's, with Techman's table: thousands of
+# addresses), so a test suite that starts many built it again each time. Bounded.
+_LAYOUTS: dict[
+    tuple[int, tuple[int, ...], tuple[tuple[Table, int, int], ...]],
+    tuple[RegisterMap, tuple[RegisterField, ...], _Layout],
+] = {}
+_MAX_LAYOUTS = 64
+
+
+def _layout(
+    register_map: RegisterMap,
+    extra_fields: tuple[RegisterField, ...],
+    raw_areas: tuple[tuple[Table, int, int], ...],
+) -> _Layout:
+    key = (id(register_map), tuple(map(id, extra_fields)), raw_areas)
+    entry = _LAYOUTS.get(key)
+    if entry is not None and entry[0] is register_map and entry[1] == extra_fields:
+        return entry[2]
+    built = _build_layout(register_map, extra_fields, raw_areas)
+    if len(_LAYOUTS) >= _MAX_LAYOUTS:
+        _LAYOUTS.clear()
+    _LAYOUTS[key] = (register_map, extra_fields, built)
+    return built
+
+
+def _build_layout(
+    register_map: RegisterMap,
+    extra_fields: tuple[RegisterField, ...],
+    raw_areas: tuple[tuple[Table, int, int], ...],
+) -> _Layout:
+    zeros: dict[Table, dict[int, int]] = {table: {} for table in Table}
+    owner: dict[Table, dict[int, RegisterField]] = {table: {} for table in Table}
+    gaps: dict[Table, set[int]] = {table: set() for table in Table}
+    raw: dict[Table, set[int]] = {table: set() for table in Table}
+    extra = {f.name: f for f in extra_fields if f.name not in register_map.fields}
+    for field in (*register_map.fields.values(), *extra.values()):
+        for address in range(field.address, field.end + 1):
+            zeros[field.table][address] = 0
+            owner[field.table][address] = field
+    for table, first, count in raw_areas:
+        for address in range(first, first + count):
+            if address not in zeros[table]:
+                zeros[table][address] = 0
+                raw[table].add(address)
+    for table in Table:
+        ordered = sorted(
+            (f for f in register_map.fields.values() if f.table is table),
+            key=lambda f: f.address,
+        )
+        for before, after in pairwise(ordered):
+            gap = after.address - before.end - 1
+            if 0 < gap <= register_map.max_read_gap:
+                gaps[table].update(range(before.end + 1, after.address))
+    served = {table: tuple(_merge(set(zeros[table]))) for table in Table}
+    readable = {table: tuple(_merge(set(zeros[table]) | gaps[table])) for table in Table}
+    return _Layout(zeros, owner, gaps, raw, extra, served, readable)
+
+
 class RegisterBank:
     """Register memory of one device, serving exactly the addresses of its register map."""
 
@@ -57,12 +137,17 @@ class RegisterBank:
         e.g. Techman's fixed table) and ``raw_areas`` ``(table, first, count)`` of plain
         read/write memory (e.g. the user define area) wherever no field is."""
         self._map = register_map
-        self._words: dict[Table, dict[int, int]] = {table: {} for table in Table}
+        layout = _layout(register_map, tuple(extra_fields), tuple(raw_areas))
+        # Each bank's own memory, all zeros; the rest of the layout is shared, read only.
+        self._words: dict[Table, dict[int, int]] = {
+            table: dict(words) for table, words in layout.zeros.items()
+        }
         # Address -> the field covering it, to check write access per address.
-        self._owner: dict[Table, dict[int, RegisterField]] = {table: {} for table in Table}
-        self._gaps: dict[Table, set[int]] = {table: set() for table in Table}
-        self._raw: dict[Table, set[int]] = {table: set() for table in Table}
-        self._extra = {f.name: f for f in extra_fields if f.name not in register_map.fields}
+        self._owner = layout.owner
+        self._gaps = layout.gaps
+        self._raw = layout.raw
+        self._extra = layout.extra
+        self._layout = layout
         # The last value ``set`` stored in each field, its words, its table and its
         # addresses: a device publishes most fields unchanged at every tick, and
         # encoding them again was most of an idle tick's cost.
@@ -71,24 +156,6 @@ class RegisterBank:
         self._table_changes: dict[Table, int] = dict.fromkeys(Table, 0)
         self._network_writes = 0
         self._field_writes: dict[str, int] = dict.fromkeys(register_map.fields, 0)
-        for field in (*register_map.fields.values(), *self._extra.values()):
-            for address in range(field.address, field.end + 1):
-                self._words[field.table][address] = 0
-                self._owner[field.table][address] = field
-        for table, first, count in raw_areas:
-            for address in range(first, first + count):
-                if address not in self._words[table]:
-                    self._words[table][address] = 0
-                    self._raw[table].add(address)
-        for table in Table:
-            ordered = sorted(
-                (f for f in register_map.fields.values() if f.table is table),
-                key=lambda f: f.address,
-            )
-            for before, after in pairwise(ordered):
-                gap = after.address - before.end - 1
-                if 0 < gap <= register_map.max_read_gap:
-                    self._gaps[table].update(range(before.end + 1, after.address))
 
     @property
     def register_map(self) -> RegisterMap:
@@ -186,11 +253,11 @@ class RegisterBank:
 
     def served(self, table: Table) -> list[tuple[int, int]]:
         """Addresses covered by fields, as contiguous ``(first address, count)`` runs."""
-        return _merge(set(self._words[table]))
+        return list(self._layout.served[table])
 
     def readable(self, table: Table) -> list[tuple[int, int]]:
         """Addresses a read may cover (fields plus bridgeable gaps), as ``(first, count)``."""
-        return _merge(set(self._words[table]) | self._gaps[table])
+        return list(self._layout.readable[table])
 
     def read(self, table: Table, address: int, count: int) -> list[int]:
         """Words (or 0/1 per bit) at ``address``..``address + count - 1``; gaps read as 0."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import threading
 import time
@@ -253,6 +254,41 @@ class _Listener(ModbusTcpServer):
                 handler.transport.close()
 
 
+_Runs = tuple[tuple[int, int], ...]
+
+
+@functools.lru_cache(maxsize=16)
+def _sim_data(
+    runs: tuple[_Runs, _Runs, _Runs, _Runs],
+) -> tuple[tuple[SimData, ...], ...]:
+    """pymodbus' entries for the readable runs of the coils, discrete inputs, holding and
+    input registers, made once per layout: a server of a bank with Techman's table has
+    hundreds (pymodbus checks each as it is made) and a simulator starts one server each
+    time. pymodbus reads them, and copies their values into each device's registers."""
+    blocks: list[tuple[SimData, ...]] = []
+    for table, table_runs in zip(
+        (Table.COIL, Table.DISCRETE_INPUT, Table.HOLDING, Table.INPUT), runs, strict=True
+    ):
+        if table.is_bit:
+            # One list of n bits, not count=n: pymodbus 3.16 checks bit blocks for
+            # overlap with n * n addresses, which a long run (e.g. 900-1699) overflows.
+            entries = [
+                SimData(address=a, values=[False] * n, datatype=DataType.BITS)
+                for a, n in table_runs
+            ]
+            # pymodbus needs at least one entry per table; the trace hook refuses
+            # every address of an empty table before pymodbus looks at it.
+            entries = entries or [SimData(address=0, values=False, datatype=DataType.BITS)]
+        else:
+            entries = [
+                SimData(address=a, count=n, values=0, datatype=DataType.REGISTERS)
+                for a, n in table_runs
+            ]
+            entries = entries or [SimData(address=0, datatype=DataType.INVALID)]
+        blocks.append(tuple(entries))
+    return tuple(blocks)
+
+
 class DeviceServer:
     """A Modbus TCP listener serving one register bank, with network faults."""
 
@@ -364,26 +400,16 @@ class DeviceServer:
         server.close_late_connections()
 
     def _sim_device(self) -> SimDevice:
-        blocks: list[list[SimData]] = []
-        for table in (Table.COIL, Table.DISCRETE_INPUT, Table.HOLDING, Table.INPUT):
-            runs = self._bank.readable(table)
-            if table.is_bit:
-                # One list of n bits, not count=n: pymodbus 3.16 checks bit blocks for
-                # overlap with n * n addresses, which a long run (e.g. 900-1699) overflows.
-                entries = [
-                    SimData(address=a, values=[False] * n, datatype=DataType.BITS) for a, n in runs
-                ]
-                # pymodbus needs at least one entry per table; the trace hook refuses
-                # every address of an empty table before pymodbus looks at it.
-                entries = entries or [SimData(address=0, values=False, datatype=DataType.BITS)]
-            else:
-                entries = [
-                    SimData(address=a, count=n, values=0, datatype=DataType.REGISTERS)
-                    for a, n in runs
-                ]
-                entries = entries or [SimData(address=0, datatype=DataType.INVALID)]
-            blocks.append(entries)
-        coils, discrete, holding, inputs = blocks
+        # Fresh lists (pymodbus sorts them in place) of the entries made for these runs.
+        coils, discrete, holding, inputs = (
+            list(entries)
+            for entries in _sim_data(
+                tuple(
+                    tuple(self._bank.readable(table))
+                    for table in (Table.COIL, Table.DISCRETE_INPUT, Table.HOLDING, Table.INPUT)
+                )
+            )
+        )
         # id 0 = every unit id; the trace hook enforces a device id where one is required.
         return SimDevice(id=0, simdata=(coils, discrete, holding, inputs), action=self._action)
 

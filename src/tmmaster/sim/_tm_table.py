@@ -143,9 +143,21 @@ def _spans() -> tuple[tuple[RegisterField, frozenset[tuple[Table, int]]], ...]:
     )
 
 
+# tm_table_fields by the identity of the profile (each entry holds it, so its id cannot be
+# reused while the entry lives): every simulated tmflow robot asks again. Bounded.
+_FIELDS_OF: dict[int, tuple[RegisterMap, tuple[RegisterField, ...]]] = {}
+
+
 def tm_table_fields(profile: RegisterMap) -> tuple[RegisterField, ...]:
     """Table entries that ``profile`` does not define itself (by name or by address)."""
+    entry = _FIELDS_OF.get(id(profile))
+    if entry is not None and entry[0] is profile:
+        return entry[1]
     taken = {(f.table, a) for f in profile.fields.values() for a in range(f.address, f.end + 1)}
-    return tuple(
+    fields = tuple(
         f for f, span in _spans() if f.name not in profile.fields and taken.isdisjoint(span)
     )
+    if len(_FIELDS_OF) >= 64:
+        _FIELDS_OF.clear()
+    _FIELDS_OF[id(profile)] = (profile, fields)
+    return fields
