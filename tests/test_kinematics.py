@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 import tmmaster
 from tmmaster import JointSpec, MotionType, Pose, UnreachablePoseError, robot_model
 from tmmaster import _kinematics as kin
+from tmmaster._robot_models import joint_chain
 from tmmaster.pickplace import ARTICLE_HOME
 
 TM5 = robot_model("tm5-700")
@@ -225,3 +227,18 @@ def test_a_line_through_an_unreachable_region_is_refused() -> None:
     a, b = Pose(300, -200, 200, 180, 0, 90), Pose(-300, 200, 200, 180, 0, 90)
     with pytest.raises(UnreachablePoseError):
         TM5.line_joints(a, b)  # passes the J1 axis, where no tool-down pose exists
+
+
+@pytest.mark.parametrize("name", ["tm5-700", "tm5-900", "tm12", "tm14"])
+def test_joint_origins_are_the_frames_positions(name: str) -> None:
+    # The simulator's link check uses the matrix-free path; it must place every joint
+    # where the frames the master plans with do.
+    chain = joint_chain(robot_model(name))
+    rng = random.Random(7)
+    for _ in range(200):
+        q = [rng.uniform(-math.pi, math.pi) for _ in range(6)]
+        frames = chain.frames(q)
+        origins = chain.joint_origins(q)
+        assert len(origins) == len(frames)
+        for frame, point in zip(frames, origins, strict=True):
+            assert point == pytest.approx([frame[i][3] for i in range(3)], abs=1e-9)
