@@ -283,3 +283,25 @@ def test_a_boxs_depth_in_a_box_is_the_shortest_move_apart() -> None:
     # Turned about two axes, its lowest corner 17.3 mm under its centre (10 sqrt(3)).
     tilted = Pose(0, 0, 20 + 10 * 3**0.5 - 2, 45, 35.2643897, 0)
     assert box_depth(big, kin.pose_to_transform(tilted), half) == pytest.approx(2, abs=1e-3)
+
+
+#: A thin plate in the pads' way, 5 mm off the TCP along the tool's x: between a pad's
+#: corners (x = +/-10 mm) and clear of the TCP, so only the pads' boxes can meet it.
+PLATE_TCP = Pose(400, 0, 200, *DOWN)
+PLATE = Fixture(
+    name="plate",
+    pose=kin.transform_to_pose(
+        kin.multiply(
+            kin.pose_to_transform(PLATE_TCP), kin.rpy_transform((5.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        )
+    ),
+    size_mm=(4, 80, 16),
+)
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_a_plate_thinner_than_a_pad_stops_the_pads_coming_down(backend_name: str) -> None:
+    b = make(backend_name, World([FAR_PART], fixtures=[PLATE]), PLATE_TCP.offset(dz=60))
+    collision(move(b, PLATE_TCP), "fixture plate")
+    # The pads (12 mm under the TCP) met the plate's top (8 mm over the TCP's target).
+    assert b.tcp_pose().z == pytest.approx(PLATE_TCP.z + 20, abs=1.0)
