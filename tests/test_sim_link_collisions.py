@@ -305,3 +305,34 @@ def test_a_plate_thinner_than_a_pad_stops_the_pads_coming_down(backend_name: str
     collision(move(b, PLATE_TCP), "fixture plate")
     # The pads (12 mm under the TCP) met the plate's top (8 mm over the TCP's target).
     assert b.tcp_pose().z == pytest.approx(PLATE_TCP.z + 20, abs=1.0)
+
+
+#: A small block between the open pads, up at the palm: only the palm's box meets it.
+NUB = Fixture(
+    name="nub",
+    pose=kin.transform_to_pose(
+        kin.multiply(
+            kin.pose_to_transform(PLATE_TCP),
+            kin.rpy_transform((5.0, 0.0, PALM_CENTRE_MM[2]), (0.0, 0.0, 0.0)),
+        )
+    ),
+    size_mm=(4, 10, 6),
+)
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_a_block_between_the_open_pads_stops_the_palm(backend_name: str) -> None:
+    # A 100 mm tool keeps the wrist's capsule well above the palm.
+    tool = Pose(0, 0, 100, 0, 0, 0)
+    world, home = World([FAR_PART], fixtures=[NUB]), PLATE_TCP.offset(dz=60)
+    if backend_name == "kinematic":
+        b: PhysicsBackend = KinematicBackend(MODEL, world=world, home=home, tool=tool)
+    else:
+        from tmmaster.sim._mujoco import MuJoCoBackend
+
+        b = MuJoCoBackend(MODEL, world=world, home=home, tool=tool, dynamics=False)
+    assert grip(b, 39) is None  # wide open: the block passes between the pads
+    fault = collision(move(b, PLATE_TCP), "fixture nub")
+    assert "link" not in fault.message  # the tool, not the arm
+    # The palm's underside (4 mm under its centre) met the block's top (3 mm over its).
+    assert b.tcp_pose().z == pytest.approx(PLATE_TCP.z + 7, abs=1.0)

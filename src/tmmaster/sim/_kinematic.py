@@ -27,8 +27,8 @@ agree by construction.
   pads, stroke and friction as the MuJoCo scene): a part too heavy for the grip force
   is squeezed but slips out when the arm moves away.
 - While the arm moves, its links (capsules round the joint chain, the shapes of the
-  MuJoCo scene, :mod:`~tmmaster.sim._collide`), the flange, the palm's corners, the
-  pads' boxes and a held part's box are checked against the table top and the world's
+  MuJoCo scene, :mod:`~tmmaster.sim._collide`), the flange, the palm's and the pads'
+  boxes and a held part's box are checked against the table top and the world's
   fixtures, and the pads against the parts: a collision stops the arm and is handed to
   the controller (:meth:`KinematicBackend.take_fault`), as is a carried part over the
   arm's rated payload.
@@ -567,10 +567,11 @@ class KinematicBackend:
         """What touches the table or a fixture now, and how deep (mm).
 
         The tool (the TCP, the flange's centre and rim, the palm's and the pads' corners)
-        as points and the pads as boxes, the links 2-5 as capsules, the held part as its box; each against the
-        table (the points: only over its top, their depth measured down from it) and
-        every fixture. A shape is only measured against an obstacle whose bounding box
-        its own overlaps: most ticks, far from everything, compute no distance at all.
+        as points and the palm and the pads as boxes, the links 2-5 as capsules, the held
+        part as its box; each against the table (the points: only over its top, their
+        depth measured down from it) and every fixture. A shape is only measured against
+        an obstacle whose bounding box its own overlaps: most ticks, far from everything,
+        compute no distance at all.
 
         Returns:
             The depth (>= 0) of each (shape, obstacle) in contact.
@@ -621,7 +622,7 @@ class KinematicBackend:
             )
             for px, py, pz in local
         ]
-        pads = self._pad_frames(t)
+        solids = self._tool_boxes(t)
         for box in near:
             if box is self._table_box:
                 # Over the table's top, a point's depth is measured down from the top.
@@ -637,21 +638,23 @@ class KinematicBackend:
                 )
             else:
                 depth = max(box.point_depth(point) for point in points)
-            # The pads as the boxes they are: an edge thinner than a pad between two of
-            # its corners still meets it (MuJoCo's pads are boxes too).
-            for frame, half in pads:
+            # The palm and the pads as the boxes they are: an edge thinner than a pad
+            # between two of its corners still meets it (in MuJoCo they are boxes too).
+            for frame, half in solids:
                 depth = max(depth, box_depth(box, frame, half))
             if depth >= 0:
                 found["the tool", box.name] = depth
 
-    def _pad_frames(self, tcp: kin.Transform) -> list[tuple[kin.Transform, kin.Vector]]:
-        """Each pad's centre frame in the base frame and its half sizes, mm."""
+    def _tool_boxes(self, tcp: kin.Transform) -> list[tuple[kin.Transform, kin.Vector]]:
+        """The palm's and each pad's centre frame in the base frame, and half sizes, mm."""
         g = self._gripper
         offset = self._width / 2 + g.pad_thickness_mm / 2
-        half = (g.pad_depth_mm / 2, g.pad_thickness_mm / 2, g.pad_height_mm / 2)
+        pad = (g.pad_depth_mm / 2, g.pad_thickness_mm / 2, g.pad_height_mm / 2)
+        centres = [(PALM_CENTRE_MM, PALM_HALF_MM)]
+        centres += [((0.0, side * offset, 0.0), pad) for side in (1.0, -1.0)]
         return [
-            (kin.multiply(tcp, kin.rpy_transform((0.0, side * offset, 0.0), (0.0, 0.0, 0.0))), half)
-            for side in (1.0, -1.0)
+            (kin.multiply(tcp, kin.rpy_transform(centre, (0.0, 0.0, 0.0))), half)
+            for centre, half in centres
         ]
 
     def _tool_local(self) -> tuple[float, list[tuple[float, float, float]]]:
