@@ -29,7 +29,9 @@ import tmmaster
 from tmmaster import PollPolicy, Pose
 from tmmaster.sim import Simulator
 
-A = Pose(300, -200, 200, 180, 0, 90)
+#: The upper end of the moves: up to 190 mm down from it, the pads stay above the
+#: simulated table (85 mm; they reach 12 mm below the TCP).
+A = Pose(300, -200, 300, 180, 0, 90)
 
 
 def measure(

@@ -104,6 +104,45 @@ def test_a_short_move_on_the_model_is_seen_at_the_robots_next_tick(expected_s: f
     assert polls <= (0.021 + expected_s) / NOMINAL + 3
 
 
+@pytest.mark.parametrize("expected_s", [0.3, 0.44, 0.57, 0.6, 0.7, 0.8, 1.0])
+def test_a_move_on_the_model_is_seen_by_the_robots_next_tick_whatever_its_window(
+    expected_s: float,
+) -> None:
+    # Moves between a short one (no dense window) and a long one (a window as wide as a
+    # tick): a window narrower than a tick closes before the robot's report, so one poll
+    # follows a tick after the predicted end (a 0.7 s move was seen 69 ms late).
+    late, _ = seen_after_the_end(1.0, expected_s, observe=False)
+    assert late <= TICK + PollPolicy().ack_delay_s + 1e-9
+
+
+@pytest.mark.parametrize("expected_s", [0.4, 0.44, 0.5])
+def test_a_short_move_is_polled_sparsely_until_its_earliest_end(expected_s: float) -> None:
+    # No window to pay for: the polls before the earliest plausible end (a robot twice
+    # as fast as the model) are spaced as a longer move's middle, so a short move on the
+    # model costs fewer polls than nominal polling, and a twice-as-fast one is still
+    # seen within one nominal interval.
+    _, polls = seen_after_the_end(1.0, expected_s, observe=False)
+    assert polls <= (0.021 + expected_s) / NOMINAL - 1
+    late, _ = seen_after_the_end(0.5, expected_s, observe=False)
+    assert late <= NOMINAL + TICK + 1e-9
+
+
+def test_a_short_move_the_robot_took_early_is_seen_a_tick_sooner() -> None:
+    # The poll at 21 ms saw the command taken; the write was at 0: the robot took it in
+    # between. One poll falls a tick after the end of a robot that took it at once,
+    # and one a tick after the predicted end (taken just before the poll).
+    policy = PollPolicy()
+    schedule = MotionSchedule(policy, NOMINAL, 0.0)
+    schedule.acknowledged(0.021, 0.43, since=0.0)
+    polls, now = [], 0.021
+    while now < 0.6:
+        now = schedule.next_poll(now, acknowledged=True)
+        polls.append(now)
+    early_report = math.ceil((0.001 + 0.43) / TICK) * TICK  # taken at 1 ms: 0.44 s
+    assert any(early_report <= t <= 0.0 + 0.43 + policy.ack_delay_s + 1e-9 for t in polls)
+    assert any(t == pytest.approx(0.021 + 0.43 + policy.ack_delay_s) for t in polls)
+
+
 @pytest.mark.parametrize("bad", [0, -1, float("nan"), float("inf")])
 def test_meaningless_intervals_are_refused(bad: float) -> None:
     with pytest.raises(ConfigError):

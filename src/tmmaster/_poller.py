@@ -150,6 +150,8 @@ class MotionSchedule:
         #: Half-width of the dense window around the predicted end; 0: no window.
         self._window = 0.0
         self._early = 0.0
+        #: How much earlier than seen the robot may have taken the command (at most a tick).
+        self._took_early = 0.0
         self._mid_interval = nominal_s
         self._observations = 0
         self._pace = 1.0
@@ -172,6 +174,7 @@ class MotionSchedule:
         # dense interval: paid by one of the two polls kept in reserve in _plan.
         early = 0.0 if since is None else min(max(at - since, 0.0), p.dense_interval_s)
         self._early = min(early, expected_s / 4)
+        self._took_early = 0.0 if since is None else min(max(at - since, 0.0), p.ack_delay_s)
         self._acked_at, self._expected = at, expected_s
         self._predicted = at + expected_s
         self._earliest = at - self._early + expected_s * p.earliest_end_fraction
@@ -292,12 +295,20 @@ class MotionSchedule:
             return now + nominal
         if not self._window:
             if self._expected > 0:
-                # No window the budget pays for (a short move): the nominal polls are
-                # shifted so that one falls a robot tick after the predicted end, where
-                # a robot on the model reports it; one poll more at most.
+                # No window the budget pays for (a short move): spaced as a longer move's
+                # middle until the earliest plausible end, nominal from then on, and
+                # shifted so that one poll falls a robot tick after the predicted end,
+                # where a robot on the model reports it.
                 seen = self._predicted + p.ack_delay_s
-                if now < seen:
-                    return min(now + nominal, seen)
+                # The robot took the command up to a tick before the poll that saw it
+                # taken: a poll that much earlier sees the end when it took it early.
+                first = seen - self._took_early if self._took_early > p.dense_interval_s else seen
+                if now < self._earliest:
+                    # A poll a nominal interval past the earliest end sees an end there.
+                    return min(now + nominal * p.max_stretch, self._earliest + nominal, first)
+                for at in (first, seen):
+                    if now < at:
+                        return min(now + nominal, at)
             return now + nominal
         opens = self._predicted - self._early - self._window / 2
         closes = self._predicted + 1.5 * self._window
@@ -307,6 +318,11 @@ class MotionSchedule:
             return min(now + nominal, opens)
         if now < closes:
             return now + p.dense_interval_s
+        # A window narrower than a robot tick closes before a robot on the model reports
+        # the end at its next tick: one poll there, as for a short move.
+        seen = self._predicted + p.ack_delay_s
+        if now < seen:
+            return min(now + nominal, seen)
         return now + nominal
 
 
