@@ -26,6 +26,7 @@ from math import copysign
 from .._codec import Value, decode, encode
 from .._exceptions import IllegalAddressError, IllegalValueError
 from .._registers import RegisterField, RegisterMap, Table
+from ._memo import IdentityMemo
 
 
 def _sign(value: float) -> float:
@@ -63,15 +64,10 @@ class _Layout:
     readable: dict[Table, tuple[tuple[int, int], ...]]
 
 
-# Layouts by the identity of their map and extra fields, and their raw areas; each entry
-# holds its map and fields, so their ids cannot be reused while it lives. A simulator
+# Layouts by their map and extra fields (by identity) and their raw areas: a simulator
 # builds the same bank each time (a tmflow robot's, with Techman's table: thousands of
-# addresses), so a test suite that starts many built it again each time. Bounded.
-_LAYOUTS: dict[
-    tuple[int, tuple[int, ...], tuple[tuple[Table, int, int], ...]],
-    tuple[RegisterMap, tuple[RegisterField, ...], _Layout],
-] = {}
-_MAX_LAYOUTS = 64
+# addresses), so a test suite that starts many built it again each time.
+_LAYOUTS: IdentityMemo[_Layout] = IdentityMemo()
 
 
 def _layout(
@@ -79,15 +75,11 @@ def _layout(
     extra_fields: tuple[RegisterField, ...],
     raw_areas: tuple[tuple[Table, int, int], ...],
 ) -> _Layout:
-    key = (id(register_map), tuple(map(id, extra_fields)), raw_areas)
-    entry = _LAYOUTS.get(key)
-    if entry is not None and entry[0] is register_map and entry[1] == extra_fields:
-        return entry[2]
-    built = _build_layout(register_map, extra_fields, raw_areas)
-    if len(_LAYOUTS) >= _MAX_LAYOUTS:
-        _LAYOUTS.clear()
-    _LAYOUTS[key] = (register_map, extra_fields, built)
-    return built
+    return _LAYOUTS.get(
+        (register_map, *extra_fields),
+        lambda: _build_layout(register_map, extra_fields, raw_areas),
+        key=raw_areas,
+    )
 
 
 def _build_layout(

@@ -15,6 +15,7 @@ from importlib import resources
 from typing import Any
 
 from .._registers import Access, RegisterField, RegisterMap, Table
+from ._memo import IdentityMemo
 
 #: Which table each Modbus function code reads or writes (TMflow 2.24, appendix C, p. 305).
 _FC_TABLE = {
@@ -143,21 +144,17 @@ def _spans() -> tuple[tuple[RegisterField, frozenset[tuple[Table, int]]], ...]:
     )
 
 
-# tm_table_fields by the identity of the profile (each entry holds it, so its id cannot be
-# reused while the entry lives): every simulated tmflow robot asks again. Bounded.
-_FIELDS_OF: dict[int, tuple[RegisterMap, tuple[RegisterField, ...]]] = {}
+# tm_table_fields by the profile (by identity): every simulated tmflow robot asks again.
+_FIELDS_OF: IdentityMemo[tuple[RegisterField, ...]] = IdentityMemo()
 
 
 def tm_table_fields(profile: RegisterMap) -> tuple[RegisterField, ...]:
     """Table entries that ``profile`` does not define itself (by name or by address)."""
-    entry = _FIELDS_OF.get(id(profile))
-    if entry is not None and entry[0] is profile:
-        return entry[1]
+    return _FIELDS_OF.get((profile,), lambda: _fields_left_to_the_table(profile))
+
+
+def _fields_left_to_the_table(profile: RegisterMap) -> tuple[RegisterField, ...]:
     taken = {(f.table, a) for f in profile.fields.values() for a in range(f.address, f.end + 1)}
-    fields = tuple(
+    return tuple(
         f for f, span in _spans() if f.name not in profile.fields and taken.isdisjoint(span)
     )
-    if len(_FIELDS_OF) >= 64:
-        _FIELDS_OF.clear()
-    _FIELDS_OF[id(profile)] = (profile, fields)
-    return fields
