@@ -631,19 +631,26 @@ def _at(pose: Pose, pick: Pose) -> bool:
     return math.hypot(pose.x - pick.x, pose.y - pick.y) <= PLACE_TOLERANCE_MM
 
 
-def _sim_scene(scene: Scene | None, pick: Pose, cycles: int) -> Scene:
+def _sim_scene(scene: Scene | None, pick: Pose, cycles: int) -> tuple[Scene, set[str]]:
     """The simulated cell: the scene given (or the built-in one) with the run's parts.
 
-    The parts a scene puts at the pick pose wait there like a feeder's; a scene with none
-    there (and the built-in cell) gets one part per cycle at the pick pose.
+    The parts a scene puts at the pick pose wait there like a feeder's, which hands them
+    out in order: the first ``cycles`` are the run's (a scene with fewer runs out, as a
+    real feeder would). A scene with none there (and the built-in cell) gets one part per
+    cycle at the pick pose.
+
+    Returns:
+        The scene, and the names of the run's parts.
     """
     scene = Scene() if scene is None else scene
-    if any(_at(p.pose, pick) for p in scene.parts):
-        return scene
-    taken = {p.name for p in scene.parts}
-    names = (f"part-{i}" for i in itertools.count(1) if f"part-{i}" not in taken)
-    feeder = [TableObject(name=next(names), pose=pick) for _ in range(cycles)]
-    return scene.model_copy(update={"parts": (*scene.parts, *feeder)})
+    waiting = [p.name for p in scene.parts if _at(p.pose, pick)]
+    if not waiting:
+        taken = {p.name for p in scene.parts}
+        names = (f"part-{i}" for i in itertools.count(1) if f"part-{i}" not in taken)
+        feeder = [TableObject(name=next(names), pose=pick) for _ in range(cycles)]
+        scene = scene.model_copy(update={"parts": (*scene.parts, *feeder)})
+        waiting = [p.name for p in feeder]
+    return scene, set(waiting[:cycles])
 
 
 def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
@@ -654,11 +661,7 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
     if options.snapshot is not None and options.physics != "mujoco":
         raise ConfigError("--snapshot needs --sim-physics mujoco")
     poses = config.poses.resolved()
-    scene = _sim_scene(options.scene, poses["pick"], command.cycles)
-    # The feeder hands out the parts at the pick pose in order: the first `cycles` are the
-    # run's (a scene with fewer runs out, as a real feeder would).
-    waiting = [p.name for p in scene.parts if _at(p.pose, poses["pick"])]
-    run_parts = set(waiting[: command.cycles])
+    scene, run_parts = _sim_scene(options.scene, poses["pick"], command.cycles)
     sim = Simulator(
         config.robot_profile(),
         time_scale=options.time_scale,
