@@ -172,9 +172,9 @@ class MotionSchedule:
             return
         # The window also opens earlier by the acknowledgement's uncertainty, at most one
         # dense interval: paid by one of the two polls kept in reserve in _plan.
-        early = 0.0 if since is None else min(max(at - since, 0.0), p.dense_interval_s)
-        self._early = min(early, expected_s / 4)
-        self._took_early = 0.0 if since is None else min(max(at - since, 0.0), p.ack_delay_s)
+        doubt = 0.0 if since is None else max(at - since, 0.0)
+        self._early = min(doubt, p.dense_interval_s, expected_s / 4)
+        self._took_early = min(doubt, p.ack_delay_s)
         self._acked_at, self._expected = at, expected_s
         self._predicted = at + expected_s
         self._earliest = at - self._early + expected_s * p.earliest_end_fraction
@@ -306,9 +306,7 @@ class MotionSchedule:
                 if now < self._earliest:
                     # A poll a nominal interval past the earliest end sees an end there.
                     return min(now + nominal * p.max_stretch, self._earliest + nominal, first)
-                for at in (first, seen):
-                    if now < at:
-                        return min(now + nominal, at)
+                return self._toward(now, (first, seen))
             return now + nominal
         opens = self._predicted - self._early - self._window / 2
         closes = self._predicted + 1.5 * self._window
@@ -320,10 +318,12 @@ class MotionSchedule:
             return now + p.dense_interval_s
         # A window narrower than a robot tick closes before a robot on the model reports
         # the end at its next tick: one poll there, as for a short move.
-        seen = self._predicted + p.ack_delay_s
-        if now < seen:
-            return min(now + nominal, seen)
-        return now + nominal
+        return self._toward(now, (self._predicted + p.ack_delay_s,))
+
+    def _toward(self, now: float, marks: tuple[float, ...]) -> float:
+        """The nominal pace, shortened to land on the first of ``marks`` still ahead."""
+        step = now + self._nominal
+        return next((min(step, mark) for mark in marks if now < mark), step)
 
 
 def _elapsed_at(fraction: float, total: float, accel_time: float) -> float:
