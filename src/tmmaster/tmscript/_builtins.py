@@ -16,7 +16,6 @@ import random as _rng
 import struct
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
-from typing import cast
 
 from ._host import Host, ModbusDevice, MotionCall
 from ._types import ARRAY_MAX, Scalar, Value, display_text, to_f32, wrap32
@@ -170,6 +169,11 @@ def _int(v: Value) -> int:
     return int(v)
 
 
+def _int_arg(args: list[Value], index: int) -> int:
+    """The optional int argument at ``index``, 0 when the call leaves it out."""
+    return _int(args[index]) if len(args) > index else 0
+
+
 def _num(v: Value) -> float:
     if isinstance(v, bool) or not isinstance(v, _NUMBER):
         raise BuiltinError(f"expected a number, got {v!r}")
@@ -219,8 +223,8 @@ def _int16(data: bytes, endian: int, unsigned: int) -> int:
 @_register("4.1", 52, "int(byte[], int, int)", "int(byte[], int)", "int(byte[])")
 def _Byte_ToInt16(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.1 Byte_ToInt16, p. 52: 2 bytes, 0 Little / 1 Big Endian, signed/unsigned."""
-    endian = _int(args[1]) if len(args) > 1 else 0
-    unsigned = _int(args[2]) if len(args) > 2 else 0
+    endian = _int_arg(args, 1)
+    unsigned = _int_arg(args, 2)
     return _int16(_bytes(args[0]), endian, unsigned)
 
 
@@ -231,7 +235,7 @@ def _int32(data: bytes, endian: int) -> int:
 @_register("4.2", 54, "int(byte[], int)", "int(byte[])")
 def _Byte_ToInt32(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.2 Byte_ToInt32, p. 54: 4 bytes, 0 Little (default) / 1 Big Endian."""
-    endian = _int(args[1]) if len(args) > 1 else 0
+    endian = _int_arg(args, 1)
     return _int32(_bytes(args[0]), endian)
 
 
@@ -243,16 +247,19 @@ def _float32(data: bytes, endian: int) -> float:
 @_register("4.3", 55, "float(byte[], int)", "float(byte[])")
 def _Byte_ToFloat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.3 Byte_ToFloat, p. 55: IEEE-754 single from 4 bytes."""
-    endian = _int(args[1]) if len(args) > 1 else 0
+    endian = _int_arg(args, 1)
     return _float32(_bytes(args[0]), endian)
+
+
+def _float64(data: bytes, endian: int) -> float:
+    value: float = struct.unpack(">d", _endian_bytes(data, 8, endian))[0]
+    return value
 
 
 @_register("4.4", 56, "double(byte[], int)", "double(byte[])")
 def _Byte_ToDouble(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.4 Byte_ToDouble, p. 56: IEEE-754 double from 8 bytes."""
-    endian = _int(args[1]) if len(args) > 1 else 0
-    value: float = struct.unpack(">d", _endian_bytes(_bytes(args[0]), 8, endian))[0]
-    return value
+    return _float64(_bytes(args[0]), _int_arg(args, 1))
 
 
 def _chunks(data: bytes, size: int) -> list[bytes]:
@@ -269,8 +276,8 @@ def _Byte_ToInt16Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     chunks = _chunks(_bytes(args[0]), 2)
     if not chunks:
         return []
-    endian = _int(args[1]) if len(args) > 1 else 0
-    unsigned = _int(args[2]) if len(args) > 2 else 0
+    endian = _int_arg(args, 1)
+    unsigned = _int_arg(args, 2)
     return [_int16(c, endian, unsigned) for c in chunks]
 
 
@@ -280,7 +287,7 @@ def _Byte_ToInt32Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     chunks = _chunks(_bytes(args[0]), 4)
     if not chunks:
         return []
-    endian = _int(args[1]) if len(args) > 1 else 0
+    endian = _int_arg(args, 1)
     return [_int32(c, endian) for c in chunks]
 
 
@@ -290,25 +297,25 @@ def _Byte_ToFloatArray(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     chunks = _chunks(_bytes(args[0]), 4)
     if not chunks:
         return []
-    endian = _int(args[1]) if len(args) > 1 else 0
+    endian = _int_arg(args, 1)
     return [_float32(c, endian) for c in chunks]
 
 
 @_register("4.8", 61, "double[](byte[], int)", "double[](byte[])")
 def _Byte_ToDoubleArray(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.8 Byte_ToDoubleArray, p. 61: every 8 bytes to a double."""
-    rest = args[1:]
-    return [
-        cast(Scalar, _Byte_ToDouble(rt, [list(c), *rest], types))
-        for c in _chunks(_bytes(args[0]), 8)
-    ]
+    chunks = _chunks(_bytes(args[0]), 8)
+    if not chunks:
+        return []
+    endian = _int_arg(args, 1)
+    return [_float64(c, endian) for c in chunks]
 
 
 @_register("4.9", 62, "string(byte[], int)", "string(byte[])")
 def _Byte_ToString(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.9 Byte_ToString, p. 62: 0 UTF-8, 1 hexadecimal, 2 ASCII (stop at 0x00)."""
     data = _bytes(args[0])
-    mode = _int(args[1]) if len(args) > 1 else 0
+    mode = _int_arg(args, 1)
     if mode == 1:
         return data.hex().upper()
     text = data.split(b"\0", 1)[0]
@@ -383,7 +390,7 @@ def _String_ToByte(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Va
 def _String_IndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.15 String_IndexOf, p. 73: first index of the substring, -1 if none."""
     text, sub = _str(args[0]), _str(args[1])
-    start = _int(args[2]) if len(args) > 2 else 0
+    start = _int_arg(args, 2)
     if start < 0 or start > len(text):
         return -1
     return text.find(sub, start)
@@ -418,7 +425,7 @@ def _String_Substring(rt: Runtime, args: list[Value], types: tuple[str, ...]) ->
 def _String_Split(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.19 String_Split, p. 81: option 0 keeps empty strings, 1 drops them."""
     text, sep = _str(args[0]), _str(args[1])
-    option = _int(args[2]) if len(args) > 2 else 0
+    option = _int_arg(args, 2)
     if option not in (0, 1):
         raise BuiltinError(f"option {option} is not supported (0 or 1)")
     parts: list[Scalar] = list(text.split(sep)) if sep else [text]
@@ -491,7 +498,7 @@ def _Array_Equals(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
 def _Array_IndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.28 Array_IndexOf, p. 92: first index of the element, -1 if none."""
     items = _arr(args[0])
-    start = _int(args[2]) if len(args) > 2 else 0
+    start = _int_arg(args, 2)
     for i in range(max(start, 0), len(items)):
         if items[i] == args[1]:
             return i
@@ -707,7 +714,7 @@ def _floor(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
 def _round(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
     """TMscript 2.24 §6.6 round, p. 171: half away from zero; optional decimal places."""
     value = _num(args[0])
-    places = _int(args[1]) if len(args) > 1 else 0
+    places = _int_arg(args, 1)
     scale = 10.0**places
     rounded = math.floor(abs(value) * scale + 0.5) / scale
     rounded = math.copysign(rounded, value)
@@ -820,7 +827,7 @@ def _QueueTag(  # noqa: N802
 ) -> Generator[str, None, Value]:
     """TMscript 2.24 §13.1 QueueTag, p. 320: tag the queue; wait 1 waits until it is done."""
     tag = _tag(args[0])
-    wait = _int(args[1]) if len(args) > 1 else 0
+    wait = _int_arg(args, 1)
     rt.host.queue_tag(tag, wait)
     while wait == 1 and not rt.host.queue_tag_done(tag):
         yield BLOCKED
@@ -1220,7 +1227,7 @@ def _modbus_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
         return _preset_write(rt, args, types)
     device = _device(rt, args[0], _int(args[1]) & 0xFF)
     kind, address, value, typ = _str(args[2]), _int(args[3]), args[4], types[4]
-    limit = _int(args[5]) if len(args) > 5 else 0
+    limit = _int_arg(args, 5)
     if value == "" or value == []:
         return False  # "the input data is empty" (p. 438)
     if kind == "DO":
