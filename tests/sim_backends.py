@@ -1,4 +1,8 @@
-"""Test-only physics backends that misbehave the way real simulators do.
+"""Test-only physics backends, and what the tests of both built-in backends share.
+
+:data:`BACKENDS` parametrizes a test over the kinematic and the MuJoCo backend (MuJoCo
+skipped without its extra); :func:`until_fault` steps a backend until a condition or a
+fault.
 
 :class:`SlowSettlingBackend` stands in for an Isaac Sim scene: the arm keeps
 oscillating for a while after a motion, and the physics view is invalidated (as on a
@@ -8,10 +12,41 @@ tests use it to prove that commands arriving meanwhile are queued and retried.
 
 from __future__ import annotations
 
+import importlib.util
+from collections.abc import Callable
+
+import pytest
+
 from tmmaster._pose import MotionType, Pose
 from tmmaster._robot_models import RobotModel
+from tmmaster.sim._backend import BackendFault, PhysicsBackend
 from tmmaster.sim._kinematic import DEFAULT_HOME, KinematicBackend
 from tmmaster.sim._world import World
+
+HAS_MUJOCO = importlib.util.find_spec("mujoco") is not None
+NEEDS_MUJOCO = pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra")
+#: Both built-in physics backends, by name.
+BACKENDS = ["kinematic", pytest.param("mujoco", marks=NEEDS_MUJOCO)]
+#: The simulated step the tests advance a backend by, s (a 50 Hz tick).
+STEP_S = 0.02
+
+
+def until_fault(
+    backend: PhysicsBackend, done: Callable[[], bool], limit_s: float = 5.0
+) -> BackendFault | None:
+    """Step ``backend`` until ``done()``: None, or the fault that stopped the arm first.
+
+    Raises:
+        AssertionError: Neither within ``limit_s`` simulated seconds.
+    """
+    for _ in range(round(limit_s / STEP_S)):
+        backend.step(STEP_S)
+        fault: BackendFault | None = backend.take_fault()  # type: ignore[attr-defined]
+        if fault is not None:
+            return fault
+        if done():
+            return None
+    raise AssertionError(f"not done in {limit_s} simulated seconds")
 
 
 class BackendNotReadyError(RuntimeError):

@@ -12,12 +12,13 @@ the base x axis, so ``across`` offsets move the part along base x, ``depth`` alo
 
 from __future__ import annotations
 
-import importlib.util
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pytest
 
 import tmmaster
+from sim_backends import BACKENDS, until_fault
 from tmmaster import Pose
 from tmmaster._pose import MotionType
 from tmmaster.sim import KinematicBackend, TableObject, World
@@ -25,15 +26,6 @@ from tmmaster.sim._backend import PhysicsBackend
 from tmmaster.sim._world import DEFAULT_GRIPPER, DEFAULT_TABLE_TOP_Z_MM, GripperGeometry
 
 MODEL = tmmaster.robot_model("tm5-700")
-DT = 0.02
-HAS_MUJOCO = importlib.util.find_spec("mujoco") is not None
-BACKENDS = [
-    "kinematic",
-    pytest.param(
-        "mujoco",
-        marks=pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra"),
-    ),
-]
 
 
 @dataclass(frozen=True)
@@ -84,16 +76,10 @@ def make_backend(name: str, world: World, home: Pose) -> PhysicsBackend:
     return MuJoCoBackend(MODEL, world=world, home=home)
 
 
-def run(backend: PhysicsBackend, done: object, limit_s: float = 5.0) -> str | None:
+def run(backend: PhysicsBackend, done: Callable[[], bool], limit_s: float = 5.0) -> str | None:
     """Step until ``done()``; the kind of a fault that stopped the arm, or None."""
-    for _ in range(round(limit_s / DT)):
-        backend.step(DT)
-        fault = backend.take_fault()  # type: ignore[attr-defined]
-        if fault is not None:
-            return str(fault.kind)
-        if done():  # type: ignore[operator]
-            return None
-    raise AssertionError(f"not done in {limit_s} simulated seconds")
+    fault = until_fault(backend, done, limit_s)
+    return None if fault is None else fault.kind
 
 
 def attempt(backend_name: str, s: Scenario) -> tuple[str, float]:

@@ -10,29 +10,19 @@ knows nothing of the simulator's table at 85 mm: the simulator catches what it l
 
 from __future__ import annotations
 
-import importlib.util
-from collections.abc import Callable
-
 import pytest
 
 import tmmaster
-from test_sim_controller import DT, article, run, run_until, send_article, send_tmflow, tmflow
+from sim_backends import BACKENDS, until_fault
+from test_sim_controller import article, run, run_until, send_article, send_tmflow, tmflow
 from tmmaster import Pose
 from tmmaster._pose import MotionType
 from tmmaster.sim import KinematicBackend, Simulator, TableObject, World
-from tmmaster.sim._backend import BackendFault, PhysicsBackend
+from tmmaster.sim._backend import PhysicsBackend
 from tmmaster.sim._controller import SimErrorCode
 from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM
 
 MODEL = tmmaster.robot_model("tm5-700")
-HAS_MUJOCO = importlib.util.find_spec("mujoco") is not None
-BACKENDS = [
-    "kinematic",
-    pytest.param(
-        "mujoco",
-        marks=pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra"),
-    ),
-]
 ABOVE = Pose(300, -200, 200, 180, 0, 90)
 #: Above the master's floor (0 mm), below the simulator's table top (85 mm) + the pads.
 INTO_TABLE = Pose(300, -200, 60, 180, 0, 90)
@@ -50,19 +40,6 @@ def make(
     from tmmaster.sim._mujoco import MuJoCoBackend
 
     return MuJoCoBackend(MODEL, world=world, home=home, **options)  # type: ignore[arg-type]
-
-
-def until_fault(
-    b: PhysicsBackend, done: Callable[[], bool], limit_s: float = 5.0
-) -> BackendFault | None:
-    for _ in range(round(limit_s / DT)):
-        b.step(DT)
-        fault: BackendFault | None = b.take_fault()  # type: ignore[attr-defined]
-        if fault is not None:
-            return fault
-        if done():
-            return None
-    raise AssertionError(f"not done in {limit_s} simulated seconds")
 
 
 @pytest.mark.parametrize("backend_name", BACKENDS)

@@ -9,14 +9,13 @@ A part set down on a support, and the ordinary pick and place cycles, are no col
 
 from __future__ import annotations
 
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
 
 import tmmaster
-from test_sim_collisions import until_fault
+from sim_backends import BACKENDS, NEEDS_MUJOCO, until_fault
 from test_sim_controller import article, run_until, send_article
 from tmmaster import Pose
 from tmmaster import _kinematics as kin
@@ -38,9 +37,6 @@ from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM, Fixture
 
 MODEL = tmmaster.robot_model("tm5-700")
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "scene.toml"
-HAS_MUJOCO = importlib.util.find_spec("mujoco") is not None
-NEEDS_MUJOCO = pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra")
-BACKENDS = ["kinematic", pytest.param("mujoco", marks=NEEDS_MUJOCO)]
 DOWN = (180.0, 0.0, 90.0)  # the tool pointing down, the fingers closing along the base x
 FAR_PART = TableObject(name="far", pose=Pose(500, 300, 100, *DOWN))
 

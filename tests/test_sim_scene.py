@@ -7,13 +7,12 @@ backends build their world from it, and ``Simulator(scene=...)`` and ``--scene``
 
 from __future__ import annotations
 
-import importlib.util
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 import tmmaster
+from sim_backends import BACKENDS, HAS_MUJOCO, STEP_S, until_fault
 from tmmaster import Pose
 from tmmaster._pose import MotionType
 from tmmaster.sim import KinematicBackend, Simulator
@@ -24,15 +23,6 @@ from tmmaster.sim._world import Fixture
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "scene.toml"
 MODEL = tmmaster.robot_model("tm5-700")
-HAS_MUJOCO = importlib.util.find_spec("mujoco") is not None
-BACKENDS = [
-    "kinematic",
-    pytest.param(
-        "mujoco",
-        marks=pytest.mark.skipif(not HAS_MUJOCO, reason="the MuJoCo backend needs the extra"),
-    ),
-]
-DT = 0.02
 PICK = Pose(300, -200, 100, 180, 0, 90)
 #: Beside the jig (x 390..510, y -110..-50, top at 185 mm), low enough for the pads.
 BESIDE_JIG = Pose(320, -80, 150, 180, 0, 90)
@@ -59,20 +49,9 @@ def make(name: str, scene: Scene, home: Pose, **options: object) -> PhysicsBacke
     )
 
 
-def until(b: PhysicsBackend, done: Callable[[], bool], limit_s: float = 5.0) -> BackendFault | None:
-    for _ in range(round(limit_s / DT)):
-        b.step(DT)
-        fault: BackendFault | None = b.take_fault()  # type: ignore[attr-defined]
-        if fault is not None:
-            return fault
-        if done():
-            return None
-    raise AssertionError(f"not done in {limit_s} simulated seconds")
-
-
 def line(b: PhysicsBackend, target: Pose, speed: float = 50) -> BackendFault | None:
     b.start_motion(target, motion=MotionType.LINE, speed_percent=speed, accel_time_s=0.1)
-    return until(b, b.is_settled)
+    return until_fault(b, b.is_settled)
 
 
 def test_the_example_scene_loads_with_its_fixtures_parts_and_gripper() -> None:
@@ -93,7 +72,7 @@ def test_a_pick_runs_against_the_example_scene_on_the_kinematic_backend() -> Non
     b = make("kinematic", load_scene(EXAMPLE), home=PICK.offset(dz=100))
     assert line(b, PICK) is None
     b.drive_gripper(0, speed_mm_s=100, force_n=40)
-    assert until(b, lambda: not b.gripper_state().moving) is None
+    assert until_fault(b, lambda: not b.gripper_state().moving) is None
     assert b.gripper_state().contact
     assert line(b, PICK.offset(dz=100)) is None
     held = {o.name: o for o in b.objects() if o.held}
@@ -145,7 +124,7 @@ def test_the_mujoco_scene_has_the_fixtures_and_the_part_rests_on_the_shelf() -> 
     assert 'name="fixture0"' in b.mjcf
     assert 'name="fixture1"' in b.mjcf
     for _ in range(50):
-        b.step(DT)
+        b.step(STEP_S)
     shelf = {o.name: o for o in b.objects()}["on-shelf"]
     assert shelf.pose.z == pytest.approx(150, abs=1)
     assert shelf.resting_on == "shelf"
