@@ -12,18 +12,22 @@ the awaiting coroutine asks the robot's thread to give the call up
 (:meth:`Robot.interrupt`: the wait ends, its command is withdrawn or the arm stopped, by
 ``_MotionFollower.abandon``); the ``CancelledError`` is raised once that call has ended,
 bounded by :attr:`AsyncRobot.settle_timeout_s`. A call cancelled before the thread
-started it never runs. A move handed back by a call whose caller was cancelled meanwhile
-(``start_move``) is given up the same way, before the thread runs another call.
+started it never runs; a wait or progress call that follows a sent move gives that move
+up however early it is cancelled (queued, or before its first step: ``_Primed``). A
+move handed back by a call whose caller was cancelled meanwhile (``start_move``) is
+given up the same way, before the thread runs another call.
 """
 
 from __future__ import annotations
 
 import asyncio
 import collections
+import collections.abc
+import contextlib
 import functools
 import inspect
 import threading
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Callable, Coroutine, Generator, Sequence
 from enum import Enum
 from typing import Any, Concatenate, Generic, Literal, ParamSpec, Protocol, TypeVar
 
@@ -71,6 +75,8 @@ class _Worker:
         self._ready = threading.Condition()
         self._thread: threading.Thread | None = None
         self._closed = False
+        #: The job the thread runs now (None between jobs).
+        self.running: _Runs | None = None
 
     def submit(self, job: _Runs, *, first: bool = False) -> bool:
         """Queue ``job`` (``first``: before every queued one); False once shut down."""
@@ -95,7 +101,11 @@ class _Worker:
                 if not self._jobs:
                     return  # shut down, every queued call run
                 job = self._jobs.popleft()
-            job.run()
+                self.running = job
+            try:
+                job.run()
+            finally:
+                self.running = None
 
     def shutdown(self, timeout_s: float) -> bool:
         """Take no new call, run the queued ones, end the thread; False if still running."""
@@ -221,6 +231,47 @@ def _live_motion(value: object, follows: Motion | None) -> Motion | None:
     return motion
 
 
+class _Primed(collections.abc.Coroutine[Any, Any, T]):
+    """A coroutine that reaches its first ``await`` even when cancelled before its first step.
+
+    asyncio cancels a task that never ran by throwing ``CancelledError`` into a coroutine
+    that has not started, which runs none of its code (``asyncio.wait_for(coro, 0)``).
+    A wait that follows a sent move must still give the move up: thrown into before it
+    started, this coroutine first runs its body up to its first ``await`` (the call is
+    queued), then throws there, where the body's clean-up handles it.
+    """
+
+    def __init__(self, body: Coroutine[Any, Any, T]) -> None:
+        self._body = body
+        self._started = False
+
+    def send(self, value: Any) -> Any:
+        """Run the body on to its next ``await``."""
+        self._started = True
+        return self._body.send(value)
+
+    def throw(self, typ: Any, val: Any = None, tb: Any = None) -> Any:
+        """Raise ``typ`` in the body at its current ``await`` (its first, if not started)."""
+        if not self._started:
+            self._started = True
+            with contextlib.suppress(StopIteration):
+                self._body.send(None)  # what it yields is dropped: the throw comes first
+        if val is None and tb is None:
+            return self._body.throw(typ)
+        return self._body.throw(typ, val, tb)  # pragma: no cover - the legacy form
+
+    def close(self) -> None:
+        """Close the body (its clean-up runs if it started)."""
+        self._body.close()
+
+    def __await__(self) -> Generator[Any, None, T]:
+        return self._steps()
+
+    def _steps(self) -> Generator[Any, None, T]:
+        # Awaited: the body steps on as any awaited coroutine's (throws included).
+        return (yield from self._body.__await__())
+
+
 class AsyncRobot:
     """A :class:`~tmmaster.Robot` driven from asyncio: each call awaited, never blocking.
 
@@ -285,6 +336,10 @@ class AsyncRobot:
         # True while a stop request of the user's own (interrupt()) stands: a cancelled
         # call's stop request is withdrawn when the call ends, never the user's.
         self._user_stop = False
+        # interrupt() and a cancelled call's end take turns: the call's end reads
+        # _user_stop and clears the stop request as one step, so an interrupt() of the
+        # user's in between is never cleared with it.
+        self._stop_lock = threading.Lock()
         self._release: Callable[[], None] | None = None
         self._release_lock = threading.Lock()
 
@@ -691,13 +746,15 @@ class AsyncRobot:
         command withdrawn or the arm stopped; later moves raise StopRequestedError
         unsent until :meth:`clear_stop_request`. Never blocks.
         """
-        self._user_stop = True
-        self.robot.interrupt()
+        with self._stop_lock:
+            self._user_stop = True
+            self.robot.interrupt()
 
     def clear_stop_request(self) -> None:
         """Allow commands again after :meth:`interrupt` (not after :meth:`close`)."""
-        self._user_stop = False
-        self.robot.clear_stop_request()
+        with self._stop_lock:
+            self._user_stop = False
+            self.robot.clear_stop_request()
 
     async def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw or stop what is outstanding, close the connections, end the thread.
@@ -766,9 +823,12 @@ class AsyncRobot:
     async def _run(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> T:
         return await self._await(_Job(self, functools.partial(fn, *args, **kwargs)))
 
-    async def _follow(self, motion: Motion, call: Callable[[], T]) -> T:
-        """A call that follows ``motion`` (its wait, its progress): cancelled, it gives it up."""
-        return await self._await(_Job(self, call, follows=motion))
+    def _follow(self, motion: Motion, call: Callable[[], T]) -> _Primed[T]:
+        """A call that follows ``motion`` (its wait, its progress): cancelled, it gives it up.
+
+        Cancelled before its first step too (:class:`_Primed`).
+        """
+        return _Primed(self._await(_Job(self, call, follows=motion)))
 
     async def _await(self, job: _Job[T]) -> T:
         if not self._worker.submit(job):
@@ -782,16 +842,22 @@ class AsyncRobot:
     async def _give_up(self, job: _Job[Any]) -> None:
         """The caller was cancelled: the call gives up, then whatever it left running."""
         job.cancel()
-        if job.skipped:
-            return  # never started: nothing was sent
         deadline = asyncio.get_running_loop().time() + self.settle_timeout_s
-        if not await self._settle(job.outcome, deadline, "call"):
+        if job.skipped:
+            # Never started, so the call itself sent nothing; but a wait queued behind
+            # another call follows a move that was sent, and that move is given up.
+            live = _live_motion(None, job.follows)
+            if live is not None:
+                self._interrupt_followers(live)
+        elif not await self._settle(job.outcome, deadline, "call"):
             return
-        live = job.unsupervised()
+        else:
+            # The call had ended (a move sent) when the caller was cancelled: nobody
+            # will wait for that move.
+            live = job.unsupervised()
         if live is None:
             return
-        # The call had ended (a move sent) when the caller was cancelled: nobody will
-        # wait for that move, so it is given up before any other call runs.
+        # Given up before any other call runs.
         give_up = _Job(self, functools.partial(self._give_up_in_thread, live))
         if self._worker.submit(give_up, first=True):
             await self._settle(give_up.outcome, deadline, "give_up")
@@ -812,17 +878,26 @@ class AsyncRobot:
                 continue  # cancelled again (a second Ctrl-C): the clean-up still comes first
         return True
 
+    def _interrupt_followers(self, motion: Motion) -> None:
+        """Another caller's running wait on ``motion`` gives up too (the move is given up)."""
+        running = self._worker.running
+        if isinstance(running, _Job) and running.follows is motion:
+            running.cancel()
+
     def _interrupt_for_cancel(self) -> None:
         """From the caller's loop (a call cancelled): its wait gives up now."""
         self.robot.interrupt()
 
     def _end_interrupt(self) -> None:
         """In the robot's thread, a cancelled call over: take back its stop request."""
-        if not self._user_stop:
-            self.robot.clear_stop_request()
+        with self._stop_lock:
+            if not self._user_stop:
+                self.robot.clear_stop_request()
 
     def _give_up_in_thread(self, motion: Motion) -> None:
         """In the robot's thread: withdraw ``motion`` or stop it (its wait, given up at once)."""
+        if _live_motion(None, motion) is None:
+            return  # over, or given up already (by the wait it followed)
         self.robot.interrupt()
         try:
             motion.wait()  # ends at once with StopRequestedError, after the clean-up
@@ -883,14 +958,19 @@ class AsyncMotion:
         """Where the move stands."""
         return self.motion.phase
 
-    async def wait(self, timeout_s: float | None = None) -> None:
+    def wait(self, timeout_s: float | None = None) -> Coroutine[Any, Any, None]:
         """Wait until the move is done (:meth:`Motion.wait`).
 
         Cancelled, the move is withdrawn or stopped before the ``CancelledError`` is
-        raised.
+        raised: while the wait is queued behind another call of the robot, while it
+        runs, and also when it is cancelled before it ever ran
+        (``asyncio.wait_for(motion.wait(), 0)``).
 
         Args:
             timeout_s: How long to wait, s; None: the move's own ``timeout_s``.
+
+        Returns:
+            The wait, a coroutine (await it, or make it a task).
 
         Raises:
             AcknowledgeTimeoutError: The robot did not take the command in time.
@@ -900,20 +980,22 @@ class AsyncMotion:
             ConnectionLostError: The link broke and did not come back in time.
         """
         motion = self.motion
-        await self._robot._follow(motion, functools.partial(motion.wait, timeout_s))
+        return self._robot._follow(motion, functools.partial(motion.wait, timeout_s))
 
-    async def progress(self) -> MoveProgress:
+    def progress(self) -> Coroutine[Any, Any, MoveProgress]:
         """Poll the robot once and report where the move stands (:meth:`Motion.progress`).
 
+        Cancelled, the move is given up as a cancelled :meth:`wait` gives it up.
+
         Returns:
-            The phase, the last pose, the time elapsed and expected, and the fraction
-            of the distance covered.
+            A coroutine of the phase, the last pose, the time elapsed and expected, and
+            the fraction of the distance covered.
 
         Raises:
             RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
         """
         motion = self.motion
-        return await self._robot._follow(motion, motion.progress)
+        return self._robot._follow(motion, motion.progress)
 
     def __await__(self) -> Generator[Any, None, Motion]:
         return self._finished().__await__()

@@ -1,0 +1,252 @@
+"""Cancelling an awaited wait gives its move up, whatever state the call is in.
+
+The invariant (docs/safety.md): a cancelled or interrupted call that owns or follows a
+sent command withdraws or stops it before the ``CancelledError`` reaches the caller,
+whether the call was queued behind another call of the robot, running, or a coroutine
+cancelled before its first step. The simulator's motion log is the judge.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import Callable, Coroutine
+from typing import Any, TypeVar
+
+import pytest
+
+import tmmaster
+from safety_invariant import Issued, check
+from sim_speeds import SUITE_TICK_HZ
+from tmmaster import Pose, Robot, TimeoutPolicy, aio
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+T = TypeVar("T")
+
+A = Pose(300, -200, 150, 180, 0, 90)
+B = Pose(300, -200, 180, 180, 0, 90)
+PROFILES = ["article", "tmflow"]
+
+
+def open_robot(sim: Simulator, **options: Any) -> aio.AsyncRobot:
+    options.setdefault("poll_interval_s", 0.01)
+    return aio.connect("127.0.0.1", sim.port, profile=sim.profile, gripper=None, **options)
+
+
+def run(scenario: Callable[[], Coroutine[Any, Any, T]]) -> T:
+    async def bounded() -> T:
+        async with asyncio.timeout(30):
+            return await scenario()
+
+    return asyncio.run(bounded())
+
+
+async def until(condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "condition not met in time"
+        await asyncio.sleep(0.002)
+
+
+def given_up(motion: tmmaster.Motion) -> bool:
+    """The move was withdrawn before the robot took it, or the stop was delivered."""
+    return motion.abandoned and (motion.withdrawn is True or motion.stop_delivered is True)
+
+
+class Blocker:
+    """A call of the robot's that holds its thread until released (a slow link's read)."""
+
+    def __init__(self) -> None:
+        self.started = threading.Event()
+        self.release = threading.Event()
+
+    def __call__(self, robot: Robot) -> None:
+        self.started.set()
+        self.release.wait(5)
+
+
+async def hold_the_thread(robot: aio.AsyncRobot, blocker: Blocker) -> asyncio.Task[None]:
+    task = asyncio.create_task(robot.call(blocker))
+    await until(blocker.started.is_set)
+    return task
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_wait_cancelled_while_queued_withdraws_the_unacknowledged_move(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # The acknowledgement comes 20 simulated s (0.5 s) after the write: the move is
+    # sent, not taken, when its wait (queued behind another call) is cancelled.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+    issued: list[Issued] = []
+
+    async def scenario() -> None:
+        timeouts = TimeoutPolicy(ack_timeout_s=30)
+        async with open_robot(sim, timeouts=timeouts) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            issued.append(Issued(A, time.monotonic()))
+            handle = await robot.start_move(A, speed=60)
+            blocker = Blocker()
+            blocked = await hold_the_thread(robot, blocker)
+            waiting = asyncio.create_task(handle.wait())
+            await asyncio.sleep(0.02)
+            waiting.cancel()
+            threading.Timer(0.1, blocker.release.set).start()
+            with pytest.raises(asyncio.CancelledError):
+                await waiting
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
+            assert given_up(handle.motion), handle.motion
+            await blocked
+            sim.clear_faults()
+            await asyncio.sleep(0.4)  # 16 simulated s: a command still armed would run now
+
+    run(scenario)
+    check(issued, sim.motion_log())
+    assert [m.target for m in sim.motion_log() if m.target is not None] == []
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_wait_cancelled_while_queued_stops_the_running_move(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=2, tick_hz=SUITE_TICK_HZ)  # seconds long
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            handle = await robot.start_move(A, speed=10)
+            await until(lambda: bool(sim.motion_log()))
+            blocker = Blocker()
+            blocked = await hold_the_thread(robot, blocker)
+            waiting = asyncio.create_task(handle.wait())
+            await asyncio.sleep(0.02)
+            waiting.cancel()
+            threading.Timer(0.05, blocker.release.set).start()
+            with pytest.raises(asyncio.CancelledError):
+                await waiting
+            assert handle.motion.stop_delivered is True
+            await blocked
+
+    run(scenario)
+    assert [m.target for m in sim.motion_log() if m.target is not None] == [A]
+    assert not sim.tcp_pose().is_close(A)  # stopped short of it (seconds away)
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_wait_for_zero_gives_the_move_up(tm_simulator_factory: SimFactory, profile: str) -> None:
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+    issued: list[Issued] = []
+
+    async def scenario() -> None:
+        async with open_robot(sim, timeouts=TimeoutPolicy(ack_timeout_s=30)) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            issued.append(Issued(A, time.monotonic()))
+            handle = await robot.start_move(A, speed=60)
+            with pytest.raises(TimeoutError):
+                await asyncio.wait_for(handle.wait(), 0)
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "TimeoutError"
+            assert given_up(handle.motion), handle.motion
+            sim.clear_faults()
+            await asyncio.sleep(0.4)
+
+    run(scenario)
+    check(issued, sim.motion_log())
+    assert [m.target for m in sim.motion_log() if m.target is not None] == []
+
+
+@pytest.mark.parametrize("sibling_first", [True, False])
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_task_group_whose_sibling_fails_gives_the_move_up(
+    tm_simulator_factory: SimFactory, profile: str, sibling_first: bool
+) -> None:
+    # Sibling first: the wait's task is cancelled before its first step.
+    sim = tm_simulator_factory(profile, time_scale=2, tick_hz=SUITE_TICK_HZ)
+    issued: list[Issued] = []
+
+    async def fails() -> None:
+        raise LookupError("a sibling fails at once")
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            issued.append(Issued(A, time.monotonic()))
+            handle = await robot.start_move(A, speed=10)
+            with pytest.raises(ExceptionGroup):  # noqa: PT012 - the group is the subject
+                async with asyncio.TaskGroup() as group:
+                    if sibling_first:
+                        group.create_task(fails())
+                    group.create_task(handle.wait())
+                    if not sibling_first:
+                        group.create_task(fails())
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
+            assert given_up(handle.motion), handle.motion
+            await asyncio.sleep(0.3)
+
+    run(scenario)
+    check(issued, sim.motion_log())
+    assert not sim.tcp_pose().is_close(A)  # stopped short of it (seconds away)
+
+
+def test_a_second_waiter_is_given_up_with_the_move(tm_simulator_factory: SimFactory) -> None:
+    # One task waits on the move (running), a second one's wait is queued behind it;
+    # cancelling the queued one gives the move up, and the running wait ends with it.
+    sim = tm_simulator_factory("tmflow", time_scale=2, tick_hz=SUITE_TICK_HZ)
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            handle = await robot.start_move(A, speed=10)
+            first = asyncio.create_task(handle.wait())
+            await until(lambda: bool(sim.motion_log()))
+            second = asyncio.create_task(handle.wait())
+            await asyncio.sleep(0.02)
+            second.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await second
+            assert handle.motion.stop_delivered is True
+            with pytest.raises(tmmaster.StopRequestedError):
+                await first
+
+    run(scenario)
+    assert not sim.tcp_pose().is_close(A)
+
+
+def test_an_interrupt_between_a_cancelled_calls_end_and_its_clear_stands(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # Forced interleaving: the user's interrupt() lands while the robot's thread is
+    # taking back a cancelled call's stop request. It must still stand afterwards.
+    sim = tm_simulator_factory("article", time_scale=2, tick_hz=SUITE_TICK_HZ)
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            in_clear = threading.Event()
+            interrupted = threading.Event()
+            real_clear = robot.robot.clear_stop_request
+
+            def slow_clear() -> None:
+                if threading.current_thread() is not threading.main_thread():
+                    in_clear.set()
+                    interrupted.wait(0.3)  # the window the user's interrupt() falls in
+                real_clear()
+
+            robot.robot.clear_stop_request = slow_clear  # type: ignore[method-assign]
+            task = asyncio.create_task(robot.move_to(A, speed=10))
+            await until(lambda: bool(sim.motion_log()))
+            task.cancel()
+            user = threading.Thread(
+                target=lambda: (in_clear.wait(5), robot.interrupt(), interrupted.set())
+            )
+            user.start()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            await asyncio.to_thread(user.join, 5)
+            with pytest.raises(tmmaster.StopRequestedError):
+                await robot.move_to(B, speed=10)  # refused, unsent
+            robot.robot.clear_stop_request = real_clear  # type: ignore[method-assign]
+
+    run(scenario)
+    assert [m.target for m in sim.motion_log() if m.target is not None] == [A]
