@@ -6,7 +6,8 @@ client connection, parses MBAP frames, and plays scripted faults on matching req
 ``delay``         hold the request ``delay_s`` before forwarding it (and everything after
                   it on that connection: TCP keeps order)
 ``hold``          forward the request ``delay_s`` later *even if the client has given up and
-                  closed the connection meanwhile* (a frame stuck in the network)
+                  closed the connection meanwhile* (a frame stuck in the network); with
+                  ``release`` (an event), when the test sets it instead
 ``drop_request``  never forward the request (the master times out)
 ``drop_answer``   forward the request, swallow the answer (executed, but the master
                   cannot know)
@@ -48,6 +49,9 @@ class Rule:
     delay_s: float = 0.0
     #: How many times the rule fires (after ``nth - 1`` matching requests went through).
     times: int = 1
+    #: ``hold`` only: deliver when this is set (not after ``delay_s``), so that a test
+    #: lets the frame land at a point of its own scenario rather than at a time.
+    release: threading.Event | None = None
     _seen: int = field(default=0, repr=False)
 
     def matches(self, function_code: int, address: int | None) -> bool:
@@ -150,7 +154,7 @@ class _Link:
                     break
                 self._forward(frame)
             elif rule.action == "hold":
-                self._hold(frame, rule.delay_s)
+                self._hold(frame, rule.delay_s, rule.release)
             elif rule.action == "drop_request":
                 continue
             elif rule.action == "drop_answer":
@@ -172,12 +176,21 @@ class _Link:
         with self._holds_done:
             return self._holds
 
-    def _hold(self, frame: bytes, delay_s: float) -> None:
+    def _hold(self, frame: bytes, delay_s: float, release: threading.Event | None) -> None:
         with self._holds_done:
             self._holds += 1
 
+        def released() -> bool:
+            """True when the frame is to go on; False when the proxy closes first."""
+            if release is None:
+                return not self.proxy._stopping.wait(delay_s)
+            while not release.wait(0.005):
+                if self.proxy._stopping.is_set():
+                    return False
+            return True
+
         def deliver() -> None:
-            if not self.proxy._stopping.wait(delay_s):
+            if released():
                 self._forward(frame)
             with self._holds_done:
                 self._holds -= 1

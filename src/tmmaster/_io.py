@@ -7,8 +7,12 @@ module DO/DI 0-3 at 0800-0803, p. 307). Everything is checked before a byte is s
 module, the channel (in range for that module), the value (a bool).
 
 A DO write sets an absolute value, so writing it twice is harmless: it goes through the
-transport's retry policy like a read (docs/safety.md). It passes the robot's command
-gate, so no DO is written once ``close()`` began or while a stop is requested. The
+transport's retry policy like a read (docs/safety.md). A write whose frame may still be
+on its way (no answer came) is remembered; a later write of the other value to the same
+output reads the output back until that frame has landed and been undone, or until the
+retry policy's total time since it was sent has passed (:meth:`RobotIO.set_do`). It
+passes the robot's command gate, so no DO is written once ``close()`` began or while a
+stop is requested. The
 end-module output that the robot program's gripper uses is refused unless the user
 releases it (:attr:`RobotIO.gripper_output`): writing it behind the program's back would
 open or close the gripper outside any command the master follows.
@@ -17,9 +21,12 @@ open or close the gripper outside any command the master follows.
 from __future__ import annotations
 
 import math
+import threading
+import time
+from dataclasses import dataclass
 from typing import Any, Literal
 
-from ._exceptions import ConfigError, StopRequestedError
+from ._exceptions import ConfigError, ConnectError, ModbusExceptionError, StopRequestedError
 from ._gate import CommandGate
 from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
 from ._robot_program import END_MODULE_DO, GripperWiring
@@ -31,6 +38,22 @@ DEFAULT_MODULE = "control_box"
 END_MODULE = "end_module"
 
 Kind = Literal["do", "di"]
+
+#: How often an output is read back while a late write of the other value may land, s.
+WATCH_INTERVAL_S = 0.02
+
+#: Failures after which a write's frame is not on its way: never sent (no connection, the
+#: gate refused it, a bad argument) or answered (a Modbus exception).
+_SETTLED_FAILURES = (ConnectError, ModbusExceptionError, StopRequestedError, ConfigError)
+
+
+@dataclass(frozen=True)
+class _Doubt:
+    """A write of ours that got no answer: its frame may still reach the robot."""
+
+    value: bool
+    #: ``time.monotonic()`` just before it was sent.
+    sent_at: float
 
 
 def io_modules(profile: RobotProfile) -> dict[str, DigitalIOModule]:
@@ -207,6 +230,11 @@ class RobotIO:
         self._gate = gate
         self._log = log
         self._gripper_output = default_gripper_output(profile)
+        # Per coil address: its writes that got no answer (their frames may still land),
+        # and a lock that makes one set_do of that coil at a time write and watch it.
+        self._doubts: dict[int, list[_Doubt]] = {}
+        self._coil_locks: dict[int, threading.Lock] = {}
+        self._locks_lock = threading.Lock()
 
     @property
     def modules(self) -> tuple[str, ...]:
@@ -242,6 +270,14 @@ class RobotIO:
         robot's retry policy when its answer is lost (setting a DO to the same value
         twice is harmless); logged as ``robot.io_set``.
 
+        A write that got no answer (a timeout, a lost connection) may still reach the
+        robot later, from a connection the master has given up. So when an earlier write
+        of the other value to this output is in that doubt, the call reads the output
+        back every ``WATCH_INTERVAL_S`` after writing: a late frame that lands is undone
+        at once (logged as ``robot.io_late_write``), and the call returns once every such
+        frame has been seen and undone, or once the retry policy's ``total_time_s`` has
+        passed since the newest of them was sent. Without such a doubt, no read is made.
+
         Args:
             channel: The DO number, from 0 (control box 0-15, end module 0-3 on a TM).
             value: True: high; False: low.
@@ -250,8 +286,11 @@ class RobotIO:
         Raises:
             ConfigError: An unknown module, a channel out of range or not an int, a
                 value that is not a bool, or the gripper's output.
-            StopRequestedError: The robot is closing or a stop is requested: not written.
-            TransportError: The write failed after its retries (a subclass says how).
+            StopRequestedError: The robot is closing or a stop is requested: not written
+                (or, when the message says so, written but no longer watched for an
+                earlier write that could still land).
+            TransportError: The write, or a read-back, failed after its retries (a
+                subclass says how).
         """
         address = io_address(self._profile, module, "do", channel)
         what = f"{module} DO {channel}"
@@ -264,15 +303,92 @@ class RobotIO:
                 " gripper behind the program's back; use robot.gripper, or set"
                 " robot.io.gripper_output = None if no program drives this output"
             )
+        with self._coil_lock(address):
+            self._write(address, value, what)
+            self._settle(address, value, what)
+        self._log.info("robot.io_set", module=module, do=channel, value=value)
+
+    def _coil_lock(self, address: int) -> threading.Lock:
+        with self._locks_lock:
+            return self._coil_locks.setdefault(address, threading.Lock())
+
+    def _write(self, address: int, value: bool, what: str) -> None:
+        """Write ``value`` to the coil (retried); remember each attempt left unanswered."""
+        transport = self._transport
+        doubts = self._doubts.setdefault(address, [])
+        in_doubt = False
 
         def send() -> None:
-            self._transport.write_block(Table.COIL, address, [int(value)], retry=True)
+            transport.write_block(Table.COIL, address, [int(value)], retry=False)
+
+        def once() -> None:
+            nonlocal in_doubt
+            sent_at = time.monotonic()
+            try:
+                self._gate.write(_nothing, send)
+            except _SETTLED_FAILURES:
+                raise
+            except BaseException:
+                doubts.append(_Doubt(value, sent_at))
+                in_doubt = True
+                raise
+
+        def counted(_error: BaseException) -> None:
+            transport.stats.retries += 1
 
         try:
-            self._gate.write(_nothing, send)
+            transport.retry.call(
+                f"write {what}", once, on_retry=counted, interrupt=transport.interrupt
+            )
         except StopRequestedError as exc:
-            raise StopRequestedError(f"{what} not written: {exc}") from exc
-        self._log.info("robot.io_set", module=module, do=channel, value=value)
+            done = "not confirmed (an attempt may still land)" if in_doubt else "not written"
+            raise StopRequestedError(f"{what} {done}: {exc}") from exc
+
+    def _settle(self, address: int, value: bool, what: str) -> None:
+        """Watch the coil until no earlier write of ours of the other value can land unseen.
+
+        Each read that finds the other value counts one late frame landed, and the coil is
+        written back at once. The watch ends when the read shows ``value`` and as many
+        landings were seen as frames were in doubt, or at the horizon: the retry policy's
+        total time after the newest of them was sent.
+        """
+        horizon = self._transport.retry.total_time_s
+        now = time.monotonic()
+        doubts = [d for d in self._doubts.get(address, []) if d.sent_at + horizon > now]
+        against = [d for d in doubts if d.value != value]
+        self._doubts[address] = doubts
+        if not against:
+            return
+        until = max(d.sent_at for d in against) + horizon
+        seen = 0
+        try:
+            while True:
+                if self._read_coil(address) != value:
+                    seen += 1
+                    self._log.warning("robot.io_late_write", output=what, found=not value)
+                    self._write(address, value, what)  # answered: the coil holds value
+                elif seen >= len(against):
+                    break
+                if time.monotonic() >= until:
+                    break
+                self._pause()
+        except StopRequestedError as exc:
+            raise StopRequestedError(
+                f"{what} set to {value}, but an earlier write of {not value} could still land:"
+                f" no longer watched ({exc})"
+            ) from exc
+        self._doubts[address] = [d for d in self._doubts[address] if d.value == value]
+
+    def _read_coil(self, address: int) -> bool:
+        return bool(self._transport.read_block(Table.COIL, address, 1)[0])
+
+    def _pause(self) -> None:
+        """Wait one watch interval; a stop request (or ``close()``) ends the watch."""
+        interrupt = self._transport.interrupt
+        if interrupt is None:
+            time.sleep(WATCH_INTERVAL_S)
+        elif interrupt.wait(WATCH_INTERVAL_S):
+            raise StopRequestedError("a stop was requested")
 
     def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
         """Read digital output ``channel`` of ``module`` back (one FC 01 request).

@@ -306,6 +306,8 @@ class Transport(Protocol):
     device_id: int
     #: Bound of one request, s.
     timeout: float
+    #: How failed requests and connects are retried.
+    retry: RetryPolicy
     #: Request, retry, reconnect and byte counters.
     stats: TransportStats
     #: When set, sleeps between retry attempts of interruptible requests end at once.

@@ -1,0 +1,187 @@
+"""A digital output never ends at an older value than the latest one asked for.
+
+A fault proxy holds the first FC 05 to control box DO 3 (matched by function code and
+address) and delivers it late, after the master timed out, reconnected and retried it,
+and after a later write asked for the other value. The judge is the simulator's own
+coil and its request log, and the master's read-back.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import threading
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from fault_proxy import FaultProxy, Rule
+from tmmaster import ResponseTimeoutError, RetryPolicy, Robot, StopRequestedError, aio
+from tmmaster.sim import Simulator
+
+Factory = Callable[..., Simulator]
+
+#: The master's answer timeout, s: the held frame times out, the retry goes through.
+TIMEOUT_S = 0.2
+#: The retry policy's total time is also how long the master watches for a late frame
+#: (a bound these tests never wait for: the late frame lands well before it).
+RETRY = RetryPolicy(attempts=4, total_time_s=3.0, initial_backoff_s=0.01, jitter_s=0)
+DO = 3
+
+
+@pytest.fixture
+def sim(tm_simulator_factory: Factory) -> Simulator:
+    return tm_simulator_factory("tmflow")
+
+
+@pytest.fixture
+def proxy(sim: Simulator) -> Iterator[FaultProxy]:
+    with FaultProxy(sim.port) as p:
+        yield p
+
+
+def coil_writes(sim: Simulator, address: int = DO) -> list[bool]:
+    """The values of every FC 05 write to ``address`` the simulator executed, in order."""
+    return [
+        bool(r.values[0])
+        for r in sim.request_log
+        if r.function_code == 5 and r.address == address and r.values
+    ]
+
+
+def coil_reads(sim: Simulator, address: int = DO) -> int:
+    return sum(1 for r in sim.request_log if r.function_code == 1 and r.address == address)
+
+
+def wrote_false(sim: Simulator) -> Callable[[], bool]:
+    return lambda: False in coil_writes(sim)
+
+
+@contextlib.contextmanager
+def held_until(proxy: FaultProxy, condition: Callable[[], bool]) -> Iterator[Rule]:
+    """Hold the first FC 05 to DO 3 until ``condition`` holds (at the latest, the block's
+    end), then let it land: after the master gave it up, retried, and wrote again."""
+    release, done = threading.Event(), threading.Event()
+    rule = proxy.add(Rule("hold", function_code=5, address=DO, release=release))
+
+    def watch() -> None:
+        while not condition() and not done.wait(0.005):
+            pass
+        release.set()
+
+    thread = threading.Thread(target=watch, name="release-held-frame")
+    thread.start()
+    try:
+        yield rule
+    finally:
+        done.set()
+        thread.join(5)
+
+
+def landed(sim: Simulator, proxy: FaultProxy) -> None:
+    """Wait until the held frame reached the simulator (True written twice: retry + late)."""
+    proxy.wait_held()
+    sim.wait_for(lambda: coil_writes(sim).count(True) >= 2, timeout=3)
+
+
+def test_a_late_write_lands_and_the_output_still_ends_at_the_latest_value(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    with Robot("127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RETRY) as robot:
+        sim.clear_request_log()
+        with held_until(proxy, wrote_false(sim)) as held:
+            robot.io.set_do(DO, True)  # times out, reconnects, retries: True
+            assert held.times == 0  # the hold fired on that write
+            robot.io.set_do(DO, False)
+            landed(sim, proxy)
+        # The late True reached the robot after the False; the master undid it.
+        writes = coil_writes(sim)
+        assert writes[:3] == [True, False, True], writes
+        assert writes[-1] is False
+        assert sim.do(DO) is False
+        assert robot.io.do(DO) is False
+
+
+def test_a_write_that_failed_is_still_watched_for(sim: Simulator, proxy: FaultProxy) -> None:
+    """No retry: the first write raises, its frame still on its way; the next one wins."""
+    with Robot(
+        "127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RetryPolicy(attempts=1)
+    ) as robot:
+        sim.clear_request_log()
+        with held_until(proxy, wrote_false(sim)):
+            with pytest.raises(ResponseTimeoutError):
+                robot.io.set_do(DO, True)
+            robot.io.set_do(DO, False)
+            proxy.wait_held()
+            sim.wait_for(lambda: True in coil_writes(sim), timeout=3)
+        assert coil_writes(sim)[:2] == [False, True]
+        assert coil_writes(sim)[-1] is False
+        assert sim.do(DO) is False
+        assert robot.io.do(DO) is False
+
+
+def test_a_write_in_doubt_that_never_lands_is_watched_for_a_bounded_time(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    """The first write is lost for good: the next write of the other value reads the coil
+    back until the retry policy's total time since the lost write has passed, then returns.
+    Once nothing is in doubt any more, a write is one FC 05 again and reads nothing."""
+    retry = RetryPolicy(attempts=4, total_time_s=0.6, initial_backoff_s=0.01, jitter_s=0)
+    with Robot("127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=retry) as robot:
+        sim.clear_request_log()
+        proxy.add(Rule("drop_request", function_code=5, address=DO))
+        robot.io.set_do(DO, True)
+        robot.io.set_do(DO, False)
+        assert coil_writes(sim) == [True, False]  # nothing to undo
+        assert coil_reads(sim) >= 1  # but the coil was read back
+        assert sim.do(DO) is False
+        sim.clear_request_log()
+        robot.io.set_do(DO, True)
+        robot.io.set_do(DO, False)
+        assert coil_writes(sim) == [True, False]
+        assert coil_reads(sim) == 0
+
+
+def test_a_stop_request_ends_the_watch_and_says_so(sim: Simulator, proxy: FaultProxy) -> None:
+    """While a late frame may still land, a stop request ends the watch: no write follows
+    a stop, so set_do raises StopRequestedError saying the output may still change."""
+    with Robot("127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RETRY) as robot:
+        sim.clear_request_log()
+        with held_until(proxy, lambda: False):  # lands once the block is over
+            robot.io.set_do(DO, True)
+            # Interrupt once set_do(False) has written its value and is watching.
+            stopper = threading.Thread(
+                target=lambda: (sim.wait_for(wrote_false(sim), timeout=3), robot.interrupt())
+            )
+            stopper.start()
+            try:
+                with pytest.raises(StopRequestedError, match="could still land"):
+                    robot.io.set_do(DO, False)
+            finally:
+                stopper.join(5)
+        proxy.wait_held()
+        robot.clear_stop_request()
+
+
+def test_the_async_front_goes_through_the_same_guard(sim: Simulator, proxy: FaultProxy) -> None:
+    """``AsyncRobotIO.set_do`` runs ``RobotIO.set_do`` on the robot's thread: same ending."""
+
+    async def scenario() -> bool:
+        async with aio.connect(
+            "127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RETRY
+        ) as robot:
+            sim.clear_request_log()
+            with held_until(proxy, wrote_false(sim)):
+                await robot.io.set_do(DO, True)
+                await robot.io.set_do(DO, False)
+                await asyncio.to_thread(landed, sim, proxy)
+            return await robot.io.do(DO)
+
+    async def bounded() -> bool:
+        async with asyncio.timeout(20):
+            return await scenario()
+
+    assert asyncio.run(bounded()) is False
+    assert coil_writes(sim)[:3] == [True, False, True]
+    assert coil_writes(sim)[-1] is False
+    assert sim.do(DO) is False
