@@ -3,17 +3,58 @@
 from __future__ import annotations
 
 import math
+import sys
+from decimal import Decimal
+from typing import TypeGuard
 
 from ._exceptions import ConfigError
+
+#: The largest magnitude a float holds; an int beyond it has no float (OverflowError).
+_FLOAT_MAX = sys.float_info.max
+
+#: The longest ``repr`` :func:`shown` quotes in a message before cutting it short.
+_SHOWN_CHARS = 100
+
+
+def is_finite_number(value: object) -> TypeGuard[int | float]:
+    """True for a finite int or float (not a bool, not a string, not nan or inf).
+
+    An int too large for a float (``10**400``) is not one: it has no float to become.
+
+    Args:
+        value: Anything a caller passed.
+
+    Returns:
+        Whether ``value`` is a number a float holds.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    if isinstance(value, int):
+        # Compared exactly (no conversion), so 10**400 is refused, not an OverflowError.
+        return -_FLOAT_MAX <= value <= _FLOAT_MAX
+    return math.isfinite(value)
+
+
+def shown(value: object) -> str:
+    """``value`` as an error message quotes it: its ``repr``, cut to 100 characters.
+
+    An int too large for a float is written in scientific notation (``1.000e+400``):
+    Python refuses to write an int of more than 4300 digits (a ValueError).
+
+    Args:
+        value: Anything a caller passed.
+
+    Returns:
+        A short text for a message.
+    """
+    if isinstance(value, int) and not isinstance(value, bool) and not is_finite_number(value):
+        return f"{Decimal(value):.3e}"
+    text = repr(value)
+    return text if len(text) <= _SHOWN_CHARS else f"{text[: _SHOWN_CHARS - 3]}..."
 
 
 def require_positive(name: str, value: object) -> float:
     """``value`` as a float when it is a finite number > 0; else a ConfigError naming ``name``."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value <= 0
-    ):
-        raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
+    if not is_finite_number(value) or value <= 0:
+        raise ConfigError(f"{name} must be a finite number > 0, got {shown(value)}")
     return float(value)

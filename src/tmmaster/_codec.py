@@ -127,7 +127,9 @@ def _build_encoder(field: RegisterField) -> Encoder:
         # bool is an int: refused explicitly, as is anything that is not a number.
         if value.__class__ is bool or not isinstance(value, int | float):
             raise refuse(value)
-        if not isfinite(value) or not low <= value <= high:
+        # The range first: it compares an int too large for a float exactly, where
+        # isfinite() would raise OverflowError.
+        if not low <= value <= high or not isfinite(value):
             raise refuse(value)
         return value * scale
 

@@ -79,7 +79,9 @@ class ValueOutOfRangeError(ConfigError):
         self.value = value
         #: The allowed range, in words.
         self.allowed = allowed
-        super().__init__(f"{field}: value {value!r} is out of range (allowed {allowed})")
+        from ._checks import shown  # here: _checks imports this module
+
+        super().__init__(f"{field}: value {shown(value)} is out of range (allowed {allowed})")
 
 
 class UnreachablePoseError(ConfigError):

@@ -13,6 +13,7 @@ from typing import Any
 from pydantic import ConfigDict, ValidationError
 from pydantic.dataclasses import dataclass
 
+from ._checks import shown
 from ._error_root import ConfigError
 
 _POSE_FIELDS = ("x", "y", "z", "rx", "ry", "rz")
@@ -300,7 +301,7 @@ def _pose_init(self: Pose, *args: Any, **kwargs: Any) -> None:
                 missing.append(str(name))
             elif error["type"] != "unexpected_positional_argument":
                 problems.append(f"{name}: {error['msg']}")
-        given = [repr(a) for a in args] + [f"{k}={v!r}" for k, v in kwargs.items()]
+        given = [shown(a) for a in args] + [f"{k}={shown(v)}" for k, v in kwargs.items()]
         needs = "a pose needs all 6: x, y, z (mm), rx, ry, rz (degrees)"
         if missing:
             problems.insert(0, f"{', '.join(missing)} missing in Pose({', '.join(given)}); {needs}")

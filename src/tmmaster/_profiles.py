@@ -19,6 +19,7 @@ from pydantic import Field, TypeAdapter, ValidationError
 from ._codec import describe_range
 from ._exceptions import RegisterMapError
 from ._registers import DataType, GripperProfile, RegisterField, RobotProfile
+from ._toml import read_toml
 
 Profile = RobotProfile | GripperProfile
 
@@ -112,15 +113,7 @@ def load_profile(name_or_path: str | Path) -> Profile:
     path = Path(name_or_path)
     if isinstance(name_or_path, str) and path.suffix != ".toml":
         return _builtin_profile(name_or_path)
-    try:
-        data = tomllib.loads(path.read_text("utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise RegisterMapError(f"{path}: cannot read profile: {exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise RegisterMapError(
-            f"{path}: not a UTF-8 text (TOML) file: byte 0x{exc.object[exc.start]:02x}"
-            f" at offset {exc.start}"
-        ) from exc
+    data = read_toml(path, f"profile {path}", error=RegisterMapError)
     return profile_from_data(data, source=str(path))
 
 

@@ -44,7 +44,7 @@ from ._channels import (
     heartbeat_stalled,
     pose_from,
 )
-from ._checks import require_positive
+from ._checks import is_finite_number, require_positive, shown
 from ._exceptions import (
     AcknowledgeTimeoutError,
     CommandRejectedError,
@@ -1420,7 +1420,7 @@ class Robot:
         if isinstance(speed, bool) or not isinstance(speed, int):
             raise ConfigError(f"speed must be an integer percent, got {speed!r}")
         if not 1 <= speed <= self.max_speed_percent:
-            raise ConfigError(f"speed {speed} % is outside 1..{self.max_speed_percent} %")
+            raise ConfigError(f"speed {shown(speed)} % is outside 1..{self.max_speed_percent} %")
         units = suspect_units(pose.as_list()) if self.check_units else None
         if units is not None:
             warn_units(f"target {written_list(pose)}: {units}")
@@ -2221,8 +2221,8 @@ def _joint_values(joints: object) -> tuple[float, ...]:
         raise ConfigError(f"joints need six angles J1..J6 (deg), got {len(joints)}")
     values = []
     for i, q in enumerate(joints, start=1):
-        if isinstance(q, bool) or not isinstance(q, int | float) or not math.isfinite(q):
-            raise ConfigError(f"J{i} must be a finite number of degrees, got {q!r}")
+        if not is_finite_number(q):
+            raise ConfigError(f"J{i} must be a finite number of degrees, got {shown(q)}")
         values.append(float(q))
     return tuple(values)
 
@@ -2230,8 +2230,8 @@ def _joint_values(joints: object) -> tuple[float, ...]:
 def _offset_pose(*values: object) -> Pose:
     """A relative move's offsets as a Pose; ConfigError naming a value that is no number."""
     for name, v in zip(("dx", "dy", "dz", "drx", "dry", "drz"), values, strict=True):
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise ConfigError(f"{name} must be a finite number, got {v!r}")
+        if not is_finite_number(v):
+            raise ConfigError(f"{name} must be a finite number, got {shown(v)}")
     x, y, z, rx, ry, rz = (float(v) for v in values)  # type: ignore[arg-type]
     return Pose(x, y, z, rx, ry, rz)
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
@@ -37,6 +36,7 @@ from .._profiles import DEFAULT_PROFILE
 from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
 from .._robot import FrameCheck, Robot, TimeoutPolicy, Workspace
+from .._toml import read_toml
 from ..sim._world import DEFAULT_TABLE_TOP_Z_MM
 
 
@@ -439,21 +439,19 @@ _POSE_KEYS = ("approach", "pick", "lift", "place", "home")
 
 
 def read_config_data(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file into a mapping; unreadable or malformed files raise ConfigError."""
-    p = Path(path)
-    try:
-        text = p.read_text("utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the file ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(
-            f"{p}: not a UTF-8 text (TOML) file: byte 0x{exc.object[exc.start]:02x}"
-            f" at offset {exc.start}"
-        ) from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+    """Read a TOML file into a mapping; unreadable or malformed files raise ConfigError.
+
+    Args:
+        path: The file.
+
+    Returns:
+        The parsed document.
+
+    Raises:
+        ConfigError: The file is unreadable, too large, not UTF-8 or not TOML tmmaster
+            reads (``tmmaster._toml.read_toml``); the message names the file.
+    """
+    return read_toml(path)
 
 
 def load_config(

@@ -13,6 +13,7 @@ import math
 import os
 import re
 import stat
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -289,14 +290,7 @@ def load_report(path: str | Path) -> RunReport:
             UTF-8, is not a run report, or has a ``report_version`` this tmmaster does not
             read (:data:`SUPPORTED_REPORT_VERSIONS`). The message names the file.
     """
-    text = _read_report_text(path)
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ConfigError(
-            f"{path}: not a tmmaster run report: invalid JSON at line {exc.lineno}"
-            f" column {exc.colno}: {exc.msg}"
-        ) from None
+    data = _parse_report_json(path, _read_report_text(path))
     version = data.get("report_version") if isinstance(data, dict) else None
     # Checked first: a report from a newer tmmaster fails validation in ways that would
     # hide the real reason (its keys may mean something else).
@@ -313,11 +307,59 @@ def load_report(path: str | Path) -> RunReport:
     try:
         return RunReport.model_validate(data)
     except ValidationError as exc:
+        # The location holds the file's own keys: made printable like everything shown.
         problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or '(top)'}: {err['msg']}"
+            f"{printable('.'.join(str(p) for p in err['loc']), 200) or '(top)'}: {err['msg']}"
             for err in exc.errors()[:3]
         )
         raise ConfigError(f"{path}: not a tmmaster run report: {problems}") from None
+
+
+def _parse_report_json(path: str | Path, text: str) -> Any:
+    """The report's JSON value; ConfigError (naming the file) for anything json refuses."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not a tmmaster run report: invalid JSON at line {exc.lineno}"
+            f" column {exc.colno}: {exc.msg}"
+        ) from None
+    except RecursionError:  # the C parser's guard against deep nesting
+        raise ConfigError(
+            f"{path}: not a tmmaster run report: arrays or objects nested too deeply"
+        ) from None
+    except ValueError:  # an integer of more digits than Python converts
+        raise ConfigError(
+            f"{path}: not a tmmaster run report: an integer of more than"
+            f" {sys.get_int_max_str_digits()} digits"
+        ) from None
+
+
+#: Characters a terminal acts on instead of showing: C0 and C1 controls (ESC starts the
+#: ANSI sequences that move the cursor, clear the screen or set the window title), DEL,
+#: the line and paragraph separators, and the bidirectional overrides that reorder text.
+_UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028-\u202e\u2066-\u2069]")
+
+
+def printable(text: str, limit: int) -> str:
+    """``text`` safe to print on a terminal: every control character escaped, at most ``limit``.
+
+    Each control character (:data:`_UNPRINTABLE`) is written as Python writes it in a
+    string (``\\x1b``, ``\\n``, ``\\u202e``), so the text shows what the file holds
+    and never moves the cursor or recolours the terminal; a longer text is cut to ``limit``
+    characters and ends with ``...``. (Rich markup is a separate matter: strings shown
+    through rich go in ``Text`` objects, never parsed as markup.)
+
+    Args:
+        text: A string taken from a file.
+        limit: The most characters to keep (at least 4).
+
+    Returns:
+        The printable text.
+    """
+    if len(text) > limit:
+        text = text[: limit - 3] + "..."
+    return _UNPRINTABLE.sub(lambda m: m[0].encode("unicode_escape").decode("ascii"), text)
 
 
 def _read_report_text(path: str | Path) -> str:

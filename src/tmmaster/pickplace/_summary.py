@@ -7,75 +7,125 @@ Shown by ``python -m tmmaster.pickplace`` on a terminal after the run and by
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
-from ._report import RunReport
+from ._report import RunReport, printable
 
 _RESULT_STYLE = {"done": "bold green", "interrupted": "bold yellow"}
+
+#: The most characters of a name (a state, the sequence, the host) the summary shows.
+_NAME_CHARS = 80
+#: The most characters of a sentence (the reason, the error's message) the summary shows.
+_SENTENCE_CHARS = 1000
+#: The most states the table lists (a run has about ten); the rest are counted.
+MAX_STATE_ROWS = 50
+#: The cycle times listed in full up to this many; beyond, the first and last halves.
+MAX_LISTED_TIMES = 20
 
 
 def _seconds(value: float | None) -> str:
     return "-" if value is None else f"{value:.2f}"
 
 
-def summary_renderable(report: RunReport) -> Any:
-    """A rich renderable: result line, per-state table and cycle times of ``report``."""
-    style = _RESULT_STYLE.get(report.result, "bold red")
+def _name(text: str) -> str:
+    return printable(text, _NAME_CHARS)
+
+
+def _head(report: RunReport, style: str) -> Text:
+    """The result line: result, exit code, sequence, cycles, duration, target."""
     head = Text()
-    head.append(report.result.upper(), style=style)
+    head.append(_name(report.result).upper(), style=style)
     head.append(f"  exit {report.exit_code}")
     if report.sequence:
-        head.append(f"  {report.sequence}")
+        head.append(f"  {_name(report.sequence)}")
     requested = report.cycles.requested
     head.append(f"  cycles {report.cycles.completed}/{'-' if requested is None else requested}")
     head.append(f"  {_seconds(report.duration_s)} s")
     if report.retries.grasp:
         head.append(f"  grasp retries {report.retries.grasp}")
     if report.target is not None:
-        head.append(f"  {report.target.profile}@{report.target.host}:{report.target.port}")
-    parts: list[Any] = [head]
-    if report.reason:
-        parts.append(Text(report.reason, style=style))
+        target = report.target
+        head.append(f"  {_name(target.profile)}@{_name(target.host)}:{target.port}")
+    return head
 
-    if report.states:
-        table = Table(title="time per state", title_justify="left", show_edge=False)
-        table.add_column("state")
-        table.add_column("kind")
-        for name in ("passes", "total s", "mean s", "max s", "share"):
-            table.add_column(name, justify="right")
-        total = sum(t.total_s for t in report.states.values()) or 1.0
-        moves = set(report.move_states)
-        for state, timing in report.states.items():
-            kind = "" if not moves else ("move" if state in moves else "wait")
-            table.add_row(
-                state,
-                kind,
-                str(timing.count),
-                f"{timing.total_s:.2f}",
-                f"{timing.mean_s:.2f}",
-                f"{timing.max_s:.2f}",
-                f"{100 * timing.total_s / total:.0f}%",
-            )
-        parts.append(table)
-    if report.cycles.times_s:
-        times = report.cycles.times_s
-        parts.append(
-            Text(
-                f"cycle times (s): {', '.join(f'{t:.2f}' for t in times)}"
-                f"  (mean {sum(times) / len(times):.2f}, max {max(times):.2f})"
-            )
+
+def _state_table(report: RunReport) -> list[Any]:
+    """The per-state table (at most MAX_STATE_ROWS rows) and, beyond, a count of the rest."""
+    table = Table(title="time per state", title_justify="left", show_edge=False)
+    table.add_column("state")
+    table.add_column("kind")
+    for name in ("passes", "total s", "mean s", "max s", "share"):
+        table.add_column(name, justify="right")
+    total = sum(t.total_s for t in report.states.values()) or 1.0
+    moves = set(report.move_states)
+    for state, timing in itertools.islice(report.states.items(), MAX_STATE_ROWS):
+        kind = "" if not moves else ("move" if state in moves else "wait")
+        # Text, not str: a cell given as a str is parsed as rich markup ("[/]" raises).
+        table.add_row(
+            Text(_name(state)),
+            Text(kind),
+            str(timing.count),
+            f"{timing.total_s:.2f}",
+            f"{timing.mean_s:.2f}",
+            f"{timing.max_s:.2f}",
+            f"{100 * timing.total_s / total:.0f}%",
         )
-    if report.error is not None and not report.reason:  # the reason already says it
-        code = f" (robot error code {report.error.error_code})" if report.error.error_code else ""
+    parts: list[Any] = [table]
+    hidden = len(report.states) - MAX_STATE_ROWS
+    if hidden > 0:
+        parts.append(Text(f"({hidden} more states not listed; the share is of all of them)"))
+    return parts
+
+
+def _cycle_times(times: list[float]) -> Text:
+    """The cycle times: every one up to MAX_LISTED_TIMES, else the first and the last."""
+    half = MAX_LISTED_TIMES // 2
+    if len(times) <= MAX_LISTED_TIMES:
+        listed = ", ".join(f"{t:.2f}" for t in times)
+    else:
+        first = ", ".join(f"{t:.2f}" for t in times[:half])
+        last = ", ".join(f"{t:.2f}" for t in times[-half:])
+        listed = f"{first}, ... {len(times) - 2 * half} more ..., {last}"
+    return Text(
+        f"cycle times (s): {listed}  (mean {sum(times) / len(times):.2f}, max {max(times):.2f})"
+    )
+
+
+def summary_renderable(report: RunReport) -> Any:
+    """A rich renderable: result line, per-state table and cycle times of ``report``.
+
+    Every string from the report is shown as text, never parsed as rich markup, with its
+    control characters escaped (``printable``); the output is bounded whatever the report
+    holds: at most :data:`MAX_STATE_ROWS` states and :data:`MAX_LISTED_TIMES` cycle times
+    are listed, names and sentences are cut short.
+
+    Args:
+        report: The run report.
+
+    Returns:
+        A rich ``Group`` to print.
+    """
+    style = _RESULT_STYLE.get(report.result, "bold red")
+    parts: list[Any] = [_head(report, style)]
+    if report.reason:
+        parts.append(Text(printable(report.reason, _SENTENCE_CHARS), style=style))
+    if report.states:
+        parts.extend(_state_table(report))
+    if report.cycles.times_s:
+        parts.append(_cycle_times(report.cycles.times_s))
+    error = report.error
+    if error is not None and not report.reason:  # the reason already says it
+        code = f" (robot error code {error.error_code})" if error.error_code else ""
         verb = "stopped" if report.result == "interrupted" else "failed"
         parts.append(
             Text(
-                f"{verb} in {report.error.state} (cycle {report.error.cycle}):"
-                f" {report.error.type}: {report.error.message}{code}",
+                f"{verb} in {_name(error.state)} (cycle {error.cycle}):"
+                f" {_name(error.type)}: {printable(error.message, _SENTENCE_CHARS)}{code}",
                 style="red",
             )
         )

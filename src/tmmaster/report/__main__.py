@@ -4,8 +4,9 @@
 ``plot run.json -o run.png`` draws the timeline (needs matplotlib: ``tmmaster[plot]``).
 Exit codes: 0 done, 1 matplotlib missing, the image or the table cannot be written
 (a full disk, a closed pipe), 2 the file is not a readable run report (not a regular
-file, larger than 256 MiB, not UTF-8, not a report, an unsupported ``report_version``) or
-an option is wrong.
+file, larger than 256 MiB, not UTF-8, nested too deeply, not a report, an unsupported
+``report_version``) or an option is wrong. ``show`` prints the file's strings as text
+(no rich markup, control characters escaped) and a bounded table (docs/pickplace.md).
 """
 
 from __future__ import annotations

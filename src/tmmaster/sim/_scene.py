@@ -26,13 +26,13 @@ physics backend.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .._exceptions import ConfigError
+from .._toml import read_toml
 from ._world import (
     DEFAULT_TABLE_TOP_Z_MM,
     TABLE,
@@ -124,16 +124,11 @@ def load_scene(path: str | Path) -> Scene:
         The scene.
 
     Raises:
-        ConfigError: An unreadable file, not TOML, or an invalid scene (the message names
-            the file and each bad key).
+        ConfigError: An unreadable file, one over 1 MiB, not TOML (or nested too deeply to
+            read), or an invalid scene (the message names the file and each bad key).
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text("utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(f"scene {path}: cannot read it: {exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"scene {path}: not a UTF-8 text (TOML) file") from exc
+    data = read_toml(path, f"scene {path}")
     return scene_from_data(data, source=f"scene {path}")
 
 
