@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import dataclass
 from decimal import Decimal
 from typing import TypeGuard
 
@@ -57,4 +58,36 @@ def require_positive(name: str, value: object) -> float:
     """``value`` as a float when it is a finite number > 0; else a ConfigError naming ``name``."""
     if not is_finite_number(value) or value <= 0:
         raise ConfigError(f"{name} must be a finite number > 0, got {shown(value)}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """The range a numeric option must lie in: ``low`` (excluded when ``open_low``) to
+    ``high`` (included), in ``unit``."""
+
+    low: float
+    high: float
+    unit: str
+    #: True: ``low`` itself is refused (``(0, 50]``); False: allowed (``[0.001, 5]``).
+    open_low: bool = False
+
+    def __str__(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{'(' if self.open_low else '['}{self.low:g}, {self.high:g}]{unit}"
+
+    def admits(self, value: float) -> bool:
+        """True when ``value`` lies in the range."""
+        above = value > self.low if self.open_low else value >= self.low
+        return above and value <= self.high
+
+
+def require_in(name: str, value: object, bounds: Bounds) -> float:
+    """``value`` as a float when it is a finite number within ``bounds``.
+
+    Otherwise a ConfigError naming ``name`` and the range, for instance
+    ``poll_interval_s must be a number in [0.001, 5] s, got 1e9``.
+    """
+    if not is_finite_number(value) or not bounds.admits(value):
+        raise ConfigError(f"{name} must be a number in {bounds}, got {shown(value)}")
     return float(value)

@@ -6,6 +6,7 @@ a wait by this state, so when to poll and when to stop polling are written once.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -122,13 +123,19 @@ class FollowState:
         due = self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
         # A profile whose poll carries no pose reads it once, where it tells the most.
         ticket.observe_pose = self.schedule.wants_observation(due)
-        return due
+        # Never past the wait's deadline: a long interval (or a stretched one in the
+        # middle of a move) ends there, and the poll at the deadline tells.
+        return min(due, self.deadline())
 
-    def overdue(self, now: float) -> Overdue | None:
-        """The deadline that passed: acknowledgement (while sent), motion (while running)."""
+    def deadline(self) -> float:
+        """When the wait's current deadline passes (``time.monotonic()``).
+
+        The acknowledgement's while the command is sent, the motion's while it runs,
+        infinity otherwise.
+        """
         motion = self.motion
         if motion.phase is MovePhase.SENT:
-            return Overdue.ACK if now >= self.ack_deadline else None
+            return self.ack_deadline
         if motion.phase is MovePhase.RUNNING:
             ticket = motion.ticket
             started = ticket.acknowledged_at or ticket.sent_at
@@ -139,8 +146,14 @@ class FollowState:
                 # observed (at most 4 times). A stalled arm shows no progress, and keeps
                 # the model's budget.
                 budget *= max(self.schedule.pace, 1.0)
-            return Overdue.MOTION if now - started >= budget else None
-        return None
+            return started + budget
+        return math.inf
+
+    def overdue(self, now: float) -> Overdue | None:
+        """The deadline that passed: acknowledgement (while sent), motion (while running)."""
+        if now < self.deadline():
+            return None
+        return Overdue.ACK if self.motion.phase is MovePhase.SENT else Overdue.MOTION
 
     def settled(self, observation: Observation, now: float) -> bool:
         """True when a poll's result needs the waiting thread (anything but "poll again")."""

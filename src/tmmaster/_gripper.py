@@ -289,7 +289,7 @@ def _wait(
     ``stop_event`` ends it with :class:`StopRequestedError`.
     """
     deadline = time.monotonic() + timeout_s
-    poller = Poller(poll, stop_event)
+    poller = Poller(poll, stop_event, deadline=deadline)
     while True:
         poller.check()
         if guard is not None:

@@ -20,21 +20,40 @@ class Poller:
     :class:`StopRequestedError` as soon as the event is set (``Event.wait`` wakes at
     once), so a stop request never turns a wait into a busy loop of requests.
 
+    A deadline, when given, is the wait's own: no sleep lasts past it, so the poll
+    after the last sleep happens at the deadline, not up to an interval later. Past
+    it, a sleep returns at once: the caller's loop checks the deadline after each
+    poll and ends the wait.
+
     Args:
         interval_s: Seconds between two polls (> 0).
         stop_event: Ends every sleep when set; None: nothing ends them early.
+        deadline: A ``time.monotonic()`` value no sleep lasts past; None: no bound.
 
     Raises:
-        ConfigError: An interval that is not a finite number > 0.
+        ConfigError: An interval that is not a finite number > 0, or a deadline that is
+            not a finite number.
     """
 
-    def __init__(self, interval_s: float, stop_event: threading.Event | None = None) -> None:
+    def __init__(
+        self,
+        interval_s: float,
+        stop_event: threading.Event | None = None,
+        *,
+        deadline: float | None = None,
+    ) -> None:
         if not (isinstance(interval_s, int | float) and math.isfinite(interval_s)) or (
             interval_s <= 0
         ):
             raise ConfigError(f"poll interval must be a finite number > 0 s, got {interval_s!r}")
+        if deadline is not None and not (
+            isinstance(deadline, int | float) and math.isfinite(deadline)
+        ):
+            raise ConfigError(f"deadline must be a finite time.monotonic() value, got {deadline!r}")
         #: Seconds between two polls.
         self.interval_s = interval_s
+        #: No sleep lasts past this ``time.monotonic()`` value (None: no bound).
+        self.deadline = deadline
         self._next = time.monotonic()
         self._stop = stop_event
 
@@ -48,7 +67,9 @@ class Poller:
             raise StopRequestedError("stop requested")
 
     def sleep_until(self, when: float) -> None:
-        """Sleep until the monotonic time ``when`` (at once if it has passed).
+        """Sleep until the monotonic time ``when``, or the deadline if that comes first.
+
+        At once if that moment has passed.
 
         Args:
             when: A ``time.monotonic()`` value.
@@ -57,6 +78,8 @@ class Poller:
             StopRequestedError: The stop event is set, before or during the sleep.
         """
         self.check()
+        if self.deadline is not None and self.deadline < when:
+            when = self.deadline
         delay = when - time.monotonic()
         if delay <= 0:
             return
@@ -67,7 +90,13 @@ class Poller:
             time.sleep(delay)
 
     def sleep(self) -> None:
-        """Sleep until the next poll is due (no drift: deadlines advance by the interval)."""
+        """Sleep until the next poll is due (no drift: polls advance by the interval).
+
+        Never past the deadline: the last sleep of a wait ends at it.
+
+        Raises:
+            StopRequestedError: The stop event is set, before or during the sleep.
+        """
         self._next += self.interval_s
         now = time.monotonic()
         if self._next < now:  # a slow poll: don't try to catch up with a burst of reads

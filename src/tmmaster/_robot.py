@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Annotated, Any, Literal, ParamSpec
+from typing import Annotated, Any, Literal, ParamSpec, TypeVar
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
@@ -44,7 +44,7 @@ from ._channels import (
     heartbeat_stalled,
     pose_from,
 )
-from ._checks import is_finite_number, require_positive, shown
+from ._checks import Bounds, is_finite_number, require_in, require_positive, shown
 from ._exceptions import (
     AcknowledgeTimeoutError,
     CommandRejectedError,
@@ -101,6 +101,7 @@ from ._transport import (
 _log = get_logger("tmmaster.robot")
 
 _P = ParamSpec("_P")
+_PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy")
 
 
 class Workspace(BaseModel):
@@ -462,6 +463,10 @@ class _MotionFollower:
         self.timeouts = timeouts
         self.position_tolerance_mm = position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
+        #: Set by ``Robot.close()`` when it begins: another caller's wait for a withdraw's
+        #: answer ends then (its command is stopped instead), so close() never waits
+        #: on it for longer than a request.
+        self.closing = threading.Event()
         # One caller at a time gives a command up (a wait, close(), the exit hook).
         self._abandon_lock = threading.Lock()
         # The motions the master gave up on, and of those, the ones whose clean-up is
@@ -487,7 +492,12 @@ class _MotionFollower:
         return _Following(self, motion)
 
     def abandon(
-        self, motion: Motion, reason: BaseException, *, deadline: float | None = None
+        self,
+        motion: Motion,
+        reason: BaseException,
+        *,
+        deadline: float | None = None,
+        closer: bool = False,
     ) -> bool:
         """Make sure a command the master gives up on can never start later.
 
@@ -505,7 +515,12 @@ class _MotionFollower:
             motion: the command given up on.
             reason: why (a robot fault means the robot stopped itself).
             deadline: a ``time.monotonic()`` bound on waiting for another caller's
-                clean-up; None waits as long as that takes (its requests are bounded).
+                clean-up, and on this caller's wait for a withdraw's answer; None waits
+                as long as that takes (its requests and the answer are bounded).
+            closer: True for ``Robot.close()`` (and the exit hook): its wait for the
+                withdraw's answer is not ended by the close itself, only by
+                ``deadline``. Any other caller's wait ends when a close begins, and
+                the command is stopped.
 
         Returns:
             True when the command can no longer run: never written, already finished,
@@ -532,21 +547,30 @@ class _MotionFollower:
                 self._settled[motion] = True  # refused before any byte was sent
                 return True
             with deferred():
-                confirmed = self._withdraw_or_stop(motion, reason)
+                confirmed = self._withdraw_or_stop(
+                    motion, reason, until=deadline, interruptible=not closer
+                )
                 # Recorded inside the section: a Ctrl-C held back is raised after it.
                 self._settled[motion] = confirmed
             return confirmed
         finally:
             lock.release()
 
-    def _withdraw_or_stop(self, motion: Motion, reason: BaseException) -> bool:
+    def _withdraw_or_stop(
+        self,
+        motion: Motion,
+        reason: BaseException,
+        *,
+        until: float | None = None,
+        interruptible: bool = True,
+    ) -> bool:
         """:meth:`abandon`'s work: withdraw a command not yet taken, stop a running one."""
         ticket = motion.ticket
         running = ticket.acknowledged
         confirmed = True
         if not running and not ticket.withdrawn:
             try:
-                running = self._withdraw(ticket)
+                running = self._withdraw(ticket, until=until, interruptible=interruptible)
                 ticket.withdrawn = not running
                 motion.withdrawn = not running
             except TMMasterError as exc:
@@ -584,30 +608,48 @@ class _MotionFollower:
                 self._log.error("robot.stop_failed", error=str(exc))
         return confirmed
 
-    def _withdraw(self, ticket: Ticket) -> bool:
+    def _withdraw(
+        self, ticket: Ticket, *, until: float | None = None, interruptible: bool = True
+    ) -> bool:
         """Withdraw ``ticket`` and wait for the robot's answer; True if it was taken after all.
 
         A program that answers withdraws (tmflow's cancel record) is waited for, bounded
-        by ``ack_timeout_s`` and not interruptible (a clean-up): "withdrawn" is reported
-        only once the program consumed the cancel or cannot take the command any more.
+        by ``ack_timeout_s`` and by ``until``: "withdrawn" is reported only once the
+        program consumed the cancel or cannot take the command any more. A stop request
+        does not end this wait (a stop request is what withdraws); the close of the
+        robot does when ``interruptible`` (every caller but ``close()`` itself), and the
+        caller then stops the command as for an unanswered cancel.
 
         Raises:
-            CommandStateUnknownError: no answer within the bound (the caller stops).
+            CommandStateUnknownError: no answer within the bound, or the robot closing
+                first (the caller stops).
         """
         outcome = self._channel.withdraw(ticket)
         if outcome is not None:
             return outcome
         deadline = time.monotonic() + self.timeouts.ack_timeout_s
-        poller = Poller(self.poll_interval_s)
+        within = f"within {self.timeouts.ack_timeout_s:g} s"
+        if until is not None and until < deadline:
+            deadline, within = until, "before the close's timeout"
+        # The close's event, not the stop event: a stop request (already set when a
+        # stop request gave the command up) must not cut short the withdraw it asks for.
+        poller = Poller(
+            self.poll_interval_s, self.closing if interruptible else None, deadline=deadline
+        )
         while True:
-            poller.sleep()
+            try:
+                poller.sleep()
+            except StopRequestedError as exc:
+                raise CommandStateUnknownError(
+                    f"the robot connection began to close before the robot program answered"
+                    f" the cancel of command {ticket.seq}"
+                ) from exc
             outcome = self._channel.withdraw_outcome(ticket)
             if outcome is not None:
                 return outcome
             if time.monotonic() >= deadline:
                 raise CommandStateUnknownError(
-                    f"the robot program did not answer the cancel of command {ticket.seq}"
-                    f" within {self.timeouts.ack_timeout_s:g} s"
+                    f"the robot program did not answer the cancel of command {ticket.seq} {within}"
                 )
 
     def poll(self, motion: Motion) -> None:
@@ -781,6 +823,38 @@ def _motion_type(motion: MotionType | str) -> MotionType:
         raise ConfigError(f"motion must be one of {choices}, got {motion!r}") from None
 
 
+#: The range of each numeric option of :class:`Robot` (its constructor and its setters
+#: check them alike, :func:`_checked_option`); docs/robot-api.md lists them.
+_OPTION_BOUNDS: dict[str, Bounds] = {
+    "poll_interval_s": Bounds(0.001, 5.0, "s"),
+    "request_timeout_s": Bounds(0.0, 60.0, "s", open_low=True),
+    "position_tolerance_mm": Bounds(0.0, 50.0, "mm", open_low=True),
+    "orientation_tolerance_deg": Bounds(0.0, 45.0, "deg", open_low=True),
+    "gripper_settle_s": Bounds(0.0, 60.0, "s", open_low=True),
+}
+
+
+def _checked_option(name: str, value: object) -> float:
+    """``value`` for the Robot option ``name``; a ConfigError naming it and its range."""
+    return require_in(name, value, _OPTION_BOUNDS[name])
+
+
+def _speed_limit(value: object) -> int:
+    """``max_speed_percent`` when it is an integer in [1, 100]; a ConfigError otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
+        raise ConfigError(f"max_speed_percent must be an integer in [1, 100] %, got {value!r}")
+    return value
+
+
+def _policy(name: str, value: object, kind: type[_PolicyT]) -> _PolicyT:
+    """``value`` when it is a ``kind`` (None: the default one); a ConfigError otherwise."""
+    if value is None:
+        return kind()
+    if not isinstance(value, kind):
+        raise ConfigError(f"{name} must be a tmmaster.{kind.__name__}, got {value!r}")
+    return value
+
+
 @dataclass(frozen=True)
 class _Mount:
     """What a Robot hands its gripper driver (:class:`~tmmaster._gripper.GripperMount`)."""
@@ -832,22 +906,22 @@ class Robot:
             ``"onrobot-2fg7"``, a gripper TOML file, a GripperProfile, or a Gripper.
         gripper_host: Where a stand-alone gripper listens; None: the robot's host.
         gripper_port: The stand-alone gripper's port.
-        poll_interval_s: Seconds between two status reads of a wait.
+        poll_interval_s: Seconds between two status reads of a wait, 0.001 to 5.
         polling: When a move is polled (dense around the acknowledgement and the
             expected end); None: ``PollPolicy()``.
         timeouts: Acknowledgement, motion and gripper timeouts; None:
             ``TimeoutPolicy()``.
         retry: How transient failures are retried (never a command write); None:
             ``RetryPolicy()``, up to 12 attempts within 10 s.
-        request_timeout_s: Bound of one Modbus request, s.
+        request_timeout_s: Bound of one Modbus request, s (up to 60).
         workspace: Where the tool may go (a table plane at z = 0 and a box); None:
             ``Workspace()``.
-        max_speed_percent: Faster moves are refused, 1..100.
+        max_speed_percent: Faster moves are refused, an integer 1..100.
         position_tolerance_mm: A finished move's TCP must be this close to the
-            target, mm.
-        orientation_tolerance_deg: ... and its orientation this close, deg.
+            target, mm (up to 50).
+        orientation_tolerance_deg: ... and its orientation this close, deg (up to 45).
         gripper_settle_s: The article profile's register gripper (no busy flag): how
-            long an open or a close takes at most, s.
+            long an open or a close takes at most, s (up to 60).
         tool: The TCP in the flange frame (mm, deg): poses are TCP poses, TCP = flange
             x tool; None: the TCP is the flange.
         name: The robot's name in messages and logs.
@@ -862,8 +936,9 @@ class Robot:
             metres or radians.
 
     Raises:
-        ConfigError: An invalid argument, named in the message (an unknown profile or
-            model: RegisterMapError).
+        ConfigError: An invalid argument, named in the message with its range where it
+            has one (an unknown profile or model: RegisterMapError). The setters of
+            the options check what the constructor checks.
     """
 
     def __init__(
@@ -911,16 +986,28 @@ class Robot:
         self.profile = robot_profile(profile)
         #: The arm model.
         self.model = model if isinstance(model, RobotModel) else robot_model(model)
-        if not 1 <= max_speed_percent <= 100:
-            raise ConfigError(f"max_speed_percent must be 1..100, got {max_speed_percent}")
-        for option, value in (
-            ("poll_interval_s", poll_interval_s),
-            ("request_timeout_s", request_timeout_s),
-            ("position_tolerance_mm", position_tolerance_mm),
-            ("orientation_tolerance_deg", orientation_tolerance_deg),
-            ("gripper_settle_s", gripper_settle_s),
-        ):
-            require_positive(option, value)
+        # Checked as the setters check them (one rule each, docs/robot-api.md).
+        max_speed_percent = _speed_limit(max_speed_percent)
+        (
+            poll_interval_s,
+            request_timeout_s,
+            position_tolerance_mm,
+            orientation_tolerance_deg,
+            gripper_settle_s,
+        ) = (
+            _checked_option(option, value)
+            for option, value in (
+                ("poll_interval_s", poll_interval_s),
+                ("request_timeout_s", request_timeout_s),
+                ("position_tolerance_mm", position_tolerance_mm),
+                ("orientation_tolerance_deg", orientation_tolerance_deg),
+                ("gripper_settle_s", gripper_settle_s),
+            )
+        )
+        polling, timeouts = (
+            _policy("polling", polling, PollPolicy),
+            _policy("timeouts", timeouts, TimeoutPolicy),
+        )
         #: The robot's name in messages and logs.
         self.name = name
         #: Where the tool may go: the table plane (on by default) and the TCP's box.
@@ -955,8 +1042,7 @@ class Robot:
         self._joints_hint: tuple[float, ...] | None = None
         self._hint_pose: Pose | None = None
         self._joints_mismatch_logged = False
-        #: Faster moves are refused, %.
-        self.max_speed_percent = max_speed_percent
+        self._max_speed_percent = max_speed_percent
         link: dict[str, Any] = {
             "device_id": self.profile.device_id,
             "timeout": request_timeout_s,
@@ -992,8 +1078,8 @@ class Robot:
             self._stop_event,
             self._log,
             poll_interval_s=poll_interval_s,
-            polling=polling if polling is not None else PollPolicy(),
-            timeouts=timeouts if timeouts is not None else TimeoutPolicy(),
+            polling=polling,
+            timeouts=timeouts,
             position_tolerance_mm=position_tolerance_mm,
             orientation_tolerance_deg=orientation_tolerance_deg,
         )
@@ -1056,7 +1142,7 @@ class Robot:
 
     @poll_interval_s.setter
     def poll_interval_s(self, value: float) -> None:
-        self._follower.poll_interval_s = value
+        self._follower.poll_interval_s = _checked_option("poll_interval_s", value)
 
     @property
     def polling(self) -> PollPolicy:
@@ -1065,7 +1151,9 @@ class Robot:
 
     @polling.setter
     def polling(self, value: PollPolicy) -> None:
-        self._follower.polling = value
+        if value is None:
+            raise ConfigError("polling must be a tmmaster.PollPolicy, got None")
+        self._follower.polling = _policy("polling", value, PollPolicy)
 
     @property
     def timeouts(self) -> TimeoutPolicy:
@@ -1074,7 +1162,9 @@ class Robot:
 
     @timeouts.setter
     def timeouts(self, value: TimeoutPolicy) -> None:
-        self._follower.timeouts = value
+        if value is None:
+            raise ConfigError("timeouts must be a tmmaster.TimeoutPolicy, got None")
+        self._follower.timeouts = _policy("timeouts", value, TimeoutPolicy)
 
     @property
     def position_tolerance_mm(self) -> float:
@@ -1083,7 +1173,7 @@ class Robot:
 
     @position_tolerance_mm.setter
     def position_tolerance_mm(self, value: float) -> None:
-        self._follower.position_tolerance_mm = value
+        self._follower.position_tolerance_mm = _checked_option("position_tolerance_mm", value)
 
     @property
     def orientation_tolerance_deg(self) -> float:
@@ -1092,7 +1182,18 @@ class Robot:
 
     @orientation_tolerance_deg.setter
     def orientation_tolerance_deg(self, value: float) -> None:
-        self._follower.orientation_tolerance_deg = value
+        self._follower.orientation_tolerance_deg = _checked_option(
+            "orientation_tolerance_deg", value
+        )
+
+    @property
+    def max_speed_percent(self) -> int:
+        """Faster moves are refused, % (an integer in [1, 100])."""
+        return self._max_speed_percent
+
+    @max_speed_percent.setter
+    def max_speed_percent(self, value: int) -> None:
+        self._max_speed_percent = _speed_limit(value)
 
     # -- connection -------------------------------------------------------
 
@@ -1251,6 +1352,9 @@ class Robot:
         with deferred():
             self._gate.close()
             self.interrupt()  # waits in progress end now, a fleet's included
+            # Another thread's wait for a withdraw's answer ends now: it stops the command
+            # instead, and this close finishes at once (its own withdraw is not ended so).
+            self._follower.closing.set()
             if self._closed_safely is None or self._transport.state is not ConnectionState.CLOSED:
                 self._closed_safely = self._give_up_outstanding(deadline)
                 self.gripper.disconnect()
@@ -1274,7 +1378,10 @@ class Robot:
         if motion is None:
             return True
         return self._follower.abandon(
-            motion, StopRequestedError("the robot connection is closing"), deadline=deadline
+            motion,
+            StopRequestedError("the robot connection is closing"),
+            deadline=deadline,
+            closer=True,
         )
 
     def _at_exit(self) -> None:
@@ -1375,7 +1482,7 @@ class Robot:
         """
         require_positive("timeout_s", timeout_s)
         deadline = time.monotonic() + timeout_s
-        poller = Poller(self.poll_interval_s, self._stop_event)
+        poller = Poller(self.poll_interval_s, self._stop_event, deadline=deadline)
         while True:
             poller.check()
             status = self.status()
@@ -2180,7 +2287,7 @@ class Robot:
                 return
         else:
             deadline = time.monotonic() + self.timeouts.in_flight_s
-            poller = Poller(self.poll_interval_s, self._stop_event)
+            poller = Poller(self.poll_interval_s, self._stop_event, deadline=deadline)
             while time.monotonic() < deadline:
                 poller.sleep()
                 if self._channel.write_landed(ticket):
