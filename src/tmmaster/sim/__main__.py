@@ -35,6 +35,9 @@ from ._world import DEFAULT_PART_POSE, TableObject
 #: Most parts ``--parts`` puts on the table: as many as ``--cycles`` of pick & place runs.
 MAX_PARTS = 1_000_000
 
+#: After SIGINT or SIGTERM the process ends within this many seconds, closed cleanly or not.
+STOP_WITHIN_S = 5.0
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the simulator's options to ``parser`` (used by ``tmmaster sim``); return it."""
@@ -280,18 +283,8 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
         return 2
     if args.mjcf is not None or args.snapshot is not None:
         return _write_scene(sim, args.mjcf, args.snapshot)
-    stop = threading.Event()
-    reset = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        _ = frame
-        # SIGUSR1 is the operator's reset on the pendant: clear the error, keep running.
-        (reset if signum == signal.SIGUSR1 else stop).set()
-
-    previous = {
-        sig: signal.signal(sig, on_signal)
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
-    }
+    signals = _Signals()
+    stop, reset = signals.stop, signals.reset
     try:
         try:
             sim.start()
@@ -314,10 +307,58 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
                 print("robot error reset (SIGUSR1)", flush=True)
     finally:
         sim.close()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        signals.restore()
     print("simulator stopped", flush=True)
     return 0
+
+
+class _Signals:
+    """SIGINT and SIGTERM stop the simulator, SIGUSR1 resets a robot error (installed now).
+
+    The stop always ends the process: a second SIGINT/SIGTERM ends it at once, and a
+    simulator that has not closed :data:`STOP_WITHIN_S` after the first is left behind
+    (exit 1, one line on stderr) rather than ignoring the signal.
+    """
+
+    def __init__(self) -> None:
+        self.stop = threading.Event()
+        self.reset = threading.Event()
+        self._watchdog: threading.Timer | None = None
+        self._previous = {
+            sig: signal.signal(sig, self._on_signal)
+            for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
+        }
+
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
+        _ = frame
+        if signum == signal.SIGUSR1:
+            # The operator's reset on the pendant: clear the error, keep running.
+            self.reset.set()
+            return
+        if self.stop.is_set():
+            _exit_now(f"{signal.Signals(signum).name} while stopping: exited without closing")
+        self.stop.set()
+        watchdog = threading.Timer(
+            STOP_WITHIN_S,
+            _exit_now,
+            args=(f"the simulator did not close within {STOP_WITHIN_S:g} s of the signal",),
+        )
+        watchdog.daemon = True
+        watchdog.start()
+        self._watchdog = watchdog
+
+    def restore(self) -> None:
+        """The simulator closed: no watchdog, the previous signal handlers back."""
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+
+def _exit_now(reason: str) -> None:
+    """End the process at once (exit 1) with one line on stderr."""
+    os.write(2, f"sim: {reason} [exit 1]\n".encode())
+    os._exit(1)
 
 
 def _write_scene(sim: Simulator, mjcf: str | None, snapshot: str | None) -> int:

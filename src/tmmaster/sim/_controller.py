@@ -22,7 +22,9 @@ step.
 
 from __future__ import annotations
 
+import math
 import time
+import traceback
 from abc import abstractmethod
 from array import array
 from collections.abc import Sequence
@@ -78,6 +80,9 @@ class SimErrorCode(IntEnum):
     SINGULARITY = 0x0106
     #: The physics view was rebuilt mid-motion and the motion did not survive.
     MOTION_LOST = 0x0107
+    #: The control tick raised (a fault of the simulator, of a backend of one's own, or
+    #: memory exhausted): the robot stops in error instead of freezing its registers.
+    TICK_FAILED = 0x0108
     #: Emergency stop pressed.
     EMERGENCY_STOP = 0x0200
     #: Techman's "Over Payload Limit" (0x0000000F, TMflow SW 2.24 Software Manual,
@@ -264,6 +269,7 @@ class RobotController(SimDevice[RobotProfile]):
         self._motion_log: list[MotionRecord] = []
         self._saturating = False  # the published pose is saturated (encodable range rule)
         self._rest_error_raised = False  # POSE_OUT_OF_RANGE raised for the current rest
+        self._tick_failed = False  # TICK_FAILED reported, not yet reset by the operator
         # Published at every tick: the pose fields and their ranges are looked up once,
         # and a pose equal to the last one that encoded is not encoded again to check it.
         self._tcp_fields = tuple(profile.field(n) for n in TCP_FIELDS)
@@ -394,6 +400,7 @@ class RobotController(SimDevice[RobotProfile]):
         code = self._error_code
         self._error_code = 0
         self._estop = False
+        self._tick_failed = False
         self._publish_error_cleared()
         self._log.info("sim.error_cleared", device=self._name, code=code)
 
@@ -462,6 +469,30 @@ class RobotController(SimDevice[RobotProfile]):
         return 0.0
 
     # -- the tick ----------------------------------------------------------------------
+
+    def tick(self, dt: float) -> None:
+        """Advance by ``dt`` s; an exception inside the tick stops the robot in error.
+
+        The robot stops with :attr:`SimErrorCode.TICK_FAILED` (tmflow: the project stops,
+        its program abandoned without errorstop), logged ``sim.tick_failed`` once until
+        the operator's reset; the next ticks publish the registers as usual.
+
+        Raises:
+            ValueError: ``dt`` is not a finite number >= 0.
+        """
+        if not math.isfinite(dt) or dt < 0:
+            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
+        try:
+            super().tick(dt)
+        except Exception as exc:
+            if not self._tick_failed:
+                self._tick_failed = True
+                _log_tick_failure(self._log, self._name, exc)
+                self._abandon_program()
+                self._enter_error(SimErrorCode.TICK_FAILED, f"tick failed ({type(exc).__name__})")
+
+    def _abandon_program(self) -> None:
+        """The tick failed: drop whatever program runs, without its error handling."""
 
     def _run(self, dt: float, ready: bool) -> None:
         self._take_backend_fault()
@@ -861,3 +892,16 @@ class RobotController(SimDevice[RobotProfile]):
             return self._profile.field(field).code_of(label)
         except KeyError:
             return default
+
+
+def _log_tick_failure(log: Logger, device: str, exc: Exception) -> None:
+    """One error-level line: the exception that ended a tick, and where it was raised."""
+    frames = traceback.extract_tb(exc.__traceback__)[-1:]
+    where = f"{frames[0].filename}:{frames[0].lineno} in {frames[0].name}" if frames else "?"
+    log_error = getattr(log, "error", log.warning)  # a Logger may have no error()
+    log_error(
+        "sim.tick_failed",
+        device=device,
+        error=f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__,
+        where=where,
+    )

@@ -45,6 +45,11 @@ from ._sequence import SequenceController
 #: Statements a program may run per control tick before it yields to the robot (a busy
 #: loop must not freeze the simulator; TMflow time-slices a project the same way).
 STATEMENTS_PER_TICK = 400
+#: Wall seconds a program may run per control tick, whichever of the two budgets ends
+#: first: slow statements yield too, so the Modbus server (on the same thread) keeps
+#: answering. A statement running then finishes first (a bounded one: strings and
+#: arrays are capped, see ``docs/tmscript.md``).
+TICK_SECONDS = 0.01
 
 #: The Modbus tables behind each function code, and whether it writes.
 _FUNCTIONS: dict[int, tuple[Table, bool]] = {
@@ -430,9 +435,15 @@ class ScriptProjectController(SequenceController):
         self._queue.clear()
         if execution is not None:
             if self._error_code:
-                execution.fail(reason)  # errorstop ([TS] 3.4, p. 31)
+                execution.fail(reason, max_seconds=TICK_SECONDS)  # errorstop ([TS] 3.4, p. 31)
             else:
-                execution.stop()  # closestop ([TS] 3.3, p. 30)
+                execution.stop(max_seconds=TICK_SECONDS)  # closestop ([TS] 3.3, p. 30)
+
+    def _abandon_program(self) -> None:
+        # The tick failed: the program is dropped as it is, without errorstop (which would
+        # run on a state the failure may have left half-updated).
+        self._execution = None
+        self._queue.clear()
 
     def _run_handshake(self, dt: float, ready: bool) -> None:
         self._handle_buttons()
@@ -450,7 +461,7 @@ class ScriptProjectController(SequenceController):
             self._start_queued()
 
     def _step(self, execution: Execution) -> None:
-        status = execution.step(STATEMENTS_PER_TICK)
+        status = execution.step(STATEMENTS_PER_TICK, TICK_SECONDS)
         if self._execution is not execution:
             return  # the program stopped the project (Exit()) or failed: handled below
         if status.state == "ended":

@@ -18,7 +18,7 @@ from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 
 from ._host import Host, ModbusDevice, MotionCall
-from ._types import ARRAY_MAX, Scalar, Value, display_text, to_f32, wrap32
+from ._types import ARRAY_MAX, STRING_MAX, Scalar, Value, display_text, to_f32, wrap32
 
 __all__ = ["BUILTINS", "UNSUPPORTED", "Builtin", "BuiltinError", "Runtime", "Signature"]
 
@@ -438,7 +438,13 @@ def _String_Split(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
 def _String_Replace(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.20 String_Replace, p. 82 (an empty search string replaces nothing)."""
     text, old, new = _str(args[0]), _str(args[1]), _str(args[2])
-    return text.replace(old, new) if old else text
+    if not old:
+        return text
+    # Counted before it is built: a short text can grow past any memory.
+    length = len(text) + text.count(old) * (len(new) - len(old))
+    if length > STRING_MAX:
+        raise BuiltinError(f"a string holds at most {STRING_MAX} characters, not {length}")
+    return text.replace(old, new)
 
 
 @_register("4.21", 83, "string(string)")

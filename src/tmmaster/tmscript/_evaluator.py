@@ -11,6 +11,7 @@ function; only those become generators (the common statement costs one call).
 from __future__ import annotations
 
 import enum
+import math
 import time
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from ._parser import parse_script
 from ._types import (
     INTEGRAL,
     NUMERIC,
+    STRING_MAX,
     ConversionError,
     Value,
     convert,
@@ -48,6 +50,16 @@ __all__ = [
 
 #: Longest a closestop or errorstop section runs (TMscript 2.24 §3.3, p. 30).
 STOP_SECTION_LIMIT_S = 12.0
+#: With a time budget (:meth:`Execution.step`'s ``max_seconds``), the clock is read every
+#: this many statements...
+CLOCK_EVERY = 8
+#: ...and after every statement once a slice of them took this long (wall seconds).
+SLOW_SLICE_S = 0.001
+#: :meth:`Execution.run_to_end` checks its timeout at least this often (wall seconds,
+#: plus the statement running then).
+RUN_SLICE_S = 0.05
+#: After the timeout, closestop gets this long (wall seconds) before run_to_end raises.
+TIMEOUT_CLOSESTOP_S = 0.5
 
 _BUDGET = "budget"
 _BLOCKED = "blocked"
@@ -86,11 +98,47 @@ class _Frame:
 
 
 class _Run(Runtime):
-    """The runtime state one execution shares with every closure."""
+    """The runtime state one execution shares with every closure.
+
+    The budget of a step: ``budget`` counts down the statements of the current slice;
+    when it runs out, :meth:`spent` says whether the step's budget is (statements or
+    time) or hands out the next slice. With a time budget a slice is
+    :data:`CLOCK_EVERY` statements, one after a slice that took :data:`SLOW_SLICE_S`
+    or more: the clock is read often enough that a slow statement overshoots it by
+    itself only.
+    """
 
     def __init__(self, host: Host) -> None:
         super().__init__(host)
         self.budget = 0
+        self._left = 0  # statements of the step not yet handed out in a slice
+        self._deadline = math.inf  # time.monotonic() at which the step yields
+        self._sliced = 0.0  # time.monotonic() when the current slice began
+
+    def start(self, max_statements: int, max_seconds: float | None) -> None:
+        """Budget a step: at most ``max_statements`` statements and ``max_seconds``."""
+        self.budget = 0
+        self._left = max(1, max_statements)
+        if max_seconds is None:
+            self._deadline = math.inf
+        else:
+            self._sliced = time.monotonic()
+            self._deadline = self._sliced + max(0.0, max_seconds)
+
+    def spent(self) -> bool:
+        """The slice ran out: True when the step's budget is spent, else a new slice."""
+        if self._left <= 0:
+            return True
+        size = self._left
+        if self._deadline != math.inf:
+            now = time.monotonic()
+            if now >= self._deadline:
+                return True
+            size = min(size, 1 if now - self._sliced >= SLOW_SLICE_S else CLOCK_EVERY)
+            self._sliced = now
+        self._left -= size
+        self.budget = size - 1  # the statement that asked is the slice's first
+        return False
 
 
 class _Return:
@@ -134,6 +182,18 @@ def _syntax(node: a.Node, message: str) -> TMScriptSyntaxError:
 
 def _runtime(node: a.Node, message: str) -> TMScriptRuntimeError:
     return TMScriptRuntimeError(message, line=node.line, column=node.column)
+
+
+def _too_long(node: a.Node, length: int) -> TMScriptRuntimeError:
+    """A string over :data:`~._types.STRING_MAX` characters (tmmaster's bound)."""
+    return _runtime(node, f"a string holds at most {STRING_MAX} characters, not {length}")
+
+
+def _capped(node: a.Node, result: Value) -> Value:
+    """A built-in's ``result``, refused when it is a string over the cap."""
+    if isinstance(result, str) and len(result) > STRING_MAX:
+        raise _too_long(node, len(result))
+    return result
 
 
 def _type_name(spec: a.TypeSpec) -> str:
@@ -292,7 +352,7 @@ class _Compiler:
             rt = fr.rt
             for simple, fn in steps:
                 rt.budget -= 1
-                if rt.budget < 0:
+                if rt.budget < 0 and rt.spent():
                     yield _BUDGET
                 if simple:
                     fn(fr)
@@ -313,7 +373,7 @@ class _Compiler:
         def run(fr: _Frame) -> Generator[str, None, Control]:
             rt = fr.rt
             rt.budget -= 1
-            if rt.budget < 0:
+            if rt.budget < 0 and rt.spent():
                 yield _BUDGET
             pure(fr)
             return None
@@ -491,7 +551,7 @@ class _Compiler:
             rt = fr.rt
             while True:
                 rt.budget -= 1  # each iteration counts: while(true){} yields
-                if rt.budget < 0:
+                if rt.budget < 0 and rt.spent():
                     yield _BUDGET
                 if not truthy((yield from test(fr))):
                     return None
@@ -511,7 +571,7 @@ class _Compiler:
             rt = fr.rt
             while True:
                 rt.budget -= 1
-                if rt.budget < 0:
+                if rt.budget < 0 and rt.spent():
                     yield _BUDGET
                 ctl = yield from body(fr)
                 if ctl is _BREAK:
@@ -539,7 +599,7 @@ class _Compiler:
                 yield from init(fr)
             while True:
                 rt.budget -= 1
-                if rt.budget < 0:
+                if rt.budget < 0 and rt.spent():
                     yield _BUDGET
                 if test is not None and not truthy((yield from test(fr))):
                     return None
@@ -739,7 +799,14 @@ class _Compiler:
         if op == "+" and ("string" in (lt, rt_)):
             if is_array(lt) or is_array(rt_):
                 raise _syntax(node, "an array cannot be added to a string")
-            return (lambda x, y: display_text(x, lt) + display_text(y, rt_)), "string"
+
+            def concat(x: Value, y: Value) -> str:
+                left, right = display_text(x, lt), display_text(y, rt_)
+                if len(left) + len(right) > STRING_MAX:
+                    raise _too_long(node, len(left) + len(right))
+                return left + right
+
+            return concat, "string"
         if op in ("==", "!=", "<", "<=", ">", ">="):
             return self.comparison(node, op, lt, rt_), "bool"
         if lt not in NUMERIC or rt_ not in NUMERIC:
@@ -1002,7 +1069,7 @@ class _Compiler:
                 # Display shows any value as TMflow writes it (§5.6; arrays as {1,2,3}).
                 shown_type = ce.type
                 shown = cast(PureFn, ce.fn)
-                fns.append(_CExpr(_shown(shown, shown_type), "string", False))
+                fns.append(_CExpr(_shown(shown, shown_type, arg), "string", False))
                 types.append("string")
             elif want in ("?", "?[]", "*"):
                 fns.append(ce)
@@ -1017,7 +1084,7 @@ class _Compiler:
         name = node.name
 
         def fail(exc: Exception) -> TMScriptRuntimeError:
-            return _runtime(node, f"{name}(): {exc}")
+            return _runtime(node, f"{name}(): {str(exc) or type(exc).__name__}")
 
         impl = builtin.impl
         blocking = builtin.blocking
@@ -1027,7 +1094,7 @@ class _Compiler:
             def call_pure(fr: _Frame) -> Value:
                 values = [fn(fr) for fn in pure]
                 try:
-                    return impl(fr.rt, values, arg_types)
+                    return _capped(node, impl(fr.rt, values, arg_types))
                 except (ExitRequest, TMScriptRuntimeError):
                     raise
                 except (HostError, TMMasterError, OSError, ValueError, ArithmeticError) as exc:
@@ -1045,9 +1112,9 @@ class _Compiler:
                 values.append((yield from f(fr)) if gen else f(fr))
             try:
                 if blocking is not None:
-                    return (yield from blocking(fr.rt, values, arg_types))
+                    return _capped(node, (yield from blocking(fr.rt, values, arg_types)))
                 assert impl is not None
-                return impl(fr.rt, values, arg_types)
+                return _capped(node, impl(fr.rt, values, arg_types))
             except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
                 raise
             except Exception as exc:
@@ -1151,8 +1218,22 @@ class _Compiler:
         return _CExpr(preset, "bool", False)
 
 
-def _shown(fn: PureFn, typ: str) -> PureFn:
-    return lambda fr: display_text(fn(fr), typ)
+def _shown(fn: PureFn, typ: str, node: a.Node) -> PureFn:
+    """``Display``'s text of a value that is not a string (an array as ``{1,2,3}``)."""
+
+    def show(fr: _Frame) -> str:
+        value = fn(fr)
+        if isinstance(value, list) and typ == "string[]":
+            # Counted before it is built: the elements may be long strings.
+            length = sum(len(cast(str, item)) + 1 for item in value) + 1
+            if length > STRING_MAX:
+                raise _too_long(node, length)
+        text = display_text(value, typ)
+        if len(text) > STRING_MAX:
+            raise _too_long(node, len(text))
+        return text
+
+    return show
 
 
 def _copy(value: Value) -> Value:
@@ -1389,54 +1470,42 @@ class Execution:
                 self.error = error
             self._finish()
 
-    def step(self, max_statements: int = 1000) -> Status:
-        """Run until the script blocks, ends, fails or has run ``max_statements`` statements.
+    def step(self, max_statements: int = 1000, max_seconds: float | None = None) -> Status:
+        """Run until the script blocks, ends, fails or has spent its budget.
 
         Each statement and each loop iteration counts. The next call goes on where this
-        one stopped.
+        one stopped. A statement that fails in Python (out of memory, too deep a
+        recursion, a fault of the interpreter) is a runtime error of the script: it runs
+        errorstop like any other.
 
         Args:
-            max_statements: The budget (at least 1).
+            max_statements: The most statements to run (at least 1).
+            max_seconds: The most wall seconds to run (``time.monotonic()``), or None for
+                no limit: the step yields once they have passed, overshooting by the
+                statement that was running (the clock is read every
+                :data:`CLOCK_EVERY` statements, after every one once they run slowly).
 
         Returns:
             The new ``state``, with ``error`` and ``exit_code``.
         """
-        self._step(max_statements)
+        self._step(max_statements, max_seconds)
         return Status(self.state, self.error, self.exit_code)
 
-    def _step(self, max_statements: int) -> ExecState:
+    def _step(self, max_statements: int, max_seconds: float | None = None) -> ExecState:
         if self.state in (ExecState.ENDED, ExecState.ERROR):
             return self.state
         if self._rt.paused:
             self.state = ExecState.PAUSED
             return self.state
-        self._rt.budget = max(1, max_statements)
+        self._rt.start(max_statements, max_seconds)
         while self._gen is not None:
             if self._phase != "main" and (
                 self.host.now_s() - self._phase_start > STOP_SECTION_LIMIT_S
             ):
                 self._finish()  # closed after 12 s at most (§3.3, p. 30)
                 break
-            try:
-                signal = next(self._gen)
-            except StopIteration:
-                if self._phase == "main":
-                    self._enter("closestop")
-                else:
-                    self._finish()
-                continue
-            except ExitRequest as exit_:
-                self.exit_code = exit_.code
-                if self._phase != "main":
-                    self._finish()
-                else:
-                    self._enter("errorstop" if exit_.code < 0 else "closestop")
-                continue
-            except TMScriptRuntimeError as exc:
-                self._on_error(exc)
-                continue
-            except RecursionError:
-                self._on_error(TMScriptRuntimeError("too deep recursion", line=0, column=0))
+            signal = self._advance(self._gen)
+            if signal is None:
                 continue
             if signal == _BUDGET:
                 self.state = ExecState.RUNNING
@@ -1447,20 +1516,47 @@ class Execution:
             return self.state
         return self.state
 
+    def _advance(self, gen: Generator[str, None, Control]) -> str | None:
+        """Run ``gen`` to its next yield; None when it ended or failed (handled here)."""
+        try:
+            return next(gen)
+        except StopIteration:
+            if self._phase == "main":
+                self._enter("closestop")
+            else:
+                self._finish()
+        except ExitRequest as exit_:
+            self.exit_code = exit_.code
+            if self._phase != "main":
+                self._finish()
+            else:
+                self._enter("errorstop" if exit_.code < 0 else "closestop")
+        except TMScriptRuntimeError as exc:
+            self._on_error(exc)
+        except RecursionError:
+            self._on_error(TMScriptRuntimeError("too deep recursion", line=0, column=0))
+        except MemoryError:
+            self._on_error(TMScriptRuntimeError("out of memory", line=0, column=0))
+        except Exception as exc:  # a fault of the interpreter: the script stops in error
+            reason = f"internal error: {type(exc).__name__}: {exc}"
+            self._on_error(TMScriptRuntimeError(reason, line=0, column=0))
+        return None
+
     def resume(self) -> None:
         """Resume after ``Pause()`` (the Play button)."""
         self._rt.paused = False
         if self.state == ExecState.PAUSED:
             self.state = ExecState.RUNNING
 
-    def stop(self, max_statements: int = 100_000) -> ExecState:
+    def stop(self, max_statements: int = 100_000, max_seconds: float | None = None) -> ExecState:
         """Stop the project (the Stop button): run ``closestop`` (TMscript 2.24 §3.3).
 
-        closestop runs at once with its own budget; if it blocks (a Sleep), later
-        :meth:`step` calls finish it.
+        closestop runs at once with its own budget; if it blocks (a Sleep) or spends the
+        budget, later :meth:`step` calls finish it.
 
         Args:
             max_statements: closestop's budget now.
+            max_seconds: closestop's time budget now (wall seconds), None for none.
 
         Returns:
             The new ``state``.
@@ -1468,15 +1564,21 @@ class Execution:
         if self._phase == "main" and self.state not in (ExecState.ENDED, ExecState.ERROR):
             self._rt.paused = False
             self._enter("closestop")
-            self._step(max_statements)
+            self._step(max_statements, max_seconds)
         return self.state
 
-    def fail(self, error: str | TMScriptRuntimeError, max_statements: int = 100_000) -> ExecState:
+    def fail(
+        self,
+        error: str | TMScriptRuntimeError,
+        max_statements: int = 100_000,
+        max_seconds: float | None = None,
+    ) -> ExecState:
         """An error from outside the script (an emergency stop): run ``errorstop`` (§3.4).
 
         Args:
             error: The error, or its message.
             max_statements: errorstop's budget now.
+            max_seconds: errorstop's time budget now (wall seconds), None for none.
 
         Returns:
             The new ``state``.
@@ -1488,15 +1590,16 @@ class Execution:
         self._rt.paused = False
         self._on_error(error)
         if self._gen is not None:
-            self._step(max_statements)
+            self._step(max_statements, max_seconds)
         return self.state
 
     def run_to_end(self, timeout_s: float | None = None, poll_s: float = 0.001) -> ExecState:
         """Step until the project ends, sleeping (wall clock) while it waits.
 
         Args:
-            timeout_s: Stop the project (closestop) after this many seconds; None: no
-                limit.
+            timeout_s: Stop the project (closestop) after this many wall seconds; None:
+                no limit. It is checked every :data:`RUN_SLICE_S` at least (plus the
+                statement running then), whatever the script does.
             poll_s: Wall seconds to sleep while the script waits.
 
         Returns:
@@ -1504,15 +1607,16 @@ class Execution:
             paused itself and nothing can resume it.
 
         Raises:
-            TimeoutError: The timeout ran out (the project was stopped first).
+            TimeoutError: The timeout ran out (the project was stopped first: closestop
+                got :data:`TIMEOUT_CLOSESTOP_S` at most).
         """
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
-            state = self._step(10_000)
+            state = self._step(10_000, None if deadline is None else RUN_SLICE_S)
             if state in (ExecState.ENDED, ExecState.ERROR, ExecState.PAUSED):
                 return state
             if deadline is not None and time.monotonic() > deadline:
-                self.stop()
+                self.stop(max_seconds=TIMEOUT_CLOSESTOP_S)
                 raise TimeoutError(f"the script ran longer than {timeout_s} s")
             if state == ExecState.BLOCKED:
                 time.sleep(poll_s)

@@ -13,15 +13,22 @@ from functools import cache
 from importlib.resources import files
 from typing import cast
 
-from lark import Lark, Token, Transformer, v_args
+from lark import Lark, Token, Transformer, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 from lark.lark import PostLex
 from lark.tree import Meta
 
 from .._exceptions import TMScriptSyntaxError
 from . import _ast as a
+from ._types import STRING_MAX
 
-__all__ = ["parse_script"]
+__all__ = ["MAX_NESTING", "parse_script"]
+
+#: How deeply a script may nest: each operand of an operator, each call, block and
+#: statement inside another is one level (``1+1+...+1`` nests once per ``+``). The
+#: manual states no limit: this one is tmmaster's, as checking and running a script
+#: takes a Python stack frame or two per level.
+MAX_NESTING = 200
 
 #: Words after which a ``{`` opens a block (anything else opens an array constant).
 _BLOCK_OPENERS = frozenset({")", "else", "do", "define", "main", "closestop", "errorstop"})
@@ -429,7 +436,13 @@ class _ToAst(Transformer[Token, object]):
         return a.Literal(**_pos(meta), value=value, type=typ)
 
     def string_literal(self, meta: Meta, children: list[object]) -> a.Literal:
-        return a.Literal(**_pos(meta), value=_string_value(str(children[0])), type="string")
+        value = _string_value(str(children[0]))
+        if len(value) > STRING_MAX:
+            raise TMScriptSyntaxError(
+                f"a string holds at most {STRING_MAX} characters, not {len(value)}",
+                **_pos(meta),
+            )
+        return a.Literal(**_pos(meta), value=value, type="string")
 
     def array_literal(self, meta: Meta, children: list[object]) -> a.ArrayLiteral:
         return a.ArrayLiteral(**_pos(meta), items=_exprs(children))
@@ -459,15 +472,47 @@ def _describe(exc: UnexpectedInput) -> str:
     return "syntax error"
 
 
+def _check_nesting(tree: Tree[Token]) -> None:
+    """Raise TMScriptSyntaxError where ``tree`` nests deeper than :data:`MAX_NESTING`.
+
+    Walked with a stack of its own (the tree may be as deep as the text is long).
+    """
+    stack: list[tuple[Tree[Token], int]] = [(tree, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > MAX_NESTING:
+            line, column = _tree_position(node)
+            raise TMScriptSyntaxError(
+                f"the script nests more than {MAX_NESTING} levels deep here"
+                " (split the expression or the blocks)",
+                line=line,
+                column=column,
+            )
+        stack.extend((child, depth + 1) for child in node.children if isinstance(child, Tree))
+
+
+def _tree_position(node: Tree[Token]) -> tuple[int, int]:
+    """Where ``node`` starts: its position, else its first token's."""
+    meta = node.meta
+    if not meta.empty:
+        return meta.line, meta.column
+    for token in node.scan_values(lambda v: isinstance(v, Token)):
+        return token.line or 1, token.column or 1
+    return 1, 1
+
+
 def parse_script(text: str) -> a.Script:
     """Parse a Script Project's text into its syntax tree.
 
     :param text: the whole script.
     :returns: the :class:`._ast.Script`.
-    :raises TMScriptSyntaxError: the text is not TMscript; ``line``/``column`` say where.
+    :raises TMScriptSyntaxError: the text is not TMscript, nests more than
+        :data:`MAX_NESTING` levels deep or has a string constant over
+        :data:`~._types.STRING_MAX` characters; ``line``/``column`` say where.
     """
     try:
         tree = _parser().parse(text)
+        _check_nesting(tree)
         return cast(a.Script, _ToAst().transform(tree))
     except UnexpectedInput as exc:
         line, column = _error_position(exc, text)

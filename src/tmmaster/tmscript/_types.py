@@ -13,6 +13,7 @@ from typing import TypeAlias
 
 __all__ = [
     "ARRAY_MAX",
+    "STRING_MAX",
     "ConversionError",
     "Scalar",
     "Value",
@@ -33,6 +34,9 @@ Value: TypeAlias = Scalar | list[int] | list[float] | list[bool] | list[str] | l
 
 #: The most elements an array holds (TMscript 2.24 §2.3, p. 18).
 ARRAY_MAX = 2048
+#: The most characters a string holds. The manual states no limit: this one is
+#: tmmaster's, so that a program doubling a string ends with an error, not out of memory.
+STRING_MAX = 65536
 
 INTEGRAL = frozenset({"byte", "int16", "int", "int32"})
 NUMERIC = INTEGRAL | {"float", "double"}
