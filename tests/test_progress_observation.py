@@ -111,6 +111,7 @@ class _Motion:
         self.expected_s = 2.0
         self.timeout_s = 10.0
         self.last_pose: Pose | None = None
+        self.start: Pose | None = Pose(0, 0, 300, 180, 0, 0)
         self.accel_s = 0.2
         self.timeout_from_model = True
 
@@ -126,6 +127,7 @@ def _follow(motion: _Motion) -> FollowState:
         poll_interval_s=0.05,
         polling=PollPolicy(),
         ack_timeout_s=1.0,
+        stall_s=1.0,
     )
 
 
@@ -147,24 +149,82 @@ def test_a_robot_seen_moving_slower_than_the_model_gets_more_time(from_model: bo
     motion.timeout_from_model = from_model
     follow = _follow(motion)
     _half_pace(motion, follow)
+    # A quarter of the model's pace from then on: still moving past the model's budget
+    # (its polls see progress), it gets more time.
+    for at in (2.0, 3.0, 4.0, 4.6):
+        _seen_at(motion, follow, at, _quarter_pace(at))
     assert follow.overdue(4.7) is (None if from_model else Overdue.MOTION)
-    # Twice the budget for a robot moving at half the model's pace; a timeout the user
-    # fixed stays as it is.
-    assert follow.overdue(9.3) is Overdue.MOTION
+    for at in (5.5, 6.5, 7.5):
+        _seen_at(motion, follow, at, _quarter_pace(at))
+    assert follow.overdue(8.4) is (None if from_model else Overdue.MOTION)
+    # A timeout the user fixed stays as it is; a grown one needs progress to go on.
+    assert follow.overdue(8.6) is Overdue.MOTION
+
+
+def _quarter_pace(at: float) -> float:
+    """How much of its path an arm at a quarter of the model's pace covered at ``at``."""
+    return trapezoid_progress(at / 4, 2.0, 0.2)
+
+
+def _seen_at(motion: _Motion, follow: FollowState, at: float, progress: float) -> None:
+    """A poll at ``at`` that sees the arm at ``progress`` of its path."""
+    follow.poll_started = at
+    motion.last_pose = Pose(100 * progress, 0, 300, 180, 0, 0)
+    follow.due()
+
+
+def test_an_arm_that_stops_is_a_stall_within_the_model_budget() -> None:
+    # The arm moves at half the model's pace (the budget would grow to 9.2 s), then
+    # stops at 1.5 s: the polls see no progress, and the model's 4.6 s budget stands.
+    ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
+    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
+    motion = _Motion(ticket)
+    motion.timeout_s = 4.6
+    follow = _follow(motion)
+    _half_pace(motion, follow)
+    stopped = trapezoid_progress(0.75, 2.0, 0.2)
+    for at in (1.5, 2.0, 3.0, 4.0, 4.5):
+        _seen_at(motion, follow, at, stopped)
+    assert follow.schedule.pace > 1.0  # the pace alone would have given it more time
+    assert follow.overdue(4.55) is None
+    assert follow.overdue(4.61) is Overdue.MOTION
+    assert follow.applied_budget() == pytest.approx(4.6)
+    assert "a stall" in follow.describe_stall()
+
+
+def test_an_arm_that_stops_past_the_model_budget_is_a_stall_after_its_bound() -> None:
+    ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
+    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
+    motion = _Motion(ticket)
+    motion.timeout_s = 4.6
+    follow = _follow(motion)
+    _half_pace(motion, follow)
+    for at in (2.0, 3.0, 4.0, 5.0, 6.0):
+        _seen_at(motion, follow, at, _quarter_pace(at))
+    for at in (6.5, 6.9):  # stopped at 6.0
+        _seen_at(motion, follow, at, _quarter_pace(6.0))
+    assert follow.overdue(6.95) is None
+    assert follow.overdue(7.05) is Overdue.MOTION  # 1 s (stall_s) after the last progress
+    assert follow.applied_budget() == pytest.approx(7.0)
+
+
+def test_polls_read_the_pose_from_a_stall_bound_before_the_model_budget_ends() -> None:
+    ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
+    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
+    motion = _Motion(ticket)
+    motion.timeout_s = 4.6
+    follow = _follow(motion)
+    _half_pace(motion, follow)
+    follow.poll_started = 3.7
+    follow.due()
+    assert ticket.observe_pose
 
 
 def test_each_new_pose_moves_the_predicted_end() -> None:
     ticket = Ticket(Command(CommandKind.PTP, TARGET, 50), [], 0.0, seq=1)
     ticket.acknowledged, ticket.acknowledged_at = True, 0.0
     motion = _Motion(ticket)
-    follow = FollowState(
-        motion,
-        None,
-        stop_event=threading.Event(),
-        poll_interval_s=0.05,
-        polling=PollPolicy(),
-        ack_timeout_s=1.0,
-    )
+    follow = _follow(motion)
     follow.poll_started = 0.0
     follow.due()
     assert follow.schedule.expected_end == pytest.approx(2.0)

@@ -236,7 +236,7 @@ class FleetMember:
         ended = threading.Event()
         now = time.monotonic()
         # The loop hands back by the deadlines; beyond them, the last poll's requests.
-        bound = max(follow.ack_deadline - now, 0.0) + follow.budget
+        bound = max(follow.ack_deadline - now, 0.0) + follow.longest_budget()
         bound += 4 * self.transport.timeout + _LOOP_GRACE_S
         future = self.fleet._submit(self._follow(follow, ended))
         if future is None:

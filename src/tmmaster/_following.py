@@ -14,15 +14,24 @@ from enum import Enum
 from typing import Protocol
 
 from ._channels import Observation, Ticket
-from ._poller import MotionSchedule, Poller, PollPolicy
+from ._poller import PACE_LIMIT, MotionSchedule, Poller, PollPolicy
 from ._pose import Pose
 from ._status import MovePhase
+
+#: How far the arm must move between two polls' poses for the wait to count it as
+#: progress: above a reported pose's rounding (0.001 mm on Techman's table, 0.1 mm on
+#: the article's), far below any real move's travel in a poll interval.
+PROGRESS_MM = 0.1
+#: The same for the orientation alone (a move that only turns the tool), deg.
+PROGRESS_DEG = 0.1
 
 
 class FollowedMotion(Protocol):
     """What a wait needs of a :class:`~tmmaster.Motion`."""
 
     phase: MovePhase
+    #: Where the move started, when known.
+    start: Pose | None
     expected_s: float
     timeout_s: float
     last_pose: Pose | None
@@ -63,13 +72,16 @@ class FollowState:
     __slots__ = (
         "_anchored",
         "_observed",
+        "_progress_pose",
         "ack_deadline",
         "budget",
+        "last_progress_at",
         "motion",
         "poll_started",
         "poller",
         "scales_with_pace",
         "schedule",
+        "stall_s",
         "stop_event",
     )
 
@@ -82,6 +94,7 @@ class FollowState:
         poll_interval_s: float,
         polling: PollPolicy,
         ack_timeout_s: float,
+        stall_s: float,
     ) -> None:
         ticket = motion.ticket
         self.motion = motion
@@ -100,6 +113,11 @@ class FollowState:
         self.poll_started = time.monotonic()
         self._anchored = False
         self._observed: Pose | None = None
+        #: How long a move whose budget grew with its pace may show no progress, s.
+        self.stall_s = stall_s
+        #: ``time.monotonic()`` of the poll that last saw the arm move (None: not yet).
+        self.last_progress_at: float | None = None
+        self._progress_pose: Pose | None = motion.start
 
     def due(self) -> float:
         """The monotonic time of the next poll.
@@ -119,10 +137,17 @@ class FollowState:
         pose = motion.last_pose
         if self._anchored and pose is not None and pose is not self._observed:
             self._observed = pose
+            self._note_progress(pose)
             self.schedule.observed(self.poll_started, motion.path_fraction(pose))
         due = self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
-        # A profile whose poll carries no pose reads it once, where it tells the most.
-        ticket.observe_pose = self.schedule.wants_observation(due)
+        # A profile whose poll carries no pose reads it once, where it tells the most;
+        # and at every poll from a stall's bound before the model's budget ends, where
+        # only progress seen keeps the wait going.
+        ticket.observe_pose = self.schedule.wants_observation(due) or (
+            self.scales_with_pace
+            and motion.phase is MovePhase.RUNNING
+            and due >= self._model_deadline() - self.stall_window()
+        )
         # Never past the wait's deadline: a long interval (or a stretched one in the
         # middle of a move) ends there, and the poll at the deadline tells.
         return min(due, self.deadline())
@@ -137,17 +162,66 @@ class FollowState:
         if motion.phase is MovePhase.SENT:
             return self.ack_deadline
         if motion.phase is MovePhase.RUNNING:
-            ticket = motion.ticket
-            started = ticket.acknowledged_at or ticket.sent_at
-            budget = self.budget
-            if self.scales_with_pace:
-                # A robot slower than the model (a reduced project speed) that the polls
-                # see progressing steadily is not stalled: its budget grows with the pace
-                # observed (at most 4 times). A stalled arm shows no progress, and keeps
-                # the model's budget.
-                budget *= max(self.schedule.pace, 1.0)
-            return started + budget
+            return self._started() + self.applied_budget()
         return math.inf
+
+    def applied_budget(self) -> float:
+        """The motion's budget in force now, from its acknowledgement, s.
+
+        The given (or model's) budget, grown with the pace the polls observe (a robot
+        slower than the model, a reduced project speed: at most 4 times) only as far as
+        the arm keeps moving: past the model's budget, a poll must see progress at
+        least every :meth:`stall_window`. An arm that stops is a stall, raised at the
+        model's budget when it stopped before it, else a window after its last progress.
+        """
+        if not self.scales_with_pace:
+            return self.budget
+        grown = self.budget * max(self.schedule.pace, 1.0)
+        if self.last_progress_at is None:
+            return self.budget
+        moving_until = max(self._model_deadline(), self.last_progress_at + self.stall_window())
+        return min(grown, moving_until - self._started())
+
+    def stall_window(self) -> float:
+        """How long the arm may show no progress past the model's budget, s.
+
+        ``stall_s``, or a quarter of the budget for a short move: a stall that began
+        before the model's budget ended is raised when it ends.
+        """
+        return min(self.stall_s, self.budget / 4)
+
+    def longest_budget(self) -> float:
+        """The most :meth:`applied_budget` can grow to, s (a bound for whoever waits on it)."""
+        return self.budget * PACE_LIMIT if self.scales_with_pace else self.budget
+
+    def _started(self) -> float:
+        ticket = self.motion.ticket
+        return ticket.acknowledged_at or ticket.sent_at
+
+    def _model_deadline(self) -> float:
+        return self._started() + self.budget
+
+    def _note_progress(self, pose: Pose) -> None:
+        """Count ``pose`` as progress when the arm moved measurably since the last."""
+        last = self._progress_pose
+        if last is not None and (
+            pose.distance_to(last) < PROGRESS_MM and pose.rotation_to(last) < PROGRESS_DEG
+        ):
+            return
+        self._progress_pose = pose
+        if last is not None:
+            self.last_progress_at = self.poll_started
+
+    def describe_stall(self) -> str:
+        """Why the motion's deadline passed, for its timeout's message."""
+        if not self.scales_with_pace or self.applied_budget() >= self.budget * max(
+            self.schedule.pace, 1.0
+        ):
+            return ""
+        if self.last_progress_at is None:
+            return "; no progress seen since the acknowledgement"
+        idle = time.monotonic() - self.last_progress_at
+        return f"; no progress seen for {idle:.2f} s (a stall)"
 
     def overdue(self, now: float) -> Overdue | None:
         """The deadline that passed: acknowledgement (while sent), motion (while running)."""

@@ -150,6 +150,8 @@ class PollPolicy(BaseModel):
 #: How far an observed pace may move the predicted end: a robot between 4 times faster
 #: and 4 times slower than the model; beyond that the observation is not trusted.
 _PACE_LIMITS = (0.25, 4.0)
+#: How many times the model's budget a move's wait may grow to (the slowest pace trusted).
+PACE_LIMIT = _PACE_LIMITS[1]
 #: Polls a move's schedule keeps in reserve for the rounding at the dense window's edges.
 _RESERVE = 2.0
 #: Observed progress used to re-predict the end: not the ramps' first and last few per

@@ -193,6 +193,10 @@ class TimeoutPolicy(BaseModel):
     #: After a command write whose answer was lost (clear-on-accept profiles, which must
     #: never write a command twice): how long to watch for the write to land late.
     in_flight_s: Annotated[float, Field(gt=0, le=600)] = 5.0
+    #: A move whose derived timeout grows with a pace slower than the model's must show
+    #: progress (0.1 mm or 0.1 deg) at least this often past its model budget (or every
+    #: quarter of that budget, if less); none for this long is a stall, s.
+    stall_s: Annotated[float, Field(gt=0, le=60)] = 1.0
 
     def for_motion(self, expected_s: float) -> float:
         """The timeout of a move expected to take ``expected_s`` seconds.
@@ -691,6 +695,7 @@ class _MotionFollower:
             poll_interval_s=self.poll_interval_s,
             polling=self.polling,
             ack_timeout_s=self.timeouts.ack_timeout_s,
+            stall_s=self.timeouts.stall_s,
         )
         shared = self.shared_driver
         while True:
@@ -708,7 +713,7 @@ class _MotionFollower:
             if overdue is Overdue.ACK:
                 self._ack_timed_out(motion)
             elif overdue is Overdue.MOTION:
-                self._motion_timed_out(motion, follow.budget)
+                self._motion_timed_out(motion, follow)
 
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
         """The current pose for an error report; the fallback if it cannot be read."""
@@ -798,8 +803,10 @@ class _MotionFollower:
             pose=motion.last_pose,
         )
 
-    def _motion_timed_out(self, motion: Motion, budget: float) -> None:
+    def _motion_timed_out(self, motion: Motion, follow: FollowState) -> None:
         motion.phase = MovePhase.FAILED
+        budget = follow.applied_budget()  # the bound actually applied, grown or not
+        stall = follow.describe_stall()
         pose = self._pose_or(motion.last_pose)
         self._log.error(
             "robot.motion_timeout",
@@ -809,7 +816,7 @@ class _MotionFollower:
         # The stop follows in abandon(), as for every running move the master gives up on.
         raise MotionTimeoutError(
             f"move to {motion.target} did not finish within {budget:.2f} s"
-            f" (expected {motion.expected_s:.2f} s); last pose {pose}",
+            f" (expected {motion.expected_s:.2f} s){stall}; last pose {pose}",
             pose=pose,
         )
 

@@ -1,0 +1,54 @@
+"""A stalled arm is raised within the budget the master announced, not 4x later.
+
+The derived timeout grows with the pace the polls observe only while the arm keeps
+moving; the simulator's ``stall`` fault stops a move halfway, and the robot stays busy.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import pytest
+
+import tmmaster
+from tmmaster import Pose, Robot, TimeoutPolicy
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+
+START = Pose(300, -200, 300, 180, 0, 90)
+TARGET = Pose(300, 100, 300, 180, 0, 90)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_stalled_line_is_raised_within_its_announced_timeout(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # Real time: the model's expected time is the simulated arm's (the stall is the
+    # only difference), so the polls see the pace drop to nothing halfway.
+    sim = tm_simulator_factory(profile, faults=["stall:at_move=2"], time_scale=1.0)
+    timeouts = TimeoutPolicy(motion_factor=1.0, motion_margin_s=0.6)
+    with Robot(
+        "127.0.0.1",
+        sim.port,
+        profile=profile,
+        gripper=None,
+        poll_interval_s=0.02,
+        timeouts=timeouts,
+    ) as robot:
+        robot.wait_until_ready(5)
+        robot.move_to(START, speed=100)
+        motion = robot.start_move(TARGET, speed=60, motion="line")
+        with pytest.raises(tmmaster.MotionTimeoutError) as info:
+            motion.wait()
+        raised_at = time.monotonic()
+    acked_at = motion.ticket.acknowledged_at
+    assert acked_at is not None
+    announced = motion.timeout_s
+    # Within the announced budget (plus a poll and the error's own pose read), where
+    # the observed pace used to stretch it up to 4 times.
+    assert raised_at - acked_at <= announced + 0.25, (raised_at - acked_at, announced)
+    message = str(info.value)
+    assert f"within {announced:.2f} s" in message
+    assert "a stall" in message or "no progress" in message
