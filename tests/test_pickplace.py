@@ -267,13 +267,16 @@ def test_robot_error_exits_with_the_fault_code_and_never_retreats(
     code, report = run_cli(sim, config, tmp_path)
 
     assert code == EXIT_ROBOT_FAULT
-    assert_one_line_reason(capsys.readouterr().err, code, "MOVE_TO_LIFT", "error code 500")
+    assert_one_line_reason(
+        capsys.readouterr().err, code, "MOVE_TO_LIFT", "0x01F4 (not in TMflow 2.24 Appendix J)"
+    )
     assert report["error"] == {
         "state": "MOVE_TO_LIFT",
         "cycle": 1,
         "type": "RobotFaultError",
         "message": report["error"]["message"],
         "error_code": 500,
+        "error_meaning": "0x01F4 (not in TMflow 2.24 Appendix J)",
     }
     assert report["reaction"]["performed"] is False
     assert len(motion_writes(sim.request_log)) == 3, "nothing may move after a robot error"
@@ -287,7 +290,7 @@ def test_estop_never_moves_again(
     code, report = run_cli(sim, config, tmp_path)
 
     assert code == EXIT_ROBOT_FAULT
-    assert_one_line_reason(capsys.readouterr().err, code, "MOVE_TO_PLACE", "error code 512")
+    assert_one_line_reason(capsys.readouterr().err, code, "MOVE_TO_PLACE", "0x0200 (not in")
     assert report["reaction"]["performed"] is False
     assert len(motion_writes(sim.request_log)) == 4
 

@@ -334,7 +334,7 @@ def test_8_5_estop_ends_an_article_gripper_wait_and_blocks_gripper_writes(
         robot.wait_until_ready(timeout_s=5)
         threading.Timer(0.05, sim.press_estop).start()
         # The article table has no e-stop bit: the robot reports it as an error (0x0200).
-        with pytest.raises(tmmaster.RobotFaultError, match="512"):
+        with pytest.raises(tmmaster.RobotFaultError, match="0x0200"):
             robot.gripper.open()  # would wait its 5 s settle time without the robot check
         sim.clear_request_log()
         with pytest.raises(tmmaster.RobotFaultError):

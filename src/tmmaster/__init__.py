@@ -101,6 +101,7 @@ if _TYPE_CHECKING:
     from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
     from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
     from ._status import MovePhase, MoveProgress, RobotStatus
+    from ._tm_errors import TMErrorCode, lookup_tm_error
     from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
 
 #: Public name -> the private module that defines it.
@@ -173,6 +174,7 @@ _EXPORTS = {
     "SequenceGripper": "._gripper",
     "StatusMonitor": "._monitor",
     "StopRequestedError": "._exceptions",
+    "TMErrorCode": "._tm_errors",
     "TMMasterError": "._exceptions",
     "TMScriptError": "._exceptions",
     "TMScriptRuntimeError": "._exceptions",
@@ -197,6 +199,7 @@ _EXPORTS = {
     "encode": "._codec",
     "gripper_profile": "._profiles",
     "load_profile": "._profiles",
+    "lookup_tm_error": "._tm_errors",
     "profile_markdown": "._profiles",
     "robot_model": "._robot_models",
     "robot_profile": "._profiles",
@@ -276,6 +279,7 @@ __all__ = [
     "SequenceGripper",
     "StatusMonitor",
     "StopRequestedError",
+    "TMErrorCode",
     "TMMasterError",
     "TMScriptError",
     "TMScriptRuntimeError",
@@ -301,6 +305,7 @@ __all__ = [
     "encode",
     "gripper_profile",
     "load_profile",
+    "lookup_tm_error",
     "profile_markdown",
     "robot_model",
     "robot_profile",

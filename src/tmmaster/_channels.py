@@ -360,7 +360,7 @@ class CommandChannel(ABC):
             )
         if status.error:
             return RobotFaultError(
-                f"robot in error (mode {status.mode}, error code {status.error_code})",
+                f"robot in error (mode {status.mode})",  # the error adds the code's meaning
                 error_code=status.error_code,
                 pose=status.pose,
             )
@@ -705,7 +705,7 @@ class SequenceChannel(CommandChannel):
         if bool(flags["estop"]):
             return EmergencyStopError("emergency stop is pressed", error_code=code)
         if bool(flags["error"]):
-            return RobotFaultError(f"robot error (last error code {code})", error_code=code)
+            return RobotFaultError("robot error", error_code=code)  # + code, meaning
         if bool(flags.get("paused", False)):
             return ProjectPausedError(
                 "the TMflow project is paused: Play would resume the interrupted move"

@@ -50,6 +50,7 @@ from ._error_root import TMMasterError as TMMasterError
 
 if TYPE_CHECKING:
     from ._pose import Pose
+    from ._tm_errors import TMErrorCode
 
 
 class RegisterMapError(ConfigError):
@@ -244,12 +245,56 @@ class RobotError(TMMasterError):
         super().__init__(message)
 
 
-class RobotFaultError(RobotError):
-    """The robot reported an error (error mode or error flag) with its code."""
+class _TMCodedError(RobotError):
+    """A robot error whose code is Techman's (TMflow 2.24 Appendix J): the message says it.
+
+    A non-zero ``error_code`` is appended to the message with its meaning and, where
+    short, what to do: ``robot error: 0x0022 Force or Torque Over Range; what to do
+    (TMflow 2.24 manual p. 409): ...``; a code the manual does not list reads ``0x1234
+    (not in TMflow 2.24 Appendix J)``.
+
+    Args:
+        message: What happened.
+        error_code: The robot's error code (0: none reported).
+        pose: Where the arm was, when known.
+    """
+
+    def __init__(self, message: str, *, error_code: int = 0, pose: Pose | None = None) -> None:
+        if error_code:
+            from ._tm_errors import code_hex, describe_fault  # lazily: data, on a fault only
+
+            if code_hex(error_code) not in message:
+                message = f"{message}: {describe_fault(error_code)}"
+        super().__init__(message, error_code=error_code, pose=pose)
+
+    @property
+    def code(self) -> int | None:
+        """The robot's error code, None when none was reported."""
+        return self.error_code or None
+
+    @property
+    def tm_error(self) -> TMErrorCode | None:
+        """The code's entry in TMflow 2.24 Appendix J (text, pages, what to do), if listed."""
+        if not self.error_code:
+            return None
+        from ._tm_errors import lookup
+
+        try:
+            return lookup(self.error_code)
+        except ConfigError:  # a broken install: the message already said so
+            return None
 
 
-class EmergencyStopError(RobotError):
-    """The emergency stop is pressed."""
+class RobotFaultError(_TMCodedError):
+    """The robot reported an error (error mode or error flag) with its code.
+
+    ``code`` is the code (None: none reported), ``tm_error`` its entry of TMflow 2.24
+    Appendix J (:class:`~tmmaster.TMErrorCode`), and the message names both.
+    """
+
+
+class EmergencyStopError(_TMCodedError):
+    """The emergency stop is pressed (``code``/``tm_error`` as for RobotFaultError)."""
 
 
 class ProjectPausedError(RobotFaultError):

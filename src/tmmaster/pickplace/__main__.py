@@ -42,11 +42,13 @@ from .._cliparse import ArgumentParser, UsageError, one_line
 from .._exceptions import (
     ConfigError,
     ConnectRefusedError,
+    EmergencyStopError,
     GripperError,
     HostNotFoundError,
     MotionTimeoutError,
     ProfileMismatchError,
     RobotError,
+    RobotFaultError,
     TransportError,
 )
 from .._logging import add_logging_arguments, configure_command_logging, get_logger
@@ -54,6 +56,7 @@ from .._pose import Pose
 from .._profiles import DEFAULT_PROFILE, builtin_profile_names, load_profile
 from .._registers import RobotProfile
 from .._robot import Robot
+from .._tm_errors import code_suffix
 from .._version import add_version_argument
 from ..sim._backend import PhysicsUnavailableError
 from ..sim._scene import Scene, load_scene
@@ -797,7 +800,10 @@ def _run_on(
         }[result.stop_delivered]
         return code, f"interrupted in {failure.state} (cycle {failure.cycle}); {stopped}"
     label = RESULT_NAMES[code].replace("_", " ")
-    code_text = f" (robot error code {failure.error_code})" if failure.error_code else ""
+    if isinstance(failure.exception, RobotFaultError | EmergencyStopError):  # TM's codes
+        code_text = code_suffix(failure.error_code, failure.message)
+    else:
+        code_text = f" (robot error code {failure.error_code})" if failure.error_code else ""
     reaction = ""
     if result.reaction is not None and result.reaction.reaction == "retreat":
         reaction = "; retreated" if result.reaction.performed else "; did not retreat"

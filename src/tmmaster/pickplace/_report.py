@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from .._exceptions import ConfigError
 from .._pose import Pose
+from .._tm_errors import fault_meaning
 from ._runner import RunResult
 
 #: Bumped when a key changes meaning or disappears (adding keys keeps the version).
@@ -124,6 +125,9 @@ class ErrorInfo(_Part):
     """The error's message."""
     error_code: int | None = None
     """The robot's error code, when the failure carries one."""
+    error_meaning: str | None = None
+    """A robot fault's or e-stop's code and its text in TMflow 2.24 Appendix J
+    (``0x0022 Force or Torque Over Range``; ``0x1234 (not in TMflow 2.24 Appendix J)``)."""
 
 
 class ReactionInfo(_Part):
@@ -539,7 +543,12 @@ def build_run_report(
             for r in run.records
         ],
         "retries": {"grasp": 0 if run is None else run.retries},
-        "error": None if run is None or run.failure is None else run.failure.as_dict(),
+        "error": None
+        if run is None or run.failure is None
+        else {
+            **run.failure.as_dict(),
+            "error_meaning": fault_meaning(run.failure.exception),
+        },
         "reaction": None
         if run is None or run.reaction is None
         else {

@@ -121,6 +121,9 @@ def summary_renderable(report: RunReport) -> Any:
     error = report.error
     if error is not None and not report.reason:  # the reason already says it
         code = f" (robot error code {error.error_code})" if error.error_code else ""
+        if error.error_meaning:  # a robot fault or e-stop: TM's code, with its meaning
+            shown = error.error_meaning.split()[0] in error.message
+            code = "" if shown else f" (robot error {error.error_meaning})"
         verb = "stopped" if report.result == "interrupted" else "failed"
         parts.append(
             Text(

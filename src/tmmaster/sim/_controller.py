@@ -46,6 +46,7 @@ from .._registers import (
     RobotProfile,
 )
 from .._robot_models import RobotModel
+from .._tm_errors import describe_fault
 from ._backend import MotionRejectedError, PathBackend, PhysicsBackend
 from ._bank import RegisterBank
 from ._device import Logger, SimDevice
@@ -700,7 +701,13 @@ class RobotController(SimDevice[RobotProfile]):
 
     def _enter_error(self, code: int, reason: str) -> None:
         self._error_code = int(code)
-        self._log.warning("sim.robot_error", device=self._name, code=int(code), reason=reason)
+        self._log.warning(
+            "sim.robot_error",
+            device=self._name,
+            code=int(code),
+            meaning=describe_fault(int(code)),
+            reason=reason,
+        )
         self._stop_motion()
         self._active = None
         self._publish_error(int(code), reason)
