@@ -14,9 +14,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from . import _robot_program as robot_program_cli
-from ._cliparse import EXIT_OUTPUT_FAILED, ArgumentParser, UsageError, one_line, write_stdout
+from ._cliparse import (
+    EXIT_OUTPUT_FAILED,
+    ArgumentParser,
+    UsageError,
+    did_you_mean,
+    ended_quietly,
+    one_line,
+    write_stdout,
+)
 from ._exceptions import TMMasterError
-from ._logging import add_logging_arguments, configure_logging
+from ._logging import LOG_LEVELS, add_logging_arguments, configure_logging
 from ._profiles import builtin_profile_names, load_profile, profile_markdown
 from ._version import add_version_argument
 
@@ -38,7 +46,14 @@ def _run_profile(args: argparse.Namespace) -> int:
             profile = load_profile(name)
             lines.append(f"{name:14} {profile.kind:8} {profile.description}\n")
         return _emit("".join(lines), None)
-    return _emit(profile_markdown(load_profile(args.profile)), args.output)
+    name = args.profile
+    names = builtin_profile_names()
+    if name not in names and not name.endswith(".toml") and not Path(name).exists():
+        raise UsageError(
+            f"profile show {name}: no such profile; the built-in profiles are"
+            f" {', '.join(names)} (or a profile FILE.toml){did_you_mean(name, names)}"
+        )
+    return _emit(profile_markdown(load_profile(name)), args.output)
 
 
 def _emit(text: str, output: str | None) -> int:
@@ -70,9 +85,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = ArgumentParser(prog="tmmaster", description="Drive a Techman robot over Modbus TCP.")
     add_version_argument(parser)
-    sub = parser.add_subparsers(
-        dest="command", metavar="{sim,pickplace,report,profile,schema,robot-program}"
+    # Also before the command (``tmmaster --log-level debug sim``): for every command.
+    parser.add_argument(
+        "--log-json",
+        dest="global_log_json",
+        action="store_true",
+        help="log structured events as one JSON object per line on stderr (any command)",
     )
+    parser.add_argument(
+        "--log-level",
+        dest="global_log_level",
+        type=str.lower,
+        choices=LOG_LEVELS,
+        default=None,
+        help="level of the events logged on stderr (any command; the command's own"
+        " --log-level, after it, wins)",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sim_main.add_arguments(
         sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
     )
@@ -100,7 +129,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     robot_program_cli.add_arguments(program)
     add_logging_arguments(program, default_level="warning")
+    # The usage line names every command mounted above (and any added later).
+    sub.metavar = "{" + ",".join(sub.choices) + "}"
     return parser
+
+
+def _apply_global_logging(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """``--log-level``/``--log-json`` given before the command count for the command.
+
+    The command's own ``--log-level`` (after its name) wins over the one before it.
+    """
+    if getattr(args, "global_log_json", False):
+        args.log_json = True
+    level = getattr(args, "global_log_level", None)
+    if level is None or args.command is None:
+        return
+    command_parser = _subcommand_parser(parser, args.command)
+    own_default = None if command_parser is None else command_parser.get_default("log_level")
+    if getattr(args, "log_level", None) == own_default:
+        args.log_level = level
+
+
+def _subcommand_parser(
+    parser: argparse.ArgumentParser, name: str
+) -> argparse.ArgumentParser | None:
+    """The parser of ``tmmaster NAME`` (None when there is none)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            found = action.choices.get(name)
+            return found if isinstance(found, argparse.ArgumentParser) else None
+    return None
 
 
 def config_schema() -> str:
@@ -121,9 +179,13 @@ def report_schema() -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``tmmaster`` console script."""
+    """Entry point of the ``tmmaster`` console script.
+
+    A reader of stdout that went away (``| head``) ends any command quietly, with the
+    shell's status for it, 141 (:data:`~tmmaster._cliparse.EXIT_BROKEN_PIPE`).
+    """
     try:
-        return _main(argv)
+        return ended_quietly(lambda: _main(argv))
     except KeyboardInterrupt:
         print(f"tmmaster: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
         return _sigint.EXIT_INTERRUPTED
@@ -141,9 +203,11 @@ def _main(argv: Sequence[str] | None) -> int:
     except UsageError as exc:
         print(f"tmmaster: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2
-    if args.command is None:  # plain ``tmmaster``: say what it can do
-        parser.print_help()
-        return 0
+    if args.command is None:  # plain ``tmmaster``: say what it can do, as a usage error
+        parser.print_help(sys.stderr)
+        print("tmmaster: give a command [exit 2]", file=sys.stderr)
+        return 2
+    _apply_global_logging(parser, args)
     if args.command == "sim":
         return sim_main.run(args)
     if args.command == "pickplace":
@@ -164,6 +228,9 @@ def _main(argv: Sequence[str] | None) -> int:
             own = own[own.index("robot-program") + 1 :] if "robot-program" in own else []
             return _emit(robot_program_cli.run(args, own), args.output)
         return _run_profile(args)
+    except UsageError as exc:  # a name the command line chose from a set
+        print(f"tmmaster: {one_line(exc)} [exit 2]", file=sys.stderr)
+        return 2
     except TMMasterError as exc:
         print(f"tmmaster: {exc}", file=sys.stderr)
         return 2

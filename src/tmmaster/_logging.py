@@ -44,6 +44,7 @@ def add_logging_arguments(
     parser.add_argument(
         "--log-level",
         default=default_level,
+        type=str.lower,  # DEBUG, Debug and debug alike
         choices=LOG_LEVELS,
         help=level_help or f"level of the events logged on stderr (default: {default_level})",
     )

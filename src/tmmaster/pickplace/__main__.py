@@ -3,7 +3,8 @@
 ``tmmaster pickplace`` mounts the same options: :func:`add_arguments` fills a parser,
 :func:`run` runs from the parsed namespace and returns the exit code.
 
-Exit codes (also in docs/pickplace.md):
+Exit codes (also in docs/pickplace.md; a closed stdout, as ``| head`` leaves, turns a 0
+into 141 and changes nothing else: the run goes on and --report is written):
 
 ===  ===========================================================================
 0    every cycle done (with --sim: and every part on the place position)
@@ -24,7 +25,6 @@ from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
 # isort: on
 
 import argparse
-import difflib
 import itertools
 import logging
 import math
@@ -38,7 +38,15 @@ from dataclasses import dataclass
 from types import FrameType
 from typing import TYPE_CHECKING, Any, TextIO, cast
 
-from .._cliparse import ArgumentParser, UsageError, one_line
+from .._cliparse import (
+    EXIT_BROKEN_PIPE,
+    ArgumentParser,
+    UsageError,
+    did_you_mean,
+    ended_quietly,
+    one_line,
+    say,
+)
 from .._exceptions import (
     ConfigError,
     ConnectRefusedError,
@@ -63,7 +71,7 @@ from ..sim._scene import Scene, load_scene
 from ..sim._world import TableObject
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
-from ._plan import estimate, format_plan, validate_plan
+from ._plan import CyclePlan, estimate, format_plan, validate_plan
 from ._runner import Runner, RunResult, StateEvent, StopRequestedError
 from ._sequences import load_sequence, pick_and_place
 from ._steps import TaskSequence
@@ -264,18 +272,25 @@ class _Output:
         self.events = events
         #: Set by the first Ctrl-C.
         self.interrupted = False
+        #: Set when stdout's reader went away (``| head``): the run goes on, quietly.
+        self.stdout_gone = False
         #: What the log handler lets through (None: everything at the level).
         self.log_filter: logging.Filter | None = None if events else _LogFilter(self)
 
     def info(self, line: str) -> None:
         """A line about the run as it goes, on stdout: on a terminal, or with -v."""
         if not self.quiet and (self.events or self.live is not None) and not self.interrupted:
-            print(line, flush=True)
+            self.say(line)
 
     def result(self, line: str) -> None:
         """A line of the run's result on stdout (not with --quiet, nor after a Ctrl-C)."""
         if not self.quiet and (self.events or not self.interrupted):
-            print(line, flush=True)
+            self.say(line)
+
+    def say(self, line: str) -> None:
+        """``line`` on stdout; once its reader went away (``| head``), nothing, quietly."""
+        if not self.stdout_gone and not say(line):
+            self.stdout_gone = True
 
     def interrupt(self) -> None:
         """The first Ctrl-C: from now on the command says only how it ended (safe in a
@@ -399,14 +414,15 @@ def _run(args: argparse.Namespace, out: _Output) -> int:
     if reason is not None:
         print(f"pickplace: {_one_line(reason)} [exit {code}]", file=stderr, flush=True)
     elif outcome.done_line is not None:
-        print(outcome.done_line, flush=True)
+        out.say(outcome.done_line)
     if args.report:
         try:
             write_report(args.report, report)
         except OSError as exc:
             print(f"pickplace: cannot write the report {args.report}: {exc}", file=stderr)
             return code or EXIT_FAILED
-    return code
+    # The report says how the run ended; the status also says the output was cut short.
+    return EXIT_BROKEN_PIPE if code == EXIT_OK and out.stdout_gone else code
 
 
 def _print_summary(console: Console, report: RunReport) -> None:
@@ -497,12 +513,44 @@ def _check_profile_option(value: str) -> None:
     if value in robots:
         return
     what = "a gripper profile" if value in builtin_profile_names() else "no such profile"
-    close = difflib.get_close_matches(value, robots, n=1)
-    hint = f"; did you mean {close[0]}?" if close else ""
     raise UsageError(
         f"--profile {value}: {what}; the robot profiles are {', '.join(robots)}"
-        f" (or a profile FILE.toml){hint}"
+        f" (or a profile FILE.toml){did_you_mean(value, robots)}"
     )
+
+
+def _check_option_ranges(overrides: dict[str, dict[str, Any]]) -> None:
+    """A number option outside its key's range, said as the option (``--port 70000``).
+
+    The bounds are the configuration model's own (the file's key takes the same).
+
+    Raises:
+        UsageError: ``--port 70000: must be 1..65535``.
+    """
+    for option, (section, key) in _CONFIG_OPTIONS.items():
+        value = overrides.get(section, {}).get(key)
+        if not isinstance(value, int | float):
+            continue
+        model = PickPlaceConfig.model_fields[section].annotation
+        assert model is not None
+        field = model.model_fields[key]
+        low = next((getattr(m, "ge", None) for m in field.metadata if hasattr(m, "ge")), None)
+        high = next((getattr(m, "le", None) for m in field.metadata if hasattr(m, "le")), None)
+        inside = (low is None or value >= low) and (high is None or value <= high)
+        if not inside:  # nan included: no comparison holds for it
+            flag = "--" + option.replace("_", "-")
+            bound = (
+                f"{_number(low)}..{_number(high)}"
+                if low is not None and high is not None
+                else (f">= {_number(low)}" if low is not None else f"<= {_number(high)}")
+            )
+            raise UsageError(f"{flag} {_number(value)}: must be {bound}")
+
+
+def _number(value: float | None) -> str:
+    """A bound or a value as a user writes it: 65535, 1000000, 0.005."""
+    assert value is not None
+    return str(int(value)) if float(value).is_integer() else f"{value:g}"
 
 
 def _check_sim_options(sim: bool, overrides: dict[str, dict[str, Any]]) -> None:
@@ -546,6 +594,7 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
         require_mujoco()  # a missing extra is said first, in one line
     outcome.config_file = config_file
     overrides = _overrides(args)
+    _check_option_ranges(overrides)
     _check_sim_options(sim is not None, overrides)
     profile = overrides.get("robot", {}).get("profile")
     if profile is not None:
@@ -595,19 +644,19 @@ def _execute(args: argparse.Namespace, outcome: _Outcome, out: _Output) -> tuple
     command = _command(args, outcome)
     config, sequence, cycles = command.config, command.sequence, command.cycles
     if command.diagram:
-        print(mermaid(sequence, cycles=cycles))
+        out.say(mermaid(sequence, cycles=cycles))
         return EXIT_OK, None
     # 2. Every move of the run is checked on the configured robot, still sending nothing.
     robot = _configured_robot(config)
     keep = False
     try:
         validate_plan(robot, sequence, cycles, source=command.source)
-        outcome.move_states = sorted({m.state for m in sequence.planned_moves(cycles)})
+        outcome.move_states = CyclePlan(sequence, cycles).states()
         home = config.poses.resolved()["home"]
         planned = estimate(sequence, 1, robot.model, start=home)
         outcome.expected_cycle_s = sum(m.expected_s for m in planned) or None
         if command.dry_run:
-            print(
+            out.say(
                 format_plan(
                     sequence,
                     cycles,
@@ -942,7 +991,7 @@ def _main(argv: Sequence[str] | list[str] | None, *, process: bool) -> int:
             return EXIT_CONFIG
         return run(args)
 
-    return run_guarded(parse_and_run, process=process)
+    return ended_quietly(lambda: run_guarded(parse_and_run, process=process))
 
 
 def run_guarded(body: Callable[[], int], *, process: bool = False) -> int:

@@ -3,10 +3,11 @@
 ``show run.json`` prints the summary table (per-state times, cycles, result);
 ``plot run.json -o run.png`` draws the timeline (needs matplotlib: ``tmmaster[plot]``).
 Exit codes: 0 done, 1 matplotlib missing, the image or the table cannot be written
-(a full disk, a closed pipe), 2 the file is not a readable run report (not a regular
-file, larger than 256 MiB, not UTF-8, nested too deeply, not a report, an unsupported
-``report_version``) or an option is wrong. ``show`` prints the file's strings as text
-(no rich markup, control characters escaped) and a bounded table (docs/pickplace.md).
+(a full disk), 141 the reader of stdout went away (``| head``), 2 the file is not a
+readable run report (not a regular file, larger than 256 MiB, not UTF-8, nested too
+deeply, not a report, an unsupported ``report_version``) or an option is wrong. ``show``
+prints the file's strings as text (no rich markup, control characters escaped) and a
+bounded table (docs/pickplace.md).
 """
 
 from __future__ import annotations
@@ -94,9 +95,12 @@ def _run(args: argparse.Namespace) -> int:
 
         from ..pickplace._summary import summary_renderable
 
-        return write_stdout(
-            lambda: Console(file=sys.stdout).print(summary_renderable(report)), prog="report"
-        )
+        # Rendered first, written by write_stdout: rich would end the process itself on a
+        # closed pipe (exit 1); a reader that went away is the shared quiet 141.
+        console = Console(file=sys.stdout)
+        with console.capture() as captured:
+            console.print(summary_renderable(report))
+        return write_stdout(lambda: sys.stdout.write(captured.get()), prog="report")
     from ._plot import plot_report, recorded_nothing
 
     output = Path(args.output) if args.output else Path(args.report).with_suffix(".png")

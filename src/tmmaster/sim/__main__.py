@@ -20,8 +20,8 @@ from pathlib import Path
 from types import FrameType
 
 from .._address import check_host
-from .._cliparse import ArgumentParser, one_line, run_command
-from .._exceptions import ConfigError, TMMasterError
+from .._cliparse import ArgumentParser, did_you_mean, one_line, run_command
+from .._exceptions import ConfigError, TMMasterError, TMScriptError
 from .._logging import add_logging_arguments, configure_logging
 from .._pose import Pose
 from .._profiles import DEFAULT_PROFILE, builtin_profile_names
@@ -244,6 +244,36 @@ def _tool(text: str | None) -> Pose | None:
         raise ConfigError(f"--tool X,Y,Z,RX,RY,RZ: {exc} (got {text!r})") from exc
 
 
+def _check_names(args: argparse.Namespace) -> None:
+    """A profile, gripper or fault kind not among the known ones, with the closest one.
+
+    Raises:
+        ConfigError: ``--gripper onrobot: no such gripper profile; the gripper profiles
+            are blog-2fg7, onrobot-2fg7 (or a FILE.toml); did you mean onrobot-2fg7?``
+    """
+    from ._faults import FAULT_KINDS
+
+    robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
+    grippers = [n for n in builtin_profile_names() if n not in robots]
+    for option, value, names, what in (
+        ("--profile", args.profile, robots, "robot profile"),
+        ("--gripper", args.gripper, grippers, "gripper profile"),
+    ):
+        if value is None or value in names or value.endswith(".toml") or Path(value).exists():
+            continue
+        raise ConfigError(
+            f"{option} {value}: no such {what}; the {what}s are {', '.join(names)}"
+            f" (or a FILE.toml){did_you_mean(value, names)}"
+        )
+    for fault in args.fault:
+        kind = str(fault).split(":", 1)[0].strip()
+        if kind and kind not in FAULT_KINDS:
+            raise ConfigError(
+                f"--fault {fault}: unknown kind {kind!r} (known: {', '.join(FAULT_KINDS)})"
+                f"{did_you_mean(kind, FAULT_KINDS)}"
+            )
+
+
 def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
     for option, value in (("--mjcf", args.mjcf), ("--snapshot", args.snapshot)):
         if value is not None and args.physics != "mujoco":
@@ -253,6 +283,7 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
         # Headless rendering: EGL, read by mujoco when it is first imported (below).
         os.environ.setdefault("MUJOCO_GL", "egl")
     try:
+        _check_names(args)
         sim = Simulator(
             args.profile,
             # An address alone (a port goes in --port): said as the option, exit 2.
@@ -278,6 +309,10 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
         print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)
         return 1
+    except TMScriptError as exc:  # the --program file: said as a compiler says it
+        where = f"{args.program}:{exc.line}:{exc.column}" if args.program else "program"
+        print(f"sim: {where}: {one_line(exc.reason)} [exit 2]", file=sys.stderr)
+        return 2
     except (TMMasterError, ValueError, KeyError) as exc:
         print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2
