@@ -220,7 +220,9 @@ def test_blog_unacknowledged_command_times_out_and_is_withdrawn(
 ) -> None:
     # A gripper still activating (gSTA 1) leaves control at 16: nobody acknowledges. It
     # activates 0.5 s (wall, at 1x) after the start, 0.3 s after the 0.2 s ack timeout.
-    sim = tm_simulator_factory("article", gripper="blog-2fg7", time_scale=1.0, init_time_s=0.5)
+    sim = tm_simulator_factory(
+        "article", gripper="blog-2fg7", time_scale=1.0, init_time_s=0.5, wait_ready=False
+    )
     assert sim.gripper_port is not None
     link = GripperLink(sim.url, sim.gripper_port, ack_timeout_s=0.2, timeout_s=5.0)
     gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link)

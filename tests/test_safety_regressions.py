@@ -304,7 +304,8 @@ def test_8_3_a_command_code_equal_to_none_is_refused(tmp_path: Path) -> None:
 def test_8_4_a_stop_request_ends_the_ready_wait_without_a_busy_loop(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, init_time_s=1000.0)  # initialising for good
+    # Initialising for good: start() returns without waiting for the start-up.
+    sim = tm_simulator_factory(profile, init_time_s=1000.0, wait_ready=False)
     with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.05) as robot:
         sim.clear_request_log()
         timer = threading.Timer(0.1, robot.interrupt)  # two polls into the wait

@@ -151,7 +151,8 @@ def test_a_pollers_sleep_ends_at_its_deadline_not_an_interval_later() -> None:
 def test_a_ready_wait_ends_at_its_deadline_with_the_longest_interval(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, init_time_s=1000.0)  # initialising for good
+    # Initialising for good: start() returns without waiting for the start-up.
+    sim = tm_simulator_factory(profile, init_time_s=1000.0, wait_ready=False)
     robot = robots(sim)
     started = time.monotonic()
     with pytest.raises(MotionTimeoutError, match=r"not ready after 0\.3 s"):

@@ -100,7 +100,7 @@ if _TYPE_CHECKING:
     from ._retry import RetryPolicy
     from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
     from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
-    from ._status import MovePhase, MoveProgress, RobotStatus
+    from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus
     from ._tm_errors import TMErrorCode, lookup_tm_error
     from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
 
@@ -149,6 +149,7 @@ _EXPORTS = {
     "MotionType": "._pose",
     "ProfileMismatchError": "._exceptions",
     "ProjectPausedError": "._exceptions",
+    "ProjectState": "._status",
     "MovePhase": "._status",
     "MoveProgress": "._status",
     "NoGripper": "._gripper",
@@ -262,6 +263,7 @@ __all__ = [
     "Pose",
     "ProfileMismatchError",
     "ProjectPausedError",
+    "ProjectState",
     "RegisterField",
     "RegisterGripper",
     "RegisterMap",

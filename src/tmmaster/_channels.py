@@ -49,7 +49,7 @@ from ._registers import (
     Role,
     Table,
 )
-from ._status import RobotStatus
+from ._status import PROJECT_PAUSED, PROJECT_STOPPED, RobotStatus
 from ._transport import (
     Block,
     ConnectionState,
@@ -707,11 +707,9 @@ class SequenceChannel(CommandChannel):
         if bool(flags["error"]):
             return RobotFaultError("robot error", error_code=code)  # + code, meaning
         if bool(flags.get("paused", False)):
-            return ProjectPausedError(
-                "the TMflow project is paused: Play would resume the interrupted move"
-            )
+            return ProjectPausedError(PROJECT_PAUSED)
         if not bool(flags["project_running"]):
-            return RobotFaultError("the TMflow project is not running")
+            return RobotFaultError(PROJECT_STOPPED)
         return None
 
     def _flags_failure_steps(

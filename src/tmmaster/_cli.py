@@ -1,5 +1,5 @@
-"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``profile``, ``schema`` and
-``robot-program``."""
+"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``robot``, ``profile``,
+``schema`` and ``robot-program``."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from . import _robot_cli as robot_cli
 from . import _robot_program as robot_program_cli
 from ._cliparse import (
     EXIT_OUTPUT_FAILED,
@@ -113,6 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tmscript_main.add_arguments(
         sub.add_parser("tmscript", help="check, evaluate or run TMscript (Script Projects)")
+    )
+    robot_cli.add_arguments(
+        sub.add_parser(
+            "robot", help="read the TMflow project's state, or press Play, Pause or Stop"
+        )
     )
     _add_profile_commands(sub.add_parser("profile", help="list or show register profiles"))
     schema = sub.add_parser(
@@ -215,6 +221,8 @@ def _main(argv: Sequence[str] | None) -> int:
         return pickplace_main.run_guarded(lambda: pickplace_main.run(args), process=argv is None)
     if args.command == "report":
         return report_main.run(args)
+    if args.command == "robot":
+        return robot_cli.run(args)
     if args.command == "tmscript":
         from .tmscript import __main__ as tmscript_main
 

@@ -78,6 +78,7 @@ from ._profiles import (
     load_profile,
     robot_profile,
 )
+from ._project import PRESS_TIMEOUT_S, ProjectControl
 from ._registers import (
     FLANGE_FIELDS,
     ROBOT_BASE_TCP_FIELDS,
@@ -89,7 +90,7 @@ from ._registers import (
 from ._retry import RetryPolicy
 from ._robot_models import PathGauge, RobotModel, arc_through, robot_model
 from ._sigint import deferred
-from ._status import MovePhase, MoveProgress, RobotStatus
+from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus, project_hint
 from ._transport import (
     BlockTransport,
     ConnectionState,
@@ -1079,6 +1080,10 @@ class Robot:
         self._log = _log.bind(robot=name)
         # Digital I/O: its writes pass the same gate as commands.
         self._io = RobotIO(self.profile, self._transport, self._gate, self._log)
+        # The TMflow project's Play and Pause: pressed only when asked, through the gate.
+        self._project = ProjectControl(
+            self.profile, self._transport, self._channel, self._gate, self._stop_event, self._log
+        )
         # Polls, waits for and gives up safely every command sent (each Motion has it).
         self._follower = _MotionFollower(
             self._channel,
@@ -1499,7 +1504,8 @@ class Robot:
                 raise failure
             if time.monotonic() >= deadline:
                 raise MotionTimeoutError(
-                    f"robot not ready after {timeout_s:g} s ({status})", pose=status.pose
+                    f"robot not ready after {timeout_s:g} s ({status}){project_hint(status)}",
+                    pose=status.pose,
                 )
             poller.sleep()
 
@@ -2229,6 +2235,70 @@ class Robot:
         )
         handle.wait()
         return handle
+
+    def project_state(self) -> ProjectState:
+        """The TMflow project's state, from Techman's table (7201, 7202, 7204, 7208).
+
+        Returns:
+            RUNNING, PAUSED, STOPPED or ERROR (a robot error or the e-stop).
+
+        Raises:
+            ConfigError: The profile has no TMflow project (article).
+            TransportError: The read failed.
+        """
+        return self._project.state()
+
+    def play(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
+        """Press Play (coil 7104) on a stopped or paused project and wait until it runs.
+
+        Never implicit: nothing in tmmaster presses Play unless you call this (or press
+        it on the robot). A stopped project starts ``main`` from the beginning; a paused
+        one goes on, with the move it interrupted, if any. A running project is left as
+        it is (the coil is a toggle: pressing it would pause it). The press passes the
+        command gate: refused after :meth:`interrupt` or :meth:`close`. TMflow takes it
+        only in Auto mode with the Robot Stick disabled and AUT.P high
+        (docs/tmflow-program.md, settings checklist).
+
+        Args:
+            timeout_s: How long to wait for the project to run after the press, s.
+
+        Returns:
+            ProjectState.RUNNING.
+
+        Raises:
+            ConfigError: The profile has no TMflow project (article), or a bad
+                ``timeout_s``.
+            RobotFaultError: The robot is in error (EmergencyStopError: e-stop); reset it
+                on the robot first. Nothing was pressed.
+            RobotError: Manual mode (nothing pressed), or the project did not run within
+                ``timeout_s``.
+            StopRequestedError: A stop was requested or the robot is closing.
+            TransportError: The link failed.
+        """
+        return self._project.play(timeout_s, self.poll_interval_s)
+
+    def pause(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
+        """Press Pause (coil 7104) on a running project and wait until it is paused.
+
+        A stopped project is left stopped (the toggle would start it). A move in progress
+        ends with :class:`ProjectPausedError` and the master presses Stop on it, so Play
+        can never resume it. The press passes the command gate, like :meth:`play`.
+
+        Args:
+            timeout_s: How long to wait for the project to pause after the press, s.
+
+        Returns:
+            ProjectState.PAUSED, or STOPPED for a stopped project (nothing pressed).
+
+        Raises:
+            ConfigError: The profile has no TMflow project (article), or a bad
+                ``timeout_s``.
+            RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
+            RobotError: The project did not pause within ``timeout_s``.
+            StopRequestedError: A stop was requested or the robot is closing.
+            TransportError: The link failed.
+        """
+        return self._project.pause(timeout_s, self.poll_interval_s)
 
     def stop(self) -> None:
         """Stop the arm now (article: command = stop; tmflow: the TM Stop button)."""

@@ -7,7 +7,60 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from ._codec import Value
+from ._exceptions import ProjectPausedError, RobotFaultError
 from ._pose import Pose
+
+
+class ProjectState(StrEnum):
+    """Where a TMflow project stands, as Techman's table reports it (7201-7208)."""
+
+    RUNNING = "running"  # 7202 project running, not paused
+    PAUSED = "paused"  # 7204 project paused: Play resumes it
+    STOPPED = "stopped"  # neither running nor paused: Play starts it from the beginning
+    ERROR = "error"  # 7201 robot error or 7208 e-stop: reset it on the robot first
+
+
+#: What a command on a stopped project fails with: the state and the fix, one line.
+PROJECT_STOPPED = "the TMflow project is stopped: press Play on the robot, or robot.play()"
+#: What a command on a paused project fails with (Play resumes a move it interrupted).
+PROJECT_PAUSED = (
+    "the TMflow project is paused: press Play on the robot, or robot.play()"
+    " (Play resumes the move it interrupted, if any)"
+)
+
+
+def project_hint(status: RobotStatus) -> str:
+    """``"; <state and fix>"`` for a stopped or paused project, else ``""``.
+
+    Args:
+        status: A status snapshot.
+
+    Returns:
+        The text to append to a "not ready" message.
+    """
+    state = status.project
+    if state is ProjectState.STOPPED:
+        return f"; {PROJECT_STOPPED}"
+    if state is ProjectState.PAUSED:
+        return f"; {PROJECT_PAUSED}"
+    return ""
+
+
+def project_failure(status: RobotStatus) -> RobotFaultError | None:
+    """The error a stopped or paused project stands for (it names the fix), else None.
+
+    Args:
+        status: A status snapshot.
+
+    Returns:
+        RobotFaultError for a stopped project, ProjectPausedError for a paused one.
+    """
+    state = status.project
+    if state is ProjectState.STOPPED:
+        return RobotFaultError(PROJECT_STOPPED, pose=status.pose)
+    if state is ProjectState.PAUSED:
+        return ProjectPausedError(PROJECT_PAUSED, pose=status.pose)
+    return None
 
 
 class MovePhase(StrEnum):
@@ -47,17 +100,30 @@ class RobotStatus:
 
     @property
     def ready(self) -> bool:
-        """True when the robot can take a motion command."""
+        """True when the robot can take a motion command (tmflow: its project not paused)."""
         return (
             not self.moving
             and not self.error
             and not self.estop
-            and self.mode
-            in (
-                "auto",
-                "running",
-            )
+            and self.mode in ("auto", "running")
+            and self.project is not ProjectState.PAUSED
         )
+
+    @property
+    def project(self) -> ProjectState | None:
+        """The TMflow project's state; None for a profile without a project (article).
+
+        Returns:
+            ERROR while the robot is in error or the e-stop is pressed, else PAUSED
+            (7204), RUNNING (7202) or STOPPED.
+        """
+        if "project_running" not in self.raw:
+            return None
+        if self.error or self.estop:
+            return ProjectState.ERROR
+        if self.raw.get("paused"):
+            return ProjectState.PAUSED
+        return ProjectState.RUNNING if self.raw["project_running"] else ProjectState.STOPPED
 
     def __str__(self) -> str:
         flags = [self.mode, "moving" if self.moving else "idle"]
@@ -65,6 +131,8 @@ class RobotStatus:
             flags.append(f"error {self.error_code}")
         if self.estop:
             flags.append("E-STOP")
+        if self.project is ProjectState.PAUSED:
+            flags.append("paused")
         if self.holding is not None:
             flags.append("holding" if self.holding else "empty")
         return f"RobotStatus({', '.join(flags)}, pose={self.pose})"

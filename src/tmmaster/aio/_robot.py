@@ -39,8 +39,9 @@ from .._gripper import GripperStatus
 from .._io import DEFAULT_MODULE
 from .._logging import get_logger
 from .._pose import MotionType, Pose
+from .._project import PRESS_TIMEOUT_S
 from .._robot import Motion, Robot
-from .._status import MovePhase, MoveProgress, RobotStatus
+from .._status import MovePhase, MoveProgress, ProjectState, RobotStatus
 
 _log = get_logger("tmmaster.aio")
 
@@ -738,6 +739,52 @@ class AsyncRobot:
             TransportError: The stop could not be written.
         """
         await self._run(self.robot.stop)
+
+    async def project_state(self) -> ProjectState:
+        """The TMflow project's state (:meth:`Robot.project_state`).
+
+        Returns:
+            RUNNING, PAUSED, STOPPED or ERROR.
+
+        Raises:
+            ConfigError: The profile has no TMflow project (article).
+            TransportError: The read failed.
+        """
+        return await self._run(self.robot.project_state)
+
+    async def play(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
+        """Press Play on a stopped or paused project; wait until it runs (:meth:`Robot.play`).
+
+        Args:
+            timeout_s: How long to wait for the project to run after the press, s.
+
+        Returns:
+            ProjectState.RUNNING.
+
+        Raises:
+            ConfigError: The profile has no TMflow project (article).
+            RobotFaultError: The robot is in error; nothing was pressed.
+            RobotError: Manual mode, or the project did not run within ``timeout_s``.
+            StopRequestedError: A stop was requested or the robot is closing.
+        """
+        return await self._run(self.robot.play, timeout_s)
+
+    async def pause(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
+        """Press Pause on a running project; wait until it pauses (:meth:`Robot.pause`).
+
+        Args:
+            timeout_s: How long to wait for the project to pause after the press, s.
+
+        Returns:
+            ProjectState.PAUSED, or STOPPED for a stopped project (nothing pressed).
+
+        Raises:
+            ConfigError: The profile has no TMflow project (article).
+            RobotFaultError: The robot is in error.
+            RobotError: The project did not pause within ``timeout_s``.
+            StopRequestedError: A stop was requested or the robot is closing.
+        """
+        return await self._run(self.robot.pause, timeout_s)
 
     def interrupt(self) -> None:
         """Make running waits give up now, and refuse new commands until cleared.

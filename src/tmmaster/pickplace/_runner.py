@@ -30,6 +30,7 @@ from .._gripper import GripperStatus
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Robot
+from .._status import project_failure
 from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
 from ._steps import PlannedMove, Step, TaskSequence
@@ -442,6 +443,10 @@ class Runner:
         started = time.monotonic()
         try:
             self._check_stop()
+            # A stopped or paused TMflow project never gets ready by itself: said at once,
+            # with the fix, instead of a wait that ends in "not ready".
+            if (failure := project_failure(self.robot.status())) is not None:
+                raise failure
             self.robot.wait_until_ready(self.ready_timeout_s)
             if run.sequence.prepare is not None:
                 run.sequence.prepare(run.ctx)

@@ -334,6 +334,13 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
             f"press Ctrl-C to stop; kill -USR1 {os.getpid()} resets a robot error or e-stop",
             flush=True,
         )
+        if sim.profile.has("play_pause"):
+            # Printed once start() returned: the project runs, a master may connect now.
+            print(
+                "project running; after a stop or a reset: tmmaster robot play"
+                f" --host {sim.host} --port {sim.port}",
+                flush=True,
+            )
         # wait() with a timeout keeps the main thread responsive to signals.
         while not stop.wait(0.2):
             if reset.is_set():

@@ -84,6 +84,11 @@ class SimDevice(ABC, Generic[ProfileT]):
         return self._time_s
 
     @property
+    def initialised(self) -> bool:
+        """True once ``init_time_s`` has passed (the start-up done, whatever its outcome)."""
+        return self._initialised
+
+    @property
     def grasps(self) -> int:
         """Gripper close commands executed so far."""
         return self._grasps

@@ -19,7 +19,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from .._exceptions import ConfigError, UnknownNameError
+from .._exceptions import ConfigError, ConnectError, UnknownNameError
 from .._io import io_address, io_value
 from .._pose import DEFAULT_HOME, Pose
 from .._profiles import DEFAULT_PROFILE, gripper_profile, robot_profile
@@ -101,7 +101,8 @@ class Simulator:
         backend: Your own PhysicsBackend; None: the ``physics`` backend.
         physics: ``"kinematic"`` (analytic) or ``"mujoco"`` (the ``tmmaster[mujoco]``
             extra); not with ``backend``.
-        init_time_s: Simulated seconds before the robot reports ready.
+        init_time_s: Simulated seconds before the robot reports ready (its start-up:
+            tmflow starts the project then).
         request_listener: Called with each RequestRecord, on the simulator's thread.
         initial_seq: tmflow: the sequence numbers at the start (e.g. 32766, to test
             their wrap).
@@ -125,6 +126,11 @@ class Simulator:
             are exactly where the trajectory says); True: on, or ConfigError where it
             cannot be (the kinematic backend, another model). :attr:`dynamics` says
             which the simulator runs with. Not with ``backend``.
+        wait_ready: True (the default): :meth:`start` (and ``with``) returns, and
+            ``sim.url`` opens, only once the robot (and gripper) finished its start-up
+            (``init_time_s``): tmflow's project runs and its program took its first
+            steps, so a command written right after takes effect. False: at once,
+            while it still initialises (to test a master against a robot that boots).
 
     Raises:
         ConfigError: a bad argument, named in the message: ``time_scale`` not a finite
@@ -164,6 +170,7 @@ class Simulator:
         program: str | Path | None = None,
         speed_factor: float = 1.0,
         dynamics: bool | None = None,
+        wait_ready: bool = True,
     ) -> None:
         if not (math.isfinite(time_scale) and time_scale > 0):
             raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
@@ -302,6 +309,11 @@ class Simulator:
         #: Control ticks run so far (a plain int: reading it from another thread is safe).
         self.ticks = 0
         self._closed = False
+        self._init_time_s = init_time_s
+        self._wait_ready = wait_ready
+        #: Set once every device finished its start-up (at once with wait_ready=False),
+        #: or the tick failed: start() returns and ``sim.url`` opens then.
+        self._ready = threading.Event()
 
     # -- properties ---------------------------------------------------------------------
 
@@ -397,10 +409,30 @@ class Simulator:
         self._thread.start()
         try:
             asyncio.run_coroutine_threadsafe(self._start_async(), loop).result(_CALL_TIMEOUT_S)
+            self._wait_started_up()
         except BaseException:
             self.close()
             raise
         return self
+
+    def _wait_started_up(self) -> None:
+        """Wait until every device finished its start-up (the tick sets the event)."""
+        if not self._wait_ready:
+            self._ready.set()
+            return
+        # init_time_s in wall seconds, and room for a machine that is slow to tick.
+        budget = self._init_time_s / self._time_scale + _CALL_TIMEOUT_S
+        if not self._ready.wait(budget):
+            raise RuntimeError(
+                f"the simulated robot did not finish starting up within {budget:g} s"
+            )
+        if self._tick_error is not None:
+            raise RuntimeError("the simulator's control tick failed") from self._tick_error
+
+    def _started_up(self) -> bool:
+        """Every device finished initialising (tmflow: its project started in that tick)."""
+        gripper = self._gripper
+        return self._controller.initialised and (gripper is None or gripper.initialised)
 
     def close(self) -> None:
         """Stop servers, tick and thread; safe to call more than once.
@@ -410,6 +442,7 @@ class Simulator:
         if self._closed:
             return
         self._closed = True
+        self._ready.set()  # a connect waiting for the start-up goes on (and finds it closed)
         # Only our own registration: a simulator refused for a taken name frees nothing.
         unregister_endpoint(self._url, self._open_memory_transport)
         loop, thread = self._loop, self._thread
@@ -476,10 +509,13 @@ class Simulator:
                 if self._gripper is not None:
                     self._gripper.tick(dt_sim)
                 self.ticks += 1
+                if not self._ready.is_set() and self._started_up():
+                    self._ready.set()
             except Exception as exc:
                 # Stop ticking and report it through wait_for(): a hidden bug would
                 # otherwise look like a robot that never moves.
                 self._tick_error = exc
+                self._ready.set()  # start() reports it
                 raise
             deadline += period
             delay = deadline - loop.time()
@@ -545,6 +581,10 @@ class Simulator:
     ) -> Transport:
         from ._memory import MemoryTransport
 
+        # The name resolves once the robot started up (start() returns then, too): a
+        # master on another thread that connects meanwhile waits for it.
+        if not self._ready.wait(max(timeout, self._init_time_s / self._time_scale)):
+            raise ConnectError(f"{self._url} is still starting up: not ready within {timeout:g} s")
         return MemoryTransport(
             self, role, device_id=device_id, timeout=timeout, retry=retry, name=name
         )

@@ -1,0 +1,209 @@
+"""The TMflow project's state and its Play and Pause buttons, pressed only when asked.
+
+TMflow runs the robot program as a project. Techman's table reports its state (7201
+error, 7202 running, 7204 paused, 7208 e-stop: FC 02, TMflow 2.24 appendix C, pp.
+305-306) and takes the Robot Stick's buttons as coils: 7104 Play/Pause, "triggered as
+1 received (toggle)", and 7105 Stop (FC 05, p. 313). Only in Auto mode (a Modbus Play
+"cannot be written to when the robot is in Manual Mode", 12.1, p. 219), with the Robot
+Stick disabled (remote control) or a fieldbus active, and in Auto mode only while the
+AUT.P input is high (appendix C, note, p. 314).
+
+:class:`ProjectControl` reads the state, then presses the toggle only when it does what
+was asked (Play on a stopped or paused project, Pause on a running one), through the
+robot's command gate: a stop request or ``close()`` refuses the press. Nothing here
+runs unless a caller asks: no method of the library presses Play on its own.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+from ._channels import CommandChannel
+from ._checks import require_positive
+from ._exceptions import ConfigError, RobotError
+from ._gate import CommandGate
+from ._poller import Poller
+from ._registers import RobotProfile
+from ._status import ProjectState, RobotStatus
+from ._transport import Transport
+
+#: How long ``play()`` and ``pause()`` wait for the project to show the new state, s.
+PRESS_TIMEOUT_S = 5.0
+
+#: What TMflow needs before it takes Play over Modbus (TMflow 2.24 manual).
+REMOTE_PLAY_NEEDS = (
+    "TMflow takes Play over Modbus only in Auto mode, with the Robot Stick disabled"
+    " (remote control) and the AUT.P input high (TMflow 2.24 appendix C, p. 314)"
+)
+
+
+def _nothing() -> None:
+    """A button press registers nothing (no command to withdraw or stop later)."""
+
+
+class ProjectControl:
+    """Reads a TMflow project's state and presses Play or Pause (coil 7104) when asked.
+
+    Args:
+        profile: The robot's register map (``play_pause`` and ``project_running``).
+        transport: The robot's link.
+        channel: Reads the status snapshots.
+        gate: The robot's command gate: a stop request or close() refuses a press.
+        stop_event: The robot's stop request (ends a wait for the new state).
+        log: The robot's bound logger.
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        transport: Transport,
+        channel: CommandChannel,
+        gate: CommandGate,
+        stop_event: threading.Event,
+        log: Any,
+    ) -> None:
+        self._profile = profile
+        self._transport = transport
+        self._channel = channel
+        self._gate = gate
+        self._stop_event = stop_event
+        self._log = log
+
+    def _require(self, what: str) -> None:
+        """ConfigError for a profile without a TMflow project (the article's)."""
+        if not (self._profile.has("play_pause") and self._profile.has("project_running")):
+            raise ConfigError(
+                f"{what}: profile {self._profile.name!r} has no TMflow project (no Play/Pause"
+                " coil, no project state): its robot takes commands once initialised;"
+                " robot.stop() stops the arm"
+            )
+
+    def _status(self) -> tuple[RobotStatus, ProjectState]:
+        status = self._channel.read_status()
+        state = status.project
+        assert state is not None  # _require: the profile has project_running
+        return status, state
+
+    def state(self) -> ProjectState:
+        """The project's state now (one status read).
+
+        Returns:
+            RUNNING, PAUSED, STOPPED or ERROR (robot error or e-stop).
+
+        Raises:
+            ConfigError: The profile has no TMflow project.
+            TransportError: The read failed.
+        """
+        self._require("project_state()")
+        return self._status()[1]
+
+    def play(self, timeout_s: float, poll_interval_s: float) -> ProjectState:
+        """Press Play on a stopped or paused project; wait until it runs.
+
+        Args:
+            timeout_s: How long to wait for the project to run after the press, s.
+            poll_interval_s: Seconds between two status reads.
+
+        Returns:
+            RUNNING (also when it was running already: nothing pressed).
+
+        Raises:
+            ConfigError: The profile has no project, or a bad ``timeout_s``.
+            RobotFaultError: The robot is in error (EmergencyStopError: e-stop): reset it
+                on the robot first; nothing pressed.
+            RobotError: Manual mode (nothing pressed), or the project did not run within
+                ``timeout_s`` of the press (the remote-control settings).
+            StopRequestedError: A stop was requested or the robot is closing.
+            TransportError: The link failed.
+        """
+        self._require("play()")
+        require_positive("timeout_s", timeout_s)
+        status, state = self._status()
+        if state is ProjectState.RUNNING:
+            self._log.info("robot.play_skipped", reason="the project runs already")
+            return state
+        self._refuse_fault(status, "play()")
+        if (
+            "ma_mode" in status.raw
+            and self._profile.field("ma_mode").label(int(status.raw["ma_mode"])) == "manual"
+        ):
+            raise RobotError(
+                "play(): the robot is in Manual mode, where TMflow refuses Play over Modbus"
+                " (TMflow 2.24, 12.1, p. 219): switch it to Auto mode on the robot",
+                pose=status.pose,
+            )
+        self._press("play", state)
+        return self._wait_for(ProjectState.RUNNING, state, timeout_s, poll_interval_s)
+
+    def pause(self, timeout_s: float, poll_interval_s: float) -> ProjectState:
+        """Press Pause on a running project; wait until it shows paused.
+
+        Args:
+            timeout_s: How long to wait for the project to pause after the press, s.
+            poll_interval_s: Seconds between two status reads.
+
+        Returns:
+            PAUSED, or STOPPED when it was stopped (nothing pressed: the Play/Pause
+            toggle would start it).
+
+        Raises:
+            ConfigError: The profile has no project, or a bad ``timeout_s``.
+            RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
+            RobotError: The project did not pause within ``timeout_s`` of the press.
+            StopRequestedError: A stop was requested or the robot is closing.
+            TransportError: The link failed.
+        """
+        self._require("pause()")
+        require_positive("timeout_s", timeout_s)
+        status, state = self._status()
+        self._refuse_fault(status, "pause()")
+        if state is not ProjectState.RUNNING:
+            self._log.info("robot.pause_skipped", reason=f"the project is {state.value}")
+            return state
+        self._press("pause", state)
+        return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s)
+
+    def _refuse_fault(self, status: RobotStatus, what: str) -> None:
+        failure = self._channel.status_failure(status)
+        if failure is not None:
+            raise type(failure)(
+                f"{what}: {failure}: reset it on the robot first",
+                error_code=failure.error_code,
+                pose=failure.pose,
+            )
+
+    def _press(self, button: str, state: ProjectState) -> None:
+        """Press the Play/Pause toggle once, through the gate (never written twice)."""
+        field = self._profile.field("play_pause")
+
+        def send() -> None:
+            # Sent once: a repeated toggle would undo the press.
+            self._transport.write_fields([(field, True)], retry=False, interruptible=False)
+
+        self._gate.write(_nothing, send)
+        self._log.warning("robot.project_button", button=button, project=state.value)
+
+    def _wait_for(
+        self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float
+    ) -> ProjectState:
+        deadline = time.monotonic() + timeout_s
+        poller = Poller(interval, self._stop_event, deadline=deadline)
+        while True:
+            poller.check()
+            status, state = self._status()
+            if state is wanted:
+                return state
+            if state is ProjectState.ERROR:
+                failure = self._channel.status_failure(status)
+                assert failure is not None
+                raise failure
+            if time.monotonic() >= deadline:
+                raise RobotError(
+                    f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
+                    f" (the project was {before.value}) and the project is {state.value}"
+                    f" {timeout_s:g} s later: {REMOTE_PLAY_NEEDS}",
+                    pose=status.pose,
+                )
+            poller.sleep()

@@ -1,0 +1,127 @@
+"""``tmmaster robot status|play|pause|stop``: the TMflow project's state and its buttons.
+
+``add_arguments(parser)`` fills the subcommand's parser and ``run(args)`` runs it: one
+connection, one action, one answer on stdout, and an exit status:
+
+===  ====================================================================
+0    done (``status``: read; ``play``: running; ``pause``: paused or stopped)
+2    bad options, or a profile without a TMflow project (article: play/pause)
+3    the connection failed
+4    the robot refused: in error or e-stop, Manual mode, or the project did not
+     change within ``--timeout``
+===  ====================================================================
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ._address import check_host
+from ._cliparse import one_line, write_stdout
+from ._exceptions import ConfigError, TMMasterError, TransportError
+from ._logging import add_logging_arguments, configure_logging
+from ._profiles import DEFAULT_PROFILE, builtin_profile_names
+from ._project import PRESS_TIMEOUT_S
+from ._robot import Robot
+from ._status import RobotStatus
+
+#: The actions, in the order ``--help`` lists them.
+ACTIONS = ("status", "play", "pause", "stop")
+
+EXIT_CONFIG = 2
+EXIT_CONNECTION = 3
+EXIT_REFUSED = 4
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the ``robot`` subcommand's arguments to ``parser``; return it.
+
+    Args:
+        parser: The subcommand's parser.
+
+    Returns:
+        ``parser``.
+    """
+    robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
+    parser.add_argument(
+        "action",
+        choices=ACTIONS,
+        help="status: the project's state and the robot's; play: press Play on a stopped or"
+        " paused project; pause: press Pause on a running one; stop: press Stop",
+    )
+    parser.add_argument("--host", required=True, help="robot address (or sim://NAME)")
+    parser.add_argument("--port", type=int, default=502, help="robot Modbus TCP port (502)")
+    parser.add_argument(
+        "--profile",
+        default=DEFAULT_PROFILE,
+        metavar="NAME|FILE.toml",
+        help=f"robot profile: {' or '.join(robots)}, or a TOML file (default: {DEFAULT_PROFILE})",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=PRESS_TIMEOUT_S,
+        metavar="S",
+        help="play/pause: seconds to wait for the project's new state"
+        f" (default: {PRESS_TIMEOUT_S:g})",
+    )
+    add_logging_arguments(parser, default_level="warning")
+    return parser
+
+
+def _status_lines(status: RobotStatus) -> str:
+    project = status.project or "none (this profile has no TMflow project)"
+    lines = [
+        f"project  {project}",
+        f"mode     {status.mode}",
+        f"moving   {'yes' if status.moving else 'no'}",
+        f"error    {status.error_code if status.error else 'none'}",
+        f"e-stop   {'PRESSED' if status.estop else 'released'}",
+        f"ready    {'yes' if status.ready else 'no'}",
+        f"pose     {status.pose}",
+    ]
+    return "".join(f"{line}\n" for line in lines)
+
+
+def _act(robot: Robot, action: str, timeout_s: float) -> str:
+    """Run ``action`` on a connected ``robot``; what to print."""
+    if action == "play":
+        return f"project  {robot.play(timeout_s)}\n"
+    if action == "pause":
+        return f"project  {robot.pause(timeout_s)}\n"
+    if action == "stop":
+        robot.stop()
+        return "stop     pressed\n"
+    return _status_lines(robot.status())
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``tmmaster robot ACTION`` from parsed ``args``; the exit status.
+
+    Args:
+        args: The parsed options.
+
+    Returns:
+        0, or the status of the module's table.
+    """
+    undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
+    try:
+        host = check_host(args.host, field="--host", port_field="--port")
+        with Robot(host, args.port, profile=args.profile, name="cli") as robot:
+            text = _act(robot, args.action, args.timeout)
+    except TMMasterError as exc:
+        code = _exit_code(exc)
+        print(f"tmmaster robot {args.action}: {one_line(exc)} [exit {code}]", file=sys.stderr)
+        return code
+    finally:
+        undo_logging()
+    return write_stdout(lambda: sys.stdout.write(text), prog="tmmaster robot")
+
+
+def _exit_code(exc: TMMasterError) -> int:
+    if isinstance(exc, ConfigError):
+        return EXIT_CONFIG
+    if isinstance(exc, TransportError):
+        return EXIT_CONNECTION
+    return EXIT_REFUSED

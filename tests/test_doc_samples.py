@@ -1,0 +1,141 @@
+"""The README's and the docs' Python samples run as written, right after a simulator starts.
+
+Every ```python block of README.md and docs/*.md runs here, the blocks of one page in
+order and in one namespace (a later block may use an earlier one's imports), as a reader
+would paste them. A block that talks to ``python -m tmmaster.sim --port 5020`` runs
+against a simulator started for it the moment before, on a free loopback port put in
+place of 5020: the profile the page tells the reader to start (``--profile article``
+for a block with ``profile="article"``, else the default tmflow) and, for a block with
+``onrobot-2fg7`` and 5021, that gripper on the port put in place of 5021. No block waits
+for the simulator: ``Simulator.start()`` returns once the robot is ready.
+
+An HTML comment on the line before a block says what it needs:
+
+- ``<!-- sample: robot -->``: a fragment that continues with a connected ``robot`` (the
+  page's "a simulator started with ... --port 5020"): it gets one, closed after;
+- ``<!-- sample: skip (REASON) -->``: not run, for the reason given (a real robot's
+  address, a sketch for another program, a signature). Keep these few.
+
+Simulators a block makes itself run at the suite's pace (their explicit options kept).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import tmmaster
+import tmmaster.sim
+from sim_speeds import QUICK
+from tmmaster.sim import Simulator
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+_BLOCK = re.compile(r"^```python\n(.*?)^```", re.DOTALL | re.MULTILINE)
+_MARK = re.compile(r"<!-- sample: (robot|skip)(?: \((.+)\))? -->")
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One ```python block: where it is, its code and its mark."""
+
+    where: str
+    code: str
+    mark: str | None
+    reason: str | None
+
+
+def _samples(page: Path) -> list[Sample]:
+    text = page.read_text(encoding="utf-8")
+    found = []
+    for match in _BLOCK.finditer(text):
+        before = text[: match.start()].rstrip().splitlines()
+        mark = _MARK.fullmatch(before[-1].strip()) if before else None
+        line = text[: match.start()].count("\n") + 1
+        found.append(
+            Sample(
+                f"{page.relative_to(ROOT)}:{line}",
+                match.group(1),
+                mark.group(1) if mark else None,
+                mark.group(2) if mark else None,
+            )
+        )
+    return found
+
+
+PAGES_WITH_SAMPLES = [p for p in PAGES if _samples(p)]
+
+#: The suite's pace, with the start-up of a real-time simulator (0.2 s of wall time):
+#: a sample that ran before the robot is ready would fail, not slip through.
+PACE: dict[str, Any] = {**QUICK, "init_time_s": 0.2 * QUICK["time_scale"]}
+
+
+class _SuitePaced(Simulator):
+    """A block's own Simulator at the suite's pace unless it says otherwise."""
+
+    def __init__(self, *args: Any, **options: Any) -> None:
+        for key, value in PACE.items():
+            options.setdefault(key, value)
+        super().__init__(*args, **options)
+
+
+@contextlib.contextmanager
+def _simulators(code: str) -> Iterator[str]:
+    """Start what ``code`` expects on 5020 (and 5021); yield the code with their ports."""
+    with contextlib.ExitStack() as stack:
+        if "5020" in code:
+            gripper = "onrobot-2fg7" if "onrobot-2fg7" in code and "5021" in code else None
+            profile = "article" if 'profile="article"' in code else "tmflow"
+            sim = stack.enter_context(Simulator(profile, gripper=gripper, **PACE))
+            code = code.replace("5020", str(sim.port))
+            if gripper is not None:
+                code = code.replace("5021", str(sim.gripper_port))
+        yield code
+
+
+#: An address literal: a sample runs only if each is a loopback one.
+_ADDRESS = re.compile(r"\b\d{1,3}(?:\.\d{1,3}){3}\b")
+
+
+def _run(sample: Sample, namespace: dict[str, Any]) -> None:
+    # Never anything but loopback: a sample for a real cell is marked skip.
+    outside = [a for a in _ADDRESS.findall(sample.code) if not a.startswith("127.")]
+    assert not outside, f"{sample.where} talks to {outside}: mark it <!-- sample: skip (...) -->"
+    with _simulators(sample.code) as code, contextlib.ExitStack() as stack:
+        if sample.mark == "robot":
+            sim = stack.enter_context(Simulator(**PACE))
+            namespace["robot"] = stack.enter_context(tmmaster.connect(sim.host, sim.port))
+        exec(compile(code, sample.where, "exec"), namespace)
+
+
+def test_every_page_with_samples_is_found() -> None:
+    names = {p.name for p in PAGES_WITH_SAMPLES}
+    assert {"README.md", "robot-api.md", "simulator.md"} <= names
+
+
+def test_the_skipped_samples_are_few_and_say_why() -> None:
+    skipped = [s for p in PAGES_WITH_SAMPLES for s in _samples(p) if s.mark == "skip"]
+    assert all(s.reason for s in skipped), [s.where for s in skipped if not s.reason]
+    assert len(skipped) <= 10, [s.where for s in skipped]
+
+
+@pytest.mark.parametrize("page", PAGES_WITH_SAMPLES, ids=lambda p: p.name)
+def test_the_samples_of_a_page_run_right_after_start_up(
+    page: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(tmmaster.sim, "Simulator", _SuitePaced)
+    namespace: dict[str, Any] = {"__name__": "__sample__"}
+    for sample in _samples(page):
+        if sample.mark == "skip":
+            continue
+        if "mujoco" in sample.code:
+            pytest.importorskip("mujoco")
+        _run(sample, namespace)
+    capsys.readouterr()
