@@ -17,13 +17,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, Workspace, configure_logging
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, configure_logging
 from tmmaster.pickplace import RetryRule, Runner, StepContext, TaskSequence, mermaid
 
 PART = Pose(300, -200, 100, 180, 0, 90)
-#: The top of the table the parts stand on, mm (the simulated cell's): no TCP or flange
-#: may go below it (state your own table's height).
-TABLE = Workspace(floor_z_mm=85)
 ABOVE_PART = PART.offset(dz=100)
 CAMERA = Pose(200, 0, 250, 180, 0, 90)
 
@@ -89,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
             args.port,
             profile=args.profile,
             gripper_settle_s=args.settle,
-            workspace=TABLE,
+            # The default Workspace() is the simulated cell (its table top at 85 mm): on
+            # yours, workspace=Workspace(floor_z_mm=your table top's height).
         ) as robot:
             result = Runner(robot).run(sequence)
     except TMMasterError as exc:

@@ -14,6 +14,10 @@ docs/performance.md, "Many robots from one process"):
   cannot queue for the GIL the way 400 polling threads sometimes do; the tmflow
   profile's status is six reads, not one: about 100 driven robots per process on two
   cores (docs/performance.md);
+* connecting in parallel, at most ``CONNECT_WORKERS`` robots at once: a robot that does
+  not answer holds up its own connect (until its retries give up, ``--retry-s``), not
+  everybody's: 50 robots with a few dead ones start moving after about one connect
+  timeout, not one per dead robot;
 * plain threads, one per robot (not ``asyncio.to_thread`` with its default executor,
   which has only ``min(32, cpus + 4)`` workers: robot 33 would wait for another to
   finish);
@@ -66,6 +70,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -74,6 +79,7 @@ from tmmaster import (
     Fleet,
     MonitoredStatus,
     Pose,
+    RetryPolicy,
     Robot,
     StatusMonitor,
     TMMasterError,
@@ -88,6 +94,8 @@ TOUR = (
     Pose(250.0, 0.0, 300.0, 180.0, 0.0, 90.0),
 )
 SPEED = 80
+#: Robots connecting at the same time, at most (one thread each while they connect).
+CONNECT_WORKERS = 32
 
 
 @dataclass
@@ -115,6 +123,27 @@ def drive(robot: Robot, moves: int, report: RobotReport) -> None:
         report.error = exc
 
 
+def connect_all(
+    pool: ThreadPoolExecutor, robots: Sequence[Robot], reports: Sequence[RobotReport]
+) -> list[tuple[Robot, RobotReport]]:
+    """Connect every robot, ``pool``'s workers at once; the connected ones, in order.
+
+    A robot that cannot connect keeps its error in its report; the others do not wait
+    for it (beyond the pool's bound).
+    """
+
+    def connect(robot: Robot, report: RobotReport) -> bool:
+        try:
+            robot.connect()
+        except TMMasterError as exc:
+            report.error = exc
+            return False
+        return True
+
+    done = list(pool.map(connect, robots, reports))
+    return [(robot, report) for robot, report, ok in zip(robots, reports, done, strict=True) if ok]
+
+
 def run(
     ports: Sequence[int],
     *,
@@ -124,15 +153,19 @@ def run(
     watch_hz: float = 10.0,
     first_index: int = 0,
     fleet: bool = True,
+    retry_s: float = 10.0,
 ) -> list[RobotReport]:
     """Drive one robot per port, one thread each, watched at ``watch_hz`` (> 0).
 
     ``fleet``: the robots in one :class:`tmmaster.Fleet`, which polls their waits and
     watches them on one event loop over their own links; else each robot polls its own
     waits, and a :class:`tmmaster.StatusMonitor` watches the connected ones over their
-    links too, between their requests.
+    links too, between their requests. The robots connect in parallel (at most
+    ``CONNECT_WORKERS`` at once); each retries a failed connect or request for up to
+    ``retry_s`` seconds.
     """
     shared = Fleet(watch_hz=watch_hz or None) if fleet else None
+    retry = RetryPolicy(total_time_s=retry_s)
     robots = [
         Robot(
             host,
@@ -141,6 +174,7 @@ def run(
             gripper=None,
             name=f"robot{first_index + i}",
             fleet=shared,
+            retry=retry,
         )
         for i, port in enumerate(ports)
     ]
@@ -148,15 +182,11 @@ def run(
     threads: list[threading.Thread] = []
     interrupted = False
     monitor = StatusMonitor(rate_hz=watch_hz) if watch_hz > 0 and shared is None else None
+    pool = ThreadPoolExecutor(
+        max_workers=max(1, min(len(robots), CONNECT_WORKERS)), thread_name_prefix="connect"
+    )
     try:
-        connected: list[tuple[Robot, RobotReport]] = []
-        for robot, report in zip(robots, reports, strict=True):
-            try:
-                robot.connect()
-            except TMMasterError as exc:
-                report.error = exc
-                continue
-            connected.append((robot, report))
+        connected = connect_all(pool, robots, reports)
         if monitor is not None:
             # Over each robot's own link: no second connection, which a controller that
             # takes one Modbus client would refuse (or give the robot's slot away for).
@@ -197,6 +227,9 @@ def run(
         unconfirmed = [robot.name for robot in robots if not robot.close()]
         if shared is not None:
             unconfirmed += [name for name in shared.close() if name not in unconfirmed]
+        # After the robots are closed: a connect still running (Ctrl-C came during the
+        # connects) ends with its robot's close.
+        pool.shutdown(wait=True, cancel_futures=True)
     if interrupted:
         raise Interrupted(unconfirmed)
     return reports
@@ -247,6 +280,7 @@ def run_in_processes(
     watch_hz: float = 10.0,
     first_index: int = 0,
     fleet: bool = True,
+    retry_s: float = 10.0,
 ) -> list[RobotReport]:
     """Drive the robots from ``processes`` child processes of this script, a share each."""
     share, extra = divmod(len(ports), processes)
@@ -259,7 +293,7 @@ def run_in_processes(
         command = [
             sys.executable, __file__, "--host", host, "--ports", *map(str, group),
             "--moves", str(moves), "--profile", profile, "--watch-hz", str(watch_hz),
-            "--first-index", str(first_index + first), "--json",
+            "--first-index", str(first_index + first), "--json", "--retry-s", str(retry_s),
             *([] if fleet else ["--no-fleet"]),
         ]  # fmt: skip
         children.append(
@@ -297,6 +331,7 @@ def drive_all(
     watch_hz: float = 10.0,
     first_index: int = 0,
     fleet: bool = True,
+    retry_s: float = 10.0,
 ) -> list[RobotReport]:
     """:func:`run` in this process, or :func:`run_in_processes` when ``processes`` > 1."""
     options: dict[str, Any] = {
@@ -306,6 +341,7 @@ def drive_all(
         "watch_hz": watch_hz,
         "first_index": first_index,
         "fleet": fleet,
+        "retry_s": retry_s,
     }
     if processes > 1:
         return run_in_processes(ports, processes=processes, **options)
@@ -354,8 +390,8 @@ def print_reports(reports: Sequence[RobotReport]) -> int:
     return 1 if failed else 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``--sim N`` (default) or ``--ports P1 P2 ...``; ``--processes K``."""
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sim", type=int, default=None, metavar="N", help="start N simulators")
     parser.add_argument("--host", default=HOST)
@@ -377,9 +413,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--processes", type=int, default=1, help="child processes sharing the robots"
     )
+    parser.add_argument(
+        "--retry-s",
+        type=float,
+        default=10.0,
+        help="how long a robot retries a failed connect or request, s (default 10)",
+    )
     # Used by --processes for its children: their robots' numbers, and JSON reports.
     parser.add_argument("--first-index", type=int, default=0, help=argparse.SUPPRESS)
     parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: ``--sim N`` (default) or ``--ports P1 P2 ...``; ``--processes K``."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.sim is not None and args.ports is not None:
         parser.error("--sim and --ports are exclusive")
@@ -389,6 +437,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--watch-hz must be >= 0")
     if args.processes < 1:
         parser.error("--processes must be >= 1")
+    if not 0 < args.retry_s <= 600:
+        parser.error("--retry-s must be in (0, 600]")
     try:
         if args.ports is not None:
             reports = drive_all(
@@ -400,6 +450,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 watch_hz=args.watch_hz,
                 first_index=args.first_index,
                 fleet=args.fleet,
+                retry_s=args.retry_s,
             )
         else:
             n = 8 if args.sim is None else args.sim

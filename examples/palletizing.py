@@ -25,7 +25,6 @@ from tmmaster import (
     Pose,
     Robot,
     TMMasterError,
-    Workspace,
     configure_logging,
 )
 from tmmaster.pickplace import Pallet, Runner, palletizing, validate_plan
@@ -34,9 +33,6 @@ PICK = Pose(300, -200, 100, 180, 0, 90)
 HOME = DEFAULT_HOME  # tool down, 250 mm in front of J1: reachable by a TM5-700
 #: Slot 1; columns go along +x, rows along +y, layers up (a part's centre, 100 mm up).
 PALLET_ORIGIN = Pose(240, 140, 100, 180, 0, 90)
-#: The top of the table the parts stand on, mm (the simulated cell's): no TCP or flange
-#: may go below it (state your own table's height).
-TABLE = Workspace(floor_z_mm=85)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -75,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
             args.port,
             profile=args.profile,
             gripper_settle_s=args.settle,
-            workspace=TABLE,
+            # The default Workspace() is the simulated cell (its table top at 85 mm): on
+            # yours, workspace=Workspace(floor_z_mm=your table top's height).
         ) as robot:
             # Every slot is checked against the profile before the first move.
             validate_plan(robot, sequence, pallet.size, source=f"{args.rows}x{args.cols} pallet")

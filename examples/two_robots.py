@@ -45,7 +45,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, Workspace
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError
 from tmmaster.sim import ObjectState, Simulator, TableObject
 
 HOST = "127.0.0.1"
@@ -53,9 +53,6 @@ HOST = "127.0.0.1"
 B_OFFSET_Y_MM = 400.0
 #: Where robot A's part lies (the article's pick position), in A's frame.
 PICK_A = Pose(300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
-#: The table top under each robot's parts, in its own base frame, mm (the simulated
-#: cells'): no TCP or flange may go below it (state your own table's height).
-TABLE = Workspace(floor_z_mm=85)
 #: The handover table in A's frame (the article's place position, on the table)...
 HANDOVER = Pose(300.0, 200.0, 100.0, 180.0, 0.0, 90.0)
 #: ... and the same point in B's frame.
@@ -172,7 +169,8 @@ def run(
                 profile=profile,
                 gripper_settle_s=settle_s,
                 name=f"robot-{name}",
-                workspace=TABLE,
+                # The default Workspace() is the simulated cell (its table top at 85 mm): on
+                # yours, workspace=Workspace(floor_z_mm=your table top's height).
             ) as robot:
                 job(robot, shared)
         except BaseException as exc:  # reported by main(); the other robot is told

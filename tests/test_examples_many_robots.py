@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import select
+import socket
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
@@ -10,7 +13,7 @@ from types import ModuleType
 import pytest
 
 from examples_support import load_example
-from tmmaster import RobotFaultError
+from tmmaster import RobotFaultError, TransportError
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -156,3 +159,76 @@ def test_a_report_survives_the_trip_from_a_child(example: ModuleType) -> None:
     assert (back.name, back.moves_done, back.move_times_s) == ("robot7", 2, [0.5, 0.25])
     assert str(back.error) == "RobotFaultError: robot in error"
     assert back.watched is None
+
+
+class SilentSlaves:
+    """Loopback ports that accept connections and never answer, until ``gate`` are open.
+
+    Once ``gate`` connections are open at the same time it records that, closes them
+    all and stops listening (further connects are refused): robots connecting one after
+    another never get there (each gives up alone, its link closed, before the next
+    tries); robots connecting in parallel do, at once. An event, not a time.
+    """
+
+    def __init__(self, ports: int, gate: int) -> None:
+        self._listeners = []
+        for _ in range(ports):
+            listener = socket.socket()
+            listener.bind(("127.0.0.1", 0))
+            listener.listen(16)
+            self._listeners.append(listener)
+        self.ports = [int(s.getsockname()[1]) for s in self._listeners]
+        self._gate = gate
+        self._open: list[socket.socket] = []
+        #: The most connections open at the same time.
+        self.most_at_once = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="silent-slaves", daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while not self._stop.is_set() and self._listeners:
+            ready, _, _ = select.select([*self._listeners, *self._open], [], [], 0.02)
+            for sock in ready:
+                if sock in self._listeners:
+                    self._open.append(sock.accept()[0])
+                elif not sock.recv(4096):  # the robot gave up and closed: gone
+                    self._open.remove(sock)
+                    sock.close()
+                # (a request's bytes are read and never answered)
+            self.most_at_once = max(self.most_at_once, len(self._open))
+            if len(self._open) >= self._gate:
+                self._close_all()
+
+    def _close_all(self) -> None:
+        for sock in [*self._open, *self._listeners]:
+            sock.close()
+        self._open, self._listeners = [], []
+
+    def close(self) -> None:
+        """Stop serving and close every socket."""
+        self._stop.set()
+        self._thread.join(5)
+        self._close_all()
+
+
+@pytest.mark.parametrize("fleet", [True, False], ids=["fleet", "no-fleet"])
+def test_robots_connect_in_parallel_and_the_dead_ones_hold_up_nobody(
+    tm_simulator_factory: Factory, example: ModuleType, fleet: bool
+) -> None:
+    live = [tm_simulator_factory() for _ in range(2)]
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        refused = int(s.getsockname()[1])  # nobody listens there once released
+    silent = SilentSlaves(4, gate=4)
+    try:
+        ports = [live[0].port, *silent.ports[:2], refused, *silent.ports[2:], live[1].port]
+        reports = example.run(ports, moves=1, watch_hz=0, fleet=fleet, retry_s=0.3)
+    finally:
+        silent.close()
+    # The four silent robots were connecting at the same time: in parallel.
+    assert silent.most_at_once == 4
+    assert [r.moves_done for r in reports] == [1, 0, 0, 0, 0, 0, 1]
+    assert [isinstance(r.error, TransportError) for r in reports] == [False] + [True] * 5 + [False]
+    for sim in live:
+        assert len([m for m in sim.motion_log() if m.target is not None]) == 1

@@ -126,14 +126,14 @@ def open_robot(sim: Simulator, opened: list[Robot], **options: Any) -> Robot:
 
 
 def test_the_table_plane_is_on_by_default() -> None:
-    workspace = Workspace()
-    workspace.check(Pose(300, 0, 5, 180, 0, 90))
+    workspace = Workspace()  # the default cell's table top, 85 mm
+    workspace.check(Pose(300, 0, 100, 180, 0, 90))
     with pytest.raises(ConfigError, match="table plane"):
         workspace.check(Pose(300, 0, -150, 180, 0, 90))
     # The flange is a tool point too: a tool pointing up from below the table.
     tool = Pose(0, 0, 150, 0, 0, 0)
     with pytest.raises(ConfigError, match="flange"):
-        workspace.check(Pose(300, 0, 100, 0, 0, 0), tool=tool)
+        workspace.check(Pose(300, 0, 200, 0, 0, 0), tool=tool)
     workspace.check(Pose(300, 0, 100, 180, 0, 0), tool=tool)  # tool down: flange at 250
     # Configurable: a table top, or none for a pedestal.
     with pytest.raises(ConfigError, match="floor_z_mm = 85"):
@@ -157,7 +157,9 @@ def test_a_line_the_arm_cannot_follow_is_refused_before_any_request(
     memory_simulator_factory: SimFactory, opened: list[Robot]
 ) -> None:
     sim = memory_simulator_factory("tmflow", **QUICK)
-    robot = open_robot(sim, opened)
+    # The target's posture has the elbow low (link 2 below the default table plane, where
+    # the simulated table is not): the arm's links are not what this test is about.
+    robot = open_robot(sim, opened, workspace=Workspace(arm_radius_mm=None))
     start = Pose(350, -150, 250, 180, 0, 90)
     robot.move_to(start, speed=100)
     # Straight across the J1 axis: the path passes the shoulder singularity.

@@ -343,6 +343,42 @@ def test_robots_that_cannot_be_shared_are_refused(
         monitor.add_robot(robots(sim.port, name="late"))
 
 
+def test_an_own_link_to_a_commanded_robot_is_refused_naming_it(
+    tm_simulator_factory: SimFactory,
+    slave_factory: Callable[..., OneClientSlave],
+    robots: Callable[..., Robot],
+) -> None:
+    sim = tm_simulator_factory("article")
+    slave = slave_factory(sim, "refuse")
+    robot = robots(slave.port, name="arm")
+    robot.connect()
+    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    with pytest.raises(ConfigError, match=r"Robot 'arm' .* monitor\.add_robot\(robot"):
+        monitor.add("watch", "127.0.0.1", slave.port, profile="article")
+    # The way it names: the robot's own link, and the slave sees one client.
+    monitor.add_robot(robot, name="watch")
+    with monitor:
+        assert wait_for(monitor, "watch", lambda s: s.polls >= 2).error is None
+        robot.move_to(TOUR[0], speed=80)
+    assert slave.accepted == 1
+    assert slave.refused == 0
+    # Once the robot is closed, the address is nobody's: a link of the monitor's own.
+    robot.close()
+    StatusMonitor().add("watch", "127.0.0.1", slave.port, profile="article")
+
+
+def test_a_robot_made_after_add_is_refused_at_start(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
+) -> None:
+    sim = tm_simulator_factory("article")
+    monitor = StatusMonitor(rate_hz=RATE_HZ)
+    monitor.add("watch", "127.0.0.1", sim.port, profile="article")
+    robots(sim.port, name="late")
+    with pytest.raises(ConfigError, match="Robot 'late'"):
+        monitor.start()
+    monitor.close()
+
+
 # -- (b) a monitor with its own connection backs off ----------------------------------
 
 
@@ -373,7 +409,9 @@ def test_an_own_link_behind_a_taken_slot_backs_off(
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
     monitor = StatusMonitor(rate_hz=RATE_HZ)
-    monitor.add("own", "127.0.0.1", slave.port, profile="article")
+    # The robot stands for another program's client: the monitor reaches the slave by
+    # another name than the robot's address, so it is not refused as the robot's own.
+    monitor.add("own", "localhost", slave.port, profile="article")
     with monitor:
         started = time.monotonic()
         assert tour(robot, 3) == 3
@@ -402,7 +440,9 @@ def test_last_connection_wins_reconnects_are_bounded_by_the_back_off(
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
     monitor = StatusMonitor(rate_hz=RATE_HZ)
-    monitor.add("own", "127.0.0.1", slave.port, profile="article")
+    # The robot stands for another program's client: the monitor reaches the slave by
+    # another name than the robot's address, so it is not refused as the robot's own.
+    monitor.add("own", "localhost", slave.port, profile="article")
     with monitor:
         started = time.monotonic()
         # A monitor's connect that lands between the robot's last read and its command

@@ -252,7 +252,8 @@ def test_an_arc_below_the_table_plane_is_refused_before_any_write(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     sim = tm_simulator_factory(**QUICK)
-    robot = robots(sim, workspace=tmmaster.Workspace(floor_z_mm=150))
+    # The TCP's own path against the plane (no tool extent round it).
+    robot = robots(sim, workspace=tmmaster.Workspace(floor_z_mm=150, tool_extent_mm=None))
     low_start = Pose(300, -200, 160, 180, 0, 90)
     robot.move_to(low_start, speed=50)
     sim.clear_request_log()

@@ -230,11 +230,16 @@ def test_tmflow_reports_an_overload_with_tms_code() -> None:
 
 
 def test_the_master_lets_a_move_below_the_table_by_and_the_simulator_stops_it() -> None:
-    # The master's default workspace floor is the robot's mounting plane (0 mm): a TCP at
+    # A master told of no table (its floor the robot's mounting plane, 0 mm): a TCP at
     # 60 mm passes its checks; the simulated cell's table top is at 85 mm.
     with (
         Simulator("tmflow", time_scale=20, tick_hz=100, listen=False) as sim,
-        tmmaster.connect(sim.url, profile="tmflow", poll_interval_s=0.01) as robot,
+        tmmaster.connect(
+            sim.url,
+            profile="tmflow",
+            poll_interval_s=0.01,
+            workspace=tmmaster.Workspace(floor_z_mm=0),
+        ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(ABOVE, speed=50)

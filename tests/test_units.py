@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, Pose, Robot, UnitsWarning, UnreachablePoseError
+from tmmaster import ConfigError, Pose, Robot, UnitsWarning
 from tmmaster._pose import suspect_units
 from tmmaster.pickplace import (
     load_config,
@@ -125,7 +125,9 @@ def test_check_units_false_takes_the_values_as_given() -> None:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            with contextlib.suppress(UnreachablePoseError):
+            # Taken as degrees: the tool points up, the wrist into the table (or out of
+            # reach): refused, and without a word about units.
+            with contextlib.suppress(ConfigError):
                 robot.check_move(Pose(300, -200, 200, 3.14159, 0, 1.5708), 30)
             with pytest.raises(ConfigError) as info:
                 robot.check_move(Pose(0.3, -0.2, 0.1, 180, 0, 90), 30)
@@ -222,7 +224,9 @@ def test_the_command_runs_radian_like_values_when_told_to(
 ) -> None:
     path = _config(
         tmp_path,
-        "[poses]\ncheck_units = false\npick = [300, -200, 100, 3.14159, 0, 1.5708]\n",
+        # Taken as degrees the tool points up, the wrist below it: no table in this cell.
+        "[poses]\ncheck_units = false\npick = [300, -200, 100, 3.14159, 0, 1.5708]\n"
+        "[workspace]\nfloor_z_mm = -2000\n",
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # nor does the robot warn: the file said so

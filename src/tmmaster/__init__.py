@@ -7,11 +7,10 @@ use, so ``import tmmaster`` stays cheap. ``tmmaster.__version__`` is the install
 version.
 """
 
-from __future__ import annotations
-
 # isort: off
-# First: under ``python -m tmmaster.<command>`` a Ctrl-C while the package loads exits
-# 130 in one line (a library user's program is left alone, see _sigint).
+# First (not even ``from __future__``, which loads a module): under ``python -m
+# tmmaster.<command>`` a Ctrl-C while the package loads exits 130 in one line (a
+# library user's program is left alone, see _sigint).
 from . import _sigint as _sigint
 # isort: on
 

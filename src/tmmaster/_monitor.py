@@ -43,6 +43,7 @@ from typing import Any, Literal, Protocol, Self
 from ._address import SIM_SCHEME, check_host
 from ._channels import CommandChannel, channel_for
 from ._codec import Value
+from ._commanded import commanding
 from ._exceptions import (
     ConfigError,
     ConnectError,
@@ -311,6 +312,8 @@ class _Watched(StatusRecord):
         backoff_max_s: float,
     ) -> None:
         super().__init__(name, _log.bind(robot=name, host=host, port=port))
+        #: The robot's address and port.
+        self.host, self.port = host, port
         self._period = period
         self._backoff_max_s = backoff_max_s
         #: Refused connects and lost links in a row (the back-off's exponent).
@@ -480,6 +483,18 @@ class _CommandedRobot(Protocol):
     _channel: CommandChannel
 
 
+def _refuse_commanded(name: str, host: str, port: int) -> None:
+    """Refuse a link of the monitor's own to an address a Robot of this process commands."""
+    robot = commanding(host, port)
+    if robot is not None:
+        raise ConfigError(
+            f"StatusMonitor.add({name!r}, {host!r}, {port}): Robot {robot.name!r} of this"
+            " process commands that address; a second connection could lock it out or"
+            " take the connection its stop needs. Watch it over its own link:"
+            f" monitor.add_robot(robot, name={name!r})"
+        )
+
+
 class StatusMonitor:
     """Watch the status of many robots from one thread: read-only, for dashboards and supervision.
 
@@ -601,7 +616,9 @@ class StatusMonitor:
         """Add a robot to watch over a Modbus TCP link of the monitor's own, before :meth:`start`.
 
         For a robot this process also commands, use :meth:`add_robot`: a slave that
-        accepts one client cannot serve both links.
+        accepts one client cannot serve both links, so an address that an open
+        :class:`~tmmaster.Robot` of this process was made for (the same host string and
+        port) is refused here, and again at :meth:`start` for a Robot made since.
 
         Args:
             name: The robot's name in :meth:`latest` and :meth:`snapshot`.
@@ -611,7 +628,9 @@ class StatusMonitor:
                 :class:`RobotProfile`).
 
         Raises:
-            ConfigError: After :meth:`start`, or naming a bad argument.
+            ConfigError: After :meth:`start`, naming a bad argument, or naming the open
+                Robot of this process that commands ``host``:``port`` (watch it with
+                :meth:`add_robot`).
             RegisterMapError: The profile cannot be loaded.
         """
         self._check_name(name)
@@ -622,6 +641,7 @@ class StatusMonitor:
             )
         if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
             raise ConfigError(f"port must be 1..65535, got {port!r}")
+        _refuse_commanded(name, host, port)
         self._robots[name] = _Watched(
             name,
             host,
@@ -725,6 +745,9 @@ class StatusMonitor:
             raise ConfigError("a closed StatusMonitor cannot be restarted; make a new one")
         if self._runner.thread is not None:
             return self
+        for robot in self._robots.values():
+            if isinstance(robot, _Watched):  # a Robot made since add() commands it now?
+                _refuse_commanded(robot.name, robot.host, robot.port)
         shared = [r for r in self._robots.values() if isinstance(r, _SharedWatched)]
         if shared and self._executor is None:
             self._executor = ThreadPoolExecutor(

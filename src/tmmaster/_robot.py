@@ -32,8 +32,15 @@ from typing import Annotated, Any, Literal, ParamSpec, TypeVar
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
+from . import _commanded
 from . import _kinematics as kin
 from ._address import SIM_SCHEME, check_host, check_port
+from ._cell import (
+    DEFAULT_ARM_RADIUS_MM,
+    DEFAULT_TABLE_TOP_Z_MM,
+    DEFAULT_TOOL_EXTENT_MM,
+    arm_lowest_z_mm,
+)
 from ._channels import (
     Command,
     CommandChannel,
@@ -108,12 +115,17 @@ _PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy")
 class Workspace(BaseModel):
     """Where the tool may go, in mm (robot base frame): a table plane and a box.
 
-    The table plane is on by default: no TCP and no flange (the two ends of the tool;
-    the tool between them is a straight segment, so it stays above the plane too) may
-    go below ``floor_z_mm``. Its default, 0 mm, is the plane the robot's base stands
-    on in Techman's robot base frame; set the height of your table top (for instance
-    ``Workspace(floor_z_mm=85)``), or ``None`` for an arm that must reach below its
-    mounting plane (mounted on a pedestal or a wall). The box bounds the TCP only.
+    The defaults describe the default cell (the built-in simulator's): a table whose top
+    is at ``floor_z_mm`` = 85 mm and the simulator's gripper around the TCP
+    (``tool_extent_mm``). No TCP, no flange and no corner of the tool's extent may go
+    below the table plane, so a move validated with these defaults does not run the tool
+    into that table. **Another cell states its own:** ``Workspace(floor_z_mm=...)``, the
+    top of your table in the robot base frame (``0`` for the plane the robot stands on),
+    and ``tool_extent_mm`` for your tool (``None``: only the TCP and the flange); or
+    ``floor_z_mm=None`` for an arm that must reach below its mounting plane (mounted on
+    a pedestal or a wall). At each target the arm's links (``arm_radius_mm``) must stay
+    above the plane too (:meth:`check_arm`). The box (``x``, ``y``, ``z``) bounds the
+    TCP only.
     """
 
     # NaN or infinite bounds would make range checks pass or fail by accident.
@@ -125,8 +137,29 @@ class Workspace(BaseModel):
     y: tuple[float, float] = (-2000.0, 2000.0)
     #: The TCP's range along z, mm.
     z: tuple[float, float] = (-2000.0, 2000.0)
-    #: The table plane, mm: no TCP and no flange below it. None: no plane.
-    floor_z_mm: float | None = 0.0
+    #: The table plane, mm: no TCP, no flange and no corner of the tool's extent below
+    #: it. Default: the default cell's table top (85 mm). None: no plane.
+    floor_z_mm: float | None = DEFAULT_TABLE_TOP_Z_MM
+    #: The tool's extent around the TCP in the TCP frame, (x lo, hi), (y lo, hi),
+    #: (z lo, hi), mm: a box no corner of which may go below the table plane. Default:
+    #: the simulator's gripper with the TCP at the flange. None: the TCP and flange only.
+    tool_extent_mm: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = (
+        DEFAULT_TOOL_EXTENT_MM
+    )
+    #: The radius of the arm's links round the segments between its joints, mm: no
+    #: link may go below the table plane at a target (:meth:`check_arm`). Default: the
+    #: simulator's arm. None: the links are not checked.
+    arm_radius_mm: Annotated[float, Field(gt=0, le=500)] | None = DEFAULT_ARM_RADIUS_MM
+
+    @model_validator(mode="after")
+    def _extent_is_ordered(self) -> Workspace:
+        for axis, (low, high) in zip("xyz", self.tool_extent_mm or (), strict=False):
+            if not -2000 <= low <= high <= 2000:
+                raise ValueError(
+                    f"tool_extent_mm: {axis} needs -2000 <= lo <= hi <= 2000 mm,"
+                    f" got ({low}, {high})"
+                )
+        return self
 
     def check(self, pose: Pose, *, tool: Pose | None = None) -> None:
         """Refuse a TCP ``pose`` outside the box or with the tool below the table plane.
@@ -137,7 +170,7 @@ class Workspace(BaseModel):
                 the flange for the table plane.
 
         Raises:
-            ConfigError: naming the axis or the point (TCP, flange) and its height.
+            ConfigError: naming the axis or the point (TCP, tool, flange) and its height.
         """
         for axis, (low, high) in (("x", self.x), ("y", self.y), ("z", self.z)):
             value = getattr(pose, axis)
@@ -148,18 +181,60 @@ class Workspace(BaseModel):
         floor = self.floor_z_mm
         if floor is None:
             return
+        plane = f"the table plane (workspace floor_z_mm = {floor:g} mm)"
         if pose.z < floor:
+            raise ConfigError(f"pose z = {pose.z:g} mm puts the TCP below {plane}")
+        lowest = self.tool_lowest_z_mm(pose)
+        if lowest <= floor:  # touching the table is hitting it
             raise ConfigError(
-                f"pose z = {pose.z:g} mm puts the TCP below the table plane"
-                f" (workspace floor_z_mm = {floor:g} mm)"
+                f"pose {pose} puts the tool's lowest point at z = {lowest:.1f} mm, on or"
+                f" below {plane}; the tool reaches {pose.z - lowest:.1f} mm below the TCP"
+                " in this orientation (workspace tool_extent_mm)"
             )
         if tool is not None:
             flange = kin.flange_of(pose, tool)
             if flange.z < floor:
                 raise ConfigError(
-                    f"pose {pose} puts the flange at z = {flange.z:.1f} mm, below the table"
-                    f" plane (workspace floor_z_mm = {floor:g} mm)"
+                    f"pose {pose} puts the flange at z = {flange.z:.1f} mm, below {plane}"
                 )
+
+    def check_arm(self, model: RobotModel, joints_deg: Sequence[float]) -> None:
+        """Refuse joints that put a link of the arm below the table plane.
+
+        Args:
+            model: The arm model.
+            joints_deg: The joints, deg.
+
+        Raises:
+            ConfigError: naming the link and its lowest point's height.
+        """
+        floor, radius = self.floor_z_mm, self.arm_radius_mm
+        if floor is None or radius is None:
+            return
+        link, lowest = arm_lowest_z_mm(model, joints_deg, radius)
+        if lowest <= floor:
+            joints = ", ".join(f"{q:.1f}" for q in joints_deg)
+            raise ConfigError(
+                f"joints ({joints}) deg put link {link} of the arm at z = {lowest:.1f} mm,"
+                f" on or below the table plane (workspace floor_z_mm = {floor:g} mm,"
+                f" arm_radius_mm = {radius:g} mm)"
+            )
+
+    def tool_lowest_z_mm(self, pose: Pose) -> float:
+        """The height of the lowest corner of the tool's extent with the TCP at ``pose``.
+
+        Args:
+            pose: the TCP pose (mm, deg) in the robot base frame.
+
+        Returns:
+            The lowest corner's z, mm (the TCP's z when ``tool_extent_mm`` is None).
+        """
+        if self.tool_extent_mm is None:
+            return pose.z
+        row = kin.pose_to_transform(pose)[2]
+        return pose.z + sum(
+            min(row[i] * low, row[i] * high) for i, (low, high) in enumerate(self.tool_extent_mm)
+        )
 
 
 class TimeoutPolicy(BaseModel):
@@ -1128,6 +1203,7 @@ class Robot:
                 run_command=self._run_command,
             )
         )
+        _commanded.register(self)  # made: a StatusMonitor.add() to its address is refused
 
     def _make_gripper(
         self,
@@ -1547,7 +1623,9 @@ class Robot:
         seed = seed_deg if seed_deg is not None else self._joints_hint
         try:
             self.workspace.check(pose, tool=self.tool)
-            return self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+            joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+            self.workspace.check_arm(self.model, joints)
+            return joints
         except ConfigError as exc:
             if units is None:
                 raise
@@ -1985,6 +2063,7 @@ class Robot:
             point = kin.transform_to_pose(arc.at(k / steps))
             try:
                 self.workspace.check(point, tool=self.tool)
+                self.workspace.check_arm(self.model, samples[k])
             except ConfigError as exc:
                 raise ConfigError(f"the arc to {to} passes {point}: {exc}") from exc
         return list(samples)

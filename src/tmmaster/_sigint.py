@@ -1,19 +1,30 @@
-"""Ctrl-C while a command starts: exit 130 with one line, never a traceback.
+"""Ctrl-C while a command starts or ends: one line, never a traceback.
 
 Imported first by each command's entry module, before pymodbus, pydantic and the rest
-load. When the running program is one of tmmaster's commands, a Ctrl-C until the
-command's ``main()`` takes over (:func:`handled_by_main`) ends the process at once:
-nothing is connected or started yet, so there is nothing to clean up. Imported any
-other way (a library user, a test), this module does nothing.
+load. When the running program is one of tmmaster's commands:
+
+- until the command's ``main()`` takes over (:func:`handled_by_main`), a Ctrl-C ends the
+  process at once with one line and exit 130: nothing is connected or started yet, so
+  there is nothing to clean up. The handler is installed before this module imports
+  anything that Python's start-up has not already loaded;
+- from then on a Ctrl-C is a :class:`KeyboardInterrupt`, which ``main()`` turns into one
+  line, until the interpreter exits: once the main thread has ended (Python's exit, its
+  exit hooks: a :class:`~tmmaster.Robot` still open withdraws or stops its command) a
+  Ctrl-C is ignored, so it neither cuts a hook short nor prints a traceback.
+
+Imported any other way (a library user, a test), the handlers are left alone; only a
+Ctrl-C that :class:`deferred` held back during an exit hook is dropped there, not raised.
+
+A Ctrl-C before the first line of tmmaster runs (Python's own start-up: ``site``, the
+``-m`` machinery) is Python's: its usual ``KeyboardInterrupt`` traceback.
 """
 
-from __future__ import annotations
-
+# No ``from __future__ import annotations`` and only modules Python's start-up has
+# loaded (``_signal`` is the C module under ``signal``): nothing to load before the
+# handler is in place.
+import _signal  # type: ignore[import-not-found]  # no stubs: the C module under signal
 import os
-import signal
 import sys
-import threading
-from types import FrameType
 
 #: Entry modules of the commands, and the name each prints its messages under.
 _COMMANDS = {
@@ -26,6 +37,10 @@ _COMMANDS = {
 
 #: Exit status of an interrupted command (128 + SIGINT), as shells report it.
 EXIT_INTERRUPTED = 130
+
+#: Test hook: ``import`` or ``exit``: say so on stderr there and wait for a byte on stdin
+#: (a test sends Ctrl-C at that very point instead of after a guessed delay).
+_PAUSE_AT = "TMMASTER_TEST_SIGINT_AT"
 
 
 def _command_name() -> str | None:
@@ -44,30 +59,66 @@ def _command_name() -> str | None:
     return None
 
 
-def _install() -> None:
+def _install() -> str | None:
+    """For a command: Ctrl-C exits 130 in one line; the command's name (None: not one)."""
     name = _command_name()
-    if name is None or threading.current_thread() is not threading.main_thread():
-        return
-    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        return  # started in the background by a shell: leave it ignored
+    if name is None or _signal.getsignal(_signal.SIGINT) == _signal.SIG_IGN:
+        return None  # not a command; or started in the background by a shell: left ignored
 
-    def interrupted(signum: int, frame: FrameType | None) -> None:
+    def interrupted(signum: int, frame: object) -> None:
         _ = signum, frame
         os.write(2, f"{name}: interrupted [exit {EXIT_INTERRUPTED}]\n".encode())
         os._exit(EXIT_INTERRUPTED)
 
-    signal.signal(signal.SIGINT, interrupted)
+    try:
+        _signal.signal(_signal.SIGINT, interrupted)
+    except ValueError:  # imported in another thread than the main one
+        return None
+    return name
+
+
+_NAME = _install()
+
+# Only now: a Ctrl-C while these load is already one line (isort: the order matters).
+import atexit  # noqa: E402
+import signal  # noqa: E402
+import threading  # noqa: E402
+from types import FrameType  # noqa: E402
+
+
+def _exiting() -> bool:
+    """True once the main thread has ended: the interpreter exits (its exit hooks run)."""
+    return not threading.main_thread().is_alive()
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    """A command's Ctrl-C: KeyboardInterrupt for ``main()``; ignored once Python exits."""
+    _ = signum, frame
+    if _exiting():
+        return  # an exit hook (a robot's withdraw or stop) runs to its end
+    raise KeyboardInterrupt
 
 
 def handled_by_main() -> None:
-    """Hand Ctrl-C back to Python's default (KeyboardInterrupt), which ``main()`` catches."""
+    """Hand Ctrl-C to ``main()`` as a :class:`KeyboardInterrupt` (Python's default handler
+    outside a command; in a command, one that is quiet once the interpreter exits)."""
     if threading.current_thread() is not threading.main_thread():
         return
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        handler = signal.default_int_handler if _NAME is None else _interrupt
+        signal.signal(signal.SIGINT, handler)
 
 
-_install()
+def _pause(point: str) -> None:
+    """The test hook (:data:`_PAUSE_AT`)."""
+    if os.environ.get(_PAUSE_AT) == point:
+        os.write(2, f"tmmaster-test: paused at {point}\n".encode())
+        os.read(0, 1)
+
+
+if _NAME is not None and os.environ.get(_PAUSE_AT) == "exit":
+    atexit.register(_pause, "exit")  # registered first: runs last of the exit hooks
+_pause("import")
 
 
 class deferred:  # noqa: N801 - used as a context manager, like contextlib's lower-case ones
@@ -115,6 +166,8 @@ class deferred:  # noqa: N801 - used as a context manager, like contextlib's low
         signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
         if self._pending:
             self._pending = False
+            if _exiting():
+                return  # an exit hook's: the program is over, nothing left to interrupt
             if previous is signal.SIG_DFL:
                 signal.raise_signal(signal.SIGINT)
             elif callable(previous):

@@ -30,6 +30,7 @@ from pydantic import (
 
 from .. import _profiles
 from .._address import check_host
+from .._cell import DEFAULT_TABLE_TOP_Z_MM
 from .._exceptions import ConfigError
 from .._pose import MotionType, Pose, pose_count_problem, suspect_units, written_list
 from .._profiles import DEFAULT_PROFILE
@@ -37,7 +38,6 @@ from .._registers import GripperProfile, RobotProfile
 from .._retry import RetryPolicy
 from .._robot import FrameCheck, Robot, TimeoutPolicy, Workspace
 from .._toml import read_toml
-from ..sim._world import DEFAULT_TABLE_TOP_Z_MM
 
 
 def _finite_pose(value: object) -> object:

@@ -30,20 +30,25 @@ from pydantic import (
     model_validator,
 )
 
+from .. import _cell
 from .. import _kinematics as kin
 from .._error_root import ConfigError
 from .._pose import Pose
 from ._backend import ObjectState
 
-#: Pick position of the part in the article's pick-and-place example.
-DEFAULT_PART_POSE = Pose(300.0, -200.0, 100.0, 180.0, 0.0, 90.0)
+#: Height of the table top in the robot base frame, mm: the default cell's
+#: (:data:`tmmaster._cell.DEFAULT_TABLE_TOP_Z_MM`), which the master's default
+#: :class:`~tmmaster.Workspace` keeps the tool above.
+DEFAULT_TABLE_TOP_Z_MM = _cell.DEFAULT_TABLE_TOP_Z_MM
 
 #: Size of the default part (a 30 mm cube), mm.
 DEFAULT_PART_SIZE_MM = (30.0, 30.0, 30.0)
 
-#: Height of the table top in the robot base frame, mm: the default part (centre at
-#: DEFAULT_PART_POSE, 30 mm high) rests on it exactly where it starts.
-DEFAULT_TABLE_TOP_Z_MM = DEFAULT_PART_POSE.z - DEFAULT_PART_SIZE_MM[2] / 2
+#: Pick position of the part in the article's pick-and-place example: its centre, the
+#: part resting on the default table (z = 85 + 15 = 100 mm).
+DEFAULT_PART_POSE = Pose(
+    300.0, -200.0, DEFAULT_TABLE_TOP_Z_MM + DEFAULT_PART_SIZE_MM[2] / 2, 180.0, 0.0, 90.0
+)
 
 #: Standard gravity, m/s^2.
 GRAVITY_M_S2 = 9.81
