@@ -30,6 +30,7 @@ from tmmaster import (
     ConfigError,
     ConnectionLostError,
     IllegalAddressError,
+    NotModbusError,
     ResponseTimeoutError,
     TransportError,
     ValueOutOfRangeError,
@@ -80,12 +81,18 @@ def test_a_late_answer_is_dropped_not_taken_for_the_next_read(slave: type[SlaveT
 
 
 @pytest.mark.parametrize(
-    "foreign",
-    [answer_with(registers(1, 2), tid_offset=7), answer_with(registers(1, 2), unit=7)],
+    ("foreign", "error"),
+    [
+        # An id never sent on this connection: no Modbus server answers so.
+        (answer_with(registers(1, 2), tid_offset=7), NotModbusError),
+        (answer_with(registers(1, 2), unit=7), ResponseTimeoutError),
+    ],
     ids=["another transaction id", "another unit id"],
 )
-def test_a_foreign_answer_is_not_taken(slave: type[SlaveThread], foreign: Answer) -> None:
-    with slave([foreign]) as s, link(s.port) as t, pytest.raises(ResponseTimeoutError):
+def test_a_foreign_answer_is_not_taken(
+    slave: type[SlaveThread], foreign: Answer, error: type[Exception]
+) -> None:
+    with slave([foreign]) as s, link(s.port) as t, pytest.raises(error):
         t.read_block(Table.HOLDING, 0, 2)
 
 

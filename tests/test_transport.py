@@ -158,6 +158,9 @@ def test_idempotent_writes_are_retried(
 ) -> None:
     transport = quick_transport
     transport.retry = RetryPolicy(attempts=2, initial_backoff_s=0.02)  # one retry shows it
+    # The device has answered once: a silence after that is an outage, and retried (a
+    # link that never answered is not: test_not_modbus.py).
+    transport.read_block(Table.HOLDING, 0, 1)
     # Each answer comes 0.2 s after its attempt's 0.25 s timeout; the first one lands
     # while the retry waits for its own.
     server.knobs.write_delay_s = 0.45

@@ -13,7 +13,8 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     │   ├── ConnectError (ConnectionError)        could not open the connection
     │   │   ├── ConnectRefusedError               nothing listens at host:port (refused)
     │   │   ├── HostNotFoundError                 the host name does not resolve
-    │   │   └── TransportClosedError              the link was closed by its owner
+    │   │   ├── TransportClosedError              the link was closed by its owner
+    │   │   └── NotModbusError                    host:port answers, but not in Modbus TCP
     │   ├── ConnectionLostError (ConnectionError) the connection broke during a request
     │   ├── ResponseTimeoutError (TimeoutError)   no answer within the request timeout
     │   └── ModbusExceptionError                  the device answered with an exception code
@@ -149,12 +150,47 @@ class TransportClosedError(ConnectError):
     retryable = False
 
 
+class NotModbusError(ConnectError):
+    """Something answers at the host and port, but not in Modbus TCP: the wrong port.
+
+    An HTTP server, a device speaking another protocol, garbage: a frame whose protocol
+    id is not 0, whose length no Modbus TCP frame has, or answers under a transaction id
+    never sent. Raised within one request timeout and never retried (``retryable``
+    False): a device that speaks another protocol will not start speaking Modbus. A
+    :class:`ConnectError`, so code that handles a failed connection handles it too.
+
+    Args:
+        message: What was received, naming host and port.
+        host: The device's address.
+        port: Its port.
+    """
+
+    retryable = False
+
+    def __init__(self, message: str, *, host: str = "", port: int = 0) -> None:
+        #: The device's address.
+        self.host = host
+        #: Its port.
+        self.port = port
+        super().__init__(message)
+
+
 class ConnectionLostError(TransportError, ConnectionError):
     """The connection broke while a request was in flight."""
 
 
 class ResponseTimeoutError(TransportError, TimeoutError):
-    """The device did not answer within the request timeout."""
+    """The device did not answer within the request timeout.
+
+    Attributes:
+        retryable: False on a link whose device has never answered a request (it
+            accepted the connection, then said nothing): the
+            :class:`~tmmaster.RetryPolicy` raises it at once (docs/robot-api.md, "When
+            a connection fails").
+    """
+
+    #: Whether the retry policy may try again; False raises at once.
+    retryable: bool = True
 
 
 class ModbusExceptionError(TransportError):

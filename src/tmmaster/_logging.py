@@ -23,6 +23,11 @@ if TYPE_CHECKING:
 ROOT_LOGGER = "tmmaster"
 
 logging.getLogger(ROOT_LOGGER).addHandler(logging.NullHandler())
+# pymodbus logs on "pymodbus.*" without a handler of its own (its NullHandler is on
+# "pymodbus_internal"), so Python's last-resort handler printed its warnings and errors
+# ("Invalid Modbus protocol id: 21584") on stderr of every program using tmmaster. The
+# same NullHandler: they reach an application's handlers only once it configures logging.
+logging.getLogger("pymodbus").addHandler(logging.NullHandler())
 
 
 #: The levels every command's ``--log-level`` accepts.

@@ -1,10 +1,12 @@
 """The one retry policy: exponential backoff with jitter, bounded by attempts and time.
 
 Only transient transport failures are retried (a connection lost or not opened in
-time, a response timeout, a busy device). A connection that cannot succeed on a later
-attempt is raised at once (its ``retryable`` is False): a closed link, and on a link
-never connected yet a refused connection or a host name that does not resolve (the
-transport decides, :meth:`BlockTransport._connect_once`). pymodbus's own retries are
+time, a response timeout, a busy device). A failure that cannot succeed on a later
+attempt is raised at once (its ``retryable`` is False): a closed link; on a link never
+connected yet a refused connection or a host name that does not resolve (the transport
+decides, :meth:`BlockTransport._connect_once`); a device that answers in something other
+than Modbus TCP (:class:`NotModbusError`); and a response timeout on a link whose device
+has never answered (:meth:`ModbusTransport._no_answer`). pymodbus's own retries are
 switched off by the transport, so retries never multiply and no write is resent behind
 the caller's back.
 

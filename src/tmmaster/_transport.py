@@ -9,7 +9,10 @@ and a wait costs one system call (docs/performance.md).
 
 Reads, and writes the caller declares idempotent, retry and reconnect. A write that
 triggers a command is sent exactly once: if it fails, the caller must read the
-device's state back to learn whether the command arrived.
+device's state back to learn whether the command arrived. Nothing is retried after an
+answer that is not Modbus TCP (:class:`NotModbusError`, checked on each frame's header
+before pymodbus' framer sees it), nor a timeout on a link whose device has never
+answered anything (:meth:`ModbusTransport._no_answer`).
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from ._exceptions import (
     ConnectRefusedError,
     HostNotFoundError,
     ModbusExceptionError,
+    NotModbusError,
     ResponseTimeoutError,
     TransportClosedError,
     TransportError,
@@ -892,9 +896,11 @@ def next_answer(
 
     pymodbus' socket framer cuts and decodes the frame; a frame from another unit id is
     skipped here (pymodbus would log it as an error). ``(0, None)``: wait for more bytes.
+    Bytes no Modbus TCP server sends raise :class:`ForeignReplyError` (:func:`check_header`).
     """
     used = 0
     while used < len(buffer):
+        check_header(buffer, used)
         size, pdu = framer.handleFrame(buffer[used:], 0, 0)
         if not size:
             break
@@ -906,6 +912,68 @@ def next_answer(
             continue
         return used, pdu
     return used, None
+
+
+class ForeignReplyError(Exception):
+    """Bytes no Modbus TCP server sends (internal: each link maps it to :class:`NotModbusError`).
+
+    Args:
+        reason: What is wrong, e.g. ``protocol id 21584, Modbus TCP's is 0``.
+        data: The bytes received, from the frame that is wrong.
+    """
+
+    def __init__(self, reason: str, data: bytes) -> None:
+        super().__init__(reason)
+        #: What is wrong.
+        self.reason = reason
+        #: The bytes received, from the frame that is wrong.
+        self.data = data
+
+
+#: The lengths an MBAP header may give (unit id + PDU; 2: pymodbus' tolerance of a
+#: device that leaves the exception code out of the count).
+MBAP_LENGTHS = range(2, 255)
+
+
+def check_header(buffer: bytes, start: int) -> None:
+    """Refuse a frame at ``start`` whose MBAP header no Modbus TCP server sends.
+
+    Checked as soon as the bytes are there, before pymodbus' framer, which would log
+    the frame on its own logger and wait for more bytes forever: a protocol id other
+    than 0 (an HTTP answer's is 21584, ``TP``), a length outside 2-254.
+
+    Raises:
+        ForeignReplyError: The header is not Modbus TCP's.
+    """
+    size = len(buffer) - start
+    if size < 4:
+        return
+    if buffer[start + 2] or buffer[start + 3]:
+        protocol = buffer[start + 2] << 8 | buffer[start + 3]
+        raise ForeignReplyError(f"protocol id {protocol}, Modbus TCP's is 0", buffer[start:])
+    if size >= 6 and (length := buffer[start + 4] << 8 | buffer[start + 5]) not in MBAP_LENGTHS:
+        raise ForeignReplyError(f"frame length {length}, Modbus TCP's is 2-254", buffer[start:])
+
+
+def shown_bytes(data: bytes) -> str:
+    """The start of ``data`` for a message: up to 24 characters of text, quoted, or 12
+    bytes in hex."""
+    if all(32 <= b < 127 or b in (9, 10, 13) for b in data[:24]):
+        return repr(data[:24].decode("ascii")) + ("..." if len(data) > 24 else "")
+    return data[:12].hex(" ") + ("..." if len(data) > 12 else "")
+
+
+def not_modbus_error(
+    reply: ForeignReplyError, *, name: str, host: str, port: int, what: str
+) -> NotModbusError:
+    """The :class:`NotModbusError` of bytes that are not Modbus TCP (one line, host:port)."""
+    where = endpoint_text(host, port)
+    return NotModbusError(
+        f"{name} at {where} is not a Modbus TCP server: its answer to {what} starts"
+        f" {shown_bytes(reply.data)} ({reply.reason}); is the port right?",
+        host=host,
+        port=port,
+    )
 
 
 #: The request PDU class of each read function code.
@@ -999,6 +1067,13 @@ class ModbusTransport(BlockTransport):
         self._kernel_bounds = False
         self._framer = FramerSocket(DecodePDU(is_server=False))
         self._tid = 0
+        # The first transaction id sent on the open socket, and how many were sent on it:
+        # an answer under any other id was never asked for (a device that is not Modbus).
+        self._link_first_tid = 1
+        self._link_sent = 0
+        # Whether the device has ever answered a request (an exception answer included).
+        # Until it has, a request that gets no answer is not retried: see _no_answer.
+        self._answered = False
 
     def _link_open(self) -> bool:
         return self._socket is not None
@@ -1020,6 +1095,8 @@ class ModbusTransport(BlockTransport):
             sock.close()
             raise ConnectError(f"cannot set up the link to {self.name}: {exc}") from exc
         self._socket = sock
+        self._link_first_tid = self._tid % 0xFFFF + 1
+        self._link_sent = 0
 
     def _bound_waits(self, sock: socket.socket, seconds: float) -> None:
         """Bound every later send and receive on ``sock`` by ``seconds``."""
@@ -1047,53 +1124,115 @@ class ModbusTransport(BlockTransport):
         frame = self._framer.buildFrame(request)
         deadline = time.monotonic() + self.timeout
         try:
+            self._link_sent += 1
             sock.sendall(frame)
             self.stats.bytes_sent += len(frame)
             response = self._receive(sock, tid, deadline)
         except (TimeoutError, BlockingIOError) as exc:
             # BlockingIOError: the kernel's SO_RCVTIMEO/SO_SNDTIMEO ran out (EAGAIN).
-            raise ResponseTimeoutError(
-                f"{self.name}: no answer to {what} within {self.timeout:g} s"
-            ) from exc
+            raise self._no_answer(what) from exc
         except OSError as exc:
             raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
+        except ForeignReplyError as exc:
+            raise not_modbus_error(
+                exc, name=self.name, host=self.host, port=self.port, what=what
+            ) from None
         except DECODE_FAILURES as exc:
             raise TransportError(f"{self.name}: malformed answer to {what}: {exc}") from exc
+        self._answered = True
         return answer_words(response, request, count=count, name=self.name, what=what)
 
+    def _no_answer(self, what: str) -> ResponseTimeoutError:
+        """The error of a request that got no answer in time.
+
+        The rule: a link that has never answered anything is not retried beyond its
+        first request's timeout. Something accepted the connection but does not speak
+        Modbus to us (another protocol, a unit id it ignores); waiting the retry
+        policy's whole budget there only hides that. Once the device has answered, a
+        silence is an outage and the retry policy rides it out. Only retries are
+        dropped, so nothing is ever sent more often than before.
+        """
+        error = ResponseTimeoutError(f"{self.name}: no answer to {what} within {self.timeout:g} s")
+        if not self._answered:
+            where = endpoint_text(self.host, self.port)
+            error = ResponseTimeoutError(
+                f"{self.name} at {where} accepted the connection but never answered:"
+                f" no answer to {what} within {self.timeout:g} s (is it a Modbus TCP"
+                f" server, for unit id {self.device_id}?)"
+            )
+            error.retryable = False
+        return error
+
+    def _sent_here(self, tid: int) -> bool:
+        """Whether a request under ``tid`` was sent on the open socket."""
+        if self._link_sent >= 0xFFFF:
+            return 1 <= tid <= 0xFFFF
+        return 1 <= tid <= 0xFFFF and (tid - self._link_first_tid) % 0xFFFF < self._link_sent
+
     def _receive(self, sock: socket.socket, tid: int, deadline: float) -> ModbusPDU:
-        """The answer under ``tid`` by ``deadline``; other ids' answers are skipped."""
+        """The answer under ``tid`` by ``deadline``; other ids' answers are skipped.
+
+        Raises:
+            TimeoutError: No answer by ``deadline`` (BlockingIOError from the kernel's).
+            ForeignReplyError: Bytes that are not Modbus TCP; or, at the deadline, answers
+                only under ids never sent on this socket.
+        """
         buffer = b""
+        # The first answer under an id never sent here: (its id, its bytes).
+        stray: tuple[int, bytes] | None = None
         shortened = False
         try:
             while True:
-                chunk = sock.recv(_RECV_SIZE)
+                try:
+                    chunk = sock.recv(_RECV_SIZE)
+                except (TimeoutError, BlockingIOError):
+                    _refuse_stray(stray, tid)
+                    raise
                 if not chunk:
                     raise ConnectionResetError("closed by the device")  # mapped by _exchange
                 self.stats.bytes_received += len(chunk)
                 buffer += chunk
-                while buffer:
-                    used, pdu = next_answer(
-                        self._framer, buffer, device_id=self.device_id, name=self.name
-                    )
-                    if not used:
-                        break
-                    buffer = buffer[used:]
-                    if pdu is not None and pdu.transaction_id == tid:
-                        return pdu
-                    if pdu is not None:
-                        _log.debug(
-                            "transport.unawaited_answer", device=self.name, tid=pdu.transaction_id
-                        )
+                pdu, buffer, stray = self._take_answer(buffer, tid, stray)
+                if pdu is not None:
+                    return pdu
                 # Part of a frame, or another id's answer: wait on, by the same deadline.
                 now = time.monotonic()
                 if now >= deadline:
+                    _refuse_stray(stray, tid)
                     raise TimeoutError
                 shortened = True
                 self._bound_waits(sock, deadline - now)
         finally:
             if shortened and self._socket is sock:
                 self._bound_waits(sock, self.timeout)
+
+    def _take_answer(
+        self, buffer: bytes, tid: int, stray: tuple[int, bytes] | None
+    ) -> tuple[ModbusPDU | None, bytes, tuple[int, bytes] | None]:
+        """The answer under ``tid`` among the whole frames of ``buffer``, the bytes left,
+        and the first answer under an id never sent here (kept from ``stray``)."""
+        while buffer:
+            used, pdu = next_answer(self._framer, buffer, device_id=self.device_id, name=self.name)
+            if not used:
+                break
+            frame, buffer = buffer[:used], buffer[used:]
+            if pdu is None:
+                continue
+            if pdu.transaction_id == tid:
+                return pdu, buffer, stray
+            if stray is None and not self._sent_here(pdu.transaction_id):
+                stray = (pdu.transaction_id, frame)
+            _log.debug("transport.unawaited_answer", device=self.name, tid=pdu.transaction_id)
+        return None, buffer, stray
+
+
+def _refuse_stray(stray: tuple[int, bytes] | None, tid: int) -> None:
+    """At a request's deadline: answers came, but only under ids never sent here."""
+    if stray is not None:
+        raise ForeignReplyError(
+            f"transaction id {stray[0]}, never sent on this connection; the request's is {tid}",
+            stray[1],
+        )
 
 
 class _Stream(asyncio.Protocol):
@@ -1106,10 +1245,21 @@ class _Stream(asyncio.Protocol):
     the stream.
     """
 
-    def __init__(self, name: str, device_id: int, stats: TransportStats | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        device_id: int,
+        stats: TransportStats | None = None,
+        *,
+        host: str = "",
+        port: int = 0,
+    ) -> None:
         self.name = name
         self.device_id = device_id
         self.stats = stats
+        #: The device's address and port, for a :class:`NotModbusError`.
+        self.host = host
+        self.port = port
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
@@ -1130,6 +1280,12 @@ class _Stream(asyncio.Protocol):
                 used, pdu = next_answer(
                     self.framer, self._buffer, device_id=self.device_id, name=self.name
                 )
+            except ForeignReplyError as exc:
+                what = "a request"
+                self.fail(
+                    not_modbus_error(exc, name=self.name, host=self.host, port=self.port, what=what)
+                )
+                return
             except DECODE_FAILURES as exc:
                 self.fail(TransportError(f"{self.name}: undecodable answer: {exc}"))
                 return
@@ -1236,7 +1392,9 @@ class AsyncLink:
         try:
             async with asyncio.timeout(self.timeout):
                 _transport, stream = await loop.create_connection(
-                    lambda: _Stream(self.name, self.device_id, self.stats),
+                    lambda: _Stream(
+                        self.name, self.device_id, self.stats, host=self.host, port=self.port
+                    ),
                     self.host,
                     self.port,
                 )

@@ -54,6 +54,7 @@ from .._exceptions import (
     GripperError,
     HostNotFoundError,
     MotionTimeoutError,
+    NotModbusError,
     ProfileMismatchError,
     RobotError,
     RobotFaultError,
@@ -807,7 +808,7 @@ def _run_on(
             robot.connect()
         except ProfileMismatchError as exc:
             return EXIT_CONFIG, _mismatch_reason(exc)
-        except (ConnectRefusedError, HostNotFoundError) as exc:
+        except (ConnectRefusedError, HostNotFoundError, NotModbusError) as exc:
             return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
         except TransportError as exc:
             return EXIT_CONNECTION, f"robot at {host}:{port} unreachable: {exc}"
