@@ -18,7 +18,7 @@ import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import ConfigError, FrameCheck, MotionType, Pose, Robot
+from tmmaster import ConfigError, FrameCheck, MotionType, Pose, Robot, Workspace
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
 from tmmaster.sim import KinematicBackend, Simulator
@@ -159,7 +159,8 @@ def test_where_the_profile_publishes_no_joints_the_ready_posture_is_assumed(
     backend = RecordingBackend()
     backend.wind()
     sim = memory_simulator_factory("article", backend=backend, **QUICK)
-    robot = Robot(sim.url, profile="article", gripper=None)
+    # No table: the subject is the posture the plan starts from, not the cell.
+    robot = Robot(sim.url, profile="article", gripper=None, workspace=Workspace(floor_z_mm=None))
     opened.append(robot)
     robot.connect()
     assert sim.request_log == []

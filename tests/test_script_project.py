@@ -177,7 +177,7 @@ def test_a_bad_program_is_refused_before_the_simulator_starts(
     assert sim_main.main(["--program", str(program), "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert needle in err
-    assert "line" in err
+    assert f"{program}:" in err  # the file, then its line and column
 
 
 def test_a_program_is_refused_on_a_profile_without_sequence_numbers(tmp_path: Path) -> None:

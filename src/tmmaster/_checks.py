@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from decimal import Decimal
 from typing import TypeGuard
 
-from ._exceptions import ConfigError
+from ._error_root import ConfigError
 
 #: The largest magnitude a float holds; an int beyond it has no float (OverflowError).
 _FLOAT_MAX = sys.float_info.max

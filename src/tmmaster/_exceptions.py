@@ -46,12 +46,13 @@ from typing import TYPE_CHECKING
 
 # The root and ConfigError live in _error_root.py so that data modules (_pose.py) can
 # raise them without importing this module, which needs Pose for its annotations.
+from ._checks import shown
 from ._error_root import ConfigError as ConfigError
 from ._error_root import TMMasterError as TMMasterError
+from ._tm_errors import TMErrorCode, code_hex, describe, describe_fault, lookup
 
 if TYPE_CHECKING:
     from ._pose import Pose
-    from ._tm_errors import TMErrorCode
 
 
 class RegisterMapError(ConfigError):
@@ -81,8 +82,6 @@ class ValueOutOfRangeError(ConfigError):
         self.value = value
         #: The allowed range, in words.
         self.allowed = allowed
-        from ._checks import shown  # here: _checks imports this module
-
         super().__init__(f"{field}: value {shown(value)} is out of range (allowed {allowed})")
 
 
@@ -296,11 +295,8 @@ class _TMCodedError(RobotError):
     """
 
     def __init__(self, message: str, *, error_code: int = 0, pose: Pose | None = None) -> None:
-        if error_code:
-            from ._tm_errors import code_hex, describe_fault  # lazily: data, on a fault only
-
-            if code_hex(error_code) not in message:
-                message = f"{message}: {describe_fault(error_code)}"
+        if error_code and code_hex(error_code) not in message:
+            message = f"{message}: {describe_fault(error_code)}"
         super().__init__(message, error_code=error_code, pose=pose)
 
     @property
@@ -313,8 +309,6 @@ class _TMCodedError(RobotError):
         """The code's entry in TMflow 2.24 Appendix J (text, pages, what to do), if listed."""
         if not self.error_code:
             return None
-        from ._tm_errors import lookup
-
         try:
             return lookup(self.error_code)
         except ConfigError:  # a broken install: the message already said so
@@ -331,6 +325,24 @@ class RobotFaultError(_TMCodedError):
 
 class EmergencyStopError(_TMCodedError):
     """The emergency stop is pressed (``code``/``tm_error`` as for RobotFaultError)."""
+
+
+def fault_meaning(exc: BaseException) -> str | None:
+    """The code and meaning of a robot fault or e-stop, for a report.
+
+    Args:
+        exc: The error that ended a run.
+
+    Returns:
+        ``"0x0022 Force or Torque Over Range"`` for a RobotFaultError or EmergencyStopError
+        with a code (TMflow's codes), else None (other errors' codes are not Techman's).
+    """
+    if not isinstance(exc, RobotFaultError | EmergencyStopError) or not exc.error_code:
+        return None
+    try:
+        return describe(exc.error_code)
+    except ConfigError:  # a broken install: the bare code still says which
+        return code_hex(exc.error_code)
 
 
 class ProjectPausedError(RobotFaultError):

@@ -158,26 +158,6 @@ def code_suffix(code: int | None, message: str) -> str:
         return f" (robot error {code_hex(code)})"
 
 
-def fault_meaning(exc: BaseException) -> str | None:
-    """The code and meaning of a robot fault or e-stop, for a report.
-
-    Args:
-        exc: The error that ended a run.
-
-    Returns:
-        ``"0x0022 Force or Torque Over Range"`` for a RobotFaultError or EmergencyStopError
-        with a code (TMflow's codes), else None (other errors' codes are not Techman's).
-    """
-    from ._exceptions import EmergencyStopError, RobotFaultError  # here: it imports us
-
-    if not isinstance(exc, RobotFaultError | EmergencyStopError) or not exc.error_code:
-        return None
-    try:
-        return describe(exc.error_code)
-    except ConfigError:  # a broken install: the bare code still says which
-        return code_hex(exc.error_code)
-
-
 def lookup_tm_error(code: int) -> TMErrorCode | None:
     """The entry of TMflow 2.24 Appendix J for a robot's error code.
 

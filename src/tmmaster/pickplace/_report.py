@@ -20,9 +20,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .._exceptions import ConfigError
+from .._exceptions import ConfigError, fault_meaning
 from .._pose import Pose
-from .._tm_errors import fault_meaning
 from ._runner import RunResult
 
 #: Bumped when a key changes meaning or disappears (adding keys keeps the version).
