@@ -48,8 +48,11 @@ STATEMENTS_PER_TICK = 400
 #: Wall seconds a program may run per control tick, whichever of the two budgets ends
 #: first: slow statements yield too, so the Modbus server (on the same thread) keeps
 #: answering. A statement running then finishes first (a bounded one: strings and
-#: arrays are capped, see ``docs/tmscript.md``).
-TICK_SECONDS = 0.01
+#: arrays are capped, see ``docs/tmscript.md``). Well above what an ordinary tick's
+#: statements take on a loaded machine (a Line's path check: a few ms), so that how far
+#: a program gets in a tick does not depend on the machine's load; well below a
+#: request timeout.
+TICK_SECONDS = 0.05
 
 #: The Modbus tables behind each function code, and whether it writes.
 _FUNCTIONS: dict[int, tuple[Table, bool]] = {
