@@ -19,7 +19,15 @@ from typing import Any, TypeAlias, cast
 
 from .._exceptions import TMMasterError, TMScriptRuntimeError, TMScriptSyntaxError
 from . import _ast as a
-from ._builtins import BUILTINS, UNSUPPORTED, Builtin, ExitRequest, ModbusConfig, Runtime
+from ._builtins import (
+    BUILTINS,
+    UNSUPPORTED,
+    Builtin,
+    ExitRequest,
+    Impl,
+    ModbusConfig,
+    Runtime,
+)
 from ._host import Host, HostError
 from ._parser import parse_script
 from ._types import (
@@ -226,6 +234,25 @@ def _converted_literal(node: a.Expr, conv: Callable[[Value], Value]) -> Any:
         return _NOT_CONSTANT
 
 
+def _element_type(node: a.ArrayLiteral, types: set[str]) -> str:
+    """The element type of an array literal whose elements have ``types``."""
+    if not types:
+        elem = "?"
+    elif types <= NUMERIC:
+        elem = "byte" if types == {"byte"} else "int"
+        if types & {"float", "double"}:
+            elem = "double" if "double" in types else "float"
+        elif types - {"byte"}:
+            elem = "int"
+    elif len(types) == 1:
+        elem = next(iter(types))
+    else:
+        raise _syntax(node, "the elements of an array have one type")
+    if any(is_array(t) for t in types):
+        raise _syntax(node, "only one-dimensional arrays exist (§2.3)")
+    return elem
+
+
 def _lift(ce: _CExpr) -> GenFn:
     """The expression as a generator function (pure ones are wrapped)."""
     if ce.gen:
@@ -255,7 +282,12 @@ class _Scope:
     is_global: bool = False
 
 
-class _Compiler:
+class _ExprCompiler:
+    """Names and expressions: each expression becomes a closure of a known type.
+
+    Calls go to :class:`_CallCompiler`; :class:`_Compiler` adds the statements.
+    """
+
     def __init__(self, script: a.Script) -> None:
         self.script = script
         self.globals: dict[str, tuple[int, str]] = {}
@@ -265,6 +297,7 @@ class _Compiler:
         self.scope = _Scope(is_global=True)
         self.function: _Function | None = None
         self.section = ""
+        self.calls = _CallCompiler(self)
 
     # ---- names ----
 
@@ -291,6 +324,381 @@ class _Compiler:
             slot, typ = self.globals[name]
             return True, slot, typ
         return None
+
+    # ---- expressions ----
+
+    def pure(self, node: a.Expr, where: str) -> _CExpr:
+        ce = self.expr(node)
+        if ce.gen:
+            raise _syntax(node, f"{where}: a waiting call or a function call is not allowed here")
+        return ce
+
+    def to_type(self, ce: _CExpr, want: str, node: a.Node) -> PureFn:
+        conv = self.converter(ce.type, want, node)
+        fn = cast(PureFn, ce.fn)
+        if conv is None:
+            return fn
+        return lambda fr: conv(fn(fr))
+
+    def converter(self, source: str, target: str, node: a.Node) -> Callable[[Value], Value] | None:
+        """The implicit conversion of an assignment (TMscript 2.24 §2.7), None if none needed."""
+        if source == target and target not in ("float",):
+            if is_array(target):
+                return _copy  # arrays are values: an assignment copies
+            return None
+        if target == "?" or target == "*":
+            return None
+        if source not in ("?", "void") and is_array(source) != is_array(target):
+            raise _syntax(node, f"a {source} cannot be assigned to a {target}")
+        if source == "void":
+            raise _syntax(node, "the function returns no value")
+
+        def conv(value: Value) -> Value:
+            try:
+                return convert(value, source, target)
+            except ConversionError as exc:
+                raise _runtime(node, str(exc)) from None
+
+        return conv
+
+    def converted(self, node: a.Expr, want: str, at: a.Node) -> _CExpr:
+        ce = self.expr(node)
+        conv = self.converter(ce.type, want, at)
+        if conv is None:
+            return _CExpr(ce.fn, want, ce.gen)
+        constant = _converted_literal(node, conv)
+        if constant is not _NOT_CONSTANT:
+            return _CExpr(lambda fr: constant, want, False)
+        if not ce.gen:
+            fn = cast(PureFn, ce.fn)
+            return _CExpr(lambda fr: conv(fn(fr)), want, False)
+        gen = cast(GenFn, ce.fn)
+
+        def converted_gen(fr: _Frame) -> Gen:
+            return conv((yield from gen(fr)))
+
+        return _CExpr(converted_gen, want, True)
+
+    def expr(self, node: a.Expr) -> _CExpr:
+        if isinstance(node, a.Literal):
+            value = node.value
+            return _CExpr(lambda fr: value, node.type, False)
+        if isinstance(node, a.Name):
+            return self.name(node)
+        if isinstance(node, a.ArrayLiteral):
+            return self.array(node)
+        if isinstance(node, a.Binary):
+            return self.binary(node)
+        if isinstance(node, a.Logic):
+            return self.logic(node)
+        if isinstance(node, a.Unary):
+            return self.unary(node)
+        if isinstance(node, a.Ternary):
+            return self.ternary(node)
+        if isinstance(node, a.Assign):
+            return self.assign(node)
+        if isinstance(node, a.IncDec):
+            return self.incdec(node)
+        if isinstance(node, a.Index):
+            return self.index(node)
+        if isinstance(node, a.Cast):
+            return self.cast(node)
+        if isinstance(node, a.Call):
+            return self.calls.call(node)
+        if isinstance(node, a.MethodCall):
+            return self.calls.method_call(node)
+        raise _syntax(node, f"unsupported expression {type(node).__name__}")
+
+    def name(self, node: a.Name) -> _CExpr:
+        found = self.lookup(node.name)
+        if found is None:
+            if node.name in self.devices:
+                device = node.name
+                return _CExpr(lambda fr: device, "string", False)
+            # A bare word that is no variable is a string, with a warning (§2.2, p. 16).
+            self.warnings.append(
+                ScriptWarning(
+                    node.line, node.column, f"{node.name} is not a variable: taken as a string"
+                )
+            )
+            text = node.name
+            return _CExpr(lambda fr: text, "string", False)
+        is_global, slot, typ = found
+        if is_global:
+            return _CExpr(lambda fr: fr.g[slot], typ, False)
+        return _CExpr(lambda fr: fr.l[slot], typ, False)
+
+    def array(self, node: a.ArrayLiteral) -> _CExpr:
+        items = [self.expr(item) for item in node.items]
+        types = {ce.type for ce in items}
+        elem = _element_type(node, types)
+        if any(ce.gen for ce in items):
+            gens = [_lift(ce) for ce in items]
+
+            def make_gen(fr: _Frame) -> Gen:
+                out = []
+                for g in gens:
+                    out.append((yield from g(fr)))
+                return out
+
+            return _CExpr(make_gen, elem + "[]", True)
+        fns = [cast(PureFn, ce.fn) for ce in items]
+        return _CExpr(lambda fr: [fn(fr) for fn in fns], elem + "[]", False)
+
+    def arith(self, node: a.Node, op: str, lt: str, rt_: str) -> tuple[Callable[..., Value], str]:
+        """The function of a binary operator on two values, and the result type."""
+        if op == "+" and ("string" in (lt, rt_)):
+            if is_array(lt) or is_array(rt_):
+                raise _syntax(node, "an array cannot be added to a string")
+
+            def concat(x: Value, y: Value) -> str:
+                left, right = display_text(x, lt), display_text(y, rt_)
+                if len(left) + len(right) > STRING_MAX:
+                    raise _too_long(node, len(left) + len(right))
+                return left + right
+
+            return concat, "string"
+        if op in ("==", "!=", "<", "<=", ">", ">="):
+            return self.comparison(node, op, lt, rt_), "bool"
+        if lt not in NUMERIC or rt_ not in NUMERIC:
+            raise _syntax(node, f"operator {op} does not apply to {lt} and {rt_}")
+        typ = _promote(lt, rt_)
+        if op in ("%", "<<", ">>", "&", "|", "^") and typ != "int":
+            raise _syntax(node, f"operator {op} takes integers, not {lt} and {rt_}")
+        return _ARITH[(op, typ)](node), typ
+
+    def comparison(self, node: a.Node, op: str, lt: str, rt_: str) -> Callable[[Any, Any], bool]:
+        kinds = {("n" if t in NUMERIC else t) for t in (lt, rt_)}
+        if len(kinds) != 1 or any(is_array(t) for t in (lt, rt_)):
+            raise _syntax(node, f"a {lt} cannot be compared with a {rt_}")
+        if "bool" in kinds and op not in ("==", "!="):
+            raise _syntax(node, f"operator {op} does not apply to bool")
+        return _COMPARE[op]
+
+    def binary(self, node: a.Binary) -> _CExpr:
+        left, right = self.expr(node.left), self.expr(node.right)
+        fn, typ = self.arith(node, node.op, left.type, right.type)
+        if not left.gen and not right.gen:
+            lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
+            return _CExpr(lambda fr: fn(lf(fr), rf(fr)), typ, False)
+        lg, rg = _lift(left), _lift(right)
+
+        def binary_gen(fr: _Frame) -> Gen:
+            x = yield from lg(fr)
+            y = yield from rg(fr)
+            return fn(x, y)
+
+        return _CExpr(binary_gen, typ, True)
+
+    def logic(self, node: a.Logic) -> _CExpr:
+        left, right = self.expr(node.left), self.expr(node.right)
+        is_and = node.op == "&&"
+        if not left.gen and not right.gen:
+            lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
+            if is_and:
+                return _CExpr(lambda fr: truthy(lf(fr)) and truthy(rf(fr)), "bool", False)
+            return _CExpr(lambda fr: truthy(lf(fr)) or truthy(rf(fr)), "bool", False)
+        lg, rg = _lift(left), _lift(right)
+
+        def logic_gen(fr: _Frame) -> Gen:
+            first = truthy((yield from lg(fr)))
+            if first != is_and:
+                return first
+            return truthy((yield from rg(fr)))
+
+        return _CExpr(logic_gen, "bool", True)
+
+    def unary(self, node: a.Unary) -> _CExpr:
+        operand = self.expr(node.operand)
+        typ = operand.type
+        fn: Callable[[Any], Value]
+        if node.op == "!":
+            fn, typ = (lambda v: not truthy(v)), "bool"
+        elif typ not in NUMERIC:
+            raise _syntax(node, f"operator {node.op} does not apply to {typ}")
+        elif node.op == "~":
+            if typ not in INTEGRAL:
+                raise _syntax(node, "operator ~ takes an integer")
+            fn, typ = (lambda v: wrap32(~v)), "int"
+        elif node.op == "-":
+            if typ in INTEGRAL:
+                fn, typ = (lambda v: wrap32(-v)), "int"
+            else:
+                fn = lambda v: -v  # noqa: E731
+        else:
+            fn = lambda v: v  # noqa: E731
+            typ = "int" if typ in INTEGRAL else typ
+        if not operand.gen:
+            of = cast(PureFn, operand.fn)
+            return _CExpr(lambda fr: fn(of(fr)), typ, False)
+        og = cast(GenFn, operand.fn)
+
+        def unary_gen(fr: _Frame) -> Gen:
+            return fn((yield from og(fr)))
+
+        return _CExpr(unary_gen, typ, True)
+
+    def ternary(self, node: a.Ternary) -> _CExpr:
+        cond, then, other = (self.expr(n) for n in (node.condition, node.then, node.otherwise))
+        typ = then.type
+        if then.type != other.type:
+            if then.type in NUMERIC and other.type in NUMERIC:
+                typ = _promote(then.type, other.type)
+            else:
+                raise _syntax(node, f"the two results are {then.type} and {other.type}")
+        if not (cond.gen or then.gen or other.gen):
+            cf, tf, of = (cast(PureFn, c.fn) for c in (cond, then, other))
+            return _CExpr(lambda fr: tf(fr) if truthy(cf(fr)) else of(fr), typ, False)
+        cg, tg, og = _lift(cond), _lift(then), _lift(other)
+
+        def ternary_gen(fr: _Frame) -> Gen:
+            if truthy((yield from cg(fr))):
+                return (yield from tg(fr))
+            return (yield from og(fr))
+
+        return _CExpr(ternary_gen, typ, True)
+
+    def target(self, node: a.Expr) -> tuple[str, Callable[[_Frame, Value], None], _CExpr]:
+        """An assignable place: its type, a store function and its read expression."""
+        if isinstance(node, a.Name):
+            found = self.lookup(node.name)
+            if found is None:
+                raise _syntax(node, f"variable {node.name} is not declared")
+            is_global, slot, typ = found
+
+            def store(fr: _Frame, value: Value) -> None:
+                (fr.g if is_global else fr.l)[slot] = value
+
+            return typ, store, self.name(node)
+        if isinstance(node, a.Index):
+            base = self.expr(node.target)
+            if not is_array(base.type) or base.gen:
+                raise _syntax(node, "only an array variable's element can be assigned")
+            index = self.pure(node.index, "an index")
+            bf, xf = cast(PureFn, base.fn), self.to_type(index, "int", node.index)
+
+            def store_elem(fr: _Frame, value: Value) -> None:
+                items = cast(list[Value], bf(fr))
+                i = cast(int, xf(fr))
+                if not 0 <= i < len(items):
+                    raise _runtime(node, f"index {i} is out of the array (length {len(items)})")
+                items[i] = value
+
+            return element_type(base.type), store_elem, self.index(node)
+        raise _syntax(node, "only a variable or an array element can be assigned")
+
+    def assign(self, node: a.Assign) -> _CExpr:
+        typ, store, current = self.target(node.target)
+        value = self.expr(node.value)
+        combine: Callable[[Any, Any], Value] | None = None
+        vtype = value.type
+        if node.op != "=":
+            combine, vtype = self.arith(node, node.op[:-1], typ, value.type)
+        conv = self.converter(vtype, typ, node)
+        cur_fn = cast(PureFn, current.fn)
+        if not value.gen:
+            vf = cast(PureFn, value.fn)
+
+            def assign_pure(fr: _Frame) -> Value:
+                result = vf(fr)
+                if combine is not None:
+                    result = combine(cur_fn(fr), result)
+                if conv is not None:
+                    result = conv(result)
+                store(fr, result)
+                return result
+
+            return _CExpr(assign_pure, typ, False)
+        vg = cast(GenFn, value.fn)
+
+        def assign_gen(fr: _Frame) -> Gen:
+            result = yield from vg(fr)
+            if combine is not None:
+                result = combine(cur_fn(fr), result)
+            if conv is not None:
+                result = conv(result)
+            store(fr, result)
+            return result
+
+        return _CExpr(assign_gen, typ, True)
+
+    def incdec(self, node: a.IncDec) -> _CExpr:
+        typ, store, current = self.target(node.target)
+        if typ not in NUMERIC:
+            raise _syntax(node, f"{node.op} takes a numeric variable, not {typ}")
+        delta = 1 if node.op == "++" else -1
+        conv = self.converter("int" if typ in INTEGRAL else typ, typ, node)
+        cur = cast(PureFn, current.fn)
+        prefix = node.prefix
+        is_int = typ in INTEGRAL
+
+        def step(fr: _Frame) -> Value:
+            old = cast(float, cur(fr))
+            new: Value = wrap32(int(old) + delta) if is_int else old + delta
+            if conv is not None:
+                new = conv(new)
+            store(fr, new)
+            return new if prefix else old
+
+        return _CExpr(step, typ, False)
+
+    def index(self, node: a.Index) -> _CExpr:
+        base = self.expr(node.target)
+        if not is_array(base.type):
+            raise _syntax(node, f"a {base.type} has no elements")
+        index = self.expr(node.index)
+        elem = element_type(base.type)
+        conv = self.converter(index.type, "int", node.index)
+        constant = _NOT_CONSTANT if conv is None else _converted_literal(node.index, conv)
+        if constant is not _NOT_CONSTANT:
+            index, conv = _CExpr(lambda fr: constant, "int", False), None
+
+        def get(items: list[Value], i: Value) -> Value:
+            if conv is not None:
+                i = conv(i)
+            n = cast(int, i)
+            if not 0 <= n < len(items):
+                raise _runtime(node, f"index {n} is out of the array (length {len(items)})")
+            return items[n]
+
+        if not base.gen and not index.gen:
+            bf, xf = cast(PureFn, base.fn), cast(PureFn, index.fn)
+            return _CExpr(lambda fr: get(cast(list[Value], bf(fr)), xf(fr)), elem, False)
+        bg, xg = _lift(base), _lift(index)
+
+        def index_gen(fr: _Frame) -> Gen:
+            items = yield from bg(fr)
+            i = yield from xg(fr)
+            return get(items, i)
+
+        return _CExpr(index_gen, elem, True)
+
+    def cast(self, node: a.Cast) -> _CExpr:
+        operand = self.expr(node.operand)
+        target = _type_name(node.type)
+        if is_array(operand.type) != is_array(target) and operand.type != "?":
+            raise _syntax(node, f"a {operand.type} cannot be converted to {target} (§2.5)")
+        source = operand.type
+
+        def conv(value: Value) -> Value:
+            try:
+                return convert(value, source, target)
+            except ConversionError as exc:
+                raise _runtime(node, str(exc)) from None
+
+        if not operand.gen:
+            of = cast(PureFn, operand.fn)
+            return _CExpr(lambda fr: conv(of(fr)), target, False)
+        og = cast(GenFn, operand.fn)
+
+        def cast_gen(fr: _Frame) -> Gen:
+            return conv((yield from og(fr)))
+
+        return _CExpr(cast_gen, target, True)
+
+
+class _Compiler(_ExprCompiler):
+    """Statements and the project's sections, over the expressions of its base."""
 
     # ---- the project ----
 
@@ -661,395 +1069,17 @@ class _Compiler:
 
         return test
 
-    # ---- expressions ----
 
-    def pure(self, node: a.Expr, where: str) -> _CExpr:
-        ce = self.expr(node)
-        if ce.gen:
-            raise _syntax(node, f"{where}: a waiting call or a function call is not allowed here")
-        return ce
+class _CallCompiler:
+    """Calls: a built-in, a customized function, a device's method (§3.10, §16.1)."""
 
-    def to_type(self, ce: _CExpr, want: str, node: a.Node) -> PureFn:
-        conv = self.converter(ce.type, want, node)
-        fn = cast(PureFn, ce.fn)
-        if conv is None:
-            return fn
-        return lambda fr: conv(fn(fr))
-
-    def converter(self, source: str, target: str, node: a.Node) -> Callable[[Value], Value] | None:
-        """The implicit conversion of an assignment (TMscript 2.24 §2.7), None if none needed."""
-        if source == target and target not in ("float",):
-            if is_array(target):
-                return _copy  # arrays are values: an assignment copies
-            return None
-        if target == "?" or target == "*":
-            return None
-        if source not in ("?", "void") and is_array(source) != is_array(target):
-            raise _syntax(node, f"a {source} cannot be assigned to a {target}")
-        if source == "void":
-            raise _syntax(node, "the function returns no value")
-
-        def conv(value: Value) -> Value:
-            try:
-                return convert(value, source, target)
-            except ConversionError as exc:
-                raise _runtime(node, str(exc)) from None
-
-        return conv
-
-    def converted(self, node: a.Expr, want: str, at: a.Node) -> _CExpr:
-        ce = self.expr(node)
-        conv = self.converter(ce.type, want, at)
-        if conv is None:
-            return _CExpr(ce.fn, want, ce.gen)
-        constant = _converted_literal(node, conv)
-        if constant is not _NOT_CONSTANT:
-            return _CExpr(lambda fr: constant, want, False)
-        if not ce.gen:
-            fn = cast(PureFn, ce.fn)
-            return _CExpr(lambda fr: conv(fn(fr)), want, False)
-        gen = cast(GenFn, ce.fn)
-
-        def converted_gen(fr: _Frame) -> Gen:
-            return conv((yield from gen(fr)))
-
-        return _CExpr(converted_gen, want, True)
-
-    def expr(self, node: a.Expr) -> _CExpr:
-        if isinstance(node, a.Literal):
-            value = node.value
-            return _CExpr(lambda fr: value, node.type, False)
-        if isinstance(node, a.Name):
-            return self.name(node)
-        if isinstance(node, a.ArrayLiteral):
-            return self.array(node)
-        if isinstance(node, a.Binary):
-            return self.binary(node)
-        if isinstance(node, a.Logic):
-            return self.logic(node)
-        if isinstance(node, a.Unary):
-            return self.unary(node)
-        if isinstance(node, a.Ternary):
-            return self.ternary(node)
-        if isinstance(node, a.Assign):
-            return self.assign(node)
-        if isinstance(node, a.IncDec):
-            return self.incdec(node)
-        if isinstance(node, a.Index):
-            return self.index(node)
-        if isinstance(node, a.Cast):
-            return self.cast(node)
-        if isinstance(node, a.Call):
-            return self.call(node)
-        if isinstance(node, a.MethodCall):
-            return self.method_call(node)
-        raise _syntax(node, f"unsupported expression {type(node).__name__}")
-
-    def name(self, node: a.Name) -> _CExpr:
-        found = self.lookup(node.name)
-        if found is None:
-            if node.name in self.devices:
-                device = node.name
-                return _CExpr(lambda fr: device, "string", False)
-            # A bare word that is no variable is a string, with a warning (§2.2, p. 16).
-            self.warnings.append(
-                ScriptWarning(
-                    node.line, node.column, f"{node.name} is not a variable: taken as a string"
-                )
-            )
-            text = node.name
-            return _CExpr(lambda fr: text, "string", False)
-        is_global, slot, typ = found
-        if is_global:
-            return _CExpr(lambda fr: fr.g[slot], typ, False)
-        return _CExpr(lambda fr: fr.l[slot], typ, False)
-
-    def array(self, node: a.ArrayLiteral) -> _CExpr:
-        items = [self.expr(item) for item in node.items]
-        types = {ce.type for ce in items}
-        if not items:
-            elem = "?"
-        elif types <= NUMERIC:
-            elem = "byte" if types == {"byte"} else "int"
-            if types & {"float", "double"}:
-                elem = "double" if "double" in types else "float"
-            elif types - {"byte"}:
-                elem = "int"
-        elif len(types) == 1:
-            elem = next(iter(types))
-        else:
-            raise _syntax(node, "the elements of an array have one type")
-        if any(is_array(t) for t in types):
-            raise _syntax(node, "only one-dimensional arrays exist (§2.3)")
-        if any(ce.gen for ce in items):
-            gens = [_lift(ce) for ce in items]
-
-            def make_gen(fr: _Frame) -> Gen:
-                out = []
-                for g in gens:
-                    out.append((yield from g(fr)))
-                return out
-
-            return _CExpr(make_gen, elem + "[]", True)
-        fns = [cast(PureFn, ce.fn) for ce in items]
-        return _CExpr(lambda fr: [fn(fr) for fn in fns], elem + "[]", False)
-
-    def arith(self, node: a.Node, op: str, lt: str, rt_: str) -> tuple[Callable[..., Value], str]:
-        """The function of a binary operator on two values, and the result type."""
-        if op == "+" and ("string" in (lt, rt_)):
-            if is_array(lt) or is_array(rt_):
-                raise _syntax(node, "an array cannot be added to a string")
-
-            def concat(x: Value, y: Value) -> str:
-                left, right = display_text(x, lt), display_text(y, rt_)
-                if len(left) + len(right) > STRING_MAX:
-                    raise _too_long(node, len(left) + len(right))
-                return left + right
-
-            return concat, "string"
-        if op in ("==", "!=", "<", "<=", ">", ">="):
-            return self.comparison(node, op, lt, rt_), "bool"
-        if lt not in NUMERIC or rt_ not in NUMERIC:
-            raise _syntax(node, f"operator {op} does not apply to {lt} and {rt_}")
-        typ = _promote(lt, rt_)
-        if op in ("%", "<<", ">>", "&", "|", "^") and typ != "int":
-            raise _syntax(node, f"operator {op} takes integers, not {lt} and {rt_}")
-        return _ARITH[(op, typ)](node), typ
-
-    def comparison(self, node: a.Node, op: str, lt: str, rt_: str) -> Callable[[Any, Any], bool]:
-        kinds = {("n" if t in NUMERIC else t) for t in (lt, rt_)}
-        if len(kinds) != 1 or any(is_array(t) for t in (lt, rt_)):
-            raise _syntax(node, f"a {lt} cannot be compared with a {rt_}")
-        if "bool" in kinds and op not in ("==", "!="):
-            raise _syntax(node, f"operator {op} does not apply to bool")
-        return _COMPARE[op]
-
-    def binary(self, node: a.Binary) -> _CExpr:
-        left, right = self.expr(node.left), self.expr(node.right)
-        fn, typ = self.arith(node, node.op, left.type, right.type)
-        if not left.gen and not right.gen:
-            lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
-            return _CExpr(lambda fr: fn(lf(fr), rf(fr)), typ, False)
-        lg, rg = _lift(left), _lift(right)
-
-        def binary_gen(fr: _Frame) -> Gen:
-            x = yield from lg(fr)
-            y = yield from rg(fr)
-            return fn(x, y)
-
-        return _CExpr(binary_gen, typ, True)
-
-    def logic(self, node: a.Logic) -> _CExpr:
-        left, right = self.expr(node.left), self.expr(node.right)
-        is_and = node.op == "&&"
-        if not left.gen and not right.gen:
-            lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
-            if is_and:
-                return _CExpr(lambda fr: truthy(lf(fr)) and truthy(rf(fr)), "bool", False)
-            return _CExpr(lambda fr: truthy(lf(fr)) or truthy(rf(fr)), "bool", False)
-        lg, rg = _lift(left), _lift(right)
-
-        def logic_gen(fr: _Frame) -> Gen:
-            first = truthy((yield from lg(fr)))
-            if first != is_and:
-                return first
-            return truthy((yield from rg(fr)))
-
-        return _CExpr(logic_gen, "bool", True)
-
-    def unary(self, node: a.Unary) -> _CExpr:
-        operand = self.expr(node.operand)
-        typ = operand.type
-        fn: Callable[[Any], Value]
-        if node.op == "!":
-            fn, typ = (lambda v: not truthy(v)), "bool"
-        elif typ not in NUMERIC:
-            raise _syntax(node, f"operator {node.op} does not apply to {typ}")
-        elif node.op == "~":
-            if typ not in INTEGRAL:
-                raise _syntax(node, "operator ~ takes an integer")
-            fn, typ = (lambda v: wrap32(~v)), "int"
-        elif node.op == "-":
-            if typ in INTEGRAL:
-                fn, typ = (lambda v: wrap32(-v)), "int"
-            else:
-                fn = lambda v: -v  # noqa: E731
-        else:
-            fn = lambda v: v  # noqa: E731
-            typ = "int" if typ in INTEGRAL else typ
-        if not operand.gen:
-            of = cast(PureFn, operand.fn)
-            return _CExpr(lambda fr: fn(of(fr)), typ, False)
-        og = cast(GenFn, operand.fn)
-
-        def unary_gen(fr: _Frame) -> Gen:
-            return fn((yield from og(fr)))
-
-        return _CExpr(unary_gen, typ, True)
-
-    def ternary(self, node: a.Ternary) -> _CExpr:
-        cond, then, other = (self.expr(n) for n in (node.condition, node.then, node.otherwise))
-        typ = then.type
-        if then.type != other.type:
-            if then.type in NUMERIC and other.type in NUMERIC:
-                typ = _promote(then.type, other.type)
-            else:
-                raise _syntax(node, f"the two results are {then.type} and {other.type}")
-        if not (cond.gen or then.gen or other.gen):
-            cf, tf, of = (cast(PureFn, c.fn) for c in (cond, then, other))
-            return _CExpr(lambda fr: tf(fr) if truthy(cf(fr)) else of(fr), typ, False)
-        cg, tg, og = _lift(cond), _lift(then), _lift(other)
-
-        def ternary_gen(fr: _Frame) -> Gen:
-            if truthy((yield from cg(fr))):
-                return (yield from tg(fr))
-            return (yield from og(fr))
-
-        return _CExpr(ternary_gen, typ, True)
-
-    def target(self, node: a.Expr) -> tuple[str, Callable[[_Frame, Value], None], _CExpr]:
-        """An assignable place: its type, a store function and its read expression."""
-        if isinstance(node, a.Name):
-            found = self.lookup(node.name)
-            if found is None:
-                raise _syntax(node, f"variable {node.name} is not declared")
-            is_global, slot, typ = found
-
-            def store(fr: _Frame, value: Value) -> None:
-                (fr.g if is_global else fr.l)[slot] = value
-
-            return typ, store, self.name(node)
-        if isinstance(node, a.Index):
-            base = self.expr(node.target)
-            if not is_array(base.type) or base.gen:
-                raise _syntax(node, "only an array variable's element can be assigned")
-            index = self.pure(node.index, "an index")
-            bf, xf = cast(PureFn, base.fn), self.to_type(index, "int", node.index)
-
-            def store_elem(fr: _Frame, value: Value) -> None:
-                items = cast(list[Value], bf(fr))
-                i = cast(int, xf(fr))
-                if not 0 <= i < len(items):
-                    raise _runtime(node, f"index {i} is out of the array (length {len(items)})")
-                items[i] = value
-
-            return element_type(base.type), store_elem, self.index(node)
-        raise _syntax(node, "only a variable or an array element can be assigned")
-
-    def assign(self, node: a.Assign) -> _CExpr:
-        typ, store, current = self.target(node.target)
-        value = self.expr(node.value)
-        combine: Callable[[Any, Any], Value] | None = None
-        vtype = value.type
-        if node.op != "=":
-            combine, vtype = self.arith(node, node.op[:-1], typ, value.type)
-        conv = self.converter(vtype, typ, node)
-        cur_fn = cast(PureFn, current.fn)
-        if not value.gen:
-            vf = cast(PureFn, value.fn)
-
-            def assign_pure(fr: _Frame) -> Value:
-                result = vf(fr)
-                if combine is not None:
-                    result = combine(cur_fn(fr), result)
-                if conv is not None:
-                    result = conv(result)
-                store(fr, result)
-                return result
-
-            return _CExpr(assign_pure, typ, False)
-        vg = cast(GenFn, value.fn)
-
-        def assign_gen(fr: _Frame) -> Gen:
-            result = yield from vg(fr)
-            if combine is not None:
-                result = combine(cur_fn(fr), result)
-            if conv is not None:
-                result = conv(result)
-            store(fr, result)
-            return result
-
-        return _CExpr(assign_gen, typ, True)
-
-    def incdec(self, node: a.IncDec) -> _CExpr:
-        typ, store, current = self.target(node.target)
-        if typ not in NUMERIC:
-            raise _syntax(node, f"{node.op} takes a numeric variable, not {typ}")
-        delta = 1 if node.op == "++" else -1
-        conv = self.converter("int" if typ in INTEGRAL else typ, typ, node)
-        cur = cast(PureFn, current.fn)
-        prefix = node.prefix
-        is_int = typ in INTEGRAL
-
-        def step(fr: _Frame) -> Value:
-            old = cast(float, cur(fr))
-            new: Value = wrap32(int(old) + delta) if is_int else old + delta
-            if conv is not None:
-                new = conv(new)
-            store(fr, new)
-            return new if prefix else old
-
-        return _CExpr(step, typ, False)
-
-    def index(self, node: a.Index) -> _CExpr:
-        base = self.expr(node.target)
-        if not is_array(base.type):
-            raise _syntax(node, f"a {base.type} has no elements")
-        index = self.expr(node.index)
-        elem = element_type(base.type)
-        conv = self.converter(index.type, "int", node.index)
-        constant = _NOT_CONSTANT if conv is None else _converted_literal(node.index, conv)
-        if constant is not _NOT_CONSTANT:
-            index, conv = _CExpr(lambda fr: constant, "int", False), None
-
-        def get(items: list[Value], i: Value) -> Value:
-            if conv is not None:
-                i = conv(i)
-            n = cast(int, i)
-            if not 0 <= n < len(items):
-                raise _runtime(node, f"index {n} is out of the array (length {len(items)})")
-            return items[n]
-
-        if not base.gen and not index.gen:
-            bf, xf = cast(PureFn, base.fn), cast(PureFn, index.fn)
-            return _CExpr(lambda fr: get(cast(list[Value], bf(fr)), xf(fr)), elem, False)
-        bg, xg = _lift(base), _lift(index)
-
-        def index_gen(fr: _Frame) -> Gen:
-            items = yield from bg(fr)
-            i = yield from xg(fr)
-            return get(items, i)
-
-        return _CExpr(index_gen, elem, True)
-
-    def cast(self, node: a.Cast) -> _CExpr:
-        operand = self.expr(node.operand)
-        target = _type_name(node.type)
-        if is_array(operand.type) != is_array(target) and operand.type != "?":
-            raise _syntax(node, f"a {operand.type} cannot be converted to {target} (§2.5)")
-        source = operand.type
-
-        def conv(value: Value) -> Value:
-            try:
-                return convert(value, source, target)
-            except ConversionError as exc:
-                raise _runtime(node, str(exc)) from None
-
-        if not operand.gen:
-            of = cast(PureFn, operand.fn)
-            return _CExpr(lambda fr: conv(of(fr)), target, False)
-        og = cast(GenFn, operand.fn)
-
-        def cast_gen(fr: _Frame) -> Gen:
-            return conv((yield from og(fr)))
-
-        return _CExpr(cast_gen, target, True)
-
-    # ---- calls ----
+    def __init__(self, exprs: _ExprCompiler) -> None:
+        self.c = exprs
 
     def call(self, node: a.Call) -> _CExpr:
-        if node.name in self.functions:
-            return self.user_call(node, self.functions[node.name])
+        c = self.c
+        if node.name in c.functions:
+            return self.user_call(node, c.functions[node.name])
         builtin = BUILTINS.get(node.name)
         if builtin is None:
             if node.name in UNSUPPORTED:
@@ -1057,70 +1087,36 @@ class _Compiler:
             raise _syntax(node, f"unknown function {node.name}()")
         if node.name == "WaitFor" and len(node.args) == 2:
             return self.wait_for(node, builtin)
-        if builtin.motion and self.section in ("closestop", "errorstop"):
-            raise _syntax(node, f"{node.name}(): no motion in {self.section} (§3.3, §3.4)")
-        args = [self.expr(arg) for arg in node.args]
+        if builtin.motion and c.section in ("closestop", "errorstop"):
+            raise _syntax(node, f"{node.name}(): no motion in {c.section} (§3.3, §3.4)")
+        args = [c.expr(arg) for arg in node.args]
         sig = self.resolve(node, builtin, [ce.type for ce in args])
-        params = sig.params
+        fns, types = self.arguments(node, args, sig.params)
+        ret = types[0] if sig.returns == "$0" else sig.returns
+        arg_types = tuple(types)
+        if builtin.impl is not None and not any(ce.gen for ce in fns):
+            return _CExpr(_builtin_pure(node, builtin.impl, fns, arg_types), ret, False)
+        return _CExpr(_builtin_gen(node, builtin, fns, arg_types), ret, True)
+
+    def arguments(
+        self, node: a.Call, args: list[_CExpr], params: tuple[str, ...]
+    ) -> tuple[list[_CExpr], list[str]]:
+        """A built-in's arguments converted to its syntax's parameters, and their types."""
         fns: list[_CExpr] = []
         types: list[str] = []
         for ce, want, arg in zip(args, params, node.args, strict=True):
             if node.name == "Display" and ce.type != "string" and not ce.gen:
                 # Display shows any value as TMflow writes it (§5.6; arrays as {1,2,3}).
-                shown_type = ce.type
                 shown = cast(PureFn, ce.fn)
-                fns.append(_CExpr(_shown(shown, shown_type, arg), "string", False))
+                fns.append(_CExpr(_shown(shown, ce.type, arg), "string", False))
                 types.append("string")
             elif want in ("?", "?[]", "*"):
                 fns.append(ce)
                 types.append(ce.type)
             else:
-                fns.append(self.converted(arg, want, arg) if ce.type != want else ce)
+                fns.append(self.c.converted(arg, want, arg) if ce.type != want else ce)
                 types.append(want)
-        ret = sig.returns
-        if ret == "$0":
-            ret = types[0]
-        arg_types = tuple(types)
-        name = node.name
-
-        def fail(exc: Exception) -> TMScriptRuntimeError:
-            return _runtime(node, f"{name}(): {str(exc) or type(exc).__name__}")
-
-        impl = builtin.impl
-        blocking = builtin.blocking
-        if impl is not None and not any(ce.gen for ce in fns):
-            pure = [cast(PureFn, ce.fn) for ce in fns]
-
-            def call_pure(fr: _Frame) -> Value:
-                values = [fn(fr) for fn in pure]
-                try:
-                    return _capped(node, impl(fr.rt, values, arg_types))
-                except (ExitRequest, TMScriptRuntimeError):
-                    raise
-                except (HostError, TMMasterError, OSError, ValueError, ArithmeticError) as exc:
-                    raise fail(exc) from None
-                except Exception as exc:
-                    raise fail(exc) from None
-
-            return _CExpr(call_pure, ret, False)
-        # Arguments in order; a plain one is called, not wrapped into a generator.
-        steps = [(ce.gen, ce.fn) for ce in fns]
-
-        def call_gen(fr: _Frame) -> Gen:
-            values = []
-            for gen, f in steps:
-                values.append((yield from f(fr)) if gen else f(fr))
-            try:
-                if blocking is not None:
-                    return _capped(node, (yield from blocking(fr.rt, values, arg_types)))
-                assert impl is not None
-                return _capped(node, impl(fr.rt, values, arg_types))
-            except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
-                raise
-            except Exception as exc:
-                raise fail(exc) from None
-
-        return _CExpr(call_gen, ret, True)
+        return fns, types
 
     def resolve(self, node: a.Call, builtin: Builtin, types: list[str]) -> Any:
         """Pick the syntax the arguments fit (TMscript 2.24 §2.2: smaller types widen)."""
@@ -1140,8 +1136,8 @@ class _Compiler:
 
     def wait_for(self, node: a.Call, builtin: Builtin) -> _CExpr:
         # WaitFor(condition, ms) evaluates the condition again on each poll (§5.4, p. 158).
-        cond = _lift(self.expr(node.args[0]))
-        timeout_ce = self.converted(node.args[1], "int", node.args[1])
+        cond = _lift(self.c.expr(node.args[0]))
+        timeout_ce = self.c.converted(node.args[1], "int", node.args[1])
         timeout = _lift(timeout_ce)
 
         def wait_gen(fr: _Frame) -> Gen:
@@ -1165,7 +1161,7 @@ class _Compiler:
         args = [
             (ce.gen, ce.fn)
             for ce in (
-                self.converted(arg, want, arg)
+                self.c.converted(arg, want, arg)
                 for arg, want in zip(node.args, fn.params, strict=True)
             )
         ]
@@ -1189,7 +1185,7 @@ class _Compiler:
 
     def method_call(self, node: a.MethodCall) -> _CExpr:
         # device.Preset(name, slave, "DO"/"DI"/"RO"/"RI", address, type[, suffix]) (§16.1.1).
-        if not isinstance(node.target, a.Name) or node.target.name not in self.devices:
+        if not isinstance(node.target, a.Name) or node.target.name not in self.c.devices:
             raise _syntax(node, f"{node.method}() needs a ModbusTCP device variable")
         if node.method != "Preset":
             raise _syntax(node, f"{node.method}() is not supported by tmmaster.tmscript")
@@ -1197,7 +1193,7 @@ class _Compiler:
             raise _syntax(node, "Preset() takes 5 or 6 arguments (§16.1.1)")
         wants = ("string", "byte", "string", "int", "string", "int")
         fns = [
-            self.to_type(self.pure(arg, "Preset"), want, arg)
+            self.c.to_type(self.c.pure(arg, "Preset"), want, arg)
             for arg, want in zip(node.args, wants, strict=False)
         ]
         device = node.target.name
@@ -1216,6 +1212,56 @@ class _Compiler:
             return True
 
         return _CExpr(preset, "bool", False)
+
+
+def _call_failure(node: a.Call, exc: Exception) -> TMScriptRuntimeError:
+    return _runtime(node, f"{node.name}(): {str(exc) or type(exc).__name__}")
+
+
+def _builtin_pure(
+    node: a.Call, impl: Impl, fns: list[_CExpr], arg_types: tuple[str, ...]
+) -> PureFn:
+    """A call of a built-in that returns at once, with plain arguments: a plain closure."""
+    pure = [cast(PureFn, ce.fn) for ce in fns]
+
+    def call_pure(fr: _Frame) -> Value:
+        values = [fn(fr) for fn in pure]
+        try:
+            return _capped(node, impl(fr.rt, values, arg_types))
+        except (ExitRequest, TMScriptRuntimeError):
+            raise
+        except (HostError, TMMasterError, OSError, ValueError, ArithmeticError) as exc:
+            raise _call_failure(node, exc) from None
+        except Exception as exc:
+            raise _call_failure(node, exc) from None
+
+    return call_pure
+
+
+def _builtin_gen(
+    node: a.Call, builtin: Builtin, fns: list[_CExpr], arg_types: tuple[str, ...]
+) -> GenFn:
+    """A call of a built-in that may wait, or with an argument that may: a generator."""
+    impl = builtin.impl
+    blocking = builtin.blocking
+    # Arguments in order; a plain one is called, not wrapped into a generator.
+    steps = [(ce.gen, ce.fn) for ce in fns]
+
+    def call_gen(fr: _Frame) -> Gen:
+        values = []
+        for gen, f in steps:
+            values.append((yield from f(fr)) if gen else f(fr))
+        try:
+            if blocking is not None:
+                return _capped(node, (yield from blocking(fr.rt, values, arg_types)))
+            assert impl is not None
+            return _capped(node, impl(fr.rt, values, arg_types))
+        except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
+            raise
+        except Exception as exc:
+            raise _call_failure(node, exc) from None
+
+    return call_gen
 
 
 def _shown(fn: PureFn, typ: str, node: a.Node) -> PureFn:
