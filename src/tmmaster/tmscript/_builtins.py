@@ -1171,6 +1171,22 @@ def _encode_registers(value: Value, typ: str) -> bytes:
     return struct.pack(">i", wrap32(value))
 
 
+def _preset_data(value: Scalar, typ: str, suffix: int, count: int) -> bytes:
+    """The bytes an RO preset of type ``typ`` (over one register) writes for ``value``.
+
+    A string is UTF-8, cut or padded with 0x00 to ``count`` registers (none: to an even
+    length); a number is packed in the preset's word order ``suffix``.
+    """
+    if typ == "string":
+        data = _str(value).encode("utf-8")
+        if count > 0:
+            return data[: 2 * count].ljust(2 * count, b"\0")
+        return data + b"\0" if len(data) % 2 else data
+    fmt = {"int32": ">i", "int": ">i", "float": ">f", "double": ">d"}[typ]
+    number = wrap32(_int(value)) if fmt == ">i" else float(value)
+    return _ordered(struct.pack(fmt, number), suffix)
+
+
 def _preset_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
     """§16.11 syntaxes 1 and 2 (p. 436): one value through a preset, never an array.
 
@@ -1199,20 +1215,19 @@ def _preset_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
         )
         rt.host.modbus_request(device, 6, address, 1, [word])
         return True
-    if typ == "string":
-        count = _int(args[3]) if len(args) > 3 else suffix
-        data = _str(value).encode("utf-8")
-        if count > 0:
-            data = data[: 2 * count].ljust(2 * count, b"\0")
-        elif len(data) % 2:
-            data += b"\0"
-    else:
-        fmt = {"int32": ">i", "int": ">i", "float": ">f", "double": ">d"}[typ]
-        number = wrap32(_int(value)) if fmt == ">i" else float(value)
-        data = _ordered(struct.pack(fmt, number), suffix)
+    count = _int(args[3]) if typ == "string" and len(args) > 3 else suffix
+    data = _preset_data(value, typ, suffix, count)
     words = [int.from_bytes(c, "big") for c in _chunks(data, 2)]
     rt.host.modbus_request(device, 16, address, len(words), words)
     return True
+
+
+def _coil_bits(value: Value, limit: int) -> list[int]:
+    """The coils a DO write sets: one per value (an array: each), at most ``limit`` if > 0."""
+    bits = [1 if v else 0 for v in value] if isinstance(value, list) else [1 if value else 0]
+    if limit > 0:
+        bits = bits[:limit]
+    return bits
 
 
 @_register_linked(
@@ -1237,9 +1252,7 @@ def _modbus_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
     if value == "" or value == []:
         return False  # "the input data is empty" (p. 438)
     if kind == "DO":
-        bits = [1 if v else 0 for v in value] if isinstance(value, list) else [1 if value else 0]
-        if limit > 0:
-            bits = bits[:limit]
+        bits = _coil_bits(value, limit)
         code = 15 if isinstance(value, list) else 5
         rt.host.modbus_request(device, code, address, len(bits), bits)
         return True
