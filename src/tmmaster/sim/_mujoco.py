@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 from xml.sax.saxutils import quoteattr
 
 from .. import _kinematics as kin
+from .._checks import Bounds, require_in, require_positive
 from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import MotionType, Pose
 from .._robot_models import RobotModel, trapezoid_progress
@@ -111,6 +112,7 @@ _TABLE_BITS = (1, 0)
 _PART_BITS = (4, 1 | 2 | 4)
 _PAD_BITS = (2, 1)
 _ARM_BITS = (8, 1)
+_ARM_CONTACT = f'contype="{_ARM_BITS[0]}" conaffinity="{_ARM_BITS[1]}"'
 
 #: Radius of the arm's capsules, m (the kinematic backend checks the same ones).
 _ARM_RADIUS_M = ARM_RADIUS_MM / 1000
@@ -316,7 +318,26 @@ def build_mjcf(
         )
     # Arm links: weightless and gravity-compensated when the backend sets the joints.
     comp = "" if dynamics else ' gravcomp="1"'
-    lines = [
+    lines = _mjcf_head(model, timestep_s)
+    lines += _mjcf_table(table_top_z_mm, fixtures)
+    indent = "    " + "  " * len(model.joints)
+    lines += _mjcf_arm(model, dynamics, comp)
+    lines += _mjcf_gripper(indent, tool, gripper, comp)
+    for _ in model.joints:
+        indent = indent[:-2]
+        lines.append(f"{indent}</body>")
+    lines += _mjcf_parts(objects)
+    lines.append("  </worldbody>")
+    lines += _mjcf_equality(len(objects), timestep_s)
+    lines += _mjcf_actuators(model, dynamics)
+    lines += _mjcf_sensors()
+    lines.append("</mujoco>")
+    return "\n".join(lines) + "\n"
+
+
+def _mjcf_head(model: RobotModel, timestep_s: float) -> list[str]:
+    """The document's opening: compiler, options, assets, light and floor."""
+    return [
         f"<mujoco model={quoteattr('tmmaster ' + model.name)}>",
         '  <compiler angle="radian" autolimits="true"/>',
         f'  <option timestep="{timestep_s:g}" gravity="0 0 -9.81" integrator="implicitfast"'
@@ -332,14 +353,18 @@ def build_mjcf(
         '    <geom name="floor" type="plane" size="2 2 0.05" material="grid"'
         ' contype="0" conaffinity="0"/>',
     ]
+
+
+def _mjcf_table(table_top_z_mm: float, fixtures: Sequence[Fixture]) -> list[str]:
+    """The table, the fixtures (static boxes) and the arm's base."""
     top = table_top_z_mm / 1000
     (cx, cy), (sx, sy) = TABLE_CENTRE_XY_MM, TABLE_HALF_SIZE_XY_MM
-    lines.append(
+    lines = [
         f'    <geom name="table" type="box" pos="{cx / 1000:g} {cy / 1000:g} {top - 0.02:.6g}"'
         f' size="{sx / 1000:g} {sy / 1000:g} 0.02" rgba=".55 .45 .35 1"'
         f' friction="0.8 0.005 0.0001"{_RIGID}'
         f' contype="{_TABLE_BITS[0]}" conaffinity="{_TABLE_BITS[1]}"/>'
-    )
+    ]
     for k, fixture in enumerate(fixtures):
         lines.append(
             f'    <geom name="fixture{k}" type="box"'
@@ -352,11 +377,18 @@ def build_mjcf(
         '    <geom name="base" type="cylinder" pos="0 0 0.04" size="0.075 0.04"'
         ' rgba=".85 .85 .85 1" contype="0" conaffinity="0"/>'
     )
-    # The arm: one body per joint, each holding a capsule to the next joint's origin. The
-    # capsules collide with the table (an arm collision); the last one stops short of the
-    # flange by its radius, so the wrist's collision shape ends at the flange plane.
+    return lines
+
+
+def _mjcf_arm(model: RobotModel, dynamics: bool, comp: str) -> list[str]:
+    """The arm's bodies, opened and left open (the gripper goes in the last one).
+
+    One body per joint, each holding a capsule to the next joint's origin. The capsules
+    collide with the table (an arm collision); the last one stops short of the flange by
+    its radius, so the wrist's collision shape ends at the flange plane.
+    """
+    lines: list[str] = []
     indent = "    "
-    arm = f'contype="{_ARM_BITS[0]}" conaffinity="{_ARM_BITS[1]}"'
     for i, spec in enumerate(model.joints):
         origin = kin.rpy_transform(
             spec.origin_xyz_mm, [math.radians(a) for a in spec.origin_rpy_deg]
@@ -376,30 +408,41 @@ def build_mjcf(
             f'{indent}<joint name="j{i + 1}" type="hinge" axis="0 0 1" range="{lo:.9g} {hi:.9g}"'
             f' armature="{armature}" damping="0"/>'
         )
-        nxt = model.joints[i + 1].origin_xyz_mm if i + 1 < len(model.joints) else (0.0, 0.0, 0.0)
-        length = math.hypot(*nxt)
-        if length > 1e-6:
-            end = [v / 1000 for v in nxt]
-            if i + 2 == len(model.joints):  # the wrist ends at the flange
-                keep = max(0.0, 1 - _ARM_RADIUS_M / (length / 1000))
-                end = [v * keep for v in end]
-            lines.append(
-                f'{indent}<geom name="arm{i + 1}" type="capsule"'
-                f' fromto="0 0 0 {_fmt(end)}" size="{_ARM_RADIUS_M:g}"'
-                f' rgba=".9 .9 .92 1" {arm} mass="2"/>'
-            )
-        elif i + 1 < len(model.joints):
-            lines.append(
-                f'{indent}<geom name="arm{i + 1}" type="sphere" size="{_ARM_RADIUS_M + 0.005:g}"'
-                f' rgba=".9 .9 .92 1" {arm} mass="2"/>'
-            )
-    # Flange (frame of J6) -> TCP: the gripper, fingers closing along the tool's y.
+        lines += _mjcf_link_geom(model, i, indent)
+    return lines
+
+
+def _mjcf_link_geom(model: RobotModel, i: int, indent: str) -> list[str]:
+    """Link ``i``'s collision shape: a capsule to the next joint (a sphere if none)."""
+    nxt = model.joints[i + 1].origin_xyz_mm if i + 1 < len(model.joints) else (0.0, 0.0, 0.0)
+    length = math.hypot(*nxt)
+    if length > 1e-6:
+        end = [v / 1000 for v in nxt]
+        if i + 2 == len(model.joints):  # the wrist ends at the flange
+            keep = max(0.0, 1 - _ARM_RADIUS_M / (length / 1000))
+            end = [v * keep for v in end]
+        return [
+            f'{indent}<geom name="arm{i + 1}" type="capsule"'
+            f' fromto="0 0 0 {_fmt(end)}" size="{_ARM_RADIUS_M:g}"'
+            f' rgba=".9 .9 .92 1" {_ARM_CONTACT} mass="2"/>'
+        ]
+    if i + 1 < len(model.joints):
+        return [
+            f'{indent}<geom name="arm{i + 1}" type="sphere" size="{_ARM_RADIUS_M + 0.005:g}"'
+            f' rgba=".9 .9 .92 1" {_ARM_CONTACT} mass="2"/>'
+        ]
+    return []
+
+
+def _mjcf_gripper(indent: str, tool: Pose | None, gripper: GripperGeometry, comp: str) -> list[str]:
+    """Flange (frame of J6) -> TCP: the gripper, fingers closing along the tool's y."""
     tcp = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
-    lines.append(
+    arm = _ARM_CONTACT
+    lines = [
         f'{indent}<geom name="flange" type="cylinder" pos="0 0 -0.005" size="0.032 0.005"'
-        f' rgba=".2 .2 .2 1" {arm} mass="0.1"/>'
-    )
-    lines.append(f'{indent}<body name="tcp" {_frame_attrs(tcp)}{comp}>')
+        f' rgba=".2 .2 .2 1" {arm} mass="0.1"/>',
+        f'{indent}<body name="tcp" {_frame_attrs(tcp)}{comp}>',
+    ]
     g = indent + "  "
     stroke = (gripper.min_width_mm / 2000, gripper.max_width_mm / 2000)
     lines.append(
@@ -433,10 +476,12 @@ def build_mjcf(
         )
         lines.append(f"{g}</body>")
     lines.append(f"{indent}</body>")
-    for _ in model.joints:
-        indent = indent[:-2]
-        lines.append(f"{indent}</body>")
-    # Parts: free boxes with their size and mass.
+    return lines
+
+
+def _mjcf_parts(objects: Sequence[TableObject]) -> list[str]:
+    """Parts: free boxes with their size and mass."""
+    lines: list[str] = []
     for k, obj in enumerate(objects):
         t = kin.pose_to_transform(obj.pose)
         half = _fmt([s / 2000 for s in obj.size_mm])
@@ -448,25 +493,38 @@ def build_mjcf(
             f' contype="{_PART_BITS[0]}" conaffinity="{_PART_BITS[1]}"/>'
         )
         lines.append("    </body>")
-    lines.append("  </worldbody>")
-    lines.append("  <equality>")
-    # The fingers move together, symmetrically about the TCP (one drive, as on the 2FG7;
-    # Menagerie's 2F-85 couples its fingers the same way): a part squeezed between them
-    # cannot shift them sideways when the arm accelerates.
-    lines.append(
+    return lines
+
+
+def _mjcf_equality(parts: int, timestep_s: float) -> list[str]:
+    """The fingers' coupling and a weld per part (active while a weld grasp holds it).
+
+    The fingers move together, symmetrically about the TCP (one drive, as on the 2FG7;
+    Menagerie's 2F-85 couples its fingers the same way): a part squeezed between them
+    cannot shift them sideways when the arm accelerates.
+    """
+    lines = [
+        "  <equality>",
         '    <joint name="fingers" joint1="finger_r" joint2="finger_l" polycoef="0 1 0 0 0"'
-        ' solref="0.004 1" solimp="0.95 0.99 0.001"/>'
-    )
-    for k in range(len(objects)):
+        ' solref="0.004 1" solimp="0.95 0.99 0.001"/>',
+    ]
+    for k in range(parts):
         lines.append(
             f'    <weld name="grip{k}" body1="tcp" body2="part{k}" active="false"'
             f' solref="{2 * timestep_s:g} 1" solimp="0.99 0.999 0.001"/>'
         )
     lines.append("  </equality>")
-    # The fingers are force motors: the backend computes each finger's force (a
-    # speed-ramped position servo while it travels, the commanded force once it is
-    # blocked on a part), always within the commanded force.
-    lines.append("  <actuator>")
+    return lines
+
+
+def _mjcf_actuators(model: RobotModel, dynamics: bool) -> list[str]:
+    """The fingers' force motors and, with dynamics, the joints' torque motors.
+
+    The fingers are force motors: the backend computes each finger's force (a
+    speed-ramped position servo while it travels, the commanded force once it is
+    blocked on a part), always within the commanded force.
+    """
+    lines = ["  <actuator>"]
     for side in ("l", "r"):
         lines.append(f'    <motor name="finger_{side}" joint="finger_{side}" gear="1"/>')
     if dynamics:
@@ -478,14 +536,20 @@ def build_mjcf(
                 f' ctrlrange="{-effort:g} {effort:g}"/>'
             )
     lines.append("  </actuator>")
-    # Contact sensors (cheaper to read than MuJoCo's contact list every step): the arm,
-    # tool or pads in the table (the deepest contact), and the net force on each pad
-    # from everything and from the table alone.
-    lines.append("  <sensor>")
-    lines.append(
+    return lines
+
+
+def _mjcf_sensors() -> list[str]:
+    """Contact sensors (cheaper to read than MuJoCo's contact list every step).
+
+    The arm, tool or pads in the table (the deepest contact), and the net force on each
+    pad from everything and from the table alone.
+    """
+    lines = [
+        "  <sensor>",
         '    <contact name="arm_table" subtree1="link1" body2="world" num="1"'
-        ' reduce="mindist" data="found dist"/>'
-    )
+        ' reduce="mindist" data="found dist"/>',
+    ]
     for side in ("l", "r"):
         lines.append(
             f'    <contact name="pad_{side}_touch" geom1="pad_{side}" num="1"'
@@ -496,136 +560,45 @@ def build_mjcf(
             ' reduce="netforce" data="found force"/>'
         )
     lines.append("  </sensor>")
-    lines.append("</mujoco>")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
-class MuJoCoBackend:
-    """MuJoCo :class:`~tmmaster.sim.PhysicsBackend`: joint-space arm, gripper, falling parts.
+class _FingersAndParts:
+    """The gripper's fingers and the parts of a MuJoCo scene (the base of MuJoCoBackend).
 
-    Args:
-        model: The arm (``tmmaster.robot_model("tm5-700")``).
-        world: The parts and the table (None: one part at ``DEFAULT_PART_POSE``).
-        home: The TCP pose at the start (None: the model's ready posture).
-        tool: The TCP in the flange frame (None: the TCP is the flange).
-        grasp: ``"friction"`` (the pads hold a part by friction alone: a part too heavy
-            for the grip force slips out) or ``"weld"`` (once both pads touch a part it is
-            locked to the tool, whatever its mass).
-        gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
-        timestep_s: The physics step, s.
-        gripper_min_width_mm: The fingers' smallest width (None: the gripper's), mm.
-        gripper_max_width_mm: The fingers' largest width (None: the gripper's), mm.
-        keep_motion_on_reinit: A rebuild keeps the running motion (False: loses it).
-        collision_force_n: A pad pressing on a part it does not hold harder than this while
-            the arm moves is a collision, N.
-        dynamics: Arm dynamics: the links get the masses and inertias of Techman's URDF
-            and feel gravity, and each joint is a servo (PD plus the arm's own gravity
-            and the planned acceleration through its mass matrix, an integral term for
-            a payload it does not know of) whose torque is limited to the joint's
-            effort, following the planned trajectory as its reference: the joints and
-            TCP reported are where the joints are (they lag the reference with a part
-            the servo does not know of), and a move is done only once every
-            joint has settled within ``SETTLE_TOLERANCE_DEG`` of its target. False: an
-            ideal servo, the joints follow the trajectory exactly (no lag, no
-            settling). None (the default): on for the models whose link masses are
-            known (:func:`has_dynamics_data`: the TM5-700 and TM5-900), off for the
-            others; :attr:`dynamics` says which.
-
-    Raises:
-        PhysicsUnavailableError: ``mujoco`` is not installed.
-        ValueError: A bad time step, stroke or grasp mode, an unreachable ``home``, or
-            ``dynamics`` for a model whose link masses are not known.
+    The model, the data and the ids below are the backend's, found again at each rebuild.
     """
 
-    def __init__(
-        self,
-        model: RobotModel,
-        *,
-        world: World | None = None,
-        home: Pose | None = None,
-        tool: Pose | None = None,
-        grasp: GraspMode = "friction",
-        gripper: GripperGeometry | None = None,
-        timestep_s: float = DEFAULT_TIMESTEP_S,
-        gripper_min_width_mm: float | None = None,
-        gripper_max_width_mm: float | None = None,
-        keep_motion_on_reinit: bool = True,
-        collision_force_n: float = DEFAULT_COLLISION_FORCE_N,
-        dynamics: bool | None = None,
-    ) -> None:
-        self._mj = _import_mujoco()
-        if dynamics is None:
-            dynamics = has_dynamics_data(model.name)
-        if not (math.isfinite(timestep_s) and 0 < timestep_s <= 0.01):
-            raise ValueError(f"timestep_s must be in (0, 0.01], got {timestep_s}")
-        if grasp not in GRASP_MODES:
-            raise ValueError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
-        if not (math.isfinite(collision_force_n) and collision_force_n > 0):
-            raise ValueError(f"collision_force_n must be > 0, got {collision_force_n}")
-        self._gripper = gripper_geometry(gripper, gripper_min_width_mm, gripper_max_width_mm)
-        world = World() if world is None else world
-        self._model = model
-        self._tool = tool
+    _mj: Any
+    _m: Any
+    _d: Any
+    _ready: bool
+    _qpos: Any
+    _ctrl: Any
+    _finger_qpos: list[int]
+    _finger_dof: list[int]
+    _part_qpos: list[int]
+    _part_dof: list[int]
+    _part_body: list[int]
+    _part_geom: dict[int, int]
+    _pads: list[int]
+    _welds: list[int]
+    _sense_pads: list[int]
+    _tcp_body: int
+    _table: int
+    _fixture_geom: dict[int, str]
+
+    def _init_parts(self, world: World, grasp: GraspMode, gripper: GripperGeometry) -> None:
+        """The parts, the fixtures and the gripper's command state, before the model."""
+        self._gripper = gripper
         self._grasp_mode: GraspMode = grasp
-        self._timestep = timestep_s
-        self._gripper_min = self._gripper.min_width_mm
-        self._gripper_max = self._gripper.max_width_mm
-        self._collision_force = collision_force_n
-        self.keep_motion_on_reinit = keep_motion_on_reinit
+        self._gripper_min = gripper.min_width_mm
+        self._gripper_max = gripper.max_width_mm
         self._objects = list(world.objects)
         self._fixtures = world.fixtures
         self._table_top_mm = world.table_top_z_mm
-        self._xml = build_mjcf(
-            model,
-            self._objects,
-            table_top_z_mm=world.table_top_z_mm,
-            tool=tool,
-            gripper=self._gripper,
-            timestep_s=timestep_s,
-            dynamics=dynamics,
-            fixtures=world.fixtures,
-        )
-        self._dynamics = dynamics
-        # Joint servo (dynamics): gains per joint, the integral term's torque (N m), and
-        # the last reference (rad, rad/s) and the torques (N m) commanded.
-        self._kp: list[float] = []
-        self._kd: list[float] = []
-        self._servo_joints: list[tuple[int, int, float, float, float]] = []
-        self._integral = [0.0] * len(model.joints)
-        self._effort = list(_URDF_EFFORT_NM.get(model.name, ()))
-        #: Largest tracking error seen since the last start of a motion (deg, per joint).
-        self.max_tracking_error_deg = [0.0] * len(model.joints)
-        #: With dynamics: the physics steps of the current move at which each joint's
-        #: servo asked for more than the joint's effort and was held at it (saturated).
-        self.saturated_steps = [0] * len(model.joints)
-        # Stopped by a fault (dynamics): at rest once the joints stop, wherever what was
-        # hit holds them; the integral term stops growing, so the servo does not press
-        # ever harder into it. The next motion clears it.
-        self._blocked = False
         # Feeder: a part that starts inside an earlier one waits out of the scene.
-        self._queued: list[int] = []
-        placed: list[TableObject] = []
-        for k, obj in enumerate(self._objects):
-            if any(_boxes_overlap(obj, other) for other in placed):
-                self._queued.append(k)
-            else:
-                placed.append(obj)
-        if home is None:
-            joints: tuple[float, ...] = tuple(model.ready_joints_deg)
-        else:
-            try:
-                joints = tuple(model.inverse(home, tool=tool))
-            except UnreachablePoseError as exc:
-                raise ValueError(f"home {home} is not reachable: {exc}") from exc
-        self._hold = joints
-        self._trajectory: _Trajectory | None = None
-        self._ready = True
-        self._pending_s = 0.0
-        #: Simulated seconds stepped so far.
-        self.sim_time_s = 0.0
-        #: Wall seconds spent in the last rebuild (``reinitialize()``).
-        self.last_rebuild_s = 0.0
-        self.rebuilds = 0
+        self._queued = _queued_parts(self._objects)
         # Gripper command state: targets are per finger (half the width), m.
         self._finger_target = self._gripper_max / 2000
         self._finger_ctrl = self._finger_target
@@ -636,334 +609,6 @@ class MuJoCoBackend:
         self._stopped_for = 0.0
         self._held: int | None = None
         self._lost_ticks = 0
-        # Collisions: the arm's table penetration the running motion started with (m;
-        # -1: none), and the fault not yet taken by the controller.
-        self._start_depth = -1.0
-        self._fault: BackendFault | None = None
-        self._build(None)
-
-    # -- model --------------------------------------------------------------------------
-
-    @property
-    def tool(self) -> Pose | None:
-        """The TCP in the flange frame (None: the TCP is the flange); fixed with the scene."""
-        return self._tool
-
-    @property
-    def model(self) -> RobotModel:
-        """The arm model whose kinematics and limits plan the motions."""
-        return self._model
-
-    @property
-    def gripper(self) -> GripperGeometry:
-        """The fingers' stroke, pads and friction."""
-        return self._gripper
-
-    @property
-    def grasp(self) -> GraspMode:
-        """``"friction"`` or ``"weld"``: how a part between the pads is held."""
-        return self._grasp_mode
-
-    @property
-    def mjcf(self) -> str:
-        """The generated MJCF scene."""
-        return self._xml
-
-    @property
-    def mj_model(self) -> Any:
-        """The ``mujoco.MjModel`` (rebuilt by :meth:`reinitialize`)."""
-        return self._m
-
-    @property
-    def mj_data(self) -> Any:
-        """The ``mujoco.MjData``."""
-        return self._d
-
-    @property
-    def motion_running(self) -> bool:
-        """True while a trajectory is being followed."""
-        return self._trajectory is not None
-
-    def _build(self, snapshot: dict[str, Any] | None) -> None:
-        mj = self._mj
-        m = mj.MjModel.from_xml_string(self._xml)
-        d = mj.MjData(m)
-        self._m, self._d = m, d
-        obj = mj.mjtObj
-
-        def ident(kind: Any, label: str) -> int:
-            return int(mj.mj_name2id(m, kind, label))
-
-        def joint(label: str) -> tuple[int, int]:
-            j = ident(obj.mjOBJ_JOINT, label)
-            return int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
-
-        def sensor(label: str) -> int:
-            return int(m.sensor_adr[ident(obj.mjOBJ_SENSOR, label)])
-
-        parts = range(len(self._objects))
-        arm = [joint(f"j{i}") for i in range(1, 7)]
-        fingers = [joint(f"finger_{s}") for s in ("l", "r")]
-        free = [joint(f"part{k}") for k in parts]
-        self._arm_qpos, self._arm_dof = [a for a, _ in arm], [b for _, b in arm]
-        # MjData's arrays, cached: reading the attribute costs as much as the write.
-        self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
-        self._sensordata = d.sensordata
-        self._bias = d.qfrc_bias
-        # The servo's acceleration feed-forward M(q) a_ref: a_ref at the arm's dofs (one
-        # chain, so consecutive; the fingers' and parts' stay 0) and the torques, arrays
-        # reused every step.
-        import numpy as np
-
-        first = self._arm_dof[0]
-        self._arm_dofs = slice(first, first + len(self._arm_dof))
-        if self._arm_dof != list(range(first, self._arm_dofs.stop)):
-            raise RuntimeError(f"the arm's joints are not consecutive dofs: {self._arm_dof}")
-        self._accel = np.zeros(m.nv)
-        self._inertial = np.zeros(m.nv)
-        self._finger_qpos, self._finger_dof = [a for a, _ in fingers], [b for _, b in fingers]
-        self._part_qpos, self._part_dof = [a for a, _ in free], [b for _, b in free]
-        self._pads = [ident(obj.mjOBJ_GEOM, f"pad_{s}") for s in ("l", "r")]
-        self._table = ident(obj.mjOBJ_GEOM, "table")
-        self._fixture_geom = {
-            ident(obj.mjOBJ_GEOM, f"fixture{k}"): f.name for k, f in enumerate(self._fixtures)
-        }
-        self._tcp_body = ident(obj.mjOBJ_BODY, "tcp")
-        self._flange_body = ident(obj.mjOBJ_BODY, "link6")
-        self._part_body = [ident(obj.mjOBJ_BODY, f"part{k}") for k in parts]
-        self._part_geom = {ident(obj.mjOBJ_GEOM, f"part{k}"): k for k in parts}
-        self._welds = [ident(obj.mjOBJ_EQUALITY, f"grip{k}") for k in parts]
-        self._sense_table = sensor("arm_table")
-        self._sense_pads = [sensor("pad_l_touch"), sensor("pad_r_touch")]
-        self._sense_pad_table = [sensor("pad_l_table"), sensor("pad_r_table")]
-        if snapshot is None:
-            for adr, q in zip(self._arm_qpos, self._hold, strict=True):
-                d.qpos[adr] = math.radians(q)
-            for adr in self._finger_qpos:
-                d.qpos[adr] = self._finger_ctrl
-            for k in self._queued:
-                self._park(k)
-        else:
-            d.qpos[:] = snapshot["qpos"]
-            d.qvel[:] = snapshot["qvel"]
-            d.ctrl[:] = snapshot["ctrl"]
-            d.time = snapshot["time"]
-            m.eq_data[:] = snapshot["eq_data"]
-            d.eq_active[:] = snapshot["eq_active"]
-        mj.mj_forward(m, d)
-        if self._dynamics and not self._kp:
-            self._servo_gains(m)
-
-    def _servo_gains(self, m: Any) -> None:
-        """PD gains: ``_SERVO_HZ`` / ``_SERVO_ZETA`` for each joint's inertia when ready."""
-        mj = self._mj
-        d = mj.MjData(m)
-        for adr, q in zip(self._arm_qpos, self._model.ready_joints_deg, strict=True):
-            d.qpos[adr] = math.radians(q)
-        mj.mj_forward(m, d)
-        import numpy as np
-
-        full = np.zeros((m.nv, m.nv))
-        mj.mj_fullM(m, d, full)
-        w = 2 * math.pi * _SERVO_HZ
-        for dof in self._arm_dof:
-            inertia = float(full[dof, dof])  # the diagonal, armature included
-            self._kp.append(inertia * w * w)
-            self._kd.append(2 * _SERVO_ZETA * inertia * w)
-        self._servo_joints = list(
-            zip(self._arm_qpos, self._arm_dof, self._kp, self._kd, self._effort, strict=True)
-        )
-
-    def _snapshot(self) -> dict[str, Any]:
-        m, d = self._m, self._d
-        return {
-            "qpos": d.qpos.copy(),
-            "qvel": d.qvel.copy(),
-            "ctrl": d.ctrl.copy(),
-            "time": d.time,
-            "eq_data": m.eq_data.copy(),
-            "eq_active": d.eq_active.copy(),
-        }
-
-    # -- the ready / reinitialize contract ----------------------------------------------
-
-    def invalidate(self) -> None:
-        """Drop the physics view (as a scene reload would) until :meth:`reinitialize`."""
-        self._ready = False
-
-    def is_ready(self) -> bool:
-        """False after :meth:`invalidate` until :meth:`reinitialize` rebuilt the model."""
-        return self._ready
-
-    def reinitialize(self) -> bool:
-        """Rebuild the MuJoCo model and data from the MJCF and the last state.
-
-        The running trajectory is kept (True) unless ``keep_motion_on_reinit`` is False:
-        then the arm holds where it is and the motion is lost (False).
-        """
-        start = time.perf_counter()
-        snapshot = self._snapshot()
-        self._build(snapshot)
-        self.last_rebuild_s = time.perf_counter() - start
-        self.rebuilds += 1
-        self._ready = True
-        if self._trajectory is not None and not self.keep_motion_on_reinit:
-            self.stop_motion()
-            return False
-        return True
-
-    # -- arm ----------------------------------------------------------------------------
-
-    def _current_joints(self) -> tuple[float, ...]:
-        return tuple(math.degrees(self._d.qpos[a]) for a in self._arm_qpos)
-
-    def start_motion(
-        self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
-    ) -> float:
-        """Plan the joint trajectory to ``target`` and start it; return its duration in s."""
-        if accel_time_s < 0:
-            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
-        if not self._ready:
-            raise RuntimeError("start_motion while the MuJoCo model is being rebuilt")
-        here = self._command_joints()
-        start = self._model.forward(here, tool=self._tool)
-        try:
-            samples: list[tuple[float, ...]] = [here]
-            if motion is MotionType.LINE:
-                path = self._model.line_joints(
-                    start, target, start_joints_deg=here, tool=self._tool
-                )
-                samples += [tuple(q) for q in path[1:]]
-                duration = self._model.line_time(
-                    start,
-                    target,
-                    speed_percent=speed_percent,
-                    accel_time_s=accel_time_s,
-                    tool=self._tool,
-                    samples=path,
-                )
-            else:
-                samples.append(tuple(self._model.inverse(target, seed_deg=here, tool=self._tool)))
-                duration = self._model.ptp_time(
-                    here, samples[-1], speed_percent=speed_percent, accel_time_s=accel_time_s
-                )
-        except UnreachablePoseError as exc:
-            reason: RejectReason = "reach"
-            if exc.reason == "joint_limit":
-                reason = "joint_limit"
-            elif exc.reason == "singularity":
-                reason = "singularity"
-            raise MotionRejectedError(reason, str(exc)) from exc
-        return self._follow(samples, duration, accel_time_s)
-
-    def start_joint_motion(
-        self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
-    ) -> float:
-        """Start a joint-space PTP to exactly ``joints_deg``; return its duration in s."""
-        if accel_time_s < 0:
-            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
-        if not self._ready:
-            raise RuntimeError("start_joint_motion while the MuJoCo model is being rebuilt")
-        here = self._command_joints()
-        try:
-            joints = self._model.check_joints(joints_deg, tool=self._tool)
-        except UnreachablePoseError as exc:
-            raise MotionRejectedError(_reject_reason(exc.reason), str(exc)) from exc
-        duration = self._model.ptp_time(
-            here, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
-        )
-        return self._follow([here, tuple(joints)], duration, accel_time_s)
-
-    def start_arc_motion(
-        self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
-    ) -> float:
-        """Start a circular arc through ``via``'s position to ``target``; return its duration."""
-        if accel_time_s < 0:
-            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
-        if not self._ready:
-            raise RuntimeError("start_arc_motion while the MuJoCo model is being rebuilt")
-        here = self._command_joints()
-        start = self._model.forward(here, tool=self._tool)
-        try:
-            path = self._model.arc_joints(
-                start, via, target, start_joints_deg=here, tool=self._tool
-            )
-        except UnreachablePoseError as exc:
-            raise MotionRejectedError(_reject_reason(exc.reason), str(exc)) from exc
-        except ConfigError as exc:  # no arc through the points
-            raise MotionRejectedError("reach", str(exc)) from exc
-        duration = self._model.arc_time(
-            start,
-            via,
-            target,
-            speed_percent=speed_percent,
-            accel_time_s=accel_time_s,
-            tool=self._tool,
-            samples=path,
-        )
-        return self._follow([here, *(tuple(q) for q in path[1:])], duration, accel_time_s)
-
-    def _follow(
-        self, samples: list[tuple[float, ...]], duration: float, accel_time_s: float
-    ) -> float:
-        """Start following joint ``samples`` over ``duration``; return it."""
-        self._trajectory = _Trajectory(samples, duration, accel_time_s)
-        self._blocked = False
-        self.max_tracking_error_deg = [0.0] * len(samples[0])
-        self.saturated_steps = [0] * len(samples[0])
-        # A contact the arm already had (a collision it is backing out of) is known: only
-        # a deeper one is a collision.
-        self._start_depth = self._table_depth()
-        return duration
-
-    def _command_joints(self) -> tuple[float, ...]:
-        trajectory = self._trajectory
-        if trajectory is None:
-            return self._hold
-        return trajectory.joints_at(trajectory.elapsed_s)
-
-    def stop_motion(self) -> None:
-        """Hold the current joints (the servo stops at once).
-
-        With dynamics, the joints where they are, not the reference that leads them: the
-        arm brakes and comes to rest where it was stopped, as without.
-        """
-        if self._trajectory is not None:
-            self._hold = self._current_joints() if self._dynamics else self._command_joints()
-            self._trajectory = None
-
-    def is_settled(self) -> bool:
-        """True when no trajectory runs (and, with dynamics, the joints settled at its end)."""
-        if self._trajectory is not None:
-            return False
-        if not self._dynamics:
-            return True
-        qpos, qvel = self._qpos, self._qvel
-        for adr, dof, q in zip(self._arm_qpos, self._arm_dof, self._hold, strict=True):
-            if abs(qvel[dof] / _RAD) > SETTLE_SPEED_DEG_S:
-                return False
-            # Stopped by a fault, the arm rests where what it hit holds it: it may never
-            # reach the joints it held at the fault, and no move of it is reported done.
-            if not self._blocked and abs(qpos[adr] / _RAD - q) > SETTLE_TOLERANCE_DEG:
-                return False
-        return True
-
-    @property
-    def dynamics(self) -> bool:
-        """True when the joints are torque-driven servos, False for the ideal servo.
-
-        Returns:
-            Whether the arm's dynamics are modelled (see the class docstring).
-        """
-        return self._dynamics
-
-    def reference_joints_deg(self) -> tuple[float, ...]:
-        """The joints the servo is told to be at now (the trajectory's sample), deg."""
-        return self._command_joints()
-
-    def joint_positions_deg(self) -> tuple[float, ...]:
-        """Current joint angles J1..J6, degrees."""
-        return self._current_joints()
 
     def _body_pose(self, body: int) -> Pose:
         d = self._d
@@ -976,214 +621,6 @@ class MuJoCoBackend:
             kin.IDENTITY[3],
         )
         return kin.transform_to_pose(t)
-
-    def tcp_pose(self) -> Pose:
-        """Current TCP pose (the gripper's grasp point), from MuJoCo's kinematics."""
-        return self._body_pose(self._tcp_body)
-
-    def flange_pose(self) -> Pose:
-        """Current flange pose (frame of J6)."""
-        return self._body_pose(self._flange_body)
-
-    # -- faults -------------------------------------------------------------------------
-
-    def take_fault(self) -> BackendFault | None:
-        """The collision or overload that stopped the arm since the last call, once.
-
-        Returns:
-            The fault, or None.
-        """
-        fault, self._fault = self._fault, None
-        return fault
-
-    def _table_depth(self) -> float:
-        """How deep the arm, tool or pads are in the table (m); -1 when they do not touch."""
-        data = self._sensordata
-        adr = self._sense_table
-        return -float(data[adr + 1]) if data[adr] > 0 else -1.0
-
-    def _check_collision(self) -> BackendFault | None:
-        """A contact the moving arm did not expect, from this step's contact sensors."""
-        depth = self._table_depth()
-        if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_M:
-            return BackendFault(
-                "collision", f"the arm hit {self._obstacle()} ({depth * 1000:.1f} mm deep)"
-            )
-        if self._held is not None:
-            return None
-        data = self._sensordata
-        for adr, table, side in zip(
-            self._sense_pads, self._sense_pad_table, ("left", "right"), strict=True
-        ):
-            if data[adr] <= 0:
-                continue
-            # The pad's net contact force, less what the table pushes on it: the parts'.
-            force = math.hypot(*(data[adr + i] - data[table + i] for i in (1, 2, 3)))
-            if force > self._collision_force:
-                return BackendFault(
-                    "collision", f"the {side} finger pressed on a part with {force:.0f} N"
-                )
-        return None
-
-    def _overload(self) -> BackendFault | None:
-        """The part held is heavier than the arm's rated payload (while the arm moves)."""
-        if self._held is None:
-            return None
-        payload = self._model.payload_kg
-        if payload is None:
-            return None
-        obj = self._objects[self._held]
-        if obj.mass_kg <= payload:
-            return None
-        return BackendFault(
-            "payload",
-            f"carrying {obj.name} ({obj.mass_kg:g} kg) over the rated payload of {payload:g} kg",
-        )
-
-    def _stop_for(self, fault: BackendFault, joints: tuple[float, ...]) -> None:
-        """Stop where the fault showed (the step's pose, not the trajectory's next one).
-
-        With dynamics the servo holds where the joints are, not where the reference
-        was: the reference leads them, and holding it would press into what was hit;
-        the arm is at rest once its joints stop (see :meth:`is_settled`).
-        """
-        self._trajectory = None
-        self._hold = self._current_joints() if self._dynamics else joints
-        self._integral = [0.0] * len(self._integral) if self._dynamics else self._integral
-        self._blocked = self._dynamics
-        self._fault = fault
-
-    # -- simulation ---------------------------------------------------------------------
-
-    def step(self, dt: float) -> None:
-        """Advance the physics by ``dt`` simulated seconds (whole physics steps)."""
-        if dt < 0 or not math.isfinite(dt):
-            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
-        if not self._ready:
-            return
-        self._pending_s += dt
-        steps = int(self._pending_s / self._timestep + 1e-6)
-        self._pending_s -= steps * self._timestep
-        for _ in range(steps):
-            self._substep()
-        if self._queued:
-            self._feed()  # once per tick: a waiting part appears when its spot is free
-        if self._grasp_mode == "friction" and self._closing:
-            self._update_held()
-        if not self._dynamics:
-            # Report exactly the commanded joints (the integrator moved them by a hair).
-            self._set_arm(self._command_joints(), None)
-        # The poses of the joints the last step ended with (mj_step leaves them one step
-        # behind).
-        self._mj.mj_kinematics(self._m, self._d)
-
-    def _set_arm(self, joints: Sequence[float], velocity: Sequence[float] | None) -> None:
-        # Element writes into the cached arrays: the cheapest way into MjData from Python
-        # (this runs every physics step).
-        qpos, qvel = self._qpos, self._qvel
-        for adr, q in zip(self._arm_qpos, joints, strict=True):
-            qpos[adr] = q * _RAD
-        if velocity is None:
-            for adr in self._arm_dof:
-                qvel[adr] = 0.0
-        else:
-            for adr, w in zip(self._arm_dof, velocity, strict=True):
-                qvel[adr] = w * _RAD
-
-    def _servo(
-        self,
-        reference: Sequence[float],
-        velocity: Sequence[float] | None,
-        acceleration_rad: list[float] | None = None,
-    ) -> None:
-        """Each joint's torque towards ``reference`` (deg) moving at ``velocity`` (deg/s).
-
-        PD on the error plus the arm's own gravity and Coriolis torques (MuJoCo's bias
-        force of the last step: a part held is not in it) plus the torque of the
-        reference's acceleration (``acceleration_rad``, rad/s^2) through the mass matrix
-        of the last step (the arm's links, armature, gripper and fingers: a part held,
-        welded or gripped, is a body of its own, not in it) plus an integral term, the
-        total limited to the joint's effort (the integral stops growing at the limit).
-        """
-        # Plain floats (tolist) and one slice write: numpy scalars cost more than the maths.
-        qpos, qvel = self._qpos.tolist(), self._qvel.tolist()
-        if acceleration_rad is None:
-            bias = self._bias.tolist()
-        else:
-            self._accel[self._arm_dofs] = acceleration_rad
-            inertial = self._inertial
-            self._mj.mj_mulM(self._m, self._d, inertial, self._accel)
-            inertial += self._bias
-            bias = inertial.tolist()
-        h = self._timestep
-        worst = self.max_tracking_error_deg
-        saturated = self.saturated_steps
-        integral = self._integral
-        blocked = self._blocked
-        torques = []
-        for i, (adr, dof, kp, kd, effort) in enumerate(self._servo_joints):
-            error = reference[i] * _RAD - qpos[adr]
-            speed = qvel[dof]
-            v_error = -speed if velocity is None else velocity[i] * _RAD - speed
-            grown = integral[i] if blocked else integral[i] + kp * error * h / _SERVO_TI_S
-            torque = kp * error + kd * v_error + bias[dof] + grown
-            if -effort < torque < effort:
-                integral[i] = grown
-            else:
-                torque = effort if torque > 0 else -effort
-                saturated[i] += 1
-            torques.append(torque)
-            e = abs(error) / _RAD
-            if e > worst[i]:
-                worst[i] = e
-        self._ctrl[2:8] = torques
-
-    def _substep(self) -> None:
-        h = self._timestep
-        trajectory = self._trajectory
-        now = self._hold
-        if trajectory is None:
-            if self._dynamics:
-                self._servo(now, None)
-            else:
-                self._set_arm(self._hold, None)
-        else:
-            now = trajectory.joints_at(trajectory.elapsed_s)
-            trajectory.elapsed_s += h
-            nxt = trajectory.joints_at(trajectory.elapsed_s)
-            velocity = [(b - a) / h for a, b in zip(now, nxt, strict=True)]
-            if self._dynamics:
-                # Computed torque on the sampled reference, consistent with the step:
-                # the arm on the reference now (joints ``now``, moving at the last step's
-                # velocity, which brought it there) reaches ``nxt`` at the end of this
-                # step when its velocity changes to ``velocity``, so the feed-forward
-                # acceleration is that change over the step. Differencing rather than
-                # the trapezoid's phase: the joint samples are a polyline swept by the
-                # trapezoid, and the difference holds both the profile's acceleration and
-                # the polyline's turn at a sample, the PD then seeing no error on an arm
-                # that follows exactly.
-                last = trajectory.velocity or [0.0] * len(velocity)
-                scale = _RAD / h
-                accel = [(v - u) * scale for u, v in zip(last, velocity, strict=True)]
-                trajectory.velocity = velocity
-                cruising = min(accel) > -_FF_MIN_ACCEL and max(accel) < _FF_MIN_ACCEL
-                self._servo(now, last, None if cruising else accel)
-            else:
-                self._set_arm(now, velocity)
-            if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
-                self._hold = trajectory.samples[-1]
-                self._trajectory = None
-        self._drive_fingers(h)
-        for k in self._queued:
-            self._park(k)
-        self._mj.mj_step(self._m, self._d)
-        self.sim_time_s += h
-        if trajectory is not None:
-            fault = self._check_collision() or self._overload()
-            if fault is not None:
-                self._stop_for(fault, now)
-        if self._gripper_moving:
-            self._update_gripper(h)
 
     # -- gripper ------------------------------------------------------------------------
 
@@ -1434,6 +871,665 @@ class MuJoCoBackend:
             for k, obj in enumerate(self._objects)
         ]
 
+
+class MuJoCoBackend(_FingersAndParts):
+    """MuJoCo :class:`~tmmaster.sim.PhysicsBackend`: joint-space arm, gripper, falling parts.
+
+    Args:
+        model: The arm (``tmmaster.robot_model("tm5-700")``).
+        world: The parts and the table (None: one part at ``DEFAULT_PART_POSE``).
+        home: The TCP pose at the start (None: the model's ready posture).
+        tool: The TCP in the flange frame (None: the TCP is the flange).
+        grasp: ``"friction"`` (the pads hold a part by friction alone: a part too heavy
+            for the grip force slips out) or ``"weld"`` (once both pads touch a part it is
+            locked to the tool, whatever its mass).
+        gripper: The fingers' stroke, pads and friction (None: an OnRobot 2FG7).
+        timestep_s: The physics step, s.
+        gripper_min_width_mm: The fingers' smallest width (None: the gripper's), mm.
+        gripper_max_width_mm: The fingers' largest width (None: the gripper's), mm.
+        keep_motion_on_reinit: A rebuild keeps the running motion (False: loses it).
+        collision_force_n: A pad pressing on a part it does not hold harder than this while
+            the arm moves is a collision, N.
+        dynamics: Arm dynamics: the links get the masses and inertias of Techman's URDF
+            and feel gravity, and each joint is a servo (PD plus the arm's own gravity
+            and the planned acceleration through its mass matrix, an integral term for
+            a payload it does not know of) whose torque is limited to the joint's
+            effort, following the planned trajectory as its reference: the joints and
+            TCP reported are where the joints are (they lag the reference with a part
+            the servo does not know of), and a move is done only once every
+            joint has settled within ``SETTLE_TOLERANCE_DEG`` of its target. False: an
+            ideal servo, the joints follow the trajectory exactly (no lag, no
+            settling). None (the default): on for the models whose link masses are
+            known (:func:`has_dynamics_data`: the TM5-700 and TM5-900), off for the
+            others; :attr:`dynamics` says which.
+
+    Raises:
+        PhysicsUnavailableError: ``mujoco`` is not installed.
+        ValueError: A bad time step, stroke or grasp mode, an unreachable ``home``, or
+            ``dynamics`` for a model whose link masses are not known.
+    """
+
+    def __init__(
+        self,
+        model: RobotModel,
+        *,
+        world: World | None = None,
+        home: Pose | None = None,
+        tool: Pose | None = None,
+        grasp: GraspMode = "friction",
+        gripper: GripperGeometry | None = None,
+        timestep_s: float = DEFAULT_TIMESTEP_S,
+        gripper_min_width_mm: float | None = None,
+        gripper_max_width_mm: float | None = None,
+        keep_motion_on_reinit: bool = True,
+        collision_force_n: float = DEFAULT_COLLISION_FORCE_N,
+        dynamics: bool | None = None,
+    ) -> None:
+        self._mj = _import_mujoco()
+        if dynamics is None:
+            dynamics = has_dynamics_data(model.name)
+        require_in("timestep_s", timestep_s, Bounds(0, 0.01, "s", open_low=True))
+        if grasp not in GRASP_MODES:
+            raise ValueError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
+        require_positive("collision_force_n", collision_force_n)
+        geometry = gripper_geometry(gripper, gripper_min_width_mm, gripper_max_width_mm)
+        world = World() if world is None else world
+        self._model = model
+        self._tool = tool
+        self._timestep = timestep_s
+        self._collision_force = collision_force_n
+        self.keep_motion_on_reinit = keep_motion_on_reinit
+        self._init_parts(world, grasp, geometry)
+        self._xml = build_mjcf(
+            model,
+            self._objects,
+            table_top_z_mm=world.table_top_z_mm,
+            tool=tool,
+            gripper=self._gripper,
+            timestep_s=timestep_s,
+            dynamics=dynamics,
+            fixtures=world.fixtures,
+        )
+        self._dynamics = dynamics
+        self._init_servo(model)
+        self._hold = _home_joints(model, home, tool)
+        self._trajectory: _Trajectory | None = None
+        self._ready = True
+        self._pending_s = 0.0
+        #: Simulated seconds stepped so far.
+        self.sim_time_s = 0.0
+        #: Wall seconds spent in the last rebuild (``reinitialize()``).
+        self.last_rebuild_s = 0.0
+        self.rebuilds = 0
+        # Collisions: the arm's table penetration the running motion started with (m;
+        # -1: none), and the fault not yet taken by the controller.
+        self._start_depth = -1.0
+        self._fault: BackendFault | None = None
+        self._build(None)
+
+    def _init_servo(self, model: RobotModel) -> None:
+        """The joint servo's state (used with dynamics)."""
+        # Gains per joint, the integral term's torque (N m), and the last reference (rad,
+        # rad/s) and the torques (N m) commanded.
+        self._kp: list[float] = []
+        self._kd: list[float] = []
+        self._servo_joints: list[tuple[int, int, float, float, float]] = []
+        self._integral = [0.0] * len(model.joints)
+        self._effort = list(_URDF_EFFORT_NM.get(model.name, ()))
+        #: Largest tracking error seen since the last start of a motion (deg, per joint).
+        self.max_tracking_error_deg = [0.0] * len(model.joints)
+        #: With dynamics: the physics steps of the current move at which each joint's
+        #: servo asked for more than the joint's effort and was held at it (saturated).
+        self.saturated_steps = [0] * len(model.joints)
+        # Stopped by a fault (dynamics): at rest once the joints stop, wherever what was
+        # hit holds them; the integral term stops growing, so the servo does not press
+        # ever harder into it. The next motion clears it.
+        self._blocked = False
+
+    # -- model --------------------------------------------------------------------------
+
+    @property
+    def tool(self) -> Pose | None:
+        """The TCP in the flange frame (None: the TCP is the flange); fixed with the scene."""
+        return self._tool
+
+    @property
+    def model(self) -> RobotModel:
+        """The arm model whose kinematics and limits plan the motions."""
+        return self._model
+
+    @property
+    def gripper(self) -> GripperGeometry:
+        """The fingers' stroke, pads and friction."""
+        return self._gripper
+
+    @property
+    def grasp(self) -> GraspMode:
+        """``"friction"`` or ``"weld"``: how a part between the pads is held."""
+        return self._grasp_mode
+
+    @property
+    def mjcf(self) -> str:
+        """The generated MJCF scene."""
+        return self._xml
+
+    @property
+    def mj_model(self) -> Any:
+        """The ``mujoco.MjModel`` (rebuilt by :meth:`reinitialize`)."""
+        return self._m
+
+    @property
+    def mj_data(self) -> Any:
+        """The ``mujoco.MjData``."""
+        return self._d
+
+    @property
+    def motion_running(self) -> bool:
+        """True while a trajectory is being followed."""
+        return self._trajectory is not None
+
+    def _build(self, snapshot: dict[str, Any] | None) -> None:
+        mj = self._mj
+        m = mj.MjModel.from_xml_string(self._xml)
+        d = mj.MjData(m)
+        self._m, self._d = m, d
+        self._find_arm(m, d)
+        self._find_scene(m)
+        if snapshot is None:
+            for adr, q in zip(self._arm_qpos, self._hold, strict=True):
+                d.qpos[adr] = math.radians(q)
+            for adr in self._finger_qpos:
+                d.qpos[adr] = self._finger_ctrl
+            for k in self._queued:
+                self._park(k)
+        else:
+            d.qpos[:] = snapshot["qpos"]
+            d.qvel[:] = snapshot["qvel"]
+            d.ctrl[:] = snapshot["ctrl"]
+            d.time = snapshot["time"]
+            m.eq_data[:] = snapshot["eq_data"]
+            d.eq_active[:] = snapshot["eq_active"]
+        mj.mj_forward(m, d)
+        if self._dynamics and not self._kp:
+            self._servo_gains(m)
+
+    def _ident(self, m: Any, kind: Any, label: str) -> int:
+        """The id of MuJoCo object ``label`` of ``kind`` (an ``mjtObj``)."""
+        return int(self._mj.mj_name2id(m, kind, label))
+
+    def _joint(self, m: Any, label: str) -> tuple[int, int]:
+        """Joint ``label``'s address in qpos and in qvel."""
+        j = self._ident(m, self._mj.mjtObj.mjOBJ_JOINT, label)
+        return int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
+
+    def _find_arm(self, m: Any, d: Any) -> None:
+        """The arm's joints and MjData's arrays the steps write (cached)."""
+        arm = [self._joint(m, f"j{i}") for i in range(1, 7)]
+        self._arm_qpos, self._arm_dof = [a for a, _ in arm], [b for _, b in arm]
+        # MjData's arrays, cached: reading the attribute costs as much as the write.
+        self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
+        self._sensordata = d.sensordata
+        self._bias = d.qfrc_bias
+        # The servo's acceleration feed-forward M(q) a_ref: a_ref at the arm's dofs (one
+        # chain, so consecutive; the fingers' and parts' stay 0) and the torques, arrays
+        # reused every step.
+        import numpy as np
+
+        first = self._arm_dof[0]
+        self._arm_dofs = slice(first, first + len(self._arm_dof))
+        if self._arm_dof != list(range(first, self._arm_dofs.stop)):
+            raise RuntimeError(f"the arm's joints are not consecutive dofs: {self._arm_dof}")
+        self._accel = np.zeros(m.nv)
+        self._inertial = np.zeros(m.nv)
+
+    def _find_scene(self, m: Any) -> None:
+        """The fingers', pads', parts', fixtures' and sensors' ids and addresses."""
+        obj = self._mj.mjtObj
+
+        def ident(kind: Any, label: str) -> int:
+            return self._ident(m, kind, label)
+
+        def sensor(label: str) -> int:
+            return int(m.sensor_adr[ident(obj.mjOBJ_SENSOR, label)])
+
+        parts = range(len(self._objects))
+        fingers = [self._joint(m, f"finger_{s}") for s in ("l", "r")]
+        free = [self._joint(m, f"part{k}") for k in parts]
+        self._finger_qpos, self._finger_dof = [a for a, _ in fingers], [b for _, b in fingers]
+        self._part_qpos, self._part_dof = [a for a, _ in free], [b for _, b in free]
+        self._pads = [ident(obj.mjOBJ_GEOM, f"pad_{s}") for s in ("l", "r")]
+        self._table = ident(obj.mjOBJ_GEOM, "table")
+        self._fixture_geom = {
+            ident(obj.mjOBJ_GEOM, f"fixture{k}"): f.name for k, f in enumerate(self._fixtures)
+        }
+        self._tcp_body = ident(obj.mjOBJ_BODY, "tcp")
+        self._flange_body = ident(obj.mjOBJ_BODY, "link6")
+        self._part_body = [ident(obj.mjOBJ_BODY, f"part{k}") for k in parts]
+        self._part_geom = {ident(obj.mjOBJ_GEOM, f"part{k}"): k for k in parts}
+        self._welds = [ident(obj.mjOBJ_EQUALITY, f"grip{k}") for k in parts]
+        self._sense_table = sensor("arm_table")
+        self._sense_pads = [sensor("pad_l_touch"), sensor("pad_r_touch")]
+        self._sense_pad_table = [sensor("pad_l_table"), sensor("pad_r_table")]
+
+    def _servo_gains(self, m: Any) -> None:
+        """PD gains: ``_SERVO_HZ`` / ``_SERVO_ZETA`` for each joint's inertia when ready."""
+        mj = self._mj
+        d = mj.MjData(m)
+        for adr, q in zip(self._arm_qpos, self._model.ready_joints_deg, strict=True):
+            d.qpos[adr] = math.radians(q)
+        mj.mj_forward(m, d)
+        import numpy as np
+
+        full = np.zeros((m.nv, m.nv))
+        mj.mj_fullM(m, d, full)
+        w = 2 * math.pi * _SERVO_HZ
+        for dof in self._arm_dof:
+            inertia = float(full[dof, dof])  # the diagonal, armature included
+            self._kp.append(inertia * w * w)
+            self._kd.append(2 * _SERVO_ZETA * inertia * w)
+        self._servo_joints = list(
+            zip(self._arm_qpos, self._arm_dof, self._kp, self._kd, self._effort, strict=True)
+        )
+
+    def _snapshot(self) -> dict[str, Any]:
+        m, d = self._m, self._d
+        return {
+            "qpos": d.qpos.copy(),
+            "qvel": d.qvel.copy(),
+            "ctrl": d.ctrl.copy(),
+            "time": d.time,
+            "eq_data": m.eq_data.copy(),
+            "eq_active": d.eq_active.copy(),
+        }
+
+    # -- the ready / reinitialize contract ----------------------------------------------
+
+    def invalidate(self) -> None:
+        """Drop the physics view (as a scene reload would) until :meth:`reinitialize`."""
+        self._ready = False
+
+    def is_ready(self) -> bool:
+        """False after :meth:`invalidate` until :meth:`reinitialize` rebuilt the model."""
+        return self._ready
+
+    def reinitialize(self) -> bool:
+        """Rebuild the MuJoCo model and data from the MJCF and the last state.
+
+        The running trajectory is kept (True) unless ``keep_motion_on_reinit`` is False:
+        then the arm holds where it is and the motion is lost (False).
+        """
+        start = time.perf_counter()
+        snapshot = self._snapshot()
+        self._build(snapshot)
+        self.last_rebuild_s = time.perf_counter() - start
+        self.rebuilds += 1
+        self._ready = True
+        if self._trajectory is not None and not self.keep_motion_on_reinit:
+            self.stop_motion()
+            return False
+        return True
+
+    # -- arm ----------------------------------------------------------------------------
+
+    def _current_joints(self) -> tuple[float, ...]:
+        return tuple(math.degrees(self._d.qpos[a]) for a in self._arm_qpos)
+
+    def start_motion(
+        self, target: Pose, *, motion: MotionType, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Plan the joint trajectory to ``target`` and start it; return its duration in s."""
+        if accel_time_s < 0:
+            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+        if not self._ready:
+            raise RuntimeError("start_motion while the MuJoCo model is being rebuilt")
+        here = self._command_joints()
+        start = self._model.forward(here, tool=self._tool)
+        try:
+            samples: list[tuple[float, ...]] = [here]
+            if motion is MotionType.LINE:
+                path = self._model.line_joints(
+                    start, target, start_joints_deg=here, tool=self._tool
+                )
+                samples += [tuple(q) for q in path[1:]]
+                duration = self._model.line_time(
+                    start,
+                    target,
+                    speed_percent=speed_percent,
+                    accel_time_s=accel_time_s,
+                    tool=self._tool,
+                    samples=path,
+                )
+            else:
+                samples.append(tuple(self._model.inverse(target, seed_deg=here, tool=self._tool)))
+                duration = self._model.ptp_time(
+                    here, samples[-1], speed_percent=speed_percent, accel_time_s=accel_time_s
+                )
+        except UnreachablePoseError as exc:
+            reason: RejectReason = "reach"
+            if exc.reason == "joint_limit":
+                reason = "joint_limit"
+            elif exc.reason == "singularity":
+                reason = "singularity"
+            raise MotionRejectedError(reason, str(exc)) from exc
+        return self._follow(samples, duration, accel_time_s)
+
+    def start_joint_motion(
+        self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Start a joint-space PTP to exactly ``joints_deg``; return its duration in s."""
+        if accel_time_s < 0:
+            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+        if not self._ready:
+            raise RuntimeError("start_joint_motion while the MuJoCo model is being rebuilt")
+        here = self._command_joints()
+        try:
+            joints = self._model.check_joints(joints_deg, tool=self._tool)
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reject_reason(exc.reason), str(exc)) from exc
+        duration = self._model.ptp_time(
+            here, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
+        )
+        return self._follow([here, tuple(joints)], duration, accel_time_s)
+
+    def start_arc_motion(
+        self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
+    ) -> float:
+        """Start a circular arc through ``via``'s position to ``target``; return its duration."""
+        if accel_time_s < 0:
+            raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
+        if not self._ready:
+            raise RuntimeError("start_arc_motion while the MuJoCo model is being rebuilt")
+        here = self._command_joints()
+        start = self._model.forward(here, tool=self._tool)
+        try:
+            path = self._model.arc_joints(
+                start, via, target, start_joints_deg=here, tool=self._tool
+            )
+        except UnreachablePoseError as exc:
+            raise MotionRejectedError(_reject_reason(exc.reason), str(exc)) from exc
+        except ConfigError as exc:  # no arc through the points
+            raise MotionRejectedError("reach", str(exc)) from exc
+        duration = self._model.arc_time(
+            start,
+            via,
+            target,
+            speed_percent=speed_percent,
+            accel_time_s=accel_time_s,
+            tool=self._tool,
+            samples=path,
+        )
+        return self._follow([here, *(tuple(q) for q in path[1:])], duration, accel_time_s)
+
+    def _follow(
+        self, samples: list[tuple[float, ...]], duration: float, accel_time_s: float
+    ) -> float:
+        """Start following joint ``samples`` over ``duration``; return it."""
+        self._trajectory = _Trajectory(samples, duration, accel_time_s)
+        self._blocked = False
+        self.max_tracking_error_deg = [0.0] * len(samples[0])
+        self.saturated_steps = [0] * len(samples[0])
+        # A contact the arm already had (a collision it is backing out of) is known: only
+        # a deeper one is a collision.
+        self._start_depth = self._table_depth()
+        return duration
+
+    def _command_joints(self) -> tuple[float, ...]:
+        trajectory = self._trajectory
+        if trajectory is None:
+            return self._hold
+        return trajectory.joints_at(trajectory.elapsed_s)
+
+    def stop_motion(self) -> None:
+        """Hold the current joints (the servo stops at once).
+
+        With dynamics, the joints where they are, not the reference that leads them: the
+        arm brakes and comes to rest where it was stopped, as without.
+        """
+        if self._trajectory is not None:
+            self._hold = self._current_joints() if self._dynamics else self._command_joints()
+            self._trajectory = None
+
+    def is_settled(self) -> bool:
+        """True when no trajectory runs (and, with dynamics, the joints settled at its end)."""
+        if self._trajectory is not None:
+            return False
+        if not self._dynamics:
+            return True
+        qpos, qvel = self._qpos, self._qvel
+        for adr, dof, q in zip(self._arm_qpos, self._arm_dof, self._hold, strict=True):
+            if abs(qvel[dof] / _RAD) > SETTLE_SPEED_DEG_S:
+                return False
+            # Stopped by a fault, the arm rests where what it hit holds it: it may never
+            # reach the joints it held at the fault, and no move of it is reported done.
+            if not self._blocked and abs(qpos[adr] / _RAD - q) > SETTLE_TOLERANCE_DEG:
+                return False
+        return True
+
+    @property
+    def dynamics(self) -> bool:
+        """True when the joints are torque-driven servos, False for the ideal servo.
+
+        Returns:
+            Whether the arm's dynamics are modelled (see the class docstring).
+        """
+        return self._dynamics
+
+    def reference_joints_deg(self) -> tuple[float, ...]:
+        """The joints the servo is told to be at now (the trajectory's sample), deg."""
+        return self._command_joints()
+
+    def joint_positions_deg(self) -> tuple[float, ...]:
+        """Current joint angles J1..J6, degrees."""
+        return self._current_joints()
+
+    def tcp_pose(self) -> Pose:
+        """Current TCP pose (the gripper's grasp point), from MuJoCo's kinematics."""
+        return self._body_pose(self._tcp_body)
+
+    def flange_pose(self) -> Pose:
+        """Current flange pose (frame of J6)."""
+        return self._body_pose(self._flange_body)
+
+    # -- faults -------------------------------------------------------------------------
+
+    def take_fault(self) -> BackendFault | None:
+        """The collision or overload that stopped the arm since the last call, once.
+
+        Returns:
+            The fault, or None.
+        """
+        fault, self._fault = self._fault, None
+        return fault
+
+    def _table_depth(self) -> float:
+        """How deep the arm, tool or pads are in the table (m); -1 when they do not touch."""
+        data = self._sensordata
+        adr = self._sense_table
+        return -float(data[adr + 1]) if data[adr] > 0 else -1.0
+
+    def _check_collision(self) -> BackendFault | None:
+        """A contact the moving arm did not expect, from this step's contact sensors."""
+        depth = self._table_depth()
+        if depth >= 0 and depth > self._start_depth + _COLLISION_DEPTH_M:
+            return BackendFault(
+                "collision", f"the arm hit {self._obstacle()} ({depth * 1000:.1f} mm deep)"
+            )
+        if self._held is not None:
+            return None
+        data = self._sensordata
+        for adr, table, side in zip(
+            self._sense_pads, self._sense_pad_table, ("left", "right"), strict=True
+        ):
+            if data[adr] <= 0:
+                continue
+            # The pad's net contact force, less what the table pushes on it: the parts'.
+            force = math.hypot(*(data[adr + i] - data[table + i] for i in (1, 2, 3)))
+            if force > self._collision_force:
+                return BackendFault(
+                    "collision", f"the {side} finger pressed on a part with {force:.0f} N"
+                )
+        return None
+
+    def _overload(self) -> BackendFault | None:
+        """The part held is heavier than the arm's rated payload (while the arm moves)."""
+        if self._held is None:
+            return None
+        payload = self._model.payload_kg
+        if payload is None:
+            return None
+        obj = self._objects[self._held]
+        if obj.mass_kg <= payload:
+            return None
+        return BackendFault(
+            "payload",
+            f"carrying {obj.name} ({obj.mass_kg:g} kg) over the rated payload of {payload:g} kg",
+        )
+
+    def _stop_for(self, fault: BackendFault, joints: tuple[float, ...]) -> None:
+        """Stop where the fault showed (the step's pose, not the trajectory's next one).
+
+        With dynamics the servo holds where the joints are, not where the reference
+        was: the reference leads them, and holding it would press into what was hit;
+        the arm is at rest once its joints stop (see :meth:`is_settled`).
+        """
+        self._trajectory = None
+        self._hold = self._current_joints() if self._dynamics else joints
+        self._integral = [0.0] * len(self._integral) if self._dynamics else self._integral
+        self._blocked = self._dynamics
+        self._fault = fault
+
+    # -- simulation ---------------------------------------------------------------------
+
+    def step(self, dt: float) -> None:
+        """Advance the physics by ``dt`` simulated seconds (whole physics steps)."""
+        if dt < 0 or not math.isfinite(dt):
+            raise ValueError(f"dt must be a finite number >= 0, got {dt}")
+        if not self._ready:
+            return
+        self._pending_s += dt
+        steps = int(self._pending_s / self._timestep + 1e-6)
+        self._pending_s -= steps * self._timestep
+        for _ in range(steps):
+            self._substep()
+        if self._queued:
+            self._feed()  # once per tick: a waiting part appears when its spot is free
+        if self._grasp_mode == "friction" and self._closing:
+            self._update_held()
+        if not self._dynamics:
+            # Report exactly the commanded joints (the integrator moved them by a hair).
+            self._set_arm(self._command_joints(), None)
+        # The poses of the joints the last step ended with (mj_step leaves them one step
+        # behind).
+        self._mj.mj_kinematics(self._m, self._d)
+
+    def _set_arm(self, joints: Sequence[float], velocity: Sequence[float] | None) -> None:
+        # Element writes into the cached arrays: the cheapest way into MjData from Python
+        # (this runs every physics step).
+        qpos, qvel = self._qpos, self._qvel
+        for adr, q in zip(self._arm_qpos, joints, strict=True):
+            qpos[adr] = q * _RAD
+        if velocity is None:
+            for adr in self._arm_dof:
+                qvel[adr] = 0.0
+        else:
+            for adr, w in zip(self._arm_dof, velocity, strict=True):
+                qvel[adr] = w * _RAD
+
+    def _servo(
+        self,
+        reference: Sequence[float],
+        velocity: Sequence[float] | None,
+        acceleration_rad: list[float] | None = None,
+    ) -> None:
+        """Each joint's torque towards ``reference`` (deg) moving at ``velocity`` (deg/s).
+
+        PD on the error plus the arm's own gravity and Coriolis torques (MuJoCo's bias
+        force of the last step: a part held is not in it) plus the torque of the
+        reference's acceleration (``acceleration_rad``, rad/s^2) through the mass matrix
+        of the last step (the arm's links, armature, gripper and fingers: a part held,
+        welded or gripped, is a body of its own, not in it) plus an integral term, the
+        total limited to the joint's effort (the integral stops growing at the limit).
+        """
+        # Plain floats (tolist) and one slice write: numpy scalars cost more than the maths.
+        qpos, qvel = self._qpos.tolist(), self._qvel.tolist()
+        if acceleration_rad is None:
+            bias = self._bias.tolist()
+        else:
+            self._accel[self._arm_dofs] = acceleration_rad
+            inertial = self._inertial
+            self._mj.mj_mulM(self._m, self._d, inertial, self._accel)
+            inertial += self._bias
+            bias = inertial.tolist()
+        h = self._timestep
+        worst = self.max_tracking_error_deg
+        saturated = self.saturated_steps
+        integral = self._integral
+        blocked = self._blocked
+        torques = []
+        for i, (adr, dof, kp, kd, effort) in enumerate(self._servo_joints):
+            error = reference[i] * _RAD - qpos[adr]
+            speed = qvel[dof]
+            v_error = -speed if velocity is None else velocity[i] * _RAD - speed
+            grown = integral[i] if blocked else integral[i] + kp * error * h / _SERVO_TI_S
+            torque = kp * error + kd * v_error + bias[dof] + grown
+            if -effort < torque < effort:
+                integral[i] = grown
+            else:
+                torque = effort if torque > 0 else -effort
+                saturated[i] += 1
+            torques.append(torque)
+            e = abs(error) / _RAD
+            if e > worst[i]:
+                worst[i] = e
+        self._ctrl[2:8] = torques
+
+    def _substep(self) -> None:
+        h = self._timestep
+        trajectory = self._trajectory
+        now = self._hold
+        if trajectory is None:
+            if self._dynamics:
+                self._servo(now, None)
+            else:
+                self._set_arm(self._hold, None)
+        else:
+            now = trajectory.joints_at(trajectory.elapsed_s)
+            trajectory.elapsed_s += h
+            nxt = trajectory.joints_at(trajectory.elapsed_s)
+            velocity = [(b - a) / h for a, b in zip(now, nxt, strict=True)]
+            if self._dynamics:
+                # Computed torque on the sampled reference, consistent with the step:
+                # the arm on the reference now (joints ``now``, moving at the last step's
+                # velocity, which brought it there) reaches ``nxt`` at the end of this
+                # step when its velocity changes to ``velocity``, so the feed-forward
+                # acceleration is that change over the step. Differencing rather than
+                # the trapezoid's phase: the joint samples are a polyline swept by the
+                # trapezoid, and the difference holds both the profile's acceleration and
+                # the polyline's turn at a sample, the PD then seeing no error on an arm
+                # that follows exactly.
+                last = trajectory.velocity or [0.0] * len(velocity)
+                scale = _RAD / h
+                accel = [(v - u) * scale for u, v in zip(last, velocity, strict=True)]
+                trajectory.velocity = velocity
+                cruising = min(accel) > -_FF_MIN_ACCEL and max(accel) < _FF_MIN_ACCEL
+                self._servo(now, last, None if cruising else accel)
+            else:
+                self._set_arm(now, velocity)
+            if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
+                self._hold = trajectory.samples[-1]
+                self._trajectory = None
+        self._drive_fingers(h)
+        for k in self._queued:
+            self._park(k)
+        self._mj.mj_step(self._m, self._d)
+        self.sim_time_s += h
+        if trajectory is not None:
+            fault = self._check_collision() or self._overload()
+            if fault is not None:
+                self._stop_for(fault, now)
+        if self._gripper_moving:
+            self._update_gripper(h)
+
     # -- pictures -----------------------------------------------------------------------
 
     def snapshot(self, path: Path, *, width: int = 800, height: int = 600) -> Path:
@@ -1476,6 +1572,28 @@ def save_snapshot(
             "offscreen rendering needs OpenGL: pip install 'tmmaster[mujoco-render]' and"
             f" set MUJOCO_GL=egl ({' '.join(str(exc).split())})"
         ) from exc
+
+
+def _queued_parts(objects: Sequence[TableObject]) -> list[int]:
+    """The parts that start inside an earlier one: they wait out of the scene."""
+    queued: list[int] = []
+    placed: list[TableObject] = []
+    for k, obj in enumerate(objects):
+        if any(_boxes_overlap(obj, other) for other in placed):
+            queued.append(k)
+        else:
+            placed.append(obj)
+    return queued
+
+
+def _home_joints(model: RobotModel, home: Pose | None, tool: Pose | None) -> tuple[float, ...]:
+    """The joints at ``home`` (None: the model's ready posture)."""
+    if home is None:
+        return tuple(model.ready_joints_deg)
+    try:
+        return tuple(model.inverse(home, tool=tool))
+    except UnreachablePoseError as exc:
+        raise ValueError(f"home {home} is not reachable: {exc}") from exc
 
 
 def _boxes_overlap(a: TableObject, b: TableObject) -> bool:
