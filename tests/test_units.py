@@ -1,23 +1,27 @@
-"""Units guarded: a pose has all six values, and metres or radians are caught.
+"""Units guarded: a pose has six numbers, and metres or radians are refused.
 
-The rule (``suspect_units``): a position within 2 mm of the base origin on every axis
-looks like metres; three angles within 2 pi, one of them within 0.005 of a multiple of
-pi/4, look like radians. The library warns (``UnitsWarning``), the pick & place files
-refuse (exit 2) unless they say ``check_units = false``; every message quotes the key
-and the values as the user wrote them.
+The rules (``suspect_units``, docs/robot-api.md "Units"): a position within 2 mm of the
+base origin on every axis looks like metres; three angles within 2 pi, one of them
+within 0.005 of a multiple of pi/4, look like radians; three angles within 2 pi that,
+read as radians, point the tool within 45 degrees of straight down look like radians.
+The library refuses such a target or tool (``UnitsError``, a ConfigError, before
+anything is sent) unless ``Robot(check_units=False)``; the pick & place files refuse
+(exit 2) unless they say ``check_units = false``; every message quotes the values as
+the user wrote them, on one line.
 """
 
 from __future__ import annotations
 
-import contextlib
 import warnings
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, Pose, Robot, UnitsWarning
-from tmmaster._pose import suspect_units
+from sim_speeds import QUICK
+from tmmaster import ConfigError, Pose, Robot, UnitsError, Workspace
+from tmmaster._pose import suspect_units, written
 from tmmaster.pickplace import (
     load_config,
     load_sequence,
@@ -26,6 +30,7 @@ from tmmaster.pickplace import (
     validate_plan,
 )
 from tmmaster.pickplace.__main__ import EXIT_CONFIG, EXIT_OK, main
+from tmmaster.sim import Simulator
 
 # -- all six values ---------------------------------------------------------------------
 
@@ -53,7 +58,7 @@ def test_from_sequence_names_the_values_missing() -> None:
     assert isinstance(info.value, ValueError)  # as before
 
 
-# -- the rule -----------------------------------------------------------------------------
+# -- the rules ----------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize(
@@ -63,8 +68,11 @@ def test_from_sequence_names_the_values_missing() -> None:
         (300, -200, 100, 0, 0, 0),  # tool up
         (300, -200, 100, 1.5, 0, 0),  # 1.5 degrees
         (300, -200, 100, 0.5, -1.2, 0.3),
-        (300, -200, 100, 3, 0, 6),  # whole small degrees
         (300, -200, 100, 0.8, 0, 0),
+        (300, -200, 100, 0, 0, 3.1),  # rz alone: up either way
+        (300, -200, 100, 2.3, 0, 0),  # as radians 132 deg from up: not within 45 of down
+        (300, -200, 100, 3.1, 0, 7),  # rz beyond 2 pi: degrees
+        (300, -200, 100, -179, 1, 90),
         (0, 0, 0, 0, 0, 0),  # a tool with no offset
         (0, 0, 150, 0, 0, 0),
         (2, 0, 0, 0, 0, 0),
@@ -92,64 +100,168 @@ def test_metres_and_radians_are_suspected(values: tuple[float, ...], says: str) 
     assert says in problem
 
 
-# -- the library warns ----------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("values", "down", "up"),
+    [
+        ((300, -200, 100, 3.1, 0, 1.6), 2, 3),  # radians, rounded: no quarter turn
+        ((300, -200, 100, -3.1, 0.05, -1.6), 4, 3),
+        ((300, -200, 100, 2.4, 0, 0), 42, 2),  # just within 45 deg of straight down
+        ((300, -200, 100, 2.5, 0.3, 1.2), 40, 3),
+        ((300, -200, 100, 0, 3, 0), 8, 3),
+        ((300, -200, 100, 3, 0, 6), 8, 3),  # or 3 and 6 degrees: the tool 3 deg from up
+    ],
+)
+def test_a_tool_down_pose_in_radians_is_suspected(
+    values: tuple[float, ...], down: int, up: int
+) -> None:
+    rx, ry, rz = (written(v) for v in values[3:])
+    assert suspect_units(values) == (
+        f"rx, ry, rz = {rx}, {ry}, {rz} look like radians: orientations are in degrees"
+        f" (read as radians the tool points {down} deg from straight down, read as degrees"
+        f" {up} deg from straight up)"
+    )
 
 
-def test_a_target_in_radians_warns_at_the_callers_line() -> None:
+# -- the library refuses ----------------------------------------------------------------------
+
+RADIANS = Pose(300, -200, 200, 3.14159, 0, 1.5708)
+ROUNDED_RADIANS = Pose(300, -200, 200, 3.1, 0, 1.6)
+
+
+@pytest.fixture
+def as_a_program_runs() -> Iterator[None]:
+    """Python's default warning filters, not the suite's "error": a warning stops nothing."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        yield
+
+
+@pytest.mark.usefixtures("as_a_program_runs")
+def test_a_target_in_radians_is_refused_naming_the_values_and_the_rule() -> None:
     robot = Robot("127.0.0.1", profile="article", gripper=None)
     try:
-        with pytest.warns(UnitsWarning) as caught, contextlib.suppress(ConfigError):
-            robot.check_move(Pose(300, -200, 200, 3.14159, 0, 1.5708), 30)
-        assert len(caught) == 1
-        assert str(caught[0].message) == (
+        with pytest.raises(UnitsError) as info:  # refused, not warned
+            robot.check_move(RADIANS, 30)
+        assert str(info.value) == (
             "target [300, -200, 200, 3.14159, 0, 1.5708]: rx, ry, rz = 3.14159, 0, 1.5708"
-            " look like radians: orientations are in degrees (3.14159 rad is 180 deg)"
+            " look like radians: orientations are in degrees (3.14159 rad is 180 deg); if"
+            " these really are mm and degrees, make the robot with Robot(check_units=False)"
         )
-        assert caught[0].filename == __file__  # this test's line, not tmmaster's
+        assert isinstance(info.value, ConfigError)
+        with pytest.raises(UnitsError, match=r"^target \[300, -200, 200, 3\.1, 0, 1\.6\]: "):
+            robot.validate_move(ROUNDED_RADIANS, 30)
     finally:
         robot.close()
 
 
-def test_a_target_in_metres_warns_and_its_refusal_says_why() -> None:
+@pytest.mark.usefixtures("as_a_program_runs")
+def test_a_target_in_metres_is_refused_as_metres() -> None:
     robot = Robot("127.0.0.1", profile="article", gripper=None)
     try:
-        with pytest.warns(UnitsWarning), pytest.raises(ConfigError) as info:
+        with pytest.raises(UnitsError) as info:
             robot.check_move(Pose(0.3, -0.2, 0.1, 180, 0, 90), 30)
-        assert "x, y, z = 0.3, -0.2, 0.1 look like metres" in str(info.value)
+        assert str(info.value).startswith(
+            "target [0.3, -0.2, 0.1, 180, 0, 90]: x, y, z = 0.3, -0.2, 0.1 look like metres"
+        )
+        assert "table" not in str(info.value)  # the units, before the workspace
     finally:
         robot.close()
 
 
+@pytest.mark.usefixtures("as_a_program_runs")
+@pytest.mark.parametrize("target", [RADIANS, ROUNDED_RADIANS], ids=["exact", "rounded"])
+def test_a_move_in_radians_sends_nothing(
+    memory_simulator_factory: Callable[..., Simulator], target: Pose
+) -> None:
+    sim = memory_simulator_factory("tmflow", **QUICK)
+    # No table plane in the master's workspace: only the units stand between the target
+    # and the robot (taken as degrees, the wrist would go into the simulated table).
+    free = Workspace(floor_z_mm=None)
+    with Robot(sim.url, profile="tmflow", gripper=None, workspace=free) as robot:
+        sim.clear_request_log()
+        with pytest.raises(UnitsError, match="look like radians"):
+            robot.move_to(target, speed=30)
+        assert [r for r in sim.request_log if r.is_write] == []
+        assert robot.status().error_code == 0  # the arm did not hit the table
+
+
+@pytest.mark.usefixtures("as_a_program_runs")
 def test_check_units_false_takes_the_values_as_given() -> None:
-    robot = Robot("127.0.0.1", profile="article", gripper=None, check_units=False)
+    # Taken as degrees, (3.1, 0, 1.6) points the tool 3 deg from straight up: a pose the
+    # arm can take where no table is in the way.
+    free = Workspace(floor_z_mm=None)
+    robot = Robot("127.0.0.1", profile="tmflow", gripper=None, workspace=free)
+    lax = Robot("127.0.0.1", profile="tmflow", gripper=None, workspace=free, check_units=False)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            # Taken as degrees: the tool points up, the wrist into the table (or out of
-            # reach): refused, and without a word about units.
-            with contextlib.suppress(ConfigError):
-                robot.check_move(Pose(300, -200, 200, 3.14159, 0, 1.5708), 30)
-            with pytest.raises(ConfigError) as info:
-                robot.check_move(Pose(0.3, -0.2, 0.1, 180, 0, 90), 30)
+        with pytest.raises(UnitsError):
+            robot.check_move(ROUNDED_RADIANS, 30)
+        lax.check_move(ROUNDED_RADIANS, 30)
+        with pytest.raises(ConfigError) as info:  # out of reach taken as mm: said as such
+            lax.check_move(Pose(0.3, -0.2, 0.1, 180, 0, 90), 30)
+        assert not isinstance(info.value, UnitsError)
         assert "metres" not in str(info.value)
     finally:
         robot.close()
+        lax.close()
 
 
-def test_a_tool_in_metres_warns_when_the_robot_is_made() -> None:
-    with pytest.warns(UnitsWarning, match=r"^tool \[0, 0, 0.15, 0, 0, 0\]: .* look like metres"):
-        robot = Robot("127.0.0.1", profile="article", gripper=None, tool=Pose(0, 0, 0.15, 0, 0, 0))
+@pytest.mark.usefixtures("as_a_program_runs")
+def test_a_tool_in_metres_is_refused_when_the_robot_is_made() -> None:
+    with pytest.raises(UnitsError, match=r"^tool \[0, 0, 0.15, 0, 0, 0\]: .* look like metres"):
+        Robot("127.0.0.1", profile="article", gripper=None, tool=Pose(0, 0, 0.15, 0, 0, 0))
+    robot = Robot(
+        "127.0.0.1",
+        profile="article",
+        gripper=None,
+        tool=Pose(0, 0, 0.15, 0, 0, 0),
+        check_units=False,
+    )
     robot.close()
 
 
-def test_usual_targets_do_not_warn() -> None:
+def test_usual_targets_are_taken() -> None:
     robot = Robot("127.0.0.1", profile="article", gripper=None, tool=Pose(0, 0, 150, 0, 0, 0))
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            robot.check_move(Pose(300, -200, 200, 180, 0, 90), 30)
+        robot.check_move(Pose(300, -200, 200, 180, 0, 90), 30)
     finally:
         robot.close()
+
+
+def test_the_error_class_is_public_and_no_warning() -> None:
+    assert issubclass(tmmaster.UnitsError, ConfigError)
+    assert not issubclass(tmmaster.UnitsError, Warning)
+    assert "UnitsError" in tmmaster.__all__
+    assert not hasattr(tmmaster, "UnitsWarning")
+
+
+# -- a coordinate is a number ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("values", "says"),
+    [
+        (("300", -200, 200, 180, 0, 90), "invalid pose: x must be an int or float, got '300'"),
+        ((300, -200, 200, 180, True, 90), "invalid pose: ry must be an int or float, got True"),
+        ((300, -200, 200, 180, 0, None), "invalid pose: rz must be an int or float, got None"),
+    ],
+)
+def test_a_coordinate_that_is_not_a_number_is_refused_naming_it(
+    values: tuple[object, ...], says: str
+) -> None:
+    with pytest.raises(ConfigError) as info:
+        Pose(*values)  # type: ignore[arg-type]
+    assert str(info.value) == says
+    with pytest.raises(ConfigError, match="x must be an int or float, got '300'"):
+        Pose.from_sequence(["300", -200, 200, 180, 0, 90])  # type: ignore[list-item]
+
+
+def test_a_pose_from_text_or_a_file_is_still_numbers(tmp_path: Path) -> None:
+    assert Pose.parse("300,-200,200,180,0,90") == Pose(300.0, -200.0, 200.0, 180.0, 0.0, 90.0)
+    pose = Pose(300, -200, 200, 180, 0, 90)  # ints are numbers
+    assert pose.as_list() == [300.0, -200.0, 200.0, 180.0, 0.0, 90.0]
+    assert all(type(value) is float for value in pose)
+    config = load_config(_config(tmp_path, "[poses]\npick = [300, -200, 100, 180, 0, 90]\n"))
+    assert config.poses.resolved()["pick"] == Pose(300, -200, 100, 180, 0, 90)
 
 
 # -- the pick & place files refuse ------------------------------------------------------------
@@ -186,16 +298,18 @@ def test_every_pose_of_the_config_is_checked(tmp_path: Path, text: str, key: str
         load_config(_config(tmp_path, text))
 
 
-def test_check_units_false_accepts_them_and_the_robot_does_not_warn(tmp_path: Path) -> None:
+def test_check_units_false_accepts_them_and_the_robot_does_not_refuse(tmp_path: Path) -> None:
     path = _config(
         tmp_path, "[poses]\ncheck_units = false\npick = [300, -200, 100, 3.14159, 0, 1.5708]\n"
     )
     config = load_config(path)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        robot = robot_from_config(config, "127.0.0.1")
-        with contextlib.suppress(ConfigError):
+    robot = robot_from_config(config, "127.0.0.1")
+    try:
+        # Taken as degrees: the wrist into the table, refused as such, not for its units.
+        with pytest.raises(ConfigError) as info:
             robot.check_move(config.poses.resolved()["pick"], 10)
+        assert not isinstance(info.value, UnitsError)
+    finally:
         robot.close()
 
 
@@ -206,6 +320,20 @@ def test_five_values_are_refused_naming_the_one_missing(tmp_path: Path) -> None:
     assert str(info.value) == (
         f"{path}: poses.place: [300, 200, 200, 180, 0] has 5 values; a pose needs all 6:"
         " x, y, z (mm), rx, ry, rz (degrees) (rz missing)"
+    )
+
+
+def test_the_command_refuses_rounded_radians_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _config(tmp_path, "[poses]\npick = [300, -200, 100, 3.1, 0, 1.6]\n")
+    assert main(["--config", str(path), "--dry-run"]) == EXIT_CONFIG
+    err = capsys.readouterr().err
+    assert err == (
+        f"pickplace: config error: {path}: poses.pick: [300, -200, 100, 3.1, 0, 1.6]: rx, ry,"
+        " rz = 3.1, 0, 1.6 look like radians: orientations are in degrees (read as radians the"
+        " tool points 2 deg from straight down, read as degrees 3 deg from straight up); if"
+        " these really are mm and degrees, set [poses] check_units = false [exit 2]\n"
     )
 
 
@@ -228,9 +356,7 @@ def test_the_command_runs_radian_like_values_when_told_to(
         "[poses]\ncheck_units = false\npick = [300, -200, 100, 3.14159, 0, 1.5708]\n"
         "[workspace]\nfloor_z_mm = -2000\n",
     )
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # nor does the robot warn: the file said so
-        assert main(["--config", str(path), "--dry-run"]) == EXIT_OK
+    assert main(["--config", str(path), "--dry-run"]) == EXIT_OK  # nor does the robot refuse
     assert "3.14159" in capsys.readouterr().out  # the plan shows the pose as given
 
 
@@ -258,16 +384,16 @@ def test_a_sequence_files_poses_are_checked(tmp_path: Path) -> None:
     path.write_text(SEQUENCE.format(extra="", pose=good, inline="[300, 0, 100, 3.1416, 0, 0]"))
     with pytest.raises(ConfigError, match=r"steps\.1\.pose: .* look like radians"):
         load_sequence(path)
+    path.write_text(SEQUENCE.format(extra="", pose=good, inline="[300, 0, 100, 3.1, 0, 1.6]"))
+    with pytest.raises(ConfigError, match=r"steps\.1\.pose: .* 2 deg from straight down") as info:
+        load_sequence(path)
+    assert "\n" not in str(info.value)
     path.write_text(
         SEQUENCE.format(
             extra="check_units = false", pose=good, inline="[300, 0, 100, 3.1416, 0, 0]"
         )
     )
     assert load_sequence(path).name == "s"
-
-
-def test_the_warning_class_is_public() -> None:
-    assert issubclass(tmmaster.UnitsWarning, UserWarning)
 
 
 def test_a_derived_pose_is_named_by_what_was_written(tmp_path: Path) -> None:

@@ -75,7 +75,7 @@ if _TYPE_CHECKING:
     from ._logging import configure_logging
     from ._monitor import MonitoredStatus, StatusMonitor
     from ._poller import Poller, PollPolicy
-    from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsWarning
+    from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsError
     from ._profiles import (
         DEFAULT_PROFILE,
         builtin_profile_names,
@@ -187,7 +187,7 @@ _EXPORTS = {
     "TransportClosedError": "._exceptions",
     "TransportError": "._exceptions",
     "TransportStats": "._transport",
-    "UnitsWarning": "._pose",
+    "UnitsError": "._pose",
     "UnreachablePoseError": "._exceptions",
     "Value": "._codec",
     "ValueOutOfRangeError": "._exceptions",
@@ -294,7 +294,7 @@ __all__ = [
     "TransportClosedError",
     "TransportError",
     "TransportStats",
-    "UnitsWarning",
+    "UnitsError",
     "UnreachablePoseError",
     "Value",
     "ValueOutOfRangeError",

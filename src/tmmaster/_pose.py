@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import math
-import sys
-import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from enum import StrEnum
-from pathlib import Path
 from typing import Any
 
-from pydantic import ConfigDict, ValidationError
+from pydantic import ConfigDict, Field, ValidationError
 from pydantic.dataclasses import dataclass
 
 from ._checks import shown
@@ -31,8 +28,9 @@ class Pose:
     """A TCP pose in the robot base frame: position in mm, orientation in degrees.
 
     The orientation is Techman's: ``Rz(rz) @ Ry(ry) @ Rx(rx)``, as TMflow shows it.
-    Every coordinate must be a finite number: anything else raises
-    :class:`~tmmaster.ConfigError` naming the coordinate.
+    Every coordinate must be a finite int or float (numpy's numbers too; not a str, not
+    a bool, which pydantic's lax mode would convert: the fields are strict): anything
+    else raises :class:`~tmmaster.ConfigError` naming the coordinate.
 
     Example:
         ```python
@@ -45,17 +43,17 @@ class Pose:
     """
 
     #: Position along the base's x axis, mm.
-    x: float
+    x: float = Field(strict=True)
     #: Position along the base's y axis, mm.
-    y: float
+    y: float = Field(strict=True)
     #: Position along the base's z axis, mm.
-    z: float
+    z: float = Field(strict=True)
     #: Rotation about x, degrees.
-    rx: float
+    rx: float = Field(strict=True)
     #: Rotation about y, degrees.
-    ry: float
+    ry: float = Field(strict=True)
     #: Rotation about z, degrees.
-    rz: float
+    rz: float = Field(strict=True)
 
     @classmethod
     def from_sequence(cls, values: Sequence[float]) -> Pose:
@@ -188,13 +186,13 @@ def _quaternion(rx: float, ry: float, rz: float) -> tuple[float, float, float, f
     )
 
 
-class UnitsWarning(ConfigError, UserWarning):  # noqa: N818 - a warning first
+class UnitsError(ConfigError):
     """A pose whose values look like metres or radians, where tmmaster takes mm and degrees.
 
-    Issued by :class:`~tmmaster.Robot` for a target (before anything is sent) and for
-    its ``tool``; the rule is in docs/robot-api.md ("Units"). ``Robot(check_units=False)``
-    switches it off; ``warnings.simplefilter("error", tmmaster.UnitsWarning)`` raises it
-    instead, a :class:`~tmmaster.ConfigError` like every refusal before I/O.
+    Raised by :class:`~tmmaster.Robot` for a target (before anything is sent) and for its
+    ``tool`` (when the robot is made), naming the values and the rule they match; the
+    rules are in docs/robot-api.md ("Units"). ``Robot(check_units=False)`` takes such
+    values as written.
     """
 
 
@@ -205,6 +203,9 @@ METRES_LIMIT = 2.0
 #: radians: 3.14, 3.1416, 1.5708 and 0.785 do, 3, 1.5 and 0.8 do not.
 RADIANS_TOLERANCE = 0.005
 _QUARTER_TURNS = [k * math.pi / 4 for k in range(1, 9)]
+#: Read as radians, a tool z axis within this of straight down (degrees) looks like a
+#: tool-down pose written in radians: ``cos(ry) * cos(rx) <= -cos(45 deg)``.
+TOOL_DOWN_DEG = 45.0
 
 
 def written(value: float) -> str:
@@ -236,14 +237,20 @@ def pose_count_problem(values: Sequence[object]) -> str:
 def suspect_units(values: Sequence[float]) -> str | None:
     """Why ``[x, y, z, rx, ry, rz]`` looks like metres or radians, or None.
 
-    The rule (docs/robot-api.md, "Units"):
+    The rules (docs/robot-api.md, "Units"):
 
     - **metres**: ``|x|``, ``|y|`` and ``|z|`` all under :data:`METRES_LIMIT` (2 mm from
       the base origin, inside the robot's own base) and not all zero;
-    - **radians**: ``|rx|``, ``|ry|`` and ``|rz|`` all at most 2 pi (6.28), and one of them
-      within :data:`RADIANS_TOLERANCE` of a multiple of pi/4 (0.785, 1.571, 3.1416, ...).
-      Small degree values (0, 1.5, 5, 0.5) and every usual degree pose (180, 0, 90) do
-      not look like radians.
+    - **radians, a quarter turn**: ``|rx|``, ``|ry|`` and ``|rz|`` all at most 2 pi (with
+      :data:`RADIANS_TOLERANCE` to spare), and one of them within
+      :data:`RADIANS_TOLERANCE` of a multiple of pi/4 (0.785, 1.571, 3.1416, ...);
+    - **radians, tool down**: the three angles all at most 2 pi, so that read as degrees
+      the tool points within 9 degrees of straight up, and read as radians it points
+      within :data:`TOOL_DOWN_DEG` of straight down: ``cos(ry) * cos(rx) <= -cos(45
+      deg)`` (the tool z axis's z component under Techman's ``Rz @ Ry @ Rx``).
+
+    Small degree values (0, 1.5, 5, 0.5) and every usual degree pose (180, 0, 90) match
+    none of them.
 
     Args:
         values: the six values, mm and degrees as the user gave them.
@@ -259,28 +266,41 @@ def suspect_units(values: Sequence[float]) -> str | None:
             f"x, y, z = {', '.join(map(written, position))} look like metres: positions are"
             f" in mm ({written(first)} m is {written(round(first * 1000, 3))} mm)"
         )
-    if all(abs(a) <= 2 * math.pi + RADIANS_TOLERANCE for a in angles):
-        for angle in angles:
-            if any(abs(abs(angle) - q) <= RADIANS_TOLERANCE for q in _QUARTER_TURNS):
-                degrees = round(math.degrees(angle))
-                return (
-                    f"rx, ry, rz = {', '.join(map(written, angles))} look like radians:"
-                    f" orientations are in degrees ({written(angle)} rad is {degrees} deg)"
-                )
+    if not all(abs(a) <= 2 * math.pi + RADIANS_TOLERANCE for a in angles):
+        return None
+    said = f"rx, ry, rz = {', '.join(map(written, angles))} look like radians"
+    for angle in angles:
+        if any(abs(abs(angle) - q) <= RADIANS_TOLERANCE for q in _QUARTER_TURNS):
+            degrees = round(math.degrees(angle))
+            return f"{said}: orientations are in degrees ({written(angle)} rad is {degrees} deg)"
+    tool_z = math.cos(ry) * math.cos(rx)  # read as radians
+    if tool_z <= -math.cos(math.radians(TOOL_DOWN_DEG)):
+        down = math.degrees(math.acos(min(1.0, -tool_z)))
+        up = math.degrees(math.acos(math.cos(math.radians(ry)) * math.cos(math.radians(rx))))
+        return (
+            f"{said}: orientations are in degrees (read as radians the tool points"
+            f" {down:.0f} deg from straight down, read as degrees {up:.0f} deg from"
+            " straight up)"
+        )
     return None
 
 
-_PACKAGE = Path(__file__).resolve().parent
+def refuse_suspect_units(what: str, pose: Pose) -> None:
+    """Raise :class:`UnitsError` when ``pose`` looks like metres or radians.
 
+    Args:
+        what: what the pose is, for the message (``"target"``, ``"tool"``).
+        pose: the pose as the user gave it.
 
-def warn_units(message: str) -> None:
-    """Issue a :class:`UnitsWarning` pointing at the first caller outside tmmaster."""
-    frame = sys._getframe(1)
-    level = 2
-    while frame.f_back is not None and _PACKAGE in Path(frame.f_code.co_filename).resolve().parents:
-        frame = frame.f_back
-        level += 1
-    warnings.warn(message, UnitsWarning, stacklevel=level)
+    Raises:
+        UnitsError: naming the values and the rule they match, and the opt-out.
+    """
+    problem = suspect_units(pose.as_list())
+    if problem is not None:
+        raise UnitsError(
+            f"{what} {written_list(pose)}: {problem}; if these really are mm and degrees,"
+            " make the robot with Robot(check_units=False)"
+        )
 
 
 _validated_init = Pose.__init__
@@ -299,6 +319,8 @@ def _pose_init(self: Pose, *args: Any, **kwargs: Any) -> None:
             name = _POSE_FIELDS[where] if isinstance(where, int) and where < 6 else where
             if error["type"] == "missing":
                 missing.append(str(name))
+            elif error["type"] == "float_type":
+                problems.append(f"{name} must be an int or float, got {shown(error['input'])}")
             elif error["type"] != "unexpected_positional_argument":
                 problems.append(f"{name}: {error['msg']}")
         given = [shown(a) for a in args] + [f"{k}={shown(v)}" for k, v in kwargs.items()]

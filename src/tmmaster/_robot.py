@@ -68,7 +68,6 @@ from ._exceptions import (
     RobotFaultError,
     StopRequestedError,
     TMMasterError,
-    UnreachablePoseError,
 )
 from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet, wake_waits
 from ._following import FollowState, Overdue, SharedDriver
@@ -77,7 +76,7 @@ from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for
 from ._io import RobotIO
 from ._logging import get_logger
 from ._poller import Poller, PollPolicy
-from ._pose import MotionType, Pose, suspect_units, warn_units, written_list
+from ._pose import MotionType, Pose, refuse_suspect_units
 from ._profiles import (
     DEFAULT_PROFILE,
     builtin_profile_names,
@@ -1015,8 +1014,8 @@ class Robot:
             event loop (not with ``transport`` or a ``sim://`` host).
         frame_check: At connect, the robot's TCP must be its flange x ``tool``; None:
             ``FrameCheck()``; ``FrameCheck.off("why")`` switches it off.
-        check_units: Warn (UnitsWarning) when a target or the ``tool`` looks like
-            metres or radians.
+        check_units: Refuse (UnitsError, before anything is sent) a target or a
+            ``tool`` that looks like metres or radians; False takes them as written.
 
     Raises:
         ConfigError: An invalid argument, named in the message with its range where it
@@ -1101,13 +1100,11 @@ class Robot:
             )
         #: The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool.
         self.tool = tool
-        #: Whether a target or ``tool`` that looks like metres or radians warns
-        #: (:class:`~tmmaster.UnitsWarning`; docs/robot-api.md, "Units").
+        #: Whether a target or ``tool`` that looks like metres or radians is refused
+        #: (:class:`~tmmaster.UnitsError`; docs/robot-api.md, "Units").
         self.check_units = bool(check_units)
         if self.check_units and tool is not None:
-            problem = suspect_units(tool.as_list())
-            if problem is not None:
-                warn_units(f"tool {written_list(tool)}: {problem}")
+            refuse_suspect_units("tool", tool)
         if frame_check is None:
             frame_check = FrameCheck()
         if not isinstance(frame_check, FrameCheck):
@@ -1608,8 +1605,9 @@ class Robot:
             The target's joints, deg.
 
         Raises:
-            ConfigError: The move is not allowed (UnreachablePoseError for a pose the
-                arm cannot take).
+            ConfigError: The move is not allowed (UnitsError for a target that looks
+                like metres or radians, UnreachablePoseError for a pose the arm cannot
+                take).
         """
         if not isinstance(pose, Pose):
             raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
@@ -1617,24 +1615,13 @@ class Robot:
             raise ConfigError(f"speed must be an integer percent, got {speed!r}")
         if not 1 <= speed <= self.max_speed_percent:
             raise ConfigError(f"speed {shown(speed)} % is outside 1..{self.max_speed_percent} %")
-        units = suspect_units(pose.as_list()) if self.check_units else None
-        if units is not None:
-            warn_units(f"target {written_list(pose)}: {units}")
+        if self.check_units:
+            refuse_suspect_units("target", pose)
         seed = seed_deg if seed_deg is not None else self._joints_hint
-        try:
-            self.workspace.check(pose, tool=self.tool)
-            joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
-            self.workspace.check_arm(self.model, joints)
-            return joints
-        except ConfigError as exc:
-            if units is None:
-                raise
-            # Refused: say why it probably is (what the user wrote, read as mm and deg).
-            if isinstance(exc, UnreachablePoseError):
-                raise UnreachablePoseError(
-                    f"{exc}; {units}", reason=exc.reason, pose=exc.pose
-                ) from exc
-            raise ConfigError(f"{exc}; {units}") from exc
+        self.workspace.check(pose, tool=self.tool)
+        joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+        self.workspace.check_arm(self.model, joints)
+        return joints
 
     def expected_motion_time(
         self,
