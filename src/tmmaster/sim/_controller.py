@@ -178,6 +178,20 @@ class MoveArgs:
         return replace(self, via=points[(reached + n) // 2], start=here)
 
 
+@dataclass(frozen=True)
+class GripperMoves:
+    """The widths, speed and force of the robot's own gripper open and close commands."""
+
+    #: The width an open command drives the fingers to, mm.
+    open_width_mm: float = 39.0
+    #: The width a close command drives the fingers to (a part stops them), mm.
+    close_width_mm: float = 0.0
+    #: The fingers' speed, mm/s.
+    speed_mm_s: float = 100.0
+    #: The grip force, N.
+    force_n: float = 40.0
+
+
 @dataclass
 class _Active:
     """The command the controller is executing."""
@@ -216,25 +230,13 @@ class RobotController(SimDevice[RobotProfile]):
         accel_time_s: float | None = None,
         log: Logger | None = None,
         step_backend: bool = True,
-        gripper_open_width_mm: float = 39.0,
-        gripper_close_width_mm: float = 0.0,
-        gripper_speed_mm_s: float = 100.0,
-        gripper_force_n: float = 40.0,
+        gripper_moves: GripperMoves = GripperMoves(),
         initial_seq: int = 0,
         speed_factor: float = 1.0,
     ) -> None:
         if accel_time_s is not None and accel_time_s < 0:
             raise ConfigError(f"accel_time_s must be >= 0, got {accel_time_s}")
-        if initial_seq and not self._takes_initial_seq(profile, initial_seq):
-            if not self._takes_initial_seq(profile, 1):  # no sequence numbers at all
-                raise ConfigError(
-                    f"initial_seq must be 0: profile {profile.name} has no sequence numbers,"
-                    f" got {initial_seq}"
-                )
-            raise ConfigError(
-                f"initial_seq must be 0..{profile.seq_max} with profile {profile.name},"
-                f" got {initial_seq}"
-            )
+        self._check_initial_seq(profile, initial_seq)
         # Ready before the base adds the given faults (through _add_fault).
         self._move_faults: list[_MoveFault] = []
         self._timed_estops: list[EstopFault] = []
@@ -250,10 +252,7 @@ class RobotController(SimDevice[RobotProfile]):
         )
         self._model = model
         self._accel_time_s = model.accel_time_s if accel_time_s is None else accel_time_s
-        self._gripper_open = gripper_open_width_mm
-        self._gripper_close = gripper_close_width_mm
-        self._gripper_speed = gripper_speed_mm_s
-        self._gripper_force = gripper_force_n
+        self._gripper_moves = gripper_moves
         self._initial_seq = initial_seq
         #: The arm is this many times faster than the model (its backend moves by a
         #: model with the speeds scaled): acceleration times shrink by as much.
@@ -271,8 +270,28 @@ class RobotController(SimDevice[RobotProfile]):
         self._saturating = False  # the published pose is saturated (encodable range rule)
         self._rest_error_raised = False  # POSE_OUT_OF_RANGE raised for the current rest
         self._tick_failed = False  # TICK_FAILED reported, not yet reset by the operator
-        # Published at every tick: the pose fields and their ranges are looked up once,
-        # and a pose equal to the last one that encoded is not encoded again to check it.
+        self._init_publication(profile, bank)
+        self._reset_handshake_registers()
+        self._publish_pose()
+
+    @classmethod
+    def _check_initial_seq(cls, profile: RobotProfile, initial_seq: int) -> None:
+        """Refuse a first sequence number the profile's handshake cannot count from."""
+        if initial_seq and not cls._takes_initial_seq(profile, initial_seq):
+            if not cls._takes_initial_seq(profile, 1):  # no sequence numbers at all
+                raise ConfigError(
+                    f"initial_seq must be 0: profile {profile.name} has no sequence numbers,"
+                    f" got {initial_seq}"
+                )
+            raise ConfigError(
+                f"initial_seq must be 0..{profile.seq_max} with profile {profile.name},"
+                f" got {initial_seq}"
+            )
+
+    def _init_publication(self, profile: RobotProfile, bank: RegisterBank) -> None:
+        """What publishing the pose at every tick keeps between ticks."""
+        # The pose fields and their ranges are looked up once, and a pose equal to the
+        # last one that encoded is not encoded again to check it.
         self._tcp_fields = tuple(profile.field(n) for n in TCP_FIELDS)
         self._tcp_ranges = tuple(allowed_range(f) for f in self._tcp_fields)
         self._encodable_pose: list[float] | None = None
@@ -285,8 +304,6 @@ class RobotController(SimDevice[RobotProfile]):
         self._published_tcp: bytes | None = None
         self._tm_table_pose: tuple[bytes, int | None] | None = None
         self._tm_table_clock: tuple[int, int] | None = None
-        self._reset_handshake_registers()
-        self._publish_pose()
 
     @classmethod
     def bank_for(cls, profile: RobotProfile) -> RegisterBank:
@@ -544,35 +561,34 @@ class RobotController(SimDevice[RobotProfile]):
         """Start the backend motion; False (error reported, nothing started) if it failed."""
         return self._start_move(MoveArgs(target, motion, speed, accel, seq))
 
+    def _backend_start(self, move: MoveArgs) -> float:
+        """Start ``move`` on the backend; return its expected duration, s."""
+        backend = self._backend
+        accel_time_s = move.accel_s / self._speed_factor
+        if move.joints is None and move.via is None:
+            return backend.start_motion(
+                move.target,
+                motion=move.motion,
+                speed_percent=move.speed,
+                accel_time_s=accel_time_s,
+            )
+        if not isinstance(backend, PathBackend):
+            raise TypeError(f"{type(backend).__name__} cannot follow a {move.kind}")
+        if move.joints is not None:
+            return backend.start_joint_motion(
+                move.joints, speed_percent=move.speed, accel_time_s=accel_time_s
+            )
+        assert move.via is not None
+        return backend.start_arc_motion(
+            move.via, move.target, speed_percent=move.speed, accel_time_s=accel_time_s
+        )
+
     def _start_move(self, move: MoveArgs) -> bool:
         """Start ``move`` on the backend; False (error reported, nothing started) if it failed."""
-        target, motion, speed, seq = move.target, move.motion, move.speed, move.seq
-        accel = move.accel_s
+        target, speed, seq = move.target, move.speed, move.seq
         number = self._moves_started + 1
-        backend = self._backend
         try:
-            if move.joints is not None or move.via is not None:
-                if not isinstance(backend, PathBackend):
-                    raise TypeError(f"{type(backend).__name__} cannot follow a {move.kind}")
-                if move.joints is not None:
-                    expected = backend.start_joint_motion(
-                        move.joints, speed_percent=speed, accel_time_s=accel / self._speed_factor
-                    )
-                else:
-                    assert move.via is not None
-                    expected = backend.start_arc_motion(
-                        move.via,
-                        target,
-                        speed_percent=speed,
-                        accel_time_s=accel / self._speed_factor,
-                    )
-            else:
-                expected = backend.start_motion(
-                    target,
-                    motion=motion,
-                    speed_percent=speed,
-                    accel_time_s=accel / self._speed_factor,
-                )
+            expected = self._backend_start(move)
         except MotionRejectedError as exc:  # the backend's own reach / limit check
             self._log.warning(
                 "sim.command_rejected",
@@ -611,11 +627,12 @@ class RobotController(SimDevice[RobotProfile]):
 
     def _drive_gripper(self, *, close: bool, seq: int = 0) -> None:
         number, miss = self._count_grasp() if close else (0, False)
+        moves = self._gripper_moves
         try:
             self._backend.drive_gripper(
-                self._gripper_close if close else self._gripper_open,
-                speed_mm_s=self._gripper_speed,
-                force_n=self._gripper_force,
+                moves.close_width_mm if close else moves.open_width_mm,
+                speed_mm_s=moves.speed_mm_s,
+                force_n=moves.force_n,
             )
         except Exception as exc:  # a backend failure is a robot error, not a crash
             self._log.warning("sim.backend_failed", device=self._name, error=repr(exc))
