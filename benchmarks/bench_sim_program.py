@@ -24,7 +24,6 @@ from tmmaster import Pose
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_models import robot_model
 from tmmaster._transport import encode_writes, group_writes
-from tmmaster.sim._controllers import controller_class
 from tmmaster.sim._kinematic import KinematicBackend
 from tmmaster.sim._world import World
 
@@ -38,11 +37,7 @@ def make_controllers(n: int) -> list[object]:
     out = []
     for _ in range(n):
         backend = KinematicBackend(model, world=World(()))
-        cls = controller_class(profile.handshake)
-        options: dict[str, object] = {}
-        script = getattr(_simulator, "_script_project", None)
-        if script is not None:  # a revision whose tmflow robot runs the program
-            cls, options = script(profile, "generated", None)
+        cls, options = _simulator._script_project(profile, "generated", None)
         bank = cls.bank_for(profile)
         out.append((cls(profile, bank, backend, model, **options), bank))
     return out

@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 import tmmaster
+import tmmaster.sim  # serves sim:// hosts (the simulator is a plugin of the core)
 from modbus_test_server import TestServer, free_port
 from tmmaster import (
     ConfigError,

@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from test_sim_controller import controller_class, controller_for
 from tmmaster import RetryPolicy, TMScriptSyntaxError
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_models import robot_model
@@ -25,7 +26,6 @@ from tmmaster._transport import ModbusTransport
 from tmmaster.sim import Simulator
 from tmmaster.sim.__main__ import STOP_WITHIN_S
 from tmmaster.sim._controller import RobotController, SimErrorCode
-from tmmaster.sim._controllers import controller_class, controller_for
 from tmmaster.sim._kinematic import KinematicBackend
 from tmmaster.tmscript import ExecState, Execution, NullHost, parse
 from tmmaster.tmscript.__main__ import main as tmscript_main

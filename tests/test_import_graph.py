@@ -1,8 +1,12 @@
-"""Every module imports, and the package's import graph has no cycles.
+"""Every module imports, the package's import graph has no cycles, and the simulator is a plugin.
 
 Type-only imports (under ``if TYPE_CHECKING:``) count too: a cycle there is still two
 modules that each need the other to be understood. Imports inside functions count as
 well (a lazy import is still a dependency).
+
+The simulator (``tmmaster.sim``) is a plugin of the core: no module outside it imports it
+when it is imported; a function may, where the user asked for the simulator
+(``pickplace --sim``, the ``tmmaster sim`` command).
 """
 
 from __future__ import annotations
@@ -44,12 +48,16 @@ def _resolve(module: str, is_package: bool, level: int, name: str | None) -> str
     return ".".join([*base, name] if name else base)
 
 
-def _imports(module: str, path: Path) -> set[str]:
-    """Modules of this package that ``module`` imports, at any depth of its code."""
+def _imports(module: str, path: Path, *, at_import: bool = False) -> set[str]:
+    """Modules of this package that ``module`` imports, at any depth of its code.
+
+    ``at_import``: only the imports that run when ``module`` is imported (none inside a
+    function or under ``if TYPE_CHECKING:``).
+    """
     tree = ast.parse(path.read_text("utf-8"))
     is_package = path.name == "__init__.py"
     targets: set[str] = set()
-    for node in ast.walk(tree):
+    for node in _executed_at_import(tree) if at_import else ast.walk(tree):
         if isinstance(node, ast.Import):
             targets.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -67,6 +75,31 @@ def _imports(module: str, path: Path) -> set[str]:
         if target and target != module:
             edges.add(target)
     return edges
+
+
+def _is_type_checking(node: ast.AST) -> bool:
+    test = node.test if isinstance(node, ast.If) else None
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _executed_at_import(tree: ast.AST) -> list[ast.AST]:
+    """The nodes of ``tree`` run when the module is imported: not inside a function (or a
+    lambda), nor under ``if TYPE_CHECKING:`` (its ``else`` runs)."""
+    found: list[ast.AST] = []
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        found.append(node)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+            continue
+        if _is_type_checking(node):
+            assert isinstance(node, ast.If)
+            todo.extend(node.orelse)
+            continue
+        todo.extend(ast.iter_child_nodes(node))
+    return found
 
 
 def _graph() -> dict[str, set[str]]:
@@ -122,6 +155,41 @@ def test_every_module_imports(module: str) -> None:
 def test_the_import_graph_has_no_cycles() -> None:
     cycles = _cycles(_graph())
     assert cycles == [], f"import cycles (type-only imports count): {cycles}"
+
+
+def test_no_module_outside_the_simulator_imports_it_when_imported() -> None:
+    # The core, the commands and the report run against a real robot without loading the
+    # simulator; only a function the user reaches by asking for it imports it.
+    reaching = {
+        module: sorted(edge for edge in edges if edge.startswith("tmmaster.sim"))
+        for module, path in MODULES.items()
+        if module != "tmmaster.sim" and not module.startswith("tmmaster.sim.")
+        for edges in [_imports(module, path, at_import=True)]
+    }
+    assert {m: e for m, e in reaching.items() if e} == {}
+
+
+def test_imports_at_import_time_skip_functions_and_type_only_blocks() -> None:
+    tree = ast.parse(
+        "import a\n"
+        "if TYPE_CHECKING:\n    import b\nelse:\n    import c\n"
+        "def f():\n    import d\n"
+        "class K:\n    import e\n"
+    )
+    found = {
+        alias.name
+        for node in _executed_at_import(tree)
+        if isinstance(node, ast.Import)
+        for alias in node.names
+    }
+    assert found == {"a", "c", "e"}
+    # pickplace's --sim path imports the simulator inside its functions: an edge, not
+    # an import at import time.
+    path = MODULES["tmmaster.pickplace.__main__"]
+    edges = _imports("tmmaster.pickplace.__main__", path)
+    at_import = _imports("tmmaster.pickplace.__main__", path, at_import=True)
+    assert "tmmaster.sim" in edges
+    assert not any(edge.startswith("tmmaster.sim") for edge in at_import)
 
 
 def test_type_only_and_function_level_imports_are_edges() -> None:

@@ -14,12 +14,13 @@ from tmmaster._codec import encode
 from tmmaster._exceptions import ValueOutOfRangeError
 from tmmaster._pose import MotionType, Pose
 from tmmaster._profiles import gripper_profile, robot_profile
-from tmmaster._registers import TARGET_FIELDS, Handshake, RegisterMap, Table
+from tmmaster._registers import TARGET_FIELDS, Handshake, RegisterMap, RobotProfile, Table
 from tmmaster._robot_models import robot_model
+from tmmaster.sim import Simulator
 from tmmaster.sim._backend import MotionRejectedError, RejectReason
 from tmmaster.sim._bank import RegisterBank
+from tmmaster.sim._clear_on_accept import ClearOnAcceptController
 from tmmaster.sim._controller import RobotController, SimErrorCode
-from tmmaster.sim._controllers import controller_class, controller_for
 from tmmaster.sim._faults import (
     EstopFault,
     Fault,
@@ -31,8 +32,27 @@ from tmmaster.sim._faults import (
 )
 from tmmaster.sim._grippers import Blog2FG7Device, OnRobot2FG7Device
 from tmmaster.sim._kinematic import DEFAULT_HOME, KinematicBackend
+from tmmaster.sim._script_project import ScriptProjectController
 from tmmaster.sim._tm_table import tm_table_areas, tm_table_fields
 from tmmaster.sim._world import DEFAULT_PART_POSE
+
+#: The controller class the simulator runs per handshake (tmflow: a TMflow project, its
+#: robot program interpreted).
+CONTROLLERS: dict[Handshake, type[RobotController]] = {
+    Handshake.CLEAR_ON_ACCEPT: ClearOnAcceptController,
+    Handshake.SEQUENCE: ScriptProjectController,
+}
+
+
+def controller_class(handshake: Handshake) -> type[RobotController]:
+    return CONTROLLERS[handshake]
+
+
+def controller_for(
+    profile: RobotProfile, bank: RegisterBank, backend: Any, model: Any, **options: Any
+) -> RobotController:
+    return controller_class(profile.handshake)(profile, bank, backend, model, **options)
+
 
 DT = 0.02  # 50 Hz, the article slave's tick
 MODEL = robot_model("tm5-700")
@@ -1435,6 +1455,9 @@ def test_each_handshake_runs_in_its_own_controller_class(name: str, tm_table: bo
     assert bank.has("flange_x") is tm_table  # Techman's fixed table beside tmflow only
     ctl = controller_for(profile, bank, KinematicBackend(MODEL), MODEL, log=ListLogger())
     assert type(ctl) is cls
+    sim = Simulator(name, listen=False)  # built, not started: no thread, no socket
+    assert type(sim._controller) is cls  # the simulator runs the same class
+    sim.close()
 
 
 def test_every_handshake_has_a_controller_class_of_its_own() -> None:

@@ -1,8 +1,10 @@
 """Where a robot is: a host and a port, checked before any I/O.
 
 A host is an IPv4 address (``192.168.1.100``), an IPv6 address (``::1``, or ``[::1]``
-as in a URL, taken without its brackets), a host name (``robot-3.local``), or the
-``sim://name`` of an in-process simulator. Everything else is refused with a
+as in a URL, taken without its brackets), a host name (``robot-3.local``), or
+``scheme://name``, an in-process endpoint, for a scheme a plugin registered with
+:func:`register_scheme` (the simulator registers ``sim`` when ``tmmaster.sim`` is
+imported; the core imports no plugin). Everything else is refused with a
 :class:`ConfigError` naming the field and the value as written: a port in the host
 (``192.168.1.100:502``), a URL (``http://...``, ``modbus://...``), spaces, characters no
 host name has, an IPv4 address with a part missing (``192.168.1`` would silently be
@@ -14,15 +16,85 @@ from __future__ import annotations
 import ipaddress
 import operator
 import string
+import threading
+from collections.abc import Callable
+from typing import Any
 from urllib.parse import urlsplit
 
 from ._error_root import ConfigError
 
-#: The prefix of an in-process simulator's address (``Simulator(listen=False).url``).
-SIM_SCHEME = "sim://"
+#: Opens a transport to an in-process endpoint: ``opener(url, role=..., device_id=...,
+#: timeout=..., retry=..., name=...)`` returns a :class:`~tmmaster.Transport` (or raises
+#: :class:`ConnectError` when nothing of that name runs).
+SchemeOpener = Callable[..., Any]
+
+#: ``scheme`` -> the opener of its ``scheme://name`` addresses (filled by plugins).
+_SCHEMES: dict[str, SchemeOpener] = {}
+_SCHEMES_LOCK = threading.Lock()
+
+#: What starts an endpoint of a scheme the package ships, for the message when its
+#: plugin was not imported (the message only: the core imports no plugin).
+_SHIPPED_SCHEMES = {
+    "sim": "no in-process simulator named {name!r}: start one with"
+    " tmmaster.sim.Simulator(listen=False, name={name!r}) (sim:// is served once"
+    " tmmaster.sim is imported)",
+}
 
 _NAME_PUNCTUATION = frozenset("-._")
 _DIGITS_AND_DOTS = frozenset(string.digits + ".")
+
+
+def register_scheme(scheme: str, opener: SchemeOpener) -> None:
+    """Serve ``scheme://name`` hosts in this process through ``opener`` (for plugins).
+
+    :func:`check_host` then takes such a host as it is, and ``Robot(host)`` opens its
+    links with ``opener(url, role=..., device_id=..., timeout=..., retry=...,
+    name=...)``; ``opener`` resolves the name (and raises :class:`ConnectError` when
+    nothing of that name runs). ``tmmaster.sim`` registers ``sim`` when imported.
+
+    Args:
+        scheme: the URL scheme, without ``://`` (``"sim"``).
+        opener: opens a transport to ``url``.
+
+    Raises:
+        ConfigError: ``scheme`` is not a plain name, or another opener serves it
+            already (two plugins for one scheme).
+    """
+    if not scheme.isidentifier():
+        raise ConfigError(f"scheme {scheme!r}: not a plain name (letters, digits, _)")
+    with _SCHEMES_LOCK:
+        current = _SCHEMES.get(scheme)
+        if current is not None and current is not opener:
+            raise ConfigError(f"{scheme}:// is served already by {current!r}")
+        _SCHEMES[scheme] = opener
+
+
+def scheme_opener(host: str) -> SchemeOpener | None:
+    """The opener of ``host`` when it is an in-process ``scheme://name`` (None: a network host).
+
+    Args:
+        host: a host as :func:`check_host` returned it.
+
+    Returns:
+        The opener its plugin registered, or None for a host on the network.
+    """
+    scheme, sep, _ = host.partition("://")
+    if not sep:
+        return None
+    with _SCHEMES_LOCK:
+        return _SCHEMES.get(scheme)
+
+
+def is_in_process(host: object) -> bool:
+    """Whether ``host`` is an in-process ``scheme://name`` of a registered scheme (no port).
+
+    Args:
+        host: what the user gave (anything).
+
+    Returns:
+        True for a string whose scheme a plugin registered.
+    """
+    return isinstance(host, str) and scheme_opener(host) is not None
 
 
 def check_host(host: object, *, field: str = "host", port_field: str = "port") -> str:
@@ -38,7 +110,8 @@ def check_host(host: object, *, field: str = "host", port_field: str = "port") -
         The host to connect to: as given, or an IPv6 address without its brackets.
 
     Raises:
-        ConfigError: not an address, a host name or a ``sim://`` name; the message is
+        ConfigError: not an address, a host name or an in-process ``scheme://name`` of a
+            registered scheme (:func:`register_scheme`); the message is
             ``"<field>: <what is wrong>"``, quoting the value as given and saying what
             to write instead.
     """
@@ -47,9 +120,9 @@ def check_host(host: object, *, field: str = "host", port_field: str = "port") -
         raise ConfigError(f"{prefix}not a string (an IP address or host name): {host!r}")
     if not host.strip():
         raise ConfigError(f"{prefix}empty; give the robot's IP address or host name")
-    if host.startswith(SIM_SCHEME):
-        return host  # an in-process simulator, resolved where the link is opened
     if "://" in host:
+        if scheme_opener(host) is not None:
+            return host  # an in-process endpoint, resolved where the link is opened
         raise ConfigError(_url_message(host, prefix, port_field))
     if any(c.isspace() for c in host):
         raise ConfigError(f"{prefix}{host!r} contains a space: give the address alone")
@@ -131,7 +204,15 @@ def _port_message(host: str, prefix: str, port_field: str) -> str:
 
 
 def _url_message(host: str, prefix: str, port_field: str) -> str:
-    """What to write instead of a URL: the address alone, and its port where it belongs."""
+    """What to write instead of a URL: the address alone, and its port where it belongs.
+
+    A scheme the package ships whose plugin was not imported (``sim://x`` before
+    ``tmmaster.sim``) is said as what starts such an endpoint.
+    """
+    scheme, _, rest = host.partition("://")
+    shipped = _SHIPPED_SCHEMES.get(scheme)
+    if shipped is not None:
+        return prefix + shipped.format(name=rest)
     try:
         parts = urlsplit(host)
         name, port = parts.hostname, parts.port

@@ -31,7 +31,7 @@ import weakref
 from collections.abc import Callable, Coroutine, Iterable
 from typing import Any, Generic, Protocol, Self, TypeVar, cast
 
-from ._address import SIM_SCHEME, check_host, check_port
+from ._address import check_host, check_port, is_in_process
 from ._channels import CommandChannel, Observation
 from ._checks import require_positive
 from ._codec import Value
@@ -719,7 +719,7 @@ def join_fleet(
 ) -> LoopTransport:
     """For :class:`~tmmaster.Robot`: a new robot's link on ``fleet``'s loop (started here)."""
     host, port = check_host(host), check_port(port)
-    if host.startswith(SIM_SCHEME):
+    if is_in_process(host):
         raise ConfigError(
             f"host {host!r}: a Fleet's robots speak Modbus TCP (no in-process endpoints)"
         )

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Protocol, Self
 
-from ._address import SIM_SCHEME, check_host
+from ._address import check_host, is_in_process
 from ._channels import CommandChannel, channel_for
 from ._codec import Value
 from ._commanded import commanding
@@ -635,7 +635,7 @@ class StatusMonitor:
         """
         self._check_name(name)
         host = check_host(host)
-        if host.startswith(SIM_SCHEME):
+        if is_in_process(host):
             raise ConfigError(
                 f"host {host!r}: a StatusMonitor polls over Modbus TCP (no in-process endpoints)"
             )

@@ -34,7 +34,7 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
 from . import _commanded
 from . import _kinematics as kin
-from ._address import SIM_SCHEME, check_host, check_port
+from ._address import check_host, check_port, is_in_process
 from ._cell import (
     DEFAULT_ARM_RADIUS_MM,
     DEFAULT_TABLE_TOP_Z_MM,
@@ -1051,10 +1051,11 @@ class Robot:
         frame_check: FrameCheck | None = None,
         check_units: bool = True,
     ) -> None:
-        # The addresses used are checked before anything else (a sim:// host has no port).
+        # The addresses used are checked before anything else (an in-process host, such
+        # as sim://name, has no port).
         if transport is None:
             host = check_host(host, field="host", port_field="port")
-            if not host.startswith(SIM_SCHEME):
+            if not is_in_process(host):
                 port = check_port(port, field="port")
         if gripper_transport is None:
             if gripper_host is not None:
@@ -1062,7 +1063,7 @@ class Robot:
                     gripper_host, field="gripper_host", port_field="gripper_port"
                 )
             reached = gripper_host or host
-            if not (isinstance(reached, str) and reached.startswith(SIM_SCHEME)):
+            if not is_in_process(reached):
                 gripper_port = check_port(gripper_port, field="gripper_port")
         #: The robot's register map.
         self.profile = robot_profile(profile)
@@ -1136,7 +1137,7 @@ class Robot:
             if transport is not None:
                 raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
             loop_link = join_fleet(fleet, host, port, **link)
-        # ``host`` "sim://name" reaches an in-process simulator without a socket.
+        # An in-process ``host`` ("sim://name") opens through the plugin that registered it.
         self._transport: Transport = loop_link or transport or open_transport(host, port, **link)
         self._channel: CommandChannel = channel_for(self.profile, self._transport)
         self._stop_event = threading.Event()

@@ -45,7 +45,7 @@ from pymodbus.pdu.register_message import (
     WriteMultipleRegistersRequest,
 )
 
-from ._address import SIM_SCHEME, check_host, check_port
+from ._address import check_host, check_port, scheme_opener
 from ._codec import Decoder, Value, decoder, encoder
 from ._exceptions import (
     MODBUS_EXCEPTIONS,
@@ -1043,7 +1043,8 @@ class ModbusTransport(BlockTransport):
         name: The link's name in messages and logs.
 
     Raises:
-        ConfigError: An invalid host or port, or a ``sim://`` address.
+        ConfigError: An invalid host or port, or an in-process ``scheme://name`` address
+            (``sim://``).
     """
 
     def __init__(
@@ -1057,10 +1058,10 @@ class ModbusTransport(BlockTransport):
         name: str = "device",
     ) -> None:
         host, port = check_host(host), check_port(port)
-        if host.startswith(SIM_SCHEME):
+        if scheme_opener(host) is not None:
             raise ConfigError(
                 f"host {host!r}: a ModbusTransport speaks Modbus TCP (use open_transport or"
-                " Robot for an in-process simulator)"
+                " Robot for an in-process endpoint)"
             )
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
         self._socket: socket.socket | None = None
@@ -1476,47 +1477,6 @@ class AsyncLink:
             stream.fail(ConnectionLostError(f"{self.name}: link closed"))
 
 
-#: ``scheme://name`` -> factory of a transport for one device role ("robot", "gripper").
-TransportFactory = Callable[..., Transport]
-_ENDPOINTS: dict[str, TransportFactory] = {}
-_ENDPOINTS_LOCK = threading.Lock()
-
-
-def register_endpoint(url: str, factory: TransportFactory) -> None:
-    """Make ``url`` (e.g. ``sim://sim-1``) open transports through ``factory``.
-
-    Args:
-        url: the in-process address, ``sim://<name>``.
-        factory: opens a transport to the endpoint.
-
-    Raises:
-        ConfigError: ``url`` already belongs to another endpoint of this process (two
-            simulators of one name): replacing it would silently send the first one's
-            robots to the second.
-    """
-    with _ENDPOINTS_LOCK:
-        current = _ENDPOINTS.get(url)
-        if current is not None and current != factory:
-            raise ConfigError(
-                f"{url} is already taken by a running simulator in this process:"
-                " give each simulator its own name, or close the first one"
-            )
-        _ENDPOINTS[url] = factory
-
-
-def unregister_endpoint(url: str, factory: TransportFactory | None = None) -> None:
-    """Forget ``url`` (safe when unknown).
-
-    Args:
-        url: the in-process address to forget.
-        factory: when given, forget ``url`` only while it still opens through this
-            factory (one refused for a taken name must not free the other's).
-    """
-    with _ENDPOINTS_LOCK:
-        if factory is None or _ENDPOINTS.get(url) == factory:
-            _ENDPOINTS.pop(url, None)
-
-
 def open_transport(
     host: str,
     port: int,
@@ -1527,21 +1487,20 @@ def open_transport(
     retry: RetryPolicy | None = None,
     name: str = "device",
 ) -> Transport:
-    """A Modbus TCP transport to ``host:port``, or an in-process one for a ``sim://`` name.
+    """A Modbus TCP transport to ``host:port``, or an in-process one for ``scheme://name``.
 
     The host and port are checked first (:func:`check_host`): a port in the host, a URL,
-    or anything that is no address is a :class:`ConfigError`, before any I/O.
+    or anything that is no address is a :class:`ConfigError`, before any I/O. A host of
+    a scheme a plugin registered (:func:`~tmmaster._address.register_scheme`, as
+    ``tmmaster.sim`` does for ``sim://``) opens through that plugin's opener.
     """
     host = check_host(host)
-    if not host.startswith(SIM_SCHEME):
+    opener = scheme_opener(host)
+    if opener is None:
         return ModbusTransport(
             host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
         )
-    with _ENDPOINTS_LOCK:
-        factory = _ENDPOINTS.get(host)
-    if factory is None:
-        known = ", ".join(sorted(_ENDPOINTS)) or "none"
-        raise ConnectError(
-            f"no in-process endpoint {host!r} (started simulators in this process: {known})"
-        )
-    return factory(role=role, device_id=device_id, timeout=timeout, retry=retry, name=name)
+    transport: Transport = opener(
+        host, role=role, device_id=device_id, timeout=timeout, retry=retry, name=name
+    )
+    return transport

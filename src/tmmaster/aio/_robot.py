@@ -31,7 +31,7 @@ from collections.abc import Callable, Coroutine, Generator, Sequence
 from enum import Enum
 from typing import Any, Concatenate, Generic, Literal, ParamSpec, Protocol, TypeVar
 
-from .._address import SIM_SCHEME
+from .._address import is_in_process
 from .._checks import require_positive
 from .._exceptions import TMMasterError, TransportClosedError
 from .._fleet import Fleet
@@ -1316,7 +1316,7 @@ def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
         if (
             options.get("fleet") is None
             and options.get("transport") is None
-            and not (isinstance(host, str) and host.startswith(SIM_SCHEME))
+            and not is_in_process(host)
         ):
             fleet = _SHARED_FLEET.acquire()
             options["fleet"] = fleet

@@ -67,9 +67,6 @@ from .._registers import RobotProfile
 from .._robot import Robot
 from .._tm_errors import code_suffix
 from .._version import add_version_argument
-from ..sim._backend import PhysicsUnavailableError
-from ..sim._scene import Scene, load_scene
-from ..sim._world import TableObject
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
 from ._plan import CyclePlan, estimate, format_plan, validate_plan
@@ -80,6 +77,7 @@ from ._steps import TaskSequence
 if TYPE_CHECKING:  # rich loads only when a terminal shows the live display
     from rich.console import Console
 
+    from ..sim._scene import Scene  # the simulator loads only with --sim
     from ._live import LiveProgress
     from ._report import RunReport
 
@@ -387,7 +385,7 @@ def _run(args: argparse.Namespace, out: _Output) -> int:
         code, reason = EXIT_CONFIG, str(exc)
     except ConfigError as exc:
         code, reason = EXIT_CONFIG, f"config error: {exc}"
-    except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
+    except ImportError as exc:  # an optional extra (--sim-physics mujoco) is missing: say which
         code, reason = EXIT_FAILED, str(exc)
     except Exception as exc:  # the last line of defence: one line, never a traceback
         code = exit_code_for(exc)
@@ -575,24 +573,7 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     scene_file = args.sim_scene
     if scene_file is not None and not args.sim:
         raise UsageError("--sim-scene needs --sim (a robot's cell is the robot's)")
-    sim = (
-        _SimOptions(
-            time_scale,
-            args.sim_physics,
-            args.snapshot,
-            None if scene_file is None else load_scene(scene_file),
-        )
-        if args.sim
-        else None
-    )
-    if sim is not None and sim.physics == "mujoco":
-        from ..sim._mujoco import require_mujoco
-
-        if sim.snapshot is not None:
-            # Headless rendering: EGL, read by mujoco when it is first imported.
-            os.environ.setdefault("MUJOCO_GL", "egl")
-
-        require_mujoco()  # a missing extra is said first, in one line
+    sim = _sim_options(args, time_scale, scene_file) if args.sim else None
     outcome.config_file = config_file
     overrides = _overrides(args)
     _check_option_ranges(overrides)
@@ -695,6 +676,8 @@ def _sim_scene(scene: Scene | None, pick: Pose, cycles: int) -> tuple[Scene, set
     Returns:
         The scene, and the names of the run's parts.
     """
+    from ..sim import Scene, TableObject
+
     scene = Scene() if scene is None else scene
     waiting = [p.name for p in scene.parts if _at(p.pose, pick)]
     if not waiting:
@@ -704,6 +687,29 @@ def _sim_scene(scene: Scene | None, pick: Pose, cycles: int) -> tuple[Scene, set
         scene = scene.model_copy(update={"parts": (*scene.parts, *feeder)})
         waiting = [p.name for p in feeder]
     return scene, set(waiting[:cycles])
+
+
+def _sim_options(
+    args: argparse.Namespace, time_scale: float, scene_file: str | None
+) -> _SimOptions:
+    """With --sim: the embedded simulator's options (the simulator loads here, when asked)."""
+    from ..sim import load_scene
+
+    sim = _SimOptions(
+        time_scale,
+        args.sim_physics,
+        args.snapshot,
+        None if scene_file is None else load_scene(scene_file),
+    )
+    if sim.physics == "mujoco":
+        from ..sim._mujoco import require_mujoco
+
+        if sim.snapshot is not None:
+            # Headless rendering: EGL, read by mujoco when it is first imported.
+            os.environ.setdefault("MUJOCO_GL", "egl")
+
+        require_mujoco()  # a missing extra is said first, in one line
+    return sim
 
 
 def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:

@@ -10,11 +10,14 @@ code runs against it and against a real robot. Start one with
 from __future__ import annotations
 
 from typing import TYPE_CHECKING as _TYPE_CHECKING
+from typing import Any as _Any
 
+from .._address import register_scheme as _register_scheme
 from .._lazy import lazy_attributes as _lazy_attributes
 
 if _TYPE_CHECKING:
     from .._pose import DEFAULT_HOME
+    from .._transport import Transport as _Transport
     from ._backend import (
         BackendFault,
         GripperState,
@@ -98,6 +101,18 @@ _EXPORTS = {
 }
 
 __getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
+
+
+def _open_sim_url(url: str, **options: _Any) -> _Transport:
+    """Open ``sim://name``: the running simulator of that name (ConnectError: none runs)."""
+    # Imported here: ``import tmmaster.sim`` stays cheap; a started simulator loaded it.
+    from ._memory import open_endpoint
+
+    return open_endpoint(url, **options)
+
+
+# The simulator is a plugin of the core: the core serves sim:// through this opener.
+_register_scheme("sim", _open_sim_url)
 
 __all__ = [
     "DEFAULT_GRIPPER",

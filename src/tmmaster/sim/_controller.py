@@ -11,9 +11,10 @@ rebuild it), fire timed faults (the device prologue), run the profile's handshak
 (advance the running command, then take a pending one), publish the TCP pose.
 
 As the client has one channel per handshake (``_channels.py``), the simulator has one
-controller per handshake, chosen by :func:`controller_for`:
+controller per handshake, chosen by the :class:`~._simulator.Simulator` that builds it:
 :class:`~._clear_on_accept.ClearOnAcceptController` (the article) and
-:class:`~._sequence.SequenceController` (tmflow). This base holds what they share:
+:class:`~._sequence.SequenceController` (tmflow, run as the robot program interpreted by
+:class:`~._script_project.ScriptProjectController`). This base holds what they share:
 backend driving, device faults, the error and e-stop state, motion records, pose
 publication under the encodable range rule and Techman's fixed table. The rules, error
 codes and fault effects are documented in ``docs/simulator-model.md``; keep the two in

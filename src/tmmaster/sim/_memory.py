@@ -9,26 +9,112 @@ check, the request log and the network faults. A dropped connection raises
 answer), a ``slow_responses`` delay longer than the timeout raises
 :class:`ResponseTimeoutError` while the device still applies the write later, and
 ``stop_listening`` refuses connections for its duration.
+
+The ``sim://name`` addresses of this process resolve here: a started simulator
+registers its name (:func:`register_endpoint`) and ``tmmaster.sim`` serves the ``sim``
+scheme of the core's in-process registry with :func:`open_endpoint`.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from typing import Protocol, TypeVar
 
 from .._exceptions import (
     MODBUS_EXCEPTIONS,
+    ConfigError,
     ConnectError,
     ConnectionLostError,
     ModbusExceptionError,
     ResponseTimeoutError,
 )
 from .._retry import RetryPolicy
-from .._transport import BlockTransport
+from .._transport import BlockTransport, Transport
 from ._server import DeviceServer, MemoryAnswer
 
 T = TypeVar("T")
+
+#: ``sim://name`` -> opener of a transport to that running simulator, for one device
+#: role ("robot", "gripper").
+EndpointOpener = Callable[..., Transport]
+_ENDPOINTS: dict[str, EndpointOpener] = {}
+_ENDPOINTS_LOCK = threading.Lock()
+
+
+def register_endpoint(url: str, opener: EndpointOpener) -> None:
+    """Make ``url`` (e.g. ``sim://sim-1``) open transports through ``opener``.
+
+    Args:
+        url: the simulator's address, ``sim://<name>``.
+        opener: opens a transport to it (keyword arguments ``role``, ``device_id``,
+            ``timeout``, ``retry``, ``name``).
+
+    Raises:
+        ConfigError: ``url`` already belongs to another running simulator of this
+            process (two of one name): replacing it would silently send the first
+            one's robots to the second.
+    """
+    with _ENDPOINTS_LOCK:
+        current = _ENDPOINTS.get(url)
+        if current is not None and current != opener:
+            raise ConfigError(
+                f"{url} is already taken by a running simulator in this process:"
+                " give each simulator its own name, or close the first one"
+            )
+        _ENDPOINTS[url] = opener
+
+
+def unregister_endpoint(url: str, opener: EndpointOpener | None = None) -> None:
+    """Forget ``url`` (safe when unknown).
+
+    Args:
+        url: the simulator's address to forget.
+        opener: when given, forget ``url`` only while it still opens through this
+            opener (a simulator refused for a taken name must not free the other's).
+    """
+    with _ENDPOINTS_LOCK:
+        if opener is None or _ENDPOINTS.get(url) == opener:
+            _ENDPOINTS.pop(url, None)
+
+
+def open_endpoint(
+    url: str,
+    *,
+    role: str = "robot",
+    device_id: int = 1,
+    timeout: float = 1.0,
+    retry: RetryPolicy | None = None,
+    name: str = "device",
+) -> Transport:
+    """A transport to the running simulator at ``url`` (the core's opener of ``sim://``).
+
+    Args:
+        url: ``sim://<name>``.
+        role: the device, ``"robot"`` or ``"gripper"``.
+        device_id: the Modbus unit id of the requests.
+        timeout: bound of one request, s.
+        retry: how failed requests are retried; None: the default policy.
+        name: the link's name in messages and logs.
+
+    Returns:
+        An in-memory transport to that simulator's device.
+
+    Raises:
+        ConnectError: no simulator of that name runs in this process.
+    """
+    with _ENDPOINTS_LOCK:
+        opener = _ENDPOINTS.get(url)
+        running = ", ".join(sorted(_ENDPOINTS)) or "none"
+    if opener is None:
+        wanted = url.partition("://")[2]
+        raise ConnectError(
+            f"no in-process endpoint {url!r}: no simulator named {wanted!r} runs in this"
+            f" process (start one with Simulator(listen=False, name={wanted!r});"
+            f" running: {running})"
+        )
+    return opener(role=role, device_id=device_id, timeout=timeout, retry=retry, name=name)
 
 
 class SimulatorLoop(Protocol):

@@ -26,13 +26,14 @@ from .._profiles import DEFAULT_PROFILE, gripper_profile, robot_profile
 from .._registers import GripperProfile, Handshake, RobotProfile, Table
 from .._retry import RetryPolicy
 from .._robot_models import RobotModel, robot_model
-from .._transport import Transport, register_endpoint, unregister_endpoint
+from .._transport import Transport
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
+from ._clear_on_accept import ClearOnAcceptController
 from ._controller import MotionRecord, RobotController
-from ._controllers import controller_class
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
+from ._memory import register_endpoint, unregister_endpoint
 from ._scene import Scene, scene_of
 from ._server import DeviceServer, RequestLog, RequestRecord
 from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
@@ -232,7 +233,10 @@ class Simulator:
         network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
         device = [f for f in all_faults if not is_network_fault(f)]
         self._log = RequestLog(listener=request_listener)
-        controller = controller_class(self._profile.handshake)
+        # One controller class per handshake (as the client has one channel per handshake):
+        # the article's clears on accept; the sequence handshake is a TMflow project, the
+        # robot program interpreted (ScriptProjectController, below).
+        controller: type[RobotController] = ClearOnAcceptController
         handshake_options: dict[str, Any] = {}
         if program is None and self._profile.handshake is Handshake.SEQUENCE:
             program = "generated"  # the robot program tmmaster ships, interpreted
