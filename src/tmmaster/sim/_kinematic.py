@@ -200,6 +200,11 @@ class KinematicBackend:
         self._motion: _Motion | None = None
         # Starts "long settled": the arm is at rest when the simulation begins.
         self._rest_s = math.inf
+        self._init_gripper()
+        self._init_collisions(model)
+
+    def _init_gripper(self) -> None:
+        """The fingers' state: open, at rest, touching nothing."""
         self._width = self._gripper_max
         self._target_width = self._gripper_max
         self._finger_speed = 0.0
@@ -213,6 +218,9 @@ class KinematicBackend:
         self._close_from = self._gripper_max
         # A part squeezed but too heavy for the grip: it stays while the arm moves away.
         self._pinched: str | None = None
+
+    def _init_collisions(self, model: RobotModel) -> None:
+        """The arm's links, the obstacles and the caches the collision checks keep."""
         # Collisions: what touches the table or a fixture, and how deep, when the running
         # motion started (a contact being backed out of is known); the pads in the parts
         # then; and the fault not yet taken.
