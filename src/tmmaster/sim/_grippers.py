@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 from .._registers import GripperDriverName, GripperProfile
 from ._backend import PhysicsBackend
@@ -202,6 +203,22 @@ class Blog2FG7Device(_GripperDevice):
             self._set_status(object_status=3, motion_state=0)
 
 
+@dataclass(frozen=True)
+class OnRobotLimits:
+    """An OnRobot 2FG7's stroke, speeds and forces (its presets and clamps)."""
+
+    #: The smallest and largest external grip widths, mm.
+    min_external_mm: float = 1.0
+    max_external_mm: float = 39.0
+    #: An internal grip's widths are the external ones plus this, mm.
+    internal_offset_mm: float = 34.0
+    #: The finger speeds at 1 % and at 100 %, mm/s.
+    speed_range_mm_s: tuple[float, float] = (16.0, 450.0)
+    #: The smallest force (a requested 0 gets it) and the power setting's ceiling, N.
+    min_force_n: float = 20.0
+    max_force_n: float = 100.0
+
+
 class OnRobot2FG7Device(_GripperDevice):
     """OnRobot 2FG7 on a Compute Box: grip external/internal/stop, status bits, live widths."""
 
@@ -213,12 +230,7 @@ class OnRobot2FG7Device(_GripperDevice):
         *,
         faults: Sequence[Fault] = (),
         init_time_s: float = 0.2,
-        min_external_mm: float = 1.0,
-        max_external_mm: float = 39.0,
-        internal_offset_mm: float = 34.0,
-        speed_range_mm_s: tuple[float, float] = (16.0, 450.0),
-        min_force_n: float = 20.0,
-        max_force_n: float = 100.0,
+        limits: OnRobotLimits = OnRobotLimits(),
         product_code: int = ONROBOT_2FG7_PRODUCT_CODE,
         step_backend: bool = True,
         log: Logger | None = None,
@@ -227,7 +239,7 @@ class OnRobot2FG7Device(_GripperDevice):
             raise ValueError(
                 f"product_code must be 0xC0 (2FG7) or 0xC1 (2FG14), got {product_code}"
             )
-        if not 0 < min_force_n <= max_force_n:
+        if not 0 < limits.min_force_n <= limits.max_force_n:
             raise ValueError("need 0 < min_force_n <= max_force_n")
         super().__init__(
             profile,
@@ -238,21 +250,21 @@ class OnRobot2FG7Device(_GripperDevice):
             step_backend=step_backend,
             log=log,
         )
-        self._min_ext = min_external_mm
-        self._max_ext = max_external_mm
-        self._offset = internal_offset_mm
-        self._speeds = speed_range_mm_s
-        self._min_force = min_force_n
+        self._min_ext = limits.min_external_mm
+        self._max_ext = limits.max_external_mm
+        self._offset = limits.internal_offset_mm
+        self._speeds = limits.speed_range_mm_s
+        self._min_force = limits.min_force_n
         self._force = 0.0
         self._internal_grip = False
         # Presets a master reads at run time instead of hard-coding the stroke.
-        bank.set("min_external_width", min_external_mm)
-        bank.set("max_external_width", max_external_mm)
-        bank.set("min_internal_width", min_external_mm + internal_offset_mm)
-        bank.set("max_internal_width", max_external_mm + internal_offset_mm)
+        bank.set("min_external_width", limits.min_external_mm)
+        bank.set("max_external_width", limits.max_external_mm)
+        bank.set("min_internal_width", limits.min_external_mm + limits.internal_offset_mm)
+        bank.set("max_internal_width", limits.max_external_mm + limits.internal_offset_mm)
         bank.set("product_code", product_code)
         # The force ceiling of the power setting (the box's default power, fixture value).
-        bank.set("max_force", max_force_n)
+        bank.set("max_force", limits.max_force_n)
         for name, value in _FIXTURE_IDENTITY[product_code].items():
             if self._profile.has(name):
                 bank.set(name, value)
