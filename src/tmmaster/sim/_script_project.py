@@ -323,13 +323,7 @@ class ScriptProjectController(SequenceController):
         modelled are a host error; a joint target or an arc on a backend that cannot
         follow one is refused (False).
         """
-        fmt = call.format.upper()
-        if call.kind == "PTP" and fmt not in ("CPP", "JPP"):
-            raise HostError(f"motion format {call.format!r} is not modelled (CPP, JPP)")
-        if call.kind == "Circle" and (call.arc_angle != 0 or call.rotation not in (None, 0)):
-            raise HostError(
-                "Circle is modelled with arc angle 0 and linear interpolation of the pose only"
-            )
+        fmt = _modelled_format(call)
         speed = float(call.speed)
         if call.kind != "PTP" and fmt[1] in "AD":
             # Absolute speed, mm/s: the percent of the arm's top TCP speed it is.
@@ -340,22 +334,8 @@ class ScriptProjectController(SequenceController):
         accel_s = (call.accel_time_ms if call.accel_time_ms > 0 else 200) / 1000.0
         # From where the arm will be: the end of the last queued move, or here.
         start = self._queue[-1].target if self._queue else self._backend.tcp_pose()
-        joints: tuple[float, ...] | None = None
-        via: Pose | None = None
         try:
-            if fmt == "JPP":
-                joints = self._model.check_joints(call.target, tool=self.tool)
-                target = self._model.forward(joints, self.tool)
-            else:
-                target = Pose(*call.target)
-            if call.kind == "Circle":
-                assert call.via is not None
-                via = Pose(*call.via)
-                self._model.arc_joints(start, via, target, tool=self.tool)
-            elif call.kind == "Line":
-                self._model.line_joints(start, target, tool=self.tool)
-            elif joints is None:
-                self._model.inverse(target, tool=self.tool)
+            target, joints, via = self._planned(call, fmt, start)
         except UnreachablePoseError as exc:
             self.log_rejected(call.kind, exc.reason, Pose(*call.target[:6]))
             return False
@@ -370,6 +350,32 @@ class ScriptProjectController(SequenceController):
             _Queued(target, motion, speed, accel_s, joints=joints, via=via, start=start)
         )
         return True
+
+    def _planned(
+        self, call: MotionCall, fmt: str, start: Pose
+    ) -> tuple[Pose, tuple[float, ...] | None, Pose | None]:
+        """The move's target, joint target and arc point, its path checked from ``start``.
+
+        Raises:
+            UnreachablePoseError: The target or the path is out of reach.
+            ConfigError: No arc passes through the points.
+        """
+        joints: tuple[float, ...] | None = None
+        via: Pose | None = None
+        if fmt == "JPP":
+            joints = self._model.check_joints(call.target, tool=self.tool)
+            target = self._model.forward(joints, self.tool)
+        else:
+            target = Pose(*call.target)
+        if call.kind == "Circle":
+            assert call.via is not None
+            via = Pose(*call.via)
+            self._model.arc_joints(start, via, target, tool=self.tool)
+        elif call.kind == "Line":
+            self._model.line_joints(start, target, tool=self.tool)
+        elif joints is None:
+            self._model.inverse(target, tool=self.tool)
+        return target, joints, via
 
     def tag_last(self, tag: int) -> None:
         """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done)."""
@@ -517,3 +523,15 @@ def _backend_tool(backend: PhysicsBackend) -> Pose | None:
     if isinstance(backend, KinematicBackend | MuJoCoBackend):
         return backend.tool
     return None
+
+
+def _modelled_format(call: MotionCall) -> str:
+    """The motion's format in capitals; a host error for what the simulator does not model."""
+    fmt = call.format.upper()
+    if call.kind == "PTP" and fmt not in ("CPP", "JPP"):
+        raise HostError(f"motion format {call.format!r} is not modelled (CPP, JPP)")
+    if call.kind == "Circle" and (call.arc_angle != 0 or call.rotation not in (None, 0)):
+        raise HostError(
+            "Circle is modelled with arc angle 0 and linear interpolation of the pose only"
+        )
+    return fmt
