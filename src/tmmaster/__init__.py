@@ -56,6 +56,7 @@ if _TYPE_CHECKING:
         TMScriptSyntaxError,
         TransportClosedError,
         TransportError,
+        UnknownNameError,
         UnreachablePoseError,
         ValueOutOfRangeError,
     )
@@ -73,7 +74,7 @@ if _TYPE_CHECKING:
     )
     from ._io import RobotIO
     from ._logging import configure_logging
-    from ._monitor import MonitoredStatus, StatusMonitor
+    from ._monitor import EventLoopName, MonitoredStatus, StatusMonitor
     from ._poller import Poller, PollPolicy
     from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsError
     from ._profiles import (
@@ -125,6 +126,7 @@ _EXPORTS = {
     "DeviceFailureError": "._exceptions",
     "DigitalIOModule": "._registers",
     "EmergencyStopError": "._exceptions",
+    "EventLoopName": "._monitor",
     "Fleet": "._fleet",
     "FrameCheck": "._robot",
     "GraspFailedError": "._exceptions",
@@ -188,6 +190,7 @@ _EXPORTS = {
     "TransportError": "._exceptions",
     "TransportStats": "._transport",
     "UnitsError": "._pose",
+    "UnknownNameError": "._exceptions",
     "UnreachablePoseError": "._exceptions",
     "Value": "._codec",
     "ValueOutOfRangeError": "._exceptions",
@@ -233,6 +236,7 @@ __all__ = [
     "DeviceFailureError",
     "DigitalIOModule",
     "EmergencyStopError",
+    "EventLoopName",
     "Fleet",
     "FrameCheck",
     "GraspFailedError",
@@ -295,6 +299,7 @@ __all__ = [
     "TransportError",
     "TransportStats",
     "UnitsError",
+    "UnknownNameError",
     "UnreachablePoseError",
     "Value",
     "ValueOutOfRangeError",

@@ -13,3 +13,8 @@ class TMMasterError(Exception):
 
 class ConfigError(TMMasterError, ValueError):
     """Invalid configuration, detected before anything is sent."""
+
+
+# Shown as ``tmmaster.ConfigError`` (tracebacks, reprs, pickles) from the start, like the
+# errors of _exceptions.py: both are exported by ``tmmaster``.
+TMMasterError.__module__ = ConfigError.__module__ = "tmmaster"

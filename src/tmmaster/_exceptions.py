@@ -13,7 +13,7 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     │   ├── ConnectError (ConnectionError)        could not open the connection
     │   │   ├── ConnectRefusedError               nothing listens at host:port (refused)
     │   │   ├── HostNotFoundError                 the host name does not resolve
-    │   │   ├── TransportClosedError              the link was closed by its owner
+    │   │   ├── TransportClosedError              the link is closed, or not opened yet
     │   │   └── NotModbusError                    host:port answers, but not in Modbus TCP
     │   ├── ConnectionLostError (ConnectionError) the connection broke during a request
     │   ├── ResponseTimeoutError (TimeoutError)   no answer within the request timeout
@@ -141,9 +141,12 @@ class HostNotFoundError(ConnectError):
 
 
 class TransportClosedError(ConnectError):
-    """The link was closed by its owner (``close()``, its Fleet closing): nothing was sent.
+    """The link is not open: nothing was sent.
 
-    Never retried: no later attempt can succeed on a closed link.
+    Closed by its owner (``close()``, its Fleet closing), or never opened: a
+    :class:`~tmmaster.Robot` used before :meth:`~tmmaster.Robot.connect` (the message
+    names the fix: ``robot.connect()``, or ``with tmmaster.connect(...) as robot:``).
+    Never retried: no later attempt can succeed on a link its owner has not opened.
     """
 
     retryable = False
@@ -446,3 +449,17 @@ class TMScriptSyntaxError(TMScriptError):
 
 class TMScriptRuntimeError(TMScriptError):
     """A statement of the script failed while it ran (division by zero, a bad conversion...)."""
+
+
+# Every public error reads ``tmmaster.RobotFaultError`` in a traceback, a repr and a
+# pickle from the moment it is defined, not only once read through ``tmmaster`` (whose
+# lazy import rehomes a name on first access); each of them is exported there.
+for _error in list(globals().values()):
+    if (
+        isinstance(_error, type)
+        and issubclass(_error, BaseException)
+        and _error.__module__ == __name__
+        and not _error.__name__.startswith("_")
+    ):
+        _error.__module__ = "tmmaster"
+del _error

@@ -25,7 +25,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 from ._channels import CommandKind
 from ._checks import require_positive
@@ -54,11 +54,15 @@ _log = get_logger("tmmaster.gripper")
 class GripperMount(Protocol):
     """What a gripper driver gets from the robot it is mounted on (not the whole Robot).
 
-    :class:`~tmmaster.Robot` hands one to :meth:`Gripper.attach`: the robot's register
-    map and link (for grippers wired through the robot), its fault check, the stop
-    event that ends every wait, its poll interval and gripper timeouts, and a way to run
-    a gripper command through the robot program's handshake.
+    :class:`~tmmaster.Robot` hands one to :meth:`Gripper.attach`: the robot's name,
+    register map and link (for grippers wired through the robot), its fault check, the
+    stop event that ends every wait, its poll interval and gripper timeouts, and a way
+    to run a gripper command through the robot program's handshake.
     """
+
+    @property
+    def name(self) -> str:
+        """The robot's name: every log event of its gripper carries it (``robot=``)."""
 
     @property
     def profile(self) -> RobotProfile:
@@ -66,7 +70,7 @@ class GripperMount(Protocol):
 
     @property
     def transport(self) -> Transport:
-        """The robot's link."""
+        """The robot's link (TransportClosedError before the robot is connected)."""
 
     @property
     def stop_event(self) -> threading.Event:
@@ -143,14 +147,20 @@ class Gripper(ABC):
     #: The driver's name (a gripper profile's name for the stand-alone grippers).
     kind: str = "gripper"
     _mount: GripperMount | None = None
+    # Where the driver logs: once mounted, every event names the robot (``robot=``).
+    _events: Any = _log
 
     def attach(self, mount: GripperMount) -> None:
         """Mount on a robot: its fault check and stop event guard every wait (Robot calls it).
+
+        From then on every log event of the gripper names the robot (``robot=NAME``, as
+        the robot's own events do) besides the driver (``gripper=KIND``).
 
         Args:
             mount: What the robot lends its gripper.
         """
         self._mount = mount
+        self._events = _log.bind(robot=mount.name)
 
     def connect(self) -> None:  # noqa: B027 - most grippers share the robot's link
         """Open the gripper's own connection, if it has one."""
@@ -214,7 +224,7 @@ class Gripper(ABC):
         """
         status = self.close(timeout_s=timeout_s)
         if not status.holding:
-            _log.warning("gripper.grasp_failed", gripper=self.kind)
+            self._events.warning("gripper.grasp_failed", gripper=self.kind)
             raise GraspFailedError(f"{self.kind}: closed but no object detected")
         return status
 
@@ -365,7 +375,7 @@ class RegisterGripper(_RobotWiredGripper):
         # The settle time counts from the write that landed, not from the first attempt:
         # retries during a short outage must not eat the time the fingers need.
         started = time.monotonic()
-        _log.info("gripper.command_sent", gripper=self.kind, command=label)
+        self._events.info("gripper.command_sent", gripper=self.kind, command=label)
 
         def check() -> GripperStatus | None:
             # One read: the article's status block holds the error state and the grasp.
@@ -380,7 +390,7 @@ class RegisterGripper(_RobotWiredGripper):
         status = _wait(
             f"gripper {label}", robot.poll_interval_s, bound, check, stop_event=robot.stop_event
         )
-        _log.info(
+        self._events.info(
             "gripper.command_done",
             gripper=self.kind,
             holding=status.holding,
@@ -421,7 +431,7 @@ class SequenceGripper(_RobotWiredGripper):
         robot = self._robot()
         if timeout_s is not None:
             _timeout(timeout_s, 0.0)
-        _log.info("gripper.command_sent", gripper=self.kind, command=kind.value)
+        self._events.info("gripper.command_sent", gripper=self.kind, command=kind.value)
         robot.run_command(kind, timeout_s)
         return self.status()
 
@@ -555,7 +565,7 @@ class _OwnConnectionGripper(Gripper):
             guard=self._guard,
             stop_event=self._stop_event,
         )
-        _log.info(
+        self._events.info(
             "gripper.command_done",
             gripper=self.kind,
             holding=status.holding,
@@ -629,7 +639,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             ],
             retry=False,
         )
-        _log.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
+        self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
         acknowledged = False
 
         def check() -> GripperStatus | None:
@@ -666,7 +676,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
                 [(field, field.code_of("stop"))], retry=True, interruptible=False
             )
         except TransportError as exc:
-            _log.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
+            self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the map's maximum width.
@@ -811,7 +821,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             else (values[names[2]], values[names[3]])
         )
         self.limits = (float(low), float(high))
-        _log.info(
+        self._events.info(
             "gripper.connected",
             gripper=self.kind,
             product=product,
@@ -876,7 +886,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             ],
             retry=False,
         )
-        _log.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
+        self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
 
         def check() -> GripperStatus | None:
             status = self.status()

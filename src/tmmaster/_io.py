@@ -23,9 +23,11 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from ._checks import shown
 from ._exceptions import ConfigError, ConnectError, ModbusExceptionError, StopRequestedError
 from ._gate import CommandGate
 from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
@@ -123,14 +125,15 @@ def io_address(profile: RobotProfile, module: object, kind: Kind, channel: objec
     if count == 0:
         raise ConfigError(f"module {module} has no {label}")
     if isinstance(channel, bool) or not isinstance(channel, int):
-        shown = "NaN" if isinstance(channel, float) and math.isnan(channel) else repr(channel)
+        text = "NaN" if isinstance(channel, float) and math.isnan(channel) else shown(channel)
         raise ConfigError(
-            f"{module} {label}: the channel must be an int (0..{count - 1}), got {shown}"
+            f"{module} {label}: the channel must be an int (0..{count - 1}), got {text}"
             f" ({type(channel).__name__})"
         )
     if not 0 <= channel < count:
         raise ConfigError(
-            f"{module} {label} {channel} does not exist: module {module} has {label} 0-{count - 1}"
+            f"{module} {label} {shown(channel)} does not exist: module {module} has"
+            f" {label} 0-{count - 1}"
         )
     return first + channel
 
@@ -216,6 +219,7 @@ class RobotIO:
         transport: Transport,
         gate: CommandGate,
         log: Any,
+        require_connection: Callable[[], None] | None = None,
     ) -> None:
         """Made by :class:`~tmmaster.Robot` (``robot.io``), never by a user.
 
@@ -224,9 +228,12 @@ class RobotIO:
             transport: The robot's link.
             gate: The robot's command gate.
             log: The robot's logger.
+            require_connection: Raises before any request while the robot is not
+                connected (after the arguments are checked); None: no such check.
         """
         self._profile = profile
-        self._transport = transport
+        self._link = transport
+        self._require_connection = require_connection
         self._gate = gate
         self._log = log
         self._gripper_output = default_gripper_output(profile)
@@ -235,6 +242,13 @@ class RobotIO:
         self._doubts: dict[int, list[_Doubt]] = {}
         self._coil_locks: dict[int, threading.Lock] = {}
         self._locks_lock = threading.Lock()
+
+    @property
+    def _transport(self) -> Transport:
+        """The robot's link; refused while the robot is not connected (no I/O connects)."""
+        if self._require_connection is not None:
+            self._require_connection()
+        return self._link
 
     @property
     def modules(self) -> tuple[str, ...]:

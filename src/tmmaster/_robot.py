@@ -68,6 +68,7 @@ from ._exceptions import (
     RobotFaultError,
     StopRequestedError,
     TMMasterError,
+    TransportClosedError,
 )
 from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet, wake_waits
 from ._following import FollowState, Overdue, SharedDriver
@@ -941,8 +942,10 @@ def _policy(name: str, value: object, kind: type[_PolicyT]) -> _PolicyT:
 class _Mount:
     """What a Robot hands its gripper driver (:class:`~tmmaster._gripper.GripperMount`)."""
 
+    name: str
     profile: RobotProfile
-    transport: Transport
+    link: Transport
+    require_connection: Callable[[], None]
     stop_event: threading.Event
     poll_interval_s: float
     gripper_timeout_s: float
@@ -951,6 +954,12 @@ class _Mount:
     checked_status: Callable[[], RobotStatus]
     run_command: Callable[[CommandKind, float | None], None]
 
+    @property
+    def transport(self) -> Transport:
+        """The robot's link; TransportClosedError before :meth:`Robot.connect`."""
+        self.require_connection()
+        return self.link
+
 
 class Robot:
     """A connection to one robot (and its gripper) speaking one profile.
@@ -958,8 +967,10 @@ class Robot:
     Every move is validated before a byte is sent (speed, workspace, the arm's reach,
     the profile's encodable range), written once, acknowledged, waited for on a
     monotonic clock and checked at its end (docs/robot-api.md). Nothing connects before
-    :meth:`connect` (or ``with``); :func:`~tmmaster.connect` does both. One Robot is
-    used by one thread; :meth:`interrupt` is the call meant for other threads.
+    :meth:`connect` (or ``with``); :func:`~tmmaster.connect` does both. Before that, a
+    command or a read raises :class:`TransportClosedError` naming the fix (nothing is
+    sent; the checks of a move and of its arguments come first). One Robot is used by
+    one thread; :meth:`interrupt` is the call meant for other threads.
 
     Example:
         Against the simulator (``python -m tmmaster.sim --port 5020``):
@@ -1152,7 +1163,9 @@ class Robot:
         self._last_motion: Motion | None = None
         self._log = _log.bind(robot=name)
         # Digital I/O: its writes pass the same gate as commands.
-        self._io = RobotIO(self.profile, self._transport, self._gate, self._log)
+        self._io = RobotIO(
+            self.profile, self._transport, self._gate, self._log, self._require_connection
+        )
         # The TMflow project's Play and Pause: pressed only when asked, through the gate.
         self._project = ProjectControl(
             self.profile, self._transport, self._channel, self._gate, self._stop_event, self._log
@@ -1190,8 +1203,10 @@ class Robot:
         )
         self.gripper.attach(
             _Mount(
+                name=name,
                 profile=self.profile,
-                transport=self._transport,
+                link=self._transport,
+                require_connection=self._require_connection,
                 stop_event=self._stop_event,
                 poll_interval_s=poll_interval_s,
                 gripper_timeout_s=self.timeouts.gripper_timeout_s,
@@ -1337,6 +1352,19 @@ class Robot:
             profile=self.profile.name,
         )
         return self
+
+    def _require_connection(self) -> None:
+        """Refuse I/O before :meth:`connect`: nothing connects on its own.
+
+        Raises:
+            TransportClosedError: never connected (a closed robot's link says so itself).
+        """
+        if self._connected or self._transport.state is ConnectionState.CLOSED:
+            return
+        raise TransportClosedError(
+            f"{self.name}: not connected, nothing was sent: call robot.connect() first, or"
+            " open it with `with tmmaster.connect(...) as robot:` (or `with robot:`)"
+        )
 
     def _read_arm_at_connect(self) -> None:
         """At connect: the frame check and the robot's joints, in one read where contiguous.
@@ -1491,6 +1519,7 @@ class Robot:
 
     def check_fault(self) -> None:
         """Read the fewest registers that tell; raise the typed error if in e-stop or error."""
+        self._require_connection()
         failure = self._channel.read_failure()
         if failure is not None:
             raise failure
@@ -1514,6 +1543,7 @@ class Robot:
             TransportError: The read failed (ProfileMismatchError when the device answers
                 another built-in profile's registers).
         """
+        self._require_connection()
         try:
             return self._channel.read_status()
         except IllegalAddressError as exc:
@@ -1549,7 +1579,11 @@ class Robot:
 
         Returns:
             The TCP pose the robot reports, mm / deg.
+
+        Raises:
+            TransportError: The read failed (TransportClosedError: never connected).
         """
+        self._require_connection()
         return self._channel.read_pose()
 
     def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
@@ -2035,6 +2069,7 @@ class Robot:
 
     def _read_start(self) -> Pose:
         """The TCP pose the robot reports (with its joints, where published), for a plan."""
+        self._require_connection()
         start, joints = self._channel.read_pose_and_joints()
         if joints is not None:
             self._take_robot_joints(start, joints)
@@ -2081,6 +2116,11 @@ class Robot:
         """
         if timeout is not None:
             require_positive("timeout", timeout)
+        if not self._connected:
+            # What prepare() refuses before its first read (a value out of the profile's
+            # range) is said first, as on a connected robot; then the missing connect.
+            self._channel.check_command(command)
+            self._require_connection()
         # prepare() encodes (refusing out-of-range values) before its first read.
         ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
         start: Pose | None = None
@@ -2313,6 +2353,7 @@ class Robot:
             ConfigError: The profile has no TMflow project (article).
             TransportError: The read failed.
         """
+        self._require_connection()
         return self._project.state()
 
     def play(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
@@ -2342,6 +2383,7 @@ class Robot:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
+        self._require_connection()
         return self._project.play(timeout_s, self.poll_interval_s)
 
     def pause(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
@@ -2365,10 +2407,18 @@ class Robot:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
+        self._require_connection()
         return self._project.pause(timeout_s, self.poll_interval_s)
 
     def stop(self) -> None:
-        """Stop the arm now (article: command = stop; tmflow: the TM Stop button)."""
+        """Stop the arm now (article: command = stop; tmflow: the TM Stop button).
+
+        Raises:
+            TransportClosedError: The robot was never connected (nothing was sent) or is
+                closed.
+            TransportError: The stop could not be written.
+        """
+        self._require_connection()
         # A stop is idempotent: the channel retries it, even after a stop request.
         self._follower.stop()
 
@@ -2554,8 +2604,11 @@ def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:
             raise
 
     connect.__qualname__ = "connect"
-    # help() and the API docs show Robot's parameters, not *args/**kwargs.
-    connect.__signature__ = inspect.signature(make)  # type: ignore[attr-defined]
+    # help() and the API docs show Robot's parameters, not *args/**kwargs, and what this
+    # function returns (a Robot; the constructor's own signature returns None).
+    connect.__signature__ = inspect.signature(make).replace(  # type: ignore[attr-defined]
+        return_annotation=inspect.signature(connect).return_annotation
+    )
     return connect
 
 

@@ -1332,8 +1332,11 @@ def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
         return opened
 
     connect.__qualname__ = "connect"
-    # help() and the API docs show Robot's parameters, not *args/**kwargs.
-    connect.__signature__ = signature  # type: ignore[attr-defined]
+    # help() and the API docs show Robot's parameters, not *args/**kwargs, and what this
+    # function returns (an AsyncRobot; Robot's constructor returns None).
+    connect.__signature__ = signature.replace(  # type: ignore[attr-defined]
+        return_annotation=inspect.signature(connect).return_annotation
+    )
     return connect
 
 

@@ -66,6 +66,7 @@ from .._profiles import DEFAULT_PROFILE, builtin_profile_names, load_profile
 from .._registers import RobotProfile
 from .._robot import Robot
 from .._tm_errors import code_suffix
+from .._transport import endpoint_text
 from .._version import add_version_argument
 from ._config import PickPlaceConfig, load_config, robot_from_config
 from ._machine import mermaid
@@ -817,7 +818,7 @@ def _run_on(
         except (ConnectRefusedError, HostNotFoundError, NotModbusError) as exc:
             return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
         except TransportError as exc:
-            return EXIT_CONNECTION, f"robot at {host}:{port} unreachable: {exc}"
+            return EXIT_CONNECTION, _unreachable(host, port, exc)
         except StopRequestedError:
             return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
         if sampler is not None:
@@ -867,6 +868,17 @@ def _run_on(
         f"{label} in {failure.state} (cycle {failure.cycle}): {failure.type}:"
         f" {failure.message}{code_text}{reaction}"
     )
+
+
+def _unreachable(host: str, port: int, exc: TransportError) -> str:
+    """Why the robot could not be reached, naming its address once.
+
+    An error that already names the address (a listener that accepted and never
+    answered) is said in its own words; any other is prefixed with it.
+    """
+    where = endpoint_text(host, port)
+    text = str(exc)
+    return text if where in text else f"robot at {where} unreachable: {text}"
 
 
 def _mismatch_reason(exc: ProfileMismatchError) -> str:

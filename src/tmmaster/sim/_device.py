@@ -17,6 +17,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from typing import Any, Generic, Protocol, TypeVar
 
+from .._checks import is_finite_number, shown
 from .._error_root import ConfigError
 from .._logging import get_logger
 from .._registers import RegisterMap
@@ -57,8 +58,8 @@ class SimDevice(ABC, Generic[ProfileT]):
     ) -> None:
         if bank.register_map is not profile and bank.register_map != profile:
             raise ValueError("the register bank must serve the device's profile")
-        if not (math.isfinite(init_time_s) and init_time_s >= 0):
-            raise ConfigError(f"init_time_s must be a finite number >= 0, got {init_time_s}")
+        if not (is_finite_number(init_time_s) and init_time_s >= 0):
+            raise ConfigError(f"init_time_s must be a finite number >= 0, got {shown(init_time_s)}")
         self._profile = profile
         self._bank = bank
         self._backend = backend

@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
-import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -19,6 +18,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from .._checks import Bounds, is_finite_number, require_in, require_positive, shown
 from .._exceptions import ConfigError, ConnectError, UnknownNameError
 from .._io import io_address, io_value
 from .._pose import DEFAULT_HOME, Pose
@@ -48,6 +48,33 @@ _CALL_TIMEOUT_S = 10.0
 
 #: Numbers the ``sim://sim-N`` names of simulators made without a name.
 _SIM_NUMBERS = itertools.count(1)
+
+
+def _numeric_options(
+    time_scale: object,
+    tick_hz: object,
+    port: object,
+    gripper_port: object,
+    init_time_s: object,
+    speed_factor: object,
+) -> tuple[float, float]:
+    """Simulator's numbers checked: any value (a string, 10**400) is a ConfigError naming it.
+
+    Returns:
+        ``time_scale`` and ``tick_hz`` as floats.
+    """
+    scale = require_positive("time_scale", time_scale)
+    hz = require_in("tick_hz", tick_hz, Bounds(0, 1000, "Hz", open_low=True))
+    for option, value in (("port", port), ("gripper_port", gripper_port)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
+            raise ConfigError(
+                f"{option} must be an integer 0..65535 (0: a free port), got {shown(value)}"
+            )
+    if not (is_finite_number(init_time_s) and init_time_s >= 0):
+        raise ConfigError(f"init_time_s must be a finite number >= 0, got {shown(init_time_s)}")
+    if not (is_finite_number(speed_factor) and 0.1 <= speed_factor <= 10):
+        raise ConfigError(f"speed_factor must be a number in 0.1..10, got {shown(speed_factor)}")
+    return scale, hz
 
 
 def _as_fault(fault: Fault | str) -> Fault:
@@ -173,13 +200,9 @@ class Simulator:
         dynamics: bool | None = None,
         wait_ready: bool = True,
     ) -> None:
-        if not (math.isfinite(time_scale) and time_scale > 0):
-            raise ConfigError(f"time_scale must be a finite number > 0, got {time_scale}")
-        if not (math.isfinite(tick_hz) and 0 < tick_hz <= 1000):
-            raise ConfigError(f"tick_hz must be in (0, 1000], got {tick_hz}")
-        for option, value in (("port", port), ("gripper_port", gripper_port)):
-            if not 0 <= value <= 65535:
-                raise ConfigError(f"{option} must be 0..65535, got {value}")
+        time_scale, tick_hz = _numeric_options(
+            time_scale, tick_hz, port, gripper_port, init_time_s, speed_factor
+        )
         self._profile = robot_profile(profile)
         self._model = robot_model(model)
         self._time_scale = float(time_scale)
@@ -191,8 +214,6 @@ class Simulator:
         if backend is not None and physics != "kinematic":
             raise ConfigError("give either backend or physics, not both")
         own_backend = backend is not None
-        if not (isinstance(speed_factor, int | float) and 0.1 <= speed_factor <= 10):
-            raise ConfigError(f"speed_factor must be a number in 0.1..10, got {speed_factor!r}")
         if speed_factor != 1 and backend is not None:
             raise ConfigError("speed_factor: give your own backend a model with its speeds")
         if tool is not None and backend is not None:

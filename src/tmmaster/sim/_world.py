@@ -32,6 +32,7 @@ from pydantic import (
 
 from .. import _cell
 from .. import _kinematics as kin
+from .._checks import is_finite_number, shown
 from .._error_root import ConfigError
 from .._pose import Pose
 from ._backend import ObjectState
@@ -653,8 +654,10 @@ class World:
         table_top_z_mm: float = DEFAULT_TABLE_TOP_Z_MM,
         fixtures: Iterable[Fixture] = (),
     ) -> None:
-        if not math.isfinite(table_top_z_mm):
-            raise ConfigError(f"table_top_z_mm must be finite, got {table_top_z_mm}")
+        if not is_finite_number(table_top_z_mm):
+            raise ConfigError(
+                f"table_top_z_mm must be a finite number, got {shown(table_top_z_mm)}"
+            )
         #: Height of the table top, mm.
         self.table_top_z_mm = float(table_top_z_mm)
         items = [TableObject(name="part", pose=DEFAULT_PART_POSE)] if objects is None else objects
