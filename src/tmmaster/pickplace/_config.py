@@ -44,8 +44,13 @@ def _finite_pose(value: object) -> object:
     if isinstance(value, list | tuple):
         if len(value) != 6:  # said with the values as written and the names missing
             raise ValueError(pose_count_problem(value))
-        # A NaN or infinite coordinate would pass a range check ("not < max") by accident.
+        # A NaN or infinite coordinate would pass a range check ("not < max") by accident;
+        # a number written as text ("300") is refused as tmmaster.Pose refuses it.
         for item in value:
+            if isinstance(item, bool) or not isinstance(item, int | float):
+                raise ValueError(
+                    f"pose values must be numbers, got {item!r} in {written_list(value)}"
+                )
             if isinstance(item, float) and not math.isfinite(item):
                 raise ValueError("pose values must be finite numbers")
     return value
