@@ -290,7 +290,7 @@ def test_the_modbus_server_answers_while_a_program_runs_slow_statements(
     sim: Simulator = tm_simulator_factory(program=program, time_scale=1.0, tick_hz=50)
     sim.wait_for(lambda: "sorting" in sim.displayed(), timeout=20)
     # Each Array_Sort takes milliseconds: 400 of them were one tick of seconds, during
-    # which no request was answered. The tick's time budget yields after 50 ms.
+    # which no request was answered. The tick's CPU-time budget yields after 20 ms.
     assert read_running(sim.port, 5) == [1] * 5
 
 

@@ -23,6 +23,7 @@ beginning.
 from __future__ import annotations
 
 import functools
+import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,14 +46,13 @@ from ._sequence import SequenceController
 #: Statements a program may run per control tick before it yields to the robot (a busy
 #: loop must not freeze the simulator; TMflow time-slices a project the same way).
 STATEMENTS_PER_TICK = 400
-#: Wall seconds a program may run per control tick, whichever of the two budgets ends
-#: first: slow statements yield too, so the Modbus server (on the same thread) keeps
-#: answering. A statement running then finishes first (a bounded one: strings and
-#: arrays are capped, see ``docs/tmscript.md``). Well above what an ordinary tick's
-#: statements take on a loaded machine (a Line's path check: a few ms), so that how far
-#: a program gets in a tick does not depend on the machine's load; well below a
-#: request timeout.
-TICK_SECONDS = 0.05
+#: CPU seconds a program may run per control tick (``time.thread_time``), whichever of
+#: the two budgets ends first: slow statements yield too, so the Modbus server (on the
+#: same thread) keeps answering between ticks. CPU time, not wall time, so that how far
+#: a program gets in a tick does not depend on the machine's load. A statement running
+#: then finishes first (a bounded one: strings and arrays are capped, see
+#: ``docs/tmscript.md``).
+TICK_SECONDS = 0.02
 
 #: The Modbus tables behind each function code, and whether it writes.
 _FUNCTIONS: dict[int, tuple[Table, bool]] = {
@@ -435,7 +435,7 @@ class ScriptProjectController(SequenceController):
         self._set_paused(False, "start")
         self._bank.set("project_running", True)
         # main from the beginning; define's variables fresh ([TS] 3.1-3.2, p. 29).
-        self._execution = Execution(self._program, SimHost(self))
+        self._execution = Execution(self._program, SimHost(self), budget_clock=time.thread_time)
         self._log.info("sim.project_started", device=self._name)
 
     def _stop_project(self, reason: str) -> None:

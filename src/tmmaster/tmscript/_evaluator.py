@@ -119,9 +119,11 @@ class _Run(Runtime):
     def __init__(self, host: Host) -> None:
         super().__init__(host)
         self.budget = 0
+        #: The clock of the time budget: wall seconds by default (time.monotonic).
+        self.clock: Callable[[], float] = time.monotonic
         self._left = 0  # statements of the step not yet handed out in a slice
-        self._deadline = math.inf  # time.monotonic() at which the step yields
-        self._sliced = 0.0  # time.monotonic() when the current slice began
+        self._deadline = math.inf  # clock() at which the step yields
+        self._sliced = 0.0  # clock() when the current slice began
 
     def start(self, max_statements: int, max_seconds: float | None) -> None:
         """Budget a step: at most ``max_statements`` statements and ``max_seconds``."""
@@ -130,7 +132,7 @@ class _Run(Runtime):
         if max_seconds is None:
             self._deadline = math.inf
         else:
-            self._sliced = time.monotonic()
+            self._sliced = self.clock()
             self._deadline = self._sliced + max(0.0, max_seconds)
 
     def spent(self) -> bool:
@@ -139,7 +141,7 @@ class _Run(Runtime):
             return True
         size = self._left
         if self._deadline != math.inf:
-            now = time.monotonic()
+            now = self.clock()
             if now >= self._deadline:
                 return True
             size = min(size, 1 if now - self._sliced >= SLOW_SLICE_S else CLOCK_EVERY)
@@ -1460,14 +1462,20 @@ class Execution:
     Args:
         program: From :func:`parse`.
         host: The clock, dashboard, Modbus and motion.
+        budget_clock: The clock of :meth:`step`'s ``max_seconds``: wall seconds
+            (``time.monotonic``) by default; ``time.thread_time`` counts the CPU seconds
+            of the calling thread, which do not depend on the machine's load.
     """
 
-    def __init__(self, program: Program, host: Host) -> None:
+    def __init__(
+        self, program: Program, host: Host, *, budget_clock: Callable[[], float] = time.monotonic
+    ) -> None:
         #: The program that runs.
         self.program = program
         #: What the script reaches.
         self.host = host
         self._rt = _Run(host)
+        self._rt.clock = budget_clock
         self._globals: list[Value] = [None] * program.globals_size  # type: ignore[list-item]
         #: Where the execution stands.
         self.state = ExecState.RUNNING
@@ -1526,7 +1534,8 @@ class Execution:
 
         Args:
             max_statements: The most statements to run (at least 1).
-            max_seconds: The most wall seconds to run (``time.monotonic()``), or None for
+            max_seconds: The most seconds to run by the budget clock (wall seconds
+                unless the Execution was given another), or None for
                 no limit: the step yields once they have passed, overshooting by the
                 statement that was running (the clock is read every
                 :data:`CLOCK_EVERY` statements, after every one once they run slowly).
