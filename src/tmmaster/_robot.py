@@ -20,7 +20,6 @@ import atexit
 import functools
 import inspect
 import logging
-import math
 import threading
 import time
 import weakref
@@ -30,17 +29,11 @@ from pathlib import Path
 from types import TracebackType
 from typing import Annotated, Any, Literal, ParamSpec, TypeVar
 
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from . import _commanded
 from . import _kinematics as kin
 from ._address import check_host, check_port, is_in_process
-from ._cell import (
-    DEFAULT_ARM_RADIUS_MM,
-    DEFAULT_TABLE_TOP_Z_MM,
-    DEFAULT_TOOL_EXTENT_MM,
-    arm_lowest_z_mm,
-)
 from ._channels import (
     Command,
     CommandChannel,
@@ -51,7 +44,7 @@ from ._channels import (
     heartbeat_stalled,
     pose_from,
 )
-from ._checks import Bounds, is_finite_number, require_in, require_positive, shown
+from ._checks import Bounds, require_in, require_positive
 from ._exceptions import (
     AcknowledgeTimeoutError,
     CommandRejectedError,
@@ -76,8 +69,19 @@ from ._gate import CommandGate
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._io import RobotIO
 from ._logging import get_logger
+from ._planning import (
+    Planner,
+    check_accel,
+    checked_tool,
+    joint_values,
+    motion_type,
+    moved,
+    offset_pose,
+)
+from ._planning import TimeoutPolicy as TimeoutPolicy  # tmmaster imports it from here
+from ._planning import Workspace as Workspace  # tmmaster imports it from here
 from ._poller import Poller, PollPolicy
-from ._pose import MotionType, Pose, refuse_suspect_units
+from ._pose import MotionType, Pose
 from ._profiles import (
     DEFAULT_PROFILE,
     builtin_profile_names,
@@ -95,7 +99,7 @@ from ._registers import (
     Role,
 )
 from ._retry import RetryPolicy
-from ._robot_models import PathGauge, RobotModel, arc_through, robot_model
+from ._robot_models import PathGauge, RobotModel, robot_model
 from ._sigint import deferred
 from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus, project_hint
 from ._transport import (
@@ -110,182 +114,6 @@ _log = get_logger("tmmaster.robot")
 
 _P = ParamSpec("_P")
 _PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy")
-
-
-class Workspace(BaseModel):
-    """Where the tool may go, in mm (robot base frame): a table plane and a box.
-
-    The defaults describe the default cell (the built-in simulator's): a table whose top
-    is at ``floor_z_mm`` = 85 mm and the simulator's gripper around the TCP
-    (``tool_extent_mm``). No TCP, no flange and no corner of the tool's extent may go
-    below the table plane, so a move validated with these defaults does not run the tool
-    into that table. **Another cell states its own:** ``Workspace(floor_z_mm=...)``, the
-    top of your table in the robot base frame (``0`` for the plane the robot stands on),
-    and ``tool_extent_mm`` for your tool (``None``: only the TCP and the flange); or
-    ``floor_z_mm=None`` for an arm that must reach below its mounting plane (mounted on
-    a pedestal or a wall). At each target the arm's links (``arm_radius_mm``) must stay
-    above the plane too (:meth:`check_arm`). The box (``x``, ``y``, ``z``) bounds the
-    TCP only.
-    """
-
-    # NaN or infinite bounds would make range checks pass or fail by accident.
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
-
-    #: The TCP's range along x (lowest, highest), mm.
-    x: tuple[float, float] = (-2000.0, 2000.0)
-    #: The TCP's range along y, mm.
-    y: tuple[float, float] = (-2000.0, 2000.0)
-    #: The TCP's range along z, mm.
-    z: tuple[float, float] = (-2000.0, 2000.0)
-    #: The table plane, mm: no TCP, no flange and no corner of the tool's extent below
-    #: it. Default: the default cell's table top (85 mm). None: no plane.
-    floor_z_mm: float | None = DEFAULT_TABLE_TOP_Z_MM
-    #: The tool's extent around the TCP in the TCP frame, (x lo, hi), (y lo, hi),
-    #: (z lo, hi), mm: a box no corner of which may go below the table plane. Default:
-    #: the simulator's gripper with the TCP at the flange. None: the TCP and flange only.
-    tool_extent_mm: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = (
-        DEFAULT_TOOL_EXTENT_MM
-    )
-    #: The radius of the arm's links round the segments between its joints, mm: no
-    #: link may go below the table plane at a target (:meth:`check_arm`). Default: the
-    #: simulator's arm. None: the links are not checked.
-    arm_radius_mm: Annotated[float, Field(gt=0, le=500)] | None = DEFAULT_ARM_RADIUS_MM
-
-    @model_validator(mode="after")
-    def _extent_is_ordered(self) -> Workspace:
-        for axis, (low, high) in zip("xyz", self.tool_extent_mm or (), strict=False):
-            if not -2000 <= low <= high <= 2000:
-                raise ValueError(
-                    f"tool_extent_mm: {axis} needs -2000 <= lo <= hi <= 2000 mm,"
-                    f" got ({low}, {high})"
-                )
-        return self
-
-    def check(self, pose: Pose, *, tool: Pose | None = None) -> None:
-        """Refuse a TCP ``pose`` outside the box or with the tool below the table plane.
-
-        Args:
-            pose: the TCP pose (mm, deg) in the robot base frame.
-            tool: the TCP in the flange frame (None: the TCP is the flange), to place
-                the flange for the table plane.
-
-        Raises:
-            ConfigError: naming the axis or the point (TCP, tool, flange) and its height.
-        """
-        for axis, (low, high) in (("x", self.x), ("y", self.y), ("z", self.z)):
-            value = getattr(pose, axis)
-            if not low <= value <= high:
-                raise ConfigError(
-                    f"pose {axis} = {value:g} mm is outside the workspace ({low:g}..{high:g} mm)"
-                )
-        floor = self.floor_z_mm
-        if floor is None:
-            return
-        plane = f"the table plane (workspace floor_z_mm = {floor:g} mm)"
-        if pose.z < floor:
-            raise ConfigError(f"pose z = {pose.z:g} mm puts the TCP below {plane}")
-        lowest = self.tool_lowest_z_mm(pose)
-        if lowest <= floor:  # touching the table is hitting it
-            raise ConfigError(
-                f"pose {pose} puts the tool's lowest point at z = {lowest:.1f} mm, on or"
-                f" below {plane}; the tool reaches {pose.z - lowest:.1f} mm below the TCP"
-                " in this orientation (workspace tool_extent_mm)"
-            )
-        if tool is not None:
-            flange = kin.flange_of(pose, tool)
-            if flange.z < floor:
-                raise ConfigError(
-                    f"pose {pose} puts the flange at z = {flange.z:.1f} mm, below {plane}"
-                )
-
-    def check_arm(self, model: RobotModel, joints_deg: Sequence[float]) -> None:
-        """Refuse joints that put a link of the arm below the table plane.
-
-        Args:
-            model: The arm model.
-            joints_deg: The joints, deg.
-
-        Raises:
-            ConfigError: naming the link and its lowest point's height.
-        """
-        floor, radius = self.floor_z_mm, self.arm_radius_mm
-        if floor is None or radius is None:
-            return
-        link, lowest = arm_lowest_z_mm(model, joints_deg, radius)
-        if lowest <= floor:
-            joints = ", ".join(f"{q:.1f}" for q in joints_deg)
-            raise ConfigError(
-                f"joints ({joints}) deg put link {link} of the arm at z = {lowest:.1f} mm,"
-                f" on or below the table plane (workspace floor_z_mm = {floor:g} mm,"
-                f" arm_radius_mm = {radius:g} mm)"
-            )
-
-    def tool_lowest_z_mm(self, pose: Pose) -> float:
-        """The height of the lowest corner of the tool's extent with the TCP at ``pose``.
-
-        Args:
-            pose: the TCP pose (mm, deg) in the robot base frame.
-
-        Returns:
-            The lowest corner's z, mm (the TCP's z when ``tool_extent_mm`` is None).
-        """
-        if self.tool_extent_mm is None:
-            return pose.z
-        row = kin.pose_to_transform(pose)[2]
-        return pose.z + sum(
-            min(row[i] * low, row[i] * high) for i, (low, high) in enumerate(self.tool_extent_mm)
-        )
-
-
-class TimeoutPolicy(BaseModel):
-    """How long waits may take; motion timeouts derive from the move unless fixed.
-
-    Every bound is finite; the pick & place configuration (``[timeouts]``) is this model
-    and also accepts its older key names ``ack_s``, ``motion_s`` and ``gripper_s``.
-    """
-
-    model_config = ConfigDict(
-        frozen=True, extra="forbid", allow_inf_nan=False, populate_by_name=True
-    )
-
-    #: The robot must acknowledge a command within this time.
-    ack_timeout_s: Annotated[
-        float, Field(gt=0, le=60, validation_alias=AliasChoices("ack_timeout_s", "ack_s"))
-    ] = 2.0
-    #: Motion timeout = factor x expected time + margin (the article's ~130 % rule) ...
-    motion_factor: Annotated[float, Field(ge=1, le=10)] = 1.3
-    #: ... + this margin, s.
-    motion_margin_s: Annotated[float, Field(ge=0, le=600)] = 2.0
-    #: ... unless fixed here for every move.
-    motion_timeout_s: Annotated[
-        Annotated[float, Field(gt=0, le=3600)] | None,
-        Field(validation_alias=AliasChoices("motion_timeout_s", "motion_s")),
-    ] = None
-    #: Gripper moves must end within this time.
-    gripper_timeout_s: Annotated[
-        float,
-        Field(gt=0, le=600, validation_alias=AliasChoices("gripper_timeout_s", "gripper_s")),
-    ] = 5.0
-    #: After a command write whose answer was lost (clear-on-accept profiles, which must
-    #: never write a command twice): how long to watch for the write to land late.
-    in_flight_s: Annotated[float, Field(gt=0, le=600)] = 5.0
-    #: A move whose derived timeout grows with a pace slower than the model's must show
-    #: progress (0.1 mm or 0.1 deg) at least this often past its model budget (or every
-    #: quarter of that budget, if less); none for this long is a stall, s.
-    stall_s: Annotated[float, Field(gt=0, le=60)] = 1.0
-
-    def for_motion(self, expected_s: float) -> float:
-        """The timeout of a move expected to take ``expected_s`` seconds.
-
-        Args:
-            expected_s: The move's expected duration, s.
-
-        Returns:
-            ``motion_timeout_s`` when fixed, else factor x expected + margin, s.
-        """
-        if self.motion_timeout_s is not None:
-            return self.motion_timeout_s
-        return expected_s * self.motion_factor + self.motion_margin_s
 
 
 class FrameCheck(BaseModel):
@@ -897,15 +725,6 @@ class _MotionFollower:
         )
 
 
-def _motion_type(motion: MotionType | str) -> MotionType:
-    """``motion`` as a :class:`MotionType`; a ConfigError naming the choices otherwise."""
-    try:
-        return MotionType(motion)
-    except ValueError:
-        choices = ", ".join(repr(m.value) for m in MotionType)
-        raise ConfigError(f"motion must be one of {choices}, got {motion!r}") from None
-
-
 #: The range of each numeric option of :class:`Robot` (its constructor and its setters
 #: check them alike, :func:`_checked_option`); docs/robot-api.md lists them.
 _OPTION_BOUNDS: dict[str, Bounds] = {
@@ -1078,8 +897,7 @@ class Robot:
                 gripper_port = check_port(gripper_port, field="gripper_port")
         #: The robot's register map.
         self.profile = robot_profile(profile)
-        #: The arm model.
-        self.model = model if isinstance(model, RobotModel) else robot_model(model)
+        arm = model if isinstance(model, RobotModel) else robot_model(model)
         # Checked as the setters check them (one rule each, docs/robot-api.md).
         max_speed_percent = _speed_limit(max_speed_percent)
         (
@@ -1104,19 +922,7 @@ class Robot:
         )
         #: The robot's name in messages and logs.
         self.name = name
-        #: Where the tool may go: the table plane (on by default) and the TCP's box.
-        self.workspace = Workspace() if workspace is None else workspace
-        if tool is not None and not isinstance(tool, Pose):
-            raise ConfigError(
-                f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
-            )
-        #: The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool.
-        self.tool = tool
-        #: Whether a target or ``tool`` that looks like metres or radians is refused
-        #: (:class:`~tmmaster.UnitsError`; docs/robot-api.md, "Units").
-        self.check_units = bool(check_units)
-        if self.check_units and tool is not None:
-            refuse_suspect_units("tool", tool)
+        tool = checked_tool(tool, bool(check_units))
         if frame_check is None:
             frame_check = FrameCheck()
         if not isinstance(frame_check, FrameCheck):
@@ -1126,15 +932,6 @@ class Robot:
             )
         #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
         self.frame_check = frame_check
-        # Where the arm is believed to be, for inverse kinematics and motion times: the
-        # joints the robot reported (at connect, before each plan) where the profile
-        # publishes them, moved on to each commanded target's joints; the pose they put
-        # the TCP at. Without published joints: the last commanded target's (none at
-        # first: the model's ready posture is the seed).
-        self._joints_hint: tuple[float, ...] | None = None
-        self._hint_pose: Pose | None = None
-        self._joints_mismatch_logged = False
-        self._max_speed_percent = max_speed_percent
         link: dict[str, Any] = {
             "device_id": self.profile.device_id,
             "timeout": request_timeout_s,
@@ -1180,6 +977,16 @@ class Robot:
             timeouts=timeouts,
             position_tolerance_mm=position_tolerance_mm,
             orientation_tolerance_deg=orientation_tolerance_deg,
+        )
+        # Checks and plans every move from where the arm is believed to be (no I/O).
+        self._planner = Planner(
+            arm,
+            workspace=Workspace() if workspace is None else workspace,
+            tool=tool,
+            check_units=bool(check_units),
+            max_speed_percent=max_speed_percent,
+            settings=self._follower,
+            log=self._log,
         )
         self._shared: FleetMember | None = None
         if fleet is not None and loop_link is not None:
@@ -1290,11 +1097,52 @@ class Robot:
     @property
     def max_speed_percent(self) -> int:
         """Faster moves are refused, % (an integer in [1, 100])."""
-        return self._max_speed_percent
+        return self._planner.max_speed_percent
 
     @max_speed_percent.setter
     def max_speed_percent(self, value: int) -> None:
-        self._max_speed_percent = _speed_limit(value)
+        self._planner.max_speed_percent = _speed_limit(value)
+
+    # -- what a move is planned with (the planner's) ---------------------------
+
+    @property
+    def model(self) -> RobotModel:
+        """The arm model: inverse kinematics of every target, expected motion times."""
+        return self._planner.model
+
+    @model.setter
+    def model(self, value: RobotModel) -> None:
+        self._planner.model = value
+
+    @property
+    def workspace(self) -> Workspace:
+        """Where the tool may go: the table plane (on by default) and the TCP's box."""
+        return self._planner.workspace
+
+    @workspace.setter
+    def workspace(self, value: Workspace) -> None:
+        self._planner.workspace = value
+
+    @property
+    def tool(self) -> Pose | None:
+        """The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool."""
+        return self._planner.tool
+
+    @tool.setter
+    def tool(self, value: Pose | None) -> None:
+        self._planner.tool = value
+
+    @property
+    def check_units(self) -> bool:
+        """Whether a target or ``tool`` that looks like metres or radians is refused.
+
+        Refused with :class:`~tmmaster.UnitsError` (docs/robot-api.md, "Units").
+        """
+        return self._planner.check_units
+
+    @check_units.setter
+    def check_units(self, value: bool) -> None:
+        self._planner.check_units = value
 
     # -- connection -------------------------------------------------------
 
@@ -1400,7 +1248,7 @@ class Robot:
             )
         joints = channel.joints_from(values)
         if joints is not None:
-            self._take_robot_joints(tcp, joints)
+            self._planner.take_robot_joints(tcp, joints)
 
     def _check_frames(self, flange: Pose, tcp: Pose, robot_base_tcp: Pose | None) -> None:
         """:class:`FrameCheck`: the robot's TCP is its flange x ``tool``, in the robot base.
@@ -1644,19 +1492,7 @@ class Robot:
                 like metres or radians, UnreachablePoseError for a pose the arm cannot
                 take).
         """
-        if not isinstance(pose, Pose):
-            raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
-        if isinstance(speed, bool) or not isinstance(speed, int):
-            raise ConfigError(f"speed must be an integer percent, got {speed!r}")
-        if not 1 <= speed <= self.max_speed_percent:
-            raise ConfigError(f"speed {shown(speed)} % is outside 1..{self.max_speed_percent} %")
-        if self.check_units:
-            refuse_suspect_units("target", pose)
-        seed = seed_deg if seed_deg is not None else self._joints_hint
-        self.workspace.check(pose, tool=self.tool)
-        joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
-        self.workspace.check_arm(self.model, joints)
-        return joints
+        return self._planner.validate(pose, speed, seed_deg)
 
     def expected_motion_time(
         self,
@@ -1684,26 +1520,7 @@ class Robot:
             UnreachablePoseError: The target, or a Line's straight path, cannot be
                 taken.
         """
-        return self.model.motion_time(
-            self._planning_start(start),
-            target,
-            speed_percent=speed,
-            motion=motion,
-            accel_time_s=_accel_s(accel_time_ms),
-            start_joints_deg=self._joints_hint,
-            tool=self.tool,
-        )
-
-    def _planning_start(self, start: Pose) -> Pose:
-        """The pose a plan starts from: the last target when the arm reads as being there."""
-        last = self._hint_pose
-        if last is not None and start.is_close(
-            last, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
-        ):
-            # The arm is where the last move put it (the read pose differs by the
-            # registers' rounding): plan from the exact target, whose joints are known.
-            return last
-        return start
+        return self._planner.expected_time(start, target, speed, motion, accel_time_ms)
 
     def check_move(
         self,
@@ -1735,10 +1552,8 @@ class Robot:
             ConfigError: What is wrong (UnreachablePoseError for a pose or a path the
                 arm cannot take, ValueOutOfRangeError for one the profile cannot encode).
         """
-        motion = _motion_type(motion)
-        joints = self.validate_move(target, speed, seed_deg=seed_deg)
-        if motion is MotionType.LINE and start is not None:
-            self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
+        motion = motion_type(motion)
+        joints = self._planner.check_move(target, speed, motion, start, seed_deg)
         self._channel.check_move(target, speed, motion)
         return joints
 
@@ -1784,17 +1599,10 @@ class Robot:
             CommandRejectedError: The robot refused the command.
             StopRequestedError: A stop was requested (nothing is sent).
         """
-        motion = _motion_type(motion)
+        motion = motion_type(motion)
         percent = self._speed_argument(speed, speed_mm_s, motion)
-        _check_accel(accel_time_ms)
-        self.validate_move(target, percent)
-        if motion is MotionType.LINE and self._hint_pose is not None:
-            # The straight path from where the arm is believed to be, before any request:
-            # a Line the arm cannot follow is refused without touching the robot. It is
-            # checked again from the pose the robot reports before the write.
-            self.model.line_joints(
-                self._hint_pose, target, start_joints_deg=self._joints_hint, tool=self.tool
-            )
+        check_accel(accel_time_ms)
+        self._planner.check_path(target, percent, motion)
         # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
         command = Command(
             CommandKind.of(motion), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
@@ -1808,32 +1616,13 @@ class Robot:
 
         ``motion`` None: a Circle (which takes mm/s too).
         """
-        if speed_mm_s is None:
-            return 30 if speed is None else speed
-        if speed is not None:
-            raise ConfigError(
-                f"give either speed ({speed!r} %) or speed_mm_s ({speed_mm_s!r} mm/s), not both"
-            )
-        if motion is MotionType.PTP:
-            raise ConfigError(
-                "speed_mm_s is a TCP speed, for Line and Circle moves; a PTP's speed is a"
-                " percent (speed=)"
-            )
-        if isinstance(speed_mm_s, bool) or not isinstance(speed_mm_s, int):
-            raise ConfigError(f"speed_mm_s must be an integer (mm/s), got {speed_mm_s!r}")
-        top = int(self.model.tcp_speed_mm_s * self.max_speed_percent / 100)
-        if not 1 <= speed_mm_s <= top:
-            raise ConfigError(
-                f"speed_mm_s {speed_mm_s} mm/s is outside 1..{top} mm/s (max_speed_percent"
-                f" {self.max_speed_percent} % of the {self.model.name}'s"
-                f" {self.model.tcp_speed_mm_s:g} mm/s)"
-            )
-        if not self._channel.extension_fields:
+        percent = self._planner.speed_percent(speed, speed_mm_s, motion)
+        if speed_mm_s is not None and not self._channel.extension_fields:
             raise ConfigError(
                 f"profile {self.profile.name!r} has no TCP speed in mm/s (speed_mm_s): give"
                 " speed in %"
             )
-        return min(self.max_speed_percent, math.ceil(speed_mm_s * 100 / self.model.tcp_speed_mm_s))
+        return percent
 
     def move_joints(
         self,
@@ -1885,11 +1674,9 @@ class Robot:
             TransportError: The link failed and did not come back in time.
         """
         self._require(CommandKind.PTP_JOINTS, "a joint move (move_joints)")
-        values = _joint_values(joints)
-        _check_accel(accel_time_ms)
-        checked = self.model.check_joints(values, tool=self.tool)
-        tcp = self.model.forward(checked, self.tool)
-        self.validate_move(tcp, speed, seed_deg=checked)
+        values = joint_values(joints)
+        check_accel(accel_time_ms)
+        checked, tcp = self._planner.joint_target(values, speed)
         command = Command(CommandKind.PTP_JOINTS, tcp, speed, accel_time_ms, joints=checked)
         handle = self._start_command(command, timeout=timeout)
         handle.wait()
@@ -1958,18 +1745,18 @@ class Robot:
             StopRequestedError: A stop was requested (the move is withdrawn or stopped).
             TransportError: The link failed and did not come back in time.
         """
-        offset = _offset_pose(dx, dy, dz, drx, dry, drz)
+        offset = offset_pose(dx, dy, dz, drx, dry, drz)
         if frame not in ("base", "tool"):
             raise ConfigError(f"frame must be 'base' or 'tool', got {frame!r}")
-        kind = _motion_type(motion)
+        kind = motion_type(motion)
         percent = self._speed_argument(speed, speed_mm_s, kind)
-        _check_accel(accel_time_ms)
+        check_accel(accel_time_ms)
         if speed_mm_s is not None:
             self._channel.check_command(
                 Command(CommandKind.LINE, offset, percent, accel_time_ms, speed_mm_s=speed_mm_s)
             )
         start = self._read_start()
-        target = _moved(start, offset, frame)
+        target = moved(start, offset, frame)
         self.validate_move(target, percent)
         command = Command(
             CommandKind.of(kind), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
@@ -2039,18 +1826,14 @@ class Robot:
         if not isinstance(via, Pose):
             raise ConfigError(f"via must be a tmmaster.Pose, got {type(via).__name__}")
         percent = self._speed_argument(speed, speed_mm_s, None)
-        _check_accel(accel_time_ms)
-        self.validate_move(to, percent)
-        self.workspace.check(via)  # its position (the TCP passes there)
-        if self._hint_pose is not None:
-            # The arc from where the arm is believed to be, before any request.
-            self._check_arc(self._hint_pose, via, to, self._joints_hint)
+        check_accel(accel_time_ms)
+        # The arc from where the arm is believed to be, before any request.
+        self._planner.check_arc_move(via, to, percent)
         self._channel.check_command(
             Command(CommandKind.CIRCLE, to, percent, accel_time_ms, via=via, speed_mm_s=speed_mm_s)
         )
         start = self._read_start()
-        arc = arc_through(self._planning_start(start), via, to)
-        on_arc = kin.transform_to_pose(arc.at(arc.via_fraction))
+        on_arc = self._planner.via_on_arc(start, via, to)
         command = Command(
             CommandKind.CIRCLE, to, percent, accel_time_ms, via=on_arc, speed_mm_s=speed_mm_s
         )
@@ -2072,24 +1855,8 @@ class Robot:
         self._require_connection()
         start, joints = self._channel.read_pose_and_joints()
         if joints is not None:
-            self._take_robot_joints(start, joints)
+            self._planner.take_robot_joints(start, joints)
         return start
-
-    def _check_arc(
-        self, start: Pose, via: Pose, to: Pose, joints: Sequence[float] | None
-    ) -> list[tuple[float, ...]]:
-        """The arc's joint samples from ``start``; refuses a point outside the workspace."""
-        samples = self.model.arc_joints(start, via, to, start_joints_deg=joints, tool=self.tool)
-        arc = arc_through(start, via, to)
-        steps = len(samples) - 1
-        for k in range(steps + 1):
-            point = kin.transform_to_pose(arc.at(k / steps))
-            try:
-                self.workspace.check(point, tool=self.tool)
-                self.workspace.check_arm(self.model, samples[k])
-            except ConfigError as exc:
-                raise ConfigError(f"the arc to {to} passes {point}: {exc}") from exc
-        return list(samples)
 
     def _run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
         """A gripper command through the robot program's handshake, waited for."""
@@ -2125,26 +1892,18 @@ class Robot:
         ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
         start: Pose | None = None
         joints: tuple[float, ...] | None = None
-        gauge: PathGauge | None = None
-        expected = 0.0
         if command.target is not None:
-            start, joints, expected, gauge = self._plan(ticket, resolved_at)
-            default_timeout = self.timeouts.for_motion(expected)
-        else:
-            default_timeout = self.timeouts.gripper_timeout_s
-        timeout_s = timeout if timeout is not None else default_timeout
-        accel = _accel_s(command.accel_time_ms)
+            start, joints = self._arm_before(ticket)
+        plan = self._planner.plan(command, start, joints, timeout=timeout, resolved_at=resolved_at)
         motion = Motion(
             self._follower,
             ticket,
-            start=start,
-            expected_s=expected,
-            timeout_s=timeout_s,
-            gauge=gauge,
-            accel_s=(self.model.accel_time_s if accel is None else accel) if gauge else 0.0,
-            timeout_from_model=(
-                gauge is not None and timeout is None and self.timeouts.motion_timeout_s is None
-            ),
+            start=plan.start,
+            expected_s=plan.expected_s,
+            timeout_s=plan.timeout_s,
+            gauge=plan.gauge,
+            accel_s=plan.accel_s,
+            timeout_from_model=plan.timeout_from_model,
         )
 
         def register() -> None:
@@ -2152,9 +1911,7 @@ class Robot:
 
         with self._follower.following(motion):
             self._send(ticket, register)
-        if joints is not None:
-            # The next move starts where this one ends (until the robot says otherwise).
-            self._joints_hint, self._hint_pose = joints, command.target
+        self._planner.sent(plan)
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
             self._log.info(
                 "robot.command_sent",
@@ -2162,122 +1919,20 @@ class Robot:
                 target=None if command.target is None else command.target.as_list(),
                 speed=command.speed,
                 seq=ticket.seq or None,
-                expected_s=round(expected, 3),
-                timeout_s=round(timeout_s, 3),
+                expected_s=round(plan.expected_s, 3),
+                timeout_s=round(plan.timeout_s, 3),
             )
         return motion
 
-    def _plan(
-        self, ticket: Ticket, resolved_at: Pose | None = None
-    ) -> tuple[Pose, tuple[float, ...], float, PathGauge]:
-        """A move's start (the robot's pose), its target's joints, expected time and gauge.
+    def _arm_before(self, ticket: Ticket) -> tuple[Pose, tuple[float, ...] | None]:
+        """Where a move starts: the checks' read when they made one, else one read.
 
-        Before the write: the start pose comes from the checks' read when they made one,
-        else it is read, with the joints where the profile publishes them (one request).
-        Raises :class:`UnreachablePoseError` when the target (or a Line's or an arc's
-        path) cannot be taken from the arm's actual joints, and :class:`RobotError` when
-        the arm is no longer at ``resolved_at``.
+        The pose with the joints where the profile publishes them (one request).
         """
-        command = ticket.command
-        target = command.target
-        assert target is not None
         start, joints = ticket.start_pose, ticket.start_joints
         if start is None or (joints is None and self._channel.joint_fields):
             start, joints = self._channel.read_pose_and_joints()
-        if joints is not None:
-            self._take_robot_joints(start, joints)
-        if resolved_at is not None and not start.is_close(
-            resolved_at, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
-        ):
-            raise RobotError(
-                f"the arm moved since the {command.kind.value} command was resolved against"
-                f" {resolved_at}: it is at {start}; nothing was sent",
-                pose=start,
-            )
-        origin = self._planning_start(start)
-        hint = self._joints_hint
-        accel = _accel_s(command.accel_time_ms)
-        speed = float(command.speed or 100)
-        if command.speed_mm_s is not None:
-            speed = min(100.0, command.speed_mm_s * 100 / self.model.tcp_speed_mm_s)
-        if command.kind is CommandKind.PTP_JOINTS:
-            assert command.joints is not None
-            target_joints = self.model.check_joints(command.joints, tool=self.tool)
-            first = self.model._start_joints(origin, hint, self.tool)
-            expected = self.model.ptp_time(
-                first, target_joints, speed_percent=speed, accel_time_s=accel
-            )
-            motion = MotionType.PTP
-        elif command.kind is CommandKind.CIRCLE:
-            assert command.via is not None
-            samples = self._check_arc(origin, command.via, target, hint)
-            target_joints = self.model.check_joints(samples[-1], tool=self.tool)
-            expected = self.model.arc_time(
-                origin,
-                command.via,
-                target,
-                speed_percent=speed,
-                accel_time_s=accel,
-                tool=self.tool,
-                samples=samples,
-            )
-            arc = arc_through(origin, command.via, target)
-            gauge = PathGauge.along(
-                origin,
-                target,
-                [kin.transform_to_pose(arc.at(k / PathGauge.SAMPLES)) for k in range(21)],
-            )
-            return start, target_joints, expected, gauge
-        else:
-            # The same solve as validate_move's when the hint did not change (cached).
-            target_joints = self.model.inverse(target, seed_deg=hint, tool=self.tool)
-            motion = MotionType(command.kind.value)
-            expected = self.model.motion_time(
-                origin,
-                target,
-                speed_percent=speed,
-                motion=motion,
-                accel_time_s=accel,
-                start_joints_deg=hint,
-                tool=self.tool,
-            )
-        gauge = PathGauge.of(
-            self.model,
-            origin,
-            target,
-            motion=motion,
-            start_joints_deg=hint,
-            target_joints_deg=target_joints,
-            tool=self.tool,
-        )
-        return start, target_joints, expected, gauge
-
-    def _take_robot_joints(self, pose: Pose, joints: tuple[float, ...]) -> None:
-        """Plan from the joints the robot reported at ``pose``, unless they are the hint's.
-
-        Joints within :data:`_SAME_JOINTS_DEG` of the hint keep the hint (the arm is where
-        the last move put it: its exact joints and target are kept, and the solver's cache
-        hits). Joints whose forward kinematics (with ``tool``) do not put the TCP at
-        ``pose`` are not taken (a simulated arm without a joint model publishes zeros).
-        """
-        hint = self._joints_hint
-        if hint is not None and all(
-            abs(a - b) <= _SAME_JOINTS_DEG for a, b in zip(joints, hint, strict=True)
-        ):
-            return
-        if not self.model.forward(joints, self.tool).is_close(
-            pose, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
-        ):
-            if not self._joints_mismatch_logged:
-                self._joints_mismatch_logged = True
-                self._log.warning(
-                    "robot.joints_not_taken",
-                    joints=[round(q, 3) for q in joints],
-                    pose=pose.as_list(),
-                    reason="their forward kinematics with the tool miss the reported TCP",
-                )
-            return
-        self._joints_hint, self._hint_pose = joints, pose
+        return start, joints
 
     def move_to(
         self,
@@ -2497,69 +2152,6 @@ class Robot:
 
 def _nothing() -> None:
     """A command already registered (a resend of the same ticket)."""
-
-
-def _accel_s(accel_time_ms: int | None) -> float | None:
-    """A command's acceleration time in s; None (the model's) for None or 0 (the default)."""
-    return accel_time_ms / 1000.0 if accel_time_ms else None
-
-
-def _check_accel(accel_time_ms: object) -> None:
-    """An acceleration time is None or an integer number of ms (its range: the profile's)."""
-    if accel_time_ms is not None and (
-        isinstance(accel_time_ms, bool) or not isinstance(accel_time_ms, int)
-    ):
-        raise ConfigError(f"accel_time_ms must be an integer (ms), got {accel_time_ms!r}")
-
-
-def _joint_values(joints: object) -> tuple[float, ...]:
-    """Six finite joint angles as floats; ConfigError naming what is wrong."""
-    if isinstance(joints, str | bytes | Pose) or not isinstance(joints, Sequence):
-        raise ConfigError(
-            f"joints must be a sequence of six angles J1..J6 (deg), got {type(joints).__name__}"
-        )
-    if len(joints) != 6:
-        raise ConfigError(f"joints need six angles J1..J6 (deg), got {len(joints)}")
-    values = []
-    for i, q in enumerate(joints, start=1):
-        if not is_finite_number(q):
-            raise ConfigError(f"J{i} must be a finite number of degrees, got {shown(q)}")
-        values.append(float(q))
-    return tuple(values)
-
-
-def _offset_pose(*values: object) -> Pose:
-    """A relative move's offsets as a Pose; ConfigError naming a value that is no number."""
-    for name, v in zip(("dx", "dy", "dz", "drx", "dry", "drz"), values, strict=True):
-        if not is_finite_number(v):
-            raise ConfigError(f"{name} must be a finite number, got {shown(v)}")
-    x, y, z, rx, ry, rz = (float(v) for v in values)  # type: ignore[arg-type]
-    return Pose(x, y, z, rx, ry, rz)
-
-
-def _moved(start: Pose, offset: Pose, frame: str) -> Pose:
-    """``start`` moved by ``offset``: in the tool frame (start x offset), or in the base's.
-
-    In the base frame the TCP moves along the base's axes and turns about them in place.
-    """
-    here = kin.pose_to_transform(start)
-    if frame == "tool":
-        return kin.transform_to_pose(kin.multiply(here, kin.pose_to_transform(offset)))
-    turn = kin.pose_to_transform(Pose(0, 0, 0, offset.rx, offset.ry, offset.rz))
-    turned = kin.transform_to_pose(kin.multiply(turn, here))
-    return Pose(
-        start.x + offset.x,
-        start.y + offset.y,
-        start.z + offset.z,
-        turned.rx,
-        turned.ry,
-        turned.rz,
-    )
-
-
-#: Reported joints this close (deg, each) to the hint are the hint's (the registers'
-#: float32 rounding, a servo's last hundredths of a degree).
-_SAME_JOINTS_DEG = 0.05
 
 
 def _pose_text(pose: Pose) -> str:

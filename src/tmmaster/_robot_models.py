@@ -244,10 +244,29 @@ class RobotModel(BaseModel):
                 break
         return best
 
-    def _start_joints(
-        self, start: Pose, joints_deg: Sequence[float] | None, tool: Pose | None
+    def start_joints(
+        self,
+        start: Pose,
+        joints_deg: Sequence[float] | None = None,
+        tool: Pose | None = None,
     ) -> Joints:
-        """The joints a move starts from: the given ones when they put the arm at ``start``."""
+        """The joints a move from ``start`` starts at: the given ones when they put the arm there.
+
+        Joints whose forward kinematics (with ``tool``) put the TCP at ``start`` are kept
+        (the branch the arm is on); otherwise ``start`` is solved, from ``joints_deg``
+        when given.
+
+        Args:
+            start: The TCP pose at the start.
+            joints_deg: The joints the arm is believed to be at; None: not known.
+            tool: The TCP in the flange frame (None: the TCP is the flange).
+
+        Returns:
+            The six joint angles, deg.
+
+        Raises:
+            UnreachablePoseError: ``start`` cannot be solved.
+        """
         if joints_deg is not None:
             joints = _six(joints_deg)
             if _cached_forward(self, joints, tool).is_close(start, mm=1e-3, deg=1e-3):
@@ -513,7 +532,7 @@ class RobotModel(BaseModel):
         what: str,
     ) -> tuple[Joints, ...]:
         """Joints at ``steps`` + 1 evenly spaced points ``at(k / steps)`` of a TCP path."""
-        seed = self._start_joints(start, start_joints, tool)
+        seed = self.start_joints(start, start_joints, tool)
         samples = [seed]
         for k in range(1, steps + 1):
             pose = kin.transform_to_pose(at(k / steps))
@@ -743,7 +762,7 @@ class RobotModel(BaseModel):
                 start_joints_deg=start_joints_deg,
                 tool=tool,
             )
-        first = self._start_joints(start, start_joints_deg, tool)
+        first = self.start_joints(start, start_joints_deg, tool)
         last = self.inverse(target, seed_deg=first, tool=tool)
         return self.ptp_time(first, last, speed_percent=speed_percent, accel_time_s=accel_time_s)
 
@@ -828,7 +847,7 @@ class PathGauge:
         """The gauge of a move from ``start`` (at ``start_joints_deg``) to ``target``."""
         if motion is MotionType.LINE or start.distance_to(target) < 1.0:
             return cls(start, target, None)
-        first = model._start_joints(start, start_joints_deg, tool)
+        first = model.start_joints(start, start_joints_deg, tool)
         return _cached_gauge(model, start, target, _rounded(first), _six(target_joints_deg), tool)
 
 
