@@ -32,14 +32,14 @@ MADE_BY_THE_PACKAGE = {
     "tmmaster.aio._robot.AsyncMotion",
     "tmmaster.aio._robot.AsyncRobotIO",
     "tmmaster._io.RobotIO",
-    "tmmaster._robot.Motion",
+    "tmmaster._command.Motion",
     "tmmaster.tmscript._evaluator.Program",
 }
 
 #: Members of public classes that serve the package itself, not its users: left out of
 #: the reference.
 INTERNAL_MEMBERS = {
-    "tmmaster._robot.Motion.ticket",
+    "tmmaster._command.Motion.ticket",
     "tmmaster._transport.BlockTransport.read_plan",
     "tmmaster.sim._simulator.Simulator.device_server",
     "tmmaster.tmscript._evaluator.Program.script",

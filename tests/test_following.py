@@ -8,9 +8,9 @@ from types import SimpleNamespace
 
 import pytest
 
+import tmmaster._command as command_module
 import tmmaster._following as following_module
 import tmmaster._poller as poller_module
-import tmmaster._robot as robot_module
 from tmmaster import (
     AcknowledgeTimeoutError,
     MovePhase,
@@ -21,8 +21,8 @@ from tmmaster import (
     TimeoutPolicy,
 )
 from tmmaster._channels import Command, CommandKind, Observation, Ticket
+from tmmaster._command import Motion, _MotionFollower
 from tmmaster._logging import get_logger
-from tmmaster._robot import Motion, _MotionFollower
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -132,7 +132,7 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
 ) -> None:
     clock = FakeClock()
     fake_time = SimpleNamespace(monotonic=clock.monotonic)
-    monkeypatch.setattr(robot_module, "time", fake_time)
+    monkeypatch.setattr(command_module, "time", fake_time)
     monkeypatch.setattr(poller_module, "time", fake_time)
     monkeypatch.setattr(following_module, "time", fake_time)
     policy = PollPolicy()

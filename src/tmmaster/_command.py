@@ -1,0 +1,699 @@
+"""The command path: gate, send once, read back, follow, abandon.
+
+A :class:`~tmmaster.Robot` owns one :class:`_MotionFollower`. Every command the robot
+sends passes its :class:`~tmmaster._gate.CommandGate` and is written exactly once
+(:meth:`_MotionFollower.send`: after a failed write, the registers are read back to
+find out whether it landed); the :class:`Motion` handle it returns is polled and
+waited for by the follower, which is also the one place where a command the master
+gives up on is withdrawn or stopped (docs/safety.md).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import threading
+import time
+import weakref
+from collections.abc import Callable
+from types import TracebackType
+from typing import Any, Literal
+
+from ._channels import Command, CommandChannel, Observation, Ticket, heartbeat_stalled
+from ._checks import require_positive
+from ._exceptions import (
+    AcknowledgeTimeoutError,
+    CommandRejectedError,
+    CommandStateUnknownError,
+    ConnectionLostError,
+    EmergencyStopError,
+    MotionTimeoutError,
+    ResponseTimeoutError,
+    RobotError,
+    RobotFaultError,
+    StopRequestedError,
+    TMMasterError,
+)
+from ._following import FollowState, Overdue, SharedDriver
+from ._gate import CommandGate
+from ._planning import Plan, TimeoutPolicy
+from ._poller import Poller, PollPolicy
+from ._pose import Pose
+from ._robot_models import PathGauge
+from ._sigint import deferred
+from ._status import MovePhase, MoveProgress
+
+
+class Motion:
+    """A move that was sent; ask for its progress, or wait for it.
+
+    Made by :meth:`Robot.start_move` (and returned by :meth:`Robot.move_to`, done).
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+        ```python
+        from tmmaster import Pose, connect
+
+        with connect("127.0.0.1", 5020) as robot:
+            motion = robot.start_move(Pose(300, -200, 200, 180, 0, 90), speed=50)
+            print(motion.progress().phase)  # sent or running
+            motion.wait()
+            print(motion.done, motion.last_pose)
+        ```
+    """
+
+    def __init__(
+        self,
+        follower: _MotionFollower,
+        ticket: Ticket,
+        *,
+        start: Pose | None,
+        expected_s: float,
+        timeout_s: float,
+        gauge: PathGauge | None = None,
+        accel_s: float = 0.0,
+        timeout_from_model: bool = False,
+    ) -> None:
+        self._follower = follower
+        self._ticket = ticket
+        #: Where the move started, when known.
+        self.start = start
+        #: The TCP target (None for a gripper command).
+        self.target = ticket.command.target
+        #: The expected duration by the arm model, s.
+        self.expected_s = expected_s
+        #: How long the move may take before its wait gives up, s.
+        self.timeout_s = timeout_s
+        #: The move's acceleration time by the arm model, s (0: not a move).
+        self.accel_s = accel_s
+        #: True when ``timeout_s`` was derived from the model's expected time: the wait
+        #: then gives a robot the polls see moving slower than the model more time.
+        self.timeout_from_model = timeout_from_model
+        self._gauge = gauge
+        #: Where the move stands.
+        self.phase = MovePhase.SENT
+        #: The last TCP pose read during the move (None before the first read).
+        self.last_pose: Pose | None = None
+        #: ``time.monotonic()`` when the move was seen done or failed (None before).
+        self.finished_at: float | None = None
+        #: After the master gave up on this command: True when it was withdrawn before the
+        #: robot took it, False when the withdraw failed or came too late, None otherwise.
+        self.withdrawn: bool | None = None
+        #: After the master gave up on a running move: True when the stop was delivered,
+        #: False when it could not be, None when no stop was needed.
+        self.stop_delivered: bool | None = None
+        #: True once the robot reported the command finished (done, or idle after it).
+        self.reported_finished = False
+        #: ``time.monotonic()`` when the poll that saw it reported finished returned.
+        self.reported_finished_at: float | None = None
+
+    def path_fraction(self, pose: Pose) -> float | None:
+        """How much of the path the robot covered at ``pose``, by the arm model (0..1).
+
+        Args:
+            pose: a TCP pose the robot reported during the move.
+
+        Returns:
+            The fraction of the path, or None where the model cannot tell (not a move,
+            or a PTP whose distance to the target does not shrink all the way).
+        """
+        return None if self._gauge is None else self._gauge.fraction(pose)
+
+    @property
+    def command(self) -> Command:
+        """The command this motion carries."""
+        return self._ticket.command
+
+    @property
+    def ticket(self) -> Ticket:
+        """The channel's record of the command sent (sequence number, acknowledgement).
+
+        Low level, for diagnostics: the robot's follower updates it; do not change it.
+        """
+        return self._ticket
+
+    @property
+    def done(self) -> bool:
+        """True once the robot acknowledged and then finished the move."""
+        return self.phase is MovePhase.DONE
+
+    @property
+    def abandoned(self) -> bool:
+        """True once the master gave up on this command (failure, timeout, stop, close)."""
+        return self._follower.abandoned(self)
+
+    def progress(self) -> MoveProgress:
+        """Poll the robot once and report where the move stands (raises on robot failure).
+
+        Returns:
+            The phase, the last pose, the time elapsed and expected, and the fraction
+            of the distance covered.
+
+        Raises:
+            RobotFaultError: The robot reported an error (EmergencyStopError for an
+                e-stop).
+        """
+        if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
+            polled_pose = self.last_pose
+            with self._follower.following(self):
+                self._follower.poll(self)
+                if self.last_pose is polled_pose and not self.done:
+                    # This profile's poll does not carry the pose: read it for the report.
+                    self.last_pose = self._follower.read_pose()
+        elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
+        fraction: float | None = None
+        if self.last_pose is not None and self.target is not None and self.start is not None:
+            total = self.start.distance_to(self.target)
+            remaining = self.last_pose.distance_to(self.target)
+            fraction = 1.0 if total == 0 else max(0.0, min(1.0, 1 - remaining / total))
+        return MoveProgress(self.phase, self.last_pose, elapsed, self.expected_s, fraction)
+
+    def wait(self, timeout_s: float | None = None) -> None:
+        """Block until the move is done; raises a typed error on failure or timeout.
+
+        Whatever ends the wait early (robot failure, timeout, stop request, lost link,
+        an exception), the command is withdrawn if the robot has not taken it, and a
+        running move is stopped unless the robot stopped it itself.
+
+        Args:
+            timeout_s: How long to wait, s; None: the move's own ``timeout_s``.
+
+        Raises:
+            AcknowledgeTimeoutError: The robot did not take the command in time.
+            MotionTimeoutError: The move did not finish in time.
+            RobotFaultError: The robot reported an error (EmergencyStopError for an
+                e-stop).
+            StopRequestedError: A stop was requested (:meth:`Robot.interrupt`).
+            ConnectionLostError: The link broke and did not come back in time.
+        """
+        if timeout_s is not None:
+            require_positive("timeout_s", timeout_s)
+        with self._follower.following(self):
+            self._follower.wait(self, timeout_s)
+
+
+class _Following:
+    """The context of :meth:`_MotionFollower.following`: an escaping exception abandons the motion.
+
+    A class rather than a generator context manager: entered on every wait and send,
+    it costs one object instead of a generator's frame and ``contextlib``'s machinery.
+    The exception is never swallowed.
+    """
+
+    __slots__ = ("_follower", "_motion")
+
+    def __init__(self, follower: _MotionFollower, motion: Motion) -> None:
+        self._follower = follower
+        self._motion = motion
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> Literal[False]:
+        if exc is not None:
+            self._follower.abandon(self._motion, exc)
+        return False
+
+
+class _MotionFollower:
+    """Follows every command a Robot sent: polls it, waits for it, gives it up safely.
+
+    Writes each command once through its gate (:meth:`start`, :meth:`send`), and is
+    the one place where a command the master gives up on is withdrawn or stopped
+    (docs/safety.md). A :class:`Robot` owns one and hands it to each :class:`Motion`;
+    the Robot's polling, timeout and tolerance settings are this object's attributes.
+    """
+
+    def __init__(
+        self,
+        channel: CommandChannel,
+        stop_event: threading.Event,
+        log: Any,
+        *,
+        poll_interval_s: float,
+        polling: PollPolicy,
+        timeouts: TimeoutPolicy,
+        position_tolerance_mm: float,
+        orientation_tolerance_deg: float,
+    ) -> None:
+        self._channel = channel
+        self.stop_event = stop_event
+        #: Every command write passes here: never after close() or a stop request began.
+        self.gate = CommandGate(stop_event)
+        self._log = log
+        #: Set for a robot of a Fleet: its waits' polls run on the fleet's event loop.
+        self.shared_driver: SharedDriver | None = None
+        self.poll_interval_s = poll_interval_s
+        self.polling = polling
+        self.timeouts = timeouts
+        self.position_tolerance_mm = position_tolerance_mm
+        self.orientation_tolerance_deg = orientation_tolerance_deg
+        #: Set by ``Robot.close()`` when it begins: another caller's wait for a withdraw's
+        #: answer ends then (its command is stopped instead), so close() never waits
+        #: on it for longer than a request.
+        self.closing = threading.Event()
+        # One caller at a time gives a command up (a wait, close(), the exit hook).
+        self._abandon_lock = threading.Lock()
+        # The motions the master gave up on, and of those, the ones whose clean-up is
+        # over: True when safe, False when it could not be confirmed.
+        self._given_up: weakref.WeakSet[Motion] = weakref.WeakSet()
+        self._settled: weakref.WeakKeyDictionary[Motion, bool] = weakref.WeakKeyDictionary()
+
+    def start(self, ticket: Ticket, plan: Plan, register: Callable[[Motion], None]) -> Motion:
+        """Send a planned command once (:meth:`send`) and return its handle.
+
+        ``register`` records the handle as the robot's outstanding command, under the
+        gate's lock before the first byte is written. Whatever escapes the write, the
+        command is given up safely first (:meth:`following`).
+        """
+        motion = Motion(
+            self,
+            ticket,
+            start=plan.start,
+            expected_s=plan.expected_s,
+            timeout_s=plan.timeout_s,
+            gauge=plan.gauge,
+            accel_s=plan.accel_s,
+            timeout_from_model=plan.timeout_from_model,
+        )
+        with self.following(motion):
+            self.send(ticket, functools.partial(register, motion))
+        if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+            command = ticket.command
+            self._log.info(
+                "robot.command_sent",
+                command=command.kind.value,
+                target=None if command.target is None else command.target.as_list(),
+                speed=command.speed,
+                seq=ticket.seq or None,
+                expected_s=round(plan.expected_s, 3),
+                timeout_s=round(plan.timeout_s, 3),
+            )
+        return motion
+
+    def send(self, ticket: Ticket, register: Callable[[], None]) -> None:
+        """Write a command once; after a failed write, find out whether it landed.
+
+        Each write passes the gate: refused (:class:`StopRequestedError`, nothing
+        written) once the robot's ``close()`` or a stop request began; ``register`` records the
+        command as outstanding under the same lock, before its first byte is sent.
+
+        A command is written again only where the protocol makes a duplicate harmless
+        (a sequence number the program takes at most once). On a clear-on-accept profile
+        the master watches for the late write for ``timeouts.in_flight_s`` and carries on
+        if it lands; otherwise the command is withdrawn and the error says so.
+        """
+        send = functools.partial(self._channel.send, ticket)
+        try:
+            self.gate.write(register, send)
+            return
+        except (ConnectionLostError, ResponseTimeoutError) as exc:
+            self._log.warning(
+                "robot.command_write_failed", error=str(exc), command=ticket.command.kind.value
+            )
+            failure: TMMasterError = exc
+        self._channel.transport.connect()  # the transport's retry policy rides out a short outage
+        if self._channel.write_landed(ticket):
+            self._log.info("robot.command_write_landed", command=ticket.command.kind.value)
+            return
+        if self._channel.duplicate_safe:
+            self._log.warning(
+                "robot.command_resent",
+                command=ticket.command.kind.value,
+                seq=ticket.seq,
+                reason="same sequence number: the program takes it at most once",
+            )
+            try:
+                self.gate.write(_nothing, send)
+                return
+            except (ConnectionLostError, ResponseTimeoutError) as exc:
+                failure = exc
+            self._channel.transport.connect()
+            if self._channel.write_landed(ticket):
+                return
+        else:
+            deadline = time.monotonic() + self.timeouts.in_flight_s
+            poller = Poller(self.poll_interval_s, self.stop_event, deadline=deadline)
+            while time.monotonic() < deadline:
+                poller.sleep()
+                if self._channel.write_landed(ticket):
+                    self._log.warning(
+                        "robot.command_write_landed_late", command=ticket.command.kind.value
+                    )
+                    return
+        raise CommandStateUnknownError(
+            f"the {ticket.command.kind.value} command write got no answer and did not show up in"
+            " the robot's registers; it was not written again and has been withdrawn"
+        ) from failure
+
+    def abandoned(self, motion: Motion) -> bool:
+        """True once the master gave up on ``motion``."""
+        return motion in self._given_up
+
+    def read_pose(self) -> Pose:
+        """The current TCP pose."""
+        return self._channel.read_pose()
+
+    def stop(self) -> None:
+        """Stop the arm now (the channel retries a stop: it is idempotent)."""
+        self._channel.stop()
+        self._log.warning("robot.stop_sent")
+
+    def following(self, motion: Motion) -> _Following:
+        """Whatever escapes the block, the master gives the command up safely first."""
+        return _Following(self, motion)
+
+    def abandon(
+        self,
+        motion: Motion,
+        reason: BaseException,
+        *,
+        deadline: float | None = None,
+        closer: bool = False,
+    ) -> bool:
+        """Make sure a command the master gives up on can never start later.
+
+        Not yet acknowledged: withdraw it (if the robot took it meanwhile, it is running).
+        Running: stop the arm, unless the robot stopped itself (fault, e-stop, refusal).
+        Every step is best effort and logged; none of them raises a tmmaster error.
+
+        One caller at a time does the work (a wait, ``close()`` on another thread, the
+        exit hook): the others wait for it. The command counts as given up safely only
+        once its withdraw or stop was delivered or definitively failed: a caller cut
+        short (a second Ctrl-C, an exception) leaves it to the next one. In the main
+        thread, Ctrl-C is held back until the work is done (``_sigint.deferred``).
+
+        Args:
+            motion: the command given up on.
+            reason: why (a robot fault means the robot stopped itself).
+            deadline: a ``time.monotonic()`` bound on waiting for another caller's
+                clean-up, and on this caller's wait for a withdraw's answer; None waits
+                as long as that takes (its requests and the answer are bounded).
+            closer: True for ``Robot.close()`` (and the exit hook): its wait for the
+                withdraw's answer is not ended by the close itself, only by
+                ``deadline``. Any other caller's wait ends when a close begins, and
+                the command is stopped.
+
+        Returns:
+            True when the command can no longer run: never written, already finished,
+            withdrawn, stopped by the robot itself, or a stop delivered. False when that
+            could not be confirmed (the withdraw and the stop failed, the profile has no
+            stop, or another caller was still at it at ``deadline``).
+        """
+        lock = self._abandon_lock
+        if deadline is None:
+            acquired = lock.acquire()
+        else:
+            acquired = lock.acquire(timeout=max(deadline - time.monotonic(), 0.0))
+        if not acquired:
+            return False
+        try:
+            settled = self._settled.get(motion)
+            if settled is not None:
+                return settled
+            if motion.done or motion.reported_finished:
+                return True  # nothing left to withdraw or stop
+            self._given_up.add(motion)
+            motion.phase = MovePhase.FAILED
+            if not motion.ticket.written:
+                self._settled[motion] = True  # refused before any byte was sent
+                return True
+            with deferred():
+                confirmed = self._withdraw_or_stop(
+                    motion, reason, until=deadline, interruptible=not closer
+                )
+                # Recorded inside the section: a Ctrl-C held back is raised after it.
+                self._settled[motion] = confirmed
+            return confirmed
+        finally:
+            lock.release()
+
+    def _withdraw_or_stop(
+        self,
+        motion: Motion,
+        reason: BaseException,
+        *,
+        until: float | None = None,
+        interruptible: bool = True,
+    ) -> bool:
+        """:meth:`abandon`'s work: withdraw a command not yet taken, stop a running one."""
+        ticket = motion.ticket
+        running = ticket.acknowledged
+        confirmed = True
+        if not running and not ticket.withdrawn:
+            try:
+                running = self._withdraw(ticket, until=until, interruptible=interruptible)
+                ticket.withdrawn = not running
+                motion.withdrawn = not running
+            except TMMasterError as exc:
+                # Not known whether the robot took it: stop, which is harmless if it did not.
+                running = True
+                motion.withdrawn = False
+                self._log.error(
+                    "robot.withdraw_failed", command=motion.command.kind.value, error=str(exc)
+                )
+            else:
+                self._log.warning(
+                    "robot.command_withdrawn" if not running else "robot.withdraw_too_late",
+                    command=motion.command.kind.value,
+                    reason=type(reason).__name__,
+                )
+        stopped_itself = isinstance(
+            reason, RobotFaultError | EmergencyStopError | CommandRejectedError
+        )
+        if running and stopped_itself and not isinstance(reason, CommandRejectedError):
+            # The robot stopped the move itself; where Play could resume it (a paused
+            # TMflow project), press Stop so that it never resumes.
+            try:
+                stopped_itself = not self._channel.may_resume()
+            except TMMasterError:
+                stopped_itself = False  # not known: the Stop is harmless
+        if running and not stopped_itself:
+            if not self._channel.can_stop:
+                return False  # running, and this profile cannot stop it
+            try:
+                self.stop()
+                motion.stop_delivered = True
+            except TMMasterError as exc:
+                motion.stop_delivered = False
+                confirmed = False
+                self._log.error("robot.stop_failed", error=str(exc))
+        return confirmed
+
+    def _withdraw(
+        self, ticket: Ticket, *, until: float | None = None, interruptible: bool = True
+    ) -> bool:
+        """Withdraw ``ticket`` and wait for the robot's answer; True if it was taken after all.
+
+        A program that answers withdraws (tmflow's cancel record) is waited for, bounded
+        by ``ack_timeout_s`` and by ``until``: "withdrawn" is reported only once the
+        program consumed the cancel or cannot take the command any more. A stop request
+        does not end this wait (a stop request is what withdraws); the close of the
+        robot does when ``interruptible`` (every caller but ``close()`` itself), and the
+        caller then stops the command as for an unanswered cancel.
+
+        Raises:
+            CommandStateUnknownError: no answer within the bound, or the robot closing
+                first (the caller stops).
+        """
+        outcome = self._channel.withdraw(ticket)
+        if outcome is not None:
+            return outcome
+        deadline = time.monotonic() + self.timeouts.ack_timeout_s
+        within = f"within {self.timeouts.ack_timeout_s:g} s"
+        if until is not None and until < deadline:
+            deadline, within = until, "before the close's timeout"
+        # The close's event, not the stop event: a stop request (already set when a
+        # stop request gave the command up) must not cut short the withdraw it asks for.
+        poller = Poller(
+            self.poll_interval_s, self.closing if interruptible else None, deadline=deadline
+        )
+        while True:
+            try:
+                poller.sleep()
+            except StopRequestedError as exc:
+                raise CommandStateUnknownError(
+                    f"the robot connection began to close before the robot program answered"
+                    f" the cancel of command {ticket.seq}"
+                ) from exc
+            outcome = self._channel.withdraw_outcome(ticket)
+            if outcome is not None:
+                return outcome
+            if time.monotonic() >= deadline:
+                raise CommandStateUnknownError(
+                    f"the robot program did not answer the cancel of command {ticket.seq} {within}"
+                )
+
+    def poll(self, motion: Motion) -> None:
+        """Poll the command once; raises the typed error when the robot failed it."""
+        self._apply(motion, self._channel.poll(motion.ticket))
+
+    def _apply(self, motion: Motion, observation: Observation) -> None:
+        """Act on what a poll saw: raise the robot's failure, note the acknowledgement, finish."""
+        if observation.pose is not None:
+            motion.last_pose = observation.pose
+        if observation.failure is not None:
+            motion.phase = MovePhase.FAILED
+            self._log.error(
+                "robot.command_failed",
+                command=motion.command.kind.value,
+                error=str(observation.failure),
+            )
+            if observation.failure.pose is None:
+                observation.failure.pose = self._pose_or(motion.last_pose)
+            raise observation.failure
+        if observation.acknowledged and motion.phase is MovePhase.SENT:
+            motion.phase = MovePhase.RUNNING
+            ticket = motion.ticket
+            if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+                self._log.info(
+                    "robot.command_acknowledged",
+                    command=motion.command.kind.value,
+                    ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
+                )
+        if observation.done:
+            self._finish(motion, observation.pose)
+
+    def wait(self, motion: Motion, timeout_s: float | None) -> None:
+        """Poll until the command is done; raises on failure, timeout or stop request."""
+        follow = FollowState(
+            motion,
+            timeout_s,
+            stop_event=self.stop_event,
+            poll_interval_s=self.poll_interval_s,
+            polling=self.polling,
+            ack_timeout_s=self.timeouts.ack_timeout_s,
+            stall_s=self.timeouts.stall_s,
+        )
+        shared = self.shared_driver
+        while True:
+            observation = None if shared is None else shared(follow)
+            if observation is None:
+                # This thread polls: no shared driver, or it handed this poll back (a
+                # stop request, a failed or busy link: the transport's retries apply).
+                follow.poller.sleep_until(follow.due())
+                follow.poll_started = time.monotonic()
+                observation = self._channel.poll(motion.ticket)
+            self._apply(motion, observation)
+            if motion.done:
+                return
+            overdue = follow.overdue(time.monotonic())
+            if overdue is Overdue.ACK:
+                self._ack_timed_out(motion)
+            elif overdue is Overdue.MOTION:
+                self._motion_timed_out(motion, follow)
+
+    def _pose_or(self, fallback: Pose | None) -> Pose | None:
+        """The current pose for an error report; the fallback if it cannot be read."""
+        try:
+            return self._channel.read_pose()
+        except TMMasterError:
+            return fallback
+
+    def _finish(self, motion: Motion, polled_pose: Pose | None) -> None:
+        motion.reported_finished = True
+        motion.reported_finished_at = time.monotonic()
+        if motion.target is not None:
+            # The poll that saw the move finished read the pose in the same snapshot
+            # (article); only a profile whose poll carries no pose needs one more read.
+            # tmflow: the joints come with it (one request), for the next move's plan.
+            joints: tuple[float, ...] | None = None
+            if polled_pose is not None:
+                pose = polled_pose
+            else:
+                pose, joints = self._channel.read_pose_and_joints()
+            motion.last_pose = pose
+            if not pose.is_close(
+                motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
+            ):
+                self._channel.after_done = None  # a failed move's state is not reused
+                motion.phase = MovePhase.FAILED
+                raise RobotError(
+                    f"robot reported the move finished but the TCP is at {pose},"
+                    f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
+                    pose=pose,
+                )
+            wanted = motion.command.joints
+            if wanted is not None and joints is not None:
+                # A joint move arrives at its joints, not only at their TCP (another
+                # branch reaches the same TCP with other joints).
+                worst = max(abs(a - b) for a, b in zip(joints, wanted, strict=True))
+                if worst > self.orientation_tolerance_deg:
+                    self._channel.after_done = None
+                    motion.phase = MovePhase.FAILED
+                    raise RobotError(
+                        f"robot reported the move finished but its joints are"
+                        f" {[round(q, 2) for q in joints]}, {worst:.2f} deg from the target"
+                        f" {[round(q, 2) for q in wanted]}",
+                        pose=pose,
+                    )
+        motion.phase = MovePhase.DONE
+        motion.finished_at = time.monotonic()
+        if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+            self._log.info(
+                "robot.command_done",
+                command=motion.command.kind.value,
+                duration_s=round(motion.finished_at - motion.ticket.sent_at, 4),
+                expected_s=round(motion.expected_s, 3),
+            )
+
+    def _ack_timed_out(self, motion: Motion) -> None:
+        ticket = motion.ticket
+        try:
+            taken = self._withdraw(ticket)
+        except CommandStateUnknownError as exc:
+            # Not known whether the program will take it: the clean-up that follows
+            # (abandon) withdraws again, and stops the project if still unanswered.
+            motion.phase = MovePhase.FAILED
+            self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
+            raise AcknowledgeTimeoutError(
+                f"the robot did not acknowledge the {motion.command.kind.value} command within"
+                f" {self.timeouts.ack_timeout_s:g} s, nor answer its cancel: {exc}",
+                pose=motion.last_pose,
+            ) from exc
+        if taken:
+            # The robot took it just as we gave up: it is executing our command.
+            ticket.acknowledged = True
+            ticket.acknowledged_at = time.monotonic()
+            motion.phase = MovePhase.RUNNING
+            self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
+            return
+        ticket.withdrawn = True
+        motion.withdrawn = True
+        motion.phase = MovePhase.FAILED
+        hint = ""
+        if heartbeat_stalled(ticket):
+            hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
+        self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
+        raise AcknowledgeTimeoutError(
+            f"the robot did not acknowledge the {motion.command.kind.value} command within"
+            f" {self.timeouts.ack_timeout_s:g} s; the command was withdrawn{hint}",
+            pose=motion.last_pose,
+        )
+
+    def _motion_timed_out(self, motion: Motion, follow: FollowState) -> None:
+        motion.phase = MovePhase.FAILED
+        budget = follow.applied_budget()  # the bound actually applied, grown or not
+        stall = follow.describe_stall()
+        pose = self._pose_or(motion.last_pose)
+        self._log.error(
+            "robot.motion_timeout",
+            timeout_s=round(budget, 3),
+            pose=None if pose is None else pose.as_list(),
+        )
+        # The stop follows in abandon(), as for every running move the master gives up on.
+        raise MotionTimeoutError(
+            f"move to {motion.target} did not finish within {budget:.2f} s"
+            f" (expected {motion.expected_s:.2f} s){stall}; last pose {pose}",
+            pose=pose,
+        )
+
+
+def _nothing() -> None:
+    """A command already registered (a resend of the same ticket)."""
