@@ -183,6 +183,196 @@ def _policy(name: str, value: object, kind: type[_PolicyT]) -> _PolicyT:
 
 
 @dataclass(frozen=True)
+class _Options:
+    """A Robot's options that its setters check too, checked (docs/robot-api.md)."""
+
+    max_speed_percent: int
+    poll_interval_s: float
+    request_timeout_s: float
+    position_tolerance_mm: float
+    orientation_tolerance_deg: float
+    gripper_settle_s: float
+    polling: PollPolicy
+    timeouts: TimeoutPolicy
+    retry: RetryPolicy | None
+
+    @classmethod
+    def checked(
+        cls,
+        *,
+        max_speed_percent: object,
+        poll_interval_s: object,
+        request_timeout_s: object,
+        position_tolerance_mm: object,
+        orientation_tolerance_deg: object,
+        gripper_settle_s: object,
+        polling: object,
+        timeouts: object,
+        retry: RetryPolicy | None,
+    ) -> _Options:
+        """The options checked in this order, each as its setter checks it."""
+        speed_limit = _speed_limit(max_speed_percent)
+        poll, request, mm, deg, settle = (
+            _checked_option(option, value)
+            for option, value in (
+                ("poll_interval_s", poll_interval_s),
+                ("request_timeout_s", request_timeout_s),
+                ("position_tolerance_mm", position_tolerance_mm),
+                ("orientation_tolerance_deg", orientation_tolerance_deg),
+                ("gripper_settle_s", gripper_settle_s),
+            )
+        )
+        return cls(
+            speed_limit,
+            poll,
+            request,
+            mm,
+            deg,
+            settle,
+            _policy("polling", polling, PollPolicy),
+            _policy("timeouts", timeouts, TimeoutPolicy),
+            retry,
+        )
+
+    def follower(
+        self, channel: CommandChannel, stop_event: threading.Event, log: Any
+    ) -> _MotionFollower:
+        """The robot's command path, with the polling, timeout and tolerance settings."""
+        return _MotionFollower(
+            channel,
+            stop_event,
+            log,
+            poll_interval_s=self.poll_interval_s,
+            polling=self.polling,
+            timeouts=self.timeouts,
+            position_tolerance_mm=self.position_tolerance_mm,
+            orientation_tolerance_deg=self.orientation_tolerance_deg,
+        )
+
+    def planner(
+        self,
+        model: RobotModel,
+        workspace: Workspace | None,
+        tool: Pose | None,
+        check_units: bool,
+        settings: _MotionFollower,
+        log: Any,
+    ) -> Planner:
+        """The robot's planner (``tool`` checked), with ``max_speed_percent``."""
+        return Planner(
+            model,
+            workspace=Workspace() if workspace is None else workspace,
+            tool=tool,
+            check_units=bool(check_units),
+            max_speed_percent=self.max_speed_percent,
+            settings=settings,
+            log=log,
+        )
+
+    def gripper(
+        self,
+        spec: str | Path | GripperProfile | Gripper | None,
+        profile: RobotProfile,
+        links: _Links,
+    ) -> Gripper:
+        """The gripper for ``spec``: an instance as given, "auto" what the profile offers.
+
+        A stand-alone gripper listens at the gripper's address of ``links`` (or speaks
+        over its ready link).
+        """
+        if isinstance(spec, Gripper):
+            return spec
+        if spec is None or spec == "none":
+            return NoGripper()
+        if spec == "auto":
+            return auto_gripper(profile, settle_s=self.gripper_settle_s)
+        link = GripperLink(
+            host=links.gripper_host,
+            port=links.gripper_port,
+            retry=self.retry,
+            request_timeout_s=self.request_timeout_s,
+            poll_interval_s=self.poll_interval_s,
+            timeout_s=self.timeouts.gripper_timeout_s,
+            ack_timeout_s=self.timeouts.ack_timeout_s,
+            transport=links.gripper_transport,
+        )
+        return gripper_for_profile(gripper_profile(spec), link)
+
+
+def _checked_frame_check(frame_check: object) -> FrameCheck:
+    """The ``frame_check`` option: a FrameCheck (None: the default one, on)."""
+    if frame_check is None:
+        return FrameCheck()
+    if not isinstance(frame_check, FrameCheck):
+        raise ConfigError(
+            'frame_check must be a tmmaster.FrameCheck (FrameCheck.off("why") switches'
+            f" it off), got {frame_check!r}"
+        )
+    return frame_check
+
+
+@dataclass(frozen=True)
+class _Links:
+    """Where a Robot and its stand-alone gripper are, checked (or their ready links)."""
+
+    host: str
+    port: int
+    gripper_host: str
+    gripper_port: int
+    transport: Transport | None
+    gripper_transport: Transport | None
+
+    @classmethod
+    def checked(
+        cls,
+        host: str,
+        port: int,
+        gripper_host: str | None,
+        gripper_port: int,
+        transport: Transport | None,
+        gripper_transport: Transport | None,
+    ) -> _Links:
+        """The addresses checked (an in-process host, sim://name, has no port).
+
+        A ready ``transport`` (``gripper_transport``) leaves its address unchecked. The
+        gripper's host is the robot's unless given.
+        """
+        if transport is None:
+            host = check_host(host, field="host", port_field="port")
+            if not is_in_process(host):
+                port = check_port(port, field="port")
+        if gripper_transport is None:
+            if gripper_host is not None:
+                gripper_host = check_host(
+                    gripper_host, field="gripper_host", port_field="gripper_port"
+                )
+            if not is_in_process(gripper_host or host):
+                gripper_port = check_port(gripper_port, field="gripper_port")
+        return cls(host, port, gripper_host or host, gripper_port, transport, gripper_transport)
+
+    def open(
+        self, profile: RobotProfile, name: str, fleet: Fleet | None, options: _Options
+    ) -> Transport:
+        """The robot's link: the ready one, a Fleet's, or one opened to ``host:port``.
+
+        An in-process ``host`` ("sim://name") opens through the plugin that registered it.
+        """
+        link: dict[str, Any] = {
+            "device_id": profile.device_id,
+            "timeout": options.request_timeout_s,
+            "retry": options.retry,
+            "name": name,
+        }
+        if fleet is not None:
+            if not isinstance(fleet, Fleet):
+                raise ConfigError(f"fleet must be a tmmaster.Fleet, got {type(fleet).__name__}")
+            if self.transport is not None:
+                raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
+            return join_fleet(fleet, self.host, self.port, **link)
+        return self.transport or open_transport(self.host, self.port, **link)
+
+
+@dataclass(frozen=True)
 class _Mount:
     """What a Robot hands its gripper driver (:class:`~tmmaster._gripper.GripperMount`)."""
 
@@ -306,166 +496,89 @@ class Robot:
         frame_check: FrameCheck | None = None,
         check_units: bool = True,
     ) -> None:
-        # The addresses used are checked before anything else (an in-process host, such
-        # as sim://name, has no port).
-        if transport is None:
-            host = check_host(host, field="host", port_field="port")
-            if not is_in_process(host):
-                port = check_port(port, field="port")
-        if gripper_transport is None:
-            if gripper_host is not None:
-                gripper_host = check_host(
-                    gripper_host, field="gripper_host", port_field="gripper_port"
-                )
-            reached = gripper_host or host
-            if not is_in_process(reached):
-                gripper_port = check_port(gripper_port, field="gripper_port")
+        # The addresses first, then every option, before anything is opened.
+        links = _Links.checked(host, port, gripper_host, gripper_port, transport, gripper_transport)
         #: The robot's register map.
         self.profile = robot_profile(profile)
         arm = model if isinstance(model, RobotModel) else robot_model(model)
-        # Checked as the setters check them (one rule each, docs/robot-api.md).
-        max_speed_percent = _speed_limit(max_speed_percent)
-        (
-            poll_interval_s,
-            request_timeout_s,
-            position_tolerance_mm,
-            orientation_tolerance_deg,
-            gripper_settle_s,
-        ) = (
-            _checked_option(option, value)
-            for option, value in (
-                ("poll_interval_s", poll_interval_s),
-                ("request_timeout_s", request_timeout_s),
-                ("position_tolerance_mm", position_tolerance_mm),
-                ("orientation_tolerance_deg", orientation_tolerance_deg),
-                ("gripper_settle_s", gripper_settle_s),
-            )
-        )
-        polling, timeouts = (
-            _policy("polling", polling, PollPolicy),
-            _policy("timeouts", timeouts, TimeoutPolicy),
+        options = _Options.checked(
+            max_speed_percent=max_speed_percent,
+            poll_interval_s=poll_interval_s,
+            request_timeout_s=request_timeout_s,
+            position_tolerance_mm=position_tolerance_mm,
+            orientation_tolerance_deg=orientation_tolerance_deg,
+            gripper_settle_s=gripper_settle_s,
+            polling=polling,
+            timeouts=timeouts,
+            retry=retry,
         )
         #: The robot's name in messages and logs.
         self.name = name
         tool = checked_tool(tool, bool(check_units))
-        if frame_check is None:
-            frame_check = FrameCheck()
-        if not isinstance(frame_check, FrameCheck):
-            raise ConfigError(
-                'frame_check must be a tmmaster.FrameCheck (FrameCheck.off("why") switches'
-                f" it off), got {frame_check!r}"
-            )
         #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
-        self.frame_check = frame_check
-        link: dict[str, Any] = {
-            "device_id": self.profile.device_id,
-            "timeout": request_timeout_s,
-            "retry": retry,
-            "name": name,
-        }
-        loop_link: LoopTransport | None = None
-        if fleet is not None:
-            if not isinstance(fleet, Fleet):
-                raise ConfigError(f"fleet must be a tmmaster.Fleet, got {type(fleet).__name__}")
-            if transport is not None:
-                raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
-            loop_link = join_fleet(fleet, host, port, **link)
-        # An in-process ``host`` ("sim://name") opens through the plugin that registered it.
-        self._transport: Transport = loop_link or transport or open_transport(host, port, **link)
-        self._channel: CommandChannel = channel_for(self.profile, self._transport)
-        self._stop_event = threading.Event()
-        # Retry sleeps of reads end at once on a stop request, like every poll.
-        self._transport.interrupt = self._stop_event
+        self.frame_check = _checked_frame_check(frame_check)
+        self._transport = links.open(self.profile, name, fleet, options)
         self._log = _log.bind(robot=name)
-        # Sends once, polls, waits for and gives up safely every command (each Motion
-        # has it); its gate: every command write passes it, never after close() or a
-        # stop request began.
-        self._follower = _MotionFollower(
-            self._channel,
-            self._stop_event,
-            self._log,
-            poll_interval_s=poll_interval_s,
-            polling=polling,
-            timeouts=timeouts,
-            position_tolerance_mm=position_tolerance_mm,
-            orientation_tolerance_deg=orientation_tolerance_deg,
+        self._open_command_path(options, fleet)
+        # Checks and plans every move from where the arm is believed to be (no I/O).
+        self._planner = options.planner(
+            arm, workspace, tool, check_units, self._follower, self._log
         )
-        self._gate = self._follower.gate
         self._connected = False
         # What the last close() found: True when nothing it sent can still run.
         self._closed_safely: bool | None = None
         #: The last command sent; while it is not settled, close() withdraws or stops it.
         self._last_motion: Motion | None = None
-        # Digital I/O: its writes pass the same gate as commands.
+        #: The robot's gripper (a NoGripper when there is none).
+        self.gripper = options.gripper(gripper, self.profile, links)
+        self.gripper.attach(self._mount())
+        _commanded.register(self)  # made: a StatusMonitor.add() to its address is refused
+
+    def _open_command_path(self, options: _Options, fleet: Fleet | None) -> None:
+        """The channel over the link, the stop event, the follower and its gate; the I/O
+        and the TMflow project's Play and Pause, whose writes pass the same gate; a
+        Fleet's robot joins its fleet."""
+        self._channel: CommandChannel = channel_for(self.profile, self._transport)
+        self._stop_event = threading.Event()
+        # Retry sleeps of reads end at once on a stop request, like every poll.
+        self._transport.interrupt = self._stop_event
+        # Sends once, polls, waits for and gives up safely every command (each Motion
+        # has it); every command write passes its gate, never after close() or a stop
+        # request began.
+        self._follower = options.follower(self._channel, self._stop_event, self._log)
+        self._gate = self._follower.gate
         self._io = RobotIO(
             self.profile, self._transport, self._gate, self._log, self._require_connection
         )
-        # The TMflow project's Play and Pause: pressed only when asked, through the gate.
+        # Pressed only when asked.
         self._project = ProjectControl(
             self.profile, self._transport, self._channel, self._gate, self._stop_event, self._log
         )
-        # Checks and plans every move from where the arm is believed to be (no I/O).
-        self._planner = Planner(
-            arm,
-            workspace=Workspace() if workspace is None else workspace,
-            tool=tool,
-            check_units=bool(check_units),
-            max_speed_percent=max_speed_percent,
-            settings=self._follower,
-            log=self._log,
-        )
-        self._shared: FleetMember | None = None
-        if fleet is not None and loop_link is not None:
-            # The polls of this robot's waits run on the fleet's loop.
-            self._shared = fleet_driver(fleet, self, self._channel, loop_link, self._gate)
-            self._follower.shared_driver = self._shared.follow
-        #: The robot's gripper (a NoGripper when there is none).
-        self.gripper: Gripper = self._make_gripper(
-            gripper,
-            GripperLink(
-                host=gripper_host or host,
-                port=gripper_port,
-                retry=retry,
-                request_timeout_s=request_timeout_s,
-                poll_interval_s=poll_interval_s,
-                timeout_s=self.timeouts.gripper_timeout_s,
-                ack_timeout_s=self.timeouts.ack_timeout_s,
-                transport=gripper_transport,
-            ),
-            settle_s=gripper_settle_s,
-        )
-        self.gripper.attach(
-            _Mount(
-                name=name,
-                profile=self.profile,
-                link=self._transport,
-                require_connection=self._require_connection,
-                stop_event=self._stop_event,
-                poll_interval_s=poll_interval_s,
-                gripper_timeout_s=self.timeouts.gripper_timeout_s,
-                ack_timeout_s=self.timeouts.ack_timeout_s,
-                check_fault=self.check_fault,
-                checked_status=self._checked_status,
-                run_command=self._run_command,
-            )
-        )
-        _commanded.register(self)  # made: a StatusMonitor.add() to its address is refused
+        self._shared = self._join(fleet)
 
-    def _make_gripper(
-        self,
-        spec: str | Path | GripperProfile | Gripper | None,
-        link: GripperLink,
-        *,
-        settle_s: float,
-    ) -> Gripper:
-        """The gripper for ``spec``: an instance as given, "auto" what the profile offers."""
-        if isinstance(spec, Gripper):
-            return spec
-        if spec is None or spec == "none":
-            return NoGripper()
-        if spec == "auto":
-            return auto_gripper(self.profile, settle_s=settle_s)
-        return gripper_for_profile(gripper_profile(spec), link)
+    def _join(self, fleet: Fleet | None) -> FleetMember | None:
+        """A Fleet's robot: the polls of its waits run on the fleet's loop."""
+        if fleet is None or not isinstance(self._transport, LoopTransport):
+            return None
+        member = fleet_driver(fleet, self, self._channel, self._transport, self._gate)
+        self._follower.shared_driver = member.follow
+        return member
+
+    def _mount(self) -> _Mount:
+        """What the gripper driver gets of this robot: never the Robot itself."""
+        return _Mount(
+            name=self.name,
+            profile=self.profile,
+            link=self._transport,
+            require_connection=self._require_connection,
+            stop_event=self._stop_event,
+            poll_interval_s=self.poll_interval_s,
+            gripper_timeout_s=self.timeouts.gripper_timeout_s,
+            ack_timeout_s=self.timeouts.ack_timeout_s,
+            check_fault=self.check_fault,
+            checked_status=self._checked_status,
+            run_command=self._run_command,
+        )
 
     # -- settings (the follower's: every wait reads them when it starts) ---
 
@@ -661,13 +774,15 @@ class Robot:
         try:
             values = channel.read(fields)
         except IllegalAddressError as exc:
-            mismatch = self._profile_mismatch(exc)
+            mismatch = _profile_mismatch(self._transport, self.profile, exc)
             if mismatch is None:
                 raise
             raise mismatch from exc
         tcp = pose_from(values, TCP_FIELDS)
         if check:
-            self._check_frames(
+            _check_frames(
+                self.frame_check,
+                self.tool,
                 pose_from(values, FLANGE_FIELDS),
                 tcp,
                 pose_from(values, ROBOT_BASE_TCP_FIELDS) if channel.robot_base_tcp_fields else None,
@@ -675,43 +790,6 @@ class Robot:
         joints = channel.joints_from(values)
         if joints is not None:
             self._planner.take_robot_joints(tcp, joints)
-
-    def _check_frames(self, flange: Pose, tcp: Pose, robot_base_tcp: Pose | None) -> None:
-        """:class:`FrameCheck`: the robot's TCP is its flange x ``tool``, in the robot base.
-
-        Raises:
-            ConfigError: naming the tool offset the robot appears to have and ``tool``, or
-                the two TCP poses when the current base is not the robot base.
-        """
-        check = self.frame_check
-        tool = kin.IDENTITY if self.tool is None else kin.pose_to_transform(self.tool)
-        expected = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(flange), tool))
-        mm, deg = tcp.distance_to(expected), tcp.rotation_to(expected)
-        if mm > check.position_tolerance_mm or deg > check.orientation_tolerance_deg:
-            apparent = kin.transform_to_pose(
-                kin.multiply(kin.invert(kin.pose_to_transform(flange)), kin.pose_to_transform(tcp))
-            )
-            mine = "none (the TCP is the flange)" if self.tool is None else _pose_text(self.tool)
-            raise ConfigError(
-                f"frame check: the robot's TCP is not its flange x this Robot's tool: the robot"
-                f" reports a tool offset of {_pose_text(apparent)} (inverse(flange) x TCP;"
-                f" TCP {tcp}, flange {flange}), this Robot's tool is {mine}"
-                f" ({mm:.1f} mm, {deg:.1f} deg apart). Give Robot(tool=...) the robot's"
-                " tool, or generate the robot program for the master's (tmmaster"
-                " robot-program --tool; its ChangeTCP sets the robot's TCP when the project"
-                ' starts), or pass frame_check=FrameCheck.off("why")'
-            )
-        if robot_base_tcp is not None and (
-            robot_base_tcp.distance_to(tcp) > check.position_tolerance_mm
-            or robot_base_tcp.rotation_to(tcp) > check.orientation_tolerance_deg
-        ):
-            raise ConfigError(
-                f"frame check: the robot reports its TCP in a base other than the robot base"
-                f" ({tcp} in the current base, {robot_base_tcp} in the robot base); the"
-                " master's poses are in the robot base (the robot program's"
-                ' ChangeBase("RobotBase") when the project starts), or pass'
-                ' frame_check=FrameCheck.off("why")'
-            )
 
     def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
@@ -821,32 +899,10 @@ class Robot:
         try:
             return self._channel.read_status()
         except IllegalAddressError as exc:
-            mismatch = self._profile_mismatch(exc)
+            mismatch = _profile_mismatch(self._transport, self.profile, exc)
             if mismatch is None:
                 raise
             raise mismatch from exc
-
-    def _profile_mismatch(self, refused: IllegalAddressError) -> ProfileMismatchError | None:
-        """After a refused read: the built-in profile the device seems to speak, as an error."""
-        for name in builtin_profile_names():
-            if name == self.profile.name:
-                continue
-            other = load_profile(name)
-            if not isinstance(other, RobotProfile):
-                continue
-            try:
-                self._transport.read_fields(
-                    other.role(Role.STATUS)[:1], retry=False, interruptible=False
-                )
-            except TMMasterError:
-                continue
-            return ProfileMismatchError(
-                f"{refused}; the device answers the {name!r} profile's status registers:"
-                f" is it running that profile? (this Robot speaks {self.profile.name!r})",
-                profile=self.profile.name,
-                device_profile=name,
-            )
-        return None
 
     def pose(self) -> Pose:
         """The current TCP pose.
@@ -1496,6 +1552,68 @@ class Robot:
         self._stop_event.set()
         if self._shared is not None:
             wake_waits(self._shared)  # a wait polled by the fleet ends now
+
+
+def _check_frames(
+    check: FrameCheck, tool: Pose | None, flange: Pose, tcp: Pose, robot_base_tcp: Pose | None
+) -> None:
+    """:class:`FrameCheck`: the robot's TCP is its flange x ``tool``, in the robot base.
+
+    Raises:
+        ConfigError: naming the tool offset the robot appears to have and ``tool``, or
+            the two TCP poses when the current base is not the robot base.
+    """
+    offset = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
+    expected = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(flange), offset))
+    mm, deg = tcp.distance_to(expected), tcp.rotation_to(expected)
+    if mm > check.position_tolerance_mm or deg > check.orientation_tolerance_deg:
+        apparent = kin.transform_to_pose(
+            kin.multiply(kin.invert(kin.pose_to_transform(flange)), kin.pose_to_transform(tcp))
+        )
+        mine = "none (the TCP is the flange)" if tool is None else _pose_text(tool)
+        raise ConfigError(
+            f"frame check: the robot's TCP is not its flange x this Robot's tool: the robot"
+            f" reports a tool offset of {_pose_text(apparent)} (inverse(flange) x TCP;"
+            f" TCP {tcp}, flange {flange}), this Robot's tool is {mine}"
+            f" ({mm:.1f} mm, {deg:.1f} deg apart). Give Robot(tool=...) the robot's"
+            " tool, or generate the robot program for the master's (tmmaster"
+            " robot-program --tool; its ChangeTCP sets the robot's TCP when the project"
+            ' starts), or pass frame_check=FrameCheck.off("why")'
+        )
+    if robot_base_tcp is not None and (
+        robot_base_tcp.distance_to(tcp) > check.position_tolerance_mm
+        or robot_base_tcp.rotation_to(tcp) > check.orientation_tolerance_deg
+    ):
+        raise ConfigError(
+            f"frame check: the robot reports its TCP in a base other than the robot base"
+            f" ({tcp} in the current base, {robot_base_tcp} in the robot base); the"
+            " master's poses are in the robot base (the robot program's"
+            ' ChangeBase("RobotBase") when the project starts), or pass'
+            ' frame_check=FrameCheck.off("why")'
+        )
+
+
+def _profile_mismatch(
+    transport: Transport, profile: RobotProfile, refused: IllegalAddressError
+) -> ProfileMismatchError | None:
+    """After a refused read: the built-in profile the device seems to speak, as an error."""
+    for name in builtin_profile_names():
+        if name == profile.name:
+            continue
+        other = load_profile(name)
+        if not isinstance(other, RobotProfile):
+            continue
+        try:
+            transport.read_fields(other.role(Role.STATUS)[:1], retry=False, interruptible=False)
+        except TMMasterError:
+            continue
+        return ProfileMismatchError(
+            f"{refused}; the device answers the {name!r} profile's status registers:"
+            f" is it running that profile? (this Robot speaks {profile.name!r})",
+            profile=profile.name,
+            device_profile=name,
+        )
+    return None
 
 
 def _pose_text(pose: Pose) -> str:
