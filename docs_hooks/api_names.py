@@ -55,5 +55,16 @@ MADE_LIKE = {
     "tmmaster.aio._robot.connect": "tmmaster._robot.Robot",
 }
 
+#: Classes whose members are made at import time from another class's (``move_to =
+#: _awaited(Robot.move_to)``, a docstring taken from ``Robot.connect``): the reference
+#: shows each as it is at run time, an ``async`` method with the other's parameters and
+#: the docstring made for it.
+DERIVED = {
+    "tmmaster.aio._robot.AsyncGripper",
+    "tmmaster.aio._robot.AsyncMotion",
+    "tmmaster.aio._robot.AsyncRobot",
+    "tmmaster.aio._robot.AsyncRobotIO",
+}
+
 #: Public names documented by their package's docstring, not rendered on their own.
 NOT_RENDERED = {"tmmaster.__version__"}

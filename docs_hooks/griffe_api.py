@@ -13,6 +13,10 @@ static analysis would otherwise show wrong (the names involved: docs_hooks/api_n
   ``Robot``'s signature (``connect = _connected(Robot)``): each is shown as the function
   it is, with ``Robot``'s parameters, its own return type and the docstring it has at
   run time.
+- ``tmmaster.aio``'s methods are made at import time from the sync ones (``move_to =
+  _awaited(Robot.move_to)``), or take their docstrings from them: each is shown as it
+  is at run time, an ``async`` method with the sync method's parameters and the
+  docstring made for it.
 - A Protocol that stands for a public class in a signature (it breaks an import
   cycle: ``Fleet.latest(robot: _Closable)``) is shown as that class (``Robot``).
 - Classes only the package makes (``Motion``) are shown without a constructor, and
@@ -107,6 +111,8 @@ class PublicAPI(griffe.Extension):
                 _hide_private_bases(cls, public)
         for function_path, class_path in NAMES.MADE_LIKE.items():
             _shape_like(pkg, function_path, class_path)
+        for class_path in NAMES.DERIVED:
+            _show_as_run(pkg, class_path)
         _name_stand_ins(pkg)
 
 
@@ -235,6 +241,60 @@ def _shape_like(pkg: griffe.Module, function_path: str, class_path: str) -> None
             doc, lineno=attribute.lineno, endlineno=attribute.endlineno, parent=function
         )
     module.set_member(name, function)
+
+
+def _show_as_run(pkg: griffe.Module, class_path: str) -> None:
+    """Show the members of ``class_path`` made at import time as they are at run time."""
+    cls = pkg.modules_collection.get_member(class_path)
+    module_path, name = class_path.rsplit(".", 1)
+    runtime = getattr(importlib.import_module(module_path), name)
+    for member_name, member in list(cls.members.items()):
+        if member.is_alias or member_name.startswith("_"):
+            continue
+        value = inspect.getattr_static(runtime, member_name, None)
+        made_from = getattr(value, "__wrapped__", None)
+        if isinstance(member, griffe.Attribute) and inspect.isfunction(made_from):
+            cls.set_member(member_name, _awaited_method(pkg, cls, member, value, made_from))
+        elif (doc := inspect.getdoc(value)) and doc != getattr(member.docstring, "value", None):
+            member.docstring = _docstring_like(cls, doc, member)  # set at import time
+
+
+def _awaited_method(
+    pkg: griffe.Module, cls: griffe.Class, member: griffe.Object, value: Any, sync: Any
+) -> griffe.Function:
+    """An ``async`` method with ``sync``'s parameters and ``value``'s docstring."""
+    made_from = pkg.modules_collection.get_member(f"{sync.__module__}.{sync.__qualname__}")
+    returns = inspect.signature(value).return_annotation
+    same = returns == inspect.signature(sync).return_annotation
+    function = griffe.Function(
+        member.name,
+        lineno=member.lineno,
+        endlineno=member.endlineno,
+        # Copies: a Function takes its parameters as its own (``parameter.function``).
+        parameters=griffe.Parameters(
+            *[
+                griffe.Parameter(p.name, annotation=p.annotation, kind=p.kind, default=p.default)
+                for p in made_from.parameters
+            ]
+        ),
+        returns=made_from.returns if same else griffe.ExprName(str(returns), parent=cls),
+    )
+    function.labels.add("async")
+    function.docstring = _docstring_like(cls, inspect.getdoc(value) or "", function)
+    return function
+
+
+def _docstring_like(cls: griffe.Class, text: str, owner: griffe.Object) -> griffe.Docstring:
+    """``owner``'s docstring ``text``, parsed as the class's own (Google style)."""
+    model = cls.docstring
+    return griffe.Docstring(
+        text,
+        lineno=owner.lineno,
+        endlineno=owner.endlineno,
+        parent=owner,
+        parser=None if model is None else model.parser,
+        parser_options=None if model is None else model.parser_options,
+    )
 
 
 def _name_stand_ins(pkg: griffe.Module) -> None:

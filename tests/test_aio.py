@@ -237,20 +237,46 @@ def test_cancelling_a_running_joint_move_or_arc_stops_it_and_nothing_moves_later
     check(issued, sim.motion_log())
 
 
-def test_the_awaited_moves_take_the_robots_parameters() -> None:
-    """AsyncRobot's methods take exactly Robot's parameters; every move is offered."""
-    shared = {
+#: Methods of the sync classes whose awaited twin has a body of its own: a result of
+#: another kind (connect: the AsyncRobot), a close that runs beside a running call, the
+#: stop request kept apart from a cancelled call's (sync), a property made a read.
+OWN_BODY = {"connect", "close", "interrupt", "clear_stop_request", "holding"}
+
+
+@pytest.mark.parametrize(
+    ("front", "sync"),
+    [
+        (aio.AsyncRobot, Robot),
+        (aio.AsyncGripper, tmmaster.Gripper),
+        (aio.AsyncRobotIO, tmmaster.RobotIO),
+    ],
+)
+def test_the_awaited_methods_are_made_from_the_sync_ones(front: type, sync: type) -> None:
+    """Each awaited method is the sync method of its name, derived: one signature and one
+    docstring (its Args, Returns and Raises), never typed again; every move is offered."""
+    offered = {
         name
-        for name, member in vars(aio.AsyncRobot).items()
-        if not name.startswith("_") and callable(member) and callable(getattr(Robot, name, None))
+        for name, member in vars(front).items()
+        if not name.startswith("_") and callable(member) and callable(getattr(sync, name, None))
     }
     robot_moves = {name for name in dir(Robot) if name.startswith(("move_", "start_move"))}
-    assert robot_moves >= {"move_to", "start_move", "move_joints", "move_by", "move_arc"}
-    assert sorted(robot_moves - shared) == []
-    for name in sorted(shared):
-        awaited = inspect.signature(getattr(aio.AsyncRobot, name)).parameters
-        sync = inspect.signature(getattr(Robot, name)).parameters
-        assert list(awaited.values()) == list(sync.values()), name
+    assert sync is not Robot or robot_moves <= offered
+    for name in sorted(offered - OWN_BODY):
+        awaited, method = getattr(front, name), getattr(sync, name)
+        assert inspect.iscoroutinefunction(awaited), name
+        assert inspect.unwrap(awaited) is method, name
+        assert awaited.__qualname__ == f"{front.__name__}.{name}"
+        made, typed = inspect.signature(awaited), inspect.signature(method)
+        assert made.parameters == typed.parameters, name
+        returns = "AsyncMotion" if name == "start_move" else typed.return_annotation
+        assert made.return_annotation == returns, name
+        doc, sync_doc = inspect.getdoc(awaited) or "", inspect.getdoc(method) or ""
+        assert doc.startswith(sync_doc.split("\n")[0]), name
+        for section in ("Args:", "Raises:", "Returns:"):
+            if section in sync_doc and not (section == "Returns:" and name == "start_move"):
+                block = sync_doc.split(section)[1].split("\n\n")[0]
+                assert section + block in doc, (name, section)
+        assert "```" not in doc, name  # a sync example is left out
 
 
 @pytest.mark.parametrize("profile", PROFILES)

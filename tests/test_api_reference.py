@@ -16,7 +16,10 @@ in docs_hooks/api_names.py):
 - no rendered signature, base class or attribute type names something private: an
   underscore name, a private module (``kin.Transform``) or a class of the package that
   no public package exports (an attribute's value naming one is not shown);
-- each docs/api page renders its package, or each of its public names.
+- each docs/api page renders its package, or each of its public names;
+- a method made at import time from another class's (``move_to =
+  _awaited(Robot.move_to)``) is checked as the method the site shows: that one's
+  parameters, the docstring it has at run time; its class is listed for the site.
 """
 
 from __future__ import annotations
@@ -225,6 +228,24 @@ def _function_node(function: Any) -> Function:
     raise AssertionError(function)
 
 
+def _made_from(owner: type, name: str) -> Any:
+    """The method a class attribute was made from at import time (``move_to =
+    _awaited(Robot.move_to)``), or None: a function that names what it wraps."""
+    value = inspect.getattr_static(owner, name, None)
+    if inspect.isfunction(value) and inspect.isfunction(getattr(value, "__wrapped__", None)):
+        return value.__wrapped__
+    return None
+
+
+def _method_source(method: Any) -> tuple[str, Function]:
+    """The module and the ``def`` of a method of a class of the package."""
+    owner = getattr(sys.modules[method.__module__], method.__qualname__.split(".")[0])
+    for item in _class_node(owner).body:
+        if isinstance(item, Function) and item.name == method.__name__:
+            return _home_module(owner), item
+    raise AssertionError(method)
+
+
 # -- docstrings --------------------------------------------------------------------------
 
 
@@ -323,6 +344,10 @@ def _class_members(entry: Public) -> Iterator[Rendered]:
     for owner in _shown_classes(cls):
         module = _home_module(owner)
         for item in _class_node(owner).body:
+            made = _made_method(entry, owner, item)
+            if made is not None:
+                yield made
+                continue
             if not isinstance(item, Function) or item.name in seen:
                 continue
             name = item.name
@@ -344,6 +369,17 @@ def _class_members(entry: Public) -> Iterator[Rendered]:
                 both = "\n\n".join(d for d in (_own_docstring(cls), doc) if d)
                 where = f"{entry.qualname} (class or __init__ docstring)"
                 yield Rendered(where, module, item, both or None, method=True)
+
+
+def _made_method(entry: Public, owner: type, item: ast.stmt) -> Rendered | None:
+    """A public method made at import time (``move_to = _awaited(Robot.move_to)``): shown
+    with the parameters of the method it was made from and its own docstring."""
+    name = _assigned_name(item)
+    if name is None or name.startswith("_") or (made_from := _made_from(owner, name)) is None:
+        return None
+    module, node = _method_source(made_from)
+    doc = _own_docstring(inspect.getattr_static(owner, name))
+    return Rendered(f"{entry.qualname}.{name}", module, node, doc, method=True)
 
 
 def _callables() -> Iterator[Rendered]:
@@ -394,6 +430,8 @@ def _undocumented_attributes(cls: type) -> Iterator[str]:
         for name, body, index in found:
             if name.startswith("_") or name in listed or name == "model_config":
                 continue
+            if _made_from(owner, name) is not None:
+                continue  # a method: checked as one (_made_method)
             if _is_internal(owner, name):
                 continue
             if isinstance(inspect.getattr_static(owner, name, None), property):
@@ -564,6 +602,31 @@ def test_functions_made_like_a_class_take_its_arguments() -> None:
         assert _own_docstring(function), function_path
 
 
+def _set_at_import_time(owner: type) -> Iterator[str]:
+    """Public members of ``owner`` made at import time, or given their docstring then."""
+    for item in _class_node(owner).body:
+        if isinstance(item, Function):
+            if item.name.startswith("_") or _decorators(item) & {"overload", "setter", "deleter"}:
+                continue
+            if _own_docstring(inspect.getattr_static(owner, item.name)) != ast.get_docstring(item):
+                yield item.name
+        elif (name := _assigned_name(item)) is not None and _made_from(owner, name) is not None:
+            yield name
+
+
+def test_classes_with_methods_made_at_import_time_are_shown_as_they_run() -> None:
+    """The site shows a method made at import time, or a docstring set then, only for a
+    class in ``DERIVED`` (docs_hooks/griffe_api.py); else it would show an attribute."""
+    unlisted = []
+    for entry in PUBLIC:
+        cls = entry.value
+        if not inspect.isclass(cls) or _path(cls) in NAMES.DERIVED:
+            continue
+        for owner in _shown_classes(cls):
+            unlisted += [f"{entry.qualname}.{name}" for name in _set_at_import_time(owner)]
+    assert unlisted == []
+
+
 def _lookup(path: str) -> Any:
     """The object at a dotted source path: ``tmmaster._robot.Motion``, a member of it."""
     parts = path.split(".")
@@ -589,6 +652,7 @@ def test_the_names_shown_differently_exist() -> None:
         *NAMES.INTERNAL_MEMBERS,
         *NAMES.MADE_LIKE,
         *NAMES.MADE_LIKE.values(),
+        *NAMES.DERIVED,
     ]
     assert [path for path in listed if _lookup(path) is _MISSING] == []
 

@@ -2,7 +2,9 @@
 
 An :class:`AsyncRobot` owns one thread (``_Worker``) that runs the :class:`Robot`'s own
 methods, one call at a time in the order they were made: every check, write, wait,
-withdraw and stop is the sync Robot's, written once in ``_robot.py``. The robot's link
+withdraw and stop is the sync Robot's, written once in ``_robot.py``. The awaited methods
+are made from the sync ones (``move_to = _awaited(Robot.move_to)``): the same signature
+and docstring, typed once. The robot's link
 and the polls of its waits live on a :class:`~tmmaster.Fleet`'s event loop (by default
 one fleet shared by every robot :func:`connect` opens), so a waiting robot costs its
 thread nothing until the loop wakes it.
@@ -26,40 +28,34 @@ import collections.abc
 import contextlib
 import functools
 import inspect
+import re
+import textwrap
 import threading
-from collections.abc import Callable, Coroutine, Generator, Sequence
+from collections.abc import Callable, Coroutine, Generator
 from enum import Enum
-from typing import Any, Concatenate, Generic, Literal, ParamSpec, Protocol, TypeVar
+from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, cast
 
 from .._address import is_in_process
 from .._checks import require_positive
 from .._exceptions import TMMasterError, TransportClosedError
 from .._fleet import Fleet
-from .._gripper import GripperStatus
-from .._io import DEFAULT_MODULE
+from .._gripper import Gripper
+from .._io import RobotIO
 from .._logging import get_logger
-from .._pose import MotionType, Pose
-from .._project import PRESS_TIMEOUT_S
 from .._robot import Motion, Robot
-from .._status import MovePhase, MoveProgress, ProjectState, RobotStatus
+from .._status import MovePhase, MoveProgress
 
 _log = get_logger("tmmaster.aio")
 
 P = ParamSpec("P")
 T = TypeVar("T")
+R = TypeVar("R")
+F = TypeVar("F", bound=Callable[..., Any])
 
 #: How long a cancelled call may take to give its command up before the CancelledError
 #: is raised anyway, s: beyond a withdraw's answer (``ack_timeout_s``) and a stop's
 #: retries on a link that is down (the default RetryPolicy: 10 s).
 DEFAULT_SETTLE_TIMEOUT_S = 30.0
-
-
-class _Runs(Protocol):
-    """What the robot's thread runs: a call, from its start to its outcome."""
-
-    def run(self) -> None:
-        """Run the call in the robot's thread and hand its outcome to the awaiting loop."""
-        ...
 
 
 class _Worker:
@@ -72,14 +68,14 @@ class _Worker:
 
     def __init__(self, name: str) -> None:
         self._name = name
-        self._jobs: collections.deque[_Runs] = collections.deque()
+        self._jobs: collections.deque[_Job[Any]] = collections.deque()
         self._ready = threading.Condition()
         self._thread: threading.Thread | None = None
         self._closed = False
         #: The job the thread runs now (None between jobs).
-        self.running: _Runs | None = None
+        self.running: _Job[Any] | None = None
 
-    def submit(self, job: _Runs, *, first: bool = False) -> bool:
+    def submit(self, job: _Job[Any], *, first: bool = False) -> bool:
         """Queue ``job`` (``first``: before every queued one); False once shut down."""
         with self._ready:
             if self._closed:
@@ -153,11 +149,6 @@ class _Job(Generic[T]):
     def skipped(self) -> bool:
         """True when the call was cancelled before the robot's thread started it."""
         return self._state is _State.SKIPPED
-
-    @property
-    def interrupted(self) -> bool:
-        """True when the call was cancelled while the robot's thread ran it."""
-        return self._interrupted
 
     def cancel(self) -> None:
         """From the caller's loop: never start the call, or make the running one give up.
@@ -273,7 +264,162 @@ class _Primed(collections.abc.Coroutine[Any, Any, T]):
         return (yield from self._body.__await__())
 
 
-class AsyncRobot:
+# -- the awaited methods, made from the sync ones -----------------------------------------
+
+#: What a method made by :func:`_awaited` says after the sync method's summary.
+_AWAITED = (
+    "Awaited: :meth:`{}`, run on the robot's thread. Cancelled, it is given up as a sync"
+    " call that ends with an exception is (a command the robot has not taken is withdrawn,"
+    " a running move is stopped), then the ``CancelledError`` is raised."
+)
+#: The order of a derived docstring's sections (any other after them).
+_ORDER = ("Args", "Returns", "Raises")
+
+
+def _sections(doc: str) -> dict[str, str]:
+    """A Google-style docstring's parts: ``{"": the text before its sections, "Args": ...}``."""
+    parts = re.split(r"^(\w[\w ]*):\n", inspect.cleandoc(doc), flags=re.MULTILINE)
+    titles, bodies = parts[1::2], parts[2::2]
+    return {"": parts[0].strip(), **{t: b.rstrip() for t, b in zip(titles, bodies, strict=True)}}
+
+
+def _derived_doc(method: Callable[..., Any], own: str) -> str:
+    """``method``'s docstring with ``own``'s text after its summary, ``own``'s sections in
+    place of its own (Returns), and no example (the sync method's is sync code)."""
+    sync, mine = _sections(inspect.getdoc(method) or ""), _sections(own)
+    summary, _, rest = sync.pop("").partition("\n\n")
+    blocks = [summary, mine.pop(""), rest]
+    sections = {t: body for t, body in {**sync, **mine}.items() if not t.startswith("Example")}
+    for title in sorted(sections, key=lambda t: _ORDER.index(t) if t in _ORDER else len(_ORDER)):
+        blocks.append(f"{title}:\n{sections[title]}")
+    return "\n\n".join(block for block in blocks if block)
+
+
+def _documented(method: Callable[..., Any]) -> Callable[[F], F]:
+    """A decorator: the function's docstring is ``method``'s with its own (:func:`_derived_doc`)."""
+
+    def document(function: F) -> F:
+        function.__doc__ = _derived_doc(method, function.__doc__ or "")
+        return function
+
+    return document
+
+
+def _derive(
+    method: Callable[Concatenate[Any, P], T], then: Callable[[Any, T], R] | None, own: str = ""
+) -> Callable[Concatenate[_Front, P], Coroutine[Any, Any, R]]:
+    """An ``async def`` that runs ``method`` (by name) on the robot's thread, then ``then``.
+
+    Its name, signature and docstring are ``method``'s: the docstring with a note that it
+    is awaited, and with ``own`` (a docstring's sections, such as a Returns that says
+    what ``then`` makes: :func:`_derived_doc`); with ``then``, its return annotation is
+    ``then``'s name.
+    """
+    name = method.__name__
+
+    async def awaited(self: _Front, /, *args: P.args, **kwargs: P.kwargs) -> R:
+        value = await self._on_thread(name, *args, **kwargs)
+        return cast(R, value if then is None else then(self, value))
+
+    signature = inspect.signature(method)
+    if then is not None:
+        signature = signature.replace(return_annotation=then.__name__)
+    awaited.__name__ = name
+    awaited.__wrapped__ = method  # type: ignore[attr-defined]
+    awaited.__signature__ = signature  # type: ignore[attr-defined]
+    note = textwrap.fill(_AWAITED.format(method.__qualname__), 88)
+    awaited.__doc__ = _derived_doc(method, note + own)
+    return awaited
+
+
+def _awaited(
+    method: Callable[Concatenate[Any, P], T],
+) -> Callable[Concatenate[_Front, P], Coroutine[Any, Any, T]]:
+    """``method`` of the Robot (of its gripper, its I/O), awaited: see :func:`_derive`."""
+    return _derive(method, None)
+
+
+class _Front:
+    """An awaited front of the Robot, or of a part of it (``_part``: its gripper, its I/O).
+
+    Its methods made by :func:`_awaited` run the method of the same name on the robot's
+    thread (:meth:`_on_thread`); they are named after the class.
+    """
+
+    #: The Robot's attribute this front awaits (AsyncRobot awaits the Robot itself).
+    _part = ""
+
+    def __init__(self, robot: AsyncRobot) -> None:
+        self._robot = robot
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        for name, member in vars(cls).items():
+            if inspect.iscoroutinefunction(member) and hasattr(member, "__wrapped__"):
+                member.__qualname__ = f"{cls.__qualname__}.{name}"
+
+    def _on_thread(self, name: str, /, *args: Any, **kwargs: Any) -> Coroutine[Any, Any, Any]:
+        """The method ``name`` of the part, called on the robot's thread."""
+        part = getattr(self._robot.robot, self._part)
+        return self._robot._run(getattr(part, name), *args, **kwargs)
+
+
+class AsyncMotion:
+    """A move sent by :meth:`AsyncRobot.start_move`: await it, or ask its progress.
+
+    ``await motion`` waits for the end and returns the finished :class:`~tmmaster.Motion`
+    (the same as :meth:`wait`, then :attr:`motion`).
+    """
+
+    def __init__(self, robot: AsyncRobot, motion: Motion) -> None:
+        self._robot = robot
+        #: The move itself: its target, phase, last pose, ``withdrawn``,
+        #: ``stop_delivered``... (never call its blocking ``wait`` from a coroutine).
+        self.motion = motion
+
+    @property
+    @_documented(Motion.done)
+    def done(self) -> bool:
+        return self.motion.done
+
+    @property
+    def phase(self) -> MovePhase:
+        """Where the move stands."""
+        return self.motion.phase
+
+    @_documented(Motion.wait)
+    def wait(self, timeout_s: float | None = None) -> Coroutine[Any, Any, None]:
+        """Awaited: :meth:`Motion.wait`, run on the robot's thread. Cancelled, the move is
+        withdrawn or stopped before the ``CancelledError`` is raised: while the wait is
+        queued behind another call of the robot, while it runs, and also when it is
+        cancelled before it ever ran (``asyncio.wait_for(motion.wait(), 0)``).
+
+        Returns:
+            The wait, a coroutine (await it, or make it a task).
+        """
+        motion = self.motion
+        return self._robot._follow(motion, functools.partial(motion.wait, timeout_s))
+
+    @_documented(Motion.progress)
+    def progress(self) -> Coroutine[Any, Any, MoveProgress]:
+        """Awaited: :meth:`Motion.progress`, run on the robot's thread. Cancelled, the move
+        is given up as a cancelled :meth:`wait` gives it up.
+
+        Returns:
+            The report (a :class:`~tmmaster.MoveProgress`), a coroutine.
+        """
+        motion = self.motion
+        return self._robot._follow(motion, motion.progress)
+
+    def __await__(self) -> Generator[Any, None, Motion]:
+        return self._finished().__await__()
+
+    async def _finished(self) -> Motion:
+        await self.wait()
+        return self.motion
+
+
+class AsyncRobot(_Front):
     """A :class:`~tmmaster.Robot` driven from asyncio: each call awaited, never blocking.
 
     Every method is the Robot method of the same name, run on this robot's own thread
@@ -352,12 +498,10 @@ class AsyncRobot:
         return self.robot.name
 
     @property
+    @_documented(Robot.last_motion)
     def last_motion(self) -> Motion | None:
-        """The last command sent (move or gripper action), with its outcome.
-
-        A cancelled call's command is here too: ``withdrawn`` and ``stop_delivered``
-        say how it was given up.
-        """
+        """A cancelled call's command is here too: ``withdrawn`` and ``stop_delivered``
+        say how it was given up."""
         return self.robot.last_motion
 
     # -- the calls, on the robot's thread ----------------------------------------------
@@ -386,18 +530,10 @@ class AsyncRobot:
         """
         return await self._run(fn, self.robot, *args, **kwargs)
 
+    @_documented(Robot.connect)
     async def connect(self) -> AsyncRobot:
-        """Open the connections (:meth:`Robot.connect`); a no-op when open.
-
-        A connect that fails, or is cancelled, closes this robot.
-
-        Returns:
-            This robot, connected.
-
-        Raises:
-            ConnectError: The robot cannot be reached, or was closed.
-            ConfigError: The frame check failed (see :meth:`Robot.connect`).
-        """
+        """Awaited: :meth:`Robot.connect`. A connect that fails, or is cancelled, closes
+        this robot."""
         try:
             await self._run(self.robot.connect)
         except BaseException:
@@ -405,444 +541,58 @@ class AsyncRobot:
             raise
         return self
 
-    async def status(self) -> RobotStatus:
-        """One status snapshot (:meth:`Robot.status`).
+    status = _awaited(Robot.status)
+    pose = _awaited(Robot.pose)
+    check_fault = _awaited(Robot.check_fault)
+    wait_until_ready = _awaited(Robot.wait_until_ready)
+    check_move = _awaited(Robot.check_move)
+    move_to = _awaited(Robot.move_to)
+    start_move = _derive(
+        Robot.start_move,
+        AsyncMotion,
+        "\n\nReturns:\n    The move's handle, an :class:`AsyncMotion`: await it (or its\n"
+        "        :meth:`AsyncMotion.wait`), or ask its :meth:`AsyncMotion.progress`.",
+    )
+    move_joints = _awaited(Robot.move_joints)
+    move_by = _awaited(Robot.move_by)
+    move_arc = _awaited(Robot.move_arc)
+    stop = _awaited(Robot.stop)
+    project_state = _awaited(Robot.project_state)
+    play = _awaited(Robot.play)
+    pause = _awaited(Robot.pause)
 
-        Returns:
-            The robot's mode, motion, error, e-stop, grasp and TCP pose.
-
-        Raises:
-            TransportError: The read failed.
-        """
-        return await self._run(self.robot.status)
-
-    async def pose(self) -> Pose:
-        """The current TCP pose (:meth:`Robot.pose`).
-
-        Returns:
-            The TCP pose the robot reports, mm / deg.
-
-        Raises:
-            TransportError: The read failed.
-        """
-        return await self._run(self.robot.pose)
-
-    async def check_fault(self) -> None:
-        """Raise the typed error if the robot is in e-stop or error (:meth:`Robot.check_fault`).
-
-        Raises:
-            RobotFaultError: The robot is in error (EmergencyStopError for an e-stop).
-        """
-        await self._run(self.robot.check_fault)
-
-    async def wait_until_ready(self, timeout_s: float = 10.0) -> RobotStatus:
-        """Wait until the robot can take a motion command (:meth:`Robot.wait_until_ready`).
-
-        Args:
-            timeout_s: How long to wait, s.
-
-        Returns:
-            The first status that is ready.
-
-        Raises:
-            MotionTimeoutError: Not ready in time.
-            RobotFaultError: The robot is in error (EmergencyStopError for an e-stop).
-            StopRequestedError: A stop was requested.
-        """
-        return await self._run(self.robot.wait_until_ready, timeout_s)
-
-    async def check_move(
-        self,
-        target: Pose,
-        speed: int,
-        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
-        *,
-        start: Pose | None = None,
-        seed_deg: Sequence[float] | None = None,
-    ) -> tuple[float, ...]:
-        """Check a move fully without sending it (:meth:`Robot.check_move`).
-
-        Args:
-            target: The TCP target.
-            speed: Speed, an integer percent.
-            motion: ``"ptp"`` or ``"line"``.
-            start: Where a Line starts (None: its path is not checked).
-            seed_deg: The joints at ``start``.
-
-        Returns:
-            The target's joints, deg.
-
-        Raises:
-            ConfigError: What is wrong (UnreachablePoseError, ValueOutOfRangeError).
-        """
-        return await self._run(
-            self.robot.check_move, target, speed, motion, start=start, seed_deg=seed_deg
-        )
-
-    async def move_to(
-        self,
-        target: Pose,
-        *,
-        speed: int | None = None,
-        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
-        timeout: float | None = None,
-        accel_time_ms: int | None = None,
-        speed_mm_s: int | None = None,
-    ) -> Motion:
-        """Move to ``target``; return when the robot acknowledged and finished the move.
-
-        :meth:`Robot.move_to`, awaited. Cancelled before the robot took the command, the
-        command is withdrawn; while the arm moves, the arm is stopped; then the
-        ``CancelledError`` is raised. :attr:`last_motion` says which.
-
-        Args:
-            target: The TCP target (mm, deg, robot base frame).
-            speed: Speed, an integer percent (1 .. ``max_speed_percent``); None: 30 %
-                (or ``speed_mm_s``).
-            motion: ``"ptp"`` (joint interpolation) or ``"line"`` (a straight TCP path).
-            timeout: How long the move may take, s; None: from the expected time.
-            accel_time_ms: Time to reach full speed, ms, where the profile has the
-                field; None: the robot's default.
-            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
-
-        Returns:
-            The finished move (its attributes; it has nothing left to wait for).
-
-        Raises:
-            ConfigError: The move is not allowed; nothing is sent.
-            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
-            MotionTimeoutError: The move did not finish in time (the arm is stopped).
-            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
-            StopRequestedError: A stop was requested, or the robot was closed.
-            TransportError: The link failed and did not come back in time.
-        """
-        return await self._run(
-            self.robot.move_to,
-            target,
-            speed=speed,
-            motion=motion,
-            timeout=timeout,
-            accel_time_ms=accel_time_ms,
-            speed_mm_s=speed_mm_s,
-        )
-
-    async def start_move(
-        self,
-        target: Pose,
-        *,
-        speed: int | None = None,
-        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
-        timeout: float | None = None,
-        accel_time_ms: int | None = None,
-        speed_mm_s: int | None = None,
-    ) -> AsyncMotion:
-        """Validate and send a move; return once it is sent (:meth:`Robot.start_move`).
-
-        ``await`` the handle (or its :meth:`AsyncMotion.wait`) for the end. Cancelled
-        before the handle is returned, the move is withdrawn or stopped.
-
-        Args:
-            target: The TCP target (mm, deg, robot base frame).
-            speed: Speed, an integer percent (1 .. ``max_speed_percent``); None: 30 %
-                (or ``speed_mm_s``).
-            motion: ``"ptp"`` or ``"line"``.
-            timeout: How long the move may take, s; None: from the expected time.
-            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
-            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
-
-        Returns:
-            The move's handle.
-
-        Raises:
-            ConfigError: The move is not allowed (nothing is sent).
-            RobotFaultError: The robot is in error or e-stop (nothing is sent).
-            StopRequestedError: A stop was requested (nothing is sent).
-        """
-        sent = await self._run(
-            self.robot.start_move,
-            target,
-            speed=speed,
-            motion=motion,
-            timeout=timeout,
-            accel_time_ms=accel_time_ms,
-            speed_mm_s=speed_mm_s,
-        )
-        return AsyncMotion(self, sent)
-
-    async def move_joints(
-        self,
-        joints: Sequence[float],
-        *,
-        speed: int = 30,
-        timeout: float | None = None,
-        accel_time_ms: int | None = None,
-    ) -> Motion:
-        """Move to joint angles J1..J6 (a PTP in joint space); return when it is done.
-
-        :meth:`Robot.move_joints`, awaited: the same checks before any request, and the
-        joints and the TCP checked at the end. Cancelled before the robot took the
-        command, the command is withdrawn; while the arm moves, the arm is stopped; then
-        the ``CancelledError`` is raised.
-
-        Args:
-            joints: J1..J6, deg.
-            speed: Speed, an integer percent of the joints' top speeds (1 ..
-                ``max_speed_percent``).
-            timeout: How long the move may take, s; None: from the expected time.
-            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
-
-        Returns:
-            The finished move (``motion.target``: the TCP pose the joints give).
-
-        Raises:
-            ConfigError: The move is not allowed, or the profile has no joint move
-                (``article``); UnreachablePoseError for joints past a range, at a
-                singularity or out of reach. Nothing is sent.
-            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
-            MotionTimeoutError: The move did not finish in time (the arm is stopped).
-            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
-            StopRequestedError: A stop was requested, or the robot was closed.
-            TransportError: The link failed and did not come back in time.
-        """
-        return await self._run(
-            self.robot.move_joints,
-            joints,
-            speed=speed,
-            timeout=timeout,
-            accel_time_ms=accel_time_ms,
-        )
-
-    async def move_by(
-        self,
-        dx: float = 0.0,
-        dy: float = 0.0,
-        dz: float = 0.0,
-        drx: float = 0.0,
-        dry: float = 0.0,
-        drz: float = 0.0,
-        *,
-        frame: Literal["base", "tool"] = "base",
-        speed: int | None = None,
-        motion: MotionType | Literal["ptp", "line"] = MotionType.PTP,
-        timeout: float | None = None,
-        accel_time_ms: int | None = None,
-        speed_mm_s: int | None = None,
-    ) -> Motion:
-        """Move relative to where the robot reports the TCP; return when it is done.
-
-        :meth:`Robot.move_by`, awaited: the offset is resolved against the TCP pose the
-        robot reports into one absolute target, sent like :meth:`move_to`'s. Cancelled
-        before the robot took the command, the command is withdrawn; while the arm
-        moves, the arm is stopped; then the ``CancelledError`` is raised.
-
-        Args:
-            dx: Offset along x, mm.
-            dy: Offset along y, mm.
-            dz: Offset along z, mm.
-            drx: Rotation about x, deg.
-            dry: Rotation about y, deg.
-            drz: Rotation about z, deg.
-            frame: ``"base"`` (the robot base's axes) or ``"tool"`` (the TCP's own frame).
-            speed: Speed, an integer percent; None: 30 % (or ``speed_mm_s``).
-            motion: ``"ptp"`` or ``"line"``.
-            timeout: How long the move may take, s; None: from the expected time.
-            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
-            speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
-
-        Returns:
-            The finished move (``motion.start``: the pose it was resolved against).
-
-        Raises:
-            ConfigError: A bad offset, frame or speed (nothing is read or sent), or a
-                target the move may not take (nothing is sent).
-            RobotError: The arm moved between the read and the write (nothing is sent).
-            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
-            MotionTimeoutError: The move did not finish in time (the arm is stopped).
-            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
-            StopRequestedError: A stop was requested, or the robot was closed.
-            TransportError: The link failed and did not come back in time.
-        """
-        return await self._run(
-            self.robot.move_by,
-            dx,
-            dy,
-            dz,
-            drx,
-            dry,
-            drz,
-            frame=frame,
-            speed=speed,
-            motion=motion,
-            timeout=timeout,
-            accel_time_ms=accel_time_ms,
-            speed_mm_s=speed_mm_s,
-        )
-
-    async def move_arc(
-        self,
-        via: Pose,
-        to: Pose,
-        *,
-        speed: int | None = None,
-        timeout: float | None = None,
-        accel_time_ms: int | None = None,
-        speed_mm_s: int | None = None,
-    ) -> Motion:
-        """Move the TCP along a circular arc through ``via`` to ``to``; return when done.
-
-        :meth:`Robot.move_arc`, awaited: the arc is resolved against the TCP pose the
-        robot reports and checked before the write like a Line. Cancelled before the
-        robot took the command, the command is withdrawn; while the arm moves, the arm
-        is stopped; then the ``CancelledError`` is raised.
-
-        Args:
-            via: A pose whose position the arc passes through (mm).
-            to: The TCP target at the arc's end (mm, deg).
-            speed: Speed, an integer percent of the arm's top TCP speed; None: 30 % (or
-                ``speed_mm_s``).
-            timeout: How long the move may take, s; None: from the expected time.
-            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
-            speed_mm_s: The TCP speed in mm/s instead of ``speed`` (``tmflow``).
-
-        Returns:
-            The finished move.
-
-        Raises:
-            ConfigError: No arc passes through the points, the arc may not be taken, or
-                the profile has no circle command (``article``); UnreachablePoseError
-                for an arc the arm cannot follow. Nothing is sent.
-            RobotError: The arm moved between the read and the write (nothing is sent).
-            AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
-            MotionTimeoutError: The move did not finish in time (the arm is stopped).
-            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
-            StopRequestedError: A stop was requested, or the robot was closed.
-            TransportError: The link failed and did not come back in time.
-        """
-        return await self._run(
-            self.robot.move_arc,
-            via,
-            to,
-            speed=speed,
-            timeout=timeout,
-            accel_time_ms=accel_time_ms,
-            speed_mm_s=speed_mm_s,
-        )
-
-    async def stop(self) -> None:
-        """Stop the arm (:meth:`Robot.stop`), as the robot's next call.
-
-        To stop a move another task awaits, cancel that task (or :meth:`interrupt`):
-        its wait gives the move up and stops the arm.
-
-        Raises:
-            ConfigError: The profile defines no stop.
-            TransportError: The stop could not be written.
-        """
-        await self._run(self.robot.stop)
-
-    async def project_state(self) -> ProjectState:
-        """The TMflow project's state (:meth:`Robot.project_state`).
-
-        Returns:
-            RUNNING, PAUSED, STOPPED or ERROR.
-
-        Raises:
-            ConfigError: The profile has no TMflow project (article).
-            TransportError: The read failed.
-        """
-        return await self._run(self.robot.project_state)
-
-    async def play(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
-        """Press Play on a stopped or paused project; wait until it runs (:meth:`Robot.play`).
-
-        Args:
-            timeout_s: How long to wait for the project to run after the press, s.
-
-        Returns:
-            ProjectState.RUNNING.
-
-        Raises:
-            ConfigError: The profile has no TMflow project (article).
-            RobotFaultError: The robot is in error; nothing was pressed.
-            RobotError: Manual mode, or the project did not run within ``timeout_s``.
-            StopRequestedError: A stop was requested or the robot is closing.
-        """
-        return await self._run(self.robot.play, timeout_s)
-
-    async def pause(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
-        """Press Pause on a running project; wait until it pauses (:meth:`Robot.pause`).
-
-        Args:
-            timeout_s: How long to wait for the project to pause after the press, s.
-
-        Returns:
-            ProjectState.PAUSED, or STOPPED for a stopped project (nothing pressed).
-
-        Raises:
-            ConfigError: The profile has no TMflow project (article).
-            RobotFaultError: The robot is in error.
-            RobotError: The project did not pause within ``timeout_s``.
-            StopRequestedError: A stop was requested or the robot is closing.
-        """
-        return await self._run(self.robot.pause, timeout_s)
-
+    @_documented(Robot.interrupt)
     def interrupt(self) -> None:
-        """Make running waits give up now, and refuse new commands until cleared.
-
-        :meth:`Robot.interrupt`: the call waiting ends with StopRequestedError, its
-        command withdrawn or the arm stopped; later moves raise StopRequestedError
-        unsent until :meth:`clear_stop_request`. Never blocks.
-        """
+        """Never blocks. The stop request stands after a cancelled call (which takes back
+        only its own)."""
         with self._stop_lock:
             self._user_stop = True
             self.robot.interrupt()
 
+    @_documented(Robot.clear_stop_request)
     def clear_stop_request(self) -> None:
-        """Allow commands again after :meth:`interrupt` (not after :meth:`close`)."""
         with self._stop_lock:
             self._user_stop = False
             self.robot.clear_stop_request()
 
+    @_documented(Robot.close)
     async def close(self, *, timeout_s: float | None = None) -> bool:
-        """Withdraw or stop what is outstanding, close the connections, end the thread.
-
-        :meth:`Robot.close` (from another thread: it does not queue behind a running
-        call): a move running is stopped, and the call awaiting it raises
-        StopRequestedError. Calls made after it raise TransportClosedError. Safe to
-        call more than once. Cancelled, it still finishes first (bounded by
-        :attr:`settle_timeout_s`).
-
-        Args:
-            timeout_s: A bound on the clean-up, s; None: the retry policy's own bounds.
-
-        Returns:
-            True when nothing this robot sent can still run; False when a withdraw or
-            stop could not be confirmed (logged).
-
-        Raises:
-            ConfigError: ``timeout_s`` is not a finite number > 0.
+        """Awaited, on a thread of its own: it does not queue behind a running call, whose
+        wait it ends (StopRequestedError); then this robot's thread ends, and calls made
+        after it raise TransportClosedError. Cancelled, it still finishes first (bounded
+        by :attr:`settle_timeout_s`).
         """
         if timeout_s is not None:
             require_positive("timeout_s", timeout_s)
-        loop = asyncio.get_running_loop()
-        closed: asyncio.Future[bool] = loop.create_future()
-        closed.add_done_callback(_retrieve)
-
-        def close_here() -> None:
-            try:
-                safely = self._close_in_thread(timeout_s)
-            except BaseException as exc:
-                _hand_over(loop, closed, None, exc)
-            else:
-                _hand_over(loop, closed, safely, None)
-
-        threading.Thread(
-            target=close_here, name=f"tmmaster-aio-close-{self.name}", daemon=True
-        ).start()
+        # Not queued behind a running call: a thread of its own runs it, as a call.
+        closing = _Job(self, functools.partial(self._close_in_thread, timeout_s))
+        name = f"tmmaster-aio-close-{self.name}"
+        threading.Thread(target=closing.run, name=name, daemon=True).start()
         try:
-            return await asyncio.shield(closed)
+            return await asyncio.shield(closing.outcome)
         except asyncio.CancelledError:
-            await self._settle(closed, loop.time() + self.settle_timeout_s, "close")
+            deadline = asyncio.get_running_loop().time() + self.settle_timeout_s
+            await self._settle(closing.outcome, deadline, "close")
             raise
 
     def _close_in_thread(self, timeout_s: float | None) -> bool:
@@ -866,6 +616,9 @@ class AsyncRobot:
         return self.connect().__await__()
 
     # -- internals -----------------------------------------------------------------------
+
+    def _on_thread(self, name: str, /, *args: Any, **kwargs: Any) -> Coroutine[Any, Any, Any]:
+        return self._run(getattr(self.robot, name), *args, **kwargs)
 
     async def _run(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> T:
         return await self._await(_Job(self, functools.partial(fn, *args, **kwargs)))
@@ -928,7 +681,7 @@ class AsyncRobot:
     def _interrupt_followers(self, motion: Motion) -> None:
         """Another caller's running wait on ``motion`` gives up too (the move is given up)."""
         running = self._worker.running
-        if isinstance(running, _Job) and running.follows is motion:
+        if running is not None and running.follows is motion:
             running.cancel()
 
     def _interrupt_for_cancel(self) -> None:
@@ -960,171 +713,24 @@ class AsyncRobot:
         )
 
 
-def _hand_over(
-    loop: asyncio.AbstractEventLoop,
-    future: asyncio.Future[T],
-    value: T | None,
-    error: BaseException | None,
-) -> None:
-    """From a thread: settle ``future`` on ``loop`` (nothing if the loop has closed)."""
-
-    def settle() -> None:
-        if future.done():
-            return
-        if error is not None:
-            future.set_exception(error)
-        else:
-            future.set_result(value)  # type: ignore[arg-type]  # T when no error
-
-    try:
-        loop.call_soon_threadsafe(settle)
-    except RuntimeError:
-        return
-
-
-class AsyncMotion:
-    """A move sent by :meth:`AsyncRobot.start_move`: await it, or ask its progress.
-
-    ``await motion`` waits for the end and returns the finished :class:`~tmmaster.Motion`
-    (the same as :meth:`wait`, then :attr:`motion`).
-    """
-
-    def __init__(self, robot: AsyncRobot, motion: Motion) -> None:
-        self._robot = robot
-        #: The move itself: its target, phase, last pose, ``withdrawn``,
-        #: ``stop_delivered``... (never call its blocking ``wait`` from a coroutine).
-        self.motion = motion
-
-    @property
-    def done(self) -> bool:
-        """True once the robot acknowledged and then finished the move."""
-        return self.motion.done
-
-    @property
-    def phase(self) -> MovePhase:
-        """Where the move stands."""
-        return self.motion.phase
-
-    def wait(self, timeout_s: float | None = None) -> Coroutine[Any, Any, None]:
-        """Wait until the move is done (:meth:`Motion.wait`).
-
-        Cancelled, the move is withdrawn or stopped before the ``CancelledError`` is
-        raised: while the wait is queued behind another call of the robot, while it
-        runs, and also when it is cancelled before it ever ran
-        (``asyncio.wait_for(motion.wait(), 0)``).
-
-        Args:
-            timeout_s: How long to wait, s; None: the move's own ``timeout_s``.
-
-        Returns:
-            The wait, a coroutine (await it, or make it a task).
-
-        Raises:
-            AcknowledgeTimeoutError: The robot did not take the command in time.
-            MotionTimeoutError: The move did not finish in time.
-            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
-            StopRequestedError: A stop was requested, or the robot was closed.
-            ConnectionLostError: The link broke and did not come back in time.
-        """
-        motion = self.motion
-        return self._robot._follow(motion, functools.partial(motion.wait, timeout_s))
-
-    def progress(self) -> Coroutine[Any, Any, MoveProgress]:
-        """Poll the robot once and report where the move stands (:meth:`Motion.progress`).
-
-        Cancelled, the move is given up as a cancelled :meth:`wait` gives it up.
-
-        Returns:
-            A coroutine of the phase, the last pose, the time elapsed and expected, and
-            the fraction of the distance covered.
-
-        Raises:
-            RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
-        """
-        motion = self.motion
-        return self._robot._follow(motion, motion.progress)
-
-    def __await__(self) -> Generator[Any, None, Motion]:
-        return self._finished().__await__()
-
-    async def _finished(self) -> Motion:
-        await self.wait()
-        return self.motion
-
-
-class AsyncGripper:
+class AsyncGripper(_Front):
     """An :class:`AsyncRobot`'s gripper: the Robot's :class:`~tmmaster.Gripper`, awaited.
 
     Each call runs on the robot's thread like the robot's own calls; cancelled, its
     command is withdrawn or stopped like a move's.
     """
 
-    def __init__(self, robot: AsyncRobot) -> None:
-        self._robot = robot
+    _part = "gripper"
 
     @property
     def kind(self) -> str:
         """The driver's name (a gripper profile's name for the stand-alone grippers)."""
         return self._robot.robot.gripper.kind
 
-    async def status(self) -> GripperStatus:
-        """Read the gripper's status once.
-
-        Returns:
-            The gripper's status now.
-
-        Raises:
-            TransportError: The read failed.
-        """
-        return await self._robot._run(self._robot.robot.gripper.status)
-
-    async def open(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Open the fingers fully; return when they have stopped.
-
-        Args:
-            timeout_s: How long the fingers may take, s; None: the driver's default.
-
-        Returns:
-            The status once the fingers stopped.
-
-        Raises:
-            GripperTimeoutError: The fingers did not stop in time.
-            StopRequestedError: A stop was requested meanwhile.
-            RobotFaultError: The robot went into e-stop or error (a subclass of it).
-        """
-        return await self._robot._run(self._robot.robot.gripper.open, timeout_s=timeout_s)
-
-    async def close(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Close the fingers; return when they stopped (on an object or fully closed).
-
-        Args:
-            timeout_s: How long the fingers may take, s; None: the driver's default.
-
-        Returns:
-            The status once the fingers stopped; ``holding`` says whether they hold
-            an object.
-
-        Raises:
-            GripperTimeoutError: The fingers did not stop in time.
-            StopRequestedError: A stop was requested meanwhile.
-            RobotFaultError: The robot went into e-stop or error (a subclass of it).
-        """
-        return await self._robot._run(self._robot.robot.gripper.close, timeout_s=timeout_s)
-
-    async def grip(self, *, timeout_s: float | None = None) -> GripperStatus:
-        """Close and require an object.
-
-        Args:
-            timeout_s: How long the fingers may take, s; None: the driver's default.
-
-        Returns:
-            The status, holding an object.
-
-        Raises:
-            GraspFailedError: The fingers closed on nothing.
-            GripperTimeoutError: The fingers did not stop in time.
-        """
-        return await self._robot._run(self._robot.robot.gripper.grip, timeout_s=timeout_s)
+    status = _awaited(Gripper.status)
+    open = _awaited(Gripper.open)
+    close = _awaited(Gripper.close)
+    grip = _awaited(Gripper.grip)
 
     async def holding(self) -> bool:
         """Whether the gripper detects an object now (one status read).
@@ -1138,7 +744,7 @@ class AsyncGripper:
         return (await self.status()).holding
 
 
-class AsyncRobotIO:
+class AsyncRobotIO(_Front):
     """An :class:`AsyncRobot`'s digital I/O: the Robot's :class:`~tmmaster.RobotIO`, awaited.
 
     Each call runs on the robot's thread like the robot's own calls. An output write
@@ -1146,91 +752,18 @@ class AsyncRobotIO:
     stop is requested.
     """
 
-    def __init__(self, robot: AsyncRobot) -> None:
-        self._robot = robot
+    _part = "io"
 
     @property
+    @_documented(RobotIO.modules)
     def modules(self) -> tuple[str, ...]:
-        """The names of the robot's digital I/O modules (empty when the profile has none)."""
         return self._robot.robot.io.modules
 
-    async def set_do(self, channel: int, value: bool, *, module: str = DEFAULT_MODULE) -> None:
-        """Set digital output ``channel`` of ``module`` high (True) or low (False).
-
-        Args:
-            channel: The DO number, from 0 (control box 0-15, end module 0-3 on a TM).
-            value: True: high; False: low.
-            module: ``"control_box"`` or ``"end_module"`` (the profile's modules).
-
-        Raises:
-            ConfigError: An unknown module, a channel out of range or not an int, a
-                value that is not a bool, or the gripper's output.
-            StopRequestedError: The robot is closing or a stop is requested: not written.
-            TransportError: The write failed after its retries.
-        """
-        await self._robot._run(self._robot.robot.io.set_do, channel, value, module=module)
-
-    async def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
-        """Read digital output ``channel`` of ``module`` back (one request).
-
-        Args:
-            channel: The DO number, from 0.
-            module: ``"control_box"`` or ``"end_module"``.
-
-        Returns:
-            True when the output is high.
-
-        Raises:
-            ConfigError: An unknown module or a channel out of range or not an int.
-            TransportError: The read failed.
-        """
-        return await self._robot._run(self._robot.robot.io.do, channel, module=module)
-
-    async def di(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
-        """Read digital input ``channel`` of ``module`` (one request).
-
-        Args:
-            channel: The DI number, from 0.
-            module: ``"control_box"`` or ``"end_module"``.
-
-        Returns:
-            True when the input is high.
-
-        Raises:
-            ConfigError: An unknown module or a channel out of range or not an int.
-            TransportError: The read failed.
-        """
-        return await self._robot._run(self._robot.robot.io.di, channel, module=module)
-
-    async def dos(self, *, module: str = DEFAULT_MODULE) -> tuple[bool, ...]:
-        """Read every digital output of ``module`` in one request.
-
-        Args:
-            module: ``"control_box"`` or ``"end_module"``.
-
-        Returns:
-            One bool per DO, DO 0 first.
-
-        Raises:
-            ConfigError: An unknown module, or one without DOs.
-            TransportError: The read failed.
-        """
-        return await self._robot._run(self._robot.robot.io.dos, module=module)
-
-    async def dis(self, *, module: str = DEFAULT_MODULE) -> tuple[bool, ...]:
-        """Read every digital input of ``module`` in one request.
-
-        Args:
-            module: ``"control_box"`` or ``"end_module"``.
-
-        Returns:
-            One bool per DI, DI 0 first.
-
-        Raises:
-            ConfigError: An unknown module, or one without DIs.
-            TransportError: The read failed.
-        """
-        return await self._robot._run(self._robot.robot.io.dis, module=module)
+    set_do = _awaited(RobotIO.set_do)
+    do = _awaited(RobotIO.do)
+    di = _awaited(RobotIO.di)
+    dos = _awaited(RobotIO.dos)
+    dis = _awaited(RobotIO.dis)
 
 
 class _SharedFleet:
