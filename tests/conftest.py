@@ -100,110 +100,52 @@ def memory_simulator_factory(
     return make
 
 
-#: xdist workers for a run of several test files (``-n auto`` in pyproject's addopts). Most
-#: tests wait on the wall clock (simulated moves, timeouts), which workers overlap: the
-#: suite waits about 88 s for 31-33 s of CPU. A worker costs about 1 s of CPU to start now
-#: that the test modules are rewritten once (above). On two cores (24 Nov 2026) six took
-#: 19.7-21.3 s, five 20.6-21.0 s, four 23.5 s (docs/architecture.md); more than six only
-#: adds CPU, and load, against the safety tests' timing margins.
-SUITE_WORKERS = 6
+#: xdist workers per CPU for ``-n auto`` (measured in docs/contributing.md, "Before it
+#: lands"): most of a test's time is waiting on the wall clock (simulated moves,
+#: timeouts), which a second worker per CPU overlaps; each worker also costs its
+#: start-up (about 3 s of CPU: imports and collecting every test) and adds load against
+#: the safety tests' timing margins.
+WORKERS_PER_CPU = 2
 
 
-def _warm_the_rewrite_cache(config: pytest.Config) -> None:
-    """Rewrite the test modules' asserts once, here, before the xdist workers start.
-
-    Otherwise each worker rewrites all of them at the same time on a clean checkout (CI):
-    about 1.6 s of CPU each. This uses pytest's private helpers, so any surprise from a
-    newer pytest only skips the warm-up (the workers then rewrite as usual).
-    """
-    try:
-        from _pytest.assertion import rewrite
-
-        state = config.stash[rewrite.assertstate_key]
-        for source in sorted(Path(__file__).parent.glob("test_*.py")):
-            pyc = rewrite.get_cache_dir(source) / (source.name[:-3] + rewrite.PYC_TAIL)
-            if rewrite._read_pyc(source, pyc) is not None:
-                continue
-            source_hash, code = rewrite._rewrite_test(source, config)
-            if rewrite.try_makedirs(pyc.parent):
-                rewrite._write_pyc(state, code, source_hash, pyc)
-    except Exception:  # an optimisation only: never fail the run for it
-        return
+def _cpus() -> int:
+    """How many CPUs this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Cache compiled test modules; in the xdist controller, warm that cache for the workers."""
-    # Containers (and .ci/run) often set PYTHONDONTWRITEBYTECODE=1: then every worker
-    # rewrote every test module's asserts on every run. The cache goes into the usual,
-    # git-ignored __pycache__ folders, as Python does by default.
-    sys.dont_write_bytecode = False
-    if hasattr(config, "workerinput"):
-        return
-    _compile_the_package()
-    if not config.getoption("numprocesses", None):
-        return
-    _warm_the_rewrite_cache(config)
+    """Keep the bytecode of the suite's processes (the workers, the CLI tests' subprocesses).
 
-
-def _compile_the_package() -> None:
-    """Write the bytecode of tmmaster's modules that has none, or an outdated one.
-
-    The plugin (``-p tmmaster.sim.pytest_plugin``) and this file import most of tmmaster
-    before ``pytest_configure`` lets this process write bytecode: under
-    PYTHONDONTWRITEBYTECODE=1 those modules (about half the package) were compiled from
-    source again by every xdist worker and every subprocess a test starts (the CLI
-    tests', the examples'), which can only read a cache. Up-to-date files are skipped.
+    Containers and CI (``.ci/run``) often set PYTHONDONTWRITEBYTECODE=1: then every xdist
+    worker compiled tmmaster and rewrote every test module's asserts again, and every
+    subprocess a test starts compiled the package again (about 1 s of CPU each). Python
+    and pytest write their caches into the usual, git-ignored ``__pycache__`` folders.
     """
-    import compileall
-
-    package = Path(tmmaster.__file__).parent
-    try:
-        compileall.compile_dir(package, quiet=2)
-    except OSError:  # a read-only install: an optimisation only
-        return
+    del config
+    sys.dont_write_bytecode = False
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
-    """``-n auto``: ``SUITE_WORKERS`` for the suite or several files, one process for one file."""
+    """``-n auto``: ``WORKERS_PER_CPU`` workers a CPU, one process for a single test file.
+
+    The suite (or a folder) gets the number of CPUs this process may use, times
+    ``WORKERS_PER_CPU``; a few files no more workers than files; a single file runs in
+    this process (no worker start-up to pay). PYTEST_XDIST_AUTO_NUM_WORKERS overrides it.
+    """
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
         return None  # xdist's own hook reads it
+    workers = WORKERS_PER_CPU * _cpus()
     if config.args_source is pytest.Config.ArgsSource.TESTPATHS:
-        return SUITE_WORKERS
+        return workers
     files: set[Path] = set()
     for arg in config.args:
         path = config.invocation_params.dir / arg.split("::")[0]
         files.update(path.rglob("test_*.py") if path.is_dir() else [path])
-    return min(SUITE_WORKERS, len(files)) if len(files) > 1 else 0
-
-
-#: Modules whose tests wait longest on the wall clock (simulated moves, timeouts, CLI
-#: subprocesses), longest first (measured with ``--durations``). They are started first, so
-#: that under xdist the short tests fill the other workers meanwhile instead of a long test
-#: starting last and the whole run waiting for it alone.
-_LONGEST_FIRST = (
-    "test_safety_stateful.py",
-    "test_cli_ux.py",
-    "test_safety_regressions.py",
-    "test_sim_mujoco.py",
-    "test_examples_docstrings.py",
-    "test_examples.py",
-    "test_pickplace.py",
-    "test_examples_two_robots.py",
-    "test_pickplace_options.py",
-    "test_transport.py",
-    "test_logging.py",
-    "test_sim_server.py",
-    "test_robot.py",
-    "test_grippers.py",
-    "test_pickplace_runner.py",
-)
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Run the modules that wait longest first (stable: their own order is kept)."""
-    rank = {name: i for i, name in enumerate(_LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+    return min(workers, len(files)) if len(files) > 1 else 0
 
 
 @pytest.fixture

@@ -330,13 +330,24 @@ def test_grasp_miss_after_every_retry_exits_with_the_grasp_code(
     assert len(motion_writes(sim.request_log)) == 6
 
 
-@pytest.mark.parametrize("after_requests", [6, 24, 29])
+#: Where the link drops: right after the answer to the n-th write of a register, so the
+#: drop lands in the same phase of the cycle whatever the poll schedule. The gripper's
+#: opening at the start (before any move), its closing on the part (while the grasp is
+#: checked), the lift's command block (while the arm moves with the part).
+DROP_POINTS = {
+    "start": (GRIPPER_REGISTER, 1),
+    "grasp": (GRIPPER_REGISTER, 2),
+    "lift": (TARGET_BLOCK, 3),
+}
+
+
+@pytest.mark.parametrize("where", list(DROP_POINTS))
 def test_a_dropped_connection_is_survived_without_sending_any_command_twice(
-    tm_simulator_factory: SimFactory, tmp_path: Path, after_requests: int
+    tm_simulator_factory: SimFactory, tmp_path: Path, where: str
 ) -> None:
-    sim = tm_simulator_factory(
-        "article", objects=parts(1), faults=[f"drop_connections:after_requests={after_requests}"]
-    )
+    register, nth_write = DROP_POINTS[where]
+    drop = f"drop_connections:on_write_to={register},after_requests={nth_write}"
+    sim = tm_simulator_factory("article", objects=parts(1), faults=[drop])
     code, report = run_cli(sim, write_config(tmp_path), tmp_path)
 
     assert code == EXIT_OK

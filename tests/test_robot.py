@@ -339,7 +339,9 @@ def test_connection_drop_during_the_wait_reconnects_and_never_resends(
     sim = tm_simulator_factory(profile, time_scale=5)
     robot = robots(sim)
     motion = robot.start_move(APPROACH, speed=30)
-    sim.inject("drop_connections:after_requests=3")
+    # The command is acknowledged: the link drops after the next request, a poll of the
+    # wait (the move takes seconds at time_scale 5), however the polls are scheduled.
+    sim.inject("drop_connections:after_requests=1")
     motion.wait()
     assert robot.stats.reconnects >= 1
     assert len(command_writes(sim)) == 1

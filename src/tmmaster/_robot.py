@@ -12,6 +12,11 @@ Every move follows the same rules, whatever the profile:
 
 Completion is never inferred from an idle flag alone: the robot must have
 acknowledged the command first, and the final pose must be at the target.
+
+This module is the Robot's lifecycle and its public verbs. Its parts: the planner
+(``_planning.py``: step 1's checks, the joints seed, expected times and timeouts, no
+I/O) and the command path (``_command.py``: the gate, the one write, the waits, and
+giving a command up safely).
 """
 
 from __future__ import annotations
