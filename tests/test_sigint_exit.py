@@ -1,5 +1,6 @@
-"""Ctrl-C while a command loads or while the interpreter exits: one line or nothing, never
-a traceback; and a Ctrl-C never cuts an exit hook (a robot's withdraw or stop) short.
+"""Ctrl-C as a command starts or while the interpreter exits: one line or nothing, never
+a traceback; a Ctrl-C never cuts an exit hook (a robot's withdraw or stop) short; and
+importing tmmaster changes no signal handler.
 
 Each command runs in a child process that pauses at the point under test (the test hook
 ``TMMASTER_TEST_SIGINT_AT``: it says so on stderr and waits for a byte on stdin), so the
@@ -8,6 +9,7 @@ Ctrl-Cs arrive exactly there: an event, not a guessed delay.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -23,9 +25,14 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 COMMANDS = {
     "sim": [sys.executable, "-m", "tmmaster.sim", "--help"],
     "pickplace": [sys.executable, "-m", "tmmaster.pickplace", "--help"],
+    "report": [sys.executable, "-m", "tmmaster.report", "--help"],
+    "tmscript": [sys.executable, "-m", "tmmaster.tmscript", "--help"],
     "tmmaster": [sys.executable, "-m", "tmmaster", "--help"],
     "console script": [str(Path(sys.executable).with_name("tmmaster")), "--help"],
 }
+
+#: The name each command's messages start with.
+PROGS = {"console script": "tmmaster"}
 
 
 def _paused(command: list[str], point: str, signals: int) -> tuple[int, str]:
@@ -45,16 +52,16 @@ def _paused(command: list[str], point: str, signals: int) -> tuple[int, str]:
         assert seen == f"tmmaster-test: paused at {point}\n", seen
         for _ in range(signals):
             proc.send_signal(signal.SIGINT)
-        try:
+        with contextlib.suppress(BrokenPipeError):
             proc.stdin.write(b"x")  # let it go on (it may have exited already)
-            proc.stdin.close()
-        except BrokenPipeError:
-            pass
+            proc.stdin.flush()
         err = proc.stderr.read().decode()
         return proc.wait(timeout=30), err
     finally:
         proc.kill()
         proc.wait()
+        with contextlib.suppress(BrokenPipeError):
+            proc.stdin.close()
         proc.stderr.close()
 
 
@@ -68,15 +75,67 @@ def test_ctrl_c_during_the_exit_hooks_is_quiet(name: str) -> None:
     assert code == 0  # --help's status: the Ctrl-Cs changed nothing
 
 
-@pytest.mark.parametrize("name", ["sim", "console script"])
-def test_ctrl_c_while_the_package_loads_is_one_line(name: str) -> None:
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_ctrl_c_as_soon_as_a_command_starts_is_one_line(name: str) -> None:
+    # The first moment of main(): the command's one wrapper already holds Ctrl-C.
     command = COMMANDS[name]
     if not Path(command[0]).exists():
         pytest.skip("the console script is not installed next to this interpreter")
-    code, err = _paused(command, "import", signals=1)
-    prog = "sim" if name == "sim" else "tmmaster"
-    assert err == f"{prog}: interrupted [exit 130]\n"
+    code, err = _paused(command, "start", signals=2)
+    assert err == f"{PROGS.get(name, name)}: interrupted [exit 130]\n"
     assert code == 130
+
+
+def test_importing_tmmaster_and_its_commands_changes_no_signal_handler() -> None:
+    # Even named as the console script (argv[0]), importing is not running a command:
+    # only a command's main() handles Ctrl-C.
+    script = textwrap.dedent(
+        """
+        import importlib, signal, sys
+        sys.argv[0] = "/usr/local/bin/tmmaster"
+        before = signal.getsignal(signal.SIGINT)
+        for module in ("tmmaster", "tmmaster.aio", "tmmaster._cli", "tmmaster.sim.__main__",
+                       "tmmaster.pickplace.__main__", "tmmaster.report.__main__",
+                       "tmmaster.tmscript.__main__"):
+            importlib.import_module(module)
+        print(signal.getsignal(signal.SIGINT) is before, flush=True)
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.stdout == "True\n", done.stderr
+
+
+def test_a_ctrl_c_caught_in_generated_code_still_exits_130(tmp_path: Path) -> None:
+    # CPython remembers a KeyboardInterrupt that ended code run from source text (how
+    # dataclasses make their methods: a Ctrl-C can land there while a module loads) and,
+    # under ``python -m``, used to end the process by SIGINT (-2) although main()
+    # said 130 in one line.
+    (tmp_path / "late_ctrl_c.py").write_text(
+        textwrap.dedent(
+            """
+            import sys
+            from tmmaster._sigint import run_main
+
+            def body():
+                exec("raise KeyboardInterrupt", {})  # as if in a dataclass's __init__ source
+                return 0
+
+            sys.exit(run_main("demo", body, process=True))
+            """
+        )
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "late_ctrl_c"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        cwd=tmp_path,
+    )
+    assert done.stderr == "demo: interrupted [exit 130]\n"
+    assert done.returncode == 130  # not -2: killed by the signal
 
 
 def test_a_ctrl_c_held_back_by_an_exit_hook_is_dropped_not_raised() -> None:

@@ -101,3 +101,31 @@ def test_any_plugin_registers_a_scheme_the_core_opens_through_it() -> None:
         "print(json.dumps([check_host('bench://one'), *asked]))\n"
     )
     assert asked == ["bench://one", ["bench://one", "robot", "r1"], "bench://one: nothing runs"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["robot", "--help"],
+        ["profile", "list"],
+        ["pickplace", "--dry-run", "--quiet"],
+        ["report", "--help"],
+        ["tmscript", "--help"],
+        ["--help"],
+    ],
+    ids=" ".join,
+)
+def test_a_tmmaster_command_other_than_sim_loads_no_simulator(argv: list[str]) -> None:
+    # Each command's options load only when it is chosen: the sim command's need the
+    # simulator, the others' do not (the top-level help lists every command anyway).
+    loaded = _run(
+        "import contextlib, io, json, sys\n"
+        "from tmmaster._cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    try:\n"
+        f"        main({argv!r})\n"
+        "    except SystemExit:  # --help\n"
+        "        pass\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('tmmaster.sim'))))\n"
+    )
+    assert loaded == []

@@ -1,20 +1,20 @@
-"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``robot``, ``profile``,
-``schema`` and ``robot-program``."""
+"""The ``tmmaster`` command: ``sim``, ``pickplace``, ``report``, ``tmscript``, ``robot``,
+``profile``, ``schema`` and ``robot-program``.
+
+Each command's options are added to its parser, and its module imported, only when that
+command runs: ``tmmaster robot status`` never loads the simulator.
+"""
 
 from __future__ import annotations
 
-# isort: off
-from . import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
-# isort: on
-
 import argparse
+import importlib
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
-from . import _robot_cli as robot_cli
-from . import _robot_program as robot_program_cli
 from ._cliparse import (
     EXIT_OUTPUT_FAILED,
     ArgumentParser,
@@ -27,7 +27,86 @@ from ._cliparse import (
 from ._exceptions import TMMasterError
 from ._logging import LOG_LEVELS, add_logging_arguments, configure_logging
 from ._profiles import builtin_profile_names, load_profile, profile_markdown
+from ._sigint import run_main
 from ._version import add_version_argument
+
+#: The commands, in the order the help lists them: their one-line help, and the module
+#: whose ``add_arguments(parser)`` and ``run(args)`` make them (None: this module's own).
+COMMANDS: dict[str, tuple[str, str | None]] = {
+    "sim": ("run the robot simulator (a Modbus TCP server)", "tmmaster.sim.__main__"),
+    "pickplace": ("run a configurable pick & place", "tmmaster.pickplace.__main__"),
+    "report": ("show a run report as a table, or plot it", "tmmaster.report.__main__"),
+    "tmscript": (
+        "check, evaluate or run TMscript (Script Projects)",
+        "tmmaster.tmscript.__main__",
+    ),
+    "robot": (
+        "read the TMflow project's state, or press Play, Pause or Stop",
+        "tmmaster._robot_cli",
+    ),
+    "profile": ("list or show register profiles", None),
+    "schema": (
+        "print the JSON Schema of the pick & place config (or of the run report)",
+        None,
+    ),
+    "robot-program": (
+        "write the TMflow Script Project the robot runs for a sequence profile (tmflow)",
+        "tmmaster._robot_program",
+    ),
+}
+
+
+class _CommandParser(ArgumentParser):
+    """A command's parser, filled with its options only when the command is chosen
+    (parsed) or its help is shown: the top-level help needs only the one-line help."""
+
+    def __init__(
+        self, *args: Any, fill: Callable[[ArgumentParser], object] | None = None, **kwargs: Any
+    ) -> None:
+        # Without fill: a command's own sub-commands (``profile list``), made by argparse.
+        super().__init__(*args, **kwargs)
+        self._fill: Callable[[ArgumentParser], object] | None = fill
+
+    def filled(self) -> _CommandParser:
+        """This parser, with the command's options added (once)."""
+        fill, self._fill = self._fill, None
+        if fill is not None:
+            fill(self)
+        return self
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """Fill the parser, then parse (argparse calls this for the chosen command)."""
+        return super(_CommandParser, self.filled()).parse_known_args(args, namespace)
+
+    def format_help(self) -> str:
+        """Fill the parser, then format its help."""
+        return super(_CommandParser, self.filled()).format_help()
+
+
+def _module(name: str) -> Any:
+    """The module that makes the command ``name`` (imported now)."""
+    module = COMMANDS[name][1]
+    assert module is not None
+    return importlib.import_module(module)
+
+
+def _fill_command(name: str, parser: ArgumentParser) -> None:
+    """Add the options of the command ``name`` to its ``parser``."""
+    if name == "profile":
+        _add_profile_commands(parser)
+    elif name == "schema":
+        parser.add_argument(
+            "--report", action="store_true", help="the run report's schema instead of the config's"
+        )
+        parser.add_argument("--output", "-o", metavar="FILE.json", help="write to a file instead")
+        add_logging_arguments(parser, default_level="warning")
+    elif name == "robot-program":
+        _module(name).add_arguments(parser)
+        add_logging_arguments(parser, default_level="warning")
+    else:
+        _module(name).add_arguments(parser)
 
 
 def _add_profile_commands(parser: argparse.ArgumentParser) -> None:
@@ -78,12 +157,7 @@ def _emit(text: str, output: str | None) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``tmmaster`` argument parser with every subcommand mounted."""
-    from .pickplace import __main__ as pickplace_main
-    from .report import __main__ as report_main
-    from .sim import __main__ as sim_main
-    from .tmscript import __main__ as tmscript_main
-
+    """The ``tmmaster`` argument parser: every command, each filled when it is chosen."""
     parser = ArgumentParser(prog="tmmaster", description="Drive a Techman robot over Modbus TCP.")
     add_version_argument(parser)
     # Also before the command (``tmmaster --log-level debug sim``): for every command.
@@ -102,40 +176,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="level of the events logged on stderr (any command; the command's own"
         " --log-level, after it, wins)",
     )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sim_main.add_arguments(
-        sub.add_parser("sim", help="run the robot simulator (a Modbus TCP server)")
-    )
-    pickplace_main.add_arguments(
-        sub.add_parser("pickplace", help="run a configurable pick & place")
-    )
-    report_main.add_arguments(
-        sub.add_parser("report", help="show a run report as a table, or plot it")
-    )
-    tmscript_main.add_arguments(
-        sub.add_parser("tmscript", help="check, evaluate or run TMscript (Script Projects)")
-    )
-    robot_cli.add_arguments(
-        sub.add_parser(
-            "robot", help="read the TMflow project's state, or press Play, Pause or Stop"
-        )
-    )
-    _add_profile_commands(sub.add_parser("profile", help="list or show register profiles"))
-    schema = sub.add_parser(
-        "schema", help="print the JSON Schema of the pick & place config (or of the run report)"
-    )
-    schema.add_argument(
-        "--report", action="store_true", help="the run report's schema instead of the config's"
-    )
-    schema.add_argument("--output", "-o", metavar="FILE.json", help="write to a file instead")
-    add_logging_arguments(schema, default_level="warning")
-    program = sub.add_parser(
-        "robot-program",
-        help="write the TMflow Script Project the robot runs for a sequence profile (tmflow)",
-    )
-    robot_program_cli.add_arguments(program)
-    add_logging_arguments(program, default_level="warning")
-    # The usage line names every command mounted above (and any added later).
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_CommandParser)
+    for name, (summary, _) in COMMANDS.items():
+
+        def fill(command_parser: ArgumentParser, name: str = name) -> None:
+            _fill_command(name, command_parser)
+
+        sub.add_parser(name, help=summary, fill=fill)
+    # The usage line names every command (and any added later).
     sub.metavar = "{" + ",".join(sub.choices) + "}"
     return parser
 
@@ -163,6 +211,8 @@ def _subcommand_parser(
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             found = action.choices.get(name)
+            if isinstance(found, _CommandParser):
+                return found.filled()
             return found if isinstance(found, argparse.ArgumentParser) else None
     return None
 
@@ -185,24 +235,17 @@ def report_schema() -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``tmmaster`` console script.
+    """Entry point of the ``tmmaster`` console script (``argv`` None: the process's own).
 
-    A reader of stdout that went away (``| head``) ends any command quietly, with the
-    shell's status for it, 141 (:data:`~tmmaster._cliparse.EXIT_BROKEN_PIPE`).
+    Bad usage is one line and exit 2; Ctrl-C, at any moment, one line and exit 130
+    (:func:`tmmaster._sigint.run_main`). A reader of stdout that went away (``| head``)
+    ends any command quietly, with the shell's status for it, 141
+    (:data:`~tmmaster._cliparse.EXIT_BROKEN_PIPE`).
     """
-    try:
-        return ended_quietly(lambda: _main(argv))
-    except KeyboardInterrupt:
-        print(f"tmmaster: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
-        return _sigint.EXIT_INTERRUPTED
+    return run_main("tmmaster", lambda: ended_quietly(lambda: _main(argv)), process=argv is None)
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    from .pickplace import __main__ as pickplace_main
-    from .report import __main__ as report_main
-    from .sim import __main__ as sim_main
-
-    _sigint.handled_by_main()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -214,19 +257,16 @@ def _main(argv: Sequence[str] | None) -> int:
         print("tmmaster: give a command [exit 2]", file=sys.stderr)
         return 2
     _apply_global_logging(parser, args)
-    if args.command == "sim":
-        return sim_main.run(args)
     if args.command == "pickplace":
-        # As the process itself (no argv given), Ctrl-C stays ignored on the way out.
-        return pickplace_main.run_guarded(lambda: pickplace_main.run(args), process=argv is None)
-    if args.command == "report":
-        return report_main.run(args)
-    if args.command == "robot":
-        return robot_cli.run(args)
-    if args.command == "tmscript":
-        from .tmscript import __main__ as tmscript_main
+        # Under its own name: a Ctrl-C says "pickplace: interrupted", as the module does.
+        return run_main("pickplace", lambda: _module("pickplace").run(args), process=False)
+    if args.command in ("sim", "report", "robot", "tmscript"):
+        return int(_module(args.command).run(args))
+    return _run_own(args, argv)
 
-        return tmscript_main.run(args)
+
+def _run_own(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    """``profile``, ``schema`` and ``robot-program``: text on stdout or in a file."""
     undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
         if args.command == "schema":
@@ -234,7 +274,7 @@ def _main(argv: Sequence[str] | None) -> int:
         if args.command == "robot-program":
             own = list(argv if argv is not None else sys.argv[1:])
             own = own[own.index("robot-program") + 1 :] if "robot-program" in own else []
-            return _emit(robot_program_cli.run(args, own), args.output)
+            return _emit(_module("robot-program").run(args, own), args.output)
         return _run_profile(args)
     except UsageError as exc:  # a name the command line chose from a set
         print(f"tmmaster: {one_line(exc)} [exit 2]", file=sys.stderr)

@@ -10,8 +10,8 @@ import sys
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NoReturn
 
-from . import _sigint
 from ._exceptions import ConfigError
+from ._sigint import run_main
 
 
 class UsageError(ConfigError):
@@ -218,20 +218,21 @@ def run_command(
     run: Callable[[argparse.Namespace], int],
     argv: Sequence[str] | None,
 ) -> int:
-    """A command's ``main()``: parse ``argv``, run, and turn bad usage and Ctrl-C into one line.
+    """A command's ``main()``: parse ``argv`` and run; bad usage and Ctrl-C are one line.
+
+    Runs under :func:`tmmaster._sigint.run_main`, the one place a command handles Ctrl-C.
 
     Args:
         prog: the name the messages start with.
         build_parser: makes the command's parser.
         run: runs the parsed command; returns the exit status.
-        argv: the arguments (None: ``sys.argv[1:]``).
+        argv: the arguments; None: ``sys.argv[1:]``, and the command is the process
+            itself (its ``__main__``, the console script).
 
     Returns:
-        ``run``'s status; 2 for bad usage; 130 when interrupted before the command's
-        own handling of Ctrl-C took over; :data:`EXIT_BROKEN_PIPE` when the reader of
-        stdout went away.
+        ``run``'s status; 2 for bad usage; 130 after a Ctrl-C;
+        :data:`EXIT_BROKEN_PIPE` when the reader of stdout went away.
     """
-    _sigint.handled_by_main()
 
     def parse_and_run() -> int:
         try:
@@ -241,8 +242,4 @@ def run_command(
             return 2
         return run(args)
 
-    try:
-        return ended_quietly(parse_and_run)
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted [exit {_sigint.EXIT_INTERRUPTED}]", file=sys.stderr)
-        return _sigint.EXIT_INTERRUPTED
+    return run_main(prog, lambda: ended_quietly(parse_and_run), process=argv is None)

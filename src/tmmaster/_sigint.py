@@ -1,89 +1,49 @@
-"""Ctrl-C while a command starts or ends: one line, never a traceback.
+"""Ctrl-C in tmmaster's commands, and the critical sections it must not cut short.
 
-Imported first by each command's entry module, before pymodbus, pydantic and the rest
-load. When the running program is one of tmmaster's commands:
+Nothing happens when this module is imported: a program that imports tmmaster keeps its
+own Ctrl-C handling. Each command's ``main()`` runs through :func:`run_main`, the one
+place a command handles Ctrl-C:
 
-- until the command's ``main()`` takes over (:func:`handled_by_main`), a Ctrl-C ends the
-  process at once with one line and exit 130: nothing is connected or started yet, so
-  there is nothing to clean up. The handler is installed before this module imports
-  anything that Python's start-up has not already loaded;
-- from then on a Ctrl-C is a :class:`KeyboardInterrupt`, which ``main()`` turns into one
-  line, until the interpreter exits: once the main thread has ended (Python's exit, its
-  exit hooks: a :class:`~tmmaster.Robot` still open withdraws or stops its command) a
-  Ctrl-C is ignored, so it neither cuts a hook short nor prints a traceback.
+- the first Ctrl-C raises :class:`KeyboardInterrupt` wherever the command is, so its
+  clean-up runs as for any exception (a robot withdraws or stops its command, a
+  simulator closes); :func:`run_main` turns it into one line,
+  ``PROG: interrupted [exit 130]``, never a traceback;
+- any later Ctrl-C is ignored, so it cuts short neither the clean-up, nor that line,
+  nor Python's exit hooks (a robot still open withdraws or stops its command there);
+- a command that winds down by itself on the first Ctrl-C (a pick & place run stops the
+  arm and writes its report) asks for that with :func:`first_stops`.
 
-Imported any other way (a library user, a test), the handlers are left alone; only a
-Ctrl-C that :class:`deferred` held back during an exit hook is dropped there, not raised.
+A Ctrl-C before ``main()`` runs (Python starting, tmmaster and the command's modules
+loading) is Python's own: a ``KeyboardInterrupt`` traceback, and the process ends by the
+signal (a shell shows 130). Nothing is connected or started then.
 
-A Ctrl-C before the first line of tmmaster runs (Python's own start-up: ``site``, the
-``-m`` machinery) is Python's: its usual ``KeyboardInterrupt`` traceback.
+:class:`deferred` is the critical section, for commands and library programs alike: a
+withdraw or a stop runs to its end, and a Ctrl-C that came meanwhile is delivered after it.
 """
 
-# No ``from __future__ import annotations`` and only modules Python's start-up has
-# loaded (``_signal`` is the C module under ``signal``): nothing to load before the
-# handler is in place.
-import _signal  # type: ignore[import-not-found]  # no stubs: the C module under signal
-import os
-import sys
+from __future__ import annotations
 
-#: Entry modules of the commands, and the name each prints its messages under.
-_COMMANDS = {
-    "tmmaster.__main__": "tmmaster",
-    "tmmaster.pickplace.__main__": "pickplace",
-    "tmmaster.report.__main__": "report",
-    "tmmaster.sim.__main__": "sim",
-    "tmmaster.tmscript.__main__": "tmscript",
-}
+import _thread
+import atexit
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from types import FrameType
 
 #: Exit status of an interrupted command (128 + SIGINT), as shells report it.
 EXIT_INTERRUPTED = 130
 
-#: Test hook: ``import`` or ``exit``: say so on stderr there and wait for a byte on stdin
-#: (a test sends Ctrl-C at that very point instead of after a guessed delay).
+#: Test hook: ``start`` or ``exit``: a command says so on stderr there and waits for a
+#: byte on stdin (a test sends Ctrl-C at that very point instead of after a guessed delay).
 _PAUSE_AT = "TMMASTER_TEST_SIGINT_AT"
 
 
-def _command_name() -> str | None:
-    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
-    if spec is not None and spec.name in _COMMANDS:
-        return _COMMANDS[spec.name]
-    # ``python -m tmmaster.pickplace``: while runpy imports the packages (tmmaster's
-    # __init__ imports this module first), __main__ is not set up yet; the command line
-    # already says which module runs.
-    argv = getattr(sys, "orig_argv", [])
-    if "-m" in argv[:-1]:
-        module = argv[argv.index("-m") + 1]
-        return _COMMANDS.get(f"{module}.__main__")
-    if os.path.basename(sys.argv[0] if sys.argv else "") == "tmmaster":
-        return "tmmaster"  # the console script
-    return None
-
-
-def _install() -> str | None:
-    """For a command: Ctrl-C exits 130 in one line; the command's name (None: not one)."""
-    name = _command_name()
-    if name is None or _signal.getsignal(_signal.SIGINT) == _signal.SIG_IGN:
-        return None  # not a command; or started in the background by a shell: left ignored
-
-    def interrupted(signum: int, frame: object) -> None:
-        _ = signum, frame
-        os.write(2, f"{name}: interrupted [exit {EXIT_INTERRUPTED}]\n".encode())
-        os._exit(EXIT_INTERRUPTED)
-
-    try:
-        _signal.signal(_signal.SIGINT, interrupted)
-    except ValueError:  # imported in another thread than the main one
-        return None
-    return name
-
-
-_NAME = _install()
-
-# Only now: a Ctrl-C while these load is already one line (isort: the order matters).
-import atexit  # noqa: E402
-import signal  # noqa: E402
-import threading  # noqa: E402
-from types import FrameType  # noqa: E402
+def _in_main_thread() -> bool:
+    """True in the main thread, the only one Python runs signal handlers in."""
+    return threading.current_thread() is threading.main_thread()
 
 
 def _exiting() -> bool:
@@ -91,22 +51,21 @@ def _exiting() -> bool:
     return not threading.main_thread().is_alive()
 
 
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    """A command's Ctrl-C: KeyboardInterrupt for ``main()``; ignored once Python exits."""
+def _ignore() -> None:
+    """From now on a Ctrl-C changes nothing (main thread only: elsewhere it cannot be set)."""
+    if _in_main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _interrupt_once(signum: int, frame: FrameType | None) -> None:
+    """A command's first Ctrl-C: a KeyboardInterrupt; any later one is ignored.
+
+    Ignoring comes first, so a Ctrl-C arriving while this runs finds SIG_IGN: at most
+    one KeyboardInterrupt comes out, whatever the number of Ctrl-C.
+    """
     _ = signum, frame
-    if _exiting():
-        return  # an exit hook (a robot's withdraw or stop) runs to its end
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     raise KeyboardInterrupt
-
-
-def handled_by_main() -> None:
-    """Hand Ctrl-C to ``main()`` as a :class:`KeyboardInterrupt` (Python's default handler
-    outside a command; in a command, one that is quiet once the interpreter exits)."""
-    if threading.current_thread() is not threading.main_thread():
-        return
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        handler = signal.default_int_handler if _NAME is None else _interrupt
-        signal.signal(signal.SIGINT, handler)
 
 
 def _pause(point: str) -> None:
@@ -116,9 +75,109 @@ def _pause(point: str) -> None:
         os.read(0, 1)
 
 
-if _NAME is not None and os.environ.get(_PAUSE_AT) == "exit":
-    atexit.register(_pause, "exit")  # registered first: runs last of the exit hooks
-_pause("import")
+def _forget_caught_interrupt() -> None:
+    """Keep CPython from ending the process by SIGINT for a Ctrl-C that was handled.
+
+    CPython remembers a KeyboardInterrupt that ended code it ran from a string
+    (``exec``/``eval`` of source text: dataclasses and namedtuple make their methods
+    so) even when a caller caught it, and under ``python -m`` it then kills the
+    process with SIGINT at exit: status -2 instead of the 130 ``main()`` returned. Any
+    later evaluation of source text clears that memory; this is one, with nothing in it.
+    """
+    exec("", {})  # the empty program: clears that record, runs nothing
+
+
+def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
+    """Run a command's ``body`` so that Ctrl-C ends it in one line and exit 130.
+
+    Every command's ``main()`` runs through this (``tmmaster``, ``python -m
+    tmmaster.pickplace``, ``.sim``, ``.report``, ``.tmscript``). A run started with
+    Ctrl-C ignored (``command &`` in a script) leaves it ignored. Nested (``tmmaster
+    pickplace`` runs pickplace's under tmmaster's), the inner one names the command.
+
+    Args:
+        prog: The command's name, the start of its line (``pickplace``).
+        body: Runs the command; returns its exit status.
+        process: True when the command is the process itself (its ``__main__``, the
+            console script): Ctrl-C stays ignored once ``body`` returns, while Python
+            exits. False (a caller in the same process, a test): the caller's handler
+            is put back.
+
+    Returns:
+        ``body``'s status; :data:`EXIT_INTERRUPTED` after a Ctrl-C.
+    """
+    previous = signal.getsignal(signal.SIGINT) if _in_main_thread() else None
+    if previous is not None and previous is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, _interrupt_once)
+    if process and os.environ.get(_PAUSE_AT) == "exit":
+        atexit.register(_pause, "exit")  # registered before any robot's: runs after them
+    try:
+        if process:
+            _pause("start")
+        return body()
+    except KeyboardInterrupt:
+        _ignore()  # also when the KeyboardInterrupt came from elsewhere (interrupt_main)
+        print(f"{prog}: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
+    finally:
+        _hand_back(previous, process=process)
+
+
+def _hand_back(previous: object, *, process: bool) -> None:
+    """:func:`run_main`'s way out: what a Ctrl-C does after the command."""
+    if process:
+        _ignore()  # the process only exits now
+        _forget_caught_interrupt()
+    elif previous is None or previous is signal.SIG_IGN:
+        return  # not set here (another thread), or left ignored
+    elif previous is _interrupt_once and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        return  # nested in a command that a Ctrl-C ends too: it stays ignored
+    else:
+        signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
+
+
+@contextmanager
+def first_stops(stop: Callable[[], None]) -> Iterator[None]:
+    """While the block runs, the first Ctrl-C calls ``stop`` instead of interrupting.
+
+    The command then winds down by itself (a pick & place run stops the arm, writes its
+    report and says how it ended). A second Ctrl-C gives up at once: a
+    :class:`KeyboardInterrupt` (a :class:`deferred` withdraw or stop still runs to its
+    end); any later one is ignored. After a Ctrl-C, Ctrl-C stays ignored once the block
+    ends: the command only says how it ended. Outside the main thread, or with Ctrl-C
+    ignored, it changes nothing.
+
+    Args:
+        stop: Asks the command to stop (sets events: thread-safe). It runs in a thread
+            of its own, started at once: the handler may have interrupted the main
+            thread inside the very lock ``stop`` takes (an Event's, while the main thread
+            waits on it), which ``stop`` then waits for instead of deadlocking.
+
+    Yields:
+        Nothing.
+    """
+    previous = signal.getsignal(signal.SIGINT) if _in_main_thread() else None
+    if previous is None or previous is signal.SIG_IGN:
+        yield
+        return
+    pressed = False
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        nonlocal pressed
+        _ = signum, frame
+        if pressed:
+            _interrupt_once(signum, frame)
+        pressed = True
+        # _thread, not threading: Thread.start() takes locks of its own the main thread
+        # may hold at this point.
+        _thread.start_new_thread(stop, ())
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        if signal.getsignal(signal.SIGINT) is handler:
+            signal.signal(signal.SIGINT, signal.SIG_IGN if pressed else previous)
 
 
 class deferred:  # noqa: N801 - used as a context manager, like contextlib's lower-case ones
@@ -128,8 +187,10 @@ class deferred:  # noqa: N801 - used as a context manager, like contextlib's low
     main thread (the only one that receives SIGINT), the handler is replaced by one that
     only records the signal; on exit the previous handler is restored and, if a signal
     came meanwhile, called once, so the interrupt still happens, just after the clean-up.
-    Elsewhere (other threads, a handler Python did not install) it does nothing.
-    Re-entrant: a nested section leaves the outer one's recorder in place.
+    Once the interpreter exits (an exit hook's section), a Ctrl-C held back is dropped:
+    the program is over. Elsewhere (other threads, a handler Python did not install, or
+    Ctrl-C ignored) it does nothing. Re-entrant: a nested section leaves the outer one's
+    recorder in place.
     """
 
     __slots__ = ("_pending", "_previous")
@@ -139,7 +200,7 @@ class deferred:  # noqa: N801 - used as a context manager, like contextlib's low
         self._pending = False
 
     def __enter__(self) -> None:
-        if threading.current_thread() is not threading.main_thread():
+        if not _in_main_thread():
             return
         try:
             previous = signal.getsignal(signal.SIGINT)

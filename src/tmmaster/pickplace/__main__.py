@@ -20,22 +20,16 @@ into 141 and changes nothing else: the run goes on and --report is written):
 
 from __future__ import annotations
 
-# isort: off
-from .. import _sigint  # first: a Ctrl-C while the rest loads exits 130 quietly
-# isort: on
-
 import argparse
 import itertools
 import logging
 import math
 import os
-import signal
 import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from types import FrameType
 from typing import TYPE_CHECKING, Any, TextIO, cast
 
 from .._cliparse import (
@@ -43,8 +37,7 @@ from .._cliparse import (
     ArgumentParser,
     UsageError,
     did_you_mean,
-    ended_quietly,
-    one_line,
+    run_command,
     say,
 )
 from .._exceptions import (
@@ -65,6 +58,7 @@ from .._pose import Pose
 from .._profiles import DEFAULT_PROFILE, builtin_profile_names, load_profile
 from .._registers import RobotProfile
 from .._robot import Robot
+from .._sigint import first_stops
 from .._tm_errors import code_suffix
 from .._transport import endpoint_text
 from .._version import add_version_argument
@@ -352,17 +346,12 @@ def run(args: argparse.Namespace, *, output: _Output | None = None) -> int:
     undo_logging = configure_command_logging(
         json=args.log_json, level=_log_level(args), stream=log_stream, record_filter=out.log_filter
     )
-    sigint = _sigint_handler()
     try:
         return _run(args, out)
     finally:
         if out.live is not None:
             out.live.end()
-        # In-process callers (tests, tmmaster's CLI) get their logging and Ctrl-C back;
-        # main()'s own handler is main()'s to put back (or to leave ignored).
-        undo_logging()
-        if sigint is not None and sigint is not _interrupt_once:
-            signal.signal(signal.SIGINT, sigint)
+        undo_logging()  # in-process callers (tests, tmmaster's CLI) get their logging back
 
 
 def _one_line(text: str) -> str:
@@ -807,35 +796,36 @@ def _run_on(
         out.interrupt()
         runner.request_stop()
 
-    restore = _install_sigint(stop)
-    if out.live is not None:
-        out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
-    try:
-        try:
-            robot.connect()
-        except ProfileMismatchError as exc:
-            return EXIT_CONFIG, _mismatch_reason(exc)
-        except (ConnectRefusedError, HostNotFoundError, NotModbusError) as exc:
-            return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
-        except TransportError as exc:
-            return EXIT_CONNECTION, _unreachable(host, port, exc)
-        except StopRequestedError:
-            return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
-        if sampler is not None:
-            sampler.start()
-        try:
-            result = runner.run(sequence, cycles=cycles)
-        finally:
-            if sampler is not None:
-                # The runner's clock: timeline and TCP path share one time axis.
-                sampler.stop(origin=getattr(runner, "_run_start", None))
-        outcome.run = result
-    finally:
+    # The first Ctrl-C stops the run (the arm is stopped, the report written); a second
+    # one gives up at once.
+    with first_stops(stop):
         if out.live is not None:
-            out.live.end()
-        robot.close()
-        restore()
-        outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
+            out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
+        try:
+            try:
+                robot.connect()
+            except ProfileMismatchError as exc:
+                return EXIT_CONFIG, _mismatch_reason(exc)
+            except (ConnectRefusedError, HostNotFoundError, NotModbusError) as exc:
+                return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
+            except TransportError as exc:
+                return EXIT_CONNECTION, _unreachable(host, port, exc)
+            except StopRequestedError:
+                return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
+            if sampler is not None:
+                sampler.start()
+            try:
+                result = runner.run(sequence, cycles=cycles)
+            finally:
+                if sampler is not None:
+                    # The runner's clock: timeline and TCP path share one time axis.
+                    sampler.stop(origin=getattr(runner, "_run_start", None))
+            outcome.run = result
+        finally:
+            if out.live is not None:
+                out.live.end()
+            robot.close()
+            outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
     if result.ok:
         times = ", ".join(f"{t:.2f}" for t in result.cycle_times_s)
         outcome.done_line = (
@@ -946,111 +936,17 @@ def _gripper_stats(robot: Robot) -> dict[str, Any] | None:
     return None if stats is None else dict(stats.as_dict())
 
 
-def _sigint_handler() -> Any:
-    """SIGINT's handler now (None outside the main thread, where it cannot be set)."""
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.getsignal(signal.SIGINT)
-
-
-def _ignore_sigint() -> None:
-    """From here on a Ctrl-C changes nothing: the command is only saying how it ended."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _interrupt_once(signum: int, frame: FrameType | None) -> None:
-    """Ctrl-C outside the run: interrupt once; any later one is ignored, so the one line
-    and exit 130 that follow are never cut short (nor the process killed by the signal)."""
-    _ = signum, frame
-    _ignore_sigint()
-    raise KeyboardInterrupt
-
-
-def _install_sigint(stop: Callable[[], None]) -> Callable[[], None]:
-    """First Ctrl-C: stop the run cleanly; a second one: give up at once.
-
-    After the first, the rest of the command (the clean-up, the report, the last line)
-    ignores Ctrl-C: the handler the restore puts back is SIG_IGN.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        return lambda: None
-    pressed = threading.Event()
-
-    def handler(signum: int, frame: FrameType | None) -> None:
-        _ = signum, frame
-        if pressed.is_set():
-            _ignore_sigint()
-            raise KeyboardInterrupt
-        pressed.set()
-        stop()
-
-    previous = signal.signal(signal.SIGINT, handler)
-
-    def restore() -> None:
-        if signal.getsignal(signal.SIGINT) is handler:
-            signal.signal(signal.SIGINT, signal.SIG_IGN if pressed.is_set() else previous)
-
-    return restore
-
-
 def main(argv: Sequence[str] | list[str] | None = None) -> int:
-    """Entry point of ``python -m tmmaster.pickplace``."""
-    return _main(argv, process=False)
+    """Entry point of ``python -m tmmaster.pickplace`` (``argv`` None: the process's own).
 
-
-def _main(argv: Sequence[str] | list[str] | None, *, process: bool) -> int:
-    """``main``; as the process itself (``process``), Ctrl-C stays ignored on the way out."""
-
-    def parse_and_run() -> int:
-        try:
-            args = build_parser().parse_args(argv)
-        except UsageError as exc:
-            print(f"pickplace: {one_line(exc)} [exit {EXIT_CONFIG}]", file=sys.stderr)
-            return EXIT_CONFIG
-        return run(args)
-
-    return ended_quietly(lambda: run_guarded(parse_and_run, process=process))
-
-
-def run_guarded(body: Callable[[], int], *, process: bool = False) -> int:
-    """Run the command ``body`` so that Ctrl-C ends it in one line and exit 130.
-
-    ``python -m tmmaster.pickplace`` and ``tmmaster pickplace`` both run through it: a
-    Ctrl-C outside the run (a second one during the clean-up, one while the report is
-    written) is one line and exit 130, never a traceback, and any further one is
-    ignored.
-
-    Args:
-        body: Parses (if it must) and runs the command; returns its exit status.
-        process: True when the command is the process itself: Ctrl-C stays ignored
-            on the way out; False: the caller's SIGINT handler is put back.
-
-    Returns:
-        The command's exit status (130 after a Ctrl-C).
+    Bad options are one line and exit 2; Ctrl-C, at any moment, one line and exit 130
+    (:func:`tmmaster._sigint.run_main`).
     """
-    _sigint.handled_by_main()
-    previous = _sigint_handler()
-    if previous is not None and previous is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, _interrupt_once)
-    try:
-        code = body()
-    except KeyboardInterrupt:
-        # A Ctrl-C outside the run (argument parsing, report writing, a second Ctrl-C
-        # during the clean-up): still one line and exit 130, never a traceback. The
-        # handler that raised it ignores any further one.
-        print(f"pickplace: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
-        code = EXIT_INTERRUPTED
-    finally:
-        if process:
-            _ignore_sigint()  # the process only exits now
-        elif previous is not None:
-            signal.signal(signal.SIGINT, previous)  # an in-process caller gets its own back
-    return code
+    return run_command("pickplace", build_parser, run, argv)
 
 
 if __name__ == "__main__":
-    sys.exit(_main(None, process=True))
+    sys.exit(main())
 
 
-__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "run", "run_guarded"]
+__all__ = ["add_arguments", "build_parser", "exit_code_for", "main", "run"]

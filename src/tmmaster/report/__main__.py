@@ -12,10 +12,6 @@ bounded table (docs/pickplace.md).
 
 from __future__ import annotations
 
-# isort: off
-from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits 130 quietly
-# isort: on
-
 import argparse
 import sys
 from collections.abc import Sequence

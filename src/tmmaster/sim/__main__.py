@@ -6,10 +6,6 @@
 
 from __future__ import annotations
 
-# isort: off
-from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits 130 quietly
-# isort: on
-
 import argparse
 import os
 import signal
