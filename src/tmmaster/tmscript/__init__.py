@@ -64,18 +64,19 @@ def evaluate(expression: str) -> tuple[Value, str]:
     try:
         return _evaluate(expression)
     except TMScriptError as exc:
-        # The expression sits on line 1 after "main {" (6 characters).
-        raise type(exc)(exc.reason, line=1, column=max(1, exc.column - 6)) from None
+        from ._parser import expression_error
+
+        raise expression_error(exc, expression) from None
 
 
 def _evaluate(expression: str) -> tuple[Value, str]:
     from ._ast import ExprStatement
     from ._evaluator import _CExpr, _Compiler, _Frame, _Run, _Scope
-    from ._parser import parse_script
+    from ._parser import expression_script, parse_script
 
     if "\n" in expression:
         raise TMScriptSyntaxError("expected one expression on one line", line=1, column=1)
-    script = parse_script(f"main {{{expression}\n}}\n")
+    script = parse_script(expression_script(expression))
     assert script.main is not None
     statements = script.main.statements
     if len(statements) != 1 or not isinstance(statements[0], ExprStatement):

@@ -1,8 +1,10 @@
 """``python -m tmmaster.tmscript`` (and ``tmmaster tmscript``): check, evaluate or run TMscript.
 
-``check FILE`` reads a Script Project and reports the first syntax error or unsupported
-function; ``eval "EXPR"`` prints an expression's value as TMflow displays it; ``run FILE``
-runs a Script Project without a robot (each ``Display()`` printed as one line).
+``check FILE`` reads a Script Project and reports every syntax error, unknown or
+unsupported function and type error it finds, one ``FILE:LINE:COLUMN: message`` line each;
+``eval "EXPR"`` prints an expression's value as TMflow displays it; ``run FILE`` runs a
+Script Project without a robot (each ``Display()`` printed as one line). Each takes
+``--log-json`` and ``--log-level`` as every tmmaster command does.
 Exit codes: 0 fine, 1 a runtime error or the timeout, 2 the script cannot run (a syntax
 error, an unsupported function, it moves the robot or talks Modbus) or a wrong option.
 """
@@ -14,16 +16,37 @@ from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits
 # isort: on
 
 import argparse
+import contextlib
+import dataclasses
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from .._cliparse import ArgumentParser, one_line, run_command
+from .._logging import add_logging_arguments, configure_logging, get_logger
 from .._version import add_version_argument
+
+if TYPE_CHECKING:
+    from .._exceptions import TMScriptSyntaxError
+    from ._ast import Script
+    from ._evaluator import ScriptWarning
+
+#: The level of the events logged on stderr when ``--log-level`` is not given.
+DEFAULT_LOG_LEVEL = "warning"
+
+_log = get_logger("tmmaster.tmscript")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Add the ``check``, ``eval`` and ``run`` subcommands to ``parser``; return it."""
+    """Add the ``check``, ``eval`` and ``run`` subcommands to ``parser``; return it.
+
+    Args:
+        parser: ``python -m tmmaster.tmscript``'s parser, or ``tmmaster tmscript``'s.
+
+    Returns:
+        ``parser``.
+    """
     add_version_argument(parser)
     sub = parser.add_subparsers(dest="tmscript_command", required=True, metavar="{check,eval,run}")
     check = sub.add_parser("check", help="check a Script Project without running it")
@@ -35,11 +58,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     run.add_argument(
         "--timeout", type=float, default=None, metavar="S", help="stop it after S seconds"
     )
+    for command in (check, evaluate, run):
+        # No default of its own: ``tmmaster --log-level debug tmscript ...`` then counts.
+        add_logging_arguments(
+            command,
+            level_help=f"level of the events logged on stderr (default: {DEFAULT_LOG_LEVEL})",
+        )
     return parser
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The parser of ``python -m tmmaster.tmscript``."""
+    """The parser of ``python -m tmmaster.tmscript``.
+
+    Returns:
+        The parser, with its ``check``, ``eval`` and ``run`` subcommands.
+    """
     parser = ArgumentParser(
         prog="python -m tmmaster.tmscript",
         description="Check, evaluate or run TMscript (TMflow Script Projects).",
@@ -56,27 +89,121 @@ def _where(file: str, exc: Exception) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``check``, ``eval`` or ``run`` from parsed ``args``; return the exit code."""
-    from .._exceptions import TMScriptRuntimeError, TMScriptSyntaxError
-    from . import ExecState, Execution, NullHost, NullHostError, display_text, evaluate, parse
+    """Run ``check``, ``eval`` or ``run`` from parsed ``args``; return the exit code.
 
-    if args.tmscript_command == "eval":
-        try:
-            value, typ = evaluate(args.expression)
-        except TMScriptSyntaxError as exc:
-            print(_where("<expr>", exc), file=sys.stderr)
-            return 2
-        except TMScriptRuntimeError as exc:
-            print(_where("<expr>", exc), file=sys.stderr)
-            return 1
-        print(display_text(value, typ))
-        return 0
+    Args:
+        args: The parsed options.
+
+    Returns:
+        0 fine; 1 a runtime error or the timeout; 2 the script cannot run.
+    """
+    level = getattr(args, "log_level", None) or DEFAULT_LOG_LEVEL
+    undo = configure_logging(
+        json=bool(getattr(args, "log_json", False)), level=level, stream=sys.stderr
+    )
+    try:
+        if args.tmscript_command == "eval":
+            return _eval(args.expression)
+        return _on_file(args)
+    finally:
+        undo()
+
+
+def _eval(expression: str) -> int:
+    from .._exceptions import TMScriptRuntimeError, TMScriptSyntaxError
+    from . import display_text, evaluate
+
+    try:
+        value, typ = evaluate(expression)
+    except TMScriptSyntaxError as exc:
+        print(_where("<expr>", exc), file=sys.stderr)
+        return 2
+    except TMScriptRuntimeError as exc:
+        print(_where("<expr>", exc), file=sys.stderr)
+        return 1
+    _log.debug("tmscript.evaluated", expression=expression, type=typ)
+    print(display_text(value, typ))
+    return 0
+
+
+def _on_file(args: argparse.Namespace) -> int:
     file = args.file
     try:
         text = Path(file).read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         print(f"{file}: cannot read: {one_line(exc)}", file=sys.stderr)
         return 2
+    if args.tmscript_command == "check":
+        return _check(file, text)
+    return _run(file, text, args.timeout)
+
+
+def _check(file: str, text: str) -> int:
+    """``check``: every error and warning, one line each in the order of the text."""
+    from ._parser import MAX_ERRORS, check_script
+
+    script, errors = check_script(text)
+    warnings: tuple[ScriptWarning, ...] = ()
+    if script is not None:
+        errors, warnings = _semantic_errors(script)
+    lines = [(e.line, e.column, _where(file, e)) for e in errors]
+    lines += [
+        (w.line, w.column, f"{file}:{w.line}:{w.column}: warning: {w.message}") for w in warnings
+    ]
+    for _, _, line in sorted(lines):
+        print(line, file=sys.stderr)
+    _log.info("tmscript.checked", file=file, errors=len(errors), warnings=len(warnings))
+    if not errors:
+        print(f"{file}: OK")
+        return 0
+    if len(errors) > 1:
+        more = f" (check stops at {MAX_ERRORS})" if len(errors) >= MAX_ERRORS else ""
+        print(f"{file}: {len(errors)} errors{more}", file=sys.stderr)
+    return 2
+
+
+def _semantic_errors(script: Script) -> tuple[list[TMScriptSyntaxError], tuple[ScriptWarning, ...]]:
+    """The errors a syntactically right script has (unknown functions, wrong arguments,
+    types): each statement's, not only the first; and its warnings."""
+    from .._exceptions import TMScriptSyntaxError
+    from . import _ast
+    from ._evaluator import _Compiler
+
+    class CheckAll(_Compiler):
+        """The compiler, going on after a statement's error to check the next ones."""
+
+        def __init__(self, script: Script) -> None:
+            super().__init__(script)
+            self.errors: list[TMScriptSyntaxError] = []
+
+        def statement(self, node: _ast.Statement) -> tuple[bool, Callable[[Any], Any]]:
+            try:
+                return super().statement(node)
+            except TMScriptSyntaxError as exc:
+                self.errors.append(exc)
+            if isinstance(node, _ast.Declaration) and node.init is not None:
+                # The variable is declared all the same: its uses are no errors of their own.
+                with contextlib.suppress(TMScriptSyntaxError):
+                    super().statement(dataclasses.replace(node, init=None))
+            return True, _nothing
+
+    compiler = CheckAll(script)
+    try:
+        compiler.compile()
+    except TMScriptSyntaxError as exc:  # not in a statement: a function defined twice...
+        compiler.errors.append(exc)
+    errors = sorted(compiler.errors, key=lambda e: (e.line, e.column))
+    return errors, tuple(compiler.warnings)
+
+
+def _nothing(frame: object) -> None:
+    """What a statement in error compiles to (a checked script never runs)."""
+
+
+def _run(file: str, text: str, timeout: float | None) -> int:
+    from .._exceptions import TMScriptSyntaxError
+    from . import ExecState, Execution, NullHost, NullHostError, parse
+
     try:
         program = parse(text, filename=file)
     except TMScriptSyntaxError as exc:
@@ -86,15 +213,13 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"{file}:{warning.line}:{warning.column}: warning: {warning.message}", file=sys.stderr
         )
-    if args.tmscript_command == "check":
-        print(f"{file}: OK")
-        return 0
     execution = Execution(program, NullHost(on_display=print))
     try:
-        state = execution.run_to_end(args.timeout)  # an ExecState
+        state = execution.run_to_end(timeout)  # an ExecState
     except TimeoutError as exc:
         print(f"{file}: {exc}", file=sys.stderr)
         return 1
+    _log.info("tmscript.ran", file=file, state=str(state))
     if state == ExecState.ERROR and execution.error is not None:
         error = execution.error
         print(_where(file, error), file=sys.stderr)
@@ -107,7 +232,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m tmmaster.tmscript``."""
+    """Entry point of ``python -m tmmaster.tmscript``.
+
+    Args:
+        argv: The arguments (None: ``sys.argv[1:]``).
+
+    Returns:
+        The exit status.
+    """
     return run_command("tmscript", build_parser, run, argv)
 
 

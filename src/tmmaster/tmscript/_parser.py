@@ -8,21 +8,23 @@ statement (and adds one before a block's ``}``), so the grammar stays LALR(1).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from functools import cache
 from importlib.resources import files
-from typing import cast
+from typing import Any, cast
 
 from lark import Lark, Token, Transformer, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 from lark.lark import PostLex
+from lark.parsers.lalr_parser_state import ParserState
 from lark.tree import Meta
 
-from .._exceptions import TMScriptSyntaxError
+from .._exceptions import TMScriptError, TMScriptSyntaxError
 from . import _ast as a
 from ._types import STRING_MAX
 
-__all__ = ["MAX_NESTING", "parse_script"]
+__all__ = ["MAX_ERRORS", "MAX_NESTING", "check_script", "parse_script"]
 
 #: How deeply a script may nest: each operand of an operator, each call, block and
 #: statement inside another is one level (``1+1+...+1`` nests once per ``+``). The
@@ -75,7 +77,7 @@ class _Newlines(PostLex):
                     pending = tok
                 continue
             word = _word(tok)
-            if pending is not None and word in ("{", "}", "else"):
+            if pending is not None and word in ("{", "else"):
                 pending = None
             if pending is not None and word == "while" and after_do:
                 pending = None
@@ -86,6 +88,8 @@ class _Newlines(PostLex):
                 and pending is None
                 and prev not in ("{", None, "_NL")
             ):
+                # The statement before a "}" on its own line keeps its own newline (an
+                # error there points at the end of that line, not at the "}").
                 pending = Token.new_borrow_pos("_NL", "\n", tok)
             if pending is not None:
                 yield pending
@@ -449,27 +453,116 @@ class _ToAst(Transformer[Token, object]):
 
 
 def _error_position(exc: UnexpectedInput, text: str) -> tuple[int, int]:
+    token = getattr(exc, "token", None)
+    if isinstance(token, Token) and token.type == "$END":
+        return _end_position(token, text)
     line = getattr(exc, "line", -1)
     column = getattr(exc, "column", -1)
     if isinstance(line, int) and line > 0 and isinstance(column, int) and column > 0:
         return line, column
-    lines = text.splitlines() or [""]
+    return _text_end(text)
+
+
+def _text_end(text: str) -> tuple[int, int]:
+    """Just after the last character that is not white space."""
+    lines = text.rstrip().splitlines() or [""]
     return len(lines), len(lines[-1]) + 1
+
+
+def _end_position(end: Token, text: str) -> tuple[int, int]:
+    """Where the script ends too early: just after its last token.
+
+    lark's end-of-input token borrows the last token's position: after a newline, that
+    newline's (the end of its line); after anything else, where that token ends.
+    """
+    line, column = end.line, end.column
+    end_line, end_column = end.end_line, end.end_column
+    if not (isinstance(line, int) and line > 0 and isinstance(column, int) and column > 0):
+        return _text_end(text)
+    if isinstance(end_line, int) and end_line == line and isinstance(end_column, int):
+        return end_line, end_column
+    return line, column
+
+
+#: Terminals that close a bracket, as the script writes them.
+_CLOSERS = {"RPAR": "')'", "RSQB": "']'", "RBRACE": "'}'", "_RB": "'}'"}
+#: A parser state expecting one of these (and nothing that starts a statement or
+#: ends one) wants an operand: the expression before the token is incomplete.
+_OPERAND_STARTS = frozenset({"NAME", "INT", "LPAR"})
+_STATEMENT_STARTS = frozenset({"_NL", "_RB", "IF", "TYPE", "RPAR", "RSQB", "COMMA", "SEMICOLON"})
+
+
+def _expected_hint(exc: UnexpectedInput) -> str:
+    """What the parser wanted instead, when that is one thing to name."""
+    expected = set(getattr(exc, "expected", None) or ())
+    if len(expected) == 1 and next(iter(expected)) in _CLOSERS:
+        return f", expected {_CLOSERS[next(iter(expected))]}"
+    if expected >= _OPERAND_STARTS and not expected & _STATEMENT_STARTS:
+        return ": an operand is missing"
+    return ""
+
+
+#: How the error at the end of a script that ends too early begins.
+_AT_THE_END = "unexpected end of the script"
 
 
 def _describe(exc: UnexpectedInput) -> str:
     if isinstance(exc, UnexpectedCharacters):
+        if exc.char == '"':
+            return "a string constant without its closing '\"' on this line"
         return f"unexpected character {exc.char!r}"
-    if isinstance(exc, UnexpectedEOF):
-        return "unexpected end of the script (a missing '}' or ')'?)"
+    hint = _expected_hint(exc)
+    if isinstance(exc, UnexpectedEOF) or (
+        isinstance(exc, UnexpectedToken) and exc.token.type == "$END"
+    ):
+        return _AT_THE_END + (hint or " (a missing '}' or ')'?)")
     if isinstance(exc, UnexpectedToken):
         tok = exc.token
-        if tok.type == "$END":
-            return "unexpected end of the script (a missing '}' or ')'?)"
         if tok.type == "_NL":
-            return "unexpected end of line"
-        return f"unexpected {str(tok.value)!r}"
+            return f"unexpected end of line{hint}"
+        return f"unexpected {str(tok.value)!r}{hint}"
     return "syntax error"
+
+
+def _syntax_error(exc: UnexpectedInput, text: str) -> TMScriptSyntaxError:
+    line, column = _error_position(exc, text)
+    return TMScriptSyntaxError(_describe(exc), line=line, column=column)
+
+
+#: What ``eval`` wraps an expression in (:func:`expression_script`): the expression sits
+#: on line 1, after these characters.
+_EXPRESSION_PREFIX = "main {"
+#: An error past the expression's end, as the wrapping's "}" or the end of the text saw it.
+_PAST_THE_END = re.compile(r"^unexpected ('\}'|end of the script|end of line)")
+
+
+def expression_script(expression: str) -> str:
+    """The Script Project that evaluates ``expression`` (on one line) as its one statement."""
+    return f"{_EXPRESSION_PREFIX}{expression}\n}}\n"
+
+
+def expression_error(exc: TMScriptError, expression: str) -> TMScriptError:
+    """``exc``, raised for :func:`expression_script`'s text, placed in ``expression`` alone.
+
+    An error past the expression (at the "}" it is wrapped in, or at the end of the text)
+    points just after the expression's last character: that is where it ends too early.
+
+    Args:
+        exc: The error, with its position in the wrapped text.
+        expression: The expression as the user wrote it.
+
+    Returns:
+        The same kind of error on line 1, its column counted in ``expression``.
+    """
+    end = len(expression.rstrip()) + 1
+    reason = exc.reason
+    if exc.line > 1:
+        column = end
+        reason = _PAST_THE_END.sub("unexpected end of the expression", reason)
+    else:
+        column = min(max(1, exc.column - len(_EXPRESSION_PREFIX)), len(expression) + 1)
+        reason = reason.replace("unexpected end of line", "unexpected end of the expression")
+    return type(exc)(reason, line=1, column=column)
 
 
 def _check_nesting(tree: Tree[Token]) -> None:
@@ -515,10 +608,142 @@ def parse_script(text: str) -> a.Script:
         _check_nesting(tree)
         return cast(a.Script, _ToAst().transform(tree))
     except UnexpectedInput as exc:
-        line, column = _error_position(exc, text)
-        raise TMScriptSyntaxError(_describe(exc), line=line, column=column) from None
+        raise _syntax_error(exc, text) from None
     except Exception as exc:  # a TMScriptSyntaxError raised inside the transformer
         inner = getattr(exc, "orig_exc", None)
         if isinstance(inner, TMScriptSyntaxError):
             raise inner from None
         raise
+
+
+#: The most syntax errors :func:`check_script` reports for one script.
+MAX_ERRORS = 100
+#: Tokens that end a statement or a block: where the parser picks up after an error.
+_SYNC = ("_NL", "_RB")
+
+
+def check_script(text: str) -> tuple[a.Script | None, list[TMScriptSyntaxError]]:
+    """Parse a Script Project as :func:`parse_script` does, but find all its syntax errors.
+
+    After a syntax error the parser skips to the end of the statement (a whole block
+    when one opens on the way) and goes on from there; an unknown character is skipped.
+
+    :param text: the whole script.
+    :returns: ``(script, [])`` when the script has no syntax error, else ``(None,
+        errors)``: in the order of the text, the first of each line, at most
+        :data:`MAX_ERRORS`; the first is the one :func:`parse_script` raises.
+    """
+    try:
+        return parse_script(text), []
+    except TMScriptSyntaxError as first:
+        found = _recovered_errors(text)
+        errors = _first_per_line([first, *found])
+        return None, errors[:MAX_ERRORS]
+
+
+def _first_per_line(errors: list[TMScriptSyntaxError]) -> list[TMScriptSyntaxError]:
+    """The first of ``errors`` on each line, in the order of the text; and the end of the
+    script coming too early (a block not closed), wherever it is."""
+    by_line: dict[tuple[int, bool], TMScriptSyntaxError] = {}
+    for error in errors:
+        by_line.setdefault((error.line, error.reason.startswith(_AT_THE_END)), error)
+    return sorted(by_line.values(), key=lambda e: (e.line, e.column))
+
+
+def _recovered_errors(text: str) -> list[TMScriptSyntaxError]:
+    """Every syntax error of ``text``: its unknown characters, then (with each of them
+    read as a space) the grammar's errors in the order of the text."""
+    lexical, text = _unknown_characters(text)
+    if len(lexical) >= MAX_ERRORS:
+        return lexical
+    try:
+        found = _parse_recovering(text)
+    except UnexpectedCharacters:  # pragma: no cover - each one was replaced by a space
+        found = []
+    return lexical + sorted(found, key=lambda e: (e.line, e.column))
+
+
+def _unknown_characters(text: str) -> tuple[list[TMScriptSyntaxError], str]:
+    """The characters no token starts with (at most :data:`MAX_ERRORS`), and ``text``
+    with each of them replaced by a space.
+
+    Lexing starts again just after each one: a token would have started there, so the
+    rest reads as it would have.
+    """
+    errors: list[TMScriptSyntaxError] = []
+    chars = list(text)
+    offset = 0
+    while len(errors) < MAX_ERRORS:
+        try:
+            for _ in _parser().lex(text[offset:]):
+                pass
+        except UnexpectedCharacters as exc:
+            at = offset + (exc.pos_in_stream or 0)
+            line = text.count("\n", 0, at) + 1
+            column = at - (text.rfind("\n", 0, at) + 1) + 1
+            errors.append(TMScriptSyntaxError(_describe(exc), line=line, column=column))
+            chars[at] = " "
+            offset = at + 1
+        else:
+            break
+    return errors, "".join(chars)
+
+
+def _parse_recovering(text: str) -> list[TMScriptSyntaxError]:
+    """The grammar's errors in ``text``, which has no unknown character."""
+    parser = _parser().parse_interactive(text)
+    state = parser.parser_state
+    tokens: Iterator[Token] = parser.lexer_thread.lex(state)  # type: ignore[no-untyped-call]
+    stream = iter(tokens)
+    errors: list[TMScriptSyntaxError] = []
+    last: Token | None = None
+    for tok in stream:
+        last = tok
+        try:
+            state.feed_token(tok)
+        except UnexpectedToken as exc:
+            errors.append(_syntax_error(exc, text))
+            last = None if len(errors) >= MAX_ERRORS else _resync(state, tok, stream)
+            if last is None:
+                return errors
+    end = Token.new_borrow_pos("$END", "", last) if last is not None else Token("$END", "")
+    try:
+        state.feed_token(end, True)
+    except UnexpectedToken as exc:
+        errors.append(_syntax_error(exc, text))
+    return errors
+
+
+def _resync(state: ParserState[Any], bad: Token, stream: Iterator[Token]) -> Token | None:
+    """After ``bad`` was refused: skip to the statement's end and drop the statement.
+
+    Tokens are skipped up to the next newline or block end outside any block opened on
+    the way; then the parser's stack is unwound until that token fits (the statement so
+    far, cut short) or a statement may begin there (the token is dropped).
+
+    :returns: the token it picked up at (fed or dropped); None when the script ended first.
+    """
+    depth = 0
+    tok: Token | None = bad
+    while tok is not None and not (depth == 0 and tok.type in _SYNC):
+        if tok.type == "_LB":
+            depth += 1
+        elif tok.type == "_RB":
+            depth -= 1
+        tok = next(stream, None)
+    if tok is None:
+        return None
+    table = state.parse_conf.states
+    while True:
+        try:
+            state.copy(deepcopy_values=False).feed_token(tok)
+        except UnexpectedToken:
+            pass
+        else:
+            state.feed_token(tok)
+            return tok
+        at_boundary = tok.type == "_NL" and "_RB" in table[state.state_stack[-1]]
+        if at_boundary or len(state.state_stack) <= 1:
+            return tok  # dropped
+        state.state_stack.pop()
+        state.value_stack.pop()
