@@ -2,218 +2,100 @@
 
 The same code runs against the built-in simulator (``python -m tmmaster.sim``) and
 against a real robot: only the host changes. Everything public is importable from
-here; modules starting with an underscore are private. Names are imported on first
-use, so ``import tmmaster`` stays cheap. ``tmmaster.__version__`` is the installed
-version.
+here; modules starting with an underscore are private. ``tmmaster.__version__`` is the
+installed version. The simulator is a plugin: ``import tmmaster`` does not load it
+(``tmmaster.sim`` does).
 """
 
-# isort: off
-# First (not even ``from __future__``, which loads a module): under ``python -m
-# tmmaster.<command>`` a Ctrl-C while the package loads exits 130 in one line (a
-# library user's program is left alone, see _sigint).
-from . import _sigint as _sigint
-# isort: on
+from types import FunctionType as _FunctionType
 
-from typing import TYPE_CHECKING as _TYPE_CHECKING
-
-from ._lazy import lazy_attributes as _lazy_attributes
-from ._version import version as _version_of_package
-
-if _TYPE_CHECKING:
-    from ._channels import Command, CommandKind
-    from ._codec import Value, allowed_range, decode, encode
-    from ._exceptions import (
-        AcknowledgeTimeoutError,
-        CommandRejectedError,
-        CommandStateUnknownError,
-        ConfigError,
-        ConnectError,
-        ConnectionLostError,
-        ConnectRefusedError,
-        DeviceBusyError,
-        DeviceFailureError,
-        EmergencyStopError,
-        GraspFailedError,
-        GripperError,
-        GripperTimeoutError,
-        HostNotFoundError,
-        IllegalAddressError,
-        IllegalFunctionError,
-        IllegalValueError,
-        ModbusExceptionError,
-        MotionTimeoutError,
-        NotModbusError,
-        ProfileMismatchError,
-        ProjectPausedError,
-        RegisterMapError,
-        ResponseTimeoutError,
-        RobotError,
-        RobotFaultError,
-        StopRequestedError,
-        TMMasterError,
-        TMScriptError,
-        TMScriptRuntimeError,
-        TMScriptSyntaxError,
-        TransportClosedError,
-        TransportError,
-        UnknownNameError,
-        UnreachablePoseError,
-        ValueOutOfRangeError,
-    )
-    from ._fleet import Fleet
-    from ._gripper import (
-        Blog2FG7Gripper,
-        Gripper,
-        GripperLink,
-        GripperMount,
-        GripperStatus,
-        NoGripper,
-        OnRobot2FG7Gripper,
-        RegisterGripper,
-        SequenceGripper,
-    )
-    from ._io import RobotIO
-    from ._logging import configure_logging
-    from ._monitor import EventLoopName, MonitoredStatus, StatusMonitor
-    from ._poller import Poller, PollPolicy
-    from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsError
-    from ._profiles import (
-        DEFAULT_PROFILE,
-        builtin_profile_names,
-        gripper_profile,
-        load_profile,
-        profile_markdown,
-        robot_profile,
-    )
-    from ._registers import (
-        Access,
-        DataType,
-        DigitalIOModule,
-        GripperProfile,
-        Handshake,
-        RegisterField,
-        RegisterMap,
-        RobotProfile,
-        Role,
-        Table,
-        WordOrder,
-    )
-    from ._retry import RetryPolicy
-    from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
-    from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
-    from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus
-    from ._tm_errors import TMErrorCode, lookup_tm_error
-    from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
-
-#: Public name -> the private module that defines it.
-_EXPORTS = {
-    "Access": "._registers",
-    "AcknowledgeTimeoutError": "._exceptions",
-    "Blog2FG7Gripper": "._gripper",
-    "Command": "._channels",
-    "CommandKind": "._channels",
-    "CommandRejectedError": "._exceptions",
-    "CommandStateUnknownError": "._exceptions",
-    "ConfigError": "._exceptions",
-    "ConnectError": "._exceptions",
-    "ConnectRefusedError": "._exceptions",
-    "ConnectionLostError": "._exceptions",
-    "ConnectionState": "._transport",
-    "DEFAULT_HOME": "._pose",
-    "DEFAULT_PROFILE": "._profiles",
-    "DataType": "._registers",
-    "DeviceBusyError": "._exceptions",
-    "DeviceFailureError": "._exceptions",
-    "DigitalIOModule": "._registers",
-    "EmergencyStopError": "._exceptions",
-    "EventLoopName": "._monitor",
-    "Fleet": "._fleet",
-    "FrameCheck": "._robot",
-    "GraspFailedError": "._exceptions",
-    "Gripper": "._gripper",
-    "GripperError": "._exceptions",
-    "GripperProfile": "._registers",
-    "GripperLink": "._gripper",
-    "GripperMount": "._gripper",
-    "GripperStatus": "._gripper",
-    "GripperTimeoutError": "._exceptions",
-    "HostNotFoundError": "._exceptions",
-    "Handshake": "._registers",
-    "IllegalAddressError": "._exceptions",
-    "IllegalFunctionError": "._exceptions",
-    "IllegalValueError": "._exceptions",
-    "ModbusExceptionError": "._exceptions",
-    "ModbusTransport": "._transport",
-    "MonitoredStatus": "._monitor",
-    "JointSpec": "._robot_models",
-    "Motion": "._robot",
-    "MotionTimeoutError": "._exceptions",
-    "MotionType": "._pose",
-    "ProfileMismatchError": "._exceptions",
-    "ProjectPausedError": "._exceptions",
-    "ProjectState": "._status",
-    "MovePhase": "._status",
-    "MoveProgress": "._status",
-    "NoGripper": "._gripper",
-    "NotModbusError": "._exceptions",
-    "OnRobot2FG7Gripper": "._gripper",
-    "PollPolicy": "._poller",
-    "Poller": "._poller",
-    "Pose": "._pose",
-    "ROBOT_MODELS": "._robot_models",
-    "RegisterField": "._registers",
-    "RegisterGripper": "._gripper",
-    "RegisterMap": "._registers",
-    "RegisterMapError": "._exceptions",
-    "ResponseTimeoutError": "._exceptions",
-    "RetryPolicy": "._retry",
-    "Robot": "._robot",
-    "RobotError": "._exceptions",
-    "RobotFaultError": "._exceptions",
-    "RobotIO": "._io",
-    "RobotModel": "._robot_models",
-    "RobotProfile": "._registers",
-    "RobotStatus": "._status",
-    "Role": "._registers",
-    "SequenceGripper": "._gripper",
-    "StatusMonitor": "._monitor",
-    "StopRequestedError": "._exceptions",
-    "TMErrorCode": "._tm_errors",
-    "TMMasterError": "._exceptions",
-    "TMScriptError": "._exceptions",
-    "TMScriptRuntimeError": "._exceptions",
-    "TMScriptSyntaxError": "._exceptions",
-    "Table": "._registers",
-    "TimeoutPolicy": "._robot",
-    "Transport": "._transport",
-    "TransportClosedError": "._exceptions",
-    "TransportError": "._exceptions",
-    "TransportStats": "._transport",
-    "UnitsError": "._pose",
-    "UnknownNameError": "._exceptions",
-    "UnreachablePoseError": "._exceptions",
-    "Value": "._codec",
-    "ValueOutOfRangeError": "._exceptions",
-    "WordOrder": "._registers",
-    "Workspace": "._robot",
-    "allowed_range": "._codec",
-    "builtin_profile_names": "._profiles",
-    "configure_logging": "._logging",
-    "connect": "._robot",
-    "decode": "._codec",
-    "encode": "._codec",
-    "gripper_profile": "._profiles",
-    "load_profile": "._profiles",
-    "lookup_tm_error": "._tm_errors",
-    "profile_markdown": "._profiles",
-    "robot_model": "._robot_models",
-    "robot_profile": "._profiles",
-}
-
-
-__getattr__, __dir__ = _lazy_attributes(
-    __name__, globals(), _EXPORTS, computed={"__version__": _version_of_package}
+from ._channels import Command, CommandKind
+from ._codec import Value, allowed_range, decode, encode
+from ._exceptions import (
+    AcknowledgeTimeoutError,
+    CommandRejectedError,
+    CommandStateUnknownError,
+    ConfigError,
+    ConnectError,
+    ConnectionLostError,
+    ConnectRefusedError,
+    DeviceBusyError,
+    DeviceFailureError,
+    EmergencyStopError,
+    GraspFailedError,
+    GripperError,
+    GripperTimeoutError,
+    HostNotFoundError,
+    IllegalAddressError,
+    IllegalFunctionError,
+    IllegalValueError,
+    ModbusExceptionError,
+    MotionTimeoutError,
+    NotModbusError,
+    ProfileMismatchError,
+    ProjectPausedError,
+    RegisterMapError,
+    ResponseTimeoutError,
+    RobotError,
+    RobotFaultError,
+    StopRequestedError,
+    TMMasterError,
+    TMScriptError,
+    TMScriptRuntimeError,
+    TMScriptSyntaxError,
+    TransportClosedError,
+    TransportError,
+    UnknownNameError,
+    UnreachablePoseError,
+    ValueOutOfRangeError,
 )
+from ._fleet import Fleet
+from ._gripper import (
+    Blog2FG7Gripper,
+    Gripper,
+    GripperLink,
+    GripperMount,
+    GripperStatus,
+    NoGripper,
+    OnRobot2FG7Gripper,
+    RegisterGripper,
+    SequenceGripper,
+)
+from ._io import RobotIO
+from ._logging import configure_logging
+from ._monitor import EventLoopName, MonitoredStatus, StatusMonitor
+from ._poller import Poller, PollPolicy
+from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsError
+from ._profiles import (
+    DEFAULT_PROFILE,
+    builtin_profile_names,
+    gripper_profile,
+    load_profile,
+    profile_markdown,
+    robot_profile,
+)
+from ._registers import (
+    Access,
+    DataType,
+    DigitalIOModule,
+    GripperProfile,
+    Handshake,
+    RegisterField,
+    RegisterMap,
+    RobotProfile,
+    Role,
+    Table,
+    WordOrder,
+)
+from ._retry import RetryPolicy
+from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
+from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
+from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus
+from ._tm_errors import TMErrorCode, lookup_tm_error
+from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
+from ._version import version as _version
+
+__version__ = _version()
 
 __all__ = [
     "DEFAULT_HOME",
@@ -319,3 +201,11 @@ __all__ = [
     "robot_model",
     "robot_profile",
 ]
+
+# Shown as tmmaster.Name where they are used (tracebacks, reprs, the docs), not as the
+# private module that defines them.
+for _name in __all__:
+    _value = globals()[_name]
+    if isinstance(_value, type | _FunctionType) and _value.__module__.startswith("tmmaster._"):
+        _value.__module__ = __name__
+del _name, _value

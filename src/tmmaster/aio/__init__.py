@@ -10,23 +10,16 @@ command the robot has not taken is withdrawn, a running move is stopped, and the
 ``CancelledError`` reaches your code once that is settled.
 """
 
-from __future__ import annotations
+from types import FunctionType as _FunctionType
 
-from typing import TYPE_CHECKING as _TYPE_CHECKING
-
-from .._lazy import lazy_attributes as _lazy_attributes
-
-if _TYPE_CHECKING:
-    from ._robot import AsyncGripper, AsyncMotion, AsyncRobot, AsyncRobotIO, connect
-
-_EXPORTS = {
-    "AsyncGripper": "._robot",
-    "AsyncMotion": "._robot",
-    "AsyncRobot": "._robot",
-    "AsyncRobotIO": "._robot",
-    "connect": "._robot",
-}
-
-__getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
+from ._robot import AsyncGripper, AsyncMotion, AsyncRobot, AsyncRobotIO, connect
 
 __all__ = ["AsyncGripper", "AsyncMotion", "AsyncRobot", "AsyncRobotIO", "connect"]
+
+# Shown as tmmaster.aio.Name where they are used (tracebacks, reprs, the docs), not as
+# the private module that defines them.
+for _name in __all__:
+    _value = globals()[_name]
+    if isinstance(_value, type | _FunctionType) and _value.__module__.startswith(f"{__name__}._"):
+        _value.__module__ = __name__
+del _name, _value

@@ -7,15 +7,16 @@ matplotlib (``pip install 'tmmaster[plot]'``); the report model itself is
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING as _TYPE_CHECKING
+from types import FunctionType as _FunctionType
 
-from .._lazy import lazy_attributes as _lazy_attributes
-
-if _TYPE_CHECKING:
-    from ._plot import plot_report
-
-_EXPORTS = {"plot_report": "._plot"}
-
-__getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
+from ._plot import plot_report
 
 __all__ = ["plot_report"]
+
+# Shown as tmmaster.report.Name where they are used (tracebacks, reprs, the docs), not as the
+# private module that defines them.
+for _name in __all__:
+    _value = globals()[_name]
+    if isinstance(_value, type | _FunctionType) and _value.__module__.startswith(f"{__name__}._"):
+        _value.__module__ = __name__
+del _name, _value

@@ -7,108 +7,58 @@ code runs against it and against a real robot. Start one with
 (``Robot(sim.url)``, or ``Robot(..., transport=MemoryTransport(sim))``).
 """
 
-from __future__ import annotations
-
-from typing import TYPE_CHECKING as _TYPE_CHECKING
+from types import FunctionType as _FunctionType
 from typing import Any as _Any
 
 from .._address import register_scheme as _register_scheme
-from .._lazy import lazy_attributes as _lazy_attributes
-
-if _TYPE_CHECKING:
-    from .._pose import DEFAULT_HOME
-    from .._transport import Transport as _Transport
-    from ._backend import (
-        BackendFault,
-        GripperState,
-        MotionRejectedError,
-        ObjectState,
-        PathBackend,
-        PhysicsBackend,
-        PhysicsUnavailableError,
-    )
-    from ._controller import MotionRecord
-    from ._faults import (
-        FAULT_KINDS,
-        DropConnectionsFault,
-        EstopFault,
-        Fault,
-        GraspMissFault,
-        LateAckFault,
-        ModbusExceptionFault,
-        RobotErrorFault,
-        SlowResponsesFault,
-        StallFault,
-        StopListeningFault,
-        is_network_fault,
-        parse_fault,
-    )
-    from ._kinematic import KinematicBackend
-    from ._memory import MemoryTransport
-    from ._scene import Scene, SceneTable, load_scene
-    from ._server import RequestRecord
-    from ._simulator import Simulator
-    from ._world import (
-        DEFAULT_GRIPPER,
-        DEFAULT_PART_POSE,
-        Fixture,
-        GraspFit,
-        GraspMode,
-        GripperGeometry,
-        TableObject,
-        World,
-    )
-
-#: Public name -> the private module that defines it (imported on first use).
-_EXPORTS = {
-    "BackendFault": "._backend",
-    "DEFAULT_GRIPPER": "._world",
-    "DEFAULT_HOME": "tmmaster._pose",
-    "DEFAULT_PART_POSE": "._world",
-    "DropConnectionsFault": "._faults",
-    "EstopFault": "._faults",
-    "FAULT_KINDS": "._faults",
-    "Fault": "._faults",
-    "Fixture": "._world",
-    "GraspFit": "._world",
-    "GraspMissFault": "._faults",
-    "GraspMode": "._world",
-    "GripperGeometry": "._world",
-    "GripperState": "._backend",
-    "KinematicBackend": "._kinematic",
-    "LateAckFault": "._faults",
-    "MemoryTransport": "._memory",
-    "MotionRejectedError": "._backend",
-    "ModbusExceptionFault": "._faults",
-    "MotionRecord": "._controller",
-    "ObjectState": "._backend",
-    "PathBackend": "._backend",
-    "PhysicsBackend": "._backend",
-    "PhysicsUnavailableError": "._backend",
-    "RequestRecord": "._server",
-    "RobotErrorFault": "._faults",
-    "Scene": "._scene",
-    "SceneTable": "._scene",
-    "Simulator": "._simulator",
-    "SlowResponsesFault": "._faults",
-    "StallFault": "._faults",
-    "StopListeningFault": "._faults",
-    "TableObject": "._world",
-    "World": "._world",
-    "is_network_fault": "._faults",
-    "load_scene": "._scene",
-    "parse_fault": "._faults",
-}
-
-__getattr__, __dir__ = _lazy_attributes(__name__, globals(), _EXPORTS)
+from .._pose import DEFAULT_HOME
+from .._transport import Transport as _Transport
+from ._backend import (
+    BackendFault,
+    GripperState,
+    MotionRejectedError,
+    ObjectState,
+    PathBackend,
+    PhysicsBackend,
+    PhysicsUnavailableError,
+)
+from ._controller import MotionRecord
+from ._faults import (
+    FAULT_KINDS,
+    DropConnectionsFault,
+    EstopFault,
+    Fault,
+    GraspMissFault,
+    LateAckFault,
+    ModbusExceptionFault,
+    RobotErrorFault,
+    SlowResponsesFault,
+    StallFault,
+    StopListeningFault,
+    is_network_fault,
+    parse_fault,
+)
+from ._kinematic import KinematicBackend
+from ._memory import MemoryTransport
+from ._memory import open_endpoint as _open_endpoint
+from ._scene import Scene, SceneTable, load_scene
+from ._server import RequestRecord
+from ._simulator import Simulator
+from ._world import (
+    DEFAULT_GRIPPER,
+    DEFAULT_PART_POSE,
+    Fixture,
+    GraspFit,
+    GraspMode,
+    GripperGeometry,
+    TableObject,
+    World,
+)
 
 
 def _open_sim_url(url: str, **options: _Any) -> _Transport:
     """Open ``sim://name``: the running simulator of that name (ConnectError: none runs)."""
-    # Imported here: ``import tmmaster.sim`` stays cheap; a started simulator loaded it.
-    from ._memory import open_endpoint
-
-    return open_endpoint(url, **options)
+    return _open_endpoint(url, **options)
 
 
 # The simulator is a plugin of the core: the core serves sim:// through this opener.
@@ -153,3 +103,11 @@ __all__ = [
     "load_scene",
     "parse_fault",
 ]
+
+# Shown as tmmaster.sim.Name where they are used (tracebacks, reprs, the docs), not as
+# the private module that defines them.
+for _name in __all__:
+    _value = globals()[_name]
+    if isinstance(_value, type | _FunctionType) and _value.__module__.startswith(f"{__name__}._"):
+        _value.__module__ = __name__
+del _name, _value
