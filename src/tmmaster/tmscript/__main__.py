@@ -11,10 +11,6 @@ error, an unsupported function, it moves the robot or talks Modbus) or a wrong o
 
 from __future__ import annotations
 
-# isort: off
-from .. import _sigint  # noqa: F401  first: a Ctrl-C while the rest loads exits 130 quietly
-# isort: on
-
 import argparse
 import contextlib
 import dataclasses
