@@ -6,11 +6,12 @@
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import os
 import signal
 import sys
-import threading
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
@@ -315,7 +316,6 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     if args.mjcf is not None or args.snapshot is not None:
         return _write_scene(sim, args.mjcf, args.snapshot)
     signals = _Signals()
-    stop, reset = signals.stop, signals.reset
     try:
         try:
             sim.start()
@@ -337,10 +337,11 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
                 f" --host {sim.host} --port {sim.port}",
                 flush=True,
             )
-        # wait() with a timeout keeps the main thread responsive to signals.
-        while not stop.wait(0.2):
-            if reset.is_set():
-                reset.clear()
+        # Short sleeps keep the main thread responsive to signals.
+        while not signals.stopping:
+            time.sleep(0.05)
+            if signals.reset_asked:
+                signals.reset_asked = False
                 sim.clear_error()
                 print("robot error reset (SIGUSR1)", flush=True)
     finally:
@@ -355,13 +356,15 @@ class _Signals:
 
     The stop always ends the process: a second SIGINT/SIGTERM ends it at once, and a
     simulator that has not closed :data:`STOP_WITHIN_S` after the first is left behind
-    (exit 1, one line on stderr) rather than ignoring the signal.
+    (exit 1, one line on stderr) rather than ignoring the signal. The handler takes no
+    lock (it sets plain flags, which the main thread polls, and starts the watchdog with
+    ``_thread``): a lock taken there could be one the interrupted main thread holds.
     """
 
     def __init__(self) -> None:
-        self.stop = threading.Event()
-        self.reset = threading.Event()
-        self._watchdog: threading.Timer | None = None
+        self.stopping = False
+        self.reset_asked = False
+        self._closed = False
         self._previous = {
             sig: signal.signal(sig, self._on_signal)
             for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
@@ -371,24 +374,22 @@ class _Signals:
         _ = frame
         if signum == signal.SIGUSR1:
             # The operator's reset on the pendant: clear the error, keep running.
-            self.reset.set()
+            self.reset_asked = True
             return
-        if self.stop.is_set():
+        if self.stopping:
             _exit_now(f"{signal.Signals(signum).name} while stopping: exited without closing")
-        self.stop.set()
-        watchdog = threading.Timer(
-            STOP_WITHIN_S,
-            _exit_now,
-            args=(f"the simulator did not close within {STOP_WITHIN_S:g} s of the signal",),
-        )
-        watchdog.daemon = True
-        watchdog.start()
-        self._watchdog = watchdog
+        self.stopping = True
+        _thread.start_new_thread(self._watch, ())
+
+    def _watch(self) -> None:
+        """The watchdog: the process ends if the simulator has not closed in time."""
+        time.sleep(STOP_WITHIN_S)
+        if not self._closed:
+            _exit_now(f"the simulator did not close within {STOP_WITHIN_S:g} s of the signal")
 
     def restore(self) -> None:
-        """The simulator closed: no watchdog, the previous signal handlers back."""
-        if self._watchdog is not None:
-            self._watchdog.cancel()
+        """The simulator closed: the watchdog stands down, the previous handlers are back."""
+        self._closed = True
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
 
