@@ -88,10 +88,17 @@ class AsyncCommandSafety(RuleBasedStateMachine):
         self.count += 1
         return BASES[self.count % len(BASES)].offset(dz=0.5 * self.count)
 
-    def _ready(self) -> None:
-        # The operator brings the robot back (a stop on tmflow stops the project).
+    def _ready_project(self) -> None:
+        # The operator brings the robot back (a stop on tmflow stops the project). Play
+        # is the Play/Pause toggle: pressed on a running project it would pause it.
         self.sim.clear_error()
-        self.sim.press_play()
+        if self.profile == "tmflow" and not (
+            self.sim.field("project_running") and not self.sim.field("paused")
+        ):
+            self.sim.press_play()
+
+    def _ready(self) -> None:
+        self._ready_project()
         assert self.robot is not None
         self.robot.clear_stop_request()
         with contextlib.suppress(TMMasterError):
@@ -231,8 +238,7 @@ class AsyncCommandSafety(RuleBasedStateMachine):
         try:
             if self.robot is not None:
                 self._run(self.robot.close())
-            self.sim.clear_error()
-            self.sim.press_play()
+            self._ready_project()
             time.sleep(0.3)  # 1.5 simulated s: whatever is still armed would run now
             check(self.issued, self.sim.motion_log())
             self.a_move_given_up_is_not_running_after()
