@@ -127,13 +127,7 @@ def check_host(host: object, *, field: str = "host", port_field: str = "port") -
     if any(c.isspace() for c in host):
         raise ConfigError(f"{prefix}{host!r} contains a space: give the address alone")
     if host.startswith("["):
-        inner, bracket, rest = host[1:].partition("]")
-        if bracket and _is_ipv6(inner):
-            if not rest:
-                return inner
-            if rest[0] == ":" and rest[1:].isdigit():
-                raise ConfigError(_port_message(host, prefix, port_field))
-        raise ConfigError(f"{prefix}{host!r} is not an IPv6 address in brackets ([::1])")
+        return _bracketed_ipv6(host, prefix, port_field)
     try:
         ipaddress.ip_address(host)
     except ValueError:
@@ -145,6 +139,22 @@ def check_host(host: object, *, field: str = "host", port_field: str = "port") -
         raise ConfigError(_port_message(host, prefix, port_field))
     if colons > 1:
         raise ConfigError(f"{prefix}{host!r} is not a valid IPv6 address")
+    return _host_name(host, prefix)
+
+
+def _bracketed_ipv6(host: str, prefix: str, port_field: str) -> str:
+    """``[::1]`` -> ``::1``; a ConfigError for a port after it or anything else."""
+    inner, bracket, rest = host[1:].partition("]")
+    if bracket and _is_ipv6(inner):
+        if not rest:
+            return inner
+        if rest[0] == ":" and rest[1:].isdigit():
+            raise ConfigError(_port_message(host, prefix, port_field))
+    raise ConfigError(f"{prefix}{host!r} is not an IPv6 address in brackets ([::1])")
+
+
+def _host_name(host: str, prefix: str) -> str:
+    """``host`` when it is a valid host name (not an IP address); else a ConfigError."""
     if set(host) <= _DIGITS_AND_DOTS:
         raise ConfigError(
             f"{prefix}{host!r} is not a valid IPv4 address (four numbers 0-255, as in"

@@ -473,7 +473,9 @@ class Robot:
             the options check what the constructor checks.
     """
 
-    def __init__(
+    # Over the house limit of 12 (tests/test_house_limits.py): grouping Robot's public
+    # options is an API decision still open.
+    def __init__(  # noqa: PLR0913
         self,
         host: str,
         port: int = 502,

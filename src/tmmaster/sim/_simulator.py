@@ -171,7 +171,9 @@ class Simulator:
             ``dynamics`` with ``backend``.
     """
 
-    def __init__(
+    # Over the house limits (tests/test_house_limits.py): to take a backend and a world
+    # object instead of its options one by one.
+    def __init__(  # noqa: C901, PLR0913, PLR0915
         self,
         profile: str | Path | RobotProfile = DEFAULT_PROFILE,
         *,

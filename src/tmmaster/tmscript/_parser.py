@@ -49,7 +49,7 @@ class _Newlines(PostLex):
 
     always_accept = ("_NL",)
 
-    def process(self, stream: Iterator[Token]) -> Iterator[Token]:
+    def process(self, stream: Iterator[Token]) -> Iterator[Token]:  # noqa: C901 - listed
         # Each open bracket: "paren" (newlines inside are ignored), "header" (its ")" is
         # followed by a body), "block", "do" (a do-while's body), "array".
         stack: list[str] = []
