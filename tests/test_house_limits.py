@@ -35,8 +35,6 @@ KNOWN: dict[tuple[str, str], int] = {
     ("lines", "pickplace/__main__.py:add_arguments"): 87,
     ("lines", "pickplace/__main__.py:_run_on"): 75,
     ("lines", "pickplace/__main__.py:_run_with_sim"): 66,
-    ("lines", "pickplace/_report.py:build_run_report"): 64,
-    ("lines", "_robot_program.py:robot_program"): 61,
     # TMscript's newline filter for the LALR parser.
     ("lines", "tmscript/_parser.py:process"): 68,
 }

@@ -162,6 +162,32 @@ def check_program_profile(profile: RobotProfile) -> None:
             raise ConfigError(f"profile {profile.name!r}: {name} must be a holding register")
 
 
+#: The template's names for the codes of the handshake's fields: name -> (field, label).
+_CODES = {
+    "cmd_none": ("command", "none"),
+    "cmd_ptp": ("command", "ptp"),
+    "cmd_line": ("command", "line"),
+    "cmd_joints": ("command", "ptp_joints"),
+    "cmd_circle": ("command", "circle"),
+    "cmd_open": ("command", "gripper_open"),
+    "cmd_close": ("command", "gripper_close"),
+    "state_idle": ("robot_state", "idle"),
+    "state_busy": ("robot_state", "busy"),
+    "state_error": ("robot_state", "error"),
+    "result_ok": ("result_code", "ok"),
+    "unreachable": ("result_code", "unreachable"),
+    "invalid_command": ("result_code", "invalid_command"),
+    "motion_failed": ("result_code", "motion_failed"),
+    "gripper_failed": ("result_code", "gripper_failed"),
+    "cancelled": ("result_code", "cancelled"),
+}
+
+
+def _value_codes(profile: RobotProfile) -> dict[str, int]:
+    """The codes the program compares and writes, by the template's names."""
+    return {name: profile.field(field).code_of(label) for name, (field, label) in _CODES.items()}
+
+
 def robot_program(
     profile: RobotProfile,
     *,
@@ -187,24 +213,7 @@ def robot_program(
     check_program_profile(profile)
     wiring = gripper if gripper is not None else GripperWiring()
     tool_values = (0.0,) * 6 if tool is None else tool.as_list()
-    codes = {
-        "cmd_none": profile.field("command").code_of("none"),
-        "cmd_ptp": profile.field("command").code_of("ptp"),
-        "cmd_line": profile.field("command").code_of("line"),
-        "cmd_joints": profile.field("command").code_of("ptp_joints"),
-        "cmd_circle": profile.field("command").code_of("circle"),
-        "cmd_open": profile.field("command").code_of("gripper_open"),
-        "cmd_close": profile.field("command").code_of("gripper_close"),
-        "state_idle": profile.field("robot_state").code_of("idle"),
-        "state_busy": profile.field("robot_state").code_of("busy"),
-        "state_error": profile.field("robot_state").code_of("error"),
-        "result_ok": profile.field("result_code").code_of("ok"),
-        "unreachable": profile.field("result_code").code_of("unreachable"),
-        "invalid_command": profile.field("result_code").code_of("invalid_command"),
-        "motion_failed": profile.field("result_code").code_of("motion_failed"),
-        "gripper_failed": profile.field("result_code").code_of("gripper_failed"),
-        "cancelled": profile.field("result_code").code_of("cancelled"),
-    }
+    codes = _value_codes(profile)
     first = profile.field(TARGET_FIELDS[0]).address
     addresses = {name: profile.field(name).address for name in (*_FEEDBACK, "command")}
     grip = Template(_GRIP_IO if wiring.kind == "io" else _GRIP_NONE).substitute(

@@ -519,19 +519,43 @@ def build_run_report(
         "reason": reason,
         "config": {"file": config_file, "digest": config_digest},
         "target": target,
-        "sequence": None if run is None else run.sequence,
-        "final_state": None if run is None else run.state,
-        "started_at": None if run is None else run.started_at,
-        "duration_s": None if run is None else run.duration_s,
+        **_run_fields(run),
+        "transport": transport,
+        "sim": sim,
+        "move_states": list(move_states or []),
+    }
+    return RunReport.model_validate(data)
+
+
+def _run_fields(run: RunResult | None) -> dict[str, Any]:
+    """The report's fields that come from the run (their empty values without one)."""
+    if run is None:
+        return {
+            "sequence": None,
+            "final_state": None,
+            "started_at": None,
+            "duration_s": None,
+            "cycles": {"requested": None, "completed": 0, "times_s": []},
+            "states": {},
+            "timeline": [],
+            "retries": {"grasp": 0},
+            "error": None,
+            "reaction": None,
+            "stop_delivered": None,
+        }
+    failure, reaction = run.failure, run.reaction
+    return {
+        "sequence": run.sequence,
+        "final_state": run.state,
+        "started_at": run.started_at,
+        "duration_s": run.duration_s,
         "cycles": {
-            "requested": None if run is None else run.cycles_requested,
-            "completed": 0 if run is None else run.cycles_completed,
-            "times_s": [] if run is None else run.cycle_times_s,
+            "requested": run.cycles_requested,
+            "completed": run.cycles_completed,
+            "times_s": run.cycle_times_s,
         },
-        "states": {} if run is None else run.state_timings(),
-        "timeline": []
-        if run is None
-        else [
+        "states": run.state_timings(),
+        "timeline": [
             {
                 "state": r.state,
                 "cycle": r.cycle,
@@ -541,28 +565,21 @@ def build_run_report(
             }
             for r in run.records
         ],
-        "retries": {"grasp": 0 if run is None else run.retries},
+        "retries": {"grasp": run.retries},
         "error": None
-        if run is None or run.failure is None
-        else {
-            **run.failure.as_dict(),
-            "error_meaning": fault_meaning(run.failure.exception),
-        },
+        if failure is None
+        else {**failure.as_dict(), "error_meaning": fault_meaning(failure.exception)},
         "reaction": None
-        if run is None or run.reaction is None
+        if reaction is None
         else {
-            "reaction": run.reaction.reaction,
-            "performed": run.reaction.performed,
-            "detail": run.reaction.detail,
+            "reaction": reaction.reaction,
+            "performed": reaction.performed,
+            "detail": reaction.detail,
         },
         # Whether a stop reached the robot after a stop request or an abandoned move
         # (null: none was needed, or the profile has no stop).
-        "stop_delivered": None if run is None else run.stop_delivered,
-        "transport": transport,
-        "sim": sim,
-        "move_states": list(move_states or []),
+        "stop_delivered": run.stop_delivered,
     }
-    return RunReport.model_validate(data)
 
 
 #: A JSON array of numbers only, as ``json.dumps(indent=2)`` spreads it over lines.
