@@ -86,9 +86,21 @@ def test_ctrl_c_as_soon_as_a_command_starts_is_one_line(name: str) -> None:
     assert code == 130
 
 
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_ctrl_c_while_the_package_loads_is_one_line(name: str) -> None:
+    # Before main() runs: tmmaster and the command's modules still load. The process is
+    # one of tmmaster's commands, so a Ctrl-C there is one line too.
+    command = COMMANDS[name]
+    if not Path(command[0]).exists():
+        pytest.skip("the console script is not installed next to this interpreter")
+    code, err = _paused(command, "import", signals=1)
+    assert err == f"{PROGS.get(name, name)}: interrupted [exit 130]\n"
+    assert code == 130
+
+
 def test_importing_tmmaster_and_its_commands_changes_no_signal_handler() -> None:
-    # Even named as the console script (argv[0]), importing is not running a command:
-    # only a command's main() handles Ctrl-C.
+    # Even named as the console script (argv[0]), a program that imports tmmaster is not
+    # one of its commands: its Ctrl-C handling stays its own.
     script = textwrap.dedent(
         """
         import importlib, signal, sys

@@ -7,6 +7,12 @@ installed version. The simulator is a plugin: ``import tmmaster`` does not load 
 (``tmmaster.sim`` does).
 """
 
+# isort: off
+# First: while a command of tmmaster's loads, Ctrl-C is one line and exit 130 (it acts
+# only when this process is one of the commands; see _startup).
+from . import _startup as _startup
+# isort: on
+
 from types import FunctionType as _FunctionType
 
 from ._channels import Command, CommandKind
