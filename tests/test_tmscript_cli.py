@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import tmmaster
-from tmmaster import TMScriptSyntaxError
+from tmmaster import TMScriptSyntaxError, _cli
 from tmmaster._cli import build_parser as tmmaster_parser
 from tmmaster._cli import main as tmmaster_main
 from tmmaster._cliparse import UsageError
@@ -293,3 +293,21 @@ def test_check_of_a_mangled_script_begins_with_the_error_run_reports(
         assert len(lines) == (1 if count == 1 else count + 1), (text[:40], lines)
         if count > 1:
             assert lines[-1] == f"{script}: {count} errors"
+
+
+@pytest.mark.parametrize(
+    ("argv", "level"),
+    [
+        (["--log-level", "debug", "report", "show", "run.json"], "debug"),
+        (["--log-level", "debug", "profile", "list"], "debug"),
+        (["--log-level", "debug", "tmscript", "eval", "1"], "debug"),
+        (["--log-level", "debug", "report", "show", "run.json", "--log-level", "error"], "error"),
+    ],
+)
+def test_a_log_level_before_the_command_reaches_its_sub_command(
+    argv: list[str], level: str
+) -> None:
+    # Sub-commands of sub-commands (report show, profile list) have their own default.
+    args = _cli.build_parser().parse_args(argv)
+    _cli._apply_global_logging(args, argv)
+    assert args.log_level == level

@@ -188,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _apply_global_logging(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+def _apply_global_logging(args: argparse.Namespace, argv: Sequence[str]) -> None:
     """``--log-level``/``--log-json`` given before the command count for the command.
 
     The command's own ``--log-level`` (after its name) wins over the one before it.
@@ -198,23 +198,10 @@ def _apply_global_logging(parser: argparse.ArgumentParser, args: argparse.Namesp
     level = getattr(args, "global_log_level", None)
     if level is None or args.command is None:
         return
-    command_parser = _subcommand_parser(parser, args.command)
-    own_default = None if command_parser is None else command_parser.get_default("log_level")
-    if getattr(args, "log_level", None) == own_default:
+    words = list(argv)
+    after = words[words.index(args.command) + 1 :] if args.command in words else []
+    if not any(word == "--log-level" or word.startswith("--log-level=") for word in after):
         args.log_level = level
-
-
-def _subcommand_parser(
-    parser: argparse.ArgumentParser, name: str
-) -> argparse.ArgumentParser | None:
-    """The parser of ``tmmaster NAME`` (None when there is none)."""
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            found = action.choices.get(name)
-            if isinstance(found, _CommandParser):
-                return found.filled()
-            return found if isinstance(found, argparse.ArgumentParser) else None
-    return None
 
 
 def config_schema() -> str:
@@ -256,7 +243,7 @@ def _main(argv: Sequence[str] | None) -> int:
         parser.print_help(sys.stderr)
         print("tmmaster: give a command [exit 2]", file=sys.stderr)
         return 2
-    _apply_global_logging(parser, args)
+    _apply_global_logging(args, sys.argv[1:] if argv is None else argv)
     if args.command == "pickplace":
         # Under its own name: a Ctrl-C says "pickplace: interrupted", as the module does.
         return run_main("pickplace", lambda: _module("pickplace").run(args), process=False)
