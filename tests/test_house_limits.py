@@ -30,8 +30,6 @@ KNOWN: dict[tuple[str, str], int] = {
     ("params", "sim/_simulator.py:__init__"): 25,
     ("lines", "sim/_simulator.py:__init__"): 153,
     # Command lines whose options are one long argparse list, and their runners.
-    ("lines", "sim/__main__.py:add_arguments"): 158,
-    ("lines", "sim/__main__.py:_serve"): 74,
     ("lines", "pickplace/__main__.py:add_arguments"): 87,
     ("lines", "pickplace/__main__.py:_run_on"): 75,
     ("lines", "pickplace/__main__.py:_run_with_sim"): 66,

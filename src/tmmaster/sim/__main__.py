@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 from .._address import check_host
 from .._cliparse import ArgumentParser, did_you_mean, one_line, run_command
@@ -36,158 +37,45 @@ MAX_PARTS = 1_000_000
 STOP_WITHIN_S = 5.0
 
 
+#: The options in the order ``--help`` lists them (each concern's are defined below).
+_HELP_ORDER = (
+    "--profile",
+    "--port",
+    "--bind",
+    "--time-scale",
+    "--speed-factor",
+    "--tick-hz",
+    "--model",
+    "--physics",
+    "--mjcf",
+    "--snapshot",
+    "--tool",
+    "--gripper",
+    "--gripper-port",
+    "--fault",
+    "--program",
+    "--resume-after-error",
+    "--trace-requests",
+    "--parts",
+    "--scene",
+    "--dynamics",
+    "--grasp",
+)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the simulator's options to ``parser`` (used by ``tmmaster sim``); return it."""
-    robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
-    grippers = [n for n in builtin_profile_names() if n not in robots]
-    parser.add_argument(
-        "--profile",
-        default=DEFAULT_PROFILE,
-        metavar="NAME|FILE.toml",
-        help=f"robot profile: {' or '.join(robots)}, or a TOML file (default: {DEFAULT_PROFILE})",
-    )
-    parser.add_argument(
-        "--port",
-        type=int,
-        default=5020,
-        help="robot Modbus TCP port; 0 picks a free one (default: 5020)",
-    )
-    parser.add_argument(
-        "--bind",
-        default="127.0.0.1",
-        metavar="ADDRESS",
-        help="address to listen on (default: 127.0.0.1; Modbus has no authentication,"
-        " so think twice before 0.0.0.0)",
-    )
-    parser.add_argument(
-        "--time-scale",
-        type=float,
-        default=1.0,
-        metavar="X",
-        help="simulated seconds per wall second (default: 1.0)",
-    )
-    parser.add_argument(
-        "--speed-factor",
-        type=float,
-        default=1.0,
-        metavar="K",
-        help="the arm moves K times faster than the arm model the master plans with"
-        " (0.1..10, default: 1; for testing a master against a robot it does not predict)",
-    )
-    parser.add_argument(
-        "--tick-hz",
-        type=float,
-        default=50.0,
-        metavar="HZ",
-        help="control tick rate in wall Hz (default: 50, like the TM controller)",
-    )
-    parser.add_argument(
-        "--model",
-        default="tm5-700",
-        choices=sorted(ROBOT_MODELS),
-        help="arm model whose reach and speed limits time the motions (default: tm5-700)",
-    )
-    parser.add_argument(
-        "--physics",
-        default="kinematic",
-        choices=["kinematic", "mujoco"],
-        help="physics backend: kinematic (analytic, default) or mujoco (needs the extra"
-        " tmmaster[mujoco]; docs/physics-backends.md)",
-    )
-    parser.add_argument(
-        "--mjcf",
-        default=None,
-        metavar="FILE",
-        help="with --physics mujoco: write the MuJoCo scene this simulator would run (the"
-        " arm, gripper, table and parts, as MJCF) to FILE and exit, without serving",
-    )
-    parser.add_argument(
-        "--snapshot",
-        default=None,
-        metavar="FILE.png",
-        help="with --physics mujoco: render the cell this simulator would start with (the"
-        " arm, gripper, table, fixtures and parts; --scene) to FILE.png and exit, without"
-        " serving (needs OpenGL: the extra tmmaster[mujoco-render]; MUJOCO_GL=egl headless)",
-    )
-    parser.add_argument(
-        "--tool",
-        default=None,
-        metavar="X,Y,Z,RX,RY,RZ",
-        help="TCP offset in the flange frame, mm and deg (TCP = flange x tool;"
-        " default: none, the TCP is the flange)",
-    )
-    parser.add_argument(
-        "--gripper",
-        default=None,
-        metavar="NAME|FILE.toml",
-        help=f"separate gripper device: {' or '.join(grippers)}, or a TOML file"
-        " (default: none; the article profile has its gripper in the robot map)",
-    )
-    parser.add_argument(
-        "--gripper-port",
-        type=int,
-        default=5021,
-        metavar="N",
-        help="gripper Modbus TCP port; 0 picks a free one (default: 5021)",
-    )
-    parser.add_argument(
-        "--fault",
-        action="append",
-        default=[],
-        metavar="SPEC",
-        help='inject a fault, e.g. "slow_responses:delay_s=0.2" (repeatable;'
-        " see docs/simulator.md)",
-    )
-    parser.add_argument(
-        "--program",
-        metavar="FILE|generated",
-        help="tmflow: run this TMflow Script Project on the robot through the TMscript"
-        " interpreter ('generated': the one tmmaster robot-program writes)",
-    )
-    parser.add_argument(
-        "--resume-after-error",
-        choices=("on", "off"),
-        default="off",
-        help="tmflow: TMflow's Resumption Behavior; on: an e-stop pauses the project and"
-        " Play resumes the interrupted move (default: off)",
-    )
-    parser.add_argument(
-        "--trace-requests",
-        action="store_true",
-        help="print every Modbus request the simulator receives as one JSON line on stdout",
-    )
-    parser.add_argument(
-        "--parts",
-        type=int,
-        default=None,
-        metavar="N",
-        help="parts waiting at the pick position, like a feeder: the next one is there"
-        f" after one is taken (default: 1; 0 for an empty table; at most {MAX_PARTS:,};"
-        " not with --scene)",
-    )
-    parser.add_argument(
-        "--scene",
-        default=None,
-        metavar="FILE.toml",
-        help="the cell from a TOML scene file: table height, fixtures the arm must not"
-        " touch, parts, gripper geometry (docs/simulator.md#scene-files)",
-    )
-    parser.add_argument(
-        "--dynamics",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="with --physics mujoco: the links carry Techman's masses and inertias and each"
-        " joint is a servo limited to its effort (the arm lags; a move is done once it"
-        " settled); --no-dynamics: the ideal servo, the joints exactly where the trajectory"
-        " says (default: on for tm5-700 and tm5-900, off for the other models)",
-    )
-    parser.add_argument(
-        "--grasp",
-        default="friction",
-        choices=["friction", "weld"],
-        help="how the fingers hold a part: friction (a part too heavy for the grip force"
-        " slips out, default) or weld (carried whatever its mass)",
-    )
+    options = {
+        **_network_options(),
+        **_robot_options(),
+        **_physics_options(),
+        **_fault_options(),
+        **_program_options(),
+        **_output_options(),
+    }
+    # ValueError for an option missing from _HELP_ORDER: none is left out of --help.
+    for flag in sorted(options, key=_HELP_ORDER.index):
+        parser.add_argument(flag, **options[flag])
     add_logging_arguments(
         parser,
         default_level="info",
@@ -195,6 +83,180 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     )
     add_version_argument(parser)
     return parser
+
+
+def _network_options() -> dict[str, dict[str, Any]]:
+    """Where the robot and the gripper listen: ``--bind``, ``--port``, ``--gripper-port``."""
+    return {
+        "--port": {
+            "type": int,
+            "default": 5020,
+            "help": "robot Modbus TCP port; 0 picks a free one (default: 5020)",
+        },
+        "--bind": {
+            "default": "127.0.0.1",
+            "metavar": "ADDRESS",
+            "help": "address to listen on (default: 127.0.0.1; Modbus has no authentication,"
+            " so think twice before 0.0.0.0)",
+        },
+        "--gripper-port": {
+            "type": int,
+            "default": 5021,
+            "metavar": "N",
+            "help": "gripper Modbus TCP port; 0 picks a free one (default: 5021)",
+        },
+    }
+
+
+def _robot_options() -> dict[str, dict[str, Any]]:
+    """What is simulated: ``--profile``, ``--model``, ``--tool``, ``--gripper``."""
+    robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
+    grippers = [n for n in builtin_profile_names() if n not in robots]
+    return {
+        "--profile": {
+            "default": DEFAULT_PROFILE,
+            "metavar": "NAME|FILE.toml",
+            "help": f"robot profile: {' or '.join(robots)}, or a TOML file"
+            f" (default: {DEFAULT_PROFILE})",
+        },
+        "--model": {
+            "default": "tm5-700",
+            "choices": sorted(ROBOT_MODELS),
+            "help": "arm model whose reach and speed limits time the motions (default: tm5-700)",
+        },
+        "--tool": {
+            "default": None,
+            "metavar": "X,Y,Z,RX,RY,RZ",
+            "help": "TCP offset in the flange frame, mm and deg (TCP = flange x tool;"
+            " default: none, the TCP is the flange)",
+        },
+        "--gripper": {
+            "default": None,
+            "metavar": "NAME|FILE.toml",
+            "help": f"separate gripper device: {' or '.join(grippers)}, or a TOML file"
+            " (default: none; the article profile has its gripper in the robot map)",
+        },
+    }
+
+
+def _physics_options() -> dict[str, dict[str, Any]]:
+    """How the cell moves: the clock, the backend, the table's parts, the grasp."""
+    return {
+        "--time-scale": {
+            "type": float,
+            "default": 1.0,
+            "metavar": "X",
+            "help": "simulated seconds per wall second (default: 1.0)",
+        },
+        "--speed-factor": {
+            "type": float,
+            "default": 1.0,
+            "metavar": "K",
+            "help": "the arm moves K times faster than the arm model the master plans with"
+            " (0.1..10, default: 1; for testing a master against a robot it does not predict)",
+        },
+        "--tick-hz": {
+            "type": float,
+            "default": 50.0,
+            "metavar": "HZ",
+            "help": "control tick rate in wall Hz (default: 50, like the TM controller)",
+        },
+        "--physics": {
+            "default": "kinematic",
+            "choices": ["kinematic", "mujoco"],
+            "help": "physics backend: kinematic (analytic, default) or mujoco (needs the extra"
+            " tmmaster[mujoco]; docs/physics-backends.md)",
+        },
+        **_cell_options(),
+    }
+
+
+def _cell_options() -> dict[str, dict[str, Any]]:
+    """The physics of the cell: ``--parts``, ``--scene``, ``--dynamics``, ``--grasp``."""
+    return {
+        "--parts": {
+            "type": int,
+            "default": None,
+            "metavar": "N",
+            "help": "parts waiting at the pick position, like a feeder: the next one is there"
+            f" after one is taken (default: 1; 0 for an empty table; at most {MAX_PARTS:,};"
+            " not with --scene)",
+        },
+        "--scene": {
+            "default": None,
+            "metavar": "FILE.toml",
+            "help": "the cell from a TOML scene file: table height, fixtures the arm must not"
+            " touch, parts, gripper geometry (docs/simulator.md#scene-files)",
+        },
+        "--dynamics": {
+            "action": argparse.BooleanOptionalAction,
+            "default": None,
+            "help": "with --physics mujoco: the links carry Techman's masses and inertias and"
+            " each joint is a servo limited to its effort (the arm lags; a move is done once it"
+            " settled); --no-dynamics: the ideal servo, the joints exactly where the trajectory"
+            " says (default: on for tm5-700 and tm5-900, off for the other models)",
+        },
+        "--grasp": {
+            "default": "friction",
+            "choices": ["friction", "weld"],
+            "help": "how the fingers hold a part: friction (a part too heavy for the grip force"
+            " slips out, default) or weld (carried whatever its mass)",
+        },
+    }
+
+
+def _fault_options() -> dict[str, dict[str, Any]]:
+    """Faults armed from the start: ``--fault``."""
+    return {
+        "--fault": {
+            "action": "append",
+            "default": [],
+            "metavar": "SPEC",
+            "help": 'inject a fault, e.g. "slow_responses:delay_s=0.2" (repeatable;'
+            " see docs/simulator.md)",
+        },
+    }
+
+
+def _program_options() -> dict[str, dict[str, Any]]:
+    """The robot's own program (tmflow): ``--program``, ``--resume-after-error``."""
+    return {
+        "--program": {
+            "metavar": "FILE|generated",
+            "help": "tmflow: run this TMflow Script Project on the robot through the TMscript"
+            " interpreter ('generated': the one tmmaster robot-program writes)",
+        },
+        "--resume-after-error": {
+            "choices": ("on", "off"),
+            "default": "off",
+            "help": "tmflow: TMflow's Resumption Behavior; on: an e-stop pauses the project and"
+            " Play resumes the interrupted move (default: off)",
+        },
+    }
+
+
+def _output_options() -> dict[str, dict[str, Any]]:
+    """What is written besides serving: ``--mjcf``, ``--snapshot``, ``--trace-requests``."""
+    return {
+        "--mjcf": {
+            "default": None,
+            "metavar": "FILE",
+            "help": "with --physics mujoco: write the MuJoCo scene this simulator would run (the"
+            " arm, gripper, table and parts, as MJCF) to FILE and exit, without serving",
+        },
+        "--snapshot": {
+            "default": None,
+            "metavar": "FILE.png",
+            "help": "with --physics mujoco: render the cell this simulator would start with"
+            " (the arm, gripper, table, fixtures and parts; --scene) to FILE.png and exit,"
+            " without serving (needs OpenGL: the extra tmmaster[mujoco-render];"
+            " MUJOCO_GL=egl headless)",
+        },
+        "--trace-requests": {
+            "action": "store_true",
+            "help": "print every Modbus request the simulator receives as one JSON line on stdout",
+        },
+    }
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -272,6 +334,7 @@ def _check_names(args: argparse.Namespace) -> None:
 
 
 def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> int:
+    """Build the simulator of ``args``, then write its scene or serve it; the exit code."""
     for option, value in (("--mjcf", args.mjcf), ("--snapshot", args.snapshot)):
         if value is not None and args.physics != "mujoco":
             print(f"sim: {option} needs --physics mujoco [exit 2]", file=sys.stderr)
@@ -279,9 +342,32 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     if args.snapshot is not None:
         # Headless rendering: EGL, read by mujoco when it is first imported (below).
         os.environ.setdefault("MUJOCO_GL", "egl")
+    sim = _build(args, echo)
+    if isinstance(sim, int):
+        return sim
+    if args.mjcf is not None or args.snapshot is not None:
+        return _write_scene(sim, args.mjcf, args.snapshot)
+    signals = _Signals()
+    try:
+        try:
+            sim.start()
+        except OSError as exc:
+            print(f"sim: {exc} [exit 1]", file=sys.stderr)
+            return 1
+        _print_banner(sim, args.fault)
+        _wait(sim, signals)
+    finally:
+        sim.close()
+        signals.restore()
+    print("simulator stopped", flush=True)
+    return 0
+
+
+def _build(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> Simulator | int:
+    """The simulator ``args`` describe (not started), or the exit code of a refusal."""
     try:
         _check_names(args)
-        sim = Simulator(
+        return Simulator(
             args.profile,
             # An address alone (a port goes in --port): said as the option, exit 2.
             host=check_host(args.bind, field="--bind", port_field="--port"),
@@ -313,42 +399,36 @@ def _serve(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> i
     except (TMMasterError, ValueError, KeyError) as exc:
         print(f"sim: {one_line(exc)} [exit 2]", file=sys.stderr)
         return 2
-    if args.mjcf is not None or args.snapshot is not None:
-        return _write_scene(sim, args.mjcf, args.snapshot)
-    signals = _Signals()
-    try:
-        try:
-            sim.start()
-        except OSError as exc:
-            print(f"sim: {exc} [exit 1]", file=sys.stderr)
-            return 1
-        for line in simulator_summary(sim):
-            print(line, flush=True)
-        for fault in args.fault:
-            print(f"fault   armed: {fault}", flush=True)
+
+
+def _print_banner(sim: Simulator, faults: Sequence[str]) -> None:
+    """What runs where, the armed faults, and how to stop it (the simulator has started)."""
+    for line in simulator_summary(sim):
+        print(line, flush=True)
+    for fault in faults:
+        print(f"fault   armed: {fault}", flush=True)
+    print(
+        f"press Ctrl-C to stop; kill -USR1 {os.getpid()} resets a robot error or e-stop",
+        flush=True,
+    )
+    if sim.profile.has("play_pause"):
+        # Printed once start() returned: the project runs, a master may connect now.
         print(
-            f"press Ctrl-C to stop; kill -USR1 {os.getpid()} resets a robot error or e-stop",
+            "project running; after a stop or a reset: tmmaster robot play"
+            f" --host {sim.host} --port {sim.port}",
             flush=True,
         )
-        if sim.profile.has("play_pause"):
-            # Printed once start() returned: the project runs, a master may connect now.
-            print(
-                "project running; after a stop or a reset: tmmaster robot play"
-                f" --host {sim.host} --port {sim.port}",
-                flush=True,
-            )
-        # Short sleeps keep the main thread responsive to signals.
-        while not signals.stopping:
-            time.sleep(0.05)
-            if signals.reset_asked:
-                signals.reset_asked = False
-                sim.clear_error()
-                print("robot error reset (SIGUSR1)", flush=True)
-    finally:
-        sim.close()
-        signals.restore()
-    print("simulator stopped", flush=True)
-    return 0
+
+
+def _wait(sim: Simulator, signals: _Signals) -> None:
+    """Serve until SIGINT or SIGTERM; a SIGUSR1 resets the robot's error meanwhile."""
+    # Short sleeps keep the main thread responsive to signals.
+    while not signals.stopping:
+        time.sleep(0.05)
+        if signals.reset_asked:
+            signals.reset_asked = False
+            sim.clear_error()
+            print("robot error reset (SIGUSR1)", flush=True)
 
 
 class _Signals:

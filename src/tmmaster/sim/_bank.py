@@ -89,7 +89,6 @@ def _build_layout(
 ) -> _Layout:
     zeros: dict[Table, dict[int, int]] = {table: {} for table in Table}
     owner: dict[Table, dict[int, RegisterField]] = {table: {} for table in Table}
-    gaps: dict[Table, set[int]] = {table: set() for table in Table}
     raw: dict[Table, set[int]] = {table: set() for table in Table}
     extra = {f.name: f for f in extra_fields if f.name not in register_map.fields}
     for field in (*register_map.fields.values(), *extra.values()):
@@ -101,18 +100,24 @@ def _build_layout(
             if address not in zeros[table]:
                 zeros[table][address] = 0
                 raw[table].add(address)
-    for table in Table:
-        ordered = sorted(
-            (f for f in register_map.fields.values() if f.table is table),
-            key=lambda f: f.address,
-        )
-        for before, after in pairwise(ordered):
-            gap = after.address - before.end - 1
-            if 0 < gap <= register_map.max_read_gap:
-                gaps[table].update(range(before.end + 1, after.address))
+    gaps = {table: _gaps(register_map, table) for table in Table}
     served = {table: tuple(_merge(set(zeros[table]))) for table in Table}
     readable = {table: tuple(_merge(set(zeros[table]) | gaps[table])) for table in Table}
     return _Layout(zeros, owner, gaps, raw, extra, served, readable)
+
+
+def _gaps(register_map: RegisterMap, table: Table) -> set[int]:
+    """The unused addresses of ``table`` between two of the map's fields that a read may cover."""
+    gaps: set[int] = set()
+    ordered = sorted(
+        (f for f in register_map.fields.values() if f.table is table),
+        key=lambda f: f.address,
+    )
+    for before, after in pairwise(ordered):
+        gap = after.address - before.end - 1
+        if 0 < gap <= register_map.max_read_gap:
+            gaps.update(range(before.end + 1, after.address))
+    return gaps
 
 
 class RegisterBank:
@@ -278,34 +283,7 @@ class RegisterBank:
             raise IllegalAddressError(
                 f"{self._map.name}: the {table.value} table is read-only (write at {address})"
             )
-        owners = self._owner[table]
-        raw = self._raw[table]
-        touched: dict[str, RegisterField] = {}
-        for offset, value in enumerate(values):
-            a = address + offset
-            field = owners.get(a)
-            limit = 1 if table.is_bit else 0xFFFF
-            if field is None and a in raw:
-                if not 0 <= value <= limit:
-                    raise IllegalValueError(
-                        f"{self._map.name}: value {value} does not fit {table.value} address {a}"
-                    )
-                continue
-            if field is None:
-                raise IllegalAddressError(
-                    f"{self._map.name}: {table.value} address {a} is not served"
-                    f" (write of {len(values)} at {address})"
-                )
-            if not field.access.writable and not device:
-                raise IllegalAddressError(
-                    f"{self._map.name}: field {field.name} ({table.value} {a}) is written by"
-                    " the device only"
-                )
-            if not 0 <= value <= limit:
-                raise IllegalValueError(
-                    f"{self._map.name}: value {value} does not fit {table.value} address {a}"
-                )
-            touched[field.name] = field
+        touched = self._writable_fields(table, address, values, device=device)
         words = self._words[table]
         changed = False
         for offset, value in enumerate(values):
@@ -320,6 +298,46 @@ class RegisterBank:
         if changed:
             self._version += 1
             self._table_changes[table] += 1
+
+    def _writable_fields(
+        self, table: Table, address: int, values: Sequence[int], *, device: bool
+    ) -> dict[str, RegisterField]:
+        """The fields a write of ``values`` at ``address`` touches, by name; checked first.
+
+        Raises:
+            IllegalAddressError: An address no field or raw area covers, or a field only
+                the device writes (unless ``device``).
+            IllegalValueError: A value that does not fit its word (or bit).
+        """
+        owners = self._owner[table]
+        raw = self._raw[table]
+        limit = 1 if table.is_bit else 0xFFFF
+        touched: dict[str, RegisterField] = {}
+        for offset, value in enumerate(values):
+            a = address + offset
+            field = owners.get(a)
+            if field is None and a in raw:
+                self._check_value(table, a, value, limit)
+                continue
+            if field is None:
+                raise IllegalAddressError(
+                    f"{self._map.name}: {table.value} address {a} is not served"
+                    f" (write of {len(values)} at {address})"
+                )
+            if not field.access.writable and not device:
+                raise IllegalAddressError(
+                    f"{self._map.name}: field {field.name} ({table.value} {a}) is written by"
+                    " the device only"
+                )
+            self._check_value(table, a, value, limit)
+            touched[field.name] = field
+        return touched
+
+    def _check_value(self, table: Table, address: int, value: int, limit: int) -> None:
+        if not 0 <= value <= limit:
+            raise IllegalValueError(
+                f"{self._map.name}: value {value} does not fit {table.value} address {address}"
+            )
 
     def _check_range(self, table: Table, address: int, count: int) -> None:
         if count < 1 or address < 0 or address + count - 1 > 65535:
