@@ -29,10 +29,6 @@ KNOWN: dict[tuple[str, str], int] = {
     # The simulator's constructor: to take a backend and a world object instead.
     ("params", "sim/_simulator.py:__init__"): 25,
     ("lines", "sim/_simulator.py:__init__"): 153,
-    # Command lines whose options are one long argparse list, and their runners.
-    ("lines", "pickplace/__main__.py:add_arguments"): 87,
-    ("lines", "pickplace/__main__.py:_run_on"): 75,
-    ("lines", "pickplace/__main__.py:_run_with_sim"): 66,
     # TMscript's newline filter for the LALR parser.
     ("lines", "tmscript/_parser.py:process"): 68,
 }

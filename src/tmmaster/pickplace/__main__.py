@@ -123,6 +123,43 @@ def exit_code_for(exc: BaseException) -> int:
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the pick & place options to ``parser`` (used by ``tmmaster pickplace``); return it."""
+    _add_robot_arguments(parser)
+    _add_sim_arguments(parser)
+    parser.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="validate and print the plan (poses, speeds, motion types, expected times);"
+        " connect to nothing",
+    )
+    parser.add_argument(
+        "--diagram", action="store_true", help="print the state machine as a mermaid diagram"
+    )
+    add_logging_arguments(
+        parser,
+        level_help="level of the events logged on stderr (default: warning; info with -v or"
+        " --log-json)",
+    )
+    parser.add_argument(
+        "--verbose",
+        "-v",
+        action="count",
+        default=0,
+        help="log the run's events on stderr (info; -vv: debug), above the live display on a"
+        " terminal",
+    )
+    parser.add_argument(
+        "--quiet",
+        "-q",
+        action="store_true",
+        help="print only errors and the final one-line result",
+    )
+    add_version_argument(parser)
+    parser.add_argument("--report", metavar="FILE.json", help="write a JSON run report")
+    return parser
+
+
+def _add_robot_arguments(parser: argparse.ArgumentParser) -> None:
+    """The robot, the files and the run: --host to --poll-interval."""
     robots = [n for n in builtin_profile_names() if n in ("article", "tmflow")]
     parser.add_argument("--host", help="robot address (required unless --sim/--dry-run/--diagram)")
     parser.add_argument("--port", type=int, default=None, help="robot Modbus TCP port (502)")
@@ -144,6 +181,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument(
         "--poll-interval", type=float, default=None, metavar="S", help="poll interval (0.05 s)"
     )
+
+
+def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+    """The embedded simulator: --sim and its options."""
     parser.add_argument(
         "--sim",
         action="store_true",
@@ -178,37 +219,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="with --sim --sim-physics mujoco: render the cell at the end to DIR/cell-end.png"
         " (needs OpenGL: MUJOCO_GL=egl and PyOpenGL, extra tmmaster[mujoco-render])",
     )
-    parser.add_argument(
-        "--dry-run",
-        action="store_true",
-        help="validate and print the plan (poses, speeds, motion types, expected times);"
-        " connect to nothing",
-    )
-    parser.add_argument(
-        "--diagram", action="store_true", help="print the state machine as a mermaid diagram"
-    )
-    add_logging_arguments(
-        parser,
-        level_help="level of the events logged on stderr (default: warning; info with -v or"
-        " --log-json)",
-    )
-    parser.add_argument(
-        "--verbose",
-        "-v",
-        action="count",
-        default=0,
-        help="log the run's events on stderr (info; -vv: debug), above the live display on a"
-        " terminal",
-    )
-    parser.add_argument(
-        "--quiet",
-        "-q",
-        action="store_true",
-        help="print only errors and the final one-line result",
-    )
-    add_version_argument(parser)
-    parser.add_argument("--report", metavar="FILE.json", help="write a JSON run report")
-    return parser
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -312,10 +322,10 @@ class _LogFilter(logging.Filter):
         return not self._out.interrupted or record.levelno >= logging.ERROR
 
 
-def _make_output(args: argparse.Namespace, stderr: TextIO) -> _Output:
-    events = bool(args.verbose or args.log_level or args.log_json)
-    if args.quiet or args.log_json or not stderr.isatty():
-        return _Output(quiet=args.quiet, events=events)
+def _make_output(options: _OutputOptions, stderr: TextIO) -> _Output:
+    events = bool(options.verbose or options.log_level or options.log_json)
+    if options.quiet or options.log_json or not stderr.isatty():
+        return _Output(quiet=options.quiet, events=events)
     try:
         from rich.console import Console
 
@@ -326,28 +336,38 @@ def _make_output(args: argparse.Namespace, stderr: TextIO) -> _Output:
     return _Output(quiet=False, live=LiveProgress(console), console=console, events=events)
 
 
-def _log_level(args: argparse.Namespace) -> str:
+def _log_level(options: _OutputOptions) -> str:
     """Warnings and errors by default, on a terminal or not; the events with -v (or JSON)."""
-    if args.quiet:
+    if options.quiet:
         return "error"
-    if args.log_level:
-        return str(args.log_level)
-    if args.verbose >= 2:
+    if options.log_level:
+        return options.log_level
+    if options.verbose >= 2:
         return "debug"
-    return "info" if args.verbose or args.log_json else "warning"
+    return "info" if options.verbose or options.log_json else "warning"
 
 
 def run(args: argparse.Namespace, *, output: _Output | None = None) -> int:
-    """Run pick & place from parsed ``args``; returns the exit code (never raises)."""
+    """Run pick & place from parsed ``args``; returns the exit code (never raises).
+
+    ``args`` stops here: :func:`_resolve` turns it into one frozen :class:`_Invocation`
+    (the validated :class:`PickPlaceConfig` in a :class:`_Command`, and the output
+    options), and everything after reads that.
+    """
     stderr = sys.stderr
-    out = output if output is not None else _make_output(args, stderr)
+    outcome = _Outcome()
+    invocation = _resolve(args, outcome)
+    out = output if output is not None else _make_output(invocation.output, stderr)
     # The live display's stream has what a logging handler uses: write, flush, isatty.
     log_stream = cast("TextIO", out.live.log_stream) if out.live is not None else stderr
     undo_logging = configure_command_logging(
-        json=args.log_json, level=_log_level(args), stream=log_stream, record_filter=out.log_filter
+        json=invocation.output.log_json,
+        level=_log_level(invocation.output),
+        stream=log_stream,
+        record_filter=out.log_filter,
     )
     try:
-        return _run(args, out)
+        return _run(invocation, outcome, out)
     finally:
         if out.live is not None:
             out.live.end()
@@ -358,17 +378,16 @@ def _one_line(text: str) -> str:
     return " ".join(text.split())
 
 
-def _run(args: argparse.Namespace, out: _Output) -> int:
+def _run(invocation: _Invocation, outcome: _Outcome, out: _Output) -> int:
     # Here, not at the top: building the report's models costs some 60 ms that --help,
     # --version and a wrong option do not need; a run loads them before it connects.
     from ._report import build_run_report, write_report
 
     stderr = sys.stderr
-    outcome = _Outcome()
     code = EXIT_FAILED
     reason: str | None = None
     try:
-        code, reason = _execute(args, outcome, out)
+        code, reason = _execute(invocation.command, outcome, out)
     except KeyboardInterrupt:
         code, reason = EXIT_INTERRUPTED, "interrupted"
     except UsageError as exc:  # an option that cannot be: said as the option
@@ -404,11 +423,14 @@ def _run(args: argparse.Namespace, out: _Output) -> int:
         print(f"pickplace: {_one_line(reason)} [exit {code}]", file=stderr, flush=True)
     elif outcome.done_line is not None:
         out.say(outcome.done_line)
-    if args.report:
+    if invocation.output.report:
         try:
-            write_report(args.report, report)
+            write_report(invocation.output.report, report)
         except OSError as exc:
-            print(f"pickplace: cannot write the report {args.report}: {exc}", file=stderr)
+            print(
+                f"pickplace: cannot write the report {invocation.output.report}: {exc}",
+                file=stderr,
+            )
             return code or EXIT_FAILED
     # The report says how the run ended; the status also says the output was cut short.
     return EXIT_BROKEN_PIPE if code == EXIT_OK and out.stdout_gone else code
@@ -445,8 +467,21 @@ _COMMAND_OPTIONS = frozenset(
         "snapshot",
     }
 )
-#: The options that only shape the output: the only ones read after :func:`_command`.
+#: The options that only shape the output: the only ones read after :func:`_command`
+#: (by :func:`_resolve`, into the :class:`_OutputOptions`).
 _OUTPUT_OPTIONS = frozenset({"log_json", "log_level", "quiet", "report", "verbose"})
+
+
+@dataclass(frozen=True)
+class _OutputOptions:
+    """How the command speaks, and where its report goes."""
+
+    quiet: bool
+    verbose: int
+    log_level: str | None
+    log_json: bool
+    #: The JSON run report to write (--report), or None.
+    report: str | None
 
 
 @dataclass(frozen=True)
@@ -477,6 +512,42 @@ class _Command:
     diagram: bool
     #: The simulator to start and run against (--sim), or None.
     sim: _SimOptions | None
+
+
+@dataclass(frozen=True)
+class _Invocation:
+    """The command line, resolved once: what to run (or why it cannot) and the output."""
+
+    #: What to run; or the error that reading the options and files raised, which the
+    #: run reports (exit code, last line, report) as it would one of its own.
+    command: _Command | BaseException
+    output: _OutputOptions
+
+
+def _resolve(args: argparse.Namespace, outcome: _Outcome) -> _Invocation:
+    """The one place ``args`` is read: the options become a frozen :class:`_Invocation`.
+
+    Args:
+        args: The parsed command line (:func:`add_arguments`'s options).
+        outcome: Filled with the configuration file and the configuration, for the
+            report, as far as reading them got.
+
+    Returns:
+        The invocation; nothing after this reads ``args``.
+    """
+    command: _Command | BaseException
+    try:
+        command = _command(args, outcome)
+    except (KeyboardInterrupt, Exception) as exc:  # reported by the run, with the report
+        command = exc
+    output = _OutputOptions(
+        quiet=bool(args.quiet),
+        verbose=int(args.verbose or 0),
+        log_level=None if args.log_level is None else str(args.log_level),
+        log_json=bool(args.log_json),
+        report=args.report,
+    )
+    return _Invocation(command, output)
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
@@ -563,7 +634,9 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     scene_file = args.sim_scene
     if scene_file is not None and not args.sim:
         raise UsageError("--sim-scene needs --sim (a robot's cell is the robot's)")
-    sim = _sim_options(args, time_scale, scene_file) if args.sim else None
+    sim = (
+        _sim_options(time_scale, args.sim_physics, args.snapshot, scene_file) if args.sim else None
+    )
     outcome.config_file = config_file
     overrides = _overrides(args)
     _check_option_ranges(overrides)
@@ -611,9 +684,12 @@ def _configured_robot(config: PickPlaceConfig) -> Robot:
     return robot_from_config(config)
 
 
-def _execute(args: argparse.Namespace, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
-    # 1. Every option is read and validated before anything connects.
-    command = _command(args, outcome)
+def _execute(
+    command: _Command | BaseException, outcome: _Outcome, out: _Output
+) -> tuple[int, str | None]:
+    # 1. Every option was read and validated (by _resolve) before anything connects.
+    if isinstance(command, BaseException):
+        raise command
     config, sequence, cycles = command.config, command.sequence, command.cycles
     if command.diagram:
         out.say(mermaid(sequence, cycles=cycles))
@@ -680,16 +756,13 @@ def _sim_scene(scene: Scene | None, pick: Pose, cycles: int) -> tuple[Scene, set
 
 
 def _sim_options(
-    args: argparse.Namespace, time_scale: float, scene_file: str | None
+    time_scale: float, physics: str, snapshot: str | None, scene_file: str | None
 ) -> _SimOptions:
     """With --sim: the embedded simulator's options (the simulator loads here, when asked)."""
     from ..sim import load_scene
 
     sim = _SimOptions(
-        time_scale,
-        args.sim_physics,
-        args.snapshot,
-        None if scene_file is None else load_scene(scene_file),
+        time_scale, physics, snapshot, None if scene_file is None else load_scene(scene_file)
     )
     if sim.physics == "mujoco":
         from ..sim._mujoco import require_mujoco
@@ -763,17 +836,21 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
         from ..sim._mujoco import save_snapshot
 
         out.result(f"simulator: snapshot {save_snapshot(sim, options.snapshot)}")
-    if place is not None:
-        for item in outcome.sim["objects"]:
-            pose = ", ".join(f"{v:g}" for v in item["pose"][:3])
-            if not item["run_part"]:  # a scene's other part: where it is, nothing asked
-                out.info(f"simulator: {item['name']} rests on {item['resting_on']} ({pose})")
-                continue
-            where = "on the place position" if item["on_place"] else "NOT on the place position"
-            out.result(f"simulator: {item['name']} is {where} ({pose})")
-        if code == EXIT_OK and not outcome.sim["on_place"]:
-            return EXIT_FAILED, "the run ended DONE but a part is not on the place position"
+    if place is not None and not _parts_placed(outcome.sim, out) and code == EXIT_OK:
+        return EXIT_FAILED, "the run ended DONE but a part is not on the place position"
     return code, reason
+
+
+def _parts_placed(sim_report: dict[str, Any], out: _Output) -> bool:
+    """Say where each part ended; whether every run part is on the place position."""
+    for item in sim_report["objects"]:
+        pose = ", ".join(f"{v:g}" for v in item["pose"][:3])
+        if not item["run_part"]:  # a scene's other part: where it is, nothing asked
+            out.info(f"simulator: {item['name']} rests on {item['resting_on']} ({pose})")
+            continue
+        where = "on the place position" if item["on_place"] else "NOT on the place position"
+        out.result(f"simulator: {item['name']} is {where} ({pose})")
+    return bool(sim_report["on_place"])
 
 
 def _run_on(
@@ -802,16 +879,9 @@ def _run_on(
         if out.live is not None:
             out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
         try:
-            try:
-                robot.connect()
-            except ProfileMismatchError as exc:
-                return EXIT_CONFIG, _mismatch_reason(exc)
-            except (ConnectRefusedError, HostNotFoundError, NotModbusError) as exc:
-                return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
-            except TransportError as exc:
-                return EXIT_CONNECTION, _unreachable(host, port, exc)
-            except StopRequestedError:
-                return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
+            refused = _connect(robot, host, port)
+            if refused is not None:
+                return refused
             if sampler is not None:
                 sampler.start()
             try:
@@ -834,6 +904,26 @@ def _run_on(
             f" {result.retries} grasp retr{'y' if result.retries == 1 else 'ies'})"
         )
         return EXIT_OK, None
+    return _failed(result)
+
+
+def _connect(robot: Robot, host: str, port: int) -> tuple[int, str] | None:
+    """Connect ``robot``; None, or the exit code and reason it could not."""
+    try:
+        robot.connect()
+    except ProfileMismatchError as exc:
+        return EXIT_CONFIG, _mismatch_reason(exc)
+    except (ConnectRefusedError, HostNotFoundError, NotModbusError) as exc:
+        return EXIT_CONNECTION, str(exc)  # says what happened, naming the address
+    except TransportError as exc:
+        return EXIT_CONNECTION, _unreachable(host, port, exc)
+    except StopRequestedError:
+        return EXIT_INTERRUPTED, f"interrupted while connecting to {host}:{port}"
+    return None
+
+
+def _failed(result: RunResult) -> tuple[int, str]:
+    """The exit code and reason of a run that did not end DONE."""
     failure = result.failure
     assert failure is not None
     if isinstance(failure.exception, ProfileMismatchError):
