@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable
 from typing import Any, TypeVar
 
 import pytest
@@ -19,6 +19,7 @@ import pytest
 import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
+from test_aio import run, until
 from tmmaster import Pose, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator
 
@@ -33,21 +34,6 @@ PROFILES = ["article", "tmflow"]
 def open_robot(sim: Simulator, **options: Any) -> aio.AsyncRobot:
     options.setdefault("poll_interval_s", 0.01)
     return aio.connect("127.0.0.1", sim.port, profile=sim.profile, gripper=None, **options)
-
-
-def run(scenario: Callable[[], Coroutine[Any, Any, T]]) -> T:
-    async def bounded() -> T:
-        async with asyncio.timeout(30):
-            return await scenario()
-
-    return asyncio.run(bounded())
-
-
-async def until(condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "condition not met in time"
-        await asyncio.sleep(0.002)
 
 
 def given_up(motion: tmmaster.Motion) -> bool:

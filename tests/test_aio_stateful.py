@@ -145,45 +145,42 @@ class AsyncCommandSafety(RuleBasedStateMachine):
     @precondition(lambda self: self.robot is not None)
     @rule(speed=st.integers(30, 100))
     def awaited_move(self, speed: int) -> None:
-        assert self.robot is not None
-        self._ready()
-        command = Issued(self._target(), time.monotonic())
-        self.issued.append(command)
-        try:
-            self._run(self.robot.move_to(command.target, speed=speed))
-        except TMMasterError as exc:
-            command.outcome = type(exc).__name__
-        else:
-            command.outcome = "done"
-        command.ended_at = time.monotonic()
+        self._run(self._awaited_move(self._issue(), speed))
 
     @precondition(lambda self: self.robot is not None)
     @rule(speed=st.integers(10, 60), point=st.sampled_from(CANCEL_POINTS))
     def cancelled_wait(self, speed: int, point: str) -> None:
+        self._run(self._cancelled_wait(self._issue(), speed, point))
+
+    async def _awaited_move(self, command: Issued, speed: int) -> None:
+        """``move_to`` awaited, its outcome recorded (and noted as given up if it failed)."""
+        robot = self.robot
+        assert robot is not None
+        try:
+            await robot.move_to(command.target, speed=speed)
+            command.outcome = "done"
+        except TMMasterError as exc:
+            command.outcome = type(exc).__name__
+        command.ended_at = time.monotonic()
+        if command.gave_up:
+            self.given_up.append((command, command.ended_at))
+
+    def _issue(self) -> Issued:
         self._ready()
         command = Issued(self._target(), time.monotonic())
         self.issued.append(command)
-        self._run(self._cancelled_wait(command, speed, point))
+        return command
 
     @precondition(lambda self: self.robot is not None)
     @rule(speed=st.integers(10, 60), after_s=st.floats(0.0, 0.08))
     def interrupted_move(self, speed: int, after_s: float) -> None:
         robot = self.robot
         assert robot is not None
-        self._ready()
-        command = Issued(self._target(), time.monotonic())
-        self.issued.append(command)
+        command = self._issue()
 
         async def scenario() -> None:
             self.loop.call_later(after_s, robot.interrupt)
-            try:
-                await robot.move_to(command.target, speed=speed)
-                command.outcome = "done"
-            except TMMasterError as exc:
-                command.outcome = type(exc).__name__
-            command.ended_at = time.monotonic()
-            if command.gave_up:
-                self.given_up.append((command, command.ended_at))
+            await self._awaited_move(command, speed)
             await asyncio.sleep(after_s)  # the interrupt has landed
 
         self._run(scenario())
@@ -193,20 +190,11 @@ class AsyncCommandSafety(RuleBasedStateMachine):
     def closed_while_moving(self, speed: int, after_s: float) -> None:
         robot = self.robot
         assert robot is not None
-        self._ready()
-        command = Issued(self._target(), time.monotonic())
-        self.issued.append(command)
+        command = self._issue()
 
         async def scenario() -> None:
             closing = self.loop.call_later(after_s, lambda: asyncio.ensure_future(robot.close()))
-            try:
-                await robot.move_to(command.target, speed=speed)
-                command.outcome = "done"
-            except TMMasterError as exc:
-                command.outcome = type(exc).__name__
-            command.ended_at = time.monotonic()
-            if command.gave_up:
-                self.given_up.append((command, command.ended_at))
+            await self._awaited_move(command, speed)
             closing.cancel()
             await robot.close()
 
