@@ -342,10 +342,7 @@ def fault_meaning(exc: BaseException) -> str | None:
     """
     if not isinstance(exc, RobotFaultError | EmergencyStopError) or not exc.error_code:
         return None
-    try:
-        return describe(exc.error_code)
-    except ConfigError:  # a broken install: the bare code still says which
-        return code_hex(exc.error_code)
+    return describe(exc.error_code)
 
 
 class ProjectPausedError(RobotFaultError):

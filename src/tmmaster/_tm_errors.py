@@ -114,9 +114,13 @@ def describe(code: int) -> str:
 
     Returns:
         ``"0x0022 Force or Torque Over Range"``, or ``"0x1234 (not in TMflow 2.24
-        Appendix J)"`` for a code the manual does not list.
+        Appendix J)"`` for a code the manual does not list; the bare ``"0x0022"`` where
+        the data cannot be read (a broken install: never raises).
     """
-    entry = lookup(code)
+    try:
+        entry = lookup(code)
+    except (ConfigError, OSError):  # a broken install: the bare code still says which
+        return code_hex(code)
     return entry.label if entry is not None else f"{code_hex(code)} (not in {SOURCE})"
 
 
@@ -152,10 +156,7 @@ def code_suffix(code: int | None, message: str) -> str:
     """
     if not code or code_hex(code) in message:
         return ""
-    try:
-        return f" (robot error {describe(code)})"
-    except ConfigError:  # a broken install: the bare code still says which
-        return f" (robot error {code_hex(code)})"
+    return f" (robot error {describe(code)})"
 
 
 def lookup_tm_error(code: int) -> TMErrorCode | None:
