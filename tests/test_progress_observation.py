@@ -173,15 +173,21 @@ def _seen_at(motion: _Motion, follow: FollowState, at: float, progress: float) -
     follow.due()
 
 
-def test_an_arm_that_stops_is_a_stall_within_the_model_budget() -> None:
-    # The arm moves at half the model's pace (the budget would grow to 9.2 s), then
-    # stops at 1.5 s: the polls see no progress, and the model's 4.6 s budget stands.
+def _line_at_half_pace() -> tuple[_Motion, FollowState]:
+    """A Line acknowledged at 0 with the model's 4.6 s budget, seen at half pace at 1 s."""
     ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
     ticket.acknowledged, ticket.acknowledged_at = True, 0.0
     motion = _Motion(ticket)
     motion.timeout_s = 4.6
     follow = _follow(motion)
     _half_pace(motion, follow)
+    return motion, follow
+
+
+def test_an_arm_that_stops_is_a_stall_within_the_model_budget() -> None:
+    # The arm moves at half the model's pace (the budget would grow to 9.2 s), then
+    # stops at 1.5 s: the polls see no progress, and the model's 4.6 s budget stands.
+    motion, follow = _line_at_half_pace()
     stopped = trapezoid_progress(0.75, 2.0, 0.2)
     for at in (1.5, 2.0, 3.0, 4.0, 4.5):
         _seen_at(motion, follow, at, stopped)
@@ -193,12 +199,7 @@ def test_an_arm_that_stops_is_a_stall_within_the_model_budget() -> None:
 
 
 def test_an_arm_that_stops_past_the_model_budget_is_a_stall_after_its_bound() -> None:
-    ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
-    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
-    motion = _Motion(ticket)
-    motion.timeout_s = 4.6
-    follow = _follow(motion)
-    _half_pace(motion, follow)
+    motion, follow = _line_at_half_pace()
     for at in (2.0, 3.0, 4.0, 5.0, 6.0):
         _seen_at(motion, follow, at, _quarter_pace(at))
     for at in (6.5, 6.9):  # stopped at 6.0
@@ -209,15 +210,10 @@ def test_an_arm_that_stops_past_the_model_budget_is_a_stall_after_its_bound() ->
 
 
 def test_polls_read_the_pose_from_a_stall_bound_before_the_model_budget_ends() -> None:
-    ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
-    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
-    motion = _Motion(ticket)
-    motion.timeout_s = 4.6
-    follow = _follow(motion)
-    _half_pace(motion, follow)
+    motion, follow = _line_at_half_pace()
     follow.poll_started = 3.7
     follow.due()
-    assert ticket.observe_pose
+    assert motion.ticket.observe_pose
 
 
 def test_each_new_pose_moves_the_predicted_end() -> None:
