@@ -29,8 +29,6 @@ KNOWN: dict[tuple[str, str], int] = {
     # The simulator's constructor: to take a backend and a world object instead.
     ("params", "sim/_simulator.py:__init__"): 25,
     ("lines", "sim/_simulator.py:__init__"): 153,
-    # TMscript's newline filter for the LALR parser.
-    ("lines", "tmscript/_parser.py:process"): 68,
 }
 
 

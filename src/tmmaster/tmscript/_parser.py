@@ -44,87 +44,108 @@ def _word(tok: Token) -> str:
     return tok.type if tok.type in _PUNCT_TYPES else str(tok.value)
 
 
+class _Layout:
+    """Where the post-lexer stands: the open brackets and the newline not yet emitted.
+
+    Each open bracket is one of "paren" (newlines inside are ignored), "header" (its
+    ")" is followed by a body), "block", "do" (a do-while's body), "array".
+    """
+
+    def __init__(self) -> None:
+        self.stack: list[str] = []
+        self.prev: str | None = None  # the previous significant token's word
+        self.pending: Token | None = None  # a newline not yet known to end a statement
+        self.after_header = False  # the previous token closed an if/for/while/switch header
+        self.after_do = False  # the previous token closed a do-while's body
+        self.do_while = False  # the last while seen ends a do-while
+
+    def newline(self, tok: Token) -> None:
+        """Keep ``tok`` as pending when it may end a statement."""
+        ignored = not self.stack or self.stack[-1] in ("paren", "header", "array")
+        if (
+            self.pending is None
+            and not ignored
+            and not self.after_header
+            and self.prev not in ("{", "else", "do", None)
+            and not self.after_do
+        ):
+            self.pending = tok
+
+    def flush_before(self, word: str, tok: Token) -> Token | None:
+        """The pending newline to emit before ``tok``, or None when ``tok`` cancels it."""
+        if self.pending is not None and (
+            word in ("{", "else") or (word == "while" and self.after_do)
+        ):
+            self.pending = None
+        if (
+            word == "}"
+            and self.stack
+            and self.stack[-1] in ("block", "do")
+            and self.pending is None
+            and self.prev not in ("{", None, "_NL")
+        ):
+            # The statement before a "}" on its own line keeps its own newline (an
+            # error there points at the end of that line, not at the "}").
+            self.pending = Token.new_borrow_pos("_NL", "\n", tok)
+        pending, self.pending = self.pending, None
+        if pending is not None:
+            self.prev = "_NL"
+        return pending
+
+    def bracket(self, word: str, tok: Token) -> Token:
+        """Track ``tok``'s bracket; a block's braces become ``_LB`` / ``_RB``."""
+        closed_header = self.after_header
+        self.after_header = False
+        if word == "while":
+            self.do_while = self.after_do  # the while of a do-while: no body follows
+        self.after_do = False
+        if word in ("(", "[", "{"):
+            self.stack.append(self._opened(word, closed_header))
+        elif word in (")", "]", "}") and self.stack:
+            top = self.stack.pop()
+            self.after_header = top == "header"
+            self.after_do = top == "do"
+            if word == "}" and top in ("block", "do"):
+                tok = Token.new_borrow_pos("_RB", "}", tok)
+        if word == "{" and self.stack[-1] in ("block", "do"):
+            tok = Token.new_borrow_pos("_LB", "{", tok)
+        self.prev = word
+        return tok
+
+    def _opened(self, word: str, closed_header: bool) -> str:
+        """What the bracket ``word`` (``(``, ``[`` or ``{``) opens."""
+        prev = self.prev
+        if word == "(":
+            header = prev in _HEADER_KEYWORDS and not (prev == "while" and self.do_while)
+            return "header" if header else "paren"
+        if word == "[":
+            return "paren"
+        # After ")" only an if/for/while/switch header or a function's parameters open
+        # a block: "(int[]){...}" is a cast of an array constant.
+        opens_block = prev in _BLOCK_OPENERS and (prev != ")" or closed_header or not self.stack)
+        if opens_block or prev == "_NL" or prev is None:
+            return "do" if prev == "do" else "block"
+        return "array"
+
+
 class _Newlines(PostLex):
     """Keep a newline only where it ends a statement."""
 
     always_accept = ("_NL",)
 
-    def process(self, stream: Iterator[Token]) -> Iterator[Token]:  # noqa: C901 - listed
-        # Each open bracket: "paren" (newlines inside are ignored), "header" (its ")" is
-        # followed by a body), "block", "do" (a do-while's body), "array".
-        stack: list[str] = []
-        prev: str | None = None  # the previous significant token's word
-        pending: Token | None = None  # a newline not yet known to end a statement
-        after_header = False  # the previous token closed an if/for/while/switch header
-        after_do = False  # the previous token closed a do-while's body
-        do_while = False  # the last while seen ends a do-while
-
-        def ignore_newlines() -> bool:
-            if not stack:
-                return True  # between sections
-            top = stack[-1]
-            return top in ("paren", "header", "array")
-
+    def process(self, stream: Iterator[Token]) -> Iterator[Token]:
+        layout = _Layout()
         for tok in stream:
             if tok.type == "_NL":
-                if (
-                    pending is None
-                    and not ignore_newlines()
-                    and not after_header
-                    and prev not in ("{", "else", "do", None)
-                    and not after_do
-                ):
-                    pending = tok
+                layout.newline(tok)
                 continue
             word = _word(tok)
-            if pending is not None and word in ("{", "else"):
-                pending = None
-            if pending is not None and word == "while" and after_do:
-                pending = None
-            if (
-                word == "}"
-                and stack
-                and stack[-1] in ("block", "do")
-                and pending is None
-                and prev not in ("{", None, "_NL")
-            ):
-                # The statement before a "}" on its own line keeps its own newline (an
-                # error there points at the end of that line, not at the "}").
-                pending = Token.new_borrow_pos("_NL", "\n", tok)
+            pending = layout.flush_before(word, tok)
             if pending is not None:
                 yield pending
-                pending = None
-                prev = "_NL"
-            closed_header = after_header
-            after_header = False
-            if word == "while":
-                do_while = after_do  # the while of a do-while: no body follows its header
-            after_do = False
-            if word == "(":
-                header = prev in _HEADER_KEYWORDS and not (prev == "while" and do_while)
-                stack.append("header" if header else "paren")
-            elif word == "[":
-                stack.append("paren")
-            elif word == "{":
-                # After ")" only an if/for/while/switch header or a function's parameters
-                # open a block: "(int[]){...}" is a cast of an array constant.
-                opens_block = prev in _BLOCK_OPENERS and (prev != ")" or closed_header or not stack)
-                if opens_block or prev == "_NL" or prev is None:
-                    stack.append("do" if prev == "do" else "block")
-                else:
-                    stack.append("array")
-            elif word in (")", "]", "}") and stack:
-                top = stack.pop()
-                after_header = top == "header"
-                after_do = top == "do"
-                if word == "}" and top in ("block", "do"):
-                    tok = Token.new_borrow_pos("_RB", "}", tok)
-            if word == "{" and stack[-1] in ("block", "do"):
-                tok = Token.new_borrow_pos("_LB", "{", tok)
-            yield tok
-            prev = word
-        if pending is not None and stack:
-            yield pending
+            yield layout.bracket(word, tok)
+        if layout.pending is not None and layout.stack:
+            yield layout.pending
 
 
 @cache
