@@ -241,6 +241,7 @@ class _NoIO:
 
     stats = tmmaster.TransportStats()
     state = tmmaster.ConnectionState.CONNECTED
+    epoch = 0
 
     def __getattr__(self, name: str) -> Any:
         raise AssertionError(f"a poll used the transport directly ({name})")

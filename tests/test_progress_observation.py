@@ -65,6 +65,7 @@ def test_a_ptp_is_gauged_by_its_joint_path(progress: float) -> None:
 class _NoIO:
     stats = tmmaster.TransportStats()
     state = tmmaster.ConnectionState.CONNECTED
+    epoch = 0
 
     def __getattr__(self, name: str) -> Any:
         raise AssertionError(f"a poll used the transport directly ({name})")

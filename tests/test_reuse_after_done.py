@@ -134,6 +134,25 @@ def test_a_write_since_the_done_read_forbids_reuse(
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_statistics_reset_by_the_user_never_make_a_read_reusable_after_a_write(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    """The reuse rule rests on the link's epoch, not on counters a user may reset."""
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim, gripper=None)
+    robot.move_to(APPROACH, speed=30)
+    refresh(robot)
+    # A user measuring per move zeroes the counters, then the same link writes once.
+    robot.stats.requests_by_function.clear()
+    robot.stats.errors = robot.stats.retries = robot.stats.reconnects = 0
+    command = robot.profile.field("command")
+    robot._transport.write_fields([(command, command.code_of("none"))], retry=False)
+    sim.clear_request_log()
+    robot.start_move(PICK, speed=30).wait()
+    assert reads_before_write(sim) == FULL_CHECK[profile]
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_dropped_connection_since_the_done_read_forbids_reuse(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:

@@ -154,20 +154,15 @@ class Ticket:
     plan: list[tuple[Block, list[int]]] = field(default_factory=list)
 
 
-def link_mark(transport: Transport) -> tuple[int, ...] | None:
-    """What changes whenever the link writes, fails, retries or reconnects (None: not connected).
+def link_mark(transport: Transport) -> int | None:
+    """The link's epoch while it is connected (None: not connected).
 
-    Two equal marks mean: the same connection, and not one write, error, retry or
-    reconnect on it in between.
+    Two equal marks mean: the same connection, and not one write, failed request, retry
+    or reconnect on it in between (:attr:`Transport.epoch`).
     """
     if transport.state is not ConnectionState.CONNECTED:
         return None
-    stats = transport.stats
-    get = stats.requests_by_function.get
-    # The write function codes (FC05, FC06, FC15, FC16), summed without a generator:
-    # this runs on every poll.
-    writes = get(5, 0) + get(6, 0) + get(15, 0) + get(16, 0)
-    return (writes, stats.errors, stats.retries, stats.reconnects)
+    return transport.epoch
 
 
 @dataclass
@@ -185,7 +180,7 @@ class StateAfterDone:
     #: ``time.monotonic()`` just before the poll's first request (the age counts from here).
     read_at: float
     #: :func:`link_mark` just before the poll's first request.
-    link: tuple[int, ...]
+    link: int
     #: The TCP pose, when it was read after the done (the final at-target check).
     pose: Pose | None = None
     #: The joints (deg) read with ``pose``, where the profile publishes them.
@@ -319,13 +314,13 @@ class CommandChannel(ABC):
             return None
         return tuple(float(values[f.name]) for f in self.joint_fields)
 
-    def _poll_mark(self) -> tuple[float, tuple[int, ...] | None]:
+    def _poll_mark(self) -> tuple[float, int | None]:
         """Before a poll's first request: forget the last done state; the time and link mark."""
         self.after_done = None
         return time.monotonic(), link_mark(self.transport)
 
     def _remember_done(
-        self, values: dict[str, Value], mark: tuple[float, tuple[int, ...] | None]
+        self, values: dict[str, Value], mark: tuple[float, int | None]
     ) -> None:
         """Keep what the poll that saw the command finished read, for the next command."""
         read_at, link = mark

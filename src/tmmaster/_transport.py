@@ -107,6 +107,10 @@ def describe_read(table: Table, address: int, count: int) -> str:
     return f"read {table.value} {address}+{count}"
 
 
+#: Modbus function codes that write (FC05, FC06, FC15, FC16).
+_WRITE_CODES = frozenset({5, 6, 15, 16})
+
+
 class ConnectionState(StrEnum):
     """Where a transport's connection stands."""
 
@@ -321,6 +325,12 @@ class Transport(Protocol):
     def state(self) -> ConnectionState:
         """Current connection state."""
 
+    @property
+    def epoch(self) -> int:
+        """Changes whenever the link may have changed or missed a register: a write sent,
+        a failed request, a retry, a connect, a close. Two equal epochs: not one of these
+        in between (what a read taken at the first one may be trusted for)."""
+
     def connect(self) -> None:
         """Open the link, retrying per the policy; raises :class:`ConnectError`."""
 
@@ -459,6 +469,8 @@ class BlockTransport(ABC):
         self.interrupt: threading.Event | None = None
         #: Request, retry, reconnect and byte counters.
         self.stats = TransportStats()
+        # Not the counters above (a user may reset those): see the epoch property.
+        self._epoch = 0
         self._state = ConnectionState.NEW
         self._lock = threading.RLock()
         # Set by bound_retries(): no retry past this time (a clean-up under a budget).
@@ -503,6 +515,13 @@ class BlockTransport(ABC):
         """Current connection state."""
         return self._state
 
+    @property
+    def epoch(self) -> int:
+        """Changes whenever the link may have changed or missed a register: a write sent,
+        a failed request, a retry, a connect, a close. Two equal epochs: not one of these
+        in between (what a read taken at the first one may be trusted for)."""
+        return self._epoch
+
     def connect(self) -> None:
         """Open the connection, retrying per the policy; raises :class:`ConnectError`."""
         with self._lock:
@@ -520,6 +539,7 @@ class BlockTransport(ABC):
             if self._state is ConnectionState.CLOSED:
                 return
             self._close_link()
+            self._epoch += 1
             self._state = ConnectionState.CLOSED
             self._log.debug("transport.closed")
 
@@ -547,6 +567,7 @@ class BlockTransport(ABC):
             if not reconnect:
                 exc.retryable = False
             raise
+        self._epoch += 1
         if reconnect:
             self.stats.reconnects += 1
             self._log.info("transport.reconnected")
@@ -562,6 +583,7 @@ class BlockTransport(ABC):
             self._state = ConnectionState.DISCONNECTED
 
     def _on_retry(self, _error: BaseException) -> None:
+        self._epoch += 1
         self.stats.retries += 1
 
     # -- raw requests --------------------------------------------------------
@@ -581,6 +603,8 @@ class BlockTransport(ABC):
 
     def _count_request(self, function_code: int) -> None:
         """Count a request about to be sent (every link's requests are counted here)."""
+        if function_code in _WRITE_CODES:
+            self._epoch += 1
         self.stats.requests += 1
         self.stats.requests_by_function[function_code] = (
             self.stats.requests_by_function.get(function_code, 0) + 1
@@ -588,6 +612,7 @@ class BlockTransport(ABC):
 
     def _request_failed(self, error: BaseException) -> None:
         """After a request failed: count it, and drop the link unless the device answered."""
+        self._epoch += 1
         if isinstance(error, ModbusExceptionError):
             self.stats.errors += 1  # the device answered: the link is fine
             return
