@@ -259,7 +259,7 @@ def analyse(master: str, sim: Simulator, events: list[Event], waits: list[float]
 def one_round(master: str, policy: PollPolicy) -> Round:
     """A fresh simulator, one cycle of ``master``, analysed."""
     backend = RecordingBackend()
-    with Simulator("article", time_scale=1.0, backend=backend) as sim:
+    with Simulator("article", time_scale=1.0, cell=backend) as sim:
         sim.wait_for(lambda: sim.field("robot_mode") == 5, timeout=10)
         sim.clear_request_log()
         if master == "article":

@@ -88,6 +88,7 @@ from _mbap import answer_frame, split_requests
 
 from tmmaster import Fleet, MonitoredStatus, Robot, StatusMonitor
 from tmmaster._transport import READ_FUNCTION, BlockTransport
+from tmmaster.sim import Timing
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
 STATUS_ADDRESS, STATUS_COUNT = 0, 22
@@ -112,7 +113,10 @@ def serve(n: int, tick_hz: float, profile: str) -> None:
     """Child mode: run ``n`` simulators, print their ports, stay until stdin closes."""
     from tmmaster.sim import Simulator
 
-    sims = [Simulator(profile, tick_hz=tick_hz, init_time_s=0.0).start() for _ in range(n)]
+    sims = [
+        Simulator(profile, timing=Timing(tick_hz=tick_hz, init_time_s=0.0)).start()
+        for _ in range(n)
+    ]
     try:
         print(json.dumps({"ports": [s.port for s in sims]}), flush=True)
         sys.stdin.read()  # until the parent closes our stdin
@@ -125,7 +129,7 @@ def idle_cost(n: int, tick_hz: float, seconds: float) -> str:
     """CPU % of ``n`` idle simulators in this process (no client), and one tick's CPU."""
     from tmmaster.sim import Simulator
 
-    sims = [Simulator("article", tick_hz=tick_hz).start() for _ in range(n)]
+    sims = [Simulator("article", timing=Timing(tick_hz=tick_hz)).start() for _ in range(n)]
     try:
         time.sleep(0.5)
         cpu0, wall0 = time.process_time(), time.monotonic()
@@ -194,7 +198,7 @@ def status_answers(profile: str) -> Answers:
     from tmmaster.sim import Simulator
 
     answers: Answers = {}
-    with Simulator(profile, init_time_s=0.0) as sim:
+    with Simulator(profile, timing=Timing(init_time_s=0.0)) as sim:
         robot = Robot("127.0.0.1", sim.port, profile=profile, gripper=None).connect()
         try:
             channel, transport = robot._channel, robot._transport

@@ -27,7 +27,7 @@ import sys
 
 import tmmaster
 from tmmaster import PollPolicy, Pose
-from tmmaster.sim import Simulator
+from tmmaster.sim import Cell, Simulator
 
 #: The upper end of the moves: up to 190 mm down from it, the pads stay above the
 #: simulated table (85 mm; they reach 12 mm below the TCP).
@@ -44,7 +44,7 @@ def measure(
     speed: int = 60,
 ) -> tuple[list[float], list[float], float]:
     b = A.offset(dz=-dz)
-    with Simulator(profile, time_scale=1.0, speed_factor=speed_factor) as sim:
+    with Simulator(profile, time_scale=1.0, cell=Cell(speed_factor=speed_factor)) as sim:
         with tmmaster.Robot(
             "127.0.0.1",
             sim.port,

@@ -46,7 +46,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError
-from tmmaster.sim import ObjectState, Simulator, TableObject
+from tmmaster.sim import Cell, ObjectState, Simulator, TableObject
 
 HOST = "127.0.0.1"
 #: Where B's base stands, along A's y axis (B faces the same way as A), mm.
@@ -199,11 +199,11 @@ class SimResult:
 def run_with_simulators(time_scale: float = 10.0, *, profile: str = DEFAULT_PROFILE) -> SimResult:
     """Start two simulators (A: part at PICK_A; B: part at HANDOVER_B) and run."""
     sim_a = Simulator(
-        profile, time_scale=time_scale, objects=[TableObject(name="part", pose=PICK_A)]
+        profile, time_scale=time_scale, cell=Cell(scene=[TableObject(name="part", pose=PICK_A)])
     )
     # B's world gets its own part at the handover point: the worlds are not linked.
     sim_b = Simulator(
-        profile, time_scale=time_scale, objects=[TableObject(name="part", pose=HANDOVER_B)]
+        profile, time_scale=time_scale, cell=Cell(scene=[TableObject(name="part", pose=HANDOVER_B)])
     )
     with sim_a, sim_b:
         # The gripper's settle time is physical time: scale it with the simulation.

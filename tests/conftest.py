@@ -16,7 +16,7 @@ import pytest
 import tmmaster
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Robot
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 
 def _open_sockets() -> set[str]:
@@ -79,7 +79,7 @@ def tm_simulator_factory(
 
     def make(profile: Any = "tmflow", **options: Any) -> Simulator:
         options.setdefault("time_scale", SUITE_TIME_SCALE)
-        options.setdefault("tick_hz", SUITE_TICK_HZ)
+        options.setdefault("timing", Timing(tick_hz=SUITE_TICK_HZ))
         return tm_simulator_factory(profile, **options)
 
     return make

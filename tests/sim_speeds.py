@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 #: Simulated seconds one control tick may advance.
 TICK_SIM_S = 0.4
@@ -20,7 +20,7 @@ SUITE_TICK_HZ = SUITE_TIME_SCALE / TICK_SIM_S
 #: For runs whose subject is the outcome (the moves sent, where the parts end up, the
 #: exit code), not a wall-clock delay nor a request count a fault is timed by: 100x at
 #: 250 Hz, so a move ends by the master's first poll instead of a stretched later one.
-QUICK: dict[str, Any] = {"time_scale": 100.0, "tick_hz": 100.0 / TICK_SIM_S}
+QUICK: dict[str, Any] = {"time_scale": 100.0, "timing": Timing(tick_hz=100.0 / TICK_SIM_S)}
 
 
 def ticking_simulator(*args: Any, time_scale: float, **options: Any) -> Simulator:
@@ -29,4 +29,6 @@ def ticking_simulator(*args: Any, time_scale: float, **options: Any) -> Simulato
     For examples that build their own simulators at Simulator's default 50 Hz tick, which
     allows 20x at most: tests swap it in for the example's ``Simulator``.
     """
-    return Simulator(*args, time_scale=time_scale, tick_hz=time_scale / TICK_SIM_S, **options)
+    return Simulator(
+        *args, time_scale=time_scale, timing=Timing(tick_hz=time_scale / TICK_SIM_S), **options
+    )

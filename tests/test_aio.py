@@ -22,7 +22,7 @@ import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
 from tmmaster import MovePhase, Pose, Robot, TimeoutPolicy, aio
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
 T = TypeVar("T")
@@ -35,7 +35,7 @@ PROFILES = ["article", "tmflow"]
 
 def slow(time_scale: float) -> dict[str, float]:
     """A simulator ``time_scale`` times real time, ticking at the suite's rate."""
-    return {"time_scale": time_scale, "tick_hz": SUITE_TICK_HZ}
+    return {"time_scale": time_scale, "timing": Timing(tick_hz=SUITE_TICK_HZ)}
 
 
 def open_robot(sim: Simulator, **options: Any) -> aio.AsyncRobot:
@@ -633,7 +633,7 @@ def test_a_held_frame_of_an_awaited_move_never_runs_after_it_was_given_up() -> N
     async def scenario() -> None:
         issued: list[Issued] = []
         with (
-            Simulator("tmflow", time_scale=20.0, tick_hz=50.0) as sim,
+            Simulator("tmflow", time_scale=20.0, timing=Timing(tick_hz=50.0)) as sim,
             FaultProxy(sim.port) as proxy,
         ):
             async with aio.connect(

@@ -21,7 +21,7 @@ from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
 from test_aio import run, until
 from tmmaster import Pose, Robot, TimeoutPolicy, aio
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
 T = TypeVar("T")
@@ -97,7 +97,8 @@ def test_a_wait_cancelled_while_queued_withdraws_the_unacknowledged_move(
 def test_a_wait_cancelled_while_queued_stops_the_running_move(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile, time_scale=2, tick_hz=SUITE_TICK_HZ)  # seconds long
+    # Seconds long.
+    sim = tm_simulator_factory(profile, time_scale=2, timing=Timing(tick_hz=SUITE_TICK_HZ))
 
     async def scenario() -> None:
         async with open_robot(sim) as robot:
@@ -148,7 +149,7 @@ def test_a_task_group_whose_sibling_fails_gives_the_move_up(
     tm_simulator_factory: SimFactory, profile: str, sibling_first: bool
 ) -> None:
     # Sibling first: the wait's task is cancelled before its first step.
-    sim = tm_simulator_factory(profile, time_scale=2, tick_hz=SUITE_TICK_HZ)
+    sim = tm_simulator_factory(profile, time_scale=2, timing=Timing(tick_hz=SUITE_TICK_HZ))
     issued: list[Issued] = []
 
     async def fails() -> None:
@@ -178,7 +179,7 @@ def test_a_task_group_whose_sibling_fails_gives_the_move_up(
 def test_a_second_waiter_is_given_up_with_the_move(tm_simulator_factory: SimFactory) -> None:
     # One task waits on the move (running), a second one's wait is queued behind it;
     # cancelling the queued one gives the move up, and the running wait ends with it.
-    sim = tm_simulator_factory("tmflow", time_scale=2, tick_hz=SUITE_TICK_HZ)
+    sim = tm_simulator_factory("tmflow", time_scale=2, timing=Timing(tick_hz=SUITE_TICK_HZ))
 
     async def scenario() -> None:
         async with open_robot(sim) as robot:
@@ -204,7 +205,7 @@ def test_an_interrupt_between_a_cancelled_calls_end_and_its_clear_stands(
 ) -> None:
     # Forced interleaving: the user's interrupt() lands while the robot's thread is
     # taking back a cancelled call's stop request. It must still stand afterwards.
-    sim = tm_simulator_factory("article", time_scale=2, tick_hz=SUITE_TICK_HZ)
+    sim = tm_simulator_factory("article", time_scale=2, timing=Timing(tick_hz=SUITE_TICK_HZ))
 
     async def scenario() -> None:
         async with open_robot(sim) as robot:

@@ -28,7 +28,7 @@ from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, 
 
 from safety_invariant import Issued, check
 from tmmaster import Pose, TimeoutPolicy, TMMasterError, aio
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 STATEFUL_EXAMPLES = int(os.environ.get("TMMASTER_STATEFUL_EXAMPLES", "3"))
 
@@ -55,7 +55,7 @@ class AsyncCommandSafety(RuleBasedStateMachine):
 
     def __init__(self) -> None:
         super().__init__()
-        self.sim = Simulator(self.profile, time_scale=5, tick_hz=100).start()
+        self.sim = Simulator(self.profile, time_scale=5, timing=Timing(tick_hz=100)).start()
         self.loop = asyncio.new_event_loop()
         self.issued: list[Issued] = []
         self.given_up: list[tuple[Issued, float]] = []

@@ -21,7 +21,7 @@ from sim_speeds import QUICK
 from tmmaster import ConfigError, FrameCheck, MotionType, Pose, Robot, Workspace
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
-from tmmaster.sim import KinematicBackend, Simulator
+from tmmaster.sim import Cell, KinematicBackend, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
 TM5 = tmmaster.robot_model("tm5-700")
@@ -112,7 +112,7 @@ def test_a_fresh_master_plans_from_the_joints_the_robot_reports(
     backend = RecordingBackend()
     wound = backend.wind()
     assert wound[0] > 240
-    sim = memory_simulator_factory("tmflow", backend=backend, **QUICK)
+    sim = memory_simulator_factory("tmflow", cell=backend, **QUICK)
     target = around(theta)
     robot = open_robot(sim, opened)
     predicted = robot.validate_move(target, 50)  # seeded from the joints read at connect
@@ -131,7 +131,7 @@ def test_the_joints_are_read_again_before_each_plan(
     # The master connects and moves; then someone else (another master) winds the arm
     # round the base. The master's next plan starts from where the arm really is.
     backend = RecordingBackend()
-    sim = memory_simulator_factory("tmflow", backend=backend, **QUICK)
+    sim = memory_simulator_factory("tmflow", cell=backend, **QUICK)
     robot = open_robot(sim, opened)
     robot.move_to(around(0), speed=100)
     other = open_robot(sim, opened, name="other")
@@ -158,7 +158,7 @@ def test_where_the_profile_publishes_no_joints_the_ready_posture_is_assumed(
     # plan starts from the model's ready posture (docs/kinematics.md).
     backend = RecordingBackend()
     backend.wind()
-    sim = memory_simulator_factory("article", backend=backend, **QUICK)
+    sim = memory_simulator_factory("article", cell=backend, **QUICK)
     # No table: the subject is the posture the plan starts from, not the cell.
     robot = Robot(sim.url, profile="article", gripper=None, workspace=Workspace(floor_z_mm=None))
     opened.append(robot)
@@ -174,7 +174,7 @@ def test_where_the_profile_publishes_no_joints_the_ready_posture_is_assumed(
 def test_a_robot_whose_tcp_is_not_the_masters_is_refused_at_connect(
     memory_simulator_factory: SimFactory,
 ) -> None:
-    sim = memory_simulator_factory("tmflow", tool=TOOL, **QUICK)
+    sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     robot = Robot(sim.url, profile="tmflow", gripper=None)  # no tool: TCP = flange
     with pytest.raises(ConfigError, match=r"tool offset of \(0, 0, 150, 0, 0, 0\)") as caught:
         robot.connect()
@@ -186,7 +186,7 @@ def test_a_robot_whose_tcp_is_not_the_masters_is_refused_at_connect(
 def test_a_master_with_the_robots_tool_connects_and_moves(
     memory_simulator_factory: SimFactory, opened: list[Robot]
 ) -> None:
-    sim = memory_simulator_factory("tmflow", tool=TOOL, **QUICK)
+    sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     robot = open_robot(sim, opened, tool=TOOL)
     robot.move_to(around(0), speed=100)
     assert sim.tcp_pose().is_close(around(0), mm=1e-3, deg=1e-3)
@@ -195,7 +195,7 @@ def test_a_master_with_the_robots_tool_connects_and_moves(
 def test_the_check_switched_off_connects_and_logs_why(
     memory_simulator_factory: SimFactory, opened: list[Robot], caplog: pytest.LogCaptureFixture
 ) -> None:
-    sim = memory_simulator_factory("tmflow", tool=TOOL, **QUICK)
+    sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     with caplog.at_level(logging.WARNING, "tmmaster"):
         open_robot(sim, opened, frame_check=FrameCheck.off("bench test: TCP taught elsewhere"))
     assert "robot.frame_check_off" in caplog.text
@@ -209,7 +209,7 @@ def test_the_tcp_the_program_sets_is_what_is_checked(
     # ChangeTCP when the project starts: the robot's TCP is then 150 mm off the flange.
     program = tmp_path / "program.tms"
     program.write_text(robot_program(robot_profile("tmflow"), tool=TOOL), encoding="utf-8")
-    sim = tm_simulator_factory("tmflow", program=program)
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     with pytest.raises(ConfigError, match=r"tool offset of \(0, 0, 150, 0, 0, 0\)"):
         Robot("127.0.0.1", sim.port, profile="tmflow", gripper=None).connect()
@@ -224,7 +224,7 @@ def test_a_tcp_in_another_base_is_refused(memory_simulator_factory: SimFactory) 
     for axis in ("x", "y", "z", "rx", "ry", "rz"):
         data["fields"][f"robot_base_tcp_{axis}"]["address"] -= 12
     shifted = tmmaster.RobotProfile.model_validate({**data, "name": "tmflow-shifted"})
-    sim = memory_simulator_factory("tmflow", tool=TOOL, **QUICK)
+    sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     robot = Robot(sim.url, profile=shifted, gripper=None, tool=TOOL)
     with pytest.raises(ConfigError, match="base other than the robot base"):
         robot.connect()

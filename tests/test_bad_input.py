@@ -16,11 +16,10 @@ from typing import Any
 
 import pytest
 
-from tmmaster import ConfigError, Pose, _cli, robot_model
+from tmmaster import ConfigError, Pose, _cli
 from tmmaster.pickplace import __main__ as pickplace_main
-from tmmaster.sim import KinematicBackend
+from tmmaster.sim import Cell, Listen, RobotSetup, Timing
 from tmmaster.sim import __main__ as sim_main
-from tmmaster.sim._scene import Scene
 from tmmaster.sim._simulator import Simulator
 from tmmaster.sim._world import DEFAULT_PART_POSE, TableObject
 
@@ -446,50 +445,55 @@ def test_sim_bad_input_is_exit_2_with_one_line(
     assert named in _one_line(capsys)
 
 
+TWO_PARTS = [TableObject(name="p", pose=DEFAULT_PART_POSE)] * 2
+
+
 @pytest.mark.parametrize(
-    ("kwargs", "named"),
+    ("make", "named"),
     [
-        pytest.param({"time_scale": float("nan")}, "time_scale", id="time-scale-nan"),
-        pytest.param({"time_scale": float("inf")}, "time_scale", id="time-scale-inf"),
-        pytest.param({"time_scale": 0.0}, "time_scale", id="time-scale-zero"),
-        pytest.param({"time_scale": -1.0}, "time_scale", id="time-scale-negative"),
-        pytest.param({"tick_hz": float("nan")}, "tick_hz", id="tick-hz-nan"),
-        pytest.param({"port": 70000}, "port", id="port-70000"),
-        pytest.param({"gripper_port": -1}, "gripper_port", id="gripper-port-negative"),
-        pytest.param({"init_time_s": float("nan")}, "init_time_s", id="init-time-nan"),
-        pytest.param({"initial_seq": 40000}, "initial_seq", id="initial-seq-past-seq-max"),
-        pytest.param({"initial_seq": -1}, "initial_seq", id="initial-seq-negative"),
+        pytest.param(lambda: Simulator(time_scale=NAN), "time_scale", id="time-scale-nan"),
+        pytest.param(lambda: Simulator(time_scale=INF), "time_scale", id="time-scale-inf"),
+        pytest.param(lambda: Simulator(time_scale=0.0), "time_scale", id="time-scale-zero"),
+        pytest.param(lambda: Simulator(time_scale=-1.0), "time_scale", id="time-scale-negative"),
+        pytest.param(lambda: Timing(tick_hz=NAN), "tick_hz", id="tick-hz-nan"),
+        pytest.param(lambda: Listen(port=70000), "port", id="port-70000"),
+        pytest.param(lambda: Listen(gripper_port=-1), "gripper_port", id="gripper-port-negative"),
+        pytest.param(lambda: Timing(init_time_s=NAN), "init_time_s", id="init-time-nan"),
         pytest.param(
-            {"profile": "article", "initial_seq": 3}, "initial_seq", id="initial-seq-no-seq"
+            lambda: Simulator(robot=RobotSetup(initial_seq=40000)),
+            "initial_seq",
+            id="initial-seq-past-seq-max",
         ),
         pytest.param(
-            {"objects": [TableObject(name="p", pose=DEFAULT_PART_POSE)] * 2},
-            "duplicate",
-            id="objects-duplicate-name",
-        ),
-        pytest.param({"grasp": "glue"}, "grasp", id="grasp-unknown"),
-        pytest.param({"dynamics": True}, "dynamics", id="dynamics-kinematic"),
-        pytest.param(
-            {"dynamics": True, "backend": KinematicBackend(robot_model("tm5-700"))},
-            "dynamics",
-            id="dynamics-own-backend",
+            lambda: Simulator(robot=RobotSetup(initial_seq=-1)),
+            "initial_seq",
+            id="initial-seq-negative",
         ),
         pytest.param(
-            {"scene": Scene(), "objects": [TableObject(name="p", pose=DEFAULT_PART_POSE)]},
-            "objects or scene",
-            id="scene-and-objects",
+            lambda: Simulator("article", robot=RobotSetup(initial_seq=3)),
+            "initial_seq",
+            id="initial-seq-no-seq",
         ),
-        pytest.param({"scene": "nowhere.toml"}, "nowhere.toml", id="scene-missing"),
-        pytest.param({"scene": 3}, "scene", id="scene-not-a-scene"),
+        pytest.param(
+            lambda: Simulator(cell=Cell(scene=TWO_PARTS)), "duplicate", id="parts-duplicate-name"
+        ),
+        pytest.param(lambda: Cell(grasp="glue"), "grasp", id="grasp-unknown"),  # type: ignore[arg-type]
+        pytest.param(lambda: Cell(dynamics=True), "dynamics", id="dynamics-kinematic"),
+        pytest.param(lambda: Cell(scene="nowhere.toml"), "nowhere.toml", id="scene-missing"),
+        pytest.param(lambda: Cell(scene=3), "scene", id="scene-not-a-scene"),  # type: ignore[arg-type]
+        pytest.param(lambda: Simulator(cell="mujoco"), "cell must be", id="cell-a-name"),  # type: ignore[arg-type]
+        pytest.param(lambda: Simulator(robot="tm12"), "robot must be", id="robot-a-name"),  # type: ignore[arg-type]
+        pytest.param(lambda: Simulator(timing=50), "timing must be", id="timing-a-number"),  # type: ignore[arg-type]
+        pytest.param(lambda: Simulator(listen=5020), "listen must be", id="listen-a-port"),  # type: ignore[arg-type]
     ],
 )
 def test_simulator_bad_arguments_raise_config_error_naming_them(
-    kwargs: dict[str, Any], named: str
+    make: Callable[[], object], named: str
 ) -> None:
     # A TMMasterError (ConfigError, still a ValueError), not a bare ValueError: callers
-    # catch the library's errors at one root.
+    # catch the library's errors at one root. Each group is checked when it is made.
     with pytest.raises(ConfigError, match=named):
-        Simulator(**kwargs)
+        make()
 
 
 # -- robot.io and Simulator.set_di: every argument checked before a byte is sent --------

@@ -27,7 +27,7 @@ from tmmaster.pickplace import (
     validate_plan,
 )
 from tmmaster.pickplace.__main__ import EXIT_CONFIG, EXIT_OK, main
-from tmmaster.sim import DEFAULT_PART_POSE, Simulator, World
+from tmmaster.sim import DEFAULT_PART_POSE, Simulator, Timing, World
 from tmmaster.sim._collide import (
     ARM_RADIUS_MM,
     FLANGE_RADIUS_MM,
@@ -91,7 +91,7 @@ def test_what_the_master_was_not_told_the_simulator_stops(tmp_path: Path) -> Non
     config = load_config(
         _config(tmp_path, f"[poses]\npick = {INTO_TABLE}\n\n[workspace]\nfloor_z_mm = 40\n")
     )
-    with Simulator("tmflow", time_scale=20, tick_hz=100, listen=False) as sim:
+    with Simulator("tmflow", time_scale=20, timing=Timing(tick_hz=100), listen=False) as sim:
         robot = robot_from_config(config, host=sim.url)
         with robot:
             robot.wait_until_ready(timeout_s=5)
@@ -165,7 +165,7 @@ def test_the_arm_check_measures_the_simulators_links(joints: tuple[float, ...]) 
 def _sim(records: list[RequestRecord] | None = None) -> Simulator:
     return Simulator(
         time_scale=50,
-        tick_hz=100,
+        timing=Timing(tick_hz=100),
         listen=False,
         request_listener=None if records is None else records.append,
     )

@@ -19,7 +19,7 @@ from pymodbus.client import ModbusTcpClient
 
 import tmmaster
 from tmmaster import robot_model
-from tmmaster.sim import DEFAULT_PART_POSE, KinematicBackend, Simulator
+from tmmaster.sim import DEFAULT_PART_POSE, KinematicBackend, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
 
@@ -91,7 +91,7 @@ class TwoFG7Client:
 def test_a_public_style_2fg7_client_opens_moves_and_reads_status(
     tm_simulator_factory: SimFactory,
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     assert sim.gripper_port is not None
     gripper = TwoFG7Client("127.0.0.1", sim.gripper_port)  # reads 0x0405 and the limits
     try:
@@ -112,7 +112,7 @@ def test_a_public_style_2fg7_client_opens_moves_and_reads_status(
 
 
 def test_the_2fg7_clients_force_reads_negative_on_a_part(tm_simulator_factory: SimFactory) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     assert sim.gripper_port is not None
     # Polled every 10 ms (the suite's pace; the default 50 ms is stretched mid-move): the
     # move only brings the fingers around the 30 mm part for the client under test.
@@ -317,7 +317,7 @@ def test_a_public_style_tm_client_reads_every_documented_address(
     tm_simulator_factory: SimFactory,
 ) -> None:
     backend = KinematicBackend(robot_model("tm5-700"))
-    sim = tm_simulator_factory("tmflow", backend=backend)
+    sim = tm_simulator_factory("tmflow", cell=backend)
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     tm = TMClient("127.0.0.1", sim.port)
     try:

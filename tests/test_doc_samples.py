@@ -33,7 +33,7 @@ import pytest
 import tmmaster
 import tmmaster.sim
 from sim_speeds import QUICK
-from tmmaster.sim import Simulator
+from tmmaster.sim import RobotSetup, Simulator, Timing
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -74,7 +74,10 @@ PAGES_WITH_SAMPLES = [p for p in PAGES if _samples(p)]
 
 #: The suite's pace, with the start-up of a real-time simulator (0.2 s of wall time):
 #: a sample that ran before the robot is ready would fail, not slip through.
-PACE: dict[str, Any] = {**QUICK, "init_time_s": 0.2 * QUICK["time_scale"]}
+PACE: dict[str, Any] = {
+    **QUICK,
+    "timing": Timing(tick_hz=QUICK["timing"].tick_hz, init_time_s=0.2 * QUICK["time_scale"]),
+}
 
 
 class _SuitePaced(Simulator):
@@ -93,7 +96,7 @@ def _simulators(code: str) -> Iterator[str]:
         if "5020" in code:
             gripper = "onrobot-2fg7" if "onrobot-2fg7" in code and "5021" in code else None
             profile = "article" if 'profile="article"' in code else "tmflow"
-            sim = stack.enter_context(Simulator(profile, gripper=gripper, **PACE))
+            sim = stack.enter_context(Simulator(profile, robot=RobotSetup(gripper=gripper), **PACE))
             code = code.replace("5020", str(sim.port))
             if gripper is not None:
                 code = code.replace("5021", str(sim.gripper_port))

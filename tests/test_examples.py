@@ -18,7 +18,7 @@ from examples_support import EXAMPLES, load_example
 from sim_speeds import QUICK
 from tmmaster import DEFAULT_HOME, Pose
 from tmmaster.pickplace.__main__ import main as pickplace_main
-from tmmaster.sim import Simulator, TableObject
+from tmmaster.sim import Cell, Simulator, TableObject
 
 PICK = Pose(300, -200, 100, 180, 0, 90)
 PLACE = Pose(300, 200, 200, 180, 0, 90)
@@ -50,7 +50,9 @@ def fast_config(tmp_path: Path) -> Path:
 
 def test_pick_and_place_example(tm_simulator_factory: SimFactory, fast_config: Path) -> None:
     sim = tm_simulator_factory(
-        "article", objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(2)], **QUICK
+        "article",
+        cell=Cell(scene=[TableObject(name=f"p{i}", pose=PICK) for i in range(2)]),
+        **QUICK,
     )
     argv = [*target(sim), "--cycles", "2", "--config", str(fast_config)]
     assert load_example("pick_and_place").main(argv) == 0
@@ -73,7 +75,9 @@ def test_custom_sequence_example(tm_simulator_factory: SimFactory) -> None:
 
 def test_palletizing_example(tm_simulator_factory: SimFactory) -> None:
     sim = tm_simulator_factory(
-        "article", objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(4)], **QUICK
+        "article",
+        cell=Cell(scene=[TableObject(name=f"p{i}", pose=PICK) for i in range(4)]),
+        **QUICK,
     )
     argv = [*target(sim), "--rows", "2", "--cols", "2", "--settle", "0.05"]
     assert load_example("palletizing").main(argv) == 0
@@ -108,7 +112,9 @@ def test_an_example_runs_as_a_script(
     # As ``python examples/palletizing.py ...`` runs it: __name__ == "__main__", sys.argv
     # and sys.path[0] set to the script's, its exit status from sys.exit() (in-process: a
     # new interpreter would cost most of a second of CPU importing the dependencies).
-    sim = tm_simulator_factory("article", objects=[TableObject(name="p", pose=PICK)], **QUICK)
+    sim = tm_simulator_factory(
+        "article", cell=Cell(scene=[TableObject(name="p", pose=PICK)]), **QUICK
+    )
     script = EXAMPLES / "palletizing.py"
     argv = [*target(sim), "--rows", "1", "--cols", "1", "--settle", "0.05"]
     monkeypatch.setattr(sys, "argv", [str(script), *argv])

@@ -21,7 +21,7 @@ import pytest
 from examples_support import EXAMPLES, documented_commands, load_example
 from sim_speeds import QUICK, SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster._cliparse import UsageError
-from tmmaster.sim import DEFAULT_PART_POSE, Simulator, TableObject
+from tmmaster.sim import DEFAULT_PART_POSE, Cell, RobotSetup, Simulator, TableObject, Timing
 from tmmaster.sim.__main__ import build_parser
 
 SimFactory = Callable[..., Simulator]
@@ -35,7 +35,10 @@ SIM_OPTIONS = {"profile", "port", "parts", "model", "fault"}
 #: How fast an example's own simulators run: the suite's pace (40x, 100 Hz). Up to 8
 #: tmflow simulators tick in one process (each tick runs the robot program): at QUICK's
 #: 250 Hz they would fall behind.
-OWN_SIMULATORS: dict[str, Any] = {"time_scale": SUITE_TIME_SCALE, "tick_hz": SUITE_TICK_HZ}
+OWN_SIMULATORS: dict[str, Any] = {
+    "time_scale": SUITE_TIME_SCALE,
+    "timing": Timing(tick_hz=SUITE_TICK_HZ),
+}
 
 #: Options of an example's command line whose values are ports.
 PORT_OPTIONS = ("--port", "--port-a", "--port-b", "--ports")
@@ -77,7 +80,13 @@ def start_simulator(words: list[str], factory: SimFactory) -> tuple[str, Simulat
         )
     count = 1 if args.parts is None else args.parts  # the simulator's default: one part
     parts = [TableObject(name=f"part-{i}", pose=DEFAULT_PART_POSE) for i in range(count)]
-    sim = factory(args.profile, model=args.model, faults=args.fault, objects=parts, **QUICK)
+    sim = factory(
+        args.profile,
+        robot=RobotSetup(model=args.model),
+        cell=Cell(scene=parts),
+        faults=args.fault,
+        **QUICK,
+    )
     return str(args.port), sim
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from examples_support import load_example
 from sim_speeds import QUICK, ticking_simulator
-from tmmaster.sim import Simulator, TableObject
+from tmmaster.sim import Cell, Simulator, TableObject
 
 Factory = Callable[..., Simulator]
 
@@ -60,9 +60,11 @@ def test_handover_on_its_own_simulators(fast_example: ModuleType) -> None:
 
 
 def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType) -> None:
-    sim_a = tm_simulator_factory(objects=[TableObject(name="part", pose=example.PICK_A)], **QUICK)
+    sim_a = tm_simulator_factory(
+        cell=Cell(scene=[TableObject(name="part", pose=example.PICK_A)]), **QUICK
+    )
     sim_b = tm_simulator_factory(
-        objects=[TableObject(name="part", pose=example.HANDOVER_B)], **QUICK
+        cell=Cell(scene=[TableObject(name="part", pose=example.HANDOVER_B)]), **QUICK
     )
     code = example.main(
         ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
@@ -77,10 +79,10 @@ def test_main_on_given_ports(tm_simulator_factory: Factory, example: ModuleType)
 
 def test_the_article_profile_on_both(tm_simulator_factory: Factory, example: ModuleType) -> None:
     sim_a = tm_simulator_factory(
-        "article", objects=[TableObject(name="part", pose=example.PICK_A)], **QUICK
+        "article", cell=Cell(scene=[TableObject(name="part", pose=example.PICK_A)]), **QUICK
     )
     sim_b = tm_simulator_factory(
-        "article", objects=[TableObject(name="part", pose=example.HANDOVER_B)], **QUICK
+        "article", cell=Cell(scene=[TableObject(name="part", pose=example.HANDOVER_B)]), **QUICK
     )
     argv = ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
     assert example.main([*argv, "--profile", "article"]) == 0
@@ -89,8 +91,10 @@ def test_the_article_profile_on_both(tm_simulator_factory: Factory, example: Mod
 
 def test_b_does_not_pick_when_a_fails(tm_simulator_factory: Factory, example: ModuleType) -> None:
     # A's world has no part: A's grip fails, so B must not come down to the table.
-    sim_a = tm_simulator_factory(objects=[])
-    sim_b = tm_simulator_factory(objects=[TableObject(name="part", pose=example.HANDOVER_B)])
+    sim_a = tm_simulator_factory(cell=Cell(scene=[]))
+    sim_b = tm_simulator_factory(
+        cell=Cell(scene=[TableObject(name="part", pose=example.HANDOVER_B)])
+    )
     shared = example.run(sim_a.port, sim_b.port, settle_s=0.05)
     assert set(shared.errors) == {"A", "B"}
     assert "robot A failed" in str(shared.errors["B"])

@@ -12,6 +12,7 @@ from contextlib import contextmanager
 
 import pytest
 
+from sim_speeds import SUITE_TICK_HZ
 from tmmaster import (
     AcknowledgeTimeoutError,
     Blog2FG7Gripper,
@@ -32,7 +33,7 @@ from tmmaster import (
 )
 from tmmaster._profiles import profile_from_data
 from tmmaster._registers import GripperProfile
-from tmmaster.sim import DEFAULT_PART_POSE, RequestRecord, Simulator
+from tmmaster.sim import DEFAULT_PART_POSE, RequestRecord, RobotSetup, Simulator, Timing
 
 Factory = Callable[..., Simulator]
 
@@ -182,7 +183,7 @@ def test_tmflow_close_away_and_grasp_miss_raise_grasp_failed(
 
 
 def test_blog_grip_is_acknowledged_and_reports_gobj(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory("article", gripper="blog-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="blog-2fg7"))
     assert sim.gripper_port is not None
     options = {"gripper": "blog-2fg7", "gripper_port": sim.gripper_port}
     with robot_at(sim, DEFAULT_PART_POSE, **options) as robot:
@@ -206,7 +207,7 @@ def test_blog_grip_is_acknowledged_and_reports_gobj(tm_simulator_factory: Factor
 
 
 def test_blog_close_on_nothing_raises_grasp_failed(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory("article", gripper="blog-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="blog-2fg7"))
     assert sim.gripper_port is not None
     options = {"gripper": "blog-2fg7", "gripper_port": sim.gripper_port}
     with robot_at(sim, ABOVE_PART, **options) as robot, pytest.raises(GraspFailedError):
@@ -221,7 +222,11 @@ def test_blog_unacknowledged_command_times_out_and_is_withdrawn(
     # A gripper still activating (gSTA 1) leaves control at 16: nobody acknowledges. It
     # activates 0.5 s (wall, at 1x) after the start, 0.3 s after the 0.2 s ack timeout.
     sim = tm_simulator_factory(
-        "article", gripper="blog-2fg7", time_scale=1.0, init_time_s=0.5, wait_ready=False
+        "article",
+        robot=RobotSetup(gripper="blog-2fg7"),
+        time_scale=1.0,
+        timing=Timing(tick_hz=SUITE_TICK_HZ, init_time_s=0.5),
+        wait_ready=False,
     )
     assert sim.gripper_port is not None
     link = GripperLink(sim.url, sim.gripper_port, ack_timeout_s=0.2, timeout_s=5.0)
@@ -257,7 +262,7 @@ def onrobot(sim: Simulator, **options: object) -> OnRobot2FG7Gripper:
 def test_onrobot_limits_are_read_from_the_device_at_connect(
     tm_simulator_factory: Factory,
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     external = onrobot(sim)
     external.disconnect()
     internal = onrobot(sim, grip="internal")
@@ -281,7 +286,7 @@ def test_onrobot_limits_are_read_from_the_device_at_connect(
 def test_onrobot_writes_width_force_speed_and_command_in_one_fc16(
     tm_simulator_factory: Factory,
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     gripper = onrobot(sim)
     try:
         gripper.force_n = 60.0
@@ -304,7 +309,12 @@ def test_onrobot_completion_is_the_target_width_not_just_not_busy(
     # 8 ticks per second (0.4 simulated s each): the write lands just after a tick, and the
     # first status read after it comes ~120 ms before the device takes the command at the
     # next one, while the status still says "not busy" at 39 mm.
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7", tick_hz=8.0, time_scale=3.2)
+    sim = tm_simulator_factory(
+        "article",
+        robot=RobotSetup(gripper="onrobot-2fg7"),
+        timing=Timing(tick_hz=8.0),
+        time_scale=3.2,
+    )
     gripper = onrobot(sim)
     try:
         ticks = sim.ticks
@@ -322,7 +332,9 @@ def test_onrobot_completion_is_the_target_width_not_just_not_busy(
 def test_onrobot_stopped_short_without_grip_is_not_success(tm_simulator_factory: Factory) -> None:
     # grasp_miss: the fingers stop on the part (30 mm) but report no grip. Not busy,
     # not at the target and no grip: the move has not been shown to succeed.
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7", faults=["grasp_miss"])
+    sim = tm_simulator_factory(
+        "article", robot=RobotSetup(gripper="onrobot-2fg7"), faults=["grasp_miss"]
+    )
     assert sim.gripper_port is not None
     options = {"gripper": "onrobot-2fg7", "gripper_port": sim.gripper_port}
     with robot_at(sim, DEFAULT_PART_POSE, **options) as robot:
@@ -334,7 +346,7 @@ def test_onrobot_stopped_short_without_grip_is_not_success(tm_simulator_factory:
 
 
 def test_onrobot_grip_holds_the_part_and_fails_on_nothing(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     assert sim.gripper_port is not None
     options = {"gripper": "onrobot-2fg7", "gripper_port": sim.gripper_port}
     with robot_at(sim, DEFAULT_PART_POSE, **options) as robot:
@@ -355,7 +367,7 @@ def test_onrobot_grip_holds_the_part_and_fails_on_nothing(tm_simulator_factory: 
 def test_onrobot_out_of_limit_width_is_refused_before_any_write(
     tm_simulator_factory: Factory, width: float
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     gripper = onrobot(sim)
     try:
         sim.clear_request_log()
@@ -374,7 +386,7 @@ def test_onrobot_refuses_to_move_before_connect() -> None:
 
 
 def test_onrobot_second_connection_is_a_clear_error(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     first = onrobot(sim)
     try:
         assert sim.gripper_port is not None
@@ -398,7 +410,7 @@ def test_onrobot_second_connection_is_a_clear_error(tm_simulator_factory: Factor
 def test_onrobot_force_zero_is_accepted_and_the_live_ceiling_is_enforced(
     tm_simulator_factory: Factory,
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     gripper = onrobot(sim, force_n=0.0, speed_percent=1)
     try:
         assert gripper.max_force_n == 100.0  # read from 0x0405 at connect
@@ -428,7 +440,7 @@ def test_onrobot_bad_force_or_speed_is_refused_at_construction(force: float, spe
 
 
 def test_onrobot_refuses_a_device_that_is_not_a_2fg(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     sim._call(lambda: sim._gripper_bank.set("product_code", 0x20))  # type: ignore[union-attr]
     with pytest.raises(GripperError, match=r"0x0020 \(RG2\), not a 2FG7"):
         onrobot(sim)
@@ -437,7 +449,7 @@ def test_onrobot_refuses_a_device_that_is_not_a_2fg(tm_simulator_factory: Factor
 def test_onrobot_dual_quick_changer_unit_ids(tm_simulator_factory: Factory) -> None:
     secondary = profile_from_data({"extends": "onrobot-2fg7", "device_id": 67})
     assert isinstance(secondary, GripperProfile)
-    sim = tm_simulator_factory("article", gripper=secondary)
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper=secondary))
     assert sim.gripper_port is not None
     link = GripperLink(sim.url, sim.gripper_port, timeout_s=2.0)
     gripper = OnRobot2FG7Gripper(secondary, link)
@@ -457,7 +469,7 @@ def test_onrobot_dual_quick_changer_unit_ids(tm_simulator_factory: Factory) -> N
 def test_a_gripper_instance_keeps_its_options_and_is_guarded_by_the_robot(
     tm_simulator_factory: Factory,
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     assert sim.gripper_port is not None
     link = GripperLink(sim.url, sim.gripper_port, timeout_s=2.0)
     gripper = OnRobot2FG7Gripper(

@@ -23,7 +23,7 @@ from tmmaster import RetryPolicy, TMScriptSyntaxError
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_models import robot_model
 from tmmaster._transport import ModbusTransport
-from tmmaster.sim import Simulator
+from tmmaster.sim import RobotSetup, Simulator, Timing
 from tmmaster.sim.__main__ import STOP_WITHIN_S
 from tmmaster.sim._controller import RobotController, SimErrorCode
 from tmmaster.sim._kinematic import KinematicBackend
@@ -149,7 +149,7 @@ def test_a_simulator_whose_tick_raises_keeps_serving_registers_in_error(
     tm_simulator_factory: Any,
 ) -> None:
     backend = BombBackend()
-    sim: Simulator = tm_simulator_factory(backend=backend, time_scale=1.0)
+    sim: Simulator = tm_simulator_factory(cell=backend, time_scale=1.0)
     sim.wait_for(lambda: bool(sim.field("project_running")))
     backend.armed = True
     sim.wait_for(lambda: bool(sim.field("error")))
@@ -287,7 +287,9 @@ def test_the_modbus_server_answers_while_a_program_runs_slow_statements(
 ) -> None:
     program = tmp_path / "sorting.script"
     program.write_text(sorting(16384), encoding="utf-8")
-    sim: Simulator = tm_simulator_factory(program=program, time_scale=1.0, tick_hz=50)
+    sim: Simulator = tm_simulator_factory(
+        robot=RobotSetup(program=program), time_scale=1.0, timing=Timing(tick_hz=50)
+    )
     sim.wait_for(lambda: "sorting" in sim.displayed(), timeout=20)
     # Each Array_Sort takes milliseconds: 400 of them were one tick of seconds, during
     # which no request was answered. The tick's CPU-time budget yields after 20 ms.

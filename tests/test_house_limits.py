@@ -26,9 +26,6 @@ PARAMETERS = 12
 KNOWN: dict[tuple[str, str], int] = {
     # Robot's public constructor: grouping its options is an API decision still open.
     ("params", "_robot.py:__init__"): 24,
-    # The simulator's constructor: to take a backend and a world object instead.
-    ("params", "sim/_simulator.py:__init__"): 25,
-    ("lines", "sim/_simulator.py:__init__"): 153,
 }
 
 

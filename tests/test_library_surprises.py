@@ -20,6 +20,7 @@ import subprocess
 import sys
 import typing
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,7 @@ from tmmaster import (
 )
 from tmmaster.pickplace.__main__ import EXIT_CONNECTION
 from tmmaster.pickplace.__main__ import main as pickplace_main
-from tmmaster.sim import Simulator, World
+from tmmaster.sim import Cell, Listen, Simulator, Timing, World
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -184,7 +185,8 @@ def test_the_robot_api_pages_first_sample_runs_against_the_readmes_simulator(
     first = re.search(r"^```python\n(.*?)^```", text, re.DOTALL | re.MULTILINE)
     assert first is not None
     assert "5020" in first.group(1)
-    sim = Simulator(time_scale=40, tick_hz=100)  # as `python -m tmmaster.sim` (tmflow)
+    # As `python -m tmmaster.sim` (tmflow).
+    sim = Simulator(time_scale=40, timing=Timing(tick_hz=100))
     with sim:
         code = first.group(1).replace("5020", str(sim.port))
         exec(compile(code, "docs/robot-api.md (first sample)", "exec"), {"__name__": "sample"})
@@ -203,24 +205,24 @@ def test_a_do_number_no_float_holds_is_a_config_error() -> None:
 
 
 @pytest.mark.parametrize(
-    ("option", "value"),
+    ("group", "option", "value"),
     [
-        ("time_scale", 10**400),
-        ("time_scale", "2"),
-        ("tick_hz", 10**400),
-        ("init_time_s", 10**400),
-        ("init_time_s", 10**5000),
-        ("speed_factor", 10**5000),
-        ("port", 10**5000),
-        ("gripper_port", 1.5),
+        (None, "time_scale", 10**400),
+        (None, "time_scale", "2"),
+        (Timing, "tick_hz", 10**400),
+        (Timing, "init_time_s", 10**400),
+        (Timing, "init_time_s", 10**5000),
+        (Cell, "speed_factor", 10**5000),
+        (Listen, "port", 10**5000),
+        (Listen, "gripper_port", 1.5),
     ],
-    ids=lambda v: v if isinstance(v, str) else type(v).__name__,
+    ids=lambda v: v if isinstance(v, str) else getattr(v, "__name__", type(v).__name__),
 )
 def test_a_simulator_option_no_float_holds_is_a_config_error_naming_it(
-    option: str, value: object
+    group: Callable[..., object] | None, option: str, value: object
 ) -> None:
     with pytest.raises(ConfigError, match=rf"^{option} must be"):
-        Simulator(listen=False, **{option: value})
+        (group or partial(Simulator, listen=False))(**{option: value})
 
 
 def test_a_table_height_no_float_holds_is_a_config_error() -> None:

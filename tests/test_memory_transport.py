@@ -8,7 +8,7 @@ import pytest
 
 import tmmaster
 from tmmaster import ConnectError, ConnectionLostError, ResponseTimeoutError, RetryPolicy, Table
-from tmmaster.sim import MemoryTransport, Simulator
+from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
 
 ONCE = RetryPolicy(attempts=1)
 
@@ -83,7 +83,7 @@ def test_stop_listening_refuses_connections_for_a_while(sim: Simulator) -> None:
 
 
 def test_the_onrobot_gripper_serves_one_memory_link_at_a_time() -> None:
-    sim = Simulator("article", listen=False, gripper="onrobot-2fg7")
+    sim = Simulator("article", listen=False, robot=RobotSetup(gripper="onrobot-2fg7"))
     with (
         sim,
         MemoryTransport(sim, "gripper", device_id=65, retry=ONCE) as first,

@@ -20,7 +20,7 @@ from tmmaster import (
     StatusMonitor,
     TransportError,
 )
-from tmmaster.sim import Simulator
+from tmmaster.sim import Listen, Simulator
 
 SimFactory = Callable[..., Simulator]
 
@@ -292,7 +292,7 @@ def test_a_robot_unreachable_at_start_is_picked_up_later(
     monitor.add("late", "127.0.0.1", port, profile="article")
     with monitor:
         assert isinstance(monitor.latest("late").error, ConnectError)
-        tm_simulator_factory("article", port=port)  # the robot comes up
+        tm_simulator_factory("article", listen=Listen(port=port))  # the robot comes up
         seen = wait_for(monitor, "late", lambda s: s.polls >= 2)
     assert seen.error is None
     assert seen.status is not None

@@ -34,7 +34,7 @@ from tmmaster.pickplace.__main__ import (
     EXIT_TIMEOUT,
     main,
 )
-from tmmaster.sim import RequestRecord, Simulator, TableObject
+from tmmaster.sim import Cell, RequestRecord, Simulator, TableObject
 
 PICK = Pose.from_sequence(ARTICLE_PICK)
 PLACE = Pose.from_sequence(ARTICLE_PLACE)
@@ -160,7 +160,7 @@ def int16(value: int) -> int:
 def test_article_cycle_ends_done_with_the_part_on_the_place_position(
     tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    sim = tm_simulator_factory("article", objects=parts(1), **QUICK)
+    sim = tm_simulator_factory("article", cell=Cell(scene=parts(1)), **QUICK)
     code, report = run_cli(sim, write_config(tmp_path), tmp_path)
 
     assert code == EXIT_OK
@@ -201,7 +201,7 @@ def test_article_cycle_ends_done_with_the_part_on_the_place_position(
 
 
 def test_several_cycles_place_every_part(tm_simulator_factory: SimFactory, tmp_path: Path) -> None:
-    sim = tm_simulator_factory("article", objects=parts(3), **QUICK)
+    sim = tm_simulator_factory("article", cell=Cell(scene=parts(3)), **QUICK)
     code, report = run_cli(sim, write_config(tmp_path), tmp_path, "--cycles", "3")
 
     assert code == EXIT_OK
@@ -222,7 +222,9 @@ def test_several_cycles_place_every_part(tm_simulator_factory: SimFactory, tmp_p
 def test_stall_times_out_stops_the_arm_and_exits_with_the_timeout_code(
     tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    sim = tm_simulator_factory("article", objects=parts(1), faults=["stall:at_move=2"], **QUICK)
+    sim = tm_simulator_factory(
+        "article", cell=Cell(scene=parts(1)), faults=["stall:at_move=2"], **QUICK
+    )
     config = write_config(tmp_path, timeouts=f"motion_s = {STALL_TIMEOUT_S}")
     code, report = run_cli(sim, config, tmp_path)
 
@@ -243,7 +245,9 @@ def test_stall_times_out_stops_the_arm_and_exits_with_the_timeout_code(
 def test_stall_with_retreat_goes_up_then_home_at_low_speed(
     tm_simulator_factory: SimFactory, tmp_path: Path
 ) -> None:
-    sim = tm_simulator_factory("article", objects=parts(1), faults=["stall:at_move=2"], **QUICK)
+    sim = tm_simulator_factory(
+        "article", cell=Cell(scene=parts(1)), faults=["stall:at_move=2"], **QUICK
+    )
     config = write_config(
         tmp_path, '[on_error]\nreaction = "retreat"\n', timeouts=f"motion_s = {STALL_TIMEOUT_S}"
     )
@@ -261,7 +265,7 @@ def test_robot_error_exits_with_the_fault_code_and_never_retreats(
     tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     sim = tm_simulator_factory(
-        "article", objects=parts(1), faults=["robot_error:at_move=3,code=0x1F4"], **QUICK
+        "article", cell=Cell(scene=parts(1)), faults=["robot_error:at_move=3,code=0x1F4"], **QUICK
     )
     config = write_config(tmp_path, '[on_error]\nreaction = "retreat"\n')
     code, report = run_cli(sim, config, tmp_path)
@@ -285,7 +289,9 @@ def test_robot_error_exits_with_the_fault_code_and_never_retreats(
 def test_estop_never_moves_again(
     tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    sim = tm_simulator_factory("article", objects=parts(1), faults=["estop:at_move=4"], **QUICK)
+    sim = tm_simulator_factory(
+        "article", cell=Cell(scene=parts(1)), faults=["estop:at_move=4"], **QUICK
+    )
     config = write_config(tmp_path, '[on_error]\nreaction = "retreat"\n')
     code, report = run_cli(sim, config, tmp_path)
 
@@ -299,7 +305,7 @@ def test_grasp_miss_is_retried_and_the_cycle_completes(
     tm_simulator_factory: SimFactory, tmp_path: Path
 ) -> None:
     sim = tm_simulator_factory(
-        "article", objects=parts(1), faults=["grasp_miss:at_grasp=1"], **QUICK
+        "article", cell=Cell(scene=parts(1)), faults=["grasp_miss:at_grasp=1"], **QUICK
     )
     code, report = run_cli(sim, write_config(tmp_path), tmp_path)
 
@@ -317,7 +323,7 @@ def test_grasp_miss_after_every_retry_exits_with_the_grasp_code(
     tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     misses = [f"grasp_miss:at_grasp={n}" for n in (1, 2, 3)]
-    sim = tm_simulator_factory("article", objects=parts(1), faults=misses, **QUICK)
+    sim = tm_simulator_factory("article", cell=Cell(scene=parts(1)), faults=misses, **QUICK)
     config = write_config(tmp_path, run="grasp_retries = 2")
     code, report = run_cli(sim, config, tmp_path)
 
@@ -347,7 +353,7 @@ def test_a_dropped_connection_is_survived_without_sending_any_command_twice(
 ) -> None:
     register, nth_write = DROP_POINTS[where]
     drop = f"drop_connections:on_write_to={register},after_requests={nth_write}"
-    sim = tm_simulator_factory("article", objects=parts(1), faults=[drop])
+    sim = tm_simulator_factory("article", cell=Cell(scene=parts(1)), faults=[drop])
     code, report = run_cli(sim, write_config(tmp_path), tmp_path)
 
     assert code == EXIT_OK
@@ -383,7 +389,7 @@ def test_an_invalid_config_sends_nothing_and_names_field_and_file(
     extra: str,
     needles: list[str],
 ) -> None:
-    sim = tm_simulator_factory("article", objects=parts(1))
+    sim = tm_simulator_factory("article", cell=Cell(scene=parts(1)))
     config = tmp_path / "broken.toml"
     config.write_text(extra)
     code, report = run_cli(sim, config, tmp_path)

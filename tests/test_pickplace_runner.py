@@ -38,7 +38,7 @@ from tmmaster.pickplace import (
     validate_config,
     validate_plan,
 )
-from tmmaster.sim import Simulator, TableObject
+from tmmaster.sim import Cell, Simulator, TableObject
 
 PICK = Pose.from_sequence(ARTICLE_PICK)
 PLACE = Pose.from_sequence(ARTICLE_PLACE)
@@ -76,7 +76,9 @@ def fast_config(**sections: dict[str, object]) -> PickPlaceConfig:
 def sim(tm_simulator_factory: SimFactory) -> Simulator:
     """An article simulator with three parts at the pick pose."""
     return tm_simulator_factory(
-        "article", objects=[TableObject(name=f"part-{i}", pose=PICK) for i in range(3)], **QUICK
+        "article",
+        cell=Cell(scene=[TableObject(name=f"part-{i}", pose=PICK) for i in range(3)]),
+        **QUICK,
     )
 
 
@@ -318,7 +320,7 @@ def test_palletizing_places_each_part_into_its_slot(tm_simulator_factory: SimFac
     pallet = Pallet(origin=Pose(250, 150, 100, 180, 0, 90), rows=1, cols=2, dx=40, dy=40)
     sim = tm_simulator_factory(
         "article",
-        objects=[TableObject(name=f"p{i}", pose=PICK) for i in range(pallet.size)],
+        cell=Cell(scene=[TableObject(name=f"p{i}", pose=PICK) for i in range(pallet.size)]),
         **QUICK,
     )
     seq = palletizing(pick=PICK, pallet=pallet, home=HOME)

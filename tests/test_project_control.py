@@ -33,7 +33,7 @@ from tmmaster import (
 )
 from tmmaster._cli import main
 from tmmaster.pickplace import Runner, pick_and_place, validate_config
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
 
@@ -103,7 +103,7 @@ def test_an_awaited_robot_of_a_fleet_and_one_in_process_move_right_after_start()
 
 
 def test_wait_ready_false_returns_while_the_robot_still_starts_up() -> None:
-    with Simulator("tmflow", init_time_s=1000.0, wait_ready=False) as sim:
+    with Simulator("tmflow", timing=Timing(init_time_s=1000.0), wait_ready=False) as sim:
         assert not sim.field("project_running")
         with connect(sim.url) as robot:
             assert robot.project_state() is ProjectState.STOPPED

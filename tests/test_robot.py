@@ -12,7 +12,7 @@ import pytest
 import tmmaster
 from tmmaster import MovePhase, Pose, Robot, TimeoutPolicy
 from tmmaster._registers import EXTENSION_FIELDS
-from tmmaster.sim import MemoryTransport, Simulator
+from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
 
@@ -120,7 +120,7 @@ def test_a_move_is_one_write_of_the_whole_command_block(
 def test_out_of_range_pose_sends_nothing(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
-    sim = tm_simulator_factory("article", model="tm5-900")
+    sim = tm_simulator_factory("article", robot=RobotSetup(model="tm5-900"))
     robot = robots(sim, model="tm5-900")
     sim.clear_request_log()
     with pytest.raises(tmmaster.ValueOutOfRangeError, match=r"target_x: value 400"):
@@ -324,7 +324,7 @@ def test_command_rejected_by_the_robot_program(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     # The master believes in a TM12's reach; the simulated TM5-700 refuses the target.
-    sim = tm_simulator_factory("tmflow", model="tm5-700")
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(model="tm5-700"))
     robot = robots(sim, model="tm12")
     with pytest.raises(tmmaster.CommandRejectedError, match="unreachable") as info:
         robot.move_to(Pose(0, 900, 300, 180, 0, 0), speed=30)

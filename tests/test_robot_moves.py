@@ -20,7 +20,7 @@ from safety_invariant import Issued, check
 from sim_speeds import QUICK
 from tmmaster import Pose, Robot, TimeoutPolicy, robot_model
 from tmmaster._kinematics import Arc
-from tmmaster.sim import KinematicBackend, Simulator
+from tmmaster.sim import Cell, KinematicBackend, Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
 
@@ -157,7 +157,7 @@ def test_move_by_resolves_against_the_reported_pose_in_the_base_and_the_tool_fra
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     tool = Pose(0, 0, 100, 0, 0, 0)
-    sim = tm_simulator_factory(tool=tool, **QUICK)
+    sim = tm_simulator_factory(cell=Cell(tool=tool), **QUICK)
     robot = robots(sim, tool=tool)
     robot.move_to(START, speed=50)
     moved = robot.move_by(dx=20, dz=-30, motion="line", speed_mm_s=200)
@@ -387,7 +387,7 @@ def test_a_held_frame_of_a_new_command_never_runs_after_the_master_gave_up(kind:
     # and cancels the number, so the frame that lands later can never run.
     issued: list[Issued] = []
     with (
-        Simulator("tmflow", time_scale=20.0, tick_hz=50.0) as sim,
+        Simulator("tmflow", time_scale=20.0, timing=Timing(tick_hz=50.0)) as sim,
         FaultProxy(sim.port) as proxy,
         Robot(
             "127.0.0.1",

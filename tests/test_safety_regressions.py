@@ -25,7 +25,7 @@ from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Pose, RetryPolicy, Robot, TimeoutPolicy
 from tmmaster.pickplace import Runner, TaskSequence
-from tmmaster.sim import Simulator
+from tmmaster.sim import RobotSetup, Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
 
@@ -38,7 +38,7 @@ REQUEST_TIMEOUT_S = 0.15
 #: simulator's own (in simulated seconds, scaled here to keep their wall-clock timing) and
 #: whose operator waits count the simulator's ticks: each tick is 0.4 simulated s at both
 #: speeds, so the same ticks take half the wall time.
-FAST = {"time_scale": SUITE_TIME_SCALE, "tick_hz": SUITE_TICK_HZ}
+FAST = {"time_scale": SUITE_TIME_SCALE, "timing": Timing(tick_hz=SUITE_TICK_HZ)}
 
 
 @pytest.fixture
@@ -47,7 +47,7 @@ def tm_simulator_factory(tm_simulator_factory: SimFactory) -> SimFactory:
 
     def make(profile: str = "article", **options: Any) -> Simulator:
         options.setdefault("time_scale", 20.0)
-        options.setdefault("tick_hz", 50.0)
+        options.setdefault("timing", Timing(tick_hz=50.0))
         return tm_simulator_factory(profile, **options)
 
     return make
@@ -305,7 +305,9 @@ def test_8_4_a_stop_request_ends_the_ready_wait_without_a_busy_loop(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
     # Initialising for good: start() returns without waiting for the start-up.
-    sim = tm_simulator_factory(profile, init_time_s=1000.0, wait_ready=False)
+    sim = tm_simulator_factory(
+        profile, timing=Timing(tick_hz=50.0, init_time_s=1000.0), wait_ready=False
+    )
     with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.05) as robot:
         sim.clear_request_log()
         timer = threading.Timer(0.1, robot.interrupt)  # two polls into the wait
@@ -344,7 +346,7 @@ def test_8_5_estop_ends_an_article_gripper_wait_and_blocks_gripper_writes(
 
 
 def test_8_5_estop_ends_an_onrobot_gripper_wait(tm_simulator_factory: SimFactory) -> None:
-    sim = tm_simulator_factory("tmflow", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(gripper="onrobot-2fg7"))
     with Robot(
         "127.0.0.1",
         sim.port,
@@ -632,7 +634,7 @@ def test_a_move_interrupted_by_a_resumable_stop_is_stopped_for_good(
     # and Play would resume the interrupted move (TMflow 2.24 manual, Table 5, p. 53).
     # The master gives the move up, so it presses Stop: Play then starts the project from
     # the beginning, whose start-up rule runs nothing.
-    sim = tm_simulator_factory("tmflow", resume_after_error=True, **FAST)
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(resume_after_error=True), **FAST)
     robot = robots(sim.port, "tmflow")
     robot.wait_until_ready(timeout_s=5)
     issued = [Issued(A, time.monotonic())]

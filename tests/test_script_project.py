@@ -21,7 +21,7 @@ import tmmaster
 from tmmaster import ConfigError, FrameCheck, Pose, Robot, TimeoutPolicy
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
-from tmmaster.sim import Simulator
+from tmmaster.sim import Cell, RobotSetup, Simulator
 from tmmaster.sim import __main__ as sim_main
 
 SimFactory = Callable[..., Simulator]
@@ -62,7 +62,9 @@ def test_a_cancel_that_lands_between_the_programs_read_and_its_ack_is_never_run(
         text = without_compare_and_ack(text)
     program = tmp_path / "program.tms"
     program.write_text(text, encoding="utf-8")
-    sim = tm_simulator_factory("tmflow", program=program, faults=["late_ack:delay_s=6"])
+    sim = tm_simulator_factory(
+        "tmflow", robot=RobotSetup(program=program), faults=["late_ack:delay_s=6"]
+    )
     robot = open_robot(sim, timeouts=TimeoutPolicy(ack_timeout_s=1.0))
     try:
         motion = robot.start_move(A, speed=30)
@@ -97,7 +99,9 @@ def test_the_program_sets_the_masters_tcp_whatever_the_robot_had(
         text = text.replace("    ChangeTCP(tool)\n", "")
     program = tmp_path / "program.tms"
     program.write_text(text, encoding="utf-8")
-    sim = tm_simulator_factory("tmflow", tool=Pose(0, 0, 150, 0, 0, 0), program=program)
+    sim = tm_simulator_factory(
+        "tmflow", cell=Cell(tool=Pose(0, 0, 150, 0, 0, 0)), robot=RobotSetup(program=program)
+    )
     # The program's ChangeTCP runs when the project starts: the master connects after it.
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     options: dict[str, Any] = {}
@@ -148,7 +152,7 @@ closestop
 def test_a_users_own_script_project_runs(tm_simulator_factory: SimFactory, tmp_path: Path) -> None:
     program = tmp_path / "mine.tms"
     program.write_text(USER_PROJECT, encoding="utf-8")
-    sim = tm_simulator_factory("tmflow", program=program)
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
     sim.wait_for(lambda: "closestop ran" in sim.displayed(), timeout=5)
     assert sim.displayed() == [
         "hello from a user's project",
@@ -173,7 +177,7 @@ def test_a_bad_program_is_refused_before_the_simulator_starts(
     program = tmp_path / "bad.tms"
     program.write_text(text, encoding="utf-8")
     with pytest.raises(tmmaster.TMScriptSyntaxError, match=needle):
-        Simulator("tmflow", program=program, listen=False)
+        Simulator("tmflow", robot=RobotSetup(program=program), listen=False)
     assert sim_main.main(["--program", str(program), "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert needle in err
@@ -184,9 +188,9 @@ def test_a_program_is_refused_on_a_profile_without_sequence_numbers(tmp_path: Pa
     program = tmp_path / "p.tms"
     program.write_text("main\n{\n}\n", encoding="utf-8")
     with pytest.raises(tmmaster.ConfigError, match="sequence"):
-        Simulator("article", program=program, listen=False)
+        Simulator("article", robot=RobotSetup(program=program), listen=False)
     with pytest.raises(tmmaster.ConfigError, match="cannot read"):
-        Simulator("tmflow", program=tmp_path / "missing.tms", listen=False)
+        Simulator("tmflow", robot=RobotSetup(program=tmp_path / "missing.tms"), listen=False)
 
 
 def test_the_start_up_rule_of_the_program_cancels_a_command_written_while_stopped(
@@ -221,7 +225,7 @@ def test_a_programs_own_pause_waits_for_play(
         'main\n{\n    Display("before")\n    Pause()\n    Display("after")\n}\n',
         encoding="utf-8",
     )
-    sim = tm_simulator_factory("tmflow", program=program)
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
     sim.wait_for(lambda: bool(sim.field("paused")), timeout=5)
     assert sim.displayed() == ["before"]
     sim.press_play()

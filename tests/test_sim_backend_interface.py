@@ -13,7 +13,7 @@ import pytest
 import tmmaster
 from sim_backends import SlowSettlingBackend
 from tmmaster import Pose
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 APPROACH = Pose(300, -200, 200, 180, 0, 90)
 PICK = Pose(300, -200, 100, 180, 0, 90)
@@ -27,7 +27,9 @@ def test_moves_complete_through_slow_settling_and_reinitialisation(profile: str)
     # 40x at 100 Hz, polled every 5 ms: 0.4 simulated s per tick and two polls per tick,
     # as at 20x, 50 Hz and 10 ms, in half the wall time; the 2 s settle is 5 ticks.
     with (
-        Simulator(profile, time_scale=40, tick_hz=100, backend=backend, listen=False) as sim,
+        Simulator(
+            profile, time_scale=40, timing=Timing(tick_hz=100), cell=backend, listen=False
+        ) as sim,
         # The article's register gripper waits its settle time for a close on nothing:
         # 0.2 s (wall) is 8 simulated s, ~20 ticks for the controller to take the close.
         tmmaster.connect(

@@ -17,7 +17,7 @@ from sim_backends import BACKENDS, until_fault
 from test_sim_controller import article, run, run_until, send_article, send_tmflow, tmflow
 from tmmaster import Pose
 from tmmaster._pose import MotionType
-from tmmaster.sim import KinematicBackend, Simulator, TableObject, World
+from tmmaster.sim import KinematicBackend, Simulator, TableObject, Timing, World
 from tmmaster.sim._backend import PhysicsBackend
 from tmmaster.sim._controller import SimErrorCode
 from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM
@@ -233,7 +233,7 @@ def test_the_master_lets_a_move_below_the_table_by_and_the_simulator_stops_it() 
     # A master told of no table (its floor the robot's mounting plane, 0 mm): a TCP at
     # 60 mm passes its checks; the simulated cell's table top is at 85 mm.
     with (
-        Simulator("tmflow", time_scale=20, tick_hz=100, listen=False) as sim,
+        Simulator("tmflow", time_scale=20, timing=Timing(tick_hz=100), listen=False) as sim,
         tmmaster.connect(
             sim.url,
             profile="tmflow",

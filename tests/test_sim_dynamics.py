@@ -18,7 +18,7 @@ import pytest
 import tmmaster
 from tmmaster import ConfigError, Pose
 from tmmaster._pose import MotionType
-from tmmaster.sim import KinematicBackend, Simulator, TableObject, World
+from tmmaster.sim import Cell, KinematicBackend, RobotSetup, Simulator, TableObject, World
 from tmmaster.sim._mujoco import MuJoCoBackend, build_mjcf
 from tmmaster.sim._simulator import simulator_summary
 from tmmaster.sim._world import DEFAULT_TABLE_TOP_Z_MM
@@ -174,7 +174,7 @@ def test_a_fast_line_down_stops_where_planned_without_overshooting() -> None:
 def test_the_pick_and_place_cycle_through_the_master_with_a_heavy_part() -> None:
     b = dynamic(5.0)
     with (
-        Simulator("tmflow", time_scale=20, backend=b, listen=False) as sim,
+        Simulator("tmflow", time_scale=20, cell=b, listen=False) as sim,
         tmmaster.connect(sim.url, profile="tmflow", poll_interval_s=0.01) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
@@ -215,7 +215,7 @@ def test_a_joint_held_at_its_effort_shows_as_saturation_and_lag(
 
 
 def test_the_simulator_and_its_command_line_choose_the_dynamics() -> None:
-    with Simulator(physics="mujoco", dynamics=True, listen=False) as sim:
+    with Simulator(cell=Cell(physics="mujoco", dynamics=True), listen=False) as sim:
         backend = sim.backend
         assert isinstance(backend, MuJoCoBackend)
         assert backend.dynamics
@@ -228,20 +228,22 @@ def test_the_simulator_and_its_command_line_choose_the_dynamics() -> None:
 
 
 @pytest.mark.parametrize(
-    ("options", "expected"),
+    ("cell", "model", "expected"),
     [
-        pytest.param({"physics": "mujoco"}, True, id="mujoco-tm5-700"),
-        pytest.param({"physics": "mujoco", "model": "tm5-900"}, True, id="mujoco-tm5-900"),
-        pytest.param({"physics": "mujoco", "model": "tm12"}, False, id="mujoco-tm12-no-data"),
-        pytest.param({"physics": "mujoco", "dynamics": False}, False, id="mujoco-ideal-servo"),
-        pytest.param({}, False, id="kinematic"),
-        pytest.param({"dynamics": False}, False, id="kinematic-told-off"),
+        pytest.param(Cell(physics="mujoco"), "tm5-700", True, id="mujoco-tm5-700"),
+        pytest.param(Cell(physics="mujoco"), "tm5-900", True, id="mujoco-tm5-900"),
+        pytest.param(Cell(physics="mujoco"), "tm12", False, id="mujoco-tm12-no-data"),
+        pytest.param(
+            Cell(physics="mujoco", dynamics=False), "tm5-700", False, id="mujoco-ideal-servo"
+        ),
+        pytest.param(Cell(), "tm5-700", False, id="kinematic"),
+        pytest.param(Cell(dynamics=False), "tm5-700", False, id="kinematic-told-off"),
     ],
 )
 def test_dynamics_is_the_mujoco_default_where_the_link_masses_are_known(
-    options: dict[str, object], expected: bool
+    cell: Cell, model: str, expected: bool
 ) -> None:
-    sim = Simulator(listen=False, **options)  # type: ignore[arg-type]
+    sim = Simulator(listen=False, cell=cell, robot=RobotSetup(model=model))
     try:
         assert sim.dynamics is expected
         assert getattr(sim.backend, "dynamics", False) is expected
@@ -253,10 +255,12 @@ def test_dynamics_is_the_mujoco_default_where_the_link_masses_are_known(
 
 def test_dynamics_the_simulator_cannot_give_is_a_config_error() -> None:
     with pytest.raises(ConfigError, match="tm12"):
-        Simulator(physics="mujoco", model="tm12", dynamics=True, listen=False)
-    # Your own backend models what it models: not even False is Simulator's to give.
-    with pytest.raises(ConfigError, match="own backend"):
-        Simulator(backend=KinematicBackend(MODEL), dynamics=False, listen=False)
-    with Simulator(backend=KinematicBackend(MODEL), listen=False) as sim:
+        Simulator(
+            cell=Cell(physics="mujoco", dynamics=True), robot=RobotSetup(model="tm12"), listen=False
+        )
+    with pytest.raises(ConfigError, match="only the mujoco physics backend"):
+        Cell(dynamics=True)
+    # Your own backend models what it models: it takes no Cell options at all.
+    with Simulator(cell=KinematicBackend(MODEL), listen=False) as sim:
         assert not sim.dynamics
         assert sim.physics is None

@@ -33,7 +33,7 @@ from tmmaster import DEFAULT_HOME, JointSpec, MotionType, Pose, RobotModel, robo
 from tmmaster import _kinematics as kin
 from tmmaster._registers import TARGET_FIELDS
 from tmmaster._robot_models import trapezoid_progress
-from tmmaster.sim import KinematicBackend, Simulator
+from tmmaster.sim import Cell, KinematicBackend, Simulator
 from tmmaster.sim import __main__ as sim_main
 from tmmaster.sim._backend import MotionRejectedError
 from tmmaster.sim._controller import SimErrorCode
@@ -351,7 +351,7 @@ def test_joints_and_flange_read_over_modbus_agree_by_forward_kinematics(
 ) -> None:
     # 4x at the suite's 100 Hz: 0.04 simulated s a tick, the PTP below about 0.9 s
     # (~23 ticks in ~0.23 s of wall time), each tick read a few times (see the loop).
-    sim = tm_simulator_factory("tmflow", tool=TOOL, time_scale=4)
+    sim = tm_simulator_factory("tmflow", cell=Cell(tool=TOOL), time_scale=4)
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     assert sim.tool == TOOL
     client = ModbusTcpClient("127.0.0.1", port=sim.port, timeout=2)
@@ -395,9 +395,16 @@ def test_the_cli_takes_a_tool_and_refuses_a_bad_one(capsys: pytest.CaptureFixtur
     assert sim_main._tool(args.tool) == TOOL
 
 
-def test_a_tool_with_a_backend_of_ones_own_is_refused() -> None:
-    with pytest.raises(ValueError, match="tool"):
-        Simulator(backend=KinematicBackend(TM5), tool=TOOL, listen=False)
+def test_the_tool_is_the_cells_and_a_backend_of_ones_own_keeps_its_own() -> None:
+    sim = Simulator(cell=Cell(tool=TOOL), listen=False)
+    assert sim.tool == TOOL
+    assert sim.call(sim.backend.tcp_pose) == sim.tcp_pose()
+    own = Simulator(cell=KinematicBackend(TM5, tool=TOOL), listen=False)
+    assert own.tool is None  # the simulator gives your backend nothing: it has its own
+    with pytest.raises(tmmaster.ConfigError, match="cell must be a Cell or a PhysicsBackend"):
+        Simulator(cell="kinematic", listen=False)  # type: ignore[arg-type]
+    with pytest.raises(tmmaster.ConfigError, match="tool must be a Pose"):
+        Cell(tool=(0, 0, 120, 0, 0, 0))  # type: ignore[arg-type]
 
 
 class JointlessBackend(KinematicBackend):
@@ -440,7 +447,7 @@ def test_a_master_with_the_same_tool_drives_the_simulator_through_the_cycle(
 ) -> None:
     # 100x with a 250 Hz tick (0.4 simulated s a tick, as the suite's 40x at 100 Hz): the
     # subject is where the tool puts the TCP, and each move now ends by the first poll.
-    sim = memory_simulator_factory(profile, tool=TOOL, **QUICK)
+    sim = memory_simulator_factory(profile, cell=Cell(tool=TOOL), **QUICK)
     with tmmaster.connect(sim.url, profile=profile, tool=TOOL) as robot:
         robot.wait_until_ready()
         for target, motion in CYCLE:

@@ -20,7 +20,7 @@ import pytest
 import tmmaster
 from tmmaster import Pose
 from tmmaster._pose import MotionType
-from tmmaster.sim import Simulator, TableObject, World
+from tmmaster.sim import Cell, Simulator, TableObject, World
 from tmmaster.sim._backend import MotionRejectedError, PhysicsBackend
 from tmmaster.sim._kinematic import KinematicBackend
 from tmmaster.sim._mujoco import MuJoCoBackend, build_mjcf
@@ -305,7 +305,7 @@ def test_reinitialise_mid_motion_rebuilds_the_model(keep: bool) -> None:
 def test_the_article_cycle_through_the_master_survives_a_rebuild_mid_motion() -> None:
     b = backend()
     with (
-        Simulator("tmflow", time_scale=20, backend=b, listen=False) as sim,
+        Simulator("tmflow", time_scale=20, cell=b, listen=False) as sim,
         tmmaster.connect(sim.url, profile="tmflow", poll_interval_s=0.01) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
@@ -320,10 +320,10 @@ def test_the_article_cycle_through_the_master_survives_a_rebuild_mid_motion() ->
 
 
 def test_simulator_builds_the_mujoco_backend_by_name() -> None:
-    with Simulator(physics="mujoco", listen=False) as sim:
+    with Simulator(cell=Cell(physics="mujoco"), listen=False) as sim:
         assert isinstance(sim.backend, MuJoCoBackend)
     with pytest.raises(tmmaster.ConfigError, match="unknown physics backend 'bullet'"):
-        Simulator(physics="bullet", listen=False)
+        Simulator(cell=Cell(physics="bullet"), listen=False)
 
 
 def pickplace(*argv: str, cwd: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:

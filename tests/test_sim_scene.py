@@ -15,7 +15,7 @@ import tmmaster
 from sim_backends import BACKENDS, HAS_MUJOCO, STEP_S, until_fault
 from tmmaster import Pose
 from tmmaster._pose import MotionType
-from tmmaster.sim import KinematicBackend, Simulator
+from tmmaster.sim import Cell, KinematicBackend, Simulator
 from tmmaster.sim import __main__ as sim_main
 from tmmaster.sim._backend import BackendFault, PhysicsBackend
 from tmmaster.sim._scene import Scene, load_scene, scene_from_data
@@ -131,7 +131,7 @@ def test_the_mujoco_scene_has_the_fixtures_and_the_part_rests_on_the_shelf() -> 
 
 
 def test_simulator_runs_a_scene_file_with_its_gripper_and_grasp() -> None:
-    sim = Simulator(scene=EXAMPLE, grasp="weld", listen=False)
+    sim = Simulator(cell=Cell(scene=EXAMPLE, grasp="weld"), listen=False)
     try:
         assert [o.name for o in sim.objects()] == ["part-1", "part-2", "on-shelf"]
         backend = sim.backend

@@ -27,7 +27,7 @@ from tmmaster import (
 from tmmaster._pose import Pose
 from tmmaster._profiles import robot_profile
 from tmmaster._registers import Table
-from tmmaster.sim import Simulator
+from tmmaster.sim import RobotSetup, Simulator
 from tmmaster.sim.__main__ import main as sim_main
 from tmmaster.sim._bank import RegisterBank
 from tmmaster.sim._tm_table import tm_table_fields, user_area
@@ -326,7 +326,7 @@ def test_modbus_exception_for_an_address_range(tm_simulator_factory: Factory) ->
 def test_onrobot_gripper_allows_one_connection_and_its_unit_id(
     tm_simulator_factory: Factory,
 ) -> None:
-    sim = tm_simulator_factory("article", gripper="onrobot-2fg7")
+    sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     assert sim.gripper_port is not None
     assert sim.gripper_port != sim.port
     with client(sim.gripper_port, device_id=65) as first:
@@ -394,7 +394,7 @@ def test_unknown_options_fail_before_anything_starts() -> None:
     with pytest.raises(ValueError, match="time_scale"):
         Simulator(time_scale=0)
     with pytest.raises(ValueError, match="unknown robot model"):
-        Simulator(model="tm99")
+        Simulator(robot=RobotSetup(model="tm99"))
 
 
 def test_objects_and_pose_are_visible(article_simulator: Simulator) -> None:

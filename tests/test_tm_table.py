@@ -77,7 +77,7 @@ class JointModelBackend(KinematicBackend):
 def test_flange_and_joints_come_from_the_backend_when_it_has_them(
     tm_simulator_factory: Callable[..., Simulator],
 ) -> None:
-    sim = tm_simulator_factory("tmflow", backend=JointModelBackend(robot_model("tm5-700")))
+    sim = tm_simulator_factory("tmflow", cell=JointModelBackend(robot_model("tm5-700")))
     sim.wait_for(lambda: sim.field("joint_6") == pytest.approx(-60.0), 2.0)
     flange = [sim.field(f"flange_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")]
     base_flange = [sim.field(f"robot_base_flange_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")]

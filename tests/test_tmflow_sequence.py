@@ -11,7 +11,7 @@ import tmmaster
 from tmmaster import Pose
 from tmmaster._profiles import profile_from_data
 from tmmaster._registers import RobotProfile
-from tmmaster.sim import Simulator
+from tmmaster.sim import RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
 
@@ -32,7 +32,7 @@ def seq_writes(sim: Simulator) -> list[int]:
 
 
 def test_master_walks_the_sequence_across_32767_to_1(tm_simulator_factory: SimFactory) -> None:
-    sim = tm_simulator_factory("tmflow", initial_seq=32766)
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(initial_seq=32766))
     with tmmaster.connect("127.0.0.1", port=sim.port, profile="tmflow") as robot:
         robot.wait_until_ready(timeout_s=5)
         for target in (A, B, C):

@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 import tmmaster
+from sim_speeds import SUITE_TICK_HZ
 from tmmaster import (
     AcknowledgeTimeoutError,
     ConfigError,
@@ -28,7 +29,7 @@ from tmmaster import (
     StopRequestedError,
     TimeoutPolicy,
 )
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
 APPROACH = Pose(300, -200, 200, 180, 0, 90)
@@ -152,7 +153,9 @@ def test_a_ready_wait_ends_at_its_deadline_with_the_longest_interval(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
     # Initialising for good: start() returns without waiting for the start-up.
-    sim = tm_simulator_factory(profile, init_time_s=1000.0, wait_ready=False)
+    sim = tm_simulator_factory(
+        profile, timing=Timing(tick_hz=SUITE_TICK_HZ, init_time_s=1000.0), wait_ready=False
+    )
     robot = robots(sim)
     started = time.monotonic()
     with pytest.raises(MotionTimeoutError, match=r"not ready after 0\.3 s"):
@@ -182,7 +185,9 @@ def test_a_motion_wait_ends_at_its_deadline_with_the_longest_interval(
 ) -> None:
     # A slow move (several s of wall time) given 0.4 s: polls spaced by up to 3 nominal
     # intervals in the middle of a move still end at the motion's deadline.
-    sim = tm_simulator_factory(profile, time_scale=1, init_time_s=0.0)
+    sim = tm_simulator_factory(
+        profile, time_scale=1, timing=Timing(tick_hz=SUITE_TICK_HZ, init_time_s=0.0)
+    )
     robot = robots(sim)
     robot.wait_until_ready(5)
     started = time.monotonic()

@@ -776,7 +776,7 @@ def _sim_options(
 
 
 def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
-    from ..sim import Simulator
+    from ..sim import Cell, RobotSetup, Simulator
 
     options, config = command.sim, command.config
     assert options is not None
@@ -787,10 +787,8 @@ def _run_with_sim(command: _Command, outcome: _Outcome, out: _Output) -> tuple[i
     sim = Simulator(
         config.robot_profile(),
         time_scale=options.time_scale,
-        model=config.robot.model,
-        gripper=config.gripper_profile(),
-        scene=scene,
-        physics=options.physics,
+        robot=RobotSetup(model=config.robot.model, gripper=config.gripper_profile()),
+        cell=Cell(scene=scene, physics=options.physics),
     )
     with sim:
         # MuJoCo models the arm's dynamics where it can (the simulator's default): said.

@@ -41,6 +41,7 @@ from ._faults import (
 from ._kinematic import KinematicBackend
 from ._memory import MemoryTransport
 from ._memory import open_endpoint as _open_endpoint
+from ._options import Cell, Listen, RobotSetup, Timing
 from ._scene import Scene, SceneTable, load_scene
 from ._server import RequestRecord
 from ._simulator import Simulator
@@ -70,6 +71,7 @@ __all__ = [
     "DEFAULT_PART_POSE",
     "FAULT_KINDS",
     "BackendFault",
+    "Cell",
     "DropConnectionsFault",
     "EstopFault",
     "Fault",
@@ -81,6 +83,7 @@ __all__ = [
     "GripperState",
     "KinematicBackend",
     "LateAckFault",
+    "Listen",
     "MemoryTransport",
     "ModbusExceptionFault",
     "MotionRecord",
@@ -91,6 +94,7 @@ __all__ = [
     "PhysicsUnavailableError",
     "RequestRecord",
     "RobotErrorFault",
+    "RobotSetup",
     "Scene",
     "SceneTable",
     "Simulator",
@@ -98,6 +102,7 @@ __all__ = [
     "StallFault",
     "StopListeningFault",
     "TableObject",
+    "Timing",
     "World",
     "is_network_fault",
     "load_scene",

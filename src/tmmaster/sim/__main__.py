@@ -26,6 +26,7 @@ from .._profiles import DEFAULT_PROFILE, builtin_profile_names
 from .._robot_models import ROBOT_MODELS
 from .._version import add_version_argument
 from ._backend import PhysicsUnavailableError
+from ._options import Cell, Listen, RobotSetup, Timing
 from ._server import RequestRecord, json_line
 from ._simulator import Simulator, simulator_summary
 from ._world import DEFAULT_PART_POSE, TableObject
@@ -281,12 +282,12 @@ def run(args: argparse.Namespace) -> int:
         undo_logging()
 
 
-def _parts(count: int | None, scene: str | None) -> list[TableObject] | None:
-    """The ``--parts`` feeder, or None with ``--scene`` (its parts)."""
+def _scene(count: int | None, scene: str | None) -> str | list[TableObject]:
+    """The ``--scene`` file, or the ``--parts`` feeder (one part by default)."""
     if scene is not None:
         if count is not None:
             raise ConfigError("--parts: give the parts in the --scene file, not both")
-        return None
+        return scene
     count = 1 if count is None else count
     if not 0 <= count <= MAX_PARTS:
         raise ConfigError(f"--parts must be 0..{MAX_PARTS:,}, got {count}")
@@ -369,25 +370,30 @@ def _build(args: argparse.Namespace, echo: Callable[[RequestRecord], None]) -> S
         _check_names(args)
         return Simulator(
             args.profile,
-            # An address alone (a port goes in --port): said as the option, exit 2.
-            host=check_host(args.bind, field="--bind", port_field="--port"),
-            port=args.port,
             time_scale=args.time_scale,
-            tick_hz=args.tick_hz,
-            model=args.model,
-            gripper=args.gripper,
-            gripper_port=args.gripper_port,
+            # An address alone (a port goes in --port): said as the option, exit 2.
+            listen=Listen(
+                host=check_host(args.bind, field="--bind", port_field="--port"),
+                port=args.port,
+                gripper_port=args.gripper_port,
+            ),
+            robot=RobotSetup(
+                model=args.model,
+                gripper=args.gripper,
+                program=args.program,
+                resume_after_error=args.resume_after_error == "on",
+            ),
+            cell=Cell(
+                scene=_scene(args.parts, args.scene),
+                physics=args.physics,
+                tool=_tool(args.tool),
+                grasp=args.grasp,
+                dynamics=args.dynamics,
+                speed_factor=args.speed_factor,
+            ),
+            timing=Timing(tick_hz=args.tick_hz),
             faults=args.fault,
-            objects=_parts(args.parts, args.scene),
-            scene=args.scene,
-            grasp=args.grasp,
-            dynamics=args.dynamics,
             request_listener=echo if args.trace_requests else None,
-            physics=args.physics,
-            tool=_tool(args.tool),
-            resume_after_error=args.resume_after_error == "on",
-            program=args.program,
-            speed_factor=args.speed_factor,
         )
     except PhysicsUnavailableError as exc:  # an optional extra is missing: say which
         print(f"sim: {one_line(exc)} [exit 1]", file=sys.stderr)

@@ -138,7 +138,7 @@ class _Motion:
 class KinematicBackend:
     """Analytic :class:`~tmmaster.sim.PhysicsBackend`: a TM joint chain, ideal gripper.
 
-    The simulator's default backend (``Simulator(physics="kinematic")``): joints
+    The simulator's default backend (``Cell(physics="kinematic")``): joints
     interpolated along the arm model's motion times, fingers at a constant speed,
     objects grasped and dropped by the :class:`World`'s rules.
 

@@ -20,8 +20,8 @@ A scene file describes the cell the simulated robot works in::
     max_width_mm = 39.0
 
 :func:`load_scene` reads and validates one (errors name the key);
-``Simulator(scene=...)`` and ``python -m tmmaster.sim --scene FILE`` run it on either
-physics backend.
+``Simulator(cell=Cell(scene=...))`` and ``python -m tmmaster.sim --scene FILE`` run it
+on either physics backend.
 """
 
 from __future__ import annotations

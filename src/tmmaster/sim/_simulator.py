@@ -18,11 +18,11 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from .._checks import Bounds, is_finite_number, require_in, require_positive, shown
+from .._checks import require_positive, shown
 from .._exceptions import ConfigError, ConnectError, UnknownNameError
 from .._io import io_address, io_value
 from .._pose import DEFAULT_HOME, Pose
-from .._profiles import DEFAULT_PROFILE, gripper_profile, robot_profile
+from .._profiles import DEFAULT_PROFILE, robot_profile
 from .._registers import GripperProfile, Handshake, RobotProfile, Table
 from .._retry import RetryPolicy
 from .._robot_models import RobotModel, robot_model
@@ -34,9 +34,9 @@ from ._controller import MotionRecord, RobotController
 from ._faults import Fault, NetworkFault, is_network_fault, parse_fault
 from ._kinematic import KinematicBackend
 from ._memory import register_endpoint, unregister_endpoint
-from ._scene import Scene, scene_of
+from ._options import PHYSICS_BACKENDS, Cell, Listen, RobotSetup, Timing
 from ._server import DeviceServer, RequestLog, RequestRecord
-from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
+from ._world import GraspMode, GripperGeometry, World
 
 if TYPE_CHECKING:
     from ._grippers import Blog2FG7Device, OnRobot2FG7Device
@@ -50,35 +50,37 @@ _CALL_TIMEOUT_S = 10.0
 _SIM_NUMBERS = itertools.count(1)
 
 
-def _numeric_options(
-    time_scale: object,
-    tick_hz: object,
-    port: object,
-    gripper_port: object,
-    init_time_s: object,
-    speed_factor: object,
-) -> tuple[float, float]:
-    """Simulator's numbers checked: any value (a string, 10**400) is a ConfigError naming it.
-
-    Returns:
-        ``time_scale`` and ``tick_hz`` as floats.
-    """
-    scale = require_positive("time_scale", time_scale)
-    hz = require_in("tick_hz", tick_hz, Bounds(0, 1000, "Hz", open_low=True))
-    for option, value in (("port", port), ("gripper_port", gripper_port)):
-        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
-            raise ConfigError(
-                f"{option} must be an integer 0..65535 (0: a free port), got {shown(value)}"
-            )
-    if not (is_finite_number(init_time_s) and init_time_s >= 0):
-        raise ConfigError(f"init_time_s must be a finite number >= 0, got {shown(init_time_s)}")
-    if not (is_finite_number(speed_factor) and 0.1 <= speed_factor <= 10):
-        raise ConfigError(f"speed_factor must be a number in 0.1..10, got {shown(speed_factor)}")
-    return scale, hz
-
-
 def _as_fault(fault: Fault | str) -> Fault:
     return parse_fault(fault) if isinstance(fault, str) else fault
+
+
+def _split_faults(faults: Iterable[Fault | str]) -> tuple[list[NetworkFault], list[Fault]]:
+    """The faults to play: the network faults (the servers play them), then the others."""
+    parsed = [_as_fault(f) for f in faults]
+    network: list[NetworkFault] = [f for f in parsed if is_network_fault(f)]  # type: ignore[misc]
+    return network, [f for f in parsed if not is_network_fault(f)]
+
+
+def _backend_of(
+    cell: Cell | PhysicsBackend | None, model: RobotModel
+) -> tuple[PhysicsBackend, Cell | None]:
+    """The physics backend, and the Cell it simulates (None: your own backend)."""
+    if cell is None or isinstance(cell, Cell):
+        cell = Cell() if cell is None else cell
+        return _built_in_backend(cell, model), cell
+    if isinstance(cell, PhysicsBackend):
+        return cell, None
+    raise ConfigError(f"cell must be a Cell or a PhysicsBackend, got {shown(cell)}")
+
+
+def _group(option: str, value: object, kind: type[T], expected: str = "") -> T:
+    """``value`` when it is a ``kind`` (None: the default one); else a ConfigError."""
+    if value is None:
+        return kind()
+    if not isinstance(value, kind):
+        expected = expected or f"a {kind.__name__}"
+        raise ConfigError(f"{option} must be {expected}, got {shown(value)}")
+    return value
 
 
 class Simulator:
@@ -101,234 +103,117 @@ class Simulator:
         ```
 
         ``Simulator(listen=False)`` opens no socket: ``connect(sim.url)`` reaches it
-        in-process.
+        in-process. The other options come in groups, each checked when it is made
+        (``listen=Listen(host=..., port=..., gripper_port=...)`` for fixed ports):
+
+        ```python
+        from tmmaster.sim import DEFAULT_PART_POSE, Cell, RobotSetup, Simulator, TableObject
+        from tmmaster.sim import Timing
+
+        part = TableObject(name="part", pose=DEFAULT_PART_POSE, mass_kg=0.5)
+        sim = Simulator(
+            "tmflow",
+            time_scale=10,
+            robot=RobotSetup(model="tm5-900", gripper="onrobot-2fg7"),
+            cell=Cell(scene=[part], grasp="weld"),  # or your own PhysicsBackend
+            timing=Timing(tick_hz=100),
+        )
+        print(sim.url, sim.tool)  # sim://sim-N None: not started yet
+        ```
 
     Args:
         profile: The robot's register map: ``"tmflow"`` (default), ``"article"``, a
             TOML file or a RobotProfile.
-        host: The address to listen on (Modbus has no authentication: loopback unless
-            you mean it).
-        port: The robot's Modbus TCP port; 0 picks a free one (``sim.port`` once
-            started).
         time_scale: Simulated seconds per wall second (10: a 2 s move takes 0.2 s).
-        tick_hz: Control ticks per wall second; each advances simulated time by
-            ``time_scale / tick_hz``.
-        model: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``.
-        gripper: A separate gripper device: None, ``"blog-2fg7"``, ``"onrobot-2fg7"``,
-            a TOML file or a GripperProfile.
-        gripper_port: The separate gripper's port; 0 picks a free one.
-        objects: The objects on the table; None: one part at ``DEFAULT_PART_POSE``;
-            not with ``scene``.
-        scene: The cell: a :class:`Scene` or a TOML scene file (table height, fixtures,
-            parts, gripper geometry); not with ``objects`` or ``backend``.
-        grasp: How the fingers hold a part: ``"friction"`` (a part too heavy for the
-            grip force slips out) or ``"weld"`` (a part between the pads is carried
-            whatever its mass); not with ``backend``.
-        faults: Faults to play from the start: Fault models or ``"kind:key=value,..."``
-            texts (:func:`parse_fault`).
-        backend: Your own PhysicsBackend; None: the ``physics`` backend.
-        physics: ``"kinematic"`` (analytic) or ``"mujoco"`` (the ``tmmaster[mujoco]``
-            extra); not with ``backend``.
-        init_time_s: Simulated seconds before the robot reports ready (its start-up:
-            tmflow starts the project then).
-        request_listener: Called with each RequestRecord, on the simulator's thread.
-        initial_seq: tmflow: the sequence numbers at the start (e.g. 32766, to test
-            their wrap).
-        listen: False: no TCP listener at all; reach it in-process at ``sim.url``.
+        listen: True (the default): Modbus TCP on a free loopback port (``sim.port``);
+            a :class:`Listen`: on that host and those ports; False: no TCP listener at
+            all, reach it in-process at ``sim.url``.
         name: The in-process name (``sim.url`` is ``"sim://NAME"``); default
             ``sim-1``, ``sim-2``...; unique among running simulators.
-        tool: The TCP in the flange frame (TCP = flange x tool); not with ``backend``.
-        resume_after_error: tmflow: an e-stop pauses the project (Play resumes the
-            move) instead of stopping it.
-        program: tmflow: the Script Project the robot runs; None or ``"generated"``:
-            the program ``tmmaster robot-program`` writes for the profile and tool.
-        speed_factor: The arm moves this many times faster than the model the master
-            plans with (0.1..10; for testing a master against a robot it does not
-            predict); not with ``backend``.
-        dynamics: Arm dynamics, with ``physics="mujoco"``: the links carry Techman's
-            masses and inertias and each joint is a servo limited to its effort, so the
-            arm lags its trajectory (more with a heavy part) and a move is done once the
-            joints settled; the reported pose is where the joints are. None (the
-            default): on with the mujoco backend for the models whose link masses are
-            known (TM5-700, TM5-900), off otherwise; False: the ideal servo (the joints
-            are exactly where the trajectory says); True: on, or ConfigError where it
-            cannot be (the kinematic backend, another model). :attr:`dynamics` says
-            which the simulator runs with. Not with ``backend``.
+        robot: The arm model, the separate gripper, the program (:class:`RobotSetup`);
+            None: a TM5-700 without a separate gripper, running the generated program
+            on tmflow.
+        cell: The table and its parts, the tool, the grasp and the physics engine
+            (:class:`Cell`; None: ``Cell()``, one part on the table, kinematic), or
+            your own :class:`PhysicsBackend`, which models all of that itself.
+        timing: The control tick rate and the robot's start-up time (:class:`Timing`).
+        faults: Faults to play from the start: Fault models or ``"kind:key=value,..."``
+            texts (:func:`parse_fault`).
+        request_listener: Called with each RequestRecord, on the simulator's thread.
         wait_ready: True (the default): :meth:`start` (and ``with``) returns, and
             ``sim.url`` opens, only once the robot (and gripper) finished its start-up
-            (``init_time_s``): tmflow's project runs and its program took its first
-            steps, so a command written right after takes effect. False: at once,
+            (``Timing.init_time_s``): tmflow's project runs and its program took its
+            first steps, so a command written right after takes effect. False: at once,
             while it still initialises (to test a master against a robot that boots).
 
     Raises:
         ConfigError: a bad argument, named in the message: ``time_scale`` not a finite
-            number above 0, ``tick_hz`` outside (0, 1000], a port outside 0..65535,
-            ``init_time_s`` below 0 or not finite, ``initial_seq`` outside the
-            profile's sequence range, ``speed_factor`` outside 0.1..10, two objects
-            of one name, an unknown profile, model or physics backend, an invalid
-            scene (naming the key), an unknown ``grasp``, ``dynamics=True`` without
-            the mujoco backend or for a model whose link masses are not known,
-            ``dynamics`` with ``backend``.
+            number above 0, a group of the wrong type, ``initial_seq`` outside the
+            profile's sequence range, a program on a profile without the sequence
+            handshake, ``resume_after_error`` on such a profile, two objects of one
+            name, an unknown profile, ``dynamics=True`` for a model whose link masses
+            are not known. (Each group checks its own fields when it is made.)
     """
 
-    # Over the house limits (tests/test_house_limits.py): to take a backend and a world
-    # object instead of its options one by one.
-    def __init__(  # noqa: C901, PLR0913, PLR0915
+    def __init__(
         self,
         profile: str | Path | RobotProfile = DEFAULT_PROFILE,
         *,
-        host: str = "127.0.0.1",
-        port: int = 0,
         time_scale: float = 1.0,
-        tick_hz: float = 50.0,
-        model: str = "tm5-700",
-        gripper: str | Path | GripperProfile | None = None,
-        gripper_port: int = 0,
-        objects: Iterable[TableObject] | None = None,
-        scene: Scene | str | Path | None = None,
-        grasp: str = "friction",
-        faults: Iterable[Fault | str] = (),
-        backend: PhysicsBackend | None = None,
-        physics: str = "kinematic",
-        init_time_s: float = 0.2,
-        request_listener: Callable[[RequestRecord], None] | None = None,
-        initial_seq: int = 0,
-        listen: bool = True,
+        listen: bool | Listen = True,
         name: str | None = None,
-        tool: Pose | None = None,
-        resume_after_error: bool = False,
-        program: str | Path | None = None,
-        speed_factor: float = 1.0,
-        dynamics: bool | None = None,
+        robot: RobotSetup | None = None,
+        cell: Cell | PhysicsBackend | None = None,
+        timing: Timing | None = None,
+        faults: Iterable[Fault | str] = (),
+        request_listener: Callable[[RequestRecord], None] | None = None,
         wait_ready: bool = True,
     ) -> None:
-        time_scale, tick_hz = _numeric_options(
-            time_scale, tick_hz, port, gripper_port, init_time_s, speed_factor
-        )
+        self._time_scale = require_positive("time_scale", time_scale)
+        setup = _group("robot", robot, RobotSetup)
+        timing = _group("timing", timing, Timing)
+        bound = None if isinstance(listen, bool) else listen
+        where = _group("listen", bound, Listen, "True, False or a Listen")
         self._profile = robot_profile(profile)
-        self._model = robot_model(model)
-        self._time_scale = float(time_scale)
-        self._tick_hz = float(tick_hz)
-        self._host = host
+        self._model = robot_model(setup.model)
+        self._tick_hz = timing.tick_hz
+        self._host = where.host
         #: False: no TCP listener; reach it in-process through :attr:`url`.
-        self.listen = listen
+        self.listen = listen is not False
         self._url = f"sim://{name or f'sim-{next(_SIM_NUMBERS)}'}"
-        if backend is not None and physics != "kinematic":
-            raise ConfigError("give either backend or physics, not both")
-        own_backend = backend is not None
-        if speed_factor != 1 and backend is not None:
-            raise ConfigError("speed_factor: give your own backend a model with its speeds")
-        if tool is not None and backend is not None:
-            raise ConfigError("tool: give the tool offset to your own backend, not to Simulator")
-        if grasp not in GRASP_MODES:
-            raise ConfigError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {grasp!r}")
-        if grasp != "friction" and backend is not None:
-            raise ConfigError("grasp: give the grasp mode to your own backend, not to Simulator")
-        # Your own backend models what it models: neither True nor False can be honoured.
-        if dynamics is not None and backend is not None:
-            raise ConfigError("dynamics: give your own backend its dynamics, not Simulator")
-        if dynamics and physics != "mujoco":
-            raise ConfigError(
-                "dynamics: only the mujoco physics backend models arm dynamics"
-                " (physics='mujoco', --physics mujoco)"
-            )
-        if scene is not None and objects is not None:
-            raise ConfigError("give either objects or scene, not both")
-        if scene is not None and backend is not None:
-            raise ConfigError("scene: give your own backend its world, not Simulator")
-        #: The TCP in the flange frame (TCP = flange x tool); None: the TCP is the flange.
-        self.tool = tool
-        if backend is None:
-            cell = None if scene is None else scene_of(scene)
-            backend = physics_backend(
-                physics,
-                _faster(self._model, speed_factor),
-                world=World(objects) if cell is None else cell.world(),
-                tool=tool,
-                gripper=None if cell is None else cell.gripper,
-                grasp=grasp,  # type: ignore[arg-type]  # checked against GRASP_MODES
-                dynamics=dynamics,
-            )
-        # The built-in backend's name for the summary (None: your own backend).
-        self._physics = None if own_backend else physics
-        self._backend: PhysicsBackend = backend
-        all_faults = [_as_fault(f) for f in faults]
-        network: list[NetworkFault] = [f for f in all_faults if is_network_fault(f)]  # type: ignore[misc]
-        device = [f for f in all_faults if not is_network_fault(f)]
+        self._backend, self._cell = _backend_of(cell, self._model)
+        network, device = _split_faults(faults)
         self._log = RequestLog(listener=request_listener)
-        # One controller class per handshake (as the client has one channel per handshake):
-        # the article's clears on accept; the sequence handshake is a TMflow project, the
-        # robot program interpreted (ScriptProjectController, below).
-        controller: type[RobotController] = ClearOnAcceptController
-        handshake_options: dict[str, Any] = {}
-        if program is None and self._profile.handshake is Handshake.SEQUENCE:
-            program = "generated"  # the robot program tmmaster ships, interpreted
-        if program is not None:
-            controller, handshake_options = _script_project(self._profile, program, tool)
+        controller, handshake_options = _controller_class(self._profile, setup, self.tool)
         self._bank = controller.bank_for(self._profile)
-        if resume_after_error:
-            if self._profile.handshake is not Handshake.SEQUENCE:
-                raise ConfigError(
-                    "resume_after_error is a TMflow project setting: it needs a"
-                    f" sequence-handshake profile, not {self._profile.name!r}"
-                )
-            handshake_options["resume_after_error"] = True
         self._controller = controller(
             self._profile,
             self._bank,
             self._backend,
             self._model,
             faults=device,
-            init_time_s=init_time_s,
-            initial_seq=initial_seq,
-            speed_factor=float(speed_factor),
+            init_time_s=timing.init_time_s,
+            initial_seq=setup.initial_seq,
+            speed_factor=1.0 if self._cell is None else float(self._cell.speed_factor),
             **handshake_options,
         )
         self._robot_server = DeviceServer(
             "robot",
             self._bank,
-            host=host,
-            port=port,
+            host=where.host,
+            port=where.port,
             log=self._log,
             device_id=None,  # the TM controller ignores the unit id
-            tcp=listen,
+            tcp=self.listen,
         )
         self._servers = [self._robot_server]
-        self._gripper_profile: GripperProfile | None = None
-        self._gripper_bank: RegisterBank | None = None
-        self._gripper: Blog2FG7Device | OnRobot2FG7Device | None = None
-        self._gripper_server: DeviceServer | None = None
-        if gripper is not None:
-            # Imported here: the gripper devices are only needed with a separate gripper.
-            from ._grippers import GRIPPER_DEVICES
-
-            gp = gripper_profile(gripper)
-            self._gripper_profile = gp
-            self._gripper_bank = RegisterBank(gp)
-            self._gripper = GRIPPER_DEVICES[gp.driver](
-                gp,
-                self._gripper_bank,
-                self._backend,
-                faults=device,
-                init_time_s=init_time_s,
-                # One backend, stepped once per tick: the robot controller steps it.
-                step_backend=False,
-            )
-            self._gripper_server = DeviceServer(
-                "gripper",
-                self._gripper_bank,
-                host=host,
-                port=gripper_port,
-                log=self._log,
-                # The Compute Box answers its own unit id only; the article's Isaac Sim
-                # server (blog-2fg7) answers any.
-                device_id=gp.device_id if gp.own_unit_id_only else None,
-                max_connections=gp.max_connections,
-                tcp=listen,
-            )
-            self._servers.append(self._gripper_server)
+        self._add_gripper(setup.gripper_profile, where, device, timing.init_time_s)
         for server in self._servers:
             server.set_faults(network)
+        self._init_lifecycle(timing.init_time_s, wait_ready)
+
+    def _init_lifecycle(self, init_time_s: float, wait_ready: bool) -> None:
+        """The state of the loop thread and the start-up: nothing runs yet."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._tick_task: asyncio.Task[None] | None = None
@@ -341,6 +226,47 @@ class Simulator:
         #: Set once every device finished its start-up (at once with wait_ready=False),
         #: or the tick failed: start() returns and ``sim.url`` opens then.
         self._ready = threading.Event()
+
+    def _add_gripper(
+        self,
+        profile: GripperProfile | None,
+        where: Listen,
+        faults: Sequence[Fault],
+        init_time_s: float,
+    ) -> None:
+        """The separate gripper device and its server (none without a gripper profile)."""
+        self._gripper_profile = profile
+        self._gripper_bank: RegisterBank | None = None
+        self._gripper: Blog2FG7Device | OnRobot2FG7Device | None = None
+        self._gripper_server: DeviceServer | None = None
+        if profile is None:
+            return
+        # Imported here: the gripper devices are only needed with a separate gripper.
+        from ._grippers import GRIPPER_DEVICES
+
+        self._gripper_bank = RegisterBank(profile)
+        self._gripper = GRIPPER_DEVICES[profile.driver](
+            profile,
+            self._gripper_bank,
+            self._backend,
+            faults=faults,
+            init_time_s=init_time_s,
+            # One backend, stepped once per tick: the robot controller steps it.
+            step_backend=False,
+        )
+        self._gripper_server = DeviceServer(
+            "gripper",
+            self._gripper_bank,
+            host=where.host,
+            port=where.gripper_port,
+            log=self._log,
+            # The Compute Box answers its own unit id only; the article's Isaac Sim
+            # server (blog-2fg7) answers any.
+            device_id=profile.device_id if profile.own_unit_id_only else None,
+            max_connections=profile.max_connections,
+            tcp=self.listen,
+        )
+        self._servers.append(self._gripper_server)
 
     # -- properties ---------------------------------------------------------------------
 
@@ -380,13 +306,22 @@ class Simulator:
         return self._backend
 
     @property
+    def tool(self) -> Pose | None:
+        """The TCP in the flange frame (TCP = flange x tool): the :class:`Cell`'s.
+
+        Returns:
+            The tool, or None: the TCP is the flange (or your own backend's tool).
+        """
+        return None if self._cell is None else self._cell.tool
+
+    @property
     def physics(self) -> str | None:
         """The built-in physics backend's name (``"kinematic"``, ``"mujoco"``).
 
         Returns:
-            The name, or None with your own ``backend``.
+            The name, or None with your own backend.
         """
-        return self._physics
+        return None if self._cell is None else self._cell.physics
 
     @property
     def dynamics(self) -> bool:
@@ -796,8 +731,44 @@ class Simulator:
             time.sleep(interval)
 
 
-#: Physics backends a simulator can be built with by name (``--physics``).
-PHYSICS_BACKENDS = ("kinematic", "mujoco")
+def _controller_class(
+    profile: RobotProfile, setup: RobotSetup, tool: Pose | None
+) -> tuple[type[RobotController], dict[str, Any]]:
+    """The controller class of ``profile``'s handshake, and its options from ``setup``.
+
+    One controller class per handshake (as the client has one channel per handshake):
+    the article's clears on accept; the sequence handshake is a TMflow project, the
+    robot program interpreted (ScriptProjectController).
+    """
+    program = setup.program
+    if program is None and profile.handshake is Handshake.SEQUENCE:
+        program = "generated"  # the robot program tmmaster ships, interpreted
+    controller: type[RobotController] = ClearOnAcceptController
+    options: dict[str, Any] = {}
+    if program is not None:
+        controller, options = _script_project(profile, program, tool)
+    if setup.resume_after_error:
+        if profile.handshake is not Handshake.SEQUENCE:
+            raise ConfigError(
+                "resume_after_error is a TMflow project setting: it needs a"
+                f" sequence-handshake profile, not {profile.name!r}"
+            )
+        options["resume_after_error"] = True
+    return controller, options
+
+
+def _built_in_backend(cell: Cell, model: RobotModel) -> PhysicsBackend:
+    """The built-in physics backend ``cell`` names, simulating its world for ``model``."""
+    world, gripper = cell.world()
+    return physics_backend(
+        cell.physics,
+        _faster(model, cell.speed_factor),
+        world=world,
+        tool=cell.tool,
+        gripper=gripper,
+        grasp=cell.grasp,
+        dynamics=cell.dynamics,
+    )
 
 
 def _script_project(

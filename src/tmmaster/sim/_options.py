@@ -1,0 +1,230 @@
+"""The simulator's options, grouped: the robot, the cell, the timing and where it listens.
+
+Each group is a frozen dataclass checked once, when it is made: a bad value is a
+ConfigError that names the field. :class:`~tmmaster.sim.Simulator` takes them whole, so
+the options that only make sense together travel together (the physics engine with the
+world it simulates; your own backend instead of both).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from .._checks import Bounds, is_finite_number, require_in, shown
+from .._exceptions import ConfigError, UnknownNameError
+from .._pose import Pose
+from .._profiles import gripper_profile
+from .._registers import GripperProfile
+from .._robot_models import robot_model
+from ._scene import Scene, load_scene
+from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
+
+#: Physics backends a simulator can be built with by name (``Cell(physics=...)``).
+PHYSICS_BACKENDS = ("kinematic", "mujoco")
+
+
+def _port(field: str, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
+        raise ConfigError(
+            f"{field} must be an integer 0..65535 (0: a free port), got {shown(value)}"
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class Listen:
+    """Where the simulator serves Modbus TCP: ``Simulator(listen=Listen(port=5020))``.
+
+    Args:
+        host: The address to listen on (Modbus has no authentication: loopback unless
+            you mean it).
+        port: The robot's Modbus TCP port; 0 picks a free one (``sim.port`` once
+            started).
+        gripper_port: The separate gripper's port (``RobotSetup(gripper=...)``); 0 picks
+            a free one.
+
+    Raises:
+        ConfigError: A port that is not an integer 0..65535, a host that is not a string.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 0
+    gripper_port: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.host, str) or not self.host:
+            raise ConfigError(f"host must be an address, got {shown(self.host)}")
+        _port("port", self.port)
+        _port("gripper_port", self.gripper_port)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Timing:
+    """How the simulator's clock ticks, and how long the robot takes to start up.
+
+    Args:
+        tick_hz: Control ticks per wall second, in (0, 1000]; each advances simulated
+            time by ``time_scale / tick_hz``.
+        init_time_s: Simulated seconds before the robot reports ready (its start-up:
+            tmflow starts the project then); a finite number >= 0.
+
+    Raises:
+        ConfigError: ``tick_hz`` outside (0, 1000], ``init_time_s`` below 0 or not finite.
+    """
+
+    tick_hz: float = 50.0
+    init_time_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        hz = require_in("tick_hz", self.tick_hz, Bounds(0, 1000, "Hz", open_low=True))
+        object.__setattr__(self, "tick_hz", hz)
+        if not (is_finite_number(self.init_time_s) and self.init_time_s >= 0):
+            raise ConfigError(
+                f"init_time_s must be a finite number >= 0, got {shown(self.init_time_s)}"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotSetup:
+    """The simulated robot: its arm model, separate gripper and (tmflow) its program.
+
+    Args:
+        model: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``.
+        gripper: A separate gripper device, served on its own port: None,
+            ``"blog-2fg7"``, ``"onrobot-2fg7"``, a TOML file or a GripperProfile.
+        program: tmflow: the Script Project the robot runs; None or ``"generated"``:
+            the program ``tmmaster robot-program`` writes for the profile and tool.
+        initial_seq: tmflow: the sequence numbers at the start (e.g. 32766, to test
+            their wrap).
+        resume_after_error: tmflow: an e-stop pauses the project (Play resumes the
+            move) instead of stopping it.
+
+    Raises:
+        ConfigError: An unknown model (UnknownNameError) or gripper profile,
+            ``initial_seq`` not an int, ``resume_after_error`` not a bool. (The program
+            and the range of ``initial_seq`` depend on the profile: the Simulator checks
+            them.)
+    """
+
+    model: str = "tm5-700"
+    gripper: str | Path | GripperProfile | None = None
+    program: str | Path | None = None
+    initial_seq: int = 0
+    resume_after_error: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.model, str):
+            raise ConfigError(f"model must be a model name, got {shown(self.model)}")
+        robot_model(self.model)  # an unknown name: UnknownNameError listing the models
+        if self.gripper is not None:
+            object.__setattr__(self, "gripper", gripper_profile(self.gripper))
+        if isinstance(self.initial_seq, bool) or not isinstance(self.initial_seq, int):
+            raise ConfigError(f"initial_seq must be an int, got {shown(self.initial_seq)}")
+        if not isinstance(self.resume_after_error, bool):
+            raise ConfigError(
+                f"resume_after_error must be True or False, got {shown(self.resume_after_error)}"
+            )
+
+    @property
+    def gripper_profile(self) -> GripperProfile | None:
+        """The separate gripper's profile (loaded when this setup was made), or None."""
+        gripper = self.gripper
+        assert gripper is None or isinstance(gripper, GripperProfile)  # __post_init__
+        return gripper
+
+
+@dataclass(frozen=True, kw_only=True)
+class Cell:
+    """The cell the robot works in, simulated by a built-in physics backend.
+
+    ``Simulator(cell=...)`` takes this or your own :class:`PhysicsBackend`, which then
+    models the world, the tool, the grasp and the arm's speed itself.
+
+    Args:
+        scene: What is on the table: a :class:`Scene`, a TOML scene file (table height,
+            fixtures, parts, gripper geometry; read when the Cell is made), or the
+            parts alone (TableObjects on the default table; ``[]``: an empty table).
+            None: one part at ``DEFAULT_PART_POSE``.
+        physics: ``"kinematic"`` (analytic) or ``"mujoco"`` (the ``tmmaster[mujoco]``
+            extra).
+        tool: The TCP in the flange frame (TCP = flange x tool); None: the flange.
+        grasp: How the fingers hold a part: ``"friction"`` (a part too heavy for the
+            grip force slips out) or ``"weld"`` (a part between the pads is carried
+            whatever its mass).
+        dynamics: Arm dynamics, with ``physics="mujoco"``: the links carry Techman's
+            masses and inertias and each joint is a servo limited to its effort, so the
+            arm lags its trajectory (more with a heavy part) and a move is done once the
+            joints settled; the reported pose is where the joints are. None (the
+            default): on with the mujoco backend for the models whose link masses are
+            known (TM5-700, TM5-900), off otherwise; False: the ideal servo; True: on,
+            or ConfigError where it cannot be (another model).
+        speed_factor: The arm moves this many times faster than the model the master
+            plans with (0.1..10; for testing a master against a robot it does not
+            predict).
+
+    Raises:
+        ConfigError: An unknown ``physics`` (UnknownNameError) or ``grasp``, a scene
+            file that cannot be read or is invalid (naming the key), parts that are not
+            TableObjects, ``tool`` not a Pose, ``dynamics=True`` with the kinematic
+            backend, ``speed_factor`` outside 0.1..10.
+    """
+
+    scene: Scene | str | Path | Iterable[TableObject] | None = None
+    physics: str = "kinematic"
+    tool: Pose | None = None
+    grasp: GraspMode = "friction"
+    dynamics: bool | None = None
+    speed_factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.physics not in PHYSICS_BACKENDS:
+            raise UnknownNameError(
+                f"unknown physics backend {self.physics!r} (known: {', '.join(PHYSICS_BACKENDS)})"
+            )
+        if self.grasp not in GRASP_MODES:
+            raise ConfigError(f"grasp must be one of {', '.join(GRASP_MODES)}, got {self.grasp!r}")
+        if self.dynamics not in (None, True, False):
+            raise ConfigError(f"dynamics must be None, True or False, got {shown(self.dynamics)}")
+        if self.dynamics and self.physics != "mujoco":
+            raise ConfigError(
+                "dynamics: only the mujoco physics backend models arm dynamics"
+                " (physics='mujoco', --physics mujoco)"
+            )
+        if not (is_finite_number(self.speed_factor) and 0.1 <= self.speed_factor <= 10):
+            raise ConfigError(
+                f"speed_factor must be a number in 0.1..10, got {shown(self.speed_factor)}"
+            )
+        if self.tool is not None and not isinstance(self.tool, Pose):
+            raise ConfigError(f"tool must be a Pose, got {shown(self.tool)}")
+        object.__setattr__(self, "scene", _scene(self.scene))
+
+    def world(self) -> tuple[World, GripperGeometry | None]:
+        """A new world of this cell, and the gripper geometry its scene gives (or None).
+
+        Returns:
+            The world (its parts at rest) and the scene's gripper (None: an OnRobot 2FG7).
+
+        Raises:
+            ConfigError: Two parts or fixtures of one name.
+        """
+        scene = self.scene
+        if isinstance(scene, Scene):
+            return scene.world(), scene.gripper
+        assert scene is None or isinstance(scene, tuple)  # __post_init__
+        return World(scene), None
+
+
+def _scene(scene: object) -> Scene | tuple[TableObject, ...] | None:
+    """``Cell.scene`` checked: a Scene, a loaded scene file, a tuple of parts or None."""
+    if scene is None or isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, str | Path):
+        return load_scene(scene)
+    if isinstance(scene, Iterable):
+        parts = tuple(scene)
+        for part in parts:
+            if not isinstance(part, TableObject):
+                raise ConfigError(f"scene: a part must be a TableObject, got {shown(part)}")
+        return parts
+    raise ConfigError(f"scene must be a Scene, a scene file or TableObjects, got {shown(scene)}")
