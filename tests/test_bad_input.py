@@ -477,6 +477,10 @@ TWO_PARTS = [TableObject(name="p", pose=DEFAULT_PART_POSE)] * 2
         pytest.param(
             lambda: Simulator(cell=Cell(scene=TWO_PARTS)), "duplicate", id="parts-duplicate-name"
         ),
+        pytest.param(lambda: RobotSetup(model="tm99"), "unknown robot model", id="model-unknown"),
+        pytest.param(lambda: RobotSetup(gripper="nope"), "nope", id="gripper-unknown"),
+        pytest.param(lambda: Cell(physics="bullet"), "physics backend", id="physics-unknown"),
+        pytest.param(lambda: Cell(speed_factor=0), "speed_factor", id="speed-factor-zero"),
         pytest.param(lambda: Cell(grasp="glue"), "grasp", id="grasp-unknown"),  # type: ignore[arg-type]
         pytest.param(lambda: Cell(dynamics=True), "dynamics", id="dynamics-kinematic"),
         pytest.param(lambda: Cell(scene="nowhere.toml"), "nowhere.toml", id="scene-missing"),

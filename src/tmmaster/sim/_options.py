@@ -9,7 +9,7 @@ world it simulates; your own backend instead of both).
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from .._checks import Bounds, is_finite_number, require_in, shown
@@ -112,13 +112,14 @@ class RobotSetup:
     program: str | Path | None = None
     initial_seq: int = 0
     resume_after_error: bool = False
+    _gripper: GripperProfile | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.model, str):
             raise ConfigError(f"model must be a model name, got {shown(self.model)}")
         robot_model(self.model)  # an unknown name: UnknownNameError listing the models
         if self.gripper is not None:
-            object.__setattr__(self, "gripper", gripper_profile(self.gripper))
+            object.__setattr__(self, "_gripper", gripper_profile(self.gripper))
         if isinstance(self.initial_seq, bool) or not isinstance(self.initial_seq, int):
             raise ConfigError(f"initial_seq must be an int, got {shown(self.initial_seq)}")
         if not isinstance(self.resume_after_error, bool):
@@ -129,9 +130,7 @@ class RobotSetup:
     @property
     def gripper_profile(self) -> GripperProfile | None:
         """The separate gripper's profile (loaded when this setup was made), or None."""
-        gripper = self.gripper
-        assert gripper is None or isinstance(gripper, GripperProfile)  # __post_init__
-        return gripper
+        return self._gripper
 
 
 @dataclass(frozen=True, kw_only=True)
