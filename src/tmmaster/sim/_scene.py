@@ -130,22 +130,3 @@ def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     data = read_toml(path, f"scene {path}")
     return scene_from_data(data, source=f"scene {path}")
-
-
-def scene_of(scene: Scene | str | Path) -> Scene:
-    """``scene`` itself, or the scene in the TOML file it names.
-
-    Args:
-        scene: A Scene, or a scene file's path.
-
-    Returns:
-        The scene.
-
-    Raises:
-        ConfigError: As :func:`load_scene`, or ``scene`` is neither.
-    """
-    if isinstance(scene, Scene):
-        return scene
-    if isinstance(scene, str | Path):
-        return load_scene(scene)
-    raise ConfigError(f"scene must be a Scene or a TOML file's path, got {scene!r}")
