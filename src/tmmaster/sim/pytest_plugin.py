@@ -11,7 +11,9 @@ Opt-in, so installing tmmaster costs other test suites nothing: enable it with
 ``tm_simulator_factory``
     ``tm_simulator_factory(profile="tmflow", **options)`` starts a Simulator with any
     :class:`~tmmaster.sim.Simulator` options (defaults: a free port and
-    ``time_scale=20``); every one it made is closed after the test.
+    ``time_scale=20``), e.g. ``tm_simulator_factory("article",
+    robot=RobotSetup(gripper="onrobot-2fg7"), faults=["estop:at_move=2"])``; every one
+    it made is closed after the test.
 
 The profile is the simulator's register map, and the code under test must speak the same
 one. For the article's map, ask for it: ``tm_simulator_factory("article")``, and connect
