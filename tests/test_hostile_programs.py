@@ -19,10 +19,9 @@ from typing import Any
 import pytest
 
 from test_sim_controller import controller_class, controller_for
-from tmmaster import RetryPolicy, TMScriptSyntaxError
+from tmmaster import ModbusTransport, RetryPolicy, TMScriptSyntaxError
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_models import robot_model
-from tmmaster._transport import ModbusTransport
 from tmmaster.sim import RobotSetup, Simulator, Timing
 from tmmaster.sim.__main__ import STOP_WITHIN_S
 from tmmaster.sim._controller import RobotController, SimErrorCode

@@ -1,18 +1,15 @@
-"""ModbusTransport's own socket link against a scripted slave: what it does with bad answers.
+"""ModbusTransport (a blocking caller's link on the default driver) against a scripted slave.
 
-The transport sends one request at a time on a plain socket and takes an answer only
-under the request's transaction id and from its unit id; after any failure it closes
-the socket, so a late answer can never be read as a later request's. Every test runs
-with both ways of bounding a wait: the kernel's receive timeout (Linux) and Python's
-socket timeout (elsewhere).
+Each request goes to the driver's event loop, is sent there once on the AsyncLink and
+answered only under the request's transaction id and from its unit id; after any failure
+the link is closed, so a late answer can never be read as a later request's. These are
+the guarantees of the raw-socket link the transport used to have, kept on the one link.
 """
 
 from __future__ import annotations
 
 import asyncio
-import socket
 import struct
-import sys
 import time
 
 import pytest
@@ -30,31 +27,23 @@ from tmmaster import (
     ConfigError,
     ConnectionLostError,
     IllegalAddressError,
+    ModbusTransport,
     NotModbusError,
     ResponseTimeoutError,
     TransportError,
     ValueOutOfRangeError,
-    _transport,
+    _fleet,
 )
 from tmmaster._registers import Table
 from tmmaster._retry import RetryPolicy
-from tmmaster._transport import ConnectionState, ModbusTransport
+from tmmaster._transport import ConnectionState
 
 TIMEOUT_S = 0.2
 
-WAYS = ["kernel", "python"] if sys.platform.startswith("linux") else ["python"]
-
-
-@pytest.fixture(params=WAYS)
-def bounded_by(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """Which mechanism bounds each wait: SO_RCVTIMEO ("kernel") or the socket timeout."""
-    monkeypatch.setattr(_transport, "_KERNEL_TIMEOUTS", request.param == "kernel")
-    return str(request.param)
-
 
 @pytest.fixture
-def slave(bounded_by: str) -> type[SlaveThread]:
-    """SlaveThread, once the wait mechanism is chosen."""
+def slave() -> type[SlaveThread]:
+    """The scripted slave."""
     return SlaveThread
 
 
@@ -191,8 +180,14 @@ def test_a_silent_device_times_out_and_the_next_read_works(slave: type[SlaveThre
 def test_an_interrupted_request_drops_the_link(
     slave: type[SlaveThread], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    # Ctrl-C while an answer is awaited: the answer may still come, so the socket goes.
-    def interrupted(*_args: object) -> object:
+    # Ctrl-C while an answer is awaited: the answer may still come, so the link goes.
+    real_wait = _fleet._Latch.wait
+    waits: list[object] = []
+
+    def interrupted(latch: _fleet._Latch[object], bound: float) -> object:
+        waits.append(latch)
+        if len(waits) > 1:
+            return real_wait(latch, bound)  # closing the link afterwards: not interrupted
         deadline = time.monotonic() + 2
         while not s.server.requests and time.monotonic() < deadline:
             time.sleep(0.005)  # the slave has the request (and its connection a handler)
@@ -200,31 +195,10 @@ def test_an_interrupted_request_drops_the_link(
 
     with slave([answer_with(registers(1, 2), after_s=0.05)]) as s, link(s.port) as t:
         with monkeypatch.context() as patch:
-            patch.setattr(ModbusTransport, "_receive", interrupted)
+            patch.setattr(_fleet._Latch, "wait", interrupted)
             with pytest.raises(KeyboardInterrupt):
                 t.read_block(Table.HOLDING, 0, 2)
         assert t.state is ConnectionState.DISCONNECTED
-
-
-class GreenSocket(socket.socket):
-    """Stands for a monkey-patched socket class (gevent's, eventlet's): not the stdlib's."""
-
-
-def test_a_socket_of_another_class_is_bounded_by_its_own_timeout(
-    slave: type[SlaveThread], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # A green socket never blocks in the kernel, so SO_RCVTIMEO would bound nothing there.
-    def green_connection(address: tuple[str, int], timeout: float) -> socket.socket:
-        sock = GreenSocket()
-        sock.settimeout(timeout)
-        sock.connect(address)
-        return sock
-
-    monkeypatch.setattr(socket, "create_connection", green_connection)
-    with slave([never_answer]) as s, link(s.port) as t:
-        with pytest.raises(ResponseTimeoutError):
-            t.read_block(Table.HOLDING, 0, 2)
-        assert not t._kernel_bounds
 
 
 @pytest.mark.parametrize(

@@ -10,6 +10,7 @@ from collections.abc import Iterator
 import pytest
 
 from modbus_test_server import TestServer
+from tmmaster import ModbusTransport
 from tmmaster._exceptions import (
     ConnectError,
     DeviceBusyError,
@@ -25,7 +26,7 @@ from tmmaster._exceptions import (
 from tmmaster._profiles import robot_profile
 from tmmaster._registers import TARGET_FIELDS, Role, Table
 from tmmaster._retry import RetryPolicy
-from tmmaster._transport import ConnectionState, ModbusTransport, plan_reads
+from tmmaster._transport import ConnectionState, plan_reads
 
 FAST_RETRY = RetryPolicy(attempts=6, total_time_s=5, initial_backoff_s=0.02, max_backoff_s=0.2)
 
@@ -133,8 +134,9 @@ def test_reconnects_after_the_server_restarts(
     server.stop()
     server.start()  # same port, fresh state
     assert transport.read_block(Table.HOLDING, 0, 1) == [0]
+    # The loss is seen when the server closes the link, or by the next request (then
+    # retried): either way one reconnect.
     assert transport.stats.reconnects == 1
-    assert transport.stats.retries >= 1
     assert transport.state is ConnectionState.CONNECTED
 
 

@@ -55,7 +55,7 @@ from ._exceptions import (
     UnreachablePoseError,
     ValueOutOfRangeError,
 )
-from ._fleet import Fleet
+from ._fleet import Fleet, ModbusTransport
 from ._gripper import (
     Blog2FG7Gripper,
     Gripper,
@@ -69,7 +69,8 @@ from ._gripper import (
 )
 from ._io import RobotIO
 from ._logging import configure_logging
-from ._monitor import EventLoopName, MonitoredStatus, StatusMonitor
+from ._loop import EventLoopName, MonitoredStatus
+from ._monitor import StatusMonitor
 from ._poller import Poller, PollPolicy
 from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsError
 from ._profiles import (
@@ -98,7 +99,7 @@ from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
 from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus
 from ._tm_errors import TMErrorCode, lookup_tm_error
-from ._transport import ConnectionState, ModbusTransport, Transport, TransportStats
+from ._transport import ConnectionState, Transport, TransportStats
 from ._version import version as _version
 
 __version__ = _version()

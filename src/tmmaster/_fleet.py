@@ -1,7 +1,11 @@
-"""Many robots driven from one process: their links and their waits on one event loop.
+"""The driver: robots' links and the polls of their waits on one event loop per process.
 
-A :class:`Fleet` runs ONE asyncio event loop in ONE background thread. Every
-:class:`~tmmaster.Robot` made with ``fleet=`` keeps its own thread for what it decides
+A :class:`Fleet` runs ONE asyncio event loop in ONE background thread. The process has
+one by default (:func:`default_fleet`: started by the first network link that connects,
+stopped when the last one closes), which every :class:`~tmmaster.Robot`, stand-alone
+gripper and :class:`ModbusTransport` made without ``fleet=`` or ``transport=`` joins;
+a Fleet a user makes is the same driver, owned explicitly. Every robot on a driver
+keeps its own thread for what it decides
 (checks, the command write, withdraws, stops: the blocking code of ``_robot.py``,
 unchanged), but its connection lives on the fleet's loop (:class:`LoopTransport`), and
 the polls of its waits run there too: the loop polls each waiting robot on the same
@@ -25,13 +29,14 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import os
 import threading
 import time
 import weakref
 from collections.abc import Callable, Coroutine, Iterable
 from typing import Any, Generic, Protocol, Self, TypeVar, cast
 
-from ._address import check_host, check_port, is_in_process
+from ._address import check_host, check_port, is_in_process, scheme_opener
 from ._channels import CommandChannel, Observation
 from ._checks import require_positive
 from ._codec import Value
@@ -45,7 +50,7 @@ from ._exceptions import (
 from ._following import FollowState
 from ._gate import CommandGate
 from ._logging import get_logger
-from ._monitor import (
+from ._loop import (
     EventLoopName,
     LoopThread,
     MonitoredStatus,
@@ -54,7 +59,7 @@ from ._monitor import (
 )
 from ._registers import RegisterField
 from ._retry import RetryPolicy
-from ._transport import AsyncLink, BlockTransport, ConnectionState
+from ._transport import AsyncLink, BlockTransport, ConnectionState, Transport
 
 _log = get_logger("tmmaster.fleet")
 
@@ -81,17 +86,19 @@ _LOOP_GRACE_S = 1.0
 
 
 class LoopTransport(BlockTransport):
-    """A robot's Modbus TCP link on a :class:`Fleet`'s event loop.
+    """A robot's Modbus TCP link on a driver's event loop (a :class:`Fleet`'s).
 
     The robot's thread uses it like any transport (blocking, with the retry policy);
     each request is sent on the loop and the thread waits for its answer. The fleet's
     loop reads through :meth:`read_on_loop`, holding the same lock, so requests on the
-    link never interleave.
+    link never interleave. With ``fleet`` None the link is on the process's default
+    driver (:func:`default_fleet`): taken here, given back by :meth:`close` (or when
+    the transport is garbage collected unclosed), its loop started by the first connect.
     """
 
     def __init__(
         self,
-        fleet: Fleet,
+        fleet: Fleet | None,
         host: str,
         port: int,
         *,
@@ -101,16 +108,54 @@ class LoopTransport(BlockTransport):
         name: str,
     ) -> None:
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
+        self._release: weakref.finalize[..., Any] | None = None
+        if fleet is None:
+            fleet = _DEFAULT.acquire()
+            self._release = weakref.finalize(self, _DEFAULT.release, fleet)
+            self._release.atexit = False  # at exit the daemon loop thread simply ends
         self._fleet = fleet
         self._link = AsyncLink(host, port, device_id=device_id, timeout=timeout, name=name)
         self._link.stats = self.stats
+
+    @property
+    def fleet(self) -> Fleet:
+        """The driver this link lives on (the default one, or a Fleet of your own)."""
+        return self._fleet
+
+    @property
+    def on_default_driver(self) -> bool:
+        """True for a link on the process's default driver (not a Fleet of the user's)."""
+        return self._release is not None
+
+    def close(self) -> None:
+        """Close the link; safe to call more than once. A default driver's link gives it back."""
+        super().close()
+        if self._release is not None:
+            self._release()  # once: a finalizer runs at most once
 
     # -- the link, from the robot's thread ----------------------------------------
 
     def _link_open(self) -> bool:
         return self._link.connected
 
+    @property
+    def state(self) -> ConnectionState:
+        """Current connection state (a link the device closed is disconnected at once)."""
+        state = self._state
+        if state is ConnectionState.CONNECTED and not self._link.connected:
+            return ConnectionState.DISCONNECTED
+        return state
+
+    def _connect_once(self) -> None:
+        if self._state is ConnectionState.CONNECTED and not self._link.connected:
+            # Lost between two requests (the device closed it): opening it again is a
+            # reconnect, an outage the retry policy rides out.
+            self._state = ConnectionState.DISCONNECTED
+        super()._connect_once()
+
     def _open_link(self) -> None:
+        if self._release is not None:
+            self._fleet.start()  # the default driver's loop starts with its first link
         self._fleet._call(self._link.connect(), self.timeout + _LOOP_GRACE_S, self.name)
 
     def _close_link(self) -> None:
@@ -133,6 +178,7 @@ class LoopTransport(BlockTransport):
     ) -> list[int]:
         # A callback on the loop and a lock to wait on: no task or coroutine per request
         # (about a third of a request's cost through run_coroutine_threadsafe).
+        self._link.device_id = self.device_id  # the unit id may be changed between requests
         latch: _Latch[list[int]] = _Latch()
         started = self._fleet._call_soon(
             self._link.start,
@@ -165,7 +211,11 @@ class LoopTransport(BlockTransport):
         self._link.close()
 
     def hold(self) -> bool:
-        """From the loop: take the link's lock if it is free (never blocks); True if taken."""
+        """From the loop: take the link's lock if it is free (never blocks).
+
+        Returns:
+            True if taken (give it back with :meth:`release`).
+        """
         return self._lock.acquire(blocking=False)
 
     def release(self) -> None:
@@ -179,6 +229,16 @@ class LoopTransport(BlockTransport):
 
         No retry and no reconnect (the loop never blocks): a failure raises, counted and
         with the link dropped as for any request, and the robot's thread takes over.
+
+        Args:
+            fields: The fields.
+            max_gap: A read may span this many unused addresses.
+
+        Returns:
+            Each field's engineering value, by name.
+
+        Raises:
+            TransportError: A read failed (a subclass says how).
         """
         plan = self.read_plan(fields, max_gap=max_gap)
         result: dict[str, Value] = {}
@@ -188,6 +248,7 @@ class LoopTransport(BlockTransport):
             if not self._link.connected:
                 raise ConnectionLostError(f"{self.name}: not connected for {what}")
             self._count_request(function_code)
+            self._link.device_id = self.device_id
             try:
                 words = await self._link.exchange(
                     what, function_code, block.address, block.count, None
@@ -631,6 +692,13 @@ class Fleet:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
+    def _retire(self) -> None:
+        """The default driver, given back by its last link: stop the loop (its robots are
+        closed, or garbage); from the loop thread itself, without waiting for it."""
+        with self._lock:
+            self._closed = True
+        self._runner.stop()
+
     # -- calling the loop ------------------------------------------------------------------
 
     @property
@@ -752,3 +820,145 @@ def fleet_driver(
 def wake_waits(member: FleetMember) -> None:
     """For :meth:`Robot.interrupt`: a wait the loop polls for ``member`` ends now."""
     member.fleet._call_soon(member.wake)
+
+
+class _DefaultDriver:
+    """The process's default driver: one Fleet, made by its first user, retired with its last.
+
+    Every network link made without ``fleet=`` (a Robot's, a stand-alone gripper's, a
+    :class:`ModbusTransport`, an AsyncRobot's) takes it and gives it back once closed,
+    so a process with no open link has no loop thread, and the next link starts a new one.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._fleet: Fleet | None = None
+        self._users = 0
+
+    def acquire(self) -> Fleet:
+        """Take the default driver (made now if none); give it back with :meth:`release`."""
+        with self._lock:
+            if self._fleet is None:
+                self._fleet = Fleet()
+                self._users = 0
+            self._users += 1
+            return self._fleet
+
+    def release(self, fleet: Fleet) -> None:
+        """Give ``fleet`` back; the last user's release stops its loop."""
+        with self._lock:
+            if fleet is not self._fleet:
+                return  # a driver forgotten at a fork
+            self._users -= 1
+            if self._users > 0:
+                return
+            self._fleet = None
+        fleet._retire()
+
+    def forget(self) -> None:
+        """In a forked child: the parent's loop thread is not there; the next link makes one."""
+        self._lock = threading.Lock()
+        self._fleet = None
+        self._users = 0
+
+    @property
+    def running(self) -> Fleet | None:
+        """The default driver while it has users (None: no link holds it)."""
+        return self._fleet
+
+
+_DEFAULT = _DefaultDriver()
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_DEFAULT.forget)
+
+
+def default_fleet() -> Fleet | None:
+    """The process's default driver while a link holds it; None when none does."""
+    return _DEFAULT.running
+
+
+class ModbusTransport(LoopTransport):
+    """Reads and writes one Modbus TCP device, with counting, error mapping and retries.
+
+    The link is an :class:`~tmmaster._transport.AsyncLink` on the process's default
+    driver, the event loop every Robot made without ``fleet=`` uses (started by the
+    first connect, stopped when the last link closes): pymodbus' socket framer and PDU
+    classes build each request and decode its answer, and the answer is taken only
+    under the request's own transaction id and from the transport's unit id. A failure
+    closes the link, so a late answer can never be read as a later request's. Nothing
+    is ever resent here: the :class:`RetryPolicy` decides. ``Robot(host, port)`` makes
+    one; make your own to read or write a device directly, and close it when done.
+
+    Example:
+        Against the simulator (``python -m tmmaster.sim --port 5020``):
+
+        ```python
+        from tmmaster import ModbusTransport, robot_profile
+
+        profile = robot_profile("tmflow")
+        with ModbusTransport("127.0.0.1", 5020, device_id=profile.device_id) as link:
+            print(link.read_fields(profile.select(["tcp_x", "tcp_y", "tcp_z"])))
+        ```
+
+    Args:
+        host: The device's address (an IP address or a host name).
+        port: Its Modbus TCP port.
+        device_id: The Modbus unit id of every request.
+        timeout: Bound of one request (and of a connect), s.
+        retry: How failed requests and connects are retried; None: the default policy.
+        name: The link's name in messages and logs.
+
+    Raises:
+        ConfigError: An invalid host or port, or an in-process ``scheme://name`` address
+            (``sim://``).
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int = 502,
+        *,
+        device_id: int = 1,
+        timeout: float = 1.0,
+        retry: RetryPolicy | None = None,
+        name: str = "device",
+    ) -> None:
+        host, port = check_host(host), check_port(port)
+        if scheme_opener(host) is not None:
+            raise ConfigError(
+                f"host {host!r}: a ModbusTransport speaks Modbus TCP (use open_transport or"
+                " Robot for an in-process endpoint)"
+            )
+        super().__init__(
+            None, host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
+        )
+
+
+def open_transport(
+    host: str,
+    port: int,
+    *,
+    role: str = "robot",
+    device_id: int = 1,
+    timeout: float = 1.0,
+    retry: RetryPolicy | None = None,
+    name: str = "device",
+) -> Transport:
+    """A Modbus TCP transport to ``host:port``, or an in-process one for ``scheme://name``.
+
+    The host and port are checked first (:func:`check_host`): a port in the host, a URL,
+    or anything that is no address is a :class:`ConfigError`, before any I/O. A host of
+    a scheme a plugin registered (:func:`~tmmaster._address.register_scheme`, as
+    ``tmmaster.sim`` does for ``sim://``) opens through that plugin's opener; any other
+    is a :class:`ModbusTransport` on the default driver.
+    """
+    host = check_host(host)
+    opener = scheme_opener(host)
+    if opener is None:
+        return ModbusTransport(
+            host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
+        )
+    transport: Transport = opener(
+        host, role=role, device_id=device_id, timeout=timeout, retry=retry, name=name
+    )
+    return transport

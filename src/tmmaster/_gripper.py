@@ -41,12 +41,13 @@ from ._exceptions import (
     ResponseTimeoutError,
     TransportError,
 )
+from ._fleet import open_transport
 from ._logging import get_logger
 from ._poller import Poller
 from ._registers import GripperDriverName, GripperProfile, RobotProfile
 from ._retry import RetryPolicy
 from ._status import RobotStatus
-from ._transport import Transport, open_transport
+from ._transport import Transport
 
 _log = get_logger("tmmaster.gripper")
 

@@ -56,7 +56,15 @@ from ._exceptions import (
     TMMasterError,
     TransportClosedError,
 )
-from ._fleet import Fleet, FleetMember, LoopTransport, fleet_driver, join_fleet, wake_waits
+from ._fleet import (
+    Fleet,
+    FleetMember,
+    LoopTransport,
+    fleet_driver,
+    join_fleet,
+    open_transport,
+    wake_waits,
+)
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._io import RobotIO
 from ._logging import get_logger
@@ -98,7 +106,6 @@ from ._transport import (
     ConnectionState,
     Transport,
     TransportStats,
-    open_transport,
 )
 
 _log = get_logger("tmmaster.robot")
@@ -360,7 +367,8 @@ class _Links:
     ) -> Transport:
         """The robot's link: the ready one, a Fleet's, or one opened to ``host:port``.
 
-        An in-process ``host`` ("sim://name") opens through the plugin that registered it.
+        An in-process ``host`` ("sim://name") opens through the plugin that registered it;
+        any other is opened on the process's default driver.
         """
         link: dict[str, Any] = {
             "device_id": profile.device_id,
@@ -564,10 +572,12 @@ class Robot:
         self._shared = self._join(fleet)
 
     def _join(self, fleet: Fleet | None) -> FleetMember | None:
-        """A Fleet's robot: the polls of its waits run on the fleet's loop."""
-        if fleet is None or not isinstance(self._transport, LoopTransport):
-            return None
-        member = fleet_driver(fleet, self, self._channel, self._transport, self._gate)
+        """A robot whose link is on a driver (its Fleet's, or the process's default one):
+        the polls of its waits run on that driver's loop."""
+        transport = self._transport
+        if not isinstance(transport, LoopTransport):
+            return None  # in process (sim://): the robot's thread polls
+        member = fleet_driver(fleet or transport.fleet, self, self._channel, transport, self._gate)
         self._follower.shared_driver = member.follow
         return member
 

@@ -1,27 +1,28 @@
-"""The one module that speaks Modbus client-side: pymodbus' framer and PDUs, our sockets.
+"""The one module that speaks Modbus client-side: pymodbus' framer and PDUs, one link.
 
-A :class:`ModbusTransport` reads and writes register blocks for one device, counts
-what it does, maps every failure to a :class:`TransportError`, and applies the
-:class:`RetryPolicy`. pymodbus' socket framer and PDU classes build every request and
-decode every answer; the socket under them is the transport's own (not pymodbus'
-client), one request at a time, so nothing is ever resent behind the policy's back,
-and a wait costs one system call (docs/performance.md).
+:class:`AsyncLink` is the one Modbus TCP link: an asyncio protocol on a driver's event
+loop (``_fleet.py``: a :class:`~tmmaster.Fleet`'s, or the process's default driver's),
+whose frames pymodbus' socket framer and PDU classes build and decode. Each request is
+sent once and answered only under its own transaction id and from its unit id; after
+any failure the link is closed, so a late answer can never be read as a later
+request's. :class:`BlockTransport` is what every robot-side transport shares: state,
+counters, field plans and the :class:`RetryPolicy`.
 
 Reads, and writes the caller declares idempotent, retry and reconnect. A write that
 triggers a command is sent exactly once: if it fails, the caller must read the
 device's state back to learn whether the command arrived. Nothing is retried after an
 answer that is not Modbus TCP (:class:`NotModbusError`, checked on each frame's header
 before pymodbus' framer sees it), nor a timeout on a link whose device has never
-answered anything (:meth:`ModbusTransport._no_answer`).
+answered anything (:func:`no_answer_error`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import functools
+import ipaddress
 import socket
 import struct
-import sys
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -45,7 +46,6 @@ from pymodbus.pdu.register_message import (
     WriteMultipleRegistersRequest,
 )
 
-from ._address import check_host, check_port, scheme_opener
 from ._codec import Decoder, Value, decoder, encoder
 from ._exceptions import (
     MODBUS_EXCEPTIONS,
@@ -299,9 +299,9 @@ def _group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
 class Transport(Protocol):
     """What the layers above (channels, grippers, the robot) need from a device link.
 
-    :class:`ModbusTransport` (Modbus TCP through pymodbus) is the default;
-    ``tmmaster.sim.MemoryTransport`` talks to an in-process simulator without sockets.
-    Both share the same counters, error mapping and retries.
+    :class:`~tmmaster.ModbusTransport` (Modbus TCP, an :class:`AsyncLink` on a driver's
+    event loop) is the default; ``tmmaster.sim.MemoryTransport`` talks to an in-process
+    simulator without sockets. Both share the same counters, error mapping and retries.
     """
 
     #: The device's address.
@@ -1009,264 +1009,15 @@ _READ_REQUEST_CLASSES: dict[int, type[ModbusPDU]] = {
     4: ReadInputRegistersRequest,
 }
 
-#: Receive buffer per ``recv``: larger than any Modbus TCP frame (260 bytes).
-_RECV_SIZE = 4096
-
-#: Bound each blocking ``recv``/``send`` by the kernel (SO_RCVTIMEO/SO_SNDTIMEO) on Linux:
-#: one system call per wait and one release of the GIL, where Python's socket timeout
-#: polls first (two of each). Elsewhere Python's socket timeout bounds them.
-_KERNEL_TIMEOUTS = sys.platform.startswith("linux")
-
-
-def _kernel_bounds(sock: socket.socket) -> bool:
-    """True when the kernel's timeouts bound ``sock``'s waits (see ``_KERNEL_TIMEOUTS``).
-
-    Only for the standard library's own socket class: a green socket (gevent's or
-    eventlet's, after monkey-patching) never blocks in the kernel, so only its own
-    timeout, Python's, bounds a wait there.
-    """
-    return _KERNEL_TIMEOUTS and type(sock).__module__ == "socket"
-
-
-def _kernel_timeout(sock: socket.socket, seconds: float) -> None:
-    """Bound every blocking receive and send on ``sock`` by ``seconds`` (Linux)."""
-    whole = int(seconds)
-    # At least 1 µs: a zero timeval would mean "wait forever".
-    micro = max(int((seconds - whole) * 1_000_000), 0 if whole else 1)
-    value = struct.pack("ll", whole, micro)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, value)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, value)
-
-
-class ModbusTransport(BlockTransport):
-    """Reads and writes one Modbus TCP device, with counting, error mapping and retries.
-
-    One TCP socket, one request at a time: pymodbus' socket framer and PDU classes build
-    each request and decode its answer, and the answer is taken only under the request's
-    own transaction id and from the transport's unit id. A failure closes the socket,
-    so a late answer can never be read as a later request's. Nothing is ever resent
-    here: the :class:`RetryPolicy` decides. ``Robot(host, port)`` makes one; make your
-    own to read or write a device directly.
-
-    Example:
-        Against the simulator (``python -m tmmaster.sim --port 5020``):
-
-        ```python
-        from tmmaster import ModbusTransport, robot_profile
-
-        profile = robot_profile("tmflow")
-        with ModbusTransport("127.0.0.1", 5020, device_id=profile.device_id) as link:
-            print(link.read_fields(profile.select(["tcp_x", "tcp_y", "tcp_z"])))
-        ```
-
-    Args:
-        host: The device's address (an IP address or a host name).
-        port: Its Modbus TCP port.
-        device_id: The Modbus unit id of every request.
-        timeout: Bound of one request (and of a connect), s.
-        retry: How failed requests and connects are retried; None: the default policy.
-        name: The link's name in messages and logs.
-
-    Raises:
-        ConfigError: An invalid host or port, or an in-process ``scheme://name`` address
-            (``sim://``).
-    """
-
-    def __init__(
-        self,
-        host: str,
-        port: int = 502,
-        *,
-        device_id: int = 1,
-        timeout: float = 1.0,
-        retry: RetryPolicy | None = None,
-        name: str = "device",
-    ) -> None:
-        host, port = check_host(host), check_port(port)
-        if scheme_opener(host) is not None:
-            raise ConfigError(
-                f"host {host!r}: a ModbusTransport speaks Modbus TCP (use open_transport or"
-                " Robot for an in-process endpoint)"
-            )
-        super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
-        self._socket: socket.socket | None = None
-        self._kernel_bounds = False
-        self._framer = FramerSocket(DecodePDU(is_server=False))
-        self._tid = 0
-        # The first transaction id sent on the open socket, and how many were sent on it:
-        # an answer under any other id was never asked for (a device that is not Modbus).
-        self._link_first_tid = 1
-        self._link_sent = 0
-        # Whether the device has ever answered a request (an exception answer included).
-        # Until it has, a request that gets no answer is not retried: see _no_answer.
-        self._answered = False
-
-    def _link_open(self) -> bool:
-        return self._socket is not None
-
-    def _open_link(self) -> None:
-        try:
-            sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
-        except (OSError, UnicodeError) as exc:
-            raise connect_error(
-                exc, name=self.name, host=self.host, port=self.port, timeout=self.timeout
-            ) from exc
-        try:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._kernel_bounds = _kernel_bounds(sock)
-            if self._kernel_bounds:
-                sock.settimeout(None)  # blocking: the kernel's timeouts bound each wait
-            self._bound_waits(sock, self.timeout)
-        except OSError as exc:
-            sock.close()
-            raise ConnectError(f"cannot set up the link to {self.name}: {exc}") from exc
-        self._socket = sock
-        self._link_first_tid = self._tid % 0xFFFF + 1
-        self._link_sent = 0
-
-    def _bound_waits(self, sock: socket.socket, seconds: float) -> None:
-        """Bound every later send and receive on ``sock`` by ``seconds``."""
-        if self._kernel_bounds:
-            _kernel_timeout(sock, seconds)
-        else:
-            sock.settimeout(seconds)
-
-    def _close_link(self) -> None:
-        sock, self._socket = self._socket, None
-        if sock is not None:
-            sock.close()
-
-    def _exchange(
-        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
-    ) -> list[int]:
-        """Send one request once and wait, within ``timeout``, for its own answer."""
-        sock = self._socket
-        if sock is None:
-            raise ConnectionLostError(f"{self.name}: not connected for {what}")
-        self._tid = tid = self._tid % 0xFFFF + 1
-        request = request_pdu(
-            function_code, address, count, values, device_id=self.device_id, tid=tid
-        )
-        frame = self._framer.buildFrame(request)
-        deadline = time.monotonic() + self.timeout
-        try:
-            self._link_sent += 1
-            sock.sendall(frame)
-            self.stats.bytes_sent += len(frame)
-            response = self._receive(sock, tid, deadline)
-        except (TimeoutError, BlockingIOError) as exc:
-            # BlockingIOError: the kernel's SO_RCVTIMEO/SO_SNDTIMEO ran out (EAGAIN).
-            raise self._no_answer(what) from exc
-        except OSError as exc:
-            raise ConnectionLostError(f"{self.name}: connection lost during {what}") from exc
-        except ForeignReplyError as exc:
-            raise not_modbus_error(
-                exc, name=self.name, host=self.host, port=self.port, what=what
-            ) from None
-        except DECODE_FAILURES as exc:
-            raise TransportError(f"{self.name}: malformed answer to {what}: {exc}") from exc
-        self._answered = True
-        return answer_words(response, request, count=count, name=self.name, what=what)
-
-    def _no_answer(self, what: str) -> ResponseTimeoutError:
-        """The error of a request that got no answer in time.
-
-        The rule: a link that has never answered anything is not retried beyond its
-        first request's timeout. Something accepted the connection but does not speak
-        Modbus to us (another protocol, a unit id it ignores); waiting the retry
-        policy's whole budget there only hides that. Once the device has answered, a
-        silence is an outage and the retry policy rides it out. Only retries are
-        dropped, so nothing is ever sent more often than before.
-        """
-        error = ResponseTimeoutError(f"{self.name}: no answer to {what} within {self.timeout:g} s")
-        if not self._answered:
-            where = endpoint_text(self.host, self.port)
-            error = ResponseTimeoutError(
-                f"{self.name} at {where} accepted the connection but never answered:"
-                f" no answer to {what} within {self.timeout:g} s (is it a Modbus TCP"
-                f" server, for unit id {self.device_id}?)"
-            )
-            error.retryable = False
-        return error
-
-    def _sent_here(self, tid: int) -> bool:
-        """Whether a request under ``tid`` was sent on the open socket."""
-        if self._link_sent >= 0xFFFF:
-            return 1 <= tid <= 0xFFFF
-        return 1 <= tid <= 0xFFFF and (tid - self._link_first_tid) % 0xFFFF < self._link_sent
-
-    def _receive(self, sock: socket.socket, tid: int, deadline: float) -> ModbusPDU:
-        """The answer under ``tid`` by ``deadline``; other ids' answers are skipped.
-
-        Raises:
-            TimeoutError: No answer by ``deadline`` (BlockingIOError from the kernel's).
-            ForeignReplyError: Bytes that are not Modbus TCP; or, at the deadline, answers
-                only under ids never sent on this socket.
-        """
-        buffer = b""
-        # The first answer under an id never sent here: (its id, its bytes).
-        stray: tuple[int, bytes] | None = None
-        shortened = False
-        try:
-            while True:
-                try:
-                    chunk = sock.recv(_RECV_SIZE)
-                except (TimeoutError, BlockingIOError):
-                    _refuse_stray(stray, tid)
-                    raise
-                if not chunk:
-                    raise ConnectionResetError("closed by the device")  # mapped by _exchange
-                self.stats.bytes_received += len(chunk)
-                buffer += chunk
-                pdu, buffer, stray = self._take_answer(buffer, tid, stray)
-                if pdu is not None:
-                    return pdu
-                # Part of a frame, or another id's answer: wait on, by the same deadline.
-                now = time.monotonic()
-                if now >= deadline:
-                    _refuse_stray(stray, tid)
-                    raise TimeoutError
-                shortened = True
-                self._bound_waits(sock, deadline - now)
-        finally:
-            if shortened and self._socket is sock:
-                self._bound_waits(sock, self.timeout)
-
-    def _take_answer(
-        self, buffer: bytes, tid: int, stray: tuple[int, bytes] | None
-    ) -> tuple[ModbusPDU | None, bytes, tuple[int, bytes] | None]:
-        """The answer under ``tid`` among the whole frames of ``buffer``, the bytes left,
-        and the first answer under an id never sent here (kept from ``stray``)."""
-        while buffer:
-            used, pdu = next_answer(self._framer, buffer, device_id=self.device_id, name=self.name)
-            if not used:
-                break
-            frame, buffer = buffer[:used], buffer[used:]
-            if pdu is None:
-                continue
-            if pdu.transaction_id == tid:
-                return pdu, buffer, stray
-            if stray is None and not self._sent_here(pdu.transaction_id):
-                stray = (pdu.transaction_id, frame)
-            _log.debug("transport.unawaited_answer", device=self.name, tid=pdu.transaction_id)
-        return None, buffer, stray
-
-
-def _refuse_stray(stray: tuple[int, bytes] | None, tid: int) -> None:
-    """At a request's deadline: answers came, but only under ids never sent here."""
-    if stray is not None:
-        raise ForeignReplyError(
-            f"transaction id {stray[0]}, never sent on this connection; the request's is {tid}",
-            stray[1],
-        )
-
 
 class _Stream(asyncio.Protocol):
     """One Modbus TCP stream of an :class:`AsyncLink`: answers matched to requests by id.
 
     pymodbus' socket framer cuts the stream into frames and its PDU decoder decodes them;
     an answer from another unit id, or whose transaction id no request awaits (a late
-    answer to a request that timed out), is dropped, as pymodbus' own client does.
+    answer to a request that timed out), is dropped, as pymodbus' own client does. An
+    answer under an id never sent on this stream is kept: a request that then gets no
+    answer of its own fails as :class:`NotModbusError` (no Modbus server answers so).
     Losing the connection or an undecodable frame fails every awaited request and closes
     the stream.
     """
@@ -1289,8 +1040,15 @@ class _Stream(asyncio.Protocol):
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
-        #: Transaction id -> the future its answer resolves.
-        self.awaited: dict[int, asyncio.Future[ModbusPDU]] = {}
+        #: Transaction id -> the future its answer resolves, and the request's description.
+        self.awaited: dict[int, tuple[asyncio.Future[ModbusPDU], str]] = {}
+        #: The first transaction id sent on this stream, and how many were sent on it.
+        self.first_tid = 0
+        self.sent = 0
+        #: Set on the first answer from the device (an exception answer included).
+        self.answered = False
+        #: The first answer under an id never sent here: (its id, its frame).
+        self.stray: tuple[int, bytes] | None = None
         self._buffer = b""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -1307,50 +1065,109 @@ class _Stream(asyncio.Protocol):
                     self.framer, self._buffer, device_id=self.device_id, name=self.name
                 )
             except ForeignReplyError as exc:
-                what = "a request"
-                self.fail(
-                    not_modbus_error(exc, name=self.name, host=self.host, port=self.port, what=what)
-                )
+                self.fail(functools.partial(_not_modbus, exc, self))
                 return
             except DECODE_FAILURES as exc:
-                self.fail(TransportError(f"{self.name}: undecodable answer: {exc}"))
+                self.fail(functools.partial(_malformed, self.name, exc))
                 return
             if not used:
                 return  # a partial frame: wait for the rest
-            self._buffer = self._buffer[used:]
+            frame, self._buffer = self._buffer[:used], self._buffer[used:]
             if pdu is None:
                 continue
-            future = self.awaited.pop(pdu.transaction_id, None)
-            if future is None or future.done():
-                _log.debug("transport.unawaited_answer", device=self.name, tid=pdu.transaction_id)
-                continue
-            future.set_result(pdu)
+            self._take(pdu, frame)
+
+    def _take(self, pdu: ModbusPDU, frame: bytes) -> None:
+        """An answer from the device: to the request awaiting its id, or dropped."""
+        tid = pdu.transaction_id
+        entry = self.awaited.pop(tid, None)
+        if entry is None or entry[0].done():
+            if self.stray is None and not self.sent_here(tid):
+                self.stray = (tid, frame)
+            _log.debug("transport.unawaited_answer", device=self.name, tid=tid)
+            return
+        self.answered = True
+        entry[0].set_result(pdu)
+
+    def sent_here(self, tid: int) -> bool:
+        """Whether a request under ``tid`` was sent on this stream."""
+        if self.sent >= 0xFFFF:
+            return 1 <= tid <= 0xFFFF
+        return 1 <= tid <= 0xFFFF and (tid - self.first_tid) % 0xFFFF < self.sent
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.fail(ConnectionLostError(f"{self.name}: connection lost"))
+        self.fail(lambda what: ConnectionLostError(f"{self.name}: connection lost during {what}"))
 
-    def fail(self, error: TransportError) -> None:
-        """Fail every awaited request with ``error`` and close the stream."""
+    def fail(self, error: Callable[[str], TransportError]) -> None:
+        """Fail every awaited request with ``error(what)`` and close the stream."""
         self.closed = True
         awaited, self.awaited = self.awaited, {}
-        for future in awaited.values():
+        for future, what in awaited.values():
             if not future.done():
-                future.set_exception(error)
+                future.set_exception(error(what))
         if self.transport is not None:
             self.transport.close()
 
 
-def _expire(future: asyncio.Future[ModbusPDU], link: AsyncLink, what: str) -> None:
-    """A request's deadline: fail it unless answered (the message is built only here)."""
-    if not future.done():
-        future.set_exception(
-            ResponseTimeoutError(f"{link.name}: no answer to {what} within {link.timeout:g} s")
+def _not_modbus(reply: ForeignReplyError, stream: _Stream, what: str) -> TransportError:
+    return not_modbus_error(reply, name=stream.name, host=stream.host, port=stream.port, what=what)
+
+
+def _is_ip(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
+
+
+def _malformed(name: str, exc: BaseException, what: str) -> TransportError:
+    return TransportError(f"{name}: malformed answer to {what}: {exc}")
+
+
+def no_answer_error(link: AsyncLink, what: str, *, answered: bool) -> ResponseTimeoutError:
+    """The error of a request that got no answer in time.
+
+    The rule: a link that has never answered anything is not retried beyond its first
+    request's timeout. Something accepted the connection but does not speak Modbus to
+    us (another protocol, a unit id it ignores); waiting the retry policy's whole
+    budget there only hides that. Once the device has answered, a silence is an outage
+    and the retry policy rides it out. Only retries are dropped, so nothing is ever
+    sent more often than before.
+    """
+    if answered:
+        return ResponseTimeoutError(f"{link.name}: no answer to {what} within {link.timeout:g} s")
+    where = endpoint_text(link.host, link.port)
+    error = ResponseTimeoutError(
+        f"{link.name} at {where} accepted the connection but never answered:"
+        f" no answer to {what} within {link.timeout:g} s (is it a Modbus TCP"
+        f" server, for unit id {link.device_id}?)"
+    )
+    error.retryable = False
+    return error
+
+
+def _expire(future: asyncio.Future[ModbusPDU], link: AsyncLink, stream: _Stream, what: str) -> None:
+    """A request's deadline: fail it unless answered (the message is built only here).
+
+    Answers came, but only under ids never sent on this stream: not a Modbus server.
+    """
+    if future.done():
+        return
+    if stream.stray is not None:
+        tid, frame = stream.stray
+        reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
+        error: TransportError = not_modbus_error(
+            reply, name=link.name, host=link.host, port=link.port, what=what
         )
+    else:
+        error = no_answer_error(link, what, answered=link.answered or stream.answered)
+    future.set_exception(error)
 
 
 def _answered(
     deadline: asyncio.TimerHandle,
-    awaited: dict[int, asyncio.Future[ModbusPDU]],
+    awaited: dict[int, tuple[asyncio.Future[ModbusPDU], str]],
     tid: int,
     _answer: asyncio.Future[ModbusPDU],
 ) -> None:
@@ -1385,14 +1202,15 @@ def _deliver(
 
 
 class AsyncLink:
-    """A Modbus TCP link on the running asyncio loop (a StatusMonitor's, a Fleet's robots').
+    """The Modbus TCP link, on the running asyncio loop (every robot's, a StatusMonitor's).
 
     pymodbus frames and decodes (its socket framer and PDU classes); the stream is a
     plain asyncio protocol, not pymodbus' async client, whose per-request machinery was
-    most of a monitor's CPU (docs/performance.md). Failures map to the same
-    :class:`TransportError` subclasses as :class:`ModbusTransport`'s. It has no retry and
-    no counters of its own (``stats``, when set, counts bytes): a failed request raises,
-    and the caller closes the link and reconnects.
+    most of a monitor's CPU (docs/performance.md). Failures map to
+    :class:`TransportError` subclasses. It has no retry and no counters of its own
+    (``stats``, when set, counts bytes): a request is sent once, a failed one raises,
+    and the caller closes the link and reconnects (a robot's
+    :class:`~tmmaster.ModbusTransport` applies its retry policy above it).
     """
 
     def __init__(self, host: str, port: int, *, device_id: int, timeout: float, name: str):
@@ -1405,6 +1223,8 @@ class AsyncLink:
         self.stats: TransportStats | None = None
         self._stream: _Stream | None = None
         self._tid = 0
+        #: Whether the device has answered on any stream of this link (see no_answer_error).
+        self.answered = False
 
     @property
     def connected(self) -> bool:
@@ -1417,18 +1237,36 @@ class AsyncLink:
         loop = asyncio.get_running_loop()
         try:
             async with asyncio.timeout(self.timeout):
-                _transport, stream = await loop.create_connection(
-                    lambda: _Stream(
-                        self.name, self.device_id, self.stats, host=self.host, port=self.port
-                    ),
-                    self.host,
-                    self.port,
-                )
+                stream = await self._open_stream(loop)
         except (OSError, TimeoutError, UnicodeError) as exc:
             raise connect_error(
                 exc, name=self.name, host=self.host, port=self.port, timeout=self.timeout
             ) from exc
+        stream.first_tid = self._tid % 0xFFFF + 1
         self._stream = stream
+
+    async def _open_stream(self, loop: asyncio.AbstractEventLoop) -> _Stream:
+        """A connected stream; a host name resolved as ``socket.create_connection`` does
+        (the standard resolver, in a worker thread; each address in turn)."""
+
+        def stream() -> _Stream:
+            return _Stream(self.name, self.device_id, self.stats, host=self.host, port=self.port)
+
+        addresses: list[tuple[str, int]] = [(self.host, self.port)]
+        if not _is_ip(self.host):
+            infos = await loop.run_in_executor(
+                None, socket.getaddrinfo, self.host, self.port, 0, socket.SOCK_STREAM
+            )
+            addresses = [(str(info[4][0]), int(info[4][1])) for info in infos]
+        error: OSError = OSError(f"no address for {self.host}")
+        for host, port in addresses:
+            try:
+                _transport, opened = await loop.create_connection(stream, host, port)
+            except OSError as exc:
+                error = exc
+            else:
+                return opened
+        raise error
 
     async def read_block(self, table: Table, address: int, count: int, what: str) -> list[int]:
         """Read ``count`` words (or bits as 0/1) in one request; failures as TransportError."""
@@ -1464,12 +1302,14 @@ class AsyncLink:
         )
         loop = asyncio.get_running_loop()
         answer: asyncio.Future[ModbusPDU] = loop.create_future()
-        stream.awaited[tid] = answer
+        stream.awaited[tid] = (answer, what)
+        stream.device_id = self.device_id  # answers are taken from the request's unit id
         frame = stream.framer.buildFrame(request)
+        stream.sent += 1
         stream.transport.write(frame)
         if self.stats is not None:
             self.stats.bytes_sent += len(frame)
-        deadline = loop.call_later(self.timeout, _expire, answer, self, what)
+        deadline = loop.call_later(self.timeout, _expire, answer, self, stream, what)
         answer.add_done_callback(functools.partial(_answered, deadline, stream.awaited, tid))
         return request, answer
 
@@ -1499,33 +1339,5 @@ class AsyncLink:
         """Close the link (safe when closed): after a failure it may still carry a late answer."""
         stream, self._stream = self._stream, None
         if stream is not None:
-            stream.fail(ConnectionLostError(f"{self.name}: link closed"))
-
-
-def open_transport(
-    host: str,
-    port: int,
-    *,
-    role: str = "robot",
-    device_id: int = 1,
-    timeout: float = 1.0,
-    retry: RetryPolicy | None = None,
-    name: str = "device",
-) -> Transport:
-    """A Modbus TCP transport to ``host:port``, or an in-process one for ``scheme://name``.
-
-    The host and port are checked first (:func:`check_host`): a port in the host, a URL,
-    or anything that is no address is a :class:`ConfigError`, before any I/O. A host of
-    a scheme a plugin registered (:func:`~tmmaster._address.register_scheme`, as
-    ``tmmaster.sim`` does for ``sim://``) opens through that plugin's opener.
-    """
-    host = check_host(host)
-    opener = scheme_opener(host)
-    if opener is None:
-        return ModbusTransport(
-            host, port, device_id=device_id, timeout=timeout, retry=retry, name=name
-        )
-    transport: Transport = opener(
-        host, role=role, device_id=device_id, timeout=timeout, retry=retry, name=name
-    )
-    return transport
+            self.answered = self.answered or stream.answered
+            stream.fail(lambda what: ConnectionLostError(f"{self.name}: link closed during {what}"))

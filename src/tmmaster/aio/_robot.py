@@ -5,9 +5,9 @@ methods, one call at a time in the order they were made: every check, write, wai
 withdraw and stop is the sync Robot's, written once in ``_robot.py``. The awaited methods
 are made from the sync ones (``move_to = _awaited(Robot.move_to)``): the same signature
 and docstring, typed once. The robot's link
-and the polls of its waits live on a :class:`~tmmaster.Fleet`'s event loop (by default
-one fleet shared by every robot :func:`connect` opens), so a waiting robot costs its
-thread nothing until the loop wakes it.
+and the polls of its waits live on a driver's event loop (the process's default one,
+which every network Robot joins, or a :class:`~tmmaster.Fleet` of your own), so a
+waiting robot costs its thread nothing until the loop wakes it.
 
 The caller's event loop only awaits a future per call (``_Job.outcome``). Cancelling
 the awaiting coroutine asks the robot's thread to give the call up
@@ -35,10 +35,8 @@ from collections.abc import Callable, Coroutine, Generator
 from enum import Enum
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, cast
 
-from .._address import is_in_process
 from .._checks import require_positive
 from .._exceptions import TMMasterError, TransportClosedError
-from .._fleet import Fleet
 from .._gripper import Gripper
 from .._io import RobotIO
 from .._logging import get_logger
@@ -424,9 +422,9 @@ class AsyncRobot(_Front):
 
     Every method is the Robot method of the same name, run on this robot's own thread
     (one call at a time, in the order the calls were made, as a Robot used from one
-    thread): the same checks, the one write, the same waits, withdraws and stops. With
-    a Fleet (what :func:`connect` gives a robot), the polls of its waits run on the
-    fleet's event loop and the robot's thread is woken only when a poll needs it.
+    thread): the same checks, the one write, the same waits, withdraws and stops. The
+    polls of its waits run on the driver's event loop (the process's default one, or
+    the robot's Fleet) and the robot's thread is woken only when a poll needs it.
 
     Cancelling an awaited call (``task.cancel()``, ``asyncio.timeout``, Ctrl-C in
     ``asyncio.run``) gives its command up as a wait ended by an exception does: a
@@ -456,9 +454,9 @@ class AsyncRobot(_Front):
         ```
 
     Args:
-        robot: The Robot to drive (not connected yet, or connected); made with
-            ``fleet=`` for its waits to be polled on that fleet's loop. The AsyncRobot
-            closes it in :meth:`close`.
+        robot: The Robot to drive (not connected yet, or connected); its waits are
+            polled on its driver's loop (its Fleet's, or the process's default one).
+            The AsyncRobot closes it in :meth:`close`.
         settle_timeout_s: How long a cancelled call may take to give its command up
             before the ``CancelledError`` is raised anyway (the clean-up then goes on in
             the robot's thread, and an error is logged), s.
@@ -487,8 +485,6 @@ class AsyncRobot(_Front):
         # _user_stop and clears the stop request as one step, so an interrupt() of the
         # user's in between is never cleared with it.
         self._stop_lock = threading.Lock()
-        self._release: Callable[[], None] | None = None
-        self._release_lock = threading.Lock()
 
     # -- attributes (no I/O) -----------------------------------------------------------
 
@@ -600,10 +596,6 @@ class AsyncRobot(_Front):
         # Calls still queued run now and fail at once: the robot is closed.
         if not self._worker.shutdown(self.settle_timeout_s):
             self._log.error("aio.thread_still_running", timeout_s=self.settle_timeout_s)
-        with self._release_lock:
-            release, self._release = self._release, None
-        if release is not None:
-            release()
         return safely
 
     async def __aenter__(self) -> AsyncRobot:
@@ -766,36 +758,6 @@ class AsyncRobotIO(_Front):
     dis = _awaited(RobotIO.dis)
 
 
-class _SharedFleet:
-    """The Fleet of the robots :func:`connect` opens: made with the first, closed with the last."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._fleet: Fleet | None = None
-        self._users = 0
-
-    def acquire(self) -> Fleet:
-        with self._lock:
-            if self._fleet is None:
-                self._fleet = Fleet()
-                self._users = 0
-            self._users += 1
-            return self._fleet
-
-    def release(self, fleet: Fleet) -> None:
-        with self._lock:
-            if fleet is not self._fleet:
-                return
-            self._users -= 1
-            if self._users > 0:
-                return
-            self._fleet = None
-        fleet.close()  # its robots are closed: this stops its loop
-
-
-_SHARED_FLEET = _SharedFleet()
-
-
 def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
     """An AsyncRobot from ``make``'s arguments, with ``make``'s exact signature."""
     signature = inspect.signature(make)
@@ -803,12 +765,11 @@ def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
     def connect(*args: P.args, **kwargs: P.kwargs) -> AsyncRobot:
         """Open an :class:`AsyncRobot`: ``await`` it, or use it in ``async with``.
 
-        Every argument is :class:`~tmmaster.Robot`'s, with the same defaults, but for
-        ``fleet``: None (the default) puts the robot in one Fleet shared by the robots
-        this function opens, started with the first and closed with the last, so that the
-        polls of their waits run on one event loop (docs/robot-api.md, "asyncio"). A
-        ``sim://`` host (an in-process simulator) or a ``transport=`` of your own has no
-        fleet: the robot's thread polls its waits itself.
+        Every argument is :class:`~tmmaster.Robot`'s, with the same defaults: without
+        a ``link=`` the robot's link and the polls of its waits run on the process's
+        default driver, one event loop shared by every robot (docs/robot-api.md,
+        "asyncio"). A ``sim://`` host (an in-process simulator) or a Transport of your
+        own as ``link`` keeps its link: the robot's thread polls its waits itself.
 
         Making the robot does no I/O; ``await aio.connect(...)`` or ``async with
         aio.connect(...) as robot`` connects it, and ``async with`` closes it (a move
@@ -842,27 +803,7 @@ def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
         Raises:
             ConfigError: An invalid argument.
         """
-        bound = signature.bind(*args, **kwargs)
-        options = bound.arguments
-        fleet: Fleet | None = None
-        host = options.get("host")
-        if (
-            options.get("fleet") is None
-            and options.get("transport") is None
-            and not is_in_process(host)
-        ):
-            fleet = _SHARED_FLEET.acquire()
-            options["fleet"] = fleet
-        try:
-            robot = Robot(*bound.args, **bound.kwargs)
-        except BaseException:
-            if fleet is not None:
-                _SHARED_FLEET.release(fleet)
-            raise
-        opened = AsyncRobot(robot)
-        if fleet is not None:
-            opened._release = functools.partial(_SHARED_FLEET.release, fleet)
-        return opened
+        return AsyncRobot(make(*args, **kwargs))
 
     connect.__qualname__ = "connect"
     # help() and the API docs show Robot's parameters, not *args/**kwargs, and what this

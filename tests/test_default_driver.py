@@ -1,0 +1,106 @@
+"""The process's default driver: every network link made without ``fleet=`` on one loop.
+
+A Robot, an AsyncRobot and a ModbusTransport made without ``fleet=`` or ``transport=``
+take the default driver (one event-loop thread for the whole process): it starts with
+the first connect and ends when the last of them is closed or dropped. In-process
+``sim://`` robots stay off it. The driver's loop thread is a daemon: it never keeps the
+process alive after the main thread returns.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import threading
+from collections.abc import Callable
+
+from tmmaster import ModbusTransport, Pose, Robot, aio
+from tmmaster._fleet import LoopTransport, default_fleet
+from tmmaster._registers import Table
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+
+A = Pose(300, -200, 150, 180, 0, 90)
+
+
+def driver_threads() -> list[threading.Thread]:
+    """The loop threads of drivers alive now."""
+    return [t for t in threading.enumerate() if t.name == "tmmaster-fleet"]
+
+
+def robot(sim: Simulator) -> Robot:
+    return Robot("127.0.0.1", sim.port, profile=sim.profile, gripper=None)
+
+
+def test_plain_robots_share_one_loop_thread_that_ends_with_the_last(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    first_sim, second_sim = tm_simulator_factory("article"), tm_simulator_factory("article")
+    first, second = robot(first_sim), robot(second_sim)
+    assert driver_threads() == []  # nothing runs before a connect
+    first.connect()
+    second.connect()
+    threads = driver_threads()
+    assert len(threads) == 1  # one loop for both
+    assert threads[0].daemon  # main() returning is never held up by it
+    driver = default_fleet()
+    assert driver is not None
+    assert isinstance(first._transport, LoopTransport)
+    assert first._transport.fleet is driver
+    assert isinstance(second._transport, LoopTransport)
+    assert second._transport.fleet is driver
+    first.wait_until_ready(timeout_s=5)
+    assert first.move_to(A, speed=50).done  # its waits polled on that loop
+    first.close()
+    assert driver_threads() == threads  # the second still holds it
+    second.close()
+    assert driver_threads() == []
+    assert default_fleet() is None
+
+
+def test_an_async_robot_and_a_transport_use_the_same_driver(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("article")
+    sync = robot(sim).connect()
+    try:
+
+        async def main() -> None:
+            async with aio.connect(
+                "127.0.0.1", sim.port, profile="article", gripper=None
+            ) as opened:
+                link = opened.robot._transport
+                assert isinstance(link, LoopTransport)
+                assert link.fleet is default_fleet()
+
+        asyncio.run(main())
+        with ModbusTransport("127.0.0.1", sim.port) as transport:
+            assert transport.read_block(Table.HOLDING, 0, 1) is not None
+            assert transport.fleet is default_fleet()
+        assert len(driver_threads()) == 1
+    finally:
+        sync.close()
+    assert driver_threads() == []
+
+
+def test_a_robot_dropped_unconnected_gives_the_driver_back(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory("article")
+    made = robot(sim)
+    assert default_fleet() is not None
+    del made
+    gc.collect()
+    assert default_fleet() is None
+    assert driver_threads() == []
+
+
+def test_an_in_process_robot_stays_off_the_driver(
+    memory_simulator_factory: SimFactory,
+) -> None:
+    sim = memory_simulator_factory("article")
+    with Robot(sim.url, profile="article", gripper=None) as local:
+        assert not isinstance(local._transport, LoopTransport)
+        assert default_fleet() is None
+        assert driver_threads() == []
