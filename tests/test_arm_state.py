@@ -20,7 +20,7 @@ import tmmaster
 from sim_speeds import QUICK
 from tmmaster import ConfigError, FrameCheck, MotionType, Pose, Robot, Workspace
 from tmmaster._profiles import robot_profile
-from tmmaster._robot_program import robot_program
+from tmmaster._robot_program import ToolSetting, robot_program
 from tmmaster.sim import Cell, KinematicBackend, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -208,7 +208,8 @@ def test_the_tcp_the_program_sets_is_what_is_checked(
     # The simulator has no tool, but its program (made for a 150 mm tool) sets one with
     # ChangeTCP when the project starts: the robot's TCP is then 150 mm off the flange.
     program = tmp_path / "program.tms"
-    program.write_text(robot_program(robot_profile("tmflow"), tool=TOOL), encoding="utf-8")
+    text = robot_program(robot_profile("tmflow"), tool=ToolSetting(tcp=TOOL, mass_kg=1.1))
+    program.write_text(text, encoding="utf-8")
     sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
     sim.wait_for(lambda: sim.field("project_running") is True, 2.0)
     with pytest.raises(ConfigError, match=r"tool offset of \(0, 0, 150, 0, 0, 0\)"):

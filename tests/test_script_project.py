@@ -23,6 +23,7 @@ from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
 from tmmaster.sim import Cell, RobotSetup, Simulator
 from tmmaster.sim import __main__ as sim_main
+from tmmaster.sim._script_project import simulated_tool
 
 SimFactory = Callable[..., Simulator]
 
@@ -57,7 +58,7 @@ def test_a_cancel_that_lands_between_the_programs_read_and_its_ack_is_never_run(
     # cancel record. The generated program reads the command again before and after
     # acknowledging it and consumes the cancel; a program that acknowledges from the
     # block it read runs the move the master gave up (the master then stops it).
-    text = robot_program(robot_profile("tmflow"))
+    text = robot_program(robot_profile("tmflow"), tool=simulated_tool(None))
     if not compare_and_ack:
         text = without_compare_and_ack(text)
     program = tmp_path / "program.tms"
@@ -94,9 +95,14 @@ def test_the_program_sets_the_masters_tcp_whatever_the_robot_had(
     # where the master's kinematics put it. Without it, the robot reaches the same TCP
     # pose with its own tool: the flange (and every joint) 150 mm from the master's plan,
     # which the master's frame check refuses at connect (switched off here to show it).
-    text = robot_program(robot_profile("tmflow"), tool=None)
+    text = robot_program(robot_profile("tmflow"), tool=simulated_tool(None))
     if not change_tcp:
-        text = text.replace("    ChangeTCP(tool)\n", "")
+        change = (
+            "    if (!ChangeTCP(tool, 1.1))\n"
+            '    {\n        Abort("ChangeTCP refused the tool")\n    }\n'
+        )
+        assert change in text
+        text = text.replace(change, "")
     program = tmp_path / "program.tms"
     program.write_text(text, encoding="utf-8")
     sim = tm_simulator_factory(

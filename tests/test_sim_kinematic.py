@@ -261,15 +261,17 @@ def test_article_reports_each_refusal_with_its_own_error_code(
     assert "sim.motion_started" not in log.names()
 
 
-def test_tmflow_refuses_a_line_through_the_base_with_result_motion_failed() -> None:
-    # The target is reachable (inversekin), the straight path is not: Line() rejects the
-    # command (returns False) and the program reports motion_failed.
+def test_tmflow_stops_in_error_on_a_line_through_the_base() -> None:
+    # The target is reachable (inversekin), the straight path is not. On a robot Line()
+    # returns false for a malformed command only (TMscript 2.24 p. 337): the robot stops
+    # in error, "Inverse Kinematics Failure, Interpolation Points Issue" (0x12, TMflow
+    # 2.24 appendix J, p. 349), and errorstop reports the command failed.
     ctl, bank, backend, _ = tmflow()
     send_tmflow(bank, 1, target=APPROACH)
     run_until(ctl, lambda: bank.get("done_seq") == 1)
     send_tmflow(bank, 2, command=2, target=Pose(-300, 200, 200, 180, 0, 90))
-    # The program reports it within a tick or two (its wall-time budget per tick may
-    # end after the Line's check, on a cold or loaded machine).
+    run_until(ctl, lambda: bank.get("project_running") is False, limit_s=2.0)
+    assert (bank.get("error"), bank.get("last_error_code")) == (True, 0x12)
     run_until(ctl, lambda: bank.get("result_code") != 0, limit_s=4 * DT)
     assert (bank.get("ack_seq"), bank.get("done_seq")) == (2, 1)
     assert (bank.get("result_code"), bank.get("robot_state")) == (3, 2)
@@ -466,7 +468,8 @@ def test_a_master_with_the_same_tool_drives_the_simulator_through_the_cycle(
 def test_tmflow_reports_unreachable_and_logs_the_reason(target: Pose, reason: str) -> None:
     ctl, bank, _, log = tmflow()
     send_tmflow(bank, 1, target=target)
-    ctl.tick(DT)
+    # Within a tick or two (the program's time budget per tick may end after inversekin).
+    run_until(ctl, lambda: bank.get("result_code") != 0, limit_s=4 * DT)
     assert (bank.get("ack_seq"), bank.get("done_seq")) == (1, 0)
     # The profile's result_code has no joint_limit / singularity label: unreachable.
     assert (bank.get("result_code"), bank.get("robot_state")) == (1, 2)

@@ -304,7 +304,7 @@ def test_motion_is_refused_in_closestop() -> None:
         ('main\n{\n  Display("x"\n}\n', 4, 1),
         ("main\n{\n  x = 1 @ 2\n}\n", 3, 9),
         ('main\n{\n  Display123("wrong")\n}\n', 3, 3),
-        ("main\n{\n  ThreadRun(f(), false)\n}\n", 3, 3),
+        ("main\n{\n  ThreadExit(1)\n}\n", 3, 3),
         ('main\n{\n  int a = 1 + "x" * 2\n}\n', 3, 19),
     ],
 )
@@ -318,8 +318,8 @@ def test_bad_scripts_name_line_and_column(text: str, line: int, column: int) -> 
 def test_unknown_function_is_named() -> None:
     with pytest.raises(TMScriptSyntaxError, match=r"unknown function Display123\(\)"):
         parse('main\n{\nDisplay123("wrong")\n}\n')
-    with pytest.raises(TMScriptSyntaxError, match=r"ThreadRun\(\) is not supported"):
-        parse("main\n{\nThreadRun(1, false)\n}\n")
+    with pytest.raises(TMScriptSyntaxError, match=r"ThreadExit\(\) is not supported"):
+        parse("main\n{\nThreadExit(1)\n}\n")
 
 
 def test_cli_check_eval_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -339,6 +339,11 @@ VIA_FIELDS = tuple(f"via_{n}" for n in _POSE_NAMES)
 EXTENSION_FIELDS = (*VIA_FIELDS, "speed_mm_s", "ext_seq")
 ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 
+#: TMflow's user define area, holding registers a project may read and write (TMflow 2.24
+#: Software Manual, appendix C, "User Define Area", p. 319): where a sequence profile's
+#: feedback lives.
+USER_AREA = (9000, 9999)
+
 #: Optional fields that belong to the command block when a profile has them.
 _OPTIONAL_BLOCK = ("accel_time", *EXTENSION_FIELDS)
 #: Command labels that make the robot act; none may share the "none" code.
@@ -480,6 +485,8 @@ class RobotProfile(RegisterMap):
                 raise ValueError(f"profile {self.name!r}: field {name} must be writable")
         self._check_command_codes()
         self._check_command_block()
+        if self.handshake is Handshake.SEQUENCE:
+            self._check_feedback_area()
         return self
 
     @property
@@ -516,6 +523,36 @@ class RobotProfile(RegisterMap):
         return tuple(
             sorted((self.fields[n] for n in names if n in self.fields), key=lambda f: f.address)
         )
+
+    def _check_feedback_area(self) -> None:
+        # The robot program reads ack_seq and done_seq in one request (two registers),
+        # and it can write only TMflow's user define area: holding registers 9000-9999
+        # (TMflow 2.24 Software Manual, appendix C, "User Define Area", p. 319).
+        ack, done = self.fields["ack_seq"], self.fields["done_seq"]
+        if (
+            ack.table is not done.table
+            or ack.dtype.width != 1
+            or done.dtype.width != 1
+            or done.address != ack.address + 1
+        ):
+            raise ValueError(
+                f"profile {self.name!r}: field done_seq ({done.table.value} {done.address})"
+                f" must be the one-register field right after ack_seq ({ack.table.value}"
+                f" {ack.address}): the robot program reads both in one request"
+            )
+        written = [*self.role(Role.FEEDBACK)]
+        if "grasp_status" in self.fields:  # written by the program's gripper function
+            written.append(self.fields["grasp_status"])
+        for field in written:
+            if field.table is not Table.HOLDING or not (
+                USER_AREA[0] <= field.address and field.end <= USER_AREA[1]
+            ):
+                raise ValueError(
+                    f"profile {self.name!r}: feedback field {field.name} ({field.table.value}"
+                    f" {field.address}) must lie in the holding registers"
+                    f" {USER_AREA[0]}-{USER_AREA[1]}, TMflow's user define area, which the"
+                    " robot program writes"
+                )
 
     def _check_command_codes(self) -> None:
         # A command code equal to "none" (or to 0, what a withdraw writes) would be

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -39,6 +40,11 @@ END_MODULE_DI = 800
 #: The feedback and command fields the program reads or writes, by name.
 _FEEDBACK = ("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "grasp_status")
 _WORDS = ("speed", "accel_time", "command", "seq")
+#: The master's heartbeat and its time-to-live, read together.
+_MASTER = ("master_heartbeat", "master_ttl_ms")
+#: The read/write timeout of the program's Modbus device, ms (TMscript 2.24 §16.1,
+#: p. 414: 0..10000, 10000 by default): well inside the 12 s closestop and errorstop get.
+MODBUS_TIMEOUT_MS = 1000
 
 
 @dataclass(frozen=True)
@@ -73,25 +79,32 @@ _GRIP_IO = """// The gripper on the end module, through the robot's own Modbus t
 // appendix C, End Module, p. 307: DO 0-3 are coils 800-803, FC 05; DI 0-3 are discrete
 // inputs 800-803, FC 02): DO$output closes it when high and opens it when low; after $settle_ms ms
 // ([TS] 5.5 Sleep, p. 159) DI$input tells whether a part is held ([TS] 16.11 modbus_write
-// Syntax 3, p. 437; 16.5 modbus_read Syntax 2, p. 424). Edit this function for another
-// gripper; keep its last two steps (grasp_status, then Done()).
+// Syntax 3, p. 437, false when the write failed; 16.5 modbus_read Syntax 2, p. 424: a
+// byte[], kept in a variable before it is indexed, [TS] 2.4 operators, p. 19). Edit this
+// function for another gripper; keep its last two steps (grasp_status, then Done()).
 void Grip()
 {
+    ok = false
     if (cmd == $cmd_close)
     {
-        modbus_write("TM", 1, "DO", $do_address, 1)
+        ok = modbus_write("TM", 1, "DO", $do_address, 1)
     }
     else
     {
-        modbus_write("TM", 1, "DO", $do_address, 0)
+        ok = modbus_write("TM", 1, "DO", $do_address, 0)
+    }
+    if (!ok)
+    {
+        Abort("modbus_write DO$output failed (the Modbus slave refused a write from 127.0.0.1?)")
     }
     Sleep($settle_ms)
     grasp = 0
     if (cmd == $cmd_close)
     {
-        grasp = modbus_read("TM", 1, "DI", $di_address, 1)[0]
+        bits = modbus_read("TM", 1, "DI", $di_address, 1)
+        grasp = bits[0]
     }
-    modbus_write("TM", "fbGrasp", grasp)
+    Put("fbGrasp", grasp)
     Done()
 }"""
 
@@ -102,11 +115,123 @@ void Grip()
 }"""
 
 
-def _format_number(value: float) -> str:
-    """A number as TMscript source: integers without a fraction, others shortest-exact."""
-    if not math.isfinite(value):
-        raise ConfigError(f"tool values must be finite, got {value!r}")
-    return str(int(value)) if float(value).is_integer() else repr(float(value))
+#: The largest tool values the program writes, by field: a TCP within 2 m of the flange
+#: (the profile's target range), angles within one turn, a tool up to 100 kg, principal
+#: moments of inertia up to 1e8 kg mm^2 (100 kg m^2). Each is written as a float literal
+#: with six decimals at most, never an integer (TMscript's int is 32-bit, [TS] 2.2).
+TOOL_POSITION_MAX_MM = 2000.0
+TOOL_ANGLE_MAX_DEG = 360.0
+TOOL_MASS_MAX_KG = 100.0
+TOOL_INERTIA_MAX = 1e8
+_TCP_NAMES = ("x", "y", "z", "rx", "ry", "rz")
+#: ChangeTCP's inertia array (TMscript 2.24 §13.6 syntax 4, pp. 327-328): principal
+#: moments Ixx, Iyy, Izz, then the mass centre frame X, Y, Z, RX, RY, RZ.
+INERTIA_NAMES = ("ixx", "iyy", "izz", "cx", "cy", "cz", "crx", "cry", "crz")
+#: A tool name as TMflow's Tool Settings shows it, written into a string literal.
+_TOOL_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_\-]{0,63}$")
+
+
+def _bound(name: str, index: int) -> tuple[float, float]:
+    """The range of a tool value: ``name`` "tool" (X..RZ) or "inertia" (its nine)."""
+    if name == "tool":
+        top = TOOL_POSITION_MAX_MM if index < 3 else TOOL_ANGLE_MAX_DEG
+        return -top, top
+    if index < 3:
+        return 0.0, TOOL_INERTIA_MAX
+    top = TOOL_POSITION_MAX_MM if index < 6 else TOOL_ANGLE_MAX_DEG
+    return -top, top
+
+
+def _float_literal(field: str, value: float, low: float, high: float) -> str:
+    """``value`` as a TMscript float literal: checked in ``low..high``, six decimals at most.
+
+    Raises:
+        ConfigError: Not a finite number in range (the message names ``field``).
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{field} must be a number, got {value!r}")
+    if not math.isfinite(value) or not low <= value <= high:
+        raise ConfigError(f"{field} must be a finite number in {low:g}..{high:g}, got {value!r}")
+    text = f"{float(value):.6f}".rstrip("0")
+    text = text + "0" if text.endswith(".") else text
+    return "0.0" if float(text) == 0 else text
+
+
+@dataclass(frozen=True)
+class ToolSetting:
+    """The TCP the program sets when it starts: a TMflow tool by name, or values with mass.
+
+    ``name``: a tool defined in TMflow's Tool Settings with its mass and inertia (TMflow
+    2.24 Software Manual, §8 "Create the TCP", pp. 156-157); the program calls
+    ``ChangeTCP("name")`` (TMscript 2.24 §13.6 syntax 1, p. 327). Otherwise ``tcp`` (X,
+    Y, Z, RX, RY, RZ of the TCP in the flange frame, mm and degrees) and ``mass_kg``,
+    required (a tool is never weightless by default): ``ChangeTCP(tool, mass)`` (syntax
+    3, p. 327), or with ``inertia`` (Ixx, Iyy, Izz in kg mm^2, then the mass centre frame
+    X, Y, Z in mm and RX, RY, RZ in degrees, w.r.t. the flange)
+    ``ChangeTCP(tool, mass, inertia)`` (syntax 4, pp. 327-328). ``mass_kg=0`` is a
+    deliberate choice (a bare flange), never a default.
+
+    Raises:
+        ConfigError: Neither or both ways, a missing mass, a value out of range (the
+            message names it), a name TMflow would not show.
+    """
+
+    name: str | None = None
+    tcp: Pose | None = None
+    mass_kg: float | None = None
+    inertia: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.name is not None:
+            if self.tcp is not None or self.mass_kg is not None or self.inertia is not None:
+                raise ConfigError(
+                    "tool: give a TMflow tool name or values with mass, not both (the named"
+                    " tool carries its own mass and inertia)"
+                )
+            if not isinstance(self.name, str) or not _TOOL_NAME.match(self.name):
+                raise ConfigError(
+                    "tool name must be 1-64 letters, digits, '_' or '-' as TMflow shows it,"
+                    f" got {self.name!r}"
+                )
+            return
+        if self.tcp is None:
+            raise ConfigError("tool: give a TMflow tool name, or the TCP values and mass_kg")
+        if self.mass_kg is None:
+            raise ConfigError(
+                "tool mass_kg is required with the TCP values: TMflow needs the tool's mass"
+                " (0 only for a bare flange, given on purpose)"
+            )
+        if self.inertia is not None and len(self.inertia) != len(INERTIA_NAMES):
+            raise ConfigError(
+                f"tool inertia needs {len(INERTIA_NAMES)} values"
+                f" ({', '.join(INERTIA_NAMES)}), got {len(self.inertia)}"
+            )
+        self.statements()  # every value checked now, naming the one out of range
+
+    def statements(self) -> tuple[str, str]:
+        """The program's declarations (``define``) and its ChangeTCP call (``main``).
+
+        Returns:
+            ``(declarations, call)``, TMscript source lines without indentation.
+        """
+        if self.name is not None:
+            return "", f'ChangeTCP("{self.name}")'
+        assert self.tcp is not None
+        assert self.mass_kg is not None
+        values = ", ".join(
+            _float_literal(f"tool {n}", v, *_bound("tool", i))
+            for i, (n, v) in enumerate(zip(_TCP_NAMES, self.tcp.as_list(), strict=True))
+        )
+        mass = _float_literal("tool mass_kg", self.mass_kg, 0.0, TOOL_MASS_MAX_KG)
+        declarations = f"float[] tool = {{{values}}}"
+        if self.inertia is None:
+            return declarations, f"ChangeTCP(tool, {mass})"
+        inertia = ", ".join(
+            _float_literal(f"tool inertia {n}", v, *_bound("inertia", i))
+            for i, (n, v) in enumerate(zip(INERTIA_NAMES, self.inertia, strict=True))
+        )
+        declarations += f"\n    float[] inertia = {{{inertia}}}"
+        return declarations, f"ChangeTCP(tool, {mass}, inertia)"
 
 
 def check_program_profile(profile: RobotProfile) -> None:
@@ -128,7 +253,7 @@ def check_program_profile(profile: RobotProfile) -> None:
         )
     missing = [
         name
-        for name in (*TARGET_FIELDS, *_WORDS, *EXTENSION_FIELDS, *_FEEDBACK)
+        for name in (*TARGET_FIELDS, *_WORDS, *EXTENSION_FIELDS, *_FEEDBACK, *_MASTER)
         if not profile.has(name)
     ]
     if missing:
@@ -160,6 +285,16 @@ def check_program_profile(profile: RobotProfile) -> None:
     for name in _FEEDBACK:
         if profile.field(name).table is not Table.HOLDING:
             raise ConfigError(f"profile {profile.name!r}: {name} must be a holding register")
+    beat, ttl = (profile.field(name) for name in _MASTER)
+    if not (
+        beat.table is ttl.table is Table.HOLDING
+        and beat.dtype.width == ttl.dtype.width == 1
+        and ttl.address == beat.address + 1
+    ):
+        raise ConfigError(
+            f"profile {profile.name!r}: master_ttl_ms must be the holding register right"
+            f" after master_heartbeat ({beat.address}) for the robot program"
+        )
 
 
 #: The template's names for the codes of the handshake's fields: name -> (field, label).
@@ -191,7 +326,7 @@ def _value_codes(profile: RobotProfile) -> dict[str, int]:
 def robot_program(
     profile: RobotProfile,
     *,
-    tool: Pose | None = None,
+    tool: ToolSetting,
     gripper: GripperWiring | None = None,
     arguments: str = "",
 ) -> str:
@@ -199,8 +334,8 @@ def robot_program(
 
     Args:
         profile: a sequence-handshake robot profile (``tmflow`` or one extending it).
-        tool: the TCP in the flange frame the master plans with (mm, deg); None: the
-            flange itself.
+        tool: the TCP the program sets, with its mass: a TMflow tool by name, or the
+            values the master plans with (mm, deg) and the mass (:class:`ToolSetting`).
         gripper: how the program drives the gripper (end-module I/O by default).
         arguments: the command line that made it, quoted in the program's header.
 
@@ -208,14 +343,20 @@ def robot_program(
         The program's text (TMscript 2.24), ending with a newline.
 
     Raises:
-        ConfigError: a profile the program cannot serve, or a bad tool or gripper.
+        ConfigError: a profile the program cannot serve, a tool that is not a
+            ToolSetting, or a bad gripper.
     """
     check_program_profile(profile)
+    if not isinstance(tool, ToolSetting):
+        raise ConfigError(
+            "robot_program: tool must be a ToolSetting (a TMflow tool name, or the TCP"
+            f" values with mass_kg), got {tool!r}"
+        )
     wiring = gripper if gripper is not None else GripperWiring()
-    tool_values = (0.0,) * 6 if tool is None else tool.as_list()
+    tool_define, tool_change = tool.statements()
     codes = _value_codes(profile)
     first = profile.field(TARGET_FIELDS[0]).address
-    addresses = {name: profile.field(name).address for name in (*_FEEDBACK, "command")}
+    addresses = {name: profile.field(name).address for name in (*_FEEDBACK, *_MASTER, "command")}
     grip = Template(_GRIP_IO if wiring.kind == "io" else _GRIP_NONE).substitute(
         output=wiring.output,
         input=wiring.input,
@@ -241,7 +382,9 @@ def robot_program(
         fb_first=min(addresses[name] for name in _FEEDBACK),
         fb_last=max(addresses[name] for name in _FEEDBACK),
         seq_max=profile.seq_max,
-        tool=", ".join(_format_number(v) for v in tool_values),
+        tool_define=tool_define,
+        tool_change=tool_change,
+        timeout_ms=MODBUS_TIMEOUT_MS,
         gripper=grip,
         **addresses,
         **codes,
@@ -255,6 +398,45 @@ def _tool_argument(text: str) -> Pose:
         return Pose.parse(text)
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(f"{exc} (got {text!r})") from exc
+
+
+def _numbers_argument(text: str) -> tuple[float, ...]:
+    """Comma-separated numbers (argparse type)."""
+    try:
+        return tuple(float(part) for part in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"expected numbers separated by commas, got {text!r}"
+        ) from exc
+
+
+def tool_from_arguments(args: argparse.Namespace) -> ToolSetting:
+    """The :class:`ToolSetting` of ``--tool-name`` or ``--tool``/``--tool-mass``/``--tool-inertia``.
+
+    Args:
+        args: parsed by a parser that :func:`add_arguments` set up.
+
+    Returns:
+        The tool setting.
+
+    Raises:
+        ConfigError: No tool given, both ways given, no mass, or a value out of range.
+    """
+    if args.tool_name is None and args.tool is None:
+        raise ConfigError(
+            "robot-program needs the tool: --tool-name NAME (a tool defined in TMflow, with"
+            " its mass), or --tool X,Y,Z,RX,RY,RZ with --tool-mass KG"
+        )
+    if args.tool_name is not None:
+        if args.tool is not None or args.tool_mass is not None or args.tool_inertia is not None:
+            raise ConfigError(
+                "--tool-name takes the tool's values from TMflow: leave out --tool,"
+                " --tool-mass and --tool-inertia"
+            )
+        return ToolSetting(name=args.tool_name)
+    if args.tool_mass is None:
+        raise ConfigError("--tool needs --tool-mass KG: TMflow needs the tool's mass")
+    return ToolSetting(tcp=args.tool, mass_kg=args.tool_mass, inertia=args.tool_inertia)
 
 
 def _gripper_argument(text: str) -> GripperWiring:
@@ -282,11 +464,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--profile", default="tmflow", help="a sequence-handshake profile name or .toml file"
     )
-    parser.add_argument(
+    tool = parser.add_argument_group(
+        "tool (required: --tool-name, or --tool with --tool-mass)",
+        "the TCP the program sets when it starts, with the tool's mass",
+    )
+    tool.add_argument(
+        "--tool-name",
+        metavar="NAME",
+        help="a tool defined in TMflow (Configuration > Tool Settings) with its mass and"
+        " inertia: ChangeTCP(NAME)",
+    )
+    tool.add_argument(
         "--tool",
         type=_tool_argument,
         metavar="X,Y,Z,RX,RY,RZ",
         help="the TCP in the flange frame (mm, deg), as the master's Robot(tool=...)",
+    )
+    tool.add_argument(
+        "--tool-mass", type=float, metavar="KG", help="the tool's mass in kg (with --tool)"
+    )
+    tool.add_argument(
+        "--tool-inertia",
+        type=_numbers_argument,
+        metavar="IXX,IYY,IZZ,X,Y,Z,RX,RY,RZ",
+        help="principal moments of inertia (kg mm^2) and the mass centre frame w.r.t. the"
+        " flange (mm, deg), with --tool",
     )
     parser.add_argument(
         "--gripper",
@@ -309,11 +511,14 @@ def run(args: argparse.Namespace, argv: Sequence[str] = ()) -> str:
         The program text.
 
     Raises:
-        ConfigError: a profile the program cannot serve.
+        ConfigError: a profile the program cannot serve, or a tool missing or out of range.
     """
     from ._profiles import robot_profile
 
     quoted = "".join(f" {shlex.quote(a)}" for a in argv)
     return robot_program(
-        robot_profile(args.profile), tool=args.tool, gripper=args.gripper, arguments=quoted
+        robot_profile(args.profile),
+        tool=tool_from_arguments(args),
+        gripper=args.gripper,
+        arguments=quoted,
     )

@@ -33,9 +33,9 @@ from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import MotionType, Pose
 from .._registers import RobotProfile, Table
 from .._robot_models import RobotModel
-from .._robot_program import END_MODULE_DO, robot_program
+from .._robot_program import END_MODULE_DO, ToolSetting, robot_program
 from ..tmscript import Execution, Program, parse
-from ..tmscript._host import HostError, ModbusDevice, MotionCall
+from ..tmscript._host import HostError, ModbusCommunicationError, ModbusDevice, MotionCall
 from ._backend import PathBackend, PhysicsBackend
 from ._bank import RegisterBank
 from ._controller import MoveArgs, SimErrorCode, _Active
@@ -66,6 +66,19 @@ _FUNCTIONS: dict[int, tuple[Table, bool]] = {
     16: (Table.HOLDING, True),
 }
 
+#: Techman's error codes for a move the arm cannot make (TMflow 2.24 Software Manual,
+#: appendix J, p. 349): "Inverse Kinematics Failure, Working Range Issue" (a PTP or
+#: Circle target out of reach), "... Interpolation Points Issue" (a reachable target on
+#: a path the arm cannot follow), "Target of Line Motion is Out of reachable point of
+#: Robot", "Target of PtP Motion is Out of Joint Boundary" (a joint target).
+TM_IK_WORKING_RANGE = 0x0001
+TM_IK_INTERPOLATION = 0x0012
+TM_LINE_TARGET_UNREACHABLE = 0x001B
+TM_PTP_JOINT_BOUNDARY = 0x001C
+
+#: The mass of the simulated tool the generated program declares (an OnRobot 2FG7, 1.1 kg).
+SIMULATED_TOOL_MASS_KG = 1.1
+
 #: Error code the simulated controller reports when the program fails (a script error).
 SCRIPT_ERROR = 0x0300
 
@@ -85,6 +98,8 @@ class _Queued:
     #: ``Circle``: a point on the arc, and where the arc starts.
     via: Pose | None = None
     start: Pose | None = None
+    #: A move the arm cannot make: the error code and reason the robot stops with.
+    error: tuple[int, str] | None = None
 
 
 class SimHost:
@@ -120,6 +135,17 @@ class SimHost:
         if table is None:
             raise HostError(f"Modbus function {function} is not supported")
         bank = self._c.bank
+        refused = self._c.refused_writes
+        if (
+            write
+            and refused
+            and any((table, a) in refused for a in range(address, address + count))
+        ):
+            # The slave's answer to a client without write permission (its IP filter):
+            # a communication error, on which modbus_write returns false.
+            raise ModbusCommunicationError(
+                f"{device.name}: write to {table.value} {address} refused"
+            )
         try:
             if write:
                 bank.write(table, address, list(values or ()), device=True)
@@ -169,14 +195,23 @@ class SimHost:
         mass: float | None = None,
         inertia: Sequence[float] | None = None,
     ) -> None:
-        """The TCP of the following moves: the flange, or X, Y, Z, RX, RY, RZ."""
+        """The TCP of the following moves: the flange, or X, Y, Z, RX, RY, RZ, with the
+        tool's mass and inertia (TMscript 2.24 §13.6, pp. 327-328), published at 7354-7385
+        (TMflow 2.24 appendix C, "TCP Value", p. 313)."""
         if isinstance(value, str):
             if value != "RobotEndFlange":
                 raise HostError(f"TCP {value!r}: the simulator knows RobotEndFlange only")
             tool: Pose | None = None
         else:
             tool = None if all(abs(v) < 1e-9 for v in value) else Pose(*value)
+        if inertia is not None and len(inertia) != 9:
+            raise HostError(f"ChangeTCP: the inertia needs 9 values, got {len(inertia)}")
         self._c.change_tool(tool)
+        self._c.publish_tcp_value(
+            [0.0] * 6 if isinstance(value, str) else list(value),
+            0.0 if mass is None else float(mass),
+            [0.0] * 9 if inertia is None else list(inertia),
+        )
 
     def inversekin(
         self, pose: Sequence[float], reference: Sequence[float] | None = None
@@ -223,7 +258,9 @@ class ScriptProjectController(SequenceController):
     ) -> None:
         if program is None:
             # The program tmmaster ships, for this profile and the backend's tool.
-            program = robot_program(profile, tool=_backend_tool(backend))
+            program = robot_program(profile, tool=simulated_tool(_backend_tool(backend)))
+        #: The mass of the tool the program set (``ChangeTCP``), kg; None before it did.
+        self.tool_mass_kg: float | None = None
         #: The program's source, when given as text (the generated one is).
         self.program_text: str | None = program if isinstance(program, str) else None
         self._program = program if isinstance(program, Program) else _parsed(program)
@@ -235,6 +272,10 @@ class ScriptProjectController(SequenceController):
         self._gripper_output = gripper_output
         self._gripper_input = gripper_input
         self._gripper_output_high = False
+        #: Addresses the robot's slave refuses the program's writes to, as ``(table,
+        #: address)``: a slave whose IP filter gives 127.0.0.1 no write permission (a test
+        #: hook; empty by default).
+        self.refused_writes: set[tuple[Table, int]] = set()
         #: Every ``Display()`` text, in order (for tests and the CLI's trace).
         self.displayed: list[str] = []
         super().__init__(profile, bank, backend, model, **options)
@@ -283,6 +324,16 @@ class ScriptProjectController(SequenceController):
                 " start the simulator with that tool"
             )
 
+    def publish_tcp_value(self, tcp: list[float], mass: float, inertia: list[float]) -> None:
+        """The TCP the program set, its mass and inertia, where TMflow publishes them."""
+        self.tool_mass_kg = mass
+        names = [f"tcp_value_{n}" for n in ("x", "y", "z", "rx", "ry", "rz", "mass")]
+        names += [f"tcp_value_{n}" for n in ("ixx", "iyy", "izz")]
+        names += [f"tcp_value_cm_{n}" for n in ("x", "y", "z", "rx", "ry", "rz")]
+        for name, value in zip(names, [*tcp, mass, *inertia], strict=True):
+            if self._bank.has(name):
+                self._bank.set(name, value)
+
     def after_read(self, table: Table, address: int, words: list[int]) -> None:
         """A late_ack fault: the program read a new command and takes ``delay_s`` to ack it.
 
@@ -315,13 +366,16 @@ class ScriptProjectController(SequenceController):
         )
 
     def queue_motion(self, call: MotionCall) -> bool:
-        """Put a move into the buffer; False for a target or path the arm cannot take.
+        """Put a move into the buffer; False only for a command the robot would reject.
 
         PTP "CPP" / "JPP" (joints reached exactly), Line "C" + speed in % ("P") or mm/s
         ("A", "D") + any blending letter, Circle "CPP" / "CAP" / "CDP" with arc angle 0
         (blending is not modelled: each move ends at rest). Formats and arguments not
-        modelled are a host error; a joint target or an arc on a backend that cannot
-        follow one is refused (False).
+        modelled are a host error; a speed out of range, or a joint target or an arc on
+        a backend that cannot follow one, is refused (False). A target or a path the arm
+        cannot take is queued as it is on a robot, where PTP, Line and Circle return
+        false for a malformed command only (TMscript 2.24 pp. 331, 337, 343): when the
+        buffer reaches it, the robot stops in error with Techman's code for it.
         """
         fmt = _modelled_format(call)
         speed = float(call.speed)
@@ -336,12 +390,14 @@ class ScriptProjectController(SequenceController):
         start = self._queue[-1].target if self._queue else self._backend.tcp_pose()
         try:
             target, joints, via = self._planned(call, fmt, start)
-        except UnreachablePoseError as exc:
-            self.log_rejected(call.kind, exc.reason, Pose(*call.target[:6]))
-            return False
-        except ConfigError as exc:  # no arc through the points
-            self.log_rejected(call.kind, str(exc), Pose(*call.target[:6]))
-            return False
+        except (UnreachablePoseError, ConfigError) as exc:  # ConfigError: no arc
+            reason = exc.reason if isinstance(exc, UnreachablePoseError) else str(exc)
+            self.log_rejected(call.kind, reason, Pose(*call.target[:6]))
+            stop = (self._rejection_code(call, fmt), f"{call.kind} {fmt}: {reason}")
+            self._queue.append(
+                _Queued(Pose(*call.target[:6]), MotionType.PTP, speed, accel_s, error=stop)
+            )
+            return True
         if (joints is not None or via is not None) and not isinstance(self._backend, PathBackend):
             self.log_rejected(call.kind, f"{type(self._backend).__name__} cannot follow it", target)
             return False
@@ -350,6 +406,17 @@ class ScriptProjectController(SequenceController):
             _Queued(target, motion, speed, accel_s, joints=joints, via=via, start=start)
         )
         return True
+
+    def _rejection_code(self, call: MotionCall, fmt: str) -> int:
+        """Techman's error code for a move the arm cannot make (TMflow 2.24, appendix J,
+        p. 349): its target is out of reach, or only its path is."""
+        if fmt == "JPP":
+            return TM_PTP_JOINT_BOUNDARY
+        try:
+            self._model.inverse(Pose(*call.target[:6]), tool=self.tool)
+        except UnreachablePoseError:
+            return TM_LINE_TARGET_UNREACHABLE if call.kind == "Line" else TM_IK_WORKING_RANGE
+        return TM_IK_INTERPOLATION
 
     def _planned(
         self, call: MotionCall, fmt: str, start: Pose
@@ -457,7 +524,11 @@ class ScriptProjectController(SequenceController):
     def _run_handshake(self, dt: float, ready: bool) -> None:
         self._handle_buttons()
         self._publish_grip()
-        if not self._running or self._paused:
+        if not self._running:
+            return
+        if self._paused:
+            if self._execution is not None:
+                self._step_paused(self._execution)
             return
         if self._active is not None:
             self._advance(dt, ready)
@@ -469,10 +540,26 @@ class ScriptProjectController(SequenceController):
         if self._active is None and self._queue and ready and self._running:
             self._start_queued()
 
+    def _step_paused(self, execution: Execution) -> None:
+        """A paused project: its non-pause threads run ([TS] 3.12.1, p. 47).
+
+        One that stops the project (``Exit()``, an error) ends the pause: the interrupted
+        move is dropped, never resumed, and the stop section runs from the next tick.
+        """
+        execution.step_threads(STATEMENTS_PER_TICK, TICK_SECONDS)
+        if self._execution is execution and execution.phase != "main":
+            self._interrupted = None
+            self._queue.clear()
+            self._set_paused(False, "the program stopped the project from a thread")
+
     def _step(self, execution: Execution) -> None:
         status = execution.step(STATEMENTS_PER_TICK, TICK_SECONDS)
         if self._execution is not execution:
             return  # the program stopped the project (Exit()) or failed: handled below
+        if execution.phase != "main" and not execution.exit_waits and self._queue:
+            # Exit(false, ...): the project stops without waiting for the motion ([TS]
+            # 5.1, p. 154): the arm stops, the buffer is dropped.
+            self.clear_buffer()
         if status.state == "ended":
             self._log.info("sim.program_ended", device=self._name)
             self._execution = None
@@ -485,6 +572,12 @@ class ScriptProjectController(SequenceController):
 
     def _start_queued(self) -> None:
         move = self._queue[0]
+        if move.error is not None:
+            # The motion controller reaches a move it cannot make: an error stop.
+            code, reason = move.error
+            self._queue.clear()
+            self._enter_error(code, f"motion target rejected ({reason})")
+            return
         args = MoveArgs(
             move.target,
             move.motion,
@@ -516,6 +609,12 @@ class ScriptProjectController(SequenceController):
     def _backend_failed(self, seq: int, kind: Literal["motion", "gripper"]) -> None:
         self._queue.clear()
         self._enter_error(SimErrorCode.BACKEND_FAILURE, f"{kind} backend failed")
+
+
+def simulated_tool(tool: Pose | None) -> ToolSetting:
+    """The tool the generated program sets on the simulated robot: ``tool`` (None: the
+    flange's own frame) with the simulated gripper's mass, an OnRobot 2FG7's 1.1 kg."""
+    return ToolSetting(tcp=tool or Pose(0, 0, 0, 0, 0, 0), mass_kg=SIMULATED_TOOL_MASS_KG)
 
 
 def _backend_tool(backend: PhysicsBackend) -> Pose | None:

@@ -786,10 +786,10 @@ def _script_project(
         )
     # Imported here: the interpreter is loaded only by a simulator that runs a program.
     from .._robot_program import robot_program
-    from ._script_project import ScriptProjectController
+    from ._script_project import ScriptProjectController, simulated_tool
 
     if program == "generated":
-        text = robot_program(profile, tool=tool)
+        text = robot_program(profile, tool=simulated_tool(tool))
     else:
         path = Path(program)
         try:

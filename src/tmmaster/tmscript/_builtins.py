@@ -17,7 +17,7 @@ import struct
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 
-from ._host import Host, ModbusDevice, MotionCall
+from ._host import Host, ModbusCommunicationError, ModbusDevice, MotionCall
 from ._types import ARRAY_MAX, STRING_MAX, Scalar, Value, display_text, to_f32, wrap32
 
 __all__ = ["BUILTINS", "UNSUPPORTED", "Builtin", "BuiltinError", "Runtime", "Signature"]
@@ -57,8 +57,10 @@ class ModbusConfig:
 class ExitRequest(Exception):  # noqa: N818 - a signal, not an error
     """``Exit()`` was called (TMscript 2.24 §5.1)."""
 
-    def __init__(self, code: int) -> None:
+    def __init__(self, code: int, *, wait: bool = True) -> None:
         self.code = code
+        #: Exit(false, ...): stop without waiting for the motion to end (§5.1, p. 154).
+        self.wait = wait
         super().__init__(code)
 
 
@@ -70,6 +72,10 @@ class Runtime:
         self.devices: dict[str, ModbusConfig] = {}
         self.motion_allowed = True
         self.paused = False
+        #: The host's clock when the project started (GetNowStamp counts from it).
+        self.started_s = 0.0
+        #: The thread running now: 1 is main (ThreadRun numbers the others from 2).
+        self.thread = 1
 
 
 Impl = Callable[[Runtime, list[Value], tuple[str, ...]], Value]
@@ -589,6 +595,23 @@ def _GetBytes(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value: 
     return _checked(out)
 
 
+@_register("4.39", 128, "int()", "double(bool)")
+def _GetNowStamp(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.39 GetNowStamp, p. 128: the project's run time, ms (-1: overflow)."""
+    ms = int((rt.host.now_s() - rt.started_s) * 1000.0)
+    if args and args[0]:
+        return float(ms)
+    return ms if ms <= 2**31 - 1 else -1
+
+
+# ThreadRun(statement, bool) runs its statement in a thread of its own: the evaluator
+# compiles it (TMscript 2.24 §3.12.1, p. 47); this entry gives its signatures.
+@_register("3.12.1", 47, "int(*, bool)", "int(*)")
+def _ThreadRun(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §3.12.1 ThreadRun, p. 47 (compiled by the evaluator)."""
+    raise BuiltinError("ThreadRun is compiled by the evaluator")  # pragma: no cover
+
+
 @_register("4.42", 133, "int(*)")
 def _Length(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.42 Length, p. 133: bytes of a number, characters, or elements."""
@@ -605,10 +628,13 @@ def _Length(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  #
 def _Exit(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §5.1 Exit, p. 154: > 0 closestop, 0 by whether it erred, < 0 errorstop."""
     code = 0
+    wait = True
     for arg, typ in zip(args, types, strict=True):
         if typ != "bool":
             code = _int(arg)
-    raise ExitRequest(code)
+        else:
+            wait = bool(arg)
+    raise ExitRequest(code, wait=wait)
 
 
 @_register_blocking("5.2", 156, "bool()")
@@ -1244,8 +1270,16 @@ def _modbus_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
     By address (syntaxes 3 and 4): DO: FC 05 for one value, FC 15 for an array; RO: FC 06
     for one register, else FC 16.
     """
-    if types[1] == "string":
-        return _preset_write(rt, args, types)
+    try:
+        if types[1] == "string":
+            return _preset_write(rt, args, types)
+        return _address_write(rt, args, types)
+    except ModbusCommunicationError:
+        return False  # "an error occurred in Modbus communication" (p. 436)
+
+
+def _address_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+    """§16.11 syntaxes 3 and 4 (p. 436): by device, slave id, type and address."""
     device = _device(rt, args[0], _int(args[1]) & 0xFF)
     kind, address, value, typ = _str(args[2]), _int(args[3]), args[4], types[4]
     limit = _int_arg(args, 5)
@@ -1277,7 +1311,6 @@ UNSUPPORTED: frozenset[str] = frozenset(
         "GetToken",
         "GetAllTokens",
         "GetNow",
-        "GetNowStamp",
         "GetVarValue",
         "SetVarValue",
         "Ctrl",
@@ -1293,7 +1326,6 @@ UNSUPPORTED: frozenset[str] = frozenset(
         "ExecText",
         "ExecFile",
         "RedirectToProject",
-        "ThreadRun",
         "ThreadID",
         "ThreadState",
         "ThreadExit",

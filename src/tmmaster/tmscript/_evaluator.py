@@ -10,6 +10,7 @@ function; only those become generators (the common statement costs one call).
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 import time
@@ -118,6 +119,8 @@ class _Run(Runtime):
 
     def __init__(self, host: Host) -> None:
         super().__init__(host)
+        #: Threads ThreadRun started, in the order they run (main is not among them).
+        self.threads: list[_Thread] = []
         self.budget = 0
         #: The clock of the time budget: wall seconds by default (time.monotonic).
         self.clock: Callable[[], float] = time.monotonic
@@ -156,6 +159,18 @@ class _Return:
 
     def __init__(self, value: Value) -> None:
         self.value = value
+
+
+@dataclass
+class _Thread:
+    """A thread ThreadRun started (TMscript 2.24 §3.12, p. 47)."""
+
+    #: Its ID (main is 1).
+    ident: int
+    #: The statement it runs.
+    gen: Generator[str, None, Any]
+    #: It goes on while the project is paused (ThreadRun's bool, §3.12.1).
+    nonpause: bool
 
 
 _BREAK = "break"
@@ -1089,8 +1104,12 @@ class _CallCompiler:
             raise _syntax(node, f"unknown function {node.name}()")
         if node.name == "WaitFor" and len(node.args) == 2:
             return self.wait_for(node, builtin)
+        if node.name == "ThreadRun":
+            return self.thread_run(node)
         if builtin.motion and c.section in ("closestop", "errorstop"):
             raise _syntax(node, f"{node.name}(): no motion in {c.section} (§3.3, §3.4)")
+        if builtin.motion:
+            builtin = _main_thread_only(builtin)
         args = [c.expr(arg) for arg in node.args]
         sig = self.resolve(node, builtin, [ce.type for ce in args])
         fns, types = self.arguments(node, args, sig.params)
@@ -1155,6 +1174,27 @@ class _CallCompiler:
 
         return _CExpr(wait_gen, "bool", True)
 
+    def thread_run(self, node: a.Call) -> _CExpr:
+        # ThreadRun(statement, nonpause) runs the statement in a new thread and goes on
+        # (TMscript 2.24 §3.12.1, p. 47); the bool is false when left out.
+        if len(node.args) not in (1, 2):
+            raise _syntax(node, "ThreadRun(statement, bool) takes 1 or 2 arguments")
+        body = _lift(self.c.expr(node.args[0]))
+        nonpause = (
+            _lift(self.c.converted(node.args[1], "bool", node.args[1]))
+            if len(node.args) == 2
+            else None
+        )
+
+        def start_thread(fr: _Frame) -> Gen:
+            keep = truthy((yield from nonpause(fr))) if nonpause is not None else False
+            rt = fr.rt
+            ident = 2 + max((t.ident - 1 for t in rt.threads), default=0)
+            rt.threads.append(_Thread(ident, body(fr), keep))
+            return ident
+
+        return _CExpr(start_thread, "int", True)
+
     def user_call(self, node: a.Call, fn: _Function) -> _CExpr:
         if len(node.args) != len(fn.params):
             raise _syntax(
@@ -1214,6 +1254,20 @@ class _CallCompiler:
             return True
 
         return _CExpr(preset, "bool", False)
+
+
+def _main_thread_only(builtin: Builtin) -> Builtin:
+    """A motion function that fails in any thread but main (TMscript 2.24 §3.12, p. 47)."""
+    impl = builtin.impl
+    if impl is None:
+        return builtin
+
+    def guarded(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+        if rt.thread != 1:
+            raise ValueError("robot motion functions run in the main thread only (§3.12, p. 47)")
+        return impl(rt, args, types)
+
+    return dataclasses.replace(builtin, impl=guarded)
 
 
 def _call_failure(node: a.Call, exc: Exception) -> TMScriptRuntimeError:
@@ -1483,9 +1537,17 @@ class Execution:
         self.error: TMScriptRuntimeError | None = None
         #: The code given to Exit(), if it was called.
         self.exit_code: int | None = None
+        #: Whether Exit() asked to wait for the motion to end first (Exit(false): no).
+        self.exit_waits = True
         self._phase = "main"
         self._phase_start = 0.0
+        self._rt.started_s = host.now_s()
         self._gen: Generator[str, None, Control] | None = self._main()
+
+    @property
+    def phase(self) -> str:
+        """The section running: ``"main"``, ``"closestop"`` or ``"errorstop"``."""
+        return self._phase
 
     def _section(self, kind: str) -> Generator[str, None, Control] | None:
         section = self.program.sections.get(kind)
@@ -1504,6 +1566,10 @@ class Execution:
     def _enter(self, phase: str) -> None:
         if self._gen is not None:
             self._gen.close()
+        # The threads end with main.
+        threads, self._rt.threads = self._rt.threads, []
+        for thread in threads:
+            thread.gen.close()
         self._phase = phase
         self._phase_start = self.host.now_s()
         self._rt.motion_allowed = False
@@ -1553,6 +1619,8 @@ class Execution:
             self.state = ExecState.PAUSED
             return self.state
         self._rt.start(max_statements, max_seconds)
+        if self._phase == "main":
+            self._step_threads(nonpause_only=False)
         while self._gen is not None:
             if self._phase != "main" and (
                 self.host.now_s() - self._phase_start > STOP_SECTION_LIMIT_S
@@ -1571,17 +1639,59 @@ class Execution:
             return self.state
         return self.state
 
-    def _advance(self, gen: Generator[str, None, Control]) -> str | None:
-        """Run ``gen`` to its next yield; None when it ended or failed (handled here)."""
+    def step_threads(self, max_statements: int = 1000, max_seconds: float | None = None) -> Status:
+        """Run the non-pause threads only, as TMflow does while the project is paused.
+
+        A thread started with ``ThreadRun(statement, true)`` goes on while the project
+        is paused (TMscript 2.24 §3.12, p. 47); main and the other threads wait. Each
+        runs to its next wait or until the budget is spent.
+
+        Args:
+            max_statements: The most statements to run (at least 1).
+            max_seconds: The most seconds to run by the budget clock, or None.
+
+        Returns:
+            The new ``state``: a thread may have stopped the project (``Exit()``, an
+            error), which leaves main for closestop or errorstop.
+        """
+        if self.state not in (ExecState.ENDED, ExecState.ERROR) and self._phase == "main":
+            self._rt.start(max_statements, max_seconds)
+            self._step_threads(nonpause_only=True)
+        return Status(self.state, self.error, self.exit_code)
+
+    def _step_threads(self, *, nonpause_only: bool) -> None:
+        """Run each thread to its next yield; one that stops the project ends the round."""
+        rt = self._rt
+        for thread in list(rt.threads):
+            if nonpause_only and not thread.nonpause:
+                continue
+            rt.thread = thread.ident
+            try:
+                self._advance(thread.gen, thread=thread)
+            finally:
+                rt.thread = 1
+            if self._phase != "main" or self._gen is None:
+                return
+
+    def _advance(
+        self, gen: Generator[str, None, Control], thread: _Thread | None = None
+    ) -> str | None:
+        """Run ``gen`` to its next yield; None when it ended or failed (handled here).
+
+        ``thread``: ``gen`` is that thread's (ThreadRun); its end ends only the thread.
+        """
         try:
             return next(gen)
         except StopIteration:
-            if self._phase == "main":
+            if thread is not None:
+                self._rt.threads.remove(thread)
+            elif self._phase == "main":
                 self._enter("closestop")
             else:
                 self._finish()
         except ExitRequest as exit_:
             self.exit_code = exit_.code
+            self.exit_waits = exit_.wait
             if self._phase != "main":
                 self._finish()
             else:

@@ -14,11 +14,27 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol, runtime_checkable
 
-__all__ = ["Host", "HostError", "ModbusDevice", "MotionCall", "NullHost", "NullHostError"]
+__all__ = [
+    "Host",
+    "HostError",
+    "ModbusCommunicationError",
+    "ModbusDevice",
+    "MotionCall",
+    "NullHost",
+    "NullHostError",
+]
 
 
 class HostError(Exception):
     """A host could not do what the script asked (a Modbus timeout, a rejected motion...)."""
+
+
+class ModbusCommunicationError(HostError):
+    """The device refused a request or did not answer it (an exception answer, a timeout).
+
+    ``modbus_write`` returns false on it ("an error occurred in Modbus communication",
+    TMscript 2.24 §16.11, p. 436); other functions fail with it.
+    """
 
 
 @dataclass(frozen=True, slots=True)
