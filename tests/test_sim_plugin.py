@@ -103,29 +103,35 @@ def test_any_plugin_registers_a_scheme_the_core_opens_through_it() -> None:
     assert asked == ["bench://one", ["bench://one", "robot", "r1"], "bench://one: nothing runs"]
 
 
-@pytest.mark.parametrize(
-    "argv",
-    [
-        ["robot", "--help"],
-        ["profile", "list"],
-        ["pickplace", "--dry-run", "--quiet"],
-        ["report", "--help"],
-        ["tmscript", "--help"],
-        ["--help"],
-    ],
-    ids=" ".join,
-)
-def test_a_tmmaster_command_other_than_sim_loads_no_simulator(argv: list[str]) -> None:
+#: The commands other than ``sim``, as ``tmmaster`` arguments.
+OTHER_COMMANDS = [
+    ["robot", "--help"],
+    ["profile", "list"],
+    ["pickplace", "--dry-run", "--quiet"],
+    ["report", "--help"],
+    ["tmscript", "--help"],
+    ["--help"],
+]
+
+
+def test_a_tmmaster_command_other_than_sim_loads_no_simulator() -> None:
     # Each command's options load only when it is chosen: the sim command's need the
     # simulator, the others' do not (the top-level help lists every command anyway).
+    # One fresh process runs them one after the other and lists what is loaded after
+    # each: a module once loaded stays in sys.modules, so the first command to load the
+    # simulator is the one named.
     loaded = _run(
         "import contextlib, io, json, sys\n"
         "from tmmaster._cli import main\n"
-        "with contextlib.redirect_stdout(io.StringIO()):\n"
-        "    try:\n"
-        f"        main({argv!r})\n"
-        "    except SystemExit:  # --help\n"
-        "        pass\n"
-        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('tmmaster.sim'))))\n"
+        "after = {}\n"
+        f"for argv in {OTHER_COMMANDS!r}:\n"
+        "    with contextlib.redirect_stdout(io.StringIO()):\n"
+        "        try:\n"
+        "            main(argv)\n"
+        "        except SystemExit:  # --help\n"
+        "            pass\n"
+        "    sim = sorted(m for m in sys.modules if m.startswith('tmmaster.sim'))\n"
+        "    after[' '.join(argv)] = sim\n"
+        "print(json.dumps(after))\n"
     )
-    assert loaded == []
+    assert loaded == {" ".join(argv): [] for argv in OTHER_COMMANDS}
