@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import Pose, Robot, UnreachablePoseError
+from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError
 from tmmaster.pickplace import ARTICLE_HOME, pick_and_place, validate_config, validate_plan
 from tmmaster.sim import Simulator
 
@@ -66,11 +66,11 @@ def test_a_line_through_a_joint_limit_is_refused_before_the_write(
         robot.move_to(NEAR_BASE, speed=30, motion="line")
     assert caught.value.reason == "joint_limit"
     assert motion_writes(sim) == []  # status reads happened; no command was written
-    # The target itself is reachable (on another arm configuration): a PTP there passes
-    # every check. It is not run: flipping the arm on the way sweeps the fingers 9 mm into
-    # the simulated cell's table (top at 85 mm), which the simulator stops as a collision.
-    joints = robot.check_move(NEAR_BASE, speed=100)
-    assert tmmaster.robot_model("tm5-700").forward(joints).is_close(NEAR_BASE, mm=1e-3)
+    # The target itself has joint solutions, none in the arm's configuration (J3 would
+    # pass its limit there too); the PTP's, the nearest in another configuration (J1
+    # turned about 120 deg), puts link 3 under the table: refused as well, nothing sent.
+    with pytest.raises(ConfigError, match="link 3"):
+        robot.check_move(NEAR_BASE, speed=100)
     assert motion_writes(sim) == []
 
 

@@ -283,6 +283,14 @@ class Planner:
 
     def validate(self, pose: Pose, speed: int, seed_deg: Sequence[float] | None = None) -> Joints:
         """:meth:`Robot.validate_move`: speed, units, workspace, inverse kinematics."""
+        self._check_target(pose, speed)
+        seed = seed_deg if seed_deg is not None else self.joints_hint
+        joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+        self.workspace.check_arm(self.model, joints)
+        return joints
+
+    def _check_target(self, pose: Pose, speed: int) -> None:
+        """A target's checks without its joints: type, speed, units, the workspace."""
         if not isinstance(pose, Pose):
             raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
         if isinstance(speed, bool) or not isinstance(speed, int):
@@ -291,11 +299,17 @@ class Planner:
             raise ConfigError(f"speed {shown(speed)} % is outside 1..{self.max_speed_percent} %")
         if self.check_units:
             refuse_suspect_units("target", pose)
-        seed = seed_deg if seed_deg is not None else self.joints_hint
         self.workspace.check(pose, tool=self.tool)
-        joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
-        self.workspace.check_arm(self.model, joints)
-        return joints
+
+    def _check_line(
+        self, start: Pose, target: Pose, speed: int, seed_deg: Sequence[float] | None
+    ) -> Joints:
+        """A Line's checks: it ends where its path from the arm's joints ends (the arm
+        keeps its configuration), not where a fresh inverse solution would put it."""
+        self._check_target(target, speed)
+        path = self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
+        self.workspace.check_arm(self.model, path[-1])
+        return path[-1]
 
     def check_move(
         self,
@@ -306,10 +320,9 @@ class Planner:
         seed_deg: Sequence[float] | None,
     ) -> Joints:
         """:meth:`Robot.check_move`'s model checks (the profile's encoding aside)."""
-        joints = self.validate(target, speed, seed_deg)
         if motion is MotionType.LINE and start is not None:
-            self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
-        return joints
+            return self._check_line(start, target, speed, seed_deg)
+        return self.validate(target, speed, seed_deg)
 
     def check_path(self, target: Pose, speed: int, motion: MotionType) -> None:
         """A move's checks before any request, a Line's path from the seed included.
@@ -317,18 +330,20 @@ class Planner:
         A Line the arm cannot follow from where it is believed to be is refused without
         touching the robot; it is checked again from the pose the robot reports.
         """
-        self.validate(target, speed)
         if motion is MotionType.LINE and self.hint_pose is not None:
-            self.model.line_joints(
-                self.hint_pose, target, start_joints_deg=self.joints_hint, tool=self.tool
-            )
+            self._check_line(self.hint_pose, target, speed, self.joints_hint)
+        else:
+            self.validate(target, speed)
 
     def check_arc_move(self, via: Pose, to: Pose, speed: int) -> None:
         """An arc's checks before any request: its end, ``via``, the arc from the seed."""
-        self.validate(to, speed)
+        self._check_target(to, speed)
         self.workspace.check(via)  # its position (the TCP passes there)
         if self.hint_pose is not None:
-            self.check_arc(self.hint_pose, via, to, self.joints_hint)
+            samples = self.check_arc(self.hint_pose, via, to, self.joints_hint)
+            self.workspace.check_arm(self.model, samples[-1])
+        else:
+            self.validate(to, speed)
 
     def joint_target(self, joints: Sequence[float], speed: int) -> tuple[Joints, Pose]:
         """A joint move's checked joints and the TCP pose they give (validated as a target)."""

@@ -149,6 +149,14 @@ class RobotModel(BaseModel):
     ) -> Joints:
         """Joints (deg) that put the flange (or the ``tool``'s TCP) at ``pose``, nearest the seed.
 
+        Nearest: in the seed's pose configuration (shoulder, elbow and wrist,
+        :meth:`configuration`) when any solution has it, as TMscript's ``inversekin``
+        answers "by the current pose configuration" (TMscript 2.24, p. 207); else the
+        solution with the shortest PTP from the seed (:meth:`ptp_seconds`). The master
+        plans with this rule and the simulator moves with it; a real controller's own
+        choice is the robot's, and the master's timeouts and arrival checks do not
+        depend on it (docs/kinematics.md).
+
         Args:
             pose: The flange pose, or the TCP pose with ``tool``.
             seed_deg: Joints to start from (where the arm is); None: the ready posture.
@@ -191,10 +199,12 @@ class RobotModel(BaseModel):
         else:
             # The canonical postures find nearly every pose; the wider search (J1 aimed at
             # the flange and its opposite, the shoulder all round) runs only when they
-            # found no admissible solution, so a refusal is never a missed branch.
+            # found none in the seed's configuration, so a refusal is never a missed
+            # branch and another configuration is taken only when the seed's has none.
             best = self._search(self._starts(seed), seed, target, tool_t, problems)
-            if best is None:
-                best = self._search(self._wide_starts(seed, flange), seed, target, tool_t, problems)
+            if best is None or self.configuration(best) != self.configuration(seed):
+                wide = self._wide_starts(seed, flange)
+                best = self._search(wide, seed, target, tool_t, problems, best)
         if best is not None:
             return best
         if not problems:
@@ -221,10 +231,20 @@ class RobotModel(BaseModel):
         target: kin.Transform,
         tool_t: kin.Transform,
         problems: list[tuple[str, str]],
+        best: Joints | None = None,
     ) -> Joints | None:
-        """The admissible solution nearest the seed from ``starts``; appends what failed."""
-        best: Joints | None = None
-        best_distance = math.inf
+        """The admissible solution from ``starts`` (or ``best``) that :meth:`inverse`
+        prefers; appends what failed.
+
+        Preferred: the seed's configuration (:meth:`configuration`) over any other, then
+        the shortest PTP from the seed (:meth:`ptp_seconds`).
+        """
+        keep = self.configuration(seed)
+
+        def preference(joints: Joints) -> tuple[bool, float]:
+            return (self.configuration(joints) != keep, self.ptp_seconds(seed, joints))
+
+        best_key = (True, math.inf) if best is None else preference(best)
         for start in starts:
             raw = kin.dls_inverse(
                 self._chain, target, [math.radians(q) for q in start], tool=tool_t
@@ -236,13 +256,52 @@ class RobotModel(BaseModel):
                 problems.append(problem)
                 continue
             assert joints is not None
-            distance = max(abs(a - b) for a, b in zip(joints, seed, strict=True))
-            if distance < best_distance:
-                best, best_distance = joints, distance
-            if start == seed:
-                # Converged from the seed itself: that is the nearest branch.
+            key = preference(joints)
+            if key < best_key:
+                best, best_key = joints, key
+            if start == seed and not key[0]:
+                # The seed's own configuration, its joints moved by whole turns nearest
+                # the seed (_admissible): no other start can find a preferred one.
                 break
         return best
+
+    def configuration(self, joints_deg: Sequence[float]) -> tuple[bool, bool, bool]:
+        """The arm's pose configuration: shoulder, elbow and wrist.
+
+        Techman's pose configuration (Config1-3: PTP Syntax 2 and its figure, TMscript
+        2.24 pp. 332-334) tells the same three choices apart: the side the arm reaches
+        to across J2's axis (Config1: a cross product of the arm's reach and the wrist
+        offset, projected on the base's X-Y plane), then the signs of J3 and J5 relative
+        to it. Two joint sets have the same configuration when these three are equal.
+
+        Args:
+            joints_deg: J1..J6, deg.
+
+        Returns:
+            (the wrist in front of the J2 axis, J3 >= 0, J5 >= 0).
+        """
+        frames = self.joint_frames(joints_deg)
+        axis = frames[1]  # J2's frame: its z column is J2's axis
+        wrist = frames[4]  # J5's origin
+        # "Front": the J2 axis crossed with the vertical, i.e. (a_y, -a_x) in the plane.
+        front = wrist[0][3] * axis[1][2] - wrist[1][3] * axis[0][2]
+        return (front >= 0.0, joints_deg[2] >= 0.0, joints_deg[4] >= 0.0)
+
+    def ptp_seconds(self, start_deg: Sequence[float], end_deg: Sequence[float]) -> float:
+        """How far apart two joint sets are for a PTP: the largest joint travel over that
+        joint's top speed, s at 100 % (acceleration aside).
+
+        Args:
+            start_deg: J1..J6, deg.
+            end_deg: J1..J6, deg.
+
+        Returns:
+            Seconds.
+        """
+        return max(
+            abs(b - a) / v
+            for a, b, v in zip(start_deg, end_deg, self.joint_speed_deg_s, strict=True)
+        )
 
     def start_joints(
         self,
