@@ -13,19 +13,23 @@ from __future__ import annotations
 import re
 import struct
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 import tmmaster
+from test_script_project import open_robot
 from test_sim_controller import DT, FAR, HOME, run, run_until, send_tmflow, tmflow
-from tmmaster import Pose, _cli
+from tmmaster import FrameCheck, Pose, _cli
 from tmmaster._profiles import profile_from_data, robot_profile
 from tmmaster._registers import Table
 from tmmaster._robot_program import ToolSetting, robot_program
+from tmmaster.sim import RobotSetup, Simulator
 from tmmaster.sim._controller import RobotController
 from tmmaster.sim._script_project import (
     TM_IK_INTERPOLATION,
+    TM_IK_WORKING_RANGE,
     TM_PTP_JOINT_BOUNDARY,
     ScriptProjectController,
 )
@@ -268,6 +272,30 @@ def test_a_line_whose_path_the_arm_cannot_follow_is_an_error_stop() -> None:
     send_tmflow(bank, 1, command=2, target=Pose(-300, 200, 200, 180, 0, 90))
     run_until(ctl, lambda: bank.get("error") is True, limit_s=2.0)
     assert bank.get("last_error_code") == TM_IK_INTERPOLATION
+
+
+def test_the_master_sees_the_error_stop_of_a_target_the_arm_cannot_reach(
+    tm_simulator_factory: Callable[..., Simulator], tmp_path: Path
+) -> None:
+    # A program without the inversekin check hands PTP a target the simulated TM5-700
+    # cannot reach (a master planning for a TM5-900 sends it): the robot stops in error
+    # with 0x0001, and the master raises RobotFaultError naming Techman's code.
+    text = program_text()
+    check = "        joints = inversekin(target)\n        if (Length(joints) != 6)\n"
+    assert check in text
+    program = tmp_path / "no_reach_check.tms"
+    program.write_text(text.replace(check, "        if (false)\n", 1), encoding="utf-8")
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    robot = open_robot(
+        sim, model="tm5-900", frame_check=FrameCheck.off("the two arm models differ on purpose")
+    )
+    try:
+        with pytest.raises(tmmaster.RobotFaultError, match="0x0001") as info:
+            robot.move_to(Pose(800, 0, 300, 180, 0, 90), speed=30, timeout=10)
+        assert info.value.error_code == TM_IK_WORKING_RANGE
+        assert sim.motion_log() == ()
+    finally:
+        robot.close()
 
 
 # -- 5. profile checks -----------------------------------------------------------------------
