@@ -610,7 +610,7 @@ def run_fleet(
     fleet._timings = timings  # lateness and response of every answered watch read
     with fleet:
         robots = [
-            Robot("127.0.0.1", port, profile=profile, gripper=None, name=f"robot{i}", fleet=fleet)
+            Robot("127.0.0.1", port, profile=profile, gripper=None, name=f"robot{i}", link=fleet)
             for i, port in enumerate(ports)
         ]
         for robot in robots:

@@ -430,7 +430,7 @@ def measure(
     sims = SimFarm(n, per_process or n, time_scale, sim_cpus, slave)
     fleet = Fleet(watch_hz=watch_hz or None) if mode == "fleet" else None
     robots = [
-        Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}", fleet=fleet)
+        Robot("127.0.0.1", port, profile="article", gripper=None, name=f"robot{i}", link=fleet)
         for i, port in enumerate(sims.ports)
     ]
     try:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError, configure_logging
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TimeoutPolicy, TMMasterError, configure_logging
 from tmmaster.pickplace import RetryRule, Runner, StepContext, TaskSequence, mermaid
 
 PART = Pose(300, -200, 100, 180, 0, 90)
@@ -85,9 +85,9 @@ def main(argv: list[str] | None = None) -> int:
             args.host,
             args.port,
             profile=args.profile,
-            gripper_settle_s=args.settle,
+            timeouts=TimeoutPolicy(gripper_settle_s=args.settle),
             # The default Workspace() is the simulated cell (its table top at 85 mm): on
-            # yours, workspace=Workspace(floor_z_mm=your table top's height).
+            # yours, checks=Checks(workspace=Workspace(floor_z_mm=your table top's height).
         ) as robot:
             result = Runner(robot).run(sequence)
     except TMMasterError as exc:

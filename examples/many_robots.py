@@ -173,8 +173,8 @@ def run(
             profile=profile,
             gripper=None,
             name=f"robot{first_index + i}",
-            fleet=shared,
             retry=retry,
+            link=shared,
         )
         for i, port in enumerate(ports)
     ]

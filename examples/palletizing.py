@@ -24,6 +24,7 @@ from tmmaster import (
     DEFAULT_PROFILE,
     Pose,
     Robot,
+    TimeoutPolicy,
     TMMasterError,
     configure_logging,
 )
@@ -70,9 +71,9 @@ def main(argv: list[str] | None = None) -> int:
             args.host,
             args.port,
             profile=args.profile,
-            gripper_settle_s=args.settle,
+            timeouts=TimeoutPolicy(gripper_settle_s=args.settle),
             # The default Workspace() is the simulated cell (its table top at 85 mm): on
-            # yours, workspace=Workspace(floor_z_mm=your table top's height).
+            # yours, checks=Checks(workspace=Workspace(floor_z_mm=your table top's height).
         ) as robot:
             # Every slot is checked against the profile before the first move.
             validate_plan(robot, sequence, pallet.size, source=f"{args.rows}x{args.cols} pallet")

@@ -45,7 +45,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from tmmaster import DEFAULT_PROFILE, Pose, Robot, TMMasterError
+from tmmaster import DEFAULT_PROFILE, Pose, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import Cell, ObjectState, Simulator, TableObject
 
 HOST = "127.0.0.1"
@@ -167,10 +167,10 @@ def run(
                 host,
                 port,
                 profile=profile,
-                gripper_settle_s=settle_s,
                 name=f"robot-{name}",
+                timeouts=TimeoutPolicy(gripper_settle_s=settle_s),
                 # The default Workspace() is the simulated cell (its table top at 85 mm): on
-                # yours, workspace=Workspace(floor_z_mm=your table top's height).
+                # yours, checks=Checks(workspace=Workspace(floor_z_mm=your table top's height).
             ) as robot:
                 job(robot, shared)
         except BaseException as exc:  # reported by main(); the other robot is told

@@ -15,7 +15,7 @@ import pytest
 
 import tmmaster
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
-from tmmaster import Robot
+from tmmaster import PollPolicy, Robot
 from tmmaster.sim import Simulator, Timing
 
 
@@ -158,7 +158,7 @@ def robots() -> Iterator[Callable[..., Robot]]:
 
     def make(sim: Simulator, **options: Any) -> Robot:
         options.setdefault("profile", sim.profile)
-        options.setdefault("poll_interval_s", 0.01)
+        options.setdefault("polling", PollPolicy(interval_s=0.01))
         options.setdefault(
             "retry", tmmaster.RetryPolicy(attempts=8, total_time_s=5, initial_backoff_s=0.02)
         )

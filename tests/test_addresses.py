@@ -24,6 +24,7 @@ from tmmaster import (
     ConnectError,
     ConnectRefusedError,
     Fleet,
+    GripperDevice,
     HostNotFoundError,
     ModbusTransport,
     RetryPolicy,
@@ -131,8 +132,8 @@ def test_robot_and_connect_refuse_a_port_in_the_host_before_any_io(no_io: None) 
     assert str(info.value) == "host: '192.168.1.100:502' includes a port; put the port in port"
     with pytest.raises(ConfigError, match=r"^host: 'http://192\.0\.2\.1:502' is a URL"):
         Robot("http://192.0.2.1:502")
-    with pytest.raises(ConfigError, match=r"^gripper_host: .* put the port in gripper_port"):
-        Robot("127.0.0.1", gripper="blog-2fg7", gripper_host="127.0.0.1:5021")
+    with pytest.raises(ConfigError, match=r"^gripper\.host: .* put the port in gripper\.port"):
+        Robot("127.0.0.1", gripper=GripperDevice("blog-2fg7", host="127.0.0.1:5021"))
     with pytest.raises(ConfigError, match=r"^port: 70000 is not a TCP port"):
         Robot("127.0.0.1", 70000)
     with pytest.raises(ConfigError, match=r"^host: "):
@@ -145,7 +146,7 @@ def test_a_fleet_robot_refuses_a_port_in_the_host_before_any_io(no_io: None) -> 
     fleet = Fleet()
     try:
         with pytest.raises(ConfigError, match=r"^host: .* includes a port"):
-            Robot("10.0.0.7:502", profile="article", gripper=None, fleet=fleet)
+            Robot("10.0.0.7:502", profile="article", gripper=None, link=fleet)
     finally:
         fleet.close()
 
@@ -223,11 +224,11 @@ def test_a_name_that_does_not_resolve_is_said_as_such_at_once(unresolvable: list
 def test_a_fleet_robot_says_the_same(unresolvable: list[str]) -> None:
     fleet = Fleet()
     try:
-        robot = Robot("robot.invalid", profile="article", gripper=None, fleet=fleet, retry=PATIENT)
+        robot = Robot("robot.invalid", profile="article", gripper=None, retry=PATIENT, link=fleet)
         with pytest.raises(HostNotFoundError, match=r"cannot resolve host 'robot\.invalid'"):
             robot.connect()
         assert robot.stats.retries == 0
-        robot = Robot("127.0.0.1", free_port(), profile="article", gripper=None, fleet=fleet)
+        robot = Robot("127.0.0.1", free_port(), profile="article", gripper=None, link=fleet)
         with pytest.raises(ConnectRefusedError):
             robot.connect()
         assert robot.stats.retries == 0

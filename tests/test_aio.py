@@ -21,7 +21,7 @@ import pytest
 import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
-from tmmaster import MovePhase, Pose, Robot, TimeoutPolicy, aio
+from tmmaster import MovePhase, PollPolicy, Pose, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
@@ -40,8 +40,8 @@ def slow(time_scale: float) -> dict[str, float]:
 
 def open_robot(sim: Simulator, **options: Any) -> aio.AsyncRobot:
     """``aio.connect`` to ``sim`` with the suite's short poll interval."""
-    options.setdefault("poll_interval_s", 0.01)
-    options.setdefault("gripper_settle_s", 0.05)
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
+    options.setdefault("timeouts", TimeoutPolicy(gripper_settle_s=0.05))
     return aio.connect("127.0.0.1", sim.port, profile=sim.profile, **options)
 
 
@@ -288,7 +288,9 @@ def test_cancelling_before_the_robot_took_the_command_withdraws_it(
     issued: list[Issued] = []
 
     async def scenario() -> None:
-        async with open_robot(sim, timeouts=TimeoutPolicy(ack_timeout_s=30)) as robot:
+        async with open_robot(
+            sim, timeouts=TimeoutPolicy(ack_timeout_s=30, gripper_settle_s=0.05)
+        ) as robot:
             await robot.wait_until_ready(timeout_s=5)
             issued.append(Issued(A, time.monotonic()))
             task = asyncio.create_task(robot.move_to(A, speed=60))
@@ -391,7 +393,9 @@ def test_ctrl_c_in_asyncio_run_withdraws_and_closes(
     seen: dict[str, Any] = {}
 
     async def main() -> None:
-        async with open_robot(sim, timeouts=TimeoutPolicy(ack_timeout_s=30)) as robot:
+        async with open_robot(
+            sim, timeouts=TimeoutPolicy(ack_timeout_s=30, gripper_settle_s=0.05)
+        ) as robot:
             await robot.wait_until_ready(timeout_s=5)
             seen["robot"] = robot
             # Ctrl-C while the command waits for its acknowledgement (asyncio.run's own
@@ -613,9 +617,18 @@ def test_a_robot_of_your_own_fleet_or_in_process_simulator(
     async def scenario() -> None:
         with tmmaster.Fleet() as fleet:
             own = aio.AsyncRobot(
-                Robot("127.0.0.1", tcp.port, fleet=fleet, poll_interval_s=0.01, name="own")
+                Robot(
+                    "127.0.0.1",
+                    tcp.port,
+                    name="own",
+                    polling=PollPolicy(interval_s=0.01),
+                    link=fleet,
+                )
             )
-            async with own, aio.connect(memory.url, poll_interval_s=0.01) as in_process:
+            async with (
+                own,
+                aio.connect(memory.url, polling=PollPolicy(interval_s=0.01)) as in_process,
+            ):
                 assert in_process.robot._shared is None  # its thread polls its waits
                 await asyncio.gather(own.move_to(A, speed=80), in_process.move_to(A, speed=80))
 
@@ -639,10 +652,9 @@ def test_a_held_frame_of_an_awaited_move_never_runs_after_it_was_given_up() -> N
             async with aio.connect(
                 "127.0.0.1",
                 proxy.port,
-                poll_interval_s=0.01,
-                request_timeout_s=0.15,
-                timeouts=TimeoutPolicy(ack_timeout_s=0.5, motion_margin_s=1.0),
+                timeouts=TimeoutPolicy(request_s=0.15, ack_timeout_s=0.5, motion_margin_s=1.0),
                 retry=tmmaster.RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02),
+                polling=PollPolicy(interval_s=0.01),
             ) as robot:
                 first = Issued(A, time.monotonic())
                 await robot.move_to(A, speed=80)

@@ -20,7 +20,7 @@ import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
 from test_aio import run, until
-from tmmaster import Pose, Robot, TimeoutPolicy, aio
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
@@ -32,7 +32,7 @@ PROFILES = ["article", "tmflow"]
 
 
 def open_robot(sim: Simulator, **options: Any) -> aio.AsyncRobot:
-    options.setdefault("poll_interval_s", 0.01)
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
     return aio.connect("127.0.0.1", sim.port, profile=sim.profile, gripper=None, **options)
 
 

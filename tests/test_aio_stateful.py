@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
 from safety_invariant import Issued, check
-from tmmaster import Pose, TimeoutPolicy, TMMasterError, aio
+from tmmaster import PollPolicy, Pose, TimeoutPolicy, TMMasterError, aio
 from tmmaster.sim import Simulator, Timing
 
 STATEFUL_EXAMPLES = int(os.environ.get("TMMASTER_STATEFUL_EXAMPLES", "3"))
@@ -74,8 +74,8 @@ class AsyncCommandSafety(RuleBasedStateMachine):
             self.sim.port,
             profile=self.profile,
             gripper=None,
-            poll_interval_s=0.01,
             timeouts=TimeoutPolicy(ack_timeout_s=2.0),
+            polling=PollPolicy(interval_s=0.01),
         )
         try:
             self._run(robot.connect())

@@ -18,7 +18,7 @@ import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import ConfigError, FrameCheck, MotionType, Pose, Robot, Workspace
+from tmmaster import Checks, ConfigError, FrameCheck, MotionType, PollPolicy, Pose, Robot, Workspace
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import ToolSetting, robot_program
 from tmmaster.sim import Cell, KinematicBackend, RobotSetup, Simulator
@@ -79,7 +79,7 @@ def opened() -> Iterator[list[Robot]]:
 def open_robot(sim: Simulator, opened: list[Robot], **options: Any) -> Robot:
     options.setdefault("profile", "tmflow")
     options.setdefault("gripper", None)
-    options.setdefault("poll_interval_s", 0.01)
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
     robot = Robot(sim.url, **options)
     opened.append(robot)
     robot.connect()
@@ -160,7 +160,12 @@ def test_where_the_profile_publishes_no_joints_the_ready_posture_is_assumed(
     backend.wind()
     sim = memory_simulator_factory("article", cell=backend, **QUICK)
     # No table: the subject is the posture the plan starts from, not the cell.
-    robot = Robot(sim.url, profile="article", gripper=None, workspace=Workspace(floor_z_mm=None))
+    robot = Robot(
+        sim.url,
+        profile="article",
+        gripper=None,
+        checks=Checks(workspace=Workspace(floor_z_mm=None)),
+    )
     opened.append(robot)
     robot.connect()
     assert sim.request_log == []
@@ -197,7 +202,9 @@ def test_the_check_switched_off_connects_and_logs_why(
 ) -> None:
     sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     with caplog.at_level(logging.WARNING, "tmmaster"):
-        open_robot(sim, opened, frame_check=FrameCheck.off("bench test: TCP taught elsewhere"))
+        open_robot(
+            sim, opened, checks=Checks(frame=FrameCheck.off("bench test: TCP taught elsewhere"))
+        )
     assert "robot.frame_check_off" in caplog.text
     assert "bench test: TCP taught elsewhere" in caplog.text
 
@@ -232,8 +239,8 @@ def test_a_tcp_in_another_base_is_refused(memory_simulator_factory: SimFactory) 
 
 
 def test_the_check_is_typed_and_off_needs_a_reason() -> None:
-    with pytest.raises(ConfigError, match="frame_check"):
-        Robot("127.0.0.1", 1, frame_check=False)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"checks\.frame"):
+        Checks(frame=False)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="reason"):
         FrameCheck.off("  ")
     with pytest.raises(ValueError, match="reason"):

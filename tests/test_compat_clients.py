@@ -18,7 +18,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 import tmmaster
-from tmmaster import robot_model
+from tmmaster import PollPolicy, robot_model
 from tmmaster.sim import DEFAULT_PART_POSE, KinematicBackend, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -117,7 +117,7 @@ def test_the_2fg7_clients_force_reads_negative_on_a_part(tm_simulator_factory: S
     # Polled every 10 ms (the suite's pace; the default 50 ms is stretched mid-move): the
     # move only brings the fingers around the 30 mm part for the client under test.
     with tmmaster.connect(
-        "127.0.0.1", port=sim.port, profile="article", poll_interval_s=0.01
+        "127.0.0.1", port=sim.port, profile="article", polling=PollPolicy(interval_s=0.01)
     ) as robot:
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(DEFAULT_PART_POSE, speed=100)  # fingers around the 30 mm part

@@ -20,11 +20,11 @@ import pytest
 import tmmaster
 import tmmaster._fleet as fleet_module
 from fault_proxy import FaultProxy, Rule
-from tmmaster import Fleet, MovePhase, Pose, Robot, TimeoutPolicy
+from tmmaster import Fleet, MovePhase, PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster._channels import channel_for
 from tmmaster._following import FollowState
 from tmmaster._profiles import robot_profile
-from tmmaster.sim import DEFAULT_PART_POSE, MemoryTransport, Simulator
+from tmmaster.sim import DEFAULT_PART_POSE, Simulator
 
 SimFactory = Callable[..., Simulator]
 
@@ -47,8 +47,8 @@ def robots(fleet: Fleet) -> Iterator[Callable[..., Robot]]:
 
     def make(sim: Simulator, **options: Any) -> Robot:
         options.setdefault("gripper", None)
-        options.setdefault("poll_interval_s", 0.01)
-        robot = Robot("127.0.0.1", sim.port, profile=sim.profile, fleet=fleet, **options)
+        options.setdefault("polling", PollPolicy(interval_s=0.01))
+        robot = Robot("127.0.0.1", sim.port, profile=sim.profile, link=fleet, **options)
         opened.append(robot)
         robot.connect()
         robot.wait_until_ready(timeout_s=5)
@@ -135,7 +135,7 @@ def test_an_interrupt_ends_a_wait_the_loop_polls_at_once_and_stops_the_arm(
 ) -> None:
     sim = tm_simulator_factory(profile, time_scale=2)
     # Nominal polling at 1 s: only the interrupt's wake-up can end the wait quickly.
-    robot = robots(sim, poll_interval_s=1.0, polling=tmmaster.PollPolicy(predictive=False))
+    robot = robots(sim, polling=tmmaster.PollPolicy(interval_s=1.0, predictive=False))
     motion = robot.start_move(A, speed=10)
     sim.wait_for(lambda: bool(sim.motion_log()), timeout=5)
     threading.Timer(0.1, robot.interrupt).start()
@@ -193,9 +193,9 @@ def test_a_request_without_an_answer_times_out_on_its_own_timeout(
             proxy.port,
             profile="article",
             gripper=None,
-            request_timeout_s=0.1,
             retry=tmmaster.RetryPolicy(attempts=1),
-            fleet=fleet,
+            timeouts=TimeoutPolicy(request_s=0.1),
+            link=fleet,
         )
         with robot:
             proxy.add(Rule("drop_answer", function_code=3))
@@ -211,7 +211,7 @@ def test_closing_the_fleet_closes_its_robots_and_is_safe_twice(
 ) -> None:
     sim = tm_simulator_factory("article", time_scale=2)
     fleet = Fleet()
-    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None, link=fleet)
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
     motion = robot.start_move(A, speed=10)
@@ -223,17 +223,15 @@ def test_closing_the_fleet_closes_its_robots_and_is_safe_twice(
     with pytest.raises(tmmaster.ConnectError):
         robot.status()
     with pytest.raises(tmmaster.ConfigError):
-        Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+        Robot("127.0.0.1", sim.port, profile="article", gripper=None, link=fleet)
 
 
-def test_a_fleet_robot_refuses_an_explicit_transport_or_an_in_process_host(
+def test_a_fleet_robot_refuses_an_in_process_host(
     fleet: Fleet, tm_simulator_factory: SimFactory
 ) -> None:
     sim = tm_simulator_factory("article", listen=False)
-    with pytest.raises(tmmaster.ConfigError, match="transport or fleet"):
-        Robot("127.0.0.1", transport=MemoryTransport(sim), fleet=fleet)
     with pytest.raises(tmmaster.ConfigError, match="Modbus TCP"):
-        Robot(sim.url, fleet=fleet)
+        Robot(sim.url, link=fleet)
 
 
 class _NoIO:
@@ -295,12 +293,17 @@ def test_the_watch_reads_each_robots_status_between_its_moves_and_polls(
 ) -> None:
     sim = tm_simulator_factory(profile, time_scale=4)
     with Fleet(watch_hz=50) as fleet:
-        idle = Robot("127.0.0.1", sim.port, profile=profile, gripper=None, fleet=fleet)
+        idle = Robot("127.0.0.1", sim.port, profile=profile, gripper=None, link=fleet)
         time.sleep(0.1)
         assert fleet.latest(idle).polls == 0  # not connected: nothing read, nothing failed
         assert fleet.latest(idle).failures == 0
         robot = Robot(
-            "127.0.0.1", sim.port, profile=profile, gripper=None, poll_interval_s=0.01, fleet=fleet
+            "127.0.0.1",
+            sim.port,
+            profile=profile,
+            gripper=None,
+            polling=PollPolicy(interval_s=0.01),
+            link=fleet,
         )
         robot.connect()
         robot.wait_until_ready(timeout_s=5)
@@ -326,7 +329,7 @@ def test_latest_needs_a_watching_fleet_and_one_of_its_robots(
     fleet: Fleet, tm_simulator_factory: SimFactory
 ) -> None:
     sim = tm_simulator_factory("article")
-    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None, link=fleet)
     with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
         fleet.latest(robot)
     with Fleet(watch_hz=20) as other, pytest.raises(tmmaster.ConfigError, match="not one"):
@@ -349,9 +352,9 @@ def test_the_watch_does_not_read_again_what_a_moves_poll_just_read(
             sim.port,
             profile="article",
             gripper=None,
-            poll_interval_s=0.005,  # polls 5 ms apart: always fresher than half a slot
-            polling=tmmaster.PollPolicy(predictive=False),
-            fleet=fleet,
+            # polls 5 ms apart: always fresher than half a slot
+            polling=tmmaster.PollPolicy(interval_s=0.005, predictive=False),
+            link=fleet,
         )
         with robot:
             robot.wait_until_ready(timeout_s=5)
@@ -391,7 +394,7 @@ def test_a_fleet_robot_that_cannot_connect_raises_connect_error(fleet: Fleet) ->
         profile="article",
         gripper=None,
         retry=tmmaster.RetryPolicy(attempts=2, initial_backoff_s=0.01),
-        fleet=fleet,
+        link=fleet,
     )
     with pytest.raises(tmmaster.ConnectError):
         robot.connect()
@@ -406,7 +409,7 @@ def test_a_stop_request_just_before_the_loops_first_nap_is_not_slept_through(
     """The stop event set after the thread handed the wait over, before the loop's nap,
     with no wake-up call (the race interrupt() has with the loop): the loop sees it."""
     sim = tm_simulator_factory("article", time_scale=2)
-    robot = robots(sim, poll_interval_s=1.0, polling=tmmaster.PollPolicy(predictive=False))
+    robot = robots(sim, polling=tmmaster.PollPolicy(interval_s=1.0, predictive=False))
     due = FollowState.due
 
     def due_then_stop(state: FollowState) -> float:
@@ -430,7 +433,7 @@ def test_closing_the_fleet_while_a_thread_waits_ends_the_wait_and_stops_the_arm(
 ) -> None:
     sim = tm_simulator_factory(profile, time_scale=2)
     fleet = Fleet(watch_hz=20)
-    robot = Robot("127.0.0.1", sim.port, profile=profile, gripper=None, fleet=fleet)
+    robot = Robot("127.0.0.1", sim.port, profile=profile, gripper=None, link=fleet)
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
     ended: list[BaseException] = []
@@ -472,9 +475,9 @@ def test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_
             sim.port,
             profile=profile,
             gripper=None,
-            poll_interval_s=0.01,
             name=f"r{i}",
-            fleet=fleet,
+            polling=PollPolicy(interval_s=0.01),
+            link=fleet,
         )
         for i, sim in enumerate(sims)
     ]
@@ -533,8 +536,10 @@ def test_a_fleet_refuses_what_it_cannot_serve(tm_simulator_factory: SimFactory) 
         Fleet(watch_hz=1e6)
     with pytest.raises(tmmaster.ConfigError, match="watch_hz"):
         Fleet(watch_hz=float("nan"))
-    with pytest.raises(tmmaster.ConfigError, match=r"fleet must be a tmmaster\.Fleet"):
-        Robot("127.0.0.1", 1, profile="article", fleet=object())  # type: ignore[arg-type]
+    with pytest.raises(
+        tmmaster.ConfigError, match=r"link must be a tmmaster\.Transport or a tmmaster\.Fleet"
+    ):
+        Robot("127.0.0.1", 1, profile="article", link=object())  # type: ignore[arg-type]
     with Fleet(watch_hz=20) as fleet:
         with pytest.raises(tmmaster.ConfigError, match="not one"):
             fleet.latest(object())  # type: ignore[arg-type]

@@ -19,16 +19,19 @@ from tmmaster import (
     ConfigError,
     ConnectError,
     GraspFailedError,
+    GripperDevice,
     GripperError,
     GripperLink,
     GripperTimeoutError,
     OnRobot2FG7Gripper,
+    PollPolicy,
     Pose,
     RegisterGripper,
     RetryPolicy,
     Robot,
     SequenceGripper,
     StopRequestedError,
+    TimeoutPolicy,
     gripper_profile,
 )
 from tmmaster._profiles import profile_from_data
@@ -56,7 +59,7 @@ def robot_at(sim: Simulator, pose: Pose, **options: object) -> Iterator[Robot]:
     the simulators run at 40x, where the default 50 ms pace would make each move last
     ~0.17 s instead of ~0.04 s.
     """
-    options.setdefault("poll_interval_s", 0.01)
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
     robot = Robot(sim.url, profile=sim.profile, **options)  # type: ignore[arg-type]
     with robot:
         robot.wait_until_ready(5.0)
@@ -88,7 +91,12 @@ def test_article_grip_at_the_part_holds_it_and_returns_on_detection(
     sim = tm_simulator_factory("article")
     settle_s = 2.0
     # The polls are counted below: at the 50 ms pace they are written for.
-    with robot_at(sim, DEFAULT_PART_POSE, gripper_settle_s=settle_s, poll_interval_s=0.05) as robot:
+    with robot_at(
+        sim,
+        DEFAULT_PART_POSE,
+        timeouts=TimeoutPolicy(gripper_settle_s=settle_s),
+        polling=PollPolicy(interval_s=0.05),
+    ) as robot:
         gripper = robot.gripper
         assert isinstance(gripper, RegisterGripper)
         grasp = robot.profile.field("grasp_status")
@@ -116,7 +124,7 @@ def test_article_grip_at_the_part_holds_it_and_returns_on_detection(
 def test_article_close_away_from_the_part_is_not_holding(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article")
     # 0.15 s of settle: ~15 ticks, the fingers close all the way in one (39 mm at 40x).
-    with robot_at(sim, ABOVE_PART, gripper_settle_s=0.15) as robot:
+    with robot_at(sim, ABOVE_PART, timeouts=TimeoutPolicy(gripper_settle_s=0.15)) as robot:
         status = robot.gripper.close()
         assert not status.holding
         with pytest.raises(GraspFailedError):
@@ -128,7 +136,7 @@ def test_article_close_away_from_the_part_is_not_holding(tm_simulator_factory: F
 def test_article_grasp_miss_raises_grasp_failed(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article", faults=["grasp_miss:at_grasp=1"])
     # 0.2 s of settle: the last grip must see the part within it (it takes ~1-2 ticks).
-    with robot_at(sim, DEFAULT_PART_POSE, gripper_settle_s=0.2) as robot:
+    with robot_at(sim, DEFAULT_PART_POSE, timeouts=TimeoutPolicy(gripper_settle_s=0.2)) as robot:
         with pytest.raises(GraspFailedError):
             robot.gripper.grip()
         # The miss hides one close only: after opening, the next grip succeeds.
@@ -185,7 +193,7 @@ def test_tmflow_close_away_and_grasp_miss_raise_grasp_failed(
 def test_blog_grip_is_acknowledged_and_reports_gobj(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article", robot=RobotSetup(gripper="blog-2fg7"))
     assert sim.gripper_port is not None
-    options = {"gripper": "blog-2fg7", "gripper_port": sim.gripper_port}
+    options = {"gripper": GripperDevice("blog-2fg7", port=sim.gripper_port)}
     with robot_at(sim, DEFAULT_PART_POSE, **options) as robot:
         gripper = robot.gripper
         assert isinstance(gripper, Blog2FG7Gripper)
@@ -209,7 +217,7 @@ def test_blog_grip_is_acknowledged_and_reports_gobj(tm_simulator_factory: Factor
 def test_blog_close_on_nothing_raises_grasp_failed(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article", robot=RobotSetup(gripper="blog-2fg7"))
     assert sim.gripper_port is not None
-    options = {"gripper": "blog-2fg7", "gripper_port": sim.gripper_port}
+    options = {"gripper": GripperDevice("blog-2fg7", port=sim.gripper_port)}
     with robot_at(sim, ABOVE_PART, **options) as robot, pytest.raises(GraspFailedError):
         robot.gripper.grip()
     assert sim.field("object_status", device="gripper") == 3  # at position, no object
@@ -336,7 +344,7 @@ def test_onrobot_stopped_short_without_grip_is_not_success(tm_simulator_factory:
         "article", robot=RobotSetup(gripper="onrobot-2fg7"), faults=["grasp_miss"]
     )
     assert sim.gripper_port is not None
-    options = {"gripper": "onrobot-2fg7", "gripper_port": sim.gripper_port}
+    options = {"gripper": GripperDevice("onrobot-2fg7", port=sim.gripper_port)}
     with robot_at(sim, DEFAULT_PART_POSE, **options) as robot:
         gripper = robot.gripper
         assert isinstance(gripper, OnRobot2FG7Gripper)
@@ -348,7 +356,7 @@ def test_onrobot_stopped_short_without_grip_is_not_success(tm_simulator_factory:
 def test_onrobot_grip_holds_the_part_and_fails_on_nothing(tm_simulator_factory: Factory) -> None:
     sim = tm_simulator_factory("article", robot=RobotSetup(gripper="onrobot-2fg7"))
     assert sim.gripper_port is not None
-    options = {"gripper": "onrobot-2fg7", "gripper_port": sim.gripper_port}
+    options = {"gripper": GripperDevice("onrobot-2fg7", port=sim.gripper_port)}
     with robot_at(sim, DEFAULT_PART_POSE, **options) as robot:
         status = robot.gripper.grip()
         assert status.holding
@@ -394,8 +402,7 @@ def test_onrobot_second_connection_is_a_clear_error(tm_simulator_factory: Factor
             sim.url,
             sim.port,
             profile="article",
-            gripper="onrobot-2fg7",
-            gripper_port=sim.gripper_port,
+            gripper=GripperDevice("onrobot-2fg7", port=sim.gripper_port),
             # One quick retry: enough to show a retry does not get through either.
             retry=RetryPolicy(attempts=2, initial_backoff_s=0.01, jitter_s=0.01),
         )

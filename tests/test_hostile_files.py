@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from rich.console import Console
 
-from tmmaster import ConfigError, Pose, RegisterMapError, Robot, load_profile
+from tmmaster import ConfigError, PollPolicy, Pose, RegisterMapError, Robot, load_profile
 from tmmaster._toml import MAX_KEY_PARTS, MAX_TOML_BYTES
 from tmmaster.pickplace import load_config, load_report
 from tmmaster.pickplace.__main__ import EXIT_CONFIG
@@ -254,8 +254,8 @@ HUGER = 10**5000  # more digits than Python writes (its 4300-digit limit)
 
 @pytest.mark.parametrize("value", [HUGE, -HUGE, HUGER], ids=["1e400", "-1e400", "1e5000"])
 def test_numbers_too_large_for_a_float_are_config_errors_naming_the_field(value: int) -> None:
-    with pytest.raises(ConfigError, match="poll_interval_s"):
-        Robot("127.0.0.1", port=5999, poll_interval_s=value)
+    with pytest.raises(ConfigError, match=r"polling\.interval_s"):
+        Robot("127.0.0.1", port=5999, polling=PollPolicy(interval_s=value))
     with pytest.raises(ConfigError, match="x"):
         Pose(value, 0, 0, 180, 0, 90)
     robot = Robot("127.0.0.1", port=5999)

@@ -18,7 +18,7 @@ import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError, Workspace
+from tmmaster import Checks, ConfigError, PollPolicy, Pose, Robot, UnreachablePoseError, Workspace
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -117,7 +117,7 @@ def opened() -> Iterator[list[Robot]]:
 def open_robot(sim: Simulator, opened: list[Robot], **options: Any) -> Robot:
     options.setdefault("profile", "tmflow")
     options.setdefault("gripper", None)
-    options.setdefault("poll_interval_s", 0.01)
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
     robot = Robot(sim.url, **options)
     opened.append(robot)
     robot.connect()
@@ -159,7 +159,7 @@ def test_a_line_the_arm_cannot_follow_is_refused_before_any_request(
     sim = memory_simulator_factory("tmflow", **QUICK)
     # The target's posture has the elbow low (link 2 below the default table plane, where
     # the simulated table is not): the arm's links are not what this test is about.
-    robot = open_robot(sim, opened, workspace=Workspace(arm_radius_mm=None))
+    robot = open_robot(sim, opened, checks=Checks(workspace=Workspace(arm_radius_mm=None)))
     start = Pose(350, -150, 250, 180, 0, 90)
     robot.move_to(start, speed=100)
     # Straight across the J1 axis: the path passes the shoulder singularity.

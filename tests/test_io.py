@@ -18,6 +18,7 @@ from tmmaster import (
     RetryPolicy,
     Robot,
     StopRequestedError,
+    TimeoutPolicy,
     connect,
 )
 from tmmaster._robot_program import END_MODULE_DO
@@ -184,7 +185,7 @@ def tcp_sim(tm_simulator_factory: Factory) -> Simulator:
 def test_a_lost_answer_leaves_the_coil_as_requested(tcp_sim: Simulator, retries: bool) -> None:
     retry = RetryPolicy(initial_backoff_s=0.01, jitter_s=0) if retries else RetryPolicy(attempts=1)
     with FaultProxy(tcp_sim.port) as proxy:
-        robot = Robot("127.0.0.1", proxy.port, request_timeout_s=0.3, retry=retry)
+        robot = Robot("127.0.0.1", proxy.port, retry=retry, timeouts=TimeoutPolicy(request_s=0.3))
         with robot:
             tcp_sim.clear_request_log()
             proxy.add(Rule("drop_answer", function_code=5))
@@ -206,7 +207,7 @@ def test_a_lost_answer_leaves_the_coil_as_requested(tcp_sim: Simulator, retries:
 def test_close_waits_for_a_do_write_in_flight_then_refuses_the_next(tcp_sim: Simulator) -> None:
     """close() from another thread never cuts a DO write short, and no write follows it."""
     with FaultProxy(tcp_sim.port) as proxy:
-        robot = Robot("127.0.0.1", proxy.port, request_timeout_s=2.0)
+        robot = Robot("127.0.0.1", proxy.port, timeouts=TimeoutPolicy(request_s=2.0))
         robot.connect()
         proxy.add(Rule("delay", function_code=5, delay_s=0.3))
         outcome: list[BaseException | None] = []

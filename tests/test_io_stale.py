@@ -16,7 +16,14 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from tmmaster import ResponseTimeoutError, RetryPolicy, Robot, StopRequestedError, aio
+from tmmaster import (
+    ResponseTimeoutError,
+    RetryPolicy,
+    Robot,
+    StopRequestedError,
+    TimeoutPolicy,
+    aio,
+)
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -87,7 +94,9 @@ def landed(sim: Simulator, proxy: FaultProxy) -> None:
 def test_a_late_write_lands_and_the_output_still_ends_at_the_latest_value(
     sim: Simulator, proxy: FaultProxy
 ) -> None:
-    with Robot("127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RETRY) as robot:
+    with Robot(
+        "127.0.0.1", proxy.port, retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S)
+    ) as robot:
         sim.clear_request_log()
         with held_until(proxy, wrote_false(sim)) as held:
             robot.io.set_do(DO, True)  # times out, reconnects, retries: True
@@ -105,7 +114,10 @@ def test_a_late_write_lands_and_the_output_still_ends_at_the_latest_value(
 def test_a_write_that_failed_is_still_watched_for(sim: Simulator, proxy: FaultProxy) -> None:
     """No retry: the first write raises, its frame still on its way; the next one wins."""
     with Robot(
-        "127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RetryPolicy(attempts=1)
+        "127.0.0.1",
+        proxy.port,
+        retry=RetryPolicy(attempts=1),
+        timeouts=TimeoutPolicy(request_s=TIMEOUT_S),
     ) as robot:
         sim.clear_request_log()
         with held_until(proxy, wrote_false(sim)):
@@ -127,7 +139,9 @@ def test_a_write_in_doubt_that_never_lands_is_watched_for_a_bounded_time(
     back until the retry policy's total time since the lost write has passed, then returns.
     Once nothing is in doubt any more, a write is one FC 05 again and reads nothing."""
     retry = RetryPolicy(attempts=4, total_time_s=0.6, initial_backoff_s=0.01, jitter_s=0)
-    with Robot("127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=retry) as robot:
+    with Robot(
+        "127.0.0.1", proxy.port, retry=retry, timeouts=TimeoutPolicy(request_s=TIMEOUT_S)
+    ) as robot:
         sim.clear_request_log()
         proxy.add(Rule("drop_request", function_code=5, address=DO))
         robot.io.set_do(DO, True)
@@ -145,7 +159,9 @@ def test_a_write_in_doubt_that_never_lands_is_watched_for_a_bounded_time(
 def test_a_stop_request_ends_the_watch_and_says_so(sim: Simulator, proxy: FaultProxy) -> None:
     """While a late frame may still land, a stop request ends the watch: no write follows
     a stop, so set_do raises StopRequestedError saying the output may still change."""
-    with Robot("127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RETRY) as robot:
+    with Robot(
+        "127.0.0.1", proxy.port, retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S)
+    ) as robot:
         sim.clear_request_log()
         with held_until(proxy, lambda: False):  # lands once the block is over
             robot.io.set_do(DO, True)
@@ -168,7 +184,7 @@ def test_the_async_front_goes_through_the_same_guard(sim: Simulator, proxy: Faul
 
     async def scenario() -> bool:
         async with aio.connect(
-            "127.0.0.1", proxy.port, request_timeout_s=TIMEOUT_S, retry=RETRY
+            "127.0.0.1", proxy.port, retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S)
         ) as robot:
             sim.clear_request_log()
             with held_until(proxy, wrote_false(sim)):

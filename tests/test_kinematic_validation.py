@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError
+from tmmaster import ConfigError, PollPolicy, Pose, Robot, UnreachablePoseError
 from tmmaster.pickplace import ARTICLE_HOME, pick_and_place, validate_config, validate_plan
 from tmmaster.sim import Simulator
 
@@ -25,7 +25,7 @@ def robots(memory_simulator_factory: SimFactory) -> Iterator[Callable[..., Robot
 
     def make(profile: str = "article", **options: Any) -> Robot:
         sim = memory_simulator_factory(profile)
-        robot = Robot(sim.url, profile=profile, poll_interval_s=0.01, **options)
+        robot = Robot(sim.url, profile=profile, polling=PollPolicy(interval_s=0.01), **options)
         opened.append(robot)
         robot.connect()
         robot.wait_until_ready(timeout_s=5)

@@ -35,6 +35,7 @@ from tmmaster import (
     Pose,
     Robot,
     StatusMonitor,
+    TimeoutPolicy,
     TransportClosedError,
 )
 from tmmaster.pickplace.__main__ import EXIT_CONNECTION
@@ -105,7 +106,9 @@ def test_after_connect_the_same_robot_works(tm_simulator_factory: Any) -> None:
 def test_a_grippers_log_events_name_its_robot(
     tm_simulator_factory: Any, robots: Any, caplog: pytest.LogCaptureFixture, profile: str
 ) -> None:
-    robot = robots(tm_simulator_factory(profile), name="cell-1", gripper_settle_s=0.05)
+    robot = robots(
+        tm_simulator_factory(profile), name="cell-1", timeouts=TimeoutPolicy(gripper_settle_s=0.05)
+    )
     with caplog.at_level(logging.INFO, "tmmaster"):
         robot.gripper.open()
         robot.gripper.close()

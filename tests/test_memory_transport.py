@@ -7,7 +7,14 @@ from collections.abc import Iterator
 import pytest
 
 import tmmaster
-from tmmaster import ConnectError, ConnectionLostError, ResponseTimeoutError, RetryPolicy, Table
+from tmmaster import (
+    ConnectError,
+    ConnectionLostError,
+    PollPolicy,
+    ResponseTimeoutError,
+    RetryPolicy,
+    Table,
+)
 from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
 
 ONCE = RetryPolicy(attempts=1)
@@ -20,7 +27,7 @@ def sim() -> Iterator[Simulator]:
 
 
 def test_a_memory_robot_is_a_transport_and_logs_like_tcp(sim: Simulator) -> None:
-    with tmmaster.connect(sim.url, profile="article", poll_interval_s=0.01) as robot:
+    with tmmaster.connect(sim.url, profile="article", polling=PollPolicy(interval_s=0.01)) as robot:
         assert isinstance(robot._transport, tmmaster.Transport)
         assert isinstance(robot._transport, MemoryTransport)
         before = robot.stats.requests
@@ -102,11 +109,15 @@ def test_a_second_running_simulator_of_one_name_is_refused_and_close_frees_it() 
             second.start()
         assert not second.running  # nothing started
         second.close()  # frees nothing: the name still leads to the first one
-        with tmmaster.connect(first.url, profile="article", poll_interval_s=0.01) as robot:
+        with tmmaster.connect(
+            first.url, profile="article", polling=PollPolicy(interval_s=0.01)
+        ) as robot:
             robot.status()
         assert first.request_log  # the robot talked to the first simulator
     # Closed, the name is free for a new simulator.
     with Simulator("article", listen=False, name="cell-a") as again:
         assert again.url == "sim://cell-a"
-        with tmmaster.connect(again.url, profile="article", poll_interval_s=0.01) as robot:
+        with tmmaster.connect(
+            again.url, profile="article", polling=PollPolicy(interval_s=0.01)
+        ) as robot:
             robot.status()

@@ -28,6 +28,7 @@ from tmmaster import (
     ConnectionLostError,
     Fleet,
     MonitoredStatus,
+    PollPolicy,
     Pose,
     Robot,
     StatusMonitor,
@@ -188,7 +189,7 @@ def robots() -> Iterator[Callable[..., Robot]]:
     def make(port: int, **options: Any) -> Robot:
         options.setdefault("profile", "article")
         options.setdefault("gripper", None)
-        options.setdefault("poll_interval_s", 0.01)
+        options.setdefault("polling", PollPolicy(interval_s=0.01))
         robot = Robot("127.0.0.1", port, **options)
         opened.append(robot)
         return robot
@@ -335,7 +336,7 @@ def test_robots_that_cannot_be_shared_are_refused(
     with pytest.raises(ConfigError, match="closed"):
         monitor.add_robot(closed)
     with Fleet() as fleet:
-        member = Robot("127.0.0.1", sim.port, profile="article", gripper=None, fleet=fleet)
+        member = Robot("127.0.0.1", sim.port, profile="article", gripper=None, link=fleet)
         with pytest.raises(ConfigError, match=r"Fleet\.latest"):
             monitor.add_robot(member, name="member")
     monitor.close()

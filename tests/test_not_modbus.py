@@ -31,6 +31,7 @@ from tmmaster import (
     ResponseTimeoutError,
     RetryPolicy,
     Robot,
+    TimeoutPolicy,
     TransportError,
 )
 from tmmaster._registers import Table
@@ -183,7 +184,7 @@ def test_a_robot_on_an_http_port_is_not_modbus_within_one_request_timeout(
     capfd: pytest.CaptureFixture[str],
 ) -> None:
     with Listener(http, close_after=True) as server:
-        robot = Robot("127.0.0.1", server.port, request_timeout_s=TIMEOUT_S)
+        robot = Robot("127.0.0.1", server.port, timeouts=TimeoutPolicy(request_s=TIMEOUT_S))
         started = time.monotonic()
         with pytest.raises(NotModbusError, match=f"127.0.0.1:{server.port} is not a Modbus"):
             robot.connect()
@@ -221,7 +222,7 @@ def test_a_silent_listener_fails_on_the_first_request_and_a_link_that_answered_r
 
 def test_a_robot_on_a_silent_listener_fails_within_its_first_request_timeout() -> None:
     with Listener(silent) as server:
-        robot = Robot("127.0.0.1", server.port, request_timeout_s=TIMEOUT_S)
+        robot = Robot("127.0.0.1", server.port, timeouts=TimeoutPolicy(request_s=TIMEOUT_S))
         started = time.monotonic()
         with pytest.raises(ResponseTimeoutError, match="never answered"):
             robot.connect()

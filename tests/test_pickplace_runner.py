@@ -13,7 +13,7 @@ import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import ConfigError, Pose, Robot
+from tmmaster import ConfigError, PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.pickplace import (
     ARTICLE_PICK,
     ARTICLE_PLACE,
@@ -88,8 +88,8 @@ def robot(sim: Simulator) -> Iterator[Robot]:
     with Robot(
         sim.url,
         profile="article",
-        poll_interval_s=0.02,
-        gripper_settle_s=0.05,
+        polling=PollPolicy(interval_s=0.02),
+        timeouts=TimeoutPolicy(gripper_settle_s=0.05),
     ) as r:
         yield r
 
@@ -252,7 +252,7 @@ def test_a_stop_request_interrupts_a_running_wait_and_stops_the_arm(
     tm_simulator_factory: SimFactory,
 ) -> None:
     sim = tm_simulator_factory("article", faults=["stall:at_move=1"])
-    with Robot(sim.url, profile="article", poll_interval_s=0.02) as robot:
+    with Robot(sim.url, profile="article", polling=PollPolicy(interval_s=0.02)) as robot:
         runner = Runner(robot)
         seq = TaskSequence("one-move")
         seq.add("MOVE", lambda ctx: ctx.move(PICK.offset(dz=100), speed=30))
@@ -291,7 +291,12 @@ def test_a_user_sequence_in_python_gets_the_shared_retry_policy(
 
     seq.add("GRIP", lambda ctx: ctx.grip(), retry=RetryRule("ABOVE", 1, recover=_open))
     seq.add("UP", lambda ctx: ctx.move(above, speed=20, motion="line"))
-    with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
+    with Robot(
+        sim.url,
+        profile="article",
+        polling=PollPolicy(interval_s=0.02),
+        timeouts=TimeoutPolicy(gripper_settle_s=0.05),
+    ) as robot:
         result = Runner(robot).run(seq)
     assert result.ok
     assert result.retries == 1
@@ -324,7 +329,12 @@ def test_palletizing_places_each_part_into_its_slot(tm_simulator_factory: SimFac
         **QUICK,
     )
     seq = palletizing(pick=PICK, pallet=pallet, home=HOME)
-    with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
+    with Robot(
+        sim.url,
+        profile="article",
+        polling=PollPolicy(interval_s=0.02),
+        timeouts=TimeoutPolicy(gripper_settle_s=0.05),
+    ) as robot:
         validate_plan(robot, seq, pallet.size, source="test")
         result = Runner(robot).run(seq)
     assert result.ok
@@ -361,7 +371,12 @@ def test_a_toml_sequence_runs_with_retries(tm_simulator_factory: SimFactory) -> 
             ],
         }
     )
-    with Robot(sim.url, profile="article", poll_interval_s=0.02, gripper_settle_s=0.05) as robot:
+    with Robot(
+        sim.url,
+        profile="article",
+        polling=PollPolicy(interval_s=0.02),
+        timeouts=TimeoutPolicy(gripper_settle_s=0.05),
+    ) as robot:
         result = Runner(robot).run(seq)
     assert result.ok, result.failure
     assert result.retries == 1

@@ -22,6 +22,7 @@ import tmmaster
 from tmmaster import (
     ConfigError,
     EmergencyStopError,
+    PollPolicy,
     Pose,
     ProjectPausedError,
     ProjectState,
@@ -62,7 +63,7 @@ def sim(tm_simulator_factory: SimFactory) -> Simulator:
 @pytest.fixture
 def robot(sim: Simulator) -> Iterator[Robot]:
     """A connected robot that polls often."""
-    with connect(sim.url, poll_interval_s=0.01) as r:
+    with connect(sim.url, polling=PollPolicy(interval_s=0.01)) as r:
         yield r
 
 
@@ -80,7 +81,7 @@ def test_a_move_right_after_start_runs_at_real_time(transport: str) -> None:
     # The README's sample without wait_until_ready(): the project runs when start() returns.
     with Simulator("tmflow", listen=transport == "tcp") as sim:
         address = (sim.host, sim.port) if transport == "tcp" else (sim.url,)
-        with connect(*address, poll_interval_s=0.01) as robot:
+        with connect(*address, polling=PollPolicy(interval_s=0.01)) as robot:
             assert robot.project_state() is ProjectState.RUNNING
             assert robot.status().ready
             robot.move_to(NEARBY, speed=100)
@@ -91,8 +92,18 @@ def test_an_awaited_robot_of_a_fleet_and_one_in_process_move_right_after_start()
     # The flaky test_aio case, at real time and without waiting: both robots just started.
     async def scenario() -> None:
         with tmmaster.Fleet() as fleet:
-            own = aio.AsyncRobot(Robot(tcp.host, tcp.port, fleet=fleet, poll_interval_s=0.01))
-            async with own, aio.connect(memory.url, poll_interval_s=0.01) as in_process:
+            own = aio.AsyncRobot(
+                Robot(
+                    tcp.host,
+                    tcp.port,
+                    polling=PollPolicy(interval_s=0.01),
+                    link=fleet,
+                )
+            )
+            async with (
+                own,
+                aio.connect(memory.url, polling=PollPolicy(interval_s=0.01)) as in_process,
+            ):
                 assert await in_process.project_state() is ProjectState.RUNNING
                 await asyncio.gather(
                     own.move_to(NEARBY, speed=100), in_process.move_to(NEARBY, speed=100)

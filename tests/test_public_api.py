@@ -16,6 +16,7 @@ import tmmaster.aio
 import tmmaster.pickplace
 import tmmaster.report
 import tmmaster.sim
+from tmmaster import PollPolicy
 from tmmaster._cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -146,7 +147,10 @@ def _bad_calls() -> list[tuple[str, Callable[[], object]]]:
         ("motion lin", lambda: tmmaster.Robot("127.0.0.1", profile="article").start_move(
             tmmaster.Pose(300, -200, 200, 180, 0, 90), motion="lin"  # type: ignore[arg-type]
         )),
-        ("bad poll interval", lambda: tmmaster.Robot("127.0.0.1", poll_interval_s=0)),
+        ("bad poll interval", lambda: PollPolicy(interval_s=0)),
+        ("bad speed cap", lambda: tmmaster.Checks(max_speed_percent=0)),
+        ("bad gripper port", lambda: tmmaster.GripperDevice("onrobot-2fg7", "127.0.0.1", 0)),
+        ("bad link", lambda: tmmaster.Robot("127.0.0.1", link="x")),  # type: ignore[arg-type]
         ("bad monitor rate", lambda: tmmaster.StatusMonitor(rate_hz=0)),
         ("unknown monitored robot", lambda: tmmaster.StatusMonitor().latest("r1")),
         ("value out of range", lambda: tmmaster.encode(article.field("target_x"), 400)),

@@ -94,7 +94,7 @@ def test_a_stale_done_read_is_read_again(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
     sim = tm_simulator_factory(profile)
-    robot = robots(sim, gripper=None, polling=PollPolicy(reuse_done_read_s=0.05))
+    robot = robots(sim, gripper=None, polling=PollPolicy(interval_s=0.01, reuse_done_read_s=0.05))
     robot.move_to(APPROACH, speed=30)
     state = robot._channel.after_done
     assert state is not None
@@ -109,7 +109,7 @@ def test_reuse_can_be_switched_off(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
     sim = tm_simulator_factory(profile)
-    robot = robots(sim, gripper=None, polling=PollPolicy(reuse_done_read_s=0))
+    robot = robots(sim, gripper=None, polling=PollPolicy(interval_s=0.01, reuse_done_read_s=0))
     robot.move_to(APPROACH, speed=30)
     refresh(robot)
     sim.clear_request_log()

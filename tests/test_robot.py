@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import MovePhase, Pose, Robot, TimeoutPolicy
+from tmmaster import Checks, MovePhase, PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster._registers import EXTENSION_FIELDS
 from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
 
@@ -145,7 +145,7 @@ def test_invalid_moves_are_refused_before_any_request(
     message: str,
 ) -> None:
     sim = tm_simulator_factory("tmflow")
-    robot = robots(sim, workspace=tmmaster.Workspace(z=(0, 800)))
+    robot = robots(sim, checks=Checks(workspace=tmmaster.Workspace(z=(0, 800))))
     sim.clear_request_log()
     with pytest.raises(tmmaster.ConfigError, match=message):
         robot.move_to(target, speed=speed)
@@ -507,14 +507,14 @@ def test_close_says_whether_it_could_confirm_the_clean_up(
     # Nothing outstanding: confirmed. A move outstanding on a robot that vanished: the
     # withdraw and the stop cannot be delivered, within the budget: not confirmed.
     sim = tm_simulator_factory(profile)
-    robot = Robot(sim.url, profile=profile, gripper=None, poll_interval_s=0.01)
+    robot = Robot(sim.url, profile=profile, gripper=None, polling=PollPolicy(interval_s=0.01))
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
     robot.move_to(APPROACH, speed=80)
     assert robot.close() is True
     assert robot.close() is True  # a second close says the same
     other = tm_simulator_factory(profile, time_scale=1)
-    robot = Robot(other.url, profile=profile, gripper=None, poll_interval_s=0.01)
+    robot = Robot(other.url, profile=profile, gripper=None, polling=PollPolicy(interval_s=0.01))
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
     robot.start_move(APPROACH.offset(dz=-50), speed=5)  # seconds long

@@ -18,7 +18,7 @@ import tmmaster
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
 from sim_speeds import QUICK
-from tmmaster import Pose, Robot, TimeoutPolicy, robot_model
+from tmmaster import Checks, PollPolicy, Pose, Robot, TimeoutPolicy, robot_model
 from tmmaster._kinematics import Arc
 from tmmaster.sim import Cell, KinematicBackend, Simulator, Timing
 
@@ -253,7 +253,9 @@ def test_an_arc_below_the_table_plane_is_refused_before_any_write(
 ) -> None:
     sim = tm_simulator_factory(**QUICK)
     # The TCP's own path against the plane (no tool extent round it).
-    robot = robots(sim, workspace=tmmaster.Workspace(floor_z_mm=150, tool_extent_mm=None))
+    robot = robots(
+        sim, checks=Checks(workspace=tmmaster.Workspace(floor_z_mm=150, tool_extent_mm=None))
+    )
     low_start = Pose(300, -200, 160, 180, 0, 90)
     robot.move_to(low_start, speed=50)
     sim.clear_request_log()
@@ -392,10 +394,9 @@ def test_a_held_frame_of_a_new_command_never_runs_after_the_master_gave_up(kind:
         Robot(
             "127.0.0.1",
             proxy.port,
-            poll_interval_s=0.01,
-            request_timeout_s=0.15,
-            timeouts=TimeoutPolicy(ack_timeout_s=0.5, motion_margin_s=1.0),
+            timeouts=TimeoutPolicy(request_s=0.15, ack_timeout_s=0.5, motion_margin_s=1.0),
             retry=tmmaster.RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02),
+            polling=PollPolicy(interval_s=0.01),
         ) as robot,
     ):
         first = Issued(START, time.monotonic())

@@ -21,7 +21,7 @@ import pytest
 import tmmaster
 from test_script_project import open_robot
 from test_sim_controller import DT, FAR, HOME, run, run_until, send_tmflow, tmflow
-from tmmaster import FrameCheck, Pose, _cli
+from tmmaster import Checks, FrameCheck, Pose, _cli
 from tmmaster._profiles import profile_from_data, robot_profile
 from tmmaster._registers import Table
 from tmmaster._robot_program import ToolSetting, robot_program
@@ -287,7 +287,9 @@ def test_the_master_sees_the_error_stop_of_a_target_the_arm_cannot_reach(
     program.write_text(text.replace(check, "        if (false)\n", 1), encoding="utf-8")
     sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
     robot = open_robot(
-        sim, model="tm5-900", frame_check=FrameCheck.off("the two arm models differ on purpose")
+        sim,
+        model="tm5-900",
+        checks=Checks(frame=FrameCheck.off("the two arm models differ on purpose")),
     )
     try:
         with pytest.raises(tmmaster.RobotFaultError, match="0x0001") as info:

@@ -23,7 +23,7 @@ import tmmaster
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
-from tmmaster import Pose, RetryPolicy, Robot, TimeoutPolicy
+from tmmaster import Checks, GripperDevice, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
 from tmmaster.pickplace import Runner, TaskSequence
 from tmmaster.sim import RobotSetup, Simulator, Timing
 
@@ -65,16 +65,18 @@ def robots(request: pytest.FixtureRequest) -> Iterator[Callable[..., Robot]]:
 
     def make(port: int, profile: str, **options: Any) -> Robot:
         options.setdefault("gripper", None)
-        options.setdefault("poll_interval_s", 0.01)
-        options.setdefault("request_timeout_s", REQUEST_TIMEOUT_S)
+        options.setdefault("polling", PollPolicy(interval_s=0.01))
         options.setdefault(
-            "timeouts", TimeoutPolicy(ack_timeout_s=0.5, in_flight_s=0.5, motion_margin_s=1.0)
+            "timeouts",
+            TimeoutPolicy(
+                request_s=REQUEST_TIMEOUT_S, ack_timeout_s=0.5, in_flight_s=0.5, motion_margin_s=1.0
+            ),
         )
         options.setdefault(
             "retry",
             RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02, max_backoff_s=0.3),
         )
-        robot = Robot("127.0.0.1", port, profile=profile, fleet=fleet, **options)
+        robot = Robot("127.0.0.1", port, profile=profile, link=fleet, **options)
         opened.append(robot)
         robot.connect()
         return robot
@@ -152,7 +154,12 @@ def test_8_1_a_write_later_than_the_in_flight_window_is_reported_not_assumed(
         robot = robots(
             proxy.port,
             "article",
-            timeouts=TimeoutPolicy(ack_timeout_s=0.5, in_flight_s=0.25, motion_margin_s=1.0),
+            timeouts=TimeoutPolicy(
+                request_s=REQUEST_TIMEOUT_S,
+                ack_timeout_s=0.5,
+                in_flight_s=0.25,
+                motion_margin_s=1.0,
+            ),
         )
         proxy.add(Rule("drop_request", function_code=16, address=0x0200))
         assert attempt(robot, A, issued) == "CommandStateUnknownError"
@@ -264,7 +271,9 @@ def test_8_2_a_stop_during_the_runners_preparation_is_an_interruption(
     # Every command acknowledged 10 simulated s = 0.25 s wall late (tmflow's gripper_open
     # too); the article gripper settles for 0.5 s: the stop at 0.1 s comes in preparation.
     sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=10"], **FAST)
-    with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.01) as robot:
+    with Robot(
+        "127.0.0.1", sim.port, profile=profile, polling=PollPolicy(interval_s=0.01)
+    ) as robot:
         runner = Runner(robot)
         sequence = TaskSequence("one-move", prepare=lambda ctx: ctx.open_gripper())
         sequence.add("MOVE", lambda ctx: ctx.move(A, speed=30))
@@ -308,7 +317,9 @@ def test_8_4_a_stop_request_ends_the_ready_wait_without_a_busy_loop(
     sim = tm_simulator_factory(
         profile, timing=Timing(tick_hz=50.0, init_time_s=1000.0), wait_ready=False
     )
-    with Robot("127.0.0.1", sim.port, profile=profile, poll_interval_s=0.05) as robot:
+    with Robot(
+        "127.0.0.1", sim.port, profile=profile, polling=PollPolicy(interval_s=0.05)
+    ) as robot:
         sim.clear_request_log()
         timer = threading.Timer(0.1, robot.interrupt)  # two polls into the wait
         timer.start()
@@ -332,7 +343,11 @@ def test_8_5_estop_ends_an_article_gripper_wait_and_blocks_gripper_writes(
 ) -> None:
     sim = tm_simulator_factory("article")
     with Robot(
-        "127.0.0.1", sim.port, profile="article", poll_interval_s=0.01, gripper_settle_s=5.0
+        "127.0.0.1",
+        sim.port,
+        profile="article",
+        polling=PollPolicy(interval_s=0.01),
+        timeouts=TimeoutPolicy(gripper_settle_s=5.0),
     ) as robot:
         robot.wait_until_ready(timeout_s=5)
         threading.Timer(0.05, sim.press_estop).start()
@@ -351,9 +366,8 @@ def test_8_5_estop_ends_an_onrobot_gripper_wait(tm_simulator_factory: SimFactory
         "127.0.0.1",
         sim.port,
         profile="tmflow",
-        gripper="onrobot-2fg7",
-        gripper_port=sim.gripper_port,
-        poll_interval_s=0.01,
+        gripper=GripperDevice("onrobot-2fg7", port=sim.gripper_port),
+        polling=PollPolicy(interval_s=0.01),
     ) as robot:
         robot.wait_until_ready(timeout_s=5)
         sim.press_estop()
@@ -380,19 +394,21 @@ def test_8_6_meaningless_timeouts_are_refused_before_any_request(
 
 
 @pytest.mark.parametrize(
-    "option",
+    ("kind", "option"),
     [
-        "position_tolerance_mm",
-        "orientation_tolerance_deg",
-        "poll_interval_s",
-        "request_timeout_s",
-        "gripper_settle_s",
+        (Checks, "position_tolerance_mm"),
+        (Checks, "orientation_tolerance_deg"),
+        (PollPolicy, "interval_s"),
+        (TimeoutPolicy, "request_s"),
+        (TimeoutPolicy, "gripper_settle_s"),
     ],
 )
 @pytest.mark.parametrize("bad", [math.nan, math.inf, 0, -1])
-def test_8_6_meaningless_robot_options_are_refused(option: str, bad: float) -> None:
-    with pytest.raises(tmmaster.ConfigError, match=option):
-        Robot("127.0.0.1", 1, profile="article", **{option: bad})
+def test_8_6_meaningless_robot_options_are_refused(
+    kind: type[Checks | PollPolicy | TimeoutPolicy], option: str, bad: float
+) -> None:
+    with pytest.raises(tmmaster.ConfigError, match=rf"{kind.argument}\.{option}"):
+        Robot("127.0.0.1", 1, profile="article", **{kind.argument: kind(**{option: bad})})
 
 
 # -- 8.8: outages --------------------------------------------------------------------------
@@ -406,7 +422,11 @@ def test_8_8_the_default_retry_policy_rides_out_a_one_second_outage_mid_cycle(
     with (
         FaultProxy(sim.port) as proxy,
         Robot(
-            "127.0.0.1", proxy.port, profile="article", gripper=None, poll_interval_s=0.01
+            "127.0.0.1",
+            proxy.port,
+            profile="article",
+            gripper=None,
+            polling=PollPolicy(interval_s=0.01),
         ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
@@ -563,9 +583,9 @@ def test_a_second_ctrl_c_during_the_clean_up_never_leaves_a_command_armed(
 
 _EXIT_WHILE_COMMANDING = """
 import sys, threading, time
-from tmmaster import Pose, Robot
+from tmmaster import PollPolicy, Pose, Robot
 robot = Robot("127.0.0.1", int(sys.argv[1]), profile=sys.argv[2], gripper=None,
-              poll_interval_s=0.01)
+              polling=PollPolicy(interval_s=0.01))
 robot.connect()
 robot.wait_until_ready(timeout_s=5)
 robot.move_to(Pose(300, -200, 150, 180, 0, 90), speed=80)

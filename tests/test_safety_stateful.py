@@ -28,7 +28,7 @@ from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, 
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
-from tmmaster import Fleet, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import Simulator
 
 STATEFUL_EXAMPLES = int(os.environ.get("TMMASTER_STATEFUL_EXAMPLES", "5"))
@@ -78,15 +78,18 @@ class CommandSafety(RuleBasedStateMachine):
             self.proxy.port,
             profile=self.profile,
             gripper=None,
-            poll_interval_s=0.01,
-            request_timeout_s=REQUEST_TIMEOUT_S,
             timeouts=TimeoutPolicy(
-                ack_timeout_s=0.4, in_flight_s=IN_FLIGHT_S, motion_factor=1.3, motion_margin_s=0.8
+                request_s=REQUEST_TIMEOUT_S,
+                ack_timeout_s=0.4,
+                in_flight_s=IN_FLIGHT_S,
+                motion_factor=1.3,
+                motion_margin_s=0.8,
             ),
             retry=RetryPolicy(
                 attempts=6, total_time_s=1.0, initial_backoff_s=0.02, max_backoff_s=0.2
             ),
-            fleet=self.fleet,
+            polling=PollPolicy(interval_s=0.01),
+            link=self.fleet,
         )
         try:
             robot.connect()

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, FrameCheck, Pose, Robot, TimeoutPolicy
+from tmmaster import Checks, ConfigError, FrameCheck, PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
 from tmmaster.sim import Cell, RobotSetup, Simulator
@@ -33,7 +33,7 @@ B = Pose(250, 0, 160, 180, 0, 90)
 
 def open_robot(sim: Simulator, **options: Any) -> Robot:
     options.setdefault("gripper", None)
-    options.setdefault("poll_interval_s", 0.01)
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
     robot = Robot("127.0.0.1", sim.port, profile="tmflow", **options)
     robot.connect()
     robot.wait_until_ready(timeout_s=5)
@@ -114,7 +114,7 @@ def test_the_program_sets_the_masters_tcp_whatever_the_robot_had(
     if not change_tcp:
         with pytest.raises(ConfigError, match=r"tool offset of \(0, 0, 150, 0, 0, 0\)"):
             open_robot(sim)
-        options["frame_check"] = FrameCheck.off("the test shows where the flange goes")
+        options["checks"] = Checks(frame=FrameCheck.off("the test shows where the flange goes"))
     robot = open_robot(sim, **options)
     try:
         joints = robot.validate_move(B, 50)

@@ -12,7 +12,7 @@ import pytest
 
 import tmmaster
 from sim_backends import SlowSettlingBackend
-from tmmaster import Pose
+from tmmaster import PollPolicy, Pose, TimeoutPolicy
 from tmmaster.sim import Simulator, Timing
 
 APPROACH = Pose(300, -200, 200, 180, 0, 90)
@@ -33,7 +33,10 @@ def test_moves_complete_through_slow_settling_and_reinitialisation(profile: str)
         # The article's register gripper waits its settle time for a close on nothing:
         # 0.2 s (wall) is 8 simulated s, ~20 ticks for the controller to take the close.
         tmmaster.connect(
-            sim.url, profile=profile, poll_interval_s=0.005, gripper_settle_s=0.2
+            sim.url,
+            profile=profile,
+            polling=PollPolicy(interval_s=0.005),
+            timeouts=TimeoutPolicy(gripper_settle_s=0.2),
         ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)

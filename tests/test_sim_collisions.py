@@ -15,7 +15,7 @@ import pytest
 import tmmaster
 from sim_backends import BACKENDS, until_fault
 from test_sim_controller import article, run, run_until, send_article, send_tmflow, tmflow
-from tmmaster import Pose
+from tmmaster import Checks, PollPolicy, Pose
 from tmmaster._pose import MotionType
 from tmmaster.sim import KinematicBackend, Simulator, TableObject, Timing, World
 from tmmaster.sim._backend import PhysicsBackend
@@ -237,8 +237,8 @@ def test_the_master_lets_a_move_below_the_table_by_and_the_simulator_stops_it() 
         tmmaster.connect(
             sim.url,
             profile="tmflow",
-            poll_interval_s=0.01,
-            workspace=tmmaster.Workspace(floor_z_mm=0),
+            polling=PollPolicy(interval_s=0.01),
+            checks=Checks(workspace=tmmaster.Workspace(floor_z_mm=0)),
         ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)

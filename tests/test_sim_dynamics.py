@@ -16,7 +16,7 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, Pose
+from tmmaster import ConfigError, PollPolicy, Pose
 from tmmaster._pose import MotionType
 from tmmaster.sim import Cell, KinematicBackend, RobotSetup, Simulator, TableObject, World
 from tmmaster.sim._mujoco import MuJoCoBackend, build_mjcf
@@ -175,7 +175,7 @@ def test_the_pick_and_place_cycle_through_the_master_with_a_heavy_part() -> None
     b = dynamic(5.0)
     with (
         Simulator("tmflow", time_scale=20, cell=b, listen=False) as sim,
-        tmmaster.connect(sim.url, profile="tmflow", poll_interval_s=0.01) as robot,
+        tmmaster.connect(sim.url, profile="tmflow", polling=PollPolicy(interval_s=0.01)) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(ABOVE_PICK, speed=50)

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 import tmmaster
-from tmmaster import Pose
+from tmmaster import PollPolicy, Pose
 from tmmaster._pose import MotionType
 from tmmaster.sim import Cell, Simulator, TableObject, World
 from tmmaster.sim._backend import MotionRejectedError, PhysicsBackend
@@ -306,7 +306,7 @@ def test_the_article_cycle_through_the_master_survives_a_rebuild_mid_motion() ->
     b = backend()
     with (
         Simulator("tmflow", time_scale=20, cell=b, listen=False) as sim,
-        tmmaster.connect(sim.url, profile="tmflow", poll_interval_s=0.01) as robot,
+        tmmaster.connect(sim.url, profile="tmflow", polling=PollPolicy(interval_s=0.01)) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(ABOVE_PICK, speed=50)

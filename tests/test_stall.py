@@ -12,7 +12,7 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
-from tmmaster import Pose, Robot, TimeoutPolicy
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -34,8 +34,8 @@ def test_a_stalled_line_is_raised_within_its_announced_timeout(
         sim.port,
         profile=profile,
         gripper=None,
-        poll_interval_s=0.02,
         timeouts=timeouts,
+        polling=PollPolicy(interval_s=0.02),
     ) as robot:
         robot.wait_until_ready(5)
         robot.move_to(START, speed=100)

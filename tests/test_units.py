@@ -5,7 +5,7 @@ base origin on every axis looks like metres; three angles within 2 pi, one of th
 within 0.005 of a multiple of pi/4, look like radians; three angles within 2 pi that,
 read as radians, point the tool within 45 degrees of straight down look like radians.
 The library refuses such a target or tool (``UnitsError``, a ConfigError, before
-anything is sent) unless ``Robot(check_units=False)``; the pick & place files refuse
+anything is sent) unless ``Robot(checks=Checks(units=False))``; the pick & place files refuse
 (exit 2) unless they say ``check_units = false``; every message quotes the values as
 the user wrote them, on one line.
 """
@@ -20,7 +20,7 @@ import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import ConfigError, Pose, Robot, UnitsError, Workspace
+from tmmaster import Checks, ConfigError, Pose, Robot, UnitsError, Workspace
 from tmmaster._pose import suspect_units, written
 from tmmaster.pickplace import (
     load_config,
@@ -145,7 +145,8 @@ def test_a_target_in_radians_is_refused_naming_the_values_and_the_rule() -> None
         assert str(info.value) == (
             "target [300, -200, 200, 3.14159, 0, 1.5708]: rx, ry, rz = 3.14159, 0, 1.5708"
             " look like radians: orientations are in degrees (3.14159 rad is 180 deg); if"
-            " these really are mm and degrees, make the robot with Robot(check_units=False)"
+            " these really are mm and degrees, make the robot with"
+            " Robot(checks=Checks(units=False))"
         )
         assert isinstance(info.value, ConfigError)
         with pytest.raises(UnitsError, match=r"^target \[300, -200, 200, 3\.1, 0, 1\.6\]: "):
@@ -177,7 +178,7 @@ def test_a_move_in_radians_sends_nothing(
     # No table plane in the master's workspace: only the units stand between the target
     # and the robot (taken as degrees, the wrist would go into the simulated table).
     free = Workspace(floor_z_mm=None)
-    with Robot(sim.url, profile="tmflow", gripper=None, workspace=free) as robot:
+    with Robot(sim.url, profile="tmflow", gripper=None, checks=Checks(workspace=free)) as robot:
         sim.clear_request_log()
         with pytest.raises(UnitsError, match="look like radians"):
             robot.move_to(target, speed=30)
@@ -190,8 +191,13 @@ def test_check_units_false_takes_the_values_as_given() -> None:
     # Taken as degrees, (3.1, 0, 1.6) points the tool 3 deg from straight up: a pose the
     # arm can take where no table is in the way.
     free = Workspace(floor_z_mm=None)
-    robot = Robot("127.0.0.1", profile="tmflow", gripper=None, workspace=free)
-    lax = Robot("127.0.0.1", profile="tmflow", gripper=None, workspace=free, check_units=False)
+    robot = Robot("127.0.0.1", profile="tmflow", gripper=None, checks=Checks(workspace=free))
+    lax = Robot(
+        "127.0.0.1",
+        profile="tmflow",
+        gripper=None,
+        checks=Checks(workspace=free, units=False),
+    )
     try:
         with pytest.raises(UnitsError):
             robot.check_move(ROUNDED_RADIANS, 30)
@@ -214,7 +220,7 @@ def test_a_tool_in_metres_is_refused_when_the_robot_is_made() -> None:
         profile="article",
         gripper=None,
         tool=Pose(0, 0, 0.15, 0, 0, 0),
-        check_units=False,
+        checks=Checks(units=False),
     )
     robot.close()
 

@@ -21,14 +21,17 @@ import tmmaster
 from sim_speeds import SUITE_TICK_HZ
 from tmmaster import (
     AcknowledgeTimeoutError,
+    Checks,
     ConfigError,
     MotionTimeoutError,
     Poller,
+    PollPolicy,
     Pose,
     Robot,
     StopRequestedError,
     TimeoutPolicy,
 )
+from tmmaster._checks import Policy
 from tmmaster.sim import Simulator, Timing
 
 SimFactory = Callable[..., Simulator]
@@ -51,8 +54,8 @@ def robots(request: pytest.FixtureRequest) -> Iterator[Callable[..., Robot]]:
     def make(sim: Simulator, **options: Any) -> Robot:
         options.setdefault("profile", sim.profile)
         options.setdefault("gripper", None)
-        options.setdefault("poll_interval_s", LONGEST_INTERVAL_S)
-        robot = Robot("127.0.0.1", sim.port, fleet=fleet, **options)
+        options.setdefault("polling", PollPolicy(interval_s=LONGEST_INTERVAL_S))
+        robot = Robot("127.0.0.1", sim.port, link=fleet, **options)
         opened.append(robot)
         robot.connect()
         return robot
@@ -67,10 +70,37 @@ def robots(request: pytest.FixtureRequest) -> Iterator[Callable[..., Robot]]:
 # -- the options' ranges ------------------------------------------------------------------
 
 
+#: A Robot property with a setter -> where the constructor takes it (argument, field).
+OPTION_AT: dict[str, tuple[type[Policy], str]] = {
+    "poll_interval_s": (PollPolicy, "interval_s"),
+    "request_timeout_s": (TimeoutPolicy, "request_s"),
+    "gripper_settle_s": (TimeoutPolicy, "gripper_settle_s"),
+    "position_tolerance_mm": (Checks, "position_tolerance_mm"),
+    "orientation_tolerance_deg": (Checks, "orientation_tolerance_deg"),
+    "max_speed_percent": (Checks, "max_speed_percent"),
+}
+
+
+def made_with(option: str, value: object) -> Robot:
+    """A Robot given ``value`` for ``option`` in the option object that holds it."""
+    kind, field = OPTION_AT[option]
+    return Robot("127.0.0.1", 1, profile="article", **{kind.argument: kind(**{field: value})})
+
+
+def named(option: str) -> str:
+    """``option`` as the constructor's message names it: ``polling.interval_s``."""
+    kind, field = OPTION_AT[option]
+    return rf"{kind.argument}\.{field}"
+
+
 def test_an_absurd_poll_interval_is_refused_by_the_constructor_and_the_setter() -> None:
-    with pytest.raises(ConfigError, match=r"poll_interval_s must be a number in \[0\.001, 5\] s"):
-        Robot("127.0.0.1", 1, profile="article", poll_interval_s=1e9)
-    robot = Robot("127.0.0.1", 1, profile="article", poll_interval_s=LONGEST_INTERVAL_S)
+    with pytest.raises(
+        ConfigError, match=r"polling\.interval_s must be a number in \[0\.001, 5\] s"
+    ):
+        Robot("127.0.0.1", 1, profile="article", polling=PollPolicy(interval_s=1e9))
+    robot = Robot(
+        "127.0.0.1", 1, profile="article", polling=PollPolicy(interval_s=LONGEST_INTERVAL_S)
+    )
     with pytest.raises(ConfigError, match=r"poll_interval_s .*\[0\.001, 5\] s.*1000000000"):
         robot.poll_interval_s = 1e9
     assert robot.poll_interval_s == LONGEST_INTERVAL_S
@@ -89,8 +119,8 @@ def test_an_absurd_poll_interval_is_refused_by_the_constructor_and_the_setter() 
 )
 @pytest.mark.parametrize("bad", [math.nan, -1, "x", 1e9, True])
 def test_a_setter_refuses_what_the_constructor_refuses(option: str, good: float, bad: Any) -> None:
-    with pytest.raises(ConfigError, match=option):
-        Robot("127.0.0.1", 1, profile="article", **{option: bad})
+    with pytest.raises(ConfigError, match=named(option)):
+        made_with(option, bad)
     robot = Robot("127.0.0.1", 1, profile="article")
     before = getattr(robot, option)
     with pytest.raises(ConfigError, match=option):
@@ -116,8 +146,8 @@ def test_a_setter_refuses_what_the_constructor_refuses(option: str, good: float,
 def test_an_option_out_of_its_range_is_refused_naming_the_range(
     option: str, bad: object, range_text: str
 ) -> None:
-    with pytest.raises(ConfigError, match=rf"{option} must be .*{range_text}, got"):
-        Robot("127.0.0.1", 1, profile="article", **{option: bad})
+    with pytest.raises(ConfigError, match=rf"{named(option)} must be .*{range_text}, got"):
+        made_with(option, bad)
 
 
 @pytest.mark.parametrize("option", ["timeouts", "polling"])
@@ -209,7 +239,10 @@ def test_close_from_another_thread_ends_a_pending_withdraw_within_its_timeout(
     # stop request) and waits for the cancel's answer, for up to 20 s.
     sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=400"])
     robot = Robot(
-        sim.url, gripper=None, poll_interval_s=0.01, timeouts=TimeoutPolicy(ack_timeout_s=20)
+        sim.url,
+        gripper=None,
+        timeouts=TimeoutPolicy(ack_timeout_s=20),
+        polling=PollPolicy(interval_s=0.01),
     )
     robot.connect()
     robot.wait_until_ready(5)
@@ -253,7 +286,10 @@ def test_close_bounds_its_own_wait_for_a_withdraws_answer_by_its_timeout(
     # the answer, then stops the command.
     sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=400"])
     robot = Robot(
-        sim.url, gripper=None, poll_interval_s=0.01, timeouts=TimeoutPolicy(ack_timeout_s=20)
+        sim.url,
+        gripper=None,
+        timeouts=TimeoutPolicy(ack_timeout_s=20),
+        polling=PollPolicy(interval_s=0.01),
     )
     robot.connect()
     robot.wait_until_ready(5)
@@ -274,7 +310,7 @@ def test_close_still_waits_for_its_own_withdraws_answer(
     # ends other threads' waits does not end its own, so the command is withdrawn, and
     # the project is not stopped.
     sim = tm_simulator_factory("tmflow", faults=["late_ack:delay_s=8"])
-    robot = Robot(sim.url, gripper=None, poll_interval_s=0.01)
+    robot = Robot(sim.url, gripper=None, polling=PollPolicy(interval_s=0.01))
     robot.connect()
     robot.wait_until_ready(5)
     motion = robot.start_move(APPROACH, speed=30)

@@ -71,6 +71,7 @@ from ._io import RobotIO
 from ._logging import configure_logging
 from ._loop import EventLoopName, MonitoredStatus
 from ._monitor import StatusMonitor
+from ._options import Checks, FrameCheck, GripperDevice
 from ._poller import Poller, PollPolicy
 from ._pose import DEFAULT_HOME, MotionType, Pose, UnitsError
 from ._profiles import (
@@ -95,7 +96,7 @@ from ._registers import (
     WordOrder,
 )
 from ._retry import RetryPolicy
-from ._robot import FrameCheck, Motion, Robot, TimeoutPolicy, Workspace, connect
+from ._robot import Motion, Robot, TimeoutPolicy, Workspace, connect
 from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus
 from ._tm_errors import TMErrorCode, lookup_tm_error
@@ -111,6 +112,7 @@ __all__ = [
     "Access",
     "AcknowledgeTimeoutError",
     "Blog2FG7Gripper",
+    "Checks",
     "Command",
     "CommandKind",
     "CommandRejectedError",
@@ -130,6 +132,7 @@ __all__ = [
     "FrameCheck",
     "GraspFailedError",
     "Gripper",
+    "GripperDevice",
     "GripperError",
     "GripperLink",
     "GripperMount",

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from decimal import Decimal
-from typing import TypeGuard
+from typing import Any, ClassVar, TypeGuard
+
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from ._error_root import ConfigError
 
@@ -91,3 +94,56 @@ def require_in(name: str, value: object, bounds: Bounds) -> float:
     if not is_finite_number(value) or not bounds.admits(value):
         raise ConfigError(f"{name} must be a number in {bounds}, got {shown(value)}")
     return float(value)
+
+
+class Policy(BaseModel):
+    """A frozen options object of :class:`~tmmaster.Robot` (``polling=PollPolicy(...)``).
+
+    Built in code, an invalid value is a :class:`ConfigError` naming the field as the
+    robot's argument writes it (``polling.interval_s must be a number in [0.001, 5] s,
+    got 1e9``); validated inside another pydantic model (a configuration file), it stays
+    that model's validation error.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    #: The Robot argument that takes this policy: the prefix of a field's name in errors.
+    argument: ClassVar[str] = ""
+
+    def __init__(self, /, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as exc:
+            raise ConfigError(self._problems(exc)) from exc
+
+    # Validated inside another model (model_validate, a configuration section), pydantic
+    # skips this __init__, as it does BaseModel's and RootModel's (their same marker):
+    # the error stays a ValidationError located at the field.
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
+
+    @classmethod
+    def _problems(cls, exc: ValidationError) -> str:
+        """Every problem of ``exc``, each naming its field (``checks.units: ...``)."""
+        problems = []
+        for error in exc.errors():
+            cause = error.get("ctx", {}).get("error")
+            if isinstance(cause, ConfigError):
+                problems.append(str(cause))  # already names the field and its range
+                continue
+            where = ".".join(str(part) for part in (cls.argument, *error["loc"]) if part)
+            got = "" if error["type"] == "missing" else f", got {shown(error['input'])}"
+            problems.append(f"{where}: {error['msg']}{got}")
+        return "; ".join(problems)
+
+
+def bounded(name: str, bounds: Bounds) -> Callable[[object], float]:
+    """A pydantic "before" check of a field: ``value`` in ``bounds``, else a ConfigError.
+
+    It sees the value as given (a bool, a string, nan, 10**400 are refused as
+    :func:`require_in` refuses them), so the message is the one a setter gives.
+    """
+
+    def check(value: object) -> float:
+        return require_in(name, value, bounds)
+
+    return check

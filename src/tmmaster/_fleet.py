@@ -3,7 +3,7 @@
 A :class:`Fleet` runs ONE asyncio event loop in ONE background thread. The process has
 one by default (:func:`default_fleet`: started by the first network link that connects,
 stopped when the last one closes), which every :class:`~tmmaster.Robot`, stand-alone
-gripper and :class:`ModbusTransport` made without ``fleet=`` or ``transport=`` joins;
+gripper and :class:`ModbusTransport` made without a ``link=`` of its own joins;
 a Fleet a user makes is the same driver, owned explicitly. Every robot on a driver
 keeps its own thread for what it decides
 (checks, the command write, withdraws, stops: the blocking code of ``_robot.py``,
@@ -499,7 +499,7 @@ def _settle(future: asyncio.Future[None]) -> None:
 class Fleet:
     """Drive many robots from one process: their links and the polls of their waits on one loop.
 
-    Make each robot with ``Robot(host, port, fleet=fleet)`` and drive it from its own
+    Make each robot with ``Robot(host, port, link=fleet)`` and drive it from its own
     thread as usual (``move_to``, ``wait``, ``stop``): the safety rules are the
     Robot's, unchanged. What changes is who polls: while a robot's thread waits for a
     move, the fleet's single event loop polls it on the same schedule and wakes the
@@ -523,7 +523,7 @@ class Fleet:
                 robot.move_to(Pose(300, -200, 200, 180, 0, 90), speed=50)
 
         with Fleet(watch_hz=10) as fleet:
-            robots = [Robot("127.0.0.1", port, fleet=fleet, name=f"r{port}")
+            robots = [Robot("127.0.0.1", port, link=fleet, name=f"r{port}")
                       for port in (5020, 5021)]
             threads = [threading.Thread(target=cycle, args=(r,)) for r in robots]
             for thread in threads:

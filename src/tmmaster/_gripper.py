@@ -597,7 +597,7 @@ class _OwnConnectionGripper(Gripper):
 class Blog2FG7Gripper(_OwnConnectionGripper):
     """The second article's map: force / width / control=16, gOBJ status from 258.
 
-    Made by ``Robot(gripper="blog-2fg7", gripper_port=...)`` (or
+    Made by ``Robot(gripper=GripperDevice("blog-2fg7", port=...))`` (or
     ``Robot(gripper=Blog2FG7Gripper(...))``), on its own Modbus connection.
 
     Args:
@@ -730,7 +730,7 @@ def _check_force_speed(kind: str, force_n: float, speed_percent: int, ceiling_n:
 class OnRobot2FG7Gripper(_OwnConnectionGripper):
     """The real OnRobot 2FG7 or 2FG14 (Compute Box, unit id 65; 66 / 67 on a Dual Quick Changer).
 
-    Made by ``Robot(gripper="onrobot-2fg7", gripper_host=..., gripper_port=...)`` (or
+    Made by ``Robot(gripper=GripperDevice("onrobot-2fg7", host=..., port=...))`` (or
     ``Robot(gripper=OnRobot2FG7Gripper(...))``), on its own Modbus connection. At
     :meth:`connect` it checks the product code and reads the width limits of the grip
     mode and the force ceiling.

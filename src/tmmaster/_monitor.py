@@ -469,7 +469,7 @@ class StatusMonitor:
         robot's own requests reconnect it. The reads count in ``robot.stats``.
 
         Args:
-            robot: A :class:`Robot` (connected now or later) made without ``fleet=``.
+            robot: A :class:`Robot` (connected now or later) made without a Fleet as ``link=``.
             name: Its name here; the robot's ``name`` when None.
 
         Returns:

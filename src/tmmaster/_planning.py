@@ -13,9 +13,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any, Protocol
+from typing import Annotated, Any, ClassVar, Protocol
 
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    AliasChoices,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    model_validator,
+)
 
 from . import _kinematics as kin
 from ._cell import (
@@ -25,7 +32,7 @@ from ._cell import (
     arm_lowest_z_mm,
 )
 from ._channels import Command, CommandKind
-from ._checks import is_finite_number, shown
+from ._checks import Bounds, Policy, bounded, is_finite_number, shown
 from ._exceptions import ConfigError, RobotError
 from ._pose import MotionType, Pose, refuse_suspect_units
 from ._robot_models import PathGauge, RobotModel, arc_through
@@ -162,17 +169,31 @@ class Workspace(BaseModel):
         )
 
 
-class TimeoutPolicy(BaseModel):
-    """How long waits may take; motion timeouts derive from the move unless fixed.
+#: The range of one Modbus request's bound (``TimeoutPolicy.request_s``), s.
+REQUEST_BOUNDS = Bounds(0.0, 60.0, "s", open_low=True)
+#: The range of a register gripper's settle time (``TimeoutPolicy.gripper_settle_s``), s.
+SETTLE_BOUNDS = Bounds(0.0, 60.0, "s", open_low=True)
 
-    Every bound is finite; the pick & place configuration (``[timeouts]``) is this model
-    and also accepts its older key names ``ack_s``, ``motion_s`` and ``gripper_s``.
+
+class TimeoutPolicy(Policy):
+    """How long requests and waits may take; motion timeouts derive from the move unless fixed.
+
+    ``Robot(host, timeouts=TimeoutPolicy(request_s=2.0))``. Every bound is finite; the
+    pick & place configuration (``[timeouts]``) is this model and also accepts its older
+    key names ``ack_s``, ``motion_s`` and ``gripper_s``. ``request_s`` and
+    ``gripper_settle_s`` are read when the robot is made (its link and its gripper);
+    the others by every wait when it starts. An invalid value is a
+    :class:`~tmmaster.ConfigError` naming the field (``timeouts.request_s must be ...``).
     """
 
-    model_config = ConfigDict(
-        frozen=True, extra="forbid", allow_inf_nan=False, populate_by_name=True
-    )
+    model_config = ConfigDict(populate_by_name=True)
+    #: The Robot argument that takes it: its fields are named ``timeouts.<field>`` in errors.
+    argument: ClassVar[str] = "timeouts"
 
+    #: One Modbus request must be answered within this time, s (up to 60).
+    request_s: Annotated[float, BeforeValidator(bounded("timeouts.request_s", REQUEST_BOUNDS))] = (
+        1.0
+    )
     #: The robot must acknowledge a command within this time.
     ack_timeout_s: Annotated[
         float, Field(gt=0, le=60, validation_alias=AliasChoices("ack_timeout_s", "ack_s"))
@@ -191,6 +212,11 @@ class TimeoutPolicy(BaseModel):
         float,
         Field(gt=0, le=600, validation_alias=AliasChoices("gripper_timeout_s", "gripper_s")),
     ] = 5.0
+    #: A register gripper without a busy flag (the article profile's): how long an open
+    #: or a close takes at most, s (up to 60).
+    gripper_settle_s: Annotated[
+        float, BeforeValidator(bounded("timeouts.gripper_settle_s", SETTLE_BOUNDS))
+    ] = 0.5
     #: After a command write whose answer was lost (clear-on-accept profiles, which must
     #: never write a command twice): how long to watch for the write to land late.
     in_flight_s: Annotated[float, Field(gt=0, le=600)] = 5.0

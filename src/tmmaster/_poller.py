@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Annotated
+from typing import Annotated, ClassVar
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BeforeValidator, Field
 
+from ._checks import Bounds, Policy, bounded
 from ._exceptions import ConfigError, StopRequestedError
 from ._robot_models import trapezoid_progress
 
@@ -104,8 +105,15 @@ class Poller:
         self.sleep_until(self._next)
 
 
-class PollPolicy(BaseModel):
-    """Predictive polling of a move: nominal pace, dense where something is expected.
+#: The range of a wait's nominal poll interval (``PollPolicy.interval_s``), s.
+INTERVAL_BOUNDS = Bounds(0.001, 5.0, "s")
+
+
+class PollPolicy(Policy):
+    """How a robot polls its waits: the nominal pace, dense where something is expected.
+
+    ``Robot(host, polling=PollPolicy(interval_s=0.02))``: every wait reads the robot's
+    status at most ``interval_s`` apart (its nominal pace).
 
     The master knows when the robot should acknowledge (its next control tick after the
     write) and when the move should end (acknowledgement + expected time). It polls
@@ -118,10 +126,18 @@ class PollPolicy(BaseModel):
     than the nominal interval after that, and the predicted end moves with the progress
     each poll observes. A finish the model did not predict is seen within one nominal
     interval.
+
+    An invalid value is a :class:`~tmmaster.ConfigError` naming the field
+    (``polling.interval_s must be a number in [0.001, 5] s, got 10``).
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+    #: The Robot argument that takes it: its fields are named ``polling.<field>`` in errors.
+    argument: ClassVar[str] = "polling"
 
+    #: Seconds between two status reads of a wait (its nominal pace), 0.001 to 5.
+    interval_s: Annotated[
+        float, BeforeValidator(bounded("polling.interval_s", INTERVAL_BOUNDS))
+    ] = 0.05
     #: False: poll every nominal interval, nothing else.
     predictive: bool = True
     #: Interval inside the dense windows, in seconds.

@@ -191,8 +191,8 @@ class UnitsError(ConfigError):
 
     Raised by :class:`~tmmaster.Robot` for a target (before anything is sent) and for its
     ``tool`` (when the robot is made), naming the values and the rule they match; the
-    rules are in docs/robot-api.md ("Units"). ``Robot(check_units=False)`` takes such
-    values as written.
+    rules are in docs/robot-api.md ("Units"). ``Robot(checks=Checks(units=False))``
+    takes such values as written.
     """
 
 
@@ -299,7 +299,7 @@ def refuse_suspect_units(what: str, pose: Pose) -> None:
     if problem is not None:
         raise UnitsError(
             f"{what} {written_list(pose)}: {problem}; if these really are mm and degrees,"
-            " make the robot with Robot(check_units=False)"
+            " make the robot with Robot(checks=Checks(units=False))"
         )
 
 

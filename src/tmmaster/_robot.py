@@ -28,9 +28,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal, ParamSpec, TypeVar
-
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from typing import Any, Literal, ParamSpec, TypeVar
 
 from . import _commanded
 from . import _kinematics as kin
@@ -43,7 +41,7 @@ from ._channels import (
     channel_for,
     pose_from,
 )
-from ._checks import Bounds, require_in, require_positive
+from ._checks import require_in, require_positive
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._command import _MotionFollower
 from ._exceptions import (
@@ -68,6 +66,8 @@ from ._fleet import (
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
 from ._io import RobotIO
 from ._logging import get_logger
+from ._options import ORIENTATION_BOUNDS, POSITION_BOUNDS, Checks, GripperDevice, speed_limit
+from ._options import FrameCheck as FrameCheck  # tmmaster imports it from here
 from ._planning import (
     Planner,
     check_accel,
@@ -79,7 +79,7 @@ from ._planning import (
 )
 from ._planning import TimeoutPolicy as TimeoutPolicy  # tmmaster imports it from here
 from ._planning import Workspace as Workspace  # tmmaster imports it from here
-from ._poller import Poller, PollPolicy
+from ._poller import INTERVAL_BOUNDS, Poller, PollPolicy
 from ._pose import MotionType, Pose
 from ._profiles import (
     DEFAULT_PROFILE,
@@ -111,78 +111,27 @@ from ._transport import (
 _log = get_logger("tmmaster.robot")
 
 _P = ParamSpec("_P")
-_PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy")
+_PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy", "Checks")
 
 
-class FrameCheck(BaseModel):
-    """At connect: the robot's TCP must be its flange times the master's ``tool``.
-
-    For a profile that publishes the flange pose and the TCP pose (``tmflow``: Techman's
-    7001-7012 and 7025-7036, both in the current base), :meth:`Robot.connect` reads both
-    in one request and refuses a robot whose TCP is not ``flange x tool`` within the
-    tolerances, naming the tool offset the robot appears to have (``inverse(flange) x
-    TCP``). Where the profile also publishes the TCP in the robot base (7049-7060), the
-    two TCP poses must agree: the master's poses are in the robot base. On by default;
-    ``FrameCheck.off("why")`` switches it off, and the reason is logged at warning level
-    at every connect.
-    """
-
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
-
-    #: False: not checked (``reason`` says why).
-    enabled: bool = True
-    #: Why the check is off (required then); logged at warning level at connect.
-    reason: str = ""
-    #: Largest distance between the robot's TCP and flange x tool, mm.
-    position_tolerance_mm: Annotated[float, Field(gt=0, le=1000)] = 1.0
-    #: Largest angle between the two orientations (:meth:`Pose.rotation_to`), deg.
-    orientation_tolerance_deg: Annotated[float, Field(gt=0, le=180)] = 1.0
-
-    @model_validator(mode="after")
-    def _off_needs_a_reason(self) -> FrameCheck:
-        if not self.enabled and not self.reason.strip():
-            raise ValueError('a frame check switched off needs a reason: FrameCheck.off("why")')
-        return self
-
-    @classmethod
-    def off(cls, reason: str) -> FrameCheck:
-        """The check switched off, for ``reason`` (logged at warning level at connect).
-
-        Args:
-            reason: why the robot's TCP need not match the master's tool (not empty).
-
-        Returns:
-            A disabled check.
-
-        Raises:
-            ConfigError: ``reason`` is empty.
-        """
-        if not isinstance(reason, str) or not reason.strip():
-            raise ConfigError(f"FrameCheck.off needs a reason, got {reason!r}")
-        return cls(enabled=False, reason=reason)
+def _link(link: object) -> tuple[Transport | None, Fleet | None]:
+    """The ``link`` option: a ready Transport, a Fleet whose loop runs the link, or None."""
+    if link is None:
+        return None, None
+    if isinstance(link, Fleet):
+        return None, link
+    if isinstance(link, Transport):
+        return link, None
+    raise ConfigError(
+        f"link must be a tmmaster.Transport or a tmmaster.Fleet, got {type(link).__name__}"
+    )
 
 
-#: The range of each numeric option of :class:`Robot` (its constructor and its setters
-#: check them alike, :func:`_checked_option`); docs/robot-api.md lists them.
-_OPTION_BOUNDS: dict[str, Bounds] = {
-    "poll_interval_s": Bounds(0.001, 5.0, "s"),
-    "request_timeout_s": Bounds(0.0, 60.0, "s", open_low=True),
-    "position_tolerance_mm": Bounds(0.0, 50.0, "mm", open_low=True),
-    "orientation_tolerance_deg": Bounds(0.0, 45.0, "deg", open_low=True),
-    "gripper_settle_s": Bounds(0.0, 60.0, "s", open_low=True),
-}
-
-
-def _checked_option(name: str, value: object) -> float:
-    """``value`` for the Robot option ``name``; a ConfigError naming it and its range."""
-    return require_in(name, value, _OPTION_BOUNDS[name])
-
-
-def _speed_limit(value: object) -> int:
-    """``max_speed_percent`` when it is an integer in [1, 100]; a ConfigError otherwise."""
-    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
-        raise ConfigError(f"max_speed_percent must be an integer in [1, 100] %, got {value!r}")
-    return value
+def _device_address(gripper: object) -> tuple[str | None, int, Transport | None]:
+    """A GripperDevice's host, port and ready link; any other gripper: the robot's host, 502."""
+    if isinstance(gripper, GripperDevice):
+        return gripper.host, gripper.port, gripper.transport
+    return None, 502, None
 
 
 def _policy(name: str, value: object, kind: type[_PolicyT]) -> _PolicyT:
@@ -196,55 +145,29 @@ def _policy(name: str, value: object, kind: type[_PolicyT]) -> _PolicyT:
 
 @dataclass(frozen=True)
 class _Options:
-    """A Robot's options that its setters check too, checked (docs/robot-api.md)."""
+    """A Robot's option objects, checked (docs/robot-api.md)."""
 
-    max_speed_percent: int
-    poll_interval_s: float
-    request_timeout_s: float
-    position_tolerance_mm: float
-    orientation_tolerance_deg: float
-    gripper_settle_s: float
     polling: PollPolicy
     timeouts: TimeoutPolicy
     retry: RetryPolicy | None
+    checks: Checks
 
     @classmethod
     def checked(
-        cls,
-        *,
-        max_speed_percent: object,
-        poll_interval_s: object,
-        request_timeout_s: object,
-        position_tolerance_mm: object,
-        orientation_tolerance_deg: object,
-        gripper_settle_s: object,
-        polling: object,
-        timeouts: object,
-        retry: RetryPolicy | None,
+        cls, polling: object, timeouts: object, retry: RetryPolicy | None, checks: object
     ) -> _Options:
-        """The options checked in this order, each as its setter checks it."""
-        speed_limit = _speed_limit(max_speed_percent)
-        poll, request, mm, deg, settle = (
-            _checked_option(option, value)
-            for option, value in (
-                ("poll_interval_s", poll_interval_s),
-                ("request_timeout_s", request_timeout_s),
-                ("position_tolerance_mm", position_tolerance_mm),
-                ("orientation_tolerance_deg", orientation_tolerance_deg),
-                ("gripper_settle_s", gripper_settle_s),
-            )
-        )
+        """Each option object checked for its type (None: the default one)."""
         return cls(
-            speed_limit,
-            poll,
-            request,
-            mm,
-            deg,
-            settle,
             _policy("polling", polling, PollPolicy),
             _policy("timeouts", timeouts, TimeoutPolicy),
             retry,
+            _policy("checks", checks, Checks),
         )
+
+    @property
+    def request_timeout_s(self) -> float:
+        """The bound of one Modbus request, s (``timeouts.request_s``)."""
+        return self.timeouts.request_s
 
     def follower(
         self, channel: CommandChannel, stop_event: threading.Event, log: Any
@@ -254,73 +177,56 @@ class _Options:
             channel,
             stop_event,
             log,
-            poll_interval_s=self.poll_interval_s,
+            poll_interval_s=self.polling.interval_s,
             polling=self.polling,
             timeouts=self.timeouts,
-            position_tolerance_mm=self.position_tolerance_mm,
-            orientation_tolerance_deg=self.orientation_tolerance_deg,
+            position_tolerance_mm=self.checks.position_tolerance_mm,
+            orientation_tolerance_deg=self.checks.orientation_tolerance_deg,
         )
 
     def planner(
-        self,
-        model: RobotModel,
-        workspace: Workspace | None,
-        tool: Pose | None,
-        check_units: bool,
-        settings: _MotionFollower,
-        log: Any,
+        self, model: RobotModel, tool: Pose | None, settings: _MotionFollower, log: Any
     ) -> Planner:
-        """The robot's planner (``tool`` checked), with ``max_speed_percent``."""
+        """The robot's planner (``tool`` checked), with the workspace and speed checks."""
         return Planner(
             model,
-            workspace=Workspace() if workspace is None else workspace,
+            workspace=self.checks.workspace,
             tool=tool,
-            check_units=bool(check_units),
-            max_speed_percent=self.max_speed_percent,
+            check_units=self.checks.units,
+            max_speed_percent=self.checks.max_speed_percent,
             settings=settings,
             log=log,
         )
 
     def gripper(
         self,
-        spec: str | Path | GripperProfile | Gripper | None,
+        spec: str | Path | GripperProfile | GripperDevice | Gripper | None,
         profile: RobotProfile,
         links: _Links,
     ) -> Gripper:
         """The gripper for ``spec``: an instance as given, "auto" what the profile offers.
 
-        A stand-alone gripper listens at the gripper's address of ``links`` (or speaks
-        over its ready link).
+        A stand-alone gripper listens at the gripper's address of ``links`` (a
+        GripperDevice's, else the robot's host), or speaks over its ready link.
         """
         if isinstance(spec, Gripper):
             return spec
         if spec is None or spec == "none":
             return NoGripper()
         if spec == "auto":
-            return auto_gripper(profile, settle_s=self.gripper_settle_s)
+            return auto_gripper(profile, settle_s=self.timeouts.gripper_settle_s)
         link = GripperLink(
             host=links.gripper_host,
             port=links.gripper_port,
             retry=self.retry,
-            request_timeout_s=self.request_timeout_s,
-            poll_interval_s=self.poll_interval_s,
+            request_timeout_s=self.timeouts.request_s,
+            poll_interval_s=self.polling.interval_s,
             timeout_s=self.timeouts.gripper_timeout_s,
             ack_timeout_s=self.timeouts.ack_timeout_s,
             transport=links.gripper_transport,
         )
-        return gripper_for_profile(gripper_profile(spec), link)
-
-
-def _checked_frame_check(frame_check: object) -> FrameCheck:
-    """The ``frame_check`` option: a FrameCheck (None: the default one, on)."""
-    if frame_check is None:
-        return FrameCheck()
-    if not isinstance(frame_check, FrameCheck):
-        raise ConfigError(
-            'frame_check must be a tmmaster.FrameCheck (FrameCheck.off("why") switches'
-            f" it off), got {frame_check!r}"
-        )
-    return frame_check
+        kind = spec.profile if isinstance(spec, GripperDevice) else spec
+        return gripper_for_profile(gripper_profile(kind), link)
 
 
 @dataclass(frozen=True)
@@ -356,10 +262,10 @@ class _Links:
         if gripper_transport is None:
             if gripper_host is not None:
                 gripper_host = check_host(
-                    gripper_host, field="gripper_host", port_field="gripper_port"
+                    gripper_host, field="gripper.host", port_field="gripper.port"
                 )
             if not is_in_process(gripper_host or host):
-                gripper_port = check_port(gripper_port, field="gripper_port")
+                gripper_port = check_port(gripper_port, field="gripper.port")
         return cls(host, port, gripper_host or host, gripper_port, transport, gripper_transport)
 
     def open(
@@ -443,102 +349,67 @@ class Robot:
         model: The arm: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"``, ``"tm14"`` or a
             RobotModel; inverse kinematics of every target, and expected motion times.
         gripper: ``"auto"`` (what the profile offers), None, ``"blog-2fg7"``,
-            ``"onrobot-2fg7"``, a gripper TOML file, a GripperProfile, or a Gripper.
-        gripper_host: Where a stand-alone gripper listens; None: the robot's host.
-        gripper_port: The stand-alone gripper's port.
-        poll_interval_s: Seconds between two status reads of a wait, 0.001 to 5.
-        polling: When a move is polled (dense around the acknowledgement and the
-            expected end); None: ``PollPolicy()``.
-        timeouts: Acknowledgement, motion and gripper timeouts; None:
-            ``TimeoutPolicy()``.
-        retry: How transient failures are retried (never a command write); None:
-            ``RetryPolicy()``, up to 12 attempts within 10 s.
-        request_timeout_s: Bound of one Modbus request, s (up to 60).
-        workspace: Where the tool may go (a table plane at z = 0 and a box); None:
-            ``Workspace()``.
-        max_speed_percent: Faster moves are refused, an integer 1..100.
-        position_tolerance_mm: A finished move's TCP must be this close to the
-            target, mm (up to 50).
-        orientation_tolerance_deg: ... and its orientation this close, deg (up to 45).
-        gripper_settle_s: The article profile's register gripper (no busy flag): how
-            long an open or a close takes at most, s (up to 60).
+            ``"onrobot-2fg7"``, a gripper TOML file or a GripperProfile (a stand-alone
+            gripper at the robot's host, port 502), a :class:`GripperDevice` (one at
+            an address or on a ready link of its own), or a Gripper.
         tool: The TCP in the flange frame (mm, deg): poses are TCP poses, TCP = flange
             x tool; None: the TCP is the flange.
         name: The robot's name in messages and logs.
-        transport: A ready Transport for the robot's link instead of one opened to
-            ``host:port``.
-        gripper_transport: A ready Transport for a stand-alone gripper's link.
-        fleet: A Fleet: the robot's link and the polls of its waits on the fleet's
-            event loop (not with ``transport`` or a ``sim://`` host).
-        frame_check: At connect, the robot's TCP must be its flange x ``tool``; None:
-            ``FrameCheck()``; ``FrameCheck.off("why")`` switches it off.
-        check_units: Refuse (UnitsError, before anything is sent) a target or a
-            ``tool`` that looks like metres or radians; False takes them as written.
+        polling: How waits poll: the nominal interval (``interval_s``, 0.001 to 5 s)
+            and the dense windows around the acknowledgement and the expected end;
+            None: ``PollPolicy()`` (50 ms).
+        timeouts: The bound of one Modbus request (``request_s``), the
+            acknowledgement, motion and gripper timeouts, a register gripper's settle
+            time; None: ``TimeoutPolicy()``.
+        retry: How transient failures are retried (never a command write); None:
+            ``RetryPolicy()``, up to 12 attempts within 10 s.
+        checks: What is checked before a move is sent and at its end (workspace, speed
+            cap, tolerances, units) and at connect (the frame check); None:
+            ``Checks()``.
+        link: A ready Transport for the robot's link instead of one opened to
+            ``host:port``, or a Fleet: the robot's link and the polls of its waits on
+            the fleet's event loop (not with a ``sim://`` host).
 
     Raises:
         ConfigError: An invalid argument, named in the message with its range where it
             has one (an unknown profile or model: RegisterMapError). The setters of
-            the options check what the constructor checks.
+            the options check what the option objects check.
     """
 
-    # Over the house limit of 12 (tests/test_house_limits.py): grouping Robot's public
-    # options is an API decision still open.
-    def __init__(  # noqa: PLR0913
+    def __init__(
         self,
         host: str,
         port: int = 502,
         *,
         profile: str | Path | RobotProfile = DEFAULT_PROFILE,
         model: str | RobotModel = "tm5-700",
-        gripper: str | Path | GripperProfile | Gripper | None = "auto",
-        gripper_host: str | None = None,
-        gripper_port: int = 502,
-        poll_interval_s: float = 0.05,
+        gripper: str | Path | GripperProfile | GripperDevice | Gripper | None = "auto",
+        tool: Pose | None = None,
+        name: str = "robot",
         polling: PollPolicy | None = None,
         timeouts: TimeoutPolicy | None = None,
         retry: RetryPolicy | None = None,
-        request_timeout_s: float = 1.0,
-        workspace: Workspace | None = None,
-        max_speed_percent: int = 100,
-        position_tolerance_mm: float = 1.0,
-        orientation_tolerance_deg: float = 1.0,
-        gripper_settle_s: float = 0.5,
-        tool: Pose | None = None,
-        name: str = "robot",
-        transport: Transport | None = None,
-        gripper_transport: Transport | None = None,
-        fleet: Fleet | None = None,
-        frame_check: FrameCheck | None = None,
-        check_units: bool = True,
+        checks: Checks | None = None,
+        link: Transport | Fleet | None = None,
     ) -> None:
         # The addresses first, then every option, before anything is opened.
-        links = _Links.checked(host, port, gripper_host, gripper_port, transport, gripper_transport)
+        transport, fleet = _link(link)
+        gripper_host, gripper_port, gripper_link = _device_address(gripper)
+        links = _Links.checked(host, port, gripper_host, gripper_port, transport, gripper_link)
         #: The robot's register map.
         self.profile = robot_profile(profile)
         arm = model if isinstance(model, RobotModel) else robot_model(model)
-        options = _Options.checked(
-            max_speed_percent=max_speed_percent,
-            poll_interval_s=poll_interval_s,
-            request_timeout_s=request_timeout_s,
-            position_tolerance_mm=position_tolerance_mm,
-            orientation_tolerance_deg=orientation_tolerance_deg,
-            gripper_settle_s=gripper_settle_s,
-            polling=polling,
-            timeouts=timeouts,
-            retry=retry,
-        )
+        options = _Options.checked(polling, timeouts, retry, checks)
         #: The robot's name in messages and logs.
         self.name = name
-        tool = checked_tool(tool, bool(check_units))
+        tool = checked_tool(tool, options.checks.units)
         #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
-        self.frame_check = _checked_frame_check(frame_check)
+        self.frame_check = options.checks.frame
         self._transport = links.open(self.profile, name, fleet, options)
         self._log = _log.bind(robot=name)
         self._open_command_path(options, fleet)
         # Checks and plans every move from where the arm is believed to be (no I/O).
-        self._planner = options.planner(
-            arm, workspace, tool, check_units, self._follower, self._log
-        )
+        self._planner = options.planner(arm, tool, self._follower, self._log)
         self._connected = False
         # What the last close() found: True when nothing it sent can still run.
         self._closed_safely: bool | None = None
@@ -606,11 +477,13 @@ class Robot:
 
     @poll_interval_s.setter
     def poll_interval_s(self, value: float) -> None:
-        self._follower.poll_interval_s = _checked_option("poll_interval_s", value)
+        interval = require_in("poll_interval_s", value, INTERVAL_BOUNDS)
+        self._follower.poll_interval_s = interval
+        self._follower.polling = self._follower.polling.model_copy(update={"interval_s": interval})
 
     @property
     def polling(self) -> PollPolicy:
-        """When a move is polled (dense around the acknowledgement and the expected end)."""
+        """How waits poll: the nominal interval and when a move is polled densely."""
         return self._follower.polling
 
     @polling.setter
@@ -618,10 +491,16 @@ class Robot:
         if value is None:
             raise ConfigError("polling must be a tmmaster.PollPolicy, got None")
         self._follower.polling = _policy("polling", value, PollPolicy)
+        self._follower.poll_interval_s = value.interval_s
 
     @property
     def timeouts(self) -> TimeoutPolicy:
-        """How long waits may take (acknowledgement, motion, gripper, in-flight write)."""
+        """How long waits may take (acknowledgement, motion, gripper, in-flight write).
+
+        A new policy applies to the next wait; its ``request_s`` and
+        ``gripper_settle_s`` are read when the robot is made (they bound its link and
+        its gripper), and are those a robot keeps.
+        """
         return self._follower.timeouts
 
     @timeouts.setter
@@ -637,7 +516,9 @@ class Robot:
 
     @position_tolerance_mm.setter
     def position_tolerance_mm(self, value: float) -> None:
-        self._follower.position_tolerance_mm = _checked_option("position_tolerance_mm", value)
+        self._follower.position_tolerance_mm = require_in(
+            "position_tolerance_mm", value, POSITION_BOUNDS
+        )
 
     @property
     def orientation_tolerance_deg(self) -> float:
@@ -646,8 +527,8 @@ class Robot:
 
     @orientation_tolerance_deg.setter
     def orientation_tolerance_deg(self, value: float) -> None:
-        self._follower.orientation_tolerance_deg = _checked_option(
-            "orientation_tolerance_deg", value
+        self._follower.orientation_tolerance_deg = require_in(
+            "orientation_tolerance_deg", value, ORIENTATION_BOUNDS
         )
 
     @property
@@ -657,7 +538,22 @@ class Robot:
 
     @max_speed_percent.setter
     def max_speed_percent(self, value: int) -> None:
-        self._planner.max_speed_percent = _speed_limit(value)
+        self._planner.max_speed_percent = speed_limit(value)
+
+    @property
+    def checks(self) -> Checks:
+        """What is checked now: the workspace, speed cap, tolerances, units, frame check.
+
+        Made from the properties below (each has a setter); read-only itself.
+        """
+        return Checks.model_construct(
+            workspace=self.workspace,
+            max_speed_percent=self.max_speed_percent,
+            position_tolerance_mm=self.position_tolerance_mm,
+            orientation_tolerance_deg=self.orientation_tolerance_deg,
+            units=self.check_units,
+            frame=self.frame_check,
+        )
 
     # -- what a move is planned with (the planner's) ---------------------------
 
@@ -1595,7 +1491,7 @@ def _check_frames(
             f" ({mm:.1f} mm, {deg:.1f} deg apart). Give Robot(tool=...) the robot's"
             " tool, or generate the robot program for the master's (tmmaster"
             " robot-program --tool; its ChangeTCP sets the robot's TCP when the project"
-            ' starts), or pass frame_check=FrameCheck.off("why")'
+            ' starts), or pass checks=Checks(frame=FrameCheck.off("why"))'
         )
     if robot_base_tcp is not None and (
         robot_base_tcp.distance_to(tcp) > check.position_tolerance_mm
@@ -1606,7 +1502,7 @@ def _check_frames(
             f" ({tcp} in the current base, {robot_base_tcp} in the robot base); the"
             " master's poses are in the robot base (the robot program's"
             ' ChangeBase("RobotBase") when the project starts), or pass'
-            ' frame_check=FrameCheck.off("why")'
+            ' checks=Checks(frame=FrameCheck.off("why"))'
         )
 
 

@@ -27,11 +27,14 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+from pydantic.json_schema import SkipJsonSchema
 
 from .. import _profiles
 from .._address import check_host
 from .._cell import DEFAULT_TABLE_TOP_Z_MM
 from .._exceptions import ConfigError
+from .._options import Checks, GripperDevice
+from .._poller import PollPolicy
 from .._pose import MotionType, Pose, pose_count_problem, suspect_units, written_list
 from .._profiles import DEFAULT_PROFILE
 from .._registers import GripperProfile, RobotProfile
@@ -222,6 +225,15 @@ class TimeoutsSection(TimeoutPolicy):
     request_s: Annotated[float, Field(gt=0, le=60)] = 1.0
     #: The robot must be ready (auto, idle, no error) within this time at start.
     ready_s: Annotated[float, Field(gt=0, le=600)] = 10.0
+    #: Not a key of this section: the gripper's settle time is ``[gripper] settle_s``.
+    gripper_settle_s: SkipJsonSchema[float] = Field(default=0.5, exclude=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _settle_is_the_grippers(cls, data: Any) -> Any:
+        if isinstance(data, Mapping) and "gripper_settle_s" in data:
+            raise ValueError("gripper_settle_s is not a [timeouts] key: set [gripper] settle_s")
+        return data
 
 
 class RetrySection(RetryPolicy):
@@ -539,26 +551,37 @@ def robot_from_config(
     if target is None:
         raise ConfigError("robot.host: no robot address (set [robot] host, or pass host)")
     g = config.gripper
-    loaded_gripper = config.gripper_profile()
+    # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
+    settle_s = max(g.settle_s / settle_scale, min(g.settle_s, 0.1))
     return Robot(
         target,
         port if port is not None else config.robot.port,
         profile=config.robot_profile(),
         model=config.robot.model,
-        gripper=g.kind if loaded_gripper is None else loaded_gripper,
-        gripper_host=g.host,
-        gripper_port=gripper_port if gripper_port is not None else g.port,
-        poll_interval_s=config.run.poll_interval_s,
-        timeouts=config.timeouts,
-        retry=config.retry,
-        request_timeout_s=config.timeouts.request_s,
-        workspace=config.workspace,
-        max_speed_percent=config.robot.max_speed,
-        position_tolerance_mm=config.robot.position_tolerance_mm,
+        gripper=_gripper(config, gripper_port),
         tool=config.robot.tool_pose(),
-        frame_check=config.robot.frame_check,
-        # The configuration's poses were checked as written (check_pose_units).
-        check_units=False,
-        # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
-        gripper_settle_s=max(g.settle_s / settle_scale, min(g.settle_s, 0.1)),
+        polling=PollPolicy(interval_s=config.run.poll_interval_s),
+        timeouts=config.timeouts.model_copy(update={"gripper_settle_s": settle_s}),
+        retry=config.retry,
+        checks=Checks(
+            workspace=config.workspace,
+            max_speed_percent=config.robot.max_speed,
+            position_tolerance_mm=config.robot.position_tolerance_mm,
+            # The configuration's poses were checked as written (check_pose_units).
+            units=False,
+            frame=config.robot.frame_check,
+        ),
+    )
+
+
+def _gripper(config: PickPlaceConfig, port: int | None) -> str | GripperDevice:
+    """``[gripper]`` as Robot's gripper: "auto" or "none", else a device at its address."""
+    g = config.gripper
+    if g.kind in ("auto", "none"):
+        return g.kind
+    loaded = config.gripper_profile()
+    return GripperDevice(
+        g.kind if loaded is None else loaded,
+        host=g.host,
+        port=port if port is not None else g.port,
     )

@@ -6,7 +6,7 @@ requests (checked between states; running waits are interrupted through
 cycles, one log event per state change with its duration, timing per state and per
 cycle, recording which state failed and why, and the reaction to a failure ("stay",
 or "retreat" to a safe pose at low speed, never after an e-stop or a robot error).
-Polling and timeouts are the robot API's (``Robot(poll_interval_s=, timeouts=)``).
+Polling and timeouts are the robot API's (``Robot(polling=, timeouts=)``).
 """
 
 from __future__ import annotations

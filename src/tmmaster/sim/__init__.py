@@ -4,7 +4,7 @@ Like python-can's virtual bus, the simulator is part of the library: the same ma
 code runs against it and against a real robot. Start one with
 ``with Simulator() as sim:`` (a free loopback port) or ``python -m tmmaster.sim``;
 ``Simulator(listen=False)`` opens no socket and is reached in-process at ``sim.url``
-(``Robot(sim.url)``, or ``Robot(..., transport=MemoryTransport(sim))``).
+(``Robot(sim.url)``, or ``Robot(..., link=MemoryTransport(sim))``).
 """
 
 from types import FunctionType as _FunctionType

@@ -168,7 +168,7 @@ class MemoryTransport(BlockTransport):
         from tmmaster.sim import MemoryTransport, Simulator
 
         with Simulator(listen=False) as sim:
-            robot = Robot(sim.url, transport=MemoryTransport(sim))
+            robot = Robot(sim.url, link=MemoryTransport(sim))
             with robot:
                 print(robot.status().mode)
         ```
