@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +21,7 @@ import pytest
 import tmmaster
 from test_script_project import open_robot
 from test_sim_controller import DT, FAR, HOME, run, run_until, send_tmflow, tmflow
+from test_tmscript_execution import FakeHost
 from tmmaster import Checks, FrameCheck, Pose, _cli
 from tmmaster._profiles import profile_from_data, robot_profile
 from tmmaster._registers import Table
@@ -33,7 +34,7 @@ from tmmaster.sim._script_project import (
     TM_PTP_JOINT_BOUNDARY,
     ScriptProjectController,
 )
-from tmmaster.tmscript import parse
+from tmmaster.tmscript import Execution, parse
 
 TOOL = ToolSetting(tcp=Pose(0, 0, 0, 0, 0, 0), mass_kg=1.1)
 CANCELLED, MOTION_FAILED, GRIPPER_FAILED = 5, 3, 4
@@ -61,6 +62,57 @@ def test_the_program_sets_the_tool_with_its_mass_and_inertia() -> None:
     assert "float[] tool" not in named
     parse(text)
     parse(named)
+
+
+class ToolRecorder(FakeHost):
+    """A host that records each ChangeTCP."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tools: list[tuple[object, float | None, list[float] | None]] = []
+
+    def change_tcp(
+        self,
+        value: str | Sequence[float],
+        mass: float | None = None,
+        inertia: Sequence[float] | None = None,
+    ) -> None:
+        shown = value if isinstance(value, str) else list(value)
+        self.tools.append((shown, mass, None if inertia is None else list(inertia)))
+
+
+def test_the_interpreter_takes_every_changetcp_syntax_with_its_mass() -> None:
+    # TMscript 2.24 §13.6, pp. 327-329: the manual's own examples of syntaxes 1-7.
+    script = """
+define
+{
+    float[] Tool1 = {0,0,150,0,0,90}
+    float[] COM1 = {2,0.5,0.5,0,0,-80,0,0,0}
+}
+main
+{
+    ChangeTCP("RobotEndFlange")
+    ChangeTCP(Tool1)
+    ChangeTCP(Tool1,2)
+    ChangeTCP(Tool1,2,COM1)
+    ChangeTCP(0,0,150,0,0,90)
+    ChangeTCP(0,0,150,0,0,90,2)
+    ChangeTCP(0,0,150,0,0,90,2, 2,0.5,0.5,0,0,-80,0,0,0)
+}
+"""
+    host = ToolRecorder()
+    Execution(parse(script), host).run_to_end(timeout_s=5)
+    tcp = [0.0, 0.0, 150.0, 0.0, 0.0, 90.0]
+    com = [2.0, 0.5, 0.5, 0.0, 0.0, -80.0, 0.0, 0.0, 0.0]
+    assert host.tools == [
+        ("RobotEndFlange", None, None),
+        (tcp, None, None),
+        (tcp, 2.0, None),
+        (tcp, 2.0, com),
+        (tcp, None, None),
+        (tcp, 2.0, None),
+        (tcp, 2.0, com),
+    ]
 
 
 def test_the_simulated_robot_publishes_the_mass_the_program_set() -> None:

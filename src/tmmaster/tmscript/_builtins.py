@@ -931,12 +931,25 @@ def _ChangeBase(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value
     "bool(float[])",
     "bool(float[], float)",
     "bool(float[], float, float[])",
+    "bool(" + ", ".join(["float"] * 6) + ")",
+    "bool(" + ", ".join(["float"] * 7) + ")",
+    "bool(" + ", ".join(["float"] * 16) + ")",
     motion=True,
 )
 def _ChangeTCP(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §13.6 ChangeTCP, p. 327: a TCP name, or values, mass and inertia."""
+    """TMscript 2.24 §13.6 ChangeTCP, pp. 327-329: a TCP name, or values, mass and inertia.
+
+    Syntaxes 1-4 (pp. 327-328): a name, or ``float[]`` values, mass, ``float[]`` inertia;
+    syntaxes 5-7 (pp. 328-329): the same as 6, 7 or 16 separate numbers.
+    """
     if isinstance(args[0], str):
         rt.host.change_tcp(args[0])
+        return True
+    if types[0] != "float[]":  # syntaxes 5-7: X..RZ[, mass[, nine inertia values]]
+        numbers = [_num(a) for a in args]
+        mass = numbers[6] if len(numbers) > 6 else None
+        inertia = numbers[7:] if len(numbers) > 7 else None
+        rt.host.change_tcp(numbers[:6], mass, inertia)
         return True
     mass = _num(args[1]) if len(args) > 1 else None
     inertia = _floats(args[2]) if len(args) > 2 else None
