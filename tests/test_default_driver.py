@@ -1,6 +1,6 @@
-"""The process's default driver: every network link made without ``fleet=`` on one loop.
+"""The process's default driver: every link not on a user's Fleet, on one loop.
 
-A Robot, an AsyncRobot and a ModbusTransport made without ``fleet=`` or ``transport=``
+A Robot and an AsyncRobot made without a ``link=``, and a ModbusTransport,
 take the default driver (one event-loop thread for the whole process): it starts with
 the first connect and ends when the last of them is closed or dropped. In-process
 ``sim://`` robots stay off it. The driver's loop thread is a daemon: it never keeps the

@@ -825,7 +825,7 @@ def wake_waits(member: FleetMember) -> None:
 class _DefaultDriver:
     """The process's default driver: one Fleet, made by its first user, retired with its last.
 
-    Every network link made without ``fleet=`` (a Robot's, a stand-alone gripper's, a
+    Every network link not on a Fleet of the user's (a Robot's, a stand-alone gripper's, a
     :class:`ModbusTransport`, an AsyncRobot's) takes it and gives it back once closed,
     so a process with no open link has no loop thread, and the next link starts a new one.
     """
@@ -881,7 +881,7 @@ class ModbusTransport(LoopTransport):
     """Reads and writes one Modbus TCP device, with counting, error mapping and retries.
 
     The link is an :class:`~tmmaster._transport.AsyncLink` on the process's default
-    driver, the event loop every Robot made without ``fleet=`` uses (started by the
+    driver, the event loop every Robot without a Fleet as ``link=`` uses (started by the
     first connect, stopped when the last link closes): pymodbus' socket framer and PDU
     classes build each request and decode its answer, and the answer is taken only
     under the request's own transaction id and from the transport's unit id. A failure
