@@ -100,6 +100,8 @@ class _Queued:
     start: Pose | None = None
     #: A move the arm cannot make: the error code and reason the robot stops with.
     error: tuple[int, str] | None = None
+    #: The joints the arm ends at, as planned when queued (the next move plans from them).
+    end_joints: tuple[float, ...] | None = None
 
 
 class SimHost:
@@ -386,10 +388,14 @@ class ScriptProjectController(SequenceController):
             self.log_rejected(call.kind, f"speed {call.speed} ({fmt})", Pose(*call.target[:6]))
             return False
         accel_s = (call.accel_time_ms if call.accel_time_ms > 0 else 200) / 1000.0
-        # From where the arm will be: the end of the last queued move, or here.
-        start = self._queue[-1].target if self._queue else self._backend.tcp_pose()
+        # From where the arm will be, joints included: the end of the last queued move,
+        # or here (a path checked from another posture refuses Lines the arm can follow).
+        if self._queue:
+            start, start_joints = self._queue[-1].target, self._queue[-1].end_joints
+        else:
+            start, start_joints = self._backend.tcp_pose(), self._backend.joint_positions_deg()
         try:
-            target, joints, via = self._planned(call, fmt, start)
+            target, joints, via, end = self._planned(call, fmt, start, start_joints)
         except (UnreachablePoseError, ConfigError) as exc:  # ConfigError: no arc
             reason = exc.reason if isinstance(exc, UnreachablePoseError) else str(exc)
             self.log_rejected(call.kind, reason, Pose(*call.target[:6]))
@@ -403,7 +409,9 @@ class ScriptProjectController(SequenceController):
             return False
         motion = MotionType.PTP if call.kind == "PTP" else MotionType.LINE
         self._queue.append(
-            _Queued(target, motion, speed, accel_s, joints=joints, via=via, start=start)
+            _Queued(
+                target, motion, speed, accel_s, joints=joints, via=via, start=start, end_joints=end
+            )
         )
         return True
 
@@ -419,9 +427,10 @@ class ScriptProjectController(SequenceController):
         return TM_IK_INTERPOLATION
 
     def _planned(
-        self, call: MotionCall, fmt: str, start: Pose
-    ) -> tuple[Pose, tuple[float, ...] | None, Pose | None]:
-        """The move's target, joint target and arc point, its path checked from ``start``.
+        self, call: MotionCall, fmt: str, start: Pose, start_joints: Sequence[float] | None
+    ) -> tuple[Pose, tuple[float, ...] | None, Pose | None, tuple[float, ...]]:
+        """The move's target, joint target, arc point and end joints, its path checked
+        from ``start`` with the arm at ``start_joints`` (None: the model's ready posture).
 
         Raises:
             UnreachablePoseError: The target or the path is out of reach.
@@ -434,15 +443,20 @@ class ScriptProjectController(SequenceController):
             target = self._model.forward(joints, self.tool)
         else:
             target = Pose(*call.target)
+        seed = None if start_joints is None else tuple(start_joints)
+        model, tool = self._model, self.tool
+        end: Sequence[float]
         if call.kind == "Circle":
             assert call.via is not None
             via = Pose(*call.via)
-            self._model.arc_joints(start, via, target, tool=self.tool)
+            end = model.arc_joints(start, via, target, start_joints_deg=seed, tool=tool)[-1]
         elif call.kind == "Line":
-            self._model.line_joints(start, target, tool=self.tool)
+            end = model.line_joints(start, target, start_joints_deg=seed, tool=tool)[-1]
         elif joints is None:
-            self._model.inverse(target, tool=self.tool)
-        return target, joints, via
+            end = model.inverse(target, seed_deg=seed, tool=tool)
+        else:
+            end = joints
+        return target, joints, via, tuple(end)
 
     def tag_last(self, tag: int) -> None:
         """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done)."""
