@@ -9,6 +9,8 @@ gripper as a GripperDevice, a ready link or a Fleet as ``link``. Nothing here co
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import pydantic
 import pytest
@@ -29,6 +31,21 @@ from tmmaster import (
 )
 from tmmaster.pickplace import robot_from_config, validate_config
 from tmmaster.sim import MemoryTransport, Simulator
+
+
+@pytest.fixture
+def made() -> Iterator[Callable[..., Robot]]:
+    """``Robot(...)``, closed after the test (a network robot holds the default driver)."""
+    robots: list[Robot] = []
+
+    def make(*args: Any, **options: Any) -> Robot:
+        robots.append(Robot(*args, **options))
+        return robots[-1]
+
+    yield make
+    for robot in robots:
+        robot.close()
+
 
 SIGNATURE = [
     "host",
@@ -51,7 +68,7 @@ def test_robot_and_both_connects_take_the_grouped_options(make: object) -> None:
     assert list(inspect.signature(make).parameters) == SIGNATURE  # type: ignore[arg-type]
 
 
-def test_each_option_object_reaches_what_it_sets() -> None:
+def test_each_option_object_reaches_what_it_sets(made: Callable[..., Robot]) -> None:
     checks = Checks(
         workspace=Workspace(floor_z_mm=0),
         max_speed_percent=40,
@@ -60,7 +77,7 @@ def test_each_option_object_reaches_what_it_sets() -> None:
         units=False,
         frame=FrameCheck.off("the tool is taught on the pendant"),
     )
-    robot = Robot(
+    robot = made(
         "127.0.0.1",
         1,
         profile="article",
@@ -79,8 +96,8 @@ def test_each_option_object_reaches_what_it_sets() -> None:
     assert robot.checks == checks
 
 
-def test_the_defaults_are_the_old_ones() -> None:
-    robot = Robot("127.0.0.1", 1, profile="article")
+def test_the_defaults_are_the_old_ones(made: Callable[..., Robot]) -> None:
+    robot = made("127.0.0.1", 1, profile="article")
     assert robot.poll_interval_s == 0.05
     assert robot._transport.timeout == 1.0  # type: ignore[attr-defined]
     assert robot.gripper._settle_s == 0.5  # type: ignore[attr-defined]
@@ -94,8 +111,8 @@ def test_the_defaults_are_the_old_ones() -> None:
     assert robot.workspace == Workspace()
 
 
-def test_the_interval_and_the_polling_policy_stay_one_setting() -> None:
-    robot = Robot("127.0.0.1", 1, profile="article")
+def test_the_interval_and_the_polling_policy_stay_one_setting(made: Callable[..., Robot]) -> None:
+    robot = made("127.0.0.1", 1, profile="article")
     robot.poll_interval_s = 0.03
     assert robot.polling.interval_s == 0.03
     robot.polling = PollPolicy(interval_s=0.2, predictive=False)
@@ -105,13 +122,11 @@ def test_the_interval_and_the_polling_policy_stay_one_setting() -> None:
     assert robot.checks.max_speed_percent == 20
 
 
-def test_a_gripper_device_is_reached_at_its_own_address() -> None:
-    robot = Robot(
-        "127.0.0.1", 1, gripper=GripperDevice("onrobot-2fg7", host="127.0.0.2", port=1502)
-    )
+def test_a_gripper_device_is_reached_at_its_own_address(made: Callable[..., Robot]) -> None:
+    robot = made("127.0.0.1", 1, gripper=GripperDevice("onrobot-2fg7", host="127.0.0.2", port=1502))
     link = robot.gripper.transport  # type: ignore[attr-defined]
     assert (link.host, link.port) == ("127.0.0.2", 1502)
-    by_name = Robot("127.0.0.1", 1, gripper="onrobot-2fg7").gripper.transport  # type: ignore[attr-defined]
+    by_name = made("127.0.0.1", 1, gripper="onrobot-2fg7").gripper.transport  # type: ignore[attr-defined]
     assert (by_name.host, by_name.port) == ("127.0.0.1", 502)  # the robot's host, port 502
 
 
@@ -131,22 +146,26 @@ def test_a_gripper_device_refuses_what_the_robot_would(device: object, named: st
         device()  # type: ignore[operator]
 
 
-def test_a_gripper_device_at_the_robots_host_has_its_port_checked_by_the_robot() -> None:
+def test_a_gripper_device_at_the_robots_host_has_its_port_checked_by_the_robot(
+    made: Callable[..., Robot],
+) -> None:
     with pytest.raises(ConfigError, match=r"^gripper\.port: 70000"):
-        Robot("127.0.0.1", 1, gripper=GripperDevice("onrobot-2fg7", port=70000))
+        made("127.0.0.1", 1, gripper=GripperDevice("onrobot-2fg7", port=70000))
 
 
-def test_link_takes_a_ready_transport_or_a_fleet_and_nothing_else() -> None:
+def test_link_takes_a_ready_transport_or_a_fleet_and_nothing_else(
+    made: Callable[..., Robot],
+) -> None:
     with Simulator("article", listen=False) as sim:
         ready = MemoryTransport(sim)
-        assert Robot("127.0.0.1", profile="article", link=ready)._transport is ready
+        assert made("127.0.0.1", profile="article", link=ready)._transport is ready
     with Fleet() as fleet:
-        robot = Robot("127.0.0.1", 1, profile="article", gripper=None, link=fleet)
+        robot = made("127.0.0.1", 1, profile="article", gripper=None, link=fleet)
         robot.close()
     with pytest.raises(
         ConfigError, match=r"^link must be a tmmaster\.Transport or a tmmaster\.Fleet"
     ):
-        Robot("127.0.0.1", 1, link="127.0.0.1:502")  # type: ignore[arg-type]
+        made("127.0.0.1", 1, link="127.0.0.1:502")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(
@@ -214,6 +233,17 @@ def test_the_pick_and_place_configuration_maps_onto_the_groups() -> None:
         }
     )
     robot = robot_from_config(config)
+    settled = robot_from_config(validate_config({"robot": {"host": "127.0.0.1"}}), settle_scale=10)
+    try:
+        check_mapped(robot)
+        assert settled.timeouts.gripper_settle_s == 0.1  # 0.5 / 10, never below 0.1 s
+    finally:
+        robot.close()
+        settled.close()
+
+
+def check_mapped(robot: Robot) -> None:
+    """The robot ``test_the_pick_and_place_configuration_maps_onto_the_groups`` made."""
     assert robot.poll_interval_s == 0.02
     assert robot._transport.timeout == 2.0  # type: ignore[attr-defined]
     assert robot.timeouts.ack_timeout_s == 3.0
@@ -222,5 +252,3 @@ def test_the_pick_and_place_configuration_maps_onto_the_groups() -> None:
     assert robot.check_units is False  # the file's poses were checked as written
     link = robot.gripper.transport  # type: ignore[attr-defined]
     assert (link.host, link.port) == ("127.0.0.3", 1503)
-    settled = robot_from_config(validate_config({"robot": {"host": "127.0.0.1"}}), settle_scale=10)
-    assert settled.timeouts.gripper_settle_s == 0.1  # 0.5 / 10, never below 0.1 s
