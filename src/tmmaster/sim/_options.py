@@ -36,20 +36,16 @@ def _port(field: str, value: object) -> None:
 class Listen:
     """Where the simulator serves Modbus TCP: ``Simulator(listen=Listen(port=5020))``.
 
-    Args:
-        host: The address to listen on (Modbus has no authentication: loopback unless
-            you mean it).
-        port: The robot's Modbus TCP port; 0 picks a free one (``sim.port`` once
-            started).
-        gripper_port: The separate gripper's port (``RobotSetup(gripper=...)``); 0 picks
-            a free one.
-
     Raises:
         ConfigError: A port that is not an integer 0..65535, a host that is not a string.
     """
 
+    #: The address to listen on (Modbus has no authentication: loopback unless you mean
+    #: it).
     host: str = "127.0.0.1"
+    #: The robot's Modbus TCP port; 0 picks a free one (``sim.port`` once started).
     port: int = 0
+    #: The separate gripper's port (``RobotSetup(gripper=...)``); 0 picks a free one.
     gripper_port: int = 0
 
     def __post_init__(self) -> None:
@@ -63,17 +59,15 @@ class Listen:
 class Timing:
     """How the simulator's clock ticks, and how long the robot takes to start up.
 
-    Args:
-        tick_hz: Control ticks per wall second, in (0, 1000]; each advances simulated
-            time by ``time_scale / tick_hz``.
-        init_time_s: Simulated seconds before the robot reports ready (its start-up:
-            tmflow starts the project then); a finite number >= 0.
-
     Raises:
         ConfigError: ``tick_hz`` outside (0, 1000], ``init_time_s`` below 0 or not finite.
     """
 
+    #: Control ticks per wall second, in (0, 1000]; each advances simulated time by
+    #: ``time_scale / tick_hz``.
     tick_hz: float = 50.0
+    #: Simulated seconds before the robot reports ready (its start-up: tmflow starts the
+    #: project then); a finite number >= 0.
     init_time_s: float = 0.2
 
     def __post_init__(self) -> None:
@@ -89,17 +83,6 @@ class Timing:
 class RobotSetup:
     """The simulated robot: its arm model, separate gripper and (tmflow) its program.
 
-    Args:
-        model: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``.
-        gripper: A separate gripper device, served on its own port: None,
-            ``"blog-2fg7"``, ``"onrobot-2fg7"``, a TOML file or a GripperProfile.
-        program: tmflow: the Script Project the robot runs; None or ``"generated"``:
-            the program ``tmmaster robot-program`` writes for the profile and tool.
-        initial_seq: tmflow: the sequence numbers at the start (e.g. 32766, to test
-            their wrap).
-        resume_after_error: tmflow: an e-stop pauses the project (Play resumes the
-            move) instead of stopping it.
-
     Raises:
         ConfigError: An unknown model (UnknownNameError) or gripper profile,
             ``initial_seq`` not an int, ``resume_after_error`` not a bool. (The program
@@ -107,10 +90,18 @@ class RobotSetup:
             them.)
     """
 
+    #: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``.
     model: str = "tm5-700"
+    #: A separate gripper device, served on its own port: None, ``"blog-2fg7"``,
+    #: ``"onrobot-2fg7"``, a TOML file or a GripperProfile.
     gripper: str | Path | GripperProfile | None = None
+    #: tmflow: the Script Project the robot runs; None or ``"generated"``: the program
+    #: ``tmmaster robot-program`` writes for the profile and the cell's tool.
     program: str | Path | None = None
+    #: tmflow: the sequence numbers at the start (e.g. 32766, to test their wrap).
     initial_seq: int = 0
+    #: tmflow: an e-stop pauses the project (Play resumes the move) instead of stopping
+    #: it.
     resume_after_error: bool = False
     _gripper: GripperProfile | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -140,28 +131,6 @@ class Cell:
     ``Simulator(cell=...)`` takes this or your own :class:`PhysicsBackend`, which then
     models the world, the tool, the grasp and the arm's speed itself.
 
-    Args:
-        scene: What is on the table: a :class:`Scene`, a TOML scene file (table height,
-            fixtures, parts, gripper geometry; read when the Cell is made), or the
-            parts alone (TableObjects on the default table; ``[]``: an empty table).
-            None: one part at ``DEFAULT_PART_POSE``.
-        physics: ``"kinematic"`` (analytic) or ``"mujoco"`` (the ``tmmaster[mujoco]``
-            extra).
-        tool: The TCP in the flange frame (TCP = flange x tool); None: the flange.
-        grasp: How the fingers hold a part: ``"friction"`` (a part too heavy for the
-            grip force slips out) or ``"weld"`` (a part between the pads is carried
-            whatever its mass).
-        dynamics: Arm dynamics, with ``physics="mujoco"``: the links carry Techman's
-            masses and inertias and each joint is a servo limited to its effort, so the
-            arm lags its trajectory (more with a heavy part) and a move is done once the
-            joints settled; the reported pose is where the joints are. None (the
-            default): on with the mujoco backend for the models whose link masses are
-            known (TM5-700, TM5-900), off otherwise; False: the ideal servo; True: on,
-            or ConfigError where it cannot be (another model).
-        speed_factor: The arm moves this many times faster than the model the master
-            plans with (0.1..10; for testing a master against a robot it does not
-            predict).
-
     Raises:
         ConfigError: An unknown ``physics`` (UnknownNameError) or ``grasp``, a scene
             file that cannot be read or is invalid (naming the key), parts that are not
@@ -169,11 +138,28 @@ class Cell:
             backend, ``speed_factor`` outside 0.1..10.
     """
 
+    #: What is on the table: a :class:`Scene`, a TOML scene file (table height,
+    #: fixtures, parts, gripper geometry; read when the Cell is made: this is then its
+    #: Scene), or the parts alone (TableObjects on the default table; ``[]``: an empty
+    #: table). None: one part at ``DEFAULT_PART_POSE``.
     scene: Scene | str | Path | Iterable[TableObject] | None = None
+    #: ``"kinematic"`` (analytic) or ``"mujoco"`` (the ``tmmaster[mujoco]`` extra).
     physics: str = "kinematic"
+    #: The TCP in the flange frame (TCP = flange x tool); None: the flange.
     tool: Pose | None = None
+    #: How the fingers hold a part: ``"friction"`` (a part too heavy for the grip force
+    #: slips out) or ``"weld"`` (a part between the pads is carried whatever its mass).
     grasp: GraspMode = "friction"
+    #: Arm dynamics, with ``physics="mujoco"``: the links carry Techman's masses and
+    #: inertias and each joint is a servo limited to its effort, so the arm lags its
+    #: trajectory (more with a heavy part) and a move is done once the joints settled;
+    #: the reported pose is where the joints are. None (the default): on with the
+    #: mujoco backend for the models whose link masses are known (TM5-700, TM5-900),
+    #: off otherwise; False: the ideal servo; True: on, or ConfigError where it cannot
+    #: be (another model).
     dynamics: bool | None = None
+    #: The arm moves this many times faster than the model the master plans with
+    #: (0.1..10; for testing a master against a robot it does not predict).
     speed_factor: float = 1.0
 
     def __post_init__(self) -> None:
