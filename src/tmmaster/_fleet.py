@@ -509,6 +509,11 @@ class Fleet:
     :meth:`close` closes every robot still open (withdrawing or stopping what each has
     outstanding), then the loop; safe to call more than once.
 
+    A robot made without a Fleet runs the same way on the process's default driver, a
+    Fleet of the library's own (started by the first connect, stopped when the last
+    link closes); make a Fleet of your own to watch its robots (``watch_hz``), to close
+    them all at once, or to keep groups of robots on separate loops.
+
     Example:
         Two robots against two simulators (``python -m tmmaster.sim --port 5020`` and
         ``--port 5021``), one thread each:

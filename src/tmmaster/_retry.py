@@ -6,7 +6,7 @@ attempt is raised at once (its ``retryable`` is False): a closed link; on a link
 connected yet a refused connection or a host name that does not resolve (the transport
 decides, :meth:`BlockTransport._connect_once`); a device that answers in something other
 than Modbus TCP (:class:`NotModbusError`); and a response timeout on a link whose device
-has never answered (:meth:`ModbusTransport._no_answer`). pymodbus's own retries are
+has never answered (:func:`~tmmaster._transport.no_answer_error`). pymodbus's own retries are
 switched off by the transport, so retries never multiply and no write is resent behind
 the caller's back.
 

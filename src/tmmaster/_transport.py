@@ -1010,6 +1010,19 @@ _READ_REQUEST_CLASSES: dict[int, type[ModbusPDU]] = {
 }
 
 
+class _Pending(Protocol):
+    """What awaits one request's answer: a future (a coroutine's) or a :class:`_Call`."""
+
+    def done(self) -> bool:
+        """True once settled."""
+
+    def set_result(self, result: ModbusPDU, /) -> None:
+        """The answer."""
+
+    def set_exception(self, exception: BaseException, /) -> None:
+        """The failure."""
+
+
 class _Stream(asyncio.Protocol):
     """One Modbus TCP stream of an :class:`AsyncLink`: answers matched to requests by id.
 
@@ -1040,8 +1053,9 @@ class _Stream(asyncio.Protocol):
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
-        #: Transaction id -> the future its answer resolves, and the request's description.
-        self.awaited: dict[int, tuple[asyncio.Future[ModbusPDU], str]] = {}
+        #: Transaction id -> what its answer settles (a future, or a thread's request),
+        #: and the request's description.
+        self.awaited: dict[int, tuple[_Pending, str]] = {}
         #: The first transaction id sent on this stream, and how many were sent on it.
         self.first_tid = 0
         self.sent = 0
@@ -1147,7 +1161,7 @@ def no_answer_error(link: AsyncLink, what: str, *, answered: bool) -> ResponseTi
     return error
 
 
-def _expire(future: asyncio.Future[ModbusPDU], link: AsyncLink, stream: _Stream, what: str) -> None:
+def _expire(future: _Pending, link: AsyncLink, stream: _Stream, what: str) -> None:
     """A request's deadline: fail it unless answered (the message is built only here).
 
     Answers came, but only under ids never sent on this stream: not a Modbus server.
@@ -1167,7 +1181,7 @@ def _expire(future: asyncio.Future[ModbusPDU], link: AsyncLink, stream: _Stream,
 
 def _answered(
     deadline: asyncio.TimerHandle,
-    awaited: dict[int, tuple[asyncio.Future[ModbusPDU], str]],
+    awaited: dict[int, tuple[_Pending, str]],
     tid: int,
     _answer: asyncio.Future[ModbusPDU],
 ) -> None:
@@ -1176,29 +1190,72 @@ def _answered(
     awaited.pop(tid, None)
 
 
-def _deliver(
-    request: ModbusPDU,
-    count: int,
-    name: str,
-    what: str,
-    settle: Callable[[list[int]], object],
-    fail: Callable[[BaseException], object],
-    answer: asyncio.Future[ModbusPDU],
-) -> None:
-    """A started request's outcome, to the one callback that wants it (:meth:`AsyncLink.start`)."""
-    if answer.cancelled():
-        fail(ConnectionLostError(f"{name}: {what} was given up"))
-        return
-    error = answer.exception()
-    if error is not None:
-        fail(error)
-        return
-    try:
-        words = answer_words(answer.result(), request, count=count, name=name, what=what)
-    except TransportError as exc:
-        fail(exc)
-        return
-    settle(words)
+class _Call:
+    """A request started for a caller in another thread (:meth:`AsyncLink.start`).
+
+    Its answer, failure or deadline settles it at once on the loop: ``settle(words)`` or
+    ``fail(error)``, once, with no future and no further turn of the loop.
+    """
+
+    __slots__ = (
+        "_done", "count", "fail", "name", "request", "settle", "stream", "tid", "timer", "what"
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        request: ModbusPDU,
+        count: int,
+        name: str,
+        what: str,
+        settle: Callable[[list[int]], object],
+        fail: Callable[[BaseException], object],
+    ) -> None:
+        self.request = request
+        self.count = count
+        self.name = name
+        self.what = what
+        self.settle = settle
+        self.fail = fail
+        self.stream: _Stream | None = None
+        self.tid = 0
+        self.timer: asyncio.TimerHandle | None = None
+        self._done = False
+
+    def done(self) -> bool:
+        """True once settled."""
+        return self._done
+
+    def _end(self) -> None:
+        """Settled: its deadline and its slot go."""
+        self._done = True
+        if self.timer is not None:
+            self.timer.cancel()
+        stream = self.stream
+        if stream is not None:
+            entry = stream.awaited.get(self.tid)
+            if entry is not None and entry[0] is self:
+                del stream.awaited[self.tid]
+
+    def set_result(self, result: ModbusPDU) -> None:
+        """The answer came (from the stream)."""
+        if self._done:
+            return
+        self._end()
+        try:
+            words = answer_words(
+                result, self.request, count=self.count, name=self.name, what=self.what
+            )
+        except TransportError as exc:
+            self.fail(exc)
+            return
+        self.settle(words)
+
+    def set_exception(self, exception: BaseException) -> None:
+        """The request failed: the link, its deadline, or an undecodable answer."""
+        if self._done:
+            return
+        self._end()
+        self.fail(exception)
 
 
 class AsyncLink:
@@ -1293,6 +1350,17 @@ class AsyncLink:
         :class:`ConnectionLostError` when the link is lost; :func:`answer_words` reads
         the answer. For a caller in another thread, without a coroutine per request.
         """
+        stream, request = self._request(what, function_code, address, count, values)
+        answer: asyncio.Future[ModbusPDU] = asyncio.get_running_loop().create_future()
+        deadline = self._write(stream, request, answer, what)
+        tid = request.transaction_id
+        answer.add_done_callback(functools.partial(_answered, deadline, stream.awaited, tid))
+        return request, answer
+
+    def _request(
+        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
+    ) -> tuple[_Stream, ModbusPDU]:
+        """The open stream and the request's PDU under the next transaction id."""
         stream = self._stream
         if stream is None or stream.closed or stream.transport is None:
             raise ConnectionLostError(f"{self.name}: not connected for {what}")
@@ -1300,18 +1368,22 @@ class AsyncLink:
         request = request_pdu(
             function_code, address, count, values, device_id=self.device_id, tid=tid
         )
-        loop = asyncio.get_running_loop()
-        answer: asyncio.Future[ModbusPDU] = loop.create_future()
-        stream.awaited[tid] = (answer, what)
+        return stream, request
+
+    def _write(
+        self, stream: _Stream, request: ModbusPDU, pending: _Pending, what: str
+    ) -> asyncio.TimerHandle:
+        """Send ``request`` once, awaited by ``pending``; its deadline."""
+        stream.awaited[request.transaction_id] = (pending, what)
         stream.device_id = self.device_id  # answers are taken from the request's unit id
         frame = stream.framer.buildFrame(request)
         stream.sent += 1
+        assert stream.transport is not None  # checked by _request
         stream.transport.write(frame)
         if self.stats is not None:
             self.stats.bytes_sent += len(frame)
-        deadline = loop.call_later(self.timeout, _expire, answer, self, stream, what)
-        answer.add_done_callback(functools.partial(_answered, deadline, stream.awaited, tid))
-        return request, answer
+        loop = asyncio.get_running_loop()
+        return loop.call_later(self.timeout, _expire, pending, self, stream, what)
 
     def start(
         self,
@@ -1328,12 +1400,13 @@ class AsyncLink:
         For a caller in another thread (a Fleet robot's), without a coroutine per request.
         """
         try:
-            request, answer = self.send(what, function_code, address, count, values)
+            stream, request = self._request(what, function_code, address, count, values)
         except BaseException as exc:
             fail(exc)
             return
-        deliver = functools.partial(_deliver, request, count, self.name, what, settle, fail)
-        answer.add_done_callback(deliver)
+        call = _Call(request, count, self.name, what, settle, fail)
+        call.stream, call.tid = stream, request.transaction_id
+        call.timer = self._write(stream, request, call, what)
 
     def close(self) -> None:
         """Close the link (safe when closed): after a failure it may still carry a late answer."""
