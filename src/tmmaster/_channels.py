@@ -319,9 +319,7 @@ class CommandChannel(ABC):
         self.after_done = None
         return time.monotonic(), link_mark(self.transport)
 
-    def _remember_done(
-        self, values: dict[str, Value], mark: tuple[float, int | None]
-    ) -> None:
+    def _remember_done(self, values: dict[str, Value], mark: tuple[float, int | None]) -> None:
         """Keep what the poll that saw the command finished read, for the next command."""
         read_at, link = mark
         if link is not None:
