@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import importlib
 import os
 import sys
 import threading
@@ -141,11 +142,49 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
     workers = WORKERS_PER_CPU * _cpus()
     if config.args_source is pytest.Config.ArgsSource.TESTPATHS:
         return workers
+    files = _files_named(config)
+    return min(workers, len(files)) if len(files) > 1 else 0
+
+
+def _files_named(config: pytest.Config) -> set[Path]:
+    """The test files the command line names: each file, and every one in a folder."""
     files: set[Path] = set()
     for arg in config.args:
         path = config.invocation_params.dir / arg.split("::")[0]
         files.update(path.rglob("test_*.py") if path.is_dir() else [path])
-    return min(workers, len(files)) if len(files) > 1 else 0
+    return files
+
+
+def _rewrite_cached(source: Path) -> bool:
+    """Whether ``__pycache__`` holds pytest's rewrite of ``source``, written after its change."""
+    changed = source.stat().st_mtime
+    cached = (source.parent / "__pycache__").glob(f"{source.stem}.*-pytest-*.pyc")
+    return any(pyc.stat().st_mtime >= changed for pyc in cached)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """An xdist controller imports the test modules pytest has no rewrite cached for, once.
+
+    Pytest rewrites a test module's asserts when it first imports it and caches the result
+    in ``__pycache__``; every xdist worker imports every test module to collect it. From a
+    fresh clone (as in CI) all the workers rewrote all the modules at the same time: about
+    4.5 s of CPU each for this suite, before any test ran. Imported here first, before the
+    workers start, the modules are rewritten once and the workers load pytest's cache. A
+    module whose cache is newer than its source is not imported here; one that fails to
+    import is left to the workers to report.
+    """
+    config = session.config
+    here = Path(__file__).resolve().parent
+    if not config.pluginmanager.has_plugin("dsession") or str(here) not in sys.path:
+        return  # no xdist workers to start, or not the folder pytest imports tests from
+    for source in sorted(path.resolve() for path in _files_named(config)):
+        if source.parent != here or not source.is_file() or _rewrite_cached(source):
+            continue
+        try:
+            importlib.import_module(source.stem)
+        except (Exception, pytest.skip.Exception):
+            continue
 
 
 @pytest.fixture
