@@ -17,7 +17,7 @@ from .._exceptions import ConfigError, UnknownNameError
 from .._pose import Pose
 from .._profiles import gripper_profile
 from .._registers import GripperProfile
-from .._robot_models import robot_model
+from .._robot_models import RobotModel, robot_model
 from ._scene import Scene, load_scene
 from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
 
@@ -90,8 +90,10 @@ class RobotSetup:
             them.)
     """
 
-    #: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``.
-    model: str = "tm5-700"
+    #: The arm model: ``"tm5-700"``, ``"tm5-900"``, ``"tm12"`` or ``"tm14"``, or a
+    #: RobotModel: an arm that differs from the one the master plans with (a calibrated
+    #: variant, another inverse-kinematics choice).
+    model: str | RobotModel = "tm5-700"
     #: A separate gripper device, served on its own port: None, ``"blog-2fg7"``,
     #: ``"onrobot-2fg7"``, a TOML file or a GripperProfile.
     gripper: str | Path | GripperProfile | None = None
@@ -104,11 +106,18 @@ class RobotSetup:
     #: it.
     resume_after_error: bool = False
     _gripper: GripperProfile | None = field(default=None, init=False, repr=False, compare=False)
+    _arm: RobotModel | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.model, str):
-            raise ConfigError(f"model must be a model name, got {shown(self.model)}")
-        robot_model(self.model)  # an unknown name: UnknownNameError listing the models
+        if isinstance(self.model, RobotModel):
+            arm = self.model
+        elif isinstance(self.model, str):
+            arm = robot_model(self.model)  # an unknown name: UnknownNameError, the models
+        else:
+            raise ConfigError(
+                f"model must be a model name or a RobotModel, got {shown(self.model)}"
+            )
+        object.__setattr__(self, "_arm", arm)
         if self.gripper is not None:
             object.__setattr__(self, "_gripper", gripper_profile(self.gripper))
         if isinstance(self.initial_seq, bool) or not isinstance(self.initial_seq, int):
@@ -117,6 +126,12 @@ class RobotSetup:
             raise ConfigError(
                 f"resume_after_error must be True or False, got {shown(self.resume_after_error)}"
             )
+
+    @property
+    def arm(self) -> RobotModel:
+        """The arm model (loaded when this setup was made)."""
+        assert self._arm is not None  # set by __post_init__
+        return self._arm
 
     @property
     def gripper_profile(self) -> GripperProfile | None:

@@ -25,7 +25,7 @@ from .._pose import DEFAULT_HOME, Pose
 from .._profiles import DEFAULT_PROFILE, robot_profile
 from .._registers import GripperProfile, Handshake, RobotProfile, Table
 from .._retry import RetryPolicy
-from .._robot_models import RobotModel, robot_model
+from .._robot_models import RobotModel
 from .._transport import Transport
 from ._backend import ObjectState, PhysicsBackend
 from ._bank import RegisterBank
@@ -175,7 +175,7 @@ class Simulator:
         bound = None if isinstance(listen, bool) else listen
         where = _group("listen", bound, Listen, "True, False or a Listen")
         self._profile = robot_profile(profile)
-        self._model = robot_model(setup.model)
+        self._model = setup.arm
         self._tick_hz = timing.tick_hz
         self._host = where.host
         #: False: no TCP listener; reach it in-process through :attr:`url`.
