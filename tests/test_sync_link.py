@@ -34,7 +34,8 @@ from tmmaster import (
     ValueOutOfRangeError,
     _fleet,
 )
-from tmmaster._registers import Table
+from tmmaster._fleet import LoopTransport
+from tmmaster._registers import RegisterField, Role, Table
 from tmmaster._retry import RetryPolicy
 from tmmaster._transport import ConnectionState
 
@@ -238,3 +239,52 @@ def test_a_read_no_request_can_carry_sends_nothing(
             t.read_block(table, address, count)
         assert t.stats.requests == 0
     assert s.server.requests == []
+
+
+def two_blocks() -> list[RegisterField]:
+    """Two holding fields far apart: two read requests (holding 0 and holding 10)."""
+    return [
+        RegisterField(
+            name="first", role=Role.STATUS, table=Table.HOLDING, address=0, type="uint16"
+        ),
+        RegisterField(
+            name="second", role=Role.STATUS, table=Table.HOLDING, address=10, type="uint16"
+        ),
+    ]
+
+
+def test_a_read_of_several_blocks_is_one_hand_over_to_the_loop(
+    slave: type[SlaveThread], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Each block is still its own request, sent once, one after the other; the calling
+    # thread hands the whole read to the loop once (not once per request).
+    script = [answer_with(registers(7)), answer_with(registers(8))]
+    with slave(script) as s, link(s.port) as t:
+        monkeypatch.setattr(LoopTransport, "_exchange", refuse_per_request_hand_over)
+        assert t.read_fields(two_blocks()) == {"first": 7, "second": 8}
+        assert t.stats.requests == 2
+        assert [pdu[:3] for pdu in s.server.requests] == [bytes([3, 0, 0]), bytes([3, 0, 10])]
+
+
+def refuse_per_request_hand_over(*_args: object) -> list[int]:
+    raise AssertionError("a request was handed to the loop on its own")
+
+
+def test_a_block_that_fails_is_retried_alone_its_failure_its_first_attempt(
+    slave: type[SlaveThread],
+) -> None:
+    script = [answer_with(registers(7)), close_connection, answer_with(registers(8))]
+    with slave(script) as s, link(s.port, attempts=2) as t:
+        assert t.read_fields(two_blocks()) == {"first": 7, "second": 8}
+        assert t.stats.retries == 1  # the failed chained read was the first of two attempts
+        assert t.stats.reconnects == 1
+        assert len(s.server.requests) == 3  # the first block is not read again
+
+
+def test_a_block_that_fails_without_retries_fails_the_read(slave: type[SlaveThread]) -> None:
+    script = [answer_with(registers(7)), close_connection, answer_with(registers(8))]
+    with slave(script) as s, link(s.port, attempts=1) as t:
+        with pytest.raises(ConnectionLostError, match="read holding 10"):
+            t.read_fields(two_blocks())
+        assert t.stats.retries == 0
+        assert len(s.server.requests) == 2

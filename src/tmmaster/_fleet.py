@@ -59,9 +59,11 @@ from ._loop import (
 )
 from ._registers import RegisterField
 from ._retry import RetryPolicy
-from ._transport import AsyncLink, BlockTransport, ConnectionState, Transport
+from ._transport import AsyncLink, Block, BlockTransport, ConnectionState, Transport
 
 _log = get_logger("tmmaster.fleet")
+
+_UP = ConnectionState.CONNECTED
 
 T = TypeVar("T")
 
@@ -199,6 +201,95 @@ class LoopTransport(BlockTransport):
                 f"{self.name}: the fleet's event loop did not answer {what}"
             ) from exc
 
+    def read_fields(
+        self,
+        fields: Iterable[RegisterField],
+        *,
+        max_gap: int = 0,
+        retry: bool = True,
+        interruptible: bool = True,
+    ) -> dict[str, Value]:
+        """Read and decode fields, one request per contiguous block, in one hand-over.
+
+        While the link is up, every block is read on the loop in one go (each request
+        sent once, one after the other) and the calling thread is woken once. A block
+        that fails, and those after it, are read one at a time as any read is, with the
+        retry policy: the failure counts as that block's first attempt.
+
+        Args:
+            fields: The fields.
+            max_gap: A read may span this many unused addresses to fetch two fields
+                in one request.
+            retry: Retry a failed read per the retry policy.
+            interruptible: A stop request (``interrupt``) ends the waits between
+                retries.
+
+        Returns:
+            Each field's engineering value, by name.
+
+        Raises:
+            TransportError: A read failed (a subclass says how).
+        """
+        plan = self.read_plan(fields, max_gap=max_gap)
+        with self._lock:
+            if len(plan.blocks) < 2 or self._fleet._on_loop() or self.state is not _UP:
+                return super().read_fields(
+                    fields, max_gap=max_gap, retry=retry, interruptible=interruptible
+                )
+            answers, failure = self._read_in_one_hand_over(plan.blocks)
+            result: dict[str, Value] = {}
+            for index, (block, slots) in enumerate(zip(plan.blocks, plan.slots, strict=True)):
+                if index < len(answers):
+                    words = answers[index]
+                else:
+                    first = failure if index == len(answers) else None
+                    words = self._read_after(block, first, retry=retry, interruptible=interruptible)
+                for name, offset, decode in slots:
+                    result[name] = decode(words, offset)
+            return result
+
+    def _read_in_one_hand_over(
+        self, blocks: tuple[Block, ...]
+    ) -> tuple[list[list[int]], BaseException | None]:
+        """Every block's words, read on the loop in one go, up to the first failure."""
+        requests = [(*self._read_request(b.table, b.address, b.count), b) for b in blocks]
+        self._link.device_id = self.device_id
+        latch: _Latch[tuple[list[list[int]], BaseException | None]] = _Latch()
+        chain = _ChainedRead(self, requests, latch.settle)
+        if not self._fleet._call_soon(chain.next):
+            raise TransportClosedError(f"{self.name}: the fleet is closed")
+        try:
+            answers, failure = latch.wait(self.timeout * len(blocks) + _LOOP_GRACE_S)
+        except _NoAnswerError as exc:
+            error = ResponseTimeoutError(
+                f"{self.name}: the fleet's event loop did not answer {requests[0][0]}"
+            )
+            self._request_failed(error)
+            raise error from exc
+        except BaseException as exc:  # interrupted (Ctrl-C): an answer may still come
+            self._request_failed(exc)
+            raise
+        if failure is not None:
+            self._request_failed(failure)
+        return answers, failure
+
+    def _read_after(
+        self, block: Block, first: BaseException | None, *, retry: bool, interruptible: bool
+    ) -> list[int]:
+        """One block read as :meth:`read_block` reads it; ``first``: its first attempt's failure."""
+        what, function_code = self._read_request(block.table, block.address, block.count)
+        failed = [first] if first is not None else []
+
+        def once() -> list[int]:
+            if failed:
+                raise failed.pop()
+            words = self._execute(what, function_code, block.address, block.count, None)
+            if len(words) != block.count:
+                raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+            return words
+
+        return self._run(what, once, retry=retry, interruptible=interruptible)
+
     # -- the loop's side ------------------------------------------------------------
 
     @property
@@ -261,6 +352,76 @@ class LoopTransport(BlockTransport):
             for name, offset, decode in slots:
                 result[name] = decode(words, offset)
         return result
+
+
+    async def write_on_loop(self, address: int, words: list[int]) -> None:
+        """From the loop, holding the lock: write holding registers in one FC16 request, once.
+
+        For the master's heartbeat (:mod:`._heartbeat`): no retry and no reconnect (the
+        loop never blocks), and not counted as one of the link's requests. A failure
+        raises, with the link dropped as for any request.
+
+        Args:
+            address: The first holding register.
+            words: The words (0..65535).
+
+        Raises:
+            TransportError: The write failed (a subclass says how).
+        """
+        what = f"write holding {address}+{len(words)} (heartbeat)"
+        self._refuse_if_closed()
+        if not self._link.connected:
+            raise ConnectionLostError(f"{self.name}: not connected for {what}")
+        self._link.device_id = self.device_id
+        try:
+            await self._link.exchange(what, 16, address, len(words), words)
+        except BaseException as exc:
+            self._request_failed(exc)
+            raise
+
+class _ChainedRead:
+    """On the loop: a read's blocks one after the other, each sent once, then one answer.
+
+    ``done((answers, None))`` with every block's words, or ``done((answers, error))``
+    with those read before the first failure.
+    """
+
+    def __init__(
+        self,
+        transport: LoopTransport,
+        requests: list[tuple[str, int, Block]],
+        done: Callable[[tuple[list[list[int]], BaseException | None]], None],
+    ) -> None:
+        self.transport = transport
+        self.requests = requests
+        self.done = done
+        self.answers: list[list[int]] = []
+
+    def next(self) -> None:
+        """Send the next block's request, or answer when every block is read."""
+        index = len(self.answers)
+        if index == len(self.requests):
+            self.done((self.answers, None))
+            return
+        what, function_code, block = self.requests[index]
+        transport = self.transport
+        link = transport._link
+        if not link.connected:
+            self.done((self.answers, ConnectionLostError(f"{link.name}: not connected for {what}")))
+            return
+        transport._count_request(function_code)
+        link.start(what, function_code, block.address, block.count, None, self._read, self._fail)
+
+    def _read(self, words: list[int]) -> None:
+        what, _function_code, block = self.requests[len(self.answers)]
+        if len(words) != block.count:
+            self._fail(ResponseTimeoutError(f"{self.transport.name}: short answer to {what}"))
+            return
+        self.answers.append(words)
+        self.next()
+
+    def _fail(self, error: BaseException) -> None:
+        self.done((self.answers, error))
 
 
 class FleetMember:
@@ -403,6 +564,33 @@ class FleetMember:
     def linked(self) -> bool:
         """True while the robot's link is up (the robot's thread opens it, never the watch)."""
         return self.transport.state is ConnectionState.CONNECTED and self.transport.link_up
+
+    async def write_when_free(self, address: int, words: list[int]) -> BaseException | bool | None:
+        """On the loop: one heartbeat write on the robot's link, if the link is free now.
+
+        Never waits for the robot's thread: the link's lock is taken only if free (as a
+        poll takes it), and polls and watch reads on the loop take turns with it.
+
+        Args:
+            address: The first holding register.
+            words: The words.
+
+        Returns:
+            None when written; True when the link was busy or down (nothing sent); the
+            error when the write failed.
+        """
+        if not self.linked():
+            return True
+        async with self._turn:
+            if not self.transport.hold():
+                return True
+            try:
+                await self.transport.write_on_loop(address, words)
+            except TransportError as exc:
+                return exc
+            finally:
+                self.transport.release()
+        return None
 
     async def _poll(self, follow: FollowState) -> Observation:
         """The channel's one poll, its reads made on the loop."""
