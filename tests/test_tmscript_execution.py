@@ -128,7 +128,8 @@ def test_waitfor_in_an_expression_reevaluates_its_condition() -> None:
 def test_a_literal_is_converted_where_the_script_reaches_it() -> None:
     # A literal given where another type is wanted (an assignment, an argument, an index)
     # is converted as any value is; one that cannot be is an error only once reached.
-    lines = ["main", "{", "int[] a = {5, 6, 7}", "byte b = 1000", "Display(b)",
+    # (A constant out of a byte's range is refused (§2.2, p. 15); a calculation is not.)
+    lines = ["main", "{", "int[] a = {5, 6, 7}", "byte b = 0 + 1000", "Display(b)",
              "Display(a[2])", 'Display(a["1"])', "Display(Byte_ToInt16({1, 2}, 1))",
              "int n = 0", "if (n > 0)", "{", 'Display(a["x"])', "}",
              "Display(n)", 'Display(a["x"])', "Display(n)", "}"]  # fmt: skip

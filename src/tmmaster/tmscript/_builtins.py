@@ -13,12 +13,22 @@ from __future__ import annotations
 
 import math
 import random as _rng
+import re
 import struct
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 
 from ._host import Host, ModbusCommunicationError, ModbusDevice, MotionCall
-from ._types import ARRAY_MAX, STRING_MAX, Scalar, Value, display_text, to_f32, wrap32
+from ._types import (
+    ARRAY_MAX,
+    FLOAT_MAX,
+    STRING_MAX,
+    Scalar,
+    Value,
+    display_text,
+    to_f32,
+    wrap32,
+)
 
 __all__ = ["BUILTINS", "UNSUPPORTED", "Builtin", "BuiltinError", "Runtime", "Signature"]
 
@@ -330,82 +340,201 @@ def _Byte_ToString(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Va
     return text.decode("utf-8", errors="replace")
 
 
-@_register("4.10", 63, "byte[](byte[], byte[])", "byte[](byte[], byte)")
+def _concat_part(items: list[Scalar], start: int, count: int) -> list[Scalar]:
+    # A start < 0 is 0; a count < 0 or past the end takes the rest (§4.10 syntaxes 3, 4).
+    start = max(start, 0)
+    return items[start:] if count < 0 else items[start : start + count]
+
+
+def _concat_any(args: list[Value], types: tuple[str, ...]) -> list[Scalar]:
+    # Syntax 5: each byte or byte[] in order; any other type is left out (p. 65).
+    out: list[Scalar] = []
+    for value, typ in zip(args, types, strict=True):
+        if typ == "byte[]":
+            out.extend(_arr(value))
+        elif typ == "byte":
+            out.append(_int(value) & 0xFF)
+    return out
+
+
+@_register(
+    "4.10",
+    63,
+    "byte[](byte[], byte[])",
+    "byte[](byte[], byte)",
+    "byte[](byte[], byte[], int)",
+    "byte[](byte[], int, int, byte[], int, int)",
+    "byte[](*, *, *...)",
+)
 def _Byte_Concat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.10 Byte_Concat, p. 63: the two-argument syntaxes."""
-    first = _arr(args[0])
+    """TMscript 2.24 §4.10 Byte_Concat, pp. 63-65: an array and a byte or an array (1, 2),
+    part of the second array (3), parts of both (4), or any bytes and byte arrays (5)."""
+    if types == ("byte[]", "byte[]", "int"):
+        part = _concat_part(_arr(args[1]), 0, _int(args[2]))
+        return _checked([*_arr(args[0]), *part])
+    if types == ("byte[]", "int", "int", "byte[]", "int", "int"):
+        first = _concat_part(_arr(args[0]), _int(args[1]), _int(args[2]))
+        return _checked([*first, *_concat_part(_arr(args[3]), _int(args[4]), _int(args[5]))])
+    if len(types) > 2:
+        return _checked(_concat_any(args, types))
     second = args[1]
     tail: list[Scalar] = list(second) if isinstance(second, list) else [second]
-    return _checked([*first, *(_int(b) & 0xFF for b in tail)])
+    return _checked([*_arr(args[0]), *(_int(b) & 0xFF for b in tail)])
+
+
+_DIGITS = {10: "0123456789", 16: "0123456789abcdef", 2: "01"}
+_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+def _notation(text: str, base: int) -> tuple[int, str] | None:
+    """The base and digits of an integer text, or None when it is not valid in ``base``.
+
+    Base 10 also detects the 0x and 0b prefixes; base 16 takes an 0x prefix and base 2 an
+    0b prefix (TMscript 2.24 §4.11, p. 66: "0b1100" in base 16 is 0x0B1100). A sign goes
+    only before decimal digits ("-0x1234" is not valid).
+    """
+    body = text.strip().lower()
+    prefix = {16: "0x", 2: "0b"}
+    if base == 10:
+        for detected, mark in prefix.items():
+            if body.startswith(mark):
+                base, body = detected, body[2:]
+                break
+        else:
+            if body[:1] in ("+", "-") and body[1:2].isdigit():
+                return (10, body) if body[1:].isdigit() else None
+    elif base in prefix and body.startswith(prefix[base]):
+        body = body[2:]
+    if base not in _DIGITS or not body or any(c not in _DIGITS[base] for c in body):
+        return None
+    return base, body
 
 
 def _parse_int(text: str, base: int) -> int:
-    body = text.strip()
-    sign = -1 if body.startswith("-") else 1
-    body = body.lstrip("+-")
-    low = body.lower()
-    if low.startswith("0x"):
-        base, body = 16, body[2:]
-    elif low.startswith("0b"):
-        base, body = 2, body[2:]
-    try:
-        return wrap32(sign * int(body, base))
-    except ValueError:
-        raise BuiltinError(f'unable to convert "{text}" to an integer') from None
+    # Text that is not valid in the notation gives 0 (TMscript 2.24 §4.11, p. 66).
+    found = _notation(text, base)
+    return 0 if found is None else wrap32(int(found[1], found[0]))
 
 
 @_register("4.11", 66, "int(string, int)", "int(string)", "int[](string[], int)", "int[](string[])")
 def _String_ToInteger(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.11 String_ToInteger, p. 66: base 10, 16 or 2; 0x/0b prefixes win."""
+    """TMscript 2.24 §4.11 String_ToInteger, p. 66: base 10 (or 0x/0b), 16 or 2; invalid: 0."""
     base = _int(args[1]) if len(args) > 1 else 10
     if isinstance(args[0], list):
         return [_parse_int(_str(s), base) for s in args[0]]
     return _parse_int(_str(args[0]), base)
 
 
-def _parse_float(text: str) -> float:
-    try:
-        return float(text.strip())
-    except ValueError:
-        raise BuiltinError(f'unable to convert "{text}" to a number') from None
+def _parse_real(text: str, base: int, size: int) -> float:
+    """A float (``size`` 4) or double (8) from text; invalid text gives 0 (§4.12, §4.13).
+
+    Decimal text is read as a number; hexadecimal or binary text (by base or by its 0x/0b
+    prefix) gives the IEEE-754 number with those bits ("0x1234" is 6.53E-42 as a float).
+    """
+    if base == 10 and _DECIMAL.fullmatch(text.strip()):
+        value = float(text.strip())
+        return to_f32(value) if size == 4 and abs(value) <= FLOAT_MAX else value
+    found = _notation(text, base)
+    if found is None or found[0] == 10:
+        return 0.0
+    bits = int(found[1], found[0]) & ((1 << (8 * size)) - 1)
+    (value,) = struct.unpack("<f" if size == 4 else "<d", bits.to_bytes(size, "little"))
+    return 0.0 if math.isnan(value) or math.isinf(value) else float(value)
 
 
-@_register("4.12", 68, "float(string)", "float[](string[])")
+def _to_real(args: list[Value], size: int) -> Value:
+    base = _int(args[1]) if len(args) > 1 else 10
+    if isinstance(args[0], list):
+        return [_parse_real(_str(s), base, size) for s in args[0]]
+    return _parse_real(_str(args[0]), base, size)
+
+
+@_register(
+    "4.12", 68, "float(string, int)", "float(string)", "float[](string[], int)", "float[](string[])"
+)
 def _String_ToFloat(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.12 String_ToFloat, p. 68 (decimal text)."""
-    if isinstance(args[0], list):
-        return [to_f32(_parse_float(_str(s))) for s in args[0]]
-    return to_f32(_parse_float(_str(args[0])))
+    """TMscript 2.24 §4.12 String_ToFloat, p. 68: base 10 (or 0x/0b), 16 or 2; invalid: 0."""
+    return _to_real(args, 4)
 
 
-@_register("4.13", 70, "double(string)", "double[](string[])")
+@_register(
+    "4.13",
+    70,
+    "double(string, int)",
+    "double(string)",
+    "double[](string[], int)",
+    "double[](string[])",
+)
 def _String_ToDouble(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.13 String_ToDouble, p. 70 (decimal text)."""
-    if isinstance(args[0], list):
-        return [_parse_float(_str(s)) for s in args[0]]
-    return _parse_float(_str(args[0]))
+    """TMscript 2.24 §4.13 String_ToDouble, p. 70: base 10 (or 0x/0b), 16 or 2; invalid: 0."""
+    return _to_real(args, 8)
 
 
-@_register("4.14", 72, "byte[](string)")
+def _hex_bytes(text: str) -> list[Scalar]:
+    # Hexadecimal digits up to the first that is not one, two a byte, the last one filled
+    # with 0; none at all gives {0x00} (TMscript 2.24 §4.14, p. 72).
+    digits = ""
+    for char in text:
+        if char.lower() not in _DIGITS[16]:
+            break
+        digits += char
+    digits = (digits or "0") + "0" * (len(digits or "0") % 2)
+    return list(bytes.fromhex(digits))
+
+
+@_register("4.14", 72, "byte[](string, int)", "byte[](string)")
 def _String_ToByte(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.14 String_ToByte, p. 72: the UTF-8 bytes of the string."""
-    return _checked(list(_str(args[0]).encode("utf-8")))
+    """TMscript 2.24 §4.14 String_ToByte, p. 72: 0 UTF-8 (default), 1 hexadecimal, 2 ASCII."""
+    text, mode = _str(args[0]), _int_arg(args, 1)
+    if mode == 1:
+        return _checked(_hex_bytes(text))
+    if mode == 2:
+        return _checked(list(text.encode("ascii", errors="replace")))
+    return _checked(list(text.encode("utf-8")))
 
 
-@_register("4.15", 73, "int(string, string, int)", "int(string, string)")
+@_register(
+    "4.15",
+    73,
+    "int(string, string, int)",
+    "int(string, string)",
+    "int(string[], string, int)",
+    "int(string[], string)",
+)
 def _String_IndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.15 String_IndexOf, p. 73: first index of the substring, -1 if none."""
-    text, sub = _str(args[0]), _str(args[1])
-    start = _int_arg(args, 2)
+    """TMscript 2.24 §4.15 String_IndexOf, p. 73: first index of the substring, -1 if none.
+
+    In a string array (syntaxes 3, 4): the first element from ``start`` that holds it.
+    """
+    sub, start = _str(args[1]), _int_arg(args, 2)
+    if isinstance(args[0], list):
+        items = [_str(item) for item in args[0]]
+        return next((i for i in range(max(start, 0), len(items)) if sub in items[i]), -1)
+    text = _str(args[0])
     if start < 0 or start > len(text):
         return -1
     return text.find(sub, start)
 
 
-@_register("4.16", 75, "int(string, string, int)", "int(string, string)")
+@_register(
+    "4.16",
+    75,
+    "int(string, string, int)",
+    "int(string, string)",
+    "int(string[], string, int)",
+    "int(string[], string)",
+)
 def _String_LastIndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.16 String_LastIndexOf, p. 75: last index of the substring, -1 if none."""
-    text, sub = _str(args[0]), _str(args[1])
+    """TMscript 2.24 §4.16 String_LastIndexOf, p. 75: last index of the substring, -1 if none.
+
+    In a string array (syntaxes 3, 4): the last element up to ``start`` that holds it.
+    """
+    sub = _str(args[1])
+    if isinstance(args[0], list):
+        items = [_str(item) for item in args[0]]
+        start = min(_int(args[2]), len(items) - 1) if len(args) > 2 else len(items) - 1
+        return next((i for i in range(start, -1, -1) if sub in items[i]), -1)
+    text = _str(args[0])
     if len(args) > 2:
         start = _int(args[2])
         if start < 0:
@@ -414,28 +543,108 @@ def _String_LastIndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) 
     return text.rfind(sub)
 
 
-@_register("4.18", 78, "string(string, int, int)", "string(string, int)")
-def _String_Substring(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.18 String_Substring, p. 78: by start index and length (syntaxes 1, 2).
+@_register("4.17", 77, "int(string, string, int)", "int(string, string)")
+def _String_DiffIndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.17 String_DiffIndexOf, p. 77: where two strings first differ from
+    ``start``: -1 when they match, -2 when ``start`` is past both (a shorter string reads
+    as '\\0' past its end)."""
+    first, second, start = _str(args[0]), _str(args[1]), max(_int_arg(args, 2), 0)
+    if first == second:
+        return -1
+    if start >= max(len(first), len(second)):
+        return -2
+    for i in range(start, max(len(first), len(second))):
+        if first[i : i + 1] != second[i : i + 1]:
+            return i
+    return -1
 
-    A start out of the string gives ``""``; a negative or too long length runs to the end.
-    """
-    text, start = _str(args[0]), _int(args[1])
-    length = _int(args[2]) if len(args) > 2 else -1
+
+def _substring(text: str, start: int, length: int) -> str:
     if start < 0 or start >= len(text):
         return ""
     return text[start:] if length < 0 else text[start : start + length]
 
 
+def _between(text: str, prefix: str, suffix: str, count: int) -> str:
+    """The ``count``-th part of ``text`` from ``prefix`` to ``suffix`` (§4.18 syntax 5)."""
+    if not prefix and not suffix:
+        return text
+    if count <= 0:
+        return ""
+    if not prefix:
+        end = len(text)
+        for _ in range(count):  # suffixes counted from the back (p. 80)
+            end = text.rfind(suffix, 0, end)
+            if end < 0:
+                return ""
+        return text[: end + len(suffix)]
+    at = 0
+    for _ in range(count):
+        begin = text.find(prefix, at)
+        if begin < 0:
+            return ""
+        finish = text.find(suffix, begin + len(prefix)) if suffix else len(text)
+        if finish < 0:
+            return ""
+        at = finish + len(suffix) if suffix else begin + len(prefix)
+    return text[begin : finish + len(suffix)] if suffix else text[begin:]
+
+
+@_register(
+    "4.18",
+    78,
+    "string(string, int, int)",
+    "string(string, int)",
+    "string(string, string, int)",
+    "string(string, string)",
+    "string(string, string, string, int)",
+    "string(string, string, string)",
+)
+def _String_Substring(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
+    """TMscript 2.24 §4.18 String_Substring, pp. 78-80: by start index and length
+    (syntaxes 1, 2), from a target string (3, 4), or between a prefix and a suffix (5, 6).
+
+    A start out of the string gives ``""``; a negative or too long length runs to the end.
+    """
+    text = _str(args[0])
+    if types[1] == "string" and len(types) > 2 and types[2] == "string":
+        count = _int(args[3]) if len(args) > 3 else 1
+        return _between(text, _str(args[1]), _str(args[2]), count)
+    length = _int(args[2]) if len(args) > 2 else -1
+    if types[1] == "string":
+        start = text.find(_str(args[1]))
+        return "" if start < 0 else _substring(text, start, length)
+    return _substring(text, _int(args[1]), length)
+
+
+def _split_quoted(text: str, sep: str) -> list[str]:
+    # A separator inside double quotation marks does not split (§4.19 options 2, 3).
+    parts, current, quoted, i = [], "", False, 0
+    while i < len(text):
+        if text[i] == '"':
+            quoted = not quoted
+        elif not quoted and text.startswith(sep, i):
+            parts.append(current)
+            current, i = "", i + len(sep)
+            continue
+        current += text[i]
+        i += 1
+    return [*parts, current]
+
+
 @_register("4.19", 81, "string[](string, string, int)", "string[](string, string)")
 def _String_Split(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.19 String_Split, p. 81: option 0 keeps empty strings, 1 drops them."""
+    """TMscript 2.24 §4.19 String_Split, p. 81: options 0/2 keep empty strings, 1/3 drop
+    them; 2 and 3 do not split inside double quotation marks."""
     text, sep = _str(args[0]), _str(args[1])
     option = _int_arg(args, 2)
-    if option not in (0, 1):
-        raise BuiltinError(f"option {option} is not supported (0 or 1)")
-    parts: list[Scalar] = list(text.split(sep)) if sep else [text]
-    if option == 1:
+    if option not in (0, 1, 2, 3):
+        raise BuiltinError(f"option {option} is not 0, 1, 2 or 3")
+    if not sep:
+        parts: list[Scalar] = [text]
+    else:
+        parts = list(_split_quoted(text, sep) if option >= 2 else text.split(sep))
+    if option in (1, 3):
         parts = [p for p in parts if p != ""]
     return _checked(parts)
 
@@ -453,10 +662,27 @@ def _String_Replace(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> V
     return text.replace(old, new)
 
 
-@_register("4.21", 83, "string(string)")
+def _trim_start(text: str, word: str) -> str:
+    while word and text.startswith(word):
+        text = text[len(word) :]
+    return text
+
+
+def _trim_end(text: str, word: str) -> str:
+    while word and text.endswith(word):
+        text = text[: -len(word)]
+    return text
+
+
+@_register("4.21", 83, "string(string)", "string(string, string)", "string(string, string, string)")
 def _String_Trim(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.21 String_Trim, p. 83: white space off both ends (syntax 1)."""
-    return _str(args[0]).strip()
+    """TMscript 2.24 §4.21 String_Trim, pp. 83-84: white space off both ends (syntax 1), or
+    every leading repeat of a string (2) and every trailing repeat of another (3)."""
+    text = _str(args[0])
+    if len(args) == 1:
+        return text.strip()
+    text = _trim_start(text, _str(args[1]))
+    return _trim_end(text, _str(args[2])) if len(args) > 2 else text
 
 
 @_register("4.22", 85, "string(string)")
@@ -481,9 +707,13 @@ def _Array_Append(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
 
 @_register("4.25", 88, "$0(?[], int, *)")
 def _Array_Insert(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.25 Array_Insert, p. 88: an element or an array before ``index``."""
+    """TMscript 2.24 §4.25 Array_Insert, p. 88: an element or an array before ``index``.
+
+    An index < 0 stops the project; one past the end appends (p. 88: "Out of the index. The
+    value will insert in the end of the array").
+    """
     items, index = _arr(args[0]), _int(args[1])
-    if index < 0 or index > len(items):
+    if index < 0:
         raise BuiltinError(f"index {index} is out of the array (0..{len(items)})")
     second = args[2]
     middle: list[Scalar] = list(second) if isinstance(second, list) else [second]
@@ -500,10 +730,22 @@ def _Array_Remove(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
     return [*items[:index], *items[index + max(count, 0) :]]
 
 
-@_register("4.27", 90, "bool(?[], ?[])")
+@_register("4.27", 90, "bool(?[], ?[])", "bool(?[], int, ?[], int, int)")
 def _Array_Equals(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.27 Array_Equals, p. 90 (syntax 1: the whole arrays)."""
-    return _arr(args[0]) == _arr(args[1])
+    """TMscript 2.24 §4.27 Array_Equals, pp. 90-91: the whole arrays (syntax 1), or ``count``
+    elements of each from a start index (syntax 2: 0 elements are equal; a count < 0, a
+    start out of its array or a range past its end is not)."""
+    if len(args) == 2:
+        return _arr(args[0]) == _arr(args[1])
+    first, second = _arr(args[0]), _arr(args[2])
+    start1, start2, count = _int(args[1]), _int(args[3]), _int(args[4])
+    if count == 0:
+        return True
+    if count < 0 or min(start1, start2) < 0:
+        return False
+    if start1 + count > len(first) or start2 + count > len(second):
+        return False
+    return first[start1 : start1 + count] == second[start2 : start2 + count]
 
 
 @_register("4.28", 92, "int(?[], ?, int)", "int(?[], ?)")
@@ -517,11 +759,13 @@ def _Array_IndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Va
     return -1
 
 
-@_register("4.29", 94, "int(?[], ?)")
+@_register("4.29", 94, "int(?[], ?, int)", "int(?[], ?)")
 def _Array_LastIndexOf(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.29 Array_LastIndexOf, p. 94: last index of the element, -1 if none."""
+    """TMscript 2.24 §4.29 Array_LastIndexOf, p. 94: last index of the element at or before
+    ``start`` (default: the last element), -1 if none."""
     items = _arr(args[0])
-    for i in range(len(items) - 1, -1, -1):
+    start = min(_int(args[2]), len(items) - 1) if len(args) > 2 else len(items) - 1
+    for i in range(start, -1, -1):
         if items[i] == args[1]:
             return i
     return -1
@@ -580,11 +824,39 @@ def _value_bytes(value: Value, typ: str) -> bytes:
     return struct.pack("<i", wrap32(value))
 
 
-@_register("4.34", 105, "byte[](*, int)", "byte[](*)")
+def _int_bytes(value: int, big: bool, mode: int) -> bytes:
+    # Mode 0 int32; 1 int16 when the value fits one, else int32; 2 int16, the low 16 bits
+    # (TMscript 2.24 §4.34 syntaxes 3 and 4, p. 107).
+    short = mode == 2 or (mode == 1 and -0x8000 <= value <= 0x7FFF)
+    data = (
+        struct.pack("<h", ((value + 0x8000) & 0xFFFF) - 0x8000)
+        if short
+        else _value_bytes(value, "int")
+    )
+    return data[::-1] if big else data
+
+
+@_register(
+    "4.34",
+    105,
+    "byte[](int, int, int)",
+    "byte[](int[], int, int)",
+    "byte[](*, int)",
+    "byte[](*)",
+)
 def _GetBytes(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.34 GetBytes, p. 105: 0 Little Endian (default), 1 Big Endian per value."""
+    """TMscript 2.24 §4.34 GetBytes, pp. 105-108: 0 Little Endian (default), 1 Big Endian
+    per value; a string array with 1 puts 0x00 0x00 between its strings; an int or int[]
+    with a third argument: 0 int32, 1 int16 where it fits, 2 int16."""
     big = len(args) > 1 and _int(args[1]) == 1
     value, typ = args[0], types[0]
+    if len(args) == 3:
+        items = value if isinstance(value, list) else [value]
+        mode = _int(args[2])
+        return _checked([b for item in items for b in _int_bytes(_int(item), big, mode)])
+    if typ == "string[]" and big:
+        joined = b"\0\0".join(_str(item).encode("utf-8") for item in _arr(value))
+        return _checked(list(joined))
     if not big or isinstance(value, str):
         return _checked(list(_value_bytes(value, typ)))
     items = value if isinstance(value, list) else [value]
@@ -598,7 +870,10 @@ def _GetBytes(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value: 
 @_register("4.39", 128, "int()", "double(bool)")
 def _GetNowStamp(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.39 GetNowStamp, p. 128: the project's run time, ms (-1: overflow)."""
-    ms = int((rt.host.now_s() - rt.started_s) * 1000.0)
+    # A host whose clock runs faster than the wall clock (a simulator's time_scale)
+    # counts its seconds in wall seconds here, the clock a master's heartbeat keeps.
+    scale = getattr(rt.host, "stamp_scale", 1.0)
+    ms = int((rt.host.now_s() - rt.started_s) * 1000.0 / scale)
     if args and args[0]:
         return float(ms)
     return ms if ms <= 2**31 - 1 else -1
@@ -695,17 +970,24 @@ def _Display(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  
 # ---- chapter 6: math -------------------------------------------------------------------
 
 
+def _real(value: float, types: tuple[str, ...]) -> float:
+    """A result in the syntax's type: a float syntax (float arguments) returns a float."""
+    return to_f32(value) if types and types[0] == "float" and abs(value) <= FLOAT_MAX else value
+
+
 def _math1(section: str, page: int, name: str, fn: Callable[[float], float]) -> None:
+    # Syntax 1 float(float), syntax 2 double(double): an int argument widens to a float
+    # (TMscript 2.24 §2.2, p. 15; d2r(1) is 0.017453292, a float, p. 181).
     def impl(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
         try:
             result = fn(_num(args[0]))
         except (ValueError, OverflowError):
             raise BuiltinError(f"{name}({display_text(args[0], types[0])}) is undefined") from None
-        return result
+        return _real(result, types)
 
     impl.__doc__ = f"TMscript 2.24 §{section} {name}, p. {page}."
     BUILTINS[name] = Builtin(
-        name, section, page, _sigs("double(double)", "float(float)"), impl=impl
+        name, section, page, _sigs("float(float)", "double(double)"), impl=impl
     )
 
 
@@ -718,87 +1000,94 @@ def _abs(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
     return abs(_num(value))
 
 
-@_register("6.2", 166, "double(double, double)", "float(float, float)")
+@_register("6.2", 166, "int(int, double)", "float(float, double)", "double(double, double)")
 def _pow(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.2 pow, p. 166."""
+    """TMscript 2.24 §6.2 pow, pp. 166-167: in the base's type (an int base: the power
+    truncated to an int, pow(100, -2) is 0); NaN is an error."""
     try:
-        return math.pow(_num(args[0]), _num(args[1]))
+        power = math.pow(_num(args[0]), _num(args[1]))
     except (ValueError, OverflowError, ZeroDivisionError):
         raise BuiltinError("the power is undefined") from None
+    if types[0] == "int":
+        if math.isinf(power) or abs(power) >= 2**63:
+            raise BuiltinError("the power is out of an int's range")
+        return wrap32(int(power))
+    return _real(power, types)
 
 
 _math1("6.3", 168, "sqrt", math.sqrt)
+_math1("6.4", 169, "ceil", lambda x: float(math.ceil(x)))
+_math1("6.5", 170, "floor", lambda x: float(math.floor(x)))
 
 
-@_register("6.4", 169, "int(?)")
-def _ceil(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.4 ceil, p. 169: the smallest integer not below."""
-    return wrap32(math.ceil(_num(args[0])))
-
-
-@_register("6.5", 170, "int(?)")
-def _floor(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.5 floor, p. 170: the largest integer not above."""
-    return wrap32(math.floor(_num(args[0])))
-
-
-@_register("6.6", 171, "int(?)", "$0(?, int)")
+@_register("6.6", 171, "float(float, int)", "float(float)", "double(double, int)", "double(double)")
 def _round(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.6 round, p. 171: half away from zero; optional decimal places."""
+    """TMscript 2.24 §6.6 round, pp. 171-172: half away from zero, in the argument's type;
+    digits 0..15, any other number of digits is 0."""
     value = _num(args[0])
     places = _int_arg(args, 1)
+    if not 0 <= places <= 15:
+        places = 0
     scale = 10.0**places
-    rounded = math.floor(abs(value) * scale + 0.5) / scale
-    rounded = math.copysign(rounded, value)
-    return wrap32(int(rounded)) if len(args) == 1 else rounded
+    rounded = math.copysign(math.floor(abs(value) * scale + 0.5) / scale, value)
+    return _real(rounded + 0.0, types)
 
 
-@_register("6.7", 173, "int(int, int)", "double()")
+@_register("6.7", 173, "float()", "int(int)", "int(int, int)")
 def _random(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.7 random, p. 173: an int in [min, max], or a double in [0, 1)."""
+    """TMscript 2.24 §6.7 random, pp. 173-174: a float in [0, 1); an int in [0, max) (0 when
+    max <= 0); an int in [min, max) (min when max <= min)."""
     if not args:
-        return _rng.random()
-    low, high = _int(args[0]), _int(args[1])
-    return _rng.randint(min(low, high), max(low, high))
+        return to_f32(_rng.random()) % 1.0
+    low, high = (0, _int(args[0])) if len(args) == 1 else (_int(args[0]), _int(args[1]))
+    return low if high <= low else _rng.randrange(low, high)
 
 
 def _numbers(args: list[Value]) -> list[float]:
-    if len(args) == 1 and isinstance(args[0], list):
-        return _floats(args[0])
-    return [_num(a) for a in args]
+    # Each argument, or each element of an array argument (§6.8-§6.13, pp. 175-180).
+    out: list[float] = []
+    for arg in args:
+        out.extend(_floats(arg) if isinstance(arg, list) else [_num(arg)])
+    return out
 
 
-@_register("6.8", 175, "double(?[])")
+def _in_type(value: float, types: tuple[str, ...]) -> Value:
+    # sum, min, max: an int when every argument is an integer type, else a double (p. 175).
+    integral = all(t.removesuffix("[]") in ("byte", "int", "int16") for t in types)
+    return wrap32(int(value)) if integral else value
+
+
+@_register("6.8", 175, "$num(*, *...)")
 def _sum(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.8 sum, p. 175: of an array's elements."""
-    return math.fsum(_numbers(args))
+    """TMscript 2.24 §6.8 sum, p. 175: of the arguments and of their arrays' elements."""
+    return _in_type(math.fsum(_numbers(args)), types)
 
 
-@_register("6.9", 176, "double(?[])")
+@_register("6.9", 176, "double(*, *...)")
 def _average(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.9 average, p. 176: of an array's elements."""
+    """TMscript 2.24 §6.9 average, p. 176: of the arguments and of their arrays' elements."""
     values = _numbers(args)
     if not values:
         raise BuiltinError("the average of an empty array")
     return math.fsum(values) / len(values)
 
 
-@_register("6.12", 179, "double(?[])")
+@_register("6.12", 179, "$num(*, *...)")
 def _min(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.12 min, p. 179: the smallest element."""
+    """TMscript 2.24 §6.12 min, p. 179: the smallest argument or array element."""
     values = _numbers(args)
     if not values:
         raise BuiltinError("the minimum of an empty array")
-    return min(values)
+    return _in_type(min(values), types)
 
 
-@_register("6.13", 180, "double(?[])")
+@_register("6.13", 180, "$num(*, *...)")
 def _max(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.13 max, p. 180: the largest element."""
+    """TMscript 2.24 §6.13 max, p. 180: the largest argument or array element."""
     values = _numbers(args)
     if not values:
         raise BuiltinError("the maximum of an empty array")
-    return max(values)
+    return _in_type(max(values), types)
 
 
 _math1("6.14", 181, "d2r", math.radians)
@@ -813,19 +1102,21 @@ _math1("6.21", 188, "atan", lambda x: math.degrees(math.atan(x)))
 _math1("6.24", 192, "log10", math.log10)
 
 
-@_register("6.22", 189, "double(double, double)", "float(float, float)")
+@_register("6.22", 189, "float(float, float)", "double(double, double)")
 def _atan2(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.22 atan2, p. 189: degrees, of (y, x)."""
-    return math.degrees(math.atan2(_num(args[0]), _num(args[1])))
+    """TMscript 2.24 §6.22 atan2, p. 189: degrees, of (y, x); floats for int arguments."""
+    return _real(math.degrees(math.atan2(_num(args[0]), _num(args[1]))), types)
 
 
-@_register("6.23", 190, "double(double)", "double(double, double)")
+@_register(
+    "6.23", 190, "float(float, double)", "double(double, double)", "float(float)", "double(double)"
+)
 def _log(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
-    """TMscript 2.24 §6.23 log, p. 190: natural logarithm, or of (value, base)."""
+    """TMscript 2.24 §6.23 log, pp. 190-191: natural logarithm, or of (value, base)."""
     try:
         if len(args) == 2:
-            return math.log(_num(args[0]), _num(args[1]))
-        return math.log(_num(args[0]))
+            return _real(math.log(_num(args[0]), _num(args[1])), types)
+        return _real(math.log(_num(args[0])), types)
     except (ValueError, ZeroDivisionError):
         raise BuiltinError("the logarithm is undefined") from None
 
@@ -1319,7 +1610,6 @@ def _address_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Va
 #: Functions of the manual this interpreter refuses, by name (checked when a script is read).
 UNSUPPORTED: frozenset[str] = frozenset(
     {
-        "String_DiffIndexOf",
         "GetString",
         "GetToken",
         "GetAllTokens",

@@ -205,6 +205,19 @@ def _syntax(node: a.Node, message: str) -> TMScriptSyntaxError:
     return TMScriptSyntaxError(message, line=node.line, column=node.column)
 
 
+def _byte_range(value: a.Expr, typ: str) -> None:
+    """A constant out of 0..255 given to a byte is an error (TMscript 2.24 §2.2, p. 15:
+    ``byte b = -100`` "mismatches with the value range of byte"); a calculation keeps 8 bits."""
+    if typ != "byte" or not isinstance(value, a.Literal) or value.type not in ("int", "double"):
+        return
+    if isinstance(value.value, int) and not 0 <= value.value <= 255:
+        raise _syntax(
+            value,
+            f"{value.value} is out of a byte's range 0..255 "
+            "(§2.2, p. 15: a byte constant must fit; a calculation such as 0 - 100 keeps 8 bits)",
+        )
+
+
 def _runtime(node: a.Node, message: str) -> TMScriptRuntimeError:
     return TMScriptRuntimeError(message, line=node.line, column=node.column)
 
@@ -606,6 +619,8 @@ class _ExprCompiler:
 
     def assign(self, node: a.Assign) -> _CExpr:
         typ, store, current = self.target(node.target)
+        if node.op == "=":
+            _byte_range(node.value, typ)
         value = self.expr(node.value)
         combine: Callable[[Any, Any], Value] | None = None
         vtype = value.type
@@ -856,6 +871,8 @@ class _Compiler(_ExprCompiler):
             is_array(typ)
         ):
             raise _syntax(node.type, f"unknown type {node.type}")
+        if node.init is not None:
+            _byte_range(node.init, typ)
         init = self.converted(node.init, typ, node) if node.init is not None else None
         is_global, slot = self.declare(node, node.name, typ)
         default = default_value(typ)
@@ -1112,8 +1129,8 @@ class _CallCompiler:
             builtin = _main_thread_only(builtin)
         args = [c.expr(arg) for arg in node.args]
         sig = self.resolve(node, builtin, [ce.type for ce in args])
-        fns, types = self.arguments(node, args, sig.params)
-        ret = types[0] if sig.returns == "$0" else sig.returns
+        fns, types = self.arguments(node, args, _expand(sig.params, len(args)))
+        ret = _return_type(sig.returns, types)
         arg_types = tuple(types)
         if builtin.impl is not None and not any(ce.gen for ce in fns):
             return _CExpr(_builtin_pure(node, builtin.impl, fns, arg_types), ret, False)
@@ -1141,12 +1158,17 @@ class _CallCompiler:
 
     def resolve(self, node: a.Call, builtin: Builtin, types: list[str]) -> Any:
         """Pick the syntax the arguments fit (TMscript 2.24 §2.2: smaller types widen)."""
-        candidates = [s for s in builtin.signatures if len(s.params) == len(types)]
         if builtin.name == "Display":
             types = ["string" if not t.endswith("?") else t for t in types]
-        for sig in candidates:
-            if all(_fits(t, p) for t, p in zip(types, sig.params, strict=True)):
-                return sig
+        # The syntax the arguments reach at the least cost: exact types first, then the
+        # smaller types widening to greater ones (§2.2, p. 15), then any other conversion.
+        best: tuple[int, Any] | None = None
+        for sig in builtin.signatures:
+            cost = _cost(types, _expand(sig.params, len(types)))
+            if cost is not None and (best is None or cost < best[0]):
+                best = (cost, sig)
+        if best is not None:
+            return best[1]
         shown = ", ".join(types)
         syntaxes = "; ".join(f"{builtin.name}({', '.join(s.params)})" for s in builtin.signatures)
         raise _syntax(
@@ -1340,6 +1362,44 @@ def _shown(fn: PureFn, typ: str, node: a.Node) -> PureFn:
 
 def _copy(value: Value) -> Value:
     return list(value) if isinstance(value, list) else value
+
+
+#: The order in which numeric types widen (TMscript 2.24 §2.2, p. 15: smaller to greater).
+_RANK = {"byte": 0, "int16": 1, "int": 2, "int32": 2, "float": 3, "double": 4}
+
+
+def _expand(params: tuple[str, ...], count: int) -> tuple[str, ...]:
+    """A syntax's parameters for ``count`` arguments: ``*...`` repeats for the rest."""
+    if params and params[-1] == "*...":
+        return params[:-1] + ("*",) * max(count - len(params) + 1, 0)
+    return params
+
+
+def _return_type(returns: str, types: list[str]) -> str:
+    """``$0``: the first argument's type; ``$num``: int for integers only, else double."""
+    if returns == "$0":
+        return types[0]
+    if returns == "$num":
+        return "int" if all(element_type(t) in INTEGRAL for t in types) else "double"
+    return returns
+
+
+def _cost(types: list[str], params: tuple[str, ...]) -> int | None:
+    """What it costs to pass ``types`` to ``params``; None when they do not fit."""
+    if len(types) != len(params) or (params and params[-1] == "*..."):
+        return None
+    total = 0
+    for arg, param in zip(types, params, strict=True):
+        if not _fits(arg, param):
+            return None
+        pe, ae = element_type(param), element_type(arg)
+        if param in ("*", "?", "?[]"):
+            total += 2
+        elif pe != ae and ae != "?" and pe in _RANK and ae in _RANK:
+            total += 1 if _RANK[ae] < _RANK[pe] else 3
+        elif pe != ae and ae != "?":
+            total += 4
+    return total
 
 
 def _fits(arg: str, param: str) -> bool:
