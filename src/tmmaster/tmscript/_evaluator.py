@@ -184,7 +184,8 @@ StmtFn: TypeAlias = Callable[[_Frame], Generator[str, None, Control]]
 
 @dataclass(frozen=True)
 class ScriptWarning:
-    """A compile warning the manual documents (§2.7): a bare word taken as a string."""
+    """A compile warning: a bare word taken as a string, an integer constant over 32 bits
+    taken as a double (both §2.7, p. 27), an element of an expression's result (§2.4)."""
 
     #: The line, 1-based.
     line: int
@@ -412,6 +413,15 @@ class _ExprCompiler:
     def expr(self, node: a.Expr) -> _CExpr:
         if isinstance(node, a.Literal):
             value = node.value
+            if isinstance(value, int) and not isinstance(value, bool) and node.type == "double":
+                # An integer constant over 32 bits is no int (§2.7, p. 27): a double here.
+                self.warnings.append(
+                    ScriptWarning(
+                        node.line,
+                        node.column,
+                        f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double",
+                    )
+                )
             return _CExpr(lambda fr: value, node.type, False)
         if isinstance(node, a.Name):
             return self.name(node)
@@ -675,6 +685,17 @@ class _ExprCompiler:
         return _CExpr(step, typ, False)
 
     def index(self, node: a.Index) -> _CExpr:
+        if not isinstance(node.target, a.Name):
+            # [] takes an array variable (the operator table, §2.4, p. 19): an element of a
+            # function's result is read, with a warning (user projects index modbus_read's).
+            self.warnings.append(
+                ScriptWarning(
+                    node.line,
+                    node.column,
+                    "[] takes an array variable (§2.4, p. 19): indexing an expression's "
+                    "result is not in the manual",
+                )
+            )
         base = self.expr(node.target)
         if not is_array(base.type):
             raise _syntax(node, f"a {base.type} has no elements")
