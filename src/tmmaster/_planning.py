@@ -180,10 +180,11 @@ class TimeoutPolicy(Policy):
 
     ``Robot(host, timeouts=TimeoutPolicy(request_s=2.0))``. Every bound is finite; the
     pick & place configuration (``[timeouts]``) is this model and also accepts its older
-    key names ``ack_s``, ``motion_s`` and ``gripper_s``. ``request_s`` and
-    ``gripper_settle_s`` are read when the robot is made (its link and its gripper);
-    the others by every wait when it starts. An invalid value is a
-    :class:`~tmmaster.ConfigError` naming the field (``timeouts.request_s must be ...``).
+    key names ``ack_s``, ``motion_s`` and ``gripper_s``. ``request_s``,
+    ``gripper_settle_s`` and the heartbeat's two are read when the robot is made (its
+    link, its gripper, its heartbeat); the others by every wait when it starts. An
+    invalid value is a :class:`~tmmaster.ConfigError` naming the field
+    (``timeouts.request_s must be ...``).
     """
 
     model_config = ConfigDict(populate_by_name=True)
@@ -224,6 +225,23 @@ class TimeoutPolicy(Policy):
     #: progress (0.1 mm or 0.1 deg) at least this often past its model budget (or every
     #: quarter of that budget, if less); none for this long is a stall, s.
     stall_s: Annotated[float, Field(gt=0, le=60)] = 1.0
+    #: The master's heartbeat (``tmflow``: ``master_heartbeat``, docs/safety.md): written
+    #: this often from connect to close, s (0.02 to 0.5: the robot program asks for a
+    #: change at least every 500 ms).
+    heartbeat_s: Annotated[float, Field(ge=0.02, le=0.5)] = 0.4
+    #: ... and a command on the robot expires once the heartbeat has been silent this
+    #: long (``master_ttl_ms``), s (0.5 to 10, at least three heartbeats).
+    heartbeat_ttl_s: Annotated[float, Field(ge=0.5, le=10)] = 2.0
+
+    @model_validator(mode="after")
+    def _ttl_spans_heartbeats(self) -> TimeoutPolicy:
+        if self.heartbeat_ttl_s < 3 * self.heartbeat_s:
+            raise ValueError(
+                f"heartbeat_ttl_s ({self.heartbeat_ttl_s:g} s) must be at least three"
+                f" heartbeats ({3 * self.heartbeat_s:g} s): a late write must not expire a"
+                " command"
+            )
+        return self
 
     def for_motion(self, expected_s: float) -> float:
         """The timeout of a move expected to take ``expected_s`` seconds.

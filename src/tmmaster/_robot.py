@@ -64,6 +64,7 @@ from ._fleet import (
     wake_waits,
 )
 from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
+from ._heartbeat import Heartbeat
 from ._io import RobotIO
 from ._logging import get_logger
 from ._options import ORIENTATION_BOUNDS, POSITION_BOUNDS, Checks, GripperDevice, speed_limit
@@ -168,6 +169,16 @@ class _Options:
     def request_timeout_s(self) -> float:
         """The bound of one Modbus request, s (``timeouts.request_s``)."""
         return self.timeouts.request_s
+
+    def heartbeat(self, profile: RobotProfile, transport: Transport, log: Any) -> Heartbeat:
+        """The robot's heartbeat writer, with the timeout policy's period and TTL."""
+        return Heartbeat(
+            profile,
+            transport,
+            period_s=self.timeouts.heartbeat_s,
+            ttl_s=self.timeouts.heartbeat_ttl_s,
+            log=log,
+        )
 
     def follower(
         self, channel: CommandChannel, stop_event: threading.Event, log: Any
@@ -441,6 +452,8 @@ class Robot:
             self.profile, self._transport, self._channel, self._gate, self._stop_event, self._log
         )
         self._shared = self._join(fleet)
+        # The master's heartbeat (tmflow), written from connect to close (_heartbeat.py).
+        self._heartbeat = options.heartbeat(self.profile, self._transport, self._log)
 
     def _join(self, fleet: Fleet | None) -> FleetMember | None:
         """A robot whose link is on a driver (its Fleet's, or the process's default one):
@@ -644,6 +657,7 @@ class Robot:
             self.close()
             raise
         self._connected = True
+        self._heartbeat.start(self._shared)
         atexit.register(self._at_exit)
         self._log.info(
             "robot.connected",
@@ -736,6 +750,7 @@ class Robot:
             self._follower.closing.set()
             if self._closed_safely is None or self._transport.state is not ConnectionState.CLOSED:
                 self._closed_safely = self._give_up_outstanding(deadline)
+                self._heartbeat.stop()  # the robot program expires what is left
                 self.gripper.disconnect()
                 self._transport.close()
             # Only now: until the clean-up is over, the exit hook may still have it to do.

@@ -114,6 +114,11 @@ class SimHost:
         """The simulated clock, seconds."""
         return self._c.time_s
 
+    @property
+    def stamp_scale(self) -> float:
+        """Simulated seconds per wall second: ``GetNowStamp`` counts wall milliseconds."""
+        return self._c.stamp_scale
+
     def display(self, text: str) -> None:
         """A ``Display()`` line, logged."""
         self._c.displayed.append(text)
@@ -280,6 +285,11 @@ class ScriptProjectController(SequenceController):
         self.refused_writes: set[tuple[Table, int]] = set()
         #: Every ``Display()`` text, in order (for tests and the CLI's trace).
         self.displayed: list[str] = []
+        #: Simulated seconds per wall second (the Simulator's ``time_scale``):
+        #: ``GetNowStamp`` counts wall milliseconds, the clock of the master's heartbeat
+        #: (``master_ttl_ms``), so a simulator faster than real time expires no command
+        #: of a live master.
+        self.stamp_scale = 1.0
         super().__init__(profile, bank, backend, model, **options)
 
     # -- what the host reaches ----------------------------------------------------------

@@ -197,6 +197,8 @@ class Simulator:
             speed_factor=1.0 if self._cell is None else float(self._cell.speed_factor),
             **handshake_options,
         )
+        if hasattr(self._controller, "stamp_scale"):  # a Script Project: GetNowStamp
+            self._controller.stamp_scale = self._time_scale
         self._robot_server = DeviceServer(
             "robot",
             self._bank,

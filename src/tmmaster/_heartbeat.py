@@ -1,0 +1,246 @@
+"""The master's heartbeat: a command on the robot lives only as long as its master.
+
+The ``tmflow`` robot program expires a command whose master went silent: once
+``master_heartbeat`` (9050) has not changed for ``master_ttl_ms`` (9051) it takes no
+command and lets no command go on, paused or not (docs/tmflow-program.md, "Command
+expiry"; docs/safety.md). A connected :class:`~tmmaster.Robot` writes both registers in
+one FC16 request every ``TimeoutPolicy.heartbeat_s`` from connect to close, the
+heartbeat changed each time (1..32767, then 1 again) and the time-to-live
+``TimeoutPolicy.heartbeat_ttl_s``.
+
+A heartbeat write is no command: it never passes the command gate nor the command
+path's retry, and a write that fails is simply followed by the next one. It is not
+counted in the link's request counters either (:attr:`Heartbeat.writes` counts it), so
+what a move costs reads the same with or without it.
+
+Where it runs:
+
+* a network robot: a task on its driver's event loop (the loop every link of the
+  process runs on). It takes the link's lock as the fleet's polls do, without ever
+  blocking: a link busy with the robot's thread skips the slot, tried again shortly.
+* an in-process robot (``sim://``, a MemoryTransport: each request waits for the
+  simulator's thread, which the driver's loop must never do) or any other ready
+  Transport: a small daemon thread of its own, ended by ``close()``.
+
+Either stops at ``close()``, when the link is closed, when the driver stops, or when
+the Robot is garbage.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import weakref
+from typing import TYPE_CHECKING, Any
+
+from ._exceptions import TMMasterError
+from ._registers import RegisterField, RobotProfile, Table
+from ._transport import BlockTransport, ConnectionState, Transport
+
+if TYPE_CHECKING:
+    from ._fleet import FleetMember
+
+#: The registers of the heartbeat, in this order (adjacent holding registers).
+HEARTBEAT_FIELDS = ("master_heartbeat", "master_ttl_ms")
+
+#: The heartbeat counts 1..32767, then 1 again (0: never written).
+HEARTBEAT_MAX = 32767
+
+#: After a slot found the link busy or a write failed: try again this soon, s.
+_RETRY_S = 0.05
+
+
+class Heartbeat:
+    """One robot's heartbeat writer (nothing to write where the profile has no such fields).
+
+    Args:
+        profile: The robot's register map.
+        transport: The robot's link.
+        period_s: Seconds between two writes.
+        ttl_s: The time-to-live written with each beat, s.
+        log: The robot's logger.
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        transport: Transport,
+        *,
+        period_s: float,
+        ttl_s: float,
+        log: Any,
+    ) -> None:
+        self._fields: tuple[RegisterField, ...] = (
+            profile.select(HEARTBEAT_FIELDS)
+            if all(profile.has(n) for n in HEARTBEAT_FIELDS)
+            else ()
+        )
+        if self._fields:
+            first, second = self._fields
+            if first.table is not Table.HOLDING or second.address != first.address + 1:
+                self._fields = ()  # not one FC16 request: the program could not read it so
+        self._transport = transport
+        self.period_s = period_s
+        self.ttl_ms = round(ttl_s * 1000)
+        self._log = log
+        #: The last heartbeat value sent (0: none yet).
+        self.beat = 0
+        #: Writes answered by the robot.
+        self.writes = 0
+        #: Slots that found the link busy, closed or failing (the next slot writes).
+        self.missed = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._member: FleetMember | None = None
+        self._failing = False
+
+    @property
+    def enabled(self) -> bool:
+        """True when the profile has the heartbeat registers (``tmflow``)."""
+        return bool(self._fields)
+
+    @property
+    def running(self) -> bool:
+        """True between :meth:`start` and :meth:`stop`."""
+        return (self._thread is not None or self._task is not None) and not self._stop.is_set()
+
+    @property
+    def address(self) -> int:
+        """The first register (``master_heartbeat``)."""
+        return self._fields[0].address
+
+    def next_words(self) -> list[int]:
+        """The next beat and the time-to-live: the words of one write."""
+        self.beat = self.beat % HEARTBEAT_MAX + 1
+        return [self.beat, self.ttl_ms]
+
+    def start(self, member: FleetMember | None) -> None:
+        """Start writing: on ``member``'s driver loop, or (None) in a thread of its own.
+
+        Args:
+            member: The robot's side of its driver (a network robot), or None.
+        """
+        if not self.enabled or self.running:
+            return
+        self._stop.clear()
+        if member is not None:
+            self._member = member
+            member.fleet._call_soon(self._start_task, member)
+            return
+        thread = threading.Thread(
+            target=_beat_in_thread,
+            args=(weakref.ref(self), self._stop, self._transport),
+            name=f"tmmaster-heartbeat-{getattr(self._transport, 'name', 'robot')}",
+            daemon=True,
+        )
+        self._thread = thread
+        weakref.finalize(self, self._stop.set)
+        thread.start()
+
+    def _start_task(self, member: FleetMember) -> None:
+        """On the loop: the task, cancelled with the fleet's other tasks when it stops."""
+        if self._stop.is_set():
+            return
+        task = asyncio.get_running_loop().create_task(
+            _beat_on_loop(weakref.ref(self), member, self._stop),
+            name=f"tmmaster-heartbeat-{member.transport.name}",
+        )
+        self._task = task
+        member.fleet._watches.add(task)
+        task.add_done_callback(member.fleet._watches.discard)
+
+    def stop(self, *, timeout_s: float = 1.0) -> None:
+        """Stop writing (the robot program expires a command after ``ttl_s``).
+
+        Args:
+            timeout_s: How long to wait for a write in flight to end.
+        """
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout_s)
+        task, self._task = self._task, None
+        member, self._member = self._member, None
+        if task is not None and member is not None:
+            member.fleet._call_soon(task.cancel)
+
+    def wrote(self, ok: bool, error: BaseException | None = None) -> None:
+        """Count one slot: written, or missed (logged once per run of failures)."""
+        if ok:
+            self.writes += 1
+            if self._failing:
+                self._failing = False
+                self._log.info("robot.heartbeat_resumed", beat=self.beat)
+            return
+        self.missed += 1
+        if error is not None and not self._failing:
+            self._failing = True
+            self._log.warning("robot.heartbeat_failed", error=str(error))
+
+
+async def _beat_on_loop(
+    ref: weakref.ref[Heartbeat], member: FleetMember, stop: threading.Event
+) -> None:
+    """On the driver's loop: one write per period while the robot and its link live."""
+    while not stop.is_set() and member.watching():
+        beat = ref()
+        if beat is None:
+            return
+        delay = beat.period_s
+        if member.linked():
+            outcome = await member.write_when_free(beat.address, beat.next_words())
+            beat.wrote(outcome is None, outcome if isinstance(outcome, BaseException) else None)
+            if outcome is not None:
+                delay = min(delay, _RETRY_S)
+        del beat  # the task keeps no Robot alive between two beats
+        await asyncio.sleep(delay)
+
+
+def _beat_in_thread(
+    ref: weakref.ref[Heartbeat], stop: threading.Event, transport: Transport
+) -> None:
+    """In a thread of its own: one write per period while the robot and its link live."""
+    delay = 0.0
+    while not stop.wait(delay):
+        beat = ref()
+        if beat is None or transport.state is ConnectionState.CLOSED:
+            return
+        delay = beat.period_s
+        error = _write_once(transport, beat.address, beat.next_words())
+        beat.wrote(error is None, error if isinstance(error, BaseException) else None)
+        if error is not None:
+            delay = min(delay, _RETRY_S)
+        del beat
+
+
+def _write_once(
+    transport: Transport, address: int, words: list[int]
+) -> BaseException | bool | None:
+    """One FC16 write, sent once; None when answered, True when the link was busy or down,
+    the error when it failed.
+
+    A BlockTransport's request is made under its lock, taken without waiting on the
+    robot's thread, and not counted as one of the link's requests.
+    """
+    if not isinstance(transport, BlockTransport):
+        try:
+            transport.write_block(Table.HOLDING, address, words, retry=False, interruptible=False)
+        except TMMasterError as exc:
+            return exc
+        return None
+    lock = transport._lock
+    if not lock.acquire(blocking=False):
+        return True
+    try:
+        if transport.state is not ConnectionState.CONNECTED or not transport._link_open():
+            return True  # the robot's thread reconnects a dropped link, never the heartbeat
+        what = f"write holding {address}+{len(words)} (heartbeat)"
+        try:
+            transport._exchange(what, 16, address, len(words), words)
+        except TMMasterError as exc:
+            transport._request_failed(exc)
+            return exc
+        return None
+    finally:
+        lock.release()

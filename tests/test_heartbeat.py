@@ -1,0 +1,141 @@
+"""The master's heartbeat: a command on the robot lives only as long as its master.
+
+A connected tmflow Robot writes ``master_heartbeat`` and ``master_ttl_ms`` (9050-9051)
+in one FC16 request every ``TimeoutPolicy.heartbeat_s``, from connect to close, on its
+driver's loop (a network robot) or in a small thread (an in-process one). The generated
+robot program, interpreted by the simulator, expires a command whose master went
+silent: a move paused mid-way never resumes at Play once the heartbeat stopped, and a
+live master's long move is never expired.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from tmmaster import ConfigError, Pose, Robot, TimeoutPolicy
+from tmmaster._heartbeat import HEARTBEAT_MAX, Heartbeat
+from tmmaster._profiles import robot_profile
+from tmmaster.sim import Simulator
+
+LEFT = Pose(300, -200, 200, 180, 0, 90)
+FAR = Pose(300, 200, 200, 180, 0, 90)  # from LEFT: a long turn of J1
+#: A short time-to-live, so that an expiry is seen within a second (wall time: the
+#: simulated program counts GetNowStamp in wall milliseconds whatever the time scale).
+FAST = TimeoutPolicy(heartbeat_s=0.05, heartbeat_ttl_s=0.5)
+
+
+@pytest.fixture(params=["network", "in-process"])
+def sim(request: pytest.FixtureRequest) -> Iterator[Simulator]:
+    with Simulator(time_scale=5, listen=request.param == "network") as simulator:
+        yield simulator
+
+
+def robot_for(sim: Simulator, **options: object) -> Robot:
+    if sim.listen:
+        return Robot("127.0.0.1", sim.port, **options)  # type: ignore[arg-type]
+    return Robot(sim.url, **options)  # type: ignore[arg-type]
+
+
+def heartbeat_writes(sim: Simulator) -> list[tuple[int, ...]]:
+    return [
+        r.values
+        for r in sim.request_log
+        if r.function_code == 16 and r.address == 9050 and r.values is not None
+    ]
+
+
+def press_play_pause(sim: Simulator) -> None:
+    """The operator's Play/Pause button on the pendant (coil 7104)."""
+    sim.call(lambda: sim._controller.bank.set("play_pause", True))
+
+
+def test_a_connected_robot_writes_its_heartbeat_until_it_closes(sim: Simulator) -> None:
+    robot = robot_for(sim, timeouts=FAST)
+    with robot:
+        sim.wait_for(lambda: len(heartbeat_writes(sim)) >= 3, timeout=5.0)
+        requests = robot.stats.requests
+    writes = heartbeat_writes(sim)
+    # One FC16 request of both registers; the heartbeat changes every time, the TTL in ms.
+    beats = [values[0] for values in writes]
+    assert all(len(values) == 2 and values[1] == 500 for values in writes)
+    assert beats == list(range(1, len(beats) + 1))
+    assert sim.field("master_ttl_ms") == 500
+    # Not counted as the link's requests: what a move costs reads the same.
+    assert requests == robot.stats.requests
+    # Nothing after close().
+    after = len(heartbeat_writes(sim))
+    assert not robot._heartbeat.running
+    time.sleep(4 * FAST.heartbeat_s)
+    assert len(heartbeat_writes(sim)) == after
+
+
+def test_the_heartbeat_wraps_to_1_after_32767() -> None:
+    class Log:
+        def info(self, *args: object, **kwargs: object) -> None: ...
+
+        def warning(self, *args: object, **kwargs: object) -> None: ...
+
+    no_link: Any = None
+    beat = Heartbeat(robot_profile("tmflow"), no_link, period_s=0.4, ttl_s=2.0, log=Log())
+    beat.beat = HEARTBEAT_MAX - 1
+    assert [beat.next_words()[0] for _ in range(3)] == [HEARTBEAT_MAX, 1, 2]
+    assert beat.next_words()[1] == 2000
+    article = Heartbeat(robot_profile("article"), no_link, period_s=0.4, ttl_s=2.0, log=Log())
+    assert not article.enabled
+
+
+def test_the_period_and_ttl_are_checked() -> None:
+    assert (TimeoutPolicy().heartbeat_s, TimeoutPolicy().heartbeat_ttl_s) == (0.4, 2.0)
+    with pytest.raises(ConfigError, match=r"timeouts\.heartbeat_s"):
+        TimeoutPolicy(heartbeat_s=0.6)
+    with pytest.raises(ConfigError, match="at least three heartbeats"):
+        TimeoutPolicy(heartbeat_s=0.5, heartbeat_ttl_s=1.0)
+
+
+@pytest.mark.parametrize("master_alive", [False, True])
+def test_a_paused_move_whose_master_stopped_beating_never_resumes(
+    sim: Simulator, master_alive: bool
+) -> None:
+    robot = robot_for(sim, timeouts=FAST)
+    with robot:
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+        start = sim.tcp_pose()
+        motion = robot.start_move(FAR, speed=5)
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(start) > 20, timeout=5.0)
+        press_play_pause(sim)  # the operator pauses the project mid-move
+        sim.wait_for(lambda: bool(sim.field("paused")), timeout=2.0)
+        if not master_alive:
+            robot._heartbeat.stop()  # the master is gone: nothing beats any more
+            sim.wait_for(lambda: not sim.field("project_running"), timeout=3.0)
+        else:
+            sim.wait_for(lambda: len(heartbeat_writes(sim)) > 12, timeout=3.0)  # > TTL
+        held = sim.tcp_pose()
+        press_play_pause(sim)  # the operator presses Play
+        if master_alive:
+            motion.wait()  # resumed and finished: a live master's move never expires
+            assert sim.tcp_pose().is_close(FAR, mm=1.0, deg=1.0)
+        else:
+            sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
+            sim.wait_for(lambda: sim.field("robot_state") == 0, timeout=2.0)
+            assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
+            assert len(sim.motion_log()) == 2  # LEFT, then FAR: never started again
+            assert any("heartbeat" in line for line in sim.displayed())
+            assert motion.done is False
+        robot.interrupt()
+
+
+def test_a_long_move_of_a_live_master_is_not_expired(sim: Simulator) -> None:
+    # The move takes several times the time-to-live: each heartbeat keeps it alive.
+    robot = robot_for(sim, timeouts=FAST)
+    with robot:
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+        motion = robot.move_to(FAR, speed=5)
+        assert motion.done
+        assert motion.finished_at is not None
+        assert motion.finished_at - motion.ticket.sent_at > 2 * FAST.heartbeat_ttl_s
