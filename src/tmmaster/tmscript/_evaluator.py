@@ -412,17 +412,7 @@ class _ExprCompiler:
 
     def expr(self, node: a.Expr) -> _CExpr:
         if isinstance(node, a.Literal):
-            value = node.value
-            if isinstance(value, int) and not isinstance(value, bool) and node.type == "double":
-                # An integer constant over 32 bits is no int (§2.7, p. 27): a double here.
-                self.warnings.append(
-                    ScriptWarning(
-                        node.line,
-                        node.column,
-                        f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double",
-                    )
-                )
-            return _CExpr(lambda fr: value, node.type, False)
+            return self.literal(node)
         if isinstance(node, a.Name):
             return self.name(node)
         if isinstance(node, a.ArrayLiteral):
@@ -448,6 +438,19 @@ class _ExprCompiler:
         if isinstance(node, a.MethodCall):
             return self.calls.method_call(node)
         raise _syntax(node, f"unsupported expression {type(node).__name__}")
+
+    def literal(self, node: a.Literal) -> _CExpr:
+        value = node.value
+        if isinstance(value, int) and not isinstance(value, bool) and node.type == "double":
+            # An integer constant over 32 bits is no int (§2.7, p. 27): a double here.
+            self.warnings.append(
+                ScriptWarning(
+                    node.line,
+                    node.column,
+                    f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double",
+                )
+            )
+        return _CExpr(lambda fr: value, node.type, False)
 
     def name(self, node: a.Name) -> _CExpr:
         found = self.lookup(node.name)
