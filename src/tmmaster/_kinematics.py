@@ -138,7 +138,12 @@ def _tidy(angle_deg: float) -> float:
 def rotation_error(current: Transform, target: Transform) -> Vector:
     """Rotation vector (rad, base frame) that turns ``current``'s orientation into ``target``'s."""
     # R_err = R_t @ R_c^T, then its axis-angle (log map), robust up to 180 degrees.
-    r = [[sum(target[i][k] * current[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
+    # Term by term in the order sum() adds them (the same floats), without its generators.
+    t, c = target, current
+    r = [
+        [0 + t[i][0] * c[j][0] + t[i][1] * c[j][1] + t[i][2] * c[j][2] for j in range(3)]
+        for i in range(3)
+    ]
     cos_angle = max(-1.0, min(1.0, (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0))
     angle = math.acos(cos_angle)
     axis = (r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1])
@@ -293,6 +298,37 @@ def pose_error(current: Transform, target: Transform) -> list[float]:
     ]
 
 
+def _damped_gram(jac: list[list[float]], damping: float) -> list[list[float]]:
+    """``jac @ jac.T + damping**2 * I`` of a 6x6 Jacobian (its rows: the six twist parts).
+
+    Written out term by term in the order ``sum`` adds them (the same floats to the last
+    bit): the inverse kinematics spends most of its time here. The product is symmetric
+    (``a * b == b * a`` exactly), so each pair off the diagonal is computed once.
+    """
+    d2 = damping**2
+    out = [[0.0] * 6 for _ in range(6)]
+    for i, a in enumerate(jac):
+        for j in range(i, 6):
+            b = jac[j]
+            s = 0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+            s = s + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
+            if i == j:
+                out[i][i] = s + d2
+            else:
+                out[i][j] = out[j][i] = s + 0.0
+    return out
+
+
+def _transposed_times(jac: list[list[float]], y: list[float]) -> list[float]:
+    """``jac.T @ y`` of a 6x6 Jacobian, term by term in the order ``sum`` adds them."""
+    j0, j1, j2, j3, j4, j5 = jac
+    y0, y1, y2, y3, y4, y5 = y
+    return [
+        0 + j0[k] * y0 + j1[k] * y1 + j2[k] * y2 + j3[k] * y3 + j4[k] * y4 + j5[k] * y5
+        for k in range(6)
+    ]
+
+
 def dls_inverse(
     chain: Chain,
     target: Transform,
@@ -326,18 +362,11 @@ def dls_inverse(
         # Adapt the damping: shrink it while converging, grow it when an update overshoots.
         damping = max(damping * 0.5, 1e-6) if norm < previous else min(damping * 4.0, 1.0)
         previous = norm
-        jjt = [
-            [
-                sum(jac[i][k] * jac[j][k] for k in range(6)) + (damping**2 if i == j else 0.0)
-                for j in range(6)
-            ]
-            for i in range(6)
-        ]
         try:
-            y = solve(jjt, error)
+            y = solve(_damped_gram(jac, damping), error)
         except ZeroDivisionError:
             return None
-        step = [sum(jac[i][k] * y[i] for i in range(6)) for k in range(6)]
+        step = _transposed_times(jac, y)
         # Bound a single update so a far target is approached, not jumped over.
         largest = max(abs(s) for s in step)
         if largest > 0.5:
