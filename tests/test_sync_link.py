@@ -288,3 +288,22 @@ def test_a_block_that_fails_without_retries_fails_the_read(slave: type[SlaveThre
             t.read_fields(two_blocks())
         assert t.stats.retries == 0
         assert len(s.server.requests) == 2
+
+
+def test_a_link_the_device_closes_between_requests_is_reopened_before_the_next(
+    slave: type[SlaveThread],
+) -> None:
+    # The close is seen when it happens: the next request goes on a fresh connection
+    # instead of failing on the dead one (no retry needed, none allowed here).
+    async def answer_then_close(tid: int, request: bytes, writer: asyncio.StreamWriter) -> None:
+        await answer_with(registers(1, 2))(tid, request, writer)
+        writer.close()
+
+    with slave([answer_then_close, answer_with(registers(3, 4))]) as s, link(s.port) as t:
+        assert t.read_block(Table.HOLDING, 0, 2) == [1, 2]
+        deadline = time.monotonic() + 2
+        while t.state is not ConnectionState.DISCONNECTED and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert t.state is ConnectionState.DISCONNECTED
+        assert t.read_block(Table.HOLDING, 0, 2) == [3, 4]
+        assert (t.stats.reconnects, t.stats.retries, t.stats.errors) == (1, 0, 0)
