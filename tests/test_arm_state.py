@@ -227,10 +227,12 @@ def test_the_tcp_the_program_sets_is_what_is_checked(
 
 def test_a_tcp_in_another_base_is_refused(memory_simulator_factory: SimFactory) -> None:
     # A map whose robot-base TCP (7049-7060 in Techman's table) points at the robot-base
-    # flange (7037-7048): to the master, the robot reports its TCP in a base 150 mm off.
+    # flange (7037-7048), and the other way round: to the master, the robot reports its
+    # TCP in a base 150 mm off.
     data = robot_profile("tmflow").model_dump(by_alias=True)
     for axis in ("x", "y", "z", "rx", "ry", "rz"):
         data["fields"][f"robot_base_tcp_{axis}"]["address"] -= 12
+        data["fields"][f"robot_base_flange_{axis}"]["address"] += 12
     shifted = tmmaster.RobotProfile.model_validate({**data, "name": "tmflow-shifted"})
     sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     robot = Robot(sim.url, profile=shifted, gripper=None, tool=TOOL)

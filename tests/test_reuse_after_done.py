@@ -26,8 +26,9 @@ COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
 #: What the checks read before the write when they cannot reuse the done poll's read.
 FULL_CHECK = {
     "article": [(3, 0x0200), (3, 0x0000)],  # command block, status block
-    # tmflow's last read: the joints and the TCP pose, 7013-7036 in one request.
-    "tmflow": [(2, 7201), (2, 7207), (3, 9015), (3, 9100), (4, 7013)],
+    # tmflow's last read: the joints and the TCP pose with the frames, 7001-7060 in one
+    # request.
+    "tmflow": [(2, 7201), (2, 7207), (3, 9015), (3, 9100), (4, 7001)],
 }
 #: ... and when they can: article the command block; tmflow ``seq`` (the pose and the
 #: joints are the final at-target check's).

@@ -100,6 +100,7 @@ from ._robot import Motion, Robot, TimeoutPolicy, Workspace, connect
 from ._robot_models import ROBOT_MODELS, JointSpec, RobotModel, robot_model
 from ._status import MovePhase, MoveProgress, ProjectState, RobotStatus
 from ._tm_errors import TMErrorCode, lookup_tm_error
+from ._tool import Tool, ToolMismatchError
 from ._transport import ConnectionState, Transport, TransportStats
 from ._version import version as _version
 
@@ -186,6 +187,8 @@ __all__ = [
     "TMScriptSyntaxError",
     "Table",
     "TimeoutPolicy",
+    "Tool",
+    "ToolMismatchError",
     "Transport",
     "TransportClosedError",
     "TransportError",

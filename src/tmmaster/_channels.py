@@ -136,6 +136,8 @@ class Ticket:
     start_pose: Pose | None = None
     #: The joints (deg) read with ``start_pose``, where the profile publishes them.
     start_joints: tuple[float, ...] | None = None
+    #: Every field read with ``start_pose`` (the frames, where the plan read carries them).
+    start_values: dict[str, Value] | None = None
     acknowledged: bool = False
     acknowledged_at: float | None = None
     #: ``time.monotonic()`` before the last poll that saw the command not yet taken (the
@@ -185,6 +187,8 @@ class StateAfterDone:
     pose: Pose | None = None
     #: The joints (deg) read with ``pose``, where the profile publishes them.
     joints: tuple[float, ...] | None = None
+    #: Every field read with ``pose`` and ``joints`` (the frames, where published).
+    plan_values: dict[str, Value] | None = None
 
 
 @dataclass(frozen=True)
@@ -258,8 +262,19 @@ class CommandChannel(ABC):
         self.flange_fields = _published(profile, FLANGE_FIELDS)
         self.robot_base_tcp_fields = _published(profile, ROBOT_BASE_TCP_FIELDS)
         # Before a plan: the TCP pose with the joints, where published (Techman's
-        # 7013-7036: one request).
-        self.plan_fields = (*self.joint_fields, *self.tcp_fields)
+        # 7013-7036: one request), and with the frames where the profile publishes all of
+        # 7001-7060 (flange, joints, TCP, both in the robot base): still one request, so
+        # the frame check runs before every move at no request more.
+        robot_base_flange = _published(profile, tuple("robot_base_" + n for n in FLANGE_FIELDS))
+        frames = (*self.flange_fields, *robot_base_flange, *self.robot_base_tcp_fields)
+        #: True when the plan read carries the frames (the flange, both bases).
+        self.frames_in_plan = bool(self.flange_fields and robot_base_flange)
+        self.plan_fields = (
+            *(self.flange_fields if self.frames_in_plan else ()),
+            *self.joint_fields,
+            *self.tcp_fields,
+            *(frames[len(self.flange_fields) :] if self.frames_in_plan else ()),
+        )
         self.command_fields = (command,)
         self.target_block = (*profile.select(TARGET_FIELDS), command)
         # The command block's fields, looked up once (the map does not change under a
@@ -299,14 +314,21 @@ class CommandChannel(ABC):
         One request where the two are contiguous (Techman's 7013-7036), as one for the
         pose alone.
         """
+        values = self.read_plan_values()
+        return pose_from(values, TCP_FIELDS), self.joints_from(values)
+
+    def read_plan_values(self) -> dict[str, Value]:
+        """The plan's read: the TCP pose, the joints and the frames where published.
+
+        One request where they are contiguous (Techman's 7001-7060). Read after the poll
+        that saw a command done, the next command may start its plan from it.
+        """
         values = self.read(self.plan_fields)
-        pose = pose_from(values, TCP_FIELDS)
-        joints = self.joints_from(values)
         if self.after_done is not None:
-            # Read after the done poll: the next command may start its plan from them.
-            self.after_done.pose = pose
-            self.after_done.joints = joints
-        return pose, joints
+            self.after_done.pose = pose_from(values, TCP_FIELDS)
+            self.after_done.joints = self.joints_from(values)
+            self.after_done.plan_values = values
+        return values
 
     def joints_from(self, values: dict[str, Value]) -> tuple[float, ...] | None:
         """The joints J1..J6 (deg) in ``values``; None where the profile does not publish them."""
@@ -725,6 +747,7 @@ class SequenceChannel(CommandChannel):
         after_done = self.take_after_done(reuse_s)
         start_pose: Pose | None = None
         start_joints: tuple[float, ...] | None = None
+        start_values: dict[str, Value] | None = None
         if after_done is not None:
             # The feedback block that showed the last command done and the flags read
             # after it (the poll that saw it finished): the same checks run on them.
@@ -734,6 +757,7 @@ class SequenceChannel(CommandChannel):
                 raise failure
             feedback = {**after_done.values, **self.read(self.seq_only)}
             start_pose, start_joints = after_done.pose, after_done.joints
+            start_values = after_done.plan_values
         else:
             flags = self.read(self.flag_fields)
             if (failure := self._read_flags_failure(flags)) is not None:
@@ -766,6 +790,7 @@ class SequenceChannel(CommandChannel):
             seq=seq,
             start_pose=start_pose,
             start_joints=start_joints,
+            start_values=start_values,
             extra={"heartbeat": feedback.get("heartbeat", 0)},
             plan=group_writes([*encoded, *encode_writes(numbered)]),
         )

@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any, Literal, ParamSpec, TypeVar
 
 from . import _commanded
-from . import _kinematics as kin
 from ._address import check_host, check_port, is_in_process
 from ._channels import (
     Command,
@@ -91,8 +90,6 @@ from ._profiles import (
 )
 from ._project import PRESS_TIMEOUT_S, ProjectControl
 from ._registers import (
-    FLANGE_FIELDS,
-    ROBOT_BASE_TCP_FIELDS,
     TCP_FIELDS,
     GripperProfile,
     RobotProfile,
@@ -102,6 +99,7 @@ from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
 from ._sigint import deferred
 from ._status import ProjectState, RobotStatus, project_hint
+from ._tool import FrameGuard, Tool, tool_option
 from ._transport import (
     BlockTransport,
     ConnectionState,
@@ -364,7 +362,8 @@ class Robot:
             gripper at the robot's host, port 502), a :class:`GripperDevice` (one at
             an address or on a ready link of its own), or a Gripper.
         tool: The TCP in the flange frame (mm, deg): poses are TCP poses, TCP = flange
-            x tool; None: the TCP is the flange.
+            x tool; a :class:`Tool` carries its mass as well (checked at connect against
+            the robot's, Techman's 7366); None: the TCP is the flange.
         name: The robot's name in messages and logs.
         polling: How waits poll: the nominal interval (``interval_s``, 0.001 to 5 s)
             and the dense windows around the acknowledgement and the expected end;
@@ -395,7 +394,7 @@ class Robot:
         profile: str | Path | RobotProfile = DEFAULT_PROFILE,
         model: str | RobotModel = "tm5-700",
         gripper: str | Path | GripperProfile | GripperDevice | Gripper | None = "auto",
-        tool: Pose | None = None,
+        tool: Pose | Tool | None = None,
         name: str = "robot",
         polling: PollPolicy | None = None,
         timeouts: TimeoutPolicy | None = None,
@@ -413,12 +412,15 @@ class Robot:
         options = _Options.checked(polling, timeouts, retry, checks)
         #: The robot's name in messages and logs.
         self.name = name
-        tool = checked_tool(tool, options.checks.units)
+        tool_pose, tool_spec = tool_option(tool)
+        tool = checked_tool(tool_pose, options.checks.units)
         #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
         self.frame_check = options.checks.frame
         self._transport = links.open(self.profile, name, fleet, options)
         self._log = _log.bind(robot=name)
         self._open_command_path(options, fleet)
+        # The frame check, at connect and before every move (_tool.py).
+        self._frames = FrameGuard(self._channel, self.frame_check, tool_spec, self._log)
         # Checks and plans every move from where the arm is believed to be (no I/O).
         self._planner = options.planner(arm, tool, self._follower, self._log)
         self._connected = False
@@ -681,21 +683,21 @@ class Robot:
         )
 
     def _read_arm_at_connect(self) -> None:
-        """At connect: the frame check and the robot's joints, in one read where contiguous.
+        """At connect: the frame check (:class:`~tmmaster._tool.FrameGuard`: the frames,
+        the TCP value and mass) and the robot's joints, in one read where contiguous.
 
         Raises:
-            ConfigError: the robot's TCP is not its flange x ``tool`` (or not in the robot
-                base), with the frame check on.
+            ConfigError: a tool the profile cannot verify, with the frame check on.
+            ToolMismatchError: the robot's TCP, base, TCP value or mass are not the
+                master's tool (or its base not the robot base), with the frame check on.
         """
-        channel = self._channel
-        check = self.frame_check.enabled and bool(channel.flange_fields)
-        if channel.flange_fields and not self.frame_check.enabled:
-            self._log.warning("robot.frame_check_off", reason=self.frame_check.reason)
-        fields = (
-            *(channel.flange_fields if check else ()),
-            *channel.plan_fields,
-            *(channel.robot_base_tcp_fields if check else ()),
-        )
+        channel, frames = self._channel, self._frames
+        frames.check = self.frame_check
+        frames.refuse_unverifiable(self.tool)
+        check = frames.enabled
+        fields = channel.plan_fields
+        if check and not channel.frames_in_plan:
+            fields = (*channel.flange_fields, *fields, *channel.robot_base_tcp_fields)
         if not check and not channel.joint_fields:
             return  # nothing to check, nothing to seed from
         try:
@@ -705,18 +707,11 @@ class Robot:
             if mismatch is None:
                 raise
             raise mismatch from exc
-        tcp = pose_from(values, TCP_FIELDS)
         if check:
-            _check_frames(
-                self.frame_check,
-                self.tool,
-                pose_from(values, FLANGE_FIELDS),
-                tcp,
-                pose_from(values, ROBOT_BASE_TCP_FIELDS) if channel.robot_base_tcp_fields else None,
-            )
+            frames.at_connect(values, self.tool)
         joints = channel.joints_from(values)
         if joints is not None:
-            self._planner.take_robot_joints(tcp, joints)
+            self._planner.take_robot_joints(pose_from(values, TCP_FIELDS), joints)
 
     def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
@@ -1314,14 +1309,9 @@ class Robot:
         self._last_motion = motion
 
     def _arm_before(self, ticket: Ticket) -> tuple[Pose, tuple[float, ...] | None]:
-        """Where a move starts: the checks' read when they made one, else one read.
-
-        The pose with the joints where the profile publishes them (one request).
-        """
-        start, joints = ticket.start_pose, ticket.start_joints
-        if start is None or (joints is None and self._channel.joint_fields):
-            start, joints = self._channel.read_pose_and_joints()
-        return start, joints
+        """Where a move starts (the checks' read when they made one, else one read), the
+        robot's TCP and base checked against the master's tool (the frame check)."""
+        return self._frames.arm_before(ticket, self.tool)
 
     def move_to(
         self,
@@ -1482,45 +1472,6 @@ class Robot:
             wake_waits(self._shared)  # a wait polled by the fleet ends now
 
 
-def _check_frames(
-    check: FrameCheck, tool: Pose | None, flange: Pose, tcp: Pose, robot_base_tcp: Pose | None
-) -> None:
-    """:class:`FrameCheck`: the robot's TCP is its flange x ``tool``, in the robot base.
-
-    Raises:
-        ConfigError: naming the tool offset the robot appears to have and ``tool``, or
-            the two TCP poses when the current base is not the robot base.
-    """
-    offset = kin.IDENTITY if tool is None else kin.pose_to_transform(tool)
-    expected = kin.transform_to_pose(kin.multiply(kin.pose_to_transform(flange), offset))
-    mm, deg = tcp.distance_to(expected), tcp.rotation_to(expected)
-    if mm > check.position_tolerance_mm or deg > check.orientation_tolerance_deg:
-        apparent = kin.transform_to_pose(
-            kin.multiply(kin.invert(kin.pose_to_transform(flange)), kin.pose_to_transform(tcp))
-        )
-        mine = "none (the TCP is the flange)" if tool is None else _pose_text(tool)
-        raise ConfigError(
-            f"frame check: the robot's TCP is not its flange x this Robot's tool: the robot"
-            f" reports a tool offset of {_pose_text(apparent)} (inverse(flange) x TCP;"
-            f" TCP {tcp}, flange {flange}), this Robot's tool is {mine}"
-            f" ({mm:.1f} mm, {deg:.1f} deg apart). Give Robot(tool=...) the robot's"
-            " tool, or generate the robot program for the master's (tmmaster"
-            " robot-program --tool; its ChangeTCP sets the robot's TCP when the project"
-            ' starts), or pass checks=Checks(frame=FrameCheck.off("why"))'
-        )
-    if robot_base_tcp is not None and (
-        robot_base_tcp.distance_to(tcp) > check.position_tolerance_mm
-        or robot_base_tcp.rotation_to(tcp) > check.orientation_tolerance_deg
-    ):
-        raise ConfigError(
-            f"frame check: the robot reports its TCP in a base other than the robot base"
-            f" ({tcp} in the current base, {robot_base_tcp} in the robot base); the"
-            " master's poses are in the robot base (the robot program's"
-            ' ChangeBase("RobotBase") when the project starts), or pass'
-            ' checks=Checks(frame=FrameCheck.off("why"))'
-        )
-
-
 def _profile_mismatch(
     transport: Transport, profile: RobotProfile, refused: IllegalAddressError
 ) -> ProfileMismatchError | None:
@@ -1542,12 +1493,6 @@ def _profile_mismatch(
             device_profile=name,
         )
     return None
-
-
-def _pose_text(pose: Pose) -> str:
-    """``pose`` as ``(x, y, z, rx, ry, rz)`` rounded to 0.01: ``(0, 0, 150, 0, 0, 0)``."""
-    values = [round(v, 2) + 0.0 for v in pose.as_list()]  # + 0.0: no "-0"
-    return "(" + ", ".join(f"{v:g}" for v in values) + ")"
 
 
 def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:

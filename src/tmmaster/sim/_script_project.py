@@ -291,6 +291,13 @@ class ScriptProjectController(SequenceController):
         #: of a live master.
         self.stamp_scale = 1.0
         super().__init__(profile, bank, backend, model, **options)
+        # The robot's active tool before the project sets its own (TMflow's TCP value,
+        # 7354-7385): the cell's, with the simulated gripper's mass.
+        tool = _backend_tool(backend) or Pose(0, 0, 0, 0, 0, 0)
+        names = [f"tcp_value_{n}" for n in ("x", "y", "z", "rx", "ry", "rz", "mass")]
+        for name, value in zip(names, [*tool.as_list(), SIMULATED_TOOL_MASS_KG], strict=True):
+            if bank.has(name):
+                bank.set(name, value)
 
     # -- what the host reaches ----------------------------------------------------------
 
