@@ -64,7 +64,15 @@ SCENARIOS = {
     "45 mm wide: beyond the stroke": Scenario("collision", size_mm=(30, 45, 30)),
     "1 kg at 40 N: friction carries it": Scenario("held", mass_kg=1.0, width_mm=30),
     "5 kg at 40 N: it slips out": Scenario("slipped", mass_kg=5.0),
+    # 2 x 0.5 x 40 N = 40 N of friction would carry 4 kg; the safety factor of 2 leaves 2 kg.
+    "3 kg at 40 N: beyond the safety factor, it slips out": Scenario("slipped", mass_kg=3.0),
+    # Within the margin by more than the lift's own acceleration (MuJoCo feels it).
+    "1.6 kg at 40 N: within the safety factor, carried": Scenario("held", mass_kg=1.6, width_mm=30),
     "6.5 kg at 140 N: carried, over the payload": Scenario("payload", mass_kg=6.5, force_n=140),
+    # 5.5 kg is within the TM5-700's 6 kg, but not with the 2FG7's own 1.1 kg.
+    "5.5 kg at 140 N: with the gripper, over the payload": Scenario(
+        "payload", mass_kg=5.5, force_n=140
+    ),
 }
 
 

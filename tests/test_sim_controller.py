@@ -408,13 +408,17 @@ def test_article_command_during_initialisation_waits() -> None:
 
 
 def test_article_stop_is_taken_while_moving() -> None:
-    ctl, bank, _backend, _ = article()
+    ctl, bank, backend, _ = article()
     send_article(bank, PART, speed=20)
     run(ctl, 0.3)
     bank.write(Table.HOLDING, 0x0207, [3])
     ctl.tick(DT)
     assert bank.get("command") == 0
-    assert bank.get("motion_status") == 0
+    # The arm brakes to rest (a stop takes time): moving until then, idle at rest.
+    assert bank.get("motion_status") == 1
+    assert not backend.is_settled()
+    run_until(ctl, lambda: bank.get("motion_status") == 0, limit_s=1.0)
+    assert backend.is_settled()
     stopped = pose_of(bank)
     run(ctl, 1.0)
     assert pose_of(bank) == stopped
@@ -480,6 +484,7 @@ def test_article_robot_error_at_the_nth_move() -> None:
     run_until(ctl, lambda: bank.get("robot_mode") == 7)
     assert bank.get("error_code") == 0x1F4
     assert bank.get("motion_status") == 0
+    run_until(ctl, backend.is_settled, limit_s=1.0)  # the arm brakes to rest
     stopped = backend.tcp_pose()
     run(ctl, 1.0)
     assert backend.tcp_pose() == stopped
@@ -877,6 +882,7 @@ def test_tmflow_robot_error_stops_the_project() -> None:
     assert bank.get("ack_seq") == 1
     assert bank.get("done_seq") == 0
     beat = bank.get("heartbeat")
+    run_until(ctl, backend.is_settled, limit_s=1.0)  # the arm brakes to rest
     stopped = backend.tcp_pose()
     run(ctl, 1.0)
     assert bank.get("heartbeat") == beat  # the program no longer runs
@@ -945,6 +951,7 @@ def test_tmflow_stop_button_stops_the_project_and_play_restarts_it() -> None:
     ctl.tick(DT)
     assert bank.get("stop_project") is False  # a button springs back
     assert bank.get("project_running") is False
+    run_until(ctl, backend.is_settled, limit_s=1.0)  # the arm brakes to rest
     stopped = backend.tcp_pose()
     run(ctl, 1.0)
     assert backend.tcp_pose() == stopped

@@ -108,8 +108,8 @@ def carry_fast(mass_kg: float) -> tuple[MuJoCoBackend, float, float]:
 
 def test_a_heavy_part_makes_the_tcp_lag_the_reference_and_done_waits_for_it() -> None:
     light, light_lag, light_done = carry_fast(0.1)
-    heavy, heavy_lag, heavy_done = carry_fast(5.0)  # within the TM5-700's 6 kg
-    # The servo does not know the part: a 5 kg part at full speed lags by millimetres
+    heavy, heavy_lag, heavy_done = carry_fast(4.9)  # with the 1.1 kg gripper: the 6 kg
+    # The servo does not know the part: a 4.9 kg part at full speed lags by millimetres
     # (4 mm), the arm with a light one, its acceleration fed forward, by hundredths (a
     # PD servo alone lagged 4 mm with it).
     assert heavy_lag > 3.0
@@ -128,7 +128,7 @@ def test_a_heavy_part_makes_the_tcp_lag_the_reference_and_done_waits_for_it() ->
 
 
 def test_the_move_is_not_done_while_the_joints_still_move() -> None:
-    b = holding(5.0)  # a part the servo does not know of: the joints lag
+    b = holding(4.9)  # a part the servo does not know of: the joints lag
     duration = b.start_motion(PLACE, motion=MotionType.PTP, speed_percent=100, accel_time_s=0.2)
     # Step to the end of the planned trajectory: the reference is at the target ...
     b.step(math.ceil(duration / 0.002) * 0.002)
@@ -172,7 +172,7 @@ def test_a_fast_line_down_stops_where_planned_without_overshooting() -> None:
 
 
 def test_the_pick_and_place_cycle_through_the_master_with_a_heavy_part() -> None:
-    b = dynamic(5.0)
+    b = dynamic(4.9)  # with the 1.1 kg gripper: the TM5-700's 6 kg
     with (
         Simulator("tmflow", time_scale=20, cell=b, listen=False) as sim,
         tmmaster.connect(sim.url, profile="tmflow", polling=PollPolicy(interval_s=0.01)) as robot,
@@ -200,13 +200,13 @@ def test_a_joint_held_at_its_effort_shows_as_saturation_and_lag(
 ) -> None:
     from tmmaster.sim import _mujoco
 
-    full, full_lag, full_done = carry_fast(5.0)
-    assert full.saturated_steps == [0] * 6  # the TM5's efforts carry 5 kg at full speed
+    full, full_lag, full_done = carry_fast(4.9)
+    assert full.saturated_steps == [0] * 6  # the TM5's efforts carry 4.9 kg at full speed
     # The same arm with a J1 motor of 20 N m instead of 157: the servo is held at the
     # limit, J1 falls behind its reference and the move settles later.
     weak_efforts = (20.0, *_mujoco._URDF_EFFORT_NM["tm5-700"][1:])
     monkeypatch.setitem(_mujoco._URDF_EFFORT_NM, "tm5-700", weak_efforts)
-    weak, weak_lag, weak_done = carry_fast(5.0)
+    weak, weak_lag, weak_done = carry_fast(4.9)
     assert weak.saturated_steps[0] > 100
     assert weak.saturated_steps[1:] == [0] * 5
     assert weak_lag > 5 * full_lag

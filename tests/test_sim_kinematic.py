@@ -213,7 +213,9 @@ def test_a_refusal_leaves_a_running_motion_alone() -> None:
 
 def test_ptp_goes_where_a_line_cannot() -> None:
     backend = KinematicBackend(TM5, home=APPROACH)
-    target = Pose(-300, 200, 200, 180, 0, 90)
+    # rz -90: J6 ends near 20 deg (at rz 90 it passes -160 deg, where the end module's
+    # camera meets wrist 1, a self-collision).
+    target = Pose(-300, 200, 200, 180, 0, -90)
     backend.start_motion(target, motion=MotionType.PTP, speed_percent=100, accel_time_s=ACCEL)
     for _ in ticks(backend):
         fk_consistent(backend)
@@ -309,6 +311,10 @@ def test_an_arm_stopped_beyond_the_encodable_range_is_an_error_once() -> None:
     run_until(ctl, lambda: backend.tcp_pose().x > ARTICLE_MAX + 5)
     send_article(bank, PLACE, command=3)  # stop, where the registers cannot say
     ctl.tick(DT)
+    # The arm brakes (a stop takes time): an error once it is at rest out of range.
+    assert bank.get("error_code") == 0
+    run_until(ctl, backend.is_settled)
+    assert backend.tcp_pose().x > ARTICLE_MAX
     assert bank.get("error_code") == SimErrorCode.POSE_OUT_OF_RANGE
     assert bank.get("tcp_x") == pytest.approx(ARTICLE_MAX)
     assert "sim.pose_out_of_range" in log.names()
@@ -329,7 +335,9 @@ def test_an_estop_beyond_the_encodable_range_keeps_its_own_code() -> None:
     send_article(bank, PLACE)
     run_until(ctl, lambda: backend.tcp_pose().x > ARTICLE_MAX + 5)
     ctl.press_estop()
-    run(ctl, 0.2)
+    run(ctl, 0.5)  # the arm brakes to rest (a stop takes time), out of range
+    assert backend.is_settled()
+    assert backend.tcp_pose().x > ARTICLE_MAX
     assert bank.get("error_code") == SimErrorCode.EMERGENCY_STOP
     ctl.clear_error()
     run(ctl, 0.2)

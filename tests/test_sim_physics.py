@@ -180,11 +180,16 @@ def test_stop_motion_holds_the_current_pose() -> None:
     backend.step(duration / 2)
     stopped = backend.tcp_pose()
     backend.stop_motion()
-    assert not backend.motion_running
+    assert backend.motion_running  # it brakes to rest: a stop takes time
     backend.step(duration)
-    assert backend.tcp_pose() == stopped
-    assert stopped.z == pytest.approx(150.0)
+    assert not backend.motion_running
     assert backend.is_settled()
+    rest = backend.tcp_pose()
+    assert stopped.z == pytest.approx(150.0)
+    assert PICK.z < rest.z < stopped.z  # braked on along the line, short of the target
+    assert rest.is_close(Pose(PICK.x, PICK.y, rest.z, *PICK.as_list()[3:]), mm=0.01, deg=0.01)
+    backend.step(duration)
+    assert backend.tcp_pose() == rest
 
 
 def test_orientation_wraps_the_short_way() -> None:

@@ -701,8 +701,9 @@ class RobotController(SimDevice[RobotProfile]):
             "sim.fault_fired", device=self._name, fault=fault.kind, move=active.number
         )
         if isinstance(fault, StallFault):
-            # The arm stops where it is but the motion never reports completion.
-            self._backend.stop_motion()
+            # The arm stops where it is (stuck: no braking, where a backend can say so)
+            # but the motion never reports completion.
+            getattr(self._backend, "halt_motion", self._backend.stop_motion)()
             active.stalled = True
         elif isinstance(fault, EstopFault):
             self.press_estop()

@@ -30,8 +30,11 @@ agree by construction.
   MuJoCo scene, :mod:`~tmmaster.sim._collide`), the flange, the palm's and the pads'
   boxes and a held part's box are checked against the table top and the world's
   fixtures, and the pads against the parts: a collision stops the arm and is handed to
-  the controller (:meth:`KinematicBackend.take_fault`), as is a carried part over the
-  arm's rated payload.
+  the controller (:meth:`KinematicBackend.take_fault`), as is a carried part that with
+  the gripper's own mass weighs more than the arm's rated payload (:mod:`._payload`).
+- A stop (:meth:`KinematicBackend.stop_motion`: the Stop command, an e-stop, a robot
+  error, an overload) brakes along the path over a time and a distance
+  (:mod:`._stopping`); a collision stops the arm where it touched.
 
 Everything is driven by :meth:`KinematicBackend.step`; there is no wall clock.
 """
@@ -57,6 +60,8 @@ from ._collide import (
     link_contacts,
     transform_point,
 )
+from ._payload import over_payload
+from ._stopping import Braking, path_gradient, plan_braking, trapezoid_rate
 from ._world import (
     GRASP_MODES,
     TABLE_CENTRE_XY_MM,
@@ -133,6 +138,15 @@ class _Motion:
     elapsed_s: float = 0.0
     #: A circle: the arc the TCP follows (a Line otherwise).
     arc: kin.Arc | None = None
+    #: Stopped: how it brakes along its path (:mod:`._stopping`), from ``braking_from_s``.
+    braking: Braking | None = None
+    braking_from_s: float = 0.0
+
+    def progress(self, elapsed_s: float) -> float:
+        """The path's progress (0..1) ``elapsed_s`` after the start, braking included."""
+        if self.braking is not None and elapsed_s >= self.braking_from_s:
+            return self.braking.progress(elapsed_s - self.braking_from_s)
+        return trapezoid_progress(elapsed_s, self.duration_s, self.accel_time_s)
 
 
 class KinematicBackend:
@@ -464,7 +478,23 @@ class KinematicBackend:
         )
 
     def stop_motion(self) -> None:
-        """Hold the current joints; the kinematic arm decelerates instantly."""
+        """Brake to rest along the path (:mod:`._stopping`): the arm moves until at rest."""
+        motion = self._motion
+        if motion is None or motion.braking is not None:
+            return
+        t = motion.elapsed_s
+        progress = motion.progress(t)
+        rate = trapezoid_rate(t, motion.duration_s, motion.accel_time_s)
+        samples = motion.samples or [motion.start_joints, motion.target_joints]
+        braking = plan_braking(
+            progress, rate, path_gradient(samples, progress), self._model.joint_speed_deg_s
+        )
+        if braking is not None:  # None: the motion's own end comes first
+            motion.braking, motion.braking_from_s = braking, t
+            motion.duration_s = t + braking.duration_s
+
+    def halt_motion(self) -> None:
+        """Stop where the arm is now, with no braking (a stalled arm, or what it hit holds it)."""
         if self._motion is not None:
             self._motion = None
             self._rest_s = 0.0
@@ -536,14 +566,16 @@ class KinematicBackend:
         started_s = 0.0 if motion is None else motion.elapsed_s
         self._step_arm(dt)
         if motion is not None:
-            fault = self._check_collision() or self._overload()
+            braking = motion.braking is not None
+            fault = self._check_collision() or (None if braking else self._overload())
             if fault is None:
                 self._start_overlaps = self._overlaps_now  # compared with the next tick's
+            elif fault.kind == "collision":
+                self._fault = self._back_to_contact(motion, started_s, fault)
+                self.halt_motion()
             else:
-                if fault.kind == "collision":
-                    fault = self._back_to_contact(motion, started_s, fault)
-                self.stop_motion()
                 self._fault = fault
+                self.stop_motion()
         self._step_gripper(dt)
         self._world.follow(self._pose)
         if self._pinched is not None:
@@ -798,15 +830,8 @@ class KinematicBackend:
         return self._check_collision() or fault
 
     def _overload(self) -> BackendFault | None:
-        """The part carried is heavier than the arm's rated payload."""
-        held = self._world.held
-        payload = self._model.payload_kg
-        if held is None or payload is None or held.mass_kg <= payload:
-            return None
-        return BackendFault(
-            "payload",
-            f"carrying {held.name} ({held.mass_kg:g} kg) over the rated payload of {payload:g} kg",
-        )
+        """The gripper and the part carried weigh more than the arm's rated payload."""
+        return over_payload(self._world.held, self._gripper, self._model.payload_kg)
 
     def _check_pinched(self) -> None:
         """The squeezed part too heavy to carry slips out once the pads leave it."""
@@ -827,8 +852,9 @@ class KinematicBackend:
             return
         motion.elapsed_s += dt
         if motion.elapsed_s + _EPS >= motion.duration_s:
-            # Land exactly on the target, not on an interpolated approximation of it.
-            self._set(motion.target_joints, motion.target)
+            # Land exactly on the target (or where the braking ends), not on an
+            # interpolated approximation of it.
+            self._place(motion, motion.duration_s)
             self._motion = None
             self._rest_s = max(0.0, motion.elapsed_s - motion.duration_s)
             return
@@ -836,10 +862,10 @@ class KinematicBackend:
 
     def _place(self, motion: _Motion, elapsed_s: float) -> None:
         """Put the arm where ``motion`` has it ``elapsed_s`` after its start."""
-        if elapsed_s + _EPS >= motion.duration_s:
+        if motion.braking is None and elapsed_s + _EPS >= motion.duration_s:
             self._set(motion.target_joints, motion.target)
             return
-        progress = trapezoid_progress(elapsed_s, motion.duration_s, motion.accel_time_s)
+        progress = motion.progress(elapsed_s)
         if motion.kind is MotionType.PTP:
             joints = _lerp(motion.start_joints, motion.target_joints, progress)
             self._set(joints, self._forward(joints))

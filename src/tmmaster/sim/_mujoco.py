@@ -56,9 +56,12 @@ from ._backend import (
     RejectReason,
 )
 from ._collide import ARM_RADIUS_MM
+from ._payload import over_payload
+from ._stopping import Braking, path_gradient, plan_braking, trapezoid_rate
 from ._world import (
     DEFAULT_GRIPPER,
     GRASP_MODES,
+    GRAVITY_M_S2,
     TABLE,
     TABLE_CENTRE_XY_MM,
     TABLE_HALF_SIZE_XY_MM,
@@ -228,6 +231,9 @@ class _Trajectory:
     #: The last sample asked for (elapsed, joints): each physics step asks for the joints
     #: where the previous one ended.
     _last: tuple[float, tuple[float, ...]] = (-1.0, ())
+    #: Stopped: how it brakes along its path (:mod:`._stopping`), from ``braking_from_s``.
+    braking: Braking | None = None
+    braking_from_s: float = 0.0
 
     def joints_at(self, elapsed_s: float) -> tuple[float, ...]:
         if elapsed_s == self._last[0]:
@@ -236,10 +242,28 @@ class _Trajectory:
         self._last = (elapsed_s, joints)
         return joints
 
+    def brake(self, top_speeds_deg_s: Sequence[float]) -> None:
+        """Brake to rest along the path from now (unless its own end comes first)."""
+        if self.braking is not None:
+            return
+        t = self.elapsed_s
+        progress = trapezoid_progress(t, self.duration_s, self.accel_time_s)
+        rate = trapezoid_rate(t, self.duration_s, self.accel_time_s)
+        gradient = path_gradient(self.samples, progress)
+        braking = plan_braking(progress, rate, gradient, top_speeds_deg_s)
+        if braking is not None:
+            self.braking, self.braking_from_s = braking, t
+            self.duration_s = t + braking.duration_s
+            self._last = (-1.0, ())
+
     def _joints_at(self, elapsed_s: float) -> tuple[float, ...]:
-        if elapsed_s + _EPS >= self.duration_s:
+        braking = self.braking
+        if braking is None and elapsed_s + _EPS >= self.duration_s:
             return self.samples[-1]
-        s = trapezoid_progress(elapsed_s, self.duration_s, self.accel_time_s)
+        if braking is not None and elapsed_s >= self.braking_from_s:
+            s = braking.progress(elapsed_s - self.braking_from_s)
+        else:
+            s = trapezoid_progress(elapsed_s, self.duration_s, self.accel_time_s)
         position = s * (len(self.samples) - 1)
         k = min(int(position), len(self.samples) - 2)
         frac = position - k
@@ -609,6 +633,8 @@ class _FingersAndParts:
         self._stopped_for = 0.0
         self._held: int | None = None
         self._lost_ticks = 0
+        # Friction grasp: the part body the grip's safety margin loads (see _load_margin).
+        self._margin_body: int | None = None
 
     def _body_pose(self, body: int) -> Pose:
         d = self._d
@@ -768,6 +794,27 @@ class _FingersAndParts:
         m.eq_data[eq, 6:10] = rel_quat
         m.eq_data[eq, 10] = 1.0
         d.eq_active[eq] = 1
+
+    def _load_margin(self) -> None:
+        """Friction grasp: the part held weighs ``safety_factor`` times its weight on the pads.
+
+        The kinematic backend's rule (:meth:`GripperGeometry.holds`): a grip carries a part
+        when 2 x friction x force >= safety_factor x mass x g. The pads' friction alone
+        would carry up to safety_factor times that (twice the 2FG7's rated force-fit
+        payload); an extra downward force of (safety_factor - 1) x mass x g on the part
+        held, while the fingers hold it, makes MuJoCo's contacts keep the same margin. A
+        part resting on a support between the pads only presses harder on it.
+        """
+        xfrc = self._d.xfrc_applied
+        if self._margin_body is not None:
+            xfrc[self._margin_body, 2] = 0.0
+            self._margin_body = None
+        k = self._held
+        if k is None or self._grasp_mode != "friction" or self._gripper.safety_factor <= 1:
+            return
+        extra = (self._gripper.safety_factor - 1) * self._objects[k].mass_kg * GRAVITY_M_S2
+        self._margin_body = self._part_body[k]
+        xfrc[self._margin_body, 2] = -extra
 
     def _release(self) -> None:
         k = self._held
@@ -976,6 +1023,8 @@ class MuJoCoBackend(_FingersAndParts):
         self._servo_joints: list[tuple[int, int, float, float, float]] = []
         self._integral = [0.0] * len(model.joints)
         self._effort = list(_URDF_EFFORT_NM.get(model.name, ()))
+        #: The joints' top speeds, rad/s: the servo never turns a joint faster.
+        self._top_speeds = [w * _RAD for w in model.joint_speed_deg_s]
         #: Largest tracking error seen since the last start of a motion (deg, per joint).
         self.max_tracking_error_deg = [0.0] * len(model.joints)
         #: With dynamics: the physics steps of the current move at which each joint's
@@ -1165,7 +1214,7 @@ class MuJoCoBackend(_FingersAndParts):
         self.rebuilds += 1
         self._ready = True
         if self._trajectory is not None and not self.keep_motion_on_reinit:
-            self.stop_motion()
+            self.halt_motion()
             return False
         return True
 
@@ -1280,10 +1329,18 @@ class MuJoCoBackend(_FingersAndParts):
         return trajectory.joints_at(trajectory.elapsed_s)
 
     def stop_motion(self) -> None:
-        """Hold the current joints (the servo stops at once).
+        """Brake to rest along the path (:mod:`._stopping`): the arm moves until at rest.
 
-        With dynamics, the joints where they are, not the reference that leads them: the
-        arm brakes and comes to rest where it was stopped, as without.
+        The reference decelerates along the trajectory; once it ends, the servo holds
+        where it ended (with dynamics, a payload included: no sag).
+        """
+        if self._trajectory is not None:
+            self._trajectory.brake(self._model.joint_speed_deg_s)
+
+    def halt_motion(self) -> None:
+        """Hold the current joints now, with no braking (a stalled arm, a lost motion).
+
+        With dynamics, the joints where they are, not the reference that leads them.
         """
         if self._trajectory is not None:
             self._hold = self._current_joints() if self._dynamics else self._command_joints()
@@ -1371,32 +1428,37 @@ class MuJoCoBackend(_FingersAndParts):
         return None
 
     def _overload(self) -> BackendFault | None:
-        """The part held is heavier than the arm's rated payload (while the arm moves)."""
-        if self._held is None:
+        """The gripper and the part held weigh more than the arm's rated payload.
+
+        Checked while the arm moves, not while it brakes for a stop (already stopping).
+        """
+        trajectory = self._trajectory
+        if self._held is None or (trajectory is not None and trajectory.braking is not None):
             return None
-        payload = self._model.payload_kg
-        if payload is None:
-            return None
-        obj = self._objects[self._held]
-        if obj.mass_kg <= payload:
-            return None
-        return BackendFault(
-            "payload",
-            f"carrying {obj.name} ({obj.mass_kg:g} kg) over the rated payload of {payload:g} kg",
-        )
+        part: TableObject | None = self._objects[self._held]
+        if self._grasp_mode == "friction" and not self._gripper.holds(
+            self._objects[self._held].mass_kg, self._finger_force
+        ):
+            part = None  # squeezed, but too heavy for the grip: it stays behind
+        return over_payload(part, self._gripper, self._model.payload_kg)
 
     def _stop_for(self, fault: BackendFault, joints: tuple[float, ...]) -> None:
-        """Stop where the fault showed (the step's pose, not the trajectory's next one).
+        """Stop for ``fault``: a collision where it showed, anything else by braking.
 
-        With dynamics the servo holds where the joints are, not where the reference
+        A collision stops the arm at the step's pose (what it hit holds it). With
+        dynamics the servo then holds where the joints are, not where the reference
         was: the reference leads them, and holding it would press into what was hit;
-        the arm is at rest once its joints stop (see :meth:`is_settled`).
+        the arm is at rest once its joints stop (see :meth:`is_settled`). An overload
+        brakes along the path as a stop does (:meth:`stop_motion`).
         """
+        self._fault = fault
+        if fault.kind != "collision":
+            self.stop_motion()  # nothing holds the arm: it brakes along its path
+            return
         self._trajectory = None
         self._hold = self._current_joints() if self._dynamics else joints
-        self._integral = [0.0] * len(self._integral) if self._dynamics else self._integral
+        # The integral term keeps what it held (a payload: no sag) and stops growing.
         self._blocked = self._dynamics
-        self._fault = fault
 
     # -- simulation ---------------------------------------------------------------------
 
@@ -1409,6 +1471,7 @@ class MuJoCoBackend(_FingersAndParts):
         self._pending_s += dt
         steps = int(self._pending_s / self._timestep + 1e-6)
         self._pending_s -= steps * self._timestep
+        self._load_margin()
         for _ in range(steps):
             self._substep()
         if self._queued:
@@ -1483,6 +1546,18 @@ class MuJoCoBackend(_FingersAndParts):
                 worst[i] = e
         self._ctrl[2:8] = torques
 
+    def _clip_speeds(self) -> None:
+        """With dynamics, no joint turns faster than its top speed (a drive's speed limit)."""
+        if not self._dynamics:
+            return  # the joints follow the planned trajectory exactly
+        qvel = self._qvel
+        for dof, top in zip(self._arm_dof, self._top_speeds, strict=True):
+            w = qvel[dof]
+            if w > top:
+                qvel[dof] = top
+            elif w < -top:
+                qvel[dof] = -top
+
     def _substep(self) -> None:
         h = self._timestep
         trajectory = self._trajectory
@@ -1516,13 +1591,14 @@ class MuJoCoBackend(_FingersAndParts):
             else:
                 self._set_arm(now, velocity)
             if trajectory.elapsed_s + _EPS >= trajectory.duration_s:
-                self._hold = trajectory.samples[-1]
+                self._hold = trajectory.joints_at(trajectory.duration_s)
                 self._trajectory = None
         self._drive_fingers(h)
         for k in self._queued:
             self._park(k)
         self._mj.mj_step(self._m, self._d)
         self.sim_time_s += h
+        self._clip_speeds()
         if trajectory is not None:
             fault = self._check_collision() or self._overload()
             if fault is not None:

@@ -85,8 +85,14 @@ class GripperGeometry(BaseModel):
     #: Friction coefficient between a pad and a part (an assumption, see
     #: docs/simulator-model.md#the-grasp-rule).
     friction: float = Field(default=0.5, gt=0, le=2)
-    #: A part is carried when 2 x friction x force >= safety_factor x mass x g.
+    #: A part is carried when 2 x friction x force >= safety_factor x mass x g: with the
+    #: 2FG7's strongest grip (140 N) that is 7.1 kg, its rated force-fit payload (7 kg,
+    #: OnRobot's 2FG7 datasheet), so the rule's margin is OnRobot's.
     safety_factor: float = Field(default=2.0, ge=1)
+    #: The gripper's own mass, kg, carried by the arm with the part (the arm's payload
+    #: counts both): an OnRobot 2FG7 weighs 1.1 kg (OnRobot's 2FG7 datasheet; 1.10 kg in
+    #: its description in OnRobot's ROS driver).
+    mass_kg: float = Field(default=1.1, ge=0)
 
     @model_validator(mode="after")
     def _stroke_is_ordered(self) -> GripperGeometry:
