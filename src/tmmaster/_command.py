@@ -105,6 +105,8 @@ class Motion:
         self.stop_delivered: bool | None = None
         #: True once the robot reported the command finished (done, or idle after it).
         self.reported_finished = False
+        #: The project speed its expected time assumes, % (the robot's, read at connect).
+        self.project_speed_percent = 100.0
         #: ``time.monotonic()`` when the poll that saw it reported finished returned.
         self.reported_finished_at: float | None = None
 
@@ -249,6 +251,10 @@ class _MotionFollower:
         self._log = log
         #: Set for a robot of a Fleet: its waits' polls run on the fleet's event loop.
         self.shared_driver: SharedDriver | None = None
+        #: Reads the robot's project speed now (%, None: not published), where the
+        #: profile has one: a move at its derived deadline asks once whether it was
+        #: lowered since the plan.
+        self.project_speed: Callable[[], float | None] | None = None
         self.poll_interval_s = poll_interval_s
         self.polling = polling
         self.timeouts = timeouts
@@ -282,6 +288,7 @@ class _MotionFollower:
             accel_s=plan.accel_s,
             timeout_from_model=plan.timeout_from_model,
         )
+        motion.project_speed_percent = plan.project_speed_percent
         with self.following(motion):
             self.send(ticket, functools.partial(register, motion))
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
@@ -572,6 +579,7 @@ class _MotionFollower:
             stall_s=self.timeouts.stall_s,
         )
         shared = self.shared_driver
+        speed_checked = False
         while True:
             observation = None if shared is None else shared(follow)
             if observation is None:
@@ -587,7 +595,32 @@ class _MotionFollower:
             if overdue is Overdue.ACK:
                 self._ack_timed_out(motion)
             elif overdue is Overdue.MOTION:
+                if not speed_checked and self._project_slowed(motion, follow):
+                    speed_checked = True
+                    continue
                 self._motion_timed_out(motion, follow)
+
+    def _project_slowed(self, motion: Motion, follow: FollowState) -> bool:
+        """At a derived deadline: True when the project speed was lowered since the plan,
+        the move's budget then grown by as much (the move takes that much longer)."""
+        reread = self.project_speed
+        if reread is None or not follow.scales_with_pace:
+            return False
+        try:
+            percent = reread()
+        except TMMasterError:
+            return False  # not known: the deadline stands
+        planned = motion.project_speed_percent
+        if percent is None or percent >= planned:
+            return False
+        factor = planned / percent
+        follow.budget *= factor
+        motion.expected_s *= factor
+        motion.project_speed_percent = percent
+        self._log.warning(
+            "robot.project_speed_lowered", planned=planned, now=percent, budget_s=follow.budget
+        )
+        return True
 
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
         """The current pose for an error report; the fallback if it cannot be read."""

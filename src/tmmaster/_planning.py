@@ -11,7 +11,7 @@ plan starts from. It reads and writes nothing: the robot reads, the planner deci
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, ClassVar, Protocol
 
@@ -288,6 +288,8 @@ class Plan:
     accel_s: float = 0.0
     #: True when ``timeout_s`` derives from the model's expected time.
     timeout_from_model: bool = False
+    #: The project speed the expected time assumes, %.
+    project_speed_percent: float = 100.0
 
 
 class Planner:
@@ -313,6 +315,9 @@ class Planner:
         self.model = model
         self.workspace = workspace
         self.tool = tool
+        #: The robot's project speed, % (``tmflow``: Techman's 7101, read at connect):
+        #: TMflow runs every move at its own speed times this, and so does the plan.
+        self.project_speed_percent = 100.0
         self.check_units = check_units
         self.max_speed_percent = max_speed_percent
         self._settings = settings
@@ -503,7 +508,7 @@ class Planner:
         return self.model.motion_time(
             self.origin(start),
             target,
-            speed_percent=speed,
+            speed_percent=speed * self.project_speed_percent / 100.0,
             motion=motion,
             accel_time_s=accel_s(accel_time_ms),
             start_joints_deg=self.joints_hint,
@@ -548,6 +553,7 @@ class Planner:
         speed = float(command.speed or 100)
         if command.speed_mm_s is not None:
             speed = min(100.0, command.speed_mm_s * 100 / self.model.tcp_speed_mm_s)
+        speed *= self.project_speed_percent / 100.0  # TMflow: motion speed x project speed
         if command.kind is CommandKind.CIRCLE:
             target_joints, expected, gauge = self._plan_arc(command, origin, speed, accel)
         else:
@@ -561,7 +567,23 @@ class Planner:
             gauge,
             accel_s=self.model.accel_time_s if accel is None else accel,
             timeout_from_model=timeout is None and timeouts.motion_timeout_s is None,
+            project_speed_percent=self.project_speed_percent,
         )
+
+    def take_project_speed(self, values: Mapping[str, object]) -> float | None:
+        """The project speed in ``values`` (``project_speed``, %), taken for the next plans.
+
+        Args:
+            values: Fields the robot reported (a status, a read of 7101).
+
+        Returns:
+            The project speed, %; None where ``values`` has none (or one out of 1..100).
+        """
+        value = values.get("project_speed")
+        if not is_finite_number(value) or not 1 <= value <= 100:
+            return None
+        self.project_speed_percent = float(value)
+        return self.project_speed_percent
 
     def _plan_move(
         self, command: Command, origin: Pose, speed: float, accel: float | None

@@ -423,6 +423,8 @@ class Robot:
         self._frames = FrameGuard(self._channel, self.frame_check, tool_spec, self._log)
         # Checks and plans every move from where the arm is believed to be (no I/O).
         self._planner = options.planner(arm, tool, self._follower, self._log)
+        if self.profile.has("project_speed"):  # a move at its deadline asks again
+            self._follower.project_speed = self._read_project_speed
         self._connected = False
         # What the last close() found: True when nothing it sent can still run.
         self._closed_safely: bool | None = None
@@ -653,6 +655,7 @@ class Robot:
             self._transport.connect()
             self.gripper.connect()
             self._read_arm_at_connect()
+            self._read_project_speed()
         except BaseException:
             # ``with Robot(...)`` never reaches __exit__ when connecting fails: close
             # here so a half-open robot link is not left behind.
@@ -712,6 +715,14 @@ class Robot:
         joints = channel.joints_from(values)
         if joints is not None:
             self._planner.take_robot_joints(pose_from(values, TCP_FIELDS), joints)
+
+    def _read_project_speed(self) -> float | None:
+        """The robot's project speed (``tmflow``: 7101, one request), for the next plans:
+        TMflow runs every move at its speed times the project speed."""
+        if not self.profile.has("project_speed"):
+            return None
+        field = self.profile.field("project_speed")
+        return self._planner.take_project_speed(self._channel.read((field,)))
 
     def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
@@ -820,12 +831,14 @@ class Robot:
         """
         self._require_connection()
         try:
-            return self._channel.read_status()
+            status = self._channel.read_status()
         except IllegalAddressError as exc:
             mismatch = _profile_mismatch(self._transport, self.profile, exc)
             if mismatch is None:
                 raise
             raise mismatch from exc
+        self._planner.take_project_speed(status.raw)  # tmflow: 7101, read with the status
+        return status
 
     def pose(self) -> Pose:
         """The current TCP pose.

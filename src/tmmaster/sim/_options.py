@@ -21,6 +21,9 @@ from .._robot_models import RobotModel, robot_model
 from ._scene import Scene, load_scene
 from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
 
+#: The project speeds TMflow offers, % (TMflow 2.24 Appendix C, p. 314: 5..100 by 5).
+_PROJECT_SPEEDS = range(5, 101, 5)
+
 #: Physics backends a simulator can be built with by name (``Cell(physics=...)``).
 PHYSICS_BACKENDS = ("kinematic", "mujoco")
 
@@ -105,6 +108,9 @@ class RobotSetup:
     #: tmflow: an e-stop pauses the project (Play resumes the move) instead of stopping
     #: it.
     resume_after_error: bool = False
+    #: tmflow: the project speed, % (Techman's 7101: 5..100 in steps of 5): every move
+    #: runs at its own speed times this, as in TMflow.
+    project_speed: int = 100
     _gripper: GripperProfile | None = field(default=None, init=False, repr=False, compare=False)
     _arm: RobotModel | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -125,6 +131,11 @@ class RobotSetup:
         if not isinstance(self.resume_after_error, bool):
             raise ConfigError(
                 f"resume_after_error must be True or False, got {shown(self.resume_after_error)}"
+            )
+        speed = self.project_speed
+        if isinstance(speed, bool) or not isinstance(speed, int) or speed not in _PROJECT_SPEEDS:
+            raise ConfigError(
+                f"project_speed must be an integer 5..100 in steps of 5 (%), got {shown(speed)}"
             )
 
     @property

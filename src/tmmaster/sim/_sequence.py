@@ -12,6 +12,7 @@ documented in ``docs/simulator-model.md``.
 
 from __future__ import annotations
 
+import dataclasses
 from abc import abstractmethod
 from typing import Any
 
@@ -33,7 +34,16 @@ class SequenceController(RobotController):
     #: Simulated time when the project last started.
     _project_started_s = 0.0
 
-    def __init__(self, *args: Any, resume_after_error: bool = False, **options: Any) -> None:
+    def __init__(
+        self,
+        *args: Any,
+        resume_after_error: bool = False,
+        project_speed: int = 100,
+        **options: Any,
+    ) -> None:
+        #: The project speed the project starts with, % (Techman's 7101): every move runs
+        #: at its speed times the project speed the register holds when it starts.
+        self._project_speed = project_speed
         #: TMflow's Motion Settings > Resumption Behavior, "continue project execution from
         #: the error position" (TMflow 2.24 manual, Table 5, pp. 53-54; p. 112): an e-stop
         #: pauses the project instead of stopping it, and Play resumes the interrupted move.
@@ -43,6 +53,13 @@ class SequenceController(RobotController):
         self._motion_args: MoveArgs | None = None
         self._pausing_on_error = False
         super().__init__(*args, **options)
+
+    def _backend_start(self, move: MoveArgs) -> float:
+        """TMflow runs a move at its speed times the project speed (7101), as it is now."""
+        percent = self._bank.get("project_speed") if self._profile.has("project_speed") else 100
+        if percent != 100:
+            move = dataclasses.replace(move, speed=move.speed * float(percent) / 100.0)
+        return super()._backend_start(move)
 
     @property
     def project_paused(self) -> bool:
@@ -75,7 +92,7 @@ class SequenceController(RobotController):
         if self._profile.has("ma_mode"):
             self._bank.set("ma_mode", self._code("ma_mode", "auto", 1))
         if self._profile.has("project_speed"):
-            self._bank.set("project_speed", 100)
+            self._bank.set("project_speed", self._project_speed)
         self._bank.set("robot_state", self._code("robot_state", "idle", 0))
         # As if command number initial_seq had been the last one, taken and finished.
         for name in ("seq", "ack_seq", "done_seq"):

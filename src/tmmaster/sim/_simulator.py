@@ -756,6 +756,13 @@ def _controller_class(
                 f" sequence-handshake profile, not {profile.name!r}"
             )
         options["resume_after_error"] = True
+    if setup.project_speed != 100:
+        if profile.handshake is not Handshake.SEQUENCE:
+            raise ConfigError(
+                "project_speed is a TMflow project setting: it needs a sequence-handshake"
+                f" profile, not {profile.name!r}"
+            )
+        options["project_speed"] = setup.project_speed
     return controller, options
 
 
