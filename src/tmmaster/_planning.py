@@ -24,6 +24,7 @@ from pydantic import (
     model_validator,
 )
 
+from . import _body as body
 from . import _kinematics as kin
 from ._cell import (
     DEFAULT_ARM_RADIUS_MM,
@@ -331,12 +332,26 @@ class Planner:
     # -- validation ----------------------------------------------------------
 
     def validate(self, pose: Pose, speed: int, seed_deg: Sequence[float] | None = None) -> Joints:
-        """:meth:`Robot.validate_move`: speed, units, workspace, inverse kinematics."""
+        """:meth:`Robot.validate_move`: speed, units, workspace, inverse kinematics, and
+        the arm's body along the PTP from ``seed_deg`` (or the seed) to the target."""
         self._check_target(pose, speed)
         seed = seed_deg if seed_deg is not None else self.joints_hint
         joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
         self.workspace.check_arm(self.model, joints)
+        # From where the arm starts (not from the target itself: a joint move's seed).
+        start = None if seed is None or body.same_joints(seed, joints) else seed
+        self._check_body(start, body.ptp_samples(start, joints))
         return joints
+
+    def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
+        """Self-collision, the mounting plane and the gripper's housing at ``samples``."""
+        body.check_body(
+            self.model,
+            samples,
+            tool=self.tool,
+            floor_z_mm=self.workspace.floor_z_mm,
+            start=start,
+        )
 
     def _check_target(self, pose: Pose, speed: int) -> None:
         """A target's checks without its joints: type, speed, units, the workspace."""
@@ -358,6 +373,7 @@ class Planner:
         self._check_target(target, speed)
         path = self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
         self.workspace.check_arm(self.model, path[-1])
+        self._check_body(path[0], path[1:])
         return path[-1]
 
     def check_move(
@@ -399,6 +415,9 @@ class Planner:
         checked = self.model.check_joints(joints, tool=self.tool)
         tcp = self.model.forward(checked, self.tool)
         self.validate(tcp, speed, checked)
+        hint = self.joints_hint
+        if hint is not None:
+            self._check_body(hint, body.ptp_samples(hint, checked))
         return checked, tcp
 
     def check_arc(
@@ -415,6 +434,10 @@ class Planner:
                 self.workspace.check_arm(self.model, samples[k])
             except ConfigError as exc:
                 raise ConfigError(f"the arc to {to} passes {point}: {exc}") from exc
+        try:
+            self._check_body(samples[0], samples[1:])
+        except ConfigError as exc:
+            raise ConfigError(f"the arc to {to}: {exc}") from exc
         return list(samples)
 
     def via_on_arc(self, start: Pose, via: Pose, to: Pose) -> Pose:

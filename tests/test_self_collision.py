@@ -1,0 +1,172 @@
+"""Self-collision, the mounting plane and the 2FG7 housing, refused before any byte
+(``tmmaster._body``'s capsules, fitted to Techman's collision meshes)."""
+
+from __future__ import annotations
+
+import logging
+import random
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+import tmmaster
+from tmmaster import ConfigError, PollPolicy, Pose, Robot, UnreachablePoseError, Workspace
+from tmmaster import _body as body
+from tmmaster._planning import Planner, TimeoutPolicy
+from tmmaster.sim import Simulator
+from tmmaster.sim._world import Fixture
+
+MODEL = tmmaster.robot_model("tm5-700")
+READY = (0.0, 0.0, 90.0, 0.0, 90.0, 0.0)
+#: The wrist folded back: the end module's camera 17 mm into the forearm's wrist end,
+#: the TCP 244 mm above the base, over the table.
+FOLDED = (-44.0, -8.0, 122.0, -23.0, 120.0, -136.0)
+#: Behind the robot, the tool down 30 mm above the mounting plane (its table at z = 0):
+#: the TCP, the flange and the tool are above the plane, the end module's camera (52 mm
+#: beyond the flange) 22 mm below it.
+BEHIND_HIGH = Pose(-300, 0, 300, 180, 0, -90)
+BEHIND_LOW = Pose(-300, 0, 30, 180, 0, -90)
+#: A TCP 180 mm beyond the flange: room for the 2FG7's 144 mm housing.
+LONG_TOOL = Pose(0, 0, 180, 0, 0, 0)
+#: A beam across the table at the housing's height (z 390..410) when the TCP is at 300
+#: with the tool down: the pads (288..312) pass under it, the flange (480) over it.
+BEAM = Fixture(name="beam", pose=Pose(450, 0, 400, 0, 0, 0), size_mm=(20, 600, 20))
+BEAM_FROM = Pose(350, 0, 300, 180, 0, 90)
+BEAM_TO = Pose(550, 0, 300, 180, 0, 90)
+
+
+class _Settings:
+    position_tolerance_mm = 0.5
+    orientation_tolerance_deg = 0.5
+    timeouts = TimeoutPolicy()
+
+
+def planner(workspace: Workspace | None = None, tool: Pose | None = None) -> Planner:
+    return Planner(
+        MODEL,
+        workspace=workspace or Workspace(),
+        tool=tool,
+        check_units=True,
+        max_speed_percent=100,
+        settings=_Settings(),
+        log=logging.getLogger("test"),
+    )
+
+
+@pytest.fixture
+def robots(memory_simulator_factory: Callable[..., Simulator]) -> Iterator[Callable[..., Robot]]:
+    opened: list[Robot] = []
+
+    def make(**options: Any) -> Robot:
+        sim = memory_simulator_factory("tmflow")
+        robot = Robot(sim.url, profile="tmflow", polling=PollPolicy(interval_s=0.01), **options)
+        opened.append(robot)
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        robot.sim = sim  # type: ignore[attr-defined]
+        return robot
+
+    yield make
+    for robot in opened:
+        robot.close()
+
+
+def motion_writes(sim: Simulator) -> list[object]:
+    """Every FC16 that reached the robot (the command block is one FC16)."""
+    return [r for r in sim.request_log if r.function_code == 16 and not r.refused]
+
+
+# -- the master ---------------------------------------------------------------------------
+
+
+def test_the_capsules_name_the_colliding_pair_and_its_depth() -> None:
+    found = body.contacts(MODEL, FOLDED)
+    assert found, "the folded wrist collides"
+    first = found[0]
+    assert "link 6 camera" in (first.first, first.second)
+    assert first.distance_mm < -10
+    assert body.contacts(MODEL, READY) == []
+
+
+def test_a_self_colliding_joint_target_is_refused_before_any_byte(
+    robots: Callable[..., Robot],
+) -> None:
+    robot = robots()
+    sim: Simulator = robot.sim  # type: ignore[attr-defined]
+    sim.clear_request_log()
+    with pytest.raises(ConfigError, match="self-collision") as caught:
+        robot.move_joints(FOLDED, speed=30)
+    assert "link 6 camera" in str(caught.value)
+    assert "link 3 " in str(caught.value)
+    assert motion_writes(sim) == []
+
+
+def test_a_self_colliding_cartesian_target_is_refused_by_validate() -> None:
+    # From the ready posture the nearest solution is the folded wrist.
+    target = MODEL.forward(FOLDED)
+    with pytest.raises(ConfigError, match=r"self-collision.*link 6 camera"):
+        planner().validate(target, 30, READY)
+    # ... and the same joints as a joint target, with no joints known to start from.
+    with pytest.raises(ConfigError, match=r"self-collision.*link 6 camera"):
+        planner().joint_target(FOLDED, 30)
+
+
+def test_a_link_below_the_mounting_plane_is_refused_with_the_tcp_above(
+    robots: Callable[..., Robot],
+) -> None:
+    robot = robots()
+    robot.workspace = Workspace(floor_z_mm=0)  # a table level with the mounting plane
+    sim: Simulator = robot.sim  # type: ignore[attr-defined]
+    sim.clear_request_log()
+    with pytest.raises(ConfigError, match="mounting plane") as caught:
+        robot.move_to(BEHIND_LOW, speed=30)
+    assert "link 6 camera" in str(caught.value)
+    assert motion_writes(sim) == []
+
+
+def test_a_cell_without_a_floor_may_reach_below_the_mounting_plane() -> None:
+    high = MODEL.inverse(BEHIND_HIGH, seed_deg=READY)
+    planner(Workspace(floor_z_mm=None)).validate(BEHIND_LOW, 30, high)
+    with pytest.raises(ConfigError, match="mounting plane"):
+        planner(Workspace(floor_z_mm=0)).validate(BEHIND_LOW, 30, high)
+
+
+#: The tool tilted sideways 124 mm above the table: the pads and the tool's extent above
+#: it (85 mm), the 2FG7 housing's 40 mm radius under it.
+TILTED = (61.3, 29.7, 100.4, 49.8, 61.3, 90.0)
+
+
+def test_the_2fg7_housing_below_the_table_is_refused() -> None:
+    cell = Workspace(arm_radius_mm=None)  # the links' own check aside
+    with pytest.raises(ConfigError, match="2FG7 housing at z = 8"):
+        planner(cell, tool=LONG_TOOL).validate(MODEL.forward(TILTED, LONG_TOOL), 30, TILTED)
+    # The TCP at the flange leaves no room for a housing: the same joints pass.
+    planner(cell).validate(MODEL.forward(TILTED), 30, TILTED)
+
+
+def test_ordinary_targets_over_the_table_are_still_accepted() -> None:
+    # 200 random targets over the table, the tool down, J6 within 90 deg of its middle:
+    # none refused by the body checks, the PTP from the ready posture included.
+    rng = random.Random(5)
+    p = planner()
+    accepted = 0
+    while accepted < 200:
+        pose = Pose(
+            round(rng.uniform(300, 600), 1),
+            round(rng.uniform(-300, 300), 1),
+            round(rng.uniform(150, 400), 1),
+            180.0,
+            0.0,
+            round(90 + rng.uniform(-90, 90), 1),
+        )
+        try:
+            joints = MODEL.inverse(pose, seed_deg=READY)
+        except UnreachablePoseError:
+            continue
+        try:
+            p.workspace.check_arm(MODEL, joints)
+        except ConfigError:
+            continue
+        accepted += 1
+        p.validate(pose, 50, READY)
