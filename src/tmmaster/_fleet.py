@@ -353,7 +353,6 @@ class LoopTransport(BlockTransport):
                 result[name] = decode(words, offset)
         return result
 
-
     async def write_on_loop(self, address: int, words: list[int]) -> None:
         """From the loop, holding the lock: write holding registers in one FC16 request, once.
 
@@ -378,6 +377,7 @@ class LoopTransport(BlockTransport):
         except BaseException as exc:
             self._request_failed(exc)
             raise
+
 
 class _ChainedRead:
     """On the loop: a read's blocks one after the other, each sent once, then one answer.
