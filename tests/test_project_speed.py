@@ -8,11 +8,18 @@ false MotionTimeoutError.
 
 from __future__ import annotations
 
+import threading
+import time
+
 import pytest
 
 from sim_speeds import QUICK
 from test_sim_controller import run_until, send_tmflow, tmflow
-from tmmaster import ConfigError, MotionType, Pose, Robot
+from tmmaster import ConfigError, MotionType, PollPolicy, Pose, Robot, TimeoutPolicy
+from tmmaster._channels import Command, CommandKind, Ticket
+from tmmaster._command import Motion, _MotionFollower
+from tmmaster._following import FollowState
+from tmmaster._logging import get_logger
 from tmmaster.sim import Cell, RobotSetup, Simulator
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
@@ -78,3 +85,46 @@ def test_a_half_speed_project_on_a_slow_arm_gives_no_false_timeout() -> None:
         for i in range(30):
             target = Pose(300, -100 - 100 * (i % 2), 200 - 10 * (i % 3), 180, 0, 90)
             assert robot.move_to(target, speed=50).done
+
+
+def test_a_project_speed_lowered_since_the_plan_grows_the_moves_budget() -> None:
+    # At the move's derived deadline the master reads 7101 once: lowered from 100 % to
+    # 25 % since the plan, the move takes four times as long, and is given that time.
+    follower = _MotionFollower(
+        channel=None,  # type: ignore[arg-type]  # nothing here reads the robot
+        stop_event=threading.Event(),
+        log=get_logger("test"),
+        poll_interval_s=0.05,
+        polling=PollPolicy(),
+        timeouts=TimeoutPolicy(),
+        position_tolerance_mm=1.0,
+        orientation_tolerance_deg=1.0,
+    )
+
+    def follow_of(timeout_s: float | None) -> tuple[Motion, FollowState]:
+        ticket = Ticket(Command(CommandKind.PTP, RIGHT, 50), [], time.monotonic())
+        motion = Motion(
+            follower, ticket, start=LEFT, expected_s=2.0, timeout_s=4.6, timeout_from_model=True
+        )
+        state = FollowState(
+            motion,
+            timeout_s,
+            stop_event=follower.stop_event,
+            poll_interval_s=0.05,
+            polling=PollPolicy(),
+            ack_timeout_s=2.0,
+            stall_s=1.0,
+        )
+        return motion, state
+
+    motion, follow = follow_of(None)
+    follower.project_speed = lambda: 25.0
+    assert follower._project_slowed(motion, follow)
+    assert (follow.budget, motion.expected_s) == (pytest.approx(18.4), pytest.approx(8.0))
+    motion, follow = follow_of(None)
+    follower.project_speed = lambda: 100.0  # not lowered: the deadline stands
+    assert not follower._project_slowed(motion, follow)
+    motion, follow = follow_of(3.0)  # a timeout given is never changed
+    follower.project_speed = lambda: 25.0
+    assert not follower._project_slowed(motion, follow)
+    assert follow.budget == 3.0
