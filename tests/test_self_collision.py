@@ -1,5 +1,6 @@
-"""Self-collision, the mounting plane and the 2FG7 housing, refused before any byte
-(``tmmaster._body``'s capsules, fitted to Techman's collision meshes)."""
+"""Self-collision, the mounting plane and the 2FG7 housing: refused before any byte, stopped
+by both simulator backends when forced (``tmmaster._body``'s capsules, fitted to Techman's
+collision meshes)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,15 @@ from typing import Any
 import pytest
 
 import tmmaster
+from sim_backends import BACKENDS, until_fault
+from test_sim_controller import article, run_until, send_article
 from tmmaster import ConfigError, PollPolicy, Pose, Robot, UnreachablePoseError, Workspace
 from tmmaster import _body as body
 from tmmaster._planning import Planner, TimeoutPolicy
-from tmmaster.sim import Simulator
+from tmmaster._pose import MotionType
+from tmmaster.sim import KinematicBackend, Simulator, World
+from tmmaster.sim._backend import BackendFault, PhysicsBackend
+from tmmaster.sim._controller import SimErrorCode
 from tmmaster.sim._world import Fixture
 
 MODEL = tmmaster.robot_model("tm5-700")
@@ -170,3 +176,60 @@ def test_ordinary_targets_over_the_table_are_still_accepted() -> None:
             continue
         accepted += 1
         p.validate(pose, 50, READY)
+
+
+# -- the simulator ---------------------------------------------------------------------
+
+
+def make(name: str, home: Pose, **options: Any) -> PhysicsBackend:
+    if name == "kinematic":
+        return KinematicBackend(MODEL, home=home, **options)
+    from tmmaster.sim._mujoco import MuJoCoBackend
+
+    return MuJoCoBackend(MODEL, home=home, dynamics=False, **options)
+
+
+def collision(fault: BackendFault | None, *names: str) -> None:
+    assert fault is not None
+    assert fault.kind == "collision"
+    for name in names:
+        assert name in fault.message
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_a_forced_self_colliding_joint_move_stops_the_arm(backend_name: str) -> None:
+    b = make(backend_name, MODEL.forward(READY), world=World())
+    b.start_joint_motion(FOLDED, speed_percent=50, accel_time_s=0.2)
+    collision(until_fault(b, b.is_settled, limit_s=8.0), "link 6 camera", "link 3")
+    assert b.is_settled()
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_a_forced_move_below_the_mounting_plane_stops_the_arm(backend_name: str) -> None:
+    b = make(backend_name, BEHIND_HIGH, world=World())
+    b.start_motion(BEHIND_LOW, motion=MotionType.LINE, speed_percent=30, accel_time_s=0.2)
+    collision(until_fault(b, b.is_settled, limit_s=8.0), "the mounting plane", "link 6 camera")
+    # Stopped with the camera at the plane (its 2 mm margin): the TCP 52 + 2 mm above it.
+    assert b.tcp_pose().z == pytest.approx(54, abs=3)
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_the_mounting_plane_is_tms_collision_error(backend_name: str) -> None:
+    backend = make(backend_name, BEHIND_HIGH, world=World())
+    ctl, bank, _, _ = article(backend=backend)  # type: ignore[arg-type]
+    send_article(bank, BEHIND_LOW, speed=20, command=2)  # a Line
+    run_until(ctl, lambda: bank.get("error_code") != 0)
+    assert bank.get("error_code") == SimErrorCode.COLLISION
+    assert bank.get("robot_mode") == 7  # error
+
+
+@pytest.mark.parametrize("backend_name", BACKENDS)
+def test_a_beam_at_the_2fg7_housings_height_stops_the_arm(backend_name: str) -> None:
+    clear = make(backend_name, BEAM_FROM, tool=LONG_TOOL, world=World())
+    clear.start_motion(BEAM_TO, motion=MotionType.LINE, speed_percent=30, accel_time_s=0.2)
+    assert until_fault(clear, clear.is_settled, limit_s=8.0) is None
+    b = make(backend_name, BEAM_FROM, tool=LONG_TOOL, world=World(fixtures=[BEAM]))
+    b.start_motion(BEAM_TO, motion=MotionType.LINE, speed_percent=30, accel_time_s=0.2)
+    collision(until_fault(b, b.is_settled, limit_s=8.0), "fixture beam")
+    # The housing's 40 mm radius meets the beam's near face (x = 440).
+    assert b.tcp_pose().x == pytest.approx(400, abs=1)

@@ -45,6 +45,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from .. import _body as body
 from .. import _kinematics as kin
 from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import DEFAULT_HOME, MotionType, Pose
@@ -58,6 +59,7 @@ from ._collide import (
     arm_links,
     box_depth,
     link_contacts,
+    segment_depth,
     transform_point,
 )
 from ._payload import over_payload
@@ -621,6 +623,7 @@ class KinematicBackend:
         origins = self._joint_origins()
         for link, box, depth in link_contacts(origins, self._links, self._obstacles):
             found[self._link_names[link], box.name] = depth
+        self._body_contacts(found)
         held = None if self._world.held is None else held_frame(self._world, self._tcp_t)
         if held is not None:
             obj, frame = held
@@ -635,6 +638,23 @@ class KinematicBackend:
                     if depth >= 0:
                         found[f"held part {obj.name}", box.name] = depth
         return found
+
+    def _body_contacts(self, found: dict[_ContactKey, float]) -> None:
+        """Add the arm's parts meeting each other or the mounting plane (the capsules the
+        master checks, :mod:`tmmaster._body`) and the 2FG7 housing in an obstacle."""
+        for c in body.contacts(self._model, self._joints, self._tool):
+            found[c.first, c.second] = -c.distance_mm
+        housing = body.housing_segment(self._model, self._joints, self._tool)
+        if housing is None:
+            return
+        a, b, r = housing
+        low = tuple(min(a[i], b[i]) - r for i in range(3))
+        high = tuple(max(a[i], b[i]) + r for i in range(3))
+        for box in self._obstacles:
+            if box.overlaps(low, high):
+                depth = segment_depth(box, a, b, r)
+                if depth >= 0:
+                    found["the 2FG7 housing", box.name] = depth
 
     @property
     def _tcp_t(self) -> kin.Transform:

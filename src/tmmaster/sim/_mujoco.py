@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 from xml.sax.saxutils import quoteattr
 
+from .. import _body as body
 from .. import _kinematics as kin
 from .._checks import Bounds, require_in, require_positive
 from .._exceptions import ConfigError, UnreachablePoseError
@@ -465,8 +466,16 @@ def _mjcf_gripper(indent: str, tool: Pose | None, gripper: GripperGeometry, comp
     lines = [
         f'{indent}<geom name="flange" type="cylinder" pos="0 0 -0.005" size="0.032 0.005"'
         f' rgba=".2 .2 .2 1" {arm} mass="0.1"/>',
-        f'{indent}<body name="tcp" {_frame_attrs(tcp)}{comp}>',
     ]
+    housing = body.housing_in_flange(tool)
+    if housing is not None:  # the 2FG7's housing, between the flange and the fingers
+        a, b, r = housing
+        lines.append(
+            f'{indent}<geom name="housing" type="capsule" fromto="{_fmt([v / 1000 for v in a])}'
+            f' {_fmt([v / 1000 for v in b])}" size="{r / 1000:g}" rgba=".3 .3 .35 1" {arm}'
+            ' mass="0.001"/>'
+        )
+    lines.append(f'{indent}<body name="tcp" {_frame_attrs(tcp)}{comp}>')
     g = indent + "  "
     stroke = (gripper.min_width_mm / 2000, gripper.max_width_mm / 2000)
     lines.append(
@@ -1011,6 +1020,8 @@ class MuJoCoBackend(_FingersAndParts):
         # Collisions: the arm's table penetration the running motion started with (m;
         # -1: none), and the fault not yet taken by the controller.
         self._start_depth = -1.0
+        # ... and the arm's parts meeting each other or the mounting plane then (mm).
+        self._start_body: dict[tuple[str, str], float] = {}
         self._fault: BackendFault | None = None
         self._build(None)
 
@@ -1320,7 +1331,25 @@ class MuJoCoBackend(_FingersAndParts):
         # A contact the arm already had (a collision it is backing out of) is known: only
         # a deeper one is a collision.
         self._start_depth = self._table_depth()
+        self._start_body = self._body_depths(self._current_joints())
         return duration
+
+    def _body_depths(self, joints: tuple[float, ...]) -> dict[tuple[str, str], float]:
+        """The arm's parts meeting each other or the mounting plane at ``joints``, mm."""
+        return {
+            (c.first, c.second): -c.distance_mm
+            for c in body.contacts(self._model, joints, self._tool)
+        }
+
+    def _body_fault(self, joints: tuple[float, ...]) -> BackendFault | None:
+        """Self-collision or a part at the mounting plane at ``joints``, deeper than when
+        the motion started (the master's capsules, :mod:`tmmaster._body`), once a tick."""
+        for (first, second), depth in self._body_depths(joints).items():
+            if depth > self._start_body.get((first, second), -1.0) + _COLLISION_DEPTH_M * 1000:
+                return BackendFault(
+                    "collision", f"the arm hit {second} ({first}, {depth:.1f} mm deep)"
+                )
+        return None
 
     def _command_joints(self) -> tuple[float, ...]:
         trajectory = self._trajectory
@@ -1472,8 +1501,14 @@ class MuJoCoBackend(_FingersAndParts):
         steps = int(self._pending_s / self._timestep + 1e-6)
         self._pending_s -= steps * self._timestep
         self._load_margin()
+        moving = self._trajectory is not None
         for _ in range(steps):
             self._substep()
+        if moving and steps and self._fault is None:
+            joints = self._current_joints()
+            fault = self._body_fault(joints)
+            if fault is not None:
+                self._stop_for(fault, joints)
         if self._queued:
             self._feed()  # once per tick: a waiting part appears when its spot is free
         if self._grasp_mode == "friction" and self._closing:
