@@ -42,6 +42,8 @@ class Scenario:
     #: The part turned about the vertical, deg.
     turned: float = 0.0
     force_n: float = 40.0
+    #: The speed of the Line down onto the part, %.
+    speed: float = 20.0
     #: The width the fingers stop at, for the scenarios that grip, mm.
     width_mm: float | None = None
     extra: dict[str, object] = field(default_factory=dict)
@@ -51,6 +53,12 @@ SCENARIOS = {
     "centred": Scenario("held", width_mm=30),
     "4 mm across, pushed to the centre": Scenario("held", across=4, width_mm=30),
     "12 mm across: a pad lands on it": Scenario("collision", across=12),
+    # A pad's inner face 19.5 mm off the TCP, the part's edge at 19.6 mm: it lands on it.
+    "4.6 mm across: a pad lands on its edge": Scenario("collision", across=4.6),
+    "4.6 mm across at 100 %: a pad lands on its edge": Scenario("collision", across=4.6, speed=100),
+    "4.4 mm across at 100 %: pushed to the centre": Scenario(
+        "held", across=4.4, speed=100, width_mm=30
+    ),
     "20 mm deep: the pads overlap 5 mm": Scenario("held", depth=20, width_mm=30),
     "30 mm deep: the pads pass beside": Scenario("missed", depth=30),
     "TCP 20 mm high": Scenario("held", high=20, width_mm=30),
@@ -97,7 +105,7 @@ def attempt(backend_name: str, s: Scenario) -> tuple[str, float]:
     above = grasp.offset(dz=60)
     world = World([TableObject(name="part", pose=part, size_mm=s.size_mm, mass_kg=s.mass_kg)])
     b = make_backend(backend_name, world, above)
-    b.start_motion(grasp, motion=MotionType.LINE, speed_percent=20, accel_time_s=0.1)
+    b.start_motion(grasp, motion=MotionType.LINE, speed_percent=s.speed, accel_time_s=0.1)
     fault = run(b, b.is_settled)
     if fault is not None:
         return fault, 0.0
