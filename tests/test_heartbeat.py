@@ -139,3 +139,23 @@ def test_a_long_move_of_a_live_master_is_not_expired(sim: Simulator) -> None:
         assert motion.done
         assert motion.finished_at is not None
         assert motion.finished_at - motion.ticket.sent_at > 2 * FAST.heartbeat_ttl_s
+
+
+def test_a_beat_waits_for_a_link_the_robots_thread_holds(sim: Simulator) -> None:
+    """A robot polling densely holds its link most of the time: a beat that only tried
+    the link's lock missed beat after beat, and the program expired a live master's
+    command. A beat waits for the link (up to its period) instead."""
+    period = 0.4
+    robot = robot_for(sim, timeouts=TimeoutPolicy(heartbeat_s=period, heartbeat_ttl_s=2.0))
+    with robot:
+        beat: Heartbeat = robot._heartbeat  # type: ignore[attr-defined]
+        sim.wait_for(lambda: beat.writes >= 1, timeout=5.0)
+        written = beat.writes
+        while beat.writes == written:  # right after a beat: the next is a period away
+            time.sleep(0.001)
+        # The robot's thread in a long request: the next beat's slot comes while the link
+        # is busy, and the link is free again half a period later.
+        with robot._transport._lock:  # type: ignore[attr-defined]
+            time.sleep(1.5 * period)
+        sim.wait_for(lambda: beat.writes >= written + 2, timeout=5.0)
+        assert beat.missed == 0

@@ -565,32 +565,40 @@ class FleetMember:
         """True while the robot's link is up (the robot's thread opens it, never the watch)."""
         return self.transport.state is ConnectionState.CONNECTED and self.transport.link_up
 
-    async def write_when_free(self, address: int, words: list[int]) -> BaseException | bool | None:
-        """On the loop: one heartbeat write on the robot's link, if the link is free now.
+    async def write_when_free(
+        self, address: int, words: list[int], *, wait_s: float, poll_s: float
+    ) -> BaseException | bool | None:
+        """On the loop: one heartbeat write on the robot's link, once the link is free.
 
-        Never waits for the robot's thread: the link's lock is taken only if free (as a
-        poll takes it), and polls and watch reads on the loop take turns with it.
+        Never blocks the loop on the robot's thread: the link's lock is taken only when
+        free (as a poll takes it), looked at again every ``poll_s`` for up to ``wait_s``;
+        polls and watch reads on the loop take turns with it.
 
         Args:
             address: The first holding register.
             words: The words.
+            wait_s: How long to wait for the link to be free, s.
+            poll_s: How often to look, s.
 
         Returns:
-            None when written; True when the link was busy or down (nothing sent); the
-            error when the write failed.
+            None when written; True when the link stayed busy or is down (nothing
+            sent); the error when the write failed.
         """
-        if not self.linked():
-            return True
-        async with self._turn:
-            if not self.transport.hold():
+        deadline = asyncio.get_running_loop().time() + wait_s
+        while self.linked():
+            async with self._turn:
+                if self.transport.hold():
+                    try:
+                        await self.transport.write_on_loop(address, words)
+                    except TransportError as exc:
+                        return exc
+                    finally:
+                        self.transport.release()
+                    return None
+            if asyncio.get_running_loop().time() >= deadline:
                 return True
-            try:
-                await self.transport.write_on_loop(address, words)
-            except TransportError as exc:
-                return exc
-            finally:
-                self.transport.release()
-        return None
+            await asyncio.sleep(poll_s)
+        return True
 
     async def _poll(self, follow: FollowState) -> Observation:
         """The channel's one poll, its reads made on the loop."""

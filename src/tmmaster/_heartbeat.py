@@ -46,8 +46,11 @@ HEARTBEAT_FIELDS = ("master_heartbeat", "master_ttl_ms")
 #: The heartbeat counts 1..32767, then 1 again (0: never written).
 HEARTBEAT_MAX = 32767
 
-#: After a slot found the link busy or a write failed: try again this soon, s.
+#: After a write failed: try again this soon, s.
 _RETRY_S = 0.05
+#: While the link is busy with the robot's own requests: look again this often, s (a
+#: poll that skipped a busy link missed beats while a robot polled densely).
+_BUSY_POLL_S = 0.005
 
 
 class Heartbeat:
@@ -189,7 +192,9 @@ async def _beat_on_loop(
             return
         delay = beat.period_s
         if member.linked():
-            outcome = await member.write_when_free(beat.address, beat.next_words())
+            outcome = await member.write_when_free(
+                beat.address, beat.next_words(), wait_s=beat.period_s, poll_s=_BUSY_POLL_S
+            )
             beat.wrote(outcome is None, outcome if isinstance(outcome, BaseException) else None)
             if outcome is not None:
                 delay = min(delay, _RETRY_S)
@@ -207,7 +212,7 @@ def _beat_in_thread(
         if beat is None or transport.state is ConnectionState.CLOSED:
             return
         delay = beat.period_s
-        error = _write_once(transport, beat.address, beat.next_words())
+        error = _write_once(transport, beat.address, beat.next_words(), beat.period_s)
         beat.wrote(error is None, error if isinstance(error, BaseException) else None)
         if error is not None:
             delay = min(delay, _RETRY_S)
@@ -215,13 +220,15 @@ def _beat_in_thread(
 
 
 def _write_once(
-    transport: Transport, address: int, words: list[int]
+    transport: Transport, address: int, words: list[int], wait_s: float
 ) -> BaseException | bool | None:
-    """One FC16 write, sent once; None when answered, True when the link was busy or down,
-    the error when it failed.
+    """One FC16 write, sent once; None when answered, True when the link stayed busy for
+    ``wait_s`` or is down, the error when it failed.
 
-    A BlockTransport's request is made under its lock, taken without waiting on the
-    robot's thread, and not counted as one of the link's requests.
+    A BlockTransport's request is made under its lock, waited for at most ``wait_s``
+    (a robot polling densely holds it most of the time: a write that only tried the
+    lock missed beat after beat, and the program expired a live master's command), and
+    not counted as one of the link's requests.
     """
     if not isinstance(transport, BlockTransport):
         try:
@@ -230,7 +237,7 @@ def _write_once(
             return exc
         return None
     lock = transport._lock
-    if not lock.acquire(blocking=False):
+    if not lock.acquire(timeout=wait_s):
         return True
     try:
         if transport.state is not ConnectionState.CONNECTED or not transport._link_open():
