@@ -245,6 +245,7 @@ def test_a_paused_move_whose_master_is_gone_never_moves_again(master_dies: bool)
     master.run_until(lambda: backend.tcp_pose().distance_to(HOME) > 20)
     press_play_pause(master)  # Pause, mid-move
     assert bank.get("paused") is True
+    master.run_until(backend.is_settled, limit_s=1.0)  # the arm brakes to rest
     held = backend.tcp_pose()
     master.alive = not master_dies
     for _ in range(round(4.0 / DT)):  # twice the time-to-live, paused
