@@ -29,7 +29,7 @@ from tmmaster.pickplace import (
     robot_from_config,
     validate_plan,
 )
-from tmmaster.pickplace.__main__ import EXIT_CONFIG, EXIT_OK, main
+from tmmaster.pickplace.__main__ import EXIT_CONFIG, main
 from tmmaster.sim import Simulator
 
 # -- all six values ---------------------------------------------------------------------
@@ -189,7 +189,9 @@ def test_a_move_in_radians_sends_nothing(
 @pytest.mark.usefixtures("as_a_program_runs")
 def test_check_units_false_takes_the_values_as_given() -> None:
     # Taken as degrees, (3.1, 0, 1.6) points the tool 3 deg from straight up: a pose the
-    # arm can take where no table is in the way.
+    # arm can take where no table is in the way (high enough for the wrist to clear the
+    # arm's own links).
+    upward = Pose(300, 200, 500, 3.1, 0, 1.6)
     free = Workspace(floor_z_mm=None)
     robot = Robot("127.0.0.1", profile="tmflow", gripper=None, checks=Checks(workspace=free))
     lax = Robot(
@@ -201,7 +203,7 @@ def test_check_units_false_takes_the_values_as_given() -> None:
     try:
         with pytest.raises(UnitsError):
             robot.check_move(ROUNDED_RADIANS, 30)
-        lax.check_move(ROUNDED_RADIANS, 30)
+        lax.check_move(upward, 30)
         with pytest.raises(ConfigError) as info:  # out of reach taken as mm: said as such
             lax.check_move(Pose(0.3, -0.2, 0.1, 180, 0, 90), 30)
         assert not isinstance(info.value, UnitsError)
@@ -362,8 +364,14 @@ def test_the_command_runs_radian_like_values_when_told_to(
         "[poses]\ncheck_units = false\npick = [300, -200, 100, 3.14159, 0, 1.5708]\n"
         "[workspace]\nfloor_z_mm = -2000\n",
     )
-    assert main(["--config", str(path), "--dry-run"]) == EXIT_OK  # nor does the robot refuse
-    assert "3.14159" in capsys.readouterr().out  # the plan shows the pose as given
+    # Not refused for its units: the plan takes the pose as given, as degrees, and the
+    # arm model judges it (a tool pointing up in a pick and place puts the wrist into
+    # the arm's own links: refused for that, naming the pose).
+    assert main(["--config", str(path), "--dry-run"]) == EXIT_CONFIG
+    err = capsys.readouterr().err
+    assert "radians" not in err
+    assert "self-collision" in err
+    assert "poses.pick" in err
 
 
 SEQUENCE = """name = "s"
