@@ -1460,6 +1460,10 @@ class Robot:
     def stop(self) -> None:
         """Stop the arm now (article: command = stop; tmflow: the TM Stop button).
 
+        Returns once the stop is written; the arm then brakes to rest, which takes
+        a Category 2 stop's deceleration time (300 ms by default on a TM5S, TMflow 2.24
+        p. 112): :meth:`status` reports ``moving`` until it is at rest.
+
         Raises:
             TransportClosedError: The robot was never connected (nothing was sent) or is
                 closed.
