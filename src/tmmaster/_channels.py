@@ -395,36 +395,17 @@ class CommandChannel(ABC):
         self, command: Command
     ) -> tuple[list[tuple[RegisterField, Value]], list[Encoded]]:
         """The command block's field values and their words (raises naming the field)."""
-        if not self.supports(command.kind):
-            raise ConfigError(
-                f"profile {self.profile.name!r} has no {command.kind.value!r} command"
-            )
-        if command.speed_mm_s is not None and (
-            self._speed_mm_s_field is None or command.kind not in _EXTENDED
-        ):
-            raise ConfigError(
-                f"profile {self.profile.name!r} has no TCP speed in mm/s for a"
-                f" {command.kind.value!r} command"
-                + ("" if self._speed_mm_s_field is None else " (only line and circle have one)")
-            )
+        self._refuse_unsupported(command)
         p = self.profile
         words: list[tuple[RegisterField, Value]] = []
         if command.target is not None:
-            if command.kind is CommandKind.PTP_JOINTS:
-                if command.joints is None or len(command.joints) != 6:
-                    raise ConfigError("a ptp_joints command needs six joint angles")
-                values = list(command.joints)
-            else:
-                values = command.target.as_list()
-            words += zip(self._target_fields, values, strict=True)
+            words += zip(self._target_fields, self._target_values(command), strict=True)
         if command.speed is not None:
             words.append((self._speed_field or p.field("speed"), command.speed))
         if command.target is not None and self._accel_field is not None:
             # Always written (0 = the program's default) so the block stays contiguous
             # and goes out as one atomic request.
             words.append((self._accel_field, command.accel_time_ms or 0))
-        if command.kind is CommandKind.CIRCLE and command.via is None:
-            raise ConfigError("a circle command needs a via point")
         if command.kind in _EXTENDED and self._speed_mm_s_field is not None:
             # Every Line and Circle writes the extension (in the same request; ext_seq
             # follows with the number): one left from an earlier command never applies.
@@ -440,6 +421,33 @@ class CommandChannel(ABC):
         # Every value encoded now: ValueOutOfRangeError naming the field, before any I/O;
         # the words are kept, so the write does not encode them again.
         return words, encode_writes(words)
+
+    def _refuse_unsupported(self, command: Command) -> None:
+        """A command this profile cannot carry: ConfigError naming what is missing."""
+        if not self.supports(command.kind):
+            raise ConfigError(
+                f"profile {self.profile.name!r} has no {command.kind.value!r} command"
+            )
+        if command.speed_mm_s is not None and (
+            self._speed_mm_s_field is None or command.kind not in _EXTENDED
+        ):
+            raise ConfigError(
+                f"profile {self.profile.name!r} has no TCP speed in mm/s for a"
+                f" {command.kind.value!r} command"
+                + ("" if self._speed_mm_s_field is None else " (only line and circle have one)")
+            )
+        if command.kind is CommandKind.CIRCLE and command.via is None:
+            raise ConfigError("a circle command needs a via point")
+
+    @staticmethod
+    def _target_values(command: Command) -> list[float]:
+        """The target's six values: the joints of a ptp_joints command, else the pose."""
+        if command.kind is CommandKind.PTP_JOINTS:
+            if command.joints is None or len(command.joints) != 6:
+                raise ConfigError("a ptp_joints command needs six joint angles")
+            return list(command.joints)
+        assert command.target is not None
+        return command.target.as_list()
 
     @abstractmethod
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:

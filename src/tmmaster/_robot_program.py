@@ -258,6 +258,15 @@ def check_program_profile(profile: RobotProfile) -> None:
     ]
     if missing:
         raise ConfigError(f"profile {profile.name!r} lacks the fields {', '.join(missing)}")
+    _check_command_block(profile)
+    for name in _FEEDBACK:
+        if profile.field(name).table is not Table.HOLDING:
+            raise ConfigError(f"profile {profile.name!r}: {name} must be a holding register")
+    _check_heartbeat(profile)
+
+
+def _check_command_block(profile: RobotProfile) -> None:
+    """The target, via and words where the program reads them (ConfigError if not)."""
     first = profile.field(TARGET_FIELDS[0]).address
     floats = [(name, first + 2 * i) for i, name in enumerate(TARGET_FIELDS)]
     floats += [(name, first + 16 + 2 * i) for i, name in enumerate(VIA_FIELDS)]
@@ -282,9 +291,10 @@ def check_program_profile(profile: RobotProfile) -> None:
                 f"profile {profile.name!r}: {name} must be the holding register at"
                 f" {address} for the robot program"
             )
-    for name in _FEEDBACK:
-        if profile.field(name).table is not Table.HOLDING:
-            raise ConfigError(f"profile {profile.name!r}: {name} must be a holding register")
+
+
+def _check_heartbeat(profile: RobotProfile) -> None:
+    """master_heartbeat and master_ttl_ms as one FC16 request (ConfigError if not)."""
     beat, ttl = (profile.field(name) for name in _MASTER)
     if not (
         beat.table is ttl.table is Table.HOLDING
