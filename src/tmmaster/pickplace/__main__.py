@@ -378,28 +378,30 @@ def _one_line(text: str) -> str:
     return " ".join(text.split())
 
 
+def _ended(invocation: _Invocation, outcome: _Outcome, out: _Output) -> tuple[int, str | None]:
+    """Run the command; its exit code and, for any end but success, the reason."""
+    try:
+        return _execute(invocation.command, outcome, out)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED, "interrupted"
+    except UsageError as exc:  # an option that cannot be: said as the option
+        return EXIT_CONFIG, str(exc)
+    except ConfigError as exc:
+        return EXIT_CONFIG, f"config error: {exc}"
+    except ImportError as exc:  # an optional extra (--sim-physics mujoco) is missing: say which
+        return EXIT_FAILED, str(exc)
+    except Exception as exc:  # the last line of defence: one line, never a traceback
+        _log.error("pickplace.unexpected_error", error=str(exc), error_type=type(exc).__name__)
+        return exit_code_for(exc), f"{type(exc).__name__}: {exc}"
+
+
 def _run(invocation: _Invocation, outcome: _Outcome, out: _Output) -> int:
     # Here, not at the top: building the report's models costs some 60 ms that --help,
     # --version and a wrong option do not need; a run loads them before it connects.
-    from ._report import build_run_report, write_report
+    from ._report import build_run_report
 
     stderr = sys.stderr
-    code = EXIT_FAILED
-    reason: str | None = None
-    try:
-        code, reason = _execute(invocation.command, outcome, out)
-    except KeyboardInterrupt:
-        code, reason = EXIT_INTERRUPTED, "interrupted"
-    except UsageError as exc:  # an option that cannot be: said as the option
-        code, reason = EXIT_CONFIG, str(exc)
-    except ConfigError as exc:
-        code, reason = EXIT_CONFIG, f"config error: {exc}"
-    except ImportError as exc:  # an optional extra (--sim-physics mujoco) is missing: say which
-        code, reason = EXIT_FAILED, str(exc)
-    except Exception as exc:  # the last line of defence: one line, never a traceback
-        code = exit_code_for(exc)
-        reason = f"{type(exc).__name__}: {exc}"
-        _log.error("pickplace.unexpected_error", error=str(exc), error_type=type(exc).__name__)
+    code, reason = _ended(invocation, outcome, out)
     if out.live is not None:
         out.live.end()
     report = build_run_report(
@@ -414,6 +416,22 @@ def _run(invocation: _Invocation, outcome: _Outcome, out: _Output) -> int:
         sim=outcome.sim,
         move_states=outcome.move_states,
     )
+    _tell(out, outcome, report, (code, reason), stderr)
+    if invocation.output.report and not _written(invocation.output.report, report, stderr):
+        return code or EXIT_FAILED
+    # The report says how the run ended; the status also says the output was cut short.
+    return EXIT_BROKEN_PIPE if code == EXIT_OK and out.stdout_gone else code
+
+
+def _tell(
+    out: _Output,
+    outcome: _Outcome,
+    report: RunReport,
+    ended: tuple[int, str | None],
+    stderr: TextIO,
+) -> None:
+    """The run's end on the terminal: the summary, then the last line (why, or done)."""
+    code, reason = ended
     if code == EXIT_INTERRUPTED:
         out.interrupt()  # a second Ctrl-C, or one before the run: its last line only
     shown = out.events or not out.interrupted
@@ -423,17 +441,18 @@ def _run(invocation: _Invocation, outcome: _Outcome, out: _Output) -> int:
         print(f"pickplace: {_one_line(reason)} [exit {code}]", file=stderr, flush=True)
     elif outcome.done_line is not None:
         out.say(outcome.done_line)
-    if invocation.output.report:
-        try:
-            write_report(invocation.output.report, report)
-        except OSError as exc:
-            print(
-                f"pickplace: cannot write the report {invocation.output.report}: {exc}",
-                file=stderr,
-            )
-            return code or EXIT_FAILED
-    # The report says how the run ended; the status also says the output was cut short.
-    return EXIT_BROKEN_PIPE if code == EXIT_OK and out.stdout_gone else code
+
+
+def _written(path: str, report: RunReport, stderr: TextIO) -> bool:
+    """Write the run report to ``path``; False (said on stderr) when it cannot be."""
+    from ._report import write_report
+
+    try:
+        write_report(path, report)
+    except OSError as exc:
+        print(f"pickplace: cannot write the report {path}: {exc}", file=stderr)
+        return False
+    return True
 
 
 def _print_summary(console: Console, report: RunReport) -> None:
