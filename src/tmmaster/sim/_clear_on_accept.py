@@ -54,6 +54,8 @@ class ClearOnAcceptController(RobotController):
     def _run_handshake(self, dt: float, ready: bool) -> None:
         if self._active is not None:
             self._advance(dt, ready)
+        elif self._error_code:
+            self._publish_braking()
         command_field = self._profile.field("command")
         raw = int(self._bank.get("command"))
         label = command_field.label(raw)
@@ -150,10 +152,15 @@ class ClearOnAcceptController(RobotController):
     def _motion_failed(self, active: _Active) -> None:
         self._enter_error(SimErrorCode.MOTION_LOST, "motion lost when the physics was rebuilt")
 
+    def _publish_braking(self) -> None:
+        """In error: moving until the arm, stopped by the error, is at rest (a stop takes
+        time, and a master must never read "not moving" while the arm still moves)."""
+        self._bank.set("motion_status", 0 if self._backend.is_settled() else 1)
+
     def _publish_error(self, code: int, reason: str) -> None:
         self._bank.set("error_code", code)
         self._bank.set("robot_mode", self._profile.mode_error)
-        self._bank.set("motion_status", 0)
+        self._publish_braking()
         # A robot in error discards a pending command instead of keeping it for later.
         self._discard_commands("error")
 
