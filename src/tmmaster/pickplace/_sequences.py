@@ -353,6 +353,17 @@ class SequenceFile(BaseModel):
     retreat: RetreatSpec | None = None
 
 
+def _action_of(step: GripStep | ReleaseStep | WaitStep | CheckStep) -> Action:
+    """What a step that is not a move does."""
+    if isinstance(step, GripStep):
+        return _grip
+    if isinstance(step, ReleaseStep):
+        return _open
+    if isinstance(step, WaitStep):
+        return _waiter(step.seconds)
+    return _checker(step.holding)
+
+
 def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> TaskSequence:
     """Build a sequence from a mapping (a parsed TOML file); errors name key and source.
 
@@ -393,14 +404,8 @@ def sequence_from_data(data: Mapping[str, Any], *, source: str = "<data>") -> Ta
         if isinstance(step, MoveStep):
             pose = pose_of(step.pose, f"{where}.pose").offset(dz=step.z_offset)
             planned = PlannedMove(name, pose, step.speed, step.motion, f"{where}.pose")
-        elif isinstance(step, GripStep):
-            action = _grip
-        elif isinstance(step, ReleaseStep):
-            action = _open
-        elif isinstance(step, WaitStep):
-            action = _waiter(step.seconds)
         else:
-            action = _checker(step.holding)
+            action = _action_of(step)
         if isinstance(step, _Retrying) and step.retry_from is not None:
             retry = RetryRule(step.retry_from, step.retries, recover=_open)
         try:
