@@ -202,6 +202,19 @@ class _CExpr:
     gen: bool  # fn returns a generator
 
 
+def _mapped(ce: _CExpr, fn: Callable[[Any], Any], typ: str) -> _CExpr:
+    """``ce`` with ``fn`` applied to its value, of type ``typ`` (pure stays pure)."""
+    if not ce.gen:
+        pure = cast(PureFn, ce.fn)
+        return _CExpr(lambda fr: fn(pure(fr)), typ, False)
+    gen = cast(GenFn, ce.fn)
+
+    def mapped_gen(fr: _Frame) -> Gen:
+        return fn((yield from gen(fr)))
+
+    return _CExpr(mapped_gen, typ, True)
+
+
 def _syntax(node: a.Node, message: str) -> TMScriptSyntaxError:
     return TMScriptSyntaxError(message, line=node.line, column=node.column)
 
@@ -400,15 +413,7 @@ class _ExprCompiler:
         constant = _converted_literal(node, conv)
         if constant is not _NOT_CONSTANT:
             return _CExpr(lambda fr: constant, want, False)
-        if not ce.gen:
-            fn = cast(PureFn, ce.fn)
-            return _CExpr(lambda fr: conv(fn(fr)), want, False)
-        gen = cast(GenFn, ce.fn)
-
-        def converted_gen(fr: _Frame) -> Gen:
-            return conv((yield from gen(fr)))
-
-        return _CExpr(converted_gen, want, True)
+        return _mapped(ce, conv, want)
 
     def expr(self, node: a.Expr) -> _CExpr:
         if isinstance(node, a.Literal):
@@ -571,15 +576,7 @@ class _ExprCompiler:
         else:
             fn = lambda v: v  # noqa: E731
             typ = "int" if typ in INTEGRAL else typ
-        if not operand.gen:
-            of = cast(PureFn, operand.fn)
-            return _CExpr(lambda fr: fn(of(fr)), typ, False)
-        og = cast(GenFn, operand.fn)
-
-        def unary_gen(fr: _Frame) -> Gen:
-            return fn((yield from og(fr)))
-
-        return _CExpr(unary_gen, typ, True)
+        return _mapped(operand, fn, typ)
 
     def ternary(self, node: a.Ternary) -> _CExpr:
         cond, then, other = (self.expr(n) for n in (node.condition, node.then, node.otherwise))
@@ -742,15 +739,7 @@ class _ExprCompiler:
             except ConversionError as exc:
                 raise _runtime(node, str(exc)) from None
 
-        if not operand.gen:
-            of = cast(PureFn, operand.fn)
-            return _CExpr(lambda fr: conv(of(fr)), target, False)
-        og = cast(GenFn, operand.fn)
-
-        def cast_gen(fr: _Frame) -> Gen:
-            return conv((yield from og(fr)))
-
-        return _CExpr(cast_gen, target, True)
+        return _mapped(operand, conv, target)
 
 
 class _Compiler(_ExprCompiler):
