@@ -225,29 +225,13 @@ def _write_once(
     """One FC16 write, sent once; None when answered, True when the link stayed busy for
     ``wait_s`` or is down, the error when it failed.
 
-    A BlockTransport's request is made under its lock, waited for at most ``wait_s``
-    (a robot polling densely holds it most of the time: a write that only tried the
-    lock missed beat after beat, and the program expired a live master's command), and
-    not counted as one of the link's requests.
+    A BlockTransport writes it under its lock, waited for at most ``wait_s``
+    (:meth:`BlockTransport.write_when_free`).
     """
-    if not isinstance(transport, BlockTransport):
-        try:
-            transport.write_block(Table.HOLDING, address, words, retry=False, interruptible=False)
-        except TMMasterError as exc:
-            return exc
-        return None
-    lock = transport._lock
-    if not lock.acquire(timeout=wait_s):
-        return True
+    if isinstance(transport, BlockTransport):
+        return transport.write_when_free(address, words, wait_s=wait_s)
     try:
-        if transport.state is not ConnectionState.CONNECTED or not transport._link_open():
-            return True  # the robot's thread reconnects a dropped link, never the heartbeat
-        what = f"write holding {address}+{len(words)} (heartbeat)"
-        try:
-            transport._exchange(what, 16, address, len(words), words)
-        except TMMasterError as exc:
-            transport._request_failed(exc)
-            return exc
-        return None
-    finally:
-        lock.release()
+        transport.write_block(Table.HOLDING, address, words, retry=False, interruptible=False)
+    except TMMasterError as exc:
+        return exc
+    return None

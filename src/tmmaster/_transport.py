@@ -47,6 +47,7 @@ from pymodbus.pdu.register_message import (
 )
 
 from ._codec import Decoder, Value, decoder, encoder
+from ._error_root import TMMasterError
 from ._exceptions import (
     MODBUS_EXCEPTIONS,
     ConfigError,
@@ -621,6 +622,41 @@ class BlockTransport(ABC):
         # A link failure, or an interruption mid-request (KeyboardInterrupt, a cancelled
         # task): the request's answer may still come on this stream.
         self._drop()
+
+    def write_when_free(
+        self, address: int, words: list[int], *, wait_s: float
+    ) -> BaseException | bool | None:
+        """Write holding registers in one FC16 request, sent once, once the link is free.
+
+        For a write that is no command (the master's heartbeat): it never reconnects a
+        dropped link (the robot's thread does), is never retried, and is not counted as
+        one of the link's requests. The lock is waited for at most ``wait_s``: a robot
+        polling densely holds it most of the time, and a write that only tried it missed
+        beat after beat.
+
+        Args:
+            address: The first holding register.
+            words: The words.
+            wait_s: How long to wait for the link's lock, s.
+
+        Returns:
+            None when answered; True when the link stayed busy or is down (nothing
+            sent); the error when the write failed.
+        """
+        if not self._lock.acquire(timeout=wait_s):
+            return True
+        try:
+            if self.state is not ConnectionState.CONNECTED or not self._link_open():
+                return True
+            what = f"write holding {address}+{len(words)} (heartbeat)"
+            try:
+                self._exchange(what, 16, address, len(words), words)
+            except TMMasterError as exc:
+                self._request_failed(exc)
+                return exc
+            return None
+        finally:
+            self._lock.release()
 
     def bound_retries(self, deadline: float) -> None:
         """From now on, retry no request past ``deadline`` (``time.monotonic()``).
