@@ -30,14 +30,14 @@ them, never raises them.
 from __future__ import annotations
 
 import asyncio
-import math
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Protocol, Self
 
-from ._address import check_host, is_in_process
+from ._address import check_host, check_port, is_in_process
 from ._channels import CommandChannel, channel_for
+from ._checks import Bounds, require_in
 from ._codec import Value
 from ._commanded import commanding
 from ._exceptions import (
@@ -379,14 +379,16 @@ class StatusMonitor:
         event_loop: EventLoopName = "auto",
     ) -> None:
         #: Polls per second of each robot.
-        self.rate_hz = _require_within("rate_hz", rate_hz, self.MIN_RATE_HZ, self.MAX_RATE_HZ)
+        self.rate_hz = require_in(
+            "rate_hz", rate_hz, Bounds(self.MIN_RATE_HZ, self.MAX_RATE_HZ, "Hz")
+        )
         #: The answer timeout of the monitor's own links, s.
-        self.timeout_s = _require_within(
-            "timeout_s", timeout_s, self.MIN_TIMEOUT_S, self.MAX_TIMEOUT_S
+        self.timeout_s = require_in(
+            "timeout_s", timeout_s, Bounds(self.MIN_TIMEOUT_S, self.MAX_TIMEOUT_S, "s")
         )
         #: The longest wait before reconnecting an own link, s.
-        self.backoff_max_s = _require_within(
-            "backoff_max_s", backoff_max_s, 0.0, self.MAX_BACKOFF_S, low_inclusive=False
+        self.backoff_max_s = require_in(
+            "backoff_max_s", backoff_max_s, Bounds(0.0, self.MAX_BACKOFF_S, "s", open_low=True)
         )
         self._runner = LoopThread(event_loop, name="tmmaster-monitor", owner="StatusMonitor")
         #: The event loop the monitor runs on: "uvloop" or "asyncio".
@@ -444,8 +446,7 @@ class StatusMonitor:
             raise ConfigError(
                 f"host {host!r}: a StatusMonitor polls over Modbus TCP (no in-process endpoints)"
             )
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
-            raise ConfigError(f"port must be 1..65535, got {port!r}")
+        port = check_port(port)
         _refuse_commanded(name, host, port)
         self._robots[name] = _Watched(
             name,
@@ -631,20 +632,3 @@ class StatusMonitor:
             running=lambda: not self._stopping,
             timings=self._timings,
         )
-
-
-def _require_within(
-    name: str, value: object, low: float, high: float, *, low_inclusive: bool = True
-) -> float:
-    """``value`` as a float when it is a finite number in range; else a ConfigError naming it."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value > high
-        or value < low
-        or (value == low and not low_inclusive)
-    ):
-        bounds = f"in {low:g}..{high:g}" if low_inclusive else f"> {low:g} and <= {high:g}"
-        raise ConfigError(f"{name} must be a finite number {bounds}, got {value!r}")
-    return float(value)
