@@ -159,7 +159,7 @@ class _Job(Generic[T]):
                 self._state = _State.SKIPPED
             elif self._state is _State.RUNNING and not self._interrupted:
                 self._interrupted = True
-                self._owner._interrupt_for_cancel()
+                self._owner.robot.interrupt()  # its wait gives up now
 
     def run(self) -> None:
         """In the robot's thread: the call, then (if cancelled meanwhile) its clean-up."""
@@ -255,11 +255,8 @@ class _Primed(collections.abc.Coroutine[Any, Any, T]):
         self._body.close()
 
     def __await__(self) -> Generator[Any, None, T]:
-        return self._steps()
-
-    def _steps(self) -> Generator[Any, None, T]:
-        # Awaited: the body steps on as any awaited coroutine's (throws included).
-        return (yield from self._body.__await__())
+        # Awaited: the body steps on as any awaited coroutine (throws included).
+        return self._body.__await__()
 
 
 # -- the awaited methods, made from the sync ones -----------------------------------------
@@ -675,10 +672,6 @@ class AsyncRobot(_Front):
         running = self._worker.running
         if running is not None and running.follows is motion:
             running.cancel()
-
-    def _interrupt_for_cancel(self) -> None:
-        """From the caller's loop (a call cancelled): its wait gives up now."""
-        self.robot.interrupt()
 
     def _end_interrupt(self) -> None:
         """In the robot's thread, a cancelled call over: take back its stop request."""
