@@ -20,8 +20,8 @@ from ._cliparse import (
     ArgumentParser,
     UsageError,
     did_you_mean,
-    ended_quietly,
     one_line,
+    run_command,
     write_stdout,
 )
 from ._exceptions import TMMasterError
@@ -229,18 +229,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ends any command quietly, with the shell's status for it, 141
     (:data:`~tmmaster._cliparse.EXIT_BROKEN_PIPE`).
     """
-    return run_main("tmmaster", lambda: ended_quietly(lambda: _main(argv)), process=argv is None)
+    return run_command("tmmaster", build_parser, lambda args: _run(args, argv), argv)
 
 
-def _main(argv: Sequence[str] | None) -> int:
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except UsageError as exc:
-        print(f"tmmaster: {one_line(exc)} [exit 2]", file=sys.stderr)
-        return 2
+def _run(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.command is None:  # plain ``tmmaster``: say what it can do, as a usage error
-        parser.print_help(sys.stderr)
+        build_parser().print_help(sys.stderr)
         print("tmmaster: give a command [exit 2]", file=sys.stderr)
         return 2
     _apply_global_logging(args, sys.argv[1:] if argv is None else argv)
