@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import collections.abc
+import concurrent.futures
 import contextlib
 import functools
 import inspect
@@ -32,7 +33,6 @@ import re
 import textwrap
 import threading
 from collections.abc import Callable, Coroutine, Generator
-from enum import Enum
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, cast
 
 from .._checks import require_positive
@@ -91,8 +91,7 @@ class _Worker:
     def _run(self) -> None:
         while True:
             with self._ready:
-                while not self._jobs and not self._closed:
-                    self._ready.wait()
+                self._ready.wait_for(lambda: self._jobs or self._closed)
                 if not self._jobs:
                     return  # shut down, every queued call run
                 job = self._jobs.popleft()
@@ -114,13 +113,6 @@ class _Worker:
         return not thread.is_alive()
 
 
-class _State(Enum):
-    QUEUED = "queued"
-    SKIPPED = "skipped"
-    RUNNING = "running"
-    ENDED = "ended"
-
-
 class _Job(Generic[T]):
     """One call of an AsyncRobot: run by the robot's thread, awaited on the caller's loop."""
 
@@ -135,18 +127,20 @@ class _Job(Generic[T]):
         self._call = call
         #: The motion the call follows (a motion's wait or progress), given up with it.
         self.follows = follows
-        self._loop = asyncio.get_running_loop()
-        #: The call's result or exception, set on the caller's loop.
-        self.outcome: asyncio.Future[T] = self._loop.create_future()
+        # Pending (queued), cancelled (skipped: never run) or running, then the call's
+        # result or exception, set by the robot's thread once its clean-up is done.
+        self._future: concurrent.futures.Future[T] = concurrent.futures.Future()
+        #: The same, on the caller's loop (nothing is set there once that loop is closed).
+        self.outcome = asyncio.wrap_future(self._future, loop=asyncio.get_running_loop())
         self.outcome.add_done_callback(_retrieve)
         self._lock = threading.Lock()
-        self._state = _State.QUEUED
+        self._ended = False
         self._interrupted = False
 
     @property
     def skipped(self) -> bool:
         """True when the call was cancelled before the robot's thread started it."""
-        return self._state is _State.SKIPPED
+        return self._future.cancelled()
 
     def cancel(self) -> None:
         """From the caller's loop: never start the call, or make the running one give up.
@@ -155,18 +149,16 @@ class _Job(Generic[T]):
         its next poll, or at once where a Fleet's loop polls it.
         """
         with self._lock:
-            if self._state is _State.QUEUED:
-                self._state = _State.SKIPPED
-            elif self._state is _State.RUNNING and not self._interrupted:
-                self._interrupted = True
-                self._owner.robot.interrupt()  # its wait gives up now
+            if self._future.cancel() or self._ended or self._interrupted:
+                return  # skipped now, or over, or given up already
+            self._interrupted = True
+            self._owner.robot.interrupt()  # its wait gives up now
 
     def run(self) -> None:
         """In the robot's thread: the call, then (if cancelled meanwhile) its clean-up."""
         with self._lock:
-            if self._state is _State.SKIPPED:
-                return
-            self._state = _State.RUNNING
+            if not self._future.set_running_or_notify_cancel():
+                return  # skipped
         value: T | None = None
         error: BaseException | None = None
         try:
@@ -174,7 +166,7 @@ class _Job(Generic[T]):
         except BaseException as exc:  # handed to the awaiting coroutine as it is
             error = exc
         with self._lock:
-            self._state = _State.ENDED
+            self._ended = True
             interrupted = self._interrupted
         if interrupted:
             # Nobody waits for what this call started: give it up before the next call.
@@ -182,7 +174,10 @@ class _Job(Generic[T]):
             if live is not None:
                 self._owner._give_up_in_thread(live)
             self._owner._end_interrupt()
-        self._deliver(value, error)
+        if error is not None:
+            self._future.set_exception(error)
+        else:
+            self._future.set_result(value)  # type: ignore[arg-type]  # T when no error
 
     def unsupervised(self) -> Motion | None:
         """After the call ended uninterrupted: the motion it leaves nobody waiting for."""
@@ -191,20 +186,6 @@ class _Job(Generic[T]):
         if self.outcome.exception() is not None:
             return None
         return _live_motion(self.outcome.result(), self.follows)
-
-    def _deliver(self, value: T | None, error: BaseException | None) -> None:
-        try:
-            self._loop.call_soon_threadsafe(self._settle, value, error)
-        except RuntimeError:  # the caller's loop is closed: nobody awaits this any more
-            return
-
-    def _settle(self, value: T | None, error: BaseException | None) -> None:
-        if self.outcome.done():
-            return
-        if error is not None:
-            self.outcome.set_exception(error)
-        else:
-            self.outcome.set_result(value)  # type: ignore[arg-type]  # T when no error
 
 
 def _retrieve(future: asyncio.Future[Any]) -> None:
@@ -233,17 +214,14 @@ class _Primed(collections.abc.Coroutine[Any, Any, T]):
 
     def __init__(self, body: Coroutine[Any, Any, T]) -> None:
         self._body = body
-        self._started = False
 
     def send(self, value: Any) -> Any:
         """Run the body on to its next ``await``."""
-        self._started = True
         return self._body.send(value)
 
     def throw(self, typ: Any, val: Any = None, tb: Any = None) -> Any:
         """Raise ``typ`` in the body at its current ``await`` (its first, if not started)."""
-        if not self._started:
-            self._started = True
+        if inspect.getcoroutinestate(self._body) == inspect.CORO_CREATED:
             with contextlib.suppress(StopIteration):
                 self._body.send(None)  # what it yields is dropped: the throw comes first
         if val is None and tb is None:
@@ -312,16 +290,15 @@ def _derive(
     """
     name = method.__name__
 
+    # Named after the method, which it wraps: its signature is the method's.
+    @functools.wraps(method, assigned=("__name__",))
     async def awaited(self: _Front, /, *args: P.args, **kwargs: P.kwargs) -> R:
         value = await self._on_thread(name, *args, **kwargs)
         return cast(R, value if then is None else then(self, value))
 
-    signature = inspect.signature(method)
     if then is not None:
-        signature = signature.replace(return_annotation=then.__name__)
-    awaited.__name__ = name
-    awaited.__wrapped__ = method  # type: ignore[attr-defined]
-    awaited.__signature__ = signature  # type: ignore[attr-defined]
+        signature = inspect.signature(method).replace(return_annotation=then.__name__)
+        awaited.__signature__ = signature  # type: ignore[attr-defined]
     note = textwrap.fill(_AWAITED.format(method.__qualname__), 88)
     awaited.__doc__ = _derived_doc(method, note + own)
     return awaited
