@@ -555,17 +555,23 @@ class _MotionFollower:
             if observation.failure.pose is None:
                 observation.failure.pose = self._pose_or(motion.last_pose)
             raise observation.failure
-        if observation.acknowledged and motion.phase is MovePhase.SENT:
-            motion.phase = MovePhase.RUNNING
-            ticket = motion.ticket
-            if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
-                self._log.info(
-                    "robot.command_acknowledged",
-                    command=motion.command.kind.value,
-                    ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
-                )
+        if observation.acknowledged:
+            self._note_acknowledged(motion)
         if observation.done:
             self._finish(motion, observation.pose)
+
+    def _note_acknowledged(self, motion: Motion) -> None:
+        """The robot took the command: RUNNING (from the thread, or a Fleet's loop)."""
+        if motion.phase is not MovePhase.SENT:
+            return
+        motion.phase = MovePhase.RUNNING
+        ticket = motion.ticket
+        if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
+            self._log.info(
+                "robot.command_acknowledged",
+                command=motion.command.kind.value,
+                ack_s=round((ticket.acknowledged_at or time.monotonic()) - ticket.sent_at, 4),
+            )
 
     def wait(self, motion: Motion, timeout_s: float | None) -> None:
         """Poll until the command is done; raises on failure, timeout or stop request."""
@@ -579,6 +585,7 @@ class _MotionFollower:
             stall_s=self.timeouts.stall_s,
         )
         shared = self.shared_driver
+        follow.on_acknowledged = functools.partial(self._note_acknowledged, motion)
         speed_checked = False
         while True:
             observation = None if shared is None else shared(follow)

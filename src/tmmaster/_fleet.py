@@ -455,29 +455,26 @@ class FleetMember:
         """From the robot's thread: poll on the loop until the thread must act (None: poll)."""
         if follow.stop_event.is_set():
             return None
-        ended = threading.Event()
         now = time.monotonic()
         # The loop hands back by the deadlines; beyond them, the last poll's requests.
         bound = max(follow.ack_deadline - now, 0.0) + follow.longest_budget()
         bound += 4 * self.transport.timeout + _LOOP_GRACE_S
-        future = self.fleet._submit(self._follow(follow, ended))
-        if future is None:
+        job = _FollowJob(self, follow)
+        if not self.fleet._call_soon(job.begin):
             return None  # the loop has ended: the thread polls (and its requests fail)
         try:
-            return _result(future, bound)
-        except concurrent.futures.CancelledError:
+            return job.latch.wait(bound)
+        except (concurrent.futures.CancelledError, asyncio.CancelledError):
             return None  # the loop ended meanwhile: as above
         except _NoAnswerError as exc:
             raise TransportError(
                 f"{self.transport.name}: the fleet's event loop did not answer within {bound:.1f} s"
             ) from exc
         finally:
-            if not ended.is_set():
+            if not job.ended.is_set() and self.fleet._call_soon(job.cancel):
                 # Given up (Ctrl-C, the bound): the loop's poll must be over before the
                 # thread acts on the command (withdraw, stop), so nothing interleaves.
-                future.cancel()
-                if self.fleet._running:
-                    ended.wait(self.transport.timeout + _LOOP_GRACE_S)
+                job.ended.wait(self.transport.timeout + _LOOP_GRACE_S)
 
     def wake(self) -> None:
         """On the loop: end the current nap early (a stop request)."""
@@ -623,6 +620,42 @@ class FleetMember:
 _MAIN_THREAD_SLICE_S = 0.05
 
 
+class _FollowJob:
+    """One hand-over of a wait to the loop: its task, started and cancelled on the loop.
+
+    A callback and a :class:`_Latch` instead of ``run_coroutine_threadsafe`` (no
+    concurrent future chained to the task): the thread is woken once, by the task's end.
+    """
+
+    __slots__ = ("cancelled", "ended", "follow", "latch", "member", "task")
+
+    def __init__(self, member: FleetMember, follow: FollowState) -> None:
+        self.member = member
+        self.follow = follow
+        #: Set once the loop's polls of this wait are over (or never began).
+        self.ended = threading.Event()
+        self.latch: _Latch[Observation | None] = _Latch()
+        self.task: asyncio.Task[Observation | None] | None = None
+        self.cancelled = False
+
+    def begin(self) -> None:
+        """On the loop: start polling (nothing when given up first or the loop is ending)."""
+        if self.cancelled or not self.member.fleet._running:
+            self.ended.set()
+            self.latch.settle(None)
+            return
+        self.task = asyncio.get_running_loop().create_task(
+            self.member._follow(self.follow, self.ended)
+        )
+        self.task.add_done_callback(self.latch.take)
+
+    def cancel(self) -> None:
+        """On the loop: the thread gave up waiting; end the polls."""
+        self.cancelled = True
+        if self.task is not None:
+            self.task.cancel()
+
+
 class _Latch(Generic[T]):
     """One answer handed from the loop to a waiting thread: a value or an exception."""
 
@@ -644,7 +677,7 @@ class _Latch(Generic[T]):
         self._error = error
         self._lock.release()
 
-    def take(self, future: concurrent.futures.Future[T]) -> None:
+    def take(self, future: concurrent.futures.Future[T] | asyncio.Future[T]) -> None:
         """A finished future's result, or its exception (cancelled: ``CancelledError``)."""
         try:
             value = future.result()

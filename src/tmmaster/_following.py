@@ -77,6 +77,7 @@ class FollowState:
         "budget",
         "last_progress_at",
         "motion",
+        "on_acknowledged",
         "poll_started",
         "poller",
         "scales_with_pace",
@@ -118,6 +119,10 @@ class FollowState:
         #: ``time.monotonic()`` of the poll that last saw the arm move (None: not yet).
         self.last_progress_at: float | None = None
         self._progress_pose: Pose | None = motion.start
+        #: Notes the acknowledgement where the poll saw it (the command path's, so that a
+        #: Fleet's loop polls on to the end instead of handing the thread each step);
+        #: None: :meth:`settled` hands the acknowledgement to the waiting thread.
+        self.on_acknowledged: Callable[[], None] | None = None
 
     def due(self) -> float:
         """The monotonic time of the next poll.
@@ -234,7 +239,9 @@ class FollowState:
         if observation.failure is not None or observation.done:
             return True
         if observation.acknowledged and self.motion.phase is MovePhase.SENT:
-            return True  # the thread notes it (and the schedule anchors on it)
+            if self.on_acknowledged is None:
+                return True  # the thread notes it (and the schedule anchors on it)
+            self.on_acknowledged()  # RUNNING: the motion's deadline applies from here
         return self.overdue(now) is not None
 
 
