@@ -611,10 +611,12 @@ class AsyncRobot(_Front):
         deadline = asyncio.get_running_loop().time() + self.settle_timeout_s
         if job.skipped:
             # Never started, so the call itself sent nothing; but a wait queued behind
-            # another call follows a move that was sent, and that move is given up.
+            # another call follows a move that was sent, and that move is given up: a
+            # running wait on it (another caller's) gives up too.
             live = _live_motion(None, job.follows)
-            if live is not None:
-                self._interrupt_followers(live)
+            running = self._worker.running
+            if live is not None and running is not None and running.follows is live:
+                running.cancel()
         elif not await self._settle(job.outcome, deadline, "call"):
             return
         else:
@@ -643,12 +645,6 @@ class AsyncRobot(_Front):
             except asyncio.CancelledError:
                 continue  # cancelled again (a second Ctrl-C): the clean-up still comes first
         return True
-
-    def _interrupt_followers(self, motion: Motion) -> None:
-        """Another caller's running wait on ``motion`` gives up too (the move is given up)."""
-        running = self._worker.running
-        if running is not None and running.follows is motion:
-            running.cancel()
 
     def _end_interrupt(self) -> None:
         """In the robot's thread, a cancelled call over: take back its stop request."""
