@@ -2,8 +2,9 @@
 
 One artifact: the text :func:`robot_program` returns is what a user loads into TMflow
 (``tmmaster robot-program -o tmmaster.tms``) and what the simulator executes through
-:mod:`tmmaster.tmscript`. The template (``robot_program.tms``, beside this module) cites
-the TMscript 2.24 section of every construct it uses; this module only fills in the
+:mod:`tmmaster.tmscript`. The template (``robot_program.tms``, beside this module, with
+the gripper's ``Grip()`` in ``robot_program_grip_io.tms`` or ``robot_program_grip_none.tms``)
+cites the TMscript 2.24 section of every construct it uses; this module only fills in the
 profile's addresses and codes, the tool and the gripper wiring, after checking that the
 profile is one the program can serve.
 """
@@ -73,46 +74,6 @@ class GripperWiring:
         ):
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
                 raise ConfigError(f"gripper {name} must be an integer 0..{high}, got {value!r}")
-
-
-_GRIP_IO = """// The gripper on the end module, through the robot's own Modbus table ([TMF]
-// appendix C, End Module, p. 307: DO 0-3 are coils 800-803, FC 05; DI 0-3 are discrete
-// inputs 800-803, FC 02): DO$output closes it when high and opens it when low; after $settle_ms ms
-// ([TS] 5.5 Sleep, p. 159) DI$input tells whether a part is held ([TS] 16.11 modbus_write
-// Syntax 3, p. 437, false when the write failed; 16.5 modbus_read Syntax 2, p. 424: a
-// byte[], kept in a variable before it is indexed, [TS] 2.4 operators, p. 19). Edit this
-// function for another gripper; keep its last two steps (grasp_status, then Done()).
-void Grip()
-{
-    ok = false
-    if (cmd == $cmd_close)
-    {
-        ok = modbus_write("TM", 1, "DO", $do_address, 1)
-    }
-    else
-    {
-        ok = modbus_write("TM", 1, "DO", $do_address, 0)
-    }
-    if (!ok)
-    {
-        Abort("modbus_write DO$output failed (the Modbus slave refused a write from 127.0.0.1?)")
-    }
-    Sleep($settle_ms)
-    grasp = 0
-    if (cmd == $cmd_close)
-    {
-        bits = modbus_read("TM", 1, "DI", $di_address, 1)
-        grasp = bits[0]
-    }
-    Put("fbGrasp", grasp)
-    Done()
-}"""
-
-_GRIP_NONE = """// No gripper: gripper commands are refused.
-void Grip()
-{
-    Finish($gripper_failed, $state_error)
-}"""
 
 
 #: The largest tool values the program writes, by field: a TCP within 2 m of the flange
@@ -333,6 +294,11 @@ def _value_codes(profile: RobotProfile) -> dict[str, int]:
     return {name: profile.field(field).code_of(label) for name, (field, label) in _CODES.items()}
 
 
+def _template(name: str) -> Template:
+    """A TMscript template beside this module (its last newline left to the caller)."""
+    return Template(resources.files("tmmaster").joinpath(name).read_text("utf-8").rstrip("\n"))
+
+
 def robot_program(
     profile: RobotProfile,
     *,
@@ -367,7 +333,7 @@ def robot_program(
     codes = _value_codes(profile)
     first = profile.field(TARGET_FIELDS[0]).address
     addresses = {name: profile.field(name).address for name in (*_FEEDBACK, *_MASTER, "command")}
-    grip = Template(_GRIP_IO if wiring.kind == "io" else _GRIP_NONE).substitute(
+    grip = _template(f"robot_program_grip_{wiring.kind}.tms").substitute(
         output=wiring.output,
         input=wiring.input,
         do_address=END_MODULE_DO + wiring.output,
@@ -375,8 +341,7 @@ def robot_program(
         settle_ms=wiring.settle_ms,
         **codes,
     )
-    template = resources.files("tmmaster").joinpath("robot_program.tms").read_text("utf-8")
-    text = Template(template).substitute(
+    text = _template("robot_program.tms").substitute(
         version=version(),
         profile=profile.name,
         arguments=arguments,
