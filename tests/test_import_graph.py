@@ -12,6 +12,7 @@ when it is imported; a function may, where the user asked for the simulator
 from __future__ import annotations
 
 import ast
+import functools
 import importlib
 import importlib.util
 from pathlib import Path
@@ -48,13 +49,19 @@ def _resolve(module: str, is_package: bool, level: int, name: str | None) -> str
     return ".".join([*base, name] if name else base)
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """The module's syntax tree, parsed once per process (several tests read it)."""
+    return ast.parse(path.read_text("utf-8"))
+
+
 def _imports(module: str, path: Path, *, at_import: bool = False) -> set[str]:
     """Modules of this package that ``module`` imports, at any depth of its code.
 
     ``at_import``: only the imports that run when ``module`` is imported (none inside a
     function or under ``if TYPE_CHECKING:``).
     """
-    tree = ast.parse(path.read_text("utf-8"))
+    tree = _tree(path)
     is_package = path.name == "__init__.py"
     targets: set[str] = set()
     for node in _executed_at_import(tree) if at_import else ast.walk(tree):
