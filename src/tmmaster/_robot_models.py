@@ -558,39 +558,25 @@ class RobotModel(BaseModel):
                 have to flip configuration on the way.
         """
         seed = self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg)
-        return list(_cached_line(self, start, target, _rounded(seed), tool, step_mm, step_deg))
+        return list(
+            _cached_path(self, start, None, target, _rounded(seed), tool, step_mm, step_deg)
+        )
 
-    def _line(
+    def _path(
         self,
         start: Pose,
+        via: Pose | None,
         target: Pose,
         start_joints: Joints,
         tool: Pose | None,
         step_mm: float,
         step_deg: float,
     ) -> tuple[Joints, ...]:
-        a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
-        rotation = math.degrees(math.hypot(*kin.rotation_error(a, b)))
-        steps = max(1, math.ceil(max(start.distance_to(target) / step_mm, rotation / step_deg)))
-        return self._path(
-            start,
-            lambda f: kin.interpolate(a, b, f),
-            steps,
-            start_joints,
-            tool,
-            f"the straight path to {target}",
-        )
-
-    def _path(
-        self,
-        start: Pose,
-        at: Callable[[float], kin.Transform],
-        steps: int,
-        start_joints: Joints,
-        tool: Pose | None,
-        what: str,
-    ) -> tuple[Joints, ...]:
-        """Joints at ``steps`` + 1 evenly spaced points ``at(k / steps)`` of a TCP path."""
+        """Joints at evenly spaced points of a Line (``via`` None) or an arc, at most
+        ``step_mm`` and ``step_deg`` apart."""
+        at, length_mm, rotation_deg = _path_geometry(start, via, target)
+        steps = max(1, math.ceil(max(length_mm / step_mm, rotation_deg / step_deg)))
+        what = f"the straight path to {target}" if via is None else f"the arc to {target}"
         seed = self.start_joints(start, start_joints, tool)
         samples = [seed]
         for k in range(1, steps + 1):
@@ -651,22 +637,7 @@ class RobotModel(BaseModel):
                 have to flip configuration on the way.
         """
         seed = self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg)
-        return list(_cached_arc(self, start, via, target, _rounded(seed), tool, step_mm, step_deg))
-
-    def _arc(
-        self,
-        start: Pose,
-        via: Pose,
-        target: Pose,
-        start_joints: Joints,
-        tool: Pose | None,
-        step_mm: float,
-        step_deg: float,
-    ) -> tuple[Joints, ...]:
-        arc = arc_through(start, via, target)
-        rotation = math.degrees(math.hypot(*kin.rotation_error(arc.start, arc.end)))
-        steps = max(1, math.ceil(max(arc.length_mm / step_mm, rotation / step_deg)))
-        return self._path(start, arc.at, steps, start_joints, tool, f"the arc to {target}")
+        return list(_cached_path(self, start, via, target, _rounded(seed), tool, step_mm, step_deg))
 
     def line_time(
         self,
@@ -699,16 +670,9 @@ class RobotModel(BaseModel):
             UnreachablePoseError: The path cannot be taken.
         """
         _speed_scale(speed_percent)
-        a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
         if samples is None:
             samples = self.line_joints(start, target, start_joints_deg=start_joints_deg, tool=tool)
-        return self._path_time(
-            start.distance_to(target),
-            math.degrees(math.hypot(*kin.rotation_error(a, b))),
-            samples,
-            speed_percent,
-            accel_time_s,
-        )
+        return self._path_time(start, None, target, samples, speed_percent, accel_time_s)
 
     def arc_time(
         self,
@@ -744,23 +708,17 @@ class RobotModel(BaseModel):
             UnreachablePoseError: The arc cannot be taken.
         """
         _speed_scale(speed_percent)
-        arc = arc_through(start, via, target)
         if samples is None:
             samples = self.arc_joints(
                 start, via, target, start_joints_deg=start_joints_deg, tool=tool
             )
-        return self._path_time(
-            arc.length_mm,
-            math.degrees(math.hypot(*kin.rotation_error(arc.start, arc.end))),
-            samples,
-            speed_percent,
-            accel_time_s,
-        )
+        return self._path_time(start, via, target, samples, speed_percent, accel_time_s)
 
     def _path_time(
         self,
-        length_mm: float,
-        rotation_deg: float,
+        start: Pose,
+        via: Pose | None,
+        target: Pose,
         samples: Sequence[Sequence[float]],
         speed_percent: float,
         accel_time_s: float | None,
@@ -768,6 +726,7 @@ class RobotModel(BaseModel):
         """A Cartesian path's trapezoid, slowed where a joint would be too fast, s."""
         scale = _speed_scale(speed_percent)
         ramp = self.accel_time_s if accel_time_s is None else accel_time_s
+        _, length_mm, rotation_deg = _path_geometry(start, via, target)
         cartesian = max(
             trapezoid_time(length_mm, self.tcp_speed_mm_s * scale, ramp),
             trapezoid_time(rotation_deg, min(self.joint_speed_deg_s[3:]) * scale, ramp),
@@ -938,30 +897,38 @@ def _cached_forward(model: RobotModel, joints: Joints, tool: Pose | None) -> Pos
 
 
 @functools.lru_cache(maxsize=256)
-def _cached_line(
+def _cached_path(
     model: RobotModel,
     start: Pose,
+    via: Pose | None,
     target: Pose,
     seed: Joints,
     tool: Pose | None,
     step_mm: float,
     step_deg: float,
 ) -> tuple[Joints, ...]:
-    return model._line(start, target, seed, tool, step_mm, step_deg)
+    return model._path(start, via, target, seed, tool, step_mm, step_deg)
 
 
-@functools.lru_cache(maxsize=256)
-def _cached_arc(
-    model: RobotModel,
-    start: Pose,
-    via: Pose,
-    target: Pose,
-    seed: Joints,
-    tool: Pose | None,
-    step_mm: float,
-    step_deg: float,
-) -> tuple[Joints, ...]:
-    return model._arc(start, via, target, seed, tool, step_mm, step_deg)
+def _path_geometry(
+    start: Pose, via: Pose | None, target: Pose
+) -> tuple[Callable[[float], Transform], float, float]:
+    """A Line's (``via`` None) or an arc's path: the TCP at a fraction of it, its length
+    (mm) and its rotation (deg).
+
+    Raises:
+        ConfigError: No arc passes through the three points.
+    """
+    if via is None:
+        a, b = kin.pose_to_transform(start), kin.pose_to_transform(target)
+        return (lambda f: kin.interpolate(a, b, f)), start.distance_to(target), _turn_deg(a, b)
+    arc = arc_through(start, via, target)
+    return arc.at, arc.length_mm, _turn_deg(arc.start, arc.end)
+
+
+def _turn_deg(a: Transform, b: Transform) -> float:
+    """The rotation from ``a``'s orientation to ``b``'s, deg."""
+    return math.degrees(math.hypot(*kin.rotation_error(a, b)))
 
 
 def arc_through(start: Pose, via: Pose, target: Pose) -> kin.Arc:
