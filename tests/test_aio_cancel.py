@@ -9,6 +9,7 @@ cancelled before its first step. The simulator's motion log is the judge.
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -237,3 +238,31 @@ def test_an_interrupt_between_a_cancelled_calls_end_and_its_clear_stands(
 
     run(scenario)
     assert [m.target for m in sim.motion_log() if m.target is not None] == [A]
+
+
+def test_a_call_that_will_not_give_up_raises_the_cancel_after_settle_timeout_s(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # A call deaf to the stop request (a slow link's read) holds the robot's thread: the
+    # CancelledError comes once settle_timeout_s is over, with an error logged, and a
+    # second cancel meanwhile does not cut that wait short.
+    blocker = Blocker()
+
+    async def scenario() -> float:
+        robot = aio.AsyncRobot(Robot("127.0.0.1", 502), settle_timeout_s=0.3)
+        task = await hold_the_thread(robot, blocker)
+        cancelled_at = time.monotonic()
+        task.cancel()
+        await asyncio.sleep(0.05)
+        task.cancel()  # a second Ctrl-C
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        waited = time.monotonic() - cancelled_at
+        blocker.release.set()
+        await robot.close()
+        return waited
+
+    with caplog.at_level(logging.ERROR, logger="tmmaster.aio"):
+        waited = run(scenario)
+    assert waited >= 0.3  # the bound is the very feature: never raised before it
+    assert any("aio.cancel_unsettled" in r.getMessage() for r in caplog.records)

@@ -369,8 +369,7 @@ class AsyncMotion:
         Returns:
             The wait, a coroutine (await it, or make it a task).
         """
-        motion = self.motion
-        return self._robot._follow(motion, functools.partial(motion.wait, timeout_s))
+        return self._robot._follow(self.motion, functools.partial(self.motion.wait, timeout_s))
 
     @_documented(Motion.progress)
     def progress(self) -> Coroutine[Any, Any, MoveProgress]:
@@ -380,8 +379,7 @@ class AsyncMotion:
         Returns:
             The report (a :class:`~tmmaster.MoveProgress`), a coroutine.
         """
-        motion = self.motion
-        return self._robot._follow(motion, motion.progress)
+        return self._robot._follow(self.motion, self.motion.progress)
 
     def __await__(self) -> Generator[Any, None, Motion]:
         return self._finished().__await__()
@@ -633,18 +631,15 @@ class AsyncRobot(_Front):
     async def _settle(self, future: asyncio.Future[Any], deadline: float, what: str) -> bool:
         """Wait for ``future`` until ``deadline`` (loop time), whatever cancels the caller."""
         loop = asyncio.get_running_loop()
-        while not future.done():
-            left = deadline - loop.time()
-            if left <= 0:
-                self._log.error(
-                    "aio.cancel_unsettled", what=what, settle_timeout_s=self.settle_timeout_s
-                )
-                return False
-            try:
-                await asyncio.wait((future,), timeout=left)
-            except asyncio.CancelledError:
-                continue  # cancelled again (a second Ctrl-C): the clean-up still comes first
-        return True
+        while not future.done() and loop.time() < deadline:
+            # Cancelled again (a second Ctrl-C): the clean-up still comes first.
+            with contextlib.suppress(asyncio.CancelledError):
+                await asyncio.wait((future,), timeout=deadline - loop.time())
+        if not future.done():
+            self._log.error(
+                "aio.cancel_unsettled", what=what, settle_timeout_s=self.settle_timeout_s
+            )
+        return future.done()
 
     def _end_interrupt(self) -> None:
         """In the robot's thread, a cancelled call over: take back its stop request."""
