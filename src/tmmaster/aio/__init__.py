@@ -10,16 +10,12 @@ command the robot has not taken is withdrawn, a running move is stopped, and the
 ``CancelledError`` reaches your code once that is settled.
 """
 
-from types import FunctionType as _FunctionType
-
 from ._robot import AsyncGripper, AsyncMotion, AsyncRobot, AsyncRobotIO, connect
 
 __all__ = ["AsyncGripper", "AsyncMotion", "AsyncRobot", "AsyncRobotIO", "connect"]
 
 # Shown as tmmaster.aio.Name where they are used (tracebacks, reprs, the docs), not as
-# the private module that defines them.
+# the private module that defines them (each is a class or function of ._robot).
 for _name in __all__:
-    _value = globals()[_name]
-    if isinstance(_value, type | _FunctionType) and _value.__module__.startswith(f"{__name__}._"):
-        _value.__module__ = __name__
-del _name, _value
+    globals()[_name].__module__ = __name__
+del _name

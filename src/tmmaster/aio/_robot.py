@@ -65,10 +65,9 @@ class _Worker:
     """
 
     def __init__(self, name: str) -> None:
-        self._name = name
         self._jobs: collections.deque[_Job[Any]] = collections.deque()
         self._ready = threading.Condition()
-        self._thread: threading.Thread | None = None
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._closed = False
         #: The job the thread runs now (None between jobs).
         self.running: _Job[Any] | None = None
@@ -82,8 +81,7 @@ class _Worker:
                 self._jobs.appendleft(job)
             else:
                 self._jobs.append(job)
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+            if self._thread.ident is None:  # the first call
                 self._thread.start()
             self._ready.notify()
         return True
@@ -103,14 +101,13 @@ class _Worker:
 
     def shutdown(self, timeout_s: float) -> bool:
         """Take no new call, run the queued ones, end the thread; False if still running."""
-        with self._ready:
+        with self._ready:  # no thread starts after this
             self._closed = True
             self._ready.notify()
-            thread = self._thread
-        if thread is None or thread is threading.current_thread():
+        if self._thread.ident is None or self._thread is threading.current_thread():
             return True
-        thread.join(timeout_s)
-        return not thread.is_alive()
+        self._thread.join(timeout_s)
+        return not self._thread.is_alive()
 
 
 class _Job(Generic[T]):
@@ -382,10 +379,7 @@ class AsyncMotion:
         return self._robot._follow(self.motion, self.motion.progress)
 
     def __await__(self) -> Generator[Any, None, Motion]:
-        return self._finished().__await__()
-
-    async def _finished(self) -> Motion:
-        await self.wait()
+        yield from self.wait().__await__()
         return self.motion
 
 
