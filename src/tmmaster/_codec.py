@@ -180,24 +180,9 @@ def decode(field: RegisterField, words: Sequence[int]) -> Value:
     """
     if len(words) != field.width:
         raise ValueError(f"{field.name}: expected {field.width} words, got {len(words)}")
-    if field.dtype is DataType.BOOL:
-        return bool(words[0])
-    if any(not 0 <= w <= 0xFFFF for w in words):
+    if field.dtype is not DataType.BOOL and any(not 0 <= w <= 0xFFFF for w in words):
         raise ValueError(f"{field.name}: register words must be 0..65535, got {list(words)}")
-    if field.dtype is DataType.FLOAT32:
-        high, low = _order(list(words), field.word_order)
-        (number,) = struct.unpack(">f", bytes([high >> 8, high & 0xFF, low >> 8, low & 0xFF]))
-        return float(number) / field.scale if field.scale != 1 else float(number)
-    if field.dtype.width == 1:
-        raw = words[0]
-        if field.dtype is DataType.INT16 and raw >= 0x8000:
-            raw -= 0x10000
-    else:
-        high, low = _order(list(words), field.word_order)
-        raw = high << 16 | low
-        if field.dtype is DataType.INT32 and raw >= 0x80000000:
-            raw -= 0x100000000
-    return raw / field.scale if field.scale != 1 else raw
+    return decoder(field)(words, 0)
 
 
 #: Decodes one field's words; built once per field by :func:`decoder`.
@@ -247,8 +232,3 @@ def decoder(field: RegisterField) -> Decoder:
         return raw / scale if scale != 1 else raw
 
     return word32
-
-
-def _order(words: list[int], order: WordOrder) -> list[int]:
-    # Swapping is its own inverse, so the same helper serves encode and decode.
-    return words if order is WordOrder.BIG else [words[1], words[0]]
