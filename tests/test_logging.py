@@ -53,12 +53,12 @@ def test_configure_logging_prints_events_and_can_be_undone(
     assert capfd.readouterr() == ("", "")
 
 
-def test_a_disabled_event_never_enters_the_processors() -> None:
+def test_a_disabled_event_never_enters_the_processors(monkeypatch: pytest.MonkeyPatch) -> None:
     import logging
 
     import structlog
 
-    from tmmaster._structlog import _BoundLogger
+    from tmmaster import _structlog
 
     seen: list[str] = []
 
@@ -66,14 +66,17 @@ def test_a_disabled_event_never_enters_the_processors() -> None:
         seen.append(str(event["event"]))
         raise structlog.DropEvent
 
+    monkeypatch.setattr(_structlog, "_PROCESSORS", [spy])
     std = logging.getLogger("tmmaster.test_disabled_events")
     std.setLevel(logging.WARNING)
-    log = structlog.wrap_logger(std, processors=[spy], wrapper_class=_BoundLogger).bind(a=1)
+    log = get_logger("tmmaster.test_disabled_events").bind(a=1)
     log.debug("d")
     log.info("i")
     log.warning("w")
     log.error("e")
-    assert seen == ["w", "e"]
+    log.exception("x")
+    std.setLevel(logging.NOTSET)
+    assert seen == ["w", "e", "x"]
 
 
 def test_is_enabled_for_follows_the_standard_loggers_level() -> None:

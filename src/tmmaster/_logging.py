@@ -60,8 +60,8 @@ class _Logger:
 
     An event below the standard logger's level costs one ``isEnabledFor`` check (answered
     from the logging module's cache) and never imports structlog; ``bind`` keeps the
-    context for when an event is enabled. The structlog logger is
-    :class:`tmmaster._structlog._BoundLogger`.
+    context for when an event is enabled: a disabled event never enters structlog's
+    processors.
     """
 
     __slots__ = ("_context", "_std", "_wrapped")

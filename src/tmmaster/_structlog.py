@@ -73,54 +73,12 @@ _PROCESSORS: list[structlog.typing.Processor] = [
 ]
 
 
-class _BoundLogger(structlog.stdlib.BoundLogger):
-    """A stdlib bound logger that drops a disabled event before building it.
-
-    ``filter_by_level`` would drop it too, but only after structlog has copied the bound
-    context and entered its processor chain (several microseconds per event); the
-    library is quiet by default, so the events of every move would pay that for nothing.
-    ``Logger.isEnabledFor`` is the same test, answered from the logging module's cache.
-    """
-
-    def debug(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at DEBUG, if enabled."""
-        if not self._logger.isEnabledFor(logging.DEBUG):
-            return None
-        return super().debug(event, *args, **kw)
-
-    def info(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at INFO, if enabled."""
-        if not self._logger.isEnabledFor(logging.INFO):
-            return None
-        return super().info(event, *args, **kw)
-
-    def warning(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at WARNING, if enabled."""
-        if not self._logger.isEnabledFor(logging.WARNING):
-            return None
-        return super().warning(event, *args, **kw)
-
-    warn = warning
-
-    def error(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at ERROR, if enabled."""
-        if not self._logger.isEnabledFor(logging.ERROR):
-            return None
-        return super().error(event, *args, **kw)
-
-    def exception(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at ERROR with the current exception, if enabled."""
-        if not self._logger.isEnabledFor(logging.ERROR):
-            return None
-        return super().exception(event, *args, **kw)
-
-
 def wrap_logger(std: logging.Logger) -> Any:
     """A structlog logger on the standard logger ``std``."""
     return structlog.wrap_logger(
         std,
         processors=_PROCESSORS,
-        wrapper_class=_BoundLogger,
+        wrapper_class=structlog.stdlib.BoundLogger,
         cache_logger_on_first_use=True,
     )
 
