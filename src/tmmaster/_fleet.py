@@ -232,7 +232,7 @@ class LoopTransport(BlockTransport):
         """
         plan = self.read_plan(fields, max_gap=max_gap)
         with self._lock:
-            if len(plan.blocks) < 2 or self._fleet._on_loop() or self.state is not _UP:
+            if self._fleet._on_loop() or self.state is not _UP:
                 return super().read_fields(
                     fields, max_gap=max_gap, retry=retry, interruptible=interruptible
                 )
