@@ -6,10 +6,15 @@ request's CPU on the driver (docs/performance.md, the hot path).
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable
 from typing import Any
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from pymodbus.framer import FramerSocket
+from pymodbus.pdu import DecodePDU
 
 import tmmaster._fleet as fleet_module
 from scripted_slave import SlaveThread, answer_with, registers
@@ -17,6 +22,7 @@ from tmmaster import ModbusTransport, PollPolicy, Pose, Robot, RobotStatus
 from tmmaster._fleet import LoopTransport
 from tmmaster._registers import RegisterField, Role, Table
 from tmmaster._retry import RetryPolicy
+from tmmaster._transport import common_answer
 from tmmaster.sim import Simulator
 
 A = Pose(300, -200, 150, 180, 0, 90)
@@ -72,3 +78,55 @@ def test_a_move_hands_its_wait_to_the_loop_once(
             assert motion.done
             assert woken == ["observation"]
         assert isinstance(robot.status(), RobotStatus)
+
+
+def framed(tid: int, unit: int, pdu: bytes, *, length: int | None = None) -> bytes:
+    """A Modbus TCP frame: the MBAP header (``length`` as given, or the true one), the PDU."""
+    size = len(pdu) + 1 if length is None else length
+    return struct.pack(">HHHB", tid, 0, size, unit) + pdu
+
+
+def answers() -> st.SearchStrategy[bytes]:
+    """Answers to reads (FC 1-4) and FC16 writes, well-formed or not quite."""
+    reads = st.builds(
+        lambda fc, data, tid, unit: framed(tid, unit, bytes([fc, len(data)]) + data),
+        st.integers(1, 4),
+        st.binary(max_size=40),
+        st.integers(0, 0xFFFF),
+        st.integers(0, 255),
+    )
+    writes = st.builds(
+        lambda address, count, tid: framed(tid, 1, struct.pack(">BHH", 16, address, count)),
+        st.integers(0, 0xFFFF),
+        st.integers(0, 0xFFFF),
+        st.integers(0, 0xFFFF),
+    )
+    odd = st.builds(
+        lambda fc, data, length: framed(7, 1, bytes([fc, len(data)]) + data, length=length),
+        st.integers(1, 16),
+        st.binary(max_size=12),
+        st.integers(2, 20),
+    )
+    return st.one_of(reads, writes, odd)
+
+
+@given(answer=answers(), tail=st.binary(max_size=3))
+def test_an_answer_decoded_here_is_the_one_pymodbus_decodes(answer: bytes, tail: bytes) -> None:
+    # The common answers (reads, FC16 writes) are decoded without pymodbus' decoder; what
+    # they decode to is what pymodbus' framer gives, and anything else is left to it.
+    buffer = answer + tail
+    ours = common_answer(buffer, 0)
+    if ours is None:
+        return
+    size, pdu = FramerSocket(DecodePDU(is_server=False)).handleFrame(buffer, 0, 0)
+    assert pdu is not None
+    assert ours[0] == size
+    mine = ours[1]
+    assert (mine.function_code, mine.dev_id, mine.transaction_id) == (
+        pdu.function_code,
+        pdu.dev_id,
+        pdu.transaction_id,
+    )
+    assert (list(mine.registers), list(mine.bits)) == (list(pdu.registers), list(pdu.bits))
+    if pdu.function_code == 16:
+        assert (mine.address, mine.count) == (pdu.address, pdu.count)
