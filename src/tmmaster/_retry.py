@@ -107,29 +107,24 @@ class RetryPolicy(BaseModel):
                 raise
             first_error: BaseException = exc
 
-        def before_sleep(state: tenacity.RetryCallState) -> None:
-            error = state.outcome.exception() if state.outcome else None
+        def retrying_after(error: BaseException | None, attempt: int, delay_s: float) -> None:
+            """Attempt ``attempt`` failed with ``error``: say so, count it, wait ``delay_s``."""
             _log.warning(
                 "transport.retry",
                 operation=operation,
-                attempt=state.attempt_number + 1,
-                delay_s=round(state.upcoming_sleep, 3),
+                attempt=attempt,
+                delay_s=round(delay_s, 3),
                 error=str(error),
                 error_type=type(error).__name__,
             )
             if on_retry is not None and error is not None:
                 on_retry(error)
 
-        _log.warning(
-            "transport.retry",
-            operation=operation,
-            attempt=1,
-            delay_s=round(self.initial_backoff_s, 3),
-            error=str(first_error),
-            error_type=type(first_error).__name__,
-        )
-        if on_retry is not None:
-            on_retry(first_error)
+        def before_sleep(state: tenacity.RetryCallState) -> None:
+            error = state.outcome.exception() if state.outcome else None
+            retrying_after(error, state.attempt_number + 1, state.upcoming_sleep)
+
+        retrying_after(first_error, 1, self.initial_backoff_s)
         sleep = _sleeper(interrupt)
         sleep(self.initial_backoff_s + random.uniform(0, self.jitter_s))
         remaining_s = self.total_time_s - (time.monotonic() - started)
