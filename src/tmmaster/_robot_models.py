@@ -16,6 +16,7 @@ import tomllib
 from collections.abc import Callable, Mapping, Sequence
 from importlib import resources
 from types import MappingProxyType
+from typing import cast
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -102,8 +103,7 @@ class RobotModel(BaseModel):
     @property
     def joint_speed_deg_s(self) -> Joints:
         """Maximum joint speeds J1..J6 at 100 % speed, deg/s."""
-        s = [j.speed_deg_s for j in self.joints]
-        return (s[0], s[1], s[2], s[3], s[4], s[5])
+        return cast(Joints, tuple(j.speed_deg_s for j in self.joints))
 
     @property
     def _chain(self) -> kin.Chain:
@@ -436,8 +436,8 @@ class RobotModel(BaseModel):
                     "joint_limit",
                     f"J{i + 1} would be {wrapped:.1f} deg, outside {low:g}..{high:g} deg",
                 )
-            chosen.append(_nearest(candidates, s))
-        result = (chosen[0], chosen[1], chosen[2], chosen[3], chosen[4], chosen[5])
+            chosen.append(min(candidates, key=lambda c: abs(c - s)))  # nearest the seed
+        result = cast(Joints, tuple(chosen))
         singular = self.singularity(result)
         if singular is not None:
             return None, ("singularity", singular)
@@ -973,25 +973,13 @@ def _joints_text(joints: Sequence[float]) -> str:
 
 
 def _rounded(joints: Joints) -> Joints:
-    r = [round(q, 3) for q in joints]
-    return (r[0], r[1], r[2], r[3], r[4], r[5])
-
-
-def _nearest(candidates: list[float], reference: float) -> float:
-    return min(candidates, key=lambda c: abs(c - reference))
+    return cast(Joints, tuple(round(q, 3) for q in joints))
 
 
 def _six(joints: Sequence[float]) -> Joints:
     if len(joints) != 6:
         raise ValueError(f"need 6 joint values J1..J6, got {len(joints)}")
-    return (
-        float(joints[0]),
-        float(joints[1]),
-        float(joints[2]),
-        float(joints[3]),
-        float(joints[4]),
-        float(joints[5]),
-    )
+    return cast(Joints, tuple(float(q) for q in joints))
 
 
 def trapezoid_time(distance: float, top_speed: float, accel_time: float) -> float:
