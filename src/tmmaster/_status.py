@@ -38,12 +38,8 @@ def project_hint(status: RobotStatus) -> str:
     Returns:
         The text to append to a "not ready" message.
     """
-    state = status.project
-    if state is ProjectState.STOPPED:
-        return f"; {PROJECT_STOPPED}"
-    if state is ProjectState.PAUSED:
-        return f"; {PROJECT_PAUSED}"
-    return ""
+    failure = project_failure(status)
+    return "" if failure is None else f"; {failure}"
 
 
 def project_failure(status: RobotStatus) -> RobotFaultError | None:

@@ -231,9 +231,8 @@ class FrameGuard:
         if not self._channel.robot_base_tcp_fields or ROBOT_BASE_TCP_FIELDS[0] not in values:
             return
         base_tcp = pose_from(values, ROBOT_BASE_TCP_FIELDS)
-        if (
-            base_tcp.distance_to(tcp) > check.position_tolerance_mm
-            or base_tcp.rotation_to(tcp) > check.orientation_tolerance_deg
+        if not base_tcp.is_close(
+            tcp, mm=check.position_tolerance_mm, deg=check.orientation_tolerance_deg
         ):
             raise ToolMismatchError(
                 f"frame check {when}: the base differs: the robot reports its TCP in a base"
