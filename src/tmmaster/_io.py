@@ -58,26 +58,6 @@ class _Doubt:
     sent_at: float
 
 
-def io_modules(profile: RobotProfile) -> dict[str, DigitalIOModule]:
-    """The profile's digital I/O modules, refusing a profile that has none.
-
-    Args:
-        profile: The robot profile.
-
-    Returns:
-        The modules by name.
-
-    Raises:
-        ConfigError: The profile declares no digital I/O.
-    """
-    if not profile.digital_io:
-        raise ConfigError(
-            f"profile {profile.name!r} declares no digital I/O (a [digital_io.NAME] table,"
-            " docs/register-maps.md)"
-        )
-    return profile.digital_io
-
-
 def io_module(profile: RobotProfile, module: object) -> DigitalIOModule:
     """The module called ``module`` (``ConfigError`` listing the profile's modules).
 
@@ -91,7 +71,12 @@ def io_module(profile: RobotProfile, module: object) -> DigitalIOModule:
     Raises:
         ConfigError: The profile has no digital I/O, or no module of that name.
     """
-    modules = io_modules(profile)
+    modules = profile.digital_io
+    if not modules:
+        raise ConfigError(
+            f"profile {profile.name!r} declares no digital I/O (a [digital_io.NAME] table,"
+            " docs/register-maps.md)"
+        )
     found = modules.get(module) if isinstance(module, str) else None
     if found is None:
         raise ConfigError(
@@ -170,24 +155,6 @@ def digital_io_areas(profile: RobotProfile) -> tuple[tuple[Table, int, int], ...
     return tuple(span for module in profile.digital_io.values() for span in module.spans())
 
 
-def default_gripper_output(profile: RobotProfile) -> int | None:
-    """The end-module DO the robot program's gripper uses, by default.
-
-    A sequence-handshake profile is served by a robot program; the one ``tmmaster
-    robot-program`` writes drives its gripper with end-module DO 0 unless told otherwise
-    (``--gripper io:do=N``, ``--gripper none``).
-
-    Args:
-        profile: The robot profile.
-
-    Returns:
-        The DO number, or None when no program drives one (clear-on-accept profiles).
-    """
-    if profile.handshake is Handshake.SEQUENCE:
-        return GripperWiring().output
-    return None
-
-
 class RobotIO:
     """A robot's digital I/O: control-box and end-module DOs and DIs (``robot.io``).
 
@@ -236,7 +203,11 @@ class RobotIO:
         self._require_connection = require_connection
         self._gate = gate
         self._log = log
-        self._gripper_output = default_gripper_output(profile)
+        # A sequence-handshake profile is served by a robot program; the one ``tmmaster
+        # robot-program`` writes drives its gripper with end-module DO 0 unless told
+        # otherwise (``--gripper io:do=N``, ``--gripper none``).
+        sequence = profile.handshake is Handshake.SEQUENCE
+        self._gripper_output = GripperWiring().output if sequence else None
         # Per coil address: its writes that got no answer (their frames may still land),
         # and a lock that makes one set_do of that coil at a time write and watch it.
         self._doubts: dict[int, list[_Doubt]] = {}
