@@ -348,7 +348,7 @@ class RobotIO:
         seen = 0
         try:
             while True:
-                if self._read_coil(address) != value:
+                if bool(self._transport.read_block(Table.COIL, address, 1)[0]) != value:
                     seen += 1
                     self._log.warning("robot.io_late_write", output=what, found=not value)
                     self._write(address, value, what)  # answered: the coil holds value
@@ -363,9 +363,6 @@ class RobotIO:
                 f" no longer watched ({exc})"
             ) from exc
         self._doubts[address] = [d for d in self._doubts[address] if d.value == value]
-
-    def _read_coil(self, address: int) -> bool:
-        return bool(self._transport.read_block(Table.COIL, address, 1)[0])
 
     def _pause(self) -> None:
         """Wait one watch interval; a stop request (or ``close()``) ends the watch."""

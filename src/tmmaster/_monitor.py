@@ -603,7 +603,14 @@ class StatusMonitor:
                 period = 1.0 / self.rate_hz
                 tasks = [
                     asyncio.create_task(
-                        self._watch(robot, origin + period * i / len(robots), period),
+                        poll_on_schedule(
+                            robot,
+                            robot.poll,
+                            due=origin + period * i / len(robots),
+                            period=period,
+                            running=lambda: not self._stopping,
+                            timings=self._timings,
+                        ),
                         name=f"tmmaster-monitor-{robot.name}",
                     )
                     for i, robot in enumerate(robots)
@@ -621,14 +628,3 @@ class StatusMonitor:
             # Closing transports release their sockets on a later loop turn.
             for _ in range(3):
                 await asyncio.sleep(0)
-
-    async def _watch(self, robot: _Watched | _SharedWatched, due: float, period: float) -> None:
-        """Poll one robot on its schedule until cancelled or stopping."""
-        await poll_on_schedule(
-            robot,
-            robot.poll,
-            due=due,
-            period=period,
-            running=lambda: not self._stopping,
-            timings=self._timings,
-        )

@@ -289,11 +289,6 @@ _CODES = {
 }
 
 
-def _value_codes(profile: RobotProfile) -> dict[str, int]:
-    """The codes the program compares and writes, by the template's names."""
-    return {name: profile.field(field).code_of(label) for name, (field, label) in _CODES.items()}
-
-
 def _template(name: str) -> Template:
     """A TMscript template beside this module (its last newline left to the caller)."""
     return Template(resources.files("tmmaster").joinpath(name).read_text("utf-8").rstrip("\n"))
@@ -330,7 +325,8 @@ def robot_program(
         )
     wiring = gripper if gripper is not None else GripperWiring()
     tool_define, tool_change = tool.statements()
-    codes = _value_codes(profile)
+    # The codes the program compares and writes, by the template's names.
+    codes = {name: profile.field(field).code_of(label) for name, (field, label) in _CODES.items()}
     first = profile.field(TARGET_FIELDS[0]).address
     addresses = {name: profile.field(name).address for name in (*_FEEDBACK, *_MASTER, "command")}
     grip = _template(f"robot_program_grip_{wiring.kind}.tms").substitute(

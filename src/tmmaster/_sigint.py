@@ -46,11 +46,6 @@ def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
-def _exiting() -> bool:
-    """True once the main thread has ended: the interpreter exits (its exit hooks run)."""
-    return not threading.main_thread().is_alive()
-
-
 def _ignore() -> None:
     """From now on a Ctrl-C changes nothing (main thread only: elsewhere it cannot be set)."""
     if _in_main_thread():
@@ -227,8 +222,10 @@ class deferred:  # noqa: N801 - used as a context manager, like contextlib's low
         signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
         if self._pending:
             self._pending = False
-            if _exiting():
-                return  # an exit hook's: the program is over, nothing left to interrupt
+            if not threading.main_thread().is_alive():
+                # The main thread has ended: an exit hook's section, the program is over,
+                # nothing is left to interrupt.
+                return
             if previous is signal.SIG_DFL:
                 signal.raise_signal(signal.SIGINT)
             elif callable(previous):

@@ -181,6 +181,7 @@ def lookup_tm_error(code: int) -> TMErrorCode | None:
 lookup = lookup_tm_error
 
 
+@functools.cache
 def tm_errors() -> Mapping[int, TMErrorCode]:
     """Every code of Appendix J, parsed and validated (about 3,400 entries).
 
@@ -190,7 +191,17 @@ def tm_errors() -> Mapping[int, TMErrorCode]:
     Raises:
         ConfigError: The data file is missing or malformed (a broken install).
     """
-    return _all()
+    try:
+        entries = tomllib.loads(_text())["error"]
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{DATA_FILE}: {exc}") from exc
+    result: dict[int, TMErrorCode] = {}
+    for data in entries:
+        entry = _entry(data)
+        if entry.code in result:
+            raise ConfigError(f"{DATA_FILE}: code {entry.hex} listed twice")
+        result[entry.code] = entry
+    return MappingProxyType(result)
 
 
 @functools.cache
@@ -230,18 +241,3 @@ def _lookup(code: int) -> TMErrorCode | None:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{DATA_FILE}: entry {code_hex(code)}: {exc}") from exc
     return _entry(data)
-
-
-@functools.cache
-def _all() -> Mapping[int, TMErrorCode]:
-    try:
-        entries = tomllib.loads(_text())["error"]
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{DATA_FILE}: {exc}") from exc
-    result: dict[int, TMErrorCode] = {}
-    for data in entries:
-        entry = _entry(data)
-        if entry.code in result:
-            raise ConfigError(f"{DATA_FILE}: code {entry.hex} listed twice")
-        result[entry.code] = entry
-    return MappingProxyType(result)
