@@ -407,15 +407,9 @@ class StopRequestedError(TMMasterError):
         super().__init__(message)
 
 
+#: The error of each Modbus exception code: one subclass of ModbusExceptionError per code.
 MODBUS_EXCEPTIONS: dict[int, type[ModbusExceptionError]] = {
-    cls.code: cls
-    for cls in (
-        IllegalFunctionError,
-        IllegalAddressError,
-        IllegalValueError,
-        DeviceFailureError,
-        DeviceBusyError,
-    )
+    cls.code: cls for cls in ModbusExceptionError.__subclasses__()
 }
 
 
