@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 from collections.abc import Callable
@@ -142,8 +143,4 @@ def bounded(name: str, bounds: Bounds) -> Callable[[object], float]:
     It sees the value as given (a bool, a string, nan, 10**400 are refused as
     :func:`require_in` refuses them), so the message is the one a setter gives.
     """
-
-    def check(value: object) -> float:
-        return require_in(name, value, bounds)
-
-    return check
+    return functools.partial(require_in, name, bounds=bounds)

@@ -6,7 +6,7 @@ and :class:`~tmmaster.TimeoutPolicy`, next to the code that reads them.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, ClassVar
@@ -93,15 +93,6 @@ def speed_limit(value: object, name: str = "max_speed_percent") -> int:
     return value
 
 
-def speed_limit_check(name: str) -> Callable[[object], int]:
-    """A pydantic "before" check of a speed limit field named ``name``."""
-
-    def check(value: object) -> int:
-        return speed_limit(value, name)
-
-    return check
-
-
 class Checks(Policy):
     """What the master checks of a move before it sends it and at its end, and of the
     robot at connect.
@@ -122,7 +113,7 @@ class Checks(Policy):
     workspace: Workspace = Workspace()
     #: Faster moves are refused, an integer 1..100 (%).
     max_speed_percent: Annotated[
-        int, BeforeValidator(speed_limit_check("checks.max_speed_percent"))
+        int, BeforeValidator(functools.partial(speed_limit, name="checks.max_speed_percent"))
     ] = 100
     #: A finished move's TCP must be this close to the target, mm (up to 50).
     position_tolerance_mm: Annotated[
