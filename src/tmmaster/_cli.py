@@ -16,11 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from ._cliparse import (
-    EXIT_OUTPUT_FAILED,
     ArgumentParser,
     UsageError,
     did_you_mean,
     one_line,
+    output_failed,
     run_command,
     write_stdout,
 )
@@ -147,12 +147,7 @@ def _emit(text: str, output: str | None) -> int:
     try:
         Path(output).write_text(text, encoding="utf-8")
     except OSError as exc:
-        reason = exc.strerror or str(exc)
-        print(
-            f"tmmaster: cannot write {output}: {reason} [exit {EXIT_OUTPUT_FAILED}]",
-            file=sys.stderr,
-        )
-        return EXIT_OUTPUT_FAILED
+        return output_failed("tmmaster", output, exc)
     return 0
 
 

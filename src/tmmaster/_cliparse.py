@@ -144,13 +144,24 @@ def write_stdout(write: Callable[[], object], *, prog: str) -> int:
         return EXIT_BROKEN_PIPE
     except OSError as exc:
         discard_stdout()
-        reason = exc.strerror or str(exc)
-        print(
-            f"{prog}: cannot write the output: {reason} [exit {EXIT_OUTPUT_FAILED}]",
-            file=sys.stderr,
-        )
-        return EXIT_OUTPUT_FAILED
+        return output_failed(prog, "the output", exc)
     return 0
+
+
+def output_failed(prog: str, what: str, exc: OSError) -> int:
+    """Say on stderr that ``what`` could not be written, in one line; the exit status.
+
+    Args:
+        prog: the command's name, the start of the line.
+        what: what could not be written (``the output``, a file's name).
+        exc: the error the write raised.
+
+    Returns:
+        :data:`EXIT_OUTPUT_FAILED`.
+    """
+    reason = exc.strerror or str(exc)
+    print(f"{prog}: cannot write {what}: {reason} [exit {EXIT_OUTPUT_FAILED}]", file=sys.stderr)
+    return EXIT_OUTPUT_FAILED
 
 
 def discard_stdout() -> None:
