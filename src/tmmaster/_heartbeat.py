@@ -168,18 +168,23 @@ class Heartbeat:
         if task is not None and member is not None:
             member.fleet._call_soon(task.cancel)
 
-    def wrote(self, ok: bool, error: BaseException | None = None) -> None:
-        """Count one slot: written, or missed (logged once per run of failures)."""
-        if ok:
+    def wrote(self, outcome: BaseException | bool | None) -> float:
+        """Count one slot and say when the next beat is due, s from now.
+
+        ``outcome``: None, written; True, missed (the link busy or down); an error, missed
+        (logged once per run of failures). A missed beat is tried again soon.
+        """
+        if outcome is None:
             self.writes += 1
             if self._failing:
                 self._failing = False
                 self._log.info("robot.heartbeat_resumed", beat=self.beat)
-            return
+            return self.period_s
         self.missed += 1
-        if error is not None and not self._failing:
+        if isinstance(outcome, BaseException) and not self._failing:
             self._failing = True
-            self._log.warning("robot.heartbeat_failed", error=str(error))
+            self._log.warning("robot.heartbeat_failed", error=str(outcome))
+        return min(self.period_s, _RETRY_S)
 
 
 async def _beat_on_loop(
@@ -195,9 +200,7 @@ async def _beat_on_loop(
             outcome = await member.write_when_free(
                 beat.address, beat.next_words(), wait_s=beat.period_s, poll_s=_BUSY_POLL_S
             )
-            beat.wrote(outcome is None, outcome if isinstance(outcome, BaseException) else None)
-            if outcome is not None:
-                delay = min(delay, _RETRY_S)
+            delay = beat.wrote(outcome)
         del beat  # the task keeps no Robot alive between two beats
         await asyncio.sleep(delay)
 
@@ -211,11 +214,8 @@ def _beat_in_thread(
         beat = ref()
         if beat is None or transport.state is ConnectionState.CLOSED:
             return
-        delay = beat.period_s
-        error = _write_once(transport, beat.address, beat.next_words(), beat.period_s)
-        beat.wrote(error is None, error if isinstance(error, BaseException) else None)
-        if error is not None:
-            delay = min(delay, _RETRY_S)
+        outcome = _write_once(transport, beat.address, beat.next_words(), beat.period_s)
+        delay = beat.wrote(outcome)
         del beat
 
 
