@@ -459,22 +459,24 @@ class FleetMember:
         # The loop hands back by the deadlines; beyond them, the last poll's requests.
         bound = max(follow.ack_deadline - now, 0.0) + follow.longest_budget()
         bound += 4 * self.transport.timeout + _LOOP_GRACE_S
-        job = _FollowJob(self, follow)
-        if not self.fleet._call_soon(job.begin):
+        ended = threading.Event()
+        job = _Job(self._follow(follow, ended), ended)
+        if not self.fleet._call_soon(job.begin, self.fleet):
+            job.close()
             return None  # the loop has ended: the thread polls (and its requests fail)
         try:
             return job.latch.wait(bound)
-        except (concurrent.futures.CancelledError, asyncio.CancelledError):
+        except _CANCELLED:
             return None  # the loop ended meanwhile: as above
         except _NoAnswerError as exc:
             raise TransportError(
                 f"{self.transport.name}: the fleet's event loop did not answer within {bound:.1f} s"
             ) from exc
         finally:
-            if not job.ended.is_set() and self.fleet._call_soon(job.cancel):
+            if not ended.is_set() and self.fleet._call_soon(job.cancel):
                 # Given up (Ctrl-C, the bound): the loop's poll must be over before the
                 # thread acts on the command (withdraw, stop), so nothing interleaves.
-                job.ended.wait(self.transport.timeout + _LOOP_GRACE_S)
+                ended.wait(self.transport.timeout + _LOOP_GRACE_S)
 
     def wake(self) -> None:
         """On the loop: end the current nap early (a stop request)."""
@@ -620,40 +622,49 @@ class FleetMember:
 _MAIN_THREAD_SLICE_S = 0.05
 
 
-class _FollowJob:
-    """One hand-over of a wait to the loop: its task, started and cancelled on the loop.
+class _Job(Generic[T]):
+    """A coroutine run on the loop for a thread that waits for it (a wait's polls, a connect).
 
-    A callback and a :class:`_Latch` instead of ``run_coroutine_threadsafe`` (no
-    concurrent future chained to the task): the thread is woken once, by the task's end.
+    Started by a callback on the loop, its end settling a :class:`_Latch`: no concurrent
+    future chained to the task, the thread woken once. ``ended`` (when given) is set when
+    the coroutine will not run at all; the coroutine sets it itself otherwise.
     """
 
-    __slots__ = ("cancelled", "ended", "follow", "latch", "member", "task")
+    __slots__ = ("_coroutine", "_ended", "cancelled", "latch", "task")
 
-    def __init__(self, member: FleetMember, follow: FollowState) -> None:
-        self.member = member
-        self.follow = follow
-        #: Set once the loop's polls of this wait are over (or never began).
-        self.ended = threading.Event()
-        self.latch: _Latch[Observation | None] = _Latch()
-        self.task: asyncio.Task[Observation | None] | None = None
+    def __init__(
+        self, coroutine: Coroutine[Any, Any, T], ended: threading.Event | None = None
+    ) -> None:
+        self._coroutine = coroutine
+        self._ended = ended
+        self.latch: _Latch[T] = _Latch()
+        self.task: asyncio.Task[T] | None = None
         self.cancelled = False
 
-    def begin(self) -> None:
-        """On the loop: start polling (nothing when given up first or the loop is ending)."""
-        if self.cancelled or not self.member.fleet._running:
-            self.ended.set()
-            self.latch.settle(None)
+    def close(self) -> None:
+        """The coroutine will not run (nothing awaited it)."""
+        self._coroutine.close()
+        if self._ended is not None:
+            self._ended.set()
+
+    def begin(self, fleet: Fleet) -> None:
+        """On the loop: run the coroutine (CancelledError when the loop is ending)."""
+        if self.cancelled or not fleet._running:
+            self.close()
+            self.latch.fail(concurrent.futures.CancelledError())
             return
-        self.task = asyncio.get_running_loop().create_task(
-            self.member._follow(self.follow, self.ended)
-        )
+        self.task = asyncio.get_running_loop().create_task(self._coroutine)
         self.task.add_done_callback(self.latch.take)
 
     def cancel(self) -> None:
-        """On the loop: the thread gave up waiting; end the polls."""
+        """On the loop: the thread gave up waiting; cancel the coroutine."""
         self.cancelled = True
         if self.task is not None:
             self.task.cancel()
+
+
+#: What a job's latch raises when its coroutine was cancelled, or never ran.
+_CANCELLED = (concurrent.futures.CancelledError, asyncio.CancelledError)
 
 
 class _Latch(Generic[T]):
@@ -707,17 +718,6 @@ class _Latch(Generic[T]):
 
 class _NoAnswerError(Exception):
     """The loop did not finish a coroutine within its bound (not the coroutine's own error)."""
-
-
-def _result(future: concurrent.futures.Future[T], bound: float) -> T:
-    """``future.result()`` within ``bound`` seconds, waited for as a :class:`_Latch` is.
-
-    Raises :class:`_NoAnswerError` when the bound passes; a ``TimeoutError`` the coroutine
-    raised itself (a :class:`ResponseTimeoutError`) is its answer, raised as it is.
-    """
-    latch: _Latch[T] = _Latch()
-    future.add_done_callback(latch.take)
-    return latch.wait(bound)
 
 
 def _settle(future: asyncio.Future[None]) -> None:
@@ -945,37 +945,28 @@ class Fleet:
         """True in the loop's own thread."""
         return threading.current_thread() is self._runner.thread
 
-    def _submit(self, coroutine: Coroutine[Any, Any, T]) -> concurrent.futures.Future[T] | None:
-        """Run ``coroutine`` on the loop; None (the coroutine closed) when the loop has ended."""
-        loop = self._runner.loop
-        if loop is None or not self._running:
-            coroutine.close()
-            return None
-        try:
-            return asyncio.run_coroutine_threadsafe(coroutine, loop)
-        except RuntimeError:  # closed meanwhile
-            coroutine.close()
-            return None
-
     def _call(self, coroutine: Coroutine[Any, Any, T], bound: float, name: str) -> T:
         """Run ``coroutine`` on the loop and wait for its result, at most ``bound`` seconds."""
+        job = _Job(coroutine)
         if self._on_loop():
-            coroutine.close()
+            job.close()
             raise RuntimeError("a Fleet's loop must never wait for itself")
-        future = self._submit(coroutine)
-        if future is None:
+        if not self._call_soon(job.begin, self):
+            job.close()
             raise TransportClosedError(f"{name}: the fleet is closed")
         try:
-            return _result(future, bound)
+            return job.latch.wait(bound)
         except _NoAnswerError as exc:
-            future.cancel()
+            self._call_soon(job.cancel)
             raise ResponseTimeoutError(
                 f"{name}: the fleet's event loop did not answer within {bound:.1f} s"
             ) from exc
-        except concurrent.futures.CancelledError as exc:
+        except _CANCELLED as exc:
             raise ConnectionLostError(f"{name}: the fleet closed during the request") from exc
         except BaseException:
-            future.cancel()  # interrupted (Ctrl-C): the request is dropped with its link
+            self._call_soon(
+                job.cancel
+            )  # interrupted (Ctrl-C): the request is dropped with its link
             raise
 
     def _call_soon(self, callback: Callable[..., object], *args: Any) -> bool:

@@ -1092,19 +1092,6 @@ _READ_REQUEST_CLASSES: dict[int, type[ModbusPDU]] = {
 }
 
 
-class _Pending(Protocol):
-    """What awaits one request's answer: a future (a coroutine's) or a :class:`_Call`."""
-
-    def done(self) -> bool:
-        """True once settled."""
-
-    def set_result(self, result: ModbusPDU, /) -> None:
-        """The answer."""
-
-    def set_exception(self, exception: BaseException, /) -> None:
-        """The failure."""
-
-
 class _Stream(asyncio.Protocol):
     """One Modbus TCP stream of an :class:`AsyncLink`: answers matched to requests by id.
 
@@ -1135,9 +1122,9 @@ class _Stream(asyncio.Protocol):
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
-        #: Transaction id -> what its answer settles (a future, or a thread's request),
+        #: Transaction id -> what its answer settles (its :class:`_Call`),
         #: and the request's description.
-        self.awaited: dict[int, tuple[_Pending, str]] = {}
+        self.awaited: dict[int, tuple[_Call, str]] = {}
         #: The first transaction id sent on this stream, and how many were sent on it.
         self.first_tid = 0
         self.sent = 0
@@ -1243,7 +1230,7 @@ def no_answer_error(link: AsyncLink, what: str, *, answered: bool) -> ResponseTi
     return error
 
 
-def _expire(future: _Pending, link: AsyncLink, stream: _Stream, what: str) -> None:
+def _expire(future: _Call, link: AsyncLink, stream: _Stream, what: str) -> None:
     """A request's deadline: fail it unless answered (the message is built only here).
 
     Answers came, but only under ids never sent on this stream: not a Modbus server.
@@ -1261,19 +1248,22 @@ def _expire(future: _Pending, link: AsyncLink, stream: _Stream, what: str) -> No
     future.set_exception(error)
 
 
-def _answered(
-    deadline: asyncio.TimerHandle,
-    awaited: dict[int, tuple[_Pending, str]],
-    tid: int,
-    _answer: asyncio.Future[ModbusPDU],
-) -> None:
-    """A request's answer came, failed or was given up: its deadline and slot go."""
-    deadline.cancel()
-    awaited.pop(tid, None)
+#: ``_resolve``'s mark of a failure.
+_FAILED = object()
+
+
+def _resolve(future: asyncio.Future[list[int]], how: object, value: Any) -> None:
+    """Settle a coroutine's request once (its task may have been cancelled meanwhile)."""
+    if future.done():
+        return
+    if how is _FAILED:
+        future.set_exception(value)
+    else:
+        future.set_result(value)
 
 
 class _Call:
-    """A request started for a caller in another thread (:meth:`AsyncLink.start`).
+    """One request awaiting its answer (:meth:`AsyncLink.start`: a coroutine's, a thread's).
 
     Its answer, failure or deadline settles it at once on the loop: ``settle(words)`` or
     ``fail(error)``, once, with no future and no further turn of the loop.
@@ -1307,8 +1297,8 @@ class _Call:
         """True once settled."""
         return self._done
 
-    def _end(self) -> None:
-        """Settled: its deadline and its slot go."""
+    def end(self) -> None:
+        """Settled or given up: its deadline and its slot go (a late answer is dropped)."""
         self._done = True
         if self.timer is not None:
             self.timer.cancel()
@@ -1322,7 +1312,7 @@ class _Call:
         """The answer came (from the stream)."""
         if self._done:
             return
-        self._end()
+        self.end()
         try:
             words = answer_words(
                 result, self.request, count=self.count, name=self.name, what=self.what
@@ -1336,7 +1326,7 @@ class _Call:
         """The request failed: the link, its deadline, or an undecodable answer."""
         if self._done:
             return
-        self._end()
+        self.end()
         self.fail(exception)
 
 
@@ -1419,25 +1409,21 @@ class AsyncLink:
         The words (bits as 0/1) of a read's answer, ``[]`` for a write; failures as
         :class:`TransportError` subclasses. Nothing is ever resent here.
         """
-        request, answer = self.send(what, function_code, address, count, values)
-        response = await answer
-        return answer_words(response, request, count=count, name=self.name, what=what)
-
-    def send(
-        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
-    ) -> tuple[ModbusPDU, asyncio.Future[ModbusPDU]]:
-        """On the loop: send one request once; the request and the future of its answer.
-
-        The future fails with :class:`ResponseTimeoutError` after ``timeout`` and with
-        :class:`ConnectionLostError` when the link is lost; :func:`answer_words` reads
-        the answer. For a caller in another thread, without a coroutine per request.
-        """
-        stream, request = self._request(what, function_code, address, count, values)
-        answer: asyncio.Future[ModbusPDU] = asyncio.get_running_loop().create_future()
-        deadline = self._write(stream, request, answer, what)
-        tid = request.transaction_id
-        answer.add_done_callback(functools.partial(_answered, deadline, stream.awaited, tid))
-        return request, answer
+        answer: asyncio.Future[list[int]] = asyncio.get_running_loop().create_future()
+        call = self.start(
+            what,
+            function_code,
+            address,
+            count,
+            values,
+            functools.partial(_resolve, answer, None),
+            functools.partial(_resolve, answer, _FAILED),
+        )
+        try:
+            return await answer
+        finally:
+            if call is not None:
+                call.end()  # given up (cancelled): its deadline and slot go
 
     def _request(
         self, what: str, function_code: int, address: int, count: int, values: list[int] | None
@@ -1453,7 +1439,7 @@ class AsyncLink:
         return stream, request
 
     def _write(
-        self, stream: _Stream, request: ModbusPDU, pending: _Pending, what: str
+        self, stream: _Stream, request: ModbusPDU, pending: _Call, what: str
     ) -> asyncio.TimerHandle:
         """Send ``request`` once, awaited by ``pending``; its deadline."""
         stream.awaited[request.transaction_id] = (pending, what)
@@ -1476,19 +1462,21 @@ class AsyncLink:
         values: list[int] | None,
         settle: Callable[[list[int]], object],
         fail: Callable[[BaseException], object],
-    ) -> None:
+    ) -> _Call | None:
         """On the loop: send one request; ``settle(words)`` or ``fail(error)`` follows, once.
 
-        For a caller in another thread (a Fleet robot's), without a coroutine per request.
+        Without a coroutine or a future per request (a thread's request, a chained read).
+        The call (None: failed at once) can be ended early (:meth:`_Call.end`).
         """
         try:
             stream, request = self._request(what, function_code, address, count, values)
         except BaseException as exc:
             fail(exc)
-            return
+            return None
         call = _Call(request, count, self.name, what, settle, fail)
         call.stream, call.tid = stream, request.transaction_id
         call.timer = self._write(stream, request, call, what)
+        return call
 
     def close(self) -> None:
         """Close the link (safe when closed): after a failure it may still carry a late answer."""
