@@ -92,15 +92,22 @@ INERTIA_NAMES = ("ixx", "iyy", "izz", "cx", "cy", "cz", "crx", "cry", "crz")
 _TOOL_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_\-]{0,63}$")
 
 
-def _bound(name: str, index: int) -> tuple[float, float]:
-    """The range of a tool value: ``name`` "tool" (X..RZ) or "inertia" (its nine)."""
-    if name == "tool":
-        top = TOOL_POSITION_MAX_MM if index < 3 else TOOL_ANGLE_MAX_DEG
-        return -top, top
-    if index < 3:
-        return 0.0, TOOL_INERTIA_MAX
-    top = TOOL_POSITION_MAX_MM if index < 6 else TOOL_ANGLE_MAX_DEG
-    return -top, top
+#: The range of each TCP value (X, Y, Z, RX, RY, RZ) and of each inertia value (the
+#: moments, then the mass centre frame, which is bounded as a TCP).
+_POSITION = (-TOOL_POSITION_MAX_MM, TOOL_POSITION_MAX_MM)
+_ANGLE = (-TOOL_ANGLE_MAX_DEG, TOOL_ANGLE_MAX_DEG)
+_TCP_BOUNDS = (_POSITION, _POSITION, _POSITION, _ANGLE, _ANGLE, _ANGLE)
+_INERTIA_BOUNDS = ((0.0, TOOL_INERTIA_MAX),) * 3 + _TCP_BOUNDS
+
+
+def _literals(
+    what: str, names: Sequence[str], values: Sequence[float], bounds: Sequence[tuple[float, float]]
+) -> str:
+    """``values`` as TMscript float literals, comma-separated, each checked in its bounds."""
+    return ", ".join(
+        _float_literal(f"{what} {name}", value, *bound)
+        for name, value, bound in zip(names, values, bounds, strict=True)
+    )
 
 
 def _float_literal(field: str, value: float, low: float, high: float) -> str:
@@ -179,18 +186,12 @@ class ToolSetting:
             return "", f'ChangeTCP("{self.name}")'
         assert self.tcp is not None
         assert self.mass_kg is not None
-        values = ", ".join(
-            _float_literal(f"tool {n}", v, *_bound("tool", i))
-            for i, (n, v) in enumerate(zip(_TCP_NAMES, self.tcp.as_list(), strict=True))
-        )
+        values = _literals("tool", _TCP_NAMES, self.tcp.as_list(), _TCP_BOUNDS)
         mass = _float_literal("tool mass_kg", self.mass_kg, 0.0, TOOL_MASS_MAX_KG)
         declarations = f"float[] tool = {{{values}}}"
         if self.inertia is None:
             return declarations, f"ChangeTCP(tool, {mass})"
-        inertia = ", ".join(
-            _float_literal(f"tool inertia {n}", v, *_bound("inertia", i))
-            for i, (n, v) in enumerate(zip(INERTIA_NAMES, self.inertia, strict=True))
-        )
+        inertia = _literals("tool inertia", INERTIA_NAMES, self.inertia, _INERTIA_BOUNDS)
         declarations += f"\n    float[] inertia = {{{inertia}}}"
         return declarations, f"ChangeTCP(tool, {mass}, inertia)"
 
