@@ -139,7 +139,7 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
     expected_s = 1.0
     sent_at = clock.now
     # The robot reports the end 5 ms after the expected end, inside the dense window.
-    ack_at = sent_at + policy.ack_delay_s + poll_s
+    ack_at = sent_at + poller_module.ACK_DELAY_S + poll_s
     end_at = ack_at + expected_s + 0.005
     channel = TimedChannel(clock, poll_s, end_at)
     follower = _MotionFollower(
@@ -162,11 +162,11 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
     assert dense, "no poll in the window around the expected end"
     # Start to start: the dense interval, or back to back when a poll takes longer.
     for gap in dense:
-        assert gap == pytest.approx(max(policy.dense_interval_s, poll_s))
+        assert gap == pytest.approx(max(poller_module.DENSE_S, poll_s))
     # The end is seen at most one interval plus one poll after the robot reported it.
-    assert clock.now - end_at <= max(policy.dense_interval_s, poll_s) + poll_s + 1e-9
+    assert clock.now - end_at <= max(poller_module.DENSE_S, poll_s) + poll_s + 1e-9
     # Never more than one poll per dense interval, however long the polls take.
     assert (
         min(b - a for a, b in itertools.pairwise(starts))
-        >= min(policy.dense_interval_s, poll_s) - 1e-9
+        >= min(poller_module.DENSE_S, poll_s) - 1e-9
     )

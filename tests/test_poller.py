@@ -9,7 +9,7 @@ import threading
 import pytest
 
 from tmmaster import ConfigError, Poller, PollPolicy, StopRequestedError
-from tmmaster._poller import MotionSchedule
+from tmmaster._poller import ACK_DELAY_S, DENSE_S, STRETCH, MotionSchedule
 from tmmaster._robot_models import trapezoid_progress
 
 NOMINAL = 0.05
@@ -41,40 +41,32 @@ def polls_of(
         now = nxt
 
 
-@pytest.mark.parametrize("expected_s", [0.8, 1.0, 2.5, 8.0])
+@pytest.mark.parametrize("expected_s", [0.3, 0.8, 1.0, 2.5, 8.0])
 def test_a_move_costs_no_more_polls_than_nominal_polling(expected_s: float) -> None:
-    policy = PollPolicy()
     ack_at = 0.021
     end = ack_at + expected_s
-    schedule = MotionSchedule(policy, NOMINAL, 0.0)
-    times = polls_of(
-        schedule,
-        sent_at=0.0,
-        ack_at=ack_at,
-        expected_s=expected_s,
-        until=end + policy.completion_window_s,
-    )
-    nominal_polls = (end + policy.completion_window_s) / NOMINAL
-    assert len(times) <= nominal_polls + 1
-    # Dense around the expected end: a completion reported in the window is seen within
-    # one dense interval.
-    window = schedule.window_s
-    assert window >= policy.dense_interval_s
-    near_end = [t for t in times if end - window / 2 <= t <= end + 1.5 * window]
+    until = end + 2 * TICK
+    schedule = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
+    times = polls_of(schedule, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until)
+    assert len(times) <= until / NOMINAL + 1
+    # Dense from the expected end to a robot tick after it, where a robot on the model
+    # reports it: a completion reported there is seen within one dense interval.
+    near_end = [t for t in times if end <= t <= end + TICK + DENSE_S]
     gaps = [b - a for a, b in itertools.pairwise(near_end)]
-    assert len(gaps) >= 2
-    assert max(gaps) <= policy.dense_interval_s + 1e-9
-    # Never stretched beyond max_stretch x nominal in the middle.
+    assert len(near_end) >= 2
+    assert max(gaps) <= DENSE_S + 1e-9
+    assert near_end[0] <= end + DENSE_S + 1e-9
+    assert near_end[-1] >= end + TICK - 1e-9
+    # Never stretched beyond STRETCH x nominal in the middle.
     all_gaps = [b - a for a, b in itertools.pairwise(times)]
-    assert max(all_gaps) <= NOMINAL * policy.max_stretch + 1e-9
+    assert max(all_gaps) <= NOMINAL * STRETCH + 1e-9
 
 
 def test_the_first_poll_follows_the_robots_next_tick() -> None:
-    policy = PollPolicy()
-    schedule = MotionSchedule(policy, NOMINAL, sent_at=10.0)
-    assert schedule.next_poll(10.0, acknowledged=False) == pytest.approx(10.0 + policy.ack_delay_s)
-    # Dense for the acknowledgement window, then nominal.
-    assert schedule.next_poll(10.025, acknowledged=False) == pytest.approx(10.033)
+    schedule = MotionSchedule(PollPolicy(), NOMINAL, sent_at=10.0)
+    assert schedule.next_poll(10.0, acknowledged=False) == pytest.approx(10.0 + ACK_DELAY_S)
+    # Dense for a robot tick, then nominal.
+    assert schedule.next_poll(10.025, acknowledged=False) == pytest.approx(10.025 + DENSE_S)
     assert schedule.next_poll(10.5, acknowledged=False) == pytest.approx(10.55)
 
 
@@ -85,70 +77,77 @@ def test_predictive_polling_can_be_switched_off() -> None:
     assert schedule.next_poll(1.0, acknowledged=True) == pytest.approx(1.0 + NOMINAL)
 
 
-def test_a_short_move_that_cannot_afford_a_dense_window_polls_at_the_nominal_pace() -> None:
-    policy = PollPolicy()
-    schedule = MotionSchedule(policy, NOMINAL, sent_at=0.0)
+def test_a_very_short_move_is_polled_densely_until_a_tick_after_its_end() -> None:
+    schedule = MotionSchedule(PollPolicy(), NOMINAL, sent_at=0.0)
     schedule.acknowledged(0.02, 0.01)
-    # One poll a robot tick after the predicted end, then the nominal pace.
-    seen = 0.02 + 0.01 + policy.ack_delay_s
+    seen = 0.02 + 0.01 + DENSE_S
     assert schedule.next_poll(0.02, acknowledged=True) == pytest.approx(seen)
-    assert schedule.next_poll(seen, acknowledged=True) == pytest.approx(seen + NOMINAL)
+    assert schedule.next_poll(seen, acknowledged=True) == pytest.approx(seen + DENSE_S)
+    # Past the robot's tick after the end: the nominal pace.
+    assert schedule.next_poll(0.051, acknowledged=True) == pytest.approx(0.051 + NOMINAL)
 
 
-@pytest.mark.parametrize("expected_s", [0.3, 0.34, 0.5])
-def test_a_short_move_on_the_model_is_seen_at_the_robots_next_tick(expected_s: float) -> None:
-    # Too short for a dense window: the nominal polls are shifted so that one lands a
-    # tick after the predicted end, where a robot on the model reports it.
+@pytest.mark.parametrize("expected_s", [0.3, 0.313, 0.34, 0.5])
+def test_a_short_move_on_the_model_is_seen_within_a_dense_interval(expected_s: float) -> None:
+    # Every move has its window, a short one too: the robot's report at its next tick
+    # is seen within a dense interval (not a tick later), early enough for the next
+    # command to make the robot's following tick.
     late, polls = seen_after_the_end(1.0, expected_s, observe=False)
-    assert late <= TICK + PollPolicy().ack_delay_s
+    reported_after = math.ceil((0.021 + expected_s) / TICK) * TICK - (0.021 + expected_s)
+    assert late <= reported_after + DENSE_S + 1e-9
     assert polls <= (0.021 + expected_s) / NOMINAL + 3
 
 
 @pytest.mark.parametrize("expected_s", [0.3, 0.44, 0.57, 0.6, 0.7, 0.8, 1.0])
-def test_a_move_on_the_model_is_seen_by_the_robots_next_tick_whatever_its_window(
+def test_a_move_on_the_model_is_seen_by_the_robots_next_tick_whatever_its_length(
     expected_s: float,
 ) -> None:
-    # Moves between a short one (no dense window) and a long one (a window as wide as a
-    # tick): a window narrower than a tick closes before the robot's report, so one poll
-    # follows a tick after the predicted end (a 0.7 s move was seen 69 ms late).
     late, _ = seen_after_the_end(1.0, expected_s, observe=False)
-    assert late <= TICK + PollPolicy().ack_delay_s + 1e-9
+    assert late <= TICK + DENSE_S + 1e-9
 
 
 @pytest.mark.parametrize("expected_s", [0.4, 0.44, 0.5])
 def test_a_short_move_is_polled_sparsely_until_its_earliest_end(expected_s: float) -> None:
-    # No window to pay for: the polls before the earliest plausible end (a robot twice
-    # as fast as the model) are spaced as a longer move's middle, so a short move on the
-    # model costs fewer polls than nominal polling, and a twice-as-fast one is still
-    # seen within one nominal interval.
-    _, polls = seen_after_the_end(1.0, expected_s, observe=False)
+    # The polls before the earliest plausible end (a robot twice as fast as the model)
+    # are spaced, so a short move on the model costs fewer polls than nominal polling,
+    # and a twice-as-fast one is still seen within one nominal interval.
+    # Polls that see the progress (every article poll, a tmflow poll a third and two
+    # thirds in) put the earliest end later still.
+    _, polls = seen_after_the_end(1.0, expected_s, observe=True)
     assert polls <= (0.021 + expected_s) / NOMINAL - 1
+    _, blind = seen_after_the_end(1.0, expected_s, observe=False)
+    assert blind <= (0.021 + expected_s) / NOMINAL
     late, _ = seen_after_the_end(0.5, expected_s, observe=False)
     assert late <= NOMINAL + TICK + 1e-9
 
 
-def test_a_short_move_the_robot_took_early_is_seen_a_tick_sooner() -> None:
+def test_a_short_move_the_robot_took_early_is_seen_within_a_dense_interval() -> None:
     # The poll at 21 ms saw the command taken; the write was at 0: the robot took it in
-    # between. One poll falls a tick after the end of a robot that took it at once,
-    # and one a tick after the predicted end (taken just before the poll).
-    policy = PollPolicy()
-    schedule = MotionSchedule(policy, NOMINAL, 0.0)
+    # between. The window opens at the end of a robot that took it at once.
+    schedule = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
     schedule.acknowledged(0.021, 0.43, since=0.0)
     polls, now = [], 0.021
     while now < 0.6:
         now = schedule.next_poll(now, acknowledged=True)
         polls.append(now)
     early_report = math.ceil((0.001 + 0.43) / TICK) * TICK  # taken at 1 ms: 0.44 s
-    assert any(early_report <= t <= 0.0 + 0.43 + policy.ack_delay_s + 1e-9 for t in polls)
-    assert any(t == pytest.approx(0.021 + 0.43 + policy.ack_delay_s) for t in polls)
+    late_report = math.ceil((0.021 + 0.43) / TICK) * TICK  # taken at 21 ms: 0.46 s
+    for report in (early_report, late_report):
+        assert any(report <= t <= report + DENSE_S + 1e-9 for t in polls)
 
 
 @pytest.mark.parametrize("bad", [0, -1, float("nan"), float("inf")])
 def test_meaningless_intervals_are_refused(bad: float) -> None:
     with pytest.raises(ConfigError):
         Poller(bad)
-    with pytest.raises(ValueError, match="dense_interval_s"):
-        PollPolicy(dense_interval_s=bad)
+    with pytest.raises(ConfigError, match="interval_s"):
+        PollPolicy(interval_s=bad)
+
+
+def test_the_schedules_constants_are_not_options() -> None:
+    # The dense interval, the robot's tick and the windows are the schedule's own.
+    with pytest.raises(ConfigError, match="dense_interval_s"):
+        PollPolicy(dense_interval_s=0.005)  # type: ignore[call-arg]
 
 
 def test_a_stop_request_ends_every_sleep_instead_of_spinning() -> None:
@@ -169,19 +168,18 @@ def test_the_window_opens_early_enough_for_an_acknowledgement_seen_late(
 ) -> None:
     # The robot took the command somewhere between the write (0) and the poll that saw
     # it (21 ms): it may report the end as early as expected_s after the write.
-    policy = PollPolicy()
     ack_at, end = 0.021, 0.021 + expected_s
-    until = end + policy.completion_window_s
-    plain = MotionSchedule(policy, NOMINAL, 0.0)
+    until = end + 2 * TICK
+    plain = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
     plain_times = polls_of(plain, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until)
-    early = MotionSchedule(policy, NOMINAL, 0.0)
+    early = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
     early_times = polls_of(
         early, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until, since=0.0
     )
-    first_dense = next(a for a, b in itertools.pairwise(early_times) if b - a <= 0.0081)
-    plain_dense = next(a for a, b in itertools.pairwise(plain_times) if b - a <= 0.0081)
+    first_dense = next(a for a, b in itertools.pairwise(early_times) if b - a <= DENSE_S + 1e-9)
+    plain_dense = next(a for a, b in itertools.pairwise(plain_times) if b - a <= DENSE_S + 1e-9)
     assert first_dense < plain_dense
-    assert first_dense < end - early.window_s / 2
+    assert first_dense <= expected_s + DENSE_S + 1e-9
     # Still no more polls than nominal polling over the move.
     assert len(early_times) <= until / NOMINAL + 1
 
@@ -234,13 +232,13 @@ def test_a_robot_faster_or_slower_than_the_model_is_seen_within_one_interval(
     assert late <= NOMINAL + TICK + 1e-9
 
 
-@pytest.mark.parametrize("pace", [0.6, 1.5])
+@pytest.mark.parametrize("pace", [0.6, 1.33, 1.57])
 def test_the_observed_progress_moves_the_dense_window_to_the_real_end(pace: float) -> None:
     # A long move whose robot is off the model: what the polls see carries the dense
     # window to the real end, so the end is seen within a dense interval of the report.
     blind, _ = seen_after_the_end(pace, 4.0, observe=False)
     late, polls = seen_after_the_end(pace, 4.0, observe=True)
-    assert late <= TICK + PollPolicy().dense_interval_s + 1e-9 < blind
+    assert late <= TICK + DENSE_S + 1e-9 < blind
     assert polls <= (4.0 * pace) / NOMINAL + 4
 
 
@@ -254,6 +252,7 @@ def test_a_robot_that_speeds_up_after_a_slow_start_is_seen_within_one_interval()
     schedule.observed(0.9, 0.06)
     assert schedule.expected_end is not None
     assert schedule.expected_end > 2.0
+    assert schedule.pace > 1.0
     now = 0.9
     while now < 3.0:
         nxt = schedule.next_poll(now, acknowledged=True)

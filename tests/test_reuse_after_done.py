@@ -1,7 +1,7 @@
 """The next command's checks may reuse what the poll that saw the last one finished read.
 
 Only that read (never one from before the done), only once, only while fresh
-(``PollPolicy.reuse_done_read_s``), only on the same connection with nothing written
+(``REUSE_DONE_READ_S``, one robot tick), only on the same connection with nothing written
 since; and the checks on it are the same: an error or e-stop in it blocks the write.
 These tests are about the rule, not the machine's speed: where a reuse is expected, the
 record's age is set to "just read" first, so a slow machine cannot make them flaky.
@@ -15,7 +15,9 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
+import tmmaster._robot as robot_module
 from tmmaster import PollPolicy, Pose, Robot
+from tmmaster._channels import REUSE_DONE_READ_S
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -95,22 +97,26 @@ def test_a_stale_done_read_is_read_again(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
 ) -> None:
     sim = tm_simulator_factory(profile)
-    robot = robots(sim, gripper=None, polling=PollPolicy(interval_s=0.01, reuse_done_read_s=0.05))
+    robot = robots(sim, gripper=None, polling=PollPolicy(interval_s=0.01))
     robot.move_to(APPROACH, speed=30)
     state = robot._channel.after_done
     assert state is not None
-    state.read_at = time.monotonic() - 0.06  # older than reuse_done_read_s
+    state.read_at = time.monotonic() - 2 * REUSE_DONE_READ_S  # older than that
     sim.clear_request_log()
     robot.start_move(PICK, speed=30).wait()
     assert reads_before_write(sim) == FULL_CHECK[profile]
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
-def test_reuse_can_be_switched_off(
-    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+def test_a_zero_reuse_window_never_reuses(
+    tm_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    profile: str,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    monkeypatch.setattr(robot_module, "REUSE_DONE_READ_S", 0.0)
     sim = tm_simulator_factory(profile)
-    robot = robots(sim, gripper=None, polling=PollPolicy(interval_s=0.01, reuse_done_read_s=0))
+    robot = robots(sim, gripper=None, polling=PollPolicy(interval_s=0.01))
     robot.move_to(APPROACH, speed=30)
     refresh(robot)
     sim.clear_request_log()

@@ -18,6 +18,7 @@ import pytest
 
 import tmmaster
 from tmmaster import Checks, ConfigError, FrameCheck, Pose, Robot, Tool, ToolMismatchError
+from tmmaster._channels import REUSE_DONE_READ_S
 from tmmaster.sim import Simulator
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
@@ -74,8 +75,8 @@ def test_a_tcp_changed_after_connect_stops_the_next_move_unsent(sim: Simulator) 
         sim.call(lambda: sim.backend.set_tool(Pose(0, 0, 150, 0, 0, 0)))  # type: ignore[attr-defined]
         sim.wait_for(lambda: sim.field("tcp_z") < 100, timeout=2.0)
         # Past the window in which the last move's final read stands in for the next
-        # one's (PollPolicy.reuse_done_read_s): a change older than that is always seen.
-        time.sleep(2 * robot.polling.reuse_done_read_s)
+        # one's (REUSE_DONE_READ_S): a change older than that is always seen.
+        time.sleep(2 * REUSE_DONE_READ_S)
         sim.clear_request_log()
         with pytest.raises(ToolMismatchError, match=r"before this ptp command: tool z differs"):
             robot.move_to(LOWER, speed=50)

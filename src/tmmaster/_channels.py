@@ -167,6 +167,11 @@ def link_mark(transport: Transport) -> int | None:
     return transport.epoch
 
 
+#: How old (s) the read of the poll that saw a command finished may be for the next
+#: command's checks to use it instead of reading again: one TM control tick (50 Hz).
+REUSE_DONE_READ_S = 0.02
+
+
 @dataclass
 class StateAfterDone:
     """The registers read by the poll that saw a command finished, and right after it.

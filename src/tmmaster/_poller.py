@@ -7,11 +7,10 @@ import threading
 import time
 from typing import Annotated, ClassVar
 
-from pydantic import BeforeValidator, Field
+from pydantic import BeforeValidator
 
 from ._checks import Bounds, Policy, bounded
 from ._exceptions import ConfigError, StopRequestedError
-from ._robot_models import trapezoid_progress
 
 
 class Poller:
@@ -110,22 +109,16 @@ INTERVAL_BOUNDS = Bounds(0.001, 5.0, "s")
 
 
 class PollPolicy(Policy):
-    """How a robot polls its waits: the nominal pace, dense where something is expected.
+    """How a robot polls its waits: the nominal pace, dense where an answer is due.
 
     ``Robot(host, polling=PollPolicy(interval_s=0.02))``: every wait reads the robot's
     status at most ``interval_s`` apart (its nominal pace).
 
-    The master knows when the robot should acknowledge (its next control tick after the
-    write) and when the move should end (acknowledgement + expected time). It polls
-    densely in a short window at those moments and spaces the polls in between so that
-    a move costs no more requests than polling at the nominal interval would.
-
-    The prediction is the arm model's, and a robot may differ from it: the polls are
-    spaced only until the earliest moment the move could plausibly end (a robot
-    ``1 / earliest_end_fraction`` times faster than the model), never more sparsely
-    than the nominal interval after that, and the predicted end moves with the progress
-    each poll observes. A finish the model did not predict is seen within one nominal
-    interval.
+    ``predictive`` (the default): the master knows when the robot should acknowledge a
+    command (its next control tick after the write) and when a move should end (its
+    start + the model's expected time, at the pace the polls observe). It polls about
+    every 10 ms in those short windows and spaces the polls in between (:class:`MotionSchedule`).
+    A robot faster than the model is seen within one nominal interval.
 
     An invalid value is a :class:`~tmmaster.ConfigError` naming the field
     (``polling.interval_s must be a number in [0.001, 5] s, got 10``).
@@ -140,36 +133,29 @@ class PollPolicy(Policy):
     ] = 0.05
     #: False: poll every nominal interval, nothing else.
     predictive: bool = True
-    #: Interval inside the dense windows, in seconds.
-    dense_interval_s: Annotated[float, Field(gt=0, le=1)] = 0.008
-    #: Half-width of the window around the expected end of a move, in seconds. The
-    #: window opens half of this before the expected end and closes 1.5 times this after
-    #: it: a robot reports the end at its next control tick, and never early.
-    completion_window_s: Annotated[float, Field(gt=0, le=5)] = 0.05
-    #: First poll after the write: about one robot control tick (TM: 50 Hz), in seconds.
-    ack_delay_s: Annotated[float, Field(gt=0, le=1)] = 0.021
-    #: How long to keep polling densely after ``ack_delay_s`` for the acknowledgement.
-    ack_window_s: Annotated[float, Field(ge=0, le=1)] = 0.02
-    #: Never space the polls in the middle of a move by more than this many nominal intervals.
-    max_stretch: Annotated[float, Field(ge=1, le=10)] = 3.0
-    #: The earliest a move may end, as a fraction of its expected time (0.5: a robot
-    #: twice as fast as the model): polls are never spaced beyond the nominal interval
-    #: from then on. 0 never spaces them; 1 trusts the model's time.
-    earliest_end_fraction: Annotated[float, Field(ge=0, le=1)] = 0.5
-    #: The next command's checks may use the registers read by the poll that saw the
-    #: previous command finished instead of reading them again, if that poll began at most
-    #: this long ago (seconds) on the same connection with nothing written since; 0: the
-    #: checks always read again. The default is one TM control tick (50 Hz).
-    reuse_done_read_s: Annotated[float, Field(ge=0, le=0.1)] = 0.02
 
 
+#: A robot's control tick (TM: 50 Hz), s: it takes a command and reports an end at one.
+TICK_S = 0.02
+#: The first poll after a write: just after the robot's next tick, s.
+ACK_DELAY_S = TICK_S + 0.001
+#: The widest window polled densely, s: what a robot on the model needs, one tick and
+#: the acknowledgement's doubt (at most ``ACK_DELAY_S``).
+_WIDEST_WINDOW_S = TICK_S + ACK_DELAY_S
+#: The interval where an answer is due (the acknowledgement, a move's end), s: four
+#: polls cover the widest window, and an end is seen early enough to write the next
+#: command before the robot's next tick.
+DENSE_S = _WIDEST_WINDOW_S / 4
+#: A move's middle is polled at most this many nominal intervals apart.
+STRETCH = 3.0
+#: The earliest a move may end, as a fraction of the time left by the model (0.5: a
+#: robot twice as fast): polls are never further apart than the nominal interval after it.
+EARLIEST_FRACTION = 0.5
 #: How far an observed pace may move the predicted end: a robot between 4 times faster
 #: and 4 times slower than the model; beyond that the observation is not trusted.
 _PACE_LIMITS = (0.25, 4.0)
 #: How many times the model's budget a move's wait may grow to (the slowest pace trusted).
 PACE_LIMIT = _PACE_LIMITS[1]
-#: Polls a move's schedule keeps in reserve for the rounding at the dense window's edges.
-_RESERVE = 2.0
 #: Observed progress used to re-predict the end: not the ramps' first and last few per
 #: cent, where a pose's rounding weighs more than the progress.
 _PROGRESS_USED = (0.05, 0.95)
@@ -177,6 +163,14 @@ _PROGRESS_USED = (0.05, 0.95)
 
 class MotionSchedule:
     """When to poll a move next, from its send time, acknowledgement and expected time.
+
+    The robot took the command between ``since`` (the last moment it was seen pending)
+    and the acknowledgement, and moves at a pace (times the model's time) known to lie
+    in a range: 1 by the model, then what the poses the polls read allow. The end falls
+    between the earliest start at the lowest pace and the latest start at the highest
+    pace, and is reported at the robot's next tick: the polls are dense (``DENSE_S``)
+    over exactly that window, nominal from the earliest plausible end to it, and spaced
+    (``STRETCH``) before. Nothing here decides that a move ended: only a poll does.
 
     ``accel_s``: the move's acceleration time by the model (the progress of a move
     follows a trapezoid profile), used to read the robot's pace from the progress a
@@ -186,200 +180,157 @@ class MotionSchedule:
     def __init__(
         self, policy: PollPolicy, nominal_s: float, sent_at: float, *, accel_s: float = 0.0
     ) -> None:
-        self._policy = policy
+        self._predictive = policy.predictive
         self._nominal = nominal_s
         self._sent_at = sent_at
         self._accel = max(accel_s, 0.0)
         self._acked_at = 0.0
+        #: The earliest moment the robot may have taken the command.
+        self._took_from = 0.0
         self._expected = 0.0
         #: No poll spaced beyond the nominal interval from this moment (monotonic s).
         self._earliest = math.inf
-        #: Half-width of the dense window around the predicted end; 0: no window.
-        self._window = 0.0
-        self._early = 0.0
-        #: How much earlier than seen the robot may have taken the command (at most a tick).
-        self._took_early = 0.0
-        self._mid_interval = nominal_s
         self._observations = 0
-        self._pace = 1.0
-        #: When the move is predicted to end: the model's, then the observed pace's.
-        self._predicted = 0.0
+        #: The robot's pace (times the model's time): its lowest and highest plausible value.
+        self._paces = (1.0, 1.0)
 
     def acknowledged(self, at: float, expected_s: float, *, since: float | None = None) -> None:
-        """Anchor the completion window: the move should end at ``at + expected_s``.
+        """Anchor the end window: the move should end ``expected_s`` after it started.
 
         ``since``: the latest moment the command was seen not yet taken (the start of
         the last poll that saw it pending, else the write). The robot took it between
-        ``since`` and ``at``, so it may report the end as early as ``since +
-        expected_s``: the window opens that much earlier, as far as the polls saved in
-        the middle of the move can pay for it.
+        ``since`` (at most a tick before ``at``) and ``at``.
         """
-        p = self._policy
-        if not p.predictive or expected_s <= 0:
+        if not self._predictive or expected_s <= 0:
             return
-        # The window also opens earlier by the acknowledgement's uncertainty, at most one
-        # dense interval: paid by one of the two polls kept in reserve in _plan.
-        doubt = 0.0 if since is None else max(at - since, 0.0)
-        self._early = min(doubt, p.dense_interval_s, expected_s / 4)
-        self._took_early = min(doubt, p.ack_delay_s)
-        self._acked_at, self._expected = at, expected_s
-        self._predicted = at + expected_s
-        self._earliest = at - self._early + expected_s * p.earliest_end_fraction
-        self._plan(at)
+        doubt = 0.0 if since is None else min(max(at - since, 0.0), ACK_DELAY_S)
+        self._acked_at, self._took_from, self._expected = at, at - doubt, expected_s
+        self._earliest = self._took_from + expected_s * EARLIEST_FRACTION
 
     def observed(self, at: float, fraction: float | None) -> None:
-        """Re-predict the end from the progress a poll observed.
+        """Narrow the robot's pace, and so the end window, by the progress a poll observed.
+
+        The robot was at ``fraction`` of its path at its last tick before ``at``, and
+        started between the earliest take and the acknowledgement: that bounds its pace.
+        A bound that agrees with the range known so far narrows it; one that does not
+        (a robot that changed its pace) replaces it.
 
         Args:
             at: when the poll began (``time.monotonic()``).
             fraction: how much of the move's path the robot had covered (0..1), None
                 when the poll could not tell.
         """
-        if fraction is None or self._expected <= 0:
-            return
-        self._observations += 1
         low, high = _PROGRESS_USED
-        if not low < fraction < high:
-            return
-        elapsed = at - self._acked_at
-        if elapsed <= 0:
+        if fraction is None or self._expected <= 0 or fraction <= low:
+            return  # nothing seen yet, or not yet out of the ramp: a look still due
+        self._observations += 1
+        if fraction >= high:
             return
         # A robot k times slower than the model covers the model's profile k times
-        # slower: the progress seen at ``elapsed`` is the model's at ``elapsed / k``.
+        # slower: the progress seen is the model's at ``elapsed / k``.
         model_elapsed = _elapsed_at(fraction, self._expected, self._accel)
-        if model_elapsed <= 0:
-            return
-        pace = min(max(elapsed / model_elapsed, _PACE_LIMITS[0]), _PACE_LIMITS[1])
-        self._pace = pace
-        end = self._acked_at + self._expected * pace
-        # A new prediction within a quarter of the window (a dense interval at least)
-        # of the last one moves nothing: a pose's rounding, not the robot's pace.
-        if abs(end - self._predicted) < max(self._policy.dense_interval_s, self._window / 4):
-            return
-        self._predicted = end
-        # The robot's own pace now says when it could end at the earliest; never later
-        # than the model's end, so a robot that speeds up again (a speed override raised
-        # mid-move) is still seen within one nominal interval from then on.
-        remaining = max(end - at, 0.0)
+        least, most = _PACE_LIMITS
+        slow = min(max((at - self._took_from) / model_elapsed, least), most)
+        fast = min(max((at - TICK_S - self._acked_at) / model_elapsed, least), slow)
+        lowest, highest = self._paces
+        if fast <= highest and lowest <= slow:
+            self._paces = (max(lowest, fast), min(highest, slow))
+        else:
+            self._paces = (fast, slow)
+        # The earliest plausible end from here: the rest of the move twice as fast, never
+        # later than the model's end (a robot that speeds up again is seen in time).
+        opens = self.window()[0]
         self._earliest = min(
-            at + remaining * self._policy.earliest_end_fraction,
-            self._acked_at + self._expected,
+            at + max(opens - at, 0.0) * EARLIEST_FRACTION, self._acked_at + self._expected
         )
-        if not self._window:
-            # The polls already spaced paid for a window: it moves with the end.
-            self._plan(at)
 
-    def _plan(self, start: float) -> None:
-        """Window and middle pace for the move's predicted end, seen from ``start``.
-
-        A move may cost no more polls than nominal polling over the same time: the polls
-        saved by spacing the middle (at most to ``max_stretch`` nominal intervals, and
-        only before the earliest plausible end) pay for the dense window around the
-        end. The widest window they can pay for is taken; two polls are kept in reserve
-        for the rounding at the window's edges.
-        """
-        p = self._policy
-        n, d, cap = self._nominal, p.dense_interval_s, self._nominal * p.max_stretch
-        end = self._predicted
-        span = end - start
-        window = min(p.completion_window_s, span / 2)
-        while window >= d:
-            opens = end - self._early - window / 2
-            closes = end + 1.5 * window
-            stretchable = max(min(self._earliest, opens) - start, 0.0)
-            nominal = max(opens - max(self._earliest, start), 0.0)
-            spare = (closes - start) / n - nominal / n - (2 * window + self._early) / d - _RESERVE
-            if spare >= stretchable / cap and (spare > 0 or stretchable == 0):
-                self._window = window
-                if stretchable > 0:
-                    self._mid_interval = min(max(stretchable / spare, n), cap)
-                return
-            window *= 0.8
-        self._window = 0.0
+    def window(self) -> tuple[float, float]:
+        """From when to when the robot may report the end (monotonic s; both 0 before
+        the acknowledgement)."""
+        if self._expected <= 0:
+            return (0.0, 0.0)
+        lowest, highest = self._paces
+        opens = self._took_from + self._expected * lowest
+        closes = self._acked_at + self._expected * highest + TICK_S
+        # A pace known only roughly (one look, early in the move) would make a window
+        # too wide to poll densely: its middle, the nominal pace either side.
+        spare = max(closes - opens - _WIDEST_WINDOW_S, 0.0) / 2
+        return opens + spare, closes - spare
 
     def wants_observation(self, at: float) -> bool:
         """True when the poll at ``at`` should read the pose: a third and two thirds in.
 
-        Only a move with a dense window gains from it: the progress seen on the way
-        moves the window to where the robot's own pace puts the end, and the second
-        look corrects the first (read early, in the ramp, it weighs a pose's rounding
-        and the model's profile more).
+        The progress seen on the way narrows the robot's pace, and with it the window
+        where it reports the end; the second look corrects the first (read early, in
+        the ramp, it weighs a pose's rounding and the model's profile more).
         """
-        if self._observations >= 2 or not self._window:
-            return False
-        share = (self._observations + 1) / 3
-        return at >= self._acked_at + (self._predicted - self._acked_at) * share
+        return at >= self._observation_due()
 
-    @property
-    def window_s(self) -> float:
-        """Half-width of the dense window around the expected end (0 when there is none)."""
-        return self._window
+    def _observation_due(self) -> float:
+        """When the next look at the pose is due (infinity: none is)."""
+        end = self.expected_end
+        if self._observations >= 2 or end is None:
+            return math.inf
+        return self._acked_at + (end - self._acked_at) * (self._observations + 1) / 3
 
     @property
     def pace(self) -> float:
-        """How many times slower than the model the robot moves, as last observed (1: as
+        """How many times slower than the model the robot moves, at the most (1: as
         predicted or not observed; 0.25..4)."""
-        return self._pace
+        return self._paces[1]
 
     @property
     def expected_end(self) -> float | None:
-        """When the move is predicted to end (monotonic s), None before the acknowledgement."""
+        """When the move ends at the latest start and highest pace (monotonic s), None
+        before the acknowledgement."""
         if self._expected <= 0:
             return None
-        return self._predicted
+        return self._acked_at + self._expected * self._paces[1]
 
     def next_poll(self, now: float, *, acknowledged: bool) -> float:
         """The monotonic time of the next poll (never earlier than ``now``)."""
-        p, nominal = self._policy, self._nominal
-        if not p.predictive:
+        nominal = self._nominal
+        if not self._predictive:
             return now + nominal
+        dense = min(DENSE_S, nominal)
         if not acknowledged:
-            first = self._sent_at + p.ack_delay_s
+            first = self._sent_at + ACK_DELAY_S
             if now < first:
                 return first
-            if now < first + p.ack_window_s:
-                return now + p.dense_interval_s
+            return now + (dense if now < first + TICK_S else nominal)
+        if self._expected <= 0:
             return now + nominal
-        if not self._window:
-            if self._expected > 0:
-                # No window the budget pays for (a short move): spaced as a longer move's
-                # middle until the earliest plausible end, nominal from then on, and
-                # shifted so that one poll falls a robot tick after the predicted end,
-                # where a robot on the model reports it.
-                seen = self._predicted + p.ack_delay_s
-                # The robot took the command up to a tick before the poll that saw it
-                # taken: a poll that much earlier sees the end when it took it early.
-                first = seen - self._took_early if self._took_early > p.dense_interval_s else seen
-                if now < self._earliest:
-                    # A poll a nominal interval past the earliest end sees an end there.
-                    return min(now + nominal * p.max_stretch, self._earliest + nominal, first)
-                return self._toward(now, (first, seen))
-            return now + nominal
-        opens = self._predicted - self._early - self._window / 2
-        closes = self._predicted + 1.5 * self._window
+        opens, closes = self.window()
+        # The robot reports the end after the window opens: the first poll there comes
+        # a dense interval after it.
+        first = opens + dense
+        if now < self._earliest:
+            # A poll a nominal interval past the earliest end sees an end there; one
+            # where a look at the pose is due moves the window with the robot's pace.
+            look = self._observation_due()
+            return min(
+                now + nominal * STRETCH,
+                self._earliest + nominal,
+                first,
+                look if look > now + nominal else first,
+            )
         if now < opens:
-            if now < self._earliest:
-                return min(now + self._mid_interval, self._earliest, opens)
-            return min(now + nominal, opens)
-        if now < closes:
-            return now + p.dense_interval_s
-        # A window narrower than a robot tick closes before a robot on the model reports
-        # the end at its next tick: one poll there, as for a short move.
-        return self._toward(now, (self._predicted + p.ack_delay_s,))
-
-    def _toward(self, now: float, marks: tuple[float, ...]) -> float:
-        """The nominal pace, shortened to land on the first of ``marks`` still ahead."""
-        step = now + self._nominal
-        return next((min(step, mark) for mark in marks if now < mark), step)
+            return min(now + nominal, first)
+        return now + (dense if now < closes else nominal)
 
 
 def _elapsed_at(fraction: float, total: float, accel_time: float) -> float:
-    """When a trapezoid move of ``total`` s has covered ``fraction`` of its path (bisection)."""
-    low, high = 0.0, total
-    for _ in range(40):
-        middle = (low + high) / 2
-        if trapezoid_progress(middle, total, accel_time) < fraction:
-            low = middle
-        else:
-            high = middle
-    return (low + high) / 2
+    """When a trapezoid move of ``total`` s has covered ``fraction`` (0..1) of its path.
+
+    The inverse of :func:`~tmmaster._robot_models.trapezoid_progress`.
+    """
+    ramp = min(accel_time, total / 2.0)
+    if ramp <= 0:
+        return fraction * total
+    top = 1.0 / (total - ramp)  # the top speed, in path per second
+    ramp_part = 0.5 * top * ramp
+    if fraction < ramp_part:
+        return math.sqrt(2.0 * fraction * ramp / top)
+    if fraction <= 1.0 - ramp_part:
+        return ramp + (fraction - ramp_part) / top
+    return total - math.sqrt(2.0 * (1.0 - fraction) * ramp / top)

@@ -33,6 +33,7 @@ from typing import Any, Literal, ParamSpec, TypeVar
 from . import _commanded
 from ._address import check_host, check_port, is_in_process
 from ._channels import (
+    REUSE_DONE_READ_S,
     Command,
     CommandChannel,
     CommandKind,
@@ -1307,7 +1308,7 @@ class Robot:
             self._channel.check_command(command)
             self._require_connection()
         # prepare() encodes (refusing out-of-range values) before its first read.
-        ticket = self._channel.prepare(command, reuse_s=self.polling.reuse_done_read_s)
+        ticket = self._channel.prepare(command, reuse_s=REUSE_DONE_READ_S)
         start: Pose | None = None
         joints: tuple[float, ...] | None = None
         if command.target is not None:
