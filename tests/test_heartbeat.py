@@ -10,6 +10,7 @@ live master's long move is never expired.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -159,3 +160,29 @@ def test_a_beat_waits_for_a_link_the_robots_thread_holds(sim: Simulator) -> None
             time.sleep(1.5 * period)
         sim.wait_for(lambda: beat.writes >= written + 2, timeout=5.0)
         assert beat.missed == 0
+
+
+def test_a_thread_reading_back_to_back_does_not_starve_the_heartbeat(sim: Simulator) -> None:
+    """Locks are not fair: a thread reading the status back to back held the link at
+    every look of the heartbeat, no beat got in, and the robot program expired the live
+    master's long move. The thread now lets a waiting beat go first."""
+    robot = robot_for(sim, timeouts=FAST)
+    stop = threading.Event()
+
+    def read_back_to_back() -> None:
+        while not stop.is_set():
+            robot.status()
+
+    with robot:
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+        reader = threading.Thread(target=read_back_to_back)
+        reader.start()
+        try:
+            motion = robot.move_to(FAR, speed=5)  # several times the time-to-live
+        finally:
+            stop.set()
+            reader.join()
+        assert motion.done
+        assert motion.finished_at is not None
+        assert motion.finished_at - motion.ticket.sent_at > 2 * FAST.heartbeat_ttl_s

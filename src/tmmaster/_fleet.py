@@ -231,6 +231,7 @@ class LoopTransport(BlockTransport):
             TransportError: A read failed (a subclass says how).
         """
         plan = self.read_plan(fields, max_gap=max_gap)
+        self._yield_turn()
         with self._lock:
             if self._fleet._on_loop() or self.state is not _UP:
                 return super().read_fields(
@@ -272,6 +273,11 @@ class LoopTransport(BlockTransport):
         if failure is not None:
             self._request_failed(failure)
         return answers, failure
+
+    def _yield_turn(self) -> None:
+        """Let a waiting heartbeat go first, never on the loop (the beat waits on it)."""
+        if not self._fleet._on_loop():
+            super()._yield_turn()
 
     def _read_after(
         self, block: Block, first: BaseException | None, *, retry: bool, interruptible: bool
@@ -584,19 +590,20 @@ class FleetMember:
             sent); the error when the write failed.
         """
         deadline = asyncio.get_running_loop().time() + wait_s
-        while self.linked():
-            async with self._turn:
-                if self.transport.hold():
-                    try:
-                        await self.transport.write_on_loop(address, words)
-                    except TransportError as exc:
-                        return exc
-                    finally:
-                        self.transport.release()
-                    return None
-            if asyncio.get_running_loop().time() >= deadline:
-                return True
-            await asyncio.sleep(poll_s)
+        with self.transport.let_in():
+            while self.linked():
+                async with self._turn:
+                    if self.transport.hold():
+                        try:
+                            await self.transport.write_on_loop(address, words)
+                        except TransportError as exc:
+                            return exc
+                        finally:
+                            self.transport.release()
+                        return None
+                if asyncio.get_running_loop().time() >= deadline:
+                    return True
+                await asyncio.sleep(poll_s)
         return True
 
     async def _poll(self, follow: FollowState) -> Observation:

@@ -19,6 +19,7 @@ answered anything (:func:`no_answer_error`).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import ipaddress
 import socket
@@ -26,7 +27,7 @@ import struct
 import threading
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, Self, TypeVar, cast, runtime_checkable
@@ -115,6 +116,10 @@ def describe_read(table: Table, address: int, count: int) -> str:
 
 #: Modbus function codes that write (FC05, FC06, FC15, FC16).
 _WRITE_CODES = frozenset({5, 6, 15, 16})
+
+#: How long a request of the robot's thread lets a waiting heartbeat go first, s at most
+#: (see BlockTransport.let_in).
+_LET_IN_S = 0.05
 
 
 class ConnectionState(StrEnum):
@@ -479,6 +484,12 @@ class BlockTransport(ABC):
         self._epoch = 0
         self._state = ConnectionState.NEW
         self._lock = threading.RLock()
+        # Cleared while a heartbeat waits for the link: the robot's thread lets it in
+        # before its next request. Locks are not fair: a thread requesting back to back
+        # held the lock at every look, no beat got in, and the robot program expired the
+        # live master's command.
+        self._free_turn = threading.Event()
+        self._free_turn.set()
         # Set by bound_retries(): no retry past this time (a clean-up under a budget).
         self._retry_deadline: float | None = None
         # Read plans by the identity of the fields asked for: a status poll reads the same
@@ -648,8 +659,9 @@ class BlockTransport(ABC):
             None when answered; True when the link stayed busy or is down (nothing
             sent); the error when the write failed.
         """
-        if not self._lock.acquire(timeout=wait_s):
-            return True
+        with self.let_in():
+            if not self._lock.acquire(timeout=wait_s):
+                return True
         try:
             if self.state is not ConnectionState.CONNECTED or not self._link_open():
                 return True
@@ -663,6 +675,28 @@ class BlockTransport(ABC):
         finally:
             self._lock.release()
 
+    def _yield_turn(self) -> None:
+        """Before a request of the robot's thread: let a waiting heartbeat go first.
+
+        Bounded (50 ms): a request nested in one that holds the lock (a failed block's
+        retry) waits that long at most, and the beat then waits for the lock as usual.
+        """
+        if not self._free_turn.is_set():
+            self._free_turn.wait(_LET_IN_S)
+
+    @contextlib.contextmanager
+    def let_in(self) -> Iterator[None]:
+        """While inside: the robot's thread waits (up to 50 ms) before each new request.
+
+        For a write that must get a turn on a busy link (the heartbeat): it takes the lock
+        between two of the thread's requests instead of racing the thread for it.
+        """
+        self._free_turn.clear()
+        try:
+            yield
+        finally:
+            self._free_turn.set()
+
     def bound_retries(self, deadline: float) -> None:
         """From now on, retry no request past ``deadline`` (``time.monotonic()``).
 
@@ -675,6 +709,7 @@ class BlockTransport(ABC):
         self._retry_deadline = deadline
 
     def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
+        self._yield_turn()
         with self._lock:
             self._refuse_if_closed()
             policy = self.retry if retry else NO_RETRY
