@@ -350,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--policy",
         default="{}",
-        help="PollPolicy fields for tmmaster as JSON, e.g. '{\"dense_interval_s\": 0.005}'",
+        help="PollPolicy fields for tmmaster as JSON, e.g. '{\"interval_s\": 0.02}'",
     )
     args = parser.parse_args(argv)
     policy_fields: dict[str, Any] = json.loads(args.policy)
