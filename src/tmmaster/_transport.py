@@ -690,6 +690,9 @@ class BlockTransport(ABC):
 
         For a write that must get a turn on a busy link (the heartbeat): it takes the lock
         between two of the thread's requests instead of racing the thread for it.
+
+        Yields:
+            Nothing: the block inside is the waiting write's turn.
         """
         self._free_turn.clear()
         try:
