@@ -548,7 +548,7 @@ class FleetMember:
         if not self.linked():
             return
         record = self.record
-        read_at = record.read_at
+        read_at = record.published.read_at
         if read_at is not None and time.monotonic() - read_at < self.fresh_s:
             return
         async with self._turn:

@@ -150,46 +150,37 @@ class StatusRecord:
         self.name = name
         self._failed_event = f"{events}.poll_failed"
         self._recovered_event = f"{events}.poll_recovered"
-        self.status: RobotStatus | None = None
-        self.read_at: float | None = None
-        self.error: TMMasterError | None = None
-        self.polls = 0
-        self.skipped = 0
-        self.failures = 0
-        #: What readers see: replaced (one reference assignment) after every change.
+        #: The state, as readers see it: replaced (one reference assignment) after every
+        #: change, never changed in place.
         self.published = _NOTHING_YET
         self._log = log
 
-    def publish(self) -> None:
-        """Make the current state visible to readers."""
-        self.published = MonitoredStatus(
-            self.status, self.read_at, self.error, self.polls, self.skipped, self.failures
-        )
-
     def skip(self, slots: int) -> None:
         """Record ``slots`` slots that passed without a poll."""
-        self.skipped += slots
-        self.publish()
+        now = self.published
+        self.published = MonitoredStatus(
+            now.status, now.read_at, now.error, now.polls, now.skipped + slots, now.failures
+        )
 
     def fail(self, error: TMMasterError) -> None:
         """Record a failed poll (logged once as a warning, then at debug level)."""
-        if self.error is None:
+        now = self.published
+        if now.error is None:
             self._log.warning(self._failed_event, error=str(error))
         else:
             self._log.debug(self._failed_event, error=str(error))
-        self.error = error
-        self.failures += 1
-        self.publish()
+        self.published = MonitoredStatus(
+            now.status, now.read_at, error, now.polls, now.skipped, now.failures + 1
+        )
 
     def succeed(self, status: RobotStatus) -> None:
         """Record a poll's status."""
-        if self.error is not None:
-            self._log.debug(self._recovered_event, failures=self.failures)
-        self.status = status
-        self.read_at = status.timestamp
-        self.error = None
-        self.polls += 1
-        self.publish()
+        now = self.published
+        if now.error is not None:
+            self._log.debug(self._recovered_event, failures=now.failures)
+        self.published = MonitoredStatus(
+            status, status.timestamp, None, now.polls + 1, now.skipped, now.failures
+        )
 
 
 async def poll_on_schedule(
@@ -213,7 +204,8 @@ async def poll_on_schedule(
         sent = time.monotonic()
         await poll()
         now = time.monotonic()
-        if timings is not None and record.read_at is not None and record.read_at >= sent:
+        read_at = record.published.read_at
+        if timings is not None and read_at is not None and read_at >= sent:
             timings.append((sent - due, now - sent))
         passed = math.floor((now - due) / period)
         if passed > 0:
