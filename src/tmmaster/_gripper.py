@@ -430,8 +430,7 @@ class SequenceGripper(_RobotWiredGripper):
 
     def _run(self, kind: CommandKind, timeout_s: float | None) -> GripperStatus:
         robot = self._robot()
-        if timeout_s is not None:
-            _timeout(timeout_s, 0.0)
+        _timeout(timeout_s, 0.0)  # checked here; the command's wait applies it
         self._events.info("gripper.command_sent", gripper=self.kind, command=kind.value)
         robot.run_command(kind, timeout_s)
         return self.status()
