@@ -346,8 +346,9 @@ def check_body(
             if before is None or c.distance_mm < before - START_CONTACT_SLACK_MM:
                 raise ConfigError(_contact_text(c, joints, samples))
         if floor_z_mm is not None:
-            lowest = housing_lowest_z_mm(model, joints, tool)
-            if lowest is not None and lowest <= floor_z_mm:
+            segment = housing_segment(model, joints, tool)  # None: no housing
+            lowest = math.inf if segment is None else min(segment[0][2], segment[1][2]) - segment[2]
+            if lowest <= floor_z_mm:
                 raise ConfigError(
                     f"{_where(joints, samples)} put the 2FG7 housing at z = {lowest:.1f} mm,"
                     f" on or below the table plane (workspace floor_z_mm = {floor_z_mm:g} mm)"
@@ -390,26 +391,6 @@ def _contact_text(c: Contact, joints: tuple[float, ...], samples: Sequence[Seque
         f" ({-c.distance_mm:.1f} mm overlap of the capsules fitted to Techman's collision"
         " meshes)"
     )
-
-
-def housing_lowest_z_mm(
-    model: RobotModel, joints_deg: Sequence[float], tool: Pose | None
-) -> float | None:
-    """The lowest point of the 2FG7 housing at ``joints_deg`` (None: no housing), mm.
-
-    Args:
-        model: The arm model.
-        joints_deg: The joints, deg.
-        tool: The TCP in the flange frame.
-
-    Returns:
-        The z of its lowest point, or None when the tool leaves no room for one.
-    """
-    segment = housing_segment(model, joints_deg, tool)
-    if segment is None:
-        return None
-    a, b, r = segment
-    return min(a[2], b[2]) - r
 
 
 def housing_segment(
