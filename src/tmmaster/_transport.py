@@ -1160,9 +1160,8 @@ class _Stream(asyncio.Protocol):
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
-        #: Transaction id -> what its answer settles (its :class:`_Call`),
-        #: and the request's description.
-        self.awaited: dict[int, tuple[_Call, str]] = {}
+        #: Transaction id -> what its answer settles (its :class:`_Call`).
+        self.awaited: dict[int, _Call] = {}
         #: The first transaction id sent on this stream, and how many were sent on it.
         self.first_tid = 0
         self.sent = 0
@@ -1201,14 +1200,14 @@ class _Stream(asyncio.Protocol):
     def _take(self, pdu: ModbusPDU, frame: bytes) -> None:
         """An answer from the device: to the request awaiting its id, or dropped."""
         tid = pdu.transaction_id
-        entry = self.awaited.pop(tid, None)
-        if entry is None or entry[0].done():
+        call = self.awaited.pop(tid, None)
+        if call is None or call.done():
             if self.stray is None and not self.sent_here(tid):
                 self.stray = (tid, frame)
             _log.debug("transport.unawaited_answer", device=self.name, tid=tid)
             return
         self.answered = True
-        entry[0].set_result(pdu)
+        call.set_result(pdu)
 
     def sent_here(self, tid: int) -> bool:
         """Whether a request under ``tid`` was sent on this stream."""
@@ -1223,9 +1222,9 @@ class _Stream(asyncio.Protocol):
         """Fail every awaited request with ``error(what)`` and close the stream."""
         self.closed = True
         awaited, self.awaited = self.awaited, {}
-        for future, what in awaited.values():
-            if not future.done():
-                future.set_exception(error(what))
+        for call in awaited.values():
+            if not call.done():
+                call.set_exception(error(call.what))
         if self.transport is not None:
             self.transport.close()
 
@@ -1268,7 +1267,7 @@ def no_answer_error(link: AsyncLink, what: str, *, answered: bool) -> ResponseTi
     return error
 
 
-def _expire(future: _Call, link: AsyncLink, stream: _Stream, what: str) -> None:
+def _expire(future: _Call, link: AsyncLink, stream: _Stream) -> None:
     """A request's deadline: fail it unless answered (the message is built only here).
 
     Answers came, but only under ids never sent on this stream: not a Modbus server.
@@ -1279,10 +1278,10 @@ def _expire(future: _Call, link: AsyncLink, stream: _Stream, what: str) -> None:
         tid, frame = stream.stray
         reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
         error: TransportError = not_modbus_error(
-            reply, name=link.name, host=link.host, port=link.port, what=what
+            reply, name=link.name, host=link.host, port=link.port, what=future.what
         )
     else:
-        error = no_answer_error(link, what, answered=link.answered or stream.answered)
+        error = no_answer_error(link, future.what, answered=link.answered or stream.answered)
     future.set_exception(error)
 
 
@@ -1341,10 +1340,8 @@ class _Call:
         if self.timer is not None:
             self.timer.cancel()
         stream = self.stream
-        if stream is not None:
-            entry = stream.awaited.get(self.tid)
-            if entry is not None and entry[0] is self:
-                del stream.awaited[self.tid]
+        if stream is not None and stream.awaited.get(self.tid) is self:
+            del stream.awaited[self.tid]
 
     def set_result(self, result: ModbusPDU) -> None:
         """The answer came (from the stream)."""
@@ -1476,21 +1473,6 @@ class AsyncLink:
         )
         return stream, request
 
-    def _write(
-        self, stream: _Stream, request: ModbusPDU, pending: _Call, what: str
-    ) -> asyncio.TimerHandle:
-        """Send ``request`` once, awaited by ``pending``; its deadline."""
-        stream.awaited[request.transaction_id] = (pending, what)
-        stream.device_id = self.device_id  # answers are taken from the request's unit id
-        frame = stream.framer.buildFrame(request)
-        stream.sent += 1
-        assert stream.transport is not None  # checked by _request
-        stream.transport.write(frame)
-        if self.stats is not None:
-            self.stats.bytes_sent += len(frame)
-        loop = asyncio.get_running_loop()
-        return loop.call_later(self.timeout, _expire, pending, self, stream, what)
-
     def start(
         self,
         what: str,
@@ -1513,7 +1495,17 @@ class AsyncLink:
             return None
         call = _Call(request, count, self.name, what, settle, fail)
         call.stream, call.tid = stream, request.transaction_id
-        call.timer = self._write(stream, request, call, what)
+        stream.awaited[call.tid] = call
+        stream.device_id = self.device_id  # answers are taken from the request's unit id
+        frame = stream.framer.buildFrame(request)
+        stream.sent += 1
+        assert stream.transport is not None  # checked by _request
+        stream.transport.write(frame)
+        if self.stats is not None:
+            self.stats.bytes_sent += len(frame)
+        call.timer = asyncio.get_running_loop().call_later(
+            self.timeout, _expire, call, self, stream
+        )
         return call
 
     def close(self) -> None:
