@@ -268,17 +268,13 @@ def group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
     key = tuple(map(id, fields))
     entry = _WRITE_LAYOUTS.get(key)
     if entry is None or entry[0] != fields:
-        layout = _write_layout(fields)
+        # Each field's "words" are its position: the blocks list the positions they take.
+        grouped = _group_writes([(f, [i]) for i, f in enumerate(fields)])
+        layout = [(block, tuple(positions)) for block, positions in grouped]
         if len(_WRITE_LAYOUTS) >= _MAX_WRITE_LAYOUTS:
             _WRITE_LAYOUTS.clear()
         _WRITE_LAYOUTS[key] = entry = (fields, layout)
     return [(block, [w for i in positions for w in encoded[i][1]]) for block, positions in entry[1]]
-
-
-def _write_layout(fields: tuple[RegisterField, ...]) -> list[tuple[Block, tuple[int, ...]]]:
-    """The write blocks of ``fields`` and the positions (in ``fields``) of each's fields."""
-    grouped = _group_writes([(f, [i]) for i, f in enumerate(fields)])
-    return [(block, tuple(positions)) for block, positions in grouped]
 
 
 def _group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
