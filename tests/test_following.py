@@ -23,6 +23,7 @@ from tmmaster import (
 from tmmaster._channels import Command, CommandKind, Observation, Ticket
 from tmmaster._command import Motion, _MotionFollower
 from tmmaster._logging import get_logger
+from tmmaster._planning import Plan
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -153,7 +154,8 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
         orientation_tolerance_deg=0.1,
     )
     ticket = Ticket(Command(CommandKind.GRIPPER_CLOSE), [], sent_at)
-    motion = Motion(follower, ticket, start=None, expected_s=expected_s, timeout_s=10)
+    plan = Plan(start=None, joints=None, target=None, expected_s=expected_s, timeout_s=10)
+    motion = Motion(follower, ticket, plan)
     follower.wait(motion, None)
     assert motion.done
     assert motion.reported_finished_at == clock.now

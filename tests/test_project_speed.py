@@ -20,6 +20,7 @@ from tmmaster._channels import Command, CommandKind, Ticket
 from tmmaster._command import Motion, _MotionFollower
 from tmmaster._following import FollowState
 from tmmaster._logging import get_logger
+from tmmaster._planning import Plan
 from tmmaster.sim import Cell, RobotSetup, Simulator
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
@@ -103,9 +104,8 @@ def test_a_project_speed_lowered_since_the_plan_grows_the_moves_budget() -> None
 
     def follow_of(timeout_s: float | None) -> tuple[Motion, FollowState]:
         ticket = Ticket(Command(CommandKind.PTP, RIGHT, 50), [], time.monotonic())
-        motion = Motion(
-            follower, ticket, start=LEFT, expected_s=2.0, timeout_s=4.6, timeout_from_model=True
-        )
+        plan = Plan(LEFT, None, RIGHT, expected_s=2.0, timeout_s=4.6, timeout_from_model=True)
+        motion = Motion(follower, ticket, plan)
         state = FollowState(
             motion,
             timeout_s,

@@ -39,7 +39,6 @@ from ._gate import CommandGate
 from ._planning import Plan, TimeoutPolicy
 from ._poller import Poller, PollPolicy
 from ._pose import Pose
-from ._robot_models import PathGauge
 from ._sigint import deferred
 from ._status import MovePhase, MoveProgress
 
@@ -63,34 +62,23 @@ class Motion:
         ```
     """
 
-    def __init__(
-        self,
-        follower: _MotionFollower,
-        ticket: Ticket,
-        *,
-        start: Pose | None,
-        expected_s: float,
-        timeout_s: float,
-        gauge: PathGauge | None = None,
-        accel_s: float = 0.0,
-        timeout_from_model: bool = False,
-    ) -> None:
+    def __init__(self, follower: _MotionFollower, ticket: Ticket, plan: Plan) -> None:
         self._follower = follower
         self._ticket = ticket
         #: Where the move started, when known.
-        self.start = start
+        self.start = plan.start
         #: The TCP target (None for a gripper command).
         self.target = ticket.command.target
         #: The expected duration by the arm model, s.
-        self.expected_s = expected_s
+        self.expected_s = plan.expected_s
         #: How long the move may take before its wait gives up, s.
-        self.timeout_s = timeout_s
+        self.timeout_s = plan.timeout_s
         #: The move's acceleration time by the arm model, s (0: not a move).
-        self.accel_s = accel_s
+        self.accel_s = plan.accel_s
         #: True when ``timeout_s`` was derived from the model's expected time: the wait
         #: then gives a robot the polls see moving slower than the model more time.
-        self.timeout_from_model = timeout_from_model
-        self._gauge = gauge
+        self.timeout_from_model = plan.timeout_from_model
+        self._gauge = plan.gauge
         #: Where the move stands.
         self.phase = MovePhase.SENT
         #: The last TCP pose read during the move (None before the first read).
@@ -106,7 +94,7 @@ class Motion:
         #: True once the robot reported the command finished (done, or idle after it).
         self.reported_finished = False
         #: The project speed its expected time assumes, % (the robot's, read at connect).
-        self.project_speed_percent = 100.0
+        self.project_speed_percent = plan.project_speed_percent
         #: ``time.monotonic()`` when the poll that saw it reported finished returned.
         self.reported_finished_at: float | None = None
 
@@ -278,17 +266,7 @@ class _MotionFollower:
         gate's lock before the first byte is written. Whatever escapes the write, the
         command is given up safely first (:meth:`following`).
         """
-        motion = Motion(
-            self,
-            ticket,
-            start=plan.start,
-            expected_s=plan.expected_s,
-            timeout_s=plan.timeout_s,
-            gauge=plan.gauge,
-            accel_s=plan.accel_s,
-            timeout_from_model=plan.timeout_from_model,
-        )
-        motion.project_speed_percent = plan.project_speed_percent
+        motion = Motion(self, ticket, plan)
         with self.following(motion):
             self.send(ticket, functools.partial(register, motion))
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
