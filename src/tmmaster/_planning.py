@@ -395,10 +395,7 @@ class Planner:
         A Line the arm cannot follow from where it is believed to be is refused without
         touching the robot; it is checked again from the pose the robot reports.
         """
-        if motion is MotionType.LINE and self.hint_pose is not None:
-            self._check_line(self.hint_pose, target, speed, self.joints_hint)
-        else:
-            self.validate(target, speed)
+        self.check_move(target, speed, motion, self.hint_pose, self.joints_hint)
 
     def check_arc_move(self, via: Pose, to: Pose, speed: int) -> None:
         """An arc's checks before any request: its end, ``via``, the arc from the seed."""
