@@ -28,7 +28,7 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, Self, TypeVar, cast, runtime_checkable
 
@@ -156,15 +156,8 @@ class TransportStats:
         Returns:
             The counters by name (``requests_by_function`` sorted by code).
         """
-        return {
-            "requests": self.requests,
-            "retries": self.retries,
-            "reconnects": self.reconnects,
-            "errors": self.errors,
-            "bytes_sent": self.bytes_sent,
-            "bytes_received": self.bytes_received,
-            "requests_by_function": dict(sorted(self.requests_by_function.items())),
-        }
+        by_function = dict(sorted(self.requests_by_function.items()))
+        return {**asdict(self), "requests_by_function": by_function}
 
 
 @dataclass(frozen=True)
