@@ -1266,9 +1266,7 @@ def _expire(future: _Call, link: AsyncLink, stream: _Stream) -> None:
     if stream.stray is not None:
         tid, frame = stream.stray
         reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
-        error: TransportError = not_modbus_error(
-            reply, name=link.name, host=link.host, port=link.port, what=future.what
-        )
+        error: TransportError = _not_modbus(reply, stream, future.what)
     else:
         error = no_answer_error(link, future.what, answered=link.answered or stream.answered)
     future.set_exception(error)
