@@ -902,15 +902,14 @@ def endpoint_text(host: str, port: int) -> str:
     return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
 
 
-def connect_error(
-    exc: BaseException, *, name: str, host: str, port: int, timeout: float
-) -> ConnectError:
+def connect_error(exc: BaseException, link: AsyncLink) -> ConnectError:
     """The typed error of a connection that could not be opened (the one mapping).
 
     A name that does not resolve is a :class:`HostNotFoundError`, a refusal a
     :class:`ConnectRefusedError`; anything else (no answer in time, no route, the
     network down) a plain :class:`ConnectError`, an outage.
     """
+    name, host, port, timeout = link.name, link.host, link.port, link.timeout
     where = endpoint_text(host, port)
     if isinstance(exc, socket.gaierror | UnicodeError):
         # UnicodeError: the IDNA codec refusing a label (longer than 63 characters).
@@ -1390,9 +1389,7 @@ class AsyncLink:
             async with asyncio.timeout(self.timeout):
                 stream = await self._open_stream(loop)
         except (OSError, TimeoutError, UnicodeError) as exc:
-            raise connect_error(
-                exc, name=self.name, host=self.host, port=self.port, timeout=self.timeout
-            ) from exc
+            raise connect_error(exc, self) from exc
         stream.first_tid = self._tid % 0xFFFF + 1
         self._stream = stream
 
