@@ -1096,16 +1096,14 @@ def shown_bytes(data: bytes) -> str:
     return data[:12].hex(" ") + ("..." if len(data) > 12 else "")
 
 
-def not_modbus_error(
-    reply: ForeignReplyError, *, name: str, host: str, port: int, what: str
-) -> NotModbusError:
+def not_modbus_error(reply: ForeignReplyError, stream: _Stream, what: str) -> NotModbusError:
     """The :class:`NotModbusError` of bytes that are not Modbus TCP (one line, host:port)."""
-    where = endpoint_text(host, port)
+    where = endpoint_text(stream.host, stream.port)
     return NotModbusError(
-        f"{name} at {where} is not a Modbus TCP server: its answer to {what} starts"
+        f"{stream.name} at {where} is not a Modbus TCP server: its answer to {what} starts"
         f" {shown_bytes(reply.data)} ({reply.reason}); is the port right?",
-        host=host,
-        port=port,
+        host=stream.host,
+        port=stream.port,
     )
 
 
@@ -1173,7 +1171,7 @@ class _Stream(asyncio.Protocol):
                     self.framer, self._buffer, device_id=self.device_id, name=self.name
                 )
             except ForeignReplyError as exc:
-                self.fail(functools.partial(_not_modbus, exc, self))
+                self.fail(functools.partial(not_modbus_error, exc, self))
                 return
             except DECODE_FAILURES as exc:
                 self.fail(functools.partial(_malformed, self.name, exc))
@@ -1215,10 +1213,6 @@ class _Stream(asyncio.Protocol):
                 call.set_exception(error(call.what))
         if self.transport is not None:
             self.transport.close()
-
-
-def _not_modbus(reply: ForeignReplyError, stream: _Stream, what: str) -> TransportError:
-    return not_modbus_error(reply, name=stream.name, host=stream.host, port=stream.port, what=what)
 
 
 def _is_ip(host: str) -> bool:
@@ -1265,7 +1259,7 @@ def _expire(future: _Call, link: AsyncLink, stream: _Stream) -> None:
     if stream.stray is not None:
         tid, frame = stream.stray
         reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
-        error: TransportError = _not_modbus(reply, stream, future.what)
+        error: TransportError = not_modbus_error(reply, stream, future.what)
     else:
         error = no_answer_error(link, future.what, answered=link.answered or stream.answered)
     future.set_exception(error)
