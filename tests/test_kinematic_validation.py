@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from typing import Any
+from collections.abc import Callable
 
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, PollPolicy, Pose, Robot, UnreachablePoseError
+from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError
 from tmmaster.pickplace import ARTICLE_HOME, pick_and_place, validate_config, validate_plan
 from tmmaster.sim import Simulator
 
@@ -16,25 +15,6 @@ SimFactory = Callable[..., Simulator]
 ABOVE_NEAR_BASE = Pose(250, 0, 200, 180, 0, 90)
 #: Straight below ABOVE_NEAR_BASE: J3 passes its 155 deg limit at z ~ 115 on the way.
 NEAR_BASE = Pose(250, 0, 100, 180, 0, 90)
-
-
-@pytest.fixture
-def robots(memory_simulator_factory: SimFactory) -> Iterator[Callable[..., Robot]]:
-    """An in-memory simulator and a connected robot on it, closed after the test."""
-    opened: list[Robot] = []
-
-    def make(profile: str = "article", **options: Any) -> Robot:
-        sim = memory_simulator_factory(profile)
-        robot = Robot(sim.url, profile=profile, polling=PollPolicy(interval_s=0.01), **options)
-        opened.append(robot)
-        robot.connect()
-        robot.wait_until_ready(timeout_s=5)
-        robot.sim = sim  # type: ignore[attr-defined]
-        return robot
-
-    yield make
-    for robot in opened:
-        robot.close()
 
 
 def requests_sent(sim: Simulator) -> list[object]:
@@ -49,10 +29,10 @@ def motion_writes(sim: Simulator) -> list[object]:
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_the_articles_home_is_refused_and_nothing_is_sent(
-    robots: Callable[..., Robot], profile: str
+    robots: Callable[..., Robot], memory_simulator_factory: SimFactory, profile: str
 ) -> None:
-    robot = robots(profile)
-    sim: Simulator = robot.sim  # type: ignore[attr-defined]
+    sim = memory_simulator_factory(profile)
+    robot = robots(sim)
     sim.clear_request_log()
     with pytest.raises(UnreachablePoseError, match="out of reach") as caught:
         robot.move_to(Pose.from_sequence(ARTICLE_HOME), speed=30)
@@ -61,10 +41,10 @@ def test_the_articles_home_is_refused_and_nothing_is_sent(
 
 
 def test_a_line_through_a_joint_limit_is_refused_before_the_write(
-    robots: Callable[..., Robot],
+    robots: Callable[..., Robot], memory_simulator_factory: SimFactory
 ) -> None:
-    robot = robots("article")
-    sim: Simulator = robot.sim  # type: ignore[attr-defined]
+    sim = memory_simulator_factory("article")
+    robot = robots(sim)
     robot.move_to(ABOVE_NEAR_BASE, speed=100)
     sim.clear_request_log()
     with pytest.raises(UnreachablePoseError, match="J3") as caught:
