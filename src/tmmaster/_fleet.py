@@ -971,9 +971,8 @@ class Fleet:
         except _CANCELLED as exc:
             raise ConnectionLostError(f"{name}: the fleet closed during the request") from exc
         except BaseException:
-            self._call_soon(
-                job.cancel
-            )  # interrupted (Ctrl-C): the request is dropped with its link
+            # Interrupted (Ctrl-C): the request is dropped with its link.
+            self._call_soon(job.cancel)
             raise
 
     def _call_soon(self, callback: Callable[..., object], *args: Any) -> bool:
