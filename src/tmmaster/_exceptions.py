@@ -440,17 +440,3 @@ class TMScriptSyntaxError(TMScriptError):
 
 class TMScriptRuntimeError(TMScriptError):
     """A statement of the script failed while it ran (division by zero, a bad conversion...)."""
-
-
-# Every public error reads ``tmmaster.RobotFaultError`` in a traceback, a repr and a
-# pickle from the moment it is defined, not only once read through ``tmmaster`` (whose
-# lazy import rehomes a name on first access); each of them is exported there.
-for _error in list(globals().values()):
-    if (
-        isinstance(_error, type)
-        and issubclass(_error, BaseException)
-        and _error.__module__ == __name__
-        and not _error.__name__.startswith("_")
-    ):
-        _error.__module__ = "tmmaster"
-del _error
