@@ -175,27 +175,6 @@ def arm_body(name: str, tool: Pose | None) -> ArmBody | None:
     return ArmBody(specs, names, pairs, centres)
 
 
-def placed(
-    body: ArmBody, model: RobotModel, joints_deg: Sequence[float]
-) -> list[tuple[Vector, Vector, float]]:
-    """Each capsule of ``body`` where ``joints_deg`` put it: its ends (base frame) and radius.
-
-    Args:
-        body: The arm's body.
-        model: The arm model.
-        joints_deg: The joints, deg.
-
-    Returns:
-        (a, b, radius) per capsule, in the order of ``body.specs``.
-    """
-    frames = _frames(body, model, joints_deg)
-    out = []
-    for link, _, a, b, r in body.specs:
-        t = frames[link]
-        out.append((_apply(t, a), _apply(t, b), r))
-    return out
-
-
 #: A link's frame: three rows of its rotation and position, mm.
 Frame = Sequence[Sequence[float]]
 _BASE: Frame = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0))
@@ -264,17 +243,19 @@ def contacts(
     specs = body.specs
     centres = [_apply(frames[s[0]], c) for s, c in zip(specs, body.centres, strict=True)]
     ends: dict[int, tuple[Vector, Vector]] = {}
+
+    def ends_of(k: int) -> tuple[Vector, Vector]:
+        """Capsule ``k``'s segment ends in the base frame, placed once."""
+        if k not in ends:
+            frame = frames[specs[k][0]]
+            ends[k] = (_apply(frame, specs[k][2]), _apply(frame, specs[k][3]))
+        return ends[k]
+
     found = []
     for i, j, reach in body.pairs:
         if math.dist(centres[i], centres[j]) > reach:
             continue  # bounding spheres apart
-        for k in (i, j):
-            if k not in ends:
-                ends[k] = (
-                    _apply(frames[specs[k][0]], specs[k][2]),
-                    _apply(frames[specs[k][0]], specs[k][3]),
-                )
-        gap = segment_distance(*ends[i], *ends[j]) - specs[i][4] - specs[j][4]
+        gap = segment_distance(*ends_of(i), *ends_of(j)) - specs[i][4] - specs[j][4]
         if gap < -GRAZE_MM:
             found.append(Contact(body.names[i], body.names[j], gap))
     if mount:
@@ -286,10 +267,7 @@ def contacts(
                 or centres[k][2] - math.dist(spec[2], spec[3]) / 2 - spec[4] >= MOUNT_MARGIN_MM
             ):
                 continue
-            a, b = ends.get(k) or (
-                _apply(frames[spec[0]], spec[2]),
-                _apply(frames[spec[0]], spec[3]),
-            )
+            a, b = ends_of(k)
             gap = min(a[2], b[2]) - spec[4] - MOUNT_MARGIN_MM
             if gap < 0:
                 found.append(Contact(body.names[k], "the mounting plane", gap))
