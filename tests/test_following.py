@@ -147,7 +147,6 @@ def test_polls_are_paced_from_each_polls_start_not_its_end(
         channel,  # type: ignore[arg-type]
         ClockEvent(clock),  # type: ignore[arg-type]
         get_logger("tmmaster.test_following").bind(robot="timed"),
-        poll_interval_s=0.05,
         polling=policy,
         timeouts=TimeoutPolicy(),
         position_tolerance_mm=0.1,

@@ -46,7 +46,7 @@ def test_a_move_costs_no_more_polls_than_nominal_polling(expected_s: float) -> N
     ack_at = 0.021
     end = ack_at + expected_s
     until = end + 2 * TICK
-    schedule = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
+    schedule = MotionSchedule(PollPolicy(), 0.0)
     times = polls_of(schedule, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until)
     assert len(times) <= until / NOMINAL + 1
     # Dense from the expected end to a robot tick after it, where a robot on the model
@@ -63,7 +63,7 @@ def test_a_move_costs_no_more_polls_than_nominal_polling(expected_s: float) -> N
 
 
 def test_the_first_poll_follows_the_robots_next_tick() -> None:
-    schedule = MotionSchedule(PollPolicy(), NOMINAL, sent_at=10.0)
+    schedule = MotionSchedule(PollPolicy(), sent_at=10.0)
     assert schedule.next_poll(10.0, acknowledged=False) == pytest.approx(10.0 + ACK_DELAY_S)
     # Dense for a robot tick, then nominal.
     assert schedule.next_poll(10.025, acknowledged=False) == pytest.approx(10.025 + DENSE_S)
@@ -71,14 +71,14 @@ def test_the_first_poll_follows_the_robots_next_tick() -> None:
 
 
 def test_predictive_polling_can_be_switched_off() -> None:
-    schedule = MotionSchedule(PollPolicy(predictive=False), NOMINAL, sent_at=0.0)
+    schedule = MotionSchedule(PollPolicy(predictive=False), sent_at=0.0)
     assert schedule.next_poll(0.0, acknowledged=False) == pytest.approx(NOMINAL)
     schedule.acknowledged(0.02, 1.0)
     assert schedule.next_poll(1.0, acknowledged=True) == pytest.approx(1.0 + NOMINAL)
 
 
 def test_a_very_short_move_is_polled_densely_until_a_tick_after_its_end() -> None:
-    schedule = MotionSchedule(PollPolicy(), NOMINAL, sent_at=0.0)
+    schedule = MotionSchedule(PollPolicy(), sent_at=0.0)
     schedule.acknowledged(0.02, 0.01)
     seen = 0.02 + 0.01 + DENSE_S
     assert schedule.next_poll(0.02, acknowledged=True) == pytest.approx(seen)
@@ -124,7 +124,7 @@ def test_a_short_move_is_polled_sparsely_until_its_earliest_end(expected_s: floa
 def test_a_short_move_the_robot_took_early_is_seen_within_a_dense_interval() -> None:
     # The poll at 21 ms saw the command taken; the write was at 0: the robot took it in
     # between. The window opens at the end of a robot that took it at once.
-    schedule = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
+    schedule = MotionSchedule(PollPolicy(), 0.0)
     schedule.acknowledged(0.021, 0.43, since=0.0)
     polls, now = [], 0.021
     while now < 0.6:
@@ -170,9 +170,9 @@ def test_the_window_opens_early_enough_for_an_acknowledgement_seen_late(
     # it (21 ms): it may report the end as early as expected_s after the write.
     ack_at, end = 0.021, 0.021 + expected_s
     until = end + 2 * TICK
-    plain = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
+    plain = MotionSchedule(PollPolicy(), 0.0)
     plain_times = polls_of(plain, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until)
-    early = MotionSchedule(PollPolicy(), NOMINAL, 0.0)
+    early = MotionSchedule(PollPolicy(), 0.0)
     early_times = polls_of(
         early, sent_at=0.0, ack_at=ack_at, expected_s=expected_s, until=until, since=0.0
     )
@@ -201,7 +201,7 @@ def seen_after_the_end(
     """
     policy = policy or PollPolicy()
     accel = 0.2
-    schedule = MotionSchedule(policy, NOMINAL, 0.0, accel_s=accel)
+    schedule = MotionSchedule(policy, 0.0, accel_s=accel)
     ack_at = 0.021
     end = ack_at + expected_s * pace
     reported = math.ceil(end / TICK) * TICK
@@ -247,7 +247,7 @@ def test_a_robot_that_speeds_up_after_a_slow_start_is_seen_within_one_interval()
     # operator's speed override turned down): the polls may be spaced again, but never
     # past the model's own end, so a robot that speeds up again is seen in time.
     policy = PollPolicy()
-    schedule = MotionSchedule(policy, NOMINAL, 0.0, accel_s=0.2)
+    schedule = MotionSchedule(policy, 0.0, accel_s=0.2)
     schedule.acknowledged(0.0, 2.0)
     schedule.observed(0.9, 0.06)
     assert schedule.expected_end is not None

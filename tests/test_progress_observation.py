@@ -125,7 +125,6 @@ def _follow(motion: _Motion) -> FollowState:
         motion,
         None,
         stop_event=threading.Event(),
-        poll_interval_s=0.05,
         polling=PollPolicy(),
         ack_timeout_s=1.0,
         stall_s=1.0,

@@ -95,7 +95,6 @@ def test_a_project_speed_lowered_since_the_plan_grows_the_moves_budget() -> None
         channel=None,  # type: ignore[arg-type]  # nothing here reads the robot
         stop_event=threading.Event(),
         log=get_logger("test"),
-        poll_interval_s=0.05,
         polling=PollPolicy(),
         timeouts=TimeoutPolicy(),
         position_tolerance_mm=1.0,
@@ -110,7 +109,6 @@ def test_a_project_speed_lowered_since_the_plan_grows_the_moves_budget() -> None
             motion,
             timeout_s,
             stop_event=follower.stop_event,
-            poll_interval_s=0.05,
             polling=PollPolicy(),
             ack_timeout_s=2.0,
             stall_s=1.0,

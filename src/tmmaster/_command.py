@@ -226,7 +226,6 @@ class _MotionFollower:
         stop_event: threading.Event,
         log: Any,
         *,
-        poll_interval_s: float,
         polling: PollPolicy,
         timeouts: TimeoutPolicy,
         position_tolerance_mm: float,
@@ -243,7 +242,7 @@ class _MotionFollower:
         #: profile has one: a move at its derived deadline asks once whether it was
         #: lowered since the plan.
         self.project_speed: Callable[[], float | None] | None = None
-        self.poll_interval_s = poll_interval_s
+        #: How waits poll (``interval_s``: the nominal pace of every wait).
         self.polling = polling
         self.timeouts = timeouts
         self.position_tolerance_mm = position_tolerance_mm
@@ -324,7 +323,7 @@ class _MotionFollower:
                 return
         else:
             deadline = time.monotonic() + self.timeouts.in_flight_s
-            poller = Poller(self.poll_interval_s, self.stop_event, deadline=deadline)
+            poller = Poller(self.polling.interval_s, self.stop_event, deadline=deadline)
             while time.monotonic() < deadline:
                 poller.sleep()
                 if self._channel.write_landed(ticket):
@@ -497,7 +496,7 @@ class _MotionFollower:
         # The close's event, not the stop event: a stop request (already set when a
         # stop request gave the command up) must not cut short the withdraw it asks for.
         poller = Poller(
-            self.poll_interval_s, self.closing if interruptible else None, deadline=deadline
+            self.polling.interval_s, self.closing if interruptible else None, deadline=deadline
         )
         while True:
             try:
@@ -557,7 +556,6 @@ class _MotionFollower:
             motion,
             timeout_s,
             stop_event=self.stop_event,
-            poll_interval_s=self.poll_interval_s,
             polling=self.polling,
             ack_timeout_s=self.timeouts.ack_timeout_s,
             stall_s=self.timeouts.stall_s,

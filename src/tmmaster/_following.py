@@ -92,7 +92,6 @@ class FollowState:
         timeout_s: float | None,
         *,
         stop_event: threading.Event,
-        poll_interval_s: float,
         polling: PollPolicy,
         ack_timeout_s: float,
         stall_s: float,
@@ -105,10 +104,8 @@ class FollowState:
         #: given): it then grows with the pace the polls observe.
         self.scales_with_pace = timeout_s is None and motion.timeout_from_model
         self.stop_event = stop_event
-        self.poller = Poller(poll_interval_s, stop_event)
-        self.schedule = MotionSchedule(
-            polling, poll_interval_s, ticket.sent_at, accel_s=motion.accel_s
-        )
+        self.poller = Poller(polling.interval_s, stop_event)
+        self.schedule = MotionSchedule(polling, ticket.sent_at, accel_s=motion.accel_s)
         self.ack_deadline = ticket.sent_at + ack_timeout_s
         #: ``time.monotonic()`` at the start of the last poll (the wait's start before one).
         self.poll_started = time.monotonic()

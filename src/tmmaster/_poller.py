@@ -177,11 +177,9 @@ class MotionSchedule:
     poll observes (:meth:`observed`).
     """
 
-    def __init__(
-        self, policy: PollPolicy, nominal_s: float, sent_at: float, *, accel_s: float = 0.0
-    ) -> None:
+    def __init__(self, policy: PollPolicy, sent_at: float, *, accel_s: float = 0.0) -> None:
         self._predictive = policy.predictive
-        self._nominal = nominal_s
+        self._nominal = policy.interval_s
         self._sent_at = sent_at
         self._accel = max(accel_s, 0.0)
         self._acked_at = 0.0

@@ -22,6 +22,7 @@ giving a command up safely).
 from __future__ import annotations
 
 import atexit
+import functools
 import inspect
 import threading
 import time
@@ -37,7 +38,6 @@ from ._channels import (
     Command,
     CommandChannel,
     CommandKind,
-    Ticket,
     channel_for,
     pose_from,
 )
@@ -111,6 +111,7 @@ from ._transport import (
 _log = get_logger("tmmaster.robot")
 
 _P = ParamSpec("_P")
+_T = TypeVar("_T")
 _PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy", "Checks")
 
 
@@ -134,9 +135,10 @@ def _device_address(gripper: object) -> tuple[str | None, int, Transport | None]
     return None, 502, None
 
 
-def _policy(name: str, value: object, kind: type[_PolicyT]) -> _PolicyT:
-    """``value`` when it is a ``kind`` (None: the default one); a ConfigError otherwise."""
-    if value is None:
+def _policy(name: str, value: object, kind: type[_PolicyT], *, default: bool = True) -> _PolicyT:
+    """``value`` when it is a ``kind`` (None: the default one, where ``default``); a
+    ConfigError otherwise."""
+    if value is None and default:
         return kind()
     if not isinstance(value, kind):
         raise ConfigError(f"{name} must be a tmmaster.{kind.__name__}, got {value!r}")
@@ -164,11 +166,6 @@ class _Options:
             _policy("checks", checks, Checks),
         )
 
-    @property
-    def request_timeout_s(self) -> float:
-        """The bound of one Modbus request, s (``timeouts.request_s``)."""
-        return self.timeouts.request_s
-
     def heartbeat(self, profile: RobotProfile, transport: Transport, log: Any) -> Heartbeat:
         """The robot's heartbeat writer, with the timeout policy's period and TTL."""
         return Heartbeat(
@@ -187,7 +184,6 @@ class _Options:
             channel,
             stop_event,
             log,
-            poll_interval_s=self.polling.interval_s,
             polling=self.polling,
             timeouts=self.timeouts,
             position_tolerance_mm=self.checks.position_tolerance_mm,
@@ -263,19 +259,15 @@ class _Links:
         """The addresses checked (an in-process host, sim://name, has no port).
 
         A ready ``transport`` (``gripper_transport``) leaves its address unchecked. The
-        gripper's host is the robot's unless given.
+        gripper's host is the robot's unless given (a GripperDevice checked its own); its
+        port is checked here, where the robot's host is its host.
         """
         if transport is None:
             host = check_host(host, field="host", port_field="port")
             if not is_in_process(host):
                 port = check_port(port, field="port")
-        if gripper_transport is None:
-            if gripper_host is not None:
-                gripper_host = check_host(
-                    gripper_host, field="gripper.host", port_field="gripper.port"
-                )
-            if not is_in_process(gripper_host or host):
-                gripper_port = check_port(gripper_port, field="gripper.port")
+        if gripper_transport is None and not is_in_process(gripper_host or host):
+            gripper_port = check_port(gripper_port, field="gripper.port")
         return cls(host, port, gripper_host or host, gripper_port, transport, gripper_transport)
 
     def open(
@@ -284,19 +276,16 @@ class _Links:
         """The robot's link: the ready one, a Fleet's, or one opened to ``host:port``.
 
         An in-process ``host`` ("sim://name") opens through the plugin that registered it;
-        any other is opened on the process's default driver.
+        any other is opened on the process's default driver. (``link=`` is one or the
+        other: a Fleet's robot has no ready transport.)
         """
         link: dict[str, Any] = {
             "device_id": profile.device_id,
-            "timeout": options.request_timeout_s,
+            "timeout": options.timeouts.request_s,
             "retry": options.retry,
             "name": name,
         }
         if fleet is not None:
-            if not isinstance(fleet, Fleet):
-                raise ConfigError(f"fleet must be a tmmaster.Fleet, got {type(fleet).__name__}")
-            if self.transport is not None:
-                raise ConfigError("pass either transport or fleet: a Fleet's robot uses its link")
             return join_fleet(fleet, self.host, self.port, **link)
         return self.transport or open_transport(self.host, self.port, **link)
 
@@ -491,12 +480,11 @@ class Robot:
     @property
     def poll_interval_s(self) -> float:
         """Seconds between two polls of a wait (its nominal pace)."""
-        return self._follower.poll_interval_s
+        return self._follower.polling.interval_s
 
     @poll_interval_s.setter
     def poll_interval_s(self, value: float) -> None:
         interval = require_in("poll_interval_s", value, INTERVAL_BOUNDS)
-        self._follower.poll_interval_s = interval
         self._follower.polling = self._follower.polling.model_copy(update={"interval_s": interval})
 
     @property
@@ -506,10 +494,7 @@ class Robot:
 
     @polling.setter
     def polling(self, value: PollPolicy) -> None:
-        if value is None:
-            raise ConfigError("polling must be a tmmaster.PollPolicy, got None")
-        self._follower.polling = _policy("polling", value, PollPolicy)
-        self._follower.poll_interval_s = value.interval_s
+        self._follower.polling = _policy("polling", value, PollPolicy, default=False)
 
     @property
     def timeouts(self) -> TimeoutPolicy:
@@ -523,9 +508,7 @@ class Robot:
 
     @timeouts.setter
     def timeouts(self, value: TimeoutPolicy) -> None:
-        if value is None:
-            raise ConfigError("timeouts must be a tmmaster.TimeoutPolicy, got None")
-        self._follower.timeouts = _policy("timeouts", value, TimeoutPolicy)
+        self._follower.timeouts = _policy("timeouts", value, TimeoutPolicy, default=False)
 
     @property
     def position_tolerance_mm(self) -> float:
@@ -704,18 +687,23 @@ class Robot:
             fields = (*channel.flange_fields, *fields, *channel.robot_base_tcp_fields)
         if not check and not channel.joint_fields:
             return  # nothing to check, nothing to seed from
-        try:
-            values = channel.read(fields)
-        except IllegalAddressError as exc:
-            mismatch = _profile_mismatch(self._transport, self.profile, exc)
-            if mismatch is None:
-                raise
-            raise mismatch from exc
+        values = self._read_naming_profile(functools.partial(channel.read, fields))
         if check:
             frames.at_connect(values, self.tool)
         joints = channel.joints_from(values)
         if joints is not None:
             self._planner.take_robot_joints(pose_from(values, TCP_FIELDS), joints)
+
+    def _read_naming_profile(self, read: Callable[[], _T]) -> _T:
+        """``read()``; refused (IllegalAddressError), the ProfileMismatchError naming the
+        built-in profile the device answers instead, where one does."""
+        try:
+            return read()
+        except IllegalAddressError as exc:
+            mismatch = _profile_mismatch(self._transport, self.profile, exc)
+            if mismatch is None:
+                raise
+            raise mismatch from exc
 
     def _read_project_speed(self) -> float | None:
         """The robot's project speed (``tmflow``: 7101, one request), for the next plans:
@@ -831,13 +819,7 @@ class Robot:
                 another built-in profile's registers).
         """
         self._require_connection()
-        try:
-            status = self._channel.read_status()
-        except IllegalAddressError as exc:
-            mismatch = _profile_mismatch(self._transport, self.profile, exc)
-            if mismatch is None:
-                raise
-            raise mismatch from exc
+        status = self._read_naming_profile(self._channel.read_status)
         self._planner.take_project_speed(status.raw)  # tmflow: 7101, read with the status
         return status
 
@@ -872,11 +854,9 @@ class Robot:
         poller = Poller(self.poll_interval_s, self._stop_event, deadline=deadline)
         while True:
             poller.check()
-            status = self.status()
+            status = self._checked_status()  # a ready robot is in neither e-stop nor error
             if status.ready:
                 return status
-            if (failure := self._channel.status_failure(status)) is not None:
-                raise failure
             if time.monotonic() >= deadline:
                 raise MotionTimeoutError(
                     f"robot not ready after {timeout_s:g} s ({status}){project_hint(status)}",
@@ -1312,7 +1292,8 @@ class Robot:
         start: Pose | None = None
         joints: tuple[float, ...] | None = None
         if command.target is not None:
-            start, joints = self._arm_before(ticket)
+            # Where the move starts, the robot's TCP and base checked against the tool.
+            start, joints = self._frames.arm_before(ticket, self.tool)
         plan = self._planner.plan(command, start, joints, timeout=timeout, resolved_at=resolved_at)
         motion = self._follower.start(ticket, plan, self._outstanding)
         self._planner.sent(plan)
@@ -1321,11 +1302,6 @@ class Robot:
     def _outstanding(self, motion: Motion) -> None:
         """Record the command being sent (under the gate's lock, before its write)."""
         self._last_motion = motion
-
-    def _arm_before(self, ticket: Ticket) -> tuple[Pose, tuple[float, ...] | None]:
-        """Where a move starts (the checks' read when they made one, else one read), the
-        robot's TCP and base checked against the master's tool (the frame check)."""
-        return self._frames.arm_before(ticket, self.tool)
 
     def move_to(
         self,
