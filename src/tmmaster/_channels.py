@@ -75,11 +75,6 @@ class CommandKind(StrEnum):
     #: A circular arc through a via point (TMscript ``Circle``).
     CIRCLE = "circle"
 
-    @property
-    def is_move(self) -> bool:
-        """True for the commands that move the arm (a target: PTP, Line, joints, Circle)."""
-        return self in _MOVES
-
     @classmethod
     def of(cls, motion: MotionType) -> CommandKind:
         """The command kind for a motion type.
@@ -93,8 +88,6 @@ class CommandKind(StrEnum):
         return cls.PTP if motion is MotionType.PTP else cls.LINE
 
 
-#: The command kinds that move the arm to a target.
-_MOVES = frozenset({CommandKind.PTP, CommandKind.LINE, CommandKind.PTP_JOINTS, CommandKind.CIRCLE})
 #: The command kinds that write the command block's extension (via, speed_mm_s, ext_seq).
 _EXTENDED = frozenset({CommandKind.LINE, CommandKind.CIRCLE})
 
@@ -281,10 +274,10 @@ class CommandChannel(ABC):
             *(frames[len(self.flange_fields) :] if self.frames_in_plan else ()),
         )
         self.command_fields = (command,)
-        self.target_block = (*profile.select(TARGET_FIELDS), command)
         # The command block's fields, looked up once (the map does not change under a
         # channel: the field sets above are built once too).
         self._target_fields = profile.select(TARGET_FIELDS)
+        self.target_block = (*self._target_fields, command)
         self._speed_field = profile.field("speed") if profile.has("speed") else None
         self._accel_field = profile.field("accel_time") if profile.has("accel_time") else None
         self._via_fields = self.extension_fields[: len(VIA_FIELDS)]
@@ -299,6 +292,12 @@ class CommandChannel(ABC):
     def read(self, fields: tuple[RegisterField, ...] | list[RegisterField]) -> dict[str, Value]:
         """Read fields, one request per contiguous block, retrying transient failures."""
         return self.transport.read_fields(fields, max_gap=self.profile.max_read_gap)
+
+    def _read_regardless(self, fields: tuple[RegisterField, ...]) -> dict[str, Value]:
+        """:meth:`read`, even after a stop request (a withdraw or a stop's own reads)."""
+        return self.transport.read_fields(
+            fields, max_gap=self.profile.max_read_gap, interruptible=False
+        )
 
     def read_status(self) -> RobotStatus:
         """A full status snapshot."""
@@ -346,6 +345,15 @@ class CommandChannel(ABC):
         self.after_done = None
         return time.monotonic(), link_mark(self.transport)
 
+    @staticmethod
+    def _note_ack(ticket: Ticket, taken: bool, mark: tuple[float, int | None]) -> None:
+        """Note what a poll saw of a command not yet acknowledged: taken now, or pending."""
+        if taken:
+            ticket.acknowledged = True
+            ticket.acknowledged_at = time.monotonic()
+        else:
+            ticket.pending_seen_at = mark[0]
+
     def _remember_done(self, values: dict[str, Value], mark: tuple[float, int | None]) -> None:
         """Keep what the poll that saw the command finished read, for the next command."""
         read_at, link = mark
@@ -391,10 +399,6 @@ class CommandChannel(ABC):
     def supports(self, kind: CommandKind) -> bool:
         """True when the profile's command field has a value for ``kind``."""
         return kind in self.supported
-
-    def encode_command(self, command: Command) -> list[tuple[RegisterField, Value]]:
-        """Field values of the command block; every value is range-checked here, before I/O."""
-        return self._encode_command(command)[0]
 
     def _encode_command(
         self, command: Command
@@ -554,11 +558,11 @@ class CommandChannel(ABC):
 
     def check_move(self, target: Pose, speed: int, motion: MotionType) -> None:
         """Encode a move's command block without sending it (raises naming the field)."""
-        self.encode_command(Command(CommandKind.of(motion), target, speed))
+        self._encode_command(Command(CommandKind.of(motion), target, speed))
 
     def check_command(self, command: Command) -> None:
         """Encode any command's block without sending it (raises naming the field)."""
-        self.encode_command(command)
+        self._encode_command(command)
 
 
 class ClearOnAcceptChannel(CommandChannel):
@@ -623,11 +627,7 @@ class ClearOnAcceptChannel(CommandChannel):
         mark = self._poll_mark()
         if not ticket.acknowledged:
             pending = int((yield self.command_fields)["command"])
-            if pending == 0:
-                ticket.acknowledged = True
-                ticket.acknowledged_at = time.monotonic()
-            else:
-                ticket.pending_seen_at = mark[0]
+            self._note_ack(ticket, pending == 0, mark)
         # Read after the command register: the robot sets "moving" before it clears the
         # command, so idle here, after seeing the command cleared, means finished.
         status = self.status_from((yield self.status_fields))
@@ -639,12 +639,8 @@ class ClearOnAcceptChannel(CommandChannel):
 
     def withdraw(self, ticket: Ticket) -> bool:
         """Write command = none, then check whether the robot had started the move meanwhile."""
-        command = self.profile.field("command")
-        self.transport.write_fields([(command, 0)], retry=True, interruptible=False)
-        status = self.transport.read_fields(
-            self.status_fields, max_gap=self.profile.max_read_gap, interruptible=False
-        )
-        return self.status_from(status).moving
+        self.transport.write_fields([(self._command_field, 0)], retry=True, interruptible=False)
+        return self.status_from(self._read_regardless(self.status_fields)).moving
 
     def write_landed(self, ticket: Ticket) -> bool:
         """Our targets in the registers (pending or taken), or the arm moving: the write arrived.
@@ -675,8 +671,7 @@ class ClearOnAcceptChannel(CommandChannel):
         """command = stop, when the profile defines it."""
         if not self.supports(CommandKind.STOP):
             return None
-        command = self.profile.field("command")
-        return [(command, command.code_of("stop"))]
+        return [(self._command_field, self._command_field.code_of("stop"))]
 
 
 class SequenceChannel(CommandChannel):
@@ -722,32 +717,21 @@ class SequenceChannel(CommandChannel):
             joints=self.joints_from(values) if "joint_1" in values else None,
         )
 
-    @staticmethod
-    def _faulted(flags: dict[str, Value]) -> bool:
-        """True when the flags show an e-stop or an error (the error code says which)."""
-        return bool(flags["estop"]) or bool(flags["error"])
-
-    @staticmethod
-    def _flags_failure(flags: dict[str, Value], code: int) -> RobotError | None:
-        """The failure Techman's status bits show; ``code``: the last error code (if faulted)."""
-        if bool(flags["estop"]):
-            return EmergencyStopError("emergency stop is pressed", error_code=code)
-        if bool(flags["error"]):
+    def _flags_failure_steps(
+        self, flags: dict[str, Value]
+    ) -> Generator[tuple[RegisterField, ...], dict[str, Value], RobotError | None]:
+        """The failure Techman's status bits show; an e-stop or an error reads (by
+        yielding it) the last error code, which the error's message names."""
+        if bool(flags["estop"]) or bool(flags["error"]):
+            code = int((yield self.error_code_fields)["last_error_code"])
+            if bool(flags["estop"]):
+                return EmergencyStopError("emergency stop is pressed", error_code=code)
             return RobotFaultError("robot error", error_code=code)  # + code, meaning
         if bool(flags.get("paused", False)):
             return ProjectPausedError(PROJECT_PAUSED)
         if not bool(flags["project_running"]):
             return RobotFaultError(PROJECT_STOPPED)
         return None
-
-    def _flags_failure_steps(
-        self, flags: dict[str, Value]
-    ) -> Generator[tuple[RegisterField, ...], dict[str, Value], RobotError | None]:
-        """:meth:`_flags_failure`, reading the error code (by yielding it) when faulted."""
-        code = 0
-        if self._faulted(flags):
-            code = int((yield self.error_code_fields)["last_error_code"])
-        return self._flags_failure(flags, code)
 
     def _read_flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
         """:meth:`_flags_failure_steps`, its read made through the transport."""
@@ -761,20 +745,17 @@ class SequenceChannel(CommandChannel):
         start_pose: Pose | None = None
         start_joints: tuple[float, ...] | None = None
         start_values: dict[str, Value] | None = None
+        # The feedback block that showed the last command done and the flags read after
+        # it (the poll that saw it finished), where they may stand in: the same checks
+        # run on them. ``seq`` is not part of a poll: it is read now.
+        flags = self.read(self.flag_fields) if after_done is None else after_done.values
+        if (failure := self._read_flags_failure(flags)) is not None:
+            raise failure
         if after_done is not None:
-            # The feedback block that showed the last command done and the flags read
-            # after it (the poll that saw it finished): the same checks run on them.
-            # ``seq`` is not part of a poll: it is read now.
-            flags = after_done.values
-            if (failure := self._read_flags_failure(flags)) is not None:
-                raise failure
             feedback = {**after_done.values, **self.read(self.seq_only)}
             start_pose, start_joints = after_done.pose, after_done.joints
             start_values = after_done.plan_values
         else:
-            flags = self.read(self.flag_fields)
-            if (failure := self._read_flags_failure(flags)) is not None:
-                raise failure
             feedback = self.read(self.feedback_and_seq)
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
         state = p.field("robot_state").label(int(feedback["robot_state"]))
@@ -816,11 +797,7 @@ class SequenceChannel(CommandChannel):
         ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
         failure = yield from self._flags_failure_steps(flags)
         if not ticket.acknowledged:
-            if int(feedback["ack_seq"]) == ticket.seq:
-                ticket.acknowledged = True
-                ticket.acknowledged_at = time.monotonic()
-            else:
-                ticket.pending_seen_at = mark[0]
+            self._note_ack(ticket, int(feedback["ack_seq"]) == ticket.seq, mark)
         done = False
         if ticket.acknowledged and failure is None:
             if int(feedback["done_seq"]) == ticket.seq:
@@ -861,7 +838,7 @@ class SequenceChannel(CommandChannel):
         outcome = self.withdraw_outcome(ticket)
         if outcome is not None:
             return outcome
-        command = p.field("command")
+        command = self._command_field
         self.transport.write_fields(
             [(command, command.code_of("none")), (p.field("seq"), ticket.seq)],
             retry=True,
@@ -875,23 +852,17 @@ class SequenceChannel(CommandChannel):
         None: it has not answered yet (``ack_seq`` is not our number and the project runs).
         """
         p = self.profile
-        values = self.transport.read_fields(
-            self.feedback_fields, max_gap=p.max_read_gap, interruptible=False
-        )
+        values = self._read_regardless(self.feedback_fields)
         if int(values["ack_seq"]) == ticket.seq:
             return p.field("result_code").label(int(values["result_code"])) != "cancelled"
-        flags = self.transport.read_fields(
-            self.flag_fields, max_gap=p.max_read_gap, interruptible=False
-        )
+        flags = self._read_regardless(self.flag_fields)
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
         return None
 
     def may_resume(self) -> bool:
         """True while the project is paused or still running: Play could resume a move."""
-        flags = self.transport.read_fields(
-            self.flag_fields, max_gap=self.profile.max_read_gap, interruptible=False
-        )
+        flags = self._read_regardless(self.flag_fields)
         return bool(flags.get("paused", False)) or bool(flags["project_running"])
 
     def write_landed(self, ticket: Ticket) -> bool:
