@@ -63,8 +63,6 @@ from ._transport import AsyncLink, Block, BlockTransport, ConnectionState, Trans
 
 _log = get_logger("tmmaster.fleet")
 
-_UP = ConnectionState.CONNECTED
-
 T = TypeVar("T")
 
 
@@ -182,20 +180,18 @@ class LoopTransport(BlockTransport):
         # (about a third of a request's cost through run_coroutine_threadsafe).
         self._link.device_id = self.device_id  # the unit id may be changed between requests
         latch: _Latch[list[int]] = _Latch()
-        started = self._fleet._call_soon(
-            self._link.start,
-            what,
-            function_code,
-            address,
-            count,
-            values,
-            latch.settle,
-            latch.fail,
-        )
-        if not started:
+        start = self._link.start
+        args = (what, function_code, address, count, values, latch.settle, latch.fail)
+        return self._hand_over(what, self.timeout + _LOOP_GRACE_S, latch, start, *args)
+
+    def _hand_over(
+        self, what: str, bound: float, latch: _Latch[T], start: Callable[..., object], *args: Any
+    ) -> T:
+        """Run ``start(*args)`` on the loop and wait, at most ``bound`` s, for ``latch``."""
+        if not self._fleet._call_soon(start, *args):
             raise TransportClosedError(f"{self.name}: the fleet is closed")
         try:
-            return latch.wait(self.timeout + _LOOP_GRACE_S)
+            return latch.wait(bound)
         except _NoAnswerError as exc:
             raise ResponseTimeoutError(
                 f"{self.name}: the fleet's event loop did not answer {what}"
@@ -233,21 +229,17 @@ class LoopTransport(BlockTransport):
         plan = self.read_plan(fields, max_gap=max_gap)
         self._yield_turn()
         with self._lock:
-            if self._fleet._on_loop() or self.state is not _UP:
+            if self._fleet._on_loop() or self.state is not ConnectionState.CONNECTED:
                 return super().read_fields(
                     fields, max_gap=max_gap, retry=retry, interruptible=interruptible
                 )
             answers, failure = self._read_in_one_hand_over(plan.blocks)
-            result: dict[str, Value] = {}
-            for index, (block, slots) in enumerate(zip(plan.blocks, plan.slots, strict=True)):
-                if index < len(answers):
-                    words = answers[index]
-                else:
-                    first = failure if index == len(answers) else None
-                    words = self._read_after(block, first, retry=retry, interruptible=interruptible)
-                for name, offset, decode in slots:
-                    result[name] = decode(words, offset)
-            return result
+            for block in plan.blocks[len(answers) :]:
+                answers.append(
+                    self._read_after(block, failure, retry=retry, interruptible=interruptible)
+                )
+                failure = None  # the failed block's first attempt was the hand-over's
+            return plan.decode(answers)
 
     def _read_in_one_hand_over(
         self, blocks: tuple[Block, ...]
@@ -257,18 +249,13 @@ class LoopTransport(BlockTransport):
         self._link.device_id = self.device_id
         latch: _Latch[tuple[list[list[int]], BaseException | None]] = _Latch()
         chain = _ChainedRead(self, requests, latch.settle)
-        if not self._fleet._call_soon(chain.next):
-            raise TransportClosedError(f"{self.name}: the fleet is closed")
+        bound = self.timeout * len(blocks) + _LOOP_GRACE_S
         try:
-            answers, failure = latch.wait(self.timeout * len(blocks) + _LOOP_GRACE_S)
-        except _NoAnswerError as exc:
-            error = ResponseTimeoutError(
-                f"{self.name}: the fleet's event loop did not answer {requests[0][0]}"
-            )
-            self._request_failed(error)
-            raise error from exc
-        except BaseException as exc:  # interrupted (Ctrl-C): an answer may still come
-            self._request_failed(exc)
+            answers, failure = self._hand_over(requests[0][0], bound, latch, chain.next)
+        except TransportClosedError:
+            raise  # the loop has ended: nothing was sent
+        except BaseException as exc:  # no answer in time, or interrupted (Ctrl-C)
+            self._request_failed(exc)  # an answer may still come
             raise
         if failure is not None:
             self._request_failed(failure)
@@ -297,11 +284,6 @@ class LoopTransport(BlockTransport):
         return self._run(what, once, retry=retry, interruptible=interruptible)
 
     # -- the loop's side ------------------------------------------------------------
-
-    @property
-    def link_up(self) -> bool:
-        """True while the link is open."""
-        return self._link.connected
 
     def drop_on_loop(self) -> None:
         """From the loop, as it ends: close the link (a later request reconnects, and fails)."""
@@ -338,8 +320,8 @@ class LoopTransport(BlockTransport):
             TransportError: A read failed (a subclass says how).
         """
         plan = self.read_plan(fields, max_gap=max_gap)
-        result: dict[str, Value] = {}
-        for block, slots in zip(plan.blocks, plan.slots, strict=True):
+        answers: list[list[int]] = []
+        for block in plan.blocks:
             what, function_code = self._read_request(block.table, block.address, block.count)
             self._refuse_if_closed()
             if not self._link.connected:
@@ -355,9 +337,8 @@ class LoopTransport(BlockTransport):
                 raise
             if len(words) != block.count:
                 raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
-            for name, offset, decode in slots:
-                result[name] = decode(words, offset)
-        return result
+            answers.append(words)
+        return plan.decode(answers)
 
     async def write_on_loop(self, address: int, words: list[int]) -> None:
         """From the loop, holding the lock: write holding registers in one FC16 request, once.
@@ -567,8 +548,11 @@ class FleetMember:
         record.succeed(self.channel.status_from(values))
 
     def linked(self) -> bool:
-        """True while the robot's link is up (the robot's thread opens it, never the watch)."""
-        return self.transport.state is ConnectionState.CONNECTED and self.transport.link_up
+        """True while the robot's link is up (the robot's thread opens it, never the watch).
+
+        A link the device closed reads as disconnected (:attr:`LoopTransport.state`).
+        """
+        return self.transport.state is ConnectionState.CONNECTED
 
     async def write_when_free(
         self, address: int, words: list[int], *, wait_s: float, poll_s: float
@@ -989,7 +973,8 @@ class Fleet:
     # -- the loop thread ----------------------------------------------------------------
 
     async def _main(self) -> None:
-        wake = self._runner.ready()
+        wake = self._runner.bind()
+        self._runner.ready()
         try:
             await wake.wait()
         finally:

@@ -73,7 +73,7 @@ class LoopThread:
 
     :meth:`start` runs the owner's main coroutine on a new loop and returns once that
     coroutine called :meth:`ready` (or failed: a bug, raised by ``start`` as a
-    :class:`TransportError`); :meth:`stop` wakes the coroutine's :meth:`ready` event
+    :class:`TransportError`); :meth:`stop` sets the event its :meth:`bind` gave
     and joins the thread.
     """
 
@@ -101,19 +101,15 @@ class LoopThread:
                 f"the {self._owner}'s loop failed: {self._crash!r}"
             ) from self._crash
 
-    def ready(self) -> asyncio.Event:
-        """From the main coroutine: the loop is up; the event :meth:`stop` will set."""
-        self.loop = asyncio.get_running_loop()
-        if self.wake is None:
-            self.wake = asyncio.Event()
-        self._started.set()
-        return self.wake
-
     def bind(self) -> asyncio.Event:
-        """From the main coroutine, before :meth:`ready`: the event :meth:`stop` will set."""
+        """From the main coroutine, first: the event :meth:`stop` will set."""
         self.loop = asyncio.get_running_loop()
         self.wake = asyncio.Event()
         return self.wake
+
+    def ready(self) -> None:
+        """From the main coroutine, after :meth:`bind`: the loop is up, :meth:`start` returns."""
+        self._started.set()
 
     def stop(self) -> None:
         """Wake the main coroutine to end and join the thread (bounded); safe twice."""

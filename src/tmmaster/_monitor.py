@@ -134,17 +134,11 @@ class _Watched(StatusRecord):
                 host, port, device_id=profile.device_id, timeout=timeout_s, retry=None, name=name
             ),
         )
-        plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
-        #: Per block of the plan: (table, address, count, description, decoding slots).
-        self.requests = tuple(
-            (
-                block.table,
-                block.address,
-                block.count,
-                describe_read(block.table, block.address, block.count),
-                slots,
-            )
-            for block, slots in zip(plan.blocks, plan.slots, strict=True)
+        self.plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
+        #: Per block of the plan: (table, address, count, description).
+        self.reads = tuple(
+            (b.table, b.address, b.count, describe_read(b.table, b.address, b.count))
+            for b in self.plan.blocks
         )
         self.link = AsyncLink(host, port, device_id=profile.device_id, timeout=timeout_s, name=name)
 
@@ -194,13 +188,9 @@ class _Watched(StatusRecord):
             if not self.link.connected:
                 return
         read_block = self.link.read_block
-        values: dict[str, Value] = {}
         try:
-            for table, address, count, what, slots in self.requests:
-                words = await read_block(table, address, count, what)
-                for field_name, offset, decode in slots:
-                    values[field_name] = decode(words, offset)
-            status = self.channel.status_from(values)
+            answers = [await read_block(*read) for read in self.reads]
+            status = self.channel.status_from(self.plan.decode(answers))
         except ModbusExceptionError as exc:
             self.fail(exc)  # the device answered: the link is fine
             return

@@ -188,6 +188,14 @@ class ReadPlan:
         )
         return cls(blocks, slots)
 
+    def decode(self, answers: Sequence[Sequence[int]]) -> dict[str, Value]:
+        """Each field's value by name, from the words read for each block in turn."""
+        return {
+            name: decode(words, offset)
+            for words, slots in zip(answers, self.slots, strict=True)
+            for name, offset, decode in slots
+        }
+
 
 def plan_reads(fields: Iterable[RegisterField], *, max_gap: int = 0) -> list[Block]:
     """Group fields into as few contiguous blocks as the protocol limits allow."""
@@ -827,15 +835,14 @@ class BlockTransport(ABC):
             TransportError: A read failed (a subclass says how).
         """
         plan = self.read_plan(fields, max_gap=max_gap)
-        result: dict[str, Value] = {}
-        read_block = self.read_block
-        for block, slots in zip(plan.blocks, plan.slots, strict=True):
-            words = read_block(
-                block.table, block.address, block.count, retry=retry, interruptible=interruptible
-            )
-            for name, offset, decode in slots:
-                result[name] = decode(words, offset)
-        return result
+        return plan.decode(
+            [
+                self.read_block(
+                    b.table, b.address, b.count, retry=retry, interruptible=interruptible
+                )
+                for b in plan.blocks
+            ]
+        )
 
     def read_plan(self, fields: Iterable[RegisterField], *, max_gap: int = 0) -> ReadPlan:
         """The cached :class:`ReadPlan` of ``fields`` (computed on first use)."""
@@ -1096,14 +1103,14 @@ def shown_bytes(data: bytes) -> str:
     return data[:12].hex(" ") + ("..." if len(data) > 12 else "")
 
 
-def not_modbus_error(reply: ForeignReplyError, stream: _Stream, what: str) -> NotModbusError:
+def not_modbus_error(reply: ForeignReplyError, link: AsyncLink, what: str) -> NotModbusError:
     """The :class:`NotModbusError` of bytes that are not Modbus TCP (one line, host:port)."""
-    where = endpoint_text(stream.host, stream.port)
+    where = endpoint_text(link.host, link.port)
     return NotModbusError(
-        f"{stream.name} at {where} is not a Modbus TCP server: its answer to {what} starts"
+        f"{link.name} at {where} is not a Modbus TCP server: its answer to {what} starts"
         f" {shown_bytes(reply.data)} ({reply.reason}); is the port right?",
-        host=stream.host,
-        port=stream.port,
+        host=link.host,
+        port=link.port,
     )
 
 
@@ -1128,21 +1135,9 @@ class _Stream(asyncio.Protocol):
     the stream.
     """
 
-    def __init__(
-        self,
-        name: str,
-        device_id: int,
-        stats: TransportStats | None = None,
-        *,
-        host: str = "",
-        port: int = 0,
-    ) -> None:
-        self.name = name
-        self.device_id = device_id
-        self.stats = stats
-        #: The device's address and port, for a :class:`NotModbusError`.
-        self.host = host
-        self.port = port
+    def __init__(self, link: AsyncLink) -> None:
+        #: The link it carries: its name, unit id, byte counters and address.
+        self.link = link
         self.framer = FramerSocket(DecodePDU(is_server=False))
         self.transport: asyncio.Transport | None = None
         self.closed = False
@@ -1162,19 +1157,20 @@ class _Stream(asyncio.Protocol):
         self.transport = cast(asyncio.Transport, transport)
 
     def data_received(self, data: bytes) -> None:
-        if self.stats is not None:
-            self.stats.bytes_received += len(data)
+        link = self.link
+        if link.stats is not None:
+            link.stats.bytes_received += len(data)
         self._buffer += data
         while self._buffer and not self.closed:
             try:
                 used, pdu = next_answer(
-                    self.framer, self._buffer, device_id=self.device_id, name=self.name
+                    self.framer, self._buffer, device_id=link.device_id, name=link.name
                 )
             except ForeignReplyError as exc:
-                self.fail(functools.partial(not_modbus_error, exc, self))
+                self.fail(functools.partial(not_modbus_error, exc, link))
                 return
             except DECODE_FAILURES as exc:
-                self.fail(functools.partial(_malformed, self.name, exc))
+                self.fail(functools.partial(_malformed, link.name, exc))
                 return
             if not used:
                 return  # a partial frame: wait for the rest
@@ -1190,7 +1186,7 @@ class _Stream(asyncio.Protocol):
         if call is None or call.done():
             if self.stray is None and not self.sent_here(tid):
                 self.stray = (tid, frame)
-            _log.debug("transport.unawaited_answer", device=self.name, tid=tid)
+            _log.debug("transport.unawaited_answer", device=self.link.name, tid=tid)
             return
         self.answered = True
         call.set_result(pdu)
@@ -1202,7 +1198,8 @@ class _Stream(asyncio.Protocol):
         return 1 <= tid <= 0xFFFF and (tid - self.first_tid) % 0xFFFF < self.sent
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.fail(lambda what: ConnectionLostError(f"{self.name}: connection lost during {what}"))
+        name = self.link.name
+        self.fail(lambda what: ConnectionLostError(f"{name}: connection lost during {what}"))
 
     def fail(self, error: Callable[[str], TransportError]) -> None:
         """Fail every awaited request with ``error(what)`` and close the stream."""
@@ -1259,7 +1256,7 @@ def _expire(future: _Call, link: AsyncLink, stream: _Stream) -> None:
     if stream.stray is not None:
         tid, frame = stream.stray
         reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
-        error: TransportError = not_modbus_error(reply, stream, future.what)
+        error: TransportError = not_modbus_error(reply, link, future.what)
     else:
         error = no_answer_error(link, future.what, answered=link.answered or stream.answered)
     future.set_exception(error)
@@ -1390,10 +1387,6 @@ class AsyncLink:
     async def _open_stream(self, loop: asyncio.AbstractEventLoop) -> _Stream:
         """A connected stream; a host name resolved as ``socket.create_connection`` does
         (the standard resolver, in a worker thread; each address in turn)."""
-
-        def stream() -> _Stream:
-            return _Stream(self.name, self.device_id, self.stats, host=self.host, port=self.port)
-
         addresses: list[tuple[str, int]] = [(self.host, self.port)]
         if not _is_ip(self.host):
             infos = await loop.run_in_executor(
@@ -1403,7 +1396,7 @@ class AsyncLink:
         error: OSError = OSError(f"no address for {self.host}")
         for host, port in addresses:
             try:
-                _transport, opened = await loop.create_connection(stream, host, port)
+                _transport, opened = await loop.create_connection(lambda: _Stream(self), host, port)
             except OSError as exc:
                 error = exc
             else:
@@ -1474,7 +1467,6 @@ class AsyncLink:
         call = _Call(request, count, self.name, what, settle, fail)
         call.stream, call.tid = stream, request.transaction_id
         stream.awaited[call.tid] = call
-        stream.device_id = self.device_id  # answers are taken from the request's unit id
         frame = stream.framer.buildFrame(request)
         stream.sent += 1
         assert stream.transport is not None  # checked by _request
