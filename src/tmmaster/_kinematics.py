@@ -59,13 +59,11 @@ def invert(t: Transform) -> Transform:
     """The inverse of a rigid transform (rotation transposed, translation mapped back)."""
     r = [[t[j][i] for j in range(3)] for i in range(3)]
     p = [t[0][3], t[1][3], t[2][3]]
-    rows = [(*r[i], -(r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2])) for i in range(3)]
-    return (
-        (rows[0][0], rows[0][1], rows[0][2], rows[0][3]),
-        (rows[1][0], rows[1][1], rows[1][2], rows[1][3]),
-        (rows[2][0], rows[2][1], rows[2][2], rows[2][3]),
-        IDENTITY[3],
-    )
+    rows = [
+        (r[i][0], r[i][1], r[i][2], -(r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2]))
+        for i in range(3)
+    ]
+    return (rows[0], rows[1], rows[2], IDENTITY[3])
 
 
 def rpy_transform(xyz: Sequence[float], rpy_rad: Sequence[float]) -> Transform:
