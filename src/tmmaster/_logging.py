@@ -11,6 +11,7 @@ so its events can be filtered apart from the master's.
 
 from __future__ import annotations
 
+import functools
 import logging
 import sys
 from collections.abc import Callable
@@ -79,7 +80,10 @@ class _Logger:
         """True when an event at ``level`` would be logged (build costly fields only then)."""
         return self._std.isEnabledFor(level)
 
-    def _emit(self, level: int, method: str, event: str | None, args: Any, kw: Any) -> Any:
+    def _emit(
+        self, level: int, method: str, event: str | None = None, *args: Any, **kw: Any
+    ) -> Any:
+        """Log ``event`` at ``level`` through structlog's ``method``, if enabled."""
         if not self._std.isEnabledFor(level):
             return None
         wrapped = self._wrapped
@@ -90,27 +94,12 @@ class _Logger:
             wrapped = self._wrapped = wrap_logger(self._std).bind(**self._context)
         return getattr(wrapped, method)(event, *args, **kw)
 
-    def debug(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at DEBUG, if enabled."""
-        return self._emit(logging.DEBUG, "debug", event, args, kw)
-
-    def info(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at INFO, if enabled."""
-        return self._emit(logging.INFO, "info", event, args, kw)
-
-    def warning(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at WARNING, if enabled."""
-        return self._emit(logging.WARNING, "warning", event, args, kw)
-
-    warn = warning
-
-    def error(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at ERROR, if enabled."""
-        return self._emit(logging.ERROR, "error", event, args, kw)
-
-    def exception(self, event: str | None = None, *args: Any, **kw: Any) -> Any:
-        """Log at ERROR with the current exception, if enabled."""
-        return self._emit(logging.ERROR, "exception", event, args, kw)
+    # ``log.info(event, **fields)``: one level each; ``exception`` adds the traceback.
+    debug = functools.partialmethod(_emit, logging.DEBUG, "debug")
+    info = functools.partialmethod(_emit, logging.INFO, "info")
+    warning = functools.partialmethod(_emit, logging.WARNING, "warning")
+    error = functools.partialmethod(_emit, logging.ERROR, "error")
+    exception = functools.partialmethod(_emit, logging.ERROR, "exception")
 
 
 def get_logger(name: str) -> Any:
