@@ -209,7 +209,7 @@ def test_the_shipped_config_schema_matches_the_model() -> None:
 
 
 def test_the_shipped_report_schema_matches_the_model() -> None:
-    from tmmaster._cli import report_schema
+    from tmmaster.pickplace import report_schema
 
     shipped = ROOT / "src" / "tmmaster" / "schemas" / "run-report.schema.json"
     assert shipped.read_text(encoding="utf-8") == report_schema(), (

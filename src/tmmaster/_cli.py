@@ -8,6 +8,7 @@ command runs: ``tmmaster robot status`` never loads the simulator.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import json
 import sys
@@ -173,11 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_CommandParser)
     for name, (summary, _) in COMMANDS.items():
-
-        def fill(command_parser: ArgumentParser, name: str = name) -> None:
-            _fill_command(name, command_parser)
-
-        sub.add_parser(name, help=summary, fill=fill)
+        sub.add_parser(name, help=summary, fill=functools.partial(_fill_command, name))
     # The usage line names every command (and any added later).
     sub.metavar = "{" + ",".join(sub.choices) + "}"
     return parser
@@ -207,13 +204,6 @@ def config_schema() -> str:
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "tmmaster pick & place configuration (TOML)"
     return json.dumps(schema, indent=2, sort_keys=True) + "\n"
-
-
-def report_schema() -> str:
-    """The JSON Schema of the pick & place run report, generated from its model."""
-    from .pickplace._report import report_schema as schema
-
-    return schema()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -246,6 +236,8 @@ def _run_own(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
         if args.command == "schema":
+            from .pickplace import report_schema
+
             return _emit(report_schema() if args.report else config_schema(), args.output)
         if args.command == "robot-program":
             own = list(argv if argv is not None else sys.argv[1:])
