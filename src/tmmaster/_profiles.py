@@ -40,22 +40,16 @@ def builtin_profile_names() -> list[str]:
     Returns:
         The names, e.g. ``["article", "blog-2fg7", "onrobot-2fg7", "tmflow"]``.
     """
-    return list(_builtin_names())
-
-
-@functools.cache
-def _builtin_names() -> tuple[str, ...]:
-    # The installed package's files do not change while it runs: listed once.
     folder = resources.files("tmmaster").joinpath("profiles")
-    return tuple(
-        sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
+    return sorted(
+        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
     )
 
 
 def _builtin_data(name: str) -> dict[str, Any]:
-    if name not in _builtin_names():
-        known = ", ".join(builtin_profile_names())
-        raise RegisterMapError(f"unknown profile {name!r} (built-in profiles: {known})")
+    known = builtin_profile_names()
+    if name not in known:
+        raise RegisterMapError(f"unknown profile {name!r} (built-in profiles: {', '.join(known)})")
     text = (
         resources.files("tmmaster").joinpath("profiles").joinpath(f"{name}.toml").read_text("utf-8")
     )
