@@ -12,7 +12,7 @@ import pytest
 import tmmaster
 from tmmaster import Pose, Robot
 from tmmaster._exceptions import EmergencyStopError, RobotFaultError
-from tmmaster._tm_errors import code_hex, describe, lookup, tm_errors
+from tmmaster._tm_errors import code_hex, describe, lookup_tm_error, tm_errors
 from tmmaster.pickplace.__main__ import EXIT_ROBOT_FAULT, main
 from tmmaster.sim import Simulator
 from tmmaster.sim._controller import SimErrorCode
@@ -45,8 +45,8 @@ def test_every_entry_has_its_code_hex_text_and_page() -> None:
 
 
 def test_the_codes_the_simulator_raises_read_as_the_manual_prints_them() -> None:
-    payload = lookup(SimErrorCode.OVER_PAYLOAD)
-    collision = lookup(SimErrorCode.COLLISION)
+    payload = lookup_tm_error(SimErrorCode.OVER_PAYLOAD)
+    collision = lookup_tm_error(SimErrorCode.COLLISION)
     assert payload is not None
     assert collision is not None
     assert (payload.label, payload.page, payload.suggestion_page) == (
@@ -65,16 +65,16 @@ def test_the_codes_the_simulator_raises_read_as_the_manual_prints_them() -> None
 def test_one_lookup_reads_what_the_whole_file_says() -> None:
     entries = tm_errors()
     for code, entry in entries.items():
-        assert lookup(code) == entry
-    assert lookup(0x1234) is None
-    assert lookup(-0x10000000) == entries[0xF0000000]  # an int32 read as signed
+        assert lookup_tm_error(code) == entry
+    assert lookup_tm_error(0x1234) is None
+    assert lookup_tm_error(-0x10000000) == entries[0xF0000000]  # an int32 read as signed
 
 
 def test_our_hints_are_marked_and_never_replace_the_manuals() -> None:
     ours = [e for e in tm_errors().values() if e.what_to_do_by == "tmmaster"]
     assert ours
     assert all(e.code < 0x100 for e in ours)
-    entry = lookup(0x06)
+    entry = lookup_tm_error(0x06)
     assert entry is not None
     assert "tmmaster's hint" in entry.hint()
 
@@ -84,8 +84,8 @@ def test_codes_are_shown_in_hex_with_their_meaning() -> None:
     assert code_hex(0x5F133) == "0x5F133"
     assert describe(0x22) == COLLISION
     assert describe(0x1234) == f"0x1234 {NOT_LISTED}"
-    assert tmmaster.lookup_tm_error(0x22) == lookup(0x22)
-    assert isinstance(lookup(0x22), tmmaster.TMErrorCode)
+    assert tmmaster.lookup_tm_error(0x22) == lookup_tm_error(0x22)
+    assert isinstance(lookup_tm_error(0x22), tmmaster.TMErrorCode)
 
 
 # -- the errors ------------------------------------------------------------------------
@@ -98,7 +98,7 @@ def test_a_fault_names_its_code_its_meaning_and_what_to_do() -> None:
     )
     assert "Trigger Robot Stick Reset button" in str(error)
     assert error.code == error.error_code == 0x22
-    assert error.tm_error == lookup(0x22)
+    assert error.tm_error == lookup_tm_error(0x22)
 
 
 def test_an_unknown_code_says_the_manual_does_not_list_it() -> None:
@@ -133,7 +133,7 @@ def test_a_simulated_collision_code_reads_as_techmans_text(
     assert COLLISION in str(info.value)
     assert "what to do (TMflow 2.24 manual p. 409)" in str(info.value)
     assert info.value.code == 0x22
-    assert info.value.tm_error == lookup(0x22)
+    assert info.value.tm_error == lookup_tm_error(0x22)
 
 
 def test_a_simulated_stand_in_code_is_said_to_be_not_techmans(

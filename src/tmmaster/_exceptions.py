@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING
 from ._checks import shown
 from ._error_root import ConfigError as ConfigError
 from ._error_root import TMMasterError as TMMasterError
-from ._tm_errors import TMErrorCode, code_hex, describe, describe_fault, lookup
+from ._tm_errors import TMErrorCode, code_hex, describe, describe_fault, lookup_tm_error
 
 if TYPE_CHECKING:
     from ._pose import Pose
@@ -313,7 +313,7 @@ class _TMCodedError(RobotError):
         if not self.error_code:
             return None
         try:
-            return lookup(self.error_code)
+            return lookup_tm_error(self.error_code)
         except ConfigError:  # a broken install: the message already said so
             return None
 

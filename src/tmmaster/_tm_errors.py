@@ -8,7 +8,7 @@ suggestion with its cause, what to check and what to do (pp. 406-641).
 cites its pages. Where the manual gives no solution for a motion error, the entry carries
 a short hint of ours, marked ``what_to_do_by = "tmmaster"``.
 
-:func:`lookup` finds one code without parsing the whole file (about 1 MB of TOML: one
+:func:`lookup_tm_error` finds one code without parsing the whole file (about 1 MB of TOML: one
 entry is parsed on first use, then cached); :func:`tm_errors` parses and validates them
 all.
 """
@@ -118,7 +118,7 @@ def describe(code: int) -> str:
         the data cannot be read (a broken install: never raises).
     """
     try:
-        entry = lookup(code)
+        entry = lookup_tm_error(code)
     except (ConfigError, OSError):  # a broken install: the bare code still says which
         return code_hex(code)
     return entry.label if entry is not None else f"{code_hex(code)} (not in {SOURCE})"
@@ -136,7 +136,7 @@ def describe_fault(code: int) -> str:
         ``"0x0022 Force or Torque Over Range; what to do (TMflow 2.24 manual p. 409): ..."``.
     """
     try:
-        entry = lookup(code)
+        entry = lookup_tm_error(code)
     except (ConfigError, OSError) as exc:  # the message must not fail on the data
         return f"{code_hex(code)} (its meaning could not be read: {exc})"
     if entry is None:
@@ -175,10 +175,6 @@ def lookup_tm_error(code: int) -> TMErrorCode | None:
         ConfigError: The data file is missing or malformed (a broken install).
     """
     return _lookup(code & 0xFFFFFFFF)
-
-
-#: The module's own name for :func:`lookup_tm_error`.
-lookup = lookup_tm_error
 
 
 @functools.cache
