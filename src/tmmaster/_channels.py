@@ -591,14 +591,10 @@ class ClearOnAcceptChannel(CommandChannel):
         words, encoded = self._encode_command(command)
         p = self.profile
         after_done = self.take_after_done(reuse_s)
-        if after_done is not None:
-            # The status block the poll that saw the last command finished read (after
-            # the cleared command register, idle): the same checks run on it.
-            status = self.status_from(after_done.values)
-            block = self.read(self.target_block)
-        else:
-            block = self.read(self.target_block)
-            status = self.read_status()
+        block = self.read(self.target_block)
+        # The status block the poll that saw the last command finished read (after the
+        # cleared command register, idle), where it may stand in: the same checks run on it.
+        status = self.read_status() if after_done is None else self.status_from(after_done.values)
         if (failure := self.status_failure(status)) is not None:
             raise failure
         if command.kind is not CommandKind.STOP:
@@ -742,21 +738,16 @@ class SequenceChannel(CommandChannel):
         words, encoded = self._encode_command(command)
         p = self.profile
         after_done = self.take_after_done(reuse_s)
-        start_pose: Pose | None = None
-        start_joints: tuple[float, ...] | None = None
-        start_values: dict[str, Value] | None = None
         # The feedback block that showed the last command done and the flags read after
         # it (the poll that saw it finished), where they may stand in: the same checks
         # run on them. ``seq`` is not part of a poll: it is read now.
         flags = self.read(self.flag_fields) if after_done is None else after_done.values
         if (failure := self._read_flags_failure(flags)) is not None:
             raise failure
-        if after_done is not None:
-            feedback = {**after_done.values, **self.read(self.seq_only)}
-            start_pose, start_joints = after_done.pose, after_done.joints
-            start_values = after_done.plan_values
-        else:
+        if after_done is None:
             feedback = self.read(self.feedback_and_seq)
+        else:
+            feedback = {**after_done.values, **self.read(self.seq_only)}
         seq_now, ack, done = (int(feedback[n]) for n in ("seq", "ack_seq", "done_seq"))
         state = p.field("robot_state").label(int(feedback["robot_state"]))
         if not 0 <= ack <= p.seq_max:
@@ -777,17 +768,18 @@ class SequenceChannel(CommandChannel):
             # The extension carries the number of the command it belongs to.
             numbered.append((self.extension_fields[-1], seq))
         words += numbered
-        return Ticket(
+        ticket = Ticket(
             command,
             words,
             time.monotonic(),
             seq=seq,
-            start_pose=start_pose,
-            start_joints=start_joints,
-            start_values=start_values,
             extra={"heartbeat": feedback.get("heartbeat", 0)},
             plan=group_writes([*encoded, *encode_writes(numbered)]),
         )
+        if after_done is not None:  # what the poll read after the done: the plan's start
+            ticket.start_pose, ticket.start_joints = after_done.pose, after_done.joints
+            ticket.start_values = after_done.plan_values
+        return ticket
 
     def poll_steps(self, ticket: Ticket) -> PollSteps:
         """One read of the feedback block, then the status flags (two reads when split)."""
