@@ -105,12 +105,6 @@ class RobotModel(BaseModel):
         """Maximum joint speeds J1..J6 at 100 % speed, deg/s."""
         return cast(Joints, tuple(j.speed_deg_s for j in self.joints))
 
-    @property
-    def _chain(self) -> kin.Chain:
-        # Keyed by the joints, not cached on the instance: model_copy(update=...) would
-        # carry a cached chain over to a model with other joints.
-        return _chain_of(self.joints)
-
     # -- kinematics ------------------------------------------------------------------
 
     def joint_frames(self, joints_deg: Sequence[float]) -> list[Transform]:
@@ -122,7 +116,7 @@ class RobotModel(BaseModel):
         Returns:
             Six transforms from the base frame.
         """
-        return self._chain.frames([math.radians(q) for q in _six(joints_deg)])
+        return joint_chain(self).frames([math.radians(q) for q in _six(joints_deg)])
 
     def forward(self, joints_deg: Sequence[float], tool: Pose | None = None) -> Pose:
         """Flange pose for the joints (J1..J6, deg), or the TCP pose with a ``tool`` offset.
@@ -134,7 +128,7 @@ class RobotModel(BaseModel):
         Returns:
             The pose in the base frame.
         """
-        flange = self._chain.flange([math.radians(q) for q in _six(joints_deg)])
+        flange = joint_chain(self).flange([math.radians(q) for q in _six(joints_deg)])
         if tool is not None:
             flange = kin.multiply(flange, kin.pose_to_transform(tool))
         return kin.transform_to_pose(flange)
@@ -247,7 +241,7 @@ class RobotModel(BaseModel):
         best_key = (True, math.inf) if best is None else preference(best)
         for start in starts:
             raw = kin.dls_inverse(
-                self._chain, target, [math.radians(q) for q in start], tool=tool_t
+                joint_chain(self), target, [math.radians(q) for q in start], tool=tool_t
             )
             if raw is None:
                 continue
@@ -411,7 +405,7 @@ class RobotModel(BaseModel):
             The distance, mm.
         """
         q = [math.radians(a) for a in _six(joints_deg)]
-        jacobian, _ = self._chain.jacobian(q)
+        jacobian, _ = joint_chain(self).jacobian(q)
         scale = (
             self.joints[2].origin_xyz_mm[0]
             * self.joints[3].origin_xyz_mm[0]
@@ -951,6 +945,8 @@ def joint_chain(model: RobotModel) -> kin.Chain:
     return _chain_of(model.joints)
 
 
+# Keyed by the joints, not cached on the model: model_copy(update=...) would carry a
+# cached chain over to a model with other joints.
 @functools.lru_cache(maxsize=32)
 def _chain_of(joints: tuple[JointSpec, ...]) -> kin.Chain:
     return kin.Chain(
