@@ -666,13 +666,7 @@ class _MotionFollower:
         except CommandStateUnknownError as exc:
             # Not known whether the program will take it: the clean-up that follows
             # (abandon) withdraws again, and stops the project if still unanswered.
-            motion.phase = MovePhase.FAILED
-            self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
-            raise AcknowledgeTimeoutError(
-                f"the robot did not acknowledge the {motion.command.kind.value} command within"
-                f" {self.timeouts.ack_timeout_s:g} s, nor answer its cancel: {exc}",
-                pose=motion.last_pose,
-            ) from exc
+            raise self._unacknowledged(motion, f", nor answer its cancel: {exc}") from exc
         if taken:
             # The robot took it just as we gave up: it is executing our command.
             ticket.acknowledged = True
@@ -682,14 +676,19 @@ class _MotionFollower:
             return
         ticket.withdrawn = True
         motion.withdrawn = True
-        motion.phase = MovePhase.FAILED
         hint = ""
         if heartbeat_stalled(ticket):
             hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
+        raise self._unacknowledged(motion, f"; the command was withdrawn{hint}")
+
+    def _unacknowledged(self, motion: Motion, outcome: str) -> AcknowledgeTimeoutError:
+        """Not taken in time: the motion failed (logged); the error to raise, ``outcome``
+        saying what became of the command."""
+        motion.phase = MovePhase.FAILED
         self._log.error("robot.acknowledge_timeout", command=motion.command.kind.value)
-        raise AcknowledgeTimeoutError(
+        return AcknowledgeTimeoutError(
             f"the robot did not acknowledge the {motion.command.kind.value} command within"
-            f" {self.timeouts.ack_timeout_s:g} s; the command was withdrawn{hint}",
+            f" {self.timeouts.ack_timeout_s:g} s{outcome}",
             pose=motion.last_pose,
         )
 

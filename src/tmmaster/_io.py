@@ -186,7 +186,7 @@ class RobotIO:
         transport: Transport,
         gate: CommandGate,
         log: Any,
-        require_connection: Callable[[], None] | None = None,
+        require_connection: Callable[[], None],
     ) -> None:
         """Made by :class:`~tmmaster.Robot` (``robot.io``), never by a user.
 
@@ -196,7 +196,7 @@ class RobotIO:
             gate: The robot's command gate.
             log: The robot's logger.
             require_connection: Raises before any request while the robot is not
-                connected (after the arguments are checked); None: no such check.
+                connected (after the arguments are checked).
         """
         self._profile = profile
         self._link = transport
@@ -217,8 +217,7 @@ class RobotIO:
     @property
     def _transport(self) -> Transport:
         """The robot's link; refused while the robot is not connected (no I/O connects)."""
-        if self._require_connection is not None:
-            self._require_connection()
+        self._require_connection()
         return self._link
 
     @property

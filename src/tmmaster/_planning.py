@@ -671,17 +671,6 @@ class Planner:
         return target_joints, expected, gauge
 
 
-def checked_tool(tool: object, check_units: bool) -> Pose | None:
-    """The ``tool`` option: None or a Pose (not in metres or radians, when checked)."""
-    if tool is not None and not isinstance(tool, Pose):
-        raise ConfigError(
-            f"tool must be a tmmaster.Pose (the TCP in the flange frame), got {tool!r}"
-        )
-    if check_units and tool is not None:
-        refuse_suspect_units("tool", tool)
-    return tool
-
-
 def motion_type(motion: MotionType | str) -> MotionType:
     """``motion`` as a :class:`MotionType`; a ConfigError naming the choices otherwise."""
     try:

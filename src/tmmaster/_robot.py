@@ -72,7 +72,6 @@ from ._options import FrameCheck as FrameCheck  # tmmaster imports it from here
 from ._planning import (
     Planner,
     check_accel,
-    checked_tool,
     joint_values,
     motion_type,
     moved,
@@ -126,13 +125,6 @@ def _link(link: object) -> tuple[Transport | None, Fleet | None]:
     raise ConfigError(
         f"link must be a tmmaster.Transport or a tmmaster.Fleet, got {type(link).__name__}"
     )
-
-
-def _device_address(gripper: object) -> tuple[str | None, int, Transport | None]:
-    """A GripperDevice's host, port and ready link; any other gripper: the robot's host, 502."""
-    if isinstance(gripper, GripperDevice):
-        return gripper.host, gripper.port, gripper.transport
-    return None, 502, None
 
 
 def _policy(name: str, value: object, kind: type[_PolicyT], *, default: bool = True) -> _PolicyT:
@@ -241,43 +233,40 @@ class _Links:
 
     host: str
     port: int
+    #: The ``link`` option: a ready transport, or the Fleet whose loop runs the link.
+    transport: Transport | None
+    fleet: Fleet | None
     gripper_host: str
     gripper_port: int
-    transport: Transport | None
     gripper_transport: Transport | None
 
     @classmethod
-    def checked(
-        cls,
-        host: str,
-        port: int,
-        gripper_host: str | None,
-        gripper_port: int,
-        transport: Transport | None,
-        gripper_transport: Transport | None,
-    ) -> _Links:
+    def checked(cls, host: str, port: int, link: object, gripper: object) -> _Links:
         """The addresses checked (an in-process host, sim://name, has no port).
 
-        A ready ``transport`` (``gripper_transport``) leaves its address unchecked. The
-        gripper's host is the robot's unless given (a GripperDevice checked its own); its
-        port is checked here, where the robot's host is its host.
+        A ready transport (``link``, a GripperDevice's) leaves its address unchecked. A
+        stand-alone gripper is at a GripperDevice's host (which it checked itself), else
+        at the robot's host, port 502.
         """
+        transport, fleet = _link(link)
         if transport is None:
             host = check_host(host, field="host", port_field="port")
             if not is_in_process(host):
                 port = check_port(port, field="port")
+        gripper_host, gripper_port, gripper_transport = None, 502, None
+        if isinstance(gripper, GripperDevice):
+            gripper_host, gripper_port = gripper.host, gripper.port
+            gripper_transport = gripper.transport
         if gripper_transport is None and not is_in_process(gripper_host or host):
             gripper_port = check_port(gripper_port, field="gripper.port")
-        return cls(host, port, gripper_host or host, gripper_port, transport, gripper_transport)
+        gripper_host = gripper_host or host
+        return cls(host, port, transport, fleet, gripper_host, gripper_port, gripper_transport)
 
-    def open(
-        self, profile: RobotProfile, name: str, fleet: Fleet | None, options: _Options
-    ) -> Transport:
+    def open(self, profile: RobotProfile, name: str, options: _Options) -> Transport:
         """The robot's link: the ready one, a Fleet's, or one opened to ``host:port``.
 
         An in-process ``host`` ("sim://name") opens through the plugin that registered it;
-        any other is opened on the process's default driver. (``link=`` is one or the
-        other: a Fleet's robot has no ready transport.)
+        any other is opened on the process's default driver.
         """
         link: dict[str, Any] = {
             "device_id": profile.device_id,
@@ -285,8 +274,8 @@ class _Links:
             "retry": options.retry,
             "name": name,
         }
-        if fleet is not None:
-            return join_fleet(fleet, self.host, self.port, **link)
+        if self.fleet is not None:
+            return join_fleet(self.fleet, self.host, self.port, **link)
         return self.transport or open_transport(self.host, self.port, **link)
 
 
@@ -393,26 +382,23 @@ class Robot:
         link: Transport | Fleet | None = None,
     ) -> None:
         # The addresses first, then every option, before anything is opened.
-        transport, fleet = _link(link)
-        gripper_host, gripper_port, gripper_link = _device_address(gripper)
-        links = _Links.checked(host, port, gripper_host, gripper_port, transport, gripper_link)
+        links = _Links.checked(host, port, link, gripper)
         #: The robot's register map.
         self.profile = robot_profile(profile)
         arm = model if isinstance(model, RobotModel) else robot_model(model)
         options = _Options.checked(polling, timeouts, retry, checks)
         #: The robot's name in messages and logs.
         self.name = name
-        tool_pose, tool_spec = tool_option(tool)
-        tool = checked_tool(tool_pose, options.checks.units)
+        tool_pose, tool_spec = tool_option(tool, options.checks.units)
         #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
         self.frame_check = options.checks.frame
-        self._transport = links.open(self.profile, name, fleet, options)
+        self._transport = links.open(self.profile, name, options)
         self._log = _log.bind(robot=name)
-        self._open_command_path(options, fleet)
+        self._open_command_path(options, links.fleet)
         # The frame check, at connect and before every move (_tool.py).
         self._frames = FrameGuard(self._channel, self.frame_check, tool_spec, self._log)
         # Checks and plans every move from where the arm is believed to be (no I/O).
-        self._planner = options.planner(arm, tool, self._follower, self._log)
+        self._planner = options.planner(arm, tool_pose, self._follower, self._log)
         if self.profile.has("project_speed"):  # a move at its deadline asks again
             self._follower.project_speed = self._read_project_speed
         self._connected = False

@@ -22,7 +22,7 @@ from ._channels import CommandChannel, Ticket, pose_from
 from ._checks import is_finite_number, shown
 from ._codec import Value
 from ._exceptions import ConfigError
-from ._pose import Pose
+from ._pose import Pose, refuse_suspect_units
 from ._registers import FLANGE_FIELDS, ROBOT_BASE_TCP_FIELDS, TCP_FIELDS
 
 if TYPE_CHECKING:
@@ -87,16 +87,18 @@ class Tool:
             )
 
 
-def tool_option(tool: object) -> tuple[object, Tool | None]:
-    """The ``tool`` option split: its pose (checked by the planner) and the Tool, if one."""
-    if isinstance(tool, Tool):
-        return tool.pose, tool
-    if tool is not None and not isinstance(tool, Pose):
+def tool_option(tool: object, check_units: bool) -> tuple[Pose | None, Tool | None]:
+    """The ``tool`` option split: its pose (not in metres or radians, when checked) and
+    the Tool, if one."""
+    pose, spec = (tool.pose, tool) if isinstance(tool, Tool) else (tool, None)
+    if pose is not None and not isinstance(pose, Pose):
         raise ConfigError(
             "tool must be a tmmaster.Pose (the TCP in the flange frame) or a tmmaster.Tool"
             f" (with its mass), got {tool!r}"
         )
-    return tool, None
+    if check_units and pose is not None:
+        refuse_suspect_units("tool", pose)
+    return pose, spec
 
 
 class FrameGuard:
