@@ -214,15 +214,7 @@ def _published(profile: RobotProfile, names: tuple[str, ...]) -> tuple[RegisterF
 
 def pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
     """The pose in ``values`` under the six field ``names`` (x, y, z, rx, ry, rz, in order)."""
-    x, y, z, rx, ry, rz = names
-    return Pose(
-        float(values[x]),
-        float(values[y]),
-        float(values[z]),
-        float(values[rx]),
-        float(values[ry]),
-        float(values[rz]),
-    )
+    return Pose(*[float(values[name]) for name in names])
 
 
 class CommandChannel(ABC):
@@ -278,7 +270,7 @@ class CommandChannel(ABC):
         # channel: the field sets above are built once too).
         self._target_fields = profile.select(TARGET_FIELDS)
         self.target_block = (*self._target_fields, command)
-        self._speed_field = profile.field("speed") if profile.has("speed") else None
+        self._speed_field = profile.field("speed")
         self._accel_field = profile.field("accel_time") if profile.has("accel_time") else None
         self._via_fields = self.extension_fields[: len(VIA_FIELDS)]
         self._speed_mm_s_field = profile.field("speed_mm_s") if self.extension_fields else None
@@ -405,12 +397,11 @@ class CommandChannel(ABC):
     ) -> tuple[list[tuple[RegisterField, Value]], list[Encoded]]:
         """The command block's field values and their words (raises naming the field)."""
         self._refuse_unsupported(command)
-        p = self.profile
         words: list[tuple[RegisterField, Value]] = []
         if command.target is not None:
             words += zip(self._target_fields, self._target_values(command), strict=True)
         if command.speed is not None:
-            words.append((self._speed_field or p.field("speed"), command.speed))
+            words.append((self._speed_field, command.speed))
         if command.target is not None and self._accel_field is not None:
             # Always written (0 = the program's default) so the block stays contiguous
             # and goes out as one atomic request.
@@ -729,10 +720,6 @@ class SequenceChannel(CommandChannel):
             return RobotFaultError(PROJECT_STOPPED)
         return None
 
-    def _read_flags_failure(self, flags: dict[str, Value]) -> RobotError | None:
-        """:meth:`_flags_failure_steps`, its read made through the transport."""
-        return self._drive(self._flags_failure_steps(flags))
-
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
         words, encoded = self._encode_command(command)
@@ -742,7 +729,7 @@ class SequenceChannel(CommandChannel):
         # it (the poll that saw it finished), where they may stand in: the same checks
         # run on them. ``seq`` is not part of a poll: it is read now.
         flags = self.read(self.flag_fields) if after_done is None else after_done.values
-        if (failure := self._read_flags_failure(flags)) is not None:
+        if (failure := self._drive(self._flags_failure_steps(flags))) is not None:
             raise failure
         if after_done is None:
             feedback = self.read(self.feedback_and_seq)
@@ -864,7 +851,7 @@ class SequenceChannel(CommandChannel):
 
     def read_failure(self) -> RobotError | None:
         """One read of Techman's status bits (e-stop, error, project running)."""
-        return self._read_flags_failure(self.read(self.flag_fields))
+        return self._drive(self._flags_failure_steps(self.read(self.flag_fields)))
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """Press the TM Stop button (coil 7105): the project stops and the arm halts."""
