@@ -103,9 +103,6 @@ def _fill_command(name: str, parser: ArgumentParser) -> None:
         )
         parser.add_argument("--output", "-o", metavar="FILE.json", help="write to a file instead")
         add_logging_arguments(parser, default_level="warning")
-    elif name == "robot-program":
-        _module(name).add_arguments(parser)
-        add_logging_arguments(parser, default_level="warning")
     else:
         _module(name).add_arguments(parser)
 
@@ -214,24 +211,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     ends any command quietly, with the shell's status for it, 141
     (:data:`~tmmaster._cliparse.EXIT_BROKEN_PIPE`).
     """
-    return run_command("tmmaster", build_parser, lambda args: _run(args, argv), argv)
+    words = sys.argv[1:] if argv is None else argv
+    return run_command("tmmaster", build_parser, lambda args: _run(args, words), argv)
 
 
-def _run(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+def _run(args: argparse.Namespace, words: Sequence[str]) -> int:
+    """Run the parsed command; ``words``: the command line it was parsed from."""
     if args.command is None:  # plain ``tmmaster``: say what it can do, as a usage error
         build_parser().print_help(sys.stderr)
         print("tmmaster: give a command [exit 2]", file=sys.stderr)
         return 2
-    _apply_global_logging(args, sys.argv[1:] if argv is None else argv)
+    _apply_global_logging(args, words)
     if args.command == "pickplace":
         # Under its own name: a Ctrl-C says "pickplace: interrupted", as the module does.
         return run_main("pickplace", lambda: _module("pickplace").run(args), process=False)
     if args.command in ("sim", "report", "robot", "tmscript"):
         return int(_module(args.command).run(args))
-    return _run_own(args, argv)
+    return _run_own(args, words)
 
 
-def _run_own(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+def _run_own(args: argparse.Namespace, words: Sequence[str]) -> int:
     """``profile``, ``schema`` and ``robot-program``: text on stdout or in a file."""
     undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
@@ -240,8 +239,7 @@ def _run_own(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
             return _emit(report_schema() if args.report else config_schema(), args.output)
         if args.command == "robot-program":
-            own = list(argv if argv is not None else sys.argv[1:])
-            own = own[own.index("robot-program") + 1 :] if "robot-program" in own else []
+            own = words[words.index("robot-program") + 1 :] if "robot-program" in words else []
             return _emit(_module("robot-program").run(args, own), args.output)
         return _run_profile(args)
     except UsageError as exc:  # a name the command line chose from a set

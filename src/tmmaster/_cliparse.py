@@ -89,9 +89,7 @@ class ArgumentParser(argparse.ArgumentParser):
             UsageError: An unknown option or argument, or any other usage error.
         """
         parsed, extras = self.parse_known_args(args, namespace)
-        hints: dict[str, str] = getattr(parsed, _HINTS, {})
-        if hasattr(parsed, _HINTS):
-            delattr(parsed, _HINTS)
+        hints: dict[str, str] = vars(parsed).pop(_HINTS, {})  # not an option: taken out
         if extras:
             said = "".join(hints.get(token.split("=", 1)[0], "") for token in extras)
             self.error(f"unrecognized arguments: {' '.join(extras)}{said}")

@@ -21,6 +21,7 @@ from importlib import resources
 from string import Template
 
 from ._exceptions import ConfigError
+from ._logging import add_logging_arguments
 from ._pose import Pose
 from ._registers import (
     EXTENSION_FIELDS,
@@ -470,6 +471,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="end-module I/O gripper (default io:do=0,di=0,settle_ms=500) or none",
     )
     parser.add_argument("--output", "-o", metavar="FILE.tms", help="write to a file instead")
+    add_logging_arguments(parser, default_level="warning")
 
 
 def run(args: argparse.Namespace, argv: Sequence[str] = ()) -> str:
