@@ -145,7 +145,7 @@ class FollowState:
         # A profile whose poll carries no pose reads it once, where it tells the most;
         # and at every poll from a stall's bound before the model's budget ends, where
         # only progress seen keeps the wait going.
-        ticket.observe_pose = self.schedule.wants_observation(due) or (
+        ticket.observe_pose = due >= self.schedule.observation_due() or (
             self.scales_with_pace
             and motion.phase is MovePhase.RUNNING
             and due >= self._model_deadline() - self.stall_window()

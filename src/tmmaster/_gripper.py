@@ -815,12 +815,8 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             )
         self.product = product
         self.max_force_n = float(identity["max_force"])
-        low, high = (
-            (values[names[0]], values[names[1]])
-            if self.grip_mode == "external"
-            else (values[names[2]], values[names[3]])
-        )
-        self.limits = (float(low), float(high))
+        low, high = names[:2] if self.grip_mode == "external" else names[2:]
+        self.limits = (float(values[low]), float(values[high]))
         self._events.info(
             "gripper.connected",
             gripper=self.kind,

@@ -402,8 +402,7 @@ class Planner:
         self._check_target(to, speed)
         self.workspace.check(via)  # its position (the TCP passes there)
         if self.hint_pose is not None:
-            samples = self.check_arc(self.hint_pose, via, to, self.joints_hint)
-            self.workspace.check_arm(self.model, samples[-1])
+            self.check_arc(self.hint_pose, via, to, self.joints_hint)  # its end's arm too
         else:
             self.validate(to, speed)
 
@@ -525,12 +524,19 @@ class Planner:
         self, start: Pose, target: Pose, speed: float, motion: MotionType, accel_time_ms: int | None
     ) -> float:
         """:meth:`Robot.expected_motion_time`: the arm model's time from the seed, s."""
+        speed = speed * self.project_speed_percent / 100.0  # TMflow: x the project speed
+        return self._model_time(self.origin(start), target, speed, motion, accel_s(accel_time_ms))
+
+    def _model_time(
+        self, origin: Pose, target: Pose, speed: float, motion: MotionType, accel: float | None
+    ) -> float:
+        """The arm model's time of a PTP or a Line from ``origin`` and the seed, s."""
         return self.model.motion_time(
-            self.origin(start),
+            origin,
             target,
-            speed_percent=speed * self.project_speed_percent / 100.0,
+            speed_percent=speed,
             motion=motion,
-            accel_time_s=accel_s(accel_time_ms),
+            accel_time_s=accel,
             start_joints_deg=self.joints_hint,
             tool=self.tool,
         )
@@ -624,15 +630,7 @@ class Planner:
             # The same solve as validate()'s when the seed did not change (cached).
             target_joints = self.model.inverse(target, seed_deg=hint, tool=self.tool)
             motion = MotionType(command.kind.value)
-            expected = self.model.motion_time(
-                origin,
-                target,
-                speed_percent=speed,
-                motion=motion,
-                accel_time_s=accel,
-                start_joints_deg=hint,
-                tool=self.tool,
-            )
+            expected = self._model_time(origin, target, speed, motion, accel)
         gauge = PathGauge.of(
             self.model,
             origin,

@@ -255,17 +255,14 @@ class MotionSchedule:
         spare = max(closes - opens - _WIDEST_WINDOW_S, 0.0) / 2
         return opens + spare, closes - spare
 
-    def wants_observation(self, at: float) -> bool:
-        """True when the poll at ``at`` should read the pose: a third and two thirds in.
+    def observation_due(self) -> float:
+        """When the next poll should read the pose (infinity: none should): a third and
+        two thirds into the move.
 
         The progress seen on the way narrows the robot's pace, and with it the window
         where it reports the end; the second look corrects the first (read early, in
         the ramp, it weighs a pose's rounding and the model's profile more).
         """
-        return at >= self._observation_due()
-
-    def _observation_due(self) -> float:
-        """When the next look at the pose is due (infinity: none is)."""
         end = self.expected_end
         if self._observations >= 2 or end is None:
             return math.inf
@@ -305,7 +302,7 @@ class MotionSchedule:
         if now < self._earliest:
             # A poll a nominal interval past the earliest end sees an end there; one
             # where a look at the pose is due moves the window with the robot's pace.
-            look = self._observation_due()
+            look = self.observation_due()
             return min(
                 now + nominal * STRETCH,
                 self._earliest + nominal,

@@ -399,8 +399,8 @@ class Robot:
         self._frames = FrameGuard(self._channel, self.frame_check, tool_spec, self._log)
         # Checks and plans every move from where the arm is believed to be (no I/O).
         self._planner = options.planner(arm, tool_pose, self._follower, self._log)
-        if self.profile.has("project_speed"):  # a move at its deadline asks again
-            self._follower.project_speed = self._read_project_speed
+        # A move at its deadline asks again (None, no read, where the profile has none).
+        self._follower.project_speed = self._read_project_speed
         self._connected = False
         # What the last close() found: True when nothing it sent can still run.
         self._closed_safely: bool | None = None
