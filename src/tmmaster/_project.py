@@ -118,13 +118,10 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        self._require("play()")
-        require_positive("timeout_s", timeout_s)
-        status, state = self._status()
+        status, state = self._before_press("play()", timeout_s)
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
-        self._refuse_fault(status, "play()")
         if (
             "ma_mode" in status.raw
             and self._profile.field("ma_mode").label(int(status.raw["ma_mode"])) == "manual"
@@ -155,17 +152,20 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        self._require("pause()")
-        require_positive("timeout_s", timeout_s)
-        status, state = self._status()
-        self._refuse_fault(status, "pause()")
+        state = self._before_press("pause()", timeout_s)[1]
         if state is not ProjectState.RUNNING:
             self._log.info("robot.pause_skipped", reason=f"the project is {state.value}")
             return state
         self._press("pause", state)
         return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s)
 
-    def _refuse_fault(self, status: RobotStatus, what: str) -> None:
+    def _before_press(self, what: str, timeout_s: float) -> tuple[RobotStatus, ProjectState]:
+        """The status a press starts from; refused without a project, for a bad
+        ``timeout_s``, or while the robot is in error or e-stop (a running project never
+        is: its state would be ERROR)."""
+        self._require(what)
+        require_positive("timeout_s", timeout_s)
+        status, state = self._status()
         failure = self._channel.status_failure(status)
         if failure is not None:
             raise type(failure)(
@@ -173,6 +173,7 @@ class ProjectControl:
                 error_code=failure.error_code,
                 pose=failure.pose,
             )
+        return status, state
 
     def _press(self, button: str, state: ProjectState) -> None:
         """Press the Play/Pause toggle once, through the gate (never written twice)."""
