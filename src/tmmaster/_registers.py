@@ -227,11 +227,10 @@ class RegisterMap(BaseModel):
     @classmethod
     def _names_from_keys(cls, data: Any) -> Any:
         if isinstance(data, dict) and isinstance(data.get("fields"), dict):
-            fields: dict[str, Any] = {}
-            for key, spec in data["fields"].items():
-                if isinstance(spec, dict):
-                    spec = {"name": key, **spec}
-                fields[key] = spec
+            fields = {
+                key: {"name": key, **spec} if isinstance(spec, dict) else spec
+                for key, spec in data["fields"].items()
+            }
             data = {**data, "fields": fields}
         return data
 
