@@ -158,44 +158,6 @@ class _Options:
             _policy("checks", checks, Checks),
         )
 
-    def heartbeat(self, profile: RobotProfile, transport: Transport, log: Any) -> Heartbeat:
-        """The robot's heartbeat writer, with the timeout policy's period and TTL."""
-        return Heartbeat(
-            profile,
-            transport,
-            period_s=self.timeouts.heartbeat_s,
-            ttl_s=self.timeouts.heartbeat_ttl_s,
-            log=log,
-        )
-
-    def follower(
-        self, channel: CommandChannel, stop_event: threading.Event, log: Any
-    ) -> _MotionFollower:
-        """The robot's command path, with the polling, timeout and tolerance settings."""
-        return _MotionFollower(
-            channel,
-            stop_event,
-            log,
-            polling=self.polling,
-            timeouts=self.timeouts,
-            position_tolerance_mm=self.checks.position_tolerance_mm,
-            orientation_tolerance_deg=self.checks.orientation_tolerance_deg,
-        )
-
-    def planner(
-        self, model: RobotModel, tool: Pose | None, settings: _MotionFollower, log: Any
-    ) -> Planner:
-        """The robot's planner (``tool`` checked), with the workspace and speed checks."""
-        return Planner(
-            model,
-            workspace=self.checks.workspace,
-            tool=tool,
-            check_units=self.checks.units,
-            max_speed_percent=self.checks.max_speed_percent,
-            settings=settings,
-            log=log,
-        )
-
     def gripper(
         self,
         spec: str | Path | GripperProfile | GripperDevice | Gripper | None,
@@ -398,7 +360,15 @@ class Robot:
         # The frame check, at connect and before every move (_tool.py).
         self._frames = FrameGuard(self._channel, self.frame_check, tool_spec, self._log)
         # Checks and plans every move from where the arm is believed to be (no I/O).
-        self._planner = options.planner(arm, tool_pose, self._follower, self._log)
+        self._planner = Planner(
+            arm,
+            workspace=options.checks.workspace,
+            tool=tool_pose,
+            check_units=options.checks.units,
+            max_speed_percent=options.checks.max_speed_percent,
+            settings=self._follower,
+            log=self._log,
+        )
         # A move at its deadline asks again (None, no read, where the profile has none).
         self._follower.project_speed = self._read_project_speed
         self._connected = False
@@ -421,8 +391,16 @@ class Robot:
         self._transport.interrupt = self._stop_event
         # Sends once, polls, waits for and gives up safely every command (each Motion
         # has it); every command write passes its gate, never after close() or a stop
-        # request began.
-        self._follower = options.follower(self._channel, self._stop_event, self._log)
+        # request began. It holds the polling, timeout and tolerance settings.
+        self._follower = _MotionFollower(
+            self._channel,
+            self._stop_event,
+            self._log,
+            polling=options.polling,
+            timeouts=options.timeouts,
+            position_tolerance_mm=options.checks.position_tolerance_mm,
+            orientation_tolerance_deg=options.checks.orientation_tolerance_deg,
+        )
         self._gate = self._follower.gate
         self._io = RobotIO(
             self.profile, self._transport, self._gate, self._log, self._require_connection
@@ -433,7 +411,13 @@ class Robot:
         )
         self._shared = self._join(fleet)
         # The master's heartbeat (tmflow), written from connect to close (_heartbeat.py).
-        self._heartbeat = options.heartbeat(self.profile, self._transport, self._log)
+        self._heartbeat = Heartbeat(
+            self.profile,
+            self._transport,
+            period_s=options.timeouts.heartbeat_s,
+            ttl_s=options.timeouts.heartbeat_ttl_s,
+            log=self._log,
+        )
 
     def _join(self, fleet: Fleet | None) -> FleetMember | None:
         """A robot whose link is on a driver (its Fleet's, or the process's default one):
@@ -1063,9 +1047,7 @@ class Robot:
         check_accel(accel_time_ms)
         checked, tcp = self._planner.joint_target(values, speed)
         command = Command(CommandKind.PTP_JOINTS, tcp, speed, accel_time_ms, joints=checked)
-        handle = self._start_command(command, timeout=timeout)
-        handle.wait()
-        return handle
+        return _waited(self._start_command(command, timeout=timeout))
 
     def move_by(
         self,
@@ -1147,9 +1129,7 @@ class Robot:
             CommandKind.of(kind), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
         )
         self._channel.check_command(command)
-        handle = self._start_command(command, timeout=timeout, resolved_at=start)
-        handle.wait()
-        return handle
+        return _waited(self._start_command(command, timeout=timeout, resolved_at=start))
 
     def move_arc(
         self,
@@ -1223,9 +1203,7 @@ class Robot:
             CommandKind.CIRCLE, to, percent, accel_time_ms, via=on_arc, speed_mm_s=speed_mm_s
         )
         self._channel.check_command(command)
-        handle = self._start_command(command, timeout=timeout, resolved_at=start)
-        handle.wait()
-        return handle
+        return _waited(self._start_command(command, timeout=timeout, resolved_at=start))
 
     def _require(self, kind: CommandKind, what: str) -> None:
         """Refuse a command the profile has no code for (ConfigError naming it), no I/O."""
@@ -1450,6 +1428,12 @@ class Robot:
         self._stop_event.set()
         if self._shared is not None:
             wake_waits(self._shared)  # a wait polled by the fleet ends now
+
+
+def _waited(motion: Motion) -> Motion:
+    """``motion``, once it is done (:meth:`Motion.wait`: raises when it failed)."""
+    motion.wait()
+    return motion
 
 
 def _profile_mismatch(
