@@ -175,7 +175,8 @@ def first_stops(stop: Callable[[], None]) -> Iterator[None]:
             signal.signal(signal.SIGINT, signal.SIG_IGN if pressed else previous)
 
 
-class deferred:  # noqa: N801 - used as a context manager, like contextlib's lower-case ones
+@contextmanager
+def deferred() -> Iterator[None]:
     """Hold Ctrl-C back for the length of a critical section, then deliver it.
 
     A withdraw or stop that a second Ctrl-C cuts short leaves a command armed. In the
@@ -186,47 +187,35 @@ class deferred:  # noqa: N801 - used as a context manager, like contextlib's low
     the program is over. Elsewhere (other threads, a handler Python did not install, or
     Ctrl-C ignored) it does nothing. Re-entrant: a nested section leaves the outer one's
     recorder in place.
+
+    Yields:
+        Nothing.
     """
+    pending = False
 
-    __slots__ = ("_pending", "_previous")
+    def record(signum: int, frame: FrameType | None) -> None:
+        nonlocal pending
+        _ = signum, frame
+        pending = True
 
-    def __init__(self) -> None:
-        self._previous: signal.Handlers | object | None = None
-        self._pending = False
-
-    def __enter__(self) -> None:
-        if not _in_main_thread():
-            return
-        try:
-            previous = signal.getsignal(signal.SIGINT)
-        except ValueError:  # not the main interpreter
-            return
-        if previous is None or previous is signal.SIG_IGN or getattr(previous, "deferring", False):
-            return
-
-        def record(signum: int, frame: FrameType | None) -> None:
-            _ = signum, frame
-            self._pending = True
-
-        record.deferring = True  # type: ignore[attr-defined]
-        try:
+    record.deferring = True  # type: ignore[attr-defined]
+    previous = signal.getsignal(signal.SIGINT) if _in_main_thread() else None
+    if previous is signal.SIG_IGN or getattr(previous, "deferring", False):
+        previous = None  # ignored, or an outer section's recorder: left in place
+    try:
+        if previous is not None:
             signal.signal(signal.SIGINT, record)
-        except ValueError:
-            return
-        self._previous = previous
-
-    def __exit__(self, *exc_info: object) -> None:
-        previous, self._previous = self._previous, None
-        if previous is None:
-            return
-        signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
-        if self._pending:
-            self._pending = False
-            if not threading.main_thread().is_alive():
-                # The main thread has ended: an exit hook's section, the program is over,
-                # nothing is left to interrupt.
-                return
-            if previous is signal.SIG_DFL:
-                signal.raise_signal(signal.SIGINT)
-            elif callable(previous):
-                previous(signal.SIGINT, None)
+    except ValueError:  # not the main interpreter
+        previous = None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+            # Once the main thread has ended (an exit hook's section), the program is
+            # over: nothing is left to interrupt.
+            if pending and threading.main_thread().is_alive():
+                if previous is signal.SIG_DFL:
+                    signal.raise_signal(signal.SIGINT)
+                elif callable(previous):
+                    previous(signal.SIGINT, None)
