@@ -256,14 +256,13 @@ class CommandChannel(ABC):
         # 7001-7060 (flange, joints, TCP, both in the robot base): still one request, so
         # the frame check runs before every move at no request more.
         robot_base_flange = _published(profile, tuple("robot_base_" + n for n in FLANGE_FIELDS))
-        frames = (*self.flange_fields, *robot_base_flange, *self.robot_base_tcp_fields)
         #: True when the plan read carries the frames (the flange, both bases).
         self.frames_in_plan = bool(self.flange_fields and robot_base_flange)
         self.plan_fields = (
             *(self.flange_fields if self.frames_in_plan else ()),
             *self.joint_fields,
             *self.tcp_fields,
-            *(frames[len(self.flange_fields) :] if self.frames_in_plan else ()),
+            *((*robot_base_flange, *self.robot_base_tcp_fields) if self.frames_in_plan else ()),
         )
         self.command_fields = (command,)
         # The command block's fields, looked up once (the map does not change under a
@@ -293,8 +292,7 @@ class CommandChannel(ABC):
 
     def read_status(self) -> RobotStatus:
         """A full status snapshot."""
-        values = self.read(self.status_fields)
-        return self.status_from(values)
+        return self.status_from(self.read(self.status_fields))
 
     def read_pose(self) -> Pose:
         """The current TCP pose (one request)."""
