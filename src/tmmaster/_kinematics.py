@@ -480,12 +480,11 @@ class Arc:
         # Circumcentre: p0 + (|a|^2 (b x n) + |b|^2 (n x a)) / (2 |n|^2).
         first, second = _scaled(_cross(b, n), _dot(a, a)), _scaled(_cross(n, a), _dot(b, b))
         k = 1.0 / (2.0 * n2)
-        offset = (
-            (first[0] + second[0]) * k,
-            (first[1] + second[1]) * k,
-            (first[2] + second[2]) * k,
+        centre = (
+            p0[0] + (first[0] + second[0]) * k,
+            p0[1] + (first[1] + second[1]) * k,
+            p0[2] + (first[2] + second[2]) * k,
         )
-        centre = (p0[0] + offset[0], p0[1] + offset[1], p0[2] + offset[2])
         radius = math.dist(centre, p0)
         if radius > ARC_MAX_RADIUS_MM:
             raise ValueError(
