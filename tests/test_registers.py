@@ -24,7 +24,7 @@ from tmmaster._registers import (
     Role,
     Table,
 )
-from tmmaster._transport import plan_writes
+from tmmaster._transport import encode_writes, group_writes
 
 
 def _map(*fields: dict[str, Any]) -> RegisterMap:
@@ -205,7 +205,7 @@ def test_moved_but_contiguous_command_block_is_accepted() -> None:
 def test_builtin_command_block_goes_out_as_one_fc16(name: str) -> None:
     p = robot_profile(name)
     values: list[tuple[RegisterField, Any]] = [(f, 1) for f in p.command_block()]
-    plans = plan_writes(values)
+    plans = group_writes(encode_writes(values))
     assert len(plans) == 1
     block, words = plans[0]
     assert block.address == p.command_block()[0].address

@@ -128,11 +128,7 @@ def check_host(host: object, *, field: str = "host", port_field: str = "port") -
         raise ConfigError(f"{prefix}{host!r} contains a space: give the address alone")
     if host.startswith("["):
         return _bracketed_ipv6(host, prefix, port_field)
-    try:
-        ipaddress.ip_address(host)
-    except ValueError:
-        pass
-    else:
+    if is_ip_address(host):
         return host
     colons = host.count(":")
     if colons == 1 and host.partition(":")[2].isdigit():
@@ -145,7 +141,7 @@ def check_host(host: object, *, field: str = "host", port_field: str = "port") -
 def _bracketed_ipv6(host: str, prefix: str, port_field: str) -> str:
     """``[::1]`` -> ``::1``; a ConfigError for a port after it or anything else."""
     inner, bracket, rest = host[1:].partition("]")
-    if bracket and _is_ipv6(inner):
+    if bracket and ":" in inner and is_ip_address(inner):  # IPv6 (IPv4 has no colon)
         if not rest:
             return inner
         if rest[0] == ":" and rest[1:].isdigit():
@@ -202,11 +198,20 @@ def check_port(port: object, *, field: str = "port") -> int:
     return number
 
 
-def _is_ipv6(text: str) -> bool:
+def is_ip_address(host: str) -> bool:
+    """Whether ``host`` is an IPv4 or IPv6 address as written (no brackets), not a name.
+
+    Args:
+        host: a host string.
+
+    Returns:
+        True for an IP address.
+    """
     try:
-        return isinstance(ipaddress.ip_address(text), ipaddress.IPv6Address)
+        ipaddress.ip_address(host)
     except ValueError:
         return False
+    return True
 
 
 def _port_message(host: str, prefix: str, port_field: str) -> str:

@@ -1048,39 +1048,34 @@ class _DefaultDriver:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._fleet: Fleet | None = None
+        #: The default driver while it has users (None: no link holds it).
+        self.fleet: Fleet | None = None
         self._users = 0
 
     def acquire(self) -> Fleet:
         """Take the default driver (made now if none); give it back with :meth:`release`."""
         with self._lock:
-            if self._fleet is None:
-                self._fleet = Fleet()
-                self._users = 0
+            if self.fleet is None:
+                self.fleet = Fleet()
             self._users += 1
-            return self._fleet
+            return self.fleet
 
     def release(self, fleet: Fleet) -> None:
         """Give ``fleet`` back; the last user's release stops its loop."""
         with self._lock:
-            if fleet is not self._fleet:
+            if fleet is not self.fleet:
                 return  # a driver forgotten at a fork
             self._users -= 1
             if self._users > 0:
                 return
-            self._fleet = None
+            self.fleet = None
         fleet._retire()
 
     def forget(self) -> None:
         """In a forked child: the parent's loop thread is not there; the next link makes one."""
         self._lock = threading.Lock()
-        self._fleet = None
+        self.fleet = None
         self._users = 0
-
-    @property
-    def running(self) -> Fleet | None:
-        """The default driver while it has users (None: no link holds it)."""
-        return self._fleet
 
 
 _DEFAULT = _DefaultDriver()
@@ -1090,7 +1085,7 @@ if hasattr(os, "register_at_fork"):
 
 def default_fleet() -> Fleet | None:
     """The process's default driver while a link holds it; None when none does."""
-    return _DEFAULT.running
+    return _DEFAULT.fleet
 
 
 class ModbusTransport(LoopTransport):

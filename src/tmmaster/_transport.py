@@ -21,7 +21,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
-import ipaddress
 import socket
 import struct
 import threading
@@ -52,6 +51,7 @@ from pymodbus.pdu.register_message import (
     WriteMultipleRegistersResponse,
 )
 
+from ._address import is_ip_address
 from ._codec import Decoder, Value, decoder, encoder
 from ._error_root import TMMasterError
 from ._exceptions import (
@@ -239,15 +239,6 @@ def encode_writes(values: Iterable[tuple[RegisterField, Value]]) -> list[Encoded
             raise ConfigError(f"{f.name}: field is read-only ({f.table.value} {f.address})")
         encoded.append((f, encoder(f)(value)))
     return encoded
-
-
-def plan_writes(values: Sequence[tuple[RegisterField, Value]]) -> list[tuple[Block, list[int]]]:
-    """Encode every value first, then group adjacent fields into write blocks.
-
-    Encoding everything before returning means an out-of-range value anywhere refuses
-    the whole write: nothing is sent.
-    """
-    return group_writes(encode_writes(values))
 
 
 #: Write layouts by the identities of their fields, in the order given: the blocks and,
@@ -887,9 +878,9 @@ class BlockTransport(ABC):
             ValueOutOfRangeError: A value does not fit its field (nothing is sent).
             TransportError: A write failed (a subclass says how).
         """
-        items = list(values.items()) if isinstance(values, Mapping) else list(values)
-        plans = plan_writes(items)
-        for block, words in plans:
+        items = values.items() if isinstance(values, Mapping) else values
+        # Every value is encoded before the first write: one out of range sends nothing.
+        for block, words in group_writes(encode_writes(items)):
             self.write_block(
                 block.table, block.address, words, retry=retry, interruptible=interruptible
             )
@@ -1212,14 +1203,6 @@ class _Stream(asyncio.Protocol):
             self.transport.close()
 
 
-def _is_ip(host: str) -> bool:
-    try:
-        ipaddress.ip_address(host)
-    except ValueError:
-        return False
-    return True
-
-
 def _malformed(name: str, exc: BaseException, what: str) -> TransportError:
     return TransportError(f"{name}: malformed answer to {what}: {exc}")
 
@@ -1388,7 +1371,7 @@ class AsyncLink:
         """A connected stream; a host name resolved as ``socket.create_connection`` does
         (the standard resolver, in a worker thread; each address in turn)."""
         addresses: list[tuple[str, int]] = [(self.host, self.port)]
-        if not _is_ip(self.host):
+        if not is_ip_address(self.host):
             infos = await loop.run_in_executor(
                 None, socket.getaddrinfo, self.host, self.port, 0, socket.SOCK_STREAM
             )
@@ -1431,19 +1414,6 @@ class AsyncLink:
             if call is not None:
                 call.end()  # given up (cancelled): its deadline and slot go
 
-    def _request(
-        self, what: str, function_code: int, address: int, count: int, values: list[int] | None
-    ) -> tuple[_Stream, ModbusPDU]:
-        """The open stream and the request's PDU under the next transaction id."""
-        stream = self._stream
-        if stream is None or stream.closed or stream.transport is None:
-            raise ConnectionLostError(f"{self.name}: not connected for {what}")
-        self._tid = tid = self._tid % 0xFFFF + 1
-        request = request_pdu(
-            function_code, address, count, values, device_id=self.device_id, tid=tid
-        )
-        return stream, request
-
     def start(
         self,
         what: str,
@@ -1459,17 +1429,23 @@ class AsyncLink:
         Without a coroutine or a future per request (a thread's request, a chained read).
         The call (None: failed at once) can be ended early (:meth:`_Call.end`).
         """
+        stream = self._stream
+        if stream is None or stream.closed or stream.transport is None:
+            fail(ConnectionLostError(f"{self.name}: not connected for {what}"))
+            return None
+        self._tid = tid = self._tid % 0xFFFF + 1
         try:
-            stream, request = self._request(what, function_code, address, count, values)
+            request = request_pdu(
+                function_code, address, count, values, device_id=self.device_id, tid=tid
+            )
         except BaseException as exc:
             fail(exc)
             return None
         call = _Call(request, count, self.name, what, settle, fail)
-        call.stream, call.tid = stream, request.transaction_id
+        call.stream, call.tid = stream, tid
         stream.awaited[call.tid] = call
         frame = stream.framer.buildFrame(request)
         stream.sent += 1
-        assert stream.transport is not None  # checked by _request
         stream.transport.write(frame)
         if self.stats is not None:
             self.stats.bytes_sent += len(frame)
