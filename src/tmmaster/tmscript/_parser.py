@@ -22,6 +22,7 @@ from lark.tree import Meta
 
 from .._exceptions import TMScriptError, TMScriptSyntaxError
 from . import _ast as a
+from ._grammar_cache import cache_file
 from ._types import STRING_MAX
 
 __all__ = ["MAX_ERRORS", "MAX_NESTING", "check_script", "parse_script"]
@@ -150,7 +151,23 @@ class _Newlines(PostLex):
 
 @cache
 def _parser() -> Lark:
+    """The parser, built once per process; its tables are kept in this user's private
+    cache folder when there is one (:mod:`._grammar_cache`)."""
     grammar = files(__package__).joinpath("grammar.lark").read_text(encoding="utf-8")
+    return build_parser(grammar, cache_file(grammar))
+
+
+def build_parser(grammar: str, cache: str | None) -> Lark:
+    """lark's LALR parser of ``grammar``, its tables loaded from or saved to ``cache``.
+
+    Args:
+        grammar: The grammar's text.
+        cache: The file lark keeps the tables in (a pickle: a path in a private folder
+            only, see :mod:`._grammar_cache`), or None to build them in memory.
+
+    Returns:
+        The parser.
+    """
     return Lark(
         grammar,
         parser="lalr",
@@ -158,6 +175,7 @@ def _parser() -> Lark:
         postlex=_Newlines(),
         propagate_positions=True,
         maybe_placeholders=True,
+        cache=cache if cache is not None else False,
     )
 
 
