@@ -401,13 +401,11 @@ class DigitalIOModule(BaseModel):
 
     @model_validator(mode="after")
     def _check_span(self) -> Self:
-        for kind, address, count in (
-            ("do", self.do_address, self.do_count),
-            ("di", self.di_address, self.di_count),
-        ):
+        for table, address, count in self.spans():
             if address + count > 65536:
+                kind = "do" if table is Table.COIL else "di"
                 raise ValueError(f"{kind}_address + {kind}_count runs past address 65535")
-        if self.do_count == 0 and self.di_count == 0:
+        if not self.spans():
             raise ValueError("a digital I/O module needs do_count or di_count above 0")
         return self
 
