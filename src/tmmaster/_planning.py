@@ -365,17 +365,6 @@ class Planner:
             refuse_suspect_units("target", pose)
         self.workspace.check(pose, tool=self.tool)
 
-    def _check_line(
-        self, start: Pose, target: Pose, speed: int, seed_deg: Sequence[float] | None
-    ) -> Joints:
-        """A Line's checks: it ends where its path from the arm's joints ends (the arm
-        keeps its configuration), not where a fresh inverse solution would put it."""
-        self._check_target(target, speed)
-        path = self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
-        self.workspace.check_arm(self.model, path[-1])
-        self._check_body(path[0], path[1:])
-        return path[-1]
-
     def check_move(
         self,
         target: Pose,
@@ -384,10 +373,18 @@ class Planner:
         start: Pose | None,
         seed_deg: Sequence[float] | None,
     ) -> Joints:
-        """:meth:`Robot.check_move`'s model checks (the profile's encoding aside)."""
-        if motion is MotionType.LINE and start is not None:
-            return self._check_line(start, target, speed, seed_deg)
-        return self.validate(target, speed, seed_deg)
+        """:meth:`Robot.check_move`'s model checks (the profile's encoding aside).
+
+        A Line from ``start`` ends where its path from the arm's joints ends (the arm
+        keeps its configuration), not where a fresh inverse solution would put it.
+        """
+        if motion is not MotionType.LINE or start is None:
+            return self.validate(target, speed, seed_deg)
+        self._check_target(target, speed)
+        path = self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
+        self.workspace.check_arm(self.model, path[-1])
+        self._check_body(path[0], path[1:])
+        return path[-1]
 
     def check_path(self, target: Pose, speed: int, motion: MotionType) -> None:
         """A move's checks before any request, a Line's path from the seed included.

@@ -111,6 +111,7 @@ _log = get_logger("tmmaster.robot")
 
 _P = ParamSpec("_P")
 _T = TypeVar("_T")
+_F = TypeVar("_F", bound=Callable[..., object])
 _PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy", "Checks")
 
 
@@ -1494,9 +1495,16 @@ def _connected(make: Callable[_P, Robot]) -> Callable[_P, Robot]:
             robot.close()
             raise
 
+    return _named_connect(make, connect)
+
+
+def _named_connect(make: Callable[..., object], connect: _F) -> _F:
+    """``connect``, named so, with ``make``'s parameters and its own return annotation.
+
+    help() and the API docs then show Robot's parameters, not *args/**kwargs, and what
+    ``connect`` returns (a Robot, an AsyncRobot; the constructor's own returns None).
+    """
     connect.__qualname__ = "connect"
-    # help() and the API docs show Robot's parameters, not *args/**kwargs, and what this
-    # function returns (a Robot; the constructor's own signature returns None).
     connect.__signature__ = inspect.signature(make).replace(  # type: ignore[attr-defined]
         return_annotation=inspect.signature(connect).return_annotation
     )

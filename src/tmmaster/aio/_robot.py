@@ -40,7 +40,7 @@ from .._exceptions import TMMasterError, TransportClosedError
 from .._gripper import Gripper
 from .._io import RobotIO
 from .._logging import get_logger
-from .._robot import Motion, Robot
+from .._robot import Motion, Robot, _named_connect
 from .._status import MovePhase, MoveProgress
 
 _log = get_logger("tmmaster.aio")
@@ -715,7 +715,6 @@ class AsyncRobotIO(_Front):
 
 def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
     """An AsyncRobot from ``make``'s arguments, with ``make``'s exact signature."""
-    signature = inspect.signature(make)
 
     def connect(*args: P.args, **kwargs: P.kwargs) -> AsyncRobot:
         """Open an :class:`AsyncRobot`: ``await`` it, or use it in ``async with``.
@@ -760,13 +759,7 @@ def _async_connected(make: Callable[P, Robot]) -> Callable[P, AsyncRobot]:
         """
         return AsyncRobot(make(*args, **kwargs))
 
-    connect.__qualname__ = "connect"
-    # help() and the API docs show Robot's parameters, not *args/**kwargs, and what this
-    # function returns (an AsyncRobot; Robot's constructor returns None).
-    connect.__signature__ = signature.replace(  # type: ignore[attr-defined]
-        return_annotation=inspect.signature(connect).return_annotation
-    )
-    return connect
+    return _named_connect(make, connect)
 
 
 connect = _async_connected(Robot)
