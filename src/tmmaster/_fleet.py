@@ -59,7 +59,7 @@ from ._loop import (
 )
 from ._registers import RegisterField
 from ._retry import RetryPolicy
-from ._transport import AsyncLink, Block, BlockTransport, ConnectionState, Transport
+from ._transport import AsyncLink, Block, BlockTransport, ConnectionState, Transport, settle
 
 _log = get_logger("tmmaster.fleet")
 
@@ -145,13 +145,6 @@ class LoopTransport(BlockTransport):
         if state is ConnectionState.CONNECTED and not self._link.connected:
             return ConnectionState.DISCONNECTED
         return state
-
-    def _connect_once(self) -> None:
-        if self._state is ConnectionState.CONNECTED and not self._link.connected:
-            # Lost between two requests (the device closed it): opening it again is a
-            # reconnect, an outage the retry policy rides out.
-            self._state = ConnectionState.DISCONNECTED
-        super()._connect_once()
 
     def _open_link(self) -> None:
         if self._release is not None:
@@ -467,14 +460,13 @@ class FleetMember:
 
     def wake(self) -> None:
         """On the loop: end the current nap early (a stop request)."""
-        nap = self._nap
-        if nap is not None and not nap.done():
-            nap.set_result(None)
+        if self._nap is not None:
+            settle(self._nap, None)
 
     async def _sleep(self, delay: float) -> None:
         loop = asyncio.get_running_loop()
         self._nap = nap = loop.create_future()
-        timer = loop.call_later(delay, _settle, nap)
+        timer = loop.call_later(delay, settle, nap, None)
         try:
             await nap
         finally:
@@ -709,11 +701,6 @@ class _Latch(Generic[T]):
 
 class _NoAnswerError(Exception):
     """The loop did not finish a coroutine within its bound (not the coroutine's own error)."""
-
-
-def _settle(future: asyncio.Future[None]) -> None:
-    if not future.done():
-        future.set_result(None)
 
 
 class Fleet:

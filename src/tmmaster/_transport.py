@@ -562,7 +562,9 @@ class BlockTransport(ABC):
     def _connect_once(self) -> None:
         if self._link_open():
             return
-        reconnect = self._state is ConnectionState.DISCONNECTED
+        # Lost (a subclass's state may say so of a link the device closed between two
+        # requests): opening it again is a reconnect, an outage the retry policy rides out.
+        reconnect = self.state is ConnectionState.DISCONNECTED
         try:
             self._open_link()
         except (ConnectRefusedError, HostNotFoundError) as exc:
@@ -950,11 +952,8 @@ def request_pdu(
         return WriteMultipleRegistersRequest(
             address=address, registers=words, dev_id=device_id, transaction_id=tid
         )
-    if function_code == 5:
-        return WriteSingleCoilRequest(
-            address=address, bits=[bool(words[0])], dev_id=device_id, transaction_id=tid
-        )
-    return WriteMultipleCoilsRequest(
+    coils = WriteSingleCoilRequest if function_code == 5 else WriteMultipleCoilsRequest
+    return coils(
         address=address, bits=[bool(b) for b in words], dev_id=device_id, transaction_id=tid
     )
 
@@ -1245,18 +1244,16 @@ def _expire(future: _Call, link: AsyncLink, stream: _Stream) -> None:
     future.set_exception(error)
 
 
-#: ``_resolve``'s mark of a failure.
-_FAILED = object()
-
-
-def _resolve(future: asyncio.Future[list[int]], how: object, value: Any) -> None:
-    """Settle a coroutine's request once (its task may have been cancelled meanwhile)."""
-    if future.done():
-        return
-    if how is _FAILED:
-        future.set_exception(value)
-    else:
+def settle(future: asyncio.Future[T], value: T) -> None:
+    """Give ``future`` its result, unless settled already (its task may have been cancelled)."""
+    if not future.done():
         future.set_result(value)
+
+
+def settle_failed(future: asyncio.Future[Any], error: BaseException) -> None:
+    """Fail ``future`` with ``error``, unless settled already."""
+    if not future.done():
+        future.set_exception(error)
 
 
 class _Call:
@@ -1405,8 +1402,8 @@ class AsyncLink:
             address,
             count,
             values,
-            functools.partial(_resolve, answer, None),
-            functools.partial(_resolve, answer, _FAILED),
+            functools.partial(settle, answer),
+            functools.partial(settle_failed, answer),
         )
         try:
             return await answer
