@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 import tmmaster
-from tmmaster import MotionType, PollPolicy, Pose
+from tmmaster import MotionType, PollPolicy, Pose, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind, Ticket, channel_for
 from tmmaster._following import FollowState, Overdue
 from tmmaster._profiles import robot_profile
@@ -126,8 +126,7 @@ def _follow(motion: _Motion) -> FollowState:
         None,
         stop_event=threading.Event(),
         polling=PollPolicy(),
-        ack_timeout_s=1.0,
-        stall_s=1.0,
+        timeouts=TimeoutPolicy(ack_timeout_s=1.0, stall_s=1.0),
     )
 
 

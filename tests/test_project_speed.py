@@ -110,8 +110,7 @@ def test_a_project_speed_lowered_since_the_plan_grows_the_moves_budget() -> None
             timeout_s,
             stop_event=follower.stop_event,
             polling=PollPolicy(),
-            ack_timeout_s=2.0,
-            stall_s=1.0,
+            timeouts=TimeoutPolicy(ack_timeout_s=2.0, stall_s=1.0),
         )
         return motion, state
 

@@ -145,12 +145,8 @@ class Motion:
                 e-stop).
         """
         if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
-            polled_pose = self.last_pose
-            with self._follower.following(self):
+            with _Following(self._follower, self):
                 self._follower.poll(self)
-                if self.last_pose is polled_pose and not self.done:
-                    # This profile's poll does not carry the pose: read it for the report.
-                    self.last_pose = self._follower.read_pose()
         elapsed = (self.finished_at or time.monotonic()) - self._ticket.sent_at
         fraction: float | None = None
         if self.last_pose is not None and self.target is not None and self.start is not None:
@@ -179,12 +175,13 @@ class Motion:
         """
         if timeout_s is not None:
             require_positive("timeout_s", timeout_s)
-        with self._follower.following(self):
+        with _Following(self._follower, self):
             self._follower.wait(self, timeout_s)
 
 
 class _Following:
-    """The context of :meth:`_MotionFollower.following`: an escaping exception abandons the motion.
+    """Whatever escapes the block, the master gives the command up safely first: an
+    escaping exception abandons the motion (:meth:`_MotionFollower.abandon`).
 
     A class rather than a generator context manager: entered on every wait and send,
     it costs one object instead of a generator's frame and ``contextlib``'s machinery.
@@ -263,10 +260,10 @@ class _MotionFollower:
 
         ``register`` records the handle as the robot's outstanding command, under the
         gate's lock before the first byte is written. Whatever escapes the write, the
-        command is given up safely first (:meth:`following`).
+        command is given up safely first (:class:`_Following`).
         """
         motion = Motion(self, ticket, plan)
-        with self.following(motion):
+        with _Following(self, motion):
             self.send(ticket, functools.partial(register, motion))
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
             command = ticket.command
@@ -340,18 +337,10 @@ class _MotionFollower:
         """True once the master gave up on ``motion``."""
         return motion in self._given_up
 
-    def read_pose(self) -> Pose:
-        """The current TCP pose."""
-        return self._channel.read_pose()
-
     def stop(self) -> None:
         """Stop the arm now (the channel retries a stop: it is idempotent)."""
         self._channel.stop()
         self._log.warning("robot.stop_sent")
-
-    def following(self, motion: Motion) -> _Following:
-        """Whatever escapes the block, the master gives the command up safely first."""
-        return _Following(self, motion)
 
     def abandon(
         self,
@@ -515,8 +504,13 @@ class _MotionFollower:
                 )
 
     def poll(self, motion: Motion) -> None:
-        """Poll the command once; raises the typed error when the robot failed it."""
+        """Poll the command once for a report, with the pose; raises the typed error when
+        the robot failed it."""
+        polled_pose = motion.last_pose
         self._apply(motion, self._channel.poll(motion.ticket))
+        if motion.last_pose is polled_pose and not motion.done:
+            # This profile's poll does not carry the pose: read it for the report.
+            motion.last_pose = self._channel.read_pose()
 
     def _apply(self, motion: Motion, observation: Observation) -> None:
         """Act on what a poll saw: raise the robot's failure, note the acknowledgement, finish."""
@@ -557,8 +551,7 @@ class _MotionFollower:
             timeout_s,
             stop_event=self.stop_event,
             polling=self.polling,
-            ack_timeout_s=self.timeouts.ack_timeout_s,
-            stall_s=self.timeouts.stall_s,
+            timeouts=self.timeouts,
         )
         shared = self.shared_driver
         follow.on_acknowledged = functools.partial(self._note_acknowledged, motion)

@@ -14,6 +14,7 @@ from enum import Enum
 from typing import Protocol
 
 from ._channels import Observation, Ticket
+from ._planning import TimeoutPolicy
 from ._poller import PACE_LIMIT, MotionSchedule, Poller, PollPolicy
 from ._pose import Pose
 from ._status import MovePhase
@@ -93,8 +94,7 @@ class FollowState:
         *,
         stop_event: threading.Event,
         polling: PollPolicy,
-        ack_timeout_s: float,
-        stall_s: float,
+        timeouts: TimeoutPolicy,
     ) -> None:
         ticket = motion.ticket
         self.motion = motion
@@ -106,13 +106,13 @@ class FollowState:
         self.stop_event = stop_event
         self.poller = Poller(polling.interval_s, stop_event)
         self.schedule = MotionSchedule(polling, ticket.sent_at, accel_s=motion.accel_s)
-        self.ack_deadline = ticket.sent_at + ack_timeout_s
+        self.ack_deadline = ticket.sent_at + timeouts.ack_timeout_s
         #: ``time.monotonic()`` at the start of the last poll (the wait's start before one).
         self.poll_started = time.monotonic()
         self._anchored = False
         self._observed: Pose | None = None
         #: How long a move whose budget grew with its pace may show no progress, s.
-        self.stall_s = stall_s
+        self.stall_s = timeouts.stall_s
         #: ``time.monotonic()`` of the poll that last saw the arm move (None: not yet).
         self.last_progress_at: float | None = None
         self._progress_pose: Pose | None = motion.start

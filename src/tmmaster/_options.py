@@ -158,9 +158,6 @@ class GripperDevice:
     #: A ready link instead of one opened to ``host:port``.
     transport: Transport | None = None
 
-    #: The Robot argument that takes it: its fields are named ``gripper.<field>`` in errors.
-    argument: ClassVar[str] = "gripper"
-
     def __post_init__(self) -> None:
         if self.profile in ("auto", "none") or not isinstance(
             self.profile, str | Path | GripperProfile
