@@ -163,7 +163,7 @@ def _semantic_errors(script: Script) -> tuple[list[TMScriptSyntaxError], tuple[S
     types): each statement's, not only the first; and its warnings."""
     from .._exceptions import TMScriptSyntaxError
     from . import _ast
-    from ._evaluator import _Compiler
+    from ._evaluator import _SIMPLE, _Compiler
 
     class CheckAll(_Compiler):
         """The compiler, going on after a statement's error to check the next ones."""
@@ -172,7 +172,7 @@ def _semantic_errors(script: Script) -> tuple[list[TMScriptSyntaxError], tuple[S
             super().__init__(script)
             self.errors: list[TMScriptSyntaxError] = []
 
-        def statement(self, node: _ast.Statement) -> tuple[bool, Callable[[Any], Any]]:
+        def statement(self, node: _ast.Statement) -> tuple[str, Callable[[Any], Any]]:
             try:
                 return super().statement(node)
             except TMScriptSyntaxError as exc:
@@ -181,7 +181,7 @@ def _semantic_errors(script: Script) -> tuple[list[TMScriptSyntaxError], tuple[S
                 # The variable is declared all the same: its uses are no errors of their own.
                 with contextlib.suppress(TMScriptSyntaxError):
                     super().statement(dataclasses.replace(node, init=None))
-            return True, _nothing
+            return _SIMPLE, _nothing
 
     compiler = CheckAll(script)
     try:

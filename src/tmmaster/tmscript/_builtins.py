@@ -120,6 +120,9 @@ class Builtin:
     blocking: BlockingImpl | None = None
     #: It moves the robot: refused in closestop and errorstop (§3.3, §3.4).
     motion: bool = False
+    #: A Modbus function (``blocking`` waits for the link, then calls this): the
+    #: evaluator runs the wait and the call in one generator, not two nested ones.
+    linked: Impl | None = None
 
 
 #: Every function this interpreter runs, by name.
@@ -151,16 +154,23 @@ def _register_linked(section: str, page: int, *specs: str) -> Callable[[Impl], I
         def wait_then_call(
             rt: Runtime, args: list[Value], types: tuple[str, ...]
         ) -> Generator[str, None, Value]:
-            device = _device(rt, args[0], 0)
+            device = link_device(rt, args)
             while not rt.host.modbus_ready(device):
                 yield BLOCKED
             return fn(rt, args, types)
 
         name = fn.__name__.lstrip("_")
-        BUILTINS[name] = Builtin(name, section, page, _sigs(*specs), blocking=wait_then_call)
+        BUILTINS[name] = Builtin(
+            name, section, page, _sigs(*specs), blocking=wait_then_call, linked=fn
+        )
         return fn
 
     return decorate
+
+
+def link_device(rt: Runtime, args: list[Value]) -> ModbusDevice:
+    """The device whose link a Modbus function's call (``args``) waits for."""
+    return _device(rt, args[0], 0)
 
 
 def _register_blocking(
@@ -180,6 +190,8 @@ _NUMBER = (int, float)
 
 
 def _int(v: Value) -> int:
+    if v.__class__ is int:  # the common case first (a bool is no int here)
+        return v
     if isinstance(v, bool) or not isinstance(v, _NUMBER):
         raise BuiltinError(f"expected a number, got {v!r}")
     return int(v)
@@ -208,7 +220,16 @@ def _arr(v: Value) -> list[Scalar]:
     return list(v)
 
 
+#: The element types ``bytes()`` may take as they are (a bool is refused by ``_int``).
+_PLAIN_INTS = frozenset({int})
+
+
 def _bytes(v: Value) -> bytes:
+    if v.__class__ is list and _PLAIN_INTS.issuperset(map(type, v)):
+        try:
+            return bytes(v)  # type: ignore[arg-type]
+        except ValueError:
+            pass  # an element out of 0..255: its low 8 bits, below
     return bytes(_int(b) & 0xFF for b in _arr(v))
 
 
@@ -940,7 +961,15 @@ def _wait_ms(rt: Runtime, ms: int) -> Generator[str, None, Value]:
 @_register_blocking("5.5", 159, "bool(int)")
 def _Sleep(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
     """TMscript 2.24 §5.5 Sleep, p. 159: waits on the host's clock."""
-    return (yield from _wait_ms(rt, _int(args[0])))
+    # _wait_ms written out: a program's poll loop sleeps in every iteration.
+    ms = _int(args[0])
+    if ms < 0:
+        return False  # "invalid" (TMscript 2.24 §5.5, p. 159)
+    now_s = rt.host.now_s
+    until = now_s() + ms / 1000.0
+    while now_s() < until:
+        yield BLOCKED
+    return True
 
 
 # WaitFor(bool, int) evaluates its condition again on every poll: the evaluator compiles it

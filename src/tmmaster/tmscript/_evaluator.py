@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import operator
 import time
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ from ._builtins import (
     Impl,
     ModbusConfig,
     Runtime,
+    link_device,
 )
 from ._host import Host, HostError
 from ._parser import parse_script
@@ -175,6 +177,10 @@ class _Thread:
 
 _BREAK = "break"
 _CONTINUE = "continue"
+#: The kinds of compiled statement (see :meth:`_Compiler.statement`).
+_SIMPLE = "simple"
+_EXPR = "expr"
+_STATEMENT = "statement"
 Control: TypeAlias = str | _Return | None
 Gen: TypeAlias = Generator[str, None, Any]
 PureFn: TypeAlias = Callable[[_Frame], Value]
@@ -308,6 +314,13 @@ def _lift(ce: _CExpr) -> GenFn:
         yield  # pragma: no cover - makes this a generator
 
     return gen
+
+
+def _pure_or_gen(ce: _CExpr) -> tuple[PureFn | None, GenFn]:
+    """A loop's condition: (the plain closure, or None) and the generator function."""
+    if ce.gen:
+        return None, cast(GenFn, ce.fn)
+    return cast(PureFn, ce.fn), _lift(ce)
 
 
 @dataclass
@@ -795,20 +808,18 @@ class _Compiler(_ExprCompiler):
                 self.scope.names.pop()
 
     def statements(self, nodes: tuple[a.Statement, ...]) -> StmtFn:
-        items: list[tuple[bool, Callable[[_Frame], Any]]] = []
-        for node in nodes:
-            simple, fn = self.statement(node)
-            items.append((simple, fn))
-        steps = tuple(items)
+        steps = tuple(self.statement(node) for node in nodes)
 
         def run(fr: _Frame) -> Generator[str, None, Control]:
             rt = fr.rt
-            for simple, fn in steps:
+            for kind, fn in steps:
                 rt.budget -= 1
                 if rt.budget < 0 and rt.spent():
                     yield _BUDGET
-                if simple:
+                if kind is _SIMPLE:
                     fn(fr)
+                elif kind is _EXPR:
+                    yield from fn(fr)  # a call that may wait: its value is dropped
                 else:
                     ctl = yield from fn(fr)
                     if ctl is not None:
@@ -818,9 +829,17 @@ class _Compiler(_ExprCompiler):
         return run
 
     def as_gen(self, node: a.Statement) -> StmtFn:
-        simple, fn = self.statement(node)
-        if not simple:
+        kind, fn = self.statement(node)
+        if kind is _STATEMENT:
             return cast(StmtFn, fn)
+        if kind is _EXPR:
+            gen = cast(GenFn, fn)
+
+            def run_expr(fr: _Frame) -> Generator[str, None, Control]:
+                yield from gen(fr)
+                return None
+
+            return run_expr
         pure = fn
 
         def run(fr: _Frame) -> Generator[str, None, Control]:
@@ -833,27 +852,20 @@ class _Compiler(_ExprCompiler):
 
         return run
 
-    def statement(self, node: a.Statement) -> tuple[bool, Callable[[_Frame], Any]]:
-        """(simple, fn): a simple statement is a plain call; the others are generators."""
+    def statement(self, node: a.Statement) -> tuple[str, Callable[[_Frame], Any]]:
+        """(kind, fn): a _SIMPLE statement is a plain call; an _EXPR one a generator whose
+        value is dropped; a _STATEMENT one a generator returning a control."""
         if isinstance(node, a.Declaration):
             return self.declaration(node)
         if isinstance(node, a.ClassDeclaration):
-            return True, self.class_declaration(node)
+            return _SIMPLE, self.class_declaration(node)
         if isinstance(node, a.ExprStatement):
             ce = self.expr(node.expr)
-            if not ce.gen:
-                return True, ce.fn
-            gen = cast(GenFn, ce.fn)
-
-            def run_expr(fr: _Frame) -> Generator[str, None, Control]:
-                yield from gen(fr)
-                return None
-
-            return False, run_expr
+            return (_EXPR if ce.gen else _SIMPLE), ce.fn
         if isinstance(node, a.Block):
             self.scope.names.append({})
             try:
-                return False, self.statements(node.statements)
+                return _STATEMENT, self.statements(node.statements)
             finally:
                 self.scope.names.pop()
         if isinstance(node, a.Break | a.Continue):
@@ -863,22 +875,22 @@ class _Compiler(_ExprCompiler):
                 return ctl
                 yield  # pragma: no cover
 
-            return False, jump
+            return _STATEMENT, jump
         if isinstance(node, a.Return):
-            return False, self.return_(node)
+            return _STATEMENT, self.return_(node)
         if isinstance(node, a.If):
-            return False, self.if_(node)
+            return _STATEMENT, self.if_(node)
         if isinstance(node, a.While):
-            return False, self.while_(node)
+            return _STATEMENT, self.while_(node)
         if isinstance(node, a.DoWhile):
-            return False, self.do_while(node)
+            return _STATEMENT, self.do_while(node)
         if isinstance(node, a.For):
-            return False, self.for_(node)
+            return _STATEMENT, self.for_(node)
         if isinstance(node, a.Switch):
-            return False, self.switch(node)
+            return _STATEMENT, self.switch(node)
         raise _syntax(node, f"unsupported statement {type(node).__name__}")
 
-    def declaration(self, node: a.Declaration) -> tuple[bool, Callable[[_Frame], Any]]:
+    def declaration(self, node: a.Declaration) -> tuple[str, Callable[[_Frame], Any]]:
         typ = _type_name(node.type)
         if typ not in ("byte", "int", "int16", "float", "double", "bool", "string") and not (
             is_array(typ)
@@ -896,7 +908,7 @@ class _Compiler(_ExprCompiler):
                 target = fr.g if is_global else fr.l
                 target[slot] = [] if array else default
 
-            return True, declare_default
+            return _SIMPLE, declare_default
         if not init.gen:
             fn = cast(PureFn, init.fn)
             if is_global:
@@ -904,12 +916,12 @@ class _Compiler(_ExprCompiler):
                 def declare_global(fr: _Frame) -> None:
                     fr.g[slot] = fn(fr)
 
-                return True, declare_global
+                return _SIMPLE, declare_global
 
             def declare_local(fr: _Frame) -> None:
                 fr.l[slot] = fn(fr)
 
-            return True, declare_local
+            return _SIMPLE, declare_local
         gen = cast(GenFn, init.fn)
 
         def declare_gen(fr: _Frame) -> Generator[str, None, Control]:
@@ -917,7 +929,7 @@ class _Compiler(_ExprCompiler):
             (fr.g if is_global else fr.l)[slot] = value
             return None
 
-        return False, declare_gen
+        return _STATEMENT, declare_gen
 
     def class_declaration(self, node: a.ClassDeclaration) -> Callable[[_Frame], None]:
         # ModbusTCP name = host[, port[, timeout]] (TMscript 2.24 §16.1, p. 414).
@@ -999,7 +1011,7 @@ class _Compiler(_ExprCompiler):
             self.scope.names.pop()
 
     def while_(self, node: a.While) -> StmtFn:
-        test = _lift(self.expr(node.condition))
+        pure, test = _pure_or_gen(self.expr(node.condition))
         body = self.scoped(node.body)
 
         def run_while(fr: _Frame) -> Generator[str, None, Control]:
@@ -1008,7 +1020,7 @@ class _Compiler(_ExprCompiler):
                 rt.budget -= 1  # each iteration counts: while(true){} yields
                 if rt.budget < 0 and rt.spent():
                     yield _BUDGET
-                if not truthy((yield from test(fr))):
+                if not truthy(pure(fr) if pure is not None else (yield from test(fr))):
                     return None
                 ctl = yield from body(fr)
                 if ctl is _BREAK:
@@ -1020,7 +1032,7 @@ class _Compiler(_ExprCompiler):
 
     def do_while(self, node: a.DoWhile) -> StmtFn:
         body = self.scoped(node.body)
-        test = _lift(self.expr(node.condition))
+        pure, test = _pure_or_gen(self.expr(node.condition))
 
         def run_do(fr: _Frame) -> Generator[str, None, Control]:
             rt = fr.rt
@@ -1033,7 +1045,7 @@ class _Compiler(_ExprCompiler):
                     return None
                 if ctl is not None and ctl is not _CONTINUE:
                     return ctl
-                if not truthy((yield from test(fr))):
+                if not truthy(pure(fr) if pure is not None else (yield from test(fr))):
                     return None
 
         return run_do
@@ -1042,8 +1054,14 @@ class _Compiler(_ExprCompiler):
         self.scope.names.append({})  # the initialization's variables live in the loop
         try:
             init = self.as_gen(node.init) if node.init is not None else None
-            test = _lift(self.expr(node.condition)) if node.condition is not None else None
-            step = _lift(self.expr(node.step)) if node.step is not None else None
+            pure, test = (
+                _pure_or_gen(self.expr(node.condition))
+                if node.condition is not None
+                else (None, None)
+            )
+            pure_step, step = (
+                _pure_or_gen(self.expr(node.step)) if node.step is not None else (None, None)
+            )
             body = self.scoped(node.body)
         finally:
             self.scope.names.pop()
@@ -1056,14 +1074,19 @@ class _Compiler(_ExprCompiler):
                 rt.budget -= 1
                 if rt.budget < 0 and rt.spent():
                     yield _BUDGET
-                if test is not None and not truthy((yield from test(fr))):
+                if pure is not None:
+                    if not truthy(pure(fr)):
+                        return None
+                elif test is not None and not truthy((yield from test(fr))):
                     return None
                 ctl = yield from body(fr)
                 if ctl is _BREAK:
                     return None
                 if ctl is not None and ctl is not _CONTINUE:
                     return ctl
-                if step is not None:
+                if pure_step is not None:
+                    pure_step(fr)
+                elif step is not None:
                     yield from step(fr)
 
         return run_for
@@ -1243,11 +1266,16 @@ class _CallCompiler:
             )
         ]
         returns = fn.returns
+        # Plain arguments (the common case) are called without the generator protocol.
+        pure = None if any(gen for gen, _ in args) else [f for _, f in args]
 
         def call_user(fr: _Frame) -> Gen:
-            values = []
-            for gen, f in args:
-                values.append((yield from f(fr)) if gen else f(fr))
+            if pure is not None:
+                values = [f(fr) for f in pure]
+            else:
+                values = []
+                for gen, f in args:
+                    values.append((yield from f(fr)) if gen else f(fr))
             callee = _Frame(fr.g, fn.size, fr.rt)
             callee.l[: len(values)] = values
             assert fn.body is not None
@@ -1333,6 +1361,8 @@ def _builtin_gen(
     node: a.Call, builtin: Builtin, fns: list[_CExpr], arg_types: tuple[str, ...]
 ) -> GenFn:
     """A call of a built-in that may wait, or with an argument that may: a generator."""
+    if builtin.linked is not None and not any(ce.gen for ce in fns):
+        return _builtin_linked(node, builtin.linked, fns, arg_types)
     impl = builtin.impl
     blocking = builtin.blocking
     # Arguments in order; a plain one is called, not wrapped into a generator.
@@ -1353,6 +1383,30 @@ def _builtin_gen(
             raise _call_failure(node, exc) from None
 
     return call_gen
+
+
+def _builtin_linked(
+    node: a.Call, impl: Impl, fns: list[_CExpr], arg_types: tuple[str, ...]
+) -> GenFn:
+    """A Modbus function with plain arguments: it waits until the host's link can take
+    the request, then calls ``impl`` (as the built-in's ``blocking`` does, without a
+    second generator)."""
+    pure = [cast(PureFn, ce.fn) for ce in fns]
+
+    def call_linked(fr: _Frame) -> Gen:
+        values = [fn(fr) for fn in pure]
+        rt = fr.rt
+        try:
+            device = link_device(rt, values)
+            while not rt.host.modbus_ready(device):
+                yield _BLOCKED
+            return _capped(node, impl(rt, values, arg_types))
+        except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
+            raise
+        except Exception as exc:
+            raise _call_failure(node, exc) from None
+
+    return call_linked
 
 
 def _shown(fn: PureFn, typ: str, node: a.Node) -> PureFn:
@@ -1481,16 +1535,17 @@ def _shift_left(x: int, y: int) -> int:
 
 def _arith_table() -> dict[tuple[str, str], Callable[[a.Node], Callable[..., Value]]]:
     table: dict[tuple[str, str], Callable[[a.Node], Callable[..., Value]]] = {
-        ("+", "int"): lambda n: lambda x, y: wrap32(x + y),
-        ("-", "int"): lambda n: lambda x, y: wrap32(x - y),
-        ("*", "int"): lambda n: lambda x, y: wrap32(x * y),
+        # wrap32 written out: these run for every integer operation.
+        ("+", "int"): lambda n: lambda x, y: ((x + y + 0x80000000) & 0xFFFFFFFF) - 0x80000000,
+        ("-", "int"): lambda n: lambda x, y: ((x - y + 0x80000000) & 0xFFFFFFFF) - 0x80000000,
+        ("*", "int"): lambda n: lambda x, y: ((x * y + 0x80000000) & 0xFFFFFFFF) - 0x80000000,
         ("/", "int"): _int_div,
         ("%", "int"): _int_mod,
         ("<<", "int"): lambda n: _shift_left,
         (">>", "int"): lambda n: lambda x, y: x >> (y & 31),
-        ("&", "int"): lambda n: lambda x, y: x & y,
-        ("|", "int"): lambda n: lambda x, y: x | y,
-        ("^", "int"): lambda n: lambda x, y: x ^ y,
+        ("&", "int"): lambda n: operator.and_,
+        ("|", "int"): lambda n: operator.or_,
+        ("^", "int"): lambda n: operator.xor,
     }
     ops: dict[str, Callable[[float, float], float]] = {
         "+": lambda x, y: x + y,
@@ -1506,12 +1561,12 @@ def _arith_table() -> dict[tuple[str, str], Callable[[a.Node], Callable[..., Val
 
 _ARITH = _arith_table()
 _COMPARE: dict[str, Callable[[Any, Any], bool]] = {
-    "==": lambda x, y: x == y,
-    "!=": lambda x, y: x != y,
-    "<": lambda x, y: x < y,
-    "<=": lambda x, y: x <= y,
-    ">": lambda x, y: x > y,
-    ">=": lambda x, y: x >= y,
+    "==": operator.eq,
+    "!=": operator.ne,
+    "<": operator.lt,
+    "<=": operator.le,
+    ">": operator.gt,
+    ">=": operator.ge,
 }
 
 
