@@ -529,7 +529,7 @@ def test_every_gripper_protocol_has_one_driver_and_one_simulated_device() -> Non
 
 
 def tmmaster_gripper_for(profile: GripperProfile, link: GripperLink) -> object:
-    """The registry's choice for ``profile`` (opens nothing)."""
-    from tmmaster._gripper import gripper_for_profile
+    """The registry's choice for ``profile`` (opens nothing), as a Robot makes it."""
+    from tmmaster._gripper import GRIPPER_DRIVERS
 
-    return gripper_for_profile(profile, link)
+    return GRIPPER_DRIVERS[profile.driver](profile, link)

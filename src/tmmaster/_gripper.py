@@ -827,6 +827,13 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             max_force_n=self.max_force_n,
         )
 
+    def _connected(self) -> tuple[float, float, float]:
+        """The grip mode's smallest and largest width and the force ceiling, read at
+        :meth:`connect`; GripperError before."""
+        if self.limits is None or self.max_force_n is None:
+            raise GripperError(f"{self.kind}: not connected")
+        return (*self.limits, self.max_force_n)
+
     def _width_field(self) -> str:
         return "external_width" if self.grip_mode == "external" else "internal_width"
 
@@ -863,12 +870,10 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             ConfigError: The width, force or speed is out of range.
             GripperTimeoutError: The move did not end in time.
         """
-        if self.limits is None or self.max_force_n is None:
-            raise GripperError(f"{self.kind}: not connected")
-        low, high = self.limits
+        low, high, ceiling = self._connected()
         if not low <= width_mm <= high:
             raise ConfigError(f"{self.kind}: width {width_mm:g} mm outside {low:g}..{high:g} mm")
-        _check_force_speed(self.kind, self.force_n, self.speed_percent, self.max_force_n)
+        _check_force_speed(self.kind, self.force_n, self.speed_percent, ceiling)
         p = self.profile
         command = p.field("command").code_of(f"grip_{self.grip_mode}")
         self.check_robot()
@@ -911,9 +916,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         Raises:
             GripperError: Not connected.
         """
-        if self.limits is None:
-            raise GripperError(f"{self.kind}: not connected")
-        return self.move_to_width(self.limits[1], timeout_s=timeout_s)
+        return self.move_to_width(self._connected()[1], timeout_s=timeout_s)
 
     def close(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Close to the minimum width; stops on an object (grip detected) if there is one.
@@ -927,9 +930,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         Raises:
             GripperError: Not connected.
         """
-        if self.limits is None:
-            raise GripperError(f"{self.kind}: not connected")
-        return self.move_to_width(self.limits[0], timeout_s=timeout_s, expect_object=True)
+        return self.move_to_width(self._connected()[0], timeout_s=timeout_s, expect_object=True)
 
 
 #: The driver of each gripper protocol a profile may name (``GripperProfile.driver``);
@@ -938,11 +939,6 @@ GRIPPER_DRIVERS: Mapping[GripperDriverName, type[Blog2FG7Gripper | OnRobot2FG7Gr
     "blog-2fg7": Blog2FG7Gripper,
     "onrobot-2fg7": OnRobot2FG7Gripper,
 }
-
-
-def gripper_for_profile(profile: GripperProfile, link: GripperLink) -> Gripper:
-    """The driver of ``profile``'s protocol, on its own connection described by ``link``."""
-    return GRIPPER_DRIVERS[profile.driver](profile, link)
 
 
 def auto_gripper(profile: RobotProfile, *, settle_s: float) -> Gripper:

@@ -27,7 +27,7 @@ import inspect
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, ParamSpec, TypeVar
 
@@ -63,7 +63,7 @@ from ._fleet import (
     open_transport,
     wake_waits,
 )
-from ._gripper import Gripper, GripperLink, NoGripper, auto_gripper, gripper_for_profile
+from ._gripper import GRIPPER_DRIVERS, Gripper, GripperLink, NoGripper, auto_gripper
 from ._heartbeat import Heartbeat
 from ._io import RobotIO
 from ._logging import get_logger
@@ -186,8 +186,8 @@ class _Options:
             ack_timeout_s=self.timeouts.ack_timeout_s,
             transport=links.gripper_transport,
         )
-        kind = spec.profile if isinstance(spec, GripperDevice) else spec
-        return gripper_for_profile(gripper_profile(kind), link)
+        device = gripper_profile(spec.profile if isinstance(spec, GripperDevice) else spec)
+        return GRIPPER_DRIVERS[device.driver](device, link)  # on its own connection
 
 
 @dataclass(frozen=True)
@@ -1195,14 +1195,13 @@ class Robot:
         check_accel(accel_time_ms)
         # The arc from where the arm is believed to be, before any request.
         self._planner.check_arc_move(via, to, percent)
-        self._channel.check_command(
-            Command(CommandKind.CIRCLE, to, percent, accel_time_ms, via=via, speed_mm_s=speed_mm_s)
-        )
-        start = self._read_start()
-        on_arc = self._planner.via_on_arc(start, via, to)
         command = Command(
-            CommandKind.CIRCLE, to, percent, accel_time_ms, via=on_arc, speed_mm_s=speed_mm_s
+            CommandKind.CIRCLE, to, percent, accel_time_ms, via=via, speed_mm_s=speed_mm_s
         )
+        self._channel.check_command(command)
+        start = self._read_start()
+        # The robot's arc passes via's position with the orientation the TCP has there.
+        command = replace(command, via=self._planner.via_on_arc(start, via, to))
         self._channel.check_command(command)
         return _waited(self._start_command(command, timeout=timeout, resolved_at=start))
 
