@@ -269,10 +269,7 @@ class LoopTransport(BlockTransport):
         def once() -> list[int]:
             if failed:
                 raise failed.pop()
-            words = self._execute(what, function_code, block.address, block.count, None)
-            if len(words) != block.count:
-                raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
-            return words
+            return self._read_once(what, function_code, block.address, block.count)
 
         return self._run(what, once, retry=retry, interruptible=interruptible)
 

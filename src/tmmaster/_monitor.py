@@ -107,19 +107,11 @@ class _Watched(StatusRecord):
     """
 
     def __init__(
-        self,
-        name: str,
-        host: str,
-        port: int,
-        profile: RobotProfile,
-        timeout_s: float,
-        *,
-        period: float,
-        backoff_max_s: float,
+        self, link: AsyncLink, profile: RobotProfile, *, period: float, backoff_max_s: float
     ) -> None:
-        super().__init__(name, _log.bind(robot=name, host=host, port=port))
-        #: The robot's address and port.
-        self.host, self.port = host, port
+        super().__init__(link.name, _log.bind(robot=link.name, host=link.host, port=link.port))
+        #: The robot's link (its name, address, unit id and answer timeout).
+        self.link = link
         self._period = period
         self._backoff_max_s = backoff_max_s
         #: Refused connects and lost links in a row (the back-off's exponent).
@@ -128,33 +120,36 @@ class _Watched(StatusRecord):
         self._retry_at = 0.0
         #: When the current link opened (None while there is none).
         self._opened_at: float | None = None
-        self.channel: CommandChannel = channel_for(
-            profile,
-            _UnusedLink(
-                host, port, device_id=profile.device_id, timeout=timeout_s, retry=None, name=name
-            ),
+        unused = _UnusedLink(
+            link.host,
+            link.port,
+            device_id=link.device_id,
+            timeout=link.timeout,
+            retry=None,
+            name=link.name,
         )
+        self.channel: CommandChannel = channel_for(profile, unused)
         self.plan = ReadPlan.build(self.channel.status_fields, max_gap=profile.max_read_gap)
         #: Per block of the plan: (table, address, count, description).
         self.reads = tuple(
             (b.table, b.address, b.count, describe_read(b.table, b.address, b.count))
             for b in self.plan.blocks
         )
-        self.link = AsyncLink(host, port, device_id=profile.device_id, timeout=timeout_s, name=name)
 
     async def connect(self) -> None:
         """Open a fresh link; on failure record the :class:`ConnectError` and back off."""
         try:
             await self.link.connect()
         except ConnectError as exc:
-            self._back_off()
-            self.fail(exc)
+            self._lost(exc)
         else:
             self._opened_at = time.monotonic()
             self._log.debug("monitor.connected")
 
-    def _back_off(self) -> None:
-        """After a refused connect or a lost link: when the next connect may be tried."""
+    def _lost(self, error: TransportError) -> None:
+        """A refused connect or a lost link: the link closed, the failure recorded, and
+        when the next connect may be tried."""
+        self.drop()
         now = time.monotonic()
         if self._opened_at is not None and now - self._opened_at >= self._backoff_max_s:
             self._losses = 0  # the link had been up a while: a new row of losses begins
@@ -164,6 +159,7 @@ class _Watched(StatusRecord):
         delay = min(self._period * 2.0 ** min(self._losses - 1, 64), self._backoff_max_s)
         self._retry_at = now + delay
         self._log.debug("monitor.backing_off", delay_s=round(delay, 3), losses=self._losses)
+        self.fail(error)
 
     def drop(self) -> None:
         """Close the link: after a failure the stream may still carry a late answer."""
@@ -177,9 +173,7 @@ class _Watched(StatusRecord):
         """
         if not self.link.connected:
             if self._opened_at is not None:  # the peer closed the link between two polls
-                self.drop()
-                self._back_off()
-                self.fail(ConnectionLostError(f"{self.name}: the robot closed the link"))
+                self._lost(ConnectionLostError(f"{self.name}: the robot closed the link"))
                 return
             if time.monotonic() < self._retry_at:
                 self.skip(1)
@@ -195,9 +189,7 @@ class _Watched(StatusRecord):
             self.fail(exc)  # the device answered: the link is fine
             return
         except TransportError as exc:
-            self.drop()
-            self._back_off()
-            self.fail(exc)
+            self._lost(exc)
             return
         self.succeed(status)
 
@@ -438,15 +430,10 @@ class StatusMonitor:
             )
         port = check_port(port)
         _refuse_commanded(name, host, port)
-        self._robots[name] = _Watched(
-            name,
-            host,
-            port,
-            robot_profile(profile),
-            self.timeout_s,
-            period=1.0 / self.rate_hz,
-            backoff_max_s=self.backoff_max_s,
-        )
+        robot = robot_profile(profile)
+        link = AsyncLink(host, port, device_id=robot.device_id, timeout=self.timeout_s, name=name)
+        period = 1.0 / self.rate_hz
+        self._robots[name] = _Watched(link, robot, period=period, backoff_max_s=self.backoff_max_s)
 
     def add_robot(self, robot: _CommandedRobot, name: str | None = None) -> str:
         """Watch ``robot`` over its own link (no second connection), before :meth:`start`.
@@ -542,7 +529,7 @@ class StatusMonitor:
             return self
         for robot in self._robots.values():
             if isinstance(robot, _Watched):  # a Robot made since add() commands it now?
-                _refuse_commanded(robot.name, robot.host, robot.port)
+                _refuse_commanded(robot.name, robot.link.host, robot.link.port)
         shared = [r for r in self._robots.values() if isinstance(r, _SharedWatched)]
         if shared and self._executor is None:
             self._executor = ThreadPoolExecutor(

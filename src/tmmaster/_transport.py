@@ -741,14 +741,15 @@ class BlockTransport(ABC):
             TransportError: The read failed (a subclass says how).
         """
         what, function_code = self._read_request(table, address, count)
-
-        def once() -> list[int]:
-            words = self._execute(what, function_code, address, count, None)
-            if len(words) != count:
-                raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
-            return words
-
+        once = functools.partial(self._read_once, what, function_code, address, count)
         return self._run(what, once, retry=retry, interruptible=interruptible)
+
+    def _read_once(self, what: str, function_code: int, address: int, count: int) -> list[int]:
+        """One attempt of a read: one request, sent once, whose answer has ``count`` words."""
+        words = self._execute(what, function_code, address, count, None)
+        if len(words) != count:
+            raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
+        return words
 
     def _read_request(self, table: Table, address: int, count: int) -> tuple[str, int]:
         """A read's description and function code, checked against the protocol's limits once."""
@@ -796,9 +797,7 @@ class BlockTransport(ABC):
                 raise ValueOutOfRangeError(what, value, "0-65535, one 16-bit register")
         function_code = 16 if table is Table.HOLDING else 5 if len(values) == 1 else 15
 
-        def once() -> None:
-            self._execute(what, function_code, address, len(values), values)
-
+        once = functools.partial(self._execute, what, function_code, address, len(values), values)
         self._run(what, once, retry=retry, interruptible=interruptible)
 
     # -- fields ---------------------------------------------------------------
