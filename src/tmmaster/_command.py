@@ -14,7 +14,6 @@ import functools
 import logging
 import threading
 import time
-import weakref
 from collections.abc import Callable
 from types import TracebackType
 from typing import Any, Literal
@@ -97,6 +96,11 @@ class Motion:
         self.project_speed_percent = plan.project_speed_percent
         #: ``time.monotonic()`` when the poll that saw it reported finished returned.
         self.reported_finished_at: float | None = None
+        # Set by the follower (under its abandon lock): True once the master gave this
+        # command up; then, once that clean-up is over, True when safe, False when it
+        # could not be confirmed.
+        self._given_up = False
+        self._settled: bool | None = None
 
     def path_fraction(self, pose: Pose) -> float | None:
         """How much of the path the robot covered at ``pose``, by the arm model (0..1).
@@ -131,7 +135,7 @@ class Motion:
     @property
     def abandoned(self) -> bool:
         """True once the master gave up on this command (failure, timeout, stop, close)."""
-        return self._follower.abandoned(self)
+        return self._given_up
 
     def progress(self) -> MoveProgress:
         """Poll the robot once and report where the move stands (raises on robot failure).
@@ -250,10 +254,6 @@ class _MotionFollower:
         self.closing = threading.Event()
         # One caller at a time gives a command up (a wait, close(), the exit hook).
         self._abandon_lock = threading.Lock()
-        # The motions the master gave up on, and of those, the ones whose clean-up is
-        # over: True when safe, False when it could not be confirmed.
-        self._given_up: weakref.WeakSet[Motion] = weakref.WeakSet()
-        self._settled: weakref.WeakKeyDictionary[Motion, bool] = weakref.WeakKeyDictionary()
 
     def start(self, ticket: Ticket, plan: Plan, register: Callable[[Motion], None]) -> Motion:
         """Send a planned command once (:meth:`send`) and return its handle.
@@ -333,10 +333,6 @@ class _MotionFollower:
             " the robot's registers; it was not written again and has been withdrawn"
         ) from failure
 
-    def abandoned(self, motion: Motion) -> bool:
-        """True once the master gave up on ``motion``."""
-        return motion in self._given_up
-
     def stop(self) -> None:
         """Stop the arm now (the channel retries a stop: it is idempotent)."""
         self._channel.stop()
@@ -387,22 +383,21 @@ class _MotionFollower:
         if not acquired:
             return False
         try:
-            settled = self._settled.get(motion)
-            if settled is not None:
-                return settled
+            if motion._settled is not None:
+                return motion._settled
             if motion.done or motion.reported_finished:
                 return True  # nothing left to withdraw or stop
-            self._given_up.add(motion)
+            motion._given_up = True
             motion.phase = MovePhase.FAILED
             if not motion.ticket.written:
-                self._settled[motion] = True  # refused before any byte was sent
+                motion._settled = True  # refused before any byte was sent
                 return True
             with deferred():
                 confirmed = self._withdraw_or_stop(
                     motion, reason, until=deadline, interruptible=not closer
                 )
                 # Recorded inside the section: a Ctrl-C held back is raised after it.
-                self._settled[motion] = confirmed
+                motion._settled = confirmed
             return confirmed
         finally:
             lock.release()
