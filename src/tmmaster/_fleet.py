@@ -279,18 +279,6 @@ class LoopTransport(BlockTransport):
         """From the loop, as it ends: close the link (a later request reconnects, and fails)."""
         self._link.close()
 
-    def hold(self) -> bool:
-        """From the loop: take the link's lock if it is free (never blocks).
-
-        Returns:
-            True if taken (give it back with :meth:`release`).
-        """
-        return self._lock.acquire(blocking=False)
-
-    def release(self) -> None:
-        """From the loop: give back the lock :meth:`hold` took."""
-        self._lock.release()
-
     async def read_on_loop(
         self, fields: Iterable[RegisterField], *, max_gap: int = 0
     ) -> dict[str, Value]:

@@ -234,10 +234,9 @@ class _SharedWatched(StatusRecord):
     def _read_if_free(self) -> dict[str, Value] | None:
         """In a worker thread: the status fields' values; None when the link is busy."""
         transport = self.transport
-        lock = transport._lock
         # Never wait for the robot: its thread may hold the lock for a whole retried
         # request, and a stop it sends must not queue behind a monitor's read.
-        if not lock.acquire(blocking=False):
+        if not transport.hold():
             return None
         try:
             # Checked under the lock: nobody can reconnect or close the link meanwhile.
@@ -256,7 +255,7 @@ class _SharedWatched(StatusRecord):
                 interruptible=False,
             )
         finally:
-            lock.release()
+            transport.release()
 
 
 class _CommandedRobot(Protocol):

@@ -690,6 +690,21 @@ class BlockTransport(ABC):
         finally:
             self._free_turn.set()
 
+    def hold(self) -> bool:
+        """Take the link's lock if it is free, never waiting for it.
+
+        For a reader that must never wait for the robot's thread (a driver's loop, a
+        StatusMonitor's worker): the thread may hold the lock for a whole retried request.
+
+        Returns:
+            True if taken (give it back with :meth:`release`).
+        """
+        return self._lock.acquire(blocking=False)
+
+    def release(self) -> None:
+        """Give back the lock :meth:`hold` took."""
+        self._lock.release()
+
     def bound_retries(self, deadline: float) -> None:
         """From now on, retry no request past ``deadline`` (``time.monotonic()``).
 
@@ -1227,13 +1242,14 @@ def no_answer_error(link: AsyncLink, what: str, *, answered: bool) -> ResponseTi
     return error
 
 
-def _expire(future: _Call, link: AsyncLink, stream: _Stream) -> None:
+def _expire(future: _Call, stream: _Stream) -> None:
     """A request's deadline: fail it unless answered (the message is built only here).
 
     Answers came, but only under ids never sent on this stream: not a Modbus server.
     """
     if future.done():
         return
+    link = stream.link
     if stream.stray is not None:
         tid, frame = stream.stray
         reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
@@ -1445,9 +1461,7 @@ class AsyncLink:
         stream.transport.write(frame)
         if self.stats is not None:
             self.stats.bytes_sent += len(frame)
-        call.timer = asyncio.get_running_loop().call_later(
-            self.timeout, _expire, call, self, stream
-        )
+        call.timer = asyncio.get_running_loop().call_later(self.timeout, _expire, call, stream)
         return call
 
     def close(self) -> None:
