@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable
 from typing import Annotated, TypeVar
 
+import tenacity
 from pydantic import BaseModel, ConfigDict, Field
 
 from ._exceptions import (
@@ -95,40 +96,56 @@ class RetryPolicy(BaseModel):
         Raises:
             StopRequestedError: ``interrupt`` was set during a wait.
         """
+        # The first attempt runs outside tenacity: the retry machinery is entered only
+        # after a transient failure, so a healthy link pays nothing for it.
         started = time.monotonic()
-        sleep = _sleeper(interrupt)
-        attempt = 1
-        while True:
-            try:
-                return fn()
-            except TRANSIENT_ERRORS as exc:
-                # A closed link, a first connection refused or unresolved: no attempt can
-                # help. The time budget is looked at after each failure from the second on
-                # (and after the first wait, below).
-                late = attempt > 1 and time.monotonic() - started >= self.total_time_s
-                if attempt >= self.attempts or late or not is_transient(exc):
-                    raise
-                error = exc
-            # The wait doubles from initial_backoff_s (the first one as given, the later
-            # ones at most max_backoff_s), plus up to jitter_s.
-            backoff = self.initial_backoff_s * 2 ** (attempt - 1)
-            if attempt > 1:
-                backoff = min(backoff, self.max_backoff_s)
-            delay = backoff + random.uniform(0, self.jitter_s)
+        try:
+            return fn()
+        except TRANSIENT_ERRORS as exc:
+            # A closed link, a first connection refused or unresolved: no attempt can help.
+            if self.attempts == 1 or not is_transient(exc):
+                raise
+            first_error: BaseException = exc
+
+        def retrying_after(error: BaseException | None, attempt: int, delay_s: float) -> None:
+            """Attempt ``attempt`` failed with ``error``: say so, count it, wait ``delay_s``."""
             _log.warning(
                 "transport.retry",
                 operation=operation,
                 attempt=attempt,
-                delay_s=round(delay, 3),
+                delay_s=round(delay_s, 3),
                 error=str(error),
                 error_type=type(error).__name__,
             )
-            if on_retry is not None:
+            if on_retry is not None and error is not None:
                 on_retry(error)
-            sleep(delay)
-            if attempt == 1 and time.monotonic() - started >= self.total_time_s:
-                raise error
-            attempt += 1
+
+        def before_sleep(state: tenacity.RetryCallState) -> None:
+            error = state.outcome.exception() if state.outcome else None
+            retrying_after(error, state.attempt_number + 1, state.upcoming_sleep)
+
+        retrying_after(first_error, 1, self.initial_backoff_s)
+        sleep = _sleeper(interrupt)
+        sleep(self.initial_backoff_s + random.uniform(0, self.jitter_s))
+        remaining_s = self.total_time_s - (time.monotonic() - started)
+        if remaining_s <= 0:
+            raise first_error
+        retrying = tenacity.Retrying(
+            # Attempts 2..n: the same bounds as one policy, counted from the first attempt.
+            stop=tenacity.stop_after_attempt(self.attempts - 1)
+            | tenacity.stop_after_delay(remaining_s),
+            # Composed from the two long-stable strategies: wait_exponential_jitter's
+            # parameters were renamed in tenacity 9.2. Doubling continues from attempt 2.
+            wait=tenacity.wait_exponential(
+                multiplier=self.initial_backoff_s * 2, max=self.max_backoff_s
+            )
+            + tenacity.wait_random(0, self.jitter_s),
+            retry=tenacity.retry_if_exception(is_transient),
+            before_sleep=before_sleep,
+            sleep=sleep,
+            reraise=True,
+        )
+        return retrying(fn)
 
     def within(self, seconds: float) -> RetryPolicy:
         """This policy, its total time cut to ``seconds`` (for a clean-up under a deadline).
