@@ -144,18 +144,18 @@ def request_gaps(robot: tmmaster.Robot, moves: int) -> list[float]:
     """Run ``moves`` moves and return the gaps between the starts of their requests."""
     link = robot._transport._link  # type: ignore[attr-defined]
     starts: list[float] = []
-    request = link._request
+    start = link.start
 
     def recorded(*args: object) -> object:
         starts.append(time.monotonic())
-        return request(*args)
+        return start(*args)
 
-    link._request = recorded
+    link.start = recorded
     try:
         for i in range(moves):
             robot.move_to(B if i % 2 == 0 else A, speed=50)
     finally:
-        del link._request
+        del link.start
     return [0.0] + [b - a for a, b in itertools.pairwise(starts)]
 
 
