@@ -347,8 +347,7 @@ def dls_inverse(
         error = pose_error(tcp, target)
         position = math.hypot(*error[:3])
         rotation = math.hypot(*error[3:])
-        if position < tolerance_m and rotation < tolerance_rad:
-            return q
+        converged = position < tolerance_m and rotation < tolerance_rad
         norm = position + rotation
         # A pose out of reach stalls at a nonzero error: give up once it stops improving.
         if norm < best * 0.99:
@@ -365,6 +364,10 @@ def dls_inverse(
         except ZeroDivisionError:
             return None
         step = _transposed_times(jac, y)
+        if converged:
+            # One more step from within the tolerance: the answer then no longer depends
+            # on the seed it was approached from, and a repeating cycle's seeds settle.
+            return [a + b for a, b in zip(q, step, strict=True)]
         # Bound a single update so a far target is approached, not jumped over.
         largest = max(abs(s) for s in step)
         if largest > 0.5:

@@ -10,6 +10,7 @@ plan starts from. It reads and writes nothing: the robot reads, the planner deci
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -144,7 +145,7 @@ class Workspace(BaseModel):
         floor, radius = self.floor_z_mm, self.arm_radius_mm
         if floor is None or radius is None:
             return
-        link, lowest = arm_lowest_z_mm(model, joints_deg, radius)
+        link, lowest = _arm_lowest(model, tuple(joints_deg), radius)
         if lowest <= floor:
             joints = ", ".join(f"{q:.1f}" for q in joints_deg)
             raise ConfigError(
@@ -340,7 +341,13 @@ class Planner:
         self.workspace.check_arm(self.model, joints)
         # From where the arm starts (not from the target itself: a joint move's seed).
         start = None if seed is None or body.same_joints(seed, joints) else seed
-        self._check_body(start, body.ptp_samples(start, joints))
+        _check_ptp_body(
+            self.model,
+            None if start is None else tuple(start),
+            joints,
+            self.tool,
+            self.workspace.floor_z_mm,
+        )
         return joints
 
     def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
@@ -664,6 +671,26 @@ class Planner:
             [kin.transform_to_pose(arc.at(k / PathGauge.SAMPLES)) for k in range(21)],
         )
         return target_joints, expected, gauge
+
+
+# A cycle checks the same moves again: each pure check is done once per (arm, joints),
+# only a passing one kept (a refusal raises, and is checked again next time).
+@functools.lru_cache(maxsize=256)
+def _arm_lowest(model: RobotModel, joints: tuple[float, ...], radius: float) -> tuple[int, float]:
+    return arm_lowest_z_mm(model, joints, radius)
+
+
+@functools.lru_cache(maxsize=256)
+def _check_ptp_body(
+    model: RobotModel,
+    start: tuple[float, ...] | None,
+    joints: Joints,
+    tool: Pose | None,
+    floor_z_mm: float | None,
+) -> None:
+    """The arm's body along the PTP from ``start`` (None: from the target) to ``joints``."""
+    samples = body.ptp_samples(start, joints)
+    body.check_body(model, samples, tool=tool, floor_z_mm=floor_z_mm, start=start)
 
 
 def motion_type(motion: MotionType | str) -> MotionType:

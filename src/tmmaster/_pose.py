@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Iterator, Sequence
 from enum import StrEnum
@@ -173,6 +174,7 @@ class Pose:
         )
 
 
+@functools.lru_cache(maxsize=1024)  # poses recur: targets, the poses a cycle reads back
 def _quaternion(rx: float, ry: float, rz: float) -> tuple[float, float, float, float]:
     """The unit quaternion (w, x, y, z) of TM's orientation ``Rz(rz) @ Ry(ry) @ Rx(rx)``, deg."""
     cr, sr = math.cos(math.radians(rx) / 2), math.sin(math.radians(rx) / 2)

@@ -95,6 +95,12 @@ class RobotModel(BaseModel):
     #: Refuse wrist centres this close to the J1 axis plane (shoulder singularity), mm.
     shoulder_margin_mm: float = Field(default=20.0, ge=0)
 
+    def __hash__(self) -> int:
+        # The kinematics caches key on the model, several times a move: two fields spread
+        # the models (equal models still hash alike), the joints are compared only when
+        # two differ there.
+        return hash((self.name, self.reach_mm))
+
     @property
     def shoulder_height_mm(self) -> float:
         """Height of the shoulder (J2 axis) above the base, mm."""
@@ -942,17 +948,17 @@ def joint_chain(model: RobotModel) -> kin.Chain:
     Returns:
         The chain.
     """
-    return _chain_of(model.joints)
+    return _chain_of(model)
 
 
-# Keyed by the joints, not cached on the model: model_copy(update=...) would carry a
-# cached chain over to a model with other joints.
+# Keyed by the model (its joints compared), not stored on it: model_copy(update=...)
+# would carry a stored chain over to a model with other joints.
 @functools.lru_cache(maxsize=32)
-def _chain_of(joints: tuple[JointSpec, ...]) -> kin.Chain:
+def _chain_of(model: RobotModel) -> kin.Chain:
     return kin.Chain(
         tuple(
             kin.rpy_transform(j.origin_xyz_mm, [math.radians(a) for a in j.origin_rpy_deg])
-            for j in joints
+            for j in model.joints
         )
     )
 
@@ -975,7 +981,7 @@ def _rounded(joints: Joints) -> Joints:
 def _six(joints: Sequence[float]) -> Joints:
     if len(joints) != 6:
         raise ValueError(f"need 6 joint values J1..J6, got {len(joints)}")
-    return cast(Joints, tuple(float(q) for q in joints))
+    return cast(Joints, tuple(map(float, joints)))
 
 
 def trapezoid_time(distance: float, top_speed: float, accel_time: float) -> float:
