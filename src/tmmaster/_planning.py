@@ -336,29 +336,16 @@ class Planner:
         """:meth:`Robot.validate_move`: speed, units, workspace, inverse kinematics, and
         the arm's body along the PTP from ``seed_deg`` (or the seed) to the target."""
         self._check_target(pose, speed)
-        seed = seed_deg if seed_deg is not None else self.joints_hint
+        seed = tuple(seed_deg) if seed_deg is not None else self.joints_hint
         joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
         self.workspace.check_arm(self.model, joints)
-        # From where the arm starts (not from the target itself: a joint move's seed).
-        start = None if seed is None or body.same_joints(seed, joints) else seed
-        _check_ptp_body(
-            self.model,
-            None if start is None else tuple(start),
-            joints,
-            self.tool,
-            self.workspace.floor_z_mm,
-        )
+        _check_ptp_body(self.model, seed, joints, self.tool, self.workspace.floor_z_mm)
         return joints
 
     def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
         """Self-collision, the mounting plane and the gripper's housing at ``samples``."""
-        body.check_body(
-            self.model,
-            samples,
-            tool=self.tool,
-            floor_z_mm=self.workspace.floor_z_mm,
-            start=start,
-        )
+        floor = self.workspace.floor_z_mm
+        body.check_body(self.model, samples, tool=self.tool, floor_z_mm=floor, start=start)
 
     def _check_target(self, pose: Pose, speed: int) -> None:
         """A target's checks without its joints: type, speed, units, the workspace."""
@@ -675,22 +662,18 @@ class Planner:
 
 # A cycle checks the same moves again: each pure check is done once per (arm, joints),
 # only a passing one kept (a refusal raises, and is checked again next time).
-@functools.lru_cache(maxsize=256)
-def _arm_lowest(model: RobotModel, joints: tuple[float, ...], radius: float) -> tuple[int, float]:
-    return arm_lowest_z_mm(model, joints, radius)
+_arm_lowest = functools.lru_cache(maxsize=256)(arm_lowest_z_mm)
 
 
 @functools.lru_cache(maxsize=256)
 def _check_ptp_body(
-    model: RobotModel,
-    start: tuple[float, ...] | None,
-    joints: Joints,
-    tool: Pose | None,
-    floor_z_mm: float | None,
+    model: RobotModel, seed: Joints | None, joints: Joints, tool: Pose | None, floor: float | None
 ) -> None:
-    """The arm's body along the PTP from ``start`` (None: from the target) to ``joints``."""
+    """The arm's body along the PTP to ``joints`` from where it starts (``seed``)."""
+    # From where the arm starts (not from the target itself: a joint move's seed).
+    start = None if seed is None or body.same_joints(seed, joints) else seed
     samples = body.ptp_samples(start, joints)
-    body.check_body(model, samples, tool=tool, floor_z_mm=floor_z_mm, start=start)
+    body.check_body(model, samples, tool=tool, floor_z_mm=floor, start=start)
 
 
 def motion_type(motion: MotionType | str) -> MotionType:
