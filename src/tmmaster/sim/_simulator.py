@@ -83,6 +83,57 @@ def _group(option: str, value: object, kind: type[T], expected: str = "") -> T:
     return value
 
 
+class _Ticker:
+    """Calls ``tick`` on the event loop every ``period`` wall seconds until cancelled.
+
+    Each tick is due ``period`` after the one before; a tick more than ten periods late
+    (a stalled machine) restarts the schedule instead of bursting. One timer callback per
+    tick: a task sleeping between ticks paid a future, a second loop turn and a task step
+    at every tick. An exception from ``tick`` stops the ticking and goes to ``failed``.
+    """
+
+    def __init__(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        period: float,
+        tick: Callable[[], None],
+        failed: Callable[[BaseException], None],
+    ) -> None:
+        self._loop = loop
+        self._period = period
+        self._tick = tick
+        self._failed = failed
+        self._deadline: float | None = None  # when the tick running now was due
+        self._handle: asyncio.Handle | None = loop.call_soon(self._run)
+
+    def _run(self) -> None:
+        loop = self._loop
+        deadline = loop.time() if self._deadline is None else self._deadline
+        try:
+            self._tick()
+        except Exception as exc:
+            self._handle = None
+            self._failed(exc)
+            return
+        period = self._period
+        deadline += period
+        delay = deadline - loop.time()
+        if delay < -10 * period:
+            deadline = loop.time()
+            delay = 0.0
+        self._deadline = deadline
+        if delay > 0:
+            self._handle = loop.call_at(deadline, self._run)
+        else:
+            self._handle = loop.call_soon(self._run)
+
+    def cancel(self) -> None:
+        """No tick after this one."""
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+
+
 class Simulator:
     """A simulated TM robot (and optional gripper) served over Modbus TCP on loopback.
 
@@ -218,7 +269,7 @@ class Simulator:
         """The state of the loop thread and the start-up: nothing runs yet."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
-        self._tick_task: asyncio.Task[None] | None = None
+        self._ticker: _Ticker | None = None
         self._tick_error: BaseException | None = None
         #: Control ticks run so far (a plain int: reading it from another thread is safe).
         self.ticks = 0
@@ -452,42 +503,31 @@ class Simulator:
     async def _start_async(self) -> None:
         for server in self._servers:
             await server.start()
-        self._tick_task = asyncio.get_running_loop().create_task(self._tick_forever())
+        self._ticker = _Ticker(
+            asyncio.get_running_loop(), 1.0 / self._tick_hz, self._tick_once, self._tick_failed
+        )
 
     async def _stop_async(self) -> None:
-        if self._tick_task is not None:
-            self._tick_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._tick_task
+        if self._ticker is not None:
+            self._ticker.cancel()
         for server in self._servers:
             await server.stop()
 
-    async def _tick_forever(self) -> None:
-        loop = asyncio.get_running_loop()
-        period = 1.0 / self._tick_hz
-        dt_sim = period * self._time_scale
-        deadline = loop.time()
-        while True:
-            try:
-                self._controller.tick(dt_sim)
-                if self._gripper is not None:
-                    self._gripper.tick(dt_sim)
-                self.ticks += 1
-                if not self._ready.is_set() and self._started_up():
-                    self._ready.set()
-            except Exception as exc:
-                # Stop ticking and report it through wait_for(): a hidden bug would
-                # otherwise look like a robot that never moves.
-                self._tick_error = exc
-                self._ready.set()  # start() reports it
-                raise
-            deadline += period
-            delay = deadline - loop.time()
-            if delay < -10 * period:
-                # Far behind (a stalled machine): restart the schedule instead of bursting.
-                deadline = loop.time()
-                delay = 0.0
-            await asyncio.sleep(max(delay, 0.0))
+    def _tick_once(self) -> None:
+        """One control tick: ``1 / tick_hz`` wall seconds, times ``time_scale`` simulated."""
+        dt_sim = (1.0 / self._tick_hz) * self._time_scale
+        self._controller.tick(dt_sim)
+        if self._gripper is not None:
+            self._gripper.tick(dt_sim)
+        self.ticks += 1
+        if not self._ready.is_set() and self._started_up():
+            self._ready.set()
+
+    def _tick_failed(self, exc: BaseException) -> None:
+        # Ticking stops; wait_for() and start() report it: a hidden bug would otherwise
+        # look like a robot that never moves.
+        self._tick_error = exc
+        self._ready.set()  # start() reports it
 
     # -- calls from any thread ----------------------------------------------------------
 
