@@ -53,6 +53,16 @@ class SequenceController(RobotController):
         self._motion_args: MoveArgs | None = None
         self._pausing_on_error = False
         super().__init__(*args, **options)
+        #: The tables of the Stop and Play/Pause coils, and their change counts when the
+        #: buttons were last released (see :meth:`_handle_buttons`).
+        self._button_tables = tuple(
+            {
+                self._bank.field(n).table
+                for n in ("stop_project", "play_pause")
+                if self._profile.has(n)
+            }
+        )
+        self._buttons_released: tuple[int, ...] | None = None
 
     def _backend_start(self, move: MoveArgs) -> float:
         """TMflow runs a move at its speed times the project speed (7101), as it is now."""
@@ -108,6 +118,17 @@ class SequenceController(RobotController):
     # -- the tick ----------------------------------------------------------------------
 
     def _handle_buttons(self) -> None:
+        # A button is pressed by a write: while no word of the buttons' tables changed
+        # since they were released (both read 0 then), none is pressed.
+        if self._buttons_released == self._buttons_mark():
+            return
+        self._press_buttons()
+        self._buttons_released = self._buttons_mark()
+
+    def _buttons_mark(self) -> tuple[int, ...]:
+        return tuple(self._bank.changes(table) for table in self._button_tables)
+
+    def _press_buttons(self) -> None:
         # Coils are buttons: act on a press, then release them like a spring would.
         if self._profile.has("stop_project") and self._bank.get("stop_project"):
             self._bank.set("stop_project", False)
