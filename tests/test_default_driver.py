@@ -15,7 +15,7 @@ import threading
 from collections.abc import Callable
 
 from tmmaster import ModbusTransport, Pose, Robot, aio
-from tmmaster._fleet import LoopTransport, default_fleet
+from tmmaster._fleet import _DEFAULT, LoopTransport
 from tmmaster._registers import Table
 from tmmaster.sim import Simulator
 
@@ -44,7 +44,7 @@ def test_plain_robots_share_one_loop_thread_that_ends_with_the_last(
     threads = driver_threads()
     assert len(threads) == 1  # one loop for both
     assert threads[0].daemon  # main() returning is never held up by it
-    driver = default_fleet()
+    driver = _DEFAULT.fleet
     assert driver is not None
     assert isinstance(first._transport, LoopTransport)
     assert first._transport.fleet is driver
@@ -56,7 +56,7 @@ def test_plain_robots_share_one_loop_thread_that_ends_with_the_last(
     assert driver_threads() == threads  # the second still holds it
     second.close()
     assert driver_threads() == []
-    assert default_fleet() is None
+    assert _DEFAULT.fleet is None
 
 
 def test_an_async_robot_and_a_transport_use_the_same_driver(
@@ -72,12 +72,12 @@ def test_an_async_robot_and_a_transport_use_the_same_driver(
             ) as opened:
                 link = opened.robot._transport
                 assert isinstance(link, LoopTransport)
-                assert link.fleet is default_fleet()
+                assert link.fleet is _DEFAULT.fleet
 
         asyncio.run(main())
         with ModbusTransport("127.0.0.1", sim.port) as transport:
             assert transport.read_block(Table.HOLDING, 0, 1) is not None
-            assert transport.fleet is default_fleet()
+            assert transport.fleet is _DEFAULT.fleet
         assert len(driver_threads()) == 1
     finally:
         sync.close()
@@ -89,10 +89,10 @@ def test_a_robot_dropped_unconnected_gives_the_driver_back(
 ) -> None:
     sim = tm_simulator_factory("article")
     made = robot(sim)
-    assert default_fleet() is not None
+    assert _DEFAULT.fleet is not None
     del made
     gc.collect()
-    assert default_fleet() is None
+    assert _DEFAULT.fleet is None
     assert driver_threads() == []
 
 
@@ -102,5 +102,5 @@ def test_an_in_process_robot_stays_off_the_driver(
     sim = memory_simulator_factory("article")
     with Robot(sim.url, profile="article", gripper=None) as local:
         assert not isinstance(local._transport, LoopTransport)
-        assert default_fleet() is None
+        assert _DEFAULT.fleet is None
         assert driver_threads() == []

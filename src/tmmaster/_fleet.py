@@ -1,7 +1,7 @@
 """The driver: robots' links and the polls of their waits on one event loop per process.
 
 A :class:`Fleet` runs ONE asyncio event loop in ONE background thread. The process has
-one by default (:func:`default_fleet`: started by the first network link that connects,
+one by default (``_DEFAULT.fleet``: started by the first network link that connects,
 stopped when the last one closes), which every :class:`~tmmaster.Robot`, stand-alone
 gripper and :class:`ModbusTransport` made without a ``link=`` of its own joins;
 a Fleet a user makes is the same driver, owned explicitly. Every robot on a driver
@@ -92,7 +92,7 @@ class LoopTransport(BlockTransport):
     each request is sent on the loop and the thread waits for its answer. The fleet's
     loop reads through :meth:`read_on_loop`, holding the same lock, so requests on the
     link never interleave. With ``fleet`` None the link is on the process's default
-    driver (:func:`default_fleet`): taken here, given back by :meth:`close` (or when
+    driver (``_DEFAULT``): taken here, given back by :meth:`close` (or when
     the transport is garbage collected unclosed), its loop started by the first connect.
     """
 
@@ -180,8 +180,16 @@ class LoopTransport(BlockTransport):
     def _hand_over(
         self, what: str, bound: float, latch: _Latch[T], start: Callable[..., object], *args: Any
     ) -> T:
-        """Run ``start(*args)`` on the loop and wait, at most ``bound`` s, for ``latch``."""
-        if not self._fleet._call_soon(start, *args):
+        """Run ``start(*args)`` on the loop and wait, at most ``bound`` s, for ``latch``.
+
+        A request the loop has not started when the wait ends (no answer in time, Ctrl-C)
+        is never started: a loop held up for longer than the bound must not send a
+        command the robot has already given up on.
+        """
+        # Taken once, by whichever comes first: the loop starting the request, or this
+        # thread giving it up.
+        claim = threading.Lock()
+        if not self._fleet._call_soon(lambda: claim.acquire(blocking=False) and start(*args)):
             raise TransportClosedError(f"{self.name}: the fleet is closed")
         try:
             return latch.wait(bound)
@@ -189,6 +197,8 @@ class LoopTransport(BlockTransport):
             raise ResponseTimeoutError(
                 f"{self.name}: the fleet's event loop did not answer {what}"
             ) from exc
+        finally:
+            claim.acquire(blocking=False)  # however the wait ended: never started after it
 
     def read_fields(
         self,
@@ -369,12 +379,11 @@ class _ChainedRead:
             self.done((self.answers, None))
             return
         what, function_code, block = self.requests[index]
-        transport = self.transport
-        link = transport._link
+        link = self.transport._link
         if not link.connected:
             self.done((self.answers, ConnectionLostError(f"{link.name}: not connected for {what}")))
             return
-        transport._count_request(function_code)
+        self.transport._count_request(function_code)
         link.start(what, function_code, block.address, block.count, None, self._read, self._fail)
 
     def _read(self, words: list[int]) -> None:
@@ -1053,11 +1062,6 @@ class _DefaultDriver:
 _DEFAULT = _DefaultDriver()
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_DEFAULT.forget)
-
-
-def default_fleet() -> Fleet | None:
-    """The process's default driver while a link holds it; None when none does."""
-    return _DEFAULT.fleet
 
 
 class ModbusTransport(LoopTransport):
