@@ -18,6 +18,7 @@ What a master may address:
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
@@ -62,6 +63,8 @@ class _Layout:
     #: ``RegisterBank.served`` and ``RegisterBank.readable`` of each table.
     served: dict[Table, tuple[tuple[int, int], ...]]
     readable: dict[Table, tuple[tuple[int, int], ...]]
+    #: The first address of each readable run, in order (to find a read's run).
+    readable_starts: dict[Table, tuple[int, ...]]
 
 
 # Layouts by their map and extra fields (by identity) and their raw areas: a simulator
@@ -103,7 +106,8 @@ def _build_layout(
     gaps = {table: _gaps(register_map, table) for table in Table}
     served = {table: tuple(_merge(set(zeros[table]))) for table in Table}
     readable = {table: tuple(_merge(set(zeros[table]) | gaps[table])) for table in Table}
-    return _Layout(zeros, owner, gaps, raw, extra, served, readable)
+    starts = {table: tuple(first for first, _ in runs) for table, runs in readable.items()}
+    return _Layout(zeros, owner, gaps, raw, extra, served, readable, starts)
 
 
 def _gaps(register_map: RegisterMap, table: Table) -> set[int]:
@@ -260,13 +264,18 @@ class RegisterBank:
         """Words (or 0/1 per bit) at ``address``..``address + count - 1``; gaps read as 0."""
         self._check_range(table, address, count)
         words = self._words[table]
-        gaps = self._gaps[table]
-        for a in range(address, address + count):
-            if a not in words and a not in gaps:
-                raise IllegalAddressError(
-                    f"{self._map.name}: {table.value} address {a} is not served"
-                    f" (read of {count} from {address})"
-                )
+        # Inside one readable run (its words and gaps, merged), every address is served:
+        # one look-up instead of one per address. Otherwise each address is checked.
+        runs = self._layout.readable[table]
+        k = bisect_right(self._layout.readable_starts[table], address) - 1
+        if k < 0 or address + count > runs[k][0] + runs[k][1]:
+            gaps = self._gaps[table]
+            for a in range(address, address + count):
+                if a not in words and a not in gaps:
+                    raise IllegalAddressError(
+                        f"{self._map.name}: {table.value} address {a} is not served"
+                        f" (read of {count} from {address})"
+                    )
         return [words.get(a, 0) for a in range(address, address + count)]
 
     def write(
