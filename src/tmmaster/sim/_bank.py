@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 from math import copysign
 
-from .._codec import Value, decode, encode
+from .._codec import Encoder, Value, decode, encoder
 from .._exceptions import IllegalAddressError, IllegalValueError
 from .._registers import RegisterField, RegisterMap, Table
 from ._memo import IdentityMemo
@@ -153,6 +153,9 @@ class RegisterBank:
         # addresses: a device publishes most fields unchanged at every tick, and
         # encoding them again was most of an idle tick's cost.
         self._encoded: dict[str, tuple[Value, list[int], Table, tuple[int, ...]]] = {}
+        # Each field's encoder (the codec's own, equal to encode()), table and addresses,
+        # found once by name: a moving arm's pose changes some thirty fields a tick.
+        self._setters: dict[str, tuple[Encoder, Table, tuple[int, ...]]] = {}
         self._version = 0
         self._table_changes: dict[Table, int] = dict.fromkeys(Table, 0)
         self._network_writes = 0
@@ -232,11 +235,14 @@ class RegisterBank:
         ):
             new, table, addresses = cached[1], cached[2], cached[3]
         else:
-            field = self._field(name)
-            # encode() raises ValueOutOfRangeError before anything is stored.
-            new = encode(field, value)
-            table = field.table
-            addresses = tuple(range(field.address, field.end + 1))
+            setter = self._setters.get(name)
+            if setter is None:
+                field = self._field(name)
+                addresses = tuple(range(field.address, field.end + 1))
+                setter = self._setters[name] = (encoder(field), field.table, addresses)
+            # The encoder raises ValueOutOfRangeError before anything is stored.
+            new = setter[0](value)
+            table, addresses = setter[1], setter[2]
             self._encoded[name] = (value, new, table, addresses)
         words = self._words[table]
         # Most fields are published unchanged at every tick: compared word by word, no list.
