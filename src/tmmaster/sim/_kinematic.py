@@ -213,6 +213,8 @@ class KinematicBackend:
         self._joints: Joints = joints
         self._pose = home
         self._flange: Pose | None = None
+        # The joints _forward last ran the chain for and their flange transform.
+        self._flange_t: tuple[Joints, kin.Transform] | None = None
         self._motion: _Motion | None = None
         # Starts "long settled": the arm is at rest when the simulation begins.
         self._rest_s = math.inf
@@ -524,7 +526,13 @@ class KinematicBackend:
             The flange pose.
         """
         if self._flange is None:
-            self._flange = self._model.forward(self._joints)
+            computed = self._flange_t
+            if computed is not None and computed[0] is self._joints:
+                # The chain's flange that _forward computed for these very joints:
+                # RobotModel.forward's own arithmetic, once a tick instead of twice.
+                self._flange = kin.transform_to_pose(computed[1])
+            else:
+                self._flange = self._model.forward(self._joints)
         return self._flange
 
     def is_settled(self) -> bool:
@@ -925,6 +933,7 @@ class KinematicBackend:
         self._origins = [(f[0][3], f[1][3], f[2][3]) for f in frames]
         self._origins_of = joints
         flange = frames[-1]
+        self._flange_t = (joints, flange)
         if self._tool is not None:
             flange = kin.multiply(flange, kin.pose_to_transform(self._tool))
         return kin.transform_to_pose(flange)
