@@ -1467,6 +1467,50 @@ def test_tm_table_stays_what_the_robot_publishes_at_every_tick() -> None:
     assert bank.get("tm_robot_state") == 4
 
 
+class SetTcpBackend(KinematicBackend):
+    """A backend whose TCP pose is set by the test, held still between ticks."""
+
+    tcp = Pose(300.0, -200.0, 300.0, 180.0, 0.0, 90.0)
+
+    def tcp_pose(self) -> Pose:
+        return self.tcp
+
+
+def test_a_still_pose_is_published_again_when_a_zero_changes_sign() -> None:
+    # The same pose tick after tick is published unchanged; a zero's sign is published.
+    backend = SetTcpBackend(MODEL)
+    ctl, bank, _, _ = tmflow(backend=backend)
+    rz = bank.field("tcp_rz")
+    run(ctl, 0.2)
+    assert pose_of(bank) == backend.tcp
+    backend.tcp = Pose(300.0, -200.0, 300.0, 180.0, 0.0, -0.0)
+    run(ctl, 0.1)
+    assert bank.read(rz.table, rz.address, 2) == encode(rz, -0.0)
+    backend.tcp = Pose(300.0, -200.0, 300.0, 180.0, 0.0, 0.0)
+    ctl.tick(DT)
+    assert bank.read(rz.table, rz.address, 2) == encode(rz, 0.0)
+
+
+def test_a_still_pose_leaving_the_range_is_saturated_and_an_error_once() -> None:
+    backend = SetTcpBackend(MODEL)
+    ctl, bank, _, log = article(backend=backend)
+    run(ctl, 0.2)
+    assert pose_of(bank) == backend.tcp
+    backend.tcp = Pose(350.0, -200.0, 300.0, 180.0, 0.0, 90.0)  # x beyond 327.67
+    run(ctl, 0.2)
+    assert bank.get("tcp_x") == pytest.approx(327.67)
+    assert bank.get("error_code") == SimErrorCode.POSE_OUT_OF_RANGE
+    assert log.names().count("sim.pose_out_of_range") == 1
+    ctl.clear_error()
+    run(ctl, 0.2)  # still there: no new error for the same rest
+    assert bank.get("error_code") == 0
+    backend.tcp = Pose(300.0, -200.0, 300.0, 180.0, 0.0, 90.0)
+    run(ctl, 0.2)
+    assert pose_of(bank) == backend.tcp
+    names = log.names()
+    assert (names.count("sim.pose_saturated"), names.count("sim.pose_in_range")) == (1, 1)
+
+
 # -- the structure: one controller per handshake, one device prologue ----------------------
 
 

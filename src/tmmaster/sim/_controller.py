@@ -303,6 +303,10 @@ class RobotController(SimDevice[RobotProfile]):
         )
         self._published_mark: tuple[int, ...] | None = None
         self._published_tcp: bytes | None = None
+        # The pose (as bytes) published last when it was encodable and inside every
+        # register's range: the same pose again is published as it is, unchecked.
+        self._in_range_pose: bytes | None = None
+        self._published_values: list[float] = []
         self._tm_table_pose: tuple[bytes, int | None] | None = None
         self._tm_table_clock: tuple[int, int] | None = None
 
@@ -780,8 +784,36 @@ class RobotController(SimDevice[RobotProfile]):
         error, once per rest, since the registers cannot say where it is.
         """
         pose = self._backend.tcp_pose()
-        fields = self._tcp_fields
         values = pose.as_list()
+        tcp = array("d", values).tobytes()
+        # An idle arm: the very pose (bytes, so a zero's sign too) that was published last
+        # inside every range. Nothing is clipped, it encodes, and the saturation check would
+        # change nothing (it left both flags False for an unclipped pose).
+        if tcp != self._in_range_pose and not self._check_pose(pose, values, tcp):
+            return
+        bank = self._bank
+        # Published at every tick and mostly unchanged (an idle arm, the same second): a
+        # part is stored again only when its values differ from those it stored last, or
+        # when any word of its Modbus tables changed since the last publication. Floats
+        # are compared as their bytes: a zero's sign is stored too.
+        unchanged = self._published_mark == self._published_changes()
+        if not unchanged or tcp != self._published_tcp:
+            published = self._published_values
+            for name, value in zip(TCP_FIELDS, published, strict=True):
+                bank.set(name, value)
+            self._published_tcp = tcp
+        if bank.has("flange_x"):
+            self._publish_tm_table(pose, unchanged=unchanged)
+        self._published_mark = self._published_changes()
+
+    def _check_pose(self, pose: Pose, values: list[float], tcp: bytes) -> bool:
+        """Saturate, encode-check and saturation-log a pose that is not the last in range.
+
+        Sets ``_published_values`` (what the registers get). Returns False when the pose
+        cannot be published at all (a robot error was raised).
+        """
+        self._in_range_pose = None
+        fields = self._tcp_fields
         published = [
             min(max(v, low), high) for v, (low, high) in zip(values, self._tcp_ranges, strict=True)
         ]
@@ -802,24 +834,15 @@ class RobotController(SimDevice[RobotProfile]):
                         error=str(exc),
                     )
                     self._enter_error(SimErrorCode.POSE_OUT_OF_RANGE, "pose cannot be encoded")
-                return
+                return False
             self._encodable_pose = values
         clipped = [f.name for f, a, b in zip(fields, values, published, strict=True) if a != b]
         self._check_saturation(pose, published, clipped)
-        # Published at every tick and mostly unchanged (an idle arm, the same second): a
-        # part is stored again only when its values differ from those it stored last, or
-        # when any word of its Modbus tables changed since the last publication. Floats
-        # are compared as their bytes: a zero's sign is stored too.
-        bank = self._bank
-        unchanged = self._published_mark == self._published_changes()
-        tcp = array("d", published).tobytes()
-        if not unchanged or tcp != self._published_tcp:
-            for name, value in zip(TCP_FIELDS, published, strict=True):
-                bank.set(name, value)
-            self._published_tcp = tcp
-        if bank.has("flange_x"):
-            self._publish_tm_table(pose, unchanged=unchanged)
-        self._published_mark = self._published_changes()
+        self._published_values = published
+        if not clipped:
+            # Unclipped values are the pose's own float objects: the same bytes.
+            self._in_range_pose = tcp
+        return True
 
     def _published_changes(self) -> tuple[int, ...]:
         """The change counts of the Modbus tables the pose and Techman's table are in."""
