@@ -31,7 +31,6 @@ from ._checks import shown
 from ._exceptions import ConfigError, ConnectError, ModbusExceptionError, StopRequestedError
 from ._gate import CommandGate
 from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
-from ._robot_program import END_MODULE_DO, GripperWiring
 from ._transport import Transport
 
 #: The module ``RobotIO``'s calls address when none is named.
@@ -40,6 +39,39 @@ DEFAULT_MODULE = "control_box"
 END_MODULE = "end_module"
 
 Kind = Literal["do", "di"]
+
+#: The end module's DO 0 (coil) and DI 0 (discrete input) in Techman's Modbus table.
+END_MODULE_DO = 800
+END_MODULE_DI = 800
+
+
+@dataclass(frozen=True)
+class GripperWiring:
+    """How the program drives the gripper: none, or an end-module output and input.
+
+    ``kind`` "io": end-module digital output ``output`` (0-3) closes the gripper when high
+    and opens it when low, the program waits ``settle_ms``, then reads grip detected on
+    end-module digital input ``input`` (0-3), both through the robot's own Modbus table
+    (coils and discrete inputs 800-803, TMflow 2.24 manual, appendix C, p. 307). ``kind``
+    "none": gripper commands are refused with ``gripper_failed``.
+    """
+
+    kind: str = "io"
+    output: int = 0
+    input: int = 0
+    settle_ms: int = 500
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("io", "none"):
+            raise ConfigError(f"gripper must be 'io' or 'none', got {self.kind!r}")
+        for name, value, high in (
+            ("output", self.output, 3),
+            ("input", self.input, 3),
+            ("settle_ms", self.settle_ms, 60_000),
+        ):
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
+                raise ConfigError(f"gripper {name} must be an integer 0..{high}, got {value!r}")
+
 
 #: How often an output is read back while a late write of the other value may land, s.
 WATCH_INTERVAL_S = 0.02
@@ -71,8 +103,7 @@ def io_module(profile: RobotProfile, module: object) -> DigitalIOModule:
     Raises:
         ConfigError: The profile has no digital I/O, or no module of that name.
     """
-    modules = profile.digital_io
-    if not modules:
+    if not (modules := profile.digital_io):
         raise ConfigError(
             f"profile {profile.name!r} declares no digital I/O (a [digital_io.NAME] table,"
             " docs/register-maps.md)"

@@ -21,6 +21,7 @@ from importlib import resources
 from string import Template
 
 from ._exceptions import ConfigError
+from ._io import END_MODULE_DI, END_MODULE_DO, GripperWiring
 from ._logging import add_logging_arguments
 from ._pose import Pose
 from ._registers import (
@@ -35,10 +36,6 @@ from ._registers import (
 )
 from ._version import version
 
-#: The end module's DO 0 (coil) and DI 0 (discrete input) in Techman's Modbus table.
-END_MODULE_DO = 800
-END_MODULE_DI = 800
-
 #: The feedback and command fields the program reads or writes, by name.
 _FEEDBACK = ("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "grasp_status")
 _WORDS = ("speed", "accel_time", "command", "seq")
@@ -47,34 +44,6 @@ _MASTER = ("master_heartbeat", "master_ttl_ms")
 #: The read/write timeout of the program's Modbus device, ms (TMscript 2.24 §16.1,
 #: p. 414: 0..10000, 10000 by default): well inside the 12 s closestop and errorstop get.
 MODBUS_TIMEOUT_MS = 1000
-
-
-@dataclass(frozen=True)
-class GripperWiring:
-    """How the program drives the gripper: none, or an end-module output and input.
-
-    ``kind`` "io": end-module digital output ``output`` (0-3) closes the gripper when high
-    and opens it when low, the program waits ``settle_ms``, then reads grip detected on
-    end-module digital input ``input`` (0-3), both through the robot's own Modbus table
-    (coils and discrete inputs 800-803, TMflow 2.24 manual, appendix C, p. 307). ``kind``
-    "none": gripper commands are refused with ``gripper_failed``.
-    """
-
-    kind: str = "io"
-    output: int = 0
-    input: int = 0
-    settle_ms: int = 500
-
-    def __post_init__(self) -> None:
-        if self.kind not in ("io", "none"):
-            raise ConfigError(f"gripper must be 'io' or 'none', got {self.kind!r}")
-        for name, value, high in (
-            ("output", self.output, 3),
-            ("input", self.input, 3),
-            ("settle_ms", self.settle_ms, 60_000),
-        ):
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
-                raise ConfigError(f"gripper {name} must be an integer 0..{high}, got {value!r}")
 
 
 #: The largest tool values the program writes, by field: a TCP within 2 m of the flange

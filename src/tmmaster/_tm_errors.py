@@ -229,8 +229,7 @@ def _entry(data: object) -> TMErrorCode:
 
 @functools.cache
 def _lookup(code: int) -> TMErrorCode | None:
-    chunk = _index().get(code)
-    if chunk is None:
+    if (chunk := _index().get(code)) is None:
         return None
     try:
         data = tomllib.loads("[[error]]\n" + chunk)["error"][0]

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
-import argparse
 from functools import cache
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import argparse
 
 
 @cache

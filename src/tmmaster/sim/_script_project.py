@@ -30,10 +30,11 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from .._exceptions import ConfigError, UnreachablePoseError
+from .._io import END_MODULE_DO
 from .._pose import MotionType, Pose
 from .._registers import RobotProfile, Table
 from .._robot_models import RobotModel
-from .._robot_program import END_MODULE_DO, ToolSetting, robot_program
+from .._robot_program import ToolSetting, robot_program
 from ..tmscript import Execution, Program, parse
 from ..tmscript._host import HostError, ModbusCommunicationError, ModbusDevice, MotionCall
 from ._backend import PathBackend, PhysicsBackend
