@@ -24,7 +24,6 @@ import time
 from collections.abc import Callable
 from typing import Annotated, TypeVar
 
-import tenacity
 from pydantic import BaseModel, ConfigDict, Field
 
 from ._exceptions import (
@@ -106,6 +105,7 @@ class RetryPolicy(BaseModel):
             if self.attempts == 1 or not is_transient(exc):
                 raise
             first_error: BaseException = exc
+        import tenacity  # here, not at import: only a transient failure needs it
 
         def retrying_after(error: BaseException | None, attempt: int, delay_s: float) -> None:
             """Attempt ``attempt`` failed with ``error``: say so, count it, wait ``delay_s``."""
