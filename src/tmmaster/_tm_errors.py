@@ -41,7 +41,8 @@ _CODE_LINE = re.compile(r"^code = (\d+)$", re.MULTILINE)
 class TMErrorCode(BaseModel):
     """One error code of TMflow 2.24 Appendix J, with the manual's text and pages."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    # Built on first use, not at import: only a robot error looks an entry up.
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     #: The error code (unsigned 32-bit).
     code: int = Field(ge=0, le=0xFFFFFFFF)
