@@ -46,9 +46,11 @@ def test_a_stalled_line_is_raised_within_its_announced_timeout(
     acked_at = motion.ticket.acknowledged_at
     assert acked_at is not None
     announced = motion.timeout_s
-    # Within the announced budget (plus a poll and the error's own pose read), where
-    # the observed pace used to stretch it up to 4 times.
-    assert raised_at - acked_at <= announced + 0.25, (raised_at - acked_at, announced)
+    # Within the announced budget, where the observed pace used to stretch it up to 4
+    # times. Beyond the budget: a poll, the error's own pose read and the stop, 5-15 ms
+    # here on an idle machine, once 0.29 s with the suite's four workers on two cores;
+    # half the budget covers that and still refuses the old 4 times.
+    assert raised_at - acked_at <= 1.5 * announced, (raised_at - acked_at, announced)
     message = str(info.value)
     assert f"within {announced:.2f} s" in message
     assert "a stall" in message or "no progress" in message
