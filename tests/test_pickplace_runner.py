@@ -6,6 +6,7 @@ Everything that moves runs against the simulator over loopback TCP.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -214,7 +215,15 @@ def test_reserved_and_duplicate_step_names_are_refused() -> None:
 
 def test_runner_runs_the_article_cycle_and_times_every_state(sim: Simulator, robot: Robot) -> None:
     events: list[StateEvent] = []
-    result = Runner(robot, on_state=events.append).run(pick_and_place(fast_config()), cycles=2)
+    runner = Runner(robot, on_state=events.append)
+    assert runner.run_started is None
+    before = time.monotonic()
+    result = runner.run(pick_and_place(fast_config()), cycles=2)
+    after = time.monotonic()
+    # The run's clock (time 0 of its records and duration) is readable: the CLI's TCP path
+    # is timed on it.
+    assert runner.run_started is not None
+    assert before <= runner.run_started <= after - result.duration_s + 0.001
     assert result.ok
     assert result.cycles_completed == 2
     assert [e.state for e in events][:3] == ["MOVE_TO_APPROACH", "MOVE_TO_PICK", "GRIPPER_CLOSE"]

@@ -906,7 +906,7 @@ def _run_on(
             finally:
                 if sampler is not None:
                     # The runner's clock: timeline and TCP path share one time axis.
-                    sampler.stop(origin=getattr(runner, "_run_start", None))
+                    sampler.stop(origin=runner.run_started)
             outcome.run = result
         finally:
             if out.live is not None:

@@ -284,7 +284,7 @@ class _Run:
             cycles_requested=cycles,
             started_at=datetime.now(UTC).isoformat(timespec="milliseconds"),
         )
-        self.started = time.monotonic()
+        self.started = runner.run_started = time.monotonic()
         self.cycle_started = self.started
 
     def record(self, state: str, cycle: int, started: float, outcome: str) -> None:
@@ -354,6 +354,9 @@ class Runner:
         self.ready_timeout_s = ready_timeout_s
         #: Called with a StateEvent at every state change.
         self.on_state = on_state
+        #: ``time.monotonic()`` when the current or last :meth:`run` started (None before
+        #: the first): time 0 of its records, for whatever else is timed beside the run.
+        self.run_started: float | None = None
         self._stop = threading.Event()
         self._log = _log.bind(robot=robot.name)
 
