@@ -15,6 +15,7 @@ import socket
 import struct
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
@@ -43,7 +44,24 @@ def deliver(port: int, address: int, words: list[int]) -> None:
         assert link.recv(260)[7] == 16  # written (not an exception answer)
 
 
-def test_a_dead_masters_late_frame_never_runs_for_the_next_master(sim: Simulator) -> None:
+def age_project(sim: Simulator, days: float) -> None:
+    """Let the running project have run for ``days`` already (its GetNowStamp clock)."""
+
+    def shift() -> None:
+        controller: Any = sim._controller
+        run = controller._execution._rt
+        run.started_s -= days * 86400 * controller.stamp_scale  # simulated s per wall s
+
+    sim.call(shift)
+
+
+# 25 days: past GetNowStamp()'s int range (2147483647 ms, 24.8 days: then -1, [TS] 4.39,
+# p. 128), where the program's heartbeat clock must go on counting.
+@pytest.mark.parametrize("days", [0, 25])
+def test_a_dead_masters_late_frame_never_runs_for_the_next_master(
+    sim: Simulator, days: float
+) -> None:
+    age_project(sim, days)
     with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
         first.wait_until_ready()
         first.move_to(LEFT, speed=50)
