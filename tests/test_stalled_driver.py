@@ -4,7 +4,9 @@ Every network robot's requests go out on one event loop (its Fleet's, or the pro
 default driver: both are tested). When that loop is held up (saturated by hundreds of
 robots, a stalled machine) for longer than a request's bound, the robot's call ends with
 an error and the command is given up; the request it handed over must then never be
-sent once the loop runs again. The check is on what the simulated robot did (its motion log).
+sent once the loop runs again. Nor may it hold up the clean-up of what the robot gave up:
+a Ctrl-C before the loop began polling a move stops the arm at once. The check is on what
+the simulated robot did (its motion log, its pose).
 """
 
 from __future__ import annotations
@@ -105,3 +107,64 @@ def test_a_command_handed_to_a_stalled_loop_is_never_sent_after_the_robot_gave_i
     check(issued, sim.motion_log())
     late = [r for r in sim.request_log if r.is_write and r.address == COMMAND_BLOCK[profile]]
     assert late == writes, "the command write went out after the robot gave it up"
+
+
+def ctrl_c_before_the_loop_begins_the_polls(robot: Robot, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C in the thread's first wait for the loop, the loop not having begun the polls.
+
+    The loop is held (as behind other robots' work) until the thread has given the polls
+    up, so it begins them and cancels them in one turn, before their first step.
+    """
+    fleet = robot._transport.fleet
+    loop = fleet._runner.loop
+    assert loop is not None
+    release = threading.Event()
+    call_soon = fleet._call_soon
+
+    def soon(callback: Callable[..., object], *args: object) -> bool:
+        queued = call_soon(callback, *args)
+        job = getattr(callback, "__self__", None)
+        if isinstance(job, fleet_module._Job) and callback.__name__ == "cancel":
+            release.set()  # the thread gave the polls up: the loop runs on
+        return queued
+
+    latch_wait = fleet_module._Latch.wait
+
+    def interrupted(latch: fleet_module._Latch[object], bound: float) -> object:
+        monkeypatch.setattr(fleet_module._Latch, "wait", latch_wait)  # once
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fleet, "_call_soon", soon)
+    monkeypatch.setattr(fleet_module._Latch, "wait", interrupted)
+    loop.call_soon_threadsafe(release.wait, 30.0)
+
+
+@pytest.mark.parametrize("driver", ["fleet", "default"])
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_ctrl_c_before_the_loop_began_polling_a_move_stops_the_arm_at_once(
+    tm_simulator_factory: Callable[..., Simulator],
+    profile: str,
+    driver: str,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The thread waits at most this long (beyond the request timeout) for the polls it
+    # gave up to be over: a stop that waited it out would come after the move's end.
+    monkeypatch.setattr(fleet_module, "_LOOP_GRACE_S", 5.0)
+    sim = tm_simulator_factory(profile, time_scale=2)  # the move takes over a second
+    fleet = tmmaster.Fleet() if driver == "fleet" else None
+    robot = Robot("127.0.0.1", sim.port, profile=profile, link=fleet, gripper=None)
+    try:
+        robot.connect()
+        motion = robot.start_move(A, speed=10)
+        sim.wait_for(lambda: bool(sim.motion_log()), timeout=5)
+        ctrl_c_before_the_loop_begins_the_polls(robot, monkeypatch)
+        with pytest.raises(KeyboardInterrupt):
+            motion.wait()
+        assert motion.stop_delivered is True
+        time.sleep(0.2)  # several ticks: a move that was not stopped would go on
+        assert len(sim.motion_log()) == 1
+        assert not sim.tcp_pose().is_close(A), "the move ran to its end after Ctrl-C"
+    finally:
+        robot.close()
+        if fleet is not None:
+            fleet.close()

@@ -433,8 +433,7 @@ class FleetMember:
         # The loop hands back by the deadlines; beyond them, the last poll's requests.
         bound = max(follow.ack_deadline - now, 0.0) + follow.longest_budget()
         bound += 4 * self.transport.timeout + _LOOP_GRACE_S
-        ended = threading.Event()
-        job = _Job(self._follow(follow, ended), ended)
+        job = _Job(self._follow(follow))
         if not self.fleet._call_soon(job.begin, self.fleet):
             job.close()
             return None  # the loop has ended: the thread polls (and its requests fail)
@@ -447,10 +446,10 @@ class FleetMember:
                 f"{self.transport.name}: the fleet's event loop did not answer within {bound:.1f} s"
             ) from exc
         finally:
-            if not ended.is_set() and self.fleet._call_soon(job.cancel):
+            if not job.ended.is_set() and self.fleet._call_soon(job.cancel):
                 # Given up (Ctrl-C, the bound): the loop's poll must be over before the
                 # thread acts on the command (withdraw, stop), so nothing interleaves.
-                ended.wait(self.transport.timeout + _LOOP_GRACE_S)
+                job.ended.wait(self.transport.timeout + _LOOP_GRACE_S)
 
     def wake(self) -> None:
         """On the loop: end the current nap early (a stop request)."""
@@ -467,10 +466,9 @@ class FleetMember:
             timer.cancel()
             self._nap = None
 
-    async def _follow(self, follow: FollowState, ended: threading.Event) -> Observation | None:
+    async def _follow(self, follow: FollowState) -> Observation | None:
         """Poll on the follow's schedule until a poll settles it, or hand the poll back."""
         if self.polling:
-            ended.set()
             return None  # another wait on this robot is being polled: this one polls itself
         self.polling = True
         try:
@@ -500,7 +498,6 @@ class FleetMember:
                     return observation
         finally:
             self.polling = False
-            ended.set()
 
     def watching(self) -> bool:
         """True until the robot is closed or the fleet stops."""
@@ -603,26 +600,25 @@ class _Job(Generic[T]):
     """A coroutine run on the loop for a thread that waits for it (a wait's polls, a connect).
 
     Started by a callback on the loop, its end settling a :class:`_Latch`: no concurrent
-    future chained to the task, the thread woken once. ``ended`` (when given) is set when
-    the coroutine will not run at all; the coroutine sets it itself otherwise.
+    future chained to the task, the thread woken once. ``ended`` is set once the coroutine
+    can run no more: it never began, or its task is done (also when cancelled before its
+    first step, where the coroutine runs none of its code, not even a ``finally``).
     """
 
-    __slots__ = ("_coroutine", "_ended", "cancelled", "latch", "task")
+    __slots__ = ("_coroutine", "cancelled", "ended", "latch", "task")
 
-    def __init__(
-        self, coroutine: Coroutine[Any, Any, T], ended: threading.Event | None = None
-    ) -> None:
+    def __init__(self, coroutine: Coroutine[Any, Any, T]) -> None:
         self._coroutine = coroutine
-        self._ended = ended
+        #: Set once the coroutine can run no more (the thread waits for it after giving up).
+        self.ended = threading.Event()
         self.latch: _Latch[T] = _Latch()
         self.task: asyncio.Task[T] | None = None
         self.cancelled = False
 
     def close(self) -> None:
-        """The coroutine will not run (nothing awaited it)."""
+        """The coroutine will not run (nothing awaited it), or has ended."""
         self._coroutine.close()
-        if self._ended is not None:
-            self._ended.set()
+        self.ended.set()
 
     def begin(self, fleet: Fleet) -> None:
         """On the loop: run the coroutine (CancelledError when the loop is ending)."""
@@ -631,7 +627,12 @@ class _Job(Generic[T]):
             self.latch.fail(concurrent.futures.CancelledError())
             return
         self.task = asyncio.get_running_loop().create_task(self._coroutine)
-        self.task.add_done_callback(self.latch.take)
+        self.task.add_done_callback(self._finished)
+
+    def _finished(self, task: asyncio.Task[T]) -> None:
+        """On the loop, the task done: ended first, then the thread's answer."""
+        self.close()  # closing a finished coroutine does nothing
+        self.latch.take(task)
 
     def cancel(self) -> None:
         """On the loop: the thread gave up waiting; cancel the coroutine."""
