@@ -21,7 +21,6 @@ PAGES = {
 #: class without an import cycle): the reference names the public class.
 STAND_INS = {
     "tmmaster._fleet._Closable": "tmmaster.Robot",
-    "tmmaster._monitor._CommandedRobot": "tmmaster.Robot",
     "tmmaster.sim._memory.SimulatorLoop": "tmmaster.sim.Simulator",
 }
 

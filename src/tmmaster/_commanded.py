@@ -3,52 +3,48 @@
 A TM robot's Modbus slave may serve one client only (a controller configured so, a
 gateway in front of it): a status monitor opening its own link to a robot that a
 :class:`~tmmaster.Robot` of this process commands would lock the Robot out, or take the
-connection a stop needs. Every Robot is registered here (weakly: a Robot nobody holds
-is forgotten), and :meth:`StatusMonitor.add <tmmaster.StatusMonitor.add>` asks
-:func:`commanding` before it adds a link of its own (the monitor cannot import
-``_robot.py``, which depends on it through the Fleet).
+connection a stop needs. Every Robot registers its link here (weakly: a link nobody
+holds is forgotten), and :meth:`StatusMonitor.add <tmmaster.StatusMonitor.add>` asks
+:func:`commanding` before it adds a link of its own.
 """
 
 from __future__ import annotations
 
 import threading
 import weakref
-from typing import Any
 
-from ._transport import ConnectionState
+from ._transport import ConnectionState, Transport
 
 _LOCK = threading.Lock()
-_ROBOTS: weakref.WeakSet[Any] = weakref.WeakSet()
+#: Each Robot's link, and the Robot's name, for as long as the link lives.
+_LINKS: weakref.WeakKeyDictionary[Transport, str] = weakref.WeakKeyDictionary()
 
 
-def register(robot: Any) -> None:
-    """Remember ``robot`` (a :class:`~tmmaster.Robot`) as commanding its host and port.
+def register(name: str, transport: Transport) -> None:
+    """Remember that the robot ``name`` commands the address of ``transport``.
 
     Args:
-        robot: The robot; kept by a weak reference.
+        name: The :class:`~tmmaster.Robot`'s name, for messages.
+        transport: Its link; kept by a weak reference.
     """
     with _LOCK:
-        _ROBOTS.add(robot)
+        _LINKS[transport] = name
 
 
-def commanding(host: str, port: int) -> Any | None:
-    """A robot of this process, not closed, whose link goes to ``host``:``port``.
+def commanding(host: str, port: int) -> str | None:
+    """The name of a robot of this process, not closed, whose link goes to ``host``:``port``.
 
     Args:
         host: The address, as the robot was given it (after :func:`check_host`).
         port: The Modbus TCP port.
 
     Returns:
-        The robot, or None when no open robot of this process commands that address.
+        The robot's name, or None when no open robot of this process commands that address.
     """
     with _LOCK:
-        robots = list(_ROBOTS)
-    for robot in robots:
-        transport = getattr(robot, "_transport", None)
-        if transport is None or getattr(transport, "host", None) != host:
-            continue
-        if getattr(transport, "port", None) != port:
-            continue
-        if getattr(transport, "state", None) is not ConnectionState.CLOSED:
-            return robot
+        links = list(_LINKS.items())
+    for transport, name in links:
+        same = (transport.host, transport.port) == (host, port)
+        if same and transport.state is not ConnectionState.CLOSED:
+            return name
     return None

@@ -33,7 +33,7 @@ import asyncio
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Protocol, Self
+from typing import Self
 
 from ._address import check_host, check_port, is_in_process
 from ._channels import CommandChannel, channel_for
@@ -59,12 +59,12 @@ from ._loop import (
 )
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
+from ._robot import Robot
 from ._transport import (
     AsyncLink,
     BlockTransport,
     ConnectionState,
     ReadPlan,
-    Transport,
     describe_read,
 )
 
@@ -258,23 +258,12 @@ class _SharedWatched(StatusRecord):
             transport.release()
 
 
-class _CommandedRobot(Protocol):
-    """What :meth:`StatusMonitor.add_robot` uses of a :class:`~tmmaster.Robot`.
-
-    Its name, its link and its command channel: all the monitor needs of it.
-    """
-
-    name: str
-    _transport: Transport
-    _channel: CommandChannel
-
-
 def _refuse_commanded(name: str, host: str, port: int) -> None:
     """Refuse a link of the monitor's own to an address a Robot of this process commands."""
-    robot = commanding(host, port)
-    if robot is not None:
+    commander = commanding(host, port)
+    if commander is not None:
         raise ConfigError(
-            f"StatusMonitor.add({name!r}, {host!r}, {port}): Robot {robot.name!r} of this"
+            f"StatusMonitor.add({name!r}, {host!r}, {port}): Robot {commander!r} of this"
             " process commands that address; a second connection could lock it out or"
             " take the connection its stop needs. Watch it over its own link:"
             f" monitor.add_robot(robot, name={name!r})"
@@ -434,7 +423,7 @@ class StatusMonitor:
         period = 1.0 / self.rate_hz
         self._robots[name] = _Watched(link, robot, period=period, backoff_max_s=self.backoff_max_s)
 
-    def add_robot(self, robot: _CommandedRobot, name: str | None = None) -> str:
+    def add_robot(self, robot: Robot, name: str | None = None) -> str:
         """Watch ``robot`` over its own link (no second connection), before :meth:`start`.
 
         Each poll runs in a worker thread: it takes the robot link's lock only when it is
@@ -458,10 +447,9 @@ class StatusMonitor:
                 ``Fleet(watch_hz=...)`` and read with ``Fleet.latest``), or a robot
                 whose transport cannot be shared (a transport of your own).
         """
-        transport = getattr(robot, "_transport", None)
-        channel = getattr(robot, "_channel", None)
-        if transport is None or not isinstance(channel, CommandChannel):
+        if not isinstance(robot, Robot):
             raise ConfigError(f"robot must be a tmmaster.Robot, got {robot!r}")
+        transport, channel = robot._transport, robot._channel
         name = robot.name if name is None else name
         self._check_name(name)
         for known, watched in self._robots.items():

@@ -380,7 +380,8 @@ class Robot:
         #: The robot's gripper (a NoGripper when there is none).
         self.gripper = options.gripper(gripper, self.profile, links)
         self.gripper.attach(self._mount())
-        _commanded.register(self)  # made: a StatusMonitor.add() to its address is refused
+        # Made: a StatusMonitor.add() of its own link to this address is refused.
+        _commanded.register(self.name, self._transport)
 
     def _open_command_path(self, options: _Options, fleet: Fleet | None) -> None:
         """The channel over the link, the stop event, the follower and its gate; the I/O
