@@ -494,6 +494,9 @@ class CommandChannel(ABC):
         """After :meth:`withdraw` returned None: True taken, False withdrawn, None not yet."""
         return False
 
+    def cancel(self, ticket: Ticket) -> None:  # noqa: B027 (none, where no handshake says it)
+        """Tell the robot a command it took is given up, where the handshake can say so."""
+
     def may_resume(self) -> bool:
         """True when a move the robot stopped itself could still be resumed (Play).
 
@@ -811,17 +814,24 @@ class SequenceChannel(CommandChannel):
         (withdrawn) or not (taken); or the project not running (withdrawn: the start-up
         rule consumes it).
         """
-        p = self.profile
-        outcome = self.withdraw_outcome(ticket)
-        if outcome is not None:
-            return outcome
+        if (outcome := self.withdraw_outcome(ticket)) is None:
+            self.cancel(ticket)
+            outcome = self.withdraw_outcome(ticket)
+        return outcome
+
+    def cancel(self, ticket: Ticket) -> None:
+        """Write the cancel record: our sequence number with command = none, one request.
+
+        Not yet taken, the program consumes the number as a no-op; taken (running, or
+        paused), its watchdog stops the project, even where the robot refuses the
+        master's Stop (Manual mode, the Robot Stick in local control).
+        """
         command = self._command_field
         self.transport.write_fields(
-            [(command, command.code_of("none")), (p.field("seq"), ticket.seq)],
+            [(command, command.code_of("none")), (self.profile.field("seq"), ticket.seq)],
             retry=True,
             interruptible=False,
         )
-        return self.withdraw_outcome(ticket)
 
     def withdraw_outcome(self, ticket: Ticket) -> bool | None:
         """What the program did with our number: True taken, False cancelled or not running.

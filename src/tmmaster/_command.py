@@ -446,6 +446,7 @@ class _MotionFollower:
             if not self._channel.can_stop:
                 return False  # running, and this profile cannot stop it
             try:
+                self._channel.cancel(ticket)  # acted on by the robot even if it refuses Stop
                 self.stop()
                 motion.stop_delivered = True
             except TMMasterError as exc:
@@ -470,8 +471,7 @@ class _MotionFollower:
             CommandStateUnknownError: no answer within the bound, or the robot closing
                 first (the caller stops).
         """
-        outcome = self._channel.withdraw(ticket)
-        if outcome is not None:
+        if (outcome := self._channel.withdraw(ticket)) is not None:
             return outcome
         deadline = time.monotonic() + self.timeouts.ack_timeout_s
         within = f"within {self.timeouts.ack_timeout_s:g} s"
@@ -490,8 +490,7 @@ class _MotionFollower:
                     f"the robot connection began to close before the robot program answered"
                     f" the cancel of command {ticket.seq}"
                 ) from exc
-            outcome = self._channel.withdraw_outcome(ticket)
-            if outcome is not None:
+            if (outcome := self._channel.withdraw_outcome(ticket)) is not None:
                 return outcome
             if time.monotonic() >= deadline:
                 raise CommandStateUnknownError(
