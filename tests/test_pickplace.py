@@ -34,7 +34,7 @@ from tmmaster.pickplace.__main__ import (
     EXIT_TIMEOUT,
     main,
 )
-from tmmaster.sim import Cell, RequestRecord, Simulator, TableObject
+from tmmaster.sim import Cell, RequestRecord, RobotSetup, Simulator, TableObject
 
 PICK = Pose.from_sequence(ARTICLE_PICK)
 PLACE = Pose.from_sequence(ARTICLE_PLACE)
@@ -155,6 +155,32 @@ def int16(value: int) -> int:
 
 
 # -- the article's cycle ---------------------------------------------------------------
+
+
+def test_the_report_counts_a_stand_alone_grippers_requests_apart(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    sim = tm_simulator_factory(
+        "article", robot=RobotSetup(gripper="onrobot-2fg7"), cell=Cell(scene=parts(1)), **QUICK
+    )
+    assert sim.gripper_port is not None
+    config = write_config(tmp_path)
+    own = f'[gripper]\nkind = "onrobot-2fg7"\nport = {sim.gripper_port}\n'
+    config.write_text(config.read_text().replace("[gripper]\n", own))
+    code, report = run_cli(sim, config, tmp_path)
+    assert code == EXIT_OK
+    # Its own link: its requests are counted apart from the robot's.
+    assert report["transport"]["gripper"]["requests"] > 0
+    assert report["transport"]["robot"]["requests"] > 0
+
+
+def test_the_report_has_no_gripper_counters_for_a_gripper_on_the_robots_link(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    sim = tm_simulator_factory("article", cell=Cell(scene=parts(1)), **QUICK)
+    code, report = run_cli(sim, write_config(tmp_path), tmp_path)
+    assert code == EXIT_OK
+    assert report["transport"]["gripper"] is None
 
 
 def test_article_cycle_ends_done_with_the_part_on_the_place_position(

@@ -147,6 +147,8 @@ class Gripper(ABC):
 
     #: The driver's name (a gripper profile's name for the stand-alone grippers).
     kind: str = "gripper"
+    #: The gripper's own link (a stand-alone gripper's); None when it rides the robot's.
+    transport: Transport | None = None
     _mount: GripperMount | None = None
     # Where the driver logs: once mounted, every event names the robot (``robot=``).
     _events: Any = _log

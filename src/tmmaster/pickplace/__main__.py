@@ -1038,9 +1038,8 @@ class _TcpSampler:
 
 
 def _gripper_stats(robot: Robot) -> dict[str, Any] | None:
-    transport = getattr(robot.gripper, "transport", None)
-    stats = getattr(transport, "stats", None)
-    return None if stats is None else dict(stats.as_dict())
+    transport = robot.gripper.transport
+    return None if transport is None else dict(transport.stats.as_dict())
 
 
 def main(argv: Sequence[str] | list[str] | None = None) -> int:
