@@ -40,6 +40,10 @@ MADE_BY_THE_PACKAGE = {
 INTERNAL_MEMBERS = {
     "tmmaster._command.Motion.ticket",
     "tmmaster._transport.BlockTransport.read_plan",
+    # The coroutine protocol an AsyncMotion speaks to asyncio (a task made of the handle).
+    "tmmaster.aio._robot._Primed.close",
+    "tmmaster.aio._robot._Primed.send",
+    "tmmaster.aio._robot._Primed.throw",
     "tmmaster.sim._simulator.Simulator.device_server",
     "tmmaster.tmscript._evaluator.Program.script",
     "tmmaster.tmscript._evaluator.Program.define",

@@ -144,6 +144,47 @@ def test_wait_for_zero_gives_the_move_up(tm_simulator_factory: SimFactory, profi
     assert [m.target for m in sim.motion_log() if m.target is not None] == []
 
 
+@pytest.mark.parametrize("made", ["wait_for", "ensure_future"])
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_task_made_of_the_handle_itself_gives_the_move_up_cancelled_before_it_ran(
+    tm_simulator_factory: SimFactory, profile: str, made: str
+) -> None:
+    # ``await handle`` is ``await handle.wait()``: a task made of the handle (not of its
+    # wait) and cancelled before its first step gives the move up the same way.
+    sim = tm_simulator_factory(profile)
+    issued: list[Issued] = []
+
+    async def scenario() -> None:
+        async with open_robot(sim, timeouts=TimeoutPolicy(ack_timeout_s=30)) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            issued.append(Issued(B, time.monotonic()))
+            handle = await robot.start_move(B, speed=60)
+            # Each task made of a handle, and each await, is a wait of its own.
+            done = await asyncio.gather(handle, asyncio.ensure_future(handle))
+            assert done == [handle.motion, handle.motion]
+            assert (await handle).done
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "done"
+            sim.inject("late_ack:delay_s=20")
+            issued.append(Issued(A, time.monotonic()))
+            handle = await robot.start_move(A, speed=60)
+            if made == "wait_for":
+                with pytest.raises(TimeoutError):
+                    await asyncio.wait_for(handle, 0)
+            else:
+                task = asyncio.ensure_future(handle)
+                task.cancel()
+                with pytest.raises(asyncio.CancelledError):
+                    await task
+            issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
+            assert given_up(handle.motion), handle.motion
+            sim.clear_faults()
+            await asyncio.sleep(0.4)
+
+    run(scenario)
+    check(issued, sim.motion_log())
+    assert [m.target for m in sim.motion_log() if m.target is not None] == [B]
+
+
 @pytest.mark.parametrize("sibling_first", [True, False])
 @pytest.mark.parametrize("profile", PROFILES)
 def test_a_task_group_whose_sibling_fails_gives_the_move_up(

@@ -605,7 +605,7 @@ class _Job(Generic[T]):
     first step, where the coroutine runs none of its code, not even a ``finally``).
     """
 
-    __slots__ = ("_coroutine", "cancelled", "ended", "latch", "task")
+    __slots__ = ("_coroutine", "ended", "latch", "task")
 
     def __init__(self, coroutine: Coroutine[Any, Any, T]) -> None:
         self._coroutine = coroutine
@@ -613,7 +613,6 @@ class _Job(Generic[T]):
         self.ended = threading.Event()
         self.latch: _Latch[T] = _Latch()
         self.task: asyncio.Task[T] | None = None
-        self.cancelled = False
 
     def close(self) -> None:
         """The coroutine will not run (nothing awaited it), or has ended."""
@@ -622,7 +621,8 @@ class _Job(Generic[T]):
 
     def begin(self, fleet: Fleet) -> None:
         """On the loop: run the coroutine (CancelledError when the loop is ending)."""
-        if self.cancelled or not fleet._running:
+        # A thread queues a job's cancel only after its begin: the loop runs them in order.
+        if not fleet._running:
             self.close()
             self.latch.fail(concurrent.futures.CancelledError())
             return
@@ -630,14 +630,19 @@ class _Job(Generic[T]):
         self.task.add_done_callback(self._finished)
 
     def _finished(self, task: asyncio.Task[T]) -> None:
-        """On the loop, the task done: ended first, then the thread's answer."""
+        """On the loop, the task done: ended first, then the thread's answer (its result,
+        or its exception: cancelled, ``CancelledError``)."""
         self.close()  # closing a finished coroutine does nothing
-        self.latch.take(task)
+        try:
+            value = task.result()
+        except BaseException as exc:
+            self.latch.fail(exc)
+        else:
+            self.latch.settle(value)
 
     def cancel(self) -> None:
         """On the loop: the thread gave up waiting; cancel the coroutine."""
-        self.cancelled = True
-        if self.task is not None:
+        if self.task is not None:  # None: the loop was ending, the coroutine never ran
             self.task.cancel()
 
 
@@ -665,15 +670,6 @@ class _Latch(Generic[T]):
         """From the loop: the failure."""
         self._error = error
         self._lock.release()
-
-    def take(self, future: concurrent.futures.Future[T] | asyncio.Future[T]) -> None:
-        """A finished future's result, or its exception (cancelled: ``CancelledError``)."""
-        try:
-            value = future.result()
-        except BaseException as exc:
-            self.fail(exc)
-        else:
-            self.settle(value)
 
     def wait(self, bound: float) -> T:
         """The answer, or its failure raised; :class:`_NoAnswerError` after ``bound`` seconds.

@@ -32,6 +32,7 @@ import inspect
 import re
 import textwrap
 import threading
+import weakref
 from collections.abc import Callable, Coroutine, Generator
 from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, cast
 
@@ -40,7 +41,7 @@ from .._exceptions import TMMasterError, TransportClosedError
 from .._gripper import Gripper
 from .._io import RobotIO
 from .._logging import get_logger
-from .._robot import Motion, Robot, _named_connect
+from .._robot import Motion, Robot, _named_connect, _waited
 from .._status import MovePhase, MoveProgress
 
 _log = get_logger("tmmaster.aio")
@@ -133,11 +134,6 @@ class _Job(Generic[T]):
         self._lock = threading.Lock()
         self._ended = False
         self._interrupted = False
-
-    @property
-    def skipped(self) -> bool:
-        """True when the call was cancelled before the robot's thread started it."""
-        return self._future.cancelled()
 
     def cancel(self) -> None:
         """From the caller's loop: never start the call, or make the running one give up.
@@ -333,11 +329,14 @@ class _Front:
         return self._robot._run(getattr(part, name), *args, **kwargs)
 
 
-class AsyncMotion:
+class AsyncMotion(_Primed[Motion]):
     """A move sent by :meth:`AsyncRobot.start_move`: await it, or ask its progress.
 
     ``await motion`` waits for the end and returns the finished :class:`~tmmaster.Motion`
-    (the same as :meth:`wait`, then :attr:`motion`).
+    (the same as :meth:`wait`, then :attr:`motion`). It is a coroutine, so that a task
+    made of it (``asyncio.wait_for(motion, 5)``, ``asyncio.ensure_future(motion)``,
+    ``asyncio.gather(motion)``) runs a wait of its own, and gives the move up when it is
+    cancelled, even before its first step, as a cancelled :meth:`wait` does.
     """
 
     def __init__(self, robot: AsyncRobot, motion: Motion) -> None:
@@ -345,6 +344,8 @@ class AsyncMotion:
         #: The move itself: its target, phase, last pose, ``withdrawn``,
         #: ``stop_delivered``... (never call its blocking ``wait`` from a coroutine).
         self.motion = motion
+        # The run of each task made of the handle (each its own wait, as each ``await``).
+        self._runs = weakref.WeakKeyDictionary[object, Coroutine[Any, Any, Motion]]()
 
     @property
     @_documented(Motion.done)
@@ -378,9 +379,20 @@ class AsyncMotion:
         """
         return self._robot._follow(self.motion, self.motion.progress)
 
+    @property  # never assigned here: _Primed.__init__ (which sets it) is not called
+    def _body(self) -> Coroutine[Any, Any, Motion]:  # type: ignore[override]
+        """The run of the task stepping the handle, made at its first step (primed)."""
+        task = asyncio.current_task()
+        if task not in self._runs:
+            self._runs[task] = self._until_done()._body
+        return self._runs[task]
+
+    def _until_done(self) -> _Primed[Motion]:
+        """:meth:`wait`, then the move: what ``await motion`` and a task made of it run."""
+        return self._robot._follow(self.motion, functools.partial(_waited, self.motion))
+
     def __await__(self) -> Generator[Any, None, Motion]:
-        yield from self.wait().__await__()
-        return self.motion
+        return self._until_done().__await__()
 
 
 class AsyncRobot(_Front):
@@ -601,7 +613,7 @@ class AsyncRobot(_Front):
         """The caller was cancelled: the call gives up, then whatever it left running."""
         job.cancel()
         deadline = asyncio.get_running_loop().time() + self.settle_timeout_s
-        if job.skipped:
+        if job._future.cancelled():
             # Never started, so the call itself sent nothing; but a wait queued behind
             # another call follows a move that was sent, and that move is given up: a
             # running wait on it (another caller's) gives up too.
