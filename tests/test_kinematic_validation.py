@@ -7,7 +7,7 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
-from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError
+from tmmaster import Pose, Robot, UnreachablePoseError
 from tmmaster.pickplace import ARTICLE_HOME, pick_and_place, validate_config, validate_plan
 from tmmaster.sim import Simulator
 
@@ -52,9 +52,9 @@ def test_a_line_through_a_joint_limit_is_refused_before_the_write(
     assert caught.value.reason == "joint_limit"
     assert motion_writes(sim) == []  # status reads happened; no command was written
     # The target itself has joint solutions, none in the arm's configuration (J3 would
-    # pass its limit there too); the PTP's, the nearest in another configuration (J1
-    # turned about 120 deg), puts link 3 under the table: refused as well, nothing sent.
-    with pytest.raises(ConfigError, match="link 3"):
+    # pass its limit there too): the robot program solves a Cartesian target in the
+    # current one (TMscript inversekin, p. 207), so the PTP is refused too, nothing sent.
+    with pytest.raises(UnreachablePoseError, match="another pose configuration"):
         robot.check_move(NEAR_BASE, speed=100)
     assert motion_writes(sim) == []
 

@@ -90,11 +90,12 @@ class UnreachablePoseError(ConfigError):
 
     Args:
         message: What is wrong, naming the pose.
-        reason: ``"reach"``, ``"joint_limit"`` or ``"singularity"``.
+        reason: ``"reach"``, ``"joint_limit"``, ``"singularity"`` or ``"configuration"``
+            (reachable only in another pose configuration than the arm's).
         pose: The pose refused.
     """
 
-    #: Why: ``"reach"``, ``"joint_limit"`` or ``"singularity"``.
+    #: Why: ``"reach"``, ``"joint_limit"``, ``"singularity"`` or ``"configuration"``.
     reason: str
 
     def __init__(self, message: str, *, reason: str, pose: Pose | None = None) -> None:

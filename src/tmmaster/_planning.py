@@ -35,7 +35,7 @@ from ._cell import (
 )
 from ._channels import Command, CommandKind
 from ._checks import Bounds, Policy, bounded, is_finite_number, shown
-from ._exceptions import ConfigError, RobotError
+from ._exceptions import ConfigError, RobotError, UnreachablePoseError
 from ._pose import MotionType, Pose, refuse_suspect_units
 from ._robot_models import PathGauge, RobotModel, arc_through
 
@@ -338,9 +338,23 @@ class Planner:
         self._check_target(pose, speed)
         seed = tuple(seed_deg) if seed_deg is not None else self.joints_hint
         joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
+        self._keep_configuration(seed, joints, pose)
         self.workspace.check_arm(self.model, joints)
         _check_ptp_body(self.model, seed, joints, self.tool, self.workspace.floor_z_mm)
         return joints
+
+    def _keep_configuration(self, seed: Sequence[float] | None, joints: Joints, pose: Pose) -> None:
+        """Refuse a Cartesian target the arm reaches only in another pose configuration
+        than the one it is in (``seed``): the robot program solves it in the current one
+        (TMscript 2.24 ``inversekin``, p. 207) and answers "unreachable"."""
+        have, need = self.model.configuration(seed or joints), self.model.configuration(joints)
+        if have != need:
+            text = (
+                f"pose {pose} is reachable only in another pose configuration (shoulder front,"
+                f" J3 >= 0, J5 >= 0: {need}) than the arm's ({have}): the robot solves a Cartesian"
+                " target in its current one (TMscript inversekin, p. 207); use move_joints"
+            )
+            raise UnreachablePoseError(text, reason="configuration", pose=pose)
 
     def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
         """Self-collision, the mounting plane and the gripper's housing at ``samples``."""
@@ -413,12 +427,11 @@ class Planner:
         """The arc's joint samples from ``start``; refuses a point outside the workspace."""
         samples = self.model.arc_joints(start, via, to, start_joints_deg=joints, tool=self.tool)
         arc = arc_through(start, via, to)
-        steps = len(samples) - 1
-        for k in range(steps + 1):
-            point = kin.transform_to_pose(arc.at(k / steps))
+        for k, joints in enumerate(samples):
+            point = kin.transform_to_pose(arc.at(k / (len(samples) - 1)))
             try:
                 self.workspace.check(point, tool=self.tool)
-                self.workspace.check_arm(self.model, samples[k])
+                self.workspace.check_arm(self.model, joints)
             except ConfigError as exc:
                 raise ConfigError(f"the arc to {to} passes {point}: {exc}") from exc
         try:
@@ -467,11 +480,9 @@ class Planner:
     def origin(self, start: Pose) -> Pose:
         """The pose a plan starts from: the last target when the arm reads as being there."""
         last = self.hint_pose
-        if last is not None and self._is_at(start, last):
-            # The arm is where the last move put it (the read pose differs by the
-            # registers' rounding): plan from the exact target, whose joints are known.
-            return last
-        return start
+        # The arm is where the last move put it (the read pose differs by the registers'
+        # rounding): plan from the exact target, whose joints are known.
+        return last if last is not None and self._is_at(start, last) else start
 
     def take_robot_joints(self, pose: Pose, joints: Joints) -> None:
         """Plan from the joints the robot reported at ``pose``, unless they are the seed's.
@@ -620,6 +631,7 @@ class Planner:
         else:
             # The same solve as validate()'s when the seed did not change (cached).
             target_joints = self.model.inverse(target, seed_deg=hint, tool=self.tool)
+            self._keep_configuration(hint, target_joints, target)
             motion = MotionType(command.kind.value)
             expected = self._model_time(origin, target, speed, motion, accel)
         gauge = PathGauge.of(
@@ -719,8 +731,7 @@ def offset_pose(*values: object) -> Pose:
     for name, v in zip(("dx", "dy", "dz", "drx", "dry", "drz"), values, strict=True):
         if not is_finite_number(v):
             raise ConfigError(f"{name} must be a finite number, got {shown(v)}")
-    x, y, z, rx, ry, rz = (float(v) for v in values)  # type: ignore[arg-type]
-    return Pose(x, y, z, rx, ry, rz)
+    return Pose(*(float(v) for v in values))  # type: ignore[arg-type]
 
 
 def moved(start: Pose, offset: Pose, frame: str) -> Pose:
@@ -733,11 +744,4 @@ def moved(start: Pose, offset: Pose, frame: str) -> Pose:
         return kin.transform_to_pose(kin.multiply(here, kin.pose_to_transform(offset)))
     turn = kin.pose_to_transform(Pose(0, 0, 0, offset.rx, offset.ry, offset.rz))
     turned = kin.transform_to_pose(kin.multiply(turn, here))
-    return Pose(
-        start.x + offset.x,
-        start.y + offset.y,
-        start.z + offset.z,
-        turned.rx,
-        turned.ry,
-        turned.rz,
-    )
+    return Pose(start.x + offset.x, start.y + offset.y, start.z + offset.z, *turned.as_list()[3:])
