@@ -247,15 +247,18 @@ def test_a_stalled_motion_times_out_with_the_last_pose_and_is_stopped(
     assert isinstance(info.value, TimeoutError)
     assert info.value.pose is not None
     assert not info.value.pose.is_close(APPROACH)
-    stop_written = [
-        r
+    writes = [
+        (r.address, r.values)
         for r in sim.request_log
-        if r.values is not None and r.function_code in (5, 15, 16) and r is not None
-    ][-1]
+        if r.values is not None and r.function_code in (5, 15, 16)
+    ]
     if profile == "article":
-        assert (stop_written.address, stop_written.values) == (0x0207, (3,))
+        assert writes[-1] == (0x0207, (3,))
     else:
-        assert (stop_written.address, stop_written.values) == (7105, (1,))
+        # The Stop, then the command's cancel record (command none, its number), which the
+        # program acts on where the robot refuses the Stop.
+        assert writes[-2] == (7105, (1,))
+        assert writes[-1] == (9014, (0, 1))
 
 
 def test_derived_timeout_follows_the_articles_rule(

@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from tmmaster import Pose, ProjectPausedError, Robot, StopRequestedError
+from tmmaster import Pose, ProjectPausedError, ResponseTimeoutError, Robot, StopRequestedError
 from tmmaster.sim import Simulator
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
@@ -64,3 +64,33 @@ def test_a_move_given_up_never_goes_on_when_the_stop_coil_is_refused(
         assert sim.tcp_pose().is_close(held, mm=0.01, deg=0.01)  # not moving any more
         assert not held.is_close(FAR, mm=1.0, deg=1.0)
         assert len(sim.motion_log()) == 2  # LEFT, then FAR once: never started again
+
+
+def test_a_cancel_record_that_fails_never_keeps_the_stop_from_going_out(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The other way round: the robot takes the Stop, but the cancel record's write fails
+    # (a lossy link). The Stop is the arm's first way to stop: it must still go out.
+    with (
+        Simulator(time_scale=5) as sim,
+        Robot("127.0.0.1", sim.port, gripper=None) as robot,
+    ):
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+
+        def lost(ticket: object) -> None:
+            raise ResponseTimeoutError("the cancel record's write went unanswered")
+
+        monkeypatch.setattr(robot._channel, "cancel", lost)
+        motion = robot.start_move(FAR, speed=5)
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(LEFT) > 20, timeout=5.0)
+        robot.interrupt()
+        with pytest.raises(StopRequestedError):
+            motion.wait()
+        assert motion.stop_delivered is True
+        let_run(sim, 10)  # 4 simulated s: braked to rest
+        held = sim.tcp_pose()
+        let_run(sim, 20)
+        assert sim.tcp_pose().is_close(held, mm=0.01, deg=0.01)
+        assert not held.is_close(FAR, mm=1.0, deg=1.0)
+        assert len(sim.motion_log()) == 2

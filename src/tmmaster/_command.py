@@ -446,13 +446,18 @@ class _MotionFollower:
             if not self._channel.can_stop:
                 return False  # running, and this profile cannot stop it
             try:
-                self._channel.cancel(ticket)  # acted on by the robot even if it refuses Stop
                 self.stop()
                 motion.stop_delivered = True
             except TMMasterError as exc:
                 motion.stop_delivered = False
                 confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
+            try:
+                # After the Stop, never delaying it; whatever became of it: the program
+                # ends the command on this record even where the robot refuses Stop.
+                self._channel.cancel(ticket)
+            except TMMasterError as exc:
+                self._log.error("robot.cancel_failed", error=str(exc))
         return confirmed
 
     def _withdraw(
