@@ -281,6 +281,40 @@ def test_an_interrupt_between_a_cancelled_calls_end_and_its_clear_stands(
     assert [m.target for m in sim.motion_log() if m.target is not None] == [A]
 
 
+def test_a_clear_stop_request_while_a_cancelled_call_gives_up_does_not_take_its_stop_back(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # Forced interleaving: the user's clear_stop_request() (another part of the program
+    # resuming) lands after a running move_to was cancelled, before its wait saw the stop
+    # request (the driver's loop held). The move must still be stopped, not run to its end.
+    sim = tm_simulator_factory("article", time_scale=2, timing=Timing(tick_hz=SUITE_TICK_HZ))
+
+    async def scenario() -> None:
+        async with open_robot(sim) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            task = asyncio.create_task(robot.move_to(A, speed=10))
+            await until(lambda: bool(sim.motion_log()))
+            loop = robot.robot._transport.fleet._runner.loop
+            release = threading.Event()
+            loop.call_soon_threadsafe(release.wait, 5.0)  # the wait's polls held
+            task.cancel()
+            await until(robot.robot._stop_event.is_set)  # the cancelled call's stop request
+            robot.clear_stop_request()
+            release.set()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert robot.last_motion is not None
+            assert robot.last_motion.stop_delivered is True
+            await asyncio.sleep(0.3)  # a move still running would go on
+            assert not sim.tcp_pose().is_close(A)  # stopped short of it (seconds away)
+            # The user's clear took effect once the cancelled call was over.
+            await robot.wait_until_ready(timeout_s=5)
+            await robot.move_to(B, speed=100)
+
+    run(scenario)
+    assert [m.target for m in sim.motion_log() if m.target is not None] == [A, B]
+
+
 def test_a_call_that_will_not_give_up_raises_the_cancel_after_settle_timeout_s(
     caplog: pytest.LogCaptureFixture,
 ) -> None:

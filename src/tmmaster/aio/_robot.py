@@ -174,11 +174,10 @@ class _Job(Generic[T]):
 
     def unsupervised(self) -> Motion | None:
         """After the call ended uninterrupted: the motion it leaves nobody waiting for."""
-        if self._interrupted or not self.outcome.done() or self.outcome.cancelled():
+        outcome = self.outcome
+        if self._interrupted or not outcome.done() or outcome.cancelled() or outcome.exception():
             return None
-        if self.outcome.exception() is not None:
-            return None
-        return _live_motion(self.outcome.result(), self.follows)
+        return _live_motion(outcome.result(), self.follows)
 
 
 def _retrieve(future: asyncio.Future[Any]) -> None:
@@ -545,9 +544,13 @@ class AsyncRobot(_Front):
 
     @_documented(Robot.clear_stop_request)
     def clear_stop_request(self) -> None:
+        """A cancelled call giving its command up keeps its own stop request until it is
+        over (its wait may not have seen it yet)."""
         with self._stop_lock:
             self._user_stop = False
-            self.robot.clear_stop_request()
+            running = self._worker.running
+            if running is None or not running._interrupted:
+                self.robot.clear_stop_request()
 
     @_documented(Robot.close)
     async def close(self, *, timeout_s: float | None = None) -> bool:
@@ -631,6 +634,7 @@ class AsyncRobot(_Front):
             return
         # Given up before any other call runs.
         give_up = _Job(self, functools.partial(self._give_up_in_thread, live))
+        give_up._interrupted = True  # a stop request of its own (clear_stop_request keeps it)
         if self._worker.submit(give_up, first=True):
             await self._settle(give_up.outcome, deadline, "give_up")
 
