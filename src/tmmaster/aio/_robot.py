@@ -323,8 +323,8 @@ class _Front:
                 member.__qualname__ = f"{cls.__qualname__}.{name}"
 
     def _on_thread(self, name: str, /, *args: Any, **kwargs: Any) -> Coroutine[Any, Any, Any]:
-        """The method ``name`` of the part, called on the robot's thread."""
-        part = getattr(self._robot.robot, self._part)
+        """The method ``name`` of the part (of the Robot itself), called on the robot's thread."""
+        part = getattr(self._robot.robot, self._part) if self._part else self._robot.robot
         return self._robot._run(getattr(part, name), *args, **kwargs)
 
 
@@ -444,6 +444,7 @@ class AsyncRobot(_Front):
 
     def __init__(self, robot: Robot, *, settle_timeout_s: float = DEFAULT_SETTLE_TIMEOUT_S) -> None:
         require_positive("settle_timeout_s", settle_timeout_s)
+        super().__init__(self)  # the front of the Robot itself
         #: The Robot underneath: its settings and attributes (``name``, ``profile``,
         #: ``stats``, ``timeouts`` ...). Call its blocking methods only through :meth:`call`.
         self.robot = robot
@@ -589,9 +590,6 @@ class AsyncRobot(_Front):
         return self.connect().__await__()
 
     # -- internals -----------------------------------------------------------------------
-
-    def _on_thread(self, name: str, /, *args: Any, **kwargs: Any) -> Coroutine[Any, Any, Any]:
-        return self._run(getattr(self.robot, name), *args, **kwargs)
 
     async def _run(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> T:
         return await self._await(_Job(self, functools.partial(fn, *args, **kwargs)))
