@@ -104,10 +104,21 @@ def _build_layout(
                 zeros[table][address] = 0
                 raw[table].add(address)
     gaps = {table: _gaps(register_map, table) for table in Table}
+    return _Layout(zeros, owner, gaps, raw, extra, *_runs(zeros, gaps))
+
+
+_Runs = dict[Table, tuple[tuple[int, int], ...]]
+
+
+def _runs(
+    zeros: dict[Table, dict[int, int]], gaps: dict[Table, set[int]]
+) -> tuple[_Runs, _Runs, dict[Table, tuple[int, ...]]]:
+    """Per table: the served runs, the readable runs (the gaps a read may cover too), and
+    the first address of each readable run."""
     served = {table: tuple(_merge(set(zeros[table]))) for table in Table}
     readable = {table: tuple(_merge(set(zeros[table]) | gaps[table])) for table in Table}
     starts = {table: tuple(first for first, _ in runs) for table, runs in readable.items()}
-    return _Layout(zeros, owner, gaps, raw, extra, served, readable, starts)
+    return served, readable, starts
 
 
 def _gaps(register_map: RegisterMap, table: Table) -> set[int]:
