@@ -104,14 +104,8 @@ def transform_to_pose(t: Transform) -> Pose:
     else:
         roll = 0.0
         yaw = math.atan2(-t[0][1], t[1][1])
-    return Pose(
-        t[0][3],
-        t[1][3],
-        t[2][3],
-        _tidy(math.degrees(roll)),
-        _tidy(math.degrees(pitch)),
-        _tidy(math.degrees(yaw)),
-    )
+    angles = (_tidy(math.degrees(roll)), _tidy(math.degrees(pitch)), _tidy(math.degrees(yaw)))
+    return Pose(t[0][3], t[1][3], t[2][3], *angles)
 
 
 def flange_of(tcp: Pose, tool: Pose | None) -> Pose:

@@ -44,6 +44,9 @@ Joints = tuple[float, ...]
 #: Reported joints this close (deg, each) to the seed are the seed's (the registers'
 #: float32 rounding, a servo's last hundredths of a degree).
 SAME_JOINTS_DEG = 0.05
+#: A Line or an arc may turn the TCP by at most this much, deg: a half turn has no
+#: shorter way round, and the robot, from the pose it holds, may turn either way.
+MAX_PATH_TURN_DEG = 179.0
 
 
 class Workspace(BaseModel):
@@ -125,12 +128,10 @@ class Workspace(BaseModel):
                 f" below {plane}; the tool reaches {pose.z - lowest:.1f} mm below the TCP"
                 " in this orientation (workspace tool_extent_mm)"
             )
-        if tool is not None:
-            flange = kin.flange_of(pose, tool)
-            if flange.z < floor:
-                raise ConfigError(
-                    f"pose {pose} puts the flange at z = {flange.z:.1f} mm, below {plane}"
-                )
+        if tool is not None and (flange := kin.flange_of(pose, tool)).z < floor:
+            raise ConfigError(
+                f"pose {pose} puts the flange at z = {flange.z:.1f} mm, below {plane}"
+            )
 
     def check_arm(self, model: RobotModel, joints_deg: Sequence[float]) -> None:
         """Refuse joints that put a link of the arm below the table plane.
@@ -356,6 +357,13 @@ class Planner:
             )
             raise UnreachablePoseError(text, reason="configuration", pose=pose)
 
+    def _check_turn(self, start: Pose, target: Pose) -> None:
+        """Refuse a Line or an arc that turns the TCP (nearly) half a turn: the master
+        checks one way round, the robot may take the other (a joint past its range)."""
+        if (turn := start.rotation_to(target)) > MAX_PATH_TURN_DEG:
+            text = f"the TCP would turn {turn:.2f} deg from {start} to {target}, about half a turn"
+            raise ConfigError(f"{text}: no way round is the shorter, the robot may take either")
+
     def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
         """Self-collision, the mounting plane and the gripper's housing at ``samples``."""
         floor = self.workspace.floor_z_mm
@@ -390,6 +398,7 @@ class Planner:
             return self.validate(target, speed, seed_deg)
         self._check_target(target, speed)
         path = self.model.line_joints(start, target, start_joints_deg=seed_deg, tool=self.tool)
+        self._check_turn(start, target)
         self.workspace.check_arm(self.model, path[-1])
         self._check_body(path[0], path[1:])
         return path[-1]
@@ -426,6 +435,7 @@ class Planner:
     ) -> list[Joints]:
         """The arc's joint samples from ``start``; refuses a point outside the workspace."""
         samples = self.model.arc_joints(start, via, to, start_joints_deg=joints, tool=self.tool)
+        self._check_turn(start, to)
         arc = arc_through(start, via, to)
         for k, joints in enumerate(samples):
             point = kin.transform_to_pose(arc.at(k / (len(samples) - 1)))
@@ -515,10 +525,8 @@ class Planner:
             self.joints_hint, self.hint_pose = plan.joints, plan.target
 
     def _is_at(self, pose: Pose, other: Pose) -> bool:
-        settings = self._settings
-        return pose.is_close(
-            other, mm=settings.position_tolerance_mm, deg=settings.orientation_tolerance_deg
-        )
+        s = self._settings
+        return pose.is_close(other, mm=s.position_tolerance_mm, deg=s.orientation_tolerance_deg)
 
     # -- expected times and timeouts -----------------------------------------
 
@@ -634,6 +642,8 @@ class Planner:
             self._keep_configuration(hint, target_joints, target)
             motion = MotionType(command.kind.value)
             expected = self._model_time(origin, target, speed, motion, accel)
+            if motion is MotionType.LINE:
+                self._check_turn(origin, target)
         gauge = PathGauge.of(
             self.model,
             origin,
