@@ -99,6 +99,16 @@ class GripperMount(Protocol):
             The robot's status.
         """
 
+    def gated(self, write: Callable[[], None]) -> None:
+        """Make a gripper command write through the robot's command gate.
+
+        Args:
+            write: The write (one request).
+
+        Raises:
+            StopRequestedError: The robot is closing or a stop is requested: not written.
+        """
+
     def run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
         """Send a gripper command through the robot program's handshake and wait for it.
 
@@ -374,7 +384,7 @@ class RegisterGripper(_RobotWiredGripper):
         value = command.code_of(label)
         robot.check_fault()  # never write a gripper command during an e-stop or robot error
         # Writing the same open/close value again is harmless, so retrying is allowed.
-        robot.transport.write_fields([(command, value)], retry=True)
+        robot.gated(lambda: robot.transport.write_fields([(command, value)], retry=True))
         # The settle time counts from the write that landed, not from the first attempt:
         # retries during a short outage must not eat the time the fingers need.
         started = time.monotonic()
@@ -504,6 +514,8 @@ class _OwnConnectionGripper(Gripper):
         self.ack_timeout_s = link.ack_timeout_s
         self._guard = link.guard
         self._stop_event = link.stop_event
+        # The robot's command gate, once mounted (a gripper on its own writes directly).
+        self._gated: Callable[[Callable[[], None]], None] = _call
         #: The gripper's own link.
         self.transport: Transport = link.transport or open_transport(
             link.host,
@@ -528,6 +540,7 @@ class _OwnConnectionGripper(Gripper):
             self._guard = mount.check_fault
         if self._stop_event is None:
             self._stop_event = mount.stop_event
+        self._gated = mount.gated
 
     def connect(self) -> None:
         """Open the gripper's connection."""
@@ -633,14 +646,12 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         self.check_robot()
         started = time.monotonic()
         # One FC16 of force, width and control; sent once: the acknowledgement tells.
-        self.transport.write_fields(
-            [
-                (p.field("force"), self.force_n),
-                (p.field("width"), width_mm),
-                (p.field("control"), p.field("control").code_of("execute")),
-            ],
-            retry=False,
-        )
+        values = [
+            (p.field("force"), self.force_n),
+            (p.field("width"), width_mm),
+            (p.field("control"), p.field("control").code_of("execute")),
+        ]
+        self._gated(lambda: self.transport.write_fields(values, retry=False))
         self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
         acknowledged = False
 
@@ -880,15 +891,13 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         command = p.field("command").code_of(f"grip_{self.grip_mode}")
         self.check_robot()
         started = time.monotonic()
-        self.transport.write_fields(
-            [
-                (p.field("target_width"), width_mm),
-                (p.field("target_force"), self.force_n),
-                (p.field("target_speed"), self.speed_percent),
-                (p.field("command"), command),
-            ],
-            retry=False,
-        )
+        values = [
+            (p.field("target_width"), width_mm),
+            (p.field("target_force"), self.force_n),
+            (p.field("target_speed"), self.speed_percent),
+            (p.field("command"), command),
+        ]
+        self._gated(lambda: self.transport.write_fields(values, retry=False))
         self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
 
         def check() -> GripperStatus | None:
@@ -951,3 +960,8 @@ def auto_gripper(profile: RobotProfile, *, settle_s: float) -> Gripper:
     if CommandKind.GRIPPER_CLOSE.value in labels and profile.has("grasp_status"):
         return SequenceGripper()
     return NoGripper()
+
+
+def _call(write: Callable[[], None]) -> None:
+    """A gripper on its own: its command write, made at once."""
+    write()

@@ -63,6 +63,7 @@ from ._fleet import (
     open_transport,
     wake_waits,
 )
+from ._gate import CommandGate
 from ._gripper import GRIPPER_DRIVERS, Gripper, GripperLink, NoGripper, auto_gripper
 from ._heartbeat import Heartbeat
 from ._io import RobotIO
@@ -257,6 +258,12 @@ class _Mount:
     check_fault: Callable[[], None]
     checked_status: Callable[[], RobotStatus]
     run_command: Callable[[CommandKind, float | None], None]
+    gate: CommandGate
+
+    def gated(self, write: Callable[[], None]) -> None:
+        """A gripper command write through the robot's command gate (refused unsent
+        once close() began or while a stop is requested)."""
+        self.gate.write(lambda: None, write)
 
     @property
     def transport(self) -> Transport:
@@ -445,6 +452,7 @@ class Robot:
             check_fault=self.check_fault,
             checked_status=self._checked_status,
             run_command=self._run_command,
+            gate=self._gate,
         )
 
     # -- settings (the follower's: every wait reads them when it starts) ---
