@@ -13,11 +13,19 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import settings
 
 import tmmaster
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import PollPolicy, Robot
 from tmmaster.sim import Simulator, Timing
+
+# The property and stateful tests draw the same examples on every run, so a run's result
+# depends on the code alone; TMMASTER_HYPOTHESIS=explore draws new ones (a longer hunt,
+# with TMMASTER_STATEFUL_EXAMPLES). Loaded before any test module makes its settings.
+settings.register_profile("deterministic", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("TMMASTER_HYPOTHESIS", "deterministic"))
 
 
 def _open_sockets() -> set[str]:
