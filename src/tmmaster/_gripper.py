@@ -44,7 +44,7 @@ from ._exceptions import (
 from ._fleet import open_transport
 from ._logging import get_logger
 from ._poller import Poller
-from ._registers import GripperDriverName, GripperProfile, RobotProfile
+from ._registers import GripperDriverName, GripperProfile, RegisterField, RobotProfile
 from ._retry import RetryPolicy
 from ._status import RobotStatus
 from ._transport import Transport
@@ -501,6 +501,9 @@ class GripperLink:
 class _OwnConnectionGripper(Gripper):
     """A gripper with its own Modbus connection and register map."""
 
+    #: The field whose "stop" value withdraws a command and stops the fingers.
+    _STOP_FIELD = "command"
+
     def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
         #: The gripper's register map.
         self.profile = profile
@@ -550,18 +553,26 @@ class _OwnConnectionGripper(Gripper):
         """Close the gripper's connection (safe twice)."""
         self.transport.close()
 
-    def wait_for(
+    def _send_and_wait(
         self,
+        values: list[tuple[RegisterField, Value]],
         width_mm: float,
         started: float,
         timeout_s: float | None,
         check: Callable[[], GripperStatus | None],
     ) -> GripperStatus:
-        """Poll ``check`` until the move to ``width_mm`` is over, then log its outcome.
+        """Write a move's command once (through the robot's gate), poll ``check`` until
+        the move is over, then log its outcome.
+
+        Whatever ends the call once the write was attempted (a lost answer, a timeout, a
+        stop request, Ctrl-C, a robot e-stop) first writes the profile's stop, retried:
+        the device may have taken the command, and a move given up must not go on (a
+        command not taken yet is withdrawn, fingers at rest stay so).
 
         Args:
+            values: The command's fields and values (one FC16, never retried).
             width_mm: The move's target width (for the messages).
-            started: ``time.monotonic()`` when the command was written.
+            started: ``time.monotonic()`` before the write.
             timeout_s: Bound of the wait, s; None: ``timeout_s`` of the link.
             check: Returns the final status once the move is over, else None.
 
@@ -569,17 +580,37 @@ class _OwnConnectionGripper(Gripper):
             The final status.
 
         Raises:
-            GripperTimeoutError: The move did not end in time.
-            StopRequestedError: A stop was requested meanwhile.
+            StopRequestedError: The robot is closing or a stop is requested (unsent), or
+                a stop was requested meanwhile (the fingers were stopped).
+            GripperTimeoutError: The move did not end in time (the fingers were stopped).
         """
-        status = _wait(
-            f"{self.kind} move to {width_mm:g} mm",
-            self.poll_interval_s,
-            timeout_s or self.timeout_s,
-            check,
-            guard=self._guard,
-            stop_event=self._stop_event,
-        )
+        sent = False
+
+        def send() -> None:
+            nonlocal sent
+            sent = True
+            self.transport.write_fields(values, retry=False)
+
+        try:
+            self._gated(send)
+            self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
+            status = _wait(
+                f"{self.kind} move to {width_mm:g} mm",
+                self.poll_interval_s,
+                timeout_s or self.timeout_s,
+                check,
+                guard=self._guard,
+                stop_event=self._stop_event,
+            )
+        except BaseException:
+            if sent:
+                field = self.profile.field(self._STOP_FIELD)
+                try:
+                    stop = [(field, field.code_of("stop"))]
+                    self.transport.write_fields(stop, retry=True, interruptible=False)
+                except TransportError as exc:
+                    self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
+            raise
         self._events.info(
             "gripper.command_done",
             gripper=self.kind,
@@ -620,6 +651,8 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         force_n: Gripping force, N.
     """
 
+    _STOP_FIELD = "control"
+
     def __init__(
         self, profile: GripperProfile, link: GripperLink, *, force_n: float = 40.0
     ) -> None:
@@ -651,8 +684,6 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             (p.field("width"), width_mm),
             (p.field("control"), p.field("control").code_of("execute")),
         ]
-        self._gated(lambda: self.transport.write_fields(values, retry=False))
-        self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
         acknowledged = False
 
         def check() -> GripperStatus | None:
@@ -670,26 +701,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             status = self.status()
             return None if status.busy else status
 
-        try:
-            return self.wait_for(width_mm, started, timeout_s, check)
-        except BaseException:
-            # Whatever ends the wait (ack timeout, robot e-stop, stop request), an execute
-            # the gripper has not taken must not stay armed.
-            if not acknowledged:
-                self._withdraw()
-            raise
-
-    def _withdraw(self) -> None:
-        # A pending execute left in the register would run whenever the device gets to
-        # it (e.g. once activated), long after the caller gave up. Writing 0 withdraws
-        # it, or stops the fingers if the device took it meanwhile: safe either way.
-        field = self.profile.field("control")
-        try:
-            self.transport.write_fields(
-                [(field, field.code_of("stop"))], retry=True, interruptible=False
-            )
-        except TransportError as exc:
-            self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
+        return self._send_and_wait(values, width_mm, started, timeout_s, check)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the map's maximum width.
@@ -799,12 +811,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             GripperError: The device is not a 2FG7 or 2FG14.
         """
         super().connect()
-        names = (
-            "min_external_width",
-            "max_external_width",
-            "min_internal_width",
-            "max_internal_width",
-        )
+        names = tuple(f"{a}_{b}_width" for b in ("external", "internal") for a in ("min", "max"))
         try:
             values = self.read(*names)
         except (ConnectionLostError, ResponseTimeoutError) as exc:
@@ -897,8 +904,6 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             (p.field("target_speed"), self.speed_percent),
             (p.field("command"), command),
         ]
-        self._gated(lambda: self.transport.write_fields(values, retry=False))
-        self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
 
         def check() -> GripperStatus | None:
             status = self.status()
@@ -913,7 +918,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
                 return status
             return None
 
-        return self.wait_for(width_mm, started, timeout_s, check)
+        return self._send_and_wait(values, width_mm, started, timeout_s, check)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the maximum width of the current grip mode.

@@ -1,0 +1,113 @@
+"""A stand-alone gripper's move that the master gives up on does not go on by itself.
+
+A robot move the master gives up on (a timeout, a stop request, a lost answer) is
+stopped (docs/safety.md); a 2FG7's fingers must be too. The check is on what the
+simulated gripper did: once its fingers are at rest, they must have stopped short of
+the target instead of finishing the move the master no longer follows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from sim_speeds import SUITE_TICK_HZ
+from tmmaster import (
+    Blog2FG7Gripper,
+    GripperLink,
+    GripperTimeoutError,
+    OnRobot2FG7Gripper,
+    RetryPolicy,
+    TransportError,
+    gripper_profile,
+)
+from tmmaster.sim import RobotSetup, Simulator, Timing
+
+Factory = Callable[..., Simulator]
+
+
+@pytest.fixture
+def tm_simulator_factory(memory_simulator_factory: Factory) -> Factory:
+    """The drivers are the subject here, not TCP: simulators in memory."""
+    return memory_simulator_factory
+
+
+def slow_sim(factory: Factory, gripper: str, time_scale: float) -> Simulator:
+    """A simulator whose fingers take a good part of a second (wall) to close."""
+    return factory(
+        "tmflow",
+        robot=RobotSetup(gripper=gripper),
+        time_scale=time_scale,
+        timing=Timing(tick_hz=SUITE_TICK_HZ),
+    )
+
+
+def link(sim: Simulator) -> GripperLink:
+    """The gripper's link, polling every 10 ms."""
+    assert sim.gripper_port is not None
+    retry = RetryPolicy(attempts=5, total_time_s=2.0, initial_backoff_s=0.01, jitter_s=0.0)
+    return GripperLink(sim.url, sim.gripper_port, poll_interval_s=0.01, retry=retry)
+
+
+def at_rest_width(sim: Simulator) -> float:
+    """The fingers' width once they are at rest (a few ticks on: a command is taken at one)."""
+    ticks = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= ticks + 3, 5.0)
+    sim.wait_for(lambda: not sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+    return float(sim.call(lambda: sim.backend.gripper_state().width_mm))
+
+
+def test_an_onrobot_move_given_up_at_its_timeout_is_stopped(tm_simulator_factory: Factory) -> None:
+    # 1 %: 16 mm/s, 39 -> 1 mm takes 2.4 simulated s, 0.6 s at 4x; given up after 0.1 s.
+    sim = slow_sim(tm_simulator_factory, "onrobot-2fg7", 4.0)
+    gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), link(sim), speed_percent=1)
+    gripper.connect()
+    try:
+        with pytest.raises(GripperTimeoutError):
+            gripper.close(timeout_s=0.1)
+    finally:
+        gripper.disconnect()
+    assert at_rest_width(sim) > 15.0  # stopped, not closed to 1 mm
+
+
+def test_an_onrobot_move_whose_answer_was_lost_is_stopped(tm_simulator_factory: Factory) -> None:
+    sim = slow_sim(tm_simulator_factory, "onrobot-2fg7", 4.0)
+    gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), link(sim), speed_percent=1)
+    gripper.connect()
+    command = gripper.profile.field("command").address
+    # The device takes the command, then the link is cut before its answer.
+    sim.inject(f"drop_connections:on_write_to={command},lose=answer")
+    try:
+        with pytest.raises(TransportError):
+            gripper.close()
+    finally:
+        gripper.disconnect()
+    assert at_rest_width(sim) > 15.0
+
+
+def test_a_blog_move_given_up_after_it_was_taken_is_stopped(tm_simulator_factory: Factory) -> None:
+    # 100 mm/s: 39 -> 0 mm takes 0.39 s at 1x; acknowledged at once, given up after 0.1 s.
+    sim = slow_sim(tm_simulator_factory, "blog-2fg7", 1.0)
+    gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link(sim))
+    gripper.connect()
+    try:
+        with pytest.raises(GripperTimeoutError):
+            gripper.close(timeout_s=0.1)
+    finally:
+        gripper.disconnect()
+    assert at_rest_width(sim) > 15.0
+
+
+def test_a_blog_move_whose_answer_was_lost_is_withdrawn(tm_simulator_factory: Factory) -> None:
+    sim = slow_sim(tm_simulator_factory, "blog-2fg7", 1.0)
+    gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link(sim))
+    gripper.connect()
+    control = gripper.profile.field("control").address
+    sim.inject(f"drop_connections:on_write_to={control},lose=answer")
+    try:
+        with pytest.raises(TransportError):
+            gripper.close()
+    finally:
+        gripper.disconnect()
+    assert at_rest_width(sim) > 15.0
