@@ -477,8 +477,19 @@ def test_a_master_with_the_same_tool_drives_the_simulator_through_the_cycle(
         assert flange.is_close(DEFAULT_HOME.offset(dz=120), mm=1e-3, deg=1e-3)
 
 
+#: From the home posture (shoulder, elbow, wrist: True, True, True), reachable only with
+#: the wrist flipped (J5 -90): inversekin answers "by the current pose configuration"
+#: (TMscript 2.24, p. 207), so the robot program finds it unreachable.
+TM5_OTHER_CONFIGURATION = Pose(0, 200, 100, 180, 0, 90)
+
+
 @pytest.mark.parametrize(
-    ("target", "reason"), [(TM5_JOINT_LIMIT, "joint_limit"), (TM5_SINGULAR, "singularity")]
+    ("target", "reason"),
+    [
+        (TM5_JOINT_LIMIT, "joint_limit"),
+        (TM5_SINGULAR, "singularity"),
+        (TM5_OTHER_CONFIGURATION, "configuration"),
+    ],
 )
 def test_tmflow_reports_unreachable_and_logs_the_reason(target: Pose, reason: str) -> None:
     ctl, bank, _, log = tmflow()

@@ -22,6 +22,7 @@ beginning.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 from collections import deque
@@ -224,13 +225,30 @@ class SimHost:
     def inversekin(
         self, pose: Sequence[float], reference: Sequence[float] | None = None
     ) -> list[float]:
-        """The arm model's joints for a TCP pose in the current tool; empty when unreachable."""
-        seed = list(reference) if reference is not None and len(reference) == 6 else None
+        """The arm model's joints for a TCP pose in the current tool; empty when unreachable.
+
+        Without ``reference``, "by the current pose configuration" (TMscript 2.24 §6.35,
+        p. 207): a pose the arm reaches only in another configuration than the one it is
+        in is unreachable, as on the robot. With it, the solution nearest the reference.
+        """
+        model, here, target = self._c.model, self._c.arm_joints, Pose(*pose)
+        seed = list(reference) if reference is not None and len(reference) == 6 else here
         try:
-            return list(self._c.model.inverse(Pose(*pose), seed_deg=seed, tool=self._c.tool))
+            joints = model.inverse(target, seed_deg=seed, tool=self._c.tool)
         except UnreachablePoseError as exc:
-            self._c.log_rejected("inversekin", exc.reason, Pose(*pose))
+            self._c.log_rejected("inversekin", exc.reason, target)
             return []
+        keep = None if reference is not None or here is None else model.configuration(here)
+        if keep is None or model.configuration(joints) == keep:
+            return list(joints)
+        # The kinematic solver keeps the configuration, whatever a controller's PTP would
+        # choose (a model of another controller may choose otherwise): from here only.
+        with contextlib.suppress(UnreachablePoseError):
+            joints = model.inverse(target, seed_deg=here, tool=self._c.tool, same_branch=True)
+        if model.configuration(joints) == keep:
+            return list(joints)
+        self._c.log_rejected("inversekin", "configuration", target)
+        return []
 
     def forwardkin(self, joints: Sequence[float]) -> list[float]:
         """The TCP pose of six joint angles in the current tool."""
@@ -321,6 +339,11 @@ class ScriptProjectController(SequenceController):
     def tool(self) -> Pose | None:
         """The TCP the program set (``ChangeTCP``)."""
         return _backend_tool(self._backend)
+
+    @property
+    def arm_joints(self) -> tuple[float, ...] | None:
+        """The arm's joints now, deg (None: a backend without a joint model)."""
+        return self._backend.joint_positions_deg()
 
     def log_display(self, text: str) -> None:
         """Log a program's ``Display()``."""
