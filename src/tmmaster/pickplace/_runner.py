@@ -406,6 +406,10 @@ class Runner:
         A :class:`~tmmaster.TMMasterError` from a step fails (or retries) it and ends the
         run with a failure; any other exception from a step's code is a bug and is raised.
 
+        A stop requested on the robot (``robot.interrupt()``, from another thread, a
+        signal handler or a cancelled awaited call) stands: the run ends interrupted
+        without moving until ``robot.clear_stop_request()`` takes it back.
+
         Args:
             sequence: What to run.
             cycles: How many cycles; None: the sequence's default.
@@ -415,8 +419,6 @@ class Runner:
         """
         count = cycles if cycles is not None else sequence.default_cycles
         run = _Run(self, sequence, count)
-        if not self._stop.is_set():
-            self.robot.clear_stop_request()
         self._log.info("pickplace.run_started", sequence=sequence.name, cycles=count)
         self._start(run)
         while not run.machine.finished:
