@@ -55,6 +55,17 @@ def test_a_tool_is_a_frozen_pose_and_mass() -> None:
     assert issubclass(ToolMismatchError, ConfigError)
 
 
+@pytest.mark.parametrize(("model", "rated"), [("tm5-700", 6.0), ("tm5-900", 4.0)])
+def test_a_tool_over_the_arms_rated_payload_is_refused_before_any_connection(
+    model: str, rated: float
+) -> None:
+    # TMflow refuses a TCP load over the arm's limit (appendix J, 0x0004003B); the port is
+    # one nothing listens on: the refusal comes first.
+    with pytest.raises(ConfigError, match=rf"tool\.mass_kg .* rated payload of {rated:g} kg"):
+        Robot("127.0.0.1", 1, model=model, tool=Tool(FLANGE, mass_kg=rated + 0.5))
+    Robot("127.0.0.1", 1, model=model, tool=Tool(FLANGE, mass_kg=rated)).close()
+
+
 def test_the_robots_tool_and_mass_are_checked_at_connect(sim: Simulator) -> None:
     with Robot(sim.url, tool=Tool(FLANGE, mass_kg=SIM_MASS_KG)) as robot:
         robot.move_to(LEFT, speed=50)

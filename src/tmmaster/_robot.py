@@ -63,7 +63,6 @@ from ._fleet import (
     open_transport,
     wake_waits,
 )
-from ._gate import CommandGate
 from ._gripper import GRIPPER_DRIVERS, Gripper, GripperLink, NoGripper, auto_gripper
 from ._heartbeat import Heartbeat
 from ._io import RobotIO
@@ -258,12 +257,9 @@ class _Mount:
     check_fault: Callable[[], None]
     checked_status: Callable[[], RobotStatus]
     run_command: Callable[[CommandKind, float | None], None]
-    gate: CommandGate
-
-    def gated(self, write: Callable[[], None]) -> None:
-        """A gripper command write through the robot's command gate (refused unsent
-        once close() began or while a stop is requested)."""
-        self.gate.write(lambda: None, write)
+    #: A gripper command write through the robot's command gate (refused unsent once
+    #: close() began or while a stop is requested).
+    gated: Callable[[Callable[[], None]], None]
 
     @property
     def transport(self) -> Transport:
@@ -359,7 +355,7 @@ class Robot:
         options = _Options.checked(polling, timeouts, retry, checks)
         #: The robot's name in messages and logs.
         self.name = name
-        tool_pose, tool_spec = tool_option(tool, options.checks.units)
+        tool_pose, tool_spec = tool_option(tool, options.checks.units, arm)
         #: The check of the robot's TCP against ``tool`` at :meth:`connect`.
         self.frame_check = options.checks.frame
         self._transport = links.open(self.profile, name, options)
@@ -452,7 +448,7 @@ class Robot:
             check_fault=self.check_fault,
             checked_status=self._checked_status,
             run_command=self._run_command,
-            gate=self._gate,
+            gated=lambda write: self._gate.write(lambda: None, write),
         )
 
     # -- settings (the follower's: every wait reads them when it starts) ---

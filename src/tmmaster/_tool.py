@@ -14,6 +14,7 @@ connect unless ``Checks(frame=FrameCheck.off("why"))``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -27,6 +28,7 @@ from ._registers import FLANGE_FIELDS, ROBOT_BASE_TCP_FIELDS, TCP_FIELDS
 
 if TYPE_CHECKING:
     from ._options import FrameCheck
+    from ._robot_models import RobotModel
 
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
 #: The TCP value the robot works with (TMflow 2.24 Appendix C, p. 313), then its mass.
@@ -87,17 +89,24 @@ class Tool:
             )
 
 
-def tool_option(tool: object, check_units: bool) -> tuple[Pose | None, Tool | None]:
-    """The ``tool`` option split: its pose (not in metres or radians, when checked) and
-    the Tool, if one."""
+def tool_option(tool: object, units: bool, arm: RobotModel) -> tuple[Pose | None, Tool | None]:
+    """The ``tool`` option split: its pose (not in metres or radians, checked when
+    ``units``) and the Tool, if one, its mass within ``arm``'s rated payload: TMflow
+    refuses a heavier TCP load (TMflow 2.24 appendix J, 0x0004003B "Over maximum loading
+    with TCP loading": the TCP's mass plus the payload setting)."""
     pose, spec = (tool.pose, tool) if isinstance(tool, Tool) else (tool, None)
     if pose is not None and not isinstance(pose, Pose):
         raise ConfigError(
             "tool must be a tmmaster.Pose (the TCP in the flange frame) or a tmmaster.Tool"
             f" (with its mass), got {tool!r}"
         )
-    if check_units and pose is not None:
+    if units and pose is not None:
         refuse_suspect_units("tool", pose)
+    if spec is not None and spec.mass_kg > (arm.payload_kg or math.inf):
+        raise ConfigError(
+            f"tool.mass_kg {spec.mass_kg:g} kg is over the {arm.name}'s rated payload of"
+            f" {arm.payload_kg:g} kg: the robot refuses that TCP load (error 0x0004003B)"
+        )
     return pose, spec
 
 
@@ -135,12 +144,10 @@ class FrameGuard:
         Raises:
             ConfigError: a tool, the check on, and no flange pose nor TCP value published.
         """
-        channel = self._channel
-        if channel.flange_fields or not self.check.enabled:
-            if channel.flange_fields and not self.check.enabled:
-                self._log.warning("robot.frame_check_off", reason=self.check.reason)
-            return
-        if tool is None and self.tool is None:
+        channel, enabled = self._channel, self.check.enabled
+        if channel.flange_fields and not enabled:
+            self._log.warning("robot.frame_check_off", reason=self.check.reason)
+        if channel.flange_fields or not enabled or (tool is None and self.tool is None):
             return
         raise ConfigError(
             f"profile {channel.profile.name!r} publishes neither the flange pose nor the TCP"
