@@ -8,6 +8,7 @@ the target instead of finishing the move the master no longer follows.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 import pytest
@@ -18,7 +19,10 @@ from tmmaster import (
     GripperLink,
     GripperTimeoutError,
     OnRobot2FG7Gripper,
+    PollPolicy,
     RetryPolicy,
+    Robot,
+    TMMasterError,
     TransportError,
     gripper_profile,
 )
@@ -111,3 +115,40 @@ def test_a_blog_move_whose_answer_was_lost_is_withdrawn(tm_simulator_factory: Fa
     finally:
         gripper.disconnect()
     assert at_rest_width(sim) > 15.0
+
+
+def test_robot_close_on_another_thread_stops_a_stand_alone_gripper_move() -> None:
+    # close() ends the gripper's wait and closes its link: the move it gave up must not
+    # go on to 1 mm, whichever of the two threads gets to the link first. Over loopback
+    # TCP, where close() closes the gripper's link before the waiting thread gets to it.
+    timing = Timing(tick_hz=SUITE_TICK_HZ)
+    sim = Simulator(
+        "tmflow", robot=RobotSetup(gripper="onrobot-2fg7"), time_scale=4.0, timing=timing
+    )
+    sim.start()
+    try:
+        assert sim.gripper_port is not None
+        retry = RetryPolicy(attempts=5, total_time_s=2.0, initial_backoff_s=0.01, jitter_s=0.0)
+        device_link = GripperLink("127.0.0.1", sim.gripper_port, poll_interval_s=0.01, retry=retry)
+        gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), device_link, speed_percent=1)
+        robot = Robot("127.0.0.1", sim.port, gripper=gripper, polling=PollPolicy(interval_s=0.01))
+        robot.connect()
+        errors: list[BaseException] = []
+
+        def close_fingers() -> None:
+            try:
+                gripper.close()
+            except TMMasterError as exc:
+                errors.append(exc)
+
+        thread = threading.Thread(target=close_fingers)
+        thread.start()
+        try:
+            sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+        finally:
+            robot.close()
+            thread.join(5.0)
+        assert errors  # the wait was given up
+        assert at_rest_width(sim) > 15.0
+    finally:
+        sim.close()

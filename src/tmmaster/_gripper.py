@@ -503,6 +503,8 @@ class _OwnConnectionGripper(Gripper):
 
     #: The field whose "stop" value withdraws a command and stops the fingers.
     _STOP_FIELD = "command"
+    # True from a move's write until its call ends: a given-up move is then stopped.
+    _sent = False
 
     def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
         #: The gripper's register map.
@@ -550,19 +552,19 @@ class _OwnConnectionGripper(Gripper):
         self.transport.connect()
 
     def disconnect(self) -> None:
-        """Close the gripper's connection (safe twice)."""
+        """Close the gripper's connection (safe twice); a move under way is stopped first."""
+        self._stop_fingers()  # Robot.close() on another thread (its gate closed first)
         self.transport.close()
 
     def _send_and_wait(
         self,
         values: list[tuple[RegisterField, Value]],
         width_mm: float,
-        started: float,
         timeout_s: float | None,
         check: Callable[[], GripperStatus | None],
     ) -> GripperStatus:
-        """Write a move's command once (through the robot's gate), poll ``check`` until
-        the move is over, then log its outcome.
+        """Check the robot, write a move's command once (through the robot's gate), poll
+        ``check`` until the move is over, then log its outcome.
 
         Whatever ends the call once the write was attempted (a lost answer, a timeout, a
         stop request, Ctrl-C, a robot e-stop) first writes the profile's stop, retried:
@@ -572,7 +574,6 @@ class _OwnConnectionGripper(Gripper):
         Args:
             values: The command's fields and values (one FC16, never retried).
             width_mm: The move's target width (for the messages).
-            started: ``time.monotonic()`` before the write.
             timeout_s: Bound of the wait, s; None: ``timeout_s`` of the link.
             check: Returns the final status once the move is over, else None.
 
@@ -583,12 +584,13 @@ class _OwnConnectionGripper(Gripper):
             StopRequestedError: The robot is closing or a stop is requested (unsent), or
                 a stop was requested meanwhile (the fingers were stopped).
             GripperTimeoutError: The move did not end in time (the fingers were stopped).
+            RobotFaultError: The robot is in e-stop or error (before the write: unsent).
         """
-        sent = False
+        self.check_robot()
+        started = time.monotonic()
 
         def send() -> None:
-            nonlocal sent
-            sent = True
+            self._sent = True
             self.transport.write_fields(values, retry=False)
 
         try:
@@ -603,14 +605,10 @@ class _OwnConnectionGripper(Gripper):
                 stop_event=self._stop_event,
             )
         except BaseException:
-            if sent:
-                field = self.profile.field(self._STOP_FIELD)
-                try:
-                    stop = [(field, field.code_of("stop"))]
-                    self.transport.write_fields(stop, retry=True, interruptible=False)
-                except TransportError as exc:
-                    self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
+            self._stop_fingers()
             raise
+        finally:
+            self._sent = False
         self._events.info(
             "gripper.command_done",
             gripper=self.kind,
@@ -619,6 +617,16 @@ class _OwnConnectionGripper(Gripper):
             duration_s=round(time.monotonic() - started, 4),
         )
         return status
+
+    def _stop_fingers(self) -> None:
+        """Stop a move whose write was attempted and whose call has not ended (else none)."""
+        if self._sent:
+            try:
+                stop = [(field := self.profile.field(self._STOP_FIELD), field.code_of("stop"))]
+                self.transport.write_fields(stop, retry=True, interruptible=False)
+                self._sent = False  # delivered: another thread need not write it again
+            except TransportError as exc:
+                self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
 
     def check_robot(self) -> None:
         """Raise the robot's typed error if it is in e-stop or error (no-op on its own)."""
@@ -669,15 +677,12 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         values = self.read("object_status", "motion_state")
         obj = self.profile.field("object_status").label(int(values["object_status"]))
         return GripperStatus(
-            busy=obj == "moving",
-            holding=obj in ("object_opening", "object_closing"),
-            width_mm=None,
+            busy=obj == "moving", holding=obj in ("object_opening", "object_closing"), width_mm=None
         )
 
     def _move(self, width_mm: float, timeout_s: float | None) -> GripperStatus:
         p = self.profile
-        self.check_robot()
-        started = time.monotonic()
+        started = time.monotonic()  # the acknowledgement's clock
         # One FC16 of force, width and control; sent once: the acknowledgement tells.
         values = [
             (p.field("force"), self.force_n),
@@ -701,7 +706,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             status = self.status()
             return None if status.busy else status
 
-        return self._send_and_wait(values, width_mm, started, timeout_s, check)
+        return self._send_and_wait(values, width_mm, timeout_s, check)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the map's maximum width.
@@ -896,8 +901,6 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
         _check_force_speed(self.kind, self.force_n, self.speed_percent, ceiling)
         p = self.profile
         command = p.field("command").code_of(f"grip_{self.grip_mode}")
-        self.check_robot()
-        started = time.monotonic()
         values = [
             (p.field("target_width"), width_mm),
             (p.field("target_force"), self.force_n),
@@ -918,7 +921,7 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
                 return status
             return None
 
-        return self._send_and_wait(values, width_mm, started, timeout_s, check)
+        return self._send_and_wait(values, width_mm, timeout_s, check)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Open to the maximum width of the current grip mode.
