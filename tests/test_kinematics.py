@@ -153,6 +153,16 @@ def test_a_joint_limit_is_named() -> None:
     assert "J1" in str(caught.value)
 
 
+def test_a_line_that_takes_j6_past_its_range_says_joint_limit() -> None:
+    # Tool down from rz 0 (J6 114 deg) to rz -170: the shorter turn drives J6 up past
+    # +270 deg, where the only solution in range is a whole turn away.
+    start = Pose(300, 0, 250, 180, 0, 0)
+    with pytest.raises(UnreachablePoseError) as caught:
+        TM5.line_joints(start, Pose(300, 0, 200, 180, 0, -170), start_joints_deg=TM5.inverse(start))
+    assert caught.value.reason == "joint_limit"
+    assert "past its range" in str(caught.value)
+
+
 def test_a_stretched_arm_is_refused_as_an_elbow_singularity() -> None:
     # J3 = 0: the arm is straight (on every branch of these poses).
     for joints in ([0, 0, 0, 90, 90, 0], [0, 30, 0, 60, 90, 0]):

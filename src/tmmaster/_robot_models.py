@@ -589,11 +589,13 @@ class RobotModel(BaseModel):
                     reason=exc.reason,
                     pose=pose,
                 ) from exc
-            jump = max(abs(x - y) for x, y in zip(joints, samples[-1], strict=True))
-            if jump > 30.0:
+            if (jump := max(abs(x - y) for x, y in zip(joints, samples[-1], strict=True))) > 30:
+                # A joint a whole turn away: its range (J1, J6: +-270 deg) ends on the path.
+                wrap = jump > 300.0
+                problem = "takes a joint past its range" if wrap else "needs a configuration flip"
                 raise UnreachablePoseError(
-                    f"{what} needs a configuration flip near {pose} (a joint jumps {jump:.0f} deg)",
-                    reason="singularity",
+                    f"{what} {problem} near {pose} (a joint jumps {jump:.0f} deg)",
+                    reason="joint_limit" if wrap else "singularity",
                     pose=pose,
                 )
             samples.append(joints)
