@@ -152,3 +152,27 @@ def test_robot_close_on_another_thread_stops_a_stand_alone_gripper_move() -> Non
         assert at_rest_width(sim) > 15.0
     finally:
         sim.close()
+
+
+def test_a_stop_that_could_not_be_delivered_is_written_again_at_disconnect(
+    tm_simulator_factory: Factory,
+) -> None:
+    # One attempt per write: the stop after the timeout is lost (its connection cut
+    # before the device got it), so the move is still under way; disconnect() (what
+    # Robot.close() calls) must write the stop again rather than forget the move.
+    sim = slow_sim(tm_simulator_factory, "onrobot-2fg7", 4.0)
+    assert sim.gripper_port is not None
+    once = GripperLink(
+        sim.url, sim.gripper_port, poll_interval_s=0.01, retry=RetryPolicy(attempts=1)
+    )
+    gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), once, speed_percent=1)
+    gripper.connect()
+    command = gripper.profile.field("command").address
+    # The 2nd write covering the command register (the stop) is lost; the 1st runs.
+    sim.inject(f"drop_connections:on_write_to={command},lose=request,after_requests=2")
+    try:
+        with pytest.raises(GripperTimeoutError):
+            gripper.close(timeout_s=0.1)
+    finally:
+        gripper.disconnect()
+    assert at_rest_width(sim) > 15.0

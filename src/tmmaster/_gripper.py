@@ -503,7 +503,7 @@ class _OwnConnectionGripper(Gripper):
 
     #: The field whose "stop" value withdraws a command and stops the fingers.
     _STOP_FIELD = "command"
-    # True from a move's write until its call ends: a given-up move is then stopped.
+    # True from a move's write until it ended or its stop was delivered.
     _sent = False
 
     def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
@@ -605,10 +605,9 @@ class _OwnConnectionGripper(Gripper):
                 stop_event=self._stop_event,
             )
         except BaseException:
-            self._stop_fingers()
+            self._stop_fingers()  # one not delivered stays due: disconnect() tries again
             raise
-        finally:
-            self._sent = False
+        self._sent = False
         self._events.info(
             "gripper.command_done",
             gripper=self.kind,
@@ -619,7 +618,7 @@ class _OwnConnectionGripper(Gripper):
         return status
 
     def _stop_fingers(self) -> None:
-        """Stop a move whose write was attempted and whose call has not ended (else none)."""
+        """Stop a move whose write was attempted and that neither ended nor was stopped."""
         if self._sent:
             try:
                 stop = [(field := self.profile.field(self._STOP_FIELD), field.code_of("stop"))]
