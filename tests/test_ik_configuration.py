@@ -8,6 +8,7 @@ otherwise the one with the shortest PTP from the seed.
 
 from __future__ import annotations
 
+import random
 from collections.abc import Sequence
 
 import pytest
@@ -82,3 +83,10 @@ def test_without_the_arms_configuration_the_shortest_ptp_is_taken() -> None:
     found = solutions(pose, seed)
     assert found
     assert MODEL.ptp_seconds(seed, joints) <= min(MODEL.ptp_seconds(seed, j) for j in found) + 1e-9
+
+
+def test_the_models_configuration_is_the_joint_frames_one_on_random_postures() -> None:
+    rnd = random.Random(7)
+    for _ in range(3000):
+        joints = tuple(rnd.uniform(-270.0, 270.0) for _ in range(6))
+        assert MODEL.configuration(joints) == shoulder_elbow_wrist(joints), joints
