@@ -191,7 +191,8 @@ StmtFn: TypeAlias = Callable[[_Frame], Generator[str, None, Control]]
 @dataclass(frozen=True)
 class ScriptWarning:
     """A compile warning: a bare word taken as a string, an integer constant over 32 bits
-    taken as a double (both §2.7, p. 27), an element of an expression's result (§2.4)."""
+    taken as a double, a single quote in a string constant (all §2.7, p. 27), an element
+    of an expression's result (§2.4)."""
 
     #: The line, 1-based.
     line: int
@@ -466,6 +467,17 @@ class _ExprCompiler:
                     node.line,
                     node.column,
                     f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double",
+                )
+            )
+        if isinstance(value, str) and "'" in value:
+            # TMflow warns of a single quote in a string constant: it reads 'x' as the
+            # variable x (§2.2 p. 16, §2.7 p. 27).
+            self.warnings.append(
+                ScriptWarning(
+                    node.line,
+                    node.column,
+                    "a single quote in a string constant (§2.7 p. 27): TMflow warns and "
+                    "may read 'name' as a variable",
                 )
             )
         return _CExpr(lambda fr: value, node.type, False)
