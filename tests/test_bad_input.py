@@ -167,6 +167,10 @@ CONFIG_CASES: list[Case] = [
 ]
 
 OPTION_CASES: list[Case] = [
+    # The report is written after the arm moved: a path it cannot be written to is
+    # refused before anything is sent.
+    ("report-is-a-folder", {}, [*HOST, "--report", "{dir}"], "--report"),
+    ("report-under-a-file", {"f": "x"}, [*HOST, "--report", "{dir}/f/run.json"], "--report"),
     ("opt-port-70000", {}, ["--host", "127.0.0.1", "--port", "70000"], "port"),
     ("opt-port-0", {}, ["--host", "127.0.0.1", "--port", "0"], "port"),
     ("opt-port-negative", {}, ["--host", "127.0.0.1", "--port", "-1"], "port"),

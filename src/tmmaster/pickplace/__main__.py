@@ -21,15 +21,18 @@ into 141 and changes nothing else: the run goes on and --report is written):
 from __future__ import annotations
 
 import argparse
+import errno
 import itertools
 import logging
 import math
 import os
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO, cast
 
 from .._cliparse import (
@@ -559,14 +562,49 @@ def _resolve(args: argparse.Namespace, outcome: _Outcome) -> _Invocation:
         command = _command(args, outcome)
     except (KeyboardInterrupt, Exception) as exc:  # reported by the run, with the report
         command = exc
+    report: str | None = args.report
+    if report is not None:
+        try:
+            _check_report_option(report)
+        except UsageError as exc:
+            report = None  # it cannot be written: one line says why the run did not start
+            if isinstance(command, _Command):
+                command = exc
     output = _OutputOptions(
         quiet=bool(args.quiet),
         verbose=int(args.verbose or 0),
         log_level=None if args.log_level is None else str(args.log_level),
         log_json=bool(args.log_json),
-        report=args.report,
+        report=report,
     )
     return _Invocation(command, output)
+
+
+def _check_report_option(path: str) -> None:
+    """``--report``: a file whose folder can be written, checked before anything is sent
+    (the report is written at the end, after the arm moved).
+
+    Raises:
+        UsageError: ``--report out: is a folder; give a FILE.json`` and the like.
+    """
+    target = Path(path)
+    if target.is_dir():
+        raise UsageError(f"--report {path}: is a folder; give a FILE.json")
+    folder = target.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent  # the report's folder is made: the nearest one that exists
+    if not folder.is_dir():
+        raise UsageError(f"--report {path}: {folder} is not a folder")
+    try:
+        if folder != target.parent:
+            if not os.access(folder, os.W_OK | os.X_OK):
+                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES))
+        else:  # the folder is there: try what the report's write will do
+            fd, probe = tempfile.mkstemp(prefix=".report-", suffix=".json", dir=folder)
+            os.close(fd)
+            os.unlink(probe)
+    except OSError as exc:
+        raise UsageError(f"--report {path}: cannot be written in {folder}: {exc.strerror}") from exc
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
