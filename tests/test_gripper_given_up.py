@@ -9,6 +9,7 @@ the target instead of finishing the move the master no longer follows.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 
 import pytest
@@ -16,6 +17,7 @@ import pytest
 from sim_speeds import SUITE_TICK_HZ
 from tmmaster import (
     Blog2FG7Gripper,
+    ConfigError,
     GripperLink,
     GripperTimeoutError,
     OnRobot2FG7Gripper,
@@ -176,3 +178,78 @@ def test_a_stop_that_could_not_be_delivered_is_written_again_at_disconnect(
     finally:
         gripper.disconnect()
     assert at_rest_width(sim) > 15.0
+
+
+def test_robot_close_bounds_the_gripper_stop_it_cannot_deliver(
+    tm_simulator_factory: Factory,
+) -> None:
+    # Every write to the command register after the move's is lost, so the stop that
+    # close() owes the gripper cannot be delivered: close(timeout_s=0.3) must give it up
+    # at its deadline (not after the gripper link's 4 s of retries) and say so (False).
+    sim = slow_sim(tm_simulator_factory, "onrobot-2fg7", 1.0)
+    assert sim.gripper_port is not None
+    patient = RetryPolicy(attempts=100, total_time_s=4.0, initial_backoff_s=0.05, jitter_s=0.0)
+    device_link = GripperLink(sim.url, sim.gripper_port, poll_interval_s=0.01, retry=patient)
+    gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), device_link, speed_percent=1)
+    robot = Robot(sim.url, gripper=gripper, polling=PollPolicy(interval_s=0.01))
+    robot.connect()
+    errors: list[BaseException] = []
+
+    def close_fingers() -> None:
+        try:
+            gripper.close()
+        except TMMasterError as exc:
+            errors.append(exc)
+
+    thread = threading.Thread(target=close_fingers)
+    thread.start()
+    try:
+        sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+        command = gripper.profile.field("command").address
+        sim.inject(f"drop_connections:on_write_to={command},lose=request,once=false")
+        started = time.monotonic()
+        confirmed = robot.close(timeout_s=0.3)
+        took = time.monotonic() - started
+    finally:
+        robot.close()
+        thread.join(5.0)
+    assert confirmed is False  # the gripper's stop was not delivered
+    assert took < 2.0, f"close(timeout_s=0.3) took {took:.2f} s"  # the bound is the feature
+    assert errors  # the move was given up
+
+
+@pytest.mark.parametrize("kind", ["onrobot-2fg7", "blog-2fg7"])
+def test_a_second_command_on_another_thread_is_refused_unsent(
+    tm_simulator_factory: Factory, kind: str
+) -> None:
+    # Thread A closes the fingers; a command from another thread meanwhile would replace
+    # A's (and A's stop could halt it): it is refused before any write, and A's move ends.
+    sim = slow_sim(tm_simulator_factory, kind, 4.0 if kind == "onrobot-2fg7" else 1.0)
+    profile = gripper_profile(kind)
+    gripper: Blog2FG7Gripper | OnRobot2FG7Gripper = (
+        OnRobot2FG7Gripper(profile, link(sim), speed_percent=1)
+        if kind == "onrobot-2fg7"
+        else Blog2FG7Gripper(profile, link(sim))
+    )
+    gripper.connect()
+    errors: list[BaseException] = []
+
+    def close_fingers() -> None:
+        try:
+            gripper.close()
+        except TMMasterError as exc:
+            errors.append(exc)
+
+    thread = threading.Thread(target=close_fingers)
+    thread.start()
+    try:
+        sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+        writes = gripper.transport.stats.requests_by_function.get(16, 0)  # FC16
+        with pytest.raises(ConfigError, match=kind):
+            gripper.open()
+        assert gripper.transport.stats.requests_by_function.get(16, 0) == writes  # unsent
+    finally:
+        thread.join(5.0)
+        gripper.disconnect()
+    assert errors == []  # thread A's close was neither replaced nor stopped
+    assert at_rest_width(sim) < 2.0

@@ -20,6 +20,7 @@ error, and a stop request (``Robot.interrupt()``, Ctrl-C) ends it within one pol
 
 from __future__ import annotations
 
+import operator
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -178,8 +179,14 @@ class Gripper(ABC):
     def connect(self) -> None:  # noqa: B027 - most grippers share the robot's link
         """Open the gripper's own connection, if it has one."""
 
-    def disconnect(self) -> None:  # noqa: B027 - most grippers share the robot's link
-        """Close the gripper's own connection, if it has one (safe twice)."""
+    def disconnect(self) -> bool:
+        """Close the gripper's own connection, if it has one (safe twice).
+
+        Returns:
+            False when a move's stop was due and could not be delivered (logged as
+            ``gripper.withdraw_failed``), else True.
+        """
+        return True
 
     @abstractmethod
     def status(self) -> GripperStatus:
@@ -394,11 +401,8 @@ class RegisterGripper(_RobotWiredGripper):
             # One read: the article's status block holds the error state and the grasp.
             robot_status = robot.checked_status()
             status = GripperStatus(busy=None, holding=bool(robot_status.holding), width_mm=None)
-            if stop_early_when_holding and status.holding:
-                return status
-            if time.monotonic() - started >= self._settle_s:
-                return status
-            return None
+            settled = time.monotonic() - started >= self._settle_s
+            return status if settled or (stop_early_when_holding and status.holding) else None
 
         status = _wait(
             f"gripper {label}", robot.poll_interval_s, bound, check, stop_event=robot.stop_event
@@ -519,8 +523,9 @@ class _OwnConnectionGripper(Gripper):
         self.ack_timeout_s = link.ack_timeout_s
         self._guard = link.guard
         self._stop_event = link.stop_event
+        self._busy = threading.Lock()  # held by the one move under way
         # The robot's command gate, once mounted (a gripper on its own writes directly).
-        self._gated: Callable[[Callable[[], None]], None] = _call
+        self._gated: Callable[[Callable[[], None]], None] = operator.call
         #: The gripper's own link.
         self.transport: Transport = link.transport or open_transport(
             link.host,
@@ -551,10 +556,18 @@ class _OwnConnectionGripper(Gripper):
         """Open the gripper's connection."""
         self.transport.connect()
 
-    def disconnect(self) -> None:
-        """Close the gripper's connection (safe twice); a move under way is stopped first."""
+    def disconnect(self) -> bool:
+        """Close the gripper's connection (safe twice); a move under way is stopped first.
+
+        Its retries end at the bound a :meth:`Robot.close(timeout_s=...)
+        <tmmaster.Robot.close>` set on the link.
+
+        Returns:
+            False when the stop could not be delivered (logged), else True.
+        """
         self._stop_fingers()  # Robot.close() on another thread (its gate closed first)
         self.transport.close()
+        return not self._sent
 
     def _send_and_wait(
         self,
@@ -585,8 +598,10 @@ class _OwnConnectionGripper(Gripper):
                 a stop was requested meanwhile (the fingers were stopped).
             GripperTimeoutError: The move did not end in time (the fingers were stopped).
             RobotFaultError: The robot is in e-stop or error (before the write: unsent).
+            ConfigError: A move is under way on another thread (unsent).
         """
-        self.check_robot()
+        if not self._busy.acquire(blocking=False):
+            raise ConfigError(f"{self.kind}: a move is under way on another thread")
         started = time.monotonic()
 
         def send() -> None:
@@ -594,6 +609,7 @@ class _OwnConnectionGripper(Gripper):
             self.transport.write_fields(values, retry=False)
 
         try:
+            self.check_robot()
             self._gated(send)
             self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
             status = _wait(
@@ -604,10 +620,12 @@ class _OwnConnectionGripper(Gripper):
                 guard=self._guard,
                 stop_event=self._stop_event,
             )
+            self._sent = False
         except BaseException:
             self._stop_fingers()  # one not delivered stays due: disconnect() tries again
             raise
-        self._sent = False
+        finally:
+            self._busy.release()
         self._events.info(
             "gripper.command_done",
             gripper=self.kind,
@@ -719,6 +737,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         Raises:
             AcknowledgeTimeoutError: The gripper did not take the command (withdrawn).
             GripperTimeoutError: The fingers did not stop in time.
+            ConfigError: A move is under way on another thread (unsent).
         """
         return self._move(self.profile.field("width").maximum or 160.0, timeout_s)
 
@@ -734,6 +753,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         Raises:
             AcknowledgeTimeoutError: The gripper did not take the command (withdrawn).
             GripperTimeoutError: The fingers did not stop in time.
+            ConfigError: A move is under way on another thread (unsent).
         """
         return self._move(0.0, timeout_s)
 
@@ -858,22 +878,20 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             raise GripperError(f"{self.kind}: not connected")
         return (*self.limits, self.max_force_n)
 
-    def _width_field(self) -> str:
-        return "external_width" if self.grip_mode == "external" else "internal_width"
-
     def status(self) -> GripperStatus:
         """Busy and grip-detected bits, and the current width.
 
         Returns:
             ``busy``, ``holding`` and ``width_mm`` (of the grip mode).
         """
-        values = self.read("status", self._width_field())
+        width = "external_width" if self.grip_mode == "external" else "internal_width"
+        values = self.read("status", width)
         word = int(values["status"])
         status_field = self.profile.field("status")
         return GripperStatus(
             busy=status_field.bit(word, "busy"),
             holding=status_field.bit(word, "grip_detected"),
-            width_mm=float(values[self._width_field()]),
+            width_mm=float(values[width]),
         )
 
     def move_to_width(
@@ -891,7 +909,8 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
 
         Raises:
             GripperError: Not connected.
-            ConfigError: The width, force or speed is out of range.
+            ConfigError: The width, force or speed is out of range, or a move is
+                under way on another thread (unsent).
             GripperTimeoutError: The move did not end in time.
         """
         low, high, ceiling = self._connected()
@@ -914,11 +933,8 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             # Not busy is not enough (it may not have started): the fingers must be at
             # the target, or stopped on an object when closing onto one.
             assert status.width_mm is not None
-            if abs(status.width_mm - width_mm) <= self.width_tolerance_mm:
-                return status
-            if expect_object and status.holding:
-                return status
-            return None
+            arrived = abs(status.width_mm - width_mm) <= self.width_tolerance_mm
+            return status if arrived or (expect_object and status.holding) else None
 
         return self._send_and_wait(values, width_mm, timeout_s, check)
 
@@ -967,8 +983,3 @@ def auto_gripper(profile: RobotProfile, *, settle_s: float) -> Gripper:
     if CommandKind.GRIPPER_CLOSE.value in labels and profile.has("grasp_status"):
         return SequenceGripper()
     return NoGripper()
-
-
-def _call(write: Callable[[], None]) -> None:
-    """A gripper on its own: its command write, made at once."""
-    write()

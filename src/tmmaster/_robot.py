@@ -700,12 +700,13 @@ class Robot:
 
         Args:
             timeout_s: a bound on the clean-up (waiting for a write in flight or another
-                thread's withdraw, and the withdraw's or stop's retries); None: the
-                retry policy's own bounds.
+                thread's withdraw, and the retries of the withdraw or stop, a stand-alone
+                gripper's stop included); None: the retry policy's own bounds.
 
         Returns:
             True when nothing this robot sent can still run; False when a withdraw or
-            stop could not be confirmed (logged as ``robot.close_unconfirmed``).
+            stop (the gripper's too) could not be confirmed (logged as
+            ``robot.close_unconfirmed``).
 
         Raises:
             ConfigError: ``timeout_s`` is not a finite number > 0.
@@ -715,6 +716,9 @@ class Robot:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         with deferred():
             self._gate.close()
+            for link in (self._transport, self.gripper.transport):  # before any clean-up
+                if deadline is not None and isinstance(link, BlockTransport):
+                    link.bound_retries(deadline)
             self.interrupt()  # waits in progress end now, a fleet's included
             # Another thread's wait for a withdraw's answer ends now: it stops the command
             # instead, and this close finishes at once (its own withdraw is not ended so).
@@ -722,7 +726,7 @@ class Robot:
             if self._closed_safely is None or self._transport.state is not ConnectionState.CLOSED:
                 self._closed_safely = self._give_up_outstanding(deadline)
                 self._heartbeat.stop()  # the robot program expires what is left
-                self.gripper.disconnect()
+                self._closed_safely = self.gripper.disconnect() and self._closed_safely
                 self._transport.close()
             # Only now: until the clean-up is over, the exit hook may still have it to do.
             atexit.unregister(self._at_exit)
@@ -735,8 +739,6 @@ class Robot:
         """For :meth:`close`: withdraw or stop the last command written, if not settled."""
         if self._transport.state is ConnectionState.CLOSED:
             return True  # closed by someone else: nothing can be written any more
-        if deadline is not None and isinstance(self._transport, BlockTransport):
-            self._transport.bound_retries(deadline)
         if not self._gate.drain(deadline):
             return False  # a command write still in flight at the deadline
         motion = self._last_motion  # after drain(): the last command that can ever be written
