@@ -4,11 +4,13 @@
 connection, one action, one answer on stdout, and an exit status:
 
 ===  ====================================================================
-0    done (``status``: read; ``play``: running; ``pause``: paused or stopped)
-2    bad options, or a profile without a TMflow project (article: play/pause)
+0    done (``status``: read; ``play``: running; ``pause``: paused or stopped;
+     ``stop``: the arm at rest)
+2    bad options (checked before anything is sent), or a profile without a TMflow
+     project (article: play/pause)
 3    the connection failed
 4    the robot refused: in error or e-stop, Manual mode, or the project did not
-     change within ``--timeout``
+     change (``stop``: the arm still moved) within ``--timeout``
 ===  ====================================================================
 """
 
@@ -16,10 +18,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from ._address import check_host
+from ._checks import require_positive
 from ._cliparse import one_line, write_stdout
-from ._exceptions import ConfigError, TMMasterError, TransportError
+from ._exceptions import ConfigError, RobotError, TMMasterError, TransportError
 from ._logging import add_logging_arguments, configure_logging
 from ._profiles import DEFAULT_PROFILE, builtin_profile_names
 from ._project import PRESS_TIMEOUT_S
@@ -32,6 +36,8 @@ ACTIONS = ("status", "play", "pause", "stop")
 EXIT_CONFIG = 2
 EXIT_CONNECTION = 3
 EXIT_REFUSED = 4
+#: The exit status of a failure, by its class (the first that matches; else refused).
+_EXIT_CODES = ((ConfigError, EXIT_CONFIG), (TransportError, EXIT_CONNECTION))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -63,8 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         type=float,
         default=PRESS_TIMEOUT_S,
         metavar="S",
-        help="play/pause: seconds to wait for the project's new state"
-        f" (default: {PRESS_TIMEOUT_S:g})",
+        help="play/pause: seconds to wait for the project's new state; stop: for the arm"
+        f" to come to rest (default: {PRESS_TIMEOUT_S:g})",
     )
     add_logging_arguments(parser, default_level="warning")
     return parser
@@ -86,13 +92,16 @@ def _status_lines(status: RobotStatus) -> str:
 
 def _act(robot: Robot, action: str, timeout_s: float) -> str:
     """Run ``action`` on a connected ``robot``; what to print."""
-    if action == "play":
-        return f"project  {robot.play(timeout_s)}\n"
-    if action == "pause":
-        return f"project  {robot.pause(timeout_s)}\n"
+    if action in ("play", "pause"):
+        return f"project  {getattr(robot, action)(timeout_s)}\n"
     if action == "stop":
         robot.stop()
-        return "stop     pressed\n"
+        deadline = time.monotonic() + timeout_s
+        while robot.status().moving:  # done only once the arm is at rest
+            if time.monotonic() > deadline:
+                raise RobotError(f"stop pressed; the arm still moves after {timeout_s:g} s")
+            time.sleep(robot.poll_interval_s)
+        return "stop     pressed; the arm is at rest\n"
     return _status_lines(robot.status())
 
 
@@ -107,21 +116,14 @@ def run(args: argparse.Namespace) -> int:
     """
     undo_logging = configure_logging(json=args.log_json, level=args.log_level, stream=sys.stderr)
     try:
+        require_positive("--timeout", args.timeout)  # before the first byte, as --host
         host = check_host(args.host, field="--host", port_field="--port")
         with Robot(host, args.port, profile=args.profile, name="cli") as robot:
             text = _act(robot, args.action, args.timeout)
     except TMMasterError as exc:
-        code = _exit_code(exc)
+        code = next((c for kind, c in _EXIT_CODES if isinstance(exc, kind)), EXIT_REFUSED)
         print(f"tmmaster robot {args.action}: {one_line(exc)} [exit {code}]", file=sys.stderr)
         return code
     finally:
         undo_logging()
     return write_stdout(lambda: sys.stdout.write(text), prog="tmmaster robot")
-
-
-def _exit_code(exc: TMMasterError) -> int:
-    if isinstance(exc, ConfigError):
-        return EXIT_CONFIG
-    if isinstance(exc, TransportError):
-        return EXIT_CONNECTION
-    return EXIT_REFUSED
