@@ -187,6 +187,10 @@ OPTION_CASES: list[Case] = [
     ("opt-sim-scale-zero", {}, ["--sim", "--sim-time-scale", "0"], "--sim-time-scale"),
     ("opt-sim-scale-negative", {}, ["--sim", "--sim-time-scale", "-1"], "--sim-time-scale"),
     ("opt-sim-scale-no-sim", {}, [*HOST, "--sim-time-scale", "inf"], "--sim-time-scale"),
+    # Options of the embedded simulator never pass silently on a robot.
+    ("opt-sim-scale-on-a-robot", {}, [*HOST, "--sim-time-scale", "5"], "--sim-time-scale"),
+    ("opt-sim-physics-on-a-robot", {}, [*HOST, "--sim-physics", "kinematic"], "--sim-physics"),
+    ("opt-snapshot-on-a-robot", {}, [*HOST, "--snapshot", "{dir}"], "--snapshot"),
     ("opt-log-level", {}, [*HOST, "--log-level", "loud"], "--log-level"),
     ("opt-unknown", {}, [*HOST, "--speed", "5"], "--speed"),
     ("opt-no-host", {}, [], "--host"),

@@ -196,13 +196,13 @@ def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--sim-time-scale",
         type=float,
-        default=1.0,
+        default=None,
         metavar="X",
         help="with --sim: simulated seconds per wall second (default 1.0; 10 for a quick demo)",
     )
     parser.add_argument(
         "--sim-physics",
-        default="kinematic",
+        default=None,
         choices=["kinematic", "mujoco"],
         help="with --sim: physics backend (default kinematic; mujoco needs the extra"
         " tmmaster[mujoco] and models the arm's dynamics for the tm5-700 and tm5-900)",
@@ -687,13 +687,18 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     :func:`load_config`, which validates the result; the robot, the runner, the
     simulator, the plan and the report all read that one :class:`PickPlaceConfig`.
     """
-    config_file, sequence_file, time_scale = args.config, args.sequence, args.sim_time_scale
-    scene_file = args.sim_scene
-    if scene_file is not None and not args.sim:
+    config_file, sequence_file, scene_file = args.config, args.sequence, args.sim_scene
+    on_sim = bool(args.sim)
+    if scene_file is not None and not on_sim:
         raise UsageError("--sim-scene needs --sim (a robot's cell is the robot's)")
-    sim = (
-        _sim_options(time_scale, args.sim_physics, args.snapshot, scene_file) if args.sim else None
-    )
+    time_scale, physics, snapshot = args.sim_time_scale, args.sim_physics, args.snapshot
+    simulated = {"--sim-time-scale": time_scale, "--sim-physics": physics, "--snapshot": snapshot}
+    stray = [flag for flag, value in simulated.items() if value is not None]
+    if stray and not on_sim:  # never a silent no-op on a robot
+        raise UsageError(f"{stray[0]} needs --sim (it shapes the embedded simulator only)")
+    time_scale = 1.0 if time_scale is None else time_scale
+    physics = physics or "kinematic"
+    sim = _sim_options(time_scale, physics, snapshot, scene_file) if on_sim else None
     outcome.config_file = config_file
     overrides = _overrides(args)
     _check_option_ranges(overrides)
