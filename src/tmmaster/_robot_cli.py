@@ -93,7 +93,7 @@ def _status_lines(status: RobotStatus) -> str:
 def _act(robot: Robot, action: str, timeout_s: float) -> str:
     """Run ``action`` on a connected ``robot``; what to print."""
     if action in ("play", "pause"):
-        return f"project  {getattr(robot, action)(timeout_s)}\n"
+        return f"project  {(robot.play if action == 'play' else robot.pause)(timeout_s)}\n"
     if action == "stop":
         robot.stop()
         deadline = time.monotonic() + timeout_s
