@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from ._channels import CommandChannel
@@ -39,10 +40,7 @@ REMOTE_PLAY_NEEDS = (
 )
 
 
-def _nothing() -> None:
-    """A button press registers nothing (no command to withdraw or stop later)."""
-
-
+@dataclass(frozen=True)
 class ProjectControl:
     """Reads a TMflow project's state and presses Play or Pause (coil 7104) when asked.
 
@@ -55,21 +53,12 @@ class ProjectControl:
         log: The robot's bound logger.
     """
 
-    def __init__(
-        self,
-        profile: RobotProfile,
-        transport: Transport,
-        channel: CommandChannel,
-        gate: CommandGate,
-        stop_event: threading.Event,
-        log: Any,
-    ) -> None:
-        self._profile = profile
-        self._transport = transport
-        self._channel = channel
-        self._gate = gate
-        self._stop_event = stop_event
-        self._log = log
+    _profile: RobotProfile
+    _transport: Transport
+    _channel: CommandChannel
+    _gate: CommandGate
+    _stop_event: threading.Event
+    _log: Any
 
     def _require(self, what: str) -> None:
         """ConfigError for a profile without a TMflow project (the article's)."""
@@ -99,12 +88,16 @@ class ProjectControl:
         self._require("project_state()")
         return self._status()[1]
 
-    def play(self, timeout_s: float, poll_interval_s: float) -> ProjectState:
+    def play(self, timeout_s: float, poll_interval_s: float, own: int | None) -> ProjectState:
         """Press Play on a stopped or paused project; wait until it runs.
+
+        A paused command other than ``own`` is never resumed: another master's (one that
+        died within its heartbeat's time-to-live), or one this master gave up.
 
         Args:
             timeout_s: How long to wait for the project to run after the press, s.
             poll_interval_s: Seconds between two status reads.
+            own: The number of the command this master still follows, if any.
 
         Returns:
             RUNNING (also when it was running already: nothing pressed).
@@ -113,8 +106,9 @@ class ProjectControl:
             ConfigError: The profile has no project, or a bad ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop): reset it
                 on the robot first; nothing pressed.
-            RobotError: Manual mode (nothing pressed), or the project did not run within
-                ``timeout_s`` of the press (the remote-control settings).
+            RobotError: Manual mode, or a paused command not ``own`` (nothing pressed), or
+                the project did not run within ``timeout_s`` of the press (the
+                remote-control settings).
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
@@ -122,6 +116,11 @@ class ProjectControl:
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
+        held = self._held(status) if state is ProjectState.PAUSED else None
+        if held is not None and held != own:
+            raise RobotError(
+                f"play(): paused command {held} is another master's, or given up: press Stop"
+            )
         if (
             "ma_mode" in status.raw
             and self._profile.field("ma_mode").label(int(status.raw["ma_mode"])) == "manual"
@@ -159,6 +158,12 @@ class ProjectControl:
         self._press("pause", state)
         return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s)
 
+    def _held(self, status: RobotStatus) -> int | None:
+        """The number of the command the robot program holds taken (busy), if it says."""
+        raw, field = status.raw, self._profile.fields.get("robot_state")
+        busy = field is not None and field.label(int(raw["robot_state"])) == "busy"
+        return int(raw["ack_seq"]) if busy and "ack_seq" in raw else None
+
     def _before_press(self, what: str, timeout_s: float) -> tuple[RobotStatus, ProjectState]:
         """The status a press starts from; refused without a project, for a bad
         ``timeout_s``, or while the robot is in error or e-stop (a running project never
@@ -166,8 +171,7 @@ class ProjectControl:
         self._require(what)
         require_positive("timeout_s", timeout_s)
         status, state = self._status()
-        failure = self._channel.status_failure(status)
-        if failure is not None:
+        if (failure := self._channel.status_failure(status)) is not None:
             raise type(failure)(
                 f"{what}: {failure}: reset it on the robot first",
                 error_code=failure.error_code,
@@ -183,14 +187,13 @@ class ProjectControl:
             # Sent once: a repeated toggle would undo the press.
             self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
-        self._gate.write(_nothing, send)
+        self._gate.write(lambda: None, send)  # a press registers no command
         self._log.warning("robot.project_button", button=button, project=state.value)
 
     def _wait_for(
         self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float
     ) -> ProjectState:
-        deadline = time.monotonic() + timeout_s
-        poller = Poller(interval, self._stop_event, deadline=deadline)
+        poller = Poller(interval, self._stop_event, deadline=time.monotonic() + timeout_s)
         while True:
             poller.check()
             status, state = self._status()
@@ -200,7 +203,7 @@ class ProjectControl:
                 failure = self._channel.status_failure(status)
                 assert failure is not None
                 raise failure
-            if time.monotonic() >= deadline:
+            if time.monotonic() >= (poller.deadline or 0.0):
                 raise RobotError(
                     f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
                     f" (the project was {before.value}) and the project is {state.value}"

@@ -1356,7 +1356,9 @@ class Robot:
 
         Never implicit: nothing in tmmaster presses Play unless you call this (or press
         it on the robot). A stopped project starts ``main`` from the beginning; a paused
-        one goes on, with the move it interrupted, if any. A running project is left as
+        one goes on, with the move it interrupted, if any, only when that move is one this
+        robot still follows (not done, not given up): never another master's. A running
+        project is left as
         it is (the coil is a toggle: pressing it would pause it). The press passes the
         command gate: refused after :meth:`interrupt` or :meth:`close`. TMflow takes it
         only in Auto mode with the Robot Stick disabled and AUT.P high
@@ -1373,13 +1375,15 @@ class Robot:
                 ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop); reset it
                 on the robot first. Nothing was pressed.
-            RobotError: Manual mode (nothing pressed), or the project did not run within
-                ``timeout_s``.
+            RobotError: Manual mode, or a paused move this robot does not follow (nothing
+                pressed: press Stop), or the project did not run within ``timeout_s``.
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
         self._require_connection()
-        return self._project.play(timeout_s, self.poll_interval_s)
+        # Only a command this master still follows may resume.
+        own = m.ticket.seq if (m := self._last_motion) and not (m.done or m.abandoned) else None
+        return self._project.play(timeout_s, self.poll_interval_s, own)
 
     def pause(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
         """Press Pause (coil 7104) on a running project and wait until it is paused.
