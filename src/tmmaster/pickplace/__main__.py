@@ -687,18 +687,8 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
     :func:`load_config`, which validates the result; the robot, the runner, the
     simulator, the plan and the report all read that one :class:`PickPlaceConfig`.
     """
-    config_file, sequence_file, scene_file = args.config, args.sequence, args.sim_scene
-    on_sim = bool(args.sim)
-    if scene_file is not None and not on_sim:
-        raise UsageError("--sim-scene needs --sim (a robot's cell is the robot's)")
-    time_scale, physics, snapshot = args.sim_time_scale, args.sim_physics, args.snapshot
-    simulated = {"--sim-time-scale": time_scale, "--sim-physics": physics, "--snapshot": snapshot}
-    stray = [flag for flag, value in simulated.items() if value is not None]
-    if stray and not on_sim:  # never a silent no-op on a robot
-        raise UsageError(f"{stray[0]} needs --sim (it shapes the embedded simulator only)")
-    time_scale = 1.0 if time_scale is None else time_scale
-    physics = physics or "kinematic"
-    sim = _sim_options(time_scale, physics, snapshot, scene_file) if on_sim else None
+    config_file, sequence_file = args.config, args.sequence
+    sim = _simulator_options(args)
     outcome.config_file = config_file
     overrides = _overrides(args)
     _check_option_ranges(overrides)
@@ -708,17 +698,7 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
         _check_profile_option(profile)
     config = load_config(config_file, overrides=overrides)
     outcome.config = config
-    sequence: TaskSequence
-    if sequence_file:
-        sequence = load_sequence(sequence_file)
-        # --cycles (run.cycles) counts for a TOML sequence too; without it, its own count.
-        given = "cycles" in overrides.get("run", {})
-        cycles = config.run.cycles if given else sequence.default_cycles
-        source = sequence_file
-    else:
-        sequence = pick_and_place(config)
-        cycles = config.run.cycles
-        source = config_file or "the default configuration"
+    sequence, cycles, source = _sequence_of(config, sequence_file, config_file, overrides)
     command = _Command(
         config=config,
         sequence=sequence,
@@ -733,9 +713,41 @@ def _command(args: argparse.Namespace, outcome: _Outcome) -> _Command:
         return command
     if config.robot.host is None and not (sim or command.dry_run):
         raise ConfigError("--host is required (or --sim, --dry-run, --diagram)")
+    return command
+
+
+def _simulator_options(args: argparse.Namespace) -> _SimOptions | None:
+    """The embedded simulator's options with --sim; without it, none may be given."""
+    on_sim, scene_file = bool(args.sim), args.sim_scene
+    if scene_file is not None and not on_sim:
+        raise UsageError("--sim-scene needs --sim (a robot's cell is the robot's)")
+    time_scale, physics, snapshot = args.sim_time_scale, args.sim_physics, args.snapshot
+    simulated = {"--sim-time-scale": time_scale, "--sim-physics": physics, "--snapshot": snapshot}
+    stray = [flag for flag, value in simulated.items() if value is not None]
+    if stray and not on_sim:  # never a silent no-op on a robot
+        raise UsageError(f"{stray[0]} needs --sim (it shapes the embedded simulator only)")
+    time_scale = 1.0 if time_scale is None else time_scale
     if not (math.isfinite(time_scale) and time_scale > 0):
         raise ConfigError(f"--sim-time-scale must be a finite number > 0, got {time_scale}")
-    return command
+    if not on_sim:
+        return None
+    return _sim_options(time_scale, physics or "kinematic", snapshot, scene_file)
+
+
+def _sequence_of(
+    config: PickPlaceConfig,
+    sequence_file: str | None,
+    config_file: str | None,
+    overrides: dict[str, dict[str, Any]],
+) -> tuple[TaskSequence, int, str]:
+    """The sequence to run, its cycles and where it comes from (a TOML file, or the
+    configuration's pick & place)."""
+    if not sequence_file:
+        return pick_and_place(config), config.run.cycles, config_file or "the default configuration"
+    sequence = load_sequence(sequence_file)
+    # --cycles (run.cycles) counts for a TOML sequence too; without it, its own count.
+    given = "cycles" in overrides.get("run", {})
+    return sequence, config.run.cycles if given else sequence.default_cycles, sequence_file
 
 
 def _configured_robot(config: PickPlaceConfig) -> Robot:
