@@ -311,7 +311,7 @@ class _MotionFollower:
                 reason="same sequence number: the program takes it at most once",
             )
             try:
-                self.gate.write(_nothing, send)
+                self.gate.write(None, send)  # the same ticket: registered already
                 return
             except (ConnectionLostError, ResponseTimeoutError) as exc:
                 failure = exc
@@ -700,7 +700,3 @@ class _MotionFollower:
             f" (expected {motion.expected_s:.2f} s){stall}; last pose {pose}",
             pose=pose,
         )
-
-
-def _nothing() -> None:
-    """A command already registered (a resend of the same ticket)."""

@@ -39,12 +39,14 @@ class CommandGate:
         """True once :meth:`close` was called: no command will ever be written again."""
         return self._closed
 
-    def write(self, register: Callable[[], None], send: Callable[[], None]) -> None:
+    def write(self, register: Callable[[], None] | None, send: Callable[[], None]) -> None:
         """Run ``register`` then ``send`` under the lock, if the gate admits a command.
 
         Args:
             register: records the command as outstanding (it must be visible to a
-                closer before any byte of it can reach the robot).
+                closer before any byte of it can reach the robot); None: nothing to
+                record (a resend of a registered command, an output, a button, a gripper's
+                own command).
             send: writes the command (one request).
 
         Raises:
@@ -56,7 +58,8 @@ class CommandGate:
                 raise StopRequestedError("the robot connection is closing: command not sent")
             if self._stop_event.is_set():
                 raise StopRequestedError("a stop was requested: command not sent")
-            register()
+            if register is not None:
+                register()
             send()
 
     def close(self) -> None:

@@ -340,7 +340,7 @@ class RobotIO:
             nonlocal in_doubt
             sent_at = time.monotonic()
             try:
-                self._gate.write(_nothing, send)
+                self._gate.write(None, send)  # no command: close() withdraws none
             except _SETTLED_FAILURES:
                 raise
             except BaseException:
@@ -472,7 +472,3 @@ class RobotIO:
         count = found.do_count if kind == "do" else found.di_count
         table = Table.COIL if kind == "do" else Table.DISCRETE_INPUT
         return tuple(bool(bit) for bit in self._transport.read_block(table, first, count))
-
-
-def _nothing() -> None:
-    """A DO write registers no command: close() has nothing to withdraw for it."""

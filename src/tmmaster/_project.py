@@ -187,7 +187,7 @@ class ProjectControl:
             # Sent once: a repeated toggle would undo the press.
             self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
-        self._gate.write(lambda: None, send)  # a press registers no command
+        self._gate.write(None, send)  # a press registers no command
         self._log.warning("robot.project_button", button=button, project=state.value)
 
     def _wait_for(

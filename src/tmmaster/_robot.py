@@ -448,7 +448,7 @@ class Robot:
             check_fault=self.check_fault,
             checked_status=self._checked_status,
             run_command=self._run_command,
-            gated=lambda write: self._gate.write(lambda: None, write),
+            gated=functools.partial(self._gate.write, None),
         )
 
     # -- settings (the follower's: every wait reads them when it starts) ---
