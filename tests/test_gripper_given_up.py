@@ -18,6 +18,7 @@ from sim_speeds import SUITE_TICK_HZ
 from tmmaster import (
     Blog2FG7Gripper,
     ConfigError,
+    Gripper,
     GripperLink,
     GripperTimeoutError,
     OnRobot2FG7Gripper,
@@ -54,6 +55,27 @@ def link(sim: Simulator) -> GripperLink:
     assert sim.gripper_port is not None
     retry = RetryPolicy(attempts=5, total_time_s=2.0, initial_backoff_s=0.01, jitter_s=0.0)
     return GripperLink(sim.url, sim.gripper_port, poll_interval_s=0.01, retry=retry)
+
+
+def closing_on_another_thread(gripper: Gripper) -> tuple[threading.Thread, list[BaseException]]:
+    """``gripper.close()`` started on a thread of its own: the thread, and the tmmaster
+    errors it ended with (filled when it ends)."""
+    errors: list[BaseException] = []
+
+    def close_fingers() -> None:
+        try:
+            gripper.close()
+        except TMMasterError as exc:
+            errors.append(exc)
+
+    thread = threading.Thread(target=close_fingers)
+    thread.start()
+    return thread, errors
+
+
+def wait_until_moving(sim: Simulator) -> None:
+    """Until the simulated fingers move."""
+    sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
 
 
 def at_rest_width(sim: Simulator) -> float:
@@ -135,18 +157,9 @@ def test_robot_close_on_another_thread_stops_a_stand_alone_gripper_move() -> Non
         gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), device_link, speed_percent=1)
         robot = Robot("127.0.0.1", sim.port, gripper=gripper, polling=PollPolicy(interval_s=0.01))
         robot.connect()
-        errors: list[BaseException] = []
-
-        def close_fingers() -> None:
-            try:
-                gripper.close()
-            except TMMasterError as exc:
-                errors.append(exc)
-
-        thread = threading.Thread(target=close_fingers)
-        thread.start()
+        thread, errors = closing_on_another_thread(gripper)
         try:
-            sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+            wait_until_moving(sim)
         finally:
             robot.close()
             thread.join(5.0)
@@ -193,18 +206,9 @@ def test_robot_close_bounds_the_gripper_stop_it_cannot_deliver(
     gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), device_link, speed_percent=1)
     robot = Robot(sim.url, gripper=gripper, polling=PollPolicy(interval_s=0.01))
     robot.connect()
-    errors: list[BaseException] = []
-
-    def close_fingers() -> None:
-        try:
-            gripper.close()
-        except TMMasterError as exc:
-            errors.append(exc)
-
-    thread = threading.Thread(target=close_fingers)
-    thread.start()
+    thread, errors = closing_on_another_thread(gripper)
     try:
-        sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+        wait_until_moving(sim)
         command = gripper.profile.field("command").address
         sim.inject(f"drop_connections:on_write_to={command},lose=request,once=false")
         started = time.monotonic()
@@ -232,18 +236,9 @@ def test_a_second_command_on_another_thread_is_refused_unsent(
         else Blog2FG7Gripper(profile, link(sim))
     )
     gripper.connect()
-    errors: list[BaseException] = []
-
-    def close_fingers() -> None:
-        try:
-            gripper.close()
-        except TMMasterError as exc:
-            errors.append(exc)
-
-    thread = threading.Thread(target=close_fingers)
-    thread.start()
+    thread, errors = closing_on_another_thread(gripper)
     try:
-        sim.wait_for(lambda: sim.call(lambda: sim.backend.gripper_state().moving), 5.0)
+        wait_until_moving(sim)
         writes = gripper.transport.stats.requests_by_function.get(16, 0)  # FC16
         with pytest.raises(ConfigError, match=kind):
             gripper.open()
