@@ -86,11 +86,32 @@ def at_rest_width(sim: Simulator) -> float:
     return float(sim.call(lambda: sim.backend.gripper_state().width_mm))
 
 
-def test_an_onrobot_move_given_up_at_its_timeout_is_stopped(tm_simulator_factory: Factory) -> None:
-    # 1 %: 16 mm/s, 39 -> 1 mm takes 2.4 simulated s, 0.6 s at 4x; given up after 0.1 s.
-    sim = slow_sim(tm_simulator_factory, "onrobot-2fg7", 4.0)
-    gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), link(sim), speed_percent=1)
+#: Each driver's slow move, and the register its command write sets.
+#: OnRobot at 1 %: 16 mm/s, 39 -> 1 mm takes 2.4 simulated s, 0.6 s at 4x.
+#: blog-2fg7 at 100 mm/s: 39 -> 0 mm takes 0.39 s at 1x, acknowledged at once.
+TIME_SCALE = {"onrobot-2fg7": 4.0, "blog-2fg7": 1.0}
+COMMAND_FIELD = {"onrobot-2fg7": "command", "blog-2fg7": "control"}
+
+
+def connected_gripper(sim: Simulator, kind: str) -> Blog2FG7Gripper | OnRobot2FG7Gripper:
+    """The stand-alone driver ``kind`` on ``sim``'s gripper, slow, connected."""
+    profile = gripper_profile(kind)
+    gripper: Blog2FG7Gripper | OnRobot2FG7Gripper = (
+        OnRobot2FG7Gripper(profile, link(sim), speed_percent=1)
+        if kind == "onrobot-2fg7"
+        else Blog2FG7Gripper(profile, link(sim))
+    )
     gripper.connect()
+    return gripper
+
+
+@pytest.mark.parametrize("kind", ["onrobot-2fg7", "blog-2fg7"])
+def test_a_move_given_up_at_its_timeout_is_stopped(
+    tm_simulator_factory: Factory, kind: str
+) -> None:
+    # Given up after 0.1 s, the move taken (a blog-2fg7's acknowledged).
+    sim = slow_sim(tm_simulator_factory, kind, TIME_SCALE[kind])
+    gripper = connected_gripper(sim, kind)
     try:
         with pytest.raises(GripperTimeoutError):
             gripper.close(timeout_s=0.1)
@@ -99,40 +120,13 @@ def test_an_onrobot_move_given_up_at_its_timeout_is_stopped(tm_simulator_factory
     assert at_rest_width(sim) > 15.0  # stopped, not closed to 1 mm
 
 
-def test_an_onrobot_move_whose_answer_was_lost_is_stopped(tm_simulator_factory: Factory) -> None:
-    sim = slow_sim(tm_simulator_factory, "onrobot-2fg7", 4.0)
-    gripper = OnRobot2FG7Gripper(gripper_profile("onrobot-2fg7"), link(sim), speed_percent=1)
-    gripper.connect()
-    command = gripper.profile.field("command").address
+@pytest.mark.parametrize("kind", ["onrobot-2fg7", "blog-2fg7"])
+def test_a_move_whose_answer_was_lost_is_stopped(tm_simulator_factory: Factory, kind: str) -> None:
+    sim = slow_sim(tm_simulator_factory, kind, TIME_SCALE[kind])
+    gripper = connected_gripper(sim, kind)
+    command = gripper.profile.field(COMMAND_FIELD[kind]).address
     # The device takes the command, then the link is cut before its answer.
     sim.inject(f"drop_connections:on_write_to={command},lose=answer")
-    try:
-        with pytest.raises(TransportError):
-            gripper.close()
-    finally:
-        gripper.disconnect()
-    assert at_rest_width(sim) > 15.0
-
-
-def test_a_blog_move_given_up_after_it_was_taken_is_stopped(tm_simulator_factory: Factory) -> None:
-    # 100 mm/s: 39 -> 0 mm takes 0.39 s at 1x; acknowledged at once, given up after 0.1 s.
-    sim = slow_sim(tm_simulator_factory, "blog-2fg7", 1.0)
-    gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link(sim))
-    gripper.connect()
-    try:
-        with pytest.raises(GripperTimeoutError):
-            gripper.close(timeout_s=0.1)
-    finally:
-        gripper.disconnect()
-    assert at_rest_width(sim) > 15.0
-
-
-def test_a_blog_move_whose_answer_was_lost_is_withdrawn(tm_simulator_factory: Factory) -> None:
-    sim = slow_sim(tm_simulator_factory, "blog-2fg7", 1.0)
-    gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link(sim))
-    gripper.connect()
-    control = gripper.profile.field("control").address
-    sim.inject(f"drop_connections:on_write_to={control},lose=answer")
     try:
         with pytest.raises(TransportError):
             gripper.close()
@@ -228,14 +222,8 @@ def test_a_second_command_on_another_thread_is_refused_unsent(
 ) -> None:
     # Thread A closes the fingers; a command from another thread meanwhile would replace
     # A's (and A's stop could halt it): it is refused before any write, and A's move ends.
-    sim = slow_sim(tm_simulator_factory, kind, 4.0 if kind == "onrobot-2fg7" else 1.0)
-    profile = gripper_profile(kind)
-    gripper: Blog2FG7Gripper | OnRobot2FG7Gripper = (
-        OnRobot2FG7Gripper(profile, link(sim), speed_percent=1)
-        if kind == "onrobot-2fg7"
-        else Blog2FG7Gripper(profile, link(sim))
-    )
-    gripper.connect()
+    sim = slow_sim(tm_simulator_factory, kind, TIME_SCALE[kind])
+    gripper = connected_gripper(sim, kind)
     thread, errors = closing_on_another_thread(gripper)
     try:
         wait_until_moving(sim)
