@@ -96,8 +96,12 @@ def _act(robot: Robot, action: str, timeout_s: float) -> str:
         return f"project  {(robot.play if action == 'play' else robot.pause)(timeout_s)}\n"
     if action == "stop":
         robot.stop()
-        deadline = time.monotonic() + timeout_s
-        while robot.status().moving:  # done only once the arm is at rest
+        deadline, last = time.monotonic() + timeout_s, None
+        # At rest: not moving, and the same pose twice, within 0.5 mm / 0.5 deg over a poll
+        # (slower than 10 mm/s: braked); on tmflow "moving" is the robot program's state,
+        # which leaves busy when the project stops, before the arm has braked.
+        while (now := robot.status()).moving or last is None or not now.pose.is_close(last):
+            last = now.pose
             if time.monotonic() > deadline:
                 raise RobotError(f"stop pressed; the arm still moves after {timeout_s:g} s")
             time.sleep(robot.poll_interval_s)
