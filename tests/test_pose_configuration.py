@@ -13,6 +13,7 @@ from collections.abc import Callable
 import pytest
 
 from tmmaster import Pose, Robot, UnreachablePoseError, robot_model
+from tmmaster._planning import _configuration
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -64,3 +65,17 @@ def test_a_relative_move_out_of_the_configuration_is_refused(
         robot.move_by(*offset)
     assert caught.value.reason == "configuration"
     assert command_writes(sim) == []
+
+
+def test_the_plan_asks_no_configuration_the_check_before_the_write_asked(
+    robots: Callable[..., Robot], memory_simulator_factory: SimFactory
+) -> None:
+    # The configuration is checked before any request and again by the plan, from the
+    # joints the robot reports: where those are the seed's, the plan computes nothing new.
+    robot = robots(memory_simulator_factory("tmflow"))
+    robot.move_to(START, speed=100)
+    before = _configuration.cache_info()
+    robot.move_to(START.offset(dx=40, dz=30), speed=100)
+    after = _configuration.cache_info()
+    assert after.misses - before.misses == 1  # the new target's; the seed was known
+    assert after.hits - before.hits >= 3  # the seed before the write, both in the plan

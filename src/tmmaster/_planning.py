@@ -344,11 +344,18 @@ class Planner:
         _check_ptp_body(self.model, seed, joints, self.tool, self.workspace.floor_z_mm)
         return joints
 
-    def _keep_configuration(self, seed: Sequence[float] | None, joints: Joints, pose: Pose) -> None:
+    def _keep_configuration(self, seed: Joints | None, joints: Joints, pose: Pose) -> None:
         """Refuse a Cartesian target the arm reaches only in another pose configuration
         than the one it is in (``seed``): the robot program solves it in the current one
-        (TMscript 2.24 ``inversekin``, p. 207) and answers "unreachable"."""
-        have, need = self.model.configuration(seed or joints), self.model.configuration(joints)
+        (TMscript 2.24 ``inversekin``, p. 207) and answers "unreachable".
+
+        Asked before any request (:meth:`validate`) and again by the plan, from the
+        joints the robot reports: each joint set's configuration is computed once
+        (:func:`_configuration`), so the plan's check costs nothing new unless the
+        arm's joints changed meanwhile.
+        """
+        have = _configuration(self.model, seed or joints)
+        need = _configuration(self.model, joints)
         if have != need:
             text = (
                 f"pose {pose} is reachable only in another pose configuration (shoulder front,"
@@ -685,6 +692,13 @@ class Planner:
 # A cycle checks the same moves again: each pure check is done once per (arm, joints),
 # only a passing one kept (a refusal raises, and is checked again next time).
 _arm_lowest = functools.lru_cache(maxsize=256)(arm_lowest_z_mm)
+
+
+@functools.lru_cache(maxsize=512)
+def _configuration(model: RobotModel, joints: Joints) -> tuple[bool, bool, bool]:
+    """A joint set's pose configuration, once: a move's target is the next move's seed,
+    and the plan asks what the check before any request asked (unless the arm moved)."""
+    return model.configuration(joints)
 
 
 @functools.lru_cache(maxsize=256)
