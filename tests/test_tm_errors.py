@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import re
+import tomllib
 from collections.abc import Callable
+from importlib import resources
 from pathlib import Path
 
 import pytest
@@ -12,7 +15,7 @@ import pytest
 import tmmaster
 from tmmaster import Pose, Robot
 from tmmaster._exceptions import EmergencyStopError, RobotFaultError
-from tmmaster._tm_errors import code_hex, describe, lookup_tm_error, tm_errors
+from tmmaster._tm_errors import DATA_FILE, TMErrorCode, code_hex, describe, lookup_tm_error
 from tmmaster.pickplace.__main__ import EXIT_ROBOT_FAULT, main
 from tmmaster.sim import Simulator
 from tmmaster.sim._controller import SimErrorCode
@@ -25,6 +28,18 @@ NOT_LISTED = "(not in TMflow 2.24 Appendix J)"
 
 
 # -- the data --------------------------------------------------------------------------
+
+
+@functools.cache
+def tm_errors() -> dict[int, TMErrorCode]:
+    """Every code of Appendix J: the whole data file parsed and validated, each code once."""
+    text = resources.files("tmmaster").joinpath(DATA_FILE).read_text("utf-8")
+    entries: dict[int, TMErrorCode] = {}
+    for data in tomllib.loads(text)["error"]:
+        entry = TMErrorCode.model_validate(data)
+        assert entry.code not in entries, f"code {entry.hex} listed twice"
+        entries[entry.code] = entry
+    return entries
 
 
 def test_every_entry_has_its_code_hex_text_and_page() -> None:

@@ -9,8 +9,7 @@ cites its pages. Where the manual gives no solution for a motion error, the entr
 a short hint of ours, marked ``what_to_do_by = "tmmaster"``.
 
 :func:`lookup_tm_error` finds one code without parsing the whole file (about 1 MB of TOML: one
-entry is parsed on first use, then cached); :func:`tm_errors` parses and validates them
-all.
+entry is parsed on first use, then cached); the tests parse and validate them all.
 """
 
 from __future__ import annotations
@@ -176,29 +175,6 @@ def lookup_tm_error(code: int) -> TMErrorCode | None:
         ConfigError: The data file is missing or malformed (a broken install).
     """
     return _lookup(code & 0xFFFFFFFF)
-
-
-@functools.cache
-def tm_errors() -> Mapping[int, TMErrorCode]:
-    """Every code of Appendix J, parsed and validated (about 3,400 entries).
-
-    Returns:
-        A read-only mapping from code to entry, in the manual's order.
-
-    Raises:
-        ConfigError: The data file is missing or malformed (a broken install).
-    """
-    try:
-        entries = tomllib.loads(_text())["error"]
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{DATA_FILE}: {exc}") from exc
-    result: dict[int, TMErrorCode] = {}
-    for data in entries:
-        entry = _entry(data)
-        if entry.code in result:
-            raise ConfigError(f"{DATA_FILE}: code {entry.hex} listed twice")
-        result[entry.code] = entry
-    return MappingProxyType(result)
 
 
 @functools.cache
