@@ -30,6 +30,7 @@ from typing import Any, Literal
 from ._checks import shown
 from ._exceptions import ConfigError, ConnectError, ModbusExceptionError, StopRequestedError
 from ._gate import CommandGate
+from ._poller import Poller
 from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
 from ._transport import Transport
 
@@ -375,6 +376,8 @@ class RobotIO:
         if not against:
             return
         until = max(d.sent_at for d in against) + horizon
+        # One read every WATCH_INTERVAL_S; a stop request (or ``close()``) ends the watch.
+        poller = Poller(WATCH_INTERVAL_S, self._transport.interrupt, deadline=until)
         seen = 0
         try:
             while True:
@@ -386,21 +389,13 @@ class RobotIO:
                     break
                 if time.monotonic() >= until:
                     break
-                self._pause()
+                poller.sleep()
         except StopRequestedError as exc:
             raise StopRequestedError(
                 f"{what} set to {value}, but an earlier write of {not value} could still land:"
                 f" no longer watched ({exc})"
             ) from exc
         self._doubts[address] = [d for d in self._doubts[address] if d.value == value]
-
-    def _pause(self) -> None:
-        """Wait one watch interval; a stop request (or ``close()``) ends the watch."""
-        interrupt = self._transport.interrupt
-        if interrupt is None:
-            time.sleep(WATCH_INTERVAL_S)
-        elif interrupt.wait(WATCH_INTERVAL_S):
-            raise StopRequestedError("a stop was requested")
 
     def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
         """Read digital output ``channel`` of ``module`` back (one FC 01 request).
