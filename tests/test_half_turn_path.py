@@ -13,18 +13,12 @@ from collections.abc import Callable
 import pytest
 
 from tmmaster import ConfigError, Pose, Robot, robot_model
-from tmmaster.sim import Simulator
+from unsent_moves import SimFactory, command_writes, robot_at
 
-SimFactory = Callable[..., Simulator]
 #: Tool down, J6 = 114 deg on a TM5-700.
 START = Pose(300, 0, 250, 180, 0, 0)
 #: START turned by exactly 180 deg about the tool's axis, 50 mm lower.
 HALF_TURN = Pose(300, 0, 200, 180, 0, 180)
-
-
-def command_writes(sim: Simulator) -> list[object]:
-    """Every FC16 that reached the robot but the master's heartbeat."""
-    return [r for r in sim.request_log if r.function_code == 16 and r.address != 9050]
 
 
 def test_a_line_that_turns_half_a_turn_is_refused_before_the_write(
@@ -37,10 +31,7 @@ def test_a_line_that_turns_half_a_turn_is_refused_before_the_write(
     other_way = Pose(300, 0, 200, 180, 0, -179.99)
     with pytest.raises(ConfigError, match="jumps"):
         arm.line_joints(START, other_way, start_joints_deg=joints)
-    sim = memory_simulator_factory("tmflow")
-    robot = robots(sim)
-    robot.move_to(START, speed=100)
-    sim.clear_request_log()
+    sim, robot = robot_at(robots, memory_simulator_factory, START)
     with pytest.raises(ConfigError, match="half a turn"):
         robot.check_move(HALF_TURN, speed=30, motion="line", start=START)
     with pytest.raises(ConfigError, match="half a turn"):

@@ -14,9 +14,8 @@ import pytest
 
 from tmmaster import Pose, Robot, UnreachablePoseError, robot_model
 from tmmaster._planning import _configuration
-from tmmaster.sim import Simulator
+from unsent_moves import SimFactory, command_writes, robot_at
 
-SimFactory = Callable[..., Simulator]
 #: Tool down in front of the arm: shoulder in front, J3 > 0, J5 > 0.
 START = Pose(250, 0, 200, 180, 0, 90)
 #: Tool down near the base on the left: a TM5-700 reaches it only with J5 < 0 (the
@@ -24,18 +23,10 @@ START = Pose(250, 0, 200, 180, 0, 90)
 NEAR_BASE_LEFT = Pose(0, 200, 100, 180, 0, 90)
 
 
-def command_writes(sim: Simulator) -> list[object]:
-    """Every FC16 that reached the robot but the master's heartbeat."""
-    return [r for r in sim.request_log if r.function_code == 16 and r.address != 9050]
-
-
 def test_a_ptp_that_needs_another_configuration_is_refused_before_the_write(
     robots: Callable[..., Robot], memory_simulator_factory: SimFactory
 ) -> None:
-    sim = memory_simulator_factory("tmflow")
-    robot = robots(sim)
-    robot.move_to(START, speed=100)
-    sim.clear_request_log()
+    sim, robot = robot_at(robots, memory_simulator_factory, START)
     with pytest.raises(UnreachablePoseError, match=r"inversekin, p\. 207") as caught:
         robot.check_move(NEAR_BASE_LEFT, speed=30)
     assert caught.value.reason == "configuration"
@@ -56,10 +47,7 @@ def test_a_ptp_that_needs_another_configuration_is_refused_before_the_write(
 def test_a_relative_move_out_of_the_configuration_is_refused(
     robots: Callable[..., Robot], memory_simulator_factory: SimFactory
 ) -> None:
-    sim = memory_simulator_factory("tmflow")
-    robot = robots(sim)
-    robot.move_to(START, speed=100)
-    sim.clear_request_log()
+    sim, robot = robot_at(robots, memory_simulator_factory, START)
     offset = NEAR_BASE_LEFT.x - START.x, NEAR_BASE_LEFT.y - START.y, NEAR_BASE_LEFT.z - START.z
     with pytest.raises(UnreachablePoseError) as caught:
         robot.move_by(*offset)
