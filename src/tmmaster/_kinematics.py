@@ -152,22 +152,38 @@ def rotation_error(current: Transform, target: Transform) -> Vector:
     return (col[0] / norm * math.pi, col[1] / norm * math.pi, col[2] / norm * math.pi)
 
 
-def solve(matrix: list[list[float]], rhs: list[float]) -> list[float]:
-    """Solve ``matrix @ x = rhs`` by Gaussian elimination with partial pivoting."""
-    n = len(rhs)
-    a = [[*row, b] for row, b in zip(matrix, rhs, strict=True)]
+def _eliminate(a: list[list[float]], n: int) -> float:
+    """Gaussian elimination with partial pivoting of the first ``n`` columns, in place.
+
+    ``a`` (``n`` rows, ``n`` or more columns) becomes upper triangular in those columns.
+
+    Returns:
+        The sign the row swaps give a determinant (1 or -1); 0.0 for a singular matrix.
+    """
+    sign = 1.0
     for col in range(n):
         pivot = max(range(col, n), key=lambda i: abs(a[i][col]))
         if abs(a[pivot][col]) < 1e-300:
-            raise ZeroDivisionError("singular matrix")
-        a[col], a[pivot] = a[pivot], a[col]
+            return 0.0
+        if pivot != col:
+            a[col], a[pivot] = a[pivot], a[col]
+            sign = -sign
         p = a[col]
         for i in range(col + 1, n):
             f = a[i][col] / p[col]
             if f:
                 row = a[i]
-                for j in range(col, n + 1):
+                for j in range(col, len(row)):
                     row[j] -= f * p[j]
+    return sign
+
+
+def solve(matrix: list[list[float]], rhs: list[float]) -> list[float]:
+    """Solve ``matrix @ x = rhs`` by Gaussian elimination with partial pivoting."""
+    n = len(rhs)
+    a = [[*row, b] for row, b in zip(matrix, rhs, strict=True)]
+    if not _eliminate(a, n):
+        raise ZeroDivisionError("singular matrix")
     x = [0.0] * n
     for i in range(n - 1, -1, -1):
         x[i] = (a[i][n] - sum(a[i][j] * x[j] for j in range(i + 1, n))) / a[i][i]
@@ -176,22 +192,9 @@ def solve(matrix: list[list[float]], rhs: list[float]) -> list[float]:
 
 def determinant(matrix: list[list[float]]) -> float:
     """Determinant of a square matrix (Gaussian elimination)."""
-    n = len(matrix)
     a = [list(row) for row in matrix]
-    det = 1.0
-    for col in range(n):
-        pivot = max(range(col, n), key=lambda i: abs(a[i][col]))
-        if abs(a[pivot][col]) < 1e-300:
-            return 0.0
-        if pivot != col:
-            a[col], a[pivot] = a[pivot], a[col]
-            det = -det
-        det *= a[col][col]
-        for i in range(col + 1, n):
-            f = a[i][col] / a[col][col]
-            for j in range(col, n):
-                a[i][j] -= f * a[col][j]
-    return det
+    sign = _eliminate(a, len(a))
+    return sign * math.prod(a[i][i] for i in range(len(a))) if sign else 0.0
 
 
 @dataclass(frozen=True)
@@ -321,27 +324,28 @@ def _transposed_times(jac: list[list[float]], y: list[float]) -> list[float]:
     ]
 
 
+#: The inverse kinematics has converged within this distance, m, ...
+IK_TOLERANCE_M = 1e-6
+#: ... and this rotation, rad, ...
+IK_TOLERANCE_RAD = 1e-6
+#: ... or gives up after this many steps.
+IK_ITERATIONS = 100
+
+
 def dls_inverse(
-    chain: Chain,
-    target: Transform,
-    seed_rad: Sequence[float],
-    *,
-    tool: Transform = IDENTITY,
-    tolerance_m: float = 1e-6,
-    tolerance_rad: float = 1e-6,
-    iterations: int = 100,
+    chain: Chain, target: Transform, seed_rad: Sequence[float], *, tool: Transform = IDENTITY
 ) -> list[float] | None:
     """Damped-least-squares IK from ``seed_rad``: the joints (rad), or None without convergence."""
     q = list(seed_rad)
     damping = 1e-3
     previous = best = math.inf
     since_best = 0
-    for _ in range(iterations):
+    for _ in range(IK_ITERATIONS):
         jac, tcp = chain.jacobian(q, tool)
         error = pose_error(tcp, target)
         position = math.hypot(*error[:3])
         rotation = math.hypot(*error[3:])
-        converged = position < tolerance_m and rotation < tolerance_rad
+        converged = position < IK_TOLERANCE_M and rotation < IK_TOLERANCE_RAD
         norm = position + rotation
         # A pose out of reach stalls at a nonzero error: give up once it stops improving.
         if norm < best * 0.99:
