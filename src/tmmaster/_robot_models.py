@@ -885,32 +885,11 @@ def _cached_gauge(
     return PathGauge.along(start, target, poses)
 
 
-@functools.lru_cache(maxsize=1024)
-def _cached_inverse(
-    model: RobotModel, pose: Pose, seed: Joints, tool: Pose | None, same_branch: bool
-) -> Joints:
-    return model._solve(pose, seed, tool, same_branch)
-
-
-@functools.lru_cache(maxsize=1024)
-def _cached_forward(model: RobotModel, joints: Joints, tool: Pose | None) -> Pose:
-    # forward() is a pure function of the model, the joints and the tool; a repeating
-    # cycle starts each move from the same known joints (about 40 us per solve).
-    return model.forward(joints, tool=tool)
-
-
-@functools.lru_cache(maxsize=256)
-def _cached_path(
-    model: RobotModel,
-    start: Pose,
-    via: Pose | None,
-    target: Pose,
-    seed: Joints,
-    tool: Pose | None,
-    step_mm: float,
-    step_deg: float,
-) -> tuple[Joints, ...]:
-    return model._path(start, via, target, seed, tool, step_mm, step_deg)
+# Pure functions of the model and their arguments, cached: a repeating cycle solves the
+# same poses and paths from the same known joints (a solve is about 40 us).
+_cached_inverse = functools.lru_cache(maxsize=1024)(RobotModel._solve)
+_cached_forward = functools.lru_cache(maxsize=1024)(RobotModel.forward)
+_cached_path = functools.lru_cache(maxsize=256)(RobotModel._path)
 
 
 def _path_geometry(
@@ -942,8 +921,11 @@ def arc_through(start: Pose, via: Pose, target: Pose) -> kin.Arc:
         raise ConfigError(f"no arc from {start} through {via} to {target}: {exc}") from None
 
 
+# Keyed by the model (its joints compared), not stored on it: model_copy(update=...)
+# would carry a stored chain over to a model with other joints.
+@functools.lru_cache(maxsize=32)
 def joint_chain(model: RobotModel) -> kin.Chain:
-    """The arm's serial chain (its joints' fixed origins), to keep for repeated kinematics.
+    """The arm's serial chain (its joints' fixed origins), made once per model.
 
     Args:
         model: The arm.
@@ -951,13 +933,6 @@ def joint_chain(model: RobotModel) -> kin.Chain:
     Returns:
         The chain.
     """
-    return _chain_of(model)
-
-
-# Keyed by the model (its joints compared), not stored on it: model_copy(update=...)
-# would carry a stored chain over to a model with other joints.
-@functools.lru_cache(maxsize=32)
-def _chain_of(model: RobotModel) -> kin.Chain:
     return kin.Chain(
         tuple(
             kin.rpy_transform(j.origin_xyz_mm, [math.radians(a) for a in j.origin_rpy_deg])
