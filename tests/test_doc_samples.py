@@ -72,18 +72,31 @@ def _samples(page: Path) -> list[Sample]:
 
 PAGES_WITH_SAMPLES = [p for p in PAGES if _samples(p)]
 
-#: The suite's pace, with the start-up of a real-time simulator (0.2 s of wall time):
-#: a sample that ran before the robot is ready would fail, not slip through.
-PACE: dict[str, Any] = {
-    **QUICK,
-    "timing": Timing(tick_hz=QUICK["timing"].tick_hz, init_time_s=0.2 * QUICK["time_scale"]),
-}
+#: The start-up of a real-time simulator, in wall seconds: a sample that ran before the
+#: robot is ready would fail, not slip through.
+START_UP_S = 0.2
+
+
+def _paced(time_scale: float) -> Timing:
+    """The suite's tick rate, and ``START_UP_S`` of wall time to start up at ``time_scale``."""
+    return Timing(tick_hz=QUICK["timing"].tick_hz, init_time_s=START_UP_S * time_scale)
+
+
+#: The suite's pace.
+PACE: dict[str, Any] = {**QUICK, "timing": _paced(QUICK["time_scale"])}
 
 
 class _SuitePaced(Simulator):
-    """A block's own Simulator at the suite's pace unless it says otherwise."""
+    """A block's own Simulator at the suite's pace unless it says otherwise.
+
+    A block that gives its own ``time_scale`` (``Simulator("article", time_scale=10)``)
+    keeps it, and starts up in ``START_UP_S`` of wall time all the same (the suite's
+    ``init_time_s`` at that scale would take 10 times as long).
+    """
 
     def __init__(self, *args: Any, **options: Any) -> None:
+        time_scale = options.setdefault("time_scale", PACE["time_scale"])
+        options.setdefault("timing", _paced(time_scale))
         for key, value in PACE.items():
             options.setdefault(key, value)
         super().__init__(*args, **options)
