@@ -253,6 +253,17 @@ class Gripper(ABC):
         """True when the gripper currently detects an object."""
         return self.status().holding
 
+    def _done(self, status: GripperStatus, started: float) -> GripperStatus:
+        """Log the end of a command sent at ``started`` (``gripper.command_done``)."""
+        self._events.info(
+            "gripper.command_done",
+            gripper=self.kind,
+            holding=status.holding,
+            width_mm=status.width_mm,
+            duration_s=round(time.monotonic() - started, 4),
+        )
+        return status
+
 
 class NoGripper(Gripper):
     """Stands in when no gripper is configured: every action is a configuration error."""
@@ -407,13 +418,7 @@ class RegisterGripper(_RobotWiredGripper):
         status = _wait(
             f"gripper {label}", robot.poll_interval_s, bound, check, stop_event=robot.stop_event
         )
-        self._events.info(
-            "gripper.command_done",
-            gripper=self.kind,
-            holding=status.holding,
-            duration_s=round(time.monotonic() - started, 4),
-        )
-        return status
+        return self._done(status, started)
 
     def open(self, *, timeout_s: float | None = None) -> GripperStatus:
         """Write open, then wait the settle time (no busy flag to watch).
@@ -626,14 +631,7 @@ class _OwnConnectionGripper(Gripper):
             raise
         finally:
             self._busy.release()
-        self._events.info(
-            "gripper.command_done",
-            gripper=self.kind,
-            holding=status.holding,
-            width_mm=status.width_mm,
-            duration_s=round(time.monotonic() - started, 4),
-        )
-        return status
+        return self._done(status, started)
 
     def _stop_fingers(self) -> None:
         """Stop a move whose write was attempted and that neither ended nor was stopped."""
