@@ -141,7 +141,7 @@ def _emit(text: str, output: str | None) -> int:
     input: see :data:`EXIT_OUTPUT_FAILED`), never a traceback.
     """
     if output is None:
-        return write_stdout(lambda: sys.stdout.write(text), prog="tmmaster")
+        return write_stdout(text, prog="tmmaster")
     try:
         Path(output).write_text(text, encoding="utf-8")
     except OSError as exc:

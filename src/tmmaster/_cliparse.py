@@ -122,11 +122,11 @@ EXIT_OUTPUT_FAILED = 1
 EXIT_BROKEN_PIPE = 128 + int(signal.SIGPIPE)
 
 
-def write_stdout(write: Callable[[], object], *, prog: str) -> int:
-    """Run ``write`` (which prints to ``sys.stdout``), flush, and turn a write error into a status.
+def write_stdout(text: str, *, prog: str) -> int:
+    """Write ``text`` on ``sys.stdout``, flush, and turn a write error into a status.
 
     Args:
-        write: prints the command's output on ``sys.stdout``.
+        text: the command's output.
         prog: the command's name for the error line (``tmmaster``, ``report``).
 
     Returns:
@@ -134,16 +134,16 @@ def write_stdout(write: Callable[[], object], *, prog: str) -> int:
         with one line on stderr (e.g. ``> /dev/full``); :data:`EXIT_BROKEN_PIPE`, quietly,
         when the reader went away (a closed pipe, as ``| head`` does).
     """
+
+    def write() -> int:
+        sys.stdout.write(text)
+        return 0
+
     try:
-        write()
-        sys.stdout.flush()
-    except BrokenPipeError:
-        discard_stdout()
-        return EXIT_BROKEN_PIPE
+        return ended_quietly(write)
     except OSError as exc:
         discard_stdout()
         return output_failed(prog, "the output", exc)
-    return 0
 
 
 def output_failed(prog: str, what: str, exc: OSError) -> int:

@@ -130,4 +130,4 @@ def run(args: argparse.Namespace) -> int:
         return code
     finally:
         undo_logging()
-    return write_stdout(lambda: sys.stdout.write(text), prog="tmmaster robot")
+    return write_stdout(text, prog="tmmaster robot")

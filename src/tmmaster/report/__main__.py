@@ -96,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         console = Console(file=sys.stdout)
         with console.capture() as captured:
             console.print(summary_renderable(report))
-        return write_stdout(lambda: sys.stdout.write(captured.get()), prog="report")
+        return write_stdout(captured.get(), prog="report")
     from ._plot import plot_report, recorded_nothing
 
     output = Path(args.output) if args.output else Path(args.report).with_suffix(".png")
