@@ -178,27 +178,6 @@ def discard_stdout() -> None:
         pass
 
 
-def say(line: str) -> bool:
-    """Print ``line`` on stdout, flushed; False when the reader went away (``| head``).
-
-    After a closed pipe stdout points at the null device (see :func:`discard_stdout`):
-    later lines go nowhere, quietly, and the command carries on (a run still writes its
-    report) and ends with :func:`ended_quietly`'s status.
-
-    Args:
-        line: The line, without its newline.
-
-    Returns:
-        True when written; False when stdout's reader is gone.
-    """
-    try:
-        print(line, flush=True)
-    except BrokenPipeError:
-        discard_stdout()
-        return False
-    return True
-
-
 def ended_quietly(body: Callable[[], int]) -> int:
     """Run a command's ``body``, then flush stdout; a reader gone away ends it quietly.
 

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING
 from ._checks import shown
 from ._error_root import ConfigError as ConfigError
 from ._error_root import TMMasterError as TMMasterError
-from ._tm_errors import TMErrorCode, code_hex, describe, describe_fault, lookup_tm_error
+from ._tm_errors import TMErrorCode, code_hex, describe_fault, lookup_tm_error
 
 if TYPE_CHECKING:
     from ._pose import Pose
@@ -329,21 +329,6 @@ class RobotFaultError(_TMCodedError):
 
 class EmergencyStopError(_TMCodedError):
     """The emergency stop is pressed (``code``/``tm_error`` as for RobotFaultError)."""
-
-
-def fault_meaning(exc: BaseException) -> str | None:
-    """The code and meaning of a robot fault or e-stop, for a report.
-
-    Args:
-        exc: The error that ended a run.
-
-    Returns:
-        ``"0x0022 Force or Torque Over Range"`` for a RobotFaultError or EmergencyStopError
-        with a code (TMflow's codes), else None (other errors' codes are not Techman's).
-    """
-    if not isinstance(exc, RobotFaultError | EmergencyStopError) or not exc.error_code:
-        return None
-    return describe(exc.error_code)
 
 
 class ProjectPausedError(RobotFaultError):

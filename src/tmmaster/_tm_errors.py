@@ -144,21 +144,6 @@ def describe_fault(code: int) -> str:
     return f"{entry.label}; {entry.hint()}"
 
 
-def code_suffix(code: int | None, message: str) -> str:
-    """What a one-line report adds for a robot's error code, unless the message names it.
-
-    Args:
-        code: The robot's error code (None or 0: none).
-        message: The error's message (a RobotFaultError's already names its code).
-
-    Returns:
-        ``" (robot error 0x0022 Force or Torque Over Range)"``, or ``""``.
-    """
-    if not code or code_hex(code) in message:
-        return ""
-    return f" (robot error {describe(code)})"
-
-
 def lookup_tm_error(code: int) -> TMErrorCode | None:
     """The entry of TMflow 2.24 Appendix J for a robot's error code.
 

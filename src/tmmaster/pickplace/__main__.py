@@ -40,8 +40,8 @@ from .._cliparse import (
     ArgumentParser,
     UsageError,
     did_you_mean,
+    discard_stdout,
     run_command,
-    say,
 )
 from .._exceptions import (
     ConfigError,
@@ -62,7 +62,7 @@ from .._profiles import DEFAULT_PROFILE, builtin_profile_names, load_profile
 from .._registers import RobotProfile
 from .._robot import Robot
 from .._sigint import first_stops
-from .._tm_errors import code_suffix
+from .._tm_errors import code_hex, describe
 from .._transport import endpoint_text
 from .._version import add_version_argument
 from ._config import PickPlaceConfig, load_config, robot_from_config
@@ -295,8 +295,18 @@ class _Output:
             self.say(line)
 
     def say(self, line: str) -> None:
-        """``line`` on stdout; once its reader went away (``| head``), nothing, quietly."""
-        if not self.stdout_gone and not say(line):
+        """``line`` on stdout, flushed; once its reader went away (``| head``), nothing.
+
+        After a closed pipe stdout points at the null device (:func:`discard_stdout`):
+        later lines go nowhere, quietly, and the run carries on (it still writes its
+        report) and ends with :func:`ended_quietly`'s status.
+        """
+        if self.stdout_gone:
+            return
+        try:
+            print(line, flush=True)
+        except BrokenPipeError:
+            discard_stdout()
             self.stdout_gone = True
 
     def interrupt(self) -> None:
@@ -994,6 +1004,21 @@ def _connect(robot: Robot, host: str, port: int) -> tuple[int, str] | None:
     return None
 
 
+def _code_suffix(code: int | None, message: str) -> str:
+    """What a one-line report adds for a robot's error code, unless the message names it.
+
+    Args:
+        code: The robot's error code (None or 0: none).
+        message: The error's message (a RobotFaultError's already names its code).
+
+    Returns:
+        ``" (robot error 0x0022 Force or Torque Over Range)"``, or ``""``.
+    """
+    if not code or code_hex(code) in message:
+        return ""
+    return f" (robot error {describe(code)})"
+
+
 def _failed(result: RunResult) -> tuple[int, str]:
     """The exit code and reason of a run that did not end DONE."""
     failure = result.failure
@@ -1010,7 +1035,7 @@ def _failed(result: RunResult) -> tuple[int, str]:
         return code, f"interrupted in {failure.state} (cycle {failure.cycle}); {stopped}"
     label = RESULT_NAMES[code].replace("_", " ")
     if isinstance(failure.exception, RobotFaultError | EmergencyStopError):  # TM's codes
-        code_text = code_suffix(failure.error_code, failure.message)
+        code_text = _code_suffix(failure.error_code, failure.message)
     else:
         code_text = f" (robot error code {failure.error_code})" if failure.error_code else ""
     reaction = ""

@@ -20,8 +20,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .._exceptions import ConfigError, fault_meaning
+from .._exceptions import ConfigError, EmergencyStopError, RobotFaultError
 from .._pose import Pose
+from .._tm_errors import describe
 from ._runner import RunResult
 
 #: Bumped when a key changes meaning or disappears (adding keys keeps the version).
@@ -525,6 +526,21 @@ def build_run_report(
         "move_states": list(move_states or []),
     }
     return RunReport.model_validate(data)
+
+
+def fault_meaning(exc: BaseException) -> str | None:
+    """The code and meaning of a robot fault or e-stop, for a report.
+
+    Args:
+        exc: The error that ended a run.
+
+    Returns:
+        ``"0x0022 Force or Torque Over Range"`` for a RobotFaultError or EmergencyStopError
+        with a code (TMflow's codes), else None (other errors' codes are not Techman's).
+    """
+    if not isinstance(exc, RobotFaultError | EmergencyStopError) or not exc.error_code:
+        return None
+    return describe(exc.error_code)
 
 
 def _run_fields(run: RunResult | None) -> dict[str, Any]:
