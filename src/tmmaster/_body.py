@@ -33,6 +33,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from . import _kinematics as kin
 from ._exceptions import ConfigError
 from ._pose import Pose
 from ._robot_models import RobotModel, joint_chain
@@ -175,40 +176,14 @@ def arm_body(name: str, tool: Pose | None) -> ArmBody | None:
     return ArmBody(specs, names, pairs, centres)
 
 
-#: A link's frame: three rows of its rotation and position, mm.
-Frame = Sequence[Sequence[float]]
-_BASE: Frame = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0))
-
-
-def _frames(body: ArmBody, model: RobotModel, joints_deg: Sequence[float]) -> list[Frame]:
-    """Each link's frame (0 the base .. 6 the flange, 7 the housing's: the flange).
-
-    :meth:`Chain.frames`' products written out for rotations about z (three times
-    faster: the check runs at every sample of a path and every tick of the simulator).
-    """
-    frames = [_BASE]
-    r = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-    px = py = pz = 0.0
-    for o, q in zip(joint_chain(model).origins, joints_deg, strict=True):
-        px, py, pz = (
-            r[0][0] * o[0][3] + r[0][1] * o[1][3] + r[0][2] * o[2][3] + px,
-            r[1][0] * o[0][3] + r[1][1] * o[1][3] + r[1][2] * o[2][3] + py,
-            r[2][0] * o[0][3] + r[2][1] * o[1][3] + r[2][2] * o[2][3] + pz,
-        )
-        c, s = math.cos(math.radians(q)), math.sin(math.radians(q))
-        rows = []
-        for row in r:
-            m0 = row[0] * o[0][0] + row[1] * o[1][0] + row[2] * o[2][0]
-            m1 = row[0] * o[0][1] + row[1] * o[1][1] + row[2] * o[2][1]
-            m2 = row[0] * o[0][2] + row[1] * o[1][2] + row[2] * o[2][2]
-            rows.append((c * m0 + s * m1, c * m1 - s * m0, m2))
-        r = (rows[0], rows[1], rows[2])
-        frames.append(((*r[0], px), (*r[1], py), (*r[2], pz)))
+def _frames(model: RobotModel, joints_deg: Sequence[float]) -> list[kin.Frame]:
+    """Each link's frame (0 the base .. 6 the flange, 7 the housing's: the flange)."""
+    frames = joint_chain(model).link_frames([math.radians(q) for q in joints_deg])
     frames.append(frames[-1])
     return frames
 
 
-def _apply(t: Frame, p: Vector) -> Vector:
+def _apply(t: Sequence[Sequence[float]], p: Vector) -> Vector:
     x, y, z = p
     return (
         t[0][0] * x + t[0][1] * y + t[0][2] * z + t[0][3],
@@ -239,7 +214,7 @@ def contacts(
     body = arm_body(model.name, tool)
     if body is None:
         return []
-    frames = _frames(body, model, joints_deg)
+    frames = _frames(model, joints_deg)
     specs = body.specs
     centres = [_apply(frames[s[0]], c) for s, c in zip(specs, body.centres, strict=True)]
     ends: dict[int, tuple[Vector, Vector]] = {}

@@ -29,6 +29,8 @@ from ._pose import Pose
 
 Row = tuple[float, float, float, float]
 Transform = tuple[Row, Row, Row, Row]
+#: A rigid frame as the three rows of a transform that matter: rotation and position.
+Frame = tuple[Row, Row, Row]
 Vector = tuple[float, float, float]
 
 IDENTITY: Transform = (
@@ -216,18 +218,19 @@ class Chain:
         """Base -> flange transform."""
         return self.frames(joints_rad)[-1]
 
-    def joint_origins(self, joints_rad: Sequence[float]) -> list[Vector]:
-        """Base-frame position of each joint's origin, the last the flange's, mm.
+    def link_frames(self, joints_rad: Sequence[float]) -> list[Frame]:
+        """Base -> each joint's frame after its turn, as three rows (rotation, position).
 
-        The points of :meth:`frames`, computed without building its matrices (about
-        three times faster): the simulator checks the links between them every tick.
+        The base's frame first, the flange's last: :meth:`frames`, computed for turns
+        about z without building its 4x4 matrices (about three times faster). The
+        simulator checks the links between the joints every tick, and the body check
+        the arm at every sample of a path.
         """
         # The rotation so far, row by row, and the position of the current frame.
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
         px = py = pz = 0.0
-        points = []
-        last = len(self.origins) - 1
-        for k, ((a0, a1, a2, _), q) in enumerate(zip(self.origins, joints_rad, strict=True)):
+        frames = [((r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz))]
+        for (a0, a1, a2, _), q in zip(self.origins, joints_rad, strict=True):
             a00, a01, a02, ax = a0
             a10, a11, a12, ay = a1
             a20, a21, a22, az = a2
@@ -236,9 +239,6 @@ class Chain:
                 r10 * ax + r11 * ay + r12 * az + py,
                 r20 * ax + r21 * ay + r22 * az + pz,
             )
-            points.append((px, py, pz))
-            if k == last:
-                break  # the flange's position needs no turn after it
             # This joint's origin turned by its angle (columns 0 and 1 mixed), then
             # appended to the rotation so far.
             c, s = math.cos(q), math.sin(q)
@@ -256,7 +256,15 @@ class Chain:
                 r20 * m01 + r21 * m11 + r22 * m21,
                 r20 * a02 + r21 * a12 + r22 * a22,
             )
-        return points
+            frames.append(((r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz)))
+        return frames
+
+    def joint_origins(self, joints_rad: Sequence[float]) -> list[Vector]:
+        """Base-frame position of each joint's origin, the last the flange's, mm.
+
+        The positions of :meth:`link_frames` (a joint's turn leaves its origin where it is).
+        """
+        return [(f[0][3], f[1][3], f[2][3]) for f in self.link_frames(joints_rad)[1:]]
 
     def jacobian(
         self, joints_rad: Sequence[float], tool: Transform = IDENTITY
