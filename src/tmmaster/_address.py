@@ -187,9 +187,9 @@ def check_port(port: object, *, field: str = "port") -> int:
         ConfigError: not an integer, or outside 1..65535 (naming ``field``).
     """
     prefix = f"{field}: " if field else ""
-    if isinstance(port, bool):
-        raise ConfigError(f"{prefix}not an integer 1..65535: {port!r}")
     try:
+        if isinstance(port, bool):  # an int to Python, never a port
+            raise TypeError
         number = operator.index(port)  # type: ignore[arg-type]
     except TypeError:
         raise ConfigError(f"{prefix}not an integer 1..65535: {port!r}") from None

@@ -172,10 +172,9 @@ class Workspace(BaseModel):
         )
 
 
-#: The range of one Modbus request's bound (``TimeoutPolicy.request_s``), s.
-REQUEST_BOUNDS = Bounds(0.0, 60.0, "s", open_low=True)
-#: The range of a register gripper's settle time (``TimeoutPolicy.gripper_settle_s``), s.
-SETTLE_BOUNDS = Bounds(0.0, 60.0, "s", open_low=True)
+#: The range of one Modbus request's bound (``TimeoutPolicy.request_s``) and of a register
+#: gripper's settle time (``TimeoutPolicy.gripper_settle_s``), s.
+MINUTE_BOUNDS = Bounds(0.0, 60.0, "s", open_low=True)
 
 
 class TimeoutPolicy(Policy):
@@ -195,9 +194,7 @@ class TimeoutPolicy(Policy):
     argument: ClassVar[str] = "timeouts"
 
     #: One Modbus request must be answered within this time, s (up to 60).
-    request_s: Annotated[float, BeforeValidator(bounded("timeouts.request_s", REQUEST_BOUNDS))] = (
-        1.0
-    )
+    request_s: Annotated[float, BeforeValidator(bounded("timeouts.request_s", MINUTE_BOUNDS))] = 1.0
     #: The robot must acknowledge a command within this time.
     ack_timeout_s: Annotated[
         float, Field(gt=0, le=60, validation_alias=AliasChoices("ack_timeout_s", "ack_s"))
@@ -219,7 +216,7 @@ class TimeoutPolicy(Policy):
     #: A register gripper without a busy flag (the article profile's): how long an open
     #: or a close takes at most, s (up to 60).
     gripper_settle_s: Annotated[
-        float, BeforeValidator(bounded("timeouts.gripper_settle_s", SETTLE_BOUNDS))
+        float, BeforeValidator(bounded("timeouts.gripper_settle_s", MINUTE_BOUNDS))
     ] = 0.5
     #: After a command write whose answer was lost (clear-on-accept profiles, which must
     #: never write a command twice): how long to watch for the write to land late.
