@@ -62,6 +62,26 @@ async def settled_pose(sim: Simulator) -> Pose:
     return sim.tcp_pose()
 
 
+async def stays_stopped(sim: Simulator) -> None:
+    """Once the stop was taken, the arm stays where it stopped (not resumed)."""
+    stopped_at = await settled_pose(sim)
+    await asyncio.sleep(0.3)  # longer than the simulator's tick
+    assert sim.tcp_pose().is_close(stopped_at)
+
+
+async def moving(robot: aio.AsyncRobot, sim: Simulator) -> asyncio.Task[tmmaster.Motion]:
+    """``robot.move_to(A, speed=10)`` as a task, once the simulated arm has started it."""
+    task = asyncio.create_task(robot.move_to(A, speed=10))
+    await until(lambda: bool(sim.motion_log()))
+    return task
+
+
+def given_up(motion: tmmaster.Motion | None) -> bool:
+    """The move was withdrawn before the robot took it, or the stop was delivered."""
+    assert motion is not None
+    return motion.abandoned and (motion.withdrawn is True or motion.stop_delivered is True)
+
+
 async def operator_plays(sim: Simulator) -> None:
     """Press Play (tmflow: after a Stop) and let the project start (at the next tick)."""
     sim.press_play()
@@ -227,9 +247,7 @@ def test_cancelling_a_running_joint_move_or_arc_stops_it_and_nothing_moves_later
             motion = robot.last_motion
             assert motion is not None
             assert motion.stop_delivered is True  # before the CancelledError came
-            stopped_at = await settled_pose(sim)
-            await asyncio.sleep(0.3)  # longer than the simulator's tick
-            assert sim.tcp_pose().is_close(stopped_at)  # stopped, not resumed
+            await stays_stopped(sim)  # stopped, not resumed
             assert not sim.tcp_pose().is_close(target)  # short of its target
 
     run(scenario)
@@ -326,8 +344,7 @@ def test_cancelling_a_running_move_stops_it_and_nothing_moves_later(
         async with open_robot(sim) as robot:
             await robot.wait_until_ready(timeout_s=5)
             issued.append(Issued(A, time.monotonic()))
-            task = asyncio.create_task(robot.move_to(A, speed=10))
-            await until(lambda: bool(sim.motion_log()))
+            task = await moving(robot, sim)
             cancelled_at = time.monotonic()
             task.cancel()
             with pytest.raises(asyncio.CancelledError):
@@ -338,9 +355,7 @@ def test_cancelling_a_running_move_stops_it_and_nothing_moves_later(
             assert motion is not None
             assert motion.stop_delivered is True  # before the CancelledError came
             assert took < 1.0, took
-            stopped_at = await settled_pose(sim)
-            await asyncio.sleep(0.3)  # longer than the simulator's tick
-            assert sim.tcp_pose().is_close(stopped_at)  # stopped, not resumed
+            await stays_stopped(sim)  # stopped, not resumed
             assert not sim.tcp_pose().is_close(A)  # short of its target (seconds away)
             # The robot takes the next command: the cancelled call's stop request is gone
             # (tmflow: the Stop button stopped the project; the operator presses Play).
@@ -436,13 +451,8 @@ def test_a_cancelled_start_move_gives_its_move_up(tm_simulator_factory: SimFacto
             task.cancel()
             with pytest.raises(asyncio.CancelledError):
                 await task
-            motion = robot.last_motion
-            assert motion is not None
-            assert motion.abandoned
-            assert motion.stop_delivered is True or motion.withdrawn is True
-            stopped_at = await settled_pose(sim)
-            await asyncio.sleep(0.3)
-            assert sim.tcp_pose().is_close(stopped_at)
+            assert given_up(robot.last_motion), robot.last_motion
+            await stays_stopped(sim)  # stopped, not resumed
 
     run(scenario)
     assert not sim.tcp_pose().is_close(A)
@@ -475,13 +485,8 @@ def test_a_move_sent_just_as_its_caller_is_cancelled_is_given_up(
             task.cancel()
             with pytest.raises(asyncio.CancelledError):
                 await task
-            motion = robot.last_motion
-            assert motion is not None
-            assert motion.abandoned
-            assert motion.stop_delivered is True or motion.withdrawn is True
-            stopped_at = await settled_pose(sim)
-            await asyncio.sleep(0.3)
-            assert sim.tcp_pose().is_close(stopped_at)
+            assert given_up(robot.last_motion), robot.last_motion
+            await stays_stopped(sim)  # stopped, not resumed
 
     run(scenario)
     assert not sim.tcp_pose().is_close(A)
@@ -494,8 +499,7 @@ def test_closing_while_a_move_runs_stops_it(tm_simulator_factory: SimFactory, pr
     async def scenario() -> None:
         robot = await open_robot(sim)
         await robot.wait_until_ready(timeout_s=5)
-        task = asyncio.create_task(robot.move_to(A, speed=10))
-        await until(lambda: bool(sim.motion_log()))
+        task = await moving(robot, sim)
         assert await robot.close() is True
         with pytest.raises(tmmaster.StopRequestedError):
             await task
@@ -505,9 +509,7 @@ def test_closing_while_a_move_runs_stops_it(tm_simulator_factory: SimFactory, pr
         with pytest.raises(tmmaster.TransportClosedError):
             await robot.status()
         assert await robot.close() is True  # twice is fine
-        stopped_at = await settled_pose(sim)
-        await asyncio.sleep(0.3)
-        assert sim.tcp_pose().is_close(stopped_at)
+        await stays_stopped(sim)  # stopped, not resumed
 
     run(scenario)
     assert moves(sim) == [A]
@@ -592,8 +594,7 @@ def test_an_interrupt_of_the_users_stands_after_a_cancelled_call(
     async def scenario() -> None:
         async with open_robot(sim) as robot:
             await robot.wait_until_ready(timeout_s=5)
-            task = asyncio.create_task(robot.move_to(A, speed=10))
-            await until(lambda: bool(sim.motion_log()))
+            task = await moving(robot, sim)
             robot.interrupt()
             with pytest.raises(tmmaster.StopRequestedError):
                 await task

@@ -20,7 +20,7 @@ import pytest
 import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
-from test_aio import run, until
+from test_aio import given_up, moving, run, until
 from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator, Timing
 
@@ -35,11 +35,6 @@ PROFILES = ["article", "tmflow"]
 def open_robot(sim: Simulator, **options: Any) -> aio.AsyncRobot:
     options.setdefault("polling", PollPolicy(interval_s=0.01))
     return aio.connect("127.0.0.1", sim.port, profile=sim.profile, gripper=None, **options)
-
-
-def given_up(motion: tmmaster.Motion) -> bool:
-    """The move was withdrawn before the robot took it, or the stop was delivered."""
-    return motion.abandoned and (motion.withdrawn is True or motion.stop_delivered is True)
 
 
 class Blocker:
@@ -263,8 +258,7 @@ def test_an_interrupt_between_a_cancelled_calls_end_and_its_clear_stands(
                 real_clear()
 
             robot.robot.clear_stop_request = slow_clear  # type: ignore[method-assign]
-            task = asyncio.create_task(robot.move_to(A, speed=10))
-            await until(lambda: bool(sim.motion_log()))
+            task = await moving(robot, sim)
             task.cancel()
             user = threading.Thread(
                 target=lambda: (in_clear.wait(5), robot.interrupt(), interrupted.set())
@@ -292,8 +286,7 @@ def test_a_clear_stop_request_while_a_cancelled_call_gives_up_does_not_take_its_
     async def scenario() -> None:
         async with open_robot(sim) as robot:
             await robot.wait_until_ready(timeout_s=5)
-            task = asyncio.create_task(robot.move_to(A, speed=10))
-            await until(lambda: bool(sim.motion_log()))
+            task = await moving(robot, sim)
             loop = robot.robot._transport.fleet._runner.loop
             release = threading.Event()
             loop.call_soon_threadsafe(release.wait, 5.0)  # the wait's polls held
