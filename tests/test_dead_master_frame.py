@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import socket
 import struct
+import time
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
-from tmmaster import Pose, Robot, TimeoutPolicy
+from tmmaster import Pose, ProjectPausedError, Robot, RobotError, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator
 
@@ -82,11 +83,88 @@ def test_a_dead_masters_late_frame_never_runs_for_the_next_master(
         assert second.move_to(LEFT, speed=50).done  # the next master still commands
 
 
+def press_play_pause(sim: Simulator) -> None:
+    """The operator's Play/Pause button on the pendant (coil 7104)."""
+    sim.call(lambda: sim._controller.bank.set("play_pause", True))
+
+
+def test_a_dead_masters_late_frame_never_runs_once_another_master_claimed(
+    sim: Simulator,
+) -> None:
+    """The next master claims the robot at once (its first command, refused here because
+    the project is paused) and beats from then on: no silence ever. The dead master's
+    frame, which carries the number still free, lands later and must not run."""
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
+        first.wait_until_ready()
+        first.move_to(LEFT, speed=50)
+        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=5))
+        ((block, words),) = ticket.plan
+        first._heartbeat.stop()
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as second:
+        second.wait_until_ready()
+        press_play_pause(sim)  # the operator pauses the idle project
+        sim.wait_for(lambda: bool(sim.field("paused")), timeout=2.0)
+        with pytest.raises(ProjectPausedError):
+            second.move_to(LEFT, speed=50)  # claimed, then refused: nothing written
+        press_play_pause(sim)
+        sim.wait_for(lambda: not sim.field("paused"), timeout=2.0)
+        # Long past the dead master's time-to-live; the second beats all along.
+        beats = second._heartbeat.writes
+        sim.wait_for(lambda: second._heartbeat.writes > beats + 15, timeout=5.0)
+        deliver(sim.port, block.address, words)  # the dead master's frame lands now
+        sim.wait_for(lambda: sim.field("ack_seq") == ticket.seq, timeout=3.0)
+        assert sim.field("result_code") == 6  # another_master: consumed, never run
+        assert [record.target for record in sim.motion_log()] == [LEFT]
+        assert second.move_to(FAR, speed=50).done  # the next master still commands
+
+
+def test_a_paused_move_of_a_dead_master_is_stopped_when_the_next_master_claims(
+    sim: Simulator,
+) -> None:
+    """The next master connects within the time-to-live and commands: the dead master's
+    paused move is stopped at once, so Play on the pendant never resumes it."""
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
+        first.wait_until_ready()
+        first.move_to(LEFT, speed=50)
+        first.start_move(FAR, speed=5)
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(LEFT) > 20, timeout=5.0)
+        press_play_pause(sim)  # the operator pauses the project mid-move
+        sim.wait_for(lambda: bool(sim.field("paused")), timeout=2.0)
+        first._heartbeat.stop()  # the master dies: the next starts before the TTL
+        first._transport.close()  # type: ignore[attr-defined]
+        with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as second:
+            with pytest.raises(RobotError):
+                second.move_to(LEFT, speed=50)  # claims the robot, then refused
+            sim.wait_for(lambda: not sim.field("project_running"), timeout=3.0)
+            held = sim.tcp_pose()
+            press_play_pause(sim)  # the operator presses Play
+            sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
+            sim.wait_for(lambda: sim.field("robot_state") == 0, timeout=2.0)
+            assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
+            assert len(sim.motion_log()) == 2  # LEFT, then FAR: never started again
+            assert any("another master" in line for line in sim.displayed())
+
+
+def test_a_robot_that_only_reads_disturbs_no_moving_master(sim: Simulator) -> None:
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as master:
+        master.wait_until_ready()
+        master.move_to(LEFT, speed=50)
+        motion = master.start_move(FAR, speed=5)  # several times the time-to-live
+        with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as observer:
+            deadline = time.monotonic() + 10.0
+            while not sim.tcp_pose().is_close(FAR, mm=1.0, deg=1.0):
+                assert observer.status().mode == "running"
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+        motion.wait()
+        assert master.move_to(LEFT, speed=50).done
+
+
 @pytest.mark.xfail(
     strict=True,
-    reason="known limit (docs/safety.md, tmflow): a master started within master_ttl_ms of"
-    " the death of the one before it leaves no silence, so the dead one's number is not"
-    " used up; closing it needs the command to carry its master's identity",
+    reason="known limit (docs/safety.md, tmflow): within master_ttl_ms of its last beat, a"
+    " dead master's frame is as alive as the master could be, until another master claims"
+    " the robot with its first command (a robot that only reads claims nothing)",
 )
 def test_a_master_restarted_within_the_ttl_never_runs_the_dead_ones_late_frame(
     sim: Simulator,

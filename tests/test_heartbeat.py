@@ -1,11 +1,11 @@
 """The master's heartbeat: a command on the robot lives only as long as its master.
 
-A connected tmflow Robot writes ``master_heartbeat`` and ``master_ttl_ms`` (9050-9051)
-in one FC16 request every ``TimeoutPolicy.heartbeat_s``, from connect to close, on its
-driver's loop (a network robot) or in a small thread (an in-process one). The generated
-robot program, interpreted by the simulator, expires a command whose master went
-silent: a move paused mid-way never resumes at Play once the heartbeat stopped, and a
-live master's long move is never expired.
+A tmflow Robot writes ``master_heartbeat``, ``master_ttl_ms`` and ``master_session``
+(9050-9052) in one FC16 request every ``TimeoutPolicy.heartbeat_s``, from its first
+command to close, on its driver's loop (a network robot) or in a small thread (an
+in-process one). The generated robot program, interpreted by the simulator, expires a
+command whose master went silent: a move paused mid-way never resumes at Play once the
+heartbeat stopped, and a live master's long move is never expired.
 """
 
 from __future__ import annotations
@@ -54,19 +54,26 @@ def press_play_pause(sim: Simulator) -> None:
     sim.call(lambda: sim._controller.bank.set("play_pause", True))
 
 
-def test_a_connected_robot_writes_its_heartbeat_until_it_closes(sim: Simulator) -> None:
+def test_a_robot_beats_from_its_first_command_until_it_closes(sim: Simulator) -> None:
     robot = robot_for(sim, timeouts=FAST)
     with robot:
-        sim.wait_for(lambda: len(heartbeat_writes(sim)) >= 3, timeout=5.0)
+        robot.wait_until_ready()
+        time.sleep(4 * FAST.heartbeat_s)
+        assert heartbeat_writes(sim) == []  # a robot that only reads claims nothing
+        robot.move_to(LEFT, speed=50)
+        session = robot._heartbeat.session
         requests = robot.stats.requests
+        sim.wait_for(lambda: len(heartbeat_writes(sim)) >= 3, timeout=5.0)
+        assert requests == robot.stats.requests
     writes = heartbeat_writes(sim)
-    # One FC16 request of both registers; the heartbeat changes every time, the TTL in ms.
+    # One FC16 request of the three registers; the heartbeat changes every time, the TTL
+    # in ms, the session the one every command carries.
     beats = [values[0] for values in writes]
-    assert all(len(values) == 2 and values[1] == 500 for values in writes)
+    assert all(values[1:] == (500, session) for values in writes)
+    assert 1 <= session <= HEARTBEAT_MAX
     assert beats == list(range(1, len(beats) + 1))
     assert sim.field("master_ttl_ms") == 500
-    # Not counted as the link's requests: what a move costs reads the same.
-    assert requests == robot.stats.requests
+    assert sim.field("command_session") == session
     # Nothing after close().
     after = len(heartbeat_writes(sim))
     assert not robot._heartbeat.running
@@ -149,6 +156,8 @@ def test_a_beat_waits_for_a_link_the_robots_thread_holds(sim: Simulator) -> None
     period = 0.4
     robot = robot_for(sim, timeouts=TimeoutPolicy(heartbeat_s=period, heartbeat_ttl_s=2.0))
     with robot:
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)  # the first command: from then on it beats
         beat: Heartbeat = robot._heartbeat  # type: ignore[attr-defined]
         sim.wait_for(lambda: beat.writes >= 1, timeout=5.0)
         written = beat.writes

@@ -11,7 +11,6 @@ import pytest
 
 import tmmaster
 from tmmaster import Checks, MovePhase, PollPolicy, Pose, Robot, TimeoutPolicy
-from tmmaster._registers import EXTENSION_FIELDS
 from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -95,11 +94,12 @@ def test_a_moves_command_block_is_encoded_once(
         encoded.append(f.name)
         return real(f)
 
+    robot.move_to(APPROACH, speed=30)  # the first command (tmflow: checked, then claims)
     monkeypatch.setattr(transport_module, "encoder", counting)
     sim.clear_request_log()
     robot.move_to(APPROACH, speed=30)
-    # A PTP writes the block without the extension (a line's or a circle's only).
-    block = [f.name for f in robot.profile.command_block() if f.name not in EXTENSION_FIELDS]
+    # The whole block (tmflow: with the extension, zero for a PTP, and the session).
+    block = [f.name for f in robot.profile.command_block()]
     assert sorted(encoded) == sorted(block)  # each field once: checked, then written as is
     assert len(command_writes(sim)) == 1
 
@@ -112,9 +112,10 @@ def test_a_move_is_one_write_of_the_whole_command_block(
     robot = robots(sim)
     sim.clear_request_log()
     robot.move_to(APPROACH, speed=30)
-    writes = [r for r in sim.request_log if r.values is not None]
+    # The heartbeat's writes (tmflow, 9050) are not the move's.
+    writes = [r for r in sim.request_log if r.values is not None and r.address != 9050]
     assert len(writes) == 1
-    assert writes[0].count == (8 if profile == "article" else 16)
+    assert writes[0].count == (8 if profile == "article" else 31)
 
 
 def test_out_of_range_pose_sends_nothing(

@@ -40,6 +40,7 @@ from ._registers import (
     FLANGE_FIELDS,
     JOINT_FIELDS,
     ROBOT_BASE_TCP_FIELDS,
+    SESSION_FIELD,
     TARGET_FIELDS,
     TCP_FIELDS,
     VIA_FIELDS,
@@ -88,6 +89,8 @@ class CommandKind(StrEnum):
         return cls.PTP if motion is MotionType.PTP else cls.LINE
 
 
+#: The results of a number the robot program consumed without running its command.
+_UNRUN = ("cancelled", "another_master")
 #: The command kinds that write the command block's extension (via, speed_mm_s, ext_seq).
 _EXTENDED = frozenset({CommandKind.LINE, CommandKind.CIRCLE})
 
@@ -273,6 +276,11 @@ class CommandChannel(ABC):
         self._accel_field = profile.field("accel_time") if profile.has("accel_time") else None
         self._via_fields = self.extension_fields[: len(VIA_FIELDS)]
         self._speed_mm_s_field = profile.field("speed_mm_s") if self.extension_fields else None
+        # The master's session after the extension (tmflow: SequenceChannel).
+        self._session_field: RegisterField | None = None
+        #: This master's session, written with every command that has the field (its
+        #: heartbeat's, set when it claims the robot: :meth:`Heartbeat.claim`).
+        self.session = 0
         self._command_field = command
         self._command_codes: dict[CommandKind, int] = {}
         #: What the last poll that saw a command finished read (see :class:`StateAfterDone`).
@@ -404,9 +412,12 @@ class CommandChannel(ABC):
             # Always written (0 = the program's default) so the block stays contiguous
             # and goes out as one atomic request.
             words.append((self._accel_field, command.accel_time_ms or 0))
-        if command.kind in _EXTENDED and self._speed_mm_s_field is not None:
+        if self._speed_mm_s_field is not None and (
+            command.kind in _EXTENDED or self._session_field is not None
+        ):
             # Every Line and Circle writes the extension (in the same request; ext_seq
             # follows with the number): one left from an earlier command never applies.
+            # Every other command too (zero, ext_seq 0) where the session follows it.
             via = command.via.as_list() if command.via is not None else [0.0] * 6
             words += zip(self._via_fields, via, strict=True)
             words.append((self._speed_mm_s_field, command.speed_mm_s or 0))
@@ -679,6 +690,8 @@ class SequenceChannel(CommandChannel):
         self.error_code_fields = (p.field("last_error_code"),)
         self.seq_fields = (p.field("seq"), p.field("ack_seq"))
         self.seq_only = (p.field("seq"),)
+        if self.extension_fields and p.has(SESSION_FIELD):
+            self._session_field = p.field(SESSION_FIELD)  # every command carries it
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
@@ -755,6 +768,10 @@ class SequenceChannel(CommandChannel):
         if command.kind in _EXTENDED and self.extension_fields:
             # The extension carries the number of the command it belongs to.
             numbered.append((self.extension_fields[-1], seq))
+        elif self._session_field is not None:
+            numbered.append((self.extension_fields[-1], 0))  # the extension is no one's
+        if self._session_field is not None:
+            numbered.append((self._session_field, self.session))
         words += numbered
         ticket = Ticket(
             command,
@@ -810,9 +827,9 @@ class SequenceChannel(CommandChannel):
         have read the block just before the cancel landed, and it acknowledges the
         number it read (then reads the block again and finds the cancel, or runs the
         command if the cancel came later still). So this returns None until the answer
-        (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with result "cancelled"
-        (withdrawn) or not (taken); or the project not running (withdrawn: the start-up
-        rule consumes it).
+        (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with result "cancelled" or
+        "another_master" (withdrawn) or not (taken); or the project not running
+        (withdrawn: the start-up rule consumes it).
         """
         if (outcome := self.withdraw_outcome(ticket)) is None:
             self.cancel(ticket)
@@ -840,8 +857,8 @@ class SequenceChannel(CommandChannel):
         """
         p = self.profile
         values = self._read_regardless(self.feedback_fields)
-        if int(values["ack_seq"]) == ticket.seq:
-            return p.field("result_code").label(int(values["result_code"])) != "cancelled"
+        if int(values["ack_seq"]) == ticket.seq:  # consumed unrun, or taken
+            return p.field("result_code").label(int(values["result_code"])) not in _UNRUN
         flags = self._read_regardless(self.flag_fields)
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it

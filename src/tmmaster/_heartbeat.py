@@ -3,10 +3,17 @@
 The ``tmflow`` robot program expires a command whose master went silent: once
 ``master_heartbeat`` (9050) has not changed for ``master_ttl_ms`` (9051) it takes no
 command and lets no command go on, paused or not (docs/tmflow-program.md, "Command
-expiry"; docs/safety.md). A connected :class:`~tmmaster.Robot` writes both registers in
-one FC16 request every ``TimeoutPolicy.heartbeat_s`` from connect to close, the
-heartbeat changed each time (1..32767, then 1 again) and the time-to-live
-``TimeoutPolicy.heartbeat_ttl_s``.
+expiry"; docs/safety.md). It also runs only the commands of the master that beats: each
+master has a session, a random number in 1..32767 that it writes with every beat
+(``master_session``, 9052) and with every command (``command_session``); a command of
+another session is never run, and one running or paused is stopped.
+
+A :class:`~tmmaster.Robot` claims the robot just before its first command (one read of
+the session there, one beat with its own, different session) and from then on writes the
+three registers in one FC16 request every ``TimeoutPolicy.heartbeat_s`` until it closes,
+the heartbeat changed each time (1..32767, then 1 again), the time-to-live
+``TimeoutPolicy.heartbeat_ttl_s``. A robot that only reads never beats, so it disturbs
+no other master.
 
 A heartbeat write is no command: it never passes the command gate nor the command
 path's retry, and a write that fails is simply followed by the next one. It is not
@@ -29,6 +36,7 @@ the Robot is garbage.
 from __future__ import annotations
 
 import asyncio
+import secrets
 import threading
 import weakref
 from typing import TYPE_CHECKING, Any
@@ -41,7 +49,7 @@ if TYPE_CHECKING:
     from ._fleet import FleetMember
 
 #: The registers of the heartbeat, in this order (adjacent holding registers).
-HEARTBEAT_FIELDS = ("master_heartbeat", "master_ttl_ms")
+HEARTBEAT_FIELDS = ("master_heartbeat", "master_ttl_ms", "master_session")
 
 #: The heartbeat counts 1..32767, then 1 again (0: never written).
 HEARTBEAT_MAX = 32767
@@ -79,8 +87,10 @@ class Heartbeat:
             else ()
         )
         if self._fields:
-            first, second = self._fields
-            if first.table is not Table.HOLDING or second.address != first.address + 1:
+            first = self._fields[0]
+            if first.table is not Table.HOLDING or any(
+                f.address != first.address + i for i, f in enumerate(self._fields)
+            ):
                 self._fields = ()  # not one FC16 request: the program could not read it so
         self._transport = transport
         self.period_s = period_s
@@ -88,6 +98,8 @@ class Heartbeat:
         self._log = log
         #: The last heartbeat value sent (0: none yet).
         self.beat = 0
+        #: This master's session, written with every beat and every command (0: none).
+        self.session = _new_session() if self._fields else 0
         #: Writes answered by the robot.
         self.writes = 0
         #: Slots that found the link busy, closed or failing (the next slot writes).
@@ -114,9 +126,39 @@ class Heartbeat:
         return self._fields[0].address
 
     def next_words(self) -> list[int]:
-        """The next beat and the time-to-live: the words of one write."""
+        """The next beat, the time-to-live and the session: the words of one write."""
         self.beat = self.beat % HEARTBEAT_MAX + 1
-        return [self.beat, self.ttl_ms]
+        return [self.beat, self.ttl_ms, self.session]
+
+    @property
+    def claim_due(self) -> bool:
+        """True while a command must first :meth:`claim` the robot (not beating yet)."""
+        return self.enabled and not self.running
+
+    def claim(self, member: FleetMember | None) -> int:
+        """Before this master's first command: beat once with a session the robot does not
+        hold yet, then go on beating (:meth:`start`). Nothing once beating.
+
+        Args:
+            member: The robot's side of its driver (a network robot), or None.
+
+        Returns:
+            This master's session, for its commands (0: the profile has no heartbeat).
+
+        Raises:
+            TMMasterError: The session could not be read or the beat not written: the
+                robot would refuse the command, so it is not sent.
+        """
+        if not self.claim_due:
+            return self.session
+        held = int(self._transport.read_fields(self._fields[2:])["master_session"])
+        while self.session == held and not self.writes:  # never a predecessor's session
+            self.session = _new_session()
+        # Not a command: a beat sent twice is harmless, so the link's retries apply.
+        self._transport.write_block(Table.HOLDING, self.address, self.next_words(), retry=True)
+        self.writes += 1
+        self.start(member)
+        return self.session
 
     def start(self, member: FleetMember | None) -> None:
         """Start writing: on ``member``'s driver loop, or (None) in a thread of its own.
@@ -203,6 +245,11 @@ async def _beat_on_loop(
             delay = beat.wrote(outcome)
         del beat  # the task keeps no Robot alive between two beats
         await asyncio.sleep(delay)
+
+
+def _new_session() -> int:
+    """A master's session: random in 1..32767."""
+    return secrets.randbelow(HEARTBEAT_MAX) + 1
 
 
 def _beat_in_thread(

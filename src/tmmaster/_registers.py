@@ -336,6 +336,9 @@ JOINT_FIELDS = tuple(f"joint_{i}" for i in range(1, 7))
 #: mm/s, and the number of the command they belong to.
 VIA_FIELDS = tuple(f"via_{n}" for n in _POSE_NAMES)
 EXTENSION_FIELDS = (*VIA_FIELDS, "speed_mm_s", "ext_seq")
+#: The session of the master that wrote a command (tmflow): after the extension, so that
+#: every command writes the whole block.
+SESSION_FIELD = "command_session"
 ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 
 #: TMflow's user define area, holding registers a project may read and write (TMflow 2.24
@@ -344,7 +347,7 @@ ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 USER_AREA = (9000, 9999)
 
 #: Optional fields that belong to the command block when a profile has them.
-_OPTIONAL_BLOCK = ("accel_time", *EXTENSION_FIELDS)
+_OPTIONAL_BLOCK = ("accel_time", *EXTENSION_FIELDS, SESSION_FIELD)
 #: Command labels that make the robot act; none may share the "none" code.
 _ACTION_LABELS = frozenset(
     {"ptp", "line", "stop", "gripper_open", "gripper_close", "ptp_joints", "circle"}
@@ -511,7 +514,7 @@ class RobotProfile(RegisterMap):
         """Fields of the command block (targets, speed, accel_time, command, seq...), by address.
 
         Where the profile has them, the extension's fields (``via_*``, ``speed_mm_s``,
-        ``ext_seq``) follow ``seq``.
+        ``ext_seq``) and ``command_session`` follow ``seq``.
 
         Returns:
             The fields, contiguous in one table: written in one request.

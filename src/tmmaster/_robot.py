@@ -415,7 +415,7 @@ class Robot:
             self.profile, self._transport, self._channel, self._gate, self._stop_event, self._log
         )
         self._shared = self._join(fleet)
-        # The master's heartbeat (tmflow), written from connect to close (_heartbeat.py).
+        # The master's heartbeat (tmflow), from the first command to close (_heartbeat.py).
         self._heartbeat = Heartbeat(
             self.profile,
             self._transport,
@@ -622,7 +622,6 @@ class Robot:
             self.close()
             raise
         self._connected = True
-        self._heartbeat.start(self._shared)
         atexit.register(self._at_exit)
         self._log.info(
             "robot.connected",
@@ -1258,6 +1257,11 @@ class Robot:
             # range) is said first, as on a connected robot; then the missing connect.
             self._channel.check_command(command)
             self._require_connection()
+        if self._heartbeat.claim_due:
+            # The first command claims the robot (this master beats from then on), once
+            # it is known to be valid: a command refused claims nothing.
+            self._channel.check_command(command)
+            self._channel.session = self._heartbeat.claim(self._shared)
         # prepare() encodes (refusing out-of-range values) before its first read.
         ticket = self._channel.prepare(command, reuse_s=REUSE_DONE_READ_S)
         start: Pose | None = None

@@ -26,6 +26,7 @@ from ._logging import add_logging_arguments
 from ._pose import Pose
 from ._registers import (
     EXTENSION_FIELDS,
+    SESSION_FIELD,
     TARGET_FIELDS,
     VIA_FIELDS,
     DataType,
@@ -39,8 +40,10 @@ from ._version import version
 #: The feedback and command fields the program reads or writes, by name.
 _FEEDBACK = ("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "grasp_status")
 _WORDS = ("speed", "accel_time", "command", "seq")
-#: The master's heartbeat and its time-to-live, read together.
-_MASTER = ("master_heartbeat", "master_ttl_ms")
+#: The block's end: the extension, then the master's session.
+_BLOCK_END = (*EXTENSION_FIELDS, SESSION_FIELD)
+#: The master's heartbeat, its time-to-live and its session, read together.
+_MASTER = ("master_heartbeat", "master_ttl_ms", "master_session")
 #: The read/write timeout of the program's Modbus device, ms (TMscript 2.24 §16.1,
 #: p. 414: 0..10000, 10000 by default): well inside the 12 s closestop and errorstop get.
 MODBUS_TIMEOUT_MS = 1000
@@ -185,7 +188,7 @@ def check_program_profile(profile: RobotProfile) -> None:
         )
     missing = [
         name
-        for name in (*TARGET_FIELDS, *_WORDS, *EXTENSION_FIELDS, *_FEEDBACK, *_MASTER)
+        for name in (*TARGET_FIELDS, *_WORDS, *_BLOCK_END, *_FEEDBACK, *_MASTER)
         if not profile.has(name)
     ]
     if missing:
@@ -215,7 +218,7 @@ def _check_command_block(profile: RobotProfile) -> None:
                 f" register at {address} for the robot program"
             )
     words = [(name, first + 12 + i) for i, name in enumerate(_WORDS)]
-    words += [(name, first + 28 + i) for i, name in enumerate(EXTENSION_FIELDS[6:])]
+    words += [(name, first + 28 + i) for i, name in enumerate(_BLOCK_END[6:])]
     for name, address in words:
         field = profile.field(name)
         if field.table is not Table.HOLDING or field.address != address:
@@ -226,16 +229,17 @@ def _check_command_block(profile: RobotProfile) -> None:
 
 
 def _check_heartbeat(profile: RobotProfile) -> None:
-    """master_heartbeat and master_ttl_ms as one FC16 request (ConfigError if not)."""
-    beat, ttl = (profile.field(name) for name in _MASTER)
-    if not (
-        beat.table is ttl.table is Table.HOLDING
-        and beat.dtype.width == ttl.dtype.width == 1
-        and ttl.address == beat.address + 1
+    """master_heartbeat, master_ttl_ms and master_session as one FC16 request
+    (ConfigError if not)."""
+    fields = [profile.field(name) for name in _MASTER]
+    first = fields[0].address
+    if not all(
+        f.table is Table.HOLDING and f.dtype.width == 1 and f.address == first + i
+        for i, f in enumerate(fields)
     ):
         raise ConfigError(
-            f"profile {profile.name!r}: master_ttl_ms must be the holding register right"
-            f" after master_heartbeat ({beat.address}) for the robot program"
+            f"profile {profile.name!r}: master_ttl_ms and master_session must be the holding"
+            f" registers right after master_heartbeat ({first}) for the robot program"
         )
 
 
@@ -257,6 +261,7 @@ _CODES = {
     "motion_failed": ("result_code", "motion_failed"),
     "gripper_failed": ("result_code", "gripper_failed"),
     "cancelled": ("result_code", "cancelled"),
+    "another_master": ("result_code", "another_master"),
 }
 
 
@@ -313,8 +318,8 @@ def robot_program(
         profile=profile.name,
         arguments=arguments,
         block_first=first,
-        block_last=first + 29,
-        block_count=30,
+        block_last=first + 30,
+        block_count=31,
         words_offset=24,
         via_offset=32,
         ext_offset=56,
