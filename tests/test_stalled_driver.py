@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -28,6 +28,15 @@ B = Pose(300, -200, 180, 180, 0, 90)
 
 
 COMMAND_BLOCK = {"article": 0x0200, "tmflow": 9000}
+
+
+@pytest.fixture(params=["fleet", "default"])
+def fleet(request: pytest.FixtureRequest) -> Iterator[tmmaster.Fleet | None]:
+    """The robot's driver: a Fleet of the test's own, or None (the process's default)."""
+    own = tmmaster.Fleet() if request.param == "fleet" else None
+    yield own
+    if own is not None:
+        own.close()
 
 
 def hold_loop_at_command_write(
@@ -56,19 +65,17 @@ def hold_loop_at_command_write(
     return release
 
 
-@pytest.mark.parametrize("driver", ["fleet", "default"])
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_command_handed_to_a_stalled_loop_is_never_sent_after_the_robot_gave_it_up(
     tm_simulator_factory: Callable[..., Simulator],
     profile: str,
-    driver: str,
+    fleet: tmmaster.Fleet | None,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # How long a thread waits for the loop beyond a request's timeout: short, so that
     # the robot gives the move up within a second of the hold.
     monkeypatch.setattr(fleet_module, "_LOOP_GRACE_S", 0.05)
     sim = tm_simulator_factory(profile)
-    fleet = tmmaster.Fleet() if driver == "fleet" else None
     robot = Robot(
         "127.0.0.1",
         sim.port,
@@ -102,8 +109,6 @@ def test_a_command_handed_to_a_stalled_loop_is_never_sent_after_the_robot_gave_i
         sim.wait_for(lambda: sim.ticks >= ticks + 10, timeout=5)
     finally:
         robot.close()
-        if fleet is not None:
-            fleet.close()
     check(issued, sim.motion_log())
     late = [r for r in sim.request_log if r.is_write and r.address == COMMAND_BLOCK[profile]]
     assert late == writes, "the command write went out after the robot gave it up"
@@ -139,19 +144,17 @@ def ctrl_c_before_the_loop_begins_the_polls(robot: Robot, monkeypatch: pytest.Mo
     loop.call_soon_threadsafe(release.wait, 30.0)
 
 
-@pytest.mark.parametrize("driver", ["fleet", "default"])
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_ctrl_c_before_the_loop_began_polling_a_move_stops_the_arm_at_once(
     tm_simulator_factory: Callable[..., Simulator],
     profile: str,
-    driver: str,
+    fleet: tmmaster.Fleet | None,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # The thread waits at most this long (beyond the request timeout) for the polls it
     # gave up to be over: a stop that waited it out would come after the move's end.
     monkeypatch.setattr(fleet_module, "_LOOP_GRACE_S", 5.0)
     sim = tm_simulator_factory(profile, time_scale=2)  # the move takes over a second
-    fleet = tmmaster.Fleet() if driver == "fleet" else None
     robot = Robot("127.0.0.1", sim.port, profile=profile, link=fleet, gripper=None)
     try:
         robot.connect()
@@ -166,5 +169,3 @@ def test_ctrl_c_before_the_loop_began_polling_a_move_stops_the_arm_at_once(
         assert not sim.tcp_pose().is_close(A), "the move ran to its end after Ctrl-C"
     finally:
         robot.close()
-        if fleet is not None:
-            fleet.close()
