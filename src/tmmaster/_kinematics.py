@@ -396,17 +396,15 @@ def interpolate(a: Transform, b: Transform, fraction: float) -> Transform:
     """The pose ``fraction`` (0..1) of the way from ``a`` to ``b``: straight line, shortest turn."""
     w = rotation_error(a, b)
     r = rotation_matrix((w[0] * fraction, w[1] * fraction, w[2] * fraction))
-    rows = []
-    for i in range(3):
-        rows.append(
-            (
-                r[i][0] * a[0][0] + r[i][1] * a[1][0] + r[i][2] * a[2][0],
-                r[i][0] * a[0][1] + r[i][1] * a[1][1] + r[i][2] * a[2][1],
-                r[i][0] * a[0][2] + r[i][1] * a[1][2] + r[i][2] * a[2][2],
-                a[i][3] + (b[i][3] - a[i][3]) * fraction,
-            )
-        )
-    return (rows[0], rows[1], rows[2], IDENTITY[3])
+    # a's orientation turned that far (r @ a); its position moved along the line.
+    turned = multiply(((*r[0], 0.0), (*r[1], 0.0), (*r[2], 0.0), IDENTITY[3]), a)
+    return _placed(turned, [a[i][3] + (b[i][3] - a[i][3]) * fraction for i in range(3)])
+
+
+def _placed(t: Transform, position: Sequence[float]) -> Transform:
+    """``t``'s orientation at ``position`` (mm)."""
+    x, y, z = position
+    return ((*t[0][:3], x), (*t[1][:3], y), (*t[2][:3], z), IDENTITY[3])
 
 
 def _sub(a: Vector, b: Vector) -> Vector:
@@ -531,10 +529,4 @@ class Arc:
         turned = interpolate(self.start, self.end, fraction)
         phi = self.sweep_rad * fraction
         c, s = math.cos(phi) * self.radius_mm, math.sin(phi) * self.radius_mm
-        point = [self.centre[i] + c * self.u[i] + s * self.w[i] for i in range(3)]
-        return (
-            (*turned[0][:3], point[0]),
-            (*turned[1][:3], point[1]),
-            (*turned[2][:3], point[2]),
-            IDENTITY[3],
-        )
+        return _placed(turned, [self.centre[i] + c * self.u[i] + s * self.w[i] for i in range(3)])
