@@ -122,6 +122,8 @@ class ArmBody:
     pairs: tuple[tuple[int, int, float], ...]
     #: Each capsule's centre in its link's frame (its bounding sphere's).
     centres: tuple[Vector, ...]
+    #: Each capsule's bounding sphere's radius round that centre, mm.
+    radii: tuple[float, ...]
 
 
 def housing_in_flange(tool: Pose | None) -> tuple[Vector, Vector, float] | None:
@@ -165,15 +167,15 @@ def arm_body(name: str, tool: Pose | None) -> ArmBody | None:
     names = tuple(f"link {s[0]} {s[1]}" if s[0] < HOUSING_LINK else f"the {s[1]}" for s in specs)
     # Each capsule's bounding sphere: its segment's middle, half its length + its radius.
     centres = tuple(_mid(a, b) for _, _, a, b, _ in specs)
-    bounds = [math.dist(a, b) / 2 + r for _, _, a, b, r in specs]
+    radii = tuple(math.dist(a, b) / 2 + r for _, _, a, b, r in specs)
     pairs = tuple(
-        (i, j, bounds[i] + bounds[j])
+        (i, j, radii[i] + radii[j])
         for i in range(len(specs))
         for j in range(i + 1, len(specs))
         if specs[i][0] != specs[j][0]
         and (min(specs[i][0], specs[j][0]), max(specs[i][0], specs[j][0])) not in ALLOWED_PAIRS
     )
-    return ArmBody(specs, names, pairs, centres)
+    return ArmBody(specs, names, pairs, centres, radii)
 
 
 def _frames(model: RobotModel, joints_deg: Sequence[float]) -> list[kin.Frame]:
@@ -237,10 +239,7 @@ def contacts(
         for k, spec in enumerate(specs):
             # The base and the shoulder stand on the mount; a part whose bounding sphere
             # keeps clear of the plane cannot reach it.
-            if (
-                spec[0] < 2
-                or centres[k][2] - math.dist(spec[2], spec[3]) / 2 - spec[4] >= MOUNT_MARGIN_MM
-            ):
+            if spec[0] < 2 or centres[k][2] - body.radii[k] >= MOUNT_MARGIN_MM:
                 continue
             a, b = ends_of(k)
             gap = min(a[2], b[2]) - spec[4] - MOUNT_MARGIN_MM

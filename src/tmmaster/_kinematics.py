@@ -44,16 +44,15 @@ IDENTITY: Transform = (
 def multiply(a: Transform, b: Transform) -> Transform:
     """The product ``a @ b`` of two homogeneous transforms."""
     b0, b1, b2 = b[0], b[1], b[2]
-    rows = []
-    for r in a[:3]:
-        rows.append(
-            (
-                r[0] * b0[0] + r[1] * b1[0] + r[2] * b2[0],
-                r[0] * b0[1] + r[1] * b1[1] + r[2] * b2[1],
-                r[0] * b0[2] + r[1] * b1[2] + r[2] * b2[2],
-                r[0] * b0[3] + r[1] * b1[3] + r[2] * b2[3] + r[3],
-            )
+    rows = [
+        (
+            r[0] * b0[0] + r[1] * b1[0] + r[2] * b2[0],
+            r[0] * b0[1] + r[1] * b1[1] + r[2] * b2[1],
+            r[0] * b0[2] + r[1] * b1[2] + r[2] * b2[2],
+            r[0] * b0[3] + r[1] * b1[3] + r[2] * b2[3] + r[3],
         )
+        for r in a[:3]
+    ]
     return (rows[0], rows[1], rows[2], IDENTITY[3])
 
 

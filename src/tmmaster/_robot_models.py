@@ -280,12 +280,12 @@ class RobotModel(BaseModel):
         Returns:
             (the wrist in front of the J2 axis, J3 >= 0, J5 >= 0).
         """
-        q, chain = [math.radians(a) for a in _six(joints_deg)], joint_chain(self)
-        # J2's axis: the z column of its frame (J2's own rotation leaves it be).
-        axis = kin.multiply(kin.multiply(chain.origins[0], kin.rot_z(q[0])), chain.origins[1])
-        wrist = chain.joint_origins(q)[4]  # J5's origin (without building the matrices)
+        frames = joint_chain(self).link_frames([math.radians(a) for a in _six(joints_deg)])
+        # J2's axis: the z column of its frame (J2's own turn leaves it be); the wrist:
+        # J5's origin.
+        axis, wrist = frames[2], frames[5]
         # "Front": the J2 axis crossed with the vertical, i.e. (a_y, -a_x) in the plane.
-        front = wrist[0] * axis[1][2] - wrist[1] * axis[0][2]
+        front = wrist[0][3] * axis[1][2] - wrist[1][3] * axis[0][2]
         return (front >= 0.0, joints_deg[2] >= 0.0, joints_deg[4] >= 0.0)
 
     def ptp_seconds(self, start_deg: Sequence[float], end_deg: Sequence[float]) -> float:
