@@ -14,7 +14,18 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from pymodbus.framer import FramerSocket
-from pymodbus.pdu import DecodePDU
+from pymodbus.pdu import DecodePDU, ModbusPDU
+from pymodbus.pdu.bit_message import (
+    ReadCoilsRequest,
+    ReadDiscreteInputsRequest,
+    WriteMultipleCoilsRequest,
+    WriteSingleCoilRequest,
+)
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    WriteMultipleRegistersRequest,
+)
 
 import tmmaster._fleet as fleet_module
 from scripted_slave import SlaveThread, answer_with, registers
@@ -22,7 +33,7 @@ from tmmaster import ModbusTransport, PollPolicy, Pose, Robot, RobotStatus
 from tmmaster._fleet import LoopTransport
 from tmmaster._registers import RegisterField, Role, Table
 from tmmaster._retry import RetryPolicy
-from tmmaster._transport import common_answer
+from tmmaster._transport import common_answer, request_frame
 from tmmaster.sim import Simulator
 
 A = Pose(300, -200, 150, 180, 0, 90)
@@ -120,13 +131,45 @@ def test_an_answer_decoded_here_is_the_one_pymodbus_decodes(answer: bytes, tail:
         return
     size, pdu = FramerSocket(DecodePDU(is_server=False)).handleFrame(buffer, 0, 0)
     assert pdu is not None
-    assert ours[0] == size
-    mine = ours[1]
-    assert (mine.function_code, mine.dev_id, mine.transaction_id) == (
-        pdu.function_code,
-        pdu.dev_id,
-        pdu.transaction_id,
+    assert ours[:2] == (size, pdu.dev_id)
+    assert ours[2][:2] == (pdu.transaction_id, pdu.function_code)
+    fc = pdu.function_code
+    words = [int(b) for b in pdu.bits] if fc <= 2 else list(pdu.registers) if fc <= 4 else []
+    assert ours[2][2] == words
+
+
+def requests() -> st.SearchStrategy[tuple[int, int, int, list[int] | None]]:
+    """(function code, address, count, values) of every request a link sends."""
+    address = st.integers(0, 0xFFFF)
+    reads = st.tuples(st.integers(1, 4), address, st.integers(1, 125), st.none())
+    registers = st.lists(st.integers(0, 0xFFFF), min_size=1, max_size=123)
+    coils = st.lists(st.integers(0, 1), min_size=2, max_size=40)
+    return st.one_of(
+        reads,
+        st.builds(lambda a, w: (16, a, len(w), w), address, registers),
+        st.builds(lambda a, w: (15, a, len(w), w), address, coils),
+        st.builds(lambda a, b: (5, a, 1, [b]), address, st.integers(0, 1)),
     )
-    assert (list(mine.registers), list(mine.bits)) == (list(pdu.registers), list(pdu.bits))
-    if pdu.function_code == 16:
-        assert (mine.address, mine.count) == (pdu.address, pdu.count)
+
+
+PYMODBUS_REQUESTS: dict[int, Callable[..., ModbusPDU]] = {
+    1: ReadCoilsRequest,
+    2: ReadDiscreteInputsRequest,
+    3: ReadHoldingRegistersRequest,
+    4: ReadInputRegistersRequest,
+    5: lambda words, **kw: WriteSingleCoilRequest(bits=[bool(words[0])], **kw),
+    15: lambda words, **kw: WriteMultipleCoilsRequest(bits=[bool(b) for b in words], **kw),
+    16: lambda words, **kw: WriteMultipleRegistersRequest(registers=words, **kw),
+}
+
+
+@given(request=requests(), tid=st.integers(1, 0xFFFF), unit=st.integers(0, 255))
+def test_a_request_frame_built_here_is_the_one_pymodbus_builds(
+    request: tuple[int, int, int, list[int] | None], tid: int, unit: int
+) -> None:
+    fc, address, count, values = request
+    ids = {"address": address, "dev_id": unit, "transaction_id": tid}
+    make = PYMODBUS_REQUESTS[fc]
+    pdu = make(count=count, **ids) if values is None else make(values, **ids)
+    expected = FramerSocket(DecodePDU(is_server=False)).buildFrame(pdu)
+    assert request_frame(fc, address, count, values, device_id=unit, tid=tid) == expected

@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import functools
 import os
 import threading
 import time
@@ -248,8 +249,7 @@ class LoopTransport(BlockTransport):
         self, blocks: tuple[Block, ...]
     ) -> tuple[list[list[int]], BaseException | None]:
         """Every block's words, read on the loop in one go, up to the first failure."""
-        requests = [(*self._read_request(b.table, b.address, b.count), b) for b in blocks]
-        self._link.device_id = self.device_id
+        requests = self._chained_requests(blocks)
         latch: _Latch[tuple[list[list[int]], BaseException | None]] = _Latch()
         chain = _ChainedRead(self, requests, latch.settle)
         bound = self.timeout * len(blocks) + _LOOP_GRACE_S
@@ -263,6 +263,11 @@ class LoopTransport(BlockTransport):
         if failure is not None:
             self._request_failed(failure)
         return answers, failure
+
+    def _chained_requests(self, blocks: tuple[Block, ...]) -> list[tuple[str, int, Block]]:
+        """Each block's (description, function code, block), for a :class:`_ChainedRead`."""
+        self._link.device_id = self.device_id  # the unit id may be changed between reads
+        return [(*self._read_request(b.table, b.address, b.count), b) for b in blocks]
 
     def _yield_turn(self) -> None:
         """Let a waiting heartbeat go first, never on the loop (the beat waits on it)."""
@@ -308,24 +313,22 @@ class LoopTransport(BlockTransport):
             TransportError: A read failed (a subclass says how).
         """
         plan = self.read_plan(fields, max_gap=max_gap)
-        answers: list[list[int]] = []
-        for block in plan.blocks:
-            what, function_code = self._read_request(block.table, block.address, block.count)
-            self._refuse_if_closed()
-            if not self._link.connected:
-                raise ConnectionLostError(f"{self.name}: not connected for {what}")
-            self._count_request(function_code)
-            self._link.device_id = self.device_id
-            try:
-                words = await self._link.exchange(
-                    what, function_code, block.address, block.count, None
-                )
-            except BaseException as exc:
-                self._request_failed(exc)
-                raise
-            if len(words) != block.count:
-                raise ResponseTimeoutError(f"{self.name}: short answer to {what}")
-            answers.append(words)
+        self._refuse_if_closed()
+        requests = self._chained_requests(plan.blocks)
+        if requests and not self._link.connected:
+            raise ConnectionLostError(f"{self.name}: not connected for {requests[0][0]}")
+        # The blocks chained on callbacks, as a thread's read is: one future per read.
+        answer: asyncio.Future[tuple[list[list[int]], BaseException | None]]
+        answer = asyncio.get_running_loop().create_future()
+        _ChainedRead(self, requests, functools.partial(settle, answer)).next()
+        try:
+            answers, failure = await answer
+        except BaseException as exc:  # cancelled: an answer may still come (link dropped)
+            self._request_failed(exc)
+            raise
+        if failure is not None:
+            self._request_failed(failure)
+            raise failure
         return plan.decode(answers)
 
     async def write_on_loop(self, address: int, words: list[int]) -> None:
@@ -1066,8 +1069,8 @@ class ModbusTransport(LoopTransport):
 
     The link is an :class:`~tmmaster._transport.AsyncLink` on the process's default
     driver, the event loop every Robot without a Fleet as ``link=`` uses (started by the
-    first connect, stopped when the last link closes): pymodbus' socket framer and PDU
-    classes build each request and decode its answer, and the answer is taken only
+    first connect, stopped when the last link closes): each request is sent once, and
+    its answer (decoded here, or by pymodbus' framer where uncommon) is taken only
     under the request's own transaction id and from the transport's unit id. A failure
     closes the link, so a late answer can never be read as a later request's. Nothing
     is ever resent here: the :class:`RetryPolicy` decides. ``Robot(host, port)`` makes

@@ -1,8 +1,9 @@
-"""The one module that speaks Modbus client-side: pymodbus' framer and PDUs, one link.
+"""The one module that speaks Modbus client-side: frames, answers, one link.
 
 :class:`AsyncLink` is the one Modbus TCP link: an asyncio protocol on a driver's event
 loop (``_fleet.py``: a :class:`~tmmaster.Fleet`'s, or the process's default driver's),
-whose frames pymodbus' socket framer and PDU classes build and decode. Each request is
+whose request frames are packed here, as are the common answers (reads, FC16 writes),
+the others decoded by pymodbus' socket framer and PDU classes. Each request is
 sent once and answered only under its own transaction id and from its unit id; after
 any failure the link is closed, so a late answer can never be read as a later
 request's. :class:`BlockTransport` is what every robot-side transport shares: state,
@@ -34,22 +35,6 @@ from typing import Any, Protocol, Self, TypeVar, cast, runtime_checkable
 from pymodbus import ModbusException
 from pymodbus.framer import FramerSocket
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
-from pymodbus.pdu.bit_message import (
-    ReadCoilsRequest,
-    ReadCoilsResponse,
-    ReadDiscreteInputsRequest,
-    ReadDiscreteInputsResponse,
-    WriteMultipleCoilsRequest,
-    WriteSingleCoilRequest,
-)
-from pymodbus.pdu.register_message import (
-    ReadHoldingRegistersRequest,
-    ReadHoldingRegistersResponse,
-    ReadInputRegistersRequest,
-    ReadInputRegistersResponse,
-    WriteMultipleRegistersRequest,
-    WriteMultipleRegistersResponse,
-)
 
 from ._address import is_ip_address
 from ._codec import Decoder, Value, decoder, encoder
@@ -947,7 +932,12 @@ def refused_error(response: ModbusPDU, *, name: str, what: str) -> ModbusExcepti
     return error_class(f"{name}: device refused {what}", code=code)
 
 
-def request_pdu(
+#: A request's MBAP header and its PDU's first fields: transaction id, protocol id,
+#: length, unit id, function code, address, and the count (FC05: the coil's value).
+_REQUEST = struct.Struct(">HHHBBHH")
+
+
+def request_frame(
     function_code: int,
     address: int,
     count: int,
@@ -955,106 +945,120 @@ def request_pdu(
     *,
     device_id: int,
     tid: int,
-) -> ModbusPDU:
-    """pymodbus' PDU of one request (it encodes the request and decodes the answer)."""
-    if function_code in _READ_REQUEST_CLASSES:
-        return _READ_REQUEST_CLASSES[function_code](
-            address=address, count=count, dev_id=device_id, transaction_id=tid
-        )
+) -> bytes:
+    """One request's Modbus TCP frame, byte for byte what pymodbus' framer builds.
+
+    Reads (FC 1-4), FC05 (one coil), FC15 (coils, eight to a byte, the first in the
+    lowest bit) and FC16 (holding registers).
+    """
     words = values or []
+    if function_code <= 5:
+        last = count if function_code <= 4 else 0xFF00 if words[0] else 0
+        return _REQUEST.pack(tid, 0, 6, device_id, function_code, address, last)
     if function_code == 16:
-        return WriteMultipleRegistersRequest(
-            address=address, registers=words, dev_id=device_id, transaction_id=tid
-        )
-    coils = WriteSingleCoilRequest if function_code == 5 else WriteMultipleCoilsRequest
-    return coils(
-        address=address, bits=[bool(b) for b in words], dev_id=device_id, transaction_id=tid
-    )
+        data = struct.pack(f">B{len(words)}H", 2 * len(words), *words)
+    else:
+        packed = [
+            sum(bool(b) << i for i, b in enumerate(words[k : k + 8]))
+            for k in range(0, len(words), 8)
+        ]
+        data = bytes([len(packed), *packed])
+    head = _REQUEST.pack(tid, 0, 6 + len(data), device_id, function_code, address, len(words))
+    return head + data
 
 
 def answer_words(
-    response: ModbusPDU, request: ModbusPDU, *, count: int, name: str, what: str
+    function_code: int,
+    answer: list[int] | ModbusPDU,
+    asked: int,
+    *,
+    count: int,
+    name: str,
+    what: str,
 ) -> list[int]:
-    """The words (bits as 0/1) of an answer to a read, ``[]`` for a write; refusals raised."""
-    if isinstance(response, ExceptionResponse) or response.isError():
-        raise refused_error(response, name=name, what=what)
-    if response.function_code != request.function_code:
+    """The words (bits as 0/1) of an answer to a read of function ``asked``, ``[]`` for a
+    write; refusals raised. ``answer``: a common answer's words, or pymodbus' PDU."""
+    if not isinstance(answer, list):
+        if isinstance(answer, ExceptionResponse) or answer.isError():
+            raise refused_error(answer, name=name, what=what)
+        answer = [int(b) for b in answer.bits] if function_code <= 2 else list(answer.registers)
+    if function_code != asked:
         raise TransportError(f"{name}: answer of another function to {what}")
-    function_code = request.function_code
-    if function_code not in _READ_REQUEST_CLASSES:
+    if asked > 4:
         return []
-    if function_code in (1, 2):
-        words = [int(b) for b in response.bits[:count]]
-    else:
-        words = list(response.registers)
+    words = answer[:count] if asked <= 2 else answer
     if len(words) < count:
         raise ResponseTimeoutError(f"{name}: short answer to {what}")
     return words
 
 
+#: An answer cut from the stream: (transaction id, function code, the words of a common
+#: answer (:func:`common_answer`) or, for any other, pymodbus' PDU).
+Answer = tuple[int, int, list[int] | ModbusPDU]
+
+
 def next_answer(
     framer: FramerSocket, buffer: bytes, *, device_id: int, name: str
-) -> tuple[int, ModbusPDU | None]:
-    """The first whole answer from ``device_id`` in ``buffer``: (bytes used, PDU or None).
+) -> tuple[int, Answer | None]:
+    """The first whole answer from ``device_id`` in ``buffer``: (bytes used, answer or None).
 
-    pymodbus' socket framer cuts and decodes the frame; a frame from another unit id is
-    skipped here (pymodbus would log it as an error). ``(0, None)``: wait for more bytes.
-    Bytes no Modbus TCP server sends raise :class:`ForeignReplyError` (:func:`check_header`).
+    A common answer is decoded here (:func:`common_answer`), any other by pymodbus'
+    socket framer; a frame from another unit id is skipped (pymodbus would log it as an
+    error). ``(0, None)``: wait for more bytes. Bytes no Modbus TCP server sends raise
+    :class:`ForeignReplyError` (:func:`check_header`).
     """
     used = 0
     while used < len(buffer):
         check_header(buffer, used)
-        size, pdu = common_answer(buffer, used) or framer.handleFrame(buffer[used:], 0, 0)
+        size, unit, answer = common_answer(buffer, used) or _decoded(framer, buffer[used:])
         if not size:
             break
         used += size
-        if pdu is None:
+        if answer is None:
             continue
-        if pdu.dev_id != device_id:
-            _log.debug("transport.foreign_unit", device=name, unit=pdu.dev_id)
+        if unit != device_id:
+            _log.debug("transport.foreign_unit", device=name, unit=unit)
             continue
-        return used, pdu
+        return used, answer
     return used, None
+
+
+def _decoded(framer: FramerSocket, buffer: bytes) -> tuple[int, int, Answer | None]:
+    """pymodbus' decoding of the frame ``buffer`` starts with: (its size, unit id, answer)."""
+    size, pdu = framer.handleFrame(buffer, 0, 0)
+    if pdu is None:
+        return size, -1, None
+    return size, pdu.dev_id, (pdu.transaction_id, pdu.function_code, pdu)
 
 
 #: The MBAP header and the first two bytes of the PDU: transaction id, protocol id,
 #: length, unit id, function code, and a read's byte count (or a write's address's high byte).
 _HEAD = struct.Struct(">HHHBBB")
-_READ_ANSWERS: dict[int, type[ModbusPDU]] = {
-    1: ReadCoilsResponse,
-    2: ReadDiscreteInputsResponse,
-    3: ReadHoldingRegistersResponse,
-    4: ReadInputRegistersResponse,
-}
 
 
-def common_answer(buffer: bytes, start: int) -> tuple[int, ModbusPDU] | None:
+def common_answer(buffer: bytes, start: int) -> tuple[int, int, Answer] | None:
     """A whole, well-formed answer to a read (FC 1-4) or an FC16 write at ``start``.
 
-    (Its size, its PDU), decoded here at a tenth of the CPU of pymodbus' decoder (a
-    status read's largest cost on the driver's loop); None for anything else, which
-    pymodbus' framer decodes (a partial frame, an exception answer, a frame it refuses).
+    (Its size, its unit id, the answer with its words: a read's registers, or its bits
+    as 0/1, eight per byte; ``[]`` for the write), decoded here at a tenth of the CPU of
+    pymodbus' decoder; None for anything else, which pymodbus' framer decodes (a partial
+    frame, an exception answer, a frame it refuses).
     """
     if len(buffer) - start < 9:
         return None
     tid, _protocol, length, unit, function_code, byte_count = _HEAD.unpack_from(buffer, start)
     if len(buffer) - start < 6 + length:
         return None
-    answer = _READ_ANSWERS.get(function_code)
-    if answer is not None and length == byte_count + 3:
+    if 1 <= function_code <= 4 and length == byte_count + 3:
         data = buffer[start + 9 : start + 6 + length]
         if function_code > 2 and not byte_count % 2:
             words = list(struct.unpack(f">{byte_count // 2}H", data))
-            return 6 + length, answer(registers=words, dev_id=unit, transaction_id=tid)
+            return 6 + length, unit, (tid, function_code, words)
         if function_code <= 2:
-            bits = [bool(byte >> i & 1) for byte in data for i in range(8)]
-            return 6 + length, answer(bits=bits, dev_id=unit, transaction_id=tid)
+            bits = [byte >> i & 1 for byte in data for i in range(8)]
+            return 6 + length, unit, (tid, function_code, bits)
     if function_code == 16 and length == 6:
-        address, count = struct.unpack_from(">HH", buffer, start + 8)
-        pdu = WriteMultipleRegistersResponse(
-            address=address, count=count, dev_id=unit, transaction_id=tid
-        )
-        return 12, pdu
+        return 12, unit, (tid, 16, [])
     return None
 
 
@@ -1118,25 +1122,16 @@ def not_modbus_error(reply: ForeignReplyError, link: AsyncLink, what: str) -> No
     )
 
 
-#: The request PDU class of each read function code.
-_READ_REQUEST_CLASSES: dict[int, type[ModbusPDU]] = {
-    1: ReadCoilsRequest,
-    2: ReadDiscreteInputsRequest,
-    3: ReadHoldingRegistersRequest,
-    4: ReadInputRegistersRequest,
-}
-
-
 class _Stream(asyncio.Protocol):
     """One Modbus TCP stream of an :class:`AsyncLink`: answers matched to requests by id.
 
-    pymodbus' socket framer cuts the stream into frames and its PDU decoder decodes them;
-    an answer from another unit id, or whose transaction id no request awaits (a late
-    answer to a request that timed out), is dropped, as pymodbus' own client does. An
-    answer under an id never sent on this stream is kept: a request that then gets no
-    answer of its own fails as :class:`NotModbusError` (no Modbus server answers so).
-    Losing the connection or an undecodable frame fails every awaited request and closes
-    the stream.
+    Common answers are cut and decoded here (:func:`common_answer`), any other frame by
+    pymodbus' socket framer and PDU decoder; an answer from another unit id, or whose
+    transaction id no request awaits (a late answer to a request that timed out), is
+    dropped, as pymodbus' own client does. An answer under an id never sent on this
+    stream is kept: a request that then gets no answer of its own fails as
+    :class:`NotModbusError` (no Modbus server answers so). Losing the connection or an
+    undecodable frame fails every awaited request and closes the stream.
     """
 
     def __init__(self, link: AsyncLink) -> None:
@@ -1167,7 +1162,7 @@ class _Stream(asyncio.Protocol):
         self._buffer += data
         while self._buffer and not self.closed:
             try:
-                used, pdu = next_answer(
+                used, answer = next_answer(
                     self.framer, self._buffer, device_id=link.device_id, name=link.name
                 )
             except ForeignReplyError as exc:
@@ -1179,13 +1174,13 @@ class _Stream(asyncio.Protocol):
             if not used:
                 return  # a partial frame: wait for the rest
             frame, self._buffer = self._buffer[:used], self._buffer[used:]
-            if pdu is None:
+            if answer is None:
                 continue
-            self._take(pdu, frame)
+            self._take(answer, frame)
 
-    def _take(self, pdu: ModbusPDU, frame: bytes) -> None:
+    def _take(self, answer: Answer, frame: bytes) -> None:
         """An answer from the device: to the request awaiting its id, or dropped."""
-        tid = pdu.transaction_id
+        tid = answer[0]
         call = self.awaited.pop(tid, None)
         if call is None or call.done():
             if self.stray is None and not self.sent_here(tid):
@@ -1193,7 +1188,7 @@ class _Stream(asyncio.Protocol):
             _log.debug("transport.unawaited_answer", device=self.link.name, tid=tid)
             return
         self.answered = True
-        call.set_result(pdu)
+        call.set_result(answer[1], answer[2])
 
     def sent_here(self, tid: int) -> bool:
         """Whether a request under ``tid`` was sent on this stream."""
@@ -1279,19 +1274,19 @@ class _Call:
     """
 
     __slots__ = (
-        "_done", "count", "fail", "name", "request", "settle", "stream", "tid", "timer", "what"
+        "_done", "code", "count", "fail", "name", "settle", "stream", "tid", "timer", "what"
     )  # fmt: skip
 
     def __init__(
         self,
-        request: ModbusPDU,
+        function_code: int,
         count: int,
         name: str,
         what: str,
         settle: Callable[[list[int]], object],
         fail: Callable[[BaseException], object],
     ) -> None:
-        self.request = request
+        self.code = function_code
         self.count = count
         self.name = name
         self.what = what
@@ -1315,14 +1310,19 @@ class _Call:
         if stream is not None and stream.awaited.get(self.tid) is self:
             del stream.awaited[self.tid]
 
-    def set_result(self, result: ModbusPDU) -> None:
-        """The answer came (from the stream)."""
+    def set_result(self, function_code: int, answer: list[int] | ModbusPDU) -> None:
+        """The answer came (from the stream): its function code, its words or PDU."""
         if self._done:
             return
         self.end()
         try:
             words = answer_words(
-                result, self.request, count=self.count, name=self.name, what=self.what
+                function_code,
+                answer,
+                self.code,
+                count=self.count,
+                name=self.name,
+                what=self.what,
             )
         except TransportError as exc:
             self.fail(exc)
@@ -1340,10 +1340,10 @@ class _Call:
 class AsyncLink:
     """The Modbus TCP link, on the running asyncio loop (every robot's, a StatusMonitor's).
 
-    pymodbus frames and decodes (its socket framer and PDU classes); the stream is a
-    plain asyncio protocol, not pymodbus' async client, whose per-request machinery was
-    most of a monitor's CPU (docs/performance.md). Failures map to
-    :class:`TransportError` subclasses. It has no retry and no counters of its own
+    Requests are packed here, answers decoded here or by pymodbus (:func:`next_answer`);
+    the stream is a plain asyncio protocol, not pymodbus' async client, whose
+    per-request machinery was most of a monitor's CPU (docs/performance.md). Failures
+    map to :class:`TransportError` subclasses. It has no retry and no counters of its own
     (``stats``, when set, counts bytes): a request is sent once, a failed one raises,
     and the caller closes the link and reconnects (a robot's
     :class:`~tmmaster.ModbusTransport` applies its retry policy above it).
@@ -1447,16 +1447,15 @@ class AsyncLink:
             return None
         self._tid = tid = self._tid % 0xFFFF + 1
         try:
-            request = request_pdu(
+            frame = request_frame(
                 function_code, address, count, values, device_id=self.device_id, tid=tid
             )
         except BaseException as exc:
             fail(exc)
             return None
-        call = _Call(request, count, self.name, what, settle, fail)
+        call = _Call(function_code, count, self.name, what, settle, fail)
         call.stream, call.tid = stream, tid
         stream.awaited[call.tid] = call
-        frame = stream.framer.buildFrame(request)
         stream.sent += 1
         stream.transport.write(frame)
         if self.stats is not None:
