@@ -406,6 +406,10 @@ def _placed(t: Transform, position: Sequence[float]) -> Transform:
     return ((*t[0][:3], x), (*t[1][:3], y), (*t[2][:3], z), IDENTITY[3])
 
 
+def _add(a: Vector, b: Vector) -> Vector:
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
 def _sub(a: Vector, b: Vector) -> Vector:
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
@@ -480,12 +484,7 @@ class Arc:
             )
         # Circumcentre: p0 + (|a|^2 (b x n) + |b|^2 (n x a)) / (2 |n|^2).
         first, second = _scaled(_cross(b, n), _dot(a, a)), _scaled(_cross(n, a), _dot(b, b))
-        k = 1.0 / (2.0 * n2)
-        centre = (
-            p0[0] + (first[0] + second[0]) * k,
-            p0[1] + (first[1] + second[1]) * k,
-            p0[2] + (first[2] + second[2]) * k,
-        )
+        centre = _add(p0, _scaled(_add(first, second), 1.0 / (2.0 * n2)))
         radius = math.dist(centre, p0)
         if radius > ARC_MAX_RADIUS_MM:
             raise ValueError(
