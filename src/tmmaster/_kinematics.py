@@ -271,28 +271,14 @@ class Chain:
         for f in frames:
             z = (f[0][2], f[1][2], f[2][2])
             d = ((p[0] - f[0][3]) / 1000.0, (p[1] - f[1][3]) / 1000.0, (p[2] - f[2][3]) / 1000.0)
-            columns.append(
-                (
-                    z[1] * d[2] - z[2] * d[1],
-                    z[2] * d[0] - z[0] * d[2],
-                    z[0] * d[1] - z[1] * d[0],
-                    z[0],
-                    z[1],
-                    z[2],
-                )
-            )
+            columns.append((*_cross(z, d), *z))  # linear (z x d), then angular (z)
         return [[col[i] for col in columns] for i in range(6)], tcp
 
 
 def pose_error(current: Transform, target: Transform) -> list[float]:
     """Twist from ``current`` to ``target``: position in metres, rotation vector in rad."""
-    w = rotation_error(current, target)
-    return [
-        (target[0][3] - current[0][3]) / 1000.0,
-        (target[1][3] - current[1][3]) / 1000.0,
-        (target[2][3] - current[2][3]) / 1000.0,
-        *w,
-    ]
+    position = [(target[i][3] - current[i][3]) / 1000.0 for i in range(3)]
+    return [*position, *rotation_error(current, target)]
 
 
 def _damped_gram(jac: list[list[float]], damping: float) -> list[list[float]]:
