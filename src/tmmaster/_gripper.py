@@ -637,7 +637,8 @@ class _OwnConnectionGripper(Gripper):
         """Stop a move whose write was attempted and that neither ended nor was stopped."""
         if self._sent:
             try:
-                stop = [(field := self.profile.field(self._STOP_FIELD), field.code_of("stop"))]
+                field = self.profile.field(self._STOP_FIELD)
+                stop = [(field, field.code_of("stop"))]
                 self.transport.write_fields(stop, retry=True, interruptible=False)
                 self._sent = False  # delivered: another thread need not write it again
             except TransportError as exc:
@@ -692,7 +693,9 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         values = self.read("object_status", "motion_state")
         obj = self.profile.field("object_status").label(int(values["object_status"]))
         return GripperStatus(
-            busy=obj == "moving", holding=obj in ("object_opening", "object_closing"), width_mm=None
+            busy=obj == "moving",
+            holding=obj in ("object_opening", "object_closing"),
+            width_mm=None,
         )
 
     def _move(self, width_mm: float, timeout_s: float | None) -> GripperStatus:
@@ -833,7 +836,12 @@ class OnRobot2FG7Gripper(_OwnConnectionGripper):
             GripperError: The device is not a 2FG7 or 2FG14.
         """
         super().connect()
-        names = tuple(f"{a}_{b}_width" for b in ("external", "internal") for a in ("min", "max"))
+        names = (
+            "min_external_width",
+            "max_external_width",
+            "min_internal_width",
+            "max_internal_width",
+        )
         try:
             values = self.read(*names)
         except (ConnectionLostError, ResponseTimeoutError) as exc:

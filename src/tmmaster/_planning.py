@@ -529,8 +529,10 @@ class Planner:
             self.joints_hint, self.hint_pose = plan.joints, plan.target
 
     def _is_at(self, pose: Pose, other: Pose) -> bool:
-        s = self._settings
-        return pose.is_close(other, mm=s.position_tolerance_mm, deg=s.orientation_tolerance_deg)
+        settings = self._settings
+        return pose.is_close(
+            other, mm=settings.position_tolerance_mm, deg=settings.orientation_tolerance_deg
+        )
 
     # -- expected times and timeouts -----------------------------------------
 
@@ -752,7 +754,8 @@ def offset_pose(*values: object) -> Pose:
     for name, v in zip(("dx", "dy", "dz", "drx", "dry", "drz"), values, strict=True):
         if not is_finite_number(v):
             raise ConfigError(f"{name} must be a finite number, got {shown(v)}")
-    return Pose(*(float(v) for v in values))  # type: ignore[arg-type]
+    x, y, z, rx, ry, rz = (float(v) for v in values)  # type: ignore[arg-type]
+    return Pose(x, y, z, rx, ry, rz)
 
 
 def moved(start: Pose, offset: Pose, frame: str) -> Pose:
@@ -765,4 +768,5 @@ def moved(start: Pose, offset: Pose, frame: str) -> Pose:
         return kin.transform_to_pose(kin.multiply(here, kin.pose_to_transform(offset)))
     turn = kin.pose_to_transform(Pose(0, 0, 0, offset.rx, offset.ry, offset.rz))
     turned = kin.transform_to_pose(kin.multiply(turn, here))
-    return Pose(start.x + offset.x, start.y + offset.y, start.z + offset.z, *turned.as_list()[3:])
+    x, y, z = start.x + offset.x, start.y + offset.y, start.z + offset.z
+    return Pose(x, y, z, turned.rx, turned.ry, turned.rz)
