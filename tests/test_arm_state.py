@@ -10,15 +10,14 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import Checks, ConfigError, FrameCheck, MotionType, PollPolicy, Pose, Robot, Workspace
+from tmmaster import Checks, ConfigError, FrameCheck, MotionType, Pose, Robot, Workspace
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import ToolSetting, robot_program
 from tmmaster.sim import Cell, KinematicBackend, RobotSetup, Simulator
@@ -67,26 +66,6 @@ class RecordingBackend(KinematicBackend):
         return joints
 
 
-@pytest.fixture
-def opened() -> Iterator[list[Robot]]:
-    """Robots to close after the test."""
-    robots: list[Robot] = []
-    yield robots
-    for robot in robots:
-        robot.close()
-
-
-def open_robot(sim: Simulator, opened: list[Robot], **options: Any) -> Robot:
-    options.setdefault("profile", "tmflow")
-    options.setdefault("gripper", None)
-    options.setdefault("polling", PollPolicy(interval_s=0.01))
-    robot = Robot(sim.url, **options)
-    opened.append(robot)
-    robot.connect()
-    robot.wait_until_ready(timeout_s=5)
-    return robot
-
-
 def off_by(a: tuple[float, ...], b: tuple[float, ...] | None) -> float:
     assert b is not None
     return max(abs(x - y) for x, y in zip(a, b, strict=True))
@@ -107,14 +86,14 @@ def off_by(a: tuple[float, ...], b: tuple[float, ...] | None) -> float:
     ],
 )
 def test_a_fresh_master_plans_from_the_joints_the_robot_reports(
-    memory_simulator_factory: SimFactory, opened: list[Robot], theta: float
+    memory_simulator_factory: SimFactory, robots: Callable[..., Robot], theta: float
 ) -> None:
     backend = RecordingBackend()
     wound = backend.wind()
     assert wound[0] > 240
     sim = memory_simulator_factory("tmflow", cell=backend, **QUICK)
     target = around(theta)
-    robot = open_robot(sim, opened)
+    robot = robots(sim, gripper=None)
     predicted = robot.validate_move(target, 50)  # seeded from the joints read at connect
     motion = robot.move_to(target, speed=50)
     actual = sim.call(backend.joint_positions_deg)
@@ -126,19 +105,19 @@ def test_a_fresh_master_plans_from_the_joints_the_robot_reports(
 
 
 def test_the_joints_are_read_again_before_each_plan(
-    memory_simulator_factory: SimFactory, opened: list[Robot]
+    memory_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     # The master connects and moves; then someone else (another master) winds the arm
     # round the base. The master's next plan starts from where the arm really is.
     backend = RecordingBackend()
     sim = memory_simulator_factory("tmflow", cell=backend, **QUICK)
-    robot = open_robot(sim, opened)
+    robot = robots(sim, gripper=None)
     robot.move_to(around(0), speed=100)
     # One commanding master at a time: the robot program runs only the commands of the
     # session that beats. This one falls silent (as the operator jogs the arm) and claims
     # the robot again with its next command.
     robot._heartbeat.stop()  # type: ignore[attr-defined]
-    other = open_robot(sim, opened, name="other")
+    other = robots(sim, gripper=None, name="other")
     for pose in WINDING:
         other.move_to(pose, speed=100)
     other.close()
@@ -156,7 +135,7 @@ def test_the_joints_are_read_again_before_each_plan(
 
 
 def test_where_the_profile_publishes_no_joints_the_ready_posture_is_assumed(
-    memory_simulator_factory: SimFactory, opened: list[Robot]
+    memory_simulator_factory: SimFactory,
 ) -> None:
     # The article's map has no joints: nothing more is read at connect, and the first
     # plan starts from the model's ready posture (docs/kinematics.md).
@@ -164,17 +143,11 @@ def test_where_the_profile_publishes_no_joints_the_ready_posture_is_assumed(
     backend.wind()
     sim = memory_simulator_factory("article", cell=backend, **QUICK)
     # No table: the subject is the posture the plan starts from, not the cell.
-    robot = Robot(
-        sim.url,
-        profile="article",
-        gripper=None,
-        checks=Checks(workspace=Workspace(floor_z_mm=None)),
-    )
-    opened.append(robot)
-    robot.connect()
-    assert sim.request_log == []
-    target = around(200)
-    assert robot.validate_move(target, 50) == TM5.inverse(target)
+    checks = Checks(workspace=Workspace(floor_z_mm=None))
+    with Robot(sim.url, profile="article", gripper=None, checks=checks) as robot:
+        assert sim.request_log == []
+        target = around(200)
+        assert robot.validate_move(target, 50) == TM5.inverse(target)
 
 
 # -- frame check ----------------------------------------------------------------------
@@ -193,21 +166,25 @@ def test_a_robot_whose_tcp_is_not_the_masters_is_refused_at_connect(
 
 
 def test_a_master_with_the_robots_tool_connects_and_moves(
-    memory_simulator_factory: SimFactory, opened: list[Robot]
+    memory_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
-    robot = open_robot(sim, opened, tool=TOOL)
+    robot = robots(sim, gripper=None, tool=TOOL)
     robot.move_to(around(0), speed=100)
     assert sim.tcp_pose().is_close(around(0), mm=1e-3, deg=1e-3)
 
 
 def test_the_check_switched_off_connects_and_logs_why(
-    memory_simulator_factory: SimFactory, opened: list[Robot], caplog: pytest.LogCaptureFixture
+    memory_simulator_factory: SimFactory,
+    robots: Callable[..., Robot],
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     sim = memory_simulator_factory("tmflow", cell=Cell(tool=TOOL), **QUICK)
     with caplog.at_level(logging.WARNING, "tmmaster"):
-        open_robot(
-            sim, opened, checks=Checks(frame=FrameCheck.off("bench test: TCP taught elsewhere"))
+        robots(
+            sim,
+            gripper=None,
+            checks=Checks(frame=FrameCheck.off("bench test: TCP taught elsewhere")),
         )
     assert "robot.frame_check_off" in caplog.text
     assert "bench test: TCP taught elsewhere" in caplog.text

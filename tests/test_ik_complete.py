@@ -11,14 +11,13 @@
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Iterator
-from typing import Any
+from collections.abc import Callable
 
 import pytest
 
 import tmmaster
 from sim_speeds import QUICK
-from tmmaster import Checks, ConfigError, PollPolicy, Pose, Robot, UnreachablePoseError, Workspace
+from tmmaster import Checks, ConfigError, Pose, Robot, UnreachablePoseError, Workspace
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -106,25 +105,6 @@ def test_the_reach_limit_holds_with_any_tool(distance: float) -> None:
 # -- checks before any request ----------------------------------------------------------
 
 
-@pytest.fixture
-def opened() -> Iterator[list[Robot]]:
-    robots: list[Robot] = []
-    yield robots
-    for robot in robots:
-        robot.close()
-
-
-def open_robot(sim: Simulator, opened: list[Robot], **options: Any) -> Robot:
-    options.setdefault("profile", "tmflow")
-    options.setdefault("gripper", None)
-    options.setdefault("polling", PollPolicy(interval_s=0.01))
-    robot = Robot(sim.url, **options)
-    opened.append(robot)
-    robot.connect()
-    robot.wait_until_ready(timeout_s=5)
-    return robot
-
-
 def test_the_table_plane_is_on_by_default() -> None:
     workspace = Workspace()  # the default cell's table top, 85 mm
     workspace.check(Pose(300, 0, 100, 180, 0, 90))
@@ -142,10 +122,10 @@ def test_the_table_plane_is_on_by_default() -> None:
 
 
 def test_a_target_below_the_table_is_refused_before_any_request(
-    memory_simulator_factory: SimFactory, opened: list[Robot]
+    memory_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     sim = memory_simulator_factory("tmflow", **QUICK)
-    robot = open_robot(sim, opened)
+    robot = robots(sim, gripper=None)
     before = robot.stats.requests
     with pytest.raises(ConfigError, match="table plane"):
         robot.move_to(Pose(300, -200, -150, 180, 0, 90), speed=10)
@@ -154,12 +134,12 @@ def test_a_target_below_the_table_is_refused_before_any_request(
 
 
 def test_a_line_the_arm_cannot_follow_is_refused_before_any_request(
-    memory_simulator_factory: SimFactory, opened: list[Robot]
+    memory_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
     sim = memory_simulator_factory("tmflow", **QUICK)
     # The target's posture has the elbow low (link 2 below the default table plane, where
     # the simulated table is not): the arm's links are not what this test is about.
-    robot = open_robot(sim, opened, checks=Checks(workspace=Workspace(arm_radius_mm=None)))
+    robot = robots(sim, gripper=None, checks=Checks(workspace=Workspace(arm_radius_mm=None)))
     start = Pose(350, -150, 250, 180, 0, 90)
     robot.move_to(start, speed=100)
     # Straight across the J1 axis: the path passes the shoulder singularity.
