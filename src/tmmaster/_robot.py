@@ -41,7 +41,7 @@ from ._channels import (
     channel_for,
     pose_from,
 )
-from ._checks import require_in, require_positive
+from ._checks import is_finite_number, require_in, require_positive, shown
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._command import _MotionFollower
 from ._exceptions import (
@@ -1443,6 +1443,26 @@ class Robot:
         self._stop_event.set()
         if self._shared is not None:
             wake_waits(self._shared)  # a wait polled by the fleet ends now
+
+    def dwell(self, seconds: float) -> None:
+        """Wait ``seconds`` without a request; a stop request ends the wait at once.
+
+        A pause between steps (a camera's exposure, a part settling) that ends as every
+        wait of the robot does: at once on :meth:`interrupt` (a Ctrl-C handler, another
+        thread), and at once while a stop request stands (until
+        :meth:`clear_stop_request`).
+
+        Args:
+            seconds: How long, s (a finite number >= 0).
+
+        Raises:
+            ConfigError: ``seconds`` is not a finite number >= 0.
+            StopRequestedError: A stop was requested before or during the wait.
+        """
+        if not is_finite_number(seconds) or seconds < 0:
+            raise ConfigError(f"seconds must be a finite number >= 0, got {shown(seconds)}")
+        deadline = time.monotonic() + seconds
+        Poller(self.poll_interval_s, self._stop_event, deadline=deadline).sleep_until(deadline)
 
 
 def _waited(motion: Motion) -> Motion:

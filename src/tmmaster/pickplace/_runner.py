@@ -267,21 +267,13 @@ class _RunContext:
     def wait(self, seconds: float) -> None:
         """Dwell for ``seconds``; a stop request ends the dwell at once.
 
-        The runner's :meth:`Runner.request_stop` ends it at once, a stop requested on the
-        robot (``robot.interrupt()``) within one poll interval.
+        :meth:`Runner.request_stop` (which requests the robot's stop too) and a stop
+        requested on the robot (``robot.interrupt()``) end it at once (:meth:`Robot.dwell`).
         """
-        runner = self._run.runner
-        # What robot.interrupt() sets (a Ctrl-C handler, another thread): no public reader.
-        on_robot = runner.robot._stop_event
-        deadline = time.monotonic() + seconds
-        while True:
-            if on_robot.is_set():
-                raise StopRequestedError("stop requested on the robot during a dwell")
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return
-            if runner._stop.wait(min(left, runner.robot.poll_interval_s)):
-                raise StopRequestedError("stop requested during a dwell")
+        try:
+            self._run.runner.robot.dwell(seconds)
+        except StopRequestedError as exc:
+            raise StopRequestedError(f"{exc} during a dwell") from exc
 
 
 class _Run:
