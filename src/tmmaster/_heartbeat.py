@@ -38,6 +38,7 @@ from __future__ import annotations
 import asyncio
 import secrets
 import threading
+import time
 import weakref
 from typing import TYPE_CHECKING, Any
 
@@ -102,6 +103,8 @@ class Heartbeat:
         self.session = _new_session() if self._fields else 0
         #: Writes answered by the robot.
         self.writes = 0
+        #: When a write was last answered (time.monotonic()).
+        self.wrote_at = 0.0
         #: Slots that found the link busy, closed or failing (the next slot writes).
         self.missed = 0
         self._stop = threading.Event()
@@ -132,12 +135,18 @@ class Heartbeat:
 
     @property
     def claim_due(self) -> bool:
-        """True while a command must first :meth:`claim` the robot (not beating yet)."""
-        return self.enabled and not self.running
+        """True while a command must first :meth:`claim` the robot: not beating yet, or
+        no beat answered for half the time-to-live (the link was down: the robot may
+        see this master gone, and would consume the command as cancelled)."""
+        stale = time.monotonic() - self.wrote_at > self.ttl_ms / 2000
+        return self.enabled and (not self.running or stale)
 
     def claim(self, member: FleetMember | None) -> int:
         """Before this master's first command: beat once with a session the robot does not
-        hold yet, then go on beating (:meth:`start`). Nothing once beating.
+        hold yet (a new one after a claim that failed or a stop: the robot program may
+        have seen the old one replaced, and takes no beat of it back), then go on beating
+        (:meth:`start`). Once beating, nothing, unless no beat was answered for half the
+        time-to-live: then one beat first, with the same session.
 
         Args:
             member: The robot's side of its driver (a network robot), or None.
@@ -151,11 +160,14 @@ class Heartbeat:
         """
         if not self.claim_due:
             return self.session
-        held = int(self._transport.read_fields(self._fields[2:])["master_session"])
-        while self.session == held and not self.writes:  # never a predecessor's session
-            self.session = _new_session()
+        if not self.running:
+            held = int(self._transport.read_fields(self._fields[2:])["master_session"])
+            while self.session == held or self.beat:  # never a predecessor's
+                self.session = _new_session()
+                self.beat = 0
         # Not a command: a beat sent twice is harmless, so the link's retries apply.
         self._transport.write_block(Table.HOLDING, self.address, self.next_words(), retry=True)
+        self.wrote_at = time.monotonic()
         self.writes += 1
         self.start(member)
         return self.session
@@ -218,6 +230,7 @@ class Heartbeat:
         """
         if outcome is None:
             self.writes += 1
+            self.wrote_at = time.monotonic()
             if self._failing:
                 self._failing = False
                 self._log.info("robot.heartbeat_resumed", beat=self.beat)

@@ -1259,7 +1259,8 @@ class Robot:
             self._require_connection()
         if self._heartbeat.claim_due:
             # The first command claims the robot (this master beats from then on), once
-            # it is known to be valid: a command refused claims nothing.
+            # it is known to be valid: a command refused claims nothing. After a silence
+            # (the link was down), a beat goes first, as the program may see us gone.
             self._channel.check_command(command)
             self._channel.session = self._heartbeat.claim(self._shared)
         # prepare() encodes (refusing out-of-range values) before its first read.

@@ -1,0 +1,146 @@
+"""The master's session (tmflow) against a hostile network: a frame of a master the robot
+already saw replaced never hands the robot back to it.
+
+A master that dies (killed, its machine cut off) leaves its last frames to the network:
+its TCP stack resends them, in order, when the link comes back, long after the next
+master claimed the robot. Its heartbeat goes out on the same link as its commands, so a
+late command frame usually lands right behind a late beat of the same master. The
+simulator runs the generated robot program; its motion record is the judge.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from fault_proxy import FaultProxy, Rule
+from tmmaster import Pose, ProjectPausedError, Robot, TimeoutPolicy
+from tmmaster._channels import Command, CommandKind
+from tmmaster.sim import Simulator
+
+LEFT = Pose(300, -200, 200, 180, 0, 90)
+FAR = Pose(300, 200, 200, 180, 0, 90)
+#: Beats 0.5 s apart (wall) and a time-to-live of 10 s (the program's clock, 2 s wall at
+#: time_scale 5): a beat held in the network for a moment never makes a master gone.
+SLOW = TimeoutPolicy(heartbeat_s=0.5, heartbeat_ttl_s=10.0)
+BEAT = 9050
+
+
+@pytest.fixture
+def sim() -> Iterator[Simulator]:
+    with Simulator(time_scale=5) as simulator:
+        yield simulator
+
+
+def deliver(port: int, address: int, words: list[int]) -> None:
+    """One FC16 request on a connection of its own, as a frame held in the network lands."""
+    pdu = struct.pack(f">BHHB{len(words)}H", 16, address, len(words), 2 * len(words), *words)
+    frame = struct.pack(">HHHB", 7, 0, len(pdu) + 1, 1) + pdu
+    with socket.create_connection(("127.0.0.1", port), timeout=2.0) as link:
+        link.sendall(frame)
+        assert link.recv(260)[7] == 16  # written (not an exception answer)
+
+
+def let_run(sim: Simulator, ticks: int) -> None:
+    start = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
+
+
+def press_play_pause(sim: Simulator) -> None:
+    """The operator's Play/Pause button on the pendant (coil 7104)."""
+    sim.call(lambda: sim._controller.bank.set("play_pause", True))
+
+
+def dead_master(sim: Simulator) -> tuple[list[int], int, list[int], int]:
+    """A master that moved once and died: its last beat and its next command, both still
+    in the network (the beat's words, the command's address, words and number)."""
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=SLOW) as first:
+        first.wait_until_ready()
+        first.move_to(LEFT, speed=50)
+        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=5))
+        ((block, words),) = ticket.plan
+        first._heartbeat.stop()
+        beat = first._heartbeat.next_words()  # the beat it sent with the command
+    return beat, block.address, words, ticket.seq
+
+
+def hold_beats(sim: Simulator, proxy: FaultProxy, release: threading.Event) -> None:
+    """From now on the live master's beats are held in the network (until ``release``)."""
+    proxy.add(Rule("hold", function_code=16, address=BEAT, times=1000, release=release))
+    sim.wait_for(
+        lambda: any(s.address == BEAT and s.action == "hold" for s in proxy.seen), timeout=3.0
+    )
+
+
+def test_a_dead_masters_late_beat_and_frame_never_run_once_another_claimed(
+    sim: Simulator,
+) -> None:
+    """The next master claimed the robot (its first command, refused while paused).
+    The dead master's beat, then its command, land late: the command must not run."""
+    beat, address, words, seq = dead_master(sim)
+    release = threading.Event()
+    with (
+        FaultProxy(sim.port) as proxy,
+        Robot("127.0.0.1", proxy.port, gripper=None, timeouts=SLOW) as second,
+    ):
+        second.wait_until_ready()
+        press_play_pause(sim)
+        sim.wait_for(lambda: bool(sim.field("paused")), timeout=2.0)
+        with pytest.raises(ProjectPausedError):
+            second.move_to(LEFT, speed=50)  # claimed, then refused: nothing written
+        press_play_pause(sim)
+        sim.wait_for(lambda: not sim.field("paused"), timeout=2.0)
+        hold_beats(sim, proxy, release)  # so that only the dead master's frames land
+        deliver(sim.port, BEAT, beat)
+        deliver(sim.port, address, words)
+        sim.wait_for(lambda: sim.field("ack_seq") == seq, timeout=3.0)
+        release.set()
+        proxy.clear()
+        assert sim.field("result_code") == 6  # another_master: consumed, never run
+        assert [record.target for record in sim.motion_log()] == [LEFT]
+        assert second.move_to(LEFT, speed=50).done  # the next master still commands
+
+
+def test_a_dead_masters_late_beat_never_stops_the_next_masters_move(sim: Simulator) -> None:
+    beat, _address, _words, _seq = dead_master(sim)
+    release = threading.Event()
+    with (
+        FaultProxy(sim.port) as proxy,
+        Robot("127.0.0.1", proxy.port, gripper=None, timeouts=SLOW) as second,
+    ):
+        second.wait_until_ready()
+        motion = second.start_move(FAR, speed=10)  # claims the robot; a long move
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(LEFT) > 20, timeout=5.0)
+        hold_beats(sim, proxy, release)
+        deliver(sim.port, BEAT, beat)
+        let_run(sim, 10)  # 200 ms on the program's clock: its watchdog looked twice
+        assert sim.tcp_pose().distance_to(FAR) > 20  # still under way meanwhile
+        release.set()
+        proxy.clear()
+        motion.wait()
+        assert sim.tcp_pose().is_close(FAR, mm=1.0, deg=1.0)
+
+
+def test_the_first_command_after_a_link_outage_runs(sim: Simulator) -> None:
+    """The link was down longer than the time-to-live, so the program saw the master
+    gone (and used up a number). The master's next command goes out as soon as the link
+    is back: it must beat first, not leave the command to a program that still sees it
+    gone."""
+    policy = TimeoutPolicy(heartbeat_s=0.25, heartbeat_ttl_s=1.0)
+    with (
+        FaultProxy(sim.port) as proxy,
+        Robot("127.0.0.1", proxy.port, gripper=None, timeouts=policy) as robot,
+    ):
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+        ack = sim.field("ack_seq")
+        proxy.outage(60.0)  # every connection closed, new ones refused
+        # The program's idle rule: the master gone, its next number used up.
+        sim.wait_for(lambda: sim.field("ack_seq") != ack, timeout=5.0)
+        assert sim.field("result_code") == 5
+        proxy._refusing_until = 0.0  # the link comes back
+        assert robot.move_to(LEFT.offset(dz=-20), speed=50).done
