@@ -49,6 +49,22 @@ def _resolve(module: str, is_package: bool, level: int, name: str | None) -> str
     return ".".join([*base, name] if name else base)
 
 
+#: Where an import can be: ``import`` is a statement, never part of an expression, so the
+#: walks below go through statements only (an expression holds none).
+_STATEMENTS = ast.stmt | ast.excepthandler | ast.match_case
+
+
+def _statements(tree: ast.AST) -> list[ast.AST]:
+    """``tree`` and every statement in it, at any depth (in functions and classes too)."""
+    found: list[ast.AST] = []
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        found.append(node)
+        todo.extend(child for child in ast.iter_child_nodes(node) if isinstance(child, _STATEMENTS))
+    return found
+
+
 @functools.cache
 def _tree(path: Path) -> ast.Module:
     """The module's syntax tree, parsed once per process (several tests read it)."""
@@ -64,7 +80,7 @@ def _imports(module: str, path: Path, *, at_import: bool = False) -> set[str]:
     tree = _tree(path)
     is_package = path.name == "__init__.py"
     targets: set[str] = set()
-    for node in _executed_at_import(tree) if at_import else ast.walk(tree):
+    for node in _executed_at_import(tree) if at_import else _statements(tree):
         if isinstance(node, ast.Import):
             targets.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -92,20 +108,21 @@ def _is_type_checking(node: ast.AST) -> bool:
 
 
 def _executed_at_import(tree: ast.AST) -> list[ast.AST]:
-    """The nodes of ``tree`` run when the module is imported: not inside a function (or a
-    lambda), nor under ``if TYPE_CHECKING:`` (its ``else`` runs)."""
+    """The statements of ``tree`` run when the module is imported: not inside a function,
+    nor under ``if TYPE_CHECKING:`` (its ``else`` runs). Statements only, as in
+    :func:`_statements` (a lambda, an expression, holds none)."""
     found: list[ast.AST] = []
     todo = [tree]
     while todo:
         node = todo.pop()
         found.append(node)
-        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
             continue
         if _is_type_checking(node):
             assert isinstance(node, ast.If)
             todo.extend(node.orelse)
             continue
-        todo.extend(ast.iter_child_nodes(node))
+        todo.extend(child for child in ast.iter_child_nodes(node) if isinstance(child, _STATEMENTS))
     return found
 
 
