@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import ast
 import builtins
+import collections
 import enum
 import importlib
 import importlib.util
@@ -109,11 +110,25 @@ def _absolute(module_name: str, level: int, name: str | None) -> str:
     return ".".join([*base, name] if name else base)
 
 
+#: Where an import can be: a statement, never part of an expression.
+_STATEMENTS = ast.stmt | ast.excepthandler | ast.match_case
+
+
+def _walk_statements(tree: ast.AST) -> Iterator[ast.AST]:
+    """``ast.walk(tree)``'s nodes that are statements, in its order, without visiting any
+    expression (none holds a statement)."""
+    todo: collections.deque[ast.AST] = collections.deque([tree])
+    while todo:
+        node = todo.popleft()
+        todo.extend(child for child in ast.iter_child_nodes(node) if isinstance(child, _STATEMENTS))
+        yield node
+
+
 @cache
 def _imports_of(module_name: str) -> dict[str, tuple[str, str | None]]:
     """``{local name: (module, name in it, or None for the module)}``: every import."""
     bound: dict[str, tuple[str, str | None]] = {}
-    for node in ast.walk(_module_tree(module_name)):
+    for node in _walk_statements(_module_tree(module_name)):
         if isinstance(node, ast.ImportFrom):
             source = _absolute(module_name, node.level, node.module)
             for alias in node.names:
