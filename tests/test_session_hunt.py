@@ -14,11 +14,12 @@ import socket
 import struct
 import threading
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from tmmaster import Pose, ProjectPausedError, Robot, TimeoutPolicy
+from tmmaster import Pose, ProjectPausedError, Robot, RobotError, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator
 
@@ -144,3 +145,33 @@ def test_the_first_command_after_a_link_outage_runs(sim: Simulator) -> None:
         assert sim.field("result_code") == 5
         proxy._refusing_until = 0.0  # the link comes back
         assert robot.move_to(LEFT.offset(dz=-20), speed=50).done
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit (docs/safety.md, tmflow): two live masters that read the same"
+    " ack_seq write the same number; the program takes the first and never reads the"
+    " second, whose master then sees its number acknowledged and done. Telling them"
+    " apart needs the program to report the session of the command it took",
+)
+def test_a_master_never_takes_another_masters_done_for_its_own_command(
+    sim: Simulator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with (
+        Robot("127.0.0.1", sim.port) as first,
+        Robot("127.0.0.1", sim.port) as second,
+    ):
+        first.wait_until_ready()
+        first.gripper.open()  # the first master claims the robot
+        real_send = first._channel.send
+
+        def second_goes_first(ticket: Any) -> None:
+            # Between the first master's read of ack_seq and its write, the second
+            # master claims the robot and has its own command (the same number) done.
+            monkeypatch.setattr(first._channel, "send", real_send)
+            second.gripper.open()
+            real_send(ticket)
+
+        monkeypatch.setattr(first._channel, "send", second_goes_first)
+        with pytest.raises(RobotError):  # refused, or never taken: never "done"
+            first.gripper.close()
