@@ -25,9 +25,9 @@ from tmmaster.sim import Simulator
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 200, 200, 180, 0, 90)
-#: Beats 0.5 s apart (wall) and a time-to-live of 10 s (the program's clock, 2 s wall at
-#: time_scale 5): a beat held in the network for a moment never makes a master gone.
-SLOW = TimeoutPolicy(heartbeat_s=0.5, heartbeat_ttl_s=10.0)
+#: A time-to-live of 10 s: a beat held in the network for a moment never makes a master
+#: gone; beats 0.1 s apart, so that the test sees one held soon.
+SLOW = TimeoutPolicy(heartbeat_s=0.1, heartbeat_ttl_s=10.0)
 BEAT = 9050
 
 
