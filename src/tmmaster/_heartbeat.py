@@ -143,7 +143,7 @@ class Heartbeat:
 
     def claim(self, member: FleetMember | None) -> int:
         """Before this master's first command: beat once with a session the robot does not
-        hold yet (a new one after a claim that failed or a stop: the robot program may
+        hold yet (a new one when beating again after :meth:`stop`: the robot program may
         have seen the old one replaced, and takes no beat of it back), then go on beating
         (:meth:`start`). Once beating, nothing, unless no beat was answered for half the
         time-to-live: then one beat first, with the same session.
@@ -162,9 +162,10 @@ class Heartbeat:
             return self.session
         if not self.running:
             held = int(self._transport.read_fields(self._fields[2:])["master_session"])
-            while self.session == held or self.beat:  # never a predecessor's
+            if self.writes:  # beating again after a stop
                 self.session = _new_session()
-                self.beat = 0
+            while self.session == held:  # never a predecessor's
+                self.session = _new_session()
         # Not a command: a beat sent twice is harmless, so the link's retries apply.
         self._transport.write_block(Table.HOLDING, self.address, self.next_words(), retry=True)
         self.wrote_at = time.monotonic()
