@@ -215,6 +215,7 @@ def measure(profile: str, reads: int, moves: int, time_scale: float) -> dict[str
         "move_us": move_cpu * 1e6,
         "move_ratio": move_cpu / raw,
         "requests_per_move": move_requests / moves,
+        "move_ms": move_cpu * move_requests / moves * 1e3,
         "paced_us": raw_paced * 1e6,
         "paced_ratio": move_cpu / raw_paced,
         "alone_ratio": move_cpu / raw_alone,
@@ -230,9 +231,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     print(f"# {machine_line()}")
     print("| profile | raw pymodbus µs/req | Robot.status µs/req | ratio |"
-          " during moves µs/req | ratio | requests/move |"
+          " during moves µs/req | ratio | requests/move | CPU ms/move |"
           " raw paced µs/req | paced ratio | request only |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for profile in ("article", "tmflow"):
         rounds = [
             measure(profile, args.reads, args.moves, args.time_scale) for _ in range(args.rounds)
@@ -246,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
             f"| {profile} | {med['raw_us']:.0f} | {med['status_us']:.0f} |"
             f" {med['status_ratio']:.2f} ({status_lo:.2f}-{status_hi:.2f}) |"
             f" {med['move_us']:.0f} | {med['move_ratio']:.2f} ({move_lo:.2f}-{move_hi:.2f}) |"
-            f" {med['requests_per_move']:.1f} |"
+            f" {med['requests_per_move']:.1f} | {med['move_ms']:.2f} |"
             f" {med['paced_us']:.0f} | {med['paced_ratio']:.2f} ({paced_lo:.2f}-{paced_hi:.2f}) |"
             f" {med['alone_ratio']:.2f} |"
         )
