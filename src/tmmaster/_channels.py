@@ -215,6 +215,10 @@ def _published(profile: RobotProfile, names: tuple[str, ...]) -> tuple[RegisterF
     return profile.select(names) if all(profile.has(n) for n in names) else ()
 
 
+def _address(field: RegisterField) -> int:
+    return field.address
+
+
 def pose_from(values: dict[str, Value], names: tuple[str, ...]) -> Pose:
     """The pose in ``values`` under the six field ``names`` (x, y, z, rx, ry, rz, in order)."""
     return Pose(*[float(values[name]) for name in names])
@@ -508,6 +512,11 @@ class CommandChannel(ABC):
     def cancel(self, ticket: Ticket) -> None:  # noqa: B027 (none, where no handshake says it)
         """Tell the robot a command it took is given up, where the handshake can say so."""
 
+    def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
+        """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
+        taker = int(feedback.get("ack_session", 0))
+        return bool(self.session) and taker not in (0, self.session)
+
     def may_resume(self) -> bool:
         """True when a move the robot stopped itself could still be resumed (Play).
 
@@ -679,7 +688,10 @@ class SequenceChannel(CommandChannel):
     def __init__(self, profile: RobotProfile, transport: Transport) -> None:
         super().__init__(profile, transport)
         p = profile
-        self.feedback_fields = p.role(Role.FEEDBACK)
+        # The program's feedback block, grasp_status (9105) with it: one request, 9100-9106.
+        self.feedback_fields = tuple(
+            sorted((*p.role(Role.FEEDBACK), *_published(p, ("grasp_status",))), key=_address)
+        )
         # All of Techman's status bits, not just the three the handshake needs: together
         # they are one contiguous block (7201-7208), so one request instead of two.
         needed = p.select(("error", "estop", "project_running"))
@@ -795,6 +807,11 @@ class SequenceChannel(CommandChannel):
         failure = yield from self._flags_failure_steps(flags)
         if not ticket.acknowledged:
             self._note_ack(ticket, int(feedback["ack_seq"]) == ticket.seq, mark)
+        if ticket.acknowledged and failure is None and self._taken_for_another(feedback):
+            failure = CommandRejectedError(
+                f"the robot program took command {ticket.seq} from another master (session"
+                f" {feedback['ack_session']}): this one was never read and never runs"
+            )
         done = False
         if ticket.acknowledged and failure is None:
             if int(feedback["done_seq"]) == ticket.seq:
@@ -857,12 +874,21 @@ class SequenceChannel(CommandChannel):
         """
         p = self.profile
         values = self._read_regardless(self.feedback_fields)
-        if int(values["ack_seq"]) == ticket.seq:  # consumed unrun, or taken
+        if int(values["ack_seq"]) == ticket.seq:  # consumed unrun, or taken (whose?)
+            if self.session and "ack_session" in values:
+                # The program names the command it took (0: none ran), so a command the
+                # watchdog stopped after it moved, reported "cancelled", counts as taken.
+                return int(values["ack_session"]) == self.session
             return p.field("result_code").label(int(values["result_code"])) not in _UNRUN
         flags = self._read_regardless(self.flag_fields)
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
         return None
+
+    def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
+        """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
+        taker = int(feedback.get("ack_session", 0))
+        return bool(self.session) and taker not in (0, self.session)
 
     def may_resume(self) -> bool:
         """True while the project is paused or still running: Play could resume a move."""

@@ -38,7 +38,15 @@ from ._registers import (
 from ._version import version
 
 #: The feedback and command fields the program reads or writes, by name.
-_FEEDBACK = ("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "grasp_status")
+_FEEDBACK = (
+    "ack_seq",
+    "done_seq",
+    "robot_state",
+    "result_code",
+    "heartbeat",
+    "grasp_status",
+    "ack_session",
+)
 _WORDS = ("speed", "accel_time", "command", "seq")
 #: The block's end: the extension, then the master's session.
 _BLOCK_END = (*EXTENSION_FIELDS, SESSION_FIELD)
