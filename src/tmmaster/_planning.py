@@ -226,7 +226,7 @@ class TimeoutPolicy(Policy):
     #: quarter of that budget, if less); none for this long is a stall, s.
     stall_s: Annotated[float, Field(gt=0, le=60)] = 1.0
     #: The master's heartbeat (``tmflow``: ``master_heartbeat``, docs/safety.md): written
-    #: this often from connect to close, s (0.02 to 0.5: the robot program asks for a
+    #: this often from the first command to close, s (0.02 to 0.5: the robot program asks for a
     #: change at least every 500 ms).
     heartbeat_s: Annotated[float, Field(ge=0.02, le=0.5)] = 0.4
     #: ... and a command on the robot expires once the heartbeat has been silent this
