@@ -873,6 +873,9 @@ class SequenceChannel(CommandChannel):
         None: it has not answered yet (``ack_seq`` is not our number and the project runs).
         """
         p = self.profile
+        # The flags first: a project seen stopped before the feedback is read cannot have
+        # taken the number after that read (read the other way, it may in between).
+        flags = self._read_regardless(self.flag_fields)
         values = self._read_regardless(self.feedback_fields)
         if int(values["ack_seq"]) == ticket.seq:  # consumed unrun, or taken (whose?)
             if self.session and "ack_session" in values:
@@ -880,7 +883,6 @@ class SequenceChannel(CommandChannel):
                 # watchdog stopped after it moved, reported "cancelled", counts as taken.
                 return int(values["ack_session"]) == self.session
             return p.field("result_code").label(int(values["result_code"])) not in _UNRUN
-        flags = self._read_regardless(self.flag_fields)
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
         return None
