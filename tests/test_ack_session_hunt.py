@@ -10,7 +10,7 @@ point. The simulator runs the generated robot program; its motion record is the 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
@@ -21,6 +21,8 @@ from tmmaster.sim import Simulator
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 200, 200, 180, 0, 90)
+ACK_SEQ = 9100
+ACK_SESSION = 9106
 
 
 @pytest.fixture
@@ -37,6 +39,21 @@ def hold_program_link(sim: Simulator, held: bool) -> None:
         controller.link_free_at = 1e12 if held else -1.0
 
     sim.call(apply)
+
+
+def hold_after_write(
+    sim: Simulator, monkeypatch: pytest.MonkeyPatch, address: int, wanted: Callable[[int], bool]
+) -> None:
+    """Once the program writes a ``wanted`` value at ``address``, hold its link there."""
+    controller: Any = sim._controller
+    real_after_write = controller.after_write
+
+    def after_write(table: Any, start: int, values: Any) -> None:
+        real_after_write(table, start, values)
+        if start == address and len(values) == 1 and wanted(int(values[0])):
+            controller.link_free_at = 1e12
+
+    monkeypatch.setattr(controller, "after_write", after_write)
 
 
 def test_a_command_taken_and_stopped_between_the_withdraws_two_reads_counts_as_taken(
@@ -70,3 +87,40 @@ def test_a_command_taken_and_stopped_between_the_withdraws_two_reads_counts_as_t
         assert [record.target for record in sim.motion_log()] == [LEFT, FAR]  # it moved
         assert sim.field("ack_session") == channel.session
         assert taken is True
+
+
+@pytest.mark.parametrize("where", ["session", "ack"])
+def test_a_move_done_is_done_though_another_masters_next_command_took_the_robot(
+    sim: Simulator, monkeypatch: pytest.MonkeyPatch, where: str
+) -> None:
+    """The first master's move was acknowledged (its own session) and is done; before
+    its next poll, a second master claims the robot and the program takes that master's
+    command, the next number: its poll lands after the program wrote the second master's
+    session (ack_seq still the first master's number), or after the next ack_seq too.
+    The first master's move ran and is done, never "from another master"."""
+    near = LEFT.offset(dz=-20)
+    with (
+        Robot("127.0.0.1", sim.port, gripper=None) as first,
+        Robot("127.0.0.1", sim.port, gripper=None) as second,
+    ):
+        first.wait_until_ready()
+        first.move_to(LEFT, speed=50)
+        motion = first.start_move(near, speed=50)
+        sim.wait_for(lambda: sim.field("ack_seq") == motion.ticket.seq, timeout=3.0)
+        motion.progress()  # the first master sees its move acknowledged
+        sim.wait_for(lambda: sim.field("done_seq") == motion.ticket.seq, timeout=3.0)
+        if where == "session":  # the second master's session (not ours, not 0)
+            mine = first._channel.session
+            hold_after_write(sim, monkeypatch, ACK_SESSION, lambda v: v not in (0, mine))
+        else:
+            hold_after_write(sim, monkeypatch, ACK_SEQ, lambda v: v == motion.ticket.seq + 1)
+        # The second master claims and has the next number taken (a move where the arm
+        # is: the first master's pose check still holds); the program holds there.
+        later = second.start_move(near, speed=5)
+        sim.wait_for(lambda: sim.field("ack_session") == second._channel.session, timeout=3.0)
+        assert sim.field("done_seq") == motion.ticket.seq
+        motion.wait()  # the first master's move: done
+        hold_program_link(sim, False)
+        assert motion.done
+        later.wait()
+        assert [record.target for record in sim.motion_log()] == [LEFT, near, near]

@@ -805,9 +805,12 @@ class SequenceChannel(CommandChannel):
         flags = yield self.flag_fields
         ticket.extra["last_heartbeat"] = feedback.get("heartbeat", 0)
         failure = yield from self._flags_failure_steps(flags)
-        if not ticket.acknowledged:
+        # Whose command took the number: ack_session as the acknowledgement is first seen
+        # (later it may name the next number's taker, written before that number's ack).
+        fresh = not ticket.acknowledged
+        if fresh:
             self._note_ack(ticket, int(feedback["ack_seq"]) == ticket.seq, mark)
-        if ticket.acknowledged and failure is None and self._taken_for_another(feedback):
+        if fresh and ticket.acknowledged and failure is None and self._taken_for_another(feedback):
             failure = CommandRejectedError(
                 f"the robot program took command {ticket.seq} from another master (session"
                 f" {feedback['ack_session']}): this one was never read and never runs"
