@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from tmmaster import Pose, Robot
+from tmmaster import Pose, Robot, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator
 
@@ -124,3 +124,28 @@ def test_a_move_done_is_done_though_another_masters_next_command_took_the_robot(
         assert motion.done
         later.wait()
         assert [record.target for record in sim.motion_log()] == [LEFT, near, near]
+
+
+def test_a_command_that_ran_while_its_master_was_cut_off_counts_as_taken(
+    sim: Simulator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The program took and finished the master's command while the master saw nothing
+    of it (cut off), then saw the master gone and used up the next number (0 written to
+    ack_session before that number's ack_seq). The master's withdraw reads in between:
+    its own number, session 0, done: the command ran, never "not taken"."""
+    policy = TimeoutPolicy(heartbeat_s=0.05, heartbeat_ttl_s=0.5)
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=policy) as robot:
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+        channel = robot._channel
+        ticket = channel.prepare(Command(CommandKind.PTP, LEFT.offset(dz=-20), speed=50))
+        channel.send(ticket)
+        sim.wait_for(lambda: sim.field("done_seq") == ticket.seq, timeout=3.0)
+        hold_after_write(sim, monkeypatch, ACK_SESSION, lambda v: v == 0)
+        robot._heartbeat.stop()  # the master is silent: the program sees it gone
+        sim.wait_for(lambda: sim.field("ack_session") == 0, timeout=3.0)
+        assert sim.field("ack_seq") == ticket.seq  # the next number not acknowledged yet
+        taken = channel.withdraw_outcome(ticket)
+        hold_program_link(sim, False)
+        assert [record.target for record in sim.motion_log()] == [LEFT, LEFT.offset(dz=-20)]
+        assert taken is True

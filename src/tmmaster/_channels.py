@@ -884,7 +884,11 @@ class SequenceChannel(CommandChannel):
             if self.session and "ack_session" in values:
                 # The program names the command it took (0: none ran), so a command the
                 # watchdog stopped after it moved, reported "cancelled", counts as taken.
-                return int(values["ack_session"]) == self.session
+                # Done at our number: it ran (the 0 is the next number's, used up unrun).
+                taker = int(values["ack_session"])
+                return taker == self.session or (
+                    not taker and int(values["done_seq"]) == ticket.seq
+                )
             return p.field("result_code").label(int(values["result_code"])) not in _UNRUN
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
