@@ -847,9 +847,9 @@ class SequenceChannel(CommandChannel):
         have read the block just before the cancel landed, and it acknowledges the
         number it read (then reads the block again and finds the cancel, or runs the
         command if the cancel came later still). So this returns None until the answer
-        (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with result "cancelled" or
-        "another_master" (withdrawn) or not (taken); or the project not running
-        (withdrawn: the start-up rule consumes it).
+        (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with our session in
+        ``ack_session`` or ``done_seq`` at our number (taken) or not (withdrawn); or the
+        project not running (withdrawn: the start-up rule consumes it).
         """
         if (outcome := self.withdraw_outcome(ticket)) is None:
             self.cancel(ticket)
@@ -893,11 +893,6 @@ class SequenceChannel(CommandChannel):
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
         return None
-
-    def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
-        """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
-        taker = int(feedback.get("ack_session", 0))
-        return bool(self.session) and taker not in (0, self.session)
 
     def may_resume(self) -> bool:
         """True while the project is paused or still running: Play could resume a move."""
