@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from tmmaster import Pose, Robot, TimeoutPolicy
+from tmmaster import Pose, Robot, RobotError, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator
 
@@ -149,3 +149,31 @@ def test_a_command_that_ran_while_its_master_was_cut_off_counts_as_taken(
         hold_program_link(sim, False)
         assert [record.target for record in sim.motion_log()] == [LEFT, LEFT.offset(dz=-20)]
         assert taken is True
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit (not fixed): the start-up rule writes robot_state = idle when nothing"
+    " is pending, also when the command at ack_seq never finished; a master that polls only"
+    " after the restart waits for its deadline, then presses Stop on the new run",
+)
+def test_a_move_stopped_and_the_project_started_again_before_the_next_poll_fails_at_once(
+    sim: Simulator,
+) -> None:
+    """The operator stops the project during the master's move and starts it again before
+    the master polls (a wait called later). The move never finishes: the master's next
+    poll must say so, not wait for its deadline and then press Stop on the new run."""
+    with Robot("127.0.0.1", sim.port, gripper=None) as robot:
+        robot.wait_until_ready()
+        robot.move_to(LEFT, speed=50)
+        motion = robot.start_move(FAR, speed=5)
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(LEFT) > 5, timeout=3.0)
+        sim.call(lambda: sim._controller.bank.set("stop_project", True))  # the Stop button
+        sim.wait_for(lambda: not sim.field("project_running"), timeout=3.0)
+        sim.press_play()
+        sim.wait_for(lambda: bool(sim.field("project_running")), timeout=3.0)
+        let_run = sim.ticks
+        sim.wait_for(lambda: sim.ticks > let_run + 5, timeout=3.0)  # the start-up rule ran
+        with pytest.raises(RobotError, match="motion_failed"):
+            motion.wait(timeout_s=0.5)
+        assert sim.field("project_running")  # not stopped again by the master
