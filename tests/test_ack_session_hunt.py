@@ -1,5 +1,5 @@
-"""A withdraw (tmflow) decides from the program's feedback whether its command ran:
-hostile interleavings of the program's writes and the master's reads.
+"""A master (tmflow) reads from the program's feedback whether its command ran: hostile
+interleavings of the program's writes and the master's reads.
 
 The program takes a number at most once and names whose command it took
 (``ack_session``, 9106); a master that gives a command up reads that answer. These
