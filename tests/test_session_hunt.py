@@ -10,8 +10,6 @@ simulator runs the generated robot program; its motion record is the judge.
 
 from __future__ import annotations
 
-import socket
-import struct
 import threading
 from collections.abc import Iterator
 from typing import Any
@@ -19,12 +17,11 @@ from typing import Any
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from tmmaster import Pose, ProjectPausedError, Robot, RobotError, TimeoutPolicy
+from test_dead_master_frame import FAR, LEFT, deliver, press_play_pause
+from tmmaster import ProjectPausedError, Robot, RobotError, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator
 
-LEFT = Pose(300, -200, 200, 180, 0, 90)
-FAR = Pose(300, 200, 200, 180, 0, 90)
 #: A time-to-live of 10 s: a beat held in the network for a moment never makes a master
 #: gone; beats 0.1 s apart, so that the test sees one held soon.
 SLOW = TimeoutPolicy(heartbeat_s=0.1, heartbeat_ttl_s=10.0)
@@ -37,23 +34,9 @@ def sim() -> Iterator[Simulator]:
         yield simulator
 
 
-def deliver(port: int, address: int, words: list[int]) -> None:
-    """One FC16 request on a connection of its own, as a frame held in the network lands."""
-    pdu = struct.pack(f">BHHB{len(words)}H", 16, address, len(words), 2 * len(words), *words)
-    frame = struct.pack(">HHHB", 7, 0, len(pdu) + 1, 1) + pdu
-    with socket.create_connection(("127.0.0.1", port), timeout=2.0) as link:
-        link.sendall(frame)
-        assert link.recv(260)[7] == 16  # written (not an exception answer)
-
-
 def let_run(sim: Simulator, ticks: int) -> None:
     start = sim.ticks
     sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
-
-
-def press_play_pause(sim: Simulator) -> None:
-    """The operator's Play/Pause button on the pendant (coil 7104)."""
-    sim.call(lambda: sim._controller.bank.set("play_pause", True))
 
 
 def dead_master(sim: Simulator) -> tuple[list[int], int, list[int], int]:
