@@ -151,12 +151,6 @@ def test_a_command_that_ran_while_its_master_was_cut_off_counts_as_taken(
         assert taken is True
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known limit (not fixed): the start-up rule writes robot_state = idle when nothing"
-    " is pending, also when the command at ack_seq never finished; a master that polls only"
-    " after the restart waits for its deadline, then presses Stop on the new run",
-)
 def test_a_move_stopped_and_the_project_started_again_before_the_next_poll_fails_at_once(
     sim: Simulator,
 ) -> None:

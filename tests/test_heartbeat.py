@@ -129,7 +129,11 @@ def test_a_paused_move_whose_master_stopped_beating_never_resumes(
             assert sim.tcp_pose().is_close(FAR, mm=1.0, deg=1.0)
         else:
             sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
-            sim.wait_for(lambda: sim.field("robot_state") == 0, timeout=2.0)
+            # The program runs again (its loop beats; robot_state stays 2: the move never
+            # finished, the start-up rule says so).
+            beat = sim.field("heartbeat")
+            sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2.0)
+            assert sim.field("robot_state") == 2
             assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
             assert len(sim.motion_log()) == 2  # LEFT, then FAR: never started again
             assert any("heartbeat" in line for line in sim.displayed())

@@ -68,7 +68,11 @@ def test_a_paused_move_of_a_killed_master_never_moves_again(sim: Simulator) -> N
         held = sim.tcp_pose()
         press_play_pause(sim)  # the operator presses Play
         sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
-        sim.wait_for(lambda: sim.field("robot_state") == 0, timeout=2.0)
+        # The program runs again (its loop beats; robot_state stays 2: the move never
+        # finished, the start-up rule says so).
+        beat = sim.field("heartbeat")
+        sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2.0)
+        assert sim.field("robot_state") == 2
         assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
         assert len(sim.motion_log()) == 2  # the first move, the long one: never again
     finally:
