@@ -24,6 +24,7 @@ from __future__ import annotations
 import atexit
 import functools
 import inspect
+import math
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -41,7 +42,7 @@ from ._channels import (
     channel_for,
     pose_from,
 )
-from ._checks import is_finite_number, require_in, require_positive, shown
+from ._checks import Bounds, require_in, require_positive
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._command import _MotionFollower
 from ._exceptions import (
@@ -1460,10 +1461,12 @@ class Robot:
             ConfigError: ``seconds`` is not a finite number >= 0.
             StopRequestedError: A stop was requested before or during the wait.
         """
-        if not is_finite_number(seconds) or seconds < 0:
-            raise ConfigError(f"seconds must be a finite number >= 0, got {shown(seconds)}")
-        deadline = time.monotonic() + seconds
+        deadline = time.monotonic() + require_in("seconds", seconds, _DWELL)
         Poller(self.poll_interval_s, self._stop_event, deadline=deadline).sleep_until(deadline)
+
+
+#: A dwell's range: any finite time, none included.
+_DWELL = Bounds(0.0, math.inf, "s")
 
 
 def _waited(motion: Motion) -> Motion:
