@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from pendant import press_play_pause, runs_again_without_moving
 from tmmaster import Pose, ProjectPausedError, Robot, RobotError, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator
@@ -83,11 +84,6 @@ def test_a_dead_masters_late_frame_never_runs_for_the_next_master(
         assert second.move_to(LEFT, speed=50).done  # the next master still commands
 
 
-def press_play_pause(sim: Simulator) -> None:
-    """The operator's Play/Pause button on the pendant (coil 7104)."""
-    sim.call(lambda: sim._controller.bank.set("play_pause", True))
-
-
 def test_a_dead_masters_late_frame_never_runs_once_another_master_claimed(
     sim: Simulator,
 ) -> None:
@@ -138,14 +134,7 @@ def test_a_paused_move_of_a_dead_master_is_stopped_when_the_next_master_claims(
             sim.wait_for(lambda: not sim.field("project_running"), timeout=3.0)
             held = sim.tcp_pose()
             press_play_pause(sim)  # the operator presses Play
-            sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
-            # The program runs again (its loop beats; robot_state stays 2: the move never
-            # finished, the start-up rule says so).
-            beat = sim.field("heartbeat")
-            sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2.0)
-            assert sim.field("robot_state") == 2
-            assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
-            assert len(sim.motion_log()) == 2  # LEFT, then FAR: never started again
+            runs_again_without_moving(sim, held, moves=2)
             assert any("another master" in line for line in sim.displayed())
 
 

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from pendant import press_play_pause, runs_again_without_moving
 from tmmaster import ConfigError, Pose, Robot, TimeoutPolicy
 from tmmaster._heartbeat import HEARTBEAT_MAX, Heartbeat
 from tmmaster._profiles import robot_profile
@@ -47,11 +48,6 @@ def heartbeat_writes(sim: Simulator) -> list[tuple[int, ...]]:
         for r in sim.request_log
         if r.function_code == 16 and r.address == 9050 and r.values is not None
     ]
-
-
-def press_play_pause(sim: Simulator) -> None:
-    """The operator's Play/Pause button on the pendant (coil 7104)."""
-    sim.call(lambda: sim._controller.bank.set("play_pause", True))
 
 
 def test_a_robot_beats_from_its_first_command_until_it_closes(sim: Simulator) -> None:
@@ -128,14 +124,7 @@ def test_a_paused_move_whose_master_stopped_beating_never_resumes(
             motion.wait()  # resumed and finished: a live master's move never expires
             assert sim.tcp_pose().is_close(FAR, mm=1.0, deg=1.0)
         else:
-            sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
-            # The program runs again (its loop beats; robot_state stays 2: the move never
-            # finished, the start-up rule says so).
-            beat = sim.field("heartbeat")
-            sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2.0)
-            assert sim.field("robot_state") == 2
-            assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
-            assert len(sim.motion_log()) == 2  # LEFT, then FAR: never started again
+            runs_again_without_moving(sim, held, moves=2)
             assert any("heartbeat" in line for line in sim.displayed())
             assert motion.done is False
         robot.interrupt()

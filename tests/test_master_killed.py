@@ -15,6 +15,7 @@ from collections.abc import Iterator
 
 import pytest
 
+from pendant import press_play_pause, runs_again_without_moving
 from tmmaster.sim import Simulator
 
 MASTER = textwrap.dedent(
@@ -40,11 +41,6 @@ def sim() -> Iterator[Simulator]:
         yield simulator
 
 
-def press_play_pause(sim: Simulator) -> None:
-    """The operator's Play/Pause button on the pendant (coil 7104)."""
-    sim.call(lambda: sim._controller.bank.set("play_pause", True))
-
-
 def test_a_paused_move_of_a_killed_master_never_moves_again(sim: Simulator) -> None:
     master = subprocess.Popen(
         [sys.executable, "-c", MASTER, str(sim.port)],
@@ -67,14 +63,7 @@ def test_a_paused_move_of_a_killed_master_never_moves_again(sim: Simulator) -> N
         sim.wait_for(lambda: not sim.field("project_running"), timeout=3.0)
         held = sim.tcp_pose()
         press_play_pause(sim)  # the operator presses Play
-        sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
-        # The program runs again (its loop beats; robot_state stays 2: the move never
-        # finished, the start-up rule says so).
-        beat = sim.field("heartbeat")
-        sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2.0)
-        assert sim.field("robot_state") == 2
-        assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)  # not a micron
-        assert len(sim.motion_log()) == 2  # the first move, the long one: never again
+        runs_again_without_moving(sim, held, moves=2)
     finally:
         if master.poll() is None:
             master.kill()

@@ -17,7 +17,8 @@ from typing import Any
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from test_dead_master_frame import FAR, LEFT, deliver, press_play_pause
+from pendant import press_play_pause
+from test_dead_master_frame import FAR, LEFT, deliver
 from tmmaster import ProjectPausedError, Robot, RobotError, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import Simulator

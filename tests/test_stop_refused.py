@@ -13,6 +13,7 @@ from collections.abc import Iterator
 
 import pytest
 
+from pendant import press_play_pause
 from tmmaster import Pose, ProjectPausedError, ResponseTimeoutError, Robot, StopRequestedError
 from tmmaster.sim import Simulator
 
@@ -30,11 +31,6 @@ def sim() -> Iterator[Simulator]:
 def let_run(sim: Simulator, ticks: int) -> None:
     start = sim.ticks
     sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
-
-
-def press_play_pause(sim: Simulator) -> None:
-    """The operator's Play/Pause button on the pendant (coil 7104)."""
-    sim.call(lambda: sim._controller.bank.set("play_pause", True))
 
 
 @pytest.mark.parametrize("how", ["interrupt", "pause"])
