@@ -56,6 +56,18 @@ def age_project(sim: Simulator, days: float) -> None:
     sim.call(shift)
 
 
+def frame_of_a_master_that_died(sim: Simulator) -> tuple[int, int, list[int]]:
+    """A master that moved to LEFT, then died writing its next command (to FAR): that
+    frame, still in the network (its number, its block's address, its words)."""
+    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
+        first.wait_until_ready()
+        first.move_to(LEFT, speed=50)
+        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=5))
+        ((block, words),) = ticket.plan
+        first._heartbeat.stop()  # the master is gone: nothing beats any more
+    return ticket.seq, block.address, words
+
+
 # 25 days: past GetNowStamp()'s int range (2147483647 ms, 24.8 days: then -1, [TS] 4.39,
 # p. 128), where the program's heartbeat clock must go on counting.
 @pytest.mark.parametrize("days", [0, 25])
@@ -63,21 +75,15 @@ def test_a_dead_masters_late_frame_never_runs_for_the_next_master(
     sim: Simulator, days: float
 ) -> None:
     age_project(sim, days)
-    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
-        first.wait_until_ready()
-        first.move_to(LEFT, speed=50)
-        # The frame the first master was writing when it died: its next number.
-        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=5))
-        ((block, words),) = ticket.plan
-        first._heartbeat.stop()  # the master is gone: nothing beats any more
-        # The silence on the simulator's own clock (GetNowStamp: 20 ms a tick here), so a
-        # simulator slowed by load is not looked at too early: 0.8 s, past the TTL (0.5 s)
-        # and the program's next look (every 0.1 s).
-        gone = sim.ticks
-        sim.wait_for(lambda: sim.ticks > gone + 40, timeout=5.0)
+    _, address, words = frame_of_a_master_that_died(sim)
+    # The silence on the simulator's own clock (GetNowStamp: 20 ms a tick here), so a
+    # simulator slowed by load is not looked at too early: 0.8 s, past the TTL (0.5 s)
+    # and the program's next look (every 0.1 s).
+    gone = sim.ticks
+    sim.wait_for(lambda: sim.ticks > gone + 40, timeout=5.0)
     with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as second:
         second.wait_until_ready()
-        deliver(sim.port, block.address, words)  # the dead master's frame lands now
+        deliver(sim.port, address, words)  # the dead master's frame lands now
         landed = sim.ticks
         sim.wait_for(lambda: sim.ticks > landed + 5, timeout=3.0)
         assert [record.target for record in sim.motion_log()] == [LEFT]
@@ -90,12 +96,7 @@ def test_a_dead_masters_late_frame_never_runs_once_another_master_claimed(
     """The next master claims the robot at once (its first command, refused here because
     the project is paused) and beats from then on: no silence ever. The dead master's
     frame, which carries the number still free, lands later and must not run."""
-    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
-        first.wait_until_ready()
-        first.move_to(LEFT, speed=50)
-        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=5))
-        ((block, words),) = ticket.plan
-        first._heartbeat.stop()
+    seq, address, words = frame_of_a_master_that_died(sim)
     with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as second:
         second.wait_until_ready()
         press_play_pause(sim)  # the operator pauses the idle project
@@ -107,8 +108,8 @@ def test_a_dead_masters_late_frame_never_runs_once_another_master_claimed(
         # Long past the dead master's time-to-live; the second beats all along.
         beats = second._heartbeat.writes
         sim.wait_for(lambda: second._heartbeat.writes > beats + 15, timeout=5.0)
-        deliver(sim.port, block.address, words)  # the dead master's frame lands now
-        sim.wait_for(lambda: sim.field("ack_seq") == ticket.seq, timeout=3.0)
+        deliver(sim.port, address, words)  # the dead master's frame lands now
+        sim.wait_for(lambda: sim.field("ack_seq") == seq, timeout=3.0)
         assert sim.field("result_code") == 6  # another_master: consumed, never run
         assert [record.target for record in sim.motion_log()] == [LEFT]
         assert second.move_to(FAR, speed=50).done  # the next master still commands
@@ -162,15 +163,10 @@ def test_a_robot_that_only_reads_disturbs_no_moving_master(sim: Simulator) -> No
 def test_a_master_restarted_within_the_ttl_never_runs_the_dead_ones_late_frame(
     sim: Simulator,
 ) -> None:
-    with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as first:
-        first.wait_until_ready()
-        first.move_to(LEFT, speed=50)
-        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=5))
-        ((block, words),) = ticket.plan
-        first._heartbeat.stop()
+    _, address, words = frame_of_a_master_that_died(sim)
     with Robot("127.0.0.1", sim.port, gripper=None, timeouts=FAST) as second:
         second.wait_until_ready()  # at once: no silence for the program to see
-        deliver(sim.port, block.address, words)
+        deliver(sim.port, address, words)
         landed = sim.ticks
         sim.wait_for(lambda: sim.ticks > landed + 5, timeout=3.0)
         assert [record.target for record in sim.motion_log()] == [LEFT]
