@@ -512,11 +512,6 @@ class CommandChannel(ABC):
     def cancel(self, ticket: Ticket) -> None:  # noqa: B027 (none, where no handshake says it)
         """Tell the robot a command it took is given up, where the handshake can say so."""
 
-    def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
-        """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
-        taker = int(feedback.get("ack_session", 0))
-        return bool(self.session) and taker not in (0, self.session)
-
     def may_resume(self) -> bool:
         """True when a move the robot stopped itself could still be resumed (Play).
 
@@ -893,6 +888,11 @@ class SequenceChannel(CommandChannel):
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
         return None
+
+    def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
+        """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
+        taker = int(feedback.get("ack_session", 0))
+        return bool(self.session) and taker not in (0, self.session)
 
     def may_resume(self) -> bool:
         """True while the project is paused or still running: Play could resume a move."""
