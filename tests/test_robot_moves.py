@@ -19,6 +19,7 @@ from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
 from sim_speeds import QUICK
 from tmmaster import Checks, PollPolicy, Pose, Robot, TimeoutPolicy, robot_model
+from tmmaster._codec import Value
 from tmmaster._kinematics import Arc
 from tmmaster.sim import Cell, KinematicBackend, Simulator, Timing
 
@@ -140,15 +141,15 @@ def test_move_joints_arrival_is_checked_on_the_joints(
     sim = tm_simulator_factory(**QUICK)
     robot = robots(sim)
     channel = robot._channel
-    real = channel.read_pose_and_joints
+    real = channel._note_plan_read  # the read of the pose and joints after a done
 
-    def other_branch() -> tuple[Pose, tuple[float, ...] | None]:
-        pose, joints = real()
+    def other_branch(values: dict[str, Value]) -> tuple[Pose, tuple[float, ...] | None]:
+        pose, joints = real(values)
         assert joints is not None
         return pose, (joints[0] + 5.0, *joints[1:])  # the TCP agrees, a joint does not
 
     robot.move_joints(READY, speed=50)
-    monkeypatch.setattr(channel, "read_pose_and_joints", other_branch)
+    monkeypatch.setattr(channel, "_note_plan_read", other_branch)
     with pytest.raises(tmmaster.RobotError, match="joints"):
         robot.move_joints([5, 0, 95, 0, 90, 0], speed=50)
 

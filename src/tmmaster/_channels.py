@@ -142,6 +142,9 @@ class Ticket:
     #: Set by the wait's schedule: the next poll also reads the TCP pose, where the
     #: profile's poll does not carry it (one request), to gauge the move's progress.
     observe_pose: bool = False
+    #: True once a poll saw the robot report the command finished (before that poll's
+    #: last read: a failure of that read leaves nothing to stop).
+    finished: bool = False
     #: True once the command was taken back (it can no longer start).
     withdrawn: bool = False
     #: True once a write of the command block was attempted (it may have landed even if
@@ -201,6 +204,8 @@ class Observation:
     #: Set when the robot reported a failure; the wait must end with it.
     failure: RobotError | None
     pose: Pose | None
+    #: The joints (deg) read with ``pose``, where the poll read them.
+    joints: tuple[float, ...] | None = None
 
 
 #: A poll without I/O (:meth:`CommandChannel.poll_steps`): yields the fields to read
@@ -330,11 +335,17 @@ class CommandChannel(ABC):
         that saw a command done, the next command may start its plan from it.
         """
         values = self.read(self.plan_fields)
-        if self.after_done is not None:
-            self.after_done.pose = pose_from(values, TCP_FIELDS)
-            self.after_done.joints = self.joints_from(values)
-            self.after_done.plan_values = values
+        self._note_plan_read(values)
         return values
+
+    def _note_plan_read(self, values: dict[str, Value]) -> tuple[Pose, tuple[float, ...] | None]:
+        """The pose and joints in a plan read; kept for the next command's plan when the
+        read follows the poll that saw a command done."""
+        pose, joints = pose_from(values, TCP_FIELDS), self.joints_from(values)
+        if self.after_done is not None:
+            self.after_done.pose, self.after_done.joints = pose, joints
+            self.after_done.plan_values = values
+        return pose, joints
 
     def joints_from(self, values: dict[str, Value]) -> tuple[float, ...] | None:
         """The joints J1..J6 (deg) in ``values``; None where the profile does not publish them."""
@@ -637,8 +648,9 @@ class ClearOnAcceptChannel(CommandChannel):
         failure = self.status_failure(status)
         done = ticket.acknowledged and not status.moving and failure is None
         if done:
+            ticket.finished = True
             self._remember_done(dict(status.raw), mark)
-        return Observation(ticket.acknowledged, done, failure, status.pose)
+        return Observation(ticket.acknowledged, done, failure, status.pose, status.joints)
 
     def withdraw(self, ticket: Ticket) -> bool:
         """Write command = none, then check whether the robot had started the move meanwhile."""
@@ -820,13 +832,19 @@ class SequenceChannel(CommandChannel):
                     f"robot program rejected command {ticket.seq}: {result}",
                     error_code=int(feedback["result_code"]),
                 )
-        if done:
-            self._remember_done({**feedback, **flags}, mark)
         pose: Pose | None = None
-        if ticket.observe_pose and not done and failure is None:
+        joints: tuple[float, ...] | None = None
+        if done:
+            ticket.finished = True
+            self._remember_done({**feedback, **flags}, mark)
+            if ticket.command.target is not None:
+                # The final at-target check's read, in the same poll (on a driver's loop,
+                # no hand-over more); the next command's plan may start from it.
+                pose, joints = self._note_plan_read((yield self.plan_fields))
+        elif ticket.observe_pose and failure is None:
             ticket.observe_pose = False
             pose = pose_from((yield self.tcp_fields), TCP_FIELDS)
-        return Observation(ticket.acknowledged, done, failure, pose)
+        return Observation(ticket.acknowledged, done, failure, pose, joints)
 
     duplicate_safe = True  # the program takes a sequence number at most once
 

@@ -385,7 +385,7 @@ class _MotionFollower:
         try:
             if motion._settled is not None:
                 return motion._settled
-            if motion.done or motion.reported_finished:
+            if motion.done or motion.reported_finished or motion.ticket.finished:
                 return True  # nothing left to withdraw or stop
             motion._given_up = True
             motion.phase = MovePhase.FAILED
@@ -528,7 +528,7 @@ class _MotionFollower:
         if observation.acknowledged:
             self._note_acknowledged(motion)
         if observation.done:
-            self._finish(motion, observation.pose)
+            self._finish(motion, observation)
 
     def _note_acknowledged(self, motion: Motion) -> None:
         """The robot took the command: RUNNING (from the thread, or a Fleet's loop)."""
@@ -604,17 +604,14 @@ class _MotionFollower:
         except TMMasterError:
             return fallback
 
-    def _finish(self, motion: Motion, polled_pose: Pose | None) -> None:
+    def _finish(self, motion: Motion, polled: Observation) -> None:
         motion.reported_finished = True
         motion.reported_finished_at = time.monotonic()
         if motion.target is not None:
-            # The poll that saw the move finished read the pose in the same snapshot
-            # (article); only a profile whose poll carries no pose needs one more read.
-            # tmflow: the joints come with it (one request), for the next move's plan.
-            joints: tuple[float, ...] | None = None
-            if polled_pose is not None:
-                pose = polled_pose
-            else:
+            # The poll that saw the move finished read the pose: in the same snapshot
+            # (article), or right after it with the joints (tmflow).
+            pose, joints = polled.pose, polled.joints
+            if pose is None:
                 pose, joints = self._channel.read_pose_and_joints()
             motion.last_pose = pose
             if not pose.is_close(
