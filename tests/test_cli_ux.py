@@ -12,7 +12,6 @@ import io
 import json
 import os
 import re
-import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -186,24 +185,6 @@ def test_the_state_is_never_cut_whatever_the_width(width: int, live_at: Callable
     assert "…" not in "".join(lines[:-1])  # only the last event may be shortened
     assert any("elapsed" in line for line in lines)
     assert any("ETA" in line for line in lines)
-
-
-def test_import_tmmaster_loads_neither_rich_nor_matplotlib() -> None:
-    # structlog imports rich when it is installed; tmmaster imports structlog only once
-    # logging is on (the first enabled event, or configure_logging), so importing the
-    # commands loads neither.
-    code = (
-        "import sys, tmmaster; a = sorted(m for m in ('rich', 'matplotlib') if m in sys.modules);"
-        "import tmmaster.pickplace.__main__, tmmaster.report.__main__;"
-        "print(a, 'matplotlib' in sys.modules);"
-        "print(sorted(m for m in ('rich', 'structlog') if m in sys.modules))"
-    )
-    done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
-    )
-    first, commands = done.stdout.strip().splitlines()
-    assert first == "[] False"
-    assert commands == "[]"
 
 
 # -- the report: model, show, plot ------------------------------------------------------

@@ -4,10 +4,12 @@ Importing the SDK, the command lines and the report loads no ``tmmaster.sim`` mo
 (a run against a real robot pays nothing for the simulator); ``tmmaster.sim`` registers
 the ``sim`` scheme in the core's registry of in-process transports when it is imported,
 and a ``sim://`` host used before that is a ConfigError that says how to start one.
-The checks of what a fresh process loads run in one fresh process, one after the other
-(one interpreter start instead of four): each reports what it found and the modules of
-``tmmaster.sim`` loaded by then, so the first check to load the simulator is the one
-named; the plugin's own scheme is registered last.
+Importing tmmaster loads neither rich nor matplotlib, nor do the commands load rich or
+structlog (logging loads them once it is on). The checks of what a fresh process loads
+run in one fresh process, one after the other, in one test (one interpreter start
+instead of five; several tests sharing a fixture would each start one under xdist): each
+reports what it found and the modules of ``tmmaster.sim`` loaded by then, so the first
+check to load the simulator is the one named; the plugin's own scheme is registered last.
 """
 
 from __future__ import annotations
@@ -24,9 +26,20 @@ from tmmaster import ConfigError, ConnectError, Robot
 from tmmaster._address import check_host, register_scheme
 
 #: The checks run in one fresh interpreter, in this order: name -> Python source that
-#: sets ``found`` (a JSON value). The sim:// host check comes first (it imports only
-#: tmmaster and tmmaster.aio, as a fresh program would), the plugin's registration last.
+#: sets ``found`` (a JSON value). What ``import tmmaster`` loads comes first (nothing has
+#: run before it but the driver's json, sys and traceback), then the sim:// host check
+#: (it imports tmmaster.aio, as a fresh program would), the plugin's registration last.
 FRESH_CHECKS: dict[str, str] = {
+    # structlog imports rich when it is installed; tmmaster imports structlog only once
+    # logging is on (the first enabled event, or configure_logging), so importing the
+    # commands loads neither.
+    "rich, matplotlib and structlog": (
+        "import tmmaster\n"
+        "first = sorted(m for m in ('rich', 'matplotlib') if m in sys.modules)\n"
+        "import tmmaster.pickplace.__main__, tmmaster.report.__main__\n"
+        "found = [first, 'matplotlib' in sys.modules,\n"
+        "         sorted(m for m in ('rich', 'structlog') if m in sys.modules)]\n"
+    ),
     "sim host before the simulator": (
         "import asyncio\n"
         "import tmmaster\n"
@@ -113,8 +126,7 @@ _DRIVER = (
 )
 
 
-@pytest.fixture(scope="module")
-def fresh() -> dict[str, Any]:
+def fresh_process() -> dict[str, Any]:
     """Run ``FRESH_CHECKS`` in one fresh interpreter: name -> [what it found, the
     ``tmmaster.sim`` modules loaded once it ran]."""
     done = subprocess.run(
@@ -136,16 +148,14 @@ def _found(fresh: dict[str, Any], name: str) -> tuple[Any, list[str]]:
     return found, sim
 
 
-def test_the_sdk_the_commands_the_report_and_a_real_robot_run_load_no_simulator(
-    fresh: dict[str, Any],
-) -> None:
-    (before, code), after = _found(fresh, "sdk, commands, report and a real run")
-    assert [before, code, after] == [[], 0, []]
-
-
-def test_a_sim_host_before_the_simulator_is_imported_says_how_to_start_one(
-    fresh: dict[str, Any],
-) -> None:
+def test_a_fresh_process_loads_no_simulator_nor_rich_and_opens_a_plugins_scheme() -> None:
+    fresh = fresh_process()
+    # Importing tmmaster loads neither rich nor matplotlib; the commands neither rich nor
+    # structlog.
+    (first, matplotlib, commands), loaded = _found(fresh, "rich, matplotlib and structlog")
+    assert (first, matplotlib, commands) == ([], False, [])
+    assert loaded == []  # nor the simulator
+    # A sim:// host before the simulator is imported says how to start one.
     messages, loaded = _found(fresh, "sim host before the simulator")
     assert len(messages) == 3
     for message in messages:
@@ -153,6 +163,15 @@ def test_a_sim_host_before_the_simulator_is_imported_says_how_to_start_one(
         assert "no in-process simulator named 'cell-9'" in message
         assert "tmmaster.sim.Simulator(" in message
     assert loaded == []  # said without loading the simulator
+    # The SDK, the command lines, the report and a real robot's run load no simulator.
+    (before, code), after = _found(fresh, "sdk, commands, report and a real run")
+    assert [before, code, after] == [[], 0, []]
+    # Nor does any tmmaster command other than sim.
+    loaded, _ = _found(fresh, "other commands")
+    assert loaded == {" ".join(argv): [] for argv in OTHER_COMMANDS}
+    # Any plugin registers a scheme the core opens through it.
+    asked, _ = _found(fresh, "a plugin's scheme")
+    assert asked == ["bench://one", ["bench://one", "robot", "r1"], "bench://one: nothing runs"]
 
 
 def test_the_simulator_serves_sim_once_imported_and_names_a_missing_one() -> None:
@@ -164,13 +183,3 @@ def test_the_simulator_serves_sim_once_imported_and_names_a_missing_one() -> Non
         register_scheme("sim", lambda url, **options: None)
     with pytest.raises(ConfigError, match="not a plain name"):
         register_scheme("a b", lambda url, **options: None)
-
-
-def test_any_plugin_registers_a_scheme_the_core_opens_through_it(fresh: dict[str, Any]) -> None:
-    asked, _ = _found(fresh, "a plugin's scheme")
-    assert asked == ["bench://one", ["bench://one", "robot", "r1"], "bench://one: nothing runs"]
-
-
-def test_a_tmmaster_command_other_than_sim_loads_no_simulator(fresh: dict[str, Any]) -> None:
-    loaded, _ = _found(fresh, "other commands")
-    assert loaded == {" ".join(argv): [] for argv in OTHER_COMMANDS}
