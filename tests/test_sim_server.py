@@ -411,21 +411,18 @@ def test_objects_and_pose_are_visible(article_simulator: Simulator) -> None:
 # -- the command line -------------------------------------------------------------------
 
 
-def test_cli_runs_until_sigint_and_exits_0() -> None:
-    # SIGTERM: the banner test below ends the simulator with it.
+def test_the_cli_banner_lists_faults_sigusr1_resets_an_error_and_sigint_exits_0() -> None:
+    # One process for the command line's whole life: its banner (the armed fault), the
+    # operator's reset (SIGUSR1), --trace-requests on stdout, --log-json on stderr, and
+    # the stop on SIGINT with exit 0 (SIGTERM, the other stop signal:
+    # test_hostile_programs ends a simulator process with it).
     src = Path(__file__).resolve().parents[1] / "src"
     env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
     proc = subprocess.Popen(
         [
-            sys.executable,
-            "-m",
-            "tmmaster.sim",
-            "--port",
-            "0",
-            "--time-scale",
-            "10",
-            "--trace-requests",
-            "--log-json",
+            *(sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10"),
+            *("--profile", "article", "--fault", "estop:after_s=0.5"),
+            *("--trace-requests", "--log-json"),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -434,14 +431,21 @@ def test_cli_runs_until_sigint_and_exits_0() -> None:
     )
     try:
         assert proc.stdout is not None
-        line = ""
-        deadline = time.monotonic() + 10
-        while "robot" not in line and time.monotonic() < deadline:
-            line = proc.stdout.readline()
-        assert "modbus tcp 127.0.0.1:" in line, line
-        port = int(line.split("127.0.0.1:")[1].split()[0])
-        with client(port) as c:
-            hr(c, 0)
+        banner = [proc.stdout.readline() for _ in range(5)]
+        assert "modbus tcp 127.0.0.1:" in banner[0], banner
+        port = int(banner[0].split()[3].rsplit(":", 1)[1])
+        assert banner[2].startswith("physics kinematic")
+        assert banner[3].strip() == "fault   armed: estop:after_s=0.5"
+        assert f"kill -USR1 {proc.pid}" in banner[4]
+        with ModbusTransport("127.0.0.1", port) as link:
+            deadline = time.monotonic() + 10
+            while link.read_block(Table.HOLDING, 3, 1) != [0x0200]:  # e-stop fired
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+            proc.send_signal(signal.SIGUSR1)
+            while link.read_block(Table.HOLDING, 3, 1) != [0]:  # the operator's reset
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=10)
     finally:
@@ -450,6 +454,7 @@ def test_cli_runs_until_sigint_and_exits_0() -> None:
             proc.communicate()
     assert proc.returncode == 0
     assert '"function_code":3' in out  # --trace-requests: the requests on stdout
+    assert "robot error reset (SIGUSR1)" in out
     assert "simulator stopped" in out
     # --log-json: the simulator's events, one JSON object per line on stderr.
     events = [json.loads(line) for line in err.splitlines() if line.strip()]
@@ -468,39 +473,3 @@ def test_a_taken_port_is_one_line_and_exit_1(capsys: pytest.CaptureFixture[str])
         f"sim: cannot listen on 127.0.0.1:{port} (port in use, or not an address of this"
         " machine) [exit 1]"
     ]
-
-
-def test_the_cli_banner_lists_faults_and_sigusr1_resets_an_error() -> None:
-    proc = subprocess.Popen(
-        [
-            *(sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10"),
-            *("--profile", "article", "--fault", "estop:after_s=0.5", "--log-level", "warning"),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert proc.stdout is not None
-        banner = [proc.stdout.readline() for _ in range(5)]
-        port = int(banner[0].split()[3].rsplit(":", 1)[1])
-        assert banner[2].startswith("physics kinematic")
-        assert banner[3].strip() == "fault   armed: estop:after_s=0.5"
-        assert f"kill -USR1 {proc.pid}" in banner[4]
-        with ModbusTransport("127.0.0.1", port) as link:
-            deadline = time.monotonic() + 10
-            while link.read_block(Table.HOLDING, 3, 1) != [0x0200]:  # e-stop fired
-                assert time.monotonic() < deadline
-                time.sleep(0.05)
-            proc.send_signal(signal.SIGUSR1)
-            while link.read_block(Table.HOLDING, 3, 1) != [0]:  # the operator's reset
-                assert time.monotonic() < deadline
-                time.sleep(0.05)
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 0
-    assert "simulator stopped" in out
