@@ -9,6 +9,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -82,21 +83,15 @@ def test_without_a_watch_nothing_is_watched(
     assert report.watched is None
 
 
-@pytest.mark.parametrize(
-    "options", [["--processes", "1"], ["--processes", "2", "--no-fleet"]], ids=["1", "2"]
-)
 def test_main_on_given_ports(
-    tm_simulator_factory: Factory,
-    example: ModuleType,
-    options: list[str],
-    capsys: pytest.CaptureFixture[str],
+    tm_simulator_factory: Factory, example: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    # In this process (--processes 2: test_several_processes_share_the_robots).
     sims = [tm_simulator_factory() for _ in range(2)]
     ports = [str(s.port) for s in sims]
-    assert example.main(["--ports", *ports, "--moves", "1", *options]) == 0
+    assert example.main(["--ports", *ports, "--moves", "1", "--processes", "1"]) == 0
     out = capsys.readouterr().out
     assert "2 of 2 robots done" in out
-    # Two children, one robot each, reported in order.
     assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot")] == [
         "robot0",
         "robot1",
@@ -120,13 +115,30 @@ def test_bad_arguments_exit_2(example: ModuleType, argv: list[str]) -> None:
 
 
 def test_several_processes_share_the_robots(
-    tm_simulator_factory: Factory, example: ModuleType
+    tm_simulator_factory: Factory,
+    example: ModuleType,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
-    # On the article's map: the children are told the profile.
+    # main() on given ports with --processes 2 (two child processes: each starts a fresh
+    # interpreter, so one run serves every check). On the article's map: the children are
+    # told the profile; --no-fleet reaches them too.
     sims = [tm_simulator_factory("article") for _ in range(4)]
     sims.append(tm_simulator_factory("article", faults=["robot_error:at_move=2"]))
-    ports = [s.port for s in sims]
-    reports = example.run_in_processes(ports, processes=2, moves=3, watch_hz=50, profile="article")
+    ports = [str(s.port) for s in sims]
+    calls: list[tuple[dict[str, object], list[Any]]] = []
+    real = example.run_in_processes
+
+    def recorded(*args: Any, **options: Any) -> list[Any]:
+        reports: list[Any] = real(*args, **options)
+        calls.append((options, reports))
+        return reports
+
+    monkeypatch.setattr(example, "run_in_processes", recorded)
+    argv = ["--ports", *ports, "--moves", "3", "--processes", "2", "--no-fleet"]
+    assert example.main([*argv, "--profile", "article", "--watch-hz", "50"]) == 1  # one failed
+    ((options, reports),) = calls
+    assert (options["processes"], options["fleet"]) == (2, False)
     # Each child drove a contiguous share; the parent gathered them in order.
     assert [r.name for r in reports] == [f"robot{i}" for i in range(5)]
     assert [r.moves_done for r in reports] == [3, 3, 3, 3, 1]
@@ -138,6 +150,11 @@ def test_several_processes_share_the_robots(
         assert len(targets) == 3  # each robot driven by exactly one child
     # The failed robot started nothing after its error.
     assert len([m for m in sims[4].motion_log() if m.target is not None]) == 2
+    # main() printed them in order, the failure included.
+    out = capsys.readouterr().out
+    assert "4 of 5 robots done" in out
+    named = [line.split(":")[0] for line in out.splitlines() if line.startswith("robot")]
+    assert named == [f"robot{i}" for i in range(5)]
 
 
 def test_a_child_that_ends_without_reporting_fails_its_robots(
