@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -411,19 +412,48 @@ def test_objects_and_pose_are_visible(article_simulator: Simulator) -> None:
 # -- the command line -------------------------------------------------------------------
 
 
+PAUSED_AT_EXIT = "tmmaster-test: paused at exit\n"
+
+
+def _ctrl_c_in_the_exit_hooks(proc: subprocess.Popen[str]) -> tuple[str, str, str]:
+    """Once ``proc`` was told to stop: its stderr up to the test hook's pause in the exit
+    hooks, two Ctrl-Cs there, then the rest of its stdout and stderr."""
+    assert proc.stdin is not None
+    assert proc.stderr is not None
+    before = ""
+    deadline = time.monotonic() + 10
+    while not before.endswith(PAUSED_AT_EXIT) and time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break  # it ended without pausing
+        before += line
+    if before.endswith(PAUSED_AT_EXIT):
+        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signal.SIGINT)
+    with contextlib.suppress(BrokenPipeError):
+        proc.stdin.write("x")  # let it go on (it may have exited already)
+        proc.stdin.flush()
+    out, after = proc.communicate(timeout=10)
+    return before, out, after
+
+
 def test_the_cli_banner_lists_faults_sigusr1_resets_an_error_and_sigint_exits_0() -> None:
     # One process for the command line's whole life: its banner (the armed fault), the
-    # operator's reset (SIGUSR1), --trace-requests on stdout, --log-json on stderr, and
-    # the stop on SIGINT with exit 0 (SIGTERM, the other stop signal:
-    # test_hostile_programs ends a simulator process with it).
+    # operator's reset (SIGUSR1), --trace-requests on stdout, --log-json on stderr, the
+    # stop on SIGINT with exit 0 (SIGTERM, the other stop signal: test_hostile_programs
+    # ends a simulator process with it), and two Ctrl-Cs while Python runs the exit hooks
+    # (the test hook pauses there; for the commands without a process test of their own,
+    # after --help: test_sigint_exit), which change nothing.
     src = Path(__file__).resolve().parents[1] / "src"
     env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    env["TMMASTER_TEST_SIGINT_AT"] = "exit"
     proc = subprocess.Popen(
         [
             *(sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10"),
             *("--profile", "article", "--fault", "estop:after_s=0.5"),
             *("--trace-requests", "--log-json"),
         ],
+        stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -447,17 +477,21 @@ def test_the_cli_banner_lists_faults_sigusr1_resets_an_error_and_sigint_exits_0(
                 assert time.monotonic() < deadline
                 time.sleep(0.05)
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=10)
+        err, out, after_the_pause = _ctrl_c_in_the_exit_hooks(proc)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
+    assert err.endswith(PAUSED_AT_EXIT), err + after_the_pause
+    assert after_the_pause == ""  # no "Exception ignored in atexit callback", no traceback
     assert proc.returncode == 0
     assert '"function_code":3' in out  # --trace-requests: the requests on stdout
     assert "robot error reset (SIGUSR1)" in out
     assert "simulator stopped" in out
     # --log-json: the simulator's events, one JSON object per line on stderr.
-    events = [json.loads(line) for line in err.splitlines() if line.strip()]
+    events = [
+        json.loads(line) for line in err.removesuffix(PAUSED_AT_EXIT).splitlines() if line.strip()
+    ]
     assert any(e["event"] == "sim.initialised" for e in events), err
 
 
