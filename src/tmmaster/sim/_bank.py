@@ -193,6 +193,19 @@ class RegisterBank:
         """
         return self._table_changes[table]
 
+    def changes_in(self, tables: tuple[Table, ...]) -> int:
+        """The sum of :meth:`changes` over ``tables``: while it stays, every word of them does
+        (each count only grows). One call for a device's check at every tick.
+
+        Args:
+            tables: Modbus tables.
+
+        Returns:
+            The sum of their change counts so far.
+        """
+        counts = self._table_changes
+        return sum([counts[table] for table in tables])
+
     @property
     def network_writes(self) -> int:
         """Number of successful network writes so far."""

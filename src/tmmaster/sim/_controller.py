@@ -301,13 +301,25 @@ class RobotController(SimDevice[RobotProfile]):
         self._published_tables = tuple(
             {bank.field(n).table for n in (*TCP_FIELDS, *_TM_TABLE_FIELDS) if bank.has(n)}
         )
-        self._published_mark: tuple[int, ...] | None = None
+        self._published_mark: int | None = None
         self._published_tcp: bytes | None = None
         # The pose (as bytes) published last when it was encodable and inside every
         # register's range: the same pose again is published as it is, unchecked.
         self._in_range_pose: bytes | None = None
         self._published_values: list[float] = []
         self._tm_table_pose: tuple[bytes, int | None] | None = None
+        # The bytes of the last pose objects seen (a Pose is immutable, a tuple too): an
+        # idle arm's backend hands the same objects out at every tick.
+        self._pose_seen: tuple[Pose | None, bytes] = (None, b"")
+        self._tm_seen: tuple[Pose | None, Pose | None, tuple[float, ...] | None, bytes] = (
+            None,
+            None,
+            None,
+            b"",
+        )
+        # The bank's fields never change: whether it has Techman's table, looked up once.
+        self._has_tm_table = bank.has("flange_x")
+        self._has_tm_state = bank.has("tm_robot_state")
         self._tm_table_clock: tuple[int, int] | None = None
 
     @classmethod
@@ -784,12 +796,14 @@ class RobotController(SimDevice[RobotProfile]):
         error, once per rest, since the registers cannot say where it is.
         """
         pose = self._backend.tcp_pose()
-        values = pose.as_list()
-        tcp = array("d", values).tobytes()
+        seen, tcp = self._pose_seen
+        if pose is not seen or pose.__class__ is not Pose:
+            tcp = array("d", pose.as_list()).tobytes()
+            self._pose_seen = (pose, tcp)
         # An idle arm: the very pose (bytes, so a zero's sign too) that was published last
         # inside every range. Nothing is clipped, it encodes, and the saturation check would
         # change nothing (it left both flags False for an unclipped pose).
-        if tcp != self._in_range_pose and not self._check_pose(pose, values, tcp):
+        if tcp != self._in_range_pose and not self._check_pose(pose, pose.as_list(), tcp):
             return
         bank = self._bank
         # Published at every tick and mostly unchanged (an idle arm, the same second): a
@@ -802,7 +816,7 @@ class RobotController(SimDevice[RobotProfile]):
             for name, value in zip(TCP_FIELDS, published, strict=True):
                 bank.set(name, value)
             self._published_tcp = tcp
-        if bank.has("flange_x"):
+        if self._has_tm_table:
             self._publish_tm_table(pose, unchanged=unchanged)
         self._published_mark = self._published_changes()
 
@@ -844,9 +858,9 @@ class RobotController(SimDevice[RobotProfile]):
             self._in_range_pose = tcp
         return True
 
-    def _published_changes(self) -> tuple[int, ...]:
-        """The change counts of the Modbus tables the pose and Techman's table are in."""
-        return tuple(self._bank.changes(table) for table in self._published_tables)
+    def _published_changes(self) -> int:
+        """The change count of the Modbus tables the pose and Techman's table are in."""
+        return self._bank.changes_in(self._published_tables)
 
     def _check_saturation(self, pose: Pose, published: list[float], clipped: list[str]) -> None:
         """Log a saturated excursion once; an arm at rest outside the range is an error."""
@@ -891,14 +905,14 @@ class RobotController(SimDevice[RobotProfile]):
         joints = self._backend.joint_positions_deg() or (0.0,) * 6
         # Without a joint model the simulated tool is the identity: flange = TCP.
         flange = tcp if flange is None else flange
-        flange_values = flange.as_list()
-        tcp_values = tcp.as_list()
         # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
         clock = (int(self._running_timer_s()), int(self._time_s))
-        values = array("d", [*flange_values, *tcp_values, *joints]).tobytes()
+        values = self._tm_table_bytes(flange, tcp, joints)
         pose = (values, self._tm_robot_state())
         bank_set = self._bank.set
         if not unchanged or pose != self._tm_table_pose:
+            flange_values = flange.as_list()
+            tcp_values = tcp.as_list()
             # The simulated current base is the robot base (Current Base 8300-8311 reads 0).
             for names, group in (
                 (FLANGE_FIELDS, flange_values),
@@ -924,9 +938,27 @@ class RobotController(SimDevice[RobotProfile]):
                 bank_set(secs, whole % 60)
             self._tm_table_clock = clock
 
+    def _tm_table_bytes(self, flange: Pose, tcp: Pose, joints: Sequence[float]) -> bytes:
+        """The flange, the TCP and the joints as the bytes of their doubles (the same
+        objects as at the last call: the same bytes, not built again)."""
+        seen_flange, seen_tcp, seen_joints, values = self._tm_seen
+        if (
+            flange is seen_flange
+            and tcp is seen_tcp
+            and joints is seen_joints
+            and flange.__class__ is Pose
+            and tcp.__class__ is Pose
+            and joints.__class__ is tuple
+        ):
+            return values
+        values = array("d", [*flange.as_list(), *tcp.as_list(), *joints]).tobytes()
+        held = joints if joints.__class__ is tuple else None
+        self._tm_seen = (flange, tcp, held, values)
+        return values
+
     def _tm_robot_state(self) -> int | None:
         """Robot State (7215): STO, error or normal; None when the profile has no such field."""
-        if not self._bank.has("tm_robot_state"):
+        if not self._has_tm_state:
             return None
         return 4 if self._estop else 2 if self._error_code else 0
 

@@ -114,7 +114,7 @@ class SimHost:
 
     def now_s(self) -> float:
         """The simulated clock, seconds."""
-        return self._c.time_s
+        return self._c._time_s  # not the property: the program reads it in every wait
 
     @property
     def stamp_scale(self) -> float:
@@ -143,28 +143,28 @@ class SimHost:
         table, write = _FUNCTIONS.get(function, (None, False))
         if table is None:
             raise HostError(f"Modbus function {function} is not supported")
-        bank = self._c.bank
-        refused = self._c.refused_writes
-        if (
-            write
-            and refused
-            and any((table, a) in refused for a in range(address, address + count))
-        ):
+        c = self._c
+        if not write:
+            try:
+                words = c.bank.read(table, address, count)
+            except Exception as exc:  # an illegal address: the device's exception answer
+                raise HostError(f"{device.name}: {exc}") from exc
+            c.after_read(table, address, words)
+            return words
+        refused = c.refused_writes
+        if refused and any((table, a) in refused for a in range(address, address + count)):
             # The slave's answer to a client without write permission (its IP filter):
             # a communication error, on which modbus_write returns false.
             raise ModbusCommunicationError(
                 f"{device.name}: write to {table.value} {address} refused"
             )
+        written = list(values or ())
         try:
-            if write:
-                bank.write(table, address, list(values or ()), device=True)
-                self._c.after_write(table, address, list(values or ()))
-                return []
-            words = bank.read(table, address, count)
+            c.bank.write(table, address, written, device=True)
+            c.after_write(table, address, written)
         except Exception as exc:  # an illegal address: the device's exception answer
             raise HostError(f"{device.name}: {exc}") from exc
-        self._c.after_read(table, address, words)
-        return words
+        return []
 
     def modbus_ready(self, device: ModbusDevice) -> bool:
         """False while a late_ack fault holds the program's link (its next request waits)."""

@@ -54,7 +54,7 @@ class SequenceController(RobotController):
         self._pausing_on_error = False
         super().__init__(*args, **options)
         #: The tables of the Stop and Play/Pause coils, and their change counts when the
-        #: buttons were last released (see :meth:`_handle_buttons`).
+        #: buttons were last released, summed (see :meth:`_handle_buttons`).
         self._button_tables = tuple(
             {
                 self._bank.field(n).table
@@ -62,7 +62,7 @@ class SequenceController(RobotController):
                 if self._profile.has(n)
             }
         )
-        self._buttons_released: tuple[int, ...] | None = None
+        self._buttons_released: int | None = None
 
     def _backend_start(self, move: MoveArgs) -> float:
         """TMflow runs a move at its speed times the project speed (7101), as it is now."""
@@ -125,8 +125,8 @@ class SequenceController(RobotController):
         self._press_buttons()
         self._buttons_released = self._buttons_mark()
 
-    def _buttons_mark(self) -> tuple[int, ...]:
-        return tuple(self._bank.changes(table) for table in self._button_tables)
+    def _buttons_mark(self) -> int:
+        return self._bank.changes_in(self._button_tables)
 
     def _press_buttons(self) -> None:
         # Coils are buttons: act on a press, then release them like a spring would.

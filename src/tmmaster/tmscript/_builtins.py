@@ -310,12 +310,16 @@ def _chunks(data: bytes, size: int) -> list[bytes]:
 @_register("4.5", 57, "int[](byte[], int, int)", "int[](byte[], int)", "int[](byte[])")
 def _Byte_ToInt16Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.5 Byte_ToInt16Array, p. 57: every 2 bytes to an int16."""
-    chunks = _chunks(_bytes(args[0]), 2)
-    if not chunks:
+    data = _bytes(args[0])
+    if not data:
         return []
     endian = _int_arg(args, 1)
     unsigned = _int_arg(args, 2)
-    return [_int16(c, endian, unsigned) for c in chunks]
+    if len(data) & 1:
+        data += b"\0"  # the last chunk filled up with a zero, as _int16 does
+    # One unpack of every chunk, as _int16 converts each: 1 Big Endian, any other Little.
+    order = ">" if endian == 1 else "<"
+    return list(struct.unpack(f"{order}{len(data) // 2}{'H' if unsigned == 1 else 'h'}", data))
 
 
 @_register("4.6", 59, "int[](byte[], int)", "int[](byte[])")
@@ -1389,7 +1393,7 @@ def _as_bytes(kind: str, words: list[int]) -> bytes:
     # Bits: one byte each; registers: two bytes each, high byte first (§16.5, p. 424).
     if kind in ("DO", "DI"):
         return bytes(1 if w else 0 for w in words)
-    return b"".join((w & 0xFFFF).to_bytes(2, "big") for w in words)
+    return struct.pack(f">{len(words)}H", *[w & 0xFFFF for w in words])
 
 
 def _ordered(chunk: bytes, endian: int) -> bytes:

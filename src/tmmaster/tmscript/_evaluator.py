@@ -207,6 +207,8 @@ class _CExpr:
     fn: Callable[[_Frame], Any]
     type: str
     gen: bool  # fn returns a generator
+    #: ``(value,)`` for a constant (what ``fn`` always returns, immutable), else None.
+    const: tuple[Any] | None = None
 
 
 def _mapped(ce: _CExpr, fn: Callable[[Any], Any], typ: str) -> _CExpr:
@@ -423,10 +425,10 @@ class _ExprCompiler:
         ce = self.expr(node)
         conv = self.converter(ce.type, want, at)
         if conv is None:
-            return _CExpr(ce.fn, want, ce.gen)
+            return _CExpr(ce.fn, want, ce.gen, ce.const)
         constant = _converted_literal(node, conv)
         if constant is not _NOT_CONSTANT:
-            return _CExpr(lambda fr: constant, want, False)
+            return _CExpr(lambda fr: constant, want, False, (constant,))
         return _mapped(ce, conv, want)
 
     def expr(self, node: a.Expr) -> _CExpr:
@@ -480,7 +482,7 @@ class _ExprCompiler:
                     "may read 'name' as a variable",
                 )
             )
-        return _CExpr(lambda fr: value, node.type, False)
+        return _CExpr(lambda fr: value, node.type, False, (value,))
 
     def name(self, node: a.Name) -> _CExpr:
         found = self.lookup(node.name)
@@ -551,6 +553,8 @@ class _ExprCompiler:
     def binary(self, node: a.Binary) -> _CExpr:
         left, right = self.expr(node.left), self.expr(node.right)
         fn, typ = self.arith(node, node.op, left.type, right.type)
+        if not left.gen and isinstance(node.right, a.Literal):
+            return _CExpr(self.with_constant(node.left, left, fn, node.right.value), typ, False)
         if not left.gen and not right.gen:
             lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
             return _CExpr(lambda fr: fn(lf(fr), rf(fr)), typ, False)
@@ -563,14 +567,43 @@ class _ExprCompiler:
 
         return _CExpr(binary_gen, typ, True)
 
+    def with_constant(
+        self, node: a.Expr, left: _CExpr, fn: Callable[[Any, Any], Value], k: Value
+    ) -> PureFn:
+        """``fn(left, k)`` for a constant ``k`` (a literal: what its closure returns), a
+        variable ``left`` read inlined: the common ``i + 1``, ``n == 0``, ``(a + 1) % m``."""
+        place = self.place(node)
+        if place is not None and place[0]:
+            slot = place[1]
+            return lambda fr: fn(fr.g[slot], k)
+        if place is not None:
+            slot = place[1]
+            return lambda fr: fn(fr.l[slot], k)
+        lf = cast(PureFn, left.fn)
+        return lambda fr: fn(lf(fr), k)
+
     def logic(self, node: a.Logic) -> _CExpr:
         left, right = self.expr(node.left), self.expr(node.right)
         is_and = node.op == "&&"
         if not left.gen and not right.gen:
             lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
-            if is_and:
-                return _CExpr(lambda fr: truthy(lf(fr)) and truthy(rf(fr)), "bool", False)
-            return _CExpr(lambda fr: truthy(lf(fr)) or truthy(rf(fr)), "bool", False)
+            # truthy() of a bool is the bool itself: tested first, without the call.
+
+            def and_(fr: _Frame) -> bool:
+                x = lf(fr)
+                if not (x is True or (x is not False and truthy(x))):
+                    return False
+                y = rf(fr)
+                return y is True or (y is not False and truthy(y))
+
+            def or_(fr: _Frame) -> bool:
+                x = lf(fr)
+                if x is True or (x is not False and truthy(x)):
+                    return True
+                y = rf(fr)
+                return y is True or (y is not False and truthy(y))
+
+            return _CExpr(and_ if is_and else or_, "bool", False)
         lg, rg = _lift(left), _lift(right)
 
         def logic_gen(fr: _Frame) -> Gen:
@@ -586,6 +619,14 @@ class _ExprCompiler:
         typ = operand.type
         fn: Callable[[Any], Value]
         if node.op == "!":
+            if not operand.gen:
+                pf = cast(PureFn, operand.fn)
+
+                def not_(fr: _Frame) -> bool:
+                    v = pf(fr)
+                    return False if v is True else True if v is False else not truthy(v)
+
+                return _CExpr(not_, "bool", False)
             fn, typ = (lambda v: not truthy(v)), "bool"
         elif typ not in NUMERIC:
             raise _syntax(node, f"operator {node.op} does not apply to {typ}")
@@ -643,8 +684,9 @@ class _ExprCompiler:
             bf, xf = cast(PureFn, base.fn), self.to_type(index, "int", node.index)
 
             def store_elem(fr: _Frame, value: Value) -> None:
-                items = cast(list[Value], bf(fr))
-                i = cast(int, xf(fr))
+                # Plain annotations, no cast(): this runs for every store.
+                items: list[Value] = bf(fr)  # type: ignore[assignment]
+                i: int = xf(fr)  # type: ignore[assignment]
                 if not 0 <= i < len(items):
                     raise _runtime(node, f"index {i} is out of the array (length {len(items)})")
                 items[i] = value
@@ -700,7 +742,7 @@ class _ExprCompiler:
         is_int = typ in INTEGRAL
 
         def step(fr: _Frame) -> Value:
-            old = cast(float, cur(fr))
+            old: float = cur(fr)  # type: ignore[assignment]
             new: Value = wrap32(int(old) + delta) if is_int else old + delta
             if conv is not None:
                 new = conv(new)
@@ -730,18 +772,22 @@ class _ExprCompiler:
         constant = _NOT_CONSTANT if conv is None else _converted_literal(node.index, conv)
         if constant is not _NOT_CONSTANT:
             index, conv = _CExpr(lambda fr: constant, "int", False), None
+        elif conv is None and isinstance(node.index, a.Literal):
+            constant = node.index.value  # an int constant: what its closure returns
 
         def get(items: list[Value], i: Value) -> Value:
             if conv is not None:
                 i = conv(i)
-            n = cast(int, i)
+            n: int = i  # type: ignore[assignment]
             if not 0 <= n < len(items):
                 raise _runtime(node, f"index {n} is out of the array (length {len(items)})")
             return items[n]
 
+        if not base.gen and constant is not _NOT_CONSTANT:
+            return _CExpr(self.element_at(node, base, constant), elem, False)
         if not base.gen and not index.gen:
             bf, xf = cast(PureFn, base.fn), cast(PureFn, index.fn)
-            return _CExpr(lambda fr: get(cast(list[Value], bf(fr)), xf(fr)), elem, False)
+            return _CExpr(lambda fr: get(bf(fr), xf(fr)), elem, False)  # type: ignore[arg-type]
         bg, xg = _lift(base), _lift(index)
 
         def index_gen(fr: _Frame) -> Gen:
@@ -750,6 +796,50 @@ class _ExprCompiler:
             return get(items, i)
 
         return _CExpr(index_gen, elem, True)
+
+    def element_at(self, node: a.Index, base: _CExpr, n: int) -> PureFn:
+        """``base[n]`` for a constant ``n``: one closure (an array variable's read inlined)."""
+        place = self.place(node.target)
+        bf = cast(PureFn, base.fn)
+
+        def out_of(items: list[Value]) -> TMScriptRuntimeError:
+            return _runtime(node, f"index {n} is out of the array (length {len(items)})")
+
+        if place is not None and place[0]:
+            slot = place[1]
+
+            def global_at(fr: _Frame) -> Value:
+                items: list[Value] = fr.g[slot]  # type: ignore[assignment]
+                if not 0 <= n < len(items):
+                    raise out_of(items)
+                return items[n]
+
+            return global_at
+        if place is not None:
+            slot = place[1]
+
+            def local_at(fr: _Frame) -> Value:
+                items: list[Value] = fr.l[slot]  # type: ignore[assignment]
+                if not 0 <= n < len(items):
+                    raise out_of(items)
+                return items[n]
+
+            return local_at
+
+        def element(fr: _Frame) -> Value:
+            items: list[Value] = bf(fr)  # type: ignore[assignment]
+            if not 0 <= n < len(items):
+                raise out_of(items)
+            return items[n]
+
+        return element
+
+    def place(self, node: a.Expr) -> tuple[bool, int] | None:
+        """(global, slot) of a variable read by name; None for any other expression."""
+        if not isinstance(node, a.Name):
+            return None
+        found = self.lookup(node.name)
+        return None if found is None else (found[0], found[1])
 
     def cast(self, node: a.Cast) -> _CExpr:
         operand = self.expr(node.operand)
@@ -835,7 +925,7 @@ class _Compiler(_ExprCompiler):
                 else:
                     ctl = yield from fn(fr)
                     if ctl is not None:
-                        return cast(Control, ctl)
+                        return ctl  # type: ignore[no-any-return]
             return None
 
         return run
@@ -997,7 +1087,8 @@ class _Compiler(_ExprCompiler):
             test = cast(PureFn, cond.fn)
 
             def run_if(fr: _Frame) -> Generator[str, None, Control]:
-                if truthy(test(fr)):
+                c = test(fr)
+                if c is True or (c is not False and truthy(c)):  # a bool without the call
                     return (yield from then(fr))
                 if other is not None:
                     return (yield from other(fr))
@@ -1032,7 +1123,8 @@ class _Compiler(_ExprCompiler):
                 rt.budget -= 1  # each iteration counts: while(true){} yields
                 if rt.budget < 0 and rt.spent():
                     yield _BUDGET
-                if not truthy(pure(fr) if pure is not None else (yield from test(fr))):
+                c = pure(fr) if pure is not None else (yield from test(fr))
+                if c is not True and (c is False or not truthy(c)):  # a bool without the call
                     return None
                 ctl = yield from body(fr)
                 if ctl is _BREAK:
@@ -1349,16 +1441,39 @@ def _call_failure(node: a.Call, exc: Exception) -> TMScriptRuntimeError:
     return _runtime(node, f"{node.name}(): {str(exc) or type(exc).__name__}")
 
 
+def _arguments(fns: list[_CExpr]) -> Callable[[_Frame], list[Value]]:
+    """The values of a call's plain arguments, a new list each call: the constants (a
+    literal, a converted literal) computed once, only the others called."""
+    pure = [cast(PureFn, ce.fn) for ce in fns]
+    if all(ce.const is None for ce in fns):
+        return lambda fr: [fn(fr) for fn in pure]
+    template: list[Value] = [None if ce.const is None else ce.const[0] for ce in fns]  # type: ignore[misc]
+    varying = [(i, cast(PureFn, ce.fn)) for i, ce in enumerate(fns) if ce.const is None]
+    if not varying:
+        return lambda fr: template.copy()
+
+    def values(fr: _Frame) -> list[Value]:
+        out = template.copy()
+        for i, fn in varying:
+            out[i] = fn(fr)
+        return out
+
+    return values
+
+
 def _builtin_pure(
     node: a.Call, impl: Impl, fns: list[_CExpr], arg_types: tuple[str, ...]
 ) -> PureFn:
     """A call of a built-in that returns at once, with plain arguments: a plain closure."""
-    pure = [cast(PureFn, ce.fn) for ce in fns]
+    arguments = _arguments(fns)
 
     def call_pure(fr: _Frame) -> Value:
-        values = [fn(fr) for fn in pure]
+        values = arguments(fr)
         try:
-            return _capped(node, impl(fr.rt, values, arg_types))
+            result = impl(fr.rt, values, arg_types)
+            if isinstance(result, str) and len(result) > STRING_MAX:  # _capped, inlined
+                raise _too_long(node, len(result))
+            return result
         except (ExitRequest, TMScriptRuntimeError):
             raise
         except (HostError, TMMasterError, OSError, ValueError, ArithmeticError) as exc:
@@ -1377,13 +1492,15 @@ def _builtin_gen(
         return _builtin_linked(node, builtin.linked, fns, arg_types)
     impl = builtin.impl
     blocking = builtin.blocking
-    # Arguments in order; a plain one is called, not wrapped into a generator.
-    steps = [(ce.gen, ce.fn) for ce in fns]
+    # Arguments in order; a plain one is called, not wrapped into a generator; a
+    # constant is in the template already.
+    template: list[Value] = [None if ce.const is None else ce.const[0] for ce in fns]  # type: ignore[misc]
+    steps = [(i, ce.gen, ce.fn) for i, ce in enumerate(fns) if ce.const is None]
 
     def call_gen(fr: _Frame) -> Gen:
-        values = []
-        for gen, f in steps:
-            values.append((yield from f(fr)) if gen else f(fr))
+        values = template.copy()
+        for i, gen, f in steps:
+            values[i] = (yield from f(fr)) if gen else f(fr)
         try:
             if blocking is not None:
                 return _capped(node, (yield from blocking(fr.rt, values, arg_types)))
@@ -1403,16 +1520,19 @@ def _builtin_linked(
     """A Modbus function with plain arguments: it waits until the host's link can take
     the request, then calls ``impl`` (as the built-in's ``blocking`` does, without a
     second generator)."""
-    pure = [cast(PureFn, ce.fn) for ce in fns]
+    arguments = _arguments(fns)
 
     def call_linked(fr: _Frame) -> Gen:
-        values = [fn(fr) for fn in pure]
+        values = arguments(fr)
         rt = fr.rt
         try:
             device = link_device(rt, values)
             while not rt.host.modbus_ready(device):
                 yield _BLOCKED
-            return _capped(node, impl(rt, values, arg_types))
+            result = impl(rt, values, arg_types)
+            if isinstance(result, str) and len(result) > STRING_MAX:  # _capped, inlined
+                raise _too_long(node, len(result))
+            return result
         except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
             raise
         except Exception as exc:
