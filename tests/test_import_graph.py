@@ -12,7 +12,6 @@ when it is imported; a function may, where the user asked for the simulator
 from __future__ import annotations
 
 import ast
-import functools
 import importlib
 import importlib.util
 from pathlib import Path
@@ -20,6 +19,7 @@ from pathlib import Path
 import pytest
 
 import tmmaster
+from source_trees import source
 
 PACKAGE = Path(tmmaster.__file__).parent
 
@@ -65,10 +65,10 @@ def _statements(tree: ast.AST) -> list[ast.AST]:
     return found
 
 
-@functools.cache
 def _tree(path: Path) -> ast.Module:
-    """The module's syntax tree, parsed once per process (several tests read it)."""
-    return ast.parse(path.read_text("utf-8"))
+    """The module's syntax tree, parsed once per process (several tests, and the house
+    limits', read it)."""
+    return source(path)[1]
 
 
 def _imports(module: str, path: Path, *, at_import: bool = False) -> set[str]:
