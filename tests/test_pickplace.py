@@ -7,7 +7,6 @@ tests run the real ``python -m tmmaster.pickplace`` entry point as a subprocess.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -22,6 +21,7 @@ from typing import Any
 import pytest
 
 import tmmaster
+from exit_hooks import PAUSE_AT_EXIT, PAUSED_AT_EXIT, ctrl_c_in_the_exit_hooks
 from sim_speeds import QUICK
 from tmmaster import Pose
 from tmmaster.pickplace import ARTICLE_PICK, ARTICLE_PLACE
@@ -532,26 +532,17 @@ def test_entry_point_runs_the_article_cycle_on_the_simulator(tmp_path: Path) -> 
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        env={**_env(), "TMMASTER_TEST_SIGINT_AT": "exit"},
+        env={**_env(), **PAUSE_AT_EXIT},
     )
     try:
-        assert proc.stdin is not None
-        assert proc.stderr is not None
-        paused = proc.stderr.readline()  # piped, a run that ends well says nothing there
-        if paused == "tmmaster-test: paused at exit\n":
-            proc.send_signal(signal.SIGINT)
-            proc.send_signal(signal.SIGINT)
-        with contextlib.suppress(BrokenPipeError):
-            proc.stdin.write("x")  # let it go on (it may have exited already)
-            proc.stdin.flush()
-        out, err = proc.communicate(timeout=60)
+        err, out, after_the_pause = ctrl_c_in_the_exit_hooks(proc)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert paused == "tmmaster-test: paused at exit\n", paused + err
-    assert proc.returncode == EXIT_OK
-    assert err == ""
+    assert err.endswith(PAUSED_AT_EXIT), err + after_the_pause
+    assert after_the_pause == ""
+    assert proc.returncode == EXIT_OK, err
     assert "part-1 is on the place position" in out
     assert json.loads(report.read_text())["result"] == "done"
 

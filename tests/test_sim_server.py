@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -18,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from exit_hooks import PAUSE_AT_EXIT, PAUSED_AT_EXIT, ctrl_c_in_the_exit_hooks
 from tmmaster import (
     DEFAULT_PROFILE,
     ConnectionState,
@@ -412,31 +412,6 @@ def test_objects_and_pose_are_visible(article_simulator: Simulator) -> None:
 # -- the command line -------------------------------------------------------------------
 
 
-PAUSED_AT_EXIT = "tmmaster-test: paused at exit\n"
-
-
-def _ctrl_c_in_the_exit_hooks(proc: subprocess.Popen[str]) -> tuple[str, str, str]:
-    """Once ``proc`` was told to stop: its stderr up to the test hook's pause in the exit
-    hooks, two Ctrl-Cs there, then the rest of its stdout and stderr."""
-    assert proc.stdin is not None
-    assert proc.stderr is not None
-    before = ""
-    deadline = time.monotonic() + 10
-    while not before.endswith(PAUSED_AT_EXIT) and time.monotonic() < deadline:
-        line = proc.stderr.readline()
-        if not line:
-            break  # it ended without pausing
-        before += line
-    if before.endswith(PAUSED_AT_EXIT):
-        proc.send_signal(signal.SIGINT)
-        proc.send_signal(signal.SIGINT)
-    with contextlib.suppress(BrokenPipeError):
-        proc.stdin.write("x")  # let it go on (it may have exited already)
-        proc.stdin.flush()
-    out, after = proc.communicate(timeout=10)
-    return before, out, after
-
-
 def test_the_cli_banner_lists_faults_sigusr1_resets_an_error_and_sigint_exits_0() -> None:
     # One process for the command line's whole life: its banner (the armed fault), the
     # operator's reset (SIGUSR1), --trace-requests on stdout, --log-json on stderr, the
@@ -446,7 +421,7 @@ def test_the_cli_banner_lists_faults_sigusr1_resets_an_error_and_sigint_exits_0(
     # after --help: test_sigint_exit), which change nothing.
     src = Path(__file__).resolve().parents[1] / "src"
     env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    env["TMMASTER_TEST_SIGINT_AT"] = "exit"
+    env.update(PAUSE_AT_EXIT)
     proc = subprocess.Popen(
         [
             *(sys.executable, "-m", "tmmaster.sim", "--port", "0", "--time-scale", "10"),
@@ -477,7 +452,7 @@ def test_the_cli_banner_lists_faults_sigusr1_resets_an_error_and_sigint_exits_0(
                 assert time.monotonic() < deadline
                 time.sleep(0.05)
         proc.send_signal(signal.SIGINT)
-        err, out, after_the_pause = _ctrl_c_in_the_exit_hooks(proc)
+        err, out, after_the_pause = ctrl_c_in_the_exit_hooks(proc, timeout=10)
     finally:
         if proc.poll() is None:
             proc.kill()
