@@ -146,7 +146,7 @@ class SimHost:
         c = self._c
         if not write:
             try:
-                words = c.bank.read(table, address, count)
+                words = c._bank.read(table, address, count)
             except Exception as exc:  # an illegal address: the device's exception answer
                 raise HostError(f"{device.name}: {exc}") from exc
             c.after_read(table, address, words)
@@ -160,7 +160,7 @@ class SimHost:
             )
         written = list(values or ())
         try:
-            c.bank.write(table, address, written, device=True)
+            c._bank.write(table, address, written, device=True)
             c.after_write(table, address, written)
         except Exception as exc:  # an illegal address: the device's exception answer
             raise HostError(f"{device.name}: {exc}") from exc
@@ -168,7 +168,8 @@ class SimHost:
 
     def modbus_ready(self, device: ModbusDevice) -> bool:
         """False while a late_ack fault holds the program's link (its next request waits)."""
-        return self._c.time_s >= self._c.link_free_at
+        c = self._c
+        return c._time_s >= c.link_free_at  # the field: the program asks before every request
 
     def motion(self, call: MotionCall) -> bool:
         """Put a PTP, Line or Circle into the motion buffer ("CPP", "JPP", "CAP"...).
@@ -296,7 +297,9 @@ class ScriptProjectController(SequenceController):
         #: Simulated time from which the program's next Modbus request may go (late_ack).
         self.link_free_at = -1.0
         self._gripper_output = gripper_output
-        self._gripper_input = gripper_input
+        grip_input = f"em_di_{gripper_input}"
+        #: The end module's DI field of the grip input (None: the profile has none).
+        self._grip_input_field: str | None = grip_input if bank.has(grip_input) else None
         self._gripper_output_high = False
         #: Addresses the robot's slave refuses the program's writes to, as ``(table,
         #: address)``: a slave whose IP filter gives 127.0.0.1 no write permission (a test
@@ -542,8 +545,8 @@ class ScriptProjectController(SequenceController):
 
     def _publish_grip(self) -> None:
         """The end module's grip input: a part is held between closed fingers."""
-        name = f"em_di_{self._gripper_input}"
-        if self._bank.has(name):
+        name = self._grip_input_field
+        if name is not None:
             self._bank.set(name, self._grip_detected())
 
     # -- the project -------------------------------------------------------------------

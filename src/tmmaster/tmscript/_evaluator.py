@@ -1503,9 +1503,13 @@ def _builtin_gen(
             values[i] = (yield from f(fr)) if gen else f(fr)
         try:
             if blocking is not None:
-                return _capped(node, (yield from blocking(fr.rt, values, arg_types)))
-            assert impl is not None
-            return _capped(node, impl(fr.rt, values, arg_types))
+                result = yield from blocking(fr.rt, values, arg_types)
+            else:
+                assert impl is not None
+                result = impl(fr.rt, values, arg_types)
+            if isinstance(result, str) and len(result) > STRING_MAX:  # _capped, inlined
+                raise _too_long(node, len(result))
+            return result
         except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
             raise
         except Exception as exc:
@@ -1637,6 +1641,8 @@ def _int_mod(node: a.Node) -> Callable[[int, int], int]:
     def mod(x: int, y: int) -> int:
         if y == 0:
             raise _runtime(node, "division by zero")
+        if x >= 0 and y > 0:
+            return x % y  # the common case: abs() of both is themselves
         r = abs(x) % abs(y)  # the sign of the dividend, like C
         return r if x >= 0 else -r
 
