@@ -79,7 +79,7 @@ WATCH_INTERVAL_S = 0.02
 
 #: Failures after which a write's frame is not on its way: never sent (no connection, the
 #: gate refused it, a bad argument) or answered (a Modbus exception).
-_SETTLED_FAILURES = (ConnectError, ModbusExceptionError, StopRequestedError, ConfigError)
+SETTLED_FAILURES = (ConnectError, ModbusExceptionError, StopRequestedError, ConfigError)
 
 
 @dataclass(frozen=True)
@@ -342,7 +342,7 @@ class RobotIO:
             sent_at = time.monotonic()
             try:
                 self._gate.write(None, send)  # no command: close() withdraws none
-            except _SETTLED_FAILURES:
+            except SETTLED_FAILURES:
                 raise
             except BaseException:
                 doubts.append(_Doubt(value, sent_at))
