@@ -362,7 +362,7 @@ def test_the_watch_does_not_read_again_what_a_moves_poll_just_read(
             assert reads  # the watch reads an idle robot itself
             before = len(reads)
             published = fleet.latest(robot).polls
-            motion = robot.move_to(A, speed=20)
+            motion = robot.move_to(A, speed=50)  # 0.68 s: thirteen watch slots
             assert motion.expected_s > 0.3  # real time: six watch slots or more
             # The move's polls were published in its slots; the watch read at most at the
             # edges (without this, about one read per slot: six or more).

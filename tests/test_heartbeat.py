@@ -28,11 +28,14 @@ FAR = Pose(300, 200, 200, 180, 0, 90)  # from LEFT: a long turn of J1
 #: A short time-to-live, so that an expiry is seen within a second (wall time: the
 #: simulated program counts GetNowStamp in wall milliseconds whatever the time scale).
 FAST = TimeoutPolicy(heartbeat_s=0.05, heartbeat_ttl_s=0.5)
+#: Simulated seconds per wall second: the long move (LEFT to FAR at 5 %, 7.7 simulated
+#: seconds) takes at least 1.28 s of wall time, over twice the time-to-live.
+TIME_SCALE = 6
 
 
 @pytest.fixture(params=["network", "in-process"])
 def sim(request: pytest.FixtureRequest) -> Iterator[Simulator]:
-    with Simulator(time_scale=5, listen=request.param == "network") as simulator:
+    with Simulator(time_scale=TIME_SCALE, listen=request.param == "network") as simulator:
         yield simulator
 
 
@@ -109,7 +112,8 @@ def test_a_paused_move_whose_master_stopped_beating_never_resumes(
         robot.wait_until_ready()
         robot.move_to(LEFT, speed=50)
         start = sim.tcp_pose()
-        motion = robot.start_move(FAR, speed=5)
+        # 0.64 s of wall time: paused 20 mm into its 400 mm, long before its end.
+        motion = robot.start_move(FAR, speed=10)
         sim.wait_for(lambda: sim.tcp_pose().distance_to(start) > 20, timeout=5.0)
         press_play_pause(sim)  # the operator pauses the project mid-move
         sim.wait_for(lambda: bool(sim.field("paused")), timeout=2.0)
@@ -146,8 +150,8 @@ def test_a_beat_waits_for_a_link_the_robots_thread_holds(sim: Simulator) -> None
     """A robot polling densely holds its link most of the time: a beat that only tried
     the link's lock missed beat after beat, and the program expired a live master's
     command. A beat waits for the link (up to its period) instead."""
-    period = 0.4
-    robot = robot_for(sim, timeouts=TimeoutPolicy(heartbeat_s=period, heartbeat_ttl_s=2.0))
+    period = 0.25
+    robot = robot_for(sim, timeouts=TimeoutPolicy(heartbeat_s=period, heartbeat_ttl_s=1.0))
     with robot:
         robot.wait_until_ready()
         robot.move_to(LEFT, speed=50)  # the first command: from then on it beats

@@ -22,7 +22,9 @@ FAR = Pose(300, 200, 200, 180, 0, 90)  # from LEFT: a long turn of J1
 
 @pytest.fixture
 def sim() -> Iterator[Simulator]:
-    with Simulator(time_scale=5) as simulator:
+    # The slow move takes 0.77 s of wall time (7.7 simulated seconds): paused 20 mm into
+    # its 400 mm, long before its end.
+    with Simulator(time_scale=10) as simulator:
         yield simulator
 
 

@@ -177,11 +177,14 @@ def test_8_1_tmflow_a_frame_held_for_any_time_never_runs_after_the_master_gave_u
     issued: list[Issued] = []
     with FaultProxy(sim.port) as proxy:
         robot = robots(proxy.port, "tmflow")
-        # Held past the timeout, the resend (same sequence number) and the withdraw.
-        proxy.add(Rule("hold", function_code=16, address=9000, delay_s=1.5))
+        # Held past the timeout, the resend (same sequence number) and the withdraw:
+        # released only once the master has given the command up.
+        landed = threading.Event()
+        proxy.add(Rule("hold", function_code=16, address=9000, release=landed))
         proxy.add(Rule("drop_request", function_code=16, address=9000, nth=1))
         attempt(robot, A, issued)  # gives up and withdraws after ~0.35 s
-        # The held frame lands 1.5 s after it was sent. The dropped resend never reaches
+        landed.set()
+        # The held frame lands after the master gave up. The dropped resend never reaches
         # the robot and the withdraw is written at 9014, so the first command write the
         # robot sees at 9000 is the held frame; then 5 ticks (2 simulated s) for the
         # program to take it, had its number not been used up.
