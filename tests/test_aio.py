@@ -640,8 +640,9 @@ def test_a_robot_of_your_own_fleet_or_in_process_simulator(
 
 def test_a_held_frame_of_an_awaited_move_never_runs_after_it_was_given_up() -> None:
     # Between the master and the robot: the move's command write is held in the network
-    # for 0.9 s and its resend dropped; the awaited move_to gives up (no acknowledgement)
-    # and cancels the sequence number, so the frame that lands later can never run.
+    # until the master has given it up, and its resend dropped; the awaited move_to gives
+    # up (no acknowledgement) and cancels the sequence number, so the frame that lands
+    # later can never run.
     from fault_proxy import FaultProxy, Rule
 
     async def scenario() -> None:
@@ -661,13 +662,15 @@ def test_a_held_frame_of_an_awaited_move_never_runs_after_it_was_given_up() -> N
                 await robot.move_to(A, speed=80)
                 first.outcome, first.ended_at = "done", time.monotonic()
                 issued.append(first)
-                proxy.add(Rule("hold", function_code=16, address=9000, delay_s=0.9))
+                release = threading.Event()
+                proxy.add(Rule("hold", function_code=16, address=9000, release=release))
                 proxy.add(Rule("drop_request", function_code=16, address=9000, nth=1))
                 given_up = Issued(B, time.monotonic())
                 issued.append(given_up)
                 with pytest.raises(tmmaster.TMMasterError) as info:
                     await robot.move_to(B, speed=80)
                 given_up.outcome, given_up.ended_at = type(info.value).__name__, time.monotonic()
+                release.set()  # the held frame lands now, after the master gave it up
 
                 def writes() -> int:
                     return len(

@@ -115,7 +115,8 @@ def test_the_first_command_after_a_link_outage_runs(sim: Simulator) -> None:
     gone (and used up a number). The master's next command goes out as soon as the link
     is back: it must beat first, not leave the command to a program that still sees it
     gone."""
-    policy = TimeoutPolicy(heartbeat_s=0.25, heartbeat_ttl_s=1.0)
+    # The shortest time-to-live (the outage is ended only once the program saw it pass).
+    policy = TimeoutPolicy(heartbeat_s=0.16, heartbeat_ttl_s=0.5)
     with (
         FaultProxy(sim.port) as proxy,
         Robot("127.0.0.1", proxy.port, gripper=None, timeouts=policy) as robot,
