@@ -23,8 +23,9 @@ from typing import Any
 
 from ._channels import CommandChannel
 from ._checks import require_positive
-from ._exceptions import ConfigError, RobotError
+from ._exceptions import ConfigError, RobotError, TMMasterError
 from ._gate import CommandGate
+from ._io import SETTLED_FAILURES
 from ._poller import Poller
 from ._registers import RobotProfile
 from ._status import ProjectState, RobotStatus
@@ -180,15 +181,36 @@ class ProjectControl:
         return status, state
 
     def _press(self, button: str, state: ProjectState) -> None:
-        """Press the Play/Pause toggle once, through the gate (never written twice)."""
+        """Press the Play/Pause toggle once, through the gate (never written twice).
+
+        A press whose answer never came may still land, later, on a project paused
+        meanwhile (by the operator, an e-stop with resumption on), where the toggle is
+        Play: so before the error reaches the caller the Stop button is pressed
+        (retried). The project ends; a press that lands after it starts it from the
+        beginning, where the start-up rule runs nothing pending.
+        """
         field = self._profile.field("play_pause")
 
         def send() -> None:
             # Sent once: a repeated toggle would undo the press.
             self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
-        self._gate.write(None, send)  # a press registers no command
+        try:
+            self._gate.write(None, send)  # a press registers no command
+        except SETTLED_FAILURES:
+            raise  # never sent, or answered: nothing can land later
+        except BaseException as exc:
+            self._log.error("robot.project_button_unanswered", button=button, error=str(exc))
+            self._stop_after_lost_press()
+            raise
         self._log.warning("robot.project_button", button=button, project=state.value)
+
+    def _stop_after_lost_press(self) -> None:
+        """Press Stop: a lost Play/Pause press can then never resume a move when it lands."""
+        try:
+            self._channel.stop()
+        except TMMasterError as exc:
+            self._log.error("robot.stop_failed", reason="project button unanswered", error=str(exc))
 
     def _wait_for(
         self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float

@@ -1384,7 +1384,8 @@ class Robot:
             RobotError: Manual mode, or a paused move this robot does not follow (nothing
                 pressed: press Stop), or the project did not run within ``timeout_s``.
             StopRequestedError: A stop was requested or the robot is closing.
-            TransportError: The link failed.
+            TransportError: The link failed (a press left unanswered: Stop was pressed,
+                so that it cannot resume a paused move when it lands).
         """
         self._require_connection()
         # Only a command this master still follows may resume.
@@ -1410,7 +1411,8 @@ class Robot:
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
             RobotError: The project did not pause within ``timeout_s``.
             StopRequestedError: A stop was requested or the robot is closing.
-            TransportError: The link failed.
+            TransportError: The link failed (a press left unanswered: Stop was pressed,
+                so that it cannot resume a paused move when it lands).
         """
         self._require_connection()
         return self._project.pause(timeout_s, self.poll_interval_s)

@@ -1,0 +1,95 @@
+"""A Play/Pause press whose answer was lost never lands later as a resume.
+
+TMflow's Play/Pause coil (7104) is a toggle. A fault proxy holds the master's press
+(matched by function code and address) past the request timeout: ``robot.pause()``
+raises, so the master gave that press up. Then the operator pauses the move on the
+pendant, and only then does the held press land (released on what the simulator shows,
+never on a time). Landing on the paused project, a toggle is Play: the move the
+operator paused would run on. The judge is the simulator's arm: it must stay where it
+was once the held press landed.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from fault_proxy import FaultProxy
+from fault_proxy import Rule as FaultRule
+from pendant import press_play_pause
+from tmmaster import (
+    PollPolicy,
+    Pose,
+    RetryPolicy,
+    Robot,
+    RobotError,
+    TimeoutPolicy,
+    TransportError,
+)
+from tmmaster.sim import Simulator
+
+Factory = Callable[..., Simulator]
+
+#: Techman's Play/Pause coil (TMflow 2.24 appendix C, p. 313).
+PLAY_PAUSE = 7104
+#: The master's answer timeout, s: the held press times out.
+TIMEOUT_S = 0.2
+RETRY = RetryPolicy(attempts=4, total_time_s=3.0, initial_backoff_s=0.01, jitter_s=0)
+
+
+@pytest.fixture
+def sim(tm_simulator_factory: Factory) -> Simulator:
+    # Real time: the move must still run while the press times out.
+    return tm_simulator_factory("tmflow", time_scale=1.0)
+
+
+@pytest.fixture
+def proxy(sim: Simulator) -> Iterator[FaultProxy]:
+    with FaultProxy(sim.port) as p:
+        yield p
+
+
+def test_a_pause_press_given_up_never_resumes_a_move_the_operator_paused(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    with Robot(
+        "127.0.0.1",
+        proxy.port,
+        retry=RETRY,
+        timeouts=TimeoutPolicy(request_s=TIMEOUT_S),
+        polling=PollPolicy(interval_s=0.01),
+    ) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        start = robot.pose()
+        motion = robot.start_move(start.offset(dz=-150), speed=5)
+        sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=2)
+        release = threading.Event()
+        proxy.add(FaultRule("hold", function_code=5, address=PLAY_PAUSE, release=release))
+        try:
+            with pytest.raises(TransportError):
+                robot.pause()  # the press is held: no answer, the call gives it up
+            # The operator pauses the move on the pendant (a stopped project stays put),
+            # once the robot acted on whatever the master wrote meanwhile.
+            ticks = sim.ticks
+            sim.wait_for(lambda: sim.ticks >= ticks + 3, timeout=2)
+            if sim.field("project_running"):
+                press_play_pause(sim)
+                sim.wait_for(lambda: bool(sim.field("paused")), timeout=2)
+        finally:
+            release.set()
+        proxy.wait_held()
+        ticks = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= ticks + 3, timeout=2)
+        held: Pose = sim.tcp_pose()
+        ticks = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= ticks + 10, timeout=2)
+        # The late press landed; the arm never moved on.
+        assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6), (held, sim.tcp_pose())
+        assert sim.motion_log()[0].done_wall_time is None
+        assert len(sim.motion_log()) == 1
+        # The master pressed Stop on the project when the press went unanswered: the
+        # move is reported failed, never done.
+        with pytest.raises(RobotError):
+            motion.wait()
