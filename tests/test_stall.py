@@ -18,7 +18,7 @@ from tmmaster.sim import Simulator
 SimFactory = Callable[..., Simulator]
 
 START = Pose(300, -200, 300, 180, 0, 90)
-TARGET = Pose(300, 100, 300, 180, 0, 90)
+TARGET = Pose(300, -50, 300, 180, 0, 90)  # a 150 mm line
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
