@@ -118,7 +118,8 @@ def test_a_late_open_frame_never_leaves_a_closed_article_gripper_open(
 def test_a_gripper_command_while_the_arm_runs_a_move_is_refused(
     tm_simulator_factory: Factory, profile: str
 ) -> None:
-    sim = tm_simulator_factory(profile)
+    # A move of about 0.6 s wall time: the gripper command comes while it runs.
+    sim = tm_simulator_factory(profile, time_scale=2.0)
     with Robot(sim.url, profile=profile, polling=PollPolicy(interval_s=0.01)) as robot:
         robot.wait_until_ready(timeout_s=5)
         motion = robot.start_move(robot.pose().offset(dz=-100), speed=10)

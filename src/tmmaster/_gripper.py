@@ -450,6 +450,7 @@ class RegisterGripper(_RobotWiredGripper):
                     self._events.warning(
                         "gripper.late_write", gripper=self.kind, found=found, wanted=value
                     )
+                    robot.check_fault()  # no gripper write during an e-stop or error
                     self._write(robot, command, value)  # answered: the register holds it
                 elif seen >= len(against) or time.monotonic() >= until:
                     break
