@@ -97,7 +97,9 @@ def test_a_pause_press_given_up_never_resumes_a_move_the_operator_paused(
 
 
 @pytest.mark.xfail(
-    strict=True,
+    # Not strict: whether the arm has moved measurably by the check depends on when the
+    # master's own wait for PAUSED reads the state (it went unseen in 1 run of 4 here).
+    strict=False,
     reason="Play/Pause is one toggle coil: when the operator presses Pause while the"
     " master's pause() press is on its way, the master's press lands second and resumes"
     " the move, and pause() reads the operator's pause as its own and returns PAUSED"

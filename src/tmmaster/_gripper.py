@@ -40,11 +40,10 @@ from ._exceptions import (
     GripperError,
     GripperTimeoutError,
     ResponseTimeoutError,
-    StopRequestedError,
     TransportError,
 )
 from ._fleet import open_transport
-from ._io import SETTLED_FAILURES, WATCH_INTERVAL_S
+from ._io import LevelOutput
 from ._logging import get_logger
 from ._poller import Poller
 from ._registers import GripperDriverName, GripperProfile, RegisterField, RobotProfile
@@ -400,67 +399,24 @@ class RegisterGripper(_RobotWiredGripper):
 
     def __init__(self, *, settle_s: float = 0.5) -> None:
         self._settle_s = _timeout(settle_s, 0.5)
-        # Writes of ours that got no answer (their frames may still land): value, sent at.
-        self._doubts: list[tuple[Value, float]] = []
+        self._register: tuple[GripperMount, LevelOutput] | None = None
 
-    def _write(self, robot: GripperMount, command: RegisterField, value: Value) -> None:
-        """Write ``value`` (retried, through the gate); remember each attempt unanswered."""
-        transport = robot.transport
+    def _output(self, robot: GripperMount) -> LevelOutput:
+        """The register as a :class:`LevelOutput` on ``robot``'s link (one per mount)."""
+        if self._register is None or self._register[0] is not robot:
 
-        def once() -> None:
-            sent_at = time.monotonic()
-            try:
-                robot.gated(lambda: transport.write_fields([(command, value)], retry=False))
-            except SETTLED_FAILURES:
-                raise
-            except BaseException:
-                self._doubts.append((value, sent_at))
-                raise
+            def late(found: Value, wanted: Value) -> None:
+                self._events.warning(
+                    "gripper.late_write", gripper=self.kind, found=found, wanted=wanted
+                )
+                robot.check_fault()  # no gripper write during an e-stop or error
 
-        def counted(_error: BaseException) -> None:
-            transport.stats.retries += 1
-
-        transport.retry.call(
-            f"write {command.name}", once, on_retry=counted, interrupt=transport.interrupt
-        )
-
-    def _watch(self, robot: GripperMount, command: RegisterField, value: Value) -> None:
-        """Read the register back until no earlier write of another value can land unseen.
-
-        Each read that finds another value counts one late frame landed, and ``value`` is
-        written back at once. The watch ends when the read shows ``value`` and as many
-        landings were seen as frames were in doubt, or at the horizon: the retry
-        policy's total time after the newest of them was sent.
-        """
-        transport = robot.transport
-        horizon = transport.retry.total_time_s
-        now = time.monotonic()
-        self._doubts = [d for d in self._doubts if d[1] + horizon > now]
-        against = [d for d in self._doubts if d[0] != value]
-        if not against:
-            return
-        until = max(sent_at for _, sent_at in against) + horizon
-        poller = Poller(WATCH_INTERVAL_S, robot.stop_event, deadline=until)
-        seen = 0
-        try:
-            while True:
-                found = transport.read_fields([command])[command.name]
-                if found != value:
-                    seen += 1
-                    self._events.warning(
-                        "gripper.late_write", gripper=self.kind, found=found, wanted=value
-                    )
-                    robot.check_fault()  # no gripper write during an e-stop or error
-                    self._write(robot, command, value)  # answered: the register holds it
-                elif seen >= len(against) or time.monotonic() >= until:
-                    break
-                poller.sleep()
-        except StopRequestedError as exc:
-            raise StopRequestedError(
-                f"{self.kind}: gripper register set to {value}, but an earlier write of"
-                f" another value could still land: no longer watched ({exc})"
-            ) from exc
-        self._doubts = [d for d in self._doubts if d[0] == value]
+            command = robot.profile.field("gripper_command")
+            output = LevelOutput(
+                f"{self.kind}: gripper register", command, robot.transport, robot.gated, late
+            )
+            self._register = (robot, output)
+        return self._register[1]
 
     def _command_and_settle(
         self, label: str, timeout_s: float | None, *, stop_early_when_holding: bool
@@ -471,8 +427,7 @@ class RegisterGripper(_RobotWiredGripper):
         value = command.code_of(label)
         robot.check_fault()  # never write a gripper command during an e-stop or robot error
         # Writing the same open/close value again is harmless, so retrying is allowed.
-        self._write(robot, command, value)
-        self._watch(robot, command, value)
+        self._output(robot).set(value)
         # The settle time counts from the write that landed, not from the first attempt:
         # retries during a short outage must not eat the time the fingers need.
         started = time.monotonic()

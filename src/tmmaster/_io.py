@@ -20,6 +20,7 @@ open or close the gripper outside any command the master follows.
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -28,10 +29,20 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from ._checks import shown
+from ._codec import Value
 from ._exceptions import ConfigError, ConnectError, ModbusExceptionError, StopRequestedError
 from ._gate import CommandGate
 from ._poller import Poller
-from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
+from ._registers import (
+    Access,
+    DataType,
+    DigitalIOModule,
+    Handshake,
+    RegisterField,
+    RobotProfile,
+    Role,
+    Table,
+)
 from ._transport import Transport
 
 #: The module ``RobotIO``'s calls address when none is named.
@@ -82,13 +93,122 @@ WATCH_INTERVAL_S = 0.02
 SETTLED_FAILURES = (ConnectError, ModbusExceptionError, StopRequestedError, ConfigError)
 
 
-@dataclass(frozen=True)
-class _Doubt:
-    """A write of ours that got no answer: its frame may still reach the robot."""
+class LevelOutput:
+    """An output that holds the last value written to it (a DO coil, the article's
+    gripper register), written once per call and watched for a late frame of ours.
 
-    value: bool
-    #: ``time.monotonic()`` just before it was sent.
-    sent_at: float
+    Writing the same value twice is harmless, so a write goes through the retry policy.
+    An attempt left unanswered (a timeout, a lost connection) may still reach the robot
+    later, from a connection the master has given up: it is remembered, and a later
+    :meth:`set` of another value reads the output back every ``WATCH_INTERVAL_S`` until
+    that frame has landed and been undone, or until the retry policy's ``total_time_s``
+    since it was sent has passed. One :meth:`set` at a time writes and watches it; a stop
+    request (the link's ``interrupt``) ends its retries and its watch.
+
+    Args:
+        what: The output, as messages name it (``"control_box DO 3"``).
+        field: Its register or coil.
+        transport: The robot's link (its retry policy and counters).
+        gated: Runs one attempt at a write through the robot's command gate.
+        on_late: Told (found, wanted) before a late frame is undone; may raise to
+            leave it (a robot in error).
+    """
+
+    def __init__(
+        self,
+        what: str,
+        field: RegisterField,
+        transport: Transport,
+        gated: Callable[[Callable[[], None]], None],
+        on_late: Callable[[Value, Value], None],
+    ) -> None:
+        self.what = what
+        self._field = field
+        self._transport = transport
+        self._gated = gated
+        self._on_late = on_late
+        # Our writes that got no answer (their frames may still land): value, sent at.
+        self._doubts: list[tuple[Value, float]] = []
+        self._lock = threading.Lock()
+
+    def set(self, value: Value) -> None:
+        """Write ``value``, then watch for a late frame of another value (see the class).
+
+        Args:
+            value: The value.
+
+        Raises:
+            StopRequestedError: A stop was requested: not written, or (the message says
+                so) written but no longer watched for an earlier write that could land.
+            TransportError: The write, or a read-back, failed after its retries.
+        """
+        with self._lock:
+            self._write(value)
+            self._settle(value)
+
+    def _write(self, value: Value) -> None:
+        """Write ``value`` (retried); remember each attempt left unanswered."""
+        transport = self._transport
+        in_doubt = False
+
+        def once() -> None:
+            nonlocal in_doubt
+            sent_at = time.monotonic()
+            try:
+                self._gated(lambda: transport.write_fields([(self._field, value)], retry=False))
+            except SETTLED_FAILURES:
+                raise
+            except BaseException:
+                self._doubts.append((value, sent_at))
+                in_doubt = True
+                raise
+
+        def counted(_error: BaseException) -> None:
+            transport.stats.retries += 1
+
+        try:
+            transport.retry.call(
+                f"write {self.what}", once, on_retry=counted, interrupt=transport.interrupt
+            )
+        except StopRequestedError as exc:
+            done = "not confirmed (an attempt may still land)" if in_doubt else "not written"
+            raise StopRequestedError(f"{self.what} {done}: {exc}") from exc
+
+    def _settle(self, value: Value) -> None:
+        """Read the output back until no earlier write of another value can land unseen.
+
+        Each read that finds another value counts one late frame landed, and ``value`` is
+        written back at once. The watch ends when the read shows ``value`` and as many
+        landings were seen as frames were in doubt, or at the horizon: the retry policy's
+        total time after the newest of them was sent.
+        """
+        horizon = self._transport.retry.total_time_s
+        now = time.monotonic()
+        self._doubts = [d for d in self._doubts if d[1] + horizon > now]
+        against = [d for d in self._doubts if d[0] != value]
+        if not against:
+            return
+        until = max(sent_at for _, sent_at in against) + horizon
+        poller = Poller(WATCH_INTERVAL_S, self._transport.interrupt, deadline=until)
+        seen = 0
+        try:
+            while True:
+                found = self._transport.read_fields([self._field])[self._field.name]
+                if found != value:
+                    seen += 1
+                    self._on_late(found, value)
+                    self._write(value)  # answered: the output holds value
+                elif seen >= len(against):
+                    break
+                if time.monotonic() >= until:
+                    break
+                poller.sleep()
+        except StopRequestedError as exc:
+            raise StopRequestedError(
+                f"{self.what} set to {value}, but an earlier write of another value could"
+                f" still land: no longer watched ({exc})"
+            ) from exc
+        self._doubts = [d for d in self._doubts if d[0] == value]
 
 
 def io_module(profile: RobotProfile, module: object) -> DigitalIOModule:
@@ -240,11 +360,9 @@ class RobotIO:
         # otherwise (``--gripper io:do=N``, ``--gripper none``).
         sequence = profile.handshake is Handshake.SEQUENCE
         self._gripper_output = GripperWiring().output if sequence else None
-        # Per coil address: its writes that got no answer (their frames may still land),
-        # and a lock that makes one set_do of that coil at a time write and watch it.
-        self._doubts: dict[int, list[_Doubt]] = {}
-        self._coil_locks: dict[int, threading.Lock] = {}
-        self._locks_lock = threading.Lock()
+        # Per coil address, the output written and watched (made at its first set_do).
+        self._outputs: dict[int, LevelOutput] = {}
+        self._outputs_lock = threading.Lock()
 
     @property
     def _transport(self) -> Transport:
@@ -319,83 +437,31 @@ class RobotIO:
                 " gripper behind the program's back; use robot.gripper, or set"
                 " robot.io.gripper_output = None if no program drives this output"
             )
-        with self._coil_lock(address):
-            self._write(address, value, what)
-            self._settle(address, value, what)
+        self._output(address, what).set(value)
         self._log.info("robot.io_set", module=module, do=channel, value=value)
 
-    def _coil_lock(self, address: int) -> threading.Lock:
-        with self._locks_lock:
-            return self._coil_locks.setdefault(address, threading.Lock())
-
-    def _write(self, address: int, value: bool, what: str) -> None:
-        """Write ``value`` to the coil (retried); remember each attempt left unanswered."""
-        transport = self._transport
-        doubts = self._doubts.setdefault(address, [])
-        in_doubt = False
-
-        def send() -> None:
-            transport.write_block(Table.COIL, address, [int(value)], retry=False)
-
-        def once() -> None:
-            nonlocal in_doubt
-            sent_at = time.monotonic()
-            try:
-                self._gate.write(None, send)  # no command: close() withdraws none
-            except SETTLED_FAILURES:
-                raise
-            except BaseException:
-                doubts.append(_Doubt(value, sent_at))
-                in_doubt = True
-                raise
-
-        def counted(_error: BaseException) -> None:
-            transport.stats.retries += 1
-
-        try:
-            transport.retry.call(
-                f"write {what}", once, on_retry=counted, interrupt=transport.interrupt
-            )
-        except StopRequestedError as exc:
-            done = "not confirmed (an attempt may still land)" if in_doubt else "not written"
-            raise StopRequestedError(f"{what} {done}: {exc}") from exc
-
-    def _settle(self, address: int, value: bool, what: str) -> None:
-        """Watch the coil until no earlier write of ours of the other value can land unseen.
-
-        Each read that finds the other value counts one late frame landed, and the coil is
-        written back at once. The watch ends when the read shows ``value`` and as many
-        landings were seen as frames were in doubt, or at the horizon: the retry policy's
-        total time after the newest of them was sent.
-        """
-        horizon = self._transport.retry.total_time_s
-        now = time.monotonic()
-        doubts = [d for d in self._doubts.get(address, []) if d.sent_at + horizon > now]
-        against = [d for d in doubts if d.value != value]
-        self._doubts[address] = doubts
-        if not against:
-            return
-        until = max(d.sent_at for d in against) + horizon
-        # One read every WATCH_INTERVAL_S; a stop request (or ``close()``) ends the watch.
-        poller = Poller(WATCH_INTERVAL_S, self._transport.interrupt, deadline=until)
-        seen = 0
-        try:
-            while True:
-                if bool(self._transport.read_block(Table.COIL, address, 1)[0]) != value:
-                    seen += 1
-                    self._log.warning("robot.io_late_write", output=what, found=not value)
-                    self._write(address, value, what)  # answered: the coil holds value
-                elif seen >= len(against):
-                    break
-                if time.monotonic() >= until:
-                    break
-                poller.sleep()
-        except StopRequestedError as exc:
-            raise StopRequestedError(
-                f"{what} set to {value}, but an earlier write of {not value} could still land:"
-                f" no longer watched ({exc})"
-            ) from exc
-        self._doubts[address] = [d for d in self._doubts[address] if d.value == value]
+    def _output(self, address: int, what: str) -> LevelOutput:
+        """The coil at ``address`` as a :class:`LevelOutput` (one per coil)."""
+        with self._outputs_lock:
+            if (output := self._outputs.get(address)) is None:
+                coil = RegisterField(
+                    name=f"do_{address}",
+                    role=Role.CONTROL,
+                    table=Table.COIL,
+                    address=address,
+                    dtype=DataType.BOOL,
+                    access=Access.READ_WRITE,
+                )
+                late = functools.partial(self._log.warning, "robot.io_late_write", output=what)
+                output = LevelOutput(
+                    what,
+                    coil,
+                    self._transport,
+                    functools.partial(self._gate.write, None),  # no command: close() withdraws none
+                    lambda found, _wanted: late(found=found),
+                )
+                self._outputs[address] = output
+            return output
 
     def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
         """Read digital output ``channel`` of ``module`` back (one FC 01 request).
