@@ -59,7 +59,7 @@ def output_reading(found: Value, *, stop: threading.Event | None = None) -> tupl
         FIELD,
         cast(Transport, link),
         lambda attempt: attempt(),
-        lambda f, w: late.append((f, w)),
+        lambda *, found, wanted: late.append((found, wanted)),
     )
     link.late = late  # type: ignore[attr-defined]
     return output, link

@@ -90,8 +90,6 @@ class Motion:
         #: After the master gave up on a running move: True when the stop was delivered,
         #: False when it could not be, None when no stop was needed.
         self.stop_delivered: bool | None = None
-        #: True once the robot reported the command finished (done, or idle after it).
-        self.reported_finished = False
         #: The project speed its expected time assumes, % (the robot's, read at connect).
         self.project_speed_percent = plan.project_speed_percent
         #: ``time.monotonic()`` when the poll that saw it reported finished returned.
@@ -385,7 +383,7 @@ class _MotionFollower:
         try:
             if motion._settled is not None:
                 return motion._settled
-            if motion.done or motion.reported_finished or motion.ticket.finished:
+            if motion.done or motion.ticket.finished:
                 return True  # nothing left to withdraw or stop
             motion._given_up = True
             motion.phase = MovePhase.FAILED
@@ -605,7 +603,6 @@ class _MotionFollower:
             return fallback
 
     def _finish(self, motion: Motion, polled: Observation) -> None:
-        motion.reported_finished = True
         motion.reported_finished_at = time.monotonic()
         if motion.target is not None:
             # The poll that saw the move finished read the pose: in the same snapshot

@@ -405,7 +405,7 @@ class RegisterGripper(_RobotWiredGripper):
         """The register as a :class:`LevelOutput` on ``robot``'s link (one per mount)."""
         if self._register is None or self._register[0] is not robot:
 
-            def late(found: Value, wanted: Value) -> None:
+            def late(*, found: Value, wanted: Value) -> None:
                 self._events.warning(
                     "gripper.late_write", gripper=self.kind, found=found, wanted=wanted
                 )

@@ -110,8 +110,8 @@ class LevelOutput:
         field: Its register or coil.
         transport: The robot's link (its retry policy and counters).
         gated: Runs one attempt at a write through the robot's command gate.
-        on_late: Told (found, wanted) before a late frame is undone; may raise to
-            leave it (a robot in error).
+        on_late: Told ``found=`` and ``wanted=`` before a late frame is undone (it
+            logs); may raise to leave the frame (a robot in error).
     """
 
     def __init__(
@@ -120,7 +120,7 @@ class LevelOutput:
         field: RegisterField,
         transport: Transport,
         gated: Callable[[Callable[[], None]], None],
-        on_late: Callable[[Value, Value], None],
+        on_late: Callable[..., object],
     ) -> None:
         self.what = what
         self._field = field
@@ -196,7 +196,7 @@ class LevelOutput:
                 found = self._transport.read_fields([self._field])[self._field.name]
                 if found != value:
                     seen += 1
-                    self._on_late(found, value)
+                    self._on_late(found=found, wanted=value)
                     self._write(value)  # answered: the output holds value
                 elif seen >= len(against):
                     break
@@ -452,13 +452,12 @@ class RobotIO:
                     dtype=DataType.BOOL,
                     access=Access.READ_WRITE,
                 )
-                late = functools.partial(self._log.warning, "robot.io_late_write", output=what)
                 output = LevelOutput(
                     what,
                     coil,
                     self._transport,
                     functools.partial(self._gate.write, None),  # no command: close() withdraws none
-                    lambda found, _wanted: late(found=found),
+                    functools.partial(self._log.warning, "robot.io_late_write", output=what),
                 )
                 self._outputs[address] = output
             return output

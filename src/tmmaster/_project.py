@@ -201,16 +201,12 @@ class ProjectControl:
             raise  # never sent, or answered: nothing can land later
         except BaseException as exc:
             self._log.error("robot.project_button_unanswered", button=button, error=str(exc))
-            self._stop_after_lost_press()
+            try:  # Stop: the lost press can then never resume a move when it lands
+                self._channel.stop()
+            except TMMasterError as failed:
+                self._log.error("robot.stop_failed", reason="button unanswered", error=str(failed))
             raise
         self._log.warning("robot.project_button", button=button, project=state.value)
-
-    def _stop_after_lost_press(self) -> None:
-        """Press Stop: a lost Play/Pause press can then never resume a move when it lands."""
-        try:
-            self._channel.stop()
-        except TMMasterError as exc:
-            self._log.error("robot.stop_failed", reason="project button unanswered", error=str(exc))
 
     def _wait_for(
         self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float
