@@ -98,23 +98,7 @@ def test_a_late_open_frame_never_leaves_a_closed_article_gripper_open(
         watcher.join(5)
 
 
-@pytest.mark.parametrize(
-    "profile",
-    [
-        "tmflow",
-        pytest.param(
-            "article",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="article: a gripper command while a move the master sent still runs"
-                " is written, and the fingers act in the middle of the move (a part can be"
-                " dropped in flight); tmflow's robot program refuses it (one command at a"
-                " time). Whether to refuse it on article (the master's own move not yet"
-                " waited for, the status moving) is a design decision left open.",
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("profile", ["tmflow", "article"])
 def test_a_gripper_command_while_the_arm_runs_a_move_is_refused(
     tm_simulator_factory: Factory, profile: str
 ) -> None:

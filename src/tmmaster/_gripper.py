@@ -40,6 +40,7 @@ from ._exceptions import (
     GripperError,
     GripperTimeoutError,
     ResponseTimeoutError,
+    RobotError,
     TransportError,
 )
 from ._fleet import open_transport
@@ -425,7 +426,10 @@ class RegisterGripper(_RobotWiredGripper):
         bound = _timeout(timeout_s, self._settle_s + 1.0)
         command = robot.profile.field("gripper_command")
         value = command.code_of(label)
-        robot.check_fault()  # never write a gripper command during an e-stop or robot error
+        # One read: never a gripper command during an e-stop or robot error, nor while the
+        # arm moves (on tmflow the robot program refuses it too: one command at a time).
+        if robot.checked_status().moving:
+            raise RobotError(f"{self.kind}: the arm is moving; a gripper command waits for it")
         # Writing the same open/close value again is harmless, so retrying is allowed.
         self._output(robot).set(value)
         # The settle time counts from the write that landed, not from the first attempt:
