@@ -20,13 +20,10 @@ import pytest
 from tmmaster import ResponseTimeoutError, RetryPolicy, StopRequestedError
 from tmmaster._codec import Value
 from tmmaster._io import LevelOutput
-from tmmaster._registers import RegisterField, Role, Table
+from tmmaster._registers import Table
 from tmmaster._transport import Transport
 
 HORIZON_S = 0.3
-FIELD = RegisterField(
-    name="out", role=Role.CONTROL, table=Table.COIL, address=0, type="bool", access="rw"
-)
 
 
 class FakeLink:
@@ -40,14 +37,14 @@ class FakeLink:
         self.sent: list[Value] = []
         self.reads = 0
 
-    def write_fields(self, items: list[tuple[RegisterField, Value]], **_: Any) -> None:
-        self.sent.append(items[0][1])
+    def write_block(self, table: Table, address: int, words: list[int], **_: Any) -> None:
+        self.sent.append(bool(words[0]))
         if len(self.sent) == 1:
             raise ResponseTimeoutError("no answer")  # its frame may still land
 
-    def read_fields(self, fields: list[RegisterField], **_: Any) -> dict[str, Value]:
+    def read_block(self, table: Table, address: int, count: int, **_: Any) -> list[int]:
         self.reads += 1
-        return {fields[0].name: self.found}
+        return [int(self.found)]
 
 
 def output_reading(found: Value, *, stop: threading.Event | None = None) -> tuple[LevelOutput, Any]:
@@ -56,7 +53,8 @@ def output_reading(found: Value, *, stop: threading.Event | None = None) -> tupl
     late: list[tuple[Value, Value]] = []
     output = LevelOutput(
         "test DO 0",
-        FIELD,
+        Table.COIL,
+        0,
         cast(Transport, link),
         lambda attempt: attempt(),
         lambda *, found, wanted: late.append((found, wanted)),
@@ -100,7 +98,7 @@ def test_without_a_doubt_a_write_reads_nothing_back() -> None:
     link = FakeLink(True)
     link.sent.append(True)  # the first write was answered
     output = LevelOutput(
-        "test DO 1", FIELD, cast(Transport, link), lambda a: a(), lambda f, w: None
+        "test DO 1", Table.COIL, 1, cast(Transport, link), lambda a: a(), lambda **_: None
     )
     output.set(True)
     output.set(False)

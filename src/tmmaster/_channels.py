@@ -367,8 +367,11 @@ class CommandChannel(ABC):
         else:
             ticket.pending_seen_at = mark[0]
 
-    def _remember_done(self, values: dict[str, Value], mark: tuple[float, int | None]) -> None:
-        """Keep what the poll that saw the command finished read, for the next command."""
+    def _remember_done(
+        self, ticket: Ticket, values: dict[str, Value], mark: tuple[float, int | None]
+    ) -> None:
+        """The poll saw ``ticket`` finished: note it, keep what it read for the next command."""
+        ticket.finished = True
         read_at, link = mark
         if link is not None:
             self.after_done = StateAfterDone(values, read_at, link)
@@ -648,8 +651,7 @@ class ClearOnAcceptChannel(CommandChannel):
         failure = self.status_failure(status)
         done = ticket.acknowledged and not status.moving and failure is None
         if done:
-            ticket.finished = True
-            self._remember_done(dict(status.raw), mark)
+            self._remember_done(ticket, dict(status.raw), mark)
         return Observation(ticket.acknowledged, done, failure, status.pose, status.joints)
 
     def withdraw(self, ticket: Ticket) -> bool:
@@ -835,8 +837,7 @@ class SequenceChannel(CommandChannel):
         pose: Pose | None = None
         joints: tuple[float, ...] | None = None
         if done:
-            ticket.finished = True
-            self._remember_done({**feedback, **flags}, mark)
+            self._remember_done(ticket, {**feedback, **flags}, mark)
             if ticket.command.target is not None:
                 # The final at-target check's read, in the same poll (on a driver's loop,
                 # no hand-over more); the next command's plan may start from it.

@@ -402,19 +402,18 @@ class RegisterGripper(_RobotWiredGripper):
         self._settle_s = _timeout(settle_s, 0.5)
         self._register: tuple[GripperMount, LevelOutput] | None = None
 
-    def _output(self, robot: GripperMount) -> LevelOutput:
-        """The register as a :class:`LevelOutput` on ``robot``'s link (one per mount)."""
+    def _output(self, robot: GripperMount, command: RegisterField) -> LevelOutput:
+        """The register (``command``: one word, 0 open, 1 close) as a :class:`LevelOutput`
+        on ``robot``'s link (one per mount)."""
         if self._register is None or self._register[0] is not robot:
 
-            def late(*, found: Value, wanted: Value) -> None:
-                self._events.warning(
-                    "gripper.late_write", gripper=self.kind, found=found, wanted=wanted
-                )
+            def late(**seen: Value) -> None:  # found=, wanted=
+                self._events.warning("gripper.late_write", gripper=self.kind, **seen)
                 robot.check_fault()  # no gripper write during an e-stop or error
 
-            command = robot.profile.field("gripper_command")
+            what = f"{self.kind}: gripper register"
             output = LevelOutput(
-                f"{self.kind}: gripper register", command, robot.transport, robot.gated, late
+                what, command.table, command.address, robot.transport, robot.gated, late
             )
             self._register = (robot, output)
         return self._register[1]
@@ -431,7 +430,7 @@ class RegisterGripper(_RobotWiredGripper):
         if robot.checked_status().moving:
             raise RobotError(f"{self.kind}: the arm is moving; a gripper command waits for it")
         # Writing the same open/close value again is harmless, so retrying is allowed.
-        self._output(robot).set(value)
+        self._output(robot, command).set(value)
         # The settle time counts from the write that landed, not from the first attempt:
         # retries during a short outage must not eat the time the fingers need.
         started = time.monotonic()

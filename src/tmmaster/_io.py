@@ -33,16 +33,7 @@ from ._codec import Value
 from ._exceptions import ConfigError, ConnectError, ModbusExceptionError, StopRequestedError
 from ._gate import CommandGate
 from ._poller import Poller
-from ._registers import (
-    Access,
-    DataType,
-    DigitalIOModule,
-    Handshake,
-    RegisterField,
-    RobotProfile,
-    Role,
-    Table,
-)
+from ._registers import DigitalIOModule, Handshake, RobotProfile, Table
 from ._transport import Transport
 
 #: The module ``RobotIO``'s calls address when none is named.
@@ -107,7 +98,8 @@ class LevelOutput:
 
     Args:
         what: The output, as messages name it (``"control_box DO 3"``).
-        field: Its register or coil.
+        table: Its Modbus table (a coil, a holding register: one bit or word).
+        address: Its address there.
         transport: The robot's link (its retry policy and counters).
         gated: Runs one attempt at a write through the robot's command gate.
         on_late: Told ``found=`` and ``wanted=`` before a late frame is undone (it
@@ -117,13 +109,14 @@ class LevelOutput:
     def __init__(
         self,
         what: str,
-        field: RegisterField,
+        table: Table,
+        address: int,
         transport: Transport,
         gated: Callable[[Callable[[], None]], None],
         on_late: Callable[..., object],
     ) -> None:
         self.what = what
-        self._field = field
+        self._at = (table, address)
         self._transport = transport
         self._gated = gated
         self._on_late = on_late
@@ -155,7 +148,7 @@ class LevelOutput:
             nonlocal in_doubt
             sent_at = time.monotonic()
             try:
-                self._gated(lambda: transport.write_fields([(self._field, value)], retry=False))
+                self._gated(lambda: transport.write_block(*self._at, [int(value)], retry=False))
             except SETTLED_FAILURES:
                 raise
             except BaseException:
@@ -183,8 +176,7 @@ class LevelOutput:
         total time after the newest of them was sent.
         """
         horizon = self._transport.retry.total_time_s
-        now = time.monotonic()
-        self._doubts = [d for d in self._doubts if d[1] + horizon > now]
+        self._doubts = [d for d in self._doubts if d[1] + horizon > time.monotonic()]
         against = [d for d in self._doubts if d[0] != value]
         if not against:
             return
@@ -193,7 +185,7 @@ class LevelOutput:
         seen = 0
         try:
             while True:
-                found = self._transport.read_fields([self._field])[self._field.name]
+                found = self._transport.read_block(*self._at, 1)[0]
                 if found != value:
                     seen += 1
                     self._on_late(found=found, wanted=value)
@@ -443,24 +435,13 @@ class RobotIO:
     def _output(self, address: int, what: str) -> LevelOutput:
         """The coil at ``address`` as a :class:`LevelOutput` (one per coil)."""
         with self._outputs_lock:
-            if (output := self._outputs.get(address)) is None:
-                coil = RegisterField(
-                    name=f"do_{address}",
-                    role=Role.CONTROL,
-                    table=Table.COIL,
-                    address=address,
-                    dtype=DataType.BOOL,
-                    access=Access.READ_WRITE,
+            if address not in self._outputs:
+                gated = functools.partial(self._gate.write, None)  # no command: none withdrawn
+                late = functools.partial(self._log.warning, "robot.io_late_write", output=what)
+                self._outputs[address] = LevelOutput(
+                    what, Table.COIL, address, self._transport, gated, late
                 )
-                output = LevelOutput(
-                    what,
-                    coil,
-                    self._transport,
-                    functools.partial(self._gate.write, None),  # no command: close() withdraws none
-                    functools.partial(self._log.warning, "robot.io_late_write", output=what),
-                )
-                self._outputs[address] = output
-            return output
+            return self._outputs[address]
 
     def do(self, channel: int, *, module: str = DEFAULT_MODULE) -> bool:
         """Read digital output ``channel`` of ``module`` back (one FC 01 request).
