@@ -62,32 +62,42 @@ def test_a_read_of_one_block_is_handed_over_as_a_whole_read() -> None:
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
-def test_a_move_hands_its_wait_to_the_loop_once(
+def test_a_move_hands_the_loop_one_read_one_write_and_its_wait(
     tm_simulator_factory: Callable[..., Simulator],
     monkeypatch: pytest.MonkeyPatch,
     profile: str,
 ) -> None:
-    # The loop notes the acknowledgement itself and polls on to the end: the robot's
-    # thread is woken once per move, by the poll that saw it done.
-    woken: list[str] = []
+    # The read before the command (what later moves reuse of the last poll aside), the
+    # write, and the wait: the loop notes the acknowledgement itself and polls on to the
+    # end (tmflow: with the final pose), so the robot's thread is woken once per wait.
+    handed: list[str] = []
+    hand_over = LoopTransport._hand_over
     follow = fleet_module.FleetMember.follow
 
-    def counted(member: fleet_module.FleetMember, state: Any) -> Any:
+    def counted_hand_over(link: Any, what: str, *args: Any) -> Any:
+        handed.append(what.split()[0])  # "read ..." / "write ..."
+        return hand_over(link, what, *args)
+
+    def counted_follow(member: fleet_module.FleetMember, state: Any) -> Any:
         observation = follow(member, state)
-        woken.append("handed back" if observation is None else "observation")
+        handed.append("handed back" if observation is None else "observation")
         return observation
 
-    monkeypatch.setattr(fleet_module.FleetMember, "follow", counted)
+    monkeypatch.setattr(LoopTransport, "_hand_over", counted_hand_over)
+    monkeypatch.setattr(fleet_module.FleetMember, "follow", counted_follow)
     sim = tm_simulator_factory(profile, time_scale=2)  # the acknowledgement ticks before the end
     with Robot(
         "127.0.0.1", sim.port, profile=profile, gripper=None, polling=PollPolicy(interval_s=0.01)
     ) as robot:
         robot.wait_until_ready(timeout_s=5)
-        for target in (A, B):
-            woken.clear()
+        robot.move_to(A, speed=60)  # the first move reads what later ones reuse
+        for target in (B, A, B):
+            handed.clear()
             motion = robot.move_to(target, speed=60)
             assert motion.done
-            assert woken == ["observation"]
+            assert motion.last_pose is not None
+            assert motion.last_pose.is_close(target, mm=0.5)
+            assert sorted(handed) == ["observation", "read", "write"]
         assert isinstance(robot.status(), RobotStatus)
 
 
