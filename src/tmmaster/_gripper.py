@@ -542,6 +542,10 @@ class _OwnConnectionGripper(Gripper):
     _STOP_FIELD = "command"
     # True from a move's write until it ended or its stop was delivered.
     _sent = False
+    # When that write was sent (a command's acknowledgement is timed from it).
+    _sent_at = 0.0
+    # Until then a stop frame of ours left unanswered may still land (and halt a move).
+    _stop_doubt_until = 0.0
 
     def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
         #: The gripper's register map.
@@ -638,11 +642,12 @@ class _OwnConnectionGripper(Gripper):
         started = time.monotonic()
 
         def send() -> None:
-            self._sent = True
+            self._sent, self._sent_at = True, time.monotonic()
             self.transport.write_fields(values, retry=False)
 
         try:
             self.check_robot()
+            self._wait_out_late_stop()
             self._gated(send)
             self._events.info("gripper.command_sent", gripper=self.kind, width_mm=width_mm)
             status = _wait(
@@ -664,6 +669,7 @@ class _OwnConnectionGripper(Gripper):
     def _stop_fingers(self) -> None:
         """Stop a move whose write was attempted and that neither ended nor was stopped."""
         if self._sent:
+            retries, sent_at = self.transport.stats.retries, time.monotonic()
             try:
                 field = self.profile.field(self._STOP_FIELD)
                 stop = [(field, field.code_of("stop"))]
@@ -671,6 +677,21 @@ class _OwnConnectionGripper(Gripper):
                 self._sent = False  # delivered: another thread need not write it again
             except TransportError as exc:
                 self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
+            finally:
+                if self._sent or self.transport.stats.retries != retries:  # an attempt unanswered
+                    self._stop_doubt_until = sent_at + self.transport.retry.total_time_s
+
+    def _wait_out_late_stop(self) -> None:
+        """Before a move's write: wait while a stop frame of ours left unanswered may still
+        land (up to the retry policy's ``total_time_s`` after it was sent). Landing during
+        the move, it would halt the fingers mid-way, and a halted move reads as one that
+        ended (no width on blog-2fg7). A stop request ends the wait (nothing written)."""
+        until = self._stop_doubt_until
+        if until > time.monotonic():
+            wait_s = round(until - time.monotonic(), 3)
+            self._events.warning("gripper.stop_in_doubt", gripper=self.kind, wait_s=wait_s)
+            poller = Poller(self.poll_interval_s, self._stop_event, deadline=until)
+            poller.sleep_until(until)
 
     def check_robot(self) -> None:
         """Raise the robot's typed error if it is in e-stop or error (no-op on its own)."""
@@ -728,7 +749,6 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
 
     def _move(self, width_mm: float, timeout_s: float | None) -> GripperStatus:
         p = self.profile
-        started = time.monotonic()  # the acknowledgement's clock
         # One FC16 of force, width and control; sent once: the acknowledgement tells.
         values = [
             (p.field("force"), self.force_n),
@@ -742,7 +762,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
             if not acknowledged:
                 control = int(self.read("control")["control"])
                 if control != 0:
-                    if time.monotonic() - started > self.ack_timeout_s:
+                    if time.monotonic() - self._sent_at > self.ack_timeout_s:
                         raise AcknowledgeTimeoutError(
                             f"{self.kind}: the gripper did not take the command within"
                             f" {self.ack_timeout_s:g} s; the command was withdrawn (control = 0)"
