@@ -16,7 +16,8 @@ from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError, robot_model
 #: "TCP Speed" default is 1500 mm/s (settable 0-4500). [TMF] 3 Safety Settings,
 #: Speed & Force, General, p. 38: these defaults are stop criteria; "If users want to
 #: reach 100% project override speed without triggering these stop criteria, set the
-#: limit value to the upper limit".
+#: limit value to the upper limit". [TMF] 9 Speed of PTP Motion, p. 169: "The PTP mode may
+#: cause the TCP to exceed speed limit, especially when the robot length is longer".
 DEFAULT_TCP_SPEED_LIMIT_MM_S = 1500.0
 
 #: A J1 swing of 120 deg with the arm half stretched, tool down, over the table.
