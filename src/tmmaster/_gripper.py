@@ -669,7 +669,7 @@ class _OwnConnectionGripper(Gripper):
     def _stop_fingers(self) -> None:
         """Stop a move whose write was attempted and that neither ended nor was stopped."""
         if self._sent:
-            retries, sent_at = self.transport.stats.retries, time.monotonic()
+            retries = self.transport.stats.retries
             try:
                 field = self.profile.field(self._STOP_FIELD)
                 stop = [(field, field.code_of("stop"))]
@@ -679,7 +679,8 @@ class _OwnConnectionGripper(Gripper):
                 self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
             finally:
                 if self._sent or self.transport.stats.retries != retries:  # an attempt unanswered
-                    self._stop_doubt_until = sent_at + self.transport.retry.total_time_s
+                    # From the end of the write: its last attempt was sent before then.
+                    self._stop_doubt_until = time.monotonic() + self.transport.retry.total_time_s
 
     def _wait_out_late_stop(self) -> None:
         """Before a move's write: wait while a stop frame of ours left unanswered may still
