@@ -194,16 +194,16 @@ def test_move_by_refuses_when_the_arm_moved_after_the_read(
     robot = robots(sim)
     robot.move_to(START, speed=50)
     channel = robot._channel
-    real = channel.read_pose_and_joints
+    real = channel.read_plan
     reads = 0
 
-    def elsewhere_first() -> tuple[Pose, tuple[float, ...] | None]:
+    def elsewhere_first() -> tuple[Pose, tuple[float, ...] | None, dict[str, Value]]:
         nonlocal reads
         reads += 1
-        pose, joints = real()
-        return (pose.offset(dx=5) if reads == 1 else pose), joints
+        pose, joints, values = real()
+        return (pose.offset(dx=5) if reads == 1 else pose), joints, values
 
-    monkeypatch.setattr(channel, "read_pose_and_joints", elsewhere_first)
+    monkeypatch.setattr(channel, "read_plan", elsewhere_first)
     sim.clear_request_log()
     with pytest.raises(tmmaster.RobotError, match="moved"):
         robot.move_by(dz=10)

@@ -319,24 +319,15 @@ class CommandChannel(ABC):
             self.after_done.pose = pose
         return pose
 
-    def read_pose_and_joints(self) -> tuple[Pose, tuple[float, ...] | None]:
-        """The TCP pose and the joints (deg; None where the profile does not publish them).
-
-        One request where the two are contiguous (Techman's 7013-7036), as one for the
-        pose alone.
-        """
-        values = self.read_plan_values()
-        return pose_from(values, TCP_FIELDS), self.joints_from(values)
-
-    def read_plan_values(self) -> dict[str, Value]:
-        """The plan's read: the TCP pose, the joints and the frames where published.
+    def read_plan(self) -> tuple[Pose, tuple[float, ...] | None, dict[str, Value]]:
+        """The plan's read: the TCP pose, the joints (deg; None where the profile does not
+        publish them) and every field read, the frames with them where published.
 
         One request where they are contiguous (Techman's 7001-7060). Read after the poll
         that saw a command done, the next command may start its plan from it.
         """
         values = self.read(self.plan_fields)
-        self._note_plan_read(values)
-        return values
+        return (*self._note_plan_read(values), values)
 
     def _note_plan_read(self, values: dict[str, Value]) -> tuple[Pose, tuple[float, ...] | None]:
         """The pose and joints in a plan read; kept for the next command's plan when the

@@ -609,7 +609,7 @@ class _MotionFollower:
             # (article), or right after it with the joints (tmflow).
             pose, joints = polled.pose, polled.joints
             if pose is None:
-                pose, joints = self._channel.read_pose_and_joints()
+                pose, joints, _ = self._channel.read_plan()
             motion.last_pose = pose
             if not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg

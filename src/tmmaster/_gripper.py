@@ -669,16 +669,20 @@ class _OwnConnectionGripper(Gripper):
     def _stop_fingers(self) -> None:
         """Stop a move whose write was attempted and that neither ended nor was stopped."""
         if self._sent:
-            retries = self.transport.stats.retries
+            field = self.profile.field(self._STOP_FIELD)
+            stop = [(field, field.code_of("stop"))]
+            doubt = False
             try:
-                field = self.profile.field(self._STOP_FIELD)
-                stop = [(field, field.code_of("stop"))]
-                self.transport.write_fields(stop, retry=True, interruptible=False)
+                try:
+                    self.transport.write_fields(stop, retry=False, interruptible=False)
+                except TransportError:
+                    doubt = True  # an attempt unanswered may still land, in a later move
+                    self.transport.write_fields(stop, retry=True, interruptible=False)
                 self._sent = False  # delivered: another thread need not write it again
             except TransportError as exc:
                 self._events.error("gripper.withdraw_failed", gripper=self.kind, error=str(exc))
             finally:
-                if self._sent or self.transport.stats.retries != retries:  # an attempt unanswered
+                if doubt or self._sent:
                     # From the end of the write: its last attempt was sent before then.
                     self._stop_doubt_until = time.monotonic() + self.transport.retry.total_time_s
 
@@ -687,12 +691,9 @@ class _OwnConnectionGripper(Gripper):
         land (up to the retry policy's ``total_time_s`` after it was sent). Landing during
         the move, it would halt the fingers mid-way, and a halted move reads as one that
         ended (no width on blog-2fg7). A stop request ends the wait (nothing written)."""
-        until = self._stop_doubt_until
-        if until > time.monotonic():
-            wait_s = round(until - time.monotonic(), 3)
-            self._events.warning("gripper.stop_in_doubt", gripper=self.kind, wait_s=wait_s)
-            poller = Poller(self.poll_interval_s, self._stop_event, deadline=until)
-            poller.sleep_until(until)
+        if (left := self._stop_doubt_until - time.monotonic()) > 0:
+            self._events.warning("gripper.stop_in_doubt", gripper=self.kind, wait_s=round(left, 3))
+            Poller(self.poll_interval_s, self._stop_event).sleep_until(self._stop_doubt_until)
 
     def check_robot(self) -> None:
         """Raise the robot's typed error if it is in e-stop or error (no-op on its own)."""

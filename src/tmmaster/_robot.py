@@ -1223,7 +1223,7 @@ class Robot:
     def _read_start(self) -> Pose:
         """The TCP pose the robot reports (with its joints, where published), for a plan."""
         self._require_connection()
-        start, joints = self._channel.read_pose_and_joints()
+        start, joints, _ = self._channel.read_plan()
         if joints is not None:
             self._planner.take_robot_joints(start, joints)
         return start

@@ -203,8 +203,7 @@ class FrameGuard:
         start, joints, values = ticket.start_pose, ticket.start_joints, ticket.start_values
         check = self.per_move and self.check.enabled
         if start is None or (joints is None and channel.joint_fields) or (check and not values):
-            values = channel.read_plan_values()
-            start, joints = pose_from(values, TCP_FIELDS), channel.joints_from(values)
+            start, joints, values = channel.read_plan()
         if check and values:
             self.frames(values, tool, f"before this {ticket.command.kind.value} command")
         return start, joints
