@@ -43,9 +43,9 @@ def test_stop_then_play_during_a_gripper_close_neither_reports_it_done_nor_runs_
             sim.wait_for(lambda: closes(sim) == 1, timeout=3)
             sim.call(lambda: sim._controller.bank.set("stop_project", True))  # the pendant
             sim.wait_for(lambda: not sim.field("project_running"), timeout=2)
-            press_play_pause(sim)  # the operator starts the project again
         finally:
-            thread.join(5)
+            thread.join(5)  # the master gave the close up (a Stop of its own lands first)
+        press_play_pause(sim)  # then the operator starts the project again
         sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2)
         beat = sim.field("heartbeat")
         sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2)
