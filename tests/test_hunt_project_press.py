@@ -1,12 +1,12 @@
 """A Play/Pause press whose answer was lost never lands later as a resume.
 
-TMflow's Play/Pause coil (7104) is a toggle. A fault proxy holds the master's press
-(matched by function code and address) past the request timeout: ``robot.pause()``
-raises, so the master gave that press up. Then the operator pauses the move on the
-pendant, and only then does the held press land (released on what the simulator shows,
-never on a time). Landing on the paused project, a toggle is Play: the move the
-operator paused would run on. The judge is the simulator's arm: it must stay where it
-was once the held press landed.
+TMflow's Play/Pause coil (7104) is a toggle, pressed by ``robot.pause()`` and
+``robot.play()`` alike. A fault proxy holds the master's press (matched by function code
+and address) past the request timeout: the call raises, so the master gave that press
+up. The held press lands only once the move is paused (by the operator, or by the
+master's own earlier ``pause()``), released on what the test did, never on a time.
+Landing on the paused project, a toggle is Play: the paused move would run on. The judge
+is the simulator's arm: it must stay where it was once the held press landed.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from fault_proxy import FaultProxy
 from fault_proxy import Rule as FaultRule
 from pendant import press_play_pause
 from tmmaster import (
+    Motion,
     PollPolicy,
     Pose,
     RetryPolicy,
@@ -35,7 +36,7 @@ Factory = Callable[..., Simulator]
 
 #: Techman's Play/Pause coil (TMflow 2.24 appendix C, p. 313).
 PLAY_PAUSE = 7104
-#: The master's answer timeout, s: the held press times out.
+#: The master's answer timeout, s: a held press times out.
 TIMEOUT_S = 0.2
 RETRY = RetryPolicy(attempts=4, total_time_s=3.0, initial_backoff_s=0.01, jitter_s=0)
 
@@ -52,22 +53,58 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
-def test_a_pause_press_given_up_never_resumes_a_move_the_operator_paused(
-    sim: Simulator, proxy: FaultProxy
-) -> None:
-    with Robot(
+def robot_through(proxy: FaultProxy, request_s: float = TIMEOUT_S) -> Robot:
+    """A robot (not yet connected) whose link passes the proxy."""
+    return Robot(
         "127.0.0.1",
         proxy.port,
         retry=RETRY,
-        timeouts=TimeoutPolicy(request_s=TIMEOUT_S),
+        timeouts=TimeoutPolicy(request_s=request_s),
         polling=PollPolicy(interval_s=0.01),
-    ) as robot:
-        robot.wait_until_ready(timeout_s=5)
-        start = robot.pose()
-        motion = robot.start_move(start.offset(dz=-150), speed=5)
-        sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=2)
-        release = threading.Event()
-        proxy.add(FaultRule("hold", function_code=5, address=PLAY_PAUSE, release=release))
+    )
+
+
+def slow_move(robot: Robot, sim: Simulator) -> Motion:
+    """A 150 mm move at 5 %, started and running on the robot."""
+    robot.wait_until_ready(timeout_s=5)
+    motion = robot.start_move(robot.pose().offset(dz=-150), speed=5)
+    sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=2)
+    return motion
+
+
+def hold_the_next_press(proxy: FaultProxy) -> threading.Event:
+    """The master's next Play/Pause press is held until the returned event is set."""
+    release = threading.Event()
+    proxy.add(FaultRule("hold", function_code=5, address=PLAY_PAUSE, release=release))
+    return release
+
+
+def assert_the_arm_stays(sim: Simulator) -> None:
+    """Once the robot acted on what landed (3 ticks), the arm does not move for 10 more."""
+    ticks = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= ticks + 3, timeout=2)
+    held: Pose = sim.tcp_pose()
+    ticks = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= ticks + 10, timeout=2)
+    assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6), (held, sim.tcp_pose())
+
+
+def assert_never_run_on(sim: Simulator, motion: Motion) -> None:
+    """The late press landed; the move never ran on and is reported failed, never done
+    (the master pressed Stop on the project when the press went unanswered)."""
+    assert_the_arm_stays(sim)
+    assert sim.motion_log()[0].done_wall_time is None
+    assert len(sim.motion_log()) == 1
+    with pytest.raises(RobotError):
+        motion.wait()
+
+
+def test_a_pause_press_given_up_never_resumes_a_move_the_operator_paused(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    with robot_through(proxy) as robot:
+        motion = slow_move(robot, sim)
+        release = hold_the_next_press(proxy)
         try:
             with pytest.raises(TransportError):
                 robot.pause()  # the press is held: no answer, the call gives it up
@@ -81,19 +118,24 @@ def test_a_pause_press_given_up_never_resumes_a_move_the_operator_paused(
         finally:
             release.set()
         proxy.wait_held()
-        ticks = sim.ticks
-        sim.wait_for(lambda: sim.ticks >= ticks + 3, timeout=2)
-        held: Pose = sim.tcp_pose()
-        ticks = sim.ticks
-        sim.wait_for(lambda: sim.ticks >= ticks + 10, timeout=2)
-        # The late press landed; the arm never moved on.
-        assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6), (held, sim.tcp_pose())
-        assert sim.motion_log()[0].done_wall_time is None
-        assert len(sim.motion_log()) == 1
-        # The master pressed Stop on the project when the press went unanswered: the
-        # move is reported failed, never done.
-        with pytest.raises(RobotError):
-            motion.wait()
+        assert_never_run_on(sim, motion)
+
+
+def test_a_play_press_given_up_never_resumes_the_paused_move(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    # The master's own move, paused by the master; its Play press is held.
+    with robot_through(proxy) as robot:
+        motion = slow_move(robot, sim)
+        robot.pause()
+        release = hold_the_next_press(proxy)
+        try:
+            with pytest.raises(TransportError):
+                robot.play()  # the press is held: no answer, the call gives it up
+        finally:
+            release.set()  # it lands now, after the master gave it up
+        proxy.wait_held()
+        assert_never_run_on(sim, motion)
 
 
 @pytest.mark.xfail(
@@ -111,18 +153,9 @@ def test_a_pause_racing_the_operators_pause_never_leaves_the_move_running(
 ) -> None:
     """The operator and the master press Pause at once; the master's press (answered in
     time) lands second. Whatever pause() then says, the arm must not run on."""
-    with Robot(
-        "127.0.0.1",
-        proxy.port,
-        retry=RETRY,
-        timeouts=TimeoutPolicy(request_s=2.0),
-        polling=PollPolicy(interval_s=0.01),
-    ) as robot:
-        robot.wait_until_ready(timeout_s=5)
-        robot.start_move(robot.pose().offset(dz=-150), speed=5)
-        sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=2)
-        release = threading.Event()
-        proxy.add(FaultRule("hold", function_code=5, address=PLAY_PAUSE, release=release))
+    with robot_through(proxy, request_s=2.0) as robot:
+        slow_move(robot, sim)
+        release = hold_the_next_press(proxy)
 
         def operator_pauses_first() -> None:
             proxy.wait_held()
@@ -138,9 +171,4 @@ def test_a_pause_racing_the_operators_pause_never_leaves_the_move_running(
         finally:
             release.set()
             operator.join(5)
-        ticks = sim.ticks
-        sim.wait_for(lambda: sim.ticks >= ticks + 3, timeout=2)
-        held = sim.tcp_pose()
-        ticks = sim.ticks
-        sim.wait_for(lambda: sim.ticks >= ticks + 10, timeout=2)
-        assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6), (held, sim.tcp_pose())
+        assert_the_arm_stays(sim)
