@@ -7,11 +7,14 @@ master reconnects, retries, and later asks for the other state. The held frame l
 only once the simulator executed that later write (released on what the simulator did,
 never on a time): the gripper must still end in the later state, as a digital output
 does (``tests/test_io_stale.py``). The judge is the simulator's own motion log and
-register.
+register. An AsyncRobot's close() cancelled during that watch ends it: once the
+``CancelledError`` reached the caller, the master writes nothing more to the register
+(the held frame, landing then, is the documented limit: no longer watched).
 """
 
 from __future__ import annotations
 
+import asyncio
 import threading
 from collections.abc import Callable, Iterator
 
@@ -19,7 +22,16 @@ import pytest
 
 from fault_proxy import FaultProxy
 from fault_proxy import Rule as FaultRule
-from tmmaster import PollPolicy, RegisterGripper, RetryPolicy, Robot, RobotError, TimeoutPolicy
+from test_aio import run, until
+from tmmaster import (
+    PollPolicy,
+    RegisterGripper,
+    RetryPolicy,
+    Robot,
+    RobotError,
+    TimeoutPolicy,
+    aio,
+)
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -96,6 +108,45 @@ def test_a_late_open_frame_never_leaves_a_closed_article_gripper_open(
     finally:
         release.set()
         watcher.join(5)
+
+
+def test_a_gripper_close_cancelled_during_its_watch_writes_nothing_after(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    release = threading.Event()
+    held = proxy.add(FaultRule("hold", function_code=16, address=GRIPPER_REGISTER, release=release))
+    sim.clear_request_log()
+
+    async def scenario() -> list[int]:
+        async with aio.connect(
+            "127.0.0.1",
+            proxy.port,
+            profile="article",
+            retry=RETRY,
+            timeouts=TimeoutPolicy(request_s=TIMEOUT_S),
+            polling=PollPolicy(interval_s=0.01),
+            gripper=RegisterGripper(settle_s=0.1),
+        ) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            await robot.gripper.open()  # the first frame held: retried, answered
+            assert held.times == 0
+            task = asyncio.create_task(robot.gripper.close())
+            # The close executed: its watch for the held open frame runs now.
+            await until(lambda: 1 in register_writes(sim))
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            after_cancel = len(register_writes(sim))
+            release.set()  # the held open lands, unwatched
+            proxy.wait_held()
+            await asyncio.sleep(0.1)  # room for a write that would still be going
+            return register_writes(sim)[after_cancel:]
+
+    try:
+        later = run(scenario)
+    finally:
+        release.set()
+    assert later == [0], later  # the late frame only: no write of the master's
 
 
 @pytest.mark.parametrize("profile", ["tmflow", "article"])

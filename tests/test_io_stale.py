@@ -179,6 +179,43 @@ def test_a_stop_request_ends_the_watch_and_says_so(sim: Simulator, proxy: FaultP
         robot.clear_stop_request()
 
 
+def test_close_during_a_do_watch_ends_it_and_nothing_is_written_after(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    # close() from another thread ends the watch; once it returned, the master writes
+    # that output no more (the held frame, landing then, is the documented limit).
+    release = threading.Event()
+    proxy.add(Rule("hold", function_code=5, address=DO, release=release))
+    robot = Robot("127.0.0.1", proxy.port, retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S))
+    errors: list[BaseException] = []
+    try:
+        robot.connect()
+        robot.io.set_do(DO, True)  # held: timed out, retried, answered
+
+        def set_low() -> None:
+            try:
+                robot.io.set_do(DO, False)
+            except StopRequestedError as exc:
+                errors.append(exc)
+
+        thread = threading.Thread(target=set_low)
+        thread.start()
+        sim.wait_for(lambda: False in coil_writes(sim), timeout=3)  # the watch runs now
+        robot.close()
+        thread.join(5)
+        after_close = len(coil_writes(sim))
+        release.set()  # the held True lands, unwatched
+        proxy.wait_held()
+        sim.wait_for(lambda: len(coil_writes(sim)) > after_close, timeout=2)
+        ticks = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= ticks + 5, timeout=2)
+    finally:
+        release.set()
+        robot.close()
+    assert len(errors) == 1  # the watch was ended, and set_do said so
+    assert coil_writes(sim)[after_close:] == [True]  # the late frame only
+
+
 def test_the_async_front_goes_through_the_same_guard(sim: Simulator, proxy: FaultProxy) -> None:
     """``AsyncRobotIO.set_do`` runs ``RobotIO.set_do`` on the robot's thread: same ending."""
 
