@@ -11,6 +11,7 @@ import pytest
 from tmmaster._exceptions import ConfigError, RegisterMapError
 from tmmaster._profiles import (
     builtin_profile_names,
+    gripper_profile,
     load_profile,
     profile_from_data,
     robot_profile,
@@ -88,6 +89,14 @@ def test_builtin_profiles_load_and_validate() -> None:
     assert builtin_profile_names() == ["article", "blog-2fg7", "onrobot-2fg7", "tmflow"]
     for name in builtin_profile_names():
         assert load_profile(name).name == name
+
+
+def test_a_profile_of_the_other_kind_is_refused_by_name() -> None:
+    with pytest.raises(RegisterMapError, match="blog-2fg7 is a gripper profile, not a robot"):
+        robot_profile("blog-2fg7")
+    with pytest.raises(RegisterMapError, match="tmflow is a robot profile, not a gripper"):
+        gripper_profile(robot_profile("tmflow"))
+    assert gripper_profile(gripper_profile("blog-2fg7")).name == "blog-2fg7"
 
 
 def test_article_profile_matches_the_article_contract() -> None:

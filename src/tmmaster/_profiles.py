@@ -12,7 +12,7 @@ import tomllib
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, TypeVar
 
 from pydantic import Field, TypeAdapter, ValidationError
 
@@ -22,6 +22,7 @@ from ._registers import DataType, GripperProfile, RegisterField, RobotProfile
 from ._toml import read_toml
 
 Profile = RobotProfile | GripperProfile
+_KindT = TypeVar("_KindT", RobotProfile, GripperProfile)
 
 _ADAPTER: TypeAdapter[Profile] = TypeAdapter(
     Annotated[RobotProfile | GripperProfile, Field(discriminator="kind")]
@@ -119,6 +120,16 @@ def _builtin_profile(name: str) -> Profile:
     return profile_from_data(_builtin_data(name), source=f"profile {name}")
 
 
+def _of_kind(name_or_path: str | Path | Profile, kind: type[_KindT]) -> _KindT:
+    """A profile of ``kind`` (returned as is) or loaded; RegisterMapError for the other kind."""
+    profile = name_or_path if isinstance(name_or_path, Profile) else load_profile(name_or_path)
+    if not isinstance(profile, kind):
+        named = profile.name if profile is name_or_path else name_or_path
+        wanted = "robot" if kind is RobotProfile else "gripper"
+        raise RegisterMapError(f"{named} is a {profile.kind} profile, not a {wanted} one")
+    return profile
+
+
 def robot_profile(name_or_path: str | Path | RobotProfile) -> RobotProfile:
     """Load a robot profile, refusing gripper profiles.
 
@@ -131,12 +142,7 @@ def robot_profile(name_or_path: str | Path | RobotProfile) -> RobotProfile:
     Raises:
         RegisterMapError: As :func:`load_profile`, or a gripper profile.
     """
-    if isinstance(name_or_path, RobotProfile):
-        return name_or_path
-    profile = load_profile(name_or_path)
-    if not isinstance(profile, RobotProfile):
-        raise RegisterMapError(f"{name_or_path} is a gripper profile, not a robot profile")
-    return profile
+    return _of_kind(name_or_path, RobotProfile)
 
 
 def gripper_profile(name_or_path: str | Path | GripperProfile) -> GripperProfile:
@@ -151,12 +157,7 @@ def gripper_profile(name_or_path: str | Path | GripperProfile) -> GripperProfile
     Raises:
         RegisterMapError: As :func:`load_profile`, or a robot profile.
     """
-    if isinstance(name_or_path, GripperProfile):
-        return name_or_path
-    profile = load_profile(name_or_path)
-    if not isinstance(profile, GripperProfile):
-        raise RegisterMapError(f"{name_or_path} is a robot profile, not a gripper profile")
-    return profile
+    return _of_kind(name_or_path, GripperProfile)
 
 
 def _format_errors(exc: ValidationError) -> str:
