@@ -854,9 +854,11 @@ class SequenceChannel(CommandChannel):
         command if the cancel came later still). So this returns None until the answer
         (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with our session in
         ``ack_session`` or ``done_seq`` at our number (taken) or not (withdrawn); or the
-        project not running (withdrawn: the start-up rule consumes it).
+        project not running (withdrawn: the start-up rule consumes the cancel, pending
+        at the next start, where a copy of the command frame still in the network, not
+        landed yet, would find its number free and run once Play is pressed).
         """
-        if (outcome := self.withdraw_outcome(ticket)) is None:
+        if not (outcome := self.withdraw_outcome(ticket)):
             self.cancel(ticket)
             outcome = self.withdraw_outcome(ticket)
         return outcome
