@@ -7,8 +7,9 @@ the robot program cannot take the number now. But the frames are still in the ne
 once the operator presses Play, the start-up rule finds nothing pending (the frames
 have not landed yet), and when they land their number is the next one, of a master
 that is still beating. Only a cancel record written at the give-up uses the number up
-(the start-up rule consumes it). The simulator runs the generated robot program; its
-motion log is the judge.
+(the start-up rule consumes it). On a running project, a number another master's move
+took is left alone: a cancel record there would stop that move. The simulator runs the
+generated robot program; its motion log is the judge.
 """
 
 from __future__ import annotations
@@ -16,12 +17,21 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
-from tmmaster import PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import (
+    PollPolicy,
+    Pose,
+    RetryPolicy,
+    Robot,
+    StopRequestedError,
+    TimeoutPolicy,
+    TMMasterError,
+)
 from tmmaster.sim import Simulator, Timing
 
 START = Pose(300, -200, 150, 180, 0, 90)
@@ -103,3 +113,35 @@ def test_a_write_held_while_the_project_stopped_never_runs_after_play(
             assert [r.target for r in sim.motion_log()] == [START]
             assert attempt(robot, NEXT, issued) == "done"  # the master still commands
     check(issued, sim.motion_log())
+
+
+def test_a_give_up_never_cancels_the_move_another_master_runs_under_its_number(
+    sim: Simulator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two masters read the same free number; the second's move takes it and runs. The
+    first gives its command up before its first poll: the number is another master's,
+    so it writes no cancel record, which the program's watchdog would take for the
+    second master giving its own move up."""
+    with (
+        Robot("127.0.0.1", sim.port, gripper=None) as first,
+        Robot("127.0.0.1", sim.port, gripper=None) as second,
+    ):
+        first.wait_until_ready()
+        first.move_to(START, speed=80)  # the first master claims the robot
+        real_send = first._channel.send
+        moves: list[Any] = []
+
+        def second_goes_first(ticket: Any) -> None:
+            # Between the first master's read of ack_seq and its write, the second
+            # claims the robot and its move takes the same number.
+            monkeypatch.setattr(first._channel, "send", real_send)
+            moves.append(second.start_move(NEXT, speed=5))
+            sim.wait_for(lambda: sim.field("ack_seq") == ticket.seq, timeout=2.0)
+            real_send(ticket)
+            first.interrupt()  # given up before its first poll
+
+        monkeypatch.setattr(first._channel, "send", second_goes_first)
+        with pytest.raises(StopRequestedError):
+            first.move_to(STALE, speed=80)
+        moves[0].wait()  # the second master's move runs to its end
+    assert [r.target for r in sim.motion_log()] == [START, NEXT]

@@ -854,11 +854,12 @@ class SequenceChannel(CommandChannel):
         command if the cancel came later still). So this returns None until the answer
         (:meth:`withdraw_outcome`): ``ack_seq`` at our number, with our session in
         ``ack_session`` or ``done_seq`` at our number (taken) or not (withdrawn); or the
-        project not running (withdrawn: the start-up rule consumes the cancel, pending
-        at the next start, where a copy of the command frame still in the network, not
-        landed yet, would find its number free and run once Play is pressed).
+        project not running (withdrawn). On a stopped project the cancel is written all
+        the same, and the start-up rule consumes it: a copy of the command frame still in
+        the network, not landed yet, would otherwise find its number free after Play. On
+        a running one, a number already taken is left alone (another master's move).
         """
-        if not (outcome := self.withdraw_outcome(ticket)):
+        if (outcome := self.withdraw_outcome(ticket)) is None or not self.may_resume():
             self.cancel(ticket)
             outcome = self.withdraw_outcome(ticket)
         return outcome
