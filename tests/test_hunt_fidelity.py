@@ -7,12 +7,13 @@ document version 1.00 (text copies: kenshu528-oss/Modbus-testkit-for-TMflow, ``T
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
 from tmmaster import ConfigError, Pose, Robot, UnreachablePoseError, robot_model
 
-#: [TMF] Appendix B, pp. 284 (TM5-700) and 286 (TM5-900): the Performance Safety
+#: [TMF] Appendix B, pp. 285 (TM5-700) and 287 (TM5-900): the Performance Safety
 #: "TCP Speed" default is 1500 mm/s (settable 0-4500). [TMF] 3 Safety Settings,
 #: Speed & Force, General, p. 38: these defaults are stop criteria; "If users want to
 #: reach 100% project override speed without triggering these stop criteria, set the
@@ -43,20 +44,14 @@ def test_a_full_speed_j1_swing_moves_the_flange_faster_than_the_default_tcp_limi
     assert _peak_tcp_speed_mm_s(SWING_FROM, SWING_TO) > DEFAULT_TCP_SPEED_LIMIT_MM_S * 1.2
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "gap: a PTP's TCP speed is not checked against the TM5's default Performance"
-        " Safety TCP speed limit (1500 mm/s, TMflow 2.24 Appendix B p. 284; a stop"
-        " criterion, 3 Safety Settings, Speed & Force, p. 38): a default-configured robot"
-        " stops this 100 % PTP that the master and the simulator run"
-    ),
-)
 def test_a_ptp_faster_than_the_default_tcp_speed_limit_is_refused() -> None:
+    # A default-configured robot stops this 100 % PTP (a stop criterion, [TMF] p. 38):
+    # the master refuses it before anything is sent, naming the figures and the setting.
     arm = robot_model("tm5-700")
     robot = Robot("127.0.0.1", 1, profile="tmflow")  # never connected
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=r"checks\.tcp_speed_limit_mm_s = 1500\)") as caught:
         robot.check_move(arm.forward(SWING_TO), 100, "ptp", seed_deg=SWING_FROM)
+    assert re.search(r"at 18\d\d mm/s", str(caught.value))
 
 
 def test_the_manuals_line_through_a_wrist_singularity_is_refused() -> None:

@@ -99,9 +99,10 @@ class Checks(Policy):
 
     ``Robot(host, checks=Checks(max_speed_percent=50, workspace=Workspace(floor_z_mm=0)))``.
     Before a byte is sent: the tool inside ``workspace``, the speed at most
-    ``max_speed_percent``, the target's units (``units``); at the end of a move: the
-    TCP within the two tolerances of the target; at connect: the robot's TCP against
-    its flange x ``tool`` (``frame``). The defaults are the safe ones. An invalid value
+    ``max_speed_percent``, the target's units (``units``), a PTP's TCP speed at most
+    ``tcp_speed_limit_mm_s``; at the end of a move: the TCP within the two tolerances
+    of the target; at connect: the robot's TCP against its flange x ``tool``
+    (``frame``). The defaults are the safe ones. An invalid value
     is a :class:`~tmmaster.ConfigError` naming the field (``checks.max_speed_percent
     must be an integer in [1, 100] %, got 0``).
     """
@@ -123,6 +124,11 @@ class Checks(Policy):
     orientation_tolerance_deg: Annotated[
         float, BeforeValidator(bounded("checks.orientation_tolerance_deg", ORIENTATION_BOUNDS))
     ] = 1.0
+    #: A PTP whose TCP would run faster is refused, mm/s (up to 4500): the robot's TCP
+    #: speed limit (TMflow's Safety Settings, Performance Safety "TCP Speed", a stop
+    #: criterion). None: the arm model's, TMflow's default 1500 mm/s; raise it to the
+    #: robot's own where its safety settings raise it (docs/kinematics.md).
+    tcp_speed_limit_mm_s: Annotated[float, Field(gt=0, le=4500, strict=True)] | None = None
     #: Refuse (UnitsError, before anything is sent) a target or a ``tool`` that looks
     #: like metres or radians; False takes them as written.
     units: bool = True

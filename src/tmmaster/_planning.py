@@ -322,6 +322,8 @@ class Planner:
         self.max_speed_percent = max_speed_percent
         self._settings = settings
         self._log = log
+        #: A PTP whose TCP would run faster is refused, mm/s (None: the model's limit).
+        self.tcp_speed_limit_mm_s: float | None = None
         #: The joints the arm is believed to be at (None: the model's ready posture).
         self.joints_hint: Joints | None = None
         #: The pose those joints put the TCP at (None: not known).
@@ -368,6 +370,19 @@ class Planner:
             text = f"the TCP would turn {turn:.2f} deg from {start} to {target}, about half a turn"
             raise ConfigError(f"{text}: no way round is the shorter, the robot may take either")
 
+    def _check_ptp_speed(self, start: Sequence[float], joints: Joints, speed: int) -> Joints:
+        """Refuse a PTP whose TCP would run faster than the robot's TCP speed limit, a
+        stop criterion of its Performance Safety settings (TMflow 2.24, 3 Safety
+        Settings, Speed & Force, p. 38; 1500 mm/s by default, Appendix B): "the PTP mode
+        may cause the TCP to exceed speed limit" (9 Speed of PTP Motion, p. 169). The
+        speed is the project speed's share of ``speed``, at the model's acceleration."""
+        percent = speed * self.project_speed_percent / 100
+        peak = max(self.model.ptp_tcp_speeds(tuple(start), joints, percent, None, self.tool))
+        if peak > (limit := self.tcp_speed_limit_mm_s or self.model.tcp_speed_limit_mm_s):
+            text = f"a PTP at {percent:g} % would move the TCP at {peak:.0f} mm/s, over the"
+            raise ConfigError(f"{text} TCP speed limit (checks.tcp_speed_limit_mm_s = {limit:g})")
+        return joints
+
     def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
         """Self-collision, the mounting plane and the gripper's housing at ``samples``."""
         floor = self.workspace.floor_z_mm
@@ -398,6 +413,9 @@ class Planner:
         A Line from ``start`` ends where its path from the arm's joints ends (the arm
         keeps its configuration), not where a fresh inverse solution would put it.
         """
+        seed = self.joints_hint if seed_deg is None else seed_deg
+        if motion is MotionType.PTP and seed is not None:
+            return self._check_ptp_speed(seed, self.validate(target, speed, seed), speed)
         if motion is not MotionType.LINE or start is None:
             return self.validate(target, speed, seed_deg)
         self._check_target(target, speed)
@@ -432,6 +450,7 @@ class Planner:
         hint = self.joints_hint
         if hint is not None:
             self._check_body(hint, body.ptp_samples(hint, checked))
+            self._check_ptp_speed(hint, checked, speed)
         return checked, tcp
 
     def check_arc(
@@ -693,11 +712,9 @@ class Planner:
 _arm_lowest = functools.lru_cache(maxsize=256)(arm_lowest_z_mm)
 
 
-@functools.lru_cache(maxsize=512)
-def _configuration(model: RobotModel, joints: Joints) -> tuple[bool, bool, bool]:
-    """A joint set's pose configuration, once: a move's target is the next move's seed,
-    and the plan asks what the check before any request asked (unless the arm moved)."""
-    return model.configuration(joints)
+# A joint set's pose configuration, once: a move's target is the next move's seed, and
+# the plan asks what the check before any request asked (unless the arm moved).
+_configuration = functools.lru_cache(maxsize=512)(RobotModel.configuration)
 
 
 @functools.lru_cache(maxsize=256)

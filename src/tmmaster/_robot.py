@@ -374,6 +374,7 @@ class Robot:
             settings=self._follower,
             log=self._log,
         )
+        self._planner.tcp_speed_limit_mm_s = options.checks.tcp_speed_limit_mm_s
         # A move at its deadline asks again (None, no read, where the profile has none).
         self._follower.project_speed = self._read_project_speed
         self._connected = False
@@ -531,6 +532,7 @@ class Robot:
             orientation_tolerance_deg=self.orientation_tolerance_deg,
             units=self.check_units,
             frame=self.frame_check,
+            tcp_speed_limit_mm_s=self._planner.tcp_speed_limit_mm_s,
         )
 
     # -- what a move is planned with (the planner's) ---------------------------

@@ -81,6 +81,10 @@ class RobotModel(BaseModel):
     joints: tuple[JointSpec, JointSpec, JointSpec, JointSpec, JointSpec, JointSpec]
     #: Maximum TCP speed of a Line motion at 100 % speed, mm/s.
     tcp_speed_mm_s: float = Field(gt=0)
+    #: The robot's TCP speed limit, mm/s: TMflow's Performance Safety "TCP Speed" stop
+    #: criterion (default 1500, settable 0-4500: TMflow 2.24 Appendix B). A PTP whose TCP
+    #: would run faster is refused by the master and stops the simulated robot (0x0021).
+    tcp_speed_limit_mm_s: float = Field(default=1500.0, gt=0, le=4500)
     #: Rated payload, kg: the simulator raises the robot's over-payload error (0x000F) for
     #: a heavier part carried; None: not known, not checked.
     payload_kg: float | None = Field(default=None, gt=0)
@@ -529,6 +533,35 @@ class RobotModel(BaseModel):
             trapezoid_time(abs(b - a), spec.speed_deg_s * scale, ramp)
             for a, b, spec in zip(_six(start_deg), _six(target_deg), self.joints, strict=True)
         )
+
+    @functools.lru_cache(maxsize=256)  # noqa: B019 (a model is immutable, kept by ROBOT_MODELS)
+    def ptp_tcp_speeds(
+        self, q0: Joints, q1: Joints, speed: float, accel_s: float | None, tool: Pose | None
+    ) -> tuple[float, ...]:
+        """The TCP's mean speed over each 20th of a PTP's duration, mm/s.
+
+        Every joint follows the same trapezoid over :meth:`ptp_time`, as the simulator's
+        arm does: the TCP (forward kinematics, with ``tool``) at 21 evenly spaced times,
+        the distance between two per 20th of the duration. Cached: a cycle repeats its
+        moves.
+
+        Args:
+            q0: The joints the PTP starts from, deg.
+            q1: The target's joints, deg.
+            speed: Speed, % (the project speed included).
+            accel_s: Time to top speed, s; None: the model's.
+            tool: The TCP in the flange frame (None: the flange).
+
+        Returns:
+            20 speeds, start to end (all 0 for a PTP that does not move).
+        """
+        seconds = self.ptp_time(q0, q1, speed_percent=speed, accel_time_s=accel_s)
+        ramp, n = self.accel_time_s if accel_s is None else accel_s, PathGauge.SAMPLES
+        fs = [trapezoid_progress(seconds * k / n, seconds, ramp) for k in range(n + 1)]
+        at = [
+            self.forward([a + (b - a) * f for a, b in zip(q0, q1, strict=True)], tool) for f in fs
+        ]
+        return tuple(n / max(seconds, 1e-9) * p.distance_to(q) for p, q in itertools.pairwise(at))
 
     def line_joints(
         self,

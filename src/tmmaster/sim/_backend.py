@@ -48,8 +48,9 @@ class PhysicsUnavailableError(TMMasterError, ImportError):
 
 
 #: Why a backend stopped the arm on its own: it hit something (the table, a fixture, a
-#: part it pressed on), or it carries more than the arm's rated payload.
-FaultKind = Literal["collision", "payload"]
+#: part it pressed on), it carries more than the arm's rated payload, or its TCP ran
+#: faster than the robot's TCP speed limit (:attr:`RobotModel.tcp_speed_limit_mm_s`).
+FaultKind = Literal["collision", "payload", "speed"]
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ class BackendFault:
     its optional ``take_fault()`` method (see ``docs/physics-backends.md``).
     """
 
-    #: ``"collision"`` or ``"payload"``.
+    #: ``"collision"``, ``"payload"`` or ``"speed"``.
     kind: FaultKind
     #: What happened, for the log (which link touched what, the mass carried).
     message: str

@@ -90,11 +90,23 @@ class SimErrorCode(IntEnum):
     #: Techman's "Over Payload Limit" (0x0000000F, TMflow SW 2.24 Software Manual,
     #: Appendix J, pp. 349 and 407): the arm carries a part over its rated payload.
     OVER_PAYLOAD = 0x000F
+    #: Techman's "Velocity or Angular Velocity Over Range" (0x00000021, Appendix J, pp.
+    #: 349 and 409: "an exceeding TCP speed or Joint speed which is over the limit of the
+    #: Safety Settings"; "check if the issued point is PTP"): a PTP's TCP ran faster than
+    #: the robot's TCP speed limit.
+    OVER_SPEED = 0x0021
     #: Techman's "Force or Torque Over Range" (0x00000022, Appendix J, pp. 349 and 409,
     #: whose first check is "if the robot collides with anything"): the arm, tool or
     #: fingers hit the table, a fixture or a part.
     COLLISION = 0x0022
 
+
+#: The robot error of each kind of fault a physics backend stopped the arm for.
+_FAULT_CODES = {
+    "collision": SimErrorCode.COLLISION,
+    "payload": SimErrorCode.OVER_PAYLOAD,
+    "speed": SimErrorCode.OVER_SPEED,
+}
 
 #: Techman's table: the flange pose in the robot base, and the Running Timer and Up Time
 #: (days, hours, minutes, seconds).
@@ -536,12 +548,13 @@ class RobotController(SimDevice[RobotProfile]):
             self._publish_pose()
 
     def _take_backend_fault(self) -> None:
-        """A collision or overload the physics stopped the arm for becomes a robot error."""
+        """A collision, an overload or an over-speed the physics stopped the arm for becomes a
+        robot error."""
         take = getattr(self._backend, "take_fault", None)  # optional in a backend
         fault = None if take is None else take()
         if fault is None:
             return
-        code = SimErrorCode.COLLISION if fault.kind == "collision" else SimErrorCode.OVER_PAYLOAD
+        code = _FAULT_CODES.get(fault.kind, SimErrorCode.OVER_PAYLOAD)
         self._log.warning(
             "sim.backend_fault", device=self._name, fault=fault.kind, detail=fault.message
         )

@@ -32,6 +32,11 @@ agree by construction.
   fixtures, and the pads against the parts: a collision stops the arm and is handed to
   the controller (:meth:`KinematicBackend.take_fault`), as is a carried part that with
   the gripper's own mass weighs more than the arm's rated payload (:mod:`._payload`).
+- A PTP whose TCP runs faster than the robot's TCP speed limit
+  (:attr:`~tmmaster.RobotModel.tcp_speed_limit_mm_s`, TMflow's Performance Safety "TCP
+  Speed", 1500 mm/s by default) stops: the arm brakes from where its TCP first runs
+  faster (:meth:`RobotModel.ptp_tcp_speeds`, the master's own check) and the fault
+  (``"speed"``) is handed to the controller, which reports Techman's 0x0021.
 - A stop (:meth:`KinematicBackend.stop_motion`: the Stop command, an e-stop, a robot
   error, an overload) brakes along the path over a time and a distance
   (:mod:`._stopping`); a collision stops the arm where it touched.
@@ -143,6 +148,9 @@ class _Motion:
     #: Stopped: how it brakes along its path (:mod:`._stopping`), from ``braking_from_s``.
     braking: Braking | None = None
     braking_from_s: float = 0.0
+    #: A PTP whose TCP runs faster than the robot's TCP speed limit: when it first does
+    #: (s after the start) and its top speed (mm/s); None: it never does.
+    over_speed: tuple[float, float] | None = None
 
     def progress(self, elapsed_s: float) -> float:
         """The path's progress (0..1) ``elapsed_s`` after the start, braking included."""
@@ -369,12 +377,8 @@ class KinematicBackend:
             joints = self._model.check_joints(joints_deg, tool=self._tool)
         except UnreachablePoseError as exc:
             raise MotionRejectedError(_reason(exc.reason), str(exc)) from exc
-        start = self._joints
-        duration = self._model.ptp_time(
-            start, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
-        )
         target = self._model.forward(joints, self._tool)
-        return self._begin(_Motion(MotionType.PTP, start, joints, target, duration, accel_time_s))
+        return self._begin(self._ptp(joints, target, speed_percent, accel_time_s))
 
     def start_arc_motion(
         self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
@@ -444,12 +448,19 @@ class KinematicBackend:
         return planned.duration_s
 
     def _plan_ptp(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
-        start = self._joints
-        joints = self._model.inverse(target, seed_deg=start, tool=self._tool)
-        duration = self._model.ptp_time(
-            start, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
-        )
-        return _Motion(MotionType.PTP, start, joints, target, duration, accel_time_s)
+        joints = self._model.inverse(target, seed_deg=self._joints, tool=self._tool)
+        return self._ptp(joints, target, speed_percent, accel_time_s)
+
+    def _ptp(self, joints: Joints, target: Pose, speed_percent: float, accel_s: float) -> _Motion:
+        """A PTP from where the arm is to ``joints``, and when its TCP first runs faster than
+        the robot's TCP speed limit (:func:`_over_speed`): the real robot's safety stops it
+        there (TMflow 2.24, 3 Safety Settings, Speed & Force, p. 38)."""
+        model, start = self._model, self._joints
+        duration = model.ptp_time(start, joints, speed_percent=speed_percent, accel_time_s=accel_s)
+        motion = _Motion(MotionType.PTP, start, joints, target, duration, accel_s)
+        speeds = model.ptp_tcp_speeds(start, joints, speed_percent, accel_s, self._tool)
+        motion.over_speed = _over_speed(speeds, duration, model.tcp_speed_limit_mm_s)
+        return motion
 
     def _plan_line(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
         start = self._pose
@@ -577,7 +588,9 @@ class KinematicBackend:
         self._step_arm(dt)
         if motion is not None:
             braking = motion.braking is not None
-            fault = self._check_collision() or (None if braking else self._overload())
+            fault = self._check_collision() or (
+                None if braking else self._overload() or self._over_speed(motion)
+            )
             if fault is None:
                 self._start_overlaps = self._overlaps_now  # compared with the next tick's
             elif fault.kind == "collision":
@@ -857,6 +870,20 @@ class KinematicBackend:
         self._place(motion, high)
         return self._check_collision() or fault
 
+    def _over_speed(self, motion: _Motion) -> BackendFault | None:
+        """A PTP that reached the time its TCP first runs past the speed limit: the arm is
+        put back there (a tick may have carried it further) to brake from it."""
+        if motion.over_speed is None or motion.elapsed_s < motion.over_speed[0]:
+            return None
+        (motion.elapsed_s, speed), motion.over_speed = motion.over_speed, None
+        self._motion = motion  # the step may have ended it: it brakes instead
+        self._place(motion, motion.elapsed_s)
+        return BackendFault(
+            "speed",
+            f"the TCP passed the robot's TCP speed limit ({self._model.tcp_speed_limit_mm_s:g}"
+            f" mm/s, its Safety Settings) on its way to {speed:.0f} mm/s",
+        )
+
     def _overload(self) -> BackendFault | None:
         """The gripper and the part carried weigh more than the arm's rated payload."""
         return over_payload(self._world.held, self._gripper, self._model.payload_kg)
@@ -1039,6 +1066,25 @@ def _check_speed(speed_percent: float, accel_time_s: float) -> None:
         raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
     if not 0 < speed_percent <= 100:
         raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
+
+
+def _over_speed(
+    speeds: Sequence[float], duration_s: float, limit: float
+) -> tuple[float, float] | None:
+    """When a PTP's TCP first runs faster than ``limit`` (s after its start), and its top
+    speed; None: it never does.
+
+    ``speeds`` are the master's own measure (:meth:`RobotModel.ptp_tcp_speeds`: the mean
+    over each 20th of the move), each taken at its 20th's middle, from rest at the start;
+    the limit is passed where the line between two of them crosses it.
+    """
+    first = next((k for k, v in enumerate(speeds) if v > limit), None)
+    if first is None:
+        return None
+    step = duration_s / len(speeds)
+    t0, v0 = ((first - 0.5) * step, speeds[first - 1]) if first else (0.0, 0.0)
+    t1, v1 = (first + 0.5) * step, speeds[first]
+    return (t0 + (t1 - t0) * (limit - v0) / (v1 - v0), max(speeds))
 
 
 def _lerp(a: Sequence[float], b: Sequence[float], fraction: float) -> Joints:

@@ -24,6 +24,10 @@ from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
 #: The project speeds TMflow offers, % (TMflow 2.24 Appendix C, p. 314: 5..100 by 5).
 _PROJECT_SPEEDS = range(5, 101, 5)
 
+#: The range of the robot's TCP speed limit (``RobotSetup.tcp_speed_limit_mm_s``): TMflow
+#: 2.24 Appendix B, Performance Safety "TCP Speed", 0-4500 mm/s (0 itself refused here).
+_TCP_SPEED_LIMIT_BOUNDS = Bounds(0.0, 4500.0, "mm/s", open_low=True)
+
 #: Physics backends a simulator can be built with by name (``Cell(physics=...)``).
 PHYSICS_BACKENDS = ("kinematic", "mujoco")
 
@@ -88,7 +92,8 @@ class RobotSetup:
 
     Raises:
         ConfigError: An unknown model (UnknownNameError) or gripper profile,
-            ``initial_seq`` not an int, ``resume_after_error`` not a bool. (The program
+            ``initial_seq`` not an int, ``resume_after_error`` not a bool,
+            ``tcp_speed_limit_mm_s`` not a number in (0, 4500] mm/s. (The program
             and the range of ``initial_seq`` depend on the profile: the Simulator checks
             them.)
     """
@@ -111,6 +116,10 @@ class RobotSetup:
     #: tmflow: the project speed, % (Techman's 7101: 5..100 in steps of 5): every move
     #: runs at its own speed times this, as in TMflow.
     project_speed: int = 100
+    #: The robot's TCP speed limit, mm/s (its Safety Settings' Performance Safety "TCP
+    #: Speed", up to 4500): a PTP whose TCP runs faster stops in error 0x0021 (the
+    #: kinematic backend). None: the arm model's, TMflow's default 1500 mm/s.
+    tcp_speed_limit_mm_s: float | None = None
     _gripper: GripperProfile | None = field(default=None, init=False, repr=False, compare=False)
     _arm: RobotModel | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -123,6 +132,11 @@ class RobotSetup:
             raise ConfigError(
                 f"model must be a model name or a RobotModel, got {shown(self.model)}"
             )
+        if self.tcp_speed_limit_mm_s is not None:
+            limit = require_in(
+                "tcp_speed_limit_mm_s", self.tcp_speed_limit_mm_s, _TCP_SPEED_LIMIT_BOUNDS
+            )
+            arm = arm.model_copy(update={"tcp_speed_limit_mm_s": limit})
         object.__setattr__(self, "_arm", arm)
         if self.gripper is not None:
             object.__setattr__(self, "_gripper", gripper_profile(self.gripper))
