@@ -334,3 +334,45 @@ def test_a_call_that_will_not_give_up_raises_the_cancel_after_settle_timeout_s(
         waited = run(scenario)
     assert waited >= 0.3  # the bound is the very feature: never raised before it
     assert any("aio.cancel_unsettled" in r.getMessage() for r in caplog.records)
+
+
+def test_a_move_cancelled_while_its_write_is_held_in_the_network_never_runs() -> None:
+    # tmflow: the task is cancelled while its command write is stuck in the network. The
+    # write times out, the master reads back, finds nothing, and may not resend (a stop
+    # is requested): it cancels the number before the CancelledError, and the frame that
+    # lands afterwards never runs.
+    from fault_proxy import FaultProxy, Rule
+
+    async def scenario() -> None:
+        issued: list[Issued] = []
+        with (
+            Simulator("tmflow", time_scale=20.0, timing=Timing(tick_hz=50.0)) as sim,
+            FaultProxy(sim.port) as proxy,
+        ):
+            async with aio.connect(
+                "127.0.0.1",
+                proxy.port,
+                gripper=None,
+                timeouts=TimeoutPolicy(request_s=0.15, ack_timeout_s=0.5, motion_margin_s=1.0),
+                polling=PollPolicy(interval_s=0.01),
+            ) as robot:
+                await robot.move_to(A, speed=80)
+                issued.append(Issued(A, 0.0, 0.0, "done"))
+                release = threading.Event()
+                proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+                issued.append(Issued(B, time.monotonic()))
+                task = asyncio.ensure_future(robot.move_to(B, speed=80))
+                await until(lambda: any(s.action == "hold" for s in proxy.seen))
+                task.cancel()
+                with pytest.raises(asyncio.CancelledError):
+                    await task
+                issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
+                assert given_up(robot.last_motion)
+                release.set()  # the held frame lands now
+                await asyncio.to_thread(proxy.wait_held)
+                ticks = sim.ticks
+                await asyncio.to_thread(sim.wait_for, lambda: sim.ticks >= ticks + 10, timeout=5.0)
+            check(issued, sim.motion_log())
+            assert [r.target for r in sim.motion_log() if r.target is not None] == [A]
+
+    run(scenario)
