@@ -20,7 +20,7 @@ import pytest
 import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
-from test_aio import given_up, moving, run, until
+from test_aio import NOTHING_LATER_TICKS, given_up, moving, run, ticks_pass, until
 from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator, Timing
 
@@ -206,7 +206,7 @@ def test_a_task_group_whose_sibling_fails_gives_the_move_up(
                         group.create_task(fails())
             issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
             assert given_up(handle.motion), handle.motion
-            await asyncio.sleep(0.3)
+            await ticks_pass(sim, NOTHING_LATER_TICKS)
 
     run(scenario)
     check(issued, sim.motion_log())
@@ -298,7 +298,7 @@ def test_a_clear_stop_request_while_a_cancelled_call_gives_up_does_not_take_its_
                 await task
             assert robot.last_motion is not None
             assert robot.last_motion.stop_delivered is True
-            await asyncio.sleep(0.3)  # a move still running would go on
+            await ticks_pass(sim, NOTHING_LATER_TICKS)  # a move still running would go on
             assert not sim.tcp_pose().is_close(A)  # stopped short of it (seconds away)
             # The user's clear took effect once the cancelled call was over.
             await robot.wait_until_ready(timeout_s=5)
