@@ -12,9 +12,11 @@ from __future__ import annotations
 import pytest
 
 import tmmaster
+from sim_backends import BACKENDS
 from sim_speeds import QUICK
 from tmmaster import Checks, ConfigError, PollPolicy, Robot, robot_model
 from tmmaster.sim import KinematicBackend, RobotSetup, Simulator
+from tmmaster.sim._backend import PhysicsBackend
 from tmmaster.sim._controller import SimErrorCode
 
 ARM = robot_model("tm5-700")
@@ -70,15 +72,22 @@ def test_a_line_between_the_same_ends_is_not_held_to_the_ptp_limit() -> None:
     robot.check_move(ARM.forward(end), 100, "line", seed_deg=start)  # no start: no path
 
 
-def _swing_backend(speed: float, limit: float | None = None) -> KinematicBackend:
+def _swing_backend(
+    speed: float, limit: float | None = None, name: str = "kinematic"
+) -> KinematicBackend:
     """The simulator's arm, its limit ``limit`` (None: the model's), starting the swing."""
     arm = ARM if limit is None else ARM.model_copy(update={"tcp_speed_limit_mm_s": limit})
-    backend = KinematicBackend(arm, home=FROM_POSE)
+    if name == "kinematic":
+        backend = KinematicBackend(arm, home=FROM_POSE)
+    else:
+        from tmmaster.sim._mujoco import MuJoCoBackend
+
+        backend = MuJoCoBackend(arm, home=FROM_POSE)  # type: ignore[assignment]
     backend.start_joint_motion(SWING_TO, speed_percent=speed, accel_time_s=0.2)
     return backend
 
 
-def _run(backend: KinematicBackend, step_s: float) -> tuple[float, list[str]]:
+def _run(backend: PhysicsBackend, step_s: float) -> tuple[float, list[str]]:
     """Step ``backend`` until the arm rests: its TCP's top speed measured step by step
     (mm/s) and the faults it handed over."""
     top, faults, before = 0.0, [], backend.tcp_pose()
@@ -87,7 +96,7 @@ def _run(backend: KinematicBackend, step_s: float) -> tuple[float, list[str]]:
         if (fault := backend.take_fault()) is not None:
             faults.append(fault.kind)
         top = max(top, before.distance_to(before := backend.tcp_pose()) / step_s)
-        if not backend.motion_running:
+        if backend.is_settled():
             break
     return top, faults
 
@@ -107,13 +116,17 @@ def test_the_simulated_arm_never_runs_its_tcp_past_the_limit_it_stops_at() -> No
     assert coarse.joint_positions_deg() == pytest.approx(stopped, abs=1e-6)
 
 
-@pytest.mark.parametrize(("speed", "limit", "stops"), [(80, None, False), (81, None, True)])
+@pytest.mark.parametrize("backend_name", BACKENDS)
+@pytest.mark.parametrize(("speed", "stops"), [(80, False), (81, True)])
 def test_the_simulator_stops_exactly_the_ptps_the_master_refuses(
-    speed: int, limit: float | None, stops: bool
+    backend_name: str, speed: int, stops: bool
 ) -> None:
-    backend = _swing_backend(speed, limit)
+    backend = _swing_backend(speed, name=backend_name)
     faults = _run(backend, 0.02)[1]
     assert faults == (["speed"] if stops else [])
+    joints = backend.joint_positions_deg()
+    assert joints is not None
+    assert (joints[0] < 0) is stops  # stopped on its way, or at the target's 60 deg
     refused = max(ARM.ptp_tcp_speeds(SWING_FROM, SWING_TO, speed, None, None)) > LIMIT
     assert refused is stops
 

@@ -68,7 +68,14 @@ from ._collide import (
     transform_point,
 )
 from ._payload import over_payload
-from ._stopping import Braking, path_gradient, plan_braking, trapezoid_rate
+from ._stopping import (
+    Braking,
+    over_speed_at,
+    path_gradient,
+    plan_braking,
+    speed_fault,
+    trapezoid_rate,
+)
 from ._world import (
     GRASP_MODES,
     TABLE_CENTRE_XY_MM,
@@ -453,13 +460,13 @@ class KinematicBackend:
 
     def _ptp(self, joints: Joints, target: Pose, speed_percent: float, accel_s: float) -> _Motion:
         """A PTP from where the arm is to ``joints``, and when its TCP first runs faster than
-        the robot's TCP speed limit (:func:`_over_speed`): the real robot's safety stops it
+        the robot's TCP speed limit (:func:`over_speed_at`): the real robot's safety stops it
         there (TMflow 2.24, 3 Safety Settings, Speed & Force, p. 38)."""
         model, start = self._model, self._joints
         duration = model.ptp_time(start, joints, speed_percent=speed_percent, accel_time_s=accel_s)
         motion = _Motion(MotionType.PTP, start, joints, target, duration, accel_s)
         speeds = model.ptp_tcp_speeds(start, joints, speed_percent, accel_s, self._tool)
-        motion.over_speed = _over_speed(speeds, duration, model.tcp_speed_limit_mm_s)
+        motion.over_speed = over_speed_at(speeds, duration, model.tcp_speed_limit_mm_s)
         return motion
 
     def _plan_line(self, target: Pose, speed_percent: float, accel_time_s: float) -> _Motion:
@@ -878,11 +885,7 @@ class KinematicBackend:
         (motion.elapsed_s, speed), motion.over_speed = motion.over_speed, None
         self._motion = motion  # the step may have ended it: it brakes instead
         self._place(motion, motion.elapsed_s)
-        return BackendFault(
-            "speed",
-            f"the TCP passed the robot's TCP speed limit ({self._model.tcp_speed_limit_mm_s:g}"
-            f" mm/s, its Safety Settings) on its way to {speed:.0f} mm/s",
-        )
+        return speed_fault(self._model.tcp_speed_limit_mm_s, speed)
 
     def _overload(self) -> BackendFault | None:
         """The gripper and the part carried weigh more than the arm's rated payload."""
@@ -1066,25 +1069,6 @@ def _check_speed(speed_percent: float, accel_time_s: float) -> None:
         raise ValueError(f"accel_time_s must be >= 0, got {accel_time_s}")
     if not 0 < speed_percent <= 100:
         raise ValueError(f"speed_percent must be in (0, 100], got {speed_percent}")
-
-
-def _over_speed(
-    speeds: Sequence[float], duration_s: float, limit: float
-) -> tuple[float, float] | None:
-    """When a PTP's TCP first runs faster than ``limit`` (s after its start), and its top
-    speed; None: it never does.
-
-    ``speeds`` are the master's own measure (:meth:`RobotModel.ptp_tcp_speeds`: the mean
-    over each 20th of the move), each taken at its 20th's middle, from rest at the start;
-    the limit is passed where the line between two of them crosses it.
-    """
-    first = next((k for k, v in enumerate(speeds) if v > limit), None)
-    if first is None:
-        return None
-    step = duration_s / len(speeds)
-    t0, v0 = ((first - 0.5) * step, speeds[first - 1]) if first else (0.0, 0.0)
-    t1, v1 = (first + 0.5) * step, speeds[first]
-    return (t0 + (t1 - t0) * (limit - v0) / (v1 - v0), max(speeds))
 
 
 def _lerp(a: Sequence[float], b: Sequence[float], fraction: float) -> Joints:

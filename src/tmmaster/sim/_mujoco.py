@@ -38,7 +38,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, cast
 from xml.sax.saxutils import quoteattr
 
 from .. import _body as body
@@ -46,7 +46,7 @@ from .. import _kinematics as kin
 from .._checks import Bounds, require_in, require_positive
 from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import MotionType, Pose
-from .._robot_models import RobotModel, trapezoid_progress
+from .._robot_models import Joints, RobotModel, trapezoid_progress
 from ._backend import (
     BackendFault,
     GripperState,
@@ -58,7 +58,14 @@ from ._backend import (
 )
 from ._collide import ARM_RADIUS_MM
 from ._payload import over_payload
-from ._stopping import Braking, path_gradient, plan_braking, trapezoid_rate
+from ._stopping import (
+    Braking,
+    over_speed_at,
+    path_gradient,
+    plan_braking,
+    speed_fault,
+    trapezoid_rate,
+)
 from ._world import (
     DEFAULT_GRIPPER,
     GRASP_MODES,
@@ -239,6 +246,9 @@ class _Trajectory:
     #: Stopped: how it brakes along its path (:mod:`._stopping`), from ``braking_from_s``.
     braking: Braking | None = None
     braking_from_s: float = 0.0
+    #: A PTP whose TCP runs faster than the robot's TCP speed limit: when it first does
+    #: (s after the start) and its top speed (mm/s); None: it never does.
+    over_speed: tuple[float, float] | None = None
 
     def joints_at(self, elapsed_s: float) -> tuple[float, ...]:
         if elapsed_s == self._last[0]:
@@ -1347,7 +1357,10 @@ class MuJoCoBackend(_FingersAndParts):
             elif exc.reason == "singularity":
                 reason = "singularity"
             raise MotionRejectedError(reason, str(exc)) from exc
-        return self._follow(samples, duration, accel_time_s)
+        self._follow(samples, duration, accel_time_s)
+        if motion is not MotionType.LINE:
+            self._watch_speed(samples[-1], speed_percent, accel_time_s)
+        return duration
 
     def start_joint_motion(
         self, joints_deg: Sequence[float], *, speed_percent: float, accel_time_s: float
@@ -1365,7 +1378,9 @@ class MuJoCoBackend(_FingersAndParts):
         duration = self._model.ptp_time(
             here, joints, speed_percent=speed_percent, accel_time_s=accel_time_s
         )
-        return self._follow([here, tuple(joints)], duration, accel_time_s)
+        self._follow([here, tuple(joints)], duration, accel_time_s)
+        self._watch_speed(joints, speed_percent, accel_time_s)
+        return duration
 
     def start_arc_motion(
         self, via: Pose, target: Pose, *, speed_percent: float, accel_time_s: float
@@ -1412,6 +1427,32 @@ class MuJoCoBackend(_FingersAndParts):
         self._start_parts = [self._part_pose(k) for k in range(len(self._objects))]
         self._start_body = self._body_depths(self._current_joints())
         return duration
+
+    def _watch_speed(
+        self, joints: Sequence[float], speed_percent: float, accel_time_s: float
+    ) -> None:
+        """The PTP just started: when its TCP first runs faster than the robot's TCP speed
+        limit (:func:`~._stopping.over_speed_at`, by the reference the servo follows)."""
+        trajectory = self._trajectory
+        assert trajectory is not None
+        model = self._model
+        start, end = (cast(Joints, tuple(q)) for q in (trajectory.samples[0], joints))
+        speeds = model.ptp_tcp_speeds(start, end, speed_percent, accel_time_s, self._tool)
+        limit = model.tcp_speed_limit_mm_s
+        trajectory.over_speed = over_speed_at(speeds, trajectory.duration_s, limit)
+
+    def _motion_fault(self, trajectory: _Trajectory) -> BackendFault | None:
+        """What stops the moving arm at this physics step: a collision, an overload or a
+        PTP past the TCP speed limit (None: nothing)."""
+        return self._check_collision() or self._overload() or self._over_speed(trajectory)
+
+    def _over_speed(self, trajectory: _Trajectory) -> BackendFault | None:
+        """The PTP's reference reached the time its TCP first runs past the speed limit."""
+        over = trajectory.over_speed
+        if over is None or trajectory.braking is not None or trajectory.elapsed_s < over[0]:
+            return None
+        trajectory.over_speed = None
+        return speed_fault(self._model.tcp_speed_limit_mm_s, over[1])
 
     def _body_depths(self, joints: tuple[float, ...]) -> dict[tuple[str, str], float]:
         """The arm's parts meeting each other or the mounting plane at ``joints``, mm."""
@@ -1717,7 +1758,7 @@ class MuJoCoBackend(_FingersAndParts):
         self.sim_time_s += h
         self._clip_speeds()
         if trajectory is not None:
-            fault = self._check_collision() or self._overload()
+            fault = self._motion_fault(trajectory)
             if fault is not None:
                 self._stop_for(fault, now)
         if self._gripper_moving:

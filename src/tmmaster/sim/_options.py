@@ -117,8 +117,8 @@ class RobotSetup:
     #: runs at its own speed times this, as in TMflow.
     project_speed: int = 100
     #: The robot's TCP speed limit, mm/s (its Safety Settings' Performance Safety "TCP
-    #: Speed", up to 4500): a PTP whose TCP runs faster stops in error 0x0021 (the
-    #: kinematic backend). None: the arm model's, TMflow's default 1500 mm/s.
+    #: Speed", up to 4500): a PTP whose TCP runs faster stops in error 0x0021. None:
+    #: the arm model's, TMflow's default 1500 mm/s.
     tcp_speed_limit_mm_s: float | None = None
     _gripper: GripperProfile | None = field(default=None, init=False, repr=False, compare=False)
     _arm: RobotModel | None = field(default=None, init=False, repr=False, compare=False)

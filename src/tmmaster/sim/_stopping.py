@@ -28,6 +28,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from ._backend import BackendFault
+
 #: Time a joint at its top speed takes to stop, s: the low end of the TM5-700's
 #: 0.34-0.68 s in Techman's Safety Manual, within TMflow's Category 2 deceleration time
 #: of 300-700 ms for the TM5S (TMflow SW 2.24 Software Manual, p. 112). An estimate.
@@ -130,3 +132,49 @@ def plan_braking(
     if braking.end_progress >= 1.0:
         return None
     return braking
+
+
+def over_speed_at(
+    speeds: Sequence[float], duration_s: float, limit: float
+) -> tuple[float, float] | None:
+    """When a PTP's TCP first runs faster than ``limit`` (s after its start), and its top
+    speed; None: it never does.
+
+    The robot's safety stops such a PTP there (its Performance Safety "TCP Speed", a stop
+    criterion: TMflow 2.24, 3 Safety Settings, Speed & Force, p. 38), and brakes.
+
+    Args:
+        speeds: The master's own measure of the TCP's speed along the PTP
+            (:meth:`~tmmaster.RobotModel.ptp_tcp_speeds`: its mean over each 20th of the
+            move), mm/s. Each is taken at its 20th's middle, from rest at the start; the
+            limit is passed where the line between two of them crosses it.
+        duration_s: The PTP's duration, s.
+        limit: The robot's TCP speed limit, mm/s.
+
+    Returns:
+        (seconds after the start, the top speed in mm/s), or None.
+    """
+    first = next((k for k, v in enumerate(speeds) if v > limit), None)
+    if first is None:
+        return None
+    step = duration_s / len(speeds)
+    t0, v0 = ((first - 0.5) * step, speeds[first - 1]) if first else (0.0, 0.0)
+    t1, v1 = (first + 0.5) * step, speeds[first]
+    return (t0 + (t1 - t0) * (limit - v0) / (v1 - v0), max(speeds))
+
+
+def speed_fault(limit: float, top: float) -> BackendFault:
+    """The fault a PTP past the robot's TCP speed limit stops for (Techman's 0x0021).
+
+    Args:
+        limit: The robot's TCP speed limit, mm/s.
+        top: The speed the PTP would have reached, mm/s.
+
+    Returns:
+        A ``"speed"`` fault naming both.
+    """
+    return BackendFault(
+        "speed",
+        f"the TCP passed the robot's TCP speed limit ({limit:g} mm/s, its Safety Settings)"
+        f" on its way to {top:.0f} mm/s",
+    )
