@@ -14,7 +14,7 @@ import pytest
 import tmmaster
 from sim_backends import BACKENDS
 from sim_speeds import QUICK
-from tmmaster import Checks, ConfigError, PollPolicy, Robot, robot_model
+from tmmaster import Checks, ConfigError, PollPolicy, Pose, Robot, robot_model
 from tmmaster.sim import KinematicBackend, RobotSetup, Simulator
 from tmmaster.sim._backend import PhysicsBackend
 from tmmaster.sim._controller import SimErrorCode
@@ -214,3 +214,21 @@ def test_the_limit_is_held_to_the_project_speeds_share_of_the_move() -> None:
         robot.move_joints(SWING_TO, speed=90)
         assert sim.tcp_pose().is_close(TO_POSE, mm=0.1)
         assert sim.field("last_error_code") == 0
+
+
+def test_a_first_move_from_joints_the_master_did_not_know_is_checked_before_the_write() -> None:
+    # article publishes no joints: the check before the move has no start to plan from,
+    # so the plan made from the pose the robot reports (read before the write) refuses it.
+    target = Pose(200, 300, 100, 180, 0, 90)  # from the ready posture: 1509 mm/s at 100 %
+    with (
+        Simulator("article", listen=False, **QUICK) as sim,
+        tmmaster.connect(sim.url, profile="article", gripper=None) as robot,
+    ):
+        robot.wait_until_ready(timeout_s=5)
+        robot.check_move(target, 100)  # nothing to plan from yet: passes
+        with pytest.raises(ConfigError, match=r"checks\.tcp_speed_limit_mm_s = 1500\)"):
+            robot.move_to(target, speed=100)
+        assert not sim.motion_log()  # nothing was sent
+        robot.move_to(target, speed=90)
+        assert sim.tcp_pose().is_close(target, mm=0.1)
+        assert sim.field("error_code") == 0

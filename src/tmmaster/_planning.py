@@ -370,14 +370,21 @@ class Planner:
             text = f"the TCP would turn {turn:.2f} deg from {start} to {target}, about half a turn"
             raise ConfigError(f"{text}: no way round is the shorter, the robot may take either")
 
-    def _check_ptp_speed(self, start: Sequence[float], joints: Joints, speed: int) -> Joints:
+    def _share(self, speed: float) -> float:
+        """The speed the robot runs a move at ``speed`` % with: TMflow's motion speed x
+        project speed."""
+        return speed * self.project_speed_percent / 100.0
+
+    def _check_ptp_speed(
+        self, start: Sequence[float], joints: Joints, percent: float, accel: float | None = None
+    ) -> Joints:
         """Refuse a PTP whose TCP would run faster than the robot's TCP speed limit, a
         stop criterion of its Performance Safety settings (TMflow 2.24, 3 Safety
         Settings, Speed & Force, p. 38; 1500 mm/s by default, Appendix B): "the PTP mode
-        may cause the TCP to exceed speed limit" (9 Speed of PTP Motion, p. 169). The
-        speed is the project speed's share of ``speed``, at the model's acceleration."""
-        percent = speed * self.project_speed_percent / 100
-        peak = max(self.model.ptp_tcp_speeds(tuple(start), joints, percent, None, self.tool))
+        may cause the TCP to exceed speed limit" (9 Speed of PTP Motion, p. 169).
+        ``percent``: the speed the robot runs it at (:meth:`_share`); ``accel``: its
+        time to top speed, s (None: the model's)."""
+        peak = max(self.model.ptp_tcp_speeds(tuple(start), joints, percent, accel, self.tool))
         if peak > (limit := self.tcp_speed_limit_mm_s or self.model.tcp_speed_limit_mm_s):
             text = f"a PTP at {percent:g} % would move the TCP at {peak:.0f} mm/s, over the"
             raise ConfigError(f"{text} TCP speed limit (checks.tcp_speed_limit_mm_s = {limit:g})")
@@ -415,7 +422,9 @@ class Planner:
         """
         seed = self.joints_hint if seed_deg is None else seed_deg
         if motion is MotionType.PTP and seed is not None:
-            return self._check_ptp_speed(seed, self.validate(target, speed, seed), speed)
+            return self._check_ptp_speed(
+                seed, self.validate(target, speed, seed), self._share(speed)
+            )
         if motion is not MotionType.LINE or start is None:
             return self.validate(target, speed, seed_deg)
         self._check_target(target, speed)
@@ -450,7 +459,7 @@ class Planner:
         hint = self.joints_hint
         if hint is not None:
             self._check_body(hint, body.ptp_samples(hint, checked))
-            self._check_ptp_speed(hint, checked, speed)
+            self._check_ptp_speed(hint, checked, self._share(speed))
         return checked, tcp
 
     def check_arc(
@@ -614,7 +623,7 @@ class Planner:
         speed = float(command.speed or 100)
         if command.speed_mm_s is not None:
             speed = min(100.0, command.speed_mm_s * 100 / self.model.tcp_speed_mm_s)
-        speed *= self.project_speed_percent / 100.0  # TMflow: motion speed x project speed
+        speed = self._share(speed)
         if command.kind is CommandKind.CIRCLE:
             target_joints, expected, gauge = self._plan_arc(command, origin, speed, accel)
         else:
@@ -669,6 +678,9 @@ class Planner:
             expected = self._model_time(origin, target, speed, motion, accel)
             if motion is MotionType.LINE:
                 self._check_turn(origin, target)
+        if motion is MotionType.PTP:  # again, from the joints the robot reported
+            first = self.model.start_joints(origin, hint, self.tool)
+            self._check_ptp_speed(first, target_joints, speed, accel)
         gauge = PathGauge.of(
             self.model,
             origin,
