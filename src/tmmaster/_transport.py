@@ -256,27 +256,16 @@ def group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
 
 def _group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
     # Table is a StrEnum: its members order as their values, without a .value lookup.
-    ordered = sorted(encoded, key=lambda item: (item[0].table, item[0].address))
-    plans: list[tuple[Block, list[int]]] = []
-    group: list[Encoded] = []
-
-    def flush() -> None:
-        if group:
-            table = group[0][0].table
-            words = [w for _, ws in group for w in ws]
-            plans.append((_block(table, [g[0] for g in group]), words))
-            group.clear()
-
-    for f, words in ordered:
-        if group:
-            last = group[-1][0]
-            limit = request_limit(f.table, write=True)
-            size = f.end - group[0][0].address + 1
-            if last.table is not f.table or f.address != last.end + 1 or size > limit:
-                flush()
-        group.append((f, words))
-    flush()
-    return plans
+    groups: list[list[Encoded]] = []
+    for f, words in sorted(encoded, key=lambda item: (item[0].table, item[0].address)):
+        first, last = (groups[-1][0][0], groups[-1][-1][0]) if groups else (f, f)
+        fits = f.end - first.address + 1 <= request_limit(f.table, write=True)
+        if not groups or last.table is not f.table or f.address != last.end + 1 or not fits:
+            groups.append([])
+        groups[-1].append((f, words))
+    return [
+        (_block(g[0][0].table, [f for f, _ in g]), [w for _, ws in g for w in ws]) for g in groups
+    ]
 
 
 @runtime_checkable
@@ -1150,6 +1139,10 @@ class _Stream(asyncio.Protocol):
         #: The first answer under an id never sent here: (its id, its frame).
         self.stray: tuple[int, bytes] | None = None
         self._buffer = b""
+        # The awaited requests' one deadline timer, (the time it is set for, its handle):
+        # set again when a request's deadline is earlier, left when one is answered (a
+        # timer per request, set and cancelled, cost more than the rest of its start).
+        self._timer: tuple[float, asyncio.TimerHandle] | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         # uvloop's transports implement asyncio.Transport's methods without subclassing it.
@@ -1196,13 +1189,29 @@ class _Stream(asyncio.Protocol):
             return 1 <= tid <= 0xFFFF
         return 1 <= tid <= 0xFFFF and (tid - self.first_tid) % 0xFFFF < self.sent
 
+    def watch(self, deadline: float) -> None:
+        """A request awaited until ``deadline`` (the loop's time): the timer fires by then."""
+        if self._timer is None or deadline < self._timer[0]:
+            if self._timer is not None:
+                self._timer[1].cancel()
+            loop = asyncio.get_running_loop()
+            self._timer = (deadline, loop.call_at(deadline, self._expire_due, deadline))
+
+    def _expire_due(self, due: float) -> None:
+        """The timer: every request due by ``due`` fails; it is set for the next one."""
+        self._timer = None
+        for call in [c for c in self.awaited.values() if c.deadline <= due]:
+            _expire(call, self)
+        if self.awaited and not self.closed:
+            self.watch(min(c.deadline for c in self.awaited.values()))
+
     def connection_lost(self, exc: Exception | None) -> None:
         name = self.link.name
         self.fail(lambda what: ConnectionLostError(f"{name}: connection lost during {what}"))
 
     def fail(self, error: Callable[[str], TransportError]) -> None:
         """Fail every awaited request with ``error(what)`` and close the stream."""
-        self.closed = True
+        self.closed = True  # the timer finds nothing awaited then
         awaited, self.awaited = self.awaited, {}
         for call in awaited.values():
             if not call.done():
@@ -1274,7 +1283,7 @@ class _Call:
     """
 
     __slots__ = (
-        "_done", "code", "count", "fail", "name", "settle", "stream", "tid", "timer", "what"
+        "_done", "code", "count", "deadline", "fail", "name", "settle", "stream", "tid", "what"
     )  # fmt: skip
 
     def __init__(
@@ -1294,7 +1303,8 @@ class _Call:
         self.fail = fail
         self.stream: _Stream | None = None
         self.tid = 0
-        self.timer: asyncio.TimerHandle | None = None
+        #: The loop's time by which it fails unanswered (its stream's timer).
+        self.deadline = 0.0
         self._done = False
 
     def done(self) -> bool:
@@ -1304,8 +1314,6 @@ class _Call:
     def end(self) -> None:
         """Settled or given up: its deadline and its slot go (a late answer is dropped)."""
         self._done = True
-        if self.timer is not None:
-            self.timer.cancel()
         stream = self.stream
         if stream is not None and stream.awaited.get(self.tid) is self:
             del stream.awaited[self.tid]
@@ -1317,12 +1325,7 @@ class _Call:
         self.end()
         try:
             words = answer_words(
-                function_code,
-                answer,
-                self.code,
-                count=self.count,
-                name=self.name,
-                what=self.what,
+                function_code, answer, self.code, count=self.count, name=self.name, what=self.what
             )
         except TransportError as exc:
             self.fail(exc)
@@ -1411,15 +1414,8 @@ class AsyncLink:
         :class:`TransportError` subclasses. Nothing is ever resent here.
         """
         answer: asyncio.Future[list[int]] = asyncio.get_running_loop().create_future()
-        call = self.start(
-            what,
-            function_code,
-            address,
-            count,
-            values,
-            functools.partial(settle, answer),
-            functools.partial(settle_failed, answer),
-        )
+        done, failed = functools.partial(settle, answer), functools.partial(settle_failed, answer)
+        call = self.start(what, function_code, address, count, values, done, failed)
         try:
             return await answer
         finally:
@@ -1460,7 +1456,8 @@ class AsyncLink:
         stream.transport.write(frame)
         if self.stats is not None:
             self.stats.bytes_sent += len(frame)
-        call.timer = asyncio.get_running_loop().call_later(self.timeout, _expire, call, stream)
+        call.deadline = asyncio.get_running_loop().time() + self.timeout
+        stream.watch(call.deadline)
         return call
 
     def close(self) -> None:
