@@ -34,13 +34,15 @@ ack_s = 0.5
 motion_margin_s = 0.5
 """
 
-#: A value for each configuration option, different from the default.
-SAMPLES: dict[str, str] = {
+#: A value for each configuration option, different from the default (None: a switch,
+#: which sets its key to true).
+SAMPLES: dict[str, str | None] = {
     "host": "10.1.2.3",
     "port": "1502",
     "profile": "article",
     "cycles": "7",
     "poll_interval": "0.25",
+    "release_held_part": None,
 }
 
 SimFactory = Callable[..., Simulator]
@@ -77,9 +79,10 @@ def test_each_config_option_changes_exactly_its_key() -> None:
 
     base = config()
     for option, value in SAMPLES.items():
-        changed = config(f"--{option.replace('_', '-')}", value)
+        flag = f"--{option.replace('_', '-')}"
+        changed = config(flag) if value is None else config(flag, value)
         section, key = cli._CONFIG_OPTIONS[option]
-        assert str(changed[section][key]) == value
+        assert str(changed[section][key]) == ("True" if value is None else value)
         changed[section][key] = base[section][key]
         assert changed == base, f"--{option} changed more than {section}.{key}"
 

@@ -184,6 +184,15 @@ def _add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--poll-interval", type=float, default=None, metavar="S", help="poll interval (0.05 s)"
     )
+    parser.add_argument(
+        "--release-held-part",
+        action="store_const",
+        const=True,
+        default=None,
+        help="a part the gripper holds at the start is released where the arm is (it falls"
+        " there); without it such a run refuses to start, exit 2"
+        " ([gripper] release_held_part_at_start)",
+    )
 
 
 def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
@@ -483,6 +492,7 @@ _CONFIG_OPTIONS: dict[str, tuple[str, str]] = {
     "profile": ("robot", "profile"),
     "cycles": ("run", "cycles"),
     "poll_interval": ("run", "poll_interval_s"),
+    "release_held_part": ("gripper", "release_held_part_at_start"),
 }
 #: The options that say what to run (the files, the mode, the simulator): read once, by
 #: :func:`_command`, into the :class:`_Command`.
@@ -656,8 +666,8 @@ def _check_option_ranges(overrides: dict[str, dict[str, Any]]) -> None:
     """
     for option, (section, key) in _CONFIG_OPTIONS.items():
         value = overrides.get(section, {}).get(key)
-        if not isinstance(value, int | float):
-            continue
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            continue  # a switch (--release-held-part) has no range
         model = PickPlaceConfig.model_fields[section].annotation
         assert model is not None
         field = model.model_fields[key]

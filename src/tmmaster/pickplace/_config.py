@@ -24,6 +24,7 @@ from pydantic import (
     Field,
     PrivateAttr,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -260,12 +261,27 @@ class GripperSection(_Section):
     #: Register gripper without busy flag: how long a close/open takes at most, s.
     settle_s: Annotated[float, Field(gt=0, le=60)] = 0.5
     #: Open the fingers before the first approach (never approach a part with them closed).
+    #: A gripper that reports holding a part is not opened: the run refuses to start.
     open_at_start: bool = True
+    #: With ``open_at_start``: a part the gripper reports holding at the start is released
+    #: where the arm is then (it falls there). False: the run refuses to start instead.
+    release_held_part_at_start: bool = False
 
     @field_validator("host")
     @classmethod
     def _an_address(cls, host: str | None) -> str | None:
         return None if host is None else check_host(host, field="", port_field="gripper.port")
+
+    @field_validator("release_held_part_at_start")
+    @classmethod
+    def _release_needs_the_open(cls, release: bool, info: ValidationInfo) -> bool:
+        # open_at_start is declared (so validated) first: a bad value of it is its own error.
+        if release and info.data.get("open_at_start") is False:
+            raise ValueError(
+                "needs open_at_start = true (with open_at_start = false nothing is opened at"
+                " the start, so nothing is released)"
+            )
+        return release
 
 
 class WorkspaceSection(Workspace):

@@ -19,6 +19,7 @@ from datetime import UTC, datetime
 from typing import Any, Literal
 
 from .._exceptions import (
+    ConfigError,
     EmergencyStopError,
     GraspFailedError,
     RobotError,
@@ -26,7 +27,7 @@ from .._exceptions import (
     StopRequestedError,
     TMMasterError,
 )
-from .._gripper import GripperStatus
+from .._gripper import GripperStatus, RegisterGripper
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Robot
@@ -241,7 +242,14 @@ class _RunContext:
         self.move(planned.pose, speed=planned.speed, motion=planned.motion)
 
     def open_gripper(self) -> GripperStatus:
-        """Open the fingers and wait until they stopped."""
+        """Open the fingers and wait until they stopped.
+
+        At the start (IDLE: the sequence's ``prepare``) a gripper that reports holding a
+        part is not opened unless the runner releases held parts at the start: the run
+        fails with :class:`ConfigError` instead (:func:`refuse_held_part`).
+        """
+        if self.state == IDLE:
+            self._run.runner._open_at_start()
         self.last_gripper = self.robot.gripper.open()
         return self.last_gripper
 
@@ -342,6 +350,10 @@ class Runner:
             robot error).
         ready_timeout_s: The robot must be ready within this time at the start, s.
         on_state: Called with a StateEvent at every state change.
+        release_held_part_at_start: When the sequence's ``prepare`` opens the gripper
+            and the gripper reports holding a part: True releases it where the arm is
+            (logged as ``pickplace.held_part_released``); False (the default) fails the
+            run in IDLE with :class:`ConfigError`, nothing moved or opened.
     """
 
     def __init__(
@@ -351,6 +363,7 @@ class Runner:
         error_reaction: Reaction = "stay",
         ready_timeout_s: float = 10.0,
         on_state: Callable[[StateEvent], None] | None = None,
+        release_held_part_at_start: bool = False,
     ) -> None:
         #: The robot it runs on.
         self.robot = robot
@@ -360,6 +373,8 @@ class Runner:
         self.ready_timeout_s = ready_timeout_s
         #: Called with a StateEvent at every state change.
         self.on_state = on_state
+        #: Release a part the gripper holds when ``prepare`` opens it (else refuse).
+        self.release_held_part_at_start = release_held_part_at_start
         #: ``time.monotonic()`` when the current or last :meth:`run` started (None before
         #: the first): time 0 of its records, for whatever else is timed beside the run.
         self.run_started: float | None = None
@@ -374,7 +389,8 @@ class Runner:
         *,
         on_state: Callable[[StateEvent], None] | None = None,
     ) -> Runner:
-        """A runner with the configuration's error reaction and readiness timeout.
+        """A runner with the configuration's error reaction, readiness timeout and
+        ``gripper.release_held_part_at_start``.
 
         Args:
             robot: The robot (``robot_from_config(config)``).
@@ -389,6 +405,7 @@ class Runner:
             error_reaction=config.on_error.reaction,
             ready_timeout_s=config.timeouts.ready_s,
             on_state=on_state,
+            release_held_part_at_start=config.gripper.release_held_part_at_start,
         )
 
     @property
@@ -557,6 +574,22 @@ class Runner:
         if self._stop.is_set():
             raise StopRequestedError("stop requested")
 
+    def _open_at_start(self) -> None:
+        """Before ``prepare`` opens the gripper: refuse (or, if allowed, announce) the
+        release of a part it holds; a gripper that cannot tell is opened as before."""
+        held = gripper_holds_a_part(self.robot)
+        if held is None:
+            self._log.warning(
+                "pickplace.held_part_unknown",
+                gripper=self.robot.gripper.kind,
+                detail="the gripper cannot say whether it holds a part; opening it at the"
+                " start as configured",
+            )
+        elif held and not self.release_held_part_at_start:
+            raise refuse_held_part(self.robot, opening=True)
+        elif held:
+            self._log.warning("pickplace.held_part_released", at=_arm_at(self.robot))
+
     def _as_stop(self, exc: BaseException, during: str) -> BaseException:
         """A failure caused by an interrupted wait is the stop request itself."""
         if self._stop.is_set() and not isinstance(exc, StopRequestedError):
@@ -625,6 +658,8 @@ class Runner:
             return ReactionRecord("stay", False, "configured to stay where it stopped")
         if failure.interrupted:
             return ReactionRecord(reaction, False, "stop requested: not moving")
+        if failure.state == IDLE:  # the arm is where the run found it, with what it holds
+            return ReactionRecord(reaction, False, "the run had not started: not moving")
         if isinstance(failure.exception, EmergencyStopError | RobotFaultError):
             return ReactionRecord(reaction, False, "robot in error or e-stop: never move")
         if sequence.retreat is None:
@@ -646,6 +681,57 @@ class Runner:
             self._log.error("pickplace.retreat_failed", error=str(exc))
             return ReactionRecord(reaction, False, f"retreat failed: {exc}")
         return ReactionRecord(reaction, True, f"retreated to {target.pose}")
+
+
+def gripper_holds_a_part(robot: Robot) -> bool | None:
+    """Whether ``robot``'s gripper reports holding a part now (one status read).
+
+    Args:
+        robot: The connected robot.
+
+    Returns:
+        The gripper's ``holding``; None when it cannot tell: a register gripper on a
+        profile without a ``grasp_status`` field.
+
+    Raises:
+        TMMasterError: The read failed (ConfigError for a robot without a gripper).
+    """
+    if isinstance(robot.gripper, RegisterGripper) and not robot.profile.has("grasp_status"):
+        return None
+    return robot.gripper.status().holding
+
+
+def refuse_held_part(robot: Robot, *, opening: bool) -> ConfigError:
+    """The error a run fails with at its start when the gripper holds a part.
+
+    Args:
+        robot: The robot (its pose is read for the message, if it can be).
+        opening: Whether the start would open the gripper (else: the sequence starts
+            with a pick, with the part still in the fingers).
+
+    Returns:
+        The :class:`ConfigError`, naming the situation and the fix.
+    """
+    held = f"the gripper holds a part at the start of the run (the arm at {_arm_at(robot)})"
+    if opening:
+        return ConfigError(
+            f"{held}: opening it would drop the part there, so nothing was moved or opened;"
+            " take the part out of the gripper, or set [gripper] release_held_part_at_start"
+            " = true (command line: --release-held-part) to release it where the arm is"
+        )
+    return ConfigError(
+        f"{held} and the cycle starts with a pick: nothing was moved or opened; take the"
+        " part out of the gripper ([gripper] open_at_start = false: the run does not open it)"
+    )
+
+
+def _arm_at(robot: Robot) -> str:
+    """Where the arm's TCP is, in words (x, y, z in mm), or "an unread position"."""
+    try:
+        pose = robot.pose()
+    except TMMasterError:
+        return "an unread position"
+    return f"x {pose.x:.1f}, y {pose.y:.1f}, z {pose.z:.1f} mm"
 
 
 __all__ = [

@@ -24,6 +24,7 @@ from ._config import (
     read_config_data,
     units_problem,
 )
+from ._runner import gripper_holds_a_part, refuse_held_part
 from ._steps import Action, Cycles, PlannedMove, RetryRule, StepContext, TaskSequence
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
@@ -56,6 +57,13 @@ def _open(ctx: StepContext) -> None:
     ctx.open_gripper()
 
 
+def _require_empty(ctx: StepContext) -> None:
+    """The start of a cycle that begins with a pick, without opening: a part the gripper
+    reports holding would be carried down onto the next part."""
+    if gripper_holds_a_part(ctx.robot):
+        raise refuse_held_part(ctx.robot, opening=False)
+
+
 def _close(ctx: StepContext) -> None:
     ctx.close_gripper()
 
@@ -68,7 +76,10 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
     """The article's cycle: approach, pick, close, check, lift, place, open, home.
 
     A failed grasp opens the fingers and goes back to the approach, up to
-    ``run.grasp_retries`` times.
+    ``run.grasp_retries`` times. The start opens the gripper (``gripper.open_at_start``;
+    the runner refuses to open one that holds a part unless
+    ``gripper.release_held_part_at_start``); without the open, a gripper that holds a
+    part fails the start (ConfigError), nothing moved.
 
     Args:
         config: Poses, speeds, motion types, retries and the error reaction; None: the
@@ -106,7 +117,7 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
         "pick-and-place",
         retreat=retreat if cfg.on_error.reaction == "retreat" else None,
         default_cycles=cfg.run.cycles,
-        prepare=_open if cfg.gripper.open_at_start else None,
+        prepare=_open if cfg.gripper.open_at_start else _require_empty,
     )
     seq.add("MOVE_TO_APPROACH", move=moves["approach"], description="above the pick pose")
     seq.add("MOVE_TO_PICK", move=moves["pick"], description="down to the part")
