@@ -124,17 +124,30 @@ def _cpus() -> int:
     return os.cpu_count() or 1
 
 
+#: The garbage collector's thresholds in a test process (Python's: 700, 10, 10).
+GC_THRESHOLDS = (10_000, 10, 10)
+
+
 def pytest_configure(config: pytest.Config) -> None:
-    """Keep the bytecode of the suite's processes (the workers, the CLI tests' subprocesses).
+    """Keep the bytecode of the suite's processes (the workers, the CLI tests' subprocesses),
+    and collect the garbage of a test process less often.
 
     Containers and CI (``.ci/run``) often set PYTHONDONTWRITEBYTECODE=1: then every xdist
     worker compiled tmmaster and rewrote every test module's asserts again, and every
     subprocess a test starts compiled the package again (about 1 s of CPU each). Python
     and pytest write their caches into the usual, git-ignored ``__pycache__`` folders.
+
+    A test process holds a large heap (every test module, the simulators' code,
+    hypothesis), which each full collection traverses: at Python's thresholds, about
+    0.1 s each, every few dozen tests. ``GC_THRESHOLDS`` cut the process's collection
+    time by more than half (measured: 1.20 -> 0.54 s over five files, 492 tests). Garbage
+    in cycles lives a little longer: ``no_leaks`` collects before it counts a socket or a
+    thread as leaked, as it did.
     """
     del config
     sys.dont_write_bytecode = False
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    gc.set_threshold(*GC_THRESHOLDS)
 
 
 @pytest.hookimpl(trylast=True)
