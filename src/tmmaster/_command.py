@@ -252,6 +252,13 @@ class _MotionFollower:
         self.closing = threading.Event()
         # One caller at a time gives a command up (a wait, close(), the exit hook).
         self._abandon_lock = threading.Lock()
+        #: The command given up whose cancel record (tmflow) could not be written, after
+        #: its withdraw and Stop failed or the Stop alone (the retry policy gave up): owed,
+        #: its give-up done again first by the next call (:meth:`settle_owed`) or by
+        #: ``close()``. Meanwhile ``silence`` (the Robot's heartbeat's stop): the robot
+        #: program sees this master gone and expires the command.
+        self.owed: Motion | None = None
+        self.silence: Callable[[], None] = lambda: None
 
     def start(self, ticket: Ticket, plan: Plan, register: Callable[[Motion], None]) -> Motion:
         """Send a planned command once (:meth:`send`) and return its handle.
@@ -374,14 +381,11 @@ class _MotionFollower:
             stop, or another caller was still at it at ``deadline``).
         """
         lock = self._abandon_lock
-        if deadline is None:
-            acquired = lock.acquire()
-        else:
-            acquired = lock.acquire(timeout=max(deadline - time.monotonic(), 0.0))
-        if not acquired:
+        wait_s = -1.0 if deadline is None else max(deadline - time.monotonic(), 0.0)  # -1: no bound
+        if not lock.acquire(timeout=wait_s):
             return False
         try:
-            if motion._settled is not None:
+            if motion._settled is not None and motion is not self.owed:
                 return motion._settled
             if motion.done or motion.ticket.finished:
                 return True  # nothing left to withdraw or stop
@@ -391,14 +395,33 @@ class _MotionFollower:
                 motion._settled = True  # refused before any byte was sent
                 return True
             with deferred():
+                motion.stop_delivered = self.owed = None  # what this attempt finds
                 confirmed = self._withdraw_or_stop(
                     motion, reason, until=deadline, interruptible=not closer
                 )
                 # Recorded inside the section: a Ctrl-C held back is raised after it.
                 motion._settled = confirmed
+                if self.owed is not None:
+                    self.silence()  # no beat: the program expires the command
             return confirmed
         finally:
             lock.release()
+
+    def settle_owed(self) -> None:
+        """Before anything else is sent: deliver the give-up still :attr:`owed`, if any.
+
+        Raises:
+            CommandStateUnknownError: it could not be delivered this time either; it stays
+                owed, and each later call tries it again first.
+        """
+        if (motion := self.owed) is None or self.gate.closed:
+            return  # nothing owed, or closed (close() did it once more)
+        if not self.abandon(motion, ConnectionLostError("given up, the link down")) and self.owed:
+            raise CommandStateUnknownError(
+                f"command {motion.ticket.seq} was given up, and its withdraw or stop is still"
+                " owed (the link is down?): nothing else is sent to the robot until it is done"
+            )
+        self.owed = None
 
     def _withdraw_or_stop(
         self,
@@ -455,6 +478,7 @@ class _MotionFollower:
                 # ends the command on this record even where the robot refuses Stop.
                 self._channel.cancel(ticket)
             except TMMasterError as exc:
+                self.owed = motion  # the record is owed: written first once the link is back
                 self._log.error("robot.cancel_failed", error=str(exc))
         return confirmed
 

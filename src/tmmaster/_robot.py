@@ -425,6 +425,7 @@ class Robot:
             ttl_s=options.timeouts.heartbeat_ttl_s,
             log=self._log,
         )
+        self._follower.silence = self._heartbeat.stop  # while a give-up is owed
 
     def _join(self, fleet: Fleet | None) -> FleetMember | None:
         """A robot whose link is on a driver (its Fleet's, or the process's default one):
@@ -637,10 +638,15 @@ class Robot:
     def _require_connection(self) -> None:
         """Refuse I/O before :meth:`connect`: nothing connects on its own.
 
+        Connected, a give-up still owed goes first (``_MotionFollower.settle_owed``): the
+        withdraw and stop of a command given up while the link was down.
+
         Raises:
             TransportClosedError: never connected (a closed robot's link says so itself).
+            CommandStateUnknownError: a give-up still owed could not be delivered.
         """
         if self._connected or self._transport.state is ConnectionState.CLOSED:
+            self._follower.settle_owed()
             return
         raise TransportClosedError(
             f"{self.name}: not connected, nothing was sent: call robot.connect() first, or"
@@ -1259,7 +1265,7 @@ class Robot:
             # What prepare() refuses before its first read (a value out of the profile's
             # range) is said first, as on a connected robot; then the missing connect.
             self._channel.check_command(command)
-            self._require_connection()
+        self._require_connection()  # and a give-up still owed goes first
         if self._heartbeat.claim_due:
             # The first command claims the robot (this master beats from then on), once
             # it is known to be valid: a command refused claims nothing. After a silence
