@@ -69,7 +69,7 @@ def robot_behind(proxy: FaultProxy, link: Fleet | None = None) -> Robot:
         link=link,
         polling=PollPolicy(interval_s=0.01),
         timeouts=TimeoutPolicy(
-            request_s=0.2, ack_timeout_s=0.5, motion_margin_s=1.0, heartbeat_ttl_s=5.0
+            request_s=0.2, ack_timeout_s=2.0, motion_margin_s=1.0, heartbeat_ttl_s=5.0
         ),
         retry=RetryPolicy(attempts=2, total_time_s=0.15, initial_backoff_s=0.02),
     )
