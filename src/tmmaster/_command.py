@@ -252,11 +252,11 @@ class _MotionFollower:
         self.closing = threading.Event()
         # One caller at a time gives a command up (a wait, close(), the exit hook).
         self._abandon_lock = threading.Lock()
-        #: The command given up whose cancel record (tmflow) could not be written, after
-        #: its withdraw and Stop failed or the Stop alone (the retry policy gave up): owed,
-        #: its give-up done again first by the next call (:meth:`settle_owed`) or by
-        #: ``close()``. Meanwhile ``silence`` (the Robot's heartbeat's stop): the robot
-        #: program sees this master gone and expires the command.
+        #: The command given up whose cancel record (tmflow), after its Stop, could not be
+        #: written (the retry policy gave up; the link down, the withdraw and the Stop
+        #: failed too): owed, its give-up done again first by the next call
+        #: (:meth:`settle_owed`) or by ``close()``. Meanwhile ``silence`` (the Robot's
+        #: heartbeat's stop): the robot program sees this master gone, expires the command.
         self.owed: Motion | None = None
         self.silence: Callable[[], None] = lambda: None
 
