@@ -163,6 +163,23 @@ def test_a_give_up_that_fails_again_stays_owed_and_nothing_else_is_sent(
         land_and_check(sim, proxy, landed, issued)
 
 
+def test_close_delivers_an_owed_give_up(sim: Simulator) -> None:
+    issued: list[Issued] = []
+    landed = threading.Event()
+    with FaultProxy(sim.port) as proxy:
+        robot = robot_behind(proxy).connect()
+        try:
+            give_up_undelivered(robot, proxy, issued, landed)
+            seq = robot.last_motion.ticket.seq  # type: ignore[union-attr]
+            mark = len(sim.request_log)
+            proxy._refusing_until = 0.0  # the link is back
+            assert robot.close(timeout_s=3.0)  # confirmed: the give-up was delivered
+            assert writes_since(sim, mark) == [(16, 9014, (0, seq))]
+        finally:
+            robot.close()
+        land_and_check(sim, proxy, landed, issued)
+
+
 def test_a_give_up_delivered_leaves_nothing_owed(sim: Simulator) -> None:
     with FaultProxy(sim.port) as proxy, robot_behind(proxy) as robot:
         robot.move_to(START, speed=80)
