@@ -668,11 +668,7 @@ def _check_option_ranges(overrides: dict[str, dict[str, Any]]) -> None:
         value = overrides.get(section, {}).get(key)
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue  # a switch (--release-held-part) has no range
-        model = PickPlaceConfig.model_fields[section].annotation
-        assert model is not None
-        field = model.model_fields[key]
-        low = next((getattr(m, "ge", None) for m in field.metadata if hasattr(m, "ge")), None)
-        high = next((getattr(m, "le", None) for m in field.metadata if hasattr(m, "le")), None)
+        low, high = _key_bounds(section, key)
         inside = (low is None or value >= low) and (high is None or value <= high)
         if not inside:  # nan included: no comparison holds for it
             flag = "--" + option.replace("_", "-")
@@ -682,6 +678,16 @@ def _check_option_ranges(overrides: dict[str, dict[str, Any]]) -> None:
                 else (f">= {_number(low)}" if low is not None else f"<= {_number(high)}")
             )
             raise UsageError(f"{flag} {_number(value)}: must be {bound}")
+
+
+def _key_bounds(section: str, key: str) -> tuple[float | None, float | None]:
+    """The configuration model's bounds of ``section.key``: (ge, le), None where unbounded."""
+    model = PickPlaceConfig.model_fields[section].annotation
+    assert model is not None
+    metadata = model.model_fields[key].metadata
+    low = next((getattr(m, "ge", None) for m in metadata if hasattr(m, "ge")), None)
+    high = next((getattr(m, "le", None) for m in metadata if hasattr(m, "le")), None)
+    return low, high
 
 
 def _number(value: float | None) -> str:
