@@ -87,7 +87,7 @@ from _machine import add_pin_arguments, machine_line, pin_child, pin_master, pin
 from _mbap import answer_frame, split_requests
 
 from tmmaster import Fleet, MonitoredStatus, Robot, StatusMonitor
-from tmmaster._transport import READ_FUNCTION, BlockTransport
+from tmmaster._transport import READ_FUNCTION, Transport
 from tmmaster.sim import Timing
 
 #: The article status block Robot.status() reads (FC3, address 0, 22 words).
@@ -202,7 +202,7 @@ def status_answers(profile: str) -> Answers:
         robot = Robot("127.0.0.1", sim.port, profile=profile, gripper=None).connect()
         try:
             channel, transport = robot._channel, robot._transport
-            assert isinstance(transport, BlockTransport)  # a Modbus TCP link here
+            assert isinstance(transport, Transport)  # a Modbus TCP link here
             plan = transport.read_plan(channel.status_fields, max_gap=channel.profile.max_read_gap)
             for block in plan.blocks:
                 words = transport.read_block(block.table, block.address, block.count)

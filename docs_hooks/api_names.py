@@ -39,7 +39,7 @@ MADE_BY_THE_PACKAGE = {
 #: the reference.
 INTERNAL_MEMBERS = {
     "tmmaster._command.Motion.ticket",
-    "tmmaster._transport.BlockTransport.read_plan",
+    "tmmaster._transport.Transport.read_plan",
     # The coroutine protocol an AsyncMotion speaks to asyncio (a task made of the handle).
     "tmmaster.aio._robot._Primed.close",
     "tmmaster.aio._robot._Primed.send",

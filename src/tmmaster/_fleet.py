@@ -60,7 +60,7 @@ from ._loop import (
 )
 from ._registers import RegisterField
 from ._retry import RetryPolicy
-from ._transport import AsyncLink, Block, BlockTransport, ConnectionState, Transport, settle
+from ._transport import AsyncLink, Block, ConnectionState, Transport, settle
 
 _log = get_logger("tmmaster.fleet")
 
@@ -86,7 +86,7 @@ MAX_WATCH_HZ = 100.0
 _LOOP_GRACE_S = 1.0
 
 
-class LoopTransport(BlockTransport):
+class LoopTransport(Transport):
     """A robot's Modbus TCP link on a driver's event loop (a :class:`Fleet`'s).
 
     The robot's thread uses it like any transport (blocking, with the retry policy);

@@ -42,9 +42,8 @@ import time
 import weakref
 from typing import TYPE_CHECKING, Any
 
-from ._exceptions import TMMasterError
 from ._registers import RegisterField, RobotProfile, Table
-from ._transport import BlockTransport, ConnectionState, Transport
+from ._transport import ConnectionState, Transport
 
 if TYPE_CHECKING:
     from ._fleet import FleetMember
@@ -283,16 +282,7 @@ def _beat_in_thread(
 def _write_once(
     transport: Transport, address: int, words: list[int], wait_s: float
 ) -> BaseException | bool | None:
-    """One FC16 write, sent once; None when answered, True when the link stayed busy for
-    ``wait_s`` or is down, the error when it failed.
-
-    A BlockTransport writes it under its lock, waited for at most ``wait_s``
-    (:meth:`BlockTransport.write_when_free`).
-    """
-    if isinstance(transport, BlockTransport):
-        return transport.write_when_free(address, words, wait_s=wait_s)
-    try:
-        transport.write_block(Table.HOLDING, address, words, retry=False, interruptible=False)
-    except TMMasterError as exc:
-        return exc
-    return None
+    """One FC16 write, sent once, under the link's lock, waited for at most ``wait_s``
+    (:meth:`Transport.write_when_free`); None when answered, True when the link stayed
+    busy for ``wait_s`` or is down, the error when it failed."""
+    return transport.write_when_free(address, words, wait_s=wait_s)

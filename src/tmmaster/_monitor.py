@@ -62,9 +62,9 @@ from ._registers import RobotProfile
 from ._robot import Robot
 from ._transport import (
     AsyncLink,
-    BlockTransport,
     ConnectionState,
     ReadPlan,
+    Transport,
     describe_read,
 )
 
@@ -75,7 +75,7 @@ _log = get_logger("tmmaster.monitor")
 _MAX_READ_WORKERS = 32
 
 
-class _UnusedLink(BlockTransport):
+class _UnusedLink(Transport):
     """The transport a monitor's channel is built with: never used (the monitor reads async).
 
     A channel only needs it to exist; the monitor calls ``status_fields`` and
@@ -204,7 +204,7 @@ class _SharedWatched(StatusRecord):
     never reopened from here: only the robot's own requests reconnect it.
     """
 
-    def __init__(self, name: str, transport: BlockTransport, channel: CommandChannel) -> None:
+    def __init__(self, name: str, transport: Transport, channel: CommandChannel) -> None:
         super().__init__(
             name, _log.bind(robot=name, host=transport.host, port=transport.port, shared=True)
         )
@@ -443,9 +443,8 @@ class StatusMonitor:
 
         Raises:
             ConfigError: After :meth:`start`; for a name or a robot already watched
-                here, a closed robot, a robot of a :class:`Fleet` (watched by
-                ``Fleet(watch_hz=...)`` and read with ``Fleet.latest``), or a robot
-                whose transport cannot be shared (a transport of your own).
+                here, a closed robot, or a robot of a :class:`Fleet` (watched by
+                ``Fleet(watch_hz=...)`` and read with ``Fleet.latest``).
         """
         if not isinstance(robot, Robot):
             raise ConfigError(f"robot must be a tmmaster.Robot, got {robot!r}")
@@ -460,11 +459,6 @@ class StatusMonitor:
             raise ConfigError(
                 f"{robot.name!r} is a Fleet's robot: the Fleet watches it over its link;"
                 " make the Fleet with watch_hz and read Fleet.latest(robot)"
-            )
-        if not isinstance(transport, BlockTransport):
-            raise ConfigError(
-                f"{robot.name!r}: its transport {type(transport).__name__} has no lock to share;"
-                " watch it with add(name, host, port) on a slave that accepts several clients"
             )
         if transport.state is ConnectionState.CLOSED:
             raise ConfigError(f"{robot.name!r} is closed: a StatusMonitor never reopens it")

@@ -4,7 +4,7 @@ Only transient transport failures are retried (a connection lost or not opened i
 time, a response timeout, a busy device). A failure that cannot succeed on a later
 attempt is raised at once (its ``retryable`` is False): a closed link; on a link never
 connected yet a refused connection or a host name that does not resolve (the transport
-decides, :meth:`BlockTransport._connect_once`); a device that answers in something other
+decides, :meth:`Transport._connect_once`); a device that answers in something other
 than Modbus TCP (:class:`NotModbusError`); and a response timeout on a link whose device
 has never answered (:func:`~tmmaster._transport.no_answer_error`). pymodbus's own retries are
 switched off by the transport, so retries never multiply and no write is resent behind

@@ -102,7 +102,6 @@ from ._sigint import deferred
 from ._status import ProjectState, RobotStatus, project_hint
 from ._tool import FrameGuard, Tool, tool_option
 from ._transport import (
-    BlockTransport,
     ConnectionState,
     Transport,
     TransportStats,
@@ -725,7 +724,7 @@ class Robot:
         with deferred():
             self._gate.close()
             for link in (self._transport, self.gripper.transport):  # before any clean-up
-                if deadline is not None and isinstance(link, BlockTransport):
+                if deadline is not None and link is not None:
                     link.bound_retries(deadline)
             self.interrupt()  # waits in progress end now, a fleet's included
             # Another thread's wait for a withdraw's answer ends now: it stops the command

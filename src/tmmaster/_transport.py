@@ -6,7 +6,7 @@ whose request frames are packed here, as are the common answers (reads, FC16 wri
 the others decoded by pymodbus' socket framer and PDU classes. Each request is
 sent once and answered only under its own transaction id and from its unit id; after
 any failure the link is closed, so a late answer can never be read as a later
-request's. :class:`BlockTransport` is what every robot-side transport shares: state,
+request's. :class:`Transport` is what every robot-side transport shares: state,
 counters, field plans and the :class:`RetryPolicy`.
 
 Reads, and writes the caller declares idempotent, retry and reconnect. A write that
@@ -30,7 +30,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
-from typing import Any, Protocol, Self, TypeVar, cast, runtime_checkable
+from typing import Any, Self, TypeVar, cast
 
 from pymodbus import ModbusException
 from pymodbus.framer import FramerSocket
@@ -103,7 +103,7 @@ def describe_read(table: Table, address: int, count: int) -> str:
 _WRITE_CODES = frozenset({5, 6, 15, 16})
 
 #: How long a request of the robot's thread lets a waiting heartbeat go first, s at most
-#: (see BlockTransport.let_in).
+#: (see Transport.let_in).
 _LET_IN_S = 0.05
 
 
@@ -268,152 +268,24 @@ def _group_writes(encoded: Sequence[Encoded]) -> list[tuple[Block, list[int]]]:
     ]
 
 
-@runtime_checkable
-class Transport(Protocol):
-    """What the layers above (channels, grippers, the robot) need from a device link.
+class Transport(ABC):
+    """A device link, what the layers above (channels, grippers, the robot) talk to.
 
     :class:`~tmmaster.ModbusTransport` (Modbus TCP, an :class:`AsyncLink` on a driver's
     event loop) is the default; ``tmmaster.sim.MemoryTransport`` talks to an in-process
-    simulator without sockets. Both share the same counters, error mapping and retries.
-    """
+    simulator without sockets. This class holds everything but the link: state,
+    counters, retries, read plans and encoding, and so every rule about when a request
+    may be retried, once. A subclass supplies the link: :meth:`_open_link`,
+    :meth:`_close_link`, :meth:`_link_open` and :meth:`_exchange` (one request, failures
+    already mapped to :class:`TransportError` subclasses).
 
-    #: The device's address.
-    host: str
-    #: Its Modbus TCP port.
-    port: int
-    #: The link's name in messages and logs.
-    name: str
-    #: The Modbus unit id of every request.
-    device_id: int
-    #: Bound of one request, s.
-    timeout: float
-    #: How failed requests and connects are retried.
-    retry: RetryPolicy
-    #: Request, retry, reconnect and byte counters.
-    stats: TransportStats
-    #: When set, sleeps between retry attempts of interruptible requests end at once.
-    interrupt: threading.Event | None
-
-    @property
-    def state(self) -> ConnectionState:
-        """Current connection state."""
-
-    @property
-    def epoch(self) -> int:
-        """Changes whenever the link may have changed or missed a register: a write sent,
-        a failed request, a retry, a connect, a close. Two equal epochs: not one of these
-        in between (what a read taken at the first one may be trusted for)."""
-
-    def connect(self) -> None:
-        """Open the link, retrying per the policy; raises :class:`ConnectError`."""
-
-    def close(self) -> None:
-        """Close the link; safe to call more than once."""
-
-    def read_block(
-        self,
-        table: Table,
-        address: int,
-        count: int,
-        *,
-        retry: bool = True,
-        interruptible: bool = True,
-    ) -> list[int]:
-        """Read ``count`` words (or bits as 0/1) from ``address`` in one request.
-
-        Args:
-            table: The Modbus table.
-            address: The first address.
-            count: How many registers (or bits).
-            retry: Retry a failed read per the retry policy.
-            interruptible: A stop request (``interrupt``) ends the waits between
-                retries.
-
-        Returns:
-            ``count`` words (bits as 0/1).
-
-        Raises:
-            TransportError: The read failed (a subclass says how).
-        """
-
-    def write_block(
-        self,
-        table: Table,
-        address: int,
-        words: Sequence[int],
-        *,
-        retry: bool,
-        interruptible: bool = True,
-    ) -> None:
-        """Write words (holding) or bits (coils) in one request.
-
-        Args:
-            table: ``Table.HOLDING`` or ``Table.COIL``.
-            address: The first address.
-            words: The words (0..65535) or bits.
-            retry: Retry a failed write per the retry policy (False for a write that
-                triggers a command: it is sent once).
-            interruptible: A stop request (``interrupt``) ends the waits between
-                retries.
-
-        Raises:
-            TransportError: The write failed (a subclass says how).
-        """
-
-    def read_fields(
-        self,
-        fields: Iterable[RegisterField],
-        *,
-        max_gap: int = 0,
-        retry: bool = True,
-        interruptible: bool = True,
-    ) -> dict[str, Value]:
-        """Read and decode fields, one request per contiguous block.
-
-        Args:
-            fields: The fields.
-            max_gap: A read may span this many unused addresses to fetch two fields
-                in one request.
-            retry: Retry a failed read per the retry policy.
-            interruptible: A stop request (``interrupt``) ends the waits between
-                retries.
-
-        Returns:
-            Each field's engineering value, by name.
-
-        Raises:
-            TransportError: A read failed (a subclass says how).
-        """
-
-    def write_fields(
-        self,
-        values: Sequence[tuple[RegisterField, Value]] | Mapping[RegisterField, Value],
-        *,
-        retry: bool,
-        interruptible: bool = True,
-    ) -> None:
-        """Encode every value (refusing before any I/O), then write each block once.
-
-        Args:
-            values: ``(field, value)`` pairs, or a mapping of them.
-            retry: Retry a failed write per the retry policy (False for a write that
-                triggers a command: it is sent once).
-            interruptible: False for clean-up writes (withdraw, stop) that must still
-                be attempted after a stop request.
-
-        Raises:
-            ValueOutOfRangeError: A value does not fit its field (nothing is sent).
-            TransportError: A write failed (a subclass says how).
-        """
-
-
-class BlockTransport(ABC):
-    """The link-independent part of a transport: state, counters, retries, field plans.
-
-    A subclass supplies the link: :meth:`_open_link`, :meth:`_close_link`,
-    :meth:`_link_open` and :meth:`_exchange` (one request, failures already mapped to
-    :class:`TransportError` subclasses). Everything else, and so every rule about
-    when a request may be retried, is shared.
+    Args:
+        host: The device's address.
+        port: Its Modbus TCP port.
+        device_id: The Modbus unit id of every request.
+        timeout: Bound of one request, s.
+        retry: How failed requests and connects are retried; None: ``RetryPolicy()``.
+        name: The link's name in messages and logs.
     """
 
     def __init__(

@@ -1,6 +1,6 @@
 """A transport to an in-process simulator: the TCP server's request path without sockets.
 
-:class:`MemoryTransport` is a :class:`~tmmaster._transport.BlockTransport` like the
+:class:`MemoryTransport` is a :class:`~tmmaster.Transport` like the
 Modbus TCP transport: the same counters, retry rules and error types. Each request is
 handed to the simulator's event loop thread and served by the same
 :class:`~tmmaster.sim._server.DeviceServer` gate as a TCP request: the device-id
@@ -31,7 +31,7 @@ from .._exceptions import (
     ResponseTimeoutError,
 )
 from .._retry import RetryPolicy
-from .._transport import BlockTransport, Transport
+from .._transport import Transport
 from ._server import DeviceServer, MemoryAnswer
 
 T = TypeVar("T")
@@ -155,7 +155,7 @@ def frame_bytes(function_code: int, count: int, *, request: bool, refused: bool)
     return header + pdu
 
 
-class MemoryTransport(BlockTransport):
+class MemoryTransport(Transport):
     """Talks to one device (``"robot"`` or ``"gripper"``) of an in-process Simulator.
 
     A :class:`~tmmaster.Transport` without a socket: each request goes through the
