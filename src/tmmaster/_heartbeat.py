@@ -172,6 +172,24 @@ class Heartbeat:
         self.start(member)
         return self.session
 
+    def renew(self) -> int:
+        """Beat at once with a new session, after a command whose write was in doubt was
+        given up: a copy of its frame still in the network carries the old session, so the
+        robot program consumes it as another master's (``another_master``), even after a
+        controller restart put its sequence numbers back at 0 and freed the frame's number.
+
+        Returns:
+            The new session, for this master's next commands.
+
+        Raises:
+            TMMasterError: The beat could not be written (the heartbeat carries the new
+                session from its next beat on).
+        """
+        self.session = (self.session + secrets.randbelow(HEARTBEAT_MAX - 1)) % HEARTBEAT_MAX + 1
+        self._transport.write_block(Table.HOLDING, self.address, self.next_words(), retry=True)
+        self.wrote_at = time.monotonic()
+        return self.session
+
     def start(self, member: FleetMember | None) -> None:
         """Start writing: on ``member``'s driver loop, or (None) in a thread of its own.
 

@@ -46,6 +46,7 @@ from ._checks import Bounds, require_in, require_positive
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._command import _MotionFollower
 from ._exceptions import (
+    CommandStateUnknownError,
     ConfigError,
     ConnectError,
     IllegalAddressError,
@@ -1279,7 +1280,12 @@ class Robot:
             # Where the move starts, the robot's TCP and base checked against the tool.
             start, joints = self._frames.arm_before(ticket, self.tool)
         plan = self._planner.plan(command, start, joints, timeout=timeout, resolved_at=resolved_at)
-        motion = self._follower.start(ticket, plan, self._outstanding)
+        try:
+            motion = self._follower.start(ticket, plan, self._outstanding)
+        except CommandStateUnknownError:
+            if self._heartbeat.running:  # given up (not owed), but its frame may still land
+                self._channel.session = self._heartbeat.renew()
+            raise
         self._planner.sent(plan)
         return motion
 

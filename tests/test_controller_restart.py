@@ -1,0 +1,111 @@
+"""A robot controller restarted under a connected master (a power cycle, the TMflow
+project reloaded): the robot program's registers come back at 0, sequence numbers,
+``ack_seq``, ``done_seq`` and the sessions alike, and the program starts afresh.
+
+The simulator has no restart of its own; :func:`restart_controller` models one on the
+simulated controller: the project stops, every register of the robot program (9000 and
+up) reads 0, and the project starts again from the beginning. The judge is the
+simulator's motion log.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from fault_proxy import FaultProxy, Rule
+from safety_invariant import Issued, check
+from tmmaster import PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
+from tmmaster.sim import Simulator, Timing
+
+START = Pose(300, -200, 150, 180, 0, 90)
+STALE = Pose(300, -200, 180, 180, 0, 90)
+NEXT = Pose(250, 0, 160, 180, 0, 90)
+
+
+#: The robot program's registers that a restart leaves at 0 (the handshake's; the target
+#: and speed words read 0 too, but no frame is taken on them alone).
+RESET = (
+    *("command", "seq", "ext_seq", "command_session"),
+    *("master_heartbeat", "master_ttl_ms", "master_session"),
+    *("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "ack_session"),
+)
+
+
+def restart_controller(sim: Simulator) -> None:
+    """The controller restarts: project stopped, program registers at 0, project started."""
+
+    sim.call(lambda: sim._controller.bank.set("stop_project", True))
+    sim.wait_for(lambda: not sim.field("project_running"), timeout=2.0)
+
+    def clear() -> None:
+        for name in RESET:
+            sim._controller.bank.set(name, 0)
+
+    sim.call(clear)
+    sim.press_play()
+    sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
+
+
+@pytest.fixture
+def sim() -> Iterator[Simulator]:
+    with Simulator(profile="tmflow", time_scale=20.0, timing=Timing(tick_hz=50.0)) as simulator:
+        yield simulator
+
+
+def attempt(robot: Robot, target: Pose, issued: list[Issued]) -> str:
+    """move_to, recording the command and how the call ended."""
+    command = Issued(target, time.monotonic())
+    issued.append(command)
+    try:
+        robot.move_to(target, speed=80)
+    except TMMasterError as exc:
+        command.outcome = type(exc).__name__
+    else:
+        command.outcome = "done"
+    command.ended_at = time.monotonic()
+    return command.outcome
+
+
+def robot_through(proxy: FaultProxy) -> Robot:
+    return Robot(
+        "127.0.0.1",
+        proxy.port,
+        profile="tmflow",
+        gripper=None,
+        polling=PollPolicy(interval_s=0.01),
+        timeouts=TimeoutPolicy(request_s=0.3, ack_timeout_s=0.5, motion_margin_s=1.0),
+        retry=RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02),
+    )
+
+
+@pytest.mark.parametrize("lands", ["before the first beat", "after the first beat"])
+def test_a_write_held_across_a_controller_restart_never_runs(sim: Simulator, lands: str) -> None:
+    """The master's first command (number 1) and its resend are held in the network; the
+    master gives it up (its cancel record uses number 1 up). The controller restarts:
+    ``ack_seq`` is 0 again, so number 1 is free. The held frames land, of the master
+    still beating, before its first beat after the restart or after it."""
+    issued: list[Issued] = []
+    with FaultProxy(sim.port) as proxy, robot_through(proxy) as robot:
+        robot.wait_until_ready()
+        landed = threading.Event()
+        proxy.add(Rule("hold", function_code=16, address=9000, release=landed, times=2))
+        assert attempt(robot, STALE, issued) == "CommandStateUnknownError"
+        assert sim.field("ack_seq") == 1  # the cancel record used the number up
+        restart_controller(sim)
+        if lands == "after the first beat":
+            sim.wait_for(lambda: sim.field("master_session") != 0, timeout=2.0)
+        landed.set()
+        proxy.wait_held()
+        start = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= start + 10, timeout=5.0)  # 4 simulated s
+        check(issued, sim.motion_log())
+        assert [r.target for r in sim.motion_log()] == []
+        # The master still commands, once the program has its beat again (a command
+        # written before that is refused as another master's: nothing moves).
+        sim.wait_for(lambda: sim.field("master_session") != 0, timeout=2.0)
+        assert attempt(robot, NEXT, issued) == "done"
+    check(issued, sim.motion_log())
