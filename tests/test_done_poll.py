@@ -7,10 +7,12 @@ nothing is stopped.
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 import tmmaster
-from fault_proxy import FaultProxy, Rule
+from fault_proxy import Action, FaultProxy, Rule
 from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
 
@@ -45,3 +47,30 @@ def test_a_failed_read_after_the_done_stops_nothing() -> None:
         assert sim.tcp_pose().is_close(B, mm=0.5)
         assert not [s for s in proxy.seen if s.function_code == 5]  # no Stop written
         assert sim.field("project_running")
+
+
+@pytest.mark.parametrize("fault", ["delay", "drop_answer"])
+def test_a_move_to_where_the_arm_is_is_done_only_once_it_ran(fault: Action) -> None:
+    # The same target again: the pose read before the write matches the target already.
+    # Its write held up, or its answer lost: done comes only from the program's done_seq
+    # for this number, after the robot ran the move.
+    with (
+        Simulator("tmflow", time_scale=4.0) as sim,
+        FaultProxy(sim.port) as proxy,
+        Robot(
+            "127.0.0.1",
+            proxy.port,
+            gripper=None,
+            timeouts=TimeoutPolicy(request_s=0.2),
+            polling=PollPolicy(interval_s=0.01),
+        ) as robot,
+    ):
+        robot.wait_until_ready(timeout_s=5)
+        robot.move_to(A, speed=60)
+        proxy.add(Rule(fault, function_code=16, address=9000, delay_s=0.1))
+        robot.move_to(A, speed=60)
+        returned = time.monotonic()
+        log = sim.motion_log()
+        assert [r.target for r in log] == [A, A]
+        assert log[1].done_wall_time is not None
+        assert log[1].done_wall_time <= returned
