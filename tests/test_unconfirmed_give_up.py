@@ -248,3 +248,40 @@ def test_a_stop_the_robot_refuses_owes_nothing() -> None:
         mark = len(sim.request_log)
         robot.status()
         assert {(fc, address) for fc, address, _ in writes_since(sim, mark)} <= {(16, 9050)}
+
+
+def test_a_close_that_cannot_deliver_the_give_up_sends_nothing_after(
+    sim: Simulator, link: Fleet | None
+) -> None:
+    # Robot.close() (or Fleet.close()) with the link still down: the give-up stays
+    # unconfirmed and the master is gone. When the link comes back nothing of it is sent
+    # (no beat, no retry); the program sees the master silent for its TTL and uses the
+    # number up, so the held frame, landing after that, never runs.
+    issued: list[Issued] = []
+    landed = threading.Event()
+    with FaultProxy(sim.port) as proxy:
+        # A short TTL, so that the program sees the closed master gone soon.
+        robot = Robot(
+            "127.0.0.1",
+            proxy.port,
+            gripper=None,
+            link=link,
+            polling=PollPolicy(interval_s=0.01),
+            timeouts=TimeoutPolicy(request_s=0.2, heartbeat_s=0.1, heartbeat_ttl_s=0.5),
+            retry=RetryPolicy(attempts=2, total_time_s=0.15, initial_backoff_s=0.02),
+        ).connect()
+        try:
+            give_up_undelivered(robot, proxy, issued, landed)
+            seq = robot.last_motion.ticket.seq  # type: ignore[union-attr]
+            if link is None:
+                assert robot.close(timeout_s=0.5) is False
+            else:
+                assert link.close(timeout_s=0.5) == (robot.name,)
+            mark = len(sim.request_log)
+            proxy._refusing_until = 0.0  # the link is back
+            sim.wait_for(lambda: sim.field("ack_seq") == seq, timeout=5.0)
+        finally:
+            robot.close()
+        land_and_check(sim, proxy, landed, issued)
+        assert [w[:2] for w in writes_since(sim, mark)] == [(16, 9000)]  # the held frame only
+        assert [r.target for r in sim.motion_log()] == [START]
