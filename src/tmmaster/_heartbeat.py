@@ -178,16 +178,15 @@ class Heartbeat:
         robot program consumes it as another master's (``another_master``), even after a
         controller restart put its sequence numbers back at 0 and freed the frame's number.
 
+        The beat is written once, as any beat: one that fails is logged and counted missed
+        (``robot.heartbeat_failed``), and the next beat carries the new session. It never
+        raises, so the caller's error (the command given up) is what the user sees.
+
         Returns:
             The new session, for this master's next commands.
-
-        Raises:
-            TMMasterError: The beat could not be written (the heartbeat carries the new
-                session from its next beat on).
         """
         self.session = (self.session + secrets.randbelow(HEARTBEAT_MAX - 1)) % HEARTBEAT_MAX + 1
-        self._transport.write_block(Table.HOLDING, self.address, self.next_words(), retry=True)
-        self.wrote_at = time.monotonic()
+        self.wrote(_write_once(self._transport, self.address, self.next_words(), self.period_s))
         return self.session
 
     def start(self, member: FleetMember | None) -> None:
