@@ -479,9 +479,10 @@ class Robot:
     def timeouts(self) -> TimeoutPolicy:
         """How long waits may take (acknowledgement, motion, gripper, in-flight write).
 
-        A new policy applies to the next wait; its ``request_s`` and
-        ``gripper_settle_s`` are read when the robot is made (they bound its link and
-        its gripper), and are those a robot keeps.
+        A new policy applies to the next wait; its ``request_s``,
+        ``gripper_settle_s``, ``heartbeat_s`` and ``heartbeat_ttl_s`` are read when the
+        robot is made (they bound its link, its gripper and its heartbeat), and are those
+        a robot keeps.
         """
         return self._follower.timeouts
 
