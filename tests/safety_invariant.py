@@ -8,10 +8,11 @@ simulator's own motion log, never what the master believes.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from tmmaster import Pose
+from tmmaster import Pose, Robot, TMMasterError
 from tmmaster.sim import MotionRecord
 
 #: Targets closer than this are the same command (tests give each command its own target).
@@ -34,6 +35,20 @@ class Issued:
     def gave_up(self) -> bool:
         """True when the master's call ended with an error (the master gave the command up)."""
         return self.outcome not in ("done", "running")
+
+
+def attempt(robot: Robot, target: Pose, issued: list[Issued], *, speed: int = 80) -> str:
+    """``robot.move_to(target)``, recorded in ``issued`` with how the call ended."""
+    command = Issued(target, time.monotonic())
+    issued.append(command)
+    try:
+        robot.move_to(target, speed=speed)
+    except TMMasterError as exc:
+        command.outcome = type(exc).__name__
+    else:
+        command.outcome = "done"
+    command.ended_at = time.monotonic()
+    return command.outcome
 
 
 def check(issued: Sequence[Issued], log: Sequence[MotionRecord]) -> None:

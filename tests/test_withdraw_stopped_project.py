@@ -15,14 +15,13 @@ generated robot program; its motion log is the judge.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from safety_invariant import Issued, check
+from safety_invariant import Issued, attempt, check
 from tmmaster import (
     PollPolicy,
     Pose,
@@ -30,7 +29,6 @@ from tmmaster import (
     Robot,
     StopRequestedError,
     TimeoutPolicy,
-    TMMasterError,
 )
 from tmmaster.sim import Simulator, Timing
 
@@ -54,20 +52,6 @@ OPERATOR: dict[str, Callable[[Simulator], None]] = {
 def sim() -> Iterator[Simulator]:
     with Simulator(profile="tmflow", time_scale=20.0, timing=Timing(tick_hz=50.0)) as simulator:
         yield simulator
-
-
-def attempt(robot: Robot, target: Pose, issued: list[Issued]) -> str:
-    """move_to, recording the command and how the call ended."""
-    command = Issued(target, time.monotonic())
-    issued.append(command)
-    try:
-        robot.move_to(target, speed=80)
-    except TMMasterError as exc:
-        command.outcome = type(exc).__name__
-    else:
-        command.outcome = "done"
-    command.ended_at = time.monotonic()
-    return command.outcome
 
 
 @pytest.mark.parametrize("operator", sorted(OPERATOR))
