@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING
 from ._checks import shown
 from ._error_root import ConfigError as ConfigError
 from ._error_root import TMMasterError as TMMasterError
-from ._tm_errors import TMErrorCode, code_hex, describe_fault, lookup_tm_error
+from ._tm_errors import TMErrorCode, code_hex, describe, lookup_tm_error
 
 if TYPE_CHECKING:
     from ._pose import Pose
@@ -300,7 +300,7 @@ class _TMCodedError(RobotError):
 
     def __init__(self, message: str, *, error_code: int = 0, pose: Pose | None = None) -> None:
         if error_code and code_hex(error_code) not in message:
-            message = f"{message}: {describe_fault(error_code)}"
+            message = f"{message}: {describe(error_code, hint=True)}"
         super().__init__(message, error_code=error_code, pose=pose)
 
     @property

@@ -106,34 +106,18 @@ def code_hex(code: int) -> str:
     return f"0x{code & 0xFFFFFFFF:04X}"
 
 
-def describe(code: int) -> str:
-    """The code and its meaning, for one line of text.
+def describe(code: int, *, hint: bool = False) -> str:
+    """The code and its meaning, for one line of text. Never raises: where the data cannot
+    be read (a broken install), the hex code and why.
 
     Args:
         code: The robot's error code.
+        hint: Add what to do, where short (the message of a robot fault).
 
     Returns:
-        ``"0x0022 Force or Torque Over Range"``, or ``"0x1234 (not in TMflow 2.24
-        Appendix J)"`` for a code the manual does not list; the bare ``"0x0022"`` where
-        the data cannot be read (a broken install: never raises).
-    """
-    try:
-        entry = lookup_tm_error(code)
-    except (ConfigError, OSError):  # a broken install: the bare code still says which
-        return code_hex(code)
-    return entry.label if entry is not None else f"{code_hex(code)} (not in {SOURCE})"
-
-
-def describe_fault(code: int) -> str:
-    """:func:`describe`, then what to do where short (the message of a robot fault).
-
-    Never raises: where the data cannot be read (a broken install), the bare hex code.
-
-    Args:
-        code: The robot's error code.
-
-    Returns:
-        ``"0x0022 Force or Torque Over Range; what to do (TMflow 2.24 manual p. 409): ..."``.
+        ``"0x0022 Force or Torque Over Range"`` (with ``hint``: then ``"; what to do
+        (TMflow 2.24 manual p. 409): ..."``), or ``"0x1234 (not in TMflow 2.24
+        Appendix J)"`` for a code the manual does not list.
     """
     try:
         entry = lookup_tm_error(code)
@@ -141,7 +125,7 @@ def describe_fault(code: int) -> str:
         return f"{code_hex(code)} (its meaning could not be read: {exc})"
     if entry is None:
         return f"{code_hex(code)} (not in {SOURCE})"
-    return f"{entry.label}; {entry.hint()}"
+    return f"{entry.label}; {entry.hint()}" if hint else entry.label
 
 
 def lookup_tm_error(code: int) -> TMErrorCode | None:

@@ -47,7 +47,7 @@ from .._registers import (
     RobotProfile,
 )
 from .._robot_models import RobotModel
-from .._tm_errors import describe_fault
+from .._tm_errors import describe
 from ._backend import MotionRejectedError, PathBackend, PhysicsBackend
 from ._bank import RegisterBank
 from ._device import Logger, SimDevice
@@ -753,7 +753,7 @@ class RobotController(SimDevice[RobotProfile]):
             "sim.robot_error",
             device=self._name,
             code=int(code),
-            meaning=describe_fault(int(code)),
+            meaning=describe(int(code), hint=True),
             reason=reason,
         )
         self._stop_motion()
