@@ -99,12 +99,6 @@ def test_a_write_held_across_a_controller_restart_never_runs(sim: Simulator, lan
     check(issued, sim.motion_log())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known limit: a command whose first copy is held and whose resend ran keeps its"
-    " session after it is done, so after a controller restart and the master's next beat"
-    " the held copy finds number 1 free and runs the move again",
-)
 def test_a_resent_write_held_across_a_restart_never_runs_twice(sim: Simulator) -> None:
     """The first copy of the master's command 1 is held; its resend runs, and the move is
     done. The controller restarts (``ack_seq`` 0 frees number 1), the master beats

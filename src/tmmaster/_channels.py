@@ -151,6 +151,8 @@ class Ticket:
     #: True once a write of the command block was attempted (it may have landed even if
     #: the write failed); a command never written has nothing to withdraw or stop.
     written: bool = False
+    #: True once a second copy of the block was written: the first may still land.
+    resent: bool = False
     extra: dict[str, Value] = field(default_factory=dict)
     #: ``words`` encoded and grouped into write blocks while preparing (encoded once).
     plan: list[tuple[Block, list[int]]] = field(default_factory=list)

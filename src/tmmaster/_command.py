@@ -207,6 +207,10 @@ class _Following:
     ) -> Literal[False]:
         if exc is not None:
             self._follower.abandon(self._motion, exc)
+        motion, follower = self._motion, self._follower
+        if motion.ticket.resent and (motion.done or motion._given_up):
+            motion.ticket.resent = False  # its copy still in the network is refused from now on
+            follower._channel.session = follower.renew()
         return False
 
 
@@ -259,6 +263,10 @@ class _MotionFollower:
         #: heartbeat's stop): the robot program sees this master gone, expires the command.
         self.owed: Motion | None = None
         self.silence: Callable[[], None] = lambda: None
+        #: Called once a command with a copy of its frame still in the network (resent)
+        #: ended: the Robot's heartbeat's, beating with a new session (returned), so that
+        #: the program takes that copy as another master's, even after a controller restart.
+        self.renew: Callable[[], int] = lambda: channel.session
 
     def start(self, ticket: Ticket, plan: Plan, register: Callable[[Motion], None]) -> Motion:
         """Send a planned command once (:meth:`send`) and return its handle.
@@ -315,6 +323,7 @@ class _MotionFollower:
                 seq=ticket.seq,
                 reason="same sequence number: the program takes it at most once",
             )
+            ticket.resent = True
             try:
                 self.gate.write(None, send)  # the same ticket: registered already
                 return

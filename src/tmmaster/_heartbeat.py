@@ -173,18 +173,22 @@ class Heartbeat:
         return self.session
 
     def renew(self) -> int:
-        """Beat at once with a new session, after a command whose write was in doubt was
-        given up: a copy of its frame still in the network carries the old session, so the
+        """Beat at once with a new session, once a command with a copy of its frame still
+        in the network (its write resent) ended: that copy carries the old session, so the
         robot program consumes it as another master's (``another_master``), even after a
         controller restart put its sequence numbers back at 0 and freed the frame's number.
 
         The beat is written once, as any beat: one that fails is logged and counted missed
         (``robot.heartbeat_failed``), and the next beat carries the new session. It never
-        raises, so the caller's error (the command given up) is what the user sees.
+        raises, so the caller's error (the command given up) is what the user sees. A
+        heartbeat not running (silenced while a give-up is owed: the next claim takes a
+        new session) writes nothing.
 
         Returns:
-            The new session, for this master's next commands.
+            The session for this master's next commands.
         """
+        if not self.running:
+            return self.session
         self.session = (self.session + secrets.randbelow(HEARTBEAT_MAX - 1)) % HEARTBEAT_MAX + 1
         self.wrote(_write_once(self._transport, self.address, self.next_words(), self.period_s))
         return self.session

@@ -46,7 +46,6 @@ from ._checks import Bounds, require_in, require_positive
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._command import _MotionFollower
 from ._exceptions import (
-    CommandStateUnknownError,
     ConfigError,
     ConnectError,
     IllegalAddressError,
@@ -426,6 +425,7 @@ class Robot:
             log=self._log,
         )
         self._follower.silence = self._heartbeat.stop  # while a give-up is owed
+        self._follower.renew = self._heartbeat.renew
 
     def _join(self, fleet: Fleet | None) -> FleetMember | None:
         """A robot whose link is on a driver (its Fleet's, or the process's default one):
@@ -1281,12 +1281,7 @@ class Robot:
             # Where the move starts, the robot's TCP and base checked against the tool.
             start, joints = self._frames.arm_before(ticket, self.tool)
         plan = self._planner.plan(command, start, joints, timeout=timeout, resolved_at=resolved_at)
-        try:
-            motion = self._follower.start(ticket, plan, self._outstanding)
-        except CommandStateUnknownError:
-            if self._heartbeat.running:  # given up (not owed), but its frame may still land
-                self._channel.session = self._heartbeat.renew()
-            raise
+        motion = self._follower.start(ticket, plan, self._outstanding)
         self._planner.sent(plan)
         return motion
 
