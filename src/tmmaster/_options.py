@@ -18,6 +18,7 @@ from ._checks import Bounds, Policy, bounded, shown
 from ._exceptions import ConfigError
 from ._planning import Workspace
 from ._registers import GripperProfile
+from ._robot_models import TCP_SPEED_MAX
 from ._transport import Transport
 
 
@@ -128,7 +129,7 @@ class Checks(Policy):
     #: speed limit (TMflow's Safety Settings, Performance Safety "TCP Speed", a stop
     #: criterion). None: the arm model's, TMflow's default 1500 mm/s; raise it to the
     #: robot's own where its safety settings raise it (docs/kinematics.md).
-    tcp_speed_limit_mm_s: Annotated[float, Field(gt=0, le=4500, strict=True)] | None = None
+    tcp_speed_limit_mm_s: Annotated[float, Field(gt=0, le=TCP_SPEED_MAX, strict=True)] | None = None
     #: Refuse (UnitsError, before anything is sent) a target or a ``tool`` that looks
     #: like metres or radians; False takes them as written.
     units: bool = True

@@ -52,6 +52,11 @@ class JointSpec(BaseModel):
         return self
 
 
+#: The highest TCP speed limit ("TCP Speed" stop criterion) TMflow accepts, mm/s (TMflow
+#: 2.24 Appendix B).
+TCP_SPEED_MAX = 4500.0
+
+
 class RobotModel(BaseModel):
     """One arm model: its joint chain, ranges, speeds and the motion-time model.
 
@@ -84,7 +89,7 @@ class RobotModel(BaseModel):
     #: The robot's TCP speed limit, mm/s: TMflow's Performance Safety "TCP Speed" stop
     #: criterion (default 1500, settable 0-4500: TMflow 2.24 Appendix B). A PTP whose TCP
     #: would run faster is refused by the master and stops the simulated robot (0x0021).
-    tcp_speed_limit_mm_s: float = Field(default=1500.0, gt=0, le=4500)
+    tcp_speed_limit_mm_s: float = Field(default=1500.0, gt=0, le=TCP_SPEED_MAX)
     #: Rated payload, kg: the simulator raises the robot's over-payload error (0x000F) for
     #: a heavier part carried; None: not known, not checked.
     payload_kg: float | None = Field(default=None, gt=0)

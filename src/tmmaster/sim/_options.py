@@ -17,7 +17,7 @@ from .._exceptions import ConfigError, UnknownNameError
 from .._pose import Pose
 from .._profiles import gripper_profile
 from .._registers import GripperProfile
-from .._robot_models import RobotModel, robot_model
+from .._robot_models import TCP_SPEED_MAX, RobotModel, robot_model
 from ._scene import Scene, load_scene
 from ._world import GRASP_MODES, GraspMode, GripperGeometry, TableObject, World
 
@@ -26,7 +26,7 @@ _PROJECT_SPEEDS = range(5, 101, 5)
 
 #: The range of the robot's TCP speed limit (``RobotSetup.tcp_speed_limit_mm_s``): TMflow
 #: 2.24 Appendix B, Performance Safety "TCP Speed", 0-4500 mm/s (0 itself refused here).
-_TCP_SPEED_LIMIT_BOUNDS = Bounds(0.0, 4500.0, "mm/s", open_low=True)
+_TCP_SPEED_LIMIT_BOUNDS = Bounds(0.0, TCP_SPEED_MAX, "mm/s", open_low=True)
 
 #: Physics backends a simulator can be built with by name (``Cell(physics=...)``).
 PHYSICS_BACKENDS = ("kinematic", "mujoco")
