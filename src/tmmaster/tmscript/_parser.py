@@ -22,7 +22,7 @@ from lark.tree import Meta
 
 from .._exceptions import TMScriptError, TMScriptSyntaxError
 from . import _ast as a
-from ._grammar_cache import cache_file
+from ._grammar_cache import cache_file, keep_parsed, load_parsed, parsed_file
 from ._types import STRING_MAX
 
 __all__ = ["MAX_ERRORS", "MAX_NESTING", "check_script", "parse_script"]
@@ -636,12 +636,26 @@ def _tree_position(node: Tree[Token]) -> tuple[int, int]:
 def parse_script(text: str) -> a.Script:
     """Parse a Script Project's text into its syntax tree.
 
+    A long script's tree is kept in this user's private cache folder, and read back from
+    there when the same script is parsed again (:func:`._grammar_cache.parsed_file`).
+
     :param text: the whole script.
     :returns: the :class:`._ast.Script`.
     :raises TMScriptSyntaxError: the text is not TMscript, nests more than
         :data:`MAX_NESTING` levels deep or has a string constant over
         :data:`~._types.STRING_MAX` characters; ``line``/``column`` say where.
     """
+    path = parsed_file(text)
+    kept = load_parsed(path)
+    if isinstance(kept, a.Script):
+        return kept
+    script = _parse(text)
+    keep_parsed(path, script)
+    return script
+
+
+def _parse(text: str) -> a.Script:
+    """:func:`parse_script` by lark's parser."""
     try:
         tree = _parser().parse(text)
         _check_nesting(tree)
