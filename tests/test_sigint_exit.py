@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+import tmmaster
+
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
 #: The commands: ``python -m MODULE`` and the console script.
@@ -37,15 +39,23 @@ PROGS = {"console script": "tmmaster"}
 
 def _paused(command: list[str], point: str, signals: int) -> tuple[int, str]:
     """Run ``command`` paused at ``point``, send ``signals`` Ctrl-Cs there, let it go on."""
+    code, err, _ = _paused_with_output(command, point, signals)
+    return code, err
+
+
+def _paused_with_output(command: list[str], point: str, signals: int) -> tuple[int, str, str]:
+    """:func:`_paused`, with what the command wrote on stdout too (its status, stderr,
+    stdout)."""
     env = {**os.environ, "TMMASTER_TEST_SIGINT_AT": point}
     proc = subprocess.Popen(
         command,
         stdin=subprocess.PIPE,
-        stdout=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         env=env,
     )
     assert proc.stdin is not None
+    assert proc.stdout is not None
     assert proc.stderr is not None
     try:
         seen = proc.stderr.readline().decode()
@@ -56,29 +66,34 @@ def _paused(command: list[str], point: str, signals: int) -> tuple[int, str]:
             proc.stdin.write(b"x")  # let it go on (it may have exited already)
             proc.stdin.flush()
         err = proc.stderr.read().decode()
-        return proc.wait(timeout=30), err
+        out = proc.stdout.read().decode()
+        return proc.wait(timeout=30), err, out
     finally:
         proc.kill()
         proc.wait()
         with contextlib.suppress(BrokenPipeError):
             proc.stdin.close()
+        proc.stdout.close()
         proc.stderr.close()
 
 
-#: The commands whose Ctrl-C in the exit hooks is checked here, after ``--help``. The
-#: simulator's and pick & place's are checked at the end of their own process tests,
-#: after a run (test_sim_server, test_pickplace: one interpreter start each, not two).
+#: The commands whose Ctrl-C in the exit hooks is checked here, after ``--version`` (the
+#: process's answer to it is checked too: test_public_api checks each command's main()
+#: in this process). The simulator's and pick & place's are checked at the end of their
+#: own process tests, after a run (test_sim_server, test_pickplace: one interpreter start
+#: each, not two).
 AT_EXIT = [name for name in COMMANDS if name not in ("sim", "pickplace")]
 
 
 @pytest.mark.parametrize("name", AT_EXIT)
 def test_ctrl_c_during_the_exit_hooks_is_quiet(name: str) -> None:
-    command = COMMANDS[name]
+    command = [*COMMANDS[name][:-1], "--version"]
     if not Path(command[0]).exists():
         pytest.skip("the console script is not installed next to this interpreter")
-    code, err = _paused(command, "exit", signals=2)
+    code, err, out = _paused_with_output(command, "exit", signals=2)
     assert err == ""  # no "Exception ignored in atexit callback", no traceback
-    assert code == 0  # --help's status: the Ctrl-Cs changed nothing
+    assert code == 0  # --version's status: the Ctrl-Cs changed nothing
+    assert out.strip().endswith(tmmaster.__version__)  # said before the exit hooks ran
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))
