@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 from math import copysign
 
-from .._codec import Encoder, Value, decode, encoder
+from .._codec import Decoder, Encoder, Value, decoder, encoder
 from .._exceptions import IllegalAddressError, IllegalValueError
 from .._registers import RegisterField, RegisterMap, Table
 from ._memo import IdentityMemo
@@ -167,6 +167,8 @@ class RegisterBank:
         # Each field's encoder (the codec's own, equal to encode()), table and addresses,
         # found once by name: a moving arm's pose changes some thirty fields a tick.
         self._setters: dict[str, tuple[Encoder, Table, tuple[int, ...]]] = {}
+        # Each field's decoder, table and first address, found once by name.
+        self._getters: dict[str, tuple[Decoder, Table, int]] = {}
         self._version = 0
         self._table_changes: dict[Table, int] = dict.fromkeys(Table, 0)
         self._network_writes = 0
@@ -204,7 +206,10 @@ class RegisterBank:
             The sum of their change counts so far.
         """
         counts = self._table_changes
-        return sum([counts[table] for table in tables])
+        total = 0
+        for table in tables:  # no comprehension: one or two tables, at every tick
+            total += counts[table]
+        return total
 
     @property
     def network_writes(self) -> int:
@@ -242,9 +247,16 @@ class RegisterBank:
 
     def get(self, name: str) -> Value:
         """Engineering value of field ``name``."""
-        field = self._field(name)
-        words = self._words[field.table]
-        return decode(field, [words[a] for a in range(field.address, field.end + 1)])
+        getter = self._getters.get(name)
+        if getter is None:
+            field = self._field(name)
+            getter = self._getters[name] = (decoder(field), field.table, field.address)
+        # decode() of the field's words: its decoder reads them where they are stored (the
+        # words of a table by address). decode()'s own checks hold here by construction:
+        # a field has its width of words, and every stored word is 0..65535 (set() stores
+        # what its encoder made; write() refuses any other value).
+        read, table, first = getter
+        return read(self._words[table], first)  # type: ignore[arg-type]
 
     def set(self, name: str, value: Value) -> None:
         """Store ``value`` in field ``name`` (device side: read-only fields too)."""
@@ -292,12 +304,14 @@ class RegisterBank:
 
     def read(self, table: Table, address: int, count: int) -> list[int]:
         """Words (or 0/1 per bit) at ``address``..``address + count - 1``; gaps read as 0."""
-        self._check_range(table, address, count)
+        if count < 1 or address < 0 or address + count - 1 > 65535:  # _check_range's test
+            self._check_range(table, address, count)
         words = self._words[table]
         # Inside one readable run (its words and gaps, merged), every address is served:
         # one look-up instead of one per address. Otherwise each address is checked.
-        runs = self._layout.readable[table]
-        k = bisect_right(self._layout.readable_starts[table], address) - 1
+        layout = self._layout
+        runs = layout.readable[table]
+        k = bisect_right(layout.readable_starts[table], address) - 1
         if k < 0 or address + count > runs[k][0] + runs[k][1]:
             gaps = self._gaps[table]
             for a in range(address, address + count):
@@ -317,7 +331,8 @@ class RegisterBank:
         which may write the fields a master may not (its feedback); not counted as a
         network write.
         """
-        self._check_range(table, address, len(values))
+        if not values or address < 0 or address + len(values) - 1 > 65535:
+            self._check_range(table, address, len(values))  # raises
         if table.read_only and not device:
             raise IllegalAddressError(
                 f"{self._map.name}: the {table.value} table is read-only (write at {address})"

@@ -942,13 +942,13 @@ class RobotController(SimDevice[RobotProfile]):
             self._publish_tm_state()
             self._tm_table_pose = pose
         if not unchanged or clock != self._tm_table_clock:
-            for (days, hours, minutes, secs), whole in zip(
-                (_RUNNING_TIMER_FIELDS, _UP_TIME_FIELDS), clock, strict=True
-            ):
-                bank_set(days, whole // 86400)
-                bank_set(hours, whole // 3600 % 24)
-                bank_set(minutes, whole // 60 % 60)
-                bank_set(secs, whole % 60)
+            # Unchanged tables hold what was stored last: only the parts that differ from
+            # it (mostly the seconds) are stored again.
+            before_clock = self._tm_table_clock
+            last = _clock_parts(before_clock) if unchanged and before_clock else _NO_CLOCK
+            for name, part, before in zip(_CLOCK_FIELDS, _clock_parts(clock), last, strict=True):
+                if part != before:
+                    bank_set(name, part)
             self._tm_table_clock = clock
 
     def _tm_table_bytes(self, flange: Pose, tcp: Pose, joints: Sequence[float]) -> bytes:
@@ -986,6 +986,21 @@ class RobotController(SimDevice[RobotProfile]):
             return self._profile.field(field).code_of(label)
         except KeyError:
             return default
+
+
+#: The Running Timer's and the Up Time's days, hours, minutes and seconds, in that order.
+_CLOCK_FIELDS = (*_RUNNING_TIMER_FIELDS, *_UP_TIME_FIELDS)
+#: Parts no clock has: each part of a clock differs from them.
+_NO_CLOCK: tuple[None, ...] = (None,) * len(_CLOCK_FIELDS)
+
+
+def _clock_parts(clock: tuple[int, int]) -> tuple[int, ...]:
+    """The values of :data:`_CLOCK_FIELDS` for (Running Timer, Up Time) in whole seconds."""
+    run, up = clock
+    return (
+        *(run // 86400, run // 3600 % 24, run // 60 % 60, run % 60),
+        *(up // 86400, up // 3600 % 24, up // 60 % 60, up % 60),
+    )
 
 
 def _log_tick_failure(log: Logger, device: str, exc: Exception) -> None:

@@ -149,7 +149,8 @@ class SimHost:
                 words = c._bank.read(table, address, count)
             except Exception as exc:  # an illegal address: the device's exception answer
                 raise HostError(f"{device.name}: {exc}") from exc
-            c.after_read(table, address, words)
+            if c._late_acks:  # after_read() acts with a late_ack fault only
+                c.after_read(table, address, words)
             return words
         refused = c.refused_writes
         if refused and any((table, a) in refused for a in range(address, address + count)):

@@ -313,8 +313,10 @@ def _Byte_ToInt16Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -
     data = _bytes(args[0])
     if not data:
         return []
-    endian = _int_arg(args, 1)
-    unsigned = _int_arg(args, 2)
+    # _int_arg() of plain ints written out: a program converts every register read so.
+    count = len(args)
+    endian = args[1] if count > 1 and args[1].__class__ is int else _int_arg(args, 1)
+    unsigned = args[2] if count > 2 and args[2].__class__ is int else _int_arg(args, 2)
     if len(data) & 1:
         data += b"\0"  # the last chunk filled up with a zero, as _int16 does
     # One unpack of every chunk, as _int16 converts each: 1 Big Endian, any other Little.
@@ -1372,20 +1374,30 @@ _TYPE_WORDS = {"bool": 1, "byte": 1, "int16": 1, "int32": 2, "int": 2, "float": 
 
 
 def _device(rt: Runtime, name: Value, unit: int) -> ModbusDevice:
-    key = _str(name).strip()
+    # _str() and ModbusConfig.device() written out: every Modbus call of a program
+    # (most of an idle robot program's work) looks its device up.
+    key = (name if name.__class__ is str else _str(name)).strip()
     config = rt.devices.get(key)
     if config is None:
         raise BuiltinError(f'no ModbusTCP device named "{key}" is declared')
-    return config.device(unit)
+    device = config._devices.get(unit)
+    return device if device is not None else config.device(unit)
 
 
 def _read(rt: Runtime, args: list[Value]) -> tuple[str, list[int]]:
-    device = _device(rt, args[0], _int(args[1]) & 0xFF)
-    kind = _str(args[2])
-    if kind not in _READ_CODES:
+    # _int() and _str() of the plain int and str arguments written out (as in _device).
+    unit, kind, address, count = args[1], args[2], args[3], args[4]
+    device = _device(rt, args[0], (unit if unit.__class__ is int else _int(unit)) & 0xFF)
+    if kind.__class__ is not str:
+        kind = _str(kind)
+    code = _READ_CODES.get(kind)
+    if code is None:
         raise BuiltinError(f'read type "{kind}" is not DO, DI, RO or RI')
-    count = _int(args[4])
-    words = rt.host.modbus_request(device, _READ_CODES[kind], _int(args[3]), count, None)
+    if count.__class__ is not int:
+        count = _int(count)
+    if address.__class__ is not int:
+        address = _int(address)
+    words = rt.host.modbus_request(device, code, address, count, None)
     return kind, list(words)
 
 
@@ -1393,7 +1405,13 @@ def _as_bytes(kind: str, words: list[int]) -> bytes:
     # Bits: one byte each; registers: two bytes each, high byte first (§16.5, p. 424).
     if kind in ("DO", "DI"):
         return bytes(1 if w else 0 for w in words)
-    return struct.pack(f">{len(words)}H", *[w & 0xFFFF for w in words])
+    fmt = f">{len(words)}H"
+    try:
+        # Words of 0..0xFFFF (what a slave answers) are packed as they are: the same
+        # bytes as their low 16 bits, without a list of them.
+        return struct.pack(fmt, *words)
+    except struct.error:
+        return struct.pack(fmt, *[w & 0xFFFF for w in words])
 
 
 def _ordered(chunk: bytes, endian: int) -> bytes:
@@ -1414,10 +1432,12 @@ def _decode_all(data: bytes, size: int, fmt: str, endian: int) -> list[Scalar]:
 
 def _preset(rt: Runtime, args: list[Value]) -> tuple[ModbusConfig, tuple[int, str, int, str, int]]:
     """The device named by ``args[0]`` and its preset named by ``args[1]`` (§16.1.1)."""
-    config = rt.devices.get(_str(args[0]).strip())
+    name, preset_name = args[0], args[1]
+    # _str() of the plain str arguments written out (as in _device).
+    config = rt.devices.get((name if name.__class__ is str else _str(name)).strip())
     if config is None:
         raise BuiltinError(f'no ModbusTCP device named "{_str(args[0])}" is declared')
-    preset = config.presets.get(_str(args[1]))
+    preset = config.presets.get(preset_name if preset_name.__class__ is str else _str(preset_name))
     if preset is None:
         raise BuiltinError(f'device "{config.name}" has no preset "{_str(args[1])}"')
     return config, preset
@@ -1564,7 +1584,7 @@ def _preset_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
         raise BuiltinError("writing an array is not supported with a preset (§16.11, p. 436)")
     if value == "":
         return False  # "the input data is empty" (p. 437)
-    device = config.device(unit)
+    device = config._devices.get(unit) or config.device(unit)
     if kind == "DO":
         rt.host.modbus_request(device, 5, address, 1, [1 if value else 0])
         return True

@@ -554,7 +554,15 @@ class _ExprCompiler:
         left, right = self.expr(node.left), self.expr(node.right)
         fn, typ = self.arith(node, node.op, left.type, right.type)
         if not left.gen and isinstance(node.right, a.Literal):
-            return _CExpr(self.with_constant(node.left, left, fn, node.right.value), typ, False)
+            k = node.right.value
+            inlined = (
+                _int_with_constant(node.op, k, self.place(node.left), left)
+                if typ == "int"
+                else None
+            )
+            if inlined is not None:
+                return _CExpr(inlined, typ, False)
+            return _CExpr(self.with_constant(node.left, left, fn, k), typ, False)
         if not left.gen and not right.gen:
             lf, rf = cast(PureFn, left.fn), cast(PureFn, right.fn)
             return _CExpr(lambda fr: fn(lf(fr), rf(fr)), typ, False)
@@ -607,10 +615,13 @@ class _ExprCompiler:
         lg, rg = _lift(left), _lift(right)
 
         def logic_gen(fr: _Frame) -> Gen:
-            first = truthy((yield from lg(fr)))
+            # truthy() of a bool is the bool itself: tested first, without the call.
+            x = yield from lg(fr)
+            first = x if x is True or x is False else truthy(x)
             if first != is_and:
                 return first
-            return truthy((yield from rg(fr)))
+            y = yield from rg(fr)
+            return y if y is True or y is False else truthy(y)
 
         return _CExpr(logic_gen, "bool", True)
 
@@ -707,6 +718,9 @@ class _ExprCompiler:
         cur_fn = cast(PureFn, current.fn)
         if not value.gen:
             vf = cast(PureFn, value.fn)
+            place = self.place(node.target) if combine is None and conv is None else None
+            if place is not None:  # the common ``x = expression``: stored inlined
+                return _CExpr(_assign_plain(vf, *place), typ, False)
 
             def assign_pure(fr: _Frame) -> Value:
                 result = vf(fr)
@@ -1098,7 +1112,8 @@ class _Compiler(_ExprCompiler):
         gtest = cast(GenFn, cond.fn)
 
         def run_if_gen(fr: _Frame) -> Generator[str, None, Control]:
-            if truthy((yield from gtest(fr))):
+            c = yield from gtest(fr)
+            if c is True or (c is not False and truthy(c)):  # a bool without the call
                 return (yield from then(fr))
             if other is not None:
                 return (yield from other(fr))
@@ -1370,18 +1385,20 @@ class _CallCompiler:
             )
         ]
         returns = fn.returns
-        # Plain arguments (the common case) are called without the generator protocol.
-        pure = None if any(gen for gen, _ in args) else [f for _, f in args]
+        # Plain arguments (the common case) are called without the generator protocol;
+        # none (the other common case) need no call at all.
+        pure = None if not args or any(gen for gen, _ in args) else _values_of([f for _, f in args])
 
         def call_user(fr: _Frame) -> Gen:
             if pure is not None:
-                values = [f(fr) for f in pure]
+                values = pure(fr)
             else:
                 values = []
                 for gen, f in args:
                     values.append((yield from f(fr)) if gen else f(fr))
             callee = _Frame(fr.g, fn.size, fr.rt)
-            callee.l[: len(values)] = values
+            if values:
+                callee.l[: len(values)] = values
             assert fn.body is not None
             ctl = yield from fn.body(callee)
             if isinstance(ctl, _Return):
@@ -1459,6 +1476,89 @@ def _arguments(fns: list[_CExpr]) -> Callable[[_Frame], list[Value]]:
         return out
 
     return values
+
+
+def _int_with_constant(
+    op: str, k: Value, place: tuple[bool, int] | None, left: _CExpr
+) -> PureFn | None:
+    """``left + k``, ``left - k`` or ``left % k`` (``k`` > 0) of ints, the operator's own
+    expression written into one closure (the common ``i + 1``, ``ack % m + 1``); None for
+    another operator or constant."""
+    if k.__class__ is not int or op not in ("+", "-", "%"):
+        return None
+    if op == "%":
+        return _int_mod_constant(k, place, left) if k > 0 else None
+    # The table's x + y and x - y: ((x +/- y + 2**31) & 0xFFFFFFFF) - 2**31.
+    return _int_add_constant(k if op == "+" else -k, place, left)
+
+
+def _int_mod_constant(c: int, place: tuple[bool, int] | None, left: _CExpr) -> PureFn:
+    """``left % c`` for ``c`` > 0: _int_mod's expression for such a divisor."""
+    lf = cast(PureFn, left.fn)
+    slot = -1 if place is None else place[1]
+
+    def mod_global(fr: _Frame) -> Value:
+        x: int = fr.g[slot]  # type: ignore[assignment]
+        return x % c if x >= 0 else -(abs(x) % c)
+
+    def mod_local(fr: _Frame) -> Value:
+        x: int = fr.l[slot]  # type: ignore[assignment]
+        return x % c if x >= 0 else -(abs(x) % c)
+
+    def mod_any(fr: _Frame) -> Value:
+        x: int = lf(fr)  # type: ignore[assignment]
+        return x % c if x >= 0 else -(abs(x) % c)
+
+    return mod_any if place is None else mod_global if place[0] else mod_local
+
+
+def _int_add_constant(d: int, place: tuple[bool, int] | None, left: _CExpr) -> PureFn:
+    """``left + d`` of ints wrapped to 32 bits, as the table's ``+`` computes it."""
+    lf = cast(PureFn, left.fn)
+    slot = -1 if place is None else place[1]
+
+    def add_global(fr: _Frame) -> Value:
+        x: int = fr.g[slot]  # type: ignore[assignment]
+        return ((x + d + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+
+    def add_local(fr: _Frame) -> Value:
+        x: int = fr.l[slot]  # type: ignore[assignment]
+        return ((x + d + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+
+    def add_any(fr: _Frame) -> Value:
+        x: int = lf(fr)  # type: ignore[assignment]
+        return ((x + d + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+
+    return add_any if place is None else add_global if place[0] else add_local
+
+
+def _assign_plain(vf: PureFn, is_global: bool, slot: int) -> PureFn:
+    """``variable = vf()`` of a variable whose type needs no conversion: one closure."""
+    if is_global:
+
+        def assign_global(fr: _Frame) -> Value:
+            result = fr.g[slot] = vf(fr)
+            return result
+
+        return assign_global
+
+    def assign_local(fr: _Frame) -> Value:
+        result = fr.l[slot] = vf(fr)
+        return result
+
+    return assign_local
+
+
+def _values_of(fns: list[PureFn]) -> Callable[[_Frame], list[Value]]:
+    """The values of plain arguments, a new list each call (no comprehension for the
+    common one or two)."""
+    if len(fns) == 1:
+        (f1,) = fns
+        return lambda fr: [f1(fr)]
+    if len(fns) == 2:
+        f1, f2 = fns
+        return lambda fr: [f1(fr), f2(fr)]
+    return lambda fr: [f(fr) for f in fns]
 
 
 def _builtin_pure(
@@ -1809,6 +1909,7 @@ class Execution:
         self._phase_start = 0.0
         self._rt.started_s = host.now_s()
         self._gen: Generator[str, None, Control] | None = self._main()
+        self._last_status = Status(self.state)
 
     @property
     def phase(self) -> str:
@@ -1876,7 +1977,21 @@ class Execution:
             The new ``state``, with ``error`` and ``exit_code``.
         """
         self._step(max_statements, max_seconds)
-        return Status(self.state, self.error, self.exit_code)
+        return self._status()
+
+    def _status(self) -> Status:
+        """``Status(state, error, exit_code)``: the one made last while they are the same
+        (a Status is immutable; a program polling for a command reports the same one at
+        every step)."""
+        last = self._last_status
+        if (
+            last.state is self.state
+            and last.error is self.error
+            and last.exit_code is self.exit_code
+        ):
+            return last
+        last = self._last_status = Status(self.state, self.error, self.exit_code)
+        return last
 
     def _step(self, max_statements: int, max_seconds: float | None = None) -> ExecState:
         if self.state in (ExecState.ENDED, ExecState.ERROR):
@@ -1923,7 +2038,7 @@ class Execution:
         if self.state not in (ExecState.ENDED, ExecState.ERROR) and self._phase == "main":
             self._rt.start(max_statements, max_seconds)
             self._step_threads(nonpause_only=True)
-        return Status(self.state, self.error, self.exit_code)
+        return self._status()
 
     def _step_threads(self, *, nonpause_only: bool) -> None:
         """Run each thread to its next yield; one that stops the project ends the round."""
