@@ -310,7 +310,16 @@ def _chunks(data: bytes, size: int) -> list[bytes]:
 @_register("4.5", 57, "int[](byte[], int, int)", "int[](byte[], int)", "int[](byte[])")
 def _Byte_ToInt16Array(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
     """TMscript 2.24 §4.5 Byte_ToInt16Array, p. 57: every 2 bytes to an int16."""
-    data = _bytes(args[0])
+    return int16_array(_bytes(args[0]), args)
+
+
+def int16_array(data: bytes, args: list[Value]) -> list[int]:
+    """Byte_ToInt16Array of the bytes ``data`` with its call's ``args`` (the byte order
+    and signedness at 1 and 2; the bytes at 0 are not read): a new list.
+
+    Raises:
+        BuiltinError: A byte order or signedness that is not a number.
+    """
     if not data:
         return []
     # _int_arg() of plain ints written out: a program converts every register read so.
@@ -1384,6 +1393,18 @@ def _device(rt: Runtime, name: Value, unit: int) -> ModbusDevice:
     return device if device is not None else config.device(unit)
 
 
+def read_registers(rt: Runtime, args: list[Value]) -> bytes:
+    """What ``modbus_read(device, slave, type, address, count)`` reads, as bytes (the
+    byte array it returns holds them).
+
+    Raises:
+        BuiltinError: An argument the call refuses.
+        HostError: The host's refusal of the request.
+    """
+    kind, words = _read(rt, args)
+    return _as_bytes(kind, words)
+
+
 def _read(rt: Runtime, args: list[Value]) -> tuple[str, list[int]]:
     # _int() and _str() of the plain int and str arguments written out (as in _device).
     unit, kind, address, count = args[1], args[2], args[3], args[4]
@@ -1470,8 +1491,7 @@ def _modbus_read(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Valu
     """TMscript 2.24 §16.5 modbus_read, p. 423: by preset, or a byte array (Big Endian)."""
     if len(args) == 2:
         return _preset_read(rt, args)
-    kind, words = _read(rt, args)
-    return list(_as_bytes(kind, words))
+    return list(read_registers(rt, args))
 
 
 def _endian_arg(args: list[Value]) -> int:

@@ -29,7 +29,9 @@ from ._builtins import (
     Impl,
     ModbusConfig,
     Runtime,
+    int16_array,
     link_device,
+    read_registers,
 )
 from ._host import Host, HostError
 from ._parser import parse_script
@@ -142,16 +144,21 @@ class _Run(Runtime):
 
     def spent(self) -> bool:
         """The slice ran out: True when the step's budget is spent, else a new slice."""
-        if self._left <= 0:
+        left = self._left
+        if left <= 0:
             return True
-        size = self._left
+        size = left
         if self._deadline != math.inf:
             now = self.clock()
             if now >= self._deadline:
                 return True
-            size = min(size, 1 if now - self._sliced >= SLOW_SLICE_S else CLOCK_EVERY)
+            # min(left, 1 if slow else CLOCK_EVERY), left >= 1, without the call
+            if now - self._sliced >= SLOW_SLICE_S:
+                size = 1
+            elif left > CLOCK_EVERY:
+                size = CLOCK_EVERY
             self._sliced = now
-        self._left -= size
+        self._left = left - size
         self.budget = size - 1  # the statement that asked is the slice's first
         return False
 
@@ -209,6 +216,12 @@ class _CExpr:
     gen: bool  # fn returns a generator
     #: ``(value,)`` for a constant (what ``fn`` always returns, immutable), else None.
     const: tuple[Any] | None = None
+    #: ``modbus_read(device, slave, type, address, count)`` with plain arguments: the
+    #: call and its argument values (a ``Byte_ToInt16Array`` of it reads in one step).
+    read: tuple[a.Call, Callable[[_Frame], list[Value]]] | None = None
+    #: ``fn`` makes a new array at each call, which no variable holds: an assignment
+    #: need not copy it.
+    fresh: bool = False
 
 
 def _mapped(ce: _CExpr, fn: Callable[[Any], Any], typ: str) -> _CExpr:
@@ -424,6 +437,8 @@ class _ExprCompiler:
     def converted(self, node: a.Expr, want: str, at: a.Node) -> _CExpr:
         ce = self.expr(node)
         conv = self.converter(ce.type, want, at)
+        if conv is _copy and ce.fresh:
+            conv = None  # a new array: nobody holds the value a copy would protect
         if conv is None:
             return _CExpr(ce.fn, want, ce.gen, ce.const)
         constant = _converted_literal(node, conv)
@@ -715,6 +730,8 @@ class _ExprCompiler:
         if node.op != "=":
             combine, vtype = self.arith(node, node.op[:-1], typ, value.type)
         conv = self.converter(vtype, typ, node)
+        if conv is _copy and value.fresh and combine is None:
+            conv = None  # a new array: nobody holds the value a copy would protect
         cur_fn = cast(PureFn, current.fn)
         if not value.gen:
             vf = cast(PureFn, value.fn)
@@ -1289,7 +1306,24 @@ class _CallCompiler:
         arg_types = tuple(types)
         if builtin.impl is not None and not any(ce.gen for ce in fns):
             return _CExpr(_builtin_pure(node, builtin.impl, fns, arg_types), ret, False)
-        return _CExpr(_builtin_gen(node, builtin, fns, arg_types), ret, True)
+        return self.waiting(node, builtin, fns, arg_types, ret)
+
+    def waiting(
+        self,
+        node: a.Call,
+        builtin: Builtin,
+        fns: list[_CExpr],
+        arg_types: tuple[str, ...],
+        ret: str,
+    ) -> _CExpr:
+        """A call that may wait (a generator): a built-in that waits or an argument that may."""
+        fused = _int16_read(node, builtin, fns)
+        if fused is not None:
+            return _CExpr(fused, ret, True, fresh=True)
+        ce = _CExpr(_builtin_gen(node, builtin, fns, arg_types), ret, True)
+        if builtin.name == "modbus_read" and len(fns) == 5 and not any(f.gen for f in fns):
+            ce.read = (node, _arguments(fns))
+        return ce
 
     def arguments(
         self, node: a.Call, args: list[_CExpr], params: tuple[str, ...]
@@ -1616,6 +1650,45 @@ def _builtin_gen(
             raise _call_failure(node, exc) from None
 
     return call_gen
+
+
+def _int16_read(node: a.Call, builtin: Builtin, fns: list[_CExpr]) -> GenFn | None:
+    """``Byte_ToInt16Array(modbus_read(...), ...)``, the common read of registers, in one
+    generator: the read as its own call runs it (its errors its own), then the conversion
+    of the bytes read (the byte array modbus_read returns holds them). None for another
+    call."""
+    if builtin.name != "Byte_ToInt16Array" or not fns or fns[0].read is None:
+        return None
+    if any(ce.gen for ce in fns[1:]):
+        return None
+    read_node, read_arguments = fns[0].read
+    # The other arguments as _builtin_gen computes them (constants once), after the read.
+    template: list[Value] = [None if ce.const is None else ce.const[0] for ce in fns]  # type: ignore[misc]
+    steps = [(i, cast(PureFn, ce.fn)) for i, ce in enumerate(fns) if i and ce.const is None]
+
+    def int16_read(fr: _Frame) -> Gen:
+        values = read_arguments(fr)
+        rt = fr.rt
+        try:  # modbus_read, as _builtin_linked runs it
+            device = link_device(rt, values)
+            while not rt.host.modbus_ready(device):
+                yield _BLOCKED
+            data = read_registers(rt, values)
+        except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
+            raise
+        except Exception as exc:
+            raise _call_failure(read_node, exc) from None
+        args = template.copy()
+        for i, f in steps:
+            args[i] = f(fr)
+        try:
+            return int16_array(data, args)
+        except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
+            raise
+        except Exception as exc:
+            raise _call_failure(node, exc) from None
+
+    return int16_read
 
 
 def _builtin_linked(
