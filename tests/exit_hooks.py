@@ -1,7 +1,7 @@
 """Two Ctrl-Cs while a command's process runs Python's exit hooks, where the test hook
 ``TMMASTER_TEST_SIGINT_AT=exit`` pauses it (it says so on stderr and waits for a byte on
 stdin): for a process test that already runs a command to its end, so the check costs no
-interpreter start of its own (test_sigint_exit does it after ``--help`` for the others).
+interpreter start of its own (test_sigint_exit does it after ``--version`` for the others).
 """
 
 from __future__ import annotations

@@ -186,3 +186,33 @@ def test_a_ctrl_c_caught_in_generated_code_still_exits_130(tmp_path: Path) -> No
     )
     assert done.stderr == "demo: interrupted [exit 130]\n"
     assert done.returncode == 130  # not -2: killed by the signal
+
+
+def test_a_command_process_leaves_its_heap_to_the_system_after_every_exit_hook(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # run_main(process=True) as a command's process runs it, in this process: what it
+    # registers at exit is recorded, not registered, and this process's Ctrl-C handling
+    # is put back after.
+    import gc
+
+    from tmmaster import _sigint
+
+    registered: list[object] = []
+    monkeypatch.setattr(_sigint.atexit, "register", lambda hook, *_: registered.append(hook))
+
+    def command() -> int:
+        registered.append("a robot's exit hook")  # as an opened Robot registers its own
+        return 0
+
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        assert _sigint.run_main("demo", command, process=True) == 0
+        # Registered first, so Python runs it last: after a robot's withdraw or stop and
+        # logging's flush, its final collections skip the whole heap (gc.freeze).
+        assert registered == [gc.freeze, "a robot's exit hook"]
+        registered.clear()
+        assert _sigint.run_main("demo", lambda: 0, process=False) == 0
+        assert registered == []  # a caller in the same process keeps its heap collected
+    finally:
+        signal.signal(signal.SIGINT, before)
