@@ -331,8 +331,9 @@ class RegisterBank:
         which may write the fields a master may not (its feedback); not counted as a
         network write.
         """
-        if not values or address < 0 or address + len(values) - 1 > 65535:
-            self._check_range(table, address, len(values))  # raises
+        count = len(values)
+        if count < 1 or address < 0 or address + count - 1 > 65535:  # _check_range's test
+            self._check_range(table, address, count)
         if table.read_only and not device:
             raise IllegalAddressError(
                 f"{self._map.name}: the {table.value} table is read-only (write at {address})"
