@@ -417,6 +417,8 @@ class RobotIO:
                 earlier write that could still land).
             TransportError: The write, or a read-back, failed after its retries (a
                 subclass says how).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         address = io_address(self._profile, module, "do", channel)
         what = f"{module} DO {channel}"
@@ -456,6 +458,8 @@ class RobotIO:
         Raises:
             ConfigError: An unknown module or a channel out of range or not an int.
             TransportError: The read failed (a subclass says how).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         address = io_address(self._profile, module, "do", channel)
         return bool(self._transport.read_block(Table.COIL, address, 1)[0])
@@ -473,6 +477,8 @@ class RobotIO:
         Raises:
             ConfigError: An unknown module or a channel out of range or not an int.
             TransportError: The read failed (a subclass says how).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         address = io_address(self._profile, module, "di", channel)
         return bool(self._transport.read_block(Table.DISCRETE_INPUT, address, 1)[0])
@@ -489,6 +495,8 @@ class RobotIO:
         Raises:
             ConfigError: An unknown module, or one without DOs.
             TransportError: The read failed (a subclass says how).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         return self._read_all(module, "do")
 
@@ -504,6 +512,8 @@ class RobotIO:
         Raises:
             ConfigError: An unknown module, or one without DIs.
             TransportError: The read failed (a subclass says how).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         return self._read_all(module, "di")
 

@@ -780,7 +780,15 @@ class Robot:
         return self._channel.can_stop
 
     def check_fault(self) -> None:
-        """Read the fewest registers that tell; raise the typed error if in e-stop or error."""
+        """Read the fewest registers that tell; raise the typed error if in e-stop or error.
+
+        Raises:
+            RobotFaultError: The robot is in error (EmergencyStopError: in e-stop).
+            TransportError: The read failed (TransportClosedError: never connected).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or
+                stop (the link was down): nothing is sent until that is delivered
+                (docs/safety.md).
+        """
         self._require_connection()
         failure = self._channel.read_failure()
         if failure is not None:
@@ -804,6 +812,8 @@ class Robot:
         Raises:
             TransportError: The read failed (ProfileMismatchError when the device answers
                 another built-in profile's registers).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require_connection()
         status = self._read_naming_profile(self._channel.read_status)
@@ -818,6 +828,8 @@ class Robot:
 
         Raises:
             TransportError: The read failed (TransportClosedError: never connected).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require_connection()
         return self._channel.read_pose()
@@ -835,6 +847,8 @@ class Robot:
             MotionTimeoutError: Not ready in time.
             RobotFaultError: The robot is in error (EmergencyStopError for an e-stop).
             StopRequestedError: A stop was requested.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         require_positive("timeout_s", timeout_s)
         deadline = time.monotonic() + timeout_s
@@ -984,6 +998,8 @@ class Robot:
             RobotFaultError: The robot is in error or e-stop (nothing is sent).
             CommandRejectedError: The robot refused the command.
             StopRequestedError: A stop was requested (nothing is sent).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         motion = motion_type(motion)
         percent = self._speed_argument(speed, speed_mm_s, motion)
@@ -1058,6 +1074,8 @@ class Robot:
             RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
             StopRequestedError: A stop was requested (the move is withdrawn or stopped).
             TransportError: The link failed and did not come back in time.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require(CommandKind.PTP_JOINTS, "a joint move (move_joints)")
         values = joint_values(joints)
@@ -1128,6 +1146,8 @@ class Robot:
             RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
             StopRequestedError: A stop was requested (the move is withdrawn or stopped).
             TransportError: The link failed and did not come back in time.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         offset = offset_pose(dx, dy, dz, drx, dry, drz)
         if frame not in ("base", "tool"):
@@ -1203,6 +1223,8 @@ class Robot:
             RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
             StopRequestedError: A stop was requested (the move is withdrawn or stopped).
             TransportError: The link failed and did not come back in time.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require(CommandKind.CIRCLE, "an arc (move_arc)")
         if not isinstance(via, Pose):
@@ -1341,6 +1363,8 @@ class Robot:
             RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
             StopRequestedError: A stop was requested (the move is withdrawn or stopped).
             TransportError: The link failed and did not come back in time.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         handle = self.start_move(
             target,
@@ -1362,6 +1386,8 @@ class Robot:
         Raises:
             ConfigError: The profile has no TMflow project (article).
             TransportError: The read failed.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require_connection()
         return self._project.state()
@@ -1395,6 +1421,8 @@ class Robot:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed (a press left unanswered: Stop was pressed,
                 so that it cannot resume a paused move when it lands).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require_connection()
         # Only a command this master still follows may resume.
@@ -1422,6 +1450,8 @@ class Robot:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed (a press left unanswered: Stop was pressed,
                 so that it cannot resume a paused move when it lands).
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require_connection()
         return self._project.pause(timeout_s, self.poll_interval_s)
@@ -1437,6 +1467,8 @@ class Robot:
             TransportClosedError: The robot was never connected (nothing was sent) or is
                 closed.
             TransportError: The stop could not be written.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         self._require_connection()
         # A stop is idempotent: the channel retries it, even after a stop request.
