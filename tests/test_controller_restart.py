@@ -154,3 +154,22 @@ def test_a_move_cut_by_a_restart_is_not_reported_withdrawn(sim: Simulator) -> No
     motion = cut_by_a_restart(sim, [])
     assert len(sim.motion_log()) == 1  # the arm started
     assert not motion.withdrawn
+
+
+def test_a_resent_command_done_leaves_a_new_session_and_the_project_running(
+    sim: Simulator,
+) -> None:
+    """Once a command written twice is done, the master beats with a new session: the
+    program's watchdog takes that for no other master (the project runs on), and the
+    next command, of the new session, runs."""
+    issued: list[Issued] = []
+    with FaultProxy(sim.port) as proxy, robot_through(proxy) as robot:
+        robot.wait_until_ready()
+        proxy.add(Rule("drop_request", function_code=16, address=9000, times=1))
+        assert attempt(robot, STALE, issued) == "done"
+        first = sim.field("command_session")
+        sim.wait_for(lambda: sim.field("master_session") not in (0, first), timeout=2.0)
+        assert sim.field("project_running")
+        assert attempt(robot, NEXT, issued) == "done"
+        assert sim.field("command_session") == sim.field("master_session") != first
+    check(issued, sim.motion_log())
