@@ -1,8 +1,8 @@
 """``Sleep(ms)`` waits on the host's clock, whatever its argument's form.
 
-A call with a plain argument runs in the evaluator's own generator; one whose argument
-waits (a customized function) takes the built-in's. Both wait the same and return the
-same (TMscript 2.24 §5.5, p. 159: false at once for a negative time).
+A constant, a variable, an expression and a customized function's result wait the
+same and return the same (TMscript 2.24 §5.5, p. 159: false at once for a negative
+time).
 """
 
 from __future__ import annotations

@@ -973,28 +973,15 @@ def _wait_ms(rt: Runtime, ms: int) -> Generator[str, None, Value]:
     return True
 
 
-def sleep_until(rt: Runtime, ms: Value) -> float | None:
-    """When ``Sleep(ms)`` called now ends on the host's clock; None for a time below 0
-    (the call returns false at once: "invalid", TMscript 2.24 §5.5, p. 159).
-
-    Raises:
-        BuiltinError: ``ms`` is not a number.
-    """
-    ms = _int(ms)
-    if ms < 0:
-        return None
-    return rt.host.now_s() + ms / 1000.0
-
-
 @_register_blocking("5.5", 159, "bool(int)")
 def _Sleep(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
     """TMscript 2.24 §5.5 Sleep, p. 159: waits on the host's clock."""
-    # _wait_ms written out: a program's poll loop sleeps in every iteration. (A call
-    # with a plain argument runs the same in the evaluator's own generator.)
-    until = sleep_until(rt, args[0])
-    if until is None:
-        return False
+    # _wait_ms written out: a program's poll loop sleeps in every iteration.
+    ms = _int(args[0])
+    if ms < 0:
+        return False  # "invalid" (TMscript 2.24 §5.5, p. 159)
     now_s = rt.host.now_s
+    until = now_s() + ms / 1000.0
     while now_s() < until:
         yield BLOCKED
     return True

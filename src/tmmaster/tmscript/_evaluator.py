@@ -32,7 +32,6 @@ from ._builtins import (
     int16_array,
     link_device,
     read_registers,
-    sleep_until,
 )
 from ._host import Host, HostError
 from ._parser import parse_script
@@ -1321,8 +1320,6 @@ class _CallCompiler:
         fused = _int16_read(node, builtin, fns)
         if fused is not None:
             return _CExpr(fused, ret, True, fresh=True)
-        if builtin.name == "Sleep" and len(fns) == 1 and not fns[0].gen:
-            return _CExpr(_sleep(node, fns[0]), ret, True)
         ce = _CExpr(_builtin_gen(node, builtin, fns, arg_types), ret, True)
         if builtin.name == "modbus_read" and len(fns) == 5 and not any(f.gen for f in fns):
             ce.read = (node, _arguments(fns))
@@ -1653,31 +1650,6 @@ def _builtin_gen(
             raise _call_failure(node, exc) from None
 
     return call_gen
-
-
-def _sleep(node: a.Call, arg: _CExpr) -> GenFn:
-    """``Sleep(ms)`` with a plain argument: the built-in's wait in the call's own generator
-    (the poll loop of a program sleeps in every turn)."""
-    constant = cast(Value, None if arg.const is None else arg.const[0])
-    f = None if arg.const is not None else cast(PureFn, arg.fn)
-
-    def sleep_gen(fr: _Frame) -> Gen:
-        ms = constant if f is None else f(fr)
-        rt = fr.rt
-        try:  # _Sleep's wait, as _builtin_gen runs it
-            until = sleep_until(rt, ms)
-            if until is None:
-                return False
-            now_s = rt.host.now_s
-            while now_s() < until:
-                yield _BLOCKED
-            return True
-        except (ExitRequest, TMScriptRuntimeError, GeneratorExit):
-            raise
-        except Exception as exc:
-            raise _call_failure(node, exc) from None
-
-    return sleep_gen
 
 
 def _int16_read(node: a.Call, builtin: Builtin, fns: list[_CExpr]) -> GenFn | None:
