@@ -113,12 +113,12 @@ def memory_simulator_factory(
     return make
 
 
-#: xdist workers per CPU for ``-n auto`` (measured in docs/contributing.md, "Before it
-#: lands"): most of a test's time is waiting on the wall clock (simulated moves,
-#: timeouts), which a second worker per CPU overlaps; each worker also costs its
-#: start-up (about 3 s of CPU: imports and collecting every test) and adds load against
-#: the safety tests' timing margins.
-WORKERS_PER_CPU = 2
+#: xdist workers per CPU for ``-n auto`` (measured in docs/architecture.md, "The
+#: transport seam"): most of a test's time is waiting on the wall clock (simulated moves,
+#: timeouts), which more workers overlap; each worker also costs its start-up (about 3 s
+#: of CPU: imports and collecting every test) and adds load against the safety tests'
+#: timing margins. Four a CPU: 64-69 s on two cores, against 92-100 s with two.
+WORKERS_PER_CPU = 4
 
 
 def _cpus() -> int:
