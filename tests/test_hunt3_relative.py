@@ -16,7 +16,8 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
-from tmmaster import Pose, Robot
+from sim_speeds import QUICK
+from tmmaster import Pose, ProjectState, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -75,3 +76,33 @@ def test_a_move_by_right_after_a_stopped_move_is_refused_unsent(
     assert done.start.is_close(rest, mm=0.5)
     assert [m.target for m in sim.motion_log()[before:]] == [done.target]
     assert sim.tcp_pose().is_close(rest.offset(dz=-40), mm=0.5)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_move_by_given_up_before_its_ack_never_runs_and_the_next_resolves_from_the_arm(
+    memory_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    # The robot gets to the first move_by only long after the master's acknowledgement
+    # timeout (the simulator's late_ack, on that move alone): the master withdraws it
+    # (tmflow: its cancel record, unanswered until then, owed). It must never run, not
+    # when the robot gets to it nor under the next command, and the next move_by is
+    # resolved against where the arm is, not where the withdrawn one would have gone.
+    sim = memory_simulator_factory(profile, faults=["late_ack:delay_s=80,at_move=2"], **QUICK)
+    robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=0.3))
+    robot.move_to(START, speed=50)  # move 1
+    before = len(sim.motion_log())
+    with pytest.raises(tmmaster.AcknowledgeTimeoutError):
+        robot.move_by(dz=-50, speed=50)  # move 2: withdrawn
+    ticks = sim.ticks + 250  # 100 simulated seconds (1 s): past the late ack's 80 s
+    sim.wait_for(lambda: sim.ticks >= ticks, timeout=10)
+    assert sim.motion_log()[before:] == ()  # the robot got to it: it did not run it
+    assert sim.tcp_pose().is_close(START, mm=0.5)
+    sim.clear_faults()  # it fires for the next move the robot arms: that is move 2 again
+    if profile == "tmflow" and robot.status().project is not ProjectState.RUNNING:
+        sim.press_play()  # the owed give-up pressed Stop: the operator's Play
+        robot.wait_until_ready(timeout_s=5)
+    done = robot.move_by(dy=30, speed=50)
+    assert [m.target for m in sim.motion_log()[before:]] == [done.target]
+    assert done.target is not None
+    assert done.target.is_close(START.offset(dy=30), mm=0.5)
+    assert sim.tcp_pose().is_close(START.offset(dy=30), mm=0.5)
