@@ -42,12 +42,18 @@ def test_a_late_frame_outlasting_an_interrupted_watch_is_undone_by_the_next_writ
         "127.0.0.1", proxy.port, retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S)
     ) as robot:
         sim.clear_request_log()
-        twice = lambda: coil_writes(sim).count(False) >= 2  # noqa: E731
-        with held_until(proxy, twice):
+
+        def false_twice() -> bool:  # the interrupted call's and the next call's
+            return coil_writes(sim).count(False) >= 2
+
+        with held_until(proxy, false_twice):
             robot.io.set_do(DO, True)  # held: timed out, retried, answered
-            stopper = threading.Thread(
-                target=lambda: (sim.wait_for(wrote_false(sim), timeout=3), robot.interrupt())
-            )
+
+            def stop_once_watching() -> None:
+                sim.wait_for(wrote_false(sim), timeout=3)  # False written: it watches now
+                robot.interrupt()
+
+            stopper = threading.Thread(target=stop_once_watching)
             stopper.start()
             try:
                 with pytest.raises(StopRequestedError, match="could still land"):
