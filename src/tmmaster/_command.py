@@ -410,6 +410,8 @@ class _MotionFollower:
                 )
                 # Recorded inside the section: a Ctrl-C held back is raised after it.
                 motion._settled = confirmed
+                if motion.stop_delivered is False and not self._channel.duplicate_safe:
+                    self.owed = motion  # no cancel record (article): the Stop itself is owed
                 if self.owed is not None:
                     self.silence()  # no beat: the program expires the command
             return confirmed
@@ -447,8 +449,7 @@ class _MotionFollower:
         if not running and not ticket.withdrawn:
             try:
                 running = self._withdraw(ticket, until=until, interruptible=interruptible)
-                ticket.withdrawn = not running
-                motion.withdrawn = not running
+                ticket.withdrawn = motion.withdrawn = not running
             except TMMasterError as exc:
                 # Not known whether the robot took it: stop, which is harmless if it did not.
                 running = True
@@ -479,8 +480,7 @@ class _MotionFollower:
                 self.stop()
                 motion.stop_delivered = True
             except TMMasterError as exc:
-                motion.stop_delivered = False
-                confirmed = False
+                motion.stop_delivered = confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
             try:
                 # After the Stop, never delaying it; whatever became of it: the program
