@@ -18,7 +18,7 @@ import pytest
 
 import tmmaster
 from fault_proxy import FaultProxy
-from tmmaster import PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
+from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -39,6 +39,16 @@ def sim(tm_simulator_factory: Factory) -> Simulator:
 def proxy(sim: Simulator) -> Iterator[FaultProxy]:
     with FaultProxy(sim.port) as p:
         yield p
+
+
+@pytest.fixture(params=["driver", "fleet"])
+def link(request: pytest.FixtureRequest) -> Iterator[Fleet | None]:
+    """The process's default driver, or a Fleet of the test's own (the same abandon())."""
+    if request.param == "driver":
+        yield None
+        return
+    with Fleet() as fleet:
+        yield fleet
 
 
 def at_rest(sim: Simulator) -> Callable[[], bool]:
@@ -67,12 +77,13 @@ def answered(robot: Robot) -> Callable[[], bool]:
 
 
 def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
-    sim: Simulator, proxy: FaultProxy
+    sim: Simulator, proxy: FaultProxy, link: Fleet | None
 ) -> None:
     with Robot(
         "127.0.0.1",
         proxy.port,
         profile="article",
+        link=link,
         polling=PollPolicy(interval_s=0.02),
         retry=RETRY,
         timeouts=TimeoutPolicy(request_s=0.2),
