@@ -12,7 +12,6 @@ from __future__ import annotations
 import threading
 import time
 
-
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
 from tmmaster import Fleet, PollPolicy, Pose, Robot, StopRequestedError, TimeoutPolicy
