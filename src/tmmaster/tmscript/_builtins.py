@@ -967,8 +967,9 @@ def _Resume(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  #
 def _wait_ms(rt: Runtime, ms: int) -> Generator[str, None, Value]:
     if ms < 0:
         return False  # "invalid" (TMscript 2.24 §5.5, p. 159)
-    until = rt.host.now_s() + ms / 1000.0
-    while rt.host.now_s() < until:
+    now_s = rt.host.now_s  # looked up once: a program's poll loop sleeps in every turn
+    until = now_s() + ms / 1000.0
+    while now_s() < until:
         yield BLOCKED
     return True
 
@@ -976,15 +977,7 @@ def _wait_ms(rt: Runtime, ms: int) -> Generator[str, None, Value]:
 @_register_blocking("5.5", 159, "bool(int)")
 def _Sleep(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
     """TMscript 2.24 §5.5 Sleep, p. 159: waits on the host's clock."""
-    # _wait_ms written out: a program's poll loop sleeps in every iteration.
-    ms = _int(args[0])
-    if ms < 0:
-        return False  # "invalid" (TMscript 2.24 §5.5, p. 159)
-    now_s = rt.host.now_s
-    until = now_s() + ms / 1000.0
-    while now_s() < until:
-        yield BLOCKED
-    return True
+    return (yield from _wait_ms(rt, _int(args[0])))
 
 
 # WaitFor(bool, int) evaluates its condition again on every poll: the evaluator compiles it
