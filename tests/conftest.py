@@ -18,7 +18,7 @@ from hypothesis import settings
 
 import tmmaster
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
-from tmmaster import PollPolicy, Robot
+from tmmaster import Fleet, PollPolicy, Robot
 from tmmaster.sim import Simulator, Timing
 
 # The property and stateful tests draw the same examples on every run, so a run's result
@@ -225,6 +225,17 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             importlib.import_module(source.stem)
         except (Exception, pytest.skip.Exception):
             continue
+
+
+@pytest.fixture(params=["driver", "fleet"])
+def driver_or_fleet(request: pytest.FixtureRequest) -> Iterator[Fleet | None]:
+    """A Robot's ``link=``: None (the process's default driver), or a Fleet of the test's
+    own; the same command path runs on either."""
+    if request.param == "driver":
+        yield None
+        return
+    with Fleet() as fleet:
+        yield fleet
 
 
 @pytest.fixture

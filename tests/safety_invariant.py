@@ -9,11 +9,11 @@ simulator's own motion log, never what the master believes.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from tmmaster import Pose, Robot, TMMasterError
-from tmmaster.sim import MotionRecord
+from tmmaster.sim import MotionRecord, Simulator
 
 #: Targets closer than this are the same command (tests give each command its own target).
 SAME_TARGET_MM = 0.05
@@ -80,3 +80,19 @@ def check(issued: Sequence[Issued], log: Sequence[MotionRecord]) -> None:
     for index, command in enumerate(issued):
         if command.outcome == "done":
             assert index in matched, f"command {index} returned done but never ran"
+
+
+def at_rest(sim: Simulator) -> Callable[[], bool]:
+    """For ``sim.wait_for``: True once the TCP did not move between two looks (braked).
+
+    Each call compares the TCP pose with the previous call's, so the looks are as far
+    apart as ``wait_for``'s interval.
+    """
+    last: list[Pose | None] = [None]
+
+    def still() -> bool:
+        now, before = sim.tcp_pose(), last[0]
+        last[0] = now
+        return before is not None and now.distance_to(before) < 1e-6
+
+    return still

@@ -18,6 +18,7 @@ import pytest
 
 import tmmaster
 from fault_proxy import FaultProxy
+from safety_invariant import at_rest
 from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
 
@@ -41,28 +42,6 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
-@pytest.fixture(params=["driver", "fleet"])
-def link(request: pytest.FixtureRequest) -> Iterator[Fleet | None]:
-    """The process's default driver, or a Fleet of the test's own (the same abandon())."""
-    if request.param == "driver":
-        yield None
-        return
-    with Fleet() as fleet:
-        yield fleet
-
-
-def at_rest(sim: Simulator) -> Callable[[], bool]:
-    """True once the TCP did not move between two looks a few ticks apart."""
-    last: list[Pose | None] = [None]
-
-    def still() -> bool:
-        now, before = sim.tcp_pose(), last[0]
-        last[0] = now
-        return before is not None and now.distance_to(before) < 1e-6
-
-    return still
-
-
 def answered(robot: Robot) -> Callable[[], bool]:
     """True once ``robot.status()`` returns (a call of the master's, not a probe)."""
 
@@ -77,13 +56,13 @@ def answered(robot: Robot) -> Callable[[], bool]:
 
 
 def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
-    sim: Simulator, proxy: FaultProxy, link: Fleet | None
+    sim: Simulator, proxy: FaultProxy, driver_or_fleet: Fleet | None
 ) -> None:
     with Robot(
         "127.0.0.1",
         proxy.port,
         profile="article",
-        link=link,
+        link=driver_or_fleet,
         polling=PollPolicy(interval_s=0.02),
         retry=RETRY,
         timeouts=TimeoutPolicy(request_s=0.2),

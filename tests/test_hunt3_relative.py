@@ -16,6 +16,7 @@ from collections.abc import Callable
 import pytest
 
 import tmmaster
+from safety_invariant import at_rest
 from sim_speeds import QUICK
 from tmmaster import Pose, ProjectState, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
@@ -24,18 +25,6 @@ SimFactory = Callable[..., Simulator]
 
 START = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 250, 200, 180, 0, 90)
-
-
-def at_rest(sim: Simulator) -> Callable[[], bool]:
-    """True once the TCP did not move between two looks a few ticks apart (braked)."""
-    last: list[Pose | None] = [None]
-
-    def still() -> bool:
-        now, before = sim.tcp_pose(), last[0]
-        last[0] = now
-        return before is not None and now.distance_to(before) < 1e-6
-
-    return still
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])

@@ -179,6 +179,45 @@ def test_a_stop_request_ends_the_watch_and_says_so(sim: Simulator, proxy: FaultP
         robot.clear_stop_request()
 
 
+def test_a_late_frame_outlasting_an_interrupted_watch_is_undone_by_the_next_write(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    """Once the stop request is taken back, the next ``set_do`` of the same value still
+    knows the interrupted watch's frame is out there: the first True, held through the
+    interrupted watch, lands only after that next write, and the output ends at the
+    value last asked for."""
+    with Robot(
+        "127.0.0.1", proxy.port, retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S)
+    ) as robot:
+        sim.clear_request_log()
+
+        def false_twice() -> bool:  # the interrupted call's and the next call's
+            return coil_writes(sim).count(False) >= 2
+
+        with held_until(proxy, false_twice):
+            robot.io.set_do(DO, True)  # held: timed out, retried, answered
+
+            def stop_once_watching() -> None:
+                sim.wait_for(wrote_false(sim), timeout=3)  # False written: it watches now
+                robot.interrupt()
+
+            stopper = threading.Thread(target=stop_once_watching)
+            stopper.start()
+            try:
+                with pytest.raises(StopRequestedError, match="could still land"):
+                    robot.io.set_do(DO, False)
+            finally:
+                stopper.join(5)
+            robot.clear_stop_request()
+            robot.io.set_do(DO, False)  # the held True lands during this call's watch
+            proxy.wait_held()
+        writes = coil_writes(sim)
+        assert writes[:4] == [True, False, False, True], writes  # the late True landed
+        assert writes[-1] is False
+        assert sim.do(DO) is False
+        assert robot.io.do(DO) is False
+
+
 def test_close_during_a_do_watch_ends_it_and_nothing_is_written_after(
     sim: Simulator, proxy: FaultProxy
 ) -> None:

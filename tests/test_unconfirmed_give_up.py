@@ -49,16 +49,6 @@ def sim() -> Iterator[Simulator]:
         yield simulator
 
 
-@pytest.fixture(params=["driver", "fleet"])
-def link(request: pytest.FixtureRequest) -> Iterator[Fleet | None]:
-    """The process's default driver, or a Fleet of the test's own."""
-    if request.param == "driver":
-        yield None
-        return
-    with Fleet() as fleet:
-        yield fleet
-
-
 def robot_behind(proxy: FaultProxy, link: Fleet | None = None) -> Robot:
     """A tmflow robot whose retry policy (0.15 s) gives up well inside its TTL (5 s)."""
     return Robot(
@@ -116,11 +106,11 @@ def land_and_check(
 
 
 def test_a_give_up_not_delivered_is_done_once_the_link_is_back(
-    sim: Simulator, link: Fleet | None
+    sim: Simulator, driver_or_fleet: Fleet | None
 ) -> None:
     issued: list[Issued] = []
     landed = threading.Event()
-    with FaultProxy(sim.port) as proxy, robot_behind(proxy, link) as robot:
+    with FaultProxy(sim.port) as proxy, robot_behind(proxy, driver_or_fleet) as robot:
         give_up_undelivered(robot, proxy, issued, landed)
         seq = robot.last_motion.ticket.seq  # type: ignore[union-attr]
         mark = len(sim.request_log)
@@ -137,11 +127,11 @@ def test_a_give_up_not_delivered_is_done_once_the_link_is_back(
 
 
 def test_a_give_up_that_fails_again_stays_owed_and_nothing_else_is_sent(
-    sim: Simulator, link: Fleet | None
+    sim: Simulator, driver_or_fleet: Fleet | None
 ) -> None:
     issued: list[Issued] = []
     landed = threading.Event()
-    with FaultProxy(sim.port) as proxy, robot_behind(proxy, link) as robot:
+    with FaultProxy(sim.port) as proxy, robot_behind(proxy, driver_or_fleet) as robot:
         give_up_undelivered(robot, proxy, issued, landed)
         session = robot._heartbeat.session
         # The link still down: a call tries the give-up again first, and says what is owed.
@@ -251,7 +241,7 @@ def test_a_stop_the_robot_refuses_owes_nothing() -> None:
 
 
 def test_a_close_that_cannot_deliver_the_give_up_sends_nothing_after(
-    sim: Simulator, link: Fleet | None
+    sim: Simulator, driver_or_fleet: Fleet | None
 ) -> None:
     # Robot.close() (or Fleet.close()) with the link still down: the give-up stays
     # unconfirmed and the master is gone. When the link comes back nothing of it is sent
@@ -265,7 +255,7 @@ def test_a_close_that_cannot_deliver_the_give_up_sends_nothing_after(
             "127.0.0.1",
             proxy.port,
             gripper=None,
-            link=link,
+            link=driver_or_fleet,
             polling=PollPolicy(interval_s=0.01),
             timeouts=TimeoutPolicy(request_s=0.2, heartbeat_s=0.1, heartbeat_ttl_s=0.5),
             retry=RetryPolicy(attempts=2, total_time_s=0.15, initial_backoff_s=0.02),
@@ -273,10 +263,10 @@ def test_a_close_that_cannot_deliver_the_give_up_sends_nothing_after(
         try:
             give_up_undelivered(robot, proxy, issued, landed)
             seq = robot.last_motion.ticket.seq  # type: ignore[union-attr]
-            if link is None:
+            if driver_or_fleet is None:
                 assert robot.close(timeout_s=0.5) is False
             else:
-                assert link.close(timeout_s=0.5) == (robot.name,)
+                assert driver_or_fleet.close(timeout_s=0.5) == (robot.name,)
             mark = len(sim.request_log)
             proxy._refusing_until = 0.0  # the link is back
             sim.wait_for(lambda: sim.field("ack_seq") == seq, timeout=5.0)
