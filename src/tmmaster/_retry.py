@@ -61,7 +61,7 @@ class RetryPolicy(BaseModel):
 
     #: Total attempts, the first one included (1 = never retry).
     attempts: Annotated[int, Field(ge=1, le=100)] = 12
-    #: Give up once this much time has passed since the first attempt, in seconds.
+    #: No attempt starts once this much time has passed since the first one, in seconds.
     total_time_s: Annotated[float, Field(gt=0)] = 10.0
     #: The wait before the second attempt, s; it doubles for each further one.
     initial_backoff_s: Annotated[float, Field(ge=0)] = 0.1
@@ -77,6 +77,7 @@ class RetryPolicy(BaseModel):
         *,
         on_retry: Callable[[BaseException], None] | None = None,
         interrupt: threading.Event | None = None,
+        until: Callable[[], float | None] | None = None,
     ) -> T:
         """Run ``fn``, retrying transient errors; the last error propagates unchanged.
 
@@ -88,6 +89,8 @@ class RetryPolicy(BaseModel):
             fn: One attempt.
             on_retry: Called with each failure that is retried.
             interrupt: Ends the waits between attempts when set.
+            until: Read before each wait: a ``time.monotonic()`` past which no attempt
+                starts (a clean-up's deadline, set while a request retries), or None.
 
         Returns:
             What ``fn`` returned.
@@ -124,16 +127,22 @@ class RetryPolicy(BaseModel):
             error = state.outcome.exception() if state.outcome else None
             retrying_after(error, state.attempt_number + 1, state.upcoming_sleep)
 
-        retrying_after(first_error, 1, self.initial_backoff_s)
-        sleep = _sleeper(interrupt)
-        sleep(self.initial_backoff_s + random.uniform(0, self.jitter_s))
-        remaining_s = self.total_time_s - (time.monotonic() - started)
-        if remaining_s <= 0:
+        def past_bounds(wait_s: float) -> bool:
+            """Whether an attempt after ``wait_s`` would start past a bound."""
+            at = time.monotonic() + wait_s
+            limit = None if until is None else until()
+            return at - started >= self.total_time_s or (limit is not None and at >= limit)
+
+        first_wait_s = self.initial_backoff_s + random.uniform(0, self.jitter_s)
+        if past_bounds(first_wait_s):
             raise first_error
+        retrying_after(first_error, 1, first_wait_s)
+        _sleeper(interrupt)(first_wait_s)
         retrying = tenacity.Retrying(
             # Attempts 2..n: the same bounds as one policy, counted from the first attempt.
-            stop=tenacity.stop_after_attempt(self.attempts - 1)
-            | tenacity.stop_after_delay(remaining_s),
+            stop=lambda state: (
+                state.attempt_number >= self.attempts - 1 or past_bounds(state.upcoming_sleep)
+            ),
             # Composed from the two long-stable strategies: wait_exponential_jitter's
             # parameters were renamed in tenacity 9.2. Doubling continues from attempt 2.
             wait=tenacity.wait_exponential(
@@ -142,23 +151,10 @@ class RetryPolicy(BaseModel):
             + tenacity.wait_random(0, self.jitter_s),
             retry=tenacity.retry_if_exception(is_transient),
             before_sleep=before_sleep,
-            sleep=sleep,
+            sleep=_sleeper(interrupt),
             reraise=True,
         )
         return retrying(fn)
-
-    def within(self, seconds: float) -> RetryPolicy:
-        """This policy, its total time cut to ``seconds`` (for a clean-up under a deadline).
-
-        Args:
-            seconds: the most time the attempts may take from the first one; at least
-                one attempt is always made.
-
-        Returns:
-            A policy no longer than this one and no longer than ``seconds``.
-        """
-        total = max(min(self.total_time_s, seconds), 1e-3)
-        return self.model_copy(update={"total_time_s": total})
 
 
 def _sleeper(interrupt: threading.Event | None) -> Callable[[float], None]:

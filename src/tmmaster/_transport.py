@@ -25,7 +25,6 @@ import functools
 import socket
 import struct
 import threading
-import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -382,6 +381,7 @@ class Transport(ABC):
                 self._connect_once,
                 on_retry=self._on_retry,
                 interrupt=self.interrupt,
+                until=self._retry_until,
             )
 
     def close(self) -> None:
@@ -552,7 +552,8 @@ class Transport(ABC):
         self._lock.release()
 
     def bound_retries(self, deadline: float) -> None:
-        """From now on, retry no request past ``deadline`` (``time.monotonic()``).
+        """From now on, retry no request past ``deadline`` (``time.monotonic()``), not even
+        one already retrying.
 
         For a clean-up under a time budget (``Robot.close(timeout_s=...)``): the
         withdraw or stop still gets its first attempt, and its retries end in time.
@@ -566,15 +567,16 @@ class Transport(ABC):
         self._yield_turn()
         with self._lock:
             self._refuse_if_closed()
-            policy = self.retry if retry else NO_RETRY
-            if self._retry_deadline is not None and retry:
-                policy = policy.within(self._retry_deadline - time.monotonic())
-            return policy.call(
+            return (self.retry if retry else NO_RETRY).call(
                 what,
                 fn,
                 on_retry=self._on_retry,
                 interrupt=self.interrupt if interruptible else None,
+                until=self._retry_until,
             )
+
+    def _retry_until(self) -> float | None:
+        return self._retry_deadline  # read at each retry: a close may set it meanwhile
 
     def read_block(
         self,
