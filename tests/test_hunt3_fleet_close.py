@@ -107,8 +107,12 @@ def settle(sim: Simulator) -> None:
 
 
 @contextmanager
-def cell() -> Iterator[Cell]:
-    """The two robots, ready, each having moved to A once (b through the proxy)."""
+def cell(request_s: float = 3.0) -> Iterator[Cell]:
+    """The two robots, ready, each having moved to A once (b through the proxy).
+
+    ``request_s``: how long b's held write waits on its answer (3 s: far longer than
+    the fleet takes to close; 1 s: less than the program's ``master_ttl_ms``).
+    """
     timing = Timing(tick_hz=50.0)
     with (
         Simulator("tmflow", time_scale=2.0, timing=timing) as sim_a,
@@ -120,8 +124,7 @@ def cell() -> Iterator[Cell]:
             gripper=None,
             link=fleet,
             polling=PollPolicy(interval_s=0.01),
-            # b's write waits on its answer far longer than the fleet takes to close.
-            timeouts=TimeoutPolicy(request_s=3.0, ack_timeout_s=5.0, motion_margin_s=1.0),
+            timeouts=TimeoutPolicy(request_s=request_s, ack_timeout_s=5.0, motion_margin_s=1.0),
         )
         robot_a = Robot("127.0.0.1", sim_a.port, profile="tmflow", name="a", **options)  # type: ignore[arg-type]
         robot_b = Robot("127.0.0.1", proxy.port, profile="tmflow", name="b", **options)  # type: ignore[arg-type]
@@ -153,25 +156,12 @@ def test_a_held_command_that_lands_after_the_robot_saw_the_master_gone_never_run
         c.judge()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Fleet.close(timeout_s=0.5) while b's command write is held in the network: "
-        "Robot.close's gate.drain(deadline) runs out with the write in flight, so b's "
-        "close gives nothing up (returns False, fleet.close returns ('b',)); it stops "
-        "the heartbeat and closes b's transport, which aborts the write; the writer's "
-        "withdraw, Stop and cancel record then fail on the closed transport/fleet, "
-        "although the robot is reachable all along, and no later call of b can deliver "
-        "them. The held frame lands right after close() returns, within master_ttl_ms "
-        "(2 s) of b's last beat, and the program takes it: B starts after the master "
-        "gave it up (TransportClosedError) and, a short move, runs to its end. "
-        "docs/safety.md 'Limits' names a held frame landing before an owed cancel "
-        "record; Fleet.close leaves the give-up owed for good, bounded only by the "
-        "heartbeat expiry."
-    ),
-)
-def test_a_held_command_that_lands_right_after_fleet_close_never_runs() -> None:
-    with cell() as c:
+@pytest.mark.parametrize("request_s", [3.0, 1.0])
+def test_a_held_command_that_lands_right_after_fleet_close_never_runs(request_s: float) -> None:
+    # close(timeout_s=0.5) runs out while b's write is held: close waits the write out
+    # and still delivers its give-up. With request_s=1.0, close returns before the
+    # program could see b's master silent (2 s): only that give-up keeps B from running.
+    with cell(request_s) as c:
         c.proxy.add(Rule("hold", function_code=16, address=9000, release=c.release))
         c.a_moves_and_b_writes()
         c.close_fleet(timeout_s=0.5)

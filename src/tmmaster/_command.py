@@ -375,13 +375,15 @@ class _MotionFollower:
         Args:
             motion: the command given up on.
             reason: why (a robot fault means the robot stopped itself).
-            deadline: a ``time.monotonic()`` bound on waiting for another caller's
-                clean-up, and on this caller's wait for a withdraw's answer; None waits
-                as long as that takes (its requests and the answer are bounded).
+            deadline: a ``time.monotonic()`` bound on this caller's wait for a
+                withdraw's answer and, but for the closer, on waiting for another
+                caller's clean-up; None waits as long as that takes (its requests and
+                the answer are bounded).
             closer: True for ``Robot.close()`` (and the exit hook): its wait for the
                 withdraw's answer is not ended by the close itself, only by
                 ``deadline``. Any other caller's wait ends when a close begins, and
-                the command is stopped.
+                the command is stopped; so the closer waits for that caller's clean-up,
+                the give-up being attempted even past ``deadline``.
 
         Returns:
             True when the command can no longer run: never written, already finished,
@@ -390,7 +392,8 @@ class _MotionFollower:
             stop, or another caller was still at it at ``deadline``).
         """
         lock = self._abandon_lock
-        wait_s = -1.0 if deadline is None else max(deadline - time.monotonic(), 0.0)  # -1: no bound
+        # -1: no bound. The closer always waits: the close ended the other's answer wait.
+        wait_s = -1.0 if deadline is None or closer else max(deadline - time.monotonic(), 0.0)
         if not lock.acquire(timeout=wait_s):
             return False
         try:

@@ -844,9 +844,10 @@ class Fleet:
         First every robot's gate closes, so no robot writes a new command from then on
         (a write already in flight finishes and is given up like any other), and every
         wait the loop polls ends. Then all robots are closed in parallel, each
-        withdrawing or stopping what it has outstanding, within ``timeout_s`` in all:
-        a robot whose link is dead does not hold the others up. Safe to call more than
-        once (later calls return an empty tuple).
+        withdrawing or stopping what it has outstanding, within ``timeout_s`` in all
+        (beyond it only for a robot with a command write still on its way, as
+        :meth:`Robot.close` says): a robot whose link is dead does not hold the others
+        up. Safe to call more than once (later calls return an empty tuple).
 
         Args:
             timeout_s: the budget for the robots' clean-up, in seconds.
@@ -882,8 +883,8 @@ class Fleet:
         ]
         for thread in threads:
             thread.start()
-        for thread in threads:
-            thread.join(max(deadline - time.monotonic(), 0.0))
+        for thread in threads:  # past the deadline too: see Robot.close
+            thread.join()
         unconfirmed = tuple(
             robot.name for robot, _member in members if not outcomes.get(robot.name, False)
         )

@@ -13,7 +13,6 @@ robot's thread wrote its next command, which then ran to its end.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 
 from ._exceptions import StopRequestedError
@@ -67,20 +66,9 @@ class CommandGate:
         self._closed = True
         self._stop_event.set()
 
-    def drain(self, deadline: float | None) -> bool:
-        """Wait until no write is in flight; False if one still was at ``deadline``.
-
-        Args:
-            deadline: a ``time.monotonic()`` bound, or None to wait as long as the
-                write takes (one request, bounded by the link's timeout).
-
-        Returns:
-            True when no write was in flight (any later one is refused once closed).
+    def drain(self) -> None:
+        """Wait until no write is in flight (one request, bounded by the link's timeout):
+        a write in flight may land and run, so whoever closes waits for it and gives it up.
         """
-        if deadline is None:
-            acquired = self._lock.acquire()
-        else:
-            acquired = self._lock.acquire(timeout=max(deadline - time.monotonic(), 0.0))
-        if acquired:
-            self._lock.release()
-        return acquired
+        with self._lock:
+            pass

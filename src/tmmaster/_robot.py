@@ -708,9 +708,11 @@ class Robot:
         main thread, Ctrl-C is held back until the clean-up is done.
 
         Args:
-            timeout_s: a bound on the clean-up (waiting for a write in flight or another
-                thread's withdraw, and the retries of the withdraw or stop, a stand-alone
-                gripper's stop included); None: the retry policy's own bounds.
+            timeout_s: a bound on the clean-up (the retries of the withdraw or stop, the
+                wait for a withdraw's answer, a stand-alone gripper's stop included);
+                None: the retry policy's own bounds. A command write in flight, which
+                may still land and run, is waited out (one request, bounded by the
+                link's timeout) and its withdraw or stop is tried once even past it.
 
         Returns:
             True when nothing this robot sent can still run; False when a withdraw or
@@ -748,8 +750,7 @@ class Robot:
         """For :meth:`close`: withdraw or stop the last command written, if not settled."""
         if self._transport.state is ConnectionState.CLOSED:
             return True  # closed by someone else: nothing can be written any more
-        if not self._gate.drain(deadline):
-            return False  # a command write still in flight at the deadline
+        self._gate.drain()  # past the deadline too: a write in flight may land and run
         motion = self._last_motion  # after drain(): the last command that can ever be written
         if motion is None:
             return True
