@@ -1,0 +1,165 @@
+"""Robot.close(timeout_s=) on a plain Robot while its own command write is held.
+
+The fix of ``close()`` under a held command write (docs/safety.md, Limits: ``close()``
+may outlast its ``timeout_s`` by one request and one give-up) was tested through a
+Fleet only (``tests/test_hunt3_fleet_close.py``). Here a plain ``Robot`` (``link=None``:
+the process's default driver) and an ``aio.AsyncRobot`` on the tmflow profile write a
+move whose FC16 to the command block is held by a FaultProxy; ``close(timeout_s=0.5)``
+is called while the frame is held, and the frame lands right after ``close()``
+returned. The request timeout (1 s) is shorter than the program's ``master_ttl_ms``
+(2 s), so only the close's own give-up keeps the frame from running. The simulator's
+motion log judges: the given-up move never starts, nothing runs twice.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from fault_proxy import FaultProxy, Rule
+from safety_invariant import Issued, at_rest, check
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError, aio
+from tmmaster.sim import Simulator
+
+Factory = Callable[..., Simulator]
+
+A = Pose(300, -200, 150, 180, 0, 90)
+B = Pose(300, -200, 180, 180, 0, 90)
+TIMEOUTS = TimeoutPolicy(request_s=1.0, ack_timeout_s=5.0, motion_margin_s=1.0)
+
+
+@pytest.fixture
+def sim(tm_simulator_factory: Factory) -> Simulator:
+    return tm_simulator_factory("tmflow", time_scale=20.0)
+
+
+@pytest.fixture
+def proxy(sim: Simulator) -> Iterator[FaultProxy]:
+    with FaultProxy(sim.port) as p:
+        yield p
+
+
+def held(proxy: FaultProxy) -> Callable[[], bool]:
+    return lambda: any(s.action == "hold" for s in proxy.seen)
+
+
+def judge(sim: Simulator, issued: list[Issued], closed_at: float, closed_wall: float) -> None:
+    """The held frame landed after the close; nothing new ran, nothing twice; at rest at A."""
+    landed = [
+        r
+        for r in sim.request_log
+        if r.function_code == 16 and r.address == 9000 and r.time > closed_wall
+    ]
+    assert landed, "the held command frame never reached the robot after the close"
+    ticks = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= ticks + 20, timeout=5.0)
+    sim.wait_for(at_rest(sim), timeout=5.0, interval=0.05)
+    check(issued, sim.motion_log())
+    late = [m for m in sim.motion_log() if m.wall_time > closed_at]
+    assert not late, f"motions started after close(): {late}"
+    assert [m.target for m in sim.motion_log() if m.target is not None] == [A]
+    assert sim.tcp_pose().is_close(A), f"the arm left A: {sim.tcp_pose()}"
+
+
+def test_close_of_a_plain_robot_gives_up_its_held_command_write(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    release = threading.Event()
+    issued: list[Issued] = []
+    robot = Robot(
+        "127.0.0.1",
+        proxy.port,
+        profile="tmflow",
+        gripper=None,
+        polling=PollPolicy(interval_s=0.01),
+        timeouts=TIMEOUTS,
+    )
+    try:
+        robot.connect()
+        robot.wait_until_ready(timeout_s=5)
+        robot.move_to(A, speed=80)
+        issued.append(Issued(A, 0.0, 0.0, "done"))
+        proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+        command = Issued(B, time.monotonic())
+        issued.append(command)
+
+        def move() -> None:
+            try:
+                robot.move_to(B, speed=80)
+            except TMMasterError as exc:
+                command.outcome = type(exc).__name__
+            else:
+                command.outcome = "done"
+            command.ended_at = time.monotonic()
+
+        thread = threading.Thread(target=move)
+        thread.start()
+        sim.wait_for(held(proxy), timeout=5.0)
+        assert thread.is_alive()  # its write waits on its answer
+        robot.close(timeout_s=0.5)
+        closed_at, closed_wall = time.monotonic(), time.time()
+        release.set()  # the held frame lands now, after the close gave it up
+        proxy.wait_held()
+        thread.join(10)
+        assert not thread.is_alive()
+        judge(sim, issued, closed_at, closed_wall)
+        assert command.outcome != "done"
+    finally:
+        release.set()
+        robot.close()
+
+
+def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    release = threading.Event()
+    issued: list[Issued] = []
+
+    async def scenario() -> tuple[float, float]:
+        robot = aio.connect(
+            "127.0.0.1",
+            proxy.port,
+            profile="tmflow",
+            gripper=None,
+            polling=PollPolicy(interval_s=0.01),
+            timeouts=TIMEOUTS,
+        )
+        try:
+            await robot
+            await robot.wait_until_ready(timeout_s=5)
+            await robot.move_to(A, speed=80)
+            issued.append(Issued(A, 0.0, 0.0, "done"))
+            proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+            command = Issued(B, time.monotonic())
+            issued.append(command)
+            move = asyncio.ensure_future(robot.move_to(B, speed=80))
+            while not held(proxy)():
+                await asyncio.sleep(0.005)
+            assert not move.done()
+            await robot.close(timeout_s=0.5)
+            closed_at, closed_wall = time.monotonic(), time.time()
+            release.set()
+            try:
+                await move
+            except TMMasterError as exc:
+                command.outcome = type(exc).__name__
+            else:
+                command.outcome = "done"
+            command.ended_at = time.monotonic()
+            assert command.outcome != "done"
+            return closed_at, closed_wall
+        finally:
+            release.set()
+            await robot.close()
+
+    async def bounded() -> tuple[float, float]:
+        async with asyncio.timeout(30):
+            return await scenario()
+
+    closed_at, closed_wall = asyncio.run(bounded())
+    proxy.wait_held()
+    judge(sim, issued, closed_at, closed_wall)
