@@ -31,9 +31,10 @@ FAR = Pose(300, 200, 150, 180, 0, 90)
 #: The robot program's registers that a restart leaves at 0 (the handshake's; the target
 #: and speed words read 0 too, but no frame is taken on them alone).
 RESET = (
-    *("command", "seq", "ext_seq", "command_session"),
+    *("command", "seq", "ext_seq", "command_session", "command_boot"),
     *("master_heartbeat", "master_ttl_ms", "master_session"),
     *("ack_seq", "done_seq", "robot_state", "result_code", "heartbeat", "ack_session"),
+    "boot_id",
 )
 
 
@@ -135,25 +136,52 @@ def cut_by_a_restart(sim: Simulator, issued: list[Issued]) -> Any:
 
 def test_a_move_cut_by_a_restart_is_never_reported_done(sim: Simulator) -> None:
     """A restart mid-move leaves ``ack_seq`` and ``done_seq`` at 0, the master's number
-    being 1: the wait never reads the move done, and the number it gives up is used up."""
+    being 1, and the program draws a new ``boot_id``: the wait never reads the move done,
+    it names the restart, and it presses no Stop on the project's new run."""
     issued: list[Issued] = []
-    cut_by_a_restart(sim, issued)
-    assert sim.field("ack_seq") == 1  # the cancel record used number 1 up
+    motion = cut_by_a_restart(sim, issued)
+    assert issued[-1].outcome == "CommandRejectedError"
     assert sim.field("done_seq") == 0
     assert len(sim.motion_log()) == 1
+    assert sim.field("project_running")
+    assert not motion.done
     check(issued, sim.motion_log())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known limit: the restart erased the acknowledgement before the master's first"
-    " poll; the wait ends with an acknowledgement timeout and the cancel record's answer"
-    " (number 1 consumed unrun) reads as withdrawn, though the arm had started",
-)
 def test_a_move_cut_by_a_restart_is_not_reported_withdrawn(sim: Simulator) -> None:
+    """The restart erased the acknowledgement before the master's first poll: the master
+    cannot read that the arm had started, so it never reports the command withdrawn."""
     motion = cut_by_a_restart(sim, [])
     assert len(sim.motion_log()) == 1  # the arm started
     assert not motion.withdrawn
+
+
+def test_a_first_copy_held_across_a_restart_during_its_resend_never_runs(sim: Simulator) -> None:
+    """The first copy of command 1 is held; the master resends it and the move starts. No
+    wait polls it (``start_move``), so the master beats on with the session of that
+    command. The controller restarts mid-move (``ack_seq`` 0 frees number 1), the master
+    beats again, and the held first copy lands: it carries the ``boot_id`` of the
+    program's earlier start and is consumed unrun."""
+    issued: list[Issued] = []
+    with FaultProxy(sim.port) as proxy, robot_through(proxy) as robot:
+        robot.wait_until_ready()
+        landed = threading.Event()
+        proxy.add(Rule("hold", function_code=16, address=9000, release=landed, times=1))
+        command = Issued(FAR, time.monotonic())
+        issued.append(command)
+        motion = robot.start_move(FAR, speed=20)  # its resend, taken
+        sim.wait_for(lambda: sim.field("ack_seq") == 1, timeout=2.0)
+        restart_controller(sim)
+        sim.wait_for(lambda: sim.field("master_session") != 0, timeout=2.0)
+        landed.set()
+        proxy.wait_held()
+        start = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= start + 10, timeout=5.0)  # 4 simulated s
+        assert [r.target for r in sim.motion_log()] == [FAR]  # the resend's, cut short
+        with pytest.raises(TMMasterError) as failed:
+            motion.wait()
+        command.outcome, command.ended_at = type(failed.value).__name__, time.monotonic()
+    check(issued, sim.motion_log())
 
 
 def test_a_resent_command_done_leaves_a_new_session_and_the_project_running(

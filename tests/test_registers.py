@@ -201,7 +201,7 @@ def test_split_tmflow_block_is_refused() -> None:
     with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*seq \(holding 9040\)"):
         profile_from_data({"extends": "tmflow", "fields": {"seq": {"address": 9040}}})
     with pytest.raises(RegisterMapError, match=r"(?s)contiguous.*accel_time"):
-        profile_from_data({"extends": "tmflow", "fields": {"accel_time": {"address": 9031}}})
+        profile_from_data({"extends": "tmflow", "fields": {"accel_time": {"address": 9032}}})
 
 
 def test_moved_but_contiguous_command_block_is_accepted() -> None:

@@ -115,7 +115,7 @@ def test_a_move_is_one_write_of_the_whole_command_block(
     # The heartbeat's writes (tmflow, 9050) are not the move's.
     writes = [r for r in sim.request_log if r.values is not None and r.address != 9050]
     assert len(writes) == 1
-    assert writes[0].count == (8 if profile == "article" else 31)
+    assert writes[0].count == (8 if profile == "article" else 32)
 
 
 def test_out_of_range_pose_sends_nothing(

@@ -116,8 +116,9 @@ def test_move_joints_runs_a_joint_ptp_to_exactly_those_joints(
     assert motion.target is not None
     assert status.pose.is_close(robot.model.forward((10, -5, 100, -5, 90, 10)), mm=0.01)
     (write,) = command_writes(sim)
-    # The whole block, one request: the extension no one's (ext_seq 0), the session last.
-    assert len(write) == 31
+    # The whole block, one request: the extension no one's (ext_seq 0), then the session
+    # and the program's start (boot_id) the master read.
+    assert len(write) == 32
     assert write[14] == robot.profile.field("command").code_of("ptp_joints")
     assert write[16:30] == (0,) * 14
     assert write[30] == robot._heartbeat.session
@@ -225,7 +226,7 @@ def test_move_arc_runs_a_circle_through_the_via_point(
     assert sim.tcp_pose().is_close(END, mm=0.01)
     assert sim.motion_log()[-1].kind == "circle"
     (write,) = command_writes(sim)
-    assert len(write) == 31  # the block, its extension and the session, one request
+    assert len(write) == 32  # the block, its extension, the session and boot: one request
     assert write[14] == robot.profile.field("command").code_of("circle")
     assert write[28] == 150  # speed_mm_s
     assert write[29] == write[15]  # ext_seq: the command's own number

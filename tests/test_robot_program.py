@@ -28,8 +28,10 @@ def sequence_profiles() -> list[str]:
 def test_the_program_carries_the_profiles_addresses_codes_and_tool() -> None:
     tool = ToolSetting(tcp=Pose(0, 0, 150, 0, 0, 90.5), mass_kg=1.25)
     text = robot_program(robot_profile("tmflow"), tool=tool)
-    # With the extension and the master's session.
-    assert 'blk = modbus_read("TM", 1, "RO", 9000, 31)' in text
+    # With the extension, the master's session and the program's start (boot_id).
+    assert 'blk = modbus_read("TM", 1, "RO", 9000, 32)' in text
+    assert 'TM.Preset("fbBoot", 1, "RO", 9107, "int16")' in text
+    assert "boot = random(1, 32767)" in text
     assert 'TM.Preset("fbAck", 1, "RO", 9100, "int16")' in text
     assert "seq == ack % 32767 + 1" in text
     assert "float[] tool = {0.0, 0.0, 150.0, 0.0, 0.0, 90.5}" in text
@@ -53,8 +55,9 @@ def test_the_program_runs_joint_moves_arcs_and_tcp_speeds() -> None:
     assert 'ok = Circle("CAP", via, target, smm, accel, 0, 0, false)' in text
     assert 'ok = Line("CAP", target, smm, accel, 0, false)' in text
     # The extension (via 9016-9027, speed_mm_s 9028, ext_seq 9029) is bytes 32-59 of
-    # the block: used only when it carries the command's number; the session follows.
-    assert "Array_SubElements(blk, 56, 6)" in text
+    # the block: used only when it carries the command's number; the session and the
+    # program's start the master read follow.
+    assert "Array_SubElements(blk, 56, 8)" in text
     assert "if (ext != seq)" in text
     assert "CheckFinite(32)" in text
     # A joint target is never handed to inversekin (it is joints, not a pose): its

@@ -37,6 +37,7 @@ from ._exceptions import (
 from ._logging import get_logger
 from ._pose import _POSE_FIELDS, MotionType, Pose
 from ._registers import (
+    BOOT_FIELD,
     EXTENSION_FIELDS,
     FLANGE_FIELDS,
     JOINT_FIELDS,
@@ -701,7 +702,7 @@ class SequenceChannel(CommandChannel):
     def __init__(self, profile: RobotProfile, transport: Transport) -> None:
         super().__init__(profile, transport)
         p = profile
-        # The program's feedback block, grasp_status (9105) with it: one request, 9100-9106.
+        # The program's feedback block, grasp_status (9105) with it: one request, 9100-9107.
         self.feedback_fields = tuple(
             sorted((*p.role(Role.FEEDBACK), *_published(p, ("grasp_status",))), key=_address)
         )
@@ -717,6 +718,8 @@ class SequenceChannel(CommandChannel):
         self.seq_only = (p.field("seq"),)
         if self.extension_fields and p.has(SESSION_FIELD):
             self._session_field = p.field(SESSION_FIELD)  # every command carries it
+        # The program's start the command was written in (tmflow: after the session).
+        self._boot_field = p.field(BOOT_FIELD) if p.has(BOOT_FIELD) else None
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
@@ -789,27 +792,34 @@ class SequenceChannel(CommandChannel):
         # The program takes only ack_seq + 1 (1..seq_max, skipping 0), so a seq that was
         # put back to withdraw a command can never be mistaken for a new one.
         seq = p.next_seq(ack)
-        numbered: list[tuple[RegisterField, Value]] = [(p.field("seq"), seq)]
-        if command.kind in _EXTENDED and self.extension_fields:
-            # The extension carries the number of the command it belongs to.
-            numbered.append((self.extension_fields[-1], seq))
-        elif self._session_field is not None:
-            numbered.append((self.extension_fields[-1], 0))  # the extension is no one's
-        if self._session_field is not None:
-            numbered.append((self._session_field, self.session))
+        numbered = self._numbered(command, seq, feedback.get("boot_id", 0))
         words += numbered
         ticket = Ticket(
             command,
             words,
             time.monotonic(),
             seq=seq,
-            extra={"heartbeat": feedback.get("heartbeat", 0)},
+            extra={"heartbeat": feedback.get("heartbeat", 0), "boot": feedback.get("boot_id", 0)},
             plan=group_writes([*encoded, *encode_writes(numbered)]),
         )
         if after_done is not None:  # what the poll read after the done: the plan's start
             ticket.start_pose, ticket.start_joints = after_done.pose, after_done.joints
             ticket.start_values = after_done.plan_values
         return ticket
+
+    def _numbered(
+        self, command: Command, seq: int, boot: Value
+    ) -> list[tuple[RegisterField, Value]]:
+        """The words that tie a block to its number, its master and the program's start."""
+        numbered: list[tuple[RegisterField, Value]] = [(self.profile.field("seq"), seq)]
+        if command.kind in _EXTENDED and self.extension_fields:
+            numbered.append((self.extension_fields[-1], seq))  # the extension's command
+        elif self._session_field is not None:
+            numbered.append((self.extension_fields[-1], 0))  # the extension is no one's
+        for stamp, value in ((self._session_field, self.session), (self._boot_field, boot)):
+            if stamp is not None:
+                numbered.append((stamp, value))
+        return numbered
 
     def poll_steps(self, ticket: Ticket) -> PollSteps:
         """One read of the feedback block, then the status flags (two reads when split)."""
@@ -829,15 +839,8 @@ class SequenceChannel(CommandChannel):
                 f" {feedback['ack_session']}): this one was never read and never runs"
             )
         done = False
-        if ticket.acknowledged and failure is None:
-            if int(feedback["done_seq"]) == ticket.seq:
-                done = True
-            elif self.profile.field("robot_state").label(int(feedback["robot_state"])) == "error":
-                result = self.profile.field("result_code").label(int(feedback["result_code"]))
-                failure = CommandRejectedError(
-                    f"robot program rejected command {ticket.seq}: {result}",
-                    error_code=int(feedback["result_code"]),
-                )
+        if failure is None:
+            done, failure = self._outcome(ticket, feedback)
         pose: Pose | None = None
         joints: tuple[float, ...] | None = None
         if done:
@@ -850,6 +853,26 @@ class SequenceChannel(CommandChannel):
             ticket.observe_pose = False
             pose = pose_from((yield self.tcp_fields), TCP_FIELDS)
         return Observation(ticket.acknowledged, done, failure, pose, joints)
+
+    def _outcome(
+        self, ticket: Ticket, feedback: dict[str, Value]
+    ) -> tuple[bool, RobotError | None]:
+        """Whether the feedback shows ``ticket`` done, or the failure it shows."""
+        if ticket.acknowledged:
+            if int(feedback["done_seq"]) == ticket.seq:
+                return True, None
+            if self.profile.field("robot_state").label(int(feedback["robot_state"])) == "error":
+                result = self.profile.field("result_code").label(int(feedback["result_code"]))
+                return False, CommandRejectedError(
+                    f"robot program rejected command {ticket.seq}: {result}",
+                    error_code=int(feedback["result_code"]),
+                )
+        if self._restarted(ticket, feedback):
+            return False, CommandRejectedError(
+                f"the robot program started again under command {ticket.seq}: it never runs"
+                " from now on (it may have moved before)"
+            )
+        return False, None
 
     duplicate_safe = True  # the program takes a sequence number at most once
 
@@ -901,6 +924,8 @@ class SequenceChannel(CommandChannel):
         # taken the number after that read (read the other way, it may in between).
         flags = self._read_regardless(self.flag_fields)
         values = self._read_regardless(self.feedback_fields)
+        if self._restarted(ticket, values):
+            return True  # the project started again since: the command may have run before
         if int(values["ack_seq"]) == ticket.seq:  # consumed unrun, or taken (whose?)
             if self.session and "ack_session" in values:
                 # The program names the command it took (0: none ran), so a command the
@@ -914,6 +939,11 @@ class SequenceChannel(CommandChannel):
         if not bool(flags["project_running"]) and not bool(flags.get("paused", False)):
             return False  # not running: nothing takes it before the start-up rule consumes it
         return None
+
+    @staticmethod
+    def _restarted(ticket: Ticket, feedback: dict[str, Value]) -> bool:
+        """True when the project started since ``ticket`` was prepared (a new boot_id)."""
+        return bool(ticket.extra.get("boot")) and feedback.get("boot_id") != ticket.extra["boot"]
 
     def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
         """True when the command at ``ack_seq`` is another master's (its session, not ours)."""

@@ -339,6 +339,8 @@ EXTENSION_FIELDS = (*VIA_FIELDS, "speed_mm_s", "ext_seq")
 #: The session of the master that wrote a command (tmflow): after the extension, so that
 #: every command writes the whole block.
 SESSION_FIELD = "command_session"
+#: The program's start the master read (tmflow, ``boot_id``), after the session.
+BOOT_FIELD = "command_boot"
 ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 
 #: TMflow's user define area, holding registers a project may read and write (TMflow 2.24
@@ -347,7 +349,7 @@ ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
 USER_AREA = (9000, 9999)
 
 #: Optional fields that belong to the command block when a profile has them.
-_OPTIONAL_BLOCK = ("accel_time", *EXTENSION_FIELDS, SESSION_FIELD)
+_OPTIONAL_BLOCK = ("accel_time", *EXTENSION_FIELDS, SESSION_FIELD, BOOT_FIELD)
 #: Command labels that make the robot act; none may share the "none" code.
 _ACTION_LABELS = frozenset(
     {"ptp", "line", "stop", "gripper_open", "gripper_close", "ptp_joints", "circle"}

@@ -25,6 +25,7 @@ from ._io import END_MODULE_DI, END_MODULE_DO, GripperWiring
 from ._logging import add_logging_arguments
 from ._pose import Pose
 from ._registers import (
+    BOOT_FIELD,
     EXTENSION_FIELDS,
     SESSION_FIELD,
     TARGET_FIELDS,
@@ -46,10 +47,11 @@ _FEEDBACK = (
     "heartbeat",
     "grasp_status",
     "ack_session",
+    "boot_id",
 )
 _WORDS = ("speed", "accel_time", "command", "seq")
-#: The block's end: the extension, then the master's session.
-_BLOCK_END = (*EXTENSION_FIELDS, SESSION_FIELD)
+#: The block's end: the extension, then the master's session and the program's start.
+_BLOCK_END = (*EXTENSION_FIELDS, SESSION_FIELD, BOOT_FIELD)
 #: The master's heartbeat, its time-to-live and its session, read together.
 _MASTER = ("master_heartbeat", "master_ttl_ms", "master_session")
 #: The read/write timeout of the program's Modbus device, ms (TMscript 2.24 §16.1,
@@ -326,8 +328,8 @@ def robot_program(
         profile=profile.name,
         arguments=arguments,
         block_first=first,
-        block_last=first + 30,
-        block_count=31,
+        block_last=first + 31,
+        block_count=32,
         words_offset=24,
         via_offset=32,
         ext_offset=56,

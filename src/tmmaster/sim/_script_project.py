@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import random
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -120,6 +121,11 @@ class SimHost:
     def stamp_scale(self) -> float:
         """Simulated seconds per wall second: ``GetNowStamp`` counts wall milliseconds."""
         return self._c.stamp_scale
+
+    @property
+    def random(self) -> random.Random:
+        """The controller's random numbers (``random()``), across the project's starts."""
+        return self._c.random
 
     def display(self, text: str) -> None:
         """A ``Display()`` line, logged."""
@@ -313,6 +319,9 @@ class ScriptProjectController(SequenceController):
         #: (``master_ttl_ms``), so a simulator faster than real time expires no command
         #: of a live master.
         self.stamp_scale = 1.0
+        #: The program's ``random()``: the same draws in every run of a test (a real
+        #: controller's are its own), a new one at each start of the project.
+        self.random = random.Random(0)
         super().__init__(profile, bank, backend, model, **options)
         # The robot's active tool before the project sets its own (TMflow's TCP value,
         # 7354-7385): the cell's, with the simulated gripper's mass.

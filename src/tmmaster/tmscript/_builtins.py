@@ -1074,10 +1074,11 @@ def _round(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
 def _random(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
     """TMscript 2.24 §6.7 random, pp. 173-174: a float in [0, 1); an int in [0, max) (0 when
     max <= 0); an int in [min, max) (min when max <= min)."""
+    rng = getattr(rt.host, "random", _rng)  # a host may keep its own (a simulator's)
     if not args:
-        return to_f32(_rng.random()) % 1.0
+        return to_f32(rng.random()) % 1.0
     low, high = (0, _int(args[0])) if len(args) == 1 else (_int(args[0]), _int(args[1]))
-    return low if high <= low else _rng.randrange(low, high)
+    return low if high <= low else rng.randrange(low, high)
 
 
 def _numbers(args: list[Value]) -> list[float]:
