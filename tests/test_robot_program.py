@@ -31,7 +31,8 @@ def test_the_program_carries_the_profiles_addresses_codes_and_tool() -> None:
     # With the extension, the master's session and the program's start (boot_id).
     assert 'blk = modbus_read("TM", 1, "RO", 9000, 32)' in text
     assert 'TM.Preset("fbBoot", 1, "RO", 9107, "int16")' in text
-    assert "boot = random(1, 32767)" in text
+    assert 'again = Byte_ToInt16Array(modbus_read("TM", 1, "RI", 7304, 3), 1, 0)' in text
+    assert "boot = (random(0, 32766) + again[0] * 3600" in text
     assert 'TM.Preset("fbAck", 1, "RO", 9100, "int16")' in text
     assert "seq == ack % 32767 + 1" in text
     assert "float[] tool = {0.0, 0.0, 150.0, 0.0, 0.0, 90.5}" in text
