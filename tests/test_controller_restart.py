@@ -19,7 +19,7 @@ import pytest
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, attempt, check
-from tmmaster import PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import Simulator, Timing
 
 START = Pose(300, -200, 150, 180, 0, 90)
@@ -59,10 +59,11 @@ def sim() -> Iterator[Simulator]:
         yield simulator
 
 
-def robot_through(proxy: FaultProxy) -> Robot:
+def robot_through(proxy: FaultProxy, link: Fleet | None = None) -> Robot:
     return Robot(
         "127.0.0.1",
         proxy.port,
+        link=link,
         profile="tmflow",
         gripper=None,
         polling=PollPolicy(interval_s=0.01),
@@ -156,14 +157,16 @@ def test_a_move_cut_by_a_restart_is_not_reported_withdrawn(sim: Simulator) -> No
     assert not motion.withdrawn
 
 
-def test_a_first_copy_held_across_a_restart_during_its_resend_never_runs(sim: Simulator) -> None:
+def test_a_first_copy_held_across_a_restart_during_its_resend_never_runs(
+    sim: Simulator, driver_or_fleet: Fleet | None
+) -> None:
     """The first copy of command 1 is held; the master resends it and the move starts. No
     wait polls it (``start_move``), so the master beats on with the session of that
     command. The controller restarts mid-move (``ack_seq`` 0 frees number 1), the master
     beats again, and the held first copy lands: it carries the ``boot_id`` of the
     program's earlier start and is consumed unrun."""
     issued: list[Issued] = []
-    with FaultProxy(sim.port) as proxy, robot_through(proxy) as robot:
+    with FaultProxy(sim.port) as proxy, robot_through(proxy, driver_or_fleet) as robot:
         robot.wait_until_ready()
         landed = threading.Event()
         proxy.add(Rule("hold", function_code=16, address=9000, release=landed, times=1))
