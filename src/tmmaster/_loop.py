@@ -14,7 +14,7 @@ import math
 import threading
 import time
 from collections.abc import Awaitable, Callable, Coroutine
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 from ._exceptions import ConfigError, TMMasterError, TransportError
@@ -153,29 +153,22 @@ class StatusRecord:
 
     def skip(self, slots: int) -> None:
         """Record ``slots`` slots that passed without a poll."""
-        now = self.published
-        self.published = MonitoredStatus(
-            now.status, now.read_at, now.error, now.polls, now.skipped + slots, now.failures
-        )
+        self.published = replace(self.published, skipped=self.published.skipped + slots)
 
     def fail(self, error: TMMasterError) -> None:
         """Record a failed poll (logged once as a warning, then at debug level)."""
         now = self.published
-        if now.error is None:
-            self._log.warning(self._failed_event, error=str(error))
-        else:
-            self._log.debug(self._failed_event, error=str(error))
-        self.published = MonitoredStatus(
-            now.status, now.read_at, error, now.polls, now.skipped, now.failures + 1
-        )
+        log = self._log.warning if now.error is None else self._log.debug
+        log(self._failed_event, error=str(error))
+        self.published = replace(now, error=error, failures=now.failures + 1)
 
     def succeed(self, status: RobotStatus) -> None:
         """Record a poll's status."""
         now = self.published
         if now.error is not None:
             self._log.debug(self._recovered_event, failures=now.failures)
-        self.published = MonitoredStatus(
-            status, status.timestamp, None, now.polls + 1, now.skipped, now.failures
+        self.published = replace(
+            now, status=status, read_at=status.timestamp, error=None, polls=now.polls + 1
         )
 
 
