@@ -568,7 +568,7 @@ class Planner:
         self, start: Pose, target: Pose, speed: float, motion: MotionType, accel_time_ms: int | None
     ) -> float:
         """:meth:`Robot.expected_motion_time`: the arm model's time from the seed, s."""
-        speed = speed * self.project_speed_percent / 100.0  # TMflow: x the project speed
+        speed = self._share(speed)  # TMflow: x the project speed
         return self._model_time(self.origin(start), target, speed, motion, accel_s(accel_time_ms))
 
     def _model_time(
@@ -770,12 +770,10 @@ def joint_values(joints: object) -> Joints:
         )
     if len(joints) != 6:
         raise ConfigError(f"joints need six angles J1..J6 (deg), got {len(joints)}")
-    values = []
     for i, q in enumerate(joints, start=1):
         if not is_finite_number(q):
             raise ConfigError(f"J{i} must be a finite number of degrees, got {shown(q)}")
-        values.append(float(q))
-    return tuple(values)
+    return tuple(float(q) for q in joints)
 
 
 def offset_pose(*values: object) -> Pose:
@@ -783,8 +781,7 @@ def offset_pose(*values: object) -> Pose:
     for name, v in zip(("dx", "dy", "dz", "drx", "dry", "drz"), values, strict=True):
         if not is_finite_number(v):
             raise ConfigError(f"{name} must be a finite number, got {shown(v)}")
-    x, y, z, rx, ry, rz = (float(v) for v in values)  # type: ignore[arg-type]
-    return Pose(x, y, z, rx, ry, rz)
+    return Pose(*(float(v) for v in values))  # type: ignore[arg-type]
 
 
 def moved(start: Pose, offset: Pose, frame: str) -> Pose:
