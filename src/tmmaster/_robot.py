@@ -1003,8 +1003,7 @@ class Robot:
                 (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         motion = motion_type(motion)
-        percent = self._speed_argument(speed, speed_mm_s, motion)
-        check_accel(accel_time_ms)
+        percent = self._speed_arguments(speed, speed_mm_s, motion, accel_time_ms)
         self._planner.check_path(target, percent, motion)
         # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
         command = Command(
@@ -1012,10 +1011,11 @@ class Robot:
         )
         return self._start_command(command, timeout=timeout)
 
-    def _speed_argument(
-        self, speed: int | None, speed_mm_s: int | None, motion: MotionType | None
+    def _speed_arguments(
+        self, speed: int | None, speed_mm_s: int | None, motion: MotionType | None, accel_ms: object
     ) -> int:
-        """The speed register's percent for ``speed`` or ``speed_mm_s`` (checked, no I/O).
+        """The speed register's percent for ``speed`` or ``speed_mm_s``, then the move's
+        ``accel_time_ms`` (``accel_ms``) checked too (no I/O).
 
         ``motion`` None: a Circle (which takes mm/s too).
         """
@@ -1025,6 +1025,7 @@ class Robot:
                 f"profile {self.profile.name!r} has no TCP speed in mm/s (speed_mm_s): give"
                 " speed in %"
             )
+        check_accel(accel_ms)
         return percent
 
     def move_joints(
@@ -1154,8 +1155,7 @@ class Robot:
         if frame not in ("base", "tool"):
             raise ConfigError(f"frame must be 'base' or 'tool', got {frame!r}")
         kind = motion_type(motion)
-        percent = self._speed_argument(speed, speed_mm_s, kind)
-        check_accel(accel_time_ms)
+        percent = self._speed_arguments(speed, speed_mm_s, kind, accel_time_ms)
         if speed_mm_s is not None:
             self._channel.check_command(
                 Command(CommandKind.LINE, offset, percent, accel_time_ms, speed_mm_s=speed_mm_s)
@@ -1230,8 +1230,7 @@ class Robot:
         self._require(CommandKind.CIRCLE, "an arc (move_arc)")
         if not isinstance(via, Pose):
             raise ConfigError(f"via must be a tmmaster.Pose, got {type(via).__name__}")
-        percent = self._speed_argument(speed, speed_mm_s, None)
-        check_accel(accel_time_ms)
+        percent = self._speed_arguments(speed, speed_mm_s, None, accel_time_ms)
         # The arc from where the arm is believed to be, before any request.
         self._planner.check_arc_move(via, to, percent)
         command = Command(
