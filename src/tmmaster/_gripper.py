@@ -347,9 +347,7 @@ def _wait(
 
 def _timeout(timeout_s: float | None, default: float) -> float:
     """``timeout_s`` when given (a finite number > 0, else ConfigError), else ``default``."""
-    if timeout_s is None:
-        return default
-    return require_positive("timeout_s", timeout_s)
+    return default if timeout_s is None else require_positive("timeout_s", timeout_s)
 
 
 class _RobotWiredGripper(Gripper):

@@ -206,15 +206,14 @@ class Heartbeat:
             self._member = member
             member.fleet._call_soon(self._start_task, member)
             return
-        thread = threading.Thread(
+        self._thread = threading.Thread(
             target=_beat_in_thread,
             args=(weakref.ref(self), self._stop, self._transport),
             name=f"tmmaster-heartbeat-{getattr(self._transport, 'name', 'robot')}",
             daemon=True,
         )
-        self._thread = thread
         weakref.finalize(self, self._stop.set)
-        thread.start()
+        self._thread.start()
 
     def _start_task(self, member: FleetMember) -> None:
         """On the loop: the task, cancelled with the fleet's other tasks when it stops."""

@@ -181,9 +181,8 @@ class _Watched(StatusRecord):
             await self.connect()
             if not self.link.connected:
                 return
-        read_block = self.link.read_block
         try:
-            answers = [await read_block(*read) for read in self.reads]
+            answers = [await self.link.read_block(*read) for read in self.reads]
             status = self.channel.status_from(self.plan.decode(answers))
         except ModbusExceptionError as exc:
             self.fail(exc)  # the device answered: the link is fine

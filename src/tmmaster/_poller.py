@@ -83,11 +83,10 @@ class Poller:
         delay = when - time.monotonic()
         if delay <= 0:
             return
-        if self._stop is not None:
-            if self._stop.wait(delay):
-                raise StopRequestedError("stop requested")
-        else:
+        if self._stop is None:
             time.sleep(delay)
+        elif self._stop.wait(delay):
+            raise StopRequestedError("stop requested")
 
     def sleep(self) -> None:
         """Sleep until the next poll is due (no drift: polls advance by the interval).
