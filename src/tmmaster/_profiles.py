@@ -51,10 +51,8 @@ def _builtin_data(name: str) -> dict[str, Any]:
     known = builtin_profile_names()
     if name not in known:
         raise RegisterMapError(f"unknown profile {name!r} (built-in profiles: {', '.join(known)})")
-    text = (
-        resources.files("tmmaster").joinpath("profiles").joinpath(f"{name}.toml").read_text("utf-8")
-    )
-    return tomllib.loads(text)
+    path = resources.files("tmmaster").joinpath("profiles", f"{name}.toml")
+    return tomllib.loads(path.read_text("utf-8"))
 
 
 def _merge(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
@@ -215,8 +213,7 @@ def profile_markdown(profile: Profile) -> str:
         "| Allowed | Meaning |"
     )
     out.append("|---|---|---|---|---|---|---|---|---|---|---|")
-    ordered = sorted(profile.fields.values(), key=lambda f: (f.table.value, f.address))
-    for f in ordered:
+    for f in sorted(profile.fields.values(), key=lambda f: (f.table.value, f.address)):
         word_order = f.word_order.value if f.width == 2 else ""
         scale = "" if f.scale == 1 else f"x{f.scale:g}"
         allowed = "" if f.dtype is DataType.BOOL else describe_range(f).split(",")[0]
