@@ -49,14 +49,16 @@ def held(proxy: FaultProxy) -> Callable[[], bool]:
 
 def judge(sim: Simulator, issued: list[Issued], closed_at: float, closed_wall: float) -> None:
     """The held frame landed after the close; nothing new ran, nothing twice; at rest at A."""
+    # The proxy has handed the frame to the socket: 20 ticks for the robot to read it
+    # and, were it to run, to start it.
+    ticks = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= ticks + 20, timeout=5.0)
     landed = [
         r
         for r in sim.request_log
         if r.function_code == 16 and r.address == 9000 and r.time > closed_wall
     ]
     assert landed, "the held command frame never reached the robot after the close"
-    ticks = sim.ticks
-    sim.wait_for(lambda: sim.ticks >= ticks + 20, timeout=5.0)
     sim.wait_for(at_rest(sim), timeout=5.0, interval=0.05)
     check(issued, sim.motion_log())
     late = [m for m in sim.motion_log() if m.wall_time > closed_at]
@@ -151,6 +153,63 @@ def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
                 command.outcome = "done"
             command.ended_at = time.monotonic()
             assert command.outcome != "done"
+            return closed_at, closed_wall
+        finally:
+            release.set()
+            await robot.close()
+
+    async def bounded() -> tuple[float, float]:
+        async with asyncio.timeout(30):
+            return await scenario()
+
+    closed_at, closed_wall = asyncio.run(bounded())
+    proxy.wait_held()
+    judge(sim, issued, closed_at, closed_wall)
+
+
+@pytest.mark.parametrize("order", ["cancel_then_close", "close_then_cancel"])
+def test_an_async_robot_closed_while_its_cancelled_moves_write_is_held(
+    sim: Simulator, proxy: FaultProxy, order: str
+) -> None:
+    # The awaited move's write is held; the move's task is cancelled and the robot
+    # closed at once, in either order, the cancellation's clean-up and the close both
+    # waiting on the same write. The frame lands once both have returned.
+    release = threading.Event()
+    issued: list[Issued] = []
+
+    async def scenario() -> tuple[float, float]:
+        robot = aio.connect(
+            "127.0.0.1",
+            proxy.port,
+            profile="tmflow",
+            gripper=None,
+            polling=PollPolicy(interval_s=0.01),
+            timeouts=TIMEOUTS,
+        )
+        try:
+            await robot
+            await robot.wait_until_ready(timeout_s=5)
+            await robot.move_to(A, speed=80)
+            issued.append(Issued(A, 0.0, 0.0, "done"))
+            proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+            command = Issued(B, time.monotonic())
+            issued.append(command)
+            move = asyncio.ensure_future(robot.move_to(B, speed=80))
+            while not held(proxy)():
+                await asyncio.sleep(0.005)
+            if order == "cancel_then_close":
+                move.cancel()
+                closing = asyncio.ensure_future(robot.close(timeout_s=0.5))
+            else:
+                closing = asyncio.ensure_future(robot.close(timeout_s=0.5))
+                await asyncio.sleep(0)  # the close's thread is started
+                move.cancel()
+            results = await asyncio.gather(move, closing, return_exceptions=True)
+            closed_at, closed_wall = time.monotonic(), time.time()
+            release.set()
+            command.outcome = type(results[0]).__name__
+            command.ended_at = closed_at
+            assert command.outcome in ("CancelledError", "StopRequestedError"), results
             return closed_at, closed_wall
         finally:
             release.set()
