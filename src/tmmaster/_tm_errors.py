@@ -166,19 +166,13 @@ def _index() -> Mapping[int, str]:
     return MappingProxyType(index)
 
 
-def _entry(data: object) -> TMErrorCode:
-    try:
-        return TMErrorCode.model_validate(data)
-    except ValidationError as exc:
-        raise ConfigError(f"{DATA_FILE}: invalid entry: {exc}") from exc
-
-
 @functools.cache
 def _lookup(code: int) -> TMErrorCode | None:
     if (chunk := _index().get(code)) is None:
         return None
     try:
-        data = tomllib.loads("[[error]]\n" + chunk)["error"][0]
+        return TMErrorCode.model_validate(tomllib.loads("[[error]]\n" + chunk)["error"][0])
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{DATA_FILE}: entry {code_hex(code)}: {exc}") from exc
-    return _entry(data)
+    except ValidationError as exc:
+        raise ConfigError(f"{DATA_FILE}: invalid entry: {exc}") from exc
