@@ -456,8 +456,7 @@ class Planner:
         checked = self.model.check_joints(joints, tool=self.tool)
         tcp = self.model.forward(checked, self.tool)
         self.validate(tcp, speed, checked)
-        hint = self.joints_hint
-        if hint is not None:
+        if (hint := self.joints_hint) is not None:
             self._check_body(hint, body.ptp_samples(hint, checked))
             self._check_ptp_speed(hint, checked, self._share(speed))
         return checked, tcp

@@ -469,8 +469,7 @@ class RobotProfile(RegisterMap):
 
     @model_validator(mode="after")
     def _check_roles(self) -> Self:
-        missing = [n for n in _REQUIRED[self.handshake] if n not in self.fields]
-        if missing:
+        if missing := [n for n in _REQUIRED[self.handshake] if n not in self.fields]:
             raise ValueError(
                 f"profile {self.name!r} ({self.handshake.value} handshake) lacks fields: "
                 + ", ".join(missing)
