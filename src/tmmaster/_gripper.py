@@ -760,8 +760,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         def check() -> GripperStatus | None:
             nonlocal acknowledged
             if not acknowledged:
-                control = int(self.read("control")["control"])
-                if control != 0:
+                if int(self.read("control")["control"]) != 0:
                     if time.monotonic() - self._sent_at > self.ack_timeout_s:
                         raise AcknowledgeTimeoutError(
                             f"{self.kind}: the gripper did not take the command within"

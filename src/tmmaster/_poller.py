@@ -277,9 +277,7 @@ class MotionSchedule:
     def expected_end(self) -> float | None:
         """When the move ends at the latest start and highest pace (monotonic s), None
         before the acknowledgement."""
-        if self._expected <= 0:
-            return None
-        return self._acked_at + self._expected * self._paces[1]
+        return None if self._expected <= 0 else self._acked_at + self._expected * self._paces[1]
 
     def next_poll(self, now: float, *, acknowledged: bool) -> float:
         """The monotonic time of the next poll (never earlier than ``now``)."""

@@ -189,9 +189,7 @@ def _retrieve(future: asyncio.Future[Any]) -> None:
 def _live_motion(value: object, follows: Motion | None) -> Motion | None:
     """The motion a call leaves running or pending: its result, or the one it follows."""
     motion = value if isinstance(value, Motion) else follows
-    if motion is None or motion.done or motion.abandoned:
-        return None
-    return motion
+    return None if motion is None or motion.done or motion.abandoned else motion
 
 
 class _Primed(collections.abc.Coroutine[Any, Any, T]):
