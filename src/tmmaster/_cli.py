@@ -119,11 +119,9 @@ def _add_profile_commands(parser: argparse.ArgumentParser) -> None:
 
 def _run_profile(args: argparse.Namespace) -> int:
     if args.profile_command == "list":
-        lines = []
-        for name in builtin_profile_names():
-            profile = load_profile(name)
-            lines.append(f"{name:14} {profile.kind:8} {profile.description}\n")
-        return _emit("".join(lines), None)
+        profiles = [(name, load_profile(name)) for name in builtin_profile_names()]
+        text = "".join(f"{name:14} {p.kind:8} {p.description}\n" for name, p in profiles)
+        return _emit(text, None)
     name = args.profile
     names = builtin_profile_names()
     if name not in names and not name.endswith(".toml") and not Path(name).exists():
