@@ -21,7 +21,7 @@ import pytest
 
 import tmmaster
 from safety_invariant import Issued, at_rest, check
-from tmmaster import PollPolicy, Pose, Robot
+from tmmaster import Fleet, PollPolicy, Pose, Robot
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -43,14 +43,26 @@ def sim(tm_simulator_factory: Factory) -> Simulator:
     return tm_simulator_factory("tmflow", time_scale=1.0)
 
 
+def open_robot(sim: Simulator, link: Fleet | None = None) -> Robot:
+    """A robot that moved to LEFT and read 7101 (100 %) last with its ``status()``."""
+    r = Robot(
+        "127.0.0.1",
+        sim.port,
+        profile="tmflow",
+        gripper=None,
+        link=link,
+        polling=PollPolicy(interval_s=0.02),
+    )
+    r.connect()
+    r.wait_until_ready(timeout_s=5)
+    r.move_to(LEFT, speed=100)
+    r.status()  # the master reads 7101 here: 100 %
+    return r
+
+
 @pytest.fixture
 def robot(sim: Simulator) -> Iterator[Robot]:
-    with Robot(
-        "127.0.0.1", sim.port, profile="tmflow", gripper=None, polling=PollPolicy(interval_s=0.02)
-    ) as r:
-        r.wait_until_ready(timeout_s=5)
-        r.move_to(LEFT, speed=100)
-        r.status()  # the master reads 7101 here: 100 %
+    with open_robot(sim) as r:
         yield r
 
 
@@ -86,12 +98,13 @@ def move_recorded(robot: Robot, target: Pose, issued: list[Issued]) -> str:
 
 
 def test_a_project_speed_lowered_after_the_masters_last_read_gives_no_timeout(
-    sim: Simulator, robot: Robot
+    sim: Simulator, driver_or_fleet: Fleet | None
 ) -> None:
     issued = [Issued(LEFT, 0.0, 0.0, "done")]
-    set_project_speed(sim, SLOW_PERCENT)  # after the master's read: its plan says 100 %
-    assert move_recorded(robot, RIGHT, issued) == "done", issued
-    done_at_rest_on(sim, RIGHT)
+    with open_robot(sim, driver_or_fleet) as robot:
+        set_project_speed(sim, SLOW_PERCENT)  # after the master's read: its plan says 100 %
+        assert move_recorded(robot, RIGHT, issued) == "done", issued
+        done_at_rest_on(sim, RIGHT)
     check(issued, sim.motion_log())
 
 
