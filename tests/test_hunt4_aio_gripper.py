@@ -11,6 +11,8 @@ up is stopped before the error reaches the caller. Here the gripper commands of 
   ``close()`` is cancelled (``asyncio.wait_for``, ``task.cancel()``) while it is held,
   and the frame lands only after the ``CancelledError`` (or ``TimeoutError``) reached
   the caller: the program must never run it;
+- a tmflow gripper close cancelled while the program runs it ends the project (so
+  Play cannot resume it), and the operator's Play afterwards never runs it again;
 - a stand-alone blog-2fg7's move cancelled while its fingers travel must be stopped
   short of its target (the gripper's stop written before the ``CancelledError``).
 
@@ -28,6 +30,7 @@ from typing import Any
 import pytest
 
 from fault_proxy import FaultProxy, Rule
+from pendant import press_play_pause
 from sim_speeds import SUITE_TICK_HZ
 from test_aio import run, until
 from tmmaster import (
@@ -181,3 +184,55 @@ def test_a_cancelled_stand_alone_gripper_close_is_stopped_before_the_error(how: 
         assert abs(width - widths[0]) < 0.5, (widths[0], width)
     finally:
         sim.close()
+
+
+@pytest.mark.parametrize("how", ["cancel", "wait_for"])
+def test_a_tmflow_gripper_close_cancelled_while_it_runs_never_runs_again(
+    tm_simulator_factory: Factory, how: str
+) -> None:
+    # Half real time: the program's gripper close takes a while (as in
+    # tests/test_hunt2_gripper_restart.py). Cancelled while it runs, it is given up
+    # before the error reaches the caller; the operator's Play afterwards never runs it
+    # again, and nothing starts after the error.
+    sim = tm_simulator_factory("tmflow", time_scale=0.5)
+
+    async def scenario() -> float:
+        async with aio.connect(
+            "127.0.0.1",
+            sim.port,
+            profile="tmflow",
+            polling=PollPolicy(interval_s=0.01),
+            timeouts=TimeoutPolicy(gripper_settle_s=0.05),
+        ) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            if how == "cancel":
+                task = asyncio.ensure_future(robot.gripper.close(timeout_s=5.0))
+                await until(lambda: [k for k, _ in gripper_actions(sim)] == ["gripper_close"])
+                task.cancel()
+                with pytest.raises(asyncio.CancelledError):
+                    await task
+            else:
+                with pytest.raises(TimeoutError):
+                    await asyncio.wait_for(robot.gripper.close(timeout_s=5.0), 0.05)
+            ended_at = time.monotonic()
+            motion = robot.last_motion
+            assert motion is not None
+            assert motion.abandoned
+            return ended_at
+
+    ended_at = run(scenario)
+    closes = [k for k, _ in gripper_actions(sim)]
+    assert closes in ([], ["gripper_close"]), closes
+    if closes:
+        # It ran, so it was stopped: the Stop (or the program's watchdog on the cancel
+        # record) ended the project, so that Play cannot resume it.
+        sim.wait_for(lambda: not sim.field("project_running"), timeout=3)
+    press_play_pause(sim)  # the operator starts the project again
+    sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2)
+    beat = sim.field("heartbeat")
+    sim.wait_for(lambda: sim.field("heartbeat") != beat, timeout=2)
+    start = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= start + 20, timeout=5)
+    assert [k for k, _ in gripper_actions(sim)] == closes, sim.motion_log()
+    late = [m for m in sim.motion_log() if m.wall_time > ended_at]
+    assert not late, f"started after the cancelled close ended: {late}"
