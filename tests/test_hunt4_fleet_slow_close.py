@@ -148,3 +148,50 @@ def test_fleet_close_with_a_slow_or_dropped_link_leaves_nothing_running(
             sim.wait_for(lambda s=sim, t=ticks: s.ticks >= t + 30, timeout=5)
             assert sim.tcp_pose().is_close(rest), f"{name} moved again after it stopped"
         assert "a" not in unconfirmed, unconfirmed
+
+
+B_TARGET = Pose(300, 150, 200, 180, 0, 90)  # about 6 s from A at speed 5, real time
+
+
+@pytest.mark.parametrize("profile", ["tmflow", "article"])
+def test_fleet_close_during_a_slow_command_write_stops_what_it_started(profile: str) -> None:
+    # b's command write reaches the robot only 0.6 s after it was sent (its answer
+    # within the 1 s request timeout): the fleet closes while it is on its way. The
+    # close waits for it and gives it up: the robot may take it after close() was
+    # called, but then stops it; nothing starts after close() returned.
+    with cell(profile) as c:
+        c.move_far("a")
+        command_block = 9000 if profile == "tmflow" else 0x0200
+        c.proxy.add(Rule("delay", function_code=16, address=command_block, delay_s=VERY_SLOW_S))
+        command = Issued(B_TARGET, time.monotonic())
+        c.issued["b"].append(command)
+
+        def run() -> None:
+            try:
+                c.robots["b"].move_to(B_TARGET, speed=5)
+            except TMMasterError as exc:
+                command.outcome = type(exc).__name__
+            else:
+                command.outcome = "done"
+            command.ended_at = time.monotonic()
+
+        thread = threading.Thread(target=run, name="move-b")
+        thread.start()
+        c.threads.append(thread)
+        c.sims["b"].wait_for(lambda: any(s.action == "delay" for s in c.proxy.seen), timeout=5)
+        unconfirmed = c.fleet.close(timeout_s=0.5)
+        closed_at = time.monotonic()
+        thread.join(15)
+        assert not thread.is_alive()
+        assert command.outcome != "done", command
+        for name, sim in c.sims.items():
+            late = [m for m in sim.motion_log() if m.wall_time > closed_at]
+            assert not late, f"{name}: motions started after Fleet.close() returned: {late}"
+            sim.wait_for(at_rest(sim), timeout=10, interval=0.1)
+            rest = sim.tcp_pose()
+            goal = FAR if name == "a" else B_TARGET
+            assert rest.distance_to(goal) > 50, f"{name} ran on to {rest} ({unconfirmed=})"
+            ticks = sim.ticks
+            sim.wait_for(lambda s=sim, t=ticks: s.ticks >= t + 30, timeout=5)
+            assert sim.tcp_pose().is_close(rest), f"{name} moved again after it stopped"
+        assert unconfirmed == (), unconfirmed
