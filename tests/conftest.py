@@ -154,6 +154,22 @@ def pytest_configure(config: pytest.Config) -> None:
     gc.set_threshold(*GC_THRESHOLDS)
 
 
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Leave what collection made out of the full collections of the tests that follow.
+
+    Once collected, a test process holds about 140,000 objects that live to its end (every
+    test module, tmmaster, hypothesis, pydantic, the test items); each full collection
+    traversed them again: in ``no_leaks``, at the thresholds, twice in pytest's own
+    collections at the end of the session (those two: 140-170 ms after collecting the
+    whole suite, under 1 ms frozen). Frozen (``gc.freeze``), they are skipped: measured on
+    five files (539 tests, one process), full collections 0.70-0.75 -> 0.42 s of CPU.
+    What the tests allocate is collected as before, so what a test leaves behind (an
+    unclosed socket, a thread, an unraisable exception in a finaliser) is found as it was.
+    """
+    del session
+    gc.freeze()
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_unconfigure(config: pytest.Config) -> None:
     """Leave the objects still alive out of Python's last collections when a run ends.
