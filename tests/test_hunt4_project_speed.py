@@ -21,18 +21,20 @@ import pytest
 
 import tmmaster
 from safety_invariant import Issued, at_rest, check
-from tmmaster import Fleet, PollPolicy, Pose, Robot
+from tmmaster import Fleet, PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
 LEFT = Pose(300, -200, 200, 180, 0, 90)
-RIGHT = Pose(300, 200, 200, 180, 0, 90)
+RIGHT = Pose(300, -140, 200, 180, 0, 90)
 BACK = Pose(300, -190, 200, 180, 0, 90)  # each command its own target (safety_invariant)
-#: At speed 50 the master expects LEFT -> RIGHT in about 0.95 s (real time) and gives it
-#: about 3.2 s, grown with the pace it observes up to 4 times (12.9 s) while the arm
-#: keeps moving. At 20 % the move takes about 3.9 s: the pace covers it. At 5 % it takes
-#: about 19 s: only the re-read of 7101 at the deadline can cover it.
+#: At speed 50 the master expects LEFT -> RIGHT in about 0.31 s (real time) and, with a
+#: 0.2 s margin, gives it about 0.6 s, grown with the pace it observes up to 4 times
+#: (2.4 s) while the arm keeps moving. At 20 % the move takes about 1.3 s: the pace
+#: covers it. At 5 % it takes several seconds: only the re-read of 7101 at the deadline
+#: can cover it.
+MARGIN = TimeoutPolicy(motion_margin_s=0.2)
 SPEED = 50
 PACE_PERCENT = 20
 SLOW_PERCENT = 5
@@ -52,6 +54,7 @@ def open_robot(sim: Simulator, link: Fleet | None = None) -> Robot:
         gripper=None,
         link=link,
         polling=PollPolicy(interval_s=0.02),
+        timeouts=MARGIN,
     )
     r.connect()
     r.wait_until_ready(timeout_s=5)
@@ -135,11 +138,11 @@ def test_a_project_speed_lowered_mid_move_slows_the_next_move_without_a_timeout(
     reason=(
         "A move that started at a lowered project speed (5 %, planned at 100 %) is timed"
         " out and stopped when the operator raised 7101 back to 100 % while it ran: the"
-        " pace-grown budget (4 x 3.2 s = 12.9 s) runs out while the arm still moves"
+        " pace-grown budget (4 x 0.6 s = 2.4 s) runs out while the arm still moves"
         " steadily, and the one re-read of 7101 at the deadline sees 100 % (not lowered"
         " since the plan), so the deadline stands; the simulated move keeps the speed it"
         " started with (docs/simulator-model.md). MotionTimeoutError, Stop pressed, the"
-        " arm left about 50 mm short of its target."
+        " arm left short of its target."
     ),
 )
 def test_a_move_started_slow_whose_project_speed_is_raised_back_mid_move_is_not_stopped(
