@@ -845,9 +845,9 @@ class Fleet:
         (a write already in flight finishes and is given up like any other), and every
         wait the loop polls ends. Then all robots are closed in parallel, each
         withdrawing or stopping what it has outstanding, within ``timeout_s`` in all
-        (beyond it only for a robot with a command write still on its way, as
-        :meth:`Robot.close` says): a robot whose link is dead does not hold the others
-        up. Safe to call more than once (later calls return an empty tuple).
+        (beyond it only by the first attempts of a robot's give-up and a command write
+        still on its way, as :meth:`Robot.close` says): a robot whose link is dead does
+        not hold the others up. Safe to call more than once (later calls return an empty tuple).
 
         Args:
             timeout_s: the budget for the robots' clean-up, in seconds.

@@ -710,9 +710,9 @@ class Robot:
         Args:
             timeout_s: a bound on the clean-up (the retries of the withdraw or stop, the
                 wait for a withdraw's answer, a stand-alone gripper's stop included);
-                None: the retry policy's own bounds. A command write in flight, which
-                may still land and run, is waited out (one request, bounded by the
-                link's timeout) and its withdraw or stop is tried once even past it.
+                None: the retry policy's own bounds. Each step still gets its first
+                attempt (one request each); a command write in flight, which may still
+                land and run, is waited out (one request) and given up the same way.
 
         Returns:
             True when nothing this robot sent can still run; False when a withdraw or
