@@ -222,3 +222,43 @@ def test_an_async_robot_closed_while_its_cancelled_moves_write_is_held(
     closed_at, closed_wall = asyncio.run(bounded())
     proxy.wait_held()
     judge(sim, issued, closed_at, closed_wall)
+
+
+def test_a_copy_the_gate_refuses_is_neither_sent_nor_logged_as_resent(
+    sim: Simulator, proxy: FaultProxy, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A stop request while the move's write is held: the write's answer never comes, and
+    the gate refuses its copy (a stop was requested). Nothing was resent, so nothing is
+    logged as resent, and the held frame, landing later, never runs."""
+    release = threading.Event()
+    issued: list[Issued] = [Issued(A, 0.0, 0.0, "done")]
+    with Robot(
+        "127.0.0.1",
+        proxy.port,
+        profile="tmflow",
+        gripper=None,
+        polling=PollPolicy(interval_s=0.01),
+        timeouts=TIMEOUTS,
+    ) as robot:
+        try:
+            robot.wait_until_ready(timeout_s=5)
+            robot.move_to(A, speed=80)
+            proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+            command = Issued(B, time.monotonic())
+            issued.append(command)
+            # A stop request as soon as the write is held (the proxy saw it).
+            threading.Thread(
+                target=lambda: (sim.wait_for(held(proxy), timeout=5.0), robot.interrupt())
+            ).start()
+            with pytest.raises(TMMasterError) as failed:
+                robot.move_to(B, speed=80)
+            command.outcome, command.ended_at = type(failed.value).__name__, time.monotonic()
+            given_up_wall = time.time()
+            release.set()
+            proxy.wait_held()
+            judge(sim, issued, command.ended_at, given_up_wall)
+            writes = [r for r in sim.request_log if r.function_code == 16 and r.address == 9000]
+            assert len(writes) == 2, writes  # A's, and B's held frame: no copy of it
+            assert "robot.command_resent" not in caplog.text
+        finally:
+            release.set()

@@ -317,15 +317,20 @@ class _MotionFollower:
             self._log.info("robot.command_write_landed", command=ticket.command.kind.value)
             return
         if self._channel.duplicate_safe:
-            self._log.warning(
-                "robot.command_resent",
-                command=ticket.command.kind.value,
-                seq=ticket.seq,
-                reason="same sequence number: the program takes it at most once",
-            )
+            # Whether or not the gate admits a copy: the first frame may still be in the
+            # network, so the command ends with a new session (_Following).
             ticket.resent = True
+
+            def resending() -> None:  # logged once the gate admits the copy, under its lock
+                self._log.warning(
+                    "robot.command_resent",
+                    command=ticket.command.kind.value,
+                    seq=ticket.seq,
+                    reason="same sequence number: the program takes it at most once",
+                )
+
             try:
-                self.gate.write(None, send)  # the same ticket: registered already
+                self.gate.write(resending, send)  # the same ticket: registered already
                 return
             except (ConnectionLostError, ResponseTimeoutError) as exc:
                 failure = exc

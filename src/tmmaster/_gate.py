@@ -43,9 +43,9 @@ class CommandGate:
 
         Args:
             register: records the command as outstanding (it must be visible to a
-                closer before any byte of it can reach the robot); None: nothing to
-                record (a resend of a registered command, an output, a button, a gripper's
-                own command).
+                closer before any byte of it can reach the robot), or that a copy of a
+                registered one is resent; None: nothing to record (an output, a button,
+                a gripper's own command).
             send: writes the command (one request).
 
         Raises:
