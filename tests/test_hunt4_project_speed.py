@@ -141,8 +141,9 @@ def test_a_project_speed_lowered_mid_move_slows_the_next_move_without_a_timeout(
         " pace-grown budget (4 x 0.6 s = 2.4 s) runs out while the arm still moves"
         " steadily, and the one re-read of 7101 at the deadline sees 100 % (not lowered"
         " since the plan), so the deadline stands; the simulated move keeps the speed it"
-        " started with (docs/simulator-model.md). MotionTimeoutError, Stop pressed, the"
-        " arm left short of its target."
+        " started with (docs/simulator-model.md: a simplification, unverified; a robot"
+        " whose running move follows the raise would finish in time). MotionTimeoutError,"
+        " Stop pressed, the arm left short of its target."
     ),
 )
 def test_a_move_started_slow_whose_project_speed_is_raised_back_mid_move_is_not_stopped(
