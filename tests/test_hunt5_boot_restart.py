@@ -196,18 +196,6 @@ def test_a_hand_written_block_with_command_boot_0_runs_after_a_restart(
         assert [r.target for r in sim.motion_log()] == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "A write held across a controller restart gets no answer; the master gives it up"
-        " and its withdraw reads the new boot_id as 'taken' (withdraw_outcome returns True"
-        " on _restarted), so it presses Stop (robot.withdraw_too_late, robot.stop_sent) on"
-        " the project's new run, although a frame of the earlier start can never run in it"
-        " and the restart ended any motion: the project stops, and the next command fails"
-        " with RobotFaultError until the operator presses Play. A wait that sees the"
-        " restart presses no Stop (docs/safety.md)."
-    ),
-)
 def test_a_give_up_across_a_restart_presses_no_stop_on_the_new_run(
     sim: Simulator, driver_or_fleet: Fleet | None
 ) -> None:

@@ -154,6 +154,9 @@ class Ticket:
     written: bool = False
     #: True once a second copy of the block was written: the first may still land.
     resent: bool = False
+    #: True once the robot program was seen started again since the command was
+    #: written (tmflow's ``boot_id``): it never runs from then on, and needs no Stop.
+    restarted: bool = False
     extra: dict[str, Value] = field(default_factory=dict)
     #: ``words`` encoded and grouped into write blocks while preparing (encoded once).
     plan: list[tuple[Block, list[int]]] = field(default_factory=list)
@@ -942,8 +945,11 @@ class SequenceChannel(CommandChannel):
 
     @staticmethod
     def _restarted(ticket: Ticket, feedback: dict[str, Value]) -> bool:
-        """True when the project started since ``ticket`` was prepared (a new boot_id)."""
-        return bool(ticket.extra.get("boot")) and feedback.get("boot_id") != ticket.extra["boot"]
+        """True (noted on ``ticket``) once the project started since ``ticket`` was
+        prepared: another boot_id."""
+        boot = ticket.extra.get("boot")
+        ticket.restarted = ticket.restarted or (bool(boot) and feedback.get("boot_id") != boot)
+        return ticket.restarted
 
     def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
         """True when the command at ``ack_seq`` is another master's (its session, not ours)."""

@@ -471,17 +471,7 @@ class _MotionFollower:
                     command=motion.command.kind.value,
                     reason=type(reason).__name__,
                 )
-        stopped_itself = isinstance(
-            reason, RobotFaultError | EmergencyStopError | CommandRejectedError
-        )
-        if running and stopped_itself and not isinstance(reason, CommandRejectedError):
-            # The robot stopped the move itself; where Play could resume it (a paused
-            # TMflow project), press Stop so that it never resumes.
-            try:
-                stopped_itself = not self._channel.may_resume()
-            except TMMasterError:
-                stopped_itself = False  # not known: the Stop is harmless
-        if running and not stopped_itself:
+        if running and not self._ended_by_robot(ticket, reason):
             if not self._channel.can_stop:
                 return False  # running, and this profile cannot stop it
             try:
@@ -498,6 +488,19 @@ class _MotionFollower:
                 self.owed = motion  # the record is owed: written first once the link is back
                 self._log.error("robot.cancel_failed", error=str(exc))
         return confirmed
+
+    def _ended_by_robot(self, ticket: Ticket, reason: BaseException) -> bool:
+        """Whether the robot ended a command it took itself, so that no Stop is needed:
+        refused it, started its program again under it, or faulted where Play cannot
+        resume the move (a paused TMflow project could: it is stopped)."""
+        if ticket.restarted or isinstance(reason, CommandRejectedError):
+            return True
+        if not isinstance(reason, RobotFaultError | EmergencyStopError):
+            return False
+        try:
+            return not self._channel.may_resume()
+        except TMMasterError:
+            return False  # not known: the Stop is harmless
 
     def _withdraw(
         self, ticket: Ticket, *, until: float | None = None, interruptible: bool = True
