@@ -17,6 +17,7 @@ import asyncio
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
@@ -30,6 +31,10 @@ Factory = Callable[..., Simulator]
 A = Pose(300, -200, 150, 180, 0, 90)
 B = Pose(300, -200, 180, 180, 0, 90)
 TIMEOUTS = TimeoutPolicy(request_s=1.0, ack_timeout_s=5.0, motion_margin_s=1.0)
+#: Every master of this file: tmflow, no gripper, 10 ms polls, a 1 s request timeout.
+OPTIONS: dict[str, Any] = dict(
+    profile="tmflow", gripper=None, polling=PollPolicy(interval_s=0.01), timeouts=TIMEOUTS
+)
 
 
 @pytest.fixture
@@ -72,14 +77,7 @@ def test_close_of_a_plain_robot_gives_up_its_held_command_write(
 ) -> None:
     release = threading.Event()
     issued: list[Issued] = []
-    robot = Robot(
-        "127.0.0.1",
-        proxy.port,
-        profile="tmflow",
-        gripper=None,
-        polling=PollPolicy(interval_s=0.01),
-        timeouts=TIMEOUTS,
-    )
+    robot = Robot("127.0.0.1", proxy.port, **OPTIONS)
     try:
         robot.connect()
         robot.wait_until_ready(timeout_s=5)
@@ -115,6 +113,23 @@ def test_close_of_a_plain_robot_gives_up_its_held_command_write(
         robot.close()
 
 
+async def held_move(
+    robot: aio.AsyncRobot, proxy: FaultProxy, release: threading.Event, issued: list[Issued]
+) -> tuple[asyncio.Future[Any], Issued]:
+    """``robot`` at A, then its awaited move to B started, its write held until ``release``."""
+    await robot
+    await robot.wait_until_ready(timeout_s=5)
+    await robot.move_to(A, speed=80)
+    issued.append(Issued(A, 0.0, 0.0, "done"))
+    proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+    command = Issued(B, time.monotonic())
+    issued.append(command)
+    move = asyncio.ensure_future(robot.move_to(B, speed=80))
+    while not held(proxy)():
+        await asyncio.sleep(0.005)
+    return move, command
+
+
 def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
     sim: Simulator, proxy: FaultProxy
 ) -> None:
@@ -122,25 +137,9 @@ def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
     issued: list[Issued] = []
 
     async def scenario() -> tuple[float, float]:
-        robot = aio.connect(
-            "127.0.0.1",
-            proxy.port,
-            profile="tmflow",
-            gripper=None,
-            polling=PollPolicy(interval_s=0.01),
-            timeouts=TIMEOUTS,
-        )
+        robot = aio.connect("127.0.0.1", proxy.port, **OPTIONS)
         try:
-            await robot
-            await robot.wait_until_ready(timeout_s=5)
-            await robot.move_to(A, speed=80)
-            issued.append(Issued(A, 0.0, 0.0, "done"))
-            proxy.add(Rule("hold", function_code=16, address=9000, release=release))
-            command = Issued(B, time.monotonic())
-            issued.append(command)
-            move = asyncio.ensure_future(robot.move_to(B, speed=80))
-            while not held(proxy)():
-                await asyncio.sleep(0.005)
+            move, command = await held_move(robot, proxy, release, issued)
             assert not move.done()
             await robot.close(timeout_s=0.5)
             closed_at, closed_wall = time.monotonic(), time.time()
@@ -178,25 +177,9 @@ def test_an_async_robot_closed_while_its_cancelled_moves_write_is_held(
     issued: list[Issued] = []
 
     async def scenario() -> tuple[float, float]:
-        robot = aio.connect(
-            "127.0.0.1",
-            proxy.port,
-            profile="tmflow",
-            gripper=None,
-            polling=PollPolicy(interval_s=0.01),
-            timeouts=TIMEOUTS,
-        )
+        robot = aio.connect("127.0.0.1", proxy.port, **OPTIONS)
         try:
-            await robot
-            await robot.wait_until_ready(timeout_s=5)
-            await robot.move_to(A, speed=80)
-            issued.append(Issued(A, 0.0, 0.0, "done"))
-            proxy.add(Rule("hold", function_code=16, address=9000, release=release))
-            command = Issued(B, time.monotonic())
-            issued.append(command)
-            move = asyncio.ensure_future(robot.move_to(B, speed=80))
-            while not held(proxy)():
-                await asyncio.sleep(0.005)
+            move, command = await held_move(robot, proxy, release, issued)
             if order == "cancel_then_close":
                 move.cancel()
                 closing = asyncio.ensure_future(robot.close(timeout_s=0.5))
@@ -232,24 +215,19 @@ def test_a_copy_the_gate_refuses_is_neither_sent_nor_logged_as_resent(
     logged as resent, and the held frame, landing later, never runs."""
     release = threading.Event()
     issued: list[Issued] = [Issued(A, 0.0, 0.0, "done")]
-    with Robot(
-        "127.0.0.1",
-        proxy.port,
-        profile="tmflow",
-        gripper=None,
-        polling=PollPolicy(interval_s=0.01),
-        timeouts=TIMEOUTS,
-    ) as robot:
+    with Robot("127.0.0.1", proxy.port, **OPTIONS) as robot:
         try:
             robot.wait_until_ready(timeout_s=5)
             robot.move_to(A, speed=80)
             proxy.add(Rule("hold", function_code=16, address=9000, release=release))
             command = Issued(B, time.monotonic())
             issued.append(command)
-            # A stop request as soon as the write is held (the proxy saw it).
-            threading.Thread(
-                target=lambda: (sim.wait_for(held(proxy), timeout=5.0), robot.interrupt())
-            ).start()
+
+            def stop_request_once_held() -> None:  # as soon as the proxy holds the write
+                sim.wait_for(held(proxy), timeout=5.0)
+                robot.interrupt()
+
+            threading.Thread(target=stop_request_once_held).start()
             with pytest.raises(TMMasterError) as failed:
                 robot.move_to(B, speed=80)
             command.outcome, command.ended_at = type(failed.value).__name__, time.monotonic()
