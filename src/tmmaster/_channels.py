@@ -795,14 +795,15 @@ class SequenceChannel(CommandChannel):
         # The program takes only ack_seq + 1 (1..seq_max, skipping 0), so a seq that was
         # put back to withdraw a command can never be mistaken for a new one.
         seq = p.next_seq(ack)
-        numbered = self._numbered(command, seq, feedback.get("boot_id", 0))
+        boot = feedback.get("boot_id", 0)  # the program's start this command belongs to
+        numbered = self._numbered(command, seq, boot)
         words += numbered
         ticket = Ticket(
             command,
             words,
             time.monotonic(),
             seq=seq,
-            extra={"heartbeat": feedback.get("heartbeat", 0), "boot": feedback.get("boot_id", 0)},
+            extra={"heartbeat": feedback.get("heartbeat", 0), "boot": boot},
             plan=group_writes([*encoded, *encode_writes(numbered)]),
         )
         if after_done is not None:  # what the poll read after the done: the plan's start
