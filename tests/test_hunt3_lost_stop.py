@@ -8,18 +8,26 @@ than the retry policy rides out: the wait gives up and its Stop fails too. The a
 on meanwhile (nothing can reach it); but once the link is back, the master's next call
 must deliver that Stop before anything else, not leave the arm to finish the move the
 master gave up. The judge is the simulator's TCP and motion log.
+
+The same holds for an awaited move of an ``aio.AsyncRobot``, given up by the lost link
+or by a cancellation while the link is down: the next awaited call, or ``close()``,
+delivers its Stop.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import asyncio
+import socket
+from collections.abc import Awaitable, Callable, Iterator
+from typing import Any
 
 import pytest
 
 import tmmaster
 from fault_proxy import FaultProxy
 from safety_invariant import at_rest
-from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
+from test_aio import until
+from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -42,6 +50,21 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
+def article_robot(proxy: FaultProxy, link: Fleet | None, **options: Any) -> Robot:
+    """The master of these tests: article, behind ``proxy``, retries that give up well
+    inside the outage."""
+    return Robot(
+        "127.0.0.1",
+        proxy.port,
+        profile="article",
+        link=link,
+        polling=PollPolicy(interval_s=0.02),
+        retry=RETRY,
+        timeouts=TimeoutPolicy(request_s=0.2),
+        **options,
+    )
+
+
 def answered(robot: Robot) -> Callable[[], bool]:
     """True once ``robot.status()`` returns (a call of the master's, not a probe)."""
 
@@ -58,15 +81,7 @@ def answered(robot: Robot) -> Callable[[], bool]:
 def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
     sim: Simulator, proxy: FaultProxy, driver_or_fleet: Fleet | None
 ) -> None:
-    with Robot(
-        "127.0.0.1",
-        proxy.port,
-        profile="article",
-        link=driver_or_fleet,
-        polling=PollPolicy(interval_s=0.02),
-        retry=RETRY,
-        timeouts=TimeoutPolicy(request_s=0.2),
-    ) as robot:
+    with article_robot(proxy, driver_or_fleet) as robot:
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(START, speed=100)
         motion = robot.start_move(FAR, speed=5)  # about 8 s to go
@@ -82,3 +97,116 @@ def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
         assert rest.distance_to(FAR) > 100, f"the given-up move ran on to {rest}"
         assert motion.stop_delivered is True
     assert [m.target for m in sim.motion_log()] == [START, FAR]
+
+
+async def answered_awaited(robot: aio.AsyncRobot) -> None:
+    """Until ``await robot.status()`` returns (a call of the master's, not a probe)."""
+    for _ in range(int((OUTAGE_S + 5) / 0.1)):
+        try:
+            await robot.status()
+        except tmmaster.TMMasterError:
+            await asyncio.sleep(0.1)
+        else:
+            return
+    raise AssertionError("the robot never answered again")
+
+
+async def lost_by_the_link(move: asyncio.Task[object], proxy: FaultProxy) -> None:
+    with pytest.raises(tmmaster.TransportError):
+        await move  # given up: the link is gone, and with it the Stop
+
+
+async def cancelled_in_the_outage(move: asyncio.Task[object], proxy: FaultProxy) -> None:
+    # At once: the cancellation's Stop is tried while the link is down (its retries,
+    # 0.3 s, end well inside the outage), so it fails and is owed.
+    move.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await move
+
+
+GiveUp = Callable[[asyncio.Task[object], FaultProxy], Awaitable[None]]
+
+
+async def moving_then_cut(
+    sim: Simulator, proxy: FaultProxy, robot: aio.AsyncRobot
+) -> asyncio.Task[object]:
+    """The arm on its way from START to FAR (about 8 s), then the link cut."""
+    await robot.wait_until_ready(timeout_s=5)
+    await robot.move_to(START, speed=100)
+    move: asyncio.Task[object] = asyncio.ensure_future(robot.move_to(FAR, speed=5))
+    await until(lambda: sim.tcp_pose().y > START.y + 10, timeout_s=20)
+    proxy.outage(OUTAGE_S)
+    return move
+
+
+async def stops_short(sim: Simulator) -> None:
+    # Looks 0.1 s apart (several ticks): to FAR would take about 8 s.
+    await asyncio.to_thread(sim.wait_for, at_rest(sim), 15, interval=0.1)
+    rest = sim.tcp_pose()
+    assert rest.distance_to(FAR) > 100, f"the given-up move ran on to {rest}"
+
+
+@pytest.mark.parametrize("give_up", [lost_by_the_link, cancelled_in_the_outage])
+def test_an_awaited_moves_lost_stop_is_delivered_by_the_next_awaited_call(
+    sim: Simulator, proxy: FaultProxy, driver_or_fleet: Fleet | None, give_up: GiveUp
+) -> None:
+    async def scenario() -> None:
+        async with aio.AsyncRobot(article_robot(proxy, driver_or_fleet, gripper=None)) as robot:
+            move = await moving_then_cut(sim, proxy, robot)
+            await give_up(move, proxy)
+            # Refused while the Stop still cannot be delivered, then it goes first.
+            await answered_awaited(robot)
+            await stops_short(sim)
+            motion = robot.last_motion
+            assert motion is not None
+            assert motion.stop_delivered is True
+
+    run_long(scenario)
+    assert [m.target for m in sim.motion_log()] == [START, FAR]
+
+
+@pytest.mark.parametrize("give_up", [lost_by_the_link, cancelled_in_the_outage])
+def test_an_awaited_moves_lost_stop_is_delivered_by_close(
+    sim: Simulator, proxy: FaultProxy, driver_or_fleet: Fleet | None, give_up: GiveUp
+) -> None:
+    async def scenario() -> None:
+        robot = aio.AsyncRobot(article_robot(proxy, driver_or_fleet, gripper=None))
+        try:
+            await robot
+            move = await moving_then_cut(sim, proxy, robot)
+            await give_up(move, proxy)
+            # The link comes back (the proxy accepts again); no call of the master
+            # reached the robot. close() delivers the owed Stop before it closes.
+            await until(proxy_accepts(proxy), timeout_s=OUTAGE_S + 2)
+            assert await robot.close(timeout_s=2.0) is True
+            await stops_short(sim)
+        finally:
+            await robot.close()
+
+    run_long(scenario)
+    assert [m.target for m in sim.motion_log()] == [START, FAR]
+
+
+def proxy_accepts(proxy: FaultProxy) -> Callable[[], bool]:
+    """For ``until``: True once the proxy takes a connection again (the outage over): a
+    refused one is reset at once, a taken one stays open and silent."""
+
+    def accepts() -> bool:
+        try:
+            with socket.create_connection(("127.0.0.1", proxy.port), timeout=1.0) as probe:
+                probe.settimeout(0.05)
+                return probe.recv(1) != b""
+        except TimeoutError:
+            return True
+        except OSError:
+            return False
+
+    return accepts
+
+
+def run_long(scenario: Callable[[], Awaitable[None]]) -> None:
+    async def bounded() -> None:
+        async with asyncio.timeout(60):
+            await scenario()
+
+    asyncio.run(bounded())

@@ -16,7 +16,7 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from typing import Any
 
 import pytest
@@ -130,6 +130,24 @@ async def held_move(
     return move, command
 
 
+def run_and_judge(
+    sim: Simulator,
+    proxy: FaultProxy,
+    issued: list[Issued],
+    scenario: Callable[[], Awaitable[tuple[float, float]]],
+) -> None:
+    """Run ``scenario`` (30 s at most), which returns when the master gave the move up
+    (monotonic and wall clock); then the held frame lands and :func:`judge` rules."""
+
+    async def bounded() -> tuple[float, float]:
+        async with asyncio.timeout(30):
+            return await scenario()
+
+    closed_at, closed_wall = asyncio.run(bounded())
+    proxy.wait_held()
+    judge(sim, issued, closed_at, closed_wall)
+
+
 def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
     sim: Simulator, proxy: FaultProxy
 ) -> None:
@@ -157,13 +175,7 @@ def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
             release.set()
             await robot.close()
 
-    async def bounded() -> tuple[float, float]:
-        async with asyncio.timeout(30):
-            return await scenario()
-
-    closed_at, closed_wall = asyncio.run(bounded())
-    proxy.wait_held()
-    judge(sim, issued, closed_at, closed_wall)
+    run_and_judge(sim, proxy, issued, scenario)
 
 
 @pytest.mark.parametrize("order", ["cancel_then_close", "close_then_cancel"])
@@ -198,13 +210,7 @@ def test_an_async_robot_closed_while_its_cancelled_moves_write_is_held(
             release.set()
             await robot.close()
 
-    async def bounded() -> tuple[float, float]:
-        async with asyncio.timeout(30):
-            return await scenario()
-
-    closed_at, closed_wall = asyncio.run(bounded())
-    proxy.wait_held()
-    judge(sim, issued, closed_at, closed_wall)
+    run_and_judge(sim, proxy, issued, scenario)
 
 
 def test_a_copy_the_gate_refuses_is_neither_sent_nor_logged_as_resent(

@@ -23,6 +23,7 @@ from pymodbus.client import ModbusTcpClient
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, attempt, check
 from test_controller_restart import restart_controller
+from test_controller_restart import robot_through as restart_master
 from test_sim_controller import words
 from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import Simulator, Timing
@@ -41,15 +42,8 @@ def sim() -> Iterator[Simulator]:
 
 def robot_through(proxy: FaultProxy, link: Fleet | None = None) -> Robot:
     """A master whose command write, held, is resent for about 3 s before it gives up."""
-    return Robot(
-        "127.0.0.1",
-        proxy.port,
-        link=link,
-        profile="tmflow",
-        gripper=None,
-        polling=PollPolicy(interval_s=0.01),
-        timeouts=TimeoutPolicy(request_s=0.3, ack_timeout_s=0.5, motion_margin_s=1.0),
-        retry=RetryPolicy(attempts=12, total_time_s=3.0, initial_backoff_s=0.02),
+    return restart_master(
+        proxy, link, RetryPolicy(attempts=12, total_time_s=3.0, initial_backoff_s=0.02)
     )
 
 
