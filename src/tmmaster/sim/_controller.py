@@ -24,7 +24,6 @@ step.
 from __future__ import annotations
 
 import math
-import time
 import traceback
 from abc import abstractmethod
 from array import array
@@ -143,9 +142,10 @@ class MotionRecord:
     speed: float | None
     #: Simulated seconds since the controller started.
     sim_time_s: float
-    #: ``time.monotonic()`` when the tick that started it ran.
+    #: ``time.monotonic()`` when the tick that started it was due (a Simulator runs a
+    #: due tick before it serves a request or a call, see :class:`Timing`).
     wall_time: float
-    #: ``time.monotonic()`` when the tick that reported it finished ran (the registers
+    #: ``time.monotonic()`` when the tick that reported it finished was due (the registers
     #: showing the end were set in that tick); None while it runs, and for one that
     #: failed, was stopped by an error or never reports its end.
     done_wall_time: float | None = None
@@ -680,7 +680,7 @@ class RobotController(SimDevice[RobotProfile]):
         self, number: int, kind: str, seq: int, target: Pose | None, speed: float | None
     ) -> None:
         self._motion_log.append(
-            MotionRecord(number, kind, seq, target, speed, self._time_s, time.monotonic())
+            MotionRecord(number, kind, seq, target, speed, self._time_s, self.clock())
         )
 
     def _grip_detected(self) -> bool:
@@ -723,7 +723,7 @@ class RobotController(SimDevice[RobotProfile]):
         """Note in its record when ``active`` was reported finished (this tick)."""
         if 0 <= active.record < len(self._motion_log):
             record = self._motion_log[active.record]
-            self._motion_log[active.record] = replace(record, done_wall_time=time.monotonic())
+            self._motion_log[active.record] = replace(record, done_wall_time=self.clock())
 
     def _fire(self, fault: _MoveFault, active: _Active) -> None:
         self._log.warning(

@@ -13,8 +13,9 @@ both the robot's gripper output and a standalone gripper close fingers.
 from __future__ import annotations
 
 import math
+import time
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Generic, Protocol, TypeVar
 
 from .._checks import is_finite_number, shown
@@ -67,6 +68,9 @@ class SimDevice(ABC, Generic[ProfileT]):
         self._step_backend = step_backend
         self._log: Logger = get_logger("tmmaster.sim") if log is None else log
         self._time_s = 0.0
+        #: The wall clock of the device's records (its motion log): ``time.monotonic``;
+        #: a Simulator gives the time its running tick was due.
+        self.clock: Callable[[], float] = time.monotonic
         self._initialised = False
         self._reinit_at: float | None = None
         self._grasps = 0

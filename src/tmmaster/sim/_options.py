@@ -67,7 +67,8 @@ class Timing:
     """How the simulator's clock ticks, and how long the robot takes to start up.
 
     Raises:
-        ConfigError: ``tick_hz`` outside (0, 1000], ``init_time_s`` below 0 or not finite.
+        ConfigError: ``tick_hz`` outside (0, 1000], ``init_time_s`` below 0 or not finite,
+            ``batch_s`` outside [0, 1].
     """
 
     #: Control ticks per wall second, in (0, 1000]; each advances simulated time by
@@ -76,6 +77,12 @@ class Timing:
     #: Simulated seconds before the robot reports ready (its start-up: tmflow starts the
     #: project then); a finite number >= 0.
     init_time_s: float = 0.2
+    #: Wall seconds a due tick may wait while nothing observes the robot, in [0, 1]. A
+    #: request or a call runs every tick due by then before it reads or writes anything,
+    #: so what a master sees is the same as with each tick at its time; between
+    #: requests the due ticks run back to back (each with its own due time, which the
+    #: motion log records), for a fraction of the CPU. 0: every tick at its own time.
+    batch_s: float = 0.1
 
     def __post_init__(self) -> None:
         hz = require_in("tick_hz", self.tick_hz, Bounds(0, 1000, "Hz", open_low=True))
@@ -84,6 +91,8 @@ class Timing:
             raise ConfigError(
                 f"init_time_s must be a finite number >= 0, got {shown(self.init_time_s)}"
             )
+        batch = require_in("batch_s", self.batch_s, Bounds(0, 1, "s"))
+        object.__setattr__(self, "batch_s", batch)
 
 
 @dataclass(frozen=True, kw_only=True)

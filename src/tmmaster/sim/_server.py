@@ -359,6 +359,10 @@ class _LayoutDevice(SimDevice):
         }
 
 
+def _nothing() -> None:
+    """No control ticks to run (a server on its own)."""
+
+
 class DeviceServer:
     """A Modbus TCP listener serving one register bank, with network faults."""
 
@@ -397,6 +401,9 @@ class DeviceServer:
         self._lose_answer = False
         self._outage: asyncio.Task[None] | None = None
         self._stopped = False
+        #: Called before a request reads or writes the bank: the Simulator runs its due
+        #: control ticks there, so every answer is as fresh as the ticks due by then.
+        self.before_data: Callable[[], None] = _nothing
 
     # -- lifecycle ----------------------------------------------------------------------
 
@@ -698,6 +705,7 @@ class DeviceServer:
         table = _TABLE_OF_FC[function_code]
         words: list[int] = []
         refused = 0
+        self.before_data()
         try:
             if values is not None:
                 self._bank.write(table, address, [int(v) for v in values])
@@ -744,6 +752,7 @@ class DeviceServer:
             delay = self._delay_s()
             if delay > 0:
                 await asyncio.sleep(delay)
+        self.before_data()
         try:
             if values is not None:
                 self._bank.write(table, address, [int(v) for v in values])
