@@ -48,10 +48,9 @@ def _sim_thread() -> threading.Thread:
 
 
 def idle_round(
-    profile: str, listen: bool, seconds: float, time_scale: float, tick_hz: float
+    profile: str, listen: bool, seconds: float, time_scale: float, timing: Timing
 ) -> tuple[float, float]:
     """(process, simulator thread) CPU milliseconds per wall second of an idle simulator."""
-    timing = Timing(tick_hz=tick_hz)
     with Simulator(profile, time_scale=time_scale, listen=listen, timing=timing):
         sim_cpu = _thread_cpu(_sim_thread())
         time.sleep(0.2)  # past the start-up
@@ -63,10 +62,9 @@ def idle_round(
 
 
 def move_round(
-    profile: str, listen: bool, moves: int, time_scale: float, tick_hz: float
+    profile: str, listen: bool, moves: int, time_scale: float, timing: Timing
 ) -> tuple[float, float, float]:
     """(process, simulator thread) CPU milliseconds per move, and wall seconds per move."""
-    timing = Timing(tick_hz=tick_hz)
     with Simulator(profile, time_scale=time_scale, listen=listen, timing=timing) as sim:
         sim_cpu = _thread_cpu(_sim_thread())
         where = (sim.host, sim.port) if listen else (sim.url,)
@@ -89,16 +87,26 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--time-scale", type=float, default=40.0)
     parser.add_argument("--tick-hz", type=float, default=100.0)
+    parser.add_argument(
+        "--batch-s",
+        type=float,
+        default=Timing().batch_s,
+        help="Timing.batch_s: how long due ticks may wait unobserved (0: one wake-up a tick)",
+    )
     args = parser.parse_args()
+    timing = Timing(tick_hz=args.tick_hz, batch_s=args.batch_s)
     print(machine_line())
-    print(f"time scale {args.time_scale:g}, tick {args.tick_hz:g} Hz, kinematic backend")
+    print(
+        f"time scale {args.time_scale:g}, tick {args.tick_hz:g} Hz, batch {args.batch_s:g} s,"
+        " kinematic backend"
+    )
     profiles = ("tmflow", "article") if args.profile == "both" else (args.profile,)
     listens = (False, True) if args.listen == "both" else (args.listen == "tcp",)
     for profile in profiles:
         for listen in listens:
             where = "tcp" if listen else "memory"
             idle = [
-                idle_round(profile, listen, args.idle, args.time_scale, args.tick_hz)
+                idle_round(profile, listen, args.idle, args.time_scale, timing)
                 for _ in range(args.rounds)
             ]
             proc = statistics.median(r[0] for r in idle)
@@ -111,7 +119,7 @@ def main() -> None:
             if args.moves <= 0:
                 continue
             moving = [
-                move_round(profile, listen, args.moves, args.time_scale, args.tick_hz)
+                move_round(profile, listen, args.moves, args.time_scale, timing)
                 for _ in range(args.rounds)
             ]
             proc = statistics.median(r[0] for r in moving)
