@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import ast
 import importlib.util
+import io
 import shlex
 import sys
+import tokenize
 from pathlib import Path
 from types import ModuleType
 
@@ -25,6 +27,30 @@ def load_example(name: str) -> ModuleType:
     return module
 
 
+def _docstring(source: str) -> str | None:
+    """``ast.get_docstring`` of the module ``source``, parsing its first statement only.
+
+    Every test process reads the examples' docstrings at collection; parsing each whole
+    example cost several times more. The docstring is the first statement: the lines up
+    to the end of the first logical line hold it (or show there is none). A first line
+    that does not parse alone (a ``def`` or ``class`` header) is parsed with the rest.
+    """
+    lines: list[str] = []
+    readline = io.StringIO(source).readline
+
+    def read() -> str:
+        lines.append(readline())
+        return lines[-1]
+
+    for token in tokenize.generate_tokens(read):
+        if token.type in (tokenize.NEWLINE, tokenize.ENDMARKER):
+            break
+    try:
+        return ast.get_docstring(ast.parse("".join(lines)))
+    except SyntaxError:
+        return ast.get_docstring(ast.parse(source))
+
+
 def documented_commands(name: str) -> list[list[list[str]]]:
     """The command lines of ``examples/<name>.py``'s docstring, in blocks, split like a shell.
 
@@ -33,7 +59,7 @@ def documented_commands(name: str) -> list[list[list[str]]]:
     in the background) is dropped.
     """
     source = (EXAMPLES / f"{name}.py").read_text(encoding="utf-8")
-    docstring = ast.get_docstring(ast.parse(source)) or ""
+    docstring = _docstring(source) or ""
     blocks: list[list[list[str]]] = []
     block: list[list[str]] = []
     for line in [*docstring.splitlines(), ""]:

@@ -78,6 +78,8 @@ def _documented() -> Iterator[tuple[str, str]]:
 def _examples() -> list[tuple[str, str]]:
     found = []
     for where, doc in _documented():
+        if "```python\n" not in doc:
+            continue  # no block in the cleaned text either (cleandoc keeps each line's end)
         for index, code in enumerate(_BLOCK.findall(inspect.cleandoc(doc))):
             found.append((f"{where}[{index}]", textwrap.dedent(code)))
     return found
