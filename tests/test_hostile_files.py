@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from rich.console import Console
 
 from tmmaster import ConfigError, PollPolicy, Pose, RegisterMapError, Robot, load_profile
 from tmmaster._toml import MAX_KEY_PARTS, MAX_TOML_BYTES
@@ -22,7 +21,6 @@ from tmmaster.pickplace import load_config, load_report
 from tmmaster.pickplace.__main__ import EXIT_CONFIG
 from tmmaster.pickplace.__main__ import main as pickplace_main
 from tmmaster.pickplace._report import RunReport
-from tmmaster.pickplace._summary import MAX_LISTED_TIMES, MAX_STATE_ROWS, summary_renderable
 from tmmaster.report.__main__ import main as report_main
 from tmmaster.sim import load_scene
 from tmmaster.sim.__main__ import main as sim_main
@@ -196,6 +194,12 @@ def _report_of(fields: dict[str, Any]) -> RunReport:
 
 
 def _rendered(report: RunReport) -> str:
+    # rich loads here, as in the command (only a terminal's summary shows it): not in
+    # every test process that collects this module.
+    from rich.console import Console
+
+    from tmmaster.pickplace._summary import summary_renderable
+
     buffer = io.StringIO()
     Console(file=buffer, width=100).print(summary_renderable(report))
     return buffer.getvalue()
@@ -205,6 +209,8 @@ def test_the_summary_of_many_cycles_lists_a_bounded_number_of_times() -> None:
     # 200,000 cycle times: the summary lists the first and the last, not every one, so
     # what is rendered does not grow with the run (rich wraps a long line in time
     # quadratic in its length: 2,000,000 times took 40 s).
+    from tmmaster.pickplace._summary import MAX_LISTED_TIMES
+
     times = [float(i % 7) for i in range(200_000)]
     report = _report_of({"cycles": {"completed": len(times), "times_s": times}})
     text = _rendered(report)
@@ -217,6 +223,8 @@ def test_the_summary_of_many_cycles_lists_a_bounded_number_of_times() -> None:
 
 
 def test_the_summary_lists_a_bounded_number_of_states() -> None:
+    from tmmaster.pickplace._summary import MAX_STATE_ROWS
+
     timing = {"count": 1, "total_s": 1.0, "mean_s": 1.0, "max_s": 1.0}
     report = RunReport.model_validate(
         {
