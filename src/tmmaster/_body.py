@@ -178,13 +178,6 @@ def arm_body(name: str, tool: Pose | None) -> ArmBody | None:
     return ArmBody(specs, names, pairs, centres, radii)
 
 
-def _frames(model: RobotModel, joints_deg: Sequence[float]) -> list[kin.Frame]:
-    """Each link's frame (0 the base .. 6 the flange, 7 the housing's: the flange)."""
-    frames = joint_chain(model).link_frames([math.radians(q) for q in joints_deg])
-    frames.append(frames[-1])
-    return frames
-
-
 def _apply(t: Sequence[Sequence[float]], p: Vector) -> Vector:
     x, y, z = p
     return (
@@ -200,6 +193,7 @@ def contacts(
     tool: Pose | None = None,
     *,
     mount: bool = True,
+    frames: Sequence[kin.Frame] | None = None,
 ) -> list[Contact]:
     """The arm's parts that meet at ``joints_deg``, and those below the mounting plane.
 
@@ -209,6 +203,7 @@ def contacts(
         tool: The TCP in the flange frame (the 2FG7 housing's room).
         mount: Also the parts (link 2 on, the housing) closer than
             :data:`MOUNT_MARGIN_MM` to the mounting plane z = 0.
+        frames: ``Chain.link_frames`` at ``joints_deg``, if the caller has them.
 
     Returns:
         The contacts, deepest first.
@@ -216,7 +211,9 @@ def contacts(
     body = arm_body(model.name, tool)
     if body is None:
         return []
-    frames = _frames(model, joints_deg)
+    if frames is None:
+        frames = joint_chain(model).link_frames([math.radians(q) for q in joints_deg])
+    frames = [*frames, frames[-1]]  # each link's (0 the base), 7 the housing's: the flange
     specs = body.specs
     centres = [_apply(frames[s[0]], c) for s, c in zip(specs, body.centres, strict=True)]
     ends: dict[int, tuple[Vector, Vector]] = {}

@@ -228,8 +228,6 @@ class KinematicBackend:
         self._joints: Joints = joints
         self._pose = home
         self._flange: Pose | None = None
-        # The joints _forward last ran the chain for and their flange transform.
-        self._flange_t: tuple[Joints, kin.Transform] | None = None
         self._motion: _Motion | None = None
         # Starts "long settled": the arm is at rest when the simulation begins.
         self._rest_s = math.inf
@@ -270,7 +268,11 @@ class KinematicBackend:
         # The tool's points in the TCP frame and their reach, for (finger width, tool).
         self._local: tuple[float, list[tuple[float, float, float]]] = (0.0, [])
         self._local_of: tuple[float, Pose | None] | None = None
-        # The joints' origins, for the joints they were computed at.
+        # The joints' frames (the chain's forward kinematics) and origins, for the joints
+        # they were computed at: the pose, the links, the body check and the flange of a
+        # tick all take the same.
+        self._frames: list[kin.Frame] = []
+        self._frames_of: Joints | None = None
         self._origins: list[tuple[float, float, float]] = []
         self._origins_of: Joints | None = None
         # The TCP's transform, for the pose it was computed from.
@@ -544,13 +546,8 @@ class KinematicBackend:
             The flange pose.
         """
         if self._flange is None:
-            computed = self._flange_t
-            if computed is not None and computed[0] is self._joints:
-                # The chain's flange that _forward computed for these very joints:
-                # RobotModel.forward's own arithmetic, once a tick instead of twice.
-                self._flange = kin.transform_to_pose(computed[1])
-            else:
-                self._flange = self._model.forward(self._joints)
+            # RobotModel.forward's own arithmetic, on the frames the tick computed.
+            self._flange = kin.transform_to_pose(self._flange_at(self._joints))
         return self._flange
 
     def is_settled(self) -> bool:
@@ -670,12 +667,16 @@ class KinematicBackend:
     def _body_contacts(self, found: dict[_ContactKey, float]) -> None:
         """Add the arm's parts meeting each other or the mounting plane (the capsules the
         master checks, :mod:`tmmaster._body`) and the 2FG7 housing in an obstacle."""
-        for c in body.contacts(self._model, self._joints, self._tool):
+        frames = self._frames_at(self._joints)
+        for c in body.contacts(self._model, self._joints, self._tool, frames=frames):
             found[c.first, c.second] = -c.distance_mm
-        housing = body.housing_segment(self._model, self._joints, self._tool)
+        # body.housing_segment's arithmetic, on the flange's frame of this tick.
+        housing = body.housing_in_flange(self._tool)
         if housing is None:
             return
         a, b, r = housing
+        flange = self._flange_at(self._joints)
+        a, b = transform_point(flange, a), transform_point(flange, b)
         low = tuple(min(a[i], b[i]) - r for i in range(3))
         high = tuple(max(a[i], b[i]) + r for i in range(3))
         for box in self._obstacles:
@@ -954,16 +955,13 @@ class KinematicBackend:
         return joints, pose
 
     def _forward(self, joints: Joints) -> Pose:
-        """The TCP at ``joints``, keeping the joints' origins for the collision check.
+        """The TCP at ``joints``, keeping the joints' frames for the collision check.
 
         :meth:`RobotModel.forward`'s arithmetic on the chain kept here: one forward
-        kinematics gives both (a PTP's tick computes no other).
+        kinematics gives the pose, the links, the body check and the flange (a PTP's tick
+        computes no other).
         """
-        frames = self._chain.frames([math.radians(q) for q in joints])
-        self._origins = [(f[0][3], f[1][3], f[2][3]) for f in frames]
-        self._origins_of = joints
-        flange = frames[-1]
-        self._flange_t = (joints, flange)
+        flange = self._flange_at(joints)
         if self._tool is not None:
             flange = kin.multiply(flange, kin.pose_to_transform(self._tool))
         return kin.transform_to_pose(flange)
@@ -971,9 +969,23 @@ class KinematicBackend:
     def _joint_origins(self) -> list[tuple[float, float, float]]:
         """The joints' origins (J1..J6, the flange last) where the arm is now, mm."""
         if self._origins_of is not self._joints:
-            self._origins = self._chain.joint_origins([math.radians(q) for q in self._joints])
+            # Chain.joint_origins: the positions of the frames after the base's.
+            frames = self._frames_at(self._joints)
+            self._origins = [(f[0][3], f[1][3], f[2][3]) for f in frames[1:]]
             self._origins_of = self._joints
         return self._origins
+
+    def _frames_at(self, joints: Joints) -> list[kin.Frame]:
+        """The chain's link frames at ``joints`` (the base first, the flange last), kept
+        for the last joints (by identity: the backend's joints tuple of a tick)."""
+        if self._frames_of is not joints:
+            self._frames = self._chain.link_frames([math.radians(q) for q in joints])
+            self._frames_of = joints
+        return self._frames
+
+    def _flange_at(self, joints: Joints) -> kin.Transform:
+        """The flange's transform at ``joints``: Chain.flange, from the kept frames."""
+        return (*self._frames_at(joints)[-1], kin.IDENTITY[3])
 
     def _set(self, joints: Joints, tcp: Pose) -> None:
         self._joints = joints
