@@ -271,15 +271,8 @@ class RegisterBank:
         ):
             new, table, addresses = cached[1], cached[2], cached[3]
         else:
-            setter = self._setters.get(name)
-            if setter is None:
-                field = self._field(name)
-                addresses = tuple(range(field.address, field.end + 1))
-                setter = self._setters[name] = (encoder(field), field.table, addresses)
             # The encoder raises ValueOutOfRangeError before anything is stored.
-            new = setter[0](value)
-            table, addresses = setter[1], setter[2]
-            self._encoded[name] = (value, new, table, addresses)
+            new, table, addresses = self._encode(name, value)
         words = self._words[table]
         # Most fields are published unchanged at every tick: compared word by word, no list.
         for address, word in zip(addresses, new, strict=True):
@@ -291,6 +284,28 @@ class RegisterBank:
             words[address] = word
         self._version += 1
         self._table_changes[table] += 1
+
+    def check(self, name: str, value: Value) -> None:
+        """Encode ``value`` for field ``name`` as :meth:`set` would, storing nothing.
+
+        A :meth:`set` of the same value that follows does not encode it again (a moving
+        arm's pose is checked whole before any of it is stored).
+
+        Raises:
+            ValueOutOfRangeError: What :meth:`set` would raise.
+        """
+        self._encode(name, value)
+
+    def _encode(self, name: str, value: Value) -> tuple[list[int], Table, tuple[int, ...]]:
+        """``value``'s words for field ``name``, its table and addresses; kept for set()."""
+        setter = self._setters.get(name)
+        if setter is None:
+            field = self._field(name)
+            addresses = tuple(range(field.address, field.end + 1))
+            setter = self._setters[name] = (encoder(field), field.table, addresses)
+        new = setter[0](value)
+        self._encoded[name] = (value, new, setter[1], setter[2])
+        return new, setter[1], setter[2]
 
     # -- network side ------------------------------------------------------------------
 

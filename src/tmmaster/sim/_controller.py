@@ -848,9 +848,11 @@ class RobotController(SimDevice[RobotProfile]):
         # (an idle arm) is not checked again.
         if values != self._encodable_pose:
             try:
-                # Encode all six before storing any: a pose is published whole or not at all.
-                for field, value in zip(fields, published, strict=True):
-                    encode(field, value)
+                # Encode all six before storing any: a pose is published whole or not at all
+                # (the bank keeps the words for the set() that follows).
+                check = self._bank.check
+                for name, value in zip(TCP_FIELDS, published, strict=True):
+                    check(name, value)
             except ValueOutOfRangeError as exc:  # not even the saturated value fits
                 self._encodable_pose = None
                 if self._error_code != SimErrorCode.POSE_OUT_OF_RANGE:
