@@ -22,7 +22,7 @@ from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
-from math import copysign
+from math import copysign, nan
 
 from .._codec import Decoder, Encoder, Value, decoder, encoder
 from .._exceptions import IllegalAddressError, IllegalValueError
@@ -135,6 +135,23 @@ def _gaps(register_map: RegisterMap, table: Table) -> set[int]:
     return gaps
 
 
+class _Slot:
+    """One field as :meth:`RegisterBank.set` stores it, and the last value it encoded."""
+
+    __slots__ = ("addresses", "encode", "memory", "table", "value", "words")
+
+    def __init__(self, encode: Encoder, memory: dict[int, int], field: RegisterField) -> None:
+        #: The codec's encoder of the field (equal to encode()).
+        self.encode = encode
+        #: The bank's words of the field's table, by address; the field's addresses.
+        self.memory = memory
+        self.table = field.table
+        self.addresses = tuple(range(field.address, field.end + 1))
+        #: The last value encoded (NaN at first: equal to no value) and its words.
+        self.value: Value = nan
+        self.words: list[int] = []
+
+
 class RegisterBank:
     """Register memory of one device, serving exactly the addresses of its register map."""
 
@@ -160,13 +177,10 @@ class RegisterBank:
         self._raw = layout.raw
         self._extra = layout.extra
         self._layout = layout
-        # The last value ``set`` stored in each field, its words, its table and its
-        # addresses: a device publishes most fields unchanged at every tick, and
-        # encoding them again was most of an idle tick's cost.
-        self._encoded: dict[str, tuple[Value, list[int], Table, tuple[int, ...]]] = {}
-        # Each field's encoder (the codec's own, equal to encode()), table and addresses,
-        # found once by name: a moving arm's pose changes some thirty fields a tick.
-        self._setters: dict[str, tuple[Encoder, Table, tuple[int, ...]]] = {}
+        # What set() needs of each field, found once by name (a moving arm's pose changes
+        # some thirty fields a tick), and the last value it encoded with its words: a
+        # device publishes most fields unchanged at every tick.
+        self._slots: dict[str, _Slot] = {}
         # Each field's decoder, table and first address, found once by name.
         self._getters: dict[str, tuple[Decoder, Table, int]] = {}
         self._version = 0
@@ -260,30 +274,54 @@ class RegisterBank:
 
     def set(self, name: str, value: Value) -> None:
         """Store ``value`` in field ``name`` (device side: read-only fields too)."""
-        cached = self._encoded.get(name)
+        slot = self._slots.get(name)
+        if slot is None:
+            slot = self._slot(name)
+        last = slot.value
         # The same value of the same type encodes to the same words, but for the sign of a
         # float zero (-0.0 == 0.0, yet a float32 field stores its sign).
         if (
-            cached is not None
-            and cached[0].__class__ is value.__class__
-            and cached[0] == value
-            and (value or value.__class__ is not float or _sign(value) == _sign(cached[0]))
+            last.__class__ is value.__class__
+            and last == value
+            and (value or value.__class__ is not float or _sign(value) == _sign(last))
         ):
-            new, table, addresses = cached[1], cached[2], cached[3]
+            new = slot.words
         else:
             # The encoder raises ValueOutOfRangeError before anything is stored.
-            new, table, addresses = self._encode(name, value)
-        words = self._words[table]
-        # Most fields are published unchanged at every tick: compared word by word, no list.
+            new = slot.encode(value)
+            slot.value, slot.words = value, new
+        words = slot.memory
+        addresses = slot.addresses
+        # Most fields are published unchanged at every tick: compared word by word, no list;
+        # a field of one or two words (all but a few) without a loop (a zip costs more
+        # than the compare).
+        if len(addresses) == 2:
+            first, second = addresses
+            high, low = new
+            if words[first] == high and words[second] == low:
+                return
+            words[first], words[second] = high, low
+        elif len(addresses) == 1:
+            (word,) = new
+            if words[addresses[0]] == word:
+                return
+            words[addresses[0]] = word
+        elif not self._store(words, addresses, new):
+            return
+        self._version += 1
+        self._table_changes[slot.table] += 1
+
+    @staticmethod
+    def _store(words: dict[int, int], addresses: tuple[int, ...], new: list[int]) -> bool:
+        """Store ``new`` at ``addresses`` unless they hold it; whether anything changed."""
         for address, word in zip(addresses, new, strict=True):
             if words[address] != word:
                 break
         else:
-            return
+            return False
         for address, word in zip(addresses, new, strict=True):
             words[address] = word
-        self._version += 1
-        self._table_changes[table] += 1
+        return True
 
     def check(self, name: str, value: Value) -> None:
         """Encode ``value`` for field ``name`` as :meth:`set` would, storing nothing.
@@ -294,18 +332,17 @@ class RegisterBank:
         Raises:
             ValueOutOfRangeError: What :meth:`set` would raise.
         """
-        self._encode(name, value)
+        slot = self._slots.get(name)
+        if slot is None:
+            slot = self._slot(name)
+        slot.words = slot.encode(value)
+        slot.value = value
 
-    def _encode(self, name: str, value: Value) -> tuple[list[int], Table, tuple[int, ...]]:
-        """``value``'s words for field ``name``, its table and addresses; kept for set()."""
-        setter = self._setters.get(name)
-        if setter is None:
-            field = self._field(name)
-            addresses = tuple(range(field.address, field.end + 1))
-            setter = self._setters[name] = (encoder(field), field.table, addresses)
-        new = setter[0](value)
-        self._encoded[name] = (value, new, setter[1], setter[2])
-        return new, setter[1], setter[2]
+    def _slot(self, name: str) -> _Slot:
+        """What set() needs of field ``name`` (KeyError: no such field), kept."""
+        field = self._field(name)
+        slot = self._slots[name] = _Slot(encoder(field), self._words[field.table], field)
+        return slot
 
     # -- network side ------------------------------------------------------------------
 
