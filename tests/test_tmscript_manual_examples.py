@@ -10,14 +10,8 @@ sometimes prints 8), and "error" when the manual says the project stops or is re
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
-import marshal
 import math
-import os
 import re
-import sys
-import tempfile
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -28,33 +22,7 @@ from tmmaster import TMScriptError
 from tmmaster.tmscript import ExecState, Execution, NullHost, evaluate, parse
 
 DATA = Path(__file__).parent / "data" / "tmscript_manual_examples.toml"
-
-
-def _load_examples() -> list[dict[str, Any]]:
-    """The examples of ``DATA``, parsed once per version of the file.
-
-    Every test process parses them to collect this module: tomllib took about 8 ms of CPU
-    for the 53 kB, each xdist worker. The parse is kept in the git-ignored ``__pycache__``
-    (marshal, named by the file's content hash, written whole or not at all) and read back
-    in a fraction of a millisecond; a missing or unreadable copy is parsed again.
-    """
-    raw = DATA.read_bytes()
-    digest = hashlib.sha256(raw).hexdigest()[:16]
-    tag = sys.implementation.cache_tag
-    cache = Path(__file__).parent / "__pycache__" / f"{DATA.stem}.{digest}.{tag}.marshal"
-    with contextlib.suppress(OSError, EOFError, ValueError, TypeError):
-        return marshal.loads(cache.read_bytes())  # type: ignore[no-any-return]
-    examples: list[dict[str, Any]] = tomllib.loads(raw.decode("utf-8"))["example"]
-    with contextlib.suppress(OSError, ValueError):
-        cache.parent.mkdir(exist_ok=True)
-        fd, part = tempfile.mkstemp(dir=cache.parent, prefix=f".{cache.name}.")
-        with os.fdopen(fd, "wb") as out:
-            out.write(marshal.dumps(examples))
-        os.replace(part, cache)
-    return examples
-
-
-EXAMPLES = _load_examples()
+EXAMPLES: list[dict[str, Any]] = tomllib.loads(DATA.read_text(encoding="utf-8"))["example"]
 _NUMBER = re.compile(r"^[-+]?(0[xX][0-9a-fA-F]+|(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)$")
 
 
