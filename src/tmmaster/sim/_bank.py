@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 from math import copysign, nan
 
-from .._codec import Decoder, Encoder, Value, allowed_range, decoder, encoder
+from .._codec import Decoder, Encoder, Value, decoder, encoder
 from .._exceptions import IllegalAddressError, IllegalValueError
 from .._registers import RegisterField, RegisterMap, Table
 from ._memo import IdentityMemo
@@ -138,7 +138,7 @@ def _gaps(register_map: RegisterMap, table: Table) -> set[int]:
 class _Slot:
     """One field as :meth:`RegisterBank.set` stores it, and the last value it encoded."""
 
-    __slots__ = ("addresses", "encode", "memory", "table", "twin", "value", "words")
+    __slots__ = ("addresses", "encode", "memory", "table", "value", "words")
 
     def __init__(self, encode: Encoder, memory: dict[int, int], field: RegisterField) -> None:
         #: The codec's encoder of the field (equal to encode()).
@@ -150,16 +150,6 @@ class _Slot:
         #: The last value encoded (NaN at first: equal to no value) and its words.
         self.value: Value = nan
         self.words: list[int] = []
-        #: A field that encodes every value to the same words (see RegisterBank.twin).
-        self.twin: _Slot | None = None
-
-
-def _same(a: Value, b: Value) -> bool:
-    """Whether ``a`` and ``b`` encode to the same words in a field: the same value of the
-    same type, and a float zero of the same sign (-0.0 == 0.0, yet float32 keeps it)."""
-    if a.__class__ is not b.__class__ or a != b:
-        return False
-    return bool(a) or a.__class__ is not float or _sign(a) == _sign(b)
 
 
 class RegisterBank:
@@ -297,12 +287,8 @@ class RegisterBank:
         ):
             new = slot.words
         else:
-            twin = slot.twin
-            # The encoder raises ValueOutOfRangeError before anything is stored; a twin
-            # that encoded this very value last has its words.
-            new = (
-                twin.words if twin is not None and _same(twin.value, value) else slot.encode(value)
-            )
+            # The encoder raises ValueOutOfRangeError before anything is stored.
+            new = slot.encode(value)
             slot.value, slot.words = value, new
         words = slot.memory
         addresses = slot.addresses
@@ -324,32 +310,6 @@ class RegisterBank:
             return
         self._version += 1
         self._table_changes[slot.table] += 1
-
-    def twin(self, name: str, of: str) -> bool:
-        """Let field ``name`` take the words ``of`` encoded last for the same value.
-
-        For fields published with the same values (Techman's flange and its robot-base
-        copy): the value is encoded once. Only fields whose encodings are the same (type,
-        scale, word order, range) are twinned.
-
-        Args:
-            name: The field that takes the words.
-            of: The field that encodes them.
-
-        Returns:
-            Whether they were twinned.
-        """
-        field, source = self._field(name), self._field(of)
-        if (field.dtype, field.scale, field.word_order, field.width) != (
-            source.dtype,
-            source.scale,
-            source.word_order,
-            source.width,
-        ) or allowed_range(field) != allowed_range(source):
-            return False
-        slot = self._slots.get(name) or self._slot(name)
-        slot.twin = self._slots.get(of) or self._slot(of)
-        return True
 
     @staticmethod
     def _store(words: dict[int, int], addresses: tuple[int, ...], new: list[int]) -> bool:

@@ -331,15 +331,6 @@ class RobotController(SimDevice[RobotProfile]):
         )
         # The bank's fields never change: whether it has Techman's table, looked up once.
         self._has_tm_table = bank.has("flange_x")
-        # Techman's robot-base copies of the flange and the TCP take the words their
-        # originals encoded for the same values (each value encoded once a tick).
-        for copies, originals in (
-            (_ROBOT_BASE_FLANGE_FIELDS, FLANGE_FIELDS),
-            (ROBOT_BASE_TCP_FIELDS, TCP_FIELDS),
-        ):
-            for copy, original in zip(copies, originals, strict=True):
-                if bank.has(copy) and bank.has(original):
-                    bank.twin(copy, original)
         self._has_tm_state = bank.has("tm_robot_state")
         self._tm_table_clock: tuple[int, int] | None = None
 
