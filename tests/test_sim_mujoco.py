@@ -303,8 +303,21 @@ def test_reinitialise_mid_motion_rebuilds_the_model(keep: bool) -> None:
     assert b.objects()[0].pose.is_close(expected, mm=CONTACT_MM, deg=0.5)
 
 
+class _RebuiltOnTheWayDown(MuJoCoBackend):
+    """Drops its physics view once, in the step that finds the arm on its way down to
+    PICK (the simulator's own tick: no thread has to look at the right moment)."""
+
+    armed = False
+
+    def step(self, dt: float) -> None:
+        super().step(dt)
+        if self.armed and self.is_ready() and PICK.z + 5 < self.tcp_pose().z < 170:
+            self.armed = False
+            self.invalidate()
+
+
 def test_the_article_cycle_through_the_master_survives_a_rebuild_mid_motion() -> None:
-    b = backend()
+    b = _RebuiltOnTheWayDown(MODEL, home=DEFAULT_HOME)
     with (
         # 10x, not 20x: the physics keeps pace on a busy machine (see the pick & place
         # cycle below).
@@ -313,17 +326,8 @@ def test_the_article_cycle_through_the_master_survives_a_rebuild_mid_motion() ->
     ):
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(ABOVE_PICK, speed=50)
+        sim.call(lambda: setattr(b, "armed", True))
         motion = robot.start_move(PICK, speed=10, motion="line")
-
-        def invalidate_midway() -> bool:
-            # On the simulator's thread: dropped while the arm is still on its way down
-            # (under load the test's thread could look only after the move had ended).
-            if not PICK.z + 5 < b.tcp_pose().z < 170:
-                return False
-            b.invalidate()
-            return True
-
-        sim.wait_for(lambda: sim.call(invalidate_midway), timeout=10)
         motion.wait(timeout_s=20)
         assert motion.done
         assert b.rebuilds == 1
