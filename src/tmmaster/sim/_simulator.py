@@ -92,9 +92,10 @@ class _Ticker:
     time, for what waking the thread once a tick cost (10-30 times the tick's own CPU).
     While ``eager()`` is true (the start-up) each tick runs at its time. A schedule more
     than ten periods behind its batches (a stalled machine) restarts instead of
-    bursting, and a catch-up that has run a period's worth of wall time leaves the rest to
-    the next loop turn, so requests are answered between slow ticks. An exception from
-    ``tick`` stops the ticking and goes to ``failed``.
+    bursting. Ticks slower than their period (a busy machine, a slow program or physics)
+    run from the timer, a period's worth of wall time each loop turn, with the requests
+    answered in between and not made to wait for more ticks. An exception from ``tick``
+    stops the ticking and goes to ``failed``.
     """
 
     def __init__(
@@ -115,13 +116,24 @@ class _Ticker:
         self._eager = eager
         self._due = time.monotonic()  # when the next tick is due
         self._ticking = False  # a tick runs now (a call it makes must not tick again)
+        self._behind = False  # slow ticks left due ticks to the timer's next turns
         self._stopped = False
         self._handle: asyncio.Handle | None = loop.call_soon(self._on_timer)
 
     def catch_up(self) -> None:
-        """Run every tick due by now, in order; nothing inside a tick or once stopped."""
-        if self._ticking or self._stopped:
-            return
+        """Run every tick due by now, in order, before something observes the simulator.
+
+        Nothing inside a tick, once stopped, or while slow ticks are behind: the timer
+        runs those between requests, as one wake-up a tick would (an observer waits for
+        the tick running, never for more).
+        """
+        if not (self._ticking or self._stopped or self._behind):
+            self._run_due()
+            if self._behind and self._handle is not None:  # the rest: from the next turn
+                self._handle.cancel()
+                self._handle = self._loop.call_soon(self._on_timer)
+
+    def _run_due(self) -> None:
         now = time.monotonic()
         if now - self._due > self._batch + 10 * self._period:
             self._due = now  # a stalled machine: restart the schedule
@@ -131,7 +143,8 @@ class _Ticker:
                 self._tick(self._due)
                 self._due += self._period
                 if time.monotonic() - now > self._period:
-                    break  # slow ticks: answer what waits first, then go on (the timer)
+                    self._behind = True  # slow ticks: answer what waits first
+                    break
         except Exception as exc:
             self.cancel()
             self._failed(exc)
@@ -140,14 +153,15 @@ class _Ticker:
 
     def _on_timer(self) -> None:
         self._handle = None
-        self.catch_up()
+        self._behind = False
+        self._run_due()
         if self._stopped:
             return
         now = time.monotonic()
-        if self._due <= now:  # behind after slow ticks: the rest on the next loop turn
+        if self._behind:  # the rest on the next loop turn, requests answered in between
             self._handle = self._loop.call_soon(self._on_timer)
         else:
-            wait = self._due - now + (0.0 if self._eager() else self._batch)
+            wait = max(self._due - now, 0.0) + (0.0 if self._eager() else self._batch)
             self._handle = self._loop.call_later(wait, self._on_timer)
 
     def cancel(self) -> None:
