@@ -343,7 +343,11 @@ def _contact_text(c: Contact, joints: tuple[float, ...], samples: Sequence[Seque
 
 
 def housing_segment(
-    model: RobotModel, joints_deg: Sequence[float], tool: Pose | None
+    model: RobotModel,
+    joints_deg: Sequence[float],
+    tool: Pose | None,
+    *,
+    flange: Sequence[Sequence[float]] | None = None,
 ) -> tuple[Vector, Vector, float] | None:
     """The 2FG7 housing's capsule at ``joints_deg``: its ends and radius (None: none).
 
@@ -351,6 +355,7 @@ def housing_segment(
         model: The arm model.
         joints_deg: The joints, deg.
         tool: The TCP in the flange frame.
+        flange: The flange's frame at ``joints_deg``, if the caller has it.
 
     Returns:
         (a, b, radius), mm, or None.
@@ -359,7 +364,8 @@ def housing_segment(
     if housing is None:
         return None
     a, b, r = housing
-    flange = joint_chain(model).flange([math.radians(q) for q in joints_deg])
+    if flange is None:
+        flange = joint_chain(model).flange([math.radians(q) for q in joints_deg])
     return _apply(flange, a), _apply(flange, b), r
 
 

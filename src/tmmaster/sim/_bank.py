@@ -274,9 +274,7 @@ class RegisterBank:
 
     def set(self, name: str, value: Value) -> None:
         """Store ``value`` in field ``name`` (device side: read-only fields too)."""
-        slot = self._slots.get(name)
-        if slot is None:
-            slot = self._slot(name)
+        slot = self._slots.get(name) or self._slot(name)
         last = slot.value
         # The same value of the same type encodes to the same words, but for the sign of a
         # float zero (-0.0 == 0.0, yet a float32 field stores its sign).
@@ -332,9 +330,7 @@ class RegisterBank:
         Raises:
             ValueOutOfRangeError: What :meth:`set` would raise.
         """
-        slot = self._slots.get(name)
-        if slot is None:
-            slot = self._slot(name)
+        slot = self._slots.get(name) or self._slot(name)
         slot.words = slot.encode(value)
         slot.value = value
 

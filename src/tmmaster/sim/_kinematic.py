@@ -670,13 +670,10 @@ class KinematicBackend:
         frames = self._frames_at(self._joints)
         for c in body.contacts(self._model, self._joints, self._tool, frames=frames):
             found[c.first, c.second] = -c.distance_mm
-        # body.housing_segment's arithmetic, on the flange's frame of this tick.
-        housing = body.housing_in_flange(self._tool)
+        housing = body.housing_segment(self._model, self._joints, self._tool, flange=frames[-1])
         if housing is None:
             return
         a, b, r = housing
-        flange = self._flange_at(self._joints)
-        a, b = transform_point(flange, a), transform_point(flange, b)
         low = tuple(min(a[i], b[i]) - r for i in range(3))
         high = tuple(max(a[i], b[i]) + r for i in range(3))
         for box in self._obstacles:
