@@ -280,6 +280,10 @@ class FaultProxy:
                 return
             time.sleep(0.01)
 
+    def played(self, action: Action) -> bool:
+        """True once a request received has met a rule with ``action`` (e.g. "hold")."""
+        return any(s.action == action for s in self.seen)
+
     @property
     def seen(self) -> list[Seen]:
         """Every request the proxy received, with the action it played."""

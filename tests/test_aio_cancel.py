@@ -362,7 +362,7 @@ def test_a_move_cancelled_while_its_write_is_held_in_the_network_never_runs() ->
                 proxy.add(Rule("hold", function_code=16, address=9000, release=release))
                 issued.append(Issued(B, time.monotonic()))
                 task = asyncio.ensure_future(robot.move_to(B, speed=80))
-                await until(lambda: any(s.action == "hold" for s in proxy.seen))
+                await until(lambda: proxy.played("hold"))
                 task.cancel()
                 with pytest.raises(asyncio.CancelledError):
                     await task

@@ -57,7 +57,7 @@ def test_a_stop_request_during_the_in_flight_watch_leaves_no_write_to_land(
             proxy.add(Rule("hold", function_code=16, address=0x0200, release=landed))
 
             def ctrl_c() -> None:
-                sim.wait_for(lambda: any(s.action == "hold" for s in proxy.seen), timeout=5.0)
+                sim.wait_for(lambda: proxy.played("hold"), timeout=5.0)
                 robot.interrupt()  # while the write is on its way
 
             stopping = threading.Thread(target=ctrl_c)

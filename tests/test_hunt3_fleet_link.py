@@ -54,7 +54,7 @@ def test_a_held_command_on_one_fleet_robot_runs_once_and_the_other_moves_once() 
 
             thread = threading.Thread(target=move_b)
             thread.start()
-            sim_b.wait_for(lambda: any(s.action == "hold" for s in proxy.seen), timeout=5.0)
+            sim_b.wait_for(lambda: proxy.played("hold"), timeout=5.0)
             for target in (A, B, A):  # the healthy robot moves while b's frame is held
                 robot_a.move_to(target, speed=80)
             # b's write timed out; it read back, found nothing, and resent the same number:

@@ -66,19 +66,15 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
-def held(proxy: FaultProxy) -> Callable[[], bool]:
-    return lambda: any(s.action == "hold" for s in proxy.seen)
-
-
 async def by_wait_for(call: Coroutine[Any, Any, Any], proxy: FaultProxy) -> None:
     with pytest.raises(TimeoutError):
         await asyncio.wait_for(call, 0.2)
-    assert held(proxy)()
+    assert proxy.played("hold")
 
 
 async def by_cancel(call: Coroutine[Any, Any, Any], proxy: FaultProxy) -> None:
     task = asyncio.ensure_future(call)
-    await until(held(proxy))
+    await until(lambda: proxy.played("hold"))
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task

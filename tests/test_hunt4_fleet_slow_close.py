@@ -178,7 +178,7 @@ def test_fleet_close_during_a_slow_command_write_stops_what_it_started(profile: 
         thread = threading.Thread(target=run, name="move-b")
         thread.start()
         c.threads.append(thread)
-        c.sims["b"].wait_for(lambda: any(s.action == "delay" for s in c.proxy.seen), timeout=5)
+        c.sims["b"].wait_for(lambda: c.proxy.played("delay"), timeout=5)
         unconfirmed = c.fleet.close(timeout_s=0.5)
         closed_at = time.monotonic()
         thread.join(15)

@@ -48,10 +48,6 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
-def held(proxy: FaultProxy) -> Callable[[], bool]:
-    return lambda: any(s.action == "hold" for s in proxy.seen)
-
-
 def judge(sim: Simulator, issued: list[Issued], closed_at: float, closed_wall: float) -> None:
     """The held frame landed after the close; nothing new ran, nothing twice; at rest at A."""
     # The proxy has handed the frame to the socket: 20 ticks for the robot to read it
@@ -98,7 +94,7 @@ def test_close_of_a_plain_robot_gives_up_its_held_command_write(
 
         thread = threading.Thread(target=move)
         thread.start()
-        sim.wait_for(held(proxy), timeout=5.0)
+        sim.wait_for(lambda: proxy.played("hold"), timeout=5.0)
         assert thread.is_alive()  # its write waits on its answer
         robot.close(timeout_s=0.5)
         closed_at, closed_wall = time.monotonic(), time.time()
@@ -125,7 +121,7 @@ async def held_move(
     command = Issued(B, time.monotonic())
     issued.append(command)
     move = asyncio.ensure_future(robot.move_to(B, speed=80))
-    while not held(proxy)():
+    while not proxy.played("hold"):
         await asyncio.sleep(0.005)
     return move, command
 
@@ -230,7 +226,7 @@ def test_a_copy_the_gate_refuses_is_neither_sent_nor_logged_as_resent(
             issued.append(command)
 
             def stop_request_once_held() -> None:  # as soon as the proxy holds the write
-                sim.wait_for(held(proxy), timeout=5.0)
+                sim.wait_for(lambda: proxy.played("hold"), timeout=5.0)
                 robot.interrupt()
 
             threading.Thread(target=stop_request_once_held).start()

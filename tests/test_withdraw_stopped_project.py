@@ -77,7 +77,7 @@ def test_a_write_held_while_the_project_stopped_never_runs_after_play(
             proxy.add(Rule("hold", function_code=16, address=9000, release=landed, times=2))
 
             def operator_acts() -> None:
-                sim.wait_for(lambda: any(s.action == "hold" for s in proxy.seen), timeout=5.0)
+                sim.wait_for(lambda: proxy.played("hold"), timeout=5.0)
                 OPERATOR[operator](sim)  # while the first frame is held
 
             acting = threading.Thread(target=operator_acts)
