@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import gc
 import random
+import threading
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -49,13 +51,47 @@ from ._sequence import SequenceController
 #: Statements a program may run per control tick before it yields to the robot (a busy
 #: loop must not freeze the simulator; TMflow time-slices a project the same way).
 STATEMENTS_PER_TICK = 400
-#: CPU seconds a program may run per control tick (``time.thread_time``), whichever of
+#: CPU seconds a program may run per control tick (``time.thread_time``, less the
+#: garbage collections that fell in it: :class:`_ProgramClock`), whichever of
 #: the two budgets ends first: slow statements yield too, so the Modbus server (on the
 #: same thread) keeps answering between ticks. CPU time, not wall time, so that how far
 #: a program gets in a tick does not depend on the machine's load. A statement running
 #: then finishes first (a bounded one: strings and arrays are capped, see
 #: ``docs/tmscript.md``).
 TICK_SECONDS = 0.02
+
+
+class _ProgramClock:
+    """The budget clock of a tick: this thread's CPU seconds less its garbage collections.
+
+    A collection the interpreter happens to trigger (tens to hundreds of milliseconds in
+    a process with a large heap) is not the program's: counted, it spent a tick's whole
+    budget, and a command written before that tick was taken a tick late. Installed in
+    ``gc.callbacks`` once, when the first Script Project starts.
+    """
+
+    _local = threading.local()
+    _installed = False
+
+    def __call__(self) -> float:
+        return time.thread_time() - getattr(self._local, "collecting_s", 0.0)
+
+    @classmethod
+    def install(cls) -> None:
+        """Count the collections from now on (once per process)."""
+        if not cls._installed:
+            cls._installed = True
+            gc.callbacks.append(cls._collection)
+
+    @classmethod
+    def _collection(cls, phase: str, info: dict[str, int]) -> None:
+        local, now = cls._local, time.thread_time()
+        if phase == "start":
+            local.started_s = now
+        elif hasattr(local, "started_s"):
+            local.collecting_s = getattr(local, "collecting_s", 0.0) + now - local.started_s
+            del local.started_s
+
 
 #: The Modbus tables behind each function code, and whether it writes.
 _FUNCTIONS: dict[int, tuple[Table, bool]] = {
@@ -570,7 +606,8 @@ class ScriptProjectController(SequenceController):
         self._set_paused(False, "start")
         self._bank.set("project_running", True)
         # main from the beginning; define's variables fresh ([TS] 3.1-3.2, p. 29).
-        self._execution = Execution(self._program, SimHost(self), budget_clock=time.thread_time)
+        _ProgramClock.install()
+        self._execution = Execution(self._program, SimHost(self), budget_clock=_ProgramClock())
         self._log.info("sim.project_started", device=self._name)
 
     def _stop_project(self, reason: str) -> None:
