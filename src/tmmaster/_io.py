@@ -83,6 +83,10 @@ WATCH_INTERVAL_S = 0.02
 #: gate refused it, a bad argument) or answered (a Modbus exception).
 SETTLED_FAILURES = (ConnectError, ModbusExceptionError, StopRequestedError, ConfigError)
 
+#: Per output (host, port, unit, table, address): the lock of its ``set`` and the writes
+#: left unanswered, kept for the process, whichever Robot's :class:`LevelOutput` sent them.
+_WATCHED: dict[tuple[object, ...], tuple[threading.Lock, list[tuple[Value, float]]]] = {}
+
 
 class LevelOutput:
     """An output that holds the last value written to it (a DO coil, the article's
@@ -118,11 +122,13 @@ class LevelOutput:
         self.what = what
         self._at = (table, address)
         self._transport = transport
-        self._gated = gated
-        self._on_late = on_late
+        self._gated, self._on_late = gated, on_late
         # Our writes that got no answer (their frames may still land): value, sent at.
-        self._doubts: list[tuple[Value, float]] = []
-        self._lock = threading.Lock()
+        # Shared with every LevelOutput of this process on the same output (a Robot made
+        # after another was closed), so that one's late frame is watched for by the next;
+        # a link that names no endpoint (a test's stand-in) shares them with nobody.
+        where = (*(getattr(transport, n, self) for n in ("host", "port", "device_id")), *self._at)
+        self._lock, self._doubts = _WATCHED.setdefault(where, (threading.Lock(), []))
 
     def set(self, value: Value) -> None:
         """Write ``value``, then watch for a late frame of another value (see the class).
@@ -176,7 +182,7 @@ class LevelOutput:
         total time after the newest of them was sent.
         """
         horizon = self._transport.retry.total_time_s
-        self._doubts = [d for d in self._doubts if d[1] + horizon > time.monotonic()]
+        self._doubts[:] = [d for d in self._doubts if d[1] + horizon > time.monotonic()]
         against = [d for d in self._doubts if d[0] != value]
         if not against:
             return
@@ -200,7 +206,7 @@ class LevelOutput:
                 f"{self.what} set to {value}, but an earlier write of another value could"
                 f" still land: no longer watched ({exc})"
             ) from exc
-        self._doubts = [d for d in self._doubts if d[0] == value]
+        self._doubts[:] = [d for d in self._doubts if d[0] == value]
 
 
 def io_module(profile: RobotProfile, module: object) -> DigitalIOModule:
