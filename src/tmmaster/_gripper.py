@@ -533,6 +533,11 @@ class GripperLink:
     stop_event: threading.Event | None = None
 
 
+#: Per stand-alone gripper (host, port): until when a stop frame of this process left
+#: unanswered may still land, whichever driver sent it (one list each, shared).
+_STOP_DOUBTS: dict[tuple[str, int], list[float]] = {}
+
+
 class _OwnConnectionGripper(Gripper):
     """A gripper with its own Modbus connection and register map."""
 
@@ -542,8 +547,6 @@ class _OwnConnectionGripper(Gripper):
     _sent = False
     # When that write was sent (a command's acknowledgement is timed from it).
     _sent_at = 0.0
-    # Until then a stop frame of ours left unanswered may still land (and halt a move).
-    _stop_doubt_until = 0.0
 
     def __init__(self, profile: GripperProfile, link: GripperLink) -> None:
         #: The gripper's register map.
@@ -556,8 +559,7 @@ class _OwnConnectionGripper(Gripper):
         self.timeout_s = link.timeout_s
         #: A command must be taken within this time, s.
         self.ack_timeout_s = link.ack_timeout_s
-        self._guard = link.guard
-        self._stop_event = link.stop_event
+        self._guard, self._stop_event = link.guard, link.stop_event
         self._busy = threading.Lock()  # held by the one move under way
         # The robot's command gate, once mounted (a gripper on its own writes directly).
         self._gated: Callable[[Callable[[], None]], None] = operator.call
@@ -571,6 +573,10 @@ class _OwnConnectionGripper(Gripper):
             retry=link.retry,
             name=profile.name,
         )
+        # Until [0] a stop frame left unanswered may still land (and halt a move): kept per
+        # gripper for the process, so that a new driver (a new Robot's) waits for it too.
+        where = (self.transport.host, self.transport.port)
+        self._stop_doubt = _STOP_DOUBTS.setdefault(where, [0.0])
 
     def attach(self, mount: GripperMount) -> None:
         """Mount on a robot: its fault check and stop event guard every wait.
@@ -581,10 +587,8 @@ class _OwnConnectionGripper(Gripper):
             mount: What the robot lends its gripper.
         """
         super().attach(mount)
-        if self._guard is None:
-            self._guard = mount.check_fault
-        if self._stop_event is None:
-            self._stop_event = mount.stop_event
+        self._guard = self._guard or mount.check_fault
+        self._stop_event = self._stop_event or mount.stop_event
         self._gated = mount.gated
 
     def connect(self) -> None:
@@ -682,16 +686,16 @@ class _OwnConnectionGripper(Gripper):
             finally:
                 if doubt or self._sent:
                     # From the end of the write: its last attempt was sent before then.
-                    self._stop_doubt_until = time.monotonic() + self.transport.retry.total_time_s
+                    self._stop_doubt[0] = time.monotonic() + self.transport.retry.total_time_s
 
     def _wait_out_late_stop(self) -> None:
         """Before a move's write: wait while a stop frame of ours left unanswered may still
         land (up to the retry policy's ``total_time_s`` after it was sent). Landing during
         the move, it would halt the fingers mid-way, and a halted move reads as one that
         ended (no width on blog-2fg7). A stop request ends the wait (nothing written)."""
-        if (left := self._stop_doubt_until - time.monotonic()) > 0:
+        if (left := self._stop_doubt[0] - time.monotonic()) > 0:
             self._events.warning("gripper.stop_in_doubt", gripper=self.kind, wait_s=round(left, 3))
-            Poller(self.poll_interval_s, self._stop_event).sleep_until(self._stop_doubt_until)
+            Poller(self.poll_interval_s, self._stop_event).sleep_until(self._stop_doubt[0])
 
     def check_robot(self) -> None:
         """Raise the robot's typed error if it is in e-stop or error (no-op on its own)."""
