@@ -242,6 +242,19 @@ def test_the_observed_progress_moves_the_dense_window_to_the_real_end(pace: floa
     assert polls <= (4.0 * pace) / NOMINAL + 4
 
 
+@pytest.mark.parametrize("pace", [1.7, 2.0, 2.3])
+@pytest.mark.parametrize("expected_s", [0.5, 1.0, 1.5])
+def test_a_look_that_finds_the_robot_braking_still_brings_the_window_to_its_end(
+    pace: float, expected_s: float
+) -> None:
+    # About twice as slow as the model: the second look, timed by the slowest pace the
+    # first allowed, finds the robot braking (past 95 % of its path), where its pose
+    # bounds the pace only loosely. That bound still carries the dense window to the
+    # end: the end is seen before a nominal interval has passed, not one interval late.
+    late, _ = seen_after_the_end(pace, expected_s, observe=True)
+    assert late < NOMINAL
+
+
 def test_a_robot_that_speeds_up_after_a_slow_start_is_seen_within_one_interval() -> None:
     # A poll sees the move barely started (a robot far slower than the model, or an
     # operator's speed override turned down): the polls may be spaced again, but never

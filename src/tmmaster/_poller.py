@@ -155,8 +155,9 @@ EARLIEST_FRACTION = 0.5
 _PACE_LIMITS = (0.25, 4.0)
 #: How many times the model's budget a move's wait may grow to (the slowest pace trusted).
 PACE_LIMIT = _PACE_LIMITS[1]
-#: Observed progress used to re-predict the end: not the ramps' first and last few per
-#: cent, where a pose's rounding weighs more than the progress.
+#: Observed progress used to re-predict the end: not the first few per cent, where a
+#: pose's rounding weighs more than the progress; past the last few, only as a loose
+#: bound (the robot is past the first, not yet at its end).
 _PROGRESS_USED = (0.05, 0.95)
 
 
@@ -221,13 +222,13 @@ class MotionSchedule:
         if fraction is None or self._expected <= 0 or fraction <= low:
             return  # nothing seen yet, or not yet out of the ramp: a look still due
         self._observations += 1
-        if fraction >= high:
-            return
         # A robot k times slower than the model covers the model's profile k times
-        # slower: the progress seen is the model's at ``elapsed / k``.
-        model_elapsed = _elapsed_at(fraction, self._expected, self._accel)
+        # slower: the progress seen is the model's at ``elapsed / k``. Braking (past
+        # ``high``), a pose bounds the pace only loosely: by ``high`` and by the end.
+        model_elapsed = _elapsed_at(min(fraction, high), self._expected, self._accel)
         least, most = _PACE_LIMITS
         slow = min(max((at - self._took_from) / model_elapsed, least), most)
+        model_elapsed = self._expected if fraction >= high else model_elapsed
         fast = min(max((at - TICK_S - self._acked_at) / model_elapsed, least), slow)
         lowest, highest = self._paces
         if fast <= highest and lowest <= slow:
