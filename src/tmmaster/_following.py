@@ -171,7 +171,7 @@ class FollowState:
         """The motion's budget in force now, from its acknowledgement, s.
 
         The given (or model's) budget, grown with the pace the polls observe (a robot
-        slower than the model, a reduced project speed: at most 4 times) only as far as
+        slower than the model, a reduced project speed: at most 20 times) only as far as
         the arm keeps moving: past the model's budget, a poll must see progress at
         least every :meth:`stall_window`. An arm that stops is a stall, raised at the
         model's budget when it stopped before it, else a window after its last progress.

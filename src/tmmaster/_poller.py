@@ -151,8 +151,10 @@ STRETCH = 3.0
 #: robot twice as fast): polls are never further apart than the nominal interval after it.
 EARLIEST_FRACTION = 0.5
 #: How far an observed pace may move the predicted end: a robot between 4 times faster
-#: and 4 times slower than the model; beyond that the observation is not trusted.
-_PACE_LIMITS = (0.25, 4.0)
+#: and 20 times slower than the model, as at a project speed of 5 %, where TMflow starts
+#: a trial run and the operator raises or lowers it while the arm moves (TMflow 2.24,
+#: 4.4 step 10, p. 49; 4.5 table 4, p. 53); beyond that the observation is not trusted.
+_PACE_LIMITS = (0.25, 20.0)
 #: How many times the model's budget a move's wait may grow to (the slowest pace trusted).
 PACE_LIMIT = _PACE_LIMITS[1]
 #: Observed progress used to re-predict the end: not the first few per cent, where a
