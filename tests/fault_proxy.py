@@ -13,8 +13,19 @@ client connection, parses MBAP frames, and plays scripted faults on matching req
                   cannot know)
 ``close_after``   forward the request, then close the client's connection instead of
                   relaying the answer
+``duplicate_answer`` forward the request, relay its answer twice (a buggy gateway)
+``delay_answer``  forward the request at once, relay its answer ``delay_s`` later, or when
+                  ``release`` is set (and every answer after it: TCP keeps order)
 ``outage``        (``FaultProxy.outage``) close every connection and refuse new ones for a
                   while, like a slave whose server restarts
+
+With ``exception`` (a Modbus exception code) a rule answers the request with that
+exception, as a Modbus TCP gateway does: ``drop_request`` answers it instead of
+forwarding (not executed); ``drop_answer`` forwards it and answers the exception in
+place of the real answer (executed, e.g. code 4 after the device applied the write);
+``delay_answer`` relays the exception in place of the answer, late; ``hold`` answers
+the exception at once and still delivers the frame later (a gateway
+that gave up waiting, code 11, while its frame to the device is stuck on its way).
 
 Everything runs on the proxy's own threads; :meth:`FaultProxy.close` joins them and
 closes every socket, so the suite's leak check holds.
@@ -32,7 +43,15 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
-Action = Literal["delay", "hold", "drop_request", "drop_answer", "close_after"]
+Action = Literal[
+    "delay",
+    "hold",
+    "drop_request",
+    "drop_answer",
+    "close_after",
+    "duplicate_answer",
+    "delay_answer",
+]
 
 #: Function codes whose PDU starts with a starting address.
 _ADDRESSED = {1, 2, 3, 4, 5, 6, 15, 16, 23}
@@ -52,6 +71,9 @@ class Rule:
     #: ``hold`` only: deliver when this is set (not after ``delay_s``), so that a test
     #: lets the frame land at a point of its own scenario rather than at a time.
     release: threading.Event | None = None
+    #: ``drop_request``, ``drop_answer``, ``hold``: answer the client with this Modbus
+    #: exception code (see the module's docstring).
+    exception: int | None = None
     _seen: int = field(default=0, repr=False)
 
     def matches(self, function_code: int, address: int | None) -> bool:
@@ -105,6 +127,12 @@ def _frames(sock: socket.socket) -> Iterator[bytes]:
         yield header + body
 
 
+def exception_answer(request: bytes, code: int) -> bytes:
+    """The exception answer (function code | 0x80, ``code``) to ``request``."""
+    tid, _protocol, _length, unit, function_code = struct.unpack(">HHHBB", request[:8])
+    return struct.pack(">HHHBBB", tid, 0, 3, unit, function_code | 0x80, code)
+
+
 def _parse(frame: bytes) -> tuple[int, int, int | None]:
     """(transaction id, function code, address or None) of a request frame."""
     tid = struct.unpack(">H", frame[0:2])[0]
@@ -125,7 +153,12 @@ class _Link:
         self.upstream = socket.create_connection((proxy.target_host, proxy.target_port), timeout=2)
         self.upstream.settimeout(None)
         self._send_lock = threading.Lock()
-        self._swallow: set[int] = set()
+        self._client_lock = threading.Lock()
+        #: Answers not relayed, by transaction id: what the client gets instead (or nothing).
+        self._swallow: dict[int, bytes | None] = {}
+        self._duplicate: set[int] = set()
+        #: Answers relayed late, by transaction id: (delay, release, what is relayed instead).
+        self._late: dict[int, tuple[float, threading.Event | None, bytes | None]] = {}
         self._close_on_answer: set[int] = set()
         self._holds = 0
         self._holds_done = threading.Condition()
@@ -141,11 +174,18 @@ class _Link:
         with self._send_lock, contextlib.suppress(OSError):
             self.upstream.sendall(frame)
 
+    def _to_client(self, frame: bytes) -> None:
+        with self._client_lock, contextlib.suppress(OSError):
+            self.client.sendall(frame)
+
     def _client_to_upstream(self) -> None:
         for frame in _frames(self.client):
             tid, function_code, address = _parse(frame)
             rule = self.proxy._match(function_code, address)
             action = rule.action if rule is not None else "pass"
+            refusal = None
+            if rule is not None and rule.exception is not None:
+                refusal = exception_answer(frame, rule.exception)
             self.proxy._note(function_code, address, action)
             if rule is None:
                 self._forward(frame)
@@ -154,11 +194,21 @@ class _Link:
                     break
                 self._forward(frame)
             elif rule.action == "hold":
+                if refusal is not None:
+                    self._to_client(refusal)
                 self._hold(frame, rule.delay_s, rule.release)
             elif rule.action == "drop_request":
+                if refusal is not None:
+                    self._to_client(refusal)
                 continue
             elif rule.action == "drop_answer":
-                self._swallow.add(tid)
+                self._swallow[tid] = refusal
+                self._forward(frame)
+            elif rule.action == "delay_answer":
+                self._late[tid] = (rule.delay_s, rule.release, refusal)
+                self._forward(frame)
+            elif rule.action == "duplicate_answer":
+                self._duplicate.add(tid)
                 self._forward(frame)
             else:  # close_after
                 self._close_on_answer.add(tid)
@@ -180,17 +230,8 @@ class _Link:
         with self._holds_done:
             self._holds += 1
 
-        def released() -> bool:
-            """True when the frame is to go on; False when the proxy closes first."""
-            if release is None:
-                return not self.proxy._stopping.wait(delay_s)
-            while not release.wait(0.005):
-                if self.proxy._stopping.is_set():
-                    return False
-            return True
-
         def deliver() -> None:
-            if released():
+            if self._wait(delay_s, release):
                 self._forward(frame)
             with self._holds_done:
                 self._holds -= 1
@@ -203,16 +244,33 @@ class _Link:
     def _upstream_to_client(self) -> None:
         for frame in _frames(self.upstream):
             tid = struct.unpack(">H", frame[0:2])[0]
+            if tid in self._late:
+                delay_s, release, refusal = self._late.pop(tid)
+                if not self._wait(delay_s, release):
+                    break
+                frame = frame if refusal is None else refusal
             if tid in self._swallow:
-                self._swallow.discard(tid)
+                if (refusal := self._swallow.pop(tid)) is not None:
+                    self._to_client(refusal)
                 continue
             if tid in self._close_on_answer:
                 self._close_on_answer.discard(tid)
                 self._shut_client()
                 continue
-            with contextlib.suppress(OSError):
-                self.client.sendall(frame)
+            self._to_client(frame)
+            if tid in self._duplicate:
+                self._duplicate.discard(tid)
+                self._to_client(frame)
         self._shut_client()
+
+    def _wait(self, delay_s: float, release: threading.Event | None) -> bool:
+        """Wait ``delay_s`` or for ``release``; False when the proxy closes first."""
+        if release is None:
+            return not self.proxy._stopping.wait(delay_s)
+        while not release.wait(0.005):
+            if self.proxy._stopping.is_set():
+                return False
+        return True
 
     def _shut_client(self) -> None:
         with contextlib.suppress(OSError):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator
 
@@ -11,6 +12,8 @@ from fault_proxy import FaultProxy, Rule
 from tmmaster import (
     ConnectError,
     ConnectionLostError,
+    DeviceBusyError,
+    DeviceFailureError,
     ModbusTransport,
     ResponseTimeoutError,
     RetryPolicy,
@@ -95,6 +98,61 @@ def test_hold_delivers_late_even_after_the_master_gave_up(
     quick_link.close()  # the master is gone; the frame is still on its way
     assert writes_at(sim, 0x0210) == 0
     sim.wait_for(lambda: writes_at(sim, 0x0210) == 1, timeout=3)
+
+
+def test_an_exception_instead_of_forwarding_never_reaches_the_slave(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("drop_request", function_code=16, exception=6))
+    with pytest.raises(DeviceBusyError):
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 0
+    assert link.read_block(Table.HOLDING, 0x0210, 1) == [0]  # the link goes on
+
+
+def test_an_exception_after_forwarding_executes_the_request(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("drop_answer", function_code=16, exception=4))
+    with pytest.raises(DeviceFailureError):
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1
+
+
+def test_an_exception_then_the_held_frame_delivers_it_late(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    release = threading.Event()
+    proxy.add(Rule("hold", function_code=16, exception=11, release=release))
+    with pytest.raises(ResponseTimeoutError, match="code 11"):  # a gateway's "no answer"
+        link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 0
+    release.set()
+    sim.wait_for(lambda: writes_at(sim, 0x0210) == 1, timeout=3)
+
+
+def test_a_duplicated_answer_is_relayed_twice(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    # The second copy carries a transaction id already answered: never taken for the next.
+    proxy.add(Rule("duplicate_answer", function_code=3, address=0x0207))
+    assert link.read_block(Table.HOLDING, 0x0207, 1) == [0]
+    for _ in range(3):
+        assert link.read_block(Table.HOLDING, 0, 4) == [int(sim.field("robot_mode")), 0, 0, 0]
+    assert proxy.played("duplicate_answer")
+
+
+def test_delay_answer_executes_at_once_and_answers_late(
+    sim: Simulator, proxy: FaultProxy, quick_link: ModbusTransport
+) -> None:
+    release = threading.Event()
+    proxy.add(Rule("delay_answer", function_code=16, address=0x0210, release=release))
+    with pytest.raises(ResponseTimeoutError):
+        quick_link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1  # executed; only its answer waits
+    release.set()  # the answer comes now, after the master dropped that connection
+    for _ in range(3):  # the late answer (no words) is never taken for a later request's
+        assert len(quick_link.read_block(Table.HOLDING, 0, 4)) == 4
 
 
 def test_delay_holds_back_one_request_only(

@@ -111,7 +111,7 @@ def test_out_of_range_value_sends_nothing(server: TestServer, transport: ModbusT
         (3, IllegalValueError),
         (4, DeviceFailureError),
         (6, DeviceBusyError),
-        (11, ModbusExceptionError),
+        (10, ModbusExceptionError),
     ],
 )
 def test_exception_responses_become_typed_errors(
@@ -124,6 +124,17 @@ def test_exception_responses_become_typed_errors(
     assert info.value.code == code
     assert isinstance(info.value, TransportError)
     # Outside the range the device still answers.
+    assert transport.read_block(Table.HOLDING, 0, 2) == [0, 0]
+
+
+def test_a_gateways_no_answer_is_a_response_timeout(
+    server: TestServer, transport: ModbusTransport
+) -> None:
+    """Code 11, a gateway's "target device failed to respond": its frame may still reach
+    the device, so it is no refusal but a timeout (tests/test_hunt7_exception_answers.py)."""
+    server.knobs.exception = (100, 109, 11)
+    with pytest.raises(ResponseTimeoutError, match="code 11"):
+        transport.read_block(Table.HOLDING, 105, 2, retry=False)
     assert transport.read_block(Table.HOLDING, 0, 2) == [0, 0]
 
 

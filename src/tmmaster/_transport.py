@@ -207,8 +207,7 @@ def plan_reads(fields: Iterable[RegisterField], *, max_gap: int = 0) -> list[Blo
 
 def _block(table: Table, fields: list[RegisterField]) -> Block:
     start = fields[0].address
-    end = max(f.end for f in fields)
-    return Block(table, start, end - start + 1, tuple(fields))
+    return Block(table, start, max(f.end for f in fields) - start + 1, tuple(fields))
 
 
 #: A field with the words its value encodes to.
@@ -459,9 +458,8 @@ class Transport(ABC):
         if function_code in _WRITE_CODES:
             self._epoch += 1
         self.stats.requests += 1
-        self.stats.requests_by_function[function_code] = (
-            self.stats.requests_by_function.get(function_code, 0) + 1
-        )
+        by_function = self.stats.requests_by_function
+        by_function[function_code] = by_function.get(function_code, 0) + 1
 
     def _request_failed(self, error: BaseException) -> None:
         """After a request failed: count it, and drop the link unless the device answered."""
@@ -788,9 +786,14 @@ def connect_error(exc: BaseException, link: AsyncLink) -> ConnectError:
     return ConnectError(f"cannot connect to {name} at {where}: {reason or type(exc).__name__}")
 
 
-def refused_error(response: ModbusPDU, *, name: str, what: str) -> ModbusExceptionError:
-    """The typed error of a Modbus exception response (IllegalAddressError for code 2 ...)."""
-    code = int(getattr(response, "exception_code", 0))
+def refused_error(code: int, *, name: str, what: str) -> TransportError:
+    """The typed error of a Modbus exception answer's ``code`` (IllegalAddressError for 2 ...).
+
+    Code 11, a gateway's "the device did not answer", is a :class:`ResponseTimeoutError`:
+    the gateway's frame may still reach the device, as a request that timed out may.
+    """
+    if code == 11:
+        return ResponseTimeoutError(f"{name}: the gateway got no answer to {what} (code 11)")
     error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
     return error_class(f"{name}: device refused {what}", code=code)
 
@@ -843,7 +846,7 @@ def answer_words(
     write; refusals raised. ``answer``: a common answer's words, or pymodbus' PDU."""
     if not isinstance(answer, list):
         if isinstance(answer, ExceptionResponse) or answer.isError():
-            raise refused_error(answer, name=name, what=what)
+            raise refused_error(int(getattr(answer, "exception_code", 0)), name=name, what=what)
         answer = [int(b) for b in answer.bits] if function_code <= 2 else list(answer.registers)
     if function_code != asked:
         raise TransportError(f"{name}: answer of another function to {what}")

@@ -23,15 +23,13 @@ from collections.abc import Callable
 from typing import Protocol, TypeVar
 
 from .._exceptions import (
-    MODBUS_EXCEPTIONS,
     ConfigError,
     ConnectError,
     ConnectionLostError,
-    ModbusExceptionError,
     ResponseTimeoutError,
 )
 from .._retry import RetryPolicy
-from .._transport import Transport
+from .._transport import Transport, refused_error
 from ._server import DeviceServer, MemoryAnswer
 
 T = TypeVar("T")
@@ -257,6 +255,5 @@ class MemoryTransport(Transport):
             function_code, count, request=False, refused=refused
         )
         if refused:
-            error_class = MODBUS_EXCEPTIONS.get(answer.refused, ModbusExceptionError)
-            raise error_class(f"{self.name}: device refused {what}", code=answer.refused)
+            raise refused_error(answer.refused, name=self.name, what=what)
         return answer.words
