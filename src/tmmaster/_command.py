@@ -38,6 +38,7 @@ from ._gate import CommandGate
 from ._planning import Plan, TimeoutPolicy
 from ._poller import Poller, PollPolicy
 from ._pose import Pose
+from ._retry import is_transient
 from ._sigint import deferred
 from ._status import MovePhase, MoveProgress
 
@@ -212,6 +213,13 @@ class _Following:
             motion.ticket.resent = False  # its copy still in the network is refused from now on
             follower._channel.session = follower.renew()
         return False
+
+
+#: Per robot (host, port, unit id): a running move's Stop that the link could not carry
+#: (article: no cancel record), owed by this process: whichever follower on that robot
+#: calls next delivers it first, a Robot made after the one that owed it was closed too.
+#: A Stop the slave refused stays with the Robot that sent it (docs/safety.md).
+_STOPS_OWED: dict[tuple[str, int, int], Motion] = {}
 
 
 class _MotionFollower:
@@ -433,14 +441,21 @@ class _MotionFollower:
             CommandStateUnknownError: it could not be delivered this time either; it stays
                 owed, and each later call tries it again first.
         """
-        if (motion := self.owed) is None or self.gate.closed:
+        if (motion := self.owed or _STOPS_OWED.get(self._robot())) is None or self.gate.closed:
             return  # nothing owed, or closed (close() did it once more)
+        self.owed = motion  # a closed Robot's Stop owed on this robot, too
         if not self.abandon(motion, ConnectionLostError("given up, the link down")) and self.owed:
             raise CommandStateUnknownError(
                 f"command {motion.ticket.seq} was given up, and its withdraw or stop is still"
                 " owed (the link is down?): nothing else is sent to the robot until it is done"
             )
         self.owed = None
+        _STOPS_OWED.pop(self._robot(), None)
+
+    def _robot(self) -> tuple[str, int, int]:
+        """Which robot this follower commands: its link's host, port and unit id."""
+        link = self._channel.transport
+        return link.host, link.port, link.device_id
 
     def _withdraw_or_stop(
         self,
@@ -480,6 +495,10 @@ class _MotionFollower:
             except TMMasterError as exc:
                 motion.stop_delivered = confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
+                if is_transient(exc) and not self._channel.duplicate_safe:
+                    _STOPS_OWED[self._robot()] = motion  # the link down: the process owes it
+                elif not is_transient(exc):
+                    _STOPS_OWED.pop(self._robot(), None)  # refused: this Robot's alone
             try:
                 # After the Stop, never delaying it; whatever became of it: the program
                 # ends the command on this record even where the robot refuses Stop.

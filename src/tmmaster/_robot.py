@@ -90,22 +90,13 @@ from ._profiles import (
     robot_profile,
 )
 from ._project import PRESS_TIMEOUT_S, ProjectControl
-from ._registers import (
-    TCP_FIELDS,
-    GripperProfile,
-    RobotProfile,
-    Role,
-)
+from ._registers import TCP_FIELDS, GripperProfile, RobotProfile, Role
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
 from ._sigint import deferred
 from ._status import ProjectState, RobotStatus, project_hint
 from ._tool import FrameGuard, Tool, tool_option
-from ._transport import (
-    ConnectionState,
-    Transport,
-    TransportStats,
-)
+from ._transport import ConnectionState, Transport, TransportStats
 
 _log = get_logger("tmmaster.robot")
 
