@@ -14,6 +14,8 @@ client connection, parses MBAP frames, and plays scripted faults on matching req
 ``close_after``   forward the request, then close the client's connection instead of
                   relaying the answer
 ``duplicate_answer`` forward the request, relay its answer twice (a buggy gateway)
+``foreign_tid``   forward the request, relay its answer under a transaction id never sent
+``foreign_unit``  forward the request, relay its answer from another unit id
 ``delay_answer``  forward the request at once, relay its answer ``delay_s`` later, or when
                   ``release`` is set (and every answer after it: TCP keeps order)
 ``outage``        (``FaultProxy.outage``) close every connection and refuse new ones for a
@@ -133,6 +135,15 @@ def exception_answer(request: bytes, code: int) -> bytes:
     return struct.pack(">HHHBBB", tid, 0, 3, unit, function_code | 0x80, code)
 
 
+def _rewritten(answer: bytes, action: str) -> bytes:
+    """``answer`` under a transaction id 0x7000 away (``foreign_tid``) or from unit id
+    ``unit + 1`` (``foreign_unit``)."""
+    tid, _protocol, _length, unit = struct.unpack(">HHHB", answer[:7])
+    if action == "foreign_tid":
+        return struct.pack(">H", (tid + 0x7000) % 0x10000 or 1) + answer[2:]
+    return answer[:6] + bytes([(unit + 1) % 256]) + answer[7:]
+
+
 def _parse(frame: bytes) -> tuple[int, int, int | None]:
     """(transaction id, function code, address or None) of a request frame."""
     tid = struct.unpack(">H", frame[0:2])[0]
@@ -157,6 +168,8 @@ class _Link:
         #: Answers not relayed, by transaction id: what the client gets instead (or nothing).
         self._swallow: dict[int, bytes | None] = {}
         self._duplicate: set[int] = set()
+        #: Answers relayed with their header rewritten, by transaction id: the action.
+        self._foreign: dict[int, str] = {}
         #: Answers relayed late, by transaction id: (delay, release, what is relayed instead).
         self._late: dict[int, tuple[float, threading.Event | None, bytes | None]] = {}
         self._close_on_answer: set[int] = set()
@@ -206,6 +219,9 @@ class _Link:
                 self._forward(frame)
             elif rule.action == "delay_answer":
                 self._late[tid] = (rule.delay_s, rule.release, refusal)
+                self._forward(frame)
+            elif rule.action in ("foreign_tid", "foreign_unit"):
+                self._foreign[tid] = rule.action
                 self._forward(frame)
             elif rule.action == "duplicate_answer":
                 self._duplicate.add(tid)
@@ -257,6 +273,8 @@ class _Link:
                 self._close_on_answer.discard(tid)
                 self._shut_client()
                 continue
+            if tid in self._foreign:
+                frame = _rewritten(frame, self._foreign.pop(tid))
             self._to_client(frame)
             if tid in self._duplicate:
                 self._duplicate.discard(tid)

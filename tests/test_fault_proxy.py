@@ -8,13 +8,14 @@ from collections.abc import Iterator
 
 import pytest
 
-from fault_proxy import FaultProxy, Rule
+from fault_proxy import Action, FaultProxy, Rule
 from tmmaster import (
     ConnectError,
     ConnectionLostError,
     DeviceBusyError,
     DeviceFailureError,
     ModbusTransport,
+    NotModbusError,
     ResponseTimeoutError,
     RetryPolicy,
 )
@@ -153,6 +154,23 @@ def test_delay_answer_executes_at_once_and_answers_late(
     release.set()  # the answer comes now, after the master dropped that connection
     for _ in range(3):  # the late answer (no words) is never taken for a later request's
         assert len(quick_link.read_block(Table.HOLDING, 0, 4)) == 4
+
+
+@pytest.mark.parametrize(
+    ("action", "error"),
+    [("foreign_tid", NotModbusError), ("foreign_unit", ResponseTimeoutError)],
+)
+def test_an_answer_with_a_foreign_header_is_not_taken(
+    sim: Simulator,
+    proxy: FaultProxy,
+    quick_link: ModbusTransport,
+    action: Action,
+    error: type[Exception],
+) -> None:
+    proxy.add(Rule(action, function_code=16, address=0x0210))
+    with pytest.raises(error):
+        quick_link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1  # executed; its answer is what is garbled
 
 
 def test_delay_holds_back_one_request_only(
