@@ -125,7 +125,7 @@ def test_an_exception_then_the_held_frame_delivers_it_late(
 ) -> None:
     release = threading.Event()
     proxy.add(Rule("hold", function_code=16, exception=11, release=release))
-    with pytest.raises(ResponseTimeoutError, match="code 11"):  # a gateway's "no answer"
+    with pytest.raises(ResponseTimeoutError, match="exception 11"):  # a gateway's "no answer"
         link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
     assert writes_at(sim, 0x0210) == 0
     release.set()

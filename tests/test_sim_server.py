@@ -345,7 +345,7 @@ def test_onrobot_gripper_allows_one_connection_and_its_unit_id(
         # (same connection: the transport takes its unit id from device_id per request).
         hr(first, 256)
         first.device_id = 1
-        with pytest.raises(ResponseTimeoutError, match="code 11"):  # 0x0B, tmmaster's timeout
+        with pytest.raises(ResponseTimeoutError, match="exception 11"):  # 0x0B: a timeout
             hr(first, 256)
     with client(sim.gripper_port, device_id=65) as again:  # the first has gone: served
         sim.wait_for(lambda: not fails(lambda: hr(again, 1536)), 2.0)

@@ -127,13 +127,15 @@ def test_exception_responses_become_typed_errors(
     assert transport.read_block(Table.HOLDING, 0, 2) == [0, 0]
 
 
+@pytest.mark.parametrize("code", [5, 11])
 def test_a_gateways_no_answer_is_a_response_timeout(
-    server: TestServer, transport: ModbusTransport
+    server: TestServer, transport: ModbusTransport, code: int
 ) -> None:
-    """Code 11, a gateway's "target device failed to respond": its frame may still reach
-    the device, so it is no refusal but a timeout (tests/test_hunt7_exception_answers.py)."""
-    server.knobs.exception = (100, 109, 11)
-    with pytest.raises(ResponseTimeoutError, match="code 11"):
+    """Code 5, "acknowledge: accepted, done later", and 11, a gateway's "target device
+    failed to respond": the request may still take effect, so it is no refusal but a
+    timeout (tests/test_hunt7_exception_answers.py)."""
+    server.knobs.exception = (100, 109, code)
+    with pytest.raises(ResponseTimeoutError, match=f"Modbus exception {code}"):
         transport.read_block(Table.HOLDING, 105, 2, retry=False)
     assert transport.read_block(Table.HOLDING, 0, 2) == [0, 0]
 

@@ -16,7 +16,7 @@ builtin a caller would naturally catch (a timeout is also a ``TimeoutError``)::
     │   │   ├── TransportClosedError              the link is closed, or not opened yet
     │   │   └── NotModbusError                    host:port answers, but not in Modbus TCP
     │   ├── ConnectionLostError (ConnectionError) the connection broke during a request
-    │   ├── ResponseTimeoutError (TimeoutError)   no answer in time (or a gateway's code 11)
+    │   ├── ResponseTimeoutError (TimeoutError)   no answer in time (or Modbus exception 5, 11)
     │   └── ModbusExceptionError                  the device answered with an exception code
     │       ├── IllegalFunctionError              code 1
     │       ├── IllegalAddressError               code 2

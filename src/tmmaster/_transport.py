@@ -789,11 +789,13 @@ def connect_error(exc: BaseException, link: AsyncLink) -> ConnectError:
 def refused_error(code: int, *, name: str, what: str) -> TransportError:
     """The typed error of a Modbus exception answer's ``code`` (IllegalAddressError for 2 ...).
 
-    Code 11, a gateway's "the device did not answer", is a :class:`ResponseTimeoutError`:
-    the gateway's frame may still reach the device, as a request that timed out may.
+    Code 5, "acknowledge: accepted, done later" (sent instead of letting the client time
+    out), and 11, a gateway's "the device did not answer", are a
+    :class:`ResponseTimeoutError`: the request may still take effect, as one that timed
+    out may.
     """
-    if code == 11:
-        return ResponseTimeoutError(f"{name}: the gateway got no answer to {what} (code 11)")
+    if code in (5, 11):
+        return ResponseTimeoutError(f"{name}: no answer to {what} yet (Modbus exception {code})")
     error_class = MODBUS_EXCEPTIONS.get(code, ModbusExceptionError)
     return error_class(f"{name}: device refused {what}", code=code)
 
