@@ -14,6 +14,8 @@ client connection, parses MBAP frames, and plays scripted faults on matching req
 ``close_after``   forward the request, then close the client's connection instead of
                   relaying the answer
 ``duplicate_answer`` forward the request, relay its answer twice (a buggy gateway)
+``duplicate_request`` forward the request, and a copy of it ``delay_s`` later or when
+                  ``release`` is set (a gateway that retries a request on its own)
 ``foreign_tid``   forward the request, relay its answer under a transaction id never sent
 ``foreign_unit``  forward the request, relay its answer from another unit id
 ``delay_answer``  forward the request at once, relay its answer ``delay_s`` later, or when
@@ -53,6 +55,9 @@ Action = Literal[
     "close_after",
     "duplicate_answer",
     "delay_answer",
+    "foreign_tid",
+    "foreign_unit",
+    "duplicate_request",
 ]
 
 #: Function codes whose PDU starts with a starting address.
@@ -223,6 +228,9 @@ class _Link:
             elif rule.action in ("foreign_tid", "foreign_unit"):
                 self._foreign[tid] = rule.action
                 self._forward(frame)
+            elif rule.action == "duplicate_request":
+                self._forward(frame)
+                self._hold(frame, rule.delay_s, rule.release)  # the copy's answer is relayed too
             elif rule.action == "duplicate_answer":
                 self._duplicate.add(tid)
                 self._forward(frame)

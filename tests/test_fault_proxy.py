@@ -173,6 +173,18 @@ def test_an_answer_with_a_foreign_header_is_not_taken(
     assert writes_at(sim, 0x0210) == 1  # executed; its answer is what is garbled
 
 
+def test_duplicate_request_executes_it_twice(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    release = threading.Event()
+    proxy.add(Rule("duplicate_request", function_code=16, address=0x0210, release=release))
+    link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert writes_at(sim, 0x0210) == 1
+    release.set()
+    sim.wait_for(lambda: writes_at(sim, 0x0210) == 2, timeout=3)
+    assert len(link.read_block(Table.HOLDING, 0, 4)) == 4  # the copy's answer is not taken
+
+
 def test_delay_holds_back_one_request_only(
     sim: Simulator, proxy: FaultProxy, link: ModbusTransport
 ) -> None:

@@ -266,8 +266,9 @@ def test_an_output_write_the_gateway_timed_out_is_watched_for(
     release = threading.Event()
 
     def do3_writes() -> list[bool]:
+        log = sim.request_log
         return [
-            bool(r.values[0]) for r in sim.request_log if r.function_code == 5 and r.address == 3
+            bool(r.values[0]) for r in log if r.function_code == 5 and r.address == 3 and r.values
         ]
 
     def release_once_false_landed() -> None:
