@@ -215,9 +215,10 @@ class _Following:
         return False
 
 
-#: Per robot (host, port, unit id): a running move's Stop that the link could not carry
-#: (article: no cancel record), owed by this process: whichever follower on that robot
-#: calls next delivers it first, a Robot made after the one that owed it was closed too.
+#: Per robot (``Transport.endpoint``: its address however spelled, port, unit id): a
+#: running move's Stop that the link could not carry (article: no cancel record), owed by
+#: this process: whichever follower on that robot calls next delivers it first, a Robot
+#: made after the one that owed it was closed too.
 #: A Stop the slave refused stays with the Robot that sent it (docs/safety.md).
 _STOPS_OWED: dict[tuple[str, int, int], Motion] = {}
 
@@ -453,9 +454,8 @@ class _MotionFollower:
         _STOPS_OWED.pop(self._robot(), None)
 
     def _robot(self) -> tuple[str, int, int]:
-        """Which robot this follower commands: its link's host, port and unit id."""
-        link = self._channel.transport
-        return link.host, link.port, link.device_id
+        """Which robot this follower commands: its link's address, port and unit id."""
+        return self._channel.transport.endpoint
 
     def _withdraw_or_stop(
         self,

@@ -533,9 +533,9 @@ class GripperLink:
     stop_event: threading.Event | None = None
 
 
-#: Per stand-alone gripper (host, port): until when a stop frame of this process left
+#: Per stand-alone gripper (``Transport.endpoint``): until when a stop frame of this process left
 #: unanswered may still land, whichever driver sent it (one list each, shared).
-_STOP_DOUBTS: dict[tuple[str, int], list[float]] = {}
+_STOP_DOUBTS: dict[tuple[str, int, int], list[float]] = {}
 
 
 class _OwnConnectionGripper(Gripper):
@@ -575,8 +575,7 @@ class _OwnConnectionGripper(Gripper):
         )
         # Until [0] a stop frame left unanswered may still land (and halt a move): kept per
         # gripper for the process, so that a new driver (a new Robot's) waits for it too.
-        where = (self.transport.host, self.transport.port)
-        self._stop_doubt = _STOP_DOUBTS.setdefault(where, [0.0])
+        self._stop_doubt = _STOP_DOUBTS.setdefault(self.transport.endpoint, [0.0])
 
     def attach(self, mount: GripperMount) -> None:
         """Mount on a robot: its fault check and stop event guard every wait.

@@ -83,7 +83,7 @@ WATCH_INTERVAL_S = 0.02
 #: gate refused it, a bad argument) or answered (a Modbus exception).
 SETTLED_FAILURES = (ConnectError, ModbusExceptionError, StopRequestedError, ConfigError)
 
-#: Per output (host, port, unit, table, address): the lock of its ``set`` and the writes
+#: Per output (``Transport.endpoint``, table, address): the lock of its ``set`` and the writes
 #: left unanswered, kept for the process, whichever Robot's :class:`LevelOutput` sent them.
 _WATCHED: dict[tuple[object, ...], tuple[threading.Lock, list[tuple[Value, float]]]] = {}
 
@@ -127,7 +127,7 @@ class LevelOutput:
         # Shared with every LevelOutput of this process on the same output (a Robot made
         # after another was closed), so that one's late frame is watched for by the next;
         # a link that names no endpoint (a test's stand-in) shares them with nobody.
-        where = (*(getattr(transport, n, self) for n in ("host", "port", "device_id")), *self._at)
+        where = (*getattr(transport, "endpoint", (self,)), *self._at)
         self._lock, self._doubts = _WATCHED.setdefault(where, (threading.Lock(), []))
 
     def set(self, value: Value) -> None:

@@ -60,13 +60,7 @@ from ._loop import (
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._robot import Robot
-from ._transport import (
-    AsyncLink,
-    ConnectionState,
-    ReadPlan,
-    Transport,
-    describe_read,
-)
+from ._transport import AsyncLink, ConnectionState, ReadPlan, Transport, describe_read
 
 _log = get_logger("tmmaster.monitor")
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import ipaddress
 import socket
 import struct
 import threading
@@ -332,6 +333,21 @@ class Transport(ABC):
         # Per read block (table, address, count): its description and function code.
         self._reads: dict[tuple[Table, int, int], tuple[str, int]] = {}
         self._log = _log.bind(device=name, host=host, port=port, device_id=device_id)
+
+    @functools.cached_property
+    def endpoint(self) -> tuple[str, int, int]:
+        """The device as the process keys what it owes it: (address, port, unit id).
+
+        The address the host resolves to, the same however it is spelled ("localhost",
+        "127.0.0.1" and "::1" are all this machine's 127.0.0.1; a name, the address it
+        resolves to first): what one Robot left unsettled on the robot (an owed Stop, a
+        late output frame, a gripper's late stop) is then honoured by a Robot that names
+        it otherwise. A host that does not resolve is its own key.
+        """
+        with contextlib.suppress(OSError, UnicodeError, ValueError):
+            ip = ipaddress.ip_address(socket.getaddrinfo(self.host, self.port)[0][4][0])
+            return "127.0.0.1" if ip.is_loopback else str(ip), self.port, self.device_id
+        return self.host, self.port, self.device_id
 
     # -- the link (subclasses) ----------------------------------------------------
 
