@@ -16,6 +16,9 @@ client connection, parses MBAP frames, and plays scripted faults on matching req
 ``duplicate_answer`` forward the request, relay its answer twice (a buggy gateway)
 ``duplicate_request`` forward the request, and a copy of it ``delay_s`` later or when
                   ``release`` is set (a gateway that retries a request on its own)
+``stale_answer``  forward the request, relay the answer the previous identical request
+                  (function, address, count) got, under this request's transaction id: a
+                  gateway serving a cache one poll behind (the first is relayed as is)
 ``foreign_tid``   forward the request, relay its answer under a transaction id never sent
 ``foreign_unit``  forward the request, relay its answer from another unit id
 ``delay_answer``  forward the request at once, relay its answer ``delay_s`` later, or when
@@ -58,6 +61,7 @@ Action = Literal[
     "foreign_tid",
     "foreign_unit",
     "duplicate_request",
+    "stale_answer",
 ]
 
 #: Function codes whose PDU starts with a starting address.
@@ -175,6 +179,9 @@ class _Link:
         self._duplicate: set[int] = set()
         #: Answers relayed with their header rewritten, by transaction id: the action.
         self._foreign: dict[int, str] = {}
+        #: stale_answer: the request's key by transaction id, and each key's last answer.
+        self._stale: dict[int, bytes] = {}
+        self._cache: dict[bytes, bytes] = {}
         #: Answers relayed late, by transaction id: (delay, release, what is relayed instead).
         self._late: dict[int, tuple[float, threading.Event | None, bytes | None]] = {}
         self._close_on_answer: set[int] = set()
@@ -227,6 +234,9 @@ class _Link:
                 self._forward(frame)
             elif rule.action in ("foreign_tid", "foreign_unit"):
                 self._foreign[tid] = rule.action
+                self._forward(frame)
+            elif rule.action == "stale_answer":
+                self._stale[tid] = frame[7:]  # function, address, count (and values)
                 self._forward(frame)
             elif rule.action == "duplicate_request":
                 self._forward(frame)
@@ -283,6 +293,10 @@ class _Link:
                 continue
             if tid in self._foreign:
                 frame = _rewritten(frame, self._foreign.pop(tid))
+            if tid in self._stale:
+                key = self._stale.pop(tid)
+                cached, self._cache[key] = self._cache.get(key), frame
+                frame = frame if cached is None else frame[:2] + cached[2:]
             self._to_client(frame)
             if tid in self._duplicate:
                 self._duplicate.discard(tid)

@@ -185,6 +185,16 @@ def test_duplicate_request_executes_it_twice(
     assert len(link.read_block(Table.HOLDING, 0, 4)) == 4  # the copy's answer is not taken
 
 
+def test_stale_answer_relays_the_previous_identical_requests_answer(
+    proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    proxy.add(Rule("stale_answer", function_code=3, address=0x0210, times=10))
+    assert link.read_block(Table.HOLDING, 0x0210, 1) == [0]
+    link.write_block(Table.HOLDING, 0x0210, [1], retry=False)
+    assert link.read_block(Table.HOLDING, 0x0210, 1) == [0]  # one read behind
+    assert link.read_block(Table.HOLDING, 0x0210, 1) == [1]
+
+
 def test_delay_holds_back_one_request_only(
     sim: Simulator, proxy: FaultProxy, link: ModbusTransport
 ) -> None:

@@ -1,0 +1,90 @@
+"""A gateway that answers reads from a cache one poll behind the robot.
+
+Some Modbus gateways serve reads from a cache they refresh on their own, so an answer
+can show the registers as they were one read earlier: before the master's own command
+write landed, while the arm still moved, before the program acknowledged. The
+FaultProxy plays such a gateway on every read (``stale_answer``: each read is answered
+with what the previous identical read got; writes go through at once).
+
+What must hold (docs/safety.md, the completion rule): a move is done only once the
+robot acknowledged it, reported it finished and the TCP is at the target; a stale
+"idle" or a stale "acknowledged" must never make a call return done while the arm still
+moves or before it reached the target, and a relative move must never be resolved
+against a pose the arm has left (it would run toward a target no call asked for). The
+judge is the simulator: its motion log (tests/safety_invariant.py) and the TCP at the
+moment each call returned.
+
+Observed (2026-11-29): every call ends in ``RobotError`` ("the robot reported the move
+finished but the TCP is at ..."): the pose read one poll behind is the previous target,
+and the completion rule's pose check refuses it. The master is of no use behind such a
+gateway, but never wrong on the safe side's account: each move ran once, to its own
+target.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from fault_proxy import FaultProxy, Rule
+from safety_invariant import Issued, at_rest, check
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
+from tmmaster.sim import Simulator
+
+Factory = Callable[..., Simulator]
+
+TIMEOUTS = TimeoutPolicy(request_s=1.0, ack_timeout_s=3.0, motion_margin_s=1.0)
+
+
+def options(profile: str) -> dict[str, Any]:
+    return dict(
+        profile=profile, gripper=None, polling=PollPolicy(interval_s=0.01), timeouts=TIMEOUTS
+    )
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_reads_one_poll_behind_never_end_a_move_early_nor_resolve_a_stale_origin(
+    tm_simulator_factory: Factory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile)
+    issued: list[Issued] = []
+
+    def call(target: Pose, move: Callable[[], object]) -> None:
+        """Run ``move`` (to ``target``); a done call must find the arm there, finished."""
+        command = Issued(target, time.monotonic())
+        issued.append(command)
+        try:
+            move()
+        except TMMasterError as exc:
+            command.outcome = type(exc).__name__
+        else:
+            command.outcome = "done"
+            pose = sim.tcp_pose()
+            assert pose.is_close(target), f"done at {pose}, short of {target}"
+            ran = [m for m in sim.motion_log() if m.target is not None]
+            assert ran[-1].done_wall_time is not None, f"done while the arm moves: {ran[-1]}"
+        command.ended_at = time.monotonic()
+
+    with FaultProxy(sim.port) as proxy, Robot("127.0.0.1", proxy.port, **options(profile)) as r:
+        r.wait_until_ready(timeout_s=5)
+        start = r.pose()
+        for code in (1, 2, 3, 4):
+            proxy.add(Rule("stale_answer", function_code=code, times=1_000_000))
+        p1, p2 = start.offset(dz=-40), start.offset(dz=-40, dy=60)
+        call(p1, lambda: r.move_to(p1, speed=80))
+        call(p2, lambda: r.move_to(p2, speed=80))
+        p3 = p2.offset(dz=-30)  # relative to where the arm is: p2
+        call(p3, lambda: r.move_by(dz=-30, speed=80))
+        p4 = start
+        call(p4, lambda: r.move_to(p4, speed=80))
+        assert proxy.played("stale_answer")
+    ticks = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= ticks + 20, timeout=5.0)
+    sim.wait_for(at_rest(sim), timeout=5.0, interval=0.05)
+    check(issued, sim.motion_log())
+    # Each move ran once, to the target its call asked for (the relative one from p2).
+    ran = [m.target for m in sim.motion_log() if m.target is not None][-4:]
+    assert all(a.is_close(b) for a, b in zip(ran, [p1, p2, p3, p4], strict=True)), ran
