@@ -33,6 +33,8 @@ place of the real answer (executed, e.g. code 4 after the device applied the wri
 ``delay_answer`` relays the exception in place of the answer, late; ``hold`` answers
 the exception at once and still delivers the frame later (a gateway
 that gave up waiting, code 11, while its frame to the device is stuck on its way).
+``hold`` with ``answer_now`` answers a write as done at once and delivers it later (a
+store-and-forward gateway that acknowledges writes itself).
 
 Everything runs on the proxy's own threads; :meth:`FaultProxy.close` joins them and
 closes every socket, so the suite's leak check holds.
@@ -85,6 +87,9 @@ class Rule:
     #: ``drop_request``, ``drop_answer``, ``hold``: answer the client with this Modbus
     #: exception code (see the module's docstring).
     exception: int | None = None
+    #: ``hold`` of a write: answer it at once as done (a store-and-forward gateway that
+    #: acknowledges writes itself), while the frame is still held.
+    answer_now: bool = False
     _seen: int = field(default=0, repr=False)
 
     def matches(self, function_code: int, address: int | None) -> bool:
@@ -142,6 +147,12 @@ def exception_answer(request: bytes, code: int) -> bytes:
     """The exception answer (function code | 0x80, ``code``) to ``request``."""
     tid, _protocol, _length, unit, function_code = struct.unpack(">HHHBB", request[:8])
     return struct.pack(">HHHBBB", tid, 0, 3, unit, function_code | 0x80, code)
+
+
+def write_answer(request: bytes) -> bytes:
+    """The normal answer to a write request (FC 5, 6, 15, 16): its first four fields."""
+    tid, _protocol, _length, unit = struct.unpack(">HHHB", request[:7])
+    return struct.pack(">HHHB", tid, 0, 6, unit) + request[7:12]
 
 
 def _rewritten(answer: bytes, action: str) -> bytes:
@@ -219,8 +230,8 @@ class _Link:
                     break
                 self._forward(frame)
             elif rule.action == "hold":
-                if refusal is not None:
-                    self._to_client(refusal)
+                if refusal is not None or rule.answer_now:
+                    self._to_client(refusal or write_answer(frame))
                 self._hold(frame, rule.delay_s, rule.release)
             elif rule.action == "drop_request":
                 if refusal is not None:

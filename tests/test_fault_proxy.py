@@ -132,6 +132,17 @@ def test_an_exception_then_the_held_frame_delivers_it_late(
     sim.wait_for(lambda: writes_at(sim, 0x0210) == 1, timeout=3)
 
 
+def test_a_write_answered_at_once_is_delivered_late(
+    sim: Simulator, proxy: FaultProxy, link: ModbusTransport
+) -> None:
+    release = threading.Event()
+    proxy.add(Rule("hold", function_code=16, address=0x0210, answer_now=True, release=release))
+    link.write_block(Table.HOLDING, 0x0210, [1], retry=False)  # answered as done
+    assert writes_at(sim, 0x0210) == 0
+    release.set()
+    sim.wait_for(lambda: writes_at(sim, 0x0210) == 1, timeout=3)
+
+
 def test_a_duplicated_answer_is_relayed_twice(
     sim: Simulator, proxy: FaultProxy, link: ModbusTransport
 ) -> None:
