@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
@@ -13,6 +15,7 @@ from tmmaster import (
     PollPolicy,
     ResponseTimeoutError,
     RetryPolicy,
+    Robot,
     Table,
 )
 from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
@@ -121,3 +124,25 @@ def test_a_second_running_simulator_of_one_name_is_refused_and_close_frees_it() 
             again.url, profile="article", polling=PollPolicy(interval_s=0.01)
         ) as robot:
             robot.status()
+
+
+def test_an_in_process_simulator_is_never_given_to_the_name_resolver(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # What the process owes a robot is keyed by Transport.endpoint, which resolves a
+    # host name; a sim:// link is its own key, its URL never sent to a DNS server.
+    asked: list[object] = []
+    resolve = socket.getaddrinfo
+
+    def spy(host: object, *args: Any, **kwargs: Any) -> Any:
+        asked.append(host)
+        return resolve(host, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(socket, "getaddrinfo", spy)
+    with (
+        Simulator("article", listen=False, time_scale=20) as sim,
+        Robot(sim.url, profile="article") as robot,
+    ):
+        robot.status()
+        assert robot._transport.endpoint == (sim.url, robot._transport.port, 1)
+    assert not [host for host in asked if "sim" in str(host)]

@@ -203,6 +203,12 @@ class MemoryTransport(Transport):
         self._server: DeviceServer = server
         self._link: int | None = None
 
+    @property
+    def endpoint(self) -> tuple[str, int, int]:
+        """The simulated device by its URL, port and unit id: nothing to resolve (a URL
+        given to the host name resolver could wait on a DNS server for seconds)."""
+        return self.host, self.port, self.device_id
+
     def _link_open(self) -> bool:
         return self._link is not None
 
