@@ -12,13 +12,16 @@ block's FC16 (the frame always reaches the robot and is executed) and on every r
   the master cannot know the write was taken, so the call must not report done, and
   the move the robot took must be stopped before the error reaches the caller;
 - the command write's answer from another unit id: skipped, so the write times out;
-  the master reads the registers back, finds its write and follows it: it runs once.
+  the master reads the registers back, finds its write and follows it: it runs once;
+- the command write's answer held past the request timeout and relayed late on the same
+  connection, once the master sent its next request: never taken for that one's.
 
 The judge is the simulator's motion log (tests/safety_invariant.py) and its arm at rest.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -106,6 +109,40 @@ def test_a_command_answer_from_another_unit_id_is_followed_once(
         proxy.add(Rule("foreign_unit", function_code=16, address=block))
         assert attempt(r, target, issued) == "done"  # its write found in the registers
         assert proxy.played("foreign_unit")
+        judge(sim, issued)
+        assert len(sim.motion_log()) == 1, sim.motion_log()
+        assert sim.tcp_pose().is_close(target)
+        sent = [s for s in proxy.seen if s.function_code == 16 and s.address == block]
+        assert len(sent) == 1, "the command write was sent again"
+
+
+def test_a_late_answer_to_the_command_write_is_never_taken_for_a_later_request(
+    tm_simulator_factory: Factory, profile: str
+) -> None:
+    """The command write is executed at once, its answer held past the request timeout and
+    relayed on the same connection once the master sent its next request (its read-back
+    of the registers). The master must not take it for that request's answer; it finds
+    its write in the registers and follows it: the move runs once."""
+    sim = tm_simulator_factory(profile)
+    issued: list[Issued] = []
+    release = threading.Event()
+    block = COMMAND_BLOCK[profile]
+    with FaultProxy(sim.port) as proxy, Robot("127.0.0.1", proxy.port, **options(profile)) as r:
+        r.wait_until_ready(timeout_s=5)
+        target = r.pose().offset(dz=-40)
+        proxy.add(Rule("delay_answer", function_code=16, address=block, release=release))
+
+        def release_at_the_next_request() -> None:
+            sim.wait_for(lambda: proxy.played("delay_answer"), timeout=5.0)
+            count = len(proxy.seen)
+            sim.wait_for(lambda: len(proxy.seen) > count, timeout=5.0)
+            release.set()
+
+        threading.Thread(target=release_at_the_next_request, daemon=True).start()
+        try:
+            assert attempt(r, target, issued) == "done"
+        finally:
+            release.set()
         judge(sim, issued)
         assert len(sim.motion_log()) == 1, sim.motion_log()
         assert sim.tcp_pose().is_close(target)
