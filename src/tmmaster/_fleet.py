@@ -51,13 +51,7 @@ from ._exceptions import (
 from ._following import FollowState
 from ._gate import CommandGate
 from ._logging import get_logger
-from ._loop import (
-    EventLoopName,
-    LoopThread,
-    MonitoredStatus,
-    StatusRecord,
-    poll_on_schedule,
-)
+from ._loop import EventLoopName, LoopThread, MonitoredStatus, StatusRecord, poll_on_schedule
 from ._registers import RegisterField
 from ._retry import RetryPolicy
 from ._transport import AsyncLink, Block, ConnectionState, Transport, settle
