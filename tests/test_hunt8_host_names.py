@@ -18,6 +18,7 @@ the address the link reached (loopback only here).
 
 from __future__ import annotations
 
+import socket
 import threading
 from collections.abc import Callable, Iterator
 
@@ -140,3 +141,16 @@ def test_every_spelling_of_one_robot_is_one_key_and_other_robots_are_not() -> No
     assert key("127.0.0.1", device_id=2) != key("localhost")
     assert key("192.0.2.7") != key("localhost")
     assert key("robot.invalid") == ("robot.invalid", 502, 1)  # unresolved: its own key
+
+
+def test_a_name_with_several_addresses_is_one_key_whatever_order_they_come_in(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A resolver may rotate a name's addresses (round-robin DNS), and give IPv6 first.
+    v4 = [(socket.AF_INET, socket.SOCK_STREAM, 6, "", (a, 502)) for a in ("10.0.0.7", "10.0.0.3")]
+    v6 = [(socket.AF_INET6, socket.SOCK_STREAM, 6, "", ("fd00::7", 502, 0, 0))]
+    keys = set()
+    for answer in (v6 + v4, v4[::-1] + v6, v4):
+        monkeypatch.setattr(socket, "getaddrinfo", lambda *_a, answer=answer, **_k: answer)
+        keys.add(ModbusTransport("tm5.lan", 502, device_id=1, timeout=0.1).endpoint)
+    assert keys == {("10.0.0.3", 502, 1)}

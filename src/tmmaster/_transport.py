@@ -339,13 +339,14 @@ class Transport(ABC):
         """The device as the process keys what it owes it: (address, port, unit id).
 
         The address the host resolves to, the same however it is spelled ("localhost",
-        "127.0.0.1" and "::1" are all this machine's 127.0.0.1; a name, the address it
-        resolves to first): what one Robot left unsettled on the robot (an owed Stop, a
-        late output frame, a gripper's late stop) is then honoured by a Robot that names
-        it otherwise. A host that does not resolve is its own key.
+        "127.0.0.1" and "::1" are all this machine's 127.0.0.1; a name, the lowest of its
+        addresses, IPv4 first, whatever order the resolver gives them in): what one Robot
+        left unsettled on the robot (an owed Stop, a late output frame, a gripper's late
+        stop) is then honoured by a Robot that names it otherwise. A host that does not
+        resolve is its own key.
         """
         with contextlib.suppress(OSError, UnicodeError, ValueError):
-            ip = ipaddress.ip_address(socket.getaddrinfo(self.host, self.port)[0][4][0])
+            ip = ipaddress.ip_address(min(socket.getaddrinfo(self.host, self.port))[4][0])
             return "127.0.0.1" if ip.is_loopback else str(ip), self.port, self.device_id
         return self.host, self.port, self.device_id
 
