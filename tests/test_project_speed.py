@@ -13,8 +13,9 @@ import time
 
 import pytest
 
+from sim_backends import BACKENDS
 from sim_speeds import QUICK
-from test_sim_controller import run_until, send_tmflow, tmflow
+from test_sim_controller import MODEL, run_until, send_tmflow, tmflow
 from tmmaster import ConfigError, MotionType, PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster._channels import Command, CommandKind, Ticket
 from tmmaster._command import Motion, _MotionFollower
@@ -42,6 +43,36 @@ def test_the_simulated_project_speed_scales_every_move() -> None:
     full, half = simulated_seconds_of_a_move(100), simulated_seconds_of_a_move(50)
     # Motion speed x project speed: twice as long at 50 % (the acceleration aside).
     assert 1.6 < half / full < 2.2
+
+
+def simulated_seconds_with_a_change(first: int, then: int, physics: str) -> float:
+    """A move started at project speed ``first``, 7101 set to ``then`` 0.3 s into it."""
+    if physics == "mujoco":
+        from tmmaster.sim._mujoco import MuJoCoBackend
+
+        ctl, bank, _, _ = tmflow(backend=MuJoCoBackend(MODEL))  # type: ignore[arg-type]
+    else:
+        ctl, bank, _, _ = tmflow()
+    bank.set("project_speed", first)
+    run_until(ctl, lambda: bank.get("robot_state") == 0)
+    send_tmflow(bank, 1, target=RIGHT, speed=50)
+    run_until(ctl, lambda: bank.get("ack_seq") == 1, limit_s=2.0)
+    started = ctl.time_s  # type: ignore[attr-defined]
+    run_until(ctl, lambda: ctl.time_s - started >= 0.3)  # type: ignore[attr-defined]
+    bank.set("project_speed", then)  # the operator's + or - on the Robot Stick
+    run_until(ctl, lambda: bank.get("done_seq") == 1, limit_s=60.0)
+    return float(ctl.time_s) - started  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("physics", BACKENDS)
+def test_a_project_speed_changed_mid_move_applies_to_the_running_move(physics: str) -> None:
+    # TMflow 2.24, 4.5 table 4 (p. 53): + and - change the project speed while the
+    # project runs; the simulator applies it to the move under way (ramped over 0.2 s).
+    full, slow = simulated_seconds_of_a_move(100), simulated_seconds_of_a_move(5)
+    raised = simulated_seconds_with_a_change(5, 100, physics)
+    assert full < raised < 0.3 + 1.3 * full < slow / 4  # the rest of the move at 100 %
+    lowered = simulated_seconds_with_a_change(100, 20, physics)
+    assert lowered > 0.3 + 3 * (full - 0.3)  # the rest at a fifth of the speed, or so
 
 
 def test_the_simulators_project_speed_setting() -> None:

@@ -229,6 +229,7 @@ class KinematicBackend:
         self._pose = home
         self._flange: Pose | None = None
         self._motion: _Motion | None = None
+        self._time_rate = 1.0
         # Starts "long settled": the arm is at rest when the simulation begins.
         self._rest_s = math.inf
         self._init_gripper()
@@ -500,6 +501,15 @@ class KinematicBackend:
             same_orientation=kin.rotation_error(start_t, target_t) == (0.0, 0.0, 0.0),
             start=start,
         )
+
+    def scale_time(self, rate: float) -> None:
+        """From now on, run the motion's time ``rate`` times as fast as planned (1: as
+        planned), a braking included: the robot's speed override changed mid-move.
+
+        Args:
+            rate: Simulated motion seconds per simulated second, > 0.
+        """
+        self._time_rate = rate
 
     def stop_motion(self) -> None:
         """Brake to rest along the path (:mod:`._stopping`): the arm moves until at rest."""
@@ -906,7 +916,7 @@ class KinematicBackend:
         if motion is None:
             self._rest_s += dt
             return
-        motion.elapsed_s += dt
+        motion.elapsed_s += dt * self._time_rate
         if motion.elapsed_s + _EPS >= motion.duration_s:
             # Land exactly on the target (or where the braking ends), not on an
             # interpolated approximation of it.

@@ -1093,6 +1093,7 @@ class MuJoCoBackend(_FingersAndParts):
         self._init_servo(model)
         self._hold = _home_joints(model, home, tool)
         self._trajectory: _Trajectory | None = None
+        self._time_rate = 1.0
         self._ready = True
         self._pending_s = 0.0
         #: Simulated seconds stepped so far.
@@ -1477,6 +1478,16 @@ class MuJoCoBackend(_FingersAndParts):
             return self._hold
         return trajectory.joints_at(trajectory.elapsed_s)
 
+    def scale_time(self, rate: float) -> None:
+        """From now on, run the motion's time ``rate`` times as fast as planned (1: as
+        planned), a braking included: the robot's speed override changed mid-move. The servo follows
+        the faster or slower reference.
+
+        Args:
+            rate: Simulated motion seconds per simulated second, > 0.
+        """
+        self._time_rate = rate
+
     def stop_motion(self) -> None:
         """Brake to rest along the path (:mod:`._stopping`): the arm moves until at rest.
 
@@ -1727,7 +1738,7 @@ class MuJoCoBackend(_FingersAndParts):
                 self._set_arm(self._hold, None)
         else:
             now = trajectory.joints_at(trajectory.elapsed_s)
-            trajectory.elapsed_s += h
+            trajectory.elapsed_s += h * self._time_rate
             nxt = trajectory.joints_at(trajectory.elapsed_s)
             velocity = [(b - a) / h for a, b in zip(now, nxt, strict=True)]
             if self._dynamics:

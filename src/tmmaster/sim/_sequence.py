@@ -22,6 +22,11 @@ from ._bank import RegisterBank
 from ._controller import MoveArgs, RobotController, SimErrorCode, _Active
 from ._tm_table import tm_table_areas, tm_table_fields
 
+#: How long the running move takes to follow a change of the project speed from 0 to 100 %
+#: (s): the arm model's acceleration time (an assumption: the manual gives none), so that
+#: a physics backend's servos see no jump in the reference's speed.
+_SPEED_CHANGE_S = 0.2
+
 
 class SequenceController(RobotController):
     """A TMflow project's states and buttons (the project itself: a subclass)."""
@@ -42,8 +47,10 @@ class SequenceController(RobotController):
         **options: Any,
     ) -> None:
         #: The project speed the project starts with, % (Techman's 7101): every move runs
-        #: at its speed times the project speed the register holds when it starts.
+        #: at its speed times the project speed the register holds, as it is now.
         self._project_speed = project_speed
+        #: The project speed the running move started at, and the one it runs at now, %.
+        self._move_percent = self._percent_now = 100.0
         #: TMflow's Motion Settings > Resumption Behavior, "continue project execution from
         #: the error position" (TMflow 2.24 manual, Table 5, pp. 53-54; p. 112): an e-stop
         #: pauses the project instead of stopping it, and Play resumes the interrupted move.
@@ -64,9 +71,24 @@ class SequenceController(RobotController):
         )
         self._buttons_released: int | None = None
 
+    def tick(self, dt: float) -> None:
+        """One tick, the running move at the project speed as it is now: TMflow applies a
+        change the operator makes while the arm moves (the Robot Stick's + and -: TMflow
+        2.24, 4.5 table 4, p. 53; "while the robot is running", 5.5.4.3 G) to the move,
+        its time running at the new speed over the one it started at (a backend without
+        ``scale_time`` keeps each move at the speed it started with)."""
+        scale_time = getattr(self._backend, "scale_time", None)  # optional in a backend
+        if scale_time is not None and self._profile.has("project_speed"):
+            change = float(self._bank.get("project_speed")) - self._percent_now
+            most = dt * 100.0 / _SPEED_CHANGE_S
+            self._percent_now += max(-most, min(most, change))
+            scale_time(max(self._percent_now, 1.0) / max(self._move_percent, 1.0))
+        super().tick(dt)
+
     def _backend_start(self, move: MoveArgs) -> float:
         """TMflow runs a move at its speed times the project speed (7101), as it is now."""
         percent = self._bank.get("project_speed") if self._profile.has("project_speed") else 100
+        self._move_percent = self._percent_now = float(percent)
         if percent != 100:
             move = dataclasses.replace(move, speed=move.speed * float(percent) / 100.0)
         return super()._backend_start(move)
