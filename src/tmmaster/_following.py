@@ -25,6 +25,10 @@ from ._status import MovePhase
 PROGRESS_MM = 0.1
 #: The same for the orientation alone (a move that only turns the tool), deg.
 PROGRESS_DEG = 0.1
+#: Within this of its target (mm, and deg) an arm is arriving, never stalled: one slower
+#: than the model creeps into its target by less than PROGRESS_MM a poll, as slowly as
+#: it is slow, then reports done at its next tick.
+ARRIVING_MM = 1.0
 
 
 class FollowedMotion(Protocol):
@@ -33,6 +37,8 @@ class FollowedMotion(Protocol):
     phase: MovePhase
     #: Where the move started, when known.
     start: Pose | None
+    #: The TCP target (None for a gripper command).
+    target: Pose | None
     expected_s: float
     timeout_s: float
     last_pose: Pose | None
@@ -204,10 +210,14 @@ class FollowState:
         return self._started() + self.budget
 
     def _note_progress(self, pose: Pose) -> None:
-        """Count ``pose`` as progress when the arm moved measurably since the last."""
-        last = self._progress_pose
-        if last is not None and (
-            pose.distance_to(last) < PROGRESS_MM and pose.rotation_to(last) < PROGRESS_DEG
+        """Count ``pose`` as progress when the arm moved measurably since the last, or is
+        arriving at its target."""
+        last, target = self._progress_pose, self.motion.target
+        arriving = target is not None and pose.is_close(target, mm=ARRIVING_MM, deg=ARRIVING_MM)
+        if (
+            last is not None
+            and not arriving
+            and (pose.distance_to(last) < PROGRESS_MM and pose.rotation_to(last) < PROGRESS_DEG)
         ):
             return
         self._progress_pose = pose
