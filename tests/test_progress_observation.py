@@ -113,6 +113,7 @@ class _Motion:
         self.timeout_s = 10.0
         self.last_pose: Pose | None = None
         self.start: Pose | None = Pose(0, 0, 300, 180, 0, 0)
+        self.target: Pose | None = Pose(100, 0, 300, 180, 0, 0)  # the end of its progress
         self.accel_s = 0.2
         self.timeout_from_model = True
 
