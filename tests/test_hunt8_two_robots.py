@@ -6,11 +6,12 @@ first. Here both ``Robot`` objects stay open (a commander and a second one, read
 commanding in turn): the first gives a long move up while a proxy outage cuts the link
 (its Stop fails, owed), the second's first call after the outage delivers the Stop, the
 operator resets the robot, and the second starts a move of its own. Then the first
-``Robot`` makes a call (a status read).
+``Robot`` makes a call (a status read) and is closed, or is closed at once.
 
 What must hold, judged on the simulator: the Stop is delivered once the link is back
 (the arm does not run on to the target given up), and the debt, once delivered, is
-settled for the whole process: the first Robot's next call sends no second Stop, which
+settled for the whole process: the first Robot's next call and its ``close()`` send no
+second Stop, which
 would halt the second Robot's move and put the robot in error. The second Robot's move
 ends done, at its target.
 """
@@ -61,8 +62,9 @@ def article_robot(proxy: FaultProxy, retry: RetryPolicy) -> Robot:
     )
 
 
+@pytest.mark.parametrize("then", ["status", "close"])
 def test_a_stop_one_robot_owed_and_another_delivered_is_not_sent_again(
-    sim: Simulator, proxy: FaultProxy
+    sim: Simulator, proxy: FaultProxy, then: str
 ) -> None:
     with article_robot(proxy, SHORT) as first, article_robot(proxy, PATIENT) as second:
         first.wait_until_ready(timeout_s=5)
@@ -82,7 +84,11 @@ def test_a_stop_one_robot_owed_and_another_delivered_is_not_sent_again(
         second.wait_until_ready(timeout_s=5)
         move = second.start_move(LOWER, speed=5)
         sim.wait_for(lambda: sim.tcp_pose().z < 190, timeout=10)
-        first.status()  # must not send the delivered Stop again
+        if then == "status":
+            first.status()  # must not send the delivered Stop again
+        if not sim.field("motion_status"):
+            raise RuntimeError("set-up: the second Robot's move ended before the first closed")
+        first.close()  # nor may its close
         move.wait()
         assert sim.tcp_pose().is_close(LOWER), sim.tcp_pose()
         assert not sim.field("error_code")

@@ -411,7 +411,10 @@ class _MotionFollower:
         if not lock.acquire(timeout=wait_s):
             return False
         try:
-            if motion._settled is not None and motion is not self.owed:
+            # An article Stop owed here that another Robot of this process delivered since
+            # is not sent again (it would halt that Robot's next move): the arm stopped.
+            theirs = motion.stop_delivered and not self._channel.duplicate_safe
+            if motion._settled is not None and (motion is not self.owed or theirs):
                 return motion._settled
             if motion.done or motion.ticket.finished:
                 return True  # nothing left to withdraw or stop
@@ -445,10 +448,7 @@ class _MotionFollower:
         if (motion := self.owed or _STOPS_OWED.get(self._robot())) is None or self.gate.closed:
             return  # nothing owed, or closed (close() did it once more)
         self.owed = motion  # a closed Robot's Stop owed on this robot, too
-        # An article Stop another Robot of this process delivered since is not sent again
-        # (it would halt that Robot's next move): the arm stopped, whatever it ran.
-        again = not (motion.stop_delivered and not self._channel.duplicate_safe)
-        if again and not self.abandon(motion, ConnectionLostError("link down")) and self.owed:
+        if not self.abandon(motion, ConnectionLostError("given up, the link down")) and self.owed:
             raise CommandStateUnknownError(
                 f"command {motion.ticket.seq} was given up, and its withdraw or stop is still"
                 " owed (the link is down?): nothing else is sent to the robot until it is done"
