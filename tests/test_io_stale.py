@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import threading
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
@@ -177,6 +178,42 @@ def test_a_stop_request_ends_the_watch_and_says_so(sim: Simulator, proxy: FaultP
                 stopper.join(5)
         proxy.wait_held()
         robot.clear_stop_request()
+
+
+def test_a_stop_request_ends_a_wait_behind_another_robots_watch(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    """Two Robots of one process share an output's watch (docs/safety.md): the second's
+    set_do waits while the first watches for its late frame, and a stop request ends
+    that wait at once, nothing written, not once the first's watch is over."""
+    options: dict[str, Any] = dict(retry=RETRY, timeouts=TimeoutPolicy(request_s=TIMEOUT_S))
+    with (
+        Robot("127.0.0.1", proxy.port, **options) as first,
+        Robot("127.0.0.1", proxy.port, **options) as second,
+    ):
+        sim.clear_request_log()
+        with held_until(proxy, lambda: False):  # lands once the block is over
+            first.io.set_do(DO, True)
+            watch = threading.Thread(target=first.io.set_do, args=(DO, False))
+            watch.start()  # writes False, then watches for the held True
+            sim.wait_for(wrote_false(sim), timeout=3)
+            refused: list[BaseException] = []
+
+            def second_sets() -> None:
+                try:
+                    second.io.set_do(DO, True)
+                except StopRequestedError as exc:
+                    refused.append(exc)
+
+            waiting = threading.Thread(target=second_sets)
+            waiting.start()
+            second.interrupt()
+            waiting.join(5)
+            assert refused, "the second Robot's set_do did not end on its stop request"
+            assert watch.is_alive()  # it did not wait for the first Robot's watch
+        watch.join(10)
+        proxy.wait_held()
+    assert coil_writes(sim) == [True, False, True, False]  # nothing of the second's
 
 
 def test_a_late_frame_outlasting_an_interrupted_watch_is_undone_by_the_next_write(

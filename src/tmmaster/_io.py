@@ -141,9 +141,16 @@ class LevelOutput:
                 so) written but no longer watched for an earlier write that could land.
             TransportError: The write, or a read-back, failed after its retries.
         """
-        with self._lock:
+        # Another Robot's set of this output may hold its lock while it watches, up to the
+        # retry policy's total time: a stop request ends the wait behind it at once.
+        while not self._lock.acquire(timeout=WATCH_INTERVAL_S):
+            if (stop := self._transport.interrupt) is not None and stop.is_set():
+                raise StopRequestedError(f"{self.what} not written: a stop was requested")
+        try:
             self._write(value)
             self._settle(value)
+        finally:
+            self._lock.release()
 
     def _write(self, value: Value) -> None:
         """Write ``value`` (retried); remember each attempt left unanswered."""

@@ -70,14 +70,7 @@ from ._io import RobotIO
 from ._logging import get_logger
 from ._options import ORIENTATION_BOUNDS, POSITION_BOUNDS, Checks, GripperDevice, speed_limit
 from ._options import FrameCheck as FrameCheck  # tmmaster imports it from here
-from ._planning import (
-    Planner,
-    check_accel,
-    joint_values,
-    motion_type,
-    moved,
-    offset_pose,
-)
+from ._planning import Planner, check_accel, joint_values, motion_type, moved, offset_pose
 from ._planning import TimeoutPolicy as TimeoutPolicy  # tmmaster imports it from here
 from ._planning import Workspace as Workspace  # tmmaster imports it from here
 from ._poller import INTERVAL_BOUNDS, Poller, PollPolicy
