@@ -185,6 +185,19 @@ def test_the_program_uses_only_documented_constructs(gripper: str) -> None:
     assert int(timeout) <= 2000
 
 
+@pytest.mark.parametrize("gripper", ["io", "none"])
+def test_a_start_up_call_that_fails_stops_the_project_with_its_reason(gripper: str) -> None:
+    # ChangeTCP returns false when refused (TMscript 2.24 13.6, p. 327); ThreadRun returns
+    # an ID <= 0 when the thread was not created (3.12.1, pp. 47-48): without the watchdog
+    # thread no command of a master gone would be given up, so neither is ignored.
+    from tmmaster._robot_program import GripperWiring
+
+    text = program_text(gripper=GripperWiring(gripper))
+    assert re.search(r"if \(ThreadRun\(Watch\(\), true\) <= 0\)\s*\{\s*Abort\(", text)
+    assert re.search(r"if \(!ChangeTCP\([^\n]*\)\)\s*\{\s*Abort\(", text)
+    assert not re.search(r"^\s*ThreadRun\(", text, re.MULTILINE)
+
+
 def test_a_write_the_slave_refuses_stops_the_project_with_its_reason() -> None:
     # The robot's slave gives 127.0.0.1 read permission only (its IP filter): the
     # program's first feedback write fails, and the project stops at once with the
