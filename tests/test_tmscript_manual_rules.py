@@ -80,3 +80,52 @@ def test_invalid_text_converts_to_zero() -> None:
 def test_array_insert_past_the_end_appends() -> None:
     # "Out of the index. The value will insert in the end of the array." (§4.25, p. 88).
     assert shows("int[] n = {1, 2}\nDisplay(Array_Insert(n, 100, 9))") == ["{1,2,9}"]
+
+
+@pytest.mark.parametrize("name", ["true", "False", "empty", "newline", "NewLine"])
+def test_a_boolean_or_reserved_character_is_no_variable_name(name: str) -> None:
+    # A name "cannot be a numeric value, a string, or a Boolean value" (§2.2, p. 14);
+    # empty, newline and NewLine are reserved characters (p. 16).
+    with pytest.raises(TMScriptSyntaxError, match=r"reserved word.*§2\.2"):
+        parse(f"main\n{{\nint {name} = 1\n}}\n")
+    with pytest.raises(TMScriptSyntaxError, match=r"reserved word.*§2\.2"):
+        parse(f'define\n{{\nModbusTCP {name} = "127.0.0.1"\n}}\nmain\n{{\n}}\n')
+
+
+@pytest.mark.parametrize(
+    ("timeout", "ends"), [(0, True), (10000, True), (10001, False), (-1, False)]
+)
+def test_a_modbus_timeout_is_0_to_10000_ms(timeout: int, ends: bool) -> None:
+    # ModbusTCP's read/write timeout: "0 .. 10000" ms (§16.1, p. 414).
+    program = parse(f'define\n{{\nModbusTCP d = "127.0.0.1", 502, {timeout}\n}}\nmain\n{{\n}}\n')
+    execution = Execution(program, NullHost(clock=lambda: 0.0))
+    state = execution.run_to_end(timeout_s=5)
+    assert state == (ExecState.ENDED if ends else ExecState.ERROR)
+    if not ends:
+        assert "p. 414" in str(execution.error)
+
+
+@pytest.mark.parametrize(
+    ("body", "warned"),
+    [
+        # The manual's own examples (§2.7, p. 27): each assignment warns.
+        ("int i = 0\nfloat f = 1.234\ni = f", "float to int"),
+        ("byte b = 100\nint i = 1000\nb = i", "int to byte"),
+        ("float f = 1.0\ndouble d = 2.345\nf = d", "double to float"),
+        ('int i = "1234"', "string to int"),
+        ('string s2 = "123"\nint x = s2', "string to int"),
+        ("string s1 = 123", "to string"),
+        ("float[] f = {1.5}\nint[] n = {0}\nn[0] = f[0]", "float to int"),
+    ],
+)
+def test_an_assignment_that_may_lose_digits_or_converts_a_string_warns(
+    body: str, warned: str
+) -> None:
+    program = parse(f"main\n{{\n{body}\n}}\n")
+    assert [warned in w.message and "p. 27" in w.message for w in program.warnings] == [True]
+
+
+def test_a_widening_assignment_or_a_byte_calculation_does_not_warn() -> None:
+    # Smaller to greater is no loss (§2.2, p. 15); "byte b = 0 - 100 // b = 156" (p. 15).
+    body = 'byte b = 0 - 100\nint i = b\nfloat f = i\ndouble d = f\nb += 1\nstring s = "n" + i'
+    assert parse(f"main\n{{\n{body}\n}}\n").warnings == ()

@@ -254,6 +254,30 @@ def _byte_range(value: a.Expr, typ: str) -> None:
         )
 
 
+#: Words a variable may not be named: the Boolean values and the reserved characters
+#: (TMscript 2.24 §2.2, pp. 14-16: a name "cannot be a numeric value, a string, or a
+#: Boolean value"; empty, newline and NewLine are "reserved characters").
+_RESERVED = frozenset({"true", "True", "false", "False", "empty", "newline", "NewLine"})
+
+
+def _check_name(node: a.Node, name: str) -> None:
+    if name in _RESERVED:
+        raise _syntax(node, f"{name} is a reserved word, not a variable name (§2.2, pp. 14-16)")
+
+
+def _lossy(value: a.Expr, source: str, target: str) -> str | None:
+    """What TMflow warns of when a value is assigned (TMscript 2.24 §2.7, p. 27), else None:
+    a variable's digits lost to a narrower number type (the manual's ``i = f``, ``b = i``,
+    ``f = d``; a calculation such as ``0 - 100`` into a byte is not flagged, §2.2 p. 15),
+    or a string turned into a number or back."""
+    if source in _RANK and target in _RANK:
+        if isinstance(value, (a.Name, a.Index)) and _RANK[target] < _RANK[source]:
+            return f"{source} to {target}: digits may be lost (§2.7, p. 27)"
+    elif "string" in (source, target) and (source in _RANK or target in _RANK):
+        return f"{source} to {target}: converted (§2.7, p. 27)"
+    return None
+
+
 def _runtime(node: a.Node, message: str) -> TMScriptRuntimeError:
     return TMScriptRuntimeError(message, line=node.line, column=node.column)
 
@@ -375,6 +399,7 @@ class _ExprCompiler:
     # ---- names ----
 
     def declare(self, node: a.Node, name: str, typ: str) -> tuple[bool, int]:
+        _check_name(node, name)
         scope = self.scope
         if any(name in s for s in scope.names) or (not scope.is_global and name in self.globals):
             raise _syntax(node, f"variable {name} is declared twice")
@@ -434,8 +459,10 @@ class _ExprCompiler:
 
         return conv
 
-    def converted(self, node: a.Expr, want: str, at: a.Node) -> _CExpr:
+    def converted(self, node: a.Expr, want: str, at: a.Node, *, warn: bool = False) -> _CExpr:
         ce = self.expr(node)
+        if warn:
+            self.warn_lossy(node, ce, want)
         conv = self.converter(ce.type, want, at)
         if conv is _copy and ce.fresh:
             conv = None  # a new array: nobody holds the value a copy would protect
@@ -445,6 +472,11 @@ class _ExprCompiler:
         if constant is not _NOT_CONSTANT:
             return _CExpr(lambda fr: constant, want, False, (constant,))
         return _mapped(ce, conv, want)
+
+    def warn_lossy(self, node: a.Expr, ce: _CExpr, target: str) -> None:
+        message = _lossy(node, ce.type, target)
+        if message is not None:
+            self.warnings.append(ScriptWarning(node.line, node.column, message))
 
     def expr(self, node: a.Expr) -> _CExpr:
         if isinstance(node, a.Literal):
@@ -725,6 +757,8 @@ class _ExprCompiler:
         if node.op == "=":
             _byte_range(node.value, typ)
         value = self.expr(node.value)
+        if node.op == "=":
+            self.warn_lossy(node.value, value, typ)
         combine: Callable[[Any, Any], Value] | None = None
         vtype = value.type
         if node.op != "=":
@@ -1031,7 +1065,7 @@ class _Compiler(_ExprCompiler):
             raise _syntax(node.type, f"unknown type {node.type}")
         if node.init is not None:
             _byte_range(node.init, typ)
-        init = self.converted(node.init, typ, node) if node.init is not None else None
+        init = self.converted(node.init, typ, node, warn=True) if node.init is not None else None
         is_global, slot = self.declare(node, node.name, typ)
         default = default_value(typ)
         array = is_array(typ)
@@ -1070,6 +1104,7 @@ class _Compiler(_ExprCompiler):
             raise _syntax(node, "ModbusTCP takes an address, a port and a timeout")
         args = [self.pure(arg, "ModbusTCP") for arg in node.args]
         name = node.name
+        _check_name(node, name)
         if name in self.devices:
             raise _syntax(node, f"device {name} is declared twice")
         self.devices.add(name)
@@ -1082,6 +1117,10 @@ class _Compiler(_ExprCompiler):
             values = [fn(fr) for fn in fns]
             port = cast(int, values[1]) if len(values) > 1 else 502
             timeout = cast(int, values[2]) if len(values) > 2 else 10000
+            if not 0 <= timeout <= 10000:
+                raise _runtime(
+                    node, f"ModbusTCP timeout {timeout} ms is not 0..10000 (§16.1, p. 414)"
+                )
             fr.rt.devices[name] = ModbusConfig(name, cast(str, values[0]), port, timeout)
 
         return declare
