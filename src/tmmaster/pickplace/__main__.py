@@ -8,7 +8,8 @@ into 141 and changes nothing else: the run goes on and --report is written):
 
 ===  ===========================================================================
 0    every cycle done (with --sim: and every part on the place position)
-1    any other failure (unexpected error; with --sim: a part not on the place position)
+1    any other failure (unexpected error; a move refused once the run began commanding;
+     with --sim: a part not on the place position)
 2    invalid configuration or options: nothing was sent to the robot
 3    connection failure (cannot connect, or the link was lost for good)
 4    robot fault: robot error, e-stop, command rejected or in an unknown state
@@ -66,7 +67,7 @@ from .._tm_errors import code_hex, describe
 from .._transport import endpoint_text
 from .._version import add_version_argument
 from ._config import PickPlaceConfig, load_config, robot_from_config
-from ._machine import mermaid
+from ._machine import IDLE, mermaid
 from ._plan import CyclePlan, estimate, format_plan, validate_plan
 from ._runner import Runner, RunResult, StateEvent, StopRequestedError
 from ._sequences import load_sequence, pick_and_place
@@ -1042,6 +1043,10 @@ def _failed(result: RunResult) -> tuple[int, str]:
     if isinstance(failure.exception, ProfileMismatchError):
         return EXIT_CONFIG, _mismatch_reason(failure.exception)
     code = exit_code_for(failure.exception)
+    if code == EXIT_CONFIG and failure.state != IDLE:
+        # Refused once the run had begun commanding the robot (the gripper opened, moves
+        # made): exit 2 says nothing was sent, which is no longer true.
+        code = EXIT_FAILED
     if failure.interrupted:
         stopped = {
             True: "the arm was stopped",
