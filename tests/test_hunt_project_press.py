@@ -27,6 +27,7 @@ from tmmaster import (
     RetryPolicy,
     Robot,
     RobotError,
+    StopRequestedError,
     TimeoutPolicy,
     TransportError,
 )
@@ -135,6 +136,38 @@ def test_a_play_press_given_up_never_resumes_the_paused_move(
         finally:
             release.set()  # it lands now, after the master gave it up
         proxy.wait_held()
+        assert_never_run_on(sim, motion)
+
+
+@pytest.mark.parametrize("ends", ["timeout", "stop_request"])
+def test_a_play_press_a_gateway_answered_and_delivered_late_never_resumes_the_move(
+    sim: Simulator, proxy: FaultProxy, ends: str
+) -> None:
+    # A store-and-forward gateway answers the Play press at once and delivers it later:
+    # play() sees the project still paused until it gives up (its timeout, or a stop
+    # request); the press lands after that and must not resume the move.
+    with robot_through(proxy) as robot:
+        motion = slow_move(robot, sim)
+        robot.pause()
+        release = threading.Event()
+        proxy.add(
+            FaultRule("hold", function_code=5, address=PLAY_PAUSE, release=release, answer_now=True)
+        )
+        stopper = threading.Thread(
+            target=lambda: (
+                sim.wait_for(lambda: proxy.played("hold"), timeout=5),
+                robot.interrupt() if ends == "stop_request" else None,
+            )
+        )
+        stopper.start()
+        try:
+            with pytest.raises(RobotError if ends == "timeout" else StopRequestedError):
+                robot.play(timeout_s=0.5 if ends == "timeout" else 30.0)
+        finally:
+            stopper.join(5)
+            release.set()  # the press lands now, after play() gave up
+        proxy.wait_held()
+        robot.clear_stop_request()
         assert_never_run_on(sim, motion)
 
 

@@ -53,14 +53,7 @@ from ._registers import (
     Table,
 )
 from ._status import PROJECT_PAUSED, PROJECT_STOPPED, RobotStatus
-from ._transport import (
-    Block,
-    ConnectionState,
-    Encoded,
-    Transport,
-    encode_writes,
-    group_writes,
-)
+from ._transport import Block, ConnectionState, Encoded, Transport, encode_writes, group_writes
 
 _log = get_logger("tmmaster.robot")
 

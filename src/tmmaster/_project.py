@@ -201,31 +201,43 @@ class ProjectControl:
             raise  # never sent, or answered: nothing can land later
         except BaseException as exc:
             self._log.error("robot.project_button_unanswered", button=button, error=str(exc))
-            try:  # Stop: the lost press can then never resume a move when it lands
-                self._channel.stop()
-            except TMMasterError as failed:
-                self._log.error("robot.stop_failed", reason="button unanswered", error=str(failed))
+            self._stop_before_giving_up("button unanswered")
             raise
         self._log.warning("robot.project_button", button=button, project=state.value)
+
+    def _stop_before_giving_up(self, reason: str) -> None:
+        """Press Stop (retried, best effort): a press that may still land later then never
+        resumes a move; it starts the project from the beginning, running nothing pending."""
+        try:
+            self._channel.stop()
+        except TMMasterError as failed:
+            self._log.error("robot.stop_failed", reason=reason, error=str(failed))
 
     def _wait_for(
         self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float
     ) -> ProjectState:
         poller = Poller(interval, self._stop_event, deadline=time.monotonic() + timeout_s)
-        while True:
-            poller.check()
-            status, state = self._status()
-            if state is wanted:
-                return state
-            if state is ProjectState.ERROR:
-                failure = self._channel.status_failure(status)
-                assert failure is not None
-                raise failure
-            if time.monotonic() >= (poller.deadline or 0.0):
-                raise RobotError(
-                    f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
-                    f" (the project was {before.value}) and the project is {state.value}"
-                    f" {timeout_s:g} s later: {REMOTE_PLAY_NEEDS}",
-                    pose=status.pose,
-                )
-            poller.sleep()
+        try:
+            while True:
+                poller.check()
+                status, state = self._status()
+                if state is wanted:
+                    return state
+                if state is ProjectState.ERROR:
+                    failure = self._channel.status_failure(status)
+                    assert failure is not None
+                    raise failure
+                if time.monotonic() >= (poller.deadline or 0.0):
+                    raise RobotError(
+                        f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
+                        f" (the project was {before.value}) and the project is {state.value}"
+                        f" {timeout_s:g} s later: {REMOTE_PLAY_NEEDS}",
+                        pose=status.pose,
+                    )
+                poller.sleep()
+        except BaseException:
+            # A Play answered but not seen taking effect may land later (a gateway that
+            # answers a write before delivering it): it must never resume a move then.
+            if wanted is ProjectState.RUNNING:
+                self._stop_before_giving_up("play unconfirmed")
+            raise
