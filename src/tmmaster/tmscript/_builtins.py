@@ -1306,7 +1306,7 @@ def _motion(kind: str, args: list[Value]) -> MotionCall:
         speed=_int(args[2]),
         accel_time_ms=_int(args[3]),
         blending=_int(args[4]),
-        precise_positioning=bool(args[5]),
+        disable_precise_positioning=bool(args[5]),
         pose=pose,
         reference_joints=joints,
     )
@@ -1362,7 +1362,7 @@ def _Circle(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  #
             speed=_int(args[3]),
             accel_time_ms=_int(args[4]),
             blending=_int(args[5]),
-            precise_positioning=bool(args[-1]),
+            disable_precise_positioning=bool(args[-1]),
             via=tuple(via),
             arc_angle=_int(args[6]),
             rotation=rotation,

@@ -73,9 +73,9 @@ class MotionCall:
     accel_time_ms: int
     #: Percentage, or radius in mm for Line's ``R`` blending format.
     blending: int
-    #: The script's last bool argument, as given (the manual names it "disable precise
-    #: positioning").
-    precise_positioning: bool
+    #: The script's last bool argument, as the manual names it: True disables precise
+    #: positioning (TMscript 2.24, 13.8, p. 331).
+    disable_precise_positioning: bool
     #: PTP's pose configuration ``[Config1, Config2, Config3]``, when given.
     pose: tuple[int, ...] | None = None
     #: PTP's reference joint angles, when given.
