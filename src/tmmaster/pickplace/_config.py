@@ -15,7 +15,7 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal, Self
+from typing import Annotated, Any, Literal, Self, get_args, get_origin
 
 from pydantic import (
     BaseModel,
@@ -440,12 +440,39 @@ def validate_config(data: Mapping[str, Any], *, source: str = "<defaults>") -> P
         ConfigError: A bad key or value (naming every one), or a pose that looks like
             metres or radians.
     """
+    if problems := _numbers_not_given_as_numbers(data):
+        raise ConfigError(f"{source}: " + "; ".join(problems))
     try:
         config = PickPlaceConfig.model_validate(dict(data))
     except ValidationError as exc:
         raise ConfigError(format_validation_error(exc, source)) from None
     check_pose_units(config, source)
     return config
+
+
+def _numbers_not_given_as_numbers(data: Mapping[str, Any]) -> list[str]:
+    """Each number key given as text or a switch (``floor_z_mm = true``, ``port = "502"``).
+
+    pydantic's lax mode would read ``true`` as 1 and ``"85"`` as 85: a typed value the
+    user did not write (a table plane at 1 mm). Said as ``section.key``, as the rest.
+    """
+    problems = []
+    for section, values in data.items():
+        field = PickPlaceConfig.model_fields.get(section)
+        model = None if field is None else field.annotation
+        if not isinstance(values, dict) or not isinstance(model, type):
+            continue  # an unknown section or a section that is not a table: pydantic says
+        for key, value in values.items():
+            sub = getattr(model, "model_fields", {}).get(key)
+            if sub is None or not isinstance(value, bool | str):
+                continue
+            kinds = {  # float, float | None, Annotated[float, ...] | None: the types named
+                get_args(a)[0] if get_origin(a) is Annotated else a
+                for a in get_args(sub.annotation) or (sub.annotation,)
+            }
+            if kinds & {int, float} and not kinds & {bool, str}:
+                problems.append(f"{section}.{key}: must be a number, got {json.dumps(value)}")
+    return problems
 
 
 def check_pose_units(config: PickPlaceConfig, source: str) -> None:
