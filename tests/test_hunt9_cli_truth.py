@@ -5,14 +5,13 @@ log and motion log are at hand; the claims checked are the exit code, the one-li
 reason and the JSON report (``--report``).
 
 1. Exit 2 means "invalid configuration or options: nothing was sent to the robot"
-   (docs/pickplace.md). A move the master refuses only once it sees where the arm
-   really is (the plan is checked before connecting, from the home pose; at run time a
-   move is checked again from the joints the robot reports) used to end the run with
-   exit 2 and ``"result": "config_error"`` after the run had opened the gripper: the
-   arm is parked at the home position in another pose configuration (J5 < 0), the
-   plan passes, the gripper opens, then the approach is refused (self-collision on its
-   joint path). Such a refusal is now exit 1 (``failed``); exit 2 stays for what is
-   refused before the run commands anything (its IDLE state: the held-part check).
+   (docs/pickplace.md). The arm parked at the home position in another pose
+   configuration (J5 < 0): the plan, checked before connecting from the home pose,
+   passes; the approach from the real joints is refused (self-collision on its joint
+   path). Once connected the run checks its moves again from the reported pose and
+   joints, so that refusal is exit 2 with no command sent. A refusal after the run
+   began commanding (here forced by skipping that check) is exit 1 (``failed``), never
+   exit 2: it used to be exit 2 after the gripper had opened.
 2. A guard on the report's per-step claims under device faults (robot error, e-stop,
    stall) hitting the 2nd and 4th moves: every move step the timeline reports ``ok``
    is a motion the robot finished, the failing state is the one whose motion was
@@ -29,6 +28,7 @@ from typing import Any
 
 import pytest
 
+import tmmaster.pickplace.__main__ as pickplace_main
 from sim_speeds import QUICK
 from tmmaster import Pose, Robot
 from tmmaster._robot_models import robot_model
@@ -74,23 +74,58 @@ def run_cli(sim: Simulator, tmp_path: Path, *extra: str) -> tuple[int, dict[str,
     return code, json.loads(report.read_text())
 
 
-def test_a_move_refused_after_the_run_opened_the_gripper_is_not_exit_2(
-    tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    sim = tm_simulator_factory("tmflow", cell=Cell(scene=[PART]), **QUICK)
-    # Home, reached with the wrist the other way (J5 < 0): the plan, checked from the
-    # default configuration, passes; the approach from these joints does not.
+def park_at_home_with_the_wrist_flipped(sim: Simulator) -> None:
+    """Home, reached with the wrist the other way (J5 < 0): the plan, checked before
+    connecting from the default configuration, passes; the approach from these joints
+    does not (a self-collision on its joint path)."""
     flipped = robot_model("tm5-700").inverse(HOME, seed_deg=(29, -37, 126, 180, -90, -150))
     assert flipped[4] < 0
     with Robot("127.0.0.1", sim.port, profile="tmflow") as robot:
         robot.move_joints(flipped, speed=50)
+
+
+def commands(sim: Simulator) -> list[object]:
+    return [r for r in sim.request_log if r.is_write and r.address == COMMAND_REGISTER]
+
+
+def test_a_first_move_the_arm_cannot_take_from_where_it_is_is_exit_2_before_any_command(
+    tm_simulator_factory: SimFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Once connected, the run checks its moves again from the pose and joints the robot
+    # reports, before its IDLE state opens the gripper: exit 2, nothing commanded.
+    sim = tm_simulator_factory("tmflow", cell=Cell(scene=[PART]), **QUICK)
+    park_at_home_with_the_wrist_flipped(sim)
     motions = len(sim.motion_log())
     sim.clear_request_log()
 
     code, report = run_cli(sim, tmp_path)
 
-    commanded = [r for r in sim.request_log if r.is_write and r.address == COMMAND_REGISTER]
-    assert commanded, "the run opened the gripper before the approach was refused"
+    assert commands(sim) == [], "a command was sent before the plan was refused"
+    assert len(sim.motion_log()) == motions
+    assert code == EXIT_CONFIG
+    assert (report["result"], report["exit_code"]) == ("config_error", EXIT_CONFIG)
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "MOVE_TO_APPROACH" in line
+    assert line.endswith(f"[exit {EXIT_CONFIG}]")
+
+
+def test_a_move_refused_after_the_run_opened_the_gripper_is_not_exit_2(
+    tm_simulator_factory: SimFactory,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A refusal the check from where the arm is cannot foresee (here: that check
+    # skipped) comes after the gripper opened: exit 1, never exit 2's "nothing sent".
+    monkeypatch.setattr(pickplace_main, "_check_from_the_arm", lambda robot, command: None)
+    sim = tm_simulator_factory("tmflow", cell=Cell(scene=[PART]), **QUICK)
+    park_at_home_with_the_wrist_flipped(sim)
+    motions = len(sim.motion_log())
+    sim.clear_request_log()
+
+    code, report = run_cli(sim, tmp_path)
+
+    assert commands(sim), "the run opened the gripper before the approach was refused"
     assert len(sim.motion_log()) == motions, "the refused approach must not move"
     assert code != EXIT_CONFIG, "exit 2 says nothing was sent, but the gripper was opened"
     assert code == EXIT_FAILED

@@ -978,7 +978,7 @@ def _run_on(
         if out.live is not None:
             out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
         try:
-            refused = _connect(robot, host, port)
+            refused = _connect(robot, host, port) or _check_from_the_arm(robot, command)
             if refused is not None:
                 return refused
             if sampler is not None:
@@ -1004,6 +1004,27 @@ def _run_on(
         )
         return EXIT_OK, None
     return _failed(result)
+
+
+def _check_from_the_arm(robot: Robot, command: _Command) -> tuple[int, str] | None:
+    """Check the run's moves once more from where the arm is, before anything is commanded.
+
+    The plan was checked from the home pose, before connecting; the robot's reported pose
+    and joints may make the first move one the arm cannot take (another configuration,
+    a self-collision on its path), which the run would refuse only after its IDLE state
+    opened the gripper. A ConfigError raised here is exit 2, nothing sent but reads.
+
+    Returns:
+        None, or the exit code and reason of a robot that speaks another profile (its
+        first status read tells: the article profile's connect reads nothing).
+    """
+    try:
+        status = robot.status()
+    except ProfileMismatchError as exc:
+        return EXIT_CONFIG, _mismatch_reason(exc)
+    where = None if status.joints is None else (status.pose, status.joints)
+    validate_plan(robot, command.sequence, command.cycles, source=command.source, start=where)
+    return None
 
 
 def _connect(robot: Robot, host: str, port: int) -> tuple[int, str] | None:

@@ -138,7 +138,14 @@ class CycleRun(Generic[T]):
     times: int
 
 
-def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: str) -> int:
+def validate_plan(
+    robot: Robot,
+    sequence: TaskSequence,
+    cycles: int,
+    *,
+    source: str,
+    start: tuple[Pose, tuple[float, ...]] | None = None,
+) -> int:
     """Validate every known move against the profile, arm and limits; returns the count.
 
     Nothing is sent: a move that cannot be encoded (e.g. beyond +/-327.67 mm in the
@@ -153,6 +160,9 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
         sequence: The sequence.
         cycles: How many cycles will run.
         source: Where the sequence comes from (a file name), for the messages.
+        start: Where the arm is before the first move, its TCP pose and joints (deg),
+            as the robot reports them (None: not known; the first move's target alone
+            is checked).
 
     Returns:
         How many distinct moves were checked.
@@ -172,7 +182,7 @@ def validate_plan(robot: Robot, sequence: TaskSequence, cycles: int, *, source: 
 
     # Each move continues from the previous one's joints; middle cycles that repeat are
     # checked until they loop (the rest would repeat the same checks).
-    for _ in CyclePlan(sequence, cycles).run(None, check_cycle):
+    for _ in CyclePlan(sequence, cycles).run(start, check_cycle):
         pass
     # The retreat starts wherever the run stopped: its path is not known in advance.
     if sequence.retreat is not None:
