@@ -82,7 +82,7 @@ def test_a_stop_one_robot_owed_and_another_delivered_is_not_sent_again(
         assert sim.tcp_pose().distance_to(FAR) > 50, "the given-up move ran on"
         sim.clear_error()  # the operator resets the robot the Stop left in error
         second.wait_until_ready(timeout_s=5)
-        move = second.start_move(LOWER, speed=5)
+        move = second.start_move(LOWER, speed=10)
         sim.wait_for(lambda: sim.tcp_pose().z < 190, timeout=10)
         if then == "status":
             first.status()  # must not send the delivered Stop again
