@@ -47,9 +47,9 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
-def article_robot(proxy: FaultProxy, retry: RetryPolicy = RETRY) -> Robot:
+def article_robot(proxy: FaultProxy, retry: RetryPolicy = RETRY, host: str = "127.0.0.1") -> Robot:
     return Robot(
-        "127.0.0.1",
+        host,
         proxy.port,
         profile="article",
         polling=PollPolicy(interval_s=0.02),
@@ -58,9 +58,12 @@ def article_robot(proxy: FaultProxy, retry: RetryPolicy = RETRY) -> Robot:
     )
 
 
+@pytest.mark.parametrize("second_host", ["127.0.0.1", "localhost"])
 def test_a_stop_owed_by_a_closed_robot_is_delivered_by_the_next_robot(
-    sim: Simulator, proxy: FaultProxy
+    sim: Simulator, proxy: FaultProxy, second_host: str
 ) -> None:
+    # The second Robot names the robot as the first did, or otherwise: the process's
+    # debts are keyed by the address the name resolves to (tests/test_hunt8_host_names.py).
     first = article_robot(proxy).connect()
     try:
         first.wait_until_ready(timeout_s=5)
@@ -76,7 +79,7 @@ def test_a_stop_owed_by_a_closed_robot_is_delivered_by_the_next_robot(
         raise RuntimeError(f"set-up: the Stop was delivered ({motion.stop_delivered}, {closed})")
     # The link back: a new master of this process, its retries riding out the outage.
     patient = RetryPolicy(attempts=20, total_time_s=OUTAGE_S + 3, initial_backoff_s=0.05)
-    with article_robot(proxy, patient) as second:
+    with article_robot(proxy, patient, second_host) as second:
         second.status()
         if not sim.field("motion_status"):
             raise RuntimeError("set-up: the move was over before the new Robot connected")
