@@ -10,6 +10,7 @@ that horizon.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from types import SimpleNamespace
@@ -29,7 +30,11 @@ HORIZON_S = 0.3
 class FakeLink:
     """A link whose first write goes unanswered and whose output always reads ``found``."""
 
+    #: Each fake is a robot of its own: none shares another's doubts.
+    _robots = itertools.count()
+
     def __init__(self, found: Value, stop: threading.Event | None = None) -> None:
+        self.endpoint = ("fake", next(self._robots), 1)
         self.retry = RetryPolicy(attempts=2, total_time_s=HORIZON_S, initial_backoff_s=0)
         self.stats = SimpleNamespace(retries=0)
         self.interrupt = stop

@@ -498,10 +498,10 @@ class _MotionFollower:
             except TMMasterError as exc:
                 motion.stop_delivered = confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
-                if is_transient(exc) and not self._channel.duplicate_safe:
-                    _STOPS_OWED[self._robot()] = motion  # the link down: the process owes it
-                elif not is_transient(exc):
+                if not is_transient(exc):
                     _STOPS_OWED.pop(self._robot(), None)  # refused: this Robot's alone
+                elif not self._channel.duplicate_safe:
+                    _STOPS_OWED[self._robot()] = motion  # the link down: the process owes it
             try:
                 # After the Stop, never delaying it; whatever became of it: the program
                 # ends the command on this record even where the robot refuses Stop.

@@ -25,10 +25,12 @@ from ._status import MovePhase
 PROGRESS_MM = 0.1
 #: The same for the orientation alone (a move that only turns the tool), deg.
 PROGRESS_DEG = 0.1
-#: Within this of its target (mm, and deg) an arm is arriving, never stalled: one slower
-#: than the model creeps into its target by less than PROGRESS_MM a poll, as slowly as
-#: it is slow, then reports done at its next tick.
+#: Within this of its target (mm) an arm is arriving, never stalled: one slower than the
+#: model creeps into its target by less than PROGRESS_MM a poll, as slowly as it is
+#: slow, then reports done at its next tick.
 ARRIVING_MM = 1.0
+#: The same for the orientation, deg.
+ARRIVING_DEG = 1.0
 
 
 class FollowedMotion(Protocol):
@@ -213,11 +215,11 @@ class FollowState:
         """Count ``pose`` as progress when the arm moved measurably since the last, or is
         arriving at its target."""
         last, target = self._progress_pose, self.motion.target
-        arriving = target is not None and pose.is_close(target, mm=ARRIVING_MM, deg=ARRIVING_MM)
         if (
             last is not None
-            and not arriving
-            and (pose.distance_to(last) < PROGRESS_MM and pose.rotation_to(last) < PROGRESS_DEG)
+            and pose.distance_to(last) < PROGRESS_MM
+            and pose.rotation_to(last) < PROGRESS_DEG
+            and (target is None or not pose.is_close(target, mm=ARRIVING_MM, deg=ARRIVING_DEG))
         ):
             return
         self._progress_pose = pose

@@ -125,9 +125,8 @@ class LevelOutput:
         self._gated, self._on_late = gated, on_late
         # Our writes that got no answer (their frames may still land): value, sent at.
         # Shared with every LevelOutput of this process on the same output (a Robot made
-        # after another was closed), so that one's late frame is watched for by the next;
-        # a link that names no endpoint (a test's stand-in) shares them with nobody.
-        where = (*getattr(transport, "endpoint", (self,)), *self._at)
+        # after another was closed), so that one's late frame is watched for by the next.
+        where = (*transport.endpoint, table, address)
         self._lock, self._doubts = _WATCHED.setdefault(where, (threading.Lock(), []))
 
     def set(self, value: Value) -> None:

@@ -1480,8 +1480,8 @@ class MuJoCoBackend(_FingersAndParts):
 
     def scale_time(self, rate: float) -> None:
         """From now on, run the motion's time ``rate`` times as fast as planned (1: as
-        planned), a braking included: the robot's speed override changed mid-move. The servo follows
-        the faster or slower reference.
+        planned), a braking included: the robot's speed override changed mid-move. The
+        servo follows the faster or slower reference.
 
         Args:
             rate: Simulated motion seconds per simulated second, > 0.
