@@ -34,6 +34,8 @@ FAR = Pose(300, 250, 200, 180, 0, 90)
 #: The outage outlasts the poll's retries, the Stop's and the close's (0.3 s each).
 OUTAGE_S = 1.5
 RETRY = RetryPolicy(attempts=2, total_time_s=0.3, initial_backoff_s=0.05, jitter_s=0)
+#: A Robot whose retries ride out the outage.
+PATIENT = RetryPolicy(attempts=20, total_time_s=OUTAGE_S + 3, initial_backoff_s=0.05)
 
 
 @pytest.fixture
@@ -78,8 +80,7 @@ def test_a_stop_owed_by_a_closed_robot_is_delivered_by_the_next_robot(
     if motion.stop_delivered is not False or closed is not False:
         raise RuntimeError(f"set-up: the Stop was delivered ({motion.stop_delivered}, {closed})")
     # The link back: a new master of this process, its retries riding out the outage.
-    patient = RetryPolicy(attempts=20, total_time_s=OUTAGE_S + 3, initial_backoff_s=0.05)
-    with article_robot(proxy, patient, second_host) as second:
+    with article_robot(proxy, PATIENT, second_host) as second:
         second.status()
         if not sim.field("motion_status"):
             raise RuntimeError("set-up: the move was over before the new Robot connected")

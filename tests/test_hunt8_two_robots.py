@@ -25,19 +25,14 @@ import pytest
 import tmmaster
 from fault_proxy import FaultProxy
 from safety_invariant import at_rest
-from tmmaster import PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
+from test_hunt6_owed_stop_new_robot import FAR, OUTAGE_S, PATIENT, START, article_robot
+from test_hunt6_owed_stop_new_robot import RETRY as SHORT
+from tmmaster import Pose
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
-START = Pose(300, -200, 200, 180, 0, 90)
-FAR = Pose(300, 250, 200, 180, 0, 90)
 LOWER = Pose(300, -200, 120, 180, 0, 90)
-#: The outage outlasts the first Robot's poll and Stop retries (0.3 s each).
-OUTAGE_S = 1.5
-SHORT = RetryPolicy(attempts=2, total_time_s=0.3, initial_backoff_s=0.05, jitter_s=0)
-#: The second Robot's retries ride out the outage.
-PATIENT = RetryPolicy(attempts=20, total_time_s=OUTAGE_S + 3, initial_backoff_s=0.05)
 
 
 @pytest.fixture
@@ -49,17 +44,6 @@ def sim(tm_simulator_factory: Factory) -> Simulator:
 def proxy(sim: Simulator) -> Iterator[FaultProxy]:
     with FaultProxy(sim.port) as p:
         yield p
-
-
-def article_robot(proxy: FaultProxy, retry: RetryPolicy) -> Robot:
-    return Robot(
-        "127.0.0.1",
-        proxy.port,
-        profile="article",
-        polling=PollPolicy(interval_s=0.02),
-        retry=retry,
-        timeouts=TimeoutPolicy(request_s=0.2),
-    )
 
 
 @pytest.mark.parametrize("then", ["status", "close"])

@@ -21,6 +21,18 @@ START = Pose(300, -200, 300, 180, 0, 90)
 TARGET = Pose(300, -50, 300, 180, 0, 90)  # a 150 mm line
 
 
+def robot_on(sim: Simulator, profile: str, *, motion_margin_s: float) -> Robot:
+    """A robot whose derived timeouts are the model's time and ``motion_margin_s``."""
+    return Robot(
+        "127.0.0.1",
+        sim.port,
+        profile=profile,
+        gripper=None,
+        timeouts=TimeoutPolicy(motion_factor=1.0, motion_margin_s=motion_margin_s),
+        polling=PollPolicy(interval_s=0.02),
+    )
+
+
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_stalled_line_is_raised_within_its_announced_timeout(
     tm_simulator_factory: SimFactory, profile: str
@@ -28,15 +40,7 @@ def test_a_stalled_line_is_raised_within_its_announced_timeout(
     # Real time: the model's expected time is the simulated arm's (the stall is the
     # only difference), so the polls see the pace drop to nothing halfway.
     sim = tm_simulator_factory(profile, faults=["stall:at_move=2"], time_scale=1.0)
-    timeouts = TimeoutPolicy(motion_factor=1.0, motion_margin_s=0.6)
-    with Robot(
-        "127.0.0.1",
-        sim.port,
-        profile=profile,
-        gripper=None,
-        timeouts=timeouts,
-        polling=PollPolicy(interval_s=0.02),
-    ) as robot:
+    with robot_on(sim, profile, motion_margin_s=0.6) as robot:
         robot.wait_until_ready(5)
         robot.move_to(START, speed=100)
         motion = robot.start_move(TARGET, speed=60, motion="line")
@@ -63,15 +67,7 @@ def test_an_arm_eight_times_slower_than_the_model_still_ends_done(
     # An arm that keeps moving is given the time its pace asks for, up to 20 times the
     # model's budget (a project speed of 5 %): here 8 times, past the 4 it once was.
     sim = tm_simulator_factory(profile, cell=Cell(speed_factor=0.125), time_scale=1.0)
-    timeouts = TimeoutPolicy(motion_factor=1.0, motion_margin_s=0.1)
-    with Robot(
-        "127.0.0.1",
-        sim.port,
-        profile=profile,
-        gripper=None,
-        timeouts=timeouts,
-        polling=PollPolicy(interval_s=0.02),
-    ) as robot:
+    with robot_on(sim, profile, motion_margin_s=0.1) as robot:
         robot.wait_until_ready(5)
         target = sim.tcp_pose().offset(dy=15)
         motion = robot.move_to(target, speed=100, motion="line")
