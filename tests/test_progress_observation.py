@@ -229,3 +229,16 @@ def test_each_new_pose_moves_the_predicted_end() -> None:
     motion.last_pose = Pose(100 * trapezoid_progress(0.5, 2.0, 0.2), 0, 300, 180, 0, 0)
     follow.due()
     assert follow.schedule.expected_end == pytest.approx(4.0, rel=0.01)
+
+
+def test_the_poll_at_a_deadline_counts_before_the_deadline_is_judged() -> None:
+    # A poll delayed past the stall window (a starved machine) finds the arm still
+    # moving: the wait counts that pose before it judges the deadline, never judging on
+    # the poll before it.
+    motion, follow = _line_at_half_pace()
+    for at in (2.0, 3.0, 4.0, 4.6):
+        _seen_at(motion, follow, at, _quarter_pace(at))
+    follow.poll_started = 5.7  # 1.1 s after the last: past the 1 s window it began
+    motion.last_pose = Pose(100 * _quarter_pace(5.7), 0, 300, 180, 0, 0)
+    assert follow.overdue(5.7) is None
+    assert follow.last_progress_at == 5.7

@@ -135,20 +135,9 @@ class FollowState:
         The prediction follows what the polls observe: each new pose the robot reported
         moves the predicted end by the pace it shows (:meth:`MotionSchedule.observed`).
         """
+        self._take_in_last_poll()
         motion = self.motion
         ticket = motion.ticket
-        if ticket.acknowledged and not self._anchored:
-            self.schedule.acknowledged(
-                ticket.acknowledged_at or ticket.sent_at,
-                motion.expected_s,
-                since=ticket.pending_seen_at or ticket.sent_at,
-            )
-            self._anchored = True
-        pose = motion.last_pose
-        if self._anchored and pose is not None and pose is not self._observed:
-            self._observed = pose
-            self._note_progress(pose)
-            self.schedule.observed(self.poll_started, motion.path_fraction(pose))
         due = self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
         # A profile whose poll carries no pose reads it once, where it tells the most;
         # and at every poll from a stall's bound before the model's budget ends, where
@@ -237,8 +226,30 @@ class FollowState:
         idle = time.monotonic() - self.last_progress_at
         return f"; no progress seen for {idle:.2f} s (a stall)"
 
+    def _take_in_last_poll(self) -> None:
+        """Anchor the schedule on the acknowledgement, and count the last poll's pose (its
+        progress, the pace it shows) once."""
+        motion = self.motion
+        ticket = motion.ticket
+        if ticket.acknowledged and not self._anchored:
+            self.schedule.acknowledged(
+                ticket.acknowledged_at or ticket.sent_at,
+                motion.expected_s,
+                since=ticket.pending_seen_at or ticket.sent_at,
+            )
+            self._anchored = True
+        pose = motion.last_pose
+        if self._anchored and pose is not None and pose is not self._observed:
+            self._observed = pose
+            self._note_progress(pose)
+            self.schedule.observed(self.poll_started, motion.path_fraction(pose))
+
     def overdue(self, now: float) -> Overdue | None:
-        """The deadline that passed: acknowledgement (while sent), motion (while running)."""
+        """The deadline that passed: acknowledgement (while sent), motion (while running).
+
+        The last poll counts first: at a deadline, its pose may show the arm still moving.
+        """
+        self._take_in_last_poll()
         if now < self.deadline():
             return None
         return Overdue.ACK if self.motion.phase is MovePhase.SENT else Overdue.MOTION
