@@ -399,11 +399,7 @@ class FleetMember:
     """One robot of a fleet: the loop's side of its waits (touched by the loop thread)."""
 
     def __init__(
-        self,
-        fleet: Fleet,
-        channel: CommandChannel,
-        transport: LoopTransport,
-        gate: CommandGate,
+        self, fleet: Fleet, channel: CommandChannel, transport: LoopTransport, gate: CommandGate
     ) -> None:
         self.fleet = fleet
         self.channel = channel

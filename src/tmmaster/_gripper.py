@@ -745,9 +745,7 @@ class Blog2FG7Gripper(_OwnConnectionGripper):
         values = self.read("object_status", "motion_state")
         obj = self.profile.field("object_status").label(int(values["object_status"]))
         return GripperStatus(
-            busy=obj == "moving",
-            holding=obj in ("object_opening", "object_closing"),
-            width_mm=None,
+            busy=obj == "moving", holding=obj in ("object_opening", "object_closing"), width_mm=None
         )
 
     def _move(self, width_mm: float, timeout_s: float | None) -> GripperStatus:

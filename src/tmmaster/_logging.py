@@ -131,11 +131,7 @@ def configure_logging(
 
 
 def configure_command_logging(
-    *,
-    json: bool,
-    level: str,
-    stream: TextIO | None,
-    record_filter: logging.Filter | None = None,
+    *, json: bool, level: str, stream: TextIO | None, record_filter: logging.Filter | None = None
 ) -> Callable[[], None]:
     """:func:`configure_logging`, with ``record_filter`` on the handler (for a command that
     says some events itself, in its own words)."""

@@ -50,13 +50,7 @@ from ._exceptions import (
 )
 from ._fleet import LoopTransport
 from ._logging import get_logger
-from ._loop import (
-    EventLoopName,
-    LoopThread,
-    MonitoredStatus,
-    StatusRecord,
-    poll_on_schedule,
-)
+from ._loop import EventLoopName, LoopThread, MonitoredStatus, StatusRecord, poll_on_schedule
 from ._profiles import DEFAULT_PROFILE, robot_profile
 from ._registers import RobotProfile
 from ._robot import Robot
