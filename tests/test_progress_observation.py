@@ -242,3 +242,33 @@ def test_the_poll_at_a_deadline_counts_before_the_deadline_is_judged() -> None:
     motion.last_pose = Pose(100 * _quarter_pace(5.7), 0, 300, 180, 0, 0)
     assert follow.overdue(5.7) is None
     assert follow.last_progress_at == 5.7
+
+
+@pytest.mark.parametrize("stall_s", [1.0, 0.2])
+def test_a_short_moves_stall_window_has_a_floor_unless_stall_s_is_lower(stall_s: float) -> None:
+    # A short move (a 0.4 s budget: a quarter is 0.1 s) at a quarter of the model's pace,
+    # whose reported pose stands still for 0.3 s past the budget (a status hiccup while
+    # the arm moves): not a stall, unless stall_s itself asks for 0.2 s.
+    ticket = Ticket(Command(CommandKind.LINE, TARGET, 50), [], 0.0, seq=1)
+    ticket.acknowledged, ticket.acknowledged_at = True, 0.0
+    motion = _Motion(ticket)
+    motion.expected_s, motion.timeout_s, motion.accel_s = 0.3, 0.4, 0.05
+    follow = FollowState(
+        motion,
+        None,
+        stop_event=threading.Event(),
+        polling=PollPolicy(),
+        timeouts=TimeoutPolicy(ack_timeout_s=1.0, stall_s=stall_s),
+    )
+    quarter = [trapezoid_progress(at / 4, 0.3, 0.05) for at in (0.0, 0.2, 0.4, 0.5)]
+    for at, progress in zip((0.0, 0.2, 0.4, 0.5), quarter, strict=True):
+        _seen_at(motion, follow, at, progress)
+    _seen_at(motion, follow, 0.8, quarter[-1])  # the pose of 0.5 s, reported again at 0.8 s
+    assert follow.stall_window() == min(stall_s, 0.5)
+    if stall_s < 0.5:
+        assert follow.overdue(0.8) is Overdue.MOTION
+        return
+    assert follow.overdue(0.8) is None
+    _seen_at(motion, follow, 0.9, trapezoid_progress(0.9 / 4, 0.3, 0.05))  # moving on
+    assert follow.overdue(1.3) is None
+    assert follow.overdue(1.41) is Overdue.MOTION  # no progress for 0.5 s after 0.9 s

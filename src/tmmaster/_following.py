@@ -31,6 +31,10 @@ PROGRESS_DEG = 0.1
 ARRIVING_MM = 1.0
 #: The same for the orientation, deg.
 ARRIVING_DEG = 1.0
+#: The shortest stall window a short move's budget sets, s (``stall_s`` set lower wins):
+#: a reported pose can stand still for a few status cycles while the arm moves (a
+#: controller or network hiccup, a robot's host paused), never a stall that short.
+STALL_FLOOR_S = 0.5
 
 
 class FollowedMotion(Protocol):
@@ -184,10 +188,11 @@ class FollowState:
     def stall_window(self) -> float:
         """How long the arm may show no progress past the model's budget, s.
 
-        ``stall_s``, or a quarter of the budget for a short move: a stall that began
-        before the model's budget ended is raised when it ends.
+        ``stall_s``, or a quarter of the budget for a short move but at least
+        :data:`STALL_FLOOR_S`: a stall that began before the model's budget ended is
+        raised when it ends.
         """
-        return min(self.stall_s, self.budget / 4)
+        return min(self.stall_s, max(self.budget / 4, STALL_FLOOR_S))
 
     def longest_budget(self) -> float:
         """The most :meth:`applied_budget` can grow to, s (a bound for whoever waits on it)."""

@@ -16,14 +16,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, ClassVar, Protocol
 
-from pydantic import (
-    AliasChoices,
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    model_validator,
-)
+from pydantic import AliasChoices, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from . import _body as body
 from . import _kinematics as kin
@@ -210,8 +203,7 @@ class TimeoutPolicy(Policy):
     ] = None
     #: Gripper moves must end within this time.
     gripper_timeout_s: Annotated[
-        float,
-        Field(gt=0, le=600, validation_alias=AliasChoices("gripper_timeout_s", "gripper_s")),
+        float, Field(gt=0, le=600, validation_alias=AliasChoices("gripper_timeout_s", "gripper_s"))
     ] = 5.0
     #: A register gripper without a busy flag (the article profile's): how long an open
     #: or a close takes at most, s (up to 60).
@@ -223,7 +215,8 @@ class TimeoutPolicy(Policy):
     in_flight_s: Annotated[float, Field(gt=0, le=600)] = 5.0
     #: A move whose derived timeout grows with a pace slower than the model's must show
     #: progress (0.1 mm or 0.1 deg) at least this often past its model budget (or every
-    #: quarter of that budget, if less); none for this long is a stall, s.
+    #: quarter of that budget, if less, but never under 0.5 s unless set so here); none
+    #: for this long is a stall, s.
     stall_s: Annotated[float, Field(gt=0, le=60)] = 1.0
     #: The master's heartbeat (``tmflow``: ``master_heartbeat``, docs/safety.md): written
     #: this often from the first command to close, s (0.02 to 0.5: the robot program asks for a
