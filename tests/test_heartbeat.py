@@ -192,3 +192,56 @@ def test_a_thread_reading_back_to_back_does_not_starve_the_heartbeat(sim: Simula
         assert motion.done
         assert motion.finished_at is not None
         assert motion.finished_at - motion.ticket.sent_at > 2 * FAST.heartbeat_ttl_s
+
+
+class _Link:
+    """A link whose heartbeat writes are answered or not, as the test says."""
+
+    def __init__(self) -> None:
+        self.busy = False
+        self.written: list[list[int]] = []
+
+    def write_when_free(self, address: int, words: list[int], *, wait_s: float) -> bool | None:
+        if self.busy:
+            return True  # the link stayed busy for wait_s: nothing sent
+        self.written.append(words)
+        return None
+
+    def write_block(self, table: object, address: int, words: list[int], retry: bool) -> None:
+        self.written.append(words)
+
+    def read_fields(self, fields: object) -> dict[str, int]:
+        return {"master_session": 0}
+
+
+def _beating(link: _Link) -> Heartbeat:
+    class Log:
+        def info(self, *args: object, **kwargs: object) -> None: ...
+
+        def warning(self, *args: object, **kwargs: object) -> None: ...
+
+    transport: Any = link
+    beat = Heartbeat(robot_profile("tmflow"), transport, period_s=0.4, ttl_s=2.0, log=Log())
+    beat._thread = threading.Thread(target=print)  # running, without a writer of its own
+    beat.claim(None)
+    return beat
+
+
+@pytest.mark.parametrize("how", ["renewed beat missed", "older beat answered after it"])
+def test_a_command_beats_first_when_the_robot_may_hold_another_session(how: str) -> None:
+    # A command carries the master's session; the program refuses one whose session is
+    # not the last beat's (another_master). After a renewal whose beat the robot may not
+    # hold, the next command's claim beats with the new session before it is sent.
+    link = _Link()
+    beat = _beating(link)
+    assert not beat.claim_due
+    older = beat.next_words()  # a slot's beat, built before the renewal, still waiting
+    link.busy = how == "renewed beat missed"
+    session = beat.renew()
+    if how == "older beat answered after it":
+        beat.wrote(None, older)
+    assert beat.claim_due
+    link.busy = False
+    assert beat.claim(None) == session
+    assert link.written[-1][2] == session
+    assert not beat.claim_due

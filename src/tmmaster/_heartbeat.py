@@ -100,6 +100,8 @@ class Heartbeat:
         self.beat = 0
         #: This master's session, written with every beat and every command (0: none).
         self.session = _new_session() if self._fields else 0
+        #: The session of the last beat answered: the one the robot holds of this master.
+        self.held = 0
         #: Writes answered by the robot.
         self.writes = 0
         #: When a write was last answered (time.monotonic()).
@@ -136,16 +138,19 @@ class Heartbeat:
     def claim_due(self) -> bool:
         """True while a command must first :meth:`claim` the robot: not beating yet, or
         no beat answered for half the time-to-live (the link was down: the robot may
-        see this master gone, and would consume the command as cancelled)."""
+        see this master gone, and would consume the command as cancelled), or the last
+        beat answered carried another session (a renewed session's beat missed, or an
+        older beat landed after it: the program would refuse the command as
+        ``another_master``)."""
         stale = time.monotonic() - self.wrote_at > self.ttl_ms / 2000
-        return self.enabled and (not self.running or stale)
+        return self.enabled and (not self.running or stale or self.held != self.session)
 
     def claim(self, member: FleetMember | None) -> int:
         """Before this master's first command: beat once with a session the robot does not
         hold yet (a new one when beating again after :meth:`stop`: the robot program may
         have seen the old one replaced, and takes no beat of it back), then go on beating
-        (:meth:`start`). Once beating, nothing, unless no beat was answered for half the
-        time-to-live: then one beat first, with the same session.
+        (:meth:`start`). Once beating, nothing, unless :attr:`claim_due` (a silence, or
+        the robot holding another session): then one beat first, with this session.
 
         Args:
             member: The robot's side of its driver (a network robot), or None.
@@ -160,15 +165,15 @@ class Heartbeat:
         if not self.claim_due:
             return self.session
         if not self.running:
-            held = int(self._transport.read_fields(self._fields[2:])["master_session"])
+            theirs = int(self._transport.read_fields(self._fields[2:])["master_session"])
             if self.writes:  # beating again after a stop
                 self.session = _new_session()
-            while self.session == held:  # never a predecessor's
+            while self.session == theirs:  # never a predecessor's
                 self.session = _new_session()
         # Not a command: a beat sent twice is harmless, so the link's retries apply.
-        self._transport.write_block(Table.HOLDING, self.address, self.next_words(), retry=True)
-        self.wrote_at = time.monotonic()
-        self.writes += 1
+        words = self.next_words()
+        self._transport.write_block(Table.HOLDING, self.address, words, retry=True)
+        self.wrote(None, words)
         self.start(member)
         return self.session
 
@@ -179,7 +184,8 @@ class Heartbeat:
         controller restart put its sequence numbers back at 0 and freed the frame's number.
 
         The beat is written once, as any beat: one that fails is logged and counted missed
-        (``robot.heartbeat_failed``), and the next beat carries the new session. It never
+        (``robot.heartbeat_failed``), the next beat carries the new session, and the next
+        command beats with it first (:attr:`claim_due`) rather than be refused. It never
         raises, so the caller's error (the command given up) is what the user sees. A
         heartbeat not running (silenced while a give-up is owed: the next claim takes a
         new session) writes nothing.
@@ -190,7 +196,8 @@ class Heartbeat:
         if not self.running:
             return self.session
         self.session = (self.session + secrets.randbelow(HEARTBEAT_MAX - 1)) % HEARTBEAT_MAX + 1
-        self.wrote(_write_once(self._transport, self.address, self.next_words(), self.period_s))
+        words = self.next_words()
+        self.wrote(_write_once(self._transport, self.address, words, self.period_s), words)
         return self.session
 
     def start(self, member: FleetMember | None) -> None:
@@ -242,8 +249,8 @@ class Heartbeat:
         if task is not None and member is not None:
             member.fleet._call_soon(task.cancel)
 
-    def wrote(self, outcome: BaseException | bool | None) -> float:
-        """Count one slot and say when the next beat is due, s from now.
+    def wrote(self, outcome: BaseException | bool | None, words: list[int]) -> float:
+        """Count one slot of the beat ``words`` and say when the next beat is due, s from now.
 
         ``outcome``: None, written; True, missed (the link busy or down); an error, missed
         (logged once per run of failures). A missed beat is tried again soon.
@@ -251,6 +258,7 @@ class Heartbeat:
         if outcome is None:
             self.writes += 1
             self.wrote_at = time.monotonic()
+            self.held = words[2]
             if self._failing:
                 self._failing = False
                 self._log.info("robot.heartbeat_resumed", beat=self.beat)
@@ -272,10 +280,11 @@ async def _beat_on_loop(
             return
         delay = beat.period_s
         if member.linked():
+            words = beat.next_words()
             outcome = await member.write_when_free(
-                beat.address, beat.next_words(), wait_s=beat.period_s, poll_s=_BUSY_POLL_S
+                beat.address, words, wait_s=beat.period_s, poll_s=_BUSY_POLL_S
             )
-            delay = beat.wrote(outcome)
+            delay = beat.wrote(outcome, words)
         del beat  # the task keeps no Robot alive between two beats
         await asyncio.sleep(delay)
 
@@ -294,8 +303,8 @@ def _beat_in_thread(
         beat = ref()
         if beat is None or transport.state is ConnectionState.CLOSED:
             return
-        outcome = _write_once(transport, beat.address, beat.next_words(), beat.period_s)
-        delay = beat.wrote(outcome)
+        words = beat.next_words()
+        delay = beat.wrote(_write_once(transport, beat.address, words, beat.period_s), words)
         del beat
 
 
