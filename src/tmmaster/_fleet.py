@@ -875,9 +875,7 @@ class Fleet:
             thread.start()
         for thread in threads:  # past the deadline too: see Robot.close
             thread.join()
-        unconfirmed = tuple(
-            robot.name for robot, _member in members if not outcomes.get(robot.name, False)
-        )
+        unconfirmed = tuple(r.name for r, _m in members if not outcomes.get(r.name, False))
         for name in unconfirmed:
             _log.error("fleet.close_unconfirmed", robot=name)
         self._runner.stop()
@@ -995,9 +993,15 @@ def fleet_driver(
     """For :class:`~tmmaster.Robot`: the loop's side of its waits and watch, registered.
 
     The fleet closes ``gate`` and then ``robot`` when it closes (:meth:`Fleet.close`).
+
+    Raises:
+        ConfigError: The fleet began to close since ``join_fleet()`` (the robot is never
+            connected: that close would not give up what it wrote).
     """
     member = FleetMember(fleet, channel, transport, gate)
     with fleet._lock:
+        if fleet._closed:  # since join_fleet(): its close has listed its robots without this one
+            raise ConfigError("this Fleet is closed; make a new one")
         fleet._members[robot] = member
         index = len(fleet._members) - 1
     if fleet.watch_hz is not None:
