@@ -59,14 +59,41 @@ class Cell:
         thread = threading.Thread(target=run, name=f"move-{name}")
         thread.start()
         self.threads.append(thread)
-        sim = self.sims[name]
-        sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5)
-        sim.wait_for(lambda: sim.tcp_pose().distance_to(A) > 5, timeout=5)
+
+    def wait_moving(self, *names: str) -> None:
+        """Each named robot took its move to FAR and its arm left A."""
+        for sim in (self.sims[name] for name in names):
+            sim.wait_for(lambda s=sim: len(s.motion_log()) == 2, timeout=5)
+            sim.wait_for(lambda s=sim: s.tcp_pose().distance_to(A) > 5, timeout=5)
+
+    def check_stopped_short(
+        self, names: list[str], goals: dict[str, Pose], why: str, closed_at: float
+    ) -> None:
+        """Each named robot is at rest short of its goal and stays there (30 ticks).
+
+        The robots are watched together, and then none has started a motion since
+        ``closed_at``.
+        """
+        rests: dict[str, tuple[Pose, int]] = {}
+        for name in names:
+            sim = self.sims[name]
+            sim.wait_for(at_rest(sim), timeout=10, interval=0.1)
+            rest = sim.tcp_pose()
+            assert rest.distance_to(goals[name]) > 50, f"{name} ran on to {rest} ({why})"
+            rests[name] = rest, sim.ticks
+        for name, (rest, ticks) in rests.items():
+            sim = self.sims[name]
+            sim.wait_for(lambda s=sim, t=ticks: s.ticks >= t + 30, timeout=5)
+            assert sim.tcp_pose().is_close(rest), f"{name} moved again after it stopped"
+        for name, sim in self.sims.items():
+            late = [m for m in sim.motion_log() if m.wall_time > closed_at]
+            assert not late, f"{name}: motions started after Fleet.close(): {late}"
 
 
 @contextmanager
 def cell(profile: str) -> Iterator[Cell]:
-    timing = Timing(tick_hz=SUITE_TICK_HZ)
+    # The start-up (0.2 s by default, in real time here) is not what these tests are about.
+    timing = Timing(tick_hz=SUITE_TICK_HZ, init_time_s=0.02)
     with (
         Simulator(profile, time_scale=1.0, timing=timing) as sim_a,
         Simulator(profile, time_scale=1.0, timing=timing) as sim_b,
@@ -87,10 +114,13 @@ def cell(profile: str) -> Iterator[Cell]:
         }
         here = Cell({"a": sim_a, "b": sim_b}, proxy, fleet, robots)
         try:
-            for name, robot in robots.items():
+            for robot in robots.values():
                 robot.connect()
                 robot.wait_until_ready(timeout_s=5)
-                robot.move_to(A, speed=100)
+            # Both arms to A at once (each move real time): then each on its long move.
+            motions = {name: robot.start_move(A, speed=100) for name, robot in robots.items()}
+            for name, motion in motions.items():
+                motion.wait()
                 here.issued[name] = [Issued(A, 0.0, 0.0, "done")]
             yield here
         finally:
@@ -124,6 +154,7 @@ def test_fleet_close_with_a_slow_or_dropped_link_leaves_nothing_running(
     with cell(profile) as c:
         c.move_far("a")
         c.move_far("b")
+        c.wait_moving("a", "b")
         fault(c)
         closed_at = time.monotonic()
         unconfirmed = c.fleet.close(timeout_s=budget_s)
@@ -136,17 +167,11 @@ def test_fleet_close_with_a_slow_or_dropped_link_leaves_nothing_running(
             late = [m for m in sim.motion_log() if m.wall_time > closed_at]
             assert not late, f"{name}: motions started after Fleet.close(): {late}"
             check(c.issued[name], sim.motion_log())
-        for name, sim in c.sims.items():
-            if name in unconfirmed and profile == "article":
-                continue  # reported: an article robot whose Stop failed may run on
-            # Confirmed (or tmflow: the program expires a silent master's move within
-            # master_ttl_ms, 2 s): at rest short of FAR (8 s away), and it stays there.
-            sim.wait_for(at_rest(sim), timeout=10, interval=0.1)
-            rest = sim.tcp_pose()
-            assert rest.distance_to(FAR) > 50, f"{name} ran on to {rest} ({unconfirmed=})"
-            ticks = sim.ticks
-            sim.wait_for(lambda s=sim, t=ticks: s.ticks >= t + 30, timeout=5)
-            assert sim.tcp_pose().is_close(rest), f"{name} moved again after it stopped"
+        # Confirmed (or tmflow: the program expires a silent master's move within
+        # master_ttl_ms, 2 s): at rest short of FAR (8 s away), and it stays there. An
+        # article robot whose Stop failed is reported, and may run on.
+        names = [n for n in c.sims if n not in unconfirmed or profile != "article"]
+        c.check_stopped_short(names, {"a": FAR, "b": FAR}, f"{unconfirmed=}", closed_at)
         assert "a" not in unconfirmed, unconfirmed
 
 
@@ -161,6 +186,7 @@ def test_fleet_close_during_a_slow_command_write_stops_what_it_started(profile: 
     # called, but then stops it; nothing starts after close() returned.
     with cell(profile) as c:
         c.move_far("a")
+        c.wait_moving("a")
         command_block = 9000 if profile == "tmflow" else 0x0200
         c.proxy.add(Rule("delay", function_code=16, address=command_block, delay_s=VERY_SLOW_S))
         command = Issued(B_TARGET, time.monotonic())
@@ -187,11 +213,5 @@ def test_fleet_close_during_a_slow_command_write_stops_what_it_started(profile: 
         for name, sim in c.sims.items():
             late = [m for m in sim.motion_log() if m.wall_time > closed_at]
             assert not late, f"{name}: motions started after Fleet.close() returned: {late}"
-            sim.wait_for(at_rest(sim), timeout=10, interval=0.1)
-            rest = sim.tcp_pose()
-            goal = FAR if name == "a" else B_TARGET
-            assert rest.distance_to(goal) > 50, f"{name} ran on to {rest} ({unconfirmed=})"
-            ticks = sim.ticks
-            sim.wait_for(lambda s=sim, t=ticks: s.ticks >= t + 30, timeout=5)
-            assert sim.tcp_pose().is_close(rest), f"{name} moved again after it stopped"
+        c.check_stopped_short(["a", "b"], {"a": FAR, "b": B_TARGET}, f"{unconfirmed=}", closed_at)
         assert unconfirmed == (), unconfirmed
