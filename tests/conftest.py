@@ -1,4 +1,5 @@
-"""Shared fixtures: every test must leave no thread and no socket behind."""
+"""Shared fixtures: every test must leave no thread and no socket behind, and no give-up
+owed to its robot reaches the next test's."""
 
 from __future__ import annotations
 
@@ -17,6 +18,9 @@ import pytest
 from hypothesis import settings
 
 import tmmaster
+import tmmaster._command
+import tmmaster._gripper
+import tmmaster._io
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Fleet, PollPolicy, Robot
 from tmmaster.sim import Simulator, Timing
@@ -76,6 +80,18 @@ def no_leaks() -> Iterator[None]:
         f"test leaked {len(new_threads)} thread(s) {[t.name for t in new_threads]}"
         f" and {len(new_sockets)} socket(s)"
     )
+
+
+@pytest.fixture(autouse=True)
+def no_debt_outlives_its_robot() -> Iterator[None]:
+    """What a test's Robots left owed to its robot (a Stop the link could not carry, a
+    late output frame, a gripper's Stop: kept per process and robot address) ends with the
+    test: its simulators are gone, and the next test's on a reused port is another robot,
+    whose first call would deliver it."""
+    yield
+    tmmaster._command._STOPS_OWED.clear()
+    tmmaster._io._WATCHED.clear()
+    tmmaster._gripper._STOP_DOUBTS.clear()
 
 
 @pytest.fixture

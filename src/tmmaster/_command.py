@@ -495,6 +495,8 @@ class _MotionFollower:
             try:
                 self.stop()
                 motion.stop_delivered = True
+                if _STOPS_OWED.get(self._robot()) is motion:  # delivered: owed no more
+                    del _STOPS_OWED[self._robot()]
             except TMMasterError as exc:
                 motion.stop_delivered = confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
