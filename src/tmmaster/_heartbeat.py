@@ -253,7 +253,8 @@ class Heartbeat:
         """Count one slot of the beat ``words`` and say when the next beat is due, s from now.
 
         ``outcome``: None, written; True, missed (the link busy or down); an error, missed
-        (logged once per run of failures). A missed beat is tried again soon.
+        (logged once per run of failures). A missed beat is tried again soon, and a beat
+        of a session renewed since it was built at once (the robot holds the old one).
         """
         if outcome is None:
             self.writes += 1
@@ -262,7 +263,7 @@ class Heartbeat:
             if self._failing:
                 self._failing = False
                 self._log.info("robot.heartbeat_resumed", beat=self.beat)
-            return self.period_s
+            return self.period_s if self.held == self.session else 0.0
         self.missed += 1
         if isinstance(outcome, BaseException) and not self._failing:
             self._failing = True
