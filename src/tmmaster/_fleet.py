@@ -837,7 +837,10 @@ class Fleet:
         withdrawing or stopping what it has outstanding, within ``timeout_s`` in all
         (beyond it only by the first attempts of a robot's give-up and a command write
         still on its way, as :meth:`Robot.close` says): a robot whose link is dead does
-        not hold the others up. Safe to call more than once (later calls return an empty tuple).
+        not hold the others up. Safe to call more than once, and from several threads at
+        once: each call returns only once every robot's clean-up is over (a call while
+        another is at work waits for it, as :meth:`Robot.close` does) and says what
+        could not be confirmed, never an empty tuple while an arm is still being stopped.
 
         Args:
             timeout_s: the budget for the robots' clean-up, in seconds.
@@ -851,9 +854,7 @@ class Fleet:
             ConfigError: ``timeout_s`` is not a finite number > 0.
         """
         require_positive("timeout_s", timeout_s)
-        with self._lock:
-            if self._closed:
-                return ()
+        with self._lock:  # a later call closes them again: it waits for a close at work
             self._closed = True
             members = list(self._members.items())
         deadline = time.monotonic() + timeout_s
