@@ -122,3 +122,47 @@ def _wait_closed(fleet: Fleet) -> None:
             return
         time.sleep(0.002)
     raise AssertionError("the fleet never began to close")
+
+
+def test_a_fleet_closing_while_a_robot_is_being_made_closes_no_half_made_robot(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The same race one step later: the robot was listed by its fleet before it was
+    # whole (its link and gate made, not its close() state): the close's thread failed
+    # on it (AttributeError), the fleet named it unconfirmed though it sent nothing, and
+    # the robot came out of Robot() open, on a closed fleet. It joins last now: a close
+    # at that point never lists it, and Robot() raises ConfigError.
+    building, go = threading.Event(), threading.Event()
+    frames = robot_module.FrameGuard
+
+    def held_frames(*args: Any) -> Any:
+        if threading.current_thread().name == "late":
+            building.set()
+            go.wait(5)
+        return frames(*args)
+
+    monkeypatch.setattr(robot_module, "FrameGuard", held_frames)
+    outcome: list[str] = []
+    failures: list[BaseException] = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: failures.append(args.exc_value))
+    with Simulator("tmflow", time_scale=20.0) as sim:
+        fleet = Fleet()
+
+        def late() -> None:
+            try:
+                Robot("127.0.0.1", sim.port, profile="tmflow", gripper=None, link=fleet).close()
+                outcome.append("made")
+            except ConfigError:
+                outcome.append("refused")
+
+        maker = threading.Thread(target=late, name="late")
+        maker.start()
+        try:
+            assert building.wait(5)
+            unconfirmed = fleet.close()
+        finally:
+            go.set()
+            maker.join(10)
+        assert not failures, failures
+        assert unconfirmed == ()
+        assert outcome == ["refused"]

@@ -344,7 +344,7 @@ class Robot:
         self.frame_check = options.checks.frame
         self._transport = links.open(self.profile, name, options)
         self._log = _log.bind(robot=name)
-        self._open_command_path(options, links.fleet)
+        self._open_command_path(options)
         # The frame check, at connect and before every move (_tool.py).
         self._frames = FrameGuard(self._channel, self.frame_check, tool_spec, self._log)
         # Checks and plans every move from where the arm is believed to be (no I/O).
@@ -368,13 +368,14 @@ class Robot:
         #: The robot's gripper (a NoGripper when there is none).
         self.gripper = options.gripper(gripper, self.profile, links)
         self.gripper.attach(self._mount())
-        # Made: a StatusMonitor.add() of its own link to this address is refused.
+        # Whole, it joins its driver (a Fleet closing from now on closes it; one closing
+        # since links.open() refuses it), and a StatusMonitor.add() of its link is refused.
+        self._shared = self._join(links.fleet)
         _commanded.register(self.name, self._transport)
 
-    def _open_command_path(self, options: _Options, fleet: Fleet | None) -> None:
+    def _open_command_path(self, options: _Options) -> None:
         """The channel over the link, the stop event, the follower and its gate; the I/O
-        and the TMflow project's Play and Pause, whose writes pass the same gate; a
-        Fleet's robot joins its fleet."""
+        and the TMflow project's Play and Pause, whose writes pass the same gate."""
         self._channel: CommandChannel = channel_for(self.profile, self._transport)
         self._stop_event = threading.Event()
         # Retry sleeps of reads end at once on a stop request, like every poll.
@@ -399,7 +400,6 @@ class Robot:
         self._project = ProjectControl(
             self.profile, self._transport, self._channel, self._gate, self._stop_event, self._log
         )
-        self._shared = self._join(fleet)
         # The master's heartbeat (tmflow), from the first command to close (_heartbeat.py).
         self._heartbeat = Heartbeat(
             self.profile,
