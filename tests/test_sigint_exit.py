@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 from pathlib import Path
 
 import pytest
@@ -216,3 +217,24 @@ def test_a_command_process_leaves_its_heap_to_the_system_after_every_exit_hook(
         assert registered == []  # a caller in the same process keeps its heap collected
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+def test_every_ctrl_c_is_noted_before_the_stop_it_sets_off_runs() -> None:
+    # The first Ctrl-C's stop runs in a thread of its own, which a loaded machine may run
+    # only after a second Ctrl-C's KeyboardInterrupt: the clean-up that runs then (a
+    # withdraw, a stop, their log lines) must already find the command interrupted.
+    from tmmaster._sigint import first_stops
+
+    release = threading.Event()
+    noted: list[int] = []
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with first_stops(lambda: release.wait(5), noted=lambda: noted.append(len(noted))):
+            signal.raise_signal(signal.SIGINT)
+            assert noted == [0]  # the stop's thread is still held
+            with pytest.raises(KeyboardInterrupt):
+                signal.raise_signal(signal.SIGINT)
+        assert noted == [0, 1]
+    finally:
+        release.set()
+        signal.signal(signal.SIGINT, previous)

@@ -132,7 +132,7 @@ def _hand_back(previous: object, *, process: bool) -> None:
 
 
 @contextmanager
-def first_stops(stop: Callable[[], None]) -> Iterator[None]:
+def first_stops(stop: Callable[[], None], *, noted: Callable[[], None]) -> Iterator[None]:
     """While the block runs, the first Ctrl-C calls ``stop`` instead of interrupting.
 
     The command then winds down by itself (a pick & place run stops the arm, writes its
@@ -147,6 +147,9 @@ def first_stops(stop: Callable[[], None]) -> Iterator[None]:
             of its own, started at once: the handler may have interrupted the main
             thread inside the very lock ``stop`` takes (an Event's, while the main thread
             waits on it), which ``stop`` then waits for instead of deadlocking.
+        noted: Called in the handler itself at each Ctrl-C, before anything it sets off
+            (it must only set a flag): the command knows it was interrupted even when a
+            second Ctrl-C's clean-up runs before ``stop``'s thread does.
 
     Yields:
         Nothing.
@@ -160,6 +163,7 @@ def first_stops(stop: Callable[[], None]) -> Iterator[None]:
     def handler(signum: int, frame: FrameType | None) -> None:
         nonlocal pressed
         _ = signum, frame
+        noted()
         if pressed:
             _interrupt_once(signum, frame)
         pressed = True

@@ -968,13 +968,9 @@ def _run_on(
     outcome.target = {"host": host, "port": port, "profile": robot.profile.name}
     runner = Runner.from_config(robot, command.config, on_state=out.progress)
 
-    def stop() -> None:
-        out.interrupt()
-        runner.request_stop()
-
     # The first Ctrl-C stops the run (the arm is stopped, the report written); a second
-    # one gives up at once.
-    with first_stops(stop):
+    # one gives up at once. Each marks the output interrupted first: only the last line.
+    with first_stops(runner.request_stop, noted=out.interrupt):
         if out.live is not None:
             out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
         try:
