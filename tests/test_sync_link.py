@@ -9,7 +9,9 @@ the guarantees of the raw-socket link the transport used to have, kept on the on
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import struct
+import threading
 import time
 
 import pytest
@@ -20,6 +22,7 @@ from scripted_slave import (
     answer_in_parts,
     answer_with,
     close_connection,
+    frame,
     never_answer,
     registers,
 )
@@ -57,15 +60,22 @@ def link(port: int, *, attempts: int = 1) -> ModbusTransport:
 
 
 def test_a_late_answer_is_dropped_not_taken_for_the_next_read(slave: type[SlaveThread]) -> None:
-    script = [
-        answer_with(registers(111, 111), after_s=0.3),  # after the read gave up
-        answer_with(registers(222, 222)),
-    ]
-    with slave(script) as s, link(s.port) as t:
+    # The late answer is sent once the read gave up, whatever a loaded machine's timers do.
+    gave_up, sent = threading.Event(), threading.Event()
+
+    async def late(tid: int, _request: bytes, writer: asyncio.StreamWriter) -> None:
+        await asyncio.to_thread(gave_up.wait, 10)
+        writer.write(frame(tid, registers(111, 111)))
+        with contextlib.suppress(ConnectionError):  # into the link the master closed
+            await writer.drain()
+        sent.set()
+
+    with slave([late, answer_with(registers(222, 222))]) as s, link(s.port) as t:
         with pytest.raises(ResponseTimeoutError, match=r"no answer to read holding .* 0\.2 s"):
             t.read_block(Table.HOLDING, 0, 2)
         assert t.state is ConnectionState.DISCONNECTED  # the late answer's stream is gone
-        time.sleep(0.15)  # the late answer is sent now, into the closed link
+        gave_up.set()
+        assert sent.wait(10)
         assert t.read_block(Table.HOLDING, 0, 2) == [222, 222]
         assert t.stats.reconnects == 1
 
