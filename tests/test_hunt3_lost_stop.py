@@ -34,14 +34,17 @@ Factory = Callable[..., Simulator]
 
 START = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 250, 200, 180, 0, 90)
-#: The outage outlasts the poll's retries and the Stop's (0.3 s each).
-OUTAGE_S = 1.5
+#: The outage outlasts the poll's retries and the Stop's (0.3 s each): unloaded, the
+#: wait gives up and the Stop fails about 0.25 s into it (connections refused at once).
+OUTAGE_S = 0.8
+#: Twice real time: FAR is still about 4 s away at speed 5, far beyond the outage.
+TIME_SCALE = 2.0
 RETRY = RetryPolicy(attempts=2, total_time_s=0.3, initial_backoff_s=0.05, jitter_s=0)
 
 
 @pytest.fixture
 def sim(tm_simulator_factory: Factory) -> Simulator:
-    return tm_simulator_factory("article", time_scale=1.0)
+    return tm_simulator_factory("article", time_scale=TIME_SCALE)
 
 
 @pytest.fixture
@@ -84,7 +87,7 @@ def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
     with article_robot(proxy, driver_or_fleet) as robot:
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(START, speed=100)
-        motion = robot.start_move(FAR, speed=5)  # about 8 s to go
+        motion = robot.start_move(FAR, speed=5)  # about 4 s to go
         sim.wait_for(lambda: sim.tcp_pose().y > START.y + 10, timeout=20)
         proxy.outage(OUTAGE_S)
         with pytest.raises(tmmaster.TransportError):
@@ -92,7 +95,7 @@ def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
         # The master's next calls: refused while the Stop still cannot be delivered
         # (CommandStateUnknownError), then, the link back, the Stop goes first.
         sim.wait_for(answered(robot), timeout=OUTAGE_S + 5, interval=0.1)
-        sim.wait_for(at_rest(sim), timeout=15, interval=0.1)  # to FAR: about 8 s
+        sim.wait_for(at_rest(sim), timeout=15, interval=0.1)  # to FAR: about 4 s
         rest = sim.tcp_pose()
         assert rest.distance_to(FAR) > 100, f"the given-up move ran on to {rest}"
         assert motion.stop_delivered is True
@@ -130,7 +133,7 @@ GiveUp = Callable[[asyncio.Task[object], FaultProxy], Awaitable[None]]
 async def moving_then_cut(
     sim: Simulator, proxy: FaultProxy, robot: aio.AsyncRobot
 ) -> asyncio.Task[object]:
-    """The arm on its way from START to FAR (about 8 s), then the link cut."""
+    """The arm on its way from START to FAR (about 4 s), then the link cut."""
     await robot.wait_until_ready(timeout_s=5)
     await robot.move_to(START, speed=100)
     move: asyncio.Task[object] = asyncio.ensure_future(robot.move_to(FAR, speed=5))
@@ -140,7 +143,7 @@ async def moving_then_cut(
 
 
 async def stops_short(sim: Simulator) -> None:
-    # Looks 0.1 s apart (several ticks): to FAR would take about 8 s.
+    # Looks 0.1 s apart (several ticks): to FAR would take about 4 s.
     await asyncio.to_thread(sim.wait_for, at_rest(sim), 15, interval=0.1)
     rest = sim.tcp_pose()
     assert rest.distance_to(FAR) > 100, f"the given-up move ran on to {rest}"
