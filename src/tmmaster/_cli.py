@@ -37,19 +37,13 @@ COMMANDS: dict[str, tuple[str, str | None]] = {
     "sim": ("run the robot simulator (a Modbus TCP server)", "tmmaster.sim.__main__"),
     "pickplace": ("run a configurable pick & place", "tmmaster.pickplace.__main__"),
     "report": ("show a run report as a table, or plot it", "tmmaster.report.__main__"),
-    "tmscript": (
-        "check, evaluate or run TMscript (Script Projects)",
-        "tmmaster.tmscript.__main__",
-    ),
+    "tmscript": ("check, evaluate or run TMscript (Script Projects)", "tmmaster.tmscript.__main__"),
     "robot": (
         "read the TMflow project's state, or press Play, Pause or Stop",
         "tmmaster._robot_cli",
     ),
     "profile": ("list or show register profiles", None),
-    "schema": (
-        "print the JSON Schema of the pick & place config (or of the run report)",
-        None,
-    ),
+    "schema": ("print the JSON Schema of the pick & place config (or of the run report)", None),
     "robot-program": (
         "write the TMflow Script Project the robot runs for a sequence profile (tmflow)",
         "tmmaster._robot_program",

@@ -314,10 +314,7 @@ class RobotModel(BaseModel):
         )
 
     def start_joints(
-        self,
-        start: Pose,
-        joints_deg: Sequence[float] | None = None,
-        tool: Pose | None = None,
+        self, start: Pose, joints_deg: Sequence[float] | None = None, tool: Pose | None = None
     ) -> Joints:
         """The joints a move from ``start`` starts at: the given ones when they put the arm there.
 
@@ -624,9 +621,7 @@ class RobotModel(BaseModel):
                 joints = self.inverse(pose, seed_deg=samples[-1], tool=tool, same_branch=True)
             except UnreachablePoseError as exc:
                 raise UnreachablePoseError(
-                    f"{what} leaves the arm's range at {pose}: {exc}",
-                    reason=exc.reason,
-                    pose=pose,
+                    f"{what} leaves the arm's range at {pose}: {exc}", reason=exc.reason, pose=pose
                 ) from exc
             if (jump := max(abs(x - y) for x, y in zip(joints, samples[-1], strict=True))) > 30:
                 # A joint a whole turn away: its range (J1, J6: +-270 deg) ends on the path.
