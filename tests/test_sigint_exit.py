@@ -16,6 +16,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -237,4 +238,29 @@ def test_every_ctrl_c_is_noted_before_the_stop_it_sets_off_runs() -> None:
         assert noted == [0, 1]
     finally:
         release.set()
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_a_ctrl_c_raised_where_python_drops_exceptions_still_ends_the_command() -> None:
+    # A Ctrl-C's KeyboardInterrupt raised inside a garbage collection's callback or a
+    # __del__ (the simulator's program clock has one) is dropped by Python ("Exception
+    # ignored in"); the command then ran on to its end, Ctrl-C ignored from then on.
+    from tmmaster._sigint import run_main
+
+    class Dropped:
+        def __del__(self) -> None:
+            signal.raise_signal(signal.SIGINT)
+            for _ in range(1000):  # the handler runs here, inside __del__
+                pass
+
+    def body() -> int:
+        Dropped()
+        for _ in range(200):  # the command goes on: a Ctrl-C must end it
+            time.sleep(0.005)
+        return 0
+
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        assert run_main("test", body, process=False) == 130
+    finally:
         signal.signal(signal.SIGINT, previous)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import _thread
 import atexit
+import functools
 import gc
 import os
 import signal
@@ -33,6 +34,7 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
+from typing import Any
 
 #: Exit status of an interrupted command (128 + SIGINT), as shells report it.
 EXIT_INTERRUPTED = 130
@@ -64,6 +66,18 @@ def _interrupt_once(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
+def _deliver_dropped(hook: Callable[[Any], object], unraisable: Any) -> None:
+    """``sys.unraisablehook`` while a command runs: a Ctrl-C's KeyboardInterrupt raised
+    where Python drops exceptions (a garbage collection's callback, a ``__del__``) is
+    delivered again in the main thread, instead of lost with Ctrl-C ignored from then on."""
+    if unraisable.exc_type is not KeyboardInterrupt or not _in_main_thread():
+        hook(unraisable)
+        return
+    signal.signal(signal.SIGINT, _interrupt_once)
+    # From another thread: called here, the handler would raise inside this hook again.
+    _thread.start_new_thread(_thread.interrupt_main, ())
+
+
 def _pause(point: str) -> None:
     """The test hook (:data:`_PAUSE_AT`)."""
     if os.environ.get(_PAUSE_AT) == point:
@@ -91,8 +105,10 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
         ``body``'s status; :data:`EXIT_INTERRUPTED` after a Ctrl-C.
     """
     previous = signal.getsignal(signal.SIGINT) if _in_main_thread() else None
+    hook = sys.unraisablehook
     if previous is not None and previous is not signal.SIG_IGN:
         signal.signal(signal.SIGINT, _interrupt_once)
+        sys.unraisablehook = functools.partial(_deliver_dropped, hook)
     if process and os.environ.get(_PAUSE_AT) == "exit":
         atexit.register(_pause, "exit")  # registered before any robot's: runs after them
     try:
@@ -110,6 +126,8 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
         print(f"{prog}: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
         return EXIT_INTERRUPTED
     finally:
+        if not process:
+            sys.unraisablehook = hook
         _hand_back(previous, process=process)
 
 
