@@ -439,22 +439,29 @@ class _MotionFollower:
             lock.release()
 
     def settle_owed(self) -> None:
-        """Before anything else is sent: deliver the give-up still :attr:`owed`, if any.
+        """Before anything else is sent: deliver the give-up still :attr:`owed`, if any,
+        then a Stop another Robot left owed on this robot (its own first).
 
         Raises:
             CommandStateUnknownError: it could not be delivered this time either; it stays
                 owed, and each later call tries it again first.
         """
-        if (motion := self.owed or _STOPS_OWED.get(self._robot())) is None or self.gate.closed:
-            return  # nothing owed, or closed (close() did it once more)
-        self.owed = motion  # a closed Robot's Stop owed on this robot, too
-        if not self.abandon(motion, ConnectionLostError("given up, the link down")) and self.owed:
-            raise CommandStateUnknownError(
-                f"command {motion.ticket.seq} was given up, and its withdraw or stop is still"
-                " owed (the link is down?): nothing else is sent to the robot until it is done"
-            )
-        self.owed = None
-        _STOPS_OWED.pop(self._robot(), None)
+        while (motion := self.owed or _STOPS_OWED.get(self._robot())) and not self.gate.closed:
+            self.owed = motion  # a closed Robot's Stop owed on this robot, too
+            given_up = ConnectionLostError("given up, the link down")
+            if not self.abandon(motion, given_up) and self.owed:
+                raise CommandStateUnknownError(
+                    f"command {motion.ticket.seq} was given up, and its withdraw or stop is"
+                    " still owed (the link is down?): nothing else is sent to the robot until"
+                    " it is done"
+                )
+            self.owed = None
+            self._owed_no_more(motion)
+
+    def _owed_no_more(self, motion: Motion) -> None:
+        """Strike ``motion``'s Stop off the process's debts; another Robot's stays owed."""
+        if _STOPS_OWED.get(robot := self._robot()) is motion:
+            del _STOPS_OWED[robot]
 
     def _robot(self) -> tuple[str, int, int]:
         """Which robot this follower commands: its link's address, port and unit id."""
@@ -495,13 +502,12 @@ class _MotionFollower:
             try:
                 self.stop()
                 motion.stop_delivered = True
-                if _STOPS_OWED.get(self._robot()) is motion:  # delivered: owed no more
-                    del _STOPS_OWED[self._robot()]
+                self._owed_no_more(motion)  # delivered
             except TMMasterError as exc:
                 motion.stop_delivered = confirmed = False
                 self._log.error("robot.stop_failed", error=str(exc))
                 if not is_transient(exc):
-                    _STOPS_OWED.pop(self._robot(), None)  # refused: this Robot's alone
+                    self._owed_no_more(motion)  # refused: this Robot's alone
                 elif not self._channel.duplicate_safe:
                     _STOPS_OWED[self._robot()] = motion  # the link down: the process owes it
             try:
