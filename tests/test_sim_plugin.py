@@ -183,3 +183,25 @@ def test_the_simulator_serves_sim_once_imported_and_names_a_missing_one() -> Non
         register_scheme("sim", lambda url, **options: None)
     with pytest.raises(ConfigError, match="not a plain name"):
         register_scheme("a b", lambda url, **options: None)
+
+
+def test_the_plugin_forgets_what_robots_owe_to_the_simulators_it_closed(
+    memory_simulator_factory: Any,
+) -> None:
+    # A debt kept per robot address outlives the Robot (docs/safety.md); once the
+    # fixture's simulators are closed, a later test's simulator on the same port or name
+    # is another robot: what was owed to these ends with them, another robot's stays.
+    from tmmaster import _command, _gripper, _io
+    from tmmaster.sim.pytest_plugin import _addresses, _forget_what_robots_owe
+
+    sim = memory_simulator_factory("article")
+    gone = set(_addresses(sim))
+    other = ("127.0.0.1", 1, 1)
+    owed: Any = object()
+    _command._STOPS_OWED.update({(sim.url, 0, 1): owed, other: owed})
+    _gripper._STOP_DOUBTS[(sim.url, 0, 65)] = [0.0]
+    _io._WATCHED[(sim.url, 0, 1, "coil", 3)] = owed
+    _forget_what_robots_owe(gone)
+    assert list(_command._STOPS_OWED) == [other]
+    assert (sim.url, 0, 65) not in _gripper._STOP_DOUBTS
+    assert not [key for key in _io._WATCHED if key[0] == sim.url]

@@ -53,8 +53,29 @@ def tm_simulator_factory() -> Iterator[Callable[..., Simulator]]:
         return sim.start()
 
     yield make
+    gone = {where for sim in made for where in _addresses(sim)}
     for sim in reversed(made):
         sim.close()
+    _forget_what_robots_owe(gone)
+
+
+def _addresses(sim: Simulator) -> list[tuple[str, int]]:
+    """Where a Robot reaches ``sim``: its URL, and its loopback ports when it listens."""
+    ports = [sim.port, sim.gripper_port] if sim.listen else []
+    return [(sim.url, 0), *(("127.0.0.1", port) for port in ports if port is not None)]
+
+
+def _forget_what_robots_owe(gone: set[tuple[str, int]]) -> None:
+    """What Robots of this process left owed to the simulators at ``gone`` (a Stop the link
+    could not carry, a late output frame, a gripper's Stop: kept per process and robot
+    address) ends with them: a later test's simulator on the same port or name is another
+    robot, whose first call would otherwise deliver it."""
+    from .. import _command, _gripper, _io
+
+    owed: list[dict[Any, Any]] = [_command._STOPS_OWED, _io._WATCHED, _gripper._STOP_DOUBTS]
+    for debts in owed:
+        for key in [key for key in debts if tuple(key[:2]) in gone]:
+            del debts[key]
 
 
 @pytest.fixture
