@@ -685,7 +685,9 @@ class _MotionFollower:
             if pose is None:
                 pose, joints, _ = self._channel.read_plan()
             motion.last_pose = pose
-            if not pose.is_close(
+            # A joint move's target TCP is the model's forward kinematics: its joints decide.
+            wanted = motion.command.joints
+            if (wanted is None or joints is None) and not pose.is_close(
                 motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
             ):
                 self._channel.after_done = None  # a failed move's state is not reused
@@ -695,7 +697,6 @@ class _MotionFollower:
                     f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
                     pose=pose,
                 )
-            wanted = motion.command.joints
             if wanted is not None and joints is not None:
                 # A joint move arrives at its joints, not only at their TCP (another
                 # branch reaches the same TCP with other joints).

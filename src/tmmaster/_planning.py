@@ -37,6 +37,9 @@ Joints = tuple[float, ...]
 #: Reported joints this close (deg, each) to the seed are the seed's (the registers'
 #: float32 rounding, a servo's last hundredths of a degree).
 SAME_JOINTS_DEG = 0.05
+#: Reported joints whose forward kinematics miss the reported TCP by more (mm, deg) are
+#: not the arm's (zeros); a calibrated arm's differ from the nominal chain's by a few mm.
+JOINTS_MISS = {"mm": 10.0, "deg": 5.0}
 #: A Line or an arc may turn the TCP by at most this much, deg: a half turn has no
 #: shorter way round, and the robot, from the pose it holds, may turn either way.
 MAX_PATH_TURN_DEG = 179.0
@@ -531,7 +534,7 @@ class Planner:
             abs(a - b) <= SAME_JOINTS_DEG for a, b in zip(joints, hint, strict=True)
         ):
             return
-        if not self._is_at(self.model.forward(joints, self.tool), pose):
+        if not self.model.forward(joints, self.tool).is_close(pose, **JOINTS_MISS):
             if not self._joints_mismatch_logged:
                 self._joints_mismatch_logged = True
                 self._log.warning(

@@ -115,11 +115,7 @@ class _Job(Generic[T]):
     """One call of an AsyncRobot: run by the robot's thread, awaited on the caller's loop."""
 
     def __init__(
-        self,
-        owner: AsyncRobot,
-        call: Callable[[], T],
-        *,
-        follows: Motion | None = None,
+        self, owner: AsyncRobot, call: Callable[[], T], *, follows: Motion | None = None
     ) -> None:
         self._owner = owner
         self._call = call
