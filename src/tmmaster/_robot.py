@@ -1028,7 +1028,8 @@ class Robot:
         (:meth:`RobotModel.check_joints`), the TCP they put the arm at (forward
         kinematics with ``tool``) inside the ``workspace`` and above its table plane. The
         expected time is the model's joint-space time from the joints the robot reports;
-        at the end, the joints the robot reports and its TCP must be those of the target.
+        at the end, the joints the robot reports must be the target's (their TCP is the
+        robot's own: a calibrated arm's differs from the model's by a mm or two).
 
         Example:
             Against the simulator (``python -m tmmaster.sim --port 5020``):
