@@ -9,9 +9,9 @@ Found by this hunt (each fails without its fix):
 
 - joints whose nominal forward kinematics missed the reported TCP by more than the
   arrival tolerance (1 mm) were ignored as "not the arm's", so the first move of a
-  Robot planned from the model's ready posture: an arm left wrist-flipped ran a PTP
-  through its own body (the simulated arm stopped, 0x0022) that the same master refuses,
-  unsent, on a nominal arm;
+  Robot planned (and ``validate_move`` checked) from the model's ready posture: an arm
+  left wrist-flipped ran a PTP through its own body (the simulated arm stopped, 0x0022)
+  that the same master refuses, unsent, on a nominal arm;
 - a joint move ended in ``RobotError`` ("finished but the TCP is at ... 1.50 mm from
   the target") with every joint exactly on its target: the target TCP was the nominal
   forward kinematics.
@@ -66,6 +66,10 @@ def test_the_first_move_is_planned_on_the_branch_the_robot_reports(extra_mm: flo
         left_flipped(sim, arm)
         before = len(sim.motion_log())
         with Robot(sim.url, gripper=None) as robot:  # a new run: it knows nothing yet
+            # Checked as from the arm's joints, as the move itself will be.
+            assert arm.configuration(robot.validate_move(REACHABLE, speed=60))[2] is False
+            with pytest.raises(ConfigError, match="self-collision"):
+                robot.validate_move(THROUGH_ITSELF, speed=60)
             with pytest.raises(ConfigError, match="self-collision"):
                 robot.move_to(THROUGH_ITSELF, speed=60)
             assert len(sim.motion_log()) == before  # nothing ran
