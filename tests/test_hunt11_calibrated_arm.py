@@ -75,7 +75,7 @@ def test_the_first_move_is_planned_on_the_branch_the_robot_reports(extra_mm: flo
             assert len(sim.motion_log()) == before  # nothing ran
             assert sim.field("last_error_code") == 0
             robot.move_to(REACHABLE, speed=60)
-        joints = sim.backend.joint_positions_deg()
+        joints = sim.call(sim.backend.joint_positions_deg)
         assert joints is not None
         assert arm.configuration(joints)[2] is False  # it stayed wrist-flipped
         assert sim.tcp_pose().is_close(REACHABLE, mm=0.01, deg=0.01)
