@@ -101,8 +101,10 @@ class AsyncCommandSafety(RuleBasedStateMachine):
         self._ready_project()
         assert self.robot is not None
         self.robot.clear_stop_request()
+        # Ready within a few ms when it will be at all (a tmflow project whose Stop lands
+        # after the check above stays stopped: then the next command meets it so).
         with contextlib.suppress(TMMasterError):
-            self._run(self.robot.wait_until_ready(timeout_s=3))
+            self._run(self.robot.wait_until_ready(timeout_s=1))
 
     async def _cancelled_wait(self, command: Issued, speed: int, point: str) -> None:
         robot = self.robot

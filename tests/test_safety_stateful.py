@@ -278,7 +278,10 @@ class CommandSafety(RuleBasedStateMachine):
             self.proxy.wait_held()
             self.sim.clear_error()
             self.sim.press_play()
-            time.sleep(0.3)  # 6 simulated seconds
+            # 3 simulated seconds, 7 ticks (due ticks run before the check reads the log):
+            # a project starts in the tick after Play, and a command written to a running
+            # one starts in the tick after the write.
+            time.sleep(0.15)
             check(self.issued, self.sim.motion_log())
         finally:
             if self.fleet is not None:
