@@ -102,8 +102,11 @@ def move_recorded(robot: Robot, target: Pose, issued: list[Issued]) -> str:
 
 
 def test_a_project_speed_lowered_after_the_masters_last_read_gives_no_timeout(
-    sim: Simulator, driver_or_fleet: Fleet | None
+    tm_simulator_factory: Factory, driver_or_fleet: Fleet | None
 ) -> None:
+    # Twice real time: at 5 % the move still takes over twice its 0.5 s deadline. (The
+    # next test's 20 % move needs real time to outlast its deadline.)
+    sim = tm_simulator_factory("tmflow", time_scale=2.0)
     issued = [Issued(LEFT, 0.0, 0.0, "done")]
     with open_robot(sim, driver_or_fleet) as robot:
         set_project_speed(sim, SLOW_PERCENT)  # after the master's read: its plan says 100 %
