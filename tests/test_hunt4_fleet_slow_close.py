@@ -62,9 +62,10 @@ class Cell:
 
     def wait_moving(self, *names: str) -> None:
         """Each named robot took its move to FAR and its arm left A."""
-        for sim in (self.sims[name] for name in names):
-            sim.wait_for(lambda s=sim: len(s.motion_log()) == 2, timeout=5)
-            sim.wait_for(lambda s=sim: s.tcp_pose().distance_to(A) > 5, timeout=5)
+        for name in names:
+            took_it, left_a = moving(self.sims[name])
+            self.sims[name].wait_for(took_it, timeout=5)
+            self.sims[name].wait_for(left_a, timeout=5)
 
     def check_stopped_short(
         self, names: list[str], goals: dict[str, Pose], why: str, closed_at: float
@@ -83,11 +84,21 @@ class Cell:
             rests[name] = rest, sim.ticks
         for name, (rest, ticks) in rests.items():
             sim = self.sims[name]
-            sim.wait_for(lambda s=sim, t=ticks: s.ticks >= t + 30, timeout=5)
+            sim.wait_for(ticked(sim, ticks + 30), timeout=5)
             assert sim.tcp_pose().is_close(rest), f"{name} moved again after it stopped"
         for name, sim in self.sims.items():
             late = [m for m in sim.motion_log() if m.wall_time > closed_at]
             assert not late, f"{name}: motions started after Fleet.close(): {late}"
+
+
+def moving(sim: Simulator) -> tuple[Callable[[], bool], Callable[[], bool]]:
+    """For ``sim.wait_for``: the robot took its move to FAR; its arm left A."""
+    return (lambda: len(sim.motion_log()) == 2), (lambda: sim.tcp_pose().distance_to(A) > 5)
+
+
+def ticked(sim: Simulator, ticks: int) -> Callable[[], bool]:
+    """For ``sim.wait_for``: the simulator has run ``ticks`` ticks."""
+    return lambda: sim.ticks >= ticks
 
 
 @contextmanager
