@@ -41,7 +41,7 @@ def test_a_stop_that_close_delivered_is_never_sent_again(tm_simulator_factory: F
     with FaultProxy(sim.port) as proxy:
 
         async def given_up_then_closed() -> None:
-            async with aio.AsyncRobot(article_robot(proxy, None, gripper=None)) as robot:
+            async with aio.AsyncRobot(article_robot(proxy, None, 0.5, gripper=None)) as robot:
                 await lost_by_the_link(await moving_then_cut(sim, proxy, robot), proxy)
                 await until(proxy_accepts(proxy), timeout_s=OUTAGE_S + 2)
                 assert await robot.close(timeout_s=2.0) is True  # the owed Stop, delivered
