@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -118,3 +118,35 @@ def test_close_during_the_claim_beat_leaves_no_command_and_no_heartbeat(how: str
         assert not sim.motion_log()
         late = [r for r in log if (r.function_code, r.address) == (16, BEAT) and r.time > closed_at]
         assert len(late) == (1 if how == "tcp" else 0), late  # only the held one
+
+
+def test_a_close_between_clear_stop_requests_check_and_its_clear_keeps_its_request(
+    memory_simulator_factory: Callable[..., Simulator],
+) -> None:
+    # clear_stop_request() checks that the robot is open, then clears the stop event; a
+    # close() on another thread in between (an AsyncRobot worker clears after a cancelled
+    # call) had its stop request wiped: a wait in progress then ended on the closed link
+    # instead of on the stop request.
+    sim = memory_simulator_factory("tmflow")
+    robot = Robot(sim.url)
+    gate = robot._gate
+    checks = 0
+
+    class ClosingMeanwhile:
+        @property
+        def closed(self) -> bool:
+            nonlocal checks
+            checks += 1
+            if checks == 1:
+                robot._stop_event.set()  # close() on another thread, right after the check
+                gate.close()
+                return False
+            return gate.closed
+
+    robot._gate = ClosingMeanwhile()  # type: ignore[assignment]
+    try:
+        robot.clear_stop_request()
+        assert robot._stop_event.is_set()
+    finally:
+        robot._gate = gate
+        robot.close()

@@ -1463,6 +1463,8 @@ class Robot:
         """Allow waits and commands again after :meth:`interrupt` (not after :meth:`close`)."""
         if not self._gate.closed:
             self._stop_event.clear()
+            if self._gate.closed:  # a close() on another thread since: its request stands
+                self._stop_event.set()
 
     def interrupt(self) -> None:
         """Make running waits give up at their next poll (for Ctrl-C handlers, other threads).
