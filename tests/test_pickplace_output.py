@@ -23,6 +23,7 @@ import pytest
 
 import tmmaster
 from tmmaster.pickplace.__main__ import EXIT_CONFIG, EXIT_INTERRUPTED, EXIT_OK, main
+from tmmaster.pickplace._runner import StateEvent
 from tmmaster.sim import Simulator
 
 #: A quick --sim run (simulated time 40x faster, 20 ms polling).
@@ -88,6 +89,50 @@ def _screen(raw: str) -> list[str]:
 def test_the_terminal_emulation_applies_erasures() -> None:
     raw = "a\nlive 1\nlast\x1b[2K\x1b[1A\x1b[2K\rdone\n"
     assert _screen(raw) == ["a", "done"]
+
+
+def test_a_ctrl_c_landing_inside_a_redraw_leaves_only_the_last_line(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A second Ctrl-C's KeyboardInterrupt lands wherever the main thread is; here inside
+    # rich's redraw, as the console leaves its buffer (found by raising it at each line
+    # of a redraw in turn). It left the console holding back all it wrote from then on:
+    # the region stayed on the screen above the last line. Ctrl-C waits for the drawing.
+    from rich.console import Console
+
+    from tmmaster.pickplace._live import LiveProgress
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    def event(state: str, previous: str) -> StateEvent:
+        return StateEvent(state, previous, 1, 50, 0.1)
+
+    screen = Terminal()
+    screen.write("simulator: tmflow profile\n")
+    console = Console(file=screen, force_terminal=True, width=60, height=30)
+    live = LiveProgress(console, refresh_per_second=0.01)  # no redraw but the runner's
+    live.begin(50, 3.0, states=["MOVE_TO_APPROACH", "MOVE_TO_PICK"])
+    live(event("MOVE_TO_APPROACH", "STARTING"))
+    leave = Console.__exit__
+
+    def ctrl_c_then_leave(self: Console, *exc: object) -> None:
+        monkeypatch.setattr(Console, "__exit__", leave)  # once
+        signal.raise_signal(signal.SIGINT)
+        leave(self, *exc)
+
+    monkeypatch.setattr(Console, "__exit__", ctrl_c_then_leave)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):  # delivered, after the drawing
+            live(event("MOVE_TO_PICK", "MOVE_TO_APPROACH"))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    live.end()
+    screen.write("pickplace: interrupted [exit 130]\n")
+    shown = [line for line in _screen(screen.getvalue()) if line.strip()]
+    assert shown == ["simulator: tmflow profile", "pickplace: interrupted [exit 130]"]
 
 
 # -- Ctrl-C ---------------------------------------------------------------------------------

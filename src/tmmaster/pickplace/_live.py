@@ -22,6 +22,7 @@ from rich.progress_bar import ProgressBar
 from rich.table import Table
 from rich.text import Text
 
+from .._sigint import deferred
 from ._runner import StateEvent
 
 #: structlog's leading ISO timestamp: the live region has its own clock.
@@ -45,7 +46,8 @@ class _ConsoleStream:
         for line in lines:
             rendered = Text.from_ansi(line)
             self._on_line(rendered.plain)  # first: the redraw below shows it as the last event
-            self._console.print(rendered, soft_wrap=True)
+            with deferred():  # drawing: see LiveProgress
+                self._console.print(rendered, soft_wrap=True)
         return len(text)
 
     def flush(self) -> None:
@@ -53,7 +55,8 @@ class _ConsoleStream:
         with self._lock:
             pending, self._buffer = self._buffer, ""
         if pending:
-            self._console.print(Text.from_ansi(pending), soft_wrap=True)
+            with deferred():
+                self._console.print(Text.from_ansi(pending), soft_wrap=True)
 
     def isatty(self) -> bool:
         """True: the console renders colours (structlog colours its key=value lines)."""
@@ -75,7 +78,12 @@ def _row(*cells: Any) -> Table:
 
 
 class LiveProgress:
-    """State, cycle k/N, a progress bar, elapsed time, ETA and last event, redrawn in place."""
+    """State, cycle k/N, a progress bar, elapsed time, ETA and last event, redrawn in place.
+
+    Each drawing in the main thread holds a Ctrl-C back until it is done (:func:`deferred`):
+    a KeyboardInterrupt raised inside rich's drawing left the region on the screen, or
+    erased the lines above it, when the region was cleared.
+    """
 
     def __init__(self, console: Console, *, refresh_per_second: float = 4.0) -> None:
         self.console = console
@@ -123,7 +131,8 @@ class LiveProgress:
         """Stop drawing and clear the region (the summary follows)."""
         live, self._live = self._live, None
         if live is not None:
-            live.stop()
+            with deferred():
+                live.stop()
 
     def __call__(self, event: StateEvent) -> None:
         """The runner's ``on_state`` listener."""
@@ -140,7 +149,8 @@ class LiveProgress:
         self.cycles = event.cycles
         self.last_event = f"{event.previous} -> {event.state}"
         if self._live is not None:
-            self._live.refresh()
+            with deferred():
+                self._live.refresh()
 
     def _log_line(self, line: str) -> None:
         text = _TIMESTAMP.sub("", line.strip())
