@@ -18,12 +18,10 @@ import pytest
 from hypothesis import settings
 
 import tmmaster
-import tmmaster._command
-import tmmaster._gripper
-import tmmaster._io
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Fleet, PollPolicy, Robot
 from tmmaster.sim import Simulator, Timing
+from tmmaster.sim.pytest_plugin import _forget_what_robots_owe
 
 # The property and stateful tests draw the same examples on every run, so a run's result
 # depends on the code alone; TMMASTER_HYPOTHESIS=explore draws new ones (a longer hunt,
@@ -89,9 +87,7 @@ def no_debt_outlives_its_robot() -> Iterator[None]:
     test: its simulators are gone, and the next test's on a reused port is another robot,
     whose first call would deliver it."""
     yield
-    tmmaster._command._STOPS_OWED.clear()
-    tmmaster._io._WATCHED.clear()
-    tmmaster._gripper._STOP_DOUBTS.clear()
+    _forget_what_robots_owe(None)  # every address: also simulators made by hand, proxies
 
 
 @pytest.fixture

@@ -65,16 +65,16 @@ def _addresses(sim: Simulator) -> list[tuple[str, int]]:
     return [(sim.url, 0), *(("127.0.0.1", port) for port in ports if port is not None)]
 
 
-def _forget_what_robots_owe(gone: set[tuple[str, int]]) -> None:
-    """What Robots of this process left owed to the simulators at ``gone`` (a Stop the link
-    could not carry, a late output frame, a gripper's Stop: kept per process and robot
-    address) ends with them: a later test's simulator on the same port or name is another
-    robot, whose first call would otherwise deliver it."""
+def _forget_what_robots_owe(gone: set[tuple[str, int]] | None) -> None:
+    """What Robots of this process left owed to the simulators at ``gone`` (None: at every
+    address; a Stop the link could not carry, a late output frame, a gripper's Stop: kept
+    per process and robot address) ends with them: a later test's simulator on the same
+    port or name is another robot, whose first call would otherwise deliver it."""
     from .. import _command, _gripper, _io
 
     owed: list[dict[Any, Any]] = [_command._STOPS_OWED, _io._WATCHED, _gripper._STOP_DOUBTS]
     for debts in owed:
-        for key in [key for key in debts if tuple(key[:2]) in gone]:
+        for key in [key for key in debts if gone is None or tuple(key[:2]) in gone]:
             del debts[key]
 
 
