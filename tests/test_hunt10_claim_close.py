@@ -27,6 +27,24 @@ from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import MemoryTransport, Simulator
 
 TARGET = Pose(300, -200, 150, 180, 0, 90)
+
+
+def moving(robot: Robot, outcome: list[str]) -> threading.Thread:
+    """``robot.move_to(TARGET)`` started on a thread of its own; its end goes to ``outcome``
+    ("done", or the name of the error)."""
+
+    def move() -> None:
+        try:
+            robot.move_to(TARGET, speed=50)
+            outcome.append("done")
+        except TMMasterError as exc:
+            outcome.append(type(exc).__name__)
+
+    mover = threading.Thread(target=move)
+    mover.start()
+    return mover
+
+
 BEAT, COMMAND = 9050, 9000
 TIMEOUTS = TimeoutPolicy(request_s=0.5, heartbeat_s=0.1, heartbeat_ttl_s=2.0)
 
@@ -87,16 +105,7 @@ def test_close_during_the_claim_beat_leaves_no_command_and_no_heartbeat(how: str
         _robot(how, sim) as (robot, held, release),
     ):
         outcome: list[str] = []
-
-        def move() -> None:
-            try:
-                robot.move_to(TARGET, speed=50)
-                outcome.append("done")
-            except TMMasterError as exc:
-                outcome.append(type(exc).__name__)
-
-        mover = threading.Thread(target=move)
-        mover.start()
+        mover = moving(robot, outcome)
         assert held.wait(5)  # the claim's beat is on its way
         closer = threading.Thread(target=robot.close)
         closer.start()

@@ -15,10 +15,9 @@ from __future__ import annotations
 import threading
 
 from fault_proxy import FaultProxy, Rule
-from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
+from test_hunt10_claim_close import moving
+from tmmaster import PollPolicy, Robot, TimeoutPolicy
 from tmmaster.sim import Simulator
-
-TARGET = Pose(300, -200, 150, 180, 0, 90)
 
 
 def test_close_during_the_read_back_of_a_lost_command_write_runs_nothing() -> None:
@@ -37,16 +36,7 @@ def test_close_during_the_read_back_of_a_lost_command_write_runs_nothing() -> No
             robot.connect()
             robot.wait_until_ready(timeout_s=5)
             proxy.add(Rule("hold", function_code=16, address=9000, release=release))
-
-            def move() -> None:
-                try:
-                    robot.move_to(TARGET, speed=50)
-                    outcome.append("done")
-                except TMMasterError as exc:
-                    outcome.append(type(exc).__name__)
-
-            mover = threading.Thread(target=move)
-            mover.start()
+            mover = moving(robot, outcome)
             sim.wait_for(lambda: proxy.played("hold"), timeout=5)
             # Armed once the write is held: the next read of seq is the read-back.
             read_back = Rule("hold", function_code=3, address=9015, release=release)
