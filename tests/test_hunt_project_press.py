@@ -171,16 +171,6 @@ def test_a_play_press_a_gateway_answered_and_delivered_late_never_resumes_the_mo
         assert_never_run_on(sim, motion)
 
 
-@pytest.mark.xfail(
-    # Not strict: whether the arm has moved measurably by the check depends on when the
-    # master's own wait for PAUSED reads the state (it went unseen in 1 run of 4 here).
-    strict=False,
-    reason="Play/Pause is one toggle coil: when the operator presses Pause while the"
-    " master's pause() press is on its way, the master's press lands second and resumes"
-    " the move, and pause() reads the operator's pause as its own and returns PAUSED"
-    " while the arm runs on. No fix is clear: the coil cannot be read back, and"
-    " confirming the state over more polls only narrows the window.",
-)
 def test_a_pause_racing_the_operators_pause_never_leaves_the_move_running(
     sim: Simulator, proxy: FaultProxy
 ) -> None:
@@ -205,3 +195,25 @@ def test_a_pause_racing_the_operators_pause_never_leaves_the_move_running(
             release.set()
             operator.join(5)
         assert_the_arm_stays(sim)
+
+
+def test_a_pause_answered_but_never_acted_on_stops_the_project(
+    sim: Simulator, proxy: FaultProxy
+) -> None:
+    """A gateway answers the Pause press and never delivers it: pause() times out, and
+    before it raises the master has pressed Stop, so the arm does not run on."""
+    with robot_through(proxy) as robot:
+        motion = slow_move(robot, sim)
+        release = threading.Event()
+        proxy.add(
+            FaultRule("hold", function_code=5, address=PLAY_PAUSE, release=release, answer_now=True)
+        )
+        try:
+            with pytest.raises(RobotError, match="Pause was pressed"):
+                robot.pause(timeout_s=0.3)
+            assert_the_arm_stays(sim)
+            assert not sim.field("project_running")
+        finally:
+            release.set()  # lands on the stopped project: it starts from the beginning
+        proxy.wait_held()
+        assert_never_run_on(sim, motion)

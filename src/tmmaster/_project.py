@@ -33,6 +33,9 @@ from ._transport import Transport
 
 #: How long ``play()`` and ``pause()`` wait for the project to show the new state, s.
 PRESS_TIMEOUT_S = 5.0
+#: How long a pause seen must hold, s: a Play/Pause press crossing ours (the pendant's)
+#: acts a few robot ticks after its answer, and may resume what showed paused.
+PAUSE_SETTLE_S = 0.1
 
 #: What TMflow needs before it takes Play over Modbus (TMflow 2.24 manual).
 REMOTE_PLAY_NEEDS = (
@@ -217,16 +220,22 @@ class ProjectControl:
         self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float
     ) -> ProjectState:
         poller = Poller(interval, self._stop_event, deadline=time.monotonic() + timeout_s)
+        settled: float | None = None  # when a pause seen is trusted
         try:
             while True:
                 poller.check()
                 status, state = self._status()
-                if state is wanted:
-                    return state
                 if state is ProjectState.ERROR:
                     failure = self._channel.status_failure(status)
                     assert failure is not None
                     raise failure
+                if wanted is ProjectState.RUNNING:
+                    if state is wanted:
+                        return state
+                elif (settled := _pause_held(state, settled, status)) is not None:
+                    poller.deadline = max(poller.deadline or 0.0, settled)
+                    if time.monotonic() >= settled:
+                        return state  # paused, or stopped by the move's follower
                 if time.monotonic() >= (poller.deadline or 0.0):
                     raise RobotError(
                         f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
@@ -237,7 +246,24 @@ class ProjectControl:
                 poller.sleep()
         except BaseException:
             # A Play answered but not seen taking effect may land later (a gateway that
-            # answers a write before delivering it): it must never resume a move then.
-            if wanted is ProjectState.RUNNING:
-                self._stop_before_giving_up("play unconfirmed")
+            # answers a write before delivering it): it must never resume a move then. A
+            # Pause not seen holding leaves the arm running, which pause() must not.
+            self._stop_before_giving_up(f"{wanted.value} unconfirmed")
             raise
+
+
+def _pause_held(state: ProjectState, settled: float | None, status: RobotStatus) -> float | None:
+    """When a pause seen may be trusted; None before one is seen.
+
+    Raises:
+        RobotError: The project showed paused and runs again.
+    """
+    if settled is None:
+        return time.monotonic() + PAUSE_SETTLE_S if state is ProjectState.PAUSED else None
+    if state is ProjectState.RUNNING:
+        raise RobotError(
+            "the project showed paused, then ran on: another Play/Pause press (the"
+            " pendant's) crossed this one; Stop was pressed",
+            pose=status.pose,
+        )
+    return settled

@@ -27,6 +27,7 @@ import inspect
 import math
 import threading
 import time
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -92,6 +93,10 @@ from ._tool import FrameGuard, Tool, tool_option
 from ._transport import ConnectionState, Transport, TransportStats
 
 _log = get_logger("tmmaster.robot")
+#: The connected Robots not closed yet, closed by the exit hook. Held weakly: a Robot the
+#: program dropped unclosed is garbage (its heartbeat stops, its link is given back),
+#: never one that goes on beating its own session beside the next Robot's.
+_OPEN: weakref.WeakSet[Robot] = weakref.WeakSet()
 
 _P = ParamSpec("_P")
 _T = TypeVar("_T")
@@ -611,7 +616,9 @@ class Robot:
             self.close()
             raise
         self._connected = True
-        atexit.register(self._at_exit)
+        _OPEN.add(self)
+        atexit.unregister(_close_at_exit)  # registered last: it runs before earlier hooks
+        atexit.register(_close_at_exit)
         self._log.info(
             "robot.connected",
             host=self._transport.host,
@@ -724,7 +731,7 @@ class Robot:
                 self._closed_safely = self.gripper.disconnect() and self._closed_safely
                 self._transport.close()
             # Only now: until the clean-up is over, the exit hook may still have it to do.
-            atexit.unregister(self._at_exit)
+            _OPEN.discard(self)
             safely = self._closed_safely
         if not safely:
             self._log.error("robot.close_unconfirmed")
@@ -744,10 +751,6 @@ class Robot:
             deadline=deadline,
             closer=True,
         )
-
-    def _at_exit(self) -> None:
-        # The interpreter is exiting with this robot still open: nothing may stay armed.
-        self.close()
 
     @property
     def io(self) -> RobotIO:
@@ -1256,11 +1259,7 @@ class Robot:
         return status
 
     def _start_command(
-        self,
-        command: Command,
-        *,
-        timeout: float | None = None,
-        resolved_at: Pose | None = None,
+        self, command: Command, *, timeout: float | None = None, resolved_at: Pose | None = None
     ) -> Motion:
         """Check, send and follow any command of the profile: a move or a gripper action.
 
@@ -1431,8 +1430,11 @@ class Robot:
             ConfigError: The profile has no TMflow project (article), or a bad
                 ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
-            RobotError: The project did not pause within ``timeout_s``.
-            StopRequestedError: A stop was requested or the robot is closing.
+            RobotError: The project did not pause within ``timeout_s``, or showed paused
+                and ran on within 0.1 s (a press from the pendant crossed this one): Stop
+                was pressed, so the arm does not run on.
+            StopRequestedError: A stop was requested or the robot is closing (Stop was
+                pressed).
             TransportError: The link failed (a press left unanswered: Stop was pressed,
                 so that it cannot resume a paused move when it lands).
             CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
@@ -1493,6 +1495,12 @@ class Robot:
         """
         deadline = time.monotonic() + require_in("seconds", seconds, _DWELL)
         Poller(self.poll_interval_s, self._stop_event, deadline=deadline).sleep_until(deadline)
+
+
+def _close_at_exit() -> None:
+    # The interpreter is exiting with robots still open: nothing may stay armed.
+    for robot in list(_OPEN):
+        robot.close()
 
 
 #: A dwell's range: any finite time, none included.
