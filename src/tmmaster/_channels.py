@@ -161,9 +161,7 @@ def link_mark(transport: Transport) -> int | None:
     Two equal marks mean: the same connection, and not one write, failed request, retry
     or reconnect on it in between (:attr:`Transport.epoch`).
     """
-    if transport.state is not ConnectionState.CONNECTED:
-        return None
-    return transport.epoch
+    return None if transport.state is not ConnectionState.CONNECTED else transport.epoch
 
 
 #: How old (s) the read of the poll that saw a command finished may be for the next
@@ -389,9 +387,7 @@ class CommandChannel(ABC):
             return None
         if time.monotonic() - state.read_at > reuse_s:
             return None
-        if link_mark(self.transport) != state.link:
-            return None
-        return state
+        return None if link_mark(self.transport) != state.link else state
 
     @abstractmethod
     def status_from(self, values: dict[str, Value]) -> RobotStatus:

@@ -34,10 +34,8 @@ def is_finite_number(value: object) -> TypeGuard[int | float]:
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
         return False
-    if isinstance(value, int):
-        # Compared exactly (no conversion), so 10**400 is refused, not an OverflowError.
-        return -_FLOAT_MAX <= value <= _FLOAT_MAX
-    return math.isfinite(value)
+    # An int compared exactly (no conversion), so 10**400 is refused, not an OverflowError.
+    return -_FLOAT_MAX <= value <= _FLOAT_MAX if isinstance(value, int) else math.isfinite(value)
 
 
 def shown(value: object) -> str:

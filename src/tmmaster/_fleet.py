@@ -103,14 +103,14 @@ class LoopTransport(Transport):
         name: str,
     ) -> None:
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
-        self._release: weakref.finalize[..., Any] | None = None
-        if fleet is None:
+        if default := fleet is None:
             fleet = _DEFAULT.acquire()
-            self._release = weakref.finalize(self, _DEFAULT.release, fleet)
-            self._release.atexit = False  # at exit the daemon loop thread simply ends
-        self._fleet = fleet
+        self._fleet, self._default = fleet, default
         self._link = AsyncLink(host, port, device_id=device_id, timeout=timeout, name=name)
         self._link.stats = self.stats
+        # Run by close(), or once garbage unclosed (a Robot dropped without close()).
+        self._release = weakref.finalize(self, _let_go, fleet, self._link)
+        self._release.atexit = False  # at exit the daemon loop thread simply ends
 
     @property
     def fleet(self) -> Fleet:
@@ -120,13 +120,12 @@ class LoopTransport(Transport):
     @property
     def on_default_driver(self) -> bool:
         """True for a link on the process's default driver (not a Fleet of the user's)."""
-        return self._release is not None
+        return self._default
 
     def close(self) -> None:
         """Close the link; safe to call more than once. A default driver's link gives it back."""
         super().close()
-        if self._release is not None:
-            self._release()  # once: a finalizer runs at most once
+        self._release()  # once: a finalizer runs at most once
 
     # -- the link, from the robot's thread ----------------------------------------
 
@@ -142,7 +141,7 @@ class LoopTransport(Transport):
         return state
 
     def _open_link(self) -> None:
-        if self._release is not None:
+        if self._default:
             self._fleet.start()  # the default driver's loop starts with its first link
         self._fleet._call(self._link.connect(), self.timeout + _LOOP_GRACE_S, self.name)
 
@@ -1008,6 +1007,13 @@ def fleet_driver(
     if fleet.watch_hz is not None:
         fleet._call_soon(fleet._start_watch, member, index)
     return member
+
+
+def _let_go(fleet: Fleet, link: AsyncLink) -> None:
+    """A link's end: closed on its loop, and a default driver's share given back (a Fleet
+    of the user's is not the default one: nothing to give back)."""
+    fleet._call_soon(link.close)
+    _DEFAULT.release(fleet)
 
 
 def wake_waits(member: FleetMember) -> None:

@@ -425,9 +425,7 @@ class RobotModel(BaseModel):
             * math.sin(q[2])
             * math.sin(q[4])
         )
-        if abs(scale) < 1e-12:
-            return 0.0
-        return abs(kin.determinant(jacobian) * 1e9 / scale)
+        return 0.0 if abs(scale) < 1e-12 else abs(kin.determinant(jacobian) * 1e9 / scale)
 
     def _admissible(
         self, joints: list[float], seed: Sequence[float]

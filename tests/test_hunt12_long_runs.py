@@ -1,0 +1,90 @@
+"""What hours of running leave behind: a Robot opened per cycle and never closed.
+
+A script that opens a Robot every cycle and forgets ``close()`` (``robot =
+tmmaster.connect(...)`` in a loop) drops each one with its link open and, on ``tmflow``,
+its heartbeat running. A dropped Robot must be garbage: its heartbeat stops (the robot
+program expires anything it left), its link closes and its share of the process's
+default driver is given back. Kept alive instead (an exit hook holding it), every one of
+them goes on beating its own session: the robot program sees its master replaced again
+and again, refuses the next Robot's commands as ``another_master`` and stops a running
+one; and each holds a socket (a robot's Modbus server serves only a few clients).
+Invariants only: what is garbage, what is left open once the loop had its turn.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import stat
+import time
+import weakref
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from tmmaster import Fleet, PollPolicy, Pose, Robot
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+
+APPROACH = Pose(300, -200, 200, 180, 0, 90)
+PICK = Pose(300, -200, 150, 180, 0, 90)
+
+
+def made(sim: Simulator, link: Fleet | str | None) -> Robot:
+    """A Robot of ``sim``: over TCP (the default driver, or a Fleet), or in process."""
+    if isinstance(link, str):  # "in-process"
+        return Robot(sim.url, profile=sim.profile, polling=PollPolicy(interval_s=0.01))
+    return Robot(
+        sim.host, port=sim.port, profile=sim.profile, link=link, polling=PollPolicy(interval_s=0.01)
+    )
+
+
+def forgotten_robot(sim: Simulator, link: Fleet | str | None, target: Pose) -> weakref.ref[Robot]:
+    """A Robot connected, moved once (it claims the robot and beats), never closed."""
+    robot = made(sim, link)
+    robot.connect()
+    robot.move_to(target, speed=80)
+    return weakref.ref(robot)
+
+
+def open_sockets() -> set[int]:
+    """The inodes of this process's open sockets (Linux's /proc/self/fd)."""
+    found = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            info = os.fstat(int(fd))
+        except OSError:  # closed since (the listing's own descriptor among them)
+            continue
+        if stat.S_ISSOCK(info.st_mode):
+            found.add(info.st_ino)
+    return found
+
+
+@pytest.fixture(params=["driver", "fleet", "in-process"])
+def link(request: pytest.FixtureRequest) -> Iterator[Fleet | str | None]:
+    """The dropped Robots' link: the default driver, a Fleet of the test's, or sim://."""
+    if request.param == "fleet":
+        with Fleet() as fleet:
+            yield fleet
+        return
+    yield None if request.param == "driver" else request.param
+
+
+def test_a_robot_dropped_without_close_is_garbage(
+    tm_simulator_factory: SimFactory, link: Fleet | str | None
+) -> None:
+    sim = tm_simulator_factory()
+    # Another Robot stays open all along: its driver keeps running.
+    with made(sim, link) as keeper:
+        before = open_sockets()
+        dropped = [forgotten_robot(sim, link, t) for t in (APPROACH, PICK, APPROACH)]
+        gc.collect()  # the collection that would come on its own
+        assert [ref() is None for ref in dropped] == [True, True, True]
+        keeper.status()
+        # Their links closed (the client's socket and the simulator's end of it), while
+        # the driver runs on: a robot's Modbus server has a slot free for the next one.
+        deadline = time.monotonic() + 2.0
+        while (left := open_sockets() - before) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert not left
