@@ -13,9 +13,11 @@ Invariants only: what is garbage, what is left open once the loop had its turn.
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import os
 import stat
+import threading
 import time
 import weakref
 from collections.abc import Callable, Iterator
@@ -23,6 +25,7 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from tmmaster import Fleet, PollPolicy, Pose, Robot
+from tmmaster.aio import AsyncRobot
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -88,3 +91,38 @@ def test_a_robot_dropped_without_close_is_garbage(
         while (left := open_sockets() - before) and time.monotonic() < deadline:
             time.sleep(0.02)
         assert not left
+
+
+async def forgotten_async_robot(sim: Simulator, target: Pose) -> weakref.ref[AsyncRobot]:
+    """An AsyncRobot connected, moved once (its thread started), never closed."""
+    robot = AsyncRobot(made(sim, None))
+    await robot.connect()
+    await robot.move_to(target, speed=80)
+    return weakref.ref(robot)
+
+
+def test_an_async_robot_dropped_without_close_is_garbage(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    sim = tm_simulator_factory()
+
+    async def cycles() -> list[weakref.ref[AsyncRobot]]:
+        return [await forgotten_async_robot(sim, t) for t in (APPROACH, PICK)]
+
+    with made(sim, None) as keeper:
+        before, threads = open_sockets(), set(threading.enumerate())
+        dropped = asyncio.run(cycles())
+        # Each robot's thread lets go of its last call just after the call's answer.
+        deadline = time.monotonic() + 2.0
+        while any(ref() is not None for ref in dropped) and time.monotonic() < deadline:
+            time.sleep(0.02)
+            gc.collect()  # the collection that would come on its own
+        assert [ref() is None for ref in dropped] == [True, True]
+        keeper.status()
+        # Each robot's own thread ended, its link closed, while the driver runs on.
+        while time.monotonic() < deadline:
+            new = [t.name for t in threading.enumerate() if t not in threads and t.is_alive()]
+            if not (left := open_sockets() - before) and not new:
+                break
+            time.sleep(0.02)
+        assert (new, left) == ([], set())

@@ -62,7 +62,8 @@ class _Worker:
 
     A daemon thread, started with the first call: a program that exits with the robot
     still open closes it from the Robot's exit hook, which waits for a clean-up this
-    thread is doing.
+    thread is doing. It holds no robot between calls, and ends once its AsyncRobot is
+    garbage (dropped without ``close()``).
     """
 
     def __init__(self, name: str) -> None:
@@ -78,10 +79,7 @@ class _Worker:
         with self._ready:
             if self._closed:
                 return False
-            if first:
-                self._jobs.appendleft(job)
-            else:
-                self._jobs.append(job)
+            (self._jobs.appendleft if first else self._jobs.append)(job)
             if self._thread.ident is None:  # the first call
                 self._thread.start()
             self._ready.notify()
@@ -99,6 +97,7 @@ class _Worker:
                 job.run()
             finally:
                 self.running = None
+                del job  # while it waits, it holds no robot: a dropped one is garbage
 
     def shutdown(self, timeout_s: float) -> bool:
         """Take no new call, run the queued ones, end the thread; False if still running."""
@@ -449,6 +448,7 @@ class AsyncRobot(_Front):
         #: The robot's digital I/O, awaited.
         self.io = AsyncRobotIO(self)
         self._worker = _Worker(f"tmmaster-aio-{robot.name}")
+        weakref.finalize(self, self._worker.shutdown, 0.0)  # dropped unclosed: it ends
         self._log = _log.bind(robot=robot.name)
         # True while a stop request of the user's own (interrupt()) stands: a cancelled
         # call's stop request is withdrawn when the call ends, never the user's.
