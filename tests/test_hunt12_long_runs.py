@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from tmmaster import Fleet, PollPolicy, Pose, Robot
+from tmmaster._fleet import _DEFAULT, LoopTransport
 from tmmaster.aio import AsyncRobot
 from tmmaster.sim import Simulator
 
@@ -126,3 +127,27 @@ def test_an_async_robot_dropped_without_close_is_garbage(
                 break
             time.sleep(0.02)
         assert (new, left) == ([], set())
+
+
+def test_a_link_collected_while_the_default_driver_is_being_taken_lets_it_go() -> None:
+    # A collection can run inside any allocation, so also while a thread holds the
+    # default driver's lock to make a new driver (Fleet() allocates plenty). A link
+    # collected there, a Fleet's dropped unclosed, gives its share back through that
+    # same lock, on the same thread: it must not wait for itself.
+    done = threading.Event()
+
+    def collect_while_taking_the_driver() -> None:
+        with Fleet() as fleet:
+            link = LoopTransport(
+                fleet, "127.0.0.1", 1, device_id=1, timeout=1.0, retry=None, name="dropped"
+            )
+            link.self_cycle = link  # type: ignore[attr-defined]  # garbage only for gc
+            del link
+            with _DEFAULT._lock:
+                gc.collect()  # the collection an allocation there could start
+        done.set()
+
+    worker = threading.Thread(target=collect_while_taking_the_driver, daemon=True)
+    worker.start()
+    worker.join(2.0)
+    assert done.is_set(), "the collection waited for the lock its own thread holds"

@@ -1030,7 +1030,9 @@ class _DefaultDriver:
     """
 
     def __init__(self) -> None:
-        self._lock = threading.Lock()
+        # Reentrant: a collection inside acquire() (Fleet() allocates) may run a garbage
+        # link's finalizer, which gives its share back through this lock on this thread.
+        self._lock = threading.RLock()
         #: The default driver while it has users (None: no link holds it).
         self.fleet: Fleet | None = None
         self._users = 0
@@ -1056,7 +1058,7 @@ class _DefaultDriver:
 
     def forget(self) -> None:
         """In a forked child: the parent's loop thread is not there; the next link makes one."""
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
         self.fleet = None
         self._users = 0
 
