@@ -151,3 +151,23 @@ def test_a_link_collected_while_the_default_driver_is_being_taken_lets_it_go() -
     worker.start()
     worker.join(2.0)
     assert done.is_set(), "the collection waited for the lock its own thread holds"
+
+
+def finalizers() -> int:
+    """How many weakref.finalize callbacks this process holds (alive, not yet run)."""
+    return sum(1 for o in gc.get_objects() if isinstance(o, weakref.finalize) and o.alive)
+
+
+def test_an_in_process_heartbeat_started_again_and_again_holds_one_finalizer(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # A heartbeat stops while a give-up is owed (the link down) and starts again with the
+    # next claim: on a long-lived in-process robot that is once per lost link, for hours.
+    sim = tm_simulator_factory()
+    with made(sim, "in-process") as robot:
+        robot.move_to(APPROACH, speed=80)  # claims: the heartbeat's thread runs
+        before = finalizers()
+        for target in (PICK, APPROACH) * 5:
+            robot._heartbeat.stop()  # what the command path's silence() does
+            robot.move_to(target, speed=80)  # claims again: a new session, a new thread
+        assert finalizers() - before < 5

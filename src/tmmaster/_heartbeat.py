@@ -109,6 +109,7 @@ class Heartbeat:
         #: Slots that found the link busy, closed or failing (the next slot writes).
         self.missed = 0
         self._stop = threading.Event()
+        weakref.finalize(self, self._stop.set)  # once: a thread of it ends with the Robot
         self._thread: threading.Thread | None = None
         self._task: asyncio.Task[None] | None = None
         self._member: FleetMember | None = None
@@ -219,7 +220,6 @@ class Heartbeat:
             name=f"tmmaster-heartbeat-{getattr(self._transport, 'name', 'robot')}",
             daemon=True,
         )
-        weakref.finalize(self, self._stop.set)
         self._thread.start()
 
     def _start_task(self, member: FleetMember) -> None:
