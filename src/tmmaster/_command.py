@@ -36,7 +36,7 @@ from ._exceptions import (
 from ._following import FollowState, Overdue, SharedDriver
 from ._gate import CommandGate
 from ._planning import Plan, TimeoutPolicy
-from ._poller import Poller, PollPolicy
+from ._poller import TICK_S, Poller, PollPolicy
 from ._pose import Pose
 from ._retry import is_transient
 from ._sigint import deferred
@@ -221,6 +221,10 @@ class _Following:
 #: made after the one that owed it was closed too.
 #: A Stop the slave refused stays with the Robot that sent it (docs/safety.md).
 _STOPS_OWED: dict[tuple[str, int, int], Motion] = {}
+#: How long after a done the pose registers may trail it, s: 200 ms of lag (a TM5's, as
+#: estimated, not measured) and five robot ticks to spare. A correct move waits only as
+#: long as they lag; never past the wait's deadline.
+SETTLE_S = 0.3
 
 
 class _MotionFollower:
@@ -477,8 +481,7 @@ class _MotionFollower:
     ) -> bool:
         """:meth:`abandon`'s work: withdraw a command not yet taken, stop a running one."""
         ticket = motion.ticket
-        running = ticket.acknowledged
-        confirmed = True
+        running, confirmed = ticket.acknowledged, True
         if not running and not ticket.withdrawn:
             try:
                 running = self._withdraw(ticket, until=until, interruptible=interruptible)
@@ -583,7 +586,7 @@ class _MotionFollower:
             # This profile's poll does not carry the pose: read it for the report.
             motion.last_pose = self._channel.read_pose()
 
-    def _apply(self, motion: Motion, observation: Observation) -> None:
+    def _apply(self, motion: Motion, observation: Observation, until: float = float("inf")) -> None:
         """Act on what a poll saw: raise the robot's failure, note the acknowledgement, finish."""
         if observation.pose is not None:
             motion.last_pose = observation.pose
@@ -600,7 +603,7 @@ class _MotionFollower:
         if observation.acknowledged:
             self._note_acknowledged(motion)
         if observation.done:
-            self._finish(motion, observation)
+            self._finish(motion, observation, until)
 
     def _note_acknowledged(self, motion: Motion) -> None:
         """The robot took the command: RUNNING (from the thread, or a Fleet's loop)."""
@@ -624,9 +627,8 @@ class _MotionFollower:
             polling=self.polling,
             timeouts=self.timeouts,
         )
-        shared = self.shared_driver
+        shared, speed_checked = self.shared_driver, False
         follow.on_acknowledged = functools.partial(self._note_acknowledged, motion)
-        speed_checked = False
         while True:
             observation = None if shared is None else shared(follow)
             if observation is None:
@@ -635,7 +637,7 @@ class _MotionFollower:
                 follow.poller.sleep_until(follow.due())
                 follow.poll_started = time.monotonic()
                 observation = self._channel.poll(motion.ticket)
-            self._apply(motion, observation)
+            self._apply(motion, observation, follow.deadline())
             if motion.done:
                 return
             overdue = follow.overdue(time.monotonic())
@@ -676,40 +678,10 @@ class _MotionFollower:
         except TMMasterError:
             return fallback
 
-    def _finish(self, motion: Motion, polled: Observation) -> None:
+    def _finish(self, motion: Motion, polled: Observation, until: float = float("inf")) -> None:
         motion.reported_finished_at = time.monotonic()
         if motion.target is not None:
-            # The poll that saw the move finished read the pose: in the same snapshot
-            # (article), or right after it with the joints (tmflow).
-            pose, joints = polled.pose, polled.joints
-            if pose is None:
-                pose, joints, _ = self._channel.read_plan()
-            motion.last_pose = pose
-            # A joint move's target TCP is the model's forward kinematics: its joints decide.
-            wanted = motion.command.joints
-            if (wanted is None or joints is None) and not pose.is_close(
-                motion.target, mm=self.position_tolerance_mm, deg=self.orientation_tolerance_deg
-            ):
-                self._channel.after_done = None  # a failed move's state is not reused
-                motion.phase = MovePhase.FAILED
-                raise RobotError(
-                    f"robot reported the move finished but the TCP is at {pose},"
-                    f" {pose.distance_to(motion.target):.2f} mm from the target {motion.target}",
-                    pose=pose,
-                )
-            if wanted is not None and joints is not None:
-                # A joint move arrives at its joints, not only at their TCP (another
-                # branch reaches the same TCP with other joints).
-                worst = max(abs(a - b) for a, b in zip(joints, wanted, strict=True))
-                if worst > self.orientation_tolerance_deg:
-                    self._channel.after_done = None
-                    motion.phase = MovePhase.FAILED
-                    raise RobotError(
-                        f"robot reported the move finished but its joints are"
-                        f" {[round(q, 2) for q in joints]}, {worst:.2f} deg from the target"
-                        f" {[round(q, 2) for q in wanted]}",
-                        pose=pose,
-                    )
+            self._arrived(motion, polled, min(until, motion.reported_finished_at + SETTLE_S))
         motion.phase = MovePhase.DONE
         motion.finished_at = time.monotonic()
         if self._log.is_enabled_for(logging.INFO):  # its fields built only when logged
@@ -719,6 +691,50 @@ class _MotionFollower:
                 duration_s=round(motion.finished_at - motion.ticket.sent_at, 4),
                 expected_s=round(motion.expected_s, 3),
             )
+
+    def _arrived(self, motion: Motion, polled: Observation, deadline: float) -> None:
+        """Check that the arm of a move the robot reported finished is at its target.
+
+        The poll that saw it finished read the pose (article: in the same snapshot;
+        tmflow: right after it, with the joints). Pose registers can trail the done flag
+        by a few ticks: a pose that misses is read again each robot tick, and the move is
+        done once two reads in a row are at the target, and within half the tolerances of
+        each other (the arm holds still there: a robot that reports done while its arm
+        still moves is not believed for it). A miss at ``deadline`` (the first read's,
+        when past) is a RobotError. A stop request ends the wait.
+        """
+        pose, joints = polled.pose, polled.joints
+        if pose is None:
+            pose, joints, _ = self._channel.read_plan()
+        # held: the last read's pose; hit: it was at the target (the done poll's counts alone)
+        poller, held, hit = Poller(TICK_S, self.stop_event, deadline=deadline), pose, True
+        mm, deg = self.position_tolerance_mm / 2, self.orientation_tolerance_deg / 2
+        while True:
+            motion.last_pose, miss = pose, self._miss(motion, pose, joints)
+            if miss is None and hit and pose.is_close(held, mm=mm, deg=deg):
+                return
+            held, hit = pose, miss is None
+            motion.phase = MovePhase.FAILED  # DONE once seen held at the target
+            if time.monotonic() >= deadline:
+                self._channel.after_done = None  # a failed move's state is not reused
+                miss = miss or f"the TCP at {pose} did not hold still at the target"
+                raise RobotError(f"robot reported the move finished but {miss}", pose=pose)
+            poller.sleep()
+            pose, joints, _ = self._channel.read_plan()
+
+    def _miss(self, motion: Motion, pose: Pose, joints: tuple[float, ...] | None) -> str | None:
+        """How the arm misses the move's target; None: within the tolerances. A joint
+        move's target TCP is the model's forward kinematics: its joints decide where
+        published (another branch reaches the same TCP with other joints)."""
+        wanted, target, deg = motion.command.joints, motion.target, self.orientation_tolerance_deg
+        assert target is not None
+        if wanted is None or joints is None:
+            off = pose.distance_to(target)
+            close = pose.is_close(target, mm=self.position_tolerance_mm, deg=deg)
+            return None if close else f"the TCP is at {pose}, {off:.2f} mm from the target {target}"
+        off = max(abs(a - b) for a, b in zip(joints, wanted, strict=True))
+        got, aim = [round(q, 2) for q in joints], [round(q, 2) for q in wanted]
+        return None if off <= deg else f"its joints are {got}, {off:.2f} deg from the target {aim}"
 
     def _ack_timed_out(self, motion: Motion) -> None:
         ticket = motion.ticket
@@ -730,13 +746,11 @@ class _MotionFollower:
             raise self._unacknowledged(motion, f", nor answer its cancel: {exc}") from exc
         if taken:
             # The robot took it just as we gave up: it is executing our command.
-            ticket.acknowledged = True
-            ticket.acknowledged_at = time.monotonic()
+            ticket.acknowledged, ticket.acknowledged_at = True, time.monotonic()
             motion.phase = MovePhase.RUNNING
             self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
             return
-        ticket.withdrawn = True
-        motion.withdrawn = True
+        ticket.withdrawn = motion.withdrawn = True
         hint = ""
         if heartbeat_stalled(ticket):
             hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
