@@ -24,10 +24,12 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
+from sim_speeds import QUICK
 from tmmaster import Fleet, PollPolicy, Pose, Robot
 from tmmaster._fleet import _DEFAULT, LoopTransport
 from tmmaster.aio import AsyncRobot
 from tmmaster.sim import Simulator
+from tmmaster.sim import _controller as sim_controller
 
 SimFactory = Callable[..., Simulator]
 
@@ -171,3 +173,22 @@ def test_an_in_process_heartbeat_started_again_and_again_holds_one_finalizer(
             robot._heartbeat.stop()  # what the command path's silence() does
             robot.move_to(target, speed=80)  # claims again: a new session, a new thread
         assert finalizers() - before < 5
+
+
+def test_a_simulator_serving_for_days_keeps_the_latest_motions(
+    tm_simulator_factory: SimFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The request log keeps the latest 100,000 requests; the motion log the latest
+    # MOTION_LOG_LIMIT motions: a simulator serving a cell all week does not grow with
+    # every move. Here a limit of 5 and 8 moves.
+    monkeypatch.setattr(sim_controller, "MOTION_LOG_LIMIT", 5, raising=False)
+    sim = tm_simulator_factory(listen=False, **QUICK)
+    targets = [APPROACH.offset(dx=10 * i) for i in range(8)]
+    with made(sim, "in-process") as robot:
+        for target in targets:
+            robot.move_to(target, speed=80)
+    log = sim.motion_log()
+    assert [m.number for m in log] == [4, 5, 6, 7, 8]
+    assert [m.target for m in log] == targets[3:]
+    # Each kept record still notes when its move was reported done.
+    assert all(m.done_wall_time is not None for m in log)

@@ -27,6 +27,7 @@ import math
 import traceback
 from abc import abstractmethod
 from array import array
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import IntEnum
@@ -58,6 +59,10 @@ from ._faults import (
     StallFault,
     is_network_fault,
 )
+
+#: Oldest motion records are dropped beyond this, as the request log's are beyond its
+#: limit: a simulator serving a cell for days does not grow with every move.
+MOTION_LOG_LIMIT = 100_000
 
 #: Faults that fire during the N-th motion.
 _MoveFault = RobotErrorFault | StallFault | EstopFault
@@ -279,7 +284,8 @@ class RobotController(SimDevice[RobotProfile]):
         self._late_since = 0.0
         self._gripper_closing = False
         self._gripper_miss = False
-        self._motion_log: list[MotionRecord] = []
+        self._motion_log: deque[MotionRecord] = deque(maxlen=MOTION_LOG_LIMIT)
+        self._records_made = 0  # every record appended: an _Active's record counts them
         self._saturating = False  # the published pose is saturated (encodable range rule)
         self._rest_error_raised = False  # POSE_OUT_OF_RANGE raised for the current rest
         self._tick_failed = False  # TICK_FAILED reported, not yet reset by the operator
@@ -354,7 +360,8 @@ class RobotController(SimDevice[RobotProfile]):
 
     @property
     def motion_log(self) -> tuple[MotionRecord, ...]:
-        """Every motion and gripper action started so far, in order."""
+        """Every motion and gripper action started so far, in order (the latest
+        ``MOTION_LOG_LIMIT``)."""
         return tuple(self._motion_log)
 
     @property
@@ -642,7 +649,7 @@ class RobotController(SimDevice[RobotProfile]):
             target=target,
             expected_s=expected,
             fault=fault,
-            record=len(self._motion_log) - 1,
+            record=self._records_made - 1,
         )
         self._log.info(
             "sim.motion_started",
@@ -682,6 +689,7 @@ class RobotController(SimDevice[RobotProfile]):
         self._motion_log.append(
             MotionRecord(number, kind, seq, target, speed, self._time_s, self.clock())
         )
+        self._records_made += 1
 
     def _grip_detected(self) -> bool:
         return (
@@ -721,9 +729,11 @@ class RobotController(SimDevice[RobotProfile]):
 
     def _record_done(self, active: _Active) -> None:
         """Note in its record when ``active`` was reported finished (this tick)."""
-        if 0 <= active.record < len(self._motion_log):
-            record = self._motion_log[active.record]
-            self._motion_log[active.record] = replace(record, done_wall_time=self.clock())
+        # Its place among the records kept (the oldest are dropped beyond the limit).
+        index = active.record - (self._records_made - len(self._motion_log))
+        if active.record >= 0 and 0 <= index < len(self._motion_log):
+            record = self._motion_log[index]
+            self._motion_log[index] = replace(record, done_wall_time=self.clock())
 
     def _fire(self, fault: _MoveFault, active: _Active) -> None:
         self._log.warning(

@@ -183,7 +183,7 @@ class SequenceController(RobotController):
             seq=seq,
             closing=close,
             miss=miss,
-            record=len(self._motion_log) - 1,
+            record=self._records_made - 1,
         )
 
     def _publish_estop(self) -> None:
