@@ -20,7 +20,15 @@ import pytest
 import tmmaster
 from safety_invariant import Issued, check
 from sim_speeds import SUITE_TICK_HZ
-from test_aio import NOTHING_LATER_TICKS, given_up, moving, run, ticks_pass, until
+from test_aio import (
+    NOTHING_LATER_TICKS,
+    given_up,
+    late_ack_over,
+    moving,
+    run,
+    ticks_pass,
+    until,
+)
 from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, aio
 from tmmaster.sim import Simulator, Timing
 
@@ -82,7 +90,7 @@ def test_a_wait_cancelled_while_queued_withdraws_the_unacknowledged_move(
             assert given_up(handle.motion), handle.motion
             await blocked
             sim.clear_faults()
-            await asyncio.sleep(0.4)  # 16 simulated s: a command still armed would run now
+            await late_ack_over(sim, handle.motion)  # a command still armed would run by now
 
     run(scenario)
     check(issued, sim.motion_log())
@@ -132,7 +140,7 @@ def test_wait_for_zero_gives_the_move_up(tm_simulator_factory: SimFactory, profi
             issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "TimeoutError"
             assert given_up(handle.motion), handle.motion
             sim.clear_faults()
-            await asyncio.sleep(0.4)
+            await late_ack_over(sim, handle.motion)
 
     run(scenario)
     check(issued, sim.motion_log())
@@ -173,7 +181,7 @@ def test_a_task_made_of_the_handle_itself_gives_the_move_up_cancelled_before_it_
             issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "CancelledError"
             assert given_up(handle.motion), handle.motion
             sim.clear_faults()
-            await asyncio.sleep(0.4)
+            await late_ack_over(sim, handle.motion)
 
     run(scenario)
     check(issued, sim.motion_log())
