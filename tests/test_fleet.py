@@ -32,6 +32,27 @@ A = Pose(300, -200, 150, 180, 0, 90)
 B = Pose(300, -200, 180, 180, 0, 90)
 C = Pose(250, 0, 160, 180, 0, 90)
 PROFILES = ["article", "tmflow"]
+#: Control ticks that show what the robot does on its own after a move was given up: a
+#: move still running goes on at every tick, a command left armed (no fault holding it)
+#: starts within two or three (test_aio.NOTHING_LATER_TICKS).
+NOTHING_LATER_TICKS = 10
+
+
+def ticks_pass(sim: Simulator, ticks: int) -> None:
+    """Until the simulator ran ``ticks`` more control ticks: counted on its own clock, so
+    a simulator slowed by load is never looked at too early."""
+    start = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
+
+
+def late_ack_over(sim: Simulator, motion: tmmaster.Motion) -> None:
+    """Until a command left armed under a late_ack fault (cleared by now) would have run,
+    then NOTHING_LATER_TICKS more (as test_aio.late_ack_over): at once on article; on
+    tmflow once the program, done waiting the delay out, answered its number."""
+    seq = motion.ticket.seq  # 0: the article contract numbers nothing
+    if seq:
+        sim.wait_for(lambda: int(sim.field("ack_seq")) >= seq, timeout=5.0)
+    ticks_pass(sim, NOTHING_LATER_TICKS)
 
 
 @pytest.fixture
@@ -147,7 +168,7 @@ def test_an_interrupt_ends_a_wait_the_loop_polls_at_once_and_stops_the_arm(
     assert took < 0.6, seen
     assert motion.phase is MovePhase.FAILED, seen
     assert motion.stop_delivered is True, seen
-    time.sleep(0.2)  # longer than the simulator's tick: a move still running would go on
+    ticks_pass(sim, NOTHING_LATER_TICKS)  # a move still running would go on
     assert not sim.tcp_pose().is_close(A), seen  # stopped short of the target (seconds away)
 
 
@@ -167,7 +188,7 @@ def test_ctrl_c_in_a_wait_the_loop_polls_withdraws_or_stops_before_returning(
     timer.join()
     assert motion.withdrawn is True
     sim.clear_faults()
-    time.sleep(0.3)  # many simulated seconds: a command still armed would run now
+    late_ack_over(sim, motion)  # a command still armed would run by now
     assert sim.motion_log() == ()
 
 
@@ -455,7 +476,7 @@ def test_closing_the_fleet_while_a_thread_waits_ends_the_wait_and_stops_the_arm(
     motion = robot.last_motion
     assert motion is not None
     assert motion.stop_delivered is True
-    time.sleep(0.2)
+    ticks_pass(sim, NOTHING_LATER_TICKS)  # a move still running would go on
     assert not sim.tcp_pose().is_close(A)  # stopped short of the target
 
 
