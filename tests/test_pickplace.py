@@ -639,15 +639,16 @@ def test_a_report_file_has_ordinary_permissions(tmp_path: Path) -> None:
 def test_three_ctrl_c_on_a_slow_link_leave_nothing_armed_after_exit(
     tm_simulator_factory: Callable[..., Simulator],
 ) -> None:
-    # A robot in its own process, its commands taken late, every answer 40 ms late: the
-    # first Ctrl-C starts the withdraw, the second and third land in the middle of it and
-    # of the close. Whatever the master printed, nothing may start once it has exited.
+    # A robot in its own process, its commands taken late, every answer 40 ms late from
+    # its first command on: the first Ctrl-C starts the withdraw, the second and third
+    # land in the middle of it and of the close. Whatever the master printed, nothing
+    # may start once it has exited. (The connection and the start-up checks before the
+    # first command go at full speed: they are not the subject, and took 1.2 s slowed.)
     from fault_proxy import FaultProxy, Rule
 
     profile = "tmflow"
     sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=8"])  # 0.2 s wall
     with FaultProxy(sim.port) as proxy:
-        proxy.add(Rule("delay", delay_s=0.04, times=1_000_000))
         proc = subprocess.Popen(
             [
                 sys.executable,
@@ -671,6 +672,7 @@ def test_three_ctrl_c_on_a_slow_link_leave_nothing_armed_after_exit(
             deadline = time.monotonic() + 30
             for line in proc.stderr:
                 if '"robot.command_sent"' in line:
+                    proxy.add(Rule("delay", delay_s=0.04, times=1_000_000))
                     break
                 assert time.monotonic() < deadline
             for _ in range(3):
