@@ -28,7 +28,7 @@ from typing import Any
 import pytest
 
 from sim_speeds import QUICK
-from tmmaster import Fleet, PollPolicy, Pose, Robot
+from tmmaster import Fleet, PollPolicy, Pose, Robot, StatusMonitor
 from tmmaster._fleet import _DEFAULT, LoopTransport
 from tmmaster.aio import AsyncRobot
 from tmmaster.sim import Simulator
@@ -200,3 +200,28 @@ def test_a_simulator_serving_for_days_keeps_the_latest_motions(
     assert [m.target for m in log] == targets[3:]
     # Each kept record still notes when its move was reported done.
     assert all(m.done_wall_time is not None for m in log)
+
+
+def test_a_status_monitor_dropped_without_close_stops_polling(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # A dashboard that starts a StatusMonitor per view and forgets close(): each one
+    # left running polls the robot for ever (its thread, its socket, up to 600 requests
+    # a second at 100 Hz) unless a dropped monitor is garbage and its loop ends.
+    sim = tm_simulator_factory()
+
+    def forgotten_monitor() -> weakref.ref[StatusMonitor]:
+        monitor = StatusMonitor(rate_hz=50)
+        monitor.add("cell", sim.host, sim.port, profile=sim.profile)
+        monitor.start()
+        return weakref.ref(monitor)
+
+    before, threads = open_sockets(), set(threading.enumerate())
+    assert collected([forgotten_monitor(), forgotten_monitor()]) == [True, True]
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        new = [t.name for t in threading.enumerate() if t not in threads and t.is_alive()]
+        if not (left := open_sockets() - before) and not new:
+            break
+        time.sleep(0.02)
+    assert (new, left) == ([], set())

@@ -750,9 +750,7 @@ class SequenceChannel(CommandChannel):
             return RobotFaultError("robot error", error_code=code)  # + code, meaning
         if bool(flags.get("paused", False)):
             return ProjectPausedError(PROJECT_PAUSED)
-        if not bool(flags["project_running"]):
-            return RobotFaultError(PROJECT_STOPPED)
-        return None
+        return None if bool(flags["project_running"]) else RobotFaultError(PROJECT_STOPPED)
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""

@@ -111,13 +111,19 @@ class LoopThread:
         """From the main coroutine, after :meth:`bind`: the loop is up, :meth:`start` returns."""
         self._started.set()
 
-    def stop(self) -> None:
-        """Wake the main coroutine to end and join the thread (bounded); safe twice."""
-        loop, wake, thread = self.loop, self.wake, self.thread
+    def end_soon(self) -> None:
+        """Wake the main coroutine to end, without waiting for it (from any thread)."""
+        loop, wake = self.loop, self.wake
         if loop is not None and wake is not None:
             with contextlib.suppress(RuntimeError):  # the loop already ended
                 loop.call_soon_threadsafe(wake.set)
-        if thread is not None and thread is not threading.current_thread():
+
+    def stop(self) -> None:
+        """Wake the main coroutine to end and join the thread (bounded); safe twice."""
+        if self.thread is not None:  # bound first (start() may still be running): woken
+            self._started.wait(_JOIN_TIMEOUT_S)
+        self.end_soon()
+        if (thread := self.thread) is not None and thread is not threading.current_thread():
             thread.join(_JOIN_TIMEOUT_S)
             if thread.is_alive():
                 _log.warning(

@@ -31,9 +31,10 @@ from __future__ import annotations
 
 import asyncio
 import time
+import weakref
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Self
+from typing import Any, Self
 
 from ._address import check_host, check_port, is_in_process
 from ._channels import CommandChannel, channel_for
@@ -352,7 +353,6 @@ class StatusMonitor:
         self.event_loop = self._runner.event_loop
         self._robots: dict[str, _Watched | _SharedWatched] = {}
         self._executor: ThreadPoolExecutor | None = None
-        self._stopping = False
         self._closed = False
         #: Set to a list before start() to record (lateness s, response s) of every
         #: answered poll (benchmarks); None records nothing.
@@ -506,8 +506,12 @@ class StatusMonitor:
             )
             for robot in shared:
                 robot.executor = self._executor
+        # The loop holds no monitor: one dropped unclosed is garbage, and its loop ends.
+        runner, robots, timings = self._runner, list(self._robots.values()), self._timings
+        period = 1.0 / self.rate_hz
         try:
-            self._runner.start(self._main)
+            runner.start(lambda: _watch(runner, robots, period, timings))
+            weakref.finalize(self, runner.end_soon)
         except TransportError:
             self.close()
             raise
@@ -522,7 +526,6 @@ class StatusMonitor:
         if self._closed:
             return
         self._closed = True
-        self._stopping = True
         self._runner.stop()
         executor, self._executor = self._executor, None
         if executor is not None:
@@ -534,42 +537,42 @@ class StatusMonitor:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
-    # -- the loop thread --------------------------------------------------------------
 
-    async def _main(self) -> None:
-        wake = self._runner.bind()
-        robots = list(self._robots.values())
-        tasks: list[asyncio.Task[None]] = []
-        try:
-            await asyncio.gather(*(robot.connect() for robot in robots))
-            self._runner.ready()
-            if not self._stopping:
-                origin = time.monotonic()
-                period = 1.0 / self.rate_hz
-                tasks = [
-                    asyncio.create_task(
-                        poll_on_schedule(
-                            robot,
-                            robot.poll,
-                            due=origin + period * i / len(robots),
-                            period=period,
-                            running=lambda: not self._stopping,
-                            timings=self._timings,
-                        ),
-                        name=f"tmmaster-monitor-{robot.name}",
-                    )
-                    for i, robot in enumerate(robots)
-                ]
-                await wake.wait()
-        finally:
-            self._stopping = True
-            pending = set(tasks)
-            while pending:  # a cancellation that meets an answer may be lost: cancel again
-                for task in pending:
-                    task.cancel()
-                _done, pending = await asyncio.wait(pending, timeout=0.1)
-            for robot in robots:
-                robot.drop()
-            # Closing transports release their sockets on a later loop turn.
-            for _ in range(3):
-                await asyncio.sleep(0)
+async def _watch(
+    runner: LoopThread, robots: list[_Watched | _SharedWatched], period: float, timings: Any
+) -> None:
+    """A monitor's loop: every robot polled on its schedule until the runner is stopped
+    (it holds no monitor: a monitor dropped unclosed is garbage, its finalizer ends this)."""
+    wake = runner.bind()
+    tasks: list[asyncio.Task[None]] = []
+    try:
+        await asyncio.gather(*(robot.connect() for robot in robots))
+        runner.ready()
+        if not wake.is_set():  # not closed while connecting
+            origin = time.monotonic()
+            tasks = [
+                asyncio.create_task(
+                    poll_on_schedule(
+                        robot,
+                        robot.poll,
+                        due=origin + period * i / len(robots),
+                        period=period,
+                        running=lambda: not wake.is_set(),
+                        timings=timings,
+                    ),
+                    name=f"tmmaster-monitor-{robot.name}",
+                )
+                for i, robot in enumerate(robots)
+            ]
+            await wake.wait()
+    finally:
+        pending = set(tasks)
+        while pending:  # a cancellation that meets an answer may be lost: cancel again
+            for task in pending:
+                task.cancel()
+            _done, pending = await asyncio.wait(pending, timeout=0.1)
+        for robot in robots:
+            robot.drop()
+        # Closing transports release their sockets on a later loop turn.
+        for _ in range(3):
+            await asyncio.sleep(0)
