@@ -140,8 +140,7 @@ class FollowState:
         moves the predicted end by the pace it shows (:meth:`MotionSchedule.observed`).
         """
         self._take_in_last_poll()
-        motion = self.motion
-        ticket = motion.ticket
+        motion, ticket = self.motion, self.motion.ticket
         due = self.schedule.next_poll(self.poll_started, acknowledged=ticket.acknowledged)
         # A profile whose poll carries no pose reads it once, where it tells the most;
         # and at every poll from a stall's bound before the model's budget ends, where
@@ -199,23 +198,30 @@ class FollowState:
         return self.budget * PACE_LIMIT if self.scales_with_pace else self.budget
 
     def _started(self) -> float:
-        ticket = self.motion.ticket
-        return ticket.acknowledged_at or ticket.sent_at
+        return self.motion.ticket.acknowledged_at or self.motion.ticket.sent_at
 
     def _model_deadline(self) -> float:
         return self._started() + self.budget
 
     def _note_progress(self, pose: Pose) -> None:
         """Count ``pose`` as progress when the arm moved measurably since the last, or is
-        arriving at its target."""
-        last, target = self._progress_pose, self.motion.target
-        if (
-            last is not None
-            and pose.distance_to(last) < PROGRESS_MM
-            and pose.rotation_to(last) < PROGRESS_DEG
-            and (target is None or not pose.is_close(target, mm=ARRIVING_MM, deg=ARRIVING_DEG))
-        ):
-            return
+        arriving at its target.
+
+        Where the model gauges the path, the move must be that much farther along it: a
+        report that wobbles by a tenth of a millimetre (a calibrated arm's) around an
+        arm that stands still makes no new farthest point at every poll.
+        """
+        last, motion = self._progress_pose, self.motion
+        start, target = motion.start, motion.target
+        arriving = target is not None and pose.is_close(target, mm=ARRIVING_MM, deg=ARRIVING_DEG)
+        if last is not None and not arriving:
+            now, then = motion.path_fraction(pose), motion.path_fraction(last)
+            moved = pose.distance_to(last), pose.rotation_to(last)
+            if now is not None and then is not None and start is not None and target is not None:
+                gain = now - then
+                moved = gain * start.distance_to(target), gain * start.rotation_to(target)
+            if moved[0] < PROGRESS_MM and moved[1] < PROGRESS_DEG:
+                return
         self._progress_pose = pose
         if last is not None:
             self.last_progress_at = self.poll_started
@@ -234,8 +240,7 @@ class FollowState:
     def _take_in_last_poll(self) -> None:
         """Anchor the schedule on the acknowledgement, and count the last poll's pose (its
         progress, the pace it shows) once."""
-        motion = self.motion
-        ticket = motion.ticket
+        motion, ticket = self.motion, self.motion.ticket
         if ticket.acknowledged and not self._anchored:
             self.schedule.acknowledged(
                 ticket.acknowledged_at or ticket.sent_at,
