@@ -27,8 +27,9 @@ from typing import Any
 
 import pytest
 
+import tmmaster._robot as robot_module
 from sim_speeds import QUICK
-from tmmaster import Fleet, PollPolicy, Pose, Robot, StatusMonitor
+from tmmaster import Fleet, PollPolicy, Pose, Robot, StatusMonitor, TransportClosedError
 from tmmaster._fleet import _DEFAULT, LoopTransport
 from tmmaster.aio import AsyncRobot
 from tmmaster.sim import Simulator
@@ -225,3 +226,22 @@ def test_a_status_monitor_dropped_without_close_stops_polling(
             break
         time.sleep(0.02)
     assert (new, left) == ([], set())
+
+
+def test_a_robot_subclass_that_is_not_hashable_connects_and_is_closed_at_exit(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # A subclass that compares by value (a dataclass, an __eq__ of its own) has no hash:
+    # the exit hook's record of open Robots must not need one.
+    class CellRobot(Robot):
+        __hash__ = None  # type: ignore[assignment]
+
+    sim = tm_simulator_factory()
+    robot = CellRobot(sim.url, profile=sim.profile)
+    try:
+        robot.connect()
+        robot_module._close_at_exit()  # what the interpreter's exit runs
+        with pytest.raises(TransportClosedError):
+            robot.status()  # it was closed there
+    finally:
+        robot.close()

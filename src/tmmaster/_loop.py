@@ -113,8 +113,7 @@ class LoopThread:
 
     def end_soon(self) -> None:
         """Wake the main coroutine to end, without waiting for it (from any thread)."""
-        loop, wake = self.loop, self.wake
-        if loop is not None and wake is not None:
+        if (loop := self.loop) is not None and (wake := self.wake) is not None:
             with contextlib.suppress(RuntimeError):  # the loop already ended
                 loop.call_soon_threadsafe(wake.set)
 

@@ -93,10 +93,10 @@ from ._tool import FrameGuard, Tool, tool_option
 from ._transport import ConnectionState, Transport, TransportStats
 
 _log = get_logger("tmmaster.robot")
-#: The connected Robots not closed yet, closed by the exit hook. Held weakly: a Robot the
-#: program dropped unclosed is garbage (its heartbeat stops, its link is given back),
-#: never one that goes on beating its own session beside the next Robot's.
-_OPEN: weakref.WeakSet[Robot] = weakref.WeakSet()
+#: The connected Robots not closed yet (by id: a subclass may have no hash), closed by the
+#: exit hook. Held weakly: a Robot the program dropped unclosed is garbage (its heartbeat
+#: stops, its link is given back), never one that beats its session beside the next's.
+_OPEN: weakref.WeakValueDictionary[int, Robot] = weakref.WeakValueDictionary()
 
 _P = ParamSpec("_P")
 _T = TypeVar("_T")
@@ -616,7 +616,7 @@ class Robot:
             self.close()
             raise
         self._connected = True
-        _OPEN.add(self)
+        _OPEN[id(self)] = self
         atexit.unregister(_close_at_exit)  # registered last: it runs before earlier hooks
         atexit.register(_close_at_exit)
         self._log.info(
@@ -731,7 +731,7 @@ class Robot:
                 self._closed_safely = self.gripper.disconnect() and self._closed_safely
                 self._transport.close()
             # Only now: until the clean-up is over, the exit hook may still have it to do.
-            _OPEN.discard(self)
+            _OPEN.pop(id(self), None)
             safely = self._closed_safely
         if not safely:
             self._log.error("robot.close_unconfirmed")
@@ -1498,9 +1498,11 @@ class Robot:
 
 
 def _close_at_exit() -> None:
-    # The interpreter is exiting with robots still open: nothing may stay armed.
-    for robot in list(_OPEN):
-        robot.close()
+    # The interpreter is exiting with robots still open: nothing may stay armed. Their
+    # references copied in one step: a robot closing on another thread meanwhile is fine.
+    for ref in _OPEN.valuerefs():
+        if (robot := ref()) is not None:
+            robot.close()
 
 
 #: A dwell's range: any finite time, none included.
