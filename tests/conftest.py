@@ -6,10 +6,8 @@ from __future__ import annotations
 import gc
 import importlib
 import os
-import stat
 import sys
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -18,6 +16,7 @@ import pytest
 from hypothesis import settings
 
 import tmmaster
+from leaks import left_open, open_sockets
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
 from tmmaster import Fleet, PollPolicy, Robot
 from tmmaster.sim import Simulator, Timing
@@ -31,23 +30,6 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("TMMASTER_HYPOTHESIS", "deterministic"))
 
 
-def _open_sockets() -> set[int]:
-    """The inodes of this process's open sockets (Linux: /proc/self/fd lists its fds).
-
-    ``os.fstat`` of each descriptor, not ``os.readlink`` of its /proc link: the same
-    socket inode for a fraction of the CPU (every test calls this twice).
-    """
-    found = set()
-    for fd in os.listdir("/proc/self/fd"):
-        try:
-            info = os.fstat(int(fd))
-        except OSError:  # closed since (the listing's own descriptor among them)
-            continue
-        if stat.S_ISSOCK(info.st_mode):
-            found.add(info.st_ino)
-    return found
-
-
 @pytest.fixture(autouse=True)
 def no_leaks() -> Iterator[None]:
     """Fail a test that leaves a thread or a socket open (python-can style)."""
@@ -55,25 +37,13 @@ def no_leaks() -> Iterator[None]:
         yield
         return
     threads_before = set(threading.enumerate())
-    sockets_before = _open_sockets()
+    sockets_before = open_sockets()
     yield
-    deadline = time.monotonic() + 2.0
-    collect = False
-    while True:
-        # pymodbus's server can drop an accepted-but-unserved connection without
-        # closing it; such a socket is unreachable garbage, closed by a collection.
-        # A collection costs tens of milliseconds with this many objects, so it is
-        # made only once something new is found (it can close sockets, never open one).
-        if collect:
-            gc.collect()
-        new_threads = [t for t in threading.enumerate() if t not in threads_before and t.is_alive()]
-        new_sockets = _open_sockets() - sockets_before
-        if not new_threads and not new_sockets:
-            return
-        collect = True
-        if time.monotonic() > deadline:
-            break
-        time.sleep(0.02)
+    # pymodbus's server can drop an accepted-but-unserved connection without closing
+    # it; such a socket is unreachable garbage, closed by a collection.
+    new_threads, new_sockets = left_open(sockets_before, threads_before, collect=True)
+    if not new_threads and not new_sockets:
+        return
     pytest.fail(
         f"test leaked {len(new_threads)} thread(s) {[t.name for t in new_threads]}"
         f" and {len(new_sockets)} socket(s)"

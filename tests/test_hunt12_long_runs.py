@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import os
-import stat
 import threading
 import time
 import weakref
@@ -28,6 +26,7 @@ from typing import Any
 import pytest
 
 import tmmaster._robot as robot_module
+from leaks import left_open, open_sockets
 from sim_speeds import QUICK
 from tmmaster import Fleet, PollPolicy, Pose, Robot, StatusMonitor, TransportClosedError
 from tmmaster._fleet import _DEFAULT, LoopTransport
@@ -68,19 +67,6 @@ def collected(refs: list[weakref.ref[Any]]) -> list[bool]:
     return [ref() is None for ref in refs]
 
 
-def open_sockets() -> set[int]:
-    """The inodes of this process's open sockets (Linux's /proc/self/fd)."""
-    found = set()
-    for fd in os.listdir("/proc/self/fd"):
-        try:
-            info = os.fstat(int(fd))
-        except OSError:  # closed since (the listing's own descriptor among them)
-            continue
-        if stat.S_ISSOCK(info.st_mode):
-            found.add(info.st_ino)
-    return found
-
-
 @pytest.fixture(params=["driver", "fleet", "in-process"])
 def link(request: pytest.FixtureRequest) -> Iterator[Fleet | str | None]:
     """The dropped Robots' link: the default driver, a Fleet of the test's, or sim://."""
@@ -103,10 +89,7 @@ def test_a_robot_dropped_without_close_is_garbage(
         keeper.status()
         # Their links closed (the client's socket and the simulator's end of it), while
         # the driver runs on: a robot's Modbus server has a slot free for the next one.
-        deadline = time.monotonic() + 2.0
-        while (left := open_sockets() - before) and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert not left
+        assert left_open(before, set(threading.enumerate()))[1] == set()
 
 
 async def forgotten_async_robot(sim: Simulator, target: Pose) -> weakref.ref[AsyncRobot]:
@@ -131,13 +114,7 @@ def test_an_async_robot_dropped_without_close_is_garbage(
         assert collected(dropped) == [True, True]
         keeper.status()
         # Each robot's own thread ended, its link closed, while the driver runs on.
-        deadline = time.monotonic() + 2.0
-        while time.monotonic() < deadline:
-            new = [t.name for t in threading.enumerate() if t not in threads and t.is_alive()]
-            if not (left := open_sockets() - before) and not new:
-                break
-            time.sleep(0.02)
-        assert (new, left) == ([], set())
+        assert left_open(before, threads) == ([], set())
 
 
 def test_a_link_collected_while_the_default_driver_is_being_taken_lets_it_go() -> None:
@@ -219,13 +196,7 @@ def test_a_status_monitor_dropped_without_close_stops_polling(
 
     before, threads = open_sockets(), set(threading.enumerate())
     assert collected([forgotten_monitor(), forgotten_monitor()]) == [True, True]
-    deadline = time.monotonic() + 2.0
-    while time.monotonic() < deadline:
-        new = [t.name for t in threading.enumerate() if t not in threads and t.is_alive()]
-        if not (left := open_sockets() - before) and not new:
-            break
-        time.sleep(0.02)
-    assert (new, left) == ([], set())
+    assert left_open(before, threads) == ([], set())
 
 
 def test_a_robot_subclass_that_is_not_hashable_connects_and_is_closed_at_exit(
