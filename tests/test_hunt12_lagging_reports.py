@@ -20,7 +20,11 @@ Found by this hunt (each fails without its fix):
   or is still on its way;
 - a stalled arm (robot busy, arm still) whose reported TCP wobbled by 0.1 mm showed
   "progress" at almost every poll: its wait grew to 20 times its budget (21.6 s for
-  1.08 s) before MotionTimeoutError. Progress is now measured along the model's path.
+  1.08 s) before MotionTimeoutError. Progress is now measured along the model's path;
+- article: a move_by made as soon as a stopped move's arm was reported idle, with the
+  reports 4 ticks late, was refused, or resolved against the brake's tail and sent
+  11.8 mm short of where the arm rested. Away from the last target the pose is now read
+  until two reads agree.
 
 Checked, nothing else found: a TCP wobbling by 0.1 mm and 0.01 deg with joints rounded
 to 0.001 deg (arrival, the frame check, pick & place; a relative move made right after a
@@ -120,12 +124,18 @@ class ReportingBackend(KinematicBackend):
         )
         #: ``time.monotonic()`` of the tick each motion's arm came to rest at (in order).
         self.rests: list[float] = []
+        #: Where the arm's TCP was when each motion started (in order).
+        self.starts: list[Pose] = []
 
     # -- what the arm does ---------------------------------------------------------
 
     def true_pose(self) -> Pose:
         """Where the arm's TCP is (not what it reports)."""
         return super().tcp_pose()
+
+    def _begin(self, planned: Any) -> float:
+        self.starts.append(self.true_pose())
+        return super()._begin(planned)
 
     def _remaining_s(self) -> float | None:
         motion = self._motion
@@ -456,6 +466,37 @@ def test_a_stalled_arm_with_a_wobbling_report_is_raised_at_its_budget(
         applied = float(message.split("did not finish within ")[1].split(" s")[0])
         assert applied < 4 * moving.timeout_s, message
         assert [m.target for m in sim.motion_log()] == [start, target]
+
+
+def test_a_relative_move_right_after_a_stop_is_resolved_where_the_arm_rests() -> None:
+    # A move stopped at speed brakes to rest; the robot then reports it idle, while its
+    # pose registers still show the end of the brake (4 ticks late). A move_by made at
+    # once must be resolved against where the arm rests. Found: refused ("the arm moved
+    # since ..."), or, when its two reads fell in one tick, resolved 11.8 mm short of the
+    # rest and sent there: a target no call asked for.
+    backend = ReportingBackend(lag_ticks=4)
+    far = Pose(300, 250, 200, 180, 0, 90)
+    with simulator("article", backend, time_scale=1.0) as sim, connect(sim, "article") as robot:
+        robot.wait_until_ready(timeout_s=5)
+        issued = [Issued(HOME, time.monotonic()), Issued(far, 0.0)]
+        robot.move_to(HOME, speed=100)
+        issued[0].outcome, issued[1].issued_at = "done", time.monotonic()
+        stopped = robot.start_move(far, speed=100)
+        sim.wait_for(lambda: sim.call(backend.true_pose).y > 0, timeout=20)  # at speed
+        robot.interrupt()
+        with pytest.raises(StopRequestedError):
+            stopped.wait()
+        issued[1].outcome, issued[1].ended_at = "StopRequestedError", time.monotonic()
+        robot.clear_stop_request()
+        sim.wait_for(lambda: not robot.status().moving, timeout=5, interval=0.005)
+        made = robot.move_by(dz=-40, speed=50)
+        assert made.start is not None
+        assert made.target is not None
+        issued.append(Issued(made.target, 0.0, None, "done"))
+        rest = backend.starts[-1]  # where the arm was when the move_by's motion began
+        assert made.start.is_close(rest, mm=1.0, deg=1.0), (made.start, rest)
+        assert made.target.is_close(rest.offset(dz=-40), mm=1.0, deg=1.0)
+    check(issued, sim.motion_log())
 
 
 @pytest.mark.parametrize("profile", ["tmflow", "article"])

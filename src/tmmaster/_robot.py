@@ -44,8 +44,8 @@ from ._channels import (
     pose_from,
 )
 from ._checks import Bounds, require_in, require_positive
+from ._command import SETTLE_S, _MotionFollower
 from ._command import Motion as Motion  # tmmaster imports it from here
-from ._command import _MotionFollower
 from ._exceptions import (
     ConfigError,
     ConnectError,
@@ -74,7 +74,7 @@ from ._options import FrameCheck as FrameCheck  # tmmaster imports it from here
 from ._planning import Planner, check_accel, joint_values, motion_type, moved, offset_pose
 from ._planning import TimeoutPolicy as TimeoutPolicy  # tmmaster imports it from here
 from ._planning import Workspace as Workspace  # tmmaster imports it from here
-from ._poller import INTERVAL_BOUNDS, Poller, PollPolicy
+from ._poller import INTERVAL_BOUNDS, TICK_S, Poller, PollPolicy
 from ._pose import MotionType, Pose
 from ._profiles import (
     DEFAULT_PROFILE,
@@ -657,8 +657,7 @@ class Robot:
         channel, frames = self._channel, self._frames
         frames.check = self.frame_check
         frames.refuse_unverifiable(self.tool)
-        check = frames.enabled
-        fields = channel.plan_fields
+        check, fields = frames.enabled, channel.plan_fields
         if check and not channel.frames_in_plan:
             fields = (*channel.flange_fields, *fields, *channel.robot_base_tcp_fields)
         if not check and not channel.joint_fields:
@@ -666,8 +665,7 @@ class Robot:
         values = self._read_naming_profile(functools.partial(channel.read, fields))
         if check:
             frames.at_connect(values, self.tool)
-        joints = channel.joints_from(values)
-        if joints is not None:
+        if (joints := channel.joints_from(values)) is not None:
             self._planner.take_robot_joints(pose_from(values, TCP_FIELDS), joints)
 
     def _read_naming_profile(self, read: Callable[[], _T]) -> _T:
@@ -676,8 +674,7 @@ class Robot:
         try:
             return read()
         except IllegalAddressError as exc:
-            mismatch = _profile_mismatch(self._transport, self.profile, exc)
-            if mismatch is None:
+            if (mismatch := _profile_mismatch(self._transport, self.profile, exc)) is None:
                 raise
             raise mismatch from exc
 
@@ -742,8 +739,8 @@ class Robot:
         if self._transport.state is ConnectionState.CLOSED:
             return True  # closed by someone else: nothing can be written any more
         self._gate.drain()  # past the deadline too: a write in flight may land and run
-        motion = self._last_motion  # after drain(): the last command that can ever be written
-        if motion is None:
+        # After drain(): the last command that can ever be written.
+        if (motion := self._last_motion) is None:
             return True
         return self._follower.abandon(
             motion,
@@ -778,8 +775,7 @@ class Robot:
                 (docs/safety.md).
         """
         self._require_connection()
-        failure = self._channel.read_failure()
-        if failure is not None:
+        if (failure := self._channel.read_failure()) is not None:
             raise failure
 
     def __enter__(self) -> Robot:
@@ -1092,9 +1088,10 @@ class Robot:
     ) -> Motion:
         """Move relative to where the robot reports the TCP, and return when it is done.
 
-        The offset is resolved against the TCP pose the robot reports (read first) into
-        one absolute target, validated and sent like :meth:`move_to`'s; before the write
-        the arm must still be at that pose. ``frame="base"``: the TCP moves ``dx, dy,
+        The offset is resolved against the TCP pose the robot reports (read first;
+        away from the last move's target, read until two reads a robot tick apart agree)
+        into one absolute target, validated and sent like :meth:`move_to`'s; before the
+        write the arm must still be at that pose. ``frame="base"``: the TCP moves ``dx, dy,
         dz`` along the robot base's axes and turns by ``Rz(drz) Ry(dry) Rx(drx)`` about
         the base's axes, in place. ``frame="tool"``: the offset is a pose in the TCP's
         own frame (target = TCP x offset), as TMscript's ``Move_PTP("TPP", ...)``.
@@ -1240,9 +1237,20 @@ class Robot:
             )
 
     def _read_start(self) -> Pose:
-        """The TCP pose the robot reports (with its joints, where published), for a plan."""
+        """The TCP pose the robot reports (with its joints, where published), for a plan.
+
+        Away from the last move's target (a stopped move's brake, the first move), the
+        pose registers may still trail an arm that just came to rest: they are read again
+        each robot tick until two reads in a row are within 0.5 mm and 0.5 deg of each
+        other, for ``SETTLE_S`` at most (a stop request ends the wait).
+        """
         self._require_connection()
         start, joints, _ = self._channel.read_plan()
+        poller = Poller(TICK_S, self._stop_event, deadline=(end := time.monotonic() + SETTLE_S))
+        before = self._planner.origin(start)  # the last move's target where the arm reads so
+        while (before is start or not start.is_close(before)) and time.monotonic() < end:
+            poller.sleep()
+            before, (start, joints, _) = start, self._channel.read_plan()
         if joints is not None:
             self._planner.take_robot_joints(start, joints)
         return start
