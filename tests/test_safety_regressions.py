@@ -138,7 +138,15 @@ def test_8_1_a_late_write_is_never_written_again_and_runs_once(
     sim = tm_simulator_factory("article")
     issued: list[Issued] = []
     with FaultProxy(sim.port) as proxy:
-        robot = robots(proxy.port, "article")
+        # The later frame lands 0.45 s after its write: 0.55 s of the windows to spare for
+        # the tick that takes it and the poll that sees it on a loaded machine.
+        robot = robots(
+            proxy.port,
+            "article",
+            timeouts=TimeoutPolicy(
+                request_s=REQUEST_TIMEOUT_S, ack_timeout_s=1.0, in_flight_s=1.0, motion_margin_s=1.0
+            ),
+        )
         for delay_s, target in ((0.3, A), (0.45, B)):
             # Delivered after the request timeout, on the connection the master dropped.
             proxy.add(Rule("hold", function_code=16, address=0x0200, delay_s=delay_s))
@@ -674,7 +682,9 @@ def test_a_move_interrupted_by_a_resumable_stop_is_stopped_for_good(
     robot = robots(sim.port, "tmflow")
     robot.wait_until_ready(timeout_s=5)
     issued = [Issued(A, time.monotonic())]
-    motion = robot.start_move(A, speed=10)
+    # Speed 3: 23 ticks to go, so the press from this thread lands mid-move on a loaded
+    # machine too (at speed 10, 7 ticks, it once came after the arm arrived).
+    motion = robot.start_move(A, speed=3)
     sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=5)  # the arm moves
     if pause == "estop":
         sim.press_estop()
@@ -688,10 +698,12 @@ def test_a_move_interrupted_by_a_resumable_stop_is_stopped_for_good(
     assert motion.stop_delivered is True
     let_run(sim, 5)
     assert not sim.field("project_running")  # stopped, not paused: nothing to resume
+    stopped_at = sim.tcp_pose()
     operator_resets(sim)  # clear the error, press Play
-    # 4 simulated s more: the whole move takes 2.8 (7 ticks at speed 10), and a move
-    # resumed at Play arrives within 8 ticks of it (measured without the master's Stop).
+    # 4 simulated s more: a move resumed at Play moves again within 2 ticks of it
+    # (measured without the master's Stop), and is never seen standing still.
     let_run(sim, 10)
     check(issued, sim.motion_log())
     assert len(sim.motion_log()) == 1
+    assert sim.tcp_pose().is_close(stopped_at, mm=1e-6, deg=1e-6)
     assert not sim.tcp_pose().is_close(A)
