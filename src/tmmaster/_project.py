@@ -235,7 +235,7 @@ class ProjectControl:
                 elif (settled := _pause_held(state, settled, status)) is not None:
                     poller.deadline = max(poller.deadline or 0.0, settled)
                     if time.monotonic() >= settled:
-                        return state  # paused, or stopped by the move's follower
+                        return state  # paused, or stopped meanwhile (the pendant's Stop)
                 if time.monotonic() >= (poller.deadline or 0.0):
                     raise RobotError(
                         f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
