@@ -244,10 +244,16 @@ def connect(sim: Simulator, profile: str, **options: object) -> Robot:
 
 
 def run(
-    robot: Robot, sim: Simulator, backend: ReportingBackend, moves: Sequence[tuple[str, Move]]
+    robot: Robot,
+    sim: Simulator,
+    backend: ReportingBackend,
+    moves: Sequence[tuple[str, Move]],
+    *,
+    at_rest: bool = True,
 ) -> list[str]:
     """Each move once; returns how each call ended. A call that returned done must find
-    the arm at rest at its target; every motion the robot ran was one call's."""
+    the arm at its target (within the tolerances) and, ``at_rest``, at rest there; every
+    motion the robot ran was one call's."""
     issued: list[Issued] = []
     outcomes: list[str] = []
     first = len(sim.motion_log())
@@ -265,8 +271,8 @@ def run(
             assert motion.target is not None
             # Done only once the arm rested at its target: the rest tick ran before the
             # read that made the call return (no timing: the order of two events).
-            assert len(backend.rests) > before - 1, f"{name}: done before the arm rested"
-            assert backend.rests[-1] <= returned, f"{name}: done while the arm moves"
+            rested = len(backend.rests) > before and backend.rests[-1] <= returned
+            assert rested or not at_rest, f"{name}: done while the arm moves"
             assert sim.call(backend.true_pose).is_close(motion.target, mm=1.0, deg=1.0), name
             outcomes.append(f"{name}: done")
         command.ended_at = time.monotonic()
@@ -319,15 +325,14 @@ def test_a_done_flag_where_the_arm_stopped_short_still_fails(profile: str) -> No
 def test_a_done_flag_a_few_ticks_early_is_done_only_once_the_arm_is_there(profile: str) -> None:
     # The robot reports each move finished 0.1 s (5 ticks) before its arm gets there:
     # the pose the done poll reads misses; the master reads it again until it is at the
-    # target on two reads in a row. The arm is then at the target (within the tolerance),
-    # never anywhere else.
+    # target on two reads in a row. The arm is then at the target within the tolerances,
+    # though maybe not yet at rest (docs/safety.md, Limits), never anywhere else; each
+    # call ran one motion.
     backend = ReportingBackend(done_early_s=0.1)
     with simulator(profile, backend, time_scale=1.0) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
-        for name, move in MOVES[profile][:3]:
-            motion = move(robot)
-            assert motion.target is not None
-            assert sim.call(backend.true_pose).is_close(motion.target, mm=1.0, deg=1.0), name
+        outcomes = run(robot, sim, backend, MOVES[profile][:3], at_rest=False)
+    assert all(o.endswith(": done") for o in outcomes), outcomes
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
