@@ -338,12 +338,18 @@ def test_a_done_flag_a_few_ticks_early_is_done_only_once_the_arm_is_there(profil
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_done_flag_far_too_early_still_fails(profile: str) -> None:
     # Reported finished a second before the arm gets there: the arm is still on its way
-    # when the master's wait for the pose ends: a RobotError, never a done.
+    # when the master's wait for the pose ends: a RobotError, never a done. The master
+    # gave the move up with its arm seen moving: it stops it, short of the target.
     backend = ReportingBackend(done_early_s=1.0)
+    target = OTHER.offset(dy=-150)
     with simulator(profile, backend, time_scale=1.0) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         with pytest.raises(RobotError, match="reported the move finished but the TCP is at"):
-            robot.move_to(OTHER.offset(dy=-150), speed=20)
+            robot.move_to(target, speed=20)
+        ticks = sim.ticks
+        sim.wait_for(lambda: sim.ticks >= ticks + 50, timeout=5.0)  # the arm would arrive
+        assert len(sim.motion_log()) == 1
+        assert not sim.call(backend.true_pose).is_close(target, mm=5.0)
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])

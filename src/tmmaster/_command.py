@@ -711,10 +711,12 @@ class _MotionFollower:
         mm, deg = self.position_tolerance_mm / 2, self.orientation_tolerance_deg / 2
         while True:
             motion.last_pose, miss = pose, self._miss(motion, pose, joints)
-            if miss is None and hit and pose.is_close(held, mm=mm, deg=deg):
+            if (still := pose.is_close(held, mm=mm, deg=deg)) and miss is None and hit:
                 return
             held, hit = pose, miss is None
             motion.phase = MovePhase.FAILED  # DONE once seen held at the target
+            # Not finished while seen moving: if the move fails here, abandon stops the arm.
+            motion.ticket.finished &= still
             if time.monotonic() >= deadline:
                 self._channel.after_done = None  # a failed move's state is not reused
                 miss = miss or f"the TCP at {pose} did not hold still at the target"

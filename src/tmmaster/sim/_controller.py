@@ -750,9 +750,11 @@ class RobotController(SimDevice[RobotProfile]):
             self._enter_error(fault.code, "injected robot error")
 
     def _stop_motion(self) -> None:
+        # Whatever the arm still does brakes, also after a done the backend reported early
+        # (a robot's Stop halts the arm, not the controller's idea of it).
+        self._backend.stop_motion()
         active = self._active
         if active is not None and active.kind == "motion":
-            self._backend.stop_motion()
             # A stopped motion is over once the arm settles, stalled or not.
             active.stalled = False
             active.fault = None
