@@ -992,7 +992,11 @@ def _run_on(
             robot.close()
             outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
     if result.ok:
-        times = ", ".join(f"{t:.2f}" for t in result.cycle_times_s)
+        shown = result.cycle_times_s
+        times = ", ".join(f"{t:.2f}" for t in (shown if len(shown) <= 20 else shown[:10]))
+        if len(shown) > 20:  # a long run: the first and the latest, not a line per cycle
+            more = result.cycles_completed - 20
+            times += f", ... {more} more ..., " + ", ".join(f"{t:.2f}" for t in shown[-10:])
         outcome.done_line = (
             f"DONE: {result.cycles_completed}/{cycles} cycle(s) of {sequence.name} in"
             f" {result.duration_s:.2f} s (cycle times: {times} s;"

@@ -99,7 +99,9 @@ class LiveProgress:
         self.within_cycle = 0.0
         self.state = "STARTING"
         self.cycle = 0
-        self.cycle_times: list[float] = []
+        #: Completed cycles timed, and their seconds together (the ETA's mean).
+        self.cycles_timed = 0
+        self.cycle_total_s = 0.0
         self.last_event = ""
         self._t0 = time.monotonic()
         self._cycle_t0 = self._t0
@@ -140,7 +142,8 @@ class LiveProgress:
         if not self.cycle:
             self._cycle_t0 = now  # the first state of cycle 1
         elif event.cycle > self.cycle or event.state == "DONE":
-            self.cycle_times.append(now - self._cycle_t0)
+            self.cycles_timed += 1
+            self.cycle_total_s += now - self._cycle_t0
             self._cycle_t0 = now
         if event.state in self.states:  # entered: the states before it are behind
             self.within_cycle = self.states.index(event.state) / len(self.states)
@@ -164,8 +167,8 @@ class LiveProgress:
         now = time.monotonic() if now is None else now
         if self.state in ("DONE", "ERROR"):
             return 0.0
-        if self.cycle_times:
-            per_cycle: float | None = sum(self.cycle_times) / len(self.cycle_times)
+        if self.cycles_timed:
+            per_cycle: float | None = self.cycle_total_s / self.cycles_timed
         else:
             per_cycle = self.expected_cycle_s
         if per_cycle is None or self.cycles <= 0:

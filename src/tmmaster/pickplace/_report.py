@@ -26,17 +26,19 @@ from .._tm_errors import describe
 from ._runner import RunResult
 
 #: Bumped when a key changes meaning or disappears (adding keys keeps the version).
-REPORT_VERSION = 1
+#: 2: ``timeline`` and ``cycles.times_s`` may hold part of a long run (``timeline_scope``,
+#: ``cycles.times_omitted``); every pass is still counted in ``states`` and ``cycles``.
+REPORT_VERSION = 2
 
 #: The report versions :func:`load_report` reads: every one up to this tmmaster's (keys
 #: are only ever added, with defaults); a newer one may mean something else.
 SUPPORTED_REPORT_VERSIONS = range(1, REPORT_VERSION + 1)
 
-#: Largest report :func:`load_report` reads, bytes (256 MiB). A report takes about 1 kB
-#: per cycle on a robot and about 12 kB per cycle of a --sim run at time scale 1 (its
-#: TCP path), so this holds some 20,000 simulated or 200,000 real cycles; reading it
-#: takes several times that in memory, which is what the limit protects (and reading
-#: /dev/zero would never end).
+#: Largest report :func:`load_report` reads, bytes (256 MiB). A report of this tmmaster
+#: lists the passes of at most 120 cycles and 2,000 cycle times (some 200 kB whatever the
+#: cycles; a --sim run adds its TCP path, at most 200,000 rows, and its parts); a version 1
+#: report listed every pass, about 1.3 kB per cycle. Reading one takes several times its
+#: size in memory, which is what the limit protects (and reading /dev/zero would never end).
 MAX_REPORT_BYTES = 256 * 1024 * 1024
 
 
@@ -74,7 +76,26 @@ class CycleSummary(_Part):
     completed: int = 0
     """Cycles finished."""
     times_s: list[float] = Field(default_factory=list)
-    """Seconds per completed cycle."""
+    """Seconds per completed cycle: every one, or (``times_omitted`` > 0) the first
+    ``times_omitted_at`` cycles' then the latest cycles'."""
+    times_omitted: int = 0
+    """Cycle times left out of ``times_s`` (counted in the statistics below)."""
+    times_omitted_at: int = 0
+    """Where in ``times_s`` they were left out: ``times_s[i]`` is cycle ``i + 1`` before
+    it, cycle ``i + 1 + times_omitted`` from it on."""
+    total_s: float | None = None
+    """Seconds of every completed cycle together (null: none completed, or a report older
+    than this key)."""
+    mean_s: float | None = None
+    """Mean seconds per completed cycle (null: none, or an older report)."""
+    min_s: float | None = None
+    """The shortest completed cycle, seconds (null: none, or an older report)."""
+    max_s: float | None = None
+    """The longest completed cycle, seconds (null: none, or an older report)."""
+
+    def cycle_of(self, index: int) -> int:
+        """The cycle (from 1) whose time is ``times_s[index]``."""
+        return index + 1 + (self.times_omitted if index >= self.times_omitted_at > 0 else 0)
 
 
 class StateTiming(_Part):
@@ -88,6 +109,33 @@ class StateTiming(_Part):
     """Mean seconds per pass."""
     max_s: float
     """The longest pass, seconds."""
+    min_s: float | None = None
+    """The shortest pass, seconds (null: a report older than this key)."""
+    retries: int = 0
+    """Passes that failed and were tried again (counted in ``count``)."""
+    failures: int = 0
+    """Passes that failed the run (counted in ``count``)."""
+
+
+class TimelineScope(_Part):
+    """What ``timeline`` lists of a run: long runs list the passes of some cycles only."""
+
+    passes: int
+    """Passes through a state in the run (skipped ones too), listed or not."""
+    listed_passes: int
+    """Passes listed in ``timeline``."""
+    listed_cycles: int
+    """Cycles (from 1) whose passes are listed."""
+    omitted_cycles: int
+    """Cycles whose passes are only counted, in ``states``."""
+    first_cycles: int
+    """The first cycles are listed, up to this many (and IDLE, cycle 0)."""
+    last_cycles: int
+    """The latest cycles are listed, up to this many."""
+    marked_cycles: int
+    """The most other cycles with a retried or failed pass listed."""
+    marked_cycles_omitted: int = 0
+    """Cycles with a retried or failed pass not listed (over ``marked_cycles``)."""
 
 
 class TimelineEntry(_Part):
@@ -248,7 +296,9 @@ class RunReport(_Part):
     states: dict[str, StateTiming] = Field(default_factory=dict)
     """Time spent in each state, by name."""
     timeline: list[TimelineEntry] = Field(default_factory=list)
-    """Every pass through a state, in order."""
+    """The passes through a state, in order: every one, or those ``timeline_scope`` says."""
+    timeline_scope: TimelineScope | None = None
+    """What ``timeline`` lists (null: every pass; a report older than this key)."""
     retries: Retries = Field(default_factory=Retries)
     """Retries used."""
     error: ErrorInfo | None = None
@@ -554,12 +604,16 @@ def _run_fields(run: RunResult | None) -> dict[str, Any]:
             "cycles": {"requested": None, "completed": 0, "times_s": []},
             "states": {},
             "timeline": [],
+            "timeline_scope": None,
             "retries": {"grasp": 0},
             "error": None,
             "reaction": None,
             "stop_delivered": None,
         }
     failure, reaction = run.failure, run.reaction
+    counted = run.log.cycles.count
+    omitted = max(counted - len(run.cycle_times_s), 0)
+    cycle_stats = run.log.cycles.as_dict() if counted else {}
     return {
         "sequence": run.sequence,
         "final_state": run.state,
@@ -569,6 +623,9 @@ def _run_fields(run: RunResult | None) -> dict[str, Any]:
             "requested": run.cycles_requested,
             "completed": run.cycles_completed,
             "times_s": run.cycle_times_s,
+            "times_omitted": omitted,
+            "times_omitted_at": run.log.times_kept_first if omitted else 0,
+            **{k: cycle_stats.get(k) for k in ("total_s", "mean_s", "min_s", "max_s")},
         },
         "states": run.state_timings(),
         "timeline": [
@@ -581,6 +638,8 @@ def _run_fields(run: RunResult | None) -> dict[str, Any]:
             }
             for r in run.records
         ],
+        # Null for a RunResult made without a runner (its records are all there is).
+        "timeline_scope": run.log.scope() if run.log.passes else None,
         "retries": {"grasp": run.retries},
         "error": None
         if failure is None

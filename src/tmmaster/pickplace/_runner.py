@@ -34,6 +34,7 @@ from .._robot import Robot
 from .._status import project_failure
 from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
+from ._runlog import RunLog
 from ._steps import PlannedMove, Step, TaskSequence
 
 _log = get_logger("tmmaster.pickplace")
@@ -134,9 +135,11 @@ class RunResult:
     cycles_requested: int
     #: How many cycles finished.
     cycles_completed: int = 0
-    #: Each finished cycle's duration, s.
+    #: Finished cycles' durations, s: every one up to 2,000; beyond, the first 1,000 and
+    #: the latest 1,000 (``log.cycles`` has the statistics of all of them).
     cycle_times_s: list[float] = field(default_factory=list)
-    #: Every pass through a state, in order.
+    #: The passes through a state, in order: every one of the first 10 cycles (and IDLE),
+    #: the latest 10, and up to 100 others with a retry or a failure (``log`` counts all).
     records: list[StateRecord] = field(default_factory=list)
     #: Why the run failed (None when it did not).
     failure: Failure | None = None
@@ -151,6 +154,8 @@ class RunResult:
     started_at: str = ""
     #: How long the run took, s.
     duration_s: float = 0.0
+    #: Every pass and cycle counted (per-state statistics), and what was kept of them.
+    log: RunLog = field(default_factory=RunLog, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -162,27 +167,20 @@ class RunResult:
         """True when the run ended because a stop was requested."""
         return self.failure is not None and self.failure.interrupted
 
-    def state_timings(self) -> dict[str, dict[str, float]]:
-        """Per state: passes, total, mean and max seconds (skipped passes excluded).
+    def state_timings(self) -> dict[str, dict[str, Any]]:
+        """Per state, over every pass (skipped ones excluded): passes, total, mean, min and
+        max seconds, and the passes that were retried or failed.
 
         Returns:
-            ``{state: {"count", "total_s", "mean_s", "max_s"}}``.
+            ``{state: {"count", "total_s", "mean_s", "min_s", "max_s", "retries",
+            "failures"}}``.
         """
-        timings: dict[str, dict[str, float]] = {}
-        for record in self.records:
-            if record.outcome == "skipped":
-                continue
-            entry = timings.setdefault(
-                record.state, {"count": 0, "total_s": 0.0, "mean_s": 0.0, "max_s": 0.0}
-            )
-            entry["count"] += 1
-            entry["total_s"] += record.duration_s
-            entry["max_s"] = max(entry["max_s"], record.duration_s)
-        for entry in timings.values():
-            entry["mean_s"] = entry["total_s"] / entry["count"]
-            for key in ("total_s", "mean_s", "max_s"):
-                entry[key] = round(entry[key], 4)
-        return timings
+        log = self.log
+        if not log.passes and self.records:  # a result made without a runner
+            log = RunLog()
+            for record in self.records:
+                log.add(record)
+        return log.state_timings()
 
 
 class _RunContext:
@@ -304,7 +302,7 @@ class _Run:
     def record(self, state: str, cycle: int, started: float, outcome: str) -> None:
         """Append the record of one pass through ``state``."""
         now = time.monotonic()
-        self.result.records.append(
+        self.result.log.add(
             StateRecord(
                 state=state,
                 cycle=cycle,
@@ -317,7 +315,7 @@ class _Run:
     def cycle_done(self, cycle: int) -> None:
         """Count a finished cycle and start the clock of the next."""
         elapsed = round(time.monotonic() - self.cycle_started, 4)
-        self.result.cycle_times_s.append(elapsed)
+        self.result.log.cycle_time(elapsed)
         self.result.cycles_completed += 1
         self.runner._log.info("pickplace.cycle_done", cycle=cycle, cycle_time_s=elapsed)
         self.cycle_started = time.monotonic()
@@ -457,6 +455,8 @@ class Runner:
                     result.stop_delivered = motion.stop_delivered
             result.reaction = self._react(sequence, result.failure)
         result.duration_s = round(time.monotonic() - run.started, 4)
+        result.records = result.log.records()
+        result.cycle_times_s = result.log.cycle_times()[0]
         self._log.info(
             "pickplace.run_done",
             sequence=sequence.name,

@@ -14,7 +14,7 @@ from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
-from ._report import RunReport, printable
+from ._report import CycleSummary, RunReport, printable
 
 _RESULT_STYLE = {"done": "bold green", "interrupted": "bold yellow"}
 
@@ -82,17 +82,42 @@ def _state_table(report: RunReport) -> list[Any]:
     return parts
 
 
-def _cycle_times(times: list[float]) -> Text:
-    """The cycle times: every one up to MAX_LISTED_TIMES, else the first and the last."""
-    half = MAX_LISTED_TIMES // 2
-    if len(times) <= MAX_LISTED_TIMES:
+def _cycle_times(cycles: CycleSummary) -> Text:
+    """The cycle times: every one up to MAX_LISTED_TIMES, else the first and the last;
+    the statistics of every completed cycle (the report's, else of the times listed)."""
+    times, half = cycles.times_s, MAX_LISTED_TIMES // 2
+    if len(times) <= MAX_LISTED_TIMES and not cycles.times_omitted:
         listed = ", ".join(f"{t:.2f}" for t in times)
     else:
         first = ", ".join(f"{t:.2f}" for t in times[:half])
         last = ", ".join(f"{t:.2f}" for t in times[-half:])
-        listed = f"{first}, ... {len(times) - 2 * half} more ..., {last}"
+        more = len(times) - 2 * half + cycles.times_omitted
+        listed = f"{first}, ... {more} more ..., {last}"
+    mean = cycles.mean_s if cycles.mean_s is not None else sum(times) / len(times)
+    longest = cycles.max_s if cycles.max_s is not None else max(times)
+    shortest = f"min {cycles.min_s:.2f}, " if cycles.min_s is not None else ""
+    return Text(f"cycle times (s): {listed}  ({shortest}mean {mean:.2f}, max {longest:.2f})")
+
+
+def _scope(report: RunReport) -> Text | None:
+    """What the timeline leaves out of a long run, in words (None: nothing)."""
+    scope = report.timeline_scope
+    if scope is None or not (scope.omitted_cycles or report.cycles.times_omitted):
+        return None
+    marked = f", up to {scope.marked_cycles} with a retry or failure"
+    if scope.marked_cycles_omitted:
+        marked += f" ({scope.marked_cycles_omitted} more not listed)"
+    times = report.cycles.times_omitted
     return Text(
-        f"cycle times (s): {listed}  (mean {sum(times) / len(times):.2f}, max {max(times):.2f})"
+        f"long run: the report lists the passes of {scope.listed_cycles} cycle(s) (the"
+        f" first {scope.first_cycles}, the latest {scope.last_cycles}{marked});"
+        f" the other {scope.omitted_cycles} cycle(s) are aggregated: the table counts all"
+        f" {scope.passes} passes"
+        + (
+            f", the cycle statistics all {times + len(report.cycles.times_s)} cycles"
+            if times
+            else ""
+        )
     )
 
 
@@ -117,7 +142,9 @@ def summary_renderable(report: RunReport) -> Any:
     if report.states:
         parts.extend(_state_table(report))
     if report.cycles.times_s:
-        parts.append(_cycle_times(report.cycles.times_s))
+        parts.append(_cycle_times(report.cycles))
+    if (scope := _scope(report)) is not None:
+        parts.append(scope)
     error = report.error
     if error is not None and not report.reason:  # the reason already says it
         code = f" (robot error code {error.error_code})" if error.error_code else ""

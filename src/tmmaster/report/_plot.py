@@ -24,6 +24,31 @@ _PICK = "#6a4c93"
 _PLACE = "#e76f51"
 #: The reason under the title is cut to this many characters.
 _REASON_CHARS = 150
+#: The most cycles drawn pass by pass (the first and the last half of those listed).
+MAX_DRAWN_CYCLES = 60
+
+
+def _drawn(report: RunReport) -> tuple[list[Any], list[int]]:
+    """The timeline entries drawn, and their cycles in order: every listed cycle up to
+    MAX_DRAWN_CYCLES, else the first and the last half of them."""
+    cycles = sorted({e.cycle for e in report.timeline})
+    if len(cycles) > MAX_DRAWN_CYCLES:
+        half = MAX_DRAWN_CYCLES // 2
+        cycles = cycles[:half] + cycles[-half:]
+    keep = set(cycles)
+    return [e for e in report.timeline if e.cycle in keep], cycles
+
+
+def _cycles_note(report: RunReport, drawn: int) -> str:
+    """What the cycle panel leaves out, in words ("" when nothing)."""
+    total = report.cycles.completed + (1 if report.final_state != "DONE" else 0)
+    listed = len({e.cycle for e in report.timeline if e.cycle > 0})
+    shown = drawn - (1 if any(e.cycle == 0 for e in report.timeline) else 0)
+    if shown >= listed and (
+        report.timeline_scope is None or not report.timeline_scope.omitted_cycles
+    ):
+        return ""
+    return f" ({shown} of {max(total, listed)} cycles drawn; the rest aggregated in the report)"
 
 
 def _state_colours(report: RunReport) -> dict[str, Any]:
@@ -39,17 +64,21 @@ def _state_colours(report: RunReport) -> dict[str, Any]:
 
 def _cycle_panel(ax: Any, report: RunReport, colours: dict[str, Any]) -> None:
     # Cycle 0 is what ran before the first cycle (IDLE: the wait for the robot to be
-    # ready): its own row, "start", so a run that failed there still shows it.
-    cycles = sorted({e.cycle for e in report.timeline})
-    starts = {c: min(e.started_s for e in report.timeline if e.cycle == c) for c in cycles}
+    # ready): its own row, "start", so a run that failed there still shows it. One row per
+    # cycle drawn, in order (a long run's report lists some cycles only).
+    entries, cycles = _drawn(report)
+    row = {c: i for i, c in enumerate(cycles)}
+    starts: dict[int, float] = {}
+    for entry in entries:
+        starts[entry.cycle] = min(starts.get(entry.cycle, entry.started_s), entry.started_s)
     seen: set[str] = set()
-    for entry in report.timeline:
+    for entry in entries:
         if entry.outcome == "skipped":
             continue
         label = entry.state if entry.state not in seen else None
         seen.add(entry.state)
         ax.barh(
-            entry.cycle,
+            row[entry.cycle],
             max(entry.duration_s, 1e-3),
             left=entry.started_s - starts[entry.cycle],
             height=0.7,
@@ -58,10 +87,10 @@ def _cycle_panel(ax: Any, report: RunReport, colours: dict[str, Any]) -> None:
             hatch="//" if entry.outcome == "retry" else None,
             label=label,
         )
-    ax.set_yticks(cycles, [f"cycle {c}" if c >= 1 else "start" for c in cycles])
+    ax.set_yticks(range(len(cycles)), [f"cycle {c}" if c >= 1 else "start" for c in cycles])
     ax.invert_yaxis()
     ax.set_xlabel("seconds since the cycle started")
-    ax.set_title("states per cycle")
+    ax.set_title("states per cycle" + _cycles_note(report, len(cycles)))
     if seen:
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small", frameon=False)
     ax.grid(axis="x", alpha=0.3)
@@ -95,7 +124,7 @@ def _tcp_speeds(
 
 def _moving_panel(ax: Any, report: RunReport) -> None:
     moves = set(report.move_states)
-    for entry in report.timeline:
+    for entry in _drawn(report)[0]:
         if entry.outcome == "skipped":
             continue
         moving = entry.state in moves
