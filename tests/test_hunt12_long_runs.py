@@ -117,6 +117,10 @@ def test_an_async_robot_dropped_without_close_is_garbage(
         assert left_open(before, threads) == ([], set())
 
 
+#: How long the collecting thread may take before it counts as waiting for itself.
+DEADLOCK_AFTER_S = 30.0
+
+
 def test_a_link_collected_while_the_default_driver_is_being_taken_lets_it_go() -> None:
     # A collection can run inside any allocation, so also while a thread holds the
     # default driver's lock to make a new driver (Fleet() allocates plenty). A link
@@ -137,7 +141,9 @@ def test_a_link_collected_while_the_default_driver_is_being_taken_lets_it_go() -
 
     worker = threading.Thread(target=collect_while_taking_the_driver, daemon=True)
     worker.start()
-    worker.join(2.0)
+    # A deadlock never ends; a full collection of a test worker's heap on a loaded
+    # machine takes about a second (2 s was once too short in a full run).
+    worker.join(DEADLOCK_AFTER_S)
     assert done.is_set(), "the collection waited for the lock its own thread holds"
 
 
