@@ -9,6 +9,7 @@ early, and its life cycle.
 from __future__ import annotations
 
 import _thread
+import signal
 import socket
 import threading
 import time
@@ -182,10 +183,16 @@ def test_ctrl_c_in_a_wait_the_loop_polls_withdraws_or_stops_before_returning(
     robot = robots(sim, timeouts=TimeoutPolicy(ack_timeout_s=30))
     motion = robot.start_move(A, speed=60)
     timer = threading.Timer(0.2, _thread.interrupt_main)
-    timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        motion.wait()
-    timer.join()
+    # Python's own Ctrl-C handler, also where pytest started with SIGINT ignored (`&` in
+    # a script, nohup): interrupt_main() does nothing then.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            motion.wait()
+        timer.join()
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert motion.withdrawn is True
     sim.clear_faults()
     late_ack_over(sim, motion)  # a command still armed would run by now
