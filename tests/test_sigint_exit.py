@@ -202,6 +202,9 @@ def test_a_command_process_leaves_its_heap_to_the_system_after_every_exit_hook(
 
     registered: list[object] = []
     monkeypatch.setattr(_sigint.atexit, "register", lambda hook, *_: registered.append(hook))
+    # A command's process keeps its unraisable hook to the end; this process gets its own
+    # back after the test, as its Ctrl-C handler.
+    monkeypatch.setattr(sys, "unraisablehook", sys.unraisablehook)
 
     def command() -> int:
         registered.append("a robot's exit hook")  # as an opened Robot registers its own
