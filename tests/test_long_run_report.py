@@ -292,3 +292,37 @@ def test_the_runner_keeps_the_first_the_latest_and_the_retried_cycles(
     assert report["timeline_scope"]["passes"] == 1 + 60 * 3 + 2 * 2
     assert report["timeline_scope"]["omitted_cycles"] == 60 - 22
     assert report["cycles"]["times_omitted"] == 0
+
+
+def test_a_sim_report_of_many_parts_lists_the_ones_to_look_at(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from types import SimpleNamespace
+
+    from tmmaster import Pose
+    from tmmaster.pickplace._report import objects_report
+
+    place = Pose(300, 200, 100, 180, 0, 90)
+    astray = {150, 151, 152}  # parts that did not reach the place position
+
+    def part(i: int) -> SimpleNamespace:
+        x = 0.0 if i in astray else place.x
+        return SimpleNamespace(
+            name=f"part-{i}", pose=Pose(x, place.y, 100, 180, 0, 90), held=False, resting_on="table"
+        )
+
+    objects = [part(i) for i in range(1, 301)]
+    sim = objects_report(objects, place, 2.0, {f"part-{i}" for i in range(1, 301)})
+    listed = [o["name"] for o in sim["objects"]]
+    expected = [*range(1, 11), *sorted(astray), *range(291, 301)]
+    assert listed == [f"part-{i}" for i in expected]
+    assert sim["objects_total"] == 300
+    assert sim["objects_on_place"] == 297
+    assert sim["on_place"] is False
+    path = tmp_path / "run.json"
+    write_report(
+        path,
+        build_report(exit_code=1, result_name="failed", reason="parts astray", sim=sim),
+    )
+    assert report_main(["show", str(path)]) == 0
+    assert "simulator: 297/300 part(s) on the place position" in capsys.readouterr().out

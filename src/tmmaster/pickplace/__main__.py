@@ -949,6 +949,13 @@ def _parts_placed(sim_report: dict[str, Any], out: _Output) -> bool:
             continue
         where = "on the place position" if item["on_place"] else "NOT on the place position"
         out.result(f"simulator: {item['name']} is {where} ({pose})")
+    unlisted = sim_report["objects_total"] - len(sim_report["objects"])
+    if unlisted:  # a long run: one part per cycle, only some listed
+        on = sim_report["objects_on_place"] - sum(i["on_place"] for i in sim_report["objects"])
+        out.result(
+            f"simulator: {unlisted} more part(s) not listed: {on} on the place position,"
+            f" {unlisted - on} not"
+        )
     return bool(sim_report["on_place"])
 
 

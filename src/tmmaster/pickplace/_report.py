@@ -246,7 +246,13 @@ class SimSummary(_Part):
     """With ``--sim``: where the parts ended, and the path the TCP took."""
 
     objects: list[SimObject] = Field(default_factory=list)
-    """Every part, where it ended."""
+    """Where the parts ended: every one up to 100; beyond, the first and the last 10 of the
+    run's, every other part, and up to 100 run parts not on the place position."""
+    objects_total: int | None = None
+    """Parts in the simulator, listed or not (null: a report older than this key, which
+    lists every part)."""
+    objects_on_place: int | None = None
+    """Parts on the place position, listed or not (null: an older report)."""
     pick: list[float] | None = None
     """The pick pose ``[x, y, z, rx, ry, rz]``, where the parts waited (null: none, or a
     report older than this key)."""
@@ -495,11 +501,32 @@ def objects_report(
     ]
     counted = [i for i in items if i["run_part"]]
     return {
-        "objects": items,
+        "objects": _listed_objects(items),
+        "objects_total": len(items),
+        "objects_on_place": sum(bool(i["on_place"]) for i in items),
         "place": None if place is None else place.as_list(),
         "tolerance_mm": tolerance_mm,
         "on_place": place is not None and bool(counted) and all(i["on_place"] for i in counted),
     }
+
+
+#: Parts listed one by one in a --sim report whatever their number; beyond, see
+#: :func:`_listed_objects` (a --sim run has one part per cycle).
+MAX_LISTED_OBJECTS = 100
+
+
+def _listed_objects(items: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every part up to MAX_LISTED_OBJECTS; beyond, in order: the first and the last 10 of
+    the run's parts, every part of the scene's own, and up to MAX_LISTED_OBJECTS run parts
+    not on the place position (the ones to look at)."""
+    if len(items) <= MAX_LISTED_OBJECTS:
+        return items
+    run = [i for i, item in enumerate(items) if item["run_part"]]
+    keep = {*run[:10], *run[-10:]}
+    keep |= {i for i, item in enumerate(items) if not item["run_part"]}
+    misplaced = [i for i in run if not items[i]["on_place"]]
+    keep |= set(misplaced[:MAX_LISTED_OBJECTS])
+    return [items[i] for i in sorted(keep)]
 
 
 def build_report(

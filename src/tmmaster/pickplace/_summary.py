@@ -14,7 +14,7 @@ from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
-from ._report import CycleSummary, RunReport, printable
+from ._report import CycleSummary, RunReport, SimSummary, printable
 
 _RESULT_STYLE = {"done": "bold green", "interrupted": "bold yellow"}
 
@@ -121,6 +121,14 @@ def _scope(report: RunReport) -> Text | None:
     )
 
 
+def _sim_parts(sim: SimSummary) -> Text:
+    """How many parts ended on the place position, of all (listed in the report or not)."""
+    placed = sim.objects_on_place
+    placed = sum(o.on_place for o in sim.objects) if placed is None else placed
+    total = len(sim.objects) if sim.objects_total is None else sim.objects_total
+    return Text(f"simulator: {placed}/{total} part(s) on the place position")
+
+
 def summary_renderable(report: RunReport) -> Any:
     """A rich renderable: result line, per-state table and cycle times of ``report``.
 
@@ -160,8 +168,5 @@ def summary_renderable(report: RunReport) -> Any:
             )
         )
     if report.sim is not None and report.sim.objects:
-        placed = sum(o.on_place for o in report.sim.objects)
-        parts.append(
-            Text(f"simulator: {placed}/{len(report.sim.objects)} part(s) on the place position")
-        )
+        parts.append(_sim_parts(report.sim))
     return Group(*parts)
