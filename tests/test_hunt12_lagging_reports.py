@@ -336,6 +336,39 @@ def test_a_done_flag_a_few_ticks_early_is_done_only_once_the_arm_is_there(profil
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_master_whose_first_read_after_an_early_done_comes_late_still_sees_it_done(
+    profile: str,
+) -> None:
+    # As above, the robot reports the move finished 0.1 s before its arm gets there, and
+    # the master is slow (a loaded machine): its first read after the done is answered
+    # only 0.35 s later, past the 0.3 s it waits for the pose. That read finds the arm at
+    # the target: the next read decides, and the arm holds still there: done (it was a
+    # RobotError, "did not hold still at the target", on a loaded 2-core machine).
+    backend = ReportingBackend(done_early_s=0.1)
+    seen: list[Motion] = []
+    slowed: list[float] = []
+
+    def slow_first_read_after_the_done(_request: RequestRecord) -> None:
+        if seen and seen[0].reported_finished_at is not None and not slowed:
+            slowed.append(time.monotonic())
+            time.sleep(0.35)  # on the simulator's thread, before the read is executed
+
+    with (
+        simulator(
+            profile, backend, time_scale=1.0, request_listener=slow_first_read_after_the_done
+        ) as sim,
+        connect(sim, profile) as robot,
+    ):
+        robot.wait_until_ready(timeout_s=5)
+        seen.append(motion := robot.start_move(OTHER, speed=35))
+        motion.wait()
+        assert slowed
+        assert motion.done
+        assert len(sim.motion_log()) == 1
+        assert sim.call(backend.true_pose).is_close(OTHER, mm=1.0, deg=1.0)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_done_flag_far_too_early_still_fails(profile: str) -> None:
     # Reported finished a second before the arm gets there: the arm is still on its way
     # when the master's wait for the pose ends: a RobotError, never a done. The master

@@ -701,26 +701,32 @@ class _MotionFollower:
         done once two reads in a row are at the target, and within half the tolerances of
         each other (the arm holds still there: a robot that reports done while its arm
         still moves is not believed for it). A miss at ``deadline`` (the first read's,
-        when past) is a RobotError. A stop request ends the wait.
+        when past) is a RobotError, as is a read there that does not hold still; a read
+        past it that first finds the arm at the target has one more read, a robot tick
+        later (a master slow to read its robot, on a loaded machine, is not failed for
+        its own lateness). A stop request ends the wait.
         """
         pose, joints = polled.pose, polled.joints
         if pose is None:
             pose, joints, _ = self._channel.read_plan()
         # held: the last read's pose; hit: it was at the target (the done poll's counts alone)
-        poller, held, hit = Poller(TICK_S, self.stop_event, deadline=deadline), pose, True
+        # Paced by robot ticks, also past the deadline (the last read's: one tick later).
+        poller, held, hit = Poller(TICK_S, self.stop_event), pose, True
         mm, deg = self.position_tolerance_mm / 2, self.orientation_tolerance_deg / 2
         while True:
             motion.last_pose, miss = pose, self._miss(motion, pose, joints)
             if (still := pose.is_close(held, mm=mm, deg=deg)) and miss is None and hit:
                 return
-            held, hit = pose, miss is None
             motion.phase = MovePhase.FAILED  # DONE once seen held at the target
             # Not finished while seen moving: if the move fails here, abandon stops the arm.
             motion.ticket.finished &= still
-            if time.monotonic() >= deadline:
+            # Past the deadline, a read that first finds the arm at the target has the
+            # next one to show it holds still (the master may be the slow one).
+            if time.monotonic() >= deadline and (miss or hit):
                 self._channel.after_done = None  # a failed move's state is not reused
                 miss = miss or f"the TCP at {pose} did not hold still at the target"
                 raise RobotError(f"robot reported the move finished but {miss}", pose=pose)
+            held, hit = pose, miss is None
             poller.sleep()
             pose, joints, _ = self._channel.read_plan()
 
