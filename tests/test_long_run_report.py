@@ -135,16 +135,19 @@ def test_a_hundred_thousand_cycles_keep_a_bounded_log() -> None:
     assert retried == [*range(500, 50_001, 500), 100_000]  # the first 100, and the latest
     assert log.marked_dropped == 99  # 50,500 .. 99,500: counted only
     assert len(log.cycle_times()[0]) == 2000
-    # What more cycles add is not kept (before: some 1.7 kB per cycle of passes).
+    # What more cycles add is not kept (before: some 1.7 kB per cycle of passes). Traced
+    # from a while after the start, so what is freed was traced too (the trend's blocks
+    # merge now and then: a block made before the trace is freed unseen).
     tracemalloc.start()
     try:
-        before = tracemalloc.get_traced_memory()[0]
         add_cycles(log, range(100_001, 105_001))
+        before = tracemalloc.get_traced_memory()[0]
+        add_cycles(log, range(105_001, 115_001))
         grown = tracemalloc.get_traced_memory()[0] - before
     finally:
         tracemalloc.stop()
     assert grown < 16 * 1024
-    assert log.passes == 210_000
+    assert log.passes == 230_000
 
 
 def synthetic_result(cycles: int, marked: Collection[int] = ()) -> RunResult:
@@ -326,3 +329,36 @@ def test_a_sim_report_of_many_parts_lists_the_ones_to_look_at(
     )
     assert report_main(["show", str(path)]) == 0
     assert "simulator: 297/300 part(s) on the place position" in capsys.readouterr().out
+
+
+def test_the_cycle_time_trend_covers_the_whole_run_in_at_most_200_blocks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = RunLog()
+    times = [round(1.0 + (c // 1000) * 0.01 + (c % 7) * 0.001, 4) for c in range(1, 5001)]
+    for t in times:
+        log.cycle_time(t)
+    trend = log.trend()
+    # 5,000 cycles: blocks of 32 cycles (1, 2, 4 ... doubled while over 200), the last short.
+    assert log.block_cycles == 32
+    assert len(trend) == 157
+    assert [row[0] for row in trend] == list(range(1, 5001, 32))
+    assert sum(row[1] for row in trend) == 5000
+    for first, count, mean_s, min_s, max_s in trend:
+        block = times[first - 1 : first - 1 + count]
+        assert mean_s == round(sum(block) / count, 4)
+        assert min_s == min(block)
+        assert max_s == max(block)
+    # Up to 200 cycles the trend is every cycle's time.
+    short = RunLog()
+    for t in times[:200]:
+        short.cycle_time(t)
+    assert [row[2] for row in short.trend()] == times[:200]
+    # Shown in one line by `report show`.
+    result = synthetic_result(5000)
+    path = tmp_path / "run.json"
+    write_report(path, build_report(exit_code=0, result_name="done", reason=None, run=result))
+    assert len(load_report(path).cycles.trend) <= 200
+    assert report_main(["show", str(path)]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "cycle time trend (mean of each 32 cycles, 157 blocks): first" in out

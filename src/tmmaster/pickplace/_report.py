@@ -93,6 +93,12 @@ class CycleSummary(_Part):
     max_s: float | None = None
     """The longest completed cycle, seconds (null: none, or an older report)."""
 
+    trend: list[tuple[int, int, float, float, float]] = Field(default_factory=list)
+    """The cycle times over the whole run, at most 200 rows: ``[first_cycle, cycles,
+    mean_s, min_s, max_s]`` per block of consecutive completed cycles (one cycle per
+    block up to 200 cycles, then 2, 4, 8...; the last block may be shorter). Empty in a
+    report older than this key."""
+
     def cycle_of(self, index: int) -> int:
         """The cycle (from 1) whose time is ``times_s[index]``."""
         return index + 1 + (self.times_omitted if index >= self.times_omitted_at > 0 else 0)
@@ -653,6 +659,7 @@ def _run_fields(run: RunResult | None) -> dict[str, Any]:
             "times_omitted": omitted,
             "times_omitted_at": run.log.times_kept_first if omitted else 0,
             **{k: cycle_stats.get(k) for k in ("total_s", "mean_s", "min_s", "max_s")},
+            "trend": run.log.trend(),
         },
         "states": run.state_timings(),
         "timeline": [

@@ -22,6 +22,9 @@ LAST_CYCLES = 10
 MARKED_CYCLES = 100
 #: The cycle times kept from the start, and from the end (the rest are only counted).
 CYCLE_TIMES = 1000
+#: The most blocks of the cycle-time trend: each block is the statistics of consecutive
+#: cycles, and two neighbours merge (the block twice as long) when one more is needed.
+TREND_BLOCKS = 200
 
 
 class Pass(Protocol):
@@ -54,6 +57,19 @@ class Stats:
         self.max_s = max(self.max_s, seconds)
         self.count += 1
         self.total_s += seconds
+
+    def merged(self, other: Stats) -> Stats:
+        """The statistics of both (durations only)."""
+        if not other.count:
+            return Stats(self.count, self.total_s, self.min_s, self.max_s)
+        if not self.count:
+            return other.merged(self)
+        return Stats(
+            self.count + other.count,
+            self.total_s + other.total_s,
+            min(self.min_s, other.min_s),
+            max(self.max_s, other.max_s),
+        )
 
     def as_dict(self) -> dict[str, Any]:
         """``count``, ``total_s``, ``mean_s``, ``min_s``, ``max_s`` (rounded to 0.1 ms),
@@ -110,6 +126,9 @@ class RunLog:
         self._times_head: list[float] = []
         self._times_tail: deque[float] = deque(maxlen=times)
         self._times_cap = times
+        #: Cycles per block of the trend (doubles as the run goes on).
+        self.block_cycles = 1
+        self._blocks: list[Stats] = []
 
     def add(self, record: Pass) -> None:
         """Count one pass and keep it while its cycle may be kept."""
@@ -131,6 +150,13 @@ class RunLog:
     def cycle_time(self, seconds: float) -> None:
         """Count one completed cycle's time."""
         self.cycles.add(seconds)
+        if not self._blocks or self._blocks[-1].count >= self.block_cycles:
+            if len(self._blocks) >= TREND_BLOCKS:
+                pairs = zip(self._blocks[::2], self._blocks[1::2], strict=True)
+                self._blocks = [a.merged(b) for a, b in pairs]
+                self.block_cycles *= 2
+            self._blocks.append(Stats())
+        self._blocks[-1].add(seconds)
         if len(self._times_head) < self._times_cap:
             self._times_head.append(seconds)
         else:
@@ -168,6 +194,17 @@ class RunLog:
         were only counted."""
         omitted = self.cycles.count - len(self._times_head) - len(self._times_tail)
         return [*self._times_head, *self._times_tail], omitted
+
+    def trend(self) -> list[tuple[int, int, float, float, float]]:
+        """The cycle-time trend: per block of consecutive cycles, ``(first cycle, cycles,
+        mean_s, min_s, max_s)``; at most TREND_BLOCKS blocks whatever the cycles."""
+        rows = []
+        for i, block in enumerate(self._blocks):
+            d = block.as_dict()
+            rows.append(
+                (i * self.block_cycles + 1, block.count, d["mean_s"], d["min_s"], d["max_s"])
+            )
+        return rows
 
     def scope(self) -> dict[str, Any]:
         """What the kept passes cover (the report's ``timeline_scope``)."""

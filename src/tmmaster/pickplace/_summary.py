@@ -99,6 +99,19 @@ def _cycle_times(cycles: CycleSummary) -> Text:
     return Text(f"cycle times (s): {listed}  ({shortest}mean {mean:.2f}, max {longest:.2f})")
 
 
+def _trend(cycles: CycleSummary) -> Text | None:
+    """The cycle-time trend of a run of more than 200 cycles, in one line (else None)."""
+    blocks = cycles.trend
+    if len(blocks) < 2 or blocks[0][1] < 2:
+        return None
+    worst = max(blocks, key=lambda row: row[2])
+    return Text(
+        f"cycle time trend (mean of each {blocks[0][1]} cycles, {len(blocks)} blocks):"
+        f" first {blocks[0][2]:.2f}, last {blocks[-1][2]:.2f}, highest {worst[2]:.2f}"
+        f" (cycles {worst[0]}-{worst[0] + worst[1] - 1})"
+    )
+
+
 def _scope(report: RunReport) -> Text | None:
     """What the timeline leaves out of a long run, in words (None: nothing)."""
     scope = report.timeline_scope
@@ -151,6 +164,8 @@ def summary_renderable(report: RunReport) -> Any:
         parts.extend(_state_table(report))
     if report.cycles.times_s:
         parts.append(_cycle_times(report.cycles))
+    if (trend := _trend(report.cycles)) is not None:
+        parts.append(trend)
     if (scope := _scope(report)) is not None:
         parts.append(scope)
     error = report.error
