@@ -98,9 +98,13 @@ def test_the_example_runs(where: str, code: str, capsys: pytest.CaptureFixture[s
     if where.rsplit("[", 1)[0] in NOT_RUN:
         pytest.skip(NOT_RUN[where.rsplit("[", 1)[0]])
     with contextlib.ExitStack() as stack:
-        for port in PORTS:
-            if port in code:
-                sim = stack.enter_context(Simulator(**QUICK))
-                code = code.replace(port, str(sim.port))
+        # In one pass, whole numbers only: a simulator's own port may contain "5021"
+        # (50215 became 338775 when the ports were replaced one after the other).
+        real = {
+            port: str(stack.enter_context(Simulator(**QUICK)).port)
+            for port in PORTS
+            if re.search(rf"\b{port}\b", code)
+        }
+        code = re.sub(r"\b(?:" + "|".join(PORTS) + r")\b", lambda m: real[m[0]], code)
         exec(compile(code, where, "exec"), {"__name__": "__example__"})
     capsys.readouterr()

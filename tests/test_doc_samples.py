@@ -123,9 +123,11 @@ def _simulators(code: str) -> Iterator[str]:
             gripper = "onrobot-2fg7" if "onrobot-2fg7" in code and "5021" in code else None
             profile = "article" if 'profile="article"' in code else "tmflow"
             sim = stack.enter_context(Simulator(profile, robot=RobotSetup(gripper=gripper), **PACE))
-            code = code.replace("5020", str(sim.port))
+            real = {"5020": str(sim.port)}
             if gripper is not None:
-                code = code.replace("5021", str(sim.gripper_port))
+                real["5021"] = str(sim.gripper_port)
+            # In one pass, whole numbers only: the robot's port may contain "5021".
+            code = re.sub(r"\b(?:5020|5021)\b", lambda m: real.get(m[0], m[0]), code)
         yield code
 
 
