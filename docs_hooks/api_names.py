@@ -44,6 +44,8 @@ INTERNAL_MEMBERS = {
     "tmmaster.aio._robot._Primed.close",
     "tmmaster.aio._robot._Primed.send",
     "tmmaster.aio._robot._Primed.throw",
+    # The runner's count of every pass; a run's records and cycle times are its output.
+    "tmmaster.pickplace._runner.RunResult.log",
     "tmmaster.sim._simulator.Simulator.device_server",
     "tmmaster.tmscript._evaluator.Program.script",
     "tmmaster.tmscript._evaluator.Program.define",

@@ -100,7 +100,14 @@ class CycleSummary(_Part):
     report older than this key."""
 
     def cycle_of(self, index: int) -> int:
-        """The cycle (from 1) whose time is ``times_s[index]``."""
+        """The cycle (from 1) whose time is ``times_s[index]``.
+
+        Args:
+            index: A position in ``times_s``.
+
+        Returns:
+            The cycle's number, counting the cycles whose times were omitted.
+        """
         return index + 1 + (self.times_omitted if index >= self.times_omitted_at > 0 else 0)
 
 
