@@ -32,11 +32,13 @@ from tmmaster._registers import Table
 from tmmaster._transport import AsyncLink
 
 
-async def with_slave(script: list[Answer], body: Callable[[AsyncLink], Awaitable[None]]) -> None:
+async def with_slave(
+    script: list[Answer], body: Callable[[AsyncLink], Awaitable[None]], *, timeout: float = 0.2
+) -> None:
     """Run ``body`` with a link connected to a slave that answers request k by ``script[k]``."""
     server = ScriptedServer(script)
     port = await server.start()
-    link = AsyncLink("127.0.0.1", port, device_id=1, timeout=0.2, name="slave")
+    link = AsyncLink("127.0.0.1", port, device_id=1, timeout=timeout, name="slave")
     try:
         await link.connect()
         await body(link)
@@ -47,18 +49,22 @@ async def with_slave(script: list[Answer], body: Callable[[AsyncLink], Awaitable
 
 def test_a_late_answer_is_dropped_not_taken_for_the_next_read() -> None:
     async def body(link: AsyncLink) -> None:
-        with pytest.raises(ResponseTimeoutError, match=r"no answer to first read within 0\.2 s"):
+        with pytest.raises(ResponseTimeoutError, match=r"no answer to first read within 1 s"):
             await link.read_block(Table.HOLDING, 0, 2, "first read")
         # The first answer (111, 111) arrives while the second read waits: it is not its.
         assert await link.read_block(Table.HOLDING, 0, 2, "second read") == [222, 222]
 
+    # 0.25 s or more between the events (the first read's give-up at 1 s, the late answer
+    # at 1.25 s, the second's at about 1.75 s, its give-up at about 2 s): with 0.05 s
+    # (a 0.2 s timeout) the second read once timed out in a run on a loaded machine.
     asyncio.run(
         with_slave(
             [
-                answer_with(registers(111, 111), after_s=0.3),  # after the first gave up
-                answer_with(registers(222, 222), after_s=0.15),  # after that late one
+                answer_with(registers(111, 111), after_s=1.25),  # after the first gave up
+                answer_with(registers(222, 222), after_s=0.75),  # after that late one
             ],
             body,
+            timeout=1.0,
         )
     )
 
