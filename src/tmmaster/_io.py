@@ -299,18 +299,6 @@ def io_value(value: object, what: str) -> bool:
     return value
 
 
-def digital_io_areas(profile: RobotProfile) -> tuple[tuple[Table, int, int], ...]:
-    """Every module's coils and discrete inputs as ``(table, first address, count)``.
-
-    Args:
-        profile: The robot profile.
-
-    Returns:
-        The areas, module by module (none for a profile without digital I/O).
-    """
-    return tuple(span for module in profile.digital_io.values() for span in module.spans())
-
-
 class RobotIO:
     """A robot's digital I/O: control-box and end-module DOs and DIs (``robot.io``).
 

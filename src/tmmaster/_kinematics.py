@@ -81,12 +81,6 @@ def rpy_transform(xyz: Sequence[float], rpy_rad: Sequence[float]) -> Transform:
     )
 
 
-def rot_z(angle_rad: float) -> Transform:
-    """A rotation about z."""
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    return ((c, -s, 0.0, 0.0), (s, c, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), IDENTITY[3])
-
-
 def pose_to_transform(pose: Pose) -> Transform:
     """The transform of a TM pose (mm; rx, ry, rz in degrees, ``Rz @ Ry @ Rx``)."""
     return rpy_transform(

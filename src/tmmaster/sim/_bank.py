@@ -26,7 +26,7 @@ from math import copysign, nan
 
 from .._codec import Decoder, Encoder, Value, decoder, encoder
 from .._exceptions import IllegalAddressError, IllegalValueError
-from .._registers import RegisterField, RegisterMap, Table
+from .._registers import RegisterField, RegisterMap, RobotProfile, Table
 from ._memo import IdentityMemo
 
 
@@ -447,3 +447,15 @@ class RegisterBank:
             raise IllegalAddressError(
                 f"{self._map.name}: bad {table.value} range: {count} from {address}"
             )
+
+
+def digital_io_areas(profile: RobotProfile) -> tuple[tuple[Table, int, int], ...]:
+    """Every module's coils and discrete inputs as ``(table, first address, count)``.
+
+    Args:
+        profile: The robot profile.
+
+    Returns:
+        The areas, module by module (none for a profile without digital I/O).
+    """
+    return tuple(span for module in profile.digital_io.values() for span in module.spans())

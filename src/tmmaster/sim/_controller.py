@@ -36,7 +36,6 @@ from typing import ClassVar, Literal
 from .. import _kinematics as kin
 from .._codec import allowed_range, encode
 from .._exceptions import ConfigError, UnreachablePoseError, ValueOutOfRangeError
-from .._io import digital_io_areas
 from .._pose import MotionType, Pose
 from .._registers import (
     FLANGE_FIELDS,
@@ -49,7 +48,7 @@ from .._registers import (
 from .._robot_models import RobotModel
 from .._tm_errors import describe
 from ._backend import MotionRejectedError, PathBackend, PhysicsBackend
-from ._bank import RegisterBank
+from ._bank import RegisterBank, digital_io_areas
 from ._device import Logger, SimDevice
 from ._faults import (
     EstopFault,

@@ -16,9 +16,8 @@ import dataclasses
 from abc import abstractmethod
 from typing import Any
 
-from .._io import digital_io_areas
 from .._registers import RobotProfile
-from ._bank import RegisterBank
+from ._bank import RegisterBank, digital_io_areas
 from ._controller import MoveArgs, RobotController, SimErrorCode, _Active
 from ._tm_table import tm_table_areas, tm_table_fields
 

@@ -523,7 +523,7 @@ def grasp_fit(
         width = across
     else:
         # Straightened: turned back by theta about the tool's z.
-        rotation = kin.multiply(kin.rot_z(-theta), rel)
+        rotation = kin.multiply(_rot_z(-theta), rel)
         width = 2 * sum(abs(rotation[1][j]) * half[j] for j in range(3))
     centred = (
         (rotation[0][0], rotation[0][1], rotation[0][2], cx),
@@ -961,3 +961,9 @@ def held_frame(world: World, tcp: kin.Transform) -> tuple[TableObject, kin.Trans
     relative = world._relative
     frame = tcp if relative is None else kin.multiply(tcp, relative)
     return world._objects[world._held], frame
+
+
+def _rot_z(angle_rad: float) -> kin.Transform:
+    """A rotation about z."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return ((c, -s, 0.0, 0.0), (s, c, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), kin.IDENTITY[3])
