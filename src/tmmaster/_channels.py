@@ -86,6 +86,10 @@ class CommandKind(StrEnum):
 
 #: The results of a number the robot program consumed without running its command.
 _UNRUN = ("cancelled", "another_master")
+#: How long a Stop this master wrote may take to show on the robot, s (a judgement: TMflow
+#: takes it at its next cycle, 20 ms on the simulator; not measured on a TM5).
+STOP_SHOWS_S = 1.0
+
 #: The command kinds that write the command block's extension (via, speed_mm_s, ext_seq).
 _EXTENDED = frozenset({CommandKind.LINE, CommandKind.CIRCLE})
 
@@ -243,6 +247,9 @@ class CommandChannel(ABC):
     def __init__(self, profile: RobotProfile, transport: Transport) -> None:
         self.profile = profile
         self.transport = transport
+        #: ``time.monotonic()`` until which a Stop this master wrote may not show yet on the
+        #: robot (TMflow takes it at its next cycle): a press decided before would land after it.
+        self.stop_shows_by = -math.inf
         command = profile.field("command")
         # The block's extension (a circle's via, a TCP speed in mm/s), where the profile
         # has all of it: it is tied to a command by the sequence number (ext_seq).
@@ -573,6 +580,7 @@ class CommandChannel(ABC):
         if words is None:
             raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
         self.transport.write_fields(words, retry=True, interruptible=False)
+        self.stop_shows_by = time.monotonic() + STOP_SHOWS_S
 
     def check_move(self, target: Pose, speed: int, motion: MotionType) -> None:
         """Encode a move's command block without sending it (raises naming the field)."""

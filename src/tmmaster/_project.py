@@ -37,6 +37,9 @@ PRESS_TIMEOUT_S = 5.0
 #: acts a few robot ticks after its answer, and may resume what showed paused.
 PAUSE_SETTLE_S = 0.1
 
+#: A status read and the project's state in it.
+_Read = tuple[RobotStatus, ProjectState]
+
 #: What TMflow needs before it takes Play over Modbus (TMflow 2.24 manual).
 REMOTE_PLAY_NEEDS = (
     "TMflow takes Play over Modbus only in Auto mode, with the Robot Stick disabled"
@@ -73,7 +76,7 @@ class ProjectControl:
                 " robot.stop() stops the arm"
             )
 
-    def _status(self) -> tuple[RobotStatus, ProjectState]:
+    def _status(self) -> _Read:
         status = self._channel.read_status()
         state = status.project
         assert state is not None  # _require: the profile has project_running
@@ -116,7 +119,7 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        status, state = self._before_press("play()", timeout_s)
+        status, state = self._before_press("play()", timeout_s, poll_interval_s)
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
@@ -155,7 +158,7 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        state = self._before_press("pause()", timeout_s)[1]
+        state = self._before_press("pause()", timeout_s, poll_interval_s)[1]
         if state is not ProjectState.RUNNING:
             self._log.info("robot.pause_skipped", reason=f"the project is {state.value}")
             return state
@@ -168,10 +171,12 @@ class ProjectControl:
         busy = field is not None and field.label(int(raw["robot_state"])) == "busy"
         return int(raw["ack_seq"]) if busy and "ack_seq" in raw else None
 
-    def _before_press(self, what: str, timeout_s: float) -> tuple[RobotStatus, ProjectState]:
+    def _before_press(self, what: str, timeout_s: float, interval: float) -> _Read:
         """The status a press starts from; refused without a project, for a bad
         ``timeout_s``, or while the robot is in error or e-stop (a running project never
-        is: its state would be ERROR)."""
+        is: its state would be ERROR). A Stop this master wrote that the project does not
+        show yet is waited for (up to ``timeout_s``): a toggle decided on the running
+        project would land after it, on the stopped one, where it is Play."""
         self._require(what)
         require_positive("timeout_s", timeout_s)
         status, state = self._status()
@@ -181,6 +186,8 @@ class ProjectControl:
                 error_code=failure.error_code,
                 pose=failure.pose,
             )
+        if state is not ProjectState.STOPPED and time.monotonic() < self._channel.stop_shows_by:
+            state = self._wait_for(ProjectState.STOPPED, state, timeout_s, interval)
         return status, state
 
     def _press(self, button: str, state: ProjectState) -> None:
@@ -198,6 +205,7 @@ class ProjectControl:
             # Sent once: a repeated toggle would undo the press.
             self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
+        self._channel.stop_shows_by = float("-inf")  # seen: _before_press waited for it
         try:
             self._gate.write(None, send)  # a press registers no command
         except SETTLED_FAILURES:
@@ -229,7 +237,7 @@ class ProjectControl:
                     failure = self._channel.status_failure(status)
                     assert failure is not None
                     raise failure
-                if wanted is ProjectState.RUNNING:
+                if wanted is not ProjectState.PAUSED:
                     if state is wanted:
                         return state
                 elif (settled := _pause_held(state, settled, status)) is not None:
@@ -237,10 +245,11 @@ class ProjectControl:
                     if time.monotonic() >= settled:
                         return state  # paused, or stopped meanwhile (the pendant's Stop)
                 if time.monotonic() >= (poller.deadline or 0.0):
+                    button = {ProjectState.RUNNING: "Play", ProjectState.PAUSED: "Pause"}
                     raise RobotError(
-                        f"{'Play' if wanted is ProjectState.RUNNING else 'Pause'} was pressed"
-                        f" (the project was {before.value}) and the project is {state.value}"
-                        f" {timeout_s:g} s later: {REMOTE_PLAY_NEEDS}",
+                        f"{button.get(wanted, 'Stop')} was pressed (the project was"
+                        f" {before.value}) and the project is {state.value} {timeout_s:g} s"
+                        f" later: {REMOTE_PLAY_NEEDS}",
                         pose=status.pose,
                     )
                 poller.sleep()
@@ -262,8 +271,7 @@ def _pause_held(state: ProjectState, settled: float | None, status: RobotStatus)
         return time.monotonic() + PAUSE_SETTLE_S if state is ProjectState.PAUSED else None
     if state is ProjectState.RUNNING:
         raise RobotError(
-            "the project showed paused, then ran on: another Play/Pause press (the"
-            " pendant's) crossed this one; Stop was pressed",
+            "the project paused, then ran on (a pendant press crossed this one): Stop pressed",
             pose=status.pose,
         )
     return settled
