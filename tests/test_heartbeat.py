@@ -175,7 +175,10 @@ def test_a_thread_reading_back_to_back_does_not_starve_the_heartbeat(sim: Simula
     """Locks are not fair: a thread reading the status back to back held the link at
     every look of the heartbeat, no beat got in, and the robot program expired the live
     master's long move. The thread now lets a waiting beat go first."""
-    robot = robot_for(sim, timeouts=FAST)
+    # A 1 s time-to-live, not FAST's 0.5 s: a loaded machine once kept the beats' thread
+    # from running for that long, beside the reader, and the program expired the move.
+    policy = TimeoutPolicy(heartbeat_s=FAST.heartbeat_s, heartbeat_ttl_s=1.0)
+    robot = robot_for(sim, timeouts=policy)
     stop = threading.Event()
 
     def read_back_to_back() -> None:
@@ -188,13 +191,13 @@ def test_a_thread_reading_back_to_back_does_not_starve_the_heartbeat(sim: Simula
         reader = threading.Thread(target=read_back_to_back)
         reader.start()
         try:
-            motion = robot.move_to(FAR, speed=5)  # several times the time-to-live
+            motion = robot.move_to(FAR, speed=2)  # about 3 s: three times the time-to-live
         finally:
             stop.set()
             reader.join()
         assert motion.done
         assert motion.finished_at is not None
-        assert motion.finished_at - motion.ticket.sent_at > 2 * FAST.heartbeat_ttl_s
+        assert motion.finished_at - motion.ticket.sent_at > 2 * policy.heartbeat_ttl_s
 
 
 class _Link:
