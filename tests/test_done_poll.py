@@ -30,8 +30,9 @@ def test_a_failed_read_after_the_done_stops_nothing() -> None:
             "127.0.0.1",
             proxy.port,
             gripper=None,
-            timeouts=TimeoutPolicy(request_s=0.1),
-            retry=tmmaster.RetryPolicy(attempts=2, total_time_s=0.5, initial_backoff_s=0.01),
+            # 0.1 s once failed a connect's read on a loaded machine.
+            timeouts=TimeoutPolicy(request_s=0.3),
+            retry=tmmaster.RetryPolicy(attempts=2, total_time_s=1.0, initial_backoff_s=0.01),
             polling=PollPolicy(interval_s=0.01),
         ) as robot,
     ):

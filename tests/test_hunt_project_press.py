@@ -37,8 +37,9 @@ Factory = Callable[..., Simulator]
 
 #: Techman's Play/Pause coil (TMflow 2.24 appendix C, p. 313).
 PLAY_PAUSE = 7104
-#: The master's answer timeout, s: a held press times out.
-TIMEOUT_S = 0.2
+#: The master's answer timeout, s: a held press times out (0.2 s was too short for a
+#: connect's reads on a loaded machine).
+TIMEOUT_S = 0.4
 RETRY = RetryPolicy(attempts=4, total_time_s=3.0, initial_backoff_s=0.01, jitter_s=0)
 
 
@@ -202,7 +203,7 @@ def test_a_pause_answered_but_never_acted_on_stops_the_project(
 ) -> None:
     """A gateway answers the Pause press and never delivers it: pause() times out, and
     before it raises the master has pressed Stop, so the arm does not run on."""
-    with robot_through(proxy) as robot:
+    with robot_through(proxy, request_s=2.0) as robot:  # every request is answered
         motion = slow_move(robot, sim)
         release = threading.Event()
         proxy.add(

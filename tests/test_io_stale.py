@@ -118,8 +118,9 @@ def test_a_write_that_failed_is_still_watched_for(sim: Simulator, proxy: FaultPr
         "127.0.0.1",
         proxy.port,
         retry=RetryPolicy(attempts=1),
-        # No read is retried either: each gets a loaded machine's margin (0.2 s failed once).
-        timeouts=TimeoutPolicy(request_s=0.5),
+        # No request is retried either: each gets a loaded machine's margin (0.2 s, then
+        # 0.5 s, failed once each: the write after the held one went unanswered).
+        timeouts=TimeoutPolicy(request_s=1.0),
     ) as robot:
         sim.clear_request_log()
         with held_until(proxy, wrote_false(sim)):
