@@ -10,6 +10,7 @@ heartbeat stopped, and a live master's long move is never expired.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections.abc import Iterator
@@ -70,7 +71,10 @@ def test_a_robot_beats_from_its_first_command_until_it_closes(sim: Simulator) ->
     beats = [values[0] for values in writes]
     assert all(values[1:] == (500, session) for values in writes)
     assert 1 <= session <= HEARTBEAT_MAX
-    assert beats == list(range(1, len(beats) + 1))
+    # Rising from 1; a beat skipped because the link stayed busy for its period (a loaded
+    # machine) still uses up its number: the program only needs each beat to differ.
+    assert beats[0] == 1
+    assert all(later > earlier for earlier, later in itertools.pairwise(beats))
     assert sim.field("master_ttl_ms") == 500
     assert sim.field("command_session") == session
     # Nothing after close().
