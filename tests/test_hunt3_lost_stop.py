@@ -200,7 +200,9 @@ def proxy_accepts(proxy: FaultProxy) -> Callable[[], bool]:
     def accepts() -> bool:
         try:
             with socket.create_connection(("127.0.0.1", proxy.port), timeout=1.0) as probe:
-                probe.settimeout(0.05)
+                # A refused connection's reset can come late on a loaded machine: 0.05 s
+                # once took a refusing proxy for an accepting one (close()'s Stop reset).
+                probe.settimeout(0.5)
                 return probe.recv(1) != b""
         except TimeoutError:
             return True
