@@ -142,7 +142,8 @@ class Ticket:
     #: profile's poll does not carry it (one request), to gauge the move's progress.
     observe_pose: bool = False
     #: True once a poll saw the robot report the command finished (before that poll's
-    #: last read: a failure of that read leaves nothing to stop).
+    #: last read: a failure of that read leaves nothing to stop); False again when the
+    #: reads after it saw the arm still moving (a failed move is then stopped).
     finished: bool = False
     #: True once the command was taken back (it can no longer start).
     withdrawn: bool = False

@@ -249,7 +249,7 @@ class ProjectControl:
                     raise RobotError(
                         f"{button.get(wanted, 'Stop')} was pressed (the project was"
                         f" {before.value}) and the project is {state.value} {timeout_s:g} s"
-                        f" later: {REMOTE_PLAY_NEEDS}",
+                        f" later{': ' + REMOTE_PLAY_NEEDS if wanted in button else ''}",
                         pose=status.pose,
                     )
                 poller.sleep()
