@@ -692,9 +692,8 @@ class ClearOnAcceptChannel(CommandChannel):
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """command = stop, when the profile defines it."""
-        if not self.supports(CommandKind.STOP):
-            return None
-        return [(self._command_field, self._command_field.code_of("stop"))]
+        field = self._command_field
+        return [(field, field.code_of("stop"))] if self.supports(CommandKind.STOP) else None
 
 
 class SequenceChannel(CommandChannel):
@@ -976,9 +975,8 @@ class SequenceChannel(CommandChannel):
 
 def channel_for(profile: RobotProfile, transport: Transport) -> CommandChannel:
     """The channel implementing ``profile``'s handshake."""
-    if profile.handshake is Handshake.CLEAR_ON_ACCEPT:
-        return ClearOnAcceptChannel(profile, transport)
-    return SequenceChannel(profile, transport)
+    clears = profile.handshake is Handshake.CLEAR_ON_ACCEPT
+    return (ClearOnAcceptChannel if clears else SequenceChannel)(profile, transport)
 
 
 def heartbeat_stalled(ticket: Ticket) -> bool:

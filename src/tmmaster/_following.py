@@ -163,9 +163,8 @@ class FollowState:
         motion = self.motion
         if motion.phase is MovePhase.SENT:
             return self.ack_deadline
-        if motion.phase is MovePhase.RUNNING:
-            return self._started() + self.applied_budget()
-        return math.inf
+        running = motion.phase is MovePhase.RUNNING
+        return self._started() + self.applied_budget() if running else math.inf
 
     def applied_budget(self) -> float:
         """The motion's budget in force now, from its acknowledgement, s.

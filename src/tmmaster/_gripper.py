@@ -1034,6 +1034,5 @@ def auto_gripper(profile: RobotProfile, *, settle_s: float) -> Gripper:
     if profile.has("gripper_command"):
         return RegisterGripper(settle_s=settle_s)
     labels = set(profile.field("command").values.values()) if profile.has("command") else set()
-    if CommandKind.GRIPPER_CLOSE.value in labels and profile.has("grasp_status"):
-        return SequenceGripper()
-    return NoGripper()
+    closes = CommandKind.GRIPPER_CLOSE.value in labels and profile.has("grasp_status")
+    return SequenceGripper() if closes else NoGripper()

@@ -54,9 +54,8 @@ def project_failure(status: RobotStatus) -> RobotFaultError | None:
     state = status.project
     if state is ProjectState.STOPPED:
         return RobotFaultError(PROJECT_STOPPED, pose=status.pose)
-    if state is ProjectState.PAUSED:
-        return ProjectPausedError(PROJECT_PAUSED, pose=status.pose)
-    return None
+    paused = state is ProjectState.PAUSED
+    return ProjectPausedError(PROJECT_PAUSED, pose=status.pose) if paused else None
 
 
 class MovePhase(StrEnum):

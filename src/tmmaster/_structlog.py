@@ -23,9 +23,8 @@ def _text(value: Any) -> str:
         text = "[" + ",".join(_text(item) for item in value) + "]"
     else:
         text = value if isinstance(value, str) else str(value)
-    if not text or any(c.isspace() or c in '"=' for c in text):
-        return json.dumps(text, ensure_ascii=False)
-    return text
+    quoted = not text or any(c.isspace() or c in '"=' for c in text)
+    return json.dumps(text, ensure_ascii=False) if quoted else text
 
 
 class LogEvent(dict[str, Any]):
