@@ -547,7 +547,12 @@ def test_entry_point_runs_the_article_cycle_on_the_simulator(tmp_path: Path) -> 
     assert json.loads(report.read_text())["result"] == "done"
 
 
-def test_sigint_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_sigint_or_sigterm_stops_the_arm_and_writes_the_report(
+    tmp_path: Path, signum: signal.Signals
+) -> None:
+    # SIGTERM is a supervisor's stop (systemctl stop, docker stop, kill): the same as
+    # Ctrl-C, never a process gone with its arm moving and no report.
     report = tmp_path / "r.json"
     # The gripper's settle time (0.5 s at scale 1) only delays the first move, before the
     # moment this test is about: the moves themselves keep their real-time durations.
@@ -579,13 +584,13 @@ def test_sigint_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
             if '"robot.command_acknowledged"' in line:
                 break
             assert time.monotonic() < deadline
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
         _, err = proc.communicate(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert proc.returncode == EXIT_INTERRUPTED
+    assert proc.returncode == EXIT_INTERRUPTED, err
     assert "Traceback" not in err
     assert last_stderr_line(err).startswith("pickplace: interrupted in MOVE_TO_APPROACH")
     data = json.loads(report.read_text())

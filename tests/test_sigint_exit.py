@@ -39,13 +39,18 @@ COMMANDS = {
 PROGS = {"console script": "tmmaster"}
 
 
-def _paused(command: list[str], point: str, signals: int) -> tuple[int, str]:
-    """Run ``command`` paused at ``point``, send ``signals`` Ctrl-Cs there, let it go on."""
-    code, err, _ = _paused_with_output(command, point, signals)
+def _paused(
+    command: list[str], point: str, signals: int, signum: int = signal.SIGINT
+) -> tuple[int, str]:
+    """Run ``command`` paused at ``point``, send ``signals`` Ctrl-Cs (or ``signum``)
+    there, let it go on."""
+    code, err, _ = _paused_with_output(command, point, signals, signum)
     return code, err
 
 
-def _paused_with_output(command: list[str], point: str, signals: int) -> tuple[int, str, str]:
+def _paused_with_output(
+    command: list[str], point: str, signals: int, signum: int = signal.SIGINT
+) -> tuple[int, str, str]:
     """:func:`_paused`, with what the command wrote on stdout too (its status, stderr,
     stdout)."""
     env = {**os.environ, "TMMASTER_TEST_SIGINT_AT": point}
@@ -63,7 +68,7 @@ def _paused_with_output(command: list[str], point: str, signals: int) -> tuple[i
         seen = proc.stderr.readline().decode()
         assert seen == f"tmmaster-test: paused at {point}\n", seen
         for _ in range(signals):
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signum)
         with contextlib.suppress(BrokenPipeError):
             proc.stdin.write(b"x")  # let it go on (it may have exited already)
             proc.stdin.flush()
@@ -109,6 +114,32 @@ def test_ctrl_c_as_soon_as_a_command_starts_is_one_line(name: str) -> None:
     assert code == 130
 
 
+@pytest.mark.parametrize("name", ["tmmaster", "pickplace"])
+def test_sigterm_as_soon_as_a_command_starts_is_what_ctrl_c_does(name: str) -> None:
+    # A supervisor's stop (systemctl stop, docker stop, kill): the command winds down as
+    # after Ctrl-C (pick & place stops its arm), in one line; a second one cuts nothing.
+    code, err = _paused(COMMANDS[name], "start", signals=2, signum=signal.SIGTERM)
+    assert err == f"{name}: interrupted [exit 130]\n"
+    assert code == 130
+
+
+def test_sigterm_during_the_exit_hooks_is_ignored_as_ctrl_c_is() -> None:
+    # A robot's exit hook (its withdraw or stop) is not cut short by a supervisor's stop.
+    code, err, out = _paused_with_output(
+        [*COMMANDS["tmmaster"][:-1], "--version"], "exit", 2, signal.SIGTERM
+    )
+    assert (code, err) == (0, "")
+    assert out.strip().endswith(tmmaster.__version__)
+
+
+def test_a_command_started_with_ctrl_c_ignored_keeps_the_default_sigterm() -> None:
+    # ``command &`` in a script: Ctrl-C stays ignored, and SIGTERM still ends it at once
+    # (forwarded to an ignored Ctrl-C, nothing could end it but SIGKILL).
+    ignoring = ["sh", "-c", 'trap "" INT; exec "$@"', "sh", *COMMANDS["tmmaster"]]
+    code, err = _paused(ignoring, "start", signals=1, signum=signal.SIGTERM)
+    assert code == -signal.SIGTERM, err
+
+
 @pytest.mark.parametrize("name", list(COMMANDS))
 def test_ctrl_c_while_the_package_loads_is_one_line(name: str) -> None:
     # Before main() runs: tmmaster and the command's modules still load. The process is
@@ -131,12 +162,13 @@ def test_a_library_program_keeps_its_ctrl_c_and_an_exit_hook_is_not_cut_short() 
         """
         import atexit, importlib, os, signal, sys
         sys.argv[0] = "/usr/local/bin/tmmaster"
-        before = signal.getsignal(signal.SIGINT)
+        before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
         for module in ("tmmaster", "tmmaster.aio", "tmmaster._cli", "tmmaster.sim.__main__",
                        "tmmaster.pickplace.__main__", "tmmaster.report.__main__",
                        "tmmaster.tmscript.__main__"):
             importlib.import_module(module)
-        print(signal.getsignal(signal.SIGINT) is before, flush=True)
+        print((signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before,
+              flush=True)
 
         from tmmaster._sigint import deferred
 

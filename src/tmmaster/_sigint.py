@@ -11,7 +11,9 @@ place a command handles Ctrl-C:
 - any later Ctrl-C is ignored, so it cuts short neither the clean-up, nor that line,
   nor Python's exit hooks (a robot still open withdraws or stops its command there);
 - a command that winds down by itself on the first Ctrl-C (a pick & place run stops the
-  arm and writes its report) asks for that with :func:`first_stops`.
+  arm and writes its report) asks for that with :func:`first_stops`;
+- in a command's process, SIGTERM (a supervisor's stop) does what Ctrl-C does at that
+  moment, unless the command started with Ctrl-C ignored: then SIGTERM keeps its default.
 
 A Ctrl-C before ``main()`` runs (Python starting, tmmaster and the command's modules
 loading) is Python's own: a ``KeyboardInterrupt`` traceback, and the process ends by the
@@ -50,20 +52,31 @@ def _in_main_thread() -> bool:
 
 
 def _ignore() -> None:
-    """From now on a Ctrl-C changes nothing (main thread only: elsewhere it cannot be set)."""
+    """From now on a Ctrl-C, and a SIGTERM doing what it does, change nothing (main thread
+    only: elsewhere it cannot be set). Ignored, not handled by a function: Python puts a
+    function handler back to the default as it exits, and a late SIGTERM would kill."""
     if _in_main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if signal.getsignal(signal.SIGTERM) is _as_ctrl_c:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
-def _interrupt_once(signum: int, frame: FrameType | None) -> None:
+def _interrupt_once(_signum: int, _frame: FrameType | None) -> None:
     """A command's first Ctrl-C: a KeyboardInterrupt; any later one is ignored.
 
     Ignoring comes first, so a Ctrl-C arriving while this runs finds SIG_IGN: at most
     one KeyboardInterrupt comes out, whatever the number of Ctrl-C.
     """
-    _ = signum, frame
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _ignore()  # a signal handler runs in the main thread
     raise KeyboardInterrupt
+
+
+def _as_ctrl_c(_signum: int, frame: FrameType | None) -> None:
+    """SIGTERM, a supervisor's stop (``kill``, ``systemctl stop``, ``docker stop``), does
+    what a Ctrl-C would do now: the command winds down as after Ctrl-C, never gone at once
+    with its arm moving (ignored once Ctrl-C is, so it cannot cut a clean-up short)."""
+    if callable(handler := signal.getsignal(signal.SIGINT)):
+        handler(signal.SIGINT, frame)
 
 
 def _deliver_dropped(hook: Callable[[Any], object], unraisable: Any) -> None:
@@ -109,6 +122,8 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
     if previous is not None and previous is not signal.SIG_IGN:
         signal.signal(signal.SIGINT, _interrupt_once)
         sys.unraisablehook = functools.partial(_deliver_dropped, hook)
+        if process and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, _as_ctrl_c)  # the process ends with the command
     if process and os.environ.get(_PAUSE_AT) == "exit":
         atexit.register(_pause, "exit")  # registered before any robot's: runs after them
     try:
@@ -180,7 +195,6 @@ def first_stops(stop: Callable[[], None], *, noted: Callable[[], None]) -> Itera
 
     def handler(signum: int, frame: FrameType | None) -> None:
         nonlocal pressed
-        _ = signum, frame
         noted()
         if pressed:
             _interrupt_once(signum, frame)
@@ -215,9 +229,8 @@ def deferred() -> Iterator[None]:
     """
     pending = False
 
-    def record(signum: int, frame: FrameType | None) -> None:
+    def record(_signum: int, _frame: FrameType | None) -> None:
         nonlocal pending
-        _ = signum, frame
         pending = True
 
     record.deferring = True  # type: ignore[attr-defined]

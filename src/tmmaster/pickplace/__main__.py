@@ -15,7 +15,7 @@ into 141 and changes nothing else: the run goes on and --report is written):
 4    robot fault: robot error, e-stop, command rejected or in an unknown state
 5    grasp failure (no object after every retry) or another gripper failure
 6    timeout (motion, acknowledgement, gripper, robot not ready)
-130  interrupted (Ctrl-C / SIGINT): the arm was stopped and the report written
+130  interrupted (Ctrl-C / SIGINT, or SIGTERM): the arm was stopped and the report written
 ===  ===========================================================================
 """
 
