@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import json
 import os
+import pty
+import select
+import shutil
 import signal
 import socket
 import subprocess
@@ -596,6 +599,43 @@ def test_sigint_or_sigterm_stops_the_arm_and_writes_the_report(
     data = json.loads(report.read_text())
     assert data["result"] == "interrupted"
     assert '"robot.stop_sent"' in err
+
+
+@pytest.mark.skipif(shutil.which("setsid") is None, reason="needs util-linux's setsid")
+def test_a_terminal_hang_up_stops_the_arm_and_writes_the_report(tmp_path: Path) -> None:
+    # An SSH session lost: the run's terminal (a pty here, its controlling terminal)
+    # hangs up mid-move, the kernel sends SIGHUP and every later write to it fails (EIO).
+    # The arm is stopped and the report written, as after Ctrl-C, never a process gone
+    # with its arm moving (SIGHUP's default) nor a run failed by its own output.
+    report = tmp_path / "r.json"
+    config = tmp_path / "settle.toml"
+    config.write_text("[gripper]\nsettle_s = 0.05\n")
+    command = [sys.executable, "-m", "tmmaster.pickplace", "--sim", "--profile", "article"]
+    terminal, child_side = pty.openpty()
+    proc = subprocess.Popen(
+        ["setsid", "--ctty", *command, "--config", str(config), "--report", str(report)],
+        stdin=child_side,
+        stdout=child_side,
+        stderr=child_side,
+        env={**_env(), "TERM": "xterm", "COLUMNS": "100"},
+    )
+    os.close(child_side)
+    try:
+        shown, deadline = b"", time.monotonic() + 30
+        while b"MOVE_TO_APPROACH" not in shown:  # the live display, in real time
+            assert time.monotonic() < deadline, shown
+            if select.select([terminal], [], [], 0.5)[0]:
+                shown += os.read(terminal, 65536)
+        os.close(terminal)  # the hang-up
+        code = proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == EXIT_INTERRUPTED
+    data = json.loads(report.read_text())
+    assert data["result"] == "interrupted"
+    assert data["reason"].endswith("the arm was stopped"), data["reason"]
 
 
 @pytest.mark.parametrize("after_s", [0.0, 0.2, 0.5])

@@ -619,10 +619,8 @@ class Planner:
         if command.speed_mm_s is not None:
             speed = min(100.0, command.speed_mm_s * 100 / self.model.tcp_speed_mm_s)
         speed = self._share(speed)
-        if command.kind is CommandKind.CIRCLE:
-            target_joints, expected, gauge = self._plan_arc(command, origin, speed, accel)
-        else:
-            target_joints, expected, gauge = self._plan_move(command, origin, speed, accel)
+        plan = self._plan_arc if command.kind is CommandKind.CIRCLE else self._plan_move
+        target_joints, expected, gauge = plan(command, origin, speed, accel)
         return Plan(
             start,
             target_joints,

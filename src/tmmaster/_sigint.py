@@ -12,8 +12,9 @@ place a command handles Ctrl-C:
   nor Python's exit hooks (a robot still open withdraws or stops its command there);
 - a command that winds down by itself on the first Ctrl-C (a pick & place run stops the
   arm and writes its report) asks for that with :func:`first_stops`;
-- in a command's process, SIGTERM (a supervisor's stop) does what Ctrl-C does at that
-  moment, unless the command started with Ctrl-C ignored: then SIGTERM keeps its default.
+- in a command's process, SIGTERM (a supervisor's stop) and SIGHUP (its terminal hung up)
+  do what Ctrl-C does at that moment, unless the command started with Ctrl-C ignored
+  (``command &``) or with them ignored (``nohup``): then they keep their handling.
 
 A Ctrl-C before ``main()`` runs (Python starting, tmmaster and the command's modules
 loading) is Python's own: a ``KeyboardInterrupt`` traceback, and the process ends by the
@@ -41,6 +42,10 @@ from typing import Any
 #: Exit status of an interrupted command (128 + SIGINT), as shells report it.
 EXIT_INTERRUPTED = 130
 
+#: The signals that end a command's process as Ctrl-C does: a supervisor's stop (``kill``,
+#: ``systemctl stop``, ``docker stop``) and a terminal's hang-up (an SSH session lost).
+_ENDING = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+
 #: Test hook: ``start`` or ``exit``: a command says so on stderr there and waits for a
 #: byte on stdin (a test sends Ctrl-C at that very point instead of after a guessed delay).
 _PAUSE_AT = "TMMASTER_TEST_SIGINT_AT"
@@ -52,13 +57,15 @@ def _in_main_thread() -> bool:
 
 
 def _ignore() -> None:
-    """From now on a Ctrl-C, and a SIGTERM doing what it does, change nothing (main thread
-    only: elsewhere it cannot be set). Ignored, not handled by a function: Python puts a
-    function handler back to the default as it exits, and a late SIGTERM would kill."""
+    """From now on a Ctrl-C, and a SIGTERM or SIGHUP doing what it does, change nothing
+    (main thread only: elsewhere it cannot be set). Ignored, not handled by a function:
+    Python puts a function handler back to the default as it exits, and a late SIGTERM
+    would kill."""
     if _in_main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        if signal.getsignal(signal.SIGTERM) is _as_ctrl_c:
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        for ending in _ENDING:
+            if signal.getsignal(ending) is _as_ctrl_c:
+                signal.signal(ending, signal.SIG_IGN)
 
 
 def _interrupt_once(_signum: int, _frame: FrameType | None) -> None:
@@ -72,9 +79,9 @@ def _interrupt_once(_signum: int, _frame: FrameType | None) -> None:
 
 
 def _as_ctrl_c(_signum: int, frame: FrameType | None) -> None:
-    """SIGTERM, a supervisor's stop (``kill``, ``systemctl stop``, ``docker stop``), does
-    what a Ctrl-C would do now: the command winds down as after Ctrl-C, never gone at once
-    with its arm moving (ignored once Ctrl-C is, so it cannot cut a clean-up short)."""
+    """SIGTERM or SIGHUP (:data:`_ENDING`) does what a Ctrl-C would do now: the command
+    winds down as after Ctrl-C, never gone at once with its arm moving (ignored once
+    Ctrl-C is, so it cannot cut a clean-up short)."""
     if callable(handler := signal.getsignal(signal.SIGINT)):
         handler(signal.SIGINT, frame)
 
@@ -122,8 +129,9 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
     if previous is not None and previous is not signal.SIG_IGN:
         signal.signal(signal.SIGINT, _interrupt_once)
         sys.unraisablehook = functools.partial(_deliver_dropped, hook)
-        if process and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
-            signal.signal(signal.SIGTERM, _as_ctrl_c)  # the process ends with the command
+        for ending in _ENDING if process else ():  # the process ends with the command
+            if signal.getsignal(ending) is signal.SIG_DFL:
+                signal.signal(ending, _as_ctrl_c)
     if process and os.environ.get(_PAUSE_AT) == "exit":
         atexit.register(_pause, "exit")  # registered before any robot's: runs after them
     try:

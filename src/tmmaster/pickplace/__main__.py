@@ -15,7 +15,7 @@ into 141 and changes nothing else: the run goes on and --report is written):
 4    robot fault: robot error, e-stop, command rejected or in an unknown state
 5    grasp failure (no object after every retry) or another gripper failure
 6    timeout (motion, acknowledgement, gripper, robot not ready)
-130  interrupted (Ctrl-C / SIGINT, or SIGTERM): the arm was stopped and the report written
+130  interrupted (Ctrl-C, SIGTERM, SIGHUP): the arm was stopped, report written
 ===  ===========================================================================
 """
 
@@ -100,6 +100,10 @@ RESULT_NAMES = {
     EXIT_TIMEOUT: "timeout",
     EXIT_INTERRUPTED: "interrupted",
 }
+
+#: A write to stdout or stderr failed because nobody reads it any more: a closed pipe
+#: (``| head``), a terminal hung up (an SSH session lost).
+_READER_GONE = frozenset({errno.EPIPE, errno.EIO})
 
 #: How far (mm) a part may be from the place pose to count as placed (--sim check).
 PLACE_TOLERANCE_MM = 2.0
@@ -315,7 +319,9 @@ class _Output:
             return
         try:
             print(line, flush=True)
-        except BrokenPipeError:
+        except OSError as exc:
+            if exc.errno not in _READER_GONE:
+                raise
             discard_stdout()
             self.stdout_gone = True
 
@@ -439,7 +445,11 @@ def _run(invocation: _Invocation, outcome: _Outcome, out: _Output) -> int:
         sim=outcome.sim,
         move_states=outcome.move_states,
     )
-    _tell(out, outcome, report, (code, reason), stderr)
+    try:
+        _tell(out, outcome, report, (code, reason), stderr)
+    except OSError as exc:  # nobody reads any more: the report is still written
+        if exc.errno not in _READER_GONE:
+            raise
     if invocation.output.report and not _written(invocation.output.report, report, stderr):
         return code or EXIT_FAILED
     # The report says how the run ended; the status also says the output was cut short.

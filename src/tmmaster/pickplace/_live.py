@@ -9,6 +9,7 @@ Imported only when stderr is a terminal.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import sys
 import threading
@@ -133,7 +134,7 @@ class LiveProgress:
         """Stop drawing and clear the region (the summary follows)."""
         live, self._live = self._live, None
         if live is not None:
-            with deferred():
+            with deferred(), contextlib.suppress(OSError):  # a terminal hung up: gone
                 live.stop()
 
     def __call__(self, event: StateEvent) -> None:
@@ -152,8 +153,11 @@ class LiveProgress:
         self.cycles = event.cycles
         self.last_event = f"{event.previous} -> {event.state}"
         if self._live is not None:
-            with deferred():
-                self._live.refresh()
+            try:
+                with deferred():
+                    self._live.refresh()
+            except OSError:  # the terminal hung up (an SSH session lost): drawn no more
+                self._live = None
 
     def _log_line(self, line: str) -> None:
         text = _TIMESTAMP.sub("", line.strip())
