@@ -299,3 +299,31 @@ def test_a_ctrl_c_raised_where_python_drops_exceptions_still_ends_the_command() 
         assert run_main("test", body, process=False) == 130
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def test_the_documented_sigterm_recipe_lets_a_clean_up_hold_it_back() -> None:
+    # robot-api.md's recipe for a program of your own: SIGTERM does what Ctrl-C does at
+    # that moment, so a robot's clean-up (deferred) holds two SIGTERMs back to its end.
+    script = textwrap.dedent(
+        """
+        import os, signal
+        from tmmaster._sigint import deferred
+
+        def as_ctrl_c(signum, frame):
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, frame)
+
+        signal.signal(signal.SIGTERM, as_ctrl_c)
+        try:
+            with deferred():
+                os.kill(os.getpid(), signal.SIGTERM)
+                os.kill(os.getpid(), signal.SIGTERM)
+                print("the clean-up ran to its end", flush=True)
+        except KeyboardInterrupt:
+            print("then KeyboardInterrupt", flush=True)
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.stdout.splitlines() == ["the clean-up ran to its end", "then KeyboardInterrupt"]
+    assert (done.returncode, done.stderr) == (0, "")
