@@ -969,7 +969,7 @@ class Robot:
             timeout: How long the move may take, s; None: from the expected time
                 (``TimeoutPolicy.for_motion``).
             accel_time_ms: Time to reach full speed, ms, where the profile has the
-                field; None: the robot's default.
+                field (ConfigError on one without it: ``article``); None: the default.
             speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (at most
                 ``max_speed_percent`` of the arm's top TCP speed), where the profile
                 has the field (``tmflow``).
@@ -1003,11 +1003,12 @@ class Robot:
         ``motion`` None: a Circle (which takes mm/s too).
         """
         percent = self._planner.speed_percent(speed, speed_mm_s, motion)
-        if speed_mm_s is not None and not self._channel.extension_fields:
-            raise ConfigError(
-                f"profile {self.profile.name!r} has no TCP speed in mm/s (speed_mm_s): give"
-                " speed in %"
-            )
+        for value, missing, what in (
+            (speed_mm_s, not self._channel.extension_fields, "TCP speed in mm/s (speed_mm_s)"),
+            (accel_ms, not self.profile.has("accel_time"), "acceleration time (accel_time_ms)"),
+        ):
+            if value is not None and missing:  # the robot would never get it
+                raise ConfigError(f"profile {self.profile.name!r} has no {what}: give speed in %")
         check_accel(accel_ms)
         return percent
 
@@ -1118,7 +1119,8 @@ class Robot:
             speed: Speed, an integer percent; None: 30 % (or ``speed_mm_s``).
             motion: ``"ptp"`` or ``"line"``.
             timeout: How long the move may take, s; None: from the expected time.
-            accel_time_ms: Time to reach full speed, ms; None: the robot's default.
+            accel_time_ms: Time to reach full speed, ms, where the profile has the
+                field (ConfigError on one without it: ``article``); None: the default.
             speed_mm_s: A Line's TCP speed in mm/s instead of ``speed``.
 
         Returns:
@@ -1341,7 +1343,7 @@ class Robot:
             timeout: How long the move may take, s; None: from the expected time
                 (``TimeoutPolicy.for_motion``).
             accel_time_ms: Time to reach full speed, ms, where the profile has the
-                field; None: the robot's default.
+                field (ConfigError on one without it: ``article``); None: the default.
             speed_mm_s: A Line's TCP speed in mm/s instead of ``speed`` (``tmflow``).
 
         Returns:
@@ -1366,8 +1368,7 @@ class Robot:
             accel_time_ms=accel_time_ms,
             speed_mm_s=speed_mm_s,
         )
-        handle.wait()
-        return handle
+        return _waited(handle)
 
     def project_state(self) -> ProjectState:
         """The TMflow project's state, from Techman's table (7201, 7202, 7204, 7208).
