@@ -15,7 +15,9 @@ move with it (a 1500 ms ramp: the expected time and the motion timeout, ``motion
 while the robot ramped at its own 200 ms; a value outside 0..10000 ms (-1, 100000), which
 docs/robot-api.md says is refused, ran the move, and 10**400 raised ``OverflowError``.
 ``accel_time_ms`` is now refused on a profile without the field, as ``speed_mm_s`` is,
-before anything is read or sent.
+before anything is read or sent. And ``dwell(1e10)`` (any time past a thread wait's
+``threading.TIMEOUT_MAX``, 9.2e9 s) raised ``OverflowError`` at once instead of waiting
+or naming ``seconds``: a dwell is now refused past 1e9 s (31 years).
 """
 
 from __future__ import annotations
@@ -67,7 +69,7 @@ BOTH: list[Case] = [
     ("gripper.close", "timeout_s", lambda r, v: r.gripper.close(timeout_s=v), BAD_TIMEOUTS),
     ("gripper.open", "timeout_s", lambda r, v: r.gripper.open(timeout_s=v), BAD_TIMEOUTS),
     ("wait_until_ready", "timeout_s", lambda r, v: r.wait_until_ready(v), BAD_TIMEOUTS),
-    ("dwell", "seconds", lambda r, v: r.dwell(v), [-1, NAN, INF, True, "1"]),
+    ("dwell", "seconds", lambda r, v: r.dwell(v), [-1, NAN, INF, True, "1", 1e10, 1e308]),
 ]
 TMFLOW: list[Case] = [
     ("move_to", "accel_time", lambda r, v: r.move_to(TARGET, accel_time_ms=v), BAD_ACCELS),

@@ -24,7 +24,6 @@ from __future__ import annotations
 import atexit
 import functools
 import inspect
-import math
 import threading
 import time
 import weakref
@@ -1496,10 +1495,10 @@ class Robot:
         :meth:`clear_stop_request`).
 
         Args:
-            seconds: How long, s (a finite number >= 0).
+            seconds: How long, s (a number from 0 to 1e9).
 
         Raises:
-            ConfigError: ``seconds`` is not a finite number >= 0.
+            ConfigError: ``seconds`` is not a number from 0 to 1e9.
             StopRequestedError: A stop was requested before or during the wait.
         """
         deadline = time.monotonic() + require_in("seconds", seconds, _DWELL)
@@ -1514,8 +1513,9 @@ def _close_at_exit() -> None:
             robot.close()
 
 
-#: A dwell's range: any finite time, none included.
-_DWELL = Bounds(0.0, math.inf, "s")
+#: A dwell's range: none included, up to 31 years (a thread's wait takes at most
+#: ``threading.TIMEOUT_MAX``, 9.2e9 s: beyond it, the wait raised OverflowError).
+_DWELL = Bounds(0.0, 1e9, "s")
 
 
 def _waited(motion: Motion) -> Motion:
