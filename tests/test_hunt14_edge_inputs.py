@@ -239,3 +239,17 @@ def test_a_relative_move_refuses_a_bad_speed_or_timeout_unwritten(
             assert len(sim.motion_log()) == moves
     finally:
         robot.close()
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="Pose's coordinates are pydantic strict floats, which take any object with"
+    " __float__ but a bool or a str: numpy's bool (np.True_, a 0-d bool array) passes as"
+    " 1.0 mm (or 1 deg), where Pose's docstring says a coordinate is never a bool. The"
+    " move then runs to x = 1 mm (probed on both profiles). Not fixed here: the core is"
+    " at its line budget, and the check belongs in Pose's validation (_pose.py)",
+)
+def test_a_numpy_bool_is_no_coordinate() -> None:
+    numpy = pytest.importorskip("numpy")
+    with pytest.raises(ConfigError, match="x must be an int or float"):
+        Pose(numpy.True_, -200, 200, 180, 0, 90)
