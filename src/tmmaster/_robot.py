@@ -547,12 +547,20 @@ class Robot:
 
     @property
     def tool(self) -> Pose | None:
-        """The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool."""
+        """The TCP in the flange frame (mm, deg); poses are TCP poses: TCP = flange x tool.
+
+        Set, it is checked as ``Robot(tool=)`` checks it (ConfigError, the tool not taken):
+        a Pose, not in metres or radians (``check_units``), and on a profile that cannot
+        verify a tool (``article``) only with the frame check off. A :class:`Tool` gives
+        its pose (its mass is checked against the robot's at :meth:`connect` only).
+        """
         return self._planner.tool
 
     @tool.setter
     def tool(self, value: Pose | None) -> None:
-        self._planner.tool = value
+        # Robot(tool=)'s checks: what connect() refuses (article), the units, the type.
+        self._frames.refuse_unverifiable(value)
+        self._planner.tool = tool_option(value, self.check_units, self.model)[0]
 
     @property
     def check_units(self) -> bool:
