@@ -218,11 +218,6 @@ PollSteps = Generator[tuple[RegisterField, ...], dict[str, Value], Observation]
 R = TypeVar("R")
 
 
-def _published(profile: RobotProfile, names: tuple[str, ...]) -> tuple[RegisterField, ...]:
-    """The named fields when the profile has every one of them, else none."""
-    return profile.select(names) if all(profile.has(n) for n in names) else ()
-
-
 def _address(field: RegisterField) -> int:
     return field.address
 
@@ -255,7 +250,7 @@ class CommandChannel(ABC):
         # The block's extension (a circle's via, a TCP speed in mm/s), where the profile
         # has all of it: it is tied to a command by the sequence number (ext_seq).
         self.extension_fields = (
-            _published(profile, EXTENSION_FIELDS) if profile.handshake is Handshake.SEQUENCE else ()
+            profile.published(EXTENSION_FIELDS) if profile.handshake is Handshake.SEQUENCE else ()
         )
         self.supported = frozenset(
             CommandKind(v)
@@ -265,7 +260,7 @@ class CommandChannel(ABC):
         # Optional sets of Techman's table, empty where the profile lacks them: read at
         # connect and before a plan; the joints also with the status (they come in the
         # same request as the TCP pose, Techman's 7013-7036).
-        self.joint_fields = _published(profile, JOINT_FIELDS)
+        self.joint_fields = profile.published(JOINT_FIELDS)
         readable_gripper = [f for f in profile.role(Role.GRIPPER) if not f.access.writable]
         self.status_fields: tuple[RegisterField, ...] = (
             *profile.role(Role.STATUS),
@@ -277,13 +272,13 @@ class CommandChannel(ABC):
         # Field sets read on every command, built once (their read plans are cached by
         # the tuple's identity).
         self.tcp_fields = profile.select(TCP_FIELDS)
-        self.flange_fields = _published(profile, FLANGE_FIELDS)
-        self.robot_base_tcp_fields = _published(profile, ROBOT_BASE_TCP_FIELDS)
+        self.flange_fields = profile.published(FLANGE_FIELDS)
+        self.robot_base_tcp_fields = profile.published(ROBOT_BASE_TCP_FIELDS)
         # Before a plan: the TCP pose with the joints, where published (Techman's
         # 7013-7036: one request), and with the frames where the profile publishes all of
         # 7001-7060 (flange, joints, TCP, both in the robot base): still one request, so
         # the frame check runs before every move at no request more.
-        robot_base_flange = _published(profile, tuple("robot_base_" + n for n in FLANGE_FIELDS))
+        robot_base_flange = profile.published(tuple("robot_base_" + n for n in FLANGE_FIELDS))
         #: True when the plan read carries the frames (the flange, both bases).
         self.frames_in_plan = bool(self.flange_fields and robot_base_flange)
         self.plan_fields = (
@@ -704,7 +699,7 @@ class SequenceChannel(CommandChannel):
         p = profile
         # The program's feedback block, grasp_status (9105) with it: one request, 9100-9107.
         self.feedback_fields = tuple(
-            sorted((*p.role(Role.FEEDBACK), *_published(p, ("grasp_status",))), key=_address)
+            sorted((*p.role(Role.FEEDBACK), *p.published(("grasp_status",))), key=_address)
         )
         # All of Techman's status bits, not just the three the handshake needs: together
         # they are one contiguous block (7201-7208), so one request instead of two.

@@ -42,7 +42,7 @@ import time
 import weakref
 from typing import TYPE_CHECKING, Any
 
-from ._registers import RegisterField, RobotProfile, Table
+from ._registers import RobotProfile, Table
 from ._transport import ConnectionState, Transport
 
 if TYPE_CHECKING:
@@ -81,11 +81,7 @@ class Heartbeat:
         ttl_s: float,
         log: Any,
     ) -> None:
-        self._fields: tuple[RegisterField, ...] = (
-            profile.select(HEARTBEAT_FIELDS)
-            if all(profile.has(n) for n in HEARTBEAT_FIELDS)
-            else ()
-        )
+        self._fields = profile.published(HEARTBEAT_FIELDS)
         if self._fields:
             first = self._fields[0]
             if first.table is not Table.HOLDING or any(

@@ -313,6 +313,17 @@ class RegisterMap(BaseModel):
         """
         return tuple(self.field(n) for n in names)
 
+    def published(self, names: Iterable[str]) -> tuple[RegisterField, ...]:
+        """The named fields where the map defines every one of them, else none.
+
+        Args:
+            names: Field names (a group that is published whole or not at all).
+
+        Returns:
+            The fields, in the order given, or ``()``.
+        """
+        return self.select(names) if all(self.has(n) for n in names) else ()
+
 
 class Handshake(StrEnum):
     """How a robot profile tells the master that a command was taken and finished."""

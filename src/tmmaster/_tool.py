@@ -127,9 +127,7 @@ class FrameGuard:
         self.check = check
         self.tool = tool
         self._log = log
-        profile = channel.profile
-        names = (*TCP_VALUE_FIELDS, TCP_MASS_FIELD)
-        self.value_fields = profile.select(names) if all(profile.has(n) for n in names) else ()
+        self.value_fields = channel.profile.published((*TCP_VALUE_FIELDS, TCP_MASS_FIELD))
         #: True where every plan read carries the frames (``tmflow``: 7001-7060).
         self.per_move = bool(channel.flange_fields) and channel.frames_in_plan
 
