@@ -390,15 +390,7 @@ class Transport(ABC):
 
     def connect(self) -> None:
         """Open the connection, retrying per the policy; raises :class:`ConnectError`."""
-        with self._lock:
-            self._refuse_if_closed()
-            self.retry.call(
-                f"connect {self.name}",
-                self._connect_once,
-                on_retry=self._on_retry,
-                interrupt=self.interrupt,
-                until=self._retry_until,
-            )
+        self._run(f"connect {self.name}", self._connect_once, retry=True, interruptible=True)
 
     def close(self) -> None:
         """Close the connection; safe to call more than once."""
