@@ -386,9 +386,7 @@ class CommandChannel(ABC):
         failed, retried or reconnected since the poll that read it began.
         """
         state, self.after_done = self.after_done, None
-        if state is None or reuse_s <= 0:
-            return None
-        if time.monotonic() - state.read_at > reuse_s:
+        if state is None or reuse_s <= 0 or time.monotonic() - state.read_at > reuse_s:
             return None
         return None if link_mark(self.transport) != state.link else state
 
@@ -578,10 +576,6 @@ class CommandChannel(ABC):
         self.transport.write_fields(words, retry=True, interruptible=False)
         self.stop_shows_by = time.monotonic() + STOP_SHOWS_S
 
-    def check_move(self, target: Pose, speed: int, motion: MotionType) -> None:
-        """Encode a move's command block without sending it (raises naming the field)."""
-        self._encode_command(Command(CommandKind.of(motion), target, speed))
-
     def check_command(self, command: Command) -> None:
         """Encode any command's block without sending it (raises naming the field)."""
         self._encode_command(command)
@@ -721,12 +715,8 @@ class SequenceChannel(CommandChannel):
         estop = bool(values["estop"])
         error = bool(values["error"]) or estop
         running = bool(values["project_running"])
-        if estop:
-            mode = "estop"
-        elif error:
-            mode = "error"
-        else:
-            mode = "running" if running else "stopped"
+        # The most severe first: an e-stop is an error too.
+        mode = "estop" if estop else "error" if error else "running" if running else "stopped"
         state = self.profile.field("robot_state").label(int(values["robot_state"]))
         return RobotStatus(
             mode=mode,
@@ -963,9 +953,8 @@ class SequenceChannel(CommandChannel):
 
     def stop_words(self) -> list[tuple[RegisterField, Value]] | None:
         """Press the TM Stop button (coil 7105): the project stops and the arm halts."""
-        if not self.profile.has("stop_project"):
-            return None
-        return [(self.profile.field("stop_project"), True)]
+        p = self.profile
+        return [(p.field("stop_project"), True)] if p.has("stop_project") else None
 
 
 def channel_for(profile: RobotProfile, transport: Transport) -> CommandChannel:

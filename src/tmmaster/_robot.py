@@ -945,7 +945,7 @@ class Robot:
         """
         motion = motion_type(motion)
         joints = self._planner.check_move(target, speed, motion, start, seed_deg)
-        self._channel.check_move(target, speed, motion)
+        self._channel.check_command(Command(CommandKind.of(motion), target, speed))
         return joints
 
     def start_move(
