@@ -15,7 +15,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from types import TracebackType
 from typing import Any, Literal
 
 from ._channels import Command, CommandChannel, Observation, Ticket, heartbeat_stalled
@@ -200,12 +199,7 @@ class _Following:
     def __enter__(self) -> None:
         return None
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> Literal[False]:
+    def __exit__(self, _type: object, exc: BaseException | None, _tb: object) -> Literal[False]:
         if exc is not None:
             self._follower.abandon(self._motion, exc)
         motion, follower = self._motion, self._follower
