@@ -42,7 +42,7 @@ from ._channels import (
     channel_for,
     pose_from,
 )
-from ._checks import Bounds, require_in, require_positive
+from ._checks import Bounds, require_in, require_positive, shown
 from ._command import SETTLE_S, _MotionFollower
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._exceptions import (
@@ -100,7 +100,7 @@ _OPEN: weakref.WeakValueDictionary[int, Robot] = weakref.WeakValueDictionary()
 _P = ParamSpec("_P")
 _T = TypeVar("_T")
 _F = TypeVar("_F", bound=Callable[..., object])
-_PolicyT = TypeVar("_PolicyT", "PollPolicy", "TimeoutPolicy", "Checks")
+_PolicyT = TypeVar("_PolicyT")  # an option object's class
 
 
 def _link(link: object) -> tuple[Transport | None, Fleet | None]:
@@ -529,21 +529,29 @@ class Robot:
 
     @property
     def model(self) -> RobotModel:
-        """The arm model: inverse kinematics of every target, expected motion times."""
+        """The arm model: inverse kinematics of every target, expected motion times.
+
+        Set, it must be a :class:`RobotModel` (``robot_model("tm12")`` for a built-in
+        one): anything else is a ConfigError naming ``model``, the model not taken.
+        """
         return self._planner.model
 
     @model.setter
     def model(self, value: RobotModel) -> None:
-        self._planner.model = value
+        self._planner.model = _policy("model", value, RobotModel, default=False)
 
     @property
     def workspace(self) -> Workspace:
-        """Where the tool may go: the table plane (on by default) and the TCP's box."""
+        """Where the tool may go: the table plane (on by default) and the TCP's box.
+
+        Set, it must be a :class:`Workspace`: anything else is a ConfigError naming
+        ``workspace``, the workspace not taken.
+        """
         return self._planner.workspace
 
     @workspace.setter
     def workspace(self, value: Workspace) -> None:
-        self._planner.workspace = value
+        self._planner.workspace = _policy("workspace", value, Workspace, default=False)
 
     @property
     def tool(self) -> Pose | None:
@@ -566,12 +574,15 @@ class Robot:
     def check_units(self) -> bool:
         """Whether a target or ``tool`` that looks like metres or radians is refused.
 
-        Refused with :class:`~tmmaster.UnitsError` (docs/robot-api.md, "Units").
+        Refused with :class:`~tmmaster.UnitsError` (docs/robot-api.md, "Units"). Set, it
+        must be True or False: anything else is a ConfigError naming ``check_units``.
         """
         return self._planner.check_units
 
     @check_units.setter
     def check_units(self, value: bool) -> None:
+        if not isinstance(value, bool):
+            raise ConfigError(f"check_units must be True or False, got {shown(value)}")
         self._planner.check_units = value
 
     # -- connection -------------------------------------------------------
