@@ -395,13 +395,18 @@ class Planner:
         """A target's checks without its joints: type, speed, units, the workspace."""
         if not isinstance(pose, Pose):
             raise ConfigError(f"target must be a tmmaster.Pose, got {type(pose).__name__}")
+        self._check_speed(speed)
+        if self.check_units:
+            refuse_suspect_units("target", pose)
+        self.workspace.check(pose, tool=self.tool)
+
+    def _check_speed(self, speed: object) -> int:
+        """``speed`` when it is an integer percent in 1..``max_speed_percent``."""
         if isinstance(speed, bool) or not isinstance(speed, int):
             raise ConfigError(f"speed must be an integer percent, got {speed!r}")
         if not 1 <= speed <= self.max_speed_percent:
             raise ConfigError(f"speed {shown(speed)} % is outside 1..{self.max_speed_percent} %")
-        if self.check_units:
-            refuse_suspect_units("target", pose)
-        self.workspace.check(pose, tool=self.tool)
+        return speed
 
     def check_move(
         self,
@@ -485,12 +490,13 @@ class Planner:
     def speed_percent(
         self, speed: int | None, speed_mm_s: int | None, motion: MotionType | None
     ) -> int:
-        """The speed register's percent for ``speed`` or ``speed_mm_s`` (checked).
+        """The speed register's percent for ``speed`` or ``speed_mm_s`` (checked: a
+        speed in % as every target's is, without the target).
 
         ``motion`` None: a Circle (which takes mm/s too).
         """
         if speed_mm_s is None:
-            return 30 if speed is None else speed
+            return self._check_speed(30 if speed is None else speed)
         if speed is not None:
             raise ConfigError(
                 f"give either speed ({speed!r} %) or speed_mm_s ({speed_mm_s!r} mm/s), not both"

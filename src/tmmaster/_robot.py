@@ -43,6 +43,7 @@ from ._channels import (
     pose_from,
 )
 from ._checks import Bounds, require_in, require_positive, shown
+from ._codec import encode
 from ._command import SETTLE_S, _MotionFollower
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._exceptions import (
@@ -1004,7 +1005,7 @@ class Robot:
                 (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         motion = motion_type(motion)
-        percent = self._speed_arguments(speed, speed_mm_s, motion, accel_time_ms)
+        percent = self._move_arguments(speed, speed_mm_s, motion, accel_time_ms, timeout)
         self._planner.check_path(target, percent, motion)
         # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
         command = Command(
@@ -1012,11 +1013,18 @@ class Robot:
         )
         return self._start_command(command, timeout=timeout)
 
-    def _speed_arguments(
-        self, speed: int | None, speed_mm_s: int | None, motion: MotionType | None, accel_ms: object
+    def _move_arguments(
+        self,
+        speed: int | None,
+        speed_mm_s: int | None,
+        motion: MotionType | None,
+        accel_ms: int | None,
+        timeout: float | None,
     ) -> int:
         """The speed register's percent for ``speed`` or ``speed_mm_s``, then the move's
-        ``accel_time_ms`` (``accel_ms``) checked too (no I/O).
+        ``accel_time_ms`` (``accel_ms``, in the profile's range) and ``timeout`` checked
+        too: no I/O, so that a move resolved against a read (``move_by``, ``move_arc``)
+        refuses them before it.
 
         ``motion`` None: a Circle (which takes mm/s too).
         """
@@ -1028,6 +1036,10 @@ class Robot:
             if value is not None and missing:  # the robot would never get it
                 raise ConfigError(f"profile {self.profile.name!r} has no {what}: give speed in %")
         check_accel(accel_ms)
+        if accel_ms is not None:  # the profile's range (tmflow: 0..10000 ms)
+            encode(self.profile.field("accel_time"), accel_ms)
+        if timeout is not None:
+            require_positive("timeout", timeout)
         return percent
 
     def move_joints(
@@ -1145,8 +1157,9 @@ class Robot:
             The finished move (``motion.start``: the pose it was resolved against).
 
         Raises:
-            ConfigError: A bad offset, frame or speed (nothing is read or sent), or a
-                target the move may not take (nothing is sent).
+            ConfigError: A bad offset, frame, speed, acceleration time or timeout
+                (nothing is read or sent), or a target the move may not take (nothing is
+                sent).
             RobotError: The arm moved between the read and the write (nothing is sent).
             AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
             MotionTimeoutError: The move did not finish in time (the arm is stopped).
@@ -1160,11 +1173,7 @@ class Robot:
         if frame not in ("base", "tool"):
             raise ConfigError(f"frame must be 'base' or 'tool', got {frame!r}")
         kind = motion_type(motion)
-        percent = self._speed_arguments(speed, speed_mm_s, kind, accel_time_ms)
-        if speed_mm_s is not None:
-            self._channel.check_command(
-                Command(CommandKind.LINE, offset, percent, accel_time_ms, speed_mm_s=speed_mm_s)
-            )
+        percent = self._move_arguments(speed, speed_mm_s, kind, accel_time_ms, timeout)
         start = self._read_start()
         target = moved(start, offset, frame)
         self.validate_move(target, percent)
@@ -1222,7 +1231,8 @@ class Robot:
         Raises:
             ConfigError: No arc passes through the points, the arc may not be taken, or
                 the profile has no circle command (``article``); UnreachablePoseError
-                for an arc the arm cannot follow. Nothing is sent.
+                for an arc the arm cannot follow. Nothing is sent (nothing is read either
+                for a bad speed, acceleration time or timeout).
             RobotError: The arm moved between the read and the write (nothing is sent).
             AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
             MotionTimeoutError: The move did not finish in time (the arm is stopped).
@@ -1235,7 +1245,7 @@ class Robot:
         self._require(CommandKind.CIRCLE, "an arc (move_arc)")
         if not isinstance(via, Pose):
             raise ConfigError(f"via must be a tmmaster.Pose, got {type(via).__name__}")
-        percent = self._speed_arguments(speed, speed_mm_s, None, accel_time_ms)
+        percent = self._move_arguments(speed, speed_mm_s, None, accel_time_ms, timeout)
         # The arc from where the arm is believed to be, before any request.
         self._planner.check_arc_move(via, to, percent)
         command = Command(
