@@ -23,7 +23,8 @@ Found later (helper H16, fails without its fix): ``move_by`` checked its speed, 
 timeout and (tmflow) its acceleration time's range only after it had read the pose it
 resolves the offset against, and ``move_arc`` its timeout after reading its start: a
 read reached the robot before the ``ConfigError``. They are now checked with the other
-move arguments (``Robot._move_arguments``) before any request.
+move arguments (``Robot._move_arguments``) before any request. And ``Pose(numpy.True_,
+...)`` was a pose at x = 1 mm: a coordinate is now a real number but a bool.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ import asyncio
 import functools
 import math
 from collections.abc import Callable, Coroutine
+from decimal import Decimal
+from fractions import Fraction
 from typing import Any
 
 import pytest
@@ -249,15 +252,19 @@ def test_a_relative_move_refuses_a_bad_speed_or_timeout_unwritten(
         robot.close()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Pose's coordinates are pydantic strict floats, which take any object with"
-    " __float__ but a bool or a str: numpy's bool (np.True_, a 0-d bool array) passes as"
-    " 1.0 mm (or 1 deg), where Pose's docstring says a coordinate is never a bool. The"
-    " move then runs to x = 1 mm (probed on both profiles). Not fixed here: the core is"
-    " at its line budget, and the check belongs in Pose's validation (_pose.py)",
-)
 def test_a_numpy_bool_is_no_coordinate() -> None:
+    # Was a strict xfail: Pose's coordinates are pydantic strict floats, which take any
+    # object with __float__ but a bool or a str: numpy's bool passed as 1.0 mm (or 1 deg),
+    # and the move then ran to x = 1 mm, where Pose's docstring says a coordinate is never
+    # a bool. A coordinate is now a real number (numbers.Real) but a bool, so a 0-d array
+    # and a Decimal (no numbers.Real) are refused as well.
     numpy = pytest.importorskip("numpy")
-    with pytest.raises(ConfigError, match="x must be an int or float"):
-        Pose(numpy.True_, -200, 200, 180, 0, 90)
+    for value in (numpy.True_, numpy.False_, numpy.array(True), numpy.array(2.0), Decimal(1)):
+        with pytest.raises(ConfigError, match="x must be an int or float"):
+            Pose(value, -200, 200, 180, 0, 90)
+
+
+def test_numpy_numbers_and_fractions_stay_coordinates() -> None:
+    numpy = pytest.importorskip("numpy")
+    for value in (numpy.float64(300.5), numpy.float32(300.5), numpy.int64(300), Fraction(601, 2)):
+        assert Pose(value, -200, 200, 180, 0, 90).x == float(value)

@@ -6,15 +6,29 @@ import functools
 import math
 from collections.abc import Iterable, Iterator, Sequence
 from enum import StrEnum
-from typing import Any
+from numbers import Real
+from typing import Annotated, Any
 
-from pydantic import ConfigDict, Field, ValidationError
+from pydantic import BeforeValidator, ConfigDict, Field, ValidationError
 from pydantic.dataclasses import dataclass
+from pydantic_core import PydanticCustomError
 
 from ._checks import shown
 from ._error_root import ConfigError
 
 _POSE_FIELDS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def _real(value: object) -> object:
+    """A coordinate as given, when it is a real number (``numbers.Real``) but a bool."""
+    if isinstance(value, float) or (isinstance(value, Real) and not isinstance(value, bool)):
+        return value  # a float first: the common case, without the ABC's check
+    raise PydanticCustomError("float_type", "Input should be a valid number")
+
+
+#: A pose coordinate. Pydantic's strict float alone takes whatever has ``__float__`` but a
+#: bool or a str: numpy's bool (as 1.0), a 0-d array, a Decimal.
+_Coordinate = Annotated[float, BeforeValidator(_real), Field(strict=True)]
 
 
 class MotionType(StrEnum):
@@ -29,8 +43,9 @@ class Pose:
     """A TCP pose in the robot base frame: position in mm, orientation in degrees.
 
     The orientation is Techman's: ``Rz(rz) @ Ry(ry) @ Rx(rx)``, as TMflow shows it.
-    Every coordinate must be a finite int or float (numpy's numbers too; not a str, not
-    a bool, which pydantic's lax mode would convert: the fields are strict): anything
+    Every coordinate must be a finite real number (``numbers.Real``): an int, a float,
+    numpy's integers and floats, a Fraction. Not a str, not a bool (Python's or numpy's),
+    which pydantic's lax mode would convert, nor a Decimal or a numpy array: anything
     else raises :class:`~tmmaster.ConfigError` naming the coordinate.
 
     Example:
@@ -44,17 +59,17 @@ class Pose:
     """
 
     #: Position along the base's x axis, mm.
-    x: float = Field(strict=True)
+    x: _Coordinate
     #: Position along the base's y axis, mm.
-    y: float = Field(strict=True)
+    y: _Coordinate
     #: Position along the base's z axis, mm.
-    z: float = Field(strict=True)
+    z: _Coordinate
     #: Rotation about x, degrees.
-    rx: float = Field(strict=True)
+    rx: _Coordinate
     #: Rotation about y, degrees.
-    ry: float = Field(strict=True)
+    ry: _Coordinate
     #: Rotation about z, degrees.
-    rz: float = Field(strict=True)
+    rz: _Coordinate
 
     @classmethod
     def from_sequence(cls, values: Sequence[float]) -> Pose:
