@@ -1163,6 +1163,7 @@ def settle_failed(future: asyncio.Future[Any], error: BaseException) -> None:
         future.set_exception(error)
 
 
+@dataclass(slots=True, eq=False)  # compared and hashed by identity, as a request is
 class _Call:
     """One request awaiting its answer (:meth:`AsyncLink.start`: a coroutine's, a thread's).
 
@@ -1170,30 +1171,18 @@ class _Call:
     ``fail(error)``, once, with no future and no further turn of the loop.
     """
 
-    __slots__ = (
-        "_done", "code", "count", "deadline", "fail", "name", "settle", "stream", "tid", "what"
-    )  # fmt: skip
-
-    def __init__(
-        self,
-        function_code: int,
-        count: int,
-        name: str,
-        what: str,
-        settle: Callable[[list[int]], object],
-        fail: Callable[[BaseException], object],
-    ) -> None:
-        self.code = function_code
-        self.count = count
-        self.name = name
-        self.what = what
-        self.settle = settle
-        self.fail = fail
-        self.stream: _Stream | None = None
-        self.tid = 0
-        #: The loop's time by which it fails unanswered (its stream's timer).
-        self.deadline = 0.0
-        self._done = False
+    #: The request's function code.
+    code: int
+    count: int
+    name: str
+    what: str
+    settle: Callable[[list[int]], object]
+    fail: Callable[[BaseException], object]
+    stream: _Stream | None = None
+    tid: int = 0
+    #: The loop's time by which it fails unanswered (its stream's timer).
+    deadline: float = 0.0
+    _done: bool = field(default=False, init=False)
 
     def done(self) -> bool:
         """True once settled."""
