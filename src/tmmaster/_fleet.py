@@ -35,6 +35,7 @@ import threading
 import time
 import weakref
 from collections.abc import Callable, Coroutine, Iterable
+from dataclasses import dataclass, field
 from typing import Any, Generic, Protocol, Self, TypeVar, cast
 
 from ._address import check_host, check_port, is_in_process, scheme_opener
@@ -350,6 +351,7 @@ class LoopTransport(Transport):
             raise
 
 
+@dataclass(eq=False)
 class _ChainedRead:
     """On the loop: a read's blocks one after the other, each sent once, then one answer.
 
@@ -357,16 +359,10 @@ class _ChainedRead:
     with those read before the first failure.
     """
 
-    def __init__(
-        self,
-        transport: LoopTransport,
-        requests: list[tuple[str, int, Block]],
-        done: Callable[[tuple[list[list[int]], BaseException | None]], None],
-    ) -> None:
-        self.transport = transport
-        self.requests = requests
-        self.done = done
-        self.answers: list[list[int]] = []
+    transport: LoopTransport
+    requests: list[tuple[str, int, Block]]
+    done: Callable[[tuple[list[list[int]], BaseException | None]], None]
+    answers: list[list[int]] = field(default_factory=list, init=False)
 
     def next(self) -> None:
         """Send the next block's request, or answer when every block is read."""
