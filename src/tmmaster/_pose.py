@@ -7,9 +7,9 @@ import math
 from collections.abc import Iterable, Iterator, Sequence
 from enum import StrEnum
 from numbers import Real
-from typing import Annotated, Any
+from typing import Any
 
-from pydantic import BeforeValidator, ConfigDict, Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError, field_validator
 from pydantic.dataclasses import dataclass
 from pydantic_core import PydanticCustomError
 
@@ -17,18 +17,6 @@ from ._checks import shown
 from ._error_root import ConfigError
 
 _POSE_FIELDS = ("x", "y", "z", "rx", "ry", "rz")
-
-
-def _real(value: object) -> object:
-    """A coordinate as given, when it is a real number (``numbers.Real``) but a bool."""
-    if isinstance(value, float) or (isinstance(value, Real) and not isinstance(value, bool)):
-        return value  # a float first: the common case, without the ABC's check
-    raise PydanticCustomError("float_type", "Input should be a valid number")
-
-
-#: A pose coordinate. Pydantic's strict float alone takes whatever has ``__float__`` but a
-#: bool or a str: numpy's bool (as 1.0), a 0-d array, a Decimal.
-_Coordinate = Annotated[float, BeforeValidator(_real), Field(strict=True)]
 
 
 class MotionType(StrEnum):
@@ -59,17 +47,27 @@ class Pose:
     """
 
     #: Position along the base's x axis, mm.
-    x: _Coordinate
+    x: float = Field(strict=True)
     #: Position along the base's y axis, mm.
-    y: _Coordinate
+    y: float = Field(strict=True)
     #: Position along the base's z axis, mm.
-    z: _Coordinate
+    z: float = Field(strict=True)
     #: Rotation about x, degrees.
-    rx: _Coordinate
+    rx: float = Field(strict=True)
     #: Rotation about y, degrees.
-    ry: _Coordinate
+    ry: float = Field(strict=True)
     #: Rotation about z, degrees.
-    rz: _Coordinate
+    rz: float = Field(strict=True)
+
+    # Pydantic's strict float alone takes whatever has ``__float__`` but a bool or a str:
+    # numpy's bool (as 1.0), a 0-d array, a Decimal.
+    @field_validator(*_POSE_FIELDS, mode="before")
+    @classmethod
+    def _real(cls, value: object) -> object:
+        """A coordinate as given, when it is a real number (``numbers.Real``) but a bool."""
+        if isinstance(value, float) or (isinstance(value, Real) and not isinstance(value, bool)):
+            return value  # a float first: the common case, without the ABC's check
+        raise PydanticCustomError("float_type", "Input should be a valid number")
 
     @classmethod
     def from_sequence(cls, values: Sequence[float]) -> Pose:
