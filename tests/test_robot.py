@@ -327,11 +327,13 @@ def test_stop_mid_move_is_not_mistaken_for_arrival(
 def test_command_rejected_by_the_robot_program(
     tm_simulator_factory: SimFactory, robots: Callable[..., Robot]
 ) -> None:
-    # The master believes in a TM12's reach; the simulated TM5-700 refuses the target.
-    sim = tm_simulator_factory("tmflow", robot=RobotSetup(model="tm5-700"))
-    robot = robots(sim, model="tm12")
+    # The master believes in a TM5-700's datasheet reach (700 mm); the simulated arm, the
+    # same kinematic chain (so connect's model check passes), refuses past 600 mm.
+    short = tmmaster.robot_model("tm5-700").model_copy(update={"reach_mm": 600.0})
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(model=short))
+    robot = robots(sim)
     with pytest.raises(tmmaster.CommandRejectedError, match="unreachable") as info:
-        robot.move_to(Pose(0, 900, 300, 180, 0, 0), speed=30)
+        robot.move_to(Pose(300, -570, 300, 180, 0, 90), speed=30)
     assert info.value.error_code == 1
     robot.move_to(APPROACH, speed=30)  # the program takes the next command
 

@@ -22,7 +22,7 @@ import tmmaster
 from test_script_project import open_robot
 from test_sim_controller import DT, FAR, HOME, run, run_until, send_tmflow, tmflow
 from test_tmscript_execution import FakeHost
-from tmmaster import Checks, FrameCheck, Pose, _cli
+from tmmaster import Pose, _cli
 from tmmaster._profiles import profile_from_data, robot_profile
 from tmmaster._registers import Table
 from tmmaster._robot_program import ToolSetting, robot_program
@@ -343,23 +343,21 @@ def test_a_line_whose_path_the_arm_cannot_follow_is_an_error_stop() -> None:
 def test_the_master_sees_the_error_stop_of_a_target_the_arm_cannot_reach(
     tm_simulator_factory: Callable[..., Simulator], tmp_path: Path
 ) -> None:
-    # A program without the inversekin check hands PTP a target the simulated TM5-700
-    # cannot reach (a master planning for a TM5-900 sends it): the robot stops in error
-    # with 0x0001, and the master raises RobotFaultError naming Techman's code.
+    # A program without the inversekin check hands PTP a target the simulated arm cannot
+    # reach (the master's TM5-700 reaches 700 mm; the simulated one, the same chain, only
+    # 600 mm): the robot stops in error with 0x0001, and the master raises
+    # RobotFaultError naming Techman's code.
     text = program_text()
     check = "        joints = inversekin(target)\n        if (Length(joints) != 6)\n"
     assert check in text
     program = tmp_path / "no_reach_check.tms"
     program.write_text(text.replace(check, "        if (false)\n", 1), encoding="utf-8")
-    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
-    robot = open_robot(
-        sim,
-        model="tm5-900",
-        checks=Checks(frame=FrameCheck.off("the two arm models differ on purpose")),
-    )
+    short = tmmaster.robot_model("tm5-700").model_copy(update={"reach_mm": 600.0})
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(model=short, program=program))
+    robot = open_robot(sim)
     try:
         with pytest.raises(tmmaster.RobotFaultError, match="0x0001") as info:
-            robot.move_to(Pose(800, 0, 300, 180, 0, 90), speed=30, timeout=10)
+            robot.move_to(Pose(300, -570, 300, 180, 0, 90), speed=30, timeout=10)
         assert info.value.error_code == TM_IK_WORKING_RANGE
         assert sim.motion_log() == ()
     finally:

@@ -30,7 +30,7 @@ from ._channels import Command, CommandKind
 from ._checks import Bounds, Policy, bounded, is_finite_number, shown
 from ._exceptions import ConfigError, RobotError, UnreachablePoseError
 from ._pose import MotionType, Pose, refuse_suspect_units
-from ._robot_models import PathGauge, RobotModel, arc_through
+from ._robot_models import ROBOT_MODELS, PathGauge, RobotModel, arc_through
 
 Joints = tuple[float, ...]
 
@@ -526,6 +526,30 @@ class Planner:
         # The arm is where the last move put it (the read pose differs by the registers'
         # rounding): plan from the exact target, whose joints are known.
         return last if last is not None and self._is_at(start, last) else start
+
+    def check_model(self, flange: Pose, joints: Joints) -> None:
+        """At connect: the robot's joints must put its flange where it reports it, by this
+        model's kinematics; every check of a move is the model's.
+
+        Joints all zero are not checked (a simulated arm without a joint model publishes
+        zeros); a calibrated arm's few mm pass (:data:`JOINTS_MISS`).
+
+        Raises:
+            ConfigError: naming ``model``, and the built-in models the joints fit.
+        """
+
+        def fits(model: RobotModel) -> bool:
+            return model.forward(joints).is_close(flange, **JOINTS_MISS)
+
+        if not any(joints) or fits(self.model):
+            return
+        names = [name for name, model in ROBOT_MODELS.items() if fits(model)]
+        raise ConfigError(
+            f"model {self.model.name!r}: the robot's joints {[round(q, 2) for q in joints]}"
+            f" put its flange at {self.model.forward(joints)}, not at {flange} where it"
+            " reports it: "
+            + (f"they fit {', '.join(names)}: give that model" if names else "no model fits")
+        )
 
     def take_robot_joints(self, pose: Pose, joints: Joints) -> None:
         """Plan from the joints the robot reported at ``pose``, unless they are the seed's.
