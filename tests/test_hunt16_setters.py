@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import pytest
 
-from tmmaster import ConfigError, PollPolicy, Pose, Robot, Workspace, robot_model
+from tmmaster import Checks, ConfigError, PollPolicy, Pose, Robot, Workspace, robot_model
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -80,3 +80,11 @@ def test_the_setters_take_a_value_of_their_type(tm_simulator_factory: Factory) -
         assert sim.motion_log()[-1].target == TARGET
     finally:
         robot.close()
+
+
+@pytest.mark.parametrize("value", ["no", None, 0, 1, 1.0])
+def test_checks_units_takes_only_a_bool_as_the_setter_does(value: object) -> None:
+    # Checks(units=0) was pydantic's lax bool: False, the units check off without a word,
+    # where robot.check_units = 0 is refused.
+    with pytest.raises(ConfigError, match=r"checks\.units"):
+        Checks(units=value)

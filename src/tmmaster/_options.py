@@ -132,7 +132,7 @@ class Checks(Policy):
     tcp_speed_limit_mm_s: Annotated[float, Field(gt=0, le=TCP_SPEED_MAX, strict=True)] | None = None
     #: Refuse (UnitsError, before anything is sent) a target or a ``tool`` that looks
     #: like metres or radians; False takes them as written.
-    units: bool = True
+    units: bool = Field(default=True, strict=True)
     #: At connect, the robot's TCP must be its flange x ``tool``;
     #: ``FrameCheck.off("why")`` switches it off.
     frame: FrameCheck = FrameCheck()
