@@ -205,6 +205,25 @@ def test_a_status_monitor_dropped_without_close_stops_polling(
     assert left_open(before, threads) == ([], set())
 
 
+@pytest.mark.parametrize("watch_hz", [None, 20.0], ids=["unwatched", "watched"])
+def test_a_fleet_dropped_without_close_with_its_robots_ends_its_loop(
+    tm_simulator_factory: SimFactory, watch_hz: float | None
+) -> None:
+    # A job that makes a Fleet and its robots per batch and forgets close(): each one
+    # left running keeps its loop thread and its sockets for the life of the process
+    # unless a dropped Fleet, once its robots are gone too, is garbage and its loop ends.
+    sim = tm_simulator_factory()
+
+    def forgotten_fleet() -> weakref.ref[Fleet]:
+        fleet = Fleet(watch_hz=watch_hz)
+        forgotten_robot(sim, fleet, APPROACH)
+        return weakref.ref(fleet)
+
+    before, threads = open_sockets(), set(threading.enumerate())
+    assert collected([forgotten_fleet(), forgotten_fleet()]) == [True, True]
+    assert left_open(before, threads) == ([], set())
+
+
 def test_a_robot_subclass_that_is_not_hashable_connects_and_is_closed_at_exit(
     tm_simulator_factory: SimFactory,
 ) -> None:

@@ -792,13 +792,21 @@ class Fleet:
         period = 1.0 / self.watch_hz
         # Golden-ratio phases: evenly spread however many robots join, and when.
         due = time.monotonic() + period * ((index * 0.6180339887) % 1.0)
+        # The watch holds no member (nor its link, nor the fleet): a robot dropped
+        # unclosed is garbage, its link let go, and the watch ends.
+        ref = weakref.ref(member)
+
+        async def watch_once() -> None:
+            if (alive := ref()) is not None:
+                await alive.watch_once()
+
         task = asyncio.get_running_loop().create_task(
             poll_on_schedule(
                 member.record,
-                member.watch_once,
+                watch_once,
                 due=due,
                 period=period,
-                running=member.watching,
+                running=lambda: (alive := ref()) is not None and alive.watching(),
                 timings=self._timings,
             ),
             name=f"tmmaster-fleet-watch-{member.transport.name}",
@@ -820,7 +828,11 @@ class Fleet:
         with self._lock:
             if self._closed:
                 raise ConfigError("this Fleet is closed; make a new one")
-            self._runner.start(self._main)
+            # The loop holds no fleet: one dropped unclosed (its robots too) is garbage,
+            # and its finalizer ends the loop.
+            runner, watches, lock, members = self._runner, self._watches, self._lock, self._members
+            runner.start(lambda: _serve(runner, watches, lock, members))
+            weakref.finalize(self, runner.end_soon)
         return self
 
     def close(self, *, timeout_s: float = 2.0) -> tuple[str, ...]:
@@ -936,25 +948,31 @@ class Fleet:
             return False
         return True
 
-    # -- the loop thread ----------------------------------------------------------------
 
-    async def _main(self) -> None:
-        wake = self._runner.bind()
-        self._runner.ready()
-        try:
-            await wake.wait()
-        finally:
-            wake.set()  # submit() refuses from now on
-            for task in list(self._watches):
-                task.cancel()
-            with self._lock:
-                members = list(self._members.values())
-            for member in members:
-                member.transport.drop_on_loop()
-            # Closing transports release their sockets on a later loop turn; the
-            # requests still awaited (none, normally) end with ConnectionLostError.
-            for _ in range(3):
-                await asyncio.sleep(0)
+async def _serve(
+    runner: LoopThread,
+    watches: set[asyncio.Task[None]],
+    lock: threading.Lock,
+    members: weakref.WeakKeyDictionary[_Closable, FleetMember],
+) -> None:
+    """A fleet's loop, until the runner is stopped (it holds no fleet: a fleet dropped
+    unclosed is garbage once its robots are, and its finalizer ends this)."""
+    wake = runner.bind()
+    runner.ready()
+    try:
+        await wake.wait()
+    finally:
+        wake.set()  # submit() refuses from now on
+        for task in list(watches):
+            task.cancel()
+        with lock:
+            left = list(members.values())
+        for member in left:
+            member.transport.drop_on_loop()
+        # Closing transports release their sockets on a later loop turn; the requests
+        # still awaited (none, normally) end with ConnectionLostError.
+        for _ in range(3):
+            await asyncio.sleep(0)
 
 
 def join_fleet(
