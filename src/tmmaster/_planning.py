@@ -777,12 +777,12 @@ def accel_s(accel_time_ms: int | None) -> float | None:
     return accel_time_ms / 1000.0 if accel_time_ms else None
 
 
-def check_accel(accel_time_ms: object) -> None:
-    """An acceleration time is None or an integer number of ms (its range: the profile's)."""
-    if accel_time_ms is not None and (
-        isinstance(accel_time_ms, bool) or not isinstance(accel_time_ms, int)
-    ):
-        raise ConfigError(f"accel_time_ms must be an integer (ms), got {accel_time_ms!r}")
+def check_accel(ms: object) -> None:
+    """An acceleration time is None, 0 (the program's default) or an integer in TMflow's
+    range, 150..9999 ms (TMflow 2.24, 9 Motion Programming, Speed of Line Motion, p. 171)."""
+    if ms is not None and (type(ms) is not int or not (ms == 0 or 150 <= ms <= 9999)):
+        text = "accel_time_ms must be 0 (the program's default) or an integer 150..9999 ms"
+        raise ConfigError(f"{text} (TMflow's time to top speed), got {shown(ms)}")
 
 
 def joint_values(joints: object) -> Joints:

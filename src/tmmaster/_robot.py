@@ -1038,7 +1038,7 @@ class Robot:
             if value is not None and missing:  # the robot would never get it
                 raise ConfigError(f"profile {self.profile.name!r} has no {what}: give speed in %")
         check_accel(accel_ms)
-        if accel_ms is not None:  # the profile's range (tmflow: 0..10000 ms)
+        if accel_ms is not None:  # the profile's range (tmflow: 0..9999 ms)
             encode(self.profile.field("accel_time"), accel_ms)
         if timeout is not None:
             require_positive("timeout", timeout)
