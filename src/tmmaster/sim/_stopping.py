@@ -145,8 +145,8 @@ def over_speed_at(
 
     Args:
         speeds: The master's own measure of the TCP's speed along the PTP
-            (:meth:`~tmmaster.RobotModel.ptp_tcp_speeds`: its mean over each 20th of the
-            move), mm/s. Each is taken at its 20th's middle, from rest at the start; the
+            (:meth:`~tmmaster.RobotModel.ptp_tcp_speeds`: its mean over each 100th of the
+            move), mm/s. Each is taken at its 100th's middle, from rest at the start; the
             limit is passed where the line between two of them crosses it.
         duration_s: The PTP's duration, s.
         limit: The robot's TCP speed limit, mm/s.
