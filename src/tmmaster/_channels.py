@@ -41,6 +41,7 @@ from ._registers import (
     EXTENSION_FIELDS,
     FLANGE_FIELDS,
     JOINT_FIELDS,
+    ROBOT_BASE_FLANGE_FIELDS,
     ROBOT_BASE_TCP_FIELDS,
     SESSION_FIELD,
     TARGET_FIELDS,
@@ -278,7 +279,7 @@ class CommandChannel(ABC):
         # 7013-7036: one request), and with the frames where the profile publishes all of
         # 7001-7060 (flange, joints, TCP, both in the robot base): still one request, so
         # the frame check runs before every move at no request more.
-        robot_base_flange = profile.published(tuple("robot_base_" + n for n in FLANGE_FIELDS))
+        robot_base_flange = profile.published(ROBOT_BASE_FLANGE_FIELDS)
         #: True when the plan read carries the frames (the flange, both bases).
         self.frames_in_plan = bool(self.flange_fields and robot_base_flange)
         self.plan_fields = (

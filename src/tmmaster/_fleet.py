@@ -136,10 +136,8 @@ class LoopTransport(Transport):
     @property
     def state(self) -> ConnectionState:
         """Current connection state (a link the device closed is disconnected at once)."""
-        state = self._state
-        if state is ConnectionState.CONNECTED and not self._link.connected:
-            return ConnectionState.DISCONNECTED
-        return state
+        lost = self._state is ConnectionState.CONNECTED and not self._link.connected
+        return ConnectionState.DISCONNECTED if lost else self._state
 
     def _open_link(self) -> None:
         if self._default:

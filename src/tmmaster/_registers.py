@@ -353,6 +353,7 @@ SESSION_FIELD = "command_session"
 #: The program's start the master read (tmflow, ``boot_id``), after the session.
 BOOT_FIELD = "command_boot"
 ROBOT_BASE_TCP_FIELDS = tuple(f"robot_base_tcp_{n}" for n in _POSE_NAMES)
+ROBOT_BASE_FLANGE_FIELDS = tuple(f"robot_base_flange_{n}" for n in _POSE_NAMES)
 
 #: TMflow's user define area, holding registers a project may read and write (TMflow 2.24
 #: Software Manual, appendix C, "User Define Area", p. 319): where a sequence profile's

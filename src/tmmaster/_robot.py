@@ -84,7 +84,7 @@ from ._profiles import (
     robot_profile,
 )
 from ._project import PRESS_TIMEOUT_S, ProjectControl
-from ._registers import FLANGE_FIELDS, TCP_FIELDS, GripperProfile, RobotProfile, Role
+from ._registers import ROBOT_BASE_FLANGE_FIELDS, TCP_FIELDS, GripperProfile, RobotProfile, Role
 from ._retry import RetryPolicy
 from ._robot_models import RobotModel, robot_model
 from ._sigint import deferred
@@ -685,8 +685,8 @@ class Robot:
         if check:
             frames.at_connect(values, self.tool)
         if (joints := channel.joints_from(values)) is not None:
-            if channel.frames_in_plan:  # the flange was read: whatever the tool
-                self._planner.check_model(pose_from(values, FLANGE_FIELDS), joints)
+            if channel.frames_in_plan:  # the flange in the robot base: whatever tool and base
+                self._planner.check_model(pose_from(values, ROBOT_BASE_FLANGE_FIELDS), joints)
             self._planner.take_robot_joints(pose_from(values, TCP_FIELDS), joints)
 
     def _read_naming_profile(self, read: Callable[[], _T]) -> _T:
