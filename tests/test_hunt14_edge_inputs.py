@@ -55,7 +55,7 @@ READY = [0, 0, 90, 0, 90, 0]
 BAD_SPEEDS = [0, -1, 101, 30.5, NAN, INF, HUGE, True, "30", [30]]
 #: Values no timeout (a finite number of seconds > 0) may take.
 BAD_TIMEOUTS = [0, -1, -0.0, NAN, INF, -INF, HUGE, True, False, "5", [5]]
-#: Values no acceleration time (an integer 0..10000 ms, tmflow) may take.
+#: Values no acceleration time (tmflow: an integer, 0 or TMflow's 150..9999 ms) may take.
 BAD_ACCELS = [-1, 10001, 1.5, NAN, INF, HUGE, True, "200"]
 #: Values no TCP speed (an integer 1..1100 mm/s on a TM5-700) may take.
 BAD_MM_S = [0, -1, 1101, 99.5, NAN, INF, HUGE, True, "100"]
