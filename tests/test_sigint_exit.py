@@ -313,7 +313,7 @@ def test_the_documented_sigterm_recipe_lets_a_clean_up_hold_it_back(
     from tmmaster._sigint import deferred
 
     def as_ctrl_c(signum: int, frame: FrameType | None) -> None:  # the recipe, as documented
-        signal.getsignal(signal.SIGINT)(signal.SIGINT, frame)  # type: ignore[operator]
+        signal.getsignal(signal.SIGINT)(signal.SIGINT, frame)  # type: ignore[operator,misc]
 
     previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     previous_term = signal.signal(signal.SIGTERM, as_ctrl_c)
