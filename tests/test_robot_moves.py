@@ -8,6 +8,7 @@ early (withdrawn before the robot took it, stopped once it runs).
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -392,8 +393,10 @@ def test_a_new_move_that_stalls_is_stopped(
 @pytest.mark.parametrize("kind", ["joints", "arc"])
 def test_a_held_frame_of_a_new_command_never_runs_after_the_master_gave_up(kind: str) -> None:
     # As test_8_1 (test_safety_regressions.py) for a PTP: the command write is held in
-    # the network for 0.9 s, the resend (the same number) dropped; the master gives up
-    # and cancels the number, so the frame that lands later can never run.
+    # the network until the master gave up, the resend (the same number) dropped; the
+    # master gives up and cancels the number, so the frame that lands later can never
+    # run. Released by the test, not after a time: a loaded machine took the master past
+    # a 0.9 s hold, and the frame landed before it gave up.
     issued: list[Issued] = []
     with (
         Simulator("tmflow", time_scale=20.0, timing=Timing(tick_hz=50.0)) as sim,
@@ -401,8 +404,10 @@ def test_a_held_frame_of_a_new_command_never_runs_after_the_master_gave_up(kind:
         Robot(
             "127.0.0.1",
             proxy.port,
-            timeouts=TimeoutPolicy(request_s=0.15, ack_timeout_s=0.5, motion_margin_s=1.0),
-            retry=tmmaster.RetryPolicy(attempts=8, total_time_s=2.0, initial_backoff_s=0.02),
+            # 0.5 s, not 0.15 s: a connect's first read is not retried, and 0.15 s went
+            # unanswered beside CPU hogs. The held write times out all the same.
+            timeouts=TimeoutPolicy(request_s=0.5, ack_timeout_s=0.5, motion_margin_s=1.0),
+            retry=tmmaster.RetryPolicy(attempts=8, total_time_s=3.0, initial_backoff_s=0.02),
             polling=PollPolicy(interval_s=0.01),
         ) as robot,
     ):
@@ -410,7 +415,8 @@ def test_a_held_frame_of_a_new_command_never_runs_after_the_master_gave_up(kind:
         robot.move_to(START, speed=80)
         first.outcome, first.ended_at = "done", time.monotonic()
         issued.append(first)
-        proxy.add(Rule("hold", function_code=16, address=9000, delay_s=0.9))
+        release = threading.Event()
+        proxy.add(Rule("hold", function_code=16, address=9000, release=release))
         proxy.add(Rule("drop_request", function_code=16, address=9000, nth=1))
         given_up = Issued(END if kind == "arc" else robot.model.forward(READY), time.monotonic())
         issued.append(given_up)
@@ -418,6 +424,7 @@ def test_a_held_frame_of_a_new_command_never_runs_after_the_master_gave_up(kind:
             new_command(robot, kind)
         given_up.outcome, given_up.ended_at = type(info.value).__name__, time.monotonic()
         landed = len([r for r in sim.request_log if r.function_code == 16 and r.address == 9000])
+        release.set()
         sim.wait_for(
             lambda: (
                 len([r for r in sim.request_log if r.function_code == 16 and r.address == 9000])
