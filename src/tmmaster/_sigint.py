@@ -117,9 +117,10 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
         prog: The command's name, the start of its line (``pickplace``).
         body: Runs the command; returns its exit status.
         process: True when the command is the process itself (its ``__main__``, the
-            console script): Ctrl-C stays ignored once ``body`` returns, while Python
-            exits. False (a caller in the same process, a test): the caller's handler
-            is put back.
+            console script): SIGTERM and SIGHUP do what Ctrl-C does (where their
+            handling is the default), and Ctrl-C stays ignored once ``body`` returns,
+            while Python exits. False (a caller in the same process, a test): the
+            caller's handler is put back, and SIGTERM and SIGHUP are left alone.
 
     Returns:
         ``body``'s status; :data:`EXIT_INTERRUPTED` after a Ctrl-C.
