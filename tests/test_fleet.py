@@ -9,10 +9,12 @@ early, and its life cycle.
 from __future__ import annotations
 
 import _thread
+import gc
 import signal
 import socket
 import threading
 import time
+import weakref
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -573,3 +575,18 @@ def test_a_fleet_refuses_what_it_cannot_serve(tm_simulator_factory: SimFactory) 
             fleet.latest(object())  # type: ignore[arg-type]
         with pytest.raises(tmmaster.ConfigError, match="timeout_s"):
             fleet.close(timeout_s=0)
+
+
+def test_starting_a_running_fleet_again_leaves_nothing_behind() -> None:
+    # start() runs at every robot's join and, for the default driver, at every reconnect
+    # attempt: a running fleet's start() is a no-op, never one more finalizer a call (a
+    # flaky link's reconnects grew the process for the fleet's whole life).
+    def finalizers() -> int:
+        return sum(1 for o in gc.get_objects() if type(o) is weakref.finalize)
+
+    with Fleet() as fleet:
+        fleet.start()
+        before = finalizers()
+        for _ in range(100):
+            fleet.start()
+        assert finalizers() == before

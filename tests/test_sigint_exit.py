@@ -10,6 +10,8 @@ Ctrl-Cs arrive exactly there: an event, not a guessed delay.
 from __future__ import annotations
 
 import contextlib
+import errno
+import io
 import os
 import signal
 import subprocess
@@ -243,7 +245,10 @@ def test_a_command_process_leaves_its_heap_to_the_system_after_every_exit_hook(
         registered.append("a robot's exit hook")  # as an opened Robot registers its own
         return 0
 
-    before = signal.getsignal(signal.SIGINT)
+    # process=True takes over SIGTERM and SIGHUP too (then ignores them, as the process
+    # would exit): all three are put back, else this process and every child it starts
+    # would ignore a SIGTERM from here on.
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
         assert _sigint.run_main("demo", command, process=True) == 0
         # Registered first, so Python runs it last: after a robot's withdraw or stop and
@@ -253,7 +258,8 @@ def test_a_command_process_leaves_its_heap_to_the_system_after_every_exit_hook(
         assert _sigint.run_main("demo", lambda: 0, process=False) == 0
         assert registered == []  # a caller in the same process keeps its heap collected
     finally:
-        signal.signal(signal.SIGINT, before)
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
 
 
 def test_every_ctrl_c_is_noted_before_the_stop_it_sets_off_runs() -> None:
@@ -331,3 +337,25 @@ def test_the_documented_sigterm_recipe_lets_a_clean_up_hold_it_back(
     out, err = capsys.readouterr()
     assert out.splitlines() == ["the clean-up ran to its end", "then KeyboardInterrupt"]
     assert err == ""  # no traceback, no "Exception ignored"
+
+
+def test_the_interrupted_line_to_a_hung_up_terminal_still_exits_130(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # After SIGHUP, stderr is a terminal that hung up: writing the one line fails with
+    # EIO. The command still ends with 130, not an OSError's traceback and exit 1.
+    class HungUp(io.StringIO):
+        def write(self, text: str) -> int:
+            raise OSError(errno.EIO, "Input/output error")
+
+    def interrupted() -> int:
+        raise KeyboardInterrupt
+
+    from tmmaster import _sigint
+
+    monkeypatch.setattr(sys, "stderr", HungUp())
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        assert _sigint.run_main("demo", interrupted, process=False) == 130
+    finally:
+        signal.signal(signal.SIGINT, before)

@@ -829,8 +829,9 @@ class Fleet:
             # The loop holds no fleet: one dropped unclosed (its robots too) is garbage,
             # and its finalizer ends the loop.
             runner, watches, lock, members = self._runner, self._watches, self._lock, self._members
-            runner.start(lambda: _serve(runner, watches, lock, members))
-            weakref.finalize(self, runner.end_soon)
+            if runner.thread is None:  # one finalizer: start() runs at every join and reconnect
+                runner.start(lambda: _serve(runner, watches, lock, members))
+                weakref.finalize(self, runner.end_soon)
         return self
 
     def close(self, *, timeout_s: float = 2.0) -> tuple[str, ...]:

@@ -35,7 +35,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from types import FrameType
 from typing import Any
 
@@ -147,7 +147,8 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
         return body()
     except KeyboardInterrupt:
         _ignore()  # also when the KeyboardInterrupt came from elsewhere (interrupt_main)
-        print(f"{prog}: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
+        with suppress(OSError):  # stderr a terminal that hung up (SIGHUP): said to nobody
+            print(f"{prog}: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)
         return EXIT_INTERRUPTED
     finally:
         if not process:

@@ -157,7 +157,7 @@ class LiveProgress:
                 with deferred():
                     self._live.refresh()
             except OSError:  # the terminal hung up (an SSH session lost): drawn no more
-                self._live = None
+                self.end()  # its refresh thread stopped too
 
     def _log_line(self, line: str) -> None:
         text = _TIMESTAMP.sub("", line.strip())
