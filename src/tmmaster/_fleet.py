@@ -826,10 +826,11 @@ class Fleet:
         with self._lock:
             if self._closed:
                 raise ConfigError("this Fleet is closed; make a new one")
+            # Started once (start() runs at every join and reconnect), with one finalizer.
             # The loop holds no fleet: one dropped unclosed (its robots too) is garbage,
             # and its finalizer ends the loop.
-            runner, watches, lock, members = self._runner, self._watches, self._lock, self._members
-            if runner.thread is None:  # one finalizer: start() runs at every join and reconnect
+            if (runner := self._runner).thread is None:
+                watches, lock, members = self._watches, self._lock, self._members
                 runner.start(lambda: _serve(runner, watches, lock, members))
                 weakref.finalize(self, runner.end_soon)
         return self
