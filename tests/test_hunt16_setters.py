@@ -18,12 +18,11 @@ from collections.abc import Callable
 
 import pytest
 
-from tmmaster import Checks, ConfigError, PollPolicy, Pose, Robot, Workspace, robot_model
+from test_hunt14_edge_inputs import TARGET, ready_robot
+from tmmaster import Checks, ConfigError, Workspace, robot_model
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
-START = Pose(300, -200, 200, 180, 0, 90)
-TARGET = Pose(320, -180, 220, 180, 0, 90)
 #: (the option, the values it must refuse)
 REFUSED: list[tuple[str, list[object]]] = [
     ("check_units", ["no", None, 0, 1, 1.0, [True]]),
@@ -37,22 +36,12 @@ def tm_simulator_factory(memory_simulator_factory: Factory) -> Factory:
     return memory_simulator_factory
 
 
-def _ready(factory: Factory, profile: str) -> tuple[Simulator, Robot]:
-    sim = factory(profile)
-    robot = Robot(sim.url, profile=profile, polling=PollPolicy(interval_s=0.01))
-    robot.connect()
-    robot.wait_until_ready(timeout_s=5)
-    robot.move_to(START, speed=100)
-    sim.clear_request_log()
-    return sim, robot
-
-
 @pytest.mark.parametrize("profile", ["tmflow", "article"])
 @pytest.mark.parametrize(("option", "values"), REFUSED, ids=[o for o, _ in REFUSED])
 def test_a_setter_refuses_a_value_of_another_type_naming_the_option(
     tm_simulator_factory: Factory, profile: str, option: str, values: list[object]
 ) -> None:
-    sim, robot = _ready(tm_simulator_factory, profile)
+    sim, robot = ready_robot(tm_simulator_factory, profile)
     try:
         before = getattr(robot, option)
         for value in values:
@@ -67,7 +56,7 @@ def test_a_setter_refuses_a_value_of_another_type_naming_the_option(
 
 
 def test_the_setters_take_a_value_of_their_type(tm_simulator_factory: Factory) -> None:
-    sim, robot = _ready(tm_simulator_factory, "tmflow")
+    sim, robot = ready_robot(tm_simulator_factory, "tmflow")
     try:
         robot.check_units = False
         robot.workspace = Workspace(floor_z_mm=0)
