@@ -40,6 +40,7 @@ from .._pose import MotionType, Pose
 from .._registers import (
     FLANGE_FIELDS,
     JOINT_FIELDS,
+    ROBOT_BASE_FLANGE_FIELDS,
     ROBOT_BASE_TCP_FIELDS,
     TARGET_FIELDS,
     TCP_FIELDS,
@@ -111,14 +112,12 @@ _FAULT_CODES = {
     "speed": SimErrorCode.OVER_SPEED,
 }
 
-#: Techman's table: the flange pose in the robot base, and the Running Timer and Up Time
-#: (days, hours, minutes, seconds).
-_ROBOT_BASE_FLANGE_FIELDS = tuple(f"robot_base_{name}" for name in FLANGE_FIELDS)
+#: Techman's table: the Running Timer and Up Time (days, hours, minutes, seconds).
 _RUNNING_TIMER_FIELDS = ("running_days", "running_hours", "running_minutes", "running_seconds")
 _UP_TIME_FIELDS = ("up_days", "up_hours", "up_minutes", "up_seconds")
 _TM_TABLE_FIELDS = (
     *FLANGE_FIELDS,
-    *_ROBOT_BASE_FLANGE_FIELDS,
+    *ROBOT_BASE_FLANGE_FIELDS,
     *ROBOT_BASE_TCP_FIELDS,
     *JOINT_FIELDS,
     "robot_link",
@@ -942,7 +941,7 @@ class RobotController(SimDevice[RobotProfile]):
             # The simulated current base is the robot base (Current Base 8300-8311 reads 0).
             for names, group in (
                 (FLANGE_FIELDS, flange_values),
-                (_ROBOT_BASE_FLANGE_FIELDS, flange_values),
+                (ROBOT_BASE_FLANGE_FIELDS, flange_values),
                 (ROBOT_BASE_TCP_FIELDS, tcp_values),
             ):
                 for name, value in zip(names, group, strict=True):
