@@ -78,6 +78,34 @@ def test_the_robots_tool_and_mass_are_checked_at_connect(sim: Simulator) -> None
         pass
 
 
+def test_a_tool_set_after_the_robot_was_made_has_its_mass_checked_too(sim: Simulator) -> None:
+    # A tool set in steps (robot.tool = Tool(...), then connect) is checked as
+    # Robot(tool=Tool(...)) is: its mass against the robot's, and a Pose then has none.
+    robot = Robot(sim.url)
+    robot.tool = Tool(FLANGE, mass_kg=2.5)
+    with pytest.raises(ToolMismatchError, match=r"tcp_value_mass differs.* 1\.1 kg.* 2\.5 kg"):
+        robot.connect()
+    robot = Robot(sim.url, tool=Tool(FLANGE, mass_kg=2.5))
+    robot.tool = FLANGE  # the 2.5 kg tool replaced by one whose mass is not given
+    with robot:
+        robot.move_to(LEFT, speed=50)
+
+
+def test_a_model_or_units_check_set_later_refuses_the_tool_the_robot_has() -> None:
+    # The setters keep what the constructor refuses: a Tool over the new arm's rated
+    # payload, a tool in metres once the units are checked. Refused, nothing is taken.
+    robot = Robot("127.0.0.1", 1, model="tm5-700", tool=Tool(FLANGE, mass_kg=5))
+    with pytest.raises(ConfigError, match=r"tool\.mass_kg 5 kg .* rated payload of 4 kg"):
+        robot.model = tmmaster.robot_model("tm5-900")
+    assert robot.model.name == "tm5-700"
+    robot.close()
+    robot = Robot("127.0.0.1", 1, tool=Pose(0, 0, 0.15, 0, 0, 0), checks=Checks(units=False))
+    with pytest.raises(tmmaster.UnitsError, match="tool"):
+        robot.check_units = True
+    assert robot.check_units is False
+    robot.close()
+
+
 def test_a_tcp_changed_after_connect_stops_the_next_move_unsent(sim: Simulator) -> None:
     with Robot(sim.url, tool=Tool(FLANGE, mass_kg=SIM_MASS_KG)) as robot:
         robot.move_to(LEFT, speed=50)

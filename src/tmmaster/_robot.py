@@ -533,13 +533,16 @@ class Robot:
         """The arm model: inverse kinematics of every target, expected motion times.
 
         Set, it must be a :class:`RobotModel` (``robot_model("tm12")`` for a built-in
-        one): anything else is a ConfigError naming ``model``, the model not taken.
+        one) whose rated payload carries the ``tool``'s mass: anything else is a
+        ConfigError naming ``model`` or ``tool.mass_kg``, the model not taken.
         """
         return self._planner.model
 
     @model.setter
     def model(self, value: RobotModel) -> None:
-        self._planner.model = _policy("model", value, RobotModel, default=False)
+        model = _policy("model", value, RobotModel, default=False)
+        tool_option(self._frames.tool, False, model)  # a Tool's mass within its rated payload
+        self._planner.model = model
 
     @property
     def workspace(self) -> Workspace:
@@ -561,7 +564,8 @@ class Robot:
         Set, it is checked as ``Robot(tool=)`` checks it (ConfigError, the tool not taken):
         a Pose, not in metres or radians (``check_units``), and on a profile that cannot
         verify a tool (``article``) only with the frame check off. A :class:`Tool` gives
-        its pose (its mass is checked against the robot's at :meth:`connect` only).
+        its pose and its mass, which must be within the model's rated payload and is
+        checked against the robot's at :meth:`connect` (a Pose has none to check).
         """
         return self._planner.tool
 
@@ -569,14 +573,15 @@ class Robot:
     def tool(self, value: Pose | None) -> None:
         # Robot(tool=)'s checks: what connect() refuses (article), the units, the type.
         self._frames.refuse_unverifiable(value)
-        self._planner.tool = tool_option(value, self.check_units, self.model)[0]
+        self._planner.tool, self._frames.tool = tool_option(value, self.check_units, self.model)
 
     @property
     def check_units(self) -> bool:
         """Whether a target or ``tool`` that looks like metres or radians is refused.
 
         Refused with :class:`~tmmaster.UnitsError` (docs/robot-api.md, "Units"). Set, it
-        must be True or False: anything else is a ConfigError naming ``check_units``.
+        must be True or False: anything else is a ConfigError naming ``check_units``; set to
+        True, a ``tool`` already set that looks like metres is refused, the setting not taken.
         """
         return self._planner.check_units
 
@@ -584,6 +589,7 @@ class Robot:
     def check_units(self, value: bool) -> None:
         if not isinstance(value, bool):
             raise ConfigError(f"check_units must be True or False, got {shown(value)}")
+        tool_option(self.tool, value, self.model)  # a tool set before, now in the units checked
         self._planner.check_units = value
 
     # -- connection -------------------------------------------------------

@@ -20,9 +20,8 @@ _RECORD_FIELDS = frozenset({"event", "level", "logger", "timestamp", "exception"
 def _text(value: Any) -> str:
     """A field's value as one token: quoted (JSON style) when it has spaces or quotes."""
     if isinstance(value, list | tuple):
-        text = "[" + ",".join(_text(item) for item in value) + "]"
-    else:
-        text = value if isinstance(value, str) else str(value)
+        value = "[" + ",".join(_text(item) for item in value) + "]"
+    text = value if isinstance(value, str) else str(value)
     quoted = not text or any(c.isspace() or c in '"=' for c in text)
     return json.dumps(text, ensure_ascii=False) if quoted else text
 
@@ -84,11 +83,9 @@ def wrap_logger(std: logging.Logger) -> Any:
 
 def event_formatter(*, json: bool, colors: bool) -> logging.Formatter:
     """A formatter printing structlog events as one JSON object, or coloured key=value."""
-    renderer: structlog.typing.Processor
+    renderer: structlog.typing.Processor = structlog.dev.ConsoleRenderer(colors=colors)
     if json:
         renderer = structlog.processors.JSONRenderer()
-    else:
-        renderer = structlog.dev.ConsoleRenderer(colors=colors)
     return structlog.stdlib.ProcessorFormatter(
         processors=[structlog.stdlib.ProcessorFormatter.remove_processors_meta, renderer]
     )
