@@ -551,8 +551,9 @@ class Planner:
             + (f"they fit {', '.join(names)}: give that model" if names else "no model fits")
         )
 
-    def take_robot_joints(self, pose: Pose, joints: Joints) -> None:
-        """Plan from the joints the robot reported at ``pose``, unless they are the seed's.
+    def take_robot_joints(self, pose: Pose, joints: Joints) -> bool:
+        """Plan from the joints the robot reported at ``pose``, unless they are the seed's
+        (returns whether it took them).
 
         Joints within :data:`SAME_JOINTS_DEG` of the seed keep the seed (the arm is where
         the last move put it: its exact joints and target are kept, and the solver's cache
@@ -563,7 +564,7 @@ class Planner:
         if hint is not None and all(
             abs(a - b) <= SAME_JOINTS_DEG for a, b in zip(joints, hint, strict=True)
         ):
-            return
+            return False
         if not self.model.forward(joints, self.tool).is_close(pose, **JOINTS_MISS):
             if not self._joints_mismatch_logged:
                 self._joints_mismatch_logged = True
@@ -573,8 +574,20 @@ class Planner:
                     pose=pose.as_list(),
                     reason="their forward kinematics with the tool miss the reported TCP",
                 )
-            return
+            return False
         self.joints_hint, self.hint_pose = joints, pose
+        return True
+
+    def _check_again(self, command: Command) -> None:
+        """A move's checks before any request, again from the joints the robot reported:
+        the arm is not where they had it (jogged or hand-guided since, a stopped move's
+        brake), so its path from there (the body, the table) is checked anew. An arc's
+        plan checks it from there anyway."""
+        kind, speed = command.kind, command.speed or 0
+        if kind is CommandKind.PTP_JOINTS:
+            self.joint_target(command.joints or (), speed)
+        elif kind is not CommandKind.CIRCLE and command.target is not None:
+            self.check_path(command.target, speed, MotionType(kind.value))
 
     def sent(self, plan: Plan) -> None:
         """A planned move was written: the next move starts where this one ends."""
@@ -635,14 +648,14 @@ class Planner:
         if target is None or start is None:
             limit = timeouts.gripper_timeout_s if timeout is None else timeout
             return Plan(None, None, None, 0.0, limit)
-        if joints is not None:
-            self.take_robot_joints(start, joints)
         if resolved_at is not None and not self._is_at(start, resolved_at):
             raise RobotError(
                 f"the arm moved since the {command.kind.value} command was resolved against"
                 f" {resolved_at}: it is at {start}; nothing was sent",
                 pose=start,
             )
+        if joints is not None and self.take_robot_joints(start, joints):
+            self._check_again(command)  # the arm was not where the checks had it
         origin = self.origin(start)
         accel = accel_s(command.accel_time_ms)
         speed = float(command.speed or 100)
@@ -685,10 +698,10 @@ class Planner:
         target = command.target
         assert target is not None
         hint = self.joints_hint
+        first = self.model.start_joints(origin, hint, self.tool)
         if command.kind is CommandKind.PTP_JOINTS:
             assert command.joints is not None
             target_joints = self.model.check_joints(command.joints, tool=self.tool)
-            first = self.model.start_joints(origin, hint, self.tool)
             expected = self.model.ptp_time(
                 first, target_joints, speed_percent=speed, accel_time_s=accel
             )
@@ -702,7 +715,6 @@ class Planner:
             if motion is MotionType.LINE:
                 self._check_turn(origin, target)
         if motion is MotionType.PTP:  # again, from the joints the robot reported
-            first = self.model.start_joints(origin, hint, self.tool)
             self._check_ptp_speed(first, target_joints, speed, accel)
         gauge = PathGauge.of(
             self.model,

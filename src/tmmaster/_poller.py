@@ -290,9 +290,7 @@ class MotionSchedule:
         dense = min(DENSE_S, nominal)
         if not acknowledged:
             first = self._sent_at + ACK_DELAY_S
-            if now < first:
-                return first
-            return now + (dense if now < first + TICK_S else nominal)
+            return first if now < first else now + (dense if now < first + TICK_S else nominal)
         if self._expected <= 0:
             return now + nominal
         opens, closes = self.window()

@@ -243,6 +243,4 @@ def profile_markdown(profile: Profile) -> str:
 
 def _io_range(count: int, first: int = 0) -> str:
     """``first``..``first + count - 1`` as ``0-15``; empty when there are none."""
-    if count == 0:
-        return ""
-    return f"{first}" if count == 1 else f"{first}-{first + count - 1}"
+    return "" if count == 0 else f"{first}" if count == 1 else f"{first}-{first + count - 1}"

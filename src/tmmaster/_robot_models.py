@@ -443,8 +443,7 @@ class RobotModel(BaseModel):
                 )
             chosen.append(min(candidates, key=lambda c: abs(c - s)))  # nearest the seed
         result = cast(Joints, tuple(chosen))
-        singular = self.singularity(result)
-        if singular is not None:
+        if (singular := self.singularity(result)) is not None:
             return None, ("singularity", singular)
         return result, None
 

@@ -934,9 +934,7 @@ def common_answer(buffer: bytes, start: int) -> tuple[int, int, Answer] | None:
         if function_code <= 2:
             bits = [byte >> i & 1 for byte in data for i in range(8)]
             return 6 + length, unit, (tid, function_code, bits)
-    if function_code == 16 and length == 6:
-        return 12, unit, (tid, 16, [])
-    return None
+    return (12, unit, (tid, 16, [])) if function_code == 16 and length == 6 else None
 
 
 class ForeignReplyError(Exception):
