@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .._exceptions import ConfigError
+from .._exceptions import ConfigError, GraspFailedError
 from .._pose import MotionType, Pose
 from ._config import (
     PickPlaceConfig,
@@ -62,6 +62,18 @@ def _require_empty(ctx: StepContext) -> None:
     reports holding would be carried down onto the next part."""
     if gripper_holds_a_part(ctx.robot):
         raise refuse_held_part(ctx.robot, opening=False)
+
+
+def _release(ctx: StepContext) -> None:
+    """Open at the place, once the gripper still reports the part: one that slipped out
+    on the way (a grip too weak to carry it) is a failure, never a part placed. A gripper
+    that cannot tell (None) is opened as before."""
+    if gripper_holds_a_part(ctx.robot) is False:
+        raise GraspFailedError(
+            f"{ctx.state}: the gripper no longer holds the part it gripped: lost on the way"
+            " from the pick (a grip too weak to carry it?); the fingers were left closed"
+        )
+    ctx.open_gripper()
 
 
 def _close(ctx: StepContext) -> None:
@@ -131,7 +143,7 @@ def pick_and_place(config: PickPlaceConfig | None = None) -> TaskSequence:
     )
     seq.add("MOVE_TO_LIFT", move=moves["lift"], description="lift the part")
     seq.add("MOVE_TO_PLACE", move=moves["place"], description="to the place pose")
-    seq.add("GRIPPER_OPEN", _open, description="release the part")
+    seq.add("GRIPPER_OPEN", _release, description="release the part (still held)")
     seq.add("MOVE_TO_HOME", move=moves["home"], description="back home")
     return seq
 
@@ -264,7 +276,7 @@ def palletizing(
     seq.add("MOVE_TO_LIFT", move=PlannedMove("MOVE_TO_LIFT", above_pick, slow_speed, line, "pick"))
     seq.add("MOVE_TO_SLOT_ABOVE", move=above_slot)
     seq.add("MOVE_TO_SLOT", move=into_slot)
-    seq.add("GRIPPER_OPEN", _open)
+    seq.add("GRIPPER_OPEN", _release)
     seq.add("MOVE_TO_SLOT_CLEAR", move=clear_slot)
     seq.add(
         "MOVE_TO_HOME", move=PlannedMove("MOVE_TO_HOME", home, speed, ptp, "home"), when=Cycles.LAST
