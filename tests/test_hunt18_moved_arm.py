@@ -25,8 +25,9 @@ import pytest
 
 from pendant import press_play_pause
 from test_hunt11_calibrated_arm import HOME, NOMINAL, THROUGH_ITSELF, wrist_flipped
+from test_safety_regressions import operator_resets
 from test_withdraw_stopped_project import press_stop
-from tmmaster import ConfigError, Pose, Robot
+from tmmaster import ConfigError, MotionTimeoutError, Pose, Robot
 from tmmaster.sim import Cell, PathBackend, Simulator
 
 #: From HOME wrist-flipped, a joint move here swings wrist 1 into the camera; from HOME
@@ -73,3 +74,28 @@ def test_a_move_from_an_arm_moved_since_the_last_target_is_checked_from_where_it
     with Robot(sim.url, gripper=None) as fresh, pytest.raises(ConfigError, match="self-coll"):
         MOVES[move](fresh)
     assert len(sim.motion_log()) == before
+
+
+#: From HOME, a PTP here passes; stopped halfway (the simulator's stall fault), the arm's
+#: PTP from where it stopped to TURNED passes wrist 1 through the camera.
+HALFWAY_OF = Pose(312.3, -252.89, 332.2, 200.86, -8.6, 44.29)
+TURNED = Pose(-107.45, 272.62, 268.17, 165.38, 2.97, 20.89)
+
+
+def test_a_move_after_the_masters_own_move_stopped_halfway_is_checked_from_there(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> None:
+    # The master's belief after a move it gave up is that move's target; the arm stopped
+    # halfway. The next PTP, clear from that target, is checked from where the arm is.
+    sim = tm_simulator_factory(cell=Cell(scene=[]), faults=["stall:at_move=2"])
+    with Robot(sim.url, gripper=None) as robot:
+        robot.move_to(HOME, speed=60)
+        with pytest.raises(MotionTimeoutError):
+            robot.move_to(HALFWAY_OF, speed=60, timeout=0.3)  # stalled, then stopped
+        sim.clear_faults()
+        operator_resets(sim)
+        before = len(sim.motion_log())
+        with pytest.raises(ConfigError, match="self-collision"):
+            robot.move_to(TURNED, speed=60)
+        assert len(sim.motion_log()) == before
+        assert sim.field("last_error_code") == 0
