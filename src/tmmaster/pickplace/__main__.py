@@ -969,6 +969,14 @@ def _parts_placed(sim_report: dict[str, Any], out: _Output) -> bool:
     return bool(sim_report["on_place"])
 
 
+def _close(robot: Robot, outcome: _Outcome) -> None:
+    """Close ``robot``: a stop the run could not deliver that close() delivered counts."""
+    confirmed = robot.close()
+    run = outcome.run
+    if confirmed and run is not None and run.stop_delivered is False:
+        run.stop_delivered = True
+
+
 def _run_on(
     command: _Command,
     robot: Robot,
@@ -1006,7 +1014,7 @@ def _run_on(
         finally:
             if out.live is not None:
                 out.live.end()
-            robot.close()
+            _close(robot, outcome)
             outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
     if result.ok:
         shown = result.cycle_times_s
@@ -1100,6 +1108,8 @@ def _failed(result: RunResult) -> tuple[int, str]:
     reaction = ""
     if result.reaction is not None and result.reaction.reaction == "retreat":
         reaction = "; retreated" if result.reaction.performed else "; did not retreat"
+    if result.stop_delivered is False:  # a move given up whose stop the link never carried
+        reaction += "; the stop could NOT be delivered: the arm may still move (check the robot)"
     return code, (
         f"{label} in {failure.state} (cycle {failure.cycle}): {failure.type}:"
         f" {failure.message}{code_text}{reaction}"
