@@ -11,6 +11,7 @@ import pytest
 
 import tmmaster
 from tmmaster import Checks, MovePhase, PollPolicy, Pose, Robot, TimeoutPolicy
+from tmmaster._channels import Command, CommandKind
 from tmmaster.sim import MemoryTransport, RobotSetup, Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -97,11 +98,32 @@ def test_a_moves_command_block_is_encoded_once(
     robot.move_to(APPROACH, speed=30)  # the first command (tmflow: checked, then claims)
     monkeypatch.setattr(transport_module, "encoder", counting)
     sim.clear_request_log()
-    robot.move_to(APPROACH, speed=30)
+    robot.move_to(PICK, speed=30)  # a command not given before
     # The whole block (tmflow: with the extension, zero for a PTP, and the session).
     block = [f.name for f in robot.profile.command_block()]
     assert sorted(encoded) == sorted(block)  # each field once: checked, then written as is
     assert len(command_writes(sim)) == 1
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_command_given_again_is_written_alike_and_refused_alike(
+    tm_simulator_factory: SimFactory, robots: Callable[..., Robot], profile: str
+) -> None:
+    # A repeated command's block comes from its first encoding: the same words (the
+    # tmflow number and session aside), and a refused one is refused every time.
+    sim = tm_simulator_factory(profile)
+    robot = robots(sim)
+    for target in (APPROACH, PICK, APPROACH, PICK):
+        robot.move_to(target, speed=30)
+    writes = command_writes(sim)
+    assert len(writes) == 4
+    fixed = 8 if profile == "article" else 15  # the words before tmflow's number (9015)
+    assert writes[0][:fixed] == writes[2][:fixed] != writes[1][:fixed]
+    assert writes[1][:fixed] == writes[3][:fixed]
+    for _ in range(2):
+        with pytest.raises(tmmaster.ValueOutOfRangeError):
+            robot._channel.check_command(Command(CommandKind.PTP, APPROACH, 70000))
+    assert len(command_writes(sim)) == 4
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])

@@ -16,6 +16,7 @@ errors; it never sleeps and never decides how long to wait: that is :mod:`._robo
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from abc import ABC, abstractmethod
@@ -303,7 +304,9 @@ class CommandChannel(ABC):
         #: heartbeat's, set when it claims the robot: :meth:`Heartbeat.claim`).
         self.session = 0
         self._command_field = command
-        self._command_codes: dict[CommandKind, int] = {}
+        # A command given again (a cycle's) is encoded once: its words and the same refusals
+        # (a refused command is not kept); the words are never changed in place.
+        self.encoded = functools.lru_cache(maxsize=64)(self._encode_command)
         #: What the last poll that saw a command finished read (see :class:`StateAfterDone`).
         self.after_done: StateAfterDone | None = None
 
@@ -438,12 +441,7 @@ class CommandChannel(ABC):
             via = command.via.as_list() if command.via is not None else [0.0] * 6
             words += zip(self._via_fields, via, strict=True)
             words.append((self._speed_mm_s_field, command.speed_mm_s or 0))
-        code = self._command_codes.get(command.kind)
-        if code is None:
-            code = self._command_codes[command.kind] = self._command_field.code_of(
-                command.kind.value
-            )
-        words.append((self._command_field, code))
+        words.append((self._command_field, self._command_field.code_of(command.kind.value)))
         # Every value encoded now: ValueOutOfRangeError naming the field, before any I/O;
         # the words are kept, so the write does not encode them again.
         return words, encode_writes(words)
@@ -579,7 +577,7 @@ class CommandChannel(ABC):
 
     def check_command(self, command: Command) -> None:
         """Encode any command's block without sending it (raises naming the field)."""
-        self._encode_command(command)
+        self.encoded(command)
 
 
 class ClearOnAcceptChannel(CommandChannel):
@@ -605,7 +603,7 @@ class ClearOnAcceptChannel(CommandChannel):
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
-        words, encoded = self._encode_command(command)
+        words, encoded = self.encoded(command)
         p = self.profile
         after_done = self.take_after_done(reuse_s)
         block = self.read(self.target_block)
@@ -748,7 +746,7 @@ class SequenceChannel(CommandChannel):
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
-        words, encoded = self._encode_command(command)
+        words, encoded = self.encoded(command)
         p = self.profile
         after_done = self.take_after_done(reuse_s)
         # The feedback block that showed the last command done and the flags read after
@@ -778,7 +776,7 @@ class SequenceChannel(CommandChannel):
         seq = p.next_seq(ack)
         boot = feedback.get("boot_id", 0)  # the program's start this command belongs to
         numbered = self._numbered(command, seq, boot)
-        words += numbered
+        words = [*words, *numbered]  # the encoded words stay as they are
         ticket = Ticket(
             command,
             words,
