@@ -532,7 +532,6 @@ class Runner:
             run.record(state, cycle, started, "failed")
             self._fail(run, state, exc)
             return
-        run.record(state, cycle, started, "retry")
         self._log.warning(
             "pickplace.retry",
             state=state,
@@ -545,9 +544,11 @@ class Runner:
         try:
             if rule.recover is not None:
                 rule.recover(run.ctx)
-        except TMMasterError as recover_exc:
-            self._fail(run, state, recover_exc)
+        except TMMasterError as recover_exc:  # never tried again: this pass failed the run
+            run.record(state, cycle, started, "failed")
+            self._fail(run, state, self._as_stop(recover_exc, state))
             return
+        run.record(state, cycle, started, "retry")
         run.result.retries += 1
         run.machine.retry(run.ctx)
         self._changed(run, state, started)
