@@ -30,7 +30,7 @@ from .._exceptions import (
 from .._gripper import GripperStatus, RegisterGripper
 from .._logging import get_logger
 from .._pose import MotionType, Pose
-from .._robot import Robot
+from .._robot import Motion, Robot
 from .._status import project_failure
 from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
@@ -439,6 +439,7 @@ class Runner:
             The outcome: ``ok`` in DONE, else ``failure`` says where and why.
         """
         count = cycles if cycles is not None else sequence.default_cycles
+        earlier = self.robot.last_motion  # an earlier run's: none of this run's business
         run = _Run(self, sequence, count)
         self._log.info("pickplace.run_started", sequence=sequence.name, cycles=count)
         self._start(run)
@@ -448,10 +449,10 @@ class Runner:
         result.state = run.machine.state
         if result.failure is not None:
             if result.failure.interrupted:
-                result.stop_delivered = self._stop_arm()
+                result.stop_delivered = self._stop_arm(earlier)
             else:
                 motion = self.robot.last_motion
-                if motion is not None and motion.abandoned:
+                if motion is not None and motion is not earlier and motion.abandoned:
                     result.stop_delivered = motion.stop_delivered
             result.reaction = self._react(sequence, result.failure)
         result.duration_s = round(time.monotonic() - run.started, 4)
@@ -638,12 +639,19 @@ class Runner:
         run.machine.fail(run.ctx)
         self._changed(run, state, started)
 
-    def _stop_arm(self) -> bool | None:
-        """After a stop request: stop the arm; True if delivered, None if it cannot be stopped."""
+    def _stop_arm(self, earlier: Motion | None) -> bool | None:
+        """After a stop request: stop the arm; True if delivered, None if it cannot be stopped.
+
+        ``earlier`` is the robot's last motion before the run (not the run's own)."""
         if not self.robot.can_stop:
             return None
         motion = self.robot.last_motion
-        if motion is not None and motion.abandoned and motion.stop_delivered:
+        if (
+            motion is not earlier
+            and motion is not None
+            and motion.abandoned
+            and motion.stop_delivered
+        ):
             return True  # the interrupted wait already stopped the arm
         try:
             self.robot.stop()
