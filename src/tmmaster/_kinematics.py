@@ -117,9 +117,7 @@ def _tidy(angle_deg: float) -> float:
         angle -= 360.0
     elif angle <= -180.0:
         angle += 360.0
-    if abs(angle + 180.0) < 1e-7:
-        return 180.0
-    return 0.0 if abs(angle) < 1e-12 else angle
+    return 180.0 if abs(angle + 180.0) < 1e-7 else 0.0 if abs(angle) < 1e-12 else angle
 
 
 def rotation_error(current: Transform, target: Transform) -> Vector:

@@ -294,7 +294,8 @@ class Planner:
     The joints seed: the joints the robot reported (at connect, before each plan) where
     the profile publishes them, moved on to each commanded target's joints; the pose
     they put the TCP at. Without published joints: the last commanded target's (none at
-    first: the model's ready posture is the seed).
+    first: the model's ready posture is the seed), and where the robot reports the arm
+    away from it, that pose solved on the branch so assumed.
     """
 
     def __init__(
@@ -551,9 +552,10 @@ class Planner:
             + (f"they fit {', '.join(names)}: give that model" if names else "no model fits")
         )
 
-    def take_robot_joints(self, pose: Pose, joints: Joints) -> bool:
+    def take_robot_joints(self, pose: Pose, joints: Joints | None) -> bool:
         """Plan from the joints the robot reported at ``pose``, unless they are the seed's
-        (returns whether it took them).
+        (returns whether it took them). None (a profile that publishes none): away from
+        the last target, the joints that put the TCP at ``pose`` on the branch assumed.
 
         Joints within :data:`SAME_JOINTS_DEG` of the seed keep the seed (the arm is where
         the last move put it: its exact joints and target are kept, and the solver's cache
@@ -561,6 +563,9 @@ class Planner:
         ``pose`` are not taken (a simulated arm without a joint model publishes zeros).
         """
         hint = self.joints_hint
+        if joints is None and self.origin(pose) is not pose:
+            return False  # none published, and the arm is at the last target: the seed's
+        joints = joints or self.model.start_joints(pose, hint, self.tool)
         if hint is not None and all(
             abs(a - b) <= SAME_JOINTS_DEG for a, b in zip(joints, hint, strict=True)
         ):
@@ -654,7 +659,7 @@ class Planner:
                 f" {resolved_at}: it is at {start}; nothing was sent",
                 pose=start,
             )
-        if joints is not None and self.take_robot_joints(start, joints):
+        if self.take_robot_joints(start, joints):
             self._check_again(command)  # the arm was not where the checks had it
         origin = self.origin(start)
         accel = accel_s(command.accel_time_ms)

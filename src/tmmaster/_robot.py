@@ -1289,8 +1289,7 @@ class Robot:
         while (before is start or not start.is_close(before)) and time.monotonic() < end:
             poller.sleep()
             before, (start, joints, _) = start, self._channel.read_plan()
-        if joints is not None:
-            self._planner.take_robot_joints(start, joints)
+        self._planner.take_robot_joints(start, joints)
         return start
 
     def _run_command(self, kind: CommandKind, timeout_s: float | None) -> None:
