@@ -16,7 +16,6 @@ errors; it never sleeps and never decides how long to wait: that is :mod:`._robo
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from abc import ABC, abstractmethod
@@ -304,9 +303,8 @@ class CommandChannel(ABC):
         #: heartbeat's, set when it claims the robot: :meth:`Heartbeat.claim`).
         self.session = 0
         self._command_field = command
-        # A command given again (a cycle's) is encoded once: its words and the same refusals
-        # (a refused command is not kept); the words are never changed in place.
-        self.encoded = functools.lru_cache(maxsize=64)(self._encode_command)
+        # Each command's block as encoded (:meth:`_encode_command`), by the command.
+        self._encoded: dict[Command, tuple[list[tuple[RegisterField, Value]], list[Encoded]]] = {}
         #: What the last poll that saw a command finished read (see :class:`StateAfterDone`).
         self.after_done: StateAfterDone | None = None
 
@@ -421,7 +419,15 @@ class CommandChannel(ABC):
     def _encode_command(
         self, command: Command
     ) -> tuple[list[tuple[RegisterField, Value]], list[Encoded]]:
-        """The command block's field values and their words (raises naming the field)."""
+        """The command block's field values and their words (raises naming the field).
+
+        A command given again (a cycle's) takes the words of its first encoding, and is
+        refused alike (a refused command is not kept); the words are never changed in
+        place. Kept in a dict of the channel's own (a cache around a bound method would
+        put the channel in a reference cycle, its link freed only by a collection).
+        """
+        if (known := self._encoded.get(command)) is not None:
+            return known
         self._refuse_unsupported(command)
         words: list[tuple[RegisterField, Value]] = []
         if command.target is not None:
@@ -443,8 +449,11 @@ class CommandChannel(ABC):
             words.append((self._speed_mm_s_field, command.speed_mm_s or 0))
         words.append((self._command_field, self._command_field.code_of(command.kind.value)))
         # Every value encoded now: ValueOutOfRangeError naming the field, before any I/O;
-        # the words are kept, so the write does not encode them again.
-        return words, encode_writes(words)
+        # the words are kept, so the write does not encode them again (nor a repeat).
+        if len(self._encoded) >= 64:  # bounded: ad-hoc commands are not kept forever
+            self._encoded.clear()
+        self._encoded[command] = known = (words, encode_writes(words))
+        return known
 
     def _refuse_unsupported(self, command: Command) -> None:
         """A command this profile cannot carry: ConfigError naming what is missing."""
@@ -577,7 +586,7 @@ class CommandChannel(ABC):
 
     def check_command(self, command: Command) -> None:
         """Encode any command's block without sending it (raises naming the field)."""
-        self.encoded(command)
+        self._encode_command(command)
 
 
 class ClearOnAcceptChannel(CommandChannel):
@@ -603,7 +612,7 @@ class ClearOnAcceptChannel(CommandChannel):
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
-        words, encoded = self.encoded(command)
+        words, encoded = self._encode_command(command)
         p = self.profile
         after_done = self.take_after_done(reuse_s)
         block = self.read(self.target_block)
@@ -746,7 +755,7 @@ class SequenceChannel(CommandChannel):
 
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
-        words, encoded = self.encoded(command)
+        words, encoded = self._encode_command(command)
         p = self.profile
         after_done = self.take_after_done(reuse_s)
         # The feedback block that showed the last command done and the flags read after
