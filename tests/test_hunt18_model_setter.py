@@ -9,11 +9,9 @@ model's payload: set to a ``tm5-900`` on a connected TM5-700, it is taken, and t
 moves are planned and checked by the TM5-900's kinematics, the robot's joints ignored
 as "not the arm's" (their forward kinematics miss the reported TCP: a warning, once).
 
-Not fixed here (hunt 18): the setter would make connect's check when connected (one
-read of the flange and the joints, the model not taken when they do not fit), which
-costs core lines the SDK no longer has; the plan cannot tell a wrong model from a
-master whose tool differs from the robot's with the frame check off, where reported
-joints that miss the TCP are ignored on purpose.
+Found by hunt 18; fixed: set on a connected robot, the setter makes connect's check
+(one read of the flange and the joints) and refuses a model they do not fit, the model
+not taken.
 """
 
 from __future__ import annotations
@@ -28,10 +26,6 @@ from tmmaster.sim import Cell, Simulator
 NEAR = Pose(300, -200, 200, 180, 0, 90)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the model setter does not check the connected arm's joints against the new model",
-)
 def test_a_model_the_connected_arm_does_not_fit_is_refused_before_any_move(
     tm_simulator_factory: Callable[..., Simulator],
 ) -> None:

@@ -353,9 +353,7 @@ class CommandChannel(ABC):
 
     def joints_from(self, values: dict[str, Value]) -> tuple[float, ...] | None:
         """The joints J1..J6 (deg) in ``values``; None where the profile does not publish them."""
-        if not self.joint_fields:
-            return None
-        return tuple(float(values[f.name]) for f in self.joint_fields)
+        return tuple(float(values[f.name]) for f in self.joint_fields) or None
 
     def _poll_mark(self) -> tuple[float, int | None]:
         """Before a poll's first request: forget the last done state; the time and link mark."""

@@ -233,10 +233,8 @@ class MotionSchedule:
         model_elapsed = self._expected if fraction >= high else model_elapsed
         fast = min(max((at - TICK_S - self._acked_at) / model_elapsed, least), slow)
         lowest, highest = self._paces
-        if fast <= highest and lowest <= slow:
-            self._paces = (max(lowest, fast), min(highest, slow))
-        else:
-            self._paces = (fast, slow)
+        overlap = fast <= highest and lowest <= slow
+        self._paces = (max(lowest, fast), min(highest, slow)) if overlap else (fast, slow)
         # The earliest plausible end from here: the rest of the move twice as fast, never
         # later than the model's end (a robot that speeds up again is seen in time).
         opens = self.window()[0]

@@ -533,8 +533,9 @@ class Robot:
         """The arm model: inverse kinematics of every target, expected motion times.
 
         Set, it must be a :class:`RobotModel` (``robot_model("tm12")`` for a built-in
-        one) whose rated payload carries the ``tool``'s mass: anything else is a
-        ConfigError naming ``model`` or ``tool.mass_kg``, the model not taken.
+        one) whose rated payload carries the ``tool``'s mass and, when connected, which the
+        arm's reported joints fit (one read, as :meth:`connect` checks them): anything
+        else is a ConfigError naming ``model`` or ``tool.mass_kg``, the model not taken.
         """
         return self._planner.model
 
@@ -542,7 +543,13 @@ class Robot:
     def model(self, value: RobotModel) -> None:
         model = _policy("model", value, RobotModel, default=False)
         tool_option(self._frames.tool, False, model)  # a Tool's mass within its rated payload
-        self._planner.model = model
+        old, self._planner.model = self._planner.model, model
+        try:  # connected: the arm's joints must fit it, as connect() checks them
+            if self._connected:
+                self._read_arm_at_connect()
+        except BaseException:
+            self._planner.model = old
+            raise
 
     @property
     def workspace(self) -> Workspace:
