@@ -1,12 +1,12 @@
-"""``robot.model = ...`` on a connected robot: the arm is not checked against the new model.
+"""``robot.model = ...`` on a connected robot: the arm is checked against the new model.
 
 ``connect()`` refuses a Robot whose ``model`` the arm's reported joints do not fit
 (``tests/test_model_mismatch.py``): every check of a move would be another arm's (the
 reach, the joint limits, the links against the table and each other, the expected
 time). ``Robot.model`` has a setter, documented among the options "meant to change
-while it runs", and it checks only the type and the tool's mass against the new
-model's payload: set to a ``tm5-900`` on a connected TM5-700, it is taken, and the next
-moves are planned and checked by the TM5-900's kinematics, the robot's joints ignored
+while it runs", and it checked only the type and the tool's mass against the new
+model's payload: set to a ``tm5-900`` on a connected TM5-700, it was taken, and the next
+moves were planned and checked by the TM5-900's kinematics, the robot's joints ignored
 as "not the arm's" (their forward kinematics miss the reported TCP: a warning, once).
 
 Found by hunt 18; fixed: set on a connected robot, the setter makes connect's check
