@@ -1326,9 +1326,10 @@ class Robot:
             self._channel.check_command(command)
         self._require_connection()  # and a give-up still owed goes first
         if self._heartbeat.claim_due:
-            # The first command claims the robot (this master beats from then on), once
-            # it is known to be valid: a command refused claims nothing. After a silence
-            # (the link was down), a beat goes first, as the program may see us gone.
+            # The first command claims the robot (this master beats from then on) once
+            # its values fit the profile; the checks that read the arm come after (the
+            # ticket carries the session), so a move they refuse has claimed it. After a
+            # silence (the link was down), a beat goes first: the program may see us gone.
             self._channel.check_command(command)
             self._channel.session = self._heartbeat.claim(self._shared)
         # prepare() encodes (refusing out-of-range values) before its first read.
