@@ -12,9 +12,11 @@ first; a gripper that can tell and no longer reports the part fails the run ther
 (GraspFailedError, exit 5, "grasp_failed"), the fingers still closed, nothing placed
 claimed. The judge is the simulator's world (where the part lies), never the master.
 
-The ``tmflow`` program's gripper cannot tell: its ``grasp_status`` is written by the
-robot program at the close only (docs/pickplace.md), so a part lost after it still reads
-as held: a strict xfail until the program (or the master) reads the gripper's input live.
+The ``tmflow`` program's ``grasp_status`` cannot tell: the robot program writes it at the
+close only (docs/pickplace.md), so a part lost after it still reads as held. The run
+reads the gripper's input itself where the configuration names it (``[gripper]
+held_input``: the end module's DI the program's gripper reads, over the robot's Modbus
+table): then the loss is seen. Without that key it is not: a strict xfail says so.
 """
 
 from __future__ import annotations
@@ -48,9 +50,11 @@ FAST: dict[str, Any] = {
 }
 TMFLOW_PROGRAM_GRIPPER = pytest.mark.xfail(
     strict=True,
-    reason="the tmflow program writes grasp_status at its close only: a part lost after it"
-    " still reads as held, and the run cannot tell it from a part carried",
+    reason="without [gripper] held_input the run reads the tmflow program's grasp_status,"
+    " written at its close only: a part lost after it still reads as held",
 )
+#: The end module's DI 0: the grip input of the generated program's default wiring.
+HELD_INPUT: dict[str, Any] = {"held_input": 0}
 
 
 def left_at_the_pick(sim: Simulator) -> bool:
@@ -60,22 +64,25 @@ def left_at_the_pick(sim: Simulator) -> bool:
 
 
 @pytest.mark.parametrize(
-    ("profile", "gripper"),
+    ("profile", "gripper", "keys"),
     [
-        ("article", None),
-        ("tmflow", "onrobot-2fg7"),
-        pytest.param("tmflow", None, marks=TMFLOW_PROGRAM_GRIPPER, id="tmflow-program"),
+        ("article", None, {}),
+        ("tmflow", "onrobot-2fg7", {}),
+        pytest.param("tmflow", None, HELD_INPUT, id="tmflow-program"),
+        pytest.param(
+            "tmflow", None, {}, marks=TMFLOW_PROGRAM_GRIPPER, id="tmflow-program-no-held-input"
+        ),
     ],
 )
 def test_a_part_lost_on_the_way_fails_the_run_instead_of_done(
-    tm_simulator_factory: Factory, profile: str, gripper: str | None
+    tm_simulator_factory: Factory, profile: str, gripper: str | None, keys: dict[str, Any]
 ) -> None:
     sim = tm_simulator_factory(
         profile, robot=RobotSetup(gripper=gripper), cell=Cell(scene=[HEAVY]), **QUICK
     )
     kind = {"kind": gripper, "port": sim.gripper_port} if gripper else {}
     config = validate_config(
-        {**FAST, "robot": {"profile": profile}, "gripper": {"settle_s": 0.05, **kind}}
+        {**FAST, "robot": {"profile": profile}, "gripper": {"settle_s": 0.05, **kind, **keys}}
     )
     with robot_from_config(config, "127.0.0.1", sim.port) as robot:
         result = Runner.from_config(robot, config).run(pick_and_place(config))
@@ -88,15 +95,16 @@ def test_a_part_lost_on_the_way_fails_the_run_instead_of_done(
     assert "no longer holds" in result.failure.message
 
 
+@pytest.mark.parametrize(("profile", "keys"), [("article", ""), ("tmflow", "held_input = 0\n")])
 def test_the_command_says_grasp_failed_for_a_part_lost_on_the_way(
-    tm_simulator_factory: Factory, tmp_path: Path
+    tm_simulator_factory: Factory, tmp_path: Path, profile: str, keys: str
 ) -> None:
     # Against a robot (no --sim): nothing but the gripper can tell the part is gone.
-    sim = tm_simulator_factory("article", cell=Cell(scene=[HEAVY]), **QUICK)
+    sim = tm_simulator_factory(profile, cell=Cell(scene=[HEAVY]), **QUICK)
     config = tmp_path / "cell.toml"
-    config.write_text("[gripper]\nsettle_s = 0.05\n[run]\npoll_interval_s = 0.01\n")
+    config.write_text(f"[gripper]\nsettle_s = 0.05\n{keys}[run]\npoll_interval_s = 0.01\n")
     report = tmp_path / "run.json"
-    argv = ["--host", "127.0.0.1", "--port", str(sim.port), "--profile", "article"]
+    argv = ["--host", "127.0.0.1", "--port", str(sim.port), "--profile", profile]
     code = main([*argv, "--config", str(config), "--report", str(report), "--quiet"])
 
     assert left_at_the_pick(sim)

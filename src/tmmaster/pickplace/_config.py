@@ -34,6 +34,7 @@ from .. import _profiles
 from .._address import check_host
 from .._cell import DEFAULT_TABLE_TOP_Z_MM
 from .._exceptions import ConfigError
+from .._io import io_address
 from .._options import Checks, GripperDevice
 from .._poller import PollPolicy
 from .._pose import MotionType, Pose, pose_count_problem, suspect_units, written_list
@@ -266,6 +267,13 @@ class GripperSection(_Section):
     #: With ``open_at_start``: a part the gripper reports holding at the start is released
     #: where the arm is then (it falls there). False: the run refuses to start instead.
     release_held_part_at_start: bool = False
+    #: The robot's digital input that is high while the fingers hold a part (on a TM the
+    #: end module's DI wired to the gripper's grip signal: the robot program's ``--gripper
+    #: io:di=N``). The run reads it, not the gripper's grasp flag, at its start and before
+    #: each release (where a part lost on the way is caught). None: the gripper's flag.
+    held_input: Annotated[int, Field(ge=0, le=15, strict=True)] | None = None
+    #: The module of ``held_input``: "end_module" or "control_box".
+    held_input_module: Literal["end_module", "control_box"] = "end_module"
 
     @field_validator("host")
     @classmethod
@@ -588,7 +596,8 @@ def robot_from_config(
         The robot, not connected.
 
     Raises:
-        ConfigError: No robot address, or an invalid one.
+        ConfigError: No robot address, or an invalid one; a ``gripper.held_input`` the
+            robot's profile has not.
     """
     target = host if host is not None else config.robot.host
     if target is None:
@@ -596,10 +605,13 @@ def robot_from_config(
     g = config.gripper
     # Never below 0.1 s: a scaled settle time must still span a few 50 Hz ticks.
     settle_s = max(g.settle_s / settle_scale, min(g.settle_s, 0.1))
+    profile = config.robot_profile()
+    if g.held_input is not None:  # one the profile has not: refused before any I/O
+        io_address(profile, g.held_input_module, "di", g.held_input)
     return Robot(
         target,
         port if port is not None else config.robot.port,
-        profile=config.robot_profile(),
+        profile=profile,
         model=config.robot.model,
         gripper=_gripper(config, gripper_port),
         tool=config.robot.tool_pose(),

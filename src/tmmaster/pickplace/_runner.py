@@ -28,6 +28,7 @@ from .._exceptions import (
     TMMasterError,
 )
 from .._gripper import GripperStatus, RegisterGripper
+from .._io import io_address
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Motion, Robot
@@ -256,6 +257,10 @@ class _RunContext:
         self.last_gripper = self.robot.gripper.close()
         return self.last_gripper
 
+    def part_held(self, *, start: bool = False) -> bool | None:
+        """Whether the gripper holds a part now (:meth:`Runner.part_held`)."""
+        return self._run.runner.part_held(start=start)
+
     def check_holding(self, expected: bool = True) -> GripperStatus:
         """Read the gripper; raise :class:`GraspFailedError` unless holding == ``expected``."""
         status = self.robot.gripper.status()
@@ -352,6 +357,12 @@ class Runner:
             and the gripper reports holding a part: True releases it where the arm is
             (logged as ``pickplace.held_part_released``); False (the default) fails the
             run in IDLE with :class:`ConfigError`, nothing moved or opened.
+        held_input: The robot's digital input that is high while the gripper holds a
+            part (:meth:`part_held`); None: the gripper's own report.
+        held_input_module: The module of ``held_input`` (``"end_module"`` by default).
+
+    Raises:
+        ConfigError: ``held_input`` is not a DI of that module in the robot's profile.
     """
 
     def __init__(
@@ -362,7 +373,11 @@ class Runner:
         ready_timeout_s: float = 10.0,
         on_state: Callable[[StateEvent], None] | None = None,
         release_held_part_at_start: bool = False,
+        held_input: int | None = None,
+        held_input_module: str = "end_module",
     ) -> None:
+        if held_input is not None:
+            io_address(robot.profile, held_input_module, "di", held_input)
         #: The robot it runs on.
         self.robot = robot
         #: ``"stay"`` or ``"retreat"`` after a failure.
@@ -373,6 +388,9 @@ class Runner:
         self.on_state = on_state
         #: Release a part the gripper holds when ``prepare`` opens it (else refuse).
         self.release_held_part_at_start = release_held_part_at_start
+        #: The DI (and its module) that tells whether a part is held; None: the gripper.
+        self.held_input = held_input
+        self.held_input_module = held_input_module
         #: ``time.monotonic()`` when the current or last :meth:`run` started (None before
         #: the first): time 0 of its records, for whatever else is timed beside the run.
         self.run_started: float | None = None
@@ -387,8 +405,8 @@ class Runner:
         *,
         on_state: Callable[[StateEvent], None] | None = None,
     ) -> Runner:
-        """A runner with the configuration's error reaction, readiness timeout and
-        ``gripper.release_held_part_at_start``.
+        """A runner with the configuration's error reaction, readiness timeout,
+        ``gripper.release_held_part_at_start`` and ``gripper.held_input``.
 
         Args:
             robot: The robot (``robot_from_config(config)``).
@@ -404,7 +422,34 @@ class Runner:
             ready_timeout_s=config.timeouts.ready_s,
             on_state=on_state,
             release_held_part_at_start=config.gripper.release_held_part_at_start,
+            held_input=config.gripper.held_input,
+            held_input_module=config.gripper.held_input_module,
         )
+
+    def part_held(self, *, start: bool = False) -> bool | None:
+        """Whether the gripper holds a part now.
+
+        With ``held_input`` the robot's digital input says it, read directly (FC 02): what
+        the wire shows now, whatever the gripper's grasp flag last recorded (a part
+        slipped out since the close, a flag left at 0 by a stop in the middle of a close,
+        registers cleared by a restart). Else the gripper's report
+        (:func:`gripper_holds_a_part`).
+
+        Args:
+            start: Asked before the start opens the gripper (or starts a pick): then a
+                part is held when the input or the gripper's report says so, so that an
+                input named wrongly (never high) cannot have a held part dropped.
+
+        Returns:
+            Whether a part is held; None when the gripper cannot tell.
+
+        Raises:
+            TMMasterError: A read failed.
+        """
+        if self.held_input is None:
+            return gripper_holds_a_part(self.robot)
+        held = self.robot.io.di(self.held_input, module=self.held_input_module)
+        return held or (start and bool(gripper_holds_a_part(self.robot)))
 
     @property
     def stop_requested(self) -> bool:
@@ -579,7 +624,7 @@ class Runner:
     def _open_at_start(self) -> None:
         """Before ``prepare`` opens the gripper: refuse (or, if allowed, announce) the
         release of a part it holds; a gripper that cannot tell is opened as before."""
-        held = gripper_holds_a_part(self.robot)
+        held = self.part_held(start=True)
         if held is None:
             self._log.warning(
                 "pickplace.held_part_unknown",

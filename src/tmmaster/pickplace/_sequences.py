@@ -24,7 +24,7 @@ from ._config import (
     read_config_data,
     units_problem,
 )
-from ._runner import gripper_holds_a_part, refuse_held_part
+from ._runner import refuse_held_part
 from ._steps import Action, Cycles, PlannedMove, RetryRule, StepContext, TaskSequence
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
@@ -60,15 +60,16 @@ def _open(ctx: StepContext) -> None:
 def _require_empty(ctx: StepContext) -> None:
     """The start of a cycle that begins with a pick, without opening: a part the gripper
     reports holding would be carried down onto the next part."""
-    if gripper_holds_a_part(ctx.robot):
+    if ctx.part_held(start=True):
         raise refuse_held_part(ctx.robot, opening=False)
 
 
 def _release(ctx: StepContext) -> None:
     """Open at the place, once the gripper still reports the part: one that slipped out
     on the way (a grip too weak to carry it) is a failure, never a part placed. A gripper
-    that cannot tell (None) is opened as before."""
-    if gripper_holds_a_part(ctx.robot) is False:
+    that cannot tell (None) is opened as before. The runner's ``held_input`` (the robot's
+    DI, read now) says it where the gripper's flag is only what its close recorded."""
+    if ctx.part_held() is False:
         raise GraspFailedError(
             f"{ctx.state}: the gripper no longer holds the part it gripped: lost on the way"
             " from the pick (a grip too weak to carry it?); the fingers were left closed"

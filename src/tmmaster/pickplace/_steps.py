@@ -92,6 +92,18 @@ class StepContext(Protocol):
             The gripper's status.
         """
 
+    def part_held(self, *, start: bool = False) -> bool | None:
+        """Whether the gripper holds a part now: the runner's ``held_input`` when it has
+        one (the robot's DI, read directly), else the gripper's report.
+
+        Args:
+            start: Asked before the run's first open or pick: a part is held when the
+                input or the gripper's report says so.
+
+        Returns:
+            Whether a part is held; None when the gripper cannot tell.
+        """
+
     def check_holding(self, expected: bool = True) -> GripperStatus:
         """Read the gripper; raise :class:`GraspFailedError` unless holding == ``expected``.
 
