@@ -388,8 +388,9 @@ class Runner:
         self.on_state = on_state
         #: Release a part the gripper holds when ``prepare`` opens it (else refuse).
         self.release_held_part_at_start = release_held_part_at_start
-        #: The DI (and its module) that tells whether a part is held; None: the gripper.
+        #: The DI that tells whether a part is held; None: the gripper's own report.
         self.held_input = held_input
+        #: The module of ``held_input``: ``"end_module"`` or ``"control_box"``.
         self.held_input_module = held_input_module
         #: ``time.monotonic()`` when the current or last :meth:`run` started (None before
         #: the first): time 0 of its records, for whatever else is timed beside the run.
