@@ -105,11 +105,16 @@ def test_one_grippers_fault_is_its_own_and_fleet_close_stops_every_gripper(
         for sim in sims:
             sim.wait_for(lambda sim=sim: fingers(sim)[0], 5.0)
         assert fleet.close() == ()
-        for thread, outcome in opens:
+        for thread, _ in opens:
             thread.join(5)
-            assert isinstance(outcome[0], TMMasterError), outcome
-        assert at_rest(sims[1]) < 30.0  # B's open stopped short of 39 mm
-        assert at_rest(sims[0]) < 38.0  # so was A's
+        assert isinstance(opens[1][1][0], TMMasterError), opens[1][1]
+        assert at_rest(sims[1]) < 30.0  # B's open (38 mm at half speed) stopped short of 39 mm
+        # A's open had half as far to go: on a busy machine it may end before the close,
+        # and is then reported done where the fingers are fully open; stopped, it is short.
+        if isinstance(opens[0][1][0], TMMasterError):
+            assert at_rest(sims[0]) < 38.0
+        else:
+            assert at_rest(sims[0]) > 38.0, opens[0][1]
     finally:
         fleet.close()
         for robot in robots:
