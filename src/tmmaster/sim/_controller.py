@@ -115,6 +115,13 @@ _FAULT_CODES = {
 #: Techman's table: the Running Timer and Up Time (days, hours, minutes, seconds).
 _RUNNING_TIMER_FIELDS = ("running_days", "running_hours", "running_minutes", "running_seconds")
 _UP_TIME_FIELDS = ("up_days", "up_hours", "up_minutes", "up_seconds")
+#: Techman's Joint Speed J1..J6 (7949-7960) and TCP Speed (7859-7872), in that order.
+_SPEED_FIELDS = (
+    *(f"joint_speed_{j}" for j in range(1, 7)),
+    *(f"tcp_speed_{a}" for a in ("x", "y", "z", "rx", "ry", "rz", "s3d")),
+)
+#: The speeds of an arm that did not move.
+_NO_SPEEDS = (0.0,) * len(_SPEED_FIELDS)
 _TM_TABLE_FIELDS = (
     *FLANGE_FIELDS,
     *ROBOT_BASE_FLANGE_FIELDS,
@@ -126,6 +133,7 @@ _TM_TABLE_FIELDS = (
     "tm_robot_state",
     *_RUNNING_TIMER_FIELDS,
     *_UP_TIME_FIELDS,
+    *_SPEED_FIELDS,
 )
 
 
@@ -323,7 +331,7 @@ class RobotController(SimDevice[RobotProfile]):
         # register's range: the same pose again is published as it is, unchecked.
         self._in_range_pose: bytes | None = None
         self._published_values: list[float] = []
-        self._tm_table_pose: tuple[bytes, int | None] | None = None
+        self._tm_table_pose: tuple[bytes, int | None, tuple[float, ...]] | None = None
         # The bytes of the last pose objects seen (a Pose is immutable, a tuple too): an
         # idle arm's backend hands the same objects out at every tick.
         self._pose_seen: tuple[Pose | None, bytes] = (None, b"")
@@ -337,6 +345,9 @@ class RobotController(SimDevice[RobotProfile]):
         self._has_tm_table = bank.has("flange_x")
         self._has_tm_state = bank.has("tm_robot_state")
         self._tm_table_clock: tuple[int, int] | None = None
+        # The joints and TCP published last, when, and the speeds published then.
+        self._tm_motion: tuple[bytes, Pose | None, Sequence[float], float] = (b"", None, (), 0.0)
+        self._tm_speeds: tuple[float, ...] = _NO_SPEEDS
 
     @classmethod
     def bank_for(cls, profile: RobotProfile) -> RegisterBank:
@@ -933,7 +944,8 @@ class RobotController(SimDevice[RobotProfile]):
         # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
         clock = (int(self._running_timer_s()), int(self._time_s))
         values = self._tm_table_bytes(flange, tcp, joints)
-        pose = (values, self._tm_robot_state())
+        speeds = self._tm_speeds_now(values, tcp, joints)
+        pose = (values, self._tm_robot_state(), speeds)
         bank_set = self._bank.set
         if not unchanged or pose != self._tm_table_pose:
             flange_values = flange.as_list()
@@ -948,6 +960,8 @@ class RobotController(SimDevice[RobotProfile]):
                     bank_set(name, value)
             for i, angle in enumerate(joints, start=1):
                 bank_set(f"joint_{i}", angle)
+            for name, speed in zip(_SPEED_FIELDS, speeds, strict=True):
+                bank_set(name, speed)
             bank_set("robot_link", True)
             bank_set("operation_mode", 1)  # auto, as ma_mode
             bank_set("aut_p", True)  # AUT.P high: able to play in auto mode
@@ -981,6 +995,21 @@ class RobotController(SimDevice[RobotProfile]):
         self._tm_seen = (flange, tcp, held, values)
         return values
 
+    def _tm_speeds_now(
+        self, values: bytes, tcp: Pose, joints: Sequence[float]
+    ) -> tuple[float, ...]:
+        """Joint Speed and TCP Speed: how far the joints and the TCP moved since the last
+        publication, per simulated second (all 0 once the arm held still a whole tick)."""
+        last_values, last_tcp, last_joints, last_s = self._tm_motion
+        now_s = self._time_s
+        # A backend's own list may change under it: its values are kept, as a tuple.
+        self._tm_motion = (values, tcp, joints if joints.__class__ is tuple else (*joints,), now_s)
+        if values == last_values or last_tcp is None:
+            self._tm_speeds = _NO_SPEEDS
+        elif now_s > last_s:  # else (no time passed) the speeds published last stand
+            self._tm_speeds = motion_speeds(last_tcp, tcp, last_joints, joints, now_s - last_s)
+        return self._tm_speeds
+
     def _tm_robot_state(self) -> int | None:
         """Robot State (7215): STO, error or normal; None when the profile has no such field."""
         if not self._has_tm_state:
@@ -1004,6 +1033,23 @@ class RobotController(SimDevice[RobotProfile]):
 _CLOCK_FIELDS = (*_RUNNING_TIMER_FIELDS, *_UP_TIME_FIELDS)
 #: Parts no clock has: each part of a clock differs from them.
 _NO_CLOCK: tuple[None, ...] = (None,) * len(_CLOCK_FIELDS)
+
+
+def motion_speeds(
+    tcp_from: Pose,
+    tcp_to: Pose,
+    joints_from: Sequence[float],
+    joints_to: Sequence[float],
+    dt: float,
+) -> tuple[float, ...]:
+    """Joint Speed J1..J6 (deg/s), then TCP Speed x, y, z (mm/s), rx, ry, rz (deg/s, each
+    angle's change the short way round) and s3d (mm/s), moving from one sample to the
+    next in ``dt`` s (> 0)."""
+    joints = [(b - a) / dt for a, b in zip(joints_from, joints_to, strict=True)]
+    a, b = tcp_from.as_list(), tcp_to.as_list()
+    linear = [(b[i] - a[i]) / dt for i in range(3)]
+    angular = [((b[i] - a[i] + 180.0) % 360.0 - 180.0) / dt for i in range(3, 6)]
+    return (*joints, *linear, *angular, math.hypot(*linear))
 
 
 def _clock_parts(clock: tuple[int, int]) -> tuple[int, ...]:
