@@ -17,6 +17,7 @@ from .._exceptions import ConfigError, UnreachablePoseError
 from .._pose import Pose
 from .._robot import Robot
 from .._robot_models import RobotModel
+from ._sequences import check_gripper_steps
 from ._steps import PlannedMove, TaskSequence
 
 S = TypeVar("S", bound=Hashable)
@@ -152,7 +153,8 @@ def validate_plan(
     article profile), that the arm cannot take (inverse kinematics from the previous
     move's joints: reach, joint ranges, singularities), a Line whose straight path
     leaves the arm's range, or a move too fast raises :class:`ConfigError` naming the
-    configuration key and ``source``.
+    configuration key and ``source``; so does a gripper step (the library's: a TOML
+    sequence's, the built-in ones) on a robot without a gripper.
 
     Args:
         robot: The robot that will run it (profile, arm model, tool, limits); it need
@@ -172,6 +174,7 @@ def validate_plan(
             arm cannot reach it).
     """
     sequence.validate()
+    check_gripper_steps(robot, sequence, source)
     checker = _MoveChecker(robot, source)
 
     def check_cycle(cycle: int, moves: list[PlannedMove], start: _Where) -> tuple[_Where, None]:

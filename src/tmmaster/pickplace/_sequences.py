@@ -10,12 +10,15 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
+from weakref import WeakSet
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, model_validator
 
 from .._exceptions import ConfigError, GraspFailedError
+from .._gripper import NoGripper
 from .._pose import MotionType, Pose
+from .._robot import Robot
 from ._config import (
     PickPlaceConfig,
     PoseValue,
@@ -41,6 +44,42 @@ PICK_AND_PLACE_STATES = (
 )
 
 
+#: The actions of this module that use the gripper: a robot without one refuses the
+#: sequences that have them before anything moves (:func:`check_gripper_steps`).
+_GRIPPER_ACTIONS: WeakSet[Action] = WeakSet()
+_A = TypeVar("_A", bound=Action)
+
+
+def _uses_gripper(action: _A) -> _A:
+    _GRIPPER_ACTIONS.add(action)
+    return action
+
+
+def check_gripper_steps(robot: Robot, sequence: TaskSequence, source: str) -> None:
+    """Refuse a sequence whose start or steps use the gripper on a robot that has none.
+
+    Only the library's gripper actions are known (a TOML sequence's, the built-in ones);
+    a Python step's own code is not.
+
+    Raises:
+        ConfigError: Naming the step (``steps.N``, its state) and ``source``.
+    """
+    if not isinstance(robot.gripper, NoGripper):
+        return
+    users = [
+        f"steps.{i} ({s.name})"
+        for i, s in enumerate(sequence.steps)
+        if s.action in _GRIPPER_ACTIONS
+    ]
+    if sequence.prepare in _GRIPPER_ACTIONS:
+        users.insert(0, "the start (open_at_start)")
+    if users:
+        raise ConfigError(
+            f"{source}: {users[0]} uses the gripper, and this robot has none"
+            f" (gripper kind 'none'){f' (and {len(users) - 1} more)' if users[1:] else ''}"
+        )
+
+
 def grasp_detected(ctx: StepContext) -> bool:
     """Guard: the last gripper reading saw an object between the fingers.
 
@@ -53,10 +92,12 @@ def grasp_detected(ctx: StepContext) -> bool:
     return ctx.last_gripper is not None and ctx.last_gripper.holding
 
 
+@_uses_gripper
 def _open(ctx: StepContext) -> None:
     ctx.open_gripper()
 
 
+@_uses_gripper
 def _require_empty(ctx: StepContext) -> None:
     """The start of a cycle that begins with a pick, without opening: a part the gripper
     reports holding would be carried down onto the next part."""
@@ -64,6 +105,7 @@ def _require_empty(ctx: StepContext) -> None:
         raise refuse_held_part(ctx.robot, opening=False)
 
 
+@_uses_gripper
 def _release(ctx: StepContext) -> None:
     """Open at the place, once the gripper still reports the part: one that slipped out
     on the way (a grip too weak to carry it) is a failure, never a part placed. A gripper
@@ -77,10 +119,22 @@ def _release(ctx: StepContext) -> None:
     ctx.open_gripper()
 
 
+@_uses_gripper
+def _release_gripped(ctx: StepContext) -> None:
+    """A TOML release: after a grip or check that saw a part (the last gripper reading),
+    that part must still be held (:func:`_release`); with none seen, a plain open."""
+    if grasp_detected(ctx):
+        _release(ctx)
+    else:
+        ctx.open_gripper()
+
+
+@_uses_gripper
 def _close(ctx: StepContext) -> None:
     ctx.close_gripper()
 
 
+@_uses_gripper
 def _check(ctx: StepContext) -> None:
     ctx.check_holding(True)
 
@@ -300,7 +354,7 @@ class _DataStep(BaseModel):
 class _Retrying(_DataStep):
     #: On a failed grasp: open, go back to this (earlier) state, try again.
     retry_from: str | None = None
-    retries: Annotated[int, Field(ge=0, le=20)] = 0
+    retries: Annotated[int, Field(ge=0, le=20, strict=True)] = 0
 
     @model_validator(mode="after")
     def _pair(self) -> _Retrying:
@@ -317,7 +371,7 @@ class MoveStep(_DataStep):
     speed: Speed
     motion: MotionType = MotionType.PTP
     #: Added to the pose's z, mm (e.g. 100 above a named pose).
-    z_offset: float = 0.0
+    z_offset: Annotated[float, Field(strict=True)] = 0.0
 
 
 class GripStep(_Retrying):
@@ -336,14 +390,14 @@ class WaitStep(_DataStep):
     """Dwell (interruptible by a stop request)."""
 
     do: Literal["wait"]
-    seconds: Annotated[float, Field(gt=0, le=3600)]
+    seconds: Annotated[float, Field(gt=0, le=3600, strict=True)]
 
 
 class CheckStep(_Retrying):
     """Require the gripper to hold (or not hold) an object."""
 
     do: Literal["check"]
-    holding: bool = True
+    holding: StrictBool = True
 
 
 DataStep = Annotated[
@@ -367,11 +421,11 @@ class SequenceFile(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     name: Annotated[str, Field(min_length=1)]
-    cycles: Annotated[int, Field(ge=1, le=1_000_000)] = 1
-    open_at_start: bool = True
+    cycles: Annotated[int, Field(ge=1, le=1_000_000, strict=True)] = 1
+    open_at_start: StrictBool = True
     #: Refuse a pose of this file that looks like metres or radians; false: take them
     #: as mm and degrees.
-    check_units: bool = True
+    check_units: StrictBool = True
     poses: dict[str, PoseValue] = {}
     steps: Annotated[list[DataStep], Field(min_length=1)]
     retreat: RetreatSpec | None = None
@@ -382,7 +436,7 @@ def _action_of(step: GripStep | ReleaseStep | WaitStep | CheckStep) -> Action:
     if isinstance(step, GripStep):
         return _grip
     if isinstance(step, ReleaseStep):
-        return _open
+        return _release_gripped
     if isinstance(step, WaitStep):
         return _waiter(step.seconds)
     return _checker(step.holding)
@@ -488,6 +542,7 @@ def load_sequence(path: str | Path) -> TaskSequence:
     return sequence_from_data(read_config_data(path), source=str(path))
 
 
+@_uses_gripper
 def _grip(ctx: StepContext) -> None:
     ctx.grip()
 
@@ -500,6 +555,7 @@ def _waiter(seconds: float) -> Action:
 
 
 def _checker(holding: bool) -> Action:
+    @_uses_gripper
     def check(ctx: StepContext) -> None:
         ctx.check_holding(holding)
 
