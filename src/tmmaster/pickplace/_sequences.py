@@ -211,7 +211,8 @@ class Pallet:
     """A grid of ``rows`` x ``cols`` slots with pitch ``dx``, ``dy``; ``layers`` high.
 
     Raises:
-        ConfigError: A count below 1 or a pitch that is not finite.
+        ConfigError: A count that is not a whole number >= 1 (a fraction, a bool), or a
+            pitch that is not a finite number.
     """
 
     #: The TCP pose of slot 0 (row 0, column 0, bottom layer).
@@ -230,11 +231,17 @@ class Pallet:
     dz: float = 0.0
 
     def __post_init__(self) -> None:
+        # A fractional count (2.5 rows) made 2.5 cycles: 2 checked, 3 run, the third
+        # into a row the pallet does not have.
         for name in ("rows", "cols", "layers"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"pallet {name} must be >= 1, got {getattr(self, name)}")
+            count = getattr(self, name)
+            if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+                raise ConfigError(f"pallet {name} must be a whole number >= 1, got {count!r}")
         for name in ("dx", "dy", "dz"):
-            if not math.isfinite(getattr(self, name)):
+            pitch = getattr(self, name)
+            if isinstance(pitch, bool) or not isinstance(pitch, int | float):
+                raise ConfigError(f"pallet {name} must be a finite number, got {pitch!r}")
+            if not math.isfinite(pitch):
                 raise ConfigError(f"pallet {name} must be a finite number")
 
     @property
