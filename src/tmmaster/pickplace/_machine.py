@@ -25,8 +25,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from transitions import Machine
 
-from .._exceptions import ConfigError
-from ._steps import Step, StepContext, TaskSequence
+from ._steps import Step, StepContext, TaskSequence, require_cycles
 
 IDLE = "IDLE"
 """The state before a run starts, and after ``reset``."""
@@ -51,7 +50,8 @@ class SequenceMachine:
             context.
 
     Raises:
-        ConfigError: An invalid sequence, or fewer than one cycle.
+        ConfigError: An invalid sequence, or a cycle count that is not a whole number
+            >= 1.
     """
 
     #: The current state: IDLE, a step's name, DONE or ERROR (maintained by transitions).
@@ -74,8 +74,7 @@ class SequenceMachine:
         guard_context: Callable[[], Any] | None = None,
     ) -> None:
         sequence.validate()
-        if cycles < 1:
-            raise ConfigError(f"cycles must be >= 1, got {cycles}")
+        require_cycles(cycles)
         #: The sequence it runs.
         self.sequence = sequence
         #: How many cycles to run.

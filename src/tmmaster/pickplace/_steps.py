@@ -144,6 +144,19 @@ ActionT = TypeVar("ActionT", bound=Action)
 RESERVED_STATES = ("IDLE", "DONE", "ERROR")
 
 
+def require_cycles(cycles: object) -> None:
+    """Refuse a cycle count that is not a whole number >= 1.
+
+    A fraction (1.5) was run as 2 cycles (cycle 1 is not the last) but planned as 1
+    (``cycle <= 1.5``): its last cycle unchecked.
+
+    Raises:
+        ConfigError: Naming the count.
+    """
+    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
+        raise ConfigError(f"cycles must be a whole number >= 1, got {cycles!r}")
+
+
 class Cycles(StrEnum):
     """In which cycles a step runs, known before the run (the plan follows it)."""
 
