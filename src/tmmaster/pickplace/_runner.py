@@ -557,11 +557,19 @@ class Runner:
         self._advance(run, step, state, cycle, started)
 
     def _act(self, run: _Run, step: Step) -> str:
-        """The step's action, unless its skip condition says no; returns the outcome."""
+        """The step's action, unless its skip condition says no; returns the outcome.
+
+        A command the action sent and left running (``ctx.robot.start_move`` without its
+        wait) is waited for here: a step ends with its move done, never with the arm
+        still moving into the next step, a gripper action, or DONE."""
         self._check_stop()
         if step.when is not None and not step.when(run.ctx):
             return "skipped"
+        before = self.robot.last_motion
         step.action(run.ctx)
+        motion = self.robot.last_motion
+        if motion is not None and motion is not before and not (motion.done or motion.abandoned):
+            motion.wait()
         return "ok"
 
     def _failed_step(

@@ -1,0 +1,53 @@
+"""A step that starts a move and returns does not end while the move still runs.
+
+``StepContext.robot`` is the robot: a Python step may call ``ctx.robot.start_move(...)``
+(the handle API) and return without waiting. Found by hunt 20 (fails without its fix):
+the runner took the step as done and went on. On ``article`` the next step opened the
+gripper while the move was still pending, and the run ended DONE with the arm not yet
+moving toward the target (the ``with Robot`` block's close then withdrew the move: the
+run reported a cycle whose move never ran). On ``tmflow`` the gripper action was refused
+("command 1 is still waiting to be acknowledged") and the run failed. The runner now
+waits for a command a step left running before the step ends: the move is done (the
+simulator's motion log shows it finished) before the next step begins.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
+from tmmaster.pickplace import Runner, StepContext, TaskSequence
+from tmmaster.sim import Simulator, Timing
+
+Factory = Callable[..., Simulator]
+TARGET = Pose(300, -200, 250, 180, 0, 90)
+
+
+@pytest.mark.parametrize("profile", ["article", "tmflow"])
+def test_a_move_a_step_left_running_is_done_before_the_next_step(
+    tm_simulator_factory: Factory, profile: str
+) -> None:
+    # 10x: the move takes some 0.3 s, far longer than the step that follows takes to start.
+    sim = tm_simulator_factory(profile, time_scale=10.0, timing=Timing(tick_hz=25.0))
+    seen: list[list[tuple[str, bool]]] = []
+
+    def open_when_moved(ctx: StepContext) -> None:
+        seen.append([(m.kind, m.done_wall_time is not None) for m in sim.motion_log()])
+        ctx.open_gripper()
+
+    seq = TaskSequence("left-moving")
+    seq.add("GO", lambda ctx: ctx.robot.start_move(TARGET, speed=10))
+    seq.add("OPEN", open_when_moved)
+    with Robot(
+        sim.url,
+        profile=profile,
+        polling=PollPolicy(interval_s=0.01),
+        timeouts=TimeoutPolicy(gripper_settle_s=0.05),
+    ) as robot:
+        result = Runner(robot).run(seq)
+        assert sim.tcp_pose().is_close(TARGET, mm=1.0)  # before the close could withdraw it
+
+    assert result.ok, result.failure
+    assert seen == [[("ptp", True)]]  # the move had finished when the gripper opened
