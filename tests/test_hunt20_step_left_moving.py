@@ -9,6 +9,12 @@ run reported a cycle whose move never ran). On ``tmflow`` the gripper action was
 ("command 1 is still waiting to be acknowledged") and the run failed. The runner now
 waits for a command a step left running before the step ends: the move is done (the
 simulator's motion log shows it finished) before the next step begins.
+
+A step that raised after ``start_move`` left its move to run on after the run had failed
+(measured: the arm reached the target after ``Runner.run`` returned ERROR, and the
+robot refused the next command as still pending). The runner now gives that command up
+as an exception escaping a wait does: withdrawn if the robot has not taken it, the arm
+stopped if it runs.
 """
 
 from __future__ import annotations
@@ -17,12 +23,13 @@ from collections.abc import Callable
 
 import pytest
 
-from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
+from tmmaster import MovePhase, PollPolicy, Pose, Robot, RobotError, TimeoutPolicy
 from tmmaster.pickplace import Runner, StepContext, TaskSequence
 from tmmaster.sim import Simulator, Timing
 
 Factory = Callable[..., Simulator]
 TARGET = Pose(300, -200, 250, 180, 0, 90)
+HOME = Pose(250, 0, 300, 180, 0, 90)
 
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
@@ -51,3 +58,40 @@ def test_a_move_a_step_left_running_is_done_before_the_next_step(
 
     assert result.ok, result.failure
     assert seen == [[("ptp", True)]]  # the move had finished when the gripper opened
+
+
+@pytest.mark.parametrize("when", ["sent", "running"])
+def test_a_step_that_raises_with_its_move_left_running_gives_the_move_up(
+    tm_simulator_factory: Factory, when: str
+) -> None:
+    sim = tm_simulator_factory(time_scale=10.0, timing=Timing(tick_hz=25.0))
+
+    def start_then_fail(ctx: StepContext) -> None:
+        motion = ctx.robot.start_move(TARGET, speed=10)
+        while when == "running" and motion.progress().phase is not MovePhase.RUNNING:
+            pass
+        raise RobotError("the camera refused the part")
+
+    seq = TaskSequence("raises")
+    seq.add("GO", start_then_fail)
+    with Robot(sim.url, polling=PollPolicy(interval_s=0.01)) as robot:
+        result = Runner(robot).run(seq)
+        assert result.failure is not None
+        assert result.failure.message == "the camera refused the part"
+        assert robot.last_motion is not None
+        assert robot.last_motion.abandoned
+        if when == "running":  # the report says the arm was stopped
+            assert result.stop_delivered is True
+        # Given up, not left owned by nobody: the next command is taken (after the Stop
+        # that ended a running move, once the project plays again).
+        if when == "running":
+            robot.play()
+        robot.wait_until_ready(5.0)
+        robot.move_to(HOME, speed=30)
+
+    # The failed step's move never finished: withdrawn unstarted, or stopped on its way.
+    assert [(m.target, m.done_wall_time is None) for m in sim.motion_log()][:-1] in (
+        [],
+        [(TARGET, True)],
+    )
+    assert sim.motion_log()[-1].target == HOME

@@ -561,14 +561,20 @@ class Runner:
 
         A command the action sent and left running (``ctx.robot.start_move`` without its
         wait) is waited for here: a step ends with its move done, never with the arm
-        still moving into the next step, a gripper action, or DONE."""
+        still moving into the next step, a gripper action, or DONE. An action that raises
+        instead gives that command up first (withdrawn, or the arm stopped), as an
+        exception escaping a wait does: the failed step's move never runs on."""
         self._check_stop()
         if step.when is not None and not step.when(run.ctx):
             return "skipped"
         before = self.robot.last_motion
-        step.action(run.ctx)
-        motion = self.robot.last_motion
-        if motion is not None and motion is not before and not (motion.done or motion.abandoned):
+        try:
+            step.action(run.ctx)
+        except BaseException as exc:
+            if (motion := _left_running(self.robot, before)) is not None:
+                motion._follower.abandon(motion, exc)
+            raise
+        if (motion := _left_running(self.robot, before)) is not None:
             motion.wait()
         return "ok"
 
@@ -744,6 +750,14 @@ class Runner:
             self._log.error("pickplace.retreat_failed", error=str(exc))
             return ReactionRecord(reaction, False, f"retreat failed: {exc}")
         return ReactionRecord(reaction, True, f"retreated to {target.pose}")
+
+
+def _left_running(robot: Robot, before: Motion | None) -> Motion | None:
+    """The command sent since ``before`` that is neither done nor given up, if any."""
+    motion = robot.last_motion
+    if motion is None or motion is before or motion.done or motion.abandoned:
+        return None
+    return motion
 
 
 def gripper_holds_a_part(robot: Robot) -> bool | None:
