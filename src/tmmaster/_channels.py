@@ -593,16 +593,14 @@ class ClearOnAcceptChannel(CommandChannel):
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret robot_mode / motion_status / error_code / grasp_status."""
         p = self.profile
-        mode_value = int(values["robot_mode"])
-        error_code = int(values["error_code"])
-        holding = bool(values["grasp_status"]) if "grasp_status" in values else None
+        mode_value, error_code = int(values["robot_mode"]), int(values["error_code"])
         return RobotStatus(
             mode=p.field("robot_mode").label(mode_value),
             moving=int(values["motion_status"]) == 1,
             error=mode_value == p.mode_error or error_code != 0,
             error_code=error_code,
             estop=False,
-            holding=holding,
+            holding=bool(values["grasp_status"]) if "grasp_status" in values else None,
             pose=pose_from(values, TCP_FIELDS),
             raw=MappingProxyType(dict(values)),
             timestamp=time.monotonic(),
@@ -611,8 +609,7 @@ class ClearOnAcceptChannel(CommandChannel):
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse when the robot is in error, not in auto mode, moving, or has a command pending."""
         words, encoded = self._encode_command(command)
-        p = self.profile
-        after_done = self.take_after_done(reuse_s)
+        p, after_done = self.profile, self.take_after_done(reuse_s)
         block = self.read(self.target_block)
         # The status block the poll that saw the last command finished read (after the
         # cleared command register, idle), where it may stand in: the same checks run on it.
@@ -666,8 +663,7 @@ class ClearOnAcceptChannel(CommandChannel):
         The robot was idle with no command pending when the write was sent, so motion now
         can only be ours. Old targets prove nothing: the frame may still be on its way.
         """
-        block = self.read(self.target_block)
-        ours = {f.name: v for f, v in ticket.words}
+        block, ours = self.read(self.target_block), {f.name: v for f, v in ticket.words}
         targets_match = all(
             abs(float(block[n]) - float(ours[n])) < 1e-6 for n in TARGET_FIELDS if n in ours
         )
@@ -719,8 +715,7 @@ class SequenceChannel(CommandChannel):
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
         estop = bool(values["estop"])
-        error = bool(values["error"]) or estop
-        running = bool(values["project_running"])
+        error, running = bool(values["error"]) or estop, bool(values["project_running"])
         # The most severe first: an e-stop is an error too.
         mode = "estop" if estop else "error" if error else "running" if running else "stopped"
         state = self.profile.field("robot_state").label(int(values["robot_state"]))
@@ -754,8 +749,7 @@ class SequenceChannel(CommandChannel):
     def prepare(self, command: Command, *, reuse_s: float = 0.0) -> Ticket:
         """Refuse unless the project runs, nothing failed, and the last command is finished."""
         words, encoded = self._encode_command(command)
-        p = self.profile
-        after_done = self.take_after_done(reuse_s)
+        p, after_done = self.profile, self.take_after_done(reuse_s)
         # The feedback block that showed the last command done and the flags read after
         # it (the poll that saw it finished), where they may stand in: the same checks
         # run on them. ``seq`` is not part of a poll: it is read now.

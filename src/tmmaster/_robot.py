@@ -65,6 +65,7 @@ from ._fleet import (
     open_transport,
     wake_waits,
 )
+from ._following import STALL_FLOOR_S
 from ._gripper import GRIPPER_DRIVERS, Gripper, GripperLink, NoGripper, auto_gripper
 from ._heartbeat import Heartbeat
 from ._io import RobotIO
@@ -98,6 +99,8 @@ _log = get_logger("tmmaster.robot")
 #: stops, its link is given back), never one that beats its session beside the next's.
 _OPEN: weakref.WeakValueDictionary[int, Robot] = weakref.WeakValueDictionary()
 
+#: The speed (deg/s) under which :meth:`Robot.wait_until_at_rest` counts a joint still.
+REST_SPEED_DEG_S = 0.05
 _P = ParamSpec("_P")
 _T = TypeVar("_T")
 _F = TypeVar("_F", bound=Callable[..., object])
@@ -715,10 +718,8 @@ class Robot:
     def _read_project_speed(self) -> float | None:
         """The robot's project speed (``tmflow``: 7101, one request), for the next plans:
         TMflow runs every move at its speed times the project speed."""
-        if not self.profile.has("project_speed"):
-            return None
-        field = self.profile.field("project_speed")
-        return self._planner.take_project_speed(self._channel.read((field,)))
+        fields = self.profile.published(("project_speed",))  # none: None
+        return self._planner.take_project_speed(self._channel.read(fields) if fields else {})
 
     def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
@@ -882,6 +883,49 @@ class Robot:
                     pose=status.pose,
                 )
             poller.sleep()
+
+    def wait_until_at_rest(self, timeout_s: float = PRESS_TIMEOUT_S) -> RobotStatus:
+        """Poll until the arm is at rest: after :meth:`stop`, an e-stop, a move given up.
+
+        On ``tmflow``, ``status().moving`` is the robot program's state and reads False
+        while a stopped arm still brakes; this reads the arm. At rest: two reads at
+        least ``STALL_FLOOR_S`` (0.5 s) apart, and every read between them, show the arm
+        not moving, with the TCP within 0.5 mm and 0.5 deg of the first, and, where the
+        profile publishes Techman's Joint Speed (tmflow: 7949-7960, one request more per
+        read, never read by a move's polls), every joint slower than
+        ``REST_SPEED_DEG_S`` (0.05 deg/s). Joint speeds that lag the arm, or pose
+        registers that stand still for a few cycles while it moves, only delay the
+        answer; on a real TM they are not verified (docs/safety.md).
+
+        Args:
+            timeout_s: How long to wait, s (5 by default).
+
+        Returns:
+            The status read that found the arm at rest.
+
+        Raises:
+            MotionTimeoutError: The arm still moves after ``timeout_s``.
+            StopRequestedError: A stop was requested (:meth:`interrupt`).
+            TransportError: A read failed.
+            CommandStateUnknownError: A command given up earlier still owes its withdraw or stop
+                (the link was down): nothing is sent until that is delivered (docs/safety.md).
+        """
+        require_positive("timeout_s", timeout_s)
+        poller = Poller(STALL_FLOOR_S, self._stop_event, deadline=time.monotonic() + timeout_s)
+        # Techman's Joint Speed J1..J6 (deg/s, TMflow 2.24 appendix C p. 317), if published.
+        speeds, first = self.profile.published([f"joint_speed_{j}" for j in range(1, 7)]), None
+        while True:
+            poller.check()
+            now, joints = self.status(), self._channel.read(speeds) if speeds else {}
+            if now.moving or any(abs(float(v)) > REST_SPEED_DEG_S for v in joints.values()):
+                first = None
+            elif first is None or not now.pose.is_close(first.pose):
+                first = now
+            elif now.timestamp - first.timestamp >= STALL_FLOOR_S:
+                return now
+            if time.monotonic() >= (poller.deadline or 0.0):
+                raise MotionTimeoutError(f"arm still moving after {timeout_s:g} s", pose=now.pose)
+            poller.sleep_until(now.timestamp + STALL_FLOOR_S)
 
     # -- moves ------------------------------------------------------------
 
@@ -1500,7 +1544,10 @@ class Robot:
 
         Returns once the stop is written; the arm then brakes to rest, which takes
         a Category 2 stop's deceleration time (300 ms by default on a TM5S, TMflow 2.24
-        p. 112): :meth:`status` reports ``moving`` until it is at rest.
+        p. 112). On ``article`` :meth:`status` reports ``moving`` until the arm is at
+        rest; on ``tmflow`` ``moving`` is the robot program's state, False as soon as the
+        project stops, while the arm still brakes. :meth:`wait_until_at_rest` waits for
+        the arm itself.
 
         Raises:
             TransportClosedError: The robot was never connected (nothing was sent) or is
@@ -1573,9 +1620,7 @@ def _profile_mismatch(
 ) -> ProfileMismatchError | None:
     """After a refused read: the built-in profile the device seems to speak, as an error."""
     for name in builtin_profile_names():
-        if name == profile.name:
-            continue
-        other = load_profile(name)
+        other = None if name == profile.name else load_profile(name)
         if not isinstance(other, RobotProfile):
             continue
         try:

@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 from ._address import check_host
 from ._checks import require_positive
 from ._cliparse import one_line, write_stdout
-from ._exceptions import ConfigError, RobotError, TMMasterError, TransportError
-from ._following import STALL_FLOOR_S
+from ._exceptions import ConfigError, TMMasterError, TransportError
 from ._logging import add_logging_arguments, configure_logging
 from ._profiles import DEFAULT_PROFILE, builtin_profile_names
 from ._project import PRESS_TIMEOUT_S
@@ -34,9 +32,7 @@ from ._status import RobotStatus
 #: The actions, in the order ``--help`` lists them.
 ACTIONS = ("status", "play", "pause", "stop")
 
-EXIT_CONFIG = 2
-EXIT_CONNECTION = 3
-EXIT_REFUSED = 4
+EXIT_CONFIG, EXIT_CONNECTION, EXIT_REFUSED = 2, 3, 4
 #: The exit status of a failure, by its class (the first that matches; else refused).
 _EXIT_CODES = ((ConfigError, EXIT_CONFIG), (TransportError, EXIT_CONNECTION))
 
@@ -97,17 +93,7 @@ def _act(robot: Robot, action: str, timeout_s: float) -> str:
         return f"project  {(robot.play if action == 'play' else robot.pause)(timeout_s)}\n"
     if action == "stop":
         robot.stop()
-        deadline, last = time.monotonic() + timeout_s, None
-        # At rest: not moving, and the same pose twice, within 0.5 mm / 0.5 deg over the
-        # stall floor (slower than 1 mm/s: braked). On tmflow "moving" is the robot
-        # program's state, which leaves busy when the project stops, before the arm has
-        # braked; and the pose registers may stand still for a few status cycles while the
-        # arm moves (a hiccup), never as long as that floor (tests/test_hunt14_cli_stop_rest.py).
-        while (now := robot.status()).moving or last is None or not now.pose.is_close(last):
-            last = now.pose
-            if time.monotonic() > deadline:
-                raise RobotError(f"stop pressed; the arm still moves after {timeout_s:g} s")
-            time.sleep(STALL_FLOOR_S)
+        robot.wait_until_at_rest(timeout_s)  # not robot.status().moving: tmflow's is the program's
         return "stop     pressed; the arm is at rest\n"
     return _status_lines(robot.status())
 

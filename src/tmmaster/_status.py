@@ -74,7 +74,7 @@ class RobotStatus:
     #: "auto", "initialising", "error" (article) or "running", "stopped", "error", "estop" (tmflow).
     mode: str
     #: True while the arm moves (tmflow: while the robot program runs a command; after a
-    #: Stop it reads False while the arm still brakes: judge the rest from ``pose``).
+    #: Stop it reads False while the arm still brakes: :meth:`Robot.wait_until_at_rest`).
     moving: bool
     #: True while the robot reports an error.
     error: bool

@@ -513,6 +513,7 @@ class AsyncRobot(_Front):
     pose = _awaited(Robot.pose)
     check_fault = _awaited(Robot.check_fault)
     wait_until_ready = _awaited(Robot.wait_until_ready)
+    wait_until_at_rest = _awaited(Robot.wait_until_at_rest)
     check_move = _awaited(Robot.check_move)
     move_to = _awaited(Robot.move_to)
     start_move = _derive(
