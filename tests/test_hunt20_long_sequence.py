@@ -41,3 +41,10 @@ def test_a_name_used_twice_is_refused_after_the_steps_were_changed_directly() ->
     seq.add("A", _nothing)  # A is gone with the old list
     with pytest.raises(ConfigError, match="'C' defined twice"):
         seq.add("C", _nothing)
+
+
+def test_a_name_made_twice_by_editing_the_steps_in_place_is_refused_by_validate() -> None:
+    seq = TaskSequence("edited").add("A", _nothing).add("B", _nothing)
+    seq.steps[1] = Step("A", _nothing)
+    with pytest.raises(ConfigError, match="'A' defined twice"):
+        seq.validate()

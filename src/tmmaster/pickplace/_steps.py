@@ -432,7 +432,8 @@ class TaskSequence:
         return register
 
     def validate(self) -> None:
-        """Check the structure: at least one step, retry targets exist and come earlier.
+        """Check the structure: at least one step, each name once, retry targets exist and
+        come earlier.
 
         Raises:
             ConfigError: What is wrong, naming the sequence and the step.
@@ -440,6 +441,9 @@ class TaskSequence:
         if not self.steps:
             raise ConfigError(f"sequence {self.name!r} has no steps")
         names = [s.name for s in self.steps]
+        if len(set(names)) != len(names):  # steps edited in place, past add()'s check
+            twice = next(n for i, n in enumerate(names) if n in names[:i])
+            raise ConfigError(f"sequence {self.name!r}: step {twice!r} defined twice")
         for index, s in enumerate(self.steps):
             if s.retry is None:
                 continue
