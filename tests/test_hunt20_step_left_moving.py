@@ -14,7 +14,9 @@ A step that raised after ``start_move`` left its move to run on after the run ha
 (measured: the arm reached the target after ``Runner.run`` returned ERROR, and the
 robot refused the next command as still pending). The runner now gives that command up
 as an exception escaping a wait does: withdrawn if the robot has not taken it, the arm
-stopped if it runs.
+stopped if it runs. The same holds for a sequence's ``prepare`` and a retry's
+``recover``: a recover that backs the arm off with ``start_move`` and returns had the
+retried pass's next move refused as still pending; it now ends with its move done.
 """
 
 from __future__ import annotations
@@ -23,8 +25,16 @@ from collections.abc import Callable
 
 import pytest
 
-from tmmaster import MovePhase, PollPolicy, Pose, Robot, RobotError, TimeoutPolicy
-from tmmaster.pickplace import Runner, StepContext, TaskSequence
+from tmmaster import (
+    GraspFailedError,
+    MovePhase,
+    PollPolicy,
+    Pose,
+    Robot,
+    RobotError,
+    TimeoutPolicy,
+)
+from tmmaster.pickplace import RetryRule, Runner, StepContext, TaskSequence
 from tmmaster.sim import Simulator, Timing
 
 Factory = Callable[..., Simulator]
@@ -95,3 +105,26 @@ def test_a_step_that_raises_with_its_move_left_running_gives_the_move_up(
         [(TARGET, True)],
     )
     assert sim.motion_log()[-1].target == HOME
+
+
+def test_a_recover_that_leaves_its_move_running_ends_with_it_done(
+    tm_simulator_factory: Factory,
+) -> None:
+    sim = tm_simulator_factory(time_scale=10.0, timing=Timing(tick_hz=25.0))
+
+    def grip(ctx: StepContext) -> None:
+        if ctx.attempt == 1:
+            raise GraspFailedError("no part the first time")
+
+    seq = TaskSequence("recover")
+    back_off = RetryRule("GRIP", 1, recover=lambda ctx: ctx.robot.start_move(TARGET, speed=10))
+    seq.add("GRIP", grip, retry=back_off)
+    seq.add("HOME", lambda ctx: ctx.move(HOME, speed=30))
+    with Robot(sim.url, polling=PollPolicy(interval_s=0.01)) as robot:
+        result = Runner(robot).run(seq)
+
+    assert result.ok, result.failure
+    assert [(m.target, m.done_wall_time is not None) for m in sim.motion_log()] == [
+        (TARGET, True),
+        (HOME, True),
+    ]

@@ -36,7 +36,7 @@ from .._status import project_failure
 from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
 from ._runlog import RunLog
-from ._steps import PlannedMove, Step, TaskSequence
+from ._steps import Action, PlannedMove, Step, TaskSequence
 
 _log = get_logger("tmmaster.pickplace")
 
@@ -524,7 +524,7 @@ class Runner:
                 raise failure
             self.robot.wait_until_ready(self.ready_timeout_s)
             if run.sequence.prepare is not None:
-                run.sequence.prepare(run.ctx)
+                self._settled(run.sequence.prepare, run.ctx)
         except TMMasterError as exc:
             run.record(IDLE, 0, started, "failed")
             self._fail(run, IDLE, self._as_stop(exc, "the preparation"))
@@ -559,24 +559,28 @@ class Runner:
     def _act(self, run: _Run, step: Step) -> str:
         """The step's action, unless its skip condition says no; returns the outcome.
 
-        A command the action sent and left running (``ctx.robot.start_move`` without its
-        wait) is waited for here: a step ends with its move done, never with the arm
-        still moving into the next step, a gripper action, or DONE. An action that raises
-        instead gives that command up first (withdrawn, or the arm stopped), as an
-        exception escaping a wait does: the failed step's move never runs on."""
+        Run through :meth:`_settled`, as ``prepare`` and a retry's ``recover`` are."""
         self._check_stop()
         if step.when is not None and not step.when(run.ctx):
             return "skipped"
+        self._settled(step.action, run.ctx)
+        return "ok"
+
+    def _settled(self, action: Action, ctx: _RunContext) -> None:
+        """Run ``action``; a command it sent and left running is waited for, so it ends
+        with its move done, never with the arm still moving into the next step, a gripper
+        action, or DONE (``ctx.robot.start_move`` without its wait). An action that raises
+        instead gives that command up first (withdrawn, or the arm stopped), as an
+        exception escaping a wait does: a failed step's move never runs on."""
         before = self.robot.last_motion
         try:
-            step.action(run.ctx)
+            action(ctx)
         except BaseException as exc:
             if (motion := _left_running(self.robot, before)) is not None:
                 motion._follower.abandon(motion, exc)
             raise
         if (motion := _left_running(self.robot, before)) is not None:
             motion.wait()
-        return "ok"
 
     def _failed_step(
         self, run: _Run, step: Step, cycle: int, started: float, exc: BaseException
@@ -604,7 +608,7 @@ class Runner:
         )
         try:
             if rule.recover is not None:
-                rule.recover(run.ctx)
+                self._settled(rule.recover, run.ctx)
         except TMMasterError as recover_exc:  # never tried again: this pass failed the run
             run.record(state, cycle, started, "failed")
             self._fail(run, state, self._as_stop(recover_exc, state))
