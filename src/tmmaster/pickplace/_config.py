@@ -459,10 +459,12 @@ def validate_config(data: Mapping[str, Any], *, source: str = "<defaults>") -> P
 
 
 def _numbers_not_given_as_numbers(data: Mapping[str, Any]) -> list[str]:
-    """Each number key given as text or a switch (``floor_z_mm = true``, ``port = "502"``).
+    """Each number key given as text or a switch (``floor_z_mm = true``, ``port = "502"``),
+    and each switch given as a number or text (``check_units = 0``).
 
     pydantic's lax mode would read ``true`` as 1 and ``"85"`` as 85: a typed value the
-    user did not write (a table plane at 1 mm). Said as ``section.key``, as the rest.
+    user did not write (a table plane at 1 mm); ``0`` as false (the units check off) and
+    ``1`` or ``"yes"`` as true (a held part released). Said as ``section.key``, as the rest.
     """
     problems = []
     for section, values in data.items():
@@ -472,13 +474,17 @@ def _numbers_not_given_as_numbers(data: Mapping[str, Any]) -> list[str]:
             continue  # an unknown section or a section that is not a table: pydantic says
         for key, value in values.items():
             sub = getattr(model, "model_fields", {}).get(key)
-            if sub is None or not isinstance(value, bool | str):
+            if sub is None:
                 continue
             kinds = {  # float, float | None, Annotated[float, ...] | None: the types named
                 get_args(a)[0] if get_origin(a) is Annotated else a
                 for a in get_args(sub.annotation) or (sub.annotation,)
             }
-            if kinds & {int, float} and not kinds & {bool, str}:
+            if kinds == {bool} and not isinstance(value, bool):
+                problems.append(
+                    f"{section}.{key}: must be true or false, got {json.dumps(value, default=str)}"
+                )
+            elif kinds & {int, float} and not kinds & {bool, str} and isinstance(value, bool | str):
                 problems.append(f"{section}.{key}: must be a number, got {json.dumps(value)}")
     return problems
 
