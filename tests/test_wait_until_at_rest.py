@@ -94,3 +94,21 @@ def test_the_wait_answers_only_once_the_arm_no_longer_creeps(profile: str) -> No
         assert sim.tcp_pose() == answered, "the arm moved after the wait said at rest"
         assert not status.moving
         robot.interrupt()
+
+
+@pytest.mark.parametrize("profile", ["tmflow", "article"])
+def test_a_timeout_shorter_than_the_stall_floor_still_finds_an_arm_at_rest(
+    profile: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The rest takes two reads a floor apart: a timeout shorter than the floor used to cut
+    # the second read's sleep at the deadline and answer "arm still moving" for an arm
+    # that never moved (`tmmaster robot stop --timeout 0.3` exit 4, where it answered at
+    # rest before the wait was a method). The read that found it still must be confirmed.
+    monkeypatch.setattr(tmmaster._robot, "STALL_FLOOR_S", 1.0)
+    with Simulator(profile=profile, listen=False) as sim, _connect(sim, profile) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        before = sim.tcp_pose()
+        status = robot.wait_until_at_rest(timeout_s=0.9)
+        assert not status.moving
+        assert status.pose.is_close(before)
+        assert sim.tcp_pose() == before  # it never moved

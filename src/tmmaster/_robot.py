@@ -898,7 +898,9 @@ class Robot:
         answer; on a real TM they are not verified (docs/safety.md).
 
         Args:
-            timeout_s: How long to wait, s (5 by default).
+            timeout_s: How long to wait, s (5 by default). A read that found the arm
+                still before it ends is followed by the read ``STALL_FLOOR_S`` later that
+                confirms the rest, however short ``timeout_s`` is (at most that floor more).
 
         Returns:
             The status read that found the arm at rest.
@@ -911,7 +913,7 @@ class Robot:
                 (the link was down): nothing is sent until that is delivered (docs/safety.md).
         """
         require_positive("timeout_s", timeout_s)
-        poller = Poller(STALL_FLOOR_S, self._stop_event, deadline=time.monotonic() + timeout_s)
+        poller, deadline = Poller(STALL_FLOOR_S, self._stop_event), time.monotonic() + timeout_s
         # Techman's Joint Speed J1..J6 (deg/s, TMflow 2.24 appendix C p. 317), if published.
         speeds, first = self.profile.published([f"joint_speed_{j}" for j in range(1, 7)]), None
         while True:
@@ -923,7 +925,7 @@ class Robot:
                 first = now
             elif now.timestamp - first.timestamp >= STALL_FLOOR_S:
                 return now
-            if time.monotonic() >= (poller.deadline or 0.0):
+            if time.monotonic() >= deadline:  # the sleep is not cut: a rest found is confirmed
                 raise MotionTimeoutError(f"arm still moving after {timeout_s:g} s", pose=now.pose)
             poller.sleep_until(now.timestamp + STALL_FLOOR_S)
 
