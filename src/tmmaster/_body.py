@@ -142,9 +142,7 @@ def housing_in_flange(tool: Pose | None) -> tuple[Vector, Vector, float] | None:
     reach = 0.0 if tool is None else tool.z
     length = min(HOUSING_LENGTH_MM, reach - HOUSING_TCP_CLEARANCE_MM)
     radius = HOUSING_WIDTH_MM / 2
-    if length < 2 * radius:
-        return None
-    return (0.0, 0.0, radius), (0.0, 0.0, length - radius), radius
+    return None if length < 2 * radius else ((0, 0, radius), (0, 0, length - radius), radius)
 
 
 @functools.lru_cache(maxsize=64)

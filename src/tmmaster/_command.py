@@ -157,6 +157,18 @@ class Motion:
             fraction = 1.0 if total == 0 else max(0.0, min(1.0, 1 - remaining / total))
         return MoveProgress(self.phase, self.last_pose, elapsed, self.expected_s, fraction)
 
+    def cancel(self) -> bool:
+        """Give the command up, as a wait that something ends early does: withdrawn if
+        the robot has not taken it, the arm stopped if it runs; nothing once it finished.
+        For a move started with :meth:`Robot.start_move` that is not to be waited for.
+
+        Returns:
+            True when the command can no longer run: never written, finished, withdrawn,
+            or stopped. False when that could not be confirmed (the link is down: the
+            give-up is then owed and delivered before anything else is sent).
+        """
+        return self._follower.abandon(self, StopRequestedError("the motion was cancelled"))
+
     def wait(self, timeout_s: float | None = None) -> None:
         """Block until the move is done; raises a typed error on failure or timeout.
 

@@ -847,9 +847,7 @@ class PathGauge:
         start, target = self._start, self._target
         if self._rotation:
             total = start.rotation_to(target)
-            if total < 0.5:
-                return None
-            return min(max(1.0 - pose.rotation_to(target) / total, 0.0), 1.0)
+            return None if total < 0.5 else min(max(1 - pose.rotation_to(target) / total, 0.0), 1.0)
         if self._line:
             along = (
                 (pose.x - start.x) * (target.x - start.x)

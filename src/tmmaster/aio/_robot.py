@@ -371,6 +371,15 @@ class AsyncMotion(_Primed[Motion]):
         """
         return self._robot._follow(self.motion, self.motion.progress)
 
+    @_documented(Motion.cancel)
+    def cancel(self) -> Coroutine[Any, Any, bool]:
+        """Awaited: :meth:`Motion.cancel`, run on the robot's thread.
+
+        Returns:
+            Whether the command can no longer run, a coroutine.
+        """
+        return self._robot._follow(self.motion, self.motion.cancel)
+
     @property  # never assigned here: _Primed.__init__ (which sets it) is not called
     def _body(self) -> Coroutine[Any, Any, Motion]:  # type: ignore[override]
         """The run of the task stepping the handle, made at its first step (primed)."""

@@ -575,9 +575,9 @@ class Runner:
         before = self.robot.last_motion
         try:
             action(ctx)
-        except BaseException as exc:
+        except BaseException:
             if (motion := _left_running(self.robot, before)) is not None:
-                motion._follower.abandon(motion, exc)
+                motion.cancel()
             raise
         if (motion := _left_running(self.robot, before)) is not None:
             motion.wait()
