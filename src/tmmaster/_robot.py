@@ -1237,7 +1237,7 @@ class Robot:
         percent = self._move_arguments(speed, speed_mm_s, kind, accel_time_ms, timeout)
         start = self._read_start()
         target = moved(start, offset, frame)
-        self.validate_move(target, percent)
+        self._planner.check_path(target, percent, kind)  # move_to's: a Line's path too
         command = Command(
             CommandKind.of(kind), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
         )
