@@ -84,6 +84,35 @@ def test_a_finished_move_cancelled_is_left_as_it_is(tm_simulator_factory: SimFac
         assert (motion.done, motion.abandoned, motion.stop_delivered) == (True, False, None)
 
 
+def finished_on_the_robot(sim: Simulator, profile: str, seq: int) -> bool:
+    """The robot's own record of the command done: tmflow's done_seq, article's idle arm
+    with the command register cleared."""
+    if profile == "tmflow":
+        return bool(sim.field("done_seq") == seq)
+    return sim.field("command") == 0 and sim.field("motion_status") == 0
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_move_that_finished_unwatched_is_left_as_it_is(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # Never polled, the motion did not know its move had finished: the give-up took it for
+    # one still running. On tmflow it pressed Stop (the project stopped: the next move was
+    # refused, "the TMflow project is stopped"); on article it reported the move
+    # withdrawn although it ran.
+    sim = tm_simulator_factory(profile)
+    with robot_of(sim, profile) as robot:
+        robot.move_to(A, speed=100)
+        motion = robot.start_move(A.offset(dz=20), speed=100)
+        sim.wait_for(lambda: finished_on_the_robot(sim, profile, motion.ticket.seq), timeout=5.0)
+        assert motion.done is False  # nothing polled it
+        assert motion.cancel() is True
+        assert (motion.done, motion.abandoned) == (True, False)
+        assert (motion.withdrawn, motion.stop_delivered) == (None, None)
+        robot.move_to(A, speed=100)  # the project still runs: the next move is taken
+    assert len(sim.motion_log()) == 3
+
+
 @pytest.mark.parametrize("profile", PROFILES)
 def test_an_awaited_cancel_gives_the_move_up_on_the_robots_thread(
     tm_simulator_factory: SimFactory, profile: str

@@ -116,8 +116,7 @@ def _run_profile(args: argparse.Namespace) -> int:
         profiles = [(name, load_profile(name)) for name in builtin_profile_names()]
         text = "".join(f"{name:14} {p.kind:8} {p.description}\n" for name, p in profiles)
         return _emit(text, None)
-    name = args.profile
-    names = builtin_profile_names()
+    name, names = args.profile, builtin_profile_names()
     if name not in names and not name.endswith(".toml") and not Path(name).exists():
         raise UsageError(
             f"profile show {name}: no such profile; the built-in profiles are"

@@ -104,8 +104,7 @@ def encoder(field: RegisterField) -> Encoder:
 
 
 def _build_encoder(field: RegisterField) -> Encoder:
-    name = field.name
-    dtype = field.dtype
+    name, dtype = field.name, field.dtype
 
     def refuse(value: object) -> ValueOutOfRangeError:
         return ValueOutOfRangeError(name, value, describe_range(field))

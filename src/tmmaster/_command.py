@@ -10,6 +10,7 @@ gives up on is withdrawn or stopped (docs/safety.md).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import threading
@@ -161,12 +162,17 @@ class Motion:
         """Give the command up, as a wait that something ends early does: withdrawn if
         the robot has not taken it, the arm stopped if it runs; nothing once it finished.
         For a move started with :meth:`Robot.start_move` that is not to be waited for.
+        One poll first (as :meth:`progress`), so a move that finished while nobody
+        polled it is found done, neither "withdrawn" nor stopped (on ``tmflow`` a Stop
+        would stop the project); a poll that fails gives the command up as a wait does.
 
         Returns:
             True when the command can no longer run: never written, finished, withdrawn,
             or stopped. False when that could not be confirmed (the link is down: the
             give-up is then owed and delivered before anything else is sent).
         """
+        with contextlib.suppress(TMMasterError):  # a failed poll gave it up already
+            self.progress()  # one poll first: a move that finished is left as it is
         return self._follower.abandon(self, StopRequestedError("the motion was cancelled"))
 
     def wait(self, timeout_s: float | None = None) -> None:

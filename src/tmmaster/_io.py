@@ -258,8 +258,7 @@ def io_address(profile: RobotProfile, module: object, kind: Kind, channel: objec
         ConfigError: An unknown module, a channel that is not an int (a bool, a float,
             NaN) or out of the module's range; the message names the module.
     """
-    found = io_module(profile, module)
-    label = kind.upper()
+    found, label = io_module(profile, module), kind.upper()
     first, count = (
         (found.do_address, found.do_count) if kind == "do" else (found.di_address, found.di_count)
     )
