@@ -539,6 +539,9 @@ class Robot:
         one) whose rated payload carries the ``tool``'s mass and, when connected, which the
         arm's reported joints fit (one read, as :meth:`connect` checks them): anything
         else is a ConfigError naming ``model`` or ``tool.mass_kg``, the model not taken.
+        That read is connect's, frame check included: a failed read (TransportError) or a
+        robot TCP that is no longer the ``tool`` (ToolMismatchError) also leaves the model
+        as it was. ``article`` publishes neither joints nor frames: nothing is read there.
         """
         return self._planner.model
 
