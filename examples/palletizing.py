@@ -28,7 +28,7 @@ from tmmaster import (
     TMMasterError,
     configure_logging,
 )
-from tmmaster.pickplace import Pallet, Runner, palletizing, validate_plan
+from tmmaster.pickplace import Pallet, Runner, palletizing
 
 PICK = Pose(300, -200, 100, 180, 0, 90)
 HOME = DEFAULT_HOME  # tool down, 250 mm in front of J1: reachable by a TM5-700
@@ -75,12 +75,17 @@ def main(argv: list[str] | None = None) -> int:
             # The default Workspace() is the simulated cell (its table top at 85 mm): on
             # yours, checks=Checks(workspace=Workspace(floor_z_mm=your table top's height).
         ) as robot:
-            # Every slot is checked against the profile before the first move.
-            validate_plan(robot, sequence, pallet.size, source=f"{args.rows}x{args.cols} pallet")
-            result = Runner(robot).run(sequence)
+            # Every slot is checked against the profile and the arm before the first move
+            # (the runner's check: a slot it cannot take fails the run in IDLE).
+            result = Runner(robot).run(sequence, source=f"{args.rows}x{args.cols} pallet")
     except TMMasterError as exc:
         print(f"palletizing: {exc}", file=sys.stderr)
         return 1
+    if result.failure is not None:
+        print(
+            f"palletizing: failed in {result.failure.state}: {result.failure.message}",
+            file=sys.stderr,
+        )
     print(
         f"palletizing: {result.cycles_completed}/{pallet.size} slots filled,"
         f" {result.state}, cycle times {result.cycle_times_s}"

@@ -16,7 +16,7 @@ import argparse
 import sys
 
 from tmmaster import DEFAULT_PROFILE, TMMasterError, configure_logging
-from tmmaster.pickplace import Runner, load_config, pick_and_place, robot_from_config, validate_plan
+from tmmaster.pickplace import Runner, load_config, pick_and_place, robot_from_config
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,8 +39,10 @@ def main(argv: list[str] | None = None) -> int:
         )
         sequence = pick_and_place(config)
         with robot_from_config(config) as robot:
-            validate_plan(robot, sequence, config.run.cycles, source=args.config or "defaults")
-            result = Runner.from_config(robot, config).run(sequence)
+            # The runner checks every move of every cycle from where the arm is before
+            # its first command: a move it cannot take fails the run in IDLE, nothing sent.
+            runner = Runner.from_config(robot, config)
+            result = runner.run(sequence, source=args.config or "defaults")
     except TMMasterError as exc:  # config error or no connection
         print(f"pick_and_place: {exc}", file=sys.stderr)
         return 1

@@ -116,7 +116,11 @@ def test_a_run_from_a_wrist_flipped_arm_refuses_its_first_move_unsent(
         result = Runner(robot).run(pick_and_place(config), cycles=CYCLES)
     assert not result.ok
     assert result.failure is not None
-    assert result.failure.state == "MOVE_TO_APPROACH"
+    # The runner checks the plan from the arm's joints before its first command (hunt 21,
+    # tests/test_hunt21_runner_validates.py): refused in IDLE, naming the approach, the
+    # gripper not even opened; it used to be refused as the approach was sent.
+    assert result.failure.state == "IDLE"
+    assert "(MOVE_TO_APPROACH)" in result.failure.message
     assert "self-collision" in result.failure.message
     assert len(sim.motion_log()) == before
     assert sim.tcp_pose().is_close(where, mm=1e-6, deg=1e-6)

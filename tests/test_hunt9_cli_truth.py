@@ -9,9 +9,10 @@ reason and the JSON report (``--report``).
    configuration (J5 < 0): the plan, checked before connecting from the home pose,
    passes; the approach from the real joints is refused (self-collision on its joint
    path). Once connected the run checks its moves again from the reported pose and
-   joints, so that refusal is exit 2 with no command sent. A refusal after the run
-   began commanding (here forced by skipping that check) is exit 1 (``failed``), never
-   exit 2: it used to be exit 2 after the gripper had opened.
+   joints (the runner's check, before its first command), so that refusal is exit 2
+   with no command sent. A refusal after the run began commanding (here forced by
+   skipping that check) is exit 1 (``failed``), never exit 2: it used to be exit 2
+   after the gripper had opened.
 2. A guard on the report's per-step claims under device faults (robot error, e-stop,
    stall) hitting the 2nd and 4th moves: every move step the timeline reports ``ok``
    is a motion the robot finished, the failing state is the one whose motion was
@@ -28,7 +29,7 @@ from typing import Any
 
 import pytest
 
-import tmmaster.pickplace.__main__ as pickplace_main
+import tmmaster.pickplace._runner as pickplace_runner
 from sim_speeds import QUICK
 from tmmaster import Pose, Robot
 from tmmaster._robot_models import robot_model
@@ -115,9 +116,10 @@ def test_a_move_refused_after_the_run_opened_the_gripper_is_not_exit_2(
     capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # A refusal the check from where the arm is cannot foresee (here: that check
-    # skipped) comes after the gripper opened: exit 1, never exit 2's "nothing sent".
-    monkeypatch.setattr(pickplace_main, "_check_from_the_arm", lambda robot, command: None)
+    # A refusal the check from where the arm is cannot foresee (here: that check, the
+    # runner's before its first command, skipped) comes after the gripper opened: exit 1,
+    # never exit 2's "nothing sent".
+    monkeypatch.setattr(pickplace_runner, "validate_plan", lambda *args, **kwargs: 0)
     sim = tm_simulator_factory("tmflow", cell=Cell(scene=[PART]), **QUICK)
     park_at_home_with_the_wrist_flipped(sim)
     motions = len(sim.motion_log())

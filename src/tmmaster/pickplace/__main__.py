@@ -999,13 +999,13 @@ def _run_on(
         if out.live is not None:
             out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
         try:
-            refused = _connect(robot, host, port) or _check_from_the_arm(robot, command)
+            refused = _connect(robot, host, port) or _speaks_the_profile(robot)
             if refused is not None:
                 return refused
             if sampler is not None:
                 sampler.start()
             try:
-                result = runner.run(sequence, cycles=cycles)
+                result = runner.run(sequence, cycles=cycles, source=command.source)
             finally:
                 if sampler is not None:
                     # The runner's clock: timeline and TCP path share one time axis.
@@ -1031,24 +1031,23 @@ def _run_on(
     return _failed(result)
 
 
-def _check_from_the_arm(robot: Robot, command: _Command) -> tuple[int, str] | None:
-    """Check the run's moves once more from where the arm is, before anything is commanded.
+def _speaks_the_profile(robot: Robot) -> tuple[int, str] | None:
+    """Whether the connected robot speaks the configured profile (one status read).
 
-    The plan was checked from the home pose, before connecting; the robot's reported pose
-    and joints may make the first move one the arm cannot take (another configuration,
-    a self-collision on its path), which the run would refuse only after its IDLE state
-    opened the gripper. A ConfigError raised here is exit 2, nothing sent but reads.
+    The run's moves are checked once more from where the arm is by the runner itself,
+    before its first command (``Runner.run``): the plan was checked from the home pose
+    before connecting, and the robot's reported pose and joints may make a move one the
+    arm cannot take (another configuration, a self-collision on its path). That refusal
+    fails the run in IDLE: exit 2, nothing sent but reads.
 
     Returns:
         None, or the exit code and reason of a robot that speaks another profile (its
         first status read tells: the article profile's connect reads nothing).
     """
     try:
-        status = robot.status()
+        robot.status()
     except ProfileMismatchError as exc:
         return EXIT_CONFIG, _mismatch_reason(exc)
-    where = None if status.joints is None else (status.pose, status.joints)
-    validate_plan(robot, command.sequence, command.cycles, source=command.source, start=where)
     return None
 
 

@@ -19,7 +19,6 @@ from datetime import UTC, datetime
 from typing import Any, Literal
 
 from .._exceptions import (
-    ConfigError,
     EmergencyStopError,
     GraspFailedError,
     RobotError,
@@ -32,11 +31,12 @@ from .._io import io_address
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Motion, Robot
-from .._status import project_failure
+from .._status import RobotStatus, project_failure
 from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
+from ._plan import validate_plan
 from ._runlog import RunLog
-from ._steps import Action, PlannedMove, Step, TaskSequence
+from ._steps import Action, PlannedMove, Step, TaskSequence, arm_at, refuse_held_part
 
 _log = get_logger("tmmaster.pickplace")
 
@@ -290,9 +290,11 @@ class _RunContext:
 class _Run:
     """Everything one :meth:`Runner.run` call owns: machine, context, result, clocks."""
 
-    def __init__(self, runner: Runner, sequence: TaskSequence, cycles: int) -> None:
+    def __init__(self, runner: Runner, sequence: TaskSequence, cycles: int, source: str) -> None:
         self.runner = runner
         self.sequence = sequence
+        #: Where the sequence comes from, for the messages of the plan's check.
+        self.source = source
         self.machine = SequenceMachine(sequence, cycles=cycles, stop_event=runner._stop)
         self.ctx = _RunContext(self)
         self.result = RunResult(
@@ -467,8 +469,17 @@ class Runner:
 
     # -- the run -------------------------------------------------------------
 
-    def run(self, sequence: TaskSequence, *, cycles: int | None = None) -> RunResult:
+    def run(
+        self, sequence: TaskSequence, *, cycles: int | None = None, source: str | None = None
+    ) -> RunResult:
         """Run ``cycles`` cycles of ``sequence``; never raises for a robot failure.
+
+        Before its first command the run checks the plan of every cycle it is about to
+        run (:func:`validate_plan`, from the pose and joints the robot reports once it is
+        ready): a move of a later step, slot or cycle that cannot be sent or taken fails
+        the run in IDLE with :class:`ConfigError` (``failure.state == "IDLE"``), nothing
+        moved or opened, only reads sent. A move known only while the run goes (made in
+        a step's code, from ``ctx.data``) is checked when it is sent, as every move is.
 
         A :class:`~tmmaster.TMMasterError` from a step fails (or retries) it and ends the
         run with a failure; any other exception from a step's code is a bug and is raised.
@@ -480,13 +491,15 @@ class Runner:
         Args:
             sequence: What to run.
             cycles: How many cycles; None: the sequence's default.
+            source: Where the sequence comes from (a file name), for the messages of the
+                plan's check; None: ``sequence <name>``.
 
         Returns:
             The outcome: ``ok`` in DONE, else ``failure`` says where and why.
         """
         count = cycles if cycles is not None else sequence.default_cycles
         earlier = self.robot.last_motion  # an earlier run's: none of this run's business
-        run = _Run(self, sequence, count)
+        run = _Run(self, sequence, count, source or f"sequence {sequence.name}")
         self._log.info("pickplace.run_started", sequence=sequence.name, cycles=count)
         self._start(run)
         while not run.machine.finished:
@@ -514,7 +527,8 @@ class Runner:
         return result
 
     def _start(self, run: _Run) -> None:
-        """IDLE: wait until the robot is ready, prepare, then enter the first step."""
+        """IDLE: wait until the robot is ready, check the plan, prepare, then enter the
+        first step."""
         started = time.monotonic()
         try:
             self._check_stop()
@@ -522,7 +536,7 @@ class Runner:
             # with the fix, instead of a wait that ends in "not ready".
             if (failure := project_failure(self.robot.status())) is not None:
                 raise failure
-            self.robot.wait_until_ready(self.ready_timeout_s)
+            self._check_plan(run, self.robot.wait_until_ready(self.ready_timeout_s))
             if run.sequence.prepare is not None:
                 self._settled(run.sequence.prepare, run.ctx)
         except TMMasterError as exc:
@@ -534,6 +548,13 @@ class Runner:
             self._fail(run, IDLE, StopRequestedError("stop requested"))
         else:
             self._changed(run, IDLE, started)
+
+    def _check_plan(self, run: _Run, ready: RobotStatus) -> None:
+        """Check every known move of the run from where the ready arm is, before anything
+        is commanded: a later step, slot or cycle the arm cannot take is refused here, not
+        after the first moves carried a part (ConfigError, reads only sent)."""
+        where = None if ready.joints is None else (ready.pose, ready.joints)
+        validate_plan(self.robot, run.sequence, run.machine.cycles, source=run.source, start=where)
 
     def _step(self, run: _Run) -> None:
         """Run the current state's action, then retry, fail or move on."""
@@ -654,7 +675,7 @@ class Runner:
         elif held and not self.release_held_part_at_start:
             raise refuse_held_part(self.robot, opening=True)
         elif held:
-            self._log.warning("pickplace.held_part_released", at=_arm_at(self.robot))
+            self._log.warning("pickplace.held_part_released", at=arm_at(self.robot))
 
     def _as_stop(self, exc: BaseException, during: str) -> BaseException:
         """A failure caused by an interrupted wait is the stop request itself."""
@@ -780,39 +801,6 @@ def gripper_holds_a_part(robot: Robot) -> bool | None:
     if isinstance(robot.gripper, RegisterGripper) and not robot.profile.has("grasp_status"):
         return None
     return robot.gripper.status().holding
-
-
-def refuse_held_part(robot: Robot, *, opening: bool) -> ConfigError:
-    """The error a run fails with at its start when the gripper holds a part.
-
-    Args:
-        robot: The robot (its pose is read for the message, if it can be).
-        opening: Whether the start would open the gripper (else: the sequence starts
-            with a pick, with the part still in the fingers).
-
-    Returns:
-        The :class:`ConfigError`, naming the situation and the fix.
-    """
-    held = f"the gripper holds a part at the start of the run (the arm at {_arm_at(robot)})"
-    if opening:
-        return ConfigError(
-            f"{held}: opening it would drop the part there, so nothing was moved or opened;"
-            " take the part out of the gripper, or set [gripper] release_held_part_at_start"
-            " = true (command line: --release-held-part) to release it where the arm is"
-        )
-    return ConfigError(
-        f"{held} and the cycle starts with a pick: nothing was moved or opened; take the"
-        " part out of the gripper ([gripper] open_at_start = false: the run does not open it)"
-    )
-
-
-def _arm_at(robot: Robot) -> str:
-    """Where the arm's TCP is, in words (x, y, z in mm), or "an unread position"."""
-    try:
-        pose = robot.pose()
-    except TMMasterError:
-        return "an unread position"
-    return f"x {pose.x:.1f}, y {pose.y:.1f}, z {pose.z:.1f} mm"
 
 
 __all__ = [

@@ -27,8 +27,15 @@ from ._config import (
     read_config_data,
     units_problem,
 )
-from ._runner import refuse_held_part
-from ._steps import Action, Cycles, PlannedMove, RetryRule, StepContext, TaskSequence
+from ._steps import (
+    Action,
+    Cycles,
+    PlannedMove,
+    RetryRule,
+    StepContext,
+    TaskSequence,
+    refuse_held_part,
+)
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
 #: The states of :func:`pick_and_place`, in order.

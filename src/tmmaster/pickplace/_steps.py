@@ -3,6 +3,8 @@
 A :class:`TaskSequence` only says *what* to do in each state. Polling, timeouts, retries,
 stop requests, logging and timing are the runner's business, the same for every
 sequence: the built-in pick & place, palletizing, a Python sequence or a TOML one.
+The refusal of a start that finds a part in the gripper (:func:`refuse_held_part`) is
+part of what a step's context offers: the runner and the sequences raise the same.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any, Literal, Protocol, TypeVar
 
-from .._exceptions import ConfigError, GraspFailedError
+from .._exceptions import ConfigError, GraspFailedError, TMMasterError
 from .._gripper import GripperStatus
 from .._pose import MotionType, Pose
 from .._robot import Robot
@@ -130,6 +132,43 @@ class StepContext(Protocol):
         Args:
             seconds: How long, s.
         """
+
+
+def refuse_held_part(robot: Robot, *, opening: bool) -> ConfigError:
+    """The error a run fails with at its start when the gripper holds a part.
+
+    What a start raises once :meth:`StepContext.part_held` (``start=True``) says a part
+    is held: the runner's, before a ``prepare`` opens the gripper, and a sequence's own,
+    before a cycle that starts with a pick. Both say it in the same words.
+
+    Args:
+        robot: The robot (its pose is read for the message, if it can be).
+        opening: Whether the start would open the gripper (else: the sequence starts
+            with a pick, with the part still in the fingers).
+
+    Returns:
+        The :class:`ConfigError`, naming the situation and the fix.
+    """
+    held = f"the gripper holds a part at the start of the run (the arm at {arm_at(robot)})"
+    if opening:
+        return ConfigError(
+            f"{held}: opening it would drop the part there, so nothing was moved or opened;"
+            " take the part out of the gripper, or set [gripper] release_held_part_at_start"
+            " = true (command line: --release-held-part) to release it where the arm is"
+        )
+    return ConfigError(
+        f"{held} and the cycle starts with a pick: nothing was moved or opened; take the"
+        " part out of the gripper ([gripper] open_at_start = false: the run does not open it)"
+    )
+
+
+def arm_at(robot: Robot) -> str:
+    """Where the arm's TCP is, in words (x, y, z in mm), or "an unread position"."""
+    try:
+        pose = robot.pose()
+    except TMMasterError:
+        return "an unread position"
+    return f"x {pose.x:.1f}, y {pose.y:.1f}, z {pose.z:.1f} mm"
 
 
 #: What a step does; its return value is ignored; a :class:`~tmmaster.TMMasterError`
