@@ -36,6 +36,7 @@ from ._config import PickPlaceConfig
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
 from ._plan import validate_plan
 from ._runlog import RunLog
+from ._sequences import moves_no_arm
 from ._steps import Action, PlannedMove, Step, TaskSequence, arm_at, refuse_held_part
 
 _log = get_logger("tmmaster.pickplace")
@@ -478,8 +479,11 @@ class Runner:
         run (:func:`validate_plan`, from the pose and joints the robot reports once it is
         ready): a move of a later step, slot or cycle that cannot be sent or taken fails
         the run in IDLE with :class:`ConfigError` (``failure.state == "IDLE"``), nothing
-        moved or opened, only reads sent. A move known only while the run goes (made in
-        a step's code, from ``ctx.data``) is checked when it is sent, as every move is.
+        moved or opened, only reads sent. A ``prepare`` of the user's code (not the
+        library's gripper open or held-part check) runs first, as it may move the arm:
+        the plan is then checked from where it left the arm. A move known only while the
+        run goes (made in a step's code, from ``ctx.data``) is checked when it is sent, as
+        every move is.
 
         A :class:`~tmmaster.TMMasterError` from a step fails (or retries) it and ends the
         run with a failure; any other exception from a step's code is a bug and is raised.
@@ -528,7 +532,7 @@ class Runner:
 
     def _start(self, run: _Run) -> None:
         """IDLE: wait until the robot is ready, check the plan, prepare, then enter the
-        first step."""
+        first step (a ``prepare`` of the user's code first: it may move the arm)."""
         started = time.monotonic()
         try:
             self._check_stop()
@@ -536,9 +540,13 @@ class Runner:
             # with the fix, instead of a wait that ends in "not ready".
             if (failure := project_failure(self.robot.status())) is not None:
                 raise failure
-            self._check_plan(run, self.robot.wait_until_ready(self.ready_timeout_s))
-            if run.sequence.prepare is not None:
-                self._settled(run.sequence.prepare, run.ctx)
+            ready, prepare = self.robot.wait_until_ready(self.ready_timeout_s), run.sequence.prepare
+            if first := moves_no_arm(prepare):  # checked before it opens the gripper
+                self._check_plan(run, ready)
+            if prepare is not None:
+                self._settled(prepare, run.ctx)
+            if not first:  # a prepare of the user's may move the arm: checked from there
+                self._check_plan(run, self.robot.wait_until_ready(self.ready_timeout_s))
         except TMMasterError as exc:
             run.record(IDLE, 0, started, "failed")
             self._fail(run, IDLE, self._as_stop(exc, "the preparation"))

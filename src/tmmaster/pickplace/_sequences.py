@@ -62,6 +62,12 @@ def _uses_gripper(action: _A) -> _A:
     return action
 
 
+def moves_no_arm(action: Action | None) -> bool:
+    """Whether ``action`` is None or one of this module's gripper actions, which move no
+    arm (a ``prepare`` of the user's code may: the runner checks the plan after it)."""
+    return action is None or action in _GRIPPER_ACTIONS
+
+
 def check_gripper_steps(robot: Robot, sequence: TaskSequence, source: str) -> None:
     """Refuse a sequence whose start or steps use the gripper on a robot that has none.
 
