@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from numbers import Integral, Real
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 from weakref import WeakSet
@@ -245,14 +246,16 @@ class Pallet:
 
     def __post_init__(self) -> None:
         # A fractional count (2.5 rows) made 2.5 cycles: 2 checked, 3 run, the third
-        # into a row the pallet does not have.
+        # into a row the pallet does not have. numpy's integers and floats are whole
+        # numbers and numbers, as a Pose takes them; a count is kept as an int.
         for name in ("rows", "cols", "layers"):
             count = getattr(self, name)
-            if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+            if isinstance(count, bool) or not isinstance(count, Integral) or count < 1:
                 raise ConfigError(f"pallet {name} must be a whole number >= 1, got {count!r}")
+            object.__setattr__(self, name, int(count))
         for name in ("dx", "dy", "dz"):
             pitch = getattr(self, name)
-            if isinstance(pitch, bool) or not isinstance(pitch, int | float):
+            if isinstance(pitch, bool) or not isinstance(pitch, Real):
                 raise ConfigError(f"pallet {name} must be a finite number, got {pitch!r}")
             if not math.isfinite(pitch):
                 raise ConfigError(f"pallet {name} must be a finite number")

@@ -13,6 +13,7 @@ import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from numbers import Integral
 from typing import Any, Literal, Protocol, TypeVar
 
 from .._exceptions import ConfigError, GraspFailedError, TMMasterError
@@ -184,7 +185,7 @@ RESERVED_STATES = ("IDLE", "DONE", "ERROR")
 
 
 def require_cycles(cycles: object) -> None:
-    """Refuse a cycle count that is not a whole number >= 1.
+    """Refuse a cycle count that is not a whole number >= 1 (numpy's integers are).
 
     A fraction (1.5) was run as 2 cycles (cycle 1 is not the last) but planned as 1
     (``cycle <= 1.5``): its last cycle unchecked.
@@ -192,7 +193,7 @@ def require_cycles(cycles: object) -> None:
     Raises:
         ConfigError: Naming the count.
     """
-    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
+    if isinstance(cycles, bool) or not isinstance(cycles, Integral) or cycles < 1:
         raise ConfigError(f"cycles must be a whole number >= 1, got {cycles!r}")
 
 
