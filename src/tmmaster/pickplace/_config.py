@@ -576,6 +576,18 @@ def load_config(
     return config
 
 
+def check_held_input(profile: RobotProfile, module: str, channel: int, key: str) -> None:
+    """Refuse a held input the robot's profile has not, naming the setting (``key``).
+
+    Raises:
+        ConfigError: ``channel`` is not a DI of ``module`` in ``profile``.
+    """
+    try:
+        io_address(profile, module, "di", channel)
+    except ConfigError as exc:
+        raise ConfigError(f"{key} = {channel} ({module}): {exc}") from None
+
+
 def robot_from_config(
     config: PickPlaceConfig,
     host: str | None = None,
@@ -613,7 +625,7 @@ def robot_from_config(
     settle_s = max(g.settle_s / settle_scale, min(g.settle_s, 0.1))
     profile = config.robot_profile()
     if g.held_input is not None:  # one the profile has not: refused before any I/O
-        io_address(profile, g.held_input_module, "di", g.held_input)
+        check_held_input(profile, g.held_input_module, g.held_input, "gripper.held_input")
     return Robot(
         target,
         port if port is not None else config.robot.port,

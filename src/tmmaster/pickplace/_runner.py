@@ -27,12 +27,11 @@ from .._exceptions import (
     TMMasterError,
 )
 from .._gripper import GripperStatus, RegisterGripper
-from .._io import io_address
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Motion, Robot
 from .._status import RobotStatus, project_failure
-from ._config import PickPlaceConfig
+from ._config import PickPlaceConfig, check_held_input
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
 from ._plan import validate_plan
 from ._runlog import RunLog
@@ -380,7 +379,7 @@ class Runner:
         held_input_module: str = "end_module",
     ) -> None:
         if held_input is not None:
-            io_address(robot.profile, held_input_module, "di", held_input)
+            check_held_input(robot.profile, held_input_module, held_input, "held_input")
         #: The robot it runs on.
         self.robot = robot
         #: ``"stay"`` or ``"retreat"`` after a failure.
