@@ -63,8 +63,7 @@ class Motion:
     """
 
     def __init__(self, follower: _MotionFollower, ticket: Ticket, plan: Plan) -> None:
-        self._follower = follower
-        self._ticket = ticket
+        self._follower, self._ticket, self._gauge = follower, ticket, plan.gauge
         #: Where the move started, when known.
         self.start = plan.start
         #: The TCP target (None for a gripper command).
@@ -78,7 +77,6 @@ class Motion:
         #: True when ``timeout_s`` was derived from the model's expected time: the wait
         #: then gives a robot the polls see moving slower than the model more time.
         self.timeout_from_model = plan.timeout_from_model
-        self._gauge = plan.gauge
         #: Where the move stands.
         self.phase = MovePhase.SENT
         #: The last TCP pose read during the move (None before the first read).
@@ -190,9 +188,13 @@ class Motion:
             MotionTimeoutError: The move did not finish in time.
             RobotFaultError: The robot reported an error (EmergencyStopError for an
                 e-stop).
-            StopRequestedError: A stop was requested (:meth:`Robot.interrupt`).
+            StopRequestedError: A stop was requested (:meth:`Robot.interrupt`), or the
+                command was given up before this wait (:meth:`cancel`, a wait that
+                ended early): it can never finish, and nothing is read.
             ConnectionLostError: The link broke and did not come back in time.
         """
+        if self._given_up:
+            raise StopRequestedError("the motion was cancelled or given up: it never finishes")
         if timeout_s is not None:
             require_positive("timeout_s", timeout_s)
         with _Following(self._follower, self):
