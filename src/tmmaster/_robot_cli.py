@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         require_positive("--timeout", args.timeout)  # before the first byte, as --host
         host = check_host(args.host, field="--host", port_field="--port")
-        with Robot(host, args.port, profile=args.profile, name="cli") as robot:
+        with Robot(host, args.port, profile=args.profile) as robot:
             text = _act(robot, args.action, args.timeout)
     except TMMasterError as exc:
         code = next((c for kind, c in _EXIT_CODES if isinstance(exc, kind)), EXIT_REFUSED)
