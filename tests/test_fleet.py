@@ -212,6 +212,23 @@ def test_a_robot_failure_seen_by_the_loop_is_raised_in_the_thread(
         robot.move_to(A, speed=30)
 
 
+@pytest.mark.parametrize("own_fleet", [False, True], ids=["default-driver", "fleet"])
+def test_reading_no_fields_reads_nothing_and_gives_nothing(
+    tm_simulator_factory: Callable[..., Simulator], own_fleet: bool
+) -> None:
+    # A profile may publish none of what a read asks for (article: no joint speeds).
+    sim = tm_simulator_factory(listen=True)
+    fleet = Fleet() if own_fleet else None
+    try:
+        with Robot("127.0.0.1", sim.port, link=fleet) as robot:
+            sim.clear_request_log()
+            assert robot._channel.read(()) == {}  # the reads a wait or a status make
+            assert list(sim.request_log) == []
+    finally:
+        if fleet is not None:
+            fleet.close()
+
+
 def test_a_request_without_an_answer_times_out_on_its_own_timeout(
     tm_simulator_factory: SimFactory, fleet: Fleet
 ) -> None:

@@ -225,7 +225,8 @@ class LoopTransport(Transport):
         plan = self.read_plan(fields, max_gap=max_gap)
         self._yield_turn()
         with self._lock:
-            if self._fleet._on_loop() or self.state is not ConnectionState.CONNECTED:
+            on_loop, up = self._fleet._on_loop(), self.state is ConnectionState.CONNECTED
+            if on_loop or not up or not plan.blocks:  # no blocks: nothing to hand over
                 return super().read_fields(
                     fields, max_gap=max_gap, retry=retry, interruptible=interruptible
                 )
@@ -496,24 +497,23 @@ class FleetMember:
         """
         if not self.linked():
             return
-        record = self.record
-        read_at = record.published.read_at
+        read_at = self.record.published.read_at
         if read_at is not None and time.monotonic() - read_at < self.fresh_s:
             return
         async with self._turn:
             if not self.transport.hold():
-                record.skip(1)  # the robot's thread is using the link: next slot
+                self.record.skip(1)  # the robot's thread is using the link: next slot
                 return
             try:
                 values = await self.transport.read_on_loop(
                     self.channel.status_fields, max_gap=self.channel.profile.max_read_gap
                 )
             except TransportError as exc:
-                record.fail(exc)
+                self.record.fail(exc)
                 return
             finally:
                 self.transport.release()
-        record.succeed(self.channel.status_from(values))
+        self.record.succeed(self.channel.status_from(values))
 
     def linked(self) -> bool:
         """True while the robot's link is up (the robot's thread opens it, never the watch).

@@ -722,7 +722,7 @@ class Robot:
         """The robot's project speed (``tmflow``: 7101, one request), for the next plans:
         TMflow runs every move at its speed times the project speed."""
         fields = self.profile.published(("project_speed",))  # none: None
-        return self._planner.take_project_speed(self._channel.read(fields) if fields else {})
+        return self._planner.take_project_speed(self._channel.read(fields))
 
     def close(self, *, timeout_s: float | None = None) -> bool:
         """Withdraw (or stop) a command still outstanding, then close every connection.
@@ -921,7 +921,7 @@ class Robot:
         speeds, first = self.profile.published([f"joint_speed_{j}" for j in range(1, 7)]), None
         while True:
             poller.check()
-            now, joints = self.status(), self._channel.read(speeds) if speeds else {}
+            now, joints = self.status(), self._channel.read(speeds)
             if now.moving or any(abs(float(v)) > REST_SPEED_DEG_S for v in joints.values()):
                 first = None
             elif first is None or not now.pose.is_close(first.pose):
