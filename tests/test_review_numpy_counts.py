@@ -14,7 +14,7 @@ import pytest
 
 from tmmaster import ConfigError, Pose, Robot
 from tmmaster.pickplace import Pallet, palletizing, validate_plan
-from tmmaster.pickplace._steps import require_cycles
+from tmmaster.pickplace._steps import require_count
 
 numpy = pytest.importorskip("numpy")
 
@@ -29,7 +29,7 @@ def test_numpy_counts_and_pitches_make_the_pallet_they_say() -> None:
     assert type(pallet.size) is int  # the sequence's cycle count, a plain int
     assert pallet.slot(5).is_close(ORIGIN.offset(dx=80, dy=50))
     assert palletizing(pick=PICK, pallet=pallet, home=HOME).default_cycles == 6
-    require_cycles(numpy.int64(3))
+    require_count(numpy.int64(3))
 
 
 @pytest.mark.parametrize(
@@ -48,7 +48,7 @@ def test_a_fraction_a_switch_or_nan_is_still_refused(kwargs: dict[str, object]) 
         Pallet(ORIGIN, **options)  # type: ignore[arg-type]
     for cycles in (numpy.float64(1.5), numpy.bool_(True), 0):
         with pytest.raises(ConfigError, match="cycles must be a whole number"):
-            require_cycles(cycles)
+            require_count(cycles)
 
 
 def test_a_numpy_cycle_count_is_planned_as_it_runs() -> None:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from transitions import Machine
 
-from ._steps import Step, StepContext, TaskSequence, require_cycles
+from ._steps import Step, StepContext, TaskSequence, require_count
 
 IDLE = "IDLE"
 """The state before a run starts, and after ``reset``."""
@@ -74,7 +74,7 @@ class SequenceMachine:
         guard_context: Callable[[], Any] | None = None,
     ) -> None:
         sequence.validate()
-        require_cycles(cycles)
+        require_count(cycles)
         #: The sequence it runs.
         self.sequence = sequence
         #: How many cycles to run.

@@ -18,7 +18,7 @@ from .._pose import Pose
 from .._robot import Robot
 from .._robot_models import RobotModel
 from ._sequences import check_gripper_steps
-from ._steps import PlannedMove, TaskSequence, require_cycles
+from ._steps import PlannedMove, TaskSequence, require_count
 
 S = TypeVar("S", bound=Hashable)
 T = TypeVar("T")
@@ -36,7 +36,7 @@ class CyclePlan:
     """
 
     def __init__(self, sequence: TaskSequence, cycles: int) -> None:
-        require_cycles(cycles)
+        require_count(cycles)
         #: The sequence.
         self.sequence = sequence
         #: How many cycles run.

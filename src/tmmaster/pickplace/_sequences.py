@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from numbers import Integral, Real
+from numbers import Real
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 from weakref import WeakSet
@@ -36,6 +36,7 @@ from ._steps import (
     StepContext,
     TaskSequence,
     refuse_held_part,
+    require_count,
 )
 
 #: The article's states, in order (IDLE, DONE and ERROR are every machine's own).
@@ -249,10 +250,7 @@ class Pallet:
         # into a row the pallet does not have. numpy's integers and floats are whole
         # numbers and numbers, as a Pose takes them; a count is kept as an int.
         for name in ("rows", "cols", "layers"):
-            count = getattr(self, name)
-            if isinstance(count, bool) or not isinstance(count, Integral) or count < 1:
-                raise ConfigError(f"pallet {name} must be a whole number >= 1, got {count!r}")
-            object.__setattr__(self, name, int(count))
+            object.__setattr__(self, name, require_count(getattr(self, name), f"pallet {name}"))
         for name in ("dx", "dy", "dz"):
             pitch = getattr(self, name)
             if isinstance(pitch, bool) or not isinstance(pitch, Real):

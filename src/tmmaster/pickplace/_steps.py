@@ -184,17 +184,26 @@ ActionT = TypeVar("ActionT", bound=Action)
 RESERVED_STATES = ("IDLE", "DONE", "ERROR")
 
 
-def require_cycles(cycles: object) -> None:
-    """Refuse a cycle count that is not a whole number >= 1 (numpy's integers are).
+def require_count(count: object, name: str = "cycles") -> int:
+    """A count (of cycles, of a pallet's rows...) that is a whole number >= 1, as an int
+    (numpy's integers are whole numbers; a bool is not).
 
-    A fraction (1.5) was run as 2 cycles (cycle 1 is not the last) but planned as 1
-    (``cycle <= 1.5``): its last cycle unchecked.
+    A fraction (1.5 cycles) was run as 2 cycles (cycle 1 is not the last) but planned as
+    1 (``cycle <= 1.5``): its last cycle unchecked.
+
+    Args:
+        count: The count given.
+        name: What it counts, for the message (``"cycles"``, ``"pallet rows"``).
+
+    Returns:
+        The count, an int.
 
     Raises:
         ConfigError: Naming the count.
     """
-    if isinstance(cycles, bool) or not isinstance(cycles, Integral) or cycles < 1:
-        raise ConfigError(f"cycles must be a whole number >= 1, got {cycles!r}")
+    if isinstance(count, bool) or not isinstance(count, Integral) or count < 1:
+        raise ConfigError(f"{name} must be a whole number >= 1, got {count!r}")
+    return int(count)
 
 
 class Cycles(StrEnum):
