@@ -92,6 +92,11 @@ def test_numbers_out_of_range_are_said_as_the_option(
         (["sim", "--profile", "tmflo"], "did you mean tmflow?"),
         (["sim", "--fault", "robot_eror"], "did you mean robot_error?"),
         (["sim", "--gripper-prot", "0"], "did you mean --gripper-port?"),
+        (
+            ["robot-program", "--version"],
+            "--version is tmmaster's own: give it before the sub-command",
+        ),
+        (["profile", "list", "--version"], "--version is tmmaster's own"),
     ],
     ids=lambda v: " ".join(v) if isinstance(v, list) else "",
 )

@@ -72,10 +72,9 @@ class ArgumentParser(argparse.ArgumentParser):
         hints: dict[str, str] = dict(getattr(parsed, _HINTS, {}))
         for token in extras:
             name = token.split("=", 1)[0]
-            if name.startswith("-") and name not in hints:
-                hint = did_you_mean(name, known)
-                if hint:
-                    hints[name] = hint
+            if name.startswith("-") and (name in known or not hints.get(name)):
+                own = f"; {name} is {self.prog}'s own: give it before the sub-command"
+                hints[name] = own if name in known else did_you_mean(name, known)
         if hints:
             setattr(parsed, _HINTS, hints)
         return parsed, extras
