@@ -193,50 +193,27 @@ class LoopTransport(Transport):
         finally:
             claim.acquire(blocking=False)  # however the wait ended: never started after it
 
-    def read_fields(
-        self,
-        fields: Iterable[RegisterField],
-        *,
-        max_gap: int = 0,
-        retry: bool = True,
-        interruptible: bool = True,
-    ) -> dict[str, Value]:
-        """Read and decode fields, one request per contiguous block, in one hand-over.
+    def _read_blocks(
+        self, blocks: tuple[Block, ...], retry: bool, interruptible: bool
+    ) -> list[list[int]]:
+        """Every block read on the loop in one go while the link is up, in one hand-over.
 
-        While the link is up, every block is read on the loop in one go (each request
-        sent once, one after the other) and the calling thread is woken once. A block
-        that fails, and those after it, are read one at a time as any read is, with the
-        retry policy: the failure counts as that block's first attempt.
-
-        Args:
-            fields: The fields.
-            max_gap: A read may span this many unused addresses to fetch two fields
-                in one request.
-            retry: Retry a failed read per the retry policy.
-            interruptible: A stop request (``interrupt``) ends the waits between
-                retries.
-
-        Returns:
-            Each field's engineering value, by name.
-
-        Raises:
-            TransportError: A read failed (a subclass says how).
+        Each request is sent once, one after the other, and the calling thread is woken
+        once. A block that fails, and those after it, are read one at a time as any read
+        is, with the retry policy: the failure counts as that block's first attempt.
         """
-        plan = self.read_plan(fields, max_gap=max_gap)
         self._yield_turn()
         with self._lock:
             on_loop, up = self._fleet._on_loop(), self.state is ConnectionState.CONNECTED
-            if on_loop or not up or not plan.blocks:  # no blocks: nothing to hand over
-                return super().read_fields(
-                    fields, max_gap=max_gap, retry=retry, interruptible=interruptible
-                )
-            answers, failure = self._read_in_one_hand_over(plan.blocks)
-            for block in plan.blocks[len(answers) :]:
+            if on_loop or not up or not blocks:  # no blocks: nothing to hand over
+                return super()._read_blocks(blocks, retry, interruptible)
+            answers, failure = self._read_in_one_hand_over(blocks)
+            for block in blocks[len(answers) :]:
                 answers.append(
                     self._read_after(block, failure, retry=retry, interruptible=interruptible)
                 )
                 failure = None  # the failed block's first attempt was the hand-over's
-            return plan.decode(answers)
+            return answers
 
     def _read_in_one_hand_over(
         self, blocks: tuple[Block, ...]

@@ -697,14 +697,16 @@ class Transport(ABC):
             TransportError: A read failed (a subclass says how).
         """
         plan = self.read_plan(fields, max_gap=max_gap)
-        return plan.decode(
-            [
-                self.read_block(
-                    b.table, b.address, b.count, retry=retry, interruptible=interruptible
-                )
-                for b in plan.blocks
-            ]
-        )
+        return plan.decode(self._read_blocks(plan.blocks, retry, interruptible))
+
+    def _read_blocks(
+        self, blocks: tuple[Block, ...], retry: bool, interruptible: bool
+    ) -> list[list[int]]:
+        """Each block's words, a request each (a driver's link reads them in one hand-over)."""
+        return [
+            self.read_block(b.table, b.address, b.count, retry=retry, interruptible=interruptible)
+            for b in blocks
+        ]
 
     def read_plan(self, fields: Iterable[RegisterField], *, max_gap: int = 0) -> ReadPlan:
         """The cached :class:`ReadPlan` of ``fields`` (computed on first use)."""
