@@ -9,11 +9,12 @@ so the start-up cost of ``--cycles 1000000`` is that of a few cycles.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Hashable, Iterator
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from .._exceptions import ConfigError, UnreachablePoseError
+from .._exceptions import ConfigError, StopRequestedError, UnreachablePoseError
 from .._pose import Pose
 from .._robot import Robot
 from .._robot_models import RobotModel
@@ -147,6 +148,7 @@ def validate_plan(
     *,
     source: str,
     start: tuple[Pose, tuple[float, ...]] | None = None,
+    stop: threading.Event | None = None,
 ) -> int:
     """Validate every known move against the profile, arm and limits; returns the count.
 
@@ -166,6 +168,8 @@ def validate_plan(
         start: Where the arm is before the first move, its TCP pose and joints (deg),
             as the robot reports them (None: not known; the first move's target alone
             is checked).
+        stop: Once set (a stop request: :meth:`Runner.request_stop`), the check ends
+            before its next move (a long pallet's check takes seconds).
 
     Returns:
         How many distinct moves were checked.
@@ -173,10 +177,11 @@ def validate_plan(
     Raises:
         ConfigError: A move that cannot be sent or taken (UnreachablePoseError when the
             arm cannot reach it).
+        StopRequestedError: ``stop`` was set before the check was over.
     """
     sequence.validate()
     check_gripper_steps(robot, sequence, source)
-    checker = _MoveChecker(robot, source)
+    checker = _MoveChecker(robot, source, stop or threading.Event())
 
     def check_cycle(cycle: int, moves: list[PlannedMove], start: _Where) -> tuple[_Where, None]:
         _ = cycle
@@ -199,16 +204,20 @@ _Where = tuple[Pose, tuple[float, ...]] | None
 
 
 class _MoveChecker:
-    """Checks moves on ``robot``, each distinct transition once; counts the checks."""
+    """Checks moves on ``robot``, each distinct transition once; counts the checks.
+    Once ``stop`` is set, the next check raises StopRequestedError."""
 
-    def __init__(self, robot: Robot, source: str) -> None:
+    def __init__(self, robot: Robot, source: str, stop: threading.Event) -> None:
         self.robot = robot
         self.source = source
+        self.stop = stop
         self.count = 0
         self._joints_after: dict[tuple[object, ...], tuple[float, ...]] = {}
 
     def check(self, move: PlannedMove, previous: _Where) -> _Where:
         """Check ``move`` from ``previous``; where the arm is after it."""
+        if self.stop.is_set():
+            raise StopRequestedError(f"stop requested during the check of the plan ({self.source})")
         key = (previous, move.pose, move.speed, move.motion)
         if key in self._joints_after:
             return (move.pose, self._joints_after[key])

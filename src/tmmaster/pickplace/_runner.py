@@ -482,7 +482,8 @@ class Runner:
         library's gripper open or held-part check) runs first, as it may move the arm:
         the plan is then checked from where it left the arm. A move known only while the
         run goes (made in a step's code, from ``ctx.data``) is checked when it is sent, as
-        every move is.
+        every move is. :meth:`request_stop` ends the check (seconds for a long pallet)
+        at its next move: the run ends interrupted in IDLE.
 
         A :class:`~tmmaster.TMMasterError` from a step fails (or retries) it and ends the
         run with a failure; any other exception from a step's code is a bug and is raised.
@@ -559,9 +560,11 @@ class Runner:
     def _check_plan(self, run: _Run, ready: RobotStatus) -> None:
         """Check every known move of the run from where the ready arm is, before anything
         is commanded: a later step, slot or cycle the arm cannot take is refused here, not
-        after the first moves carried a part (ConfigError, reads only sent)."""
+        after the first moves carried a part (ConfigError, reads only sent). A stop
+        request ends it at the next move (StopRequestedError)."""
         where = None if ready.joints is None else (ready.pose, ready.joints)
-        validate_plan(self.robot, run.sequence, run.machine.cycles, source=run.source, start=where)
+        cycles, source = run.machine.cycles, run.source
+        validate_plan(self.robot, run.sequence, cycles, source=source, start=where, stop=self._stop)
 
     def _step(self, run: _Run) -> None:
         """Run the current state's action, then retry, fail or move on."""
