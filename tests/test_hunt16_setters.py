@@ -27,7 +27,7 @@ Factory = Callable[..., Simulator]
 REFUSED: list[tuple[str, list[object]]] = [
     ("check_units", ["no", None, 0, 1, 1.0, [True]]),
     ("workspace", ["table", None, 0, {"floor_z_mm": 0}, (0, 0)]),
-    ("model", ["tm12", None, 0, robot_model]),
+    ("model", ["tm13", "TM5-700 ", None, 0, robot_model]),  # a name: a built-in one's
 ]
 
 
@@ -60,6 +60,8 @@ def test_the_setters_take_a_value_of_their_type(tm_simulator_factory: Factory) -
     try:
         robot.check_units = False
         robot.workspace = Workspace(floor_z_mm=0)
+        robot.model = "tm5-700"  # a name, as Robot(model=) takes it
+        assert robot.model is robot_model("tm5-700")
         robot.model = robot_model("tm5-700")
         assert robot.check_units is False
         assert robot.workspace == Workspace(floor_z_mm=0)

@@ -37,3 +37,13 @@ def test_a_model_the_connected_arm_does_not_fit_is_refused_before_any_move(
         assert robot.model.name == "tm5-700"
         robot.move_to(NEAR.offset(dz=50), speed=50)  # planned by the arm's own model
         assert sim.motion_log()[-1].target == NEAR.offset(dz=50)
+
+
+def test_a_model_given_by_name_is_checked_against_the_arm_as_a_model_object_is(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> None:
+    sim = tm_simulator_factory(cell=Cell(scene=[]))  # a TM5-700
+    with Robot(sim.url, gripper=None, model="tm5-700") as robot:
+        with pytest.raises(ConfigError, match=r"model 'tm5-900'.*fit tm5-700"):
+            robot.model = "tm5-900"
+        assert robot.model is robot_model("tm5-700")

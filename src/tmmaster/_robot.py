@@ -535,10 +535,11 @@ class Robot:
     def model(self) -> RobotModel:
         """The arm model: inverse kinematics of every target, expected motion times.
 
-        Set, it must be a :class:`RobotModel` (``robot_model("tm12")`` for a built-in
-        one) whose rated payload carries the ``tool``'s mass and, when connected, which the
-        arm's reported joints fit (one read, as :meth:`connect` checks them): anything
-        else is a ConfigError naming ``model`` or ``tool.mass_kg``, the model not taken.
+        Set, it must be a built-in model's name (``"tm12"``, as ``Robot(model=)`` takes
+        it) or a :class:`RobotModel`, whose rated payload carries the ``tool``'s mass and,
+        when connected, which the arm's reported joints fit (one read, as :meth:`connect`
+        checks them): anything else is a ConfigError naming ``model`` (an unknown name:
+        UnknownNameError, listing the models) or ``tool.mass_kg``, the model not taken.
         That read is connect's, frame check included: a failed read (TransportError) or a
         robot TCP that is no longer the ``tool`` (ToolMismatchError) also leaves the model
         as it was. ``article`` publishes neither joints nor frames: nothing is read there.
@@ -546,7 +547,8 @@ class Robot:
         return self._planner.model
 
     @model.setter
-    def model(self, value: RobotModel) -> None:
+    def model(self, value: str | RobotModel) -> None:
+        value = robot_model(value) if isinstance(value, str) else value  # as Robot(model=)
         model = _policy("model", value, RobotModel, default=False)
         tool_option(self._frames.tool, False, model)  # a Tool's mass within its rated payload
         old, self._planner.model = self._planner.model, model
