@@ -970,10 +970,11 @@ def _parts_placed(sim_report: dict[str, Any], out: _Output) -> bool:
 
 
 def _close(robot: Robot, outcome: _Outcome) -> None:
-    """Close ``robot``: a stop the run could not deliver that close() delivered counts."""
-    confirmed = robot.close()
-    run = outcome.run
-    if confirmed and run is not None and run.stop_delivered is False:
+    """Close ``robot``: a stop the run could not deliver that close() delivered counts
+    (not a close confirmed with nothing to stop: a move that had finished by itself)."""
+    robot.close()
+    run, motion = outcome.run, robot.last_motion
+    if run is not None and run.stop_delivered is False and motion and motion.stop_delivered:
         run.stop_delivered = True
 
 
