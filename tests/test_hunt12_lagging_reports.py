@@ -96,6 +96,7 @@ class ReportingBackend(KinematicBackend):
         stop_short_s: The arm stops this long (simulated s) before the end of each
             motion, and the robot reports it finished there.
         model: The arm (its speeds: the master plans with the nominal TM5-700's).
+        home: Where the arm starts.
         kinematic: The kinematic backend's other options (world, gripper).
     """
 
@@ -111,9 +112,10 @@ class ReportingBackend(KinematicBackend):
         stop_short_s: float = 0.0,
         seed: int = 12,
         model: RobotModel = MODEL,
+        home: Pose = HOME,
         **kinematic: Any,
     ) -> None:
-        super().__init__(model, home=HOME, **kinematic)
+        super().__init__(model, home=home, **kinematic)
         self.jitter_mm, self.jitter_deg = jitter_mm, jitter_deg
         self.joint_step_deg = joint_step_deg
         self.freeze, self.done_early_s, self.stop_short_s = freeze, done_early_s, stop_short_s
@@ -222,16 +224,45 @@ MOVES: dict[str, list[tuple[str, Move]]] = {
 
 
 def simulator(
-    profile: str, backend: ReportingBackend, *, time_scale: float = 8.0, **options: Any
+    profile: str,
+    backend: ReportingBackend,
+    *,
+    time_scale: float = 8.0,
+    tick_hz: float = 50.0,
+    **options: Any,
 ) -> Simulator:
     return Simulator(
         profile=profile,
         listen=False,
         time_scale=time_scale,
-        timing=Timing(tick_hz=50.0),
+        timing=Timing(tick_hz=tick_hz),
         cell=backend,
         **options,
     )
+
+
+def fine(time_scale: float) -> dict[str, float]:
+    """``simulator()``'s options for ``time_scale`` times real time with 0.02 simulated s
+    a tick, as at real time and 50 Hz: a fault of ``x * time_scale`` simulated seconds
+    spans the wall time ``x`` did at real time, in as many ticks, one of ``x`` simulated
+    seconds ends the arm's motion where it did; the moves take a ``time_scale``-th of
+    the wall time."""
+    return {"time_scale": time_scale, "tick_hz": 50.0 * time_scale}
+
+
+def paced(profile: str, lag_ticks: int) -> tuple[dict[str, float], int]:
+    """``simulator()``'s options for a profile's correct moves on reports ``lag_ticks``
+    ticks of 50 Hz late (20 ms each), and the lag in that simulator's ticks.
+
+    tmflow: 16x at 100 Hz, the lag in twice the ticks: as long in wall time (what the
+    master's wait for the pose is measured against), twice as long along the arm's path.
+    article: 8x at 50 Hz: its moves take 40-75 ms; at 16x they end before the master's
+    first poll after the command, which then finds the reports caught up (nothing
+    trailing seen: checked with the wait for the pose removed).
+    """
+    if profile == "tmflow":
+        return {"time_scale": 16.0, "tick_hz": 100.0}, 2 * lag_ticks
+    return {}, lag_ticks
 
 
 def connect(sim: Simulator, profile: str, **options: object) -> Robot:
@@ -291,8 +322,9 @@ def run(
 def test_pose_registers_trailing_the_done_flag_do_not_fail_correct_moves(
     profile: str, lag_ticks: int
 ) -> None:
-    backend = ReportingBackend(lag_ticks=lag_ticks)
-    with simulator(profile, backend) as sim, connect(sim, profile) as robot:
+    pace, ticks = paced(profile, lag_ticks)
+    backend = ReportingBackend(lag_ticks=ticks)
+    with simulator(profile, backend, **pace) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         outcomes = run(robot, sim, backend, MOVES[profile])
     assert all(o.endswith(": done") for o in outcomes), outcomes
@@ -315,7 +347,7 @@ def test_a_done_flag_where_the_arm_stopped_short_still_fails(profile: str) -> No
     # The arm stops 0.15 s (simulated) before the end of its path, far from the target,
     # and the robot reports the move finished there: not converging, it must fail.
     backend = ReportingBackend(stop_short_s=0.15)
-    with simulator(profile, backend, time_scale=1.0) as sim, connect(sim, profile) as robot:
+    with simulator(profile, backend, **fine(4.0)) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         outcomes = run(robot, sim, backend, MOVES[profile][:2])
         assert all("RobotError" in o and "finished but" in o for o in outcomes), outcomes
@@ -324,13 +356,13 @@ def test_a_done_flag_where_the_arm_stopped_short_still_fails(profile: str) -> No
 
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_done_flag_a_few_ticks_early_is_done_only_once_the_arm_is_there(profile: str) -> None:
-    # The robot reports each move finished 0.1 s (5 ticks) before its arm gets there:
-    # the pose the done poll reads misses; the master reads it again until it is at the
-    # target on two reads in a row. The arm is then at the target within the tolerances,
-    # though maybe not yet at rest (docs/safety.md, Limits), never anywhere else; each
-    # call ran one motion.
-    backend = ReportingBackend(done_early_s=0.1)
-    with simulator(profile, backend, time_scale=1.0) as sim, connect(sim, profile) as robot:
+    # The robot reports each move finished 0.1 s (10 ticks; 0.2 s simulated at 2x) before
+    # its arm gets there: the pose the done poll reads misses; the master reads it again
+    # until it is at the target on two reads in a row. The arm is then at the target
+    # within the tolerances, though maybe not yet at rest (docs/safety.md, Limits), never
+    # anywhere else; each call ran one motion.
+    backend = ReportingBackend(done_early_s=0.2)
+    with simulator(profile, backend, **fine(2.0)) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         outcomes = run(robot, sim, backend, MOVES[profile][:3], at_rest=False)
     assert all(o.endswith(": done") for o in outcomes), outcomes
@@ -350,7 +382,7 @@ def test_a_master_whose_first_read_after_an_early_done_comes_late_still_sees_it_
     backend = ReportingBackend(done_early_s=1.0)
     seen: list[Motion] = []
     late: list[Motion] = []
-    with simulator(profile, backend, time_scale=1.0) as sim, connect(sim, profile) as robot:
+    with simulator(profile, backend, **fine(1.0)) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         channel = robot._channel
         read_plan = channel.read_plan
@@ -379,7 +411,7 @@ def test_a_done_flag_far_too_early_still_fails(profile: str) -> None:
     # gave the move up with its arm seen moving: it stops it, short of the target.
     backend = ReportingBackend(done_early_s=1.0)
     target = OTHER.offset(dy=-150)
-    with simulator(profile, backend, time_scale=1.0) as sim, connect(sim, profile) as robot:
+    with simulator(profile, backend, **fine(1.0)) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         with pytest.raises(RobotError, match="reported the move finished but the TCP is at"):
             robot.move_to(target, speed=20)
@@ -435,8 +467,9 @@ WOBBLE: dict[str, Any] = {"jitter_mm": 0.1, "jitter_deg": 0.01, "joint_step_deg"
 @pytest.mark.parametrize("lag_ticks", [0, 3])
 @pytest.mark.parametrize("profile", ["article", "tmflow"])
 def test_a_wobbling_reported_pose_does_not_fail_correct_moves(profile: str, lag_ticks: int) -> None:
-    backend = ReportingBackend(lag_ticks=lag_ticks, **WOBBLE)
-    with simulator(profile, backend) as sim, connect(sim, profile) as robot:
+    pace, ticks = paced(profile, lag_ticks)
+    backend = ReportingBackend(lag_ticks=ticks, **WOBBLE)
+    with simulator(profile, backend, **pace) as sim, connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         outcomes = run(robot, sim, backend, MOVES[profile])
     assert all(o.endswith(": done") for o in outcomes), outcomes
@@ -459,15 +492,15 @@ def test_reports_frozen_mid_move_on_a_slow_arm_do_not_end_the_move(profile: str)
     # The arm runs at a quarter of the model's speed: its wait outlives the model's
     # budget (1.3 x the model's time, no margin) only as long as the polls see it move.
     # The reports stand still for 8 ticks (0.16 s; under the 0.5 s stall floor also on a
-    # loaded machine, where 15 ticks once took 0.58 s) at 40 % of its time, past that
-    # budget: never a stall.
-    backend = ReportingBackend(model=slower(0.25), freeze=(0.4, 8), **WOBBLE)
+    # loaded machine, where 15 ticks once took 0.58 s) at half its time (at speed 30:
+    # 0.76 s in, past that budget, 0.69 s; the arm moves on for 0.76 s): never a stall.
+    backend = ReportingBackend(model=slower(0.25), freeze=(0.5, 8), **WOBBLE)
     with (
-        simulator(profile, backend, time_scale=1.0) as sim,
+        simulator(profile, backend, **fine(1.0)) as sim,
         connect(sim, profile, timeouts=NO_MARGIN) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
-        outcomes = run(robot, sim, backend, SLOW_MOVES[:1])
+        outcomes = run(robot, sim, backend, [("ptp", lambda r: r.move_to(OTHER, speed=30))])
     assert all(o.endswith(": done") for o in outcomes), outcomes
 
 
@@ -476,7 +509,7 @@ def test_reports_frozen_longer_than_the_stall_window_stop_the_move() -> None:
     # arm (docs/safety.md): a MotionTimeoutError, the arm stopped; it never ran again.
     backend = ReportingBackend(model=slower(0.25), freeze=(0.4, 40))
     with (
-        simulator("tmflow", backend, time_scale=1.0) as sim,
+        simulator("tmflow", backend, **fine(1.0)) as sim,
         connect(sim, "tmflow", timeouts=NO_MARGIN) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
@@ -497,16 +530,15 @@ def test_a_stalled_arm_with_a_wobbling_report_is_raised_at_its_budget(
     # as on an arm whose report stands still (tests/test_stall.py), at the model's budget
     # or a stall window or two after it (the wobble can set a new farthest point along
     # the path once or twice), not once the budget grew 20 times (21.6 s for 1.08 s).
-    backend = ReportingBackend(**WOBBLE)
     start, target = Pose(300, -200, 300, 180, 0, 90), Pose(300, -50, 300, 180, 0, 90)
+    backend = ReportingBackend(home=start, **WOBBLE)
     with (
-        simulator(profile, backend, time_scale=1.0, faults=["stall:at_move=2"]) as sim,
+        simulator(profile, backend, **fine(1.0), faults=["stall:at_move=1"]) as sim,
         connect(
             sim, profile, timeouts=TimeoutPolicy(motion_factor=1.0, motion_margin_s=0.6)
         ) as robot,
     ):
         robot.wait_until_ready(timeout_s=5)
-        robot.move_to(start, speed=100)
         moving = robot.start_move(target, speed=60, motion=motion)
         with pytest.raises(MotionTimeoutError) as info:
             moving.wait()
@@ -514,7 +546,7 @@ def test_a_stalled_arm_with_a_wobbling_report_is_raised_at_its_budget(
         assert "(a stall)" in message, message  # not the pace's cap
         applied = float(message.split("did not finish within ")[1].split(" s")[0])
         assert applied < 4 * moving.timeout_s, message
-        assert [m.target for m in sim.motion_log()] == [start, target]
+        assert [m.target for m in sim.motion_log()] == [target]
 
 
 def test_a_relative_move_right_after_a_stop_is_resolved_where_the_arm_rests() -> None:
@@ -525,7 +557,7 @@ def test_a_relative_move_right_after_a_stop_is_resolved_where_the_arm_rests() ->
     # rest and sent there: a target no call asked for.
     backend = ReportingBackend(lag_ticks=4)
     far = Pose(300, 250, 200, 180, 0, 90)
-    with simulator("article", backend, time_scale=1.0) as sim, connect(sim, "article") as robot:
+    with simulator("article", backend, **fine(1.0)) as sim, connect(sim, "article") as robot:
         robot.wait_until_ready(timeout_s=5)
         issued = [Issued(HOME, time.monotonic()), Issued(far, 0.0)]
         robot.move_to(HOME, speed=100)
@@ -558,8 +590,8 @@ def test_pick_and_place_runs_on_trailing_wobbling_reports(profile: str) -> None:
     # arm at rest out of range (docs/simulator-model.md) reads the trailing pose.
     world, gripper = Cell(scene=[TableObject(name="part", pose=PICK)]).world()
     backend = ReportingBackend(lag_ticks=3, world=world, gripper=gripper, **WOBBLE)
-    # The article's gripper has no busy flag: its close is waited out (at 2x, 0.4 s).
-    settle_s = 0.4 if profile == "article" else 0.05
+    # The article's gripper has no busy flag: its close is waited out (at 4x, 0.2 s).
+    settle_s = 0.2 if profile == "article" else 0.05
     config = validate_config(
         {
             "robot": {"profile": profile},
@@ -569,7 +601,7 @@ def test_pick_and_place_runs_on_trailing_wobbling_reports(profile: str) -> None:
         }
     )
     with (
-        simulator(profile, backend, time_scale=2.0 if profile == "article" else 8.0) as sim,
+        simulator(profile, backend, time_scale=4.0 if profile == "article" else 16.0) as sim,
         Robot(
             sim.url,
             profile=profile,
