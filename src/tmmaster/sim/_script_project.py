@@ -302,6 +302,10 @@ class SimHost:
         """``Pause()``: the project pauses, as with the Pause button."""
         self._c.pause_from_program()
 
+    def resume(self) -> None:
+        """``Resume()`` (a non-pause thread's, while paused): the project resumes, as with Play."""
+        self._c.resume_from_program()
+
 
 @functools.lru_cache(maxsize=8)
 def _parsed(text: str) -> Program:
@@ -337,6 +341,8 @@ class ScriptProjectController(SequenceController):
         self._execution: Execution | None = None
         self._queue: deque[_Queued] = deque()
         self._tags: dict[int, _Queued | None] = {}
+        #: A non-pause thread called Resume() while the project was paused.
+        self._resume_asked = False
         #: Simulated time from which the program's next Modbus request may go (late_ack).
         self.link_free_at = -1.0
         self._gripper_output = gripper_output
@@ -549,8 +555,15 @@ class ScriptProjectController(SequenceController):
         return target, joints, via, tuple(end)
 
     def tag_last(self, tag: int) -> None:
-        """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done)."""
+        """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done).
+
+        Only the final four tags are kept: an older one "returns not existed" (TMscript
+        2.24 §13.2, p. 321; §13.3, p. 322).
+        """
+        self._tags.pop(tag, None)
         self._tags[tag] = self._queue[-1] if self._queue else None
+        while len(self._tags) > 4:
+            del self._tags[next(iter(self._tags))]
         if self._queue:
             self._queue[-1].tag = tag
 
@@ -572,6 +585,11 @@ class ScriptProjectController(SequenceController):
     def pause_from_program(self) -> None:
         """The program called ``Pause()``."""
         self._pause("Pause() in the program")
+
+    def resume_from_program(self) -> None:
+        """The program called ``Resume()``: a paused project resumes once its threads' step
+        ends (TMscript 2.24 §5.2, p. 156; §5.3, p. 157), unless the robot is in error."""
+        self._resume_asked = self._paused
 
     def _resume(self) -> None:
         # Play resumes the program too, where it called Pause() (TMscript 2.24 §5.2).
@@ -602,6 +620,7 @@ class ScriptProjectController(SequenceController):
         self._project_started_s = self._time_s
         self._queue.clear()
         self._tags.clear()
+        self._resume_asked = False
         self.link_free_at = -1.0
         self._set_paused(False, "start")
         self._bank.set("project_running", True)
@@ -656,6 +675,11 @@ class ScriptProjectController(SequenceController):
             self._interrupted = None
             self._queue.clear()
             self._set_paused(False, "the program stopped the project from a thread")
+        asked, self._resume_asked = self._resume_asked, False
+        in_error = self._error_code or self._estop  # Play is refused there too
+        if asked and self._paused and self._execution is execution and not in_error:
+            self._log.info("sim.project_resumed_by_program", device=self._name)
+            self._resume()
 
     def _step(self, execution: Execution) -> None:
         status = execution.step(STATEMENTS_PER_TICK, TICK_SECONDS)

@@ -912,7 +912,8 @@ def _GetNowStamp(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Valu
     ms = int((rt.host.now_s() - rt.started_s) * 1000.0 / scale)
     if args and args[0]:
         return float(ms)
-    return ms if ms <= 2**31 - 1 else -1
+    stamp = ms if ms <= 2**31 - 1 else -1
+    return float(stamp) if args else stamp  # GetNowStamp(false): a double (Syntax 2)
 
 
 # ThreadRun(statement, bool) runs its statement in a thread of its own: the evaluator
@@ -960,7 +961,14 @@ def _Pause(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[
 
 @_register("5.3", 157, "bool()")
 def _Resume(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §5.3 Resume, p. 157: the project is running already when it runs."""
+    """TMscript 2.24 §5.3 Resume, p. 157: "Resume the project and the motion of the robot".
+
+    Called while the project is paused (from a non-pause thread, §3.12 p. 47; §5.2 p. 156:
+    "Use Resume() or press the Play button"), the host resumes it, where it can.
+    """
+    resume = getattr(rt.host, "resume", None)
+    if resume is not None:
+        resume()
     return True
 
 
@@ -1201,10 +1209,14 @@ def _WaitQueueTag(  # noqa: N802
 ) -> Generator[str, None, Value]:
     """TMscript 2.24 §13.2 WaitQueueTag, p. 321: 1 done, 0 timed out, -1 no such tag.
 
-    A timeout < 0 waits without end; 0 checks once.
+    A timeout < 0 waits without end; 0 checks once. Tag 0 is invalid but waits for a
+    timeout > 0 (the manual gives no return value for it: -1, as for a tag out of 1..15).
     """
     tag = _int(args[0])
     timeout = _int(args[1]) if len(args) > 1 else -1
+    if tag == 0 and timeout > 0:
+        # "0: Invalid tag number, but waits for the timeout" (p. 321).
+        yield from _wait_ms(rt, timeout)
     if not 1 <= tag <= 15:
         return -1
     start = rt.host.now_s()
@@ -1321,8 +1333,12 @@ def _motion(kind: str, args: list[Value]) -> MotionCall:
     motion=True,
 )
 def _PTP(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §13.8 PTP, p. 331: queue a point-to-point motion ("CPP" or "JPP")."""
-    if _str(args[0]) not in ("CPP", "JPP"):
+    """TMscript 2.24 §13.8 PTP, p. 331: queue a point-to-point motion ("CPP" or "JPP").
+
+    With a pose configuration or reference joints (syntaxes 2 and 3, pp. 332-335) the
+    format is "CPP" only.
+    """
+    if _str(args[0]) not in (("CPP", "JPP") if len(args) == 6 else ("CPP",)):
         return False  # "Command rejected (format error)"
     return rt.host.motion(_motion("PTP", args))
 

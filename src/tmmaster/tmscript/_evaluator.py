@@ -278,6 +278,39 @@ def _lossy(value: a.Expr, source: str, target: str) -> str | None:
     return None
 
 
+#: The integer types' ranges: an integer constant that fits is the type it is returned as.
+_INT_RANGE = {"byte": (0, 255), "int16": (-(2**15), 2**15 - 1), "int": (-(2**31), 2**31 - 1)}
+
+
+def _check_return(node: a.Return, name: str, ce: _CExpr, want: str) -> None:
+    """A value of another type than the function's returned: refused where it would
+    narrow or change kind ("If the function defines the return type, it must return with
+    the same type", TMscript 2.24 §3.5, p. 32; TMflow 2.24 appendix J, 0x00048193 and
+    0x0004860C "Please check if return data type and function definition type matched").
+    A wider number type (an int returned as a float) and an integer constant that fits
+    pass, as in an assignment (0x00048607: "Correct: double = int, float = int, double
+    = float")."""
+    source, target = ce.type, want
+    if "?" in (source, target) or "*" in (source, target) or source == target:
+        return
+    if is_array(source) and is_array(target):
+        source, target = element_type(source), element_type(target)
+    if source in _RANK and target in _RANK:
+        if _RANK[target] >= _RANK[source]:
+            return
+        value = ce.const[0] if ce.const is not None else None
+        bounds = _INT_RANGE.get({"int32": "int"}.get(target, target))
+        if isinstance(value, int) and bounds is not None and bounds[0] <= value <= bounds[1]:
+            return
+    elif source == target:
+        return
+    raise _syntax(
+        node,
+        f"{name}() returns a {want}, not a {ce.type}: a function must return the type it"
+        " defines (§3.5, p. 32)",
+    )
+
+
 def _runtime(node: a.Node, message: str) -> TMScriptRuntimeError:
     return TMScriptRuntimeError(message, line=node.line, column=node.column)
 
@@ -463,6 +496,10 @@ class _ExprCompiler:
         ce = self.expr(node)
         if warn:
             self.warn_lossy(node, ce, want)
+        return self.converted_ce(node, ce, want, at)
+
+    def converted_ce(self, node: a.Expr, ce: _CExpr, want: str, at: a.Node) -> _CExpr:
+        """``ce``, the compiled ``node``, as a value of type ``want`` (see :meth:`converted`)."""
         conv = self.converter(ce.type, want, at)
         if conv is _copy and ce.fresh:
             conv = None  # a new array: nobody holds the value a copy would protect
@@ -510,7 +547,8 @@ class _ExprCompiler:
     def literal(self, node: a.Literal) -> _CExpr:
         value = node.value
         if isinstance(value, int) and not isinstance(value, bool) and node.type == "double":
-            # An integer constant over 32 bits is no int (§2.7, p. 27): a double here.
+            # An integer constant over 32 bits is no int (§2.7, p. 27): a double here,
+            # held as one (Length() 8, GetBytes() its 8 bytes: §4.42 p. 133, §4.34).
             self.warnings.append(
                 ScriptWarning(
                     node.line,
@@ -518,6 +556,7 @@ class _ExprCompiler:
                     f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double",
                 )
             )
+            value = float(value)
         if isinstance(value, str) and "'" in value:
             # TMflow warns of a single quote in a string constant: it reads 'x' as the
             # variable x (§2.2 p. 16, §2.7 p. 27).
@@ -1138,7 +1177,10 @@ class _Compiler(_ExprCompiler):
             return ret_void
         if want == "void":
             raise _syntax(node, "a void function returns no value")
-        value = _lift(self.converted(node.value, want, node))
+        ce = self.expr(node.value)
+        if self.function is not None:
+            _check_return(node, self.function.node.name, ce, want)
+        value = _lift(self.converted_ce(node.value, ce, want, node))
 
         def ret(fr: _Frame) -> Generator[str, None, Control]:
             result = yield from value(fr)

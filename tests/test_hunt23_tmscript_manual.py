@@ -1,0 +1,208 @@
+"""Hunt 23: programs the simulator ran where TMflow 2.24 refuses them or runs them otherwise.
+
+Each test cites the page of *Programming Language TMscript* 2.24 (document 1.00), [TS],
+or of the *TMflow SW 2.24 Software Manual* (document 1.00), [TMF], that it follows.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from tmmaster import TMScriptSyntaxError
+from tmmaster.sim import RobotSetup, Simulator
+from tmmaster.tmscript import ExecState, Execution, MotionCall, NullHost, parse
+
+SimFactory = Callable[..., Simulator]
+
+GLOBALS = """define
+{
+    int i = 3
+    float f = 1.5
+    double d = 1.5
+    int[] ia = {1}
+    float[] fa = {1.5}
+}
+"""
+
+
+class _Clock:
+    """A clock that advances 10 ms at every reading: waits end without wall time."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        self.now += 0.01
+        return self.now
+
+
+class _MotionHost(NullHost):
+    """A host that takes every motion and records it."""
+
+    def __init__(self, shown: list[str]) -> None:
+        super().__init__(on_display=shown.append, clock=_Clock())
+        self.motions: list[MotionCall] = []
+
+    def motion(self, call: MotionCall) -> bool:
+        self.motions.append(call)
+        return True
+
+
+def shows(body: str) -> list[str]:
+    shown: list[str] = []
+    program = parse(f"main\n{{\n{body}\n}}\n")
+    execution = Execution(program, NullHost(on_display=shown.append, clock=_Clock()))
+    assert execution.run_to_end(timeout_s=5) == ExecState.ENDED, execution.error
+    return shown
+
+
+def _function(returns: str, value: str) -> str:
+    main = f"main\n{{\n    {returns} r = F()\n}}\n"
+    return f"{GLOBALS}{main}{returns} F()\n{{\n    return {value}\n}}\n"
+
+
+@pytest.mark.parametrize(
+    ("returns", "value"),
+    [
+        ("int", "1.7"),  # a float constant
+        ("int", "f"),  # int = float: "Incorrect" ([TMF] appendix J, 0x00048607)
+        ("float", "d"),  # float = double: "Incorrect"
+        ("byte", "i"),
+        ("byte", "300"),  # a constant out of a byte's range ([TS] §2.2, p. 15)
+        ("int16", "i"),
+        ("int", '"5"'),
+        ("string", "5"),
+        ("int", "true"),
+        ("bool", "1"),
+        ("int[]", "fa"),
+    ],
+)
+def test_a_function_that_returns_another_type_is_refused(returns: str, value: str) -> None:
+    # "If the function defines the return type, it must return with the same type" ([TS]
+    # §3.5, p. 32); TMflow's check reports 0x00048193 "Invalid return data type", "Please
+    # check if return data type and function definition type matched" ([TMF] appendix J).
+    # The simulator converted the value and ran on (an int function returned 1 for 1.7).
+    with pytest.raises(TMScriptSyntaxError, match=r"must return the type it defines \(§3\.5"):
+        parse(_function(returns, value))
+
+
+@pytest.mark.parametrize(
+    ("returns", "value"),
+    [
+        ("int", "i"),
+        ("float", "i"),
+        ("double", "f"),
+        ("int16", "1000"),
+        ("int16", "-5"),
+        ("byte", "200"),
+        ("int", "0"),
+        ("float[]", "ia"),
+        ("bool", "i > 2"),
+    ],
+)
+def test_a_function_may_return_a_wider_number(returns: str, value: str) -> None:
+    # The same type, a wider number type ("Correct: double = int, float = int, double =
+    # float", [TMF] appendix J, 0x00048607) or an integer constant that fits.
+    parse(_function(returns, value))
+
+
+def test_an_integer_constant_over_32_bits_is_held_as_a_double() -> None:
+    # "0x0A0B0C0D0E is not int type (over 32bit)" ([TS] §2.7, p. 27): taken as a double, a
+    # double is 8 bytes ([TS] §4.42 Length, p. 133: "double n = 1.234 ... value = 8";
+    # §2.6, p. 25: IEEE-754, Little Endian). The simulator held the constant as an int:
+    # Length() 4 and GetBytes() the wrapped int32's 4 bytes, even in a double variable.
+    le = ",".join(str(b) for b in struct.pack("<d", 3000000000.0))
+    assert shows(
+        "double d = 3000000000\nDisplay(Length(d))\nDisplay(GetBytes(d))\n"
+        "Display(Length(3000000000))\nDisplay(d)"
+    ) == ["8", "{" + le + "}", "8", "3000000000"]
+
+
+def test_getnowstamp_false_is_a_double() -> None:
+    # "double GetNowStamp(bool)", false: "Use int32 type, the upper limit is 2147483647 ms"
+    # ([TS] §4.39 Syntax 2, p. 128): the value is a double all the same.
+    assert shows("Display(Length(GetNowStamp(false)))\nDisplay(Length(GetNowStamp()))") == [
+        "8",
+        "4",
+    ]
+
+
+def test_ptp_with_a_pose_configuration_or_reference_joints_takes_cpp_only() -> None:
+    # Syntaxes 2 (int[] pose configuration) and 3 (float[] reference joints): "Data format
+    # parameter includes: (1) "CPP"" ([TS] §13.8, pp. 332 and 335), False = "Command
+    # rejected (format error)". The simulator queued the "JPP" move.
+    shown: list[str] = []
+    host = _MotionHost(shown)
+    program = parse(
+        "main\n{\n"
+        "float[] j = {0, 0, 90, 0, 90, 0}\n"
+        'Display(PTP("JPP", j, 10, 200, 0, false, {0, 2, 4}))\n'
+        'Display(PTP("JPP", j, 10, 200, 0, false, j))\n'
+        'Display(PTP("CPP", {417.5, -122.3, 343.9, 180, 0, 90}, 10, 200, 0, false, {0, 2, 4}))\n'
+        'Display(PTP("JPP", j, 10, 200, 0, false))\n'
+        "}\n"
+    )
+    assert Execution(program, host).run_to_end(timeout_s=5) == ExecState.ENDED
+    assert shown == ["false", "false", "true", "true"]
+    assert [(m.format, m.pose) for m in host.motions] == [("CPP", (0, 2, 4)), ("JPP", None)]
+
+
+def test_waitqueuetag_with_tag_0_waits_for_its_timeout() -> None:
+    # "0: Invalid tag number, but waits for the timeout ... <0, >15: Unavailable tag
+    # number. No waiting for the time out" ([TS] §13.2, p. 321). The simulator returned at
+    # once for tag 0.
+    assert shows(
+        "int t = GetNowStamp()\nint r = WaitQueueTag(0, 500)\n"
+        "Display(GetNowStamp() - t >= 500)\nDisplay(r)\n"
+        "t = GetNowStamp()\nr = WaitQueueTag(16, 500)\nDisplay(GetNowStamp() - t < 500)\n"
+        "Display(r)"
+    ) == ["true", "-1", "true", "-1"]
+
+
+def test_only_the_final_four_queue_tags_are_kept(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    # "The tag number will retain the status of the final four tags, and if the tag number
+    # did not occur or exceeds them, it returns not existed" ([TS] §13.2, p. 321; §13.3,
+    # p. 322). The simulator kept every tag: tag 1 read "completed" after four newer ones.
+    program = tmp_path / "tags.tms"
+    program.write_text(
+        "main\n{\n"
+        "    QueueTag(1)\n    QueueTag(2)\n    QueueTag(3)\n    QueueTag(4)\n    QueueTag(5)\n"
+        '    Display(CheckQueueTag(1) + " " + CheckQueueTag(2) + " " + CheckQueueTag(5))\n'
+        "    Display(WaitQueueTag(1, 0))\n"
+        "    QueueTag(2)\n    QueueTag(6)\n"
+        '    Display(CheckQueueTag(2) + " " + CheckQueueTag(3))\n'
+        "    Exit()\n}\n",
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    sim.wait_for(lambda: len(sim.displayed()) == 3, timeout=5)
+    assert sim.displayed() == ["-1 1 1", "-1", "1 -1"]
+
+
+def test_resume_from_a_non_pause_thread_resumes_the_project(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    # Pause() pauses "the project ... other than non-paused threads"; "Use Resume() or press
+    # the Play button on the robot stick to resume" ([TS] §5.2, p. 156; §5.3 Resume, p. 157:
+    # "Resume the project and the motion of the robot"). A non-pause thread runs while the
+    # project is paused ([TS] §3.12, p. 47), so its Resume() resumes main. The simulator
+    # ignored Resume(): main stayed paused until someone pressed Play.
+    program = tmp_path / "resume.tms"
+    program.write_text(
+        'main\n{\n    ThreadRun(Wake(), true)\n    Display("before")\n    Pause()\n'
+        '    Display("after")\n    Exit()\n}\n'
+        'void Wake()\n{\n    Sleep(300)\n    Display("resuming")\n    Resume()\n}\n',
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    sim.wait_for(lambda: "after" in sim.displayed(), timeout=5)
+    # main waited, paused, for the thread's Resume(): "after" comes after "resuming".
+    assert sim.displayed() == ["before", "resuming", "after"]
+    sim.wait_for(lambda: not sim.field("project_running"), timeout=5)
+    assert not sim.field("paused")
