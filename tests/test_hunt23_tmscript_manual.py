@@ -7,14 +7,14 @@ or of the *TMflow SW 2.24 Software Manual* (document 1.00), [TMF], that it follo
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pytest
 
 from tmmaster import TMScriptSyntaxError
 from tmmaster.sim import RobotSetup, Simulator
-from tmmaster.tmscript import ExecState, Execution, MotionCall, NullHost, parse
+from tmmaster.tmscript import ExecState, Execution, ModbusDevice, MotionCall, NullHost, parse
 
 SimFactory = Callable[..., Simulator]
 
@@ -206,3 +206,59 @@ def test_resume_from_a_non_pause_thread_resumes_the_project(
     assert sim.displayed() == ["before", "resuming", "after"]
     sim.wait_for(lambda: not sim.field("project_running"), timeout=5)
     assert not sim.field("paused")
+
+
+class _ModbusHost(NullHost):
+    """A host whose Modbus requests are recorded (function, address, values) and answered."""
+
+    def __init__(self) -> None:
+        super().__init__(on_display=lambda text: None, clock=_Clock())
+        self.requests: list[tuple[int, int, list[int]]] = []
+
+    def modbus_ready(self, device: ModbusDevice) -> bool:
+        return True
+
+    def modbus_request(
+        self,
+        device: ModbusDevice,
+        function: int,
+        address: int,
+        count: int,
+        values: Sequence[int] | None,
+    ) -> list[int]:
+        self.requests.append((function, address, list(values or ())))
+        return [0] * count if values is None else []
+
+
+def test_a_user_defined_register_write_follows_the_manuals_table() -> None:
+    # modbus_write(device, id, "RO", address, value): "Register Output 06" for a byte or a
+    # bool, "Register Output 16" for int, float, double, string and every array ([TS]
+    # §16.11 Syntax 3 table, pp. 437-438). The simulator chose by size: a string or an
+    # array of one register went out with FC 06. The bytes of a byte[] are written as they
+    # are ("bb = {0x10,0x27} ... write 0x10,0x27", p. 439: the way to write an int16), not
+    # one register each; the count of addresses limits a string[] too ("write ABC1").
+    host = _ModbusHost()
+    program = parse(
+        'define\n{\n    ModbusTCP TM = "127.0.0.1", 502\n}\nmain\n{\n'
+        '    modbus_write("TM", 1, "RO", 9000, "AB")\n'
+        "    byte[] bb = {0x10, 0x27}\n"
+        '    modbus_write("TM", 1, "RO", 9001, bb)\n'
+        "    bool[] flags = {true}\n"
+        '    modbus_write("TM", 1, "RO", 9002, flags)\n'
+        '    modbus_write("TM", 1, "RO", 9003, (byte)7)\n'
+        '    modbus_write("TM", 1, "RO", 9004, true)\n'
+        '    modbus_write("TM", 1, "RO", 9005, 10000)\n'
+        '    string[] n = {"ABC", "12", "34"}\n'
+        '    modbus_write("TM", 1, "RO", 9006, n, 2)\n'
+        "}\n"
+    )
+    assert Execution(program, host).run_to_end(timeout_s=5) == ExecState.ENDED
+    assert host.requests == [
+        (16, 9000, [0x4142]),
+        (16, 9001, [0x1027]),
+        (16, 9002, [1]),
+        (6, 9003, [7]),
+        (6, 9004, [1]),
+        (16, 9005, [0, 10000]),
+        (16, 9006, [0x4142, 0x4331]),  # "write ABC1" (p. 439)
+    ]

@@ -1572,6 +1572,8 @@ def _encode_registers(value: Value, typ: str) -> bytes:
     # User-defined writes are Big Endian (AB CD); int means int32 (§16.11, p. 438).
     if isinstance(value, list):
         elem = typ[:-2]
+        if elem == "byte":  # the bytes as they are: {0x10, 0x27} writes 0x10, 0x27 (p. 438)
+            return bytes(_int(v) & 0xFF for v in value)
         return b"".join(_encode_registers(v, elem) for v in value)
     if isinstance(value, bool):
         return b"\x00\x01" if value else b"\x00\x00"
@@ -1655,7 +1657,7 @@ def _modbus_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Val
     """TMscript 2.24 §16.11 modbus_write, p. 436: by preset (syntaxes 1 and 2) or by address.
 
     By address (syntaxes 3 and 4): DO: FC 05 for one value, FC 15 for an array; RO: FC 06
-    for one register, else FC 16.
+    for a byte or a bool, else FC 16.
     """
     try:
         if types[1] == "string":
@@ -1683,9 +1685,12 @@ def _address_write(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Va
     if len(data) % 2:
         data += b"\0"
     words = [int.from_bytes(c, "big") for c in _chunks(data, 2)]
-    if limit > 0 and isinstance(value, str):
-        words = words[:limit]
-    code = 6 if len(words) == 1 else 16
+    if limit > 0 and (isinstance(value, str) or typ == "string[]"):
+        words = words[:limit]  # "only effective to string type data" (p. 438)
+    # FC 06 for a byte or a bool, FC 16 for a number of 32 bits or more, a string and
+    # any array (§16.11 Syntax 3 table, pp. 437-438).
+    single = len(words) == 1 and not isinstance(value, list | str)
+    code = 6 if single else 16
     rt.host.modbus_request(device, code, address, len(words), words)
     return True
 
