@@ -28,7 +28,12 @@ from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy,
 from tmmaster.sim import Simulator, Timing
 
 A = Pose(300, -200, 150, 180, 0, 90)
-FAR = Pose(300, 250, 200, 180, 0, 90)  # about 8 s away from A at speed 5, real time
+FAR = Pose(300, 250, 200, 180, 0, 90)  # about 8 s away from A at SLOW (40 simulated s)
+#: The simulators run SCALE times real time, and the long moves at SLOW %: as long in
+#: wall time as at 5 % in real time (the fleet's close, the link's delays and the tmflow
+#: program's master_ttl_ms are wall-clock windows); the setup move to A takes a fifth.
+SCALE = 5.0
+SLOW = 1
 #: Each request of b's slow link waits this long in the proxy (its timeout: 1 s).
 SLOW_S = 0.15
 VERY_SLOW_S = 0.6
@@ -49,7 +54,7 @@ class Cell:
 
         def run() -> None:
             try:
-                robot.move_to(FAR, speed=5)
+                robot.move_to(FAR, speed=SLOW)
             except TMMasterError as exc:
                 command.outcome = type(exc).__name__
             else:
@@ -103,11 +108,12 @@ def ticked(sim: Simulator, ticks: int) -> Callable[[], bool]:
 
 @contextmanager
 def cell(profile: str) -> Iterator[Cell]:
-    # The start-up (0.2 s by default, in real time here) is not what these tests are about.
+    # The start-up (0.2 s by default) is not what these tests are about. 100 Hz, as at
+    # real time: 0.05 simulated s a tick.
     timing = Timing(tick_hz=SUITE_TICK_HZ, init_time_s=0.02)
     with (
-        Simulator(profile, time_scale=1.0, timing=timing) as sim_a,
-        Simulator(profile, time_scale=1.0, timing=timing) as sim_b,
+        Simulator(profile, time_scale=SCALE, timing=timing) as sim_a,
+        Simulator(profile, time_scale=SCALE, timing=timing) as sim_b,
         FaultProxy(sim_b.port) as proxy,
     ):
         fleet = Fleet()
@@ -128,7 +134,7 @@ def cell(profile: str) -> Iterator[Cell]:
             for robot in robots.values():
                 robot.connect()
                 robot.wait_until_ready(timeout_s=5)
-            # Both arms to A at once (each move real time): then each on its long move.
+            # Both arms to A at once: then each on its long move.
             motions = {name: robot.start_move(A, speed=100) for name, robot in robots.items()}
             for name, motion in motions.items():
                 motion.wait()
@@ -186,7 +192,7 @@ def test_fleet_close_with_a_slow_or_dropped_link_leaves_nothing_running(
         assert "a" not in unconfirmed, unconfirmed
 
 
-B_TARGET = Pose(300, 150, 200, 180, 0, 90)  # about 6 s from A at speed 5, real time
+B_TARGET = Pose(300, 150, 200, 180, 0, 90)  # about 6 s from A at SLOW
 
 
 @pytest.mark.parametrize("profile", ["tmflow", "article"])
@@ -205,7 +211,7 @@ def test_fleet_close_during_a_slow_command_write_stops_what_it_started(profile: 
 
         def run() -> None:
             try:
-                c.robots["b"].move_to(B_TARGET, speed=5)
+                c.robots["b"].move_to(B_TARGET, speed=SLOW)
             except TMMasterError as exc:
                 command.outcome = type(exc).__name__
             else:
