@@ -262,3 +262,13 @@ def test_a_user_defined_register_write_follows_the_manuals_table() -> None:
         (16, 9005, [0, 10000]),
         (16, 9006, [0x4142, 0x4331]),  # "write ABC1" (p. 439)
     ]
+
+
+def test_array_subelements_with_a_negative_count_runs_to_the_end() -> None:
+    # "If sub-element number <0, sub-elements starts at starting index to the last element
+    # of input array" ([TS] §4.32, p. 99). The simulator returned an empty array.
+    assert shows(
+        "int[] n = {1000, 2000, 3000}\n"
+        "Display(Array_SubElements(n, 1, -1))\nDisplay(Array_SubElements(n, 0, -5))\n"
+        "Display(Array_SubElements(n, 1, 0))\nDisplay(Array_SubElements(n, -1, -1))"
+    ) == ["{2000,3000}", "{1000,2000,3000}", "{}", "{}"]

@@ -834,12 +834,15 @@ def _Array_Sort(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value
 
 @_register("4.32", 99, "$0(?[], int, int)", "$0(?[], int)")
 def _Array_SubElements(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # noqa: N802
-    """TMscript 2.24 §4.32 Array_SubElements, p. 99: ``count`` elements from ``index``."""
+    """TMscript 2.24 §4.32 Array_SubElements, p. 99: ``count`` elements from ``index``.
+
+    "If sub-element number <0, sub-elements starts at starting index to the last element".
+    """
     items, index = _arr(args[0]), _int(args[1])
     if index < 0 or index >= len(items):
         return []
     count = _int(args[2]) if len(args) > 2 else len(items)
-    return items[index : index + max(count, 0)]
+    return items[index:] if count < 0 else items[index : index + count]
 
 
 def _value_bytes(value: Value, typ: str) -> bytes:
