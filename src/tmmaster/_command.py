@@ -193,17 +193,24 @@ class Motion:
                 ended early): it can never finish, and nothing is read.
             ConnectionLostError: The link broke and did not come back in time.
         """
-        if self._given_up:
-            raise StopRequestedError("the motion was cancelled or given up: it never finishes")
         if timeout_s is not None:
             require_positive("timeout_s", timeout_s)
         with _Following(self._follower, self):
             self._follower.wait(self, timeout_s)
 
 
+#: What a wait on a motion given up raises (StopRequestedError): before it, or meanwhile.
+_GIVEN_UP = "the motion was cancelled or given up: it never finishes"
+
+
 class _Following:
     """Whatever escapes the block, the master gives the command up safely first: an
     escaping exception abandons the motion (:meth:`_MotionFollower.abandon`).
+
+    A motion given up already is not entered (nothing is read). One given up by another
+    thread meanwhile (:meth:`Motion.cancel`, ``close()``) raises StopRequestedError from
+    what its give-up made the robot report (a stopped project, a cancelled number, a
+    move seen ended short), which is not the robot's failure; an e-stop stays itself.
 
     A class rather than a generator context manager: entered on every wait and send,
     it costs one object instead of a generator's frame and ``contextlib``'s machinery.
@@ -213,19 +220,22 @@ class _Following:
     __slots__ = ("_follower", "_motion")
 
     def __init__(self, follower: _MotionFollower, motion: Motion) -> None:
-        self._follower = follower
-        self._motion = motion
+        self._follower, self._motion = follower, motion
 
     def __enter__(self) -> None:
-        return None
+        if self._motion._given_up:  # cancel(), or a wait that ended early
+            raise StopRequestedError(_GIVEN_UP)
 
     def __exit__(self, _type: object, exc: BaseException | None, _tb: object) -> Literal[False]:
-        if exc is not None:
-            self._follower.abandon(self._motion, exc)
         motion, follower = self._motion, self._follower
+        cancelled = motion._given_up  # not on entering: by another thread meanwhile
+        if exc is not None:
+            follower.abandon(motion, exc)
         if motion.ticket.resent and (motion.done or motion._given_up):
             motion.ticket.resent = False  # its copy still in the network is refused from now on
             follower._channel.session = follower.renew()
+        if cancelled and isinstance(exc, RobotError) and not isinstance(exc, EmergencyStopError):
+            raise StopRequestedError(_GIVEN_UP) from exc
         return False
 
 
@@ -261,8 +271,7 @@ class _MotionFollower:
         position_tolerance_mm: float,
         orientation_tolerance_deg: float,
     ) -> None:
-        self._channel = channel
-        self.stop_event = stop_event
+        self._channel, self.stop_event = channel, stop_event
         #: Every command write passes here: never after close() or a stop request began.
         self.gate = CommandGate(stop_event)
         self._log = log
@@ -773,9 +782,8 @@ class _MotionFollower:
             self._log.warning("robot.late_acknowledgement", command=motion.command.kind.value)
             return
         ticket.withdrawn = motion.withdrawn = True
-        hint = ""
-        if heartbeat_stalled(ticket):
-            hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
+        hint = "; the robot program's heartbeat did not change: is the TMflow project running?"
+        hint = hint if heartbeat_stalled(ticket) else ""
         raise self._unacknowledged(motion, f"; the command was withdrawn{hint}")
 
     def _unacknowledged(self, motion: Motion, outcome: str) -> AcknowledgeTimeoutError:

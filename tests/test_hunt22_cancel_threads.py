@@ -1,0 +1,186 @@
+"""``Motion.cancel()`` from another thread while the owning thread waits on the motion.
+
+``cancel()`` polls once (``progress()``), then gives the command up; the owner's
+``wait()`` polls on its own thread meanwhile: two threads on one robot's link and one
+ticket. What must hold, judged on the simulator's motion log and arm
+(tests/safety_invariant.py), never on what the master believes:
+
+- the command is withdrawn, or the arm is stopped short, and never runs (again) later;
+- the owner's ``wait()`` never returns as if the move were done while it was given up
+  short of its target: it raises, and a wait after it says the motion was given up;
+- a second ``cancel()`` (from either thread) and a ``cancel()`` after the move finished
+  change nothing on the robot.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import pytest
+
+from safety_invariant import Issued, check
+from test_fleet import late_ack_over, ticks_pass
+from test_motion_cancel import braked
+from tmmaster import (
+    MovePhase,
+    PollPolicy,
+    Pose,
+    Robot,
+    StopRequestedError,
+    TMMasterError,
+)
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+PROFILES = ["tmflow", "article"]
+A = Pose(300, -200, 200, 180, 0, 90)
+FAR = Pose(300, 200, 200, 180, 0, 90)
+
+
+def robot_of(sim: Simulator, profile: str) -> Robot:
+    return Robot(sim.url, profile=profile, polling=PollPolicy(interval_s=0.01))
+
+
+class Owner:
+    """``motion.wait()`` on its own thread, recording how it ended."""
+
+    def __init__(self, wait: Callable[[], None], issued: Issued) -> None:
+        self.issued = issued
+        self.error: BaseException | None = None
+        self.started = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(wait,))
+        self.thread.start()
+        self.started.wait(5)
+
+    def _run(self, wait: Callable[[], None]) -> None:
+        self.started.set()
+        try:
+            wait()
+        except TMMasterError as exc:
+            self.error = exc
+            self.issued.outcome = type(exc).__name__
+        else:
+            self.issued.outcome = "done"
+        self.issued.ended_at = time.monotonic()
+
+    def join(self) -> None:
+        self.thread.join(15)
+        assert not self.thread.is_alive(), "the owner's wait never ended"
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_running_move_cancelled_from_another_thread_is_stopped_and_its_wait_raises(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=5.0)
+    with robot_of(sim, profile) as robot:
+        robot.move_to(A, speed=100)
+        issued = [Issued(A, 0.0, 0.0, "done"), Issued(FAR, time.monotonic())]
+        motion = robot.start_move(FAR, speed=10)
+        owner = Owner(motion.wait, issued[1])
+        sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)  # on its way
+        assert motion.cancel() is True
+        given_up_at = time.monotonic()
+        owner.join()
+        assert motion.stop_delivered is True
+        assert motion.abandoned
+        assert not motion.done
+        # The owner's wait raised, saying the give-up (not blaming the robot for what
+        # the give-up made it report: "the TMflow project is stopped" on tmflow, "robot
+        # reported the move finished but the TCP is ... mm from the target" on article).
+        assert isinstance(owner.error, StopRequestedError), repr(owner.error)
+        assert "cancelled or given up" in str(owner.error)
+        stopped_at = braked(sim)
+        assert not stopped_at.is_close(FAR)
+        ticks_pass(sim, 10)
+        assert sim.tcp_pose().is_close(stopped_at)  # never resumed
+        with pytest.raises(StopRequestedError):
+            motion.wait()
+        assert motion.cancel() is True  # twice: nothing more
+    issued[1].ended_at = min(issued[1].ended_at or given_up_at, given_up_at)
+    check(issued, sim.motion_log())
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_move_not_yet_taken_cancelled_from_another_thread_never_runs(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    # The acknowledgement would come 20 simulated s (0.5 s) after the write: the owner
+    # waits for it, polling, while the other thread cancels.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+    with robot_of(sim, profile) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        issued = [Issued(A, time.monotonic())]
+        motion = robot.start_move(A, speed=60)
+        owner = Owner(motion.wait, issued[0])
+        assert motion.cancel() is True
+        given_up_at = time.monotonic()
+        owner.join()
+        # Before: "robot program rejected command 1: cancelled" (tmflow), "robot reported
+        # the move finished but the TCP is at ..." (article, the withdraw's cleared register
+        # read as the acknowledgement).
+        assert isinstance(owner.error, StopRequestedError), repr(owner.error)
+        assert motion.abandoned
+        assert motion.phase is MovePhase.FAILED
+        assert motion.withdrawn is True or motion.stop_delivered is True
+        sim.clear_faults()
+        late_ack_over(sim, motion)  # a command still armed would have run by now
+        robot.move_to(A.offset(dz=20), speed=60)
+    issued[0].ended_at = given_up_at
+    issued[0].outcome = "cancelled"
+    check([*issued, Issued(A.offset(dz=20), 0.0, 1.0, "done")], sim.motion_log())
+    # Withdrawn: it never ran; stopped (taken at the very moment): stopped short.
+    assert len(sim.motion_log()) in (1, 2)
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_two_threads_cancelling_at_once_give_it_up_once(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile, time_scale=5.0)
+    with robot_of(sim, profile) as robot:
+        robot.move_to(A, speed=100)
+        motion = robot.start_move(FAR, speed=10)
+        sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)
+        results: list[bool] = []
+        go = threading.Barrier(2)
+
+        def cancel() -> None:
+            go.wait(5)
+            results.append(motion.cancel())
+
+        threads = [threading.Thread(target=cancel) for _ in range(2)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(15)
+        assert results == [True, True]
+        assert motion.stop_delivered is True
+        stopped_at = braked(sim)
+        assert not stopped_at.is_close(FAR)
+        ticks_pass(sim, 10)
+        assert sim.tcp_pose().is_close(stopped_at)
+    assert len(sim.motion_log()) == 2
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_a_cancel_from_another_thread_after_the_owner_saw_it_done_changes_nothing(
+    tm_simulator_factory: SimFactory, profile: str
+) -> None:
+    sim = tm_simulator_factory(profile)
+    with robot_of(sim, profile) as robot:
+        motion = robot.start_move(A, speed=100)
+        issued = Issued(A, time.monotonic())
+        owner = Owner(motion.wait, issued)
+        owner.join()
+        assert owner.error is None
+        results: list[bool] = []
+        other = threading.Thread(target=lambda: results.append(motion.cancel()))
+        other.start()
+        other.join(10)
+        assert results == [True]
+        assert (motion.done, motion.abandoned, motion.stop_delivered) == (True, False, None)
+        robot.move_to(A.offset(dz=20), speed=100)  # the project still runs
+    check([issued, Issued(A.offset(dz=20), 0.0, 1.0, "done")], sim.motion_log())
