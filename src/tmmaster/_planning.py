@@ -445,13 +445,12 @@ class Planner:
         self.check_move(target, speed, motion, self.hint_pose, self.joints_hint)
 
     def check_arc_move(self, via: Pose, to: Pose, speed: int) -> None:
-        """An arc's checks before any request: its end, ``via``, the arc from the seed."""
+        """An arc's checks before any request: its end and ``via``. The arc itself is
+        checked from the pose the robot reports (its plan), not from the last target: a
+        move stopped short or given up left the arm elsewhere, where another arc starts."""
         self._check_target(to, speed)
         self.workspace.check(via)  # its position (the TCP passes there)
-        if self.hint_pose is not None:
-            self.check_arc(self.hint_pose, via, to, self.joints_hint)  # its end's arm too
-        else:
-            self.validate(to, speed)
+        self.validate(to, speed)
 
     def joint_target(self, joints: Sequence[float], speed: int) -> tuple[Joints, Pose]:
         """A joint move's checked joints and the TCP pose they give (validated as a target)."""

@@ -1312,7 +1312,7 @@ class Robot:
         if not isinstance(via, Pose):
             raise ConfigError(f"via must be a tmmaster.Pose, got {type(via).__name__}")
         percent = self._move_arguments(speed, speed_mm_s, None, accel_time_ms, timeout)
-        # The arc from where the arm is believed to be, before any request.
+        # Its end and via before any request; the arc from where the robot reports the arm.
         self._planner.check_arc_move(via, to, percent)
         command = Command(
             CommandKind.CIRCLE, to, percent, accel_time_ms, via=via, speed_mm_s=speed_mm_s
