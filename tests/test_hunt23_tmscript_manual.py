@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tmmaster import TMScriptSyntaxError
+from tmmaster import Pose, TMScriptSyntaxError
 from tmmaster.sim import RobotSetup, Simulator
 from tmmaster.tmscript import ExecState, Execution, ModbusDevice, MotionCall, NullHost, parse
 
@@ -272,3 +272,31 @@ def test_array_subelements_with_a_negative_count_runs_to_the_end() -> None:
         "Display(Array_SubElements(n, 1, -1))\nDisplay(Array_SubElements(n, 0, -5))\n"
         "Display(Array_SubElements(n, 1, 0))\nDisplay(Array_SubElements(n, -1, -1))"
     ) == ["{2000,3000}", "{1000,2000,3000}", "{}", "{}"]
+
+
+def test_an_absolute_line_speed_in_the_robots_range_is_taken(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    # "The available range of ABS Speed is from 0 to 4500 mm/s" ([TMF] 9 Line, p. 171);
+    # Line returns False only for "Command rejected (format error)" ([TS] §13.10, p. 337).
+    # The simulator refused ("false") any absolute speed above its model's top TCP speed
+    # (1100 mm/s for a TM5-700): the generated program, which takes speed_mm_s up to 2000,
+    # reported such a line motion_failed where the robot runs it.
+    program = tmp_path / "fast.tms"
+    program.write_text(
+        "main\n{\n"
+        '    PTP("CPP", {300, -200, 150, 180, 0, 90}, 50, 200, 0, false)\n'
+        "    QueueTag(1, 1)\n"
+        '    Display(Line("CAP", {250, -200, 150, 180, 0, 90}, 2000, 200, 0, false))\n'
+        "    QueueTag(2, 1)\n"
+        '    Display(Line("CDP", {300, -200, 150, 180, 0, 90}, 4501, 200, 0, false))\n'
+        "    Exit()\n}\n",
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    sim.wait_for(lambda: len(sim.displayed()) == 2, timeout=5)
+    assert sim.displayed() == ["true", "false"]
+    assert [m.target for m in sim.motion_log()] == [
+        Pose(300, -200, 150, 180, 0, 90),
+        Pose(250, -200, 150, 180, 0, 90),
+    ]

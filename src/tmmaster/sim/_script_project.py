@@ -118,6 +118,10 @@ TM_PTP_JOINT_BOUNDARY = 0x001C
 #: The mass of the simulated tool the generated program declares (an OnRobot 2FG7, 1.1 kg).
 SIMULATED_TOOL_MASS_KG = 1.1
 
+#: The most an absolute ("A", "D") Line or Circle speed may be, mm/s: "The available range
+#: of ABS Speed is from 0 to 4500 mm/s" (TMflow 2.24, 9 Line, p. 171).
+ABS_SPEED_MAX_MM_S = 4500.0
+
 #: Error code the simulated controller reports when the program fails (a script error).
 SCRIPT_ERROR = 0x0300
 
@@ -476,10 +480,7 @@ class ScriptProjectController(SequenceController):
         buffer reaches it, the robot stops in error with Techman's code for it.
         """
         fmt = _modelled_format(call)
-        speed = float(call.speed)
-        if call.kind != "PTP" and fmt[1] in "AD":
-            # Absolute speed, mm/s: the percent of the arm's top TCP speed it is.
-            speed = speed * 100.0 / self._model.tcp_speed_mm_s
+        speed = self._percent(call, fmt)
         if not 0 < speed <= 100:
             self.log_rejected(call.kind, f"speed {call.speed} ({fmt})", Pose(*call.target[:6]))
             return False
@@ -510,6 +511,18 @@ class ScriptProjectController(SequenceController):
             )
         )
         return True
+
+    def _percent(self, call: MotionCall, fmt: str) -> float:
+        """The move's speed in percent: "P" as given; an absolute speed ("A", "D"), mm/s,
+        as the percent of the arm's top TCP speed it is, at most 100 (the modelled arm goes
+        no faster), for the robot's whole range of 0..4500 mm/s ("The available range of
+        ABS Speed is from 0 to 4500 mm/s", TMflow 2.24, 9 Line, p. 171); beyond it, -1."""
+        speed = float(call.speed)
+        if call.kind == "PTP" or fmt[1] not in "AD":
+            return speed
+        if speed > ABS_SPEED_MAX_MM_S:
+            return -1.0
+        return min(100.0, speed * 100.0 / self._model.tcp_speed_mm_s)
 
     def _rejection_code(self, call: MotionCall, fmt: str) -> int:
         """Techman's error code for a move the arm cannot make (TMflow 2.24, appendix J,
