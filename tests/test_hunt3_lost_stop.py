@@ -37,8 +37,10 @@ FAR = Pose(300, 250, 200, 180, 0, 90)
 #: The outage outlasts the poll's retries and the Stop's (0.3 s each): unloaded, the
 #: wait gives up and the Stop fails about 0.25 s into it (connections refused at once).
 OUTAGE_S = 0.8
-#: Twice real time: FAR is still about 4 s away at speed 5, far beyond the outage.
-TIME_SCALE = 2.0
+#: Ten times real time, FAR at SLOW %: still about 4 s (wall) away, far beyond the
+#: outage, as at twice real time and 5 %; the move to START takes a fifth of that.
+TIME_SCALE = 10.0
+SLOW = 1
 RETRY = RetryPolicy(attempts=2, total_time_s=0.3, initial_backoff_s=0.05, jitter_s=0)
 
 
@@ -89,7 +91,7 @@ def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
     with article_robot(proxy, driver_or_fleet) as robot:
         robot.wait_until_ready(timeout_s=5)
         robot.move_to(START, speed=100)
-        motion = robot.start_move(FAR, speed=5)  # about 4 s to go
+        motion = robot.start_move(FAR, speed=SLOW)  # about 4 s to go
         sim.wait_for(lambda: sim.tcp_pose().y > START.y + 10, timeout=20)
         proxy.outage(OUTAGE_S)
         with pytest.raises(tmmaster.TransportError):
@@ -138,7 +140,7 @@ async def moving_then_cut(
     """The arm on its way from START to FAR (about 4 s), then the link cut."""
     await robot.wait_until_ready(timeout_s=5)
     await robot.move_to(START, speed=100)
-    move: asyncio.Task[object] = asyncio.ensure_future(robot.move_to(FAR, speed=5))
+    move: asyncio.Task[object] = asyncio.ensure_future(robot.move_to(FAR, speed=SLOW))
     await until(lambda: sim.tcp_pose().y > START.y + 10, timeout_s=20)
     proxy.outage(OUTAGE_S)
     return move
