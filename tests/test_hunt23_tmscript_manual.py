@@ -300,3 +300,24 @@ def test_an_absolute_line_speed_in_the_robots_range_is_taken(
         Pose(300, -200, 150, 180, 0, 90),
         Pose(250, -200, 150, 180, 0, 90),
     ]
+
+
+def test_pause_from_a_non_pause_thread_pauses_the_project_but_not_the_thread(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    # Pause() pauses "the project and the motion of the robot other than non-paused
+    # threads" ([TS] §5.2, p. 156; §3.12, p. 47: a non-pause thread "continues to operate"
+    # while the project pauses). The simulator held the calling thread in its own Pause()
+    # until someone pressed Play, so it could never go on, nor call Resume().
+    program = tmp_path / "pause_thread.tms"
+    program.write_text(
+        'main\n{\n    ThreadRun(Guard(), true)\n    Sleep(100)\n    Display("main")\n'
+        "    Exit()\n}\n"
+        'void Guard()\n{\n    Pause()\n    Display("guard goes on")\n    Sleep(300)\n'
+        '    Display("guard resumes")\n    Resume()\n}\n',
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    sim.wait_for(lambda: "main" in sim.displayed(), timeout=5)
+    # main waited, paused, from the guard's Pause() to its Resume().
+    assert sim.displayed() == ["guard goes on", "guard resumes", "main"]

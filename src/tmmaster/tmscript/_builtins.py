@@ -954,9 +954,16 @@ def _Exit(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  # n
 
 @_register_blocking("5.2", 156, "bool()")
 def _Pause(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Generator[str, None, Value]:  # noqa: N802
-    """TMscript 2.24 §5.2 Pause, p. 156: the host pauses; the script waits for a resume."""
+    """TMscript 2.24 §5.2 Pause, p. 156: the host pauses; the script waits for a resume.
+
+    Pause stops "the project and the motion of the robot other than non-paused threads":
+    a non-pause thread that calls it goes on (§3.12, p. 47).
+    """
     rt.host.pause()
     rt.paused = True
+    threads = getattr(rt, "threads", ())
+    if any(t.ident == rt.thread and t.nonpause for t in threads):
+        return True
     while rt.paused:
         yield PAUSED
     return True

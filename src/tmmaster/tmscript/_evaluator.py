@@ -2156,6 +2156,9 @@ class Execution:
         self._rt.start(max_statements, max_seconds)
         if self._phase == "main":
             self._step_threads(nonpause_only=False)
+            if self._rt.paused:  # a thread's Pause() (§5.2, p. 156): main waits too
+                self.state = ExecState.PAUSED
+                return self.state
         while self._gen is not None:
             if self._phase != "main" and (
                 self.host.now_s() - self._phase_start > STOP_SECTION_LIMIT_S
