@@ -321,3 +321,15 @@ def test_pause_from_a_non_pause_thread_pauses_the_project_but_not_the_thread(
     sim.wait_for(lambda: "main" in sim.displayed(), timeout=5)
     # main waited, paused, from the guard's Pause() to its Resume().
     assert sim.displayed() == ["guard goes on", "guard resumes", "main"]
+
+
+def test_a_float_compares_with_a_float_constant_as_floats() -> None:
+    # A constant such as 1.11 is a float ([TS] §2.2, p. 14: "1.11 is in the value range of
+    # data type: float"); "When one of the two values comes as the floating-point type, the
+    # calculation will proceed by the floating-point type" (§2.4, p. 19). The simulator
+    # compared the float variable with the constant's unrounded value: float f = 0.1 was
+    # not equal to 0.1, yet equal to 0.1 + 0 (an addition rounds to a float).
+    assert shows(
+        "float f = 0.1\nDisplay(f == 0.1)\nDisplay(f == 0.1 + 0)\nDisplay(f != 0.1)\n"
+        "Display(f < 0.1)\ndouble d = 0.1\nDisplay(d == 0.1)\nDisplay(d == f)"
+    ) == ["true", "true", "false", "false", "true", "false"]

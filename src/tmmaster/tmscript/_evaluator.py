@@ -634,7 +634,12 @@ class _ExprCompiler:
             raise _syntax(node, f"a {lt} cannot be compared with a {rt_}")
         if "bool" in kinds and op not in ("==", "!="):
             raise _syntax(node, f"operator {op} does not apply to bool")
-        return _COMPARE[op]
+        compare = _COMPARE[op]
+        if kinds == {"n"} and _promote(lt, rt_) == "float":
+            # Compared as floats, as they are added (§2.4, p. 19): a float constant is a
+            # float (§2.2, p. 14), so float f = 0.1 equals 0.1, as it equals 0.1 + 0.
+            return lambda x, y: compare(to_f32(x), to_f32(y))
+        return compare
 
     def binary(self, node: a.Binary) -> _CExpr:
         left, right = self.expr(node.left), self.expr(node.right)
