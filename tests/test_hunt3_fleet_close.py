@@ -25,7 +25,11 @@ from tmmaster.sim import Simulator, Timing
 
 A = Pose(300, -200, 150, 180, 0, 90)
 B = Pose(300, -200, 180, 180, 0, 90)
-FAR = Pose(250, 0, 400, 180, 0, 90)  # seconds away from A at speed 10 (time_scale 2)
+FAR = Pose(250, 0, 400, 180, 0, 90)  # seconds away from A at FAR_SPEED (a's time_scale)
+#: a's simulator runs A_SCALE times real time and its long move at FAR_SPEED %: as long in
+#: wall time as at 10 % and twice real time; the setup move to A takes a fifth of that.
+A_SCALE = 10.0
+FAR_SPEED = 2
 
 
 @dataclass
@@ -51,7 +55,7 @@ class Cell:
 
         def run() -> None:
             try:
-                robot.move_to(target, speed=10 if target == FAR else 80)
+                robot.move_to(target, speed=FAR_SPEED if target == FAR else 80)
             except BaseException as exc:
                 command.outcome = type(exc).__name__
             else:
@@ -115,7 +119,7 @@ def cell(request_s: float = 3.0) -> Iterator[Cell]:
     """
     timing = Timing(tick_hz=50.0)
     with (
-        Simulator("tmflow", time_scale=2.0, timing=timing) as sim_a,
+        Simulator("tmflow", time_scale=A_SCALE, timing=timing) as sim_a,
         Simulator("tmflow", time_scale=20.0, timing=timing) as sim_b,
         FaultProxy(sim_b.port) as proxy,
     ):
