@@ -333,3 +333,55 @@ def test_a_float_compares_with_a_float_constant_as_floats() -> None:
         "float f = 0.1\nDisplay(f == 0.1)\nDisplay(f == 0.1 + 0)\nDisplay(f != 0.1)\n"
         "Display(f < 0.1)\ndouble d = 0.1\nDisplay(d == 0.1)\nDisplay(d == f)"
     ) == ["true", "true", "false", "false", "true", "false"]
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        "    Init()\n",  # declared in a customized function
+        '    if (true)\n    {\n        ModbusTCP dev = "127.0.0.1", 502\n'
+        '        modbus_write("dev", 1, "RO", 9000, (byte)1)\n    }\n',  # in a block
+    ],
+)
+def test_a_device_declared_in_a_function_or_block_is_closed_when_it_ends(body: str) -> None:
+    # "once the variables exit from the scope, the variables will release the variable
+    # data. For variables declared by the class, such as SerialPort, Socket, and Modbus,
+    # the variables will close the devices" ([TS] §3.7, p. 35). The simulator kept such a
+    # device for the rest of the project: a program that used it after its scope ran on,
+    # where TMflow no longer has it.
+    host = _ModbusHost()
+    program = parse(
+        f"main\n{{\n{body}"
+        '    modbus_write("dev", 1, "RO", 9001, (byte)2)\n}\n'
+        'void Init()\n{\n    ModbusTCP dev = "127.0.0.1", 502\n'
+        '    modbus_write("dev", 1, "RO", 9000, (byte)1)\n}\n'
+    )
+    execution = Execution(program, host)
+    assert execution.run_to_end(timeout_s=5) == ExecState.ERROR
+    assert execution.error is not None
+    assert 'no ModbusTCP device named "dev"' in str(execution.error)
+    assert host.requests == [(6, 9000, [1])]  # inside its scope it worked
+
+
+def test_two_functions_may_each_declare_a_device_of_the_same_name() -> None:
+    # "Local variables are independent of different function sections. Such declared a
+    # variable a in both Test1() and Test2()" ([TS] §3.7, p. 35). The simulator refused a
+    # second local ModbusTCP of the same name as declared twice; one in define, or two in
+    # one function, still are.
+    host = _ModbusHost()
+    program = parse(
+        "main\n{\n    A()\n    B()\n}\n"
+        'void A()\n{\n    ModbusTCP dev = "127.0.0.1", 502\n'
+        '    modbus_write("dev", 1, "RO", 9000, (byte)1)\n}\n'
+        'void B()\n{\n    ModbusTCP dev = "127.0.0.1", 502\n'
+        '    modbus_write("dev", 1, "RO", 9001, (byte)2)\n}\n'
+    )
+    assert Execution(program, host).run_to_end(timeout_s=5) == ExecState.ENDED
+    assert host.requests == [(6, 9000, [1]), (6, 9001, [2])]
+    for text in (
+        'define\n{\n    ModbusTCP dev = "127.0.0.1"\n}\n'
+        'main\n{\n    ModbusTCP dev = "127.0.0.1"\n}\n',
+        'main\n{\n    ModbusTCP dev = "127.0.0.1"\n    ModbusTCP dev = "127.0.0.1"\n}\n',
+    ):
+        with pytest.raises(TMScriptSyntaxError, match="declared twice"):
+            parse(text)

@@ -237,6 +237,28 @@ def _mapped(ce: _CExpr, fn: Callable[[Any], Any], typ: str) -> _CExpr:
     return _CExpr(mapped_gen, typ, True)
 
 
+def _run_statements(steps: tuple[tuple[str, Callable[[_Frame], Any]], ...]) -> StmtFn:
+    """The statements ``steps`` (each ``(kind, fn)`` of :meth:`_Compiler.statement`) in turn."""
+
+    def run(fr: _Frame) -> Generator[str, None, Control]:
+        rt = fr.rt
+        for kind, fn in steps:
+            rt.budget -= 1
+            if rt.budget < 0 and rt.spent():
+                yield _BUDGET
+            if kind is _SIMPLE:
+                fn(fr)
+            elif kind is _EXPR:
+                yield from fn(fr)  # a call that may wait: its value is dropped
+            else:
+                ctl = yield from fn(fr)
+                if ctl is not None:
+                    return ctl  # type: ignore[no-any-return]
+        return None
+
+    return run
+
+
 def _syntax(node: a.Node, message: str) -> TMScriptSyntaxError:
     return TMScriptSyntaxError(message, line=node.line, column=node.column)
 
@@ -422,6 +444,9 @@ class _ExprCompiler:
         self.script = script
         self.globals: dict[str, tuple[int, str]] = {}
         self.devices: set[str] = set()
+        #: Where each device was declared: None in define, else the id of its function's
+        #: or section's scope (local devices of two functions are independent, §3.7 p. 35).
+        self.device_owners: dict[str, set[int | None]] = {}
         self.functions: dict[str, _Function] = {}
         self.warnings: list[ScriptWarning] = []
         self.scope = _Scope(is_global=True)
@@ -978,7 +1003,7 @@ class _Compiler(_ExprCompiler):
                 raise _syntax(fn, f"function {fn.name} is defined twice")
             params = tuple(_type_name(p.type) for p in fn.params)
             self.functions[fn.name] = _Function(fn, _type_name(fn.return_type), params)
-        define = self.statements(script.define)
+        define = self.statements(script.define, local=False)
         sections: dict[str, tuple[StmtFn, int]] = {}
         for kind, block in (
             ("main", script.main),
@@ -1018,26 +1043,29 @@ class _Compiler(_ExprCompiler):
             if new_scope:
                 self.scope.names.pop()
 
-    def statements(self, nodes: tuple[a.Statement, ...]) -> StmtFn:
+    def statements(self, nodes: tuple[a.Statement, ...], *, local: bool = True) -> StmtFn:
         steps = tuple(self.statement(node) for node in nodes)
+        run = _run_statements(steps)
+        devices = tuple(n.name for n in nodes if isinstance(n, a.ClassDeclaration))
+        if not local or not devices:
+            return run
 
-        def run(fr: _Frame) -> Generator[str, None, Control]:
-            rt = fr.rt
-            for kind, fn in steps:
-                rt.budget -= 1
-                if rt.budget < 0 and rt.spent():
-                    yield _BUDGET
-                if kind is _SIMPLE:
-                    fn(fr)
-                elif kind is _EXPR:
-                    yield from fn(fr)  # a call that may wait: its value is dropped
-                else:
-                    ctl = yield from fn(fr)
-                    if ctl is not None:
-                        return ctl  # type: ignore[no-any-return]
-            return None
+        def scoped(fr: _Frame) -> Generator[str, None, Control]:
+            # A device declared in a function or a block is closed when it ends: "For
+            # variables declared by the class, such as SerialPort, Socket, and Modbus,
+            # the variables will close the devices" (TMscript 2.24 §3.7, p. 35).
+            held = fr.rt.devices
+            saved = {name: held.get(name) for name in devices}  # an outer scope's, if any
+            try:
+                return (yield from run(fr))
+            finally:
+                for name, device in saved.items():
+                    if device is None:
+                        held.pop(name, None)
+                    else:
+                        held[name] = device
 
-        return run
+        return scoped
 
     def as_gen(self, node: a.Statement) -> StmtFn:
         kind, fn = self.statement(node)
@@ -1149,8 +1177,11 @@ class _Compiler(_ExprCompiler):
         args = [self.pure(arg, "ModbusTCP") for arg in node.args]
         name = node.name
         _check_name(node, name)
-        if name in self.devices:
+        owner = None if self.scope.is_global else id(self.scope)
+        owners = self.device_owners.setdefault(name, set())
+        if owners and (owner is None or None in owners or owner in owners):
             raise _syntax(node, f"device {name} is declared twice")
+        owners.add(owner)
         self.devices.add(name)
         fns = [
             self.to_type(arg, want, node)
