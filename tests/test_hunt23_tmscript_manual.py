@@ -385,3 +385,64 @@ def test_two_functions_may_each_declare_a_device_of_the_same_name() -> None:
     ):
         with pytest.raises(TMScriptSyntaxError, match="declared twice"):
             parse(text)
+
+
+def test_ptp_with_reference_joints_reaches_the_solution_nearest_them(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    # PTP Syntax 3, float[] reference joints: "move to target with PTP ... and attempt to
+    # reach the closest assigned joint target" ([TS] §13.8, p. 335). The simulator ignored
+    # the reference and took the solution nearest where the arm was: here the pose it is
+    # at, elbow up, where the reference asks for the elbow-down solution.
+    program = tmp_path / "reference.tms"
+    program.write_text(
+        "main\n{\n"
+        "    float[] here = {0, -20, 100, 10, 90, 0}\n"
+        "    float[] ref = {0, 40, -100, 150, 90, 0}\n"
+        '    PTP("JPP", here, 50, 200, 0, false)\n'
+        "    QueueTag(1, 1)\n"
+        "    float[] target = forwardkin(here)\n"
+        "    Display(inversekin(target, ref))\n"
+        '    Display(PTP("CPP", target, 50, 200, 0, false, ref))\n'
+        "    QueueTag(2, 1)\n"
+        '    Display("done")\n'
+        "    Exit()\n}\n",
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    sim.wait_for(lambda: "done" in sim.displayed(), timeout=10)
+    nearest = [float(v) for v in sim.displayed()[0].strip("{}").split(",")]
+    assert sim.displayed()[1:] == ["true", "done"]
+    assert abs(nearest[2] - (-100)) < 1  # the elbow-down solution
+    joints = sim.call(sim.backend.joint_positions_deg)
+    assert joints is not None
+    assert max(abs(a - b) for a, b in zip(joints, nearest, strict=True)) < 0.05
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the simulator ignores a pose configuration {Config1, Config2, Config3} "
+    "(PTP Syntax 2, inversekin Syntax 2, TMscript 2.24 pp. 207, 332-334): which digit "
+    "means which shoulder, elbow and wrist is drawn in the manual's figure, which its text "
+    "copy lost, so the solution is the one nearest the arm's joints whatever is asked",
+)
+def test_a_pose_configuration_chooses_the_solution(
+    tm_simulator_factory: SimFactory, tmp_path: Path
+) -> None:
+    # "inversekin(p1, {1,2,4}) // Convert the Cartesian coordinate values to joint angles
+    # with the pose configuration parameters ... joint1 = {149.37149,0,-90,0,-90,-30.628504}"
+    # where inversekin(p1) gives {0,0,90,0,90,0} ([TS] §6.35, p. 207): two configurations
+    # that differ in Config1 are two different solutions.
+    program = tmp_path / "config.tms"
+    program.write_text(
+        "main\n{\n"
+        "    float[] target = forwardkin({0, -20, 100, 10, 90, 0})\n"
+        "    Display(inversekin(target, {0, 2, 4}))\n"
+        "    Display(inversekin(target, {1, 2, 4}))\n"
+        "    Exit()\n}\n",
+        encoding="utf-8",
+    )
+    sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+    sim.wait_for(lambda: len(sim.displayed()) == 2, timeout=5)
+    first, second = sim.displayed()
+    assert first != second

@@ -550,6 +550,12 @@ class ScriptProjectController(SequenceController):
         if fmt == "JPP":
             joints = self._model.check_joints(call.target, tool=self.tool)
             target = self._model.forward(joints, self.tool)
+        elif call.reference_joints is not None:
+            # PTP Syntax 3: "attempt to reach the closest assigned joint target" (TMscript
+            # 2.24 §13.8, p. 335): the solution nearest the reference joints, not here.
+            target = Pose(*call.target)
+            nearest = self._model.inverse(target, seed_deg=call.reference_joints, tool=self.tool)
+            joints = self._model.check_joints(nearest, tool=self.tool)
         else:
             target = Pose(*call.target)
         seed = None if start_joints is None else tuple(start_joints)
