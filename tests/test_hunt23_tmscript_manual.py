@@ -446,3 +446,19 @@ def test_a_pose_configuration_chooses_the_solution(
     sim.wait_for(lambda: len(sim.displayed()) == 2, timeout=5)
     first, second = sim.displayed()
     assert first != second
+
+
+@pytest.mark.parametrize("index", ["1.5", "f", "d", "true", "i / 2.0"])
+def test_an_array_index_must_be_an_integer(index: str) -> None:
+    # TMflow refuses "Array Index is not an integer number" ([TMF] appendix J, 0x0004820E,
+    # p. 480: "The index used on an array variable is not an integer ... a non-integral
+    # value"). The simulator truncated a[1.5] to a[1] and ran on. (A string index is
+    # converted, as a string given for a number is: tests/test_tmscript_execution.py.)
+    with pytest.raises(TMScriptSyntaxError, match="an array index is an integer"):
+        parse(f"{GLOBALS}main\n{{\n    int[] a = {{1, 2, 3}}\n    int x = a[{index}]\n}}\n")
+    with pytest.raises(TMScriptSyntaxError, match="an array index is an integer"):
+        parse(f"{GLOBALS}main\n{{\n    int[] a = {{1, 2, 3}}\n    a[{index}] = 7\n}}\n")
+
+
+def test_an_integer_index_of_any_size_is_taken() -> None:
+    assert shows("int[] a = {1, 2, 3}\nbyte b = 2\nint i = 1\nDisplay(a[b] + a[i] + a[0])") == ["6"]

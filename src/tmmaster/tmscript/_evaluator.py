@@ -901,6 +901,11 @@ class _ExprCompiler:
         if not is_array(base.type):
             raise _syntax(node, f"a {base.type} has no elements")
         index = self.expr(node.index)
+        if index.type in ("float", "double", "bool"):
+            # TMflow 2.24 appendix J, 0x0004820E "Array Index is not an integer number"
+            # (p. 480: "a non-integral value"); the index counts elements from 0 (TMscript
+            # 2.24 §2.3, p. 18). A string is converted, as any string given for a number.
+            raise _syntax(node.index, f"an array index is an integer, not a {index.type}")
         elem = element_type(base.type)
         conv = self.converter(index.type, "int", node.index)
         constant = _NOT_CONSTANT if conv is None else _converted_literal(node.index, conv)
