@@ -420,11 +420,12 @@ class _MotionFollower:
                 withdraw's answer and, but for the closer, on waiting for another
                 caller's clean-up; None waits as long as that takes (its requests and
                 the answer are bounded).
-            closer: True for ``Robot.close()`` (and the exit hook): its wait for the
-                withdraw's answer is not ended by the close itself, only by
-                ``deadline``. Any other caller's wait ends when a close begins, and
-                the command is stopped; so the closer waits for that caller's clean-up,
-                the give-up being attempted even past ``deadline``.
+            closer: True for ``Robot.close()`` (and the exit hook): it polls the command
+                once first (:meth:`_finished`); its wait for the withdraw's answer is not
+                ended by the close itself, only by ``deadline``. Any other caller's wait
+                ends when a close begins, and the command is stopped; so the closer waits
+                for that caller's clean-up, the give-up being attempted even past
+                ``deadline``.
 
         Returns:
             True when the command can no longer run: never written, already finished,
@@ -443,7 +444,7 @@ class _MotionFollower:
             theirs = motion.stop_delivered and not self._channel.duplicate_safe
             if motion._settled is not None and (motion is not self.owed or theirs):
                 return motion._settled
-            if motion.done or motion.ticket.finished:
+            if self._finished(motion, look=closer):
                 return True  # nothing left to withdraw or stop
             motion._given_up = True
             motion.phase = MovePhase.FAILED
@@ -464,6 +465,15 @@ class _MotionFollower:
             return confirmed
         finally:
             lock.release()
+
+    def _finished(self, motion: Motion, *, look: bool) -> bool:
+        """Whether the robot finished the command; ``look``: poll one not yet known done
+        once first, a failed poll aside (``close()``, as :meth:`Motion.cancel`: a move
+        that finished unwatched is neither stopped nor said withdrawn)."""
+        if look and motion.phase in (MovePhase.SENT, MovePhase.RUNNING):
+            with contextlib.suppress(TMMasterError):
+                self.poll(motion)
+        return motion.done or motion.ticket.finished
 
     def settle_owed(self) -> None:
         """Before anything else is sent: deliver the give-up still :attr:`owed`, if any,
@@ -800,7 +810,6 @@ class _MotionFollower:
     def _motion_timed_out(self, motion: Motion, follow: FollowState) -> None:
         motion.phase = MovePhase.FAILED
         budget = follow.applied_budget()  # the bound actually applied, grown or not
-        stall = follow.describe_stall()
         pose = self._pose_or(motion.last_pose)
         self._log.error(
             "robot.motion_timeout",
@@ -810,6 +819,6 @@ class _MotionFollower:
         # The stop follows in abandon(), as for every running move the master gives up on.
         raise MotionTimeoutError(
             f"move to {motion.target} did not finish within {budget:.2f} s"
-            f" (expected {motion.expected_s:.2f} s){stall}; last pose {pose}",
+            f" (expected {motion.expected_s:.2f} s){follow.describe_stall()}; last pose {pose}",
             pose=pose,
         )

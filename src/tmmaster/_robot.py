@@ -775,19 +775,16 @@ class Robot:
         return safely
 
     def _give_up_outstanding(self, deadline: float | None) -> bool:
-        """For :meth:`close`: withdraw or stop the last command written, if not settled."""
+        """For :meth:`close`: withdraw or stop the last command written, if not settled
+        (one poll first: a move that finished unwatched is left as it is)."""
         if self._transport.state is ConnectionState.CLOSED:
             return True  # closed by someone else: nothing can be written any more
         self._gate.drain()  # past the deadline too: a write in flight may land and run
         # After drain(): the last command that can ever be written.
         if (motion := self._last_motion) is None:
             return True
-        return self._follower.abandon(
-            motion,
-            StopRequestedError("the robot connection is closing"),
-            deadline=deadline,
-            closer=True,
-        )
+        reason = StopRequestedError("the robot connection is closing")
+        return self._follower.abandon(motion, reason, deadline=deadline, closer=True)
 
     @property
     def io(self) -> RobotIO:
