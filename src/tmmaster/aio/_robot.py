@@ -373,12 +373,16 @@ class AsyncMotion(_Primed[Motion]):
 
     @_documented(Motion.cancel)
     def cancel(self) -> Coroutine[Any, Any, bool]:
-        """Awaited: :meth:`Motion.cancel`, run on the robot's thread.
+        """Awaited: :meth:`Motion.cancel`, run on the robot's thread before any call
+        queued there. A wait on the motion running there (another task's ``await
+        motion``) gives up now, as a cancelled one does (StopRequestedError), and one
+        queued raises it when its turn comes: the move is not left to run to its end
+        first.
 
         Returns:
             Whether the command can no longer run, a coroutine.
         """
-        return self._robot._follow(self.motion, self.motion.cancel)
+        return self._robot._follow(self.motion, self.motion.cancel, first=True)
 
     @property  # never assigned here: _Primed.__init__ (which sets it) is not called
     def _body(self) -> Coroutine[Any, Any, Motion]:  # type: ignore[override]
@@ -598,16 +602,20 @@ class AsyncRobot(_Front):
     async def _run(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> T:
         return await self._await(_Job(self, functools.partial(fn, *args, **kwargs)))
 
-    def _follow(self, motion: Motion, call: Callable[[], T]) -> _Primed[T]:
+    def _follow(self, motion: Motion, call: Callable[[], T], *, first: bool = False) -> _Primed[T]:
         """A call that follows ``motion`` (its wait, its progress): cancelled, it gives it up.
 
-        Cancelled before its first step too (:class:`_Primed`).
+        Cancelled before its first step too (:class:`_Primed`). ``first`` (a cancel):
+        run before the calls queued, a call following ``motion`` that runs giving up now.
         """
-        return _Primed(self._await(_Job(self, call, follows=motion)))
+        return _Primed(self._await(_Job(self, call, follows=motion), first=first))
 
-    async def _await(self, job: _Job[T]) -> T:
-        if not self._worker.submit(job):
+    async def _await(self, job: _Job[T], *, first: bool = False) -> T:
+        if not self._worker.submit(job, first=first):
             raise TransportClosedError(f"{self.name}: this robot is closed")
+        running = self._worker.running  # queued first: what runs now, not this job
+        if first and running is not None and running is not job and running.follows is job.follows:
+            running.cancel()  # never blocks: the robot's stop request ends that wait
         try:
             return await asyncio.shield(job.outcome)
         except asyncio.CancelledError:
@@ -665,9 +673,8 @@ class AsyncRobot(_Front):
             return  # over, or given up already (by the wait it followed)
         self.robot.interrupt()
         try:
-            motion.wait()  # ends at once with StopRequestedError, after the clean-up
-        except TMMasterError:
-            pass
+            with contextlib.suppress(TMMasterError):  # StopRequestedError, after the clean-up
+                motion.wait()  # ends at once
         finally:
             self._end_interrupt()
         self._log.warning(
