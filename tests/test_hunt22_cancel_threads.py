@@ -24,6 +24,7 @@ from safety_invariant import Issued, check
 from test_fleet import late_ack_over, ticks_pass
 from test_motion_cancel import braked
 from tmmaster import (
+    Fleet,
     MovePhase,
     PollPolicy,
     Pose,
@@ -184,3 +185,41 @@ def test_a_cancel_from_another_thread_after_the_owner_saw_it_done_changes_nothin
         assert (motion.done, motion.abandoned, motion.stop_delivered) == (True, False, None)
         robot.move_to(A.offset(dz=20), speed=100)  # the project still runs
     check([issued, Issued(A.offset(dz=20), 0.0, 1.0, "done")], sim.motion_log())
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+@pytest.mark.parametrize("interval_s", [0.01, 1.0])
+def test_a_cancel_while_a_fleets_loop_polls_the_owners_wait(
+    tm_simulator_factory: SimFactory, profile: str, interval_s: float
+) -> None:
+    # In a Fleet the owner's wait is polled by the fleet's event loop; cancel() polls
+    # and gives up on the calling thread meanwhile. At 1 s nominal polling, only the
+    # give-up can end the owner's wait early.
+    sim = tm_simulator_factory(profile, time_scale=5.0)
+    with Fleet() as fleet:
+        robot = Robot(
+            "127.0.0.1",
+            sim.port,
+            profile=profile,
+            link=fleet,
+            gripper=None,
+            polling=PollPolicy(interval_s=interval_s, predictive=False),
+        )
+        with robot:
+            robot.wait_until_ready(timeout_s=5)
+            robot.move_to(A, speed=100)
+            issued = [Issued(A, 0.0, 0.0, "done"), Issued(FAR, time.monotonic())]
+            motion = robot.start_move(FAR, speed=10)
+            owner = Owner(motion.wait, issued[1])
+            sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)
+            assert motion.cancel() is True
+            given_up_at = time.monotonic()
+            owner.join()
+            assert isinstance(owner.error, StopRequestedError), repr(owner.error)
+            assert motion.stop_delivered is True
+            stopped_at = braked(sim)
+            assert not stopped_at.is_close(FAR)
+            ticks_pass(sim, 10)
+            assert sim.tcp_pose().is_close(stopped_at)
+    issued[1].ended_at = min(issued[1].ended_at or given_up_at, given_up_at)
+    check(issued, sim.motion_log())
