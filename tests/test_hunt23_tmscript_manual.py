@@ -462,3 +462,37 @@ def test_an_array_index_must_be_an_integer(index: str) -> None:
 
 def test_an_integer_index_of_any_size_is_taken() -> None:
     assert shows("int[] a = {1, 2, 3}\nbyte b = 2\nint i = 1\nDisplay(a[b] + a[i] + a[0])") == ["6"]
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        "float f = 1.5\n    f++",
+        "double d = 1\n    d--",
+        "float f = 1\n    ++f",
+        "float f = 1\n    --f",
+    ],
+)
+def test_increment_and_decrement_take_an_integer_variable(body: str) -> None:
+    # "The operands ++, -- are only used by integer variable (i.e. var a: a++, a--, ++a,
+    # --a)" ([TMF] appendix J, 0x00048213, p. 481; [TS] §2.4, p. 19, the operator table's
+    # requirement: "Integer variable"). The simulator added 1 to a float.
+    with pytest.raises(TMScriptSyntaxError, match="takes an integer variable"):
+        parse(f"main\n{{\n    {body}\n}}\n")
+    parse("main\n{\n    byte b = 1\n    b++\n    int i = 0\n    --i\n}\n")
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the interpreter takes ! on any value (tests/test_tmscript_fast_paths.py::"
+    "test_not_and_logic_on_any_value asserts it, for ints, strings and doubles), where "
+    "TMflow refuses anything but a Boolean after ! (appendix J, 0x00048214, p. 481): "
+    "left for the lead to decide, as that test may not be weakened",
+)
+@pytest.mark.parametrize("value", ["5", "i", '"true"', "d"])
+def test_not_takes_a_bool(value: str) -> None:
+    # "The item following the symbol "!" is invalid in an expression which is supposed to
+    # be a Boolean type object (or variable) ... Check if the subject after the symbol "!"
+    # is a Boolean type object or not" ([TMF] appendix J, 0x00048214, p. 481).
+    with pytest.raises(TMScriptSyntaxError):
+        parse(f"{GLOBALS}main\n{{\n    bool b = !{value}\n}}\n")

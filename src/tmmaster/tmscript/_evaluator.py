@@ -867,8 +867,10 @@ class _ExprCompiler:
 
     def incdec(self, node: a.IncDec) -> _CExpr:
         typ, store, current = self.target(node.target)
-        if typ not in NUMERIC:
-            raise _syntax(node, f"{node.op} takes a numeric variable, not {typ}")
+        if typ not in INTEGRAL:
+            # "The operands ++, -- are only used by integer variable" (TMflow 2.24 appendix
+            # J, 0x00048213, p. 481; TMscript 2.24 §2.4, p. 19: "Integer variable").
+            raise _syntax(node, f"{node.op} takes an integer variable, not {typ}")
         delta = 1 if node.op == "++" else -1
         conv = self.converter("int" if typ in INTEGRAL else typ, typ, node)
         cur = cast(PureFn, current.fn)
