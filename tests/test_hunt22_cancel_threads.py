@@ -20,6 +20,7 @@ from collections.abc import Callable
 
 import pytest
 
+from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check
 from test_fleet import late_ack_over, ticks_pass
 from test_motion_cancel import braked
@@ -30,6 +31,7 @@ from tmmaster import (
     Pose,
     Robot,
     StopRequestedError,
+    TimeoutPolicy,
     TMMasterError,
 )
 from tmmaster.sim import Simulator
@@ -222,4 +224,58 @@ def test_a_cancel_while_a_fleets_loop_polls_the_owners_wait(
             ticks_pass(sim, 10)
             assert sim.tcp_pose().is_close(stopped_at)
     issued[1].ended_at = min(issued[1].ended_at or given_up_at, given_up_at)
+    check(issued, sim.motion_log())
+
+
+def test_a_cancel_from_another_thread_while_the_command_write_is_held_runs_nothing(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # tmflow: the move's write (FC16 to 9000) is held in the network; another thread takes
+    # the command as robot.last_motion (recorded before its first byte) and cancels it
+    # while the sending thread waits for the write's answer. The held frame lands only
+    # after the cancel returned: its number is used up, it never runs.
+    sim = tm_simulator_factory("tmflow", time_scale=5.0)
+    release = threading.Event()
+    with FaultProxy(sim.port) as proxy:
+        robot = Robot(
+            "127.0.0.1",
+            proxy.port,
+            profile="tmflow",
+            gripper=None,
+            polling=PollPolicy(interval_s=0.01),
+            timeouts=TimeoutPolicy(request_s=0.3, ack_timeout_s=2.0),
+        )
+        outcome: list[str] = []
+        try:
+            robot.connect()
+            robot.wait_until_ready(timeout_s=5)
+            proxy.add(Rule("hold", function_code=16, address=9000, release=release))
+            issued = [Issued(FAR, time.monotonic())]
+
+            def move() -> None:
+                try:
+                    robot.move_to(FAR, speed=50)
+                    outcome.append("done")
+                except TMMasterError as exc:
+                    outcome.append(type(exc).__name__)
+
+            mover = threading.Thread(target=move)
+            mover.start()
+            sim.wait_for(lambda: proxy.played("hold"), timeout=5)
+            motion = robot.last_motion
+            assert motion is not None
+            assert motion.target == FAR
+            assert motion.cancel() is True
+            issued[0].ended_at, issued[0].outcome = time.monotonic(), "cancelled"
+            release.set()  # the held frame lands now, after the cancel returned
+            mover.join(10)
+            assert not mover.is_alive()
+            assert outcome
+            assert outcome != ["done"], "the move was reported done"
+            proxy.wait_held()
+            ticks_pass(sim, 20)
+            assert sim.motion_log() == (), "a command given up by cancel() ran"
+        finally:
+            release.set()
+            robot.close()
     check(issued, sim.motion_log())
