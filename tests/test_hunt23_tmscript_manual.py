@@ -496,3 +496,33 @@ def test_not_takes_a_bool(value: str) -> None:
     # is a Boolean type object or not" ([TMF] appendix J, 0x00048214, p. 481).
     with pytest.raises(TMScriptSyntaxError):
         parse(f"{GLOBALS}main\n{{\n    bool b = !{value}\n}}\n")
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("int i = 3000000000", "out of an int's range"),
+        ("int i = 0\n    i = -2147483649", "out of an int's range"),
+        ("int[] a = {1, 4294967295}", "out of an int's range"),
+        ("float f = 1e39", "out of a float's range"),
+        ("byte[] bb = {1, 300}", "out of a byte's range"),
+    ],
+)
+def test_a_constant_out_of_its_types_range_is_refused(text: str, needle: str) -> None:
+    # "Invalid int range ... Invalid float range: The operand in the expression is assigned
+    # a number out of range" ([TMF] appendix J, 0x0004821B, p. 482; 0x0004821C, p. 483), as
+    # "byte b = -100 // -100 mismatches with the value range of byte. // Error" ([TS] §2.2,
+    # p. 15). The simulator refused it for a byte only: an int took the constant wrapped to
+    # 32 bits (3000000000 became -1294967296), a float failed only when reached, and an
+    # array constant's elements were never checked.
+    with pytest.raises(TMScriptSyntaxError, match=needle):
+        parse(f"main\n{{\n    {text}\n}}\n")
+
+
+def test_a_calculation_still_wraps_and_a_fitting_constant_passes() -> None:
+    # "int i = 2147483647 + 1 // i = -2147483648" ([TS] §2.2, p. 15): a calculation keeps 32
+    # bits; the extremes themselves fit.
+    assert shows(
+        "int i = 2147483647 + 1\nDisplay(i)\nint j = -2147483648\nDisplay(j)\n"
+        "double d = 3000000000\nDisplay(d)\nfloat f = 3.4E+38\nDisplay(f > 0)"
+    ) == ["-2147483648", "-2147483648", "3000000000", "true"]

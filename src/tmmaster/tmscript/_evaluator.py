@@ -36,6 +36,7 @@ from ._builtins import (
 from ._host import Host, HostError
 from ._parser import parse_script
 from ._types import (
+    FLOAT_MAX,
     INTEGRAL,
     NUMERIC,
     STRING_MAX,
@@ -264,16 +265,38 @@ def _syntax(node: a.Node, message: str) -> TMScriptSyntaxError:
 
 
 def _byte_range(value: a.Expr, typ: str) -> None:
-    """A constant out of 0..255 given to a byte is an error (TMscript 2.24 §2.2, p. 15:
-    ``byte b = -100`` "mismatches with the value range of byte"); a calculation keeps 8 bits."""
-    if typ != "byte" or not isinstance(value, a.Literal) or value.type not in ("int", "double"):
+    """A constant out of its type's range given to a byte, an int or a float is an error
+    (TMscript 2.24 §2.2, p. 15: ``byte b = -100`` "mismatches with the value range of
+    byte"; TMflow 2.24 appendix J, 0x0004821A-C "Invalid byte / int / float range", "The
+    operand in the expression is assigned a number out of range", pp. 482-483), each
+    element of an array constant too; a calculation keeps 8 or 32 bits."""
+    if isinstance(value, a.ArrayLiteral) and is_array(typ):
+        for item in value.items:
+            _byte_range(item, element_type(typ))
         return
-    if isinstance(value.value, int) and not 0 <= value.value <= 255:
-        raise _syntax(
-            value,
-            f"{value.value} is out of a byte's range 0..255 "
-            "(§2.2, p. 15: a byte constant must fit; a calculation such as 0 - 100 keeps 8 bits)",
+    if not isinstance(value, a.Literal) or value.type not in ("int", "float", "double"):
+        return
+    message = _out_of_range(value.value, typ)
+    if message is not None:
+        raise _syntax(value, message)
+
+
+def _out_of_range(number: Any, typ: str) -> str | None:
+    """Why the constant ``number`` does not fit a ``typ`` (see :func:`_byte_range`), or None."""
+    if typ == "float":
+        return None if abs(number) <= FLOAT_MAX else f"{number} is out of a float's range"
+    bounds = _INT_RANGE.get({"int32": "int"}.get(typ, typ))
+    if bounds is None or not isinstance(number, int) or bounds[0] <= number <= bounds[1]:
+        return None
+    if typ == "byte":
+        return (
+            f"{number} is out of a byte's range 0..255 "
+            "(§2.2, p. 15: a byte constant must fit; a calculation such as 0 - 100 keeps 8 bits)"
         )
+    return (
+        f"{number} is out of an {typ}'s range {bounds[0]}..{bounds[1]} "
+        "(TMflow 0x0004821B Invalid int range; a calculation keeps 32 bits)"
+    )
 
 
 #: Words a variable may not be named: the Boolean values and the reserved characters
