@@ -526,3 +526,30 @@ def test_a_calculation_still_wraps_and_a_fitting_constant_passes() -> None:
         "int i = 2147483647 + 1\nDisplay(i)\nint j = -2147483648\nDisplay(j)\n"
         "double d = 3000000000\nDisplay(d)\nfloat f = 3.4E+38\nDisplay(f > 0)"
     ) == ["-2147483648", "-2147483648", "3000000000", "true"]
+
+
+@pytest.mark.parametrize(
+    ("subject", "cases"),
+    [
+        ("x", 'case 1\n Display("a")\n break\n case 1\n Display("b")\n break'),
+        ("s", 'case "00"\n break\n case "00"\n break'),
+        ("x", "case >= 60\n break\n case >= 60\n break"),
+        ("x", "default\n break\n default\n break"),
+    ],
+)
+def test_a_duplicated_switch_case_is_refused(subject: str, cases: str) -> None:
+    # TMflow's check: 0x0004810D "Duplicated switch case condition", "Please remove
+    # duplicated switch case condition" ([TMF] appendix J, p. 365). The simulator ran the
+    # first of the two and never the second.
+    text = f'main\n{{\n int x = 1\n string s = "00"\n switch ({subject})\n {{\n {cases}\n }}\n}}\n'
+    with pytest.raises(TMScriptSyntaxError, match="duplicated switch case"):
+        parse(text)
+
+
+def test_distinct_switch_cases_pass() -> None:
+    # [TS] §3.9.2, p. 40: "case >= 100 ... case >= 100-40 ... default".
+    assert shows(
+        "int Score = 65\nswitch (Score)\n{\ncase >= 100\nDisplay(1)\nbreak\n"
+        "case >= 100-40\nDisplay(2)\nbreak\ncase 65\nDisplay(3)\nbreak\n"
+        "default\nDisplay(4)\nbreak\n}"
+    ) == ["2"]

@@ -281,6 +281,23 @@ def _byte_range(value: a.Expr, typ: str) -> None:
         raise _syntax(value, message)
 
 
+def _no_duplicate_case(node: a.Switch) -> None:
+    """Two cases of one switch with the same constant condition (or two defaults) are
+    refused: TMflow 2.24 appendix J, 0x0004810D "Duplicated switch case condition",
+    "Please remove duplicated switch case condition" (p. 365)."""
+    seen: set[tuple[str, Any]] = set()
+    for case in node.cases:
+        if case.value is None:
+            key: tuple[str, Any] = ("default", None)
+        elif isinstance(case.value, a.Literal):
+            key = (case.op, case.value.value)
+        else:
+            continue
+        if key in seen:
+            raise _syntax(case, "a duplicated switch case condition (TMflow 0x0004810D)")
+        seen.add(key)
+
+
 def _out_of_range(number: Any, typ: str) -> str | None:
     """Why the constant ``number`` does not fit a ``typ`` (see :func:`_byte_range`), or None."""
     if typ == "float":
@@ -1378,6 +1395,7 @@ class _Compiler(_ExprCompiler):
         subject = self.expr(node.subject)
         subject_fn = _lift(subject)
         cases: list[tuple[Callable[[Value, _Frame], Gen] | None, StmtFn]] = []
+        _no_duplicate_case(node)
         for case in node.cases:
             test = None
             if case.value is not None:
