@@ -23,6 +23,7 @@ from test_hunt3_lost_stop import (
     FAR,
     OUTAGE_S,
     START,
+    TIME_SCALE,
     article_robot,
     lost_by_the_link,
     moving_then_cut,
@@ -37,7 +38,8 @@ Factory = Callable[..., Simulator]
 
 
 def test_a_stop_that_close_delivered_is_never_sent_again(tm_simulator_factory: Factory) -> None:
-    sim = tm_simulator_factory("article", time_scale=2.0)
+    # moving_then_cut's pace (its move to FAR at test_hunt3_lost_stop's SLOW %).
+    sim = tm_simulator_factory("article", time_scale=TIME_SCALE)
     with FaultProxy(sim.port) as proxy:
 
         async def given_up_then_closed() -> None:
