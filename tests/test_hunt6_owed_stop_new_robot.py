@@ -31,6 +31,10 @@ Factory = Callable[..., Simulator]
 
 START = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 250, 200, 180, 0, 90)
+#: 14 times real time, FAR at SLOW %: about 3.5 s (wall) to go, as at 7 % and twice real
+#: time; the move to START takes a seventh of that.
+TIME_SCALE = 14.0
+SLOW = 1
 #: The outage outlasts the poll's retries, the Stop's and the close's (0.3 s each):
 #: unloaded, the close returns about 0.3-0.4 s into it (connections refused at once).
 OUTAGE_S = 1.0
@@ -44,7 +48,7 @@ PATIENT = RetryPolicy(
 
 @pytest.fixture
 def sim(tm_simulator_factory: Factory) -> Simulator:
-    return tm_simulator_factory("article", time_scale=2.0)
+    return tm_simulator_factory("article", time_scale=TIME_SCALE)
 
 
 @pytest.fixture
@@ -74,7 +78,7 @@ def test_a_stop_owed_by_a_closed_robot_is_delivered_by_the_next_robot(
     try:
         first.wait_until_ready(timeout_s=5)
         first.move_to(START, speed=100)
-        motion = first.start_move(FAR, speed=7)  # about 3.5 s to go at 2x
+        motion = first.start_move(FAR, speed=SLOW)  # about 3.5 s to go
         sim.wait_for(lambda: sim.tcp_pose().y > START.y + 10, timeout=20)
         proxy.outage(OUTAGE_S)
         with pytest.raises(tmmaster.TransportError):
@@ -104,7 +108,7 @@ def test_a_stop_the_slave_refuses_stays_with_the_robot_that_sent_it(
     try:
         first.wait_until_ready(timeout_s=5)
         first.move_to(START, speed=100)
-        motion = first.start_move(FAR, speed=7)
+        motion = first.start_move(FAR, speed=SLOW)
         sim.wait_for(lambda: sim.tcp_pose().y > START.y + 10, timeout=20)
         sim.inject(f"modbus_exception:table=holding,start={command},end={command},code=4")
         first.interrupt()
