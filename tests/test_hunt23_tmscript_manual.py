@@ -482,20 +482,18 @@ def test_increment_and_decrement_take_an_integer_variable(body: str) -> None:
     parse("main\n{\n    byte b = 1\n    b++\n    int i = 0\n    --i\n}\n")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the interpreter takes ! on any value (tests/test_tmscript_fast_paths.py::"
-    "test_not_and_logic_on_any_value asserts it, for ints, strings and doubles), where "
-    "TMflow refuses anything but a Boolean after ! (appendix J, 0x00048214, p. 481): "
-    "left for the lead to decide, as that test may not be weakened",
-)
-@pytest.mark.parametrize("value", ["5", "i", '"true"', "d"])
+@pytest.mark.parametrize("value", ["5", "i", '"true"', "d", "fa", "F()"])
 def test_not_takes_a_bool(value: str) -> None:
     # "The item following the symbol "!" is invalid in an expression which is supposed to
     # be a Boolean type object (or variable) ... Check if the subject after the symbol "!"
-    # is a Boolean type object or not" ([TMF] appendix J, 0x00048214, p. 481).
-    with pytest.raises(TMScriptSyntaxError):
-        parse(f"{GLOBALS}main\n{{\n    bool b = !{value}\n}}\n")
+    # is a Boolean type object or not" ([TMF] appendix J, 0x00048214, p. 481). The
+    # simulator took ! of any value, as "not truthy".
+    function = "int F()\n{\n    return 1\n}\n"
+    with pytest.raises(TMScriptSyntaxError, match=r"line 11, column 14: operator ! takes a bool"):
+        parse(f"{GLOBALS}main\n{{\n    bool b = !{value}\n}}\n{function}")
+    # Only "!": && and || keep taking any value (the operator table's example, [TS] §2.4,
+    # p. 18, is "A -= B += 10 && ! !D").
+    parse(f"{GLOBALS}main\n{{\n    bool b = !(i > 2) || !!true && i\n}}\n{function}")
 
 
 @pytest.mark.parametrize(

@@ -786,6 +786,10 @@ class _ExprCompiler:
         typ = operand.type
         fn: Callable[[Any], Value]
         if node.op == "!":
+            if typ not in ("bool", "?"):
+                # "The item following the symbol "!" ... is supposed to be a Boolean type
+                # object (or variable)" (TMflow 2.24 appendix J, 0x00048214, p. 481).
+                raise _syntax(node, f"operator ! takes a bool, not {typ}")
             if not operand.gen:
                 pf = cast(PureFn, operand.fn)
 
