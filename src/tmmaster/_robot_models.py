@@ -353,8 +353,7 @@ class RobotModel(BaseModel):
             return f"wrist singularity (J5 = {q[4]:.1f} deg, margin {self.wrist_margin_deg:g})"
         if abs(math.sin(math.radians(q[2]))) < math.sin(math.radians(self.elbow_margin_deg)):
             return f"elbow singularity (J3 = {q[2]:.1f} deg, arm stretched)"
-        distance = self.shoulder_distance_mm(q)
-        if distance < self.shoulder_margin_mm:
+        if (distance := self.shoulder_distance_mm(q)) < self.shoulder_margin_mm:
             return f"shoulder singularity (wrist {distance:.0f} mm from the J1 axis plane)"
         return None
 
@@ -387,8 +386,7 @@ class RobotModel(BaseModel):
                     reason="joint_limit",
                     pose=tcp,
                 )
-        singular = self.singularity(joints)
-        if singular is not None:
+        if (singular := self.singularity(joints)) is not None:
             raise UnreachablePoseError(
                 f"joints {_joints_text(joints)} cannot be taken by a {self.name}: {singular}",
                 reason="singularity",
@@ -612,8 +610,7 @@ class RobotModel(BaseModel):
         at, length_mm, rotation_deg = _path_geometry(start, via, target)
         steps = max(1, math.ceil(max(length_mm / step_mm, rotation_deg / step_deg)))
         what = f"the straight path to {target}" if via is None else f"the arc to {target}"
-        seed = self.start_joints(start, start_joints, tool)
-        samples = [seed]
+        samples, fastest = [self.start_joints(start, start_joints, tool)], 0.0
         for k in range(1, steps + 1):
             pose = kin.transform_to_pose(at(k / steps))
             try:
@@ -632,6 +629,10 @@ class RobotModel(BaseModel):
                     pose=pose,
                 )
             samples.append(joints)
+            fastest = max(fastest, jump)
+        if fastest > 10.0 and step_mm > 1.0:
+            # A joint turning > 10 deg a sample (near a singularity) peaks between: refine.
+            return self._path(start, via, target, start_joints, tool, step_mm / 3, step_deg / 3)
         return tuple(samples)
 
     def arc_joints(
@@ -773,8 +774,7 @@ class RobotModel(BaseModel):
         for prev, cur in itertools.pairwise(samples):
             for a, b, spec in zip(prev, cur, self.joints, strict=True):
                 needed = max(needed, abs(b - a) * steps / (spec.speed_deg_s * scale))
-        joint_bound = needed + ramp if needed > 0 else 0.0
-        return max(cartesian, joint_bound)
+        return max(cartesian, needed + ramp if needed > 0 else 0.0)
 
     def motion_time(
         self,
