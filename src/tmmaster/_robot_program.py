@@ -166,7 +166,7 @@ class ToolSetting:
             ``(declarations, call)``, TMscript source lines without indentation.
         """
         if self.name is not None:
-            return "", f'ChangeTCP("{self.name}")'
+            return f"// The tool: {self.name}, as defined in TMflow", f'ChangeTCP("{self.name}")'
         assert self.tcp is not None
         assert self.mass_kg is not None
         values = _literals("tool", _TCP_NAMES, self.tcp.as_list(), _TCP_BOUNDS)
