@@ -862,7 +862,12 @@ class _ExprCompiler:
                     raise _runtime(node, f"index {i} is out of the array (length {len(items)})")
                 items[i] = value
 
-            return element_type(base.type), store_elem, self.index(node)
+            # The read compiles the array and the index again: their warnings once only.
+            mark = len(self.warnings)
+            read = self.index(node)
+            earlier = self.warnings[:mark]
+            self.warnings[mark:] = [w for w in self.warnings[mark:] if w not in earlier]
+            return element_type(base.type), store_elem, read
         raise _syntax(node, "only a variable or an array element can be assigned")
 
     def assign(self, node: a.Assign) -> _CExpr:
@@ -1506,6 +1511,10 @@ class _CallCompiler:
                 shown = cast(PureFn, ce.fn)
                 fns.append(_CExpr(_shown(shown, ce.type, arg), "string", False))
                 types.append("string")
+            elif node.name == "Display" and is_array(ce.type):
+                # An array a customized function returns (§3.5), shown as a variable's is.
+                fns.append(_CExpr(_shown_gen(cast(GenFn, ce.fn), ce.type, arg), "string", True))
+                types.append("string")
             elif want in ("?", "?[]", "*"):
                 fns.append(ce)
                 types.append(ce.type)
@@ -1903,6 +1912,16 @@ def _shown(fn: PureFn, typ: str, node: a.Node) -> PureFn:
         return text
 
     return show
+
+
+def _shown_gen(fn: GenFn, typ: str, node: a.Node) -> GenFn:
+    """:func:`_shown` of a value that a call may wait for (a customized function's)."""
+
+    def show_gen(fr: _Frame) -> Gen:
+        value = yield from fn(fr)
+        return _shown(lambda _: value, typ, node)(fr)
+
+    return show_gen
 
 
 def _copy(value: Value) -> Value:
