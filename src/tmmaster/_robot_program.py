@@ -429,7 +429,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--tool-name",
         metavar="NAME",
         help="a tool defined in TMflow (Configuration > Tool Settings) with its mass and"
-        " inertia: ChangeTCP(NAME)",
+        " inertia: ChangeTCP(NAME); the simulator knows no tool by name (use --tool there)",
     )
     tool.add_argument(
         "--tool",
