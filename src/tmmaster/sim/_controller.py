@@ -531,6 +531,10 @@ class RobotController(SimDevice[RobotProfile]):
         """Techman's Running Timer: seconds the project has run (0 by default)."""
         return 0.0
 
+    def _up_time_s(self) -> float:
+        """Techman's Up Time: seconds since the controller started (simulated time)."""
+        return self._time_s
+
     # -- the tick ----------------------------------------------------------------------
 
     def tick(self, dt: float) -> None:
@@ -941,8 +945,8 @@ class RobotController(SimDevice[RobotProfile]):
         joints = self._backend.joint_positions_deg() or (0.0,) * 6
         # Without a joint model the simulated tool is the identity: flange = TCP.
         flange = tcp if flange is None else flange
-        # Running Timer (0 while the project is stopped) and Up Time, in simulated time.
-        clock = (int(self._running_timer_s()), int(self._time_s))
+        # Running Timer (0 while the project is stopped) and Up Time.
+        clock = (int(self._running_timer_s()), int(self._up_time_s()))
         values = self._tm_table_bytes(flange, tcp, joints)
         speeds = self._tm_speeds_now(values, tcp, joints)
         pose = (values, self._tm_robot_state(), speeds)

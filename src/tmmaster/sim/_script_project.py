@@ -361,9 +361,9 @@ class ScriptProjectController(SequenceController):
         #: Every ``Display()`` text, in order (for tests and the CLI's trace).
         self.displayed: list[str] = []
         #: Simulated seconds per wall second (the Simulator's ``time_scale``):
-        #: ``GetNowStamp`` counts wall milliseconds, the clock of the master's heartbeat
-        #: (``master_ttl_ms``), so a simulator faster than real time expires no command
-        #: of a live master.
+        #: ``GetNowStamp``, the Running Timer and the Up Time count wall time, the clock
+        #: of the master's heartbeat (``master_ttl_ms``), so a simulator faster than real
+        #: time expires no command of a live master.
         self.stamp_scale = 1.0
         #: The program's ``random()``: the same draws in every run of a test (a real
         #: controller's are its own), a new one at each start of the project.
@@ -657,6 +657,15 @@ class ScriptProjectController(SequenceController):
                 execution.fail(reason, max_seconds=TICK_SECONDS)  # errorstop ([TS] 3.4, p. 31)
             else:
                 execution.stop(max_seconds=TICK_SECONDS)  # closestop ([TS] 3.3, p. 30)
+
+    def _running_timer_s(self) -> float:
+        # In wall seconds, as GetNowStamp counts the run time (stamp_scale).
+        return super()._running_timer_s() / self.stamp_scale
+
+    def _up_time_s(self) -> float:
+        # In wall seconds too: the program measures the master's silence by it as well as
+        # by GetNowStamp, against master_ttl_ms, wall time (docs/tmflow-program.md).
+        return self._time_s / self.stamp_scale
 
     def _abandon_program(self) -> None:
         # The tick failed: the program is dropped as it is, without errorstop (which would
