@@ -31,9 +31,9 @@ Factory = Callable[..., Simulator]
 
 START = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 250, 200, 180, 0, 90)
-#: 14 times real time, FAR at SLOW %: about 3.5 s (wall) to go, as at 7 % and twice real
-#: time; the move to START takes a seventh of that.
-TIME_SCALE = 14.0
+#: 12 times real time, FAR at SLOW %: the whole move about 3.4 s of wall time (2.98 s at
+#: 7 % and twice real time, as before); the move to START takes a sixth of that.
+TIME_SCALE = 12.0
 SLOW = 1
 #: The outage outlasts the poll's retries, the Stop's and the close's (0.3 s each):
 #: unloaded, the close returns about 0.3-0.4 s into it (connections refused at once).
