@@ -68,8 +68,8 @@ def test_a_cancel_while_another_task_awaits_the_move_stops_it_short(
 def test_a_cancel_while_another_task_awaits_the_acknowledgement_withdraws_it(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
-    # The acknowledgement would come 20 simulated s (0.5 s) after the write.
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+    # The acknowledgement would come 60 simulated s (1.5 s) after the write.
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=60"])
     issued: list[Issued] = []
 
     async def scenario() -> None:

@@ -110,9 +110,9 @@ def test_a_running_move_cancelled_from_another_thread_is_stopped_and_its_wait_ra
 def test_a_move_not_yet_taken_cancelled_from_another_thread_never_runs(
     tm_simulator_factory: SimFactory, profile: str
 ) -> None:
-    # The acknowledgement would come 20 simulated s (0.5 s) after the write: the owner
+    # The acknowledgement would come 60 simulated s (1.5 s) after the write: the owner
     # waits for it, polling, while the other thread cancels.
-    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+    sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=60"])
     with robot_of(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         issued = [Issued(A, time.monotonic())]
@@ -127,15 +127,13 @@ def test_a_move_not_yet_taken_cancelled_from_another_thread_never_runs(
         assert isinstance(owner.error, StopRequestedError), repr(owner.error)
         assert motion.abandoned
         assert motion.phase is MovePhase.FAILED
-        assert motion.withdrawn is True or motion.stop_delivered is True
+        assert motion.withdrawn is True
         sim.clear_faults()
         late_ack_over(sim, motion)  # a command still armed would have run by now
-        robot.move_to(A.offset(dz=20), speed=60)
     issued[0].ended_at = given_up_at
     issued[0].outcome = "cancelled"
-    check([*issued, Issued(A.offset(dz=20), 0.0, 1.0, "done")], sim.motion_log())
-    # Withdrawn: it never ran; stopped (taken at the very moment): stopped short.
-    assert len(sim.motion_log()) in (1, 2)
+    check(issued, sim.motion_log())
+    assert sim.motion_log() == ()
 
 
 @pytest.mark.parametrize("profile", PROFILES)
@@ -233,7 +231,7 @@ def test_a_cancel_from_another_thread_while_the_command_write_is_held_runs_nothi
     # tmflow: the move's write (FC16 to 9000) is held in the network; another thread takes
     # the command as robot.last_motion (recorded before its first byte) and cancels it
     # while the sending thread waits for the write's answer. The held frame lands only
-    # after the cancel returned: its number is used up, it never runs.
+    # after the cancel returned: its number is used up, it never runs then.
     sim = tm_simulator_factory("tmflow", time_scale=5.0)
     release = threading.Event()
     with FaultProxy(sim.port) as proxy:
@@ -274,7 +272,19 @@ def test_a_cancel_from_another_thread_while_the_command_write_is_held_runs_nothi
             assert outcome != ["done"], "the move was reported done"
             proxy.wait_held()
             ticks_pass(sim, 20)
-            assert sim.motion_log() == (), "a command given up by cancel() ran"
+            if sim.motion_log():
+                # The sender's copy of the frame (resent: the program takes a number at
+                # most once) can land before the cancel record: the program takes it, the
+                # cancel's answer shows it taken, and the arm is stopped (docs/safety.md).
+                # It never starts after the cancel returned (check() below).
+                # Before: the sender, its copy landed, renewed the session while the
+                # cancel waited for the program's answer, which then read as another
+                # master's: "withdrawn", the arm moving (stopped by the robot program
+                # seeing another master).
+                assert (motion.withdrawn, motion.stop_delivered) == (False, True)
+                assert not braked(sim).is_close(FAR)
+            else:
+                assert motion.withdrawn is True
         finally:
             release.set()
             robot.close()

@@ -232,8 +232,11 @@ class _Following:
         if exc is not None:
             follower.abandon(motion, exc)
         if motion.ticket.resent and (motion.done or motion._given_up):
-            motion.ticket.resent = False  # its copy still in the network is refused from now on
-            follower._channel.session = follower.renew()
+            # Its copy still in the network is refused from now on; once the give-up
+            # another thread has under way is over (its withdraw reads the session).
+            with follower._abandon_lock:
+                motion.ticket.resent = False
+                follower._channel.session = follower.renew()
         if cancelled and isinstance(exc, RobotError) and not isinstance(exc, EmergencyStopError):
             raise StopRequestedError(_GIVEN_UP) from exc
         return False
@@ -433,10 +436,9 @@ class _MotionFollower:
             could not be confirmed (the withdraw and the stop failed, the profile has no
             stop, or another caller was still at it at ``deadline``).
         """
-        lock = self._abandon_lock
         # -1: no bound. The closer always waits: the close ended the other's answer wait.
         wait_s = -1.0 if deadline is None or closer else max(deadline - time.monotonic(), 0.0)
-        if not lock.acquire(timeout=wait_s):
+        if not self._abandon_lock.acquire(timeout=wait_s):
             return False
         try:
             # An article Stop owed here that another Robot of this process delivered since
@@ -464,7 +466,7 @@ class _MotionFollower:
                     self.silence()  # no beat: the program expires the command
             return confirmed
         finally:
-            lock.release()
+            self._abandon_lock.release()
 
     def _finished(self, motion: Motion, *, look: bool) -> bool:
         """Whether the robot finished the command; ``look``: poll one not yet known done
