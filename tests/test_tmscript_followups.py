@@ -6,11 +6,17 @@ function's array, no whitespace-only line in the program made for a named tool.
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from tmmaster._cli import main as tmmaster_main
+from tmmaster._profiles import robot_profile
+from tmmaster._robot_program import ToolSetting, robot_program
+from tmmaster.sim import RobotSetup, Simulator
+from tmmaster.sim._script_project import SCRIPT_ERROR
 from tmmaster.tmscript import Execution, NullHost, parse
 
 ARRAY_STORES = (
@@ -91,3 +97,22 @@ def test_the_generated_program_has_no_whitespace_only_line_and_checks(
     capsys.readouterr()
     assert tmmaster_main(["tmscript", "check", str(out)]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_a_program_for_a_named_tool_stops_in_the_simulator_saying_what_to_do(
+    tm_simulator_factory: Callable[..., Simulator],
+    tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # The simulator knows no TMflow tool by name but RobotEndFlange: the program made with
+    # --tool-name stops at its ChangeTCP with a script error, naming the tool and the way
+    # to run it in the simulator (docs/simulator.md, the --tool row).
+    program = tmp_path / "named.tms"
+    tool = ToolSetting(name="Gripper_2FG7")
+    program.write_text(robot_program(robot_profile("tmflow"), tool=tool), encoding="utf-8")
+    with caplog.at_level(logging.WARNING, "tmmaster"):
+        sim = tm_simulator_factory("tmflow", robot=RobotSetup(program=program))
+        sim.wait_for(lambda: sim.field("last_error_code") == SCRIPT_ERROR, 5.0)
+        sim.wait_for(lambda: "sim.program_error" in caplog.text, 5.0)
+    assert "TCP 'Gripper_2FG7'" in caplog.text
+    assert "--tool X,Y,Z,RX,RY,RZ --tool-mass KG" in caplog.text

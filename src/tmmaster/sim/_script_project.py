@@ -257,7 +257,11 @@ class SimHost:
         (TMflow 2.24 appendix C, "TCP Value", p. 313)."""
         if isinstance(value, str):
             if value != "RobotEndFlange":
-                raise HostError(f"TCP {value!r}: the simulator knows RobotEndFlange only")
+                raise HostError(
+                    f"TCP {value!r}: the simulator has no tool by name but RobotEndFlange:"
+                    " for the simulator, make the program with robot-program"
+                    " --tool X,Y,Z,RX,RY,RZ --tool-mass KG and give the simulator that --tool"
+                )
             tool: Pose | None = None
         else:
             tool = None if all(abs(v) < 1e-9 for v in value) else Pose(*value)
