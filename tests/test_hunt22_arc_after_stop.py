@@ -9,11 +9,11 @@ via and end lie on one line". The arc is now checked from the pose the robot rep
 (its plan, before the write), as it always was there too; its end and its via are still
 checked before any request.
 
-A Line has the same pre-read check (``Planner.check_path``: its straight path from the
+A Line had the same pre-read check (``Planner.check_path``: its straight path from the
 last target): after a move stopped short, a Line the arm can take from where it stands
-is refused, its path from the stale target leaving the arm's range. Not fixed here (a
-strict xfail below): the planner would have to forget its last target when a move is
-given up, which costs core lines this hunt did not have.
+was refused, its path from the stale target leaving the arm's range. Fixed: after a move
+given up, the next move reads where the arm is (and waits for it to settle) before its
+checks.
 
 The judge is the simulator: its motion log (tests/safety_invariant.py) and where its
 arm ends.
@@ -104,13 +104,6 @@ def test_an_arc_impossible_from_where_the_arm_is_is_still_refused_unsent(
     check(issued, sim.motion_log())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="move_to(motion='line') checks the Line before any request from the last"
-    " target (Planner.check_path with hint_pose): after a move given up short of it, a Line"
-    " the arm can take from where it stands is refused; the fix (forget the hint on a"
-    " give-up) needs core lines",
-)
 def test_a_line_from_where_a_stopped_move_left_the_arm_is_taken(
     tm_simulator_factory: SimFactory,
 ) -> None:

@@ -14,24 +14,24 @@ the limit at 500 mm/s, a 100 % Line runs its TCP at 1100 mm/s (TM5-700) and is a
 2.2 times the robot's limit, which stops it (0x0021) where it does not slow it (Speed
 Suppression, [TMF] Motion Settings, p. 110: "always enabled" for Flow nodes; the robot
 program's ``Line()`` is TMscript, which the page does not name).
-Strict xfails: the check belongs in ``Planner.check_path`` (``_planning.py``).
+Fixed: a Line or an arc is refused before any request when its TCP speed (its
+``speed_mm_s``, or the model's top Line speed x its percent, x the project speed) is over
+the limit; one at the limit is taken.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 
 from tmmaster import Checks, ConfigError, Pose, Robot, robot_model
+from tmmaster.sim import Cell, Simulator
 
 ARM = robot_model("tm5-700")
+NEAR = Pose(300, -200, 200, 180, 0, 90)
 READY = (0.0, 0.0, 90.0, 0.0, 90.0, 0.0)
 LIMIT_MM_S = 500.0
-REASON = (
-    "a Line's or an arc's TCP speed (tcp_speed_mm_s x speed %, or speed_mm_s, x project speed)"
-    " is not checked against checks.tcp_speed_limit_mm_s, as a PTP's is: a robot whose TCP"
-    " Speed limit is 500 mm/s stops a 1100 mm/s Line (0x0021, TMflow 2.24 Appendix J p. 409,"
-    " cause 5: LINE)"
-)
 
 
 def _robot() -> Robot:
@@ -57,7 +57,35 @@ def test_the_line_is_under_the_models_default_limit() -> None:
     assert ARM.tcp_speed_mm_s > LIMIT_MM_S
 
 
-@pytest.mark.xfail(strict=True, reason=REASON)
 def test_a_line_faster_than_the_limit_is_refused_before_any_request() -> None:
-    with pytest.raises(ConfigError, match="tcp_speed_limit_mm_s"):
+    with pytest.raises(ConfigError, match=r"a line at 1100 mm/s would move the TCP at 1100"):
         _robot().check_move(_line_target(), 100, "line", seed_deg=READY)
+    assert len(_robot().check_move(_line_target(), 45, "line", seed_deg=READY)) == 6  # 495
+
+
+def _writes(sim: Simulator, robot: Robot) -> list[object]:
+    """Every write but the heartbeat's (tmflow's master beats on its own schedule)."""
+    beat = robot.profile.field("master_heartbeat").address
+    return [r for r in sim.request_log if r.is_write and r.address != beat]
+
+
+def test_a_line_or_an_arc_over_the_limit_writes_nothing_and_one_at_it_runs(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> None:
+    sim = tm_simulator_factory(cell=Cell(scene=[]))
+    limit = Checks(tcp_speed_limit_mm_s=LIMIT_MM_S)
+    with Robot(sim.url, gripper=None, checks=limit) as robot:
+        robot.move_to(NEAR, speed=30)
+        moves, writes = len(sim.motion_log()), len(_writes(sim, robot))
+        with pytest.raises(ConfigError, match="a line at 501 mm/s"):
+            robot.move_to(NEAR.offset(dy=100), motion="line", speed_mm_s=501)
+        with pytest.raises(ConfigError, match="a line at 550 mm/s"):
+            robot.move_to(NEAR.offset(dy=100), motion="line", speed=50)
+        with pytest.raises(ConfigError, match="a circle at 1100 mm/s"):
+            robot.move_arc(NEAR.offset(dx=50, dy=50), NEAR.offset(dy=100), speed=100)
+        with pytest.raises(ConfigError, match="a line at 501 mm/s"):
+            robot.move_by(dy=100, motion="line", speed_mm_s=501)
+        assert len(_writes(sim, robot)) == writes  # no command written
+        robot.move_to(NEAR.offset(dy=100), motion="line", speed_mm_s=500)  # at the limit
+        assert len(sim.motion_log()) == moves + 1
+        assert sim.motion_log()[-1].target == NEAR.offset(dy=100)

@@ -382,10 +382,23 @@ class Planner:
         ``percent``: the speed the robot runs it at (:meth:`_share`); ``accel``: its
         time to top speed, s (None: the model's)."""
         peak = max(self.model.ptp_tcp_speeds(tuple(start), joints, percent, accel, self.tool))
-        if peak > (limit := self.tcp_speed_limit_mm_s or self.model.tcp_speed_limit_mm_s):
-            text = f"a PTP at {percent:g} % would move the TCP at {peak:.0f} mm/s, over the"
-            raise ConfigError(f"{text} TCP speed limit (checks.tcp_speed_limit_mm_s = {limit:g})")
+        self._refuse_over_limit(f"a PTP at {percent:g} %", peak)
         return joints
+
+    def check_tcp_speed(self, command: Command) -> None:
+        """Refuse a Line or an arc whose TCP would run faster than the robot's TCP speed
+        limit: at its speed (``speed_mm_s``, or the model's top Line speed x ``speed`` %)
+        x the project speed. A robot whose limit is under it stops such a move (0x0021,
+        TMflow 2.24 Appendix J, p. 409: "Check if the issued point is LINE ... (ABS)")."""
+        if command.kind in (CommandKind.LINE, CommandKind.CIRCLE):
+            top = command.speed_mm_s or self.model.tcp_speed_mm_s * (command.speed or 100) / 100
+            self._refuse_over_limit(f"a {command.kind.value} at {top:g} mm/s", self._share(top))
+
+    def _refuse_over_limit(self, what: str, tcp_mm_s: float) -> None:
+        """A ConfigError when ``tcp_mm_s`` is over the TCP speed limit, naming the setting."""
+        if tcp_mm_s > (limit := self.tcp_speed_limit_mm_s or self.model.tcp_speed_limit_mm_s):
+            text = f"{what} would move the TCP at {tcp_mm_s:.0f} mm/s, over the"
+            raise ConfigError(f"{text} TCP speed limit (checks.tcp_speed_limit_mm_s = {limit:g})")
 
     def _check_body(self, start: Sequence[float] | None, samples: Sequence[Joints]) -> None:
         """Self-collision, the mounting plane and the gripper's housing at ``samples``."""

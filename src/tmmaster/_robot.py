@@ -1020,7 +1020,8 @@ class Robot:
         """
         motion = motion_type(motion)
         joints = self._planner.check_move(target, speed, motion, start, seed_deg)
-        self._channel.check_command(Command(CommandKind.of(motion), target, speed))
+        self._planner.check_tcp_speed(command := Command(CommandKind.of(motion), target, speed))
+        self._channel.check_command(command)
         return joints
 
     def start_move(
@@ -1037,7 +1038,10 @@ class Robot:
 
         Everything :meth:`validate_move` checks is checked before the first request, and
         for a Line the straight path from where the arm is believed to be (the pose the
-        robot reported, or the last target it reached), when that is known. Where
+        robot reported, or the last target it reached), when that is known; after a move
+        given up (it may have stopped short), from where the robot reports the arm, read
+        first. A Line's or an arc's TCP speed is held to ``checks.tcp_speed_limit_mm_s``
+        as a PTP's is. Where
         the profile publishes the robot's joints, they are read with the start pose before
         the write (no extra request: Techman's 7013-7036 is one read, or the final check of
         the previous move read them) and the target's joints and the expected time are
@@ -1069,6 +1073,8 @@ class Robot:
         """
         motion = motion_type(motion)
         percent = self._move_arguments(speed, speed_mm_s, motion, accel_time_ms, timeout)
+        if (last := self._last_motion) is not None and last.abandoned:
+            self._read_start()  # a move given up may have stopped short: checked from there
         self._planner.check_path(target, percent, motion)
         # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
         command = Command(
@@ -1368,6 +1374,7 @@ class Robot:
         """
         if timeout is not None:
             require_positive("timeout", timeout)
+        self._planner.check_tcp_speed(command)  # a Line's or an arc's, before any request
         if not self._connected:
             # What prepare() refuses before its first read (a value out of the profile's
             # range) is said first, as on a connected robot; then the missing connect.
