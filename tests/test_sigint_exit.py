@@ -359,3 +359,33 @@ def test_the_interrupted_line_to_a_hung_up_terminal_still_exits_130(
         assert _sigint.run_main("demo", interrupted, process=False) == 130
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+def test_a_ctrl_c_inside_a_class_being_made_is_one_line_and_130(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # A Ctrl-C can land while a module loads inside the command (a lazy import: the
+    # logging's structlog at a pick & place start), in a dataclass field's __set_name__:
+    # Python 3.11 re-raises it as a RuntimeError caused by the KeyboardInterrupt, which
+    # ended such a run with a traceback and exit 1.
+    from tmmaster import _sigint
+
+    class Field:
+        def __set_name__(self, owner: type, name: str) -> None:
+            raise KeyboardInterrupt  # the Ctrl-C's, as the handler raises it there
+
+    def command() -> int:
+        type("Stack", (), {"exc_notes": Field()})
+        return 0
+
+    def broken() -> int:
+        raise RuntimeError("a bug, not a Ctrl-C")
+
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        assert _sigint.run_main("demo", command, process=False) == 130
+        assert capsys.readouterr().err == "demo: interrupted [exit 130]\n"
+        with pytest.raises(RuntimeError, match="a bug"):
+            _sigint.run_main("demo", broken, process=False)
+    finally:
+        signal.signal(signal.SIGINT, previous)

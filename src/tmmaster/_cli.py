@@ -178,8 +178,7 @@ def _apply_global_logging(args: argparse.Namespace, argv: Sequence[str]) -> None
     level = getattr(args, "global_log_level", None)
     if level is None or args.command is None:
         return
-    words = list(argv)
-    after = words[words.index(args.command) + 1 :] if args.command in words else []
+    after = argv[argv.index(args.command) + 1 :] if args.command in argv else []
     if not any(word == "--log-level" or word.startswith("--log-level=") for word in after):
         args.log_level = level
 

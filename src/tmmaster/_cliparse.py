@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Iterable, Sequence
+from contextlib import suppress
 from typing import Any, NoReturn
 
 from ._exceptions import ConfigError
@@ -167,14 +168,12 @@ def discard_stdout() -> None:
     What is left in ``sys.stdout``'s buffer would otherwise be written again when the
     interpreter exits, fail again and print a traceback-like warning (exit 120).
     """
-    try:
+    with suppress(OSError, ValueError):  # not a real file (a test's captured stdout)
         null = os.open(os.devnull, os.O_WRONLY)
         try:
             os.dup2(null, sys.stdout.fileno())
         finally:
             os.close(null)
-    except (OSError, ValueError):  # not a real file (a test's captured stdout)
-        pass
 
 
 def ended_quietly(body: Callable[[], int]) -> int:

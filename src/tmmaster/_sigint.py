@@ -16,9 +16,9 @@ place a command handles Ctrl-C:
   do what Ctrl-C does at that moment, unless the command started with Ctrl-C ignored
   (``command &``) or with them ignored (``nohup``): then they keep their handling.
 
-A Ctrl-C before ``main()`` runs (Python starting, tmmaster and the command's modules
-loading) is Python's own: a ``KeyboardInterrupt`` traceback, and the process ends by the
-signal (a shell shows 130). Nothing is connected or started then.
+A Ctrl-C before ``main()`` runs, while tmmaster and the command's modules load, is
+:mod:`tmmaster._startup`'s: the same line and exit 130 (before tmmaster's first line
+runs, Python's own traceback). Nothing is connected or started then.
 
 :class:`deferred` is the critical section, for commands and library programs alike: a
 withdraw or a stop runs to its end, and a Ctrl-C that came meanwhile is delivered after it.
@@ -145,7 +145,12 @@ def run_main(prog: str, body: Callable[[], int], *, process: bool) -> int:
             atexit.register(gc.freeze)
             _pause("start")
         return body()
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, RuntimeError) as exc:
+        # Python 3.11 wraps a KeyboardInterrupt raised in a class's __set_name__ (a
+        # dataclass field's, while a module loads) in a RuntimeError: a Ctrl-C too.
+        interrupt = exc.__cause__ if isinstance(exc, RuntimeError) else exc
+        if not isinstance(interrupt, KeyboardInterrupt):
+            raise
         _ignore()  # also when the KeyboardInterrupt came from elsewhere (interrupt_main)
         with suppress(OSError):  # stderr a terminal that hung up (SIGHUP): said to nobody
             print(f"{prog}: interrupted [exit {EXIT_INTERRUPTED}]", file=sys.stderr, flush=True)

@@ -51,8 +51,7 @@ def _install() -> None:
     if name is None or _signal.getsignal(_signal.SIGINT) == _signal.SIG_IGN:
         return  # another program; or a command started with Ctrl-C ignored (``cmd &``)
 
-    def interrupted(signum: int, frame: object) -> None:
-        _ = signum, frame
+    def interrupted(_signum: int, _frame: object) -> None:
         os.write(2, f"{name}: interrupted [exit {EXIT_INTERRUPTED}]\n".encode())
         os._exit(EXIT_INTERRUPTED)
 
