@@ -93,10 +93,10 @@ class Motion:
         self.project_speed_percent = plan.project_speed_percent
         #: ``time.monotonic()`` when the poll that saw it reported finished returned.
         self.reported_finished_at: float | None = None
-        # Set by the follower (under its abandon lock): True once the master gave this
-        # command up; then, once that clean-up is over, True when safe, False when it
-        # could not be confirmed.
-        self._given_up = False
+        # Set by the follower (under its abandon lock): why the master gave this command
+        # up (None before); then, once that clean-up is over, True when safe, False when
+        # it could not be confirmed.
+        self._given_up: BaseException | None = None
         self._settled: bool | None = None
 
     def path_fraction(self, pose: Pose) -> float | None:
@@ -132,7 +132,7 @@ class Motion:
     @property
     def abandoned(self) -> bool:
         """True once the master gave up on this command (failure, timeout, stop, close)."""
-        return self._given_up
+        return self._given_up is not None
 
     def progress(self) -> MoveProgress:
         """Poll the robot once and report where the move stands (raises on robot failure).
@@ -210,7 +210,8 @@ class _Following:
     A motion given up already is not entered (nothing is read). One given up by another
     thread meanwhile (:meth:`Motion.cancel`, ``close()``) raises StopRequestedError from
     what its give-up made the robot report (a stopped project, a cancelled number, a
-    move seen ended short), which is not the robot's failure; an e-stop stays itself.
+    move seen ended short), which is not the robot's failure; an e-stop stays itself,
+    and so does a fault that the other thread's poll saw first (it gave the motion up).
 
     A class rather than a generator context manager: entered on every wait and send,
     it costs one object instead of a generator's frame and ``contextlib``'s machinery.
@@ -228,7 +229,8 @@ class _Following:
 
     def __exit__(self, _type: object, exc: BaseException | None, _tb: object) -> Literal[False]:
         motion, follower = self._motion, self._follower
-        cancelled = motion._given_up  # not on entering: by another thread meanwhile
+        # Not on entering: by another thread meanwhile, asked to (not a fault it saw).
+        cancelled = isinstance(motion._given_up, StopRequestedError)
         if exc is not None:
             follower.abandon(motion, exc)
         if motion.ticket.resent and (motion.done or motion._given_up):
@@ -448,7 +450,7 @@ class _MotionFollower:
                 return motion._settled
             if self._finished(motion, look=closer):
                 return True  # nothing left to withdraw or stop
-            motion._given_up = True
+            motion._given_up = reason
             motion.phase = MovePhase.FAILED
             if not motion.ticket.written:
                 motion._settled = True  # refused before any byte was sent
