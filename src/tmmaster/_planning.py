@@ -463,7 +463,11 @@ class Planner:
         move stopped short or given up left the arm elsewhere, where another arc starts."""
         self._check_target(to, speed)
         self.workspace.check(via)  # its position (the TCP passes there)
-        self.validate(to, speed)
+        # Its end's joints and arm, as validate()'s, without the body along a PTP there:
+        # the arm takes the arc, whose samples' body the plan checks.
+        joints = self.model.inverse(to, seed_deg=self.joints_hint, tool=self.tool)
+        self._keep_configuration(self.joints_hint, joints, to)
+        self.workspace.check_arm(self.model, joints)
 
     def joint_target(self, joints: Sequence[float], speed: int) -> tuple[Joints, Pose]:
         """A joint move's checked joints and the TCP pose they give (validated as a target)."""
@@ -660,8 +664,7 @@ class Planner:
             RobotError: the arm is no longer at ``resolved_at`` (a relative move's or an
                 arc's start).
         """
-        timeouts = self._settings.timeouts
-        target = command.target
+        timeouts, target = self._settings.timeouts, command.target
         if target is None or start is None:
             limit = timeouts.gripper_timeout_s if timeout is None else timeout
             return Plan(None, None, None, 0.0, limit)
@@ -712,9 +715,8 @@ class Planner:
         self, command: Command, origin: Pose, speed: float, accel: float | None
     ) -> tuple[Joints, float, PathGauge]:
         """A PTP's, a Line's or a joint move's target joints, expected time and gauge."""
-        target = command.target
+        target, hint = command.target, self.joints_hint
         assert target is not None
-        hint = self.joints_hint
         first = self.model.start_joints(origin, hint, self.tool)
         if command.kind is CommandKind.PTP_JOINTS:
             assert command.joints is not None
