@@ -346,12 +346,16 @@ def test_the_master_sees_the_error_stop_of_a_target_the_arm_cannot_reach(
     # A program without the inversekin check hands PTP a target the simulated arm cannot
     # reach (the master's TM5-700 reaches 700 mm; the simulated one, the same chain, only
     # 600 mm): the robot stops in error with 0x0001, and the master raises
-    # RobotFaultError naming Techman's code.
+    # RobotFaultError naming Techman's code. (Without the check there are no solved
+    # joints to give the PTP as its reference: its Syntax 1, no posture.)
     text = program_text()
     check = "        joints = inversekin(target)\n        if (Length(joints) != 6)\n"
+    ptp = 'PTP("CPP", target, speed, accel, 0, false, joints)'
     assert check in text
+    assert ptp in text
+    text = text.replace(check, "        if (false)\n", 1).replace(ptp, ptp.replace(", joints", ""))
     program = tmp_path / "no_reach_check.tms"
-    program.write_text(text.replace(check, "        if (false)\n", 1), encoding="utf-8")
+    program.write_text(text, encoding="utf-8")
     short = tmmaster.robot_model("tm5-700").model_copy(update={"reach_mm": 600.0})
     sim = tm_simulator_factory("tmflow", robot=RobotSetup(model=short, program=program))
     robot = open_robot(sim)

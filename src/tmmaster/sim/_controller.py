@@ -181,11 +181,13 @@ class MoveArgs:
     #: A circle: a point on the arc, and where the arc started.
     via: Pose | None = None
     start: Pose | None = None
+    #: The joints are a Cartesian PTP's, chosen by its reference joints (Syntax 3).
+    cartesian: bool = False
 
     @property
     def kind(self) -> str:
         """The motion log's word for it: ptp, line, ptp_joints or circle."""
-        if self.joints is not None:
+        if self.joints is not None and not self.cartesian:
             return "ptp_joints"
         return "circle" if self.via is not None else self.motion.value
 

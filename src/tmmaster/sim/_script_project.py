@@ -136,8 +136,10 @@ class _Queued:
     accel_s: float
     tag: int = 0
     done: bool = False
-    #: ``PTP("JPP", ...)``: the joints to reach.
+    #: ``PTP("JPP", ...)``, or a "CPP" one's with reference joints: the joints to reach.
     joints: tuple[float, ...] | None = None
+    #: The joints are a "CPP" PTP's: the motion log says ``ptp``.
+    cartesian: bool = False
     #: ``Circle``: a point on the arc, and where the arc starts.
     via: Pose | None = None
     start: Pose | None = None
@@ -511,7 +513,15 @@ class ScriptProjectController(SequenceController):
         motion = MotionType.PTP if call.kind == "PTP" else MotionType.LINE
         self._queue.append(
             _Queued(
-                target, motion, speed, accel_s, joints=joints, via=via, start=start, end_joints=end
+                target,
+                motion,
+                speed,
+                accel_s,
+                joints=joints,
+                cartesian=fmt != "JPP",
+                via=via,
+                start=start,
+                end_joints=end,
             )
         )
         return True
@@ -559,7 +569,7 @@ class ScriptProjectController(SequenceController):
             # 2.24 §13.8, p. 335): the solution nearest the reference joints, not here.
             target = Pose(*call.target)
             nearest = self._model.inverse(target, seed_deg=call.reference_joints, tool=self.tool)
-            joints = self._model.check_joints(nearest, tool=self.tool)
+            joints = self._own_choice(target, start_joints, nearest)
         else:
             target = Pose(*call.target)
         seed = None if start_joints is None else tuple(start_joints)
@@ -576,6 +586,21 @@ class ScriptProjectController(SequenceController):
         else:
             end = joints
         return target, joints, via, tuple(end)
+
+    def _own_choice(
+        self, target: Pose, start_joints: Sequence[float] | None, nearest: Sequence[float]
+    ) -> tuple[float, ...] | None:
+        """A Cartesian PTP's joints nearest its reference: None where they are the backend's
+        own choice from ``start_joints``, within 0.001° (its Cartesian PTP then ends on the
+        target itself), or where the backend reports no joints (it takes its own)."""
+        joints = self._model.check_joints(nearest, tool=self.tool)
+        if start_joints is None:
+            return None
+        with contextlib.suppress(UnreachablePoseError):
+            own = self._model.inverse(target, seed_deg=start_joints, tool=self.tool)
+            if max(abs(a - b) for a, b in zip(own, joints, strict=True)) < 1e-3:
+                return None
+        return joints
 
     def tag_last(self, tag: int) -> None:
         """QueueTag: the last queued move carries ``tag`` (None: nothing queued, done).
@@ -748,6 +773,7 @@ class ScriptProjectController(SequenceController):
             joints=move.joints,
             via=move.via,
             start=move.start if move.via is not None else None,
+            cartesian=move.cartesian,
         )
         self._motion_args = args
         self._start_move(args)
