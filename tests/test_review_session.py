@@ -15,7 +15,7 @@ import pytest
 from safety_invariant import Issued
 from test_hunt22_cancel_threads import FAR, PROFILES, A, Owner, robot_of
 from test_motion_cancel import braked
-from tmmaster import Pose, Robot, RobotFaultError, StopRequestedError, TimeoutPolicy
+from tmmaster import PollPolicy, Pose, Robot, RobotFaultError, StopRequestedError, TimeoutPolicy
 from tmmaster.sim import Simulator
 from tmmaster.sim._script_project import ScriptProjectController
 
@@ -112,3 +112,31 @@ def test_an_arc_whose_ptp_from_the_arm_would_self_collide_is_taken(
         robot.move_arc(via, to, speed=30)
     assert sim.tcp_pose().is_close(to, mm=1.0, deg=1.0)
     assert [entry.kind for entry in sim.motion_log()][-1] == "circle"
+
+
+#: Far from the base, so that a PTP swinging J1 between them runs the TCP fast.
+WIDE_RIGHT = Pose(600, -250, 200, 180, 0, 90)
+WIDE_LEFT = Pose(600, 250, 200, 180, 0, 90)
+
+
+def test_a_joint_move_after_a_move_given_up_is_checked_from_where_the_arm_is(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    """A move to WIDE_LEFT cancelled just after it began leaves the arm by WIDE_RIGHT.
+    A joint move back to WIDE_RIGHT's joints at 80 % is short from there (its TCP at
+    about 230 mm/s by the model); from WIDE_LEFT, where the master last sent the arm,
+    it would swing J1 45 deg at 1634 mm/s, over the 1500 mm/s TCP speed limit. As
+    start_move since d5374cd, it must be checked from where the robot reports the arm."""
+    sim = tm_simulator_factory("tmflow", time_scale=5.0)
+    with Robot(sim.url, polling=PollPolicy(interval_s=0.01)) as robot:
+        robot.move_to(WIDE_RIGHT, speed=50)
+        joints = robot.status().joints
+        assert joints is not None
+        motion = robot.start_move(WIDE_LEFT, speed=5)
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(WIDE_RIGHT) > 2.0, timeout=5.0)
+        assert motion.cancel() is True
+        stopped_at = braked(sim)
+        assert stopped_at.distance_to(WIDE_RIGHT) < 30.0
+        robot.play()  # on tmflow the cancel's Stop ended the project
+        robot.move_joints(joints, speed=80)
+    assert sim.tcp_pose().is_close(WIDE_RIGHT, mm=1.0, deg=1.0)

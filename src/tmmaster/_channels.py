@@ -242,8 +242,7 @@ class CommandChannel(ABC):
     """Sends commands and interprets the robot's answers for one handshake."""
 
     def __init__(self, profile: RobotProfile, transport: Transport) -> None:
-        self.profile = profile
-        self.transport = transport
+        self.profile, self.transport = profile, transport
         #: ``time.monotonic()`` until which a Stop this master wrote may not show yet on the
         #: robot (TMflow takes it at its next cycle): a press decided before would land after it.
         self.stop_shows_by = -math.inf

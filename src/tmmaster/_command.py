@@ -288,8 +288,7 @@ class _MotionFollower:
         self.project_speed: Callable[[], float | None] | None = None
         #: How waits poll (``interval_s``: the nominal pace of every wait).
         self.polling = polling
-        self.timeouts = timeouts
-        self.position_tolerance_mm = position_tolerance_mm
+        self.timeouts, self.position_tolerance_mm = timeouts, position_tolerance_mm
         self.orientation_tolerance_deg = orientation_tolerance_deg
         #: Set by ``Robot.close()`` when it begins: another caller's wait for a withdraw's
         #: answer ends then (its command is stopped instead), so close() never waits

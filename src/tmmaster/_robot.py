@@ -1125,7 +1125,9 @@ class Robot:
         profile to its angle. Checked before any request: six finite numbers, each inside
         its range and the whole away from the arm model's singularities
         (:meth:`RobotModel.check_joints`), the TCP they put the arm at (forward
-        kinematics with ``tool``) inside the ``workspace`` and above its table plane. The
+        kinematics with ``tool``) inside the ``workspace`` and above its table plane, and
+        the arm's body and TCP speed along the PTP from where the arm is believed to be
+        (after a move given up, from where the robot reports it, read first). The
         expected time is the model's joint-space time from the joints the robot reports;
         at the end, the joints the robot reports must be the target's (their TCP is the
         robot's own: a calibrated arm's differs from the model's by a mm or two).
@@ -1166,6 +1168,8 @@ class Robot:
         self._require(CommandKind.PTP_JOINTS, "a joint move (move_joints)")
         values = joint_values(joints)
         check_accel(accel_time_ms)
+        if (last := self._last_motion) is not None and last.abandoned:
+            self._read_start()  # as start_move: checked from where a move given up left it
         checked, tcp = self._planner.joint_target(values, speed)
         command = Command(CommandKind.PTP_JOINTS, tcp, speed, accel_time_ms, joints=checked)
         return _waited(self._start_command(command, timeout=timeout))
