@@ -132,11 +132,12 @@ def test_a_joint_move_after_a_move_given_up_is_checked_from_where_the_arm_is(
         robot.move_to(WIDE_RIGHT, speed=50)
         joints = robot.status().joints
         assert joints is not None
-        motion = robot.start_move(WIDE_LEFT, speed=5)
+        motion = robot.start_move(WIDE_LEFT, speed=1)
         sim.wait_for(lambda: sim.tcp_pose().distance_to(WIDE_RIGHT) > 2.0, timeout=5.0)
         assert motion.cancel() is True
         stopped_at = braked(sim)
-        assert stopped_at.distance_to(WIDE_RIGHT) < 30.0
+        # Within 100 mm the PTP back at 80 % stays under 900 mm/s by the model.
+        assert stopped_at.distance_to(WIDE_RIGHT) < 100.0
         robot.play()  # on tmflow the cancel's Stop ended the project
         robot.move_joints(joints, speed=80)
     assert sim.tcp_pose().is_close(WIDE_RIGHT, mm=1.0, deg=1.0)
