@@ -85,6 +85,8 @@ class Literal(Expr):
 
     value: int | float | bool | str
     type: str
+    #: A hexadecimal or binary constant as written (``0xFFFFFFFF``); empty for the others.
+    written: str = ""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

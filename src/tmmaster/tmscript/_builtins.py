@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 from ._host import Host, ModbusCommunicationError, ModbusDevice, MotionCall
 from ._types import (
     ARRAY_MAX,
-    FLOAT_MAX,
     STRING_MAX,
     Scalar,
     Value,
     display_text,
+    fits_f32,
     to_f32,
     wrap32,
 )
@@ -469,7 +469,7 @@ def _parse_real(text: str, base: int, size: int) -> float:
     """
     if base == 10 and _DECIMAL.fullmatch(text.strip()):
         value = float(text.strip())
-        return to_f32(value) if size == 4 and abs(value) <= FLOAT_MAX else value
+        return to_f32(value) if size == 4 and fits_f32(value) else value
     found = _notation(text, base)
     if found is None or found[0] == 10:
         return 0.0
@@ -1027,7 +1027,7 @@ def _Display(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:  
 
 def _real(value: float, types: tuple[str, ...]) -> float:
     """A result in the syntax's type: a float syntax (float arguments) returns a float."""
-    return to_f32(value) if types and types[0] == "float" and abs(value) <= FLOAT_MAX else value
+    return to_f32(value) if types and types[0] == "float" and fits_f32(value) else value
 
 
 def _math1(section: str, page: int, name: str, fn: Callable[[float], float]) -> None:

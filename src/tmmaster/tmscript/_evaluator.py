@@ -36,7 +36,6 @@ from ._builtins import (
 from ._host import Host, HostError
 from ._parser import parse_script
 from ._types import (
-    FLOAT_MAX,
     INTEGRAL,
     NUMERIC,
     STRING_MAX,
@@ -46,6 +45,7 @@ from ._types import (
     default_value,
     display_text,
     element_type,
+    fits_f32,
     is_array,
     to_f32,
     truthy,
@@ -276,32 +276,47 @@ def _byte_range(value: a.Expr, typ: str) -> None:
         return
     if not isinstance(value, a.Literal) or value.type not in ("int", "float", "double"):
         return
+    if typ in ("int", "int32") and value.written and int(value.value) < 2**32:
+        return  # 0xFFFFFFFF: 32 bits, an int -1 with a warning (_ExprCompiler.literal)
     message = _out_of_range(value.value, typ)
     if message is not None:
         raise _syntax(value, message)
 
 
-def _no_duplicate_case(node: a.Switch) -> None:
-    """Two cases of one switch with the same constant condition (or two defaults) are
-    refused: TMflow 2.24 appendix J, 0x0004810D "Duplicated switch case condition",
-    "Please remove duplicated switch case condition" (p. 365)."""
-    seen: set[tuple[str, Any]] = set()
+def _no_duplicate_case(node: a.Switch) -> list[ScriptWarning]:
+    """Two cases of one switch with the same constant condition (the same comparison, a
+    constant of the same type and value) or two defaults are refused: TMflow 2.24 appendix
+    J, 0x0004810D "Duplicated switch case condition", "Please remove duplicated switch case
+    condition" (p. 365). Constants of two types are two conditions, as .NET's Equals has
+    them (``case 1``, ``case true``; ``case 1``, ``case 1.0``): a number equal to an
+    earlier case's is a warning, as the earlier case matches first."""
+    seen: set[tuple[str, str, Any]] = set()
+    numbers: dict[tuple[str, Any], a.Case] = {}
+    found: list[ScriptWarning] = []
     for case in node.cases:
-        if case.value is None:
-            key: tuple[str, Any] = ("default", None)
-        elif isinstance(case.value, a.Literal):
-            key = (case.op, case.value.value)
-        else:
+        lit = case.value
+        if lit is not None and not isinstance(lit, a.Literal):
             continue
+        key = ("default", "", None) if lit is None else (case.op, lit.type, lit.value)
         if key in seen:
             raise _syntax(case, "a duplicated switch case condition (TMflow 0x0004810D)")
         seen.add(key)
+        if lit is not None and lit.type in _RANK:
+            first = numbers.setdefault((case.op, lit.value), case)
+            if first is not case:
+                cond = lit.value if case.op == "==" else f"{case.op} {lit.value}"
+                message = (
+                    f"case {cond} is the condition of the case on line {first.line}, "
+                    "which matches first: this one never matches"
+                )
+                found.append(ScriptWarning(case.line, case.column, message))
+    return found
 
 
 def _out_of_range(number: Any, typ: str) -> str | None:
     """Why the constant ``number`` does not fit a ``typ`` (see :func:`_byte_range`), or None."""
     if typ == "float":
-        return None if abs(number) <= FLOAT_MAX else f"{number} is out of a float's range"
+        return None if fits_f32(number) else f"{number} is out of a float's range"
     bounds = _INT_RANGE.get({"int32": "int"}.get(typ, typ))
     if bounds is None or not isinstance(number, int) or bounds[0] <= number <= bounds[1]:
         return None
@@ -614,13 +629,13 @@ class _ExprCompiler:
         if isinstance(value, int) and not isinstance(value, bool) and node.type == "double":
             # An integer constant over 32 bits is no int (§2.7, p. 27): a double here,
             # held as one (Length() 8, GetBytes() its 8 bytes: §4.42 p. 133, §4.34).
-            self.warnings.append(
-                ScriptWarning(
-                    node.line,
-                    node.column,
-                    f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double",
+            message = f"{value} is not an int (over 32 bits, §2.7 p. 27): taken as a double"
+            if node.written and value < 2**32:  # the manual does not say (docs/tmscript.md)
+                message = (
+                    f"{node.written} is over an int's range (§2.2 p. 14): taken as a double, "
+                    f"{value}; an int takes its 32 bits, {wrap32(value)}"
                 )
-            )
+            self.warnings.append(ScriptWarning(node.line, node.column, message))
             value = float(value)
         if isinstance(value, str) and "'" in value:
             # TMflow warns of a single quote in a string constant: it reads 'x' as the
@@ -1404,7 +1419,7 @@ class _Compiler(_ExprCompiler):
         subject = self.expr(node.subject)
         subject_fn = _lift(subject)
         cases: list[tuple[Callable[[Value, _Frame], Gen] | None, StmtFn]] = []
-        _no_duplicate_case(node)
+        self.warnings.extend(_no_duplicate_case(node))
         for case in node.cases:
             test = None
             if case.value is not None:

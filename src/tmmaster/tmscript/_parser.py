@@ -12,7 +12,7 @@ import re
 from collections.abc import Iterator
 from functools import cache
 from importlib.resources import files
-from typing import Any, cast
+from typing import Any, TypedDict, cast
 
 from lark import Lark, Token, Transformer, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
@@ -23,7 +23,7 @@ from lark.tree import Meta
 from .._exceptions import TMScriptError, TMScriptSyntaxError
 from . import _ast as a
 from ._grammar_cache import cache_file, keep_parsed, load_parsed, parsed_file
-from ._types import STRING_MAX
+from ._types import STRING_MAX, fits_f32
 
 __all__ = ["MAX_ERRORS", "MAX_NESTING", "check_script", "parse_script"]
 
@@ -179,11 +179,16 @@ def build_parser(grammar: str, cache: str | None) -> Lark:
     )
 
 
-def _pos(meta: Meta) -> dict[str, int]:
+class _Where(TypedDict):
+    line: int
+    column: int
+
+
+def _pos(meta: Meta) -> _Where:
     return {"line": meta.line, "column": meta.column}
 
 
-def _tpos(tok: Token) -> dict[str, int]:
+def _tpos(tok: Token) -> _Where:
     return {"line": tok.line or 0, "column": tok.column or 0}
 
 
@@ -463,19 +468,21 @@ class _ToAst(Transformer[Token, object]):
         return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value))
 
     def hex_literal(self, meta: Meta, children: list[object]) -> a.Literal:
-        value = int(str(children[0])[2:], 16)
-        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value))
+        text = str(children[0])
+        value = int(text[2:], 16)
+        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value), written=text)
 
     def bin_literal(self, meta: Meta, children: list[object]) -> a.Literal:
-        value = int(str(children[0])[2:], 2)
-        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value))
+        text = str(children[0])
+        value = int(text[2:], 2)
+        return a.Literal(**_pos(meta), value=value, type=_smallest_int_type(value), written=text)
 
     def float_literal(self, meta: Meta, children: list[object]) -> a.Literal:
         text = str(children[0])
         value = float(text)
         # float when it fits a float's range and 7 significant digits, else double (§2.2).
         digits = len(text.lower().split("e")[0].replace(".", "").lstrip("0"))
-        typ = "float" if abs(value) <= 3.4028235e38 and digits <= 7 else "double"
+        typ = "float" if fits_f32(value) and digits <= 7 else "double"
         return a.Literal(**_pos(meta), value=value, type=typ)
 
     def string_literal(self, meta: Meta, children: list[object]) -> a.Literal:

@@ -20,6 +20,7 @@ __all__ = [
     "convert",
     "display_text",
     "element_type",
+    "fits_f32",
     "is_array",
     "is_numeric",
     "to_f32",
@@ -43,6 +44,15 @@ NUMERIC = INTEGRAL | {"float", "double"}
 SCALARS = NUMERIC | {"bool", "string"}
 _F32 = struct.Struct("<f")
 FLOAT_MAX = 3.4028234663852886e38
+#: Half a unit in the last place above FLOAT_MAX: a number this great or greater rounds to
+#: infinity as a float (IEEE 754 round to nearest, a tie to the even 2**128), one below it
+#: to a finite float (3.4028235e38, FLOAT_MAX as .NET shows it, is FLOAT_MAX).
+FLOAT_LIMIT = 2.0**128 - 2.0**103
+
+
+def fits_f32(value: float) -> bool:
+    """Whether ``value`` rounds to a finite 32-bit float (NaN does not)."""
+    return abs(value) < FLOAT_LIMIT
 
 
 class ConversionError(Exception):
@@ -78,7 +88,7 @@ def to_f32(value: float) -> float:
 
     :raises ConversionError: the value is out of a float's range, NaN or infinite (§2.5).
     """
-    if math.isnan(value) or math.isinf(value) or abs(value) > FLOAT_MAX:
+    if not fits_f32(value):
         raise ConversionError(f"{_number_text(value, 'double')} cannot be converted to float")
     result: float = _F32.unpack(_F32.pack(value))[0]
     return result
