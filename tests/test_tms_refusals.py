@@ -119,6 +119,20 @@ def test_a_32_bit_hexadecimal_int_constant_is_kept_with_a_warning() -> None:
     assert "-1" in found[0]
 
 
+def test_a_32_bit_hexadecimal_constant_is_returned_by_an_int_function_as_assigned() -> None:
+    # "If the function defines the return type, it must return with the same type" ([TS]
+    # §3.5, p. 32): an integer constant that fits passes, as in an assignment; 0xFFFFFFFF
+    # is taken as in an assignment (above), 0x100000000 still is not an int.
+    script = "main\n{{\n    int r = F()\n    Display(r)\n}}\nint F()\n{{\n    return {}\n}}\n"
+    shown: list[str] = []
+    program = parse(script.format("0xFFFFFFFF"))
+    execution = Execution(program, NullHost(on_display=shown.append, clock=_Clock()))
+    assert execution.run_to_end(timeout_s=5) == ExecState.ENDED, execution.error
+    assert shown == ["-1"]
+    with pytest.raises(TMScriptSyntaxError, match="returns a int"):
+        parse(script.format("0x100000000"))
+
+
 @pytest.mark.parametrize(
     "text",
     [

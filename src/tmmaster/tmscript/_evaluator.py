@@ -359,6 +359,15 @@ def _lossy(value: a.Expr, source: str, target: str) -> str | None:
 _INT_RANGE = {"byte": (0, 255), "int16": (-(2**15), 2**15 - 1), "int": (-(2**31), 2**31 - 1)}
 
 
+def _returned_constant(node: a.Return, ce: _CExpr, target: str) -> Any:
+    """The constant ``return`` gives, a 32-bit hexadecimal or binary one to an int as its
+    32 bits (0xFFFFFFFF is -1, as in an assignment: see :func:`_byte_range`); else None."""
+    lit = node.value
+    if isinstance(lit, a.Literal) and lit.written and target == "int" and int(lit.value) < 2**32:
+        return wrap32(int(lit.value))
+    return ce.const[0] if ce.const is not None else None
+
+
 def _check_return(node: a.Return, name: str, ce: _CExpr, want: str) -> None:
     """A value of another type than the function's returned: refused where it would
     narrow or change kind ("If the function defines the return type, it must return with
@@ -375,7 +384,7 @@ def _check_return(node: a.Return, name: str, ce: _CExpr, want: str) -> None:
     if source in _RANK and target in _RANK:
         if _RANK[target] >= _RANK[source]:
             return
-        value = ce.const[0] if ce.const is not None else None
+        value = _returned_constant(node, ce, target)
         bounds = _INT_RANGE.get({"int32": "int"}.get(target, target))
         if isinstance(value, int) and bounds is not None and bounds[0] <= value <= bounds[1]:
             return
