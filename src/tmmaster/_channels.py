@@ -652,9 +652,18 @@ class ClearOnAcceptChannel(CommandChannel):
         return Observation(ticket.acknowledged, done, failure, status.pose, status.joints)
 
     def withdraw(self, ticket: Ticket) -> bool:
-        """Write command = none, then check whether the robot had started the move meanwhile."""
+        """Write command = none, then check whether the robot had started the move meanwhile
+        (``motion_status``: moving, as :meth:`status_from` reads it).
+
+        That check is read once, not retried: one that fails (reads lost, writes passing)
+        raises, and the caller presses Stop at once, harmless if the robot did not take the
+        command, instead of after the retry policy's whole budget while the arm, had it
+        taken it, runs on (``tests/test_lostreads_giveup.py``). The Stop is idempotent and
+        owed until delivered; the command itself is never written again.
+        """
         self.transport.write_fields([(self._command_field, 0)], retry=True, interruptible=False)
-        return self.status_from(self._read_regardless(self.status_fields)).moving
+        field = self.profile.field("motion_status")
+        return int(self.transport.read_fields([field], retry=False)["motion_status"]) == 1
 
     def write_landed(self, ticket: Ticket) -> bool:
         """Our targets in the registers (pending or taken), or the arm moving: the write arrived.

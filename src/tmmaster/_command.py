@@ -523,9 +523,9 @@ class _MotionFollower:
                 running = self._withdraw(ticket, until=until, interruptible=interruptible)
                 ticket.withdrawn = motion.withdrawn = not running
             except TMMasterError as exc:
-                # Not known whether the robot took it: stop, which is harmless if it did not.
-                running = True
-                motion.withdrawn = False
+                # Not known whether the robot took it: stop, which is harmless if it did not;
+                # at once where the withdraw's read was lost (article reads it once).
+                running, motion.withdrawn = True, False
                 self._log.error(
                     "robot.withdraw_failed", command=motion.command.kind.value, error=str(exc)
                 )
