@@ -96,21 +96,12 @@ def test_close_stops_the_arm_without_waiting_out_the_lost_reads(
     judge(sim, issued)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Motion.cancel() polls the command once first (a move that finished unwatched is"
-        " left as it is), and that poll retries for the retry policy's whole budget while"
-        " the reads are lost: the arm runs on until the poll gives up. The withdraw after"
-        " it no longer adds a second budget. Fix: make cancel()'s first poll one attempt"
-        " (as close()'s is: its stop request ends the retries), a retry flag through"
-        " CommandChannel.poll/_drive/read; not done within the core line budget."
-    ),
-)
 def test_cancel_stops_the_arm_without_waiting_out_the_lost_reads(
-    sim: Simulator, proxy: FaultProxy
+    sim: Simulator, proxy: FaultProxy, driver_or_fleet: Fleet | None
 ) -> None:
-    robot, motion, issued = moving_far(sim, proxy, None)
+    """cancel()'s first poll (a move that finished unwatched is left as it is) is made
+    once: its lost read gives the command up at once, as close()'s does."""
+    robot, motion, issued = moving_far(sim, proxy, driver_or_fleet)
     with robot:
         try:
             assert motion.cancel() is True

@@ -39,11 +39,11 @@ def test_a_robot_fault_a_cancel_only_saw_reaches_the_owner_as_the_fault(
         cancelled = threading.Event()
         owners: list[int | None] = []
 
-        def held_poll(ticket: object) -> object:
+        def held_poll(ticket: object, *retry: bool) -> object:
             # The owner's poll waits for the cancel to be over: it sees the fault after.
             if owners and threading.get_ident() == owners[0]:
                 cancelled.wait(10)
-            return real_poll(ticket)  # type: ignore[arg-type]
+            return real_poll(ticket, *retry)  # type: ignore[arg-type]
 
         channel.poll = held_poll  # type: ignore[method-assign]
         owner = Owner(motion.wait, Issued(FAR, time.monotonic()))

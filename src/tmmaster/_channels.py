@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Generator
+from collections.abc import Generator, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
@@ -309,15 +309,19 @@ class CommandChannel(ABC):
 
     # -- reading ---------------------------------------------------------
 
-    def read(self, fields: tuple[RegisterField, ...] | list[RegisterField]) -> dict[str, Value]:
-        """Read fields, one request per contiguous block, retrying transient failures."""
-        return self.transport.read_fields(fields, max_gap=self.profile.max_read_gap)
+    def read(
+        self, fields: Sequence[RegisterField], *, retry: bool = True, interruptible: bool = True
+    ) -> dict[str, Value]:
+        """Read fields, one request per contiguous block, retrying transient failures
+        (``retry=False``: once, a failure raised at once); ``interruptible=False``: even
+        after a stop request."""
+        return self.transport.read_fields(
+            fields, max_gap=self.profile.max_read_gap, retry=retry, interruptible=interruptible
+        )
 
     def _read_regardless(self, fields: tuple[RegisterField, ...]) -> dict[str, Value]:
         """:meth:`read`, even after a stop request (a withdraw or a stop's own reads)."""
-        return self.transport.read_fields(
-            fields, max_gap=self.profile.max_read_gap, interruptible=False
-        )
+        return self.read(fields, interruptible=False)
 
     def read_status(self) -> RobotStatus:
         """A full status snapshot."""
@@ -489,16 +493,19 @@ class CommandChannel(ABC):
         (:meth:`take_after_done`). Every check is the same either way.
         """
 
-    def poll(self, ticket: Ticket) -> Observation:
-        """Read the robot's state once and say what happened to the ticket."""
-        return self._drive(self.poll_steps(ticket))
+    def poll(self, ticket: Ticket, retry: bool = True) -> Observation:
+        """Read the robot's state once and say what happened to the ticket
+        (``retry=False``: each read made once, as :meth:`Motion.cancel`'s first look)."""
+        return self._drive(self.poll_steps(ticket), retry)
 
-    def _drive(self, steps: Generator[tuple[RegisterField, ...], dict[str, Value], R]) -> R:
+    def _drive(
+        self, steps: Generator[tuple[RegisterField, ...], dict[str, Value], R], retry: bool = True
+    ) -> R:
         """Run steps without I/O here: read each field set they yield through the transport."""
         try:
             fields = next(steps)  # steps that need no read end here
             while True:
-                fields = steps.send(self.read(fields))
+                fields = steps.send(self.read(fields, retry=retry))
         except StopIteration as finished:
             result: R = finished.value
             return result

@@ -163,14 +163,20 @@ class Motion:
         One poll first (as :meth:`progress`), so a move that finished while nobody
         polled it is found done, neither "withdrawn" nor stopped (on ``tmflow`` a Stop
         would stop the project); a poll that fails gives the command up as a wait does.
+        That poll is made once, not retried (as ``close()``'s, which its stop request
+        cuts short): where the robot's reads are lost, the arm is not left running for
+        the retry policy's whole budget first (``tests/test_lostreads_giveup.py``).
 
         Returns:
             True when the command can no longer run: never written, finished, withdrawn,
             or stopped. False when that could not be confirmed (the link is down: the
             give-up is then owed and delivered before anything else is sent).
         """
-        with contextlib.suppress(TMMasterError):  # a failed poll gave it up already
-            self.progress()  # one poll first: a move that finished is left as it is
+        if self.phase in (MovePhase.SENT, MovePhase.RUNNING):
+            # One poll, one attempt: a move that finished is left as it is (a failure
+            # gave the command up already, at once).
+            with contextlib.suppress(TMMasterError), _Following(self._follower, self):
+                self._follower.poll(self, retry=False)
         return self._follower.abandon(self, StopRequestedError("the motion was cancelled"))
 
     def wait(self, timeout_s: float | None = None) -> None:
@@ -508,12 +514,7 @@ class _MotionFollower:
         return self._channel.transport.endpoint
 
     def _withdraw_or_stop(
-        self,
-        motion: Motion,
-        reason: BaseException,
-        *,
-        until: float | None = None,
-        interruptible: bool = True,
+        self, motion: Motion, reason: BaseException, *, until: float | None, interruptible: bool
     ) -> bool:
         """:meth:`abandon`'s work: withdraw a command not yet taken, stop a running one."""
         ticket = motion.ticket
@@ -613,11 +614,11 @@ class _MotionFollower:
                     f"the robot program did not answer the cancel of command {ticket.seq} {within}"
                 )
 
-    def poll(self, motion: Motion) -> None:
+    def poll(self, motion: Motion, retry: bool = True) -> None:
         """Poll the command once for a report, with the pose; raises the typed error when
-        the robot failed it."""
+        the robot failed it. ``retry=False``: the poll's reads are made once (not retried)."""
         polled_pose = motion.last_pose
-        self._apply(motion, self._channel.poll(motion.ticket))
+        self._apply(motion, self._channel.poll(motion.ticket, retry))
         if motion.last_pose is polled_pose and not motion.done:
             # This profile's poll does not carry the pose: read it for the report.
             motion.last_pose = self._channel.read_pose()
