@@ -235,8 +235,9 @@ class _Following:
 
     def __exit__(self, _type: object, exc: BaseException | None, _tb: object) -> Literal[False]:
         motion, follower = self._motion, self._follower
-        # Not on entering: by another thread meanwhile, asked to (not a fault it saw).
-        cancelled = isinstance(motion._given_up, StopRequestedError)
+        # Not on entering: by another thread meanwhile, asked to or for a lost read (as
+        # cancel()'s one-attempt poll), not for a robot fault it saw (that stays itself).
+        cancelled = not isinstance(motion._given_up, RobotError | None)
         if exc is not None:
             follower.abandon(motion, exc)
         if motion.ticket.resent and (motion.done or motion._given_up):
