@@ -327,9 +327,9 @@ class CommandChannel(ABC):
         """A full status snapshot."""
         return self.status_from(self.read(self.status_fields))
 
-    def read_pose(self) -> Pose:
-        """The current TCP pose (one request)."""
-        pose = pose_from(self.read(self.tcp_fields), TCP_FIELDS)
+    def read_pose(self, retry: bool = True) -> Pose:
+        """The current TCP pose (one request; ``retry=False``: made once, as :meth:`poll`)."""
+        pose = pose_from(self.read(self.tcp_fields, retry=retry), TCP_FIELDS)
         if self.after_done is not None:
             # Read after the done poll: the next command may start its plan from it.
             self.after_done.pose = pose

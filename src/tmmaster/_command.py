@@ -621,8 +621,9 @@ class _MotionFollower:
         polled_pose = motion.last_pose
         self._apply(motion, self._channel.poll(motion.ticket, retry))
         if motion.last_pose is polled_pose and not motion.done:
-            # This profile's poll does not carry the pose: read it for the report.
-            motion.last_pose = self._channel.read_pose()
+            # This profile's poll does not carry the pose: read it for the report (as the
+            # poll's reads: cancel()'s once, not waiting out the retries while the arm runs).
+            motion.last_pose = self._channel.read_pose(retry)
 
     def _apply(self, motion: Motion, observation: Observation, until: float = float("inf")) -> None:
         """Act on what a poll saw: raise the robot's failure, note the acknowledgement, finish."""
