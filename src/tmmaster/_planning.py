@@ -332,12 +332,18 @@ class Planner:
     def validate(self, pose: Pose, speed: int, seed_deg: Sequence[float] | None = None) -> Joints:
         """:meth:`Robot.validate_move`: speed, units, workspace, inverse kinematics, and
         the arm's body along the PTP from ``seed_deg`` (or the seed) to the target."""
-        self._check_target(pose, speed)
         seed = tuple(seed_deg) if seed_deg is not None else self.joints_hint
+        joints = self._target_joints(pose, speed, seed)
+        _check_ptp_body(self.model, seed, joints, self.tool, self.workspace.floor_z_mm)
+        return joints
+
+    def _target_joints(self, pose: Pose, speed: int, seed: Joints | None) -> Joints:
+        """A target's checks (:meth:`_check_target`), its joints from ``seed`` in the arm's
+        pose configuration, and the arm there: :meth:`validate` but the body on the way."""
+        self._check_target(pose, speed)
         joints = self.model.inverse(pose, seed_deg=seed, tool=self.tool)
         self._keep_configuration(seed, joints, pose)
         self.workspace.check_arm(self.model, joints)
-        _check_ptp_body(self.model, seed, joints, self.tool, self.workspace.floor_z_mm)
         return joints
 
     def _keep_configuration(self, seed: Joints | None, joints: Joints, pose: Pose) -> None:
@@ -461,13 +467,10 @@ class Planner:
         """An arc's checks before any request: its end and ``via``. The arc itself is
         checked from the pose the robot reports (its plan), not from the last target: a
         move stopped short or given up left the arm elsewhere, where another arc starts."""
-        self._check_target(to, speed)
+        # Its end as validate() checks it, without the body along a PTP there: the arm
+        # takes the arc, whose samples' body the plan checks.
+        self._target_joints(to, speed, self.joints_hint)
         self.workspace.check(via)  # its position (the TCP passes there)
-        # Its end's joints and arm, as validate()'s, without the body along a PTP there:
-        # the arm takes the arc, whose samples' body the plan checks.
-        joints = self.model.inverse(to, seed_deg=self.joints_hint, tool=self.tool)
-        self._keep_configuration(self.joints_hint, joints, to)
-        self.workspace.check_arm(self.model, joints)
 
     def joint_target(self, joints: Sequence[float], speed: int) -> tuple[Joints, Pose]:
         """A joint move's checked joints and the TCP pose they give (validated as a target)."""
