@@ -670,7 +670,7 @@ class ClearOnAcceptChannel(CommandChannel):
         """
         self.transport.write_fields([(self._command_field, 0)], retry=True, interruptible=False)
         field = self.profile.field("motion_status")
-        return int(self.transport.read_fields([field], retry=False)["motion_status"]) == 1
+        return int(self.read([field], retry=False)[field.name]) == 1
 
     def write_landed(self, ticket: Ticket) -> bool:
         """Our targets in the registers (pending or taken), or the arm moving: the write arrived.
