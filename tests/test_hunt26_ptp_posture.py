@@ -24,8 +24,8 @@ from pathlib import Path
 
 import pytest
 
-from tmmaster import ConfigError, Pose, Robot, RobotModel, UnreachablePoseError, robot_model
-from tmmaster._body import contacts, ptp_samples
+from test_other_branch import POSES, OtherConfiguration
+from tmmaster import ConfigError, Pose, Robot, RobotModel, robot_model
 from tmmaster._profiles import robot_profile
 from tmmaster._robot_program import robot_program
 from tmmaster.sim import RobotSetup, Simulator
@@ -33,21 +33,15 @@ from tmmaster.sim._script_project import simulated_tool
 
 SimFactory = Callable[..., Simulator]
 MASTER = robot_model("tm5-700")
-#: Tool-down targets whose every configuration the arm's body allows, from one another
-#: (as in tests/test_other_branch.py).
-POSES = [
-    Pose(350, 200, 400, 180, 0, 90),
-    Pose(350, 0, 400, 180, 0, 90),
-    Pose(350, 200, 250, 180, 0, -90),
-]
 NEW_PTP = 'ok = PTP("CPP", target, speed, accel, 0, false, joints)'
 OLD_PTP = 'ok = PTP("CPP", target, speed, accel, 0, false)'
 
 
-class ClosestToReference(RobotModel):
+class ClosestToReference(OtherConfiguration):
     """A TM5-700 controller that goes to "the closest assigned joint target" of a PTP's
     reference joints (a reference that solves the target is where the arm goes), and
-    otherwise takes the nearest solution in another configuration its body reaches."""
+    otherwise takes the nearest solution in another configuration its body reaches
+    (test_other_branch's controller)."""
 
     def inverse(
         self,
@@ -57,23 +51,11 @@ class ClosestToReference(RobotModel):
         tool: Pose | None = None,
         same_branch: bool = False,
     ) -> tuple[float, ...]:
-        joints = super().inverse(pose, seed_deg=seed_deg, tool=tool, same_branch=same_branch)
-        if same_branch:
-            return joints  # a Line's path keeps its configuration, as on any arm
         seed = tuple(seed_deg) if seed_deg is not None else self.ready_joints_deg
-        if self.forward(seed, tool).is_close(pose, mm=0.01, deg=0.01):
-            return joints  # the reference solves the target: it is the closest
-        keep = self.configuration(joints)
-        others = []
-        for start in self._starts(seed) + self._wide_starts(seed, pose):
-            try:
-                other = super().inverse(pose, seed_deg=start, tool=tool, same_branch=True)
-            except UnreachablePoseError:
-                continue
-            path = ptp_samples(seed, other)
-            if self.configuration(other) != keep and not any(contacts(self, q, tool) for q in path):
-                others.append(other)
-        return min(others, key=lambda q: self.ptp_seconds(seed, q), default=joints)
+        if not same_branch and self.forward(seed, tool).is_close(pose, mm=0.01, deg=0.01):
+            # The reference solves the target: it is the closest.
+            return RobotModel.inverse(self, pose, seed_deg=seed_deg, tool=tool)
+        return super().inverse(pose, seed_deg=seed_deg, tool=tool, same_branch=same_branch)
 
 
 def _program(tmp_path: Path, ptp: str) -> Path:
