@@ -128,10 +128,8 @@ class ProjectControl:
             raise RobotError(
                 f"play(): paused command {held} is another master's, or given up: press Stop"
             )
-        if (
-            "ma_mode" in status.raw
-            and self._profile.field("ma_mode").label(int(status.raw["ma_mode"])) == "manual"
-        ):
+        mode = status.raw.get("ma_mode")
+        if mode is not None and self._profile.field("ma_mode").label(int(mode)) == "manual":
             raise RobotError(
                 "play(): the robot is in Manual mode, where TMflow refuses Play over Modbus"
                 " (TMflow 2.24, 12.1, p. 219): switch it to Auto mode on the robot",
@@ -166,10 +164,15 @@ class ProjectControl:
         return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s)
 
     def _held(self, status: RobotStatus) -> int | None:
-        """The number of the command the robot program holds taken (busy), if it says."""
-        raw, field = status.raw, self._profile.fields.get("robot_state")
-        busy = field is not None and field.label(int(raw["robot_state"])) == "busy"
-        return int(raw["ack_seq"]) if busy and "ack_seq" in raw else None
+        """The number of the command the robot program holds taken (busy), or the one it
+        takes at Play: written, not taken yet (``seq == ack_seq + 1``: a block that landed
+        while the project was paused, perhaps a dead master's), if it says. A pending
+        cancel record counts too: Stop, not Play, then ends it all."""
+        if "ack_seq" not in status.raw:  # no robot program's handshake in this profile
+            return None
+        ack, p = int(status.raw["ack_seq"]), self._profile  # status.moving: busy
+        seq = ack if status.moving else int(self._channel.read((p.field("seq"),))["seq"])
+        return seq if status.moving or seq == p.next_seq(ack) else None
 
     def _before_press(self, what: str, timeout_s: float, interval: float) -> _Read:
         """The status a press starts from; refused without a project, for a bad
