@@ -74,13 +74,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 
 def _status_lines(status: RobotStatus) -> str:
-    project = status.project or "none (this profile has no TMflow project)"
+    # An e-stop the profile does not report (article: an error code) is not "released".
+    estop = "PRESSED" if status.estop else "released" if "estop" in status.raw else "unknown"
     lines = [
-        f"project  {project}",
+        f"project  {status.project or 'none (this profile has no TMflow project)'}",
         f"mode     {status.mode}",
         f"moving   {'yes' if status.moving else 'no'}",
         f"error    {status.error_code if status.error else 'none'}",
-        f"e-stop   {'PRESSED' if status.estop else 'released'}",
+        f"e-stop   {estop}",
         f"ready    {'yes' if status.ready else 'no'}",
         f"pose     {status.pose}",
     ]
