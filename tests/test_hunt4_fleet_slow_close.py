@@ -81,9 +81,12 @@ class Cell:
         ``closed_at``.
         """
         rests: dict[str, tuple[Pose, int]] = {}
+        # Watched together: each look compares every named arm with its previous look,
+        # 0.05 s (5 ticks) apart; all of them still at once is at rest.
+        still = [at_rest(self.sims[name]) for name in names]
+        self.sims["a"].wait_for(lambda: all([s() for s in still]), timeout=10, interval=0.05)
         for name in names:
             sim = self.sims[name]
-            sim.wait_for(at_rest(sim), timeout=10, interval=0.1)
             rest = sim.tcp_pose()
             assert rest.distance_to(goals[name]) > 50, f"{name} ran on to {rest} ({why})"
             rests[name] = rest, sim.ticks
