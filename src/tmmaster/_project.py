@@ -184,11 +184,8 @@ class ProjectControl:
         require_positive("timeout_s", timeout_s)
         status, state = self._status()
         if (failure := self._channel.status_failure(status)) is not None:
-            raise type(failure)(
-                f"{what}: {failure}: reset it on the robot first",
-                error_code=failure.error_code,
-                pose=failure.pose,
-            )
+            why = f"{what}: {failure}: reset it on the robot first"
+            raise type(failure)(why, error_code=failure.error_code, pose=failure.pose)
         if state is not ProjectState.STOPPED and time.monotonic() < self._channel.stop_shows_by:
             state = self._wait_for(ProjectState.STOPPED, state, timeout_s, interval)
         return status, state

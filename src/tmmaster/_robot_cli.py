@@ -10,7 +10,8 @@ connection, one action, one answer on stdout, and an exit status:
      project (article: play/pause)
 3    the connection failed
 4    the robot refused: in error or e-stop, Manual mode, or the project did not
-     change (``stop``: the arm still moved) within ``--timeout``
+     change (``stop``: the arm still moved) within ``--timeout``, or (``stop``) the
+     project still runs once the arm is at rest: the Stop never reached it
 ===  ====================================================================
 """
 
@@ -22,12 +23,12 @@ import sys
 from ._address import check_host
 from ._checks import require_positive
 from ._cliparse import one_line, write_stdout
-from ._exceptions import ConfigError, TMMasterError, TransportError
+from ._exceptions import ConfigError, RobotError, TMMasterError, TransportError
 from ._logging import add_logging_arguments, configure_logging
 from ._profiles import DEFAULT_PROFILE, builtin_profile_names
 from ._project import PRESS_TIMEOUT_S
 from ._robot import Robot
-from ._status import RobotStatus
+from ._status import ProjectState, RobotStatus
 
 #: The actions, in the order ``--help`` lists them.
 ACTIONS = ("status", "play", "pause", "stop")
@@ -95,6 +96,10 @@ def _act(robot: Robot, action: str, timeout_s: float) -> str:
     if action == "stop":
         robot.stop()
         robot.wait_until_at_rest(timeout_s)  # not robot.status().moving: tmflow's is the program's
+        # Read back: a Stop answered and never delivered (a gateway) leaves the project
+        # running, to take the next move; it shows stopped long before 0.5 s of rest.
+        if (project := robot.status().project) in (ProjectState.RUNNING, ProjectState.PAUSED):
+            raise RobotError(f"the arm is at rest, the project still {project}: Stop never landed")
         return "stop     pressed; the arm is at rest\n"
     return _status_lines(robot.status())
 
