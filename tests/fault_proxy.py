@@ -379,6 +379,12 @@ class FaultProxy:
         for link in links:
             link.close()
 
+    @property
+    def accepting(self) -> bool:
+        """True once an ``outage`` is over: a connection made now is taken, not refused."""
+        with self._lock:
+            return time.monotonic() >= self._refusing_until
+
     def wait_held(self, timeout: float = 5.0) -> None:
         """Block until every held frame has been delivered (or ``timeout`` passed)."""
         deadline = time.monotonic() + timeout

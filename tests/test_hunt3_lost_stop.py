@@ -17,7 +17,6 @@ delivers its Stop.
 from __future__ import annotations
 
 import asyncio
-import socket
 from collections.abc import Awaitable, Callable, Iterator
 from typing import Any
 
@@ -41,6 +40,9 @@ OUTAGE_S = 0.8
 #: outage, as at twice real time and 5 %; the move to START takes a fifth of that.
 TIME_SCALE = 10.0
 SLOW = 1
+#: How far apart the waits look (for an answer, for the arm at rest): 5 ticks of the
+#: suite's 100 Hz, so an arm still moving has moved between two looks.
+LOOK_S = 0.05
 RETRY = RetryPolicy(attempts=2, total_time_s=0.3, initial_backoff_s=0.05, jitter_s=0)
 
 
@@ -98,8 +100,8 @@ def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
             motion.wait()  # given up: the link is gone, and with it the Stop
         # The master's next calls: refused while the Stop still cannot be delivered
         # (CommandStateUnknownError), then, the link back, the Stop goes first.
-        sim.wait_for(answered(robot), timeout=OUTAGE_S + 5, interval=0.1)
-        sim.wait_for(at_rest(sim), timeout=15, interval=0.1)  # to FAR: about 4 s
+        sim.wait_for(answered(robot), timeout=OUTAGE_S + 5, interval=LOOK_S)
+        sim.wait_for(at_rest(sim), timeout=15, interval=LOOK_S)  # to FAR: about 4 s
         rest = sim.tcp_pose()
         assert rest.distance_to(FAR) > 100, f"the given-up move ran on to {rest}"
         assert motion.stop_delivered is True
@@ -108,11 +110,11 @@ def test_a_stop_lost_with_the_link_is_delivered_by_the_next_call(
 
 async def answered_awaited(robot: aio.AsyncRobot) -> None:
     """Until ``await robot.status()`` returns (a call of the master's, not a probe)."""
-    for _ in range(int((OUTAGE_S + 5) / 0.1)):
+    for _ in range(int((OUTAGE_S + 5) / LOOK_S)):
         try:
             await robot.status()
         except tmmaster.TMMasterError:
-            await asyncio.sleep(0.1)
+            await asyncio.sleep(LOOK_S)
         else:
             return
     raise AssertionError("the robot never answered again")
@@ -147,8 +149,8 @@ async def moving_then_cut(
 
 
 async def stops_short(sim: Simulator) -> None:
-    # Looks 0.1 s apart (several ticks): to FAR would take about 4 s.
-    await asyncio.to_thread(sim.wait_for, at_rest(sim), 15, interval=0.1)
+    # Looks LOOK_S apart (several ticks): to FAR would take about 4 s.
+    await asyncio.to_thread(sim.wait_for, at_rest(sim), 15, interval=LOOK_S)
     rest = sim.tcp_pose()
     assert rest.distance_to(FAR) > 100, f"the given-up move ran on to {rest}"
 
@@ -196,22 +198,12 @@ def test_an_awaited_moves_lost_stop_is_delivered_by_close(
 
 
 def proxy_accepts(proxy: FaultProxy) -> Callable[[], bool]:
-    """For ``until``: True once the proxy takes a connection again (the outage over): a
-    refused one is reset at once, a taken one stays open and silent."""
+    """For ``until``: True once the proxy takes a connection again (the outage over).
 
-    def accepts() -> bool:
-        try:
-            with socket.create_connection(("127.0.0.1", proxy.port), timeout=1.0) as probe:
-                # A refused connection's reset can come late on a loaded machine: 0.05 s
-                # once took a refusing proxy for an accepting one (close()'s Stop reset).
-                probe.settimeout(0.5)
-                return probe.recv(1) != b""
-        except TimeoutError:
-            return True
-        except OSError:
-            return False
-
-    return accepts
+    Asked of the proxy, which decides: a probe connection needed 0.5 s of silence to
+    tell a taken connection from a refused one whose reset came late (a loaded machine).
+    """
+    return lambda: proxy.accepting
 
 
 def run_long(scenario: Callable[[], Awaitable[None]]) -> None:
