@@ -203,11 +203,14 @@ def test_a_cancel_while_a_fleets_loop_polls_the_owners_wait(
             profile=profile,
             link=fleet,
             gripper=None,
-            polling=PollPolicy(interval_s=interval_s, predictive=False),
+            polling=PollPolicy(interval_s=0.01, predictive=False),
         )
         with robot:
             robot.wait_until_ready(timeout_s=5)
             robot.move_to(A, speed=100)
+            # The owner's wait polls at interval_s (a wait reads the policy as it starts);
+            # the set-up above, not this test's subject, at 0.01 s instead of 1 s a poll.
+            robot.polling = PollPolicy(interval_s=interval_s, predictive=False)
             issued = [Issued(A, 0.0, 0.0, "done"), Issued(FAR, time.monotonic())]
             motion = robot.start_move(FAR, speed=10)
             owner = Owner(motion.wait, issued[1])
