@@ -135,8 +135,7 @@ class ProjectControl:
                 " (TMflow 2.24, 12.1, p. 219): switch it to Auto mode on the robot",
                 pose=status.pose,
             )
-        self._press("play", state)
-        return self._wait_for(ProjectState.RUNNING, state, timeout_s, poll_interval_s)
+        return self._wait_for(ProjectState.RUNNING, state, timeout_s, poll_interval_s, "play")
 
     def pause(self, timeout_s: float, poll_interval_s: float) -> ProjectState:
         """Press Pause on a running project; wait until it shows paused.
@@ -160,8 +159,7 @@ class ProjectControl:
         if state is not ProjectState.RUNNING:
             self._log.info("robot.pause_skipped", reason=f"the project is {state.value}")
             return state
-        self._press("pause", state)
-        return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s)
+        return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s, "pause")
 
     def _held(self, status: RobotStatus) -> int | None:
         """The number of the command the robot program holds taken (busy), or the one it
@@ -193,12 +191,16 @@ class ProjectControl:
     def _press(self, button: str, state: ProjectState) -> None:
         """Press the Play/Pause toggle once, through the gate (never written twice).
 
-        A press whose answer never came may still land, later, on a project paused
-        meanwhile (by the operator, an e-stop with resumption on), where the toggle is
-        Play: so before the error reaches the caller the Stop button is pressed
-        (retried). The project ends; a press that lands after it starts it from the
-        beginning, where the start-up rule runs nothing pending.
+        Called inside :meth:`_wait_for`'s guard: a press whose answer never came, or
+        whose caller gives up at any moment after it was sent (a Ctrl-C as it is logged),
+        may still land, later, on a project paused meanwhile (by the operator, an e-stop
+        with resumption on), where the toggle is Play: so before the error reaches the
+        caller the Stop button is pressed (retried). The project ends; a press that lands
+        after it starts it from the beginning, where the start-up rule runs nothing
+        pending.
         """
+        if not button:  # a wait with nothing to press
+            return
         field = self._profile.field("play_pause")
 
         def send() -> None:
@@ -206,14 +208,7 @@ class ProjectControl:
             self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
         self._channel.stop_shows_by = float("-inf")  # seen: _before_press waited for it
-        try:
-            self._gate.write(None, send)  # a press registers no command
-        except SETTLED_FAILURES:
-            raise  # never sent, or answered: nothing can land later
-        except BaseException as exc:
-            self._log.error("robot.project_button_unanswered", button=button, error=str(exc))
-            self._stop_before_giving_up("button unanswered")
-            raise
+        self._gate.write(None, send)  # a press registers no command
         self._log.warning("robot.project_button", button=button, project=state.value)
 
     def _stop_before_giving_up(self, reason: str) -> None:
@@ -225,11 +220,16 @@ class ProjectControl:
             self._log.error("robot.stop_failed", reason=reason, error=str(failed))
 
     def _wait_for(
-        self, wanted: ProjectState, before: ProjectState, timeout_s: float, interval: float
+        self, wanted: ProjectState, was: ProjectState, timeout_s: float, dt: float, press: str = ""
     ) -> ProjectState:
-        poller = Poller(interval, self._stop_event, deadline=time.monotonic() + timeout_s)
+        """Press ``press`` (if any), then wait for ``wanted``; on any failure after the
+        press may be on its way, press Stop first."""
         settled: float | None = None  # when a pause seen is trusted
+        unsent = bool(press)  # until pressed: refused, or answered with an exception
         try:
+            self._press(press, was)
+            unsent = False
+            poller = Poller(dt, self._stop_event, deadline=time.monotonic() + timeout_s)
             while True:
                 poller.check()
                 status, state = self._status()
@@ -248,12 +248,14 @@ class ProjectControl:
                     button = {ProjectState.RUNNING: "Play", ProjectState.PAUSED: "Pause"}
                     raise RobotError(
                         f"{button.get(wanted, 'Stop')} was pressed (the project was"
-                        f" {before.value}) and the project is {state.value} {timeout_s:g} s"
+                        f" {was.value}) and the project is {state.value} {timeout_s:g} s"
                         f" later{': ' + REMOTE_PLAY_NEEDS if wanted in button else ''}",
                         pose=status.pose,
                     )
                 poller.sleep()
-        except BaseException:
+        except BaseException as exc:
+            if unsent and isinstance(exc, SETTLED_FAILURES):
+                raise  # never sent, or answered: nothing can land later
             # A Play answered but not seen taking effect may land later (a gateway that
             # answers a write before delivering it): it must never resume a move then. A
             # Pause not seen holding leaves the arm running, which pause() must not.
