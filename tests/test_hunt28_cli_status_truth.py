@@ -7,7 +7,13 @@ command printed "e-stop   released" next to "error    512" while the e-stop was
 pressed. An operator reading the status to decide whether the cell is safe to enter
 must not read a claim the robot never made.
 
-Found by hunt 28 (fails without its fix): the article line read ``e-stop   released``.
+The ``moving`` line on ``tmflow`` was the robot program's state, which leaves busy as
+soon as the project stops, while the arm still brakes (docs/safety.md): "moving   no"
+was printed while the arm went on for 10 mm during the read and 30 mm after it. It now
+also reads Techman's Joint Speed (7949-7960), as ``robot stop``'s rest wait does.
+
+Found by hunt 28 (fail without their fixes): the article line read ``e-stop
+released``; the braking arm read ``moving   no``.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from collections.abc import Callable
 
 import pytest
 
+from tmmaster import Pose, Robot
 from tmmaster._cli import main
 from tmmaster.sim import Simulator
 
@@ -46,3 +53,23 @@ def test_tmflow_says_what_its_e_stop_signal_reads(
     assert status_of(sim, capsys)["e-stop"] == "released"  # 7208 reads 0
     sim.press_estop()
     assert status_of(sim, capsys)["e-stop"] == "PRESSED"
+
+
+def test_a_braking_arm_is_never_said_to_stand_still(
+    tm_simulator_factory: SimFactory, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A quarter of real time: the arm brakes for over a second of wall time, the read
+    # takes milliseconds.
+    sim = tm_simulator_factory("tmflow", time_scale=0.25)
+    with Robot(sim.host, sim.port, gripper=None) as master:
+        start = master.pose()
+        master.start_move(Pose(300, 200, 200, 180, 0, 90), speed=100)
+        sim.wait_for(lambda: sim.tcp_pose().distance_to(start) > 20, timeout=10.0)
+        sim.call(lambda: sim._controller.bank.set("stop_project", True))  # the Stop button
+        sim.wait_for(lambda: not sim.field("project_running"), timeout=5.0)
+        before = sim.tcp_pose()
+        moving = status_of(sim, capsys)["moving"]
+        after = sim.tcp_pose()
+        if not after.is_close(before, mm=0.01, deg=0.01):  # it moved while being read
+            assert moving == "yes"
+        master.interrupt()

@@ -27,7 +27,7 @@ from ._exceptions import ConfigError, RobotError, TMMasterError, TransportError
 from ._logging import add_logging_arguments, configure_logging
 from ._profiles import DEFAULT_PROFILE, builtin_profile_names
 from ._project import PRESS_TIMEOUT_S
-from ._robot import Robot
+from ._robot import REST_SPEED_DEG_S, Robot
 from ._status import ProjectState, RobotStatus
 
 #: The actions, in the order ``--help`` lists them.
@@ -74,13 +74,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return parser
 
 
-def _status_lines(status: RobotStatus) -> str:
+def _status_lines(status: RobotStatus, moving: bool) -> str:
     # An e-stop the profile does not report (article: an error code) is not "released".
     estop = "PRESSED" if status.estop else "released" if "estop" in status.raw else "unknown"
     lines = [
         f"project  {status.project or 'none (this profile has no TMflow project)'}",
         f"mode     {status.mode}",
-        f"moving   {'yes' if status.moving else 'no'}",
+        f"moving   {'yes' if moving else 'no'}",
         f"error    {status.error_code if status.error else 'none'}",
         f"e-stop   {estop}",
         f"ready    {'yes' if status.ready else 'no'}",
@@ -101,7 +101,12 @@ def _act(robot: Robot, action: str, timeout_s: float) -> str:
         if (project := robot.status().project) in (ProjectState.RUNNING, ProjectState.PAUSED):
             raise RobotError(f"the arm is at rest, the project still {project}: Stop never landed")
         return "stop     pressed; the arm is at rest\n"
-    return _status_lines(robot.status())
+    # tmflow's status().moving is the robot program's state, idle as soon as the project
+    # stops while the arm still brakes: Techman's Joint Speed (7949-7960) shows the arm.
+    status = robot.status()
+    joints = robot.profile.published([f"joint_speed_{j}" for j in range(1, 7)])
+    braking = any(abs(float(v)) > REST_SPEED_DEG_S for v in robot._channel.read(joints).values())
+    return _status_lines(status, status.moving or braking)
 
 
 def run(args: argparse.Namespace) -> int:
