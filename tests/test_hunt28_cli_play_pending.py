@@ -81,3 +81,22 @@ def test_robot_play_never_starts_a_dead_masters_pending_command(
     assert sim.tcp_pose().is_close(home, mm=0.01, deg=0.01)
     assert code == 4
     assert "press Stop" in capsys.readouterr().err
+
+
+def test_robot_play_on_a_stopped_project_runs_no_command_left_from_before(
+    sim: Simulator, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same command left pending, then the project stopped (the pendant's Stop):
+    Play starts the project from the beginning, whose start-up rule consumes the
+    command unrun. ``robot play`` presses Play there, and the arm stays."""
+    pending_command_of_a_dead_master(sim)
+    home = sim.tcp_pose()
+    sim.call(lambda: sim._controller.bank.set("stop_project", True))  # the Stop button
+    sim.wait_for(lambda: not sim.field("project_running"), timeout=2.0)
+    assert main(["robot", "play", "--host", "127.0.0.1", "--port", str(sim.port)]) == 0
+    assert capsys.readouterr().out == "project  running\n"
+    seq = sim.field("seq")
+    sim.wait_for(lambda: sim.field("ack_seq") == seq, timeout=3.0)  # consumed
+    let_run(sim, 50)
+    assert sim.motion_log() == ()
+    assert sim.tcp_pose().is_close(home, mm=0.01, deg=0.01)
