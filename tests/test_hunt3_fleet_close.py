@@ -31,6 +31,12 @@ FAR = Pose(250, 0, 400, 180, 0, 90)  # seconds away from A at FAR_SPEED (a's tim
 #: setup move to A takes a quarter of that.
 A_SCALE = 8.0
 FAR_SPEED = 2
+#: The masters' heartbeat: the program expires a command once it has been silent for
+#: TTL_S (master_ttl_ms). 1 s, not the default 2 s, so that the held writes' timeouts,
+#: set against it, are waited out in half the time; not less: a loaded machine once kept
+#: a beat from running for that long (tests/test_heartbeat.py).
+HEARTBEAT = {"heartbeat_s": 0.25, "heartbeat_ttl_s": 1.0}
+TTL_S = HEARTBEAT["heartbeat_ttl_s"]
 
 
 @dataclass
@@ -85,8 +91,7 @@ class Cell:
 
     def judge(self) -> None:
         """What the robots did after the close: nothing new, nothing twice, ``a`` at rest."""
-        settle(self.sim_a)
-        settle(self.sim_b)
+        settle(self.sim_a, self.sim_b)
         resting = self.sim_a.tcp_pose()
         settle(self.sim_a)
         assert [c.outcome for c in (self.issued_a[-1], self.issued_b[-1])].count("done") == 0
@@ -105,18 +110,22 @@ def targets(sim: Simulator) -> list[Pose]:
     return [m.target for m in sim.motion_log() if m.target is not None]
 
 
-def settle(sim: Simulator) -> None:
-    """Let the simulator run 10 more ticks."""
-    ticks = sim.ticks
-    sim.wait_for(lambda: sim.ticks >= ticks + 10, timeout=5.0)
+def settle(*sims: Simulator) -> None:
+    """Let each simulator run 10 more ticks (together)."""
+    ticks = [sim.ticks for sim in sims]
+    sims[0].wait_for(
+        lambda: all(sim.ticks >= t + 10 for sim, t in zip(sims, ticks, strict=True)), timeout=5.0
+    )
 
 
 @contextmanager
-def cell(request_s: float = 3.0) -> Iterator[Cell]:
+def cell(request_s: float = 1.5 * TTL_S, heartbeat: dict[str, float] = HEARTBEAT) -> Iterator[Cell]:
     """The two robots, ready, each having moved to A once (b through the proxy).
 
-    ``request_s``: how long b's held write waits on its answer (3 s: far longer than
-    the fleet takes to close; 1 s: less than the program's ``master_ttl_ms``).
+    ``request_s``: how long b's held write waits on its answer (1.5 TTL_S: far longer
+    than the fleet takes to close, and than the program's ``master_ttl_ms``; 0.5 TTL_S:
+    less than ``master_ttl_ms``). The ratios of 3 s and 1 s to the default 2 s TTL.
+    ``heartbeat``: the masters' TimeoutPolicy heartbeat settings ({}: the defaults).
     """
     timing = Timing(tick_hz=50.0)
     with (
@@ -129,7 +138,9 @@ def cell(request_s: float = 3.0) -> Iterator[Cell]:
             gripper=None,
             link=fleet,
             polling=PollPolicy(interval_s=0.01),
-            timeouts=TimeoutPolicy(request_s=request_s, ack_timeout_s=5.0, motion_margin_s=1.0),
+            timeouts=TimeoutPolicy(
+                request_s=request_s, ack_timeout_s=5.0, motion_margin_s=1.0, **heartbeat
+            ),
         )
         robot_a = Robot("127.0.0.1", sim_a.port, profile="tmflow", name="a", **options)  # type: ignore[arg-type]
         robot_b = Robot("127.0.0.1", proxy.port, profile="tmflow", name="b", **options)  # type: ignore[arg-type]
@@ -161,11 +172,11 @@ def test_a_held_command_that_lands_after_the_robot_saw_the_master_gone_never_run
         c.judge()
 
 
-@pytest.mark.parametrize("request_s", [3.0, 1.0])
+@pytest.mark.parametrize("request_s", [1.5 * TTL_S, 0.5 * TTL_S])
 def test_a_held_command_that_lands_right_after_fleet_close_never_runs(request_s: float) -> None:
     # close(timeout_s=0.5) runs out while b's write is held: close waits the write out
-    # and still delivers its give-up. With request_s=1.0, close returns before the
-    # program could see b's master silent (2 s): only that give-up keeps B from running.
+    # and still delivers its give-up. With request_s=0.5 TTL_S, close returns before the
+    # program could see b's master silent (TTL_S): only that give-up keeps B from running.
     with cell(request_s) as c:
         c.proxy.add(Rule("hold", function_code=16, address=9000, release=c.release))
         c.a_moves_and_b_writes()
@@ -176,7 +187,9 @@ def test_a_held_command_that_lands_right_after_fleet_close_never_runs(request_s:
 
 
 def test_closing_the_fleet_while_the_proxy_has_cut_b_off_runs_nothing_late() -> None:
-    with cell() as c:
+    # The default heartbeat (2 s TTL) and a 3 s request timeout: the 1 s outage stays
+    # well inside the TTL, so b's link being cut does not by itself expire its command.
+    with cell(3.0, heartbeat={}) as c:
         # b's write never reaches the arm; while b waits on its answer the proxy closes
         # b's link and refuses it for a while: Fleet.close() runs during that outage.
         c.proxy.add(Rule("drop_request", function_code=16, address=9000))
