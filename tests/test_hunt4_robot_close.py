@@ -4,10 +4,10 @@ The fix of ``close()`` under a held command write (docs/safety.md, Limits: ``clo
 may outlast its ``timeout_s`` by one request and one give-up) was tested through a
 Fleet only (``tests/test_hunt3_fleet_close.py``). Here a plain ``Robot`` (``link=None``:
 the process's default driver) and an ``aio.AsyncRobot`` on the tmflow profile write a
-move whose FC16 to the command block is held by a FaultProxy; ``close(timeout_s=0.5)``
+move whose FC16 to the command block is held by a FaultProxy; ``close(timeout_s=CLOSE_S)``
 is called while the frame is held, and the frame lands right after ``close()``
-returned. The request timeout (1 s) is shorter than the program's ``master_ttl_ms``
-(2 s), so only the close's own give-up keeps the frame from running. The simulator's
+returned. The request timeout (0.5 s) is shorter than the program's ``master_ttl_ms``
+(1 s), so only the close's own give-up keeps the frame from running. The simulator's
 motion log judges: the given-up move never starts, nothing runs twice.
 """
 
@@ -30,8 +30,16 @@ Factory = Callable[..., Simulator]
 
 A = Pose(300, -200, 150, 180, 0, 90)
 B = Pose(300, -200, 180, 180, 0, 90)
-TIMEOUTS = TimeoutPolicy(request_s=1.0, ack_timeout_s=5.0, motion_margin_s=1.0)
-#: Every master of this file: tmflow, no gripper, 10 ms polls, a 1 s request timeout.
+#: Half of what these tests first used (a 1 s request timeout against the default 2 s
+#: TTL, a 0.5 s close): the same order of the three windows in half the wall time. The TTL
+#: no lower than 1 s: a loaded machine once kept a beat from running for that long
+#: (tests/test_heartbeat.py).
+TIMEOUTS = TimeoutPolicy(
+    request_s=0.5, ack_timeout_s=5.0, motion_margin_s=1.0, heartbeat_s=0.25, heartbeat_ttl_s=1.0
+)
+#: close()'s budget: shorter than the held write's request timeout, which it waits out.
+CLOSE_S = 0.25
+#: Every master of this file: tmflow, no gripper, 10 ms polls, a 0.5 s request timeout.
 OPTIONS: dict[str, Any] = dict(
     profile="tmflow", gripper=None, polling=PollPolicy(interval_s=0.01), timeouts=TIMEOUTS
 )
@@ -96,7 +104,7 @@ def test_close_of_a_plain_robot_gives_up_its_held_command_write(
         thread.start()
         sim.wait_for(lambda: proxy.played("hold"), timeout=5.0)
         assert thread.is_alive()  # its write waits on its answer
-        robot.close(timeout_s=0.5)
+        robot.close(timeout_s=CLOSE_S)
         closed_at, closed_wall = time.monotonic(), time.time()
         release.set()  # the held frame lands now, after the close gave it up
         proxy.wait_held()
@@ -155,7 +163,7 @@ def test_close_of_an_async_robot_gives_up_its_awaited_moves_held_write(
         try:
             move, command = await held_move(robot, proxy, release, issued)
             assert not move.done()
-            await robot.close(timeout_s=0.5)
+            await robot.close(timeout_s=CLOSE_S)
             closed_at, closed_wall = time.monotonic(), time.time()
             release.set()
             try:
@@ -190,9 +198,9 @@ def test_an_async_robot_closed_while_its_cancelled_moves_write_is_held(
             move, command = await held_move(robot, proxy, release, issued)
             if order == "cancel_then_close":
                 move.cancel()
-                closing = asyncio.ensure_future(robot.close(timeout_s=0.5))
+                closing = asyncio.ensure_future(robot.close(timeout_s=CLOSE_S))
             else:
-                closing = asyncio.ensure_future(robot.close(timeout_s=0.5))
+                closing = asyncio.ensure_future(robot.close(timeout_s=CLOSE_S))
                 await asyncio.sleep(0)  # the close's thread is started
                 move.cancel()
             results = await asyncio.gather(move, closing, return_exceptions=True)
