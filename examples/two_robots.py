@@ -34,6 +34,11 @@ from the start. The simulator puts its parts at ``PICK_A``'s coordinates unless 
 otherwise, which is where A picks and, in B's frame, the handover point: so the two
 simulators above need no options. Only the coordination between the two programs is
 real here; the handover itself is modelled by giving both worlds a part.
+
+When one robot fails, the cell stops: the other robot's move in progress is given up
+(the arm stopped) and it sends nothing more (``Robot.interrupt()``), so neither arm moves
+on toward a table the other may still stand over. Ctrl-C does the same for both and
+exits with code 130; any failure exits with 1, naming what failed.
 """
 
 from __future__ import annotations
@@ -45,7 +50,14 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from tmmaster import DEFAULT_PROFILE, Pose, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import (
+    DEFAULT_PROFILE,
+    Pose,
+    Robot,
+    StopRequestedError,
+    TimeoutPolicy,
+    TMMasterError,
+)
 from tmmaster.sim import Cell, ObjectState, Simulator, TableObject
 
 HOST = "127.0.0.1"
@@ -83,6 +95,12 @@ class Handover:
     #: (monotonic time, robot, step) of every step, for the report and the tests.
     steps: list[tuple[float, str, str]] = field(default_factory=list)
     errors: dict[str, BaseException] = field(default_factory=dict)
+    #: The robots, by name: a failure or Ctrl-C interrupts them all.
+    robots: dict[str, Robot] = field(default_factory=dict)
+    #: True once Ctrl-C stopped the run.
+    interrupted: bool = False
+    #: The robots whose close() could not confirm that nothing they sent can still run.
+    unconfirmed: list[str] = field(default_factory=list)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def log(self, robot: str, step: str) -> None:
@@ -90,6 +108,39 @@ class Handover:
         with self._lock:
             self.steps.append((time.monotonic(), robot, step))
         print(f"[{robot}] {step}", flush=True)
+
+    def fail(self, robot: str, error: BaseException) -> None:
+        """Record ``robot``'s failure and stop the cell: every robot's move in progress is
+        given up, and no robot sends another command (``Robot.interrupt()``)."""
+        with self._lock:
+            first = next(iter(self.errors), None)
+            if isinstance(error, StopRequestedError) and first is not None:
+                # Stopped because the other robot failed: say so.
+                stopped = RuntimeError(f"robot {first} failed: robot {robot} stopped")
+                stopped.__cause__ = error
+                error = stopped
+            self.errors[robot] = error
+        self.failed.set()
+        self.stop_all()
+
+    def interrupt(self) -> None:
+        """Ctrl-C: every robot gives its command up and sends nothing more."""
+        self.interrupted = True
+        self.stop_all()
+
+    def stop_all(self) -> None:
+        """Interrupt every robot and wake every thread that waits for the other."""
+        for robot in self.robots.values():
+            robot.interrupt()  # the move in progress is given up; nothing new is sent
+        self.released.set()  # wake B (it checks `failed` first)
+        self.ready.abort()  # wake a partner still waiting to start
+
+    def check(self, robot: str) -> None:
+        """Raise unless the run goes on (no failure, no Ctrl-C)."""
+        if self.interrupted:
+            raise StopRequestedError(f"robot {robot}: interrupted")
+        if self.failed.is_set():
+            raise RuntimeError(f"robot {next(iter(self.errors), '?')} failed: no handover")
 
     def time_of(self, robot: str, step: str) -> float:
         """When ``robot`` did ``step`` (KeyError if it never did)."""
@@ -136,8 +187,7 @@ def robot_b(robot: Robot, shared: Handover) -> None:
     shared.log("B", "waiting clear of handover")
     if not shared.released.wait(HANDOVER_TIMEOUT_S):
         raise TimeoutError(f"A did not release the part within {HANDOVER_TIMEOUT_S:g} s")
-    if shared.failed.is_set():
-        raise RuntimeError("robot A failed: no handover")
+    shared.check("B")
     shared.log("B", "going to handover")
     pick(robot, HANDOVER_B)
     shared.log("B", "picked")
@@ -153,38 +203,61 @@ def run(
     profile: str = DEFAULT_PROFILE,
     settle_s: float = 0.5,
 ) -> Handover:
-    """Drive both robots, one thread each; errors are collected in the result."""
+    """Drive both robots, one thread each; errors are collected in the result.
+
+    A failure of either robot stops both (:meth:`Handover.fail`). Ctrl-C (KeyboardInterrupt
+    in this, the main thread) interrupts both robots, waits until each has given its
+    command up and closed, then is raised again.
+    """
     shared = Handover()
-    jobs: dict[str, tuple[int, Callable[[Robot, Handover], None]]] = {
-        "A": (port_a, robot_a),
-        "B": (port_b, robot_b),
-    }
+    jobs: dict[str, Callable[[Robot, Handover], None]] = {"A": robot_a, "B": robot_b}
+    for name, port in (("A", port_a), ("B", port_b)):
+        # Made here, before any thread starts: a failure or Ctrl-C can interrupt both.
+        shared.robots[name] = Robot(
+            host,
+            port,
+            profile=profile,
+            name=f"robot-{name}",
+            timeouts=TimeoutPolicy(gripper_settle_s=settle_s),
+            # The default Workspace() is the simulated cell (its table top at 85 mm): on
+            # yours, checks=Checks(workspace=Workspace(floor_z_mm=your table top's height).
+        )
 
     def worker(name: str) -> None:
-        port, job = jobs[name]
+        robot = shared.robots[name]
         try:
-            with Robot(
-                host,
-                port,
-                profile=profile,
-                name=f"robot-{name}",
-                timeouts=TimeoutPolicy(gripper_settle_s=settle_s),
-                # The default Workspace() is the simulated cell (its table top at 85 mm): on
-                # yours, checks=Checks(workspace=Workspace(floor_z_mm=your table top's height).
-            ) as robot:
-                job(robot, shared)
-        except BaseException as exc:  # reported by main(); the other robot is told
-            shared.errors[name] = exc
-            shared.failed.set()
-            shared.released.set()  # wake B (it checks `failed` first)
-            shared.ready.abort()  # wake a partner still waiting to start
+            robot.connect()
+            jobs[name](robot, shared)
+        except BaseException as exc:  # reported by main(); the other robot is stopped
+            shared.fail(name, exc)
+        finally:
+            # close() says whether it could confirm that nothing the robot sent can run.
+            if not robot.close():
+                shared.unconfirmed.append(robot.name)
 
     threads = [threading.Thread(target=worker, args=(n,), name=f"robot-{n}") for n in jobs]
     for t in threads:
         t.start()
-    for t in threads:
-        t.join()
+    try:
+        for t in threads:
+            # join() with a timeout in a loop: the main thread stays responsive to Ctrl-C.
+            while t.is_alive():
+                t.join(0.5)
+    except KeyboardInterrupt:
+        shared.interrupt()  # each move in progress is given up (the arm stopped)
+        for t in threads:
+            t.join()
+        raise Interrupted(shared) from None
     return shared
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C ended the run once both robots had given their commands up and closed."""
+
+    def __init__(self, handover: Handover) -> None:
+        super().__init__("interrupted")
+        #: What the run did until then (its ``unconfirmed`` robots included).
+        self.handover = handover
 
 
 @dataclass
@@ -244,6 +317,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="gripper settle time, s (the article map's gripper has no busy flag)",
     )
     args = parser.parse_args(argv)
+    try:
+        return handover(parser, args)
+    except Interrupted as exc:
+        unconfirmed = exc.handover.unconfirmed
+        if unconfirmed:
+            names = ", ".join(unconfirmed)
+            print(f"interrupted: could NOT confirm that {names} stopped: check", file=sys.stderr)
+        else:
+            print("interrupted: both robots gave their commands up", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:  # again, while the robots gave their commands up
+        print("interrupted: each robot gives its command up as it closes", file=sys.stderr)
+        return 130
+    except TMMasterError as exc:  # a robot's option refused before anything was sent
+        print(f"two_robots: {exc}", file=sys.stderr)
+        return 1
+
+
+def handover(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """Run the handover the options ask for and report it; the exit code."""
     given = (args.port_a, args.port_b)
     checked = ""
     if args.sim or given == (None, None):
@@ -265,7 +358,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, error in sorted(shared.errors.items()):
         kind = "robot error" if isinstance(error, TMMasterError) else "error"
         print(f"robot {name} failed ({kind}): {error!r}", file=sys.stderr)
-    if shared.errors or problems:
+    for name in shared.unconfirmed:
+        print(f"{name}: could NOT confirm that it gave its command up: check", file=sys.stderr)
+    if shared.errors or problems or shared.unconfirmed:
         return 1
     print(f"handover done: A released and moved clear before B came{checked}")
     return 0

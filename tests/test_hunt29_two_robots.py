@@ -1,0 +1,137 @@
+"""examples/two_robots.py when things go wrong: Ctrl-C stops both arms and exits 130, and a
+failure of one robot stops the other from starting anything more.
+
+Found by hunt 29 ("the code users copy"); both tests fail without the fix:
+
+- Ctrl-C reached only the main thread, blocked in ``Thread.join()``: the
+  KeyboardInterrupt left ``main()`` as a traceback while both robot threads drove on,
+  the whole handover run to its end after the operator pressed Ctrl-C (measured: A's
+  eight remaining moves and grips, all of B's, after the Ctrl-C).
+- A robot that failed stopped nothing: robot A went on to pick and put its part on the
+  handover table with robot B e-stopped, B's arm wherever its first move had left it.
+
+The simulators' motion logs are the judge, never what the example reports.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+from examples_support import load_example
+from tmmaster import Motion, Robot
+from tmmaster.sim import Cell, Simulator, TableObject
+
+Factory = Callable[..., Simulator]
+
+#: Every action of robot A's job: pick (2 moves, grip, 1 move), place (2, open, 1), clear.
+A_ACTIONS = 9
+
+
+@pytest.fixture(scope="module")
+def example() -> ModuleType:
+    return load_example("two_robots")
+
+
+@pytest.fixture
+def sims(tm_simulator_factory: Factory, example: ModuleType) -> tuple[Simulator, Simulator]:
+    sim_a = tm_simulator_factory(cell=Cell(scene=[TableObject(name="part", pose=example.PICK_A)]))
+    sim_b = tm_simulator_factory(
+        cell=Cell(scene=[TableObject(name="part", pose=example.HANDOVER_B)]),
+        faults=["estop:at_move=1"],
+    )
+    return sim_a, sim_b
+
+
+@pytest.fixture
+def ctrl_c_handler() -> Iterator[None]:
+    """Python's own Ctrl-C handler, also where pytest was started with SIGINT ignored."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def argv(sim_a: Simulator, sim_b: Simulator) -> list[str]:
+    return ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
+
+
+def let_run(sim: Simulator, ticks: int) -> None:
+    start = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
+
+
+@pytest.mark.usefixtures("ctrl_c_handler")
+def test_ctrl_c_stops_both_arms_and_exits_130(
+    tm_simulator_factory: Factory, example: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sim_a = tm_simulator_factory(cell=Cell(scene=[TableObject(name="part", pose=example.PICK_A)]))
+    sim_b = tm_simulator_factory(
+        cell=Cell(scene=[TableObject(name="part", pose=example.HANDOVER_B)])
+    )
+    main_thread = threading.main_thread().ident
+    assert main_thread is not None
+
+    def operator() -> None:
+        # A real SIGINT to the main thread, as a terminal's Ctrl-C, once A moves.
+        sim_a.wait_for(lambda: len(sim_a.motion_log()) >= 1, timeout=10.0)
+        signal.pthread_kill(main_thread, signal.SIGINT)
+
+    thread = threading.Thread(target=operator)
+    thread.start()
+    try:
+        code = example.main(argv(sim_a, sim_b))
+    finally:
+        thread.join(10.0)
+    assert code == 130
+    assert "interrupted" in capsys.readouterr().err
+    logs = sim_a.motion_log(), sim_b.motion_log()
+    poses = sim_a.tcp_pose(), sim_b.tcp_pose()
+    let_run(sim_a, 20)
+    let_run(sim_b, 20)
+    # Nothing started after main() returned, and both arms stand still: stopped.
+    assert (sim_a.motion_log(), sim_b.motion_log()) == logs
+    assert sim_a.tcp_pose().is_close(poses[0], mm=1e-6, deg=1e-6)
+    assert sim_b.tcp_pose().is_close(poses[1], mm=1e-6, deg=1e-6)
+    # The handover did not run on: A never finished its job, B never took the part.
+    assert len(logs[0]) < A_ACTIONS, [m.kind for m in logs[0]]
+    assert not [m for m in logs[1] if m.kind == "gripper_close"]
+
+
+def test_a_starts_nothing_more_once_b_failed(
+    sims: tuple[Simulator, Simulator],
+    example: ModuleType,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    sim_a, sim_b = sims  # B's e-stop is pressed during B's first move
+    made: list[Any] = []
+    handover_class = example.Handover
+
+    def handover() -> Any:
+        made.append(handover_class())
+        return made[-1]
+
+    class GatedRobot(Robot):
+        """Robot A holds after its first move until B's failure is known (an event)."""
+
+        def move_to(self, *args: Any, **kwargs: Any) -> Motion:
+            motion = super().move_to(*args, **kwargs)
+            if self.name == "robot-A":
+                assert made[0].failed.wait(10.0), "B never failed"
+            return motion
+
+    monkeypatch.setattr(example, "Handover", handover)
+    monkeypatch.setattr(example, "Robot", GatedRobot)
+    code = example.main(argv(sim_a, sim_b))
+    # A's first move (sent before B failed) is all A ever did: no grip, no handover.
+    assert [m.kind for m in sim_a.motion_log()] == ["ptp"]
+    assert not sim_a.objects()[0].held
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "robot B failed (robot error): EmergencyStopError" in err
+    assert "robot A failed (error): RuntimeError('robot B failed: robot A stopped')" in err
