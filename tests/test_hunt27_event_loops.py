@@ -1,0 +1,99 @@
+"""Hunt 27: the driver's safety paths on both event loops, whichever one ``auto`` picks here.
+
+Every network ``Robot`` runs on a driver's loop: the process's default one or a
+``Fleet``'s, made with ``event_loop="auto"``: uvloop when it is installed (the
+``monitor`` extra, which the ``test`` extra brings), asyncio's own loop otherwise (a
+plain ``pip install tmmaster``). So the suite, run with the test extra, drives every
+network robot on uvloop, and the loop most users get is left to the tests that name it (the
+monitor's). This module runs a chosen set of the give-up, stop and close tests once on
+each loop: ``auto`` is steered by hiding uvloop (``import uvloop`` fails, as where it
+is not installed), for the default driver and every ``Fleet()`` alike. The uvloop case
+is skipped where uvloop is not installed.
+
+The tests are the other modules' own, imported (the same bodies and checks on what the
+robot did); only the loop differs.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+
+import pytest
+
+import tmmaster._fleet as fleet_module
+from test_aio_cancel import (
+    test_a_move_cancelled_while_its_write_is_held_in_the_network_never_runs,
+    test_a_wait_cancelled_while_queued_stops_the_running_move,
+)
+from test_fleet import (
+    fleet,
+    robots,
+    test_a_request_without_an_answer_times_out_on_its_own_timeout,
+    test_an_interrupt_ends_a_wait_the_loop_polls_at_once_and_stops_the_arm,
+    test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_budget,
+    test_closing_the_fleet_while_a_thread_waits_ends_the_wait_and_stops_the_arm,
+    test_ctrl_c_in_a_wait_the_loop_polls_withdraws_or_stops_before_returning,
+)
+from test_hunt3_fleet_close import (
+    test_a_held_command_that_lands_right_after_fleet_close_never_runs,
+)
+from test_hunt8_two_robots import (
+    proxy,
+    sim,
+    test_a_stop_one_robot_owed_and_another_delivered_is_not_sent_again,
+)
+from test_hunt22_cancel_threads import test_a_cancel_while_a_fleets_loop_polls_the_owners_wait
+from test_owed_stop_settled import (
+    test_a_robot_settling_its_own_stop_leaves_another_robots_debt_owed_and_delivers_it,
+)
+from tmmaster import Fleet, Robot
+from tmmaster._loop import _loop_factory
+from tmmaster.sim import Simulator
+
+__all__ = [  # collected here again, on each loop
+    "fleet",
+    "proxy",
+    "robots",
+    "sim",
+    "test_a_cancel_while_a_fleets_loop_polls_the_owners_wait",
+    "test_a_held_command_that_lands_right_after_fleet_close_never_runs",
+    "test_a_move_cancelled_while_its_write_is_held_in_the_network_never_runs",
+    "test_a_request_without_an_answer_times_out_on_its_own_timeout",
+    "test_a_robot_settling_its_own_stop_leaves_another_robots_debt_owed_and_delivers_it",
+    "test_a_stop_one_robot_owed_and_another_delivered_is_not_sent_again",
+    "test_a_wait_cancelled_while_queued_stops_the_running_move",
+    "test_an_interrupt_ends_a_wait_the_loop_polls_at_once_and_stops_the_arm",
+    "test_closing_a_fleet_with_a_dead_robot_stops_every_robot_at_once_within_its_budget",
+    "test_closing_the_fleet_while_a_thread_waits_ends_the_wait_and_stops_the_arm",
+    "test_ctrl_c_in_a_wait_the_loop_polls_withdraws_or_stops_before_returning",
+]
+
+SimFactory = Callable[..., Simulator]
+
+
+@pytest.fixture(autouse=True, params=["asyncio", "uvloop"])
+def event_loop(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """The loop ``auto`` picks during the test: asyncio's (uvloop hidden) or uvloop."""
+    if request.param == "uvloop":
+        pytest.importorskip("uvloop", reason="uvloop is the monitor extra")
+    else:
+        monkeypatch.setitem(sys.modules, "uvloop", None)  # import uvloop -> ImportError
+    # A default driver made before the test would keep its loop: none is alive (the
+    # suite's no_leaks check ends every test with the driver's loop thread gone).
+    assert fleet_module._DEFAULT.fleet is None
+    assert _loop_factory("auto")[0] == request.param
+    return str(request.param)
+
+
+def test_the_default_driver_and_a_fleet_run_on_the_loop_auto_picks(
+    tm_simulator_factory: SimFactory, event_loop: str
+) -> None:
+    sim = tm_simulator_factory("article")
+    with Fleet() as own:
+        assert own.event_loop == event_loop
+    robot = Robot("127.0.0.1", sim.port, profile="article", gripper=None)
+    with robot:
+        robot.wait_until_ready(timeout_s=5)
+        assert fleet_module._DEFAULT.fleet is not None
+        assert fleet_module._DEFAULT.fleet.event_loop == event_loop
