@@ -108,6 +108,9 @@ class RobotReport:
     error: TMMasterError | None = None
     #: What the fleet's StatusMonitor last saw of this robot (None: not watched).
     watched: MonitoredStatus | None = None
+    #: True when its close() could not confirm that nothing it sent can still run (a
+    #: withdraw or stop that did not get through: the arm may still be moving).
+    unconfirmed: bool = False
 
 
 def drive(robot: Robot, moves: int, report: RobotReport) -> None:
@@ -227,6 +230,8 @@ def run(
         unconfirmed = [robot.name for robot in robots if not robot.close()]
         if shared is not None:
             unconfirmed += [name for name in shared.close() if name not in unconfirmed]
+        for report in reports:  # reported with or without Ctrl-C
+            report.unconfirmed = report.name in unconfirmed
         # After the robots are closed: a connect still running (Ctrl-C came during the
         # connects) ends with its robot's close.
         pool.shutdown(wait=True, cancel_futures=True)
@@ -253,6 +258,7 @@ def report_to_json(report: RobotReport) -> dict[str, Any]:
         "move_times_s": report.move_times_s,
         "error": None if report.error is None else f"{type(report.error).__name__}: {report.error}",
         "watched": None if watched is None else [watched.polls, watched.failures],
+        "unconfirmed": report.unconfirmed,
     }
 
 
@@ -267,6 +273,7 @@ def report_from_json(data: dict[str, Any]) -> RobotReport:
         watched=None
         if watched is None
         else MonitoredStatus(None, None, None, watched[0], 0, watched[1]),
+        unconfirmed=bool(data.get("unconfirmed", False)),
     )
 
 
@@ -376,16 +383,19 @@ def run_with_simulators(
 
 
 def print_reports(reports: Sequence[RobotReport]) -> int:
-    """One line per robot; returns 0 when every robot finished its moves, else 1."""
+    """One line per robot; returns 0 when every robot finished its moves, else 1 (also
+    for a robot whose close could not confirm its give-up)."""
     for r in reports:
         if r.error is not None:
             print(f"{r.name}: FAILED after {r.moves_done} move(s): {r.error}")
         else:
             mean = statistics.fmean(r.move_times_s) if r.move_times_s else 0.0
             print(f"{r.name}: {r.moves_done} moves, mean {mean:.3f} s per move")
+        if r.unconfirmed:
+            print(f"  {r.name}: could NOT confirm that it gave its command up: check the arm")
         if r.watched is not None:
             print(f"  watched: {r.watched.polls} status polls, {r.watched.failures} failed")
-    failed = sum(r.error is not None for r in reports)
+    failed = sum(r.error is not None or r.unconfirmed for r in reports)
     print(f"{len(reports) - failed} of {len(reports)} robots done")
     return 1 if failed else 0
 
@@ -480,7 +490,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.json:
         for report in reports:
             print(json.dumps(report_to_json(report)))
-        return 1 if any(r.error is not None for r in reports) else 0
+        return 1 if any(r.error is not None or r.unconfirmed for r in reports) else 0
     return print_reports(reports)
 
 
