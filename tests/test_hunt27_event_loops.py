@@ -1,14 +1,15 @@
-"""Hunt 27: the driver's safety paths on both event loops, whichever one ``auto`` picks here.
+"""Hunt 27: the driver's safety paths on asyncio's own loop too, not only on uvloop.
 
 Every network ``Robot`` runs on a driver's loop: the process's default one or a
 ``Fleet``'s, made with ``event_loop="auto"``: uvloop when it is installed (the
 ``monitor`` extra, which the ``test`` extra brings), asyncio's own loop otherwise (a
 plain ``pip install tmmaster``). So the suite, run with the test extra, drives every
 network robot on uvloop, and the loop most users get is left to the tests that name it (the
-monitor's). This module runs a chosen set of the give-up, stop and close tests once on
-each loop: ``auto`` is steered by hiding uvloop (``import uvloop`` fails, as where it
-is not installed), for the default driver and every ``Fleet()`` alike. The uvloop case
-is skipped where uvloop is not installed.
+monitor's). This module runs a chosen set of the give-up, stop and close tests again on
+asyncio's loop: ``auto`` is steered by hiding uvloop (``import uvloop`` fails, as where
+it is not installed), for the default driver and every ``Fleet()`` alike. On uvloop
+they run in their own modules (measured by hunt 27: the same results on both loops,
+the same times).
 
 The tests are the other modules' own, imported (the same bodies and checks on what the
 robot did); only the loop differs.
@@ -72,18 +73,15 @@ __all__ = [  # collected here again, on each loop
 SimFactory = Callable[..., Simulator]
 
 
-@pytest.fixture(autouse=True, params=["asyncio", "uvloop"])
-def event_loop(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """The loop ``auto`` picks during the test: asyncio's (uvloop hidden) or uvloop."""
-    if request.param == "uvloop":
-        pytest.importorskip("uvloop", reason="uvloop is the monitor extra")
-    else:
-        monkeypatch.setitem(sys.modules, "uvloop", None)  # import uvloop -> ImportError
+@pytest.fixture(autouse=True)
+def event_loop(monkeypatch: pytest.MonkeyPatch) -> str:
+    """The loop ``auto`` picks during the test: asyncio's own (uvloop hidden)."""
+    monkeypatch.setitem(sys.modules, "uvloop", None)  # import uvloop -> ImportError
     # A default driver made before the test would keep its loop: none is alive (the
     # suite's no_leaks check ends every test with the driver's loop thread gone).
     assert fleet_module._DEFAULT.fleet is None
-    assert _loop_factory("auto")[0] == request.param
-    return str(request.param)
+    assert _loop_factory("auto")[0] == "asyncio"
+    return "asyncio"
 
 
 def test_the_default_driver_and_a_fleet_run_on_the_loop_auto_picks(
