@@ -72,12 +72,16 @@ def tm_simulator_factory(
     The tmflow profile, as everywhere, unless a test asks for another (``"article"``).
     40x real time with a 100 Hz tick (each tick still advances 0.4 simulated seconds, as
     the plugin's 20x at 50 Hz does). A test whose subject is a wall-clock delay passes
-    its own time_scale.
+    its own time_scale. The robot's start-up (which ``start()`` waits for) takes the wall
+    time it takes at 40x, whatever the time_scale: 0.2 s at 1x, 0.8 s at 0.25x, would
+    delay only the test's start. A test whose subject is the start-up passes its own
+    ``timing``.
     """
 
     def make(profile: Any = "tmflow", **options: Any) -> Simulator:
         options.setdefault("time_scale", SUITE_TIME_SCALE)
-        options.setdefault("timing", Timing(tick_hz=SUITE_TICK_HZ))
+        start_up_s = Timing().init_time_s * options["time_scale"] / SUITE_TIME_SCALE
+        options.setdefault("timing", Timing(tick_hz=SUITE_TICK_HZ, init_time_s=start_up_s))
         return tm_simulator_factory(profile, **options)
 
     return make
