@@ -63,7 +63,9 @@ def program(tmp_path: Path, *, wiring: GripperWiring | None = None, pre_step_ms:
 
 def simulator(path: Path | None = None) -> Simulator:
     setup = RobotSetup(program=path) if path is not None else RobotSetup()
-    return Simulator("tmflow", robot=setup, time_scale=1.0, timing=Timing(tick_hz=100.0))
+    # Ready at once: the robot's start-up (0.2 s at 1x) is not these tests' subject.
+    timing = Timing(tick_hz=100.0, init_time_s=0.0)
+    return Simulator("tmflow", robot=setup, time_scale=1.0, timing=timing)
 
 
 @pytest.fixture
