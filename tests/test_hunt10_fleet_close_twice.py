@@ -20,7 +20,7 @@ import threading
 
 from fault_proxy import FaultProxy, Rule
 from tmmaster import Fleet, PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
-from tmmaster.sim import Simulator
+from tmmaster.sim import Simulator, Timing
 
 FAR = Pose(250, 0, 400, 180, 0, 90)  # 1.3 s away from the home pose at speed 10
 STOP = 7105
@@ -28,7 +28,9 @@ STOP = 7105
 
 def test_a_second_fleet_close_returns_only_once_the_arm_was_stopped() -> None:
     release = threading.Event()
-    with Simulator("tmflow", time_scale=1.0) as sim, FaultProxy(sim.port) as proxy:
+    # Ready at once: the robot's start-up (0.2 s at 1x) is not this test's subject.
+    timing = Timing(init_time_s=0.0)
+    with Simulator("tmflow", time_scale=1.0, timing=timing) as sim, FaultProxy(sim.port) as proxy:
         fleet = Fleet()
         robot = Robot(
             "127.0.0.1",
