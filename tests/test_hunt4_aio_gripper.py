@@ -149,7 +149,7 @@ def fingers(sim: Simulator) -> tuple[bool, float]:
 @pytest.mark.parametrize("how", ["cancel", "wait_for"])
 def test_a_cancelled_stand_alone_gripper_close_is_stopped_before_the_error(how: str) -> None:
     # blog-2fg7 at 100 mm/s, real time: 39 -> 0 mm takes about 0.39 s.
-    timing = Timing(tick_hz=SUITE_TICK_HZ)
+    timing = Timing(tick_hz=SUITE_TICK_HZ, init_time_s=0.0)  # ready at once: not the subject
     sim = Simulator("tmflow", robot=RobotSetup(gripper="blog-2fg7"), time_scale=1.0, timing=timing)
     sim.start()
     try:
