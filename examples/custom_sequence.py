@@ -61,6 +61,13 @@ def build_sequence() -> TaskSequence:
     return seq
 
 
+def given_up(robot: Robot | None) -> str:
+    """What became of the robot's last command, as ``robot.close()`` says (safe twice)."""
+    if robot is None or robot.close():
+        return "nothing the robot was sent can still run"
+    return "could NOT confirm that the robot gave its command up: the arm may still move"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the inspection sequence; returns 0 when done."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -80,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.diagram:
         print(mermaid(sequence))
         return 0
+    robot: Robot | None = None
     try:
         with Robot(
             args.host,
@@ -92,8 +100,19 @@ def main(argv: list[str] | None = None) -> int:
             result = Runner(robot).run(sequence)
     except TMMasterError as exc:
         print(f"custom_sequence: {exc}", file=sys.stderr)
+        if robot is not None:
+            print(f"custom_sequence: {given_up(robot)}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the move in progress was given up before this
+        print(f"custom_sequence: interrupted; {given_up(robot)}", file=sys.stderr)
+        return 130
     print(f"{sequence.name}: {result.state} after {result.duration_s:.2f} s")
+    if result.failure is not None:
+        print(
+            f"custom_sequence: failed in {result.failure.state}: {result.failure.message}",
+            file=sys.stderr,
+        )
+        print(f"custom_sequence: {given_up(robot)}", file=sys.stderr)
     return 0 if result.ok else 1
 
 

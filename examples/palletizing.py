@@ -36,6 +36,13 @@ HOME = DEFAULT_HOME  # tool down, 250 mm in front of J1: reachable by a TM5-700
 PALLET_ORIGIN = Pose(240, 140, 100, 180, 0, 90)
 
 
+def given_up(robot: Robot | None) -> str:
+    """What became of the robot's last command, as ``robot.close()`` says (safe twice)."""
+    if robot is None or robot.close():
+        return "nothing the robot was sent can still run"
+    return "could NOT confirm that the robot gave its command up: the arm may still move"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Fill the pallet; returns 0 when every slot got its part."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -56,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     configure_logging(level="warning")
 
+    robot: Robot | None = None
     try:
         pallet = Pallet(
             origin=PALLET_ORIGIN,
@@ -80,12 +88,18 @@ def main(argv: list[str] | None = None) -> int:
             result = Runner(robot).run(sequence, source=f"{args.rows}x{args.cols} pallet")
     except TMMasterError as exc:
         print(f"palletizing: {exc}", file=sys.stderr)
+        if robot is not None:
+            print(f"palletizing: {given_up(robot)}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the move in progress was given up before this
+        print(f"palletizing: interrupted; {given_up(robot)}", file=sys.stderr)
+        return 130
     if result.failure is not None:
         print(
             f"palletizing: failed in {result.failure.state}: {result.failure.message}",
             file=sys.stderr,
         )
+        print(f"palletizing: {given_up(robot)}", file=sys.stderr)
     print(
         f"palletizing: {result.cycles_completed}/{pallet.size} slots filled,"
         f" {result.state}, cycle times {result.cycle_times_s}"

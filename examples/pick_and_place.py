@@ -15,8 +15,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tmmaster import DEFAULT_PROFILE, TMMasterError, configure_logging
+from tmmaster import DEFAULT_PROFILE, Robot, TMMasterError, configure_logging
 from tmmaster.pickplace import Runner, load_config, pick_and_place, robot_from_config
+
+
+def given_up(robot: Robot | None) -> str:
+    """What became of the robot's last command, as ``robot.close()`` says (safe twice)."""
+    if robot is None or robot.close():
+        return "nothing the robot was sent can still run"
+    return "could NOT confirm that the robot gave its command up: the arm may still move"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -30,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     configure_logging(level="warning")
 
+    robot: Robot | None = None
     try:
         # Everything is validated here, before a single byte goes out: the options are
         # applied to the file once, and the rest reads only the configuration.
@@ -45,13 +53,19 @@ def main(argv: list[str] | None = None) -> int:
             result = runner.run(sequence, source=args.config or "defaults")
     except TMMasterError as exc:  # config error or no connection
         print(f"pick_and_place: {exc}", file=sys.stderr)
+        if robot is not None:
+            print(f"pick_and_place: {given_up(robot)}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the move in progress was given up before this
+        print(f"pick_and_place: interrupted; {given_up(robot)}", file=sys.stderr)
+        return 130
 
     for state, timing in result.state_timings().items():
         print(f"{state:<18} {timing['count']:>3} x  mean {timing['mean_s']:.3f} s")
     if not result.ok:
         assert result.failure is not None
         print(f"failed in {result.failure.state}: {result.failure.message}", file=sys.stderr)
+        print(f"pick_and_place: {given_up(robot)}", file=sys.stderr)
         return 1
     print(f"done: {result.cycles_completed} cycle(s), cycle times {result.cycle_times_s}")
     return 0
