@@ -114,8 +114,8 @@ class Handover:
         given up, and no robot sends another command (``Robot.interrupt()``)."""
         with self._lock:
             first = next(iter(self.errors), None)
-            if isinstance(error, StopRequestedError) and first is not None:
-                # Stopped because the other robot failed: say so.
+            if isinstance(error, StopRequestedError) and first and not self.interrupted:
+                # Stopped because the other robot failed (not by Ctrl-C): say so.
                 stopped = RuntimeError(f"robot {first} failed: robot {robot} stopped")
                 stopped.__cause__ = error
                 error = stopped

@@ -24,7 +24,7 @@ from typing import Any
 import pytest
 
 from examples_support import load_example
-from tmmaster import Motion, Robot
+from tmmaster import Motion, Robot, StopRequestedError
 from tmmaster.sim import Cell, Simulator, TableObject
 
 Factory = Callable[..., Simulator]
@@ -56,6 +56,19 @@ def ctrl_c_handler() -> Iterator[None]:
     signal.signal(signal.SIGINT, previous)
 
 
+def keep_handovers(example: ModuleType, monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+    """Every Handover the example makes, kept for the test to look at."""
+    made: list[Any] = []
+    handover_class = example.Handover
+
+    def handover() -> Any:
+        made.append(handover_class())
+        return made[-1]
+
+    monkeypatch.setattr(example, "Handover", handover)
+    return made
+
+
 def argv(sim_a: Simulator, sim_b: Simulator) -> list[str]:
     return ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
 
@@ -79,8 +92,12 @@ def at_rest(sim: Simulator) -> None:
 
 @pytest.mark.usefixtures("ctrl_c_handler")
 def test_ctrl_c_stops_both_arms_and_exits_130(
-    tm_simulator_factory: Factory, example: ModuleType, capsys: pytest.CaptureFixture[str]
+    tm_simulator_factory: Factory,
+    example: ModuleType,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
+    made = keep_handovers(example, monkeypatch)
     sim_a = tm_simulator_factory(cell=Cell(scene=[TableObject(name="part", pose=example.PICK_A)]))
     sim_b = tm_simulator_factory(
         cell=Cell(scene=[TableObject(name="part", pose=example.HANDOVER_B)])
@@ -108,6 +125,9 @@ def test_ctrl_c_stops_both_arms_and_exits_130(
     at_rest(sim_b)
     # Nothing started after main() returned.
     assert (sim_a.motion_log(), sim_b.motion_log()) == logs
+    # Each robot was stopped by the Ctrl-C, neither blamed on the other.
+    assert made[0].interrupted
+    assert all(type(e) is StopRequestedError for e in made[0].errors.values()), made[0].errors
     # The handover did not run on: A never finished its job, B never took the part.
     assert len(logs[0]) < A_ACTIONS, [m.kind for m in logs[0]]
     assert not [m for m in logs[1] if m.kind == "gripper_close"]
@@ -120,12 +140,7 @@ def test_a_starts_nothing_more_once_b_failed(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     sim_a, sim_b = sims  # B's e-stop is pressed during B's first move
-    made: list[Any] = []
-    handover_class = example.Handover
-
-    def handover() -> Any:
-        made.append(handover_class())
-        return made[-1]
+    made = keep_handovers(example, monkeypatch)
 
     class GatedRobot(Robot):
         """Robot A holds after its first move until B's failure is known (an event)."""
@@ -136,7 +151,6 @@ def test_a_starts_nothing_more_once_b_failed(
                 assert made[0].failed.wait(10.0), "B never failed"
             return motion
 
-    monkeypatch.setattr(example, "Handover", handover)
     monkeypatch.setattr(example, "Robot", GatedRobot)
     code = example.main(argv(sim_a, sim_b))
     # A's first move (sent before B failed) is all A ever did: no grip, no handover.
