@@ -481,8 +481,8 @@ class _MotionFollower:
         once first, a failed poll aside (``close()``, as :meth:`Motion.cancel`: a move
         that finished unwatched is neither stopped nor said withdrawn)."""
         if look and motion.phase in (MovePhase.SENT, MovePhase.RUNNING):
-            with contextlib.suppress(TMMasterError):
-                self.poll(motion)
+            with contextlib.suppress(TMMasterError):  # no pose read: not for a report here
+                self._apply(motion, self._channel.poll(motion.ticket))
         return motion.done or motion.ticket.finished
 
     def settle_owed(self) -> None:

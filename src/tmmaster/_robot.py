@@ -763,8 +763,10 @@ class Robot:
             # instead, and this close finishes at once (its own withdraw is not ended so).
             self._follower.closing.set()
             if self._closed_safely is None or self._transport.state is not ConnectionState.CLOSED:
+                # No beat from now on: the robot program expires what is left, and the
+                # give-up's requests do not wait behind beats on a slow link.
+                self._heartbeat.stop()
                 self._closed_safely = self._give_up_outstanding(deadline)
-                self._heartbeat.stop()  # the robot program expires what is left
                 self._closed_safely = self.gripper.disconnect() and self._closed_safely
                 self._transport.close()
             # Only now: until the clean-up is over, the exit hook may still have it to do.
