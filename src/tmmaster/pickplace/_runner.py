@@ -21,6 +21,7 @@ from typing import Any, Literal
 from .._exceptions import (
     EmergencyStopError,
     GraspFailedError,
+    ProjectPausedError,
     RobotError,
     RobotFaultError,
     StopRequestedError,
@@ -30,7 +31,7 @@ from .._gripper import GripperStatus, RegisterGripper
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Motion, Robot
-from .._status import RobotStatus, project_failure
+from .._status import PROJECT_STOPPED, RobotStatus, project_failure
 from ._config import PickPlaceConfig, check_held_input
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
 from ._plan import validate_plan
@@ -765,7 +766,7 @@ class Runner:
         if failure.state == IDLE:  # the arm is where the run found it, with what it holds
             return ReactionRecord(reaction, False, "the run had not started: not moving")
         if isinstance(failure.exception, EmergencyStopError | RobotFaultError):
-            return ReactionRecord(reaction, False, "robot in error or e-stop: never move")
+            return ReactionRecord(reaction, False, f"{_not_movable(failure.exception)}: never move")
         if sequence.retreat is None:
             return ReactionRecord(reaction, False, "the sequence defines no retreat pose")
         target = sequence.retreat
@@ -785,6 +786,17 @@ class Runner:
             self._log.error("pickplace.retreat_failed", error=str(exc))
             return ReactionRecord(reaction, False, f"retreat failed: {exc}")
         return ReactionRecord(reaction, True, f"retreated to {target.pose}")
+
+
+def _not_movable(exc: BaseException) -> str:
+    """Why a robot fault forbids the retreat, in words: what the robot is in."""
+    if isinstance(exc, EmergencyStopError):
+        return "robot in e-stop"
+    if isinstance(exc, ProjectPausedError):
+        return "the robot's project is paused"
+    if str(exc).startswith(PROJECT_STOPPED):
+        return "the robot's project is stopped"
+    return "robot in error"
 
 
 def _left_running(robot: Robot, before: Motion | None) -> Motion | None:
