@@ -38,8 +38,10 @@ docs/performance.md, "Many robots from one process"):
   read 15-30 ms late (2-4 ms frozen);
 * past what one process can drive, more processes (``--processes K``): this script
   runs itself K times, each child driving a contiguous share of the robots, and
-  gathers their reports. On Ctrl-C in a terminal every child receives it too and gives
-  its own commands up safely; the parent waits for them and never kills one.
+  gathers their reports. On Ctrl-C the parent passes it on to every child still
+  running (a terminal's Ctrl-C reaches them too; one sent to the parent alone, by a
+  supervisor, would not), each gives its own commands up safely, and the parent waits
+  for them and never kills one.
 
 Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
 
@@ -64,6 +66,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import signal
 import statistics
 import subprocess
 import sys
@@ -320,8 +323,13 @@ def run_in_processes(
                 reason = f"its process ended with code {child.returncode} before reporting"
                 reports.append(RobotReport(name, error=TMMasterError(reason)))
     except KeyboardInterrupt:
-        # A terminal's Ctrl-C reached every child too: each gives its commands up itself.
-        # Wait for them; killing one could cut a withdraw or a stop short.
+        # Passed on to every child still running: a Ctrl-C sent to this process alone
+        # left the children driving their whole tours. A child that got the terminal's
+        # too gives its commands up all the same (the library holds a second Ctrl-C
+        # back until a withdraw or stop is delivered). Each gives its commands up
+        # itself: wait for them; killing one could cut a withdraw or a stop short.
+        for _, _, child in children:
+            child.send_signal(signal.SIGINT)  # nothing once it has ended
         for _, _, child in children:
             child.wait()
         raise

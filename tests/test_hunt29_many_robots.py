@@ -1,5 +1,6 @@
 """examples/many_robots.py says when a robot's give-up could not be confirmed, not only
 after Ctrl-C: a robot whose withdraw or stop did not get through may still be moving.
+And with ``--processes``, a Ctrl-C sent to the parent alone stops the children too.
 
 Robot 1's second command write is held in the network and its link goes down right
 behind it (every reconnect refused): the master cannot know whether the robot took the
@@ -9,14 +10,22 @@ Found by hunt 29 ("the code users copy"); the test fails without the fix: the ex
 kept close()'s answer only for its Ctrl-C message, so the run's report said "FAILED
 after 1 move(s): <the link error>" and nothing about an arm that may still be moving
 toward a target the master had given up.
+
+The second test fails without its fix: the parent waited for its children, which never
+got the SIGINT and drove all 30 moves of their tours after it (5 s), and then said
+"interrupted: each robot still open gives its command up at exit".
 """
 
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -27,6 +36,7 @@ from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "many_robots.py"
 #: tmflow's command block (the move's FC16 write).
 COMMAND = 9000
 
@@ -78,3 +88,52 @@ def test_an_unconfirmed_give_up_is_reported_and_fails_the_run(
     # The same from a child process (--processes): the parent learns it too.
     back = example.report_from_json(json.loads(json.dumps(example.report_to_json(reports[1]))))
     assert back.unconfirmed
+
+
+def test_ctrl_c_sent_to_the_parent_alone_stops_the_children(
+    tm_simulator_factory: Factory,
+) -> None:
+    # --processes 2: each child drives one robot. The SIGINT goes to the parent's PID
+    # only (a supervisor's, an IDE's stop button), not to a terminal's process group.
+    sims = [tm_simulator_factory(time_scale=5.0) for _ in range(2)]
+    ports = [str(sim.port) for sim in sims]
+    command = [sys.executable, str(EXAMPLE), "--ports", *ports, "--processes", "2"]
+    command += ["--moves", "30", "--watch-hz", "0"]
+    parent = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for sim in sims:
+            moving(sim)
+        parent.send_signal(signal.SIGINT)
+        _, err = parent.communicate(timeout=60)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+            parent.communicate()
+    assert parent.returncode == 130, err
+    assert err.count("interrupted: every robot gave its command up") == 2, err  # each child
+    for sim in sims:
+        log = sim.motion_log()
+        at_rest(sim)
+        assert sim.motion_log() == log  # nothing started after the parent ended
+        assert len(log) < 30, f"the child drove {len(log)} of its 30 moves after the Ctrl-C"
+
+
+def moving(sim: Simulator) -> None:
+    sim.wait_for(lambda: len(sim.motion_log()) >= 1, timeout=30.0)
+
+
+def at_rest(sim: Simulator) -> None:
+    """Wait until the TCP stands still over 10 ticks (an arm that braked to rest)."""
+    pose, ticks = sim.tcp_pose(), sim.ticks
+
+    def still() -> bool:
+        nonlocal pose, ticks
+        if sim.ticks < ticks + 10:
+            return False
+        now = sim.tcp_pose()
+        if now.is_close(pose, mm=1e-6, deg=1e-6):
+            return True
+        pose, ticks = now, sim.ticks
+        return False
+
+    sim.wait_for(still, timeout=5.0)
