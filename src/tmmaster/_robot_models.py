@@ -531,7 +531,7 @@ class RobotModel(BaseModel):
             for a, b, spec in zip(_six(start_deg), _six(target_deg), self.joints, strict=True)
         )
 
-    @functools.lru_cache(maxsize=256)  # noqa: B019 (a model is immutable, kept by ROBOT_MODELS)
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 (a model is immutable, kept by ROBOT_MODELS)
     def ptp_tcp_speeds(
         self, q0: Joints, q1: Joints, speed: float, accel_s: float | None, tool: Pose | None
     ) -> tuple[float, ...]:
@@ -917,9 +917,9 @@ def _cached_gauge(
 
 # Pure functions of the model and their arguments, cached: a repeating cycle solves the
 # same poses and paths from the same known joints (a solve is about 40 us).
-_cached_inverse = functools.lru_cache(maxsize=1024)(RobotModel._solve)
+_cached_inverse = functools.lru_cache(maxsize=16384)(RobotModel._solve)
 _cached_forward = functools.lru_cache(maxsize=1024)(RobotModel.forward)
-_cached_path = functools.lru_cache(maxsize=256)(RobotModel._path)
+_cached_path = functools.lru_cache(maxsize=4096)(RobotModel._path)
 
 
 def _path_geometry(
