@@ -518,7 +518,9 @@ class Runner:
                 motion = self.robot.last_motion
                 if motion is not None and motion is not earlier and motion.abandoned:
                     result.stop_delivered = motion.stop_delivered
+            before = self.robot.last_motion
             result.reaction = self._react(sequence, result.failure)
+            self._note_retreat_stop(result, before)
         result.duration_s = round(time.monotonic() - run.started, 4)
         result.records = result.log.records()
         result.cycle_times_s = result.log.cycle_times()[0]
@@ -755,6 +757,20 @@ class Runner:
             self._log.error("pickplace.stop_failed", error=str(exc))
             return False
         return True
+
+    def _note_retreat_stop(self, result: RunResult, before: Motion | None) -> None:
+        """After the reaction: a stop requested during it stops the arm, as an interrupted
+        run's does; a retreat move the run gave up is the run's own. Either says whether
+        the stop was delivered (an undelivered one wins over an earlier delivered stop)."""
+        motion = self.robot.last_motion
+        if self._stop.is_set() and result.failure is not None and not result.interrupted:
+            delivered = self._stop_arm(before)
+        elif motion is not None and motion is not before and motion.abandoned:
+            delivered = motion.stop_delivered
+        else:
+            return
+        if result.stop_delivered is None or delivered is False:
+            result.stop_delivered = delivered
 
     def _react(self, sequence: TaskSequence, failure: Failure) -> ReactionRecord:
         """Apply the error reaction; only ever moves a robot that is not in error."""
