@@ -302,6 +302,10 @@ def judge(case: Case, result: RunResult, sim: Simulator, ended: float) -> None:
         assert result.failure.state in (state, names[names.index(state) + 1]), result.failure
     else:
         assert result.failure.state == state, (result.failure, kinds)
+    assert result.cycles_completed == 0
+    assert result.failure.cycle == 1
+    last = result.records[-1]
+    assert (last.state, last.outcome) == (result.failure.state, "failed"), result.records
     assert cycle_kinds[: len(before)] == before, kinds
     assert cycle_kinds[len(before) :] in ([], [own]), kinds
     assert kinds[: len(cycle_kinds)] == cycle_kinds, kinds  # the retreat comes last
