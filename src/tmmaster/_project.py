@@ -78,9 +78,8 @@ class ProjectControl:
 
     def _status(self) -> _Read:
         status = self._channel.read_status()
-        state = status.project
-        assert state is not None  # _require: the profile has project_running
-        return status, state
+        assert status.project is not None  # _require: the profile has project_running
+        return status, status.project
 
     def state(self) -> ProjectState:
         """The project's state now (one status read).
@@ -123,8 +122,7 @@ class ProjectControl:
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
-        held = self._held(status) if state is ProjectState.PAUSED else None
-        if held is not None and held != own:
+        if state is ProjectState.PAUSED and (held := self._held(status)) not in (None, own):
             raise RobotError(
                 f"play(): paused command {held} is another master's, or given up: press Stop"
             )
@@ -211,13 +209,17 @@ class ProjectControl:
         self._gate.write(None, send)  # a press registers no command
         self._log.warning("robot.project_button", button=button, project=state.value)
 
-    def _stop_before_giving_up(self, reason: str) -> None:
+    def _stop_before_giving_up(self, why: str, press: str, exc: BaseException) -> None:
         """Press Stop (retried, best effort): a press that may still land later then never
-        resumes a move; it starts the project from the beginning, running nothing pending."""
+        resumes a move; it starts the project from the beginning, running nothing pending.
+        ``press``: the button pressed whose answer was never seen, logged
+        ``robot.project_button_unanswered`` once the Stop went (docs/safety.md)."""
         try:
             self._channel.stop()
         except TMMasterError as failed:
-            self._log.error("robot.stop_failed", reason=reason, error=str(failed))
+            self._log.error("robot.stop_failed", reason=why, error=str(failed))
+        if press:
+            self._log.error("robot.project_button_unanswered", button=press, error=str(exc))
 
     def _wait_for(
         self, wanted: ProjectState, was: ProjectState, timeout_s: float, dt: float, press: str = ""
@@ -225,10 +227,9 @@ class ProjectControl:
         """Press ``press`` (if any), then wait for ``wanted``; on any failure after the
         press may be on its way, press Stop first."""
         settled: float | None = None  # when a pause seen is trusted
-        unsent = bool(press)  # until pressed: refused, or answered with an exception
-        try:
+        try:  # until its answer came, ``press`` names the button pressed
             self._press(press, was)
-            unsent = False
+            press = ""  # answered: a failure from here on is the wait's
             poller = Poller(dt, self._stop_event, deadline=time.monotonic() + timeout_s)
             while True:
                 poller.check()
@@ -254,12 +255,12 @@ class ProjectControl:
                     )
                 poller.sleep()
         except BaseException as exc:
-            if unsent and isinstance(exc, SETTLED_FAILURES):
+            if press and isinstance(exc, SETTLED_FAILURES):
                 raise  # never sent, or answered: nothing can land later
             # A Play answered but not seen taking effect may land later (a gateway that
             # answers a write before delivering it): it must never resume a move then. A
             # Pause not seen holding leaves the arm running, which pause() must not.
-            self._stop_before_giving_up(f"{wanted.value} unconfirmed")
+            self._stop_before_giving_up(f"{wanted.value} unconfirmed", press, exc)
             raise
 
 
