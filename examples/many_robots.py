@@ -38,10 +38,10 @@ docs/performance.md, "Many robots from one process"):
   read 15-30 ms late (2-4 ms frozen);
 * past what one process can drive, more processes (``--processes K``): this script
   runs itself K times, each child driving a contiguous share of the robots, and
-  gathers their reports. On Ctrl-C the parent passes it on to every child still
-  running (a terminal's Ctrl-C reaches them too; one sent to the parent alone, by a
-  supervisor, would not), each gives its own commands up safely, and the parent waits
-  for them and never kills one.
+  gathers their reports. Each child runs in a process group of its own: a Ctrl-C (a
+  terminal's, or one sent to the parent alone) reaches the parent, which passes it on
+  to every child still running, once; each gives its own commands up safely, and the
+  parent waits for them and never kills one.
 
 Run against simulators it starts itself (``--sim N``, the default: 8 robots)::
 
@@ -64,15 +64,17 @@ Robots and simulators speak the ``tmflow`` profile unless told otherwise
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import json
+import os
 import signal
 import statistics
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -292,48 +294,77 @@ def run_in_processes(
     fleet: bool = True,
     retry_s: float = 10.0,
 ) -> list[RobotReport]:
-    """Drive the robots from ``processes`` child processes of this script, a share each."""
+    """Drive the robots from ``processes`` child processes of this script, a share each.
+
+    Each child runs in a process group of its own (POSIX): a Ctrl-C, a terminal's or one
+    sent to this process alone, reaches this process only, which passes it on to every
+    child still running, once (two at once could land inside a child's own clean-up
+    and hang it there: measured, 3 runs in 30). SIGTERM and SIGHUP (a closed terminal)
+    are taken as Ctrl-C meanwhile, so the children never drive on without a parent.
+    """
     share, extra = divmod(len(ports), processes)
     children: list[tuple[list[int], int, subprocess.Popen[str]]] = []
-    first = 0
-    for k in range(processes):
-        group = list(ports[first : first + share + (k < extra)])
-        if not group:
-            break
-        command = [
-            sys.executable, __file__, "--host", host, "--ports", *map(str, group),
-            "--moves", str(moves), "--profile", profile, "--watch-hz", str(watch_hz),
-            "--first-index", str(first_index + first), "--json", "--retry-s", str(retry_s),
-            *([] if fleet else ["--no-fleet"]),
-        ]  # fmt: skip
-        children.append(
-            (group, first, subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
-        )
-        first += len(group)
+    options = [
+        "--host", host, "--moves", str(moves), "--profile", profile, "--watch-hz",
+        str(watch_hz), "--json", "--retry-s", str(retry_s), *([] if fleet else ["--no-fleet"]),
+    ]  # fmt: skip
+    own_group: dict[str, Any] = {"process_group": 0} if os.name == "posix" else {}
     reports: list[RobotReport] = []
-    try:
-        for group, first, child in children:
-            out, _ = child.communicate()
-            got = [
-                report_from_json(json.loads(line)) for line in out.splitlines() if line[:1] == "{"
-            ]
-            reports += got
-            for i in range(len(got), len(group)):  # a child that ended before reporting
-                name = f"robot{first_index + first + i}"
-                reason = f"its process ended with code {child.returncode} before reporting"
-                reports.append(RobotReport(name, error=TMMasterError(reason)))
-    except KeyboardInterrupt:
-        # Passed on to every child still running: a Ctrl-C sent to this process alone
-        # left the children driving their whole tours. A child that got the terminal's
-        # too gives its commands up all the same (the library holds a second Ctrl-C
-        # back until a withdraw or stop is delivered). Each gives its commands up
-        # itself: wait for them; killing one could cut a withdraw or a stop short.
-        for _, _, child in children:
-            child.send_signal(signal.SIGINT)  # nothing once it has ended
-        for _, _, child in children:
-            child.wait()
-        raise
+    first = 0
+    with _terminate_as_ctrl_c():
+        try:
+            for k in range(processes):
+                group = list(ports[first : first + share + (k < extra)])
+                if not group:
+                    break
+                command = [sys.executable, __file__, "--ports", *map(str, group), *options]
+                command += ["--first-index", str(first_index + first)]
+                child = subprocess.Popen(command, stdout=subprocess.PIPE, text=True, **own_group)
+                children.append((group, first, child))
+                first += len(group)
+            for group, first, child in children:
+                reports += _child_reports(
+                    child, [first_index + first + i for i in range(len(group))]
+                )
+        except KeyboardInterrupt:
+            # Passed on to every child still running, the only Ctrl-C it gets: without it
+            # the children drove their whole tours. Each gives its commands up itself:
+            # wait for them; killing one could cut a withdraw or a stop short.
+            for _, _, child in children:
+                child.send_signal(signal.SIGINT)  # nothing once it has ended
+            for _, _, child in children:
+                child.wait()
+            raise
     return reports
+
+
+def _child_reports(child: subprocess.Popen[str], numbers: list[int]) -> list[RobotReport]:
+    """A child's reports, one per robot it was given (numbered ``numbers``)."""
+    out, _ = child.communicate()
+    got = [report_from_json(json.loads(line)) for line in out.splitlines() if line[:1] == "{"]
+    for number in numbers[len(got) :]:  # a child that ended before reporting
+        reason = f"its process ended with code {child.returncode} before reporting"
+        got.append(RobotReport(f"robot{number}", error=TMMasterError(reason)))
+    return got
+
+
+@contextlib.contextmanager
+def _terminate_as_ctrl_c() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise KeyboardInterrupt meanwhile (POSIX, main thread only)."""
+
+    def as_ctrl_c(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    names = ("SIGTERM", "SIGHUP")
+    wanted = [getattr(signal, n) for n in names if hasattr(signal, n)]
+    if threading.current_thread() is not threading.main_thread():
+        wanted = []
+    previous = {signum: signal.signal(signum, as_ctrl_c) for signum in wanted}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
 
 
 def drive_all(
