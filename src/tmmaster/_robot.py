@@ -1590,7 +1590,8 @@ class Robot:
         Until :meth:`clear_stop_request`, no new command is written either: a move or
         gripper command started meanwhile raises :class:`StopRequestedError` unsent.
         """
-        self._stop_event.set()
+        with deferred():  # a second Ctrl-C inside set() would leave the event's lock held
+            self._stop_event.set()
         if self._shared is not None:
             wake_waits(self._shared)  # a wait polled by the fleet ends now
 
