@@ -77,9 +77,9 @@ SimFactory = Callable[..., Simulator]
 def event_loop(monkeypatch: pytest.MonkeyPatch) -> str:
     """The loop ``auto`` picks during the test: asyncio's own (uvloop hidden)."""
     monkeypatch.setitem(sys.modules, "uvloop", None)  # import uvloop -> ImportError
-    # A default driver made before the test would keep its loop: none is alive (the
-    # suite's no_leaks check ends every test with the driver's loop thread gone).
-    assert fleet_module._DEFAULT.fleet is None
+    # A default driver made before the test keeps its loop (another module's robot may
+    # hold it across its tests): the test's links take a fresh one, made on this loop.
+    monkeypatch.setattr(fleet_module, "_DEFAULT", fleet_module._DefaultDriver())
     assert _loop_factory("auto")[0] == "asyncio"
     return "asyncio"
 

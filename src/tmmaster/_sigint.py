@@ -52,8 +52,9 @@ _PAUSE_AT = "TMMASTER_TEST_SIGINT_AT"
 
 
 def _in_main_thread() -> bool:
-    """True in the main thread, the only one Python runs signal handlers in."""
-    return threading.current_thread() is threading.main_thread()
+    """True in the main thread, the only one Python runs signal handlers in (asked by
+    ident: ``current_thread()`` in a ``_thread`` thread would register a dummy thread)."""
+    return threading.get_ident() == threading.main_thread().ident
 
 
 def _ignore() -> None:
