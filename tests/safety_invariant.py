@@ -96,3 +96,20 @@ def at_rest(sim: Simulator) -> Callable[[], bool]:
         return before is not None and now.distance_to(before) < 1e-6
 
     return still
+
+
+def wait_braked(sim: Simulator, ticks: int = 10, timeout: float = 5.0) -> None:
+    """Wait until the TCP stands still over ``ticks`` robot ticks (an arm braked to rest)."""
+    pose, since = sim.tcp_pose(), sim.ticks
+
+    def still() -> bool:
+        nonlocal pose, since
+        if sim.ticks < since + ticks:
+            return False
+        now = sim.tcp_pose()
+        if now.is_close(pose, mm=1e-6, deg=1e-6):
+            return True
+        pose, since = now, sim.ticks
+        return False
+
+    sim.wait_for(still, timeout=timeout)

@@ -20,6 +20,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from safety_invariant import wait_braked
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -46,23 +47,6 @@ def start(code: str) -> subprocess.Popen[str]:
 
 def moving(sim: Simulator) -> None:
     sim.wait_for(lambda: len(sim.motion_log()) == 1, timeout=30.0)
-
-
-def at_rest(sim: Simulator) -> None:
-    """Wait until the TCP stands still over 10 ticks (an arm that braked to rest)."""
-    pose, ticks = sim.tcp_pose(), sim.ticks
-
-    def still() -> bool:
-        nonlocal pose, ticks
-        if sim.ticks < ticks + 10:
-            return False
-        now = sim.tcp_pose()
-        if now.is_close(pose, mm=1e-6, deg=1e-6):
-            return True
-        pose, ticks = now, sim.ticks
-        return False
-
-    sim.wait_for(still, timeout=5.0)
 
 
 def test_a_robot_that_fails_fails_the_script(tm_simulator_factory: Factory) -> None:
@@ -96,7 +80,7 @@ def test_ctrl_c_stops_every_arm(tm_simulator_factory: Factory) -> None:
     for sim in (sim_1, sim_2):
         (motion,) = sim.motion_log()
         assert motion.done_wall_time is None  # stopped, never reported done
-        at_rest(sim)  # the stopped arm braked to rest, short of the target
+        wait_braked(sim)  # the stopped arm braked to rest, short of the target
         assert motion.target is not None
         assert not sim.tcp_pose().is_close(motion.target, mm=1.0, deg=1.0)
         assert sim.motion_log() == (motion,)

@@ -36,6 +36,7 @@ import pytest
 
 from examples_support import load_example
 from fault_proxy import FaultProxy, Rule
+from safety_invariant import wait_braked
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
@@ -130,27 +131,10 @@ def test_ctrl_c_to_the_parent_stops_the_children(
     assert err.count("interrupted: every robot gave its command up") == 2, err  # each child
     for sim in sims:
         log = sim.motion_log()
-        at_rest(sim)
+        wait_braked(sim)
         assert sim.motion_log() == log  # nothing started after the parent ended
         assert len(log) < 30, f"the child drove {len(log)} of its 30 moves after the signal"
 
 
 def moving(sim: Simulator) -> None:
     sim.wait_for(lambda: len(sim.motion_log()) >= 1, timeout=30.0)
-
-
-def at_rest(sim: Simulator) -> None:
-    """Wait until the TCP stands still over 10 ticks (an arm that braked to rest)."""
-    pose, ticks = sim.tcp_pose(), sim.ticks
-
-    def still() -> bool:
-        nonlocal pose, ticks
-        if sim.ticks < ticks + 10:
-            return False
-        now = sim.tcp_pose()
-        if now.is_close(pose, mm=1e-6, deg=1e-6):
-            return True
-        pose, ticks = now, sim.ticks
-        return False
-
-    sim.wait_for(still, timeout=5.0)

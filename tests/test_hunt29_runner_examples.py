@@ -28,6 +28,7 @@ import pytest
 
 from examples_support import load_example
 from fault_proxy import FaultProxy, Rule
+from safety_invariant import wait_braked
 from tmmaster import RetryPolicy, Robot
 from tmmaster.sim import Simulator
 
@@ -83,23 +84,6 @@ def load(name: str) -> ModuleType:
     return example
 
 
-def at_rest(sim: Simulator) -> None:
-    """Wait until the TCP stands still over 10 ticks (an arm that braked to rest)."""
-    pose, ticks = sim.tcp_pose(), sim.ticks
-
-    def still() -> bool:
-        nonlocal pose, ticks
-        if sim.ticks < ticks + 10:
-            return False
-        now = sim.tcp_pose()
-        if now.is_close(pose, mm=1e-6, deg=1e-6):
-            return True
-        pose, ticks = now, sim.ticks
-        return False
-
-    sim.wait_for(still, timeout=5.0)
-
-
 @pytest.mark.usefixtures("ctrl_c_handler")
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_ctrl_c_exits_130_with_the_arm_at_rest(
@@ -129,7 +113,7 @@ def test_ctrl_c_exits_130_with_the_arm_at_rest(
     err = capsys.readouterr().err
     assert f"{name}: interrupted; nothing the robot was sent can still run" in err
     log = sim.motion_log()
-    at_rest(sim)  # a stopped arm brakes to rest
+    wait_braked(sim)  # a stopped arm brakes to rest
     assert sim.motion_log() == log  # nothing started after main() returned
 
 

@@ -24,6 +24,7 @@ from typing import Any
 import pytest
 
 from examples_support import load_example
+from safety_invariant import wait_braked
 from tmmaster import Motion, Robot, StopRequestedError
 from tmmaster.sim import Cell, MotionRecord, Simulator, TableObject
 
@@ -73,23 +74,6 @@ def argv(sim_a: Simulator, sim_b: Simulator) -> list[str]:
     return ["--port-a", str(sim_a.port), "--port-b", str(sim_b.port), "--settle", "0.05"]
 
 
-def at_rest(sim: Simulator) -> None:
-    """Wait until the TCP stands still over 10 ticks (an arm that braked to rest)."""
-    pose, ticks = sim.tcp_pose(), sim.ticks
-
-    def still() -> bool:
-        nonlocal pose, ticks
-        if sim.ticks < ticks + 10:
-            return False
-        now = sim.tcp_pose()
-        if now.is_close(pose, mm=1e-6, deg=1e-6):
-            return True
-        pose, ticks = now, sim.ticks
-        return False
-
-    sim.wait_for(still, timeout=5.0)
-
-
 def started(log: Sequence[MotionRecord]) -> list[tuple[int, str, int | None, object]]:
     """What a motion log says was started: each motion's number, kind, seq and target."""
     return [(m.number, m.kind, m.seq, m.target) for m in log]
@@ -126,8 +110,8 @@ def test_ctrl_c_stops_both_arms_and_exits_130(
     assert code == 130
     assert "interrupted" in capsys.readouterr().err
     logs = sim_a.motion_log(), sim_b.motion_log()
-    at_rest(sim_a)  # a stopped arm brakes to rest
-    at_rest(sim_b)
+    wait_braked(sim_a)  # a stopped arm brakes to rest
+    wait_braked(sim_b)
     # Nothing started after main() returned (a stopped motion's record gets its end time
     # once it has braked to rest: the motions themselves are compared).
     assert started(sim_a.motion_log()) == started(logs[0])
