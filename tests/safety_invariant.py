@@ -113,3 +113,24 @@ def wait_braked(sim: Simulator, ticks: int = 10, timeout: float = 5.0) -> None:
         return False
 
     sim.wait_for(still, timeout=timeout)
+
+
+def record_moves(robot: Robot, issued: list[Issued]) -> None:
+    """Record every ``move_to`` of ``robot`` in ``issued`` (a runner's steps' and retreat's),
+    with its outcome: "done" or the error's type name."""
+    move_to = robot.move_to
+
+    def record(pose: Pose, **kwargs: object) -> object:
+        command = Issued(pose, time.monotonic())
+        issued.append(command)
+        try:
+            result = move_to(pose, **kwargs)  # type: ignore[arg-type]
+        except TMMasterError as exc:
+            command.outcome = type(exc).__name__
+            raise
+        finally:
+            command.ended_at = time.monotonic()
+        command.outcome = "done"
+        return result
+
+    robot.move_to = record  # type: ignore[method-assign]

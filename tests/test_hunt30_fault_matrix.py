@@ -37,9 +37,9 @@ import pytest
 
 from fault_proxy import FaultProxy, Rule
 from pendant import press_play_pause
-from safety_invariant import Issued, check
+from safety_invariant import Issued, check, record_moves
 from sim_speeds import QUICK
-from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.pickplace import (
     ARTICLE_PICK,
     PICK_AND_PLACE_STATES,
@@ -183,26 +183,6 @@ def fire(case: Case, sim: Simulator, runner: Runner) -> None:
         raise AssertionError(fault)
 
 
-def recording(robot: Robot, issued: list[Issued]) -> None:
-    """Record every move the runner issues (its steps' and its retreat's)."""
-    move_to = robot.move_to
-
-    def record(pose: Pose, **kwargs: object) -> object:
-        command = Issued(pose, time.monotonic())
-        issued.append(command)
-        try:
-            result = move_to(pose, **kwargs)  # type: ignore[arg-type]
-        except TMMasterError as exc:
-            command.outcome = type(exc).__name__
-            raise
-        finally:
-            command.ended_at = time.monotonic()
-        command.outcome = "done"
-        return result
-
-    robot.move_to = record  # type: ignore[method-assign]
-
-
 def is_gripper_command(request: RequestRecord) -> bool:
     """A write of the article's gripper register (0x0210)."""
     return request.is_write and request.address == BLOCKS["article"][1]
@@ -238,7 +218,7 @@ def run_case(factory: Factory, case: Case) -> tuple[RunResult, Simulator, float]
             timeouts=TimeoutPolicy(request_s=0.3, gripper_settle_s=0.05, in_flight_s=0.5),
         ) as robot:
             robot.wait_until_ready(5)
-            recording(robot, case.issued)
+            record_moves(robot, case.issued)
             runner = Runner.from_config(robot, config)
 
             def on_state(event: StateEvent) -> None:

@@ -21,10 +21,10 @@ from collections.abc import Callable
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from safety_invariant import Issued
+from safety_invariant import Issued, record_moves
 from sim_speeds import QUICK
 from test_hunt30_pallet_faults import ran_in_order
-from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.pickplace import (
     ARTICLE_PICK,
     Runner,
@@ -38,25 +38,6 @@ Factory = Callable[..., Simulator]
 PICK = Pose.from_sequence(ARTICLE_PICK)
 RETREAT = Pose(250, 50, 300, 180, 0, 90)
 GRIPPER_BLOCK = {"tmflow": 9014, "article": 0x0210}
-
-
-def recording(robot: Robot, issued: list[Issued]) -> None:
-    move_to = robot.move_to
-
-    def record(pose: Pose, **kwargs: object) -> object:
-        command = Issued(pose, time.monotonic())
-        issued.append(command)
-        try:
-            result = move_to(pose, **kwargs)  # type: ignore[arg-type]
-        except TMMasterError as exc:
-            command.outcome = type(exc).__name__
-            raise
-        finally:
-            command.ended_at = time.monotonic()
-        command.outcome = "done"
-        return result
-
-    robot.move_to = record  # type: ignore[method-assign]
 
 
 @pytest.mark.parametrize(
@@ -99,7 +80,7 @@ def test_a_fault_in_a_grasp_retry_runs_nothing_undocumented(
             timeouts=TimeoutPolicy(request_s=0.3, gripper_settle_s=0.05, in_flight_s=0.5),
         ) as robot:
             robot.wait_until_ready(5)
-            recording(robot, issued)
+            record_moves(robot, issued)
             runner = Runner.from_config(robot, config)
 
             def on_state(event: StateEvent) -> None:

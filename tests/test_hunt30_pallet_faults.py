@@ -22,9 +22,9 @@ from collections.abc import Callable, Sequence
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from safety_invariant import Issued
+from safety_invariant import Issued, record_moves
 from sim_speeds import QUICK
-from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy, TMMasterError
+from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
 from tmmaster.pickplace import ARTICLE_PICK, Pallet, Runner, StateEvent, palletizing
 from tmmaster.sim import Cell, MotionRecord, Simulator, TableObject
 
@@ -78,25 +78,6 @@ def ran_in_order(issued: Sequence[Issued], log: Sequence[MotionRecord]) -> None:
         assert rest.outcome != "done", f"{rest} ended done but never ran"
 
 
-def recording(robot: Robot, issued: list[Issued]) -> None:
-    move_to = robot.move_to
-
-    def record(pose: Pose, **kwargs: object) -> object:
-        command = Issued(pose, time.monotonic())
-        issued.append(command)
-        try:
-            result = move_to(pose, **kwargs)  # type: ignore[arg-type]
-        except TMMasterError as exc:
-            command.outcome = type(exc).__name__
-            raise
-        finally:
-            command.ended_at = time.monotonic()
-        command.outcome = "done"
-        return result
-
-    robot.move_to = record  # type: ignore[method-assign]
-
-
 @pytest.mark.parametrize(("profile", "slot", "state", "fault"), CASES)
 def test_a_fault_in_a_slots_cycle_leaves_the_earlier_slots_filled_and_nothing_after(
     tm_simulator_factory: Factory, profile: str, slot: int, state: str, fault: str
@@ -118,7 +99,7 @@ def test_a_fault_in_a_slots_cycle_leaves_the_earlier_slots_filled_and_nothing_af
             ),
         ) as robot:
             robot.wait_until_ready(5)
-            recording(robot, issued)
+            record_moves(robot, issued)
             runner = Runner(robot, error_reaction="retreat")
 
             def stop_once_moving(moves: int) -> None:
