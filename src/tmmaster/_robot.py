@@ -1075,8 +1075,6 @@ class Robot:
         """
         motion = motion_type(motion)
         percent = self._move_arguments(speed, speed_mm_s, motion, accel_time_ms, timeout)
-        if (last := self._last_motion) is not None and last.abandoned:
-            self._read_start()  # a move given up may have stopped short: checked from there
         self._planner.check_path(target, percent, motion)
         # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
         command = Command(
@@ -1091,11 +1089,16 @@ class Robot:
         motion: MotionType | None,
         accel_ms: int | None,
         timeout: float | None,
+        read: bool = True,
     ) -> int:
         """The speed register's percent for ``speed`` or ``speed_mm_s``, then the move's
         ``accel_time_ms`` (``accel_ms``, in the profile's range) and ``timeout`` checked
-        too: no I/O, so that a move resolved against a read (``move_by``, ``move_arc``)
-        refuses them before it.
+        too, before any I/O: nothing is read for a bad one. Then, after a move given up
+        (a cancel, a timeout, a stop: it may have stopped short, in another pose
+        configuration than its target), where the robot reports the arm is read, so that
+        the move's checks (``start_move``'s, ``move_joints``', ``move_arc``'s end) run
+        from there, not from the given-up move's target; ``read`` False: the caller reads
+        it anyway (``move_by``).
 
         ``motion`` None: a Circle (which takes mm/s too).
         """
@@ -1111,6 +1114,8 @@ class Robot:
             encode(self.profile.field("accel_time"), accel_ms)
         if timeout is not None:
             require_positive("timeout", timeout)
+        if read and (last := self._last_motion) is not None and last.abandoned:
+            self._read_start()
         return percent
 
     def move_joints(
@@ -1169,9 +1174,7 @@ class Robot:
         """
         self._require(CommandKind.PTP_JOINTS, "a joint move (move_joints)")
         values = joint_values(joints)
-        check_accel(accel_time_ms)
-        if (last := self._last_motion) is not None and last.abandoned:
-            self._read_start()  # as start_move: checked from where a move given up left it
+        self._move_arguments(speed, None, MotionType.PTP, accel_time_ms, timeout)
         checked, tcp = self._planner.joint_target(values, speed)
         command = Command(CommandKind.PTP_JOINTS, tcp, speed, accel_time_ms, joints=checked)
         return _waited(self._start_command(command, timeout=timeout))
@@ -1248,7 +1251,7 @@ class Robot:
         if frame not in ("base", "tool"):
             raise ConfigError(f"frame must be 'base' or 'tool', got {frame!r}")
         kind = motion_type(motion)
-        percent = self._move_arguments(speed, speed_mm_s, kind, accel_time_ms, timeout)
+        percent = self._move_arguments(speed, speed_mm_s, kind, accel_time_ms, timeout, read=False)
         start = self._read_start()
         target = moved(start, offset, frame)
         self._planner.check_path(target, percent, kind)  # move_to's: a Line's path too
@@ -1274,10 +1277,11 @@ class Robot:
         the circle through where it is, ``via``'s position and ``to``, from the start
         through ``via`` to ``to``, and its orientation turns uniformly from the start's
         to ``to``'s (``via``'s orientation is not used: the master writes the one the
-        TCP has there). The arc is resolved against the TCP pose the robot reports (read
-        first) and checked before the write like a Line: every point by inverse
-        kinematics on the arm's branch, and inside the ``workspace``, the tool above its
-        table plane.
+        TCP has there). Its end is checked from where the arm is believed to be (after a
+        move given up, from where the robot reports it, read first). The arc is resolved
+        against the TCP pose the robot reports (read first) and checked before the write
+        like a Line: every point by inverse kinematics on the arm's branch, and inside the
+        ``workspace``, the tool above its table plane.
 
         Example:
             Against the simulator (``python -m tmmaster.sim --port 5020``):
@@ -1321,7 +1325,7 @@ class Robot:
         if not isinstance(via, Pose):
             raise ConfigError(f"via must be a tmmaster.Pose, got {type(via).__name__}")
         percent = self._move_arguments(speed, speed_mm_s, None, accel_time_ms, timeout)
-        # Its end and via before any request; the arc from where the robot reports the arm.
+        # Its end and via (after a give-up, from the arm's read); the arc from a read too.
         self._planner.check_arc_move(via, to, percent)
         command = Command(
             CommandKind.CIRCLE, to, percent, accel_time_ms, via=via, speed_mm_s=speed_mm_s
