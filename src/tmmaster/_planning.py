@@ -464,9 +464,11 @@ class Planner:
         self.check_move(target, speed, motion, self.hint_pose, self.joints_hint)
 
     def check_arc_move(self, via: Pose, to: Pose, speed: int) -> None:
-        """An arc's checks before any request: its end and ``via``. The arc itself is
-        checked from the pose the robot reports (its plan), not from the last target: a
-        move stopped short or given up left the arm elsewhere, where another arc starts."""
+        """An arc's checks before its start is read: its end (from the joints the arm is
+        believed at: after a move given up, the ones the robot reported) and ``via``. The
+        arc itself is checked from the pose the robot reports (its plan), not from the
+        last target: a move stopped short left the arm elsewhere, where another arc
+        starts."""
         # Its end as validate() checks it, without the body along a PTP there: the arm
         # takes the arc, whose samples' body the plan checks.
         self._target_joints(to, speed, self.joints_hint)
