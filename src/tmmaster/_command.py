@@ -711,9 +711,10 @@ class _MotionFollower:
         return True
 
     def _pose_or(self, fallback: Pose | None) -> Pose | None:
-        """The current pose for an error report; the fallback if it cannot be read."""
+        """The current pose for an error report, read once (a Stop may follow: not after
+        the retries); the fallback if it cannot be read."""
         try:
-            return self._channel.read_pose()
+            return self._channel.read_pose(retry=False)
         except TMMasterError:
             return fallback
 
