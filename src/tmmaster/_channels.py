@@ -90,6 +90,9 @@ _UNRUN = ("cancelled", "another_master")
 #: How long a Stop this master wrote may take to show on the robot, s (a judgement: TMflow
 #: takes it at its next cycle, 20 ms on the simulator; not measured on a TM5).
 STOP_SHOWS_S = 1.0
+#: Per robot (``Transport.endpoint``): until when a Stop a Robot of this process wrote may
+#: not show yet on it; a Robot made after the one that wrote it (closed) waits for it too.
+STOP_SHOWS_BY: dict[tuple[str, int, int], float] = {}
 
 #: The command kinds that write the command block's extension (via, speed_mm_s, ext_seq).
 _EXTENDED = frozenset({CommandKind.LINE, CommandKind.CIRCLE})
@@ -243,9 +246,6 @@ class CommandChannel(ABC):
 
     def __init__(self, profile: RobotProfile, transport: Transport) -> None:
         self.profile, self.transport = profile, transport
-        #: ``time.monotonic()`` until which a Stop this master wrote may not show yet on the
-        #: robot (TMflow takes it at its next cycle): a press decided before would land after it.
-        self.stop_shows_by = -math.inf
         command = profile.field("command")
         # The block's extension (a circle's via, a TCP speed in mm/s), where the profile
         # has all of it: it is tied to a command by the sequence number (ext_seq).
@@ -261,13 +261,12 @@ class CommandChannel(ABC):
         # connect and before a plan; the joints also with the status (they come in the
         # same request as the TCP pose, Techman's 7013-7036).
         self.joint_fields = profile.published(JOINT_FIELDS)
-        readable_gripper = [f for f in profile.role(Role.GRIPPER) if not f.access.writable]
         self.status_fields: tuple[RegisterField, ...] = (
             *profile.role(Role.STATUS),
             *self.joint_fields,
             *profile.role(Role.POSE),
             *profile.role(Role.FEEDBACK),
-            *readable_gripper,
+            *(f for f in profile.role(Role.GRIPPER) if not f.access.writable),  # readable
         )
         # Field sets read on every command, built once (their read plans are cached by
         # the tuple's identity).
@@ -586,7 +585,7 @@ class CommandChannel(ABC):
         if words is None:
             raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
         self.transport.write_fields(words, retry=True, interruptible=False)
-        self.stop_shows_by = time.monotonic() + STOP_SHOWS_S
+        STOP_SHOWS_BY[self.transport.endpoint] = time.monotonic() + STOP_SHOWS_S
 
     def check_command(self, command: Command) -> None:
         """Encode any command's block without sending it (raises naming the field)."""

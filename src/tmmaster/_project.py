@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from ._channels import CommandChannel
+from ._channels import STOP_SHOWS_BY, CommandChannel
 from ._checks import require_positive
 from ._exceptions import ConfigError, RobotError, TMMasterError
 from ._gate import CommandGate
@@ -175,14 +175,16 @@ class ProjectControl:
         ``timeout_s``, or while the robot is in error or e-stop (a running project never
         is: its state would be ERROR). A Stop this master wrote that the project does not
         show yet is waited for (up to ``timeout_s``): a toggle decided on the running
-        project would land after it, on the stopped one, where it is Play."""
+        project would land after it, on the stopped one, where it is Play. So is one an
+        earlier Robot of this process wrote (its ``close()``): kept per robot address."""
         self._require(what)
         require_positive("timeout_s", timeout_s)
         status, state = self._status()
         if (failure := self._channel.status_failure(status)) is not None:
             why = f"{what}: {failure}: reset it on the robot first"
             raise type(failure)(why, error_code=failure.error_code, pose=failure.pose)
-        if state is not ProjectState.STOPPED and time.monotonic() < self._channel.stop_shows_by:
+        shows_by = STOP_SHOWS_BY.get(self._transport.endpoint, 0.0)  # any Robot's Stop
+        if state is not ProjectState.STOPPED and time.monotonic() < shows_by:
             state = self._wait_for(ProjectState.STOPPED, state, timeout_s, interval)
         return status, state
 
@@ -205,7 +207,7 @@ class ProjectControl:
             # Sent once: a repeated toggle would undo the press.
             self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
-        self._channel.stop_shows_by = float("-inf")  # seen: _before_press waited for it
+        STOP_SHOWS_BY.pop(self._transport.endpoint, None)  # seen: _before_press waited for it
         self._gate.write(None, send)  # a press registers no command
         self._log.warning("robot.project_button", button=button, project=state.value)
 

@@ -70,9 +70,10 @@ def _forget_what_robots_owe(gone: set[tuple[str, int]] | None) -> None:
     address; a Stop the link could not carry, a late output frame, a gripper's Stop: kept
     per process and robot address) ends with them: a later test's simulator on the same
     port or name is another robot, whose first call would otherwise deliver it."""
-    from .. import _command, _gripper, _io
+    from .. import _channels, _command, _gripper, _io
 
     owed: list[dict[Any, Any]] = [_command._STOPS_OWED, _io._WATCHED, _gripper._STOP_DOUBTS]
+    owed.append(_channels.STOP_SHOWS_BY)  # a Stop not shown yet: waited for by a press
     for debts in owed:
         for key in [key for key in debts if gone is None or tuple(key[:2]) in gone]:
             del debts[key]

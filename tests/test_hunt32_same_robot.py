@@ -1,0 +1,256 @@
+"""The same Robot object after each kind of failure: its next commands tell the truth.
+
+Hunt 32. Real scripts catch an error and carry on with the same ``Robot``. For each
+failure (an e-stop and its reset, a robot error and its reset, a motion timeout, a stop
+request then ``clear_stop_request()``, ``Motion.cancel()``, a link lost mid-move that came
+back, ``close()`` then ``connect()``, a controller restart, the TMflow project stopped
+and played again), on each profile where it applies, the failure hits a move toward
+``FAILED`` and the same object then moves to ``NEXT``. What is judged:
+
+- the robot ran each issued command at most once, none after its give-up, and ``NEXT``
+  exactly once (``safety_invariant.check`` on the simulator's motion log);
+- the next move is planned from where the simulator has the arm (``motion.start``), not
+  from the failed move's target; its expected time is the one a fresh ``Robot`` plans for
+  the same move from there (the same arm, the same target), so its timeout is sane;
+- its wait returns only once the simulator finished the move, with the arm at ``NEXT``;
+- ``last_motion``, ``progress()`` and ``status()`` tell the truth afterwards;
+- the gripper's next commands run once each, in order.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from contextlib import ExitStack
+from typing import Any
+
+import pytest
+
+from safety_invariant import Issued, check
+from sim_speeds import QUICK
+from test_controller_restart import restart_controller
+from tmmaster import (
+    ConnectError,
+    PollPolicy,
+    Pose,
+    ProjectState,
+    Robot,
+    TimeoutPolicy,
+    TMMasterError,
+)
+from tmmaster._status import MovePhase
+from tmmaster.sim import Simulator
+
+SimFactory = Callable[..., Simulator]
+
+START = Pose(220, -200, 200, 180, 0, 90)
+#: The failed move's target: a long PTP from START, so the faults hit it mid-way.
+FAILED = Pose(220, 200, 250, 180, 0, 90)
+NEXT = Pose(300, 0, 180, 180, 0, 90)
+TIMEOUTS = TimeoutPolicy(motion_margin_s=0.5, ack_timeout_s=2.0)
+
+
+def started(sim: Simulator, count: int) -> None:
+    """Wait until the robot started its ``count``-th motion (the failed one runs)."""
+    sim.wait_for(lambda: len([m for m in sim.motion_log() if m.target]) >= count, timeout=5.0)
+
+
+def recover(robot: Robot, sim: Simulator) -> None:
+    """What a script does after the failure: reset on the pendant, Play, the arm at rest."""
+    sim.clear_error()
+    if sim.profile.name == "tmflow":
+        robot.play()  # waits for the master's own Stop to show first (robot-api.md)
+        assert robot.project_state() is ProjectState.RUNNING
+    robot.wait_until_at_rest()
+
+
+def fail_estop(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    sim.inject("estop:at_move=1")
+    # article reports an e-stop as its error code only (docs/robot-api.md).
+    expected = "EmergencyStopError" if sim.profile.name == "tmflow" else "RobotFaultError"
+    attempt_failing(robot, issued, expected)
+
+
+def fail_robot_error(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    sim.inject("robot_error:at_move=1,code=0x22")
+    attempt_failing(robot, issued, "RobotFaultError")
+
+
+def fail_timeout(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    sim.inject("stall:at_move=1")
+    attempt_failing(robot, issued, "MotionTimeoutError")
+
+
+def fail_interrupt(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    before = len([m for m in sim.motion_log() if m.target])
+
+    def interrupt() -> None:
+        started(sim, before + 1)
+        robot.interrupt()
+
+    helper = threading.Thread(target=interrupt)
+    helper.start()
+    attempt_failing(robot, issued, "StopRequestedError")
+    helper.join()
+    robot.clear_stop_request()
+
+
+def fail_cancel(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    before = len([m for m in sim.motion_log() if m.target])
+    issued.append(Issued(FAILED, 0.0))
+    motion = robot.start_move(FAILED, speed=20)
+    started(sim, before + 1)
+    assert motion.cancel()
+    issued[-1].outcome = "cancelled"
+    assert motion.abandoned
+    assert not motion.done
+
+
+def fail_link(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    """The link drops mid-move and comes back: the wait carries on (not a failure)."""
+    before = len([m for m in sim.motion_log() if m.target])
+    issued.append(Issued(FAILED, 0.0))
+    motion = robot.start_move(FAILED, speed=20)
+    started(sim, before + 1)
+    sim.drop_connections()
+    motion.wait()
+    issued[-1].outcome = "done"
+
+
+def fail_close(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    """``close()`` mid-move (the arm stopped), then ``connect()`` again: refused, as
+    documented (a closed Robot is not reused); nothing is sent."""
+    before = len([m for m in sim.motion_log() if m.target])
+    issued.append(Issued(FAILED, 0.0))
+    robot.start_move(FAILED, speed=20)
+    started(sim, before + 1)
+    assert robot.close()
+    issued[-1].outcome = "closed"
+    sent = len(sim.request_log)
+    with pytest.raises(ConnectError, match="create a new Robot"):
+        robot.connect()
+    assert len(sim.request_log) == sent
+
+
+def fail_restart(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    """The controller restarts mid-move (tmflow)."""
+    before = len([m for m in sim.motion_log() if m.target])
+    issued.append(Issued(FAILED, 0.0))
+    motion = robot.start_move(FAILED, speed=20)
+    started(sim, before + 1)
+    restart_controller(sim)
+    with pytest.raises(TMMasterError) as failed:
+        motion.wait()
+    issued[-1].outcome = type(failed.value).__name__
+
+
+def fail_project_stop(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    """The operator stops the TMflow project mid-move (tmflow)."""
+    before = len([m for m in sim.motion_log() if m.target])
+    issued.append(Issued(FAILED, 0.0))
+    motion = robot.start_move(FAILED, speed=20)
+    started(sim, before + 1)
+    sim.call(lambda: sim._controller.bank.set("stop_project", True))
+    with pytest.raises(TMMasterError) as failed:
+        motion.wait()
+    issued[-1].outcome = type(failed.value).__name__
+
+
+def attempt_failing(robot: Robot, issued: list[Issued], expected: str) -> None:
+    command = Issued(FAILED, 0.0)
+    issued.append(command)
+    with pytest.raises(TMMasterError) as failed:
+        robot.move_to(FAILED, speed=20)
+    command.outcome = type(failed.value).__name__
+    assert command.outcome == expected, repr(failed.value)
+
+
+FAILURES: dict[str, Callable[[Robot, Simulator, list[Issued]], None]] = {
+    "estop": fail_estop,
+    "robot_error": fail_robot_error,
+    "timeout": fail_timeout,
+    "interrupt": fail_interrupt,
+    "cancel": fail_cancel,
+    "link": fail_link,
+    "close": fail_close,
+    "restart": fail_restart,
+    "project_stop": fail_project_stop,
+}
+TMFLOW_ONLY = ("restart", "project_stop")
+CASES = [
+    pytest.param(profile, kind, id=f"{profile}-{kind}")
+    for kind in FAILURES
+    for profile in ("article", "tmflow")
+    if profile == "tmflow" or kind not in TMFLOW_ONLY
+]
+
+
+def open_robot(sim: Simulator, *, ready: bool = True, **options: Any) -> Robot:
+    options.setdefault("polling", PollPolicy(interval_s=0.01))
+    options.setdefault("timeouts", TIMEOUTS)
+    robot = Robot(sim.url, profile=sim.profile, **options)
+    robot.connect()
+    if ready:
+        robot.wait_until_ready(timeout_s=5)
+    return robot
+
+
+def next_move_tells_the_truth(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    here = sim.tcp_pose()
+    issued.append(Issued(NEXT, 0.0))
+    motion = robot.start_move(NEXT, speed=30)
+    assert robot.last_motion is motion
+    assert motion.target is not None
+    assert motion.target.is_close(NEXT, mm=1e-6, deg=1e-6)
+    # Planned from where the arm is, not from the failed move's target.
+    assert motion.start is not None
+    assert motion.start.is_close(here, mm=1.0, deg=0.5), (motion.start, here)
+    first = motion.progress()
+    assert first.phase in (MovePhase.SENT, MovePhase.RUNNING, MovePhase.DONE)
+    assert first.expected_s == motion.expected_s > 0
+    motion.wait()
+    issued[-1].outcome = "done"
+    # No false success: the robot itself reported the move finished, at NEXT.
+    record = [m for m in sim.motion_log() if m.target is not None][-1]
+    assert record.target is not None
+    assert record.target.is_close(NEXT, mm=0.05)
+    assert record.done_wall_time is not None
+    assert sim.tcp_pose().is_close(NEXT, mm=0.05, deg=0.05)
+    # Its expected time is the arm's: what the simulator took for it, in robot seconds.
+    took_s = (record.done_wall_time - record.wall_time) * sim.time_scale
+    print(f"expected {motion.expected_s:.3f} s, took {took_s:.3f} s, timeout {motion.timeout_s}")
+    assert 0.5 * took_s <= motion.expected_s <= 2.0 * took_s + 0.2
+    assert motion.timeout_s >= motion.expected_s
+    assert motion.done
+    assert not motion.abandoned
+    assert motion.progress().phase is MovePhase.DONE
+    status = robot.status()
+    assert not status.moving
+    assert not status.error
+    assert status.pose.is_close(NEXT, mm=0.1)
+    check(issued, sim.motion_log())
+    # The gripper's next commands run once each, in order.
+    if robot.gripper is not None:
+        grips = len(sim.motion_log())
+        robot.gripper.close()
+        robot.gripper.open()
+        kinds = [m.kind for m in sim.motion_log()[grips:]]
+        assert kinds == ["gripper_close", "gripper_open"], kinds
+
+
+@pytest.mark.parametrize(("profile", "kind"), CASES)
+def test_the_next_move_after_a_failure(
+    tm_simulator_factory: SimFactory, profile: str, kind: str
+) -> None:
+    sim = tm_simulator_factory(profile, **QUICK)
+    issued: list[Issued] = []
+    with ExitStack() as stack:
+        robot = stack.enter_context(open_robot(sim))
+        robot.move_to(START, speed=50)
+        issued.append(Issued(START, 0.0, 0.0, "done"))
+        FAILURES[kind](robot, sim, issued)
+        if kind == "close":  # the same object cannot connect again: a new one carries on
+            robot = stack.enter_context(open_robot(sim, ready=False))
+        recover(robot, sim)
+        check(issued, sim.motion_log())
+        next_move_tells_the_truth(robot, sim, issued)
