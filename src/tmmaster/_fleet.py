@@ -822,8 +822,9 @@ class Fleet:
         (a write already in flight finishes and is given up like any other), and every
         wait the loop polls ends. Then all robots are closed in parallel, each
         withdrawing or stopping what it has outstanding, within ``timeout_s`` in all
-        (beyond it only by the first attempts of a robot's give-up and a command write
-        still on its way, as :meth:`Robot.close` says): a robot whose link is dead does
+        (beyond it by each robot's requests already on its link, its look at the move,
+        the first attempts of its give-up and a command write still on its way, as
+        :meth:`Robot.close` says): a robot whose link is dead does
         not hold the others up. Safe to call more than once, and from several threads at
         once: each call returns only once every robot's clean-up is over (a call while
         another is at work waits for it, as :meth:`Robot.close` does) and says what
