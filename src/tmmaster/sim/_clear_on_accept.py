@@ -54,7 +54,9 @@ class ClearOnAcceptController(RobotController):
     def _run_handshake(self, dt: float, ready: bool) -> None:
         if self._active is not None:
             self._advance(dt, ready)
-        elif self._error_code:
+        elif self._error_code or self._bank.get("motion_status"):
+            # In error, and after a reset that came while the arm still braked: moving
+            # until it is at rest, then 0 (never "moving" for good with nothing to move).
             self._publish_braking()
         command_field = self._profile.field("command")
         raw = int(self._bank.get("command"))
