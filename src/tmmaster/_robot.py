@@ -902,9 +902,10 @@ class Robot:
         answer; on a real TM they are not verified (docs/safety.md).
 
         Args:
-            timeout_s: How long to wait, s (5 by default). A read that found the arm
-                still before it ends is followed by the read ``STALL_FLOOR_S`` later that
-                confirms the rest, however short ``timeout_s`` is (at most that floor more).
+            timeout_s: How long to wait, s (5 by default). A read begun before it ends
+                that finds the arm still is followed by the read ``STALL_FLOOR_S`` later
+                that confirms the rest, however short ``timeout_s`` is or slow the link
+                (at most that floor and a read more).
 
         Returns:
             The status read that found the arm at rest.
@@ -922,14 +923,16 @@ class Robot:
         speeds, first = self.profile.published([f"joint_speed_{j}" for j in range(1, 7)]), None
         while True:
             poller.check()
-            now, joints = self.status(), self._channel.read(speeds)
-            if now.moving or any(abs(float(v)) > REST_SPEED_DEG_S for v in joints.values()):
+            # late: this read begins past the deadline. One begun before it that finds the
+            # arm still is confirmed by the next (the sleep is not cut), however slow the link.
+            late, now, js = time.monotonic() >= deadline, self.status(), self._channel.read(speeds)
+            if now.moving or any(abs(float(v)) > REST_SPEED_DEG_S for v in js.values()):
                 first = None
             elif first is None or not now.pose.is_close(first.pose):
                 first = now
             elif now.timestamp - first.timestamp >= STALL_FLOOR_S:
                 return now
-            if time.monotonic() >= deadline:  # the sleep is not cut: a rest found is confirmed
+            if time.monotonic() >= deadline and (first is not now or late):
                 raise MotionTimeoutError(f"arm still moving after {timeout_s:g} s", pose=now.pose)
             poller.sleep_until(now.timestamp + STALL_FLOOR_S)
 
