@@ -358,6 +358,18 @@ async def _async_case(sim: Simulator, kind: str, issued: list[Issued]) -> None:
             motion = await robot.start_move(FAILED, speed=20)
             started(sim, 2)
             assert await motion.cancel()
+        elif kind == "interrupt":  # then refused until clear_stop_request(), unsent
+            task = asyncio.ensure_future(robot.move_to(FAILED, speed=20))
+            while len([m for m in sim.motion_log() if m.target]) < 2:
+                await asyncio.sleep(0.005)
+            robot.interrupt()
+            with pytest.raises(StopRequestedError):
+                await task
+            sent = len(sim.request_log)
+            with pytest.raises(StopRequestedError):
+                await robot.move_to(NEXT, speed=30)
+            assert not [r for r in sim.request_log[sent:] if r.function_code in (5, 15, 16)]
+            robot.clear_stop_request()
         else:  # a task cancelled mid-move (asyncio.timeout's way)
             task = asyncio.ensure_future(robot.move_to(FAILED, speed=20))
             while len([m for m in sim.motion_log() if m.target]) < 2:
@@ -397,7 +409,10 @@ async def _async_case(sim: Simulator, kind: str, issued: list[Issued]) -> None:
 
 @pytest.mark.parametrize(
     ("profile", "kind"),
-    [("tmflow", "estop"), ("article", "cancel"), ("tmflow", "cancel"), ("tmflow", "task")],
+    [
+        *(("tmflow", "estop"), ("article", "cancel"), ("tmflow", "cancel")),
+        *(("tmflow", "task"), ("article", "interrupt")),
+    ],
 )
 def test_the_next_awaited_move_after_a_failure(
     tm_simulator_factory: SimFactory, profile: str, kind: str

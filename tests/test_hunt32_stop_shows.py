@@ -10,8 +10,10 @@ project is stopped" (found by ``test_hunt32_same_robot``'s close case, one run i
 The wait for a Stop not shown yet was the closed Robot's own; it is now kept per robot
 address for the process, as an owed Stop is.
 
-The Stop's frame is held in the network after a gateway answered it (``answer_now``),
-and lands when the new Robot's ``play()`` first reads: the moment between the answer and
+The first Robot presses Stop (``stop()``, as its ``close()`` does for a moving arm; alone
+here, so that no cancel record's watchdog stops the project first) and is closed. The
+Stop's frame is held in the network after a gateway answered it (``answer_now``), and
+lands when the new Robot's ``play()`` first reads: the moment between the answer and
 the controller's cycle, made to last, with no timing in the test.
 """
 
@@ -29,7 +31,6 @@ from tmmaster.sim import Simulator
 SimFactory = Callable[..., Simulator]
 
 START = Pose(220, -200, 200, 180, 0, 90)
-FAILED = Pose(220, 200, 250, 180, 0, 90)
 NEXT = Pose(300, 0, 180, 180, 0, 90)
 STOP_COIL = 7105
 
@@ -54,17 +55,19 @@ def test_play_after_close_waits_for_the_closed_robots_stop(
             proxy.add(
                 Rule("hold", function_code=5, address=STOP_COIL, release=landed, answer_now=True)
             )
-            issued.append(Issued(FAILED, 0.0))
-            first.start_move(FAILED, speed=20)
-            sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)
-            assert first.close()  # the Stop answered (by the gateway): delivered
-            issued[-1].outcome = "closed"
+            # The Stop a close() presses for a moving arm (here alone: no command in
+            # flight, no cancel record whose watchdog would stop the project first).
+            first.stop()
+            assert first.close()
         assert proxy.played("hold")
         with through(proxy) as second:
             mark = len(sim.request_log)
 
             def land_at_the_first_read() -> None:
-                sim.wait_for(lambda: len(sim.request_log) > mark, timeout=5.0)
+                sim.wait_for(
+                    lambda: any(r.function_code in (1, 2, 3, 4) for r in sim.request_log[mark:]),
+                    timeout=5.0,
+                )
                 landed.set()
 
             helper = threading.Thread(target=land_at_the_first_read)
