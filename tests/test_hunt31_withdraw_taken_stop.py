@@ -31,12 +31,6 @@ FAR = Pose(300, 250, 200, 180, 0, 90)  # about 8 s away from A at 1 % (40 simula
 FLAGS, STOP_COIL = 7201, 7105
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="SequenceChannel.withdraw() calls may_resume() (a second read of the flags) when"
-    " withdraw_outcome() already found the command taken on a running project; the fix is"
-    " in src/tmmaster/_channels.py, held by another helper during hunt 31",
-)
 def test_a_taken_command_given_up_unseen_is_stopped_after_one_read_of_the_flags() -> None:
     timing = Timing(tick_hz=SUITE_TICK_HZ, init_time_s=0.02)
     with (

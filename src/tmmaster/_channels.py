@@ -535,11 +535,12 @@ class CommandChannel(ABC):
     def cancel(self, ticket: Ticket) -> None:  # noqa: B027 (none, where no handshake says it)
         """Tell the robot a command it took is given up, where the handshake can say so."""
 
-    def may_resume(self) -> bool:
+    def may_resume(self, flags: dict[str, Value] | None = None) -> bool:
         """True when a move the robot stopped itself could still be resumed (Play).
 
         Read after a fault ends a running move: such a move is stopped for good (the
-        master presses Stop) where the robot could otherwise resume it.
+        master presses Stop) where the robot could otherwise resume it. ``flags``: the
+        project's flags a read has just found (None: read them).
         """
         return False
 
@@ -893,7 +894,9 @@ class SequenceChannel(CommandChannel):
         the network, not landed yet, would otherwise find its number free after Play. On
         a running one, a number already taken is left alone (another master's move).
         """
-        if (outcome := self.withdraw_outcome(ticket)) is None or not self.may_resume():
+        # The flags withdraw_outcome() just read say whether the project may resume: a
+        # second read would only delay the Stop that follows a command found taken.
+        if (outcome := self.withdraw_outcome(ticket)) is None or not self.may_resume(self.flags):
             self.cancel(ticket)
             outcome = self.withdraw_outcome(ticket)
         return outcome
@@ -920,7 +923,7 @@ class SequenceChannel(CommandChannel):
         p = self.profile
         # The flags first: a project seen stopped before the feedback is read cannot have
         # taken the number after that read (read the other way, it may in between).
-        flags = self._read_regardless(self.flag_fields)
+        flags = self.flags = self._read_regardless(self.flag_fields)
         values = self._read_regardless(self.feedback_fields)
         if self._restarted(ticket, values):
             return True  # the project started again since: the command may have run before
@@ -951,9 +954,9 @@ class SequenceChannel(CommandChannel):
         taker = int(feedback.get("ack_session", 0))
         return bool(self.session) and taker not in (0, self.session)
 
-    def may_resume(self) -> bool:
+    def may_resume(self, flags: dict[str, Value] | None = None) -> bool:
         """True while the project is paused or still running: Play could resume a move."""
-        flags = self._read_regardless(self.flag_fields)
+        flags = flags or self._read_regardless(self.flag_fields)
         return bool(flags.get("paused", False)) or bool(flags["project_running"])
 
     def write_landed(self, ticket: Ticket) -> bool:
