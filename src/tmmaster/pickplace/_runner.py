@@ -31,6 +31,7 @@ from .._gripper import GripperStatus, RegisterGripper
 from .._logging import get_logger
 from .._pose import MotionType, Pose
 from .._robot import Motion, Robot
+from .._sigint import deferred
 from .._status import PROJECT_STOPPED, RobotStatus, project_failure
 from ._config import PickPlaceConfig, check_held_input
 from ._machine import DONE, ERROR, IDLE, SequenceMachine
@@ -463,10 +464,12 @@ class Runner:
     def request_stop(self) -> None:
         """Ask the run to stop: checked between states, and running waits give up now.
 
-        Safe from a signal handler or another thread: it only sets two events.
+        Safe from a signal handler or another thread: it only sets two events (a Ctrl-C
+        that comes meanwhile is delivered after both are set, never inside an event's lock).
         """
-        self._stop.set()
-        self.robot.interrupt()
+        with deferred():
+            self._stop.set()
+            self.robot.interrupt()
 
     # -- the run -------------------------------------------------------------
 
