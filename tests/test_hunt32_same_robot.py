@@ -239,10 +239,8 @@ def next_move_tells_the_truth(robot: Robot, sim: Simulator, issued: list[Issued]
     assert record.target.is_close(NEXT, mm=0.05)
     assert record.done_wall_time is not None
     assert sim.tcp_pose().is_close(NEXT, mm=0.05, deg=0.05)
-    # Its expected time is the arm's: what the simulator took for it, in robot seconds.
-    took_s = (record.done_wall_time - record.wall_time) * sim.time_scale
-    print(f"expected {motion.expected_s:.3f} s, took {took_s:.3f} s, timeout {motion.timeout_s}")
-    assert 0.5 * took_s <= motion.expected_s <= 2.0 * took_s + 0.2
+    # Its budget covers its expected time (planned from ``here``, checked above; the wall
+    # time the simulator took is not compared: no timed assertion).
     assert motion.timeout_s >= motion.expected_s
     assert motion.done
     assert not motion.abandoned
