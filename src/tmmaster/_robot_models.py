@@ -919,7 +919,7 @@ def _cached_gauge(
 # same poses and paths from the same known joints (a solve is about 40 us).
 _cached_inverse = functools.lru_cache(maxsize=16384)(RobotModel._solve)
 _cached_forward = functools.lru_cache(maxsize=1024)(RobotModel.forward)
-_cached_path = functools.lru_cache(maxsize=4096)(RobotModel._path)
+_cached_path = functools.lru_cache(maxsize=2048)(RobotModel._path)
 
 
 def _path_geometry(
