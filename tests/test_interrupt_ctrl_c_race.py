@@ -23,7 +23,7 @@ import pytest
 from tmmaster import Robot
 
 
-class _CtrlCInsideSet(threading.Event):
+class CtrlCInsideSet(threading.Event):
     """An Event whose ``set()`` takes a Ctrl-C while it holds its lock, once."""
 
     def __init__(self) -> None:
@@ -41,14 +41,18 @@ class _CtrlCInsideSet(threading.Event):
         self._cond.release()  # type: ignore[attr-defined]
 
 
-@pytest.mark.skipif(
+#: The Ctrl-C tests need Python's own handler, in the main thread.
+NEEDS_MAIN_THREAD_CTRL_C = pytest.mark.skipif(
     threading.current_thread() is not threading.main_thread()
     or signal.getsignal(signal.SIGINT) is not signal.default_int_handler,
     reason="needs Python's own Ctrl-C handler in the main thread",
 )
+
+
+@NEEDS_MAIN_THREAD_CTRL_C
 def test_a_ctrl_c_inside_interrupt_is_delivered_after_it_and_close_still_ends() -> None:
     robot = Robot("127.0.0.1", 5020, profile="article", gripper=None)
-    event = _CtrlCInsideSet()
+    event = CtrlCInsideSet()
     robot._stop_event = event
     with pytest.raises(KeyboardInterrupt):
         robot.interrupt()

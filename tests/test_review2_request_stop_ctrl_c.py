@@ -14,42 +14,20 @@ the lock held), so it lands exactly there, every run.
 
 from __future__ import annotations
 
-import signal
 import threading
 
 import pytest
 
+from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C, CtrlCInsideSet
 from tmmaster import Robot
 from tmmaster.pickplace import Runner
 
 
-class _CtrlCInsideSet(threading.Event):
-    """An Event whose ``set()`` takes a Ctrl-C while it holds its lock, once."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.landed = False
-
-    def set(self) -> None:
-        self._cond.acquire()  # type: ignore[attr-defined]
-        if not self.landed:
-            self.landed = True
-            # As the race does: the exception leaves before any release.
-            signal.raise_signal(signal.SIGINT)
-        self._flag = True
-        self._cond.notify_all()  # type: ignore[attr-defined]
-        self._cond.release()  # type: ignore[attr-defined]
-
-
-@pytest.mark.skipif(
-    threading.current_thread() is not threading.main_thread()
-    or signal.getsignal(signal.SIGINT) is not signal.default_int_handler,
-    reason="needs Python's own Ctrl-C handler in the main thread",
-)
+@NEEDS_MAIN_THREAD_CTRL_C
 def test_a_ctrl_c_inside_request_stop_is_delivered_after_it_and_a_later_stop_ends() -> None:
     robot = Robot("127.0.0.1", 5020, profile="article", gripper=None)
     runner = Runner(robot)
-    event = _CtrlCInsideSet()
+    event = CtrlCInsideSet()
     runner._stop = event
     try:
         with pytest.raises(KeyboardInterrupt):
