@@ -919,14 +919,13 @@ class Robot:
         """
         require_positive("timeout_s", timeout_s)
         poller, deadline = Poller(STALL_FLOOR_S, self._stop_event), time.monotonic() + timeout_s
-        # Techman's Joint Speed J1..J6 (deg/s, TMflow 2.24 appendix C p. 317), if published.
-        speeds, first = self.profile.published([f"joint_speed_{j}" for j in range(1, 7)]), None
+        first: RobotStatus | None = None
         while True:
             poller.check()
             # late: this read begins past the deadline. One begun before it that finds the
             # arm still is confirmed by the next (the sleep is not cut), however slow the link.
-            late, now, js = time.monotonic() >= deadline, self.status(), self._channel.read(speeds)
-            if now.moving or any(abs(float(v)) > REST_SPEED_DEG_S for v in js.values()):
+            late = time.monotonic() >= deadline
+            if (now := self.status()).moving or self._joints_turning():
                 first = None
             elif first is None or not now.pose.is_close(first.pose):
                 first = now
@@ -935,6 +934,14 @@ class Robot:
             if time.monotonic() >= deadline and (first is not now or late):
                 raise MotionTimeoutError(f"arm still moving after {timeout_s:g} s", pose=now.pose)
             poller.sleep_until(now.timestamp + STALL_FLOOR_S)
+
+    def _joints_turning(self) -> bool:
+        """Whether a joint turns faster than ``REST_SPEED_DEG_S``, by Techman's Joint Speed
+        J1..J6 (deg/s, TMflow 2.24 appendix C p. 317; one read): on ``tmflow`` the
+        status's ``moving`` is the robot program's, idle while a stopped arm still brakes.
+        False where the profile publishes no joint speeds."""
+        speeds = self.profile.published([f"joint_speed_{j}" for j in range(1, 7)])
+        return any(abs(float(v)) > REST_SPEED_DEG_S for v in self._channel.read(speeds).values())
 
     # -- moves ------------------------------------------------------------
 

@@ -27,7 +27,7 @@ from ._exceptions import ConfigError, RobotError, TMMasterError, TransportError
 from ._logging import add_logging_arguments, configure_logging
 from ._profiles import DEFAULT_PROFILE, builtin_profile_names
 from ._project import PRESS_TIMEOUT_S
-from ._robot import REST_SPEED_DEG_S, Robot
+from ._robot import Robot
 from ._status import ProjectState, RobotStatus
 
 #: The actions, in the order ``--help`` lists them.
@@ -104,9 +104,7 @@ def _act(robot: Robot, action: str, timeout_s: float) -> str:
     # tmflow's status().moving is the robot program's state, idle as soon as the project
     # stops while the arm still brakes: Techman's Joint Speed (7949-7960) shows the arm.
     status = robot.status()
-    joints = robot.profile.published([f"joint_speed_{j}" for j in range(1, 7)])
-    braking = any(abs(float(v)) > REST_SPEED_DEG_S for v in robot._channel.read(joints).values())
-    return _status_lines(status, status.moving or braking)
+    return _status_lines(status, status.moving or robot._joints_turning())
 
 
 def run(args: argparse.Namespace) -> int:
