@@ -204,6 +204,35 @@ def test_a_thread_reading_back_to_back_does_not_starve_the_heartbeat(sim: Simula
         assert motion.finished_at - motion.ticket.sent_at > 2 * policy.heartbeat_ttl_s
 
 
+class _TurnsAsked(threading.Event):
+    """The link's "free turn" event, counting the requests that waited on it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.set()
+        self.waits = 0
+
+    def wait(self, timeout: float | None = None) -> bool:
+        self.waits += 1
+        return super().wait(timeout)
+
+
+def test_a_stop_never_gives_its_turn_to_a_waiting_beat(sim: Simulator) -> None:
+    """A request of the robot's thread lets a beat waiting for the link go first (the
+    test above). A Stop did too: on a slow link it went out a whole beat's request later.
+    Clean-up writes (and their reads) take the link as soon as it is free; the thread's
+    other requests still let the beat in."""
+    with robot_for(sim) as robot:
+        robot.wait_until_ready()
+        transport: Any = robot._transport
+        turns = transport._free_turn = _TurnsAsked()
+        with transport.let_in():  # a beat waiting for its turn on the link
+            robot.stop()
+            assert turns.waits == 0
+            robot.status()
+            assert turns.waits > 0
+
+
 class _Link:
     """A link whose heartbeat writes are answered or not, as the test says."""
 

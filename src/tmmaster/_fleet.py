@@ -202,7 +202,7 @@ class LoopTransport(Transport):
         once. A block that fails, and those after it, are read one at a time as any read
         is, with the retry policy: the failure counts as that block's first attempt.
         """
-        self._yield_turn()
+        self._yield_turn(interruptible)
         with self._lock:
             on_loop, up = self._fleet._on_loop(), self.state is ConnectionState.CONNECTED
             if on_loop or not up or not blocks:  # no blocks: nothing to hand over
@@ -239,10 +239,10 @@ class LoopTransport(Transport):
         self._link.device_id = self.device_id  # the unit id may be changed between reads
         return [(*self._read_request(b.table, b.address, b.count), b) for b in blocks]
 
-    def _yield_turn(self) -> None:
+    def _yield_turn(self, interruptible: bool) -> None:
         """Let a waiting heartbeat go first, never on the loop (the beat waits on it)."""
         if not self._fleet._on_loop():
-            super()._yield_turn()
+            super()._yield_turn(interruptible)
 
     def _read_after(
         self, block: Block, first: BaseException | None, *, retry: bool, interruptible: bool

@@ -518,13 +518,15 @@ class Transport(ABC):
         finally:
             self._lock.release()
 
-    def _yield_turn(self) -> None:
+    def _yield_turn(self, interruptible: bool) -> None:
         """Before a request of the robot's thread: let a waiting heartbeat go first.
 
         Bounded (50 ms): a request nested in one that holds the lock (a failed block's
         retry) waits that long at most, and the beat then waits for the lock as usual.
+        Never before a clean-up (``interruptible=False``: a Stop, a withdraw, a press,
+        their reads): a Stop must not queue behind a beat on a slow link.
         """
-        if not self._free_turn.is_set():
+        if interruptible and not self._free_turn.is_set():
             self._free_turn.wait(_LET_IN_S)
 
     @contextlib.contextmanager
@@ -571,7 +573,7 @@ class Transport(ABC):
         self._retry_deadline = deadline
 
     def _run(self, what: str, fn: Callable[[], T], *, retry: bool, interruptible: bool) -> T:
-        self._yield_turn()
+        self._yield_turn(interruptible)
         with self._lock:
             self._refuse_if_closed()
             return (self.retry if retry else NO_RETRY).call(
