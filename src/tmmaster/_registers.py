@@ -538,16 +538,16 @@ class RobotProfile(RegisterMap):
         )
 
     def _check_feedback_area(self) -> None:
+        # A maximum of 1: the block the program just ran is numbered ack_seq % 1 + 1 still,
+        # and it would run it again, for ever (0: no number at all).
+        if self.seq_max < 2:
+            raise ValueError(f"profile {self.name!r}: field seq needs a maximum of 2 or more")
         # The robot program reads ack_seq and done_seq in one request (two registers),
         # and it can write only TMflow's user define area: holding registers 9000-9999
         # (TMflow 2.24 Software Manual, appendix C, "User Define Area", p. 319).
         ack, done = self.fields["ack_seq"], self.fields["done_seq"]
-        if (
-            ack.table is not done.table
-            or ack.dtype.width != 1
-            or done.dtype.width != 1
-            or done.address != ack.address + 1
-        ):
+        pair = (done.table, done.address, ack.dtype.width, done.dtype.width)
+        if pair != (ack.table, ack.address + 1, 1, 1):
             raise ValueError(
                 f"profile {self.name!r}: field done_seq ({done.table.value} {done.address})"
                 f" must be the one-register field right after ack_seq ({ack.table.value}"

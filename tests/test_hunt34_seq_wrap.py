@@ -1,0 +1,180 @@
+"""The tmflow command number at its edges: the wrap (32767 -> 1), restarts, stale pairs.
+
+Hunt 34. The robot program takes a command only when ``seq == ack_seq % seq_max + 1``
+and the master numbers its next command ``ack_seq % seq_max + 1`` as it reads it: the
+master keeps no number of its own between commands. These tests put the failures of
+hunt 32 (e-stop, timeout, cancel, the project stopped, a controller restart that zeroes
+the registers) exactly on the wrap, a new master's first command on it, a dead master's
+pending command on it, and masters taking turns across it; the judge is the simulator's
+motion log (``safety_invariant.check``), never what the master believes.
+
+Found: a profile whose ``seq`` maximum is 1 was accepted, and its robot program reran
+the command it had just finished for ever: once done, ``ack_seq % 1 + 1`` is the number
+the block still carries (measured: 117 runs of one move in a second; the master's next
+command was refused, "command 1 is still waiting to be acknowledged"). A maximum of 0
+failed on a division by zero at the first command. Both are refused when the profile
+loads now.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+from collections.abc import Callable
+
+import pytest
+
+from pendant import press_play_pause
+from safety_invariant import Issued, attempt, check
+from sim_speeds import QUICK
+from test_hunt32_same_robot import (
+    FAILURES,
+    START,
+    next_move_tells_the_truth,
+    open_robot,
+    recover,
+)
+from tmmaster import Pose, RegisterMapError, Robot, TimeoutPolicy
+from tmmaster._channels import Command, CommandKind
+from tmmaster._cli import main
+from tmmaster._profiles import profile_from_data
+from tmmaster.sim import RobotSetup, Simulator
+
+SimFactory = Callable[..., Simulator]
+
+TOP = 32767
+FAR = Pose(300, 200, 200, 180, 0, 90)
+A = Pose(300, -200, 200, 180, 0, 90)
+B = Pose(300, -150, 200, 180, 0, 90)
+C = Pose(250, -150, 200, 180, 0, 90)
+D = Pose(250, -100, 180, 180, 0, 90)
+
+
+def at_wrap(factory: SimFactory, last: int) -> Simulator:
+    """A tmflow simulator whose program took and finished command ``last`` before."""
+    return factory("tmflow", robot=RobotSetup(initial_seq=last), **QUICK)
+
+
+def numbers(sim: Simulator) -> tuple[int, int, int]:
+    return int(sim.field("seq")), int(sim.field("ack_seq")), int(sim.field("done_seq"))
+
+
+@pytest.mark.parametrize("maximum", [0, 1])
+def test_a_seq_maximum_below_2_is_refused(maximum: int) -> None:
+    """With 1, ``ack_seq % 1 + 1`` is 1 again once command 1 is done: the program would
+    take the block it just ran again, and again. With 0, nothing can be numbered."""
+    with pytest.raises(RegisterMapError, match="maximum of 2 or more"):
+        profile_from_data({"extends": "tmflow", "fields": {"seq": {"maximum": maximum}}})
+
+
+def test_a_seq_maximum_of_2_alternates_and_runs_each_command_once(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    profile = profile_from_data({"extends": "tmflow", "fields": {"seq": {"maximum": 2}}})
+    sim = tm_simulator_factory(profile, **QUICK)
+    issued: list[Issued] = []
+    with open_robot(sim) as robot:
+        for target in (A, B, C):
+            assert attempt(robot, target, issued) == "done"
+    assert numbers(sim) == (1, 1, 1)  # 1, 2, then 1 again
+    check(issued, sim.motion_log())
+
+
+@pytest.mark.parametrize("kind", ["cancel", "project_stop", "restart"])
+@pytest.mark.parametrize("last", [TOP - 1, TOP - 2], ids=["failed-at-1", "failed-at-32767"])
+def test_the_next_move_after_a_failure_on_the_wrap(
+    tm_simulator_factory: SimFactory, kind: str, last: int
+) -> None:
+    """Hunt 32's failures with START numbered ``last + 1``: FAILED is command 1 (the first
+    after the wrap) or 32767 (the last before it), and the same Robot's next move runs
+    once; a restart that zeroes the registers numbers it 1 again."""
+    sim = at_wrap(tm_simulator_factory, last)
+    issued: list[Issued] = []
+    with open_robot(sim) as robot:
+        robot.move_to(START, speed=50)
+        issued.append(Issued(START, 0.0, 0.0, "done"))
+        assert numbers(sim)[1] == last + 1
+        FAILURES[kind](robot, sim, issued)
+        recover(robot, sim)
+        check(issued, sim.motion_log())
+        next_move_tells_the_truth(robot, sim, issued)
+
+
+def test_a_new_masters_first_command_lands_on_the_wrap(tm_simulator_factory: SimFactory) -> None:
+    """Masters take turns, each a new Robot (a new session), across 32767 -> 1."""
+    sim = at_wrap(tm_simulator_factory, TOP - 1)
+    issued: list[Issued] = []
+    seen = []
+    for target in (A, B, C, D):
+        with open_robot(sim) as robot:
+            assert attempt(robot, target, issued) == "done"
+        seen.append(numbers(sim)[2])
+    assert seen == [TOP, 1, 2, 3]
+    check(issued, sim.motion_log())
+
+
+def deliver(port: int, address: int, words: list[int]) -> None:
+    """One FC16 request on a connection of its own, as a frame held in the network lands."""
+    pdu = struct.pack(f">BHHB{len(words)}H", 16, address, len(words), 2 * len(words), *words)
+    frame = struct.pack(">HHHB", 7, 0, len(pdu) + 1, 1) + pdu
+    with socket.create_connection(("127.0.0.1", port), timeout=2.0) as link:
+        link.sendall(frame)
+        assert link.recv(260)[7] == 16  # written (not an exception answer)
+
+
+def let_run(sim: Simulator, ticks: int) -> None:
+    start = sim.ticks
+    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
+
+
+def dead_masters_command_on_the_wrap(sim: Simulator, *, stop: bool) -> int:
+    """ack_seq 32767: a master's command to FAR, numbered 1, lands in the paused (or
+    stopped) project's registers, and the master dies. Its number."""
+    with Robot(sim.url, gripper=None, timeouts=TimeoutPolicy(heartbeat_ttl_s=10.0)) as first:
+        first.wait_until_ready()
+        ticket = first._channel.prepare(Command(CommandKind.PTP, FAR, speed=50))
+        ((block, words),) = ticket.plan
+        if stop:
+            sim.call(lambda: sim._controller.bank.set("stop_project", True))
+            sim.wait_for(lambda: not sim.field("project_running"), timeout=2.0)
+        else:
+            press_play_pause(sim)  # the operator's Pause
+            sim.wait_for(lambda: bool(sim.field("paused")), timeout=2.0)
+        deliver(sim.port, block.address, words)
+        first._heartbeat.stop()  # the master is gone: no close, no clean-up
+    let_run(sim, 5)
+    assert ticket.seq == 1
+    assert numbers(sim)[:2] == (1, TOP)  # pending: seq == ack_seq % 32767 + 1
+    return ticket.seq
+
+
+@pytest.mark.parametrize("stop", [False, True], ids=["paused", "stopped"])
+def test_robot_play_never_runs_a_dead_masters_command_numbered_1_on_the_wrap(
+    tm_simulator_factory: SimFactory, capsys: pytest.CaptureFixture[str], stop: bool
+) -> None:
+    """Paused, ``tmmaster robot play`` refuses (press Stop); stopped, it presses Play and
+    the start-up rule consumes number 1 unrun; either way the arm stays, and a new
+    master's next command (2) runs once."""
+    sim = at_wrap(tm_simulator_factory, TOP)
+    home = sim.tcp_pose()
+    dead_masters_command_on_the_wrap(sim, stop=stop)
+    code = main(["robot", "play", "--host", "127.0.0.1", "--port", str(sim.port)])
+    if stop:
+        assert code == 0
+        sim.wait_for(lambda: sim.field("ack_seq") == 1, timeout=3.0)  # consumed
+    else:
+        assert code == 4
+        assert "press Stop" in capsys.readouterr().err
+    let_run(sim, 10)
+    assert sim.motion_log() == ()
+    assert sim.tcp_pose().is_close(home, mm=0.01, deg=0.01)
+    if not stop:
+        assert main(["robot", "stop", "--host", "127.0.0.1", "--port", str(sim.port)]) == 0
+        assert main(["robot", "play", "--host", "127.0.0.1", "--port", str(sim.port)]) == 0
+        sim.wait_for(lambda: sim.field("ack_seq") == 1, timeout=3.0)  # consumed at start
+    issued: list[Issued] = [Issued(FAR, 0.0, 0.0, "dead")]
+    with open_robot(sim) as robot:
+        assert attempt(robot, A, issued) == "done"
+    assert numbers(sim) == (2, 2, 2)
+    check(issued, sim.motion_log())
+    assert [m.target for m in sim.motion_log() if m.target] == [A]
