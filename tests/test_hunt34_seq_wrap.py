@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import socket
 import struct
+import time
 from collections.abc import Callable
 
 import pytest
@@ -178,3 +179,54 @@ def test_robot_play_never_runs_a_dead_masters_command_numbered_1_on_the_wrap(
     assert numbers(sim) == (2, 2, 2)
     check(issued, sim.motion_log())
     assert [m.target for m in sim.motion_log() if m.target] == [A]
+
+
+def handshake_put_back(sim: Simulator) -> None:
+    """The operator's Stop, ``seq`` and ``ack_seq`` written 0 by hand (``done_seq`` left as
+    it is: docs/tmflow-program.md's commissioning steps write these registers with
+    mbpoll), then Play: the program reads them back at its start."""
+    sim.call(lambda: sim._controller.bank.set("stop_project", True))
+    sim.wait_for(lambda: not sim.field("project_running"), timeout=2.0)
+
+    def put_back() -> None:
+        sim._controller.bank.set("seq", 0)
+        sim._controller.bank.set("ack_seq", 0)
+
+    sim.call(put_back)
+    sim.press_play()
+    sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
+    let_run(sim, 5)
+
+
+@pytest.mark.parametrize("kind", ["move", "gripper"])
+def test_a_done_seq_left_at_the_next_number_is_not_read_as_its_done(
+    tm_simulator_factory: SimFactory, kind: str
+) -> None:
+    """Command 1 (the first after the wrap) ran and is done (done_seq 1); seq and ack_seq
+    are put back to 0 by hand and the project started again: the next command is
+    numbered 1 again. The done_seq 1 it finds is an older command's: no master may read
+    it as this one's done (it did: a move "finished" as soon as it was taken, then failed
+    its at-target check and was stopped; a gripper close returned done while the
+    gripper still closed)."""
+    sim = tm_simulator_factory(
+        "tmflow", time_scale=20.0, robot=RobotSetup(initial_seq=TOP, gripper="blog-2fg7")
+    )
+    issued: list[Issued] = []
+    with open_robot(sim) as robot:
+        assert attempt(robot, A, issued) == "done"
+        assert numbers(sim) == (1, 1, 1)
+        handshake_put_back(sim)
+        robot.play()  # waits until it runs
+        if kind == "move":
+            assert attempt(robot, FAR, issued, speed=3) == "done"
+            ended = issued[-1].ended_at
+        else:
+            assert robot.gripper is not None
+            robot.gripper.close()
+            ended = time.monotonic()
+        ran = sim.motion_log()[-1]
+        assert (ran.kind, ran.seq) == ("ptp" if kind == "move" else "gripper_close", 1)
+        assert ran.done_wall_time is not None  # finished, and before the call returned
+        assert ended is not None
+        assert ran.done_wall_time <= ended
+    check(issued, sim.motion_log())
