@@ -20,14 +20,17 @@ from __future__ import annotations
 
 import socket
 import struct
+import threading
 import time
 from collections.abc import Callable
 
 import pytest
 
+from fault_proxy import FaultProxy, Rule
 from pendant import press_play_pause
 from safety_invariant import Issued, attempt, check
 from sim_speeds import QUICK
+from test_controller_restart import robot_through
 from test_hunt32_same_robot import (
     FAILURES,
     START,
@@ -230,3 +233,28 @@ def test_a_done_seq_left_at_the_next_number_is_not_read_as_its_done(
         assert ended is not None
         assert ran.done_wall_time <= ended
     check(issued, sim.motion_log())
+
+
+@pytest.mark.parametrize("fault", ["drop_answer", "hold"])
+def test_a_write_of_number_1_answered_late_or_held_runs_once(
+    tm_simulator_factory: SimFactory, fault: str
+) -> None:
+    """The first command after the wrap (number 1): its write's answer lost, or its first
+    copy held in the network (the resend lands) and released once the next command (2)
+    is done: B runs once, C once, and the late copy of 1 never."""
+    sim = at_wrap(tm_simulator_factory, TOP - 1)
+    issued: list[Issued] = []
+    release = threading.Event()
+    with FaultProxy(sim.port) as proxy, robot_through(proxy) as robot:
+        robot.wait_until_ready()
+        assert attempt(robot, A, issued) == "done"
+        rule = Rule(fault, function_code=16, address=9000, release=release)
+        proxy.add(rule)
+        assert attempt(robot, B, issued) == "done"
+        assert proxy.played(fault)
+        assert attempt(robot, C, issued) == "done"
+        release.set()
+        let_run(sim, 10)
+        assert numbers(sim)[1:] == (2, 2)
+    check(issued, sim.motion_log())
+    assert [m.seq for m in sim.motion_log()] == [TOP, 1, 2]
