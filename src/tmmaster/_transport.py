@@ -917,16 +917,19 @@ def _decoded(framer: FramerSocket, buffer: bytes) -> tuple[int, int, Answer | No
 _HEAD = struct.Struct(">HHHBBB")
 
 
-def common_answer(buffer: bytes, start: int) -> tuple[int, int, Answer] | None:
+def common_answer(buffer: bytes, start: int) -> tuple[int, int, Answer | None] | None:
     """A whole, well-formed answer to a read (FC 1-4) or an FC16 write at ``start``.
 
     (Its size, its unit id, the answer with its words: a read's registers, or its bits
     as 0/1, eight per byte; ``[]`` for the write), decoded here at a tenth of the CPU of
     pymodbus' decoder; None for anything else, which pymodbus' framer decodes (a partial
-    frame, an exception answer, a frame it refuses).
+    frame, an exception answer, a frame it refuses). ``(0, 0, None)``: wait for more
+    bytes, where pymodbus would cut a frame short: the first 8 bytes of one whose length
+    says 2 (a device that leaves the exception code out of the count), whose code is
+    still on its way (pymodbus reads that frame as 9 bytes only when they came together).
     """
     if len(buffer) - start < 9:
-        return None
+        return (0, 0, None) if buffer[start + 4 : start + 6] == b"\x00\x02" else None
     tid, _protocol, length, unit, function_code, byte_count = _HEAD.unpack_from(buffer, start)
     if len(buffer) - start < 6 + length:
         return None
