@@ -337,7 +337,12 @@ class RobotModel(BaseModel):
             joints = _six(joints_deg)
             if _cached_forward(self, joints, tool).is_close(start, mm=1e-3, deg=1e-3):
                 return joints
-        return self.inverse(start, seed_deg=joints_deg, tool=tool)
+        solved = self.inverse(start, seed_deg=joints_deg, tool=tool)
+        # Each joint on the arm's own turn where the solve is a whole turn (within 1 deg)
+        # from it: a calibrated arm at the end of a range (J1, J6: +-270 deg) solves a
+        # hair past the end on this chain, where the range holds only the other turn.
+        pairs = zip(solved, solved if joints_deg is None else joints_deg, strict=True)
+        return _six([g - r if abs(r := math.remainder(g - q, 360.0)) < 1 else q for q, g in pairs])
 
     def singularity(self, joints_deg: Sequence[float]) -> str | None:
         """Which singularity the joints are too close to (wrist, elbow, shoulder), or None.
@@ -428,10 +433,16 @@ class RobotModel(BaseModel):
     def _admissible(
         self, joints: list[float], seed: Sequence[float]
     ) -> tuple[Joints | None, tuple[str, str] | None]:
-        """Joints moved by whole turns into range nearest the seed, or why they cannot be."""
+        """Joints moved by whole turns into range nearest the seed, or why they cannot be.
+
+        A seed past the end of a range stretches it to the seed (and its rounding to
+        0.001 deg): from there a joint may stay as far past the end, no farther (the
+        start of a calibrated arm at the end of a range, solved on this chain:
+        :meth:`start_joints`).
+        """
         chosen = []
         for i, (q, s, spec) in enumerate(zip(joints, seed, self.joints, strict=True)):
-            low, high = spec.limits_deg
+            low, high = min(spec.limits_deg[0], s - 1e-3), max(spec.limits_deg[1], s + 1e-3)
             candidates = [q + k * 360.0 for k in range(-2, 3) if low <= q + k * 360.0 <= high]
             if not candidates:
                 wrapped = (q + 180.0) % 360.0 - 180.0
@@ -590,10 +601,8 @@ class RobotModel(BaseModel):
             UnreachablePoseError: A point of the path cannot be taken, or the arm would
                 have to flip configuration on the way.
         """
-        seed = self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg)
-        return list(
-            _cached_path(self, start, None, target, _rounded(seed), tool, step_mm, step_deg)
-        )
+        q0 = _rounded(self.ready_joints_deg if start_joints_deg is None else _six(start_joints_deg))
+        return list(_cached_path(self, start, None, target, q0, tool, step_mm, step_deg))
 
     def _path(
         self,
