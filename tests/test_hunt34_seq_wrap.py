@@ -4,9 +4,10 @@ Hunt 34. The robot program takes a command only when ``seq == ack_seq % seq_max 
 and the master numbers its next command ``ack_seq % seq_max + 1`` as it reads it: the
 master keeps no number of its own between commands. These tests put failures of hunt 32
 (a cancel, the project stopped, a controller restart that zeroes the registers; an
-e-stop and a timeout passed too, left out for time) exactly on the wrap, a new master's first command on it, a dead master's
-pending command on it, and masters taking turns across it; the judge is the simulator's
-motion log (``safety_invariant.check``), never what the master believes.
+e-stop and a timeout passed too, left out for time) exactly on the wrap, a new master's
+first command on it, a dead master's pending command on it, lost answers and held
+copies on it, and masters taking turns across it; the judge is the simulator's motion
+log (``safety_invariant.check``), never what the master believes.
 
 Found (each fails without its fix):
 
@@ -209,15 +210,15 @@ def test_robot_play_never_runs_a_dead_masters_command_numbered_1_on_the_wrap(
     assert [m.target for m in sim.motion_log() if m.target] == [A]
 
 
-def handshake_put_back(sim: Simulator) -> None:
-    """The operator's Stop, ``seq`` and ``ack_seq`` written 0 by hand (``done_seq`` left as
-    it is: docs/tmflow-program.md's commissioning steps write these registers with
-    mbpoll), then Play: the program reads them back at its start."""
+def handshake_put_back(sim: Simulator, seq: int = 0) -> None:
+    """The operator's Stop, ``seq`` (to ``seq``) and ``ack_seq`` (to 0) written by hand
+    (``done_seq`` left as it is: docs/tmflow-program.md's commissioning steps write these
+    registers with mbpoll), then Play: the program reads them back at its start."""
     sim.call(lambda: sim._controller.bank.set("stop_project", True))
     sim.wait_for(lambda: not sim.field("project_running"), timeout=2.0)
 
     def put_back() -> None:
-        sim._controller.bank.set("seq", 0)
+        sim._controller.bank.set("seq", seq)
         sim._controller.bank.set("ack_seq", 0)
 
     sim.call(put_back)
@@ -226,24 +227,30 @@ def handshake_put_back(sim: Simulator) -> None:
     let_run(sim, 5)
 
 
-@pytest.mark.parametrize("kind", ["move", "gripper"])
+@pytest.mark.parametrize(
+    ("kind", "earlier"),
+    [("move", 1), ("gripper", 1), ("move", 2)],
+    ids=["move", "gripper", "move-after-the-start-up-rule"],
+)
 def test_a_done_seq_left_at_the_next_number_is_not_read_as_its_done(
-    tm_simulator_factory: SimFactory, kind: str
+    tm_simulator_factory: SimFactory, kind: str, earlier: int
 ) -> None:
     """Command 1 (the first after the wrap) ran and is done (done_seq 1); seq and ack_seq
     are put back to 0 by hand and the project started again: the next command is
     numbered 1 again. The done_seq 1 it finds is an older command's: no master may read
     it as this one's done (it did: a move "finished" as soon as it was taken, then failed
     its at-target check and was stopped; a gripper close returned done while the
-    gripper still closed)."""
+    gripper still closed). Or commands 1 and 2 ran, seq is put back to 1 and ack_seq to
+    0: the start-up rule consumes 1, and done_seq 2 is then the next number's."""
     sim = tm_simulator_factory(
         "tmflow", time_scale=20.0, robot=RobotSetup(initial_seq=TOP, gripper="blog-2fg7")
     )
     issued: list[Issued] = []
     with open_robot(sim) as robot:
-        assert attempt(robot, A, issued) == "done"
-        assert numbers(sim) == (1, 1, 1)
-        handshake_put_back(sim)
+        for target in (A, B)[:earlier]:
+            assert attempt(robot, target, issued) == "done"
+        assert numbers(sim) == (earlier, earlier, earlier)
+        handshake_put_back(sim, seq=earlier - 1)
         robot.play()  # waits until it runs
         if kind == "move":
             assert attempt(robot, FAR, issued, speed=3) == "done"
@@ -253,7 +260,7 @@ def test_a_done_seq_left_at_the_next_number_is_not_read_as_its_done(
             robot.gripper.close()
             ended = time.monotonic()
         ran = sim.motion_log()[-1]
-        assert (ran.kind, ran.seq) == ("ptp" if kind == "move" else "gripper_close", 1)
+        assert (ran.kind, ran.seq) == ("ptp" if kind == "move" else "gripper_close", earlier)
         assert ran.done_wall_time is not None  # finished, and before the call returned
         assert ended is not None
         assert ran.done_wall_time <= ended
