@@ -145,6 +145,37 @@ def test_a_joint_move_a_whole_turn_round_is_expected_to_take_the_whole_turn(
     assert sim_joints(sim) == pytest.approx(target, abs=0.01)
 
 
+def shorter_upper_arm(extra_mm: float) -> RobotModel:
+    """The TM5-700 whose upper arm (J2 to J3) is ``extra_mm`` longer than nominal."""
+    joints = list(NOMINAL.joints)
+    joints[2] = joints[2].model_copy(update={"origin_xyz_mm": (329.0 + extra_mm, 0.0, 0.0)})
+    return NOMINAL.model_copy(update={"joints": tuple(joints)})
+
+
+#: J3 a hair inside its range (+-155 deg: the elbow folded), the tool down.
+AT_J3_END = (0.0, -40.0, 154.97, -20.0, 90.0, 0.0)
+
+
+@pytest.mark.parametrize("extra_mm", [0.0, -1.5], ids=["nominal", "calibrated"])
+def test_lines_from_an_arm_at_j3s_end_are_checked_from_its_own_posture(
+    tm_simulator_factory: Callable[..., Simulator], extra_mm: float
+) -> None:
+    """J3 has no other turn in its range: the calibrated arm's start, 155.06 deg on this
+    chain, was solved in another configuration (J1 111 deg, J2 -128 deg), whose link 3
+    is below the table: the Line up was refused for it, unsent, though the arm can go."""
+    sim = placed(tm_simulator_factory, shorter_upper_arm(extra_mm), AT_J3_END)
+    up, down = sim.tcp_pose().offset(dz=20), sim.tcp_pose().offset(dz=-20)
+    with Robot(sim.url, gripper=None) as robot:
+        before = len(sim.motion_log())
+        with pytest.raises(UnreachablePoseError) as refused:  # J3 would fold past 155 deg
+            robot.move_to(down, speed=20, motion="line")
+        assert refused.value.reason == "joint_limit"
+        assert len(sim.motion_log()) == before  # nothing was sent
+        robot.move_to(up, speed=20, motion="line")
+    assert sim.tcp_pose().is_close(up, mm=0.01, deg=0.01)
+    assert sim.field("last_error_code") == 0
+
+
 # -- found nothing: fast regressions ------------------------------------------------
 
 

@@ -334,15 +334,16 @@ class RobotModel(BaseModel):
             UnreachablePoseError: ``start`` cannot be solved.
         """
         if joints_deg is not None:
-            joints = _six(joints_deg)
-            if _cached_forward(self, joints, tool).is_close(start, mm=1e-3, deg=1e-3):
-                return joints
-        solved = self.inverse(start, seed_deg=joints_deg, tool=tool)
-        # Each joint on the arm's own turn where the solve is a whole turn (within 1 deg)
-        # from it: a calibrated arm at the end of a range (J1, J6: +-270 deg) solves a
-        # hair past the end on this chain, where the range holds only the other turn.
-        pairs = zip(solved, solved if joints_deg is None else joints_deg, strict=True)
-        return _six([g - r if abs(r := math.remainder(g - q, 360.0)) < 1 else q for q, g in pairs])
+            q0 = _six(joints_deg)
+            if _cached_forward(self, q0, tool).is_close(start, mm=1e-3, deg=1e-3):
+                return q0
+            # A joint within 1 deg of a range's end is solved from 1 deg past it, which
+            # stretches the range that far (_admissible): a calibrated arm there solves a
+            # hair past the end on this chain, and the arm is where it is (J1 and J6:
+            # not the range's other turn; J3: not another configuration).
+            ends = [spec.limits_deg for spec in self.joints]
+            joints_deg = [q + (q > b - 1) - (q < a + 1) for q, (a, b) in zip(q0, ends, strict=True)]
+        return self.inverse(start, seed_deg=joints_deg, tool=tool)
 
     def singularity(self, joints_deg: Sequence[float]) -> str | None:
         """Which singularity the joints are too close to (wrist, elbow, shoulder), or None.
@@ -437,8 +438,8 @@ class RobotModel(BaseModel):
 
         A seed past the end of a range stretches it to the seed (and its rounding to
         0.001 deg): from there a joint may stay as far past the end, no farther (the
-        start of a calibrated arm at the end of a range, solved on this chain:
-        :meth:`start_joints`).
+        start of a calibrated arm at the end of a range, solved on this chain from 1 deg
+        past the end, and a path's samples after it: :meth:`start_joints`).
         """
         chosen = []
         for i, (q, s, spec) in enumerate(zip(joints, seed, self.joints, strict=True)):
