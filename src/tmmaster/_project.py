@@ -94,7 +94,7 @@ class ProjectControl:
         self._require("project_state()")
         return self._status()[1]
 
-    def play(self, timeout_s: float, poll_interval_s: float, own: int | None) -> ProjectState:
+    def play(self, timeout_s: float, dt: float, own: int | None) -> ProjectState:
         """Press Play on a stopped or paused project; wait until it runs.
 
         A paused command other than ``own`` is never resumed: another master's (one that
@@ -102,7 +102,7 @@ class ProjectControl:
 
         Args:
             timeout_s: How long to wait for the project to run after the press, s.
-            poll_interval_s: Seconds between two status reads.
+            dt: Seconds between two status reads.
             own: The number of the command this master still follows, if any.
 
         Returns:
@@ -118,7 +118,7 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        status, state = self._before_press("play()", timeout_s, poll_interval_s)
+        status, state = self._before_press("play()", timeout_s, dt)
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
@@ -133,31 +133,32 @@ class ProjectControl:
                 " (TMflow 2.24, 12.1, p. 219): switch it to Auto mode on the robot",
                 pose=status.pose,
             )
-        return self._wait_for(ProjectState.RUNNING, state, timeout_s, poll_interval_s, "play")
+        return self._wait_for(ProjectState.RUNNING, (status, state), timeout_s, dt, "play")
 
-    def pause(self, timeout_s: float, poll_interval_s: float) -> ProjectState:
+    def pause(self, timeout_s: float, dt: float) -> ProjectState:
         """Press Pause on a running project; wait until it shows paused.
 
         Args:
             timeout_s: How long to wait for the project to pause after the press, s.
-            poll_interval_s: Seconds between two status reads.
+            dt: Seconds between two status reads.
 
         Returns:
             PAUSED, or STOPPED when it was stopped (nothing pressed: the Play/Pause
-            toggle would start it).
+            toggle would start it) or stopped during the wait (held 0.1 s).
 
         Raises:
             ConfigError: The profile has no project, or a bad ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
-            RobotError: The project did not pause within ``timeout_s`` of the press.
+            RobotError: The project did not pause within ``timeout_s`` of the press, or
+                ran again after it paused or stopped, or as a new start (Stop pressed).
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        state = self._before_press("pause()", timeout_s, poll_interval_s)[1]
+        status, state = self._before_press("pause()", timeout_s, dt)
         if state is not ProjectState.RUNNING:
             self._log.info("robot.pause_skipped", reason=f"the project is {state.value}")
             return state
-        return self._wait_for(ProjectState.PAUSED, state, timeout_s, poll_interval_s, "pause")
+        return self._wait_for(ProjectState.PAUSED, (status, state), timeout_s, dt, "pause")
 
     def _held(self, status: RobotStatus) -> int | None:
         """The number of the command the robot program holds taken (busy), or the one it
@@ -185,7 +186,7 @@ class ProjectControl:
             raise type(failure)(why, error_code=failure.error_code, pose=failure.pose)
         shows_by = STOP_SHOWS_BY.get(self._transport.endpoint, 0.0)  # any Robot's Stop
         if state is not ProjectState.STOPPED and time.monotonic() < shows_by:
-            state = self._wait_for(ProjectState.STOPPED, state, timeout_s, interval)
+            state = self._wait_for(ProjectState.STOPPED, (status, state), timeout_s, interval)
         return status, state
 
     def _press(self, button: str, state: ProjectState) -> None:
@@ -224,13 +225,13 @@ class ProjectControl:
             self._log.error("robot.project_button_unanswered", button=press, error=str(exc))
 
     def _wait_for(
-        self, wanted: ProjectState, was: ProjectState, timeout_s: float, dt: float, press: str = ""
+        self, wanted: ProjectState, was: _Read, timeout_s: float, dt: float, press: str = ""
     ) -> ProjectState:
         """Press ``press`` (if any), then wait for ``wanted``; on any failure after the
         press may be on its way, press Stop first."""
         settled: float | None = None  # when a pause seen is trusted
         try:  # until its answer came, ``press`` names the button pressed
-            self._press(press, was)
+            self._press(press, was[1])
             press = ""  # answered: a failure from here on is the wait's
             poller = Poller(dt, self._stop_event, deadline=time.monotonic() + timeout_s)
             while True:
@@ -243,7 +244,7 @@ class ProjectControl:
                 if wanted is not ProjectState.PAUSED:
                     if state is wanted:
                         return state
-                elif (settled := _pause_held(state, settled, status)) is not None:
+                elif (settled := _pause_held((status, state), settled, was)) is not None:
                     poller.deadline = max(poller.deadline or 0.0, settled)
                     if time.monotonic() >= settled:
                         return state  # paused, or stopped meanwhile (the pendant's Stop)
@@ -251,7 +252,7 @@ class ProjectControl:
                     button = {ProjectState.RUNNING: "Play", ProjectState.PAUSED: "Pause"}
                     raise RobotError(
                         f"{button.get(wanted, 'Stop')} was pressed (the project was"
-                        f" {was.value}) and the project is {state.value} {timeout_s:g} s"
+                        f" {was[1].value}) and the project is {state.value} {timeout_s:g} s"
                         f" later{': ' + REMOTE_PLAY_NEEDS if wanted in button else ''}",
                         pose=status.pose,
                     )
@@ -266,17 +267,20 @@ class ProjectControl:
             raise
 
 
-def _pause_held(state: ProjectState, settled: float | None, status: RobotStatus) -> float | None:
-    """When a pause seen may be trusted; None before one is seen.
+def _pause_held(now: _Read, settled: float | None, was: _Read) -> float | None:
+    """When a pause seen may be trusted (or a stop: the arm halts all the same, and the
+    master's own Stop on a move the pause interrupted often shows before the pause is
+    read); None before one is seen.
 
     Raises:
-        RobotError: The project showed paused and runs again.
+        RobotError: The project showed paused or stopped and runs again, or runs as a new
+            start (``boot_id``): the toggle landed on a project stopped meanwhile (a Stop
+            crossing this press), where it is Play.
     """
-    if settled is None:
-        return time.monotonic() + PAUSE_SETTLE_S if state is ProjectState.PAUSED else None
-    if state is ProjectState.RUNNING:
+    status, running, boot = now[0], now[1] is ProjectState.RUNNING, was[0].raw.get("boot_id")
+    if running and (settled is not None or status.raw.get("boot_id") != boot):
         raise RobotError(
-            "the project paused, then ran on (a pendant press crossed this one): Stop pressed",
+            "the project ran again after a stop or pause (a press crossed this one): Stop pressed",
             pose=status.pose,
         )
-    return settled
+    return settled or (None if running else time.monotonic() + PAUSE_SETTLE_S)

@@ -1551,15 +1551,18 @@ class Robot:
             timeout_s: How long to wait for the project to pause after the press, s.
 
         Returns:
-            ProjectState.PAUSED, or STOPPED for a stopped project (nothing pressed).
+            ProjectState.PAUSED, or STOPPED for a stopped project (nothing pressed) or one
+            stopped during the wait (that stayed stopped 0.1 s: Stop pressed elsewhere).
 
         Raises:
             ConfigError: The profile has no TMflow project (article), or a bad
                 ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
             RobotError: The project did not pause within ``timeout_s``, or showed paused
-                and ran on within 0.1 s (a press from the pendant crossed this one): Stop
-                was pressed, so the arm does not run on.
+                (or stopped) and ran on within 0.1 s (a press from the pendant crossed
+                this one), or ran as a new start (the press landed on a project a Stop
+                had just ended, where the toggle is Play): Stop was pressed, so the arm
+                does not run on.
             StopRequestedError: A stop was requested or the robot is closing (Stop was
                 pressed).
             TransportError: The link failed (a press left unanswered: Stop was pressed,
