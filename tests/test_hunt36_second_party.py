@@ -21,6 +21,7 @@ Found here (fail without their fix):
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -31,7 +32,17 @@ import pytest
 from fault_proxy import FaultProxy
 from fault_proxy import Rule as FaultRule
 from safety_invariant import Issued, attempt, check, wait_braked
-from tmmaster import Motion, PollPolicy, Pose, ProjectState, Robot, RobotError, TimeoutPolicy
+from tmmaster import (
+    Motion,
+    PollPolicy,
+    Pose,
+    ProjectPausedError,
+    ProjectState,
+    Robot,
+    RobotError,
+    TimeoutPolicy,
+    aio,
+)
 from tmmaster._cli import main
 from tmmaster.sim import Simulator
 
@@ -223,3 +234,39 @@ def test_robot_play_never_resumes_a_live_masters_paused_move(
     assert sim.tcp_pose().is_close(held, mm=0.01, deg=0.01)
     motion.cancel()
     assert len(sim.motion_log()) == 1
+
+
+def test_an_awaited_move_paused_by_the_operator_never_resumes_at_the_operators_play(
+    sim: Simulator, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``tmmaster.aio``: the operator's ``robot pause`` mid-move ends the awaited move
+    with ProjectPausedError (the master pressed Stop on it); the operator's ``robot
+    play`` after that starts the project over and the move never runs on. Before the
+    pause fix above, ``robot pause`` here often waited out its timeout and exited 4."""
+    issued: list[Issued] = []
+
+    async def scenario() -> None:
+        async with aio.connect(
+            "127.0.0.1", sim.port, gripper=None, polling=PollPolicy(interval_s=0.01)
+        ) as robot:
+            await robot.wait_until_ready(timeout_s=5)
+            issued.append(Issued((await robot.pose()).offset(dz=-150), time.monotonic()))
+            handle = await robot.start_move(issued[0].target, speed=5)
+            await asyncio.to_thread(moving, sim, 1)
+            paused: dict[str, Any] = {}
+            await asyncio.to_thread(operator("pause", sim.port, paused).join)
+            assert paused["code"] == 0
+            with pytest.raises(ProjectPausedError):
+                await handle.wait()
+            issued[0].outcome, issued[0].ended_at = "ProjectPausedError", time.monotonic()
+            played: dict[str, Any] = {}
+            await asyncio.to_thread(operator("play", sim.port, played).join)
+            assert played["code"] == 0  # the project was stopped: started over
+
+    asyncio.run(scenario())
+    assert capsys.readouterr().out.splitlines()[-1] == "project  running"
+    held = sim.tcp_pose()
+    wait_braked(sim)
+    assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)
+    assert sim.motion_log()[0].done_wall_time is None
+    check(issued, sim.motion_log())
