@@ -48,6 +48,8 @@ from tmmaster.sim import Simulator
 
 #: Techman's Play/Pause coil (TMflow 2.24 appendix C, p. 313).
 PLAY_PAUSE = 7104
+#: The tmflow profile's command block (target, speed, command, seq: one FC16).
+COMMAND_BLOCK = 9000
 
 
 @pytest.fixture
@@ -269,4 +271,40 @@ def test_an_awaited_move_paused_by_the_operator_never_resumes_at_the_operators_p
     wait_braked(sim)
     assert sim.tcp_pose().is_close(held, mm=1e-6, deg=1e-6)
     assert sim.motion_log()[0].done_wall_time is None
+    check(issued, sim.motion_log())
+
+
+def test_the_operators_stop_and_play_while_the_masters_command_is_on_its_way_run_nothing(
+    sim: Simulator, proxy: FaultProxy, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The master's command block (FC16, 9000) is held in the network while the operator
+    runs ``robot stop`` then ``robot play`` (a new start of the project); it lands after
+    both. Its start is not the program's now: consumed unrun, and the master's move
+    ends in an error, never "done". Found nothing (a regression test)."""
+    with Robot(
+        "127.0.0.1",
+        proxy.port,
+        gripper=None,
+        polling=PollPolicy(interval_s=0.01),
+        timeouts=TimeoutPolicy(request_s=5.0),
+    ) as robot:
+        robot.wait_until_ready(timeout_s=5)
+        release = threading.Event()
+        proxy.add(FaultRule("hold", function_code=16, address=COMMAND_BLOCK, release=release))
+        issued: list[Issued] = []
+        target = robot.pose().offset(dz=-150)
+        mover = in_thread(lambda: attempt(robot, target, issued, speed=5), {})
+        try:
+            sim.wait_for(lambda: proxy.played("hold"), timeout=5.0)  # written, held
+            for action in ("stop", "play"):
+                result: dict[str, Any] = {}
+                operator(action, sim.port, result).join()
+                assert result["code"] == 0, action
+        finally:
+            release.set()
+        mover.join()
+    assert capsys.readouterr().out.splitlines()[-1] == "project  running"
+    assert issued[0].outcome == "CommandRejectedError"
+    wait_braked(sim)
+    assert sim.motion_log() == ()
     check(issued, sim.motion_log())
