@@ -39,7 +39,7 @@ from typing import cast
 
 import pytest
 
-from tmmaster import Pose, Robot, RobotModel, UnreachablePoseError, robot_model
+from tmmaster import ConfigError, Pose, Robot, RobotModel, UnreachablePoseError, robot_model
 from tmmaster._codec import decode, encode
 from tmmaster._profiles import load_profile
 from tmmaster.sim import Cell, PathBackend, RobotSetup, Simulator
@@ -143,6 +143,68 @@ def test_a_joint_move_a_whole_turn_round_is_expected_to_take_the_whole_turn(
     assert swing > 4.0
     assert motion.expected_s == pytest.approx(swing, rel=0.01)
     assert sim_joints(sim) == pytest.approx(target, abs=0.01)
+
+
+#: J1 5 deg inside its end with the arm half stretched.
+STRETCHED_NEAR_J1_END = (265.0, 30.0, 60.0, 0.0, 90.0, 0.0)
+#: From there, J1 5.03 deg further: on the arm, 270.03 deg, past its range.
+PAST_THE_ARMS_END = {
+    "ptp": lambda robot, here: robot.move_to(turned_about_z(here, 5.03), speed=100),
+    "line": lambda robot, here: robot.move_to(turned_about_z(here, 5.03), speed=20, motion="line"),
+}
+
+
+@pytest.mark.parametrize("offset_deg", [0.0, -0.08], ids=["nominal", "calibrated"])
+@pytest.mark.parametrize("move", PAST_THE_ARMS_END)
+def test_a_target_past_the_calibrated_arms_j1_end_is_refused_unsent(
+    tm_simulator_factory: Callable[..., Simulator], move: str, offset_deg: float
+) -> None:
+    """The arm's J1 zero 0.08 deg the other way: its 270.03 deg is this chain's 269.95,
+    inside the range. The PTP was planned as a 5 deg move and sent; the arm's own
+    inverse kinematics took the other turn, swung 355 deg the other way round and
+    stopped over the TCP speed limit (0x0021); the Line was sent and refused (0x0012).
+    On the nominal arm the PTP is refused for the TCP speed of that swing, the Line as
+    past J1's range."""
+    sim = placed(tm_simulator_factory, zero_offset(offset_deg), STRETCHED_NEAR_J1_END)
+    with Robot(sim.url, gripper=None) as robot:
+        before = len(sim.motion_log())
+        with pytest.raises(ConfigError):  # UnreachablePoseError is one
+            PAST_THE_ARMS_END[move](robot, sim.tcp_pose())
+        assert len(sim.motion_log()) == before  # nothing was sent
+    assert sim.field("last_error_code") == 0
+    assert sim_joints(sim) == pytest.approx(STRETCHED_NEAR_J1_END, abs=0.01)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="hunt 35: a calibrated arm whose J1 zero puts this chain's J1 past the end"
+    " where the arm's is inside (270.05 nominal, 269.97 on the arm): the target is solved"
+    " on the range's other turn, and the PTP is refused as a 355 deg swing over the TCP"
+    " speed limit (1868 mm/s) though the arm moves 4.97 deg. A fix solves the target in"
+    " the arm's own joints (this chain's ranges moved by the start's calibration offset).",
+)
+def test_a_target_just_inside_the_calibrated_arms_j1_end_runs(
+    tm_simulator_factory: Callable[..., Simulator],
+) -> None:
+    sim = placed(tm_simulator_factory, zero_offset(0.08), STRETCHED_NEAR_J1_END)
+    with Robot(sim.url, gripper=None) as robot:
+        robot.move_to(turned_about_z(sim.tcp_pose(), 4.97), speed=100)
+    assert sim_joints(sim)[0] == pytest.approx(269.97, abs=0.01)
+
+
+@CALIBRATIONS
+def test_a_ptp_past_j1s_end_swings_the_long_way_as_planned(
+    tm_simulator_factory: Callable[..., Simulator], offset_deg: float
+) -> None:
+    """Found nothing: J1 at 265 deg, a target 10 deg further (275 deg, past the end) is
+    the range's other turn: planned and expected as the 350 deg swing the arm makes."""
+    start = (265.0, 0.0, 90.0, 0.0, 90.0, 0.0)
+    sim = placed(tm_simulator_factory, zero_offset(offset_deg), start)
+    with Robot(sim.url, gripper=None) as robot:
+        motion = robot.move_to(turned_about_z(sim.tcp_pose(), 10.0), speed=30)
+    swing = NOMINAL.ptp_time(start, (-85.0, 0.0, 90.0, 0.0, 90.0, 0.0), speed_percent=30)
+    assert motion.expected_s == pytest.approx(swing, rel=0.01)
+    assert sim_joints(sim)[0] == pytest.approx(-85.0, abs=0.01)
 
 
 def shorter_upper_arm(extra_mm: float) -> RobotModel:

@@ -309,16 +309,13 @@ class Planner:
         settings: WaitSettings,
         log: Any,
     ) -> None:
-        self.model = model
-        self.workspace = workspace
-        self.tool = tool
+        self.model, self.workspace, self.tool = model, workspace, tool
         #: The robot's project speed, % (``tmflow``: Techman's 7101, read at connect):
         #: TMflow runs every move at its own speed times this, and so does the plan.
         self.project_speed_percent = 100.0
         self.check_units = check_units
         self.max_speed_percent = max_speed_percent
-        self._settings = settings
-        self._log = log
+        self._settings, self._log = settings, log
         #: A PTP whose TCP would run faster is refused, mm/s (None: the model's limit).
         self.tcp_speed_limit_mm_s: float | None = None
         #: The joints the arm is believed to be at (None: the model's ready posture).
@@ -734,6 +731,13 @@ class Planner:
             # The same solve as validate()'s when the seed did not change (cached).
             target_joints = self.model.inverse(target, seed_deg=hint, tool=self.tool)
             self._keep_configuration(hint, target_joints, target)
+            if hint is not None and first != hint:
+                # The arm's own joints there (a calibrated arm's differ from this chain's
+                # as at its start) must be inside their ranges too: a target past an end
+                # by them is taken the other way round (a swing never planned), a Line's
+                # not at all (tests/test_hunt35_joint_edges.py).
+                real = [t + h - f for t, h, f in zip(target_joints, hint, first, strict=True)]
+                self.model.check_joints(real, tool=self.tool)
             motion = MotionType(command.kind.value)
             expected = self._model_time(origin, target, speed, motion, accel)
             if motion is MotionType.LINE:
