@@ -829,8 +829,7 @@ class SequenceChannel(CommandChannel):
         failure = yield from self._flags_failure_steps(flags)
         # Whose command took the number: ack_session as the acknowledgement is first seen
         # (later it may name the next number's taker, written before that number's ack).
-        fresh = not ticket.acknowledged
-        if fresh:
+        if fresh := not (ticket.acknowledged or self._new_runs(ticket, feedback)):
             self._note_ack(ticket, int(feedback["ack_seq"]) == ticket.seq, mark)
         if fresh and ticket.acknowledged and failure is None and self._taken_for_another(feedback):
             failure = CommandRejectedError(
@@ -857,7 +856,7 @@ class SequenceChannel(CommandChannel):
         self, ticket: Ticket, feedback: dict[str, Value]
     ) -> tuple[bool, RobotError | None]:
         """Whether the feedback shows ``ticket`` done, or the failure it shows."""
-        if ticket.acknowledged:
+        if ticket.acknowledged and not self._new_runs(ticket, feedback):
             if int(feedback["done_seq"]) == ticket.seq:
                 return True, None
             if self.profile.field("robot_state").label(int(feedback["robot_state"])) == "error":
@@ -949,10 +948,15 @@ class SequenceChannel(CommandChannel):
         ticket.restarted = ticket.restarted or (bool(boot) and feedback.get("boot_id") != boot)
         return ticket.restarted
 
+    def _new_runs(self, ticket: Ticket, feedback: dict[str, Value]) -> bool:
+        """True when the project started again since ``ticket`` (a controller restart puts
+        the numbers back at 0) and another master's command took its number: ack_seq and
+        done_seq then show that command, never ``ticket``'s."""
+        return self._restarted(ticket, feedback) and self._taken_for_another(feedback)
+
     def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
         """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
-        taker = int(feedback.get("ack_session", 0))
-        return bool(self.session) and taker not in (0, self.session)
+        return bool(self.session) and int(feedback.get("ack_session", 0)) not in (0, self.session)
 
     def may_resume(self, flags: dict[str, Value] | None = None) -> bool:
         """True while the project is paused or still running: Play could resume a move."""
