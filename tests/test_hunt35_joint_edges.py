@@ -20,15 +20,26 @@ the master plans with the nominal TM5-700):
   the other way round;
 - a joint move a whole turn round (J1 269.98 -> -89) was expected to take 0.15 s (a
   1 deg move) instead of 4.2 s: its derived timeout, 2.2 s, would give up on a real
-  robot mid-swing.
+  robot mid-swing;
+- at J3's end (154.97 deg, the upper arm 1.5 mm short; J3's range has no other turn)
+  the start was solved in another configuration, and a Line up, which the arm can take,
+  was refused because that posture's link 3 is below the table;
+- with the J1 zero 0.08 deg the other way, a target at the arm's 270.03 deg (this
+  chain's 269.95, inside) was sent: the PTP, planned as 5 deg, swung 355 deg the other
+  way round on the arm and stopped over the TCP speed limit (0x0021); the Line was
+  refused by the arm (0x0012).
 
-The fix keeps the solved start on the arm's own turn (270.06 deg, past the end), and a
-joint past the end of its range may stay as far past it, no farther: a Line down from
-there, J1 unchanged, still runs (without that half of the fix it was refused).
+The fixes: the start is solved from 1 deg past the end of a range the arm is within
+1 deg of, which stretches the range that far (the arm is where it is), and a path's
+joints may then stay as far past the end, no farther (a Line down from there, J1
+unchanged, still runs); a Cartesian target's joints, moved as the start's are from the
+reported ones, must be inside their ranges too. Not fixed (strict xfail): a target the
+chain puts past the end that the arm has inside is refused as a 355 deg swing.
 
 Found nothing (kept as fast regressions): Euler angles at +-180 deg round-tripped through
 the float32 registers give the same rotation; a seed on either side of +-180 deg gets the
-joints of its own turn.
+joints of its own turn; a PTP to a target past J1's end is planned, timed and run as
+the long swing the arm makes.
 """
 
 from __future__ import annotations
