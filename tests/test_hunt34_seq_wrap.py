@@ -105,8 +105,15 @@ def test_a_seq_maximum_of_2_alternates_and_runs_each_command_once(
     check(issued, sim.motion_log())
 
 
-@pytest.mark.parametrize("kind", ["cancel", "project_stop", "restart"])
-@pytest.mark.parametrize("last", [TOP - 1, TOP - 2], ids=["failed-at-1", "failed-at-32767"])
+@pytest.mark.parametrize(
+    ("last", "kind"),
+    [
+        pytest.param(TOP - 1, "cancel", id="failed-at-1-cancel"),
+        pytest.param(TOP - 1, "project_stop", id="failed-at-1-project_stop"),
+        pytest.param(TOP - 2, "cancel", id="failed-at-32767-cancel"),
+        pytest.param(TOP - 2, "restart", id="failed-at-32767-restart"),
+    ],
+)
 def test_the_next_move_after_a_failure_on_the_wrap(
     tm_simulator_factory: SimFactory, kind: str, last: int
 ) -> None:
