@@ -17,6 +17,14 @@ Found here (fail without their fix):
 - ``robot pause`` decided on a running project whose press landed after the master's
   Stop (a give-up): the toggle started the project over, and ``pause()`` waited its
   whole timeout on it before pressing Stop, while the master's next move ran to its end.
+
+Found nothing (kept as regression tests): the master's Play crossing the operator's
+Stop (a fresh start: the move it meant to resume never runs), ``robot play`` on a live
+master's paused move (refused), an awaited move paused by the operator then Play, and
+the operator's Stop and Play while the master's command frame is held in the network.
+Also tried, not kept (slow, nothing found): a StatusMonitor on the master's own link at
+100 Hz with 9-50 ms per read (the master's beats went out, its move finished), and the
+article's ``robot stop`` mid-move (the master's move raised, never "done").
 """
 
 from __future__ import annotations
