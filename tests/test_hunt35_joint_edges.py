@@ -24,6 +24,10 @@ the master plans with the nominal TM5-700):
 - at J3's end (154.97 deg, the upper arm 1.5 mm short; J3's range has no other turn)
   the start was solved in another configuration, and a Line up, which the arm can take,
   was refused because that posture's link 3 is below the table;
+- an arm jogged into the wrist singularity's margin (J5 = 3 deg: the margin is the
+  master's, the robot has none): the calibrated arm's start was solved without its
+  singular solution, in another configuration, and a PTP out was expected to take
+  2.79 s instead of 0.97 s;
 - with the J1 zero 0.08 deg the other way, a target at the arm's 270.03 deg (this
   chain's 269.95, inside) was sent: the PTP, planned as 5 deg, swung 355 deg the other
   way round on the arm and stopped over the TCP speed limit (0x0021); the Line was
@@ -32,7 +36,8 @@ the master plans with the nominal TM5-700):
 The fixes: the start is solved from 1 deg past the end of a range the arm is within
 1 deg of, which stretches the range that far (the arm is where it is), and a path's
 joints may then stay as far past the end, no farther (a Line down from there, J1
-unchanged, still runs); a Cartesian target's joints, moved as the start's are from the
+unchanged, still runs), without the singularity margins and the datasheet reach; a
+Cartesian target's joints, moved as the start's are from the
 reported ones, must be inside their ranges too. Not fixed (strict xfail): a target the
 chain puts past the end that the arm has inside is refused as a 355 deg swing.
 
@@ -247,6 +252,24 @@ def test_lines_from_an_arm_at_j3s_end_are_checked_from_its_own_posture(
         robot.move_to(up, speed=20, motion="line")
     assert sim.tcp_pose().is_close(up, mm=0.01, deg=0.01)
     assert sim.field("last_error_code") == 0
+
+
+@pytest.mark.parametrize("extra_mm", [0.0, 1.5], ids=["nominal", "calibrated"])
+def test_a_ptp_out_of_a_singularitys_margin_is_timed_from_the_arms_posture(
+    tm_simulator_factory: Callable[..., Simulator], extra_mm: float
+) -> None:
+    """An arm jogged to J5 = 3 deg, inside the master's wrist margin (5 deg; the robot has
+    none). The calibrated arm's start was solved without its singular solution, in
+    another configuration (J1 147 deg, J2 -61 deg): the PTP out to the ready posture
+    was expected to take 2.79 s instead of 0.97 s, from joints the arm was not at."""
+    arm = shorter_upper_arm(extra_mm).model_copy(update={"wrist_margin_deg": 0.0})
+    jogged = (0.0, 0.0, 90.0, 0.0, 3.0, 0.0)
+    sim = placed(tm_simulator_factory, arm, jogged)
+    with Robot(sim.url, gripper=None) as robot:
+        motion = robot.move_to(arm.forward(NOMINAL.ready_joints_deg), speed=50)
+    assert sim_joints(sim) == pytest.approx(NOMINAL.ready_joints_deg, abs=0.01)
+    made = NOMINAL.ptp_time(jogged, NOMINAL.ready_joints_deg, speed_percent=50)
+    assert motion.expected_s == pytest.approx(made, rel=0.01)
 
 
 # -- found nothing: fast regressions ------------------------------------------------

@@ -343,7 +343,7 @@ class RobotModel(BaseModel):
             # not the range's other turn; J3: not another configuration).
             ends = [spec.limits_deg for spec in self.joints]
             joints_deg = [q + (q > b - 1) - (q < a + 1) for q, (a, b) in zip(q0, ends, strict=True)]
-        return self.inverse(start, seed_deg=joints_deg, tool=tool)
+        return self.model_copy(update=_AS_IS).inverse(start, seed_deg=joints_deg, tool=tool)
 
     def singularity(self, joints_deg: Sequence[float]) -> str | None:
         """Which singularity the joints are too close to (wrist, elbow, shoulder), or None.
@@ -925,6 +925,11 @@ def _cached_gauge(
     return PathGauge.along(start, target, poses)
 
 
+#: What the start of a move is solved without, the arm being there (jogged into a
+#: singularity's margin, stretched past the datasheet reach, a calibrated arm's joints
+#: solved a little off on this chain): the singularity margins and the reach.
+_AS_IS = dict(wrist_margin_deg=0.0, elbow_margin_deg=0.0, shoulder_margin_mm=0.0, reach_mm=math.inf)
+
 # Pure functions of the model and their arguments, cached: a repeating cycle solves the
 # same poses and paths from the same known joints (a solve is about 40 us).
 _cached_inverse = functools.lru_cache(maxsize=16384)(RobotModel._solve)
@@ -973,12 +978,8 @@ def joint_chain(model: RobotModel) -> kin.Chain:
     Returns:
         The chain.
     """
-    return kin.Chain(
-        tuple(
-            kin.rpy_transform(j.origin_xyz_mm, [math.radians(a) for a in j.origin_rpy_deg])
-            for j in model.joints
-        )
-    )
+    origins = [(j.origin_xyz_mm, list(map(math.radians, j.origin_rpy_deg))) for j in model.joints]
+    return kin.Chain(tuple(kin.rpy_transform(xyz, rpy) for xyz, rpy in origins))
 
 
 def _speed_scale(speed_percent: float) -> float:
