@@ -29,9 +29,10 @@ Found (each fails without its fix):
   other master's done_seq 1 as its own done. It now says the program started again
   under its command (it may have moved before).
 
-Not fixed (strict xfail): ``play()`` tells the paused command it may resume by its
-number alone, so after such a restart it resumes another master's paused move that
-reuses the number of a move of its own it never waited for.
+- ``play()`` told the paused command it may resume by its number alone, so after such
+  a restart it resumed another master's paused move that reused the number of a move
+  of its own it never waited for (the arm moved 20 mm after ``play()``). It compares
+  the program's start (boot_id) the command was written in too now.
 
 The wrap itself, restarts, lost answers and held copies on it, and masters taking turns
 across it: found nothing (kept as regressions).
@@ -309,14 +310,6 @@ def test_a_write_of_number_1_answered_late_or_held_runs_once(
     assert [m.seq for m in sim.motion_log()] == [TOP, 1, 2]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="play() tells its own paused command by its number alone; after a controller"
-    " restart the numbers start at 1 again, and a Robot's move started before it (never"
-    " waited for) has the number of another master's paused move: play() resumes that"
-    " move. Fix: compare the command's boot_id too (tmmaster/_project.py, claimed by"
-    " another helper during hunt 34)",
-)
 def test_play_never_resumes_another_masters_move_that_reuses_its_number(
     tm_simulator_factory: SimFactory,
 ) -> None:

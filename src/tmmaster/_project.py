@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from ._channels import STOP_SHOWS_BY, CommandChannel
+from ._channels import STOP_SHOWS_BY, CommandChannel, Ticket
 from ._checks import require_positive
 from ._exceptions import ConfigError, RobotError, TMMasterError
 from ._gate import CommandGate
@@ -94,16 +94,17 @@ class ProjectControl:
         self._require("project_state()")
         return self._status()[1]
 
-    def play(self, timeout_s: float, dt: float, own: int | None) -> ProjectState:
+    def play(self, timeout_s: float, dt: float, own: Ticket | None) -> ProjectState:
         """Press Play on a stopped or paused project; wait until it runs.
 
         A paused command other than ``own`` is never resumed: another master's (one that
-        died within its heartbeat's time-to-live), or one this master gave up.
+        died within its heartbeat's time-to-live, or one numbered as ``own`` after a
+        controller restart put the numbers back at 0), or one this master gave up.
 
         Args:
             timeout_s: How long to wait for the project to run after the press, s.
             dt: Seconds between two status reads.
-            own: The number of the command this master still follows, if any.
+            own: The command this master still follows, if any.
 
         Returns:
             RUNNING (also when it was running already: nothing pressed).
@@ -122,7 +123,7 @@ class ProjectControl:
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
-        if state is ProjectState.PAUSED and (held := self._held(status)) not in (None, own):
+        if state is ProjectState.PAUSED and (held := self._held(status, own)) is not None:
             raise RobotError(
                 f"play(): paused command {held} is another master's, or given up: press Stop"
             )
@@ -160,16 +161,18 @@ class ProjectControl:
             return state
         return self._wait_for(ProjectState.PAUSED, (status, state), timeout_s, dt, "pause")
 
-    def _held(self, status: RobotStatus) -> int | None:
+    def _held(self, status: RobotStatus, own: Ticket | None) -> int | None:
         """The number of the command the robot program holds taken (busy), or the one it
         takes at Play: written, not taken yet (``seq == ack_seq + 1``: a block that landed
         while the project was paused, perhaps a dead master's), if it says. A pending
-        cancel record counts too: Stop, not Play, then ends it all."""
+        cancel record counts too: Stop, not Play, then ends it all. None for ``own``: its
+        number, in the program's start (boot_id) it was written in."""
         if "ack_seq" not in status.raw:  # no robot program's handshake in this profile
             return None
-        ack, p = int(status.raw["ack_seq"]), self._profile  # status.moving: busy
+        ack, p, boot = int(status.raw["ack_seq"]), self._profile, status.raw.get("boot_id", 0)
         seq = ack if status.moving else int(self._channel.read((p.field("seq"),))["seq"])
-        return seq if status.moving or seq == p.next_seq(ack) else None
+        mine = own is not None and (own.seq, own.extra.get("boot", 0)) == (seq, boot)
+        return seq if (status.moving or seq == p.next_seq(ack)) and not mine else None
 
     def _before_press(self, what: str, timeout_s: float, interval: float) -> _Read:
         """The status a press starts from; refused without a project, for a bad

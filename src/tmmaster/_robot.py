@@ -1537,7 +1537,7 @@ class Robot:
         """
         self._require_connection()
         # Only a command this master still follows may resume.
-        own = m.ticket.seq if (m := self._last_motion) and not (m.done or m.abandoned) else None
+        own = m.ticket if (m := self._last_motion) and not (m.done or m.abandoned) else None
         return self._project.play(timeout_s, self.poll_interval_s, own)
 
     def pause(self, timeout_s: float = PRESS_TIMEOUT_S) -> ProjectState:
