@@ -320,7 +320,10 @@ class RobotModel(BaseModel):
 
         Joints whose forward kinematics (with ``tool``) put the TCP at ``start`` are kept
         (the branch the arm is on); otherwise ``start`` is solved, from ``joints_deg``
-        when given.
+        when given, as where the arm is: without the singularity margins and the
+        datasheet reach, and a joint within 1 deg of the end of its range may be solved
+        up to 1 deg past it (a calibrated arm's joints solve a little off on this chain:
+        tests/test_hunt35_joint_edges.py).
 
         Args:
             start: The TCP pose at the start.
