@@ -30,8 +30,8 @@ the master plans with the nominal TM5-700):
   2.79 s instead of 0.97 s;
 - with the J1 zero 0.08 deg the other way, a target at the arm's 270.03 deg (this
   chain's 269.95, inside) was sent: the PTP, planned as 5 deg, swung 355 deg the other
-  way round on the arm and stopped over the TCP speed limit (0x0021); the Line was
-  refused by the arm (0x0012).
+  way round on the arm and stopped over the TCP speed limit (0x0021); the Line and an
+  arc there were refused by the arm (0x0012).
 
 The fixes: the start is solved from 1 deg past the end of a range the arm is within
 1 deg of, which stretches the range that far (the arm is where it is), and a path's
@@ -167,6 +167,9 @@ STRETCHED_NEAR_J1_END = (265.0, 30.0, 60.0, 0.0, 90.0, 0.0)
 PAST_THE_ARMS_END = {
     "ptp": lambda robot, here: robot.move_to(turned_about_z(here, 5.03), speed=100),
     "line": lambda robot, here: robot.move_to(turned_about_z(here, 5.03), speed=20, motion="line"),
+    "arc": lambda robot, here: robot.move_arc(
+        turned_about_z(here, 2.5, out_mm=10.0), turned_about_z(here, 5.03), speed=20
+    ),
 }
 
 
@@ -178,7 +181,8 @@ def test_a_target_past_the_calibrated_arms_j1_end_is_refused_unsent(
     """The arm's J1 zero 0.08 deg the other way: its 270.03 deg is this chain's 269.95,
     inside the range. The PTP was planned as a 5 deg move and sent; the arm's own
     inverse kinematics took the other turn, swung 355 deg the other way round and
-    stopped over the TCP speed limit (0x0021); the Line was sent and refused (0x0012).
+    stopped over the TCP speed limit (0x0021); the Line and the arc were sent and
+    refused (0x0012).
     On the nominal arm the PTP is refused for the TCP speed of that swing, the Line as
     past J1's range."""
     sim = placed(tm_simulator_factory, zero_offset(offset_deg), STRETCHED_NEAR_J1_END)

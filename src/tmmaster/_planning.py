@@ -731,13 +731,7 @@ class Planner:
             # The same solve as validate()'s when the seed did not change (cached).
             target_joints = self.model.inverse(target, seed_deg=hint, tool=self.tool)
             self._keep_configuration(hint, target_joints, target)
-            if hint is not None and first != hint:
-                # The arm's own joints there (a calibrated arm's differ from this chain's
-                # as at its start) must be inside their ranges too: a target past an end
-                # by them is taken the other way round (a swing never planned), a Line's
-                # not at all (tests/test_hunt35_joint_edges.py).
-                real = [t + h - f for t, h, f in zip(target_joints, hint, first, strict=True)]
-                self.model.check_joints(real, tool=self.tool)
+            self._check_own_joints(target_joints, first)
             motion = MotionType(command.kind.value)
             expected = self._model_time(origin, target, speed, motion, accel)
             if motion is MotionType.LINE:
@@ -755,6 +749,17 @@ class Planner:
         )
         return target_joints, expected, gauge
 
+    def _check_own_joints(self, joints: Joints, first: Sequence[float]) -> None:
+        """Refuse a target whose joints on the arm itself are past a range's end: the
+        target's ``joints`` on this chain moved as the move's start's (``first``) are
+        from the joints the robot reports (a calibrated arm's differ a little). A
+        Cartesian target past the end by that is taken the other way round on the arm
+        (a swing never planned), a Line's or an arc's not at all
+        (tests/test_hunt35_joint_edges.py)."""
+        if (hint := self.joints_hint) is not None and tuple(first) != hint:
+            real = [t + h - f for t, h, f in zip(joints, hint, first, strict=True)]
+            self.model.check_joints(real, tool=self.tool)
+
     def _plan_arc(
         self, command: Command, origin: Pose, speed: float, accel: float | None
     ) -> tuple[Joints, float, PathGauge]:
@@ -764,6 +769,7 @@ class Planner:
         assert via is not None
         samples = self.check_arc(origin, via, target, self.joints_hint)
         target_joints = self.model.check_joints(samples[-1], tool=self.tool)
+        self._check_own_joints(target_joints, samples[0])
         expected = self.model.arc_time(
             origin,
             via,
