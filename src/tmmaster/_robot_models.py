@@ -442,7 +442,9 @@ class RobotModel(BaseModel):
         A seed past the end of a range stretches it to the seed (and its rounding to
         0.001 deg): from there a joint may stay as far past the end, no farther (the
         start of a calibrated arm at the end of a range, solved on this chain from 1 deg
-        past the end, and a path's samples after it: :meth:`start_joints`).
+        past the end: :meth:`start_joints`). A path's samples after it are seeded inside
+        the range as its start stretched it (:meth:`_path`): seeded with the sample before
+        instead, each could go a rounding further, and a path crept on past the end.
         """
         chosen = []
         for i, (q, s, spec) in enumerate(zip(joints, seed, self.joints, strict=True)):
@@ -462,13 +464,9 @@ class RobotModel(BaseModel):
 
     def _starts(self, seed: Joints) -> list[Joints]:
         """The seed first, then canonical postures (shoulder, elbow and wrist flips)."""
-        j1 = seed[0]
-        starts = [seed]
-        for base in (j1, j1 + 180.0, j1 - 180.0):
-            for shoulder, elbow, wrist in ((0.0, 90.0, 0.0), (-60.0, -90.0, 150.0)):
-                for j5 in (90.0, -90.0):
-                    starts.append((base, shoulder, elbow, wrist, j5, seed[5]))
-        return starts
+        j1, arms = seed[0], ((0.0, 90.0, 0.0), (-60.0, -90.0, 150.0))  # J2-J4
+        flips = itertools.product((j1, j1 + 180.0, j1 - 180.0), arms, (90.0, -90.0))
+        return [seed, *((base, *arm, j5, seed[5]) for base, arm, j5 in flips)]
 
     def _wide_starts(self, seed: Joints, flange: Pose) -> list[Joints]:
         """Starts all round the shoulder, J1 aimed at the flange and away from it.
@@ -624,10 +622,16 @@ class RobotModel(BaseModel):
         steps = max(1, math.ceil(max(length_mm / step_mm, rotation_deg / step_deg)))
         what = f"the straight path to {target}" if via is None else f"the arc to {target}"
         samples, fastest = [self.start_joints(start, start_joints, tool)], 0.0
+        # A joint the start has past a range's end may stay there, no farther: each seed
+        # is held inside the range as the start stretches it (_admissible stretches it to
+        # the seed and its rounding, and sample by sample that crept on past the end).
+        limits = [j.limits_deg for j in self.joints]
+        ends = [(min(a, q), max(b, q)) for (a, b), q in zip(limits, samples[0], strict=True)]
         for k in range(1, steps + 1):
             pose = kin.transform_to_pose(at(k / steps))
+            seed = [min(max(q, a), b) for q, (a, b) in zip(samples[-1], ends, strict=True)]
             try:
-                joints = self.inverse(pose, seed_deg=samples[-1], tool=tool, same_branch=True)
+                joints = self.inverse(pose, seed_deg=seed, tool=tool, same_branch=True)
             except UnreachablePoseError as exc:
                 raise UnreachablePoseError(
                     f"{what} leaves the arm's range at {pose}: {exc}", reason=exc.reason, pose=pose
