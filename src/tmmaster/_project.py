@@ -94,7 +94,7 @@ class ProjectControl:
         self._require("project_state()")
         return self._status()[1]
 
-    def play(self, timeout_s: float, dt: float, own: Ticket | None) -> ProjectState:
+    def play(self, timeout_s: float, poll_interval_s: float, own: Ticket | None) -> ProjectState:
         """Press Play on a stopped or paused project; wait until it runs.
 
         A paused command other than ``own`` is never resumed: another master's (one that
@@ -103,7 +103,7 @@ class ProjectControl:
 
         Args:
             timeout_s: How long to wait for the project to run after the press, s.
-            dt: Seconds between two status reads.
+            poll_interval_s: Seconds between two status reads.
             own: The command this master still follows, if any.
 
         Returns:
@@ -119,7 +119,7 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        status, state = self._before_press("play()", timeout_s, dt)
+        status, state = before = self._before_press("play()", timeout_s, poll_interval_s)
         if state is ProjectState.RUNNING:
             self._log.info("robot.play_skipped", reason="the project runs already")
             return state
@@ -134,14 +134,14 @@ class ProjectControl:
                 " (TMflow 2.24, 12.1, p. 219): switch it to Auto mode on the robot",
                 pose=status.pose,
             )
-        return self._wait_for(ProjectState.RUNNING, (status, state), timeout_s, dt, "play")
+        return self._wait_for(ProjectState.RUNNING, before, timeout_s, poll_interval_s, "play")
 
-    def pause(self, timeout_s: float, dt: float) -> ProjectState:
+    def pause(self, timeout_s: float, poll_interval_s: float) -> ProjectState:
         """Press Pause on a running project; wait until it shows paused.
 
         Args:
             timeout_s: How long to wait for the project to pause after the press, s.
-            dt: Seconds between two status reads.
+            poll_interval_s: Seconds between two status reads.
 
         Returns:
             PAUSED, or STOPPED when it was stopped (nothing pressed: the Play/Pause
@@ -155,11 +155,11 @@ class ProjectControl:
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
-        status, state = self._before_press("pause()", timeout_s, dt)
-        if state is not ProjectState.RUNNING:
+        before = self._before_press("pause()", timeout_s, poll_interval_s)
+        if (state := before[1]) is not ProjectState.RUNNING:
             self._log.info("robot.pause_skipped", reason=f"the project is {state.value}")
             return state
-        return self._wait_for(ProjectState.PAUSED, (status, state), timeout_s, dt, "pause")
+        return self._wait_for(ProjectState.PAUSED, before, timeout_s, poll_interval_s, "pause")
 
     def _held(self, status: RobotStatus, own: Ticket | None) -> int | None:
         """The number of the command the robot program holds taken (busy), or the one it
