@@ -14,7 +14,7 @@ import struct
 import pytest
 from pymodbus.exceptions import ModbusIOException
 from pymodbus.framer import FramerSocket
-from pymodbus.pdu import DecodePDU
+from pymodbus.pdu import DecodePDU, ExceptionResponse
 
 from tmmaster._transport import next_answer
 
@@ -35,6 +35,7 @@ def test_the_whole_short_count_exception_is_the_refusal() -> None:
     assert used == len(SHORT_COUNT)
     assert answer is not None
     tid, function_code, pdu = answer
+    assert isinstance(pdu, ExceptionResponse)
     assert (tid, function_code, pdu.exception_code) == (7, 0x83, 2)
 
 
