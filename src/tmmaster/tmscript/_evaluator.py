@@ -1677,12 +1677,17 @@ class _CallCompiler:
 
 
 def _main_thread_only(builtin: Builtin) -> Builtin:
-    """A motion function that fails in any thread but main (TMscript 2.24 §3.12, p. 47)."""
+    """A motion function that fails in any thread but main (TMscript 2.24 §3.12, p. 47),
+    and in closestop and errorstop (§3.3, p. 30; §3.4, p. 31)."""
     impl = builtin.impl
     if impl is None:
         return builtin
 
     def guarded(rt: Runtime, args: list[Value], types: tuple[str, ...]) -> Value:
+        if not rt.motion_allowed:  # called through a function (a direct call: at parse)
+            raise ValueError(
+                "no motion in closestop or errorstop (§3.3, p. 30; §3.4, p. 31; TMflow 0x00048B53)"
+            )
         if rt.thread != 1:
             raise ValueError("robot motion functions run in the main thread only (§3.12, p. 47)")
         return impl(rt, args, types)
