@@ -950,9 +950,11 @@ class SequenceChannel(CommandChannel):
 
     def _new_runs(self, ticket: Ticket, feedback: dict[str, Value]) -> bool:
         """True when the project started again since ``ticket`` (a controller restart puts
-        the numbers back at 0) and another master's command took its number: ack_seq and
-        done_seq then show that command, never ``ticket``'s."""
-        return self._restarted(ticket, feedback) and self._taken_for_another(feedback)
+        the numbers back at 0) and ``ack_seq`` shows another command than ``ticket``'s:
+        another master's that took its number, or any other number (one used up unrun
+        after another master's command of ``ticket``'s number ran: its ``done_seq``)."""
+        ours = int(feedback["ack_seq"]) == ticket.seq and not self._taken_for_another(feedback)
+        return self._restarted(ticket, feedback) and not ours
 
     def _taken_for_another(self, feedback: dict[str, Value]) -> bool:
         """True when the command at ``ack_seq`` is another master's (its session, not ours)."""
