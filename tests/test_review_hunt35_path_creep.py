@@ -1,14 +1,19 @@
-"""A Line's or an arc's joints never creep past a range's end, sample by sample.
+"""Review of hunt 35: a seed past a range's end no longer stretches the range.
 
-Review of hunt 35 (tests/test_hunt35_joint_edges.py): ``_admissible`` stretches a joint's
-range to the seed and its rounding (0.001 deg), so that a calibrated arm's start, solved
-on the nominal chain a hair past the end, is planned where the arm is. A path seeds each
-sample with the one before: each sample could go 0.001 deg further past the end than the
-last, and a Line turning J1 slowly on past the end (0.02 deg over 50 samples) passed the
-master's check, from a start inside the range (nominal arm) or past it (calibrated): the
-master sent it, and the simulated arm, whose model stretches the same way, ran it past
-its range (a real TM5 refuses it, 0x0012). Each seed is now held inside the range as the
-path's start stretched it: a joint past the end may stay there, no farther.
+Hunt 35 (tests/test_hunt35_joint_edges.py) let ``_admissible`` stretch a joint's range to
+any seed past its end and the seed's rounding (0.001 deg), so that a calibrated arm's
+start, solved on the nominal chain a hair past the end, is planned where the arm is.
+Two effects reached beyond that start:
+
+- a path seeds each sample with the one before, so each sample could go 0.001 deg
+  further past the end than the last: a Line turning J1 0.02 deg on past the end over
+  50 samples passed the master's check, from a start inside the range (nominal arm) or
+  past it (calibrated); the master sent it and the simulated arm, whose model stretched
+  the same way, ran it past its range (a real TM5 refuses it, 0x0012);
+- ``RobotModel.inverse`` (public) answered a seed past the end with joints past the end.
+
+Now only the start (``start_joints``) and the path after it are solved on ranges
+stretched to that start, once per path; ``inverse`` keeps every range as it is.
 """
 
 from __future__ import annotations
@@ -87,3 +92,14 @@ def test_the_arm_never_runs_such_a_line_past_its_range(
         assert len(sim.motion_log()) == before  # nothing was sent
     assert sim.field("last_error_code") == 0
     assert sim_joints(sim) == pytest.approx(reported, abs=1e-3)
+
+
+def test_inverse_from_a_seed_past_a_range_end_answers_inside_the_range() -> None:
+    """``RobotModel.inverse`` (public; ``Robot.validate_move``'s ``seed_deg``, the
+    simulated TMscript's ``inversekin`` reference joints) promises joints inside every
+    range or a refusal "past a joint limit". Hunt 35 let any seed past an end stretch the
+    range to it: a seed at J1 = 300 deg (outside +-270) was answered J1 = 299 deg, past
+    the end, where the arm takes the pose at -61 deg."""
+    pose = NOMINAL.forward((299.0, 0.0, 90.0, 0.0, 90.0, 0.0))
+    joints = NOMINAL.inverse(pose, seed_deg=(300.0, 0.0, 90.0, 0.0, 90.0, 0.0))
+    assert joints[0] == pytest.approx(-61.0, abs=1e-3)

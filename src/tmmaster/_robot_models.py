@@ -45,6 +45,13 @@ class JointSpec(BaseModel):
     #: The joint's top speed at 100 % speed, deg/s.
     speed_deg_s: float = Field(gt=0)
 
+    def _taking(self, angle_deg: float, by: float) -> JointSpec:
+        """This joint with its range stretched to take ``angle_deg`` and ``by`` deg either
+        side of it, where it does not already (equal to this one where nothing is)."""
+        low, high = self.limits_deg
+        ends = (min(low, angle_deg - by), max(high, angle_deg + by))
+        return self.model_copy(update={"limits_deg": ends})
+
     @model_validator(mode="after")
     def _range_is_ordered(self) -> JointSpec:
         if not self.limits_deg[0] < self.limits_deg[1]:
@@ -340,13 +347,18 @@ class RobotModel(BaseModel):
             q0 = _six(joints_deg)
             if _cached_forward(self, q0, tool).is_close(start, mm=1e-3, deg=1e-3):
                 return q0
-            # A joint within 1 deg of a range's end is solved from 1 deg past it, which
-            # stretches the range that far (_admissible): a calibrated arm there solves a
-            # hair past the end on this chain, and the arm is where it is (J1 and J6:
-            # not the range's other turn; J3: not another configuration).
-            ends = [spec.limits_deg for spec in self.joints]
-            joints_deg = [q + (q > b - 1) - (q < a + 1) for q, (a, b) in zip(q0, ends, strict=True)]
-        return self.model_copy(update=_AS_IS).inverse(start, seed_deg=joints_deg, tool=tool)
+            # A joint within 1 deg of a range's end may be solved up to 1 deg past it: a
+            # calibrated arm there solves a hair past the end on this chain, and the arm is
+            # where it is (J1 and J6: not the range's other turn; J3: not another
+            # configuration).
+            return self._taking(q0, 1.0, **_AS_IS).inverse(start, seed_deg=q0, tool=tool)
+        return self.model_copy(update=_AS_IS).inverse(start, tool=tool)
+
+    def _taking(self, joints_deg: Sequence[float], by: float, **update: object) -> RobotModel:
+        """This model (``update`` applied) with each joint's range stretched to take
+        ``joints_deg`` and ``by`` deg either side of them, where not already."""
+        joints = tuple(j._taking(q, by) for j, q in zip(self.joints, joints_deg, strict=True))
+        return self.model_copy(update={**update, "joints": joints})
 
     def singularity(self, joints_deg: Sequence[float]) -> str | None:
         """Which singularity the joints are too close to (wrist, elbow, shoulder), or None.
@@ -426,29 +438,17 @@ class RobotModel(BaseModel):
         """
         q = [math.radians(a) for a in _six(joints_deg)]
         jacobian, _ = joint_chain(self).jacobian(q)
-        scale = (
-            self.joints[2].origin_xyz_mm[0]
-            * self.joints[3].origin_xyz_mm[0]
-            * math.sin(q[2])
-            * math.sin(q[4])
-        )
+        upper_arm, forearm = self.joints[2].origin_xyz_mm[0], self.joints[3].origin_xyz_mm[0]
+        scale = upper_arm * forearm * math.sin(q[2]) * math.sin(q[4])
         return 0.0 if abs(scale) < 1e-12 else abs(kin.determinant(jacobian) * 1e9 / scale)
 
     def _admissible(
         self, joints: list[float], seed: Sequence[float]
     ) -> tuple[Joints | None, tuple[str, str] | None]:
-        """Joints moved by whole turns into range nearest the seed, or why they cannot be.
-
-        A seed past the end of a range stretches it to the seed (and its rounding to
-        0.001 deg): from there a joint may stay as far past the end, no farther (the
-        start of a calibrated arm at the end of a range, solved on this chain from 1 deg
-        past the end: :meth:`start_joints`). A path's samples after it are seeded inside
-        the range as its start stretched it (:meth:`_path`): seeded with the sample before
-        instead, each could go a rounding further, and a path crept on past the end.
-        """
+        """Joints moved by whole turns into range nearest the seed, or why they cannot be."""
         chosen = []
         for i, (q, s, spec) in enumerate(zip(joints, seed, self.joints, strict=True)):
-            low, high = min(spec.limits_deg[0], s - 1e-3), max(spec.limits_deg[1], s + 1e-3)
+            low, high = spec.limits_deg
             candidates = [q + k * 360.0 for k in range(-2, 3) if low <= q + k * 360.0 <= high]
             if not candidates:
                 wrapped = (q + 180.0) % 360.0 - 180.0
@@ -622,16 +622,14 @@ class RobotModel(BaseModel):
         steps = max(1, math.ceil(max(length_mm / step_mm, rotation_deg / step_deg)))
         what = f"the straight path to {target}" if via is None else f"the arc to {target}"
         samples, fastest = [self.start_joints(start, start_joints, tool)], 0.0
-        # A joint the start has past a range's end may stay there, no farther: each seed
-        # is held inside the range as the start stretches it (_admissible stretches it to
-        # the seed and its rounding, and sample by sample that crept on past the end).
-        limits = [j.limits_deg for j in self.joints]
-        ends = [(min(a, q), max(b, q)) for (a, b), q in zip(limits, samples[0], strict=True)]
+        # A joint the start has past a range's end (a calibrated arm's, on this chain) may
+        # stay there, no farther: the ranges are stretched to the start, once (stretched
+        # to each sample's seed, a path crept on past the end, a rounding a sample).
+        model = self._taking(samples[0], 1e-3)  # and its rounding
         for k in range(1, steps + 1):
             pose = kin.transform_to_pose(at(k / steps))
-            seed = [min(max(q, a), b) for q, (a, b) in zip(samples[-1], ends, strict=True)]
             try:
-                joints = self.inverse(pose, seed_deg=seed, tool=tool, same_branch=True)
+                joints = model.inverse(pose, seed_deg=samples[-1], tool=tool, same_branch=True)
             except UnreachablePoseError as exc:
                 raise UnreachablePoseError(
                     f"{what} leaves the arm's range at {pose}: {exc}", reason=exc.reason, pose=pose
