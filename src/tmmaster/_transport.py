@@ -523,8 +523,9 @@ class Transport(ABC):
 
         Bounded (50 ms): a request nested in one that holds the lock (a failed block's
         retry) waits that long at most, and the beat then waits for the lock as usual.
-        Never before a clean-up (``interruptible=False``: a Stop, a withdraw, a press,
-        their reads): a Stop must not queue behind a beat on a slow link.
+        Never before a clean-up (``interruptible=False``: a Stop, a withdraw's cancel
+        record and its reads, a Play/Pause press; a press's status polls do wait): a
+        Stop must not queue behind a beat on a slow link.
         """
         if interruptible and not self._free_turn.is_set():
             self._free_turn.wait(_LET_IN_S)
