@@ -43,7 +43,7 @@ from ._channels import (
     pose_from,
 )
 from ._checks import Bounds, require_in, require_positive, shown
-from ._codec import encode
+from ._codec import allowed_range, encode
 from ._command import SETTLE_S, _MotionFollower
 from ._command import Motion as Motion  # tmmaster imports it from here
 from ._exceptions import (
@@ -52,6 +52,7 @@ from ._exceptions import (
     IllegalAddressError,
     MotionTimeoutError,
     ProfileMismatchError,
+    RobotError,
     StopRequestedError,
     TMMasterError,
     TransportClosedError,
@@ -1087,10 +1088,8 @@ class Robot:
         percent = self._move_arguments(speed, speed_mm_s, motion, accel_time_ms, timeout)
         self._planner.check_path(target, percent, motion)
         # prepare() encodes the block (a field the profile lacks, a range) before any I/O.
-        command = Command(
-            CommandKind.of(motion), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
-        )
-        return self._start_command(command, timeout=timeout)
+        cmd = Command(CommandKind.of(motion), target, percent, accel_time_ms, speed_mm_s=speed_mm_s)
+        return self._start_command(cmd, timeout=timeout)
 
     def _move_arguments(
         self,
@@ -1248,7 +1247,9 @@ class Robot:
             ConfigError: A bad offset, frame, speed, acceleration time or timeout
                 (nothing is read or sent), or a target the move may not take (nothing is
                 sent).
-            RobotError: The arm moved between the read and the write (nothing is sent).
+            RobotError: The arm moved between the read and the write, or its pose reads at a
+                pose register's end (the article map's ±327.67 mm: the arm may be past it,
+                where ``move_to`` brings it back). Nothing is sent.
             AcknowledgeTimeoutError: The robot did not take the command (withdrawn).
             MotionTimeoutError: The move did not finish in time (the arm is stopped).
             RobotFaultError: The robot reported an error (EmergencyStopError: e-stop).
@@ -1262,14 +1263,15 @@ class Robot:
             raise ConfigError(f"frame must be 'base' or 'tool', got {frame!r}")
         kind = motion_type(motion)
         percent = self._move_arguments(speed, speed_mm_s, kind, accel_time_ms, timeout, read=False)
-        start = self._read_start()
+        start = self._read_start()  # a register saturates at its end: the arm may be past it
+        ends = [allowed_range(self.profile.field(name)) for name in TCP_FIELDS]
+        if any(not low < value < high for value, (low, high) in zip(start, ends, strict=True)):
+            raise RobotError(f"the TCP reads {start}, a pose register's end: the arm may be past")
         target = moved(start, offset, frame)
         self._planner.check_path(target, percent, kind)  # move_to's: a Line's path too
-        command = Command(
-            CommandKind.of(kind), target, percent, accel_time_ms, speed_mm_s=speed_mm_s
-        )
-        self._channel.check_command(command)
-        return _waited(self._start_command(command, timeout=timeout, resolved_at=start))
+        cmd = Command(CommandKind.of(kind), target, percent, accel_time_ms, speed_mm_s=speed_mm_s)
+        self._channel.check_command(cmd)
+        return _waited(self._start_command(cmd, timeout=timeout, resolved_at=start))
 
     def move_arc(
         self,
