@@ -178,18 +178,20 @@ class ProjectControl:
         """The status a press starts from; refused without a project, for a bad
         ``timeout_s``, or while the robot is in error or e-stop (a running project never
         is: its state would be ERROR). A Stop this master wrote that the project does not
-        show yet is waited for (up to ``timeout_s``): a toggle decided on the running
-        project would land after it, on the stopped one, where it is Play. So is one an
-        earlier Robot of this process wrote (its ``close()``): kept per robot address."""
+        show yet is waited for (up to ``STOP_SHOWS_S`` after it): a toggle decided on the
+        running project would land after it, on the stopped one, where it is Play. So is
+        one an earlier Robot of this process wrote (its ``close()``): kept per robot
+        address. Not shown by then, it was refused, or shown and undone (a press of this
+        master's that landed late started the project over): the press starts from here."""
         self._require(what)
         require_positive("timeout_s", timeout_s)
         status, state = self._status()
         if (failure := self._channel.status_failure(status)) is not None:
             why = f"{what}: {failure}: reset it on the robot first"
             raise type(failure)(why, error_code=failure.error_code, pose=failure.pose)
-        shows_by = STOP_SHOWS_BY.get(self._transport.endpoint, 0.0)  # any Robot's Stop
-        if state is not ProjectState.STOPPED and time.monotonic() < shows_by:
-            state = self._wait_for(ProjectState.STOPPED, (status, state), timeout_s, interval)
+        left = STOP_SHOWS_BY.get(self._transport.endpoint, 0.0) - time.monotonic()  # any Robot's
+        if state is not ProjectState.STOPPED and left > 0:
+            state = self._wait_for(ProjectState.STOPPED, (status, state), left, interval)
         return status, state
 
     def _press(self, button: str, state: ProjectState) -> None:
@@ -203,17 +205,16 @@ class ProjectControl:
         after it starts it from the beginning, where the start-up rule runs nothing
         pending.
         """
-        if not button:  # a wait with nothing to press
-            return
-        field = self._profile.field("play_pause")
+        if button:  # empty: a wait with nothing to press
+            field = self._profile.field("play_pause")
 
-        def send() -> None:
-            # Sent once: a repeated toggle would undo the press.
-            self._transport.write_fields([(field, True)], retry=False, interruptible=False)
+            def send() -> None:
+                # Sent once: a repeated toggle would undo the press.
+                self._transport.write_fields([(field, True)], retry=False, interruptible=False)
 
-        STOP_SHOWS_BY.pop(self._transport.endpoint, None)  # seen: _before_press waited for it
-        self._gate.write(None, send)  # a press registers no command
-        self._log.warning("robot.project_button", button=button, project=state.value)
+            STOP_SHOWS_BY.pop(self._transport.endpoint, None)  # seen: _before_press waited
+            self._gate.write(None, send)  # a press registers no command
+            self._log.warning("robot.project_button", button=button, project=state.value)
 
     def _stop_before_giving_up(self, why: str, press: str, exc: BaseException) -> None:
         """Press Stop (retried, best effort): a press that may still land later then never
@@ -252,11 +253,12 @@ class ProjectControl:
                     if time.monotonic() >= settled:
                         return state  # paused, or stopped meanwhile (the pendant's Stop)
                 if time.monotonic() >= (poller.deadline or 0.0):
+                    if wanted is ProjectState.STOPPED:  # a Stop that did not show in its time
+                        return state  # was refused, or undone: a late press started it over
                     button = {ProjectState.RUNNING: "Play", ProjectState.PAUSED: "Pause"}
                     raise RobotError(
-                        f"{button.get(wanted, 'Stop')} was pressed (the project was"
-                        f" {was[1].value}) and the project is {state.value} {timeout_s:g} s"
-                        f" later{': ' + REMOTE_PLAY_NEEDS if wanted in button else ''}",
+                        f"{button[wanted]} was pressed (the project was {was[1].value}) and the"
+                        f" project is {state.value} {timeout_s:g} s later: {REMOTE_PLAY_NEEDS}",
                         pose=status.pose,
                     )
                 poller.sleep()
