@@ -91,8 +91,9 @@ _UNRUN = ("cancelled", "another_master")
 #: takes it at its next cycle, 20 ms on the simulator; not measured on a TM5).
 STOP_SHOWS_S = 1.0
 #: Per robot (``Transport.endpoint``): until when a Stop a Robot of this process wrote may
-#: not show yet on it; a Robot made after the one that wrote it (closed) waits for it too.
-STOP_SHOWS_BY: dict[tuple[str, int, int], float] = {}
+#: not show yet on it, and the program's start (``boot_id``) it was written in if known: a
+#: new start since shows it taken. A Robot made after the one that wrote it waits too.
+STOP_SHOWS_BY: dict[tuple[str, int, int], tuple[float, Value | None]] = {}
 
 #: The command kinds that write the command block's extension (via, speed_mm_s, ext_seq).
 _EXTENDED = frozenset({CommandKind.LINE, CommandKind.CIRCLE})
@@ -577,16 +578,17 @@ class CommandChannel(ABC):
         """True when the profile defines a way to stop the arm (:meth:`stop`)."""
         return self.stop_words() is not None
 
-    def stop(self) -> None:
+    def stop(self, boot: Value | None = None) -> None:
         """Stop the arm now; :class:`ConfigError` when the profile defines no stop.
 
         A stop is idempotent: it is written with retries, even after a stop request.
+        ``boot``: the program's start (``boot_id``) the Stop is written in, if known.
         """
         words = self.stop_words()
         if words is None:
             raise ConfigError(f"profile {self.profile.name!r} defines no way to stop the robot")
         self.transport.write_fields(words, retry=True, interruptible=False)
-        STOP_SHOWS_BY[self.transport.endpoint] = time.monotonic() + STOP_SHOWS_S
+        STOP_SHOWS_BY[self.transport.endpoint] = (time.monotonic() + STOP_SHOWS_S, boot)
 
     def check_command(self, command: Command) -> None:
         """Encode any command's block without sending it (raises naming the field)."""

@@ -115,7 +115,8 @@ class ProjectControl:
                 on the robot first; nothing pressed.
             RobotError: Manual mode, or a paused command not ``own`` (nothing pressed), or
                 the project did not run within ``timeout_s`` of the press (the
-                remote-control settings).
+                remote-control settings), or a Stop of this process's did not show within
+                ``timeout_s`` (:meth:`_before_press`).
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
@@ -151,7 +152,8 @@ class ProjectControl:
             ConfigError: The profile has no project, or a bad ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
             RobotError: The project did not pause within ``timeout_s`` of the press, or
-                ran again after it paused or stopped, or as a new start (Stop pressed).
+                ran again after it paused or stopped, or as a new start (Stop pressed), or
+                a Stop of this process's did not show within ``timeout_s``.
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed.
         """
@@ -177,21 +179,23 @@ class ProjectControl:
     def _before_press(self, what: str, timeout_s: float, interval: float) -> _Read:
         """The status a press starts from; refused without a project, for a bad
         ``timeout_s``, or while the robot is in error or e-stop (a running project never
-        is: its state would be ERROR). A Stop this master wrote that the project does not
-        show yet is waited for (up to ``STOP_SHOWS_S`` after it): a toggle decided on the
-        running project would land after it, on the stopped one, where it is Play. So is
-        one an earlier Robot of this process wrote (its ``close()``): kept per robot
-        address. Not shown by then, it was refused, or shown and undone (a press of this
-        master's that landed late started the project over): the press starts from here."""
+        is: its state would be ERROR). Within ``STOP_SHOWS_S`` of a Stop this master wrote,
+        a project not shown stopped is waited for (up to ``timeout_s``): a toggle decided
+        on the running project would land after it, on the stopped one, where it is Play.
+        So is one an earlier Robot of this process wrote (its ``close()``): kept per robot
+        address. Not for a project started anew since a Stop this master pressed on giving
+        up a press (``boot_id``): the Stop showed and was undone, the press that landed late
+        starting the project over."""
         self._require(what)
         require_positive("timeout_s", timeout_s)
         status, state = self._status()
         if (failure := self._channel.status_failure(status)) is not None:
             why = f"{what}: {failure}: reset it on the robot first"
             raise type(failure)(why, error_code=failure.error_code, pose=failure.pose)
-        left = STOP_SHOWS_BY.get(self._transport.endpoint, 0.0) - time.monotonic()  # any Robot's
-        if state is not ProjectState.STOPPED and left > 0:
-            state = self._wait_for(ProjectState.STOPPED, (status, state), left, interval)
+        by, boot = STOP_SHOWS_BY.get(self._transport.endpoint, (0.0, None))  # any Robot's
+        by = by if boot in (None, status.raw.get("boot_id")) else 0.0  # a new start: shown
+        if state is not ProjectState.STOPPED and time.monotonic() < by:
+            state = self._wait_for(ProjectState.STOPPED, (status, state), timeout_s, interval)
         return status, state
 
     def _press(self, button: str, state: ProjectState) -> None:
@@ -216,13 +220,14 @@ class ProjectControl:
             self._gate.write(None, send)  # a press registers no command
             self._log.warning("robot.project_button", button=button, project=state.value)
 
-    def _stop_before_giving_up(self, why: str, press: str, exc: BaseException) -> None:
+    def _stop_before_giving_up(self, why: str, press: str, exc: BaseException, boot: Any) -> None:
         """Press Stop (retried, best effort): a press that may still land later then never
         resumes a move; it starts the project from the beginning, running nothing pending.
         ``press``: the button pressed whose answer was never seen, logged
-        ``robot.project_button_unanswered`` once the Stop went (docs/safety.md)."""
+        ``robot.project_button_unanswered`` once the Stop went (docs/safety.md). ``boot``:
+        the program's start the press was decided in; a new start since shows the Stop."""
         try:
-            self._channel.stop()
+            self._channel.stop(boot)
         except TMMasterError as failed:
             self._log.error("robot.stop_failed", reason=why, error=str(failed))
         if press:
@@ -234,6 +239,7 @@ class ProjectControl:
         """Press ``press`` (if any), then wait for ``wanted``; on any failure after the
         press may be on its way, press Stop first."""
         settled: float | None = None  # when a pause seen is trusted
+        boot = was[0].raw.get("boot_id")  # the program's start the press is decided in
         try:  # until its answer came, ``press`` names the button pressed
             self._press(press, was[1])
             press = ""  # answered: a failure from here on is the wait's
@@ -253,12 +259,11 @@ class ProjectControl:
                     if time.monotonic() >= settled:
                         return state  # paused, or stopped meanwhile (the pendant's Stop)
                 if time.monotonic() >= (poller.deadline or 0.0):
-                    if wanted is ProjectState.STOPPED:  # a Stop that did not show in its time
-                        return state  # was refused, or undone: a late press started it over
                     button = {ProjectState.RUNNING: "Play", ProjectState.PAUSED: "Pause"}
                     raise RobotError(
-                        f"{button[wanted]} was pressed (the project was {was[1].value}) and the"
-                        f" project is {state.value} {timeout_s:g} s later: {REMOTE_PLAY_NEEDS}",
+                        f"{button.get(wanted, 'Stop')} was pressed (the project was"
+                        f" {was[1].value}) and the project is {state.value} {timeout_s:g} s"
+                        f" later{': ' + REMOTE_PLAY_NEEDS if wanted in button else ''}",
                         pose=status.pose,
                     )
                 poller.sleep()
@@ -268,7 +273,7 @@ class ProjectControl:
             # A Play answered but not seen taking effect may land later (a gateway that
             # answers a write before delivering it): it must never resume a move then. A
             # Pause not seen holding leaves the arm running, which pause() must not.
-            self._stop_before_giving_up(f"{wanted.value} unconfirmed", press, exc)
+            self._stop_before_giving_up(f"{wanted.value} unconfirmed", press, exc, boot)
             raise
 
 

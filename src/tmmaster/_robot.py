@@ -1530,7 +1530,8 @@ class Robot:
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop); reset it
                 on the robot first. Nothing was pressed.
             RobotError: Manual mode, or a paused move this robot does not follow (nothing
-                pressed: press Stop), or the project did not run within ``timeout_s``.
+                pressed: press Stop), or the project did not run within ``timeout_s``, or
+                this process's Stop of the last second did not show within it (Stop pressed).
             StopRequestedError: A stop was requested or the robot is closing.
             TransportError: The link failed (a press left unanswered: Stop was pressed,
                 so that it cannot resume a paused move when it lands).
@@ -1560,7 +1561,8 @@ class Robot:
             ConfigError: The profile has no TMflow project (article), or a bad
                 ``timeout_s``.
             RobotFaultError: The robot is in error (EmergencyStopError: e-stop).
-            RobotError: The project did not pause within ``timeout_s``, or showed paused
+            RobotError: The project did not pause within ``timeout_s`` (nor this process's
+                Stop of the last second show within it), or showed paused
                 (or stopped) and ran on within 0.1 s (a press from the pendant crossed
                 this one), or ran as a new start (the press landed on a project a Stop
                 had just ended, where the toggle is Play): Stop was pressed, so the arm
