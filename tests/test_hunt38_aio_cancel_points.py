@@ -443,8 +443,10 @@ def test_the_next_play_after_a_cancelled_pause_whose_press_landed_late_runs(
     shown yet (it may take STOP_SHOWS_S, 1 s), waited its whole timeout for a stop that
     had shown and been undone, then raised RobotError ("Stop was pressed (the project
     was running) and the project is running 0.3 s later") and pressed Stop on the
-    running project. Now a Stop not shown within its time no longer holds a press up:
-    play() finds the project running and presses nothing."""
+    running project. Now a project started anew (boot_id) since the Stop that pause()
+    pressed on giving up is not waited for (the Stop showed, and was undone): play()
+    finds the project running and presses nothing. A Stop merely slow to show is still
+    waited for, up to timeout_s (tests/test_review_hunt38_slow_stop.py)."""
     sim = tm_simulator_factory("tmflow")
     release = threading.Event()
 
