@@ -110,8 +110,10 @@ def test_a_user_coroutine_blocking_its_loop_past_the_ttl_starves_no_async_robot(
             sims[0].wait_for(
                 lambda: all(beats(s) >= n for s, n in zip(sims, needs, strict=True)), timeout=10
             )
-            # The moves still run: each command was live through all those beats.
-            assert all(sim.tcp_pose().distance_to(B) > 1.0 for sim in sims)
+            # The moves still run: each command was live through all those beats. A machine
+            # so loaded that a move outlived none of it tested nothing: skipped, not failed.
+            if not all(sim.tcp_pose().distance_to(B) > 1.0 for sim in sims):
+                pytest.skip("a move ended before the loop's block outlasted the TTL")
             for mine, motion in zip(issued, motions, strict=True):
                 try:
                     await motion
@@ -202,7 +204,7 @@ def test_a_log_handler_that_blocks_on_the_drivers_loop_expires_every_robots_comm
         motions = []
         for robot, mine in zip(robots, issued, strict=True):
             mine.append(Issued(B, time.monotonic()))
-            motions.append(robot.start_move(B, speed=10))
+            motions.append(robot.start_move(B, speed=5))  # 1.9 s: outlasts the TTL
         # The mover's wait on a thread of its own; the logged robot's acknowledgement is
         # noted on the loop, where the handler holds it.
         mover = threading.Thread(target=waited, args=(motions[0], issued[0][-1]))
