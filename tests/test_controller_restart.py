@@ -42,7 +42,8 @@ def restart_controller(sim: Simulator) -> None:
     """The controller restarts: project stopped, program registers at 0, project started."""
 
     sim.call(lambda: sim._controller.bank.set("stop_project", True))
-    sim.wait_for(lambda: not sim.field("project_running"), timeout=2.0)
+    # Bounds, not timings: 5 s leaves room for a loaded machine (2 s once ran out).
+    sim.wait_for(lambda: not sim.field("project_running"), timeout=5.0)
 
     def clear() -> None:
         for name in RESET:
@@ -50,7 +51,7 @@ def restart_controller(sim: Simulator) -> None:
 
     sim.call(clear)
     sim.press_play()
-    sim.wait_for(lambda: bool(sim.field("project_running")), timeout=2.0)
+    sim.wait_for(lambda: bool(sim.field("project_running")), timeout=5.0)
 
 
 @pytest.fixture
