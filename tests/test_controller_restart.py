@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from fault_proxy import FaultProxy, Rule
-from safety_invariant import Issued, attempt, check
+from safety_invariant import Issued, attempt, check, wait_braked
 from tmmaster import Fleet, PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy, TMMasterError
 from tmmaster.sim import Simulator, Timing
 
@@ -42,8 +42,11 @@ def restart_controller(sim: Simulator) -> None:
     """The controller restarts: project stopped, program registers at 0, project started."""
 
     sim.call(lambda: sim._controller.bank.set("stop_project", True))
-    # Bounds, not timings: 5 s leaves room for a loaded machine (2 s once ran out).
     sim.wait_for(lambda: not sim.field("project_running"), timeout=5.0)
+    # A restart takes seconds; the arm has braked long before the project starts again.
+    # Started while it still braked, the program's start-up ChangeTCP() failed ("the tool
+    # cannot change while the arm moves"), seen under load.
+    wait_braked(sim, ticks=3)
 
     def clear() -> None:
         for name in RESET:
