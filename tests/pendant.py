@@ -3,6 +3,9 @@ button, and what a Play after the master gave up must show (the arm stays put)."
 
 from __future__ import annotations
 
+import threading
+from typing import Any
+
 from tmmaster import Pose
 from tmmaster.sim import Simulator
 
@@ -10,6 +13,22 @@ from tmmaster.sim import Simulator
 def press_play_pause(sim: Simulator) -> None:
     """The operator's Play/Pause button on the pendant (coil 7104)."""
     sim.call(lambda: sim._controller.bank.set("play_pause", True))
+
+
+def hold_buttons(sim: Simulator) -> threading.Event:
+    """The controller takes no button (Play/Pause, Stop) until the returned event is
+    cleared: a robot slow to act on a press, as long as the test says."""
+    controller: Any = sim._controller
+    take_buttons = controller._handle_buttons
+    held = threading.Event()
+    held.set()
+
+    def buttons() -> None:
+        if not held.is_set():
+            take_buttons()
+
+    sim.call(lambda: setattr(controller, "_handle_buttons", buttons))
+    return held
 
 
 def runs_again_without_moving(sim: Simulator, held: Pose, moves: int) -> None:

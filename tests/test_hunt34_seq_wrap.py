@@ -40,8 +40,6 @@ across it: found nothing (kept as regressions).
 
 from __future__ import annotations
 
-import socket
-import struct
 import threading
 import time
 from collections.abc import Callable
@@ -53,6 +51,7 @@ from pendant import press_play_pause
 from safety_invariant import Issued, attempt, check
 from sim_speeds import QUICK
 from test_controller_restart import restart_controller, robot_through
+from test_hunt28_cli_play_pending import deliver, let_run
 from test_hunt32_same_robot import (
     FAILURES,
     START,
@@ -159,20 +158,6 @@ def test_two_open_masters_taking_turns_across_the_wrap(tm_simulator_factory: Sim
     assert outcomes == ["done", "done", "CommandRejectedError", "done"]
     assert [m.seq for m in sim.motion_log()] == [TOP - 1, TOP, 2]  # 1: C, consumed unrun
     check(issued, sim.motion_log())
-
-
-def deliver(port: int, address: int, words: list[int]) -> None:
-    """One FC16 request on a connection of its own, as a frame held in the network lands."""
-    pdu = struct.pack(f">BHHB{len(words)}H", 16, address, len(words), 2 * len(words), *words)
-    frame = struct.pack(">HHHB", 7, 0, len(pdu) + 1, 1) + pdu
-    with socket.create_connection(("127.0.0.1", port), timeout=2.0) as link:
-        link.sendall(frame)
-        assert link.recv(260)[7] == 16  # written (not an exception answer)
-
-
-def let_run(sim: Simulator, ticks: int) -> None:
-    start = sim.ticks
-    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
 
 
 def dead_masters_command_on_the_wrap(sim: Simulator, *, stop: bool) -> int:

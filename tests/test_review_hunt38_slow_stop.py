@@ -23,6 +23,7 @@ from typing import Any
 
 import pytest
 
+from pendant import hold_buttons
 from tmmaster import ProjectState, Robot, _channels
 from tmmaster.sim import Simulator
 
@@ -43,16 +44,7 @@ def test_a_press_after_a_stop_slower_than_stop_shows_s_is_decided_on_the_stopped
 ) -> None:
     monkeypatch.setattr(_channels, "STOP_SHOWS_S", SHOWS_S)
     sim: Simulator = tm_simulator_factory("tmflow")
-    controller: Any = sim._controller
-    take_buttons = controller._handle_buttons
-    held = threading.Event()
-    held.set()
-
-    def buttons() -> None:
-        if not held.is_set():
-            take_buttons()
-
-    sim.call(lambda: setattr(controller, "_handle_buttons", buttons))
+    held = hold_buttons(sim)
     with Robot("127.0.0.1", sim.port, gripper=None) as robot:
         robot.wait_until_ready(timeout_s=5)
         assert robot.project_state() is ProjectState.RUNNING
