@@ -35,7 +35,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Literal
 
-from fault_proxy import _ADDRESSED, _frames
+from fault_proxy import _ADDRESSED, _frames, counted_match
 
 
 @dataclass
@@ -63,17 +63,8 @@ class Piece:
     _seen: int = field(default=0, repr=False)
 
     def matches(self, on: str, function_code: int, address: int | None) -> bool:
-        if self.times <= 0 or on != self.on:
-            return False
-        if self.function_code is not None and function_code != self.function_code:
-            return False
-        if self.address is not None and address != self.address:
-            return False
-        self._seen += 1
-        if self._seen < self.nth:
-            return False
-        self.times -= 1
-        return True
+        """Count a matching request or answer; True when this one is to be played."""
+        return on == self.on and counted_match(self, function_code, address)
 
 
 @dataclass(frozen=True)

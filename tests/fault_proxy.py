@@ -50,7 +50,7 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 Action = Literal[
     "delay",
@@ -94,17 +94,24 @@ class Rule:
 
     def matches(self, function_code: int, address: int | None) -> bool:
         """Count a matching request; True when this one is to be faulted."""
-        if self.times <= 0:
-            return False
-        if self.function_code is not None and function_code != self.function_code:
-            return False
-        if self.address is not None and address != self.address:
-            return False
-        self._seen += 1
-        if self._seen < self.nth:
-            return False
-        self.times -= 1
-        return True
+        return counted_match(self, function_code, address)
+
+
+def counted_match(rule: Any, function_code: int, address: int | None) -> bool:
+    """Whether ``rule`` (its ``function_code``, ``address``, ``nth``, ``times`` and its
+    count ``_seen``) plays on this request: a matching one is counted, and the ``nth``
+    and later ones play, ``times`` in all."""
+    if rule.times <= 0:
+        return False
+    if rule.function_code is not None and function_code != rule.function_code:
+        return False
+    if rule.address is not None and address != rule.address:
+        return False
+    rule._seen += 1
+    if rule._seen < rule.nth:
+        return False
+    rule.times -= 1
+    return True
 
 
 @dataclass(frozen=True)
