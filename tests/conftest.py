@@ -9,6 +9,7 @@ import os
 import signal
 import sys
 import threading
+import traceback
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ from hypothesis import settings
 import tmmaster
 from leaks import left_open, open_sockets
 from sim_speeds import SUITE_TICK_HZ, SUITE_TIME_SCALE
-from tmmaster import Fleet, PollPolicy, Robot
+from tmmaster import Fleet, PollPolicy, Robot, _fleet
 from tmmaster.sim import Simulator, Timing
 from tmmaster.sim.pytest_plugin import _forget_what_robots_owe
 
@@ -49,8 +50,21 @@ def no_leaks() -> Iterator[None]:
         return
     pytest.fail(
         f"test leaked {len(new_threads)} thread(s) {[t.name for t in new_threads]}"
-        f" and {len(new_sockets)} socket(s)"
+        f" and {len(new_sockets)} socket(s){where_they_are(new_threads)}"
     )
+
+
+def where_they_are(threads: list[threading.Thread]) -> str:
+    """What a leaked thread is doing (its stack) and what holds the default driver, for a
+    leak seen only under load (a driver's loop thread alive 2 s after its test)."""
+    frames = sys._current_frames()
+    stacks = [
+        f"\n--- {t.name}:\n" + "".join(traceback.format_stack(frames[t.ident]))
+        for t in threads
+        if t.ident in frames
+    ]
+    driver = _fleet._DEFAULT
+    return f"\ndefault driver: {driver._users} user(s), fleet {driver.fleet!r}" + "".join(stacks)
 
 
 @pytest.fixture(autouse=True)
