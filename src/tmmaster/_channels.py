@@ -728,6 +728,9 @@ class SequenceChannel(CommandChannel):
             self._session_field = p.field(SESSION_FIELD)  # every command carries it
         # The program's start the command was written in (tmflow: after the session).
         self._boot_field = p.field(BOOT_FIELD) if p.has(BOOT_FIELD) else None
+        #: The project's flags the last withdraw_outcome() read ({}: none yet), for the
+        #: may_resume() that follows it: a second read would only delay a Stop.
+        self._flags: dict[str, Value] = {}
 
     def status_from(self, values: dict[str, Value]) -> RobotStatus:
         """Interpret the TM discrete inputs and the robot program's feedback registers."""
@@ -897,7 +900,7 @@ class SequenceChannel(CommandChannel):
         """
         # The flags withdraw_outcome() just read say whether the project may resume: a
         # second read would only delay the Stop that follows a command found taken.
-        if (outcome := self.withdraw_outcome(ticket)) is None or not self.may_resume(self.flags):
+        if (outcome := self.withdraw_outcome(ticket)) is None or not self.may_resume(self._flags):
             self.cancel(ticket)
             outcome = self.withdraw_outcome(ticket)
         return outcome
@@ -924,7 +927,7 @@ class SequenceChannel(CommandChannel):
         p = self.profile
         # The flags first: a project seen stopped before the feedback is read cannot have
         # taken the number after that read (read the other way, it may in between).
-        flags = self.flags = self._read_regardless(self.flag_fields)
+        flags = self._flags = self._read_regardless(self.flag_fields)
         values = self._read_regardless(self.feedback_fields)
         if self._restarted(ticket, values):
             return True  # the project started again since: the command may have run before
