@@ -72,16 +72,21 @@ def proxy(sim: Simulator) -> Iterator[FaultProxy]:
         yield p
 
 
-@pytest.fixture
-def master(sim: Simulator) -> Iterator[Robot]:
-    # A request timeout longer than any press the tests hold.
-    with Robot(
+def master_on(port: int) -> Robot:
+    """A master on ``port`` polling densely, its request timeout longer than any press the
+    tests hold."""
+    return Robot(
         "127.0.0.1",
-        sim.port,
+        port,
         gripper=None,
         polling=PollPolicy(interval_s=0.01),
         timeouts=TimeoutPolicy(request_s=5.0),
-    ) as robot:
+    )
+
+
+@pytest.fixture
+def master(sim: Simulator) -> Iterator[Robot]:
+    with master_on(sim.port) as robot:
         robot.wait_until_ready(timeout_s=5)
         yield robot
 
@@ -193,13 +198,7 @@ def test_the_masters_play_crossing_the_operators_stop_never_runs_the_given_up_mo
     toggle starts it over: ``play()`` did what it is documented to do on a stopped
     project, and the move it meant to resume never runs (the start-up rule): its wait
     fails, never "done". Found nothing (a regression test)."""
-    with Robot(
-        "127.0.0.1",
-        proxy.port,
-        gripper=None,
-        polling=PollPolicy(interval_s=0.01),
-        timeouts=TimeoutPolicy(request_s=5.0),
-    ) as robot:
+    with master_on(proxy.port) as robot:
         robot.wait_until_ready(timeout_s=5)
         motion: Motion = robot.start_move(robot.pose().offset(dz=-150), speed=5)
         moving(sim, 1)
@@ -289,13 +288,7 @@ def test_the_operators_stop_and_play_while_the_masters_command_is_on_its_way_run
     runs ``robot stop`` then ``robot play`` (a new start of the project); it lands after
     both. Its start is not the program's now: consumed unrun, and the master's move
     ends in an error, never "done". Found nothing (a regression test)."""
-    with Robot(
-        "127.0.0.1",
-        proxy.port,
-        gripper=None,
-        polling=PollPolicy(interval_s=0.01),
-        timeouts=TimeoutPolicy(request_s=5.0),
-    ) as robot:
+    with master_on(proxy.port) as robot:
         robot.wait_until_ready(timeout_s=5)
         release = threading.Event()
         proxy.add(FaultRule("hold", function_code=16, address=COMMAND_BLOCK, release=release))
