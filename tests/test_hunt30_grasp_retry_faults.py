@@ -22,21 +22,17 @@ import pytest
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, record_moves
-from sim_speeds import QUICK
 from test_hunt30_pallet_faults import ran_in_order
-from tmmaster import PollPolicy, Pose, Robot, TimeoutPolicy
+from test_hunt30_retreat_faults import missed_grasp_with_retreat
+from tmmaster import PollPolicy, Robot, TimeoutPolicy
 from tmmaster.pickplace import (
-    ARTICLE_PICK,
     Runner,
     StateEvent,
     pick_and_place,
-    validate_config,
 )
-from tmmaster.sim import Cell, Simulator, TableObject
+from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
-PICK = Pose.from_sequence(ARTICLE_PICK)
-RETREAT = Pose(250, 50, 300, 180, 0, 90)
 GRIPPER_BLOCK = {"tmflow": 9014, "article": 0x0210}
 
 
@@ -53,21 +49,7 @@ GRIPPER_BLOCK = {"tmflow": 9014, "article": 0x0210}
 def test_a_fault_in_a_grasp_retry_runs_nothing_undocumented(
     tm_simulator_factory: Factory, profile: str, fault: str
 ) -> None:
-    sim = tm_simulator_factory(
-        profile,
-        cell=Cell(scene=[TableObject(name="part", pose=PICK)]),
-        faults=["grasp_miss:at_grasp=1"],
-        **QUICK,
-    )
-    config = validate_config(
-        {
-            "robot": {"profile": profile},
-            "gripper": {"settle_s": 0.05},
-            "run": {"poll_interval_s": 0.01, "grasp_retries": 1},
-            "timeouts": {"ack_s": 0.5, "motion_margin_s": 0.5, "in_flight_s": 0.5},
-            "on_error": {"reaction": "retreat", "pose": list(RETREAT.as_list())},
-        }
-    )
+    sim, config = missed_grasp_with_retreat(tm_simulator_factory, profile, grasp_retries=1)
     issued: list[Issued] = []
     fired = threading.Event()
     proxy = FaultProxy(sim.port)

@@ -33,6 +33,7 @@ from sim_speeds import QUICK
 from tmmaster import PollPolicy, Pose, RetryPolicy, Robot, TimeoutPolicy
 from tmmaster.pickplace import (
     ARTICLE_PICK,
+    PickPlaceConfig,
     Runner,
     RunResult,
     StateEvent,
@@ -70,11 +71,11 @@ pose = [250, 50, 300, 180, 0, 90]
 """
 
 
-def run_with_retreat_fault(
-    factory: Factory, profile: str, action: str, then: Callable[[FaultProxy, Runner], None]
-) -> tuple[RunResult, Simulator, float, FaultProxy, threading.Event]:
-    """One cycle whose grasp misses; ``action`` on the retreat's first command write, and
-    ``then`` once the proxy played it (on the proxy's event, never a count or a sleep)."""
+def missed_grasp_with_retreat(
+    factory: Factory, profile: str, *, grasp_retries: int
+) -> tuple[Simulator, PickPlaceConfig]:
+    """A simulator whose first grasp misses, and a run that retries ``grasp_retries``
+    times, polling densely, and reacts to a failure by retreating to ``RETREAT``."""
     sim = factory(
         profile,
         cell=Cell(scene=[TableObject(name="part", pose=PICK)]),
@@ -85,11 +86,20 @@ def run_with_retreat_fault(
         {
             "robot": {"profile": profile},
             "gripper": {"settle_s": 0.05},
-            "run": {"poll_interval_s": 0.01, "grasp_retries": 0},
+            "run": {"poll_interval_s": 0.01, "grasp_retries": grasp_retries},
             "timeouts": {"ack_s": 0.5, "motion_margin_s": 0.5, "in_flight_s": 0.5},
             "on_error": {"reaction": "retreat", "pose": list(RETREAT.as_list())},
         }
     )
+    return sim, config
+
+
+def run_with_retreat_fault(
+    factory: Factory, profile: str, action: str, then: Callable[[FaultProxy, Runner], None]
+) -> tuple[RunResult, Simulator, float, FaultProxy, threading.Event]:
+    """One cycle whose grasp misses; ``action`` on the retreat's first command write, and
+    ``then`` once the proxy played it (on the proxy's event, never a count or a sleep)."""
+    sim, config = missed_grasp_with_retreat(factory, profile, grasp_retries=0)
     proxy = FaultProxy(sim.port)
     release, ended_event = threading.Event(), threading.Event()
     helpers: list[threading.Thread] = []
