@@ -19,7 +19,6 @@ import functools
 import logging
 import signal
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
@@ -27,16 +26,15 @@ from types import ModuleType
 import pytest
 
 from examples_support import load_example
-from fault_proxy import FaultProxy, Rule
+from fault_proxy import FaultProxy
 from safety_invariant import wait_braked
+from test_hunt29_many_robots import link_down_behind_the_second_move
 from tmmaster import RetryPolicy, Robot
 from tmmaster.sim import Simulator
 
 Factory = Callable[..., Simulator]
 
 EXAMPLES = ["pick_and_place", "palletizing", "custom_sequence"]
-#: tmflow's command block (a command's FC16 write).
-COMMAND = 9000
 
 
 @pytest.fixture(autouse=True)
@@ -127,16 +125,7 @@ def test_a_give_up_the_link_could_not_carry_is_said(
     sim = tm_simulator_factory()
     with FaultProxy(sim.port) as proxy:
         # The second command write held in the network, the link cut behind it.
-        proxy.add(Rule("hold", function_code=16, address=COMMAND, nth=2))
-
-        def cut() -> None:
-            deadline = time.monotonic() + 30.0
-            while not proxy.played("hold") and time.monotonic() < deadline:
-                time.sleep(0.005)
-            proxy.outage(600.0)  # every connection closed, every reconnect refused
-
-        cutter = threading.Thread(target=cut)
-        cutter.start()
+        cutter = link_down_behind_the_second_move(proxy)
         try:
             code = load(name).main(argv(name, proxy.port, tmp_path))
         finally:
