@@ -11,12 +11,17 @@ from __future__ import annotations
 
 import asyncio
 import gc
+import signal
 import threading
 from collections.abc import Callable
+from typing import Any
 
-from tmmaster import ModbusTransport, Pose, Robot, aio
-from tmmaster._fleet import _DEFAULT, LoopTransport
+import pytest
+
+from tmmaster import Fleet, ModbusTransport, Pose, Robot, aio
+from tmmaster._fleet import _DEFAULT, LoopTransport, _DefaultDriver
 from tmmaster._registers import Table
+from tmmaster._transport import AsyncLink
 from tmmaster.sim import Simulator
 
 SimFactory = Callable[..., Simulator]
@@ -104,3 +109,54 @@ def test_an_in_process_robot_stays_off_the_driver(
         assert not isinstance(local._transport, LoopTransport)
         assert _DEFAULT.fleet is None
         assert driver_threads() == []
+
+
+#: The Ctrl-C tests need Python's own handler, in the main thread.
+NEEDS_MAIN_THREAD_CTRL_C = pytest.mark.skipif(
+    threading.current_thread() is not threading.main_thread()
+    or signal.getsignal(signal.SIGINT) is not signal.default_int_handler,
+    reason="needs Python's own Ctrl-C handler in the main thread",
+)
+
+
+@NEEDS_MAIN_THREAD_CTRL_C
+def test_a_ctrl_c_while_a_link_gives_the_driver_back_comes_after_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A Ctrl-C landing in a link's release (its close handed to the loop) once kept the
+    driver's user for good, its finalizer spent: the loop thread ran on after the last
+    link (the suite's leak check saw it after its in-process Ctrl-C tests)."""
+    transport = ModbusTransport("127.0.0.1", 1)
+    assert _DEFAULT.fleet is not None
+    call_soon = Fleet._call_soon
+
+    def ctrl_c_inside(fleet: Fleet, callback: Callable[..., object], *args: Any) -> bool:
+        if getattr(callback, "__func__", None) is AsyncLink.close:
+            signal.raise_signal(signal.SIGINT)  # lands here, before the close is handed over
+        return call_soon(fleet, callback, *args)
+
+    monkeypatch.setattr(Fleet, "_call_soon", ctrl_c_inside)
+    with pytest.raises(KeyboardInterrupt):
+        transport.close()
+    assert _DEFAULT.fleet is None  # given back before the Ctrl-C came out
+    assert driver_threads() == []
+
+
+@NEEDS_MAIN_THREAD_CTRL_C
+def test_a_ctrl_c_while_a_link_takes_the_driver_leaves_its_release_armed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A Ctrl-C landing right after a link took the driver, before its release was armed:
+    the half-made link is garbage, and its release still gives the driver back."""
+    acquire = _DefaultDriver.acquire
+
+    def ctrl_c_after(driver: _DefaultDriver) -> Fleet:
+        fleet = acquire(driver)
+        signal.raise_signal(signal.SIGINT)  # lands here: taken, no release armed yet
+        return fleet
+
+    monkeypatch.setattr(_DefaultDriver, "acquire", ctrl_c_after)
+    with pytest.raises(KeyboardInterrupt):
+        ModbusTransport("127.0.0.1", 1)
+    gc.collect()
+    assert _DEFAULT.fleet is None

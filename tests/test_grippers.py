@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import get_args
 
 import pytest
 
@@ -514,11 +515,12 @@ def test_article_register_gripper_instance_and_timeout(tm_simulator_factory: Fac
 
 def test_every_gripper_protocol_has_one_driver_and_one_simulated_device() -> None:
     from tmmaster._gripper import GRIPPER_DRIVERS
-    from tmmaster._registers import GRIPPER_DRIVER_NAMES
+    from tmmaster._registers import GripperDriverName
     from tmmaster.sim._grippers import GRIPPER_DEVICES
 
-    assert set(GRIPPER_DRIVERS) == set(GRIPPER_DEVICES) == set(GRIPPER_DRIVER_NAMES)
-    for name in GRIPPER_DRIVER_NAMES:
+    names = get_args(GripperDriverName)
+    assert set(GRIPPER_DRIVERS) == set(GRIPPER_DEVICES) == set(names)
+    for name in names:
         profile = next(
             p for p in ("blog-2fg7", "onrobot-2fg7") if gripper_profile(p).driver == name
         )

@@ -55,6 +55,7 @@ from ._logging import get_logger
 from ._loop import EventLoopName, LoopThread, MonitoredStatus, StatusRecord, poll_on_schedule
 from ._registers import RegisterField
 from ._retry import RetryPolicy
+from ._sigint import deferred
 from ._transport import AsyncLink, Block, ConnectionState, Transport, settle
 
 _log = get_logger("tmmaster.fleet")
@@ -104,13 +105,16 @@ class LoopTransport(Transport):
         name: str,
     ) -> None:
         super().__init__(host, port, device_id=device_id, timeout=timeout, retry=retry, name=name)
-        if default := fleet is None:
-            fleet = _DEFAULT.acquire()
-        self._fleet, self._default = fleet, default
         self._link = AsyncLink(host, port, device_id=device_id, timeout=timeout, name=name)
         self._link.stats = self.stats
-        # Run by close(), or once garbage unclosed (a Robot dropped without close()).
-        self._release = weakref.finalize(self, _let_go, fleet, self._link)
+        # The driver taken and its release armed as one step: a Ctrl-C between them would
+        # keep a default driver's loop running for good. The release runs by close(), or
+        # once garbage unclosed (a Robot dropped without close()).
+        with deferred():
+            if default := fleet is None:
+                fleet = _DEFAULT.acquire()
+            self._release = weakref.finalize(self, _let_go, fleet, self._link)
+        self._fleet, self._default = fleet, default
         self._release.atexit = False  # at exit the daemon loop thread simply ends
 
     @property
@@ -1006,9 +1010,11 @@ def fleet_driver(
 
 def _let_go(fleet: Fleet, link: AsyncLink) -> None:
     """A link's end: closed on its loop, and a default driver's share given back (a Fleet
-    of the user's is not the default one: nothing to give back)."""
-    fleet._call_soon(link.close)
-    _DEFAULT.release(fleet)
+    of the user's is not the default one: nothing to give back). A Ctrl-C meanwhile comes
+    after it: cut short, the finalizer has run all the same, and the share is never back."""
+    with deferred():
+        fleet._call_soon(link.close)
+        _DEFAULT.release(fleet)
 
 
 def wake_waits(member: FleetMember) -> None:

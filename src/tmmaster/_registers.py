@@ -12,7 +12,7 @@ import itertools
 import re
 from collections.abc import Iterable
 from enum import StrEnum
-from typing import Annotated, Any, Literal, Self, get_args
+from typing import Annotated, Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -611,7 +611,6 @@ ONROBOT_UNIT_IDS = (65, 66, 67)
 #: (``tmmaster._gripper.GRIPPER_DRIVERS``) and one simulated device
 #: (``tmmaster.sim._grippers.GRIPPER_DEVICES``), both keyed by these names.
 GripperDriverName = Literal["blog-2fg7", "onrobot-2fg7"]
-GRIPPER_DRIVER_NAMES: tuple[str, ...] = get_args(GripperDriverName)
 
 
 class GripperProfile(RegisterMap):

@@ -762,15 +762,6 @@ class Transport(ABC):
             )
 
 
-#: What pymodbus' framer and PDU decoding may raise on a malformed answer.
-DECODE_FAILURES: tuple[type[Exception], ...] = (
-    ModbusException,
-    ValueError,
-    IndexError,
-    struct.error,
-)
-
-
 def endpoint_text(host: str, port: int) -> str:
     """``host:port`` as written in a URL: ``192.168.1.100:502``, ``[::1]:502``."""
     return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
@@ -994,8 +985,22 @@ def shown_bytes(data: bytes) -> str:
     return data[:12].hex(" ") + ("..." if len(data) > 12 else "")
 
 
-def not_modbus_error(reply: ForeignReplyError, link: AsyncLink, what: str) -> NotModbusError:
-    """The :class:`NotModbusError` of bytes that are not Modbus TCP (one line, host:port)."""
+#: What reading an answer may raise: bytes that are not Modbus TCP, and what pymodbus'
+#: framer and PDU decoding raise on a malformed answer.
+UNREADABLE_ANSWER: tuple[type[Exception], ...] = (
+    ForeignReplyError,
+    ModbusException,
+    ValueError,
+    IndexError,
+    struct.error,
+)
+
+
+def answer_error(reply: Exception, link: AsyncLink, what: str) -> TransportError:
+    """The error of an answer that cannot be read: a :class:`NotModbusError` for bytes
+    that are not Modbus TCP (one line, host:port), else a malformed Modbus answer's."""
+    if not isinstance(reply, ForeignReplyError):
+        return TransportError(f"{link.name}: malformed answer to {what}: {reply}")
     where = endpoint_text(link.host, link.port)
     return NotModbusError(
         f"{link.name} at {where} is not a Modbus TCP server: its answer to {what} starts"
@@ -1052,11 +1057,8 @@ class _Stream(asyncio.Protocol):
                 used, answer = next_answer(
                     self.framer, self._buffer, device_id=link.device_id, name=link.name
                 )
-            except ForeignReplyError as exc:
-                self.fail(functools.partial(not_modbus_error, exc, link))
-                return
-            except DECODE_FAILURES as exc:
-                self.fail(functools.partial(_malformed, link.name, exc))
+            except UNREADABLE_ANSWER as exc:
+                self.fail(functools.partial(answer_error, exc, link))
                 return
             if not used:
                 return  # a partial frame: wait for the rest
@@ -1114,10 +1116,6 @@ class _Stream(asyncio.Protocol):
             self.transport.close()
 
 
-def _malformed(name: str, exc: BaseException, what: str) -> TransportError:
-    return TransportError(f"{name}: malformed answer to {what}: {exc}")
-
-
 def no_answer_error(link: AsyncLink, what: str, *, answered: bool) -> ResponseTimeoutError:
     """The error of a request that got no answer in time.
 
@@ -1151,7 +1149,7 @@ def _expire(future: _Call, stream: _Stream) -> None:
     if stream.stray is not None:
         tid, frame = stream.stray
         reply = ForeignReplyError(f"transaction id {tid}, never sent on this connection", frame)
-        error: TransportError = not_modbus_error(reply, link, future.what)
+        error = answer_error(reply, link, future.what)
     else:
         error = no_answer_error(link, future.what, answered=link.answered or stream.answered)
     future.set_exception(error)

@@ -340,7 +340,7 @@ class OnRobot2FG7Device(_GripperDevice):
 
 
 #: The simulated device of each gripper protocol (the drivers' registry is
-#: ``tmmaster._gripper.GRIPPER_DRIVERS``; both are keyed by ``GRIPPER_DRIVER_NAMES``).
+#: ``tmmaster._gripper.GRIPPER_DRIVERS``; both are keyed by ``GripperDriverName``).
 GRIPPER_DEVICES: Mapping[GripperDriverName, type[Blog2FG7Device | OnRobot2FG7Device]] = {
     "blog-2fg7": Blog2FG7Device,
     "onrobot-2fg7": OnRobot2FG7Device,
