@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C
 from tmmaster import Fleet, ModbusTransport, Pose, Robot, aio
 from tmmaster._fleet import _DEFAULT, LoopTransport, _DefaultDriver
 from tmmaster._registers import Table
@@ -109,14 +110,6 @@ def test_an_in_process_robot_stays_off_the_driver(
         assert not isinstance(local._transport, LoopTransport)
         assert _DEFAULT.fleet is None
         assert driver_threads() == []
-
-
-#: The Ctrl-C tests need Python's own handler, in the main thread.
-NEEDS_MAIN_THREAD_CTRL_C = pytest.mark.skipif(
-    threading.current_thread() is not threading.main_thread()
-    or signal.getsignal(signal.SIGINT) is not signal.default_int_handler,
-    reason="needs Python's own Ctrl-C handler in the main thread",
-)
 
 
 @NEEDS_MAIN_THREAD_CTRL_C

@@ -247,9 +247,6 @@ def test_the_command_under_a_fault_at_a_state_exits_truthfully_and_moves_nothing
     failed = data["error"]["state"]
     if own is None:  # a read-only state: met at the next command
         assert failed in (state, names[names.index(state) + 1]), data["error"]
-        # Met there, that command may have started before the stop (Ctrl-C's stop is set
-        # by a thread the handler starts): it is the failed state's own, and stopped.
-        own = NOMINAL[failed]
     else:
         assert failed == state, data["error"]
     assert kinds[: len(before)] == before, kinds

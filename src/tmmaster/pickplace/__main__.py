@@ -995,8 +995,13 @@ def _run_on(
     runner = Runner.from_config(robot, command.config, on_state=out.progress)
 
     # The first Ctrl-C stops the run (the arm is stopped, the report written); a second
-    # one gives up at once. Each marks the output interrupted first: only the last line.
-    with first_stops(runner.request_stop, noted=out.interrupt):
+    # one gives up at once. Each marks the output interrupted first (only the last line)
+    # and the run stopping: no next state starts before the stop's thread has run.
+    def noted() -> None:  # in the signal handler: flags only
+        out.interrupt()
+        runner.note_stop()
+
+    with first_stops(runner.request_stop, noted=noted):
         if out.live is not None:
             out.live.begin(cycles, outcome.expected_cycle_s, [step.name for step in sequence.steps])
         try:

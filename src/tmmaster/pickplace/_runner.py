@@ -400,6 +400,7 @@ class Runner:
         #: the first): time 0 of its records, for whatever else is timed beside the run.
         self.run_started: float | None = None
         self._stop = threading.Event()
+        self._stop_noted = False  # note_stop(): a Ctrl-C's, before its thread sets _stop
         self._log = _log.bind(robot=robot.name)
 
     @classmethod
@@ -458,8 +459,17 @@ class Runner:
 
     @property
     def stop_requested(self) -> bool:
-        """True once :meth:`request_stop` was called."""
-        return self._stop.is_set()
+        """True once :meth:`request_stop` or :meth:`note_stop` was called."""
+        return self._stop_noted or self._stop.is_set()
+
+    def note_stop(self) -> None:
+        """Ask the run to start no further state, at once; :meth:`request_stop` follows.
+
+        Safe in a signal handler, even one that interrupted the main thread inside an
+        event's lock: it sets a flag and takes no lock. The state the run is in goes on
+        until :meth:`request_stop` interrupts its waits.
+        """
+        self._stop_noted = True
 
     def request_stop(self) -> None:
         """Ask the run to stop: checked between states, and running waits give up now.
@@ -467,6 +477,7 @@ class Runner:
         Safe from a signal handler or another thread: it only sets two events (a Ctrl-C
         that comes meanwhile is delivered after both are set, never inside an event's lock).
         """
+        self._stop_noted = True
         with deferred():
             self._stop.set()
             self.robot.interrupt()
@@ -628,7 +639,7 @@ class Runner:
         if (
             rule is None
             or not isinstance(exc, rule.on)
-            or self._stop.is_set()
+            or self.stop_requested
             or not run.machine.retries_left()
         ):
             run.record(state, cycle, started, "failed")
@@ -662,7 +673,7 @@ class Runner:
             guard = step.guard_name or "guard"
             reason = (
                 StopRequestedError("stop requested")
-                if self._stop.is_set()
+                if self.stop_requested
                 else RobotError(f"{state}: guard {guard} does not hold; not moving on")
             )
             self._fail(run, state, reason)
@@ -674,7 +685,7 @@ class Runner:
     # -- helpers -----------------------------------------------------------------
 
     def _check_stop(self) -> None:
-        if self._stop.is_set():
+        if self.stop_requested:
             raise StopRequestedError("stop requested")
 
     def _open_at_start(self) -> None:
@@ -695,7 +706,7 @@ class Runner:
 
     def _as_stop(self, exc: BaseException, during: str) -> BaseException:
         """A failure caused by an interrupted wait is the stop request itself."""
-        if self._stop.is_set() and not isinstance(exc, StopRequestedError):
+        if self.stop_requested and not isinstance(exc, StopRequestedError):
             return StopRequestedError(f"stop requested during {during}")
         return exc
 
@@ -766,7 +777,7 @@ class Runner:
         run's does; a retreat move the run gave up is the run's own. Either says whether
         the stop was delivered (an undelivered one wins over an earlier delivered stop)."""
         motion = self.robot.last_motion
-        if self._stop.is_set() and result.failure is not None and not result.interrupted:
+        if self.stop_requested and result.failure is not None and not result.interrupted:
             delivered = self._stop_arm(before)
         elif motion is not None and motion is not before and motion.abandoned:
             delivered = motion.stop_delivered
@@ -780,7 +791,7 @@ class Runner:
         reaction = self.error_reaction
         if reaction == "stay":
             return ReactionRecord("stay", False, "configured to stay where it stopped")
-        if failure.interrupted:
+        if failure.interrupted or self.stop_requested:
             return ReactionRecord(reaction, False, "stop requested: not moving")
         if failure.state == IDLE:  # the arm is where the run found it, with what it holds
             return ReactionRecord(reaction, False, "the run had not started: not moving")
