@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C
-from tmmaster import Fleet, ModbusTransport, Pose, Robot, aio
+from tmmaster import Fleet, ModbusTransport, Pose, Robot, _fleet, aio
 from tmmaster._fleet import _DEFAULT, LoopTransport, _DefaultDriver
 from tmmaster._registers import Table
 from tmmaster._transport import AsyncLink
@@ -153,3 +153,19 @@ def test_a_ctrl_c_while_a_link_takes_the_driver_leaves_its_release_armed(
         ModbusTransport("127.0.0.1", 1)
     gc.collect()
     assert _DEFAULT.fleet is None
+
+
+def test_a_link_gives_its_share_back_to_the_driver_it_took_it_from(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """test_hunt27_event_loops gives its tests a fresh default driver; a link made
+    before, collected meanwhile, gave its share back to the fresh one (refused: not its
+    fleet) and the first kept it for good: its loop thread outlived every later link (the
+    suite's leak check failed in whichever test next used the driver)."""
+    transport = ModbusTransport("127.0.0.1", 1)
+    first = _fleet._DEFAULT
+    assert first.fleet is not None
+    monkeypatch.setattr(_fleet, "_DEFAULT", _DefaultDriver())  # as test_hunt27 does
+    del transport
+    gc.collect()
+    assert first.fleet is None

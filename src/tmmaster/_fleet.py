@@ -113,7 +113,7 @@ class LoopTransport(Transport):
         with deferred():
             if default := fleet is None:
                 fleet = _DEFAULT.acquire()
-            self._release = weakref.finalize(self, _let_go, fleet, self._link)
+            self._release = weakref.finalize(self, _let_go, _DEFAULT, fleet, self._link)
         self._fleet, self._default = fleet, default
         self._release.atexit = False  # at exit the daemon loop thread simply ends
 
@@ -1008,13 +1008,14 @@ def fleet_driver(
     return member
 
 
-def _let_go(fleet: Fleet, link: AsyncLink) -> None:
-    """A link's end: closed on its loop, and a default driver's share given back (a Fleet
-    of the user's is not the default one: nothing to give back). A Ctrl-C meanwhile comes
-    after it: cut short, the finalizer has run all the same, and the share is never back."""
+def _let_go(driver: _DefaultDriver, fleet: Fleet, link: AsyncLink) -> None:
+    """A link's end: closed on its loop, and a default driver's share given back to the
+    ``driver`` it was taken from (a Fleet of the user's is not the default one: nothing to
+    give back). A Ctrl-C meanwhile comes after it: cut short, the finalizer has run all
+    the same, and the share is never back."""
     with deferred():
         fleet._call_soon(link.close)
-        _DEFAULT.release(fleet)
+        driver.release(fleet)
 
 
 def wake_waits(member: FleetMember) -> None:
