@@ -13,6 +13,7 @@ import asyncio
 import gc
 import signal
 import threading
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -169,3 +170,36 @@ def test_a_link_gives_its_share_back_to_the_driver_it_took_it_from(
     del transport
     gc.collect()
     assert first.fleet is None
+
+
+def _armed_releases() -> dict[object, bool]:
+    """Every live LoopTransport's release finalizer: whether it runs at exit."""
+    registry = weakref.finalize._registry  # type: ignore[attr-defined]
+    return {
+        f: info.atexit for f, info in registry.items() if isinstance(info.weakref(), LoopTransport)
+    }
+
+
+@NEEDS_MAIN_THREAD_CTRL_C
+def test_a_ctrl_c_as_a_link_takes_the_driver_arms_no_exit_hook(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    before = set(_armed_releases())
+    acquire = _DefaultDriver.acquire
+
+    def ctrl_c_after(driver: _DefaultDriver) -> Fleet:
+        fleet = acquire(driver)
+        signal.raise_signal(signal.SIGINT)  # held back, delivered as the section ends
+        return fleet
+
+    monkeypatch.setattr(_DefaultDriver, "acquire", ctrl_c_after)
+    with pytest.raises(KeyboardInterrupt) as caught:
+        ModbusTransport("127.0.0.1", 1)
+    try:
+        made = {f: atexit for f, atexit in _armed_releases().items() if f not in before}
+        assert len(made) == 1  # the half-made link, alive in the traceback
+        assert list(made.values()) == [False], "its release would run at exit"
+    finally:
+        del caught
+        gc.collect()
+    assert _DEFAULT.fleet is None

@@ -114,8 +114,8 @@ class LoopTransport(Transport):
             if default := fleet is None:
                 fleet = _DEFAULT.acquire()
             self._release = weakref.finalize(self, _let_go, _DEFAULT, fleet, self._link)
+            self._release.atexit = False  # at exit the daemon loop thread simply ends
         self._fleet, self._default = fleet, default
-        self._release.atexit = False  # at exit the daemon loop thread simply ends
 
     @property
     def fleet(self) -> Fleet:
