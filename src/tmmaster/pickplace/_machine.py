@@ -46,6 +46,8 @@ class SequenceMachine:
         cycles: How many cycles to run, >= 1.
         stop_event: Set when a stop is requested: no transition but the end of a
             finished cycle is taken then.
+        stopped: Read instead of ``stop_event``: True once a stop is requested (a
+            :class:`Runner`'s, noted by a Ctrl-C's handler before its event is set).
         guard_context: What steps' guards are asked about when a trigger passes no
             context.
 
@@ -72,6 +74,7 @@ class SequenceMachine:
         cycles: int,
         stop_event: threading.Event | None = None,
         guard_context: Callable[[], Any] | None = None,
+        stopped: Callable[[], bool] | None = None,
     ) -> None:
         sequence.validate()
         require_count(cycles)
@@ -84,7 +87,7 @@ class SequenceMachine:
         #: Retries used in this cycle, by step name.
         self.retries_used: dict[str, int] = {}
         self._steps = {s.name: s for s in sequence.steps}
-        self._stop = stop_event if stop_event is not None else threading.Event()
+        self._stopped = stopped or (stop_event or threading.Event()).is_set
         # Guards of steps are asked about the runner's context: the runner passes it
         # with the trigger (``advance(ctx)``); this callable is the fallback without one.
         self._guard_context: Callable[[], Any] = (
@@ -181,7 +184,7 @@ class SequenceMachine:
         Returns:
             Whether the run may go on.
         """
-        return not self._stop.is_set()
+        return not self._stopped()
 
     def more_cycles(self, *_: object) -> bool:
         """Cycles remain after the current one.

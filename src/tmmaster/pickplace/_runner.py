@@ -297,7 +297,10 @@ class _Run:
         self.sequence = sequence
         #: Where the sequence comes from, for the messages of the plan's check.
         self.source = source
-        self.machine = SequenceMachine(sequence, cycles=cycles, stop_event=runner._stop)
+        # The runner's stop as its checks see it: a Ctrl-C's noted flag, or the request.
+        self.machine = SequenceMachine(
+            sequence, cycles=cycles, stopped=lambda: runner.stop_requested
+        )
         self.ctx = _RunContext(self)
         self.result = RunResult(
             sequence=sequence.name,
