@@ -187,6 +187,8 @@ class RegisterBank:
         self._table_changes: dict[Table, int] = dict.fromkeys(Table, 0)
         self._network_writes = 0
         self._field_writes: dict[str, int] = dict.fromkeys(register_map.fields, 0)
+        # Which network write last touched each field (1: the first; 0: none yet).
+        self._field_last_write: dict[str, int] = dict.fromkeys(register_map.fields, 0)
 
     @property
     def register_map(self) -> RegisterMap:
@@ -234,6 +236,12 @@ class RegisterBank:
         """How many network writes touched field ``name`` (even with an unchanged value)."""
         self._map.field(name)  # KeyError naming the map for an unknown field
         return self._field_writes[name]
+
+    def last_write(self, name: str) -> int:
+        """Which network write last touched field ``name`` (1: the first; 0: none yet):
+        of two fields, the one written later has the larger number."""
+        self._map.field(name)  # KeyError naming the map for an unknown field
+        return self._field_last_write[name]
 
     # -- device side -------------------------------------------------------------------
 
@@ -397,6 +405,7 @@ class RegisterBank:
             for name in touched:
                 if name in self._field_writes:
                     self._field_writes[name] += 1
+                    self._field_last_write[name] = self._network_writes + 1
             self._network_writes += 1
         if changed:
             self._version += 1

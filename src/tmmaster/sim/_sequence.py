@@ -69,6 +69,9 @@ class SequenceController(RobotController):
             }
         )
         self._buttons_released: int | None = None
+        #: A Play pressed on the pendant (press_play()) since the buttons were released:
+        #: later than any press written over the network that waits with it.
+        self._pendant_play = False
 
     def tick(self, dt: float) -> None:
         """One tick, the running move at the project speed as it is now: TMflow applies a
@@ -149,31 +152,60 @@ class SequenceController(RobotController):
     def _buttons_mark(self) -> int:
         return self._bank.changes_in(self._button_tables)
 
+    def press_play(self) -> None:
+        """Press Play on the pendant: acted on at the next tick, after any press written
+        before it that waits there (a Stop pressed during an error, acted on first)."""
+        super().press_play()
+        self._pendant_play = self._profile.has("play_pause")
+
+    def _pressed_at(self, name: str) -> float:
+        """When button ``name`` was pressed, as an order: its last network write, the
+        pendant's Play after every write."""
+        if name == "play_pause" and self._pendant_play:
+            return float("inf")
+        return self._bank.last_write(name)
+
     def _press_buttons(self) -> None:
-        # Coils are buttons: act on a press, then release them like a spring would.
-        if self._profile.has("stop_project") and self._bank.get("stop_project"):
-            self._bank.set("stop_project", False)
-            if self._running:
-                self._log.info("sim.button", device=self._name, button="stop")
-                self._stop_project("stop button")
-        if self._profile.has("play_pause") and self._bank.get("play_pause"):
-            self._bank.set("play_pause", False)
-            if self._running and not self._paused:
-                self._log.info("sim.button", device=self._name, button="pause")
-                self._pause("pause button")
-            elif not self._initialised or self._error_code or self._estop:
-                self._log.warning(
-                    "sim.button_ignored",
-                    device=self._name,
-                    button="play_pause",
-                    reason="robot in error" if self._initialised else "initialising",
-                )
-            elif self._paused:
-                self._log.info("sim.button", device=self._name, button="play")
-                self._resume()
+        # Coils are buttons: act on each press in the order written, as TMflow takes each
+        # as received (a Pause, then a Stop within one tick: paused, then stopped; a Stop,
+        # then a Play/Pause landing late: the project starts over), then release them like
+        # a spring would. The pendant's Play (press_play()) comes after every written press.
+        pressed = [
+            name
+            for name in ("stop_project", "play_pause")
+            if self._profile.has(name) and self._bank.get(name)
+        ]
+        order = sorted(pressed, key=self._pressed_at)
+        self._pendant_play = False
+        for name in order:
+            self._bank.set(name, False)
+            if name == "stop_project":
+                self._press_stop()
             else:
-                self._log.info("sim.button", device=self._name, button="play_pause")
-                self._start_project()
+                self._press_play_pause()
+
+    def _press_stop(self) -> None:
+        if self._running:
+            self._log.info("sim.button", device=self._name, button="stop")
+            self._stop_project("stop button")
+
+    def _press_play_pause(self) -> None:
+        if self._running and not self._paused:
+            self._log.info("sim.button", device=self._name, button="pause")
+            self._pause("pause button")
+        elif not self._initialised or self._error_code or self._estop:
+            self._log.warning(
+                "sim.button_ignored",
+                device=self._name,
+                button="play_pause",
+                reason="robot in error" if self._initialised else "initialising",
+            )
+        elif self._paused:
+            self._log.info("sim.button", device=self._name, button="play")
+            self._resume()
+        else:
+            self._log.info("sim.button", device=self._name, button="play_pause")
+            self._start_project()
 
     def _gripper_started(self, number: int, seq: int, *, close: bool, miss: bool) -> None:
         self._active = _Active(
