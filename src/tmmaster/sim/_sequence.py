@@ -69,9 +69,12 @@ class SequenceController(RobotController):
             }
         )
         self._buttons_released: int | None = None
-        #: A Play pressed on the pendant (press_play()) since the buttons were released:
-        #: later than any press written over the network that waits with it.
-        self._pendant_play = False
+        #: The bank's network writes when the buttons were last released: a coil written
+        #: since has that write's number (RegisterBank.last_write) as its press's order.
+        self._released_writes = 0
+        #: The order of a Play pressed on the pendant (press_play()) since the buttons were
+        #: released: after the writes received before it, before any received later.
+        self._pendant_play_at: float | None = None
 
     def tick(self, dt: float) -> None:
         """One tick, the running move at the project speed as it is now: TMflow applies a
@@ -154,29 +157,37 @@ class SequenceController(RobotController):
 
     def press_play(self) -> None:
         """Press Play on the pendant: acted on at the next tick, after any press written
-        before it that waits there (a Stop pressed during an error, acted on first)."""
+        before it that waits there (a Stop pressed during an error, acted on first), and
+        before one written after it."""
         super().press_play()
-        self._pendant_play = self._profile.has("play_pause")
+        if self._profile.has("play_pause") and self._pendant_play_at is None:
+            self._pendant_play_at = self._bank.network_writes + 0.5
 
     def _pressed_at(self, name: str) -> float:
-        """When button ``name`` was pressed, as an order: its last network write, the
-        pendant's Play after every write."""
-        if name == "play_pause" and self._pendant_play:
-            return float("inf")
-        return self._bank.last_write(name)
+        """When button ``name`` was pressed, as an order: its network write since the
+        buttons were released, else the pendant's Play (press_play()), else a press set on
+        the robot's side (a test's pendant): after every write."""
+        written = self._bank.last_write(name)
+        if written > self._released_writes:
+            return written
+        if name == "play_pause" and self._pendant_play_at is not None:
+            return self._pendant_play_at
+        return float("inf")
 
     def _press_buttons(self) -> None:
         # Coils are buttons: act on each press in the order written, as TMflow takes each
         # as received (a Pause, then a Stop within one tick: paused, then stopped; a Stop,
         # then a Play/Pause landing late: the project starts over), then release them like
-        # a spring would. The pendant's Play (press_play()) comes after every written press.
+        # a spring would. The pendant's Play (press_play()) comes after the presses
+        # written before it.
         pressed = [
             name
             for name in ("stop_project", "play_pause")
             if self._profile.has(name) and self._bank.get(name)
         ]
         order = sorted(pressed, key=self._pressed_at)
-        self._pendant_play = False
+        self._released_writes = self._bank.network_writes
+        self._pendant_play_at = None
         for name in order:
             self._bank.set(name, False)
             if name == "stop_project":
