@@ -28,6 +28,7 @@ from ._gate import CommandGate
 from ._io import SETTLED_FAILURES
 from ._poller import Poller
 from ._registers import RobotProfile
+from ._sigint import deferred
 from ._status import ProjectState, RobotStatus
 from ._transport import Transport
 
@@ -225,13 +226,16 @@ class ProjectControl:
         resumes a move; it starts the project from the beginning, running nothing pending.
         ``press``: the button pressed whose answer was never seen, logged
         ``robot.project_button_unanswered`` once the Stop went (docs/safety.md). ``boot``:
-        the program's start the press was decided in; a new start since shows the Stop."""
-        try:
-            self._channel.stop(boot)
-        except TMMasterError as failed:
-            self._log.error("robot.stop_failed", reason=why, error=str(failed))
-        if press:
-            self._log.error("robot.project_button_unanswered", button=press, error=str(exc))
+        the program's start the press was decided in; a new start since shows the Stop.
+        Held back from a second Ctrl-C, as a withdraw or a stop is (``_sigint.deferred``):
+        cut short, the press landing later would resume the move given up."""
+        with deferred():
+            try:
+                self._channel.stop(boot)
+            except TMMasterError as failed:
+                self._log.error("robot.stop_failed", reason=why, error=str(failed))
+            if press:
+                self._log.error("robot.project_button_unanswered", button=press, error=str(exc))
 
     def _wait_for(
         self, wanted: ProjectState, was: _Read, timeout_s: float, dt: float, press: str = ""

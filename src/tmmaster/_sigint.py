@@ -172,11 +172,11 @@ def _hand_back(previous: object, *, process: bool) -> None:
         # process with SIGINT at exit: status -2 instead of the 130 ``main()`` returned.
         # Any later evaluation of source text clears that memory; this is one.
         exec("", {})  # the empty program: clears that record, runs nothing
-    elif previous is None or previous is signal.SIG_IGN:
-        return  # not set here (another thread), or left ignored
-    elif previous is _interrupt_once and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        return  # nested in a command that a Ctrl-C ends too: it stays ignored
-    else:
+    # Else: not set here (another thread), or left ignored; or nested in a command that a
+    # Ctrl-C ends too (its handler, Ctrl-C ignored now): it stays ignored.
+    elif previous not in (None, signal.SIG_IGN) and (
+        previous is not _interrupt_once or signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
+    ):
         signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
 
 
