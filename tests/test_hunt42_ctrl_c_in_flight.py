@@ -72,6 +72,7 @@ import pytest
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check, wait_braked
+from test_hunt41_sync_ctrl_c_points import END, START, _paused, _start, _stopped
 from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C
 from tmmaster import Motion, PollPolicy, Pose, ProjectState, Robot, TimeoutPolicy, _sigint, aio
 from tmmaster import _robot as robot_module
@@ -81,8 +82,6 @@ from tmmaster.sim import MotionRecord, Simulator
 Factory = Callable[..., Simulator]
 Point = tuple[int, int]  # function code, address
 
-START = Pose(300, -200, 150, 180, 0, 90)
-END = Pose(300, -200, 180, 180, 0, 90)
 NEXT = Pose(280, -180, 165, 180, 0, 90)
 AFTER_TICKS = 20
 SLOW = 8.0
@@ -117,25 +116,6 @@ def _ready(robot: Robot, sim: Simulator) -> None:
     if sim.profile.name == "tmflow" and robot.project_state() is not ProjectState.RUNNING:
         robot.play()
     robot.wait_until_ready(timeout_s=5)
-    wait_braked(sim, ticks=3)
-
-
-_STARTED: dict[int, Motion] = {}
-
-
-def _start(robot: Robot, sim: Simulator) -> None:
-    count = len(sim.motion_log())
-    _STARTED[id(robot)] = robot.start_move(END, speed=5)
-    sim.wait_for(lambda: len(sim.motion_log()) > count, timeout=5)
-
-
-def _paused(robot: Robot, sim: Simulator) -> None:
-    _start(robot, sim)
-    robot.pause()
-
-
-def _stopped(robot: Robot, sim: Simulator) -> None:
-    robot.stop()
     wait_braked(sim, ticks=3)
 
 
