@@ -159,8 +159,7 @@ def arm_body(name: str, tool: Pose | None) -> ArmBody | None:
     specs = ARM_CAPSULES.get(name)
     if specs is None:
         return None
-    housing = housing_in_flange(tool)
-    if housing is not None:
+    if (housing := housing_in_flange(tool)) is not None:
         specs = (*specs, (HOUSING_LINK, "2FG7 housing", *housing))
     names = tuple(f"link {s[0]} {s[1]}" if s[0] < HOUSING_LINK else f"the {s[1]}" for s in specs)
     # Each capsule's bounding sphere: its segment's middle, half its length + its radius.

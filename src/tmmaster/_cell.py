@@ -58,8 +58,7 @@ def arm_lowest_z_mm(
     lowest = (0, math.inf)
     for k in range(2, last):
         a, b = origins[k], origins[k + 1]
-        length = math.dist(a, b)
-        if length <= 1e-6:
+        if (length := math.dist(a, b)) <= 1e-6:
             continue
         keep = max(0.0, 1 - radius_mm / length) if k + 1 == last else 1.0
         z = min(a[2], a[2] + (b[2] - a[2]) * keep) - radius_mm

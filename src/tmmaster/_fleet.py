@@ -471,12 +471,15 @@ class FleetMember:
         return self.transport.state is not ConnectionState.CLOSED and self.fleet._running
 
     async def watch_once(self) -> None:
-        """Read the robot's status once for the fleet's watch (nothing while not connected).
+        """Read the robot's status once for the fleet's watch (nothing before the first
+        connect; a lost link recorded as a ``ConnectionLostError``, as a monitor records it).
 
         Nothing either when a poll of the robot's wait read the whole status within the
         last half period (the article's polls do): that status is published already.
         """
         if not self.linked():
+            if self.transport.state is ConnectionState.DISCONNECTED:
+                self.record.fail(ConnectionLostError(f"{self.transport.name}: the link is down"))
             return
         read_at = self.record.published.read_at
         if read_at is not None and time.monotonic() - read_at < self.fresh_s:
