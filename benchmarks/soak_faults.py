@@ -52,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from fault_proxy import FaultProxy, Rule
 from leaks import left_open, open_sockets
 from pendant import press_play_pause
-from safety_invariant import Issued, check
+from safety_invariant import Issued, check, wait_braked
 from tmmaster import (
     Fleet,
     PollPolicy,
@@ -270,29 +270,13 @@ class Episode:
             return to, lambda: front.move_arc(via, to, speed=speed)
         if kind == "by":
             with contextlib.suppress(TimeoutError):
-                self._wait_still(side.sim)
+                wait_braked(side.sim, ticks=5, timeout=3.0)
             side.count += 1
             offset = [rng.uniform(-15, 15) for _ in range(3)]
             target = side.sim.tcp_pose().offset(dx=offset[0], dy=offset[1], dz=offset[2])
             return target, lambda: front.move_by(*offset, speed=speed)
         target = side.target(rng)
         return target, lambda: front.move_to(target, speed=speed, motion=kind)
-
-    @staticmethod
-    def _wait_still(sim: Simulator) -> None:
-        pose, since = sim.tcp_pose(), sim.ticks
-
-        def still() -> bool:
-            nonlocal pose, since
-            if sim.ticks < since + 5:
-                return False
-            now = sim.tcp_pose()
-            if now.is_close(pose, mm=1e-6, deg=1e-6):
-                return True
-            pose, since = now, sim.ticks
-            return False
-
-        sim.wait_for(still, timeout=3.0)
 
     def _ready(self, side: Side) -> None:
         sim = side.sim

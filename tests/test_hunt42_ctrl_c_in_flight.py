@@ -72,7 +72,7 @@ import pytest
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check, wait_braked
-from test_hunt41_sync_ctrl_c_points import END, START, _paused, _start, _stopped
+from test_hunt41_sync_ctrl_c_points import END, START, _paused, _start, _stopped, let_run
 from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C
 from tmmaster import Motion, PollPolicy, Pose, ProjectState, Robot, TimeoutPolicy, _sigint, aio
 from tmmaster import _robot as robot_module
@@ -95,11 +95,6 @@ def _ctrl_c() -> None:
     thread, whose blocking wait it interrupts; ``signal.raise_signal`` in a helper
     thread would leave an asyncio loop asleep until its next event)."""
     os.kill(os.getpid(), signal.SIGINT)
-
-
-def let_run(sim: Simulator, ticks: int) -> None:
-    start = sim.ticks
-    sim.wait_for(lambda: sim.ticks >= start + ticks, timeout=5.0)
 
 
 def open_robot(port: int, profile: Any, request_s: float = 0.5) -> Robot:
@@ -328,6 +323,22 @@ def test_a_ctrl_c_while_a_request_is_held_leaves_nothing_to_run(
     check(issued, _not_resumed(sim.motion_log()))
 
 
+def _nothing_runs_on(
+    sim: Simulator, since: float, issued: list[Issued], what: str, *, resumed: bool = False
+) -> None:
+    """Nothing started after ``since`` (the motion log's clock), the arm stays at rest, a
+    new Robot moves once, and the robot ran only what was issued (with ``resumed``, a
+    resumed move's second record allowed: :func:`_not_resumed`)."""
+    late = [m for m in sim.motion_log() if m.wall_time > since]
+    assert not late, f"started after {what}: {late}"
+    rest = sim.tcp_pose()
+    let_run(sim, 5)
+    assert sim.tcp_pose().is_close(rest, mm=0.01, deg=0.01), "the arm moves on"
+    _next_robot_moves(sim, issued)
+    log = sim.motion_log()
+    check(issued, _not_resumed(log) if resumed else log)
+
+
 def _own(case: Held, record: MotionRecord) -> bool:
     if case.grip is not None:
         return record.kind == case.grip
@@ -549,12 +560,7 @@ def test_a_second_ctrl_c_during_the_clean_up_does_not_cut_it_short(
     assert motion.withdrawn is True or motion.stop_delivered is True, motion
     sim.clear_faults()
     let_run(sim, AFTER_TICKS)
-    assert not [m for m in sim.motion_log() if m.wall_time > ended_at]
-    rest = sim.tcp_pose()
-    let_run(sim, 5)
-    assert sim.tcp_pose().is_close(rest, mm=0.01, deg=0.01), "the arm moves on"
-    _next_robot_moves(sim, issued)
-    check(issued, sim.motion_log())
+    _nothing_runs_on(sim, ended_at, issued, "the KeyboardInterrupt")
 
 
 # -- 2b. the second Ctrl-C at each line of close() and of deferred() -----------------------
@@ -749,13 +755,7 @@ def test_a_ctrl_c_in_asyncio_run_while_a_request_is_held(
     motion = robot.robot.last_motion
     assert motion is not None
     assert motion.done or motion.withdrawn is True or motion.stop_delivered is True, motion
-    late = [m for m in sim.motion_log() if m.wall_time > ended_at]
-    assert not late, f"started after asyncio.run ended: {late}"
-    rest = sim.tcp_pose()
-    let_run(sim, 5)
-    assert sim.tcp_pose().is_close(rest, mm=0.01, deg=0.01), "the arm moves on"
-    _next_robot_moves(sim, issued)
-    check(issued, sim.motion_log())
+    _nothing_runs_on(sim, ended_at, issued, "asyncio.run ended")
 
 
 # -- 2c. the first Ctrl-C while a request is held, the second in its give-up ----------------
@@ -870,13 +870,7 @@ def test_a_second_ctrl_c_in_the_give_up_of_a_request_held_in_flight(
     assert motion is not None
     if motion.target == END:
         assert motion.withdrawn is True or motion.stop_delivered is True, motion
-    late = [m for m in sim.motion_log() if m.wall_time > ended_at]
-    assert not late, f"started after the KeyboardInterrupt: {late}"
-    rest = sim.tcp_pose()
-    let_run(sim, 5)
-    assert sim.tcp_pose().is_close(rest, mm=0.01, deg=0.01), "the arm moves on"
-    _next_robot_moves(sim, issued)
-    check(issued, _not_resumed(sim.motion_log()))
+    _nothing_runs_on(sim, ended_at, issued, "the KeyboardInterrupt", resumed=True)
 
 
 @pytest.mark.xfail(
