@@ -93,8 +93,9 @@ def test_a_step_that_raises_with_its_move_left_running_gives_the_move_up(
         if when == "running":  # the report says the arm was stopped
             assert result.stop_delivered is True
         # Given up, not left owned by nobody: the next command is taken (after the Stop
-        # that ended a running move, once the project plays again).
-        if when == "running":
+        # that ended a running move, once the project plays again). A "sent" move the
+        # robot took before the give-up (a loaded machine) is stopped too.
+        if result.stop_delivered:
             robot.play()
         robot.wait_until_ready(5.0)
         robot.move_to(HOME, speed=30)

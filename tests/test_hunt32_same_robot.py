@@ -68,6 +68,10 @@ START = Pose(220, -200, 200, 180, 0, 90)
 FAILED = Pose(220, 200, 250, 180, 0, 90)
 NEXT = Pose(300, 0, 180, 180, 0, 90)
 #: The article's gripper has no busy flag: its settle time at 100x real time.
+#: The failed move stops halfway and stays busy, so a cancel or an interrupt sent once it
+#: started finds it running however late a loaded machine runs the test's thread (at 100x
+#: the whole move takes some 30 ms: under load it could end first).
+STILL_MOVING = "stall:at_move=1"
 TIMEOUTS = TimeoutPolicy(motion_margin_s=0.5, ack_timeout_s=2.0, gripper_settle_s=0.05)
 
 
@@ -103,6 +107,7 @@ def fail_timeout(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
 
 
 def fail_interrupt(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    sim.inject(STILL_MOVING)
     before = len([m for m in sim.motion_log() if m.target])
 
     def interrupt() -> None:
@@ -117,6 +122,7 @@ def fail_interrupt(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
 
 
 def fail_cancel(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
+    sim.inject(STILL_MOVING)
     before = len([m for m in sim.motion_log() if m.target])
     issued.append(Issued(FAILED, 0.0))
     motion = robot.start_move(FAILED, speed=20)
@@ -141,6 +147,7 @@ def fail_link(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
 def fail_close(robot: Robot, sim: Simulator, issued: list[Issued]) -> None:
     """``close()`` mid-move (the arm stopped), then ``connect()`` again: refused, as
     documented (a closed Robot is not reused); nothing is sent."""
+    sim.inject(STILL_MOVING)
     before = len([m for m in sim.motion_log() if m.target])
     issued.append(Issued(FAILED, 0.0))
     robot.start_move(FAILED, speed=20)
@@ -353,10 +360,12 @@ async def _async_case(sim: Simulator, kind: str, issued: list[Issued]) -> None:
             with pytest.raises(TMMasterError):
                 await robot.move_to(FAILED, speed=20)
         elif kind == "cancel":
+            sim.inject(STILL_MOVING)
             motion = await robot.start_move(FAILED, speed=20)
             started(sim, 2)
             assert await motion.cancel()
         elif kind == "interrupt":  # then refused until clear_stop_request(), unsent
+            sim.inject(STILL_MOVING)
             task = asyncio.ensure_future(robot.move_to(FAILED, speed=20))
             while len([m for m in sim.motion_log() if m.target]) < 2:
                 await asyncio.sleep(0.005)
