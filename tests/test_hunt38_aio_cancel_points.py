@@ -83,7 +83,8 @@ _HANDLE: dict[int, aio.AsyncMotion] = {}
 
 
 async def _started(robot: aio.AsyncRobot) -> None:
-    _HANDLE[id(robot)] = await robot.start_move(END, speed=20)
+    # Slow enough to be under way still when the call comes, on a loaded machine too.
+    _HANDLE[id(robot)] = await robot.start_move(END, speed=5)
 
 
 def _handle(robot: aio.AsyncRobot) -> aio.AsyncMotion:
