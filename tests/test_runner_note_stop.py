@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from tmmaster import PollPolicy, Robot
+from tmmaster import EmergencyStopError, PollPolicy, Robot, RobotError, RobotFaultError
 from tmmaster.pickplace import Runner, StateEvent, StepContext, TaskSequence
 from tmmaster.sim import Simulator
 
@@ -71,3 +71,33 @@ def test_a_stop_in_a_cycles_last_state_begins_no_next_cycle(robot: Robot, how: s
     entered = [(e.state, e.cycle) for e in events]
     assert (result.failure.state, result.failure.cycle) == ("B", 1), entered
     assert ("A", 2) not in entered, entered
+
+
+@pytest.mark.parametrize(
+    ("fault", "reported"),
+    [
+        (EmergencyStopError("emergency stop is pressed"), "EmergencyStopError"),
+        (RobotFaultError("robot in error (mode error)", error_code=0x0200), "RobotFaultError"),
+        (RobotFaultError("the TMflow project is stopped"), "StopRequestedError"),
+        (RobotError("reported the move finished but the TCP is at ..."), "StopRequestedError"),
+    ],
+)
+def test_a_fault_the_robot_reports_is_not_relabelled_as_the_stop(
+    robot: Robot, fault: RobotError, reported: str
+) -> None:
+    """A Ctrl-C noted while the robot reports its own fault (an e-stop pressed as the
+    operator hits Ctrl-C): the run's failure is the fault, which a Stop never causes, not
+    "stop requested". What a stop does cause (the project stopped, a move ended short) is
+    still the stop. Review finding (P1): every failure became the stop once the flag was
+    set."""
+    runner = Runner(robot)
+
+    def step(_ctx: StepContext) -> None:
+        runner.note_stop()
+        raise fault
+
+    seq = TaskSequence("fault")
+    seq.add("A", step)
+    result = runner.run(seq)
+    assert result.failure is not None
+    assert result.failure.type == reported, result.failure

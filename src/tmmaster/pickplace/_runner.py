@@ -708,8 +708,13 @@ class Runner:
             self._log.warning("pickplace.held_part_released", at=arm_at(self.robot))
 
     def _as_stop(self, exc: BaseException, during: str) -> BaseException:
-        """A failure caused by an interrupted wait is the stop request itself."""
-        if self.stop_requested and not isinstance(exc, StopRequestedError):
+        """A failure caused by an interrupted wait is the stop request itself. A fault the
+        robot reports is never the stop's doing (a Stop sets no e-stop and no error code:
+        article reports its e-stop as code 0x0200): it is reported as it is."""
+        faulted = isinstance(exc, EmergencyStopError) or (
+            isinstance(exc, RobotFaultError) and bool(exc.error_code)
+        )
+        if self.stop_requested and not faulted and not isinstance(exc, StopRequestedError):
             return StopRequestedError(f"stop requested during {during}")
         return exc
 
