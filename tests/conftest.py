@@ -120,8 +120,9 @@ def memory_simulator_factory(
 #: transport seam"): most of a test's time is waiting on the wall clock (simulated moves,
 #: timeouts), which more workers overlap; each worker also costs its start-up (about 3 s
 #: of CPU: imports and collecting every test) and adds load against the safety tests'
-#: timing margins. Four a CPU: 64-69 s on two cores, against 92-100 s with two.
-WORKERS_PER_CPU = 4
+#: timing margins. Six a CPU: 87-91 s on two cores in five runs, against 108-117 s with
+#: four (2026-11-30, about 4,440 tests).
+WORKERS_PER_CPU = 6
 
 
 def _cpus() -> int:
