@@ -283,8 +283,11 @@ def test_a_cancel_from_another_thread_while_the_command_write_is_held_runs_nothi
                 # Before: the sender, its copy landed, renewed the session while the
                 # cancel waited for the program's answer, which then read as another
                 # master's: "withdrawn", the arm moving (stopped by the robot program
-                # seeing another master).
-                assert (motion.withdrawn, motion.stop_delivered) == (False, True)
+                # seeing another master). On a loaded machine the copy can be taken before
+                # cancel()'s own poll, which then sees it running and stops it without
+                # trying a withdraw (withdrawn None: none was tried).
+                assert motion.withdrawn is not True
+                assert motion.stop_delivered is True
                 assert not braked(sim).is_close(FAR)
             else:
                 assert motion.withdrawn is True

@@ -82,7 +82,8 @@ def test_the_wait_answers_only_once_the_arm_no_longer_creeps(profile: str) -> No
     with sim, _connect(sim, profile) as robot:
         robot.wait_until_ready(timeout_s=5)
         start = sim.tcp_pose()
-        robot.start_move(FAR, speed=20)
+        # Slow enough that the Stop comes mid-move however late a loaded machine runs it.
+        robot.start_move(FAR, speed=5)
         sim.wait_for(lambda: sim.tcp_pose().distance_to(start) > 10, timeout=5.0)
         robot.stop()
         status = robot.wait_until_at_rest(timeout_s=5)
