@@ -22,6 +22,7 @@ from tmmaster import (
     PollPolicy,
     RetryPolicy,
     Robot,
+    StopRequestedError,
     TMMasterError,
     gripper_profile,
 )
@@ -119,3 +120,38 @@ def test_one_grippers_fault_is_its_own_and_fleet_close_stops_every_gripper(
         fleet.close()
         for robot in robots:
             robot.close()
+
+
+def test_a_move_halted_by_a_close_between_its_stop_check_and_its_read_is_not_done(
+    sims: list[Simulator], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A close on another thread (a Fleet's, or Robot.close()) sets the robot's stop event,
+    then stops the fingers. Seen once beside two CPU hogs: the whole close ran between the
+    wait's stop check and its status read, which found the halted fingers not busy, and
+    open() returned as done at 35.5 mm (blog-2fg7 reports no width). Deterministic here:
+    the first status read of the wait runs that close's two steps first, waits until the
+    fingers stand, then reads. Without the fix, open() returns their status."""
+    sim = sims[0]
+    assert sim.gripper_port is not None
+    link = GripperLink("127.0.0.1", sim.gripper_port, poll_interval_s=0.01)
+    gripper = Blog2FG7Gripper(gripper_profile("blog-2fg7"), link)
+    with Robot(
+        "127.0.0.1", sim.port, gripper=gripper, polling=PollPolicy(interval_s=0.01)
+    ) as robot:
+        gripper.close(timeout_s=3.0)  # closed: the open has its whole stroke to go
+        read = gripper.status
+        closed_first: list[bool] = []
+
+        def status_after_a_close() -> object:
+            if not closed_first and fingers(sim)[0]:
+                closed_first.append(True)
+                robot.interrupt()  # the close's first step: the robot's stop event
+                gripper._stop_fingers()  # its second: the fingers' stop
+                at_rest(sim)
+            return read()
+
+        monkeypatch.setattr(gripper, "status", status_after_a_close)
+        with pytest.raises(StopRequestedError):
+            gripper.open(timeout_s=3.0)
+        assert closed_first, "the close never ran inside the wait"
+        assert at_rest(sim) < 38.0  # stopped short, as the error says

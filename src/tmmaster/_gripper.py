@@ -337,8 +337,11 @@ def _wait(
         poller.check()
         if guard is not None:
             guard()
-        result = check()
-        if result is not None:
+        if (result := check()) is not None:
+            # A stop halts the fingers, which then read as a move that ended (blog-2fg7
+            # has no width). Whoever stops them (close(), a Fleet's) sets the event first:
+            # a status read after it is not taken as the move done.
+            poller.check()
             return result
         if time.monotonic() >= deadline:
             raise GripperTimeoutError(f"{what} did not finish within {timeout_s:g} s")
