@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from test_sim_controller import DT, ListLogger, run, tmflow
+from test_sim_controller import DT, FAR, ListLogger, run, run_until, send_tmflow, tmflow
 from tmmaster._registers import Table
 from tmmaster.sim._bank import RegisterBank
 
@@ -156,3 +156,32 @@ def test_every_network_write_path_stamps_the_coils() -> None:
     assert bank.last_write("play_pause") == bank.last_write("stop_project") == before + 2
     bank.set("stop_project", True)  # the robot's side: no network write
     assert bank.last_write("stop_project") == before + 2
+
+
+@pytest.mark.parametrize("stop_again", [False, True])
+def test_a_play_landing_while_a_stop_brakes_the_arm_starts_the_project_once_at_rest(
+    stop_again: bool,
+) -> None:
+    """A master's Stop, then a toggle (held in the network) in the same tick, while the
+    arm moves: the project starts over once the arm is at rest, not while it brakes (the
+    robot program's start-up ChangeTCP() failed on the moving arm: robot error 0x0300).
+    A Stop pressed meanwhile takes the waiting start back. Hunt 42's former strict xfail,
+    here on a controller ticked by hand."""
+    ctl, bank, backend, log = tmflow()
+    run(ctl, 0.5)
+    send_tmflow(bank, 1, target=FAR, speed=100)
+    run_until(ctl, lambda: not backend.is_settled())  # the arm moves
+    started = starts(log)
+    press(bank, STOP)
+    press(bank, PLAY_PAUSE)
+    ctl.tick(DT)
+    assert "sim.project_stopped" in log.names()
+    assert not backend.is_settled()  # it brakes
+    assert not ctl.project_running  # its start waits for the arm
+    if stop_again:
+        press(bank, STOP)
+    run_until(ctl, backend.is_settled)
+    run(ctl, 2 * DT)
+    assert ctl.project_running is not stop_again
+    assert starts(log) == started + (0 if stop_again else 1)
+    assert not bank.get("error")

@@ -75,6 +75,9 @@ class SequenceController(RobotController):
         #: The order of a Play pressed on the pendant (press_play()) since the buttons were
         #: released: after the writes received before it, before any received later.
         self._pendant_play_at: float | None = None
+        #: A Play pressed on the stopped project while its arm still brakes (a Stop's):
+        #: the project starts once the arm is at rest (see :meth:`_press_play_pause`).
+        self._start_at_rest = False
 
     def tick(self, dt: float) -> None:
         """One tick, the running move at the project speed as it is now: TMflow applies a
@@ -147,6 +150,9 @@ class SequenceController(RobotController):
     def _handle_buttons(self) -> None:
         # A button is pressed by a write: while no word of the buttons' tables changed
         # since they were released (both read 0 then), none is pressed.
+        if self._start_at_rest and self._backend.is_settled():
+            self._start_at_rest = False
+            self._start_project()
         if self._buttons_released == self._buttons_mark():
             return
         self._press_buttons()
@@ -196,6 +202,7 @@ class SequenceController(RobotController):
                 self._press_play_pause()
 
     def _press_stop(self) -> None:
+        self._start_at_rest = False  # a Play waiting for the arm to rest is taken back
         if self._running:
             self._log.info("sim.button", device=self._name, button="stop")
             self._stop_project("stop button")
@@ -214,9 +221,15 @@ class SequenceController(RobotController):
         elif self._paused:
             self._log.info("sim.button", device=self._name, button="play")
             self._resume()
-        else:
+        elif self._backend.is_settled():
             self._log.info("sim.button", device=self._name, button="play_pause")
             self._start_project()
+        else:
+            # Assumed, not measured on a TM5: TMflow starts a project only once the arm a
+            # Stop brakes is at rest. Started at once, the program's start-up ChangeTCP()
+            # would fail on the moving arm and leave the robot in error.
+            self._log.info("sim.button", device=self._name, button="play_pause", at_rest=False)
+            self._start_at_rest = True
 
     def _gripper_started(self, number: int, seq: int, *, close: bool, miss: bool) -> None:
         self._active = _Active(
@@ -242,6 +255,7 @@ class SequenceController(RobotController):
         super()._enter_error(code, reason)
 
     def _publish_error(self, code: int, reason: str) -> None:
+        self._start_at_rest = False  # an error takes a waiting Play back, as it takes Play
         self._bank.set("last_error_code", code)
         self._bank.set("error", True)
         self._publish_tm_state()
