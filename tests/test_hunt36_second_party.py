@@ -234,6 +234,7 @@ def test_robot_play_never_resumes_a_live_masters_paused_move(
     moving(sim, 1)
     sim.call(lambda: sim._controller.bank.set("play_pause", True))  # the pendant's Pause
     sim.wait_for(lambda: bool(sim.field("paused")), timeout=5.0)
+    wait_braked(sim)  # paused shows at once; the arm brakes to rest after it (CI: 0.02 mm)
     held: Pose = sim.tcp_pose()
     result: dict[str, Any] = {}
     operator("play", sim.port, result).join()
