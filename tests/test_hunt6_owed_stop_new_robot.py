@@ -31,10 +31,11 @@ Factory = Callable[..., Simulator]
 
 START = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 250, 200, 180, 0, 90)
-#: 8 times real time, FAR at SLOW %: the whole move about 5 s of wall time, so that it
+#: 4 times real time, FAR at SLOW %: the whole move about 10 s of wall time, so that it
 #: still runs when the next Robot comes, on a loaded machine too (at 12x, 3.4 s, it was
-#: over once beside two CPU hogs); the move to START takes a sixth of that.
-TIME_SCALE = 8.0
+#: over once beside two CPU hogs at 12 workers; at 8x, 5 s, beside three at 16); the
+#: move to START takes a sixth of that.
+TIME_SCALE = 4.0
 SLOW = 1
 #: The outage outlasts the poll's retries, the Stop's and the close's (0.3 s each):
 #: unloaded, the close returns about 0.3-0.4 s into it (connections refused at once).
