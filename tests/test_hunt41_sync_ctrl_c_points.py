@@ -156,12 +156,9 @@ def ctrl_c(monkeypatch: pytest.MonkeyPatch) -> Iterator[CtrlC]:
         if not at.active or threading.current_thread() is not threading.main_thread():
             return hand_over(self, what, bound, latch, start, *args)
         chain = getattr(start, "__self__", None)
-        points: list[Point] = []
         if isinstance(chain, _ChainedRead):
             chain.from_main = True  # type: ignore[attr-defined]
-            points = [(code, block.address) for _what, code, block in chain.requests]
-        elif start == self._link.start:
-            points = [(args[1], args[2])]
+        points = hand_over_points(self, start, args)
         if points:
             at.boundary(points[0], "before")
         result = hand_over(self, what, bound, latch, start, *args)
@@ -194,6 +191,16 @@ def ctrl_c(monkeypatch: pytest.MonkeyPatch) -> Iterator[CtrlC]:
     finally:
         at.active = False
         signal.signal(signal.SIGINT, previous)
+
+
+def hand_over_points(transport: LoopTransport, start: Any, args: tuple[Any, ...]) -> list[Point]:
+    """The requests a hand-over to the driver's loop sends (``LoopTransport._hand_over``'s
+    ``start`` and its ``args``), as (function code, address): every block of a chained
+    read, or the link's one request; none for any other job (a connect, a close)."""
+    chain = getattr(start, "__self__", None)
+    if isinstance(chain, _ChainedRead):
+        return [(code, block.address) for _what, code, block in chain.requests]
+    return [(args[1], args[2])] if start == transport._link.start else []
 
 
 def let_run(sim: Simulator, ticks: int) -> None:

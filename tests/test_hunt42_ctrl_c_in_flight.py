@@ -72,15 +72,23 @@ import pytest
 
 from fault_proxy import FaultProxy, Rule
 from safety_invariant import Issued, check, wait_braked
-from test_hunt41_sync_ctrl_c_points import END, START, _paused, _start, _stopped, let_run
+from test_hunt41_sync_ctrl_c_points import (
+    END,
+    START,
+    Point,
+    _paused,
+    _start,
+    _stopped,
+    hand_over_points,
+    let_run,
+)
 from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C
 from tmmaster import Motion, PollPolicy, Pose, ProjectState, Robot, TimeoutPolicy, _sigint, aio
 from tmmaster import _robot as robot_module
-from tmmaster._fleet import LoopTransport, _ChainedRead, _Latch
+from tmmaster._fleet import LoopTransport, _Latch
 from tmmaster.sim import MotionRecord, Simulator
 
 Factory = Callable[..., Simulator]
-Point = tuple[int, int]  # function code, address
 
 NEXT = Pose(280, -180, 165, 180, 0, 90)
 AFTER_TICKS = 20
@@ -453,12 +461,7 @@ def second(monkeypatch: pytest.MonkeyPatch) -> Iterator[Second]:
     ) -> Any:
         if not at.active or threading.current_thread() is not threading.main_thread():
             return hand_over(self, what, bound, latch, start, *args)
-        chain = getattr(start, "__self__", None)
-        points: list[Point] = []
-        if isinstance(chain, _ChainedRead):
-            points = [(code, block.address) for _what, code, block in chain.requests]
-        elif start == self._link.start:
-            points = [(args[1], args[2])]
+        points = hand_over_points(self, start, args)
         if points:
             at.boundary(points[0], "before")
         result = hand_over(self, what, bound, latch, start, *args)
