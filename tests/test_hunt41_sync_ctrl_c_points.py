@@ -529,8 +529,14 @@ def test_a_ctrl_c_at_a_request_boundary_leaves_nothing_to_run(
         if ran and not at_target:
             assert motion.withdrawn is not True, f"said withdrawn, but it ran: {motion}"
             assert motion.stop_delivered is True or motion.done, motion
-    # A new Robot on the same simulator moves once, from where the arm is, to its end.
-    with open_robot(sim) as again:
+    next_robot_moves(sim, issued, open_robot(sim))
+    check(issued, _not_resumed(sim.motion_log(), case))
+
+
+def next_robot_moves(sim: Simulator, issued: list[Issued], again: Robot) -> None:
+    """A new Robot (``again``, closed here) on the same simulator moves once, from where
+    the arm is, to its end."""
+    with again:
         _ready(again, sim)
         here = sim.tcp_pose()
         issued.append(Issued(NEXT, time.monotonic()))
@@ -539,7 +545,6 @@ def test_a_ctrl_c_at_a_request_boundary_leaves_nothing_to_run(
         assert moved.start is not None
         assert moved.start.is_close(here, mm=1.0, deg=0.5), (moved.start, here)
         assert sim.tcp_pose().is_close(NEXT, mm=0.05, deg=0.05)
-    check(issued, _not_resumed(sim.motion_log(), case))
 
 
 def _acted_late(case: Case, record: MotionRecord, ctrl_c: CtrlC, rest: Pose) -> bool:

@@ -77,10 +77,12 @@ from test_hunt41_sync_ctrl_c_points import (
     START,
     Point,
     _paused,
+    _ready,
     _start,
     _stopped,
     hand_over_points,
     let_run,
+    next_robot_moves,
 )
 from test_interrupt_ctrl_c_race import NEEDS_MAIN_THREAD_CTRL_C
 from tmmaster import Motion, PollPolicy, Pose, ProjectState, Robot, TimeoutPolicy, _sigint, aio
@@ -90,7 +92,6 @@ from tmmaster.sim import MotionRecord, Simulator
 
 Factory = Callable[..., Simulator]
 
-NEXT = Pose(280, -180, 165, 180, 0, 90)
 AFTER_TICKS = 20
 SLOW = 8.0
 FULL = os.environ.get("TMMASTER_HUNT42") == "full"
@@ -115,25 +116,10 @@ def open_robot(port: int, profile: Any, request_s: float = 0.5) -> Robot:
     )
 
 
-def _ready(robot: Robot, sim: Simulator) -> None:
-    if sim.profile.name == "tmflow" and robot.project_state() is not ProjectState.RUNNING:
-        robot.play()
-    robot.wait_until_ready(timeout_s=5)
-    wait_braked(sim, ticks=3)
-
-
 def _next_robot_moves(sim: Simulator, issued: list[Issued]) -> None:
     """A new Robot on the same simulator moves once, from where the arm is, to its end."""
     let_run(sim, 3)  # a Stop written just before is taken (at the next tick)
-    with open_robot(sim.port, sim.profile) as again:
-        _ready(again, sim)
-        here = sim.tcp_pose()
-        issued.append(Issued(NEXT, time.monotonic()))
-        moved = again.move_to(NEXT, speed=100)
-        issued[-1].ended_at, issued[-1].outcome = time.monotonic(), "done"
-        assert moved.start is not None
-        assert moved.start.is_close(here, mm=1.0, deg=0.5), (moved.start, here)
-        assert sim.tcp_pose().is_close(NEXT, mm=0.05, deg=0.05)
+    next_robot_moves(sim, issued, open_robot(sim.port, sim.profile))
 
 
 def _not_resumed(log: tuple[MotionRecord, ...]) -> list[MotionRecord]:
