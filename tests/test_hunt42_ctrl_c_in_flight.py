@@ -44,9 +44,11 @@ press, landing later, never resumes a move), but that Stop ran outside any defer
 section (``_project.py`` ``_stop_before_giving_up``): a second Ctrl-C cut it short, and
 in a program that goes on (a REPL, a notebook) the late Play resumed the paused move the
 master had given up. Fixed (the Stop held back from a second Ctrl-C), with
-``test_a_second_ctrl_c_during_play_s_give_up_stop_still_presses_it``. Left as found: a
-Stop and a late toggle in one simulator tick of a moving arm leave the robot in error (a
-strict xfail, for the simulator's owner), and a second Ctrl-C in the few bytecodes before
+``test_a_second_ctrl_c_during_play_s_give_up_stop_still_presses_it``. A Stop and a late
+toggle in one simulator tick of a moving arm left the robot in error (a simulator defect,
+since fixed: the project starts once the arm is at rest,
+``test_a_stop_then_a_late_toggle_in_one_tick_of_a_moving_arm_leaves_the_robot_usable``).
+Left as found: a second Ctrl-C in the few bytecodes before
 close()'s deferred section holds Ctrl-C back (its first lines, ``deferred()``'s own up to
 its handler swap) cuts close() short: nothing given up until close() or the exit hook
 runs again (``test_a_second_ctrl_c_at_each_line_of_close``, full only, xfails there).
@@ -286,7 +288,7 @@ def test_a_ctrl_c_while_a_request_is_held_leaves_nothing_to_run(
             if case.target is not None:
                 issued[-1].ended_at, issued[-1].outcome = closed_at, "KeyboardInterrupt"
             # The frame lands now, after the give-up and the close, once the arm braked to rest
-            # (landing in the Stop's tick: the strict xfail below, a simulator question).
+            # (landing in the Stop's tick: the late-toggle test below, another subject).
             wait_braked(sim, ticks=3)
             release.set()
             proxy.wait_held()
@@ -849,7 +851,7 @@ def test_a_second_ctrl_c_in_the_give_up_of_a_request_held_in_flight(
             second.active = False
             ended_at = time.monotonic()
             issued[-1].ended_at, issued[-1].outcome = ended_at, "KeyboardInterrupt"
-            wait_braked(sim, ticks=3)  # see the strict xfail below: not in the Stop's tick
+            wait_braked(sim, ticks=3)  # not in the Stop's tick: the late-toggle test below
             release.set()
             proxy.wait_held()
             let_run(sim, AFTER_TICKS)
