@@ -37,6 +37,8 @@ PROFILES = ["tmflow", "article"]
 #: Both in the article's register range (+/-327.67 mm), the PTP between them too.
 A = Pose(250, -150, 200, 180, 0, 90)
 FAR = Pose(250, 150, 200, 180, 0, 90)
+#: Techman's Joint Speed J1..J6 (TMflow 2.24 appendix C p. 317), read by the wait only.
+JOINT_SPEED = 7949
 #: Simulator ticks after the answer that the arm must stand still for.
 STILL_TICKS = 10
 
@@ -96,6 +98,41 @@ def test_a_status_report_one_read_behind_never_answers_rest_while_the_arm_brakes
         status = robot.wait_until_at_rest(timeout_s=10)
         assert proxy.played("stale_answer")
         assert_still_after(sim, status)
+
+
+def test_a_sample_served_twice_answers_rest_with_the_pose_the_arm_rests_at(
+    tm_simulator_factory: SimFactory,
+) -> None:
+    # A gateway whose cache refreshes slower than the master reads serves one sample
+    # twice; the arm comes to rest between the wait's pose read and its joint-speed read
+    # (held here until the braking arm stands). "Still" rests on the joint speeds then,
+    # and the status answered must be read after them: where the arm rests, not where it
+    # passed before they were read.
+    sim = tm_simulator_factory("tmflow", time_scale=0.25)  # braking lasts over 1 s
+    proxy, release = FaultProxy(sim.port), threading.Event()
+
+    def release_once_the_arm_rests() -> None:
+        sim.wait_for(lambda: proxy.played("hold"), timeout=10.0)
+        resting = None
+        while resting != (resting := sim.tcp_pose()):
+            ticks_pass(sim, 5)
+        release.set()
+
+    try:
+        # request_s: the held read is answered, not timed out.
+        with Robot("127.0.0.1", proxy.port, timeouts=TimeoutPolicy(request_s=10)) as robot:
+            stopped_mid_move(sim, robot)
+            proxy.add(Rule("hold", function_code=4, address=JOINT_SPEED, release=release))
+            for code in (1, 2, 3, 4):
+                proxy.add(Rule("stale_answer", function_code=code, times=10_000))
+            helper = threading.Thread(target=release_once_the_arm_rests)
+            helper.start()
+            status = robot.wait_until_at_rest(timeout_s=10)
+            helper.join(10)
+            assert_still_after(sim, status)
+    finally:
+        release.set()
+        proxy.close()
 
 
 @pytest.mark.parametrize("profile", PROFILES)

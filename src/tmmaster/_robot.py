@@ -897,8 +897,8 @@ class Robot:
         least ``STALL_FLOOR_S`` (0.5 s) apart, and every read between them, show the arm
         not moving, with the TCP within 0.5 mm and 0.5 deg of the first, and, where the
         profile publishes Techman's Joint Speed (tmflow: 7949-7960, one request more per
-        read, never read by a move's polls), every joint slower than
-        ``REST_SPEED_DEG_S`` (0.05 deg/s). Joint speeds that lag the arm, or pose
+        read, never read by a move's polls, read before the status), every joint slower
+        than ``REST_SPEED_DEG_S`` (0.05 deg/s). Joint speeds that lag the arm, or pose
         registers that stand still for a few cycles while it moves, only delay the
         answer; on a real TM they are not verified (docs/safety.md).
 
@@ -909,7 +909,8 @@ class Robot:
                 (at most that floor and a read more).
 
         Returns:
-            The status read that found the arm at rest.
+            The status read that found the arm at rest (read after the joint speeds:
+            its pose is where the arm rests).
 
         Raises:
             MotionTimeoutError: The arm still moves after ``timeout_s``.
@@ -926,7 +927,9 @@ class Robot:
             # late: this read begins past the deadline. One begun before it that finds the
             # arm still is confirmed by the next (the sleep is not cut), however slow the link.
             late = time.monotonic() >= deadline
-            if (now := self.status()).moving or self._joints_turning():
+            # Joints first: a pose read after the joints were found still is where the arm
+            # rests, even from a gateway that serves one sample twice.
+            if self._joints_turning() | (now := self.status()).moving:
                 first = None
             elif first is None or not now.pose.is_close(first.pose):
                 first = now
