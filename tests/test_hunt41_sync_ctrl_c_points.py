@@ -670,7 +670,10 @@ def test_a_ctrl_c_right_after_a_pause_press_of_a_moving_arm_leaves_the_robot_usa
     assert ctrl_c.fired
     motion = robot.last_motion
     assert motion is not None
-    assert motion.stop_delivered is True, motion
+    # The Stop that pause() pressed on giving up ended the move: close() stopped it again
+    # (True), or, its poll coming after the tick that Stop took effect in (a loaded
+    # machine), found it ended by the robot (None: nothing left to stop). Never False.
+    assert motion.stop_delivered is not False, motion
     let_run(sim, AFTER_TICKS)
     with open_robot(sim) as again:
         _ready(again, sim)

@@ -365,7 +365,7 @@ def test_a_ctrl_c_while_close_s_own_give_up_is_held_is_delivered_after_it(
     """close() runs in a deferred section: the Ctrl-C comes after its clean-up, whose
     held request is given up (request_s) and retried on a new connection."""
     if state == "sent":
-        sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+        sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=200"])
     else:
         sim = tm_simulator_factory(profile, time_scale=4.0)
     release = threading.Event()
@@ -505,7 +505,7 @@ def test_a_second_ctrl_c_during_the_clean_up_does_not_cut_it_short(
 ) -> None:
     profile, first, _points = SECOND_CASES[name]
     if first == "user-sent":
-        sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=20"])
+        sim = tm_simulator_factory(profile, faults=["late_ack:delay_s=200"])
     else:
         sim = tm_simulator_factory(profile, time_scale=4.0)
     issued: list[Issued] = []
