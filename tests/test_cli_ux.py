@@ -7,6 +7,7 @@ goes to a StringIO); nothing here asserts a duration.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import io
 import json
@@ -93,6 +94,64 @@ def test_the_live_display_shows_progress_and_logs_print_above_it() -> None:
     assert "MOVE_TO_PICK" in tail
     assert "cycle times (s)" in tail
     assert "ETA" not in tail
+
+
+def test_a_second_ctrl_c_as_the_display_ends_still_closes_the_robot_and_clears_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A second Ctrl-C raises KeyboardInterrupt once (Ctrl-C is ignored after it) wherever
+    # the command is; here in the run's clean-up, as the display is ended (seen once in a
+    # terminal: the region left on the screen, the last line glued to it). The robot is
+    # closed all the same, and the display cleared by the command's next end.
+    from tmmaster.pickplace import __main__ as pickplace_module
+    from tmmaster.pickplace._live import LiveProgress
+
+    real_end, real_close, closed, drawn = LiveProgress.end, pickplace_module._close, [], []
+
+    def end_interrupted_once(live: LiveProgress) -> None:
+        if not drawn:
+            drawn.append(live._live)
+            raise KeyboardInterrupt
+        real_end(live)
+
+    def close(robot: Any, outcome: Any) -> None:
+        closed.append(robot)
+        real_close(robot, outcome)
+
+    monkeypatch.setattr(LiveProgress, "end", end_interrupted_once)
+    monkeypatch.setattr(pickplace_module, "_close", close)
+    code, raw = _forced_terminal_run(SIM)
+    assert code == 130
+    assert len(closed) == 1
+    assert closed[0].state == "closed"
+    assert drawn[0] is not None
+    assert not drawn[0].is_started, raw[-2000:]
+
+
+def test_a_ctrl_c_before_the_display_s_end_leaves_the_region_to_the_next_end(
+    live_at: Callable[..., Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The KeyboardInterrupt lands as end() enters its section, before the section holds
+    # Ctrl-C back: the region must still be there for the command's next end() to clear.
+    from tmmaster.pickplace import _live
+
+    _, live = live_at(120)
+    drawn, real, entered = live._live, _live.deferred, []
+    assert drawn is not None
+
+    @contextlib.contextmanager
+    def interrupted_once() -> Iterator[None]:
+        if not entered:
+            entered.append(True)
+            raise KeyboardInterrupt
+        with real():
+            yield
+
+    monkeypatch.setattr(_live, "deferred", interrupted_once)
+    with pytest.raises(KeyboardInterrupt):
+        live.end()
+    live.end()
+    assert not drawn.is_started
 
 
 def test_quiet_prints_only_the_final_line(capsys: pytest.CaptureFixture[str]) -> None:

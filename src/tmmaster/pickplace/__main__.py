@@ -1018,10 +1018,12 @@ def _run_on(
                     sampler.stop(origin=runner.run_started)
             outcome.run = result
         finally:
-            if out.live is not None:
-                out.live.end()
+            # The robot first: a second Ctrl-C's KeyboardInterrupt (one at most) landing
+            # here skips what follows it, and the display is ended again after the run.
             _close(robot, outcome)
             outcome.transport = {"robot": robot.stats.as_dict(), "gripper": _gripper_stats(robot)}
+            if out.live is not None:
+                out.live.end()
     if result.ok:
         shown = result.cycle_times_s
         times = ", ".join(f"{t:.2f}" for t in (shown if len(shown) <= 20 else shown[:10]))

@@ -131,10 +131,14 @@ class LiveProgress:
             self._live.start()
 
     def end(self) -> None:
-        """Stop drawing and clear the region (the summary follows)."""
-        live, self._live = self._live, None
-        if live is not None:
-            with deferred(), contextlib.suppress(OSError):  # a terminal hung up: gone
+        """Stop drawing and clear the region (the summary follows).
+
+        Let go of inside the section: a Ctrl-C landing before it leaves the region for
+        the next call to clear (the command calls this again after the run).
+        """
+        with deferred(), contextlib.suppress(OSError):  # a terminal hung up: gone
+            if (live := self._live) is not None:
+                self._live = None
                 live.stop()
 
     def __call__(self, event: StateEvent) -> None:
