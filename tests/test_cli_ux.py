@@ -128,6 +128,28 @@ def test_a_second_ctrl_c_as_the_display_ends_still_closes_the_robot_and_clears_i
     assert not drawn[0].is_started, raw[-2000:]
 
 
+def test_a_second_ctrl_c_as_the_tcp_sampler_stops_keeps_the_run_in_the_report(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # The --sim TCP sampler's stop joins its thread, where a signal handler runs: a
+    # second Ctrl-C raises there, right after the run returned. The report keeps the run.
+    from tmmaster.pickplace.__main__ import _TcpSampler
+
+    real_stop = _TcpSampler.stop
+
+    def stop_interrupted(sampler: _TcpSampler, origin: float | None) -> None:
+        real_stop(sampler, origin)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_TcpSampler, "stop", stop_interrupted)
+    path = tmp_path / "run.json"
+    assert pickplace_main([*SIM, "--quiet", "--report", str(path)]) == 130
+    report = load_report(path)
+    assert report.result == "interrupted"
+    assert report.cycles.completed == 1
+    assert report.final_state == "DONE"
+
+
 def test_a_ctrl_c_before_the_display_s_end_leaves_the_region_to_the_next_end(
     live_at: Callable[..., Any], monkeypatch: pytest.MonkeyPatch
 ) -> None:

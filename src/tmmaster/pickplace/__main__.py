@@ -1010,13 +1010,12 @@ def _run_on(
                 return refused
             if sampler is not None:
                 sampler.start()
-            try:
-                result = runner.run(sequence, cycles=cycles, source=command.source)
+            try:  # kept at once: a second Ctrl-C in the sampler's join keeps the record
+                result = outcome.run = runner.run(sequence, cycles=cycles, source=command.source)
             finally:
                 if sampler is not None:
                     # The runner's clock: timeline and TCP path share one time axis.
                     sampler.stop(origin=runner.run_started)
-            outcome.run = result
         finally:
             # The robot first: a second Ctrl-C's KeyboardInterrupt (one at most) landing
             # here skips what follows it, and the display is ended again after the run.
