@@ -108,7 +108,7 @@ def test_a_sample_served_twice_answers_rest_with_the_pose_the_arm_rests_at(
     # (held here until the braking arm stands). "Still" rests on the joint speeds then,
     # and the status answered must be read after them: where the arm rests, not where it
     # passed before they were read.
-    sim = tm_simulator_factory("tmflow", time_scale=0.25)  # braking lasts over 1 s
+    sim = tm_simulator_factory("tmflow", time_scale=0.25)  # it brakes about 1 s, 100 mm
     proxy, release = FaultProxy(sim.port), threading.Event()
 
     def release_once_the_arm_rests() -> None:

@@ -133,8 +133,9 @@ class LiveProgress:
     def end(self) -> None:
         """Stop drawing and clear the region (the summary follows).
 
-        Let go of inside the section: a Ctrl-C landing before it leaves the region for
-        the next call to clear (the command calls this again after the run).
+        The region is let go of inside the section that holds Ctrl-C back: a Ctrl-C
+        landing before that section leaves it for the next call to clear (the command
+        calls this again after the run).
         """
         with deferred(), contextlib.suppress(OSError):  # a terminal hung up: gone
             if (live := self._live) is not None:
