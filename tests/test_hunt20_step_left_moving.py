@@ -77,7 +77,10 @@ def test_a_step_that_raises_with_its_move_left_running_gives_the_move_up(
     sim = tm_simulator_factory(time_scale=10.0, timing=Timing(tick_hz=25.0))
 
     def start_then_fail(ctx: StepContext) -> None:
-        motion = ctx.robot.start_move(TARGET, speed=10)
+        # 2 %: 1.2 s of wall time at 10x, so that the give-up comes while it runs, on a
+        # loaded machine too (at 10 %, 0.26 s, 3 runs in 8 beside three CPU hogs saw it
+        # finish before the Stop landed).
+        motion = ctx.robot.start_move(TARGET, speed=2)
         while when == "running" and motion.progress().phase is not MovePhase.RUNNING:
             pass
         raise RobotError("the camera refused the part")
