@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from fault_proxy import FaultProxy, Rule
+from safety_invariant import wait_braked
 from test_fleet import ticks_pass
 from tmmaster import (
     MotionTimeoutError,
@@ -113,9 +114,7 @@ def test_a_sample_served_twice_answers_rest_with_the_pose_the_arm_rests_at(
 
     def release_once_the_arm_rests() -> None:
         sim.wait_for(lambda: proxy.played("hold"), timeout=10.0)
-        resting = None
-        while resting != (resting := sim.tcp_pose()):
-            ticks_pass(sim, 5)
+        wait_braked(sim, ticks=5)
         release.set()
 
     try:

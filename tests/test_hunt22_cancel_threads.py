@@ -40,9 +40,10 @@ SimFactory = Callable[..., Simulator]
 PROFILES = ["tmflow", "article"]
 A = Pose(300, -200, 200, 180, 0, 90)
 FAR = Pose(300, 200, 200, 180, 0, 90)
-#: The moves to FAR that a test cancels run at 3 %: 12.7 s simulated, 2.5 s of wall
+#: The speed of the moves to FAR that a test cancels, %: 12.7 s simulated, 2.5 s of wall
 #: time at 5x, so they still run when the cancel comes on a loaded machine (at 10 %,
 #: 0.8 s, one was over first at 24 workers on two cores).
+CANCELLED_SPEED = 3
 
 
 def robot_of(sim: Simulator, profile: str) -> Robot:
@@ -84,7 +85,7 @@ def test_a_running_move_cancelled_from_another_thread_is_stopped_and_its_wait_ra
     with robot_of(sim, profile) as robot:
         robot.move_to(A, speed=100)
         issued = [Issued(A, 0.0, 0.0, "done"), Issued(FAR, time.monotonic())]
-        motion = robot.start_move(FAR, speed=3)
+        motion = robot.start_move(FAR, speed=CANCELLED_SPEED)
         owner = Owner(motion.wait, issued[1])
         sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)  # on its way
         assert motion.cancel() is True
@@ -146,7 +147,7 @@ def test_two_threads_cancelling_at_once_give_it_up_once(
     sim = tm_simulator_factory(profile, time_scale=5.0)
     with robot_of(sim, profile) as robot:
         robot.move_to(A, speed=100)
-        motion = robot.start_move(FAR, speed=3)
+        motion = robot.start_move(FAR, speed=CANCELLED_SPEED)
         sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)
         results: list[bool] = []
         go = threading.Barrier(2)
@@ -215,7 +216,7 @@ def test_a_cancel_while_a_fleets_loop_polls_the_owners_wait(
             # the set-up above, not this test's subject, at 0.01 s instead of 1 s a poll.
             robot.polling = PollPolicy(interval_s=interval_s, predictive=False)
             issued = [Issued(A, 0.0, 0.0, "done"), Issued(FAR, time.monotonic())]
-            motion = robot.start_move(FAR, speed=3)
+            motion = robot.start_move(FAR, speed=CANCELLED_SPEED)
             owner = Owner(motion.wait, issued[1])
             sim.wait_for(lambda: len(sim.motion_log()) == 2, timeout=5.0)
             assert motion.cancel() is True
